@@ -1,0 +1,53 @@
+"""mdsr_opt: kinematic modelling and computational design of muscle-driven soft robots.
+
+Data flows one way: mesh -> scene -> equilibrium -> target -> contraction graph -> muscles -> design ->
+evaluation. Public names are imported lazily from the module that owns them (see ``_EXPORTS``).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+# public name -> owning module (lazy, so importing the package stays cheap)
+_EXPORTS = {
+    "Mesh": "mesh",
+    "check_polygon": "mesh",
+    "Muscle": "muscles",
+    "NeoHookean": "material",
+    "LinearElastic": "material",
+    "EnergyModel": "model",
+    "get_model": "model",
+    "EquilibriumResult": "equilibrium",
+    "SolverFailure": "equilibrium",
+    "solve_external": "equilibrium",
+    "solve_internal": "equilibrium",
+    "available_backends": "equilibrium",
+    "read_mesh": "io",
+    "write_mesh": "io",
+    # routing (issue 3)
+    "contraction_graph": "routing",
+    "route_muscles": "routing",
+    # design (issue 4)
+    "align": "align",
+    "difference": "align",
+    # evaluation against photographs (issue 5)
+    "contour_from_image": "evaluate",
+    "compare_contours": "evaluate",
+}
+
+__all__ = sorted(_EXPORTS) + ["__version__"]
+
+
+def __getattr__(name: str):
+    mod = _EXPORTS.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'mdsr_opt' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{mod}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return __all__
