@@ -1,0 +1,258 @@
+"""Minimisers of a model's energy with some coordinates held fixed: one function per backend.
+
+Every backend takes the same inputs (an :class:`~mdsr_opt.model.EnergyModel`, parameters ``p``, a first
+guess, a mask of fixed coordinates and their values) and returns a :class:`MinimizeOutcome`. Building a
+CasADi solver happens once per model and backend; later solves reuse it.
+
+Backends
+--------
+``ipopt``         IPOPT, exact Hessian (scattered element Hessians), MUMPS. The default.
+``ipopt-lbfgs``   IPOPT with a limited-memory quasi-Newton Hessian.
+``sqpmethod``     CasADi's SQP method with the exact Hessian and the ``qrqp`` QP solver.
+``uno``           The Uno solver shipped with the casadi wheel (exact Hessian derived by CasADi).
+``scipy``         ``scipy.optimize.minimize(method="trust-constr")`` on the free coordinates with
+                  CasADi-generated gradient and sparse Hessian: the baseline a user might write.
+``newton``        A plain projected Newton method in numpy/scipy: per-element Hessians projected to
+                  positive semi-definite, sparse direct solve, backtracking line search.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["MinimizeOutcome", "BACKENDS", "available_backends", "minimize"]
+
+
+@dataclass
+class MinimizeOutcome:
+    x: np.ndarray  # (2n,) flattened coordinates
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    build_time: float
+
+
+def _casadi_factory(plugin: str, opts: dict):
+    def factory(model):
+        nlp = {"x": model.x, "p": model.p, "f": model.f_fn(model.x, model.p)}
+        o = dict(opts)
+        o["show_eval_warnings"] = False  # NaN from log J in a trial step is expected; IPOPT cuts the step
+        if plugin == "ipopt":
+            o["hess_lag"] = model.hess_lag_fn
+            o["grad_f"] = model.grad_fn
+        elif plugin == "sqpmethod":
+            o["hess_lag"] = model.hess_lag_full_fn
+        # uno: CasADi derives its own gradient and Hessian from the expanded energy
+        return ca.nlpsol(f"equilibrium_{plugin.replace('-', '_')}", plugin, nlp, o)
+    return factory
+
+
+def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
+    o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
+         "ipopt.max_iter": max_iter, "ipopt.linear_solver": linear_solver, "error_on_fail": False}
+    if limited_memory:
+        o["ipopt.hessian_approximation"] = "limited-memory"
+    return o
+
+
+@contextlib.contextmanager
+def _quiet_stdout(active: bool):
+    """Silence C-level stdout (Uno prints notes about fixed variables whatever its logger says)."""
+    if not active:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def _solve_casadi(plugin, opts, model, p, x0, fixed, values):
+    solver, build_time = model.solver(plugin, opts, _casadi_factory(plugin, opts))
+    lbx = np.full(model.n_dof, -np.inf)
+    ubx = np.full(model.n_dof, np.inf)
+    lbx[fixed] = values
+    ubx[fixed] = values
+    x0 = np.array(x0, dtype=float)
+    x0[fixed] = values
+    t0 = time.perf_counter()
+    with _quiet_stdout(plugin == "uno"):
+        sol = solver(x0=x0, p=p, lbx=lbx, ubx=ubx)
+    solve_time = time.perf_counter() - t0
+    st = solver.stats()
+    status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
+    iters = int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1] if st.get("iterations") else 0))
+    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), bool(st.get("success", False)), status, iters,
+                           solve_time, build_time)
+
+
+def _free_problem(model, p, fixed, values, x0):
+    free = ~fixed
+    base = np.array(x0, dtype=float)
+    base[fixed] = values
+
+    def full(z):
+        y = base.copy()
+        y[free] = z
+        return y
+
+    return free, base, full
+
+
+def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
+    from scipy.optimize import minimize as sp_minimize
+
+    free, base, full = _free_problem(model, p, fixed, values, x0)
+
+    def fun(z):
+        f, g = model.grad_fn(full(z), p)
+        f = float(f)
+        if not np.isfinite(f):
+            return np.inf, np.zeros(free.sum())
+        return f, np.asarray(g).ravel()[free]
+
+    def hess(z):
+        return model.hessian(full(z), p)[free][:, free]
+
+    t0 = time.perf_counter()
+    res = sp_minimize(fun, base[free], jac=True, hess=hess, method="trust-constr",
+                      options={"gtol": tol, "xtol": 1e-14, "maxiter": max_iter, "verbose": 0})
+    solve_time = time.perf_counter() - t0
+    return MinimizeOutcome(full(res.x), bool(res.status in (1, 2)) and bool(np.isfinite(res.fun)),
+                           f"status {res.status}: {res.message}", int(res.nit), solve_time, 0.0)
+
+
+def _projected_blocks(Hblocks: np.ndarray) -> np.ndarray:
+    """Clamp negative eigenvalues of each symmetric block (N, d, d) to zero."""
+    w, V = np.linalg.eigh(0.5 * (Hblocks + np.swapaxes(Hblocks, 1, 2)))
+    w = np.maximum(w, 0.0)
+    return np.einsum("nij,nj,nkj->nik", V, w, V)
+
+
+def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
+    """Projected Newton: a baseline written the way a numpy/scipy user would."""
+    free, base, full = _free_problem(model, p, fixed, values, x0)
+    t0 = time.perf_counter()
+    fams = model.newton_families()
+    n = model.n_dof
+    fmap = {name: tuple(f.map(len(dofs), "serial") for f in fns) for name, (dofs, fns, _d) in fams.items()}
+    x = base.copy()
+
+    def energy(y):
+        return model.energy(y, p)
+
+    def assemble(y):
+        rows, cols, vals = [], [], []
+        for name, (dofs, _fns, data_of) in fams.items():
+            N, d = dofs.shape
+            X = y[dofs].T
+            Hb = np.asarray(fmap[name][2](X, data_of(p), p[0:2] if name == "elem" else np.zeros(0)))
+            Hb = Hb.T.reshape(N, d, d)
+            Hb = _projected_blocks(Hb)
+            rows.append(np.repeat(dofs, d, axis=1).reshape(-1))
+            cols.append(np.tile(dofs, (1, d)).reshape(-1))
+            vals.append(np.transpose(Hb, (0, 2, 1)).reshape(-1))
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+    f = energy(x)
+    status, success, it = "max_iter", False, 0
+    scale = None
+    for it in range(1, max_iter + 1):
+        g = model.gradient(x, p)[free]
+        gn = float(np.abs(g).max()) if g.size else 0.0
+        if scale is None:
+            scale = max(gn, 1e-300)
+        if gn <= tol * max(1.0, scale) or not g.size:
+            status, success = "converged", True
+            it -= 1
+            break
+        H = assemble(x)[free][:, free].tocsc()
+        H = H + sp.identity(H.shape[0], format="csc") * (1e-10 * abs(H.diagonal()).max())
+        try:
+            dz = -spla.spsolve(H, g)
+        except RuntimeError as exc:  # singular factorisation
+            status = f"linear solve failed: {exc}"
+            break
+        t = 1.0
+        while t > 1e-8:
+            y = x.copy()
+            y[free] += t * dz
+            fy = energy(y)
+            if np.isfinite(fy) and fy <= f + 1e-4 * t * float(g @ dz):
+                break
+            t *= 0.5
+        else:
+            status = "line search failed"
+            break
+        x, f = y, fy
+    return MinimizeOutcome(x, success, status, it, time.perf_counter() - t0, 0.0)
+
+
+BACKENDS = {
+    "ipopt": "IPOPT, exact Hessian, MUMPS (default)",
+    "ipopt-lbfgs": "IPOPT, limited-memory Hessian",
+    "sqpmethod": "CasADi sqpmethod (exact Hessian, qrqp)",
+    "uno": "Uno through CasADi (exact Hessian)",
+    "scipy": "scipy.optimize.minimize trust-constr with CasADi derivatives",
+    "newton": "projected Newton in numpy/scipy (baseline)",
+}
+
+
+def available_backends() -> list[str]:
+    """Names of the backends usable with this CasADi build."""
+    out = []
+    for name in BACKENDS:
+        plugin = {"ipopt-lbfgs": "ipopt"}.get(name, name)
+        if name in ("scipy", "newton") or ca.has_nlpsol(plugin):
+            out.append(name)
+    return out
+
+
+def check_backend(backend: str) -> str:
+    if not isinstance(backend, str):
+        raise TypeError(f"backend must be a string, got {type(backend).__name__}")
+    if backend not in available_backends():
+        raise ValueError(f"unknown backend {backend!r}; available: {', '.join(available_backends())}")
+    return backend
+
+
+def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=500,
+             options: dict | None = None) -> MinimizeOutcome:
+    """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n)."""
+    check_backend(backend)
+    options = dict(options or {})
+    if backend in ("ipopt", "ipopt-lbfgs"):
+        o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
+                        limited_memory=backend == "ipopt-lbfgs")
+        o.update(options)
+        return _solve_casadi("ipopt", o, model, p, x0, fixed, values)
+    if backend == "sqpmethod":
+        o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
+                                                "error_on_fail": False},
+             "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
+             "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
+        o.update(options)
+        return _solve_casadi("sqpmethod", o, model, p, x0, fixed, values)
+    if backend == "uno":
+        o = {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}
+        o.update(options)
+        return _solve_casadi("uno", o, model, p, x0, fixed, values)
+    if backend == "scipy":
+        return _solve_scipy(model, p, x0, fixed, values, tol, max_iter)
+    return _solve_newton(model, p, x0, fixed, values, tol, max_iter)

@@ -1,0 +1,342 @@
+"""External and internal driving: equilibria of a soft body, with load stepping and a linear-elastic guess.
+
+``solve_external`` holds anchors at rest and drags nodes to prescribed positions; the rest settle at
+minimum strain energy. ``solve_internal`` contracts muscles in a free body (three gauge coordinates pinned,
+which carry no load because muscle forces are self-equilibrated) and returns the state rigidly aligned to
+the rest shape.
+
+Both start from a Newton predictor (at rest it is the linear-elastic solution) and, when the predictor
+would invert an element or the solver fails, step the load: drags or contractions are applied in
+fractions that adapt (halving on failure, doubling on success). A returned state never has an inverted
+element; a failure is reported in the result (``success=False``, ``status``, ``iterations``,
+``residual``) and raised only by :meth:`EquilibriumResult.raise_on_failure`.
+
+Example
+-------
+>>> from mdsr_opt import Mesh, NeoHookean, solve_external
+>>> mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+>>> left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+>>> right = {i: (x + 1.0, y) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+>>> res = solve_external(mesh, NeoHookean(E=1.0, nu=0.3), anchors=left, drags=right)
+>>> res.success, res.min_J > 0
+(True, True)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from ._checks import as_float_array, as_index_array, positive_float
+from .align import align
+from .backends import available_backends, check_backend, minimize
+from .mesh import Mesh
+from .model import get_model, spring_parameters
+from .muscles import Muscle, check_contractions, check_muscles
+
+__all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends"]
+
+
+class SolverFailure(RuntimeError):
+    """Raised by :meth:`EquilibriumResult.raise_on_failure` when a solve did not succeed."""
+
+
+@dataclass
+class EquilibriumResult:
+    """The outcome of an equilibrium solve.
+
+    Attributes
+    ----------
+    x : (n, 2) deformed node positions (the last accepted state if the solve failed).
+    energy : total energy at ``x`` (elastic plus muscle springs).
+    elastic_energy : strain energy of the body alone.
+    success : solver converged, residual small and no element inverted.
+    status : solver status text (or the reason for failure).
+    iterations : solver iterations summed over load steps.
+    residual : max-norm of the energy gradient over the free coordinates, relative to ``E t size``.
+    min_J : smallest element ``det F``.
+    steps : load fractions accepted (``[1.0]`` when no stepping was needed).
+    build_time, solve_time : seconds spent building the model/solver (0 when reused) and solving.
+    """
+
+    x: np.ndarray
+    energy: float
+    elastic_energy: float
+    success: bool
+    status: str
+    iterations: int
+    residual: float
+    min_J: float
+    steps: list = field(default_factory=list)
+    build_time: float = 0.0
+    solve_time: float = 0.0
+    backend: str = "ipopt"
+    mode: str = "external"
+    rotation: np.ndarray | None = None  # internal driving: rotation applied to align with rest
+    translation: np.ndarray | None = None
+    muscle_model: str | None = None  # internal driving: "springs" or "cable"
+
+    def raise_on_failure(self) -> "EquilibriumResult":
+        if not self.success:
+            raise SolverFailure(f"{self.mode} driving with backend {self.backend!r} failed: {self.status} "
+                                f"(iterations {self.iterations}, residual {self.residual:.3g}, "
+                                f"min J {self.min_J:.3g})")
+        return self
+
+    def summary(self) -> dict:
+        return {"mode": self.mode, "backend": self.backend, "success": self.success, "status": self.status,
+                "iterations": self.iterations, "energy": self.energy, "residual": self.residual,
+                "min_J": self.min_J, "n_steps": len(self.steps), "build_time": self.build_time,
+                "solve_time": self.solve_time}
+
+
+# ---------------------------------------------------------------------------------- input checks
+def _check_mesh_material(mesh, material):
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
+    if not hasattr(material, "psi_expr") or not hasattr(material, "params"):
+        raise TypeError(f"material must be a material such as NeoHookean, got {type(material).__name__}")
+
+
+def _parse_drags(drags, n) -> tuple[np.ndarray, np.ndarray]:
+    if drags is None:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    if isinstance(drags, Mapping):
+        keys = list(drags.keys())
+        idx = as_index_array(np.array(keys), "drags (node indices)", n=n, shape=(None,))
+        pos = as_float_array([drags[k] for k in keys], "drags (positions)", shape=(len(keys), 2)) \
+            if keys else np.zeros((0, 2))
+    elif isinstance(drags, (tuple, list)) and len(drags) == 2:
+        idx = as_index_array(drags[0], "drags[0] (node indices)", n=n, shape=(None,))
+        pos = as_float_array(drags[1], "drags[1] (positions)", shape=(len(idx), 2))
+    else:
+        raise TypeError("drags must be a dict {node: (x, y)} or a pair (node indices, positions (k, 2))")
+    if len(np.unique(idx)) != len(idx):
+        raise ValueError("drags name a node more than once")
+    return idx, pos
+
+
+def _check_common(tol, max_iter, backend):
+    tol = positive_float(tol, "tol")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    check_backend(backend)
+    return tol
+
+
+# ---------------------------------------------------------------------------------- core loop
+def _predict(model, p, x, fixed, values):
+    """Newton step from ``x`` with the fixed coordinates moved to ``values``: the linear-elastic solution at rest."""
+    free = ~fixed
+    H = model.hessian(x, p)
+    g = model.gradient(x, p)
+    dc = values - x[fixed]
+    rhs = -(g[free] + H[free][:, fixed] @ dc)
+    Hff = H[free][:, free].tocsc()
+    try:
+        dz = spla.spsolve(Hff, rhs)
+    except RuntimeError:
+        return None
+    if not np.all(np.isfinite(dz)):
+        return None
+    y = x.copy()
+    y[free] += dz
+    y[fixed] = values
+    return y
+
+
+def _min_J(mesh, xflat):
+    return float(mesh.jacobians(xflat.reshape(-1, 2)).min())
+
+
+def _continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
+                  verbose):
+    """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time)."""
+    x = x_start.copy()
+    s, ds = 0.0, 1.0
+    steps, iters, t_solve, t_build = [], 0, 0.0, 0.0
+    status = "not started"
+    while s < 1.0 - 1e-12:
+        if ds < min_step:
+            return x, f"load stepping stalled at fraction {s:.4g} ({status})", False, iters, steps, t_solve, t_build
+        s_new = min(1.0, s + ds)
+        p = p_of(s_new)
+        vals = values_of(s_new)
+        t0 = time.perf_counter()
+        guess = _predict(model, p, x, fixed, vals)
+        t_solve += time.perf_counter() - t0
+        if guess is None or _min_J(mesh, guess) <= 0.0:
+            status = "predictor inverted an element"
+            ds /= 2
+            continue
+        out = minimize(model, p, guess, fixed, vals, backend=backend, tol=tol, max_iter=max_iter, options=options)
+        iters += out.iterations
+        t_solve += out.solve_time
+        t_build += out.build_time
+        status = out.status
+        if out.success and np.all(np.isfinite(out.x)) and _min_J(mesh, out.x) > 0.0:
+            x, s = out.x, s_new
+            steps.append(s)
+            if verbose:
+                print(f"  load {s:.4f}: {out.status}, {out.iterations} iterations")
+            ds = min(2 * ds, 1.0 - s) if s < 1.0 else ds
+        else:
+            ds /= 2
+    return x, status, True, iters, steps, t_solve, t_build
+
+
+def _result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
+            backend, mode, tol_residual=1e-5):
+    g = model.gradient(xflat, p)
+    scale = material.E * material.thickness * mesh.size
+    residual = float(np.abs(g[~fixed]).max()) / scale if (~fixed).any() else 0.0
+    mj = _min_J(mesh, xflat)
+    ok = bool(success and mj > 0 and residual <= tol_residual)
+    if success and not ok:
+        status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
+    return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=model.energy(xflat, p),
+                             elastic_energy=model.energy(xflat, p_elastic), success=ok, status=status,
+                             iterations=iters, residual=residual, min_J=mj, steps=steps,
+                             build_time=t_build, solve_time=t_solve, backend=backend, mode=mode)
+
+
+# ---------------------------------------------------------------------------------- external driving
+def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | None,
+                   drags: Mapping[int, Sequence[float]] | tuple | None, *, backend: str = "ipopt",
+                   tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
+                   min_step: float = 1.0 / 256, verbose: bool = False) -> EquilibriumResult:
+    """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors : node indices held at their rest positions.
+    drags : ``{node: (x, y)}`` or ``(indices, positions (k, 2))``.
+    backend : one of :func:`available_backends`.
+    tol, max_iter : solver tolerance and iteration cap per load step.
+    options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
+    min_step : smallest load fraction tried before giving up.
+    verbose : print each accepted load step.
+
+    Returns
+    -------
+    EquilibriumResult
+    """
+    _check_mesh_material(mesh, material)
+    tol = _check_common(tol, max_iter, backend)
+    n = mesh.n_nodes
+    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
+                         "anchors", n=n, shape=(None,))
+    if len(np.unique(anc)) != len(anc):
+        raise ValueError("anchors name a node more than once")
+    didx, dpos = _parse_drags(drags, n)
+    both = np.intersect1d(anc, didx)
+    if len(both):
+        raise ValueError(f"node {int(both[0])} is both anchored and dragged")
+    nodes = np.concatenate([anc, didx])
+    if len(nodes) == 0:
+        raise ValueError("external driving needs fixed nodes: give anchors and/or drags")
+    if len(nodes) < 2:
+        raise ValueError("external driving needs at least two fixed nodes (anchors + drags) to remove rigid "
+                         "motion; got 1")
+    t0 = time.perf_counter()
+    model = get_model(mesh, material)
+    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
+    p = model.params(material)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[2 * nodes] = True
+    fixed[2 * nodes + 1] = True
+    order = np.argsort(np.concatenate([2 * nodes, 2 * nodes + 1]))
+    rest_vals = np.concatenate([mesh.points[nodes, 0], mesh.points[nodes, 1]])[order]
+    target_nodes = np.vstack([mesh.points[anc], dpos])
+    target_vals = np.concatenate([target_nodes[:, 0], target_nodes[:, 1]])[order]
+    X = mesh.points.reshape(-1).copy()
+    x, status, ok, iters, steps, t_solve, t_build = _continuation(
+        mesh, model, lambda s: p, fixed, lambda s: rest_vals + s * (target_vals - rest_vals), X,
+        backend, tol, max_iter, options, min_step, verbose)
+    return _result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
+                   backend, "external")
+
+
+# ---------------------------------------------------------------------------------- internal driving
+def _gauge(mesh) -> tuple[int, int, int]:
+    """Three gauge coordinates (node i x & y, node j one coordinate), chosen from geometry alone."""
+    P = mesh.points
+    c = P.mean(0)
+    d = np.linalg.norm(P - c, axis=1)
+    i = int(np.lexsort((P[:, 1], P[:, 0], d))[0])
+    dj = np.linalg.norm(P - P[i], axis=1)
+    j = int(np.lexsort((P[:, 1], P[:, 0], -dj))[0])
+    v = P[j] - P[i]
+    comp = 1 if abs(v[0]) >= abs(v[1]) else 0
+    return 2 * i, 2 * i + 1, 2 * j + comp
+
+
+def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "springs",
+                   stiffness: float = 10.0, backend: str = "ipopt", tol: float = 1e-8, max_iter: int = 200,
+                   options: dict | None = None, min_step: float = 1.0 / 256, align_to_rest: bool = True,
+                   verbose: bool = False) -> EquilibriumResult:
+    """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
+
+    Parameters
+    ----------
+    muscles : list of :class:`Muscle` (or node lists) along mesh edges.
+    contractions : one value in ``[0, 1)`` per muscle.
+    model : ``"springs"`` (the paper's dummy springs: one per segment, each shortened alike) or ``"cable"``
+        (one spring on the whole path length: a rope that slides inside the body).
+    stiffness : spring stiffness relative to the material, ``kappa``: each segment spring has
+        ``k = kappa * E * thickness``; the cable has ``K = kappa * E * thickness / n_segments`` so both models
+        are equally stiff for a uniformly strained muscle.
+    align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
+
+    Returns
+    -------
+    EquilibriumResult
+    """
+    _check_mesh_material(mesh, material)
+    tol = _check_common(tol, max_iter, backend)
+    if model not in ("springs", "cable"):
+        raise ValueError(f"model must be 'springs' or 'cable', got {model!r}")
+    stiffness = positive_float(stiffness, "stiffness")
+    mus = check_muscles(mesh, muscles)
+    if not mus:
+        raise ValueError("internal driving needs at least one muscle")
+    a = check_contractions(contractions, len(mus))
+    n = mesh.n_nodes
+    k_abs = stiffness * material.E * material.thickness
+    t0 = time.perf_counter()
+    if model == "springs":
+        emodel = get_model(mesh, material)
+    else:
+        if backend == "newton":
+            raise ValueError("backend 'newton' supports the 'springs' muscle model only")
+        emodel = get_model(mesh, material, cables=[m.nodes for m in mus])
+    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
+    L0 = np.array([m.rest_length(mesh) for m in mus])
+    nseg = np.array([len(m.nodes) - 1 for m in mus], dtype=float)
+
+    def p_of(s):
+        if model == "springs":
+            return emodel.params(material, springs=spring_parameters(mesh, mus, s * a, k_abs))
+        return emodel.params(material, cables=(k_abs / nseg, (1.0 - s * a) * L0))
+
+    p_el = emodel.params(material, springs=(np.zeros(emodel.n_edges), np.ones(emodel.n_edges)),
+                         cables=(np.zeros(len(emodel.cables)), L0) if emodel.cables else None)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[list(_gauge(mesh))] = True
+    X = mesh.points.reshape(-1).copy()
+    vals = X[fixed]
+    x, status, ok, iters, steps, t_solve, t_build = _continuation(
+        mesh, emodel, p_of, fixed, lambda s: vals, X, backend, tol, max_iter, options, min_step, verbose)
+    res = _result(mesh, emodel, material, p_of(1.0), p_el, x, fixed, status, ok, iters, steps,
+                  t_model + t_build, t_solve, backend, "internal")
+    res.muscle_model = model
+    if align_to_rest:
+        al = align(res.x, mesh.points)
+        res.x = al.apply(res.x)
+        res.rotation, res.translation = al.R, al.t
+    return res
