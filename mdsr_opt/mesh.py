@@ -73,9 +73,6 @@ def check_polygon(poly: ArrayLike, name: str = "outline") -> np.ndarray:
     if np.any(seg <= 1e-12 * scale):
         i = int(np.argmin(seg))
         raise ValueError(f"{name} is degenerate: vertices {i} and {(i + 1) % len(p)} coincide")
-    area = polygon_area(p)
-    if abs(area) <= 1e-12 * scale * scale:
-        raise ValueError(f"{name} is degenerate: zero area")
     k = len(p)
     a0, a1 = p, np.roll(p, -1, axis=0)
     hit = _segments_intersect(a0, a1, a0, a1)
@@ -87,6 +84,9 @@ def check_polygon(poly: ArrayLike, name: str = "outline") -> np.ndarray:
     if hit.any():
         i, j = np.argwhere(hit)[0]
         raise ValueError(f"{name} is self-intersecting: edge {i} crosses edge {j}")
+    area = polygon_area(p)
+    if abs(area) <= 1e-12 * scale * scale:
+        raise ValueError(f"{name} is degenerate: zero area")
     return p if area > 0 else p[::-1].copy()
 
 

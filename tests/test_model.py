@@ -1,0 +1,128 @@
+"""Material and symbolic model: derivatives against finite differences, invariances, parameter checks."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean
+from mdsr_opt.model import get_model, spring_parameters
+
+from conftest import rotation
+
+
+def _perturbed(mesh, scale=0.03, seed=0):
+    x = mesh.points + scale * np.random.default_rng(seed).standard_normal(mesh.points.shape)
+    assert mesh.jacobians(x).min() > 0.2
+    return x
+
+
+@pytest.fixture(scope="module")
+def small():
+    return Mesh.from_polygon([[0, 0], [2, 0], [2, 1], [0, 1]], max_area=0.08)
+
+
+def test_psi_zero_at_rest_and_rotation_invariant():
+    mat = NeoHookean(E=2.0, nu=0.35)
+    assert mat.psi(np.eye(2)) == 0.0
+    F = np.array([[1.3, 0.2], [-0.1, 0.8]])
+    R = rotation(0.7)
+    assert mat.psi(R @ F) == pytest.approx(mat.psi(F), rel=1e-13)
+    assert mat.psi(np.diag([1.0, -1.0])) == np.inf  # inverted
+
+
+def test_psi_numpy_matches_casadi():
+    mat = NeoHookean(E=3.0, nu=0.2, thickness=0.5)
+    F = np.array([[1.1, 0.3], [0.05, 0.95]])
+    Fs = ca.SX.sym("F", 2, 2)
+    f = ca.Function("psi", [Fs], [mat.psi(Fs)])
+    assert float(f(F)) == pytest.approx(mat.psi(F), rel=1e-13)
+
+
+def test_lame_parameters():
+    mat = NeoHookean(E=10.0, nu=0.25)
+    assert mat.mu == pytest.approx(4.0)
+    assert mat.lam == pytest.approx(4.0)
+
+
+@pytest.mark.parametrize("kwargs, err, match", [
+    (dict(E=0.0, nu=0.3), ValueError, "E"),
+    (dict(E=-1.0, nu=0.3), ValueError, "E"),
+    (dict(E=1.0, nu=0.5), ValueError, "nu"),
+    (dict(E=1.0, nu=-1.0), ValueError, "nu"),
+    (dict(E=float("nan"), nu=0.3), ValueError, "finite"),
+    (dict(E=1.0, nu=float("nan")), ValueError, "nu"),
+    (dict(E=1.0, nu=0.3, thickness=0.0), ValueError, "thickness"),
+    (dict(E="1", nu=0.3), TypeError, "E"),
+])
+def test_material_parameters_validated(kwargs, err, match):
+    with pytest.raises(err, match=match):
+        NeoHookean(**kwargs)
+
+
+def test_energy_matches_numpy_sum(small):
+    mat = NeoHookean(E=3.0, nu=0.3, thickness=2.0)
+    model = get_model(small, mat)
+    x = _perturbed(small)
+    expected = float((small.areas * mat.psi(small.deformation_gradients(x))).sum())
+    assert model.energy(x, model.params(mat)) == pytest.approx(expected, rel=1e-12)
+
+
+def _fd_check(model, x, p, h=1e-6):
+    xf = x.reshape(-1)
+    E = np.eye(len(xf))
+    g = model.gradient(xf, p)
+    H = model.hessian(xf, p).toarray()
+    g_fd = np.array([(model.energy(xf + h * e, p) - model.energy(xf - h * e, p)) / (2 * h) for e in E])
+    H_fd = np.array([(model.gradient(xf + h * e, p) - model.gradient(xf - h * e, p)) / (2 * h) for e in E])
+    return np.abs(g - g_fd).max() / np.abs(g).max(), np.abs(H - H_fd).max() / np.abs(H).max(), H
+
+
+@pytest.mark.parametrize("kind", ["neo-hookean", "linear"])
+def test_gradient_and_hessian_against_finite_differences(small, kind):
+    mat = NeoHookean(1.5, 0.3) if kind == "neo-hookean" else LinearElastic(1.5, 0.3)
+    # path along mesh edges for a spring muscle and a cable
+    path = [0, int(small.neighbors[0][0])]
+    path.append(int([v for v in small.neighbors[path[-1]] if v not in path][0]))
+    model = get_model(small, mat, cables=[path])
+    k, r = spring_parameters(small, [Muscle(path)], [0.2], 5.0)
+    p = model.params(mat, springs=(k, r), cables=(np.array([3.0]), np.array([0.4])))
+    eg, eh, H = _fd_check(model, _perturbed(small), p)
+    assert eg < 1e-7
+    assert eh < 1e-6
+    assert np.allclose(H, H.T)
+
+
+def test_linear_elastic_is_small_strain_limit(small):
+    """At rest both materials have the same Hessian (the linear-elastic stiffness)."""
+    nh, le = NeoHookean(2.0, 0.3), LinearElastic(2.0, 0.3)
+    m1, m2 = get_model(small, nh), get_model(small, le)
+    H1 = m1.hessian(small.points, m1.params(nh)).toarray()
+    H2 = m2.hessian(small.points, m2.params(le)).toarray()
+    assert np.abs(H1 - H2).max() <= 1e-10 * np.abs(H1).max()
+
+
+def test_hessian_at_rest_has_exactly_three_rigid_modes(small):
+    mat = NeoHookean(1.0, 0.3)
+    m = get_model(small, mat)
+    w = np.linalg.eigvalsh(m.hessian(small.points, m.params(mat)).toarray())
+    assert np.sum(np.abs(w) < 1e-9 * w.max()) == 3
+    assert w.min() > -1e-9 * w.max()
+
+
+def test_model_is_cached_per_mesh_and_kind(small):
+    a = get_model(small, NeoHookean(1.0, 0.3))
+    b = get_model(small, NeoHookean(5.0, 0.1))
+    c = get_model(small, LinearElastic(1.0, 0.3))
+    assert a is b and a is not c
+    with pytest.raises(ValueError, match="built for a neo-hookean"):
+        a.params(LinearElastic(1.0, 0.3))
+
+
+def test_spring_parameters_combine_shared_edges(small):
+    e = small.edges[0]
+    m1, m2 = Muscle(list(e)), Muscle(list(e[::-1]))
+    k, r = spring_parameters(small, [m1, m2], [0.2, 0.4], 3.0)
+    i = small.edge_index[tuple(int(v) for v in e)]
+    assert k[i] == pytest.approx(6.0)
+    assert r[i] == pytest.approx(1.0 - 0.3)
+    assert np.count_nonzero(k) == 1 and np.all(r[np.arange(len(r)) != i] == 1.0)
