@@ -88,3 +88,116 @@ def save_figure(fig, path) -> str:
     return path
 
 # --- figures added by later modules go below this line ---
+
+
+# --- routing (issue 3) ---
+def _edge_weights_of(mesh, graph):
+    return np.array([graph.edges[int(a), int(b)]["weight"] for a, b in mesh.edges])
+
+
+def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", lw=1.5, title=None,
+                           seeds=None):
+    """The contraction graph drawn over the target mesh, each edge coloured by its weight.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : (n, 2) array
+        Target node positions.
+    graph : networkx.Graph, optional
+        From :func:`mdsr_opt.routing.contraction_graph`; computed when omitted.
+    ax : matplotlib Axes, optional
+    cmap : str
+        A diverging colormap, centred on 0: contraction (w > 0) at the top end, elongation below.
+    seeds : sequence of (i, j), optional
+        Seed edges to outline in black.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    >>> fig = plot_contraction_graph(mesh, mesh.points * [0.9, 1.0])
+    """
+    if graph is None:
+        from .routing import contraction_graph
+
+        graph = contraction_graph(mesh, target)
+    fig, ax = _axes(ax)
+    x = np.asarray(target, dtype=float)
+    ax.add_collection(PolyCollection(x[mesh.triangles], facecolors="#eeeeee", edgecolors="none"))
+    w = _edge_weights_of(mesh, graph)
+    m = float(np.abs(w).max()) or 1.0
+    plot_edges(x, mesh.edges, w, ax=ax, cmap=cmap, lw=lw, vmin=-m, vmax=m,
+               label="relative contraction $(l_0 - l)/l_0$")
+    if seeds is not None and len(seeds):
+        ax.add_collection(LineCollection(x[np.asarray(seeds)], colors="k", linewidths=lw * 2.2, zorder=3))
+    ax.set_title(title or "contraction graph (red: shortens, blue: stretches)", fontsize=10)
+    ax.autoscale_view()
+    return fig
+
+
+def plot_routing(mesh, target, result, axes=None, title=None):
+    """Routed muscles over the rest mesh (left) and the target mesh (right).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : (n, 2) array
+        Target node positions.
+    result : RoutingResult or sequence of Muscle
+        From :func:`mdsr_opt.routing.route_muscles`.
+    axes : pair of matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> from mdsr_opt.routing import route_muscles
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    >>> fig = plot_routing(mesh, mesh.points * [0.8, 1.0], route_muscles(mesh, mesh.points * [0.8, 1.0]))
+    """
+    if axes is None:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig = axes[0].figure
+    muscles = list(result)
+    x = np.asarray(target, dtype=float)
+    for ax, pos, name in ((axes[0], mesh.points, "rest"), (axes[1], x, "target")):
+        plot_mesh(mesh, pos, ax=ax, color="#dde6f0", edgecolor="#9aaabb")
+        if muscles:
+            plot_muscles(pos, muscles, ax=ax)
+            for m in muscles:
+                ends = pos[[m.nodes[0], m.nodes[-1]]]
+                ax.plot(ends[:, 0], ends[:, 1], "o", color="k", ms=3)
+        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh")
+    if muscles and len(muscles) <= 10:
+        axes[1].legend(fontsize=7, loc="best")
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_routing_timings(n_nodes, seconds, budget=None, ax=None, labels=None):
+    """Routing time against mesh size (log-log), one line per series, with an optional budget line.
+
+    ``seconds`` is a dict ``{series name: times}`` aligned with ``n_nodes``.
+    """
+    fig, ax = _axes(ax)
+    for name, t in seconds.items():
+        ax.loglog(n_nodes, t, "o-", label=name)
+    if budget is not None:
+        ax.axhline(budget, color="r", ls="--", lw=1, label=f"budget {budget:g} s")
+    ax.set_xlabel("mesh nodes")
+    ax.set_ylabel("seconds")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("muscle routing time")
+    return fig

@@ -1,0 +1,416 @@
+"""Tests of the contraction graph and the muscle routing (issue 3)."""
+
+from __future__ import annotations
+
+import networkx as nx
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle
+from mdsr_opt.routing import (MuscleStats, RoutingResult, RoutingWarning, contraction_graph, edge_weights,
+                              route_muscles)
+
+
+# ------------------------------------------------------------------------------------------ targets
+def bend(X: np.ndarray, kappa, length: float, y_axis: float) -> np.ndarray:
+    """Map a strip along x onto a curve of curvature ``kappa(s)`` (fibres at ``y_axis`` keep their length).
+
+    Positive curvature bends toward +y, so the side ``y > y_axis`` is the concave (contracted) one.
+    """
+    s = np.linspace(0.0, length, 4001)
+    k = kappa(s)
+    th = np.concatenate([[0.0], np.cumsum(0.5 * (k[1:] + k[:-1]) * np.diff(s))])
+    cx = np.concatenate([[0.0], np.cumsum(0.5 * (np.cos(th[1:]) + np.cos(th[:-1])) * np.diff(s))])
+    cy = np.concatenate([[0.0], np.cumsum(0.5 * (np.sin(th[1:]) + np.sin(th[:-1])) * np.diff(s))])
+    T = np.interp(X[:, 0], s, th)
+    x0, y0 = np.interp(X[:, 0], s, cx), np.interp(X[:, 0], s, cy)
+    y = X[:, 1] - y_axis
+    return np.column_stack([x0 - y * np.sin(T), y0 + y * np.cos(T)])
+
+
+def arc(X: np.ndarray, radius: float, y_axis: float) -> np.ndarray:
+    """Bend a strip onto a circular arc (constant curvature 1/radius)."""
+    phi = X[:, 0] / radius
+    r = radius - (X[:, 1] - y_axis)
+    return np.column_stack([r * np.sin(phi), radius - r * np.cos(phi)])
+
+
+def shorten(X: np.ndarray, angle: float, amount: float = 0.2) -> np.ndarray:
+    """Uniform shortening by ``amount`` along the direction at ``angle`` (radians)."""
+    d = np.array([np.cos(angle), np.sin(angle)])
+    return X @ (np.eye(2) - amount * np.outer(d, d)).T
+
+
+def rotation(theta: float) -> np.ndarray:
+    return np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+
+
+@pytest.fixture(scope="module")
+def strip():
+    return Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+
+
+@pytest.fixture(scope="module")
+def body():
+    """An unstructured mesh (Triangle) of a 4 x 2 rectangle."""
+    return Mesh.from_polygon([[0, 0], [4, 0], [4, 2], [0, 2]], max_area=0.01)
+
+
+def family(body):
+    """Targets with curved, oblique or uneven contraction, for the K_a / K_b trade-off."""
+    X = body.points
+    out = {f"shorten {a} deg": shorten(X, np.radians(a)) for a in (20, 35, 50, 70)}
+    out["bend, curvature x1..2"] = bend(X, lambda s: 0.15 * (1 + s / 4), 4.0, 1.0)
+    out["bend, curvature x1..4"] = bend(X, lambda s: 0.15 * (1 + 3 * s / 4), 4.0, 1.0)
+    return out
+
+
+def edge_weight_map(mesh, target):
+    _, _, w = edge_weights(mesh, target)
+    return {tuple(e): wk for e, wk in zip(mesh.edges.tolist(), w)}
+
+
+def path_weights(muscle, wmap):
+    return np.array([wmap[(min(a, b), max(a, b))] for a, b in zip(muscle.nodes[:-1], muscle.nodes[1:])])
+
+
+# ------------------------------------------------------------------------------------------ contraction graph
+def test_contraction_graph_weights_follow_the_definition(strip):
+    X = strip.points
+    G = contraction_graph(strip, X * [0.9, 1.2])
+    assert G.number_of_nodes() == strip.n_nodes and G.number_of_edges() == len(strip.edges)
+    dx, dy = 0.25, 0.25
+    diag = 1.0 - np.hypot(0.9 * dx, 1.2 * dy) / np.hypot(dx, dy)
+    for a, b, d in G.edges(data=True):
+        v = X[b] - X[a]
+        expected = 0.1 if v[1] == 0 else (-0.2 if v[0] == 0 else diag)
+        assert d["weight"] == pytest.approx(expected, abs=1e-12)
+        assert d["rest_length"] == pytest.approx(np.linalg.norm(v), abs=1e-14)
+        assert d["weight"] == pytest.approx((d["rest_length"] - d["target_length"]) / d["rest_length"])
+    assert G.graph["w_max"] == pytest.approx(0.1) and G.graph["w_min"] == pytest.approx(-0.2)
+    assert G.nodes[5]["rest"] == tuple(X[5])
+    assert G.nodes[5]["target"] == pytest.approx(tuple(X[5] * [0.9, 1.2]))
+
+
+def test_contraction_graph_is_invariant_to_rigid_motion(body):
+    t = bend(body.points, lambda s: 0.3 + 0 * s, 4.0, 1.0)
+    G1 = contraction_graph(body, t)
+    G2 = contraction_graph(body, t @ rotation(2.0).T + [5.0, -3.0])
+    w1 = np.array([d["weight"] for _, _, d in G1.edges(data=True)])
+    w2 = np.array([G2.edges[a, b]["weight"] for a, b in G1.edges()])
+    assert np.max(np.abs(w1 - w2)) < 1e-12 and np.max(np.abs(w1)) > 0.1
+
+
+# ------------------------------------------------------------------------------------------ routing: shape
+def test_bent_strip_muscle_on_the_concave_side_analytic(strip):
+    X = strip.points
+    for sign in (+1, -1):  # bend up (top side concave), then down (bottom side concave)
+        res = route_muscles(strip, arc(X, sign * 3.0, 0.5))
+        assert len(res) >= 1
+        for m in res:
+            side = sign * (X[list(m.nodes), 1] - 0.5)
+            assert np.all(side > 0), f"muscle {m.nodes} crosses to the convex side"
+        # the strongest muscle runs along the whole inner side
+        span = np.ptp(X[list(res[0].nodes), 0])
+        assert span == pytest.approx(4.0)
+        assert res.stats[0].mean_weight == pytest.approx(0.5 / 3.0, rel=0.01)
+
+
+def test_bent_strip_by_external_driving_routes_on_the_concave_side(strip):
+    from mdsr_opt import NeoHookean
+    from mdsr_opt.equilibrium import solve_external
+
+    X = strip.points
+    left = np.flatnonzero(X[:, 0] < 1e-9)
+    right = np.flatnonzero(X[:, 0] > 4.0 - 1e-9)
+    goal = arc(X, 3.0, 0.5)  # drag the right end around an arc of radius 3 (centre line)
+    sol = solve_external(strip, NeoHookean(E=1.0, nu=0.3), left, {int(i): goal[i] for i in right})
+    assert sol.success
+    res = route_muscles(strip, sol.x)
+    assert len(res) >= 1
+    top = X[:, 1] > 0.5
+    for m in res:
+        assert top[list(m.nodes)].all()
+    assert np.ptp(X[list(res[0].nodes), 0]) >= 3.0  # runs along most of the inner side
+    assert res.stats[0].contraction > 0.1
+
+
+def test_uniform_shortening_gives_straight_muscles_along_the_axis():
+    for pattern in ("right", "alternating"):
+        mesh = Mesh.rectangle(3.0, 2.0, nx=12, ny=8, pattern=pattern)
+        X = mesh.points
+        for axis in (0, 1):
+            scale = np.ones(2)
+            scale[axis] = 0.8
+            res = route_muscles(mesh, X * scale)
+            assert len(res) >= 1
+            for m, s in zip(res, res.stats):
+                assert s.turning_angle == 0.0 and s.turning_angle_target == 0.0
+                seg = np.diff(X[list(m.nodes)], axis=0)
+                assert np.all(seg[:, 1 - axis] == 0.0)  # every segment along the axis
+                assert s.mean_weight == pytest.approx(0.2) and s.nonuniformity < 1e-20
+                assert np.ptp(X[list(m.nodes), axis]) == pytest.approx(np.ptp(X[:, axis]))
+
+
+def test_muscles_are_disjoint_simple_paths_on_contracted_edges(body):
+    for name, t in family(body).items():
+        res = route_muscles(body, t, K_a=1.0, K_b=1.0, min_length=0.0)
+        wmap = edge_weight_map(body, t)
+        seen: set[int] = set()
+        assert len(res) >= 1, name
+        for m in res:
+            m.check_on(body)  # raises if a segment is not a mesh edge
+            assert len(set(m.nodes)) == len(m.nodes)
+            assert seen.isdisjoint(m.nodes), f"{name}: muscles share a node"
+            seen.update(m.nodes)
+            assert path_weights(m, wmap).min() > 1e-3, f"{name}: a muscle uses an edge that does not contract"
+
+
+def test_a_cable_cannot_push_elongated_regions_get_no_muscle(strip):
+    X = strip.points
+    # stretch the strip 10 % along x, then bend it: only a band along the inner side still shortens
+    t = arc(X * [1.1, 1.0], 3.0, 0.5)
+    wmap = edge_weight_map(strip, t)
+    contracted = np.array([w > 1e-3 for w in wmap.values()])
+    assert 0 < contracted.sum() < len(contracted) / 2
+    res = route_muscles(strip, t, K_a=0.0, K_b=0.0, min_length=0.0)  # most permissive growth
+    for m in res:
+        assert path_weights(m, wmap).min() > 1e-3
+    # a target that only stretches: nothing to route, and the user is told why
+    with pytest.warns(RoutingWarning, match="cable cannot push"):
+        empty = route_muscles(strip, X * 1.2)
+    assert len(empty) == 0 and list(empty) == [] and empty.stats == ()
+    # raising the floor above every contraction gives the same empty answer
+    with pytest.warns(RoutingWarning, match="min_contraction=0.5"):
+        assert len(route_muscles(strip, X * [0.8, 1.0], min_contraction=0.5)) == 0
+
+
+def test_splicing_joins_separate_seed_units():
+    mesh = Mesh.rectangle(6.0, 1.0, nx=24, ny=4)
+    X = mesh.points
+    peaks = lambda s: 0.2 + 0.1 * np.exp(-((s - 1.5) / 0.3) ** 2) + 0.1 * np.exp(-((s - 4.5) / 0.3) ** 2)
+    t = bend(X, peaks, 6.0, 0.5)
+    res = route_muscles(mesh, t, n_seeds=4)
+    assert nx.number_connected_components(nx.Graph(list(res.seeds))) == 2  # two seed units ...
+    assert len(res) == 1 and res.n_units == 1  # ... spliced into one muscle
+    assert np.ptp(X[list(res[0].nodes), 0]) == pytest.approx(6.0)
+    # a designer who wants uniform muscles (large K_a) keeps them apart, each more uniform
+    strict = route_muscles(mesh, t, n_seeds=4, K_a=300.0, min_length=0.0)
+    assert len(strict) == 2
+    assert max(s.nonuniformity for s in strict.stats) < res.stats[0].nonuniformity
+
+
+# -------------------------------------------------------------------------------- routing: invariance
+@pytest.mark.parametrize("seed, name", [(0, "shorten 20 deg"), (1, "shorten 50 deg"),
+                                        (2, "bend, curvature x1..4")])
+def test_relabelling_and_rigid_motion_change_nothing(body, seed, name):
+    rng = np.random.default_rng(seed)
+    t = family(body)[name]
+    ref = route_muscles(body, t, K_a=1.0, K_b=1.0, n_seeds=10)
+    perm = rng.permutation(body.n_nodes)
+    relabelled = body.relabel(perm)
+    t2 = np.empty_like(t)
+    t2[perm] = t
+    moved = t2 @ rotation(rng.uniform(0, 2 * np.pi)).T + rng.normal(scale=10.0, size=2)
+    out = route_muscles(relabelled, moved, K_a=1.0, K_b=1.0, n_seeds=10)
+    assert sum(len(m.nodes) for m in ref) >= 20
+    assert [tuple(perm[list(m.nodes)]) for m in ref] == [m.nodes for m in out]
+    assert {tuple(sorted(perm[list(e)])) for e in ref.seeds} == {tuple(sorted(e)) for e in out.seeds}
+    for a, b in zip(ref.stats, out.stats):
+        assert a.rest_length == pytest.approx(b.rest_length, rel=1e-12)
+        assert a.mean_weight == pytest.approx(b.mean_weight, rel=1e-9)
+        assert a.turning_angle == pytest.approx(b.turning_angle, abs=1e-9)
+
+
+@pytest.mark.parametrize("kind", ["shorten", "arc"])
+def test_ties_are_broken_by_geometry_not_by_node_numbers(strip, kind):
+    """Structured meshes give many equal weights: the routing must not fall back on node order."""
+    X = strip.points
+    t = X * [0.8, 1.0] if kind == "shorten" else arc(X, 3.0, 0.5)
+    ref = route_muscles(strip, t, n_seeds=4)
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        perm = rng.permutation(strip.n_nodes)
+        t2 = np.empty_like(t)
+        t2[perm] = t
+        out = route_muscles(strip.relabel(perm), t2 @ rotation(1.0).T, n_seeds=4)
+        assert [tuple(perm[list(m.nodes)]) for m in ref] == [m.nodes for m in out]
+        assert [set(perm[list(e)]) for e in ref.seeds] == [set(e) for e in out.seeds]
+
+
+def test_result_is_deterministic(body):
+    t = family(body)["shorten 35 deg"]
+    a, b = route_muscles(body, t), route_muscles(body, t)
+    assert [m.nodes for m in a] == [m.nodes for m in b] and a.seeds == b.seeds
+
+
+# ------------------------------------------------------------------------------------------ routing: knobs
+def _mean_stat(res, attr):
+    return float(np.mean([getattr(s, attr) for s in res.stats]))
+
+
+def test_raising_K_a_lowers_nonuniformity_and_K_b_lowers_turning(body):
+    nu_lo, nu_hi, tu_lo, tu_hi, len_lo, len_hi = [], [], [], [], [], []
+    for name, t in family(body).items():
+        lax_a = route_muscles(body, t, K_a=1.0, min_length=0.0)
+        strict_a = route_muscles(body, t, K_a=100.0, min_length=0.0)
+        lax_b = route_muscles(body, t, K_b=1.0, min_length=0.0)
+        strict_b = route_muscles(body, t, K_b=16.0, min_length=0.0)
+        assert min(len(lax_a), len(strict_a), len(lax_b), len(strict_b)) >= 1, name
+        nu_lo.append(_mean_stat(lax_a, "nonuniformity"))
+        nu_hi.append(_mean_stat(strict_a, "nonuniformity"))
+        tu_lo.append(_mean_stat(lax_b, "turning_angle"))
+        tu_hi.append(_mean_stat(strict_b, "turning_angle"))
+        len_lo.append(_mean_stat(lax_a, "rest_length"))
+        len_hi.append(_mean_stat(strict_a, "rest_length"))
+        assert nu_hi[-1] <= nu_lo[-1] * (1 + 1e-9), name
+        assert tu_hi[-1] <= tu_lo[-1] + 1e-9, name
+    assert np.mean(nu_hi) < 0.5 * np.mean(nu_lo)
+    assert np.mean(tu_hi) < 0.5 * np.mean(tu_lo)
+    # the paper's trade-off: a small K_a gives fewer, longer muscles
+    assert np.mean(len_lo) > 1.5 * np.mean(len_hi)
+
+
+def test_K_a_caps_the_relative_variance_of_grown_muscles(body):
+    for name, t in family(body).items():
+        wmax = max(edge_weight_map(body, t).values())
+        for K_a in (5.0, 50.0):
+            res = route_muscles(body, t, K_a=K_a, K_b=0.0, n_seeds=1, min_length=0.0)
+            assert len(res) == 1
+            assert res.stats[0].nonuniformity / wmax ** 2 <= 1.0 / K_a + 1e-6, name
+
+
+def test_seeds_are_the_most_contracted_edges(body):
+    t = family(body)["bend, curvature x1..4"]
+    wmap = edge_weight_map(body, t)
+    for n in (1, 5, 10):
+        res = route_muscles(body, t, n_seeds=n)
+        assert len(res.seeds) == n
+        ws = [wmap[e] for e in res.seeds]
+        others = [w for e, w in wmap.items() if e not in set(res.seeds)]
+        assert min(ws) >= max(others) - 1e-9
+        assert ws == sorted(ws, reverse=True)
+
+
+def test_max_muscles_keeps_the_strongest_and_min_length_drops_short_ones(body):
+    t = family(body)["shorten 50 deg"]
+    wmap = edge_weight_map(body, t)
+    full = route_muscles(body, t, n_seeds=10, min_length=0.0)
+    assert len(full) >= 4
+    strength = [float(np.sum(path_weights(m, wmap) * np.diff(np.cumsum(np.r_[0, np.linalg.norm(
+        np.diff(body.points[list(m.nodes)], axis=0), axis=1)])))) for m in full]
+    assert strength == sorted(strength, reverse=True)
+    top2 = route_muscles(body, t, n_seeds=10, min_length=0.0, max_muscles=2)
+    assert [m.nodes for m in top2] == [m.nodes for m in full][:2]
+    cut = float(np.median([s.rest_length for s in full.stats]))
+    long_only = route_muscles(body, t, n_seeds=10, min_length=cut)
+    assert all(s.rest_length >= cut for s in long_only.stats)
+    assert {m.nodes for m in long_only} == {m.nodes for m, s in zip(full, full.stats) if s.rest_length >= cut}
+    with pytest.warns(RoutingWarning, match="shorter than min_length"):
+        assert len(route_muscles(body, t, min_length=100.0)) == 0
+
+
+def test_stats_agree_with_the_muscles(body):
+    t = family(body)["shorten 20 deg"]
+    res = route_muscles(body, t)
+    wmap = edge_weight_map(body, t)
+    assert isinstance(res, RoutingResult) and all(isinstance(s, MuscleStats) for s in res.stats)
+    assert len(res.stats) == len(res) and res[0] is res.muscles[0]
+    for m, s in zip(res, res.stats):
+        assert isinstance(m, Muscle) and m.name == s.name
+        w = path_weights(m, wmap)
+        assert s.n_edges == len(w)
+        assert s.mean_weight == pytest.approx(w.mean(), rel=1e-12)
+        assert s.nonuniformity == pytest.approx(w.var(), rel=1e-9, abs=1e-18)
+        assert s.rest_length == pytest.approx(m.rest_length(body), rel=1e-12)
+        assert s.target_length == pytest.approx(m.length(t), rel=1e-12)
+        assert s.contraction == pytest.approx(1 - s.target_length / s.rest_length, rel=1e-12)
+        assert s.turning_angle == pytest.approx(m.turning_angle(body.points), abs=1e-12)
+        assert X_first_is_smaller(body, m)
+    lines = res.table().splitlines()
+    assert len(lines) == len(res) + 2 and lines[2].startswith(res.stats[0].name)
+
+
+def X_first_is_smaller(mesh, m) -> bool:
+    return tuple(mesh.points[m.nodes[0]]) < tuple(mesh.points[m.nodes[-1]])
+
+
+# ------------------------------------------------------------------------------------------ bad input
+def test_target_of_the_wrong_shape_or_type(strip):
+    X = strip.points
+    with pytest.raises(ValueError, match=r"target must have shape \(85, 2\), got \(84, 2\)"):
+        route_muscles(strip, X[:-1])
+    with pytest.raises(ValueError, match=r"target must have shape"):
+        contraction_graph(strip, X.T)
+    with pytest.raises(TypeError, match="target must be an array of numbers"):
+        route_muscles(strip, [["a", "b"]] * strip.n_nodes)
+    with pytest.raises(TypeError, match="mesh must be a mdsr_opt.Mesh"):
+        route_muscles(X, X)
+
+
+def test_target_with_nan(strip):
+    t = strip.points * [0.8, 1.0]
+    t[7, 1] = np.nan
+    with pytest.raises(ValueError, match=r"target contains NaN or inf \(first at index \(7, 1\)\)"):
+        route_muscles(strip, t)
+
+
+def test_target_with_inverted_elements(strip):
+    t = strip.points * [0.8, 1.0]
+    t[20] = t[20] + [0.0, -0.6]  # pull an interior node through its lower neighbours
+    J = strip.jacobians(t)
+    assert (J <= 0).any()
+    with pytest.raises(ValueError, match=r"target has \d+ inverted triangle\(s\) \(det F <= 0\), first"):
+        route_muscles(strip, t)
+    with pytest.raises(ValueError, match="inverts every triangle"):
+        contraction_graph(strip, strip.points * [-1.0, 1.0])  # a mirror image
+
+
+def test_rest_shape_gives_an_empty_result_with_a_warning(strip):
+    X = strip.points
+    for t in (X, X @ rotation(0.8).T + [2.0, 1.0]):
+        with pytest.warns(RoutingWarning, match="target equals the rest shape"):
+            res = route_muscles(strip, t)
+        assert len(res) == 0 and res.seeds == () and res.graph.number_of_edges() == len(strip.edges)
+
+
+@pytest.mark.parametrize("kw, exc, msg", [
+    ({"K_a": -1.0}, ValueError, "K_a must be >= 0"),
+    ({"K_b": float("nan")}, ValueError, "K_b must be finite"),
+    ({"K_h": "1"}, TypeError, "K_h must be a real number"),
+    ({"n_seeds": 0}, ValueError, "n_seeds must be >= 1"),
+    ({"n_seeds": 2.5}, TypeError, "n_seeds must be an integer"),
+    ({"max_muscles": 0}, ValueError, "max_muscles must be >= 1"),
+    ({"min_length": -0.1}, ValueError, "min_length must be >= 0"),
+    ({"min_contraction": 1.0}, ValueError, "min_contraction must be < 1"),
+])
+def test_bad_knobs(strip, kw, exc, msg):
+    with pytest.raises(exc, match=msg):
+        route_muscles(strip, strip.points * [0.8, 1.0], **kw)
+
+
+# ------------------------------------------------------------------------------------------ figures
+def test_figures(strip, tmp_path):
+    from matplotlib.collections import LineCollection
+
+    from mdsr_opt.plot import plot_contraction_graph, plot_routing, save_figure
+
+    t = arc(strip.points, 3.0, 0.5)
+    res = route_muscles(strip, t)
+    fig = plot_contraction_graph(strip, t, res.graph, seeds=res.seeds)
+    ax = fig.axes[0]
+    lcs = [c for c in ax.collections if isinstance(c, LineCollection)]
+    colored = [c for c in lcs if c.get_array() is not None]
+    assert len(colored) == 1 and len(colored[0].get_segments()) == len(strip.edges)
+    _, _, w = edge_weights(strip, t)
+    assert np.allclose(colored[0].get_array(), w)
+    assert colored[0].get_clim() == pytest.approx((-np.abs(w).max(), np.abs(w).max()))
+    assert save_figure(fig, tmp_path / "graph.png") and (tmp_path / "graph.png").stat().st_size > 1000
+
+    fig = plot_routing(strip, t, res)
+    assert len(fig.axes) == 2
+    for ax, pos in zip(fig.axes, (strip.points, t)):
+        line = [ln for ln in ax.get_lines() if ln.get_label() == "muscle 0"][0]
+        assert np.allclose(line.get_xydata(), pos[list(res[0].nodes)])
+    save_figure(fig, tmp_path / "routing.png")
+    assert (tmp_path / "routing.png").stat().st_size > 1000
