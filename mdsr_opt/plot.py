@@ -185,19 +185,23 @@ def plot_routing(mesh, target, result, axes=None, title=None):
     return fig
 
 
-def plot_routing_timings(n_nodes, seconds, budget=None, ax=None, labels=None):
-    """Routing time against mesh size (log-log), one line per series, with an optional budget line.
+def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
+    """Routing time against mesh size (log-log), one line per series, with an optional budget.
 
-    ``seconds`` is a dict ``{series name: times}`` aligned with ``n_nodes``.
+    ``series`` maps a name to ``(nodes, seconds)``; names ending in ``"cold"`` are drawn dashed.
+    ``budget`` (seconds) and ``budget_nodes`` draw the budget as a horizontal and a vertical line.
     """
-    fig, ax = _axes(ax)
-    for name, t in seconds.items():
-        ax.loglog(n_nodes, t, "o-", label=name)
+    fig, ax = _axes(ax, figsize=(7, 4.5))
+    for name, (nodes, t) in series.items():
+        ax.loglog(nodes, t, "o--" if name.endswith("cold") else "s-", label=name,
+                  alpha=0.6 if name.endswith("cold") else 1.0)
     if budget is not None:
         ax.axhline(budget, color="r", ls="--", lw=1, label=f"budget {budget:g} s")
+    if budget_nodes is not None:
+        ax.axvline(budget_nodes, color="0.5", ls=":", lw=1)
     ax.set_xlabel("mesh nodes")
     ax.set_ylabel("seconds")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, ncol=2)
     ax.set_title("muscle routing time")
     return fig

@@ -124,7 +124,10 @@ def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray,
     0.5
     """
     mesh = _check_mesh(mesh)
-    x = _check_target(mesh, target)
+    return _weights(mesh, _check_target(mesh, target))
+
+
+def _weights(mesh: Mesh, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     e = mesh.edges
     l0 = mesh.edge_lengths
     l = np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)
@@ -165,8 +168,12 @@ def contraction_graph(mesh: Mesh, target: ArrayLike) -> nx.Graph:
     >>> round(G.edges[0, 1]["weight"], 6)
     0.1
     """
-    l0, l, w = edge_weights(mesh, target)
-    x = np.asarray(target, dtype=float)
+    mesh = _check_mesh(mesh)
+    x = _check_target(mesh, target)
+    return _graph(mesh, x, *_weights(mesh, x))
+
+
+def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarray) -> nx.Graph:
     G = nx.Graph(w_max=float(w.max()), w_min=float(w.min()))
     G.add_nodes_from((i, {"rest": (float(p[0]), float(p[1])), "target": (float(q[0]), float(q[1]))})
                      for i, (p, q) in enumerate(zip(mesh.points, x)))
@@ -562,8 +569,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: floa
                   min_length=min_length, min_contraction=min_contraction)
 
     x = _check_target(mesh, target)
-    graph = contraction_graph(mesh, x)
-    l0, l, w = edge_weights(mesh, x)
+    l0, l, w = _weights(mesh, x)
+    graph = _graph(mesh, x, l0, l, w)
 
     def empty(msg: str) -> RoutingResult:
         warnings.warn(msg, RoutingWarning, stacklevel=3)
