@@ -29,10 +29,10 @@ def bend(X: np.ndarray, kappa, length: float, y_axis: float) -> np.ndarray:
 
 
 def arc(X: np.ndarray, radius: float, y_axis: float) -> np.ndarray:
-    """Bend a strip onto a circular arc (constant curvature 1/radius)."""
+    """Bend a strip onto a circular arc (curvature 1/radius); the left end (x = 0) stays in place."""
     phi = X[:, 0] / radius
     r = radius - (X[:, 1] - y_axis)
-    return np.column_stack([r * np.sin(phi), radius - r * np.cos(phi)])
+    return np.column_stack([r * np.sin(phi), y_axis + radius - r * np.cos(phi)])
 
 
 def shorten(X: np.ndarray, angle: float, amount: float = 0.2) -> np.ndarray:
