@@ -1,0 +1,984 @@
+"""Driving-quantity design: the contractions that make the muscle-driven body match a target shape.
+
+Given muscles ``C`` on a mesh and a target configuration ``y`` (typically an external-driving equilibrium),
+find contractions ``a`` (one per muscle, ``0 <= a <= a_max``) minimising the difference index
+
+``D(a) = min_{R, t} sum_i e_i |R x*_i(a) + t - y_i|^2``,
+
+where ``x*(a)`` is the internal-driving equilibrium (a minimiser of ``E_e(x) + E_d(x, a)`` with the rigid
+gauge pinned) and ``e_i`` are node weights (1 on the boundary, 0.3-0.7 inside). The difference is reported
+as a length, ``sqrt(D / sum e)``.
+
+Three methods solve it:
+
+``"flattened"`` (the default, the product's defining choice)
+    One NLP in ``(x, a, theta, t)``: minimise ``D`` subject to stationarity of the internal-driving energy
+    on the non-gauge coordinates (the lower level has no inequalities, so stationarity is its whole KKT
+    system), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
+    Hessian of the Lagrangian, warm-started from a forward solve at the initial contractions. Objective and
+    constraints are scaled (see *Scaling* below).
+``"nested"``
+    The reduced-space rival: an outer L-BFGS-B over ``a``; each evaluation solves the equilibrium (warm
+    started from the previous one) and the exact gradient comes from the implicit-function theorem by one
+    adjoint solve, ``H lambda = dD/dx`` on the free coordinates, ``dD/da = -lambda^T dg/da``.
+``"derivative-free"``
+    The baseline a user without this toolkit would write: Nelder-Mead (or Powell) over ``a`` with bounds,
+    each evaluation a warm-started forward solve.
+
+Every design is verified (:func:`verify_design`): the forward internal-driving problem is solved again from
+rest at the found contractions and its state compared with the design's; the design's state must be a strict
+minimum of the energy (the free-coordinate Hessian positive definite, checked by the signs of the pivots of
+a symmetric factorisation and the smallest eigenvalue). A design whose optimiser failed, whose verification
+gap exceeds the tolerance or whose state is a saddle is reported with ``success=False``; a target that no
+contractions reach is a success with a positive difference.
+
+Scaling
+-------
+The flattened NLP divides the objective by ``sum(e) * h**2`` (mean squared distance in mean rest edge
+lengths ``h``) and the stationarity constraints by ``E * t * h`` (strain-like). Normalising the objective
+by the body's size instead (``scaling="size"``) leaves the objective's Hessian seven orders of magnitude
+below the constraint Jacobian on a 1k-node mesh, and IPOPT then takes about ten times more iterations.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+>>> from mdsr_opt.design import design_contractions
+>>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+>>> muscle = Muscle(range(1, 16))                       # along the bottom edge
+>>> target = solve_internal(mesh, NeoHookean(1.0, 0.3), [muscle], [0.2]).x
+>>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [muscle], target)
+>>> res.success, round(float(res.contractions[0]), 6)
+(True, 0.2)
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Sequence
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numpy.typing import ArrayLike
+
+from ._checks import as_float_array, positive_float
+from .align import align, node_weights
+from .equilibrium import _check_mesh_material, _continuation, _gauge, solve_internal
+from .mesh import Mesh
+from .model import get_model, spring_parameters
+from .muscles import Muscle, check_muscles
+
+__all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
+           "verify_design", "check_minimum", "design"]
+
+METHODS = ("flattened", "nested", "derivative-free")
+
+
+# ---------------------------------------------------------------------------------------------- results
+@dataclass
+class Verification:
+    """The independent check of a design.
+
+    Attributes
+    ----------
+    passed : bool
+        The forward re-solve succeeded, its gap to the design's state is within ``gap_tol`` and the design's
+        state is a strict minimum.
+    gap : float
+        Largest node distance between the design's state and the forward re-solve from rest at the same
+        contractions, after rigidly aligning the two (a length).
+    gap_tol : float
+        The tolerance on ``gap`` (a length: ``gap_rtol * mesh.size``).
+    forward_success, forward_status : bool, str
+        Outcome of the forward re-solve.
+    forward_difference : float
+        Difference index of the forward re-solve to the target.
+    residual : float
+        Max-norm of the energy gradient on the free coordinates at the design's state, relative to
+        ``E t size``.
+    positive_definite : bool
+        The free-coordinate Hessian at the design's state is positive definite (every pivot of its
+        symmetric factorisation is positive).
+    min_eigenvalue : float
+        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle).
+    message : str
+        Why the check failed (empty when it passed).
+    time : float
+        Seconds spent verifying.
+    """
+
+    passed: bool
+    gap: float
+    gap_tol: float
+    forward_success: bool
+    forward_status: str
+    forward_difference: float
+    residual: float
+    positive_definite: bool
+    min_eigenvalue: float
+    message: str = ""
+    time: float = 0.0
+
+
+@dataclass
+class DesignResult:
+    """Contractions found for a target, the driven state and how they were found.
+
+    Attributes
+    ----------
+    method : str
+        ``"flattened"``, ``"nested"`` or ``"derivative-free"``.
+    contractions : (m,) ndarray
+        One contraction per muscle, in ``[0, a_max]``.
+    x : (n, 2) ndarray
+        The driven equilibrium at ``contractions``, rigidly aligned to the rest shape (as
+        :func:`~mdsr_opt.solve_internal` returns it).
+    rotation, translation : (2, 2) and (2,) ndarrays
+        The best rigid motion taking ``x`` onto the target: ``x @ rotation.T + translation``.
+    difference : float
+        Weighted RMS node distance to the target after that motion (a length).
+    success : bool
+        The optimiser converged and the verification passed.
+    status : str
+        The optimiser's status, with the reason when the design was rejected.
+    iterations : int
+        Outer iterations (IPOPT iterations for ``"flattened"``).
+    n_forward : int
+        Forward (equilibrium) solves made, warm start included.
+    inner_iterations : int
+        Solver iterations summed over those forward solves.
+    build_time, solve_time, time : float
+        Seconds building models and solvers (0 when cached), optimising (warm start included), and their sum.
+    initial_contractions : (m,) ndarray
+        The starting point.
+    initial_difference : float
+        Difference of the warm-start state.
+    a_max : float
+        Upper bound on the contractions.
+    muscle_model : str
+        ``"springs"`` or ``"cable"``.
+    stiffness : float
+        Spring stiffness relative to ``E t``.
+    verification : Verification or None
+        The independent check (None when ``verify=False``).
+    history : list of (float, float)
+        ``(seconds since start, difference)`` after each forward solve of the outer loop (nested,
+        derivative-free) or at start and end (flattened, whose iterates are not equilibria).
+    """
+
+    method: str
+    contractions: np.ndarray
+    x: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    difference: float
+    success: bool
+    status: str
+    iterations: int
+    n_forward: int
+    inner_iterations: int
+    build_time: float
+    solve_time: float
+    time: float
+    initial_contractions: np.ndarray
+    initial_difference: float
+    a_max: float
+    muscle_model: str = "springs"
+    stiffness: float = 10.0
+    verification: Verification | None = None
+    history: list = field(default_factory=list)
+
+    @property
+    def x_aligned(self) -> np.ndarray:
+        """The driven state moved onto the target: ``x @ rotation.T + translation``."""
+        return self.x @ self.rotation.T + self.translation
+
+    @property
+    def angle(self) -> float:
+        """Rotation angle (radians) of the motion onto the target."""
+        return float(math.atan2(self.rotation[1, 0], self.rotation[0, 0]))
+
+    def summary(self) -> dict:
+        """Scalars of the result (no arrays except the contractions), for tables and logs."""
+        v = self.verification
+        return {"method": self.method, "success": self.success, "status": self.status,
+                "contractions": [float(c) for c in self.contractions], "difference": self.difference,
+                "initial_difference": self.initial_difference, "iterations": self.iterations,
+                "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
+                "build_time": self.build_time, "solve_time": self.solve_time, "time": self.time,
+                "verified": None if v is None else v.passed, "gap": None if v is None else v.gap,
+                "min_eigenvalue": None if v is None else v.min_eigenvalue}
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict (arrays as nested lists); :meth:`from_dict` inverts it."""
+        d = {}
+        for k, v in self.__dict__.items():
+            if isinstance(v, np.ndarray):
+                d[k] = v.tolist()
+            elif isinstance(v, Verification):
+                d[k] = asdict(v)
+            elif k == "history":
+                d[k] = [[float(a), float(b)] for a, b in v]
+            else:
+                d[k] = v
+        return _finite_or_none(d)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "DesignResult":
+        d = {k: (float("nan") if v is None and k in ("difference", "initial_difference") else v)
+             for k, v in d.items()}
+        for k in ("contractions", "x", "rotation", "translation", "initial_contractions"):
+            d[k] = np.asarray(d[k], dtype=float)
+        if d.get("verification") is not None:
+            d["verification"] = Verification(**d["verification"])
+        d["history"] = [tuple(h) for h in d.get("history", [])]
+        return cls(**d)
+
+
+def _finite_or_none(o):
+    """Replace NaN/inf floats by None (JSON has no NaN), recursively."""
+    if isinstance(o, dict):
+        return {k: _finite_or_none(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite_or_none(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return o
+
+
+# ---------------------------------------------------------------------------------------------- the problem
+class _Problem:
+    """Everything the three methods share: model, affine parameters ``p(a) = p0 + B a``, gauge, weights, scales."""
+
+    def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max):
+        self.mesh, self.material, self.muscles = mesh, material, muscles
+        self.y = target
+        self.w = weights
+        self.muscle_model = muscle_model
+        self.stiffness = stiffness
+        self.a_max = a_max
+        self.m = len(muscles)
+        n = mesh.n_nodes
+        t0 = time.perf_counter()
+        if muscle_model == "springs":
+            self.model = get_model(mesh, material)
+        else:
+            self.model = get_model(mesh, material, cables=[mu.nodes for mu in muscles])
+        self.build_time = time.perf_counter() - t0
+        k_abs = stiffness * material.E * material.thickness
+        L0 = np.array([mu.rest_length(mesh) for mu in muscles])
+        nseg = np.array([len(mu.nodes) - 1 for mu in muscles], dtype=float)
+
+        def params(a):  # the same parameters solve_internal builds
+            if muscle_model == "springs":
+                return self.model.params(material, springs=spring_parameters(mesh, muscles, a, k_abs))
+            return self.model.params(material, cables=(k_abs / nseg, (1.0 - a) * L0))
+
+        self.p0 = params(np.zeros(self.m))
+        # p is affine in a (r_e = 1 - stiffness-weighted mean contraction; R_c = (1 - a_c) L0_c)
+        self.B = np.column_stack([params(np.eye(self.m)[c]) - self.p0 for c in range(self.m)])
+        self.fixed = np.zeros(2 * n, dtype=bool)
+        self.gauge = list(_gauge(mesh))
+        self.fixed[self.gauge] = True
+        self.free = ~self.fixed
+        self.X = mesh.points.reshape(-1).copy()
+        self.h = float(mesh.edge_lengths.mean())
+        self.Et = material.E * material.thickness
+        self.W = float(weights.sum())
+
+    def params(self, a) -> np.ndarray:
+        return self.p0 + self.B @ np.asarray(a, dtype=float)
+
+    def objective(self, x2):
+        """Scaled objective ``D / (sum e h^2)`` of a state (n, 2), its alignment, and ``dJ/dx`` (2n,)."""
+        al = align(x2, self.y, self.w)
+        r = x2 @ al.R.T + al.t - self.y
+        J = float((self.w * (r ** 2).sum(1)).sum()) / (self.W * self.h ** 2)
+        dJ = (2.0 / (self.W * self.h ** 2)) * (self.w[:, None] * (r @ al.R))  # envelope theorem: R, t optimal
+        return J, al, dJ.reshape(-1)
+
+    def dg_da(self, xflat) -> np.ndarray:
+        """``dg/da`` (2n, m): exact columns since the gradient is affine in ``p`` and ``p`` is affine in ``a``."""
+        g0 = self.model.gradient(xflat, self.p0)
+        return np.column_stack([self.model.gradient(xflat, self.p0 + self.B[:, c]) - g0 for c in range(self.m)])
+
+
+class _Forward:
+    """Warm-started forward solves: continuation in ``a`` from the last accepted state."""
+
+    def __init__(self, prob: _Problem, tol: float, max_iter: int):
+        self.prob = prob
+        self.tol, self.max_iter = tol, max_iter
+        self.a = np.zeros(prob.m)
+        self.x = prob.X.copy()  # the rest state is the equilibrium at a = 0
+        self.n_solves = 0
+        self.iterations = 0
+        self.build_time = 0.0
+
+    def solve(self, a) -> tuple[np.ndarray, bool, str]:
+        a = np.asarray(a, dtype=float).copy()
+        prob = self.prob
+        a_prev, x_prev = self.a.copy(), self.x
+        vals = prob.X[prob.fixed]
+        x, status, ok, iters, _steps, _ts, tb = _continuation(
+            prob.mesh, prob.model, lambda s: prob.params(a_prev + s * (a - a_prev)), prob.fixed,
+            lambda s: vals, x_prev, "ipopt", self.tol, self.max_iter, None, 1.0 / 256, False)
+        if self.n_solves == 0:  # the model's solver cache reports its build time on every reuse
+            self.build_time += tb
+        self.n_solves += 1
+        self.iterations += iters
+        if ok:
+            self.a, self.x = a, x
+        return x, ok, status
+
+
+# ---------------------------------------------------------------------------------------------- input checks
+def _check_inputs(mesh, material, muscles, target, a_max, weights, interior_weight, muscle_model, stiffness,
+                  initial):
+    _check_mesh_material(mesh, material)
+    if isinstance(muscles, Muscle):
+        muscles = [muscles]
+    if muscles is None or (hasattr(muscles, "__len__") and len(muscles) == 0):
+        raise ValueError("design needs at least one muscle: the muscle list is empty")
+    mus = check_muscles(mesh, muscles)
+    y = as_float_array(target, "target")
+    if y.shape != (mesh.n_nodes, 2):
+        raise ValueError(f"target must have shape ({mesh.n_nodes}, 2) (one position per mesh node), got {y.shape}")
+    if isinstance(a_max, bool) or not isinstance(a_max, numbers.Real):
+        raise TypeError(f"a_max must be a real number, got {type(a_max).__name__}")
+    a_max = float(a_max)
+    if not (0.0 < a_max < 1.0):
+        raise ValueError(f"a_max must lie in (0, 1) (a fraction of the rest length), got {a_max}")
+    if muscle_model not in ("springs", "cable"):
+        raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
+    stiffness = positive_float(stiffness, "stiffness")
+    if weights is None:
+        w = node_weights(mesh, interior_weight)
+    else:
+        w = as_float_array(weights, "weights", shape=(mesh.n_nodes,))
+        if (w < 0).any() or w.sum() <= 0:
+            raise ValueError("weights must be non-negative with a positive sum")
+    a0 = None
+    if initial is not None:
+        a0 = as_float_array(np.atleast_1d(initial), "initial", shape=(len(mus),))
+        if (a0 < 0).any() or (a0 > a_max).any():
+            raise ValueError(f"initial contractions must lie in [0, a_max = {a_max:g}], got {a0.tolist()}")
+    return mus, y, a_max, w, stiffness, a0
+
+
+def _initial_guess(mesh, muscles, y, a_max) -> np.ndarray:
+    """Each muscle's geometric contraction in the target (``1 - L_target / L_rest``), clipped into the bounds."""
+    a = np.array([1.0 - mu.length(y) / mu.rest_length(mesh) for mu in muscles])
+    return np.clip(a, 0.0, 0.9 * a_max)
+
+
+# ---------------------------------------------------------------------------------------------- flattened NLP
+def _flattened_solver(prob: _Problem, hessian: str, opts_key: tuple, ipopt_opts: dict):
+    """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode and options.
+
+    Parameters of the NLP: target ``y`` (2n), weights (n), ``p0``, objective scale, constraint scale, so one
+    built solver serves any target, weights, material numbers and stiffness.
+    """
+    mesh, model = prob.mesh, prob.model
+    key = ("design-flattened", tuple(mu.nodes for mu in prob.muscles), prob.muscle_model, prob.material.kind,
+           hessian, opts_key)
+    cache = mesh.__dict__.setdefault("_design_cache", {})
+    if key in cache:
+        return cache[key], 0.0
+    t0 = time.perf_counter()
+    n, m = mesh.n_nodes, prob.m
+    x = ca.SX.sym("x", 2 * n)
+    a = ca.SX.sym("a", m)
+    th = ca.SX.sym("theta")
+    tt = ca.SX.sym("t", 2)
+    y = ca.SX.sym("y", 2 * n)
+    w = ca.SX.sym("w", n)
+    p0 = ca.SX.sym("p0", model.n_params)
+    so = ca.SX.sym("obj_scale")
+    sc = ca.SX.sym("con_scale")
+    B = sp.csc_matrix(prob.B)
+    Bdm = ca.DM(ca.Sparsity(B.shape[0], B.shape[1], B.indptr.tolist(), B.indices.tolist()), B.data.tolist())
+    g = model.grad_fn(x, p0 + ca.mtimes(Bdm, a))[1]
+    free = np.nonzero(prob.free)[0].tolist()
+    G = sc * g[free]
+    Xm = ca.reshape(x, 2, n)
+    Ym = ca.reshape(y, 2, n)
+    c, s = ca.cos(th), ca.sin(th)
+    rx = c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :]
+    ry = s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :]
+    f = so * ca.dot(w, (rx ** 2 + ry ** 2).T)
+    z = ca.vertcat(x, a, th, tt)
+    par = ca.vertcat(y, w, p0, so, sc)
+    opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
+    opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
+    if hessian == "gauss-newton":
+        # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
+        lam_f = ca.SX.sym("lam_f")
+        lam_g = ca.SX.sym("lam_g", len(free))
+        r = ca.vertcat(ca.vec(rx * ca.sqrt(w).T), ca.vec(ry * ca.sqrt(w).T))
+        Jr = ca.jacobian(r, z)
+        Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
+        opts["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
+                                       ["x", "p", "lam_f", "lam_g"], ["hess"])
+    solver = ca.nlpsol("design_flattened", "ipopt", {"x": z, "p": par, "f": f, "g": G}, opts)
+    bt = time.perf_counter() - t0
+    cache[key] = solver
+    return solver, bt
+
+
+def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock):
+    mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
+    ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone"}
+    ipopt_opts.update(ipopt_options or {})
+    solver, bt = _flattened_solver(prob, hessian, tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())),
+                                   ipopt_opts)
+    t_start = time.perf_counter()
+    if warm_start:
+        x0, ok, status = fwd.solve(a0)
+        if not ok:
+            return None, f"warm start failed: {status}", 0, bt
+    else:
+        x0 = prob.X.copy()
+    J0, al0, _ = prob.objective(x0.reshape(-1, 2))
+    history = [(clock(), math.sqrt(J0) * prob.h)]
+    if scaling == "auto":
+        so, sc = 1.0 / (prob.W * prob.h ** 2), 1.0 / (prob.Et * prob.h)
+    else:  # "size": normalised by the body's size (the badly scaled variant, kept for the comparison)
+        so, sc = 1.0 / (prob.W * mesh.size ** 2), 1.0 / (prob.Et * mesh.size)
+    z0 = np.concatenate([x0, a0, [al0.angle], al0.t])
+    lbz = np.full(len(z0), -np.inf)
+    ubz = np.full(len(z0), np.inf)
+    lbz[prob.gauge] = prob.X[prob.gauge]
+    ubz[prob.gauge] = prob.X[prob.gauge]
+    lbz[2 * n:2 * n + m] = 0.0
+    ubz[2 * n:2 * n + m] = prob.a_max
+    par = np.concatenate([prob.y.reshape(-1), prob.w, prob.p0, [so, sc]])
+    sol = solver(x0=z0, p=par, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
+    st = solver.stats()
+    z = np.asarray(sol["x"]).ravel()
+    out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": bool(st.get("success")),
+           "status": str(st.get("return_status", "unknown")), "iterations": int(st.get("iter_count", 0)),
+           "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
+    return out, out["status"], out["iterations"], bt
+
+
+# ---------------------------------------------------------------------------------------------- outer loops
+class _Outer:
+    """Objective of the reduced problem ``a -> J(x*(a))`` with a record of every evaluation."""
+
+    def __init__(self, prob: _Problem, fwd: _Forward, clock: Callable[[], float], penalty: float = 1e6):
+        self.prob, self.fwd, self.clock = prob, fwd, clock
+        self.penalty = penalty
+        self.history: list[tuple[float, float]] = []
+        self.best: tuple[float, np.ndarray, np.ndarray] | None = None
+        self.failures: list[str] = []
+        self.n_eval = 0
+
+    def _eval(self, a):
+        a = np.clip(np.asarray(a, dtype=float), 0.0, self.prob.a_max)
+        x, ok, status = self.fwd.solve(a)
+        self.n_eval += 1
+        if not ok:
+            self.failures.append(status)
+            return None, a, x, None, None
+        J, al, dJ = self.prob.objective(x.reshape(-1, 2))
+        if self.best is None or J < self.best[0]:
+            self.best = (J, a.copy(), x.copy())
+        self.history.append((self.clock(), math.sqrt(self.best[0]) * self.prob.h))
+        return J, a, x, al, dJ
+
+    def value(self, a) -> float:
+        J, *_ = self._eval(a)
+        return self.penalty if J is None else J
+
+    def value_and_grad(self, a):
+        J, a, x, _al, dJ = self._eval(a)
+        if J is None:
+            raise _ForwardFailed(self.failures[-1])
+        prob = self.prob
+        H = prob.model.hessian(x, prob.params(a))
+        free = prob.free
+        Hff = H[free][:, free].tocsc()
+        lam = spla.spsolve(Hff, dJ[free])
+        grad = -(prob.dg_da(x)[free].T @ lam)
+        return J, grad
+
+
+class _ForwardFailed(RuntimeError):
+    pass
+
+
+def _run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
+    from scipy.optimize import minimize
+
+    obj = _Outer(prob, fwd, clock)
+    opts = {"maxiter": max_iter, "ftol": tol ** 2, "gtol": tol}
+    opts.update(outer_options or {})
+    try:
+        res = minimize(obj.value_and_grad, a0, jac=True, method="L-BFGS-B",
+                       bounds=[(0.0, prob.a_max)] * prob.m, options=opts)
+    except _ForwardFailed as exc:
+        return obj, False, f"forward solve failed: {exc}", obj.n_eval
+    return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
+
+
+def _run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock):
+    from scipy.optimize import minimize
+
+    obj = _Outer(prob, fwd, clock)
+    bounds = [(0.0, prob.a_max)] * prob.m
+    if outer == "nelder-mead":
+        opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": tol ** 2, "adaptive": prob.m > 2}
+        opts.update(outer_options or {})
+        res = minimize(obj.value, a0, method="Nelder-Mead", bounds=bounds, options=opts)
+    else:
+        opts = {"maxfev": max_iter, "xtol": tol, "ftol": tol ** 2}
+        opts.update(outer_options or {})
+        res = minimize(obj.value, a0, method="Powell", bounds=bounds, options=opts)
+    ok = bool(res.success) and not obj.failures
+    status = f"{'Nelder-Mead' if outer == 'nelder-mead' else 'Powell'}: {res.message}"
+    if obj.failures:
+        status += f"; {len(obj.failures)} forward solve(s) failed ({obj.failures[-1]})"
+    return obj, ok, status, int(res.nit)
+
+
+# ---------------------------------------------------------------------------------------------- public API
+def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
+                        method: str = "flattened", a_max: float = 0.6, initial: ArrayLike | None = None,
+                        weights: ArrayLike | None = None, interior_weight: float = 0.5,
+                        muscle_model: str = "springs", stiffness: float = 10.0, tol: float | None = None,
+                        max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
+                        warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
+                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5) -> DesignResult:
+    """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    muscles : sequence of Muscle (or node lists), at least one, along mesh edges.
+    target : (n, 2) array
+        Target node positions, in any pose (only the shape matters).
+    method : {"flattened", "nested", "derivative-free"}
+        See the module docstring.
+    a_max : float, default 0.6
+        Upper bound on every contraction, in ``(0, 1)``.
+    initial : (m,) array, optional
+        Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
+        clipped to ``[0, 0.9 a_max]``.
+    weights : (n,) array, optional
+        Node weights ``e_i``; default :func:`~mdsr_opt.align.node_weights` with ``interior_weight``.
+    interior_weight : float in [0.3, 0.7], default 0.5
+    muscle_model : {"springs", "cable"}
+        As in :func:`~mdsr_opt.solve_internal`.
+    stiffness : float, default 10
+        Muscle spring stiffness relative to ``E t``.
+    tol : float, optional
+        Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
+        (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).
+    max_iter : int, optional
+        IPOPT iterations (default 500), L-BFGS-B iterations (default 500), or function evaluations
+        (derivative-free, default ``400 * m``).
+    hessian : {"exact", "gauss-newton"}
+        Flattened only: the exact Hessian of the Lagrangian, or the objective's Gauss-Newton Hessian.
+    scaling : {"auto", "size"}
+        Flattened only: objective over ``sum(e) h^2`` and constraints over ``E t h`` (``h`` the mean edge
+        length), or both normalised by the body's size (for comparison studies).
+    warm_start : bool
+        Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
+    outer : {"nelder-mead", "powell"}
+        Derivative-free only: the scipy method.
+    options : dict, optional
+        Extra options for IPOPT (flattened, without the ``ipopt.`` prefix) or scipy's ``minimize``.
+    inner_tol : float
+        IPOPT tolerance of the forward solves.
+    verify : bool
+        Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only).
+    gap_rtol : float
+        Verification tolerance on the state gap, relative to ``mesh.size``.
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        Bad input: target of the wrong shape, muscles not on the mesh, ``a_max`` outside (0, 1), an empty
+        muscle list, an unknown method.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> stretched = mesh.points * 1.1                     # muscles cannot stretch a body
+    >>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [Muscle(range(1, 16))], stretched)
+    >>> res.success, res.difference > 0.01
+    (True, True)
+    """
+    clock0 = time.perf_counter()
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    if hessian not in ("exact", "gauss-newton"):
+        raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+    if scaling not in ("auto", "size"):
+        raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
+    if outer not in ("nelder-mead", "powell"):
+        raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+    mus, y, a_max, w, stiffness, a0 = _check_inputs(mesh, material, muscles, target, a_max, weights,
+                                                    interior_weight, muscle_model, stiffness, initial)
+    m = len(mus)
+    if tol is None:
+        tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
+    tol = positive_float(tol, "tol")
+    if max_iter is None:
+        max_iter = 400 * m if method == "derivative-free" else 500
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    inner_tol = positive_float(inner_tol, "inner_tol")
+    gap_rtol = positive_float(gap_rtol, "gap_rtol")
+    if a0 is None:
+        a0 = _initial_guess(mesh, mus, y, a_max)
+
+    prob = _Problem(mesh, material, mus, y, w, muscle_model, stiffness, a_max)
+    fwd = _Forward(prob, inner_tol, 200)
+    t_solve0 = time.perf_counter()
+
+    def clock():
+        return time.perf_counter() - t_solve0
+
+    build_time = prob.build_time
+    if method == "flattened":
+        out, status, iters, bt = _run_flattened(prob, a0, fwd, tol, int(max_iter), hessian, scaling, warm_start,
+                                                options, clock)
+        build_time += bt
+        if out is None:
+            x, a, ok, hist, d0 = fwd.x, a0, False, [], float("nan")
+        else:
+            x, a, ok, hist, d0 = out["x"], out["a"], out["success"], out["history"], out["initial_difference"]
+    else:
+        if method == "nested":
+            obj, ok, status, iters = _run_nested(prob, a0, fwd, tol, int(max_iter), options, clock)
+        else:
+            obj, ok, status, iters = _run_derivative_free(prob, a0, fwd, tol, int(max_iter), outer, options, clock)
+        hist = obj.history
+        d0 = hist[0][1] if hist else float("nan")
+        if obj.best is None:
+            x, a, ok = fwd.x, a0, False
+        else:
+            _J, a, x = obj.best
+    build_time += fwd.build_time
+    x2 = x.reshape(-1, 2)
+    al_rest = align(x2, mesh.points)
+    x_rest = al_rest.apply(x2)
+    al = align(x_rest, y, w)
+    t_end = time.perf_counter()
+    if method == "flattened":
+        hist = hist + [(t_end - t_solve0, al.difference)]
+    total = t_end - clock0
+    res = DesignResult(method=method, contractions=np.asarray(a, dtype=float).copy(), x=x_rest, rotation=al.R,
+                       translation=al.t, difference=al.difference, success=bool(ok), status=status,
+                       iterations=int(iters), n_forward=fwd.n_solves, inner_iterations=fwd.iterations,
+                       build_time=build_time, solve_time=total - build_time, time=total,
+                       initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
+                       a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist))
+    if not np.all(np.isfinite(res.x)) or mesh.jacobians(res.x).min() <= 0:
+        res.success = False
+        res.status += "; rejected: the design's state inverts an element"
+    if verify:
+        v = verify_design(mesh, material, mus, res, y, weights=w, gap_rtol=gap_rtol)
+        res.verification = v
+        if res.success and not v.passed:
+            res.success = False
+            res.status += f"; rejected by verification: {v.message}"
+    return res
+
+
+def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
+                  muscle_model: str = "springs", stiffness: float = 10.0) -> tuple[bool, float, float]:
+    """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
+
+    Returns ``(positive_definite, min_eigenvalue, residual)``: whether every pivot of a symmetric
+    factorisation of the free-coordinate Hessian is positive (Sylvester's law of inertia), its smallest
+    eigenvalue relative to ``E t``, and the max-norm of the free gradient relative to ``E t size``.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, NeoHookean, Muscle, solve_internal
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    >>> res = solve_internal(mesh, NeoHookean(1.0, 0.3), [Muscle(range(0, 9))], [0.2])
+    >>> pd, lam, r = check_minimum(mesh, NeoHookean(1.0, 0.3), [Muscle(range(0, 9))], [0.2], res.x)
+    >>> pd, lam > 0, r < 1e-6
+    (True, True, True)
+    """
+    _check_mesh_material(mesh, material)
+    mus = check_muscles(mesh, muscles)
+    if not mus:
+        raise ValueError("check_minimum needs at least one muscle")
+    a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
+    x = mesh._check_state(x)
+    prob = _Problem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99)
+    return _stability(prob, a, x.reshape(-1))
+
+
+def _stability(prob: _Problem, a, xflat) -> tuple[bool, float, float]:
+    # the gauge is rigid-motion invariant, so pin the gauge coordinates where x has them
+    p = prob.params(a)
+    g = prob.model.gradient(xflat, p)
+    residual = float(np.abs(g[prob.free]).max()) / (prob.Et * prob.mesh.size)
+    H = prob.model.hessian(xflat, p)
+    Hff = H[prob.free][:, prob.free].tocsc() / prob.Et
+    pd = False
+    try:
+        lu = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+        if np.array_equal(lu.perm_r, lu.perm_c):  # symmetric pivoting: pivots carry the inertia
+            pd = bool((lu.U.diagonal() > 0).all())
+        else:  # pragma: no cover - SuperLU pivoted off the diagonal; fall back to eigenvalues alone
+            pd = None
+    except RuntimeError:  # exactly singular
+        pd = False
+    try:
+        lam = float(spla.eigsh(Hff, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0])
+    except Exception:  # pragma: no cover - shift-invert failed (singular): fall back to the smallest algebraic
+        lam = float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, maxiter=20000)[0])
+    if pd and lam <= 0:
+        pd = False
+    if not pd and lam > 0:
+        # eigenvalue nearest 0 is positive but a pivot is not: a negative eigenvalue lies further out
+        try:
+            lam = min(lam, float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, maxiter=20000)[0]))
+        except Exception:  # pragma: no cover
+            pass
+    if pd is None:  # pragma: no cover
+        pd = lam > 0
+    return bool(pd), lam, residual
+
+
+def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
+                  weights: ArrayLike | None = None, gap_rtol: float = 1e-5) -> Verification:
+    """Check a design independently of how it was found.
+
+    Solves the forward internal-driving problem from rest at ``result.contractions``
+    (:func:`~mdsr_opt.solve_internal`), measures the largest node distance between that state and
+    ``result.x`` after rigid alignment, and checks that ``result.x`` is a strict minimum of the energy
+    (:func:`check_minimum`). Passes when the forward solve succeeded, the gap is at most
+    ``gap_rtol * mesh.size`` and the Hessian is positive definite.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> mat, mus = NeoHookean(1.0, 0.3), [Muscle(range(1, 16))]
+    >>> target = solve_internal(mesh, mat, mus, [0.1]).x
+    >>> res = design_contractions(mesh, mat, mus, target, verify=False)
+    >>> verify_design(mesh, mat, mus, res, target).passed
+    True
+    """
+    t0 = time.perf_counter()
+    _check_mesh_material(mesh, material)
+    mus = check_muscles(mesh, muscles)
+    y = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
+    w = node_weights(mesh) if weights is None else as_float_array(weights, "weights", shape=(mesh.n_nodes,))
+    if not isinstance(result, DesignResult):
+        raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")
+    a = np.asarray(result.contractions, dtype=float)
+    x = mesh._check_state(result.x)
+    prob = _Problem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99)
+    gap_tol = gap_rtol * mesh.size
+    fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), model=result.muscle_model,
+                         stiffness=result.stiffness, tol=1e-10)
+    fx = fwd.x
+    al = align(x, fx)
+    gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max())
+    fdiff = align(fx, y, w).difference
+    # the design's own state, expressed in the gauge frame used by the model
+    xg = x.reshape(-1)
+    pd, lam, residual = _stability(prob, a, xg)
+    msgs = []
+    if not fwd.success:
+        msgs.append(f"forward re-solve failed ({fwd.status})")
+    if not np.isfinite(gap) or gap > gap_tol:
+        msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
+    if not pd:
+        msgs.append(f"the design's state is not a minimum of the energy (a saddle: smallest Hessian "
+                    f"eigenvalue {lam:.3g} E t)")
+    return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
+                        forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
+                        positive_definite=bool(pd), min_eigenvalue=lam, message="; ".join(msgs),
+                        time=time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------------- the pipeline
+@dataclass
+class PipelineResult:
+    """The whole design pipeline: target by external driving, routed muscles, contractions, verification.
+
+    Attributes
+    ----------
+    mesh : Mesh
+    material : NeoHookean or LinearElastic
+    anchors : (k,) int ndarray
+    drag_nodes, drag_positions : (d,) int and (d, 2) float ndarrays
+    target : (n, 2) ndarray
+        The external-driving equilibrium the design aims at.
+    external : dict
+        Summary of the external-driving solve (:meth:`EquilibriumResult.summary`).
+    muscles : tuple of Muscle
+    routing : dict or None
+        Routing knobs and per-muscle figures (None when muscles were given).
+    design : DesignResult
+    times : dict
+        Seconds per stage (``external``, ``routing``, ``design``, ``total``).
+    """
+
+    mesh: Mesh
+    material: Any
+    anchors: np.ndarray
+    drag_nodes: np.ndarray
+    drag_positions: np.ndarray
+    target: np.ndarray
+    external: dict
+    muscles: tuple
+    routing: dict | None
+    design: DesignResult
+    times: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        """The design succeeded and was verified."""
+        return bool(self.design.success)
+
+    @property
+    def contractions(self) -> np.ndarray:
+        return self.design.contractions
+
+    def save(self, directory) -> str:
+        """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
+        into ``directory`` (created if missing), each atomically. Returns the JSON path."""
+        from .io import write_json, write_mesh
+
+        directory = os.fspath(directory)
+        os.makedirs(directory, exist_ok=True)
+        write_mesh(os.path.join(directory, "target.vtu"), self.mesh, x=self.target, material=self.material)
+        write_mesh(os.path.join(directory, "driven.vtu"), self.mesh, x=self.design.x_aligned,
+                   material=self.material)
+        mat = self.material
+        data = {
+            "format": "mdsr_opt.design/1",
+            "material": {"kind": mat.kind, "E": mat.E, "nu": mat.nu, "thickness": mat.thickness},
+            "anchors": self.anchors.tolist(), "drag_nodes": self.drag_nodes.tolist(),
+            "drag_positions": self.drag_positions.tolist(), "external": self.external,
+            "muscles": [{"nodes": list(mu.nodes), "name": mu.name} for mu in self.muscles],
+            "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
+            "meshes": {"target": "target.vtu", "driven": "driven.vtu"},
+        }
+        return write_json(os.path.join(directory, "design.json"), _finite_or_none(data))
+
+    @classmethod
+    def load(cls, directory) -> "PipelineResult":
+        """Read a result written by :meth:`save`."""
+        from .io import read_json, read_mesh
+        from .material import LinearElastic, NeoHookean
+
+        directory = os.fspath(directory)
+        path = os.path.join(directory, "design.json")
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no design.json in {directory}")
+        data = read_json(path)
+        if data.get("format") != "mdsr_opt.design/1":
+            raise ValueError(f"{path} is not a mdsr_opt design result (format {data.get('format')!r})")
+        md = read_mesh(os.path.join(directory, data["meshes"]["target"]))
+        m = data["material"]
+        kinds = {NeoHookean.kind: NeoHookean, LinearElastic.kind: LinearElastic}
+        material = kinds[m["kind"]](m["E"], m["nu"], m["thickness"])
+        muscles = tuple(Muscle(tuple(mu["nodes"]), name=mu.get("name")) for mu in data["muscles"])
+        return cls(mesh=md.mesh, material=material, anchors=np.asarray(data["anchors"], dtype=np.int64),
+                   drag_nodes=np.asarray(data["drag_nodes"], dtype=np.int64),
+                   drag_positions=np.asarray(data["drag_positions"], dtype=float).reshape(-1, 2),
+                   target=md.x, external=data["external"], muscles=muscles, routing=data["routing"],
+                   design=DesignResult.from_dict(data["design"]), times=data.get("times", {}))
+
+
+def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
+           routing_options: dict | None = None, method: str = "flattened", external_options: dict | None = None,
+           **design_options) -> PipelineResult:
+    """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors, drags : as in :func:`~mdsr_opt.solve_external`; their equilibrium is the target shape.
+    muscles : optional
+        Use these muscles instead of routing them.
+    routing_options : dict, optional
+        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
+    method : str
+        The design method (see :func:`design_contractions`).
+    external_options : dict, optional
+        Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
+    **design_options
+        Passed to :func:`design_contractions` (``a_max``, ``stiffness``, ``muscle_model``...).
+
+    Returns
+    -------
+    PipelineResult
+        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(dir)``
+        writes JSON plus meshes and :meth:`PipelineResult.load` reads them back.
+
+    Raises
+    ------
+    SolverFailure
+        The external-driving solve (the target) failed.
+    ValueError
+        Routing found no muscle (e.g. a target that only stretches the body), or bad input.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, NeoHookean
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    >>> top_right = {i: (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    >>> out = design(mesh, NeoHookean(1.0, 0.3), left, top_right)
+    >>> out.success, out.design.difference < 0.05
+    (True, True)
+    """
+    from .equilibrium import _parse_drags, solve_external
+
+    t0 = time.perf_counter()
+    _check_mesh_material(mesh, material)
+    ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
+    ext.raise_on_failure()
+    t1 = time.perf_counter()
+    anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
+    didx, dpos = _parse_drags(drags, mesh.n_nodes)
+    routing = None
+    if muscles is None:
+        from .routing import route_muscles
+
+        rr = route_muscles(mesh, ext.x, **(routing_options or {}))
+        mus = tuple(rr.muscles)
+        if not mus:
+            raise ValueError("routing found no muscle for this target (muscles can only contract: does the "
+                             "target shorten any edge?); pass muscles=... or relax routing_options")
+        routing = {"params": dict(rr.params), "stats": [asdict(s) for s in rr.stats], "n_units": rr.n_units}
+    else:
+        mus = tuple(check_muscles(mesh, muscles))
+    t2 = time.perf_counter()
+    res = design_contractions(mesh, material, mus, ext.x, method=method, **design_options)
+    t3 = time.perf_counter()
+    return PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
+                          target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
+                          times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
