@@ -750,20 +750,19 @@ def _stability(prob: _Problem, a, xflat) -> tuple[bool, float, float]:
             pd = None
     except RuntimeError:  # exactly singular
         pd = False
-    try:
-        lam = float(spla.eigsh(Hff, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0])
-    except Exception:  # pragma: no cover - shift-invert failed (singular): fall back to the smallest algebraic
-        lam = float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, maxiter=20000)[0])
-    if pd and lam <= 0:
-        pd = False
-    if not pd and lam > 0:
-        # eigenvalue nearest 0 is positive but a pivot is not: a negative eigenvalue lies further out
-        try:
-            lam = min(lam, float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, maxiter=20000)[0]))
-        except Exception:  # pragma: no cover
-            pass
+    if Hff.shape[0] <= 1500:  # small: the exact smallest eigenvalue, dense
+        lam = float(np.linalg.eigvalsh(Hff.toarray())[0])
+    else:
+        try:  # positive definite: the eigenvalue nearest zero is the smallest
+            lam = float(spla.eigsh(Hff, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0])
+        except Exception:  # pragma: no cover - singular shift
+            lam = 0.0
+        if not pd or lam <= 0:
+            lam = min(lam, float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, tol=1e-8,
+                                            maxiter=50000)[0]))
     if pd is None:  # pragma: no cover
         pd = lam > 0
+    pd = bool(pd and lam > 0)
     return bool(pd), lam, residual
 
 

@@ -1,0 +1,252 @@
+"""Driving-quantity design (mdsr_opt.design): recovery, bounds, reachability, numbering, verification, I/O."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.align import align, node_weights
+from mdsr_opt.design import (METHODS, DesignResult, PipelineResult, _Forward, _Outer, _Problem, check_minimum,
+                             design, design_contractions, verify_design)
+
+MAT = NeoHookean(E=1.0, nu=0.3)
+NX, NY = 16, 4
+
+
+def _rot(theta):
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def _row(j, i0, i1):
+    """Grid-line muscle along row j of the rectangle mesh, columns i0..i1."""
+    return Muscle([j * (NX + 1) + i for i in range(i0, i1 + 1)])
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return Mesh.rectangle(4.0, 1.0, NX, NY)
+
+
+@pytest.fixture(scope="module")
+def muscles():
+    return [_row(0, 1, 8), _row(NY, 8, 15)]  # bottom-left and top-right: an S-bend
+
+
+A_TRUE = np.array([0.2, 0.12])
+THETA, SHIFT = 0.5, np.array([0.3, -1.0])
+
+
+@pytest.fixture(scope="module")
+def target(mesh, muscles):
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE)
+    assert fwd.success
+    return fwd.x @ _rot(THETA).T + SHIFT  # rotated and shifted: only the shape may matter
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_recovers_known_contractions_and_rigid_motion(mesh, muscles, target, method):
+    res = design_contractions(mesh, MAT, muscles, target, method=method)
+    assert res.success, res.status
+    assert res.method == method
+    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
+    assert res.angle == pytest.approx(THETA, abs=1e-5)
+    assert res.translation == pytest.approx(SHIFT, abs=1e-5)
+    assert res.difference < 1e-5 * mesh.size
+    assert np.abs(res.x_aligned - target).max() < 1e-4
+    assert res.verification.passed and res.verification.gap < res.verification.gap_tol
+    assert res.verification.positive_definite and res.verification.min_eigenvalue > 0
+    assert res.n_forward >= 1 and res.time >= res.solve_time >= 0
+    assert res.initial_difference > 1e3 * res.difference  # it did move from the initial guess
+
+
+def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
+    y = fwd.x @ _rot(-1.0).T + [5.0, 5.0]
+    res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False)
+    assert res.success, res.status
+    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
+    assert res.angle == pytest.approx(-1.0, abs=1e-5)
+    assert res.n_forward == 0  # no warm start: the NLP started from the rest shape
+
+
+def test_flattened_gauss_newton_hessian_recovers(mesh, muscles, target):
+    res = design_contractions(mesh, MAT, muscles, target, hessian="gauss-newton")
+    assert res.success, res.status
+    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
+
+
+def test_nested_gradient_matches_finite_differences(mesh, muscles, target):
+    prob = _Problem(mesh, MAT, muscles, target, node_weights(mesh), "springs", 10.0, 0.6)
+    outer = _Outer(prob, _Forward(prob, 1e-11, 200), clock=lambda: 0.0)
+    a = np.array([0.1, 0.15])
+    _J, g = outer.value_and_grad(a)
+    eps = 1e-5
+    fd = [(outer.value(a + eps * e) - outer.value(a - eps * e)) / (2 * eps) for e in np.eye(2)]
+    assert np.abs(g).max() > 1e-3
+    assert g == pytest.approx(fd, rel=1e-4, abs=1e-9)
+
+
+@pytest.mark.parametrize("method", ["flattened", "nested", "derivative-free"])
+def test_unreachable_target_is_success_with_positive_difference(mesh, muscles, method):
+    stretched = mesh.points * [1.15, 1.0]  # muscles only contract: no contraction stretches the body
+    res = design_contractions(mesh, MAT, muscles, stretched, method=method)
+    assert res.success, res.status
+    assert res.difference > 0.05
+    assert np.all(res.contractions >= 0) and np.all(res.contractions <= res.a_max)
+    # the reported difference is the difference of the reported state
+    w = node_weights(mesh)
+    assert res.difference == pytest.approx(align(res.x, stretched, w).difference, rel=1e-9)
+    assert res.verification.passed
+
+
+def test_bounds_hold_and_become_active(mesh, muscles):
+    fwd = solve_internal(mesh, MAT, muscles, [0.35, 0.05])
+    for method in ("flattened", "nested"):
+        res = design_contractions(mesh, MAT, muscles, fwd.x, method=method, a_max=0.25)
+        assert res.success, res.status
+        assert np.all(res.contractions >= 0.0) and np.all(res.contractions <= 0.25)
+        assert res.contractions[0] == pytest.approx(0.25, abs=1e-6)  # wants 0.35, held at the bound
+        assert res.difference > 1e-3
+
+
+def test_results_do_not_depend_on_node_numbering(mesh, muscles, target):
+    perm = np.random.default_rng(3).permutation(mesh.n_nodes)
+    mesh2 = mesh.relabel(perm)
+    muscles2 = [Muscle([int(perm[v]) for v in m.nodes]) for m in muscles]
+    target2 = np.empty_like(target)
+    target2[perm] = target
+    for method in ("flattened", "nested"):
+        r1 = design_contractions(mesh, MAT, muscles, target * [1.0, 1.05], method=method)  # not reachable exactly
+        r2 = design_contractions(mesh2, MAT, muscles2, target2 * [1.0, 1.05], method=method)
+        assert r1.success and r2.success
+        assert r2.contractions == pytest.approx(r1.contractions, abs=1e-6)
+        assert r2.difference == pytest.approx(r1.difference, rel=1e-6)
+        assert np.abs(r2.x_aligned[perm] - r1.x_aligned).max() < 1e-6
+
+
+def test_bad_input_gives_clear_errors(mesh, muscles, target):
+    with pytest.raises(ValueError, match=r"target must have shape \(85, 2\)"):
+        design_contractions(mesh, MAT, muscles, target[:-1])
+    with pytest.raises(ValueError, match=r"target must have shape \(85, 2\)"):
+        design_contractions(mesh, MAT, muscles, target.T)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        design_contractions(mesh, MAT, muscles, np.full_like(target, np.nan))
+    with pytest.raises(ValueError, match="leaves the mesh"):
+        design_contractions(mesh, MAT, [Muscle([0, 2])], target)  # skips node 1
+    with pytest.raises(ValueError, match="out of range"):
+        design_contractions(mesh, MAT, [Muscle([84, 85])], target)
+    for a_max in (1.0, 1.5, 0.0):
+        with pytest.raises(ValueError, match=r"a_max must lie in \(0, 1\)"):
+            design_contractions(mesh, MAT, muscles, target, a_max=a_max)
+    with pytest.raises(ValueError, match="muscle list is empty"):
+        design_contractions(mesh, MAT, [], target)
+    with pytest.raises(ValueError, match="method must be one of"):
+        design_contractions(mesh, MAT, muscles, target, method="newton")
+    with pytest.raises(ValueError, match=r"initial contractions must lie in \[0, a_max"):
+        design_contractions(mesh, MAT, muscles, target, initial=[0.7, 0.1])
+    with pytest.raises(ValueError, match=r"initial must have shape \(2\)"):
+        design_contractions(mesh, MAT, muscles, target, initial=[0.1])
+    with pytest.raises(TypeError, match="mesh must be a mdsr_opt.Mesh"):
+        design_contractions(mesh.points, MAT, muscles, target)
+    with pytest.raises(TypeError, match="a_max must be a real number"):
+        design_contractions(mesh, MAT, muscles, target, a_max="0.5")
+
+
+def test_check_minimum_detects_a_saddle(mesh, muscles):
+    small = Mesh.rectangle(2.0, 1.0, 4, 2)
+    mus = [Muscle([0, 1, 2])]
+    fwd = solve_internal(small, MAT, mus, [0.3])
+    pd, lam, res = check_minimum(small, MAT, mus, [0.3], fwd.x)
+    assert pd and lam > 0 and res < 1e-8
+    squeezed = small.points * [0.5, 1.0]  # compressed across: the Neo-Hookean Hessian is indefinite
+    pd, lam, _res = check_minimum(small, MAT, mus, [0.0], squeezed)
+    assert not pd
+    # the smallest eigenvalue of the free-coordinate Hessian, checked densely
+    from mdsr_opt.equilibrium import _gauge
+    from mdsr_opt.model import get_model, spring_parameters
+
+    model = get_model(small, MAT)
+    p = model.params(MAT, springs=spring_parameters(small, mus, [0.0], 10.0 * MAT.E))
+    free = np.ones(2 * small.n_nodes, dtype=bool)
+    free[list(_gauge(small))] = False
+    H = model.hessian(squeezed.reshape(-1), p).toarray()[np.ix_(free, free)]
+    assert lam == pytest.approx(np.linalg.eigvalsh(H)[0], rel=1e-8)
+    assert lam < 0
+
+
+def test_verification_rejects_wrong_states(mesh, muscles, target):
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    assert res.verification is None and res.success
+    good = verify_design(mesh, MAT, muscles, res, target)
+    assert good.passed and good.message == ""
+    shifted = DesignResult.from_dict(res.to_dict())
+    shifted.x = res.x + 1e-3 * np.sin(7 * res.x[:, ::-1])  # not the equilibrium at these contractions
+    v = verify_design(mesh, MAT, muscles, shifted, target)
+    assert not v.passed and v.gap > v.gap_tol
+    assert "exceeds" in v.message
+    saddle = DesignResult.from_dict(res.to_dict())
+    saddle.x = mesh.points * [0.5, 1.0]
+    v = verify_design(mesh, MAT, muscles, saddle, target)
+    assert not v.passed and not v.positive_definite and v.min_eigenvalue < 0
+    assert "not a minimum" in v.message
+
+
+def test_failed_optimiser_is_not_success(mesh, muscles, target):
+    res = design_contractions(mesh, MAT, muscles, target, method="derivative-free", max_iter=5)
+    assert not res.success
+    assert "Maximum number" in res.status
+    res = design_contractions(mesh, MAT, muscles, target, max_iter=1)
+    assert not res.success
+    assert "Maximum_Iterations_Exceeded" in res.status
+
+
+def test_result_round_trips_through_json(mesh, muscles, target):
+    res = design_contractions(mesh, MAT, muscles, target, method="nested")
+    res.initial_difference = float("nan")  # JSON has no NaN: written as null
+    text = json.dumps(res.to_dict(), allow_nan=False)
+    back = DesignResult.from_dict(json.loads(text))
+    assert np.array_equal(back.contractions, res.contractions)
+    assert np.array_equal(back.x, res.x) and np.array_equal(back.rotation, res.rotation)
+    assert back.verification == res.verification
+    assert math.isnan(back.initial_difference)
+    assert back.summary()["contractions"] == res.summary()["contractions"]
+
+
+def test_pipeline_designs_saves_and_reloads(tmp_path):
+    mesh = Mesh.rectangle(4.0, 1.0, NX, NY)
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    out = design(mesh, MAT, left, right, routing_options={"max_muscles": 2})
+    assert out.success, out.design.status
+    assert 1 <= len(out.muscles) <= 2 and out.routing is not None
+    assert out.design.difference < 0.05 * mesh.size
+    assert out.design.verification.passed
+    assert set(out.times) == {"external", "routing", "design", "total"}
+    path = out.save(tmp_path / "result")
+    assert (tmp_path / "result" / "target.vtu").exists() and (tmp_path / "result" / "driven.vtu").exists()
+    back = PipelineResult.load(tmp_path / "result")
+    assert np.allclose(back.target, out.target, atol=1e-12)
+    assert np.array_equal(back.contractions, out.contractions)
+    assert back.muscles == out.muscles
+    assert back.material == MAT
+    assert np.array_equal(back.anchors, np.asarray(left))
+    assert back.design.difference == out.design.difference
+    # the reloaded pieces are consistent: the stored state and alignment reproduce the stored difference
+    w = node_weights(back.mesh)
+    assert align(back.design.x, back.target, w).difference == pytest.approx(back.design.difference, rel=1e-9)
+    assert json.load(open(path))["format"] == "mdsr_opt.design/1"
+    with pytest.raises(FileNotFoundError, match="no design.json"):
+        PipelineResult.load(tmp_path)
+
+
+def test_pipeline_rejects_a_target_without_contraction():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    pull = {i: (x + 0.4, y) for i, (x, y) in enumerate(mesh.points) if x == 4.0}  # stretches only
+    with pytest.warns(UserWarning), pytest.raises(ValueError, match="routing found no muscle"):
+        design(mesh, MAT, left, pull)
