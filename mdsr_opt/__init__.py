@@ -32,6 +32,14 @@ _EXPORTS = {
     # design (issue 4)
     "align": "align",
     "difference": "align",
+    "node_weights": "align",
+    "design_contractions": "design",
+    "design_pipeline": "design",
+    "verify_design": "design",
+    "check_minimum": "design",
+    "DesignResult": "design",
+    "PipelineResult": "design",
+    "Verification": "design",
     # evaluation against photographs (issue 5)
     "contour_from_image": "evaluate",
     "compare_contours": "evaluate",

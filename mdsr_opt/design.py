@@ -77,7 +77,7 @@ from .model import get_model, spring_parameters
 from .muscles import Muscle, check_muscles
 
 __all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
-           "verify_design", "check_minimum", "design"]
+           "verify_design", "check_minimum", "design", "design_pipeline"]
 
 METHODS = ("flattened", "nested", "derivative-free")
 
@@ -981,3 +981,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     return PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
                           target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
                           times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
+
+
+#: The pipeline under a name that does not clash with the module ``mdsr_opt.design`` at package level.
+design_pipeline = design
