@@ -1,0 +1,432 @@
+"""Tests of mdsr_opt.evaluate: contour extraction, contour metrics, the synthetic camera, the batch table.
+
+Every photograph here comes from the synthetic camera (``render_photo``) or is drawn with numpy.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from mdsr_opt import Mesh, cli
+from mdsr_opt.evaluate import (
+    body_mask,
+    compare_contours,
+    contour_from_image,
+    evaluate_folder,
+    evaluate_image,
+    load_image,
+    render_photo,
+    simulated_outline,
+)
+from mdsr_opt.io import write_mesh
+
+# a T-shaped body (a trunk with a neck), as in the paper's humanoid-like test pieces
+OUTLINE = [[0, 0], [4, 0], [4, 1], [2.5, 1], [2.5, 2.2], [1.5, 2.2], [1.5, 1], [0, 1]]
+BODY_RGB = (205, 95, 35)
+
+
+def bend(X: np.ndarray, k: float) -> np.ndarray:
+    """Bend the body: node at abscissa s turns by k * s / 4 radians about a centre above it."""
+    th = k * X[:, 0] / 4.0
+    r = 4.0 / k
+    return np.column_stack([(r - X[:, 1]) * np.sin(th), r - (r - X[:, 1]) * np.cos(th)])
+
+
+@pytest.fixture(scope="module")
+def body():
+    mesh = Mesh.from_polygon(OUTLINE, max_area=0.05)
+    return mesh, bend(mesh.points, 0.8)
+
+
+@pytest.fixture(scope="module")
+def photo(body):
+    mesh, x = body
+    return render_photo(mesh, x, resolution=(500, 500), seed=0)
+
+
+@pytest.fixture(scope="module")
+def contour(photo):
+    return contour_from_image(photo.image)
+
+
+def disc_image(centres, radii, shape=(200, 300)):
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    img = np.full(shape, 210, dtype=np.uint8)
+    for (cx, cy), r in zip(centres, radii):
+        img[(xx - cx) ** 2 + (yy - cy) ** 2 <= r * r] = 60
+    return img
+
+
+def truth_mask(outline_px, shape):
+    from matplotlib.path import Path
+
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    pts = np.column_stack([xx.ravel(), yy.ravel()])
+    return Path(outline_px).contains_points(pts).reshape(shape)
+
+
+def polygon_area(p):
+    return 0.5 * abs(np.dot(p[:, 0], np.roll(p[:, 1], -1)) - np.dot(p[:, 1], np.roll(p[:, 0], -1)))
+
+
+# ------------------------------------------------------------------------------------------ self-comparison
+def test_rendered_state_against_itself_is_below_one_pixel(body, photo, contour):
+    mesh, x = body
+    outline = simulated_outline(mesh, x)
+    exact = compare_contours(photo.to_pixels(outline), contour, registration="none")
+    assert exact.mean_px < 1.0
+    assert exact.max_px < 2.5
+    assert abs(exact.bias_px) < 0.3  # the sub-pixel contour is neither inside nor outside on average
+    registered = compare_contours(outline, contour)  # rotation + unit-rectangle scaling from scratch
+    assert registered.mean_px < 1.0
+    assert registered.n_nodes == len(mesh.boundary_loops[0])
+    assert registered.mean_norm == pytest.approx(registered.mean_px / registered.size_px, rel=1e-9)
+    assert registered.ratio == pytest.approx(registered.mean_px / math.sqrt(polygon_area(contour)), rel=1e-6)
+    # the registration maps the simulation into the photo: same scale as the camera's (up to the tilt)
+    cam_scale = math.sqrt(abs(np.linalg.det(photo.world_to_pixel[:2, :2])))
+    assert registered.scale == pytest.approx(cam_scale, rel=0.02)
+
+
+def test_distances_are_point_polygon_distances(body, photo, contour):
+    mesh, x = body
+    r = compare_contours(simulated_outline(mesh, x), contour)
+    # brute force: distance of each mapped node to the polyline of the contour
+    a, b = contour, np.roll(contour, -1, axis=0)
+    for p, d in zip(r.simulated_px[::7], r.distances_px[::7]):
+        t = np.clip(((p - a) * (b - a)).sum(1) / ((b - a) ** 2).sum(1), 0, 1)
+        brute = np.sqrt(((a + t[:, None] * (b - a) - p) ** 2).sum(1)).min()
+        assert d == pytest.approx(brute, abs=1e-3)
+    assert np.allclose(r.to_pixels(simulated_outline(mesh, x)), r.simulated_px)
+
+
+@pytest.mark.parametrize("extract", [{"color": BODY_RGB}, {"method": "adaptive"}, {"subpixel": False}])
+def test_other_segmentations_also_fit(body, photo, extract):
+    mesh, x = body
+    c = contour_from_image(photo.image, **extract)
+    r = compare_contours(photo.to_pixels(simulated_outline(mesh, x)), c, registration="none")
+    assert r.mean_px < 1.0
+
+
+def test_subpixel_contour_is_closer_than_pixel_centres(body, photo, contour):
+    mesh, x = body
+    ref = photo.to_pixels(simulated_outline(mesh, x))
+    coarse = compare_contours(ref, contour_from_image(photo.image, subpixel=False), registration="none")
+    fine = compare_contours(ref, contour, registration="none")
+    assert fine.mean_px < coarse.mean_px
+    assert coarse.bias_px < -0.2  # pixel centres lie inside the body's edge
+
+
+# ------------------------------------------------------------------------------------------ invariance
+def transform_photo(image, angle_deg, scale, shift_rc):
+    """Rotate by angle_deg about the centre, scale, then shift (rows, cols); edges replicated."""
+    c = (np.array(image.shape[:2]) - 1) / 2.0
+    t = math.radians(angle_deg)
+    R = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
+    M = R.T / scale  # output -> input
+    offset = c - M @ (c + np.asarray(shift_rc, float))
+    return np.stack([ndimage.affine_transform(image[..., k], M, offset=offset, order=1, mode="nearest")
+                     for k in range(3)], axis=-1)
+
+
+@pytest.mark.parametrize("angle, scale, shift", [(30.0, 0.8, (25.0, -15.0)), (-65.0, 0.9, (-10.0, 30.0)),
+                                                 (180.0, 1.0, (5.0, 5.0))])
+def test_rotating_scaling_shifting_the_photo_barely_moves_normalised_mean(body, photo, contour, angle, scale,
+                                                                          shift):
+    mesh, x = body
+    outline = simulated_outline(mesh, x)
+    base = compare_contours(outline, contour)
+    moved = transform_photo(photo.image, angle, scale, shift)
+    r = compare_contours(outline, contour_from_image(moved))
+    assert abs(r.mean_norm - base.mean_norm) < 0.01  # less than 1 % of the unit rectangle
+    assert abs(r.mean_norm - base.mean_norm) < 0.002  # what it actually achieves, with margin
+    assert r.scale / base.scale == pytest.approx(scale, rel=0.01)
+    turn = (r.angle_deg - base.angle_deg + 180.0) % 360.0 - 180.0
+    assert abs(abs(turn) - abs((angle + 180.0) % 360.0 - 180.0)) < 1.0
+
+
+def test_rotation_on_the_plate_is_recovered(body):
+    mesh, x = body
+    ph = render_photo(mesh, x, resolution=(400, 400), seed=4, rotation_deg=40.0, margin=0.2)
+    r = compare_contours(simulated_outline(mesh, x), contour_from_image(ph.image))
+    assert r.angle_deg == pytest.approx(40.0, abs=1.0)
+    assert r.mean_px < 1.0
+
+
+def test_segment_registration_and_stretch_scaling(body, photo, contour):
+    mesh, x = body
+    outline = simulated_outline(mesh, x)
+    i, j = 0, len(outline) // 2
+    q = photo.to_pixels(outline[[i, j]])
+    seg = compare_contours(outline, contour, registration="segment", segments=((i, j), (q[0], q[1])))
+    assert seg.mean_px < 1.5
+    stretch = compare_contours(outline, contour, scaling="stretch")
+    assert stretch.mean_px < 1.5
+    assert stretch.mean_norm < 0.005
+
+
+# ------------------------------------------------------------------------------------------ discrimination
+def test_a_different_shape_scores_clearly_worse(body, contour):
+    mesh, x = body
+    same = compare_contours(simulated_outline(mesh, x), contour)
+    less_bent = compare_contours(simulated_outline(mesh, bend(mesh.points, 0.3)), contour)
+    straight = compare_contours(simulated_outline(mesh), contour)
+    rectangle = Mesh.rectangle(4.0, 1.0, 8, 2)
+    other = compare_contours(simulated_outline(rectangle), contour)
+    for worse in (less_bent, straight, other):
+        assert worse.mean_norm > 0.01
+        assert worse.mean_norm > 8 * same.mean_norm
+        assert worse.mean_px > 4.0
+    assert straight.mean_norm > less_bent.mean_norm  # the further from the photo, the worse
+
+
+# ------------------------------------------------------------------------------------------ robustness
+def test_noisy_blurred_photo_still_extracts(body):
+    mesh, x = body
+    ph = render_photo(mesh, x, seed=7, noise_sigma=25.0, blur_sigma=1.5)
+    r = compare_contours(ph.to_pixels(simulated_outline(mesh, x)), contour_from_image(ph.image),
+                         registration="none")
+    assert r.mean_px < 1.5
+
+
+@pytest.mark.parametrize("extract", [{}, {"method": "adaptive"}])
+def test_low_contrast_uneven_light_photo_still_extracts(body, extract):
+    mesh, x = body
+    ph = render_photo(mesh, x, seed=11, body_color=(192, 186, 178), plate_color=(222, 222, 216),
+                      grid_color=(205, 205, 200), lighting=0.35, vignette=0.2, noise_sigma=4.0)
+    outline_px = ph.to_pixels(simulated_outline(mesh, x))
+    truth = truth_mask(outline_px, ph.image.shape[:2])
+    grey = ph.image.astype(float).mean(axis=2)
+    # low contrast indeed: the darkest plate pixels are darker than the brightest body pixels,
+    # so no single grey level separates body and plate
+    assert np.percentile(grey[~truth], 5) < np.percentile(grey[truth], 95)
+    r = compare_contours(outline_px, contour_from_image(ph.image, **extract), registration="none")
+    assert r.mean_px < 1.5
+
+
+def test_roi_restricts_the_search():
+    img = disc_image([(60, 100), (220, 100)], [30, 40])
+    c = contour_from_image(img, roi=(150, 20, 140, 160))
+    assert c[:, 0].min() > 150
+    assert polygon_area(c) == pytest.approx(math.pi * 40 ** 2, rel=0.03)
+
+
+# ------------------------------------------------------------------------------------------ bad input
+def test_empty_image_is_rejected():
+    with pytest.raises(ValueError, match="empty"):
+        contour_from_image(np.zeros((0, 0), dtype=np.uint8))
+
+
+def test_uniform_image_has_no_body():
+    with pytest.raises(ValueError, match="uniform"):
+        contour_from_image(np.full((50, 50, 3), 128, dtype=np.uint8))
+
+
+def test_image_with_only_specks_has_no_contour():
+    img = np.full((100, 100), 200, dtype=np.uint8)
+    img[10::20, 10::20] = 40  # isolated single dark pixels: removed by the morphological cleaning
+    with pytest.raises(ValueError, match="no contour"):
+        contour_from_image(img)
+
+
+def test_several_blobs_need_consent():
+    img = disc_image([(80, 100), (220, 100)], [35, 30])
+    with pytest.raises(ValueError, match="2 separate blobs.*largest=True"):
+        contour_from_image(img)
+    c = contour_from_image(img, largest=True)
+    assert polygon_area(c) == pytest.approx(math.pi * 35 ** 2, rel=0.03)
+    assert abs(c[:, 0].mean() - 80) < 1.0
+
+
+def test_small_specks_beside_the_body_are_ignored():
+    img = disc_image([(150, 100), (30, 30)], [50, 4])
+    c = contour_from_image(img)
+    assert polygon_area(c) == pytest.approx(math.pi * 50 ** 2, rel=0.03)
+
+
+@pytest.mark.parametrize("arr, err, match", [
+    (np.zeros((20, 20), dtype=np.int64), TypeError, "dtype int64"),
+    (np.zeros((20, 20), dtype=bool), TypeError, "dtype bool"),
+    (np.zeros((20, 20), dtype=complex), TypeError, "dtype complex"),
+    (np.array([["a"] * 20] * 20), TypeError, "numeric"),
+    (np.full((20, 20), 2.0), ValueError, r"\[0, 1\]"),
+    (np.full((20, 20), np.nan), ValueError, "NaN"),
+    (np.zeros((20, 20, 2), dtype=np.uint8), ValueError, "shape"),
+])
+def test_wrong_image_types_are_named(arr, err, match):
+    with pytest.raises(err, match=match):
+        contour_from_image(arr)
+
+
+def test_missing_and_undecodable_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nope.png"):
+        contour_from_image(tmp_path / "nope.png")
+    bad = tmp_path / "text.png"
+    bad.write_text("not an image")
+    with pytest.raises(ValueError, match="cannot decode"):
+        contour_from_image(bad)
+
+
+def test_bad_options_are_named():
+    img = disc_image([(150, 100)], [50])
+    with pytest.raises(ValueError, match="roi"):
+        contour_from_image(img, roi=(250, 0, 100, 100))
+    with pytest.raises(ValueError, match="method"):
+        contour_from_image(img, method="magic")
+    with pytest.raises(ValueError, match="RGB"):
+        contour_from_image(img, color=(60, 60, 60))  # colour segmentation of a grey image
+    rgb = np.repeat(img[..., None], 3, axis=2)
+    with pytest.raises(ValueError, match="body colour"):
+        contour_from_image(rgb, color=(0, 255, 0))
+
+
+def test_compare_contours_rejects_bad_outlines():
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    with pytest.raises(ValueError, match="at least 3"):
+        compare_contours(sq[:2], sq)
+    with pytest.raises(ValueError, match="NaN"):
+        compare_contours(np.array([[0, 0], [1, np.nan], [1, 1]]), sq)
+    with pytest.raises(ValueError, match="no area"):
+        compare_contours(sq, np.array([[0, 0], [1, 1], [2, 2]], float))
+    with pytest.raises(ValueError, match="registration"):
+        compare_contours(sq, sq, registration="icp")
+    with pytest.raises(ValueError, match="segments="):
+        compare_contours(sq, sq, registration="segment")
+    with pytest.raises(ValueError, match="shape"):
+        compare_contours(np.zeros((4, 3)), sq)
+
+
+# ------------------------------------------------------------------------------------------ synthetic camera
+def test_camera_is_deterministic_and_labelled(body):
+    mesh, x = body
+    a = render_photo(mesh, x, resolution=(320, 240), seed=5)
+    b = render_photo(mesh, x, resolution=(320, 240), seed=5)
+    c = render_photo(mesh, x, resolution=(320, 240), seed=6)
+    assert a.image.shape == (240, 320, 3) and a.image.dtype == np.uint8
+    assert np.array_equal(a.image, b.image)
+    assert np.array_equal(a.world_to_pixel, b.world_to_pixel)
+    assert np.abs(a.image.astype(int) - c.image.astype(int)).mean() > 1.0
+    assert a.metadata["synthetic"] is True and a.synthetic
+    # the caption is visible (dark text on the plate) in a corner that does not touch the body
+    bx, by, bw, bh = a.metadata["caption_box"]
+    box = a.image[by:by + bh + 1, bx:bx + bw + 1].mean(axis=2)
+    assert (box < 100).sum() > 30
+    inside = body_mask(a.image, color=BODY_RGB)
+    assert not inside[max(0, by - 3):by + bh + 4, max(0, bx - 3):bx + bw + 4].any()
+
+
+def test_camera_pixel_transform_lands_on_the_body(body, photo):
+    mesh, x = body
+    cent = x[mesh.triangles].mean(axis=1)  # triangle centroids are inside the body
+    px = np.round(photo.to_pixels(cent)).astype(int)
+    colours = photo.image[px[:, 1], px[:, 0]].astype(float)
+    # body pixels are orange: red well above blue, everywhere (lighting only scales them)
+    assert np.all(colours[:, 0] - colours[:, 2] > 100)
+    outline_px = photo.to_pixels(simulated_outline(mesh, x))
+    assert outline_px.min() > 0 and outline_px.max() < 499
+
+
+def test_camera_rejects_bad_settings(body):
+    mesh, x = body
+    with pytest.raises(ValueError, match="resolution"):
+        render_photo(mesh, x, resolution=(10, 10))
+    with pytest.raises(ValueError, match="margin"):
+        render_photo(mesh, x, margin=0.5)
+    with pytest.raises(ValueError, match="tilt_deg"):
+        render_photo(mesh, x, tilt_deg=45.0)
+    with pytest.raises(ValueError, match="shape"):
+        render_photo(mesh, x[:-1])
+
+
+def test_saved_photo_round_trips_with_sidecar(tmp_path, body):
+    mesh, x = body
+    ph = render_photo(mesh, x, resolution=(160, 120), seed=2)
+    path = ph.save(tmp_path / "case.png")
+    assert np.array_equal(load_image(path), ph.image)
+    meta = json.loads((tmp_path / "case.json").read_text())
+    assert meta["synthetic"] is True and meta["seed"] == 2
+    assert np.allclose(meta["world_to_pixel"], ph.world_to_pixel)
+    with pytest.raises(ValueError, match="PNG"):
+        ph.save(tmp_path / "case.jpg")
+
+
+def test_overlay_figure_shows_photo_mesh_and_contour(body, photo):
+    from mdsr_opt.plot import plot_overlay
+
+    mesh, x = body
+    r = evaluate_image(photo.image, mesh, x)
+    fig = plot_overlay(photo.image, mesh, x, r, synthetic=True, title="T")
+    ax = fig.axes[0]
+    assert ax.images[0].get_array().shape == (500, 500, 3)
+    assert "SYNTHETIC" in ax.get_title() and f"{r.mean_px:.2f} px" in ax.get_title()
+    assert len(ax.collections[0].get_paths()) == mesh.n_triangles
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------ batch
+@pytest.fixture
+def design(tmp_path, body):
+    """A design folder: two states and their synthetic photographs, written by the `photograph` command."""
+    mesh, _ = body
+    states = tmp_path / "states"
+    for k in (0.5, 0.8):
+        write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
+    assert cli.main(["photograph", str(states), "--out", str(tmp_path / "images"), "--seed", "3",
+                     "--resolution", "400x400"]) == 0
+    return tmp_path
+
+
+def test_batch_command_writes_csv_and_markdown(design, capsys):
+    out = design / "out"
+    assert cli.main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out),
+                     "--figures"]) == 0
+    rows = list(csv.DictReader((out / "evaluation.csv").open()))
+    assert [r["case"] for r in rows] == ["bend_0.5", "bend_0.8"]
+    for r in rows:
+        assert r["source"] == "synthetic"
+        assert float(r["mean_px"]) < 1.0 and float(r["std_px"]) < 1.0
+    md = (out / "evaluation.md").read_text()
+    assert md.count("| bend_0.") == 2 and "**SYNTHETIC**" in md
+    assert "Average distance" in capsys.readouterr().out
+    assert (out / "bend_0.8_overlay.png").stat().st_size > 1000
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+
+
+def test_batch_swapped_states_score_worse(design):
+    matched = evaluate_folder(design / "images", design / "states")
+    (design / "images" / "bend_0.5.png").rename(design / "images" / "tmp.png")
+    (design / "images" / "bend_0.8.png").rename(design / "images" / "bend_0.5.png")
+    (design / "images" / "tmp.png").rename(design / "images" / "bend_0.8.png")
+    swapped = evaluate_folder(design / "images", design / "states")
+    worst_match = max(r.comparison.mean_px for r in matched)
+    assert all(r.comparison.mean_px > 4 * worst_match for r in swapped)
+
+
+def test_batch_error_leaves_previous_table_untouched(design, capsys):
+    out = design / "out"
+    out.mkdir()
+    (out / "evaluation.csv").write_text("old table\n")
+    (design / "images" / "zz_broken.png").write_text("not a png")
+    mesh = Mesh.from_polygon(OUTLINE, max_area=0.05)
+    write_mesh(design / "states" / "zz_broken.vtu", mesh)
+    with pytest.raises(ValueError, match="case 'zz_broken'.*cannot decode"):
+        evaluate_folder(design / "images", design / "states", out=out)
+    assert cli.main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out)]) == 2
+    assert "cannot decode" in capsys.readouterr().err
+    assert (out / "evaluation.csv").read_text() == "old table\n"
+    assert sorted(p.name for p in out.iterdir()) == ["evaluation.csv"]
+
+
+def test_batch_needs_a_state_for_every_image(design):
+    (design / "states" / "bend_0.8.vtu").unlink()
+    with pytest.raises(ValueError, match="no state file for image.*bend_0.8.png"):
+        evaluate_folder(design / "images", design / "states")
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        evaluate_folder(design / "nothing", design / "states")
