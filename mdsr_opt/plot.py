@@ -253,3 +253,77 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
         text += " (SYNTHETIC photograph)"
     ax.set_title(text, fontsize=9)
     return fig
+
+
+def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
+    """Overlay a design's driven state (moved onto the target) on the target, with the muscles.
+
+    Parameters
+    ----------
+    mesh : the rest mesh.
+    result : ``DesignResult`` (``mdsr_opt.design``); its ``x_aligned`` is drawn.
+    target : (n, 2) target positions.
+    muscles : muscles to draw over the driven state.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> from mdsr_opt.design import design_contractions
+    >>> mesh, mat, mus = Mesh.rectangle(4.0, 1.0, 16, 4), NeoHookean(1.0, 0.3), [Muscle(range(1, 16))]
+    >>> target = solve_internal(mesh, mat, mus, [0.15]).x
+    >>> fig = plot_design(mesh, design_contractions(mesh, mat, mus, target), target, mus)
+    >>> "difference" in fig.axes[0].get_title()
+    True
+    """
+    fig, ax = _axes(ax)
+    plot_mesh(mesh, np.asarray(target), ax=ax, color="#cccccc", edgecolor="#999999", alpha=0.6, label="target")
+    plot_mesh(mesh, result.x_aligned, ax=ax, color="#8fb3d9", edgecolor="#335577", alpha=0.45,
+              label="driven (aligned)")
+    if len(muscles):
+        plot_muscles(result.x_aligned, muscles, ax=ax)
+    a = ", ".join(f"{c:.3f}" for c in result.contractions)
+    ok = "" if result.success else "  [FAILED]"
+    ax.set_title(title or f"{result.method}: a = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
+    ax.legend(fontsize=7, loc="best")
+    return fig
+
+
+def plot_design_benchmark(rows, traces=None, ax=None):
+    """Difference against time for the design methods (``benchmarks/bench_design.py``).
+
+    ``rows``: dicts with ``method``, ``mesh``, ``muscles``, ``solve_time``, ``difference`` (one marker per run:
+    colour = method, marker = mesh size, size = muscle count). ``traces``: optional
+    ``{(mesh, muscles, method): [(t, difference), ...]}``; the best difference so far of the outer loops is
+    drawn as lines for the largest case present.
+    """
+    fig, ax = _axes(ax, figsize=(7.5, 5))
+    colors = {"flattened": "#d62728", "nested": "#1f77b4", "derivative-free": "#2ca02c"}
+    markers = ["o", "s", "^", "D", "v"]
+    meshes = list(dict.fromkeys(r["mesh"] for r in rows))
+    floor = 1e-14
+    for r in rows:
+        ax.scatter(max(r["solve_time"], 1e-3), max(r["difference"], floor), color=colors.get(r["method"], "k"),
+                   marker=markers[meshes.index(r["mesh"]) % len(markers)], s=18 + 10 * r["muscles"],
+                   edgecolors="k" if r.get("success", True) else "none", linewidths=0.4, alpha=0.85)
+    if traces:
+        big = max(rows, key=lambda r: (r["nodes"], r["muscles"]))
+        for method, c in colors.items():
+            tr = traces.get((big["mesh"], big["muscles"], method))
+            if tr and len(tr) > 1:
+                t, d = np.array(tr).T
+                ax.plot(np.maximum(t, 1e-3), np.maximum(d, floor), "-", color=c, lw=0.8, alpha=0.6)
+        ax.text(0.01, 0.01, f"lines: progress on {big['mesh']} nodes, {big['muscles']} muscles",
+                transform=ax.transAxes, fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("solve time (s)")
+    ax.set_ylabel("final difference (length)")
+    for method, c in colors.items():
+        ax.scatter([], [], color=c, label=method)
+    for i, mname in enumerate(meshes):
+        ax.scatter([], [], color="grey", marker=markers[i % len(markers)], label=f"{mname} nodes")
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("contraction design: difference against time (marker size ~ muscle count)")
+    ax.grid(True, which="major", alpha=0.3)
+    return fig
