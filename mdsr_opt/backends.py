@@ -59,7 +59,9 @@ def _casadi_factory(plugin: str, opts: dict):
 
 def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
     o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
-         "ipopt.max_iter": max_iter, "ipopt.linear_solver": linear_solver, "error_on_fail": False}
+         "ipopt.max_iter": max_iter, "ipopt.linear_solver": linear_solver, "error_on_fail": False,
+         # multipliers of bounds and parameters are not used: skip their extra derivative evaluations
+         "calc_lam_p": False, "calc_lam_x": False}
     if limited_memory:
         o["ipopt.hessian_approximation"] = "limited-memory"
     return o
@@ -162,7 +164,7 @@ def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
         for name, (dofs, _fns, data_of) in fams.items():
             N, d = dofs.shape
             X = y[dofs].T
-            Hb = np.asarray(fmap[name][2](X, data_of(p), p[0:2] if name == "elem" else np.zeros(0)))
+            Hb = np.asarray(fmap[name][2](X, *data_of(p), p[0:2] if name == "elem" else np.zeros(0)))
             Hb = Hb.T.reshape(N, d, d)
             Hb = _projected_blocks(Hb)
             rows.append(np.repeat(dofs, d, axis=1).reshape(-1))

@@ -137,8 +137,9 @@ def _predict(model, p, x, fixed, values):
     dc = values - x[fixed]
     rhs = -(g[free] + H[free][:, fixed] @ dc)
     Hff = H[free][:, free].tocsc()
-    try:
-        dz = spla.spsolve(Hff, rhs)
+    try:  # symmetric mode with a minimum-degree ordering: about twice as fast as spsolve's default here
+        dz = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True}).solve(rhs)
     except RuntimeError:
         return None
     if not np.all(np.isfinite(dz)):

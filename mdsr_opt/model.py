@@ -56,32 +56,37 @@ class _Term:
     H: ca.Function  # -> vec(hess) d*d
 
 
-def _make_term(name, d, nd, ng, energy_of):
+def _make_term(name, d, data_sizes, ng, energy_of):
+    """SX functions ``(xl, *data, glob) -> W``, ``-> (W, grad)``, ``-> vec(Hessian)`` of one term.
+
+    Each per-instance datum is its own input (a row per datum when mapped), so the mapped call takes
+    rows of constants or slices of ``p`` without concatenating them in MX.
+    """
     xl = ca.SX.sym("xl", d)
-    dl = ca.SX.sym("dl", nd)
+    dl = [ca.SX.sym(f"d{i}", k) for i, k in enumerate(data_sizes)]
     gl = ca.SX.sym("gl", ng)
     w = energy_of(xl, dl, gl)
     g = ca.gradient(w, xl)
     h = ca.hessian(w, xl)[0]
-    return (ca.Function(f"{name}_W", [xl, dl, gl], [w]),
-            ca.Function(f"{name}_WG", [xl, dl, gl], [w, g]),
-            ca.Function(f"{name}_H", [xl, dl, gl], [ca.vec(ca.densify(h))]))
+    args = [xl, *dl, gl]
+    return (ca.Function(f"{name}_W", args, [w]),
+            ca.Function(f"{name}_WG", args, [w, g]),
+            ca.Function(f"{name}_H", args, [ca.vec(ca.densify(h))]))
 
 
 def _element_energy(psi_expr):
     def energy(xe, dl, mat):
+        dmi, area = dl
         Ds = ca.horzcat(xe[2:4] - xe[0:2], xe[4:6] - xe[0:2])
-        Dmi = ca.reshape(dl[0:4], 2, 2)
-        F = ca.mtimes(Ds, Dmi)
-        return dl[4] * psi_expr(F, mat)
+        F = ca.mtimes(Ds, ca.reshape(dmi, 2, 2))
+        return area * psi_expr(F, mat)
     return energy
 
 
 def _spring_energy(xs, dl, _g):
-    # dl = [l0, k, r]
-    d = xs[2:4] - xs[0:2]
-    l = ca.sqrt(ca.sumsqr(d))
-    return dl[1] / 2 * (l - dl[2] * dl[0]) ** 2
+    l0, k, r = dl
+    l = ca.sqrt(ca.sumsqr(xs[2:4] - xs[0:2]))
+    return k / 2 * (l - r * l0) ** 2
 
 
 class EnergyModel:
@@ -102,7 +107,7 @@ class EnergyModel:
     R (n_cables)]``; see :meth:`params`.
     """
 
-    def __init__(self, mesh, material, cables=(), expand: bool = True):
+    def __init__(self, mesh, material, cables=(), expand: bool = False):
         t0 = time.perf_counter()
         self.mesh = mesh
         self.material_kind = material.kind
@@ -128,29 +133,29 @@ class EnergyModel:
         self.elem_dofs = elem_dofs
         self.edge_dofs = edge_dofs
 
-        # family: (dofs, W/WG/H functions, MX data matrix (nd x N), MX global params)
+        # family: (dofs, W/WG/H functions, list of data rows (each nd_i x N), global params)
         fam = []
-        eW, eWG, eH = _make_term("elem", 6, 5, 2, _element_energy(material.psi_expr))
+        eW, eWG, eH = _make_term("elem", 6, [4, 1], 2, _element_energy(material.psi_expr))
         self.element_functions = (eW, eWG, eH)
-        fam.append((elem_dofs, eW, eWG, eH, ca.DM(elem_data.T), mat))
-        sW, sWG, sH = _make_term("spring", 4, 3, 0, _spring_energy)
+        self._elem_data = [elem_data[:, :4].T.copy(), elem_data[:, 4:].T.copy()]
+        fam.append((elem_dofs, eW, eWG, eH, [ca.DM(v) for v in self._elem_data], mat))
+        sW, sWG, sH = _make_term("spring", 4, [1, 1, 1], 0, _spring_energy)
         self.spring_functions = (sW, sWG, sH)
-        self._elem_data = elem_data.T.copy()
-        spring_data = ca.vertcat(ca.DM(mesh.edge_lengths).T, k_e.T, r_e.T)
-        fam.append((edge_dofs, sW, sWG, sH, spring_data, ca.MX(0, 1)))
+        fam.append((edge_dofs, sW, sWG, sH, [ca.DM(mesh.edge_lengths).T, k_e.T, r_e.T], ca.MX(0, 1)))
         for c, path in enumerate(self.cables):
             v = np.asarray(path)
             d = 2 * len(v)
 
             def cable_energy(xl, dl, _g, k=len(v)):
+                K, R = dl
                 L = 0
                 for i in range(k - 1):
                     L += ca.sqrt(ca.sumsqr(xl[2 * i + 2:2 * i + 4] - xl[2 * i:2 * i + 2]))
-                return dl[0] / 2 * (L - dl[1]) ** 2
+                return K / 2 * (L - R) ** 2
 
-            cW, cWG, cH = _make_term(f"cable{c}", d, 2, 0, cable_energy)
+            cW, cWG, cH = _make_term(f"cable{c}", d, [1, 1], 0, cable_energy)
             dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, d)
-            fam.append((dofs, cW, cWG, cH, ca.vertcat(K_c[c], R_c[c]), ca.MX(0, 1)))
+            fam.append((dofs, cW, cWG, cH, [K_c[c], R_c[c]], ca.MX(0, 1)))
 
         # global Hessian sparsity (upper triangle) from all families
         rows, cols, srcs = [], [], []
@@ -179,15 +184,15 @@ class EnergyModel:
             N, d = dofs.shape
             X = ca.reshape(self.x[dofs.reshape(-1).tolist()], d, N)
             Wm, WGm, Hm = (f.map(N, "serial") for f in (W, WG, H))
-            W_only += ca.sum2(Wm(X, data, glob))
-            w, g = WGm(X, data, glob)
+            W_only += ca.sum2(Wm(X, *data, glob))
+            w, g = WGm(X, *data, glob)
             W_tot += ca.sum2(w)
             Sg = sp.csr_matrix((np.ones(N * d), (dofs.reshape(-1), np.arange(N * d))), shape=(2 * n, N * d))
             G_tot += ca.mtimes(_to_dm(Sg), ca.vec(g))
             k = np.searchsorted(keys[order], cols[fi].astype(np.int64) * (2 * n) + rows[fi])
             nzpos = order[k]
             Sh = sp.csr_matrix((np.ones(len(nzpos)), (nzpos, srcs[fi])), shape=(nnz, N * d * d))
-            H_tot += ca.mtimes(_to_dm(Sh), ca.vec(Hm(X, data, glob)))
+            H_tot += ca.mtimes(_to_dm(Sh), ca.vec(Hm(X, *data, glob)))
         Hmx = ca.MX(self.hess_sparsity, H_tot)
         lam_f = ca.MX.sym("lam_f")
         lam_g = ca.MX.sym("lam_g", 0)
@@ -238,9 +243,11 @@ class EnergyModel:
 
     def hessian(self, x, p) -> sp.csc_matrix:
         """The full symmetric Hessian as a scipy CSC matrix."""
-        H = self.hess_fn(np.asarray(x, float).reshape(-1), p)
-        U = _dm_to_scipy(H)
-        return (U + sp.triu(U, k=1).T).tocsc()
+        v = np.asarray(self.hess_fn(np.asarray(x, float).reshape(-1), p).nonzeros())
+        if not hasattr(self, "_full_pattern"):
+            self._full_pattern = _symmetric_pattern(self.hess_sparsity)
+        indptr, indices, src = self._full_pattern
+        return sp.csc_matrix((v[src], indices, indptr), shape=(self.n_dof, self.n_dof))
 
     def newton_families(self) -> dict:
         """Per-family ``(dofs, (W, WG, H), data_of(p))`` for element-wise numeric methods."""
@@ -250,7 +257,7 @@ class EnergyModel:
         return {
             "elem": (self.elem_dofs, self.element_functions, lambda p: self._elem_data),
             "spring": (self.edge_dofs, self.spring_functions,
-                       lambda p: np.vstack([self.mesh.edge_lengths, p[2:2 + ne], p[2 + ne:2 + 2 * ne]])),
+                       lambda p: [self.mesh.edge_lengths[None, :], p[None, 2:2 + ne], p[None, 2 + ne:2 + 2 * ne]]),
         }
 
     def solver(self, backend: str, options: dict, factory):
@@ -263,13 +270,23 @@ class EnergyModel:
         return self._solvers[key]
 
 
-def _dm_to_scipy(H: ca.DM) -> sp.csc_matrix:
-    s = H.sparsity()
-    return sp.csc_matrix((np.asarray(H.nonzeros()), np.asarray(s.row()), np.asarray(s.colind())),
-                         shape=(s.size1(), s.size2()))
+def _symmetric_pattern(upper: ca.Sparsity):
+    """CSC pattern of the full symmetric matrix and, per entry, the index of its upper-triangle value."""
+    colind = np.asarray(upper.colind())
+    row = np.asarray(upper.row())
+    col = np.repeat(np.arange(upper.size2()), np.diff(colind))
+    nz = np.arange(len(row))
+    off = row != col
+    R = np.concatenate([row, col[off]])
+    C = np.concatenate([col, row[off]])
+    S = np.concatenate([nz, nz[off]])
+    order = np.lexsort((R, C))
+    counts = np.bincount(C, minlength=upper.size2())
+    indptr = np.concatenate([[0], np.cumsum(counts)])
+    return indptr, R[order], S[order]
 
 
-def get_model(mesh, material, cables=(), expand: bool = True) -> EnergyModel:
+def get_model(mesh, material, cables=(), expand: bool = False) -> EnergyModel:
     """The cached :class:`EnergyModel` of ``mesh`` for the material's kind (and cables, if any)."""
     cache = mesh.__dict__.setdefault("_model_cache", {})
     key = (material.kind, tuple(tuple(int(v) for v in c) for c in cables), bool(expand))
