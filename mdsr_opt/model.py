@@ -261,13 +261,15 @@ class EnergyModel:
         }
 
     def solver(self, backend: str, options: dict, factory):
-        """A cached solver for ``backend`` and ``options`` (built by ``factory(self)`` on first use)."""
+        """``(solver, seconds spent building it now)``: built by ``factory(self)`` on first use, then cached
+        (later calls report 0 s, so timings count each build once)."""
         key = (backend, repr(sorted(options.items())))
-        if key not in self._solvers:
-            t0 = time.perf_counter()
-            s = factory(self)
-            self._solvers[key] = (s, time.perf_counter() - t0)
-        return self._solvers[key]
+        if key in self._solvers:
+            return self._solvers[key], 0.0
+        t0 = time.perf_counter()
+        s = factory(self)
+        self._solvers[key] = s
+        return s, time.perf_counter() - t0
 
 
 def _symmetric_pattern(upper: ca.Sparsity):
