@@ -128,6 +128,20 @@ def _check_common(tol, max_iter, backend):
     return tol
 
 
+def _initial_guess(initial_guess, mesh) -> tuple[bool, np.ndarray]:
+    """``(predict, x_start)`` for ``initial_guess`` = ``"predictor"``, ``"rest"`` or an (n, 2) state."""
+    X = mesh.points.reshape(-1).copy()
+    if isinstance(initial_guess, str):
+        if initial_guess not in ("predictor", "rest"):
+            raise ValueError("initial_guess must be 'predictor', 'rest' or an (n, 2) array, "
+                             f"got {initial_guess!r}")
+        return initial_guess == "predictor", X
+    x0 = mesh._check_state(initial_guess)
+    if _min_J(mesh, x0.reshape(-1)) <= 0.0:
+        raise ValueError("initial_guess inverts an element (det F <= 0)")
+    return False, np.array(x0, dtype=float).reshape(-1)
+
+
 # ---------------------------------------------------------------------------------- core loop
 def _factor(model, p, x, fixed):
     """Hessian blocks at ``x`` and an LU of the free block; cached for the rest state, whose factors every
@@ -172,8 +186,11 @@ def _min_J(mesh, xflat):
 
 
 def _continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
-                  verbose):
-    """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time)."""
+                  verbose, predict=True):
+    """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
+
+    With ``predict=False`` each load step starts from the current state with the fixed coordinates moved
+    (no Newton predictor): the "poor first guess" of the comparison studies."""
     x = x_start.copy()
     s, ds = 0.0, 1.0
     steps, iters, t_solve, t_build = [], 0, 0.0, 0.0
@@ -185,10 +202,14 @@ def _continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, ma
         p = p_of(s_new)
         vals = values_of(s_new)
         t0 = time.perf_counter()
-        guess = _predict(model, p, x, fixed, vals)
+        if predict:
+            guess = _predict(model, p, x, fixed, vals)
+        else:
+            guess = x.copy()
+            guess[fixed] = vals
         t_solve += time.perf_counter() - t0
         if guess is None or _min_J(mesh, guess) <= 0.0:
-            status = "predictor inverted an element"
+            status = "predictor inverted an element" if predict else "first guess inverts an element"
             ds /= 2
             continue
         out = minimize(model, p, guess, fixed, vals, backend=backend, tol=tol, max_iter=max_iter, options=options)
@@ -226,7 +247,8 @@ def _result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, 
 def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | None,
                    drags: Mapping[int, Sequence[float]] | tuple | None, *, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
-                   min_step: float = 1.0 / 256, verbose: bool = False) -> EquilibriumResult:
+                   min_step: float = 1.0 / 256, verbose: bool = False,
+                   initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
     """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
 
     Parameters
@@ -239,6 +261,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
     min_step : smallest load fraction tried before giving up.
     verbose : print each accepted load step.
+    initial_guess : ``"predictor"`` (default: every load step starts from a Newton predictor, at rest the
+        linear-elastic solution), ``"rest"`` (each step starts from the current state, the rest shape at
+        first, with only the fixed nodes moved) or an (n, 2) state to start the first step from (its fixed
+        nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
+        combine them with ``min_step=1`` to forbid load stepping.
 
     Returns
     -------
@@ -246,6 +273,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     """
     _check_mesh_material(mesh, material)
     tol = _check_common(tol, max_iter, backend)
+    predict, x_start = _initial_guess(initial_guess, mesh)
     n = mesh.n_nodes
     anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
                          "anchors", n=n, shape=(None,))
@@ -272,10 +300,9 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     rest_vals = np.concatenate([mesh.points[nodes, 0], mesh.points[nodes, 1]])[order]
     target_nodes = np.vstack([mesh.points[anc], dpos])
     target_vals = np.concatenate([target_nodes[:, 0], target_nodes[:, 1]])[order]
-    X = mesh.points.reshape(-1).copy()
     x, status, ok, iters, steps, t_solve, t_build = _continuation(
-        mesh, model, lambda s: p, fixed, lambda s: rest_vals + s * (target_vals - rest_vals), X,
-        backend, tol, max_iter, options, min_step, verbose)
+        mesh, model, lambda s: p, fixed, lambda s: rest_vals + s * (target_vals - rest_vals), x_start,
+        backend, tol, max_iter, options, min_step, verbose, predict)
     return _result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
                    backend, "external")
 
@@ -297,7 +324,7 @@ def _gauge(mesh) -> tuple[int, int, int]:
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "springs",
                    stiffness: float = 10.0, backend: str = "ipopt", tol: float = 1e-8, max_iter: int = 200,
                    options: dict | None = None, min_step: float = 1.0 / 256, align_to_rest: bool = True,
-                   verbose: bool = False) -> EquilibriumResult:
+                   verbose: bool = False, initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
     """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
 
     Parameters
@@ -310,6 +337,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         ``k = kappa * E * thickness``; the cable has ``K = kappa * E * thickness / n_segments`` so both models
         are equally stiff for a uniformly strained muscle.
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
+    initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external` (the
+        three gauge coordinates of a given state are set to their rest values).
 
     Returns
     -------
@@ -324,6 +353,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     if not mus:
         raise ValueError("internal driving needs at least one muscle")
     a = check_contractions(contractions, len(mus))
+    predict, x_start = _initial_guess(initial_guess, mesh)
     n = mesh.n_nodes
     k_abs = stiffness * material.E * material.thickness
     t0 = time.perf_counter()
@@ -349,7 +379,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     X = mesh.points.reshape(-1).copy()
     vals = X[fixed]
     x, status, ok, iters, steps, t_solve, t_build = _continuation(
-        mesh, emodel, p_of, fixed, lambda s: vals, X, backend, tol, max_iter, options, min_step, verbose)
+        mesh, emodel, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step, verbose,
+        predict)
     res = _result(mesh, emodel, material, p_of(1.0), p_el, x, fixed, status, ok, iters, steps,
                   t_model + t_build, t_solve, backend, "internal")
     res.muscle_model = model
