@@ -14,7 +14,7 @@ Example
 
 from __future__ import annotations
 
-from functools import cached_property
+from functools import cached_property, wraps
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -22,6 +22,25 @@ from numpy.typing import ArrayLike
 from ._checks import as_float_array, as_index_array, positive_float
 
 __all__ = ["Mesh", "polygon_area", "check_polygon"]
+
+
+def _frozen(value):
+    """Make cached arrays (or lists of them) read-only so callers cannot corrupt a mesh's derived data."""
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif isinstance(value, list):
+        for v in value:
+            _frozen(v)
+    return value
+
+
+def _cached(fn):
+    """``cached_property`` whose array result is read-only."""
+    @wraps(fn)
+    def compute(self):
+        return _frozen(fn(self))
+
+    return cached_property(compute)
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -196,13 +215,13 @@ class Mesh:
     def has_edge(self, i: int, j: int) -> bool:
         return (min(i, j), max(i, j)) in self.edge_index
 
-    @cached_property
+    @_cached
     def edge_lengths(self) -> np.ndarray:
         """Rest lengths of :attr:`edges`."""
         e = self.edges
         return np.linalg.norm(self._points[e[:, 1]] - self._points[e[:, 0]], axis=1)
 
-    @cached_property
+    @_cached
     def boundary_edges(self) -> np.ndarray:
         """Directed boundary edges (b, 2), oriented with the body on their left."""
         t = self._triangles
@@ -211,12 +230,12 @@ class Mesh:
         mask = np.array([(b, a) not in keys for a, b in directed.tolist()])
         return directed[mask]
 
-    @cached_property
+    @_cached
     def boundary_nodes(self) -> np.ndarray:
         """Sorted indices of the nodes on the boundary."""
         return np.unique(self.boundary_edges)
 
-    @cached_property
+    @_cached
     def boundary_loops(self) -> list[np.ndarray]:
         """Ordered boundary loops; the first is the outer one (counter-clockwise), then holes (clockwise)."""
         nxt = {int(a): int(b) for a, b in self.boundary_edges}
@@ -233,7 +252,7 @@ class Mesh:
         loops.sort(key=lambda lp: -abs(polygon_area(self._points[lp])))
         return loops
 
-    @cached_property
+    @_cached
     def neighbors(self) -> list[np.ndarray]:
         """Sorted neighbour node indices of each node along mesh edges."""
         nb: list[list[int]] = [[] for _ in range(self.n_nodes)]
@@ -243,18 +262,18 @@ class Mesh:
         return [np.array(sorted(x), dtype=np.int64) for x in nb]
 
     # ------------------------------------------------------------------ element geometry
-    @cached_property
+    @_cached
     def Dm(self) -> np.ndarray:
         """Rest edge matrices ``[X1-X0, X2-X0]`` as columns, (m, 2, 2)."""
         X = self._points[self._triangles]
         return np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
 
-    @cached_property
+    @_cached
     def Dm_inv(self) -> np.ndarray:
         """Inverse rest edge matrices, (m, 2, 2)."""
         return np.linalg.inv(self.Dm)
 
-    @cached_property
+    @_cached
     def areas(self) -> np.ndarray:
         """Rest triangle areas, (m,)."""
         return 0.5 * np.linalg.det(self.Dm)
@@ -278,7 +297,7 @@ class Mesh:
         return as_float_array(x, name, shape=(self.n_nodes, 2))
 
     # ------------------------------------------------------------------ quality
-    @cached_property
+    @_cached
     def angles(self) -> np.ndarray:
         """Interior angles of each triangle in degrees, (m, 3)."""
         X = self._points[self._triangles]

@@ -117,3 +117,12 @@ def test_bad_holes_and_parameters():
 def test_mesh_is_immutable(strip):
     with pytest.raises(ValueError):
         strip.points[0, 0] = 5.0
+
+
+def test_derived_arrays_are_read_only():
+    """Callers get the mesh's cached arrays; writing into them must not corrupt the mesh."""
+    m = Mesh.rectangle(2.0, 1.0, 2, 1)
+    for arr in (m.edges, m.edge_lengths, m.areas, m.Dm_inv, m.boundary_nodes, m.boundary_loops[0],
+                m.neighbors[0], m.angles):
+        with pytest.raises(ValueError, match="read-only"):
+            arr[...] = 0
