@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["EnergyModel", "get_model", "spring_parameters"]
+__all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters"]
 
 
 def _to_dm(S: sp.spmatrix) -> ca.DM:
@@ -87,6 +87,48 @@ def _spring_energy(xs, dl, _g):
     l0, k, r = dl
     l = ca.sqrt(ca.sumsqr(xs[2:4] - xs[0:2]))
     return k / 2 * (l - r * l0) ** 2
+
+
+@dataclass(frozen=True)
+class TermFamily:
+    """One family of energy terms, described by numbers (see :meth:`EnergyModel.term_families`).
+
+    Attributes
+    ----------
+    name : str
+    dofs : (N, d) int ndarray
+        Global dof indices of each of the ``N`` instances.
+    W : casadi.Function
+        SX function ``(xl (d), *data, glob) -> w`` of one term.
+    data : tuple
+        Per datum input of ``W``: its ``(nd, N)`` constants, or None where it is read from ``p``.
+    data_index : tuple
+        Per datum input: ``(nd, N)`` indices into ``p``, or None where it is constant.
+    glob_index : (ng,) int ndarray
+        Indices into ``p`` of the input shared by all instances.
+    """
+
+    name: str
+    dofs: np.ndarray
+    W: ca.Function
+    data: tuple
+    data_index: tuple
+    glob_index: np.ndarray
+
+    def inputs(self, p, rows=None) -> list:
+        """The data and shared inputs of the mapped ``W`` over instances ``rows`` (all when None), for a
+        parameter vector ``p`` (a CasADi column: DM, SX or MX)."""
+        N = self.dofs.shape[0]
+        rows = np.arange(N) if rows is None else np.asarray(rows, dtype=np.int64)
+        out = []
+        for const, idx in zip(self.data, self.data_index):
+            if const is not None:
+                out.append(ca.DM(np.asarray(const)[:, rows]))
+            else:
+                sel = np.asarray(idx)[:, rows]
+                out.append(ca.reshape(p[sel.ravel(order="F").tolist()], sel.shape[0], sel.shape[1]))
+        out.append(p[self.glob_index.tolist()] if len(self.glob_index) else type(p)(0, 1))
+        return out
 
 
 class EnergyModel:
@@ -156,6 +198,9 @@ class EnergyModel:
             cW, cWG, cH = _make_term(f"cable{c}", d, [1, 1], 0, cable_energy)
             dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, d)
             fam.append((dofs, cW, cWG, cH, [K_c[c], R_c[c]], ca.MX(0, 1)))
+
+        # the cables' term functions, for :meth:`term_families`
+        self.cable_functions = tuple(f[1:4] for f in fam[2:])
 
         # global Hessian sparsity (upper triangle) from all families
         rows, cols, srcs = [], [], []
@@ -259,6 +304,29 @@ class EnergyModel:
             "spring": (self.edge_dofs, self.spring_functions,
                        lambda p: [self.mesh.edge_lengths[None, :], p[None, 2:2 + ne], p[None, 2 + ne:2 + 2 * ne]]),
         }
+
+    def term_families(self) -> list["TermFamily"]:
+        """The energy's term families (elements, edge springs, each cable) as :class:`TermFamily` records.
+
+        Each record gives the instances' dofs, the per-term SX energy function and where its inputs come
+        from (constants, or entries of ``p``), so that other derived quantities (third derivatives,
+        derivatives with respect to parameters) can be assembled term by term like the model's own
+        gradient and Hessian.
+        """
+        ne, nc = self.n_edges, len(self.cables)
+        e = np.arange(ne)
+        out = [TermFamily("elem", self.elem_dofs, self.element_functions[0], tuple(self._elem_data),
+                          (None, None), np.array([0, 1])),
+               TermFamily("spring", self.edge_dofs, self.spring_functions[0],
+                          (self.mesh.edge_lengths[None, :].copy(), None, None),
+                          (None, (2 + e)[None, :], (2 + ne + e)[None, :]), np.zeros(0, dtype=np.int64))]
+        for c, path in enumerate(self.cables):
+            v = np.asarray(path)
+            dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, 2 * len(v))
+            out.append(TermFamily(f"cable{c}", dofs, self.cable_functions[c][0], (None, None),
+                                  (np.array([[2 + 2 * ne + c]]), np.array([[2 + 2 * ne + nc + c]])),
+                                  np.zeros(0, dtype=np.int64)))
+        return out
 
     def solver(self, backend: str, options: dict, factory):
         """``(solver, seconds spent building it now)``: built by ``factory(self)`` on first use, then cached

@@ -126,3 +126,42 @@ def test_spring_parameters_combine_shared_edges(small):
     assert k[i] == pytest.approx(6.0)
     assert r[i] == pytest.approx(1.0 - 0.3)
     assert np.count_nonzero(k) == 1 and np.all(r[np.arange(len(r)) != i] == 1.0)
+
+
+def test_term_families_reproduce_energy_gradient_and_hessian(small):
+    """Summing each family's term function over its instances, with inputs read from p, gives the model."""
+    mat = NeoHookean(1.5, 0.3)
+    path = [0, int(small.neighbors[0][0])]
+    path.append(int([v for v in small.neighbors[path[-1]] if v not in path][0]))
+    model = get_model(small, mat, cables=[path])
+    k, r = spring_parameters(small, [Muscle(path)], [0.2], 5.0)
+    p = model.params(mat, springs=(k, r), cables=(np.array([3.0]), np.array([0.4])))
+    x = _perturbed(small).reshape(-1)
+    fams = model.term_families()
+    assert [f.name for f in fams] == ["elem", "spring", "cable0"]
+    W, g, H = 0.0, np.zeros(model.n_dof), np.zeros((model.n_dof, model.n_dof))
+    for fam in fams:
+        N, d = fam.dofs.shape
+        xl = ca.SX.sym("xl", d)
+        ins = [ca.SX.sym(f"d{i}", fam.W.size1_in(1 + i)) for i in range(fam.W.n_in() - 1)]
+        w = fam.W(xl, *ins)
+        F = ca.Function("F", [xl, *ins], [w, ca.gradient(w, xl), ca.hessian(w, xl)[0]])
+        vals = fam.inputs(ca.DM(p))
+        for e in range(N):
+            args = [x[fam.dofs[e]]] + [v[:, e] for v in vals[:-1]] + [vals[-1]]
+            we, ge, he = (np.array(ca.DM(u)) for u in F(*args))
+            W += we.item()
+            g[fam.dofs[e]] += ge.ravel()
+            H[np.ix_(fam.dofs[e], fam.dofs[e])] += he
+        # a subset of instances reads the same columns
+        if N > 1:
+            sub = [N - 1, 0]
+            full = [np.array(ca.DM(v)) for v in vals[:-1]]
+            for v_sub, v_full in zip(fam.inputs(ca.DM(p), sub)[:-1], full):
+                assert np.array_equal(np.array(ca.DM(v_sub)), v_full[:, sub])
+    assert W == pytest.approx(model.energy(x, p), rel=1e-12)
+    assert np.abs(g - model.gradient(x, p)).max() < 1e-12 * np.abs(g).max()
+    assert np.abs(H - model.hessian(x, p).toarray()).max() < 1e-12 * np.abs(H).max()
+    # the spring datum read from p is (k, r) on every edge; the cable's is (K, R)
+    assert np.array_equal(np.asarray(fams[1].data_index[1]).ravel(), 2 + np.arange(model.n_edges))
+    assert [float(v) for v in fams[2].inputs(ca.DM(p))[:2]] == [3.0, 0.4]
