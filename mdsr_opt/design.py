@@ -16,7 +16,10 @@ Three methods solve it:
     on the non-gauge coordinates (the lower level has no inequalities, so stationarity is its whole KKT
     system), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
     Hessian of the Lagrangian, warm-started from a forward solve at the initial contractions. Objective and
-    constraints are scaled (see *Scaling* below).
+    constraints are scaled (see *Scaling* below). The NLP's derivatives (constraint Jacobian, Hessian of the
+    Lagrangian with the energy's third derivatives) are assembled term by term from small per-element,
+    per-spring and per-cable SX functions, like the energy model's own; ``derivatives="casadi"`` instead
+    builds the NLP in SX and lets CasADi differentiate it (the same numbers, 20-30x slower to build).
 ``"nested"``
     The reduced-space rival: an outer L-BFGS-B over ``a``; each evaluation solves the equilibrium (warm
     started from the previous one) and the exact gradient comes from the implicit-function theorem by one
@@ -74,7 +77,7 @@ from ._checks import as_float_array, positive_float
 from .align import align, node_weights
 from .equilibrium import _check_mesh_material, _continuation, _gauge, solve_internal
 from .mesh import Mesh
-from .model import get_model, spring_parameters
+from .model import _to_dm, get_model, spring_parameters
 from .muscles import Muscle, check_muscles
 
 __all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
@@ -385,20 +388,286 @@ def _initial_guess(mesh, muscles, y, a_max) -> np.ndarray:
     return np.clip(a, 0.0, 0.9 * a_max)
 
 
+# ---------------------------------------------------------------------------------------------- assembled derivatives
+class _Assembly:
+    """A sparse matrix summed from vectors of term values by constant scatter matrices.
+
+    Each part is a column of values and, per scattered value, a target ``(row, col)``, the index of its
+    source in the column and an optional weight. The pattern is the union of all targets (CSC order is
+    ascending ``col * nrow + row``), and the matrix is ``sum_k S_k v_k`` on that pattern.
+    """
+
+    def __init__(self, nrow: int, ncol: int):
+        self.shape = (nrow, ncol)
+        self.parts: list = []
+
+    def add(self, values, rows, cols, src, weights=None):
+        """Scatter ``values[src[k]] * weights[k]`` to ``(rows[k], cols[k])``; targets with a negative row
+        or column are dropped."""
+        rows, cols, src = (np.asarray(v, dtype=np.int64) for v in (rows, cols, src))
+        weights = np.ones(len(rows)) if weights is None else np.asarray(weights, dtype=float)
+        keep = (rows >= 0) & (cols >= 0)
+        if keep.any():
+            self.parts.append((values, rows[keep], cols[keep], src[keep], weights[keep]))
+
+    def build(self) -> ca.MX:
+        nrow, ncol = self.shape
+        if not self.parts:
+            return ca.MX(nrow, ncol)
+        # one scatter matrix from all parts' values, stacked
+        offsets = np.cumsum([0] + [p[0].numel() for p in self.parts])
+        keys = np.concatenate([p[2] * nrow + p[1] for p in self.parts])
+        src = np.concatenate([p[3] + o for p, o in zip(self.parts, offsets)])
+        wts = np.concatenate([p[4] for p in self.parts])
+        ukeys, nzpos = np.unique(keys, return_inverse=True)
+        colind = np.concatenate([[0], np.cumsum(np.bincount(ukeys // nrow, minlength=ncol))])
+        spars = ca.Sparsity(nrow, ncol, colind.tolist(), (ukeys % nrow).tolist())
+        S = sp.csr_matrix((wts, (nzpos.ravel(), src)), shape=(len(ukeys), offsets[-1]))
+        values = ca.vertcat(*[p[0] for p in self.parts])
+        return ca.MX(spars, ca.mtimes(_to_dm(S), values))
+
+
+def _block_targets(rmap: np.ndarray, cmap: np.ndarray, upper: bool):
+    """Targets of per-instance ``d x d`` blocks (``vec`` order, instance after instance): local entry
+    ``(i, j)`` of instance ``e`` goes to ``(rmap[e, i], cmap[e, j])``; entries mapped to -1 are dropped,
+    and with ``upper`` those below the diagonal too. Returns ``(rows, cols, src)``."""
+    N, d = rmap.shape
+    rr = np.broadcast_to(rmap[:, None, :], (N, d, d)).reshape(-1)
+    cc = np.broadcast_to(cmap[:, :, None], (N, d, d)).reshape(-1)
+    keep = (rr >= 0) & (cc >= 0)
+    if upper:
+        keep &= rr <= cc
+    src = np.nonzero(keep)[0]
+    return rr[keep], cc[keep], src
+
+
+def _param_targets(rmap: np.ndarray, idx: np.ndarray, B: sp.csr_matrix, col0: int):
+    """Targets of per-instance ``d x nd`` derivatives with respect to a parameter datum (``vec`` order,
+    instance after instance), chained with ``dp/da = B``: local entry ``(i, j)`` of instance ``e`` goes to
+    ``(rmap[e, i], col0 + c)`` with weight ``B[idx[j, e], c]`` for every nonzero of that row of ``B``.
+    Returns ``(rows, cols, src, weights)``."""
+    N, d = rmap.shape
+    nd = idx.shape[0]
+    e, j, i = (g.ravel() for g in np.meshgrid(np.arange(N), np.arange(nd), np.arange(d), indexing="ij"))
+    src = e * nd * d + j * d + i
+    q = idx[j, e]
+    row = rmap[e, i]
+    cnt = np.diff(B.indptr)[q]
+    rep = np.repeat(np.arange(len(q)), cnt)
+    k = B.indptr[q][rep] + (np.arange(len(rep)) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    rows, cols, srcs, wts = row[rep], col0 + B.indices[k], src[rep], B.data[k]
+    keep = rows >= 0
+    return rows[keep], cols[keep], srcs[keep], wts[keep]
+
+
+def _term_functions(fam, sens: list[int], exact: bool = True) -> dict:
+    """SX functions of one term family ``W(xl, *data, glob)`` for the flattened NLP.
+
+    ``g``: ``-> grad W``; ``gh``: ``-> (grad W, vec(Hessian W))``; ``lxx``: ``(xl, lam, *data, glob) ->
+    vec(d^2 (lam . grad W) / dxl^2)`` (third derivatives of ``W`` contracted with the local multipliers);
+    and, for the parameter data inputs ``sens`` (those moved by the contractions), ``dg``: ``->
+    [vec(d grad W / d datum)]`` and ``lxp``: ``(xl, lam, ...) -> [vec(d^2 (lam . grad W) / dxl d datum)]``.
+    Without ``exact`` (Gauss-Newton Hessian) the third-derivative functions ``lxx`` and ``lxp`` are omitted.
+    """
+    W = fam.W
+    d = W.size1_in(0)
+    xl = ca.SX.sym("xl", d)
+    lam = ca.SX.sym("lam", d)
+    dl = [ca.SX.sym(f"d{i}", W.size1_in(1 + i)) for i in range(W.n_in() - 2)]
+    gl = ca.SX.sym("gl", W.size1_in(W.n_in() - 1))
+    args, largs = [xl, *dl, gl], [xl, lam, *dl, gl]
+    w = W(*args)
+    gx = ca.gradient(w, xl)
+    lg = ca.gradient(ca.dot(lam, gx), xl)  # = Hessian(W) lam
+
+    def vec(e):
+        return ca.vec(ca.densify(e))
+
+    out = {"g": ca.Function(f"{fam.name}_g", args, [gx]),
+           "gh": ca.Function(f"{fam.name}_gh", args, [gx, vec(ca.jacobian(gx, xl))])}
+    if exact:
+        out["lxx"] = ca.Function(f"{fam.name}_lxx", largs, [vec(ca.jacobian(lg, xl))])
+    if sens:
+        out["dg"] = ca.Function(f"{fam.name}_dg", args, [vec(ca.jacobian(gx, dl[k])) for k in sens])
+        if exact:
+            out["lxp"] = ca.Function(f"{fam.name}_lxp", largs, [vec(ca.jacobian(lg, dl[k])) for k in sens])
+    return out
+
+
+def _mapped(fn: ca.Function, X, *args) -> list:
+    """Outputs (a list) of ``fn`` mapped serially over the columns of ``X`` (and of the per-instance args)."""
+    return fn.map(X.shape[1], "serial").call([X, *args])
+
+
+def _objective_terms(x, y, w, v, so, gauss_newton: bool):
+    """The alignment objective ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives, per node, as
+    vectorised MX expressions (``x``, ``y``: 2n; ``w``: n; ``v = [theta, t]``).
+
+    Returns ``f``, the gradient parts ``(g_x0, g_x1)`` (per node, 1 x n) and ``(g_theta, g_t0, g_t1)``, and
+    the Hessian parts as a dict ``{(a, b): 1 x n values}`` over the local variables ``a, b`` in ``x0, x1,
+    th, t0, t1`` (``a <= b``; entries of the ``(theta, t)`` block are per-node summands). With
+    ``gauss_newton`` the Hessian is ``2 so w_i J_i^T J_i`` (``J_i`` the residual's Jacobian)."""
+    X0, X1 = x[0::2].T, x[1::2].T
+    Y0, Y1 = y[0::2].T, y[1::2].T
+    W2 = 2 * so * w.T
+    c, s = ca.cos(v[0]), ca.sin(v[0])
+    rx = c * X0 - s * X1 + v[1] - Y0
+    ry = s * X0 + c * X1 + v[2] - Y1
+    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    f = so * ca.sum2(w.T * (rx ** 2 + ry ** 2))
+    gx = (W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry))
+    gv = (ca.sum2(W2 * (rx * px + ry * py)), ca.sum2(W2 * rx), ca.sum2(W2 * ry))
+    zero = 0 * W2
+    h = {("x0", "x0"): W2, ("x1", "x1"): W2,  # R^T R = I
+         ("x0", "th"): W2 * -X1, ("x1", "th"): W2 * X0,  # R^T dR/dtheta x_i = (-x_i1, x_i0)
+         ("x0", "t0"): W2 * c, ("x0", "t1"): W2 * s, ("x1", "t0"): W2 * -s, ("x1", "t1"): W2 * c,
+         ("th", "th"): W2 * (px ** 2 + py ** 2), ("th", "t0"): W2 * px, ("th", "t1"): W2 * py,
+         ("t0", "t0"): W2, ("t0", "t1"): zero, ("t1", "t1"): W2}
+    if not gauss_newton:  # the residual's curvature: r . d^2 r
+        h[("x0", "th")] += W2 * (-s * rx + c * ry)
+        h[("x1", "th")] += W2 * (-c * rx - s * ry)
+        h[("th", "th")] += W2 * -(rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
+    return f, gx, gv, h
+
+
+def _assembled_nlp(prob: _Problem, hessian: str):
+    """The flattened NLP with its derivatives assembled term by term.
+
+    Returns ``(nlp, functions)``: the NLP dict (MX) and the ``grad_f``, ``jac_g`` and ``hess_lag``
+    Functions for IPOPT, all exact:
+
+    - constraints ``sc grad_x E(x, p0 + B a)`` on the free coordinates: per-term gradients scattered;
+    - their Jacobian: in ``x``, the per-term Hessians scattered onto the free rows (both triangles); in
+      ``a``, the per-term derivatives of the gradient with respect to the parameter data, chained with
+      ``B``, over the terms whose parameters move with ``a`` (the muscles' springs or cables);
+    - the objective's gradient and Hessian: closed-form per-node expressions, vectorised;
+    - the Hessian of the Lagrangian (upper triangle): the objective's, plus the per-term third derivatives
+      of the energy contracted with the multipliers (``x-x``) and their parameter derivatives (``x-a``);
+      the ``a-a`` block is zero since the constraints are affine in ``a``.
+
+    Edge springs without a muscle have zero stiffness for every design of these muscles and are left out.
+    """
+    model, n, m = prob.model, prob.mesh.n_nodes, prob.m
+    nx = 2 * n
+    nz = nx + m + 3
+    it = nx + m  # index of theta; t follows
+    npar = model.n_params
+    z = ca.MX.sym("z", nz)
+    par = ca.MX.sym("par", 3 * n + npar + 2)
+    x, a, v = z[:nx], z[nx:nx + m], z[it:]
+    y, w, p0 = par[:nx], par[nx:nx + n], par[nx + n:nx + n + npar]
+    so, sc = par[3 * n + npar], par[3 * n + npar + 1]
+    B = sp.csr_matrix(prob.B)
+    B.eliminate_zeros()
+    p = p0 + ca.mtimes(_to_dm(B), a)
+    free = np.nonzero(prob.free)[0]
+    nfree = len(free)
+    cidx = np.full(nx, -1, dtype=np.int64)  # dof -> constraint row (-1: gauge)
+    cidx[free] = np.arange(nfree)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", nfree)
+    P = sp.csr_matrix((np.ones(nfree), (free, np.arange(nfree))), shape=(nx, nfree))
+    lam_x = ca.mtimes(_to_dm(P), sc * lam_g)  # the constraints' multipliers per dof (0 on the gauge)
+
+    # objective
+    exact = hessian == "exact"  # else Gauss-Newton: the objective's part only, no third derivatives
+    f, gx, gv, ho = _objective_terms(x, y, w, v, so, not exact)
+    # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
+    grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv))
+    hess = _Assembly(nz, nz)
+    loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it), "t0": np.full(n, it + 1),
+           "t1": np.full(n, it + 2)}
+    for (ka, kb), val in ho.items():
+        hess.add(lam_f * val.T, loc[ka], loc[kb], np.arange(n))
+
+    # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
+    gval, gjac = _Assembly(nfree, 1), _Assembly(nfree, 1)  # constraints for nlp_g and for jac_g
+    jac = _Assembly(nfree, nz)
+    ind = np.diff(B.indptr) > 0  # parameters moved by the contractions
+    for fam in model.term_families():
+        rows = np.arange(fam.dofs.shape[0])
+        if fam.name == "spring":  # data (l0, k, r): only springs with stiffness
+            rows = np.nonzero(prob.p0[fam.data_index[1][0]] != 0)[0]
+        if len(rows) == 0:
+            continue
+        if len(fam.glob_index) and ind[fam.glob_index].any():  # pragma: no cover - p(a) never moves material
+            raise NotImplementedError(f"{fam.name}: the shared parameters depend on the contractions")
+        sens = [k for k, idx in enumerate(fam.data_index) if idx is not None and ind[np.asarray(idx)[:, rows]].any()]
+        fn = _term_functions(fam, sens, exact)
+        dofs = fam.dofs[rows]
+        N, d = dofs.shape
+        X = ca.reshape(x[dofs.reshape(-1).tolist()], d, N)
+        L = ca.reshape(lam_x[dofs.reshape(-1).tolist()], d, N)
+        ins = fam.inputs(p, rows)
+        gtargets = (cidx[dofs].reshape(-1), np.zeros(N * d), np.arange(N * d))
+        gval.add(ca.vec(_mapped(fn["g"], X, *ins)[0]), *gtargets)
+        gl, Hl = _mapped(fn["gh"], X, *ins)
+        gjac.add(ca.vec(gl), *gtargets)
+        jac.add(sc * ca.vec(Hl), *_block_targets(cidx[dofs], dofs, upper=False))
+        if exact:
+            hess.add(ca.vec(_mapped(fn["lxx"], X, L, *ins)[0]), *_block_targets(dofs, dofs, upper=True))
+        if not sens:
+            continue
+        moving = np.zeros(N, dtype=bool)  # instances whose parameters move with a
+        for k in sens:
+            moving |= ind[np.asarray(fam.data_index[k])[:, rows]].any(axis=0)
+        sub = np.nonzero(moving)[0]
+        ds = dofs[sub]
+        Xs, Ls = (ca.reshape(u[ds.reshape(-1).tolist()], d, len(sub)) for u in (x, lam_x))
+        ins = fam.inputs(p, rows[sub])
+        dgv = _mapped(fn["dg"], Xs, *ins)
+        lxpv = _mapped(fn["lxp"], Xs, Ls, *ins) if exact else [None] * len(sens)
+        for k, dv, lv in zip(sens, dgv, lxpv):
+            idx = np.asarray(fam.data_index[k])[:, rows[sub]]
+            jac.add(sc * ca.vec(dv), *_param_targets(cidx[ds], idx, B, nx))
+            if exact:
+                hess.add(ca.vec(lv), *_param_targets(ds, idx, B, nx))
+    g = sc * ca.densify(gval.build())
+
+    fns = {"grad_f": ca.Function("design_grad_f", [z, par], [f, grad_f], ["x", "p"], ["f", "grad"]),
+           "jac_g": ca.Function("design_jac_g", [z, par], [sc * ca.densify(gjac.build()), jac.build()],
+                                ["x", "p"], ["g", "jac"]),
+           "hess_lag": ca.Function("design_hess_lag", [z, par, lam_f, lam_g], [hess.build()],
+                                   ["x", "p", "lam_f", "lam_g"], ["hess"])}
+    return {"x": z, "p": par, "f": f, "g": g}, fns
+
+
 # ---------------------------------------------------------------------------------------------- flattened NLP
-def _flattened_solver(prob: _Problem, hessian: str, opts_key: tuple, ipopt_opts: dict):
-    """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode and options.
+def _flattened_solver(prob: _Problem, hessian: str, derivatives: str, opts_key: tuple, ipopt_opts: dict):
+    """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode, derivatives
+    and options.
 
     Parameters of the NLP: target ``y`` (2n), weights (n), ``p0``, objective scale, constraint scale, so one
     built solver serves any target, weights, material numbers and stiffness.
+
+    ``derivatives="assembled"`` gives IPOPT the derivatives assembled term by term
+    (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX and lets CasADi differentiate it.
     """
-    mesh, model = prob.mesh, prob.model
+    mesh = prob.mesh
     key = ("design-flattened", tuple(mu.nodes for mu in prob.muscles), prob.muscle_model, prob.material.kind,
-           hessian, opts_key)
+           hessian, derivatives, opts_key)
     cache = mesh.__dict__.setdefault("_design_cache", {})
     if key in cache:
         return cache[key], 0.0
     t0 = time.perf_counter()
+    opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
+    opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
+    if derivatives == "assembled":
+        nlp, fns = _assembled_nlp(prob, hessian)
+        opts.update(fns)
+        opts["calc_lam_p"] = False  # parameter multipliers are not used: skip their derivatives
+    else:
+        nlp, extra = _symbolic_nlp(prob, hessian)
+        opts.update(extra)
+    solver = ca.nlpsol("design_flattened", "ipopt", nlp, opts)
+    bt = time.perf_counter() - t0
+    cache[key] = solver
+    return solver, bt
+
+
+def _symbolic_nlp(prob: _Problem, hessian: str):
+    """The flattened NLP in SX; CasADi differentiates it (the energy's gradient expanded symbolically)."""
+    mesh, model = prob.mesh, prob.model
     n, m = mesh.n_nodes, prob.m
     x = ca.SX.sym("x", 2 * n)
     a = ca.SX.sym("a", m)
@@ -422,8 +691,7 @@ def _flattened_solver(prob: _Problem, hessian: str, opts_key: tuple, ipopt_opts:
     f = so * ca.dot(w, (rx ** 2 + ry ** 2).T)
     z = ca.vertcat(x, a, th, tt)
     par = ca.vertcat(y, w, p0, so, sc)
-    opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
-    opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
+    extra = {}
     if hessian == "gauss-newton":
         # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
         lam_f = ca.SX.sym("lam_f")
@@ -431,20 +699,18 @@ def _flattened_solver(prob: _Problem, hessian: str, opts_key: tuple, ipopt_opts:
         r = ca.vertcat(ca.vec(rx * ca.sqrt(w).T), ca.vec(ry * ca.sqrt(w).T))
         Jr = ca.jacobian(r, z)
         Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
-        opts["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
-                                       ["x", "p", "lam_f", "lam_g"], ["hess"])
-    solver = ca.nlpsol("design_flattened", "ipopt", {"x": z, "p": par, "f": f, "g": G}, opts)
-    bt = time.perf_counter() - t0
-    cache[key] = solver
-    return solver, bt
+        extra["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
+                                        ["x", "p", "lam_f", "lam_g"], ["hess"])
+    return {"x": z, "p": par, "f": f, "g": G}, extra
 
 
-def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock):
+def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
+                   derivatives="assembled"):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
     ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone"}
     ipopt_opts.update(ipopt_options or {})
-    solver, bt = _flattened_solver(prob, hessian, tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())),
-                                   ipopt_opts)
+    solver, bt = _flattened_solver(prob, hessian, derivatives,
+                                   tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())), ipopt_opts)
     t_start = time.perf_counter()
     if warm_start:
         x0, ok, status = fwd.solve(a0)
@@ -564,7 +830,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         muscle_model: str = "springs", stiffness: float = 10.0, tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
-                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5) -> DesignResult:
+                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
+                        derivatives: str = "assembled") -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
 
     Parameters
@@ -600,6 +867,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         length), or the objective normalised by the body's size instead (for comparison studies).
     warm_start : bool
         Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
+    derivatives : {"assembled", "casadi"}
+        Flattened only: give IPOPT the NLP's exact derivatives assembled term by term from small per-term
+        functions (fast to build, linear in the mesh size), or build the NLP in SX and let CasADi
+        differentiate it (the reference; slow to build). Both are exact; iterates agree to rounding.
     outer : {"nelder-mead", "powell"}
         Derivative-free only: the scipy method.
     options : dict, optional
@@ -640,6 +911,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
     if outer not in ("nelder-mead", "powell"):
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+    if derivatives not in ("assembled", "casadi"):
+        raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
     mus, y, a_max, w, stiffness, a0 = _check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
     m = len(mus)
@@ -666,7 +939,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     bt = 0.0
     if method == "flattened":
         out, status, iters, bt = _run_flattened(prob, a0, fwd, tol, int(max_iter), hessian, scaling, warm_start,
-                                                options, clock)
+                                                options, clock, derivatives)
         build_time += bt
         if out is None:
             x, a, ok, hist, d0 = fwd.x, a0, False, [], float("nan")

@@ -250,3 +250,100 @@ def test_pipeline_rejects_a_target_without_contraction():
     pull = {i: (x + 0.4, y) for i, (x, y) in enumerate(mesh.points) if x == 4.0}  # stretches only
     with pytest.warns(UserWarning), pytest.raises(ValueError, match="routing found no muscle"):
         design(mesh, MAT, left, pull)
+
+
+# ---------------------------------------------------------------------------------------------- assembled derivatives
+def _nlp_point(model_kind, seed=1):
+    """A small flattened NLP (both derivative paths) and a random point, parameters and multipliers."""
+    import casadi as ca
+
+    from mdsr_opt import design as D
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    mus = [Muscle([0, 1, 2, 3, 4]), Muscle([2 * 9 + i for i in range(4, 8)])]
+    rng = np.random.default_rng(seed)
+    y = mesh.points @ _rot(0.3).T + 0.05 * rng.standard_normal(mesh.points.shape)
+    prob = _Problem(mesh, MAT, mus, y, node_weights(mesh), model_kind, 10.0, 0.6)
+    n = mesh.n_nodes
+    z = np.concatenate([mesh.points.reshape(-1) + 0.03 * rng.standard_normal(2 * n), [0.1, 0.2], [0.3, 0.1, -0.2]])
+    par = np.concatenate([y.reshape(-1), node_weights(mesh), prob.p0, [0.7, 1.3]])
+    lam = rng.standard_normal(int(prob.free.sum()))
+    return D, ca, prob, z, par, lam
+
+
+@pytest.mark.parametrize("model_kind", ["springs", "cable"])
+@pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
+def test_assembled_derivatives_match_casadi(model_kind, hessian):
+    D, ca, prob, z, par, lam = _nlp_point(model_kind)
+    nlp, fa = D._assembled_nlp(prob, hessian)
+    snlp, extra = D._symbolic_nlp(prob, hessian)
+    zs, ps = snlp["x"], snlp["p"]
+    lf, ls = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", len(lam))
+    ref = ca.Function("ref", [zs, ps], [snlp["f"], ca.gradient(snlp["f"], zs), snlp["g"], ca.jacobian(snlp["g"], zs)])
+    f_s, gf_s, g_s, J_s = (np.array(ca.DM(v)) for v in ref(z, par))
+    if hessian == "exact":
+        H_s = np.array(ca.DM(ca.Function("H", [zs, ps, lf, ls],
+                                         [ca.hessian(lf * snlp["f"] + ca.dot(ls, snlp["g"]), zs)[0]])(z, par, 0.8, lam)))
+    else:  # the SX path's own Gauss-Newton Hessian (upper triangle)
+        H_s = np.array(ca.DM(extra["hess_lag"](z, par, 0.8, lam)))
+        H_s = np.triu(H_s) + np.triu(H_s, 1).T
+    f_a, gf_a = (np.array(ca.DM(v)) for v in fa["grad_f"](z, par))
+    g_a, J_a = (np.array(ca.DM(v)) for v in fa["jac_g"](z, par))
+    g_nlp = np.array(ca.DM(ca.Function("g", [nlp["x"], nlp["p"]], [nlp["g"]])(z, par)))
+    H = fa["hess_lag"](z, par, 0.8, lam)
+    Hu = np.array(ca.DM(H))
+    assert np.all(np.tril(Hu, -1) == 0)  # the upper triangle only
+    H_a = np.triu(Hu) + np.triu(Hu, 1).T
+
+    def rel(u, v):
+        return np.abs(u - v).max() / np.abs(v).max()
+
+    assert rel(f_a, f_s) < 1e-13 and rel(gf_a, gf_s) < 1e-13
+    assert rel(g_a, g_s) < 1e-13 and rel(g_nlp, g_s) < 1e-13
+    assert rel(J_a, J_s) < 1e-13
+    n2 = 2 * prob.mesh.n_nodes
+    assert np.abs(J_s[:, n2:n2 + 2]).max() > 1.0  # the a-columns are exercised
+    assert rel(H_a, H_s) < 1e-13
+    if hessian == "exact":
+        assert np.abs(H_s[:n2, n2:n2 + 2]).max() > 1e-2  # the x-a block is exercised
+    assert np.all(H_a[n2:n2 + 2, n2:n2 + 2] == 0)  # constraints affine in a
+
+
+@pytest.mark.parametrize("model_kind", ["springs", "cable"])
+def test_assembled_derivatives_match_finite_differences(model_kind):
+    D, ca, prob, z, par, lam = _nlp_point(model_kind, seed=4)
+    nlp, fa = D._assembled_nlp(prob, "exact")
+    lf, h = 0.8, 1e-6
+
+    def f_and_g(zz):
+        f, gf = fa["grad_f"](zz, par)
+        g, J = fa["jac_g"](zz, par)
+        return float(f), np.array(gf).ravel(), np.array(g).ravel(), np.array(ca.DM(J))
+
+    _f, gf, _g, J = f_and_g(z)
+    Hu = np.array(ca.DM(fa["hess_lag"](z, par, lf, lam)))
+    H = np.triu(Hu) + np.triu(Hu, 1).T
+    E = np.eye(len(z))
+    fd_gf, fd_J, fd_H = [], [], []
+    for e in E:
+        fp, gfp, gp, Jp = f_and_g(z + h * e)
+        fm, gfm, gm, Jm = f_and_g(z - h * e)
+        fd_gf.append((fp - fm) / (2 * h))
+        fd_J.append((gp - gm) / (2 * h))
+        fd_H.append((lf * (gfp - gfm) + (Jp - Jm).T @ lam) / (2 * h))  # d/dz of grad_z L
+    fd_gf, fd_J, fd_H = np.array(fd_gf), np.array(fd_J).T, np.array(fd_H).T
+    assert np.abs(gf - fd_gf).max() < 1e-7 * np.abs(gf).max()
+    assert np.abs(J - fd_J).max() < 1e-7 * np.abs(J).max()
+    assert np.abs(H - fd_H).max() < 1e-6 * np.abs(H).max()
+    assert np.abs(H - H.T).max() == 0
+
+
+def test_both_derivative_paths_give_the_same_design(mesh, muscles, target):
+    ra = design_contractions(mesh, MAT, muscles, target, derivatives="assembled")
+    rc = design_contractions(mesh, MAT, muscles, target, derivatives="casadi")
+    assert ra.success and rc.success, (ra.status, rc.status)
+    assert np.abs(ra.contractions - A_TRUE).max() < 1e-4
+    assert ra.contractions == pytest.approx(rc.contractions, abs=1e-9)
+    assert ra.iterations == rc.iterations
+    with pytest.raises(ValueError, match="derivatives must be 'assembled' or 'casadi'"):
+        design_contractions(mesh, MAT, muscles, target, derivatives="numeric")
