@@ -54,9 +54,11 @@ from ._checks import as_float_array, as_index_array
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
 
-__all__ = ["load_scene", "RESOLUTIONS", "Case", "Animation", "Scene", "CaseSetup", "list_problems", "get_problem",
+__all__ = ["load_scene", "seeds_for", "RESOLUTIONS", "Case", "Animation", "Scene", "CaseSetup", "list_problems", "get_problem",
            "problems_dir", "resolve_resolution", "mesh_polygon", "prepare_case", "nodes_in_box",
-           "nodes_near", "nearest_node", "nodes_in_polygon", "edge_path", "arc_map", "rigid_motion"]
+           "nodes_near", "nearest_node", "nodes_in_polygon", "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid",
+           "rigid_motion", "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun",
+           "SceneReport"]
 
 #: Named resolutions: approximate number of mesh nodes.
 RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}
@@ -297,6 +299,17 @@ def resolve_resolution(resolution: str | int) -> int:
     return int(resolution)
 
 
+def seeds_for(mesh: Mesh, minimum: int = 8) -> int:
+    """A routing ``n_seeds`` that grows like the square root of the node count (at least ``minimum``).
+
+    ``route_muscles`` seeds from the ``n_seeds`` most contracted edges of the whole mesh. On a finer mesh a
+    contracted region holds more edges, so a fixed count lands every seed in the most contracted region
+    and a second, slightly weaker region (the other half of an S-bend) gets none. The number of edges
+    along a region's length grows like ``sqrt(n_nodes)``, so the seeds do too.
+    """
+    return max(int(minimum), int(round(math.sqrt(mesh.n_nodes))))
+
+
 def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
                  resolution: str | int = "medium", min_angle: float = 30.0) -> Mesh:
     """Mesh a polygon (with holes) with about the number of nodes ``resolution`` asks for.
@@ -392,6 +405,45 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     return Muscle(path, name=name)
 
 
+def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike | None = None,
+                  name: str | None = None, inset: int = 0) -> Muscle:
+    """A muscle along a boundary loop from the boundary node nearest ``start`` to the one nearest ``end``.
+
+    Of the two ways round the loop, the one passing nearest ``via`` is taken (default: the shorter one).
+    ``inset`` drops that many nodes at each end (a muscle that stops short of a corner).
+    """
+    a = nearest_node(mesh, start, boundary=True)
+    b = nearest_node(mesh, end, boundary=True)
+    if a == b:
+        raise ValueError("start and end snap to the same boundary node")
+    for loop in mesh.boundary_loops:
+        loop = [int(v) for v in loop]
+        if a in loop and b in loop:
+            break
+    else:
+        raise ValueError("start and end lie on different boundary loops")
+    i, j = loop.index(a), loop.index(b)
+    k = len(loop)
+    fwd = [loop[(i + t) % k] for t in range((j - i) % k + 1)]
+    bwd = [loop[(i - t) % k] for t in range((i - j) % k + 1)]
+    if via is None:
+        path = min(fwd, bwd, key=lambda p: Muscle(p).rest_length(mesh))
+    else:
+        v = as_float_array(via, "via", shape=(2,))
+        path = min(fwd, bwd, key=lambda p: float(np.linalg.norm(mesh.points[p] - v, axis=1).min()))
+    if inset:
+        path = path[inset:-inset]
+    return Muscle(path, name=name)
+
+
+def load_problem_module(path: str | os.PathLike):
+    """Load a problem script as a module by file path (e.g. to reuse a body's outline in another scene)."""
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"no such problem script: {p}")
+    return _load_module(p)
+
+
 def _edge_graph(mesh: Mesh):
     import networkx as nx
 
@@ -446,6 +498,24 @@ def arc_map(points: ArrayLike, origin: ArrayLike, direction: ArrayLike, length: 
     keep = s <= 0
     out[keep] = P[keep]
     return out
+
+
+def arc_rigid(points: ArrayLike, root: ArrayLike, origin: ArrayLike, direction: ArrayLike, length: float,
+              angle: float) -> np.ndarray:
+    """Move ``points`` rigidly with the frame of a bent limb's centre line at ``root`` (see :func:`arc_map`).
+
+    Feet, a head or a tail attached to a bending spine follow it without being squashed: the group turns
+    by the centre line's tangent angle at ``root`` (projected on the centre line) and moves with that
+    centre-line point.
+    """
+    P = as_float_array(points, "points", shape=(None, 2))
+    o = as_float_array(origin, "origin", shape=(2,))
+    d = as_float_array(direction, "direction", shape=(2,))
+    d = d / np.linalg.norm(d)
+    s = float(np.clip((as_float_array(root, "root", shape=(2,)) - o) @ d, 0.0, length))
+    c0 = o + s * d
+    c1 = arc_map(c0[None], o, d, length, angle)[0]
+    return rigid_motion(P, angle * s / length, c0, c1 - c0)
 
 
 # ---------------------------------------------------------------------------------------------- registry
@@ -570,6 +640,8 @@ class CaseSetup:
         The routing on the target (for internal cases a diagnostic: what routing would have chosen).
     times : dict
         Seconds for ``target`` and ``routing``.
+    warnings : list of str
+        The routing's warnings (why it found no muscle, for instance).
     """
 
     scene: Scene
@@ -580,6 +652,7 @@ class CaseSetup:
     target_result: Any
     routing: Any = None
     times: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -618,18 +691,470 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()
+    notes: list[str] = []
     if res.success:
         if case.kind == "external" and scene.muscles is None or case.kind == "internal" and route_internal:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RoutingWarning)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", RoutingWarning)
                 routing = route_muscles(scene.mesh, res.x, **scene.routing_options)
+            notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
         if case.kind == "external" and scene.muscles is None:
             muscles = tuple(routing.muscles)
         else:
             muscles = tuple(scene.muscles)
     t2 = time.perf_counter()
     return CaseSetup(scene=scene, case=case, target=res.x.copy(), muscles=muscles, known_contractions=known,
-                     target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1})
+                     target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
+                     warnings=notes)
+
+
+# ---------------------------------------------------------------------------------------------- the pipeline
+@dataclass
+class CaseReport:
+    """Key figures of one case run through the pipeline (JSON-ready scalars and short lists).
+
+    Attributes
+    ----------
+    scene, case, kind : names and ``"external"``/``"internal"``.
+    n_nodes, n_muscles : mesh size and number of muscles designed.
+    success : the target solve, the routing (at least one muscle) and the design all succeeded.
+    message : why not, when ``success`` is False.
+    target_success, target_status : the solve that made the target.
+    contractions : designed contractions; known_contractions : internal cases' true ones.
+    contraction_error : internal cases: largest ``|designed - known|``.
+    difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
+        relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
+    initial_difference : difference at the design's starting point.
+    design_success, design_status, verified, gap : the design, its verification and the forward check's
+        largest node distance between the design's state and a fresh forward solve from rest.
+    routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
+        the fraction of the true muscles' edges that routing on the target covers.
+    photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
+        outline with it (the paper's design-versus-prototype measure), ``self`` the driven outline with its
+        own photograph (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``,
+        ``ratio`` and ``mean_norm``.
+    times : seconds per stage; files : files written (relative to the scene's folder).
+    """
+
+    scene: str
+    case: str
+    kind: str
+    n_nodes: int
+    n_muscles: int = 0
+    success: bool = False
+    message: str = ""
+    target_success: bool = False
+    target_status: str = ""
+    contractions: list = field(default_factory=list)
+    known_contractions: list | None = None
+    contraction_error: float | None = None
+    difference: float | None = None
+    relative_difference: float | None = None
+    initial_difference: float | None = None
+    design_success: bool | None = None
+    design_status: str = ""
+    verified: bool | None = None
+    gap: float | None = None
+    routing: dict | None = None
+    photo: dict | None = None
+    times: dict = field(default_factory=dict)
+    files: list = field(default_factory=list)
+
+
+@dataclass
+class CaseRun:
+    """A case's report with the arrays behind it (the setup, the design, the photograph)."""
+
+    report: CaseReport
+    setup: CaseSetup | None = None
+    design: Any = None
+    photo: Any = None
+    comparison: Any = None
+
+
+@dataclass
+class SceneReport:
+    """The outcome of :func:`run_scene`: one :class:`CaseReport` per case, animations, timing."""
+
+    scene: str
+    title: str
+    n_nodes: int
+    cases: list
+    animations: dict = field(default_factory=dict)
+    out: str = ""
+    time: float = 0.0
+
+    @property
+    def success(self) -> bool:
+        """Every case succeeded and every animation's forward solves succeeded."""
+        return all(c.success for c in self.cases) and all(a.get("success", False)
+                                                             for a in self.animations.values())
+
+    def table(self) -> str:
+        """A Markdown table of the key figures, one row per case."""
+        head = ("| scene | case | kind | nodes | muscles | contractions | difference | diff/size (%) | "
+                "design | photo d (px) | ratio (%) | time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
+        for c in self.cases:
+            a = ", ".join(f"{v:.3f}" for v in c.contractions) if c.contractions else "-"
+            d = "-" if c.difference is None else f"{c.difference:.4g}"
+            r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
+            ok = "ok" if c.success else "FAILED"
+            ph = (c.photo or {}).get("target")
+            pd = "-" if not ph else f"{ph['mean_px']:.2f}"
+            pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
+            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {d} | {r} | "
+                        f"{ok} | {pd} | {pr} | {c.times.get('total', 0.0):.1f} |")
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        from dataclasses import asdict
+
+        return {"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
+                "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
+                "cases": [asdict(c) for c in self.cases], "animations": self.animations}
+
+
+def _finite(v):
+    from .design import _finite_or_none
+
+    return _finite_or_none(v)
+
+
+def _edge_set(muscles) -> set:
+    return {(min(a, b), max(a, b)) for m in muscles for a, b in m.segments.tolist()}
+
+
+def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
+             photo_resolution: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
+             prefix: str = "") -> CaseRun:
+    """Run one case through the pipeline (nothing is written).
+
+    Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
+    contractions (:func:`~mdsr_opt.design.design_contractions` with the scene's ``design_options``, its
+    verification being the forward check) -> SYNTHETIC photograph of the driven body and contour metrics
+    (:mod:`mdsr_opt.evaluate`).
+
+    A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
+    says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
+    """
+    import time
+
+    from .design import design_contractions
+    from .equilibrium import SolverFailure
+
+    say = log or (lambda s: None)
+    if isinstance(case, str):
+        case = scene.case(case)
+    mesh = scene.mesh
+    rep = CaseReport(scene=scene.name, case=case.name, kind=case.kind, n_nodes=mesh.n_nodes)
+    run = CaseRun(report=rep)
+    t0 = time.perf_counter()
+    what = ("external driving" if case.kind == "external" else
+            f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
+    setup = prepare_case(scene, case)
+    run.setup = setup
+    tr = setup.target_result
+    rep.target_success, rep.target_status = bool(tr.success), str(tr.status)
+    rep.times.update(setup.times)
+    say(f"{prefix}target by {what}: {tr.status} ({tr.iterations} iterations, {len(tr.steps)} load step(s), "
+        f"{setup.times['target']:.2f} s)")
+    if setup.routing is not None:
+        rr = setup.routing
+        rep.routing = {"n_units": rr.n_units,
+                       "muscles": [{"n_edges": s.n_edges, "contraction": s.contraction,
+                                    "nonuniformity": s.nonuniformity} for s in rr.stats]}
+        if case.kind == "internal":
+            true = _edge_set(scene.muscles)
+            rep.routing["recovered"] = len(true & _edge_set(rr.muscles)) / max(len(true), 1)
+    if not tr.success:
+        rep.message = f"target solve failed: {tr.status}"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    if not setup.muscles:
+        why = "; ".join(setup.warnings) or "does the target shorten any edge?"
+        rep.message = f"routing found no muscle on the target ({why})"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    rep.n_muscles = len(setup.muscles)
+    if case.kind == "external" and scene.muscles is None:
+        say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
+            f"({setup.times['routing']:.2f} s)")
+    opts = dict(scene.design_options)
+    if method is not None:
+        opts["method"] = method
+    t1 = time.perf_counter()
+    try:
+        res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
+    except SolverFailure as exc:  # a forward solve inside the design failed hard
+        rep.message = f"design failed: {exc}"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    run.design = res
+    rep.times["design"] = time.perf_counter() - t1
+    rep.contractions = [float(a) for a in res.contractions]
+    rep.difference = float(res.difference)
+    rep.relative_difference = float(res.difference) / mesh.size
+    rep.initial_difference = float(res.initial_difference)
+    rep.design_success, rep.design_status = bool(res.success), str(res.status)
+    if res.verification is not None:
+        rep.verified, rep.gap = bool(res.verification.passed), float(res.verification.gap)
+    if setup.known_contractions is not None:
+        rep.known_contractions = [float(a) for a in setup.known_contractions]
+        rep.contraction_error = float(np.abs(res.contractions - setup.known_contractions).max())
+    a = ", ".join(f"{v:.3f}" for v in res.contractions)
+    say(f"{prefix}design ({res.method}): a = [{a}], difference {res.difference:.3g} "
+        f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
+        f" ({rep.times['design']:.1f} s)")
+    if photo:
+        from .evaluate import compare_contours, contour_from_image, render_photo, simulated_outline
+
+        t2 = time.perf_counter()
+        try:
+            ph = render_photo(mesh, res.x_aligned, resolution=photo_resolution, seed=0)
+            contour = contour_from_image(ph.image)
+            cmp_t = compare_contours(simulated_outline(mesh, setup.target), contour)
+            cmp_s = compare_contours(simulated_outline(mesh, res.x_aligned), contour)
+        except ValueError as exc:  # e.g. a body too thin to segment at this resolution
+            rep.photo = {"error": str(exc)}
+            say(f"{prefix}photograph: could not measure ({exc})")
+        else:
+            keys = ("mean_px", "std_px", "max_px", "ratio", "mean_norm")
+            rep.photo = {"synthetic": True, "resolution": list(photo_resolution),
+                         "target": {k: float(getattr(cmp_t, k)) for k in keys},
+                         "self": {k: float(getattr(cmp_s, k)) for k in keys}}
+            run.photo, run.comparison = ph, cmp_t
+            say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
+                f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
+                f"{cmp_s.mean_px:.2f} px")
+        rep.times["photo"] = time.perf_counter() - t2
+    rep.success = bool(res.success)
+    if not res.success:
+        rep.message = f"design not verified: {res.status}"
+    rep.times["total"] = time.perf_counter() - t0
+    return run
+
+
+def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
+    """Write a case's figures, meshes and photograph into ``folder``; returns the file names.
+
+    Files: ``target.png`` (target with anchors and drags), ``graph.png`` (contraction graph),
+    ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),
+    ``photo.png``/``photo.json`` (the SYNTHETIC photograph) and ``overlay.png`` (contour metrics), and the
+    meshes ``target.<fmt>`` and ``driven.<fmt>`` (states as displacements). Every file is written
+    atomically; what a failed stage did not produce is not written.
+    """
+    from . import plot
+    from .io import write_mesh
+    from .routing import contraction_graph
+
+    fmt = "." + mesh_format.lstrip(".")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    setup, mesh, case = run.setup, scene.mesh, run.setup.case if run.setup else None
+    files: list[str] = []
+    if setup is None:
+        return files
+    mat = scene.material
+    x = setup.target
+    if setup.target_result.success:
+        energy = mat.psi(mesh.deformation_gradients(x))
+        title = (f"{scene.name} / {case.name}: target by "
+                 f"{'external driving' if case.kind == 'external' else 'internal driving'}")
+        fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
+                               drag_positions=case.drag_positions if len(case.drag_nodes) else None,
+                               muscles=setup.muscles if case.kind == "internal" else (), values=energy,
+                               title=title)
+        files.append(plot.save_figure(fig, folder / "target.png"))
+        write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
+        files.append(str(folder / f"target{fmt}"))
+        graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
+        seeds = setup.routing.seeds if setup.routing is not None else None
+        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds),
+                                      folder / "graph.png"))
+        if setup.muscles:
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png"))
+    if run.design is not None:
+        res = run.design
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png"))
+        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
+        files.append(str(folder / f"driven{fmt}"))
+    if run.photo is not None:
+        files.append(str(run.photo.save(folder / "photo.png")))
+        files.append(str(folder / "photo.json"))
+        fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
+                                title="target outline on the driven body's photo")
+        files.append(plot.save_figure(fig, folder / "overlay.png"))
+    return [os.path.relpath(f, folder.parent) for f in files]
+
+
+def _animation_states(scene: Scene, anim: Animation, runs: dict, log) -> dict:
+    """Forward-solve every frame of ``anim``; returns a JSON-ready dict plus private arrays."""
+    from .equilibrium import solve_internal
+
+    union: list[Muscle] = []
+    slots: dict[str, list[int]] = {}
+    for cname in anim.cases:
+        run = runs.get(cname)
+        if run is None or run.design is None:
+            return {"success": False, "message": f"case {cname!r} has no design in this run"}
+        idx = []
+        for m in run.setup.muscles:
+            if m in union:
+                idx.append(union.index(m))
+            else:
+                union.append(m)
+                idx.append(len(union) - 1)
+        slots[cname] = idx
+    a_of = {}
+    for cname, idx in slots.items():
+        v = np.zeros(len(union))
+        v[idx] = runs[cname].design.contractions
+        a_of[cname] = v
+    keys = [np.zeros(len(union)) if c == "rest" else f * a_of[c] for c, f in anim.keyframes]
+    frames = []
+    for k0, k1 in zip(keys[:-1], keys[1:]):
+        for j in range(anim.frames_per_step):
+            frames.append(k0 + (k1 - k0) * j / anim.frames_per_step)
+    frames.append(keys[-1])
+    opts = scene.design_options
+    model, stiffness = opts.get("muscle_model", "springs"), opts.get("stiffness", 10.0)
+    a_max = opts.get("a_max", 0.6)
+    states, ok, fails = [], True, []
+    for i, a in enumerate(frames):
+        res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness)
+        if not res.success:
+            ok = False
+            fails.append(i)
+        states.append(res.x)
+    log(f"{anim.name}: {len(frames)} frames, {len(union)} muscle(s), "
+        f"{'all forward solves succeeded' if ok else f'{len(fails)} forward solve(s) FAILED'}")
+    return {"success": ok, "n_frames": len(frames), "failed_frames": fails,
+            "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in union],
+            "contractions": [f.tolist() for f in frames], "_states": states, "_muscles": union,
+            "_frames": frames, "_a_max": a_max}
+
+
+def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
+              method: str | None = None, photos: bool = True, figures: bool = True,
+              animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+              log: Callable[[str], None] | None = print) -> SceneReport:
+    """Run the whole pipeline on a scene's cases and write everything into ``out``.
+
+    For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
+    forward check, SYNTHETIC photograph and contour metrics (:func:`run_case`), then its figures, meshes
+    and photograph into ``out/<case>/`` (:func:`write_case`). Then each animation (forward solves of
+    interpolated contractions) as ``out/<animation>.gif`` with ``out/<animation>.json``; the rest mesh
+    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table).
+
+    Parameters
+    ----------
+    scene : Scene
+    out : folder (created).
+    cases : names of the cases to run (default all); animations needing a case not run are skipped.
+    method : design method overriding the scene's ``design_options["method"]``.
+    photos, figures, animations : turn the photographs, the figures and the animations off.
+    mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
+    photo_resolution : (width, height) of the synthetic photographs.
+    log : progress messages (``None`` for silence).
+
+    Returns
+    -------
+    SceneReport
+        ``.success`` is False when a target solve, the routing, a design or an animation frame failed;
+        the reasons are in each case's ``message`` and in ``summary.json``. Nothing is hidden.
+    """
+    import time
+
+    from . import plot
+    from .io import FORMATS, write_json
+    from .io import atomic_path
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    if "." + str(mesh_format).lstrip(".") not in FORMATS or mesh_format.lstrip(".") == "msh":
+        raise ValueError(f"mesh_format must be 'vtu', 'vtk' or 'xdmf', got {mesh_format!r}")
+    names = scene.case_names if cases is None else tuple(cases)
+    for c in names:
+        scene.case(c)  # KeyError naming the choices
+    say = log or (lambda s: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
+    if figures:
+        plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
+                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png")
+    runs: dict[str, CaseRun] = {}
+    for i, cname in enumerate(names):
+        prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+        run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
+                       prefix=prefix)
+        if figures:
+            run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)
+        runs[cname] = run
+    anim_out: dict[str, dict] = {}
+    if animations:
+        for anim in scene.animations:
+            if any(c not in runs for c in anim.cases):
+                continue
+            data = _animation_states(scene, anim, runs, lambda s: say(f"[{scene.name}] {s}"))
+            if "_states" in data:
+                act = np.asarray(data["_frames"]) / data["_a_max"]
+                titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, a = ["
+                          + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(data["_frames"])]
+                if figures:
+                    plot.save_animation(scene.mesh, data["_states"], out / f"{anim.name}.gif",
+                                        muscles=data["_muscles"], activations=act, titles=titles, fps=anim.fps)
+                    data["gif"] = f"{anim.name}.gif"
+            public = {k: v for k, v in data.items() if not k.startswith("_")}
+            anim_out[anim.name] = public
+            write_json(out / f"{anim.name}.json", _finite(public))
+    report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
+                         cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
+                         time=time.perf_counter() - t0)
+    summary = report.to_dict()
+    summary.update({"description": scene.description, "source": scene.source, "resolution": scene.resolution,
+                    "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
+                    "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
+                                 "thickness": scene.material.thickness},
+                    "routing_options": scene.routing_options, "design_options": scene.design_options,
+                    "photographs": "SYNTHETIC (rendered by mdsr_opt.evaluate.render_photo), not camera images"
+                    if photos else None,
+                    "expected": scene.expected})
+    write_json(out / "summary.json", _finite(summary))
+    with atomic_path(out / "summary.md") as tmp:
+        Path(tmp).write_text(f"# {scene.title or scene.name}\n\n{report.table()}\n")
+    say(f"{scene.name}: {'all cases succeeded' if report.success else 'SOME CASES FAILED'} in {report.time:.1f} s; "
+        f"results in {out}")
+    return report
+
+
+def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
+    """The ``__main__`` of a problem script: ``[--out DIR] [--resolution R] [--case NAME ...]``.
+
+    Returns the process exit code: 0 when every case succeeded, 1 otherwise.
+    """
+    import argparse
+
+    p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
+    p.add_argument("--out", default=None, help="output folder (default: out/<scene>)")
+    p.add_argument("--resolution", default="medium", type=_parse_resolution,
+                   help="coarse, medium, fine or a node count (default medium)")
+    p.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
+    p.add_argument("--method", default=None, help="design method (flattened, nested, derivative-free)")
+    a = p.parse_args(argv)
+    scene = build(resolution=a.resolution)
+    rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method)
+    print(rep.table())
+    return 0 if rep.success else 1
+
+
+def _parse_resolution(text: str):
+    return int(text) if text.isdigit() else text
 
 
 # ---------------------------------------------------------------------------------------------- scene files
@@ -637,7 +1162,3 @@ def load_scene(path: str | os.PathLike, resolution: str | int = "medium") -> Sce
     """Read a scene file (TOML or JSON); see the README's scene-file section for the format."""
     raise NotImplementedError("scene files are coming in the next commit")
 
-
-def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
-    """The ``__main__`` of a problem script: ``--out DIR --resolution R [--case NAME ...]``."""
-    raise NotImplementedError("the pipeline runner is coming in the next commit")

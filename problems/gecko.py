@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.scenes import (Animation, Case, Scene, arc_map, mesh_polygon, nodes_in_box, nodes_near,
+from mdsr_opt.scenes import (Animation, Case, Scene, arc_map, arc_rigid, mesh_polygon, nodes_in_box, nodes_near,
                              resolve_resolution, run_main)
 
 BEND = 0.55          # radians of bend on each side of the trunk's middle
@@ -40,13 +40,22 @@ def outline() -> np.ndarray:
     return np.vstack([lower, [[10.0, 0.0]], upper])
 
 
-def bent(points: np.ndarray, side: int) -> np.ndarray:
-    """The C-bend of the whole body, concave to the left (``side=+1``, +y) or right (``side=-1``)."""
+def bent(points: np.ndarray, side: int, root: tuple[float, float] | None = None) -> np.ndarray:
+    """The C-bend of the body, concave to the left (``side=+1``, +y) or right (``side=-1``).
+
+    Without ``root`` every point follows the bent spine (``arc_map``); with ``root`` (a point on the
+    body) the points move rigidly with the spine's frame there (``arc_rigid``): how a foot, the head or
+    the tail tip is carried.
+    """
     P = np.asarray(points, dtype=float)
+    ref = P[:, 0] if root is None else np.full(len(P), float(root[0]))
+    head = ref >= MIDDLE
     out = P.copy()
-    head = P[:, 0] >= MIDDLE
-    out[head] = arc_map(P[head], (MIDDLE, 0.0), (1.0, 0.0), 10.0 - MIDDLE, side * BEND)
-    out[~head] = arc_map(P[~head], (MIDDLE, 0.0), (-1.0, 0.0), MIDDLE, -side * BEND)
+    for sel, d, L, a in ((head, (1.0, 0.0), 10.0 - MIDDLE, side * BEND),
+                         (~head, (-1.0, 0.0), MIDDLE, -side * BEND)):
+        if sel.any():
+            out[sel] = (arc_map(P[sel], (MIDDLE, 0.0), d, L, a) if root is None
+                        else arc_rigid(P[sel], root, (MIDDLE, 0.0), d, L, a))
     return out
 
 
@@ -59,18 +68,25 @@ def build(resolution="medium") -> Scene:
         "middle": nodes_near(mesh, (MIDDLE, 0.0), max(0.3, 1.1 * h)),
         "head": nodes_in_box(mesh, xmin=9.2),
         "tail": nodes_in_box(mesh, xmax=0.8),
-        "feet": np.concatenate([nodes_in_box(mesh, ymax=-2.15), nodes_in_box(mesh, ymin=2.15)]),
     }
-    driven = np.concatenate([regions["head"], regions["tail"], regions["feet"]])
-    cases = tuple(Case(name, anchors=regions["middle"], drag_nodes=driven, drag_positions=bent(P, side)[driven],
-                       description=f"spine bent {'left' if side > 0 else 'right'} by {2 * BEND:.2f} rad")
-                  for name, side in (("bend_left", 1), ("bend_right", -1)))
+    # each group is carried rigidly by the spine's frame at its root (hip, shoulder, neck, tail)
+    groups = [(regions["head"], (9.2, 0.0)), (regions["tail"], (0.8, 0.0))]
+    for foot_y, hip_x, fx in ((-1, 4.1, 3.2), (-1, 6.9, 7.4), (1, 4.1, 3.2), (1, 6.9, 7.4)):
+        foot = nodes_near(mesh, (fx, 2.35 * foot_y), 0.45)
+        groups.append((foot, (hip_x, 0.0)))
+    regions["feet"] = np.concatenate([g for g, _ in groups[2:]])
+    driven = np.concatenate([g for g, _ in groups])
+    cases = []
+    for name, side in (("bend_left", 1), ("bend_right", -1)):
+        pos = np.vstack([bent(P[g], side, root) for g, root in groups])
+        cases.append(Case(name, anchors=regions["middle"], drag_nodes=driven, drag_positions=pos,
+                          description=f"spine bent {'left' if side > 0 else 'right'} by {2 * BEND:.2f} rad"))
     gait = Animation("gait", (("rest", 0.0), ("bend_left", 1.0), ("rest", 0.0), ("bend_right", 1.0),
                               ("rest", 0.0)), frames_per_step=5)
     return Scene(
         name="gecko", title="Gecko (paper Figure 11a): left and right bending, alternating as a gait",
         description=__doc__.split("\n\n")[2].replace("\n", " "), mesh=mesh,
-        material=NeoHookean(E=1.0, nu=0.4), cases=cases, regions=regions,
+        material=NeoHookean(E=1.0, nu=0.4), cases=tuple(cases), regions=regions,
         routing_options={"K_a": 10.0, "K_b": 4.0, "max_muscles": 2},
         design_options={"method": "flattened", "a_max": 0.6}, animations=(gait,),
         expected={"n_muscles": {"bend_left": 2, "bend_right": 2}}, resolution=resolve_resolution(resolution),

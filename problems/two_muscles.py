@@ -1,0 +1,54 @@
+"""Two-muscle experiment: the gripper body with two muscles, contracted by 20, 30, 40 and 50 %.
+
+The paper checks its internal-driving model against a prototype on three bodies driven by one, two and
+four independent muscle units, each contracted by 20 %, 30 %, 40 % and 50 % of its rest length (its
+Figure 9 and Table 3). This scene is the two-muscle group: the C-shaped ring of ``gripper.py`` with two
+muscles along its inner rim, one on the upper and one on the lower half, both contracted alike. Each case
+is the forward (internal-driving) solve at one contraction; the design must then recover the two
+contractions from the shape alone, and routing on the shape is compared with the true muscles.
+
+The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no geometry); they
+are not the paper's meshes.
+
+Run ``python problems/two_muscles.py --out out/two_muscles`` or ``mdsr run two_muscles --out out/two_muscles``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mdsr_opt.scenes import Animation, Case, Scene, boundary_path, load_problem_module, resolve_resolution, run_main
+
+LEVELS = (0.2, 0.3, 0.4, 0.5)
+
+gripper = load_problem_module(Path(__file__).with_name("gripper.py"))
+
+
+def build(resolution="medium") -> Scene:
+    """The two-muscle experiment: cases ``a20`` ... ``a50`` (internal driving, the muscles given)."""
+    mesh, material = gripper.body(resolution)
+    ri = gripper.R0 - gripper.WIDTH / 2
+    half = gripper.OPENING / 2
+
+    def rim(a0, a1):
+        return ri * np.array([np.cos(a0), np.sin(a0)]), ri * np.array([np.cos(a1), np.sin(a1)])
+
+    upper = boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ri * np.array([0.0, 1.0]), name="upper")
+    lower = boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ri * np.array([0.0, -1.0]),
+                          name="lower")
+    cases = tuple(Case(f"a{round(100 * a)}", contractions=[a, a], description=f"both muscles contracted by {a:.0%}")
+                  for a in LEVELS)
+    return Scene(
+        name="two_muscles", title="Two-muscle experiment (paper Figure 9, column B): 20-50 % contraction",
+        description=__doc__.split("\n\n")[1].replace("\n", " "), mesh=mesh, material=material, cases=cases,
+        muscles=(upper, lower), regions={"upper": list(upper.nodes), "lower": list(lower.nodes)},
+        design_options={"method": "flattened", "a_max": 0.6, "muscle_model": "springs", "stiffness": 10.0},
+        animations=(Animation("sweep", (("rest", 0.0), ("a50", 1.0), ("rest", 0.0)), frames_per_step=6),),
+        expected={"n_muscles": 2, "contractions": {c.name: c.contractions.tolist() for c in cases}},
+        resolution=resolve_resolution(resolution), source=__file__)
+
+
+if __name__ == "__main__":
+    raise SystemExit(run_main(build))
