@@ -400,6 +400,7 @@ class _Assembly:
     def __init__(self, nrow: int, ncol: int):
         self.shape = (nrow, ncol)
         self.parts: list = []
+        self._scatter = None
 
     def add(self, values, rows, cols, src, weights=None):
         """Scatter ``values[src[k]] * weights[k]`` to ``(rows[k], cols[k])``; targets with a negative row
@@ -410,21 +411,25 @@ class _Assembly:
         if keep.any():
             self.parts.append((values, rows[keep], cols[keep], src[keep], weights[keep]))
 
-    def build(self) -> ca.MX:
+    def build(self, values: list | None = None) -> ca.MX:
+        """The assembled matrix; ``values`` (one column per part, the same sizes) replaces the parts' values,
+        reusing the scatter (for a second matrix with the same structure)."""
         nrow, ncol = self.shape
         if not self.parts:
             return ca.MX(nrow, ncol)
-        # one scatter matrix from all parts' values, stacked
-        offsets = np.cumsum([0] + [p[0].numel() for p in self.parts])
-        keys = np.concatenate([p[2] * nrow + p[1] for p in self.parts])
-        src = np.concatenate([p[3] + o for p, o in zip(self.parts, offsets)])
-        wts = np.concatenate([p[4] for p in self.parts])
-        ukeys, nzpos = np.unique(keys, return_inverse=True)
-        colind = np.concatenate([[0], np.cumsum(np.bincount(ukeys // nrow, minlength=ncol))])
-        spars = ca.Sparsity(nrow, ncol, colind.tolist(), (ukeys % nrow).tolist())
-        S = sp.csr_matrix((wts, (nzpos.ravel(), src)), shape=(len(ukeys), offsets[-1]))
-        values = ca.vertcat(*[p[0] for p in self.parts])
-        return ca.MX(spars, ca.mtimes(_to_dm(S), values))
+        if self._scatter is None:  # one scatter matrix from all parts' values, stacked
+            offsets = np.cumsum([0] + [p[0].numel() for p in self.parts])
+            keys = np.concatenate([p[2] * nrow + p[1] for p in self.parts])
+            src = np.concatenate([p[3] + o for p, o in zip(self.parts, offsets)])
+            wts = np.concatenate([p[4] for p in self.parts])
+            ukeys, nzpos = np.unique(keys, return_inverse=True)
+            colind = np.concatenate([[0], np.cumsum(np.bincount(ukeys // nrow, minlength=ncol))])
+            spars = ca.Sparsity(nrow, ncol, colind.tolist(), (ukeys % nrow).tolist())
+            S = sp.csr_matrix((wts, (nzpos.ravel(), src)), shape=(len(ukeys), offsets[-1]))
+            self._scatter = (spars, _to_dm(S))
+        spars, S = self._scatter
+        vals = ca.vertcat(*([p[0] for p in self.parts] if values is None else values))
+        return ca.MX(spars, ca.mtimes(S, vals))
 
 
 def _block_targets(rmap: np.ndarray, cmap: np.ndarray, upper: bool):
@@ -581,7 +586,7 @@ def _assembled_nlp(prob: _Problem, hessian: str):
         hess.add(lam_f * val.T, loc[ka], loc[kb], np.arange(n))
 
     # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
-    gval, gjac = _Assembly(nfree, 1), _Assembly(nfree, 1)  # constraints for nlp_g and for jac_g
+    gval, gjac = _Assembly(nfree, 1), []  # the constraints, and their values from jac_g's term functions
     jac = _Assembly(nfree, nz)
     ind = np.diff(B.indptr) > 0  # parameters moved by the contractions
     for fam in model.term_families():
@@ -602,7 +607,7 @@ def _assembled_nlp(prob: _Problem, hessian: str):
         gtargets = (cidx[dofs].reshape(-1), np.zeros(N * d), np.arange(N * d))
         gval.add(ca.vec(_mapped(fn["g"], X, *ins)[0]), *gtargets)
         gl, Hl = _mapped(fn["gh"], X, *ins)
-        gjac.add(ca.vec(gl), *gtargets)
+        gjac.append(ca.vec(gl))
         jac.add(sc * ca.vec(Hl), *_block_targets(cidx[dofs], dofs, upper=False))
         if exact:
             hess.add(ca.vec(_mapped(fn["lxx"], X, L, *ins)[0]), *_block_targets(dofs, dofs, upper=True))
@@ -625,7 +630,7 @@ def _assembled_nlp(prob: _Problem, hessian: str):
     g = sc * ca.densify(gval.build())
 
     fns = {"grad_f": ca.Function("design_grad_f", [z, par], [f, grad_f], ["x", "p"], ["f", "grad"]),
-           "jac_g": ca.Function("design_jac_g", [z, par], [sc * ca.densify(gjac.build()), jac.build()],
+           "jac_g": ca.Function("design_jac_g", [z, par], [sc * ca.densify(gval.build(gjac)), jac.build()],
                                 ["x", "p"], ["g", "jac"]),
            "hess_lag": ca.Function("design_hess_lag", [z, par, lam_f, lam_g], [hess.build()],
                                    ["x", "p", "lam_f", "lam_g"], ["hess"])}
