@@ -3,11 +3,15 @@
 For 1, 2, 4 and 8 muscles on rectangle meshes of about 300, 1k and 3k nodes, a target is made by contracting
 the muscles by known amounts, rotating and shifting the result; each method designs the contractions from
 the same initial guess. Prints a table, writes ``design_bench.csv`` and ``design_bench.png`` (difference
-against time) to ``--out``. Also measures the flattened NLP's sensitivity to scaling, warm start and Hessian
-(exact vs Gauss-Newton) on the 1k-node, 4-muscle case.
+against time) to ``--out``. Also measures the flattened NLP's sensitivity to scaling, warm start, Hessian
+(exact vs Gauss-Newton) and derivatives (assembled term by term vs CasADi's symbolic ones) on the 1k-node,
+4-muscle case.
 
 Run:  python benchmarks/bench_design.py --out bench_out
       python benchmarks/bench_design.py --quick          # 300 nodes only, 1-4 muscles
+      python benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --variants
+                                                          # flattened only: build and solve, and the variants
+      python benchmarks/bench_design.py --quick --derivatives casadi   # the flattened NLP's SX path
 """
 
 from __future__ import annotations
@@ -81,9 +85,12 @@ def run(args):
                 kw = {}
                 if method == "derivative-free":
                     kw["max_iter"] = args.df_evals * m
+                if method == "flattened":
+                    kw["derivatives"] = args.derivatives
                 res = design_contractions(mesh, MAT, mus, target, method=method, **kw)
                 err = float(np.abs(res.contractions - a_true).max())
                 row = {"mesh": size, "nodes": mesh.n_nodes, "muscles": m, "method": method,
+                       "derivatives": kw.get("derivatives", ""),
                        "success": res.success, "build_time": res.build_time, "solve_time": res.solve_time,
                        "time": res.time, "iterations": res.iterations, "n_forward": res.n_forward,
                        "difference": res.difference, "rel_difference": res.difference / mesh.size,
@@ -118,14 +125,18 @@ def run(args):
                 print(f"  {size:>4} m={m}: vs {rival:<16} {t / fl_t:7.1f}x  ({t:.3f} s vs {fl_t:.3f} s)")
     # sensitivity of the flattened NLP on the 1k-node, 4-muscle case
     sens = []
-    if not args.quick and "1k" in sizes and 4 in counts:
-        print("\nflattened NLP on 1k nodes, 4 muscles: scaling, warm start, Hessian")
+    if args.variants or (not args.quick and "1k" in sizes and 4 in counts):
+        print("\nflattened NLP on 1k nodes, 4 muscles: scaling, warm start, Hessian, derivatives")
         mesh, mus, a_true, target = make_case("1k", 4)
+        get_model(mesh, MAT)  # as in the table: the energy model is built before timing
         for label, kw in [("auto scaling, warm, exact", {}),
                           ("size scaling, warm, exact", {"scaling": "size"}),
                           ("auto scaling, cold, exact", {"warm_start": False}),
                           ("size scaling, cold, exact", {"scaling": "size", "warm_start": False}),
                           ("auto scaling, warm, Gauss-Newton", {"hessian": "gauss-newton"}),
+                          ("CasADi derivatives (SX), exact", {"derivatives": "casadi"}),
+                          ("CasADi derivatives, Gauss-Newton", {"derivatives": "casadi",
+                                                                "hessian": "gauss-newton"}),
                           ("stiffness 100", {"stiffness": 100.0}),
                           ("stiffness 1", {"stiffness": 1.0})]:
             if "stiffness" in kw:  # a target made with the same stiffness
@@ -133,9 +144,11 @@ def run(args):
                 tgt = fwd.x
             else:
                 tgt = target
+            kw.setdefault("derivatives", args.derivatives)
             res = design_contractions(mesh, MAT, mus, tgt, **kw)
             err = float(np.abs(res.contractions - a_true).max())
-            sens.append({"variant": label, "success": res.success, "iterations": res.iterations,
+            sens.append({"variant": label, "derivatives": kw["derivatives"], "success": res.success,
+                         "iterations": res.iterations,
                          "build_time": res.build_time, "solve_time": res.solve_time,
                          "difference": res.difference, "contraction_error": err, "status": res.status})
             print(f"  {label:<34} ok={'y' if res.success else 'n'} iters={res.iterations:>4d} "
@@ -171,6 +184,10 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="+", default=["flattened", "nested", "derivative-free"])
     ap.add_argument("--df-evals", type=int, default=300, help="derivative-free evaluations per muscle (cap)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--derivatives", default="assembled", choices=["assembled", "casadi"],
+                    help="the flattened NLP's derivatives (see design_contractions)")
+    ap.add_argument("--variants", action="store_true",
+                    help="run the flattened variants on 1k nodes, 4 muscles whatever the sizes")
     run(ap.parse_args(argv))
 
 
