@@ -54,7 +54,7 @@ from ._checks import as_float_array, as_index_array
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
 
-__all__ = ["load_scene", "seeds_for", "RESOLUTIONS", "Case", "Animation", "Scene", "CaseSetup", "list_problems", "get_problem",
+__all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTIONS", "Case", "Animation", "Scene", "CaseSetup", "list_problems", "get_problem",
            "problems_dir", "resolve_resolution", "mesh_polygon", "prepare_case", "nodes_in_box",
            "nodes_near", "nearest_node", "nodes_in_polygon", "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid",
            "rigid_motion", "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun",
@@ -66,6 +66,14 @@ RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}
 #: Said in every problem script: the paper gives no geometry, so the shapes are ours.
 SHAPES_ARE_OURS = ("The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no "
                    "geometry); they are not the paper's meshes.")
+
+
+class UnknownName(KeyError, ValueError):
+    """An unknown problem, case or region name; the message lists the choices. It is a ``KeyError`` (a
+    lookup) and a ``ValueError`` (bad input), so the ``mdsr`` command reports it like other bad input."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
 
 
 # ---------------------------------------------------------------------------------------------- data model
@@ -266,11 +274,11 @@ class Scene:
         return tuple(c.name for c in self.cases)
 
     def case(self, name: str) -> Case:
-        """The case called ``name`` (``KeyError`` naming the choices otherwise)."""
+        """The case called ``name`` (:class:`UnknownName`, a ``KeyError``, naming the choices otherwise)."""
         for c in self.cases:
             if c.name == name:
                 return c
-        raise KeyError(f"scene {self.name!r} has no case {name!r} (cases: {', '.join(self.case_names)})")
+        raise UnknownName(f"scene {self.name!r} has no case {name!r} (cases: {', '.join(self.case_names)})")
 
     def __repr__(self) -> str:
         return (f"Scene({self.name!r}, {self.mesh.n_nodes} nodes, {len(self.cases)} case(s): "
@@ -584,7 +592,7 @@ def _build_from(path: Path, resolution) -> Scene:
     return scene
 
 
-def get_problem(name: str | os.PathLike, resolution: str | int = "medium") -> Scene:
+def get_problem(name: str | os.PathLike, resolution: str | int | None = None) -> Scene:
     """Build a scene by library name, from a problem script path, or from a scene file.
 
     Parameters
@@ -592,32 +600,34 @@ def get_problem(name: str | os.PathLike, resolution: str | int = "medium") -> Sc
     name : str or path
         A name from :func:`list_problems`, a ``.py`` file with a ``build`` factory, or a ``.toml`` /
         ``.json`` scene file (:func:`load_scene`).
-    resolution : {"coarse", "medium", "fine"} or int
-        Approximate node count (see the module docstring). A scene file that gives ``max_area`` or a mesh
-        file keeps its own.
+    resolution : {"coarse", "medium", "fine"} or int, optional
+        Approximate node count (see the module docstring); default ``"medium"`` for scripts and the file's
+        own ``body.resolution`` for scene files. A scene file that gives ``max_area`` or a mesh file keeps
+        its own mesh.
 
     Raises
     ------
-    KeyError
+    UnknownName (a KeyError and a ValueError)
         An unknown name (the message lists the library).
     FileNotFoundError
         A path that does not exist.
     """
-    resolve_resolution(resolution)
+    if resolution is not None:
+        resolve_resolution(resolution)
     s = os.fspath(name)
     p = Path(s)
     if p.suffix.lower() in (".py", ".toml", ".json") or os.sep in s or "/" in s:
         if not p.exists():
             raise FileNotFoundError(f"no such scene file: {s}")
         if p.suffix.lower() == ".py":
-            return _build_from(p, resolution)
+            return _build_from(p, "medium" if resolution is None else resolution)
         return load_scene(p, resolution=resolution)
     files = _problem_files()
     if s not in files:
         where = problems_dir()
         lib = ", ".join(files) if files else f"none found (problems folder: {where})"
-        raise KeyError(f"unknown problem {s!r}; the library has: {lib}")
-    return _build_from(files[s], resolution)
+        raise UnknownName(f"unknown problem {s!r}; the library has: {lib}")
+    return _build_from(files[s], "medium" if resolution is None else resolution)
 
 
 # ---------------------------------------------------------------------------------------------- design problem
@@ -1158,7 +1168,584 @@ def _parse_resolution(text: str):
 
 
 # ---------------------------------------------------------------------------------------------- scene files
-def load_scene(path: str | os.PathLike, resolution: str | int = "medium") -> Scene:
-    """Read a scene file (TOML or JSON); see the README's scene-file section for the format."""
-    raise NotImplementedError("scene files are coming in the next commit")
+_TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
+             "cases", "animations", "expected")
+_BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
+_MATERIAL_KEYS = ("model", "E", "nu", "thickness")
+_REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
+_MUSCLE_KEYS = ("name", "nodes", "path", "boundary")
+_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions")
+_DRAG_KEYS = ("nodes", "at", "to", "by", "rotate", "about")
+_ANIM_KEYS = ("name", "keyframes", "frames_per_step", "fps")
 
+
+class SceneFileError(ValueError):
+    """A scene file is malformed; the message names the file and the field."""
+
+
+class _Reader:
+    """Field-path-aware checks for one scene file."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, where: str, msg: str, kind: type = SceneFileError):
+        err = kind(f"{self.path.name}: {where}: {msg}")
+        raise err
+
+    def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
+        import difflib
+
+        if not isinstance(d, Mapping):
+            self.fail(where, f"expected a table/object, got {_tname(d)}", TypeError)
+        for k in d:
+            if k not in allowed:
+                close = difflib.get_close_matches(str(k), allowed, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(allowed)})"
+                self.fail(_join(where, k), f"unknown field{hint}")
+        for k in required:
+            if k not in d:
+                self.fail(_join(where, k), "missing (required)")
+        return dict(d)
+
+    def number(self, v, where: str, positive: bool = False) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(where, f"expected a number, got {_tname(v)}", TypeError)
+        v = float(v)
+        if not math.isfinite(v):
+            self.fail(where, f"must be finite, got {v}")
+        if positive and v <= 0:
+            self.fail(where, f"must be > 0, got {v}")
+        return v
+
+    def string(self, v, where: str) -> str:
+        if not isinstance(v, str) or not v:
+            self.fail(where, f"expected a non-empty string, got {_tname(v)}", TypeError)
+        return v
+
+    def point(self, v, where: str) -> np.ndarray:
+        if not isinstance(v, (list, tuple)) or len(v) != 2:
+            self.fail(where, f"expected a point [x, y], got {v!r}", TypeError if not isinstance(v, (list, tuple))
+                      else SceneFileError)
+        return np.array([self.number(c, f"{where}[{i}]") for i, c in enumerate(v)])
+
+    def points(self, v, where: str, at_least: int = 1) -> np.ndarray:
+        if not isinstance(v, (list, tuple)):
+            self.fail(where, f"expected a list of points [[x, y], ...], got {_tname(v)}", TypeError)
+        if len(v) < at_least:
+            self.fail(where, f"needs at least {at_least} point(s), got {len(v)}")
+        return np.array([self.point(p, f"{where}[{i}]") for i, p in enumerate(v)]).reshape(-1, 2)
+
+
+def _join(where: str, key) -> str:
+    return f"{where}.{key}" if where else str(key)
+
+
+def _tname(v) -> str:
+    return "a list" if isinstance(v, list) else "a table" if isinstance(v, Mapping) else type(v).__name__
+
+
+def _read_file(path: Path) -> dict:
+    suffix = path.suffix.lower()
+    text = path.read_bytes()
+    if suffix == ".json":
+        import json
+
+        try:
+            data = json.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise SceneFileError(f"{path.name}: not valid JSON: {exc}") from None
+    elif suffix == ".toml":
+        if sys.version_info >= (3, 11):
+            import tomllib
+        else:  # pragma: no cover - Python 3.10
+            import tomli as tomllib
+        try:
+            data = tomllib.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise SceneFileError(f"{path.name}: not valid TOML: {exc}") from None
+    else:
+        raise SceneFileError(f"{path.name}: a scene file ends in .toml or .json, not {suffix or 'nothing'}")
+    if not isinstance(data, dict):
+        raise SceneFileError(f"{path.name}: the top level must be a table/object, got {_tname(data)}")
+    return data
+
+
+def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> Scene:
+    """Read a scene file (TOML or JSON) into a :class:`Scene`, checking every field.
+
+    The format (TOML shown; JSON has the same structure)::
+
+        name = "finger"                       # required: letters, digits, _ - .
+        title = "A finger bent by its tip"    # optional, as is description
+
+        [body]                                # required: outline (+ holes) or mesh
+        outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
+        holes = [[[1, 0.4], [1.4, 0.4], [1.4, 0.6]]]
+        resolution = "coarse"                 # or a node count; or max_area = 0.02
+        # mesh = "finger.vtu"                 # a mesh file (any meshio format), relative to this file
+
+        [material]                            # optional: neo-hookean, E = 1, nu = 0.3, thickness = 1
+        model = "neo-hookean"                 # or "linear"
+        E = 1.0
+        nu = 0.4
+
+        [regions]                             # named node sets
+        base = { box = [-1, -1, 0, 2] }       # [xmin, ymin, xmax, ymax]
+        tip = { near = [4, 0.5], radius = 0.3, boundary = true }
+        # also: nodes = [...], polygon = [[x, y], ...], loop = 0 (a boundary loop)
+
+        [[muscles]]                           # optional; internal cases need them
+        name = "lower"
+        boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
+
+        [routing]                             # keyword arguments of route_muscles
+        max_muscles = 2
+        [design]                              # keyword arguments of design_contractions
+        a_max = 0.6
+
+        [[cases]]
+        name = "bend"
+        anchors = "base"                      # a region, node indices or [x, y] points
+        drags = [{ nodes = "tip", by = [-1.0, 1.5] },
+                 { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
+        [[cases]]
+        name = "contract"
+        contractions = [0.3]                  # an internal case: one per muscle
+
+        [[animations]]
+        name = "wave"
+        keyframes = [["rest", 0], ["bend", 1], ["rest", 0]]
+
+    Node references (``anchors``, a drag's ``nodes``, a region's ``nodes``) are a region name, a list of
+    region names, a list of node indices, or a list of ``[x, y]`` points, each snapped to the nearest node
+    (which must lie within one mean edge length). A drag moves its nodes ``to`` a point (one node; for
+    several, their centroid goes there), ``by`` a displacement, or ``rotate`` (degrees, anticlockwise)
+    ``about`` a point and then ``by``. Every error names the file and the field, e.g.
+    ``scene.toml: cases[1].drags[0].by: expected a point [x, y], got [1]``; unknown fields are errors
+    (with a suggestion).
+
+    Parameters
+    ----------
+    path : a ``.toml`` or ``.json`` file.
+    resolution : optional
+        Overrides the file's ``body.resolution`` (not ``max_area`` or a mesh file).
+
+    Raises
+    ------
+    FileNotFoundError
+        The file (or its mesh file) does not exist.
+    SceneFileError (a ValueError), TypeError
+        A malformed file.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such scene file: {path}")
+    data = _read_file(path)
+    r = _Reader(path)
+    top = r.keys(data, _TOP_KEYS, "", required=("name", "body", "cases"))
+    name = r.string(top["name"], "name")
+    try:
+        _check_name(name, "name")
+    except ValueError as exc:
+        r.fail("name", str(exc))
+    mesh, res_used = _scene_mesh(r, top["body"], path, resolution)
+    material = _scene_material(r, top.get("material", {}))
+    regions: dict[str, np.ndarray] = {}
+    reg_in = top.get("regions", {})
+    r.keys(reg_in, list(reg_in) if isinstance(reg_in, Mapping) else (), "regions")
+    for rname, spec in reg_in.items():
+        regions[rname] = _scene_region(r, mesh, spec, f"regions.{rname}", regions)
+    muscles = None
+    if "muscles" in top:
+        mus_in = top["muscles"]
+        if not isinstance(mus_in, list):
+            r.fail("muscles", f"expected a list of muscles ([[muscles]] tables), got {_tname(mus_in)}", TypeError)
+        muscles = tuple(_scene_muscle(r, mesh, m, f"muscles[{i}]", regions) for i, m in enumerate(mus_in))
+    routing = _scene_options(r, top.get("routing", {}), "routing")
+    design = _scene_options(r, top.get("design", {}), "design")
+    cases_in = top["cases"]
+    if not isinstance(cases_in, list) or not cases_in:
+        r.fail("cases", "expected a non-empty list of cases ([[cases]] tables)",
+               TypeError if not isinstance(cases_in, list) else SceneFileError)
+    cases = []
+    seen = set()
+    for i, c in enumerate(cases_in):
+        case = _scene_case(r, mesh, c, f"cases[{i}]", regions, muscles)
+        if case.name in seen:
+            r.fail(f"cases[{i}].name", f"{case.name!r} is used by an earlier case")
+        seen.add(case.name)
+        cases.append(case)
+    anims = []
+    for i, a in enumerate(top.get("animations", []) if isinstance(top.get("animations", []), list)
+                          else r.fail("animations", "expected a list of animations", TypeError)):
+        anims.append(_scene_animation(r, a, f"animations[{i}]", seen))
+    expected = top.get("expected", {})
+    if not isinstance(expected, Mapping):
+        r.fail("expected", f"expected a table, got {_tname(expected)}", TypeError)
+    try:
+        return Scene(name=name, mesh=mesh, material=material, cases=tuple(cases),
+                     title=str(top.get("title", "")), description=str(top.get("description", "")),
+                     muscles=muscles, regions=regions, routing_options=routing, design_options=design,
+                     animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path))
+    except (ValueError, TypeError) as exc:  # cross-field checks of Scene (contraction counts...)
+        raise SceneFileError(f"{path.name}: {exc}") from None
+
+
+def _scene_mesh(r: _Reader, body, path: Path, resolution) -> tuple[Mesh, int]:
+    b = r.keys(body, _BODY_KEYS, "body")
+    if ("outline" in b) == ("mesh" in b):
+        r.fail("body", "give exactly one of outline (a polygon) and mesh (a mesh file)")
+    if "mesh" in b:
+        for k in ("holes", "resolution", "max_area", "min_angle"):
+            if k in b:
+                r.fail(f"body.{k}", "only applies to an outline, not to a mesh file")
+        from .io import read_mesh
+
+        mpath = path.parent / r.string(b["mesh"], "body.mesh")
+        if not mpath.exists():
+            raise FileNotFoundError(f"{path.name}: body.mesh: no such mesh file: {mpath}")
+        try:
+            return read_mesh(mpath).mesh, 0
+        except ValueError as exc:
+            r.fail("body.mesh", str(exc))
+    outline = r.points(b["outline"], "body.outline", at_least=3)
+    holes_in = b.get("holes", [])
+    if not isinstance(holes_in, list):
+        r.fail("body.holes", f"expected a list of polygons, got {_tname(holes_in)}", TypeError)
+    holes = [r.points(h, f"body.holes[{i}]", at_least=3) for i, h in enumerate(holes_in)]
+    min_angle = r.number(b.get("min_angle", 30.0), "body.min_angle", positive=True)
+    if "max_area" in b and "resolution" in b:
+        r.fail("body", "give max_area or resolution, not both")
+    try:
+        if "max_area" in b:
+            return Mesh.from_polygon(outline, max_area=r.number(b["max_area"], "body.max_area", positive=True),
+                                     holes=holes, min_angle=min_angle), 0
+        res = resolution if resolution is not None else b.get("resolution", "medium")
+        try:
+            n = resolve_resolution(res)
+        except (ValueError, TypeError) as exc:
+            r.fail("body.resolution", str(exc), type(exc) if isinstance(exc, TypeError) else SceneFileError)
+        return mesh_polygon(outline, holes, resolution=n, min_angle=min_angle), n
+    except SceneFileError:
+        raise
+    except ValueError as exc:  # self-intersecting outline, hole outside, ...
+        r.fail("body.outline" if "holes" not in str(exc) else "body.holes", str(exc))
+
+
+def _scene_material(r: _Reader, spec):
+    from .material import LinearElastic, NeoHookean
+
+    m = r.keys(spec, _MATERIAL_KEYS, "material")
+    kinds = {"neo-hookean": NeoHookean, "neohookean": NeoHookean, "linear": LinearElastic}
+    model = m.get("model", "neo-hookean")
+    if model not in kinds:
+        r.fail("material.model", f"unknown material {model!r} (choose 'neo-hookean' or 'linear')")
+    vals = {k: r.number(m[k], f"material.{k}") for k in ("E", "nu", "thickness") if k in m}
+    try:
+        return kinds[model](vals.get("E", 1.0), vals.get("nu", 0.3), vals.get("thickness", 1.0))
+    except ValueError as exc:
+        field_ = next((k for k in ("E", "nu", "thickness") if str(exc).startswith(k)), "")
+        r.fail(f"material.{field_}" if field_ else "material", str(exc))
+
+
+def _node_ref(r: _Reader, mesh: Mesh, v, where: str, regions: dict) -> np.ndarray:
+    """A region name, region names, node indices or [x, y] points -> node indices."""
+    tol = float(mesh.edge_lengths.mean())
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v:
+        r.fail(where, f"expected a region name, node indices or [x, y] points, got {v!r}",
+               TypeError if not isinstance(v, list) else SceneFileError)
+    out = []
+    for i, item in enumerate(v):
+        w = f"{where}[{i}]"
+        if isinstance(item, str):
+            if item not in regions:
+                r.fail(w, f"unknown region {item!r} (regions: {', '.join(regions) or 'none defined'})")
+            out.extend(regions[item].tolist())
+        elif isinstance(item, bool):
+            r.fail(w, "expected a node index, a region name or a point, got a boolean", TypeError)
+        elif isinstance(item, int):
+            if not 0 <= item < mesh.n_nodes:
+                r.fail(w, f"node index {item} out of range [0, {mesh.n_nodes})")
+            out.append(item)
+        elif isinstance(item, list):
+            p = r.point(item, w)
+            try:
+                out.append(nearest_node(mesh, p, tol=tol))
+            except ValueError as exc:
+                r.fail(w, str(exc))
+        else:
+            r.fail(w, f"expected a node index, a region name or a point [x, y], got {_tname(item)}", TypeError)
+    return np.unique(np.asarray(out, dtype=np.int64))
+
+
+def _scene_region(r: _Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.ndarray:
+    s = r.keys(spec, _REGION_KEYS, where)
+    sel = [k for k in ("nodes", "box", "near", "polygon", "loop") if k in s]
+    if len(sel) != 1:
+        r.fail(where, "give exactly one of nodes, box, near, polygon, loop (boundary = true may restrict it)")
+    kind = sel[0]
+    bnd = s.get("boundary", False)
+    if not isinstance(bnd, bool):
+        r.fail(f"{where}.boundary", f"expected true or false, got {bnd!r}", TypeError)
+    if "radius" in s and kind != "near":
+        r.fail(f"{where}.radius", "only applies to near")
+    if kind == "nodes":
+        idx = _node_ref(r, mesh, s["nodes"], f"{where}.nodes", regions)
+        if bnd:
+            idx = np.intersect1d(idx, mesh.boundary_nodes)
+    elif kind == "box":
+        v = s["box"]
+        if not isinstance(v, list) or len(v) != 4:
+            r.fail(f"{where}.box", f"expected [xmin, ymin, xmax, ymax], got {v!r}")
+        x0, y0, x1, y1 = (r.number(c, f"{where}.box[{i}]") for i, c in enumerate(v))
+        if x0 > x1 or y0 > y1:
+            r.fail(f"{where}.box", "needs xmin <= xmax and ymin <= ymax")
+        idx = nodes_in_box(mesh, x0, y0, x1, y1, boundary=bnd)
+    elif kind == "near":
+        p = r.point(s["near"], f"{where}.near")
+        if "radius" not in s:
+            r.fail(f"{where}.radius", "missing (required with near)")
+        idx = nodes_near(mesh, p, r.number(s["radius"], f"{where}.radius", positive=True), boundary=bnd)
+    elif kind == "polygon":
+        idx = nodes_in_polygon(mesh, r.points(s["polygon"], f"{where}.polygon", at_least=3), boundary=bnd)
+    else:
+        k = s["loop"]
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(mesh.boundary_loops):
+            r.fail(f"{where}.loop", f"expected a boundary loop index in [0, {len(mesh.boundary_loops)}), got {k!r}")
+        idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
+    if len(idx) == 0:
+        r.fail(where, "selects no node of the mesh")
+    return np.asarray(idx, dtype=np.int64)
+
+
+def _scene_muscle(r: _Reader, mesh: Mesh, spec, where: str, regions: dict) -> Muscle:
+    m = r.keys(spec, _MUSCLE_KEYS, where)
+    sel = [k for k in ("nodes", "path", "boundary") if k in m]
+    if len(sel) != 1:
+        r.fail(where, "give exactly one of nodes (indices), path (waypoints) and boundary ({from, to, via})")
+    name = r.string(m["name"], f"{where}.name") if "name" in m else None
+    try:
+        if "nodes" in m:
+            v = m["nodes"]
+            if not isinstance(v, list) or any(isinstance(i, bool) or not isinstance(i, int) for i in v):
+                r.fail(f"{where}.nodes", "expected a list of node indices", TypeError)
+            mus = Muscle(tuple(v), name=name)
+            mus.check_on(mesh)
+            return mus
+        if "path" in m:
+            return edge_path(mesh, r.points(m["path"], f"{where}.path", at_least=2), name=name)
+        b = r.keys(m["boundary"], ("from", "to", "via"), f"{where}.boundary", required=("from", "to"))
+        via = r.point(b["via"], f"{where}.boundary.via") if "via" in b else None
+        return boundary_path(mesh, r.point(b["from"], f"{where}.boundary.from"),
+                             r.point(b["to"], f"{where}.boundary.to"), via=via, name=name)
+    except SceneFileError:
+        raise
+    except ValueError as exc:
+        r.fail(f"{where}.{sel[0]}", str(exc))
+
+
+def _scene_options(r: _Reader, spec, where: str) -> dict:
+    import inspect
+
+    from .design import design_contractions
+    from .routing import route_muscles
+
+    fn = route_muscles if where == "routing" else design_contractions
+    allowed = [p.name for p in inspect.signature(fn).parameters.values() if p.kind == p.KEYWORD_ONLY]
+    if where == "design":
+        allowed = [a for a in allowed if a not in ("initial", "weights")]
+    return r.keys(spec, allowed, where)
+
+
+def _scene_case(r: _Reader, mesh: Mesh, spec, where: str, regions: dict, muscles) -> Case:
+    c = r.keys(spec, _CASE_KEYS, where, required=("name",))
+    name = r.string(c["name"], f"{where}.name")
+    try:
+        _check_name(name, "case name")
+    except ValueError as exc:
+        r.fail(f"{where}.name", str(exc))
+    desc = str(c.get("description", ""))
+    if "contractions" in c:
+        for k in ("anchors", "drags"):
+            if k in c:
+                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors or drags")
+        v = c["contractions"]
+        if not isinstance(v, list):
+            r.fail(f"{where}.contractions", f"expected a list of numbers, got {_tname(v)}", TypeError)
+        a = [r.number(x, f"{where}.contractions[{i}]") for i, x in enumerate(v)]
+        if muscles is None:
+            r.fail(f"{where}.contractions", "an internal case needs muscles ([[muscles]])")
+        if len(a) != len(muscles):
+            r.fail(f"{where}.contractions", f"needs one value per muscle ({len(muscles)}), got {len(a)}")
+        for i, x in enumerate(a):
+            if not 0.0 <= x < 1.0:
+                r.fail(f"{where}.contractions[{i}]", f"must lie in [0, 1), got {x}")
+        return Case(name, contractions=a, description=desc)
+    anchors = (_node_ref(r, mesh, c["anchors"], f"{where}.anchors", regions) if "anchors" in c
+               else np.zeros(0, dtype=np.int64))
+    drags_in = c.get("drags", [])
+    if not isinstance(drags_in, list):
+        r.fail(f"{where}.drags", f"expected a list of drags, got {_tname(drags_in)}", TypeError)
+    nodes, pos = [], []
+    for i, d in enumerate(drags_in):
+        idx, p = _scene_drag(r, mesh, d, f"{where}.drags[{i}]", regions)
+        nodes.append(idx)
+        pos.append(p)
+    dn = np.concatenate(nodes) if nodes else np.zeros(0, dtype=np.int64)
+    dp = np.vstack(pos) if pos else np.zeros((0, 2))
+    if len(np.unique(dn)) != len(dn):
+        vals, counts = np.unique(dn, return_counts=True)
+        r.fail(f"{where}.drags", f"node {int(vals[counts > 1][0])} is dragged twice")
+    both = np.intersect1d(anchors, dn)
+    if len(both):
+        r.fail(where, f"node {int(both[0])} is both anchored and dragged")
+    if len(anchors) + len(dn) < 2:
+        r.fail(where, "an external case needs at least two fixed nodes (anchors + drags); an internal case "
+               "needs contractions")
+    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc)
+
+
+def _scene_drag(r: _Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple[np.ndarray, np.ndarray]:
+    d = r.keys(spec, _DRAG_KEYS, where)
+    if ("nodes" in d) == ("at" in d):
+        r.fail(where, "give exactly one of nodes (region, indices or points) and at (a point)")
+    idx = (_node_ref(r, mesh, d["nodes"], f"{where}.nodes", regions) if "nodes" in d
+           else _node_ref(r, mesh, [d["at"]], f"{where}.at", regions))
+    P = mesh.points[idx]
+    if "to" in d:
+        for k in ("by", "rotate", "about"):
+            if k in d:
+                r.fail(f"{where}.{k}", "cannot be combined with to")
+        return idx, P - P.mean(0) + r.point(d["to"], f"{where}.to")
+    if "by" not in d and "rotate" not in d:
+        r.fail(where, "say where the nodes go: to (a point), by (a displacement) or rotate (+ about)")
+    if "about" in d and "rotate" not in d:
+        r.fail(f"{where}.about", "only applies with rotate")
+    ang = math.radians(r.number(d["rotate"], f"{where}.rotate")) if "rotate" in d else 0.0
+    about = r.point(d["about"], f"{where}.about") if "about" in d else P.mean(0)
+    shift = r.point(d["by"], f"{where}.by") if "by" in d else np.zeros(2)
+    return idx, rigid_motion(P, ang, about, shift)
+
+
+def _scene_animation(r: _Reader, spec, where: str, case_names: set) -> Animation:
+    a = r.keys(spec, _ANIM_KEYS, where, required=("name", "keyframes"))
+    kf = a["keyframes"]
+    if not isinstance(kf, list):
+        r.fail(f"{where}.keyframes", f"expected a list of [case, fraction] pairs, got {_tname(kf)}", TypeError)
+    pairs = []
+    for i, k in enumerate(kf):
+        w = f"{where}.keyframes[{i}]"
+        if not isinstance(k, list) or len(k) != 2 or not isinstance(k[0], str):
+            r.fail(w, f"expected [case name, fraction], got {k!r}")
+        if k[0] != "rest" and k[0] not in case_names:
+            r.fail(w, f"unknown case {k[0]!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
+        pairs.append((k[0], r.number(k[1], f"{w}[1]")))
+    fps_ = a.get("frames_per_step", 6)
+    if isinstance(fps_, bool) or not isinstance(fps_, int) or fps_ < 1:
+        r.fail(f"{where}.frames_per_step", f"expected a positive integer, got {fps_!r}")
+    try:
+        return Animation(r.string(a["name"], f"{where}.name"), tuple(pairs), frames_per_step=fps_,
+                         fps=r.number(a.get("fps", 8.0), f"{where}.fps", positive=True))
+    except ValueError as exc:
+        r.fail(where, str(exc))
+
+
+# ---------------------------------------------------------------------------------------------- the command
+def _doc_line(path: Path) -> str:
+    import ast
+
+    try:
+        doc = ast.get_docstring(ast.parse(path.read_text()))
+    except SyntaxError:
+        return "(cannot be parsed)"
+    return (doc or "").strip().split("\n")[0]
+
+
+def _cmd_list(a) -> int:
+    files = _problem_files()
+    if not files:
+        print(f"no problem library found (looked in $MDSR_PROBLEMS, the source checkout and ./problems); "
+              f"run a scene file with `mdsr run PATH`")
+        return 1
+    print(f"problem library: {problems_dir()}")
+    w = max(len(n) for n in files)
+    for name, path in files.items():
+        line = f"  {name:<{w}}  {_doc_line(path)}"
+        if a.cases:
+            scene = _build_from(path, "coarse")
+            kinds = ", ".join(f"{c.name} ({c.kind})" for c in scene.cases)
+            line += f"\n  {'':<{w}}  cases: {kinds}" + (
+                f"; animations: {', '.join(x.name for x in scene.animations)}" if scene.animations else "")
+        print(line)
+    print("run one with: mdsr run NAME --out DIR   (or a scene file: mdsr run PATH.toml --out DIR)")
+    return 0
+
+
+def _cmd_run(a) -> int:
+    import time
+
+    names = list(a.scenes)
+    if names == ["all"]:
+        names = list_problems()
+        if not names:
+            raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
+    t0 = time.perf_counter()
+    scenes = [get_problem(n, resolution=a.resolution) for n in names]  # all errors before any work
+    seen = set()
+    for s in scenes:
+        if s.name in seen:
+            raise ValueError(f"scene {s.name!r} is named twice")
+        seen.add(s.name)
+    reports = []
+    log = (lambda s: None) if a.quiet else (lambda s: print(s, flush=True))
+    for k, scene in enumerate(scenes):
+        out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
+        if len(scenes) > 1:
+            log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
+        reports.append(run_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
+                                 figures=not a.no_figures, animations=not a.no_animations,
+                                 mesh_format=a.format, log=log))
+    lines = reports[0].table().split("\n")
+    for r in reports[1:]:
+        lines += r.table().split("\n")[2:]
+    ok = all(r.success for r in reports)
+    n_cases = sum(len(r.cases) for r in reports)
+    n_bad = sum(not c.success for r in reports for c in r.cases)
+    print("\n" + "\n".join(lines))
+    for r in reports:
+        for c in r.cases:
+            if not c.success:
+                print(f"FAILED {r.scene}/{c.case}: {c.message}")
+        for name, an in r.animations.items():
+            if not an.get("success", False):
+                print(f"FAILED {r.scene}/{name} (animation): {an.get('message') or an.get('failed_frames')}")
+    print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
+          f"results in {a.out}; photographs are SYNTHETIC")
+    return 0 if ok else 1
+
+
+def add_cli(sub) -> None:
+    """Register ``mdsr list`` and ``mdsr run``."""
+    p = sub.add_parser("list", help="list the problem library (the paper's robots as scenes)")
+    p.add_argument("--cases", action="store_true", help="also build each scene (coarse) and list its cases")
+    p.set_defaults(func=_cmd_list)
+
+    q = sub.add_parser("run", help="run scenes through the whole pipeline: target, muscles, contractions, "
+                       "forward check, synthetic photograph, contour metrics; figures, meshes, JSON")
+    q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
+                   help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
+    q.add_argument("--out", required=True, help="output folder (one sub-folder per scene when several)")
+    q.add_argument("--resolution", type=_parse_resolution, default=None,
+                   help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
+    q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
+    q.add_argument("--method", choices=("flattened", "nested", "derivative-free"), default=None,
+                   help="design method (default: the scene's, normally flattened)")
+    q.add_argument("--format", choices=("vtu", "vtk", "xdmf"), default="vtu", help="mesh files (default vtu)")
+    q.add_argument("--no-photos", action="store_true", help="skip the synthetic photographs and contour metrics")
+    q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
+    q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
+    q.add_argument("--quiet", action="store_true", help="print only the summary table")
+    q.set_defaults(func=_cmd_run)
