@@ -65,3 +65,12 @@ def positive_float(value, name: str, allow_zero: bool = False) -> float:
     if v < 0 or (v == 0 and not allow_zero):
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {v}")
     return v
+
+
+def check_mesh(mesh, name: str = "mesh"):
+    """Return ``mesh`` if it is a :class:`mdsr_opt.Mesh`, else raise ``TypeError`` naming ``name``."""
+    from .mesh import Mesh  # here, not at the top: mesh.py imports this module
+
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"{name} must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
+    return mesh
