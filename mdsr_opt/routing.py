@@ -16,19 +16,34 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    the unit's nonuniformity after the step (relative to the largest contraction ``w_max``) plus the
    tortuosity of the turn ``theta`` between ``e`` and the unit's end direction. A step is allowed only
    if ``g <= 1``. Of all allowed steps, the one with the smallest ``f = g + K_h * h`` is taken, where
-   ``h`` is the Manhattan distance (rest frame, in mean edge lengths) from the new endpoint to the nearest
-   endpoint of another unit. A step that reaches another unit's endpoint joins the two units into one
-   (splicing: fewer, longer muscles). Growth ends when no step is allowed.
+   ``h`` is the shortest-path length along mesh edges (rest lengths, in mean edge lengths) from the new
+   endpoint to the nearest endpoint of another unit. A step that reaches another unit's endpoint joins
+   the two units into one (splicing: fewer, longer muscles). Growth ends when no step is allowed.
 4. **Selection.** Units shorter than ``min_length`` are dropped; the rest are ranked by the contraction
    they capture (``sum w * l0`` over their edges) and the first ``max_muscles`` are returned.
 
 A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
-part of a muscle, neither as a seed nor by growth. A target that only stretches the body, or the rest
-shape itself, gives no muscles and a :class:`RoutingWarning`.
+part of a muscle, neither as a seed nor by growth. A target that only stretches the body, contracts
+nothing by more than ``min_contraction``, or equals the rest shape (every edge length within a relative
+``1e-8``, up to a rigid motion) gives no muscles and a :class:`RoutingWarning` saying which.
+
+Deviations from the paper (and from the project's design notes), on purpose:
+
+* ``g_a`` is the unit's variance *after* the step over ``w_max**2``, not the *rise* in the variance.
+  The rise can be negative (an edge near the unit's mean lowers the variance), which would reward a
+  step, and gating each step's rise lets the variance creep up without bound over many small steps.
+  The variance after the step, gated by ``g <= 1``, caps every muscle's relative variance at ``1/K_a``,
+  and dividing by ``w_max**2`` makes ``K_a`` independent of how strongly the target contracts.
+* ``h`` is the shortest-path length along mesh edges, not the Manhattan distance. The paper takes the
+  Manhattan distance because a muscle follows the lattice edges, so its length is closer to that than
+  to the straight-line distance. On a triangle mesh the length along mesh edges is exactly that path
+  length, and unlike a Manhattan distance (which depends on the x and y axes) it does not change when
+  the body is rotated: rotating mesh and target together gives the same muscles.
 
 Determinism: ties are broken by rest geometry (edge midpoints, node coordinates), never by node index,
-and weights are compared on a grid of ``1e-9`` so that round-off from a rigid motion of the target
-cannot reorder them. Relabelling the nodes or moving the target rigidly gives the same muscles.
+and weights are compared on a grid of ``1e-9``, so the ~1e-16 round-off of a rigid motion of the target
+changes the order of two weights only if they straddle a grid boundary (in practice never; the tests
+check several motions). Relabelling the nodes or moving the target rigidly gives the same muscles.
 
 Example
 -------
@@ -53,8 +68,10 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
 
-from ._checks import as_float_array, positive_float
+from ._checks import as_float_array, check_mesh, positive_float
 from .mesh import Mesh
 from .muscles import Muscle
 
@@ -69,8 +86,9 @@ __all__ = [
 
 #: Weights are compared as integers on this grid (rigid-motion round-off is ~1e-16).
 _QUANTUM = 1e-9
-#: Largest |w| for which a target counts as the rest shape.
-_REST_TOL = 1e-12
+#: A target whose every edge length matches its rest length within this relative tolerance
+#: (``|l - l0| <= _REST_RTOL * l0``, i.e. ``|w| <= _REST_RTOL``) counts as the rest shape.
+_REST_RTOL = 1e-8
 
 
 class RoutingWarning(UserWarning):
@@ -78,12 +96,6 @@ class RoutingWarning(UserWarning):
 
 
 # ---------------------------------------------------------------------------------------------- input
-def _check_mesh(mesh) -> Mesh:
-    if not isinstance(mesh, Mesh):
-        raise TypeError(f"mesh must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
-    return mesh
-
-
 def _check_target(mesh: Mesh, target: ArrayLike) -> np.ndarray:
     """The target as a finite (n, 2) float array without inverted triangles."""
     x = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
@@ -113,7 +125,9 @@ def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray,
     Returns
     -------
     l0, l, w : ndarray, shape (k,)
-        Rest length, target length and ``w = (l0 - l) / l0`` of each row of ``mesh.edges``.
+        Rest length, target length and ``w = (l0 - l) / l0`` of each row of ``mesh.edges``. ``l0`` is
+        the mesh's cached ``edge_lengths`` and read-only (copy it to modify); ``l`` and ``w`` are new
+        arrays, so changing them affects nothing else.
 
     Example
     -------
@@ -123,7 +137,7 @@ def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray,
     >>> float(w.max())
     0.5
     """
-    mesh = _check_mesh(mesh)
+    mesh = check_mesh(mesh)
     return _weights(mesh, _check_target(mesh, target))
 
 
@@ -168,7 +182,7 @@ def contraction_graph(mesh: Mesh, target: ArrayLike) -> nx.Graph:
     >>> round(G.edges[0, 1]["weight"], 6)
     0.1
     """
-    mesh = _check_mesh(mesh)
+    mesh = check_mesh(mesh)
     x = _check_target(mesh, target)
     return _graph(mesh, x, *_weights(mesh, x))
 
@@ -220,11 +234,13 @@ class MuscleStats:
     turning_angle_target: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RoutingResult:
     """Muscles routed for a target, with their figures.
 
     Iterating, ``len`` and indexing act on :attr:`muscles`, so ``for m in route_muscles(...)`` works.
+    Two results compare equal only if they are the same object (``eq=False``: the graph and the dict
+    have no meaningful ``==``); compare ``[m.nodes for m in result]`` instead.
 
     Attributes
     ----------
@@ -304,7 +320,8 @@ def _int_param(value, name: str, minimum: int = 1) -> int:
 class _Router:
     """One routing run; all orderings use rest geometry, never node indices."""
 
-    def __init__(self, mesh: Mesh, w: np.ndarray, K_a: float, K_b: float, K_h: float, floor_q: int):
+    def __init__(self, mesh: Mesh, w: np.ndarray, K_a: float, K_b: float, K_h: float, floor_q: int,
+                 ell: float):
         self.mesh = mesh
         self.X = mesh.points
         self.XL = mesh.points.tolist()
@@ -316,7 +333,8 @@ class _Router:
         mid = 0.5 * (self.X[E[:, 0]] + self.X[E[:, 1]])
         self.midl = mid.tolist()
         self.wref2 = float(int(self.wq.max()) ** 2)
-        self.ell = float(mesh.edge_lengths.mean())
+        self.l0 = mesh.edge_lengths
+        self.ell = ell
         # adjacency over feasible (contracted) edges only: a cable cannot push
         adj: list[list[tuple[int, int]]] = [[] for _ in range(mesh.n_nodes)]
         for k in np.flatnonzero(self.feasible).tolist():
@@ -326,6 +344,11 @@ class _Router:
         self.adj = adj
         self.owner = [-1] * mesh.n_nodes
         self.units: list[_Unit] = []
+        # the whole mesh with rest edge lengths, for the heuristic's shortest paths
+        n = mesh.n_nodes
+        rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+        self.csgraph = csr_matrix((np.concatenate([self.l0, self.l0]), (rows, cols)), shape=(n, n))
+        self.fields: dict[int, np.ndarray] = {}
 
     # -------------------------------------------------------------- helpers
     def _nu(self, n: int, s1: int, s2: int) -> float:
@@ -440,47 +463,67 @@ class _Router:
         return out
 
     def _heuristic(self, cands) -> np.ndarray:
-        """Manhattan distance (rest frame, in mean edge lengths) to the nearest endpoint of another unit."""
+        """Shortest-path length along mesh edges (rest lengths, in mean edge lengths) from each candidate's
+        new endpoint to the nearest endpoint of another unit.
+
+        One distance field per endpoint, by Dijkstra over the whole mesh, cached until that node stops
+        being an endpoint; a growth step therefore costs one new field (the moved endpoint).
+        """
         alive = [U for U in self.units if U.alive]
         if len(alive) < 2:
             return np.zeros(len(cands))
-        ends = np.array([self.XL[U.path[i]] for U in alive for i in (0, -1)])
-        ids = np.array([U.uid for U in alive for _ in (0, 1)])
-        pts = np.array([self.XL[c[5]] for c in cands])
+        ends = [(U.uid, U.path[i]) for U in alive for i in (0, -1)]
+        fields = self.fields
+        current = {node for _, node in ends}
+        for node in [node for node in fields if node not in current]:
+            del fields[node]  # an old endpoint is inside its unit now and never an endpoint again
+        missing = sorted(current.difference(fields))
+        if missing:
+            D = dijkstra(self.csgraph, directed=True, indices=missing)
+            for node, row in zip(missing, np.atleast_2d(D)):
+                fields[node] = row
+        pts = [c[5] for c in cands]
+        D = np.array([fields[node][pts] for _, node in ends])          # (endpoints, candidates)
+        ids = np.array([uid for uid, _ in ends])
         cid = np.array([c[3].uid for c in cands])
-        D = np.abs(pts[:, None, :] - ends[None, :, :]).sum(axis=2)
-        D[cid[:, None] == ids[None, :]] = np.inf
-        return D.min(axis=1) / self.ell
+        D[ids[:, None] == cid[None, :]] = np.inf
+        h = D.min(axis=0)
+        # no other unit reachable (a separate part of the body): nothing to steer toward
+        h[~np.isfinite(h)] = 0.0
+        return h / self.ell
 
     def grow(self) -> None:
         while True:
             cands = self._candidates()
             if not cands:
                 return
-            h = self._heuristic(cands) if self.K_h > 0 else np.zeros(len(cands))
-            best = min(range(len(cands)),
-                       key=lambda i: (cands[i][0] + self.K_h * float(h[i]), cands[i][1], cands[i][2]))
-            _, _, _, U, at_tail, u, k, V = cands[best]
-            q = self.wql[k]
-            if not at_tail:  # always grow at the tail
-                U.path.reverse()
-            if V is None:
-                U.path.append(u)
-                self.owner[u] = U.uid
-                U.n += 1
-                U.s1 += q
-                U.s2 += q * q
-            else:
-                vp = list(V.path)
-                if vp[0] != u:
-                    vp.reverse()
-                U.path.extend(vp)
-                for v in vp:
-                    self.owner[v] = U.uid
-                U.n += 1 + V.n
-                U.s1 += q + V.s1
-                U.s2 += q * q + V.s2
-                V.alive = False
+            self._step(cands, self._heuristic(cands) if self.K_h > 0 else np.zeros(len(cands)))
+
+    def _step(self, cands, h: np.ndarray) -> None:
+        """Take the allowed step with the smallest ``g + K_h * h`` (ties: edge midpoint, end node)."""
+        best = min(range(len(cands)),
+                   key=lambda i: (cands[i][0] + self.K_h * float(h[i]), cands[i][1], cands[i][2]))
+        _, _, _, U, at_tail, u, k, V = cands[best]
+        q = self.wql[k]
+        if not at_tail:  # always grow at the tail
+            U.path.reverse()
+        if V is None:
+            U.path.append(u)
+            self.owner[u] = U.uid
+            U.n += 1
+            U.s1 += q
+            U.s2 += q * q
+        else:
+            vp = list(V.path)
+            if vp[0] != u:
+                vp.reverse()
+            U.path.extend(vp)
+            for v in vp:
+                self.owner[v] = U.uid
+            U.n += 1 + V.n
+            U.s1 += q + V.s1
+            U.s2 += q * q + V.s2
+            V.alive = False
 
 
 def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: float = 4.0, K_h: float = 0.1,
@@ -503,8 +546,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: floa
         Weight of tortuosity: ``1/K_b`` caps ``1 - cos`` of each turn (4 allows about 41 degrees at zero
         nonuniformity). Raise it for straighter muscles.
     K_h : float, default 0.1
-        Weight of the heuristic (Manhattan distance to the nearest other unit's endpoint, in mean edge
-        lengths) in the best-first order; it steers growth toward other units so they join.
+        Weight of the heuristic (shortest-path length along mesh edges to the nearest other unit's
+        endpoint, in mean edge lengths) in the best-first order; it steers growth toward other units so
+        they join.
     n_seeds : int, default 8
         Number of most-contracted edges that seed the search (the paper uses 5 to 10).
     max_muscles : int, optional
@@ -532,9 +576,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: floa
     Warns
     -----
     RoutingWarning
-        The target equals the rest shape (up to a rigid motion), no edge contracts by more than
-        ``min_contraction`` (elongation only), or every unit is shorter than ``min_length``. The result
-        is then empty.
+        The target equals the rest shape (every edge length within a relative ``1e-8``, up to a rigid
+        motion), only stretches the body, contracts no edge by more than ``min_contraction``, or every
+        unit is shorter than ``min_length``. The message says which; the result is then empty.
 
     Example
     -------
@@ -549,7 +593,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: floa
     >>> bool(np.all(X[list(result[0].nodes), 1] > 0.5))  # the muscle runs on the concave side
     True
     """
-    mesh = _check_mesh(mesh)
+    mesh = check_mesh(mesh)
     K_a = positive_float(K_a, "K_a", allow_zero=True)
     K_b = positive_float(K_b, "K_b", allow_zero=True)
     K_h = positive_float(K_h, "K_h", allow_zero=True)
@@ -576,15 +620,21 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 10.0, K_b: floa
         warnings.warn(msg, RoutingWarning, stacklevel=3)
         return RoutingResult((), (), graph, (), 0, params)
 
-    if float(np.abs(w).max()) <= _REST_TOL:
-        return empty("target equals the rest shape (up to a rigid motion): no edge changes length, "
-                     "so there is nothing for a muscle to do; no muscles routed")
+    w_abs = float(np.abs(w).max())
+    if w_abs <= _REST_RTOL:
+        return empty(f"target equals the rest shape within tolerance (up to a rigid motion): no edge "
+                     f"length changes by more than {_REST_RTOL:g} of its rest length (largest "
+                     f"|w| = {w_abs:.3g}), so there is nothing for a muscle to do; no muscles routed")
     floor_q = int(round(min_contraction / _QUANTUM))
-    router = _Router(mesh, w, K_a, K_b, K_h, floor_q)
+    router = _Router(mesh, w, K_a, K_b, K_h, floor_q, ell)
     if not router.feasible.any():
+        w_top = float(w.max())
+        if w_top <= _REST_RTOL:
+            return empty(f"no edge contracts (largest relative stretch {-float(w.min()):.3g}): the "
+                         "target only stretches the body and a cable cannot push; no muscles routed")
         return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
-                     f"contraction {float(w.max()):.3g}): the target only stretches the body and a cable "
-                     "cannot push; no muscles routed")
+                     f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
+                     "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
     seeds = router.seeds(n_seeds)
     router.first_units(seeds)
     router.grow()

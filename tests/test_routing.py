@@ -6,6 +6,7 @@ import networkx as nx
 import numpy as np
 import pytest
 
+from conftest import arc_map, rotation
 from mdsr_opt import Mesh, Muscle
 from mdsr_opt.routing import (MuscleStats, RoutingResult, RoutingWarning, contraction_graph, edge_weights,
                               route_muscles)
@@ -29,10 +30,9 @@ def bend(X: np.ndarray, kappa, length: float, y_axis: float) -> np.ndarray:
 
 
 def arc(X: np.ndarray, radius: float, y_axis: float) -> np.ndarray:
-    """Bend a strip onto a circular arc (curvature 1/radius); the left end (x = 0) stays in place."""
-    phi = X[:, 0] / radius
-    r = radius - (X[:, 1] - y_axis)
-    return np.column_stack([r * np.sin(phi), y_axis + radius - r * np.cos(phi)])
+    """Bend a strip onto a circular arc of signed radius ``radius``; the fibre at ``y_axis`` keeps its
+    length (conftest's ``arc_map`` with the neutral fibre moved from y = 0 to ``y_axis``)."""
+    return arc_map(X - [0.0, y_axis], length=4.0, angle=4.0 / radius)
 
 
 def shorten(X: np.ndarray, angle: float, amount: float = 0.2) -> np.ndarray:
@@ -41,12 +41,9 @@ def shorten(X: np.ndarray, angle: float, amount: float = 0.2) -> np.ndarray:
     return X @ (np.eye(2) - amount * np.outer(d, d)).T
 
 
-def rotation(theta: float) -> np.ndarray:
-    return np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
-
-
 @pytest.fixture(scope="module")
-def strip():
+def grid_strip():
+    """A structured 4 x 1 strip (16 x 4 cells): many equal weights, so ties matter."""
     return Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
 
 
@@ -75,10 +72,24 @@ def path_weights(muscle, wmap):
 
 
 # ------------------------------------------------------------------------------------------ contraction graph
-def test_contraction_graph_weights_follow_the_definition(strip):
-    X = strip.points
-    G = contraction_graph(strip, X * [0.9, 1.2])
-    assert G.number_of_nodes() == strip.n_nodes and G.number_of_edges() == len(strip.edges)
+def test_edge_weights_cannot_corrupt_the_mesh(grid_strip):
+    t = arc(grid_strip.points, 3.0, 0.5)
+    ref = [m.nodes for m in route_muscles(grid_strip, t)]
+    l0, l, w = edge_weights(grid_strip, t)
+    with pytest.raises(ValueError, match="read-only"):
+        l0[0] = 123.0
+    l[:] = 0.0  # l and w are the caller's own arrays
+    w[:] = -1.0
+    l0_again, _, w_again = edge_weights(grid_strip, t)
+    assert np.all(l0_again == grid_strip.edge_lengths) and l0_again.max() < 1.0
+    assert w_again.max() > 0.1
+    assert [m.nodes for m in route_muscles(grid_strip, t)] == ref
+
+
+def test_contraction_graph_weights_follow_the_definition(grid_strip):
+    X = grid_strip.points
+    G = contraction_graph(grid_strip, X * [0.9, 1.2])
+    assert G.number_of_nodes() == grid_strip.n_nodes and G.number_of_edges() == len(grid_strip.edges)
     dx, dy = 0.25, 0.25
     diag = 1.0 - np.hypot(0.9 * dx, 1.2 * dy) / np.hypot(dx, dy)
     for a, b, d in G.edges(data=True):
@@ -102,10 +113,10 @@ def test_contraction_graph_is_invariant_to_rigid_motion(body):
 
 
 # ------------------------------------------------------------------------------------------ routing: shape
-def test_bent_strip_muscle_on_the_concave_side_analytic(strip):
-    X = strip.points
+def test_bent_strip_muscle_on_the_concave_side_analytic(grid_strip):
+    X = grid_strip.points
     for sign in (+1, -1):  # bend up (top side concave), then down (bottom side concave)
-        res = route_muscles(strip, arc(X, sign * 3.0, 0.5))
+        res = route_muscles(grid_strip, arc(X, sign * 3.0, 0.5))
         assert len(res) >= 1
         for m in res:
             side = sign * (X[list(m.nodes), 1] - 0.5)
@@ -116,17 +127,17 @@ def test_bent_strip_muscle_on_the_concave_side_analytic(strip):
         assert res.stats[0].mean_weight == pytest.approx(0.5 / 3.0, rel=0.01)
 
 
-def test_bent_strip_by_external_driving_routes_on_the_concave_side(strip):
+def test_bent_strip_by_external_driving_routes_on_the_concave_side(grid_strip):
     from mdsr_opt import NeoHookean
     from mdsr_opt.equilibrium import solve_external
 
-    X = strip.points
+    X = grid_strip.points
     left = np.flatnonzero(X[:, 0] < 1e-9)
     right = np.flatnonzero(X[:, 0] > 4.0 - 1e-9)
     goal = arc(X, 3.0, 0.5)  # drag the right end around an arc of radius 3 (centre line)
-    sol = solve_external(strip, NeoHookean(E=1.0, nu=0.3), left, {int(i): goal[i] for i in right})
+    sol = solve_external(grid_strip, NeoHookean(E=1.0, nu=0.3), left, {int(i): goal[i] for i in right})
     assert sol.success
-    res = route_muscles(strip, sol.x)
+    res = route_muscles(grid_strip, sol.x)
     assert len(res) >= 1
     top = X[:, 1] > 0.5
     for m in res:
@@ -166,23 +177,23 @@ def test_muscles_are_disjoint_simple_paths_on_contracted_edges(body):
             assert path_weights(m, wmap).min() > 1e-3, f"{name}: a muscle uses an edge that does not contract"
 
 
-def test_a_cable_cannot_push_elongated_regions_get_no_muscle(strip):
-    X = strip.points
+def test_a_cable_cannot_push_elongated_regions_get_no_muscle(grid_strip):
+    X = grid_strip.points
     # stretch the strip 10 % along x, then bend it: only a band along the inner side still shortens
     t = arc(X * [1.1, 1.0], 3.0, 0.5)
-    wmap = edge_weight_map(strip, t)
+    wmap = edge_weight_map(grid_strip, t)
     contracted = np.array([w > 1e-3 for w in wmap.values()])
     assert 0 < contracted.sum() < len(contracted) / 2
-    res = route_muscles(strip, t, K_a=0.0, K_b=0.0, min_length=0.0)  # most permissive growth
+    res = route_muscles(grid_strip, t, K_a=0.0, K_b=0.0, min_length=0.0)  # most permissive growth
     for m in res:
         assert path_weights(m, wmap).min() > 1e-3
     # a target that only stretches: nothing to route, and the user is told why
     with pytest.warns(RoutingWarning, match="cable cannot push"):
-        empty = route_muscles(strip, X * 1.2)
+        empty = route_muscles(grid_strip, X * 1.2)
     assert len(empty) == 0 and list(empty) == [] and empty.stats == ()
     # raising the floor above every contraction gives the same empty answer
     with pytest.warns(RoutingWarning, match="min_contraction=0.5"):
-        assert len(route_muscles(strip, X * [0.8, 1.0], min_contraction=0.5)) == 0
+        assert len(route_muscles(grid_strip, X * [0.8, 1.0], min_contraction=0.5)) == 0
 
 
 def test_splicing_joins_separate_seed_units():
@@ -223,25 +234,69 @@ def test_relabelling_and_rigid_motion_change_nothing(body, seed, name):
 
 
 @pytest.mark.parametrize("kind", ["shorten", "arc"])
-def test_ties_are_broken_by_geometry_not_by_node_numbers(strip, kind):
+def test_ties_are_broken_by_geometry_not_by_node_numbers(grid_strip, kind):
     """Structured meshes give many equal weights: the routing must not fall back on node order."""
-    X = strip.points
+    X = grid_strip.points
     t = X * [0.8, 1.0] if kind == "shorten" else arc(X, 3.0, 0.5)
-    ref = route_muscles(strip, t, n_seeds=4)
+    ref = route_muscles(grid_strip, t, n_seeds=4)
     rng = np.random.default_rng(7)
     for _ in range(3):
-        perm = rng.permutation(strip.n_nodes)
+        perm = rng.permutation(grid_strip.n_nodes)
         t2 = np.empty_like(t)
         t2[perm] = t
-        out = route_muscles(strip.relabel(perm), t2 @ rotation(1.0).T, n_seeds=4)
+        out = route_muscles(grid_strip.relabel(perm), t2 @ rotation(1.0).T, n_seeds=4)
         assert [tuple(perm[list(m.nodes)]) for m in ref] == [m.nodes for m in out]
         assert [set(perm[list(e)]) for e in ref.seeds] == [set(e) for e in out.seeds]
 
 
-def test_result_is_deterministic(body):
+def canonical(result):
+    """The muscles as node paths, each read from its smaller end node (the frame decides which end a
+    path starts at; rotating the frame may reverse it)."""
+    return [min(m.nodes, m.nodes[::-1]) for m in result]
+
+
+@pytest.mark.parametrize("name", ["shorten 35 deg", "shorten 70 deg", "bend, curvature x1..4"])
+def test_rotating_mesh_and_target_together_changes_nothing(body, name):
+    """The growth heuristic is a length along mesh edges, so it does not depend on the x and y axes
+    (a Manhattan distance would)."""
+    t = family(body)[name]
+    for kw in ({"K_a": 1.0, "K_b": 1.0, "n_seeds": 10}, {}):
+        ref = route_muscles(body, t, **kw)
+        assert sum(len(m.nodes) for m in ref) >= 20
+        for deg in (10.0, 30.0, 45.0, 90.0, 137.0, 200.0):
+            R = rotation(np.radians(deg))
+            out = route_muscles(Mesh(body.points @ R.T, body.triangles), t @ R.T, **kw)
+            assert canonical(out) == canonical(ref), f"{name}, {kw}, rotated by {deg} degrees"
+            assert {frozenset(e) for e in out.seeds} == {frozenset(e) for e in ref.seeds}
+
+
+def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
+    """h of every candidate step = shortest path over all mesh edges (rest lengths) from the new end node
+    to the nearest end node of another unit, in mean edge lengths (checked against networkx)."""
+    from mdsr_opt import routing
+
     t = family(body)["shorten 35 deg"]
-    a, b = route_muscles(body, t), route_muscles(body, t)
-    assert [m.nodes for m in a] == [m.nodes for m in b] and a.seeds == b.seeds
+    _, _, w = edge_weights(body, t)
+    ell = float(body.edge_lengths.mean())
+    router = routing._Router(body, w, 1.0, 1.0, 0.1, int(round(1e-3 / routing._QUANTUM)), ell)
+    router.first_units(router.seeds(10))
+    G = nx.Graph()
+    G.add_weighted_edges_from((int(a), int(b), float(l)) for (a, b), l in zip(body.edges, body.edge_lengths))
+    for _ in range(5):  # a few growth steps, so that endpoints have moved since the first fields
+        cands = router._candidates()
+        alive = [U for U in router.units if U.alive]
+        assert len(alive) >= 2 and cands
+        h = router._heuristic(cands)
+        ends = {V.path[i] for V in alive for i in (0, -1)}
+        dist = {e: nx.single_source_dijkstra_path_length(G, e) for e in ends}
+        for c, hc in zip(cands, h):
+            U, u = c[3], c[5]
+            others = [V.path[i] for V in alive if V is not U for i in (0, -1)]
+            assert hc == pytest.approx(min(dist[e][u] for e in others) / ell, rel=1e-12)
+            # never shorter than the straight line
+            straight = min(np.linalg.norm(body.points[u] - body.points[e]) for e in others) / ell
+            assert hc >= straight * (1 - 1e-12)
+        router._step(cands, h)
 
 
 # ------------------------------------------------------------------------------------------ routing: knobs
@@ -329,6 +384,9 @@ def test_stats_agree_with_the_muscles(body):
         assert X_first_is_smaller(body, m)
     lines = res.table().splitlines()
     assert len(lines) == len(res) + 2 and lines[2].startswith(res.stats[0].name)
+    # a result holds a graph and a dict: == is identity and hashing works (eq=False)
+    again = route_muscles(body, t)
+    assert res == res and res != again and hash(res) != hash(again)
 
 
 def X_first_is_smaller(mesh, m) -> bool:
@@ -336,42 +394,56 @@ def X_first_is_smaller(mesh, m) -> bool:
 
 
 # ------------------------------------------------------------------------------------------ bad input
-def test_target_of_the_wrong_shape_or_type(strip):
-    X = strip.points
-    with pytest.raises(ValueError, match=r"target must have shape \(85, 2\), got \(84, 2\)"):
-        route_muscles(strip, X[:-1])
+def test_target_of_the_wrong_shape_or_type(grid_strip):
+    X = grid_strip.points
+    n = grid_strip.n_nodes
+    with pytest.raises(ValueError, match=rf"target must have shape \({n}, 2\), got \({n - 1}, 2\)"):
+        route_muscles(grid_strip, X[:-1])
     with pytest.raises(ValueError, match=r"target must have shape"):
-        contraction_graph(strip, X.T)
+        contraction_graph(grid_strip, X.T)
     with pytest.raises(TypeError, match="target must be an array of numbers"):
-        route_muscles(strip, [["a", "b"]] * strip.n_nodes)
-    with pytest.raises(TypeError, match="mesh must be a mdsr_opt.Mesh"):
-        route_muscles(X, X)
+        route_muscles(grid_strip, [["a", "b"]] * grid_strip.n_nodes)
+    for fn in (route_muscles, contraction_graph, edge_weights):
+        with pytest.raises(TypeError, match="mesh must be a mdsr_opt.Mesh, got ndarray"):
+            fn(X, X)
 
 
-def test_target_with_nan(strip):
-    t = strip.points * [0.8, 1.0]
+def test_target_with_nan(grid_strip):
+    t = grid_strip.points * [0.8, 1.0]
     t[7, 1] = np.nan
     with pytest.raises(ValueError, match=r"target contains NaN or inf \(first at index \(7, 1\)\)"):
-        route_muscles(strip, t)
+        route_muscles(grid_strip, t)
 
 
-def test_target_with_inverted_elements(strip):
-    t = strip.points * [0.8, 1.0]
+def test_target_with_inverted_elements(grid_strip):
+    t = grid_strip.points * [0.8, 1.0]
     t[20] = t[20] + [0.0, -0.6]  # pull an interior node through its lower neighbours
-    J = strip.jacobians(t)
+    J = grid_strip.jacobians(t)
     assert (J <= 0).any()
     with pytest.raises(ValueError, match=r"target has \d+ inverted triangle\(s\) \(det F <= 0\), first"):
-        route_muscles(strip, t)
+        route_muscles(grid_strip, t)
     with pytest.raises(ValueError, match="inverts every triangle"):
-        contraction_graph(strip, strip.points * [-1.0, 1.0])  # a mirror image
+        contraction_graph(grid_strip, grid_strip.points * [-1.0, 1.0])  # a mirror image
 
 
-def test_rest_shape_gives_an_empty_result_with_a_warning(strip):
-    X = strip.points
-    for t in (X, X @ rotation(0.8).T + [2.0, 1.0]):
-        with pytest.warns(RoutingWarning, match="target equals the rest shape"):
-            res = route_muscles(strip, t)
-        assert len(res) == 0 and res.seeds == () and res.graph.number_of_edges() == len(strip.edges)
+def test_rest_shape_gives_an_empty_result_with_a_warning(grid_strip):
+    X = grid_strip.points
+    # the rest shape, moved rigidly, and within 1e-10 of it (round-off of an upstream solver)
+    for t in (X, X @ rotation(0.8).T + [2.0, 1.0], X * (1 + 1e-10), X * [1 - 1e-10, 1.0]):
+        with pytest.warns(RoutingWarning, match="target equals the rest shape within tolerance") as rec:
+            res = route_muscles(grid_strip, t)
+        assert len(res) == 0 and res.seeds == () and res.graph.number_of_edges() == len(grid_strip.edges)
+        assert not any("stretches" in str(r.message) for r in rec)
+
+
+def test_weak_contraction_is_not_called_stretching(grid_strip):
+    X = grid_strip.points
+    with pytest.warns(RoutingWarning) as rec:  # contracts, but by less than the default floor 1e-3
+        assert len(route_muscles(grid_strip, X * [0.9999, 1.0])) == 0
+    (msg,) = [str(r.message) for r in rec]
+    assert "min_contraction=0.001" in msg and "largest contraction 0.0001" in msg
+    assert "only stretches" not in msg and "rest shape" not in msg
+    assert len(route_muscles(grid_strip, X * [0.9999, 1.0], min_contraction=1e-5)) >= 1
 
 
 @pytest.mark.parametrize("kw, exc, msg", [
@@ -384,32 +456,32 @@ def test_rest_shape_gives_an_empty_result_with_a_warning(strip):
     ({"min_length": -0.1}, ValueError, "min_length must be >= 0"),
     ({"min_contraction": 1.0}, ValueError, "min_contraction must be < 1"),
 ])
-def test_bad_knobs(strip, kw, exc, msg):
+def test_bad_knobs(grid_strip, kw, exc, msg):
     with pytest.raises(exc, match=msg):
-        route_muscles(strip, strip.points * [0.8, 1.0], **kw)
+        route_muscles(grid_strip, grid_strip.points * [0.8, 1.0], **kw)
 
 
 # ------------------------------------------------------------------------------------------ figures
-def test_figures(strip, tmp_path):
+def test_figures(grid_strip, tmp_path):
     from matplotlib.collections import LineCollection
 
     from mdsr_opt.plot import plot_contraction_graph, plot_routing, save_figure
 
-    t = arc(strip.points, 3.0, 0.5)
-    res = route_muscles(strip, t)
-    fig = plot_contraction_graph(strip, t, res.graph, seeds=res.seeds)
+    t = arc(grid_strip.points, 3.0, 0.5)
+    res = route_muscles(grid_strip, t)
+    fig = plot_contraction_graph(grid_strip, t, res.graph, seeds=res.seeds)
     ax = fig.axes[0]
     lcs = [c for c in ax.collections if isinstance(c, LineCollection)]
     colored = [c for c in lcs if c.get_array() is not None]
-    assert len(colored) == 1 and len(colored[0].get_segments()) == len(strip.edges)
-    _, _, w = edge_weights(strip, t)
+    assert len(colored) == 1 and len(colored[0].get_segments()) == len(grid_strip.edges)
+    _, _, w = edge_weights(grid_strip, t)
     assert np.allclose(colored[0].get_array(), w)
     assert colored[0].get_clim() == pytest.approx((-np.abs(w).max(), np.abs(w).max()))
     assert save_figure(fig, tmp_path / "graph.png") and (tmp_path / "graph.png").stat().st_size > 1000
 
-    fig = plot_routing(strip, t, res)
+    fig = plot_routing(grid_strip, t, res)
     assert len(fig.axes) == 2
-    for ax, pos in zip(fig.axes, (strip.points, t)):
+    for ax, pos in zip(fig.axes, (grid_strip.points, t)):
         line = [ln for ln in ax.get_lines() if ln.get_label() == "muscle 0"][0]
         assert np.allclose(line.get_xydata(), pos[list(res[0].nodes)])
     save_figure(fig, tmp_path / "routing.png")
