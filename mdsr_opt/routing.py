@@ -69,7 +69,7 @@ import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ._checks import as_float_array, check_mesh, positive_float
 from .mesh import Mesh
@@ -189,11 +189,10 @@ def contraction_graph(mesh: Mesh, target: ArrayLike) -> nx.Graph:
 
 def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarray) -> nx.Graph:
     G = nx.Graph(w_max=float(w.max()), w_min=float(w.min()))
-    G.add_nodes_from((i, {"rest": (float(p[0]), float(p[1])), "target": (float(q[0]), float(q[1]))})
-                     for i, (p, q) in enumerate(zip(mesh.points, x)))
-    G.add_edges_from((int(a), int(b), {"rest_length": float(r), "target_length": float(t),
-                                       "weight": float(c)})
-                     for (a, b), r, t, c in zip(mesh.edges, l0, l, w))
+    G.add_nodes_from((i, {"rest": tuple(p), "target": tuple(q)})
+                     for i, (p, q) in enumerate(zip(mesh.points.tolist(), x.tolist())))
+    G.add_edges_from((a, b, {"rest_length": r, "target_length": t, "weight": c})
+                     for (a, b), r, t, c in zip(mesh.edges.tolist(), l0.tolist(), l.tolist(), w.tolist()))
     return G
 
 
@@ -337,17 +336,16 @@ class _Router:
         self.ell = ell
         # adjacency over feasible (contracted) edges only: a cable cannot push
         adj: list[list[tuple[int, int]]] = [[] for _ in range(mesh.n_nodes)]
-        for k in np.flatnonzero(self.feasible).tolist():
-            a, b = int(E[k, 0]), int(E[k, 1])
+        feasible = np.flatnonzero(self.feasible)
+        for k, (a, b) in zip(feasible.tolist(), E[feasible].tolist()):
             adj[a].append((b, k))
             adj[b].append((a, k))
         self.adj = adj
         self.owner = [-1] * mesh.n_nodes
         self.units: list[_Unit] = []
-        # the whole mesh with rest edge lengths, for the heuristic's shortest paths
-        n = mesh.n_nodes
-        rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
-        self.csgraph = csr_matrix((np.concatenate([self.l0, self.l0]), (rows, cols)), shape=(n, n))
+        # the whole mesh with rest edge lengths, for the heuristic's shortest paths (built on first use)
+        self.csgraph = None
+        self.component = None
         self.fields: dict[int, np.ndarray] = {}
 
     # -------------------------------------------------------------- helpers
@@ -422,7 +420,7 @@ class _Router:
         for v in path:
             self.owner[v] = u.uid
 
-    # -------------------------------------------------------------- growth
+    # -------------------------------------------------------------- candidate steps
     def _candidates(self):
         """Every allowed step: (g, edge key, end coords, unit, at_tail, node, edge id, partner)."""
         out = []
@@ -462,48 +460,100 @@ class _Router:
                         out.append((g, self._edge_key(k), tuple(XL[N]), U, at_tail, u, k, partner))
         return out
 
-    def _heuristic(self, cands) -> np.ndarray:
-        """Shortest-path length along mesh edges (rest lengths, in mean edge lengths) from each candidate's
-        new endpoint to the nearest endpoint of another unit.
-
-        One distance field per endpoint, by Dijkstra over the whole mesh, cached until that node stops
-        being an endpoint; a growth step therefore costs one new field (the moved endpoint).
-        """
-        alive = [U for U in self.units if U.alive]
-        if len(alive) < 2:
-            return np.zeros(len(cands))
-        ends = [(U.uid, U.path[i]) for U in alive for i in (0, -1)]
-        fields = self.fields
+    # -------------------------------------------------------------- heuristic
+    def _ends(self) -> list[tuple[int, int]]:
+        """(unit id, node) of both endpoints of every alive unit; drops the fields of stale endpoints."""
+        ends = [(U.uid, U.path[i]) for U in self.units if U.alive for i in (0, -1)]
         current = {node for _, node in ends}
-        for node in [node for node in fields if node not in current]:
-            del fields[node]  # an old endpoint is inside its unit now and never an endpoint again
-        missing = sorted(current.difference(fields))
-        if missing:
-            D = dijkstra(self.csgraph, directed=True, indices=missing)
-            for node, row in zip(missing, np.atleast_2d(D)):
-                fields[node] = row
+        for node in [node for node in self.fields if node not in current]:
+            del self.fields[node]  # an old endpoint is inside its unit now and never an endpoint again
+        return ends
+
+    def _field(self, node: int) -> np.ndarray:
+        """Shortest-path lengths (rest lengths, all mesh edges) from ``node`` to every node; cached."""
+        f = self.fields.get(node)
+        if f is None:
+            if self.csgraph is None:
+                E, n = self.mesh.edges, self.mesh.n_nodes
+                rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+                self.csgraph = csr_matrix((np.concatenate([self.l0, self.l0]), (rows, cols)), shape=(n, n))
+                self.component = connected_components(self.csgraph, directed=False)[1]
+            f = self.fields[node] = dijkstra(self.csgraph, directed=True, indices=node)
+        return f
+
+    def _heuristic(self, cands) -> np.ndarray:
+        """``h`` of every candidate: the shortest-path length along mesh edges (rest lengths, in mean edge
+        lengths) from its new endpoint to the nearest endpoint of another unit; 0 when no other unit is
+        reachable (a separate part of the body) or there is no other unit. The reference for
+        :meth:`_choose`, which computes ``h`` only where it can change the choice."""
+        ends = self._ends()
+        if len(ends) < 4:
+            return np.zeros(len(cands))
         pts = [c[5] for c in cands]
-        D = np.array([fields[node][pts] for _, node in ends])          # (endpoints, candidates)
+        D = np.array([self._field(node)[pts] for _, node in ends])          # (endpoints, candidates)
         ids = np.array([uid for uid, _ in ends])
         cid = np.array([c[3].uid for c in cands])
         D[ids[:, None] == cid[None, :]] = np.inf
         h = D.min(axis=0)
-        # no other unit reachable (a separate part of the body): nothing to steer toward
         h[~np.isfinite(h)] = 0.0
         return h / self.ell
 
+    def _choose(self, cands) -> int:
+        """Index of the step with the smallest key ``(g + K_h * h, edge midpoint, end node)``.
+
+        The same choice as taking the minimum over :meth:`_heuristic`, but cheaper: a path along mesh
+        edges is never shorter than the straight line, so ``g + K_h * |u - e| / ell`` bounds each
+        candidate's ``f`` from below. Candidates are visited in the order of that bound and the search
+        stops once the bound exceeds the best ``f`` found; within a candidate, endpoints are visited by
+        straight-line distance, so a Dijkstra field is computed only for endpoints that could be the
+        nearest. Most steps then need no new field at all.
+        """
+        K_h = self.K_h
+        ends = self._ends() if K_h > 0 else []
+        if len(ends) < 4:  # fewer than two units: h = 0 everywhere
+            return min(range(len(cands)), key=lambda i: (cands[i][0], cands[i][1], cands[i][2]))
+        self._field(ends[0][1])  # builds the graph and its components on first use
+        comp = self.component
+        P = np.array([self.XL[c[5]] for c in cands])
+        Q = np.array([self.XL[node] for _, node in ends])
+        # straight-line lower bounds, shrunk by 1e-9 so round-off cannot lift them above the path length
+        lb = np.sqrt(((P[:, None, :] - Q[None, :, :]) ** 2).sum(axis=2)) * ((1.0 - 1e-9) / self.ell)
+        ids = np.array([uid for uid, _ in ends])
+        cid = np.array([c[3].uid for c in cands])
+        cn = np.array([c[5] for c in cands])
+        en = np.array([node for _, node in ends])
+        lb[(ids[None, :] == cid[:, None]) | (comp[cn][:, None] != comp[en][None, :])] = np.inf
+        lb_h = lb.min(axis=1)
+        lb_h[~np.isfinite(lb_h)] = 0.0  # no other unit reachable: h = 0
+        g = np.array([c[0] for c in cands])
+        bound = g + K_h * lb_h
+        best_key, best = None, -1
+        for i in np.argsort(bound, kind="stable").tolist():
+            if best_key is not None and bound[i] > best_key[0]:
+                break
+            u, row = cands[i][5], lb[i]
+            h = math.inf
+            for j in np.argsort(row, kind="stable").tolist():
+                if row[j] * self.ell >= h:  # also ends the loop at the masked (inf) entries
+                    break
+                h = min(h, float(self._field(ends[j][1])[u]))
+            h = h / self.ell if math.isfinite(h) else 0.0
+            key = (cands[i][0] + K_h * h, cands[i][1], cands[i][2])
+            if best_key is None or key < best_key:
+                best_key, best = key, i
+        return best
+
+    # -------------------------------------------------------------- growth
     def grow(self) -> None:
         while True:
             cands = self._candidates()
             if not cands:
                 return
-            self._step(cands, self._heuristic(cands) if self.K_h > 0 else np.zeros(len(cands)))
+            self._apply(cands[self._choose(cands)])
 
-    def _step(self, cands, h: np.ndarray) -> None:
-        """Take the allowed step with the smallest ``g + K_h * h`` (ties: edge midpoint, end node)."""
-        best = min(range(len(cands)),
-                   key=lambda i: (cands[i][0] + self.K_h * float(h[i]), cands[i][1], cands[i][2]))
-        _, _, _, U, at_tail, u, k, V = cands[best]
+    def _apply(self, cand) -> None:
+        """Take one step (grow a unit by an edge, or splice it with another unit)."""
+        _, _, _, U, at_tail, u, k, V = cand
         q = self.wql[k]
         if not at_tail:  # always grow at the tail
             U.path.reverse()

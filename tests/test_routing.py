@@ -296,7 +296,29 @@ def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
             # never shorter than the straight line
             straight = min(np.linalg.norm(body.points[u] - body.points[e]) for e in others) / ell
             assert hc >= straight * (1 - 1e-12)
-        router._step(cands, h)
+        router._apply(cands[router._choose(cands)])
+
+
+@pytest.mark.parametrize("K_h", [0.1, 1.0])
+def test_pruned_choice_equals_the_full_heuristic(body, K_h):
+    """The growth step computes h only where a straight-line bound says it can matter; every step it
+    takes must be the one the full computation of h picks."""
+    from mdsr_opt import routing
+
+    ell = float(body.edge_lengths.mean())
+    steps = 0
+    for name in ("shorten 35 deg", "shorten 70 deg", "bend, curvature x1..4"):
+        _, _, w = edge_weights(body, family(body)[name])
+        router = routing._Router(body, w, 1.0, 1.0, K_h, int(round(1e-3 / routing._QUANTUM)), ell)
+        router.first_units(router.seeds(10))
+        while cands := router._candidates():
+            h = router._heuristic(cands)
+            full = min(range(len(cands)), key=lambda i: (cands[i][0] + K_h * float(h[i]), cands[i][1],
+                                                         cands[i][2]))
+            assert router._choose(cands) == full, f"{name}, step {steps}"
+            router._apply(cands[full])
+            steps += 1
+    assert steps >= 50
 
 
 # ------------------------------------------------------------------------------------------ routing: knobs
