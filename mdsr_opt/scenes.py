@@ -54,11 +54,12 @@ from ._checks import as_float_array, as_index_array
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
 
-__all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTIONS", "Case", "Animation", "Scene", "CaseSetup", "list_problems", "get_problem",
-           "problems_dir", "resolve_resolution", "mesh_polygon", "prepare_case", "nodes_in_box",
-           "nodes_near", "nearest_node", "nodes_in_polygon", "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid",
-           "rigid_motion", "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun",
-           "SceneReport"]
+__all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTIONS", "Case", "Animation",
+           "Scene", "CaseSetup", "list_problems", "get_problem", "problems_dir", "resolve_resolution",
+           "mesh_polygon", "prepare_case", "nodes_in_box", "nodes_near", "nearest_node", "nodes_in_polygon",
+           "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
+           "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
+           "AnimationResult", "animate"]
 
 #: Named resolutions: approximate number of mesh nodes.
 RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}
@@ -1001,51 +1002,100 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
     return [os.path.relpath(f, folder.parent) for f in files]
 
 
-def _animation_states(scene: Scene, anim: Animation, runs: dict, log) -> dict:
-    """Forward-solve every frame of ``anim``; returns a JSON-ready dict plus private arrays."""
+@dataclass
+class AnimationResult:
+    """The frames of an :class:`Animation`: forward internal-driving solves of interpolated contractions.
+
+    Attributes
+    ----------
+    name : str
+    muscles : tuple of Muscle
+        The muscles of every case in the animation (each once).
+    contractions : (frames, m) ndarray
+        The contractions of every frame.
+    states : list of (n, 2) ndarrays
+        The equilibrium of every frame (aligned to the rest shape).
+    success : bool
+        Every frame's forward solve succeeded.
+    failed_frames : list of int
+    message : str
+        Why the animation could not be made (empty otherwise).
+    """
+
+    name: str
+    muscles: tuple = ()
+    contractions: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    states: list = field(default_factory=list)
+    success: bool = False
+    failed_frames: list = field(default_factory=list)
+    message: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-ready: no states (they are in the GIF), the muscles and per-frame contractions."""
+        return {"name": self.name, "success": self.success, "message": self.message,
+                "n_frames": len(self.states), "failed_frames": list(self.failed_frames),
+                "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
+                "contractions": np.asarray(self.contractions).tolist()}
+
+
+def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tuple]) -> AnimationResult:
+    """Forward-solve every frame of an animation.
+
+    Parameters
+    ----------
+    scene : Scene
+    animation : Animation or its name in ``scene.animations``.
+    designs : mapping of case name to ``(muscles, contractions)``
+        The designed muscles and contractions of every case the animation names (from :func:`run_case`:
+        ``(run.setup.muscles, run.design.contractions)``).
+
+    Each keyframe ``(case, f)`` sets that case's muscles to ``f`` times its contractions and every other
+    muscle to 0 (``"rest"`` sets all to 0); frames in between interpolate linearly. Muscles shared by
+    several cases (equal node paths) are one muscle.
+    """
     from .equilibrium import solve_internal
 
+    if isinstance(animation, str):
+        found = [a for a in scene.animations if a.name == animation]
+        if not found:
+            raise UnknownName(f"scene {scene.name!r} has no animation {animation!r} "
+                              f"(animations: {', '.join(a.name for a in scene.animations) or 'none'})")
+        animation = found[0]
     union: list[Muscle] = []
     slots: dict[str, list[int]] = {}
-    for cname in anim.cases:
-        run = runs.get(cname)
-        if run is None or run.design is None:
-            return {"success": False, "message": f"case {cname!r} has no design in this run"}
+    for cname in animation.cases:
+        if cname not in designs:
+            return AnimationResult(animation.name, message=f"case {cname!r} has no design in this run")
+        mus, a = designs[cname]
+        if len(mus) != len(a):
+            raise ValueError(f"designs[{cname!r}]: {len(a)} contraction(s) for {len(mus)} muscle(s)")
         idx = []
-        for m in run.setup.muscles:
-            if m in union:
-                idx.append(union.index(m))
-            else:
+        for m in mus:
+            if m not in union:
                 union.append(m)
-                idx.append(len(union) - 1)
+            idx.append(union.index(m))
         slots[cname] = idx
     a_of = {}
     for cname, idx in slots.items():
         v = np.zeros(len(union))
-        v[idx] = runs[cname].design.contractions
+        v[idx] = np.asarray(designs[cname][1], dtype=float)
         a_of[cname] = v
-    keys = [np.zeros(len(union)) if c == "rest" else f * a_of[c] for c, f in anim.keyframes]
+    keys = [np.zeros(len(union)) if c == "rest" else f * a_of[c] for c, f in animation.keyframes]
     frames = []
     for k0, k1 in zip(keys[:-1], keys[1:]):
-        for j in range(anim.frames_per_step):
-            frames.append(k0 + (k1 - k0) * j / anim.frames_per_step)
+        for j in range(animation.frames_per_step):
+            frames.append(k0 + (k1 - k0) * j / animation.frames_per_step)
     frames.append(keys[-1])
     opts = scene.design_options
     model, stiffness = opts.get("muscle_model", "springs"), opts.get("stiffness", 10.0)
-    a_max = opts.get("a_max", 0.6)
-    states, ok, fails = [], True, []
+    states, fails = [], []
     for i, a in enumerate(frames):
         res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness)
         if not res.success:
-            ok = False
             fails.append(i)
         states.append(res.x)
-    log(f"{anim.name}: {len(frames)} frames, {len(union)} muscle(s), "
-        f"{'all forward solves succeeded' if ok else f'{len(fails)} forward solve(s) FAILED'}")
-    return {"success": ok, "n_frames": len(frames), "failed_frames": fails,
-            "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in union],
-            "contractions": [f.tolist() for f in frames], "_states": states, "_muscles": union,
-            "_frames": frames, "_a_max": a_max}
+    return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails,
+                           "" if not fails else f"{len(fails)} forward solve(s) failed")
 
 
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
@@ -1111,18 +1161,25 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         for anim in scene.animations:
             if any(c not in runs for c in anim.cases):
                 continue
-            data = _animation_states(scene, anim, runs, lambda s: say(f"[{scene.name}] {s}"))
-            if "_states" in data:
-                act = np.asarray(data["_frames"]) / data["_a_max"]
-                titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, a = ["
-                          + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(data["_frames"])]
+            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
+                       if runs[c].design is not None}
+            res = animate(scene, anim, designs)
+            data = res.to_dict()
+            if res.states:
+                say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
+                    + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
+                       f"{res.failed_frames})"))
                 if figures:
-                    plot.save_animation(scene.mesh, data["_states"], out / f"{anim.name}.gif",
-                                        muscles=data["_muscles"], activations=act, titles=titles, fps=anim.fps)
+                    act = res.contractions / scene.design_options.get("a_max", 0.6)
+                    titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, a = ["
+                              + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(res.contractions)]
+                    plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
+                                        activations=act, titles=titles, fps=anim.fps)
                     data["gif"] = f"{anim.name}.gif"
-            public = {k: v for k, v in data.items() if not k.startswith("_")}
-            anim_out[anim.name] = public
-            write_json(out / f"{anim.name}.json", _finite(public))
+            else:
+                say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
+            anim_out[anim.name] = data
+            write_json(out / f"{anim.name}.json", _finite(data))
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)

@@ -26,7 +26,7 @@ BEND = 0.55          # radians of bend on each side of the trunk's middle
 MIDDLE = 5.5         # x of the anchored middle of the trunk
 
 # the lower (right-hand, y < 0) half of the outline from tail tip to snout; the upper half is its mirror
-_LOWER = [(0.0, 0.0), (1.5, -0.2), (3.0, -0.45), (3.6, -0.7),
+_LOWER = [(0.0, -0.12), (1.5, -0.25), (3.0, -0.45), (3.6, -0.7),
           (3.8, -0.8), (3.0, -2.0), (2.8, -2.4), (3.3, -2.6), (3.55, -2.25), (4.4, -0.85),   # hind leg
           (5.5, -0.9),
           (6.6, -0.85), (7.2, -2.05), (7.05, -2.45), (7.55, -2.6), (7.75, -2.2), (7.2, -0.8),  # front leg
@@ -34,9 +34,9 @@ _LOWER = [(0.0, 0.0), (1.5, -0.2), (3.0, -0.45), (3.6, -0.7),
 
 
 def outline() -> np.ndarray:
-    """The gecko's outline, counter-clockwise (right side first, from the tail tip to the snout)."""
+    """The gecko's outline, counter-clockwise (right side first, from the blunt tail tip to the snout)."""
     lower = np.array(_LOWER)
-    upper = lower[1:][::-1] * [1.0, -1.0]
+    upper = lower[::-1] * [1.0, -1.0]
     return np.vstack([lower, [[10.0, 0.0]], upper])
 
 

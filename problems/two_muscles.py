@@ -3,7 +3,9 @@
 The paper checks its internal-driving model against a prototype on three bodies driven by one, two and
 four independent muscle units, each contracted by 20 %, 30 %, 40 % and 50 % of its rest length (its
 Figure 9 and Table 3). This scene is the two-muscle group: the C-shaped ring of ``gripper.py`` with two
-muscles along its inner rim, one on the upper and one on the lower half, both contracted alike. Each case
+muscles along its outer rim, one on the upper and one on the lower half, both contracted alike: the
+gripper opens. (Muscles on the inner rim would close it, but at 20 % the jaws already meet, and the model
+has no contact: beyond that they would pass through each other.) Each case
 is the forward (internal-driving) solve at one contraction; the design must then recover the two
 contractions from the shape alone, and routing on the shape is compared with the true muscles.
 
@@ -29,14 +31,14 @@ gripper = load_problem_module(Path(__file__).with_name("gripper.py"))
 def build(resolution="medium") -> Scene:
     """The two-muscle experiment: cases ``a20`` ... ``a50`` (internal driving, the muscles given)."""
     mesh, material = gripper.body(resolution)
-    ri = gripper.R0 - gripper.WIDTH / 2
+    ro = gripper.R0 + gripper.WIDTH / 2
     half = gripper.OPENING / 2
 
     def rim(a0, a1):
-        return ri * np.array([np.cos(a0), np.sin(a0)]), ri * np.array([np.cos(a1), np.sin(a1)])
+        return ro * np.array([np.cos(a0), np.sin(a0)]), ro * np.array([np.cos(a1), np.sin(a1)])
 
-    upper = boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ri * np.array([0.0, 1.0]), name="upper")
-    lower = boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ri * np.array([0.0, -1.0]),
+    upper = boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ro * np.array([0.0, 1.0]), name="upper")
+    lower = boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ro * np.array([0.0, -1.0]),
                           name="lower")
     cases = tuple(Case(f"a{round(100 * a)}", contractions=[a, a], description=f"both muscles contracted by {a:.0%}")
                   for a in LEVELS)

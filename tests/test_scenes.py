@@ -1,0 +1,338 @@
+"""Scenes: the registry, the helpers that draw scenes, the scene-file loader and the ``mdsr`` command."""
+
+from __future__ import annotations
+
+import copy
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean
+from mdsr_opt.cli import main
+from mdsr_opt.io import write_mesh
+from mdsr_opt.scenes import (Animation, Case, Scene, SceneFileError, UnknownName, arc_map, arc_rigid,
+                             boundary_path, edge_path, get_problem, list_problems, load_scene, mesh_polygon,
+                             problems_dir, resolve_resolution)
+
+DATA = Path(__file__).parent / "data"
+FINGER = DATA / "finger.toml"
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+# ---------------------------------------------------------------------------------------------- registry
+def test_registry_finds_the_repository_problems():
+    assert problems_dir() == Path(__file__).resolve().parents[1] / "problems"
+    assert "gecko" in list_problems() and "__init__" not in list_problems()
+
+
+def test_unknown_problem_names_the_library():
+    with pytest.raises(UnknownName, match=r"unknown problem 'geko'; the library has: .*gecko"):
+        get_problem("geko")
+    assert issubclass(UnknownName, KeyError) and issubclass(UnknownName, ValueError)
+
+
+def test_problems_folder_from_the_environment(tmp_path, monkeypatch):
+    (tmp_path / "square.py").write_text(
+        "from mdsr_opt import NeoHookean\n"
+        "from mdsr_opt.scenes import Case, Scene, mesh_polygon, nodes_in_box\n"
+        "def build(resolution='medium'):\n"
+        "    m = mesh_polygon([[0, 0], [1, 0], [1, 1], [0, 1]], resolution=resolution)\n"
+        "    c = Case('push', anchors=nodes_in_box(m, xmax=0), drag_nodes=nodes_in_box(m, xmin=1),\n"
+        "             drag_positions=m.points[nodes_in_box(m, xmin=1)] - [0.2, 0])\n"
+        "    return Scene('square', m, NeoHookean(1.0, 0.3), (c,))\n")
+    (tmp_path / "_helper.py").write_text("x = 1\n")
+    monkeypatch.setenv("MDSR_PROBLEMS", str(tmp_path))
+    assert list_problems() == ["square"]
+    scene = get_problem("square", resolution=60)
+    assert scene.source.endswith("square.py") and 48 <= scene.mesh.n_nodes <= 72
+    monkeypatch.setenv("MDSR_PROBLEMS", str(tmp_path / "missing"))
+    with pytest.raises(FileNotFoundError, match="MDSR_PROBLEMS"):
+        list_problems()
+
+
+def test_problem_script_by_path():
+    scene = get_problem(str(Path(__file__).resolve().parents[1] / "problems" / "gripper.py"), resolution="coarse")
+    assert scene.name == "gripper" and scene.case_names == ("close",)
+
+
+@pytest.mark.parametrize("bad, err, match", [("tiny", ValueError, "resolution must be one of"),
+                                             (5, ValueError, "at least 20 nodes"),
+                                             (2.5, TypeError, "integer node count")])
+def test_resolution_is_checked(bad, err, match):
+    with pytest.raises(err, match=match):
+        resolve_resolution(bad)
+
+
+@pytest.mark.parametrize("want", [100, 400, 1500])
+def test_mesh_polygon_meets_the_node_count(want):
+    L = [[0, 0], [3, 0], [3, 0.5], [1, 0.5], [1, 2], [0, 2]]
+    mesh = mesh_polygon(L, resolution=want)
+    assert abs(mesh.n_nodes - want) <= 0.15 * want
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def test_arc_map_keeps_lengths_along_the_centre_line():
+    s = np.linspace(0.0, 4.0, 9)
+    line = np.column_stack([s, np.zeros_like(s)])
+    bent = arc_map(line, (0.0, 0.0), (1.0, 0.0), 4.0, np.pi / 2)
+    R = 4.0 / (np.pi / 2)
+    assert np.allclose(np.linalg.norm(bent - [0.0, R], axis=1), R)        # on the circle about (0, R)
+    assert np.allclose(bent[-1], [R, R])                                   # a quarter turn
+    # points off the line keep their distance to it (normal offset)
+    off = arc_map(line + [0.0, 0.3], (0.0, 0.0), (1.0, 0.0), 4.0, np.pi / 2)
+    assert np.allclose(np.linalg.norm(off - [0.0, R], axis=1), R - 0.3)
+
+
+def test_arc_rigid_moves_a_group_rigidly():
+    rng = np.random.default_rng(1)
+    pts = rng.uniform([3.5, -0.3], [4.0, 0.3], size=(20, 2))
+    moved = arc_rigid(pts, (3.5, 0.0), (0.0, 0.0), (1.0, 0.0), 3.5, 1.0)
+    d0 = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+    d1 = np.linalg.norm(moved[:, None] - moved[None], axis=2)
+    assert np.allclose(d0, d1)
+    root = arc_map(np.array([[3.5, 0.0]]), (0.0, 0.0), (1.0, 0.0), 3.5, 1.0)[0]
+    assert np.allclose(arc_rigid(np.array([[3.5, 0.0]]), (3.5, 0.0), (0.0, 0.0), (1.0, 0.0), 3.5, 1.0)[0], root)
+
+
+def test_boundary_and_edge_paths_follow_mesh_edges():
+    mesh = mesh_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=200)
+    m = boundary_path(mesh, (0, 0), (4, 0), via=(2, 0), name="lower")
+    P = mesh.points
+    assert np.all(np.abs(P[list(m.nodes), 1]) < 1e-9)                      # along the lower side
+    assert m.rest_length(mesh) == pytest.approx(4.0)
+    m.check_on(mesh)
+    e = edge_path(mesh, [(0.2, 0.5), (2.0, 0.5), (3.8, 0.5)])
+    e.check_on(mesh)
+    assert e.rest_length(mesh) < 1.25 * 3.6
+
+
+# ---------------------------------------------------------------------------------------------- data model
+def test_scene_checks_its_cases():
+    mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    mat = NeoHookean(1.0, 0.3)
+    with pytest.raises(ValueError, match="an internal case needs the scene's muscles"):
+        Scene("s", mesh, mat, (Case("c", contractions=[0.2]),))
+    with pytest.raises(ValueError, match="2 contraction"):
+        Scene("s", mesh, mat, (Case("c", contractions=[0.2, 0.3]),), muscles=(Muscle([0, 1, 2]),))
+    ext = Case("e", anchors=[0, 5], drag_nodes=[4], drag_positions=[[2.5, 0.0]])
+    with pytest.raises(ValueError, match="case name 'e' is used twice"):
+        Scene("s", mesh, mat, (ext, ext))
+    with pytest.raises(ValueError, match="unknown case 'x'"):
+        Scene("s", mesh, mat, (ext,), animations=(Animation("a", (("rest", 0), ("x", 1))),))
+    with pytest.raises(ValueError, match="at least two fixed nodes"):
+        Case("one", anchors=[0])
+    with pytest.raises(ValueError, match="may hold only letters"):
+        Case("a/b", anchors=[0, 1])
+    with pytest.raises(UnknownName, match="has no case 'f'"):
+        Scene("s", mesh, mat, (ext,)).case("f")
+
+
+# ---------------------------------------------------------------------------------------------- scene files
+def finger_dict() -> dict:
+    return tomllib.loads(FINGER.read_text())
+
+
+def write_json(tmp_path, data, name="scene.json") -> Path:
+    p = tmp_path / name
+    p.write_text(json.dumps(data))
+    return p
+
+
+def test_toml_and_json_scene_files_agree(tmp_path):
+    a = load_scene(FINGER)
+    b = load_scene(write_json(tmp_path, finger_dict()))
+    assert a.name == b.name == "finger"
+    assert np.array_equal(a.mesh.points, b.mesh.points)
+    assert [c.name for c in a.cases] == ["bend", "contract"]
+    assert a.cases[0].kind == "external" and a.cases[1].kind == "internal"
+    assert np.array_equal(a.cases[0].drag_nodes, b.cases[0].drag_nodes)
+    assert np.allclose(a.cases[0].drag_positions, b.cases[0].drag_positions)
+    assert a.muscles == b.muscles and len(a.muscles) == 1
+    assert a.design_options == {"a_max": 0.6} and a.routing_options == {"max_muscles": 2}
+    # the drag is a 60 degree turn of the tip about (0, 0.5): distances to the pivot are kept
+    c = a.cases[0]
+    P = a.mesh.points[c.drag_nodes]
+    assert np.allclose(np.linalg.norm(c.drag_positions - [0, 0.5], axis=1), np.linalg.norm(P - [0, 0.5], axis=1))
+    ang = np.arctan2(*(c.drag_positions - [0, 0.5])[:, ::-1].T) - np.arctan2(*(P - [0, 0.5])[:, ::-1].T)
+    assert np.allclose(ang, np.radians(60))
+    # the muscle runs along the upper side
+    assert np.all(a.mesh.points[list(a.muscles[0].nodes), 1] > 1 - 1e-9)
+
+
+def test_scene_file_with_a_mesh_file(tmp_path):
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    write_mesh(tmp_path / "body.vtu", mesh)
+    d = finger_dict()
+    d["body"] = {"mesh": "body.vtu"}
+    d["regions"]["tip"] = {"box": [3.9, -1, 5, 2]}
+    d["muscles"][0]["boundary"] = {"from": [0, 1], "to": [4, 1]}
+    scene = load_scene(write_json(tmp_path, d))
+    assert scene.mesh.n_nodes == mesh.n_nodes and np.allclose(scene.mesh.points, mesh.points)
+    assert set(scene.regions["tip"].tolist()) == set(np.flatnonzero(mesh.points[:, 0] == 4.0).tolist())
+
+
+def _set(path, value):
+    def f(d):
+        keys = path.split("/")
+        cur = d
+        for k in keys[:-1]:
+            cur = cur[int(k)] if isinstance(cur, list) else cur[k]
+        last = keys[-1]
+        if value is _DELETE:
+            del cur[int(last) if isinstance(cur, list) else last]
+        elif isinstance(cur, list):
+            cur[int(last)] = value
+        else:
+            cur[last] = value
+    return f
+
+
+_DELETE = object()
+
+MALFORMED = [
+    ("missing name", _set("name", _DELETE), SceneFileError, r"name: missing \(required\)"),
+    ("unknown field", _set("case", []), SceneFileError, r"case: unknown field \(did you mean 'cases'\?\)"),
+    ("bad name", _set("name", "my finger"), SceneFileError, r"name: .*only letters"),
+    ("outline and mesh", _set("body/mesh", "x.vtu"), SceneFileError, r"body: give exactly one of outline"),
+    ("short outline", _set("body/outline", [[0, 0], [1, 0]]), SceneFileError, r"body\.outline: needs at least 3"),
+    ("3d point", _set("body/outline/1", [3.5, 0, 0]), SceneFileError, r"body\.outline\[1\]: expected a point"),
+    ("crossing outline", _set("body/outline", [[0, 0], [1, 1], [1, 0], [0, 1]]), SceneFileError,
+     r"body\.outline: .*intersect"),
+    ("text coordinate", _set("body/outline/0/0", "zero"), TypeError, r"body\.outline\[0\]\[0\]: expected a number"),
+    ("resolution", _set("body/resolution", "tiny"), SceneFileError, r"body\.resolution: resolution must be one"),
+    ("missing mesh", lambda d: d.update(body={"mesh": "nowhere.vtu"}), FileNotFoundError,
+     r"body\.mesh: no such mesh file"),
+    ("nu", _set("material/nu", 0.5), SceneFileError, r"material\.nu: nu \(Poisson's ratio\) must lie in"),
+    ("material model", _set("material/model", "mooney"), SceneFileError, r"material\.model: unknown material"),
+    ("E text", _set("material/E", "soft"), TypeError, r"material\.E: expected a number"),
+    ("region field", _set("regions/tip/radiuss", 0.3), SceneFileError,
+     r"regions\.tip\.radiuss: unknown field \(did you mean 'radius'\?\)"),
+    ("empty region", _set("regions/tip", {"near": [10, 10], "radius": 0.1}), SceneFileError,
+     r"regions\.tip: selects no node"),
+    ("region no radius", _set("regions/tip", {"near": [4, 0.5]}), SceneFileError, r"regions\.tip\.radius: missing"),
+    ("unknown region", _set("cases/0/anchors", "bas"), SceneFileError,
+     r"cases\[0\]\.anchors\[0\]: unknown region 'bas' \(regions: base, tip\)"),
+    ("index range", _set("cases/0/anchors", [0, 99999]), SceneFileError,
+     r"cases\[0\]\.anchors\[1\]: node index 99999 out of range"),
+    ("off the body", _set("cases/0/drags", [{"at": [9, 9], "to": [1, 1]}]), SceneFileError,
+     r"cases\[0\]\.drags\[0\]\.at\[0\]: no node within"),
+    ("no destination", _set("cases/0/drags", [{"nodes": "tip"}]), SceneFileError,
+     r"cases\[0\]\.drags\[0\]: say where the nodes go"),
+    ("to and by", _set("cases/0/drags", [{"nodes": "tip", "to": [1, 1], "by": [0, 1]}]), SceneFileError,
+     r"cases\[0\]\.drags\[0\]\.by: cannot be combined with to"),
+    ("by length", _set("cases/0/drags", [{"nodes": "tip", "by": [1]}]), SceneFileError,
+     r"cases\[0\]\.drags\[0\]\.by: expected a point \[x, y\], got \[1\]"),
+    ("anchored and dragged", _set("cases/0/anchors", "tip"), SceneFileError,
+     r"cases\[0\]: node \d+ is both anchored and dragged"),
+    ("one fixed node", lambda d: d["cases"][0].pop("drags") and d["cases"][0].update(anchors=[[0, 0]]),
+     SceneFileError, r"cases\[0\]: an external case needs at least two fixed nodes"),
+    ("contraction count", _set("cases/1/contractions", [0.3, 0.2]), SceneFileError,
+     r"cases\[1\]\.contractions: needs one value per muscle \(1\), got 2"),
+    ("contraction range", _set("cases/1/contractions", [1.2]), SceneFileError,
+     r"cases\[1\]\.contractions\[0\]: must lie in \[0, 1\)"),
+    ("no muscles", lambda d: d.pop("muscles"), SceneFileError,
+     r"cases\[1\]\.contractions: an internal case needs muscles"),
+    ("duplicate case", _set("cases/1/name", "bend"), SceneFileError,
+     r"cases\[1\]\.name: 'bend' is used by an earlier case"),
+    ("internal with anchors", _set("cases/1/anchors", "base"), SceneFileError,
+     r"cases\[1\]\.anchors: an internal case \(with contractions\) has no anchors"),
+    ("no cases", _set("cases", []), SceneFileError, r"cases: expected a non-empty list"),
+    ("routing option", _set("routing/max_muscle", 2), SceneFileError,
+     r"routing\.max_muscle: unknown field \(did you mean 'max_muscles'\?\)"),
+    ("design option", _set("design/amax", 0.5), SceneFileError, r"design\.amax: unknown field \(did you mean 'a_max'"),
+    ("muscle two ways", _set("muscles/0/nodes", [1, 2]), SceneFileError, r"muscles\[0\]: give exactly one of"),
+    ("muscle off the mesh", lambda d: d["muscles"][0].pop("boundary") and d["muscles"][0].update(nodes=[0, 99999]),
+     SceneFileError, r"muscles\[0\]\.nodes: muscle 'upper' has node 99999 out of range"),
+    ("animation case", _set("animations/0/keyframes/1", ["contrct", 1]), SceneFileError,
+     r"animations\[0\]\.keyframes\[1\]: unknown case 'contrct'"),
+    ("animation fraction", _set("animations/0/keyframes/1", ["contract", 2]), SceneFileError,
+     r"animations\[0\]: .*outside \[0, 1\]"),
+]
+
+
+@pytest.mark.parametrize("label, mutate, err, match", MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_malformed_scene_file_names_the_field(tmp_path, label, mutate, err, match):
+    d = copy.deepcopy(finger_dict())
+    mutate(d)
+    path = write_json(tmp_path, d)
+    with pytest.raises(err, match=r"scene\.json: " + match):
+        load_scene(path)
+
+
+@pytest.mark.parametrize("name, text, match", [
+    ("bad.toml", "name = 'x'\n[body\n", r"bad\.toml: not valid TOML"),
+    ("bad.json", "{\"name\": \"x\",", r"bad\.json: not valid JSON"),
+    ("list.json", "[1, 2]", r"list\.json: the top level must be a table"),
+    ("scene.yaml", "name: x", r"scene\.yaml: a scene file ends in \.toml or \.json"),
+])
+def test_unreadable_scene_files(tmp_path, name, text, match):
+    p = tmp_path / name
+    p.write_text(text)
+    with pytest.raises(SceneFileError, match=match):
+        load_scene(p)
+
+
+def test_missing_scene_file():
+    with pytest.raises(FileNotFoundError, match="no such scene file"):
+        get_problem("nowhere/scene.toml")
+
+
+# ---------------------------------------------------------------------------------------------- mdsr command
+def test_mdsr_list(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("gecko", "starfish", "face", "humanoid", "one_muscle", "two_muscles", "four_muscles"):
+        assert f"  {name} " in out
+
+
+def test_mdsr_run_unknown_name(capsys, tmp_path):
+    assert main(["run", "geko", "--out", str(tmp_path)]) == 2
+    assert "unknown problem 'geko'" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())     # nothing written
+
+
+def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
+    out = tmp_path / "finger"
+    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse"]) == 0
+    text = capsys.readouterr().out
+    assert "[finger 2/2 contract] design" in text                  # progress
+    assert "| finger | contract | internal |" in text and "2/2 case(s) succeeded" in text
+    files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    per_case = ["design.png", "driven.vtu", "graph.png", "muscles.png", "overlay.png", "photo.json", "photo.png",
+                "target.png", "target.vtu"]
+    assert files == sorted([f"{c}/{f}" for c in ("bend", "contract") for f in per_case]
+                           + ["curl.gif", "curl.json", "rest.png", "summary.json", "summary.md"])
+    s = json.loads((out / "summary.json").read_text())
+    assert s["success"] is True and s["photographs"].startswith("SYNTHETIC")
+    contract = s["cases"][1]
+    assert contract["contraction_error"] < 1e-6 and contract["known_contractions"] == [0.3]
+    assert contract["photo"]["self"]["mean_px"] < 1.0               # the measuring floor at 500 px
+    bend = s["cases"][0]
+    assert bend["n_muscles"] == 1 and bend["difference"] <= bend["initial_difference"]
+    gif = json.loads((out / "curl.json").read_text())
+    assert gif["success"] is True and gif["n_frames"] == 9 and max(max(f) for f in gif["contractions"]) == \
+        pytest.approx(contract["contractions"][0])
+
+
+def test_mdsr_run_reports_a_failed_case(tmp_path, capsys):
+    # a strip pulled by its end, without lateral contraction (nu = 0): every edge stretches or keeps its
+    # length, the exact equilibrium is the uniform stretch, and a cable cannot push: no muscle to route
+    d = {"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 100},
+         "material": {"nu": 0.0},
+         "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+         "cases": [{"name": "stretch", "anchors": "base", "drags": [{"nodes": "end", "by": [0.5, 0]}]}]}
+    path = write_json(tmp_path, d)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--no-figures", "--no-photos"]) == 1
+    text = capsys.readouterr().out
+    assert "FAILED strip/stretch: routing found no muscle" in text and "cable cannot push" in text
+    s = json.loads((out / "summary.json").read_text())
+    assert s["success"] is False and s["cases"][0]["target_success"] is True
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json", "summary.md"]
