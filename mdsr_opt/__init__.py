@@ -43,6 +43,14 @@ _EXPORTS = {
     # evaluation against photographs (issue 5)
     "contour_from_image": "evaluate",
     "compare_contours": "evaluate",
+    # problem library and scenes (issue 6)
+    "Scene": "scenes",
+    "Case": "scenes",
+    "list_problems": "scenes",
+    "get_problem": "scenes",
+    "load_scene": "scenes",
+    "prepare_case": "scenes",
+    "run_scene": "scenes",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]
