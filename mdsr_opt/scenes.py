@@ -852,7 +852,6 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     import time
 
     from .design import design_contractions
-    from .equilibrium import SolverFailure
 
     say = log or (lambda s: None)
     if isinstance(case, str):
@@ -899,8 +898,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     t1 = time.perf_counter()
     try:
         res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
-    except SolverFailure as exc:  # a forward solve inside the design failed hard
-        rep.message = f"design failed: {exc}"
+    except RuntimeError as exc:  # a solver inside the design failed hard (SolverFailure, CasADi errors)
+        rep.message = f"design failed: {type(exc).__name__}: {exc}"
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
         return run
@@ -1222,6 +1221,15 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 
 def _parse_resolution(text: str):
     return int(text) if text.isdigit() else text
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    import argparse
+
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() and int(p) >= 64 for p in parts):
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT with both at least 64, got {text!r}")
+    return int(parts[0]), int(parts[1])
 
 
 # ---------------------------------------------------------------------------------------------- scene files
@@ -1764,7 +1772,7 @@ def _cmd_run(a) -> int:
             log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
         reports.append(run_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                  figures=not a.no_figures, animations=not a.no_animations,
-                                 mesh_format=a.format, log=log))
+                                 mesh_format=a.format, photo_resolution=a.photo_size, log=log))
     lines = reports[0].table().split("\n")
     for r in reports[1:]:
         lines += r.table().split("\n")[2:]
@@ -1802,6 +1810,8 @@ def add_cli(sub) -> None:
                    help="design method (default: the scene's, normally flattened)")
     q.add_argument("--format", choices=("vtu", "vtk", "xdmf"), default="vtu", help="mesh files (default vtu)")
     q.add_argument("--no-photos", action="store_true", help="skip the synthetic photographs and contour metrics")
+    q.add_argument("--photo-size", type=_parse_size, default=(500, 500), metavar="WxH",
+                   help="size of the synthetic photographs in pixels (default 500x500, as in the paper)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")

@@ -300,7 +300,7 @@ def test_mdsr_run_unknown_name(capsys, tmp_path):
 
 def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     out = tmp_path / "finger"
-    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse"]) == 0
+    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--photo-size", "300x300"]) == 0
     text = capsys.readouterr().out
     assert "[finger 2/2 contract] design" in text                  # progress
     assert "| finger | contract | internal |" in text and "2/2 case(s) succeeded" in text
@@ -313,7 +313,8 @@ def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     assert s["success"] is True and s["photographs"].startswith("SYNTHETIC")
     contract = s["cases"][1]
     assert contract["contraction_error"] < 1e-6 and contract["known_contractions"] == [0.3]
-    assert contract["photo"]["self"]["mean_px"] < 1.0               # the measuring floor at 500 px
+    assert contract["photo"]["resolution"] == [300, 300]
+    assert contract["photo"]["self"]["mean_px"] < 1.0               # the measuring floor at 300 px
     bend = s["cases"][0]
     assert bend["n_muscles"] == 1 and bend["difference"] <= bend["initial_difference"]
     gif = json.loads((out / "curl.json").read_text())
