@@ -19,7 +19,7 @@ Three methods solve it:
     constraints are scaled (see *Scaling* below). The NLP's derivatives (constraint Jacobian, Hessian of the
     Lagrangian with the energy's third derivatives) are assembled term by term from small per-element,
     per-spring and per-cable SX functions, like the energy model's own; ``derivatives="casadi"`` instead
-    builds the NLP in SX and lets CasADi differentiate it (the same numbers, 20-30x slower to build).
+    builds the NLP in SX and lets CasADi differentiate it (the same numbers, 30-50x slower to build).
 ``"nested"``
     The reduced-space rival: an outer L-BFGS-B over ``a``; each evaluation solves the equilibrium (warm
     started from the previous one) and the exact gradient comes from the implicit-function theorem by one
