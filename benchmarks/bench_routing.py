@@ -8,7 +8,10 @@ Three targets on unstructured (Triangle) meshes of growing size:
 
 The budget is 0.5 s for a 3k-node mesh. Timed: ``route_muscles`` as a user calls it (input checks,
 contraction graph, seeds, growth, stats), once on a fresh mesh ("cold": the mesh's cached edge data are
-built inside the call) and as the best of ``--repeat`` further calls ("warm").
+built inside the call) and as the best of ``--repeat`` further calls ("warm"). "K_h=0 s" is the warm
+time without the growth heuristic (no shortest-path fields at all), so the difference to "warm s" is
+what the heuristic costs; "fields" counts the Dijkstra runs (one per endpoint whose distance field
+was needed).
 
 Usage::
 
@@ -29,6 +32,7 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh
+from mdsr_opt import routing
 from mdsr_opt.routing import contraction_graph, route_muscles
 
 BUDGET_S = 0.5
@@ -73,6 +77,23 @@ def _mesh(outline, n_nodes):
     return Mesh.from_polygon(outline, max_area=0.8 * area / n_nodes)
 
 
+def _count_fields(mesh, target) -> int:
+    """Number of Dijkstra runs (distance fields) in one routing call."""
+    calls = [0]
+    real = routing.dijkstra
+
+    def counting(*args, **kwargs):
+        calls[0] += 1
+        return real(*args, **kwargs)
+
+    routing.dijkstra = counting
+    try:
+        route_muscles(mesh, target)
+    finally:
+        routing.dijkstra = real
+    return calls[0]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="bench_out", help="output directory for the PNG charts")
@@ -84,7 +105,7 @@ def main(argv=None) -> int:
 
     print(f"python {platform.python_version()}, numpy {np.__version__}, {platform.machine()}")
     head = (f"{'case':<8} {'nodes':>6} {'edges':>6} {'muscles':>7} {'edges in':>8} {'graph s':>8} "
-            f"{'cold s':>8} {'warm s':>8}")
+            f"{'cold s':>8} {'warm s':>8} {'K_h=0 s':>8} {'fields':>6}")
     print(head)
     print("-" * len(head))
     rows, examples = [], {}
@@ -100,13 +121,19 @@ def main(argv=None) -> int:
                 t0 = time.perf_counter()
                 route_muscles(mesh, target)
                 warm.append(time.perf_counter() - t0)
+            no_h = []
+            for _ in range(args.repeat):
+                t0 = time.perf_counter()
+                route_muscles(mesh, target, K_h=0.0)
+                no_h.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
             contraction_graph(mesh, target)
             graph_s = time.perf_counter() - t0
             n_in = sum(s.n_edges for s in res.stats)
             rows.append((name, mesh.n_nodes, cold, min(warm)))
             print(f"{name:<8} {mesh.n_nodes:>6d} {len(mesh.edges):>6d} {len(res):>7d} {n_in:>8d} "
-                  f"{graph_s:>8.3f} {cold:>8.3f} {min(warm):>8.3f}")
+                  f"{graph_s:>8.3f} {cold:>8.3f} {min(warm):>8.3f} {min(no_h):>8.3f} "
+                  f"{_count_fields(mesh, target):>6d}")
             if abs(n - BUDGET_NODES) < 1:
                 examples[name] = (mesh, target, res)
 
