@@ -1,0 +1,312 @@
+"""Solver comparison studies (issue 7): the runner, its table, Dask, time-outs, saddles, fidelity, the CLI.
+
+Module fixtures run the quick study once at its smallest size (27-node strips against an 85-node
+reference), serially and on a two-process Dask LocalCluster.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external, solve_internal
+from mdsr_opt.cli import main
+from mdsr_opt.fidelity import choose_fidelity, pick_fidelity
+from mdsr_opt.io import read_json
+from mdsr_opt.study import (COLUMNS, FAILURES, TIMING_COLUMNS, Study, build_setup, fit_slopes, interpolate,
+                            list_study_problems, pareto_front, run_study, state_error)
+
+SMALL = dict(resolutions=[30], reference_resolution=100, progress=False)
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("quick")
+    return run_study("quick", out=out, **SMALL), out
+
+
+@pytest.fixture(scope="module")
+def quick_dask():
+    return run_study("quick", scheduler="local", workers=2, figures=False, **SMALL)
+
+
+def _arc(points, angle, length=4.0):
+    R = length / angle
+    th = points[:, 0] / length * angle
+    rr = R - points[:, 1]
+    return np.column_stack([rr * np.sin(th), R - rr * np.cos(th)])
+
+
+def _strip(ny):
+    mesh = Mesh.rectangle(4.0, 1.0, 4 * ny, ny)
+    P = mesh.points
+    return mesh, np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+
+
+# ------------------------------------------------------------------------------------ initial_guess
+def test_initial_guess_rest_reaches_the_predictor_solution():
+    mesh, left, right = _strip(4)
+    mat = NeoHookean(1.0, 0.3)
+    drags = (right, mesh.points[right] + [0.5, 0.0])
+    ref = solve_external(mesh, mat, left, drags)
+    rest = solve_external(mesh, mat, left, drags, initial_guess="rest", min_step=1.0)
+    assert ref.success and rest.success
+    assert np.abs(rest.x - ref.x).max() < 1e-7
+    # from rest the solver has more to do than from the linear-elastic predictor
+    assert rest.iterations > ref.iterations
+    warm = solve_external(mesh, mat, left, drags, initial_guess=ref.x)
+    assert warm.success and warm.iterations <= 1 and np.abs(warm.x - ref.x).max() < 1e-9
+
+
+def test_initial_guess_rest_cannot_start_a_large_bend():
+    mesh, left, right = _strip(4)
+    drags = (right, _arc(mesh.points[right], np.pi / 2))
+    res = solve_external(mesh, NeoHookean(1.0, 0.3), left, drags, initial_guess="rest", min_step=1.0)
+    assert not res.success
+    assert "first guess inverts an element" in res.status
+    # with load steps (still no predictor) the same bend goes through
+    stepped = solve_external(mesh, NeoHookean(1.0, 0.3), left, drags, initial_guess="rest")
+    assert stepped.success and len(stepped.steps) > 1
+
+
+def test_initial_guess_internal_and_bad_input():
+    mesh, _, _ = _strip(2)
+    mat = NeoHookean(1.0, 0.3)
+    bottom = np.flatnonzero(mesh.points[:, 1] == 0.0)
+    m = [Muscle(bottom[np.argsort(mesh.points[bottom, 0])])]
+    a = solve_internal(mesh, mat, m, [0.3])
+    b = solve_internal(mesh, mat, m, [0.3], initial_guess="rest")
+    assert a.success and b.success and np.abs(a.x - b.x).max() < 1e-7
+    with pytest.raises(ValueError, match="initial_guess must be 'predictor', 'rest'"):
+        solve_internal(mesh, mat, m, [0.3], initial_guess="linear")
+    flipped = mesh.points.copy()
+    flipped[:, 1] *= -1.0
+    with pytest.raises(ValueError, match="initial_guess inverts an element"):
+        solve_internal(mesh, mat, m, [0.3], initial_guess=flipped)
+    with pytest.raises(ValueError, match=r"initial_guess|x"):
+        solve_external(mesh, mat, [0, 1], None, initial_guess=np.zeros((3, 2)))
+
+
+# ------------------------------------------------------------------------------------ the quick study
+def test_quick_study_table_is_complete(quick):
+    res, out = quick
+    runs, refs, capped = res.study.plan()
+    assert len(res.rows) == len(runs) and not capped
+    for r in res.rows:
+        assert list(r) == list(COLUMNS) or set(r) == set(COLUMNS)
+        for k in COLUMNS:
+            v = r[k]
+            assert v is not None and v != "", (k, r)
+            if isinstance(v, float):
+                assert math.isfinite(v), (k, r)
+        assert r["failure"] in FAILURES
+        assert r["success"] == (r["failure"] == "none")
+        assert r["wall_time"] >= r["solve_time"] >= 0.0
+    # every problem x material x method of the study is there, at the smallest mesh
+    combos = {(r["problem"], r["material"], r["method"]) for r in res.rows}
+    eq = [m for m in res.study.methods if m not in ("flattened", "nested", "derivative-free")]
+    assert len(combos) == 3 * 2 * len(eq) + 2 * 3
+    assert {r["nodes"] for r in res.rows} == {27}
+
+
+def test_quick_study_measures_accuracy(quick):
+    res, _ = quick
+    rows = res.rows
+    nh = [r for r in rows if r["kind"] == "equilibrium" and r["material"] == "neo-hookean"]
+    assert all(r["success"] for r in nh)
+    # all converged backends agree on the same (27-node) state: their error against the reference is equal
+    for p in ("strip-stretch", "strip-bend", "strip-contract"):
+        errs = [r["error"] for r in nh if r["problem"] == p]
+        assert max(errs) - min(errs) < 1e-3 * max(errs)
+        assert 0 < min(errs) < 0.1  # a coarse mesh differs from the finer reference, but not wildly
+    # linear elasticity is not rotation invariant: on the 90-degree bend it is far off the Neo-Hookean result
+    lin = next(r for r in rows if r["problem"] == "strip-bend" and r["material"] == "linear" and
+               r["method"] == "ipopt")
+    nhb = next(r for r in nh if r["problem"] == "strip-bend" and r["method"] == "ipopt")
+    assert lin["error"] > 10 * nhb["error"]
+    # design methods recover the known contraction
+    des = [r for r in rows if r["kind"] == "design" and r["material"] == "neo-hookean"]
+    assert len(des) == 3 and all(r["success"] and r["error"] < 1e-6 for r in des)
+
+
+def test_quick_study_files(quick):
+    res, out = quick
+    with open(out / "quick.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert list(table[0]) == list(COLUMNS)
+    assert len(table) == len(res.rows)
+    assert [r["method"] for r in table] == [r["method"] for r in res.rows]
+    assert all(v not in ("", "nan") for r in table for v in r.values())
+    for f in ("quick_pareto.png", "quick_scaling.png", "quick_success.png"):
+        with open(out / f, "rb") as fh:
+            assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+    meta = read_json(out / "quick.json")
+    assert meta["environment"]["casadi"] and meta["study"]["resolutions"] == [30]
+    assert meta["runs"] == len(res.rows) and meta["timing_columns"] == list(TIMING_COLUMNS)
+    assert not [p for p in os.listdir(out) if p.startswith(".tmp-")]
+
+
+def test_dask_run_is_identical_to_serial(quick, quick_dask):
+    serial, _ = quick
+    assert quick_dask.comparable() == serial.comparable()
+    assert len(quick_dask.rows) == len(serial.rows)
+    keep = [c for c in COLUMNS if c not in TIMING_COLUMNS]
+    assert len(serial.comparable()[0]) == len(keep) == len(COLUMNS) - 3
+
+
+# ------------------------------------------------------------------------------------ failures
+def test_time_out_stops_a_slow_run():
+    st = Study("t", "time-out", ("strip-bend",), (300,), methods=("ipopt-lbfgs",), timeout=0.5,
+               reference_resolution=300)
+    res = run_study(st, progress=False)
+    (r,) = res.rows
+    assert r["failure"] == "time-out" and not r["success"]
+    assert r["wall_time"] < 5.0  # L-BFGS needs over 10 s here; the budget stops it
+
+
+def test_saddle_is_detected_past_buckling():
+    st = Study("t", "buckling", ("strip-compress",), (300,), methods=("ipopt", "newton"),
+               loads={"strip-compress": (0.05, 0.3)}, reference_resolution=300)
+    res = run_study(st, progress=False)
+    by = {(r["load"], r["method"]): r for r in res.rows}
+    for m in ("ipopt", "newton"):
+        assert by[(0.05, m)]["failure"] == "none"
+        # the solver converges (its own status says so) to the straight, unbuckled state: a saddle
+        assert by[(0.3, m)]["failure"] == "saddle" and not by[(0.3, m)]["stable"]
+        assert by[(0.3, m)]["residual"] < 1e-5
+
+
+def test_poor_guess_failure_is_inverted_elements():
+    st = Study("t", "guess", ("strip-bend",), (30,), methods=("ipopt", "newton"), guesses=("predictor", "rest"),
+               reference_resolution=30)
+    res = run_study(st, progress=False)
+    for r in res.rows:
+        assert r["failure"] == ("none" if r["guess"] == "predictor" else "inverted elements")
+
+
+# ------------------------------------------------------------------------------------ fidelity
+def _nested_error(problem, load, choice, ref_mesh, ref_x, free_body=False):
+    """Independent check: re-solve the chosen model and compare at the nodes it shares with the fine mesh."""
+    s = build_setup(problem, choice.resolution, load)
+    mat = s.material(choice.material)
+    if s.mode == "external":
+        x = solve_external(s.mesh, mat, s.anchors, s.drags).x
+    else:
+        x = solve_internal(s.mesh, mat, s.muscles, s.contractions).x
+    key = {tuple(np.round(p, 9)): i for i, p in enumerate(ref_mesh.points)}
+    idx = np.array([key[tuple(np.round(p, 9))] for p in s.mesh.points])
+    return np.linalg.norm(x - ref_x[idx], axis=1).max() / ref_mesh.size
+
+
+@pytest.mark.parametrize("problem, load, tol, material", [
+    ("strip-stretch", 0.02, 2e-3, "linear"),       # small strains: the small-strain model is adequate
+    ("strip-bend", 90.0, 1e-2, "neo-hookean"),     # large rotations: linear elasticity is not
+])
+def test_fidelity_choice_meets_its_tolerance(problem, load, tol, material):
+    fine = build_setup(problem, 1000, load)            # a known fine solution: 1105 nodes
+    ref = solve_external(fine.mesh, NeoHookean(1.0, 0.3), fine.anchors, fine.drags, tol=1e-10)
+    assert ref.success
+    c = choose_fidelity(problem, tol, load=load, resolutions=(30, 100, 300), reference=(fine.mesh, ref.x),
+                        progress=False)
+    assert c.met and c.error <= tol and c.material == material
+    assert _nested_error(problem, load, c, fine.mesh, ref.x) <= tol
+    assert abs(_nested_error(problem, load, c, fine.mesh, ref.x) - c.error) < 1e-6
+    # nothing coarser (or simpler on the same mesh) met the tolerance
+    for r in c.candidates:
+        if (r["nodes"], r["material"] == "neo-hookean") < (c.nodes, c.material == "neo-hookean"):
+            assert not (r["success"] and r["error"] <= tol)
+    assert c.node_saving == 297 / c.nodes and c.finest["material"] == "neo-hookean"
+
+
+def test_fidelity_bad_input():
+    with pytest.raises(ValueError, match="tolerance must be a positive number"):
+        choose_fidelity("strip-stretch", 0.0, progress=False)
+    with pytest.raises(ValueError, match="unknown study problem 'strip-twist'; valid: strip-stretch"):
+        choose_fidelity("strip-twist", 0.01, progress=False)
+    with pytest.raises(ValueError, match="no candidate runs"):
+        pick_fidelity([], "strip-stretch", 1.0, 0.01)
+
+
+# ------------------------------------------------------------------------------------ helpers
+def test_interpolation_is_exact_for_affine_fields():
+    mesh = Mesh.from_polygon([[0, 0], [3, 0], [3, 1], [1, 2], [0, 1]], max_area=0.05)
+    A = np.array([[1.2, -0.3], [0.4, 0.9]])
+    f = mesh.points @ A.T + [0.5, -1.0]
+    rng = np.random.default_rng(1)
+    q = rng.uniform([0, 0], [3, 1], size=(200, 2))
+    assert np.abs(interpolate(mesh.points, mesh.triangles, f, q) - (q @ A.T + [0.5, -1.0])).max() < 1e-12
+    # a rigid motion is no error for a free body, but is for an anchored one
+    th = 0.3
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    moved = mesh.points @ R.T + [2.0, 1.0]
+    assert state_error(mesh.points, moved, mesh.points, mesh.triangles, mesh.points, free_body=True) < 1e-12
+    assert state_error(mesh.points, moved, mesh.points, mesh.triangles, mesh.points) > 0.1
+
+
+def test_pareto_front_and_slopes():
+    rng = np.random.default_rng(0)
+    t, e = rng.uniform(0.1, 10, 60), rng.uniform(1e-6, 1, 60)
+    front = pareto_front(t, e)
+    for i in range(60):
+        dominated = np.any((t <= t[i]) & (e <= e[i]) & ((t < t[i]) | (e < e[i])))
+        assert (i in front) == (not dominated)
+    assert np.all(np.diff(t[front]) > 0) and np.all(np.diff(e[front]) < 0)
+    rows = [{"method": "m", "nodes": n, "build_time": 0.0, "solve_time": 3e-4 * n ** 1.5, "success": True}
+            for n in (30, 100, 300, 1000)]
+    rows.append({"method": "m", "nodes": 5000, "build_time": 0.0, "solve_time": 99.0, "success": False})
+    slope, intercept, count = fit_slopes(rows)["m"]
+    assert abs(slope - 1.5) < 1e-9 and abs(intercept - np.log10(3e-4)) < 1e-9 and count == 4
+
+
+def test_problem_library_scenes_are_study_problems():
+    from mdsr_opt import scenes
+
+    name = scenes.list_problems()[0]
+    sc = scenes.get_problem(name, resolution=150)
+    case = sc.cases[0]
+    assert f"{name}/{case.name}" in list_study_problems()
+    s = build_setup(f"{name}/{case.name}", 150, 0.5)
+    assert s.mesh.n_nodes == sc.mesh.n_nodes
+    if case.kind == "internal":
+        assert np.allclose(s.contractions, 0.5 * case.contractions)
+    else:
+        rest = sc.mesh.points[case.drag_nodes]
+        assert np.allclose(s.drags[1], rest + 0.5 * (case.drag_positions - rest))
+        assert np.array_equal(s.anchors, case.anchors)
+
+
+# ------------------------------------------------------------------------------------ bad input, CLI
+def test_bad_names_list_the_valid_ones():
+    with pytest.raises(ValueError, match="unknown study 'slow'; valid: quick, speed, stability, fidelity"):
+        run_study("slow")
+    with pytest.raises(ValueError, match=r"unknown method \(backend or design method\) 'ipopt2'; valid: ipopt"):
+        run_study("quick", methods=["ipopt2"])
+    with pytest.raises(ValueError, match="unknown material 'rubber'; valid: linear, neo-hookean"):
+        run_study("quick", materials=["rubber"])
+    with pytest.raises(ValueError, match="unknown first guess 'zero'; valid: predictor, no-predictor, rest"):
+        Study("t", "", ("strip-bend",), (30,), guesses=("zero",))
+    with pytest.raises(ValueError, match="resolutions must be integers >= 4"):
+        run_study("quick", resolutions=[2])
+    with pytest.raises(ValueError, match="loads given for 'strip-bend', which is not among its problems"):
+        Study("t", "", ("strip-stretch",), (30,), loads={"strip-bend": (1.0,)})
+
+
+def test_cli_study(tmp_path, capsys):
+    assert main(["study", "--list"]) == 0
+    listed = capsys.readouterr().out
+    assert "quick" in listed and "stability" in listed and "strip-compress" in listed
+    assert main(["study", "nope", "--out", str(tmp_path)]) == 2
+    assert "unknown study 'nope'; valid: quick" in capsys.readouterr().err
+    out = tmp_path / "q"
+    rc = main(["study", "quick", "--out", str(out), "--resolutions", "30", "--methods", "ipopt,newton",
+               "--problems", "strip-stretch", "--reference-resolution", "100", "--quiet"])
+    assert rc == 0
+    with open(out / "quick.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2 * 2  # 2 methods x 2 materials
+    assert {r["failure"] for r in rows} == {"none"}
+    assert "| ipopt | 2 | 2 |" in capsys.readouterr().out
