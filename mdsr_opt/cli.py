@@ -13,6 +13,7 @@ def _register_all(sub) -> None:
     # each module that owns a subcommand adds one line here: `from . import X; X.add_cli(sub)`
     from . import evaluate; evaluate.add_cli(sub)  # noqa: E702
     from . import scenes; scenes.add_cli(sub)  # noqa: E702
+    from . import study; study.add_cli(sub)  # noqa: E702
 
 
 def main(argv: list[str] | None = None) -> int:
