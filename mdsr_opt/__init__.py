@@ -51,6 +51,13 @@ _EXPORTS = {
     "load_scene": "scenes",
     "prepare_case": "scenes",
     "run_scene": "scenes",
+    # solver comparison studies (issue 7)
+    "Study": "study",
+    "StudyResult": "study",
+    "run_study": "study",
+    "list_studies": "study",
+    "choose_fidelity": "fidelity",
+    "FidelityChoice": "fidelity",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]
