@@ -37,24 +37,12 @@ def _is_symbolic(F) -> bool:
 
 
 @dataclass(frozen=True)
-class NeoHookean:
-    """Compressible 2D Neo-Hookean material.
-
-    ``Psi(F) = mu/2 (tr F^T F - 2) - mu ln J + lam/2 (ln J)^2``, ``mu = E / (2 (1 + nu))``,
-    ``lam = E nu / ((1 + nu)(1 - 2 nu))``; the element energy is ``thickness * area * Psi``.
-
-    Example
-    -------
-    >>> import numpy as np
-    >>> NeoHookean(E=1.0, nu=0.3).psi(np.eye(2))
-    0.0
-    """
+class _Isotropic:
+    """Validated ``E``, ``nu``, ``thickness`` and the Lame parameters shared by the isotropic materials."""
 
     E: float
     nu: float
     thickness: float = 1.0
-
-    kind = "neo-hookean"
 
     def __post_init__(self):
         E, nu = _check_E_nu(self.E, self.nu)
@@ -75,6 +63,23 @@ class NeoHookean:
         """Numeric parameters ``[mu * t, lam * t]`` fed to the symbolic model."""
         mu, lam = _lame(self.E, self.nu)
         return np.array([mu * self.thickness, lam * self.thickness])
+
+
+@dataclass(frozen=True)
+class NeoHookean(_Isotropic):
+    """Compressible 2D Neo-Hookean material.
+
+    ``Psi(F) = mu/2 (tr F^T F - 2) - mu ln J + lam/2 (ln J)^2``, ``mu = E / (2 (1 + nu))``,
+    ``lam = E nu / ((1 + nu)(1 - 2 nu))``; the element energy is ``thickness * area * Psi``.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> NeoHookean(E=1.0, nu=0.3).psi(np.eye(2))
+    0.0
+    """
+
+    kind = "neo-hookean"
 
     @staticmethod
     def psi_expr(F, params):
@@ -101,28 +106,14 @@ class NeoHookean:
 
 
 @dataclass(frozen=True)
-class LinearElastic:
+class LinearElastic(_Isotropic):
     """Small-strain (geometrically linear) isotropic elasticity, for scenes with small strains.
 
     ``Psi = mu eps:eps + lam/2 (tr eps)^2`` with ``eps = (F + F^T)/2 - I``. Not rotation invariant:
     use it only where rotations stay small (the fidelity helper decides).
     """
 
-    E: float
-    nu: float
-    thickness: float = 1.0
-
     kind = "linear"
-
-    def __post_init__(self):
-        E, nu = _check_E_nu(self.E, self.nu)
-        object.__setattr__(self, "E", E)
-        object.__setattr__(self, "nu", nu)
-        object.__setattr__(self, "thickness", positive_float(self.thickness, "thickness"))
-
-    mu = NeoHookean.mu
-    lam = NeoHookean.lam
-    params = NeoHookean.params
 
     @staticmethod
     def psi_expr(F, params):
