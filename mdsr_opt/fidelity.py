@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
@@ -172,7 +173,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
         raise ValueError(f"tolerance must be a positive number, got {tol}")
     st = Study(f"fidelity-{problem}", f"fidelity of {problem}", (problem,), tuple(resolutions), tuple(materials),
                (method,), loads={problem: (load,)}, reference_resolution=reference_resolution, timeout=timeout)
-    log = (lambda s: print(s, flush=True)) if progress else None
+    log = (lambda s: print(s, file=sys.stderr, flush=True)) if progress else None
     runs, refs, _ = st.plan()
     if reference is not None:
         ref = _reference_outcome(reference)
@@ -209,7 +210,7 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                tuple(loads), tuple(resolutions), tuple(MATERIALS), (method,),
                loads={k: tuple(v) for k, v in loads.items()}, reference_resolution=reference_resolution,
                timeout=120.0)
-    log = (lambda s: print(s, flush=True)) if progress else None
+    log = (lambda s: print(s, file=sys.stderr, flush=True)) if progress else None
     t0 = time.perf_counter()
     runs, refs, _ = st.plan()
     outs = _run_all(refs + runs, scheduler, workers, log)
@@ -257,8 +258,8 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
         if log:
             log(f"wrote fidelity.csv, fidelity_runs.csv, fidelity.md, fidelity.json"
                 f"{', fidelity.png' if figures else ''} to {out}")
-    if log:
-        log(fidelity_markdown(choices))
+    if progress:
+        print(fidelity_markdown(choices), flush=True)
     return choices, res
 
 

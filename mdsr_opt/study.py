@@ -23,6 +23,9 @@ Failure reasons (column ``failure``):
     The solver stopped without converging (iteration limit, load stepping stalled on solver failures).
 ``inverted elements``
     The first guess, the predictor or the converged state inverts an element (``det F <= 0``).
+``self-overlap``
+    The solver converged, every element is upright, but the deformed boundary crosses itself: the body
+    passes through itself (there is no contact model), e.g. a crease on the compressed side of a bend.
 ``saddle``
     The solver converged to a stationary point that is not a minimum (e.g. an unbuckled compressed strip).
 ``time-out``
@@ -68,16 +71,16 @@ from .muscles import Muscle
 __all__ = ["COLUMNS", "TIMING_COLUMNS", "FAILURES", "GUESSES", "MATERIALS", "PROBLEMS", "STUDIES",
            "StudyProblem", "Setup", "Study", "RunSpec", "StudyResult", "list_studies", "list_study_problems",
            "get_study", "build_setup", "run_study", "execute_run", "fit_slopes", "pareto_front",
-           "interpolate", "state_error", "add_cli"]
+           "interpolate", "state_error", "boundary_overlaps", "add_cli"]
 
 #: Columns of a study table, in order.
 COLUMNS = ("study", "problem", "kind", "load", "guess", "material", "method", "resolution", "nodes",
            "build_time", "solve_time", "wall_time", "iterations", "steps", "energy", "energy_error", "error",
-           "min_J", "residual", "stable", "success", "failure", "status")
+           "min_J", "residual", "stable", "overlap", "success", "failure", "status")
 #: Columns that measure time and so differ between runs of the same study.
 TIMING_COLUMNS = ("build_time", "solve_time", "wall_time")
 #: Failure reasons, in the order charts list them.
-FAILURES = ("none", "no convergence", "inverted elements", "saddle", "time-out", "error")
+FAILURES = ("none", "no convergence", "inverted elements", "self-overlap", "saddle", "time-out", "error")
 #: First guesses: the default predictor with load steps; no predictor with load steps; one solve from rest;
 #: one solve from a randomly perturbed rest shape.
 GUESSES = ("predictor", "no-predictor", "rest", "noisy")
@@ -466,11 +469,12 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           "30 % contraction, both material models, three meshes: about a minute on two cores",
           _QUICK_PROBLEMS, (30, 100, 300), ("neo-hookean", "linear"), _ALL_BACKENDS + DESIGN_METHODS,
           reference_resolution=1000, timeout=30.0, caps={"uno": 100, "ipopt-lbfgs": 100}),
-    Study("speed", "speed against accuracy and scaling: the quick problems on meshes of about 100 to 4000 "
-          "nodes, every backend and design method (slow ones capped)",
+    Study("speed", "speed against accuracy and scaling: stretch, 60 degree bend (at 90 degrees the 17k-node "
+          "reference creases through itself) and contraction on meshes of about 100 to 4000 nodes against a "
+          "17k-node reference, every backend and design method (slow ones capped)",
           _QUICK_PROBLEMS, (100, 300, 1000, 4000), ("neo-hookean", "linear"), _ALL_BACKENDS + DESIGN_METHODS,
-          reference_resolution=16000, timeout=120.0,
-          caps={"uno": 100, "ipopt-lbfgs": 300, "derivative-free": 1000, "nested": 1000, "flattened": 1000}),
+          loads={"strip-bend": (60.0,)}, reference_resolution=16000, timeout=120.0,
+          caps={"uno": 100, "ipopt-lbfgs": 300, "derivative-free": 1200, "nested": 1200, "flattened": 1200}),
     Study("stability", "where methods fail: drag size (stretch up to three widths, bends past 90 degrees), "
           "compression past buckling, contraction past 50 %, and poor first guesses",
           ("strip-stretch", "strip-bend", "strip-compress", "strip-contract"), (300,), ("neo-hookean",),
@@ -606,12 +610,43 @@ def _is_minimum(setup: Setup, material, res) -> bool:
     return _positive_definite(H / (material.E * material.thickness))
 
 
-def _classify(success: bool, status: str, min_J: float, stable: bool, wall: float, timeout: float) -> str:
+def boundary_overlaps(mesh: Mesh, x: np.ndarray) -> bool:
+    """Does the boundary of ``mesh`` in configuration ``x`` cross itself (the body overlapping itself)?
+
+    Every pair of boundary edges that share no node is tested for a proper crossing.
+
+    Example
+    -------
+    >>> m = Mesh.rectangle(4.0, 1.0, 8, 2)
+    >>> boundary_overlaps(m, m.points), boundary_overlaps(m, _arc(m.points, 2 * np.pi * 1.1))
+    (False, True)
+    """
+    x = np.asarray(x, dtype=float)
+    E = np.vstack([np.column_stack([lp, np.roll(lp, -1)]) for lp in mesh.boundary_loops])
+    a, b = x[E[:, 0]], x[E[:, 1]]
+
+    def orient(p, q, r):
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+    for i0 in range(0, len(E), 512):
+        sl = slice(i0, i0 + 512)
+        A0, A1 = a[sl, None, :], b[sl, None, :]
+        B0, B1 = a[None, :, :], b[None, :, :]
+        cross = (orient(B0, B1, A0) * orient(B0, B1, A1) < 0) & (orient(A0, A1, B0) * orient(A0, A1, B1) < 0)
+        shared = (E[sl, None, 0] == E[None, :, 0]) | (E[sl, None, 0] == E[None, :, 1]) | \
+            (E[sl, None, 1] == E[None, :, 0]) | (E[sl, None, 1] == E[None, :, 1])
+        if np.any(cross & ~shared):
+            return True
+    return False
+
+
+def _classify(success: bool, status: str, min_J: float, stable: bool, overlap: bool, wall: float,
+              timeout: float) -> str:
     s = status.lower()
     if wall > timeout or "walltime" in s or "cputime" in s or "time limit" in s:
         return "time-out"
     if success:
-        return "none" if stable else "saddle"
+        return "self-overlap" if overlap else ("none" if stable else "saddle")
     if "invert" in s or min_J <= 0:
         return "inverted elements"
     return "no convergence"
@@ -668,7 +703,7 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
     x = None
     fields = dict(build_time=mesh_time, solve_time=0.0, iterations=0, steps=0, energy=math.nan,
                   energy_error=math.nan, error=math.nan, min_J=math.nan, residual=math.nan, stable=False,
-                  success=False, failure="error", status="")
+                  overlap=False, success=False, failure="error", status="")
     tol = 1e-10 if spec.role == "reference" else 1e-8
     raised = False
     deadline = _Deadline(spec.timeout)
@@ -681,7 +716,8 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
                 fields.update(build_time=mesh_time + res.build_time, solve_time=res.solve_time,
                               iterations=int(res.iterations), steps=len(res.steps), energy=float(res.energy),
                               min_J=float(res.min_J), residual=float(res.residual), stable=stable,
-                              success=bool(res.success), status=str(res.status))
+                              overlap=boundary_overlaps(mesh, res.x), success=bool(res.success),
+                              status=str(res.status))
             else:
                 fields.update(_run_design(setup, material, spec, mesh_time))
                 x = fields.pop("x")
@@ -699,7 +735,7 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
     fields["wall_time"] = wall
     if not raised:
         fields["failure"] = _classify(fields["success"], fields["status"], fields["min_J"], fields["stable"],
-                                      wall, spec.timeout)
+                                      fields["overlap"], wall, spec.timeout)
         fields["success"] = fields["failure"] == "none"
     row.update(fields)
     return RunOutcome(index, row, None if x is None else np.asarray(x, dtype=float), mesh.points,
@@ -728,7 +764,8 @@ def _run_design(setup: Setup, material, spec: RunSpec, mesh_time: float) -> dict
                 energy_error=abs(energy - e_ref) / abs(e_ref) if e_ref else abs(energy),
                 error=float(np.abs(res.contractions - setup.contractions).max()),
                 min_J=float(setup.mesh.jacobians(res.x).min()), residual=float(v.residual) if v else math.nan,
-                stable=bool(v.positive_definite) if v else False, success=bool(res.success),
+                stable=bool(v.positive_definite) if v else False,
+                overlap=boundary_overlaps(setup.mesh, res.x), success=bool(res.success),
                 status=str(res.status) + ("" if v is None or v.passed else f"; {v.message}"), x=res.x)
 
 
@@ -851,8 +888,9 @@ def _run_all(specs: list[RunSpec], scheduler, workers, log) -> list[RunOutcome]:
             out[o.index] = o
             report(k, o)
     finally:
-        if cluster is not None:
+        if client is not scheduler:  # ours (not a Client the caller passed): close it
             client.close()
+        if cluster is not None:
             cluster.close()
     return out  # type: ignore[return-value]
 
@@ -1017,8 +1055,8 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     refmap = {(o.row["problem"], o.row["load"]): o for o in ref_out}
     for o in ref_out:
         if not o.row["success"] and log:
-            log(f"warning: reference {o.row['problem']} load {o.row['load']:g} failed ({o.row['status']}); "
-                "its runs have no accuracy")
+            log(f"warning: reference {o.row['problem']} load {o.row['load']:g} failed ({o.row['failure']}: "
+                f"{o.row['status']}); its runs have no accuracy (error and energy_error are nan)")
     _fill_accuracy(run_out, refmap)
     for o in ref_out:
         if o.row["success"]:

@@ -17,8 +17,8 @@ from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external, solve_internal
 from mdsr_opt.cli import main
 from mdsr_opt.fidelity import choose_fidelity, pick_fidelity
 from mdsr_opt.io import read_json
-from mdsr_opt.study import (COLUMNS, FAILURES, TIMING_COLUMNS, Study, build_setup, fit_slopes, interpolate,
-                            list_study_problems, pareto_front, run_study, state_error)
+from mdsr_opt.study import (COLUMNS, FAILURES, TIMING_COLUMNS, Study, _classify, boundary_overlaps, build_setup,
+                            fit_slopes, interpolate, list_study_problems, pareto_front, run_study, state_error)
 
 SMALL = dict(resolutions=[30], reference_resolution=100, progress=False)
 
@@ -180,6 +180,19 @@ def test_saddle_is_detected_past_buckling():
         assert by[(0.3, m)]["residual"] < 1e-5
 
 
+def test_self_overlap_is_a_failure():
+    mesh = Mesh.rectangle(4.0, 0.25, 32, 2)
+    assert not boundary_overlaps(mesh, _arc(mesh.points, np.pi))          # half a circle: a clean U
+    assert boundary_overlaps(mesh, _arc(mesh.points, 2.2 * np.pi))        # past a full turn: the ends cross
+    assert mesh.jacobians(_arc(mesh.points, 2.2 * np.pi)).min() > 0      # ... with every triangle upright
+    assert _classify(True, "Solve_Succeeded", 0.5, True, True, 1.0, 10.0) == "self-overlap"
+    assert _classify(True, "Solve_Succeeded", 0.5, False, False, 1.0, 10.0) == "saddle"
+    assert _classify(True, "Solve_Succeeded", 0.5, True, False, 11.0, 10.0) == "time-out"
+    assert _classify(False, "load stepping stalled (predictor inverted an element)", 0.5, False, False, 1.0,
+                     10.0) == "inverted elements"
+    assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "no convergence"
+
+
 def test_poor_guess_failure_is_inverted_elements():
     st = Study("t", "guess", ("strip-bend",), (30,), methods=("ipopt", "newton"), guesses=("predictor", "rest"),
                reference_resolution=30)
@@ -302,9 +315,15 @@ def test_cli_study(tmp_path, capsys):
     assert main(["study", "nope", "--out", str(tmp_path)]) == 2
     assert "unknown study 'nope'; valid: quick" in capsys.readouterr().err
     out = tmp_path / "q"
-    rc = main(["study", "quick", "--out", str(out), "--resolutions", "30", "--methods", "ipopt,newton",
-               "--problems", "strip-stretch", "--reference-resolution", "100", "--quiet"])
+    from distributed import LocalCluster
+
+    # --scheduler ADDRESS: a running cluster (here a thread-based one in this process, quick to start)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        rc = main(["study", "quick", "--out", str(out), "--resolutions", "30", "--methods", "ipopt,newton",
+                   "--problems", "strip-stretch", "--reference-resolution", "100", "--quiet",
+                   "--scheduler", cluster.scheduler_address])
     assert rc == 0
+    assert read_json(out / "quick.json")["scheduler"].startswith(("tcp://", "inproc://"))
     with open(out / "quick.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 2 * 2  # 2 methods x 2 materials
