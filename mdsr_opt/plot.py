@@ -467,7 +467,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
 
 # --- solver comparison studies (issue 7) ---
 _STUDY_FAILURE_COLORS = {"none": "#2ca02c", "no convergence": "#ff7f0e", "inverted elements": "#d62728",
-                         "saddle": "#9467bd", "time-out": "#7f7f7f", "error": "#111111"}
+                         "self-overlap": "#e377c2", "saddle": "#9467bd", "time-out": "#7f7f7f",
+                         "error": "#111111"}
 
 
 def _study_colors(methods):
@@ -677,14 +678,16 @@ def plot_fidelity(rows, choices, title=None, max_cols=3):
             bad = [(a, b) for a, b, r in zip(n, e, rs) if not r["success"]]
             if bad:
                 ax.plot(*zip(*bad), "x", color="k", ms=7, label=None)
+        picked = {}
         for c in choices:
             if c["problem"] == p and c["load"] == load:
                 ax.axhline(c["tol"], ls="--", color="grey", lw=0.8)
                 if c["met"]:
-                    ax.plot(c["nodes"], max(c["error"], 1e-12), "o", mfc="none", mec="k", ms=11, mew=1.3)
-                    ax.annotate(f"tol {c['tol']:g}: {c['material']}, {c['nodes']} nodes",
-                                (c["nodes"], max(c["error"], 1e-12)), fontsize=6, xytext=(4, 4),
-                                textcoords="offset points")
+                    picked.setdefault((c["nodes"], c["material"], max(c["error"], 1e-12)), []).append(c["tol"])
+        for (nodes, mat, err), tols in picked.items():
+            ax.plot(nodes, err, "o", mfc="none", mec="k", ms=11, mew=1.3)
+            ax.annotate(f"tol {', '.join(f'{t:g}' for t in tols)}: {mat}, {nodes} nodes", (nodes, err),
+                        fontsize=6, xytext=(4, 4), textcoords="offset points")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("mesh nodes")
