@@ -943,9 +943,12 @@ class StudyResult:
         lines = [f"# Study {self.study.name}", "", self.study.description, "",
                  "| method | runs | success | median time s | median error | time ~ nodes^slope | failures |",
                  "| --- | ---: | ---: | ---: | ---: | ---: | --- |"]
+        def num(v, f):
+            return "-" if not math.isfinite(v) else format(v, f)
+
         for s in self.summary():
-            lines.append(f"| {s['method']} | {s['runs']} | {s['success']} | {s['median_time']:.3g} | "
-                         f"{s['median_error']:.2g} | {s['slope']:.2f} | {s['failures']} |")
+            lines.append(f"| {s['method']} | {s['runs']} | {s['success']} | {num(s['median_time'], '.3g')} | "
+                         f"{num(s['median_error'], '.2g')} | {num(s['slope'], '.2f')} | {s['failures']} |")
         return "\n".join(lines) + "\n"
 
     def write(self, out: str | os.PathLike, figures: bool = True) -> dict:
