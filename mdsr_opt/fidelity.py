@@ -265,8 +265,8 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
 
 def fidelity_markdown(choices: Sequence[FidelityChoice]) -> str:
     """A Markdown table of choices."""
-    lines = ["| scene | load | tol | choice | nodes | error | time s | finest model time s | time saving | "
-             "node saving |", "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    lines = [("| scene | load | tol | choice | nodes | error | time s | finest model time s | time saving | "
+              "node saving |"), "| --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for c in choices:
         choice = c.material if c.met else f"none met (finest: {c.material})"
         lines.append(f"| {c.problem} | {c.load:g} | {c.tol:g} | {choice} | {c.nodes} | {c.error:.2g} | "

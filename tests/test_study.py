@@ -18,7 +18,8 @@ from mdsr_opt.cli import main
 from mdsr_opt.fidelity import choose_fidelity, pick_fidelity
 from mdsr_opt.io import read_json
 from mdsr_opt.study import (COLUMNS, FAILURES, TIMING_COLUMNS, Study, _classify, boundary_overlaps, build_setup,
-                            fit_slopes, interpolate, list_study_problems, pareto_front, run_study, state_error)
+                            fit_slopes, get_study, interpolate, list_study_problems, pareto_front, run_study,
+                            state_error)
 
 SMALL = dict(resolutions=[30], reference_resolution=100, progress=False)
 
@@ -93,8 +94,8 @@ def test_initial_guess_internal_and_bad_input():
 
 # ------------------------------------------------------------------------------------ the quick study
 def test_quick_study_table_is_complete(quick):
-    res, out = quick
-    runs, refs, capped = res.study.plan()
+    res, _ = quick
+    runs, _refs, capped = res.study.plan()
     assert len(res.rows) == len(runs) and not capped
     for r in res.rows:
         assert list(r) == list(COLUMNS) or set(r) == set(COLUMNS)
@@ -306,6 +307,13 @@ def test_bad_names_list_the_valid_ones():
         run_study("quick", resolutions=[2])
     with pytest.raises(ValueError, match="loads given for 'strip-bend', which is not among its problems"):
         Study("t", "", ("strip-stretch",), (30,), loads={"strip-bend": (1.0,)})
+    with pytest.raises(ValueError, match="strip-bend needs a positive angle in degrees, got -5.0"):
+        Study("t", "", ("strip-bend",), (30,), loads={"strip-bend": (90.0, -5.0)})
+    with pytest.raises(ValueError, match="timeout must be a positive number of seconds"):
+        run_study("quick", timeout=0)
+    # narrowing a study's problems keeps the loads of those that remain
+    st = get_study("stability").with_options(problems=["strip-bend"])
+    assert st.loads == {"strip-bend": get_study("stability").loads["strip-bend"]}
 
 
 def test_cli_study(tmp_path, capsys):
