@@ -41,7 +41,7 @@ The flattened NLP divides the objective by ``sum(e) * h**2`` (mean squared dista
 lengths ``h``) and the stationarity constraints by ``E * t * h`` (strain-like). Normalising the objective
 by the body's size instead (``scaling="size"``) leaves the objective's Hessian orders of magnitude below
 the constraint Jacobian on a 1k-node mesh, and IPOPT then regularises the Hessian and needs many more
-iterations (see ``benchmarks/bench_design.py``).
+iterations (see ``tests/benchmarks/bench_design.py``).
 
 Example
 -------

@@ -290,7 +290,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
 
 
 def plot_design_benchmark(rows, traces=None, ax=None):
-    """Difference against time for the design methods (``benchmarks/bench_design.py``).
+    """Difference against time for the design methods (``tests/benchmarks/bench_design.py``).
 
     ``rows``: dicts with ``method``, ``mesh``, ``muscles``, ``solve_time``, ``difference`` (one marker per run:
     colour = method, marker = mesh size, size = muscle count). ``traces``: optional

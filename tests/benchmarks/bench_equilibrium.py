@@ -5,8 +5,8 @@ model + solver build time, first solve time, iterations, energy; then the time o
 the built model with new drags (best of ``--repeat``). It prints a table, writes ``equilibrium.csv`` and
 the chart ``equilibrium.png`` into ``--out``.
 
-    python benchmarks/bench_equilibrium.py --out bench_out
-    python benchmarks/bench_equilibrium.py --sizes 200,1000 --backends ipopt,newton --scene bend
+    python tests/benchmarks/bench_equilibrium.py --out bench_out
+    python tests/benchmarks/bench_equilibrium.py --sizes 200,1000 --backends ipopt,newton --scene bend
 
 Slow backends are capped by node count (``--caps``) so the default run finishes in a few minutes.
 """

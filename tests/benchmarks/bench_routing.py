@@ -15,7 +15,7 @@ was needed).
 
 Usage::
 
-    python benchmarks/bench_routing.py --out bench_out
+    python tests/benchmarks/bench_routing.py --out bench_out
 
 prints a table and writes ``routing_timing.png`` (time against nodes, with the budget) and
 ``routing_examples.png`` (contraction graph and muscles of the 3k-node cases) to ``--out``.

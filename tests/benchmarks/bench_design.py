@@ -7,11 +7,11 @@ against time) to ``--out``. Also measures the flattened NLP's sensitivity to sca
 (exact vs Gauss-Newton) and derivatives (assembled term by term vs CasADi's symbolic ones) on the 1k-node,
 4-muscle case.
 
-Run:  python benchmarks/bench_design.py --out bench_out
-      python benchmarks/bench_design.py --quick          # 300 nodes only, 1-4 muscles
-      python benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --variants
+Run:  python tests/benchmarks/bench_design.py --out bench_out
+      python tests/benchmarks/bench_design.py --quick          # 300 nodes only, 1-4 muscles
+      python tests/benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --variants
                                                           # flattened only: build and solve, and the variants
-      python benchmarks/bench_design.py --quick --derivatives casadi   # the flattened NLP's SX path
+      python tests/benchmarks/bench_design.py --quick --derivatives casadi   # the flattened NLP's SX path
 """
 
 from __future__ import annotations
