@@ -1099,14 +1099,16 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
 def fit_slopes(rows: Sequence[dict], time_of: Callable[[dict], float] | None = None) -> dict:
     """Least-squares fit ``log10(time) = a + b log10(nodes)`` per method over its successful runs.
 
-    Returns ``{method: (slope b, intercept a, number of runs)}`` for methods that succeeded at two or more
-    node counts. ``time_of`` defaults to build plus solve time.
+    Returns ``{method: (slope b, intercept a, number of runs)}`` for methods whose successful runs span node
+    counts at least a factor 2 apart (closer ones give no meaningful slope). ``time_of`` defaults to build
+    plus solve time.
     """
     time_of = time_of or (lambda r: r["build_time"] + r["solve_time"])
     out = {}
     for m in dict.fromkeys(r["method"] for r in rows):
         pts = [(r["nodes"], time_of(r)) for r in rows if r["method"] == m and r["success"] and time_of(r) > 0]
-        if len({p[0] for p in pts}) < 2:
+        nodes = {p[0] for p in pts}
+        if not nodes or max(nodes) < 2 * min(nodes):
             continue
         x, y = np.log10(np.array(pts, dtype=float)).T
         b, a = np.polyfit(x, y, 1)

@@ -274,6 +274,8 @@ def test_pareto_front_and_slopes():
     rows.append({"method": "m", "nodes": 5000, "build_time": 0.0, "solve_time": 99.0, "success": False})
     slope, intercept, count = fit_slopes(rows)["m"]
     assert abs(slope - 1.5) < 1e-9 and abs(intercept - np.log10(3e-4)) < 1e-9 and count == 4
+    close = [dict(r, nodes=n) for r, n in zip(rows, (136, 144, 150, 140))]      # no factor 2: no slope
+    assert fit_slopes(close) == {}
 
 
 def test_problem_library_scenes_are_study_problems():
