@@ -237,6 +237,10 @@ def _result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, 
     ok = bool(success and mj > 0 and residual <= tol_residual)
     if success and not ok:
         status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
+    if ok and mesh.boundary_crosses(xflat.reshape(-1, 2)):
+        # every element upright, yet the body folds through itself: contact is not modelled
+        ok = False
+        status = f"{status}; rejected: the boundary crosses itself (self-contact is not modelled)"
     return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=model.energy(xflat, p),
                              elastic_energy=model.energy(xflat, p_elastic), success=ok, status=status,
                              iterations=iters, residual=residual, min_J=mj, steps=steps,

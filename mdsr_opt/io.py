@@ -44,6 +44,13 @@ class MeshData:
     cell_data: dict = field(default_factory=dict)
 
 
+def _public_mode(path) -> None:
+    """Give a temporary file (created 0600 by mkstemp) the permissions a normal file would get."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
 class atomic_path:
     """Context manager yielding a temporary path beside ``path``; renamed onto ``path`` on success only."""
 
@@ -60,6 +67,7 @@ class atomic_path:
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
+            _public_mode(self.tmp)
             os.replace(self.tmp, self.path)
         elif os.path.exists(self.tmp):
             os.remove(self.tmp)

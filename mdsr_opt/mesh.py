@@ -293,6 +293,30 @@ class Mesh:
         """``J = det F`` of each triangle; ``J <= 0`` marks an inverted element."""
         return np.linalg.det(self.deformation_gradients(x))
 
+    def boundary_crosses(self, x: ArrayLike) -> bool:
+        """Does the boundary cross itself in configuration ``x`` (the body overlapping itself)?
+
+        Elements can all stay upright (``J > 0``) while the body folds through itself; contact is not
+        modelled, so such a state is not physical. Every pair of boundary edges sharing no node is tested.
+        """
+        x = self._check_state(x)
+        E = np.vstack([np.column_stack([lp, np.roll(lp, -1)]) for lp in self.boundary_loops])
+        a, b = x[E[:, 0]], x[E[:, 1]]
+
+        def orient(p, q, r):
+            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+
+        for i0 in range(0, len(E), 512):
+            sl = slice(i0, i0 + 512)
+            A0, A1 = a[sl, None, :], b[sl, None, :]
+            B0, B1 = a[None, :, :], b[None, :, :]
+            cross = (orient(B0, B1, A0) * orient(B0, B1, A1) < 0) & (orient(A0, A1, B0) * orient(A0, A1, B1) < 0)
+            shared = (E[sl, None, 0] == E[None, :, 0]) | (E[sl, None, 0] == E[None, :, 1]) | \
+                (E[sl, None, 1] == E[None, :, 0]) | (E[sl, None, 1] == E[None, :, 1])
+            if np.any(cross & ~shared):
+                return True
+        return False
+
     def _check_state(self, x: ArrayLike, name: str = "x") -> np.ndarray:
         return as_float_array(x, name, shape=(self.n_nodes, 2))
 

@@ -8,6 +8,8 @@ import tempfile
 
 import numpy as np
 
+from .io import _public_mode
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -80,6 +82,7 @@ def save_figure(fig, path) -> str:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=130, bbox_inches="tight")
+        _public_mode(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -457,6 +460,7 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     try:
         anim = FuncAnimation(fig, draw, frames=len(states), blit=False)
         anim.save(tmp, writer=PillowWriter(fps=fps), dpi=dpi)
+        _public_mode(tmp)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

@@ -632,23 +632,7 @@ def boundary_overlaps(mesh: Mesh, x: np.ndarray) -> bool:
     >>> boundary_overlaps(m, m.points), boundary_overlaps(m, _arc(m.points, 2 * np.pi * 1.1))
     (False, True)
     """
-    x = np.asarray(x, dtype=float)
-    E = np.vstack([np.column_stack([lp, np.roll(lp, -1)]) for lp in mesh.boundary_loops])
-    a, b = x[E[:, 0]], x[E[:, 1]]
-
-    def orient(p, q, r):
-        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-
-    for i0 in range(0, len(E), 512):
-        sl = slice(i0, i0 + 512)
-        A0, A1 = a[sl, None, :], b[sl, None, :]
-        B0, B1 = a[None, :, :], b[None, :, :]
-        cross = (orient(B0, B1, A0) * orient(B0, B1, A1) < 0) & (orient(A0, A1, B0) * orient(A0, A1, B1) < 0)
-        shared = (E[sl, None, 0] == E[None, :, 0]) | (E[sl, None, 0] == E[None, :, 1]) | \
-            (E[sl, None, 1] == E[None, :, 0]) | (E[sl, None, 1] == E[None, :, 1])
-        if np.any(cross & ~shared):
-            return True
-    return False
+    return mesh.boundary_crosses(x)
 
 
 def _classify(success: bool, status: str, min_J: float, stable: bool, overlap: bool, wall: float,

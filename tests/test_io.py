@@ -57,3 +57,15 @@ def test_json_round_trip(tmp_path):
     data = {"x": np.arange(3.0), "n": np.int64(4), "ok": True}
     write_json(tmp_path / "r.json", data)
     assert read_json(tmp_path / "r.json") == {"x": [0.0, 1.0, 2.0], "n": 4, "ok": True}
+
+
+def test_written_files_get_normal_permissions(tmp_path, body):
+    """Atomic writes go through mkstemp (mode 0600); the final file must get the usual umask mode."""
+    import stat
+
+    umask = os.umask(0)
+    os.umask(umask)
+    want = 0o666 & ~umask
+    mesh, x = body
+    for path in (write_json(tmp_path / "r.json", {"a": 1}), write_mesh(tmp_path / "m.vtu", mesh, x=x)):
+        assert stat.S_IMODE(os.stat(path).st_mode) == want

@@ -126,3 +126,15 @@ def test_derived_arrays_are_read_only():
                 m.neighbors[0], m.angles):
         with pytest.raises(ValueError, match="read-only"):
             arr[...] = 0
+
+
+def test_boundary_crossing_is_detected():
+    from conftest import arc_map
+
+    m = Mesh.rectangle(4.0, 0.2, 40, 1)  # thin, so a wrap of more than a full turn keeps J > 0
+    assert not m.boundary_crosses(m.points)
+    assert not m.boundary_crosses(arc_map(m.points, angle=np.pi))
+    # wrapped past a full turn: elements stay upright but the body passes through itself
+    wrapped = arc_map(m.points, angle=2 * np.pi * 1.1)
+    assert m.jacobians(wrapped).min() > 0
+    assert m.boundary_crosses(wrapped)
