@@ -4,11 +4,10 @@ returns the matplotlib ``Figure``; ``save_figure`` writes a PNG atomically."""
 from __future__ import annotations
 
 import os
-import tempfile
 
 import numpy as np
 
-from .io import _public_mode
+from .io import atomic_path
 
 import matplotlib
 
@@ -75,18 +74,10 @@ def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
 def save_figure(fig, path) -> str:
     """Write ``fig`` to ``path`` (PNG by extension) via a temporary file, so no partial file is left."""
     path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    suffix = os.path.splitext(path)[1] or ".png"
-    fd, tmp = tempfile.mkstemp(suffix=suffix, dir=d)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=130, bbox_inches="tight")
-        _public_mode(tmp)
-        os.replace(tmp, path)
+        with atomic_path(path, suffix=os.path.splitext(path)[1] or ".png") as tmp:
+            fig.savefig(tmp, dpi=130, bbox_inches="tight")
     finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
         plt.close(fig)
     return path
 
@@ -453,18 +444,11 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         return []
 
     path = os.fspath(path)
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".gif", dir=d)
-    os.close(fd)
     try:
-        anim = FuncAnimation(fig, draw, frames=len(states), blit=False)
-        anim.save(tmp, writer=PillowWriter(fps=fps), dpi=dpi)
-        _public_mode(tmp)
-        os.replace(tmp, path)
+        with atomic_path(path, suffix=".gif") as tmp:
+            FuncAnimation(fig, draw, frames=len(states), blit=False).save(
+                tmp, writer=PillowWriter(fps=fps), dpi=dpi)
     finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
         plt.close(fig)
     return path
 
