@@ -1,8 +1,14 @@
-"""The ``mdsr`` command. Subcommands are registered by the modules that own them."""
+"""The ``mdsr`` command. Subcommands are registered by the modules that own them.
+
+Global options (before the subcommand): ``--version``; ``-v`` (more detail: ``-vv`` for debug output of the
+library's loggers) and ``-q`` (warnings and errors only, no progress bar). Library modules report through
+``logging.getLogger(__name__)``; this module is the only place that configures logging.
+"""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
 
@@ -16,16 +22,62 @@ def _register_all(sub) -> None:
     from . import study; study.add_cli(sub)  # noqa: E702
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The ``mdsr`` argument parser with every subcommand registered (also used by the tests)."""
+    from . import __version__
+
     parser = argparse.ArgumentParser(prog="mdsr", description="Muscle-driven soft robot design toolkit")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
+                        help="print the package version and exit")
+    parser.add_argument("-v", "--verbose", action="count", default=0, dest="log_verbose",
+                        help="more detail (-vv: debug messages of the library)")
+    parser.add_argument("-q", "--quiet", action="store_true", dest="log_quiet",
+                        help="only warnings, errors and results: no progress lines or bar")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _register_all(sub)
+    return parser
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
+    """Send the library's log records (logger ``mdsr_opt``) to stderr at the level the flags ask for.
+
+    Default INFO (progress messages), ``quiet`` WARNING, one ``-v`` keeps INFO with logger names, two or more
+    DEBUG. Returns the level. Only the command line calls this; a script configures logging itself.
+    """
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose >= 2 else logging.INFO)
+    logger = logging.getLogger("mdsr_opt")
+    for h in list(logger.handlers):
+        if getattr(h, "_mdsr_cli", False):
+            logger.removeHandler(h)
+    handler = logging.StreamHandler(sys.stderr)
+    handler._mdsr_cli = True  # type: ignore[attr-defined]
+    fmt = "%(levelname)s %(name)s: %(message)s" if verbose else "%(message)s"
+    handler.setFormatter(logging.Formatter(fmt))
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    logger.propagate = False
+    return level
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
+    configure_logging(args.log_verbose, args.log_quiet)
+    if args.log_quiet and hasattr(args, "quiet"):
+        args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
+    import matplotlib
+
+    matplotlib.use("Agg")  # the command line only writes files; importing mdsr_opt.plot leaves the backend alone
     try:
         return int(args.func(args) or 0)
     except (ValueError, TypeError, FileNotFoundError) as exc:
         print(f"mdsr {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `mdsr list | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

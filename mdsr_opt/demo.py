@@ -10,10 +10,13 @@ Run it as ``mdsr demo --out DIR``. It takes a few seconds and writes into ``DIR`
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 
 import numpy as np
+
+from .progress import progress_for_cli
 
 __all__ = ["finger_outline", "run_demo", "add_cli"]
 
@@ -26,7 +29,9 @@ def finger_outline(length: float = 4.0, width: float = 1.0, n_round: int = 12) -
     return np.vstack([[0.0, 0.0], tip, [0.0, width]])
 
 
-def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=print) -> dict:
+def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=None) -> dict:
+    """Run the demo into ``out``; ``log`` takes the progress messages (default: this module's logger)."""
+    log = log or logging.getLogger(__name__).info
     from . import io, plot
     from .equilibrium import solve_external, solve_internal
     from .material import NeoHookean
@@ -57,7 +62,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=pri
     fig = plot.plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label="energy density",
                          nodes=np.append(base, tip), title="external driving: anchored base, dragged tip")
     plot.plot_mesh(mesh, None, ax=fig.axes[0], color="none", edgecolor="#bbbbbb", alpha=0.6)
-    plot.save_figure(fig, os.path.join(out, "external.png"))
+    plot.save_figure(fig, os.path.join(out, "external.png"), close=True)
     io.write_mesh(os.path.join(out, "external.vtu"), mesh, x=ext.x, material=mat)
 
     log(f"[3/4] internal driving: a muscle along the lower side contracts by {contraction:.0%}")
@@ -71,7 +76,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=pri
         fig = plot.plot_mesh(mesh, res.x, values=io_energy(mesh, mat, res.x), colorbar_label="energy density",
                              title=f"internal driving ({model}), contraction {contraction:.0%}")
         plot.plot_muscles(res.x, [muscle], ax=fig.axes[0])
-        plot.save_figure(fig, os.path.join(out, f"internal_{model}.png"))
+        plot.save_figure(fig, os.path.join(out, f"internal_{model}.png"), close=True)
         io.write_mesh(os.path.join(out, f"internal_{model}.vtu"), mesh, x=res.x, material=mat)
 
     log("[4/4] writing summary.json")
@@ -93,4 +98,5 @@ def add_cli(sub) -> None:
     p.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
     p.add_argument("--max-area", type=float, default=0.01, help="largest triangle area (default 0.01)")
     p.add_argument("--contraction", type=float, default=0.3, help="muscle contraction in [0, 1) (default 0.3)")
-    p.set_defaults(func=lambda a: 0 if run_demo(a.out, a.max_area, a.contraction)["success"] else 1)
+    p.set_defaults(func=lambda a: 0 if run_demo(a.out, a.max_area, a.contraction,
+                                                log=progress_for_cli(a, 0, "mdsr demo", bar=False))["success"] else 1)

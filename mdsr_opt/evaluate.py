@@ -1406,7 +1406,10 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
             with tempfile.TemporaryDirectory() as scratch:
                 for k, ((image, mesh, x, comp, synth), row) in enumerate(zip(overlays, results)):
                     fig = plot.plot_overlay(image, mesh, x, comp, synthetic=synth, title=row.case)
-                    png = Path(plot.save_figure(fig, Path(scratch, f"{k}.png")))  # closes the figure
+                    try:
+                        png = Path(plot.save_figure(fig, Path(scratch, f"{k}.png")))
+                    finally:
+                        plot.close_figure(fig)
                     writers.insert(k, (out / f"{row.case}_overlay.png", _bytes_writer(png.read_bytes())))
         _write_together(writers)
     return results
@@ -1556,12 +1559,20 @@ def add_cli(sub) -> None:
     p.add_argument("--name", default="evaluation", help="table file stem (default: evaluation)")
     p.add_argument("--color", type=_parse_color, default=None,
                    help="body colour R,G,B or #rrggbb (switches to colour segmentation)")
-    p.add_argument("--method", choices=("auto", "otsu", "adaptive", "color"), default="auto")
-    p.add_argument("--body", choices=("auto", "dark", "light"), default="auto")
+    p.add_argument("--method", choices=("auto", "otsu", "adaptive", "color"), default="auto",
+                   help="segmentation: Otsu on the flattened grey image, adaptive threshold, or colour "
+                   "distance (default auto: colour when --color is given, else Otsu)")
+    p.add_argument("--body", choices=("auto", "dark", "light"), default="auto",
+                   help="is the body darker or lighter than the plate (default auto: the plate is what covers most of "
+                   "the image border)")
     p.add_argument("--roi", type=_parse_ints(4, "roi"), default=None, help="X,Y,W,H search rectangle")
     p.add_argument("--largest", action="store_true", help="keep the largest of several blobs")
-    p.add_argument("--registration", choices=("similarity", "none"), default="similarity")
-    p.add_argument("--scaling", choices=("uniform", "stretch"), default="uniform")
+    p.add_argument("--registration", choices=("similarity", "none"), default="similarity",
+                   help="fit rotation, scale and shift of the simulated outline (default), or none: states "
+                   "already in pixels")
+    p.add_argument("--scaling", choices=("uniform", "stretch"), default="uniform",
+                   help="one scale matching the areas (default), or per-axis scales matching the bounding "
+                   "rectangles")
     p.add_argument("--no-flip", action="store_true", help="states are already in image orientation (y down)")
     p.add_argument("--figures", action="store_true", help="also write <case>_overlay.png")
     p.set_defaults(func=_cmd_evaluate)
@@ -1569,7 +1580,7 @@ def add_cli(sub) -> None:
     q = sub.add_parser("photograph", help="render states as SYNTHETIC photographs (synthetic camera)")
     q.add_argument("states", help="a state mesh file or a folder of them")
     q.add_argument("--out", required=True, help="output folder for <state>.png and <state>.json")
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--seed", type=int, default=0, help="random seed of noise and placement (default 0)")
     q.add_argument("--resolution", type=_parse_ints(2, "resolution", "x"), default=(500, 500),
                    help="WIDTHxHEIGHT (default 500x500)")
     q.add_argument("--tilt", type=float, default=1.0, help="camera tilt, degrees (default 1)")

@@ -23,18 +23,20 @@ Example
 
 from __future__ import annotations
 
+import logging
 import math
 import os
-import sys
 import time
 from dataclasses import asdict, dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from .io import atomic_path, write_json
 from .study import (MATERIALS, RunOutcome, Study, StudyResult, _environment, _fill_accuracy, _run_all,
                     get_problem)
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ["FidelityChoice", "choose_fidelity", "pick_fidelity", "run_fidelity_study", "FIDELITY_CASES",
            "DEFAULT_TOLERANCES"]
@@ -173,7 +175,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
         raise ValueError(f"tolerance must be a positive number, got {tol}")
     st = Study(f"fidelity-{problem}", f"fidelity of {problem}", (problem,), tuple(resolutions), tuple(materials),
                (method,), loads={problem: (load,)}, reference_resolution=reference_resolution, timeout=timeout)
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if progress else None
+    log = _LOG.info if progress else None
     runs, refs, _ = st.plan()
     if reference is not None:
         ref = _reference_outcome(reference)
@@ -193,13 +195,15 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                        cases: Sequence[tuple[str, float]] = FIDELITY_CASES,
                        resolutions: Sequence[int] = (30, 100, 300, 1000), reference_resolution: int = 4000,
                        method: str = "ipopt", scheduler: Any = None, workers: int | None = None,
-                       progress: bool = True, figures: bool = True) -> tuple[list[FidelityChoice], StudyResult]:
+                       progress: bool = True, figures: bool = True,
+                       log: Callable[[str], Any] | None = None) -> tuple[list[FidelityChoice], StudyResult]:
     """The fidelity study: :func:`choose_fidelity` for each scene in ``cases`` and each tolerance.
 
     All candidates of all scenes run as one sweep (Neo-Hookean and linear, every resolution), measured against
     a Neo-Hookean reference at ``reference_resolution`` nodes; then each (scene, tolerance) is picked.
     With ``out`` it writes ``fidelity.csv`` (one row per choice), ``fidelity_runs.csv`` (every candidate),
-    ``fidelity.json``, ``fidelity.md`` and ``fidelity.png``.
+    ``fidelity.json``, ``fidelity.md`` and ``fidelity.png``. Progress messages go to ``log`` (default: this
+    module's logger) unless ``progress`` is False; ``fidelity_markdown(choices)`` gives the table.
     """
     tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
     loads: dict = {}
@@ -210,7 +214,8 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                tuple(loads), tuple(resolutions), tuple(MATERIALS), (method,),
                loads={k: tuple(v) for k, v in loads.items()}, reference_resolution=reference_resolution,
                timeout=120.0)
-    log = (lambda s: print(s, file=sys.stderr, flush=True)) if progress else None
+    if log is None or not progress:
+        log = _LOG.info if progress else None
     t0 = time.perf_counter()
     runs, refs, _ = st.plan()
     outs = _run_all(refs + runs, scheduler, workers, log)
@@ -254,12 +259,10 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
         if figures:
             from . import plot
 
-            plot.save_figure(plot.plot_fidelity(rows, table), os.path.join(out, "fidelity.png"))
+            plot.save_figure(plot.plot_fidelity(rows, table), os.path.join(out, "fidelity.png"), close=True)
         if log:
             log(f"wrote fidelity.csv, fidelity_runs.csv, fidelity.md, fidelity.json"
                 f"{', fidelity.png' if figures else ''} to {out}")
-    if progress:
-        print(fidelity_markdown(choices), flush=True)
     return choices, res
 
 

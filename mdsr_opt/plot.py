@@ -1,25 +1,43 @@
-"""Figures (matplotlib; the only module that imports it). Every function takes an optional ``ax`` and
-returns the matplotlib ``Figure``; ``save_figure`` writes a PNG atomically."""
+"""Figures (matplotlib; the only module that imports it).
+
+Conventions: every function draws into an ``ax`` (or ``axes`` / ``fig`` for multi-panel figures) that you
+pass, or into a new figure, and returns the matplotlib ``Figure``. Importing this module leaves the
+matplotlib backend alone: scripts and notebooks keep theirs (the ``mdsr`` command picks the non-interactive
+``Agg`` itself). :func:`save_figure` writes a figure atomically and closes it only when asked
+(``close=True``), so a figure you own stays open.
+
+Example
+-------
+>>> import matplotlib.pyplot as plt
+>>> from mdsr_opt import Mesh
+>>> fig, ax = plt.subplots()
+>>> plot_mesh(Mesh.rectangle(2.0, 1.0, 4, 2), ax=ax) is fig
+True
+>>> plt.close(fig)
+"""
 
 from __future__ import annotations
 
 import os
 
+import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
 
 from .io import atomic_path
-
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 
 
 def _axes(ax=None, figsize=(6, 4)):
     if ax is None:
         fig, ax = plt.subplots(figsize=figsize)
     return ax.figure, ax
+
+
+def _panels(fig, nrow, ncol, figsize):
+    """``(fig, axes)`` with an (nrow, ncol) grid: in ``fig`` when given, else in a new figure."""
+    if fig is None:
+        return plt.subplots(nrow, ncol, figsize=figsize, squeeze=False)
+    return fig, fig.subplots(nrow, ncol, squeeze=False)
 
 
 def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha=1.0, values=None,
@@ -44,7 +62,8 @@ def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha
 
 
 def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, vmin=None, vmax=None):
-    """Draw edges (k, 2) of configuration ``x`` coloured by ``values``; returns the LineCollection."""
+    """Draw edges (k, 2) of configuration ``x`` coloured by ``values``; returns the figure (the edges are
+    ``ax.collections[-1]``)."""
     fig, ax = _axes(ax)
     lc = LineCollection(np.asarray(x)[np.asarray(edges)], cmap=cmap, linewidths=lw)
     lc.set_array(np.asarray(values))
@@ -55,7 +74,7 @@ def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, v
         fig.colorbar(lc, ax=ax, label=label)
     ax.set_aspect("equal")
     ax.autoscale_view()
-    return lc
+    return fig
 
 
 def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
@@ -71,15 +90,38 @@ def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
     return fig
 
 
-def save_figure(fig, path) -> str:
-    """Write ``fig`` to ``path`` (PNG by extension) via a temporary file, so no partial file is left."""
+def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
+    """Write ``fig`` to ``path`` through a temporary file, so no partial file is left.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : str or path-like
+        The format follows the extension (``.png``, ``.svg``, ``.pdf``, ...).
+    close : bool, default False
+        Also close the figure (release it from pyplot), even when writing fails. Code that makes many
+        figures in a loop passes ``True``; a figure you still want to show stays open by default.
+    dpi : float
+        Resolution of raster formats.
+
+    Returns
+    -------
+    str
+        The path written.
+    """
     path = os.fspath(path)
     try:
         with atomic_path(path, suffix=os.path.splitext(path)[1] or ".png") as tmp:
-            fig.savefig(tmp, dpi=130, bbox_inches="tight")
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
     finally:
-        plt.close(fig)
+        if close:
+            plt.close(fig)
     return path
+
+
+def close_figure(fig) -> None:
+    """Close ``fig`` (release it from pyplot); the counterpart of ``save_figure(..., close=True)``."""
+    plt.close(fig)
 
 # --- figures added by later modules go below this line ---
 
@@ -574,10 +616,11 @@ def _study_cell_label(r, varying):
     return " ".join(parts)
 
 
-def plot_study_success(rows, title=None, max_cols=2):
+def plot_study_success(rows, title=None, max_cols=2, fig=None):
     """The success map: for each problem a grid of methods (rows) against the other varying settings (load,
     first guess, mesh, material; columns), each cell coloured by its failure reason and labelled with the
-    iteration count. Empty cells were not run (a node cap, or a design method on an equilibrium problem)."""
+    iteration count. Empty cells were not run (a node cap, or a design method on an equilibrium problem).
+    ``fig``: an empty figure to draw the panels into (default: a new one). Returns the figure."""
     from matplotlib.patches import Patch
 
     problems = list(dict.fromkeys(r["problem"] for r in rows))
@@ -594,8 +637,8 @@ def plot_study_success(rows, title=None, max_cols=2):
         cols_of[p] = cols
         widths.append(max(len(cols), 1))
     w = max(widths)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(max(4.0, 0.42 * w + 2.2) * ncol, 0.38 * len(methods) * nrow + 2.4),
-                             squeeze=False)
+    size = (max(4.0, 0.42 * w + 2.2) * ncol, 0.38 * len(methods) * nrow + 2.4)
+    fig, axes = _panels(fig, nrow, ncol, size)
     codes = {f: i for i, f in enumerate(_STUDY_FAILURE_COLORS)}
     from matplotlib.colors import ListedColormap
 
@@ -640,18 +683,18 @@ def plot_study_success(rows, title=None, max_cols=2):
     return fig
 
 
-def plot_fidelity(rows, choices, title=None, max_cols=3):
+def plot_fidelity(rows, choices, title=None, max_cols=3, fig=None):
     """Fidelity: per scene, error against mesh nodes for each material model, the tolerances as dashed lines
     and the helper's choice for each tolerance circled.
 
     ``rows``: study rows of the candidates (``problem``, ``load``, ``material``, ``nodes``, ``error``,
     ``success``); ``choices``: dicts with ``problem``, ``load``, ``tol``, ``nodes``, ``material``, ``error``,
-    ``met``.
+    ``met``. ``fig``: an empty figure to draw the panels into (default: a new one). Returns the figure.
     """
     scenes = list(dict.fromkeys((r["problem"], r["load"]) for r in rows))
     ncol = min(max_cols, len(scenes))
     nrow = int(np.ceil(len(scenes) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(4.4 * ncol, 3.6 * nrow), squeeze=False)
+    fig, axes = _panels(fig, nrow, ncol, (4.4 * ncol, 3.6 * nrow))
     mats = list(dict.fromkeys(r["material"] for r in rows))
     colors = _study_colors(mats)
     for ax, (p, load) in zip(axes.ravel(), scenes):

@@ -12,7 +12,8 @@ named node regions, and a list of :class:`Case` s, each one deformation to desig
 
 Scenes come from three places, all through :func:`get_problem`:
 
-1. the problem library, one script per scene in the ``problems/`` folder of a source checkout, each with a
+1. the problem library, one script per scene in the top-level ``problems/`` folder of the source tree
+   (installed as the package ``mdsr_opt.problems``), each with a
    factory ``build(resolution="medium") -> Scene`` (see :func:`problems_dir` for how the folder is found);
 2. a Python file path, whose ``build`` is called the same way;
 3. a scene file (TOML or JSON, :func:`load_scene`) for users who do not write Python.
@@ -40,6 +41,7 @@ True
 from __future__ import annotations
 
 import importlib.util
+import logging
 import math
 import os
 import sys
@@ -53,6 +55,7 @@ from numpy.typing import ArrayLike
 from ._checks import as_float_array, as_index_array
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
+from .progress import advance, progress_for_cli
 
 __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTIONS", "Case", "Animation",
            "Scene", "CaseSetup", "list_problems", "get_problem", "problems_dir", "resolve_resolution",
@@ -60,6 +63,8 @@ __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTI
            "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
            "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
            "AnimationResult", "animate"]
+
+_LOG = logging.getLogger(__name__)
 
 #: Named resolutions: approximate number of mesh nodes.
 RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}
@@ -531,9 +536,10 @@ def arc_rigid(points: ArrayLike, root: ArrayLike, origin: ArrayLike, direction: 
 def problems_dir() -> Path | None:
     """The folder of problem scripts.
 
-    In order: the environment variable ``MDSR_PROBLEMS``; the ``problems/`` folder of the source checkout
-    the package was imported from (an editable install or running from the repository); ``./problems`` in
-    the working directory (a regular install run from a checkout). ``None`` when there is none.
+    In order: the environment variable ``MDSR_PROBLEMS``; the package ``mdsr_opt.problems`` of an installed
+    wheel (the build maps the checkout's top-level ``problems/`` folder into the package, found through
+    :mod:`importlib`); the ``problems/`` folder of the source checkout the package was imported from (running
+    from the repository). ``None`` when there is none.
     """
     env = os.environ.get("MDSR_PROBLEMS")
     if env:
@@ -541,12 +547,17 @@ def problems_dir() -> Path | None:
         if not p.is_dir():
             raise FileNotFoundError(f"MDSR_PROBLEMS={env!r} is not a folder")
         return p
+    try:
+        spec = importlib.util.find_spec(f"{__package__}.problems")
+    except ImportError:  # pragma: no cover - a broken parent package
+        spec = None
+    if spec is not None and spec.submodule_search_locations:
+        for loc in spec.submodule_search_locations:
+            if Path(loc).is_dir():
+                return Path(loc)
     here = Path(__file__).resolve().parents[1] / "problems"
     if here.is_dir():
         return here
-    cwd = Path.cwd() / "problems"
-    if cwd.is_dir():
-        return cwd
     return None
 
 
@@ -978,18 +989,18 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
                                drag_positions=case.drag_positions if len(case.drag_nodes) else None,
                                muscles=setup.muscles if case.kind == "internal" else (), values=energy,
                                title=title)
-        files.append(plot.save_figure(fig, folder / "target.png"))
+        files.append(plot.save_figure(fig, folder / "target.png", close=True))
         write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
         files.append(str(folder / f"target{fmt}"))
         graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
         seeds = setup.routing.seeds if setup.routing is not None else None
         files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds),
-                                      folder / "graph.png"))
+                                      folder / "graph.png", close=True))
         if setup.muscles:
-            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png"))
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png", close=True))
     if run.design is not None:
         res = run.design
-        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png"))
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png", close=True))
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
     if run.photo is not None:
@@ -997,7 +1008,7 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
         files.append(str(folder / "photo.json"))
         fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
                                 title="target outline on the driven body's photo")
-        files.append(plot.save_figure(fig, folder / "overlay.png"))
+        files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
     return [os.path.relpath(f, folder.parent) for f in files]
 
 
@@ -1100,7 +1111,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
-              log: Callable[[str], None] | None = print) -> SceneReport:
+              log: Callable[[str], None] | None = _LOG.info) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -1118,7 +1129,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     photos, figures, animations : turn the photographs, the figures and the animations off.
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
     photo_resolution : (width, height) of the synthetic photographs.
-    log : progress messages (``None`` for silence).
+    log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
 
     Returns
     -------
@@ -1146,7 +1157,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
     if figures:
         plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
-                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png")
+                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png", close=True)
     runs: dict[str, CaseRun] = {}
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
@@ -1155,6 +1166,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         if figures:
             run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)
         runs[cname] = run
+        advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
     anim_out: dict[str, dict] = {}
     if animations:
         for anim in scene.animations:
@@ -1179,6 +1191,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
                 say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
             anim_out[anim.name] = data
             write_json(out / f"{anim.name}.json", _finite(data))
+            advance(log)
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
@@ -1214,7 +1227,9 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
     p.add_argument("--method", default=None, help="design method (flattened, nested, derivative-free)")
     a = p.parse_args(argv)
     scene = build(resolution=a.resolution)
-    rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method)
+    log = progress_for_cli(a, _n_units(scene, a.case, True), scene.name, unit="case")
+    rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method, log=log)
+    log.close()
     print(rep.table())
     return 0 if rep.success else 1
 
@@ -1732,7 +1747,7 @@ def _doc_line(path: Path) -> str:
 def _cmd_list(a) -> int:
     files = _problem_files()
     if not files:
-        print(f"no problem library found (looked in $MDSR_PROBLEMS, the source checkout and ./problems); "
+        print(f"no problem library found (looked in $MDSR_PROBLEMS, the installed package and the source checkout); "
               f"run a scene file with `mdsr run PATH`")
         return 1
     print(f"problem library: {problems_dir()}")
@@ -1747,6 +1762,12 @@ def _cmd_list(a) -> int:
         print(line)
     print("run one with: mdsr run NAME --out DIR   (or a scene file: mdsr run PATH.toml --out DIR)")
     return 0
+
+
+def _n_units(scene: Scene, cases, animations: bool) -> int:
+    """Units of work of ``run_scene`` for the progress bar: one per case and per animation made."""
+    names = set(scene.case_names if cases is None else cases)
+    return len(names) + (sum(set(x.cases) <= names for x in scene.animations) if animations else 0)
 
 
 def _cmd_run(a) -> int:
@@ -1765,7 +1786,7 @@ def _cmd_run(a) -> int:
             raise ValueError(f"scene {s.name!r} is named twice")
         seen.add(s.name)
     reports = []
-    log = (lambda s: None) if a.quiet else (lambda s: print(s, flush=True))
+    log = progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run", unit="case")
     for k, scene in enumerate(scenes):
         out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
         if len(scenes) > 1:
@@ -1773,6 +1794,7 @@ def _cmd_run(a) -> int:
         reports.append(run_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                  figures=not a.no_figures, animations=not a.no_animations,
                                  mesh_format=a.format, photo_resolution=a.photo_size, log=log))
+    log.close()
     lines = reports[0].table().split("\n")
     for r in reports[1:]:
         lines += r.table().split("\n")[2:]

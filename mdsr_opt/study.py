@@ -54,7 +54,6 @@ import logging
 import math
 import os
 import platform
-import sys
 import threading
 import time
 import zlib
@@ -67,6 +66,9 @@ from .io import atomic_path, write_json
 from .material import LinearElastic, NeoHookean
 from .mesh import Mesh
 from .muscles import Muscle
+from .progress import advance, expect, progress_for_cli
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ["COLUMNS", "TIMING_COLUMNS", "FAILURES", "GUESSES", "MATERIALS", "PROBLEMS", "STUDIES",
            "StudyProblem", "Setup", "Study", "RunSpec", "StudyResult", "list_studies", "list_study_problems",
@@ -838,8 +840,9 @@ def _executor(scheduler, workers: int | None):
     (or a ``distributed.Client``)."""
     try:
         from distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - declared dependency
-        raise ValueError(f"Dask runs need dask[distributed] (pip install 'dask[distributed]'): {exc}") from None
+    except ImportError as exc:
+        raise ValueError("Dask runs need the optional dask extra, which is not installed: "
+                         f"pip install \"mdsr_opt[dask]\" ({exc})") from None
     if not isinstance(scheduler, str):
         return scheduler, None
     if scheduler == "local":
@@ -858,6 +861,7 @@ def _executor(scheduler, workers: int | None):
 
 def _run_all(specs: list[RunSpec], scheduler, workers, log) -> list[RunOutcome]:
     n = len(specs)
+    expect(log, n)  # the progress bar of `mdsr study` (no-op for a plain callable)
     out: list[RunOutcome | None] = [None] * n
     t0 = time.perf_counter()
 
@@ -867,15 +871,16 @@ def _run_all(specs: list[RunSpec], scheduler, workers, log) -> list[RunOutcome]:
             msg = "ok" if r["success"] else r["failure"]
             log(f"[{k}/{n}] {specs[o.index].label()}: {msg}, {r['wall_time']:.2f} s "
                 f"(elapsed {time.perf_counter() - t0:.0f} s)")
+            advance(log)
 
     if scheduler is None:
         for i, s in enumerate(specs):
             out[i] = execute_run(s, i)
             report(i + 1, out[i])
         return out  # type: ignore[return-value]
+    client, cluster = _executor(scheduler, workers)  # a clear ValueError when the dask extra is missing
     from distributed import as_completed
 
-    client, cluster = _executor(scheduler, workers)
     try:
         futs = client.map(execute_run, specs, list(range(n)), pure=False)
         for k, fut in enumerate(as_completed(futs), 1):
@@ -966,12 +971,12 @@ class StudyResult:
             from . import plot
 
             paths["pareto"] = plot.save_figure(plot.plot_study_pareto(self.rows, title=name),
-                                               os.path.join(out, f"{name}_pareto.png"))
+                                               os.path.join(out, f"{name}_pareto.png"), close=True)
             paths["scaling"] = plot.save_figure(plot.plot_study_scaling(self.rows, fit_slopes(self.rows),
                                                                         title=name),
-                                                os.path.join(out, f"{name}_scaling.png"))
+                                                os.path.join(out, f"{name}_scaling.png"), close=True)
             paths["success"] = plot.save_figure(plot.plot_study_success(self.rows, title=name),
-                                                os.path.join(out, f"{name}_success.png"))
+                                                os.path.join(out, f"{name}_success.png"), close=True)
         return paths
 
 
@@ -1040,7 +1045,7 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
                                        materials=materials, reference_resolution=reference_resolution,
                                        timeout=timeout)
     if log is None:
-        log = (lambda s: print(s, file=sys.stderr, flush=True)) if progress else None
+        log = _LOG.info if progress else None
     elif not progress:
         log = None
     runs, refs, capped = st.plan()
@@ -1137,17 +1142,21 @@ def _cli(args) -> int:
         raise ValueError("give --out DIR for the study's table and charts")
     scheduler = args.scheduler or ("local" if args.dask else None)
     if args.name == FIDELITY_STUDY:
-        from .fidelity import run_fidelity_study
+        from .fidelity import fidelity_markdown, run_fidelity_study
 
         kw = {"resolutions": _csv_list(args.resolutions, int), "reference_resolution": args.reference_resolution}
-        run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float), scheduler=scheduler,
-                           workers=args.workers, progress=not args.quiet,
-                           **{k: v for k, v in kw.items() if v is not None})
+        with progress_for_cli(args, 0, "mdsr study fidelity", stream="stderr", unit="run") as log:
+            choices, _ = run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float), scheduler=scheduler,
+                                            workers=args.workers, progress=not args.quiet, log=log,
+                                            **{k: v for k, v in kw.items() if v is not None})
+        print(fidelity_markdown(choices), flush=True)
         return 0
-    res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int),
-                    methods=_csv_list(args.methods), problems=_csv_list(args.problems),
-                    materials=_csv_list(args.materials), reference_resolution=args.reference_resolution,
-                    timeout=args.timeout, scheduler=scheduler, workers=args.workers, progress=not args.quiet)
+    with progress_for_cli(args, 0, f"mdsr study {args.name}", stream="stderr", unit="run") as log:
+        res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int),
+                        methods=_csv_list(args.methods), problems=_csv_list(args.problems),
+                        materials=_csv_list(args.materials), reference_resolution=args.reference_resolution,
+                        timeout=args.timeout, scheduler=scheduler, workers=args.workers, progress=not args.quiet,
+                        log=log)
     print(res.markdown())
     return 0
 

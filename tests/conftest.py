@@ -1,11 +1,34 @@
-"""Shared scenes for the tests: small, fast, and each with a known answer."""
+"""Shared scenes for the tests: small, fast, and each with a known answer.
+
+Slow cases (``@pytest.mark.slow``) are left out of the default run. ``python -m pytest -m slow`` runs only
+them, ``--slow`` runs everything; any ``-m`` expression decides on its own (the deselection below applies
+only when no ``-m`` is given, so it never fights the command line).
+"""
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")  # tests write figures, never show them (subprocesses inherit it)
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 from mdsr_opt import Mesh, NeoHookean
+
+
+def pytest_addoption(parser):
+    parser.addoption("--slow", action="store_true", default=False,
+                     help="also run the slow cases (by default they are left out unless -m selects them)")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--slow") or config.getoption("markexpr"):
+        return
+    slow = [it for it in items if it.get_closest_marker("slow") is not None]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        items[:] = [it for it in items if it.get_closest_marker("slow") is None]
 
 
 @pytest.fixture(scope="session")

@@ -178,12 +178,13 @@ def run(args):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="bench_out")
-    ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
-    ap.add_argument("--muscles", nargs="+", type=int, default=[1, 2, 4, 8])
-    ap.add_argument("--methods", nargs="+", default=["flattened", "nested", "derivative-free"])
+    ap.add_argument("--out", default="bench_out", help="output folder (default bench_out)")
+    ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES), help="mesh sizes to run")
+    ap.add_argument("--muscles", nargs="+", type=int, default=[1, 2, 4, 8], help="muscle counts to run")
+    ap.add_argument("--methods", nargs="+", default=["flattened", "nested", "derivative-free"],
+                    help="design methods to compare")
     ap.add_argument("--df-evals", type=int, default=300, help="derivative-free evaluations per muscle (cap)")
-    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="the smallest size and fewer muscles only")
     ap.add_argument("--derivatives", default="assembled", choices=["assembled", "casadi"],
                     help="the flattened NLP's derivatives (see design_contractions)")
     ap.add_argument("--variants", action="store_true",

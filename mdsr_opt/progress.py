@@ -1,0 +1,135 @@
+"""Progress bars for the long commands (``mdsr run``, ``mdsr study``), built on tqdm.
+
+A :class:`Progress` is a tqdm bar with an estimate of the time left, and at the same time the ``log``
+callback that the pipeline functions already take (``run_scene(..., log=...)``, ``run_study(..., log=...)``):
+every message becomes the bar's current stage, and the functions tell it how much work there is and when a
+unit is done through :func:`expect` and :func:`advance`. These two are no-ops for a plain callable such as
+``print``, so library code calls them unconditionally and stays free of any terminal handling.
+
+The bar is drawn on stderr only when stderr is a terminal (tqdm's own rule); otherwise, and with a bar when
+``verbose`` is set, the messages are printed one per line as before.
+
+Example
+-------
+>>> import io
+>>> out = io.StringIO()
+>>> with Progress(2, "demo", enabled=False, stream=out) as log:
+...     log("first stage done")
+...     advance(log)
+>>> out.getvalue()
+'first stage done\\n'
+>>> log.n, log.total
+(1, 2)
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any, TextIO
+
+__all__ = ["Progress", "advance", "expect", "progress_for_cli"]
+
+
+def advance(log: Any, n: int = 1) -> None:
+    """Tell a progress-aware ``log`` callback that ``n`` more units of work are done (else do nothing)."""
+    step = getattr(log, "advance", None)
+    if callable(step):
+        step(n)
+
+
+def expect(log: Any, n: int) -> None:
+    """Tell a progress-aware ``log`` callback that ``n`` more units of work are coming (else do nothing)."""
+    more = getattr(log, "expect", None)
+    if callable(more):
+        more(n)
+
+
+class Progress:
+    """A tqdm progress bar that is also a ``log`` callback.
+
+    Parameters
+    ----------
+    total : int
+        Units of work known at the start (cases, runs); :meth:`expect` adds more.
+    desc : str
+        The label in front of the bar.
+    enabled : bool or None
+        Draw the bar: ``None`` (default) when stderr is a terminal, ``False`` never (``-q``, or messages
+        only).
+    stream : file, optional
+        Where messages go (default ``sys.stdout`` at the time of the call); ``None`` drops them.
+    verbose : bool
+        With a bar, still print every message above it (without, only failures and warnings are printed;
+        the rest shows as the bar's current stage).
+    unit : str
+        tqdm's unit name.
+    """
+
+    def __init__(self, total: int = 0, desc: str = "", *, enabled: bool | None = None,
+                 stream: TextIO | None | str = "stdout", verbose: bool = False, unit: str = "step") -> None:
+        from tqdm import tqdm
+
+        if not isinstance(total, int) or isinstance(total, bool) or total < 0:
+            raise ValueError(f"total must be a non-negative int, got {total!r}")
+        self._stream = stream
+        self.verbose = bool(verbose)
+        disable = (not sys.stderr.isatty()) if enabled is None else not enabled
+        self._bar = tqdm(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
+                         dynamic_ncols=True, leave=True, smoothing=0.1)
+        self.total = total
+        self.n = 0
+
+    @property
+    def active(self) -> bool:
+        """True when the bar is drawn."""
+        return not self._bar.disable
+
+    def _out(self) -> TextIO | None:
+        return sys.stdout if self._stream == "stdout" else (sys.stderr if self._stream == "stderr" else
+                                                            self._stream)  # type: ignore[return-value]
+
+    def __call__(self, message: str) -> None:
+        """Log one message: the bar's current stage, and a printed line (see ``verbose``)."""
+        message = str(message)
+        out = self._out()
+        if not self.active:
+            if out is not None:
+                print(message, file=out, flush=True)
+            return
+        first = message.strip().splitlines()[0] if message.strip() else ""
+        self._bar.set_postfix_str(first[:60], refresh=True)
+        loud = self.verbose or "FAILED" in message or message.lower().startswith(("warning", "error"))
+        if loud and out is not None:
+            self._bar.write(message, file=out)
+
+    def advance(self, n: int = 1) -> None:
+        """``n`` more units are done."""
+        self.n += n
+        if self.n > self.total:  # more work than announced: keep the bar honest rather than over 100 %
+            self.expect(self.n - self.total)
+        self._bar.update(n)
+
+    def expect(self, n: int) -> None:
+        """``n`` more units of work are coming."""
+        self.total += int(n)
+        self._bar.total = self.total
+        self._bar.refresh()
+
+    def close(self) -> None:
+        """Finish the bar (it stays on screen with the elapsed time)."""
+        self._bar.close()
+
+    def __enter__(self) -> "Progress":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def progress_for_cli(args: Any, total: int, desc: str, *, stream: str = "stdout", unit: str = "step",
+                     bar: bool = True) -> Progress:
+    """The :class:`Progress` a subcommand uses: off with ``-q``/``--quiet`` (messages dropped too), a bar on
+    a terminal (unless ``bar=False``), messages printed above it with ``-v``."""
+    quiet = bool(getattr(args, "quiet", False) or getattr(args, "log_quiet", False))
+    return Progress(total, desc, enabled=False if (quiet or not bar) else None, stream=None if quiet else stream,
+                    verbose=bool(getattr(args, "log_verbose", 0)), unit=unit)

@@ -1,0 +1,310 @@
+"""The installed product: the wheel, the command line's conventions, the plot module's manners, the extras."""
+
+from __future__ import annotations
+
+import ast
+import inspect
+import io
+import logging
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+import mdsr_opt
+from mdsr_opt.cli import build_parser, main
+
+ROOT = Path(__file__).resolve().parents[1]
+try:  # Python 3.11+
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover
+    import tomli as tomllib
+
+
+def _clean_env(**extra) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "MDSR_PROBLEMS", "MPLBACKEND")}
+    env.update(extra)
+    return env
+
+
+def _setuptools_at_least(major: int) -> bool:
+    try:
+        import setuptools
+    except ImportError:
+        return False
+    return int(setuptools.__version__.split(".")[0]) >= major
+
+
+# ---------------------------------------------------------------------------------------------- the wheel
+def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
+    # copy the sources (the build must not write build/ or *.egg-info into the checkout)
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, src / name)
+    for name in ("mdsr_opt", "problems"):
+        shutil.copytree(ROOT / name, src / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    dist = tmp_path / "dist"
+    cmd = [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-w", str(dist), "-q"]
+    if _setuptools_at_least(77):  # else pip fetches setuptools>=77 into an isolated build environment
+        cmd.append("--no-build-isolation")
+    subprocess.run(cmd, check=True, cwd=tmp_path, env=_clean_env(), timeout=300)
+    (wheel,) = dist.glob("mdsr_opt-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    # the problem library is inside the package, not a top-level `problems` package in site-packages
+    assert "mdsr_opt/problems/gecko.py" in names and "mdsr_opt/problems/one_muscle.py" in names
+    assert not any(n.startswith("problems/") for n in names)
+    assert "mdsr_opt/py.typed" in names
+    meta = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
+    assert "License-Expression: MIT" in meta and f"Version: {mdsr_opt.__version__}" in meta
+    assert 'Provides-Extra: dask' in meta and "tqdm" in meta
+    assert not any("dask" in line and "extra ==" not in line for line in meta.splitlines()
+                   if line.startswith("Requires-Dist:"))  # dask only as an extra
+    assert any(n.endswith("licenses/LICENSE") for n in names)
+
+    # a fresh virtual environment (system packages give casadi & co. without downloading), used from a
+    # folder that is not the checkout
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
+    bindir = venv / ("Scripts" if os.name == "nt" else "bin")
+    py = bindir / "python"
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-index", str(wheel)], check=True,
+                   env=_clean_env(), timeout=300)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+
+    def mdsr(*args):
+        return subprocess.run([str(bindir / "mdsr"), *args], cwd=elsewhere, env=_clean_env(),
+                              capture_output=True, text=True, timeout=300)
+
+    where = subprocess.run([str(py), "-c", "import mdsr_opt, mdsr_opt.scenes as s; "
+                            "print(mdsr_opt.__file__); print(s.problems_dir())"],
+                           cwd=elsewhere, env=_clean_env(), capture_output=True, text=True, check=True)
+    init, lib = where.stdout.split("\n")[:2]
+    assert Path(init).is_relative_to(venv) and Path(lib) == Path(init).parent / "problems"
+
+    v = mdsr("--version")
+    assert v.returncode == 0 and v.stdout.strip() == f"mdsr {mdsr_opt.__version__}"
+    listed = mdsr("list")
+    assert listed.returncode == 0, listed.stderr
+    for name in ("gecko", "one_muscle", "four_muscles", "face"):
+        assert f"  {name} " in listed.stdout
+    ran = mdsr("run", "one_muscle", "--out", str(tmp_path / "out"), "--resolution", "coarse", "--case", "a30",
+               "--no-animations", "--photo-size", "300x300")
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    assert "1/1 case(s) succeeded" in ran.stdout
+    import json
+
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["success"] is True and summary["cases"][0]["contraction_error"] < 1e-6
+
+
+def test_pyproject_declares_an_spdx_license_and_optional_dask():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert meta["license"] == "MIT" and meta["license-files"] == ["LICENSE"]
+    assert "MIT License" in (ROOT / "LICENSE").read_text()
+    assert not any(d.startswith("dask") for d in meta["dependencies"])
+    assert meta["optional-dependencies"]["dask"] == ["dask[distributed]>=2023.1"]
+    assert (ROOT / "mdsr_opt" / "py.typed").exists()
+
+
+def test_missing_dask_extra_is_a_clear_error(monkeypatch):
+    from mdsr_opt.study import run_study
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # `import distributed` now raises ImportError
+    with pytest.raises(ValueError, match=r'optional dask extra.*pip install "mdsr_opt\[dask\]"'):
+        run_study("quick", resolutions=[30], methods=["ipopt"], problems=["strip-stretch"], scheduler="local",
+                  progress=False, figures=False)
+
+
+def test_mdsr_study_dask_without_the_extra_exits_2(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    rc = main(["-q", "study", "quick", "--out", str(tmp_path / "s"), "--resolutions", "30", "--methods", "ipopt",
+               "--problems", "strip-stretch", "--dask"])
+    assert rc == 2
+    assert 'pip install "mdsr_opt[dask]"' in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()  # nothing written
+
+
+# ---------------------------------------------------------------------------------------------- command line
+def test_version_flag_prints_the_package_version(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"mdsr {mdsr_opt.__version__}"
+    assert mdsr_opt.__version__.count(".") == 2
+
+
+def _walk(parser, path=("mdsr",)):
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {a.dest: a.help for a in action._choices_actions}
+            for name, sub in action.choices.items():
+                yield path + (name,), "(the subcommand itself)", helps.get(name)
+                yield from _walk(sub, path + (name,))
+        elif not isinstance(action, argparse._HelpAction):
+            yield path, "/".join(action.option_strings) or action.dest, action.help
+
+
+def test_every_option_of_mdsr_has_help():
+    seen = list(_walk(build_parser()))
+    assert len(seen) > 40 and {p[0][-1] for p in seen} >= {"run", "list", "study", "demo", "evaluate", "photograph"}
+    missing = [f"{' '.join(p)} {opt}" for p, opt, h in seen if not h or not str(h).strip()]
+    assert missing == []
+
+
+def test_every_add_argument_in_the_code_base_has_help():
+    # the parsers built elsewhere (problem scripts' run_main, the benchmark scripts) too
+    files = [*ROOT.joinpath("mdsr_opt").glob("*.py"), *ROOT.joinpath("problems").glob("*.py"),
+             *ROOT.joinpath("tests", "benchmarks").glob("*.py")]
+    calls, missing = 0, []
+    for f in files:
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_argument":
+                calls += 1
+                if not any(k.arg == "help" for k in node.keywords):
+                    missing.append(f"{f.relative_to(ROOT)}:{node.lineno}")
+    assert calls > 40
+    assert missing == []
+
+
+def test_quiet_and_verbose_flags_set_the_log_level(tmp_path, capsys):
+    logger = logging.getLogger("mdsr_opt")
+    try:
+        assert main(["-q", "demo", "--out", str(tmp_path / "d"), "--max-area", "0.05"]) == 0
+        out = capsys.readouterr()
+        assert "[1/4]" not in out.out and "[1/4]" not in out.err  # no progress lines
+        assert logger.level == logging.WARNING
+        assert (tmp_path / "d" / "summary.json").exists()
+        assert main(["-vv", "list"]) == 0
+        assert logger.level == logging.DEBUG
+        capsys.readouterr()
+        assert main(["list"]) == 0
+        assert logger.level == logging.INFO
+    finally:
+        logger.setLevel(logging.NOTSET)
+        for h in [h for h in logger.handlers if getattr(h, "_mdsr_cli", False)]:
+            logger.removeHandler(h)
+        logger.propagate = True
+
+
+def test_library_reports_through_module_loggers(caplog, tmp_path):
+    from mdsr_opt.demo import run_demo
+
+    with caplog.at_level(logging.INFO, logger="mdsr_opt"):
+        run_demo(str(tmp_path / "d"), max_area=0.05)
+    assert any(r.name == "mdsr_opt.demo" and "[1/4]" in r.getMessage() for r in caplog.records)
+
+
+def test_no_print_in_library_code_outside_the_command_line():
+    # prints belong to the command-line functions (names starting with _cmd / _cli, add_cli handlers, run_main)
+    allowed_funcs = ("_cmd", "_cli", "run_main", "main")
+    offenders = []
+    for f in ROOT.joinpath("mdsr_opt").glob("*.py"):
+        tree = ast.parse(f.read_text())
+        for func in [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]:
+            if func.name.startswith(allowed_funcs):
+                continue
+            for node in ast.walk(func):
+                if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "print":
+                    # nested functions of an allowed function are walked from it: skip those
+                    offenders.append(f"{f.name}:{node.lineno} in {func.name}")
+    allowed = {"progress.py"}  # Progress prints the messages it is handed, on the command line's behalf
+    known = {"equilibrium.py"}  # verbose solver trace: reported to the lead (owned elsewhere)
+    offenders = [o for o in offenders if o.split(":")[0] not in allowed | known]
+    assert offenders == []
+
+
+# ---------------------------------------------------------------------------------------------- progress
+def test_progress_bar_counts_units_and_estimates_the_time_left(capsys):
+    from mdsr_opt.progress import Progress, advance, expect
+
+    bar = Progress(2, "mdsr run", enabled=True, unit="case")
+    bar("[s 1/2 a] target by external driving: ok")
+    advance(bar)
+    expect(bar, 1)
+    bar("FAILED s/b: routing found no muscle")
+    advance(bar, 2)
+    bar.close()
+    cap = capsys.readouterr()
+    assert "3/3" in cap.err and "<" in cap.err  # elapsed<remaining: the time-left estimate
+    assert "FAILED s/b" in cap.out and "target by external" not in cap.out  # only failures above the bar
+    advance(print)  # a plain callable: nothing happens
+    expect(None, 3)
+
+
+def test_progress_off_prints_messages_or_nothing():
+    from mdsr_opt.progress import Progress
+
+    out = io.StringIO()
+    with Progress(1, "x", enabled=False, stream=out) as log:
+        log("one line")
+        log.advance()
+    assert out.getvalue() == "one line\n" and log.n == 1
+    with pytest.raises(ValueError, match="total must be a non-negative int"):
+        Progress(-1)
+
+
+# ---------------------------------------------------------------------------------------------- figures
+def test_importing_plot_keeps_the_matplotlib_backend():
+    code = ("import matplotlib\n"
+            "matplotlib.use('svg')\n"
+            "before = matplotlib.get_backend()\n"
+            "import mdsr_opt.plot, mdsr_opt.scenes, mdsr_opt.evaluate, mdsr_opt.study\n"
+            "print(before, matplotlib.get_backend())\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_clean_env(), capture_output=True, text=True,
+                       check=True, timeout=120)
+    assert r.stdout.split() == ["svg", "svg"]
+    # and without any choice made: importing the module does not settle the backend
+    code = ("import matplotlib\n"
+            "b0 = matplotlib.get_backend()\n"
+            "import mdsr_opt.plot\n"
+            "print(b0, matplotlib.get_backend())\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_clean_env(), capture_output=True, text=True,
+                       check=True, timeout=120)
+    before, after = r.stdout.split()
+    assert before == after
+
+
+def test_plot_functions_take_an_axes_and_return_the_figure(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from mdsr_opt import Mesh, plot
+
+    funcs = {n: f for n, f in inspect.getmembers(plot, inspect.isfunction)
+             if n.startswith("plot_") and f.__module__ == plot.__name__}
+    assert len(funcs) >= 10
+    lacking = [n for n, f in funcs.items() if not {"ax", "axes", "fig"} & set(inspect.signature(f).parameters)]
+    assert lacking == []
+
+    mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    fig, ax = plt.subplots()
+    assert plot.plot_mesh(mesh, ax=ax) is fig
+    assert plot.plot_edges(mesh.points, mesh.edges, mesh.edge_lengths, ax=ax) is fig
+    path = plot.save_figure(fig, tmp_path / "mine.png")
+    assert os.path.getsize(path) > 1000
+    assert plt.fignum_exists(fig.number)  # the caller's figure stays open
+    plot.save_figure(fig, tmp_path / "mine.svg", close=True)
+    assert not plt.fignum_exists(fig.number) and (tmp_path / "mine.svg").read_text().startswith("<?xml")
+
+
+# ---------------------------------------------------------------------------------------------- test selection
+def test_marker_slow_selects_the_long_cases_and_the_default_run_leaves_them_out():
+    def collect(*args):
+        r = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                            "tests/test_long.py", *args], cwd=ROOT, env=_clean_env(), capture_output=True,
+                           text=True, timeout=300)
+        return [line for line in r.stdout.splitlines() if "::" in line], r.stdout
+
+    slow, text = collect("-m", "slow")
+    assert len(slow) >= 4 and all("test_long.py::" in t for t in slow), text
+    default, text = collect()
+    assert default == [] and "deselected" in text
+    everything, _ = collect("--slow")
+    assert sorted(everything) == sorted(slow)
