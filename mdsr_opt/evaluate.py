@@ -44,7 +44,7 @@ import numbers
 import os
 import tempfile
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike
 from ._checks import as_float_array, check_mesh, positive_float
 from .io import FORMATS, atomic_path
 from .mesh import polygon_area
+from .results import compact_repr, to_jsonable
 
 __all__ = [
     "load_image",
@@ -776,6 +777,14 @@ class ContourComparison:
         p = as_float_array(points, "points", shape=(None, 2))
         return p @ self.transform[:, :2].T + self.transform[:, 2]
 
+    def __repr__(self) -> str:
+        return compact_repr(self, ("mean_px", "std_px", "max_px", "mean_norm", "ratio", "angle_deg", "scale",
+                                   "n_nodes", "registration"))
+
+    def to_dict(self) -> dict:
+        """Every field (arrays as lists) as a JSON-ready dict."""
+        return to_jsonable({f.name: getattr(self, f.name) for f in fields(self)})
+
     def summary(self) -> dict[str, float]:
         """The scalar metrics as a dict (for tables)."""
         return {k: getattr(self, k) for k in ("mean_px", "std_px", "max_px", "mean_norm", "std_norm",
@@ -1034,6 +1043,14 @@ class SyntheticPhoto:
     def synthetic(self) -> bool:
         return True
 
+    def __repr__(self) -> str:
+        h, w = self.image.shape[:2]
+        return f"SyntheticPhoto({w}x{h} px, seed={self.metadata.get('seed')}, SYNTHETIC)"
+
+    def to_dict(self) -> dict:
+        """The metadata and the homography (not the pixels: :meth:`save` writes those) as a JSON-ready dict."""
+        return to_jsonable(dict(self.metadata, world_to_pixel=self.world_to_pixel, shape=self.image.shape))
+
     def to_pixels(self, points: ArrayLike) -> np.ndarray:
         """Map simulation coordinates (k, 2) to pixel coordinates (k, 2) of :attr:`image`."""
         p = as_float_array(points, "points", shape=(None, 2))
@@ -1275,6 +1292,11 @@ class CaseResult:
     state: str
     synthetic: bool
     comparison: ContourComparison
+
+    def to_dict(self) -> dict:
+        """The row with its comparison (arrays as lists) as a JSON-ready dict."""
+        return {"case": self.case, "image": self.image, "state": self.state, "synthetic": self.synthetic,
+                "comparison": self.comparison.to_dict()}
 
 
 def _list_files(where: str | os.PathLike | Sequence, suffixes: tuple[str, ...], what: str) -> list[Path]:

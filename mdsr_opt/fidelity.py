@@ -33,6 +33,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .io import atomic_path, write_json
+from .results import compact_repr, to_jsonable
 from .study import (MATERIALS, RunOutcome, Study, StudyResult, _environment, _fill_accuracy, _run_all,
                     get_problem)
 
@@ -87,6 +88,13 @@ class FidelityChoice:
     node_saving: float
     reference: str
     candidates: list = field(default_factory=list)
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("problem", "load", "tol", "met", "material", "nodes", "error", "time_saving"))
+
+    def to_dict(self) -> dict:
+        """Every field, candidates included, as a JSON-ready dict."""
+        return to_jsonable(asdict(self))
 
     def summary(self) -> dict:
         """The scalars, for a table row."""

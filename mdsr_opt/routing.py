@@ -63,7 +63,7 @@ import math
 import numbers
 import warnings
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import networkx as nx
 import numpy as np
@@ -74,6 +74,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from ._checks import as_float_array, check_mesh, positive_float
 from .mesh import Mesh
 from .muscles import Muscle
+from .results import format_value, to_jsonable
 
 __all__ = [
     "contraction_graph",
@@ -232,6 +233,10 @@ class MuscleStats:
     turning_angle: float
     turning_angle_target: float
 
+    def to_dict(self) -> dict:
+        """The figures as a JSON-ready dict."""
+        return to_jsonable(asdict(self))
+
 
 @dataclass(frozen=True, eq=False)
 class RoutingResult:
@@ -274,6 +279,19 @@ class RoutingResult:
 
     def __getitem__(self, i):
         return self.muscles[i]
+
+    def __repr__(self) -> str:
+        names = [m.name for m in self.muscles]
+        return (f"RoutingResult({len(self.muscles)} muscle(s) {format_value(names)}, edges "
+                f"{format_value([s.n_edges for s in self.stats])}, contractions "
+                f"{format_value([round(s.contraction, 4) for s in self.stats])}, n_units={self.n_units}, "
+                f"seeds={len(self.seeds)}, graph={self.graph.number_of_nodes()} nodes)")
+
+    def to_dict(self) -> dict:
+        """Muscles, their figures, seeds, unit count and knobs as a JSON-ready dict (the graph is left out:
+        :func:`contraction_graph` rebuilds it from the mesh and the target)."""
+        return to_jsonable({"muscles": list(self.muscles), "stats": [s.to_dict() for s in self.stats],
+                            "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params)})
 
     def table(self) -> str:
         """The stats as a plain-text table (one row per muscle)."""

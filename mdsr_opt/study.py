@@ -67,6 +67,7 @@ from .material import LinearElastic, NeoHookean
 from .mesh import Mesh
 from .muscles import Muscle
 from .progress import advance, expect, progress_for_cli
+from .results import format_value, to_jsonable
 
 _LOG = logging.getLogger(__name__)
 
@@ -683,6 +684,17 @@ class RunOutcome:
     triangles: np.ndarray | None = None  # references only
     free_body: bool = False
 
+    def __repr__(self) -> str:
+        r = self.row
+        return (f"RunOutcome(index={self.index}, problem={r.get('problem')!r}, method={r.get('method')!r}, "
+                f"success={r.get('success')}, failure={r.get('failure')!r}, "
+                f"x={format_value(self.x)}, points={format_value(self.points)})")
+
+    def to_dict(self) -> dict:
+        """The row and the state as a JSON-ready dict."""
+        return to_jsonable({"index": self.index, "row": self.row, "x": self.x, "points": self.points,
+                            "triangles": self.triangles, "free_body": self.free_body})
+
 
 def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
     """Run one :class:`RunSpec` (in this process or on a Dask worker) and return its :class:`RunOutcome`.
@@ -903,6 +915,19 @@ class StudyResult:
     rows: list
     references: list
     meta: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        ok = sum(bool(r.get("success")) for r in self.rows)
+        methods = list(dict.fromkeys(r.get("method") for r in self.rows))
+        wall = self.meta.get("wall_time")
+        return (f"StudyResult(study={self.study.name!r}, runs={len(self.rows)}, success={ok}, "
+                f"methods={format_value(methods)}, references={len(self.references)}"
+                + (f", wall_time={wall:.3g} s)" if isinstance(wall, (int, float)) else ")"))
+
+    def to_dict(self) -> dict:
+        """The study's definition, rows, references and metadata as a JSON-ready dict (NaN as None)."""
+        return to_jsonable({"study": self.study.to_dict(), "rows": self.rows, "references": self.references,
+                            "meta": self.meta})
 
     def column(self, name: str) -> list:
         if name not in COLUMNS:
