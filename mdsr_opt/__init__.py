@@ -1,7 +1,8 @@
 """mdsr_opt: kinematic modelling and computational design of muscle-driven soft robots.
 
 Data flows one way: mesh -> scene -> equilibrium -> target -> contraction graph -> muscles -> design ->
-evaluation. Public names are imported lazily from the module that owns them (see ``_EXPORTS``).
+evaluation. Public names are imported lazily from the module that owns them (see ``_EXPORTS``), so
+``import mdsr_opt`` stays cheap and does not touch matplotlib. The command line is :mod:`mdsr_opt.cli`.
 """
 
 from __future__ import annotations
@@ -43,14 +44,35 @@ _EXPORTS = {
     # evaluation against photographs (issue 5)
     "contour_from_image": "evaluate",
     "compare_contours": "evaluate",
+    "RoutingResult": "routing",
+    "edge_weights": "routing",
+    "render_photo": "evaluate",
+    "simulated_outline": "evaluate",
+    "evaluate_folder": "evaluate",
+    "ContourComparison": "evaluate",
     # problem library and scenes (issue 6)
     "Scene": "scenes",
     "Case": "scenes",
+    "Animation": "scenes",
     "list_problems": "scenes",
     "get_problem": "scenes",
     "load_scene": "scenes",
     "prepare_case": "scenes",
     "run_scene": "scenes",
+    "run_case": "scenes",
+    # the helpers a problem script needs: meshes at a node count, node selection, target maps
+    "mesh_polygon": "scenes",
+    "resolve_resolution": "scenes",
+    "seeds_for": "scenes",
+    "nodes_in_box": "scenes",
+    "nodes_near": "scenes",
+    "nearest_node": "scenes",
+    "nodes_in_polygon": "scenes",
+    "edge_path": "scenes",
+    "boundary_path": "scenes",
+    "rigid_motion": "scenes",
+    "arc_map": "scenes",
+    "arc_rigid": "scenes",
     # solver comparison studies (issue 7)
     "Study": "study",
     "StudyResult": "study",

@@ -121,7 +121,18 @@ def main(argv=None):
         w.writeheader()
         w.writerows(rows)
     chart(rows, os.path.join(a.out, f"equilibrium_{a.scene}.png"))
+    print("\n" + markdown(rows))
     print(f"wrote {a.out}/equilibrium_{a.scene}.csv and .png")
+
+
+def markdown(rows) -> str:
+    """The table as the README shows it (Markdown)."""
+    lines = ["| nodes | backend | iterations | fresh: build + solve s | repeat solve s | energy |",
+             "| ---: | --- | ---: | ---: | ---: | --- |"]
+    for r in rows:
+        lines.append(f"| {r['nodes']} | `{r['backend']}` | {r['iterations']} | {r['fresh_total_s']:.2f} | "
+                     f"{r['repeat_s']:.3f} | {r['energy']:.10f}" + ("" if r["success"] else " (failed)") + " |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
