@@ -30,6 +30,16 @@ from typing import Any, TextIO
 __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
 
 
+def _terminal_width() -> int:
+    """Columns of the terminal on stderr; 0 when unknown (some pseudo-terminals report a 0 x 0 size)."""
+    import os
+
+    try:
+        return os.get_terminal_size(sys.stderr.fileno()).columns
+    except (OSError, ValueError, AttributeError):
+        return 0
+
+
 def advance(log: Any, n: int = 1) -> None:
     """Tell a progress-aware ``log`` callback that ``n`` more units of work are done (else do nothing)."""
     step = getattr(log, "advance", None)
@@ -75,7 +85,8 @@ class Progress:
         self.verbose = bool(verbose)
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled
         self._bar = tqdm(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
-                         dynamic_ncols=True, leave=True, smoothing=0.1)
+                         **({"dynamic_ncols": True} if _terminal_width() > 0 else {"ncols": 100, "nrows": 24}),
+                         leave=True, smoothing=0.1)
         self.total = total
         self.n = 0
 
@@ -97,7 +108,7 @@ class Progress:
                 print(message, file=out, flush=True)
             return
         first = message.strip().splitlines()[0] if message.strip() else ""
-        self._bar.set_postfix_str(first[:60], refresh=True)
+        self._bar.set_postfix_str(first if len(first) <= 48 else first[:45] + "...", refresh=True)
         loud = self.verbose or "FAILED" in message or message.lower().startswith(("warning", "error"))
         if loud and out is not None:
             self._bar.write(message, file=out)
