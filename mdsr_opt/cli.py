@@ -38,6 +38,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _StderrHandler(logging.StreamHandler):
+    """A stream handler that writes to whatever ``sys.stderr`` is when a record comes (it may be replaced,
+    e.g. by a test's capture, after the handler was made)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.stream = sys.stderr
+        super().emit(record)
+
+
 def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
     """Send the library's log records (logger ``mdsr_opt``) to stderr at the level the flags ask for.
 
@@ -49,13 +58,12 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
     for h in list(logger.handlers):
         if getattr(h, "_mdsr_cli", False):
             logger.removeHandler(h)
-    handler = logging.StreamHandler(sys.stderr)
+    handler = _StderrHandler()
     handler._mdsr_cli = True  # type: ignore[attr-defined]
     fmt = "%(levelname)s %(name)s: %(message)s" if verbose else "%(message)s"
     handler.setFormatter(logging.Formatter(fmt))
     logger.addHandler(handler)
     logger.setLevel(level)
-    logger.propagate = False
     return level
 
 

@@ -191,7 +191,6 @@ def test_quiet_and_verbose_flags_set_the_log_level(tmp_path, capsys):
         logger.setLevel(logging.NOTSET)
         for h in [h for h in logger.handlers if getattr(h, "_mdsr_cli", False)]:
             logger.removeHandler(h)
-        logger.propagate = True
 
 
 def test_library_reports_through_module_loggers(caplog, tmp_path):
