@@ -997,10 +997,12 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
         files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds),
                                       folder / "graph.png", close=True))
         if setup.muscles:
-            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png", close=True))
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png",
+                                          close=True))
     if run.design is not None:
         res = run.design
-        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png", close=True))
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png",
+                                      close=True))
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
     if run.photo is not None:
@@ -1157,7 +1159,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
     if figures:
         plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
-                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png", close=True)
+                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png",
+                         close=True)
     runs: dict[str, CaseRun] = {}
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
@@ -1786,7 +1789,8 @@ def _cmd_run(a) -> int:
             raise ValueError(f"scene {s.name!r} is named twice")
         seen.add(s.name)
     reports = []
-    log = progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run", unit="case")
+    log = progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
+                           unit="case")
     for k, scene in enumerate(scenes):
         out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
         if len(scenes) > 1:
