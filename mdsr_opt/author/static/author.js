@@ -16,7 +16,7 @@
     handles: new Map(),    // node -> {group, pos: [x, y]}
     group: 0,
     graph: null, routing: null, design: null, saved: null,
-    seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
+    nLive: 0, seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
     view: { s: 1, ox: 0, oy: 0 },
     pointer: null, op: null, pivot: null,
     draw: null,            // {polys: [[...], ...], cur: [[x, y], ...]}
@@ -84,9 +84,11 @@
     if (m.design.method) $("method").value = m.design.method;
     if (m.design.muscle_model) $("muscle_model").value = m.design.muscle_model;
     $("save-name").value = m.name;
+    if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
     $("saved").textContent = "";
     updateTable(); drawButtons(); updateDownloads();
-    fit(m.points);
+    fit(m.points.concat(m.drag_positions));
+    S.needFit = true;
   }
 
   function onState(m) {
@@ -94,6 +96,8 @@
     if (t0 !== undefined) { S.rtts.push([performance.now(), performance.now() - t0]); delete S.sentAt[m.seq]; }
     if (S.rtts.length > 40) S.rtts.shift();
     S.state = m;
+    if (S.needFit && m.x) { fit(S.body.points.concat(m.x, m.drag_positions)); S.needFit = false; }
+    if (m.live) S.nLive += 1;
     if (m.seq == null || m.seq === S.inflight) S.inflight = null;
     // the server's fixed sets are what was solved; take them when no local edit is in progress
     if (!S.op) {
@@ -443,7 +447,7 @@
     state: () => S.state, body: () => S.body, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
     errors: () => S.errors.slice(), lastError: () => S.lastError, pong: () => S.pong,
     busy: () => S.inflight !== null || S.op !== null || S.pendingDrag,
-    seq: () => S.seq,
+    seq: () => S.seq, nLive: () => S.nLive,
     screenOf: (i) => toScreen(S.handles.has(i) ? S.handles.get(i).pos : shown()[i]),
     worldOf: (q) => toWorld(q),
     sendRaw: (text) => S.ws.send(text),
