@@ -216,11 +216,14 @@ class Session:
         return None
 
     def _report(self, res, live: bool, warm_failed: bool, t0: float) -> SolveReport:
-        J = self.mesh.jacobians(res.x)
-        crossing = bool(self.mesh.boundary_crosses(res.x))
+        if res.success:  # solve_external accepts no inverted element and no self-crossing boundary
+            crossing, inverted = False, []
+        else:
+            crossing = bool(self.mesh.boundary_crosses(res.x))
+            inverted = np.flatnonzero(self.mesh.jacobians(res.x) <= 0).tolist()
         return SolveReport(x=res.x.copy(), success=bool(res.success), status=str(res.status),
                            iterations=int(res.iterations), residual=float(res.residual),
-                           min_J=float(res.min_J), crossing=crossing, inverted=np.flatnonzero(J <= 0).tolist(),
+                           min_J=float(res.min_J), crossing=crossing, inverted=inverted,
                            live=live, warm_failed=warm_failed, solve_time=time.perf_counter() - t0)
 
     def _rest_report(self, why: str) -> SolveReport:
@@ -240,50 +243,77 @@ class Session:
         return self.state
 
     def drag(self) -> SolveReport:
-        """A live solve: warm start from the shown state via one Newton predictor step; settle on failure."""
+        """A live solve: warm start from the shown state via a predictor step; settle on failure.
+
+        The predictor reuses the tangent stiffness factored at an earlier state of the same drag (a chord
+        step), refreshed every few updates and whenever the step fails; the shown state is an equilibrium,
+        so its free gradient is zero and the step is ``-K_ff^-1 K_fc dx_fixed``.
+        """
         t0 = time.perf_counter()
         if self._ready():
             return self.settle()
-        guess = self._predict(self.mesh.points if self.state is None else self.state.x)
-        if guess is not None:
+        prev = self.state
+        if prev is None or not prev.success:
+            return self._cold(t0)
+        for fresh in (False, True):
+            guess = self._predict(prev.x, fresh)
+            if guess is None:
+                continue
             res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
                                  initial_guess=guess, min_step=1.0)
             if res.success:
                 self.state = self._report(res, live=True, warm_failed=False, t0=t0)
                 self.target = None  # a live state is not the settled target until the drag is released
                 return self.state
+        return self._cold(t0)
+
+    def _cold(self, t0: float) -> SolveReport:
         rep = self.settle()
         rep.warm_failed = True
         rep.solve_time = time.perf_counter() - t0
         return rep
 
-    def _predict(self, x: np.ndarray) -> np.ndarray | None:
-        """Newton step from ``x`` with the fixed nodes moved to their prescribed positions (None when the
-        step inverts an element or the free block is singular)."""
-        model = get_model(self.mesh, self.material)
-        p = model.params(self.material)
+    #: Live updates before the chord predictor's tangent is refactored at the current state.
+    REFRESH = 6
+
+    def _tangent(self, x: np.ndarray, fixed: np.ndarray, fresh: bool):
+        key = fixed.tobytes()
+        c = self.__dict__.get("_chord")
+        if fresh or c is None or c[0] != key or c[3] >= self.REFRESH:
+            model = get_model(self.mesh, self.material)
+            H = model.hessian(x.reshape(-1), model.params(self.material)).tocsc()
+            free = ~fixed
+            try:
+                lu = spla.splu(H[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                               options={"SymmetricMode": True})
+            except RuntimeError:  # singular: e.g. a free island of nodes
+                self.__dict__.pop("_chord", None)
+                return None
+            c = [key, lu, H[free][:, fixed].tocsr(), 0]
+            self.__dict__["_chord"] = c
+        c[3] += 1
+        return c[1], c[2]
+
+    def _predict(self, x: np.ndarray, fresh: bool = False) -> np.ndarray | None:
+        """Chord step from the equilibrium ``x`` with the fixed nodes moved to their prescribed positions
+        (None when the step inverts an element or the free block is singular)."""
         n = self.n_nodes
         nodes = np.concatenate([self.anchors, self.drag_nodes])
         vals = np.vstack([self.mesh.points[self.anchors], self.drag_positions])
         fixed = np.zeros((n, 2), dtype=bool)
         fixed[nodes] = True
         fixed = fixed.reshape(-1)
-        free = ~fixed
+        t = self._tangent(x, fixed, fresh)
+        if t is None:
+            return None
+        lu, Hfc = t
         move = np.zeros((n, 2))
         move[nodes] = vals - x[nodes]
-        xf = x.reshape(-1)
-        H = model.hessian(xf, p).tocsc()
-        g = model.gradient(xf, p)
-        try:
-            lu = spla.splu(H[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                           options={"SymmetricMode": True})
-        except RuntimeError:
-            return None
-        dz = lu.solve(-(g[free] + H[free][:, fixed] @ move.reshape(-1)[fixed]))
+        dz = lu.solve(-(Hfc @ move.reshape(-1)[fixed]))
         if not np.all(np.isfinite(dz)):
             return None
-        y = xf + move.reshape(-1)
-        y[free] += dz
+        y = x.reshape(-1) + move.reshape(-1)
+        y[~fixed] += dz
         y = y.reshape(-1, 2)
         return y if self.mesh.jacobians(y).min() > 0 else None
 
