@@ -79,7 +79,7 @@ def wait(drv, script, timeout=60.0):
 
 def idle(drv):
     """Wait until the page has no request in flight and shows the reply to its last request."""
-    wait(drv, "const s = mdsrAuthor.state(); return !mdsrAuthor.busy() && s && s.seq === mdsrAuthor.seq();")
+    wait(drv, "const s = mdsrAuthor.state(); return !mdsrAuthor.busy() && s && (s.seq === null || s.seq === mdsrAuthor.seq());")
     return drv.execute_script("return mdsrAuthor.state();")
 
 
@@ -208,3 +208,65 @@ def test_oversized_message_is_refused_and_server_keeps_serving(page):
     page.execute_script("mdsrAuthor.send({type: 'fixed', seq: 999999, anchors: arguments[0], drag_nodes: arguments[1],"
                         " drag_positions: arguments[2]});", st["anchors"], st["drag_nodes"], st["drag_positions"])
     wait(page, "return mdsrAuthor.state().seq === 999999;")
+
+
+def click_at(drv, points):
+    """Left clicks at canvas pixels ``points`` (real mouse events)."""
+    canvas = drv.find_element(By.ID, "canvas")
+    w, h = canvas.size["width"], canvas.size["height"]
+    for x, y in points:
+        ActionChains(drv).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+
+
+def test_svg_outline_file_with_a_hole(page, tmp_path):
+    svg = tmp_path / "plate.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="M0 0 H 60 V 20 H 0 Z"/>'
+                   '<rect x="25" y="5" width="10" height="10"/></svg>')
+    res = page.find_element(By.ID, "resolution")
+    res.clear()
+    res.send_keys("200")
+    page.find_element(By.ID, "file").send_keys(str(svg))
+    body = wait(page, "const b = mdsrAuthor.body(); return b && b.name === 'plate' ? b : null;")
+    assert len(body["boundary"]) == 2 and 150 < body["n_nodes"] < 260
+
+
+def test_draw_outline_anchor_drag_on_the_page(page):
+    canvas = page.find_element(By.ID, "canvas")
+    w, h = canvas.size["width"], canvas.size["height"]
+    n0 = len(page.execute_script("return mdsrAuthor.errors();"))
+    # a bow tie crosses itself: refused with a message naming it
+    page.find_element(By.ID, "draw").click()
+    click_at(page, [(w * 0.3, h * 0.3), (w * 0.7, h * 0.7), (w * 0.7, h * 0.3), (w * 0.3, h * 0.7)])
+    page.find_element(By.ID, "draw-close").click()
+    page.find_element(By.ID, "draw-mesh").click()
+    msgs = wait(page, f"const e = mdsrAuthor.errors().slice({n0}); return e.length ? e : null;")
+    assert any("self-intersecting" in m for m in msgs), msgs
+    page.find_element(By.ID, "draw").click()  # cancel
+    # a bar: meshed, anchored on the left by brushing, dragged on the right by the mouse
+    page.find_element(By.ID, "draw").click()
+    click_at(page, [(w * 0.2, h * 0.45), (w * 0.8, h * 0.45), (w * 0.8, h * 0.55), (w * 0.2, h * 0.55)])
+    page.find_element(By.ID, "draw-close").click()
+    page.find_element(By.ID, "draw-mesh").click()
+    body = wait(page, "const b = mdsrAuthor.body(); return b && b.name === 'authored' ? b : null;")
+    P = np.asarray(body["points"])
+    idle(page)
+    page.execute_script("document.getElementById('brush').value = 30;")
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=anchor]").click()
+    left = int(np.argmin(P[:, 0]))
+    sx, sy = page.execute_script(f"return mdsrAuthor.screenOf({left});")
+    click_at(page, [(sx + 2, sy)])
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=handle]").click()
+    right = int(np.argmax(P[:, 0]))
+    sx, sy = page.execute_script(f"return mdsrAuthor.screenOf({right});")
+    click_at(page, [(sx - 2, sy)])
+    st = idle(page)
+    assert len(st["anchors"]) >= 2 and right in st["drag_nodes"] and left in st["anchors"]
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=move]").click()
+    drag_with_mouse(page, right, [(0, -8)] * 5)
+    st = idle(page)
+    assert st["success"] and np.asarray(st["x"])[right, 1] > P[right, 1]  # moved up on screen = +y
+    from mdsr_opt import Mesh, NeoHookean
+
+    mesh = Mesh(P, body["triangles"])
+    ref = solve_external(mesh, NeoHookean(1.0, 0.3), st["anchors"], (st["drag_nodes"], st["drag_positions"]))
+    assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8

@@ -109,7 +109,7 @@ def screenshot(path: str) -> str:
     opts.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--window-size=1100,700", f"--user-data-dir={tempfile.mkdtemp()}"):
+                 "--window-size=1150,800", f"--user-data-dir={tempfile.mkdtemp()}"):
         opts.add_argument(flag)
     drv = webdriver.Chrome(service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"), options=opts)
 
@@ -130,13 +130,15 @@ def screenshot(path: str) -> str:
         drv.find_element(By.ID, "design").click()
         wait("return mdsrAuthor.design();")
         drv.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()
-        drv.find_element(By.ID, "show-graph").click()
         wait("return document.querySelector('#muscle-table tr') !== null;")
         time.sleep(0.5)
         drv.save_screenshot(path)
     finally:
         drv.quit()
         server.should_exit = True
+    from PIL import Image  # matplotlib's dependency: a 64-colour palette keeps the PNG small
+
+    Image.open(path).convert("RGB").quantize(colors=64).save(path, optimize=True)
     return path
 
 

@@ -120,6 +120,7 @@
     const x = document.createElement("button"); x.textContent = "\u00d7"; x.onclick = () => box.remove();
     box.appendChild(x);
     $("errors").prepend(box);
+    setTimeout(() => box.remove(), 20000);
     while ($("errors").children.length > 4) $("errors").lastChild.remove();
   }
   function status(t) { $("status").textContent = t; }
@@ -195,7 +196,7 @@
     for (const [x, y] of pts) { x0 = Math.min(x0, x); y0 = Math.min(y0, y); x1 = Math.max(x1, x); y1 = Math.max(y1, y); }
     if (!isFinite(x0)) { x0 = 0; y0 = 0; x1 = 10; y1 = 6; }
     const w = Math.max(x1 - x0, 1e-9), h = Math.max(y1 - y0, 1e-9);
-    const s = 0.55 * Math.min(r.width / w, r.height / h);
+    const s = 0.8 * Math.min(r.width / w, r.height / h);
     S.view = { s, ox: r.width / 2 - s * (x0 + x1) / 2, oy: r.height / 2 + s * (y0 + y1) / 2 };
   }
   const toScreen = (p) => [S.view.ox + S.view.s * p[0], S.view.oy - S.view.s * p[1]];
@@ -258,6 +259,25 @@
     });
   }
 
+  function legend(view) {
+    const items = [["#b9d0ea", "target (shown state)", "fill"], ["#9aa5b1", "rest outline (dashed)", "dash"],
+                   ["#111", "anchor", "square"], [GROUP_COLORS[0], "drag node", "dot"]];
+    if (S.routing) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
+    if (S.design && view === "overlay") items.push(["#f4a261", "driven by the design (aligned)", "fill"]);
+    if (S.graph && $("show-graph").checked) items.push(["#d62728", "contracted edge", "line"], ["#1f77b4", "elongated edge", "line"]);
+    if (S.design && view === "difference") items.push(["rgb(175,40,20)", "far from target", "fill"]);
+    ctx.font = "12px system-ui, sans-serif";
+    items.forEach(([c, t, kind], k) => {
+      const y = 16 + 17 * k;
+      ctx.fillStyle = c; ctx.strokeStyle = c; ctx.lineWidth = 2;
+      if (kind === "fill") ctx.fillRect(10, y - 9, 14, 10);
+      else if (kind === "square") ctx.fillRect(13, y - 7, 6, 6);
+      else if (kind === "dot") { ctx.beginPath(); ctx.arc(17, y - 4, 4, 0, 2 * Math.PI); ctx.fill(); }
+      else { ctx.setLineDash(kind === "dash" ? [4, 3] : []); ctx.beginPath(); ctx.moveTo(10, y - 4); ctx.lineTo(24, y - 4); ctx.stroke(); ctx.setLineDash([]); }
+      ctx.fillStyle = "#1d2733"; ctx.fillText(t, 30, y);
+    });
+  }
+
   function render() {
     const r = canvas.getBoundingClientRect();
     ctx.clearRect(0, 0, r.width, r.height);
@@ -290,13 +310,24 @@
       if (S.routing) drawMuscles(S.design && view === "overlay" ? S.design.x_aligned : x, S.routing.muscles, 3);
       ctx.fillStyle = "#111";
       for (const i of S.anchors) { const p = toScreen(B.points[i]); ctx.fillRect(p[0] - 3, p[1] - 3, 6, 6); }
+      const groups = new Map();
       for (const [i, h] of S.handles) {
-        const p = toScreen(h.pos), q = toScreen(B.points[i]);
-        ctx.strokeStyle = "rgba(0,0,0,.25)"; ctx.lineWidth = 1;
-        ctx.beginPath(); ctx.moveTo(q[0], q[1]); ctx.lineTo(p[0], p[1]); ctx.stroke();
-        ctx.beginPath(); ctx.arc(p[0], p[1], 4, 0, 2 * Math.PI);
+        if (!groups.has(h.group)) groups.set(h.group, { rest: [0, 0], to: [0, 0], n: 0 });
+        const g = groups.get(h.group); g.n += 1;
+        g.rest[0] += B.points[i][0]; g.rest[1] += B.points[i][1]; g.to[0] += h.pos[0]; g.to[1] += h.pos[1];
+      }
+      for (const [k, g] of groups) {  // one arrow per group: rest centroid -> where it is dragged
+        const a = toScreen([g.rest[0] / g.n, g.rest[1] / g.n]), b = toScreen([g.to[0] / g.n, g.to[1] / g.n]);
+        ctx.strokeStyle = GROUP_COLORS[k % GROUP_COLORS.length]; ctx.globalAlpha = 0.5; ctx.lineWidth = 1.5;
+        ctx.setLineDash([5, 4]); ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+        ctx.setLineDash([]); ctx.globalAlpha = 1;
+      }
+      for (const [, h] of S.handles) {
+        const p = toScreen(h.pos);
+        ctx.beginPath(); ctx.arc(p[0], p[1], 3.5, 0, 2 * Math.PI);
         ctx.fillStyle = GROUP_COLORS[h.group % GROUP_COLORS.length]; ctx.fill();
       }
+      legend(view);
       if (S.pivot) {
         const p = toScreen(S.pivot); ctx.strokeStyle = "#111"; ctx.lineWidth = 1.5;
         ctx.beginPath(); ctx.moveTo(p[0] - 7, p[1]); ctx.lineTo(p[0] + 7, p[1]); ctx.moveTo(p[0], p[1] - 7); ctx.lineTo(p[0], p[1] + 7); ctx.stroke();
