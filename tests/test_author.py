@@ -79,6 +79,7 @@ def test_live_drag_is_warm_and_agrees_with_a_cold_solve(tentacle):
     s.set_fixed(s.anchors, s.drag_nodes, s.drag_positions + shift)
     st = s.drag()
     assert st.live and st.success and not st.warm_failed
+    assert st.build_time < 1e-3  # the model and solver built by the first solve are reused
     assert s.target is None  # a live state is not a target until it is settled
     ref = solve_external(tentacle.mesh, tentacle.material, s.anchors, (s.drag_nodes, s.drag_positions))
     assert np.abs(st.x - ref.x).max() < 1e-6

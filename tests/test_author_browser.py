@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mdsr_opt import get_problem, load_scene, prepare_case, solve_external
+from mdsr_opt import contraction_graph, get_problem, load_scene, prepare_case, solve_external
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="pip install '.[test]' installs selenium")
 from selenium.webdriver.common.action_chains import ActionChains  # noqa: E402
@@ -135,6 +135,11 @@ def test_rotation_drag_rotates_the_group_about_the_pivot(page):
 def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     _, out = served
     st = idle(page)
+    page.find_element(By.ID, "show-graph").click()
+    weights = wait(page, "return mdsrAuthor.graph();")
+    scene0 = get_problem(PROBLEM, resolution=RESOLUTION)
+    G = contraction_graph(scene0.mesh, np.asarray(st["x"]))
+    assert np.allclose(weights, [G.edges[int(a), int(b)]["weight"] for a, b in scene0.mesh.edges], rtol=0, atol=1e-12)
     page.find_element(By.ID, "route").click()
     routing = wait(page, "return mdsrAuthor.routing();")
     assert len(routing["muscles"]) >= 1
@@ -162,6 +167,27 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     assert case["n_muscles"] == len(routing["muscles"])
     np.testing.assert_allclose(case["contractions"], design["contractions"], rtol=0, atol=1e-9)
     assert abs(case["difference"] - design["difference"]) <= 1e-9
+    # downloads: figures, meshes, results and the scene as a zip
+    url, _ = served
+    sid = page.execute_script("return mdsrAuthor.sid();")
+    import io
+    import urllib.request
+    import zipfile
+
+    def get(what):
+        with urllib.request.urlopen(f"{url}download/{sid}/{what}", timeout=120) as r:
+            return r.read()
+
+    for png in ("target.png", "graph.png", "muscles.png", "design.png"):
+        assert get(png)[:8] == b"\x89PNG\r\n\x1a\n"
+    from mdsr_opt import read_mesh
+
+    (tmp_path / "driven.vtu").write_bytes(get("driven.vtu"))
+    np.testing.assert_allclose(read_mesh(tmp_path / "driven.vtu").x, design["x_aligned"], rtol=0, atol=1e-12)
+    results = json.loads(get("results.json"))
+    assert results["design"]["contractions"] == design["contractions"]
+    names = zipfile.ZipFile(io.BytesIO(get("scene.zip"))).namelist()
+    assert sorted(names) == ["tentacle.json", "tentacle.mesh.vtu"]
     shot = tmp_path / "page.png"
     page.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()
     page.save_screenshot(str(shot))

@@ -59,6 +59,7 @@ class SolveReport:
     live : a warm-started drag solve (``False``: the plain ``solve_external`` call).
     warm_failed : the warm start was tried and a plain solve had to take over.
     solve_time : seconds spent in this request on the server.
+    build_time : seconds ``solve_external`` spent building the model or solver (0 when reused).
     """
 
     x: np.ndarray
@@ -72,12 +73,14 @@ class SolveReport:
     live: bool
     warm_failed: bool = False
     solve_time: float = 0.0
+    build_time: float = 0.0
 
     def to_dict(self) -> dict:
         return {"x": self.x.tolist(), "success": self.success, "status": self.status,
                 "iterations": self.iterations, "residual": _num(self.residual), "min_J": _num(self.min_J),
                 "crossing": self.crossing, "inverted": self.inverted, "live": self.live,
-                "warm_failed": self.warm_failed, "solve_time": self.solve_time}
+                "warm_failed": self.warm_failed, "solve_time": self.solve_time,
+                "build_time": self.build_time}
 
 
 def _num(v):
@@ -224,7 +227,8 @@ class Session:
         return SolveReport(x=res.x.copy(), success=bool(res.success), status=str(res.status),
                            iterations=int(res.iterations), residual=float(res.residual),
                            min_J=float(res.min_J), crossing=crossing, inverted=inverted,
-                           live=live, warm_failed=warm_failed, solve_time=time.perf_counter() - t0)
+                           live=live, warm_failed=warm_failed, solve_time=time.perf_counter() - t0,
+                           build_time=float(res.build_time))
 
     def _rest_report(self, why: str) -> SolveReport:
         return SolveReport(x=self.mesh.points.copy(), success=False, status=why, iterations=0, residual=0.0,

@@ -81,8 +81,8 @@
     $("K_a").value = m.routing.K_a; $("K_b").value = m.routing.K_b;
     $("max_muscles").value = m.routing.max_muscles == null ? "" : m.routing.max_muscles;
     if (m.design.a_max != null) $("a_max").value = m.design.a_max;
-    if (m.design.method) $("method").value = m.design.method;
-    if (m.design.muscle_model) $("muscle_model").value = m.design.muscle_model;
+    if (m.design.method) setSelect("method", m.design.method);
+    if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
     $("save-name").value = m.name;
     if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
     $("saved").textContent = "";
@@ -122,6 +122,11 @@
     $("errors").prepend(box);
     setTimeout(() => box.remove(), 20000);
     while ($("errors").children.length > 4) $("errors").lastChild.remove();
+  }
+  function setSelect(id, v) {  // a value the page does not list yet (a newer default) is added, not dropped
+    const sel = $(id);
+    if (![...sel.options].some((o) => o.value === v)) { const o = document.createElement("option"); o.textContent = v; sel.appendChild(o); }
+    sel.value = v;
   }
   function status(t) { $("status").textContent = t; }
 
@@ -333,6 +338,11 @@
         ctx.beginPath(); ctx.moveTo(p[0] - 7, p[1]); ctx.lineTo(p[0] + 7, p[1]); ctx.moveTo(p[0], p[1] - 7); ctx.lineTo(p[0], p[1] + 7); ctx.stroke();
       }
     }
+    if (!S.body && !S.draw) {
+      ctx.fillStyle = "#56657a"; ctx.font = "15px system-ui, sans-serif"; ctx.textAlign = "center";
+      ctx.fillText("Load a library problem, open a scene or outline file, or draw an outline (left).", r.width / 2, r.height / 2);
+      ctx.textAlign = "start";
+    }
     if (S.draw) {
       ctx.strokeStyle = "#0a6"; ctx.lineWidth = 2; ctx.fillStyle = "rgba(0,170,102,.12)";
       for (const poly of S.draw.polys) { path(poly, poly.map((_, k) => k)); ctx.fill(); ctx.stroke(); }
@@ -475,7 +485,7 @@
 
   // ------------------------------------------------------------------ for tests and scripting
   window.mdsrAuthor = {
-    state: () => S.state, body: () => S.body, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
+    state: () => S.state, body: () => S.body, graph: () => S.graph, sid: () => S.sid, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
     errors: () => S.errors.slice(), lastError: () => S.lastError, pong: () => S.pong,
     busy: () => S.inflight !== null || S.op !== null || S.pendingDrag,
     seq: () => S.seq, nLive: () => S.nLive,
@@ -487,11 +497,12 @@
 
   // ------------------------------------------------------------------ start
   resize();
+  render();
   fetch("/api/info").then((r) => r.json()).then((info) => {
     S.info = info;
     const sel = $("problem");
     for (const p of info.problems) { const o = document.createElement("option"); o.textContent = p; sel.appendChild(o); }
-    if (info.design.muscle_model) $("muscle_model").value = info.design.muscle_model;
+    if (info.design.muscle_model) setSelect("muscle_model", info.design.muscle_model);
     updateDownloads();
     connect();
   });
