@@ -80,8 +80,9 @@ def _server(app, sock, quiet: bool):
 
     from .server import MAX_MESSAGE
 
+    # no per-message deflate: on the loopback, compressing a 3k-node state costs more than sending it
     config = uvicorn.Config(app, log_level="warning" if quiet else "info", ws_max_size=2 * MAX_MESSAGE,
-                            ws_ping_interval=None, lifespan="off")
+                            ws_ping_interval=None, ws_per_message_deflate=False, lifespan="off")
     return uvicorn.Server(config)
 
 

@@ -32,7 +32,7 @@ TARGETS = {600: 10.0, 3000: 4.0}
 def _client(url):
     from websockets.sync.client import connect
 
-    return connect(url.replace("http", "ws", 1) + "ws", max_size=None)
+    return connect(url.replace("http", "ws", 1) + "ws", max_size=None, compression=None)
 
 
 def _recv(ws, kind, timeout=300):
@@ -56,7 +56,7 @@ def measure(nodes: int, step: float, updates: int, log=print) -> dict:
             P0 = np.asarray(body["drag_positions"])
             r = step * size * updates / (2 * np.pi)  # a circle of `updates` chords of length ~step * size
             solve, rtt, warm_failed = [], [], 0
-            t_start = time.perf_counter()
+            t_start, cpu_start = time.perf_counter(), time.process_time()
             for k in range(1, updates + 1):
                 a = 2 * np.pi * k / updates
                 off = r * np.array([np.cos(a) - 1.0, np.sin(a)])
@@ -71,6 +71,7 @@ def measure(nodes: int, step: float, updates: int, log=print) -> dict:
                 if not st["success"]:
                     log(f"  update {k}: not solved: {st['status']}")
             wall = time.perf_counter() - t_start
+            cpu = time.process_time() - cpu_start  # server and client together (same process)
             # flood: 20 drags at once; the server keeps only the latest waiting one
             for k in range(20):
                 off = 0.002 * size * (k + 1) * np.array([1.0, 0.0])
@@ -85,7 +86,7 @@ def measure(nodes: int, step: float, updates: int, log=print) -> dict:
            "first_solve_s": first["solve_time"],
            "solve_median_ms": 1e3 * statistics.median(solve), "solve_max_ms": 1e3 * max(solve),
            "rtt_median_ms": 1e3 * statistics.median(rtt), "rtt_max_ms": 1e3 * max(rtt),
-           "rate_per_s": updates / wall, "cold_fallbacks": warm_failed,
+           "rate_per_s": updates / wall, "cpu_per_update_ms": 1e3 * cpu / updates, "cold_fallbacks": warm_failed,
            "flood_sent": 20, "flood_answered": len(answered), "flood_dropped": 20 - len(answered)}
     target = TARGETS.get(min(TARGETS, key=lambda n: abs(n - nodes)))
     row["target_per_s"] = target
@@ -158,7 +159,7 @@ def main(argv=None) -> int:
             print(f"{row['nodes']:>6} nodes, step {step:.3f} size: solve median {row['solve_median_ms']:.0f} ms "
                   f"(max {row['solve_max_ms']:.0f}), round trip median {row['rtt_median_ms']:.0f} ms "
                   f"(max {row['rtt_max_ms']:.0f}), {row['rate_per_s']:.1f} updates/s (target {row['target_per_s']:g}: "
-                  f"{'met' if row['meets_target'] else 'MISSED'}), cold fallbacks {row['cold_fallbacks']}, "
+                  f"{'met' if row['meets_target'] else 'MISSED'}), CPU {row['cpu_per_update_ms']:.0f} ms/update, cold fallbacks {row['cold_fallbacks']}, "
                   f"flood: {row['flood_dropped']}/20 stale drags dropped", flush=True)
     os.makedirs(a.out, exist_ok=True)
     with open(os.path.join(a.out, "author.csv"), "w", newline="") as fh:
