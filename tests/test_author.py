@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -139,7 +140,7 @@ def test_saved_scene_reads_back_with_the_same_mesh_case_and_muscles(tentacle, tm
     c = back.case("authored")
     assert np.array_equal(c.drag_positions, s.drag_positions)  # exact floats, not rounded
     assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles]
-    data = json.loads(open(files[0]).read())
+    data = json.loads(Path(files[0]).read_text())
     assert data["routing"]["max_muscles"] == 2 and data["routing"]["K_a"] == 10.0
 
 
