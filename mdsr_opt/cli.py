@@ -20,6 +20,7 @@ def _register_all(sub) -> None:
     from . import evaluate; evaluate.add_cli(sub)  # noqa: E702
     from . import scenes; scenes.add_cli(sub)  # noqa: E702
     from . import study; study.add_cli(sub)  # noqa: E702
+    from . import author; author.add_cli(sub)  # noqa: E702
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,173 @@
+"""``mdsr author``: author targets by hand on a local web page (the paper's man-machine interface).
+
+The page loads a body (a library problem, a scene file, or an outline drawn on the page or read from an
+SVG/JSON file, meshed at a chosen resolution), lets the user mark anchors and drag nodes, drag and rotate
+them with the mouse while the external-driving equilibrium updates live, shows the contraction graph,
+routes muscles, designs their contractions and compares target and driven shape, and saves the session
+as a scene file that ``mdsr run`` reproduces. The server is Starlette on uvicorn (``pip install
+"mdsr_opt[author]"``); the page's scripts are served locally and work offline.
+
+Modules: :mod:`.session` (the state and the solves), :mod:`.server` (the web app), :mod:`.export` (scene
+file, figures, meshes, results), :mod:`.outline` (SVG/JSON outlines). Start it from Python with
+:func:`serve`, or in a thread for tests with :func:`start_in_thread`.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import socket
+import sys
+import threading
+import time
+from pathlib import Path
+
+__all__ = ["serve", "start_in_thread", "add_cli", "body_spec"]
+
+_MISSING = ("mdsr author needs the web server packages: pip install \"mdsr_opt[author]\" "
+            "(starlette and uvicorn[standard])")
+
+
+def _require():
+    try:
+        import starlette  # noqa: F401
+        import uvicorn  # noqa: F401
+    except ImportError:
+        raise ImportError(_MISSING) from None
+
+
+def body_spec(body: str | None, resolution=None) -> dict | None:
+    """The load spec for the command line's ``BODY``: a library name, a scene file, or an outline file.
+
+    Checks the body now (builds it once), so a bad name or file is reported before the server starts.
+    """
+    from .server import load_body
+
+    if body is None:
+        return None
+    p = Path(body)
+    if p.suffix.lower() in (".toml", ".json", ".svg", ".py") or "/" in body or p.exists():
+        spec = {"kind": "path", "path": str(p.resolve()), "resolution": resolution}
+    else:
+        spec = {"kind": "problem", "name": body, "resolution": resolution}
+    load_body(spec)
+    return spec
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    fam = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(fam, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    sock.listen(64)
+    return sock
+
+
+def _server(app, sock, quiet: bool):
+    import uvicorn
+
+    from .server import MAX_MESSAGE
+
+    # no per-message deflate: on the loopback, compressing a 3k-node state costs more than sending it
+    config = uvicorn.Config(app, log_level="warning" if quiet else "info", ws_max_size=2 * MAX_MESSAGE,
+                            ws_ping_interval=None, ws_per_message_deflate=False, lifespan="off")
+    return uvicorn.Server(config)
+
+
+def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", port: int = 0,
+                    out="authored", resolution=None):
+    """Start the server in a daemon thread; returns ``(url, server)`` (stop with ``server.should_exit = True``).
+
+    ``body`` is what ``mdsr author`` takes (a name or path) or a load spec dict.
+    """
+    _require()
+    from .server import make_app
+
+    spec = body if isinstance(body, dict) or body is None else body_spec(body, resolution)
+    sock = _bind(host, port)
+    server = _server(make_app(spec, out), sock, quiet=True)
+    th = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    th.start()
+    t0 = time.time()
+    while not server.started:
+        if time.time() - t0 > 30 or not th.is_alive():
+            raise RuntimeError("the author server did not start")
+        time.sleep(0.02)
+    h, p = sock.getsockname()[:2]
+    return f"http://{h if ':' not in h else f'[{h}]'}:{p}/", server
+
+
+def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, open_browser: bool = True,
+          out="authored", resolution=None) -> int:
+    """Serve the authoring page until interrupted (what ``mdsr author`` runs).
+
+    Parameters
+    ----------
+    body : library problem name, scene file (``.toml``/``.json``) or outline file (``.svg``/``.json``).
+    host : address to bind; loopback by default (any other address is announced with a warning).
+    port : 0 picks a free port.
+    open_browser : open the page in the default browser.
+    out : folder for saved scene files.
+    resolution : node count (or coarse/medium/fine) for the body.
+    """
+    _require()
+    import webbrowser
+
+    from .server import make_app
+
+    spec = body_spec(body, resolution)
+    if not _is_loopback(host):
+        print(f"mdsr author: WARNING: listening on {host}, not the loopback address: anyone who can reach "
+              "this machine can use the page and save files into the output folder", file=sys.stderr)
+    sock = _bind(host, port)
+    h, p = sock.getsockname()[:2]
+    url = f"http://{'127.0.0.1' if h in ('0.0.0.0', '::') else h}:{p}/"
+    print(f"mdsr author: serving {body or 'an empty page'} on {url} (scene files go to {Path(out).resolve()}); "
+          "Ctrl-C stops", flush=True)
+    server = _server(make_app(spec, out), sock, quiet=False)
+    if open_browser:
+        threading.Timer(0.8, webbrowser.open, args=(url,)).start()
+    try:
+        server.run(sockets=[sock])
+    except KeyboardInterrupt:  # pragma: no cover
+        pass
+    return 0
+
+
+def _cmd(a) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")  # figures are drawn in worker threads for downloads
+    if not 0 <= a.port <= 65535:
+        raise ValueError(f"--port must be in [0, 65535], got {a.port}")
+    return serve(a.body, host=a.host, port=a.port, open_browser=not a.no_browser, out=a.out,
+                 resolution=a.resolution)
+
+
+def add_cli(sub) -> None:
+    """Register ``mdsr author``."""
+    p = sub.add_parser("author", help="author targets by hand on a local web page: anchors, live drags, "
+                       "muscles, design, save as a scene file")
+    p.add_argument("body", nargs="?", default=None, metavar="PROBLEM|SCENE_FILE|OUTLINE",
+                   help="a library problem (mdsr list), a scene file (.toml/.json) or an outline (.svg, or .json "
+                   "with outline and holes); omit to choose on the page")
+    p.add_argument("--resolution", default=None,
+                   help="mesh resolution: a node count or coarse/medium/fine (default: the body's own, 600 for "
+                   "outlines)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1, loopback only)")
+    p.add_argument("--port", type=int, default=0, help="port (default 0: a free port)")
+    p.add_argument("--no-browser", action="store_true", help="do not open a browser; just print the address")
+    p.add_argument("--out", default="authored", help="folder for saved scene files (default ./authored)")
+    p.set_defaults(func=_cmd)

@@ -1,0 +1,167 @@
+"""Saving an authoring session: a scene file ``mdsr run`` reproduces, figures, meshes and results.
+
+The scene file is JSON in the format :func:`~mdsr_opt.load_scene` reads. Its body is the session's mesh,
+written next to it as ``<name>.mesh.vtu`` (binary float64, so the nodes and their numbering come back
+exactly and node ids stay valid); anchors are node ids; each drag is one node moved ``to`` its exact
+position; routed muscles are node lists (so ``mdsr run`` uses them instead of routing again); routing
+and design options are the ones the page used, the muscle model written out so a changed default cannot
+change the result.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from ..io import write_json, write_mesh
+
+__all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS"]
+
+#: What the page can download: file name -> description.
+DOWNLOADS = {
+    "scene.zip": "the scene file and its mesh (run with mdsr run)",
+    "target.png": "the target with anchors and drags",
+    "graph.png": "the contraction graph of the target",
+    "muscles.png": "the routed muscles",
+    "design.png": "the driven state over the target",
+    "target.vtu": "the target as a mesh (displacements)",
+    "driven.vtu": "the designed, driven state as a mesh",
+    "results.json": "anchors, drags, target, muscles and design as numbers",
+}
+
+
+def scene_dict(session, name: str, mesh_file: str) -> dict:
+    """The scene file's content for ``session`` (body = ``mesh_file``, one external case ``authored``)."""
+    mat = session.material
+    d = {
+        "name": name,
+        "title": f"{name}: authored with mdsr author",
+        "description": f"Authored on the mdsr author page from {session.source or session.name}.",
+        "body": {"mesh": mesh_file},
+        "material": {"model": mat.kind, "E": float(mat.E), "nu": float(mat.nu),
+                     "thickness": float(mat.thickness)},
+    }
+    if session.muscles:
+        d["muscles"] = [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}
+                        for i, m in enumerate(session.muscles)]
+    routing = session.routing_params or session.routing_options
+    if routing:
+        d["routing"] = {k: _plain(v) for k, v in routing.items() if v is not None}
+    design = dict(session.design_params or session.design_options)
+    if session.design is not None:
+        design["muscle_model"] = session.design.muscle_model
+        design["stiffness"] = float(session.design.stiffness)
+        design["a_max"] = float(session.design.a_max)
+        design["method"] = session.design.method
+    if design:
+        d["design"] = {k: _plain(v) for k, v in design.items() if v is not None}
+    case = {"name": "authored", "description": "anchors and drags set on the page"}
+    if len(session.anchors):
+        case["anchors"] = [int(v) for v in session.anchors]
+    if len(session.drag_nodes):
+        case["drags"] = [{"nodes": [int(i)], "to": [float(p[0]), float(p[1])]}
+                         for i, p in zip(session.drag_nodes, session.drag_positions)]
+    d["cases"] = [case]
+    return d
+
+
+def _plain(v):
+    if isinstance(v, (np.floating, np.integer, np.bool_)):
+        return v.item()
+    return v
+
+
+def save_scene(session, folder, name: str | None = None) -> list[str]:
+    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into ``folder``; returns the two paths.
+
+    The file is read back with :func:`~mdsr_opt.load_scene` and compared with the session (mesh, anchors,
+    drags, muscles); a mismatch raises ``RuntimeError`` rather than leaving a scene that would not
+    reproduce the page.
+    """
+    from ..scenes import load_scene
+
+    if len(session.anchors) + len(session.drag_nodes) < 2:
+        raise ValueError("nothing to save yet: a scene's case needs at least two fixed nodes (anchors and drags)")
+    name = name or session.name
+    from ..scenes import Case  # name check: letters, digits, _ - .
+
+    Case(name, anchors=[0, 1])
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    mesh_path = folder / f"{name}.mesh.vtu"
+    scene_path = folder / f"{name}.json"
+    write_mesh(mesh_path, session.mesh)
+    write_json(scene_path, scene_dict(session, name, mesh_path.name))
+    back = load_scene(scene_path)
+    case = back.cases[0]
+    same = (np.array_equal(back.mesh.points, session.mesh.points)
+            and np.array_equal(back.mesh.triangles, session.mesh.triangles)
+            and np.array_equal(np.sort(case.anchors), np.sort(session.anchors))
+            and np.array_equal(case.drag_nodes, session.drag_nodes)
+            and np.array_equal(case.drag_positions, session.drag_positions)
+            and [tuple(m.nodes) for m in (back.muscles or ())] == [tuple(m.nodes) for m in session.muscles])
+    if not same:
+        raise RuntimeError(f"{scene_path} does not read back as the session (please report this)")
+    return [os.fspath(scene_path), os.fspath(mesh_path)]
+
+
+def results_dict(session) -> dict:
+    """Anchors, drags, the shown state, the target, muscles and the design as JSON-ready numbers."""
+    d = {"format": "mdsr_opt.author_results/1", "name": session.name, "n_nodes": session.n_nodes,
+         "anchors": session.anchors.tolist(), "drag_nodes": session.drag_nodes.tolist(),
+         "drag_positions": session.drag_positions.tolist(),
+         "state": None if session.state is None else {k: v for k, v in session.state.to_dict().items()},
+         "target": None if session.target is None else session.target.tolist(),
+         "muscles": [[int(v) for v in m.nodes] for m in session.muscles]}
+    if session.design is not None:
+        d["design"] = session.design_summary()
+    return d
+
+
+def download(session, what: str, tmpdir) -> tuple[bytes, str]:
+    """The bytes and media type of one download (see :data:`DOWNLOADS`); ValueError when not available yet."""
+    from .. import plot
+
+    if what not in DOWNLOADS:
+        raise ValueError(f"unknown download {what!r} (choose from {', '.join(DOWNLOADS)})")
+    tmp = Path(tmpdir)
+    mesh, x = session.mesh, session.target
+    if what == "scene.zip":
+        files = save_scene(session, tmp / "scene")
+        buf = io.BytesIO()
+        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+            for f in files:
+                z.write(f, Path(f).name)
+        return buf.getvalue(), "application/zip"
+    if what == "results.json":
+        path = write_json(tmp / "results.json", results_dict(session))
+        return Path(path).read_bytes(), "application/json"
+    if what == "driven.vtu" or what == "design.png":
+        if session.design is None:
+            raise ValueError(f"{what}: no design yet")
+    elif x is None:
+        raise ValueError(f"{what}: no settled target yet")
+    path = tmp / what
+    if what == "target.vtu":
+        write_mesh(path, mesh, x=x, material=session.material)
+    elif what == "driven.vtu":
+        write_mesh(path, mesh, x=session.design.x_aligned, material=session.material)
+    else:
+        if what == "target.png":
+            fig = plot.plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
+                                   drag_positions=session.drag_positions if len(session.drag_nodes) else None,
+                                   title=f"{session.name}: target")
+        elif what == "graph.png":
+            fig = plot.plot_contraction_graph(mesh, x)
+        elif what == "muscles.png":
+            if not session.muscles:
+                raise ValueError("muscles.png: no muscles yet")
+            fig = plot.plot_routing(mesh, x, session.muscles)
+        else:
+            fig = plot.plot_design(mesh, session.design, x, session.muscles)
+        plot.save_figure(fig, path)
+    return path.read_bytes(), "image/png" if what.endswith(".png") else "application/octet-stream"

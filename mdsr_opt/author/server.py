@@ -1,0 +1,357 @@
+"""The ``mdsr author`` server: a Starlette app (served by uvicorn) with one websocket per page.
+
+The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route``, ``design``, ``save``,
+``ping``); the server answers with ``body``, ``state``, ``graph``, ``routing``, ``design``, ``saved``,
+``pong`` or ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
+a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``). Bad
+input of any kind is answered with an ``error`` message naming the problem, and the server keeps serving.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import math
+import os
+import secrets
+import sys
+import tempfile
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["make_app", "MAX_MESSAGE", "load_body"]
+
+#: Largest websocket message the server reads (bytes of text); larger ones get an error message.
+MAX_MESSAGE = 4 * 1024 * 1024
+STATIC = Path(__file__).with_name("static")
+_SESSIONS: "collections.OrderedDict[str, object]" = collections.OrderedDict()
+_KEEP_SESSIONS = 16
+
+
+# ---------------------------------------------------------------------------------------------- bodies
+def load_body(spec: dict):
+    """A :class:`~mdsr_opt.author.session.Session` from a load request (or the command line's argument).
+
+    ``spec``: ``{"kind": "problem", "name", "resolution"}``, ``{"kind": "path", "path", "resolution"}``
+    (a scene file or outline file on disk), ``{"kind": "scene", "filename", "text"}`` (an uploaded scene
+    file), ``{"kind": "outline", "outline", "holes", "resolution"}`` or ``{"kind": "outline_file",
+    "filename", "text", "resolution"}``.
+    """
+    from .outline import check_outline, parse_outline
+    from .session import MAX_NODES, Session
+
+    kind = spec.get("kind")
+    res = spec.get("resolution")
+    if res not in (None, "") and not isinstance(res, (str, int)) or isinstance(res, bool):
+        raise TypeError(f"resolution must be a node count or coarse/medium/fine, got {res!r}")
+    res = None if res in (None, "") else res
+    if isinstance(res, str) and res.strip().isdigit():
+        res = int(res)
+    if res is not None:
+        from ..scenes import resolve_resolution
+
+        n = resolve_resolution(int(res) if isinstance(res, str) and res.strip().isdigit() else res)
+        if n > MAX_NODES:
+            raise ValueError(f"resolution {n} is above the page's limit of {MAX_NODES} nodes")
+    if kind == "problem":
+        name = spec.get("name")
+        if not isinstance(name, str) or not name or "/" in name or "\\" in name or name.startswith("."):
+            raise ValueError(f"problem name must be a library name, got {name!r}")
+        return Session.from_problem(name, res)
+    if kind == "path":
+        p = Path(str(spec.get("path")))
+        if not p.exists():
+            raise FileNotFoundError(f"no such file: {p}")
+        if p.suffix.lower() == ".svg" or p.suffix.lower() == ".json" and not _is_scene_json(p):
+            outline, holes = parse_outline(p.name, p.read_text())
+            return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
+        if p.suffix.lower() == ".py":
+            from ..scenes import get_problem
+
+            return Session.from_scene(get_problem(p, resolution=res))
+        return Session.from_scene_file(p, res)
+    if kind == "scene":
+        fname, text = _file_fields(spec)
+        suffix = Path(fname).suffix.lower()
+        if suffix not in (".toml", ".json"):
+            raise ValueError(f"a scene file ends in .toml or .json, not {fname!r}")
+        with tempfile.TemporaryDirectory() as d:
+            path = Path(d) / Path(fname).name
+            path.write_text(text)
+            try:
+                return Session.from_scene_file(path, res)
+            except FileNotFoundError as exc:
+                raise ValueError(f"{exc} (a scene with a mesh file: start `mdsr author PATH` instead of "
+                                 "uploading it)") from None
+    if kind == "outline_file":
+        fname, text = _file_fields(spec)
+        outline, holes = parse_outline(fname, text)
+        return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(Path(fname)))
+    if kind == "outline":
+        holes = spec.get("holes") or []
+        if not isinstance(holes, list):
+            raise TypeError("holes must be a list of polygons")
+        outline, holes = check_outline(spec.get("outline"), holes, where="drawn outline")
+        return Session.from_outline(outline, holes, 600 if res is None else res)
+    raise ValueError(f"unknown body kind {kind!r} (problem, path, scene, outline, outline_file)")
+
+
+def _is_scene_json(p: Path) -> bool:
+    try:
+        data = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return True  # let the scene reader name the problem
+    return isinstance(data, dict) and "body" in data
+
+
+def _stem_name(p: Path) -> str:
+    s = "".join(ch if ch.isalnum() or ch in "_-" else "_" for ch in p.stem.split(".")[0])
+    return s or "authored"
+
+
+def _file_fields(spec):
+    fname, text = spec.get("filename"), spec.get("text")
+    if not isinstance(fname, str) or not isinstance(text, str):
+        raise TypeError("a file upload needs 'filename' and 'text' strings")
+    return fname, text
+
+
+def body_message(s) -> dict:
+    from .session import design_defaults
+
+    m = s.mesh
+    ro = dict(s.routing_options)
+    dd = design_defaults()
+    dd.update({k: v for k, v in s.design_options.items() if k in dd})
+    return {"type": "body", "name": s.name, "source": s.source, "n_nodes": m.n_nodes,
+            "points": m.points.tolist(), "triangles": m.triangles.tolist(), "edges": m.edges.tolist(),
+            "boundary": [[int(v) for v in loop] for loop in m.boundary_loops], "size": m.size,
+            "edge_length": float(m.edge_lengths.mean()),
+            "anchors": s.anchors.tolist(), "drag_nodes": s.drag_nodes.tolist(),
+            "drag_positions": s.drag_positions.tolist(),
+            "routing": {"K_a": ro.get("K_a", 10.0), "K_b": ro.get("K_b", 4.0), "max_muscles": ro.get("max_muscles")},
+            "design": {k: (v if isinstance(v, (int, float, str)) else None) for k, v in dd.items()},
+            "material": {"model": s.material.kind, "E": s.material.E, "nu": s.material.nu}}
+
+
+# ---------------------------------------------------------------------------------------------- requests
+def _number(msg, key, lo=None, hi=None, default=None):
+    v = msg.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TypeError(f"{key} must be a number, got {v!r}")
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"{key} must be finite, got {v}")
+    if lo is not None and v <= lo or hi is not None and v >= hi:
+        raise ValueError(f"{key} must lie in ({lo}, {hi}), got {v}")
+    return v
+
+
+def _fixed(session, msg):
+    for k in ("anchors", "drag_nodes", "drag_positions"):
+        if k not in msg:
+            raise ValueError(f"{msg.get('type')} message: missing field {k!r}")
+    session.set_fixed(msg["anchors"], msg["drag_nodes"], msg["drag_positions"])
+
+
+class Page:
+    """One websocket connection: its session, its queue of requests and the worker that serves them."""
+
+    def __init__(self, ws, app_state):
+        self.ws = ws
+        self.app = app_state
+        self.sid = secrets.token_urlsafe(12)
+        self.session = None
+        self.queue: collections.deque = collections.deque()
+        self.wake = asyncio.Event()
+        self.dropped = 0
+        self.tmp = tempfile.TemporaryDirectory(prefix="mdsr-author-")
+
+    async def send(self, obj: dict) -> None:
+        await self.ws.send_text(json.dumps(obj, allow_nan=False, default=_json_default))
+
+    async def error(self, message: str, request=None) -> None:
+        await self.send({"type": "error", "message": message, "request": request})
+
+    def enqueue(self, msg: dict) -> None:
+        if msg.get("type") == "drag" and self.queue and self.queue[-1].get("type") == "drag":
+            self.queue[-1] = msg  # keep only the latest drag: the page moved on
+            self.dropped += 1
+        else:
+            self.queue.append(msg)
+        self.wake.set()
+
+    async def worker(self) -> None:
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            while self.queue:
+                msg = self.queue.popleft()
+                try:
+                    reply = await asyncio.to_thread(self.handle, msg)
+                except (ValueError, TypeError, KeyError, FileNotFoundError, RuntimeError) as exc:
+                    text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+                    await self.error(f"{msg.get('type')}: {text}", msg.get("type"))
+                    continue
+                except Exception as exc:  # never let one request take the server down
+                    traceback.print_exc(file=sys.stderr)
+                    await self.error(f"{msg.get('type')}: internal error {type(exc).__name__}: {exc}",
+                                     msg.get("type"))
+                    continue
+                for r in reply:
+                    await self.send(r)
+
+    def handle(self, msg: dict) -> list[dict]:
+        """Serve one request (in a worker thread); returns the messages to send."""
+        t = msg["type"]
+        if t == "ping":
+            return [{"type": "pong", "n_nodes": None if self.session is None else self.session.n_nodes}]
+        if t == "load":
+            spec = msg.get("body")
+            if not isinstance(spec, dict):
+                raise TypeError("load message: 'body' must be an object")
+            self.session = load_body(spec)
+            _SESSIONS[self.sid] = self.session
+            while len(_SESSIONS) > _KEEP_SESSIONS:
+                _SESSIONS.popitem(last=False)
+            return [body_message(self.session), self._state(self.session.settle(), msg)]
+        s = self.session
+        if s is None:
+            raise ValueError("no body loaded yet")
+        if t in ("fixed", "drag"):
+            _fixed(s, msg)
+            return [self._state(s.drag() if t == "drag" else s.settle(), msg)]
+        if t == "graph":
+            return [{"type": "graph", "weights": s.graph_weights()}]
+        if t == "route":
+            mm = msg.get("max_muscles")
+            if mm is not None and (isinstance(mm, bool) or not isinstance(mm, int) or mm < 1 or mm > 100):
+                raise ValueError(f"max_muscles must be an integer from 1 to 100 (or empty), got {mm!r}")
+            out = s.route(_number(msg, "K_a", lo=0.0, hi=1e6), _number(msg, "K_b", lo=0.0, hi=1e6), mm)
+            return [dict(type="routing", **out)]
+        if t == "design":
+            method, model = msg.get("method"), msg.get("muscle_model")
+            for k, v in (("method", method), ("muscle_model", model)):
+                if v is not None and not isinstance(v, str):
+                    raise TypeError(f"{k} must be a string, got {v!r}")
+            out = s.run_design(method=method, muscle_model=model, a_max=_number(msg, "a_max", 0.0, 1.0))
+            return [dict(type="design", **out)]
+        if t == "save":
+            from .export import save_scene
+
+            name = msg.get("name") or s.name
+            if not isinstance(name, str):
+                raise TypeError(f"save name must be a string, got {name!r}")
+            files = save_scene(s, self.app["out"], name)
+            return [{"type": "saved", "files": [os.path.abspath(f) for f in files],
+                     "download": f"/download/{self.sid}/scene.zip"}]
+        raise ValueError(f"unknown message type {t!r}")
+
+    def _state(self, rep, msg) -> dict:
+        s = self.session
+        d = rep.to_dict()
+        d.update(type="state", seq=msg.get("seq"), dropped=self.dropped, anchors=s.anchors.tolist(),
+                 drag_nodes=s.drag_nodes.tolist(), drag_positions=s.drag_positions.tolist(),
+                 settled=s.target is not None)
+        return d
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    raise TypeError(f"cannot send {type(o).__name__}")
+
+
+def _parse(raw) -> dict:
+    """One websocket frame -> a request dict (ValueError naming what is wrong)."""
+    if raw.get("bytes") is not None:
+        raise ValueError("binary messages are not accepted: send JSON text")
+    text = raw.get("text")
+    if text is None:
+        raise ValueError("empty message")
+    if len(text) > MAX_MESSAGE:
+        raise ValueError(f"message too large: {len(text)} characters (limit {MAX_MESSAGE})")
+    try:
+        msg = json.loads(text, parse_constant=lambda c: float("nan"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"malformed message (not JSON): {exc}") from None
+    if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
+        raise ValueError("malformed message: expected a JSON object with a string 'type'")
+    return msg
+
+
+# ---------------------------------------------------------------------------------------------- the app
+def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
+    """The Starlette application.
+
+    Parameters
+    ----------
+    initial : a :func:`load_body` spec loaded when a page connects (``None``: the page starts empty).
+    out : folder where ``save`` writes scene files.
+    """
+    from starlette.applications import Starlette
+    from starlette.responses import FileResponse, JSONResponse, Response
+    from starlette.routing import Mount, Route, WebSocketRoute
+    from starlette.staticfiles import StaticFiles
+    from starlette.websockets import WebSocketDisconnect
+
+    from ..scenes import list_problems
+    from .export import DOWNLOADS, download
+    from .session import design_defaults
+
+    state = {"out": os.fspath(out), "initial": initial}
+
+    async def index(request):
+        return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def info(request):
+        return JSONResponse({"problems": list_problems(), "downloads": DOWNLOADS,
+                             "design": {k: v for k, v in design_defaults().items()
+                                        if isinstance(v, (int, float, str))},
+                             "max_message": MAX_MESSAGE, "out": os.path.abspath(state["out"])})
+
+    async def get_download(request):
+        sid, what = request.path_params["sid"], request.path_params["what"]
+        s = _SESSIONS.get(sid)
+        if s is None:
+            return JSONResponse({"error": "unknown or expired session"}, status_code=404)
+        try:
+            with tempfile.TemporaryDirectory() as d:
+                data, media = await asyncio.to_thread(download, s, what, d)
+        except (ValueError, TypeError, RuntimeError) as exc:
+            return JSONResponse({"error": str(exc)}, status_code=409)
+        return Response(data, media_type=media,
+                        headers={"Content-Disposition": f'attachment; filename="{s.name}-{what}"'})
+
+    async def ws_endpoint(ws):
+        await ws.accept()
+        page = Page(ws, state)
+        await page.send({"type": "hello", "sid": page.sid})
+        task = asyncio.create_task(page.worker())
+        if state["initial"] is not None:
+            page.enqueue({"type": "load", "body": state["initial"]})
+        try:
+            while True:
+                raw = await ws.receive()
+                if raw.get("type") == "websocket.disconnect":
+                    break
+                try:
+                    msg = _parse(raw)
+                except ValueError as exc:
+                    await page.error(str(exc))
+                    continue
+                page.enqueue(msg)
+        except WebSocketDisconnect:
+            pass
+        finally:
+            task.cancel()
+            page.tmp.cleanup()
+
+    routes = [Route("/", index), Route("/api/info", info), Route("/download/{sid}/{what}", get_download),
+              WebSocketRoute("/ws", ws_endpoint), Mount("/static", StaticFiles(directory=STATIC), name="static")]
+    return Starlette(routes=routes)

@@ -1,0 +1,413 @@
+"""The state of one authoring session: a body, its anchors and drags, the live equilibrium, muscles, design.
+
+Everything numerical goes through the public API: :func:`~mdsr_opt.solve_external` for the equilibria,
+:func:`~mdsr_opt.contraction_graph` and :func:`~mdsr_opt.route_muscles` for the muscles,
+:func:`~mdsr_opt.design_contractions` for the design. The session keeps one mesh for its whole life, so
+:func:`~mdsr_opt.get_model` builds the energy model once and every drag is a repeated solve.
+
+Two kinds of solve:
+
+* **live** (:meth:`Session.drag`): while the mouse moves, start from the last shown state moved by one
+  Newton predictor step toward the new drag positions, and call ``solve_external`` with that state as its
+  first guess and no load stepping. This is a few Newton iterations. When the predictor inverts an element
+  or the solve fails, fall back to the settled solve below.
+* **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
+  defaults, exactly what ``mdsr run`` solves for the saved scene's target. A released drag is settled.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from ..design import design_contractions
+from ..equilibrium import solve_external
+from ..mesh import Mesh
+from ..model import get_model
+from ..routing import RoutingWarning, contraction_graph, route_muscles
+from ..scenes import Scene, get_problem, load_scene, mesh_polygon, resolve_resolution, seeds_for
+
+__all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
+
+#: Largest mesh the page will build (node count), to keep a typo from freezing the server.
+MAX_NODES = 20000
+#: Coordinates farther than this many body sizes from the body are refused.
+FAR = 1e3
+
+
+def design_defaults() -> dict:
+    """The keyword defaults of :func:`~mdsr_opt.design_contractions` the page offers (read, not copied)."""
+    sig = inspect.signature(design_contractions).parameters
+    return {k: sig[k].default for k in ("method", "a_max", "muscle_model", "stiffness")}
+
+
+@dataclass
+class SolveReport:
+    """One equilibrium as the page shows it.
+
+    Attributes
+    ----------
+    x : (n, 2) state (the last accepted one if the solve failed).
+    success, status, iterations, residual, min_J : from the solve.
+    crossing : the boundary crosses itself (shown, never hidden).
+    inverted : indices of triangles with ``det F <= 0``.
+    live : a warm-started drag solve (``False``: the plain ``solve_external`` call).
+    warm_failed : the warm start was tried and a plain solve had to take over.
+    solve_time : seconds spent in this request on the server.
+    build_time : seconds ``solve_external`` spent building the model or solver (0 when reused).
+    """
+
+    x: np.ndarray
+    success: bool
+    status: str
+    iterations: int
+    residual: float
+    min_J: float
+    crossing: bool
+    inverted: list
+    live: bool
+    warm_failed: bool = False
+    solve_time: float = 0.0
+    build_time: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {"x": self.x.tolist(), "success": self.success, "status": self.status,
+                "iterations": self.iterations, "residual": _num(self.residual), "min_J": _num(self.min_J),
+                "crossing": self.crossing, "inverted": self.inverted, "live": self.live,
+                "warm_failed": self.warm_failed, "solve_time": self.solve_time,
+                "build_time": self.build_time}
+
+
+def _num(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+@dataclass
+class Session:
+    """A body with the user's anchors, drags, muscles and design.
+
+    Build one with :meth:`from_problem`, :meth:`from_scene_file` or :meth:`from_outline`.
+    """
+
+    name: str
+    mesh: Mesh
+    material: object
+    source: str = ""
+    outline: list | None = None
+    holes: list = field(default_factory=list)
+    resolution: int = 0
+    routing_options: dict = field(default_factory=dict)
+    design_options: dict = field(default_factory=dict)
+    anchors: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    drag_nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    drag_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    state: SolveReport | None = None
+    target: np.ndarray | None = None  # the last settled, successful equilibrium
+    routing: object = None
+    routing_params: dict = field(default_factory=dict)
+    muscles: tuple = ()
+    design: object = None
+    design_params: dict = field(default_factory=dict)
+    log: list = field(default_factory=list)
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_scene(cls, scene: Scene, case: str | None = None) -> "Session":
+        """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
+        s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
+                resolution=scene.resolution, routing_options=dict(scene.routing_options),
+                design_options=dict(scene.design_options))
+        ext = [c for c in scene.cases if c.kind == "external"]
+        if case is not None:
+            ext = [scene.case(case)]
+        if ext and ext[0].kind == "external":
+            s.anchors = ext[0].anchors.copy()
+            s.drag_nodes = ext[0].drag_nodes.copy()
+            s.drag_positions = ext[0].drag_positions.copy()
+        return s
+
+    @classmethod
+    def from_problem(cls, name: str, resolution: str | int | None = None) -> "Session":
+        """A library problem (see :func:`~mdsr_opt.list_problems`) at ``resolution``."""
+        return cls.from_scene(get_problem(name, resolution=_resolution(resolution)))
+
+    @classmethod
+    def from_scene_file(cls, path, resolution: str | int | None = None) -> "Session":
+        """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it."""
+        return cls.from_scene(load_scene(path, resolution=_resolution(resolution)))
+
+    @classmethod
+    def from_outline(cls, outline, holes=(), resolution: str | int = 600, name: str = "authored",
+                     material=None) -> "Session":
+        """A polygon (with holes) meshed with about ``resolution`` nodes; Neo-Hookean E = 1, nu = 0.3."""
+        from ..material import NeoHookean
+
+        n = resolve_resolution(_resolution(resolution))
+        if n > MAX_NODES:
+            raise ValueError(f"resolution {n} is above the page's limit of {MAX_NODES} nodes")
+        out = np.asarray(outline, dtype=float)
+        hs = [np.asarray(h, dtype=float) for h in holes]
+        for what, p in [("outline", out)] + [(f"hole {i + 1}", h) for i, h in enumerate(hs)]:
+            if p.ndim != 2 or p.shape[1] != 2 or not np.all(np.isfinite(p)):
+                raise ValueError(f"{what}: expected finite [x, y] points")
+        mesh = mesh_polygon(out, hs, resolution=n)
+        return cls(name=name, mesh=mesh, material=material or NeoHookean(1.0, 0.3), source="outline",
+                   outline=out.tolist(), holes=[h.tolist() for h in hs], resolution=n)
+
+    # ------------------------------------------------------------------ checks
+    @property
+    def n_nodes(self) -> int:
+        return self.mesh.n_nodes
+
+    def check_nodes(self, nodes, what: str) -> np.ndarray:
+        """Node ids as an int array; ValueError naming ``what`` for non-integers or ids out of range."""
+        if not isinstance(nodes, (list, tuple, np.ndarray)):
+            raise TypeError(f"{what}: expected a list of node ids, got {type(nodes).__name__}")
+        out = []
+        for v in nodes:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"{what}: node id {v!r} is not an integer")
+            if not 0 <= int(v) < self.n_nodes:
+                raise ValueError(f"{what}: node id {int(v)} out of range [0, {self.n_nodes})")
+            out.append(int(v))
+        idx = np.asarray(out, dtype=np.int64)
+        if len(np.unique(idx)) != len(idx):
+            raise ValueError(f"{what}: a node id is repeated")
+        return idx
+
+    def check_points(self, pts, what: str) -> np.ndarray:
+        """(k, 2) finite coordinates within ``FAR`` body sizes of the body."""
+        try:
+            a = np.asarray(pts, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"{what}: expected [x, y] number pairs") from None
+        if a.size == 0:
+            return np.zeros((0, 2))
+        if a.ndim != 2 or a.shape[1] != 2:
+            raise ValueError(f"{what}: expected [x, y] pairs, got shape {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{what}: coordinates must be finite numbers (got NaN or infinity)")
+        c = self.mesh.points.mean(0)
+        far = np.abs(a - c).max()
+        if far > FAR * self.mesh.size:
+            raise ValueError(f"{what}: coordinate {far:.3g} away from the body is too large "
+                             f"(limit {FAR:g} body sizes = {FAR * self.mesh.size:.3g})")
+        return a
+
+    def set_fixed(self, anchors, drag_nodes, drag_positions) -> None:
+        """Replace anchors and drags (checked: ids in range, finite and bounded positions, no overlap)."""
+        anc = self.check_nodes(anchors, "anchors")
+        dn = self.check_nodes(drag_nodes, "drag nodes")
+        dp = self.check_points(drag_positions, "drag positions")
+        if len(dp) != len(dn):
+            raise ValueError(f"drag positions: {len(dp)} for {len(dn)} drag nodes")
+        both = np.intersect1d(anc, dn)
+        if len(both):
+            raise ValueError(f"node {int(both[0])} is both anchored and dragged")
+        self.anchors, self.drag_nodes, self.drag_positions = anc, dn, dp
+
+    # ------------------------------------------------------------------ solves
+    def _ready(self) -> str | None:
+        if len(self.anchors) + len(self.drag_nodes) < 2:
+            return "mark at least two fixed nodes (anchors and drag nodes) to solve"
+        return None
+
+    def _report(self, res, live: bool, warm_failed: bool, t0: float) -> SolveReport:
+        if res.success:  # solve_external accepts no inverted element and no self-crossing boundary
+            crossing, inverted = False, []
+        else:
+            crossing = bool(self.mesh.boundary_crosses(res.x))
+            inverted = np.flatnonzero(self.mesh.jacobians(res.x) <= 0).tolist()
+        return SolveReport(x=res.x.copy(), success=bool(res.success), status=str(res.status),
+                           iterations=int(res.iterations), residual=float(res.residual),
+                           min_J=float(res.min_J), crossing=crossing, inverted=inverted,
+                           live=live, warm_failed=warm_failed, solve_time=time.perf_counter() - t0,
+                           build_time=float(res.build_time))
+
+    def _rest_report(self, why: str) -> SolveReport:
+        return SolveReport(x=self.mesh.points.copy(), success=False, status=why, iterations=0, residual=0.0,
+                           min_J=1.0, crossing=False, inverted=[], live=False)
+
+    def settle(self) -> SolveReport:
+        """``solve_external`` with the session's anchors and drags and its defaults (the scene's target)."""
+        t0 = time.perf_counter()
+        why = self._ready()
+        if why:
+            self.state = self._rest_report(why)
+            return self.state
+        res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions))
+        self.state = self._report(res, live=False, warm_failed=False, t0=t0)
+        self.target = res.x.copy() if res.success else None
+        return self.state
+
+    def drag(self) -> SolveReport:
+        """A live solve: warm start from the shown state via a predictor step; settle on failure.
+
+        The predictor reuses the tangent stiffness factored at an earlier state of the same drag (a chord
+        step), refreshed every few updates and whenever the step fails; the shown state is an equilibrium,
+        so its free gradient is zero and the step is ``-K_ff^-1 K_fc dx_fixed``.
+        """
+        t0 = time.perf_counter()
+        if self._ready():
+            return self.settle()
+        prev = self.state
+        if prev is None or not prev.success:
+            return self._cold(t0)
+        for fresh in (False, True):
+            guess = self._predict(prev.x, fresh)
+            if guess is None:
+                continue
+            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
+                                 initial_guess=guess, min_step=1.0)
+            if res.success:
+                self.state = self._report(res, live=True, warm_failed=False, t0=t0)
+                self.target = None  # a live state is not the settled target until the drag is released
+                return self.state
+        return self._cold(t0)
+
+    def _cold(self, t0: float) -> SolveReport:
+        rep = self.settle()
+        rep.warm_failed = True
+        rep.solve_time = time.perf_counter() - t0
+        return rep
+
+    #: Live updates before the chord predictor's tangent is refactored at the current state.
+    REFRESH = 6
+
+    def _tangent(self, x: np.ndarray, fixed: np.ndarray, fresh: bool):
+        key = fixed.tobytes()
+        c = self.__dict__.get("_chord")
+        if fresh or c is None or c[0] != key or c[3] >= self.REFRESH:
+            model = get_model(self.mesh, self.material)
+            H = model.hessian(x.reshape(-1), model.params(self.material)).tocsc()
+            free = ~fixed
+            try:
+                lu = spla.splu(H[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                               options={"SymmetricMode": True})
+            except RuntimeError:  # singular: e.g. a free island of nodes
+                self.__dict__.pop("_chord", None)
+                return None
+            c = [key, lu, H[free][:, fixed].tocsr(), 0]
+            self.__dict__["_chord"] = c
+        c[3] += 1
+        return c[1], c[2]
+
+    def _predict(self, x: np.ndarray, fresh: bool = False) -> np.ndarray | None:
+        """Chord step from the equilibrium ``x`` with the fixed nodes moved to their prescribed positions
+        (None when the step inverts an element or the free block is singular)."""
+        n = self.n_nodes
+        nodes = np.concatenate([self.anchors, self.drag_nodes])
+        vals = np.vstack([self.mesh.points[self.anchors], self.drag_positions])
+        fixed = np.zeros((n, 2), dtype=bool)
+        fixed[nodes] = True
+        fixed = fixed.reshape(-1)
+        t = self._tangent(x, fixed, fresh)
+        if t is None:
+            return None
+        lu, Hfc = t
+        move = np.zeros((n, 2))
+        move[nodes] = vals - x[nodes]
+        dz = lu.solve(-(Hfc @ move.reshape(-1)[fixed]))
+        if not np.all(np.isfinite(dz)):
+            return None
+        y = x.reshape(-1) + move.reshape(-1)
+        y[~fixed] += dz
+        y = y.reshape(-1, 2)
+        return y if self.mesh.jacobians(y).min() > 0 else None
+
+    # ------------------------------------------------------------------ muscles and design
+    def _need_target(self) -> np.ndarray:
+        if self.target is None:
+            raise ValueError("no settled target yet: mark anchors and drags and let the solve succeed "
+                             "(release the drag) first")
+        return self.target
+
+    def graph_weights(self) -> list:
+        """Contraction-graph weights of the target, one per ``mesh.edges`` row."""
+        G = contraction_graph(self.mesh, self._need_target())
+        return [float(G.edges[int(a), int(b)]["weight"]) for a, b in self.mesh.edges]
+
+    def route(self, K_a: float, K_b: float, max_muscles: int | None) -> dict:
+        """Route muscles on the target with these knobs (the scene's other routing options kept)."""
+        import warnings
+
+        target = self._need_target()
+        opts = dict(self.routing_options)
+        opts.setdefault("n_seeds", seeds_for(self.mesh))
+        opts.update(K_a=float(K_a), K_b=float(K_b), max_muscles=max_muscles)
+        if max_muscles is None:
+            opts.pop("max_muscles")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RoutingWarning)
+            rr = route_muscles(self.mesh, target, **opts)
+        self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
+        self.routed_target = target.copy()
+        return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in rr.muscles],
+                "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
+                           "nonuniformity": s.nonuniformity} for s in rr.stats],
+                "n_units": rr.n_units, "params": {k: v for k, v in opts.items()},
+                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]}
+
+    def run_design(self, **params) -> dict:
+        """Design the contractions of the routed muscles for the target (``params``: method, a_max,
+        muscle_model, stiffness; the rest of the scene's design options kept)."""
+        target = self._need_target()
+        if not self.muscles:
+            raise ValueError("no muscles yet: route muscles first")
+        if not np.array_equal(getattr(self, "routed_target", None), target):
+            raise ValueError("the target changed since the muscles were routed: route again")
+        opts = dict(self.design_options)
+        opts.update({k: v for k, v in params.items() if v is not None})
+        res = design_contractions(self.mesh, self.material, self.muscles, target, **opts)
+        self.design, self.design_params = res, opts
+        return self.design_summary()
+
+    def design_summary(self) -> dict:
+        """The design as the page shows it: per-muscle contraction, achieved contraction, stroke, tension."""
+        res = self.design
+        target = self.target
+        xd = res.x_aligned
+        rows = []
+        for i, m in enumerate(self.muscles):
+            nodes = np.asarray(m.nodes)
+            L0 = _path_length(self.mesh.points[nodes])
+            Lt = _path_length(target[nodes])
+            Ld = _path_length(xd[nodes])
+            row = {"name": m.name, "contraction": float(res.contractions[i]), "rest_length": L0,
+                   "target_length": Lt, "driven_length": Ld, "achieved_geometric": 1.0 - Ld / L0,
+                   "stroke_geometric": L0 - Ld}
+            for k in ("achieved", "stroke", "tension"):  # per-muscle fields of newer results, when present
+                v = getattr(res, k, None)
+                if v is not None:
+                    try:
+                        row[k] = float(np.asarray(v, dtype=float).reshape(-1)[i])
+                    except (TypeError, ValueError, IndexError):
+                        pass
+            rows.append(row)
+        dist = np.linalg.norm(xd - target, axis=1)
+        return {"method": res.method, "success": bool(res.success), "status": str(res.status),
+                "contractions": [float(a) for a in res.contractions], "difference": _num(res.difference),
+                "relative_difference": _num(res.difference / self.mesh.size),
+                "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
+                "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params)}
+
+
+def _path_length(p: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def _jsonable(d: dict) -> dict:
+    return {k: (v if isinstance(v, (str, int, float, bool, type(None))) else str(v)) for k, v in d.items()}
+
+
+def _resolution(resolution):
+    """Accept the page's strings for numbers ("600") as well as names and ints."""
+    if isinstance(resolution, str) and resolution.strip().isdigit():
+        return int(resolution)
+    return resolution

@@ -1,0 +1,510 @@
+// mdsr author: the page. Talks to the server over one websocket; all numbers come from the server.
+"use strict";
+(function () {
+  const $ = (id) => document.getElementById(id);
+  const canvas = $("canvas");
+  const ctx = canvas.getContext("2d");
+  const MUSCLE_COLORS = ["#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2", "#bcbd22"];
+  const GROUP_COLORS = ["#e4572e", "#7b2cbf", "#0a9396", "#c9184a", "#f4a261"];
+
+  // ------------------------------------------------------------------ page state
+  const S = {
+    ws: null, sid: null, info: null,
+    body: null,            // {points, triangles, edges, boundary, size, ...}
+    state: null,           // last state message from the server
+    anchors: new Set(),
+    handles: new Map(),    // node -> {group, pos: [x, y]}
+    group: 0,
+    graph: null, routing: null, design: null, saved: null,
+    nLive: 0, seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
+    view: { s: 1, ox: 0, oy: 0 },
+    pointer: null, op: null, pivot: null,
+    draw: null,            // {polys: [[...], ...], cur: [[x, y], ...]}
+  };
+
+  // ------------------------------------------------------------------ websocket
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const ws = new WebSocket(`${proto}://${location.host}/ws`);
+    S.ws = ws;
+    ws.onmessage = (ev) => onMessage(JSON.parse(ev.data));
+    ws.onclose = (ev) => {
+      status(`connection closed (${ev.code}${ev.reason ? ": " + ev.reason : ""}); reconnecting...`);
+      if (ev.code === 1009) showError("the last message was too large for the server and was refused");
+      setTimeout(connect, 1000);
+    };
+  }
+
+  function send(msg) {
+    const text = JSON.stringify(msg);
+    const limit = S.info ? S.info.max_message : 4 * 1024 * 1024;
+    if (text.length > limit) { showError(`message too large (${text.length} characters, limit ${limit})`); return false; }
+    if (!S.ws || S.ws.readyState !== 1) { showError("not connected to the server"); return false; }
+    S.ws.send(text);
+    return true;
+  }
+
+  function fixedPayload(type) {
+    const nodes = [...S.handles.keys()];
+    return { type, seq: ++S.seq, anchors: [...S.anchors], drag_nodes: nodes,
+             drag_positions: nodes.map((i) => S.handles.get(i).pos) };
+  }
+
+  function request(type) {           // "fixed" (settled solve) or "drag" (live solve)
+    if (!S.body) return;
+    if (type === "drag" && S.inflight !== null) { S.pendingDrag = true; return; }  // keep only the latest
+    const msg = fixedPayload(type);
+    S.sentAt[msg.seq] = performance.now();
+    S.inflight = msg.seq;
+    S.pendingDrag = false;
+    send(msg);
+  }
+
+  function onMessage(m) {
+    if (m.type === "hello") { S.sid = m.sid; status("connected"); return; }
+    if (m.type === "error") { showError(m.message); S.inflight = null; if (S.pendingDrag) request("drag"); render(); return; }
+    if (m.type === "pong") { S.pong = m; return; }
+    if (m.type === "body") return onBody(m);
+    if (m.type === "state") return onState(m);
+    if (m.type === "graph") { S.graph = m.weights; render(); return; }
+    if (m.type === "routing") { S.routing = m; S.design = null; S.graph = null; for (const w of m.warnings) showError(w); updateTable(); render(); return; }
+    if (m.type === "design") { S.design = m; if (!m.success) showError(`design not verified: ${m.status}`); updateTable(); render(); return; }
+    if (m.type === "saved") { S.saved = m; $("saved").textContent = "saved: " + m.files.join(", "); return; }
+  }
+
+  function onBody(m) {
+    S.body = m; S.graph = null; S.routing = null; S.design = null; S.saved = null; S.draw = null; S.pivot = null;
+    S.anchors = new Set(m.anchors);
+    S.handles = new Map();
+    m.drag_nodes.forEach((i, k) => S.handles.set(i, { group: 0, pos: m.drag_positions[k] }));
+    S.group = 0;
+    $("K_a").value = m.routing.K_a; $("K_b").value = m.routing.K_b;
+    $("max_muscles").value = m.routing.max_muscles == null ? "" : m.routing.max_muscles;
+    if (m.design.a_max != null) $("a_max").value = m.design.a_max;
+    if (m.design.method) setSelect("method", m.design.method);
+    if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
+    $("save-name").value = m.name;
+    if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
+    $("saved").textContent = "";
+    updateTable(); drawButtons(); updateDownloads();
+    fit(m.points.concat(m.drag_positions));
+    S.needFit = true;
+  }
+
+  function onState(m) {
+    const t0 = S.sentAt[m.seq];
+    if (t0 !== undefined) { S.rtts.push([performance.now(), performance.now() - t0]); delete S.sentAt[m.seq]; }
+    if (S.rtts.length > 40) S.rtts.shift();
+    S.state = m;
+    if (S.needFit && m.x) { fit(S.body.points.concat(m.x, m.drag_positions)); S.needFit = false; }
+    if (m.live) S.nLive += 1;
+    if (m.seq == null || m.seq === S.inflight) S.inflight = null;
+    // the server's fixed sets are what was solved; take them when no local edit is in progress
+    if (!S.op) {
+      S.anchors = new Set(m.anchors);
+      const old = S.handles; S.handles = new Map();
+      m.drag_nodes.forEach((i, k) => S.handles.set(i, { group: old.has(i) ? old.get(i).group : 0, pos: m.drag_positions[k] }));
+    }
+    if (S.routing && !m.live) { /* a new settled target invalidates muscles routed on the old one */ }
+    if (S.pendingDrag && S.op) request("drag");
+    else if (S.pendingDrag) { S.pendingDrag = false; }
+    updateStatus(); updateDownloads(); render();
+  }
+
+  // ------------------------------------------------------------------ messages and status
+  function showError(text) {
+    S.lastError = text; S.errors.push(text);
+    const box = document.createElement("div");
+    box.className = "error";
+    box.textContent = text;
+    const x = document.createElement("button"); x.textContent = "\u00d7"; x.onclick = () => box.remove();
+    box.appendChild(x);
+    $("errors").prepend(box);
+    setTimeout(() => box.remove(), 20000);
+    while ($("errors").children.length > 4) $("errors").lastChild.remove();
+  }
+  function setSelect(id, v) {  // a value the page does not list yet (a newer default) is added, not dropped
+    const sel = $(id);
+    if (![...sel.options].some((o) => o.value === v)) { const o = document.createElement("option"); o.textContent = v; sel.appendChild(o); }
+    sel.value = v;
+  }
+  function status(t) { $("status").textContent = t; }
+
+  function updateStatus() {
+    const m = S.state; if (!m) return;
+    const now = performance.now();
+    const recent = S.rtts.filter(([t]) => now - t < 3000);
+    const rtt = recent.length ? recent[recent.length - 1][1] : NaN;
+    const rate = recent.length > 1 ? (recent.length - 1) / ((recent[recent.length - 1][0] - recent[0][0]) / 1000) : NaN;
+    const bits = [
+      `${S.body.name}: ${S.body.n_nodes} nodes`,
+      m.success ? (m.live ? "live" : "settled") : "NOT SOLVED",
+      `${m.iterations} it`, `solve ${(1000 * m.solve_time).toFixed(0)} ms`,
+      isNaN(rtt) ? "" : `round trip ${rtt.toFixed(0)} ms`, isNaN(rate) ? "" : `${rate.toFixed(1)} updates/s`,
+      `min J ${m.min_J == null ? "-" : m.min_J.toFixed(3)}`, m.dropped ? `${m.dropped} stale drags dropped` : "",
+      m.success ? "" : m.status,
+    ];
+    status(bits.filter(Boolean).join(" | "));
+    const warn = [];
+    if (!m.success) warn.push(`not an equilibrium: ${m.status}`);
+    if (m.inverted.length) warn.push(`${m.inverted.length} inverted triangle(s)`);
+    if (m.crossing) warn.push("the boundary crosses itself");
+    $("banner").hidden = warn.length === 0;
+    $("banner").textContent = warn.join("; ");
+  }
+
+  function updateTable() {
+    const t = $("muscle-table");
+    t.innerHTML = "";
+    const rows = S.design ? S.design.muscles : (S.routing ? S.routing.stats.map((s) => ({ name: s.name, geo: s.contraction })) : []);
+    if (!rows.length) return;
+    const has = (k) => rows.some((r) => r[k] !== undefined);
+    const cols = S.design
+      ? [["contraction", "a"], [has("achieved") ? "achieved" : "achieved_geometric", "achieved"],
+         [has("stroke") ? "stroke" : "stroke_geometric", "stroke"]].concat(has("tension") ? [["tension", "tension"]] : [])
+      : [["geo", "target contraction"]];
+    const head = document.createElement("tr");
+    head.innerHTML = "<th>muscle</th>" + cols.map((c) => `<th>${c[1]}</th>`).join("");
+    t.appendChild(head);
+    rows.forEach((r, i) => {
+      const tr = document.createElement("tr");
+      const sw = `<span class="swatch" style="background:${MUSCLE_COLORS[i % MUSCLE_COLORS.length]}"></span>`;
+      tr.innerHTML = `<td>${sw}${r.name}</td>` + cols.map((c) => `<td>${r[c[0]] == null ? "-" : r[c[0]].toFixed(4)}</td>`).join("");
+      t.appendChild(tr);
+    });
+    if (S.design) {
+      const tr = document.createElement("tr");
+      const d = S.design.difference;
+      tr.innerHTML = `<td colspan="${cols.length + 1}">difference ${d == null ? "-" : d.toExponential(3)} ` +
+        `(${S.design.relative_difference == null ? "-" : (100 * S.design.relative_difference).toFixed(2)} % of size), ` +
+        `${S.design.success ? "verified" : "NOT verified"}</td>`;
+      t.appendChild(tr);
+    }
+  }
+
+  function updateDownloads() {
+    const box = $("downloads");
+    box.innerHTML = "";
+    if (!S.info || !S.sid || !S.body) return;
+    for (const [name, what] of Object.entries(S.info.downloads)) {
+      const a = document.createElement("a");
+      a.href = `/download/${S.sid}/${name}`; a.textContent = name; a.title = what; a.download = "";
+      box.appendChild(a);
+    }
+  }
+
+  // ------------------------------------------------------------------ geometry
+  function shown() { return S.state && S.state.x ? S.state.x : (S.body ? S.body.points : []); }
+  function fit(pts) {
+    const r = canvas.getBoundingClientRect();
+    let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
+    for (const [x, y] of pts) { x0 = Math.min(x0, x); y0 = Math.min(y0, y); x1 = Math.max(x1, x); y1 = Math.max(y1, y); }
+    if (!isFinite(x0)) { x0 = 0; y0 = 0; x1 = 10; y1 = 6; }
+    const w = Math.max(x1 - x0, 1e-9), h = Math.max(y1 - y0, 1e-9);
+    const s = 0.8 * Math.min(r.width / w, r.height / h);
+    S.view = { s, ox: r.width / 2 - s * (x0 + x1) / 2, oy: r.height / 2 + s * (y0 + y1) / 2 };
+  }
+  const toScreen = (p) => [S.view.ox + S.view.s * p[0], S.view.oy - S.view.s * p[1]];
+  const toWorld = (q) => [(q[0] - S.view.ox) / S.view.s, (S.view.oy - q[1]) / S.view.s];
+  function nodesNear(q, radius) {
+    const x = shown(), out = [];
+    for (let i = 0; i < x.length; i++) {
+      const p = toScreen(x[i]);
+      if (Math.hypot(p[0] - q[0], p[1] - q[1]) <= radius) out.push(i);
+    }
+    return out;
+  }
+  function nearestNode(q, maxPx, among) {
+    const x = shown(); let best = -1, bd = maxPx;
+    const ids = among || x.keys();
+    for (const i of ids) {
+      const p = toScreen(among ? S.handles.get(i).pos : x[i]);
+      const d = Math.hypot(p[0] - q[0], p[1] - q[1]);
+      if (d <= bd) { bd = d; best = i; }
+    }
+    return best;
+  }
+
+  // ------------------------------------------------------------------ drawing
+  function resize() {
+    const r = canvas.getBoundingClientRect(), dpr = window.devicePixelRatio || 1;
+    canvas.width = Math.round(r.width * dpr); canvas.height = Math.round(r.height * dpr);
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  }
+  function path(x, loop) {
+    ctx.beginPath();
+    loop.forEach((v, k) => { const p = toScreen(x[v]); k ? ctx.lineTo(p[0], p[1]) : ctx.moveTo(p[0], p[1]); });
+    ctx.closePath();
+  }
+  function drawMesh(x, fill, stroke, alpha, triColor) {
+    const T = S.body.triangles;
+    ctx.globalAlpha = alpha;
+    for (let k = 0; k < T.length; k++) {
+      const [a, b, c] = T[k], pa = toScreen(x[a]), pb = toScreen(x[b]), pc = toScreen(x[c]);
+      ctx.beginPath(); ctx.moveTo(pa[0], pa[1]); ctx.lineTo(pb[0], pb[1]); ctx.lineTo(pc[0], pc[1]); ctx.closePath();
+      ctx.fillStyle = triColor ? triColor(k) : fill; ctx.fill();
+      if (stroke) { ctx.strokeStyle = stroke; ctx.lineWidth = 0.5; ctx.stroke(); }
+    }
+    ctx.globalAlpha = 1;
+  }
+  function coolwarm(t) {  // t in [-1, 1]: blue (elongation) .. grey .. red (contraction)
+    t = Math.max(-1, Math.min(1, t));
+    const c = t > 0 ? [214, 39, 40] : [31, 119, 180], g = [200, 200, 200], a = Math.abs(t);
+    return `rgb(${c.map((v, i) => Math.round(g[i] + a * (v - g[i]))).join(",")})`;
+  }
+  function ramp(t) {  // 0..1: pale yellow to dark red
+    t = Math.max(0, Math.min(1, t));
+    return `rgb(${Math.round(255 - 80 * t)},${Math.round(240 - 200 * t)},${Math.round(160 - 140 * t)})`;
+  }
+  function drawMuscles(x, muscles, lw) {
+    muscles.forEach((m, i) => {
+      ctx.beginPath();
+      m.nodes.forEach((v, k) => { const p = toScreen(x[v]); k ? ctx.lineTo(p[0], p[1]) : ctx.moveTo(p[0], p[1]); });
+      ctx.strokeStyle = MUSCLE_COLORS[i % MUSCLE_COLORS.length]; ctx.lineWidth = lw; ctx.stroke();
+    });
+  }
+
+  function legend(view) {
+    const items = [["#b9d0ea", "target (shown state)", "fill"], ["#9aa5b1", "rest outline (dashed)", "dash"],
+                   ["#111", "anchor", "square"], [GROUP_COLORS[0], "drag node", "dot"]];
+    if (S.routing) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
+    if (S.design && view === "overlay") items.push(["#f4a261", "driven by the design (aligned)", "fill"]);
+    if (S.graph && $("show-graph").checked) items.push(["#d62728", "contracted edge", "line"], ["#1f77b4", "elongated edge", "line"]);
+    if (S.design && view === "difference") items.push(["rgb(175,40,20)", "far from target", "fill"]);
+    ctx.font = "12px system-ui, sans-serif";
+    items.forEach(([c, t, kind], k) => {
+      const y = 16 + 17 * k;
+      ctx.fillStyle = c; ctx.strokeStyle = c; ctx.lineWidth = 2;
+      if (kind === "fill") ctx.fillRect(10, y - 9, 14, 10);
+      else if (kind === "square") ctx.fillRect(13, y - 7, 6, 6);
+      else if (kind === "dot") { ctx.beginPath(); ctx.arc(17, y - 4, 4, 0, 2 * Math.PI); ctx.fill(); }
+      else { ctx.setLineDash(kind === "dash" ? [4, 3] : []); ctx.beginPath(); ctx.moveTo(10, y - 4); ctx.lineTo(24, y - 4); ctx.stroke(); ctx.setLineDash([]); }
+      ctx.fillStyle = "#1d2733"; ctx.fillText(t, 30, y);
+    });
+  }
+
+  function render() {
+    const r = canvas.getBoundingClientRect();
+    ctx.clearRect(0, 0, r.width, r.height);
+    if (S.body) {
+      const B = S.body, x = shown(), st = S.state;
+      for (const loop of B.boundary) { path(B.points, loop); ctx.strokeStyle = "#c3cad3"; ctx.setLineDash([4, 3]); ctx.lineWidth = 1; ctx.stroke(); ctx.setLineDash([]); }
+      const view = document.querySelector("input[name=view]:checked").value;
+      const inv = new Set(st ? st.inverted : []);
+      if (S.design && view === "difference") {
+        const d = S.design.node_distance, dmax = Math.max(...d, 1e-30);
+        drawMesh(x, null, null, 1, (k) => { const [a, b, c] = B.triangles[k]; return ramp((d[a] + d[b] + d[c]) / 3 / dmax); });
+        ctx.fillStyle = "#333"; ctx.fillText(`node distance driven-target: max ${dmax.toExponential(2)}`, 10, r.height - 10);
+      } else {
+        drawMesh(x, "#b9d0ea", S.graph ? null : "#5b7ea6", 0.9, inv.size ? (k) => (inv.has(k) ? "#d62728" : "#b9d0ea") : null);
+      }
+      if (S.graph && $("show-graph").checked) {
+        const wmax = Math.max(...S.graph.map(Math.abs), 1e-30);
+        B.edges.forEach(([a, b], k) => {
+          const pa = toScreen(x[a]), pb = toScreen(x[b]);
+          ctx.beginPath(); ctx.moveTo(pa[0], pa[1]); ctx.lineTo(pb[0], pb[1]);
+          ctx.strokeStyle = coolwarm(S.graph[k] / wmax); ctx.lineWidth = 1 + 2 * Math.max(0, S.graph[k] / wmax); ctx.stroke();
+        });
+      }
+      for (const loop of B.boundary) { path(x, loop); ctx.strokeStyle = st && st.crossing ? "#d62728" : "#23415f"; ctx.lineWidth = st && st.crossing ? 3 : 1.5; ctx.stroke(); }
+      if (S.design && view === "overlay") {
+        const xd = S.design.x_aligned;
+        drawMesh(xd, "#f4a261", null, 0.35);
+        for (const loop of B.boundary) { path(xd, loop); ctx.strokeStyle = "#c2410c"; ctx.lineWidth = 1.5; ctx.stroke(); }
+      }
+      if (S.routing) drawMuscles(S.design && view === "overlay" ? S.design.x_aligned : x, S.routing.muscles, 3);
+      ctx.fillStyle = "#111";
+      for (const i of S.anchors) { const p = toScreen(B.points[i]); ctx.fillRect(p[0] - 3, p[1] - 3, 6, 6); }
+      const groups = new Map();
+      for (const [i, h] of S.handles) {
+        if (!groups.has(h.group)) groups.set(h.group, { rest: [0, 0], to: [0, 0], n: 0 });
+        const g = groups.get(h.group); g.n += 1;
+        g.rest[0] += B.points[i][0]; g.rest[1] += B.points[i][1]; g.to[0] += h.pos[0]; g.to[1] += h.pos[1];
+      }
+      for (const [k, g] of groups) {  // one arrow per group: rest centroid -> where it is dragged
+        const a = toScreen([g.rest[0] / g.n, g.rest[1] / g.n]), b = toScreen([g.to[0] / g.n, g.to[1] / g.n]);
+        ctx.strokeStyle = GROUP_COLORS[k % GROUP_COLORS.length]; ctx.globalAlpha = 0.5; ctx.lineWidth = 1.5;
+        ctx.setLineDash([5, 4]); ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+        ctx.setLineDash([]); ctx.globalAlpha = 1;
+      }
+      for (const [, h] of S.handles) {
+        const p = toScreen(h.pos);
+        ctx.beginPath(); ctx.arc(p[0], p[1], 3.5, 0, 2 * Math.PI);
+        ctx.fillStyle = GROUP_COLORS[h.group % GROUP_COLORS.length]; ctx.fill();
+      }
+      legend(view);
+      if (S.pivot) {
+        const p = toScreen(S.pivot); ctx.strokeStyle = "#111"; ctx.lineWidth = 1.5;
+        ctx.beginPath(); ctx.moveTo(p[0] - 7, p[1]); ctx.lineTo(p[0] + 7, p[1]); ctx.moveTo(p[0], p[1] - 7); ctx.lineTo(p[0], p[1] + 7); ctx.stroke();
+      }
+    }
+    if (!S.body && !S.draw) {
+      ctx.fillStyle = "#56657a"; ctx.font = "15px system-ui, sans-serif"; ctx.textAlign = "center";
+      ctx.fillText("Load a library problem, open a scene or outline file, or draw an outline (left).", r.width / 2, r.height / 2);
+      ctx.textAlign = "start";
+    }
+    if (S.draw) {
+      ctx.strokeStyle = "#0a6"; ctx.lineWidth = 2; ctx.fillStyle = "rgba(0,170,102,.12)";
+      for (const poly of S.draw.polys) { path(poly, poly.map((_, k) => k)); ctx.fill(); ctx.stroke(); }
+      if (S.draw.cur.length) {
+        ctx.beginPath(); S.draw.cur.forEach((p, k) => { const q = toScreen(p); k ? ctx.lineTo(q[0], q[1]) : ctx.moveTo(q[0], q[1]); });
+        if (S.pointer) ctx.lineTo(S.pointer[0], S.pointer[1]);
+        ctx.stroke();
+        for (const p of S.draw.cur) { const q = toScreen(p); ctx.fillStyle = "#0a6"; ctx.fillRect(q[0] - 2, q[1] - 2, 4, 4); }
+      }
+    }
+    const tool = currentTool(), br = +$("brush").value;
+    if (S.pointer && !S.draw && (tool === "anchor" || tool === "handle") && br > 0) {
+      ctx.beginPath(); ctx.arc(S.pointer[0], S.pointer[1], br, 0, 2 * Math.PI); ctx.strokeStyle = "rgba(0,0,0,.4)"; ctx.lineWidth = 1; ctx.stroke();
+    }
+  }
+
+  // ------------------------------------------------------------------ mouse
+  const currentTool = () => document.querySelector("input[name=tool]:checked").value;
+  const HINTS = {
+    anchor: "Click or brush nodes to anchor them at rest (Shift removes).",
+    handle: "Click or brush nodes to make them drag nodes of the current group (Shift removes).",
+    move: "Press near a drag node and move: its group follows; the equilibrium updates live.",
+    rotate: "Shift-click sets the pivot (default: the group's centroid); press near a drag node and move to rotate its group.",
+  };
+  function local(ev) { const r = canvas.getBoundingClientRect(); return [ev.clientX - r.left, ev.clientY - r.top]; }
+
+  function paint(q, tool, remove) {
+    const br = +$("brush").value;
+    let ids = br > 0 ? nodesNear(q, br) : [];
+    if (!ids.length) { const i = nearestNode(q, 12); if (i >= 0) ids = [i]; }
+    const x = shown();
+    for (const i of ids) {
+      if (tool === "anchor") {
+        if (remove) S.anchors.delete(i); else { S.anchors.add(i); S.handles.delete(i); }
+      } else {
+        if (remove) S.handles.delete(i);
+        else if (!S.handles.has(i)) { S.handles.set(i, { group: S.group, pos: [x[i][0], x[i][1]] }); S.anchors.delete(i); }
+      }
+    }
+    return ids.length;
+  }
+
+  canvas.addEventListener("mousedown", (ev) => {
+    if (ev.button !== 0) return;
+    const q = local(ev), tool = currentTool();
+    if (S.draw) { S.draw.cur.push(toWorld(q)); drawButtons(); render(); return; }
+    if (!S.body) return;
+    if (tool === "anchor" || tool === "handle") {
+      S.op = { kind: "paint", tool, remove: ev.shiftKey, changed: paint(q, tool, ev.shiftKey) };
+    } else {
+      if (tool === "rotate" && ev.shiftKey) { S.pivot = toWorld(q); render(); return; }
+      const i = nearestNode(q, 25, [...S.handles.keys()]);
+      if (i < 0) { showError("press near a drag node (mark some with the Drag nodes tool first)"); return; }
+      const g = S.handles.get(i).group, members = [...S.handles.entries()].filter(([, h]) => h.group === g);
+      const start = new Map(members.map(([k, h]) => [k, h.pos.slice()]));
+      let pivot = S.pivot;
+      if (!pivot) { pivot = [0, 0]; for (const p of start.values()) { pivot[0] += p[0] / start.size; pivot[1] += p[1] / start.size; } }
+      S.op = { kind: tool, start, w0: toWorld(q), pivot };
+    }
+    render();
+  });
+
+  canvas.addEventListener("mousemove", (ev) => {
+    const q = local(ev); S.pointer = q;
+    const op = S.op;
+    if (op && op.kind === "paint") op.changed += paint(q, op.tool, op.remove);
+    else if (op) {
+      const w = toWorld(q);
+      if (op.kind === "move") {
+        const dx = w[0] - op.w0[0], dy = w[1] - op.w0[1];
+        for (const [k, p] of op.start) S.handles.get(k).pos = [p[0] + dx, p[1] + dy];
+      } else {
+        const c = op.pivot, a = Math.atan2(w[1] - c[1], w[0] - c[0]) - Math.atan2(op.w0[1] - c[1], op.w0[0] - c[0]);
+        const cs = Math.cos(a), sn = Math.sin(a);
+        for (const [k, p] of op.start) {
+          const u = p[0] - c[0], v = p[1] - c[1];
+          S.handles.get(k).pos = [c[0] + cs * u - sn * v, c[1] + sn * u + cs * v];
+        }
+      }
+      request("drag");
+    }
+    render();
+  });
+
+  function endOp() {
+    const op = S.op; S.op = null;
+    if (!op) return;
+    if (op.kind === "paint" && !op.changed) return;
+    S.pendingDrag = false;
+    S.inflight = null;
+    request("fixed");
+  }
+  window.addEventListener("mouseup", endOp);
+  canvas.addEventListener("mouseleave", () => { S.pointer = null; render(); });
+
+  // ------------------------------------------------------------------ controls
+  document.querySelectorAll("input[name=tool]").forEach((r) => r.addEventListener("change", () => { $("hint").textContent = HINTS[currentTool()]; render(); }));
+  document.querySelectorAll("input[name=view]").forEach((r) => r.addEventListener("change", render));
+  $("brush").addEventListener("input", () => { $("brush-val").textContent = $("brush").value + " px"; });
+  $("new-group").onclick = () => { S.group += 1; showHint(`new drag nodes go to group ${S.group + 1}`); };
+  $("clear-anchors").onclick = () => { S.anchors.clear(); request("fixed"); };
+  $("clear-handles").onclick = () => { S.handles.clear(); S.pivot = null; request("fixed"); };
+  function showHint(t) { $("hint").textContent = t; }
+  function resolution() { return $("resolution").value.trim() || null; }
+
+  $("load-problem").onclick = () => send({ type: "load", body: { kind: "problem", name: $("problem").value, resolution: resolution() } });
+  $("file").addEventListener("change", () => {
+    const f = $("file").files[0]; if (!f) return;
+    const limit = S.info ? S.info.max_message - 1000 : 4e6;
+    if (f.size > limit) { showError(`${f.name}: file too large (${f.size} bytes, limit ${limit})`); return; }
+    f.text().then((text) => {
+      const isOutline = /\.svg$/i.test(f.name) || (/\.json$/i.test(f.name) && !/"body"\s*:/.test(text));
+      send({ type: "load", body: { kind: isOutline ? "outline_file" : "scene", filename: f.name, text, resolution: resolution() } });
+      $("file").value = "";
+    });
+  });
+  $("draw").onclick = () => {
+    if (S.draw) { S.draw = null; } else { S.draw = { polys: [], cur: [] }; if (!S.body) fit([]); showHint("Click to place vertices; Close polygon ends it (the first is the outline, the next ones holes); Mesh builds the body."); }
+    drawButtons(); render();
+  };
+  $("draw-close").onclick = () => { if (S.draw && S.draw.cur.length >= 3) { S.draw.polys.push(S.draw.cur); S.draw.cur = []; } drawButtons(); render(); };
+  $("draw-mesh").onclick = () => {
+    if (!S.draw || !S.draw.polys.length) return;
+    send({ type: "load", body: { kind: "outline", outline: S.draw.polys[0], holes: S.draw.polys.slice(1), resolution: resolution() } });
+  };
+  function drawButtons() {
+    $("draw").textContent = S.draw ? "Cancel drawing" : "Draw outline";
+    $("draw-close").disabled = !S.draw || S.draw.cur.length < 3;
+    $("draw-mesh").disabled = !S.draw || !S.draw.polys.length;
+  }
+  $("show-graph").addEventListener("change", () => { if ($("show-graph").checked && !S.graph) send({ type: "graph" }); render(); });
+  $("route").onclick = () => {
+    const mm = $("max_muscles").value.trim();
+    send({ type: "route", K_a: Number($("K_a").value), K_b: Number($("K_b").value), max_muscles: mm === "" ? null : Number(mm) });
+  };
+  $("design").onclick = () => send({ type: "design", method: $("method").value, muscle_model: $("muscle_model").value, a_max: Number($("a_max").value) });
+  $("save").onclick = () => send({ type: "save", name: $("save-name").value.trim() || null });
+
+  window.addEventListener("resize", () => { resize(); render(); });
+
+  // ------------------------------------------------------------------ for tests and scripting
+  window.mdsrAuthor = {
+    state: () => S.state, body: () => S.body, graph: () => S.graph, sid: () => S.sid, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
+    errors: () => S.errors.slice(), lastError: () => S.lastError, pong: () => S.pong,
+    busy: () => S.inflight !== null || S.op !== null || S.pendingDrag,
+    seq: () => S.seq, nLive: () => S.nLive,
+    screenOf: (i) => toScreen(S.handles.has(i) ? S.handles.get(i).pos : shown()[i]),
+    worldOf: (q) => toWorld(q),
+    sendRaw: (text) => S.ws.send(text),
+    send: (m) => send(m),
+  };
+
+  // ------------------------------------------------------------------ start
+  resize();
+  render();
+  fetch("/api/info").then((r) => r.json()).then((info) => {
+    S.info = info;
+    const sel = $("problem");
+    for (const p of info.problems) { const o = document.createElement("option"); o.textContent = p; sel.appendChild(o); }
+    if (info.design.muscle_model) setSelect("muscle_model", info.design.muscle_model);
+    updateDownloads();
+    connect();
+  });
+  setInterval(() => { if (S.state) updateStatus(); }, 1000);
+})();

@@ -1,0 +1,228 @@
+"""mdsr author without a browser: outlines, session checks and solves, scene export, the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mdsr_opt import get_problem, load_scene, solve_external
+from mdsr_opt.author import _is_loopback, body_spec
+from mdsr_opt.author.export import download, save_scene
+from mdsr_opt.author.outline import parse_outline
+from mdsr_opt.author.server import _parse, load_body
+from mdsr_opt.author.session import Session
+
+SQUARE_WITH_HOLE = """<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 100 100">
+  <path d="M 0 0 H 80 V 40 h -80 Z"/>
+  <rect x="30" y="10" width="20" height="20"/>
+</svg>"""
+
+
+# ------------------------------------------------------------------------------------------ outlines
+def test_svg_outline_with_hole_is_read_upright():
+    outline, holes = parse_outline("body.svg", SQUARE_WITH_HOLE)
+    assert len(holes) == 1
+    assert np.isclose(abs(_area(outline)), 80 * 40) and np.isclose(abs(_area(holes[0])), 400)
+    assert outline[:, 1].max() == 0.0 and outline[:, 1].min() == -40.0  # y flipped (SVG y points down)
+    assert _area(outline) > 0  # counter-clockwise
+
+
+def _area(p):
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def test_relative_path_commands():
+    outline, _ = parse_outline("a.svg", '<svg><path d="m 1 1 l 2 0 l 0 2 l -2 0 z"/></svg>')
+    assert sorted(map(tuple, outline.tolist())) == [(1, -3), (1, -1), (3, -3), (3, -1)]
+
+
+@pytest.mark.parametrize("name, text, words", [
+    ("a.svg", '<svg><path d="M0 0 C 1 1 2 2 3 0 Z"/></svg>', "not supported"),
+    ("a.svg", '<svg><polygon points="0,0 1,0 1,1" transform="scale(2)"/></svg>', "transform"),
+    ("a.svg", "<svg><polygon points='0,0 1,0", "not valid XML"),
+    ("a.svg", '<svg><polygon points="0,0 2,2 2,0 0,2"/></svg>', "self-intersecting"),
+    ("a.json", '{"outline": [[0, 0], [2, 2], [2, 0], [0, 2]]}', "self-intersecting"),
+    ("a.json", '{"outline": [[0, 0], [1, 0]]}', "at least 3"),
+    ("a.json", '{"outlines": []}', "unknown field"),
+    ("a.json", '{"outline": [[0, 0], [1, "x"], [0, 1]]}', "not a number"),
+    ("a.txt", "0 0 1 0 1 1", "ends in .json or .svg"),
+    ("a.svg", '<!DOCTYPE x [<!ENTITY a "b">]><svg/>', "DOCTYPE"),
+])
+def test_bad_outline_files_are_named(name, text, words):
+    with pytest.raises(ValueError, match=words):
+        parse_outline(name, text)
+
+
+# ------------------------------------------------------------------------------------------ sessions
+@pytest.fixture(scope="module")
+def tentacle():
+    return get_problem("tentacle", resolution="coarse")
+
+
+def test_session_starts_from_the_first_external_case(tentacle):
+    s = Session.from_scene(tentacle)
+    case = tentacle.cases[0]
+    assert np.array_equal(s.anchors, case.anchors) and np.array_equal(s.drag_positions, case.drag_positions)
+    st = s.settle()
+    ref = solve_external(tentacle.mesh, tentacle.material, case.anchors, case.drags)
+    assert st.success and not st.live and np.array_equal(st.x, ref.x)
+    assert np.array_equal(s.target, ref.x)
+
+
+def test_live_drag_is_warm_and_agrees_with_a_cold_solve(tentacle):
+    s = Session.from_scene(tentacle)
+    s.settle()
+    shift = 0.02 * tentacle.mesh.size * np.array([1.0, -0.5])
+    s.set_fixed(s.anchors, s.drag_nodes, s.drag_positions + shift)
+    st = s.drag()
+    assert st.live and st.success and not st.warm_failed
+    assert st.build_time < 1e-3  # the model and solver built by the first solve are reused
+    assert s.target is None  # a live state is not a target until it is settled
+    ref = solve_external(tentacle.mesh, tentacle.material, s.anchors, (s.drag_nodes, s.drag_positions))
+    assert np.abs(st.x - ref.x).max() < 1e-6
+    cold = s.settle()
+    assert np.array_equal(cold.x, ref.x)
+
+
+def test_a_drag_that_cannot_be_reached_is_reported_not_hidden(tentacle):
+    s = Session.from_scene(tentacle)
+    s.settle()
+    far = s.mesh.points[s.anchors].mean(0)  # drag the tip onto the anchored base: folds the body
+    s.set_fixed(s.anchors, s.drag_nodes, s.drag_positions - s.drag_positions.mean(0) + far)
+    st = s.drag()
+    assert not st.success and st.status
+    assert s.target is None
+
+
+@pytest.mark.parametrize("anchors, dn, dp, err, words", [
+    ([0, 99999], [], [], ValueError, "out of range"),
+    ([0, 1.5], [], [], TypeError, "not an integer"),
+    ([0, 0], [], [], ValueError, "repeated"),
+    ([0], [1], [[np.nan, 0.0]], ValueError, "finite"),
+    ([0], [1], [[1e9, 0.0]], ValueError, "too large"),
+    ([0], [1, 2], [[0.0, 0.0]], ValueError, "1 for 2 drag nodes"),
+    ([0, 1], [1], [[0.0, 0.0]], ValueError, "both anchored and dragged"),
+])
+def test_fixed_nodes_are_checked_at_the_door(tentacle, anchors, dn, dp, err, words):
+    s = Session.from_scene(tentacle)
+    with pytest.raises(err, match=words):
+        s.set_fixed(anchors, dn, dp)
+
+
+def test_route_and_design_need_a_settled_target(tentacle):
+    s = Session.from_scene(tentacle)
+    with pytest.raises(ValueError, match="no settled target"):
+        s.route(10.0, 4.0, None)
+    s.settle()
+    with pytest.raises(ValueError, match="route muscles first"):
+        s.run_design()
+
+
+def test_outline_session_and_resolution_limit():
+    s = Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=120)
+    assert 90 < s.n_nodes < 150 and s.source == "outline"
+    with pytest.raises(ValueError, match="limit"):
+        Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=10 ** 6)
+
+
+# ------------------------------------------------------------------------------------------ export
+def test_saved_scene_reads_back_with_the_same_mesh_case_and_muscles(tentacle, tmp_path):
+    s = Session.from_scene(tentacle)
+    s.settle()
+    s.route(10.0, 4.0, 2)
+    files = save_scene(s, tmp_path, "x1")
+    back = load_scene(files[0])
+    assert np.array_equal(back.mesh.points, tentacle.mesh.points)
+    c = back.case("authored")
+    assert np.array_equal(c.drag_positions, s.drag_positions)  # exact floats, not rounded
+    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles]
+    data = json.loads(Path(files[0]).read_text())
+    assert data["routing"]["max_muscles"] == 2 and data["routing"]["K_a"] == 10.0
+
+
+def test_saving_needs_fixed_nodes_and_a_valid_name(tentacle, tmp_path):
+    s = Session.from_scene(tentacle)
+    with pytest.raises(ValueError, match="may hold only"):
+        save_scene(s, tmp_path, "bad name!")
+    s.set_fixed([], [], [])
+    with pytest.raises(ValueError, match="nothing to save"):
+        save_scene(s, tmp_path, "ok")
+    assert list(tmp_path.iterdir()) == []  # nothing partly written
+
+
+def test_downloads_say_what_is_missing(tentacle, tmp_path):
+    s = Session.from_scene(tentacle)
+    with pytest.raises(ValueError, match="no settled target"):
+        download(s, "target.vtu", tmp_path)
+    s.settle()
+    data, media = download(s, "target.png", tmp_path)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and media == "image/png"
+    with pytest.raises(ValueError, match="no design yet"):
+        download(s, "design.png", tmp_path)
+    with pytest.raises(ValueError, match="unknown download"):
+        download(s, "../etc/passwd", tmp_path)
+
+
+# ------------------------------------------------------------------------------------------ server pieces
+@pytest.mark.parametrize("raw, words", [
+    ({"bytes": b"\x00"}, "binary"),
+    ({"text": "{"}, "not JSON"),
+    ({"text": "[1, 2]"}, "string 'type'"),
+    ({"text": '{"type": 3}'}, "string 'type'"),
+])
+def test_malformed_frames(raw, words):
+    with pytest.raises(ValueError, match=words):
+        _parse(raw)
+
+
+def test_load_body_errors():
+    with pytest.raises(ValueError, match="library name"):
+        load_body({"kind": "problem", "name": "../etc"})
+    with pytest.raises(ValueError, match="unknown body kind"):
+        load_body({"kind": "pdf"})
+    with pytest.raises(ValueError, match="limit"):
+        load_body({"kind": "problem", "name": "tentacle", "resolution": 10 ** 6})
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        body_spec("missing/scene.toml")
+
+
+def test_json_outline_file_on_the_command_line(tmp_path):
+    p = tmp_path / "plate.json"
+    p.write_text(json.dumps({"outline": [[0, 0], [3, 0], [3, 1], [0, 1]],
+                             "holes": [[[1, 0.3], [2, 0.3], [2, 0.7], [1, 0.7]]]}))
+    spec = body_spec(str(p), resolution="200")
+    s = load_body(spec)
+    assert s.name == "plate" and len(s.mesh.boundary_loops) == 2
+
+
+def test_loopback_detection():
+    assert _is_loopback("127.0.0.1") and _is_loopback("::1") and _is_loopback("localhost")
+    assert not _is_loopback("0.0.0.0") and not _is_loopback("192.168.1.5")
+
+
+def test_non_loopback_host_warns(capsys, monkeypatch):
+    import mdsr_opt.author as author
+
+    class Stop(Exception):
+        pass
+
+    def no_bind(host, port):
+        raise Stop
+
+    monkeypatch.setattr(author, "_bind", no_bind)
+    with pytest.raises(Stop):
+        author.serve(None, host="0.0.0.0", open_browser=False)
+    assert "WARNING" in capsys.readouterr().err
+
+
+def test_cli_registers_author():
+    from mdsr_opt.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["author", "--help"])
+    assert e.value.code == 0
+    assert main(["author", "no_such_robot", "--no-browser"]) == 2

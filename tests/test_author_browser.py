@@ -1,0 +1,298 @@
+"""The authoring page (``mdsr author``) in a real headless browser: Debian's chromium + chromedriver via selenium.
+
+Real mouse events drag a point; the state the page shows must equal ``solve_external`` with the same anchors
+and drags; routing and design run from the page and the saved scene file must reproduce them with
+``python -m mdsr_opt run``; bad messages get a message on the page and the server keeps answering.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mdsr_opt import contraction_graph, get_problem, load_scene, prepare_case, solve_external
+
+from selenium import webdriver  # pip install ".[test]" installs selenium; .ci/run installs chromium
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.by import By
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEM, RESOLUTION = "tentacle", "coarse"
+
+
+def chrome_options():
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
+    for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--window-size=1200,760", f"--user-data-dir={tempfile.mkdtemp(prefix='mdsr-chromium-')}"):
+        opts.add_argument(flag)
+    return opts
+
+
+def open_browser():
+    """A headless chromium driven through Debian's chromedriver (installed by .ci/run)."""
+    from selenium.webdriver.chrome.service import Service
+
+    driver_path = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+    assert Path(driver_path).exists(), "chromium-driver is missing: apt-get install -y chromium chromium-driver"
+    return webdriver.Chrome(service=Service(driver_path), options=chrome_options())
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    from mdsr_opt.author import start_in_thread
+
+    out = tmp_path_factory.mktemp("authored")
+    url, server = start_in_thread(PROBLEM, resolution=RESOLUTION, out=out)
+    yield url, out
+    server.should_exit = True
+
+
+@pytest.fixture(scope="module")
+def page(served):
+    url, _ = served
+    drv = open_browser()
+    drv.get(url)
+    wait(drv, "const s = mdsrAuthor.state(); return s !== null && s.settled && !mdsrAuthor.busy();")
+    yield drv
+    drv.quit()
+
+
+def wait(drv, script, timeout=60.0):
+    t0 = time.time()
+    while time.time() - t0 < timeout:
+        v = drv.execute_script(script)
+        if v:
+            return v
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for: {script}; page errors: {drv.execute_script('return mdsrAuthor.errors()')}")
+
+
+def idle(drv):
+    """Wait until the page has no request in flight and shows the reply to its last request."""
+    wait(drv, "const s = mdsrAuthor.state(); return !mdsrAuthor.busy() && s && (s.seq === null || s.seq === mdsrAuthor.seq());")
+    return drv.execute_script("return mdsrAuthor.state();")
+
+
+def drag_with_mouse(drv, node, steps):
+    """Press on a drag node with the real mouse and move it by ``steps`` (list of (dx, dy) pixels)."""
+    canvas = drv.find_element(By.ID, "canvas")
+    sx, sy = drv.execute_script(f"return mdsrAuthor.screenOf({int(node)});")
+    w, h = canvas.size["width"], canvas.size["height"]
+    chain = ActionChains(drv, duration=30).move_to_element_with_offset(canvas, int(round(sx - w / 2)),
+                                                                         int(round(sy - h / 2)))
+    chain.click_and_hold()
+    for dx, dy in steps:
+        chain.move_by_offset(dx, dy).pause(0.05)
+    chain.release().perform()
+
+
+def test_mouse_drag_shows_the_solve_external_equilibrium(page):
+    scene = get_problem(PROBLEM, resolution=RESOLUTION)
+    before = page.execute_script("return mdsrAuthor.state();")
+    node = before["drag_nodes"][0]
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=move]").click()
+    live0 = page.execute_script("return mdsrAuthor.nLive();")
+    drag_with_mouse(page, node, [(-10, -6)] * 6)
+    st = idle(page)
+    assert page.execute_script("return mdsrAuthor.nLive();") > live0  # the equilibrium updated while dragging
+    assert st["success"] and not st["live"] and st["settled"]
+    moved = np.asarray(st["drag_positions"]) - np.asarray(before["drag_positions"])
+    assert np.linalg.norm(moved, axis=1).min() > 0.05 * scene.mesh.size / 10  # the whole group moved
+    assert np.allclose(moved, moved[0], atol=1e-12)  # ... rigidly, by one offset
+    ref = solve_external(scene.mesh, scene.material, st["anchors"], (st["drag_nodes"], st["drag_positions"]))
+    assert ref.success
+    assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8
+
+
+def test_rotation_drag_rotates_the_group_about_the_pivot(page):
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=rotate]").click()
+    before = idle(page)
+    node = before["drag_nodes"][0]
+    drag_with_mouse(page, node, [(0, 12)] * 4)
+    st = idle(page)
+    P0, P1 = np.asarray(before["drag_positions"]), np.asarray(st["drag_positions"])
+    c = P0.mean(0)  # the default pivot: the group's centroid
+    d0, d1 = P0 - c, P1 - c
+    assert np.allclose(np.linalg.norm(d0, axis=1), np.linalg.norm(d1, axis=1), atol=1e-9)  # distances kept
+    ang = np.arctan2(d0[:, 0] * d1[:, 1] - d0[:, 1] * d1[:, 0], (d0 * d1).sum(1))
+    far = np.linalg.norm(d0, axis=1) > 1e-6
+    assert abs(ang[far][0]) > 1e-3 and np.allclose(ang[far], ang[far][0], atol=1e-9)  # one rigid rotation
+    scene = get_problem(PROBLEM, resolution=RESOLUTION)
+    ref = solve_external(scene.mesh, scene.material, st["anchors"], (st["drag_nodes"], st["drag_positions"]))
+    assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8
+
+
+def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
+    _, out = served
+    st = idle(page)
+    page.find_element(By.ID, "show-graph").click()
+    weights = wait(page, "return mdsrAuthor.graph();")
+    scene0 = get_problem(PROBLEM, resolution=RESOLUTION)
+    G = contraction_graph(scene0.mesh, np.asarray(st["x"]))
+    assert np.allclose(weights, [G.edges[int(a), int(b)]["weight"] for a, b in scene0.mesh.edges], rtol=0, atol=1e-12)
+    page.find_element(By.ID, "route").click()
+    routing = wait(page, "return mdsrAuthor.routing();")
+    assert len(routing["muscles"]) >= 1
+    page.find_element(By.ID, "design").click()
+    design = wait(page, "return mdsrAuthor.design();", timeout=180)
+    assert design["success"], design["status"]
+    name = page.find_element(By.ID, "save-name")
+    name.clear()
+    name.send_keys("authored_tentacle")
+    page.find_element(By.ID, "save").click()
+    saved = wait(page, "return mdsrAuthor.saved();")
+    scene_file = Path(saved["files"][0])
+    assert scene_file.parent == Path(out).resolve() and scene_file.name == "authored_tentacle.json"
+    # the scene file holds the same target and muscles ...
+    scene = load_scene(scene_file)
+    setup = prepare_case(scene, "authored")
+    assert np.array_equal(setup.target, np.asarray(st["x"]))
+    assert [list(m.nodes) for m in setup.muscles] == [m["nodes"] for m in routing["muscles"]]
+    # ... and `mdsr run` designs the same contractions
+    res = subprocess.run([sys.executable, "-m", "mdsr_opt", "run", str(scene_file), "--out", str(tmp_path / "run"),
+                          "--no-photos", "--no-figures", "--no-animations", "--quiet"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    case = json.loads((tmp_path / "run" / "summary.json").read_text())["cases"][0]
+    assert case["n_muscles"] == len(routing["muscles"])
+    np.testing.assert_allclose(case["contractions"], design["contractions"], rtol=0, atol=1e-9)
+    assert abs(case["difference"] - design["difference"]) <= 1e-9
+    # downloads: figures, meshes, results and the scene as a zip
+    url, _ = served
+    sid = page.execute_script("return mdsrAuthor.sid();")
+    import io
+    import urllib.request
+    import zipfile
+
+    def get(what):
+        with urllib.request.urlopen(f"{url}download/{sid}/{what}", timeout=120) as r:
+            return r.read()
+
+    for png in ("target.png", "graph.png", "muscles.png", "design.png"):
+        assert get(png)[:8] == b"\x89PNG\r\n\x1a\n"
+    from mdsr_opt import read_mesh
+
+    (tmp_path / "driven.vtu").write_bytes(get("driven.vtu"))
+    np.testing.assert_allclose(read_mesh(tmp_path / "driven.vtu").x, design["x_aligned"], rtol=0, atol=1e-12)
+    results = json.loads(get("results.json"))
+    assert results["design"]["contractions"] == design["contractions"]
+    names = zipfile.ZipFile(io.BytesIO(get("scene.zip"))).namelist()
+    assert sorted(names) == ["tentacle.json", "tentacle.mesh.vtu"]
+    shot = tmp_path / "page.png"
+    page.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()
+    page.save_screenshot(str(shot))
+    assert shot.stat().st_size > 10_000
+
+
+def errors_after(page, n0):
+    return page.execute_script(f"return mdsrAuthor.errors().slice({n0});")
+
+
+@pytest.mark.parametrize("raw, words", [
+    ("this is not json", "malformed message"),
+    ('{"no": "type"}', "string 'type'"),
+    ('{"type": "drag", "anchors": [0, 100000], "drag_nodes": [], "drag_positions": []}', "out of range"),
+    ('{"type": "fixed", "anchors": [0], "drag_nodes": [1], "drag_positions": [[NaN, 0]]}', "finite"),
+    ('{"type": "fixed", "anchors": [0], "drag_nodes": [1], "drag_positions": [[1e200, 0]]}', "too large"),
+    ('{"type": "load", "body": {"kind": "outline", "outline": [[0, 0], [1, 1], [1, 0], [0, 1]]}}',
+     "self-intersecting"),
+    ('{"type": "route", "K_a": "ten", "K_b": 4}', "K_a must be a number"),
+    ('{"type": "load", "body": {"kind": "problem", "name": "no_such_robot"}}', "unknown problem"),
+])
+def test_bad_message_is_named_on_the_page_and_server_keeps_serving(page, raw, words):
+    n0 = len(page.execute_script("return mdsrAuthor.errors();"))
+    page.execute_script("mdsrAuthor.sendRaw(arguments[0]);", raw)
+    msgs = wait(page, f"const e = mdsrAuthor.errors().slice({n0}); return e.length ? e : null;")
+    assert any(words in m for m in msgs), msgs
+    shown = page.find_element(By.ID, "errors").text
+    assert words in shown
+    page.execute_script("mdsrAuthor.send({type: 'ping'});")
+    assert wait(page, "const p = mdsrAuthor.pong(); return p && p.n_nodes;") > 0
+
+
+def test_oversized_message_is_refused_and_server_keeps_serving(page):
+    from mdsr_opt.author.server import MAX_MESSAGE
+
+    n0 = len(page.execute_script("return mdsrAuthor.errors();"))
+    page.execute_script("mdsrAuthor.sendRaw(JSON.stringify({type: 'ping', pad: 'x'.repeat(arguments[0])}));",
+                        MAX_MESSAGE + 10)
+    msgs = wait(page, f"const e = mdsrAuthor.errors().slice({n0}); return e.length ? e : null;")
+    assert any("too large" in m for m in msgs), msgs
+    page.execute_script("mdsrAuthor.send({type: 'ping'});")
+    assert wait(page, "const p = mdsrAuthor.pong(); return p && p.n_nodes;") > 0
+    st = idle(page)  # still solving: a settle with the current fixed nodes
+    page.execute_script("mdsrAuthor.send({type: 'fixed', seq: 999999, anchors: arguments[0], drag_nodes: arguments[1],"
+                        " drag_positions: arguments[2]});", st["anchors"], st["drag_nodes"], st["drag_positions"])
+    wait(page, "return mdsrAuthor.state().seq === 999999;")
+
+
+def click_at(drv, points):
+    """Left clicks at canvas pixels ``points`` (real mouse events)."""
+    canvas = drv.find_element(By.ID, "canvas")
+    w, h = canvas.size["width"], canvas.size["height"]
+    for x, y in points:
+        ActionChains(drv).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+
+
+def test_svg_outline_file_with_a_hole(page, tmp_path):
+    svg = tmp_path / "plate.svg"
+    svg.write_text('<svg xmlns="http://www.w3.org/2000/svg"><path d="M0 0 H 60 V 20 H 0 Z"/>'
+                   '<rect x="25" y="5" width="10" height="10"/></svg>')
+    res = page.find_element(By.ID, "resolution")
+    res.clear()
+    res.send_keys("200")
+    page.find_element(By.ID, "file").send_keys(str(svg))
+    body = wait(page, "const b = mdsrAuthor.body(); return b && b.name === 'plate' ? b : null;")
+    assert len(body["boundary"]) == 2 and 150 < body["n_nodes"] < 260
+
+
+def test_draw_outline_anchor_drag_on_the_page(page):
+    canvas = page.find_element(By.ID, "canvas")
+    w, h = canvas.size["width"], canvas.size["height"]
+    n0 = len(page.execute_script("return mdsrAuthor.errors();"))
+    # a bow tie crosses itself: refused with a message naming it
+    page.find_element(By.ID, "draw").click()
+    click_at(page, [(w * 0.3, h * 0.3), (w * 0.7, h * 0.7), (w * 0.7, h * 0.3), (w * 0.3, h * 0.7)])
+    page.find_element(By.ID, "draw-close").click()
+    page.find_element(By.ID, "draw-mesh").click()
+    msgs = wait(page, f"const e = mdsrAuthor.errors().slice({n0}); return e.length ? e : null;")
+    assert any("self-intersecting" in m for m in msgs), msgs
+    page.find_element(By.ID, "draw").click()  # cancel
+    # a bar: meshed, anchored on the left by brushing, dragged on the right by the mouse
+    page.find_element(By.ID, "draw").click()
+    click_at(page, [(w * 0.2, h * 0.45), (w * 0.8, h * 0.45), (w * 0.8, h * 0.55), (w * 0.2, h * 0.55)])
+    page.find_element(By.ID, "draw-close").click()
+    page.find_element(By.ID, "draw-mesh").click()
+    body = wait(page, "const b = mdsrAuthor.body(); return b && b.name === 'authored' ? b : null;")
+    P = np.asarray(body["points"])
+    idle(page)
+    page.execute_script("document.getElementById('brush').value = 30;")
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=anchor]").click()
+    left = int(np.argmin(P[:, 0]))
+    sx, sy = page.execute_script(f"return mdsrAuthor.screenOf({left});")
+    click_at(page, [(sx + 2, sy)])
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=handle]").click()
+    right = int(np.argmax(P[:, 0]))
+    sx, sy = page.execute_script(f"return mdsrAuthor.screenOf({right});")
+    click_at(page, [(sx - 2, sy)])
+    st = idle(page)
+    assert len(st["anchors"]) >= 2 and right in st["drag_nodes"] and left in st["anchors"]
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=move]").click()
+    drag_with_mouse(page, right, [(0, -8)] * 5)
+    st = idle(page)
+    assert st["success"] and np.asarray(st["x"])[right, 1] > P[right, 1]  # moved up on screen = +y
+    from mdsr_opt import Mesh, NeoHookean
+
+    mesh = Mesh(P, body["triangles"])
+    ref = solve_external(mesh, NeoHookean(1.0, 0.3), st["anchors"], (st["drag_nodes"], st["drag_positions"]))
+    assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8
