@@ -58,7 +58,7 @@ __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTI
            "Scene", "CaseSetup", "list_problems", "get_problem", "problems_dir", "resolve_resolution",
            "mesh_polygon", "prepare_case", "nodes_in_box", "nodes_near", "nearest_node", "nodes_in_polygon",
            "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
-           "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
+           "run_main", "run_scene", "write_scene", "run_entries", "RUN_FILES", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
            "AnimationResult", "animate"]
 
 #: Named resolutions: approximate number of mesh nodes.
@@ -1100,7 +1100,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
-              log: Callable[[str], None] | None = print) -> SceneReport:
+              log: Callable[[str], None] | None = print, overwrite: bool = False) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -1119,26 +1119,78 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
     photo_resolution : (width, height) of the synthetic photographs.
     log : progress messages (``None`` for silence).
+    overwrite : bool
+        ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
+        (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
+        against a second run and removes the temporaries of an interrupted one).
 
     Returns
     -------
     SceneReport
         ``.success`` is False when a target solve, the routing, a design or an animation frame failed;
         the reasons are in each case's ``message`` and in ``summary.json``. Nothing is hidden.
-    """
-    import time
 
-    from . import plot
-    from .io import FORMATS, write_json
-    from .io import atomic_path
+    Raises
+    ------
+    OutputFolderError (a ValueError)
+        ``out`` is a file, cannot be written, holds other files (without ``overwrite``) or is locked by
+        another run.
+    KeyboardInterrupt
+        Passed on at once (never recorded as a failed case); the files already complete stay.
+    """
+    from .rundir import RunFolder
+
+    names = _check_run(scene, cases, mesh_format)
+    with RunFolder(out, overwrite=overwrite) as folder:
+        folder.begin(run_entries(scene, names))
+        report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
+                             animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
+                             log=log)
+        folder.finish("complete" if report.success else "complete, some cases failed")
+    return report
+
+
+def _check_run(scene, cases, mesh_format) -> tuple[str, ...]:
+    from .io import FORMATS
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
     if "." + str(mesh_format).lstrip(".") not in FORMATS or mesh_format.lstrip(".") == "msh":
         raise ValueError(f"mesh_format must be 'vtu', 'vtk' or 'xdmf', got {mesh_format!r}")
-    names = scene.case_names if cases is None else tuple(cases)
+    if isinstance(cases, str):
+        cases = [cases]
+    names = scene.case_names if cases is None else tuple(dict.fromkeys(cases))
     for c in names:
         scene.case(c)  # KeyError naming the choices
+    return names
+
+
+#: Files every scene run writes directly into its folder; case folders and animation files go beside them.
+RUN_FILES = ("rest.png", "summary.json", "summary.md")
+
+
+def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
+    """The names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one folder per
+    case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+    names = scene.case_names if cases is None else tuple(cases)
+    out = list(RUN_FILES) + list(names)
+    for a in scene.animations:
+        out += [f"{a.name}.gif", f"{a.name}.json"]
+    return out
+
+
+def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
+                method: str | None = None, photos: bool = True, figures: bool = True,
+                animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+                log: Callable[[str], None] | None = print) -> SceneReport:
+    """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
+    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
+    import time
+
+    from . import plot
+    from .io import atomic_path, write_json
+
+    names = _check_run(scene, cases, mesh_format)
     say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -1211,10 +1263,25 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
     p.add_argument("--resolution", default="medium", type=_parse_resolution,
                    help="coarse, medium, fine or a node count (default medium)")
     p.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
-    p.add_argument("--method", default=None, help="design method (flattened, nested, derivative-free)")
+    p.add_argument("--method", default=None, choices=("flattened", "nested", "derivative-free"),
+                   help="design method (default: the scene's, normally flattened)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier run in --out (without it, a non-empty --out is refused)")
     a = p.parse_args(argv)
-    scene = build(resolution=a.resolution)
-    rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method)
+    try:
+        if a.out is not None:
+            from .rundir import check_out_path
+
+            check_out_path(a.out)
+        scene = build(resolution=a.resolution)
+        rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method,
+                        overwrite=a.overwrite)
+    except KeyboardInterrupt:
+        print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, OSError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 2
     print(rep.table())
     return 0 if rep.success else 1
 
@@ -1757,22 +1824,33 @@ def _cmd_run(a) -> int:
         names = list_problems()
         if not names:
             raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
+    from .rundir import RunFolder
+
     t0 = time.perf_counter()
-    scenes = [get_problem(n, resolution=a.resolution) for n in names]  # all errors before any work
-    seen = set()
-    for s in scenes:
-        if s.name in seen:
-            raise ValueError(f"scene {s.name!r} is named twice")
-        seen.add(s.name)
-    reports = []
-    log = (lambda s: None) if a.quiet else (lambda s: print(s, flush=True))
-    for k, scene in enumerate(scenes):
-        out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
-        if len(scenes) > 1:
-            log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
-        reports.append(run_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
-                                 figures=not a.no_figures, animations=not a.no_animations,
-                                 mesh_format=a.format, photo_resolution=a.photo_size, log=log))
+    # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
+    # scene (all input errors), and only then any solving or writing
+    with RunFolder(a.out, overwrite=a.overwrite) as folder:
+        scenes = [get_problem(n, resolution=a.resolution) for n in names]
+        seen = set()
+        for s in scenes:
+            if s.name in seen:
+                raise ValueError(f"scene {s.name!r} is named twice")
+            seen.add(s.name)
+        if a.case:
+            for s in scenes:
+                for c in a.case:
+                    s.case(c)  # an unknown --case names the scene's cases
+        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes])
+        reports = []
+        log = (lambda s: None) if a.quiet else (lambda s: print(s, flush=True))
+        for k, scene in enumerate(scenes):
+            out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
+            if len(scenes) > 1:
+                log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
+            reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
+                                       figures=not a.no_figures, animations=not a.no_animations,
+                                       mesh_format=a.format, photo_resolution=a.photo_size, log=log))
+        folder.finish("complete" if all(r.success for r in reports) else "complete, some cases failed")
     lines = reports[0].table().split("\n")
     for r in reports[1:]:
         lines += r.table().split("\n")[2:]
@@ -1802,7 +1880,13 @@ def add_cli(sub) -> None:
                        "forward check, synthetic photograph, contour metrics; figures, meshes, JSON")
     q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
                    help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
-    q.add_argument("--out", required=True, help="output folder (one sub-folder per scene when several)")
+    q.add_argument("--out", required=True,
+                   help="output folder (one sub-folder per scene when several); it must be new or empty, and "
+                   "is locked while the run writes into it: a second run into it stops with an error")
+    q.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr run in --out (only the files that run recorded; a "
+                   "folder holding other files is still refused). Without it a non-empty --out is refused, so "
+                   "one folder never mixes two runs")
     q.add_argument("--resolution", type=_parse_resolution, default=None,
                    help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
     q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
