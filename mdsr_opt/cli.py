@@ -26,8 +26,11 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     _register_all(sub)
     args = parser.parse_args(argv)
+    from .rundir import noting_interrupts
+
     try:
-        return int(args.func(args) or 0)
+        with noting_interrupts():
+            return int(args.func(args) or 0)
     except KeyboardInterrupt:
         # Ctrl-C: stop at once with one line (no traceback); the commands' writers have removed their
         # temporary files, the files already complete stay. 130 = 128 + SIGINT, as shells report it.

@@ -29,17 +29,20 @@ mdsr_opt.rundir.OutputFolderError: --out ... already holds 1 entry ('result.txt'
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
+import signal
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Iterable
 
 __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "check_out_path", "LOCK_NAME", "MANIFEST_NAME",
-           "remove_temporaries"]
+           "remove_temporaries", "noting_interrupts", "check_interrupt"]
 
 #: The lock file inside a run's folder.
 LOCK_NAME = ".mdsr-lock"
@@ -55,6 +58,40 @@ class OutputFolderError(ValueError):
 
 class FolderBusy(OutputFolderError):
     """Another run holds the output folder's lock."""
+
+
+_INTERRUPTED = threading.Event()
+
+
+def _on_sigint(signum, frame):
+    _INTERRUPTED.set()
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def noting_interrupts():
+    """Within the block, Ctrl-C (SIGINT) raises ``KeyboardInterrupt`` as usual and is also remembered, so
+    that :func:`check_interrupt` raises it again where a C extension swallowed the first one (CasADi turns
+    an interrupt inside a solve into a failed solve). Does nothing outside the main thread, or when SIGINT
+    is not Python's default handler (e.g. ignored by the parent shell, or handled by the caller)."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    _INTERRUPTED.clear()
+    signal.signal(signal.SIGINT, _on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        _INTERRUPTED.clear()
+
+
+def check_interrupt() -> None:
+    """Raise ``KeyboardInterrupt`` if Ctrl-C was pressed inside :func:`noting_interrupts` (even if a solver
+    swallowed it). Called between the stages of a run."""
+    if _INTERRUPTED.is_set():
+        raise KeyboardInterrupt("interrupted (Ctrl-C) during a solve")
 
 
 def check_out_path(out, what: str = "--out") -> Path:

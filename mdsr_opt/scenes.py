@@ -51,6 +51,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, as_index_array
+from .rundir import check_interrupt
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
 
@@ -863,6 +864,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     what = ("external driving" if case.kind == "external" else
             f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
     setup = prepare_case(scene, case)
+    check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
     run.setup = setup
     tr = setup.target_result
     rep.target_success, rep.target_status = bool(tr.success), str(tr.status)
@@ -898,6 +900,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     t1 = time.perf_counter()
     try:
         res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
+        check_interrupt()
     except RuntimeError as exc:  # a solver inside the design failed hard (SolverFailure, CasADi errors)
         rep.message = f"design failed: {type(exc).__name__}: {exc}"
         rep.times["total"] = time.perf_counter() - t0
@@ -941,6 +944,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                 f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
                 f"{cmp_s.mean_px:.2f} px")
         rep.times["photo"] = time.perf_counter() - t2
+        check_interrupt()
     rep.success = bool(res.success)
     if not res.success:
         rep.message = f"design not verified: {res.status}"
@@ -1090,6 +1094,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     states, fails = [], []
     for i, a in enumerate(frames):
         res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness)
+        check_interrupt()
         if not res.success:
             fails.append(i)
         states.append(res.x)
@@ -1138,10 +1143,10 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     KeyboardInterrupt
         Passed on at once (never recorded as a failed case); the files already complete stay.
     """
-    from .rundir import RunFolder
+    from .rundir import RunFolder, noting_interrupts
 
     names = _check_run(scene, cases, mesh_format)
-    with RunFolder(out, overwrite=overwrite) as folder:
+    with noting_interrupts(), RunFolder(out, overwrite=overwrite) as folder:
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
@@ -1202,6 +1207,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     runs: dict[str, CaseRun] = {}
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+        check_interrupt()
         run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
                        prefix=prefix)
         if figures:
