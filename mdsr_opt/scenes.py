@@ -59,7 +59,8 @@ __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTI
            "Scene", "CaseSetup", "list_problems", "get_problem", "problems_dir", "resolve_resolution",
            "mesh_polygon", "prepare_case", "nodes_in_box", "nodes_near", "nearest_node", "nodes_in_polygon",
            "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
-           "run_main", "run_scene", "write_scene", "run_entries", "RUN_FILES", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
+           "run_main", "run_scene", "write_scene", "run_entries", "RUN_FILES", "RESERVED_NAMES",
+           "check_output_names", "check_scene_options", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
            "AnimationResult", "animate"]
 
 #: Named resolutions: approximate number of mesh nodes.
@@ -267,9 +268,10 @@ class Scene:
                     raise ValueError(f"scene {self.name!r}, animation {a.name!r}: unknown case {c!r} "
                                      f"(cases: {', '.join(names)})")
         self.animations = anims
-        self.routing_options = dict(self.routing_options)
-        self.design_options = dict(self.design_options)
+        self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
+        self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
         self.expected = dict(self.expected)
+        check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}")
 
     @property
     def case_names(self) -> tuple[str, ...]:
@@ -285,6 +287,53 @@ class Scene:
     def __repr__(self) -> str:
         return (f"Scene({self.name!r}, {self.mesh.n_nodes} nodes, {len(self.cases)} case(s): "
                 f"{', '.join(self.case_names)})")
+
+
+def check_scene_options(options, kind: str, label: str = "") -> dict:
+    """Check a scene's ``routing_options`` (``kind="routing"``) or ``design_options`` (``"design"``): every
+    key a keyword of :func:`~mdsr_opt.routing.route_muscles` / :func:`~mdsr_opt.design.design_contractions`,
+    every value in its range, solver ``options`` known to the solver. Returns a checked copy.
+
+    Raises ``SceneFileError`` (a ValueError) or ``TypeError`` naming ``label`` and the field.
+    """
+    if kind not in ("routing", "design"):
+        raise ValueError(f"kind must be 'routing' or 'design', got {kind!r}")
+    r = _Reader(label or "scene")
+    if not isinstance(options, Mapping):
+        r.fail(f"{kind}_options", f"expected a dict, got {_tname(options)}", TypeError)
+    if kind == "design" and ("initial" in options or "weights" in options):
+        return dict(options)  # per-problem arrays: design_contractions checks them against the muscles
+    return _scene_options(r, options, kind)
+
+
+#: Names a case or animation may not take: "rest" is the rest pose in keyframes; "summary" names the run's
+#: summary files.
+RESERVED_NAMES = ("rest", "summary")
+
+
+def check_output_names(case_names: Sequence[str], animation_names: Sequence[str] = (), label: str = "scene",
+                       where: Sequence[str] | None = None) -> None:
+    """Refuse case and animation names whose files would collide with each other or with a run's own files
+    (:data:`RUN_FILES`; a case writes the folder ``<case>/``, an animation ``<name>.gif`` and
+    ``<name>.json``), also on case-insensitive file systems. ``where`` names each name's field (cases
+    first, then animations) for the message.
+    """
+    names = list(case_names) + list(animation_names)
+    fields = list(where) if where is not None else \
+        [f"case {c!r}" for c in case_names] + [f"animation {a!r}" for a in animation_names]
+    taken: dict[str, str] = {f.lower(): f"the run's own file {f!r}" for f in RUN_FILES}
+    for i, n in enumerate(names):
+        is_case = i < len(case_names)
+        kind = "case" if is_case else "animation"
+        if n.lower() in RESERVED_NAMES or n.lower().split(".")[0] in RESERVED_NAMES:
+            raise SceneFileError(f"{label}: {fields[i]}: the {kind} name {n!r} is reserved ('rest' is the rest "
+                                 "pose in keyframes, 'summary' names the run's summary files); choose another")
+        for entry in ([n] if is_case else [f"{n}.gif", f"{n}.json"]):
+            key = entry.lower()
+            if key in taken:
+                raise SceneFileError(f"{label}: {fields[i]}: the {kind} {n!r} would write {entry!r}, which is "
+                                     f"{taken[key]}; choose another name")
+            taken[key] = f"written by the {kind} {n!r}"
 
 
 def _check_name(name, what: str) -> None:
@@ -394,11 +443,26 @@ def nodes_in_polygon(mesh: Mesh, polygon: ArrayLike, boundary: bool = False) -> 
     return idx.astype(np.int64)
 
 
-def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundary: bool = False) -> Muscle:
+def _snap(mesh: Mesh, p: np.ndarray, boundary: bool, tol: float | None, what: str) -> int:
+    """The node nearest ``p``; a ValueError naming ``what`` when it is farther than ``tol`` (default one mean
+    edge length)."""
+    tol = float(mesh.edge_lengths.mean()) if tol is None else float(tol)
+    k = nearest_node(mesh, p, boundary=boundary)
+    d = float(np.linalg.norm(mesh.points[k] - p))
+    if d > tol:
+        raise ValueError(f"{what} {p.tolist()} lies {d:.3g} from the nearest {'boundary ' if boundary else ''}node, "
+                         f"more than {tol:.3g} (one mean edge length): is it on the body?")
+    return k
+
+
+def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundary: bool = False,
+              tol: float | None = None) -> Muscle:
     """A muscle through the nodes nearest to ``waypoints``, joined by shortest paths along mesh edges.
 
-    The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``); consecutive ones
-    are joined by the shortest edge path (Dijkstra on rest edge lengths). The result must be a simple path.
+    The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``), each of which must
+    lie within ``tol`` (default: one mean edge length) of its waypoint, else a ``ValueError`` names the
+    waypoint and the distance; consecutive ones are joined by the shortest edge path (Dijkstra on rest edge
+    lengths). The result must be a simple path.
     """
     import networkx as nx
 
@@ -406,7 +470,7 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     if len(wp) < 2:
         raise ValueError("a muscle path needs at least two waypoints")
     G = _edge_graph(mesh)
-    ids = [nearest_node(mesh, p, boundary=boundary) for p in wp]
+    ids = [_snap(mesh, p, boundary, tol, f"waypoint {i}") for i, p in enumerate(wp)]
     path = [ids[0]]
     for a, b in zip(ids[:-1], ids[1:]):
         if a == b:
@@ -416,14 +480,16 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
 
 
 def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike | None = None,
-                  name: str | None = None, inset: int = 0) -> Muscle:
+                  name: str | None = None, inset: int = 0, tol: float | None = None) -> Muscle:
     """A muscle along a boundary loop from the boundary node nearest ``start`` to the one nearest ``end``.
 
-    Of the two ways round the loop, the one passing nearest ``via`` is taken (default: the shorter one).
-    ``inset`` drops that many nodes at each end (a muscle that stops short of a corner).
+    ``start`` and ``end`` must lie within ``tol`` (default: one mean edge length) of a boundary node, else a
+    ``ValueError`` names the point and the distance. Of the two ways round the loop, the one passing
+    nearest ``via`` is taken (default: the shorter one). ``inset`` drops that many nodes at each end (a
+    muscle that stops short of a corner).
     """
-    a = nearest_node(mesh, start, boundary=True)
-    b = nearest_node(mesh, end, boundary=True)
+    a = _snap(mesh, as_float_array(start, "start", shape=(2,)), True, tol, "start")
+    b = _snap(mesh, as_float_array(end, "end", shape=(2,)), True, tol, "end")
     if a == b:
         raise ValueError("start and end snap to the same boundary node")
     for loop in mesh.boundary_loops:
@@ -621,6 +687,9 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
     if p.suffix.lower() in (".py", ".toml", ".json") or os.sep in s or "/" in s:
         if not p.exists():
             raise FileNotFoundError(f"no such scene file: {s}")
+        if p.is_dir():
+            raise ValueError(f"{s} is a folder, not a scene: give a problem name, a problem script (.py) or a "
+                             "scene file (.toml/.json)")
         if p.suffix.lower() == ".py":
             return _build_from(p, "medium" if resolution is None else resolution)
         return load_scene(p, resolution=resolution)
@@ -1326,9 +1395,10 @@ class _Reader:
 
     def __init__(self, path: Path):
         self.path = path
+        self.label = path.name if isinstance(path, Path) else str(path)
 
     def fail(self, where: str, msg: str, kind: type = SceneFileError):
-        err = kind(f"{self.path.name}: {where}: {msg}")
+        err = kind(f"{self.label}: {where}: {msg}")
         raise err
 
     def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
@@ -1479,7 +1549,12 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such scene file: {path}")
-    data = _read_file(path)
+    if path.is_dir():
+        raise SceneFileError(f"{path} is a folder, not a scene file (a .toml or .json file)")
+    try:
+        data = _read_file(path)
+    except PermissionError:
+        raise SceneFileError(f"{path}: cannot read the scene file (permission denied)") from None
     r = _Reader(path)
     top = r.keys(data, _TOP_KEYS, "", required=("name", "body", "cases"))
     name = r.string(top["name"], "name")
@@ -1518,6 +1593,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     for i, a in enumerate(top.get("animations", []) if isinstance(top.get("animations", []), list)
                           else r.fail("animations", "expected a list of animations", TypeError)):
         anims.append(_scene_animation(r, a, f"animations[{i}]", seen))
+    check_output_names([c.name for c in cases], [a.name for a in anims], path.name,
+                       [f"cases[{i}].name" for i in range(len(cases))]
+                       + [f"animations[{i}].name" for i in range(len(anims))])
     expected = top.get("expected", {})
     if not isinstance(expected, Mapping):
         r.fail("expected", f"expected a table, got {_tname(expected)}", TypeError)
@@ -1695,7 +1773,115 @@ def _scene_options(r: _Reader, spec, where: str) -> dict:
     allowed = [p.name for p in inspect.signature(fn).parameters.values() if p.kind == p.KEYWORD_ONLY]
     if where == "design":
         allowed = [a for a in allowed if a not in ("initial", "weights")]
-    return r.keys(spec, allowed, where)
+    opts = r.keys(spec, allowed, where)
+    checks = _ROUTING_CHECKS if where == "routing" else _DESIGN_CHECKS
+    for k, v in opts.items():
+        if k in checks:  # a keyword added to the function later and not known here passes unchecked
+            opts[k] = checks[k](r, v, f"{where}.{k}")
+    if where == "design" and "options" in opts:
+        opts["options"] = _solver_options(r, opts["options"], opts)
+    return opts
+
+
+def _real(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False, what: str = ""):
+    def check(r: _Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
+            rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+            r.fail(where, f"must lie in {rng}{what}, got {x:g}")
+        return x
+    return check
+
+
+def _positive(allow_zero: bool = False):
+    def check(r: _Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < 0 or (x == 0 and not allow_zero):
+            r.fail(where, f"must be {'>= 0' if allow_zero else '> 0'}, got {x:g}")
+        return x
+    return check
+
+
+def _integer(minimum: int = 1):
+    def check(r: _Reader, v, where: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            r.fail(where, f"expected an integer, got {v!r}", TypeError)
+        if v < minimum:
+            r.fail(where, f"must be an integer >= {minimum}, got {v}")
+        return v
+    return check
+
+
+def _choice(*choices: str):
+    def check(r: _Reader, v, where: str) -> str:
+        if v not in choices:
+            r.fail(where, f"must be one of {', '.join(map(repr, choices))}, got {v!r}",
+                   SceneFileError if isinstance(v, str) else TypeError)
+        return v
+    return check
+
+
+def _boolean(r: _Reader, v, where: str) -> bool:
+    if not isinstance(v, bool):
+        r.fail(where, f"expected true or false, got {v!r}", TypeError)
+    return v
+
+
+def _table(r: _Reader, v, where: str) -> dict:
+    if not isinstance(v, Mapping):
+        r.fail(where, f"expected a table of solver options, got {_tname(v)}", TypeError)
+    return dict(v)
+
+
+#: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
+_DESIGN_CHECKS = {
+    "method": _choice("flattened", "nested", "derivative-free"),
+    "a_max": _real(0.0, 1.0, lo_open=True, hi_open=True, what=" (a fraction of the rest length)"),
+    "interior_weight": _real(0.3, 0.7),
+    "muscle_model": _choice("springs", "cable"),
+    "stiffness": _positive(),
+    "tol": _positive(),
+    "max_iter": _integer(1),
+    "hessian": _choice("exact", "gauss-newton"),
+    "scaling": _choice("auto", "size"),
+    "warm_start": _boolean,
+    "outer": _choice("nelder-mead", "powell"),
+    "options": _table,
+    "inner_tol": _positive(),
+    "verify": _boolean,
+    "gap_rtol": _positive(),
+    "derivatives": _choice("assembled", "casadi"),
+}
+_ROUTING_CHECKS = {
+    "K_a": _positive(allow_zero=True),
+    "K_b": _positive(allow_zero=True),
+    "K_h": _positive(allow_zero=True),
+    "n_seeds": _integer(1),
+    "max_muscles": _integer(1),
+    "min_length": _positive(allow_zero=True),
+    "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
+}
+
+
+def _solver_options(r: _Reader, options: dict, design: dict) -> dict:
+    """``[design.options]``: IPOPT's options (flattened, without the ``ipopt.`` prefix) or scipy's
+    ``minimize`` options (nested: L-BFGS-B; derivative-free: Nelder-Mead or Powell), each checked against
+    the solver (:func:`~mdsr_opt.backends.check_options`)."""
+    from .backends import check_options
+
+    method = design.get("method", "flattened")
+    for k, v in options.items():
+        w = f"design.options.{k}"
+        try:
+            if method == "flattened":
+                check_options("ipopt", {f"ipopt.{k}": v})
+            else:
+                sp = "L-BFGS-B" if method == "nested" else \
+                    {"nelder-mead": "Nelder-Mead", "powell": "Powell"}[design.get("outer", "nelder-mead")]
+                check_options(f"scipy:{sp}", {k: v})
+        except (ValueError, TypeError) as exc:
+            r.fail(w, str(exc).replace("'ipopt.", "'"))
+    return options
 
 
 def _scene_case(r: _Reader, mesh: Mesh, spec, where: str, regions: dict, muscles) -> Case:
