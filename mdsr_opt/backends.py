@@ -243,17 +243,21 @@ _OPTION_VERDICTS: dict = {}  # (plugin, name, repr(value)) -> None (valid) or th
 @contextlib.contextmanager
 def _captured_stdout(sink: list):
     """Capture C-level stdout (IPOPT prints why it rejects an option) into ``sink`` as one string."""
+    import io
+
     sys.stdout.flush()
     saved = os.dup(1)
+    text = io.StringIO()  # CasADi's Python build prints through sys.stdout, other builds to file descriptor 1
     with tempfile.TemporaryFile(mode="w+b") as fh:
         os.dup2(fh.fileno(), 1)
         try:
-            yield
+            with contextlib.redirect_stdout(text):
+                yield
         finally:
             os.dup2(saved, 1)
             os.close(saved)
             fh.seek(0)
-            sink.append(fh.read().decode("utf-8", "replace"))
+            sink.append(text.getvalue() + fh.read().decode("utf-8", "replace"))
 
 
 def _casadi_verdict(plugin: str, name: str, value) -> str | None:
@@ -271,8 +275,9 @@ def _casadi_verdict(plugin: str, name: str, value) -> str | None:
                 not name.startswith("ipopt.") else ""
             return f"unknown {plugin} option {name!r}{hint}"
         said = [ln.strip() for ln in printed[0].splitlines() if ln.strip().startswith("Setting:")] if printed else []
-        why = said[0].replace(" Check the option documentation.", "") if said else next((ln.strip() for ln in reversed(text.splitlines()) if ln.strip()
-                                         and "Error calling" not in ln), text)
+        why = said[0].replace(" Check the option documentation.", "") if said else next(
+            (ln.strip() for ln in reversed(text.splitlines()) if ln.strip() and "Error calling" not in ln), text)
+        why = why.split(".cpp:", 1)[1].split(": ", 1)[-1] if ".cpp:" in why else why
         return f"invalid value {value!r} for {plugin} option {name!r}: {why}"
     return None
 
