@@ -26,6 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     _register_all(sub)
     args = parser.parse_args(argv)
+    args.command_line = " ".join(["mdsr", *(sys.argv[1:] if argv is None else argv)])
     from .rundir import noting_interrupts
 
     try:

@@ -6,7 +6,7 @@ A :class:`RunFolder` guards the folder a run writes into (``mdsr run --out DIR``
   system drops when the process dies, so a crashed run leaves no lock behind that needs clearing). A second
   run into the same folder fails at once with a message naming the first (its process id and command).
 - **No mixing.** A folder that already holds files is refused; with ``overwrite=True`` (``--overwrite``) the
-  files of the earlier mdsr run there are removed first. Only files that run recorded in its manifest
+  files of an earlier mdsr run there are removed first. Only files that run recorded in its manifest
   ``DIR/.mdsr-run.json`` are ever removed: a folder holding anything else is refused even then.
 - **Nothing partial.** Every file is written through a temporary file (:class:`~mdsr_opt.io.atomic_path`);
   when the run stops (an error, Ctrl-C) the temporaries left in the folder are removed, the files already
@@ -16,15 +16,15 @@ Example
 -------
 >>> import tempfile, os
 >>> d = os.path.join(tempfile.mkdtemp(), "run")
->>> with RunFolder(d) as folder:
+>>> with RunFolder(d, command="example") as folder:
 ...     folder.begin(["result.txt"])
 ...     _ = open(os.path.join(d, "result.txt"), "w").write("42")
 >>> sorted(os.listdir(d))
 ['.mdsr-run.json', 'result.txt']
->>> RunFolder(d).__enter__()
+>>> RunFolder(d).__enter__()  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-mdsr_opt.rundir.OutputFolderError: --out ... already holds 1 entry ('result.txt'); pass --overwrite to replace the earlier mdsr run there, or choose a new folder
+mdsr_opt.rundir.OutputFolderError: --out ... holds an earlier mdsr run (`example`, complete); pass --overwrite to replace it, or choose a new folder
 """
 
 from __future__ import annotations
@@ -172,12 +172,12 @@ class RunFolder:
     def __init__(self, out, *, overwrite: bool = False, command: str = ""):
         self.path = check_out_path(out)
         self.overwrite = bool(overwrite)
-        self.command = command or " ".join(["mdsr", *sys.argv[1:]])
+        self.command = command or " ".join([os.path.basename(sys.argv[0] or "python"), *sys.argv[1:]])
         self._fd: int | None = None
         self._created: list[Path] = []
         self._old: list[str] = []
         self._begun = False
-        self._status = "running"
+        self._status = "complete"
 
     # ---------------------------------------------------------------------------------------------- lock
     def _lock(self) -> None:
@@ -237,13 +237,16 @@ class RunFolder:
             self._lock()
             entries = sorted(e for e in os.listdir(self.path) if e != LOCK_NAME)
             if entries:
-                shown = ", ".join(map(repr, entries[:3])) + (", ..." if len(entries) > 3 else "")
+                old = _read_manifest(self.path)
+                if not self.overwrite and old is not None:
+                    raise OutputFolderError(
+                        f"--out {self.path} holds an earlier mdsr run (`{old.get('command', '?')}`, "
+                        f"{old.get('status', '?')}); pass --overwrite to replace it, or choose a new folder")
                 if not self.overwrite:
+                    shown = ", ".join(map(repr, entries[:3])) + (", ..." if len(entries) > 3 else "")
                     raise OutputFolderError(
                         f"--out {self.path} already holds {len(entries)} "
-                        f"{'entry' if len(entries) == 1 else 'entries'} ({shown}); pass --overwrite to replace "
-                        "the earlier mdsr run there, or choose a new folder")
-                old = _read_manifest(self.path)
+                        f"{'entry' if len(entries) == 1 else 'entries'} ({shown}); choose a new or empty folder")
                 owned = set(old.get("claims", [])) if old else set()
                 owned.add(MANIFEST_NAME)
                 foreign = [e for e in entries if e not in owned and not e.startswith(_TMP_PREFIX)]

@@ -301,9 +301,10 @@ def check_scene_options(options, kind: str, label: str = "") -> dict:
     r = _Reader(label or "scene")
     if not isinstance(options, Mapping):
         r.fail(f"{kind}_options", f"expected a dict, got {_tname(options)}", TypeError)
-    if kind == "design" and ("initial" in options or "weights" in options):
-        return dict(options)  # per-problem arrays: design_contractions checks them against the muscles
-    return _scene_options(r, options, kind)
+    arrays = {k: options[k] for k in ("initial", "weights") if kind == "design" and k in options}
+    rest = {k: v for k, v in options.items() if k not in arrays}
+    # per-problem arrays (initial, weights) are checked by design_contractions against the muscles and mesh
+    return {**_scene_options(r, rest, kind), **arrays}
 
 
 #: Names a case or animation may not take: "rest" is the rest pose in keyframes; "summary" names the run's
@@ -1215,7 +1216,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     from .rundir import RunFolder, noting_interrupts
 
     names = _check_run(scene, cases, mesh_format)
-    with noting_interrupts(), RunFolder(out, overwrite=overwrite) as folder:
+    with noting_interrupts(), RunFolder(out, overwrite=overwrite,
+                                        command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
@@ -2021,7 +2023,7 @@ def _cmd_run(a) -> int:
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
     # scene (all input errors), and only then any solving or writing
-    with RunFolder(a.out, overwrite=a.overwrite) as folder:
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
         scenes = [get_problem(n, resolution=a.resolution) for n in names]
         seen = set()
         for s in scenes:

@@ -128,7 +128,8 @@ def test_a_second_run_is_refused_without_overwrite_and_replaces_the_first_with_i
     first = _files(out)
     assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 2
     err = capsys.readouterr().err
-    assert "already holds" in err and "pass --overwrite to replace the earlier mdsr run there" in err
+    assert f"--out {out} holds an earlier mdsr run (`mdsr run {strip}" in err
+    assert "complete); pass --overwrite to replace it, or choose a new folder" in err
     assert _files(out) == first
     # a re-run whose case now fails leaves nothing of the earlier run beside its summary
     failing = dict(STRIP, material={"nu": 0.0},
@@ -146,7 +147,7 @@ def test_refusal_message_and_foreign_files(tmp_path, capsys):
     (out / "notes.txt").write_text("mine")
     assert main(["run", str(FINGER), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "already holds 1 entry ('notes.txt'); pass --overwrite" in err
+    assert "already holds 1 entry ('notes.txt'); choose a new or empty folder" in err
     assert main(["run", str(FINGER), "--out", str(out), "--overwrite"]) == 2
     assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]     # untouched, no lock left
