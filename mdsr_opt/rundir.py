@@ -24,7 +24,7 @@ Example
 >>> RunFolder(d).__enter__()  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
-mdsr_opt.rundir.OutputFolderError: --out ... holds an earlier mdsr run (`example`, complete); pass --overwrite to replace it, or choose a new folder
+mdsr_opt.rundir.OutputFolderError: --out ... holds an earlier mdsr run (`example`, complete); pass --overwrite ...
 """
 
 from __future__ import annotations

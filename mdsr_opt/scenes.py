@@ -60,8 +60,8 @@ __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTI
            "mesh_polygon", "prepare_case", "nodes_in_box", "nodes_near", "nearest_node", "nodes_in_polygon",
            "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
            "run_main", "run_scene", "write_scene", "run_entries", "RUN_FILES", "RESERVED_NAMES",
-           "check_output_names", "check_scene_options", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
-           "AnimationResult", "animate"]
+           "check_output_names", "check_scene_options", "run_case", "write_case", "CaseReport", "CaseRun",
+           "SceneReport", "AnimationResult", "animate"]
 
 #: Named resolutions: approximate number of mesh nodes.
 RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}

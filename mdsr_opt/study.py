@@ -1170,8 +1170,8 @@ def _cli(args) -> int:
     res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int, "--resolutions"),
                     methods=_csv_list(args.methods, str, "--methods"),
                     problems=_csv_list(args.problems, str, "--problems"),
-                    materials=_csv_list(args.materials, str, "--materials"), reference_resolution=args.reference_resolution,
-                    timeout=args.timeout, scheduler=scheduler, workers=args.workers, progress=not args.quiet)
+                    materials=_csv_list(args.materials, str, "--materials"),
+                    reference_resolution=args.reference_resolution, timeout=args.timeout, scheduler=scheduler, workers=args.workers, progress=not args.quiet)
     print(res.markdown())
     return 0
 
