@@ -50,15 +50,18 @@ def _files(folder: Path) -> list[str]:
 # ---------------------------------------------------------------------------------------------- interrupts
 def test_ctrl_c_stops_a_real_run_with_exit_130(tmp_path):
     out = tmp_path / "out"
-    proc = _start(FINGER, "--out", out, "--resolution", "1200")
-    _wait_for_line(proc, "target by external driving")        # the run is solving and writing now
+    proc = _start(FINGER, "--out", out, "--resolution", "400")
+    # after the first design: the run is rendering the photograph and writing figures now (an interrupt inside
+    # an IPOPT solve is the solvers' part, tested with them; the swallowed case is the next test)
+    _wait_for_line(proc, "[finger 1/2 bend] design")
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
     _stdout, err = proc.communicate(timeout=60)
     took = time.monotonic() - t0
     assert proc.returncode == 130
     assert took < 5.0, f"took {took:.1f} s to stop"
-    assert err.strip().splitlines() == ["mdsr run: interrupted (Ctrl-C); files already complete are kept"]
+    assert err.strip().splitlines()[-1] == "mdsr run: interrupted (Ctrl-C); files already complete are kept"
+    assert "Traceback" not in err
     files = _files(out)
     assert not [f for f in files if Path(f).name.startswith(".tmp-")]       # nothing partial
     assert "summary.json" not in files                                      # the case is not "failed"
