@@ -208,3 +208,17 @@ def test_os_errors_are_one_line(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert err.strip() == f"mdsr run: error: Permission denied: {tmp_path / 'x'}"
     assert not (tmp_path / "o").exists()                              # the folder it made is gone again
+
+
+def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsys):
+    from mdsr_opt.scenes import load_problem_module, run_main
+
+    build = load_problem_module(ROOT / "problems" / "gripper.py").build
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert run_main(build, ["--out", str(out), "--resolution", "coarse", "--overwrite"]) == 2
+    assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
+    assert run_main(build, ["--out", str(tmp_path / "o2"), "--case", "nope"]) == 2
+    assert "has no case 'nope'" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()
