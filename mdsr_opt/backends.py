@@ -21,15 +21,18 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import tempfile
 import time
+import warnings
 from dataclasses import dataclass
+from typing import Mapping
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["MinimizeOutcome", "BACKENDS", "available_backends", "minimize"]
+__all__ = ["MinimizeOutcome", "BACKENDS", "available_backends", "minimize", "check_options"]
 
 
 @dataclass
@@ -234,11 +237,140 @@ def check_backend(backend: str) -> str:
     return backend
 
 
+_OPTION_VERDICTS: dict = {}  # (plugin, name, repr(value)) -> None (valid) or the error message
+
+
+@contextlib.contextmanager
+def _captured_stdout(sink: list):
+    """Capture C-level stdout (IPOPT prints why it rejects an option) into ``sink`` as one string."""
+    import io
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    text = io.StringIO()  # CasADi's Python build prints through sys.stdout, other builds to file descriptor 1
+    with tempfile.TemporaryFile(mode="w+b") as fh:
+        os.dup2(fh.fileno(), 1)
+        try:
+            with contextlib.redirect_stdout(text):
+                yield
+        finally:
+            os.dup2(saved, 1)
+            os.close(saved)
+            fh.seek(0)
+            sink.append(text.getvalue() + fh.read().decode("utf-8", "replace"))
+
+
+def _casadi_verdict(plugin: str, name: str, value) -> str | None:
+    x = ca.SX.sym("x")
+    opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False} if plugin == "ipopt" else {}
+    opts[name] = value
+    printed: list[str] = []
+    try:
+        with _captured_stdout(printed):
+            ca.nlpsol("option_probe", plugin, {"x": x, "f": (x - 1) ** 2}, opts)
+    except RuntimeError as exc:
+        text = str(exc)
+        if "No such IPOPT option" in text or "Unknown option" in text:
+            hint = " (IPOPT's own options are written 'ipopt.NAME')" if plugin == "ipopt" and \
+                not name.startswith("ipopt.") else ""
+            return f"unknown {plugin} option {name!r}{hint}"
+        said = [ln.strip() for ln in printed[0].splitlines() if ln.strip().startswith("Setting:")] if printed else []
+        why = said[0].replace(" Check the option documentation.", "") if said else next(
+            (ln.strip() for ln in reversed(text.splitlines()) if ln.strip() and "Error calling" not in ln), text)
+        why = why.split(".cpp:", 1)[1].split(": ", 1)[-1] if ".cpp:" in why else why
+        return f"invalid value {value!r} for {plugin} option {name!r}: {why}"
+    return None
+
+
+def _scipy_verdict(method: str, name: str, value) -> str | None:
+    from scipy.optimize import OptimizeWarning
+    from scipy.optimize import minimize as sp_minimize
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", OptimizeWarning)
+            sp_minimize(lambda z: float(z @ z), np.ones(2), method=method, bounds=[(-1.0, 2.0)] * 2,
+                        options={name: value})
+    except OptimizeWarning as exc:
+        if "Unknown solver options" in str(exc):
+            return f"unknown scipy {method} option {name!r}"
+        return None  # a warning about the tiny probe problem, not about the option
+    except Exception as exc:  # the value broke the method (wrong type, out of range)
+        return f"invalid value {value!r} for scipy {method} option {name!r}: {type(exc).__name__}: {exc}"
+    return None
+
+
+def check_options(backend: str, options: Mapping | None) -> dict:
+    """Check solver options against what the backend knows, before any solve.
+
+    Parameters
+    ----------
+    backend : str
+        A name of :data:`BACKENDS` (``options`` as :func:`minimize` takes them: CasADi ``nlpsol`` options,
+        IPOPT's own with the ``ipopt.`` prefix), or ``"scipy:METHOD"`` for the options of
+        ``scipy.optimize.minimize(method=METHOD)`` (as the nested and derivative-free designs take them).
+    options : mapping of str to value, or None
+
+    Returns
+    -------
+    dict
+        A copy of ``options``.
+
+    Raises
+    ------
+    TypeError
+        ``options`` is not a mapping or a name is not a string.
+    ValueError
+        An unknown option or an invalid value, named (with IPOPT's own reason, e.g. the valid settings),
+        instead of a CasADi ``RuntimeError`` when the solver is built; or options for a backend that takes
+        none (``scipy``, ``newton``).
+
+    Each option is tried once on a one-variable problem (building the solver, not solving) and the verdict
+    cached per process, so repeated calls cost a dictionary lookup.
+
+    Example
+    -------
+    >>> check_options("ipopt", {"ipopt.tol": 1e-6})
+    {'ipopt.tol': 1e-06}
+    >>> check_options("ipopt", {"ipopt.tolerance": 1e-6})
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown ipopt option 'ipopt.tolerance'
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(f"options must be a dict of option names to values, got {type(options).__name__}")
+    for k in options:
+        if not isinstance(k, str):
+            raise TypeError(f"option names must be strings, got {k!r}")
+    if not isinstance(backend, str):
+        raise TypeError(f"backend must be a string, got {type(backend).__name__}")
+    if backend.startswith("scipy:"):
+        plugin, verdict = backend, _scipy_verdict
+        method = backend.split(":", 1)[1]
+    else:
+        check_backend(backend)
+        if backend in ("scipy", "newton"):
+            if options:
+                raise ValueError(f"backend {backend!r} takes no options, got {', '.join(map(repr, options))}")
+            return {}
+        plugin, verdict = {"ipopt-lbfgs": "ipopt"}.get(backend, backend), _casadi_verdict
+        method = plugin
+    for name, value in options.items():
+        key = (plugin, name, repr(value))
+        if key not in _OPTION_VERDICTS:
+            _OPTION_VERDICTS[key] = verdict(method, name, value)
+        if _OPTION_VERDICTS[key] is not None:
+            raise ValueError(_OPTION_VERDICTS[key])
+    return dict(options)
+
+
 def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=500,
              options: dict | None = None) -> MinimizeOutcome:
     """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n)."""
     check_backend(backend)
-    options = dict(options or {})
+    options = check_options(backend, options)
     if backend in ("ipopt", "ipopt-lbfgs"):
         o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")

@@ -69,24 +69,40 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``mdsr`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
+
+    0: success; 1: the command ran but something it checked failed (a solve, a case); 2: bad input or an
+    unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.command_line = " ".join(["mdsr", *(sys.argv[1:] if argv is None else argv)])
     configure_logging(args.log_verbose, args.log_quiet)
     if args.log_quiet and hasattr(args, "quiet"):
         args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
     import matplotlib
 
     matplotlib.use("Agg")  # the command line only writes files; importing mdsr_opt.plot leaves the backend alone
+    from .rundir import noting_interrupts
+
     try:
-        return int(args.func(args) or 0)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
-        print(f"mdsr {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        with noting_interrupts():
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        # Ctrl-C: stop at once with one line (no traceback); the commands' writers have removed their
+        # temporary files, the files already complete stay. 130 = 128 + SIGINT, as shells report it.
+        print(f"\nmdsr {args.command}: interrupted (Ctrl-C); files already complete are kept", file=sys.stderr)
+        return 130
     except BrokenPipeError:  # `mdsr list | head`: the reader left; not an error of ours
         import os
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except (ValueError, TypeError, OSError) as exc:  # bad input, an unusable file or folder: one line
+        text = str(exc) if not isinstance(exc, OSError) or not exc.filename else \
+            f"{exc.strerror or type(exc).__name__}: {exc.filename}"
+        print(f"mdsr {args.command}: error: {text}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1152,6 +1152,10 @@ class PipelineResult:
         from .io import write_json, write_mesh
 
         directory = os.fspath(directory)
+        if not str(directory).strip():
+            raise ValueError("directory is empty: give a folder name")
+        if os.path.exists(directory) and not os.path.isdir(directory):
+            raise ValueError(f"{directory} is an existing file, not a folder")
         os.makedirs(directory, exist_ok=True)
         write_mesh(os.path.join(directory, "target.vtu"), self.mesh, x=self.target, material=self.material)
         write_mesh(os.path.join(directory, "driven.vtu"), self.mesh, x=self.design.x_aligned,
@@ -1170,27 +1174,70 @@ class PipelineResult:
 
     @classmethod
     def load(cls, directory) -> "PipelineResult":
-        """Read a result written by :meth:`save`."""
-        from .io import read_json, read_mesh
+        """Read a result written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``directory``, its ``design.json`` or a mesh file it names does not exist.
+        ValueError
+            ``directory`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
+            field missing or of the wrong kind, named); a mesh file cannot be read or does not match.
+        """
+        import json
+
+        from .io import read_mesh
         from .material import LinearElastic, NeoHookean
 
         directory = os.fspath(directory)
+        if not os.path.exists(directory):
+            raise FileNotFoundError(f"no such design result folder: {directory}")
+        if not os.path.isdir(directory):
+            raise ValueError(f"{directory} is a file; PipelineResult.load takes the folder written by save()")
         path = os.path.join(directory, "design.json")
         if not os.path.exists(path):
             raise FileNotFoundError(f"no design.json in {directory}")
-        data = read_json(path)
-        if data.get("format") != "mdsr_opt.design/1":
-            raise ValueError(f"{path} is not a mdsr_opt design result (format {data.get('format')!r})")
-        md = read_mesh(os.path.join(directory, data["meshes"]["target"]))
-        m = data["material"]
-        kinds = {NeoHookean.kind: NeoHookean, LinearElastic.kind: LinearElastic}
-        material = kinds[m["kind"]](m["E"], m["nu"], m["thickness"])
-        muscles = tuple(Muscle(tuple(mu["nodes"]), name=mu.get("name")) for mu in data["muscles"])
-        return cls(mesh=md.mesh, material=material, anchors=np.asarray(data["anchors"], dtype=np.int64),
-                   drag_nodes=np.asarray(data["drag_nodes"], dtype=np.int64),
-                   drag_positions=np.asarray(data["drag_positions"], dtype=float).reshape(-1, 2),
-                   target=md.x, external=data["external"], muscles=muscles, routing=data["routing"],
-                   design=DesignResult.from_dict(data["design"]), times=data.get("times", {}))
+        try:
+            with open(path, encoding="utf-8") as fh:
+                data = json.load(fh)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path} is damaged: not valid JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != "mdsr_opt.design/1":
+            fmt = data.get("format") if isinstance(data, dict) else None
+            raise ValueError(f"{path} is not a mdsr_opt design result (format {fmt!r})")
+        field_ = "meshes.target"
+        try:
+            mpath = os.path.join(directory, data["meshes"]["target"])
+            if not os.path.exists(mpath):
+                raise FileNotFoundError(f"{path}: the target mesh {mpath} is missing")
+            md = read_mesh(mpath)
+            field_ = "material"
+            m = data["material"]
+            kinds = {NeoHookean.kind: NeoHookean, LinearElastic.kind: LinearElastic}
+            if m["kind"] not in kinds:
+                raise ValueError(f"unknown material kind {m['kind']!r}")
+            material = kinds[m["kind"]](m["E"], m["nu"], m["thickness"])
+            field_ = "muscles"
+            muscles = tuple(Muscle(tuple(mu["nodes"]), name=mu.get("name")) for mu in data["muscles"])
+            for mu in muscles:
+                mu.check_on(md.mesh)
+            field_ = "anchors/drags"
+            kw = dict(anchors=np.asarray(data["anchors"], dtype=np.int64),
+                      drag_nodes=np.asarray(data["drag_nodes"], dtype=np.int64),
+                      drag_positions=np.asarray(data["drag_positions"], dtype=float).reshape(-1, 2))
+            field_ = "design"
+            design = DesignResult.from_dict(data["design"])
+            if design.x.shape != md.x.shape:
+                raise ValueError(f"the design's state has shape {design.x.shape}, the mesh {md.x.shape}")
+            field_ = "external/routing/times"
+            return cls(mesh=md.mesh, material=material, target=md.x, external=data["external"],
+                       muscles=muscles, routing=data["routing"], design=design, times=data.get("times", {}), **kw)
+        except FileNotFoundError:
+            raise
+        except KeyError as exc:
+            raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing (in {field_})") from None
+        except (TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise ValueError(f"{path} is damaged ({field_}): {exc}") from None
 
 
 def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,

@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, as_index_array
+from .rundir import check_interrupt
 from .mesh import Mesh, polygon_area
 from .muscles import Muscle, check_muscles
 from .progress import advance, progress_for_cli
@@ -61,8 +62,9 @@ __all__ = ["load_scene", "SceneFileError", "UnknownName", "seeds_for", "RESOLUTI
            "Scene", "CaseSetup", "list_problems", "get_problem", "problems_dir", "resolve_resolution",
            "mesh_polygon", "prepare_case", "nodes_in_box", "nodes_near", "nearest_node", "nodes_in_polygon",
            "edge_path", "boundary_path", "load_problem_module", "arc_map", "arc_rigid", "rigid_motion",
-           "run_main", "run_scene", "run_case", "write_case", "CaseReport", "CaseRun", "SceneReport",
-           "AnimationResult", "animate"]
+           "run_main", "run_scene", "write_scene", "run_entries", "RUN_FILES", "RESERVED_NAMES",
+           "check_output_names", "check_scene_options", "run_case", "write_case", "CaseReport", "CaseRun",
+           "SceneReport", "AnimationResult", "animate"]
 
 _LOG = logging.getLogger(__name__)
 
@@ -271,9 +273,10 @@ class Scene:
                     raise ValueError(f"scene {self.name!r}, animation {a.name!r}: unknown case {c!r} "
                                      f"(cases: {', '.join(names)})")
         self.animations = anims
-        self.routing_options = dict(self.routing_options)
-        self.design_options = dict(self.design_options)
+        self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
+        self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
         self.expected = dict(self.expected)
+        check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}")
 
     @property
     def case_names(self) -> tuple[str, ...]:
@@ -289,6 +292,54 @@ class Scene:
     def __repr__(self) -> str:
         return (f"Scene({self.name!r}, {self.mesh.n_nodes} nodes, {len(self.cases)} case(s): "
                 f"{', '.join(self.case_names)})")
+
+
+def check_scene_options(options, kind: str, label: str = "") -> dict:
+    """Check a scene's ``routing_options`` (``kind="routing"``) or ``design_options`` (``"design"``): every
+    key a keyword of :func:`~mdsr_opt.routing.route_muscles` / :func:`~mdsr_opt.design.design_contractions`,
+    every value in its range, solver ``options`` known to the solver. Returns a checked copy.
+
+    Raises ``SceneFileError`` (a ValueError) or ``TypeError`` naming ``label`` and the field.
+    """
+    if kind not in ("routing", "design"):
+        raise ValueError(f"kind must be 'routing' or 'design', got {kind!r}")
+    r = _Reader(label or "scene")
+    if not isinstance(options, Mapping):
+        r.fail(f"{kind}_options", f"expected a dict, got {_tname(options)}", TypeError)
+    arrays = {k: options[k] for k in ("initial", "weights") if kind == "design" and k in options}
+    rest = {k: v for k, v in options.items() if k not in arrays}
+    # per-problem arrays (initial, weights) are checked by design_contractions against the muscles and mesh
+    return {**_scene_options(r, rest, kind), **arrays}
+
+
+#: Names a case or animation may not take: "rest" is the rest pose in keyframes; "summary" names the run's
+#: summary files.
+RESERVED_NAMES = ("rest", "summary")
+
+
+def check_output_names(case_names: Sequence[str], animation_names: Sequence[str] = (), label: str = "scene",
+                       where: Sequence[str] | None = None) -> None:
+    """Refuse case and animation names whose files would collide with each other or with a run's own files
+    (:data:`RUN_FILES`; a case writes the folder ``<case>/``, an animation ``<name>.gif`` and
+    ``<name>.json``), also on case-insensitive file systems. ``where`` names each name's field (cases
+    first, then animations) for the message.
+    """
+    names = list(case_names) + list(animation_names)
+    fields = list(where) if where is not None else \
+        [f"case {c!r}" for c in case_names] + [f"animation {a!r}" for a in animation_names]
+    taken: dict[str, str] = {f.lower(): f"the run's own file {f!r}" for f in RUN_FILES}
+    for i, n in enumerate(names):
+        is_case = i < len(case_names)
+        kind = "case" if is_case else "animation"
+        if n.lower() in RESERVED_NAMES or n.lower().split(".")[0] in RESERVED_NAMES:
+            raise SceneFileError(f"{label}: {fields[i]}: the {kind} name {n!r} is reserved ('rest' is the rest "
+                                 "pose in keyframes, 'summary' names the run's summary files); choose another")
+        for entry in ([n] if is_case else [f"{n}.gif", f"{n}.json"]):
+            key = entry.lower()
+            if key in taken:
+                raise SceneFileError(f"{label}: {fields[i]}: the {kind} {n!r} would write {entry!r}, which is "
+                                     f"{taken[key]}; choose another name")
+            taken[key] = f"written by the {kind} {n!r}"
 
 
 def _check_name(name, what: str) -> None:
@@ -398,11 +449,26 @@ def nodes_in_polygon(mesh: Mesh, polygon: ArrayLike, boundary: bool = False) -> 
     return idx.astype(np.int64)
 
 
-def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundary: bool = False) -> Muscle:
+def _snap(mesh: Mesh, p: np.ndarray, boundary: bool, tol: float | None, what: str) -> int:
+    """The node nearest ``p``; a ValueError naming ``what`` when it is farther than ``tol`` (default one mean
+    edge length)."""
+    tol = float(mesh.edge_lengths.mean()) if tol is None else float(tol)
+    k = nearest_node(mesh, p, boundary=boundary)
+    d = float(np.linalg.norm(mesh.points[k] - p))
+    if d > tol:
+        raise ValueError(f"{what} {p.tolist()} lies {d:.3g} from the nearest {'boundary ' if boundary else ''}node, "
+                         f"more than {tol:.3g} (one mean edge length): is it on the body?")
+    return k
+
+
+def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundary: bool = False,
+              tol: float | None = None) -> Muscle:
     """A muscle through the nodes nearest to ``waypoints``, joined by shortest paths along mesh edges.
 
-    The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``); consecutive ones
-    are joined by the shortest edge path (Dijkstra on rest edge lengths). The result must be a simple path.
+    The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``), each of which must
+    lie within ``tol`` (default: one mean edge length) of its waypoint, else a ``ValueError`` names the
+    waypoint and the distance; consecutive ones are joined by the shortest edge path (Dijkstra on rest edge
+    lengths). The result must be a simple path.
     """
     import networkx as nx
 
@@ -410,7 +476,7 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     if len(wp) < 2:
         raise ValueError("a muscle path needs at least two waypoints")
     G = _edge_graph(mesh)
-    ids = [nearest_node(mesh, p, boundary=boundary) for p in wp]
+    ids = [_snap(mesh, p, boundary, tol, f"waypoint {i}") for i, p in enumerate(wp)]
     path = [ids[0]]
     for a, b in zip(ids[:-1], ids[1:]):
         if a == b:
@@ -420,14 +486,16 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
 
 
 def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike | None = None,
-                  name: str | None = None, inset: int = 0) -> Muscle:
+                  name: str | None = None, inset: int = 0, tol: float | None = None) -> Muscle:
     """A muscle along a boundary loop from the boundary node nearest ``start`` to the one nearest ``end``.
 
-    Of the two ways round the loop, the one passing nearest ``via`` is taken (default: the shorter one).
-    ``inset`` drops that many nodes at each end (a muscle that stops short of a corner).
+    ``start`` and ``end`` must lie within ``tol`` (default: one mean edge length) of a boundary node, else a
+    ``ValueError`` names the point and the distance. Of the two ways round the loop, the one passing
+    nearest ``via`` is taken (default: the shorter one). ``inset`` drops that many nodes at each end (a
+    muscle that stops short of a corner).
     """
-    a = nearest_node(mesh, start, boundary=True)
-    b = nearest_node(mesh, end, boundary=True)
+    a = _snap(mesh, as_float_array(start, "start", shape=(2,)), True, tol, "start")
+    b = _snap(mesh, as_float_array(end, "end", shape=(2,)), True, tol, "end")
     if a == b:
         raise ValueError("start and end snap to the same boundary node")
     for loop in mesh.boundary_loops:
@@ -631,6 +699,9 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
     if p.suffix.lower() in (".py", ".toml", ".json") or os.sep in s or "/" in s:
         if not p.exists():
             raise FileNotFoundError(f"no such scene file: {s}")
+        if p.is_dir():
+            raise ValueError(f"{s} is a folder, not a scene: give a problem name, a problem script (.py) or a "
+                             "scene file (.toml/.json)")
         if p.suffix.lower() == ".py":
             return _build_from(p, "medium" if resolution is None else resolution)
         return load_scene(p, resolution=resolution)
@@ -874,6 +945,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     what = ("external driving" if case.kind == "external" else
             f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
     setup = prepare_case(scene, case)
+    check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
     run.setup = setup
     tr = setup.target_result
     rep.target_success, rep.target_status = bool(tr.success), str(tr.status)
@@ -909,6 +981,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     t1 = time.perf_counter()
     try:
         res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
+        check_interrupt()
     except RuntimeError as exc:  # a solver inside the design failed hard (SolverFailure, CasADi errors)
         rep.message = f"design failed: {type(exc).__name__}: {exc}"
         rep.times["total"] = time.perf_counter() - t0
@@ -952,6 +1025,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                 f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
                 f"{cmp_s.mean_px:.2f} px")
         rep.times["photo"] = time.perf_counter() - t2
+        check_interrupt()
     rep.success = bool(res.success)
     if not res.success:
         rep.message = f"design not verified: {res.status}"
@@ -1103,6 +1177,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     states, fails = [], []
     for i, a in enumerate(frames):
         res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness)
+        check_interrupt()
         if not res.success:
             fails.append(i)
         states.append(res.x)
@@ -1113,7 +1188,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
-              log: Callable[[str], None] | None = _LOG.info) -> SceneReport:
+              log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -1132,26 +1207,79 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
     photo_resolution : (width, height) of the synthetic photographs.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
+    overwrite : bool
+        ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
+        (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
+        against a second run and removes the temporaries of an interrupted one).
 
     Returns
     -------
     SceneReport
         ``.success`` is False when a target solve, the routing, a design or an animation frame failed;
         the reasons are in each case's ``message`` and in ``summary.json``. Nothing is hidden.
-    """
-    import time
 
-    from . import plot
-    from .io import FORMATS, write_json
-    from .io import atomic_path
+    Raises
+    ------
+    OutputFolderError (a ValueError)
+        ``out`` is a file, cannot be written, holds other files (without ``overwrite``) or is locked by
+        another run.
+    KeyboardInterrupt
+        Passed on at once (never recorded as a failed case); the files already complete stay.
+    """
+    from .rundir import RunFolder, noting_interrupts
+
+    names = _check_run(scene, cases, mesh_format)
+    with noting_interrupts(), RunFolder(out, overwrite=overwrite,
+                                        command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
+        folder.begin(run_entries(scene, names))
+        report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
+                             animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
+                             log=log)
+        folder.finish("complete" if report.success else "complete, some cases failed")
+    return report
+
+
+def _check_run(scene, cases, mesh_format) -> tuple[str, ...]:
+    from .io import FORMATS
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
     if "." + str(mesh_format).lstrip(".") not in FORMATS or mesh_format.lstrip(".") == "msh":
         raise ValueError(f"mesh_format must be 'vtu', 'vtk' or 'xdmf', got {mesh_format!r}")
-    names = scene.case_names if cases is None else tuple(cases)
+    if isinstance(cases, str):
+        cases = [cases]
+    names = scene.case_names if cases is None else tuple(dict.fromkeys(cases))
     for c in names:
         scene.case(c)  # KeyError naming the choices
+    return names
+
+
+#: Files every scene run writes directly into its folder; case folders and animation files go beside them.
+RUN_FILES = ("rest.png", "summary.json", "summary.md")
+
+
+def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
+    """The names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one folder per
+    case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+    names = scene.case_names if cases is None else tuple(cases)
+    out = list(RUN_FILES) + list(names)
+    for a in scene.animations:
+        out += [f"{a.name}.gif", f"{a.name}.json"]
+    return out
+
+
+def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
+                method: str | None = None, photos: bool = True, figures: bool = True,
+                animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+                log: Callable[[str], None] | None = _LOG.info) -> SceneReport:
+    """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
+    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
+    import time
+
+    from . import plot
+    from .io import atomic_path, write_json
+
+    names = _check_run(scene, cases, mesh_format)
     say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -1164,6 +1292,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     runs: dict[str, CaseRun] = {}
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+        check_interrupt()
         run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
                        prefix=prefix)
         if figures:
@@ -1227,12 +1356,26 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
     p.add_argument("--resolution", default="medium", type=_parse_resolution,
                    help="coarse, medium, fine or a node count (default medium)")
     p.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
-    p.add_argument("--method", default=None, help="design method (flattened, nested, derivative-free)")
+    p.add_argument("--method", default=None, choices=("flattened", "nested", "derivative-free"),
+                   help="design method (default: the scene's, normally flattened)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier run in --out (without it, a non-empty --out is refused)")
     a = p.parse_args(argv)
-    scene = build(resolution=a.resolution)
-    log = progress_for_cli(a, _n_units(scene, a.case, True), scene.name, unit="case")
-    rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method, log=log)
-    log.close()
+    try:
+        if a.out is not None:
+            from .rundir import check_out_path
+
+            check_out_path(a.out)
+        scene = build(resolution=a.resolution)
+        with progress_for_cli(a, _n_units(scene, a.case, True), scene.name, unit="case") as log:
+            rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method,
+                            overwrite=a.overwrite, log=log)
+    except KeyboardInterrupt:
+        print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, OSError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 2
     print(rep.table())
     return 0 if rep.success else 1
 
@@ -1271,9 +1414,10 @@ class _Reader:
 
     def __init__(self, path: Path):
         self.path = path
+        self.label = path.name if isinstance(path, Path) else str(path)
 
     def fail(self, where: str, msg: str, kind: type = SceneFileError):
-        err = kind(f"{self.path.name}: {where}: {msg}")
+        err = kind(f"{self.label}: {where}: {msg}")
         raise err
 
     def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
@@ -1424,7 +1568,12 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no such scene file: {path}")
-    data = _read_file(path)
+    if path.is_dir():
+        raise SceneFileError(f"{path} is a folder, not a scene file (a .toml or .json file)")
+    try:
+        data = _read_file(path)
+    except PermissionError:
+        raise SceneFileError(f"{path}: cannot read the scene file (permission denied)") from None
     r = _Reader(path)
     top = r.keys(data, _TOP_KEYS, "", required=("name", "body", "cases"))
     name = r.string(top["name"], "name")
@@ -1463,6 +1612,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     for i, a in enumerate(top.get("animations", []) if isinstance(top.get("animations", []), list)
                           else r.fail("animations", "expected a list of animations", TypeError)):
         anims.append(_scene_animation(r, a, f"animations[{i}]", seen))
+    check_output_names([c.name for c in cases], [a.name for a in anims], path.name,
+                       [f"cases[{i}].name" for i in range(len(cases))]
+                       + [f"animations[{i}].name" for i in range(len(anims))])
     expected = top.get("expected", {})
     if not isinstance(expected, Mapping):
         r.fail("expected", f"expected a table, got {_tname(expected)}", TypeError)
@@ -1640,7 +1792,115 @@ def _scene_options(r: _Reader, spec, where: str) -> dict:
     allowed = [p.name for p in inspect.signature(fn).parameters.values() if p.kind == p.KEYWORD_ONLY]
     if where == "design":
         allowed = [a for a in allowed if a not in ("initial", "weights")]
-    return r.keys(spec, allowed, where)
+    opts = r.keys(spec, allowed, where)
+    checks = _ROUTING_CHECKS if where == "routing" else _DESIGN_CHECKS
+    for k, v in opts.items():
+        if k in checks:  # a keyword added to the function later and not known here passes unchecked
+            opts[k] = checks[k](r, v, f"{where}.{k}")
+    if where == "design" and "options" in opts:
+        opts["options"] = _solver_options(r, opts["options"], opts)
+    return opts
+
+
+def _real(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False, what: str = ""):
+    def check(r: _Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
+            rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+            r.fail(where, f"must lie in {rng}{what}, got {x:g}")
+        return x
+    return check
+
+
+def _positive(allow_zero: bool = False):
+    def check(r: _Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < 0 or (x == 0 and not allow_zero):
+            r.fail(where, f"must be {'>= 0' if allow_zero else '> 0'}, got {x:g}")
+        return x
+    return check
+
+
+def _integer(minimum: int = 1):
+    def check(r: _Reader, v, where: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            r.fail(where, f"expected an integer, got {v!r}", TypeError)
+        if v < minimum:
+            r.fail(where, f"must be an integer >= {minimum}, got {v}")
+        return v
+    return check
+
+
+def _choice(*choices: str):
+    def check(r: _Reader, v, where: str) -> str:
+        if v not in choices:
+            r.fail(where, f"must be one of {', '.join(map(repr, choices))}, got {v!r}",
+                   SceneFileError if isinstance(v, str) else TypeError)
+        return v
+    return check
+
+
+def _boolean(r: _Reader, v, where: str) -> bool:
+    if not isinstance(v, bool):
+        r.fail(where, f"expected true or false, got {v!r}", TypeError)
+    return v
+
+
+def _table(r: _Reader, v, where: str) -> dict:
+    if not isinstance(v, Mapping):
+        r.fail(where, f"expected a table of solver options, got {_tname(v)}", TypeError)
+    return dict(v)
+
+
+#: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
+_DESIGN_CHECKS = {
+    "method": _choice("flattened", "nested", "derivative-free"),
+    "a_max": _real(0.0, 1.0, lo_open=True, hi_open=True, what=" (a fraction of the rest length)"),
+    "interior_weight": _real(0.3, 0.7),
+    "muscle_model": _choice("springs", "cable"),
+    "stiffness": _positive(),
+    "tol": _positive(),
+    "max_iter": _integer(1),
+    "hessian": _choice("exact", "gauss-newton"),
+    "scaling": _choice("auto", "size"),
+    "warm_start": _boolean,
+    "outer": _choice("nelder-mead", "powell"),
+    "options": _table,
+    "inner_tol": _positive(),
+    "verify": _boolean,
+    "gap_rtol": _positive(),
+    "derivatives": _choice("assembled", "casadi"),
+}
+_ROUTING_CHECKS = {
+    "K_a": _positive(allow_zero=True),
+    "K_b": _positive(allow_zero=True),
+    "K_h": _positive(allow_zero=True),
+    "n_seeds": _integer(1),
+    "max_muscles": _integer(1),
+    "min_length": _positive(allow_zero=True),
+    "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
+}
+
+
+def _solver_options(r: _Reader, options: dict, design: dict) -> dict:
+    """``[design.options]``: IPOPT's options (flattened, without the ``ipopt.`` prefix) or scipy's
+    ``minimize`` options (nested: L-BFGS-B; derivative-free: Nelder-Mead or Powell), each checked against
+    the solver (:func:`~mdsr_opt.backends.check_options`)."""
+    from .backends import check_options
+
+    method = design.get("method", "flattened")
+    for k, v in options.items():
+        w = f"design.options.{k}"
+        try:
+            if method == "flattened":
+                check_options("ipopt", {f"ipopt.{k}": v})
+            else:
+                sp = "L-BFGS-B" if method == "nested" else \
+                    {"nelder-mead": "Nelder-Mead", "powell": "Powell"}[design.get("outer", "nelder-mead")]
+                check_options(f"scipy:{sp}", {k: v})
+        except (ValueError, TypeError) as exc:
+            r.fail(w, str(exc).replace("'ipopt.", "'"))
+    return options
 
 
 def _scene_case(r: _Reader, mesh: Mesh, spec, where: str, regions: dict, muscles) -> Case:
@@ -1781,24 +2041,34 @@ def _cmd_run(a) -> int:
         names = list_problems()
         if not names:
             raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
+    from .rundir import RunFolder
+
     t0 = time.perf_counter()
-    scenes = [get_problem(n, resolution=a.resolution) for n in names]  # all errors before any work
-    seen = set()
-    for s in scenes:
-        if s.name in seen:
-            raise ValueError(f"scene {s.name!r} is named twice")
-        seen.add(s.name)
-    reports = []
-    log = progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
-                           unit="case")
-    for k, scene in enumerate(scenes):
-        out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
-        if len(scenes) > 1:
-            log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
-        reports.append(run_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
-                                 figures=not a.no_figures, animations=not a.no_animations,
-                                 mesh_format=a.format, photo_resolution=a.photo_size, log=log))
-    log.close()
+    # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
+    # scene (all input errors), and only then any solving or writing
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+        scenes = [get_problem(n, resolution=a.resolution) for n in names]
+        seen = set()
+        for s in scenes:
+            if s.name in seen:
+                raise ValueError(f"scene {s.name!r} is named twice")
+            seen.add(s.name)
+        if a.case:
+            for s in scenes:
+                for c in a.case:
+                    s.case(c)  # an unknown --case names the scene's cases
+        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes])
+        reports = []
+        with progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
+                              unit="case") as log:
+            for k, scene in enumerate(scenes):
+                out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
+                if len(scenes) > 1:
+                    log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
+                reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
+                                           figures=not a.no_figures, animations=not a.no_animations,
+                                           mesh_format=a.format, photo_resolution=a.photo_size, log=log))
+        folder.finish("complete" if all(r.success for r in reports) else "complete, some cases failed")
     lines = reports[0].table().split("\n")
     for r in reports[1:]:
         lines += r.table().split("\n")[2:]
@@ -1828,7 +2098,13 @@ def add_cli(sub) -> None:
                        "forward check, synthetic photograph, contour metrics; figures, meshes, JSON")
     q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
                    help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
-    q.add_argument("--out", required=True, help="output folder (one sub-folder per scene when several)")
+    q.add_argument("--out", required=True,
+                   help="output folder (one sub-folder per scene when several); it must be new or empty, and "
+                   "is locked while the run writes into it: a second run into it stops with an error")
+    q.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr run in --out (only the files that run recorded; a "
+                   "folder holding other files is still refused). Without it a non-empty --out is refused, so "
+                   "one folder never mixes two runs")
     q.add_argument("--resolution", type=_parse_resolution, default=None,
                    help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
     q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")

@@ -742,6 +742,9 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
         else:
             fields.update(status=f"{type(exc).__name__}: {exc}".replace("\n", " ")[:300], failure="error",
                           success=False)
+    from .rundir import check_interrupt
+
+    check_interrupt()  # a Ctrl-C that a solver turned into a failed solve stops the study, never a failed row
     wall = time.perf_counter() - t_start
     fields["wall_time"] = wall
     if not raised:
@@ -1146,10 +1149,20 @@ def pareto_front(times: Sequence[float], errors: Sequence[float]) -> np.ndarray:
 
 
 # ============================================================================================== CLI
-def _csv_list(text: str | None, cast=str):
+def _csv_list(text: str | None, cast=str, flag: str = "the list"):
     if text is None:
         return None
-    return [cast(t.strip()) for t in text.split(",") if t.strip()]
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise ValueError(f"{flag}: expected a comma-separated list, got {text!r}")
+    out = []
+    for t in items:
+        try:
+            out.append(cast(t))
+        except ValueError:
+            kind = {int: "integers", float: "numbers"}.get(cast, "values")
+            raise ValueError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
+    return out
 
 
 def _cli(args) -> int:
@@ -1165,23 +1178,34 @@ def _cli(args) -> int:
         return 0
     if args.out is None:
         raise ValueError("give --out DIR for the study's table and charts")
+    from .rundir import check_out_path
+
+    check_out_path(args.out)  # every argument before any work
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ValueError(f"--timeout must be a positive number of seconds, got {args.timeout}")
+    if args.reference_resolution is not None and args.reference_resolution < 20:
+        raise ValueError(f"--reference-resolution must be at least 20 nodes, got {args.reference_resolution}")
     scheduler = args.scheduler or ("local" if args.dask else None)
     if args.name == FIDELITY_STUDY:
         from .fidelity import fidelity_markdown, run_fidelity_study
 
-        kw = {"resolutions": _csv_list(args.resolutions, int), "reference_resolution": args.reference_resolution}
+        kw = {"resolutions": _csv_list(args.resolutions, int, "--resolutions"),
+              "reference_resolution": args.reference_resolution}
         with progress_for_cli(args, 0, "mdsr study fidelity", stream="stderr", unit="run") as log:
-            choices, _ = run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float), scheduler=scheduler,
-                                            workers=args.workers, progress=not args.quiet, log=log,
-                                            **{k: v for k, v in kw.items() if v is not None})
+            choices, _ = run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float, "--tol"),
+                                            scheduler=scheduler, workers=args.workers, progress=not args.quiet,
+                                            log=log, **{k: v for k, v in kw.items() if v is not None})
         print(fidelity_markdown(choices), flush=True)
         return 0
     with progress_for_cli(args, 0, f"mdsr study {args.name}", stream="stderr", unit="run") as log:
-        res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int),
-                        methods=_csv_list(args.methods), problems=_csv_list(args.problems),
-                        materials=_csv_list(args.materials), reference_resolution=args.reference_resolution,
-                        timeout=args.timeout, scheduler=scheduler, workers=args.workers, progress=not args.quiet,
-                        log=log)
+        res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int, "--resolutions"),
+                        methods=_csv_list(args.methods, str, "--methods"),
+                        problems=_csv_list(args.problems, str, "--problems"),
+                        materials=_csv_list(args.materials, str, "--materials"),
+                        reference_resolution=args.reference_resolution, timeout=args.timeout,
+                        scheduler=scheduler, workers=args.workers, progress=not args.quiet, log=log)
     print(res.markdown())
     return 0
 

@@ -1,0 +1,224 @@
+"""Runs of ``mdsr run``: interrupts, output folders (locks, stale files, crashed runs) and a bad ``--out``."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from mdsr_opt import scenes
+from mdsr_opt.cli import main
+from mdsr_opt.rundir import LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError, RunFolder, check_out_path
+
+ROOT = Path(__file__).resolve().parents[1]
+FINGER = ROOT / "tests" / "data" / "finger.toml"
+STRIP = {"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+         "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+         "cases": [{"name": "bend", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.8, 1.2]}]}]}
+
+
+def _start(*args) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", *map(str, args)], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait_for_line(proc: subprocess.Popen, words: str, timeout: float = 60.0) -> list[str]:
+    lines = []
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if words in line:
+            return lines
+    proc.kill()
+    raise AssertionError(f"no line with {words!r} from the run; got {lines}")
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+# ---------------------------------------------------------------------------------------------- interrupts
+def test_ctrl_c_stops_a_real_run_with_exit_130(tmp_path):
+    out = tmp_path / "out"
+    proc = _start(FINGER, "--out", out, "--resolution", "400")
+    # after the first design: the run is rendering the photograph and writing figures now (an interrupt inside
+    # an IPOPT solve is the solvers' part, tested with them; the swallowed case is the next test)
+    _wait_for_line(proc, "[finger 1/2 bend] design")
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _stdout, err = proc.communicate(timeout=60)
+    took = time.monotonic() - t0
+    assert proc.returncode == 130
+    assert took < 5.0, f"took {took:.1f} s to stop"
+    assert err.strip().splitlines()[-1] == "mdsr run: interrupted (Ctrl-C); files already complete are kept"
+    assert "Traceback" not in err
+    files = _files(out)
+    assert not [f for f in files if Path(f).name.startswith(".tmp-")]       # nothing partial
+    assert "summary.json" not in files                                      # the case is not "failed"
+    manifest = json.loads((out / MANIFEST_NAME).read_text())
+    assert manifest["status"] == "interrupted"
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_an_interrupt_swallowed_by_a_solver_still_stops_the_run(tmp_path, monkeypatch):
+    """CasADi turns Ctrl-C inside IPOPT into a failed solve; the run must stop, not record a failed case."""
+    from mdsr_opt import rundir
+
+    real = scenes.prepare_case
+
+    def swallowed(*a, **k):
+        setup = real(*a, **k)
+        rundir._INTERRUPTED.set()            # what the SIGINT handler does when the solver eats the exception
+        return setup
+
+    monkeypatch.setattr(scenes, "prepare_case", swallowed)
+    out = tmp_path / "out"
+    with rundir.noting_interrupts():
+        assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-figures"]) == 130
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"
+    assert not (out / "summary.json").exists()
+
+
+def test_keyboard_interrupt_is_not_caught_as_a_case_failure(tmp_path, monkeypatch):
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    scene = scenes.get_problem(str(FINGER), resolution="coarse")
+    monkeypatch.setattr("mdsr_opt.design.design_contractions", boom)
+    with pytest.raises(KeyboardInterrupt):
+        scenes.run_case(scene, "bend", photo=False)
+
+
+# ---------------------------------------------------------------------------------------------- folders
+def test_two_concurrent_runs_cannot_mix_and_a_crashed_run_leaves_no_lock(tmp_path):
+    out = tmp_path / "out"
+    strip = tmp_path / "strip.json"
+    strip.write_text(json.dumps(STRIP))
+    first = _start(FINGER, "--out", out, "--resolution", "1200", "--overwrite")
+    _wait_for_line(first, "target by external driving")
+    second = _start(strip, "--out", out, "--overwrite", "--no-photos")
+    _out2, err2 = second.communicate(timeout=60)
+    assert second.returncode == 2
+    assert f"another mdsr run is writing into this folder (pid {first.pid}" in err2
+    assert "strip" not in (out / MANIFEST_NAME).read_text()
+    first.send_signal(signal.SIGKILL)                  # a crash: the lock goes with the process
+    first.wait(timeout=30)
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "running"
+    # the next run takes the folder over and replaces the crashed run's files completely
+    assert main(["run", str(strip), "--out", str(out), "--overwrite", "--no-photos"]) == 0
+    files = _files(out)
+    assert all(f in (MANIFEST_NAME, "rest.png", "summary.json", "summary.md") or f.startswith("bend/")
+               for f in files), files
+    assert json.loads((out / "summary.json").read_text())["scene"] == "strip"
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "complete"
+
+
+def test_a_second_run_is_refused_without_overwrite_and_replaces_the_first_with_it(tmp_path, capsys):
+    out = tmp_path / "out"
+    strip = tmp_path / "strip.json"
+    strip.write_text(json.dumps(STRIP))
+    assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 0
+    first = _files(out)
+    assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out} holds an earlier mdsr run (`mdsr run {strip}" in err
+    assert "complete); pass --overwrite to replace it, or choose a new folder" in err
+    assert _files(out) == first
+    # a re-run whose case now fails leaves nothing of the earlier run beside its summary
+    failing = dict(STRIP, material={"nu": 0.0},
+                   cases=[{"name": "stretch", "anchors": "base", "drags": [{"nodes": "end", "by": [0.5, 0]}]}])
+    strip.write_text(json.dumps(failing))
+    capsys.readouterr()
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--overwrite"]) == 1
+    assert not (out / "bend").exists()
+    assert json.loads((out / "summary.json").read_text())["success"] is False
+
+
+def test_refusal_message_and_foreign_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert main(["run", str(FINGER), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "already holds 1 entry ('notes.txt'); choose a new or empty folder" in err
+    assert main(["run", str(FINGER), "--out", str(out), "--overwrite"]) == 2
+    assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]     # untouched, no lock left
+
+
+def test_a_stale_lock_file_does_not_block(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / LOCK_NAME).write_text(json.dumps({"pid": 999999, "host": "gone"}))
+    with RunFolder(out) as f:
+        f.begin(["x"])
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_a_held_lock_names_the_holder(tmp_path):
+    with RunFolder(tmp_path / "out", command="mdsr run gecko") as f:
+        with pytest.raises(FolderBusy, match=rf"another mdsr run is writing .*pid {os.getpid()}.*mdsr run gecko"):
+            RunFolder(tmp_path / "out").__enter__()
+        f.begin([])
+
+
+@pytest.mark.parametrize("out, words", [
+    ("", "--out is empty"),
+    ("   ", "--out is empty"),
+    ("FILE", "is an existing file, not a folder"),
+    ("FILE/sub", "is a file, not a folder"),
+])
+def test_bad_out_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, out, words):
+    (tmp_path / "FILE").write_text("x")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(scenes, "get_problem", lambda *a, **k: pytest.fail("work started"))
+    assert main(["run", str(FINGER), "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["FILE"]
+
+
+def test_unwritable_out(tmp_path, capsys, monkeypatch):
+    locked = tmp_path / "ro"
+    locked.mkdir()
+    monkeypatch.setattr(os, "access", lambda p, mode: Path(p) != locked)   # as root, chmod would not bite
+    with pytest.raises(OutputFolderError, match=r"cannot write into .*ro \(permission denied\)"):
+        check_out_path(locked / "out")
+    assert main(["run", str(FINGER), "--out", str(locked / "out")]) == 2
+    assert "permission denied" in capsys.readouterr().err
+    assert not (locked / "out").exists()
+
+
+def test_os_errors_are_one_line(tmp_path, capsys, monkeypatch):
+    def denied(*a, **k):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "x"))
+
+    monkeypatch.setattr(scenes, "get_problem", denied)
+    assert main(["run", str(FINGER), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == f"mdsr run: error: Permission denied: {tmp_path / 'x'}"
+    assert not (tmp_path / "o").exists()                              # the folder it made is gone again
+
+
+def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsys):
+    from mdsr_opt.scenes import load_problem_module, run_main
+
+    build = load_problem_module(ROOT / "problems" / "gripper.py").build
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    assert run_main(build, ["--out", str(out), "--resolution", "coarse", "--overwrite"]) == 2
+    assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
+    assert run_main(build, ["--out", str(tmp_path / "o2"), "--case", "nope"]) == 2
+    assert "has no case 'nope'" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists()
