@@ -161,12 +161,15 @@ def test_every_option_of_mdsr_has_help():
 
 def test_every_add_argument_in_the_code_base_has_help():
     # the parsers built elsewhere (problem scripts' run_main, the benchmark scripts) too
-    files = [*ROOT.joinpath("mdsr_opt").glob("*.py"), *ROOT.joinpath("problems").glob("*.py"),
+    files = [*ROOT.joinpath("mdsr_opt").rglob("*.py"), *ROOT.joinpath("problems").glob("*.py"),
              *ROOT.joinpath("tests", "benchmarks").glob("*.py")]
     calls, missing = 0, []
     for f in files:
         for node in ast.walk(ast.parse(f.read_text())):
-            if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_argument":
+            # argparse's add_argument names its option with a string literal (a browser's options object has
+            # an add_argument too, called with a variable)
+            if isinstance(node, ast.Call) and getattr(node.func, "attr", None) == "add_argument" \
+                    and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str):
                 calls += 1
                 if not any(k.arg == "help" for k in node.keywords):
                     missing.append(f"{f.relative_to(ROOT)}:{node.lineno}")
