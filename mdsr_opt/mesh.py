@@ -19,7 +19,7 @@ from functools import cached_property, wraps
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array, as_index_array, positive_float
+from ._checks import as_float_array, as_index_array, positive_float, positive_int
 
 __all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES"]
 
@@ -455,15 +455,15 @@ class Mesh:
         min_angle = positive_float(min_angle, "min_angle")
         if min_angle > 34.0:
             raise ValueError(f"min_angle must be <= 34 degrees for Triangle to terminate, got {min_angle}")
-        if isinstance(max_triangles, bool) or not isinstance(max_triangles, (int, np.integer)) \
-                or max_triangles < 1:
-            raise ValueError(f"max_triangles must be a positive integer, got {max_triangles!r}")
+        max_triangles = positive_int(max_triangles, "max_triangles")
         names = ["outline"] + [f"holes[{i}]" for i in range(len(hole_polys))]
         polys = [outer] + hole_polys
-        # scale-free coordinates: centred on the outline's box, scaled by a power of two to unit size
+        # scale-free coordinates: scaled by a power of two s to about unit size and shifted by a whole
+        # multiple of s next to the outline's centre, so the transform is exact (Sterbenz) and a body near
+        # the origin meshes exactly as it would unscaled
         lo, hi = outer.min(axis=0), outer.max(axis=0)
-        centre = 0.5 * (lo + hi)
         s = float(2.0 ** np.ceil(np.log2(float(np.max(hi - lo)))))
+        centre = np.round(0.5 * (lo + hi) / s) * s
         unit = [(p - centre) / s for p in polys]
         area = polygon_area(unit[0]) - sum(polygon_area(h) for h in unit[1:])
         if area <= 0.0:

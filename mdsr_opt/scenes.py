@@ -50,7 +50,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array, as_index_array
+from ._checks import as_float_array, as_index_array, positive_int
 from .mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from .muscles import Muscle, check_muscles
 
@@ -341,6 +341,11 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
     area = polygon_area(outer) - sum(polygon_area(h) for h in holes)
     if area <= 0.0:
         raise ValueError("the holes cover the whole outline: no material is left to mesh")
+    max_triangles = positive_int(max_triangles, "max_triangles")
+    if 2 * want > max_triangles:  # a triangle mesh has about two triangles per node
+        raise ValueError(f"resolution={want} nodes would make about {2 * want:.3g} triangles, more than the "
+                         f"limit max_triangles={max_triangles}; ask for fewer nodes, or raise the limit with "
+                         "mesh_polygon(..., max_triangles=)")
     max_area = 2.2 * area / want  # a Triangle quality mesh has about 1 node per (max_area / 2.2)
     kw = dict(holes=holes, min_angle=min_angle, max_triangles=max_triangles)
     mesh = Mesh.from_polygon(outer, max_area=max_area, **kw)

@@ -181,14 +181,17 @@ def test_triangle_limit_is_refused_before_meshing():
         Mesh.from_polygon(SQUARE, max_area=0.001, max_triangles=100)
     m = Mesh.from_polygon(SQUARE, max_area=0.001, max_triangles=2000)  # raised: allowed
     assert m.n_triangles <= 2000
-    with pytest.raises(ValueError, match="max_triangles must be a positive integer"):
+    with pytest.raises(ValueError, match="max_triangles must be a positive integer, got 0"):
         Mesh.from_polygon(SQUARE, max_area=0.1, max_triangles=0)
+    with pytest.raises(TypeError, match="max_triangles must be an integer, got float 10000000.0"):
+        Mesh.from_polygon(SQUARE, max_area=0.1, max_triangles=1e7)
 
 
 def test_problem_at_absurd_resolution_is_refused_by_the_limit():
     from mdsr_opt.scenes import get_problem
 
-    with pytest.raises(ValueError, match=r"triangles.*more than the limit max_triangles=2000000"):
+    with pytest.raises(ValueError, match=r"resolution=100000000 nodes would make about 2e\+08 triangles, more "
+                                         r"than the limit max_triangles=2000000"):
         get_problem("gecko", resolution=10 ** 8)
 
 
