@@ -321,7 +321,7 @@ def test_boundary_crossing_check_scales():
 
 
 def test_polygon_contacts_are_exact():
-    from mdsr_opt.mesh import check_polygon, segment_contacts
+    from mdsr_opt.polygons import check_polygon, segment_contacts
 
     with pytest.raises(ValueError, match="self-intersecting: edge 2 .* meets edge 3|self-intersecting"):
         check_polygon([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]])  # vertex 3 on edge 0
