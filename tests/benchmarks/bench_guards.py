@@ -14,6 +14,10 @@ Measured, each in this one process (timings on a shared machine are noisy: media
 Usage::
 
     python tests/benchmarks/bench_guards.py [--repeat 5] [--skip-big]
+    /usr/bin/time -f "maxrss %M KB" python tests/benchmarks/bench_guards.py --extract 4000
+
+``--extract N`` only times ``contour_from_image`` on an N x N grey image of a dark ellipse (peak memory
+from ``/usr/bin/time``).
 """
 
 from __future__ import annotations
@@ -79,7 +83,20 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--skip-big", action="store_true", help="skip the 1.9M-triangle mesh")
+    ap.add_argument("--extract", type=int, default=0, help="only time contour extraction on N x N pixels")
     a = ap.parse_args(argv)
+    if a.extract:
+        from mdsr_opt.evaluate import contour_from_image
+
+        n = a.extract
+        yy, xx = np.ogrid[0:n, 0:n]
+        img = np.where((xx - n / 2) ** 2 / (0.3 * n) ** 2 + (yy - n / 2) ** 2 / (0.2 * n) ** 2 < 1, 60, 200)
+        img = np.repeat(img.astype(np.uint8)[..., None], 3, axis=2)
+        t0 = time.perf_counter()
+        c = contour_from_image(img, max_pixels=max(n * n, 1))
+        print(f"contour_from_image on {n} x {n} ({n * n / 1e6:.1f} MP): {time.perf_counter() - t0:.2f} s, "
+              f"{len(c)} contour points")
+        return
 
     m = Mesh.rectangle(4.0, 0.01, 8000, 1)
     print(f"strip: {m.n_nodes} nodes, {len(m.boundary_edges)} boundary edges")
