@@ -67,6 +67,15 @@ def positive_float(value, name: str, allow_zero: bool = False) -> float:
     return v
 
 
+def positive_int(value, name: str) -> int:
+    """An integer >= 1 (not a bool, not a float that happens to be whole)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
+    if value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value}")
+    return int(value)
+
+
 def check_mesh(mesh, name: str = "mesh"):
     """Return ``mesh`` if it is a :class:`mdsr_opt.Mesh`, else raise ``TypeError`` naming ``name``."""
     from .mesh import Mesh  # here, not at the top: mesh.py imports this module

@@ -58,6 +58,8 @@ from .mesh import polygon_area
 from .results import compact_repr, to_jsonable
 
 __all__ = [
+    "MAX_PIXELS",
+    "MAX_KERNEL",
     "load_image",
     "body_mask",
     "contour_from_image",
@@ -72,6 +74,15 @@ __all__ = [
     "write_table",
     "add_cli",
 ]
+
+#: Default limit on the pixels of the searched region (the image, or its ``roi``) of
+#: :func:`contour_from_image` and :func:`body_mask`; raise it with ``max_pixels=``. Extraction takes
+#: about 0.3 s and 60 MB per megapixel, so 25 megapixels (a 6000 x 4000 photograph) need about 1.5 GB.
+MAX_PIXELS = 25_000_000
+#: Largest morphology kernel (pixels): the opening and closing cost grows with the kernel's size
+#: (a 401 px kernel on a 2000 x 2000 image takes over a minute) and a kernel wider than the body's
+#: narrow parts erases them.
+MAX_KERNEL = 101
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 #: State files are the mesh formats of :mod:`mdsr_opt.io` (so a ``case.svg`` figure beside ``case.vtu``
@@ -128,27 +139,31 @@ def load_image(image_or_path: ArrayLike | str | os.PathLike, name: str = "image"
     Parameters
     ----------
     image_or_path : array_like or path
-        A ``uint8`` array (0-255), a ``uint16`` array (scaled to 0-255), or a float array with values in
-        [0, 1]; grey (H, W) or (H, W, 1), RGB (H, W, 3) or RGBA (H, W, 4). The alpha channel is
-        dropped, with a warning when some pixels are transparent (their stored colour is used as is).
-        A path is read with OpenCV and converted from BGR to RGB.
+        Pixel values of any real dtype, judged by their real range: ``uint8`` as is; other integers
+        (``uint16``, ``int64``, ...) as is when they all lie in 0-255 (8-bit data), else scaled by the
+        smallest bit depth (10, 12, 14, 16, ... bits) that holds them; ``bool`` as 0/255; floats in
+        [0, 1] scaled by 255, floats up to 255 as 8-bit values. An image whose values vary but would
+        fill fewer than 32 grey levels after that scaling is stretched to 0-255 (with a warning). Grey
+        (H, W) or (H, W, 1), RGB (H, W, 3) or RGBA (H, W, 4). The alpha channel is dropped, with a
+        warning when some pixels are transparent (their stored colour is used as is). A path is read
+        with OpenCV and converted from BGR to RGB.
     name : str
         The name used in error messages.
 
     Warns
     -----
     UserWarning
-        An RGBA image with transparent pixels: alpha is ignored.
+        An RGBA image with transparent pixels: alpha is ignored. A low-contrast image was stretched.
 
     Raises
     ------
     FileNotFoundError
         The path does not exist.
     TypeError
-        An unsupported dtype (bool, signed integers, complex, object).
+        An unsupported dtype (complex, strings, object).
     ValueError
-        An empty image, a wrong shape, non-finite or out-of-range float values, or a file OpenCV cannot
-        decode.
+        An empty image, a wrong shape, negative or non-finite values, floats above 255, or a file OpenCV
+        cannot decode.
 
     Example
     -------
@@ -179,6 +194,10 @@ def _as_uint8_image(value: Any, name: str) -> np.ndarray:
     arr = np.asarray(value)
     if arr.dtype == object or arr.dtype.kind in "USV":
         raise TypeError(f"{name} must be a numeric image array, got dtype {arr.dtype}")
+    if arr.dtype.kind == "c":
+        raise TypeError(f"{name} has unsupported dtype {arr.dtype}: an image holds real values")
+    if arr.dtype.kind not in "biuf":
+        raise TypeError(f"{name} has unsupported dtype {arr.dtype}; pass integer or float pixel values")
     if arr.size == 0:
         raise ValueError(f"{name} is empty (shape {arr.shape})")
     if arr.ndim == 3 and arr.shape[2] == 1:
@@ -190,21 +209,52 @@ def _as_uint8_image(value: Any, name: str) -> np.ndarray:
         arr = arr[:, :, :3]
     if min(arr.shape[:2]) < 3:
         raise ValueError(f"{name} is too small to hold a contour: shape {arr.shape}")
-    kind = arr.dtype
-    if kind == np.uint8:
+    return _to_uint8(arr, name)
+
+
+def _to_uint8(arr: np.ndarray, name: str) -> np.ndarray:
+    """Map pixel values of any real dtype to 0-255 by their real value range.
+
+    ``uint8`` passes unchanged; ``bool`` becomes 0/255. Other integers (``uint16``, ``int64``, ...) that
+    all lie in 0-255 are 8-bit data and are kept as they are; larger ones are scaled by the smallest bit
+    depth of 10, 12, 14, 16, ... bits that holds their maximum (a 12-bit camera image stored as
+    ``uint16`` is scaled by 255/4095, not by 255/65535). Floats in [0, 1] are scaled by 255; floats up
+    to 255 are taken as 8-bit values. When that scaling would squeeze an image whose values do vary into
+    fewer than 32 grey levels, its range is stretched to 0-255 instead, with a warning.
+    """
+    kind = arr.dtype.kind
+    if arr.dtype == np.uint8:
         return np.ascontiguousarray(arr)
-    if kind == np.uint16:
-        return np.ascontiguousarray(np.round(arr / 257.0).astype(np.uint8))
-    if np.issubdtype(kind, np.floating):
-        if not np.all(np.isfinite(arr)):
-            raise ValueError(f"{name} contains NaN or inf")
-        lo, hi = float(arr.min()), float(arr.max())
-        if lo < 0.0 or hi > 1.0:
-            raise ValueError(f"{name} is a float image with values in [{lo:g}, {hi:g}]; float images must "
-                             "lie in [0, 1] (or pass a uint8 image with values 0-255)")
-        return np.ascontiguousarray(np.round(arr * 255.0).astype(np.uint8))
-    raise TypeError(f"{name} has unsupported dtype {kind}; pass a uint8 image (0-255), a uint16 image or a "
-                    "float image in [0, 1] (e.g. image.astype(np.uint8))")
+    if kind == "b":
+        return np.ascontiguousarray(arr.astype(np.uint8) * 255)
+    if kind == "f" and not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf")
+    lo, hi = arr.min(), arr.max()
+    flo, fhi = float(lo), float(hi)
+    if flo < 0:
+        raise ValueError(f"{name} has negative values (range {lo} to {hi} in dtype {arr.dtype}); pixel "
+                         "values must be >= 0")
+    if kind in "iu":
+        if int(hi) <= 255:
+            return np.ascontiguousarray(arr.astype(np.uint8))
+        bits = max(10, 2 * math.ceil(math.log2(int(hi) + 1) / 2))
+        scale, what = 255.0 / (2.0 ** bits - 1.0), f"{bits}-bit"
+    elif fhi <= 1.0:
+        scale, what = 255.0, "[0, 1]"
+    elif fhi <= 255.0:
+        scale, what = 1.0, "[0, 255]"
+    else:
+        raise ValueError(f"{name} is a float image with values in [{flo:g}, {fhi:g}]; float images must "
+                         "lie in [0, 1] or [0, 255] (or pass an integer image, e.g. uint16)")
+    levels = (fhi - flo) * scale
+    if levels < 32 and fhi > flo and scale != 1.0:
+        warnings.warn(f"{name}: its values ({lo} to {hi}, {what} {arr.dtype}) would span only "
+                      f"{levels:.1f} of 255 grey levels; stretched to 0-255 (a color= is matched against "
+                      "the stretched values)", UserWarning, stacklevel=4)
+        out = (arr.astype(np.float32) - np.float32(flo)) * np.float32(255.0 / (fhi - flo))
+    else:
+        out = arr.astype(np.float32) * np.float32(scale)
+    return np.ascontiguousarray(np.clip(np.round(out), 0, 255).astype(np.uint8))
 
 
 def _warn_alpha(alpha: np.ndarray, name: str) -> None:
@@ -231,6 +281,33 @@ def _check_roi(roi: Sequence[int] | None, shape: tuple[int, ...]) -> tuple[int, 
     if x < 0 or y < 0 or x + w > W or y + h > H:
         raise ValueError(f"roi (x={x}, y={y}, w={w}, h={h}) does not lie inside the {W} x {H} image")
     return x, y, w, h
+
+
+def _load_region(image: Any, roi: Sequence[int] | None, max_pixels: Any) -> tuple[np.ndarray, tuple]:
+    """Load ``image`` and check ``roi`` and the size of the searched region before any image work.
+
+    For an array the size is checked before its pixels are converted; a file has to be decoded first.
+    """
+    limit = _check_int(max_pixels, "max_pixels", lo=1)
+    if not isinstance(image, (str, os.PathLike)):
+        shape = np.shape(image)
+        if len(shape) in (2, 3) and min(shape[:2]) >= 3:
+            _check_pixels(_check_roi(roi, shape), limit)
+    img = load_image(image)
+    region = _check_roi(roi, img.shape)
+    _check_pixels(region, limit)
+    return img, region
+
+
+def _check_pixels(region: tuple[int, int, int, int], limit: int) -> None:
+    w, h = region[2], region[3]
+    if w * h > limit:
+        raise ValueError(
+            f"the searched image region is {w} x {h} = {w * h / 1e6:.1f} megapixels, more than the limit "
+            f"max_pixels={limit} ({limit / 1e6:g} megapixels; extraction takes about 0.3 s and 60 MB per "
+            "megapixel); pass roi=(x, y, width, height) around the body, downscale the image (e.g. "
+            "cv2.resize(image, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)), or raise the limit "
+            "with max_pixels=")
 
 
 def _check_color(color: Any) -> np.ndarray:
@@ -306,7 +383,11 @@ def _illumination(gray: np.ndarray) -> np.ndarray:
             break
         use = bg
         coef = np.linalg.lstsq(A[use], z[use], rcond=None)[0]
-    return np.maximum(_quadratic_basis(H, W) @ coef, 1.0)
+    # evaluated by broadcasting a row and a column: one (H, W) array, not six (H, W) basis images
+    u = ((np.arange(W) + 0.5) / W * 2.0 - 1.0)[None, :]
+    v = ((np.arange(H) + 0.5) / H * 2.0 - 1.0)[:, None]
+    c = coef
+    return np.maximum(c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v, 1.0)
 
 
 def _default_kernel(h: int, w: int) -> int:
@@ -315,7 +396,7 @@ def _default_kernel(h: int, w: int) -> int:
 
 def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None = None,
               color: Any = None, method: str = "auto", body: str = "auto", color_tol: float | None = None,
-              kernel: int | None = None, flatten: bool = True) -> np.ndarray:
+              kernel: int | None = None, flatten: bool = True, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     """Segment the body: a boolean mask of the image's shape (False outside ``roi``).
 
     Parameters
@@ -344,9 +425,14 @@ def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None
     kernel : int, optional
         Size (pixels, odd) of the elliptical kernel of the morphological opening and closing; default
         scales with the image (3 px at 500 px). An even size raises ``ValueError`` (it has no centre
-        pixel and would shift the contour), a non-integer ``TypeError``.
+        pixel and would shift the contour), a non-integer ``TypeError``, and so does a kernel over
+        :data:`MAX_KERNEL` (101 px) or over a twentieth of the region's smaller side (an opening with it
+        would erase every part of the body narrower than the kernel, and its cost grows with its size).
     flatten : bool
         Flatten the illumination before Otsu.
+    max_pixels : int
+        Refuse a search region (the image, or ``roi``) of more pixels than this, before any image work;
+        default :data:`MAX_PIXELS` (25 megapixels). Raise it, or pass a ``roi``, for larger photographs.
 
     Example
     -------
@@ -356,8 +442,7 @@ def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None
     >>> bool(m[25, 30]), bool(m[5, 5]), bool(abs(int(m.sum()) - 900) < 20)  # corners are rounded a little
     (True, False, True)
     """
-    img = load_image(image)
-    x0, y0, w, h = _check_roi(roi, img.shape)
+    img, (x0, y0, w, h) = _load_region(image, roi, max_pixels)
     m, _ = _segment(img[y0:y0 + h, x0:x0 + w], color=color, method=method, body=body,
                     color_tol=color_tol, kernel=kernel, flatten=flatten)
     out = np.zeros(img.shape[:2], dtype=bool)
@@ -392,6 +477,12 @@ def _segment(crop: np.ndarray, *, color: Any, method: str, body: str, color_tol:
             # an even elliptical kernel has no centre pixel: opening and closing shift the mask
             raise ValueError(f"kernel must be odd (an even kernel has no centre pixel and shifts the "
                              f"contour by about a pixel), got {k}; use {k - 1} or {k + 1}")
+        k_max = min(MAX_KERNEL, max(3, min(h, w) // 20) | 1)
+        if k > k_max:
+            raise ValueError(f"kernel={k} is too large for a {w} x {h} search region: at most {k_max} px "
+                             f"(MAX_KERNEL={MAX_KERNEL} px, and a twentieth of the smaller side); an opening "
+                             "with a larger kernel erases every part of the body narrower than the kernel, "
+                             "and its cost grows with its size (minutes for hundreds of pixels)")
     sigma = max(0.8, min(h, w) / 600.0)
     # the mask is thresholded after a median filter, which removes thin dark lines (grid plate,
     # scratches) and speckle but keeps edges; the score for sub-pixel refinement is only Gaussian-smoothed
@@ -501,7 +592,7 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
                        color: Any = None, method: str = "auto", body: str = "auto",
                        color_tol: float | None = None, kernel: int | None = None, flatten: bool = True,
                        largest: bool = False, min_blob_fraction: float = 0.05,
-                       subpixel: bool = True) -> np.ndarray:
+                       subpixel: bool = True, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     """Extract the body's outline from a photograph as (k, 2) pixel coordinates.
 
     The image is segmented by :func:`body_mask` (thresholding, opening and closing) and the external
@@ -515,7 +606,7 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     ----------
     image : array_like or path
         See :func:`load_image`.
-    roi, color, method, body, color_tol, kernel, flatten
+    roi, color, method, body, color_tol, kernel, flatten, max_pixels
         See :func:`body_mask`.
     largest : bool
         When several blobs of comparable size remain, or the only large blob touches the border, keep
@@ -550,8 +641,7 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     >>> c.min(axis=0).round(2).tolist(), c.max(axis=0).round(2).tolist()  # edges between pixels
     ([9.5, 19.5], [69.5, 39.5])
     """
-    img = load_image(image)
-    x0, y0, w, h = _check_roi(roi, img.shape)
+    img, (x0, y0, w, h) = _load_region(image, roi, max_pixels)
     largest = _check_bool(largest, "largest")
     subpixel = _check_bool(subpixel, "subpixel")
     frac = positive_float(min_blob_fraction, "min_blob_fraction")

@@ -19,9 +19,17 @@ from functools import cached_property, wraps
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array, as_index_array, positive_float
+from ._checks import as_float_array, as_index_array, positive_float, positive_int
+from .polygons import (check_polygon, corner_angles, point_inside, polygon_area, ring_segments,  # noqa: F401
+                       segment_contacts)  # polygon_area, check_polygon, segment_contacts: re-exported
 
-__all__ = ["Mesh", "polygon_area", "check_polygon"]
+__all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES"]
+
+#: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
+MAX_TRIANGLES = 2_000_000
+#: Triangles per unit of ``area / max_area`` that Triangle makes when the area bound governs (measured:
+#: 1.55 at min_angle 20, 1.58 at 30, 1.71 at 33, on squares, strips and discs of 1e3 to 1e6 triangles).
+_TRIANGLES_PER_AREA = 1.6
 
 
 def _frozen(value):
@@ -43,97 +51,13 @@ def _cached(fn):
     return cached_property(compute)
 
 
-def polygon_area(poly: np.ndarray) -> float:
-    """Signed area of a closed polygon (positive when counter-clockwise)."""
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+def _switch_number(value: float) -> str:
+    """A number as Triangle's command line reads it: digits and a point, never an exponent.
 
-
-def _segments_intersect(a0, a1, b0, b1) -> np.ndarray:
-    """Vectorised proper-or-touching intersection test of segment sets a (k,2) and b (l,2)."""
-    def orient(p, q, r):
-        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-
-    A0, A1 = a0[:, None, :], a1[:, None, :]
-    B0, B1 = b0[None, :, :], b1[None, :, :]
-    d1 = orient(B0, B1, A0)
-    d2 = orient(B0, B1, A1)
-    d3 = orient(A0, A1, B0)
-    d4 = orient(A0, A1, B1)
-    scale = max(np.ptp(np.vstack([a0, a1, b0, b1]), axis=0).max(), 1e-300)
-    eps = 1e-12 * scale * scale
-    proper = (((d1 > eps) & (d2 < -eps)) | ((d1 < -eps) & (d2 > eps))) & \
-             (((d3 > eps) & (d4 < -eps)) | ((d3 < -eps) & (d4 > eps)))
-
-    def on_seg(p, q, r, d):  # r collinear with p-q and within its box
-        return (np.abs(d) <= eps) & (np.minimum(p[..., 0], q[..., 0]) - 1e-12 * scale <= r[..., 0]) & \
-            (r[..., 0] <= np.maximum(p[..., 0], q[..., 0]) + 1e-12 * scale) & \
-            (np.minimum(p[..., 1], q[..., 1]) - 1e-12 * scale <= r[..., 1]) & \
-            (r[..., 1] <= np.maximum(p[..., 1], q[..., 1]) + 1e-12 * scale)
-
-    touch = on_seg(B0, B1, A0, d1) | on_seg(B0, B1, A1, d2) | on_seg(A0, A1, B0, d3) | on_seg(A0, A1, B1, d4)
-    return proper | touch
-
-
-def check_polygon(poly: ArrayLike, name: str = "outline") -> np.ndarray:
-    """Validate a simple polygon (k, 2); return it counter-clockwise without a repeated closing point.
-
-    Raises ``ValueError`` for fewer than 3 vertices, repeated vertices, zero area or self-intersection.
+    Triangle's switch parser takes only ``0-9`` and ``.`` after ``a`` or ``q``; ``1e-05`` would be read as
+    ``1`` (and ``e`` as another switch), which silently meshes far coarser than asked.
     """
-    p = as_float_array(poly, name, shape=(None, 2))
-    if len(p) >= 2 and np.allclose(p[0], p[-1]):
-        p = p[:-1]
-    if len(p) < 3:
-        raise ValueError(f"{name} needs at least 3 distinct vertices, got {len(p)}")
-    scale = float(np.ptp(p, axis=0).max())
-    if scale == 0.0:
-        raise ValueError(f"{name} is degenerate: all vertices coincide")
-    seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
-    if np.any(seg <= 1e-12 * scale):
-        i = int(np.argmin(seg))
-        raise ValueError(f"{name} is degenerate: vertices {i} and {(i + 1) % len(p)} coincide")
-    k = len(p)
-    a0, a1 = p, np.roll(p, -1, axis=0)
-    hit = _segments_intersect(a0, a1, a0, a1)
-    idx = np.arange(k)
-    adjacent = (np.abs(idx[:, None] - idx[None, :]) <= 1) | (np.abs(idx[:, None] - idx[None, :]) == k - 1)
-    hit &= ~adjacent
-    if k == 3:
-        hit[:] = False
-    if hit.any():
-        i, j = np.argwhere(hit)[0]
-        raise ValueError(f"{name} is self-intersecting: edge {i} crosses edge {j}")
-    area = polygon_area(p)
-    if abs(area) <= 1e-12 * scale * scale:
-        raise ValueError(f"{name} is degenerate: zero area")
-    return p if area > 0 else p[::-1].copy()
-
-
-def _point_inside(poly: np.ndarray) -> np.ndarray:
-    """A point strictly inside a simple polygon (centroid of its largest ear triangle)."""
-    import triangle as tr
-
-    k = len(poly)
-    seg = np.column_stack([np.arange(k), (np.arange(k) + 1) % k])
-    t = tr.triangulate({"vertices": poly, "segments": seg}, "pQ")
-    tri = t["triangles"]
-    v = t["vertices"]
-    d1, d2 = v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]
-    areas = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
-    return v[tri[int(np.argmax(areas))]].mean(axis=0)
-
-
-def _point_in_polygon(pt: np.ndarray, poly: np.ndarray) -> bool:
-    x, y = pt
-    inside = False
-    j = len(poly) - 1
-    for i in range(len(poly)):
-        xi, yi = poly[i]
-        xj, yj = poly[j]
-        if (yi > y) != (yj > y) and x < (xj - xi) * (y - yi) / (yj - yi) + xi:
-            inside = not inside
-        j = i
-    return inside
+    return np.format_float_positional(float(value), trim="-")
 
 
 class Mesh:
@@ -153,17 +77,22 @@ class Mesh:
     ValueError
         NaN/inf, indices out of range, repeated nodes in a triangle, zero-area or inverted
         (clockwise) triangles, mixed orientation (fold-over), non-manifold edges or vertices,
-        duplicate triangles, or nodes used by no triangle.
+        duplicate triangles, nodes used by no triangle, or overlapping rest geometry (a boundary that
+        crosses or touches itself, or triangles winding more than once around a node).
     """
 
-    __slots__ = ("_points", "_triangles", "__dict__")
+    __slots__ = ("_points", "_triangles", "_boundary", "__dict__")
 
     def __init__(self, points: ArrayLike, triangles: ArrayLike):
         p = as_float_array(points, "points", shape=(None, 2))
         t = as_index_array(triangles, "triangles", n=len(p), shape=(None, 3))
         if len(t) == 0:
             raise ValueError("triangles is empty: a mesh needs at least one triangle")
-        _validate_topology(p, t)
+        self._boundary = _validate_topology(p, t)
+        self._boundary.setflags(write=False)
+        reason = _overlap(p, t, self._boundary, rest=True)
+        if reason:
+            raise ValueError(f"the rest geometry overlaps itself: {reason}")
         p.setflags(write=False)
         t.setflags(write=False)
         self._points = p
@@ -226,9 +155,7 @@ class Mesh:
         """Directed boundary edges (b, 2), oriented with the body on their left."""
         t = self._triangles
         directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-        keys = set(map(tuple, directed.tolist()))
-        mask = np.array([(b, a) not in keys for a, b in directed.tolist()])
-        return directed[mask]
+        return directed[self._boundary]
 
     @_cached
     def boundary_nodes(self) -> np.ndarray:
@@ -294,28 +221,17 @@ class Mesh:
         return np.linalg.det(self.deformation_gradients(x))
 
     def boundary_crosses(self, x: ArrayLike) -> bool:
-        """Does the boundary cross itself in configuration ``x`` (the body overlapping itself)?
+        """Does the body overlap itself in configuration ``x``?
 
         Elements can all stay upright (``J > 0``) while the body folds through itself; contact is not
-        modelled, so such a state is not physical. Every pair of boundary edges sharing no node is tested.
+        modelled, so such a state is not physical. True when two boundary edges that share no node have a
+        point in common (a crossing, also one through a vertex, a vertex touching an edge, or collinear
+        edges overlapping), when neighbouring boundary edges fold back onto each other, or when the
+        triangles around a boundary node cover more than a full turn. Exact for the floating-point input
+        and O(B log B) in the number B of boundary edges (see :func:`segment_contacts`).
         """
         x = self._check_state(x)
-        E = np.vstack([np.column_stack([lp, np.roll(lp, -1)]) for lp in self.boundary_loops])
-        a, b = x[E[:, 0]], x[E[:, 1]]
-
-        def orient(p, q, r):
-            return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
-
-        for i0 in range(0, len(E), 512):
-            sl = slice(i0, i0 + 512)
-            A0, A1 = a[sl, None, :], b[sl, None, :]
-            B0, B1 = a[None, :, :], b[None, :, :]
-            cross = (orient(B0, B1, A0) * orient(B0, B1, A1) < 0) & (orient(A0, A1, B0) * orient(A0, A1, B1) < 0)
-            shared = (E[sl, None, 0] == E[None, :, 0]) | (E[sl, None, 0] == E[None, :, 1]) | \
-                (E[sl, None, 1] == E[None, :, 0]) | (E[sl, None, 1] == E[None, :, 1])
-            if np.any(cross & ~shared):
-                return True
-        return False
+        return _overlap(x, self._triangles, self._boundary) is not None
 
     def _check_state(self, x: ArrayLike, name: str = "x") -> np.ndarray:
         return as_float_array(x, name, shape=(self.n_nodes, 2))
@@ -367,15 +283,37 @@ class Mesh:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_polygon(cls, outline: ArrayLike, max_area: float | None = None,
-                     holes: list[ArrayLike] | None = None, min_angle: float = 30.0) -> "Mesh":
+                     holes: list[ArrayLike] | None = None, min_angle: float = 30.0, *,
+                     max_triangles: int = MAX_TRIANGLES) -> "Mesh":
         """Quality-mesh a simple polygon (with optional polygonal holes) with Shewchuk's Triangle.
 
         Parameters
         ----------
-        outline : (k, 2) vertices of the outer boundary, either orientation.
-        max_area : largest triangle area; default: the polygon's area / 200.
-        holes : list of (k_i, 2) polygons strictly inside the outline, not touching each other.
-        min_angle : smallest interior angle in degrees (Triangle guarantees up to about 33).
+        outline : array_like, shape (k, 2)
+            Vertices of the outer boundary, either orientation.
+        max_area : float, optional
+            Largest triangle area, in the outline's units squared; default: the polygon's area / 200.
+            Honoured at any scale: the polygon is centred and scaled to unit size before meshing, so a
+            1 cm body given in metres or a body far from the origin meshes as finely as asked.
+        holes : list of array_like, optional
+            Polygons strictly inside the outline, neither touching it nor each other, and not nested
+            inside one another (a hole inside a hole would be a separate island of material).
+        min_angle : float
+            Smallest interior angle in degrees (Triangle guarantees up to about 33; at most 34). Every
+            corner of the outline (and every corner of the body at a hole) must be at least this wide,
+            since Triangle cannot split an input corner.
+        max_triangles : int
+            Refuse, before meshing, a request expected to make more triangles than this (the expectation
+            is ``1.6 x area / max_area``, what Triangle makes when the area bound governs). The default,
+            :data:`MAX_TRIANGLES` (2 million), bounds the time (seconds) and memory (about a GB) of
+            meshing and validation; pass a larger value to go beyond it.
+
+        Raises
+        ------
+        ValueError
+            A bad outline or hole (see :func:`check_polygon`), holes crossing, touching, outside the
+            outline or nested in one another, a corner narrower than ``min_angle``, ``min_angle`` above 34,
+            a non-positive ``max_area``, or a request over ``max_triangles``.
 
         Example
         -------
@@ -383,40 +321,88 @@ class Mesh:
         >>> m.quality()["min_angle_deg"] >= 30.0 - 1e-9
         True
         """
+        import shapely
         import triangle as tr
 
         outer = check_polygon(outline, "outline")
         hole_polys = [check_polygon(h, f"holes[{i}]") for i, h in enumerate(holes or [])]
-        area = polygon_area(outer)
-        if max_area is None:
-            max_area = area / 200.0
-        max_area = positive_float(max_area, "max_area")
         min_angle = positive_float(min_angle, "min_angle")
         if min_angle > 34.0:
             raise ValueError(f"min_angle must be <= 34 degrees for Triangle to terminate, got {min_angle}")
+        max_triangles = positive_int(max_triangles, "max_triangles")
+        names = ["outline"] + [f"holes[{i}]" for i in range(len(hole_polys))]
         polys = [outer] + hole_polys
-        for i, h in enumerate(hole_polys):
-            if not all(_point_in_polygon(v, outer) for v in h):
-                raise ValueError(f"holes[{i}] is not inside the outline")
-        for i in range(len(polys)):
-            for j in range(i + 1, len(polys)):
-                a, b = polys[i], polys[j]
-                if _segments_intersect(a, np.roll(a, -1, 0), b, np.roll(b, -1, 0)).any():
-                    what = "outline" if i == 0 else f"holes[{i - 1}]"
-                    raise ValueError(f"{what} and holes[{j - 1}] intersect")
-        verts, segs, offset = [], [], 0
-        for poly in polys:
-            k = len(poly)
-            verts.append(poly)
-            segs.append(np.column_stack([np.arange(k), (np.arange(k) + 1) % k]) + offset)
-            offset += k
-        data = {"vertices": np.vstack(verts), "segments": np.vstack(segs)}
+        # scale-free coordinates: scaled by a power of two s to about unit size and shifted by a whole
+        # multiple of s next to the outline's centre, so the transform is exact (Sterbenz) and a body near
+        # the origin meshes exactly as it would unscaled
+        lo, hi = outer.min(axis=0), outer.max(axis=0)
+        s = float(2.0 ** np.ceil(np.log2(float(np.max(hi - lo)))))
+        centre = np.round(0.5 * (lo + hi) / s) * s
+        unit = [(p - centre) / s for p in polys]
+        area = polygon_area(unit[0]) - sum(polygon_area(h) for h in unit[1:])
+        if area <= 0.0:
+            raise ValueError("the holes cover the whole outline: no material is left to mesh")
+        if max_area is None:
+            unit_area = area / 200.0
+            max_area = unit_area * s * s
+        else:
+            max_area = positive_float(max_area, "max_area")
+            unit_area = max_area / (s * s)
+        expected = max(_TRIANGLES_PER_AREA * area / unit_area, float(sum(len(p) for p in polys)))
+        if expected > max_triangles:
+            raise ValueError(
+                f"max_area={max_area:.6g} would make about {expected:.3g} triangles (1.6 x area "
+                f"{area * s * s:.6g} / max_area), more than the limit max_triangles={int(max_triangles)}; "
+                f"pass a larger max_area, or raise the limit with max_triangles= (Mesh.from_polygon)")
+        # the rings may not meet: one segment soup of all of them, tested at once
+        ring_of = np.repeat(np.arange(len(unit)), [len(u) for u in unit])
+        segs = ring_segments([len(u) for u in unit])
+        hit = segment_contacts(np.vstack(unit), segs)
+        for i, j in hit:
+            a, b = int(ring_of[segs[i, 0]]), int(ring_of[segs[j, 0]])
+            if a != b and a == 0:
+                raise ValueError(f"{names[b]} is not inside the outline: they intersect or touch")
+            if a != b:
+                raise ValueError(f"{names[a]} and {names[b]} intersect or touch")
         if hole_polys:
-            data["holes"] = np.array([_point_inside(h) for h in hole_polys])
-        out = tr.triangulate(data, f"pq{min_angle:.6g}a{max_area:.17g}Q")
-        pts = np.asarray(out["vertices"], dtype=float)
+            rings = [shapely.Polygon(u) for u in unit]
+            for i, u in enumerate(unit[1:]):
+                if not shapely.contains_xy(rings[0], u[0, 0], u[0, 1]):
+                    raise ValueError(f"holes[{i}] is not inside the outline")
+            tree = shapely.STRtree(rings[1:])
+            first = shapely.points(np.array([u[0] for u in unit[1:]]))
+            inner, container = tree.query(first, predicate="within")
+            for k in np.flatnonzero(inner != container):
+                raise ValueError(
+                    f"holes[{int(inner[k])}] lies inside holes[{int(container[k])}]: holes nested in holes "
+                    "are not supported (the material between them would be an island not joined to the "
+                    "body); mesh that island as a body of its own")
+        for r, (name, u) in enumerate(zip(names, unit)):
+            ang = corner_angles(u)
+            if r > 0:  # the body's angle at a hole corner is the outside of the hole's corner
+                ang = 360.0 - ang
+            k = int(np.argmin(ang))
+            if ang[k] < min_angle - 1e-9:
+                v = polys[r][k]
+                raise ValueError(
+                    f"{name} has a corner of {ang[k]:.4g} degrees at vertex {k} ({v[0]:.6g}, {v[1]:.6g}), "
+                    f"narrower than min_angle={min_angle:g}: Triangle cannot split an input corner, so that "
+                    f"angle cannot be met; pass min_angle <= {np.floor(ang[k] * 100) / 100:g} or widen the "
+                    "corner")
+        data = {"vertices": np.vstack(unit), "segments": segs}
+        if hole_polys:
+            data["holes"] = np.array([point_inside(h) for h in unit[1:]])
+        out = tr.triangulate(data, f"pq{_switch_number(min_angle)}a{_switch_number(unit_area)}Q")
         tri = np.asarray(out["triangles"], dtype=np.int64)
-        used = np.unique(tri)
+        if len(tri) > max_triangles:
+            raise ValueError(f"meshing made {len(tri)} triangles, more than the limit "
+                             f"max_triangles={int(max_triangles)} (small features or narrow gaps refine the "
+                             "mesh beyond the area bound); pass a larger max_area, or raise the limit with "
+                             "max_triangles= (Mesh.from_polygon)")
+        pts = np.asarray(out["vertices"], dtype=float) * s + centre
+        n_in = len(data["vertices"])
+        pts[:n_in] = np.vstack(polys)  # the input vertices exactly as given (Triangle keeps them first)
+        used = np.flatnonzero(np.bincount(tri.ravel(), minlength=len(pts)))
         if len(used) != len(pts):  # drop vertices left outside (never expected with 'p')
             remap = -np.ones(len(pts), dtype=np.int64)
             remap[used] = np.arange(len(used))
@@ -445,19 +431,19 @@ class Mesh:
         ys = origin[1] + np.linspace(0.0, height, ny + 1)
         X, Y = np.meshgrid(xs, ys)
         pts = np.column_stack([X.ravel(), Y.ravel()])
-        tris = []
-        for j in range(ny):
-            for i in range(nx):
-                a = j * (nx + 1) + i
-                b, c, d = a + 1, a + nx + 2, a + nx + 1
-                if pattern == "right" or (i + j) % 2 == 0:
-                    tris += [(a, b, c), (a, c, d)]
-                else:
-                    tris += [(a, b, d), (b, c, d)]
-        return cls(pts, np.array(tris, dtype=np.int64))
+        i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+        i, j = i.ravel(), j.ravel()
+        a = j * (nx + 1) + i
+        b, c, d = a + 1, a + nx + 2, a + nx + 1
+        right = np.ones_like(a, dtype=bool) if pattern == "right" else (i + j) % 2 == 0
+        first = np.where(right[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
+        second = np.where(right[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
+        tris = np.stack([first, second], axis=1).reshape(-1, 3)
+        return cls(pts, tris.astype(np.int64))
 
 
-def _validate_topology(p: np.ndarray, t: np.ndarray) -> None:
+def _validate_topology(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Validate a mesh's triangles; return the boundary mask of :func:`_edge_structure`."""
     n, m = len(p), len(t)
     rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
     if rep.any():
@@ -485,24 +471,80 @@ def _validate_topology(p: np.ndarray, t: np.ndarray) -> None:
         k = int(np.argmax(neg))
         raise ValueError(f"mixed orientation: triangle {k} {t[k].tolist()} is clockwise (inverted) while "
                          f"others are counter-clockwise; the mesh folds over")
-    sorted_t = np.sort(t, axis=1)
-    _, counts = np.unique(sorted_t, axis=0, return_counts=True)
-    if (counts > 1).any():
-        raise ValueError("duplicate triangles: the same three nodes appear in more than one triangle")
-    directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    _, dcount = np.unique(directed, axis=0, return_counts=True)
-    undirected, ucount = np.unique(np.sort(directed, axis=1), axis=0, return_counts=True)
-    if (ucount > 2).any():
-        e = undirected[int(np.argmax(ucount > 2))]
-        raise ValueError(f"non-manifold mesh: edge {e.tolist()} is shared by more than two triangles")
-    if (dcount > 1).any():
+    return _edge_structure(t, n)
+
+
+def _edge_structure(t: np.ndarray, n: int) -> np.ndarray:
+    """Check how triangles share edges; return which directed edges ``[t01; t12; t20]`` lie on the boundary.
+
+    One sort of the undirected edge keys finds every problem: an edge in more than two triangles, two
+    triangles crossing an edge in the same direction (overlap or duplicate), and boundary nodes where
+    separate fans meet (bow-tie).
+    """
+    directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]).astype(np.int64)
+    lo, hi = np.minimum(directed[:, 0], directed[:, 1]), np.maximum(directed[:, 0], directed[:, 1])
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    same = k[1:] == k[:-1]
+    if (same[1:] & same[:-1]).any():
+        _refuse_duplicates(t)
+        e = int(k[1:-1][same[1:] & same[:-1]][0])
+        raise ValueError(f"non-manifold mesh: edge {[e // n, e % n]} is shared by more than two triangles")
+    twin = np.flatnonzero(same)  # order[twin] and order[twin + 1] are the two sides of an interior edge
+    start = directed[:, 0]
+    if (start[order[twin]] == start[order[twin + 1]]).any():
+        _refuse_duplicates(t)
         raise ValueError("triangles overlap: two triangles traverse an edge in the same direction "
                          "(the mesh folds over)")
+    shared = np.zeros(len(key), dtype=bool)
+    shared[order[twin]] = True
+    shared[order[twin + 1]] = True
+    boundary = ~shared
     # boundary vertices must be manifold: at most one outgoing boundary edge each
-    keys = set(map(tuple, directed.tolist()))
-    bnd = np.array([a for a, b in directed.tolist() if (b, a) not in keys], dtype=np.int64)
-    if len(bnd):
-        _, bc = np.unique(bnd, return_counts=True)
-        if (bc > 1).any():
-            v = np.unique(bnd)[int(np.argmax(bc > 1))]
-            raise ValueError(f"non-manifold mesh: node {int(v)} joins separate fans of triangles (bow-tie)")
+    out_count = np.bincount(start[boundary], minlength=n)
+    if (out_count > 1).any():
+        raise ValueError(f"non-manifold mesh: node {int(np.argmax(out_count > 1))} joins separate fans "
+                         "of triangles (bow-tie)")
+    return boundary
+
+
+def _refuse_duplicates(t: np.ndarray) -> None:
+    """Raise if the same three nodes form more than one triangle (checked on the error path only)."""
+    _, counts = np.unique(np.sort(t, axis=1), axis=0, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError("duplicate triangles: the same three nodes appear in more than one triangle")
+
+
+def _overlap(x: np.ndarray, t: np.ndarray, boundary: np.ndarray, rest: bool = False) -> str | None:
+    """Why the triangles ``t`` at positions ``x`` overlap each other, or None.
+
+    ``boundary`` marks the boundary among the directed edges ``[t01; t12; t20]``. Tested: the triangles
+    around a boundary node turning through more than 360 degrees, (at ``rest``) around an interior node
+    through a multiple of 360 other than one, and the boundary edges meeting anywhere but at shared nodes.
+    """
+    n = len(x)
+    directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    # signed corner angles; their sum around a node is how far its fan of triangles turns
+    X = x[t]
+    turn = np.zeros(n)
+    for k in range(3):
+        u, v = X[:, (k + 1) % 3] - X[:, k], X[:, (k + 2) % 3] - X[:, k]
+        ang = np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v))
+        turn += np.bincount(t[:, k], weights=ang, minlength=n)
+    on_bnd = np.zeros(n, dtype=bool)
+    on_bnd[directed[boundary, 0]] = True
+    over = on_bnd & (turn > 2 * np.pi * (1 + 1e-12))
+    if rest:
+        over |= ~on_bnd & (np.abs(turn - 2 * np.pi) > 0.5)
+    if over.any():
+        v = int(np.argmax(over))
+        return (f"the triangles around node {v} at ({x[v, 0]:.6g}, {x[v, 1]:.6g}) turn through "
+                f"{np.degrees(turn[v]):.1f} degrees, more than a full turn")
+    E = directed[boundary]
+    hit = segment_contacts(x, E)
+    if len(hit):
+        i, j = (int(v) for v in hit[0])
+        return (f"boundary edges {E[i].tolist()} and {E[j].tolist()} meet near ({x[E[i, 0], 0]:.6g}, "
+                f"{x[E[i, 0], 1]:.6g}) where they share no node (the boundary crosses or touches itself)")
+    return None

@@ -52,9 +52,9 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array, as_index_array
+from ._checks import as_float_array, as_index_array, positive_int
 from .rundir import check_interrupt
-from .mesh import Mesh, polygon_area
+from .mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from .muscles import Muscle, check_muscles
 from .progress import advance, progress_for_cli
 
@@ -376,11 +376,14 @@ def seeds_for(mesh: Mesh, minimum: int = 8) -> int:
 
 
 def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
-                 resolution: str | int = "medium", min_angle: float = 30.0) -> Mesh:
+                 resolution: str | int = "medium", min_angle: float = 30.0, *,
+                 max_triangles: int = MAX_TRIANGLES) -> Mesh:
     """Mesh a polygon (with holes) with about the number of nodes ``resolution`` asks for.
 
     A first mesh at a guessed triangle area is measured and the area rescaled once; the node count then
-    lands within about 15 % of the request (the boundary's share of nodes varies with the shape).
+    lands within about 15 % of the request (the boundary's share of nodes varies with the shape). The
+    outline and holes may have either orientation. ``max_triangles`` is passed to
+    :meth:`Mesh.from_polygon`, which refuses a request over it before meshing.
 
     Example
     -------
@@ -389,16 +392,25 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
     True
     """
     want = resolve_resolution(resolution)
-    outer = np.asarray(outline, dtype=float)
-    area = polygon_area(outer) - sum(polygon_area(np.asarray(h, dtype=float)) for h in (holes or []))
+    outer = check_polygon(outline, "outline")  # counter-clockwise, so its area is positive
+    holes = [check_polygon(h, f"holes[{i}]") for i, h in enumerate(holes or [])]
+    area = polygon_area(outer) - sum(polygon_area(h) for h in holes)
+    if area <= 0.0:
+        raise ValueError("the holes cover the whole outline: no material is left to mesh")
+    max_triangles = positive_int(max_triangles, "max_triangles")
+    if 2 * want > max_triangles:  # a triangle mesh has about two triangles per node
+        raise ValueError(f"resolution={want} nodes would make about {2 * want:.3g} triangles, more than the "
+                         f"limit max_triangles={max_triangles}; ask for fewer nodes, or raise the limit with "
+                         "mesh_polygon(..., max_triangles=)")
     max_area = 2.2 * area / want  # a Triangle quality mesh has about 1 node per (max_area / 2.2)
-    mesh = Mesh.from_polygon(outer, max_area=max_area, holes=holes, min_angle=min_angle)
+    kw = dict(holes=holes, min_angle=min_angle, max_triangles=max_triangles)
+    mesh = Mesh.from_polygon(outer, max_area=max_area, **kw)
     for _ in range(3):
         ratio = mesh.n_nodes / want
         if abs(ratio - 1.0) <= 0.1:
             break
         max_area *= ratio
-        mesh = Mesh.from_polygon(outer, max_area=max_area, holes=holes, min_angle=min_angle)
+        mesh = Mesh.from_polygon(outer, max_area=max_area, **kw)
     return mesh
 
 

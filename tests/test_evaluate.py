@@ -365,11 +365,11 @@ def test_rgba_with_transparency_says_alpha_is_ignored(tmp_path):
 
 
 @pytest.mark.parametrize("arr, err, match", [
-    (np.zeros((20, 20), dtype=np.int64), TypeError, "dtype int64"),
-    (np.zeros((20, 20), dtype=bool), TypeError, "dtype bool"),
+    (np.full((20, 20), -3, dtype=np.int64), ValueError, r"negative values \(range -3 to -3 in dtype int64\)"),
     (np.zeros((20, 20), dtype=complex), TypeError, "dtype complex"),
     (np.array([["a"] * 20] * 20), TypeError, "numeric"),
-    (np.full((20, 20), 2.0), ValueError, r"\[0, 1\]"),
+    (np.full((20, 20), 300.0), ValueError, r"values in \[300, 300\]; float images must lie in \[0, 1\] or \[0, 255\]"),
+    (np.full((20, 20), 7, dtype=np.uint16), ValueError, r"image is uniform \(all pixels about 7\)"),
     (np.full((20, 20), np.nan), ValueError, "NaN"),
     (np.zeros((20, 20, 2), dtype=np.uint8), ValueError, "shape"),
 ])
@@ -661,3 +661,67 @@ def test_batch_needs_a_state_for_every_image(design):
         evaluate_folder(design / "images", design / "states")
     with pytest.raises(FileNotFoundError, match="does not exist"):
         evaluate_folder(design / "nothing", design / "states")
+
+
+# ------------------------------------------------------------------- dtypes by real range, bounded work
+def test_images_of_every_dtype_are_judged_by_their_real_range():
+    img8 = disc_image([(150, 100)], [50])
+    want = contour_from_image(img8)
+    # uint16 / int64 holding 8-bit data: the same image (was "image is uniform" after dividing by 257)
+    for arr in (img8.astype(np.uint16), img8.astype(np.int64), img8.astype(float)):
+        assert np.array_equal(load_image(arr), img8)
+        assert np.allclose(contour_from_image(arr), want)
+    # 12-bit data in uint16 is scaled by 255 / 4095, not 255 / 65535
+    img12 = (img8.astype(np.int64) * 4095 // 255).astype(np.uint16)
+    assert np.abs(load_image(img12).astype(int) - img8).max() <= 1
+    # floats in [0, 1], and a binary mask
+    assert np.abs(load_image(img8 / 255.0).astype(int) - img8).max() == 0
+    mask = img8 < 128
+    assert set(np.unique(load_image(mask)).tolist()) == {0, 255}
+    assert polygon_area(contour_from_image(mask)) == pytest.approx(math.pi * 50 ** 2, rel=0.03)
+
+
+def test_low_contrast_deep_image_is_stretched_with_a_warning():
+    img = np.where(disc_image([(150, 100)], [50]) < 128, 1000, 1100).astype(np.uint16)  # 12-bit range, 100 levels
+    with pytest.warns(UserWarning, match=r"\(1000 to 1100, 12-bit uint16\) would span only 6\.2 of 255 grey levels; stretched to 0-255"):
+        c = contour_from_image(img)
+    assert polygon_area(c) == pytest.approx(math.pi * 50 ** 2, rel=0.03)
+
+
+def test_image_size_is_limited_before_any_work():
+    import time
+
+    big = np.zeros((8000, 8000), np.uint8)
+    big[3000:5000, 2000:6000] = 200
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"8000 x 8000 = 64\.0 megapixels, more than the limit "
+                                         r"max_pixels=25000000.*roi=.*downscale.*max_pixels="):
+        contour_from_image(big)
+    with pytest.raises(ValueError, match="more than the limit max_pixels=25000000"):
+        body_mask(big.astype(np.uint16))  # refused before the pixels are converted
+    assert time.perf_counter() - t0 < 1.0
+    # a roi around the body is within the limit
+    c = contour_from_image(big, roi=(1800, 2800, 4400, 2400), subpixel=False)
+    assert c.min(axis=0).tolist() == [2000, 3000] and c.max(axis=0).tolist() == [5999, 4999]
+    small = disc_image([(150, 100)], [50])
+    with pytest.raises(ValueError, match="300 x 200 = 0.1 megapixels, more than the limit max_pixels=50000"):
+        contour_from_image(small, max_pixels=50_000)
+    assert len(contour_from_image(small, max_pixels=60_000)) > 100
+    with pytest.raises(ValueError, match="max_pixels must be an integer >= 1"):
+        contour_from_image(small, max_pixels=0)
+
+
+def test_huge_kernel_is_refused_quickly():
+    import time
+
+    img = np.full((2000, 2000), 210, np.uint8)
+    img[500:1500, 600:1400] = 60
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"kernel=1999 is too large for a 2000 x 2000 search region: at most "
+                                         r"101 px \(MAX_KERNEL=101 px"):
+        contour_from_image(img, kernel=1999)
+    assert time.perf_counter() - t0 < 2.0
+    small = disc_image([(150, 100)], [50])  # 300 x 200: at most 200 // 20 = 10 -> 11 px
+    with pytest.raises(ValueError, match="kernel=13 is too large for a 300 x 200 search region: at most 11 px"):
+        body_mask(small, kernel=13)
+    assert body_mask(small, kernel=11)[100, 150]

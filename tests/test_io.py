@@ -69,3 +69,104 @@ def test_written_files_get_normal_permissions(tmp_path, body):
     mesh, x = body
     for path in (write_json(tmp_path / "r.json", {"a": 1}), write_mesh(tmp_path / "m.vtu", mesh, x=x)):
         assert stat.S_IMODE(os.stat(path).st_mode) == want
+
+
+# ------------------------------------------------------------------------ refused reads, clean writes
+def _write_raw(path, points, cells, point_data=None):
+    import meshio
+
+    meshio.write(str(path), meshio.Mesh(points, cells, point_data=point_data or {}))
+    return path
+
+
+SQ3 = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]])
+
+
+def test_read_refuses_non_triangle_cells(tmp_path):
+    p = _write_raw(tmp_path / "mixed.vtu", SQ3, [("triangle", np.array([[0, 1, 2], [0, 2, 3]])),
+                                               ("quad", np.array([[1, 4, 5, 2]]))])
+    with pytest.raises(ValueError, match=r"mixed\.vtu holds cells other than triangles \(1 quad\)"):
+        read_mesh(p)
+    p = _write_raw(tmp_path / "quads.vtk", SQ3, [("quad", np.array([[0, 1, 2, 3], [1, 4, 5, 2]]))])
+    with pytest.raises(ValueError, match=r"other than triangles \(2 quad\)"):
+        read_mesh(p)
+
+
+def test_read_skips_gmsh_line_marks_with_a_warning(tmp_path):
+    p = _write_raw(tmp_path / "marked.vtu", SQ3[:4], [("triangle", np.array([[0, 1, 2], [0, 2, 3]])),
+                                                    ("line", np.array([[0, 1]]))])
+    with pytest.warns(UserWarning, match="skipped 1 line cells"):
+        back = read_mesh(p)
+    assert back.mesh.n_triangles == 2
+
+
+@pytest.mark.parametrize("field", ["displacement", "weight"])
+def test_read_refuses_non_finite_point_data(tmp_path, field):
+    v = np.zeros((4, 3)) if field == "displacement" else np.zeros(4)
+    v[2] = np.nan
+    p = _write_raw(tmp_path / "nan.vtu", SQ3[:4], [("triangle", np.array([[0, 1, 2], [0, 2, 3]]))], {field: v})
+    with pytest.raises(ValueError, match=rf"point data '{field}' contains NaN or inf \(first at node 2\)"):
+        read_mesh(p)
+
+
+def test_read_accepts_a_mesh_in_the_plane_z_1_and_names_a_tilted_one(tmp_path):
+    pts = SQ3[:4] + [0, 0, 1.0]
+    back = read_mesh(_write_raw(tmp_path / "z1.vtu", pts, [("triangle", np.array([[0, 1, 2], [0, 2, 3]]))]))
+    assert np.array_equal(back.mesh.points, SQ3[:4, :2]) and back.mesh.area == pytest.approx(1.0)
+    tilted = SQ3[:4].copy()
+    tilted[:, 2] = tilted[:, 0]
+    with pytest.raises(ValueError, match=r"not planar: z varies from 0 to 1; the body must lie in a plane"):
+        read_mesh(_write_raw(tmp_path / "tilt.vtu", tilted, [("triangle", np.array([[0, 1, 2], [0, 2, 3]]))]))
+
+
+def test_read_names_an_out_of_plane_displacement(tmp_path):
+    u = np.zeros((4, 3))
+    u[1, 2] = 0.5
+    p = _write_raw(tmp_path / "uz.vtu", SQ3[:4], [("triangle", np.array([[0, 1, 2], [0, 2, 3]]))],
+                   {"displacement": u})
+    with pytest.raises(ValueError, match=r"'displacement' moves nodes out of the plane"):
+        read_mesh(p)
+
+
+def test_write_onto_a_directory_is_refused_and_leaves_nothing(tmp_path, body):
+    mesh, x = body
+    target = tmp_path / "out.vtu"
+    target.mkdir()
+    with pytest.raises(ValueError, match=r"out\.vtu: it is a directory"):
+        write_mesh(target, mesh, x=x)
+    with pytest.raises(ValueError, match="it is a directory"):
+        write_mesh(tmp_path, mesh, x=x)  # no extension: still named as a directory, not as a format
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(ValueError, match=r"afile is a file, not a directory"):
+        write_mesh(tmp_path / "afile" / "sub" / "m.vtu", mesh)
+    assert sorted(os.listdir(tmp_path)) == ["afile", "out.vtu"]
+    assert os.listdir(target) == []
+
+
+def test_interrupted_write_leaves_no_temporary_file(tmp_path, body, monkeypatch):
+    import meshio
+
+    mesh, x = body
+
+    def interrupted(path, *args, **kwargs):
+        with open(path, "wb") as fh:
+            fh.write(b"<VTKFile partial")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(meshio, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_mesh(tmp_path / "m.vtu", mesh, x=x)
+    assert os.listdir(tmp_path) == []
+
+
+def test_failing_rename_leaves_no_temporary_file(tmp_path):
+    from mdsr_opt.io import atomic_path
+
+    target = tmp_path / "r.json"
+    with pytest.raises(OSError):
+        with atomic_path(target) as tmp:
+            with open(tmp, "w") as fh:
+                fh.write("{}")
+            target.mkdir()  # the target turns into a directory before the rename
+            (target / "keep").write_text("")
+    assert os.listdir(tmp_path) == ["r.json"] and os.listdir(target) == ["keep"]
