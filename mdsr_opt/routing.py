@@ -6,7 +6,8 @@ stretches). :func:`contraction_graph` returns these as a networkx graph. :func:`
 muscle units along strongly and uniformly contracted, smooth chains of edges:
 
 1. **Regions and seeds.** The contracted regions are the connected sets of edges contracted by at least
-   ``seed_threshold * w_max``. Each region is seeded on its own with its ``n_seeds`` most contracted
+   ``seed_threshold * w_ref`` (``w_ref``: the contraction reached by the most contracted edges of total
+   rest length four mean edge lengths; a single short edge at a corner would dominate ``w_max``). Each region is seeded on its own with its ``n_seeds`` most contracted
    edges (a global top-n would put every seed in the most contracted region).
 2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
    continuation first, every turn within ``max_turn``; each path is a muscle unit.
@@ -95,7 +96,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from ._checks import as_float_array, check_mesh, positive_float
 from .mesh import Mesh
 from .muscles import Muscle
-from .routing_symmetry import Reflection, find_reflection, weights_are_symmetric
+from .routing_symmetry import Reflection, find_reflections, weights_are_symmetric
 
 __all__ = [
     "contraction_graph",
@@ -818,7 +819,7 @@ class _Router:
 
 def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float = 4.0, K_h: float = 0.1,
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
-                  min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.5,
+                  min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
                   symmetry: str | bool = "auto") -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
@@ -852,11 +853,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     max_turn : float, default 45
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
         and splice joints alike).
-    seed_threshold : float, default 0.5
-        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_max``; each
-        region gets its own seeds.
+    seed_threshold : float, default 0.6
+        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
+        region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
+        length four mean edge lengths (so one short edge at a corner cannot set it).
     symmetry : {"auto", True, False}, default "auto"
-        Route mirrored pairs of muscles when the body is mirror-symmetric (:func:`find_reflection`) and
+        Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
         mirrored edges contract alike (within ``1e-6 * max|w|``). ``True`` requires that and raises
         otherwise; ``False`` never does it.
 
@@ -938,9 +940,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                      f"|w| = {w_abs:.3g}), so there is nothing for a muscle to do; no muscles routed")
     reflection = None
     if symmetry is not False:
-        reflection = find_reflection(mesh)
-        if reflection is not None and not weights_are_symmetric(w, reflection):
-            reflection = None
+        reflection = next((m for m in find_reflections(mesh) if weights_are_symmetric(w, m)), None)
         if symmetry is True and reflection is None:
             raise ValueError("symmetry=True but the body is not mirror-symmetric or the target does not "
                              "contract mirrored edges alike")
@@ -958,7 +958,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
                      f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
                      "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
-    threshold_q = max(floor_q + 1, int(math.ceil(seed_threshold * int(wq.max()))))
+    # the reference contraction: the largest w reached by edges of total rest length 4 mean edge lengths
+    # (not w_max, which a single short edge at a corner can dominate)
+    feas = np.flatnonzero(router.feasible)
+    order = feas[np.argsort(-wq[feas], kind="stable")]
+    reach = np.searchsorted(np.cumsum(l0[order]), 4.0 * ell)
+    w_ref_q = int(wq[order[min(reach, len(order) - 1)]])
+    threshold_q = max(floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
     regions = router.regions(threshold_q, _compression_dominated(mesh, x, w))
     seeds = router.seed_units(regions, n_seeds)
     router.grow()

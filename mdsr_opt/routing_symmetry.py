@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 from ._checks import check_mesh
 from .mesh import Mesh
 
-__all__ = ["Reflection", "find_reflection", "weights_are_symmetric"]
+__all__ = ["Reflection", "find_reflection", "find_reflections", "weights_are_symmetric"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,8 +78,8 @@ def _try_axis(mesh: Mesh, tree: cKDTree, c: np.ndarray, d: np.ndarray, tol: floa
     return Reflection(point=c.copy(), direction=d.copy(), node_map=idx.astype(np.int64), edge_map=em.astype(np.int64))
 
 
-def find_reflection(mesh: Mesh, rtol: float = 1e-6) -> Reflection | None:
-    """A reflection mapping ``mesh`` onto itself, or ``None``.
+def find_reflections(mesh: Mesh, rtol: float = 1e-6) -> list[Reflection]:
+    """Every candidate reflection that maps ``mesh`` onto itself (at most one per candidate axis).
 
     Parameters
     ----------
@@ -90,10 +90,9 @@ def find_reflection(mesh: Mesh, rtol: float = 1e-6) -> Reflection | None:
 
     Returns
     -------
-    Reflection or None
-        The first axis that works (principal axis of the node cloud with the smaller variance first, i.e.
-        the long axis of an elongated body is the mirror line of a left-right symmetric figure... both are
-        tried), or ``None`` when no candidate maps every node onto a node and every edge onto an edge.
+    list of Reflection
+        Empty when no candidate axis maps every node onto a node and every edge onto an edge. A body with
+        two mirror axes (a rectangle) gives both, the principal axis of larger variance first.
     """
     mesh = check_mesh(mesh)
     X = mesh.points
@@ -109,11 +108,18 @@ def find_reflection(mesh: Mesh, rtol: float = 1e-6) -> Reflection | None:
                 dirs.append(v / nv)
     tree = cKDTree(X)
     tol = rtol * mesh.size
+    out = []
     for d in dirs:
         r = _try_axis(mesh, tree, c, d / np.linalg.norm(d), tol)
-        if r is not None:
-            return r
-    return None
+        if r is not None and not any(np.array_equal(r.node_map, o.node_map) for o in out):
+            out.append(r)
+    return out
+
+
+def find_reflection(mesh: Mesh, rtol: float = 1e-6) -> Reflection | None:
+    """The first reflection of :func:`find_reflections`, or ``None``."""
+    found = find_reflections(mesh, rtol)
+    return found[0] if found else None
 
 
 def weights_are_symmetric(w: np.ndarray, reflection: Reflection, rtol: float = 1e-6) -> bool:

@@ -550,11 +550,26 @@ def problems_dir() -> Path | None:
     return None
 
 
-def _problem_files() -> dict[str, Path]:
+def _library_files() -> dict[str, Path]:
     d = problems_dir()
     if d is None:
         return {}
     return {p.stem: p for p in sorted(d.glob("*.py")) if not p.stem.startswith("_")}
+
+
+def _is_figure(path: Path) -> bool:
+    """A figure script (e.g. ``figure6.py``): defines ``run_figure(out, ...)`` instead of a ``build``."""
+    text = path.read_text()
+    return "\ndef run_figure(" in text and "\ndef build(" not in text
+
+
+def _problem_files() -> dict[str, Path]:
+    return {k: p for k, p in _library_files().items() if not _is_figure(p)}
+
+
+def figure_scripts() -> dict[str, Path]:
+    """The library's figure scripts (``mdsr run NAME`` calls their ``run_figure(out, resolution, log)``)."""
+    return {k: p for k, p in _library_files().items() if _is_figure(p)}
 
 
 def list_problems() -> list[str]:
@@ -1745,6 +1760,8 @@ def _cmd_list(a) -> int:
             line += f"\n  {'':<{w}}  cases: {kinds}" + (
                 f"; animations: {', '.join(x.name for x in scene.animations)}" if scene.animations else "")
         print(line)
+    for name, path in figure_scripts().items():
+        print(f"  {name:<{w}}  {_doc_line(path)} (figure)")
     print("run one with: mdsr run NAME --out DIR   (or a scene file: mdsr run PATH.toml --out DIR)")
     return 0
 
@@ -1758,6 +1775,12 @@ def _cmd_run(a) -> int:
         if not names:
             raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
     t0 = time.perf_counter()
+    figs = figure_scripts()
+    if any(n in figs for n in names):  # a figure script runs on its own (e.g. mdsr run figure6)
+        if len(names) != 1:
+            raise ValueError(f"run a figure script ({', '.join(n for n in names if n in figs)}) on its own")
+        log = (lambda s: None) if a.quiet else (lambda s: print(s, flush=True))
+        return int(_load_module(figs[names[0]]).run_figure(a.out, resolution=a.resolution or "medium", log=log))
     scenes = [get_problem(n, resolution=a.resolution) for n in names]  # all errors before any work
     seen = set()
     for s in scenes:
