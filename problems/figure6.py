@@ -138,6 +138,7 @@ def table_rows(runs):
                 a = float(res.contractions[i]) if i < len(lay) else None
                 row[f"a{i + 1}"] = a
                 row[f"stroke{i + 1}"] = None if a is None else a * L0[i]
+            row["idle"] = int(sum(float(a) < 1e-3 for a in res.contractions))
             row.update({"difference": res.difference, "relative_difference": res.difference / r["scene"].mesh.size,
                         "initial_difference": res.initial_difference, "iterations": res.iterations,
                         "success": bool(res.success), "status": res.status})
@@ -169,7 +170,8 @@ def write_table(rows, csv_path, md_path):
     show = [k for k in keys if k not in ("status", "total_length", "initial_difference")]
     lines = ["| " + " | ".join(show) + " |", "|" + "---|" * len(show)]
     lines += ["| " + " | ".join(_fmt(r[k]) for k in show) + " |" for r in rows]
-    note = ("\n\nstrokeN = aN * L0 of muscle lN (rest length, the length the servo pulls); difference = "
+    note = ("\n\nstrokeN = aN * L0 of muscle lN (rest length, the length the servo pulls); idle = muscles the "
+            "design leaves at a < 0.001 (routed, but not worth building for this target); difference = "
             "weighted RMS node distance to the target after rigid alignment (a length), relative = over the "
             "body's size; iterations = IPOPT iterations of the flattened design.\n")
     with atomic_path(md_path) as tmp:

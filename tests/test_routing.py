@@ -288,10 +288,11 @@ def _router(mesh, t, w, K_a, K_b, K_h, n_seeds=10):
     import math
 
     from mdsr_opt import routing
+    from mdsr_opt.routing_search import Router
 
     ell = float(mesh.edge_lengths.mean())
     wq = np.rint(w / routing._QUANTUM).astype(np.int64)
-    router = routing._Router(mesh, wq, K_a, K_b, K_h, int(round(1e-3 / routing._QUANTUM)), ell,
+    router = Router(mesh, wq, K_a, K_b, K_h, int(round(1e-3 / routing._QUANTUM)), ell,
                              1.0 - math.cos(math.radians(45.0)) + 1e-12)
     router.seed_units(router.regions(int(0.5 * wq.max()), routing._compression_dominated(mesh, t, w)), n_seeds)
     return router
@@ -374,7 +375,7 @@ def test_raising_K_a_lowers_nonuniformity_and_K_b_lowers_turning(body):
 
 
 def test_nonuniformity_is_the_largest_relative_mismatch_of_a_joined_part():
-    from mdsr_opt.routing import _mismatch
+    from mdsr_opt.routing_search import mismatch as _mismatch
 
     # a unit of 3 edges with mean 10 joined by an edge of weight 5: joined mean 35/4
     mu = 35 / 4

@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh
-from mdsr_opt import routing
+from mdsr_opt import routing, routing_search
 from mdsr_opt.routing import contraction_graph, route_muscles
 
 BUDGET_S = 0.5
@@ -87,17 +87,17 @@ def _mesh(outline, n_nodes):
 def _count_fields(mesh, target) -> int:
     """Number of Dijkstra runs (distance fields) in one routing call."""
     calls = [0]
-    real = routing.dijkstra
+    real = routing_search.dijkstra
 
     def counting(*args, **kwargs):
         calls[0] += 1
         return real(*args, **kwargs)
 
-    routing.dijkstra = counting
+    routing_search.dijkstra = counting
     try:
         route_muscles(mesh, target)
     finally:
-        routing.dijkstra = real
+        routing_search.dijkstra = real
     return calls[0]
 
 
