@@ -13,7 +13,8 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    cannot produce. Each region is seeded on its own with its ``n_seeds`` most contracted edges (a
    global top-n would put every seed in the most contracted region).
 2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
-   continuation first, every turn within ``max_turn``; each path is a muscle unit.
+   continuation first, every turn within ``max_turn`` and every edge passing the same gate ``g <= 1`` as
+   growth (below), so no seed joins edges that contract very differently; each path is a muscle unit.
 3. **Growth and splicing.** Units grow from their endpoints by a best-first (A*-like) search. A step adds
    a contracted edge ``e`` at an endpoint ``N`` (or joins another unit's endpoint through ``e``) and costs
 

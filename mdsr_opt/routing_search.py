@@ -173,6 +173,7 @@ class Router:
             a, b = b, a
         path = [a, b]
         on = {a, b}
+        n, s1 = 1, self.wql[k0]  # edge count and weight sum of the path, for the nonuniformity gate
         mp = self.mp
         mode = "free"
         if mp is not None:
@@ -202,13 +203,18 @@ class Router:
                     tc = turn_cost(d, self._dir(t, u))
                     if tc > self.turn_limit:
                         continue
+                    q = self.wql[k]
+                    parts = ((n, s1), (1, q), (1, q)) if mode == "crossing" else ((n, s1), (1, q))
+                    if self.K_a * mismatch(parts) + self.K_b * tc > 1.0:
+                        continue  # a seed path obeys the same gate as growth
                     key = (tc,) + self._edge_key(k)
                     if best is None or key < best[0]:
-                        best = (key, u)
+                        best = (key, u, q)
                 if best is None:
                     break
                 path.append(best[1])
                 on.add(best[1])
+                n, s1 = n + (2 if mode == "crossing" else 1), s1 + (2 if mode == "crossing" else 1) * best[2]
                 if mode == "crossing":
                     path.insert(0, mp[best[1]])
                     on.add(mp[best[1]])
