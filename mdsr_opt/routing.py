@@ -30,7 +30,8 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    Joining another unit's endpoint splices the two (fewer, longer muscles). Growth ends when no step is
    allowed.
 4. **Fragments and selection.** Units shorter than ``min_length`` are spliced into a neighbouring unit
-   end (within the tortuosity limit) or dropped; the result's ``dropped`` records each with the reason.
+   end (within the tortuosity limit, and ``K_a * share * g_a <= 1`` with ``share`` the fragment's share
+   of the joined edges) or dropped; the result's ``dropped`` records each with the reason.
    The rest are ranked by the contraction they capture (``sum w * l0``), and at most ``max_muscles`` kept.
 5. **Symmetry.** When the body is mirror-symmetric and the target contracts mirrored edges alike,
    every step is taken together with its mirror image (:mod:`mdsr_opt.routing_symmetry`), so the

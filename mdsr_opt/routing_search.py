@@ -435,8 +435,10 @@ class Router:
         """Splice or drop the units shorter than ``min_length``; returns (path, rest length, what happened).
 
         A short unit (a fragment) is spliced into another unit when one of its ends is joined to one of that
-        unit's ends by a contracted edge and every turn at the joint obeys the tortuosity limit (the
-        nonuniformity gate is waived: the fragment is short). Otherwise it is dropped. Fragments are
+        unit's ends by a contracted edge, every turn at the joint obeys the tortuosity limit, and the
+        nonuniformity gate holds with the mismatch weighted by the fragment's share of the joined edges
+        (``K_a * share * g_a <= 1``: a short fragment may differ more than a growth step). Otherwise it is
+        dropped. Fragments are
         handled shortest first; in symmetric mode a fragment and its mirror image share their fate.
         """
         notes = []
@@ -467,6 +469,10 @@ class Router:
                     nxt = V.path[1] if u == V.path[0] else V.path[-2]
                     if (P is not None and not self._turn_ok(P, N, u)) or not self._turn_ok(N, u, nxt):
                         continue
+                    q = self.wql[k]
+                    share = (F.n + 1) / (F.n + 1 + V.n)
+                    if self.K_a * share * mismatch(((F.n, F.s1), (1, q), (V.n, V.s1))) > 1.0:
+                        continue  # the fragment contracts too differently for its share of the muscle
                     if self.mp is not None and not self._orbit_ok(F, N, u, k, V):
                         continue
                     join = (at_tail, u, k, V)
@@ -488,7 +494,7 @@ class Router:
                 for G in group:
                     notes.append((tuple(G.path), length(G),
                                   f"dropped: rest length {length(G):.4g} < min_length={min_length:.4g} and no "
-                                  "unit end to splice into within the tortuosity limit"))
+                                  "unit end to splice into within the tortuosity limit and the nonuniformity gate"))
                     G.alive = False
                     for v in G.path:
                         self.owner[v] = -1

@@ -9,7 +9,6 @@ import math
 import numpy as np
 import pytest
 
-from mdsr_opt.routing import route_muscles
 from mdsr_opt.scenes import figure_scripts, get_problem, list_problems, prepare_case
 from problems import figure6
 
