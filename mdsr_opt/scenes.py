@@ -641,11 +641,26 @@ def problems_dir() -> Path | None:
     return None
 
 
-def _problem_files() -> dict[str, Path]:
+def _library_files() -> dict[str, Path]:
     d = problems_dir()
     if d is None:
         return {}
     return {p.stem: p for p in sorted(d.glob("*.py")) if not p.stem.startswith("_")}
+
+
+def _is_figure(path: Path) -> bool:
+    """A figure script (e.g. ``figure6.py``): defines ``run_figure(out, ...)`` instead of a ``build``."""
+    text = path.read_text()
+    return "\ndef run_figure(" in text and "\ndef build(" not in text
+
+
+def _problem_files() -> dict[str, Path]:
+    return {k: p for k, p in _library_files().items() if not _is_figure(p)}
+
+
+def figure_scripts() -> dict[str, Path]:
+    """The library's figure scripts (``mdsr run NAME`` calls their ``run_figure(out, resolution, log)``)."""
+    return {k: p for k, p in _library_files().items() if _is_figure(p)}
 
 
 def list_problems() -> list[str]:
@@ -2035,6 +2050,8 @@ def _cmd_list(a) -> int:
             line += f"\n  {'':<{w}}  cases: {kinds}" + (
                 f"; animations: {', '.join(x.name for x in scene.animations)}" if scene.animations else "")
         print(line)
+    for name, path in figure_scripts().items():
+        print(f"  {name:<{w}}  {_doc_line(path)} (figure)")
     print("run one with: mdsr run NAME --out DIR   (or a scene file: mdsr run PATH.toml --out DIR)")
     return 0
 
@@ -2058,6 +2075,17 @@ def _cmd_run(a) -> int:
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
     # scene (all input errors), and only then any solving or writing
+    figs = figure_scripts()
+    if any(n in figs for n in names):  # a figure script runs on its own (e.g. mdsr run figure6)
+        if len(names) != 1:
+            raise ValueError(f"run a figure script ({', '.join(n for n in names if n in figs)}) on its own")
+        module = _load_module(figs[names[0]])
+        with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+            folder.begin(getattr(module, "OUTPUTS", ()))
+            with progress_for_cli(a, 0, names[0], unit="step") as log:
+                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
+            folder.finish("complete" if code == 0 else "complete, some designs failed")
+        return code
     with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
         scenes = [get_problem(n, resolution=a.resolution) for n in names]
         seen = set()

@@ -201,14 +201,27 @@ def test_splicing_joins_separate_seed_units():
     X = mesh.points
     peaks = lambda s: 0.2 + 0.1 * np.exp(-((s - 1.5) / 0.3) ** 2) + 0.1 * np.exp(-((s - 4.5) / 0.3) ** 2)
     t = bend(X, peaks, 6.0, 0.5)
-    res = route_muscles(mesh, t, n_seeds=4)
-    assert nx.number_connected_components(nx.Graph(list(res.seeds))) == 2  # two seed units ...
+    res = route_muscles(mesh, t, K_a=4.0, seed_threshold=0.9)
+    assert res.n_regions == 2  # two contracted regions, each seeded ...
     assert len(res) == 1 and res.n_units == 1  # ... spliced into one muscle
     assert np.ptp(X[list(res[0].nodes), 0]) == pytest.approx(6.0)
-    # a designer who wants uniform muscles (large K_a) keeps them apart, each more uniform
-    strict = route_muscles(mesh, t, n_seeds=4, K_a=300.0, min_length=0.0)
-    assert len(strict) == 2
-    assert max(s.nonuniformity for s in strict.stats) < res.stats[0].nonuniformity
+    # a designer who wants uniform muscles (large K_a) keeps them apart: one muscle on each peak
+    strict = route_muscles(mesh, t, K_a=100.0, seed_threshold=0.9, min_length=0.0)
+    assert len(strict) >= 2 and all(np.ptp(X[list(m.nodes), 0]) < 3.0 for m in strict)
+    for peak in (1.5, 4.5):  # each peak has a muscle of its own
+        assert any(np.ptp(X[list(m.nodes), 0]) < 3.0 and X[list(m.nodes), 0].min() <= peak <= X[list(m.nodes), 0].max()
+                   for m in strict)
+
+
+def test_smaller_K_a_splices_more_and_the_mismatch_gate_holds():
+    """K_a is a weight of order one: g_a is the squared relative mismatch of a joined part, so the number
+    of muscles falls as K_a falls over 1 .. 100 (the paper's trade-off), never rises."""
+    mesh = Mesh.rectangle(6.0, 1.0, nx=24, ny=4)
+    X = mesh.points
+    peaks = lambda s: 0.2 + 0.1 * np.exp(-((s - 1.5) / 0.3) ** 2) + 0.1 * np.exp(-((s - 4.5) / 0.3) ** 2)
+    t = bend(X, peaks, 6.0, 0.5)
+    counts = [len(route_muscles(mesh, t, K_a=K, seed_threshold=0.9, min_length=0.0)) for K in (1, 4, 30, 100)]
+    assert counts == sorted(counts) and counts[0] < counts[-1]
 
 
 # -------------------------------------------------------------------------------- routing: invariance
@@ -270,6 +283,21 @@ def test_rotating_mesh_and_target_together_changes_nothing(body, name):
             assert {frozenset(e) for e in out.seeds} == {frozenset(e) for e in ref.seeds}
 
 
+def _router(mesh, t, w, K_a, K_b, K_h, n_seeds=10):
+    """A router with its first units, as ``route_muscles`` builds it (no symmetry)."""
+    import math
+
+    from mdsr_opt import routing
+    from mdsr_opt.routing_search import Router
+
+    ell = float(mesh.edge_lengths.mean())
+    wq = np.rint(w / routing._QUANTUM).astype(np.int64)
+    router = Router(mesh, wq, K_a, K_b, K_h, int(round(1e-3 / routing._QUANTUM)), ell,
+                             1.0 - math.cos(math.radians(45.0)) + 1e-12)
+    router.seed_units(router.regions(int(0.5 * wq.max()), routing._compression_dominated(mesh, t, w)), n_seeds)
+    return router
+
+
 def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
     """h of every candidate step = shortest path over all mesh edges (rest lengths) from the new end node
     to the nearest end node of another unit, in mean edge lengths (checked against networkx)."""
@@ -278,8 +306,7 @@ def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
     t = family(body)["shorten 35 deg"]
     _, _, w = edge_weights(body, t)
     ell = float(body.edge_lengths.mean())
-    router = routing._Router(body, w, 1.0, 1.0, 0.1, int(round(1e-3 / routing._QUANTUM)), ell)
-    router.first_units(router.seeds(10))
+    router = _router(body, t, w, 1.0, 1.0, 0.1)
     G = nx.Graph()
     G.add_weighted_edges_from((int(a), int(b), float(l)) for (a, b), l in zip(body.edges, body.edge_lengths))
     for _ in range(5):  # a few growth steps, so that endpoints have moved since the first fields
@@ -296,7 +323,7 @@ def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
             # never shorter than the straight line
             straight = min(np.linalg.norm(body.points[u] - body.points[e]) for e in others) / ell
             assert hc >= straight * (1 - 1e-12)
-        router._apply(cands[router._choose(cands)])
+        router._apply_orbit(cands[router._choose(cands)])
 
 
 @pytest.mark.parametrize("K_h", [0.1, 1.0])
@@ -309,14 +336,13 @@ def test_pruned_choice_equals_the_full_heuristic(body, K_h):
     steps = 0
     for name in ("shorten 35 deg", "shorten 70 deg", "bend, curvature x1..4"):
         _, _, w = edge_weights(body, family(body)[name])
-        router = routing._Router(body, w, 1.0, 1.0, K_h, int(round(1e-3 / routing._QUANTUM)), ell)
-        router.first_units(router.seeds(10))
+        router = _router(body, family(body)[name], w, 1.0, 1.0, K_h)
         while cands := router._candidates():
             h = router._heuristic(cands)
             full = min(range(len(cands)), key=lambda i: (cands[i][0] + K_h * float(h[i]), cands[i][1],
                                                          cands[i][2]))
             assert router._choose(cands) == full, f"{name}, step {steps}"
-            router._apply(cands[full])
+            router._apply_orbit(cands[full])
             steps += 1
     assert steps >= 50
 
@@ -348,13 +374,18 @@ def test_raising_K_a_lowers_nonuniformity_and_K_b_lowers_turning(body):
     assert np.mean(len_lo) > 1.5 * np.mean(len_hi)
 
 
-def test_K_a_caps_the_relative_variance_of_grown_muscles(body):
-    for name, t in family(body).items():
-        wmax = max(edge_weight_map(body, t).values())
-        for K_a in (5.0, 50.0):
-            res = route_muscles(body, t, K_a=K_a, K_b=0.0, n_seeds=1, min_length=0.0)
-            assert len(res) == 1
-            assert res.stats[0].nonuniformity / wmax ** 2 <= 1.0 / K_a + 1e-6, name
+def test_nonuniformity_is_the_largest_relative_mismatch_of_a_joined_part():
+    from mdsr_opt.routing_search import mismatch as _mismatch
+
+    # a unit of 3 edges with mean 10 joined by an edge of weight 5: joined mean 35/4
+    mu = 35 / 4
+    assert _mismatch(((3, 30), (1, 5))) == pytest.approx(((5 - mu) / mu) ** 2, rel=1e-15)
+    # splicing two units through an edge: the part furthest from the joined mean decides
+    mu = (20 + 8 + 60) / 9
+    assert _mismatch(((2, 20), (1, 8), (6, 60))) == pytest.approx(((8 - mu) / mu) ** 2, rel=1e-15)
+    assert _mismatch(((4, 40), (1, 10))) == 0.0  # a perfectly uniform unit costs nothing
+    # scale-free: doubling every weight changes nothing
+    assert _mismatch(((3, 60), (1, 10))) == pytest.approx(_mismatch(((3, 30), (1, 5))), rel=1e-15)
 
 
 def test_seeds_are_the_most_contracted_edges(body):
@@ -379,10 +410,19 @@ def test_max_muscles_keeps_the_strongest_and_min_length_drops_short_ones(body):
     assert strength == sorted(strength, reverse=True)
     top2 = route_muscles(body, t, n_seeds=10, min_length=0.0, max_muscles=2)
     assert [m.nodes for m in top2] == [m.nodes for m in full][:2]
+    assert len(top2.dropped) == len(full) - 2 and all("max_muscles=2" in d.reason for d in top2.dropped)
     cut = float(np.median([s.rest_length for s in full.stats]))
     long_only = route_muscles(body, t, n_seeds=10, min_length=cut)
     assert all(s.rest_length >= cut for s in long_only.stats)
-    assert {m.nodes for m in long_only} == {m.nodes for m, s in zip(full, full.stats) if s.rest_length >= cut}
+    # every fragment shorter than min_length is recorded, spliced or dropped, with the reason
+    assert long_only.dropped and all(d.rest_length < cut for d in long_only.dropped)
+    assert all(d.reason.startswith(("spliced", "dropped")) and "min_length" in d.reason for d in long_only.dropped)
+    kept = {v for m in long_only for v in m.nodes}
+    for d in long_only.dropped:
+        if d.reason.startswith("spliced"):
+            assert set(d.nodes) <= kept      # a spliced fragment lives on inside a muscle
+        else:
+            assert not set(d.nodes) & kept   # a dropped one is in no muscle
     with pytest.warns(RoutingWarning, match="shorter than min_length"):
         assert len(route_muscles(body, t, min_length=100.0)) == 0
 
@@ -508,3 +548,121 @@ def test_figures(grid_strip, tmp_path):
         assert np.allclose(line.get_xydata(), pos[list(res[0].nodes)])
     save_figure(fig, tmp_path / "routing.png")
     assert (tmp_path / "routing.png").stat().st_size > 1000
+
+
+# ------------------------------------------------------------------------------ seeds per region, symmetry
+def test_each_contracted_region_gets_seeds_not_only_the_strongest():
+    """An S-bend contracts the top of the first half strongly and the bottom of the second half weakly:
+    a global top-n would put every seed in the first half; seeds per region give the weak side a muscle."""
+    mesh = Mesh.from_polygon([[0, 0], [6, 0], [6, 1], [0, 1]], max_area=0.01)
+    X = mesh.points
+    t = bend(X, lambda s: np.where(s < 3.0, 0.4, -0.28), 6.0, 0.5)
+    wmap = edge_weight_map(mesh, t)
+    res = route_muscles(mesh, t, n_seeds=5, seed_threshold=0.5)
+    assert res.n_regions >= 2
+    top_global = sorted(wmap, key=wmap.get, reverse=True)[:5]
+    assert all(X[list(e), 0].mean() < 3.0 for e in top_global)       # the global top 5: all strong side
+    seed_x = [X[list(e), 0].mean() for e in res.seeds]
+    assert min(seed_x) < 3.0 < max(seed_x)                            # seeds on both sides
+    sides = {(bool(X[list(m.nodes), 0].mean() < 3.0), bool(X[list(m.nodes), 1].mean() > 0.5)) for m in res}
+    assert {(True, True), (False, False)} <= sides                    # concave side of each half
+
+
+def test_every_turn_obeys_the_tortuosity_rule_seeds_included(body):
+    for name, t in family(body).items():
+        for max_turn in (20.0, 45.0):
+            res = route_muscles(body, t, max_turn=max_turn, K_b=0.0, n_seeds=10, min_length=0.0)
+            assert len(res) >= 1
+            for m in res:
+                d = np.diff(body.points[list(m.nodes)], axis=0)
+                a = np.arctan2(d[:, 1], d[:, 0])
+                turn = np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi)
+                assert np.degrees(turn.max(initial=0.0)) <= max_turn + 1e-6, (name, max_turn)
+                # the seed edges of a muscle are part of its path, not exempt
+            assert max(np.degrees(s.max_turn) for s in res.stats) <= max_turn + 1e-6
+
+
+def _two_dimples(X, a=0.12):
+    """Exactly mirror-symmetric about x = 2: the top edges near x = 1 and x = 3 shorten (a tanh step)."""
+    u = X[:, 0] - 2.0
+    h = np.sign(u) * 0.5 * (1.0 + np.tanh((np.abs(u) - 1.0) / 0.2))
+    return np.column_stack([X[:, 0] - a * X[:, 1] * h, X[:, 1]])
+
+
+def mirrored_mesh(max_area=0.01):
+    """An unstructured mesh of the 4 x 1 plate, exactly mirror-symmetric about x = 2: Triangle meshes the
+    left half, the right half is its mirror image (nodes on the axis shared)."""
+    L = Mesh.from_polygon([[0, 0], [2, 0], [2, 1], [0, 1]], max_area=max_area)
+    P, T = L.points, L.triangles
+    on = np.flatnonzero(np.abs(P[:, 0] - 2.0) < 1e-12)
+    off = np.setdiff1d(np.arange(len(P)), on)
+    idx = np.arange(len(P))
+    idx[off] = len(P) + np.arange(len(off))
+    return Mesh(np.vstack([P, np.column_stack([4.0 - P[off, 0], P[off, 1]])]), np.vstack([T, idx[T][:, ::-1]]))
+
+
+def symmetric_bend(X, c=0.3, R=3.0):
+    """Bend about x = 2 with curvature (1 + 3 c u^2) / R, u = x - 2: exactly mirror-symmetric."""
+    u = X[:, 0] - 2.0
+    phi = (u + c * u ** 3) / R
+    r = R - (X[:, 1] - 0.5)
+    return np.column_stack([2.0 + r * np.sin(phi), R - r * np.cos(phi)])
+
+
+def _mirror_closed(mesh, result):
+    """True when the mirror image (about x = 2) of every muscle is a muscle, node positions to 1e-12."""
+    paths = [mesh.points[list(m.nodes)] for m in result]
+    ok = []
+    for P in paths:
+        Q = np.column_stack([4.0 - P[:, 0], P[:, 1]])
+        ok.append(any(len(R) == len(Q) and (np.allclose(R, Q, atol=1e-12) or np.allclose(R, Q[::-1], atol=1e-12))
+                      for R in paths))
+    return all(ok)
+
+
+@pytest.mark.parametrize("K_a", [1.0, 4.0, 30.0])
+def test_a_symmetric_target_gets_mirror_symmetric_muscles(K_a):
+    mesh = mirrored_mesh()
+    t = symmetric_bend(mesh.points)
+    res = route_muscles(mesh, t, K_a=K_a, min_length=0.0)
+    assert res.reflection is not None and len(res) >= 1
+    assert _mirror_closed(mesh, res)
+    # without the symmetric treatment the same target gets a muscle whose mirror image is not one
+    plain = route_muscles(mesh, t, K_a=K_a, min_length=0.0, symmetry=False)
+    assert plain.reflection is None and not _mirror_closed(mesh, plain)
+    # the symmetric layout does not depend on node numbers
+    perm = np.random.default_rng(3).permutation(mesh.n_nodes)
+    t2 = np.empty_like(t)
+    t2[perm] = t
+    out = route_muscles(mesh.relabel(perm), t2, K_a=K_a, min_length=0.0)
+    assert sorted(canonical(out)) == sorted(min(tuple(perm[list(m.nodes)]), tuple(perm[list(m.nodes)])[::-1])
+                                           for m in res)
+
+
+def test_structured_symmetric_target_gives_mirror_pairs(grid_strip):
+    res = route_muscles(grid_strip, _two_dimples(grid_strip.points), K_a=4.0, min_length=0.0)
+    assert res.reflection is not None and len(res) >= 2 and _mirror_closed(grid_strip, res)
+
+
+def test_symmetry_true_requires_a_symmetric_target(grid_strip):
+    X = grid_strip.points
+    lopsided = X.copy()
+    lopsided[:, 0] -= 0.1 * X[:, 1] * np.clip(X[:, 0] - 2.5, 0.0, None)
+    with pytest.raises(ValueError, match="not mirror-symmetric"):
+        route_muscles(grid_strip, lopsided, symmetry=True)
+    assert route_muscles(grid_strip, lopsided).reflection is None
+    assert route_muscles(grid_strip, _two_dimples(X), symmetry=False, min_length=0.0).reflection is None
+
+
+def test_find_reflection_maps_nodes_and_edges():
+    from mdsr_opt.routing_symmetry import find_reflections
+
+    mesh = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+    refl = find_reflections(mesh)
+    assert len(refl) == 2  # about x = 2 and about y = 0.5
+    for r in refl:
+        assert np.allclose(r.apply(mesh.points), mesh.points[r.node_map], atol=1e-12)
+        assert np.array_equal(r.node_map[r.node_map], np.arange(mesh.n_nodes))
+        E = mesh.edges
+        assert np.array_equal(np.sort(r.node_map[E], axis=1), E[r.edge_map])
+    assert find_reflections(Mesh.rectangle(4.0, 1.0, nx=16, ny=4, pattern="right")) == []

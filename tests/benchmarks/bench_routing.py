@@ -16,6 +16,13 @@ was needed).
 Usage::
 
     python tests/benchmarks/bench_routing.py --out bench_out
+    python tests/benchmarks/bench_routing.py --quality --out bench_out   # routing-quality table
+    python tests/benchmarks/bench_routing.py --ka-sweep                  # K_a sweep of the Figure 6 targets
+
+``--quality`` runs :func:`mdsr_opt.routing_quality.routing_quality` over every case of the problem library
+(coarse, or ``--resolution``) and writes ``routing_quality.csv`` and ``routing_quality.md``. ``--ka-sweep``
+routes the five Figure 6 targets at K_a = 0.5 .. 32 and prints the muscle counts and edge counts, the
+sweep the Figure 6 K_a pairs were chosen from.
 
 prints a table and writes ``routing_timing.png`` (time against nodes, with the budget) and
 ``routing_examples.png`` (contraction graph and muscles of the 3k-node cases) to ``--out``.
@@ -32,7 +39,7 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh
-from mdsr_opt import routing
+from mdsr_opt import routing, routing_search
 from mdsr_opt.routing import contraction_graph, route_muscles
 
 BUDGET_S = 0.5
@@ -80,18 +87,42 @@ def _mesh(outline, n_nodes):
 def _count_fields(mesh, target) -> int:
     """Number of Dijkstra runs (distance fields) in one routing call."""
     calls = [0]
-    real = routing.dijkstra
+    real = routing_search.dijkstra
 
     def counting(*args, **kwargs):
         calls[0] += 1
         return real(*args, **kwargs)
 
-    routing.dijkstra = counting
+    routing_search.dijkstra = counting
     try:
         route_muscles(mesh, target)
     finally:
-        routing.dijkstra = real
+        routing_search.dijkstra = real
     return calls[0]
+
+
+def _ka_sweep(resolution) -> int:
+    """Muscle counts and edge counts of the Figure 6 targets routed at K_a = 0.5 .. 32."""
+    import warnings
+
+    from mdsr_opt.equilibrium import solve_external
+    from mdsr_opt.scenes import get_problem, problems_dir
+
+    fig6 = __import__("importlib").import_module("problems.figure6") if problems_dir() else None
+    kas = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+    print("target".ljust(20) + "".join(f"K_a={k:g}".ljust(16) for k in kas))
+    for name, cname, pair in fig6.TARGETS:
+        scene = get_problem(name, resolution=resolution)
+        case = scene.case(cname)
+        x = solve_external(scene.mesh, scene.material, case.anchors, case.drags).x
+        cells = []
+        for k in kas:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", routing.RoutingWarning)
+                r = route_muscles(scene.mesh, x, K_a=k, **fig6.ROUTING)
+            cells.append(f"{len(r)}:" + ",".join(str(s.n_edges) for s in r.stats))
+        print(f"{name}/{cname}".ljust(20) + "".join(c.ljust(16) for c in cells) + f"  (chosen {pair})")
+    return 0
 
 
 def main(argv=None) -> int:
@@ -99,7 +130,21 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="bench_out", help="output directory for the PNG charts")
     ap.add_argument("--sizes", default="500,1000,2000,3000,5000", help="target node counts")
     ap.add_argument("--repeat", type=int, default=3, help="warm repetitions (best is reported)")
+    ap.add_argument("--quality", action="store_true", help="write the routing-quality table of the library")
+    ap.add_argument("--ka-sweep", action="store_true", help="print the K_a sweep of the Figure 6 targets")
+    ap.add_argument("--resolution", default="coarse", help="scene resolution for --quality / --ka-sweep")
     args = ap.parse_args(argv)
+    res_arg = int(args.resolution) if args.resolution.isdigit() else args.resolution
+    if args.quality:
+        from mdsr_opt.routing_quality import routing_quality, write_quality_table
+
+        rows = routing_quality(resolution=res_arg, log=lambda s: print(s, flush=True))
+        paths = write_quality_table(rows, os.path.join(args.out, "routing_quality.csv"),
+                                    os.path.join(args.out, "routing_quality.md"))
+        print("wrote " + ", ".join(paths))
+        return 0 if all(r.success for r in rows) else 1
+    if args.ka_sweep:
+        return _ka_sweep(res_arg)
     sizes = [int(s) for s in args.sizes.split(",")]
     os.makedirs(args.out, exist_ok=True)
 
