@@ -29,7 +29,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["MinimizeOutcome", "BACKENDS", "available_backends", "minimize"]
+__all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
+           "supports_constraints"]
 
 
 @dataclass
@@ -40,6 +41,7 @@ class MinimizeOutcome:
     iterations: int
     solve_time: float
     build_time: float
+    lam_g: np.ndarray | None = None  # constraint multipliers (constrained models only)
 
 
 def _casadi_factory(plugin: str, opts: dict):
@@ -55,6 +57,61 @@ def _casadi_factory(plugin: str, opts: dict):
         # uno: CasADi derives its own gradient and Hessian from the expanded energy
         return ca.nlpsol(f"equilibrium_{plugin.replace('-', '_')}", plugin, nlp, o)
     return factory
+
+
+def _constrained_factory(plugin: str, opts: dict):
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.muscle_constraints.ConstrainedModel`."""
+    def factory(cmodel):
+        model = cmodel.model
+        x, p = model.x, model.p
+        g = cmodel.constraints_expr(x)
+        nlp = {"x": x, "p": p, "f": model.f_fn(x, p), "g": g}
+        o = dict(opts)
+        o["show_eval_warnings"] = False
+        if plugin in ("ipopt", "sqpmethod"):
+            lam_f = ca.MX.sym("lam_f")
+            lam_g = ca.MX.sym("lam_g", g.size1())
+            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g)
+            if plugin == "sqpmethod":
+                H = H + ca.triu(H, False).T
+            o["hess_lag"] = ca.Function("hess_lag_c", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"],
+                                        ["hess"])
+            if plugin == "ipopt":
+                o["grad_f"] = model.grad_fn
+        return ca.nlpsol(f"constrained_{plugin}", plugin, nlp, o)
+    return factory
+
+
+def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
+    """Solve with ropes as equalities first: if every rope's multiplier (tension) is >= 0 that is a KKT point
+    of the inequality problem too; otherwise re-solve with the ropes as inequalities ``L <= target``."""
+    solver, build_time = cmodel.solver(plugin, opts, _constrained_factory(plugin, opts))
+    pe = cmodel.split(p)[0]
+    lbx = np.full(cmodel.n_dof, -np.inf)
+    ubx = np.full(cmodel.n_dof, np.inf)
+    lbx[fixed] = values
+    ubx[fixed] = values
+    x0 = np.array(x0, dtype=float)
+    x0[fixed] = values
+    total_t, total_it = 0.0, 0
+    nt = cmodel.n_targets
+    for equality in ((True, False) if nt else (False,)):
+        lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
+        t0 = time.perf_counter()
+        with _quiet_stdout(plugin == "uno"):
+            sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        total_t += time.perf_counter() - t0
+        st = solver.stats()
+        status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
+        total_it += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
+                               if st.get("iterations") else 0))
+        lam = np.asarray(sol["lam_g"]).ravel()
+        ok = bool(st.get("success", False))
+        if ok and (not equality or np.all(lam[:nt] >= 0.0)):
+            break
+        if equality and ok:
+            status = "a rope would push: re-solved with slack allowed"
+    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, total_it, total_t, build_time, lam)
 
 
 def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
@@ -239,6 +296,8 @@ def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=50
     """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n)."""
     check_backend(backend)
     options = dict(options or {})
+    if hasattr(model, "constraints"):
+        return _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options)
     if backend in ("ipopt", "ipopt-lbfgs"):
         o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")
@@ -258,3 +317,34 @@ def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=50
     if backend == "scipy":
         return _solve_scipy(model, p, x0, fixed, values, tol, max_iter)
     return _solve_newton(model, p, x0, fixed, values, tol, max_iter)
+
+
+#: backends that accept constraints (exact cable, rigid anchor patches)
+CONSTRAINED_BACKENDS = ("ipopt", "ipopt-lbfgs", "sqpmethod", "uno")
+
+
+def supports_constraints(backend: str) -> bool:
+    """Can ``backend`` solve with muscle constraints (exact cable ropes, rigid anchor patches)?"""
+    return backend in CONSTRAINED_BACKENDS
+
+
+def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options):
+    if not supports_constraints(backend):
+        raise ValueError(f"backend {backend!r} cannot take constraints (exact cable ropes, rigid anchor "
+                         f"patches); use one of {', '.join(CONSTRAINED_BACKENDS)}")
+    if backend in ("ipopt", "ipopt-lbfgs"):
+        o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
+                        limited_memory=backend == "ipopt-lbfgs")
+        o["calc_lam_p"] = False
+        o.update(options)
+        return _solve_constrained("ipopt", o, model, p, x0, fixed, values)
+    if backend == "sqpmethod":
+        o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
+                                                "error_on_fail": False},
+             "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
+             "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
+        o.update(options)
+        return _solve_constrained("sqpmethod", o, model, p, x0, fixed, values)
+    o = {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}
+    o.update(options)
+    return _solve_constrained("uno", o, model, p, x0, fixed, values)

@@ -35,7 +35,9 @@ from ._checks import as_float_array, as_index_array, positive_float
 from .align import align
 from .backends import available_backends, check_backend, minimize
 from .mesh import Mesh
+from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .model import get_model, spring_parameters
+from .muscle_constraints import ConstrainedModel, MuscleConstraints, check_anchor_radius, spring_segments, spring_stiffness
 from .muscles import Muscle, check_contractions, check_muscles
 
 __all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends"]
@@ -79,6 +81,14 @@ class EquilibriumResult:
     rotation: np.ndarray | None = None  # internal driving: rotation applied to align with rest
     translation: np.ndarray | None = None
     muscle_model: str | None = None  # internal driving: "springs" or "cable"
+    # internal driving, per muscle (see solve_internal):
+    commanded: np.ndarray | None = None  # contraction asked
+    achieved: np.ndarray | None = None  # 1 - L/L0 along the node chain in the returned state
+    stroke: np.ndarray | None = None  # achieved * L0 (length units): the rope length taken in
+    tension: np.ndarray | None = None  # rope tension (cable: the multiplier; springs: the rod force)
+    slack: np.ndarray | None = None  # cable: rope shorter than its target; springs: not pulling
+    rest_lengths: np.ndarray | None = None  # L0 per muscle
+    anchor_radius: float | None = None  # radius of the rigid anchor patches at the muscles' ends
 
     def raise_on_failure(self) -> "EquilibriumResult":
         if not self.success:
@@ -88,10 +98,15 @@ class EquilibriumResult:
         return self
 
     def summary(self) -> dict:
-        return {"mode": self.mode, "backend": self.backend, "success": self.success, "status": self.status,
-                "iterations": self.iterations, "energy": self.energy, "residual": self.residual,
-                "min_J": self.min_J, "n_steps": len(self.steps), "build_time": self.build_time,
-                "solve_time": self.solve_time}
+        out = {"mode": self.mode, "backend": self.backend, "success": self.success, "status": self.status,
+               "iterations": self.iterations, "energy": self.energy, "residual": self.residual,
+               "min_J": self.min_J, "n_steps": len(self.steps), "build_time": self.build_time,
+               "solve_time": self.solve_time}
+        if self.achieved is not None:
+            out.update(muscle_model=self.muscle_model, anchor_radius=self.anchor_radius,
+                       **{k: [float(v) if k != "slack" else bool(v) for v in getattr(self, k)]
+                          for k in ("commanded", "achieved", "stroke", "tension", "slack")})
+        return out
 
 
 # ---------------------------------------------------------------------------------- input checks
@@ -166,6 +181,8 @@ def _factor(model, p, x, fixed):
 
 def _predict(model, p, x, fixed, values):
     """Newton step from ``x`` with the fixed coordinates moved to ``values``: the linear-elastic solution at rest."""
+    if hasattr(model, "predict"):  # a constrained model linearises its constraints too (a KKT step)
+        return model.predict(p, x, fixed, values)
     free = ~fixed
     try:
         Hfc, lu = _factor(model, p, x, fixed)
@@ -325,21 +342,56 @@ def _gauge(mesh) -> tuple[int, int, int]:
     return 2 * i, 2 * i + 1, 2 * j + comp
 
 
-def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "springs",
-                   stiffness: float = 10.0, backend: str = "ipopt", tol: float = 1e-8, max_iter: int = 200,
-                   options: dict | None = None, min_step: float = 1.0 / 256, align_to_rest: bool = True,
-                   verbose: bool = False, initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
+def _muscle_constraints(mesh, muscles, radius) -> MuscleConstraints:
+    """The mesh's cached :class:`MuscleConstraints` for these muscles and anchor radius."""
+    cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
+    key = (tuple(m.nodes for m in muscles), float(radius))
+    if key not in cache:
+        if len(cache) >= 16:
+            cache.pop(next(iter(cache)))
+        cache[key] = MuscleConstraints(mesh, muscles, radius)
+    return cache[key]
+
+
+def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
+    cache = emodel.__dict__.setdefault("_constrained_cache", {})
+    key = (id(mc), bool(ropes))
+    if key not in cache or cache[key].constraints is not mc:
+        if len(cache) >= 16:
+            cache.pop(next(iter(cache)))
+        cache[key] = ConstrainedModel(emodel, mc, ropes)
+    return cache[key]
+
+
+def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "cable",
+                   stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
+                   tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
+                   min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
+                   initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
     """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
 
     Parameters
     ----------
     muscles : list of :class:`Muscle` (or node lists) along mesh edges.
     contractions : one value in ``[0, 1)`` per muscle.
-    model : ``"springs"`` (the paper's dummy springs: one per segment, each shortened alike) or ``"cable"``
-        (one spring on the whole path length: a rope that slides inside the body).
-    stiffness : spring stiffness relative to the material, ``kappa``: each segment spring has
-        ``k = kappa * E * thickness``; the cable has ``K = kappa * E * thickness / n_segments`` so both models
-        are equally stiff for a uniformly strained muscle.
+    model : ``"cable"`` (default) or ``"springs"``.
+
+        - ``"cable"``: an inextensible rope sliding along the muscle's node chain, pulled in by a servo:
+          ``min E_e(x)`` subject to ``L_c(x) <= (1 - a_c) L0_c`` for every muscle, solved exactly by the NLP
+          (no penalty). The tension is the constraint's multiplier, never compressive; a rope that would have
+          to push goes slack (``slack=True``, achieved < commanded).
+        - ``"springs"``: the paper's dummy springs, one per segment, with the stiffness stated per unit rest
+          length so the model does not depend on the mesh: a segment of rest length ``l0`` is a spring
+          ``k/2 (l - (1 - a) l0)^2`` with ``k = K / l0`` and ``K = stiffness * E * thickness * D`` (``D`` the body's diameter)
+          (a rod of axial stiffness ``K``; see
+          :func:`~mdsr_opt.muscle_constraints.segment_spring_parameters`).
+    stiffness : ``kappa`` of the springs model (ignored by the cable).
+    anchor_radius : radius (length units) of the rigid patch that anchors each muscle end: the body nodes
+        within it at rest move rigidly with the end node. Default
+        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (0.04 x the body's diameter); 0 ends each muscle
+        on its node alone. Used with both models.
+    backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
+        of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
     initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external` (the
         three gauge coordinates of a given state are set to their rest values).
@@ -347,49 +399,102 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     Returns
     -------
     EquilibriumResult
+        With, per muscle, ``commanded``, ``achieved`` (``1 - L/L0`` along the node chain in the returned
+        state), ``stroke`` (``achieved * L0``, length units), ``tension`` and ``slack``. Load stepping moves
+        the rope targets ``(1 - s a) L0`` (or the springs' rest lengths) with the load fraction ``s``.
     """
     _check_mesh_material(mesh, material)
     tol = _check_common(tol, max_iter, backend)
     if model not in ("springs", "cable"):
         raise ValueError(f"model must be 'springs' or 'cable', got {model!r}")
     stiffness = positive_float(stiffness, "stiffness")
+    radius = check_anchor_radius(mesh, anchor_radius)
     mus = check_muscles(mesh, muscles)
     if not mus:
         raise ValueError("internal driving needs at least one muscle")
     a = check_contractions(contractions, len(mus))
     predict, x_start = _initial_guess(initial_guess, mesh)
     n = mesh.n_nodes
-    k_abs = stiffness * material.E * material.thickness
     t0 = time.perf_counter()
-    if model == "springs":
-        emodel = get_model(mesh, material)
-    else:
-        if backend == "newton":
-            raise ValueError("backend 'newton' supports the 'springs' muscle model only")
-        emodel = get_model(mesh, material, cables=[m.nodes for m in mus])
+    mc = _muscle_constraints(mesh, mus, radius)
+    constrained = model == "cable" or mc.n_rigid > 0
+    if constrained and not supports_constraints(backend):
+        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
+        raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
+                         f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
+                                                                 ", or anchor_radius=0"))
+    emodel = get_model(mesh, material)
+    cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
-    L0 = np.array([m.rest_length(mesh) for m in mus])
-    nseg = np.array([len(m.nodes) - 1 for m in mus], dtype=float)
+    L0 = mc.rest_lengths
+    K = spring_stiffness(mesh, material, stiffness)
+    if model == "springs":
+        k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
+        if np.any(a * a_fac >= 1.0):
+            c = int(np.argmax(a * a_fac))
+            raise ValueError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
+                             f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
+
+    def p_energy(s):
+        if model == "springs":
+            return emodel.params(material, springs=spring_parameters(mesh, mus, s * a * a_fac, k_seg))
+        return emodel.params(material)
 
     def p_of(s):
-        if model == "springs":
-            return emodel.params(material, springs=spring_parameters(mesh, mus, s * a, k_abs))
-        return emodel.params(material, cables=(k_abs / nseg, (1.0 - s * a) * L0))
+        return cm.params(p_energy(s), (1.0 - s * a) * L0) if cm is not None else p_energy(s)
 
-    p_el = emodel.params(material, springs=(np.zeros(emodel.n_edges), np.ones(emodel.n_edges)),
-                         cables=(np.zeros(len(emodel.cables)), L0) if emodel.cables else None)
+    p_el0 = emodel.params(material)
     fixed = np.zeros(2 * n, dtype=bool)
     fixed[list(_gauge(mesh))] = True
     X = mesh.points.reshape(-1).copy()
     vals = X[fixed]
+    solver_model = cm if cm is not None else emodel
     x, status, ok, iters, steps, t_solve, t_build = _continuation(
-        mesh, emodel, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step, verbose,
-        predict)
-    res = _result(mesh, emodel, material, p_of(1.0), p_el, x, fixed, status, ok, iters, steps,
+        mesh, solver_model, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step,
+        verbose, predict)
+    p1 = p_of(1.0)
+    p_el = p_el0
+    taut = np.ones(len(mus), dtype=bool)
+    if cm is not None:
+        lam, taut_c = cm.multipliers(x, p1, fixed)
+        if model == "cable":
+            taut = taut_c
+        p1 = cm.params(cm.split(p1)[0], cm.split(p1)[1], lam)
+        p_el = cm.params(p_el0, cm.split(p1)[1])
+    res = _result(mesh, solver_model, material, p1, p_el, x, fixed, status, ok, iters, steps,
                   t_model + t_build, t_solve, backend, "internal")
     res.muscle_model = model
+    res.anchor_radius = radius
+    res.rest_lengths = L0.copy()
+    res.commanded = a.copy()
+    L = mc.lengths(x)
+    res.achieved = 1.0 - L / L0
+    res.stroke = L0 - L
+    if model == "cable":
+        res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
+        res.slack = ~taut
+    else:
+        # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
+        # chain's length since the anchored segments keep their rest lengths
+        res.tension = K * a_fac * (a - res.achieved)
+        res.slack = res.tension <= 0.0
+    if cm is not None and res.success:
+        _check_feasible(res, cm, x, p1, mesh)
     if align_to_rest:
         al = align(res.x, mesh.points)
         res.x = al.apply(res.x)
         res.rotation, res.translation = al.R, al.t
     return res
+
+
+def _check_feasible(res, cm, x, p, mesh, rtol: float = 1e-7) -> None:
+    """Reject a constrained solution whose ropes are longer than their targets or whose anchors deformed."""
+    v = cm.values(x)
+    _, targets, _ = cm.split(p)
+    nt = cm.n_targets
+    over = float(np.max((v[:nt] - targets) / cm.constraints.rest_lengths)) if nt else 0.0
+    rig = float(np.abs(v[nt:]).max()) / mesh.size if len(v) > nt else 0.0
+    if over > rtol or rig > rtol:
+        res.success = False
+        res.status = f"{res.status}; rejected: rope longer than its target by {over:.3g} L0, anchor patch " \
+                     f"deformed by {rig:.3g} x size"

@@ -11,8 +11,8 @@ only pull), with the constraint's multiplier as the rope's tension ``tau_c >= 0`
 elastic body has no finite displacement: the end segments collapse further with every refinement. Each end
 is therefore anchored over a patch of physical size, the way a knot, bead or plate spreads the force: the
 body nodes within ``radius`` of the end node at rest (and connected to it through such nodes) move rigidly
-with it. The radius defaults to :data:`ANCHOR_FRACTION` of the body's size (the diagonal of its rest
-bounding box), :func:`default_anchor_radius`; it is never a number of nodes. A node equally far from both
+with it. The radius defaults to :data:`ANCHOR_FRACTION` of the body's size (its diameter at rest,
+:func:`body_size`), :func:`default_anchor_radius`; it is never a number of nodes. A node equally far from both
 ends of one muscle, or nearer the other end, is left out of an end's patch, so the two patches of a muscle
 never overlap. Patches of *different* muscles that share a node are merged into one rigid group.
 
@@ -47,23 +47,50 @@ Example
 
 from __future__ import annotations
 
+import time
+
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ._checks import positive_float
 from .muscles import check_muscles
 
-__all__ = ["ANCHOR_FRACTION", "default_anchor_radius", "check_anchor_radius", "anchor_patches", "rigid_groups",
-           "MuscleConstraints", "spring_stiffness", "segment_spring_parameters"]
+__all__ = ["ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
+           "rigid_groups",
+           "MuscleConstraints", "ConstrainedModel", "spring_stiffness", "segment_spring_parameters",
+           "spring_segments"]
 
-#: Default anchor radius as a fraction of the body's size (the diagonal of its rest bounding box).
+#: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
 ANCHOR_FRACTION = 0.04
 
 
+def body_size(mesh) -> float:
+    """The body's diameter at rest: the largest distance between two of its nodes.
+
+    Unlike the bounding-box diagonal (``mesh.size``) it does not change when the body is rotated; for an
+    axis-aligned rectangle the two agree.
+    """
+    cache = mesh.__dict__
+    if "_diameter" not in cache:
+        P = mesh.points
+        try:
+            from scipy.spatial import ConvexHull
+
+            V = P[ConvexHull(P).vertices]
+        except Exception:  # degenerate hull (collinear points): every node
+            V = P
+        d = 0.0
+        for i0 in range(0, len(V), 1024):
+            d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))
+        cache["_diameter"] = d
+    return cache["_diameter"]
+
+
 def default_anchor_radius(mesh) -> float:
-    """The default anchor radius: :data:`ANCHOR_FRACTION` (0.04) times ``mesh.size``, in length units."""
-    return ANCHOR_FRACTION * mesh.size
+    """The default anchor radius: :data:`ANCHOR_FRACTION` (0.04) times :func:`body_size`, in length units."""
+    return ANCHOR_FRACTION * body_size(mesh)
 
 
 def _check_radius(mesh, radius) -> float:
@@ -158,30 +185,62 @@ def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]
 
 
 def spring_stiffness(mesh, material, stiffness: float) -> float:
-    """Axial stiffness ``K = stiffness * E * thickness * mesh.size`` (a force) of the dummy-spring muscles.
+    """Axial stiffness ``K = stiffness * E * thickness * body_size(mesh)`` (a force) of the dummy-spring muscles.
 
     A muscle segment of rest length ``l0`` is a spring of stiffness ``K / l0``, so the springs of a muscle
     together are an elastic rod of axial stiffness ``K`` whatever the mesh (see
     :func:`segment_spring_parameters`).
     """
-    return positive_float(stiffness, "stiffness") * material.E * material.thickness * mesh.size
+    return positive_float(stiffness, "stiffness") * material.E * material.thickness * body_size(mesh)
 
 
-def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: float):
+def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: float,
+                              anchor_radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-edge ``(k, r)`` of the dummy-spring model with stiffness stated per unit rest length.
 
-    Each segment of rest length ``l0`` adds ``k/2 (l - (1 - a) l0)^2`` with ``k = K / l0`` and
-    ``K = stiffness * E * thickness * mesh.size`` (:func:`spring_stiffness`): the energy of a muscle is then
-    ``K/2 * sum_i l0_i (l_i/l0_i - (1 - a))^2``, a quadrature of ``K/2 * integral (strain - (-a))^2 ds`` that
-    converges under refinement instead of softening as segments multiply. Feed the result to
+    Each segment of rest length ``l0`` adds ``k/2 (l - (1 - a') l0)^2`` with ``k = K / l0`` and
+    ``K = stiffness * E * thickness * body_size(mesh)`` (:func:`spring_stiffness`): the energy of a muscle is then
+    ``K/2 * sum_i l0_i (l_i/l0_i - (1 - a'))^2``, a quadrature of ``K/2 * integral (stretch - (1 - a'))^2 ds``
+    that converges under refinement instead of softening as segments multiply.
+
+    Segments inside a rigid anchor patch (both nodes in one group of :func:`rigid_groups` for
+    ``anchor_radius``) carry no spring: they cannot shorten. The other segments are all shortened alike by
+    ``a' = a L0 / L0_free`` (``L0_free``: their total rest length), so that a muscle whose springs all reach
+    their rest lengths has contracted by exactly ``a`` along its whole chain, as the exact cable does.
+    Pass ``anchor_radius=0`` for the paper's plain model (every segment, ``a' = a``). Feed the result to
     :meth:`~mdsr_opt.model.EnergyModel.params` as ``springs=``.
+
+    Raises
+    ------
+    ValueError
+        When ``a' >= 1`` (the anchors cover too much of a muscle for the contraction asked).
     """
     from .model import spring_parameters
 
     mus = check_muscles(mesh, muscles)
+    a = np.asarray(contractions, dtype=float).reshape(-1)
+    ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)
+    return spring_parameters(mesh, mus, a * a_eff, ks)
+
+
+def spring_segments(mesh, material, muscles, stiffness: float, anchor_radius: float | None = None):
+    """``(per-muscle segment stiffness arrays, per-muscle factor L0 / L0_free)`` of the dummy springs (see
+    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch."""
+    mus = check_muscles(mesh, muscles)
     K = spring_stiffness(mesh, material, stiffness)
-    per_segment = [K / m.segment_lengths(mesh.points) for m in mus]
-    return spring_parameters(mesh, mus, contractions, per_segment)
+    group_of = np.full(mesh.n_nodes, -1)
+    for gi, g in enumerate(rigid_groups(mesh, mus, anchor_radius)):
+        group_of[g] = gi
+    ks, fac = [], []
+    for m in mus:
+        seg = m.segments
+        l0 = m.segment_lengths(mesh.points)
+        inside = (group_of[seg[:, 0]] >= 0) & (group_of[seg[:, 0]] == group_of[seg[:, 1]])
+        if inside.all():
+            raise ValueError(f"muscle {m._label()} lies inside its anchor patches: give a smaller anchor_radius")
+        ks.append(np.where(inside, 0.0, K / l0))
+        fac.append(l0.sum() / l0[~inside].sum())
+    return ks, np.array(fac)
 
 
 class MuscleConstraints:
@@ -337,3 +396,193 @@ def _to_scipy(M) -> sp.csc_matrix:
 def check_anchor_radius(mesh, radius) -> float:
     """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors."""
     return _check_radius(mesh, radius)
+
+
+class ConstrainedModel:
+    """An :class:`~mdsr_opt.model.EnergyModel` whose minimisation carries muscle constraints.
+
+    The objective is the model's energy; the constraints are the rigid anchor rows of ``constraints`` and,
+    with ``ropes=True`` (the exact cable), one rope row per muscle, ``L_c(x) <= target_c``. The parameter
+    vector is ``p = [energy params, rope targets (n_targets), multipliers (n_rows)]``: the multipliers enter
+    :meth:`gradient` and :meth:`hessian`, which are those of the Lagrangian
+    ``E(x) + sum_i lam_i g_i(x)`` (with zero multipliers, those of the energy), so a KKT point has zero
+    :meth:`gradient` on the free coordinates. :func:`mdsr_opt.backends.minimize` recognises this class and
+    passes the constraints to the NLP.
+
+    Parameters
+    ----------
+    model : EnergyModel
+    constraints : MuscleConstraints
+    ropes : bool
+        Whether the rope rows are constraints (the exact cable) or left out (dummy springs: only anchors).
+    """
+
+    def __init__(self, model, constraints: MuscleConstraints, ropes: bool):
+        self.model = model
+        self.constraints = constraints
+        self.ropes = bool(ropes)
+        self.mesh = model.mesh
+        self.n_dof = model.n_dof
+        mc = constraints
+        self.rows = np.arange(mc.n_constraints) if self.ropes else np.arange(mc.n_muscles, mc.n_constraints)
+        self.n_rows = len(self.rows)
+        self.n_targets = mc.n_muscles if self.ropes else 0
+        self.n_energy_params = model.n_params
+        self.n_params = model.n_params + self.n_targets + self.n_rows
+        self._solvers: dict = {}
+
+    # ------------------------------------------------------------------ parameters
+    def params(self, p_energy, targets=None, lam=None) -> np.ndarray:
+        """``p`` from the energy parameters, the rope targets (cable only) and optional multipliers."""
+        p = np.zeros(self.n_params)
+        p[:self.n_energy_params] = p_energy
+        if self.n_targets:
+            if targets is None:
+                raise ValueError("the exact cable needs its rope target lengths")
+            p[self.n_energy_params:self.n_energy_params + self.n_targets] = targets
+        if lam is not None:
+            p[self.n_energy_params + self.n_targets:] = lam
+        return p
+
+    def split(self, p):
+        """``(p_energy, targets, lam)`` of a parameter vector."""
+        p = np.asarray(p, dtype=float)
+        a, b = self.n_energy_params, self.n_energy_params + self.n_targets
+        return p[:a], p[a:b], p[b:]
+
+    def _lam_full(self, lam) -> np.ndarray:
+        out = np.zeros(self.constraints.n_constraints)
+        out[self.rows] = lam
+        return out
+
+    def bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``(lbg, ubg)`` of the NLP's constraint rows: ropes ``<= target`` (``== target`` when
+        ``equality_ropes``), rigid rows ``== 0``."""
+        _, targets, _ = self.split(p)
+        lb = np.zeros(self.n_rows)
+        ub = np.zeros(self.n_rows)
+        if self.n_targets:
+            ub[:self.n_targets] = targets
+            lb[:self.n_targets] = targets if equality_ropes else -np.inf
+        return lb, ub
+
+    # ------------------------------------------------------------------ numeric evaluation
+    def values(self, x) -> np.ndarray:
+        """The NLP's constraint rows at ``x``."""
+        return self.constraints.values(x)[self.rows]
+
+    def jacobian(self, x) -> sp.csr_matrix:
+        return self.constraints.jacobian(x)[self.rows]
+
+    def energy(self, x, p) -> float:
+        return self.model.energy(x, self.split(p)[0])
+
+    def gradient(self, x, p) -> np.ndarray:
+        """Gradient of the Lagrangian (of the energy when the multipliers in ``p`` are zero)."""
+        pe, _, lam = self.split(p)
+        g = self.model.gradient(x, pe)
+        if np.any(lam):
+            g = g + self.jacobian(x).T @ lam
+        return g
+
+    def hessian(self, x, p) -> sp.csc_matrix:
+        """Hessian of the Lagrangian, full symmetric scipy CSC."""
+        pe, _, lam = self.split(p)
+        H = self.model.hessian(x, pe)
+        if np.any(lam):
+            H = (H + self.constraints.hessian(x, self._lam_full(lam))).tocsc()
+        return H
+
+    # ------------------------------------------------------------------ symbolic pieces for the NLP
+    def constraints_expr(self, x):
+        g = self.constraints.constraints_expr(x)
+        return g if self.ropes else g[self.constraints.n_muscles:]
+
+    def hess_lag_upper(self, x, p, lam_f, lam_g):
+        """Upper triangle of the Lagrangian's Hessian as a CasADi expression (for IPOPT's ``hess_lag``)."""
+        lam = lam_g if self.ropes else ca.vertcat(ca.MX(self.constraints.n_muscles, 1), lam_g)
+        return self.model.hess_lag_fn(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
+
+    def solver(self, backend: str, options: dict, factory):
+        """``(solver, build seconds)``, cached per backend and options like the energy model's."""
+        key = (backend, repr(sorted(options.items())))
+        if key in self._solvers:
+            return self._solvers[key], 0.0
+        t0 = time.perf_counter()
+        s = factory(self)
+        self._solvers[key] = s
+        return s, time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ predictor and multipliers
+    def predict(self, p, x, fixed, values):
+        """A Newton (KKT) step from ``x``: fixed coordinates moved to ``values``, the constraints linearised
+        and met, ropes whose predicted tension is negative dropped (slack). None if the system is singular."""
+        free = ~fixed
+        pe, targets, _ = self.split(p)
+        H = self.model.hessian(x, pe)
+        Hff = H[free][:, free]
+        dfix = values - x[fixed]
+        g = self.model.gradient(x, pe)
+        rhs_x = -(g[free] + H[free][:, fixed] @ dfix)
+        J = self.jacobian(x)
+        c = self.values(x)
+        lb, ub = self.bounds(p)
+        c = c - ub  # ropes: L - target; rigid: residual
+        keep = np.ones(self.n_rows, dtype=bool)
+        if self.n_targets:  # a rope shorter than its target at the start is taken as slack
+            keep[:self.n_targets] = c[:self.n_targets] > -1e-12 * self.constraints.rest_lengths
+        for _ in range(3):
+            Jk = J[keep]
+            Jf, Jc = Jk[:, free], Jk[:, fixed]
+            K = sp.bmat([[Hff, Jf.T], [Jf, None]], format="csc")
+            rhs = np.concatenate([rhs_x, -(c[keep] + Jc @ dfix)])
+            try:
+                sol = spla.splu(K, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+            except RuntimeError:
+                return None
+            if not np.all(np.isfinite(sol)):
+                return None
+            nk = int(keep[:self.n_targets].sum())
+            tau = sol[free.sum():free.sum() + nk]
+            if not self.n_targets or np.all(tau >= 0):
+                break
+            idx = np.nonzero(keep[:self.n_targets])[0]
+            keep[idx[tau < 0]] = False
+        y = np.array(x, dtype=float)
+        y[free] += sol[:free.sum()]
+        y[fixed] = values
+        return y
+
+    def multipliers(self, x, p, fixed, rtol: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+        """Least-squares multipliers at a solution ``x``: ``(lam (n_rows,), taut (n_targets,) bool)``.
+
+        Ropes shorter than their target by more than ``rtol * L0`` are slack (multiplier 0); a taut rope
+        whose fitted multiplier is negative is released and the fit repeated, so tensions are never
+        compressive. The Lagrangian gradient with these multipliers (:meth:`gradient`) is the KKT residual.
+        """
+        free = ~fixed
+        pe, targets, _ = self.split(p)
+        g = self.model.gradient(x, pe)[free]
+        J = self.jacobian(x)[:, free].tocsr()
+        active = np.ones(self.n_rows, dtype=bool)
+        nt = self.n_targets
+        if nt:
+            L = self.values(x)[:nt]
+            active[:nt] = L >= targets - rtol * self.constraints.rest_lengths
+        lam = np.zeros(self.n_rows)
+        for _ in range(nt + 1):
+            Ja = J[active]
+            if Ja.shape[0] == 0:
+                break
+            A = (Ja @ Ja.T).tocsc()
+            try:
+                la = spla.splu(A).solve(-(Ja @ g))
+            except RuntimeError:
+                la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
+            lam[:] = 0.0
+            lam[active] = la
+            neg = np.nonzero(active[:nt] & (lam[:nt] < 0))[0]
+            if len(neg) == 0:
+                break
+            active[neg] = False
+        return lam, active[:nt]
