@@ -25,6 +25,7 @@ _EXPORTS = {
     "solve_internal": "equilibrium",
     "available_backends": "equilibrium",
     "RigidDrag": "drags",
+    "external_stability": "equilibrium",
     "check_stability": "stability",
     "StabilityCheck": "stability",
     "read_mesh": "io",

@@ -42,7 +42,8 @@ from .model import get_model, spring_parameters
 from .muscle_constraints import ConstrainedModel, MuscleConstraints, check_anchor_radius, spring_segments, spring_stiffness
 from .muscles import Muscle, check_contractions, check_muscles
 
-__all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends"]
+__all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends",
+           "external_stability"]
 
 
 class SolverFailure(RuntimeError):
@@ -459,6 +460,41 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         predict)
     return _result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
                    backend, "external")
+
+
+def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
+    """Is ``x`` a stable equilibrium of external driving with these anchors and drags?
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors, drags : as in :func:`solve_external` (only which nodes are fixed matters here).
+    x : (n, 2) state, e.g. a design target.
+    lowest : also estimate the lowest eigenvalue of the free Hessian (see
+        :func:`~mdsr_opt.stability.check_stability`).
+
+    Returns
+    -------
+    check : StabilityCheck
+        Of the energy's Hessian on the free coordinates at ``x``.
+    residual : float
+        Max-norm of the energy gradient on the free coordinates relative to ``E t size`` (small at an
+        equilibrium).
+    """
+    _check_mesh_material(mesh, material)
+    n = mesh.n_nodes
+    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
+                         "anchors", n=n, shape=(None,))
+    nodes = np.union1d(anc, drag_path(drags, mesh).nodes)
+    xflat = mesh._check_state(x).reshape(-1)
+    model = get_model(mesh, material)
+    p = model.params(material)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[2 * nodes] = fixed[2 * nodes + 1] = True
+    g = model.gradient(xflat, p)
+    residual = float(np.abs(g[~fixed]).max()) / (material.E * material.thickness * mesh.size) \
+        if (~fixed).any() else 0.0
+    return check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest), residual
 
 
 # ---------------------------------------------------------------------------------- internal driving
