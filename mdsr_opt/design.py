@@ -78,7 +78,8 @@ from .align import align, node_weights
 from .equilibrium import _check_mesh_material, _continuation, _gauge, solve_internal
 from .mesh import Mesh
 from .model import _to_dm, get_model, spring_parameters
-from .muscle_constraints import MuscleConstraints, anchor_patches, default_anchor_radius
+from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
+                                 spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
 
 __all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
@@ -328,15 +329,15 @@ class _Problem:
         # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
         # per-segment springs of the "springs" model, zero for the cable)
         self.model = get_model(mesh, material)
-        self.constraints = MuscleConstraints(mesh, muscles, anchor_radius)
-        self.anchor_radius = float(default_anchor_radius(mesh) if anchor_radius is None else anchor_radius)
+        self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
+        self.constraints = MuscleConstraints(mesh, muscles, self.anchor_radius)
         self.build_time = time.perf_counter() - t0
-        self.k_abs = stiffness * material.E * material.thickness
         self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
 
-        def params(a):  # the same parameters solve_internal builds
+        def params(a):  # the same parameters solve_internal builds (springs: stiffness per unit rest length)
             if muscle_model == "springs":
-                return self.model.params(material, springs=spring_parameters(mesh, muscles, a, self.k_abs))
+                return self.model.params(material, springs=segment_spring_parameters(
+                    mesh, material, muscles, a, stiffness, self.anchor_radius))
             return self.model.params(material)
 
         self.p0 = params(np.zeros(self.m))
@@ -386,19 +387,21 @@ class _Problem:
 
         The cable: the rope's tension, the multiplier of its length constraint, recovered from the
         equilibrium by least squares (:meth:`_ConstraintBlock.multipliers`). Springs: the mean force of
-        the muscle's segment springs, positive when they pull."""
+        the muscle's free segment springs, ``K a' (a - achieved)`` as :func:`~mdsr_opt.solve_internal`
+        reports it (positive when they pull)."""
         if self.muscle_model == "cable":
             g = self.model.gradient(xflat, self.params(a)) / (self.Et * self.h)
             kap = self.block.multipliers(xflat, g, self.free)
             return self.block.tension(kap)
         x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
-        out = []
-        for mu, ac in zip(self.muscles, a):
-            k, r = spring_parameters(self.mesh, [mu], [ac], self.k_abs)
-            e = np.array([self.mesh.edge_index[(min(i, j), max(i, j))] for i, j in mu.segments.tolist()])
-            lnow = mu.segment_lengths(x2)
-            out.append(float(np.mean(k[e] * (lnow - r[e] * self.mesh.edge_lengths[e]))))
-        return np.array(out)
+        K = spring_stiffness(self.mesh, self.material, self.stiffness)
+        _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
+        return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+def _nonzeros(M: ca.SX) -> ca.SX:
+    """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
+    return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
 
 
 class _ConstraintBlock:
@@ -426,16 +429,7 @@ class _ConstraintBlock:
         self.nc = self.n_rope + self.n_rigid
         self.L0 = prob.L0
         self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
-        nodes = set()
-        if self.rope:
-            for mu in prob.muscles:
-                nodes.update(mu.nodes)
-        for pair in anchor_patches(prob.mesh, prob.muscles, prob.anchor_radius):
-            for patch in pair:
-                if len(patch) > 1:
-                    nodes.update(int(v) for v in patch)
-        nodes = np.array(sorted(nodes), dtype=np.int64)
-        self.dofs = np.sort(np.concatenate([2 * nodes, 2 * nodes + 1]))
+        self.dofs = np.sort(np.asarray(mc.dofs, dtype=np.int64))  # ropes' and anchor groups' coordinates
         d = len(self.dofs)
         self.d = d
         xl = ca.SX.sym("xl", d)
@@ -466,8 +460,8 @@ class _ConstraintBlock:
         Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
         self.J_sp, self.Hk_sp, self.H_sp = J.sparsity(), Hk.sparsity(), Hphi.sparsity()
         self.val = ca.Function("muscle_con_val", [xl, kap], [C, JTk])
-        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, J.nz[:], Hk.nz[:]])
-        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [Hphi.nz[:]])
+        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)])
+        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])
         self.jac_num = ca.Function("muscle_con_J", [xl], [J])
         self.hess_num = ca.Function("muscle_con_Hk", [xl, kap], [Hk])
 
@@ -1201,13 +1195,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
     mus, y, a_max, w, stiffness, a0 = _check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
-    if anchor_radius is not None:
-        if isinstance(anchor_radius, bool) or not isinstance(anchor_radius, numbers.Real):
-            raise TypeError(f"anchor_radius must be a real number (a length) or None, got "
-                            f"{type(anchor_radius).__name__}")
-        anchor_radius = float(anchor_radius)
-        if not (math.isfinite(anchor_radius) and anchor_radius >= 0.0):
-            raise ValueError(f"anchor_radius must be a finite length >= 0, got {anchor_radius}")
+    anchor_radius = check_anchor_radius(mesh, anchor_radius)
     m = len(mus)
     if tol is None:
         tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
