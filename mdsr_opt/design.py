@@ -78,7 +78,8 @@ from .align import align, node_weights
 from .equilibrium import _check_mesh_material, _continuation, _gauge, external_stability, solve_internal
 from .mesh import Mesh
 from .model import _to_dm, get_model, spring_parameters
-from .muscle_constraints import MuscleConstraints, anchor_patches, default_anchor_radius
+from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
+                                 spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
 from .stability import check_stability
 
@@ -333,15 +334,15 @@ class _Problem:
         # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
         # per-segment springs of the "springs" model, zero for the cable)
         self.model = get_model(mesh, material)
-        self.constraints = MuscleConstraints(mesh, muscles, anchor_radius)
-        self.anchor_radius = float(default_anchor_radius(mesh) if anchor_radius is None else anchor_radius)
+        self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
+        self.constraints = MuscleConstraints(mesh, muscles, self.anchor_radius)
         self.build_time = time.perf_counter() - t0
-        self.k_abs = stiffness * material.E * material.thickness
         self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
 
-        def params(a):  # the same parameters solve_internal builds
+        def params(a):  # the same parameters solve_internal builds (springs: stiffness per unit rest length)
             if muscle_model == "springs":
-                return self.model.params(material, springs=spring_parameters(mesh, muscles, a, self.k_abs))
+                return self.model.params(material, springs=segment_spring_parameters(
+                    mesh, material, muscles, a, stiffness, self.anchor_radius))
             return self.model.params(material)
 
         self.p0 = params(np.zeros(self.m))
@@ -382,6 +383,28 @@ class _Problem:
         g0 = self.model.gradient(xflat, self.p0)
         return np.column_stack([self.model.gradient(xflat, self.p0 + self.B[:, c]) - g0 for c in range(self.m)])
 
+    def kkt_data(self, a, xflat):
+        """What a stability check of the driven state ``xflat`` at contractions ``a`` needs, all in units of
+        ``E t h`` (the NLP's scaling): ``(H, free, A, kappa, residual)`` with ``H`` the Hessian of the
+        Lagrangian ``E + kappa . C`` (scipy, (2n, 2n)), ``free`` the non-gauge dofs, ``A`` the Jacobian of
+        the active muscle constraints (anchor patches, taut ropes; None without constraints), ``kappa``
+        the least-squares multipliers and ``residual`` the max-norm of the Lagrangian's free gradient."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        sc = 1.0 / (self.Et * self.h)
+        p = self.params(a)
+        g = self.model.gradient(xflat, p) * sc
+        H = self.model.hessian(xflat, p) * sc
+        blk = self.block
+        if not blk.nc:
+            return H.tocsc(), self.free.copy(), None, np.zeros(0), float(np.abs(g[self.free]).max())
+        kap = blk.multipliers(xflat, g, self.free)
+        J = blk.jacobian(xflat)
+        act = np.ones(blk.nc, dtype=bool)
+        if blk.rope:  # a slack rope (no tension) constrains nothing
+            act[:self.m] = kap[:self.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
+        res = float(np.abs((g + J.T @ kap)[self.free]).max())
+        return (H + blk.hessian(xflat, kap)).tocsc(), self.free.copy(), J[np.nonzero(act)[0]], kap, res
+
     def achieved(self, x2) -> np.ndarray:
         """Achieved contraction ``1 - L / L0`` of every muscle along its node chain in state ``x2``."""
         return 1.0 - np.array([mu.length(x2) for mu in self.muscles]) / self.L0
@@ -391,19 +414,21 @@ class _Problem:
 
         The cable: the rope's tension, the multiplier of its length constraint, recovered from the
         equilibrium by least squares (:meth:`_ConstraintBlock.multipliers`). Springs: the mean force of
-        the muscle's segment springs, positive when they pull."""
+        the muscle's free segment springs, ``K a' (a - achieved)`` as :func:`~mdsr_opt.solve_internal`
+        reports it (positive when they pull)."""
         if self.muscle_model == "cable":
             g = self.model.gradient(xflat, self.params(a)) / (self.Et * self.h)
             kap = self.block.multipliers(xflat, g, self.free)
             return self.block.tension(kap)
         x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
-        out = []
-        for mu, ac in zip(self.muscles, a):
-            k, r = spring_parameters(self.mesh, [mu], [ac], self.k_abs)
-            e = np.array([self.mesh.edge_index[(min(i, j), max(i, j))] for i, j in mu.segments.tolist()])
-            lnow = mu.segment_lengths(x2)
-            out.append(float(np.mean(k[e] * (lnow - r[e] * self.mesh.edge_lengths[e]))))
-        return np.array(out)
+        K = spring_stiffness(self.mesh, self.material, self.stiffness)
+        _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
+        return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+def _nonzeros(M: ca.SX) -> ca.SX:
+    """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
+    return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
 
 
 class _ConstraintBlock:
@@ -431,16 +456,7 @@ class _ConstraintBlock:
         self.nc = self.n_rope + self.n_rigid
         self.L0 = prob.L0
         self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
-        nodes = set()
-        if self.rope:
-            for mu in prob.muscles:
-                nodes.update(mu.nodes)
-        for pair in anchor_patches(prob.mesh, prob.muscles, prob.anchor_radius):
-            for patch in pair:
-                if len(patch) > 1:
-                    nodes.update(int(v) for v in patch)
-        nodes = np.array(sorted(nodes), dtype=np.int64)
-        self.dofs = np.sort(np.concatenate([2 * nodes, 2 * nodes + 1]))
+        self.dofs = np.sort(np.asarray(mc.dofs, dtype=np.int64))  # ropes' and anchor groups' coordinates
         d = len(self.dofs)
         self.d = d
         xl = ca.SX.sym("xl", d)
@@ -471,8 +487,8 @@ class _ConstraintBlock:
         Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
         self.J_sp, self.Hk_sp, self.H_sp = J.sparsity(), Hk.sparsity(), Hphi.sparsity()
         self.val = ca.Function("muscle_con_val", [xl, kap], [C, JTk])
-        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, J.nz[:], Hk.nz[:]])
-        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [Hphi.nz[:]])
+        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)])
+        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])
         self.jac_num = ca.Function("muscle_con_J", [xl], [J])
         self.hess_num = ca.Function("muscle_con_Hk", [xl, kap], [Hk])
 
@@ -993,9 +1009,31 @@ def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, war
     z = np.asarray(sol["x"]).ravel()
     # "Solved_To_Acceptable_Level" means IPOPT could not reach tol: not a success
     ok = bool(st.get("success")) and st.get("return_status") == "Solve_Succeeded"
+    iters = int(st.get("iter_count", 0))
+    if ok and blk.rope:
+        # A slack rope sits on its bound tau = 0 where the interior point method converges slowly (a
+        # degenerate bound: its multiplier is about zero too, e.g. when the target is reachable), leaving
+        # tensions of ~1e-7 and contractions off by ~1e-6. Polish: fix the near-zero tensions at 0 (their
+        # ropes then only measure a = achieved contraction) and solve again from the solution; kept when
+        # it converges and the objective is no worse.
+        ik = 2 * n + m + 3
+        kr = z[ik:ik + m]
+        small = kr < 1e-4 * max(1.0, float(kr.max()))
+        if small.any():
+            lb2, ub2 = lbz.copy(), ubz.copy()
+            lb2[ik + np.nonzero(small)[0]] = 0.0
+            ub2[ik + np.nonzero(small)[0]] = 0.0
+            z2 = z.copy()
+            z2[ik + np.nonzero(small)[0]] = 0.0
+            sol2 = solver(x0=z2, p=par, lbx=lb2, ubx=ub2, lbg=0.0, ubg=0.0)
+            st2 = solver.stats()
+            iters += int(st2.get("iter_count", 0))
+            if st2.get("return_status") == "Solve_Succeeded" and \
+                    float(sol2["f"]) <= float(sol["f"]) * (1 + 1e-6) + 1e-14:
+                z = np.asarray(sol2["x"]).ravel()
     out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
            "kappa": z[2 * n + m + 3:],
-           "status": str(st.get("return_status", "unknown")), "iterations": int(st.get("iter_count", 0)),
+           "status": str(st.get("return_status", "unknown")), "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt
 
@@ -1206,13 +1244,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
     mus, y, a_max, w, stiffness, a0 = _check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
-    if anchor_radius is not None:
-        if isinstance(anchor_radius, bool) or not isinstance(anchor_radius, numbers.Real):
-            raise TypeError(f"anchor_radius must be a real number (a length) or None, got "
-                            f"{type(anchor_radius).__name__}")
-        anchor_radius = float(anchor_radius)
-        if not (math.isfinite(anchor_radius) and anchor_radius >= 0.0):
-            raise ValueError(f"anchor_radius must be a finite length >= 0, got {anchor_radius}")
+    anchor_radius = check_anchor_radius(mesh, anchor_radius)
     m = len(mus)
     if tol is None:
         tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
