@@ -1376,29 +1376,13 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
 def _stability(prob: _Problem, a, xflat) -> tuple[bool, float, float]:
     """``(positive_definite, min_eigenvalue / (E t), residual)`` at ``xflat`` (see :func:`check_minimum`).
 
-    The gauge coordinates are pinned (the energy is invariant under rigid motion). With constraints the
-    multipliers are the least-squares ones of the block (``kappa``, rows scaled as in
-    :class:`_ConstraintBlock`), so the Lagrangian over ``E t`` is ``E/(E t) + h kappa . C``."""
-    p = prob.params(a)
-    g = prob.model.gradient(xflat, p)
-    H = prob.model.hessian(xflat, p) / prob.Et
-    A = None
-    if prob.muscle_model == "cable" or prob.constraints.n_rigid:
-        blk = prob.block
-        if blk.nc:
-            kap = blk.multipliers(xflat, g / (prob.Et * prob.h), prob.free)
-            J = blk.jacobian(xflat)
-            g = g + (prob.Et * prob.h) * (J.T @ kap)
-            H = (H + prob.h * blk.hessian(xflat, kap)).tocsc()
-            active = np.ones(blk.nc, dtype=bool)
-            if blk.n_rope:  # a slack rope (no tension) constrains nothing at a minimum: leave it out
-                tiny = 1e-9 * max(1.0, float(np.abs(kap).max()))
-                active[:blk.n_rope] = kap[:blk.n_rope] > tiny
-            A = J[active] if active.any() else None
-    residual = float(np.abs(g[prob.free]).max()) / (prob.Et * prob.mesh.size)
-    chk = check_stability(H, prob.free, A, lowest=True)
-    lam = float(chk.curvature) if chk.curvature is not None else 0.0
-    return bool(chk.stable), lam, residual
+    The gauge coordinates are pinned (the energy is invariant under rigid motion); with muscle constraints
+    the Hessian is the Lagrangian's with least-squares multipliers, on the tangent space of the active
+    rows (:meth:`_Problem.kkt_data`, in units of ``E t h``)."""
+    H, free, A, _kap, res = prob.kkt_data(a, xflat)
+    chk = check_stability(H, free, A, lowest=True)
+    lam = float(chk.curvature) * prob.h if chk.curvature is not None else 0.0
+    return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
 
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
