@@ -94,3 +94,43 @@ def test_min_step_wrong_type():
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
     with pytest.raises(TypeError, match="min_step must be a number"):
         solve_external(mesh, NeoHookean(1.0, 0.3), [0, 9], {8: (4.5, 0.0)}, min_step="small")
+
+
+def test_external_stability_of_a_target(clamped_strip, monkeypatch):
+    import mdsr_opt.equilibrium as eq
+    from mdsr_opt import external_stability
+
+    mesh, left, right, free = clamped_strip
+    mat = NeoHookean(1.0, 0.3)
+    drags = _push(mesh, right, 2.0)
+    buckled = solve_external(mesh, mat, left, drags)
+    monkeypatch.setattr(eq, "_RESTARTS", 0)
+    straight = solve_external(mesh, mat, left, drags)
+    chk, res = external_stability(mesh, mat, left, drags, buckled.x, lowest=True)
+    assert chk.stable and res < 1e-8
+    assert chk.curvature == pytest.approx(_min_eig(mesh, mat, buckled.x, free), rel=1e-4)
+    chk, res = external_stability(mesh, mat, left, drags, straight.x)
+    assert not chk.stable and chk.n_negative >= 1 and res < 1e-8
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_verify_design_checks_the_targets_stability(clamped_strip, monkeypatch):
+    import mdsr_opt.equilibrium as eq
+    from mdsr_opt import Muscle, design_contractions, verify_design
+
+    mesh, left, right, free = clamped_strip
+    mat = NeoHookean(1.0, 0.3)
+    drags = _push(mesh, right, 2.0)
+    buckled = solve_external(mesh, mat, left, drags)
+    monkeypatch.setattr(eq, "_RESTARTS", 0)
+    straight = solve_external(mesh, mat, left, drags)
+    bottom = sorted(np.flatnonzero(mesh.points[:, 1] == 0.0), key=lambda i: mesh.points[i, 0])
+    mus = [Muscle(bottom[2:-2])]
+    for target, stable in ((straight.x, False), (buckled.x, True)):
+        res = design_contractions(mesh, mat, mus, target, verify=False, max_iter=50)
+        v = verify_design(mesh, mat, mus, res, target, anchors=left, drags=drags)
+        assert v.target_stable is stable
+        assert ("target is not a stable equilibrium" in v.message) is (not stable)
+        if not stable:
+            assert not v.passed
+        assert verify_design(mesh, mat, mus, res, target).target_stable is None  # not asked
