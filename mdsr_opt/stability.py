@@ -166,6 +166,13 @@ def _factor_inertia(M, rtol: float, scale: float):
     return (lo if n_neg else hi), (n_neg, n_zero), True
 
 
+def _tangent(project, v):
+    """``project(v)``, or None when ``v`` lies (numerically) in the constraints' row space."""
+    w = project(v)
+    nv = np.linalg.norm(v)
+    return w if nv > 0 and np.linalg.norm(w) > 1e-8 * nv else None
+
+
 def _rayleigh(M, v) -> float:
     vv = float(v @ v)
     return float(v @ (M @ v)) / vv if vv > 0 else 0.0
@@ -304,14 +311,16 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
         order = np.argsort(d)[:5] if n_neg else np.argsort(np.abs(d))[:1]
         mu = np.inf
         for k in order:
-            v = project(fac.direction(int(k)))
-            r = _rayleigh(Hff, v)
+            v = _tangent(project, fac.direction(int(k)))
+            r = _rayleigh(Hff, v) if v is not None else np.inf
             if r < mu:
                 best, mu = v, r
         if best is not None and n_neg:
-            best, pre = _refine(M, best)
-            best = project(best)
-        if Af is None or (best is not None and _rayleigh(Hff, best) <= (rtol * h if not n_neg else 0.0)):
+            refined, pre = _refine(M, best)
+            refined = _tangent(project, refined)
+            if refined is not None and _rayleigh(Hff, refined) < mu:
+                best = refined
+        if Af is None or (best is not None and _rayleigh(Hff, best) < (rtol * h if not n_neg else 0.0)):
             break  # certified
         rho *= 100.0
     else:
