@@ -100,7 +100,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
     for equality in ((True, False) if nt else (False,)):
         lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
-        with _quiet_stdout(plugin == "uno"):
+        with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         total_t += time.perf_counter() - t0
         st = solver.stats()
