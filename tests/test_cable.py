@@ -292,3 +292,11 @@ def test_springs_stiffness_is_per_unit_rest_length():
     assert on2.sum() == on.sum() - 2
     free = mesh.edge_lengths[on2].sum()
     assert (1 - r2[on2]) * free == pytest.approx(np.full(on2.sum(), 0.2 * 4.0))
+
+
+def test_springs_of_muscles_with_different_segment_counts():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    long, short = row(mesh, 0.0), row(mesh, 1.0, 0.0, 1.0)
+    k, r = segment_spring_parameters(mesh, MAT, [long, short], [0.2, 0.1], 3.0, anchor_radius=0)
+    assert (k > 0).sum() == len(long.segments) + len(short.segments)
+    assert sorted(set(np.round(r[k > 0], 12))) == [0.8, 0.9]
