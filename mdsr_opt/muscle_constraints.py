@@ -515,13 +515,18 @@ class ConstrainedModel:
 
     # ------------------------------------------------------------------ predictor and multipliers
     def predict(self, p, x, fixed, values):
-        """A Newton (KKT) step from ``x``: fixed coordinates moved to ``values``, the constraints linearised
+        """A Newton (KKT) step from ``x`` on the Lagrangian (multipliers fitted at ``x``, see
+        :meth:`multipliers`): fixed coordinates moved to ``values``, the constraints linearised
         and met, ropes whose predicted tension is negative dropped (slack), the step halved while it would
         leave an element with less than half the smallest ``det F`` of ``x``. None if the system is
         singular."""
         free = ~fixed
         pe, targets, _ = self.split(p)
-        H = self.model.hessian(x, pe)
+        # the Hessian of the Lagrangian at x, with x's own multipliers (every rope taken as at its length):
+        # under load the energy's Hessian alone can be indefinite where the ropes hold the body
+        lam_x, _ = self.multipliers(x, self.params(pe, self.values(x)[:self.n_targets] if self.n_targets else None),
+                                    fixed)
+        H = self.hessian(x, self.params(pe, targets if self.n_targets else None, lam_x))
         Hff = H[free][:, free]
         dfix = values - x[fixed]
         g = self.model.gradient(x, pe)

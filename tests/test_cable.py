@@ -80,12 +80,21 @@ def test_an_opposing_rope_holds_with_positive_tension():
 
 def test_load_stepping_moves_the_rope_targets():
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
-    # two opposing ropes at 50 %: a hard axial squeeze that needs several load steps
-    res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 1.0)], [0.5, 0.5])
+    mus = [row(mesh, 0.0), row(mesh, 1.0)]
+    a = np.array([0.6, 0.6])  # two opposing ropes: a hard axial squeeze
+    # a tight iteration cap forces load steps; every rope target follows the load fraction s
+    res = solve_internal(mesh, MAT, mus, a, max_iter=6, initial_guess="rest")
     assert res.success, res.status
     assert len(res.steps) >= 2 and res.steps[-1] == 1.0
-    assert np.abs(res.achieved - 0.5).max() < 1e-6
+    assert np.abs(res.achieved - a).max() < 1e-6
     assert res.min_J > 0
+    # a cap too tight to finish: the failure is reported, and the last accepted state has its ropes at
+    # exactly s * a for the last accepted fraction s
+    bad = solve_internal(mesh, MAT, mus, a, max_iter=2, min_step=1 / 16)
+    assert not bad.success and "stalled" in bad.status
+    s = bad.steps[-1]
+    assert 0 < s < 1
+    assert np.abs(bad.achieved - s * a).max() < 1e-6
 
 
 def test_other_constrained_backends_agree_with_ipopt():
