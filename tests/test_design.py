@@ -43,17 +43,20 @@ THETA, SHIFT = 0.5, np.array([0.3, -1.0])
 
 @pytest.fixture(scope="module")
 def target(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, A_TRUE)
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
     assert fwd.success
     return fwd.x @ _rot(THETA).T + SHIFT  # rotated and shifted: only the shape may matter
 
 
+A_START = [0.05, 0.3]  # the cable's geometric guess is already the answer: start elsewhere
+
+
 @pytest.mark.parametrize("method", METHODS)
 def test_recovers_known_contractions_and_rigid_motion(mesh, muscles, target, method):
-    res = design_contractions(mesh, MAT, muscles, target, method=method)
+    res = design_contractions(mesh, MAT, muscles, target, method=method, initial=A_START)
     assert res.success, res.status
-    assert res.method == method
-    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
+    assert res.method == method and res.muscle_model == "cable"  # the default
+    assert np.abs(res.contractions - A_TRUE).max() < (1e-6 if method == "flattened" else 1e-5)
     assert res.angle == pytest.approx(THETA, abs=1e-5)
     assert res.translation == pytest.approx(SHIFT, abs=1e-5)
     assert res.difference < 1e-5 * mesh.size
@@ -64,24 +67,80 @@ def test_recovers_known_contractions_and_rigid_motion(mesh, muscles, target, met
     assert res.initial_difference > 1e3 * res.difference  # it did move from the initial guess
 
 
+def test_cable_design_reports_commanded_achieved_stroke_and_tension(mesh, muscles, target):
+    res = design_contractions(mesh, MAT, muscles, target, initial=A_START)
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
+    L0 = np.array([m.rest_length(mesh) for m in muscles])
+    assert res.rest_lengths == pytest.approx(L0, rel=1e-14)
+    assert np.array_equal(res.commanded, res.contractions)
+    # the exact cable reaches what it is commanded, measured along the node chain of the returned state
+    assert res.achieved == pytest.approx([1 - m.length(res.x) / m.rest_length(mesh) for m in muscles], abs=1e-14)
+    assert np.abs(res.achieved - res.contractions).max() < 1e-8
+    assert res.stroke == pytest.approx(res.achieved * L0, rel=1e-12)
+    # the NLP's tension multipliers are the forward solve's rope tensions
+    assert np.all(res.tension > 0) and not res.slack.any()
+    assert res.tension == pytest.approx(fwd.tension, rel=1e-5)
+    assert res.anchor_radius == pytest.approx(fwd.anchor_radius)
+    s = res.summary()
+    assert s["achieved"] == pytest.approx(list(res.achieved)) and s["stroke"] == pytest.approx(list(res.stroke))
+    assert s["tension"] == pytest.approx(list(res.tension)) and s["slack"] == [False, False]
+    assert "achieved" in res.muscle_table() and len(res.muscle_table().splitlines()) == 3
+
+
+def test_springs_design_recovers_and_reports_the_lower_achieved_contraction(mesh, muscles):
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="springs")
+    assert fwd.success
+    y = fwd.x @ _rot(0.2).T + [1.0, 2.0]
+    for method in ("flattened", "nested"):
+        res = design_contractions(mesh, MAT, muscles, y, muscle_model="springs", method=method, initial=A_START)
+        assert res.success, res.status
+        assert np.abs(res.contractions - A_TRUE).max() < 1e-5
+        # springs stretch: the achieved contraction is less than the commanded one, as solve_internal says
+        assert np.all(res.achieved < res.contractions - 1e-4)
+        assert res.achieved == pytest.approx(fwd.achieved, abs=1e-6)
+        assert res.tension == pytest.approx(fwd.tension, rel=1e-5)
+
+
+def test_a_slack_rope_is_reported_at_zero_tension(mesh):
+    # A along the bottom-left, B along the bottom from the same start to the right end; the target is
+    # A's contraction alone, so B must stay slack: zero tension, contracted only as far as A bends it
+    A, B = Muscle(range(1, 9)), Muscle(range(1, 16))
+    fwd = solve_internal(mesh, MAT, [A], [0.2])
+    y = fwd.x @ _rot(0.4).T
+    b_len = 1 - B.length(fwd.x) / B.rest_length(mesh)
+    for method in ("flattened", "nested"):
+        res = design_contractions(mesh, MAT, [A, B], y, method=method, initial=[0.1, 0.1])
+        assert res.success, res.status
+        assert res.contractions == pytest.approx([0.2, b_len], abs=1e-6)
+        assert res.achieved == pytest.approx(res.contractions, abs=1e-9)
+        assert list(res.slack) == [False, True]
+        assert res.tension[0] == pytest.approx(fwd.tension[0], rel=1e-5) and abs(res.tension[1]) < 1e-8
+    # the rest shape as target: nothing pulls
+    res = design_contractions(mesh, MAT, [A, B], mesh.points, initial=[0.2, 0.1])
+    assert res.success and res.contractions == pytest.approx([0, 0], abs=1e-9) and res.slack.all()
+
+
 def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
     fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
     y = fwd.x @ _rot(-1.0).T + [5.0, 5.0]
-    res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False)
+    res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False, initial=A_START)
     assert res.success, res.status
-    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
-    assert res.angle == pytest.approx(-1.0, abs=1e-5)
+    assert np.abs(res.contractions - A_TRUE).max() < 1e-6
+    assert res.angle == pytest.approx(-1.0, abs=1e-6)
     assert res.n_forward == 0  # no warm start: the NLP started from the rest shape
 
 
 def test_flattened_gauss_newton_hessian_recovers(mesh, muscles, target):
-    res = design_contractions(mesh, MAT, muscles, target, hessian="gauss-newton")
+    res = design_contractions(mesh, MAT, muscles, target, hessian="gauss-newton", initial=A_START)
     assert res.success, res.status
-    assert np.abs(res.contractions - A_TRUE).max() < 1e-4
+    assert np.abs(res.contractions - A_TRUE).max() < 1e-6
 
 
-def test_nested_gradient_matches_finite_differences(mesh, muscles, target):
-    prob = _Problem(mesh, MAT, muscles, target, node_weights(mesh), "springs", 10.0, 0.6)
+@pytest.mark.parametrize("model_kind", ["cable", "springs"])
+def test_nested_gradient_matches_finite_differences(mesh, muscles, target, model_kind):
+    # the cable: the adjoint of the KKT system (ropes and anchor patches as constraints)
+    prob = _Problem(mesh, MAT, muscles, target, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=0.3)
+    assert prob.block.n_rigid > 0 and prob.block.n_rope == (2 if model_kind == "cable" else 0)
     outer = _Outer(prob, _Forward(prob, 1e-11, 200), clock=lambda: 0.0)
     a = np.array([0.1, 0.15])
     _J, g = outer.value_and_grad(a)
@@ -105,7 +164,7 @@ def test_unreachable_target_is_success_with_positive_difference(mesh, muscles, m
 
 
 def test_bounds_hold_and_become_active(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, [0.35, 0.05])
+    fwd = solve_internal(mesh, MAT, muscles, [0.35, 0.05], model="cable")
     for method in ("flattened", "nested"):
         res = design_contractions(mesh, MAT, muscles, fwd.x, method=method, a_max=0.25)
         assert res.success, res.status
@@ -155,23 +214,30 @@ def test_bad_input_gives_clear_errors(mesh, muscles, target):
         design_contractions(mesh.points, MAT, muscles, target)
     with pytest.raises(TypeError, match="a_max must be a real number"):
         design_contractions(mesh, MAT, muscles, target, a_max="0.5")
+    with pytest.raises(ValueError, match="anchor_radius"):
+        design_contractions(mesh, MAT, muscles, target, anchor_radius=-0.1)
+    with pytest.raises(ValueError, match="muscle_model must be 'springs' or 'cable'"):
+        design_contractions(mesh, MAT, muscles, target, muscle_model="rope")
+    with pytest.raises(ValueError, match="anchor_radius"):  # one muscle's two anchors joined
+        design_contractions(mesh, MAT, muscles, target, anchor_radius=3.0)
 
 
 def test_check_minimum_detects_a_saddle(mesh, muscles):
     small = Mesh.rectangle(2.0, 1.0, 4, 2)
     mus = [Muscle([0, 1, 2])]
-    fwd = solve_internal(small, MAT, mus, [0.3])
-    pd, lam, res = check_minimum(small, MAT, mus, [0.3], fwd.x)
+    fwd = solve_internal(small, MAT, mus, [0.3], model="springs")
+    pd, lam, res = check_minimum(small, MAT, mus, [0.3], fwd.x, muscle_model="springs")
     assert pd and lam > 0 and res < 1e-8
     squeezed = small.points * [0.5, 1.0]  # compressed across: the Neo-Hookean Hessian is indefinite
-    pd, lam, _res = check_minimum(small, MAT, mus, [0.0], squeezed)
+    pd, lam, _res = check_minimum(small, MAT, mus, [0.0], squeezed, muscle_model="springs")
     assert not pd
     # the smallest eigenvalue of the free-coordinate Hessian, checked densely
     from mdsr_opt.equilibrium import _gauge
-    from mdsr_opt.model import get_model, spring_parameters
+    from mdsr_opt.model import get_model
+    from mdsr_opt.muscle_constraints import segment_spring_parameters
 
     model = get_model(small, MAT)
-    p = model.params(MAT, springs=spring_parameters(small, mus, [0.0], 10.0 * MAT.E))
+    p = model.params(MAT, springs=segment_spring_parameters(small, MAT, mus, [0.0], 10.0))
     free = np.ones(2 * small.n_nodes, dtype=bool)
     free[list(_gauge(small))] = False
     H = model.hessian(squeezed.reshape(-1), p).toarray()[np.ix_(free, free)]
@@ -206,7 +272,7 @@ def test_failed_optimiser_is_not_success(mesh, muscles, target):
 
 
 def test_result_round_trips_through_json(mesh, muscles, target):
-    res = design_contractions(mesh, MAT, muscles, target, method="nested")
+    res = design_contractions(mesh, MAT, muscles, target, method="nested", initial=A_START)
     res.initial_difference = float("nan")  # JSON has no NaN: written as null
     text = json.dumps(res.to_dict(), allow_nan=False)
     back = DesignResult.from_dict(json.loads(text))
@@ -215,6 +281,10 @@ def test_result_round_trips_through_json(mesh, muscles, target):
     assert back.verification == res.verification
     assert math.isnan(back.initial_difference)
     assert back.summary()["contractions"] == res.summary()["contractions"]
+    for k in ("achieved", "stroke", "tension", "rest_lengths"):
+        assert np.array_equal(getattr(back, k), getattr(res, k)) and len(getattr(res, k)) == 2
+    assert np.array_equal(back.slack, res.slack) and back.slack.dtype == bool
+    assert back.anchor_radius == res.anchor_radius and back.muscle_model == "cable"
 
 
 def test_pipeline_designs_saves_and_reloads(tmp_path):
@@ -223,6 +293,7 @@ def test_pipeline_designs_saves_and_reloads(tmp_path):
     right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
     out = design(mesh, MAT, left, right, routing_options={"max_muscles": 2})
     assert out.success, out.design.status
+    assert out.design.muscle_model == "cable"  # the pipeline's default too
     assert 1 <= len(out.muscles) <= 2 and out.routing is not None
     assert out.design.difference < 0.05 * mesh.size
     assert out.design.verification.passed
