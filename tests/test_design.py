@@ -444,3 +444,36 @@ def test_both_derivative_paths_give_the_same_design(mesh, muscles, target, model
     assert ra.iterations == rc.iterations
     with pytest.raises(ValueError, match="derivatives must be 'assembled' or 'casadi'"):
         design_contractions(mesh, MAT, muscles, target, derivatives="numeric")
+
+
+# ---------------------------------------------------------------------------------------------- refinement
+def _bend_stroke(ny: int) -> float:
+    """Stroke of one cable along the top of a 4 x 1 strip (``4 ny x ny`` cells) designed for a 90-degree arc."""
+    from conftest import arc_map
+
+    nx = 4 * ny
+    mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
+    top = Muscle([ny * (nx + 1) + i for i in range(nx + 1)])
+    assert np.allclose(mesh.points[list(top.nodes), 1], 1.0)
+    res = design_contractions(mesh, MAT, [top], arc_map(mesh.points), verify=False)  # default anchor size
+    assert res.success, res.status
+    assert res.stroke[0] == pytest.approx(res.contractions[0] * 4.0, rel=1e-7)  # the cable reaches its command
+    return float(res.stroke[0])
+
+
+def _assert_converging(strokes):
+    changes = np.abs(np.diff(strokes))
+    assert np.all(changes[1:] < changes[:-1]), strokes  # each refinement changes the stroke less
+    assert abs(strokes[-1] - strokes[-2]) < 0.03 * strokes[-1], strokes  # the two finest agree to 3 %
+
+
+def test_design_strokes_converge_under_refinement_coarse():
+    # 85, 297 and 1105 nodes (measured: 1.459, 1.350, 1.375)
+    _assert_converging([_bend_stroke(ny) for ny in (4, 8, 16)])
+
+
+@pytest.mark.slow
+def test_design_strokes_converge_under_refinement():
+    # 297, 1105 and 4257 nodes, the issue's meshes (measured: 1.350, 1.375, 1.352); with point ends the
+    # strokes grew without bound (0.920, 0.975, 1.035, 1.080 with the old springs)
+    _assert_converging([_bend_stroke(ny) for ny in (8, 16, 32)])
