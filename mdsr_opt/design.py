@@ -70,7 +70,6 @@ import json
 import math
 import numbers
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Sequence
@@ -83,9 +82,9 @@ from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, positive_float
 from .align import align, node_weights
-from .equilibrium import _check_mesh_material, _continuation, _gauge, solve_internal
+from .equilibrium import _check_mesh_material, _gauge, solve_internal
 from .mesh import Mesh
-from .model import _to_dm, get_model, spring_parameters
+from .model import _to_dm, get_model
 from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
                                  spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
