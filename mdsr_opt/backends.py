@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -30,7 +32,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 __all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
-           "supports_constraints"]
+           "supports_constraints", "interruptible"]
 
 
 @dataclass
@@ -140,6 +142,47 @@ def _quiet_stdout(active: bool):
         os.dup2(saved, 1)
         os.close(saved)
         os.close(devnull)
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Make Ctrl-C (SIGINT) during a CasADi solve raise :class:`KeyboardInterrupt` when the solver returns.
+
+    CasADi catches the interrupt inside a solve: IPOPT then stops after the current iteration and reports
+    ``NonIpopt_Exception_Thrown`` (printing a ``KeyboardInterruptException`` warning), a status that other
+    errors share and that load stepping would take for a failed step. Inside this context a SIGINT is
+    recorded on its way to the previous handler, and the recorded :class:`KeyboardInterrupt` is raised
+    again on exit, so the solve's outcome is never used. Nesting is fine; outside the main thread (where
+    signal handlers cannot be set) and when SIGINT is ignored this does nothing.
+
+    Example
+    -------
+    >>> with interruptible():
+    ...     pass  # sol = solver(x0=..., lbx=..., ubx=...)
+    """
+    prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
+    if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
+        yield
+        return
+    caught: list[BaseException] = []
+
+    def handler(signum, frame):
+        try:
+            prev(signum, frame)
+        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the user's handler)
+            caught.append(exc)
+            raise
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, prev)
+    if caught:
+        exc = caught[0]
+        if isinstance(exc, KeyboardInterrupt) and not exc.args:
+            exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
+        raise exc
 
 
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values):
@@ -293,8 +336,16 @@ def check_backend(backend: str) -> str:
 
 def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=500,
              options: dict | None = None) -> MinimizeOutcome:
-    """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n)."""
+    """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n).
+
+    A SIGINT during the solve raises :class:`KeyboardInterrupt` (see :func:`interruptible`); it is never
+    reported as a failed solve."""
     check_backend(backend)
+    with interruptible():  # CasADi swallows SIGINT: re-raise it as KeyboardInterrupt after the call
+        return _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options)
+
+
+def _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options) -> MinimizeOutcome:
     options = dict(options or {})
     if hasattr(model, "constraints"):
         return _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options)

@@ -82,12 +82,13 @@ from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, positive_float
 from .align import align, node_weights
-from .equilibrium import _check_mesh_material, _gauge, solve_internal
+from .equilibrium import _check_mesh_material, _gauge, external_stability, solve_internal
 from .mesh import Mesh
 from .model import _to_dm, get_model
 from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
                                  spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
+from .stability import check_stability
 
 __all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
            "verify_design", "check_minimum", "design", "design_pipeline"]
@@ -121,11 +122,14 @@ class Verification:
         The free-coordinate Hessian at the design's state is positive definite (every pivot of its
         symmetric factorisation is positive).
     min_eigenvalue : float
-        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle).
+        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle); see
+        :func:`check_minimum`.
     message : str
         Why the check failed (empty when it passed).
     time : float
         Seconds spent verifying.
+    target_stable : bool or None
+        The target is a stable equilibrium of its external driving (None: anchors and drags not given).
     """
 
     passed: bool
@@ -139,6 +143,7 @@ class Verification:
     min_eigenvalue: float
     message: str = ""
     time: float = 0.0
+    target_stable: bool | None = None
 
 
 @dataclass
@@ -1341,12 +1346,19 @@ def _report_muscles(prob: _Problem, res: DesignResult, xflat, kappa) -> None:
 
 
 def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
-                  muscle_model: str = "springs", stiffness: float = 10.0) -> tuple[bool, float, float]:
+                  muscle_model: str = "cable", stiffness: float = 10.0,
+                  anchor_radius: float | None = None) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
-    Returns ``(positive_definite, min_eigenvalue, residual)``: whether every pivot of a symmetric
-    factorisation of the free-coordinate Hessian is positive (Sylvester's law of inertia), its smallest
-    eigenvalue relative to ``E t``, and the max-norm of the free gradient relative to ``E t size``.
+    With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
+    Hessian of the Lagrangian restricted to the tangent space of the active constraints.
+
+    Returns ``(positive_definite, min_eigenvalue, residual)``: whether the (reduced) free-coordinate Hessian
+    is positive definite, from the inertia of a sparse symmetric factorisation
+    (:func:`~mdsr_opt.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
+    relative to ``E t`` (when positive definite an estimate by LOBPCG preconditioned by the factor; else the
+    curvature along the direction of most negative curvature found, an upper bound); and the max-norm of the
+    free gradient of the Lagrangian relative to ``E t size``.
 
     Example
     -------
@@ -1361,54 +1373,42 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     mus = check_muscles(mesh, muscles)
     if not mus:
         raise ValueError("check_minimum needs at least one muscle")
+    if muscle_model not in ("springs", "cable"):
+        raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
     x = mesh._check_state(x)
-    prob = _Problem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99)
+    prob = _Problem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99,
+                    anchor_radius=anchor_radius)
     return _stability(prob, a, x.reshape(-1))
 
 
 def _stability(prob: _Problem, a, xflat) -> tuple[bool, float, float]:
-    # the gauge is rigid-motion invariant, so pin the gauge coordinates where x has them
-    p = prob.params(a)
-    g = prob.model.gradient(xflat, p)
-    residual = float(np.abs(g[prob.free]).max()) / (prob.Et * prob.mesh.size)
-    H = prob.model.hessian(xflat, p)
-    Hff = H[prob.free][:, prob.free].tocsc() / prob.Et
-    pd = False
-    try:
-        lu = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-        if np.array_equal(lu.perm_r, lu.perm_c):  # symmetric pivoting: pivots carry the inertia
-            pd = bool((lu.U.diagonal() > 0).all())
-        else:  # pragma: no cover - SuperLU pivoted off the diagonal; fall back to eigenvalues alone
-            pd = None
-    except RuntimeError:  # exactly singular
-        pd = False
-    if Hff.shape[0] <= 1500:  # small: the exact smallest eigenvalue, dense
-        lam = float(np.linalg.eigvalsh(Hff.toarray())[0])
-    else:
-        try:  # positive definite: the eigenvalue nearest zero is the smallest
-            lam = float(spla.eigsh(Hff, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0])
-        except Exception:  # pragma: no cover - singular shift
-            lam = 0.0
-        if not pd or lam <= 0:
-            lam = min(lam, float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, tol=1e-8,
-                                            maxiter=50000)[0]))
-    if pd is None:  # pragma: no cover
-        pd = lam > 0
-    pd = bool(pd and lam > 0)
-    return bool(pd), lam, residual
+    """``(positive_definite, min_eigenvalue / (E t), residual)`` at ``xflat`` (see :func:`check_minimum`).
+
+    The gauge coordinates are pinned (the energy is invariant under rigid motion); with muscle constraints
+    the Hessian is the Lagrangian's with least-squares multipliers, on the tangent space of the active
+    rows (:meth:`_Problem.kkt_data`, in units of ``E t h``)."""
+    H, free, A, _kap, res = prob.kkt_data(a, xflat)
+    chk = check_stability(H, free, A, lowest=True)
+    lam = float(chk.curvature) * prob.h if chk.curvature is not None else 0.0
+    return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
 
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
-                  weights: ArrayLike | None = None, gap_rtol: float = 1e-5) -> Verification:
+                  weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
+                  drags=None) -> Verification:
     """Check a design independently of how it was found.
 
     Solves the forward internal-driving problem from rest at ``result.contractions``
     (:func:`~mdsr_opt.solve_internal`), measures the largest node distance between that state and
     ``result.x`` after rigid alignment, and checks that ``result.x`` is a strict minimum of the energy
     (:func:`check_minimum`). Passes when the forward solve succeeded, the gap is at most
-    ``gap_rtol * mesh.size`` and the Hessian is positive definite.
+    ``gap_rtol * mesh.size`` and the (reduced) Hessian is positive definite.
+
+    When the target came from external driving, give its ``anchors`` and ``drags`` (as in
+    :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
+    (:func:`~mdsr_opt.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
+    is a shape no body holds; ``target_stable`` reports it.
 
     Example
     -------
@@ -1429,10 +1429,15 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")
     a = np.asarray(result.contractions, dtype=float)
     x = mesh._check_state(result.x)
-    prob = _Problem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99)
+    radius = getattr(result, "anchor_radius", None)
+    radius = None if radius is None or not np.isfinite(radius) else float(radius)
+    target_check = None
+    if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
+        target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
+    prob = _Problem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), model=result.muscle_model,
-                         stiffness=result.stiffness, tol=1e-10)
+                         stiffness=result.stiffness, anchor_radius=radius, tol=1e-10)
     fx = fwd.x
     al = align(x, fx)
     gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max())
@@ -1446,12 +1451,18 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     if not np.isfinite(gap) or gap > gap_tol:
         msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
     if not pd:
-        msgs.append(f"the design's state is not a minimum of the energy (a saddle: smallest Hessian "
-                    f"eigenvalue {lam:.3g} E t)")
+        msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
+                    f"along its direction of negative curvature)")
+    if target_check is not None and not target_check.stable:
+        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
+                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
+    if target_check is not None and target_residual > 1e-5:
+        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
     return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
                         forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
                         positive_definite=bool(pd), min_eigenvalue=lam, message="; ".join(msgs),
-                        time=time.perf_counter() - t0)
+                        time=time.perf_counter() - t0,
+                        target_stable=None if target_check is None else bool(target_check.stable))
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline

@@ -122,6 +122,24 @@ def _check_inputs(H, free, A):
     return H, free, A
 
 
+def _independent_rows(Af: sp.csr_matrix) -> sp.csr_matrix:
+    """A maximal linearly independent subset of the rows of ``Af`` (same null space): rank-revealing
+    pivoted Cholesky (LAPACK ``dpstrf``) of the small ``m x m`` Gram matrix when its sparse LU finds it
+    singular."""
+    G = (Af @ Af.T).tocsc()
+    try:
+        d = spla.splu(G).U.diagonal()
+        if np.abs(d).min() > 1e-10 * np.abs(d).max():
+            return Af
+    except RuntimeError:
+        pass
+    from scipy.linalg import lapack
+
+    Gd = G.toarray()
+    _, piv, rank, _ = lapack.dpstrf(Gd, tol=1e-10 * float(np.abs(np.diag(Gd)).max()))
+    return Af[np.sort(piv[:rank] - 1)]
+
+
 def _inertia(fac: _Factor, rtol: float) -> tuple[int, int]:
     d = fac.d
     scale = float(np.abs(d).max()) if d.size else 0.0
@@ -134,15 +152,16 @@ def _rayleigh(M, v) -> float:
     return float(v @ (M @ v)) / vv if vv > 0 else 0.0
 
 
-def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> np.ndarray:
+def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> tuple[np.ndarray, "_Factor | None"]:
     """Shifted inverse iteration from ``v`` towards the lowest mode of ``M``.
 
     The shift ``sigma`` is pushed below the lowest eigenvalue, which the inertia of ``M - sigma I`` certifies
     (no negative pivot); iteration then converges to the lowest mode. Iterates are kept only while their
-    curvature decreases, so the result is never worse than ``v``."""
+    curvature decreases, so the result is never worse than ``v``. Also returns the factor of the positive
+    definite ``M - sigma I`` (None if none was found): a preconditioner for the lowest mode."""
     best, mu = v, _rayleigh(M, v)
     if mu >= 0:
-        return v
+        return v, None
     I = sp.identity(M.shape[0], format="csc")
 
     def below(sigma):  # the factor of M - sigma I when sigma is below every eigenvalue, else None
@@ -159,7 +178,7 @@ def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> np.ndarray:
             break
         above, sigma = sigma, 4.0 * sigma
     if fac is None:
-        return v
+        return v, None
     for _ in range(2):  # bisect [sigma, above] to bring the shift closer to lambda_min (faster iteration)
         mid = 0.5 * (sigma + above)
         f = below(mid)
@@ -177,10 +196,11 @@ def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> np.ndarray:
         r = _rayleigh(M, y)
         if r < mu:
             best, mu = y, r
-    return best
+    return best, fac
 
 
-def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = True) -> StabilityCheck:
+def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = True,
+                    lowest: bool = False) -> StabilityCheck:
     """Is ``H`` positive definite on the free coordinates (and the tangent space of active constraints)?
 
     Parameters
@@ -191,13 +211,18 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
         Mask of the free coordinates; the others are held fixed (anchors, drags, gauge).
     A : (m, N) scipy sparse matrix, optional
         Jacobian of the *active* equality constraints (taut ropes, rigid patches). The test is then on
-        ``{d_free : A_free d_free = 0}``. Its rows restricted to the free coordinates should be linearly
-        independent.
+        ``{d_free : A_free d_free = 0}``. Linearly dependent rows are allowed (a maximal independent
+        subset is used).
     rtol : float
         A pivot with ``|d| <= rtol * max|d|`` counts as zero (``n_zero``); zero pivots make a state
         not stable.
     direction : bool
         Compute a direction of negative curvature when not stable (default). ``False`` skips it.
+    lowest : bool
+        When stable, also estimate the lowest eigenvalue of the reduced Hessian (reported in ``curvature``)
+        by inverse iteration with the factorisation already made: a few triangular solves, no eigen-solve.
+        The estimate is a Rayleigh quotient, so it bounds the lowest eigenvalue from above (with
+        constraints, up to the penalty's ``O(1/rho)``).
 
     Returns
     -------
@@ -231,11 +256,9 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
         Af = Af[keep]
         if Af.shape[0]:
             method = "ldl-inertia+finsler"
+            Af = _independent_rows(Af)
             AAt = (Af @ Af.T).tocsc()
-            try:
-                aat = spla.splu(AAt)
-            except RuntimeError:
-                raise ValueError("the rows of A on the free coordinates are linearly dependent") from None
+            aat = spla.splu(AAt)
 
             def project(v, Af=Af, aat=aat):  # orthogonal projection onto null(A_f)
                 return v - Af.T @ aat.solve(Af @ v)
@@ -272,20 +295,61 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     n_neg, n_zero = counts
     stable = n_neg == 0 and n_zero == 0
     vdir, curv = None, None
-    if not stable and direction:
+    pre = fac if stable else None  # a positive definite factor: preconditioner for the lowest mode
+    best = None
+    if not stable and (direction or lowest):
         d = fac.d
         order = np.argsort(d)[:5] if n_neg else np.argsort(np.abs(d))[:1]
-        best, mu = None, np.inf
+        mu = np.inf
         for k in order:
             v = project(fac.direction(int(k)))
             r = _rayleigh(Hff, v)
             if r < mu:
                 best, mu = v, r
         if best is not None and n_neg:
-            best = _refine(Hff, best) if A is None else best
-        if best is not None and np.all(np.isfinite(best)) and np.linalg.norm(best) > 0:
-            best = best / np.linalg.norm(best)
-            vdir = np.zeros(N)
-            vdir[idx] = best
-            curv = _rayleigh(Hff, best)
+            best, pre = _refine(M, best)
+            best = project(best)
+    if lowest:
+        lam, vec = _lowest(Hff, project, Af if method.endswith("finsler") else None, pre, best)
+        if lam is not None:
+            curv = lam
+            if not stable and vec is not None and (best is None or lam < _rayleigh(Hff, best)):
+                best = vec
+    if not stable and best is not None and np.all(np.isfinite(best)) and np.linalg.norm(best) > 0:
+        best = best / np.linalg.norm(best)
+        vdir = np.zeros(N)
+        vdir[idx] = best
+        curv = _rayleigh(Hff, best)
+    if not direction:
+        vdir = None
     return StabilityCheck(bool(stable), int(n_neg), int(n_zero), vdir, curv, method, time.perf_counter() - t0)
+
+
+def _lowest(Hff, project, A_free=None, pre: "_Factor | None" = None, x0=None, k: int = 4,
+            maxiter: int = 80) -> tuple[float | None, np.ndarray | None]:
+    """Lowest eigenpair of the (reduced) matrix: LOBPCG preconditioned by a positive definite factor ``pre``
+    (the matrix's own, or of the matrix shifted below its lowest eigenvalue), so a few iterations; on the
+    null space of the active constraints when there are any. Below 100 coordinates LOBPCG is unreliable
+    and a dense solve of the small matrix is instant: used there. ``(None, None)`` without a factor."""
+    n = Hff.shape[0]
+    if n < 100:
+        if A_free is None:
+            w, V = np.linalg.eigh(Hff.toarray())
+            return float(w[0]), V[:, 0]
+        Q = np.linalg.qr(A_free.T.toarray(), mode="complete")[0][:, A_free.shape[0]:]
+        w, V = np.linalg.eigh(Q.T @ (Hff @ Q))
+        return float(w[0]), Q @ V[:, 0]
+    if pre is None:
+        return None, None
+    cols = [] if x0 is None else [np.asarray(x0, dtype=float)]
+    cols += [project(c) for c in np.random.default_rng(0).standard_normal((k - len(cols), n))]
+    X = np.column_stack(cols)
+    M = spla.LinearOperator((n, n), matvec=lambda v: project(pre.lu.solve(np.ravel(v))), dtype=float)
+    Y = None if A_free is None else A_free.T.toarray()
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        w, V = spla.lobpcg(Hff, X, M=M, Y=Y, largest=False, tol=1e-9, maxiter=maxiter)
+    i = int(np.argmin(w))
+    return float(w[i]), V[:, i]

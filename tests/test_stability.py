@@ -140,3 +140,70 @@ def test_bad_input(bad, exc, words):
     kw.update(bad)
     with pytest.raises(exc, match=words):
         check_stability(kw["H"], kw["free"], kw["A"], rtol=kw["rtol"])
+
+
+def test_lowest_eigenvalue_estimate_when_stable():
+    rng = np.random.default_rng(5)
+    for m in (0, 2):  # small (dense path)
+        H = _random_case(rng, 30, 0)
+        A = sp.csr_matrix(rng.standard_normal((m, 30))) if m else None
+        c = check_stability(sp.csc_matrix(H), np.ones(30, bool), A, lowest=True)
+        R = H if not m else sl.null_space(A.toarray()).T @ H @ sl.null_space(A.toarray())
+        assert c.stable and c.curvature == pytest.approx(np.linalg.eigvalsh(R)[0], rel=1e-8)
+
+
+def test_lowest_eigenvalue_estimate_on_a_mesh():
+    """LOBPCG preconditioned by the factor, on a real stiffness matrix (with and without constraints)."""
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    mat = NeoHookean(1.0, 0.3)
+    model = get_model(mesh, mat)
+    H = model.hessian(mesh.points.reshape(-1), model.params(mat))
+    free = np.ones(2 * mesh.n_nodes, bool)
+    left = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    free[2 * left] = free[2 * left + 1] = False
+    Hff = H[free][:, free].toarray()
+    rng = np.random.default_rng(0)
+    A = sp.random(3, H.shape[0], density=0.05, random_state=1, format="csr")
+    Z = sl.null_space(A.toarray()[:, free])
+    for AA, R in ((None, Hff), (A, Z.T @ Hff @ Z)):
+        c = check_stability(H, free, AA, lowest=True)
+        lmin = np.linalg.eigvalsh(R)[0]
+        assert c.stable and c.curvature == pytest.approx(lmin, rel=1e-3)
+
+
+def test_dependent_constraint_rows_are_reduced():
+    rng = np.random.default_rng(7)
+    H = _random_case(rng, 20, 2)
+    A = rng.standard_normal((4, 20))
+    A[3] = A[0] - 2 * A[1]  # dependent
+    Z = sl.null_space(A)
+    ev = np.linalg.eigvalsh(Z.T @ H @ Z)
+    c = check_stability(sp.csc_matrix(H), np.ones(20, bool), sp.csr_matrix(A))
+    assert c.n_negative == int((ev < 0).sum())
+    if not c.stable:
+        assert np.abs(A @ c.direction).max() < 1e-8
+
+
+@pytest.mark.parametrize("m", [0, 2])
+def test_lowest_when_unstable_is_the_lowest_eigenpair(m):
+    """On a real (indefinite) mesh Hessian: the compressed strip, large enough for the LOBPCG path."""
+    mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
+    mat = NeoHookean(1.0, 0.3)
+    P = mesh.points
+    fixed_nodes = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 10.0))
+    free = np.ones(2 * mesh.n_nodes, bool)
+    free[2 * fixed_nodes] = free[2 * fixed_nodes + 1] = False
+    model = get_model(mesh, mat)
+    x = P.copy()
+    x[:, 0] *= 0.8
+    H = model.hessian(x.reshape(-1), model.params(mat))
+    A = sp.random(m, H.shape[0], density=0.05, random_state=3, format="csr") if m else None
+    Z = np.eye(free.sum()) if not m else sl.null_space(A.toarray()[:, free])
+    lmin = np.linalg.eigvalsh(Z.T @ H[free][:, free].toarray() @ Z)[0]
+    c = check_stability(H, free, A, lowest=True)
+    assert not c.stable and lmin < 0
+    assert c.curvature == pytest.approx(lmin, rel=1e-4)
+    d = c.direction
+    assert d @ H @ d == pytest.approx(c.curvature, rel=1e-10)
+    if m:
+        assert np.abs(A @ d).max() < 1e-8
