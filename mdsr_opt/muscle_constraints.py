@@ -450,6 +450,10 @@ class ConstrainedModel:
         a, b = self.n_energy_params, self.n_energy_params + self.n_targets
         return p[:a], p[a:b], p[b:]
 
+    def force_scale(self, p) -> float:
+        """A force that sizes the multipliers: ``mu * thickness * body_size`` (``mu`` the shear modulus)."""
+        return abs(float(self.split(p)[0][0])) * body_size(self.mesh)
+
     def _lam_full(self, lam) -> np.ndarray:
         out = np.zeros(self.constraints.n_constraints)
         out[self.rows] = lam
