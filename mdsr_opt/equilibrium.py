@@ -91,7 +91,7 @@ class EquilibriumResult:
     achieved: np.ndarray | None = None  # 1 - L/L0 along the node chain in the returned state
     stroke: np.ndarray | None = None  # achieved * L0 (length units): the rope length taken in
     tension: np.ndarray | None = None  # rope tension (cable: the multiplier; springs: the rod force)
-    slack: np.ndarray | None = None  # cable: rope shorter than its target; springs: not pulling
+    slack: np.ndarray | None = None  # cable: path shorter than the rope (achieved > commanded); springs: not pulling
     rest_lengths: np.ndarray | None = None  # L0 per muscle
     anchor_radius: float | None = None  # radius of the rigid anchor patches at the muscles' ends
 
@@ -641,7 +641,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     res.stroke = L0 - L
     if model == "cable":
         res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
-        res.slack = ~taut
+        # slack: the path is shorter than the rope (a rope at its length with no load is taut, not slack)
+        res.slack = res.achieved > a + 1e-7
     else:
         # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
         # chain's length since the anchored segments keep their rest lengths

@@ -360,3 +360,15 @@ def test_a_constrained_state_the_check_calls_unstable_is_not_a_success(monkeypat
     assert not res.success and res.stable is False
     assert "not a stable equilibrium" in res.status
     assert seen and all(A is not None and A.shape[0] >= 1 for A in seen)  # active constraint rows were passed
+
+
+def test_ropes_at_rest_length_leave_the_body_exactly_at_rest():
+    # unloaded ropes have multipliers of round-off size: that must not send the solve into the barrier
+    # (slack) mode, which would leave the body a little off rest
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    mus = [row(mesh, 0.0), row(mesh, 0.5), row(mesh, 1.0), row(mesh, 0.5, 1.0, 3.0)]
+    res = solve_internal(mesh, MAT, mus, np.zeros(4))
+    assert res.success and res.iterations <= 2
+    assert np.abs(res.x - mesh.points).max() < 1e-9
+    assert np.all(res.tension >= 0.0) and res.tension.max() < 1e-12 and not res.slack.any()
+    assert np.abs(res.achieved).max() < 1e-12
