@@ -62,7 +62,7 @@ def _casadi_factory(plugin: str, opts: dict):
 
 
 def _constrained_factory(plugin: str, opts: dict):
-    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.muscle_constraints.ConstrainedModel`."""
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
         x, p = model.x, model.p

@@ -39,7 +39,8 @@ from .stability import check_stability
 from .mesh import Mesh
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .model import get_model, spring_parameters
-from .muscle_constraints import ConstrainedModel, MuscleConstraints, check_anchor_radius, spring_segments, spring_stiffness
+from .constrained import ConstrainedModel
+from .muscle_constraints import MuscleConstraints, check_anchor_radius, spring_segments, spring_stiffness
 from .muscles import Muscle, check_contractions, check_muscles
 
 __all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends",
