@@ -63,10 +63,18 @@ class EquilibriumResult:
     success : solver converged, residual small and no element inverted.
     status : solver status text (or the reason for failure).
     iterations : solver iterations summed over load steps.
-    residual : max-norm of the energy gradient over the free coordinates, relative to ``E t size``.
+    residual : max-norm of the energy gradient over the free coordinates, relative to ``E t size``; with
+        muscle constraints that of the Lagrangian (least-squares multipliers): the KKT residual.
     min_J : smallest element ``det F``.
     steps : load fractions accepted (``[1.0]`` when no stepping was needed).
     build_time, solve_time : seconds spent building the model/solver (0 when reused) and solving.
+    commanded, achieved, stroke, tension, slack, rest_lengths : internal driving, one entry per muscle: the
+        contraction asked; the contraction reached, ``1 - L/L0`` with ``L`` the node chain's length in ``x``;
+        the stroke ``achieved * L0`` (length units, what a servo winds in); the tension (cable: the rope
+        constraint's multiplier, never negative; springs: the springs' mean force
+        ``K L0/L0_free (a - achieved)``, negative when they push); slack (cable: the path is shorter than the
+        rope, so achieved > commanded at zero tension; springs: not pulling); ``L0``.
+    anchor_radius : internal driving: the radius of the rigid anchor patches at the muscles' ends.
     """
 
     x: np.ndarray
@@ -571,7 +579,19 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     EquilibriumResult
         With, per muscle, ``commanded``, ``achieved`` (``1 - L/L0`` along the node chain in the returned
         state), ``stroke`` (``achieved * L0``, length units), ``tension`` and ``slack``. Load stepping moves
-        the rope targets ``(1 - s a) L0`` (or the springs' rest lengths) with the load fraction ``s``.
+        the rope targets ``(1 - s a) L0`` (or the springs' rest lengths) with the load fraction ``s``. Only a
+        stable state is a success: the Hessian of the Lagrangian must be positive definite on the tangent
+        space of the active constraints (taut ropes, anchor patches; ``stable``, ``stability``).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> bottom = Muscle([int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0])
+    >>> res = solve_internal(mesh, NeoHookean(1.0, 0.3), [bottom], [0.3])
+    >>> res.success, round(float(res.achieved[0]), 6), round(float(res.stroke[0]), 6), bool(res.tension[0] > 0)
+    (True, 0.3, 1.2, True)
     """
     _check_mesh_material(mesh, material)
     tol = _check_common(tol, max_iter, backend)
