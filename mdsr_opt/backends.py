@@ -62,7 +62,7 @@ def _casadi_factory(plugin: str, opts: dict):
 
 
 def _constrained_factory(plugin: str, opts: dict):
-    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.muscle_constraints.ConstrainedModel`."""
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
         x, p = model.x, model.p
@@ -109,7 +109,8 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
                                if st.get("iterations") else 0))
         lam = np.asarray(sol["lam_g"]).ravel()
         ok = bool(st.get("success", False))
-        if ok and (not equality or np.all(lam[:nt] >= 0.0)):
+        # a rope at its length with no load has a multiplier of round-off size, of either sign
+        if ok and (not equality or np.all(lam[:nt] >= -1e-9 * cmodel.force_scale(p))):
             break
         if equality and ok:
             status = "a rope would push: re-solved with slack allowed"

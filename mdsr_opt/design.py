@@ -12,18 +12,24 @@ as a length, ``sqrt(D / sum e)``.
 Three methods solve it:
 
 ``"flattened"`` (the default, the product's defining choice)
-    One NLP in ``(x, a, theta, t)``: minimise ``D`` subject to stationarity of the internal-driving energy
-    on the non-gauge coordinates (the lower level has no inequalities, so stationarity is its whole KKT
-    system), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
+    One NLP in ``(x, a, theta, t, tau, mu)``: minimise ``D`` subject to the lower level's KKT conditions,
+    stationarity ``grad E(x, a) + sum_c tau_c grad L_c(x) + sum_k mu_k grad c_k(x) = 0`` on the non-gauge
+    coordinates, the exact cable's rope equalities ``L_c(x) = (1 - a_c) L0_c`` with tensions ``tau_c >= 0``
+    as bounds (``muscle_model="cable"``, the default; a rope with ``tau_c = 0`` is slack and its ``a_c`` is
+    the contraction it reached), the rigid end patches ``c_k(x) = 0`` of both muscle models
+    (:mod:`~mdsr_opt.muscle_constraints`; for ``"springs"`` the energy ``E`` includes the dummy springs and
+    there are no rope rows), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
     Hessian of the Lagrangian, warm-started from a forward solve at the initial contractions. Objective and
     constraints are scaled (see *Scaling* below). The NLP's derivatives (constraint Jacobian, Hessian of the
-    Lagrangian with the energy's third derivatives) are assembled term by term from small per-element,
-    per-spring and per-cable SX functions, like the energy model's own; ``derivatives="casadi"`` instead
-    builds the NLP in SX and lets CasADi differentiate it (the same numbers, 30-50x slower to build).
+    Lagrangian with the energy's third derivatives) are assembled term by term from small per-element and
+    per-spring SX functions, like the energy model's own, plus one sparse SX block for the muscle
+    constraints over the coordinates they touch; ``derivatives="casadi"`` instead builds the NLP in SX and
+    lets CasADi differentiate it (the same numbers, much slower to build).
 ``"nested"``
     The reduced-space rival: an outer L-BFGS-B over ``a``; each evaluation solves the equilibrium (warm
     started from the previous one) and the exact gradient comes from the implicit-function theorem by one
-    adjoint solve, ``H lambda = dD/dx`` on the free coordinates, ``dD/da = -lambda^T dg/da``.
+    adjoint solve with the KKT matrix of the equilibrium (Hessian of its Lagrangian and the active muscle
+    constraints: anchor patches, taut ropes), ``dD/da = -lambda^T dF/da``.
 ``"derivative-free"``
     The baseline a user without this toolkit would write: Nelder-Mead (or Powell) over ``a`` with bounds,
     each evaluation a warm-started forward solve.
@@ -38,7 +44,9 @@ contractions reach is a success with a positive difference.
 Scaling
 -------
 The flattened NLP divides the objective by ``sum(e) * h**2`` (mean squared distance in mean rest edge
-lengths ``h``) and the stationarity constraints by ``E * t * h`` (strain-like). Normalising the objective
+lengths ``h``), and further by its warm-start value when that exceeds 1 (a target out of reach: IPOPT's
+absolute tolerance then stays a relative one), and the stationarity constraints by ``E * t * h``
+(strain-like); rope rows are strains (``L/L0 - 1 + a``) and rigid-patch rows lengths. Normalising the objective
 by the body's size instead (``scaling="size"``) leaves the objective's Hessian orders of magnitude below
 the constraint Jacobian on a 1k-node mesh, and IPOPT then regularises the Hessian and needs many more
 iterations (see ``tests/benchmarks/bench_design.py``).
@@ -62,7 +70,6 @@ import json
 import math
 import numbers
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Sequence
@@ -75,9 +82,9 @@ from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, positive_float
 from .align import align, node_weights
-from .equilibrium import _check_mesh_material, _continuation, _gauge, external_stability, solve_internal
+from .equilibrium import _check_mesh_material, _gauge, external_stability, solve_internal
 from .mesh import Mesh
-from .model import _to_dm, get_model, spring_parameters
+from .model import _to_dm, get_model
 from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
                                  spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
@@ -977,7 +984,9 @@ def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, war
     J0, al0, _ = prob.objective(x0.reshape(-1, 2))
     history = [(clock(), math.sqrt(J0) * prob.h)]
     if scaling == "auto":
-        so, sc = 1.0 / (prob.W * prob.h ** 2), 1.0 / (prob.Et * prob.h)
+        # a target far from reachable has J0 >> 1 (J grows as 1/h^2 under refinement): dividing by it keeps
+        # IPOPT's absolute tolerance a relative one (without it a 4k-node design stopped at "acceptable")
+        so, sc = 1.0 / (prob.W * prob.h ** 2) / max(1.0, J0), 1.0 / (prob.Et * prob.h)
     else:  # "size": objective normalised by the body's size (the badly scaled variant, for comparisons)
         so, sc = 1.0 / (prob.W * mesh.size ** 2), 1.0 / (prob.Et * prob.h)
     blk = prob.block

@@ -26,6 +26,7 @@ Example
 
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass
 
@@ -377,7 +378,7 @@ def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarra
     k = np.zeros(len(mesh.edges))
     kr = np.zeros(len(mesh.edges))
     idx = mesh.edge_index
-    scalar = np.ndim(stiffness) == 0
+    scalar = isinstance(stiffness, numbers.Real) or (isinstance(stiffness, np.ndarray) and stiffness.ndim == 0)
     for c, (mus, a) in enumerate(zip(muscles, contractions)):
         ks = np.full(len(mus.segments), float(stiffness)) if scalar else np.asarray(stiffness[c], dtype=float)
         if ks.shape != (len(mus.segments),):
