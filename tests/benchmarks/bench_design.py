@@ -133,7 +133,7 @@ def run(args):
                 print(f"  {size:>4} m={m}: vs {rival:<16} {t / fl_t:7.1f}x  ({t:.3f} s vs {fl_t:.3f} s)")
     # sensitivity of the flattened NLP on the 1k-node, 4-muscle case
     sens = []
-    if args.variants or (not args.quick and "1k" in sizes and 4 in counts):
+    if args.variants or (not args.quick and not args.no_variants and "1k" in sizes and 4 in counts):
         print("\nflattened NLP on 1k nodes, 4 muscles: scaling, warm start, Hessian, derivatives")
         mesh, mus, a_true, target = make_case("1k", 4)
         get_model(mesh, MAT)  # as in the table: the energy model is built before timing
@@ -198,6 +198,7 @@ def main(argv=None):
                     help="muscle models (the target is made with the same model); rival comparisons use the first")
     ap.add_argument("--derivatives", default="assembled", choices=["assembled", "casadi"],
                     help="the flattened NLP's derivatives (see design_contractions)")
+    ap.add_argument("--no-variants", action="store_true", help="skip the flattened variants")
     ap.add_argument("--variants", action="store_true",
                     help="run the flattened variants on 1k nodes, 4 muscles whatever the sizes")
     run(ap.parse_args(argv))
