@@ -81,7 +81,7 @@ def run(args):
     print("-" * len(head))
     for size in sizes:
         for m, model in [(c, md) for c in counts for md in args.models]:
-            mesh, mus, a_true, target = make_case(size, m, model=model)
+            mesh, mus, a_true, target = make_case(size, m, seed=args.seed, model=model)
             get_model(mesh, MAT)  # the energy model is shared by all methods: build it before timing
             for method in args.methods:
                 kw = {"muscle_model": model}
@@ -192,6 +192,7 @@ def main(argv=None):
     ap.add_argument("--methods", nargs="+", default=["flattened", "nested", "derivative-free"])
     ap.add_argument("--df-evals", type=int, default=300, help="derivative-free evaluations per muscle (cap)")
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the true contractions")
     ap.add_argument("--start", default="geometric",
                     help="initial contractions: 'geometric' (each muscle's 1 - L_target/L0) or one number for all")
     ap.add_argument("--models", nargs="+", default=["cable"], choices=["cable", "springs"],
