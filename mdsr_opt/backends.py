@@ -174,16 +174,23 @@ def interruptible():
             caught.append(exc)
             raise
 
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, prev)
-    if caught:
+    def recorded():
         exc = caught[0]
         if isinstance(exc, KeyboardInterrupt) and not exc.args:
             exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
-        raise exc
+        return exc
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
+        if caught:
+            raise recorded() from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, prev)
+    if caught:
+        raise recorded()
 
 
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values):
