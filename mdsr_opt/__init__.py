@@ -25,6 +25,10 @@ _EXPORTS = {
     "solve_external": "equilibrium",
     "solve_internal": "equilibrium",
     "available_backends": "equilibrium",
+    "RigidDrag": "drags",
+    "external_stability": "equilibrium",
+    "check_stability": "stability",
+    "StabilityCheck": "stability",
     "read_mesh": "io",
     "write_mesh": "io",
     # routing (issue 3)

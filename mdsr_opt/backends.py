@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -32,7 +34,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["MinimizeOutcome", "BACKENDS", "available_backends", "minimize", "check_options"]
+__all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
+           "supports_constraints", "interruptible", "check_options"]
 
 
 @dataclass
@@ -43,6 +46,7 @@ class MinimizeOutcome:
     iterations: int
     solve_time: float
     build_time: float
+    lam_g: np.ndarray | None = None  # constraint multipliers (constrained models only)
 
 
 def _casadi_factory(plugin: str, opts: dict):
@@ -58,6 +62,62 @@ def _casadi_factory(plugin: str, opts: dict):
         # uno: CasADi derives its own gradient and Hessian from the expanded energy
         return ca.nlpsol(f"equilibrium_{plugin.replace('-', '_')}", plugin, nlp, o)
     return factory
+
+
+def _constrained_factory(plugin: str, opts: dict):
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
+    def factory(cmodel):
+        model = cmodel.model
+        x, p = model.x, model.p
+        g = cmodel.constraints_expr(x)
+        nlp = {"x": x, "p": p, "f": model.f_fn(x, p), "g": g}
+        o = dict(opts)
+        o["show_eval_warnings"] = False
+        if plugin in ("ipopt", "sqpmethod"):
+            lam_f = ca.MX.sym("lam_f")
+            lam_g = ca.MX.sym("lam_g", g.size1())
+            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g)
+            if plugin == "sqpmethod":
+                H = H + ca.triu(H, False).T
+            o["hess_lag"] = ca.Function("hess_lag_c", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"],
+                                        ["hess"])
+            if plugin == "ipopt":
+                o["grad_f"] = model.grad_fn
+        return ca.nlpsol(f"constrained_{plugin}", plugin, nlp, o)
+    return factory
+
+
+def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
+    """Solve with ropes as equalities first: if every rope's multiplier (tension) is >= 0 that is a KKT point
+    of the inequality problem too; otherwise re-solve with the ropes as inequalities ``L <= target``."""
+    solver, build_time = cmodel.solver(plugin, opts, _constrained_factory(plugin, opts))
+    pe = cmodel.split(p)[0]
+    lbx = np.full(cmodel.n_dof, -np.inf)
+    ubx = np.full(cmodel.n_dof, np.inf)
+    lbx[fixed] = values
+    ubx[fixed] = values
+    x0 = np.array(x0, dtype=float)
+    x0[fixed] = values
+    total_t, total_it = 0.0, 0
+    nt = cmodel.n_targets
+    for equality in ((True, False) if nt else (False,)):
+        lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
+        t0 = time.perf_counter()
+        with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
+            sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        total_t += time.perf_counter() - t0
+        st = solver.stats()
+        status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
+        total_it += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
+                               if st.get("iterations") else 0))
+        lam = np.asarray(sol["lam_g"]).ravel()
+        ok = bool(st.get("success", False))
+        # a rope at its length with no load has a multiplier of round-off size, of either sign
+        if ok and (not equality or np.all(lam[:nt] >= -1e-9 * cmodel.force_scale(p))):
+            break
+        if equality and ok:
+            status = "a rope would push: re-solved with slack allowed"
+    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, total_it, total_t, build_time, lam)
 
 
 def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
@@ -86,6 +146,54 @@ def _quiet_stdout(active: bool):
         os.dup2(saved, 1)
         os.close(saved)
         os.close(devnull)
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Make Ctrl-C (SIGINT) during a CasADi solve raise :class:`KeyboardInterrupt` when the solver returns.
+
+    CasADi catches the interrupt inside a solve: IPOPT then stops after the current iteration and reports
+    ``NonIpopt_Exception_Thrown`` (printing a ``KeyboardInterruptException`` warning), a status that other
+    errors share and that load stepping would take for a failed step. Inside this context a SIGINT is
+    recorded on its way to the previous handler, and the recorded :class:`KeyboardInterrupt` is raised
+    again on exit, so the solve's outcome is never used. Nesting is fine; outside the main thread (where
+    signal handlers cannot be set) and when SIGINT is ignored this does nothing.
+
+    Example
+    -------
+    >>> with interruptible():
+    ...     pass  # sol = solver(x0=..., lbx=..., ubx=...)
+    """
+    prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
+    if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
+        yield
+        return
+    caught: list[BaseException] = []
+
+    def handler(signum, frame):
+        try:
+            prev(signum, frame)
+        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the user's handler)
+            caught.append(exc)
+            raise
+
+    def recorded():
+        exc = caught[0]
+        if isinstance(exc, KeyboardInterrupt) and not exc.args:
+            exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
+        return exc
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
+        if caught:
+            raise recorded() from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, prev)
+    if caught:
+        raise recorded()
 
 
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values):
@@ -368,9 +476,20 @@ def check_options(backend: str, options: Mapping | None) -> dict:
 
 def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=500,
              options: dict | None = None) -> MinimizeOutcome:
-    """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n)."""
+    """Minimise ``model``'s energy over the coordinates not in ``fixed`` (boolean mask over 2n).
+
+    A SIGINT during the solve raises :class:`KeyboardInterrupt` (see :func:`interruptible`); it is never
+    reported as a failed solve."""
     check_backend(backend)
-    options = check_options(backend, options)
+    options = check_options(backend, options)  # unknown or invalid options: a ValueError naming them
+    with interruptible():  # CasADi swallows SIGINT: re-raise it as KeyboardInterrupt after the call
+        return _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options)
+
+
+def _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options) -> MinimizeOutcome:
+    options = dict(options or {})
+    if hasattr(model, "constraints"):
+        return _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options)
     if backend in ("ipopt", "ipopt-lbfgs"):
         o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")
@@ -390,3 +509,34 @@ def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=50
     if backend == "scipy":
         return _solve_scipy(model, p, x0, fixed, values, tol, max_iter)
     return _solve_newton(model, p, x0, fixed, values, tol, max_iter)
+
+
+#: backends that accept constraints (exact cable, rigid anchor patches)
+CONSTRAINED_BACKENDS = ("ipopt", "ipopt-lbfgs", "sqpmethod", "uno")
+
+
+def supports_constraints(backend: str) -> bool:
+    """Can ``backend`` solve with muscle constraints (exact cable ropes, rigid anchor patches)?"""
+    return backend in CONSTRAINED_BACKENDS
+
+
+def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options):
+    if not supports_constraints(backend):
+        raise ValueError(f"backend {backend!r} cannot take constraints (exact cable ropes, rigid anchor "
+                         f"patches); use one of {', '.join(CONSTRAINED_BACKENDS)}")
+    if backend in ("ipopt", "ipopt-lbfgs"):
+        o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
+                        limited_memory=backend == "ipopt-lbfgs")
+        o["calc_lam_p"] = False
+        o.update(options)
+        return _solve_constrained("ipopt", o, model, p, x0, fixed, values)
+    if backend == "sqpmethod":
+        o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
+                                                "error_on_fail": False},
+             "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
+             "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
+        o.update(options)
+        return _solve_constrained("sqpmethod", o, model, p, x0, fixed, values)
+    o = {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}
+    o.update(options)
+    return _solve_constrained("uno", o, model, p, x0, fixed, values)

@@ -12,18 +12,24 @@ as a length, ``sqrt(D / sum e)``.
 Three methods solve it:
 
 ``"flattened"`` (the default, the product's defining choice)
-    One NLP in ``(x, a, theta, t)``: minimise ``D`` subject to stationarity of the internal-driving energy
-    on the non-gauge coordinates (the lower level has no inequalities, so stationarity is its whole KKT
-    system), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
+    One NLP in ``(x, a, theta, t, tau, mu)``: minimise ``D`` subject to the lower level's KKT conditions,
+    stationarity ``grad E(x, a) + sum_c tau_c grad L_c(x) + sum_k mu_k grad c_k(x) = 0`` on the non-gauge
+    coordinates, the exact cable's rope equalities ``L_c(x) = (1 - a_c) L0_c`` with tensions ``tau_c >= 0``
+    as bounds (``muscle_model="cable"``, the default; a rope with ``tau_c = 0`` is slack and its ``a_c`` is
+    the contraction it reached), the rigid end patches ``c_k(x) = 0`` of both muscle models
+    (:mod:`~mdsr_opt.muscle_constraints`; for ``"springs"`` the energy ``E`` includes the dummy springs and
+    there are no rope rows), the gauge as fixed variables and ``0 <= a <= a_max``. IPOPT through CasADi with the exact
     Hessian of the Lagrangian, warm-started from a forward solve at the initial contractions. Objective and
     constraints are scaled (see *Scaling* below). The NLP's derivatives (constraint Jacobian, Hessian of the
-    Lagrangian with the energy's third derivatives) are assembled term by term from small per-element,
-    per-spring and per-cable SX functions, like the energy model's own; ``derivatives="casadi"`` instead
-    builds the NLP in SX and lets CasADi differentiate it (the same numbers, 30-50x slower to build).
+    Lagrangian with the energy's third derivatives) are assembled term by term from small per-element and
+    per-spring SX functions, like the energy model's own, plus one sparse SX block for the muscle
+    constraints over the coordinates they touch; ``derivatives="casadi"`` instead builds the NLP in SX and
+    lets CasADi differentiate it (the same numbers, much slower to build).
 ``"nested"``
     The reduced-space rival: an outer L-BFGS-B over ``a``; each evaluation solves the equilibrium (warm
     started from the previous one) and the exact gradient comes from the implicit-function theorem by one
-    adjoint solve, ``H lambda = dD/dx`` on the free coordinates, ``dD/da = -lambda^T dg/da``.
+    adjoint solve with the KKT matrix of the equilibrium (Hessian of its Lagrangian and the active muscle
+    constraints: anchor patches, taut ropes), ``dD/da = -lambda^T dF/da``.
 ``"derivative-free"``
     The baseline a user without this toolkit would write: Nelder-Mead (or Powell) over ``a`` with bounds,
     each evaluation a warm-started forward solve.
@@ -38,7 +44,9 @@ contractions reach is a success with a positive difference.
 Scaling
 -------
 The flattened NLP divides the objective by ``sum(e) * h**2`` (mean squared distance in mean rest edge
-lengths ``h``) and the stationarity constraints by ``E * t * h`` (strain-like). Normalising the objective
+lengths ``h``), and further by its warm-start value when that exceeds 1 (a target out of reach: IPOPT's
+absolute tolerance then stays a relative one), and the stationarity constraints by ``E * t * h``
+(strain-like); rope rows are strains (``L/L0 - 1 + a``) and rigid-patch rows lengths. Normalising the objective
 by the body's size instead (``scaling="size"``) leaves the objective's Hessian orders of magnitude below
 the constraint Jacobian on a 1k-node mesh, and IPOPT then regularises the Hessian and needs many more
 iterations (see ``tests/benchmarks/bench_design.py``).
@@ -51,9 +59,9 @@ Example
 >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
 >>> muscle = Muscle(range(1, 16))                       # along the bottom edge
 >>> target = solve_internal(mesh, NeoHookean(1.0, 0.3), [muscle], [0.2]).x
->>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [muscle], target)
->>> res.success, round(float(res.contractions[0]), 6)
-(True, 0.2)
+>>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [muscle], target, initial=[0.05])
+>>> res.success, round(float(res.contractions[0]), 6), round(float(res.stroke[0]), 6)  # stroke = a L0
+(True, 0.2, 0.7)
 """
 
 from __future__ import annotations
@@ -62,7 +70,6 @@ import json
 import math
 import numbers
 import os
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Sequence
@@ -75,10 +82,13 @@ from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, positive_float
 from .align import align, node_weights
-from .equilibrium import _check_mesh_material, _continuation, _gauge, solve_internal
+from .equilibrium import _check_mesh_material, _gauge, external_stability, solve_internal
 from .mesh import Mesh
-from .model import _to_dm, get_model, spring_parameters
+from .model import _to_dm, get_model
+from .muscle_constraints import (MuscleConstraints, check_anchor_radius, segment_spring_parameters,
+                                 spring_segments, spring_stiffness)
 from .muscles import Muscle, check_muscles
+from .stability import check_stability
 
 __all__ = ["METHODS", "DesignResult", "Verification", "PipelineResult", "design_contractions",
            "verify_design", "check_minimum", "design", "design_pipeline"]
@@ -112,11 +122,14 @@ class Verification:
         The free-coordinate Hessian at the design's state is positive definite (every pivot of its
         symmetric factorisation is positive).
     min_eigenvalue : float
-        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle).
+        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle); see
+        :func:`check_minimum`.
     message : str
         Why the check failed (empty when it passed).
     time : float
         Seconds spent verifying.
+    target_stable : bool or None
+        The target is a stable equilibrium of its external driving (None: anchors and drags not given).
     """
 
     passed: bool
@@ -130,6 +143,7 @@ class Verification:
     min_eigenvalue: float
     message: str = ""
     time: float = 0.0
+    target_stable: bool | None = None
 
 
 @dataclass
@@ -168,9 +182,24 @@ class DesignResult:
     a_max : float
         Upper bound on the contractions.
     muscle_model : str
-        ``"springs"`` or ``"cable"``.
+        ``"cable"`` (the exact rope) or ``"springs"``.
     stiffness : float
-        Spring stiffness relative to ``E t``.
+        Spring stiffness relative to ``E t`` (springs only).
+    anchor_radius : float
+        Radius of the rigid patch at each muscle end (a length; see
+        :func:`~mdsr_opt.muscle_constraints.anchor_patches`).
+    rest_lengths : (m,) ndarray
+        Each muscle's rest length ``L0`` along its node chain.
+    achieved : (m,) ndarray
+        Achieved contraction ``1 - L / L0`` of every muscle along its node chain in ``x`` (the cable:
+        equal to ``contractions`` unless the rope is slack; springs: less, the springs stretch).
+    stroke : (m,) ndarray
+        The rope length each muscle pulls in, ``achieved * L0`` (a length; what a servo winds).
+    tension : (m,) ndarray
+        The muscle's pull (force: ``E t`` times a length). The cable: the rope's tension, the multiplier
+        of its length constraint (never negative). Springs: the mean force of its segment springs.
+    slack : (m,) bool ndarray
+        The muscle does not pull (tension about zero, or negative for springs).
     verification : Verification or None
         The independent check (None when ``verify=False``).
     history : list of (float, float)
@@ -195,10 +224,32 @@ class DesignResult:
     initial_contractions: np.ndarray
     initial_difference: float
     a_max: float
-    muscle_model: str = "springs"
+    muscle_model: str = "cable"
     stiffness: float = 10.0
     verification: Verification | None = None
     history: list = field(default_factory=list)
+    anchor_radius: float = float("nan")
+    rest_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    achieved: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    stroke: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    @property
+    def commanded(self) -> np.ndarray:
+        """The designed (commanded) contractions, the same as ``contractions``."""
+        return self.contractions
+
+    def muscle_table(self) -> str:
+        """One line per muscle: commanded and achieved contraction, stroke, tension, slack."""
+        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} {'tension':>10} slack"]
+        for i in range(len(self.contractions)):
+            def at(v, k=i):
+                return float(v[k]) if len(v) > k else float("nan")
+            sl = bool(self.slack[i]) if len(self.slack) > i else False
+            lines.append(f"{i:>6} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
+                         f"{at(self.stroke):>10.4g} {at(self.tension):>10.4g} {'yes' if sl else 'no'}")
+        return "\n".join(lines)
 
     @property
     def x_aligned(self) -> np.ndarray:
@@ -214,7 +265,11 @@ class DesignResult:
         """Scalars of the result (no arrays except the contractions), for tables and logs."""
         v = self.verification
         return {"method": self.method, "success": self.success, "status": self.status,
-                "contractions": [float(c) for c in self.contractions], "difference": self.difference,
+                "muscle_model": self.muscle_model,
+                "contractions": [float(c) for c in self.contractions],
+                "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
+                "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
+                "anchor_radius": self.anchor_radius, "difference": self.difference,
                 "initial_difference": self.initial_difference, "iterations": self.iterations,
                 "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
                 "build_time": self.build_time, "solve_time": self.solve_time, "time": self.time,
@@ -237,10 +292,15 @@ class DesignResult:
 
     @classmethod
     def from_dict(cls, d: dict) -> "DesignResult":
-        d = {k: (float("nan") if v is None and k in ("difference", "initial_difference") else v)
+        d = {k: (float("nan") if v is None and k in ("difference", "initial_difference", "anchor_radius") else v)
              for k, v in d.items()}
         for k in ("contractions", "x", "rotation", "translation", "initial_contractions"):
             d[k] = np.asarray(d[k], dtype=float)
+        for k in ("rest_lengths", "achieved", "stroke", "tension"):
+            if k in d:
+                d[k] = np.asarray([np.nan if v is None else v for v in d[k]], dtype=float)
+        if "slack" in d:
+            d["slack"] = np.asarray(d["slack"], dtype=bool)
         if d.get("verification") is not None:
             d["verification"] = Verification(**d["verification"])
         d["history"] = [tuple(h) for h in d.get("history", [])]
@@ -264,9 +324,11 @@ def _finite_or_none(o):
 
 # ---------------------------------------------------------------------------------------------- the problem
 class _Problem:
-    """Everything the three methods share: model, affine parameters ``p(a) = p0 + B a``, gauge, weights, scales."""
+    """Everything the three methods share: model, affine parameters ``p(a) = p0 + B a``, the muscle
+    constraints (rope lengths for the cable, rigid end patches for both models), gauge, weights, scales."""
 
-    def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max):
+    def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max,
+                 anchor_radius=None):
         self.mesh, self.material, self.muscles = mesh, material, muscles
         self.y = target
         self.w = weights
@@ -276,22 +338,22 @@ class _Problem:
         self.m = len(muscles)
         n = mesh.n_nodes
         t0 = time.perf_counter()
-        if muscle_model == "springs":
-            self.model = get_model(mesh, material)
-        else:
-            self.model = get_model(mesh, material, cables=[mu.nodes for mu in muscles])
+        # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
+        # per-segment springs of the "springs" model, zero for the cable)
+        self.model = get_model(mesh, material)
+        self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
+        self.constraints = MuscleConstraints(mesh, muscles, self.anchor_radius)
         self.build_time = time.perf_counter() - t0
-        k_abs = stiffness * material.E * material.thickness
-        L0 = np.array([mu.rest_length(mesh) for mu in muscles])
-        nseg = np.array([len(mu.nodes) - 1 for mu in muscles], dtype=float)
+        self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
 
-        def params(a):  # the same parameters solve_internal builds
+        def params(a):  # the same parameters solve_internal builds (springs: stiffness per unit rest length)
             if muscle_model == "springs":
-                return self.model.params(material, springs=spring_parameters(mesh, muscles, a, k_abs))
-            return self.model.params(material, cables=(k_abs / nseg, (1.0 - a) * L0))
+                return self.model.params(material, springs=segment_spring_parameters(
+                    mesh, material, muscles, a, stiffness, self.anchor_radius))
+            return self.model.params(material)
 
         self.p0 = params(np.zeros(self.m))
-        # p is affine in a (r_e = 1 - stiffness-weighted mean contraction; R_c = (1 - a_c) L0_c)
+        # p is affine in a (springs: r_e = 1 - stiffness-weighted mean contraction; the cable: constant)
         self.B = np.column_stack([params(np.eye(self.m)[c]) - self.p0 for c in range(self.m)])
         self.fixed = np.zeros(2 * n, dtype=bool)
         self.gauge = list(_gauge(mesh))
@@ -301,6 +363,16 @@ class _Problem:
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
         self.W = float(weights.sum())
+        self._block = None
+
+    @property
+    def block(self) -> "_ConstraintBlock":
+        """The muscle constraints as one sparse SX block (built on first use)."""
+        if self._block is None:
+            t0 = time.perf_counter()
+            self._block = _ConstraintBlock(self)
+            self.build_time += time.perf_counter() - t0
+        return self._block
 
     def params(self, a) -> np.ndarray:
         return self.p0 + self.B @ np.asarray(a, dtype=float)
@@ -318,9 +390,152 @@ class _Problem:
         g0 = self.model.gradient(xflat, self.p0)
         return np.column_stack([self.model.gradient(xflat, self.p0 + self.B[:, c]) - g0 for c in range(self.m)])
 
+    def kkt_data(self, a, xflat):
+        """What a stability check of the driven state ``xflat`` at contractions ``a`` needs, all in units of
+        ``E t h`` (the NLP's scaling): ``(H, free, A, kappa, residual)`` with ``H`` the Hessian of the
+        Lagrangian ``E + kappa . C`` (scipy, (2n, 2n)), ``free`` the non-gauge dofs, ``A`` the Jacobian of
+        the active muscle constraints (anchor patches, taut ropes; None without constraints), ``kappa``
+        the least-squares multipliers and ``residual`` the max-norm of the Lagrangian's free gradient."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        sc = 1.0 / (self.Et * self.h)
+        p = self.params(a)
+        g = self.model.gradient(xflat, p) * sc
+        H = self.model.hessian(xflat, p) * sc
+        blk = self.block
+        if not blk.nc:
+            return H.tocsc(), self.free.copy(), None, np.zeros(0), float(np.abs(g[self.free]).max())
+        kap = blk.multipliers(xflat, g, self.free)
+        J = blk.jacobian(xflat)
+        act = np.ones(blk.nc, dtype=bool)
+        if blk.rope:  # a slack rope (no tension) constrains nothing
+            act[:self.m] = kap[:self.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
+        res = float(np.abs((g + J.T @ kap)[self.free]).max())
+        return (H + blk.hessian(xflat, kap)).tocsc(), self.free.copy(), J[np.nonzero(act)[0]], kap, res
+
+    def achieved(self, x2) -> np.ndarray:
+        """Achieved contraction ``1 - L / L0`` of every muscle along its node chain in state ``x2``."""
+        return 1.0 - np.array([mu.length(x2) for mu in self.muscles]) / self.L0
+
+    def tensions(self, a, xflat) -> np.ndarray:
+        """Per muscle pulling force in state ``xflat`` (force units, ``E t`` times a length).
+
+        The cable: the rope's tension, the multiplier of its length constraint, recovered from the
+        equilibrium by least squares (:meth:`_ConstraintBlock.multipliers`). Springs: the mean force of
+        the muscle's free segment springs, ``K a' (a - achieved)`` as :func:`~mdsr_opt.solve_internal`
+        reports it (positive when they pull)."""
+        if self.muscle_model == "cable":
+            g = self.model.gradient(xflat, self.params(a)) / (self.Et * self.h)
+            kap = self.block.multipliers(xflat, g, self.free)
+            return self.block.tension(kap)
+        x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
+        K = spring_stiffness(self.mesh, self.material, self.stiffness)
+        _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
+        return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+def _nonzeros(M: ca.SX) -> ca.SX:
+    """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
+    return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
+
+
+class _ConstraintBlock:
+    """The muscle constraints of the flattened NLP as one sparse SX block over the dofs they touch.
+
+    Rows: for the cable, one per rope, ``L_c(x) / L0_c - 1`` (the NLP adds ``+ a_c``: the equality
+    ``L_c = (1 - a_c) L0_c`` as a strain); then the rigid end-patch rows of
+    :class:`~mdsr_opt.muscle_constraints.MuscleConstraints`, each divided by the norm of its gradient at rest
+    (a length). With multipliers ``kappa`` (one per row) the stationarity conditions gain ``J(x)^T kappa``;
+    for a rope, ``kappa_c = tau_c L0_c / (E t h)`` (``tau_c`` the tension, :meth:`tension`).
+
+    Functions of the local dofs ``xl`` (sorted, so local order is global order):
+    ``val(xl, kappa) -> (C, J^T kappa)``; ``jac(xl, kappa) -> (J^T kappa, nz(J), nz(H_kappa))`` with
+    ``H_kappa = d^2 (kappa . C) / dxl^2`` (both triangles); ``hess(xl, lam, kappa, omega) -> nz(triu H)``,
+    the Hessian over ``(xl, kappa)`` of ``lam . J^T kappa + omega . C`` (the block's part of the NLP's
+    Lagrangian; the ``kappa``-``kappa`` block is zero).
+    """
+
+    def __init__(self, prob: "_Problem"):
+        mc = prob.constraints
+        n = prob.mesh.n_nodes
+        self.rope = prob.muscle_model == "cable"
+        self.n_rope = prob.m if self.rope else 0
+        self.n_rigid = int(mc.n_rigid)
+        self.nc = self.n_rope + self.n_rigid
+        self.L0 = prob.L0
+        self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
+        self.dofs = np.sort(np.asarray(mc.dofs, dtype=np.int64))  # ropes' and anchor groups' coordinates
+        d = len(self.dofs)
+        self.d = d
+        xl = ca.SX.sym("xl", d)
+        xf = ca.SX.zeros(2 * n)
+        if d:
+            xf[self.dofs.tolist()] = xl
+        parts = []
+        if self.rope:
+            parts.append(mc.lengths_expr(xf) / ca.DM(self.L0) - 1.0)
+        scale = np.ones(0)
+        if self.n_rigid:
+            raw = mc.rigid_expr(xf)
+            Jr = ca.Function("rigid_jac", [xl], [ca.jacobian(raw, xl)])(prob.X[self.dofs])
+            norms = np.sqrt(np.asarray(ca.sum2(Jr * Jr)).ravel())
+            if (norms <= 0).any():
+                raise ValueError("a rigid end-patch constraint has a zero gradient at rest (degenerate patch)")
+            scale = 1.0 / norms
+            parts.append(raw * ca.DM(scale))
+        self.rigid_scale = scale
+        C = ca.vertcat(*parts) if parts else ca.SX(0, 1)
+        kap = ca.SX.sym("kappa", self.nc)
+        lam = ca.SX.sym("lam", d)
+        om = ca.SX.sym("omega", self.nc)
+        J = ca.jacobian(C, xl)
+        JTk = ca.gradient(ca.dot(kap, C), xl) if self.nc else ca.SX(d, 1)
+        Hk = ca.hessian(ca.dot(kap, C), xl)[0] if self.nc else ca.SX(d, d)
+        phi = ca.dot(lam, JTk) + ca.dot(om, C)
+        Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
+        self.J_sp, self.Hk_sp, self.H_sp = J.sparsity(), Hk.sparsity(), Hphi.sparsity()
+        self.val = ca.Function("muscle_con_val", [xl, kap], [C, JTk])
+        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)])
+        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])
+        self.jac_num = ca.Function("muscle_con_J", [xl], [J])
+        self.hess_num = ca.Function("muscle_con_Hk", [xl, kap], [Hk])
+
+    def values(self, xflat) -> np.ndarray:
+        """The rows ``C(x)`` (without the NLP's ``+ a``)."""
+        return np.asarray(self.val(np.asarray(xflat)[self.dofs], np.zeros(self.nc))[0]).ravel()
+
+    def jacobian(self, xflat) -> sp.csr_matrix:
+        """``dC/dx`` as a scipy matrix ``(nc, 2n)``."""
+        Jl = self.jac_num(np.asarray(xflat)[self.dofs]).sparse()
+        Jl = sp.csr_matrix(Jl)
+        n2 = len(xflat)
+        return sp.csr_matrix((Jl.data, self.dofs[Jl.indices], Jl.indptr), shape=(self.nc, n2))
+
+    def hessian(self, xflat, kappa) -> sp.csr_matrix:
+        """``d^2 (kappa . C) / dx^2`` as a scipy matrix ``(2n, 2n)``."""
+        Hl = sp.coo_matrix(self.hess_num(np.asarray(xflat)[self.dofs], kappa).sparse())
+        n2 = len(xflat)
+        return sp.csr_matrix((Hl.data, (self.dofs[Hl.row], self.dofs[Hl.col])), shape=(n2, n2))
+
+    def multipliers(self, xflat, g_scaled, free=None) -> np.ndarray:
+        """Least-squares ``kappa`` with ``g_scaled + J^T kappa = 0`` on the free dofs (``g_scaled`` the
+        energy gradient over ``E t h``): the multipliers of an equilibrium, e.g. to warm-start the NLP."""
+        if self.nc == 0:
+            return np.zeros(0)
+        J = self.jacobian(xflat)
+        if free is not None:
+            J = J[:, np.nonzero(free)[0]]
+            g_scaled = np.asarray(g_scaled)[free]
+        A = (J @ J.T).tocsc()
+        return np.asarray(spla.spsolve(A, -(J @ g_scaled))).ravel()
+
+    def tension(self, kappa) -> np.ndarray:
+        """Rope tensions (force units) from the rope multipliers."""
+        return np.asarray(kappa)[:self.n_rope] * self.scale_t / self.L0[:self.n_rope]
+
 
 class _Forward:
-    """Warm-started forward solves: continuation in ``a`` from the last accepted state."""
+    """Warm-started forward solves (:func:`~mdsr_opt.solve_internal` with the problem's muscle model and
+    anchor patches), each from the last accepted state, in the gauge frame (not aligned to rest)."""
 
     def __init__(self, prob: _Problem, tol: float, max_iter: int):
         self.prob = prob
@@ -334,18 +549,19 @@ class _Forward:
     def solve(self, a) -> tuple[np.ndarray, bool, str]:
         a = np.asarray(a, dtype=float).copy()
         prob = self.prob
-        a_prev, x_prev = self.a.copy(), self.x
-        vals = prob.X[prob.fixed]
-        x, status, ok, iters, _steps, _ts, tb = _continuation(
-            prob.mesh, prob.model, lambda s: prob.params(a_prev + s * (a - a_prev)), prob.fixed,
-            lambda s: vals, x_prev, "ipopt", self.tol, self.max_iter, None, 1.0 / 256, False)
-        if self.n_solves == 0:  # the model's solver cache reports its build time on every reuse
-            self.build_time += tb
+        at_rest = self.n_solves == 0 or not np.any(self.a)
+        guess = "predictor" if at_rest else self.x.reshape(-1, 2)
+        res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
+                             model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
+                             tol=self.tol, max_iter=self.max_iter, align_to_rest=False, initial_guess=guess)
+        if self.n_solves == 0:
+            self.build_time += res.build_time
         self.n_solves += 1
-        self.iterations += iters
-        if ok:
+        self.iterations += res.iterations
+        x = res.x.reshape(-1)
+        if res.success:
             self.a, self.x = a, x
-        return x, ok, status
+        return x, bool(res.success), res.status
 
 
 # ---------------------------------------------------------------------------------------------- input checks
@@ -553,13 +769,16 @@ def _assembled_nlp(prob: _Problem, hessian: str):
     Edge springs without a muscle have zero stiffness for every design of these muscles and are left out.
     """
     model, n, m = prob.model, prob.mesh.n_nodes, prob.m
+    blk = prob.block
+    nc = blk.nc
     nx = 2 * n
-    nz = nx + m + 3
+    nz = nx + m + 3 + nc
     it = nx + m  # index of theta; t follows
+    ik = it + 3  # index of the muscle constraints' multipliers kappa
     npar = model.n_params
     z = ca.MX.sym("z", nz)
     par = ca.MX.sym("par", 3 * n + npar + 2)
-    x, a, v = z[:nx], z[nx:nx + m], z[it:]
+    x, a, v, kap = z[:nx], z[nx:nx + m], z[it:ik], z[ik:]
     y, w, p0 = par[:nx], par[nx:nx + n], par[nx + n:nx + n + npar]
     so, sc = par[3 * n + npar], par[3 * n + npar + 1]
     B = sp.csr_matrix(prob.B)
@@ -570,15 +789,16 @@ def _assembled_nlp(prob: _Problem, hessian: str):
     cidx = np.full(nx, -1, dtype=np.int64)  # dof -> constraint row (-1: gauge)
     cidx[free] = np.arange(nfree)
     lam_f = ca.MX.sym("lam_f")
-    lam_g = ca.MX.sym("lam_g", nfree)
+    lam_g = ca.MX.sym("lam_g", nfree + nc)
     P = sp.csr_matrix((np.ones(nfree), (free, np.arange(nfree))), shape=(nx, nfree))
-    lam_x = ca.mtimes(_to_dm(P), sc * lam_g)  # the constraints' multipliers per dof (0 on the gauge)
+    lam_u = ca.mtimes(_to_dm(P), lam_g[:nfree])  # the stationarity rows' multipliers per dof (0 on the gauge)
+    lam_x = sc * lam_u
 
     # objective
     exact = hessian == "exact"  # else Gauss-Newton: the objective's part only, no third derivatives
     f, gx, gv, ho = _objective_terms(x, y, w, v, so, not exact)
     # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
-    grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv))
+    grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv, ca.MX(nc, 1)))
     hess = _Assembly(nz, nz)
     loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it), "t0": np.full(n, it + 1),
            "t1": np.full(n, it + 2)}
@@ -587,7 +807,7 @@ def _assembled_nlp(prob: _Problem, hessian: str):
 
     # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
     gval, gjac = _Assembly(nfree, 1), []  # the constraints, and their values from jac_g's term functions
-    jac = _Assembly(nfree, nz)
+    jac = _Assembly(nfree + nc, nz)  # stationarity rows, then the muscle constraints' rows
     ind = np.diff(B.indptr) > 0  # parameters moved by the contractions
     for fam in model.term_families():
         rows = np.arange(fam.dofs.shape[0])
@@ -627,10 +847,36 @@ def _assembled_nlp(prob: _Problem, hessian: str):
             jac.add(sc * ca.vec(dv), *_param_targets(cidx[ds], idx, B, nx))
             if exact:
                 hess.add(ca.vec(lv), *_param_targets(ds, idx, B, nx))
-    g = sc * ca.densify(gval.build())
+    g_stat = sc * ca.densify(gval.build())
+    g_stat_j = sc * ca.densify(gval.build(gjac))
+    g, g_j = g_stat, g_stat_j
+    if nc:  # the muscle constraints: their rows, and J^T kappa in the stationarity rows
+        dl = blk.dofs
+        xl = x[dl.tolist()]
+        C, JTk = blk.val(xl, kap)
+        JTk_j, Jnz, Hknz = blk.jac(xl, kap)
+        extra, extra_j = _Assembly(nfree, 1), _Assembly(nfree, 1)
+        for asm, val in ((extra, JTk), (extra_j, JTk_j)):
+            asm.add(val, cidx[dl], np.zeros(blk.d), np.arange(blk.d))
+        arow = ca.vertcat(a, ca.MX(blk.n_rigid, 1)) if blk.rope else ca.MX(nc, 1)
+        g = ca.vertcat(g_stat + ca.densify(extra.build()), C + arow)
+        g_j = ca.vertcat(g_stat_j + ca.densify(extra_j.build()), C + arow)
+        jr, jc = np.asarray(blk.J_sp.row()), np.asarray(blk.J_sp.get_col())
+        hr, hc = np.asarray(blk.Hk_sp.row()), np.asarray(blk.Hk_sp.get_col())
+        jac.add(Hknz, cidx[dl[hr]], dl[hc], np.arange(len(hr)))  # d(J^T kappa)/dx
+        jac.add(Jnz, cidx[dl[jc]], ik + jr, np.arange(len(jr)))  # d(J^T kappa)/dkappa = J^T
+        jac.add(Jnz, nfree + jr, dl[jc], np.arange(len(jr)))  # dC/dx
+        if blk.rope:  # d(C + a)/da on the rope rows
+            jac.add(ca.MX(ca.DM.ones(m)), nfree + np.arange(m), nx + np.arange(m), np.arange(m))
+        gmap = np.concatenate([dl, ik + np.arange(nc)])
+        Hs = blk.H_sp
+        lam_l = lam_u[dl.tolist()]
+        if exact:
+            hess.add(blk.hess(xl, lam_l, kap, lam_g[nfree:]), gmap[np.asarray(Hs.row())],
+                     gmap[np.asarray(Hs.get_col())], np.arange(Hs.nnz()))
 
     fns = {"grad_f": ca.Function("design_grad_f", [z, par], [f, grad_f], ["x", "p"], ["f", "grad"]),
-           "jac_g": ca.Function("design_jac_g", [z, par], [sc * ca.densify(gval.build(gjac)), jac.build()],
+           "jac_g": ca.Function("design_jac_g", [z, par], [g_j, jac.build()],
                                 ["x", "p"], ["g", "jac"]),
            "hess_lag": ca.Function("design_hess_lag", [z, par, lam_f, lam_g], [hess.build()],
                                    ["x", "p", "lam_f", "lam_g"], ["hess"])}
@@ -650,7 +896,7 @@ def _flattened_solver(prob: _Problem, hessian: str, derivatives: str, opts_key: 
     """
     mesh = prob.mesh
     key = ("design-flattened", tuple(mu.nodes for mu in prob.muscles), prob.muscle_model, prob.material.kind,
-           hessian, derivatives, opts_key)
+           prob.anchor_radius, hessian, derivatives, opts_key)
     cache = mesh.__dict__.setdefault("_design_cache", {})
     if key in cache:
         return cache[key], 0.0
@@ -687,20 +933,32 @@ def _symbolic_nlp(prob: _Problem, hessian: str):
     Bdm = ca.DM(ca.Sparsity(B.shape[0], B.shape[1], B.indptr.tolist(), B.indices.tolist()), B.data.tolist())
     g = model.grad_fn(x, p0 + ca.mtimes(Bdm, a))[1]
     free = np.nonzero(prob.free)[0].tolist()
+    blk = prob.block
+    kap = ca.SX.sym("kappa", blk.nc)
     G = sc * g[free]
+    if blk.nc:  # the muscle constraints, written from MuscleConstraints directly (not from the block)
+        mc = prob.constraints
+        parts = []
+        if blk.rope:
+            parts.append(mc.lengths_expr(x) / ca.DM(prob.L0) - 1.0 + a)
+        if blk.n_rigid:
+            parts.append(mc.rigid_expr(x) * ca.DM(blk.rigid_scale))
+        C = ca.vertcat(*parts)
+        Ca = C - (ca.vertcat(a, ca.SX(blk.n_rigid, 1)) if blk.rope else 0)  # the part that depends on x
+        G = ca.vertcat(G + ca.gradient(ca.dot(kap, Ca), x)[free], C)
     Xm = ca.reshape(x, 2, n)
     Ym = ca.reshape(y, 2, n)
     c, s = ca.cos(th), ca.sin(th)
     rx = c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :]
     ry = s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :]
     f = so * ca.dot(w, (rx ** 2 + ry ** 2).T)
-    z = ca.vertcat(x, a, th, tt)
+    z = ca.vertcat(x, a, th, tt, kap)
     par = ca.vertcat(y, w, p0, so, sc)
     extra = {}
     if hessian == "gauss-newton":
         # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
         lam_f = ca.SX.sym("lam_f")
-        lam_g = ca.SX.sym("lam_g", len(free))
+        lam_g = ca.SX.sym("lam_g", G.numel())
         r = ca.vertcat(ca.vec(rx * ca.sqrt(w).T), ca.vec(ry * ca.sqrt(w).T))
         Jr = ca.jacobian(r, z)
         Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
@@ -726,24 +984,65 @@ def _run_flattened(prob, a0, fwd: _Forward, tol, max_iter, hessian, scaling, war
     J0, al0, _ = prob.objective(x0.reshape(-1, 2))
     history = [(clock(), math.sqrt(J0) * prob.h)]
     if scaling == "auto":
-        so, sc = 1.0 / (prob.W * prob.h ** 2), 1.0 / (prob.Et * prob.h)
+        # a target far from reachable has J0 >> 1 (J grows as 1/h^2 under refinement): dividing by it keeps
+        # IPOPT's absolute tolerance a relative one (without it a 4k-node design stopped at "acceptable")
+        so, sc = 1.0 / (prob.W * prob.h ** 2) / max(1.0, J0), 1.0 / (prob.Et * prob.h)
     else:  # "size": objective normalised by the body's size (the badly scaled variant, for comparisons)
         so, sc = 1.0 / (prob.W * mesh.size ** 2), 1.0 / (prob.Et * prob.h)
-    z0 = np.concatenate([x0, a0, [al0.angle], al0.t])
+    blk = prob.block
+    a_start = np.asarray(a0, dtype=float).copy()
+    if warm_start and blk.nc:
+        # multipliers of the forward equilibrium (least squares); a rope the forward solve left slack
+        # starts at the contraction it reached, at zero tension
+        gs = prob.model.gradient(x0, prob.params(a_start)) * sc
+        kap0 = blk.multipliers(x0, gs, prob.free)
+        if blk.rope:
+            ach = prob.achieved(x0.reshape(-1, 2))
+            slack = ach < a_start - 1e-9
+            a_start[slack] = np.clip(ach[slack], 0.0, prob.a_max)
+            kap0[:m] = np.maximum(kap0[:m], 0.0)
+    else:
+        kap0 = np.zeros(blk.nc)
+    z0 = np.concatenate([x0, a_start, [al0.angle], al0.t, kap0])
     lbz = np.full(len(z0), -np.inf)
     ubz = np.full(len(z0), np.inf)
     lbz[prob.gauge] = prob.X[prob.gauge]
     ubz[prob.gauge] = prob.X[prob.gauge]
     lbz[2 * n:2 * n + m] = 0.0
     ubz[2 * n:2 * n + m] = prob.a_max
+    if blk.rope:  # a rope only pulls: tension >= 0
+        lbz[2 * n + m + 3:2 * n + 2 * m + 3] = 0.0
     par = np.concatenate([prob.y.reshape(-1), prob.w, prob.p0, [so, sc]])
     sol = solver(x0=z0, p=par, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
     st = solver.stats()
     z = np.asarray(sol["x"]).ravel()
     # "Solved_To_Acceptable_Level" means IPOPT could not reach tol: not a success
     ok = bool(st.get("success")) and st.get("return_status") == "Solve_Succeeded"
+    iters = int(st.get("iter_count", 0))
+    if ok and blk.rope:
+        # A slack rope sits on its bound tau = 0 where the interior point method converges slowly (a
+        # degenerate bound: its multiplier is about zero too, e.g. when the target is reachable), leaving
+        # tensions of ~1e-7 and contractions off by ~1e-6. Polish: fix the near-zero tensions at 0 (their
+        # ropes then only measure a = achieved contraction) and solve again from the solution; kept when
+        # it converges and the objective is no worse.
+        ik = 2 * n + m + 3
+        kr = z[ik:ik + m]
+        small = kr < 1e-4 * max(1.0, float(kr.max()))
+        if small.any():
+            lb2, ub2 = lbz.copy(), ubz.copy()
+            lb2[ik + np.nonzero(small)[0]] = 0.0
+            ub2[ik + np.nonzero(small)[0]] = 0.0
+            z2 = z.copy()
+            z2[ik + np.nonzero(small)[0]] = 0.0
+            sol2 = solver(x0=z2, p=par, lbx=lb2, ubx=ub2, lbg=0.0, ubg=0.0)
+            st2 = solver.stats()
+            iters += int(st2.get("iter_count", 0))
+            if st2.get("return_status") == "Solve_Succeeded" and \
+                    float(sol2["f"]) <= float(sol["f"]) * (1 + 1e-6) + 1e-14:
+                z = np.asarray(sol2["x"]).ravel()
     out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
-           "status": str(st.get("return_status", "unknown")), "iterations": int(st.get("iter_count", 0)),
+           "kappa": z[2 * n + m + 3:],
+           "status": str(st.get("return_status", "unknown")), "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt
 
@@ -781,17 +1080,46 @@ class _Outer:
         J, a, x, _al, dJ = self._eval(a)
         if J is None:
             raise _ForwardFailed(self.failures[-1])
-        prob = self.prob
-        H = prob.model.hessian(x, prob.params(a))
-        free = prob.free
-        Hff = H[free][:, free].tocsc()
-        lam = spla.spsolve(Hff, dJ[free])
-        grad = -(prob.dg_da(x)[free].T @ lam)
-        return J, grad
+        return J, _reduced_gradient(self.prob, a, x, dJ)
 
 
 class _ForwardFailed(RuntimeError):
     pass
+
+
+def _reduced_gradient(prob: _Problem, a, x, dJ) -> np.ndarray:
+    """``dJ/da`` at an equilibrium ``x`` of contractions ``a`` by the implicit-function theorem.
+
+    The equilibrium solves ``F(x, kappa; a) = [sc grad E(x, a) + J_C(x)^T kappa ; C(x) + E a] = 0`` on the
+    free dofs, with the active muscle constraints (the rigid end patches; the cable's taut ropes; a slack
+    rope's row drops out, and so does its contraction's influence). One adjoint solve with the symmetric
+    KKT matrix ``K = [[H, A^T], [A, 0]]`` (``H`` the Hessian of the Lagrangian) gives
+    ``dJ/da = -lambda^T dF/da`` with ``K lambda = [dJ/dx ; 0]``. Without constraints ``K = H``.
+    """
+    free = prob.free
+    sc = 1.0 / (prob.Et * prob.h)
+    p = prob.params(a)
+    H = prob.model.hessian(x, p) * sc
+    blk = prob.block
+    dFa = sc * prob.dg_da(x)[free]
+    if blk.nc:
+        kap = blk.multipliers(x, prob.model.gradient(x, p) * sc, free)
+        act = np.ones(blk.nc, dtype=bool)
+        if blk.rope:
+            act[:prob.m] = kap[:prob.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
+        H = (H + blk.hessian(x, kap)).tocsr()
+        A = blk.jacobian(x)[np.nonzero(act)[0]][:, np.nonzero(free)[0]]
+        K = sp.bmat([[H[free][:, free], A.T], [A, None]]).tocsc()
+        Ea = np.zeros((blk.nc, prob.m))
+        if blk.rope:
+            Ea[:prob.m] = np.eye(prob.m)
+        dFa = np.vstack([dFa, Ea[act]])
+        rhs = np.concatenate([dJ[free], np.zeros(int(act.sum()))])
+    else:
+        K = H[free][:, free].tocsc()
+        rhs = dJ[free]
+    lam = spla.spsolve(K, rhs)
+    return -(dFa.T @ lam)
 
 
 def _run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
@@ -832,7 +1160,8 @@ def _run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clo
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
                         method: str = "flattened", a_max: float = 0.6, initial: ArrayLike | None = None,
                         weights: ArrayLike | None = None, interior_weight: float = 0.5,
-                        muscle_model: str = "springs", stiffness: float = 10.0, tol: float | None = None,
+                        muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
+                        tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
                         inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
@@ -855,10 +1184,14 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     weights : (n,) array, optional
         Node weights ``e_i``; default :func:`~mdsr_opt.align.node_weights` with ``interior_weight``.
     interior_weight : float in [0.3, 0.7], default 0.5
-    muscle_model : {"springs", "cable"}
-        As in :func:`~mdsr_opt.solve_internal`.
+    muscle_model : {"cable", "springs"}, default "cable"
+        As in :func:`~mdsr_opt.solve_internal`: the exact rope (its path length is ``(1 - a) L0``, its
+        tension a multiplier) or the paper's per-segment dummy springs.
     stiffness : float, default 10
-        Muscle spring stiffness relative to ``E t``.
+        Muscle spring stiffness relative to ``E t`` (springs only).
+    anchor_radius : float, optional
+        Radius of the rigid patch at each muscle end (a length, >= 0); default
+        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (a fraction of the body's size).
     tol : float, optional
         Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
         (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).
@@ -920,6 +1253,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
     mus, y, a_max, w, stiffness, a0 = _check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
+    anchor_radius = check_anchor_radius(mesh, anchor_radius)
     m = len(mus)
     if tol is None:
         tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
@@ -933,7 +1267,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if a0 is None:
         a0 = _initial_guess(mesh, mus, y, a_max)
 
-    prob = _Problem(mesh, material, mus, y, w, muscle_model, stiffness, a_max)
+    prob = _Problem(mesh, material, mus, y, w, muscle_model, stiffness, a_max, anchor_radius)
     fwd = _Forward(prob, inner_tol, 200)
     t_solve0 = time.perf_counter()
 
@@ -946,16 +1280,19 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         out, status, iters, bt = _run_flattened(prob, a0, fwd, tol, int(max_iter), hessian, scaling, warm_start,
                                                 options, clock, derivatives)
         build_time += bt
+        kappa = None
         if out is None:
             x, a, ok, hist, d0 = fwd.x, a0, False, [], float("nan")
         else:
             x, a, ok, hist, d0 = out["x"], out["a"], out["success"], out["history"], out["initial_difference"]
+            kappa = out["kappa"]
     else:
         if method == "nested":
             obj, ok, status, iters = _run_nested(prob, a0, fwd, tol, int(max_iter), options, clock)
         else:
             obj, ok, status, iters = _run_derivative_free(prob, a0, fwd, tol, int(max_iter), outer, options, clock)
         hist = obj.history
+        kappa = None
         d0 = hist[0][1] if hist else float("nan")
         if obj.best is None:
             x, a, ok = fwd.x, a0, False
@@ -975,7 +1312,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                        iterations=int(iters), n_forward=fwd.n_solves, inner_iterations=fwd.iterations,
                        build_time=build_time, solve_time=total - build_time, time=total,
                        initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
-                       a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist))
+                       a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist),
+                       anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy())
+    _report_muscles(prob, res, x, kappa)
     if not np.all(np.isfinite(res.x)) or mesh.jacobians(res.x).min() <= 0:
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
@@ -988,13 +1327,38 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     return res
 
 
+def _report_muscles(prob: _Problem, res: DesignResult, xflat, kappa) -> None:
+    """Fill the per-muscle fields of ``res``: achieved contraction, stroke, tension, slack."""
+    x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(x2)):
+        return
+    res.achieved = prob.achieved(x2)
+    res.stroke = res.achieved * prob.L0
+    try:
+        if kappa is not None and prob.muscle_model == "cable":  # the NLP's own multipliers
+            res.tension = prob.block.tension(kappa)
+        else:
+            res.tension = prob.tensions(res.contractions, x2.reshape(-1))
+    except (RuntimeError, ValueError):  # pragma: no cover - singular least squares
+        res.tension = np.full(prob.m, np.nan)
+    tiny = 1e-7 * prob.Et * prob.h
+    res.slack = res.tension <= tiny
+
+
 def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
-                  muscle_model: str = "springs", stiffness: float = 10.0) -> tuple[bool, float, float]:
+                  muscle_model: str = "cable", stiffness: float = 10.0,
+                  anchor_radius: float | None = None) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
-    Returns ``(positive_definite, min_eigenvalue, residual)``: whether every pivot of a symmetric
-    factorisation of the free-coordinate Hessian is positive (Sylvester's law of inertia), its smallest
-    eigenvalue relative to ``E t``, and the max-norm of the free gradient relative to ``E t size``.
+    With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
+    Hessian of the Lagrangian restricted to the tangent space of the active constraints.
+
+    Returns ``(positive_definite, min_eigenvalue, residual)``: whether the (reduced) free-coordinate Hessian
+    is positive definite, from the inertia of a sparse symmetric factorisation
+    (:func:`~mdsr_opt.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
+    relative to ``E t`` (when positive definite an estimate by LOBPCG preconditioned by the factor; else the
+    curvature along the direction of most negative curvature found, an upper bound); and the max-norm of the
+    free gradient of the Lagrangian relative to ``E t size``.
 
     Example
     -------
@@ -1009,54 +1373,42 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     mus = check_muscles(mesh, muscles)
     if not mus:
         raise ValueError("check_minimum needs at least one muscle")
+    if muscle_model not in ("springs", "cable"):
+        raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
     x = mesh._check_state(x)
-    prob = _Problem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99)
+    prob = _Problem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99,
+                    anchor_radius=anchor_radius)
     return _stability(prob, a, x.reshape(-1))
 
 
 def _stability(prob: _Problem, a, xflat) -> tuple[bool, float, float]:
-    # the gauge is rigid-motion invariant, so pin the gauge coordinates where x has them
-    p = prob.params(a)
-    g = prob.model.gradient(xflat, p)
-    residual = float(np.abs(g[prob.free]).max()) / (prob.Et * prob.mesh.size)
-    H = prob.model.hessian(xflat, p)
-    Hff = H[prob.free][:, prob.free].tocsc() / prob.Et
-    pd = False
-    try:
-        lu = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-        if np.array_equal(lu.perm_r, lu.perm_c):  # symmetric pivoting: pivots carry the inertia
-            pd = bool((lu.U.diagonal() > 0).all())
-        else:  # pragma: no cover - SuperLU pivoted off the diagonal; fall back to eigenvalues alone
-            pd = None
-    except RuntimeError:  # exactly singular
-        pd = False
-    if Hff.shape[0] <= 1500:  # small: the exact smallest eigenvalue, dense
-        lam = float(np.linalg.eigvalsh(Hff.toarray())[0])
-    else:
-        try:  # positive definite: the eigenvalue nearest zero is the smallest
-            lam = float(spla.eigsh(Hff, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0])
-        except Exception:  # pragma: no cover - singular shift
-            lam = 0.0
-        if not pd or lam <= 0:
-            lam = min(lam, float(spla.eigsh(Hff, k=1, which="SA", return_eigenvectors=False, tol=1e-8,
-                                            maxiter=50000)[0]))
-    if pd is None:  # pragma: no cover
-        pd = lam > 0
-    pd = bool(pd and lam > 0)
-    return bool(pd), lam, residual
+    """``(positive_definite, min_eigenvalue / (E t), residual)`` at ``xflat`` (see :func:`check_minimum`).
+
+    The gauge coordinates are pinned (the energy is invariant under rigid motion); with muscle constraints
+    the Hessian is the Lagrangian's with least-squares multipliers, on the tangent space of the active
+    rows (:meth:`_Problem.kkt_data`, in units of ``E t h``)."""
+    H, free, A, _kap, res = prob.kkt_data(a, xflat)
+    chk = check_stability(H, free, A, lowest=True)
+    lam = float(chk.curvature) * prob.h if chk.curvature is not None else 0.0
+    return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
 
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
-                  weights: ArrayLike | None = None, gap_rtol: float = 1e-5) -> Verification:
+                  weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
+                  drags=None) -> Verification:
     """Check a design independently of how it was found.
 
     Solves the forward internal-driving problem from rest at ``result.contractions``
     (:func:`~mdsr_opt.solve_internal`), measures the largest node distance between that state and
     ``result.x`` after rigid alignment, and checks that ``result.x`` is a strict minimum of the energy
     (:func:`check_minimum`). Passes when the forward solve succeeded, the gap is at most
-    ``gap_rtol * mesh.size`` and the Hessian is positive definite.
+    ``gap_rtol * mesh.size`` and the (reduced) Hessian is positive definite.
+
+    When the target came from external driving, give its ``anchors`` and ``drags`` (as in
+    :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
+    (:func:`~mdsr_opt.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
+    is a shape no body holds; ``target_stable`` reports it.
 
     Example
     -------
@@ -1077,10 +1429,15 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")
     a = np.asarray(result.contractions, dtype=float)
     x = mesh._check_state(result.x)
-    prob = _Problem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99)
+    radius = getattr(result, "anchor_radius", None)
+    radius = None if radius is None or not np.isfinite(radius) else float(radius)
+    target_check = None
+    if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
+        target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
+    prob = _Problem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), model=result.muscle_model,
-                         stiffness=result.stiffness, tol=1e-10)
+                         stiffness=result.stiffness, anchor_radius=radius, tol=1e-10)
     fx = fwd.x
     al = align(x, fx)
     gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max())
@@ -1094,12 +1451,18 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     if not np.isfinite(gap) or gap > gap_tol:
         msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
     if not pd:
-        msgs.append(f"the design's state is not a minimum of the energy (a saddle: smallest Hessian "
-                    f"eigenvalue {lam:.3g} E t)")
+        msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
+                    f"along its direction of negative curvature)")
+    if target_check is not None and not target_check.stable:
+        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
+                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
+    if target_check is not None and target_residual > 1e-5:
+        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
     return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
                         forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
                         positive_definite=bool(pd), min_eigenvalue=lam, message="; ".join(msgs),
-                        time=time.perf_counter() - t0)
+                        time=time.perf_counter() - t0,
+                        target_stable=None if target_check is None else bool(target_check.stable))
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -1258,7 +1621,9 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
     **design_options
-        Passed to :func:`design_contractions` (``a_max``, ``stiffness``, ``muscle_model``...).
+        Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
+        rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
+        contraction, the stroke (rope length pulled in) and the tension.
 
     Returns
     -------

@@ -26,6 +26,7 @@ Example
 
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass
 
@@ -365,19 +366,27 @@ def get_model(mesh, material, cables=(), expand: bool = False) -> EnergyModel:
     return cache[key]
 
 
-def spring_parameters(mesh, muscles, contractions, stiffness: float) -> tuple[np.ndarray, np.ndarray]:
+def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarray, np.ndarray]:
     """Per-edge ``(k, r)`` of the per-segment ("dummy spring") muscle model.
 
-    Each muscle segment on edge ``e`` adds ``stiffness/2 (l_e - (1 - a_c) l0_e)^2``; muscles sharing an
-    edge combine exactly into one spring with summed stiffness and stiffness-weighted mean factor.
+    Each muscle segment on edge ``e`` adds ``k_s/2 (l_e - (1 - a_c) l0_e)^2``; muscles sharing an edge
+    combine exactly into one spring with summed stiffness and stiffness-weighted mean factor.
+    ``stiffness`` is one absolute ``k_s`` for every segment, or a sequence with one array of per-segment
+    stiffnesses per muscle (see :func:`mdsr_opt.muscle_constraints.segment_spring_parameters`, which states
+    the stiffness per unit rest length so the model does not depend on the mesh).
     """
     k = np.zeros(len(mesh.edges))
     kr = np.zeros(len(mesh.edges))
     idx = mesh.edge_index
-    for mus, a in zip(muscles, contractions):
-        for i, j in mus.segments.tolist():
+    scalar = isinstance(stiffness, numbers.Real) or (isinstance(stiffness, np.ndarray) and stiffness.ndim == 0)
+    for c, (mus, a) in enumerate(zip(muscles, contractions)):
+        ks = np.full(len(mus.segments), float(stiffness)) if scalar else np.asarray(stiffness[c], dtype=float)
+        if ks.shape != (len(mus.segments),):
+            raise ValueError(f"stiffness[{c}] must have one value per segment ({len(mus.segments)}), "
+                             f"got shape {ks.shape}")
+        for (i, j), kk in zip(mus.segments.tolist(), ks.tolist()):
             e = idx[(min(i, j), max(i, j))]
-            k[e] += stiffness
-            kr[e] += stiffness * (1.0 - a)
+            k[e] += kk
+            kr[e] += kk * (1.0 - a)
     r = np.where(k > 0, kr / np.where(k > 0, k, 1.0), 1.0)
     return k, r

@@ -806,8 +806,9 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     else:
         known = case.contractions.copy()
         res = solve_internal(scene.mesh, scene.material, scene.muscles, known,
-                             model=scene.design_options.get("muscle_model", "springs"),
-                             stiffness=scene.design_options.get("stiffness", 10.0))
+                             model=scene.design_options.get("muscle_model", "cable"),
+                             stiffness=scene.design_options.get("stiffness", 10.0),
+                             anchor_radius=scene.design_options.get("anchor_radius"))
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()
@@ -840,7 +841,9 @@ class CaseReport:
     success : the target solve, the routing (at least one muscle) and the design all succeeded.
     message : why not, when ``success`` is False.
     target_success, target_status : the solve that made the target.
-    contractions : designed contractions; known_contractions : internal cases' true ones.
+    contractions : designed (commanded) contractions; known_contractions : internal cases' true ones.
+    achieved, stroke : per muscle, the contraction reached along its node chain in the driven state
+        (``1 - L/L0``) and the rope length pulled in (``achieved * L0``, length units).
     contraction_error : internal cases: largest ``|designed - known|``.
     difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
         relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
@@ -866,6 +869,8 @@ class CaseReport:
     target_success: bool = False
     target_status: str = ""
     contractions: list = field(default_factory=list)
+    achieved: list = field(default_factory=list)
+    stroke: list = field(default_factory=list)
     known_contractions: list | None = None
     contraction_error: float | None = None
     difference: float | None = None
@@ -912,18 +917,19 @@ class SceneReport:
 
     def table(self) -> str:
         """A Markdown table of the key figures, one row per case."""
-        head = ("| scene | case | kind | nodes | muscles | contractions | difference | diff/size (%) | "
-                "design | photo d (px) | ratio (%) | time (s) |")
-        rows = [head, "| --- | --- | --- | ---: | ---: | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
+        head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
+                "diff/size (%) | design | photo d (px) | ratio (%) | time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
         for c in self.cases:
-            a = ", ".join(f"{v:.3f}" for v in c.contractions) if c.contractions else "-"
+            a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
+            s = ", ".join(f"{v:.4g}" for v in c.stroke) if c.stroke else "-"
             d = "-" if c.difference is None else f"{c.difference:.4g}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
             ok = "ok" if c.success else "FAILED"
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
-            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {d} | {r} | "
+            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
                         f"{ok} | {pd} | {pr} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
 
@@ -1017,6 +1023,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     run.design = res
     rep.times["design"] = time.perf_counter() - t1
     rep.contractions = [float(a) for a in res.contractions]
+    rep.achieved = [float(a) for a in res.achieved]
+    rep.stroke = [float(s) for s in res.stroke]
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / mesh.size
     rep.initial_difference = float(res.initial_difference)
@@ -1027,7 +1035,10 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.known_contractions = [float(a) for a in setup.known_contractions]
         rep.contraction_error = float(np.abs(res.contractions - setup.known_contractions).max())
     a = ", ".join(f"{v:.3f}" for v in res.contractions)
-    say(f"{prefix}design ({res.method}): a = [{a}], difference {res.difference:.3g} "
+    ach = ", ".join(f"{v:.3f}" for v in res.achieved)
+    st = ", ".join(f"{v:.4g}" for v in res.stroke)
+    say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
+        f"strokes [{st}], difference {res.difference:.3g} "
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if photo:
@@ -1200,10 +1211,11 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
             frames.append(k0 + (k1 - k0) * j / animation.frames_per_step)
     frames.append(keys[-1])
     opts = scene.design_options
-    model, stiffness = opts.get("muscle_model", "springs"), opts.get("stiffness", 10.0)
+    model, stiffness = opts.get("muscle_model", "cable"), opts.get("stiffness", 10.0)
     states, fails = [], []
     for i, a in enumerate(frames):
-        res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness)
+        res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness,
+                             anchor_radius=opts.get("anchor_radius"))
         check_interrupt()
         if not res.success:
             fails.append(i)

@@ -12,6 +12,8 @@ Run:  python tests/benchmarks/bench_design.py --out bench_out
       python tests/benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --variants
                                                           # flattened only: build and solve, and the variants
       python tests/benchmarks/bench_design.py --quick --derivatives casadi   # the flattened NLP's SX path
+      python tests/benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --models cable springs
+                                                          # exact cable vs dummy springs: build, solve, verify
 """
 
 from __future__ import annotations
@@ -45,14 +47,14 @@ def muscles_for(nx: int, ny: int, m: int) -> list[Muscle]:
     return all_m[:m]
 
 
-def make_case(size: str, m: int, seed: int = 0):
+def make_case(size: str, m: int, seed: int = 0, model: str = "cable"):
     ny = SIZES[size]
     nx = 4 * ny
     mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
     mus = muscles_for(nx, ny, m)
     rng = np.random.default_rng(seed + 17 * m)
     a_true = rng.uniform(0.05, 0.25, size=m)
-    fwd = solve_internal(mesh, MAT, mus, a_true)
+    fwd = solve_internal(mesh, MAT, mus, a_true, model=model)
     if not fwd.success:
         raise RuntimeError(f"forward solve for the target failed: {fwd.status}")
     th = 0.4
@@ -73,23 +75,25 @@ def run(args):
     sizes = ["300"] if args.quick else args.sizes
     counts = [1, 2, 4] if args.quick else args.muscles
     rows, traces = [], {}
-    head = (f"{'mesh':>5} {'nodes':>6} {'m':>2} {'method':>16} {'ok':>3} {'build s':>8} {'solve s':>8} "
-            f"{'iters':>6} {'fwd':>5} {'difference':>11} {'|a-a*|max':>10}")
+    head = (f"{'mesh':>5} {'nodes':>6} {'m':>2} {'model':>7} {'method':>16} {'ok':>3} {'build s':>8} {'solve s':>8} "
+            f"{'verify s':>8} {'iters':>6} {'fwd':>5} {'difference':>11} {'|a-a*|max':>10}")
     print(head)
     print("-" * len(head))
     for size in sizes:
-        for m in counts:
-            mesh, mus, a_true, target = make_case(size, m)
+        for m, model in [(c, md) for c in counts for md in args.models]:
+            mesh, mus, a_true, target = make_case(size, m, seed=args.seed, model=model)
             get_model(mesh, MAT)  # the energy model is shared by all methods: build it before timing
             for method in args.methods:
-                kw = {}
+                kw = {"muscle_model": model}
+                if args.start != "geometric":  # the cable's geometric guess is the answer of a reachable target
+                    kw["initial"] = np.full(m, float(args.start))
                 if method == "derivative-free":
                     kw["max_iter"] = args.df_evals * m
                 if method == "flattened":
                     kw["derivatives"] = args.derivatives
                 res = design_contractions(mesh, MAT, mus, target, method=method, **kw)
                 err = float(np.abs(res.contractions - a_true).max())
-                row = {"mesh": size, "nodes": mesh.n_nodes, "muscles": m, "method": method,
+                row = {"mesh": size, "nodes": mesh.n_nodes, "muscles": m, "model": model, "method": method,
                        "derivatives": kw.get("derivatives", ""),
                        "success": res.success, "build_time": res.build_time, "solve_time": res.solve_time,
                        "time": res.time, "iterations": res.iterations, "n_forward": res.n_forward,
@@ -98,21 +102,25 @@ def run(args):
                        "verify_gap": res.verification.gap, "verify_time": res.verification.time,
                        "status": res.status}
                 rows.append(row)
-                traces[(size, m, method)] = res.history
-                print(f"{size:>5} {mesh.n_nodes:>6} {m:>2} {method:>16} {'y' if res.success else 'n':>3} "
-                      f"{res.build_time:>8.3f} {res.solve_time:>8.3f} {res.iterations:>6d} {res.n_forward:>5d} "
+                if model == args.models[0]:
+                    traces[(size, m, method)] = res.history
+                print(f"{size:>5} {mesh.n_nodes:>6} {m:>2} {model:>7} {method:>16} {'y' if res.success else 'n':>3} "
+                      f"{res.build_time:>8.3f} {res.solve_time:>8.3f} {res.verification.time:>8.3f} "
+                      f"{res.iterations:>6d} {res.n_forward:>5d} "
                       f"{res.difference:>11.3e} {err:>10.2e}", flush=True)
     # speed-up of flattened over the rivals at equal difference
     print("\nflattened speed-up at equal difference (rival's time to reach the flattened difference, or its "
           "own final one if worse, over flattened solve time):")
     for size in sizes:
         for m in counts:
-            fl = [r for r in rows if r["mesh"] == size and r["muscles"] == m and r["method"] == "flattened"]
+            fl = [r for r in rows if r["mesh"] == size and r["muscles"] == m and r["method"] == "flattened"
+                  and r["model"] == args.models[0]]
             if not fl:
                 continue
             fl = fl[0]
             for rival in ("nested", "derivative-free"):
-                rv = [r for r in rows if r["mesh"] == size and r["muscles"] == m and r["method"] == rival]
+                rv = [r for r in rows if r["mesh"] == size and r["muscles"] == m and r["method"] == rival
+                      and r["model"] == args.models[0]]
                 if not rv:
                     continue
                 level = max(fl["difference"], rv[0]["difference"]) * 1.01 + 1e-12
@@ -125,7 +133,7 @@ def run(args):
                 print(f"  {size:>4} m={m}: vs {rival:<16} {t / fl_t:7.1f}x  ({t:.3f} s vs {fl_t:.3f} s)")
     # sensitivity of the flattened NLP on the 1k-node, 4-muscle case
     sens = []
-    if args.variants or (not args.quick and "1k" in sizes and 4 in counts):
+    if args.variants or (not args.quick and not args.no_variants and "1k" in sizes and 4 in counts):
         print("\nflattened NLP on 1k nodes, 4 muscles: scaling, warm start, Hessian, derivatives")
         mesh, mus, a_true, target = make_case("1k", 4)
         get_model(mesh, MAT)  # as in the table: the energy model is built before timing
@@ -185,8 +193,14 @@ def main(argv=None):
                     help="design methods to compare")
     ap.add_argument("--df-evals", type=int, default=300, help="derivative-free evaluations per muscle (cap)")
     ap.add_argument("--quick", action="store_true", help="the smallest size and fewer muscles only")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the true contractions")
+    ap.add_argument("--start", default="geometric",
+                    help="initial contractions: 'geometric' (each muscle's 1 - L_target/L0) or one number for all")
+    ap.add_argument("--models", nargs="+", default=["cable"], choices=["cable", "springs"],
+                    help="muscle models (the target is made with the same model); rival comparisons use the first")
     ap.add_argument("--derivatives", default="assembled", choices=["assembled", "casadi"],
                     help="the flattened NLP's derivatives (see design_contractions)")
+    ap.add_argument("--no-variants", action="store_true", help="skip the flattened variants")
     ap.add_argument("--variants", action="store_true",
                     help="run the flattened variants on 1k nodes, 4 muscles whatever the sizes")
     run(ap.parse_args(argv))

@@ -1,0 +1,380 @@
+"""Exact cable muscles, rigid anchor patches and mesh-independent dummy springs (issue 10)."""
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.muscle_constraints import (MuscleConstraints, anchor_patches, body_size, default_anchor_radius,
+                                         rigid_groups, segment_spring_parameters)
+
+MAT = NeoHookean(E=1.0, nu=0.3)
+
+
+def row(mesh, y, x0=-np.inf, x1=np.inf):
+    """The muscle along the mesh row at height ``y`` (between x0 and x1), left to right."""
+    P = mesh.points
+    sel = [int(i) for i in np.argsort(P[:, 0], kind="stable") if abs(P[i, 1] - y) < 1e-9 and x0 <= P[i, 0] <= x1]
+    return Muscle(sel)
+
+
+def pairwise(x, nodes):
+    d = x[nodes][:, None, :] - x[nodes][None, :, :]
+    return np.sqrt((d ** 2).sum(-1))
+
+
+# ------------------------------------------------------------------------------ exact cable
+@pytest.mark.parametrize("cells", [(20, 4), (60, 16), pytest.param((128, 32), marks=pytest.mark.slow)],
+                         ids=["105-nodes", "1037-nodes", "4257-nodes"])
+def test_exact_cable_reaches_the_commanded_contraction_on_every_mesh(cells):
+    mesh = Mesh.rectangle(4.0, 1.0, *cells)
+    mus = [row(mesh, 0.0), row(mesh, 0.5)]
+    a = np.array([0.3, 0.1])
+    res = solve_internal(mesh, MAT, mus, a)
+    assert res.success, res.status
+    assert res.muscle_model == "cable"  # the default
+    L = np.array([m.length(res.x) for m in mus])
+    L0 = np.array([m.rest_length(mesh) for m in mus])
+    assert np.abs((1 - L / L0) - a).max() < 1e-6
+    assert np.abs(res.achieved - a).max() < 1e-6
+    assert np.allclose(res.commanded, a) and np.allclose(res.rest_lengths, L0)
+    assert np.allclose(res.stroke, res.achieved * L0)
+    assert np.all(res.tension > 0) and not res.slack.any()
+    assert res.residual < 1e-6  # the Lagrangian gradient: a KKT point, not a penalised one
+
+
+def test_tension_is_the_derivative_of_the_energy_with_respect_to_the_stroke():
+    # envelope theorem: dE*/d(target length) = -tau, i.e. dE*/da = tau * L0 — an independent check of the
+    # multiplier read off as the rope's tension
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0)]
+    d = 1e-4
+    e_lo, e_hi = (solve_internal(mesh, MAT, mus, [0.3 + s]).energy for s in (-d, d))
+    res = solve_internal(mesh, MAT, mus, [0.3])
+    assert (e_hi - e_lo) / (2 * d) == pytest.approx(res.tension[0] * res.rest_lengths[0], rel=1e-5)
+
+
+def test_a_rope_that_would_have_to_push_goes_slack():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    # the bottom rope bends the strip; the rope a quarter up is shortened by the bend more than its own 5 %
+    res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.25)], [0.3, 0.05])
+    assert res.success, res.status
+    assert res.achieved[0] == pytest.approx(0.3, abs=1e-6) and res.tension[0] > 0
+    assert list(res.slack) == [False, True]
+    assert res.tension[1] == 0.0  # never compressive
+    assert res.achieved[1] > 0.05 + 1e-3  # its path is shorter than the rope: it hangs loose
+    assert res.residual < 1e-6
+
+
+def test_an_opposing_rope_holds_with_positive_tension():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    # the top rope is not pulled in (a = 0) but may not lengthen: it holds against the bottom one
+    res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 1.0)], [0.3, 0.0])
+    assert res.success, res.status
+    assert np.all(res.tension > 0) and not res.slack.any()
+    assert np.abs(res.achieved - [0.3, 0.0]).max() < 1e-6
+    free = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.3])
+    # held at its length, the top cannot stretch as it does when free: the body bends less
+    top = row(mesh, 1.0)
+    assert top.length(free.x) > top.rest_length(mesh) + 0.05
+
+
+def test_load_stepping_moves_the_rope_targets():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0), row(mesh, 1.0)]
+    a = np.array([0.6, 0.6])  # two opposing ropes: a hard axial squeeze
+    # a tight iteration cap forces load steps; every rope target follows the load fraction s
+    res = solve_internal(mesh, MAT, mus, a, max_iter=6, initial_guess="rest")
+    assert res.success, res.status
+    assert len(res.steps) >= 2 and res.steps[-1] == 1.0
+    assert np.abs(res.achieved - a).max() < 1e-6
+    assert res.min_J > 0
+    # a cap too tight to finish: the failure is reported, and the last accepted state has its ropes at
+    # exactly s * a for the last accepted fraction s
+    bad = solve_internal(mesh, MAT, mus, a, max_iter=2, min_step=1 / 16)
+    assert not bad.success and "stalled" in bad.status
+    s = bad.steps[-1]
+    assert 0 < s < 1
+    assert np.abs(bad.achieved - s * a).max() < 1e-6
+
+
+@pytest.mark.parametrize("backend", ["sqpmethod", "uno"])
+def test_other_constrained_backends_agree_with_ipopt(backend):
+    from mdsr_opt.backends import available_backends
+
+    if backend not in available_backends():
+        pytest.skip(f"{backend} is not in this CasADi build")
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    mus = [row(mesh, 0.0)]
+    ref = solve_internal(mesh, MAT, mus, [0.2])
+    res = solve_internal(mesh, MAT, mus, [0.2], backend=backend)
+    assert res.success, res.status
+    assert np.abs(res.x - ref.x).max() < 1e-5
+    assert res.achieved[0] == pytest.approx(0.2, abs=1e-6)
+    assert res.tension[0] == pytest.approx(ref.tension[0], rel=1e-5)
+
+
+def test_backends_without_constraints_are_refused_at_the_door():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    mus = [row(mesh, 0.0)]
+    for backend in ("newton", "scipy"):
+        with pytest.raises(ValueError, match=f"backend '{backend}' cannot take constraints.*exact cable"):
+            solve_internal(mesh, MAT, mus, [0.2], backend=backend)
+        with pytest.raises(ValueError, match="rigid anchor patches.*anchor_radius=0"):
+            solve_internal(mesh, MAT, mus, [0.2], model="springs", backend=backend, anchor_radius=0.3)
+    # without anchor patches the springs need no constraints: the Newton baseline still runs
+    a = solve_internal(mesh, MAT, mus, [0.2], model="springs", backend="newton", anchor_radius=0)
+    b = solve_internal(mesh, MAT, mus, [0.2], model="springs", anchor_radius=0)
+    assert a.success and np.abs(a.x - b.x).max() < 1e-6
+
+
+def test_bad_anchor_radius_is_refused():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    with pytest.raises(ValueError, match="anchor_radius must be >= 0"):
+        solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.2], anchor_radius=-1.0)
+    with pytest.raises(TypeError, match="anchor_radius must be a real number"):
+        solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.2], anchor_radius="big")
+    # anchors covering half of a short muscle: the other half cannot take up a 60 % stroke
+    for model in ("cable", "springs"):
+        with pytest.raises(ValueError, match=r"shorten the rest by 1.2 >= 1; give a smaller anchor_radius"):
+            solve_internal(mesh, MAT, [row(mesh, 0.0, 0.0, 1.0)], [0.6], model=model, anchor_radius=0.3)
+
+
+# ------------------------------------------------------------------------------ anchor patches
+def test_anchor_patches_are_physical_balls_around_the_ends():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    P = mesh.points
+    m = row(mesh, 0.0)
+    r = default_anchor_radius(mesh)
+    assert r == pytest.approx(0.04 * np.hypot(4.0, 1.0))
+    (start, end), = anchor_patches(mesh, [m])
+    assert start[0] == m.nodes[0] and end[0] == m.nodes[-1]
+    for patch in (start, end):
+        d = np.linalg.norm(P - P[patch[0]], axis=1)
+        assert set(patch.tolist()) == set(np.nonzero(d <= r)[0].tolist())  # a convex body: the whole ball
+    assert not set(start.tolist()) & set(end.tolist())
+    # radius 0: the end nodes alone; a huge radius still never joins a muscle's two ends
+    (s0, e0), = anchor_patches(mesh, [m], radius=0.0)
+    assert s0.tolist() == [m.nodes[0]] and e0.tolist() == [m.nodes[-1]]
+    (s9, e9), = anchor_patches(mesh, [m], radius=10.0)
+    assert not set(s9.tolist()) & set(e9.tolist()) and len(s9) + len(e9) < mesh.n_nodes
+    # the default is a size, not a count: scaling the body scales the radius and keeps the patches
+    big = mesh.with_points(10.0 * P)
+    assert default_anchor_radius(big) == pytest.approx(10 * r)
+    (sb, eb), = anchor_patches(big, [m])
+    assert sb.tolist() == start.tolist() and eb.tolist() == end.tolist()
+    # finer meshes put more nodes in the same ball
+    fine = Mesh.rectangle(4.0, 1.0, 64, 16)
+    (sf, _), = anchor_patches(fine, [row(fine, 0.0)])
+    assert len(sf) > len(start)
+
+
+def test_body_size_is_rotation_invariant():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    c, s = np.cos(0.7), np.sin(0.7)
+    turned = mesh.with_points(mesh.points @ np.array([[c, -s], [s, c]]).T)
+    assert body_size(turned) == pytest.approx(body_size(mesh), rel=1e-12)
+    assert body_size(mesh) == pytest.approx(np.hypot(4.0, 1.0))
+
+
+def test_patches_of_different_muscles_that_touch_merge():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    left, right = row(mesh, 0.0, 0.0, 2.0), row(mesh, 0.0, 2.0, 4.0)  # share the node at x = 2
+    groups = rigid_groups(mesh, [left, right])
+    assert len(groups) == 3  # the outer two ends, and one merged group in the middle
+    mid = [g for g in groups if left.nodes[-1] in g.tolist()][0]
+    assert right.nodes[0] in mid.tolist()
+
+
+@pytest.mark.parametrize("muscle_model", ["cable", "springs"])
+def test_rigid_patches_stay_rigid(muscle_model):
+    mesh = Mesh.rectangle(4.0, 1.0, 48, 12)
+    mus = [row(mesh, 0.0), row(mesh, 0.5)]
+    res = solve_internal(mesh, MAT, mus, [0.3, 0.15], model=muscle_model)
+    assert res.success, res.status
+    groups = rigid_groups(mesh, mus, res.anchor_radius)
+    assert len(groups) == 4 and all(len(g) >= 3 for g in groups)
+    for g in groups:
+        assert np.abs(pairwise(res.x, g) - pairwise(mesh.points, g)).max() < 1e-8
+        # no reflection either: the signed area of the first three nodes keeps its sign
+        def area(x):
+            a, b, c = x[g[:3]]
+            u, v = b - a, c - a
+            return u[0] * v[1] - u[1] * v[0]
+        assert area(res.x) == pytest.approx(area(mesh.points), abs=1e-8)
+
+
+def _segment_strains(cells, radius):
+    mesh = Mesh.rectangle(4.0, 1.0, *cells)
+    m = row(mesh, 0.0)
+    res = solve_internal(mesh, MAT, [m], [0.2], anchor_radius=radius)
+    assert res.success and res.achieved[0] == pytest.approx(0.2, abs=1e-6)
+    return 1 - m.segment_lengths(res.x) / m.segment_lengths(mesh.points)
+
+
+def test_anchor_patches_keep_the_muscle_strain_from_drifting_under_refinement():
+    # a rope pulling on single end nodes indents the body more with every refinement, so the same stroke
+    # leaves less for the muscle's interior; over anchor patches of physical size the interior converges
+    cells = [(16, 4), (32, 8), (64, 16)]
+    point = [np.median(_segment_strains(c, 0.0)) for c in cells]
+    patch = [np.median(_segment_strains(c, None)) for c in cells]
+    assert point[0] - point[2] > 0.025  # measured 0.183 -> 0.150
+    assert np.ptp(patch) < 0.01  # measured 0.183, 0.190, 0.186
+
+
+@pytest.mark.slow
+def test_end_segment_strain_converges_only_with_anchor_patches():
+    cells = [(32, 8), (64, 16), (128, 32)]
+    point = [_segment_strains(c, 0.0).max() for c in cells]  # measured 0.38, 0.54, 0.69: no limit
+    patch = [_segment_strains(c, None).max() for c in cells]  # measured 0.31, 0.40, 0.43
+    assert point[2] - point[1] > 0.1
+    assert abs(patch[2] - patch[1]) < 0.5 * abs(patch[1] - patch[0])
+
+
+# ------------------------------------------------------------------------------ constraint derivatives
+def test_constraint_jacobian_and_hessian_match_finite_differences():
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    P = mesh.points
+    # a bent muscle (along the bottom, then up the right side) and a straight one
+    bottom = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 0.0]
+    side = [int(i) for i in np.argsort(P[:, 1]) if P[i, 0] == 2.0][1:]
+    mc = MuscleConstraints(mesh, [Muscle(bottom + side), row(mesh, 0.5)], radius=0.3)
+    assert mc.n_rigid > 0
+    rng = np.random.default_rng(1)
+    x = (P + 0.05 * rng.standard_normal(P.shape)).reshape(-1)
+    J = mc.jacobian(x).toarray()
+    lam = rng.standard_normal(mc.n_constraints)
+    H = mc.hessian(x, lam).toarray()
+    h = 1e-6
+    Jfd = np.zeros_like(J)
+    Hfd = np.zeros_like(H)
+    for k in range(len(x)):
+        e = np.zeros_like(x)
+        e[k] = h
+        Jfd[:, k] = (mc.values(x + e) - mc.values(x - e)) / (2 * h)
+        Hfd[:, k] = (mc.jacobian(x + e).T @ lam - mc.jacobian(x - e).T @ lam) / (2 * h)
+    assert np.abs(J - Jfd).max() < 1e-8
+    assert np.abs(H - Hfd).max() < 1e-6
+    assert np.abs(H - H.T).max() == 0.0
+    # rigid motions keep every rigid row at zero and every rope length; a reflection does not
+    c, s = np.cos(0.8), np.sin(0.8)
+    moved = P @ np.array([[c, -s], [s, c]]).T + [3.0, -1.0]
+    assert np.abs(mc.rigid(moved)).max() < 1e-12
+    assert mc.lengths(moved) == pytest.approx(mc.rest_lengths, rel=1e-12)
+    assert np.abs(mc.rigid(P * [1.0, -1.0])).max() > 0.1
+    assert mc.n_rigid == sum(2 * len(g) - 3 for g in mc.groups)
+
+
+# ------------------------------------------------------------------------------ dummy springs
+@pytest.mark.parametrize("stiffness", [1.0, 10.0])
+def test_spring_contraction_does_not_depend_on_the_mesh(stiffness):
+    def achieved(cells):
+        mesh = Mesh.rectangle(4.0, 1.0, *cells)
+        res = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.3], model="springs", stiffness=stiffness)
+        assert res.success, res.status
+        return res.achieved[0]
+
+    coarse, fine = achieved((24, 6)), achieved((64, 16))  # 175 and 1105 nodes: 6x as many
+    assert abs(fine - coarse) / fine < 0.03
+    assert coarse < 0.3  # a penalty: the body resists
+
+
+@pytest.mark.slow
+def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():
+    def achieved(cells):
+        mesh = Mesh.rectangle(4.0, 1.0, *cells)
+        res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.5)], [0.3, 0.1], model="springs",
+                             stiffness=1.0)
+        assert res.success, res.status
+        return res.achieved
+
+    coarse, fine = achieved((48, 12)), achieved((128, 32))  # 637 and 4257 nodes
+    assert np.abs(fine - coarse).max() / fine.max() < 0.03
+
+
+def test_springs_stiffness_is_per_unit_rest_length():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    m = row(mesh, 0.0)
+    k, r = segment_spring_parameters(mesh, MAT, [m], [0.2], 3.0, anchor_radius=0)
+    on = k > 0
+    l0 = mesh.edge_lengths[on]
+    K = 3.0 * MAT.E * MAT.thickness * np.hypot(4.0, 1.0)
+    assert k[on] * l0 == pytest.approx(np.full(on.sum(), K))
+    assert r[on] == pytest.approx(np.full(on.sum(), 0.8))
+    # with anchors the segments inside a patch carry no spring and the rest shorten more, so that the chain
+    # as a whole is commanded 20 %
+    k2, r2 = segment_spring_parameters(mesh, MAT, [m], [0.2], 3.0, anchor_radius=0.6)
+    on2 = k2 > 0
+    assert on2.sum() == on.sum() - 2
+    free = mesh.edge_lengths[on2].sum()
+    assert (1 - r2[on2]) * free == pytest.approx(np.full(on2.sum(), 0.2 * 4.0))
+
+
+def test_springs_of_muscles_with_different_segment_counts():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    long, short = row(mesh, 0.0), row(mesh, 1.0, 0.0, 1.0)
+    k, r = segment_spring_parameters(mesh, MAT, [long, short], [0.2, 0.1], 3.0, anchor_radius=0)
+    assert (k > 0).sum() == len(long.segments) + len(short.segments)
+    assert sorted(set(np.round(r[k > 0], 12))) == [0.8, 0.9]
+
+
+# ------------------------------------------------------------------------------ stability of constrained states
+def test_constrained_equilibrium_is_a_minimum_on_the_constraints_tangent_space():
+    """The result's stability check agrees with a dense eigen-solve of the reduced Lagrangian Hessian,
+    built here from the constraints' own Jacobian and Hessian with least-squares multipliers."""
+    import scipy.linalg as sl
+
+    from mdsr_opt.equilibrium import _gauge
+    from mdsr_opt.model import get_model
+
+    mesh = Mesh.rectangle(3.0, 1.0, 12, 4)
+    mus = [row(mesh, 0.0), row(mesh, 1.0)]
+    res = solve_internal(mesh, MAT, mus, [0.3, 0.0], align_to_rest=False)
+    assert res.success and res.stable is True
+    assert res.stability["method"].endswith("finsler") and res.stability["n_negative"] == 0
+    x = res.x.reshape(-1)
+    fixed = np.zeros(len(x), dtype=bool)
+    fixed[list(_gauge(mesh))] = True
+    free = ~fixed
+    mc = MuscleConstraints(mesh, mus, res.anchor_radius)
+    model = get_model(mesh, MAT)
+    g = model.gradient(x, model.params(MAT))
+    J = mc.jacobian(x).toarray()  # both ropes are taut (the top one holds): every row is active
+    lam = np.linalg.lstsq(J[:, free].T, -g[free], rcond=None)[0]
+    assert np.abs(g[free] + J[:, free].T @ lam).max() < 1e-7  # a KKT point
+    assert lam[:2] == pytest.approx(res.tension, rel=1e-6)
+    H = model.hessian(x, model.params(MAT)).toarray() + mc.hessian(x, lam).toarray()
+    Z = sl.null_space(J[:, free])
+    ev = np.linalg.eigvalsh(Z.T @ H[np.ix_(free, free)] @ Z)
+    assert ev[0] > 0
+
+
+def test_a_constrained_state_the_check_calls_unstable_is_not_a_success(monkeypatch):
+    """Wiring: internal driving with constraints goes through the stability check, and a failed check
+    (here forced, with no escape direction) turns the solve into a reported failure."""
+    import mdsr_opt.equilibrium as eq
+    from mdsr_opt.stability import StabilityCheck
+
+    seen = []
+
+    def unstable(H, free, A=None, **kw):
+        seen.append(A)
+        return StabilityCheck(False, 1, 0, None, -1.0, "forced", 0.0)
+
+    monkeypatch.setattr(eq, "check_stability", unstable)
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    res = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.2])
+    assert not res.success and res.stable is False
+    assert "not a stable equilibrium" in res.status
+    assert seen and all(A is not None and A.shape[0] >= 1 for A in seen)  # active constraint rows were passed
+
+
+def test_ropes_at_rest_length_leave_the_body_exactly_at_rest():
+    # unloaded ropes have multipliers of round-off size: that must not send the solve into the barrier
+    # (slack) mode, which would leave the body a little off rest
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    mus = [row(mesh, 0.0), row(mesh, 0.5), row(mesh, 1.0), row(mesh, 0.5, 1.0, 3.0)]
+    res = solve_internal(mesh, MAT, mus, np.zeros(4))
+    assert res.success and res.iterations <= 2
+    assert np.abs(res.x - mesh.points).max() < 1e-9
+    assert np.all(res.tension >= 0.0) and res.tension.max() < 1e-12 and not res.slack.any()
+    assert np.abs(res.achieved).max() < 1e-12

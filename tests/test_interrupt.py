@@ -1,0 +1,124 @@
+"""Ctrl-C during a solve stops it promptly with KeyboardInterrupt (never a failed step or a success)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# a long external solve: a fine strip compressed from a poor first guess, one IPOPT call of many iterations
+_LONG_SOLVE = r"""
+import sys, time
+import numpy as np
+from mdsr_opt import Mesh, NeoHookean, solve_external
+mesh = Mesh.rectangle(10.0, 1.0, {nx}, {ny})
+P = mesh.points
+left = np.flatnonzero(P[:, 0] == 0.0)
+drags = {{int(i): (P[i, 0] + 4.0, P[i, 1] + 2.0) for i in np.flatnonzero(P[:, 0] == 10.0)}}
+mat = NeoHookean(1.0, 0.3)
+solve_external(mesh, mat, left, drags, min_step=1.0, max_iter=5)  # builds the model and solver
+print("ready", flush=True)
+t0 = time.perf_counter()
+res = solve_external(mesh, mat, left, drags, backend="{backend}", initial_guess="rest", tol=1e-14,
+                     max_iter=100000, min_step=1e-6)
+print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
+"""
+
+
+# a long internal solve with the exact cable (the constrained NLP: equality then inequality ropes)
+_LONG_INTERNAL = r"""
+import time
+import numpy as np
+from mdsr_opt import Mesh, NeoHookean, Muscle, solve_internal
+mesh = Mesh.rectangle(10.0, 1.0, {nx}, {ny})
+P = mesh.points
+top = sorted(np.flatnonzero(P[:, 1] == 1.0), key=lambda i: P[i, 0])
+mus = [Muscle(top[2:-2])]
+mat = NeoHookean(1.0, 0.3)
+solve_internal(mesh, mat, mus, [0.01], max_iter=3)  # builds the model and solver
+print("ready", flush=True)
+t0 = time.perf_counter()
+res = solve_internal(mesh, mat, mus, [0.6], initial_guess="rest", tol=1e-14, max_iter=100000, min_step=1e-6)
+print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
+"""
+
+
+def _run_and_interrupt(backend, nx=200, ny=20, delay=1.0, script=_LONG_SOLVE):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-c", script.format(nx=nx, ny=ny, backend=backend)],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.strip() == "ready", (line, proc.stderr.read())
+        time.sleep(delay)
+        assert proc.poll() is None, "the solve ended before the interrupt: make it longer"
+        proc.send_signal(signal.SIGINT)
+        t_sig = time.perf_counter()
+        out, err = proc.communicate(timeout=60)
+        elapsed = time.perf_counter() - t_sig
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out, err, elapsed
+
+
+@pytest.mark.parametrize("backend", ["ipopt", pytest.param("newton", marks=pytest.mark.slow)])
+def test_sigint_during_solve_raises_keyboard_interrupt_promptly(backend):
+    rc, out, err, elapsed = _run_and_interrupt(backend)
+    assert "returned" not in out  # no result (neither success nor a failed step) was returned
+    assert rc != 0
+    assert "KeyboardInterrupt" in err.strip().splitlines()[-1]
+    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+
+
+@pytest.mark.slow
+def test_sigint_during_a_cable_solve_raises_keyboard_interrupt_promptly():
+    rc, out, err, elapsed = _run_and_interrupt("ipopt", script=_LONG_INTERNAL)
+    assert "returned" not in out
+    assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1]
+    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+
+
+def test_interruptible_reraises_a_swallowed_interrupt():
+    """What CasADi does: the handler's KeyboardInterrupt is caught inside the call; the guard re-raises it."""
+    from mdsr_opt.backends import interruptible
+
+    before = signal.getsignal(signal.SIGINT)
+    swallowed = []
+    with pytest.raises(KeyboardInterrupt, match="interrupted"):
+        with interruptible():
+            with interruptible():  # nested guards compose
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(0.5)  # the handler runs here
+                except KeyboardInterrupt as exc:
+                    swallowed.append(exc)  # a solver swallowing it
+    assert len(swallowed) == 1
+    assert signal.getsignal(signal.SIGINT) is before  # handler restored
+    with interruptible():  # no interrupt: nothing raised
+        pass
+
+
+def test_an_error_replacing_a_swallowed_interrupt_becomes_the_interrupt():
+    """A CasADi Function call interrupted outside a solver raises its own error: the interrupt wins."""
+    from mdsr_opt.backends import interruptible
+
+    with pytest.raises(KeyboardInterrupt, match="interrupted") as info:
+        with interruptible():
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.5)
+            except KeyboardInterrupt:
+                raise RuntimeError("SWIG: wrong arguments") from None
+    assert isinstance(info.value.__cause__, RuntimeError)
+    with pytest.raises(RuntimeError, match="plain"):  # without an interrupt, errors pass unchanged
+        with interruptible():
+            raise RuntimeError("plain")
