@@ -100,7 +100,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
     for equality in ((True, False) if nt else (False,)):
         lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
-        with _quiet_stdout(plugin == "uno"):
+        with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         total_t += time.perf_counter() - t0
         st = solver.stats()
@@ -174,16 +174,23 @@ def interruptible():
             caught.append(exc)
             raise
 
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, prev)
-    if caught:
+    def recorded():
         exc = caught[0]
         if isinstance(exc, KeyboardInterrupt) and not exc.args:
             exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
-        raise exc
+        return exc
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
+        if caught:
+            raise recorded() from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, prev)
+    if caught:
+        raise recorded()
 
 
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values):

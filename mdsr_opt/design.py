@@ -59,9 +59,9 @@ Example
 >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
 >>> muscle = Muscle(range(1, 16))                       # along the bottom edge
 >>> target = solve_internal(mesh, NeoHookean(1.0, 0.3), [muscle], [0.2]).x
->>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [muscle], target)
->>> res.success, round(float(res.contractions[0]), 6)
-(True, 0.2)
+>>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [muscle], target, initial=[0.05])
+>>> res.success, round(float(res.contractions[0]), 6), round(float(res.stroke[0]), 6)  # stroke = a L0
+(True, 0.2, 0.7)
 """
 
 from __future__ import annotations
@@ -1574,7 +1574,9 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
     **design_options
-        Passed to :func:`design_contractions` (``a_max``, ``stiffness``, ``muscle_model``...).
+        Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
+        rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
+        contraction, the stroke (rope length pulled in) and the tension.
 
     Returns
     -------
