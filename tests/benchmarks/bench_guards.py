@@ -81,7 +81,7 @@ def refusal(fn) -> tuple[str, float]:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=5, help="timed repetitions per case (the median is printed)")
     ap.add_argument("--skip-big", action="store_true", help="skip the 1.9M-triangle mesh")
     ap.add_argument("--extract", type=int, default=0, help="only time contour extraction on N x N pixels")
     a = ap.parse_args(argv)

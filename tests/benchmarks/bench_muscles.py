@@ -92,9 +92,9 @@ def run(sizes, scenes, repeat, log=print):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="1000,3000", help="approximate node counts")
-    ap.add_argument("--scenes", default="one,two")
-    ap.add_argument("--repeat", type=int, default=7)
-    ap.add_argument("--out", default="bench_out")
+    ap.add_argument("--scenes", default="one,two", help="comma-separated scenes to time (one, two)")
+    ap.add_argument("--repeat", type=int, default=7, help="timed repetitions per case (the median is printed)")
+    ap.add_argument("--out", default="bench_out", help="folder for the CSV and the chart")
     a = ap.parse_args(argv)
     rows = run([int(s) for s in a.sizes.split(",")], a.scenes.split(","), a.repeat)
     os.makedirs(a.out, exist_ok=True)

@@ -93,8 +93,8 @@ def run(size: str, repeats: int) -> list[dict]:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES))
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES), help="mesh sizes to time")
+    ap.add_argument("--repeats", type=int, default=3, help="timed repetitions per case (the median is printed)")
     args = ap.parse_args(argv)
     print(f"{'size':>5} {'nodes':>6} {'mode':>9} {'solve [s]':>10} {'check [s]':>10} {'check/solve':>12}  method")
     for size in args.sizes:
