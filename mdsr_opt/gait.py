@@ -64,6 +64,8 @@ class Gait:
     fps: float = 8.0
 
     def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name or not all(c.isalnum() or c in "_-" for c in self.name):
+            raise ValueError(f"gait name must be letters, digits, '_' and '-', got {self.name!r}")
         seq = tuple(str(s) for s in self.sequence)
         if not seq:
             raise ValueError(f"gait {self.name!r}: the pose sequence is empty")
@@ -171,7 +173,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     frames; a muscle that does not pull in a frame is released as far as either neighbouring pose needs
     (``min(s_i, s_{i+1}, 0)``: the servo pays the rope out first, so the body can stretch along it). Each
     frame is a forward internal-driving solve (:func:`~mdsr_opt.solve_internal` with the pulling muscles, the
-    layout's muscle model and anchor radius, warm-started from the previous frame); a frame in which no
+    layout's muscle model and anchor radius, warm-started from the previous frame, else from rest); a frame in which no
     muscle pulls is the rest shape exactly. A released rope whose path in the solved frame is longer than
     the rope paid out would be taut: that frame is reported as failed.
 
@@ -242,21 +244,22 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     F = len(S)
     ach, ten = np.full((F, m), np.nan), np.full((F, m), np.nan)
     states, ok, status = [], np.zeros(F, bool), []
-    x_prev = mesh.points
+    x_prev = None
     for k in range(F):
         on = np.flatnonzero(S[k] > 0)
         if not len(on):  # nothing pulls: the rest shape, exactly
             x, ok[k], msg = mesh.points.copy(), True, "rest (no muscle pulls)"
         else:
-            r = solve_internal(mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999),
-                               model=layout.muscle_model, anchor_radius=layout.anchor_radius,
-                               initial_guess=x_prev, **opts)
+            args = (mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999))
+            kw = dict(model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
+            r = solve_internal(*args, initial_guess=x_prev, **kw) if x_prev is not None else None
+            if r is None or not r.success:  # the warm start can fail (a new set of pulling muscles): from rest
+                r = solve_internal(*args, **kw)
             x, ok[k], msg = np.asarray(r.x, dtype=float), bool(r.success), str(r.status)
             st, tn = getattr(r, "stroke", None), getattr(r, "tension", None)
             ach[k, on] = st if st is not None and np.size(st) == len(on) else np.nan
             ten[k, on] = tn if tn is not None and np.size(tn) == len(on) else np.nan
-            if r.success:
-                x_prev = r.x
+            x_prev = r.x if r.success else None
         off = np.flatnonzero(S[k] <= 0)
         if len(off):  # released ropes: their length is L0 - stroke; the body's path must not exceed it
             Lx = np.array([layout.muscles[i].length(x) for i in off])
@@ -321,3 +324,83 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
     titles = [f"{title} {schedule.labels[k]} (t = {schedule.times[k]:.2f} s)".strip() for k in range(schedule.n_frames)]
     return plot.save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
                                activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
+
+
+def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> dict | None:
+    """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
+
+    Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.poses.design_poses`, the scene's routing and
+    design options, the budget ``gait.max_muscles``; the runner's own per-case routings and designs are the
+    separate layouts compared against), solves the schedule (:func:`gait_schedule`) and writes
+    ``layout.json``, ``schedule.csv``, ``schedule.png`` and ``<gait>.gif`` (with ``figures``) and the
+    fabrication files ``<scene>.svg``, ``<scene>.dxf``, ``<scene>_muscles.csv`` in ``scene.units``.
+
+    Parameters
+    ----------
+    scene : Scene with a ``gait``.
+    out : the run's folder.
+    runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
+    figures : write the chart and the GIF.
+    log : progress messages.
+
+    Returns
+    -------
+    dict or None
+        JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
+        None when a pose of the gait was not run (``--case``).
+    """
+    from pathlib import Path
+
+    from .export import export_fabrication
+    from .io import write_json
+    from .plot import save_figure
+    from .poses import design_poses
+
+    gait = scene.gait
+    say = log or (lambda s: None)
+    if any(c not in runs for c in gait.poses):
+        return None
+    folder = Path(out) / gait.name
+    info: dict = {"kind": "gait", "poses": list(gait.poses), "sequence": list(gait.sequence), "units": scene.units}
+    missing = [c for c in gait.poses if runs[c].setup is None or getattr(runs[c].setup, "target", None) is None]
+    if missing:
+        info.update(success=False, message=f"no target for pose(s) {', '.join(missing)}")
+        return info
+    targets = {c: runs[c].setup.target for c in gait.poses}
+    separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
+                if runs[c].design is not None and len(runs[c].setup.muscles)}
+    try:
+        res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
+                           routing_options=scene.routing_options, design_options=scene.design_options,
+                           separate=separate)
+        sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
+                            cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units)
+    except ValueError as exc:
+        info.update(success=False, message=str(exc))
+        say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
+        return info
+    files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
+    if figures:
+        files.append(save_figure(plot_schedule(sch, title=f"{scene.name} {gait.name}: strokes over time "
+                                               f"({sch.n_frames} frames; dotted: achieved)"), folder / "schedule.png"))
+        files.append(save_gait_animation(scene.mesh, sch, res.muscles, folder / f"{gait.name}.gif",
+                                         title=f"{scene.name} {gait.name}:", fps=gait.fps))
+    files += list(export_fabrication(scene.mesh, res, folder, units=scene.units, name=scene.name).values())
+    ok = res.all_success and bool(sch.success.all())
+    failed = [int(k) for k in np.flatnonzero(~sch.success)]
+    info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
+                differences=dict(zip(res.names, map(float, res.differences))),
+                separate_differences={n: (float(v) if np.isfinite(v) else None)
+                                      for n, v in zip(res.names, res.separate_differences)},
+                strokes={n: [float(v) for v in row] for n, row in zip(res.names, res.strokes)},
+                frames=sch.n_frames, failed_frames=failed,
+                message="" if ok else ("; ".join(f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
+                                                 if not o) + (f"; frames {failed} failed" if failed else "")),
+                times={k: float(v) for k, v in res.times.items()},
+                files=[os.path.relpath(f, folder.parent) for f in files])
+    write_json(folder / "gait.json", info)
+    say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
+        f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
+            f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
+        + f"; {sch.n_frames} frames" + ("" if ok else " - FAILED: " + info["message"]))
+    return info
