@@ -190,7 +190,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     units : str
         The mesh's length unit, written into the schedule (see :data:`mdsr_opt.export.UNITS`).
     solve_options : dict, optional
-        Extra keywords for :func:`~mdsr_opt.solve_internal` (``tol``, ``backend``...).
+        Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
+        tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
+        ropes, strokes of ~1e-3 of their length, leave residuals of ~1e-4 that the solve rejects).
 
     Returns
     -------
@@ -221,7 +223,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         seq = seq + [seq[0]]
     if len(seq) < 2:
         raise ValueError("a non-cyclic gait needs at least two poses")
-    opts = dict(solve_options or {})
+    opts = {"tol": 1e-10, **dict(solve_options or {})}  # the design's own forward tolerance
     m = layout.n_muscles
     key = [np.zeros(m) if s == "rest" else layout.strokes[layout.index(s)] for s in seq]
     S, labels, kf = [], [], []
