@@ -54,16 +54,13 @@ Example
 
 from __future__ import annotations
 
-import csv
 import math
-import os
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from ._checks import as_float_array
 from .mesh import Mesh

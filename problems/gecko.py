@@ -92,8 +92,8 @@ def build(resolution="medium") -> Scene:
         design_options={"method": "flattened", "a_max": 0.6}, animations=(gait,),
         expected={"n_muscles": {"bend_left": 2, "bend_right": 2}}, resolution=resolve_resolution(resolution),
         source=__file__, units="cm",
-        # one muscle layout for both bends, alternated: the walking gait on the shared layout (issue 16)
-        gait=Gait("walk", ("bend_left", "bend_right"), frames_per_step=6, max_muscles=4))
+        # one muscle layout for both bends, alternated through the straight body (no co-contraction) (issue 16)
+        gait=Gait("walk", ("bend_left", "rest", "bend_right", "rest"), frames_per_step=4, max_muscles=4))
 
 
 if __name__ == "__main__":
