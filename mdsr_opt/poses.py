@@ -48,8 +48,10 @@ Example
 ...     R = 3.0; phi = (X[:, 0] - 2.0) / R; r = R - s * (X[:, 1] - 0.5)
 ...     return np.column_stack([r * np.sin(phi), s * (R - r * np.cos(phi))])
 >>> res = design_poses(mesh, NeoHookean(1.0, 0.3), {"left": bend(1), "right": bend(-1)})
->>> res.n_muscles, res.separate_n_muscles.sum(), bool(res.success)
+>>> res.n_muscles, int(res.separate_n_muscles.sum()), res.all_success
 (2, 2, True)
+>>> bool(np.all(res.differences <= 1.1 * res.separate_differences))
+True
 """
 
 from __future__ import annotations
