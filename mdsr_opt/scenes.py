@@ -1190,8 +1190,11 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
                        f"{res.failed_frames})"))
                 if figures:
                     act = res.contractions / scene.design_options.get("a_max", 0.6)
-                    titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, a = ["
-                              + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(res.contractions)]
+                    # titles state the contraction each frame reached along the muscles' node chains
+                    reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles]
+                               for x in res.states]
+                    titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
+                              + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
                     plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
                                         activations=act, titles=titles, fps=anim.fps)
                     data["gif"] = f"{anim.name}.gif"

@@ -140,11 +140,37 @@ def _independent_rows(Af: sp.csr_matrix) -> sp.csr_matrix:
     return Af[np.sort(piv[:rank] - 1)]
 
 
-def _inertia(fac: _Factor, rtol: float) -> tuple[int, int]:
+def _inertia(fac: _Factor, rtol: float, scale: float) -> tuple[int, int]:
+    """``(negative, zero)`` pivots; a pivot is zero when ``|d| <= rtol * scale`` (``scale`` the largest
+    diagonal entry of the matrix tested, not of the penalised one)."""
     d = fac.d
-    scale = float(np.abs(d).max()) if d.size else 0.0
     zero = np.abs(d) <= rtol * scale
     return int(((d < 0) & ~zero).sum()), int(zero.sum())
+
+
+def _factor_inertia(M, rtol: float, scale: float):
+    """``(factor, (negative, zero), shifted)``. When the factorisation breaks down (exactly singular, or
+    SuperLU pivoted off the diagonal) the inertia of ``M + tau I`` and ``M - tau I`` brackets the zero
+    eigenvalues (``shifted=True``, the factor of the lower one returned when it has a negative pivot)."""
+    try:
+        fac = _Factor(M)
+        if fac.symmetric and np.all(np.isfinite(fac.d)):
+            return fac, _inertia(fac, rtol, scale), False
+    except RuntimeError:
+        pass
+    tau = max(rtol, 1e-12) * scale
+    I = sp.identity(M.shape[0], format="csc")
+    lo, hi = _Factor((M + tau * I).tocsc()), _Factor((M - tau * I).tocsc())
+    n_neg = int((lo.d < 0).sum())
+    n_zero = max(int((hi.d < 0).sum()) - n_neg, 0)
+    return (lo if n_neg else hi), (n_neg, n_zero), True
+
+
+def _tangent(project, v):
+    """``project(v)``, or None when ``v`` lies (numerically) in the constraints' row space."""
+    w = project(v)
+    nv = np.linalg.norm(v)
+    return w if nv > 0 and np.linalg.norm(w) > 1e-8 * nv else None
 
 
 def _rayleigh(M, v) -> float:
@@ -230,9 +256,10 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
 
     Notes
     -----
-    Cost: one sparse factorisation of the free block (two with constraints, to confirm Finsler's
-    threshold), plus, only when not stable, a few triangular solves and one more factorisation for the
-    direction. No eigen-solve.
+    Cost: one sparse factorisation of the free block (with constraints, of ``H + rho A'A``), plus, only
+    when not stable, a few triangular solves and a few factorisations for the direction (with constraints,
+    repeated with a 100x larger ``rho`` until a tangent direction of negative curvature certifies the
+    answer). No eigen-solve.
     """
     t0 = time.perf_counter()
     H, free, A = _check_inputs(H, free, A)
@@ -249,68 +276,58 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     method = "ldl-inertia"
 
     project = (lambda v: v)
-    M = Hff
+    h = float(abs(Hff.diagonal()).max()) or 1.0
+    Af, rho = None, 0.0
     if A is not None:
         Af = sp.csr_matrix(A)[:, idx]
         keep = np.asarray(abs(Af).sum(axis=1)).ravel() > 0  # rows touching only fixed coordinates
-        Af = Af[keep]
-        if Af.shape[0]:
-            method = "ldl-inertia+finsler"
-            Af = _independent_rows(Af)
-            AAt = (Af @ Af.T).tocsc()
-            aat = spla.splu(AAt)
+        Af = Af[keep] if keep.any() else None
+    if Af is not None:
+        method = "ldl-inertia+finsler"
+        Af = _independent_rows(Af)
+        AAt = (Af @ Af.T).tocsc()
+        aat = spla.splu(AAt)
 
-            def project(v, Af=Af, aat=aat):  # orthogonal projection onto null(A_f)
-                return v - Af.T @ aat.solve(Af @ v)
+        def project(v, Af=Af, aat=aat):  # orthogonal projection onto null(A_f)
+            return v - Af.T @ aat.solve(Af @ v)
 
-            h = float(abs(Hff.diagonal()).max()) or 1.0
-            a2 = float(AAt.diagonal().max())
-            rho = 1e4 * h / a2
-            M = (Hff + rho * (Af.T @ Af)).tocsc()
+        rho = 1e4 * h / float(AAt.diagonal().max())
+        AtA = (Af.T @ Af).tocsc()
 
-    fac, counts = None, None
-    try:
-        fac = _Factor(M)
-        if fac.symmetric and np.all(np.isfinite(fac.d)):
-            counts = _inertia(fac, rtol)
-            if A is not None and method.endswith("finsler"):
-                fac2 = _Factor((Hff + 100 * rho * (Af.T @ Af)).tocsc())
-                c2 = _inertia(fac2, rtol) if fac2.symmetric else None
-                if c2 != counts:  # rho below Finsler's threshold: take the larger rho
-                    fac, counts = fac2, c2
-                    rho *= 100
-                    M = (Hff + rho * (Af.T @ Af)).tocsc()
-    except RuntimeError:  # exactly singular (or SuperLU gave up on a zero pivot)
-        fac = None
-    if counts is None:
-        # exactly singular or pivoted off the diagonal: the inertia of M -+ tau I brackets the zero eigenvalues
-        method = "shifted-" + method
-        tau = max(rtol, 1e-12) * (float(abs(M.diagonal()).max()) or 1.0)
-        I = sp.identity(n, format="csc")
-        lo, hi = _Factor((M + tau * I).tocsc()), _Factor((M - tau * I).tocsc())
-        n_neg = int((lo.d < 0).sum())
-        n_zero = int((hi.d < 0).sum()) - n_neg
-        fac = lo if n_neg else hi
-        counts = (n_neg, max(n_zero, 0))
-    n_neg, n_zero = counts
-    stable = n_neg == 0 and n_zero == 0
-    vdir, curv = None, None
-    pre = fac if stable else None  # a positive definite factor: preconditioner for the lowest mode
-    best = None
-    if not stable and (direction or lowest):
+    # Finsler: M = H + rho A'A positive definite certifies Z'HZ positive definite for any rho. A rho below
+    # the (unknown) threshold can only add negative eigenvalues, so "not stable" is certified by a tangent
+    # direction of negative curvature, and otherwise rho grows.
+    best, pre = None, None
+    for attempt in range(1 if Af is None else 3):
+        M = Hff if Af is None else (Hff + rho * AtA).tocsc()
+        fac, (n_neg, n_zero), shifted = _factor_inertia(M, rtol, h)
+        if shifted:
+            method = "shifted-" + method.replace("shifted-", "")
+        stable = n_neg == 0 and n_zero == 0
+        best, pre = None, (fac if stable else None)  # a positive definite factor: a preconditioner
+        if stable or not (direction or lowest or Af is not None):
+            break
         d = fac.d
         order = np.argsort(d)[:5] if n_neg else np.argsort(np.abs(d))[:1]
         mu = np.inf
         for k in order:
-            v = project(fac.direction(int(k)))
-            r = _rayleigh(Hff, v)
+            v = _tangent(project, fac.direction(int(k)))
+            r = _rayleigh(Hff, v) if v is not None else np.inf
             if r < mu:
                 best, mu = v, r
         if best is not None and n_neg:
-            best, pre = _refine(M, best)
-            best = project(best)
+            refined, pre = _refine(M, best)
+            refined = _tangent(project, refined)
+            if refined is not None and _rayleigh(Hff, refined) < mu:
+                best = refined
+        if Af is None or (best is not None and _rayleigh(Hff, best) < (rtol * h if not n_neg else 0.0)):
+            break  # certified
+        rho *= 100.0
+    else:
+        method += "-uncertified"  # not stable for every rho tried, but no tangent direction of negative curvature
+    vdir, curv = None, None
     if lowest:
-        lam, vec = _lowest(Hff, project, Af if method.endswith("finsler") else None, pre, best)
+        lam, vec = _lowest(Hff, project, Af, pre, best)
         if lam is not None:
             curv = lam
             if not stable and vec is not None and (best is None or lam < _rayleigh(Hff, best)):

@@ -309,3 +309,54 @@ def test_springs_of_muscles_with_different_segment_counts():
     k, r = segment_spring_parameters(mesh, MAT, [long, short], [0.2, 0.1], 3.0, anchor_radius=0)
     assert (k > 0).sum() == len(long.segments) + len(short.segments)
     assert sorted(set(np.round(r[k > 0], 12))) == [0.8, 0.9]
+
+
+# ------------------------------------------------------------------------------ stability of constrained states
+def test_constrained_equilibrium_is_a_minimum_on_the_constraints_tangent_space():
+    """The result's stability check agrees with a dense eigen-solve of the reduced Lagrangian Hessian,
+    built here from the constraints' own Jacobian and Hessian with least-squares multipliers."""
+    import scipy.linalg as sl
+
+    from mdsr_opt.equilibrium import _gauge
+    from mdsr_opt.model import get_model
+
+    mesh = Mesh.rectangle(3.0, 1.0, 12, 4)
+    mus = [row(mesh, 0.0), row(mesh, 1.0)]
+    res = solve_internal(mesh, MAT, mus, [0.3, 0.0], align_to_rest=False)
+    assert res.success and res.stable is True
+    assert res.stability["method"].endswith("finsler") and res.stability["n_negative"] == 0
+    x = res.x.reshape(-1)
+    fixed = np.zeros(len(x), dtype=bool)
+    fixed[list(_gauge(mesh))] = True
+    free = ~fixed
+    mc = MuscleConstraints(mesh, mus, res.anchor_radius)
+    model = get_model(mesh, MAT)
+    g = model.gradient(x, model.params(MAT))
+    J = mc.jacobian(x).toarray()  # both ropes are taut (the top one holds): every row is active
+    lam = np.linalg.lstsq(J[:, free].T, -g[free], rcond=None)[0]
+    assert np.abs(g[free] + J[:, free].T @ lam).max() < 1e-7  # a KKT point
+    assert lam[:2] == pytest.approx(res.tension, rel=1e-6)
+    H = model.hessian(x, model.params(MAT)).toarray() + mc.hessian(x, lam).toarray()
+    Z = sl.null_space(J[:, free])
+    ev = np.linalg.eigvalsh(Z.T @ H[np.ix_(free, free)] @ Z)
+    assert ev[0] > 0
+
+
+def test_a_constrained_state_the_check_calls_unstable_is_not_a_success(monkeypatch):
+    """Wiring: internal driving with constraints goes through the stability check, and a failed check
+    (here forced, with no escape direction) turns the solve into a reported failure."""
+    import mdsr_opt.equilibrium as eq
+    from mdsr_opt.stability import StabilityCheck
+
+    seen = []
+
+    def unstable(H, free, A=None, **kw):
+        seen.append(A)
+        return StabilityCheck(False, 1, 0, None, -1.0, "forced", 0.0)
+
+    monkeypatch.setattr(eq, "check_stability", unstable)
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    res = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.2])
+    assert not res.success and res.stable is False
+    assert "not a stable equilibrium" in res.status
+    assert seen and all(A is not None and A.shape[0] >= 1 for A in seen)  # active constraint rows were passed

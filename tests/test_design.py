@@ -477,3 +477,15 @@ def test_design_strokes_converge_under_refinement():
     # 297, 1105 and 4257 nodes, the meshes (measured: 1.350, 1.375, 1.352); with point ends the
     # strokes grew without bound (0.920, 0.975, 1.035, 1.080 with the old springs)
     _assert_converging([_bend_stroke(ny) for ny in (8, 16, 32)])
+
+
+def test_scene_table_prints_achieved_contractions_and_strokes():
+    from mdsr_opt.scenes import CaseReport, SceneReport
+
+    c = CaseReport(scene="s", case="c", kind="internal", n_nodes=10, n_muscles=2, success=True,
+                   contractions=[0.3, 0.2], achieved=[0.25, 0.2], stroke=[0.5, 0.125], difference=0.01,
+                   relative_difference=0.001)
+    table = SceneReport(scene="s", title="t", n_nodes=10, cases=[c]).table()
+    head, _sep, row = table.splitlines()
+    assert "achieved contractions" in head and "strokes" in head
+    assert "0.250, 0.200" in row and "0.5, 0.125" in row and "0.300" not in row  # achieved, not commanded

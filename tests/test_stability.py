@@ -207,3 +207,19 @@ def test_lowest_when_unstable_is_the_lowest_eigenpair(m):
     assert d @ H @ d == pytest.approx(c.curvature, rel=1e-10)
     if m:
         assert np.abs(A @ d).max() < 1e-8
+
+
+def test_finsler_penalty_below_threshold_is_not_mistaken_for_a_saddle():
+    """H = [[eps, 1], [1, 0]] with the second coordinate constrained: Z'HZ = eps > 0, but H + rho A'A is
+    indefinite until rho > 1/eps; the first rho (1e4 * max diag / |A|^2 = 10) is too small, the third
+    (1e5) is enough."""
+    eps = 1e-3
+    H = sp.csc_matrix(np.array([[eps, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, eps]]))
+    A = sp.csr_matrix(np.array([[0.0, 1.0, 0.0]]))
+    c = check_stability(H, np.ones(3, bool), A)
+    assert c.stable and c.n_negative == 0 and "uncertified" not in c.method
+    # and a real saddle on the tangent space is certified as one
+    H2 = sp.csc_matrix(np.array([[-eps, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, eps]]))
+    c2 = check_stability(H2, np.ones(3, bool), A)
+    assert not c2.stable and c2.n_negative == 1 and c2.curvature == pytest.approx(-eps)
+    assert abs(c2.direction[1]) < 1e-12
