@@ -184,3 +184,45 @@ def test_scene_file_units_and_gait(tmp_path):
         bad[key] = value
         with pytest.raises(SceneFileError, match=words):
             load_scene(write_json(tmp_path, bad, name=f"bad_{key}.json"))
+
+
+def test_run_scene_writes_the_gait_folder(tmp_path):
+    """The runner's hook: a scene file with units and a gait block gives layout, schedule, chart, GIF and
+    fabrication files in out/<gait>/, every length in the scene's unit."""
+    from test_scenes import finger_dict, write_json
+
+    from mdsr_opt.scenes import load_scene, run_scene
+
+    d = finger_dict()
+    d["units"] = "cm"
+    d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 2}
+    scene = load_scene(write_json(tmp_path, d))
+    rep = run_scene(scene, tmp_path / "out", cases=["bend"], photos=False, log=None)
+    info = rep.animations["wave"]
+    assert info["success"], info.get("message")
+    folder = tmp_path / "out" / "wave"
+    names = {"layout.json", "schedule.csv", "schedule.png", "wave.gif", "gait.json", f"{scene.name}.svg",
+             f"{scene.name}.dxf", f"{scene.name}_muscles.csv"}
+    assert names <= {p.name for p in folder.iterdir()}
+    assert info["frames"] == 5 and info["n_muscles"] <= info["separate_n_muscles"]
+    head = open(folder / "schedule.csv").readline()
+    assert "stroke [cm]" in head and "[mm]" not in head
+    lay = PosesResult.load(folder / "layout.json")
+    rows = list(csv.DictReader(open(folder / f"{scene.name}_muscles.csv")))
+    np.testing.assert_allclose([float(r["stroke bend [cm]"]) for r in rows], lay.strokes[0], rtol=1e-8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, gait", [("gecko", "walk"), ("starfish", "swim_cycle")])
+def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait):
+    from mdsr_opt.scenes import get_problem, run_scene
+
+    scene = get_problem(name, resolution="coarse")
+    assert scene.gait.name == gait and scene.units == "cm"
+    rep = run_scene(scene, tmp_path, photos=False, log=None)
+    info = rep.animations[gait]
+    assert info["success"], info.get("message")
+    assert info["n_muscles"] <= info["separate_n_muscles"]
+    for pose, dd in info["differences"].items():
+        assert dd <= 1.10 * info["separate_differences"][pose] + 1e-9, pose
+    assert (tmp_path / gait / f"{name}.dxf").exists()
