@@ -62,7 +62,7 @@ def _casadi_factory(plugin: str, opts: dict):
 
 
 def _constrained_factory(plugin: str, opts: dict):
-    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.muscle_constraints.ConstrainedModel`."""
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
         x, p = model.x, model.p
@@ -100,7 +100,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
     for equality in ((True, False) if nt else (False,)):
         lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
-        with _quiet_stdout(plugin == "uno"):
+        with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         total_t += time.perf_counter() - t0
         st = solver.stats()
@@ -109,7 +109,8 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
                                if st.get("iterations") else 0))
         lam = np.asarray(sol["lam_g"]).ravel()
         ok = bool(st.get("success", False))
-        if ok and (not equality or np.all(lam[:nt] >= 0.0)):
+        # a rope at its length with no load has a multiplier of round-off size, of either sign
+        if ok and (not equality or np.all(lam[:nt] >= -1e-9 * cmodel.force_scale(p))):
             break
         if equality and ok:
             status = "a rope would push: re-solved with slack allowed"
@@ -173,16 +174,23 @@ def interruptible():
             caught.append(exc)
             raise
 
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, prev)
-    if caught:
+    def recorded():
         exc = caught[0]
         if isinstance(exc, KeyboardInterrupt) and not exc.args:
             exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
-        raise exc
+        return exc
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
+        if caught:
+            raise recorded() from exc
+        raise
+    finally:
+        signal.signal(signal.SIGINT, prev)
+    if caught:
+        raise recorded()
 
 
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values):

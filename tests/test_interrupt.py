@@ -32,9 +32,27 @@ print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
 """
 
 
-def _run_and_interrupt(backend, nx=200, ny=20, delay=1.0):
+# a long internal solve with the exact cable (the constrained NLP: equality then inequality ropes)
+_LONG_INTERNAL = r"""
+import time
+import numpy as np
+from mdsr_opt import Mesh, NeoHookean, Muscle, solve_internal
+mesh = Mesh.rectangle(10.0, 1.0, {nx}, {ny})
+P = mesh.points
+top = sorted(np.flatnonzero(P[:, 1] == 1.0), key=lambda i: P[i, 0])
+mus = [Muscle(top[2:-2])]
+mat = NeoHookean(1.0, 0.3)
+solve_internal(mesh, mat, mus, [0.01], max_iter=3)  # builds the model and solver
+print("ready", flush=True)
+t0 = time.perf_counter()
+res = solve_internal(mesh, mat, mus, [0.6], initial_guess="rest", tol=1e-14, max_iter=100000, min_step=1e-6)
+print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
+"""
+
+
+def _run_and_interrupt(backend, nx=200, ny=20, delay=1.0, script=_LONG_SOLVE):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", _LONG_SOLVE.format(nx=nx, ny=ny, backend=backend)],
+    proc = subprocess.Popen([sys.executable, "-c", script.format(nx=nx, ny=ny, backend=backend)],
                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
@@ -61,6 +79,14 @@ def test_sigint_during_solve_raises_keyboard_interrupt_promptly(backend):
     assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
 
 
+@pytest.mark.slow
+def test_sigint_during_a_cable_solve_raises_keyboard_interrupt_promptly():
+    rc, out, err, elapsed = _run_and_interrupt("ipopt", script=_LONG_INTERNAL)
+    assert "returned" not in out
+    assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1]
+    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+
+
 def test_interruptible_reraises_a_swallowed_interrupt():
     """What CasADi does: the handler's KeyboardInterrupt is caught inside the call; the guard re-raises it."""
     from mdsr_opt.backends import interruptible
@@ -79,3 +105,20 @@ def test_interruptible_reraises_a_swallowed_interrupt():
     assert signal.getsignal(signal.SIGINT) is before  # handler restored
     with interruptible():  # no interrupt: nothing raised
         pass
+
+
+def test_an_error_replacing_a_swallowed_interrupt_becomes_the_interrupt():
+    """A CasADi Function call interrupted outside a solver raises its own error: the interrupt wins."""
+    from mdsr_opt.backends import interruptible
+
+    with pytest.raises(KeyboardInterrupt, match="interrupted") as info:
+        with interruptible():
+            try:
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.5)
+            except KeyboardInterrupt:
+                raise RuntimeError("SWIG: wrong arguments") from None
+    assert isinstance(info.value.__cause__, RuntimeError)
+    with pytest.raises(RuntimeError, match="plain"):  # without an interrupt, errors pass unchanged
+        with interruptible():
+            raise RuntimeError("plain")
