@@ -254,7 +254,11 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         else:
             args = (mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999))
             kw = dict(model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
-            r = solve_internal(*args, initial_guess=x_prev, **kw) if x_prev is not None else None
+            # warm start only when the same muscles pull at least as hard as in the previous frame (from a
+            # tighter state the solver's first guess tends to invert an element; then it starts from rest)
+            warm = x_prev is not None and k > 0 and np.array_equal(on, np.flatnonzero(S[k - 1] > 0)) \
+                and bool(np.all(S[k, on] >= S[k - 1, on]))
+            r = solve_internal(*args, initial_guess=x_prev, **kw) if warm else None
             if r is None or not r.success:  # the warm start can fail (a new set of pulling muscles): from rest
                 r = solve_internal(*args, **kw)
             x, ok[k], msg = np.asarray(r.x, dtype=float), bool(r.success), str(r.status)
