@@ -84,6 +84,14 @@ _EXPORTS = {
     "list_studies": "study",
     "choose_fidelity": "fidelity",
     "FidelityChoice": "fidelity",
+    # several poses on one layout, gait schedules, fabrication files (issue 16)
+    "Pose": "poses",
+    "PosesResult": "poses",
+    "design_poses": "poses",
+    "Gait": "gait",
+    "GaitSchedule": "gait",
+    "gait_schedule": "gait",
+    "export_fabrication": "export",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

@@ -207,6 +207,11 @@ class Scene:
         Approximate node count asked for (0 when the mesh was given).
     source : str
         The file the scene came from.
+    units : str
+        The length unit of the mesh coordinates (one of :data:`mdsr_opt.export.UNITS`, default ``"mm"``),
+        carried into the gait schedule and the fabrication files.
+    gait : mdsr_opt.gait.Gait, optional
+        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.gait.run_gait`).
     """
 
     name: str
@@ -223,6 +228,8 @@ class Scene:
     expected: dict = field(default_factory=dict)
     resolution: int = 0
     source: str = ""
+    units: str = "mm"
+    gait: Any = None
 
     def __post_init__(self):
         from .equilibrium import _check_mesh_material
@@ -273,6 +280,7 @@ class Scene:
                     raise ValueError(f"scene {self.name!r}, animation {a.name!r}: unknown case {c!r} "
                                      f"(cases: {', '.join(names)})")
         self.animations = anims
+        check_units_and_gait(self)  # issue 16
         self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
         self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
         self.expected = dict(self.expected)
@@ -1304,6 +1312,8 @@ def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
     out = list(RUN_FILES) + list(names)
     for a in scene.animations:
         out += [f"{a.name}.gif", f"{a.name}.json"]
+    if scene.gait is not None:
+        out.append(scene.gait.name)  # the gait's folder: layout, schedule, animation, fabrication files
     return out
 
 
@@ -1366,6 +1376,10 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             anim_out[anim.name] = data
             write_json(out / f"{anim.name}.json", _finite(data))
             advance(log)
+    if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
+        gait_info = _run_gait(scene, out, runs, figures=figures, log=say)
+        if gait_info is not None:
+            anim_out[scene.gait.name] = gait_info
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
@@ -1437,7 +1451,7 @@ def _parse_size(text: str) -> tuple[int, int]:
 
 # ---------------------------------------------------------------------------------------------- scene files
 _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
-             "cases", "animations", "expected")
+             "cases", "animations", "expected", "units", "gait")
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
 _MATERIAL_KEYS = ("model", "E", "nu", "thickness")
 _REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
@@ -1657,6 +1671,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     check_output_names([c.name for c in cases], [a.name for a in anims], path.name,
                        [f"cases[{i}].name" for i in range(len(cases))]
                        + [f"animations[{i}].name" for i in range(len(anims))])
+    units, gait = parse_units_and_gait(r, top, seen)  # issue 16
     expected = top.get("expected", {})
     if not isinstance(expected, Mapping):
         r.fail("expected", f"expected a table, got {_tname(expected)}", TypeError)
@@ -1664,7 +1679,8 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         return Scene(name=name, mesh=mesh, material=material, cases=tuple(cases),
                      title=str(top.get("title", "")), description=str(top.get("description", "")),
                      muscles=muscles, regions=regions, routing_options=routing, design_options=design,
-                     animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path))
+                     animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path),
+                     units=units, gait=gait)
     except (ValueError, TypeError) as exc:  # cross-field checks of Scene (contraction counts...)
         raise SceneFileError(f"{path.name}: {exc}") from None
 
@@ -2173,3 +2189,64 @@ def add_cli(sub) -> None:
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)
+
+
+# ---------------------------------------------------------------------------------------------- issue 16: units, gait
+_GAIT_KEYS = ("name", "poses", "frames_per_step", "max_muscles", "step_time", "cyclic", "fps")
+
+
+def check_units_and_gait(scene: Scene) -> None:
+    """Check a scene's ``units`` (a known length unit) and ``gait`` (a Gait naming its cases)."""
+    from .export import check_units
+    from .gait import Gait
+
+    scene.units = check_units(scene.units)
+    if scene.gait is None:
+        return
+    if not isinstance(scene.gait, Gait):
+        raise TypeError(f"scene {scene.name!r}: gait must be a mdsr_opt.gait.Gait, got {type(scene.gait).__name__}")
+    names = scene.case_names
+    for c in scene.gait.poses:
+        if c not in names:
+            raise ValueError(f"scene {scene.name!r}, gait {scene.gait.name!r}: unknown case {c!r} "
+                             f"(cases: {', '.join(names)}, or 'rest')")
+
+
+def parse_units_and_gait(r: _Reader, top: Mapping, case_names: set):
+    """The scene file's ``units = "mm"`` and ``[gait]`` table (``name``, ``poses`` = case names or "rest",
+    ``frames_per_step``, ``max_muscles``, ``step_time``, ``cyclic``, ``fps``)."""
+    from .export import UNITS
+    from .gait import Gait
+
+    units = top.get("units", "mm")
+    if not isinstance(units, str) or units not in UNITS:
+        r.fail("units", f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
+    if "gait" not in top:
+        return units, None
+    g = r.keys(top["gait"], _GAIT_KEYS, "gait", required=("poses",))
+    poses = g["poses"]
+    if not isinstance(poses, list) or not poses or not all(isinstance(p, str) for p in poses):
+        r.fail("gait.poses", f"expected a non-empty list of case names, got {poses!r}")
+    for i, p in enumerate(poses):
+        if p != "rest" and p not in case_names:
+            r.fail(f"gait.poses[{i}]", f"unknown case {p!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
+    for key in ("frames_per_step", "max_muscles"):
+        v = g.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            r.fail(f"gait.{key}", f"expected a positive integer, got {v!r}")
+    if not isinstance(g.get("cyclic", True), bool):
+        r.fail("gait.cyclic", f"expected true or false, got {g['cyclic']!r}")
+    try:
+        return units, Gait(r.string(g.get("name", "gait"), "gait.name"), tuple(poses),
+                           frames_per_step=g.get("frames_per_step", 6), max_muscles=g.get("max_muscles"),
+                           step_time=r.number(g.get("step_time", 1.0), "gait.step_time", positive=True),
+                           cyclic=g.get("cyclic", True), fps=r.number(g.get("fps", 8.0), "gait.fps", positive=True))
+    except (ValueError, TypeError) as exc:
+        r.fail("gait", str(exc))
+
+
+def _run_gait(scene: Scene, out, runs, figures: bool, log):
+    from .gait import run_gait
+
+    return run_gait(scene, out, runs, figures=figures, log=log)
+

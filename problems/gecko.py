@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
+from mdsr_opt.gait import Gait
 from mdsr_opt.scenes import (Animation, Case, Scene, arc_map, arc_rigid, mesh_polygon, nodes_in_box, nodes_near,
                              resolve_resolution, run_main)
 
@@ -90,7 +91,9 @@ def build(resolution="medium") -> Scene:
         routing_options={"K_a": 10.0, "K_b": 4.0, "max_muscles": 2},
         design_options={"method": "flattened", "a_max": 0.6}, animations=(gait,),
         expected={"n_muscles": {"bend_left": 2, "bend_right": 2}}, resolution=resolve_resolution(resolution),
-        source=__file__)
+        source=__file__, units="cm",
+        # one muscle layout for both bends, alternated through the straight body (no co-contraction) (issue 16)
+        gait=Gait("walk", ("bend_left", "rest", "bend_right", "rest"), frames_per_step=4, max_muscles=4))
 
 
 if __name__ == "__main__":

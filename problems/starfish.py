@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
+from mdsr_opt.gait import Gait
 from mdsr_opt.scenes import (Animation, Case, Scene, arc_rigid, mesh_polygon, nodes_near, resolve_resolution,
                              run_main, seeds_for)
 
@@ -82,9 +83,12 @@ def build(resolution="medium") -> Scene:
         description=__doc__.split("\n\n")[1].replace("\n", " "), mesh=mesh, material=NeoHookean(E=1.0, nu=0.4),
         cases=cases, regions=regions,
         routing_options={"K_a": 10.0, "K_b": 4.0, "max_muscles": 5, "n_seeds": max(10, seeds_for(mesh))},
-        design_options={"method": "flattened", "a_max": 0.6},
+        # short arm muscles: end patches of 0.1 (the default 0.04 x diameter = 0.29 covers too much of them)
+        design_options={"method": "flattened", "a_max": 0.6, "anchor_radius": 0.1},
         animations=(Animation("swim", (("rest", 0.0), ("pinwheel", 1.0), ("rest", 0.0)), frames_per_step=6),),
-        expected={"max_muscles": 5}, resolution=n, source=__file__)
+        expected={"max_muscles": 5}, resolution=n, source=__file__, units="cm",
+        # one muscle layout for both strokes: swirl, recover, curl, recover (issue 16)
+        gait=Gait("swim_cycle", ("rest", "pinwheel", "rest", "curl"), frames_per_step=4, max_muscles=10))
 
 
 if __name__ == "__main__":

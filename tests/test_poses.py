@@ -1,0 +1,228 @@
+"""One muscle layout for several poses (mdsr_opt.poses) and the gait schedule (mdsr_opt.gait)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, NeoHookean
+from mdsr_opt.gait import Gait, gait_schedule, plot_schedule
+from mdsr_opt.poses import Pose, PosesResult, design_poses, shared_layout
+
+MAT = NeoHookean(1.0, 0.3)
+
+
+def strip(scale=1.0):
+    return Mesh.rectangle(4.0 * scale, 1.0 * scale, 16, 4)
+
+
+def bend(mesh, s, scale=1.0):
+    """The strip bent about its centre line: s = +1 up (left), -1 down (right)."""
+    X = mesh.points / scale
+    R = 3.0
+    phi = (X[:, 0] - 2.0) / R
+    r = R - s * (X[:, 1] - 0.5)
+    return scale * np.column_stack([r * np.sin(phi), s * (R - r * np.cos(phi))])
+
+
+@pytest.fixture(scope="module")
+def lr():
+    mesh = strip()
+    res = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)})
+    return mesh, res
+
+
+def test_shared_layout_reproduces_each_pose_with_no_more_muscles(lr):
+    mesh, res = lr
+    assert res.all_success
+    assert res.n_muscles <= int(res.separate_n_muscles.sum())
+    assert np.all(np.isfinite(res.separate_differences))
+    assert np.all(res.differences <= 1.10 * res.separate_differences)
+    # each bend pulls with the muscle on its concave side, the other rope is paid out (negative stroke)
+    for k, name in enumerate(res.names):
+        assert res.engaged[k].sum() == 1
+        i = int(np.flatnonzero(res.engaged[k])[0])
+        assert res.strokes[k, i] > 0.5                       # ~0.92 of a 4-long muscle
+        assert np.all(res.strokes[k, ~res.engaged[k]] < 0)
+        assert np.all(res.tensions[k, ~res.engaged[k]] == 0)
+    assert "2 shared muscles" in repr(res) and len(repr(res)) < 300
+
+
+def test_result_round_trips_through_json(lr, tmp_path):
+    _, res = lr
+    p = res.save(tmp_path / "layout.json")
+    back = PosesResult.load(p)
+    assert back.names == res.names and [m.nodes for m in back.muscles] == [m.nodes for m in res.muscles]
+    for f in ("strokes", "contractions", "differences", "separate_differences", "states", "engaged"):
+        np.testing.assert_array_equal(getattr(back, f), getattr(res, f))
+    assert json.loads(Path(p).read_text())["names"] == ["left", "right"]
+
+
+@pytest.mark.parametrize("cyclic", [True, False])
+def test_schedule_first_and_last_frames_are_the_designed_strokes(lr, cyclic):
+    mesh, res = lr
+    sch = gait_schedule(mesh, MAT, res, ["left", "right"], frames_per_step=3, cyclic=cyclic)
+    assert sch.n_frames == (2 if cyclic else 1) * 3 + 1
+    np.testing.assert_array_equal(sch.strokes[0], res.strokes[0])
+    np.testing.assert_array_equal(sch.strokes[-1], res.strokes[0 if cyclic else 1])
+    assert sch.success.all(), sch.status
+    # the forward solves reach the designed strokes at the keyframes
+    for k, name in zip(sch.keyframes, sch.sequence):
+        np.testing.assert_allclose(sch.achieved[k], res.strokes[res.index(name)], atol=1e-5)
+    np.testing.assert_allclose(sch.times[-1], 2.0 if cyclic else 1.0)
+
+
+def test_schedule_csv_and_chart(lr, tmp_path):
+    mesh, res = lr
+    sch = gait_schedule(mesh, MAT, res, ["rest", "left"], frames_per_step=2, units="cm")
+    rows = list(csv.reader(open(sch.write_csv(tmp_path / "s.csv"))))
+    assert rows[0][:4] == ["frame", "time [s]", "pose", "M0 stroke [cm]"]
+    assert len(rows) == 1 + 5
+    assert [float(v) for v in rows[1][3:5]] == [0.0, 0.0]          # rest
+    np.testing.assert_allclose([float(v) for v in rows[3][3:5]], res.strokes[0], rtol=1e-8)
+    fig = plot_schedule(sch)
+    assert fig.axes[0].get_ylabel().startswith("stroke [cm]")
+    assert np.all(sch.states[0] == mesh.points)
+
+
+def test_budget_of_one_keeps_the_strongest_muscle():
+    mesh = strip()
+    m_left = [m for m in _route(mesh, bend(mesh, 1))]
+    m_right = [m for m in _route(mesh, bend(mesh, -1))]
+    mus, src = shared_layout(mesh, {"left": m_left, "right": m_right}, max_muscles=1)
+    assert len(mus) == 1 and src == (("left",),)
+    both, src2 = shared_layout(mesh, {"left": m_left, "again": m_left})   # duplicates merged
+    assert len(both) == len(m_left) and src2[0] == ("left", "again")
+
+
+def _route(mesh, y):
+    from mdsr_opt.routing import route_muscles
+
+    return route_muscles(mesh, y)
+
+
+def test_units_propagate_body_in_millimetres():
+    """The same strip in cm (4 x 1) and in mm (40 x 10): contractions agree, strokes are 10x, headers say mm."""
+    out = []
+    for scale in (1.0, 10.0):
+        mesh = strip(scale)
+        out.append(design_poses(mesh, MAT, {"left": bend(mesh, 1, scale)}, compare=False))
+    np.testing.assert_allclose(out[1].contractions, out[0].contractions, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(out[1].strokes, 10.0 * out[0].strokes, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(out[1].rest_lengths, [40.0])
+    sch = gait_schedule(strip(10.0), MAT, out[1], ["rest", "left"], frames_per_step=1, cyclic=False, units="mm")
+    assert sch.units == "mm" and "mm" in repr(sch)
+    np.testing.assert_allclose(sch.strokes[-1], out[1].strokes[0])
+
+
+@pytest.mark.parametrize("make, kind, words", [
+    (lambda m: {}, ValueError, "poses is empty"),
+    (lambda m: [Pose("a", m.points), Pose("b", Mesh.rectangle(4, 1, 8, 2).points)], ValueError, "same mesh"),
+    (lambda m: [Pose("a", m.points, mesh=Mesh.rectangle(4.0, 1.0, 16, 4).with_points(m.points * 2))], ValueError,
+     "different mesh"),
+    (lambda m: {"a": m.points, "rest": m.points}, ValueError, "'rest'"),
+    (lambda m: "left", TypeError, "poses must be"),
+])
+def test_bad_poses_are_refused(make, kind, words):
+    mesh = strip()
+    with pytest.raises(kind, match=words):
+        design_poses(mesh, MAT, make(mesh))
+
+
+@pytest.mark.parametrize("budget, kind", [(0, ValueError), (-2, ValueError), (1.5, TypeError), (True, TypeError)])
+def test_budget_below_one_is_refused(budget, kind):
+    mesh = strip()
+    with pytest.raises(kind, match="max_muscles"):
+        design_poses(mesh, MAT, {"left": bend(mesh, 1)}, max_muscles=budget)
+
+
+@pytest.mark.parametrize("kw, kind, words", [
+    (dict(frames_per_step=0), ValueError, "frames_per_step must be a positive integer"),
+    (dict(frames_per_step=-3), ValueError, "frames_per_step"),
+    (dict(frames_per_step=2.0), TypeError, "frames_per_step"),
+    (dict(units="furlong"), ValueError, "unknown units 'furlong'"),
+    (dict(sequence=[]), ValueError, "sequence is empty"),
+    (dict(sequence=["left", "up"]), ValueError, "unknown pose 'up'"),
+])
+def test_bad_schedule_input_is_refused(lr, kw, kind, words):
+    mesh, res = lr
+    kw = dict(kw)
+    seq = kw.pop("sequence", ["left", "right"])
+    with pytest.raises(kind, match=words):
+        gait_schedule(mesh, MAT, res, seq, **kw)
+
+
+def test_gait_block_checks():
+    with pytest.raises(ValueError, match="frames_per_step"):
+        Gait("g", ("a", "b"), frames_per_step=0)
+    with pytest.raises(ValueError, match="empty"):
+        Gait("g", ())
+    with pytest.raises(ValueError, match="max_muscles"):
+        Gait("g", ("a",), max_muscles=0)
+    assert Gait("g", ("rest", "a", "rest", "b")).poses == ("a", "b")
+
+
+def test_scene_file_units_and_gait(tmp_path):
+    from test_scenes import finger_dict, write_json
+
+    from mdsr_opt.scenes import SceneFileError, load_scene
+
+    d = finger_dict()
+    d["units"] = "cm"
+    d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 3, "max_muscles": 2}
+    scene = load_scene(write_json(tmp_path, d))
+    assert scene.units == "cm" and scene.gait.poses == ("bend",) and scene.gait.frames_per_step == 3
+    for key, value, words in (("units", "furlong", "unknown units 'furlong'"),
+                              ("gait", {"poses": ["bnd"]}, r"gait\.poses\[0\]: unknown case 'bnd'"),
+                              ("gait", {"poses": ["bend"], "frames_per_step": 0}, "gait.frames_per_step"),
+                              ("gait", {"poses": ["bend"], "max_muscles": 0}, "gait.max_muscles")):
+        bad = finger_dict()
+        bad[key] = value
+        with pytest.raises(SceneFileError, match=words):
+            load_scene(write_json(tmp_path, bad, name=f"bad_{key}.json"))
+
+
+def test_run_scene_writes_the_gait_folder(tmp_path):
+    """The runner's hook: a scene file with units and a gait block gives layout, schedule, chart, GIF and
+    fabrication files in out/<gait>/, every length in the scene's unit."""
+    from test_scenes import finger_dict, write_json
+
+    from mdsr_opt.scenes import load_scene, run_scene
+
+    d = finger_dict()
+    d["units"] = "cm"
+    d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 2}
+    scene = load_scene(write_json(tmp_path, d))
+    rep = run_scene(scene, tmp_path / "out", cases=["bend"], photos=False, log=None)
+    info = rep.animations["wave"]
+    assert info["success"], info.get("message")
+    folder = tmp_path / "out" / "wave"
+    names = {"layout.json", "schedule.csv", "schedule.png", "wave.gif", "gait.json", f"{scene.name}.svg",
+             f"{scene.name}.dxf", f"{scene.name}_muscles.csv"}
+    assert names <= {p.name for p in folder.iterdir()}
+    assert info["frames"] == 5 and info["n_muscles"] <= info["separate_n_muscles"]
+    head = open(folder / "schedule.csv").readline()
+    assert "stroke [cm]" in head and "[mm]" not in head
+    lay = PosesResult.load(folder / "layout.json")
+    rows = list(csv.DictReader(open(folder / f"{scene.name}_muscles.csv")))
+    np.testing.assert_allclose([float(r["stroke bend [cm]"]) for r in rows], lay.strokes[0], rtol=1e-8)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name, gait", [("gecko", "walk"), ("starfish", "swim_cycle")])
+def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait):
+    from mdsr_opt.scenes import get_problem, run_scene
+
+    scene = get_problem(name, resolution="coarse")
+    assert scene.gait.name == gait and scene.units == "cm"
+    rep = run_scene(scene, tmp_path, photos=False, log=None)
+    info = rep.animations[gait]
+    assert info["success"], info.get("message")
+    assert info["n_muscles"] <= info["separate_n_muscles"]
+    for pose, dd in info["differences"].items():
+        assert dd <= 1.10 * info["separate_differences"][pose] + 1e-9, pose
+    assert (tmp_path / gait / f"{name}.dxf").exists()
