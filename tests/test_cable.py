@@ -378,3 +378,18 @@ def test_ropes_at_rest_length_leave_the_body_exactly_at_rest():
     assert np.abs(res.x - mesh.points).max() < 1e-9
     assert np.all(res.tension >= 0.0) and res.tension.max() < 1e-12 and not res.slack.any()
     assert np.abs(res.achieved).max() < 1e-12
+
+
+@pytest.mark.parametrize("length, E", [(1e-2, 1e5), (1e3, 1e-3)])
+def test_units_do_not_matter(length, E):
+    # the same body in other units (and a material in matching units): the same shape, contraction and
+    # (scaled) tension — constraint rows are dimensionless inside the NLP
+    base = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(base, 0.0), row(base, 0.25)]
+    ref = solve_internal(base, MAT, mus, [0.3, 0.05])
+    res = solve_internal(base.with_points(base.points * length), NeoHookean(E=E, nu=0.3), mus, [0.3, 0.05])
+    assert res.success, res.status
+    assert np.abs(res.x / length - ref.x).max() < 1e-6
+    assert np.abs(res.achieved - ref.achieved).max() < 1e-7
+    assert res.tension / (E * length) == pytest.approx(ref.tension, rel=1e-5, abs=1e-12)
+    assert list(res.slack) == list(ref.slack) == [False, True]
