@@ -393,3 +393,35 @@ def test_units_do_not_matter(length, E):
     assert np.abs(res.achieved - ref.achieved).max() < 1e-7
     assert res.tension / (E * length) == pytest.approx(ref.tension, rel=1e-5, abs=1e-12)
     assert list(res.slack) == list(ref.slack) == [False, True]
+
+
+def test_the_nlp_hessian_is_the_lagrangians():
+    # the Hessian handed to IPOPT (energy + multipliers x constraint curvature, NLP-scaled multipliers)
+    # against the numeric Lagrangian Hessian and a finite difference of the Lagrangian gradient
+    import casadi as ca
+    import scipy.sparse as sp
+
+    from mdsr_opt.constrained import ConstrainedModel
+    from mdsr_opt.model import get_model
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    mus = [row(mesh, 0.0), row(mesh, 0.5)]
+    model = get_model(mesh, MAT)
+    cm = ConstrainedModel(model, MuscleConstraints(mesh, mus, radius=0.3), ropes=True)
+    rng = np.random.default_rng(4)
+    x = mesh.points.reshape(-1) + 0.02 * rng.standard_normal(2 * mesh.n_nodes)
+    lam_nlp = rng.standard_normal(cm.n_rows)
+    lam = lam_nlp * cm.row_scale
+    pe = model.params(MAT)
+    lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", cm.n_rows)
+    Hf = ca.Function("H", [model.x, model.p, lf, lg], [cm.hess_lag_upper(model.x, model.p, lf, lg)])
+    H_nlp = np.array(ca.DM(Hf(x, pe, 1.0, lam_nlp)))
+    p = cm.params(pe, cm.values(x)[:2], lam)
+    H = cm.hessian(x, p)
+    assert np.abs(H_nlp - sp.triu(H).toarray()).max() < 1e-10
+    h = 1e-6
+    for k in rng.choice(2 * mesh.n_nodes, 8, replace=False):
+        e = np.zeros_like(x)
+        e[k] = h
+        col = (cm.gradient(x + e, p) - cm.gradient(x - e, p)) / (2 * h)
+        assert np.abs(col - H[:, k].toarray().ravel()).max() < 1e-6
