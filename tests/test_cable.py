@@ -23,7 +23,7 @@ def pairwise(x, nodes):
 
 
 # ------------------------------------------------------------------------------ exact cable
-@pytest.mark.parametrize("cells", [(20, 4), (60, 16), pytest.param((128, 32), marks=pytest.mark.slow)],
+@pytest.mark.parametrize("cells", [(20, 4), (60, 16), (128, 32)],  # ~2 s for the 4257 nodes
                          ids=["105-nodes", "1037-nodes", "4257-nodes"])
 def test_exact_cable_reaches_the_commanded_contraction_on_every_mesh(cells):
     mesh = Mesh.rectangle(4.0, 1.0, *cells)
@@ -278,8 +278,7 @@ def test_spring_contraction_does_not_depend_on_the_mesh(stiffness):
     assert coarse < 0.3  # a penalty: the body resists
 
 
-@pytest.mark.slow
-def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():
+def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():  # about 2 s
     def achieved(cells):
         mesh = Mesh.rectangle(4.0, 1.0, *cells)
         res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.5)], [0.3, 0.1], model="springs",
