@@ -10,7 +10,9 @@ eigenvalues) of a sparse symmetric factorisation ``P H P' = L D L'``: by Sylvest
 signs of the pivots ``D`` are the signs of the eigenvalues. SuperLU in symmetric mode with diagonal
 pivoting gives exactly such a factorisation (``U = D L'``). With constraints, Finsler's lemma reduces the
 question to the unconstrained one: ``Z' H Z`` is positive definite iff ``H + rho A' A`` is, for every
-``rho`` above a finite threshold; two values of ``rho`` a factor 100 apart must agree.
+``rho`` above a finite threshold. ``H + rho A' A`` positive definite certifies stability for any ``rho``; a
+``rho`` below the threshold can only add negative eigenvalues, so "not stable" is accepted only with a
+tangent direction (``A d = 0``) of negative curvature, and ``rho`` grows by 100 otherwise.
 
 When the state is not a minimum the factorisation also yields a direction of negative curvature:
 ``v = P' L^{-T} e_k`` for a negative pivot ``d_k`` has ``v' H v = d_k < 0``; a few steps of shifted inverse
@@ -55,8 +57,10 @@ class StabilityCheck:
     curvature : float or None
         ``d' H d / d' d`` along ``direction`` (in the units of ``H``).
     method : str
-        ``"ldl-inertia"`` (one factorisation), ``"ldl-inertia+finsler"`` (constrained) or
-        ``"shifted-ldl-inertia"`` (exactly singular: two factorisations shifted by ``+-tau``).
+        ``"ldl-inertia"`` (one factorisation), ``"ldl-inertia+finsler"`` (constrained), with the prefix
+        ``"shifted-"`` when the factorisation broke down (exactly singular: two factorisations shifted by
+        ``+-tau``) and the suffix ``"-uncertified"`` when a constrained state stayed indefinite for every
+        ``rho`` tried without a tangent direction of negative curvature (reported as not stable).
     time : float
         Seconds spent.
     """
@@ -240,15 +244,16 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
         ``{d_free : A_free d_free = 0}``. Linearly dependent rows are allowed (a maximal independent
         subset is used).
     rtol : float
-        A pivot with ``|d| <= rtol * max|d|`` counts as zero (``n_zero``); zero pivots make a state
-        not stable.
+        A pivot with ``|d| <= rtol * max|diag H_ff|`` counts as zero (``n_zero``); zero pivots make a
+        state not stable.
     direction : bool
         Compute a direction of negative curvature when not stable (default). ``False`` skips it.
     lowest : bool
-        When stable, also estimate the lowest eigenvalue of the reduced Hessian (reported in ``curvature``)
-        by inverse iteration with the factorisation already made: a few triangular solves, no eigen-solve.
-        The estimate is a Rayleigh quotient, so it bounds the lowest eigenvalue from above (with
-        constraints, up to the penalty's ``O(1/rho)``).
+        Also compute the lowest eigenvalue of the reduced Hessian (reported in ``curvature``; when not
+        stable, ``direction`` is then its eigenvector): LOBPCG preconditioned by a positive definite factor
+        already made (of the matrix, or of the matrix shifted below its lowest eigenvalue), so a few
+        iterations; below 100 free coordinates a dense solve of the small matrix. Off by default: the
+        solvers only need the inertia.
 
     Returns
     -------

@@ -36,7 +36,7 @@ def build(resolution="medium") -> Scene:
         name="one_muscle", title="One-muscle experiment (paper Figure 9, column A): 20-50 % contraction",
         description=__doc__.split("\n\n")[1].replace("\n", " "), mesh=mesh, material=material, cases=cases,
         muscles=(lower,), regions={"muscle": list(lower.nodes)},
-        design_options={"method": "flattened", "a_max": 0.6, "muscle_model": "springs", "stiffness": 10.0},
+        design_options={"method": "flattened", "a_max": 0.6, "muscle_model": "cable"},
         animations=(Animation("sweep", (("rest", 0.0), ("a50", 1.0), ("rest", 0.0)), frames_per_step=6),),
         expected={"n_muscles": 1, "contractions": {c.name: c.contractions.tolist() for c in cases}},
         resolution=resolve_resolution(resolution), source=__file__)

@@ -46,7 +46,7 @@ def build(resolution="medium") -> Scene:
         name="two_muscles", title="Two-muscle experiment (paper Figure 9, column B): 20-50 % contraction",
         description=__doc__.split("\n\n")[1].replace("\n", " "), mesh=mesh, material=material, cases=cases,
         muscles=(upper, lower), regions={"upper": list(upper.nodes), "lower": list(lower.nodes)},
-        design_options={"method": "flattened", "a_max": 0.6, "muscle_model": "springs", "stiffness": 10.0},
+        design_options={"method": "flattened", "a_max": 0.6, "muscle_model": "cable"},
         animations=(Animation("sweep", (("rest", 0.0), ("a50", 1.0), ("rest", 0.0)), frames_per_step=6),),
         expected={"n_muscles": 2, "contractions": {c.name: c.contractions.tolist() for c in cases}},
         resolution=resolve_resolution(resolution), source=__file__)
