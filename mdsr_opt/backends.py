@@ -69,7 +69,7 @@ def _constrained_factory(plugin: str, opts: dict):
     def factory(cmodel):
         model = cmodel.model
         x, p = model.x, model.p
-        g = cmodel.constraints_expr(x)
+        g = cmodel.nlp_constraints_expr(x)
         nlp = {"x": x, "p": p, "f": model.f_fn(x, p), "g": g}
         o = dict(opts)
         o["show_eval_warnings"] = False
@@ -101,7 +101,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
     total_t, total_it = 0.0, 0
     nt = cmodel.n_targets
     for equality in ((True, False) if nt else (False,)):
-        lbg, ubg = cmodel.bounds(p, equality_ropes=equality)
+        lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
         with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
@@ -110,7 +110,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
         status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
         total_it += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
                                if st.get("iterations") else 0))
-        lam = np.asarray(sol["lam_g"]).ravel()
+        lam = np.asarray(sol["lam_g"]).ravel() * cmodel.row_scale  # physical multipliers
         ok = bool(st.get("success", False))
         # a rope at its length with no load has a multiplier of round-off size, of either sign
         if ok and (not equality or np.all(lam[:nt] >= -1e-9 * cmodel.force_scale(p))):

@@ -51,6 +51,12 @@ class ConstrainedModel:
         self.rows = np.arange(mc.n_constraints) if self.ropes else np.arange(mc.n_muscles, mc.n_constraints)
         self.n_rows = len(self.rows)
         self.n_targets = mc.n_muscles if self.ropes else 0
+        # the NLP sees dimensionless rows (ropes over L0, rigid rows over the body size), so the solver's
+        # absolute tolerances mean the same on a body in metres as in millimetres
+        scale = np.full(self.n_rows, 1.0 / body_size(model.mesh))
+        if self.n_targets:
+            scale[:self.n_targets] = 1.0 / mc.rest_lengths
+        self.row_scale = scale
         self.n_energy_params = model.n_params
         self.n_params = model.n_params + self.n_targets + self.n_rows
         self._solvers: dict = {}
@@ -123,11 +129,23 @@ class ConstrainedModel:
 
     # ------------------------------------------------------------------ symbolic pieces for the NLP
     def constraints_expr(self, x):
+        """The rows (physical units: lengths) as a CasADi column."""
         g = self.constraints.constraints_expr(x)
         return g if self.ropes else g[self.constraints.n_muscles:]
 
+    def nlp_constraints_expr(self, x):
+        """The rows as the NLP sees them: multiplied by :attr:`row_scale` (dimensionless)."""
+        return self.constraints_expr(x) * ca.DM(self.row_scale)
+
+    def nlp_bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`bounds` for :meth:`nlp_constraints_expr`."""
+        lb, ub = self.bounds(p, equality_ropes)
+        return lb * self.row_scale, ub * self.row_scale
+
     def hess_lag_upper(self, x, p, lam_f, lam_g):
-        """Upper triangle of the Lagrangian's Hessian as a CasADi expression (for IPOPT's ``hess_lag``)."""
+        """Upper triangle of the Lagrangian's Hessian as a CasADi expression (for IPOPT's ``hess_lag``), with
+        ``lam_g`` the multipliers of :meth:`nlp_constraints_expr` (physical ones: ``row_scale * lam_g``)."""
+        lam_g = lam_g * ca.DM(self.row_scale)
         lam = lam_g if self.ropes else ca.vertcat(ca.MX(self.constraints.n_muscles, 1), lam_g)
         return self.model.hess_lag_fn(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
 

@@ -40,7 +40,8 @@ from .mesh import Mesh
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .model import get_model, spring_parameters
 from .constrained import ConstrainedModel
-from .muscle_constraints import MuscleConstraints, check_anchor_radius, spring_segments, spring_stiffness
+from .muscle_constraints import (MuscleConstraints, check_anchor_radius, rigid_groups, spring_segments,
+                                 spring_stiffness)
 from .muscles import Muscle, check_contractions, check_muscles
 
 __all__ = ["EquilibriumResult", "SolverFailure", "solve_external", "solve_internal", "available_backends",
@@ -605,25 +606,25 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     a = check_contractions(contractions, len(mus))
     predict, x_start = _initial_guess(initial_guess, mesh)
     n = mesh.n_nodes
-    t0 = time.perf_counter()
-    mc = _muscle_constraints(mesh, mus, radius)
-    constrained = model == "cable" or mc.n_rigid > 0
-    if constrained and not supports_constraints(backend):
-        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
-        raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
-                         f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
-                                                                 ", or anchor_radius=0"))
-    emodel = get_model(mesh, material)
-    cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
-    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
-    L0 = mc.rest_lengths
-    K = spring_stiffness(mesh, material, stiffness)
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
     k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
     if np.any(a * a_fac >= 1.0):
         c = int(np.argmax(a * a_fac))
         raise ValueError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
                          f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
+    constrained = model == "cable" or len(rigid_groups(mesh, mus, radius)) > 0
+    if constrained and not supports_constraints(backend):
+        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
+        raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
+                         f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
+                                                                 ", or anchor_radius=0"))
+    t0 = time.perf_counter()
+    mc = _muscle_constraints(mesh, mus, radius)
+    emodel = get_model(mesh, material)
+    cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
+    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
+    L0 = mc.rest_lengths
+    K = spring_stiffness(mesh, material, stiffness)
 
     def p_energy(s):
         if model == "springs":

@@ -23,7 +23,7 @@ def pairwise(x, nodes):
 
 
 # ------------------------------------------------------------------------------ exact cable
-@pytest.mark.parametrize("cells", [(20, 4), (60, 16), pytest.param((128, 32), marks=pytest.mark.slow)],
+@pytest.mark.parametrize("cells", [(20, 4), (60, 16), (128, 32)],  # ~2 s for the 4257 nodes
                          ids=["105-nodes", "1037-nodes", "4257-nodes"])
 def test_exact_cable_reaches_the_commanded_contraction_on_every_mesh(cells):
     mesh = Mesh.rectangle(4.0, 1.0, *cells)
@@ -278,8 +278,7 @@ def test_spring_contraction_does_not_depend_on_the_mesh(stiffness):
     assert coarse < 0.3  # a penalty: the body resists
 
 
-@pytest.mark.slow
-def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():
+def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():  # about 2 s
     def achieved(cells):
         mesh = Mesh.rectangle(4.0, 1.0, *cells)
         res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.5)], [0.3, 0.1], model="springs",
@@ -378,3 +377,50 @@ def test_ropes_at_rest_length_leave_the_body_exactly_at_rest():
     assert np.abs(res.x - mesh.points).max() < 1e-9
     assert np.all(res.tension >= 0.0) and res.tension.max() < 1e-12 and not res.slack.any()
     assert np.abs(res.achieved).max() < 1e-12
+
+
+@pytest.mark.parametrize("length, E", [(1e-2, 1e5), (1e3, 1e-3)])
+def test_units_do_not_matter(length, E):
+    # the same body in other units (and a material in matching units): the same shape, contraction and
+    # (scaled) tension — constraint rows are dimensionless inside the NLP
+    base = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(base, 0.0), row(base, 0.25)]
+    ref = solve_internal(base, MAT, mus, [0.3, 0.05])
+    res = solve_internal(base.with_points(base.points * length), NeoHookean(E=E, nu=0.3), mus, [0.3, 0.05])
+    assert res.success, res.status
+    assert np.abs(res.x / length - ref.x).max() < 1e-6
+    assert np.abs(res.achieved - ref.achieved).max() < 1e-7
+    assert res.tension / (E * length) == pytest.approx(ref.tension, rel=1e-5, abs=1e-12)
+    assert list(res.slack) == list(ref.slack) == [False, True]
+
+
+def test_the_nlp_hessian_is_the_lagrangians():
+    # the Hessian handed to IPOPT (energy + multipliers x constraint curvature, NLP-scaled multipliers)
+    # against the numeric Lagrangian Hessian and a finite difference of the Lagrangian gradient
+    import casadi as ca
+    import scipy.sparse as sp
+
+    from mdsr_opt.constrained import ConstrainedModel
+    from mdsr_opt.model import get_model
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    mus = [row(mesh, 0.0), row(mesh, 0.5)]
+    model = get_model(mesh, MAT)
+    cm = ConstrainedModel(model, MuscleConstraints(mesh, mus, radius=0.3), ropes=True)
+    rng = np.random.default_rng(4)
+    x = mesh.points.reshape(-1) + 0.02 * rng.standard_normal(2 * mesh.n_nodes)
+    lam_nlp = rng.standard_normal(cm.n_rows)
+    lam = lam_nlp * cm.row_scale
+    pe = model.params(MAT)
+    lf, lg = ca.MX.sym("lf"), ca.MX.sym("lg", cm.n_rows)
+    Hf = ca.Function("H", [model.x, model.p, lf, lg], [cm.hess_lag_upper(model.x, model.p, lf, lg)])
+    H_nlp = np.array(ca.DM(Hf(x, pe, 1.0, lam_nlp)))
+    p = cm.params(pe, cm.values(x)[:2], lam)
+    H = cm.hessian(x, p)
+    assert np.abs(H_nlp - sp.triu(H).toarray()).max() < 1e-10
+    h = 1e-6
+    for k in rng.choice(2 * mesh.n_nodes, 8, replace=False):
+        e = np.zeros_like(x)
+        e[k] = h
+        col = (cm.gradient(x + e, p) - cm.gradient(x - e, p)) / (2 * h)
+        assert np.abs(col - H[:, k].toarray().ravel()).max() < 1e-6
