@@ -268,6 +268,10 @@ class MuscleStats:
     turning_angle_target: float
     max_turn: float = 0.0
 
+    def to_dict(self) -> dict:
+        """The figures as a JSON-ready dict."""
+        return to_jsonable(asdict(self))
+
 
 @dataclass(frozen=True)
 class DroppedUnit:
@@ -354,7 +358,8 @@ class RoutingResult:
         """Muscles, their figures, seeds, unit count and knobs as a JSON-ready dict (the graph is left out:
         :func:`contraction_graph` rebuilds it from the mesh and the target)."""
         return to_jsonable({"muscles": list(self.muscles), "stats": [s.to_dict() for s in self.stats],
-                            "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params)})
+                            "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params),
+                            "dropped": [asdict(d) for d in self.dropped]})
 
     def table(self) -> str:
         """The stats as a plain-text table (one row per muscle)."""

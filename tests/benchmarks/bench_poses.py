@@ -84,9 +84,9 @@ def solve(blocks, opts):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--resolution", default="medium")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    ap.add_argument("--resolution", default="medium", help="coarse, medium, fine or a node count")
+    ap.add_argument("--repeat", type=int, default=3, help="timed repetitions (the median is printed)")
     a = ap.parse_args(argv)
     scene = get_problem("gecko", resolution=a.resolution)
     mesh, mat = scene.mesh, scene.material
