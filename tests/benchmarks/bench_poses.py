@@ -85,8 +85,8 @@ def solve(blocks, opts):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--resolution", default="medium")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--resolution", default="medium", help="mesh resolution of the scenes (default medium)")
+    ap.add_argument("--repeat", type=int, default=3, help="timed repetitions per case (default 3)")
     a = ap.parse_args(argv)
     scene = get_problem("gecko", resolution=a.resolution)
     mesh, mat = scene.mesh, scene.material
