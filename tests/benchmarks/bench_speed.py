@@ -37,7 +37,7 @@ from bench_equilibrium import scene, strip_mesh  # noqa: E402
 
 from mdsr_opt import Mesh, NeoHookean, solve_external  # noqa: E402
 from mdsr_opt.model import get_model  # noqa: E402
-from mdsr_opt.newton import NewtonEnergy, _newton_step, _Pattern  # noqa: E402
+from mdsr_opt.newton import step_seconds  # noqa: E402
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 
@@ -46,15 +46,7 @@ def floor_unit(mesh: Mesh, x: np.ndarray, fixed: np.ndarray, reps: int = 5) -> f
     """Median seconds of one assembly (gradient + Hessian blocks + scatter) and one factorisation with a
     reused ordering, at ``x``."""
     model = get_model(mesh, MAT)
-    en = NewtonEnergy(model, model.params(MAT))
-    pat = _Pattern(en, ~fixed)
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        g, He, Hs = en.element_blocks(x, project=False)
-        _newton_step(pat, He, Hs, g[~fixed])
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
+    return step_seconds(model, model.params(MAT), x, fixed, repeat=reps)
 
 
 def measure(target: int, kind: str, repeat: int, tol: float, log=print) -> dict:
