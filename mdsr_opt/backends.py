@@ -12,8 +12,9 @@ Backends
 ``uno``           The Uno solver shipped with the casadi wheel (exact Hessian derived by CasADi).
 ``scipy``         ``scipy.optimize.minimize(method="trust-constr")`` on the free coordinates with
                   CasADi-generated gradient and sparse Hessian: the baseline a user might write.
-``newton``        A plain projected Newton method in numpy/scipy: per-element Hessians projected to
-                  positive semi-definite, sparse direct solve, backtracking line search.
+``newton``        A projected Newton method in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised element
+                  terms projected to positive semi-definite, one fill-reducing ordering reused by every
+                  sparse factorisation, backtracking line search.
 """
 
 from __future__ import annotations
@@ -124,7 +125,10 @@ def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
     o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
          "ipopt.max_iter": max_iter, "ipopt.linear_solver": linear_solver, "error_on_fail": False,
          # multipliers of bounds and parameters are not used: skip their extra derivative evaluations
-         "calc_lam_p": False, "calc_lam_x": False}
+         "calc_lam_p": False, "calc_lam_x": False,
+         # fixed coordinates become parameters without bound multipliers: about half the gradient calls,
+         # solve 9-10 % faster with the same iterates (measured at 3k and 10k nodes)
+         "ipopt.fixed_variable_treatment": "make_parameter_nodual"}
     if limited_memory:
         o["ipopt.hessian_approximation"] = "limited-memory"
     return o
@@ -251,70 +255,12 @@ def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
                            f"status {res.status}: {res.message}", int(res.nit), solve_time, 0.0)
 
 
-def _projected_blocks(Hblocks: np.ndarray) -> np.ndarray:
-    """Clamp negative eigenvalues of each symmetric block (N, d, d) to zero."""
-    w, V = np.linalg.eigh(0.5 * (Hblocks + np.swapaxes(Hblocks, 1, 2)))
-    w = np.maximum(w, 0.0)
-    return np.einsum("nij,nj,nkj->nik", V, w, V)
-
-
 def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
-    """Projected Newton: a baseline written the way a numpy/scipy user would."""
-    free, base, full = _free_problem(model, p, fixed, values, x0)
-    t0 = time.perf_counter()
-    fams = model.newton_families()
-    n = model.n_dof
-    fmap = {name: tuple(f.map(len(dofs), "serial") for f in fns) for name, (dofs, fns, _d) in fams.items()}
-    x = base.copy()
+    """Projected Newton in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised assembly, one ordering reused."""
+    from .newton import projected_newton
 
-    def energy(y):
-        return model.energy(y, p)
-
-    def assemble(y):
-        rows, cols, vals = [], [], []
-        for name, (dofs, _fns, data_of) in fams.items():
-            N, d = dofs.shape
-            X = y[dofs].T
-            Hb = np.asarray(fmap[name][2](X, *data_of(p), p[0:2] if name == "elem" else np.zeros(0)))
-            Hb = Hb.T.reshape(N, d, d)
-            Hb = _projected_blocks(Hb)
-            rows.append(np.repeat(dofs, d, axis=1).reshape(-1))
-            cols.append(np.tile(dofs, (1, d)).reshape(-1))
-            vals.append(np.transpose(Hb, (0, 2, 1)).reshape(-1))
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-
-    f = energy(x)
-    status, success, it = "max_iter", False, 0
-    scale = None
-    for it in range(1, max_iter + 1):
-        g = model.gradient(x, p)[free]
-        gn = float(np.abs(g).max()) if g.size else 0.0
-        if scale is None:
-            scale = max(gn, 1e-300)
-        if gn <= tol * max(1.0, scale) or not g.size:
-            status, success = "converged", True
-            it -= 1
-            break
-        H = assemble(x)[free][:, free].tocsc()
-        H = H + sp.identity(H.shape[0], format="csc") * (1e-10 * abs(H.diagonal()).max())
-        try:
-            dz = -spla.spsolve(H, g)
-        except RuntimeError as exc:  # singular factorisation
-            status = f"linear solve failed: {exc}"
-            break
-        t = 1.0
-        while t > 1e-8:
-            y = x.copy()
-            y[free] += t * dz
-            fy = energy(y)
-            if np.isfinite(fy) and fy <= f + 1e-4 * t * float(g @ dz):
-                break
-            t *= 0.5
-        else:
-            status = "line search failed"
-            break
-        x, f = y, fy
-    return MinimizeOutcome(x, success, status, it, time.perf_counter() - t0, 0.0)
+    x, success, status, it, seconds = projected_newton(model, p, x0, fixed, values, tol=tol, max_iter=max_iter)
+    return MinimizeOutcome(x, success, status, it, seconds, 0.0)
 
 
 BACKENDS = {

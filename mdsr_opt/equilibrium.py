@@ -366,7 +366,11 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
 
 def _result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
             backend, mode, tol_residual=1e-5):
-    g = model.gradient(xflat, p)
+    if hasattr(model, "grad_fn"):  # an EnergyModel: energy and gradient from one call
+        f, g = model.grad_fn(xflat, p)
+        energy, g = float(f), np.asarray(g).ravel()
+    else:
+        g, energy = model.gradient(xflat, p), model.energy(xflat, p)
     scale = material.E * material.thickness * mesh.size
     residual = float(np.abs(g[~fixed]).max()) / scale if (~fixed).any() else 0.0
     mj = _min_J(mesh, xflat)
@@ -384,8 +388,10 @@ def _result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, 
         # every element upright, yet the body folds through itself: contact is not modelled
         ok = False
         status = f"{status}; rejected: the boundary crosses itself (self-contact is not modelled)"
-    return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=model.energy(xflat, p),
-                             elastic_energy=model.energy(xflat, p_elastic), success=ok, status=status,
+    same = p_elastic is p or np.array_equal(np.asarray(p_elastic), np.asarray(p))
+    return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=energy,
+                             elastic_energy=energy if same else model.energy(xflat, p_elastic), success=ok,
+                             status=status,
                              iterations=iters, residual=residual, min_J=mj, steps=steps,
                              build_time=t_build, solve_time=t_solve, backend=backend, mode=mode,
                              stable=None if chk is None else chk.stable,

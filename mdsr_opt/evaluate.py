@@ -777,7 +777,7 @@ def _signed_distances(points: np.ndarray, contour32: np.ndarray) -> np.ndarray:
 
 
 def _unsigned_distances(points: np.ndarray, contour: np.ndarray) -> np.ndarray:
-    """Distance of each point to a closed polyline, vectorised (used inside the rotation search)."""
+    """Distance of each point to a closed polyline, vectorised (all points against all segments)."""
     a = contour
     d = np.roll(contour, -1, axis=0) - a
     dd = np.maximum((d * d).sum(axis=1), 1e-300)
@@ -789,6 +789,38 @@ def _unsigned_distances(points: np.ndarray, contour: np.ndarray) -> np.ndarray:
         q = a + t[..., None] * d
         out[i:i + step] = np.sqrt(((p - q) ** 2).sum(axis=2).min(axis=1))
     return out
+
+
+class _PolylineDistance:
+    """Exact distances of points to one closed polyline, many times (the rotation search).
+
+    A KD-tree over the segments' midpoints: the nearest midpoint, at ``r0``, bounds a point's distance, so
+    its nearest segment has its midpoint within ``r0 + L/2`` (``L`` the longest segment); only those
+    segments (a ball query, a few per point) are measured exactly."""
+
+    def __init__(self, contour: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.a = np.asarray(contour, dtype=float)
+        self.d = np.roll(self.a, -1, axis=0) - self.a
+        self.dd = np.maximum((self.d * self.d).sum(axis=1), 1e-300)
+        self.half = 0.5 * float(np.sqrt(self.dd.max()))
+        self.tree = cKDTree(self.a + 0.5 * self.d)
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float).reshape(-1, 2)
+        if len(points) == 0:
+            return np.empty(0)
+        r0, _ = self.tree.query(points)
+        lists = self.tree.query_ball_point(points, r0 * (1 + 1e-12) + self.half + 1e-12)
+        lens = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
+        seg = np.fromiter((j for c in lists for j in c), dtype=np.int64, count=int(lens.sum()))
+        p = np.repeat(points, lens, axis=0)
+        a, d = self.a[seg], self.d[seg]
+        t = np.clip(((p - a) * d).sum(axis=1) / self.dd[seg], 0.0, 1.0)
+        dist2 = ((p - a - t[:, None] * d) ** 2).sum(axis=1)
+        starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
+        return np.sqrt(np.minimum.reduceat(dist2, starts))
 
 
 @dataclass(frozen=True, eq=False)
@@ -995,10 +1027,12 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
             D = np.diag((hi - lo) / s_size)
             return np.hstack([Q @ D @ F, (Q @ (0.5 * (lo + hi) - D @ s_mid))[:, None]])
 
+        to_contour = _PolylineDistance(M)  # one KD-tree for the whole rotation search
+
         def cost(theta: float) -> float:
             Aff = affine(theta)
             p = S @ Aff[:, :2].T + Aff[:, 2]
-            return float(_unsigned_distances(p, M).mean())
+            return float(to_contour(p).mean())
 
         if registration == "segment":
             if segments is None:

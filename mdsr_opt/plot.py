@@ -26,6 +26,10 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from .io import atomic_path
 
+# Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
+# loc="best" search, which re-runs on every draw and was 11-32 % of a scene's figure time.
+_LEGEND_OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+
 
 def _axes(ax=None, figsize=(6, 4)):
     if ax is None:
@@ -215,7 +219,7 @@ def plot_routing(mesh, target, result, axes=None, title=None):
                 ax.plot(ends[:, 0], ends[:, 1], "o", color="k", ms=3)
         ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh")
     if muscles and len(muscles) <= 10:
-        axes[1].legend(fontsize=7, loc="best")
+        axes[1].legend(fontsize=7, **_LEGEND_OUTSIDE)
     if title:
         fig.suptitle(title)
     return fig
@@ -238,7 +242,7 @@ def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
     ax.set_xlabel("mesh nodes")
     ax.set_ylabel("seconds")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, ncol=2, loc="upper left")  # explicit: "best" searches
     ax.set_title("muscle routing time")
     return fig
 
@@ -321,7 +325,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
     a = ", ".join(f"{c:.3f}" for c in result.contractions)
     ok = "" if result.success else "  [FAILED]"
     ax.set_title(title or f"{result.method}: a = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
-    ax.legend(fontsize=7, loc="best")
+    ax.legend(fontsize=7, **_LEGEND_OUTSIDE)
     return fig
 
 
@@ -384,7 +388,7 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4):
         p = mesh.points[np.asarray(idx, dtype=int)]
         ax.plot(p[:, 0], p[:, 1], "o", ms=markersize, color=cyc[i % len(cyc)], label=name)
     if regions:
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, **_LEGEND_OUTSIDE)
     ax.set_title(title or f"rest mesh: {mesh.n_nodes} nodes, {mesh.n_triangles} triangles", fontsize=9)
     return fig
 
@@ -419,7 +423,7 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     if len(muscles):
         plot_muscles(x, muscles, ax=ax)
     if len(anchors) or len(dn) or len(muscles):
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, **_LEGEND_OUTSIDE)
     ax.autoscale_view()
     if title:
         ax.set_title(title, fontsize=9)
@@ -465,24 +469,30 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     pad = 0.05 * float((hi - lo).max())
     fig, ax = plt.subplots(figsize=figsize)
     cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    # the artists are made once and updated per frame (clearing the axes and redrawing everything made the
+    # GIFs the slowest part of a scene's figures)
+    if rest:
+        for loop in mesh.boundary_loops:
+            p = mesh.points[np.append(loop, loop[0])]
+            ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
+    body = PolyCollection(states[0][mesh.triangles], facecolors="#8fb3d9", edgecolors="#335577", linewidths=0.25)
+    ax.add_collection(body)
+    lines = [ax.plot([], [], "-", color=cyc[i % len(cyc)])[0] for i in range(len(muscles))]
+    paths = [list(m.nodes) for m in muscles]
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    title = ax.set_title("", fontsize=9)
 
     def draw(k):
-        ax.clear()
-        if rest:
-            for loop in mesh.boundary_loops:
-                p = mesh.points[np.append(loop, loop[0])]
-                ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
         x = states[k]
-        ax.add_collection(PolyCollection(x[mesh.triangles], facecolors="#8fb3d9", edgecolors="#335577",
-                                         linewidths=0.25))
-        for i, m in enumerate(muscles):
+        body.set_verts(x[mesh.triangles])
+        for i, (line, p) in enumerate(zip(lines, paths)):
             a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
-            p = x[list(m.nodes)]
-            ax.plot(p[:, 0], p[:, 1], "-", color=cyc[i % len(cyc)], lw=0.8 + 2.5 * a, alpha=0.35 + 0.65 * a)
-        ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + pad)
-        ax.set_aspect("equal")
-        ax.set_title(titles[k] if titles is not None else f"frame {k + 1}/{len(states)}", fontsize=9)
+            line.set_data(x[p, 0], x[p, 1])
+            line.set_linewidth(0.8 + 2.5 * a)
+            line.set_alpha(0.35 + 0.65 * a)
+        title.set_text(titles[k] if titles is not None else f"frame {k + 1}/{len(states)}")
         return []
 
     path = os.fspath(path)
@@ -560,7 +570,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
         ax.set_ylabel(ylabels[kind])
         ax.set_title(f"{kind}: accuracy against time (x = failed run)", fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, **_LEGEND_OUTSIDE)
     if title:
         fig.suptitle(f"study {title}", fontsize=10)
     return fig

@@ -614,7 +614,7 @@ def _is_minimum(setup: Setup, material, res) -> bool:
         from .design import check_minimum
 
         pd, _lam, _r = check_minimum(setup.mesh, material, setup.muscles, setup.contractions, res.x,
-                                     muscle_model=setup.muscle_model, stiffness=setup.stiffness)
+                                     muscle_model=setup.muscle_model, stiffness=setup.stiffness, lowest=False)
         return bool(pd)
     from .model import get_model
 

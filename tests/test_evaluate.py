@@ -725,3 +725,20 @@ def test_huge_kernel_is_refused_quickly():
     with pytest.raises(ValueError, match="kernel=13 is too large for a 300 x 200 search region: at most 11 px"):
         body_mask(small, kernel=13)
     assert body_mask(small, kernel=11)[100, 150]
+
+
+def test_polyline_distance_tree_matches_all_segments():
+    """The KD-tree distance used in the rotation search equals the all-segments one (exact, not sampled)."""
+    from mdsr_opt.evaluate import _PolylineDistance, _unsigned_distances
+
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        n = int(rng.integers(3, 300))
+        th = np.sort(rng.uniform(0, 2 * np.pi, n))
+        r = 50 + 15 * rng.standard_normal(n) * (trial % 2)  # odd trials: very uneven segments
+        M = np.column_stack([r * np.cos(th), r * np.sin(th)])
+        P = rng.uniform(-200, 200, (int(rng.integers(1, 200)), 2))
+        assert np.abs(_PolylineDistance(M)(P) - _unsigned_distances(P, M)).max() < 1e-9
+    square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
+    got = _PolylineDistance(square)(np.array([[5.0, 5.0], [13.0, 14.0], [-2.0, 5.0]]))
+    assert got == pytest.approx([5.0, 5.0, 2.0], abs=1e-12)

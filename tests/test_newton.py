@@ -1,0 +1,86 @@
+"""The vectorised projected Newton backend (mdsr_opt.newton): exact derivatives, projection, energies."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean, solve_external
+from mdsr_opt.model import get_model, spring_parameters
+from mdsr_opt.newton import NewtonEnergy, _pd4, _psd4
+
+
+@pytest.mark.parametrize("mat", [NeoHookean(2.0, 0.3, thickness=0.7), LinearElastic(1.0, 0.25)])
+def test_energy_gradient_hessian_match_the_casadi_model(mat):
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    x = (mesh.points + 0.03 * np.random.default_rng(0).standard_normal(mesh.points.shape)).ravel()
+    model = get_model(mesh, mat)
+    p = model.params(mat, spring_parameters(mesh, [Muscle(range(0, 12))], [0.2], 10.0))
+    en = NewtonEnergy(model, p)
+    assert len(en.k) == 11  # only the muscle's springs are evaluated
+    H = model.hessian(x, p)
+    assert en.energy(x) == pytest.approx(model.energy(x, p), rel=1e-13)
+    assert np.abs(en.gradient(x) - model.gradient(x, p)).max() < 1e-12
+    assert abs(en.hessian(x) - H).max() < 1e-12 * abs(H).max()
+    # projected per term: positive semi-definite globally
+    assert np.linalg.eigvalsh(en.hessian(x, project=True).toarray())[0] > -1e-12
+
+
+def test_energy_is_infinite_for_an_inverted_triangle():
+    mesh = Mesh.rectangle(1.0, 1.0, 1, 1)
+    mat = NeoHookean(1.0, 0.3)
+    en = NewtonEnergy(get_model(mesh, mat), get_model(mesh, mat).params(mat))
+    assert en.energy((mesh.points * [1.0, -1.0]).ravel()) == np.inf
+
+
+def test_block_projection_clamps_only_negative_eigenvalues():
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((50, 4, 4))
+    A = A + np.swapaxes(A, 1, 2)
+    A[:10] = A[:10] @ np.swapaxes(A[:10], 1, 2) + 0.1 * np.eye(4)  # positive definite ones
+    w = np.linalg.eigvalsh(A)
+    assert np.array_equal(_pd4(A), w[:, 0] > 0)
+    P = _psd4(A)
+    wp = np.linalg.eigvalsh(P)
+    assert wp.min() > -1e-12
+    assert np.allclose(np.sort(wp, axis=1), np.sort(np.maximum(w, 0), axis=1), atol=1e-12)
+    assert np.array_equal(P[:10], A[:10])
+
+
+@pytest.mark.parametrize("bend", [False, True])
+def test_energies_match_ipopt(bend):
+    mesh = Mesh.from_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], max_area=0.012)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] < 1e-9), np.flatnonzero(P[:, 0] > 4 - 1e-9)
+    if bend:  # through 90 degrees: compressed elements, where the exact Hessian is used once it is definite
+        R, th = 8 / np.pi, P[right, 0] / 4 * np.pi / 2
+        target = np.column_stack([(R - P[right, 1]) * np.sin(th), R - (R - P[right, 1]) * np.cos(th)])
+    else:
+        target = P[right] + [1.0, 0.0]
+    mat = NeoHookean(1.0, 0.3)
+    a = solve_external(mesh, mat, left, (right, target), backend="newton", tol=1e-10)
+    b = solve_external(mesh, mat, left, (right, target), tol=1e-10)
+    assert a.success and b.success, (a.status, b.status)
+    assert a.energy == pytest.approx(b.energy, rel=1e-10)
+    assert np.abs(a.x - b.x).max() < 1e-6
+
+
+def test_sliding_cables_are_refused():
+    mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    mat = NeoHookean(1.0, 0.3)
+    model = get_model(mesh, mat, cables=[(0, 1, 2)])
+    with pytest.raises(ValueError, match="does not support sliding cables"):
+        NewtonEnergy(model, np.zeros(model.n_params))
+
+
+def test_step_seconds_times_one_assembly_and_factorisation():
+    from mdsr_opt.newton import step_seconds
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    mat = NeoHookean(1.0, 0.3)
+    model = get_model(mesh, mat)
+    fixed = np.zeros(2 * mesh.n_nodes, bool)
+    fixed[:2] = fixed[2 * 8:2 * 8 + 2] = True
+    t = step_seconds(model, model.params(mat), mesh.points.ravel(), fixed, repeat=3)
+    assert 0.0 < t < 5.0
+    assert len(model.__dict__.get("_newton_patterns", {})) == 0  # timing leaves the solver's cache alone
