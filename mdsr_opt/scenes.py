@@ -101,6 +101,9 @@ class Case:
         Internal case: one contraction per scene muscle; the internal-driving equilibrium is the target.
     description : str
         One line for reports.
+    muscles : sequence of Muscle, optional
+        External case: lay these muscles instead of routing them on the target (e.g. a muscle along a hole's
+        rim that routing does not find); the design then finds their contractions.
     """
 
     name: str
@@ -109,9 +112,18 @@ class Case:
     drag_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     contractions: np.ndarray | None = None
     description: str = ""
+    muscles: tuple | None = None
 
     def __post_init__(self):
         _check_name(self.name, "case name")
+        if self.muscles is not None:
+            if self.contractions is not None:
+                raise ValueError(f"case {self.name!r}: muscles are for an external case (an internal case "
+                                 "drives the scene's muscles)")
+            mus = tuple(self.muscles)
+            if not mus or not all(isinstance(m, Muscle) for m in mus):
+                raise TypeError(f"case {self.name!r}: muscles must be a non-empty sequence of Muscle")
+            object.__setattr__(self, "muscles", mus)
         anc = as_index_array(np.asarray(self.anchors), f"case {self.name!r}: anchors", shape=(None,))
         dn = as_index_array(np.asarray(self.drag_nodes), f"case {self.name!r}: drag_nodes", shape=(None,))
         dp = as_float_array(np.asarray(self.drag_positions, dtype=float).reshape(-1, 2) if np.size(
@@ -255,6 +267,8 @@ class Scene:
             if not self.muscles:
                 self.muscles = None
         for c in cases:
+            if c.muscles is not None:
+                check_muscles(self.mesh, c.muscles)  # nodes of this mesh, along its edges
             if c.kind == "internal":
                 if self.muscles is None:
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: an internal case needs the "
@@ -814,12 +828,15 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     muscles: tuple = ()
     notes: list[str] = []
     if res.success:
-        if case.kind == "external" and scene.muscles is None or case.kind == "internal" and route_internal:
+        own = case.kind == "external" and case.muscles is not None
+        if not own and (case.kind == "external" and scene.muscles is None or case.kind == "internal" and route_internal):
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", RoutingWarning)
                 routing = route_muscles(scene.mesh, res.x, **scene.routing_options)
             notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
-        if case.kind == "external" and scene.muscles is None:
+        if own:
+            muscles = tuple(case.muscles)
+        elif case.kind == "external" and scene.muscles is None:
             muscles = tuple(routing.muscles)
         else:
             muscles = tuple(scene.muscles)
@@ -1015,7 +1032,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     rep.n_muscles = len(setup.muscles)
-    if case.kind == "external" and scene.muscles is None:
+    if setup.routing is not None and case.kind == "external" and scene.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
     opts = dict(scene.design_options)
