@@ -303,7 +303,12 @@ def _row(scene: str, case, entry: dict, extra: str) -> str:
 
 def validation_tables(reports: Sequence) -> str:
     """Tables 2, 3 and 4 against the virtual prototype as Markdown, from scene reports (``SceneReport``
-    objects or their ``to_dict()``), one row per case that has the figures."""
+    objects or their ``to_dict()``), one row per case that has the figures.
+
+    Table 2: external cases, the design model's external driving against the prototype driven the same way.
+    Table 3: internal cases (the muscle experiments), likewise with the scene's muscles. Table 4: external
+    cases, the target against the prototype driven by the designed muscles and contractions (an internal
+    case's design recovers its known contractions, so its Table 4 row would repeat Table 3)."""
     def cases(r):
         d = r if isinstance(r, dict) else r.to_dict()
         return d["scene"], d["cases"]
@@ -324,7 +329,7 @@ def validation_tables(reports: Sequence) -> str:
             else:
                 a = ", ".join(f"{v:.0%}" for v in (c.get("known_contractions") or []))
                 t3.append(_row(name, c["case"], p.get("driving"), a or "-"))
-            if "design" in p:
+            if "design" in p and c["kind"] == "external":  # an internal case's design repeats Table 3
                 a = ", ".join(f"{v:.3f}" for v in (c.get("contractions") or []))
                 t4.append(_row(name, c["case"], p.get("design"), a or "-"))
     desc = ""
