@@ -1480,6 +1480,18 @@ def _parse_resolution(text: str):
     return int(text) if text.isdigit() else text
 
 
+def _parse_seed(text: str) -> int:
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {text!r}")
+    return v
+
+
 def _parse_size(text: str) -> tuple[int, int]:
     import argparse
 
@@ -2211,7 +2223,8 @@ def add_cli(sub) -> None:
     p.set_defaults(func=_cmd_list)
 
     q = sub.add_parser("run", help="run scenes through the whole pipeline: target, muscles, contractions, "
-                       "forward check, synthetic photograph, contour metrics; figures, meshes, JSON")
+                       "forward check, synthetic photograph, contour metrics, validation against a virtual prototype (the "
+                       "paper's Tables 2-4 in validation.md, and tables.md for several scenes); figures, meshes, JSON")
     q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
                    help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
     q.add_argument("--out", required=True,
@@ -2234,7 +2247,7 @@ def add_cli(sub) -> None:
                    help="skip the virtual prototype (a 3x finer mesh, perturbed material, the exact cable, the "
                    "synthetic camera) against which the paper's Tables 2-4 are computed (validation.md per scene, "
                    "tables.md for several scenes)")
-    q.add_argument("--prototype-seed", type=int, default=0,
+    q.add_argument("--prototype-seed", type=_parse_seed, default=0,
                    help="seed of the virtual prototype's material perturbation and camera (default 0)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")

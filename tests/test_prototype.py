@@ -81,3 +81,18 @@ def test_bad_input_is_refused(one):
         proto.internal(scene.muscles, [0.2, 0.3])
     with pytest.raises(ValueError, match="internal driving"):
         proto.external("a20")
+
+
+def test_mdsr_run_writes_the_validation_tables(tmp_path, capsys):
+    from mdsr_opt.cli import main
+
+    out = tmp_path / "one"
+    assert main(["run", "one_muscle", "--case", "a30", "--resolution", "coarse", "--no-animations",
+                 "--no-figures", "--out", str(out), "--quiet"]) == 0
+    md = (out / "validation.md").read_text()
+    assert "## Table 3" in md and "| one_muscle | a30 | 30% |" in md
+    assert "3x finer mesh" in md and "exact sliding cable" in md
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["run", "one_muscle", "--out", str(tmp_path / "bad"), "--prototype-seed", "-1"])
+    assert "non-negative integer" in capsys.readouterr().err and not (tmp_path / "bad").exists()
