@@ -870,9 +870,9 @@ class CaseReport:
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
         the fraction of the true muscles' edges that routing on the target covers.
     photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
-        outline with it (the paper's design-versus-prototype measure), ``self`` the driven outline with its
-        own photograph (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``,
-        ``ratio`` and ``mean_norm``. These photograph the design model itself (a mirror). ``prototype``
+        outline and holes with it (:func:`~mdsr_opt.evaluate.compare_loops`), ``self`` the driven state's
+        (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every
+        loop, ``outer_mean_px`` and ``mean_norm`` of the outline alone, and ``n_unmatched`` holes. These photograph the design model itself (a mirror). ``prototype``
         (when a virtual prototype was given) holds the validation against a DIFFERENT, finer model
         (:func:`~mdsr_opt.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
         included.
@@ -1069,23 +1069,27 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if photo:
-        from .evaluate import compare_contours, contour_from_image, render_photo, simulated_outline
+        from .evaluate import compare_loops, contour_loops_from_image, render_photo, simulated_loops
 
         t2 = time.perf_counter()
         try:
             ph = render_photo(mesh, res.x_aligned, resolution=photo_resolution, seed=0)
-            contour = contour_from_image(ph.image)
-            cmp_t = compare_contours(simulated_outline(mesh, setup.target), contour)
-            cmp_s = compare_contours(simulated_outline(mesh, res.x_aligned), contour)
+            loops = contour_loops_from_image(ph.image)
+            # every boundary loop is measured: the outline and each hole against its photographed counterpart
+            cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
+            cmp_s = compare_loops(simulated_loops(mesh, res.x_aligned), loops)
         except ValueError as exc:  # e.g. a body too thin to segment at this resolution
             rep.photo = {"error": str(exc)}
             say(f"{prefix}photograph: could not measure ({exc})")
         else:
-            keys = ("mean_px", "std_px", "max_px", "ratio", "mean_norm")
+            def figures(c):
+                return {"mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px, "ratio": c.ratio,
+                        "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
+                        "n_unmatched": c.n_unmatched}
+
             rep.photo = {"synthetic": True, "resolution": list(photo_resolution),
-                         "target": {k: float(getattr(cmp_t, k)) for k in keys},
-                         "self": {k: float(getattr(cmp_s, k)) for k in keys}}
-            run.photo, run.comparison = ph, cmp_t
+                         "target": figures(cmp_t), "self": figures(cmp_s)}
+            run.photo, run.comparison = ph, cmp_t.outer
             say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
                 f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
                 f"{cmp_s.mean_px:.2f} px")

@@ -34,7 +34,7 @@ from mdsr_opt.scenes import (Animation, Case, Scene, boundary_path, edge_path, m
                              resolve_resolution, run_main, seeds_for)
 
 EYE_C, EYE_AX = (1.2, 0.9), (0.65, 0.28)       # right eye centre (the left is mirrored) and semi-axes
-MOUTH_C, MOUTH_AX = (0.0, -1.9), (1.1, 0.2)
+MOUTH_C, MOUTH_AX = (0.0, -1.9), (1.1, 0.25)
 SKULL_Y = -0.5                                  # the smile holds the face above this line (the skull)
 CHIN_Y = -3.3                                   # the frown holds the face below this line (the jaw bone)
 ZYGOMATICUS = ((1.1, -1.9), (1.6, -1.2), (1.6, -0.45))   # the right smile muscle's waypoints (left mirrored)
