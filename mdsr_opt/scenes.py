@@ -829,7 +829,8 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     notes: list[str] = []
     if res.success:
         own = case.kind == "external" and case.muscles is not None
-        if not own and (case.kind == "external" and scene.muscles is None or case.kind == "internal" and route_internal):
+        # a case with its own muscles is routed too, as a diagnostic (what routing would have laid)
+        if case.kind == "external" and (scene.muscles is None or own) or case.kind == "internal" and route_internal:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", RoutingWarning)
                 routing = route_muscles(scene.mesh, res.x, **scene.routing_options)
@@ -1032,7 +1033,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     rep.n_muscles = len(setup.muscles)
-    if setup.routing is not None and case.kind == "external" and scene.muscles is None:
+    if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
     opts = dict(scene.design_options)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mdsr_opt import Mesh, NeoHookean
+from mdsr_opt import Mesh, Muscle, NeoHookean
 from mdsr_opt.scenes import (Animation, Case, Scene, boundary_path, edge_path, mesh_polygon, nodes_near,
                              resolve_resolution, run_main, seeds_for)
 
@@ -37,8 +37,9 @@ EYE_C, EYE_AX = (1.2, 0.9), (0.65, 0.28)       # right eye centre (the left is m
 MOUTH_C, MOUTH_AX = (0.0, -1.9), (1.1, 0.25)
 SKULL_Y = -0.5                                  # the smile holds the face above this line (the skull)
 CHIN_Y = -3.3                                   # the frown holds the face below this line (the jaw bone)
-ZYGOMATICUS = ((1.1, -1.9), (1.6, -1.2), (1.6, -0.45))   # the right smile muscle's waypoints (left mirrored)
+ZYGOMATICUS = ((1.1, -1.9), (1.5, -1.3), (1.6, -0.5))   # the right smile muscle's waypoints (left mirrored)
 ANCHOR_RADIUS = 0.05                             # rigid muscle-end patches smaller than an eye (default ~0.3)
+MAX_TURN = 45.0                                 # the routing's tortuosity limit, obeyed by the laid muscles
 MIN_NODES = 300                                 # fewer do not resolve the mouth corners: "coarse" gets this
 SQUEEZE = (0.6, 0.4)                            # the wink draws the eye's rim to these fractions of (width, height)
 
@@ -95,6 +96,71 @@ def symmetric_mesh(n: int) -> Mesh:
     return Mesh(points, tris)
 
 
+def turns(mesh: Mesh, nodes) -> np.ndarray:
+    """The turning angle (degrees) at each interior node of a node chain, at rest."""
+    d = np.diff(mesh.points[list(nodes)], axis=0)
+    a = np.arctan2(d[:, 1], d[:, 0])
+    return np.degrees(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi))
+
+
+def trimmed(mesh: Mesh, muscle: Muscle, max_turn: float = MAX_TURN) -> Muscle:
+    """The muscle without end nodes at which it turns by more than ``max_turn`` (an eye's sharp corner)."""
+    v = list(muscle.nodes)
+    while len(v) > 3 and turns(mesh, v)[-1] > max_turn:
+        v = v[:-1]
+    while len(v) > 3 and turns(mesh, v)[0] > max_turn:
+        v = v[1:]
+    return Muscle(v, name=muscle.name)
+
+
+def straight_path(mesh: Mesh, way, name: str, max_turn: float = MAX_TURN) -> Muscle:
+    """A muscle along mesh edges that follows the polyline ``way`` closely without sharp corners: from the node
+    nearest its start, each step takes the neighbour whose edge best points along the polyline (penalised by
+    its distance from the polyline), turning by at most ``max_turn`` where any neighbour allows, until the
+    node nearest the polyline's end is reached."""
+    P = mesh.points
+    way = np.asarray(way, dtype=float)
+    nbrs: dict[int, set] = {}
+    for a, b in mesh.edges.tolist():
+        nbrs.setdefault(a, set()).add(b)
+        nbrs.setdefault(b, set()).add(a)
+    h = float(np.mean(mesh.edge_lengths))
+    end = int(np.argmin(np.linalg.norm(P - way[-1], axis=1)))
+    v = [int(np.argmin(np.linalg.norm(P - way[0], axis=1)))]
+    seg = 0
+
+    def offset(p):  # distance to the polyline
+        best = np.inf
+        for a, b in zip(way[:-1], way[1:]):
+            t = np.clip(np.dot(p - a, b - a) / np.dot(b - a, b - a), 0.0, 1.0)
+            best = min(best, float(np.linalg.norm(p - a - t * (b - a))))
+        return best
+
+    while v[-1] != end and len(v) < 10 * len(P):
+        x = P[v[-1]]
+        while seg < len(way) - 2 and np.dot(x - way[seg + 1], way[seg + 1] - way[seg]) > -0.5 * h:
+            seg += 1
+        goal = way[seg + 1] - x if np.linalg.norm(way[seg + 1] - x) > 1e-12 else way[-1] - x
+        goal = goal / max(np.linalg.norm(goal), 1e-12)
+        prev = P[v[-1]] - P[v[-2]] if len(v) > 1 else None
+        scored = []
+        for w in nbrs[v[-1]] - set(v):
+            d = P[w] - x
+            d = d / np.linalg.norm(d)
+            turn = 0.0 if prev is None else np.degrees(np.arccos(np.clip(np.dot(d, prev / np.linalg.norm(prev)),
+                                                                          -1, 1)))
+            scored.append((turn > max_turn, -(np.dot(d, goal) - offset(P[w]) / h), w))
+        if not scored:
+            break
+        w = min(scored)[2]
+        if seg == len(way) - 2 and np.linalg.norm(P[w] - way[-1]) >= np.linalg.norm(x - way[-1]):
+            break  # past the end: stop rather than turn back
+        v.append(w)
+        if np.linalg.norm(P[v[-1]] - way[-1]) < 0.5 * h:
+            break
+    return Muscle(v, name=name)
+
+
 def motion_recovered(rest: ArrayLike, target: ArrayLike, driven: ArrayLike, nodes: ArrayLike) -> float:
     """The share of the drag motion a design reproduces.
 
@@ -146,15 +212,15 @@ def build(resolution="medium") -> Scene:
 
     # the smile's muscles: a zygomaticus on each side, from the mouth corner up into the held upper face
     # (routing on this target cuts each into two short pieces and their design stalls at medium resolution)
-    zygomatici = tuple(edge_path(mesh, [(s * x, y) for x, y in ZYGOMATICUS], name=f"zygomaticus {side}")
+    zygomatici = tuple(straight_path(mesh, [(s * x, y) for x, y in ZYGOMATICUS], name=f"zygomaticus {side}")
                        for s, side in ((-1, "left"), (1, "right")))
     # the wink: the left eye's rim drawn in about its centre (an orbicularis oculi squeezing it); its muscles
     # run along the upper and the lower lid. Routing lays them a ring of elements outside the rim, where
     # they shrink the eye less. A rope along a flat eye pulls its corners in as much as its lids together
     # (the eye shrinks rather than shuts), so the target narrows the eye as it closes it.
     ex, ey = EYE_AX
-    lids = tuple(boundary_path(mesh, (lx - ex, ly), (lx + ex, ly), via=(lx, ly + u * ey), name=f"{n} lid")
-                 for u, n in ((1, "upper"), (-1, "lower")))
+    lids = tuple(trimmed(mesh, boundary_path(mesh, (lx - ex, ly), (lx + ex, ly), via=(lx, ly + u * ey),
+                                             name=f"{n} lid")) for u, n in ((1, "upper"), (-1, "lower")))
     # the pucker: an orbicularis oris along each lip from corner to corner (routed muscles there are as good
     # on coarse meshes but come out lopsided on finer ones)
     mx, my = MOUTH_C

@@ -33,6 +33,14 @@ def test_each_expression_recovers_at_least_70_percent(scene, name):
         assert len(a) % 2 == 0 and np.allclose(a[0::2], a[1::2], atol=1e-6), a
 
 
+@pytest.mark.parametrize("resolution", ["coarse", "medium"])
+def test_laid_muscles_obey_the_tortuosity_limit(resolution):
+    s = get_problem("face", resolution=resolution)
+    laid = [m for c in s.cases for m in (c.muscles or ())]
+    assert len(laid) == 6
+    assert max(face_module.turns(s.mesh, m.nodes).max() for m in laid) <= face_module.MAX_TURN
+
+
 def test_the_face_mesh_is_mirror_symmetric(scene):
     r = find_reflection(scene.mesh)
     assert r is not None
