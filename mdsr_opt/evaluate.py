@@ -63,7 +63,11 @@ __all__ = [
     "load_image",
     "body_mask",
     "contour_from_image",
+    "contour_loops_from_image",
     "simulated_outline",
+    "simulated_loops",
+    "LoopComparison",
+    "compare_loops",
     "ContourComparison",
     "compare_contours",
     "evaluate_image",
@@ -641,6 +645,15 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     >>> c.min(axis=0).round(2).tolist(), c.max(axis=0).round(2).tolist()  # edges between pixels
     ([9.5, 19.5], [69.5, 39.5])
     """
+    return _extract_outline(image, roi=roi, color=color, method=method, body=body, color_tol=color_tol,
+                            kernel=kernel, flatten=flatten, largest=largest, min_blob_fraction=min_blob_fraction,
+                            subpixel=subpixel, max_pixels=max_pixels)[0]
+
+
+def _extract_outline(image, *, roi, color, method, body, color_tol, kernel, flatten, largest, min_blob_fraction,
+                     subpixel, max_pixels):
+    """:func:`contour_from_image`, also returning what hole extraction needs: ``(outline, mask (uint8,
+    0/255, search region), score, the outline's integer contour, (x0, y0, w, h))``."""
     img, (x0, y0, w, h) = _load_region(image, roi, max_pixels)
     largest = _check_bool(largest, "largest")
     subpixel = _check_bool(subpixel, "subpixel")
@@ -694,7 +707,74 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
         c = _refine_subpixel(c, blob > 0, score, reach=max(2.0, min(h, w) / 250.0))
     c[:, 0] += x0
     c[:, 1] += y0
-    return c
+    return c, m8, score, contours[order[0]], (x0, y0, w, h)
+
+
+def contour_loops_from_image(image: ArrayLike | str | os.PathLike, *, min_hole_fraction: float = 0.002,
+                             subpixel: bool = True, **extract) -> list[np.ndarray]:
+    """Extract the body's outline AND its holes (eyes, a mouth, windows) from a photograph.
+
+    The outline is :func:`contour_from_image`'s (same options in ``extract``, same errors). The holes
+    are the background regions enclosed by it (the inner contours of OpenCV's two-level hierarchy,
+    ``RETR_CCOMP``, of the body's blob), each refined to sub-pixel edge positions like the outline.
+
+    Parameters
+    ----------
+    image : array_like or path
+    min_hole_fraction : float in (0, 1), default 0.002
+        Holes smaller than this fraction of the area enclosed by the outline are ignored (pores, specks
+        of glare, segmentation noise).
+    subpixel : bool
+        As in :func:`contour_from_image`.
+    **extract
+        Other options of :func:`contour_from_image` (``roi``, ``color``, ``method``, ...).
+
+    Returns
+    -------
+    list of (k, 2) ndarrays
+        The outline first, then the holes by decreasing area, in pixel coordinates.
+
+    Raises
+    ------
+    ValueError
+        As :func:`contour_from_image`; a ``min_hole_fraction`` outside (0, 1).
+    """
+    frac = positive_float(min_hole_fraction, "min_hole_fraction")
+    if frac >= 1.0:
+        raise ValueError(f"min_hole_fraction must lie in (0, 1), got {frac}")
+    subpixel = _check_bool(subpixel, "subpixel")
+    opts = dict(roi=None, color=None, method="auto", body="auto", color_tol=None, kernel=None, flatten=True,
+                largest=False, min_blob_fraction=0.05, max_pixels=MAX_PIXELS)
+    unknown = set(extract) - set(opts)
+    if unknown:
+        raise TypeError(f"contour_loops_from_image got unknown option(s) {sorted(unknown)}; it takes "
+                        f"min_hole_fraction, subpixel and {sorted(opts)}")
+    opts.update(extract)
+    outline, m8, score, outer_int, (x0, y0, w, h) = _extract_outline(image, subpixel=subpixel, **opts)
+    blob = np.zeros_like(m8)
+    cv2.drawContours(blob, [outer_int.reshape(-1, 1, 2)], 0, 1, thickness=cv2.FILLED)
+    # background enclosed by the outline: the blob's holes (a hole touching the outline is not a hole)
+    enclosed = ((blob > 0) & (m8 == 0)).astype(np.uint8)
+    found, _ = cv2.findContours(enclosed * 255, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    area_out = abs(polygon_area(outline))
+    holes = []
+    for hc in found:
+        hc = hc.reshape(-1, 2)
+        if len(hc) < 3:
+            continue
+        a = cv2.contourArea(hc.astype(np.float32))
+        if a < frac * area_out:
+            continue
+        c = hc.astype(float)
+        if subpixel:
+            hb = np.zeros_like(m8)
+            cv2.drawContours(hb, [hc.reshape(-1, 1, 2)], 0, 1, thickness=cv2.FILLED)
+            c = _refine_subpixel(c, hb > 0, score, reach=max(2.0, min(h, w) / 250.0))
+        c[:, 0] += x0
+        c[:, 1] += y0
+        holes.append((a, c))
+    holes.sort(key=lambda t: -t[0])
+    return [outline] + [c for _, c in holes]
 
 
 # ----------------------------------------------------------------------------------------------- metrics
@@ -1093,6 +1173,124 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
         angle_deg=float(angle), scale=float(scale), size_px=size_px, n_nodes=len(S),
         distances_px=dist, signed_px=signed, simulated_px=P, measured_px=M, transform=A,
         registration=registration)
+
+
+def simulated_loops(mesh, x: ArrayLike | None = None) -> list[np.ndarray]:
+    """Every boundary loop of the mesh in state ``x``: the outer outline first (counter-clockwise), then
+    the holes (clockwise), each (b, 2). Checks as :func:`simulated_outline`."""
+    mesh = check_mesh(mesh)
+    x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
+    return [np.asarray(x)[loop] for loop in mesh.boundary_loops]
+
+
+@dataclass(frozen=True, eq=False)
+class LoopComparison:
+    """How well a simulated body with holes fits a photographed one, loop by loop.
+
+    Attributes
+    ----------
+    outer : ContourComparison
+        The outer outline's comparison; its registration (rotation, scale, translation) maps the holes too.
+    loops : list of dict
+        One entry per simulated loop (outline first) and per photographed hole without a simulated
+        counterpart: ``kind`` (``"outer"``, ``"hole"`` or ``"photo-only hole"``), ``index`` (simulated
+        loop index, or the measured hole's for a photo-only hole), ``matched`` (index of the measured
+        loop it was compared with, ``None`` when it has no counterpart), ``n``, ``mean_px``, ``std_px``,
+        ``max_px``. A simulated hole with no counterpart is measured to the nearest photographed loop of
+        any kind (a mouth painted shut: the distance to the lips' surroundings); a photographed hole with
+        no counterpart, each of its points to the nearest simulated loop.
+    mean_px, std_px, max_px : float
+        Over every distance of every loop together (so a loop counts by its number of points).
+    ratio : float
+        ``mean_px`` over the square root of the area the measured outline encloses.
+    n_unmatched : int
+        Simulated holes without a photographed counterpart plus photographed holes without a simulated one.
+    """
+
+    outer: ContourComparison
+    loops: list
+    mean_px: float
+    std_px: float
+    max_px: float
+    ratio: float
+    n_unmatched: int
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("mean_px", "std_px", "max_px", "ratio", "n_unmatched"))
+
+    def summary(self) -> dict:
+        """The scalar metrics and the per-loop rows (JSON-ready)."""
+        return {"mean_px": self.mean_px, "std_px": self.std_px, "max_px": self.max_px, "ratio": self.ratio,
+                "n_unmatched": self.n_unmatched, "outer_mean_px": self.outer.mean_px,
+                "loops": [dict(r) for r in self.loops]}
+
+
+def compare_loops(simulated: Sequence[ArrayLike], measured: Sequence[ArrayLike], **compare) -> LoopComparison:
+    """Compare a simulated body's outline and holes with a photograph's (e.g. :func:`simulated_loops` with
+    :func:`contour_loops_from_image`).
+
+    The outer outlines are registered and compared by :func:`compare_contours` (``compare`` holds its
+    options). The same map takes every simulated hole into the photograph's pixels, where each is matched
+    to its photographed counterpart: an optimal one-to-one assignment on centroid distance, a pair
+    accepted only when the centroids lie closer than the larger hole's equivalent radius
+    (``sqrt(area / pi)``) plus a fifth of the smaller's. Each simulated hole node is then measured to its
+    counterpart by ``cv2.pointPolygonTest``; holes without a counterpart are measured as described in
+    :class:`LoopComparison`, so a hole that is open in the simulation and shut in the photograph (or the
+    reverse) costs its full distance.
+
+    Raises
+    ------
+    ValueError
+        An empty ``simulated`` or ``measured``, or loops that are not (k >= 3, 2) arrays.
+    """
+    from scipy.optimize import linear_sum_assignment
+
+    if len(simulated) == 0 or len(measured) == 0:
+        raise ValueError("simulated and measured need at least the outer outline each")
+    S = [_as_contour(c, f"simulated[{i}]") for i, c in enumerate(simulated)]
+    M = [_as_contour(c, f"measured[{i}]") for i, c in enumerate(measured)]
+    outer = compare_contours(S[0], M[0], **compare)
+    A = outer.transform
+    Sp = [c @ A[:, :2].T + A[:, 2] for c in S[1:]]
+    Mh = M[1:]
+
+    def centre_radius(c):
+        a = abs(polygon_area(c))
+        return c.mean(axis=0), math.sqrt(a / math.pi)
+
+    cs = [centre_radius(c) for c in Sp]
+    cm = [centre_radius(c) for c in Mh]
+    pairs: dict[int, int] = {}
+    if Sp and Mh:
+        C = np.array([[np.linalg.norm(a[0] - b[0]) for b in cm] for a in cs])
+        for i, j in zip(*linear_sum_assignment(C)):
+            if C[i, j] < max(cs[i][1], cm[j][1]) + 0.2 * min(cs[i][1], cm[j][1]):
+                pairs[int(i)] = int(j)
+    rows = [{"kind": "outer", "index": 0, "matched": 0, "n": int(outer.n_nodes), "mean_px": outer.mean_px,
+             "std_px": outer.std_px, "max_px": outer.max_px}]
+    every = [outer.distances_px]
+    for i, p in enumerate(Sp):
+        if i in pairs:
+            d = np.abs(_signed_distances(p, Mh[pairs[i]].astype(np.float32).reshape(-1, 1, 2)))
+        else:
+            d = np.min([_unsigned_distances(p, m) for m in M], axis=0)
+        every.append(d)
+        rows.append({"kind": "hole", "index": i + 1, "matched": pairs[i] + 1 if i in pairs else None,
+                     "n": len(d), "mean_px": float(d.mean()), "std_px": float(d.std()), "max_px": float(d.max())})
+    sim_px = [outer.simulated_px] + Sp
+    matched_m = set(pairs.values())
+    for j, m in enumerate(Mh):
+        if j in matched_m:
+            continue
+        d = np.min([_unsigned_distances(m, p) for p in sim_px], axis=0)
+        every.append(d)
+        rows.append({"kind": "photo-only hole", "index": j + 1, "matched": None, "n": len(d),
+                     "mean_px": float(d.mean()), "std_px": float(d.std()), "max_px": float(d.max())})
+    d = np.concatenate(every)
+    n_un = (len(Sp) - len(pairs)) + (len(Mh) - len(matched_m))
+    return LoopComparison(outer=outer, loops=rows, mean_px=float(d.mean()), std_px=float(d.std()),
+                          max_px=float(d.max()), ratio=float(d.mean() / math.sqrt(abs(polygon_area(M[0])))),
+                          n_unmatched=int(n_un))
 
 
 def evaluate_image(image: ArrayLike | str | os.PathLike, mesh, x: ArrayLike | None = None, *,

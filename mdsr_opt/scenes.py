@@ -101,6 +101,9 @@ class Case:
         Internal case: one contraction per scene muscle; the internal-driving equilibrium is the target.
     description : str
         One line for reports.
+    muscles : sequence of Muscle, optional
+        External case: lay these muscles instead of routing them on the target (e.g. a muscle along a hole's
+        rim that routing does not find); the design then finds their contractions.
     """
 
     name: str
@@ -109,9 +112,18 @@ class Case:
     drag_positions: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     contractions: np.ndarray | None = None
     description: str = ""
+    muscles: tuple | None = None
 
     def __post_init__(self):
         _check_name(self.name, "case name")
+        if self.muscles is not None:
+            if self.contractions is not None:
+                raise ValueError(f"case {self.name!r}: muscles are for an external case (an internal case "
+                                 "drives the scene's muscles)")
+            mus = tuple(self.muscles)
+            if not mus or not all(isinstance(m, Muscle) for m in mus):
+                raise TypeError(f"case {self.name!r}: muscles must be a non-empty sequence of Muscle")
+            object.__setattr__(self, "muscles", mus)
         anc = as_index_array(np.asarray(self.anchors), f"case {self.name!r}: anchors", shape=(None,))
         dn = as_index_array(np.asarray(self.drag_nodes), f"case {self.name!r}: drag_nodes", shape=(None,))
         dp = as_float_array(np.asarray(self.drag_positions, dtype=float).reshape(-1, 2) if np.size(
@@ -262,6 +274,8 @@ class Scene:
             if not self.muscles:
                 self.muscles = None
         for c in cases:
+            if c.muscles is not None:
+                check_muscles(self.mesh, c.muscles)  # nodes of this mesh, along its edges
             if c.kind == "internal":
                 if self.muscles is None:
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: an internal case needs the "
@@ -822,12 +836,16 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     muscles: tuple = ()
     notes: list[str] = []
     if res.success:
-        if case.kind == "external" and scene.muscles is None or case.kind == "internal" and route_internal:
+        own = case.kind == "external" and case.muscles is not None
+        # a case with its own muscles is routed too, as a diagnostic (what routing would have laid)
+        if case.kind == "external" and (scene.muscles is None or own) or case.kind == "internal" and route_internal:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", RoutingWarning)
                 routing = route_muscles(scene.mesh, res.x, **scene.routing_options)
             notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
-        if case.kind == "external" and scene.muscles is None:
+        if own:
+            muscles = tuple(case.muscles)
+        elif case.kind == "external" and scene.muscles is None:
             muscles = tuple(routing.muscles)
         else:
             muscles = tuple(scene.muscles)
@@ -861,9 +879,12 @@ class CaseReport:
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
         the fraction of the true muscles' edges that routing on the target covers.
     photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
-        outline with it (the paper's design-versus-prototype measure), ``self`` the driven outline with its
-        own photograph (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``,
-        ``ratio`` and ``mean_norm``.
+        outline and holes with it (:func:`~mdsr_opt.evaluate.compare_loops`), ``self`` the driven state's
+        (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every
+        loop, ``outer_mean_px`` and ``mean_norm`` of the outline alone, and ``n_unmatched`` holes. These photograph the design model itself (a mirror). ``prototype``
+        (when a virtual prototype was given) holds the validation against a DIFFERENT, finer model
+        (:func:`~mdsr_opt.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
+        included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     """
 
@@ -903,6 +924,7 @@ class CaseRun:
     design: Any = None
     photo: Any = None
     comparison: Any = None
+    prototype_photos: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -926,8 +948,8 @@ class SceneReport:
     def table(self) -> str:
         """A Markdown table of the key figures, one row per case."""
         head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d (px) | ratio (%) | time (s) |")
-        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: |"]
+                "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
             s = ", ".join(f"{v:.4g}" for v in c.stroke) if c.stroke else "-"
@@ -937,8 +959,10 @@ class SceneReport:
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
+            pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
+            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "-"
             rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
-                        f"{ok} | {pd} | {pr} | {c.times.get('total', 0.0):.1f} |")
+                        f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
@@ -961,13 +985,17 @@ def _edge_set(muscles) -> set:
 
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
              photo_resolution: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
-             prefix: str = "") -> CaseRun:
+             prefix: str = "", prototype: Any = None) -> CaseRun:
     """Run one case through the pipeline (nothing is written).
 
     Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
     contractions (:func:`~mdsr_opt.design.design_contractions` with the scene's ``design_options``, its
     verification being the forward check) -> SYNTHETIC photograph of the driven body and contour metrics
     (:mod:`mdsr_opt.evaluate`).
+
+    With ``prototype`` (a :class:`~mdsr_opt.prototype.VirtualPrototype` of the scene) and ``photo``, the
+    case is also validated against the virtual prototype (:func:`~mdsr_opt.prototype.validate_case`): the
+    paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
 
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
     says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
@@ -1019,7 +1047,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     rep.n_muscles = len(setup.muscles)
-    if case.kind == "external" and scene.muscles is None:
+    if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
     opts = dict(scene.design_options)
@@ -1056,26 +1084,36 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if photo:
-        from .evaluate import compare_contours, contour_from_image, render_photo, simulated_outline
+        from .evaluate import compare_loops, contour_loops_from_image, render_photo, simulated_loops
 
         t2 = time.perf_counter()
         try:
             ph = render_photo(mesh, res.x_aligned, resolution=photo_resolution, seed=0)
-            contour = contour_from_image(ph.image)
-            cmp_t = compare_contours(simulated_outline(mesh, setup.target), contour)
-            cmp_s = compare_contours(simulated_outline(mesh, res.x_aligned), contour)
+            loops = contour_loops_from_image(ph.image)
+            # every boundary loop is measured: the outline and each hole against its photographed counterpart
+            cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
+            cmp_s = compare_loops(simulated_loops(mesh, res.x_aligned), loops)
         except ValueError as exc:  # e.g. a body too thin to segment at this resolution
             rep.photo = {"error": str(exc)}
             say(f"{prefix}photograph: could not measure ({exc})")
         else:
-            keys = ("mean_px", "std_px", "max_px", "ratio", "mean_norm")
+            def figures(c):
+                return {"mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px, "ratio": c.ratio,
+                        "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
+                        "n_unmatched": c.n_unmatched}
+
             rep.photo = {"synthetic": True, "resolution": list(photo_resolution),
-                         "target": {k: float(getattr(cmp_t, k)) for k in keys},
-                         "self": {k: float(getattr(cmp_s, k)) for k in keys}}
-            run.photo, run.comparison = ph, cmp_t
+                         "target": figures(cmp_t), "self": figures(cmp_s)}
+            run.photo, run.comparison = ph, cmp_t.outer
             say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
                 f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
                 f"{cmp_s.mean_px:.2f} px")
+        if prototype is not None:
+            from .prototype import validate_case
+
+            metrics, shots = validate_case(prototype, setup, res, log=say, prefix=prefix)
+            rep.photo = dict(rep.photo or {}, prototype=metrics)
+            run.prototype_photos = shots
         rep.times["photo"] = time.perf_counter() - t2
         check_interrupt()
     rep.success = bool(res.success)
@@ -1131,6 +1169,9 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
                                       close=True))
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
+    for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
+        files.append(str(ph.save(folder / f"prototype_{key}.png")))
+        files.append(str(folder / f"prototype_{key}.json"))
     if run.photo is not None:
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))
@@ -1241,7 +1282,8 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
-              log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False) -> SceneReport:
+              log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
+              prototype: bool = True, prototype_seed: int = 0) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -1260,6 +1302,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
     photo_resolution : (width, height) of the synthetic photographs.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
+    prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
+        (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
+        Tables 2-4 as ``out/validation.md``.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -1287,7 +1332,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
-                             log=log)
+                             log=log, prototype=prototype, prototype_seed=prototype_seed)
         folder.finish("complete" if report.success else "complete, some cases failed")
     return report
 
@@ -1308,7 +1353,7 @@ def _check_run(scene, cases, mesh_format) -> tuple[str, ...]:
 
 
 #: Files every scene run writes directly into its folder; case folders and animation files go beside them.
-RUN_FILES = ("rest.png", "summary.json", "summary.md")
+RUN_FILES = ("rest.png", "summary.json", "summary.md", "validation.md")
 
 
 def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
@@ -1326,7 +1371,8 @@ def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
 def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
-                log: Callable[[str], None] | None = _LOG.info) -> SceneReport:
+                log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
+                prototype_seed: int = 0) -> SceneReport:
     """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
     holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
     import time
@@ -1344,12 +1390,20 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
         plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
                                          f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png",
                          close=True)
+    proto = None
+    if photos and prototype:
+        from .prototype import VirtualPrototype
+
+        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_resolution=photo_resolution)
+        d = proto.describe()
+        say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
+            f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
     runs: dict[str, CaseRun] = {}
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
         check_interrupt()
         run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
-                       prefix=prefix)
+                       prefix=prefix, prototype=proto)
         if figures:
             run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)
         runs[cname] = run
@@ -1401,6 +1455,11 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     write_json(out / "summary.json", _finite(summary))
     with atomic_path(out / "summary.md") as tmp:
         Path(tmp).write_text(f"# {scene.title or scene.name}\n\n{report.table()}\n")
+    if proto is not None:
+        from .prototype import validation_tables
+
+        with atomic_path(out / "validation.md") as tmp:
+            Path(tmp).write_text(validation_tables([report]))
     say(f"{scene.name}: {'all cases succeeded' if report.success else 'SOME CASES FAILED'} in {report.time:.1f} s; "
         f"results in {out}")
     return report
@@ -1444,6 +1503,18 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 
 def _parse_resolution(text: str):
     return int(text) if text.isdigit() else text
+
+
+def _parse_seed(text: str) -> int:
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {text!r}")
+    return v
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -2134,7 +2205,7 @@ def _cmd_run(a) -> int:
             for s in scenes:
                 for c in a.case:
                     s.case(c)  # an unknown --case names the scene's cases
-        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes])
+        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
         reports = []
         with progress_for_cli(a, sum(_n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
                               unit="case") as log:
@@ -2144,7 +2215,14 @@ def _cmd_run(a) -> int:
                     log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
                 reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                            figures=not a.no_figures, animations=not a.no_animations,
-                                           mesh_format=a.format, photo_resolution=a.photo_size, log=log))
+                                           mesh_format=a.format, photo_resolution=a.photo_size, log=log,
+                                           prototype=not a.no_prototype, prototype_seed=a.prototype_seed))
+        if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
+            from .io import atomic_path
+            from .prototype import validation_tables
+
+            with atomic_path(Path(a.out) / "tables.md") as tmp:
+                Path(tmp).write_text(validation_tables(reports))
         folder.finish("complete" if all(r.success for r in reports) else "complete, some cases failed")
     lines = reports[0].table().split("\n")
     for r in reports[1:]:
@@ -2172,7 +2250,8 @@ def add_cli(sub) -> None:
     p.set_defaults(func=_cmd_list)
 
     q = sub.add_parser("run", help="run scenes through the whole pipeline: target, muscles, contractions, "
-                       "forward check, synthetic photograph, contour metrics; figures, meshes, JSON")
+                       "forward check, synthetic photograph, contour metrics, validation against a virtual prototype (the "
+                       "paper's Tables 2-4 in validation.md, and tables.md for several scenes); figures, meshes, JSON")
     q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
                    help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
     q.add_argument("--out", required=True,
@@ -2191,6 +2270,12 @@ def add_cli(sub) -> None:
     q.add_argument("--no-photos", action="store_true", help="skip the synthetic photographs and contour metrics")
     q.add_argument("--photo-size", type=_parse_size, default=(500, 500), metavar="WxH",
                    help="size of the synthetic photographs in pixels (default 500x500, as in the paper)")
+    q.add_argument("--no-prototype", action="store_true",
+                   help="skip the virtual prototype (a 3x finer mesh, perturbed material, the exact cable, the "
+                   "synthetic camera) against which the paper's Tables 2-4 are computed (validation.md per scene, "
+                   "tables.md for several scenes)")
+    q.add_argument("--prototype-seed", type=_parse_seed, default=0,
+                   help="seed of the virtual prototype's material perturbation and camera (default 0)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")

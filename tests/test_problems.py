@@ -46,7 +46,7 @@ def test_factory_builds_a_coarse_scene(name):
     assert "drawn by the mdsr_opt authors" in open(scene.source).read()
     for case in scene.cases:
         if case.kind == "external":
-            assert len(case.anchors) >= 1 and len(case.drag_nodes) >= 1
+            assert len(case.anchors) + len(case.drag_nodes) >= 2 and len(case.drag_nodes) >= 1  # face: drags alone
 
 
 @pytest.mark.parametrize("name", sorted(set(LIBRARY) - set(EXPERIMENTS)))
@@ -133,8 +133,11 @@ def test_synthetic_photograph_metrics(name):
     scene, out = runs(name)
     photo = next(iter(out.values())).report.photo
     assert photo["synthetic"] is True
-    # the measuring chain's floor (driven outline on its own photograph) stays near a pixel at 300 px
-    assert photo["self"]["mean_px"] < 2.5
+    # the measuring chain's floor (driven outline on its own photograph) stays near a pixel at 300 px, and
+    # every hole is found; a hole a few pixels thin (the face's smiling mouth at 300 px) is partly filled by
+    # the segmentation's closing, so the floor over every loop is higher there (0.7 px at 500 px)
+    assert photo["self"]["outer_mean_px"] < 2.5 and photo["self"]["n_unmatched"] == 0
+    assert photo["self"]["mean_px"] < (5.0 if name == "face" else 2.5)
     assert photo["target"]["mean_px"] >= 0.0 and 0.0 <= photo["target"]["ratio"] < 0.1
 
 

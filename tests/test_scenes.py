@@ -306,9 +306,10 @@ def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     assert "| finger | contract | internal |" in text and "2/2 case(s) succeeded" in text
     files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
     per_case = ["design.png", "driven.vtu", "graph.png", "muscles.png", "overlay.png", "photo.json", "photo.png",
-                "target.png", "target.vtu"]
+                "target.png", "target.vtu"] + [f"prototype_{k}.{e}" for k in ("design", "driving") for e in ("json", "png")]
     assert files == sorted([f"{c}/{f}" for c in ("bend", "contract") for f in per_case]
-                           + [".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json", "summary.md"])
+                           + [".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json", "summary.md",
+                              "validation.md"])
     manifest = json.loads((out / ".mdsr-run.json").read_text())
     assert manifest["status"] == "complete" and "bend" in manifest["claims"]
     s = json.loads((out / "summary.json").read_text())

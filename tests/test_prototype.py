@@ -1,0 +1,98 @@
+"""The virtual prototype (mdsr_opt.prototype): a different, finer model photographed instead of a mirror."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mdsr_opt.prototype import VirtualPrototype, validate_case, validation_tables
+from mdsr_opt.scenes import get_problem, prepare_case, run_case
+
+
+@pytest.fixture(scope="module")
+def one():
+    scene = get_problem("one_muscle", resolution="coarse")
+    return scene, VirtualPrototype.for_scene(scene, refine=2.5, seed=3)
+
+
+def test_the_prototype_is_a_different_finer_model(one):
+    scene, proto = one
+    d = proto.describe()
+    assert 2.0 * scene.mesh.n_nodes < proto.mesh.n_nodes < 3.0 * scene.mesh.n_nodes
+    assert abs(d["E_factor"] - 1.0) <= 0.10 and 0 < abs(d["nu_shift"]) <= 0.05
+    assert d["muscle_model"] == "cable" and d["synthetic"] is True
+    # seeded: the same seed draws the same prototype, another seed another one
+    again = VirtualPrototype.for_scene(scene, refine=2.5, seed=3)
+    other = VirtualPrototype.for_scene(scene, refine=2.5, seed=4)
+    assert again.material == proto.material and other.material != proto.material
+
+
+def test_transferred_muscle_follows_the_design_muscle(one):
+    scene, proto = one
+    m = scene.muscles[0]
+    fine = proto.transfer_muscle(m)
+    assert len(fine.nodes) > len(m.nodes)
+    assert fine.rest_length(proto.mesh) == pytest.approx(m.rest_length(scene.mesh), rel=0.1)
+    P, X = proto.mesh.points, scene.mesh.points
+    assert np.linalg.norm(P[fine.nodes[0]] - X[m.nodes[0]]) < 0.3
+    assert np.linalg.norm(P[fine.nodes[-1]] - X[m.nodes[-1]]) < 0.3
+
+
+def test_validation_measures_model_error_not_convergence(one):
+    """The design recovers its internal target exactly (mirror floor below 0.5 px) while the prototype,
+    a different model, sits measurably further away, more so at larger contractions."""
+    scene, proto = one
+    d = {}
+    for case in ("a20", "a50"):
+        run = run_case(scene, case, prototype=proto)
+        p = run.report.photo
+        assert p["self"]["mean_px"] < 0.5
+        t4 = p["prototype"]["design"]
+        assert p["prototype"]["driving"]["table"] == 3 and t4["table"] == 4 and t4["success"]
+        d[case] = t4["mean_px"]
+        assert t4["mean_px"] > 2 * p["target"]["mean_px"]
+    assert d["a50"] > d["a20"] > 0.5
+
+
+def test_external_case_gives_table_2_and_tables_render(one):
+    scene = get_problem("face", resolution="coarse")
+    proto = VirtualPrototype.for_scene(scene, refine=2.0, seed=0)
+    setup = prepare_case(scene, "frown")
+    metrics, photos = validate_case(proto, setup)
+    assert metrics["driving"]["table"] == 2 and metrics["driving"]["success"]
+    assert metrics["driving"]["n_unmatched"] == 0 and "design" not in metrics and set(photos) == {"driving"}
+    rep = {"scene": "face", "cases": [{"case": "frown", "kind": "external", "photo": {"prototype": metrics}}]}
+    md = validation_tables([rep])
+    assert "## Table 2" in md and "| face | frown | anchors + drags |" in md
+    assert f"{metrics['driving']['mean_px']:.2f}" in md
+
+
+def test_bad_input_is_refused(one):
+    scene, proto = one
+    with pytest.raises(TypeError, match="must be a Scene"):
+        VirtualPrototype.for_scene("one_muscle")
+    with pytest.raises(ValueError, match="refine must lie"):
+        VirtualPrototype.for_scene(scene, refine=20.0)
+    with pytest.raises(ValueError, match="nu_range"):
+        VirtualPrototype.for_scene(scene, nu_range=0.3)
+    with pytest.raises(TypeError, match="seed"):
+        VirtualPrototype.for_scene(scene, seed=1.5)
+    with pytest.raises(ValueError, match="contraction"):
+        proto.internal(scene.muscles, [0.2, 0.3])
+    with pytest.raises(ValueError, match="internal driving"):
+        proto.external("a20")
+
+
+def test_mdsr_run_writes_the_validation_tables(tmp_path, capsys):
+    from mdsr_opt.cli import main
+
+    out = tmp_path / "one"
+    assert main(["run", "one_muscle", "--case", "a30", "--resolution", "coarse", "--no-animations",
+                 "--no-figures", "--out", str(out), "--quiet"]) == 0
+    md = (out / "validation.md").read_text()
+    assert "## Table 3" in md and "| one_muscle | a30 | 30% |" in md
+    assert "3x finer mesh" in md and "exact sliding cable" in md
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        main(["run", "one_muscle", "--out", str(tmp_path / "bad"), "--prototype-seed", "-1"])
+    assert "non-negative integer" in capsys.readouterr().err and not (tmp_path / "bad").exists()
