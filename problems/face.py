@@ -30,8 +30,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mdsr_opt import Mesh, Muscle, NeoHookean
-from mdsr_opt.scenes import (Animation, Case, Scene, boundary_path, edge_path, mesh_polygon, nodes_near,
-                             resolve_resolution, run_main, seeds_for)
+from mdsr_opt.scenes.scene import Animation, Case, Scene, mesh_polygon, resolve_resolution, seeds_for
+from mdsr_opt.scenes.select import boundary_path, edge_path, nodes_near
+from mdsr_opt.scenes.runscene import run_main
 
 EYE_C, EYE_AX = (1.2, 0.9), (0.65, 0.28)       # right eye centre (the left is mirrored) and semi-axes
 MOUTH_C, MOUTH_AX = (0.0, -1.9), (1.1, 0.25)

@@ -65,9 +65,9 @@ def route_targets(resolution="medium"):
         One per target: ``scene``, ``case``, ``K_a`` (pair), ``target`` (n, 2), ``external`` (the solve) and
         ``layouts`` (two RoutingResults). A failed target solve raises ``RuntimeError`` naming it.
     """
-    from mdsr_opt.equilibrium import solve_external
-    from mdsr_opt.routing import RoutingWarning, route_muscles
-    from mdsr_opt.scenes import get_problem
+    from mdsr_opt.mechanics.equilibrium import solve_external
+    from mdsr_opt.synthesis.routing import RoutingWarning, route_muscles
+    from mdsr_opt.scenes.library import get_problem
 
     out, scenes = [], {}
     for name, cname, kas in TARGETS:
@@ -110,7 +110,7 @@ def read_ipopt_log(path):
 def design_layout(scene, target, muscles):
     """Design the contractions of ``muscles`` for ``target`` (the scene's design options, flattened NLP),
     with IPOPT's iteration log turned into a trace. Returns ``(DesignResult, trace dict)``."""
-    from mdsr_opt.design import design_contractions
+    from mdsr_opt.synthesis.contractions import design_contractions
 
     opts = {k: v for k, v in scene.design_options.items() if k != "method"}
     with tempfile.TemporaryDirectory() as tmp:
@@ -155,7 +155,7 @@ def _fmt(v):
 
 def write_table(rows, csv_path, md_path):
     """Write Table 1 as CSV and as a markdown table (both atomically)."""
-    from mdsr_opt.io import atomic_path
+    from mdsr_opt.body.io import atomic_path
 
     keys = list(rows[0])
     buf = io.StringIO()
@@ -194,9 +194,9 @@ def run_figure(out, resolution="medium", log=print) -> int:
 
     if "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
-    from mdsr_opt.io import write_json
-    from mdsr_opt.plot import save_figure
-    from mdsr_opt.plot_routing import plot_convergence, plot_design_grid, plot_layout_grid
+    from mdsr_opt.body.io import write_json
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.routing import plot_convergence, plot_design_grid, plot_layout_grid
 
     t0 = time.perf_counter()
     os.makedirs(out, exist_ok=True)

@@ -19,9 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.gait import Gait
-from mdsr_opt.scenes import (Animation, Case, Scene, arc_map, arc_rigid, mesh_polygon, nodes_in_box, nodes_near,
-                             resolve_resolution, run_main)
+from mdsr_opt.synthesis.gait import Gait
+from mdsr_opt.scenes.scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
+from mdsr_opt.scenes.shapes import arc_map, arc_rigid
+from mdsr_opt.scenes.select import nodes_in_box, nodes_near
+from mdsr_opt.scenes.runscene import run_main
 
 BEND = 0.55          # radians of bend on each side of the trunk's middle
 MIDDLE = 5.5         # x of the anchored middle of the trunk

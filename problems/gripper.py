@@ -19,7 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.scenes import Case, Scene, mesh_polygon, nodes_in_polygon, resolve_resolution, run_main, seeds_for
+from mdsr_opt.scenes.scene import Case, Scene, mesh_polygon, resolve_resolution, seeds_for
+from mdsr_opt.scenes.select import nodes_in_polygon
+from mdsr_opt.scenes.runscene import run_main
 
 R0, WIDTH = 2.0, 1.0          # centre-line radius and ring width
 OPENING = np.radians(60.0)    # the gap between the jaws, centred on +x

@@ -19,8 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.scenes import (Case, Scene, arc_rigid, mesh_polygon, nodes_in_box, resolve_resolution, run_main,
-                             seeds_for)
+from mdsr_opt.scenes.scene import Case, Scene, mesh_polygon, resolve_resolution, seeds_for
+from mdsr_opt.scenes.shapes import arc_rigid
+from mdsr_opt.scenes.select import nodes_in_box
+from mdsr_opt.scenes.runscene import run_main
 
 RAISE = 0.9        # radians each arm is raised
 LEAN = 0.35        # radians the spine bends to the right

@@ -19,9 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.gait import Gait
-from mdsr_opt.scenes import (Animation, Case, Scene, arc_rigid, mesh_polygon, nodes_near, resolve_resolution,
-                             run_main, seeds_for)
+from mdsr_opt.synthesis.gait import Gait
+from mdsr_opt.scenes.scene import Animation, Case, Scene, mesh_polygon, resolve_resolution, seeds_for
+from mdsr_opt.scenes.shapes import arc_rigid
+from mdsr_opt.scenes.select import nodes_near
+from mdsr_opt.scenes.runscene import run_main
 
 ARMS = 5
 R_DISC, R_TIP = 1.0, 3.6      # disc radius; distance of the arm tips from the centre

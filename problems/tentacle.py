@@ -19,8 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from mdsr_opt import NeoHookean
-from mdsr_opt.scenes import (Case, Scene, arc_rigid, mesh_polygon, nodes_in_box, resolve_resolution, seeds_for,
-                             rigid_motion, run_main)
+from mdsr_opt.scenes.scene import Case, Scene, mesh_polygon, resolve_resolution, seeds_for
+from mdsr_opt.scenes.shapes import arc_rigid, rigid_motion
+from mdsr_opt.scenes.select import nodes_in_box
+from mdsr_opt.scenes.runscene import run_main
 
 LENGTH = 6.0       # base to tip
 CURL = 1.8         # radians of the curl

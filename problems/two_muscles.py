@@ -21,7 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mdsr_opt.scenes import Animation, Case, Scene, boundary_path, load_problem_module, resolve_resolution, run_main
+from mdsr_opt.scenes.scene import Animation, Case, Scene, resolve_resolution
+from mdsr_opt.scenes.select import boundary_path
+from mdsr_opt.scenes.library import load_problem_module
+from mdsr_opt.scenes.runscene import run_main
 
 LEVELS = (0.2, 0.3, 0.4, 0.5)
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh
-from mdsr_opt.align import align, difference, node_weights
+from mdsr_opt.mechanics.align import align, difference, node_weights
 
 
-def _rot(theta):
+def rotation_matrix(theta):
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
 
@@ -20,7 +20,7 @@ def _brute_force(x, y, w):
     cx, cy = (w[:, None] * x).sum(0) / W, (w[:, None] * y).sum(0) / W
 
     def D(th):
-        R = _rot(th)
+        R = rotation_matrix(th)
         r = (x - cx) @ R.T - (y - cy)
         return float((w * (r ** 2).sum(1)).sum())
 
@@ -39,7 +39,7 @@ def _brute_force(x, y, w):
 def cloud():
     rng = np.random.default_rng(7)
     x = rng.normal(size=(30, 2))
-    y = x @ _rot(1.1).T + [0.4, -2.0] + 0.2 * rng.normal(size=(30, 2))  # rotated, shifted and noisy
+    y = x @ rotation_matrix(1.1).T + [0.4, -2.0] + 0.2 * rng.normal(size=(30, 2))  # rotated, shifted and noisy
     w = rng.uniform(0.3, 1.0, size=30)
     return x, y, w
 
@@ -61,7 +61,7 @@ def test_kabsch_matches_brute_force_angle_search(cloud):
 def test_exact_rigid_motion_is_recovered():
     rng = np.random.default_rng(1)
     x = rng.uniform(-1, 1, size=(12, 2))
-    R, t = _rot(-2.5), np.array([3.0, 1.5])
+    R, t = rotation_matrix(-2.5), np.array([3.0, 1.5])
     al = align(x, x @ R.T + t)
     assert np.allclose(al.R, R, atol=1e-12)
     assert np.allclose(al.t, t, atol=1e-12)
@@ -73,7 +73,7 @@ def test_invariances(cloud):
     x, y, w = cloud
     d = difference(x, y, w)
     assert d > 0.05
-    Q, s = _rot(0.7), np.array([-5.0, 2.0])
+    Q, s = rotation_matrix(0.7), np.array([-5.0, 2.0])
     assert difference(x @ Q.T + s, y, w) == pytest.approx(d, rel=1e-10)  # moving x rigidly
     assert difference(x, y @ Q.T + s, w) == pytest.approx(d, rel=1e-10)  # moving y rigidly
     assert difference(y, x, w) == pytest.approx(d, rel=1e-10)  # symmetric

@@ -220,7 +220,7 @@ def test_non_loopback_host_warns(capsys, monkeypatch):
 
 
 def test_cli_registers_author():
-    from mdsr_opt.cli import main
+    from mdsr_opt.cli.main import main
 
     with pytest.raises(SystemExit) as e:
         main(["author", "--help"])

@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
-from mdsr_opt.muscle_constraints import (MuscleConstraints, anchor_patches, body_size, default_anchor_radius,
-                                         rigid_groups, segment_spring_parameters)
+from mdsr_opt.mechanics.constraints import MuscleConstraints, anchor_patches, body_size, default_anchor_radius, rigid_groups, segment_spring_parameters
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 
@@ -99,7 +98,7 @@ def test_load_stepping_moves_the_rope_targets():
 
 @pytest.mark.parametrize("backend", ["sqpmethod", "uno"])
 def test_other_constrained_backends_agree_with_ipopt(backend):
-    from mdsr_opt.backends import available_backends
+    from mdsr_opt.mechanics.backends import available_backends
 
     if backend not in available_backends():
         pytest.skip(f"{backend} is not in this CasADi build")
@@ -322,8 +321,8 @@ def test_constrained_equilibrium_is_a_minimum_on_the_constraints_tangent_space()
     built here from the constraints' own Jacobian and Hessian with least-squares multipliers."""
     import scipy.linalg as sl
 
-    from mdsr_opt.equilibrium import _gauge
-    from mdsr_opt.model import get_model
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.mechanics.model import get_model
 
     mesh = Mesh.rectangle(3.0, 1.0, 12, 4)
     mus = [row(mesh, 0.0), row(mesh, 1.0)]
@@ -332,7 +331,7 @@ def test_constrained_equilibrium_is_a_minimum_on_the_constraints_tangent_space()
     assert res.stability["method"].endswith("finsler") and res.stability["n_negative"] == 0
     x = res.x.reshape(-1)
     fixed = np.zeros(len(x), dtype=bool)
-    fixed[list(_gauge(mesh))] = True
+    fixed[list(gauge_coordinates(mesh))] = True
     free = ~fixed
     mc = MuscleConstraints(mesh, mus, res.anchor_radius)
     model = get_model(mesh, MAT)
@@ -350,8 +349,8 @@ def test_constrained_equilibrium_is_a_minimum_on_the_constraints_tangent_space()
 def test_a_constrained_state_the_check_calls_unstable_is_not_a_success(monkeypatch):
     """Wiring: internal driving with constraints goes through the stability check, and a failed check
     (here forced, with no escape direction) turns the solve into a reported failure."""
-    import mdsr_opt.equilibrium as eq
-    from mdsr_opt.stability import StabilityCheck
+    import mdsr_opt.mechanics.loadsteps as eq
+    from mdsr_opt.mechanics.stability import StabilityCheck
 
     seen = []
 
@@ -400,8 +399,8 @@ def test_the_nlp_hessian_is_the_lagrangians():
     import casadi as ca
     import scipy.sparse as sp
 
-    from mdsr_opt.constrained import ConstrainedModel
-    from mdsr_opt.model import get_model
+    from mdsr_opt.mechanics.constrained import ConstrainedModel
+    from mdsr_opt.mechanics.model import get_model
 
     mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
     mus = [row(mesh, 0.0), row(mesh, 0.5)]

@@ -7,8 +7,8 @@ import pytest
 import scipy.linalg as sl
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, check_minimum, get_model, solve_internal
-from mdsr_opt.design import _Problem
-from mdsr_opt.equilibrium import _gauge
+from mdsr_opt.synthesis.problem import DesignProblem
+from mdsr_opt.mechanics.equilibrium import gauge_coordinates
 
 MAT = NeoHookean(1.0, 0.3)
 
@@ -26,8 +26,8 @@ def test_springs_without_patches_match_dense(small):
     assert fwd.success and fwd.stable
     squeezed = mesh.points * [0.5, 1.0]  # compressed across: the Neo-Hookean Hessian is indefinite there
     free = np.ones(2 * mesh.n_nodes, bool)
-    free[list(_gauge(mesh))] = False
-    prob = _Problem(mesh, MAT, mus, mesh.points, np.ones(mesh.n_nodes), "springs", 10.0, 0.99, anchor_radius=0.0)
+    free[list(gauge_coordinates(mesh))] = False
+    prob = DesignProblem(mesh, MAT, mus, mesh.points, np.ones(mesh.n_nodes), "springs", 10.0, 0.99, anchor_radius=0.0)
     for x, a in ((fwd.x, [0.2]), (squeezed, [0.0])):
         pd, lam, res = check_minimum(mesh, MAT, mus, a, x, muscle_model="springs", anchor_radius=0.0)
         H = prob.model.hessian(x.reshape(-1), prob.params(np.array(a))).toarray()[np.ix_(free, free)] / MAT.E
@@ -43,7 +43,7 @@ def test_cable_reduced_hessian_matches_dense(small):
     assert fwd.success and fwd.stable
     pd, lam, res = check_minimum(mesh, MAT, mus, [0.2], fwd.x)
     assert pd and lam > 0 and res < 1e-7
-    prob = _Problem(mesh, MAT, mus, mesh.points, np.ones(mesh.n_nodes), "cable", 10.0, 0.99)
+    prob = DesignProblem(mesh, MAT, mus, mesh.points, np.ones(mesh.n_nodes), "cable", 10.0, 0.99)
     H, free, A, kap, _ = prob.kkt_data(np.array([0.2]), fwd.x.reshape(-1))
     assert kap[0] > 0  # the rope is taut
     Z = sl.null_space(A.toarray()[:, free])

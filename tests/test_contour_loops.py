@@ -9,9 +9,11 @@ import cv2
 import numpy as np
 import pytest
 
-from mdsr_opt.evaluate import (compare_contours, compare_loops, contour_from_image, contour_loops_from_image,
-                               render_photo, simulated_loops, simulated_outline)
-from mdsr_opt.scenes import get_problem
+from mdsr_opt.photos.compare import compare_contours, simulated_outline
+from mdsr_opt.photos.loops import compare_loops, simulated_loops
+from mdsr_opt.photos.contours import contour_from_image, contour_loops_from_image
+from mdsr_opt.photos.camera import render_photo
+from mdsr_opt.scenes.library import get_problem
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,7 @@ import json
 
 import pytest
 
-from mdsr_opt.cli import main
+from mdsr_opt.cli.main import main
 
 
 def test_demo_command_writes_results(tmp_path, capsys):

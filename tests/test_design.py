@@ -9,15 +9,19 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
-from mdsr_opt.align import align, node_weights
-from mdsr_opt.design import (METHODS, DesignResult, PipelineResult, _Forward, _Outer, _Problem, check_minimum,
-                             design, design_contractions, verify_design)
+from mdsr_opt.mechanics.align import align, node_weights
+from mdsr_opt.synthesis.results import METHODS, DesignResult
+from mdsr_opt.synthesis.pipeline import PipelineResult, design
+from mdsr_opt.synthesis.problem import ForwardSolver, DesignProblem
+from mdsr_opt.synthesis.rivals import _Outer
+from mdsr_opt.synthesis.verify import check_minimum, verify_design
+from mdsr_opt.synthesis.contractions import design_contractions
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 NX, NY = 16, 4
 
 
-def _rot(theta):
+def rotation_matrix(theta):
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, -s], [s, c]])
 
@@ -45,7 +49,7 @@ THETA, SHIFT = 0.5, np.array([0.3, -1.0])
 def target(mesh, muscles):
     fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
     assert fwd.success
-    return fwd.x @ _rot(THETA).T + SHIFT  # rotated and shifted: only the shape may matter
+    return fwd.x @ rotation_matrix(THETA).T + SHIFT  # rotated and shifted: only the shape may matter
 
 
 A_START = [0.05, 0.3]  # the cable's geometric guess is already the answer: start elsewhere
@@ -90,7 +94,7 @@ def test_cable_design_reports_commanded_achieved_stroke_and_tension(mesh, muscle
 def test_springs_design_recovers_and_reports_the_lower_achieved_contraction(mesh, muscles):
     fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="springs")
     assert fwd.success
-    y = fwd.x @ _rot(0.2).T + [1.0, 2.0]
+    y = fwd.x @ rotation_matrix(0.2).T + [1.0, 2.0]
     for method in ("flattened", "nested"):
         res = design_contractions(mesh, MAT, muscles, y, muscle_model="springs", method=method, initial=A_START)
         assert res.success, res.status
@@ -106,7 +110,7 @@ def test_a_slack_rope_is_reported_at_zero_tension(mesh):
     # A's contraction alone, so B must stay slack: zero tension, contracted only as far as A bends it
     A, B = Muscle(range(1, 9)), Muscle(range(1, 16))
     fwd = solve_internal(mesh, MAT, [A], [0.2])
-    y = fwd.x @ _rot(0.4).T
+    y = fwd.x @ rotation_matrix(0.4).T
     b_len = 1 - B.length(fwd.x) / B.rest_length(mesh)
     for method in ("flattened", "nested"):
         res = design_contractions(mesh, MAT, [A, B], y, method=method, initial=[0.1, 0.1])
@@ -122,7 +126,7 @@ def test_a_slack_rope_is_reported_at_zero_tension(mesh):
 
 def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
     fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
-    y = fwd.x @ _rot(-1.0).T + [5.0, 5.0]
+    y = fwd.x @ rotation_matrix(-1.0).T + [5.0, 5.0]
     res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False, initial=A_START)
     assert res.success, res.status
     assert np.abs(res.contractions - A_TRUE).max() < 1e-6
@@ -139,9 +143,9 @@ def test_flattened_gauss_newton_hessian_recovers(mesh, muscles, target):
 @pytest.mark.parametrize("model_kind", ["cable", "springs"])
 def test_nested_gradient_matches_finite_differences(mesh, muscles, target, model_kind):
     # the cable: the adjoint of the KKT system (ropes and anchor patches as constraints)
-    prob = _Problem(mesh, MAT, muscles, target, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=0.3)
+    prob = DesignProblem(mesh, MAT, muscles, target, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=0.3)
     assert prob.block.n_rigid > 0 and prob.block.n_rope == (2 if model_kind == "cable" else 0)
-    outer = _Outer(prob, _Forward(prob, 1e-11, 200), clock=lambda: 0.0)
+    outer = _Outer(prob, ForwardSolver(prob, 1e-11, 200), clock=lambda: 0.0)
     a = np.array([0.1, 0.15])
     _J, g = outer.value_and_grad(a)
     eps = 1e-5
@@ -232,14 +236,14 @@ def test_check_minimum_detects_a_saddle(mesh, muscles):
     pd, lam, _res = check_minimum(small, MAT, mus, [0.0], squeezed, muscle_model="springs")
     assert not pd
     # the smallest eigenvalue of the free-coordinate Hessian, checked densely
-    from mdsr_opt.equilibrium import _gauge
-    from mdsr_opt.model import get_model
-    from mdsr_opt.muscle_constraints import segment_spring_parameters
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.mechanics.model import get_model
+    from mdsr_opt.mechanics.constraints import segment_spring_parameters
 
     model = get_model(small, MAT)
     p = model.params(MAT, springs=segment_spring_parameters(small, MAT, mus, [0.0], 10.0))
     free = np.ones(2 * small.n_nodes, dtype=bool)
-    free[list(_gauge(small))] = False
+    free[list(gauge_coordinates(small))] = False
     H = model.hessian(squeezed.reshape(-1), p).toarray()[np.ix_(free, free)]
     assert lam == pytest.approx(np.linalg.eigvalsh(H)[0], rel=1e-8)
     assert lam < 0
@@ -336,7 +340,7 @@ CASES = [("springs", 0.0), ("cable", 0.0), ("springs", 0.5), ("cable", 0.5)]
 
 def _nlp_point(model_kind, radius, seed=1):
     """A small flattened NLP (both derivative paths) and a random point, parameters and multipliers."""
-    from mdsr_opt import design as D
+    from mdsr_opt.synthesis import nlp as D
 
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
     if radius == 0:  # the second muscle shares edges 2-3 and 3-4 with the first
@@ -344,8 +348,8 @@ def _nlp_point(model_kind, radius, seed=1):
     else:
         mus = [Muscle([0, 1, 2, 3]), Muscle([5, 6, 7, 8]), Muscle([2 * 9 + i for i in range(4, 8)])]
     rng = np.random.default_rng(seed)
-    y = mesh.points @ _rot(0.3).T + 0.05 * rng.standard_normal(mesh.points.shape)
-    prob = _Problem(mesh, MAT, mus, y, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=radius)
+    y = mesh.points @ rotation_matrix(0.3).T + 0.05 * rng.standard_normal(mesh.points.shape)
+    prob = DesignProblem(mesh, MAT, mus, y, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=radius)
     blk = prob.block
     assert blk.n_rope == (3 if model_kind == "cable" else 0) and (blk.n_rigid > 0) == (radius > 0)
     n = mesh.n_nodes
@@ -485,7 +489,7 @@ def test_design_strokes_converge_under_refinement():
 
 
 def test_scene_table_prints_achieved_contractions_and_strokes():
-    from mdsr_opt.scenes import CaseReport, SceneReport
+    from mdsr_opt.scenes.runner import CaseReport, SceneReport
 
     c = CaseReport(scene="s", case="c", kind="internal", n_nodes=10, n_muscles=2, success=True,
                    contractions=[0.3, 0.2], achieved=[0.25, 0.2], stroke=[0.5, 0.125], difference=0.01,

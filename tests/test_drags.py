@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external
-from mdsr_opt.drags import drag_path
+from mdsr_opt.mechanics.drags import drag_path
 
 L = 10.0
 

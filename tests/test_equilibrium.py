@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external, solve_internal
-from mdsr_opt.align import difference
-from mdsr_opt.backends import available_backends
-from mdsr_opt.equilibrium import SolverFailure
-from mdsr_opt.model import get_model
+from mdsr_opt.mechanics.align import difference
+from mdsr_opt.mechanics.backends import available_backends
+from mdsr_opt.mechanics.result import SolverFailure
+from mdsr_opt.mechanics.model import get_model
 
 from conftest import arc_map, ends, rotation
 

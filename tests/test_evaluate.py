@@ -15,18 +15,15 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from mdsr_opt import Mesh, cli, evaluate
-from mdsr_opt.evaluate import (
-    body_mask,
-    compare_contours,
-    contour_from_image,
-    evaluate_folder,
-    evaluate_image,
-    load_image,
-    render_photo,
-    simulated_outline,
-)
-from mdsr_opt.io import write_mesh
+from mdsr_opt import Mesh
+from mdsr_opt import cli
+from mdsr_opt import photos as evaluate
+from mdsr_opt.photos.contours import body_mask, contour_from_image
+from mdsr_opt.photos.compare import compare_contours, evaluate_image, simulated_outline
+from mdsr_opt.photos.folder import evaluate_folder
+from mdsr_opt.photos.images import load_image
+from mdsr_opt.photos.camera import render_photo
+from mdsr_opt.body.io import write_mesh
 
 # a T-shaped body (a trunk with a neck), as in the paper's humanoid-like test pieces
 OUTLINE = [[0, 0], [4, 0], [4, 1], [2.5, 1], [2.5, 2.2], [1.5, 2.2], [1.5, 1], [0, 1]]
@@ -529,7 +526,7 @@ def test_failed_save_leaves_neither_image_nor_sidecar(tmp_path, body, monkeypatc
 
 
 def test_overlay_figure_shows_photo_mesh_and_contour(body, photo):
-    from mdsr_opt.plot import plot_overlay
+    from mdsr_opt.plot.photos import plot_overlay
 
     mesh, x = body
     r = evaluate_image(photo.image, mesh, x)
@@ -611,7 +608,7 @@ def test_batch_case_errors_become_value_errors_naming_the_case(design, monkeypat
     def fail(*args, **kwargs):
         raise error
 
-    monkeypatch.setattr(evaluate, "contour_from_image", fail)
+    monkeypatch.setattr("mdsr_opt.photos.folder.contour_from_image", fail)
     with pytest.raises(ValueError, match="case 'bend_0.5'") as info:
         evaluate_folder(design / "images", design / "states")
     assert info.value.__cause__ is error
@@ -629,7 +626,9 @@ def test_batch_writes_figures_and_tables_together(design, monkeypatch):
     def failing_second(fig, path):
         calls.append(path)
         if len(calls) == 2:
-            plot.plt.close(fig)
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
             raise RuntimeError("figure failed")
         return real(fig, path)
 
@@ -729,7 +728,7 @@ def test_huge_kernel_is_refused_quickly():
 
 def test_polyline_distance_tree_matches_all_segments():
     """The KD-tree distance used in the rotation search equals the all-segments one (exact, not sampled)."""
-    from mdsr_opt.evaluate import _PolylineDistance, _unsigned_distances
+    from mdsr_opt.photos.compare import _PolylineDistance, unsigned_distances
 
     rng = np.random.default_rng(3)
     for trial in range(40):
@@ -738,7 +737,7 @@ def test_polyline_distance_tree_matches_all_segments():
         r = 50 + 15 * rng.standard_normal(n) * (trial % 2)  # odd trials: very uneven segments
         M = np.column_stack([r * np.cos(th), r * np.sin(th)])
         P = rng.uniform(-200, 200, (int(rng.integers(1, 200)), 2))
-        assert np.abs(_PolylineDistance(M)(P) - _unsigned_distances(P, M)).max() < 1e-9
+        assert np.abs(_PolylineDistance(M)(P) - unsigned_distances(P, M)).max() < 1e-9
     square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
     got = _PolylineDistance(square)(np.array([[5.0, 5.0], [13.0, 14.0], [-2.0, 5.0]]))
     assert got == pytest.approx([5.0, 5.0, 2.0], abs=1e-12)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle
-from mdsr_opt.export import UNITS, check_units, export_fabrication
+from mdsr_opt.synthesis.export import UNITS, check_units, export_fabrication
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -20,7 +20,8 @@ def body():
     """A 40 x 10 plate with a square hole, in mm, and three muscles (one turning a corner)."""
     outer = np.array([[0, 0], [40, 0], [40, 10], [0, 10]], float)
     hole = np.array([[18, 4], [22, 4], [22, 6], [18, 6]], float)
-    from mdsr_opt.scenes import edge_path, mesh_polygon
+    from mdsr_opt.scenes.select import edge_path
+    from mdsr_opt.scenes.scene import mesh_polygon
 
     mesh = mesh_polygon(outer, holes=[hole], resolution=300)
     mus = [edge_path(mesh, [(1, 1), (39, 1)], name="bottom"), edge_path(mesh, [(1, 9), (39, 9)], name="top"),
@@ -89,7 +90,7 @@ def test_units_go_into_every_file(tmp_path):
 
 def test_a_real_design_exports_its_strokes_and_tensions(tmp_path):
     from mdsr_opt import NeoHookean, solve_internal
-    from mdsr_opt.design import design_contractions
+    from mdsr_opt.synthesis.contractions import design_contractions
 
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     m = Muscle(range(1, 16), name="M0")

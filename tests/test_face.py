@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mdsr_opt.routing_symmetry import find_reflection
-from mdsr_opt.scenes import get_problem, load_problem_module, problems_dir, run_case
+from mdsr_opt.synthesis.routing_symmetry import find_reflection
+from mdsr_opt.scenes.library import get_problem, load_problem_module, problems_dir
+from mdsr_opt.scenes.runner import run_case
 
 face_module = load_problem_module(problems_dir() / "face.py")
 

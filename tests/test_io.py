@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, NeoHookean
-from mdsr_opt.io import read_json, read_mesh, write_json, write_mesh
+from mdsr_opt.body.io import read_json, read_mesh, write_json, write_mesh
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +160,7 @@ def test_interrupted_write_leaves_no_temporary_file(tmp_path, body, monkeypatch)
 
 
 def test_failing_rename_leaves_no_temporary_file(tmp_path):
-    from mdsr_opt.io import atomic_path
+    from mdsr_opt.body.io import atomic_path
 
     target = tmp_path / "r.json"
     with pytest.raises(OSError):

@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mdsr_opt.design import design_contractions
-from mdsr_opt.scenes import get_problem, prepare_case
+from mdsr_opt.synthesis.contractions import design_contractions
+from mdsr_opt.scenes.library import get_problem
+from mdsr_opt.scenes.cases import prepare_case
 
 EXPERIMENTS = ("one_muscle", "two_muscles", "four_muscles")
 
@@ -34,7 +35,7 @@ def test_full_quick_study_is_identical_on_dask():
     # the README's claim: every non-timing column of the whole quick study matches between a serial run
     # and a run on a two-process local Dask cluster, rows in plan order
     pytest.importorskip("distributed", reason="needs the dask extra: pip install 'mdsr_opt[dask]'")
-    from mdsr_opt.study import run_study
+    from mdsr_opt.studies.study import run_study
 
     serial = run_study("quick", progress=False, figures=False)
     dask = run_study("quick", scheduler="local", workers=2, progress=False, figures=False)

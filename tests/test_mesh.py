@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh
-from mdsr_opt.mesh import polygon_area
+from mdsr_opt.body.mesh import polygon_area
 
 
 def test_rectangle_counts_and_area():
@@ -188,7 +188,7 @@ def test_triangle_limit_is_refused_before_meshing():
 
 
 def test_problem_at_absurd_resolution_is_refused_by_the_limit():
-    from mdsr_opt.scenes import get_problem
+    from mdsr_opt.scenes.library import get_problem
 
     with pytest.raises(ValueError, match=r"resolution=100000000 nodes would make about 2e\+08 triangles, more "
                                          r"than the limit max_triangles=2000000"):
@@ -196,7 +196,7 @@ def test_problem_at_absurd_resolution_is_refused_by_the_limit():
 
 
 def test_mesh_polygon_accepts_a_clockwise_outline():
-    from mdsr_opt.scenes import mesh_polygon
+    from mdsr_opt.scenes.scene import mesh_polygon
 
     m = mesh_polygon([[0, 0], [0, 1], [4, 1], [4, 0]], resolution=200)  # clockwise
     assert m.area == pytest.approx(4.0, rel=1e-12)
@@ -321,7 +321,7 @@ def test_boundary_crossing_check_scales():
 
 
 def test_polygon_contacts_are_exact():
-    from mdsr_opt.polygons import check_polygon, segment_contacts
+    from mdsr_opt.body.polygons import check_polygon, segment_contacts
 
     with pytest.raises(ValueError, match="self-intersecting: edge 2 .* meets edge 3|self-intersecting"):
         check_polygon([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]])  # vertex 3 on edge 0

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean
-from mdsr_opt.model import get_model, spring_parameters
+from mdsr_opt.mechanics.model import get_model, spring_parameters
 
 from conftest import rotation
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean, solve_external
-from mdsr_opt.model import get_model, spring_parameters
-from mdsr_opt.newton import NewtonEnergy, _pd4, _psd4
+from mdsr_opt.mechanics.model import get_model, spring_parameters
+from mdsr_opt.mechanics.newton import NewtonEnergy, _pd4, _psd4
 
 
 @pytest.mark.parametrize("mat", [NeoHookean(2.0, 0.3, thickness=0.7), LinearElastic(1.0, 0.25)])
@@ -74,7 +74,7 @@ def test_sliding_cables_are_refused():
 
 
 def test_step_seconds_times_one_assembly_and_factorisation():
-    from mdsr_opt.newton import step_seconds
+    from mdsr_opt.mechanics.newton import step_seconds
 
     mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
     mat = NeoHookean(1.0, 0.3)

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import mdsr_opt
-from mdsr_opt.cli import build_parser, main
+from mdsr_opt.cli.main import build_parser, main
 
 ROOT = Path(__file__).resolve().parents[1]
 try:  # Python 3.11+
@@ -113,7 +113,7 @@ def test_pyproject_declares_an_spdx_license_and_optional_dask():
 
 
 def test_missing_dask_extra_is_a_clear_error(monkeypatch):
-    from mdsr_opt.study import run_study
+    from mdsr_opt.studies.study import run_study
 
     monkeypatch.setitem(sys.modules, "distributed", None)  # `import distributed` now raises ImportError
     with pytest.raises(ValueError, match=r'optional dask extra.*pip install "mdsr_opt\[dask\]"'):
@@ -197,11 +197,11 @@ def test_quiet_and_verbose_flags_set_the_log_level(tmp_path, capsys):
 
 
 def test_library_reports_through_module_loggers(caplog, tmp_path):
-    from mdsr_opt.demo import run_demo
+    from mdsr_opt.cli.demo import run_demo
 
     with caplog.at_level(logging.INFO, logger="mdsr_opt"):
         run_demo(str(tmp_path / "d"), max_area=0.05)
-    assert any(r.name == "mdsr_opt.demo" and "[1/4]" in r.getMessage() for r in caplog.records)
+    assert any(r.name == "mdsr_opt.cli.demo" and "[1/4]" in r.getMessage() for r in caplog.records)
 
 
 def test_no_print_in_library_code_outside_the_command_line():
@@ -225,7 +225,7 @@ def test_no_print_in_library_code_outside_the_command_line():
 
 # ---------------------------------------------------------------------------------------------- progress
 def test_progress_bar_counts_units_and_estimates_the_time_left(capsys):
-    from mdsr_opt.progress import Progress, advance, expect
+    from mdsr_opt.core.progress import Progress, advance, expect
 
     bar = Progress(2, "mdsr run", enabled=True, unit="case")
     bar("[s 1/2 a] target by external driving: ok")
@@ -242,7 +242,7 @@ def test_progress_bar_counts_units_and_estimates_the_time_left(capsys):
 
 
 def test_progress_off_prints_messages_or_nothing():
-    from mdsr_opt.progress import Progress
+    from mdsr_opt.core.progress import Progress
 
     out = io.StringIO()
     with Progress(1, "x", enabled=False, stream=out) as log:
@@ -258,7 +258,7 @@ def test_importing_plot_keeps_the_matplotlib_backend():
     code = ("import matplotlib\n"
             "matplotlib.use('svg')\n"
             "before = matplotlib.get_backend()\n"
-            "import mdsr_opt.plot, mdsr_opt.scenes, mdsr_opt.evaluate, mdsr_opt.study\n"
+            "import mdsr_opt.plot, mdsr_opt.scenes, mdsr_opt.photos, mdsr_opt.studies\n"
             "print(before, matplotlib.get_backend())\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_clean_env(), capture_output=True, text=True,
                        check=True, timeout=120)
@@ -277,10 +277,10 @@ def test_importing_plot_keeps_the_matplotlib_backend():
 def test_plot_functions_take_an_axes_and_return_the_figure(tmp_path):
     import matplotlib.pyplot as plt
 
-    from mdsr_opt import Mesh, plot
+    from mdsr_opt import Mesh
+    from mdsr_opt import plot
 
-    funcs = {n: f for n, f in inspect.getmembers(plot, inspect.isfunction)
-             if n.startswith("plot_") and f.__module__ == plot.__name__}
+    funcs = {n: getattr(plot, n) for n in plot.__all__ if n.startswith("plot_")}
     assert len(funcs) >= 10
     lacking = [n for n, f in funcs.items() if not {"ax", "axes", "fig"} & set(inspect.signature(f).parameters)]
     assert lacking == []

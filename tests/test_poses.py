@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, NeoHookean
-from mdsr_opt.gait import Gait, gait_schedule, plot_schedule
-from mdsr_opt.poses import Pose, PosesResult, design_poses, shared_layout
+from mdsr_opt.synthesis.gait import Gait, gait_schedule, plot_schedule
+from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses, shared_layout
 
 MAT = NeoHookean(1.0, 0.3)
 
@@ -100,7 +100,7 @@ def test_budget_of_one_keeps_the_strongest_muscle():
 
 
 def _route(mesh, y):
-    from mdsr_opt.routing import route_muscles
+    from mdsr_opt.synthesis.routing import route_muscles
 
     return route_muscles(mesh, y)
 
@@ -169,7 +169,8 @@ def test_gait_block_checks():
 def test_scene_file_units_and_gait(tmp_path):
     from test_scenes import finger_dict, write_json
 
-    from mdsr_opt.scenes import SceneFileError, load_scene
+    from mdsr_opt.scenes.reader import SceneFileError
+    from mdsr_opt.scenes.scenefile import load_scene
 
     d = finger_dict()
     d["units"] = "cm"
@@ -191,7 +192,8 @@ def test_run_scene_writes_the_gait_folder(tmp_path):
     fabrication files in out/<gait>/, every length in the scene's unit."""
     from test_scenes import finger_dict, write_json
 
-    from mdsr_opt.scenes import load_scene, run_scene
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.scenes.runscene import run_scene
 
     d = finger_dict()
     d["units"] = "cm"
@@ -215,7 +217,8 @@ def test_run_scene_writes_the_gait_folder(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("name, gait", [("gecko", "walk"), ("starfish", "swim_cycle")])
 def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait):
-    from mdsr_opt.scenes import get_problem, run_scene
+    from mdsr_opt.scenes.library import get_problem
+    from mdsr_opt.scenes.runscene import run_scene
 
     scene = get_problem(name, resolution="coarse")
     assert scene.gait.name == gait and scene.units == "cm"

@@ -10,8 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mdsr_opt.align import align
-from mdsr_opt.scenes import Scene, animate, get_problem, list_problems, run_case
+from mdsr_opt.mechanics.align import align
+from mdsr_opt.scenes.scene import Scene
+from mdsr_opt.scenes.animate import animate
+from mdsr_opt.scenes.library import get_problem, list_problems
+from mdsr_opt.scenes.runner import run_case
 
 LIBRARY = ("face", "four_muscles", "gecko", "gripper", "humanoid", "one_muscle", "starfish", "tentacle",
            "two_muscles")

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mdsr_opt.prototype import VirtualPrototype, validate_case, validation_tables
-from mdsr_opt.scenes import get_problem, prepare_case, run_case
+from mdsr_opt.scenes.prototype import VirtualPrototype, validate_case, validation_tables
+from mdsr_opt.scenes.library import get_problem
+from mdsr_opt.scenes.cases import prepare_case
+from mdsr_opt.scenes.runner import run_case
 
 
 @pytest.fixture(scope="module")
@@ -84,7 +86,7 @@ def test_bad_input_is_refused(one):
 
 
 def test_mdsr_run_writes_the_validation_tables(tmp_path, capsys):
-    from mdsr_opt.cli import main
+    from mdsr_opt.cli.main import main
 
     out = tmp_path / "one"
     assert main(["run", "one_muscle", "--case", "a30", "--resolution", "coarse", "--no-animations",

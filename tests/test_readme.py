@@ -34,7 +34,7 @@ def test_readme_block_runs(index, tmp_path, monkeypatch):
 
 
 def test_readme_scene_file_loads(tmp_path):
-    from mdsr_opt.scenes import load_scene
+    from mdsr_opt.scenes.scenefile import load_scene
 
     path = tmp_path / "finger.toml"
     path.write_text(TOML[0])
@@ -52,7 +52,7 @@ def _command_lines():
 
 
 def test_readme_command_lines_parse_and_name_real_files():
-    from mdsr_opt.cli import build_parser
+    from mdsr_opt.cli.main import build_parser
 
     parser = build_parser()
     seen = set()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh
-from mdsr_opt.results import format_value, to_jsonable
+from mdsr_opt.core.results import format_value, to_jsonable
 
 
 def test_helpers_summarise_arrays_and_make_json():
@@ -28,7 +28,7 @@ def plate():
 
 
 def test_routing_result_repr_and_dict(plate):
-    from mdsr_opt.routing import route_muscles
+    from mdsr_opt.synthesis.routing import route_muscles
 
     target = plate.points * [0.8, 1.0]
     res = route_muscles(plate, target)
@@ -41,7 +41,7 @@ def test_routing_result_repr_and_dict(plate):
 
 
 def test_study_result_repr_and_dict():
-    from mdsr_opt.study import run_study
+    from mdsr_opt.studies.study import run_study
 
     res = run_study("quick", resolutions=[30], methods=["ipopt"], problems=["strip-stretch"], progress=False,
                     figures=False)
@@ -52,7 +52,9 @@ def test_study_result_repr_and_dict():
 
 
 def test_contour_comparison_and_photo_repr_and_dict(plate):
-    from mdsr_opt.evaluate import compare_contours, contour_from_image, render_photo, simulated_outline
+    from mdsr_opt.photos.compare import compare_contours, simulated_outline
+    from mdsr_opt.photos.contours import contour_from_image
+    from mdsr_opt.photos.camera import render_photo
 
     photo = render_photo(plate, plate.points, resolution=(300, 300), seed=1)
     assert repr(photo) == "SyntheticPhoto(300x300 px, seed=1, SYNTHETIC)"

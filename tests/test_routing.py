@@ -8,8 +8,7 @@ import pytest
 
 from conftest import arc_map, rotation
 from mdsr_opt import Mesh, Muscle
-from mdsr_opt.routing import (MuscleStats, RoutingResult, RoutingWarning, contraction_graph, edge_weights,
-                              route_muscles)
+from mdsr_opt.synthesis.routing import MuscleStats, RoutingResult, RoutingWarning, contraction_graph, edge_weights, route_muscles
 
 
 # ------------------------------------------------------------------------------------------ targets
@@ -129,7 +128,7 @@ def test_bent_strip_muscle_on_the_concave_side_analytic(grid_strip):
 
 def test_bent_strip_by_external_driving_routes_on_the_concave_side(grid_strip):
     from mdsr_opt import NeoHookean
-    from mdsr_opt.equilibrium import solve_external
+    from mdsr_opt.mechanics.equilibrium import solve_external
 
     X = grid_strip.points
     left = np.flatnonzero(X[:, 0] < 1e-9)
@@ -287,8 +286,8 @@ def _router(mesh, t, w, K_a, K_b, K_h, n_seeds=10):
     """A router with its first units, as ``route_muscles`` builds it (no symmetry)."""
     import math
 
-    from mdsr_opt import routing
-    from mdsr_opt.routing_search import Router
+    from mdsr_opt.synthesis import routing
+    from mdsr_opt.synthesis.routing_search import Router
 
     ell = float(mesh.edge_lengths.mean())
     wq = np.rint(w / routing._QUANTUM).astype(np.int64)
@@ -301,7 +300,7 @@ def _router(mesh, t, w, K_a, K_b, K_h, n_seeds=10):
 def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
     """h of every candidate step = shortest path over all mesh edges (rest lengths) from the new end node
     to the nearest end node of another unit, in mean edge lengths (checked against networkx)."""
-    from mdsr_opt import routing
+    from mdsr_opt.synthesis import routing
 
     t = family(body)["shorten 35 deg"]
     _, _, w = edge_weights(body, t)
@@ -330,7 +329,7 @@ def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
 def test_pruned_choice_equals_the_full_heuristic(body, K_h):
     """The growth step computes h only where a straight-line bound says it can matter; every step it
     takes must be the one the full computation of h picks."""
-    from mdsr_opt import routing
+    from mdsr_opt.synthesis import routing
 
     ell = float(body.edge_lengths.mean())
     steps = 0
@@ -375,7 +374,7 @@ def test_raising_K_a_lowers_nonuniformity_and_K_b_lowers_turning(body):
 
 
 def test_nonuniformity_is_the_largest_relative_mismatch_of_a_joined_part():
-    from mdsr_opt.routing_search import mismatch as _mismatch
+    from mdsr_opt.synthesis.routing_search import mismatch as _mismatch
 
     # a unit of 3 edges with mean 10 joined by an edge of weight 5: joined mean 35/4
     mu = 35 / 4
@@ -527,7 +526,8 @@ def test_bad_knobs(grid_strip, kw, exc, msg):
 def test_figures(grid_strip, tmp_path):
     from matplotlib.collections import LineCollection
 
-    from mdsr_opt.plot import plot_contraction_graph, plot_routing, save_figure
+    from mdsr_opt.plot.design import plot_contraction_graph, plot_routing
+    from mdsr_opt.plot.common import save_figure
 
     t = arc(grid_strip.points, 3.0, 0.5)
     res = route_muscles(grid_strip, t)
@@ -655,7 +655,7 @@ def test_symmetry_true_requires_a_symmetric_target(grid_strip):
 
 
 def test_find_reflection_maps_nodes_and_edges():
-    from mdsr_opt.routing_symmetry import find_reflections
+    from mdsr_opt.synthesis.routing_symmetry import find_reflections
 
     mesh = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
     refl = find_reflections(mesh)

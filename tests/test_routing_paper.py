@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from mdsr_opt.scenes import figure_scripts, get_problem, list_problems, prepare_case
+from mdsr_opt.scenes.library import figure_scripts, get_problem, list_problems
+from mdsr_opt.scenes.cases import prepare_case
 from problems import figure6
 
 
@@ -83,7 +84,7 @@ def test_read_ipopt_log_keeps_the_last_table(tmp_path):
 
 
 def test_routing_quality_rows_and_tables(tmp_path):
-    from mdsr_opt.routing_quality import edge_muscles, routing_quality, write_quality_table
+    from mdsr_opt.studies.routing_quality import edge_muscles, routing_quality, write_quality_table
 
     rows = routing_quality([("gripper", "close")], resolution="coarse")
     (r,) = rows
@@ -107,7 +108,7 @@ def test_routing_quality_rows_and_tables(tmp_path):
 
 
 def test_routing_quality_rejects_bad_cases_before_any_work():
-    from mdsr_opt.routing_quality import routing_quality, write_quality_table
+    from mdsr_opt.studies.routing_quality import routing_quality, write_quality_table
 
     with pytest.raises(TypeError, match="scene, case"):
         routing_quality(["gripper"])
@@ -119,7 +120,7 @@ def test_routing_quality_rejects_bad_cases_before_any_work():
 
 @pytest.mark.slow
 def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
-    from mdsr_opt.cli import main
+    from mdsr_opt.cli.main import main
 
     code = main(["run", "figure6", "--out", str(tmp_path), "--resolution", "coarse", "--quiet"])
     assert code == 0
@@ -134,7 +135,7 @@ def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
         for i in range(1, n + 1):  # stroke = contraction x rest length, within [0, a_max]
             assert 0.0 <= float(r[f"a{i}"]) <= 0.6 + 1e-9
             assert float(r[f"stroke{i}"]) >= 0.0
-    from mdsr_opt.io import read_json
+    from mdsr_opt.body.io import read_json
 
     data = read_json(tmp_path / "figure6.json")
     for lay, row in zip(data["layouts"], data["rows"]):

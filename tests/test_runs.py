@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from mdsr_opt import scenes
-from mdsr_opt.cli import main
-from mdsr_opt.rundir import LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError, RunFolder, check_out_path
+from mdsr_opt.cli.main import main
+from mdsr_opt.scenes.rundir import LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError, RunFolder, check_out_path
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
@@ -72,7 +72,7 @@ def test_ctrl_c_stops_a_real_run_with_exit_130(tmp_path):
 
 def test_an_interrupt_swallowed_by_a_solver_still_stops_the_run(tmp_path, monkeypatch):
     """CasADi turns Ctrl-C inside IPOPT into a failed solve; the run must stop, not record a failed case."""
-    from mdsr_opt import rundir
+    from mdsr_opt.scenes import rundir
 
     real = scenes.prepare_case
 
@@ -81,7 +81,7 @@ def test_an_interrupt_swallowed_by_a_solver_still_stops_the_run(tmp_path, monkey
         rundir._INTERRUPTED.set()            # what the SIGINT handler does when the solver eats the exception
         return setup
 
-    monkeypatch.setattr(scenes, "prepare_case", swallowed)
+    monkeypatch.setattr("mdsr_opt.scenes.runner.prepare_case", swallowed)
     out = tmp_path / "out"
     with rundir.noting_interrupts():
         assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-figures"]) == 130
@@ -94,7 +94,7 @@ def test_keyboard_interrupt_is_not_caught_as_a_case_failure(tmp_path, monkeypatc
         raise KeyboardInterrupt
 
     scene = scenes.get_problem(str(FINGER), resolution="coarse")
-    monkeypatch.setattr("mdsr_opt.design.design_contractions", boom)
+    monkeypatch.setattr("mdsr_opt.synthesis.contractions.design_contractions", boom)
     with pytest.raises(KeyboardInterrupt):
         scenes.run_case(scene, "bend", photo=False)
 
@@ -181,7 +181,7 @@ def test_a_held_lock_names_the_holder(tmp_path):
 def test_bad_out_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, out, words):
     (tmp_path / "FILE").write_text("x")
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(scenes, "get_problem", lambda *a, **k: pytest.fail("work started"))
+    monkeypatch.setattr("mdsr_opt.cli.run.get_problem", lambda *a, **k: pytest.fail("work started"))
     assert main(["run", str(FINGER), "--out", out]) == 2
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1
@@ -203,7 +203,7 @@ def test_os_errors_are_one_line(tmp_path, capsys, monkeypatch):
     def denied(*a, **k):
         raise PermissionError(13, "Permission denied", str(tmp_path / "x"))
 
-    monkeypatch.setattr(scenes, "get_problem", denied)
+    monkeypatch.setattr("mdsr_opt.cli.run.get_problem", denied)
     assert main(["run", str(FINGER), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.strip() == f"mdsr run: error: Permission denied: {tmp_path / 'x'}"
@@ -211,7 +211,8 @@ def test_os_errors_are_one_line(tmp_path, capsys, monkeypatch):
 
 
 def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsys):
-    from mdsr_opt.scenes import load_problem_module, run_main
+    from mdsr_opt.scenes.library import load_problem_module
+    from mdsr_opt.scenes.runscene import run_main
 
     build = load_problem_module(ROOT / "problems" / "gripper.py").build
     out = tmp_path / "out"

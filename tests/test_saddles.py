@@ -61,7 +61,7 @@ def test_compressed_strip_buckles_into_a_minimum(clamped_strip, compression):
 
 def test_saddle_without_escape_is_a_failure_with_the_reason(clamped_strip, monkeypatch):
     """With no re-solves allowed, the straight saddle must be reported as a failure, never as a success."""
-    import mdsr_opt.equilibrium as eq
+    import mdsr_opt.mechanics.loadsteps as eq
 
     mesh, left, right, free = clamped_strip
     mat = NeoHookean(1.0, 0.3)
@@ -97,7 +97,7 @@ def test_min_step_wrong_type():
 
 
 def test_external_stability_of_a_target(clamped_strip, monkeypatch):
-    import mdsr_opt.equilibrium as eq
+    import mdsr_opt.mechanics.loadsteps as eq
     from mdsr_opt import external_stability
 
     mesh, left, right, free = clamped_strip
@@ -115,7 +115,7 @@ def test_external_stability_of_a_target(clamped_strip, monkeypatch):
 
 @pytest.mark.filterwarnings("ignore")
 def test_verify_design_checks_the_targets_stability(clamped_strip, monkeypatch):
-    import mdsr_opt.equilibrium as eq
+    import mdsr_opt.mechanics.loadsteps as eq
     from mdsr_opt import Muscle, design_contractions, verify_design
 
     mesh, left, right, free = clamped_strip

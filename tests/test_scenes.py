@@ -11,11 +11,14 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean
-from mdsr_opt.cli import main
-from mdsr_opt.io import write_mesh
-from mdsr_opt.scenes import (Animation, Case, Scene, SceneFileError, UnknownName, arc_map, arc_rigid,
-                             boundary_path, edge_path, get_problem, list_problems, load_scene, mesh_polygon,
-                             problems_dir, resolve_resolution)
+from mdsr_opt.cli.main import main
+from mdsr_opt.body.io import write_mesh
+from mdsr_opt.scenes.scene import Animation, Case, Scene, UnknownName, mesh_polygon, resolve_resolution
+from mdsr_opt.scenes.reader import SceneFileError
+from mdsr_opt.scenes.shapes import arc_map, arc_rigid
+from mdsr_opt.scenes.select import boundary_path, edge_path
+from mdsr_opt.scenes.library import get_problem, list_problems, problems_dir
+from mdsr_opt.scenes.scenefile import load_scene
 
 DATA = Path(__file__).parent / "data"
 FINGER = DATA / "finger.toml"
@@ -41,7 +44,7 @@ def test_unknown_problem_names_the_library():
 def test_problems_folder_from_the_environment(tmp_path, monkeypatch):
     (tmp_path / "square.py").write_text(
         "from mdsr_opt import NeoHookean\n"
-        "from mdsr_opt.scenes import Case, Scene, mesh_polygon, nodes_in_box\n"
+        "from mdsr_opt.scenes.scene import Case, Scene, mesh_polygon; from mdsr_opt.scenes.select import nodes_in_box\n"
         "def build(resolution='medium'):\n"
         "    m = mesh_polygon([[0, 0], [1, 0], [1, 1], [0, 1]], resolution=resolution)\n"
         "    c = Case('push', anchors=nodes_in_box(m, xmax=0), drag_nodes=nodes_in_box(m, xmin=1),\n"

@@ -8,7 +8,7 @@ import scipy.linalg as sl
 import scipy.sparse as sp
 
 from mdsr_opt import Mesh, NeoHookean, get_model
-from mdsr_opt.stability import StabilityCheck, check_stability
+from mdsr_opt.mechanics.stability import StabilityCheck, check_stability
 
 
 def _random_case(rng, n, n_neg, sparse_band=None):

@@ -14,12 +14,14 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external, solve_internal
-from mdsr_opt.cli import main
-from mdsr_opt.fidelity import choose_fidelity, pick_fidelity
-from mdsr_opt.io import read_json
-from mdsr_opt.study import (COLUMNS, FAILURES, TIMING_COLUMNS, Study, _classify, boundary_overlaps, build_setup,
-                            fit_slopes, get_study, interpolate, list_study_problems, pareto_front, run_study,
-                            state_error)
+from mdsr_opt.cli.main import main
+from mdsr_opt.studies.fidelity import choose_fidelity, pick_fidelity
+from mdsr_opt.body.io import read_json
+from mdsr_opt.studies.spec import COLUMNS, FAILURES, TIMING_COLUMNS, Study, get_study
+from mdsr_opt.studies.runs import _classify, boundary_overlaps, interpolate, state_error
+from mdsr_opt.studies.problems import build_setup, list_study_problems
+from mdsr_opt.core.stats import fit_slopes, pareto_front
+from mdsr_opt.studies.study import run_study
 
 SMALL = dict(resolutions=[30], reference_resolution=100, progress=False)
 

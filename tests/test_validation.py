@@ -13,11 +13,15 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external
-from mdsr_opt.backends import check_options
-from mdsr_opt.cli import main
-from mdsr_opt.design import PipelineResult, design
-from mdsr_opt.scenes import (Animation, Case, Scene, SceneFileError, boundary_path, check_output_names,
-                             edge_path, get_problem, load_scene)
+from mdsr_opt.mechanics.backends import check_options
+from mdsr_opt.cli.main import main
+from mdsr_opt.synthesis.pipeline import PipelineResult, design
+from mdsr_opt.scenes.scene import Animation, Case, Scene
+from mdsr_opt.scenes.reader import SceneFileError
+from mdsr_opt.scenes.select import boundary_path, edge_path
+from mdsr_opt.scenes.names import check_output_names
+from mdsr_opt.scenes.library import get_problem
+from mdsr_opt.scenes.scenefile import load_scene
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -229,7 +233,7 @@ def test_design_result_folder_missing_or_a_file(tmp_path):
     (["--out", ""], "--out is empty"),
 ])
 def test_demo_arguments_fail_before_meshing(tmp_path, capsys, monkeypatch, args, words):
-    monkeypatch.setattr("mdsr_opt.mesh.Mesh.from_polygon", lambda *a, **k: pytest.fail("meshing started"))
+    monkeypatch.setattr("mdsr_opt.body.mesh.Mesh.from_polygon", lambda *a, **k: pytest.fail("meshing started"))
     monkeypatch.chdir(tmp_path)
     assert main(["demo", "--out", "d", *args]) == 2
     assert words in capsys.readouterr().err

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import write_json, write_mesh
+from ..body.io import write_json, write_mesh
 
 __all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS"]
 
@@ -82,12 +82,12 @@ def save_scene(session, folder, name: str | None = None) -> list[str]:
     drags, muscles); a mismatch raises ``RuntimeError`` rather than leaving a scene that would not
     reproduce the page.
     """
-    from ..scenes import load_scene
+    from ..scenes.scenefile import load_scene
 
     if len(session.anchors) + len(session.drag_nodes) < 2:
         raise ValueError("nothing to save yet: a scene's case needs at least two fixed nodes (anchors and drags)")
     name = name or session.name
-    from ..scenes import Case  # name check: letters, digits, _ - .
+    from ..scenes.scene import Case  # name check: letters, digits, _ - .
 
     Case(name, anchors=[0, 1])
     folder = Path(folder)

@@ -51,7 +51,7 @@ def load_body(spec: dict):
     if isinstance(res, str) and res.strip().isdigit():
         res = int(res)
     if res is not None:
-        from ..scenes import resolve_resolution
+        from ..scenes.scene import resolve_resolution
 
         n = resolve_resolution(int(res) if isinstance(res, str) and res.strip().isdigit() else res)
         if n > MAX_NODES:
@@ -69,7 +69,7 @@ def load_body(spec: dict):
             outline, holes = parse_outline(p.name, p.read_text())
             return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
         if p.suffix.lower() == ".py":
-            from ..scenes import get_problem
+            from ..scenes.library import get_problem
 
             return Session.from_scene(get_problem(p, resolution=res))
         return Session.from_scene_file(p, res)
@@ -300,7 +300,7 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
     from starlette.staticfiles import StaticFiles
     from starlette.websockets import WebSocketDisconnect
 
-    from ..scenes import list_problems
+    from ..scenes.library import list_problems
     from .export import DOWNLOADS, download
     from .session import design_defaults
 

@@ -25,12 +25,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from ..design import design_contractions
-from ..equilibrium import solve_external
-from ..mesh import Mesh
-from ..model import get_model
-from ..routing import RoutingWarning, contraction_graph, route_muscles
-from ..scenes import Scene, get_problem, load_scene, mesh_polygon, resolve_resolution, seeds_for
+from ..synthesis.contractions import design_contractions
+from ..mechanics.equilibrium import solve_external
+from ..body.mesh import Mesh
+from ..mechanics.model import get_model
+from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
+from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
+from ..scenes.library import get_problem
+from ..scenes.scenefile import load_scene
 
 __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
 
@@ -146,7 +148,7 @@ class Session:
     def from_outline(cls, outline, holes=(), resolution: str | int = 600, name: str = "authored",
                      material=None) -> "Session":
         """A polygon (with holes) meshed with about ``resolution`` nodes; Neo-Hookean E = 1, nu = 0.3."""
-        from ..material import NeoHookean
+        from ..body.material import NeoHookean
 
         n = resolve_resolution(_resolution(resolution))
         if n > MAX_NODES:

@@ -27,8 +27,8 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
-from mdsr_opt.design import design_contractions
-from mdsr_opt.model import get_model
+from mdsr_opt.synthesis.contractions import design_contractions
+from mdsr_opt.mechanics.model import get_model
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 SIZES = {"300": 9, "1k": 16, "3k": 27}  # rectangle 4 x 1 with (4 ny) x ny square cells
@@ -178,7 +178,8 @@ def run(args):
             wr.writeheader()
             wr.writerows(sens)
         os.replace(spath + ".tmp", spath)
-    from mdsr_opt.plot import plot_design_benchmark, save_figure
+    from mdsr_opt.plot.design import plot_design_benchmark
+    from mdsr_opt.plot.common import save_figure
 
     fig = plot_design_benchmark(rows, traces)
     png = save_figure(fig, os.path.join(args.out, "design_bench.png"))

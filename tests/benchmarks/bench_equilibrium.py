@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh, NeoHookean, solve_external
-from mdsr_opt.backends import available_backends
+from mdsr_opt.mechanics.backends import available_backends
 
 DEFAULT_CAPS = {"ipopt-lbfgs": 1200, "uno": 400, "scipy": 12000, "sqpmethod": 12000}
 

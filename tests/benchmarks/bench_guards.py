@@ -86,7 +86,7 @@ def main(argv=None) -> None:
     ap.add_argument("--extract", type=int, default=0, help="only time contour extraction on N x N pixels")
     a = ap.parse_args(argv)
     if a.extract:
-        from mdsr_opt.evaluate import contour_from_image
+        from mdsr_opt.photos.contours import contour_from_image
 
         n = a.extract
         yy, xx = np.ogrid[0:n, 0:n]
@@ -107,8 +107,8 @@ def main(argv=None) -> None:
         print(f"  bent {360 * turns:5.0f} deg: boundary_crosses {new} {1e3 * t_new:7.1f} ms (median of "
               f"{a.repeat}); all pairs {old} {t_old:6.2f} s; ratio {t_old / t_new:5.0f}x")
 
-    from mdsr_opt.evaluate import contour_from_image
-    from mdsr_opt.scenes import get_problem
+    from mdsr_opt.photos.contours import contour_from_image
+    from mdsr_opt.scenes.library import get_problem
 
     sq = np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]])
     for name, fn in [("1000 x 1000 square, max_area=0.01", lambda: Mesh.from_polygon(sq * 1000, max_area=0.01)),

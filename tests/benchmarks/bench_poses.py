@@ -23,11 +23,12 @@ import time
 import casadi as ca
 import numpy as np
 
-from mdsr_opt.align import align, node_weights
-from mdsr_opt.model import get_model
-from mdsr_opt.poses import shared_layout
-from mdsr_opt.routing import route_muscles
-from mdsr_opt.scenes import get_problem, prepare_case
+from mdsr_opt.mechanics.align import align, node_weights
+from mdsr_opt.mechanics.model import get_model
+from mdsr_opt.synthesis.poses import shared_layout
+from mdsr_opt.synthesis.routing import route_muscles
+from mdsr_opt.scenes.library import get_problem
+from mdsr_opt.scenes.cases import prepare_case
 
 
 def pose_block(model, mesh, material, muscles, y, w, tag):

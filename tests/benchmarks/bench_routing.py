@@ -39,8 +39,9 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh
-from mdsr_opt import routing, routing_search
-from mdsr_opt.routing import contraction_graph, route_muscles
+from mdsr_opt.synthesis import routing
+from mdsr_opt.synthesis import routing_search
+from mdsr_opt.synthesis.routing import contraction_graph, route_muscles
 
 BUDGET_S = 0.5
 BUDGET_NODES = 3000
@@ -105,8 +106,8 @@ def _ka_sweep(resolution) -> int:
     """Muscle counts and edge counts of the Figure 6 targets routed at K_a = 0.5 .. 32."""
     import warnings
 
-    from mdsr_opt.equilibrium import solve_external
-    from mdsr_opt.scenes import get_problem, problems_dir
+    from mdsr_opt.mechanics.equilibrium import solve_external
+    from mdsr_opt.scenes.library import get_problem, problems_dir
 
     fig6 = __import__("importlib").import_module("problems.figure6") if problems_dir() else None
     kas = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
@@ -136,7 +137,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     res_arg = int(args.resolution) if args.resolution.isdigit() else args.resolution
     if args.quality:
-        from mdsr_opt.routing_quality import routing_quality, write_quality_table
+        from mdsr_opt.studies.routing_quality import routing_quality, write_quality_table
 
         rows = routing_quality(resolution=res_arg, log=lambda s: print(s, flush=True))
         paths = write_quality_table(rows, os.path.join(args.out, "routing_quality.csv"),
@@ -182,7 +183,8 @@ def main(argv=None) -> int:
             if abs(n - BUDGET_NODES) < 1:
                 examples[name] = (mesh, target, res)
 
-    from mdsr_opt.plot import plot_contraction_graph, plot_routing, plot_routing_timings, save_figure
+    from mdsr_opt.plot.design import plot_contraction_graph, plot_routing, plot_routing_timings
+    from mdsr_opt.plot.common import save_figure
     import matplotlib.pyplot as plt
 
     series = {}

@@ -36,8 +36,8 @@ sys.path[:0] = [_HERE, os.path.dirname(os.path.dirname(_HERE))]  # the benchmark
 from bench_equilibrium import scene, strip_mesh  # noqa: E402
 
 from mdsr_opt import Mesh, NeoHookean, solve_external  # noqa: E402
-from mdsr_opt.model import get_model  # noqa: E402
-from mdsr_opt.newton import step_seconds  # noqa: E402
+from mdsr_opt.mechanics.model import get_model  # noqa: E402
+from mdsr_opt.mechanics.newton import step_seconds  # noqa: E402
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 

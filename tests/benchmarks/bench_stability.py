@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, get_model, solve_external, solve_internal
-from mdsr_opt.stability import check_stability
+from mdsr_opt.mechanics.stability import check_stability
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 SIZES = {"3k": (150, 20), "10k": (280, 35)}  # rectangle 10 x 1 with nx x ny cells: 3171 and 10116 nodes
@@ -44,14 +44,15 @@ def _check_external(mesh, anchors, dragged, x):
 
 def _check_internal(res, mesh, mus):
     """The check exactly as solve_internal runs it (uncached): multipliers, Lagrangian Hessian, Finsler."""
-    from mdsr_opt.equilibrium import _constrained_model, _gauge, _muscle_constraints, _stability_at
-    from mdsr_opt.muscle_constraints import check_anchor_radius
+    from mdsr_opt.mechanics.equilibrium import _constrained_model, gauge_coordinates, _muscle_constraints
+    from mdsr_opt.mechanics.loadsteps import _stability_at
+    from mdsr_opt.mechanics.constraints import check_anchor_radius
 
     emodel = get_model(mesh, MAT)
     mc = _muscle_constraints(mesh, mus, check_anchor_radius(mesh, None))
     cm = _constrained_model(emodel, mc, True)
     fixed = np.zeros(2 * mesh.n_nodes, bool)
-    fixed[list(_gauge(mesh))] = True
+    fixed[list(gauge_coordinates(mesh))] = True
     # the result is aligned to rest; the check is invariant, but the gauge must hold its rest values
     x = res.x.reshape(-1)
     p = cm.params(emodel.params(MAT), (1.0 - res.commanded) * mc.rest_lengths)

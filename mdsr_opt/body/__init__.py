@@ -1,0 +1,1 @@
+"""The body: meshes, polygons, materials, muscles and mesh files."""

@@ -1,0 +1,549 @@
+"""The immutable triangle mesh of a planar soft body, meshing of polygons, and quality checks.
+
+A :class:`Mesh` holds rest nodes ``points`` (n, 2) and counter-clockwise ``triangles`` (m, 3).
+Everything else (edges, boundary, element matrices, quality) is derived on first use and cached.
+Construction validates the mesh: every problem is a ``ValueError``/``TypeError`` naming it.
+
+Example
+-------
+>>> from mdsr_opt import Mesh
+>>> mesh = Mesh.rectangle(4.0, 1.0, nx=8, ny=2)
+>>> mesh.n_nodes, mesh.n_triangles
+(27, 32)
+"""
+
+from __future__ import annotations
+
+from functools import cached_property, wraps
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..core.checks import as_float_array, as_index_array, positive_float, positive_int
+from .polygons import check_polygon, corner_angles, point_inside, polygon_area, ring_segments, segment_contacts  # polygon_area, check_polygon, segment_contacts: re-exported
+
+__all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES"]
+
+#: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
+MAX_TRIANGLES = 2_000_000
+#: Triangles per unit of ``area / max_area`` that Triangle makes when the area bound governs (measured:
+#: 1.55 at min_angle 20, 1.58 at 30, 1.71 at 33, on squares, strips and discs of 1e3 to 1e6 triangles).
+_TRIANGLES_PER_AREA = 1.6
+
+
+def _frozen(value):
+    """Make cached arrays (or lists of them) read-only so callers cannot corrupt a mesh's derived data."""
+    if isinstance(value, np.ndarray):
+        value.setflags(write=False)
+    elif isinstance(value, list):
+        for v in value:
+            _frozen(v)
+    return value
+
+
+def _cached(fn):
+    """``cached_property`` whose array result is read-only."""
+    @wraps(fn)
+    def compute(self):
+        return _frozen(fn(self))
+
+    return cached_property(compute)
+
+
+def _switch_number(value: float) -> str:
+    """A number as Triangle's command line reads it: digits and a point, never an exponent.
+
+    Triangle's switch parser takes only ``0-9`` and ``.`` after ``a`` or ``q``; ``1e-05`` would be read as
+    ``1`` (and ``e`` as another switch), which silently meshes far coarser than asked.
+    """
+    return np.format_float_positional(float(value), trim="-")
+
+
+class Mesh:
+    """An immutable planar triangle mesh.
+
+    Parameters
+    ----------
+    points : array_like, shape (n, 2)
+        Rest coordinates of the nodes.
+    triangles : array_like of int, shape (m, 3)
+        Node indices of each triangle, counter-clockwise.
+
+    Raises
+    ------
+    TypeError
+        Non-numeric points or non-integer triangles.
+    ValueError
+        NaN/inf, indices out of range, repeated nodes in a triangle, zero-area or inverted
+        (clockwise) triangles, mixed orientation (fold-over), non-manifold edges or vertices,
+        duplicate triangles, nodes used by no triangle, or overlapping rest geometry (a boundary that
+        crosses or touches itself, or triangles winding more than once around a node).
+    """
+
+    __slots__ = ("_points", "_triangles", "_boundary", "__dict__")
+
+    def __init__(self, points: ArrayLike, triangles: ArrayLike):
+        p = as_float_array(points, "points", shape=(None, 2))
+        t = as_index_array(triangles, "triangles", n=len(p), shape=(None, 3))
+        if len(t) == 0:
+            raise ValueError("triangles is empty: a mesh needs at least one triangle")
+        self._boundary = _validate_topology(p, t)
+        self._boundary.setflags(write=False)
+        reason = _overlap(p, t, self._boundary, rest=True)
+        if reason:
+            raise ValueError(f"the rest geometry overlaps itself: {reason}")
+        p.setflags(write=False)
+        t.setflags(write=False)
+        self._points = p
+        self._triangles = t
+
+    # ------------------------------------------------------------------ basic data
+    @property
+    def points(self) -> np.ndarray:
+        """Rest node coordinates, (n, 2), read-only."""
+        return self._points
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """Counter-clockwise triangles, (m, 3), read-only."""
+        return self._triangles
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self._points)
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self._triangles)
+
+    def __repr__(self) -> str:
+        return f"Mesh(n_nodes={self.n_nodes}, n_triangles={self.n_triangles})"
+
+    @property
+    def size(self) -> float:
+        """Characteristic size: the diagonal of the rest bounding box."""
+        return float(np.linalg.norm(np.ptp(self._points, axis=0)))
+
+    # ------------------------------------------------------------------ derived topology
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """Unique undirected edges (k, 2) with ``i < j``, sorted lexicographically."""
+        t = self._triangles
+        e = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        e = np.sort(e, axis=1)
+        e = np.unique(e, axis=0)
+        e.setflags(write=False)
+        return e
+
+    @cached_property
+    def edge_index(self) -> dict[tuple[int, int], int]:
+        """Map ``(i, j)`` with ``i < j`` to the row of :attr:`edges`."""
+        return {(int(a), int(b)): k for k, (a, b) in enumerate(self.edges)}
+
+    def has_edge(self, i: int, j: int) -> bool:
+        return (min(i, j), max(i, j)) in self.edge_index
+
+    @_cached
+    def edge_lengths(self) -> np.ndarray:
+        """Rest lengths of :attr:`edges`."""
+        e = self.edges
+        return np.linalg.norm(self._points[e[:, 1]] - self._points[e[:, 0]], axis=1)
+
+    @_cached
+    def boundary_edges(self) -> np.ndarray:
+        """Directed boundary edges (b, 2), oriented with the body on their left."""
+        t = self._triangles
+        directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+        return directed[self._boundary]
+
+    @_cached
+    def boundary_nodes(self) -> np.ndarray:
+        """Sorted indices of the nodes on the boundary."""
+        return np.unique(self.boundary_edges)
+
+    @_cached
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Ordered boundary loops; the first is the outer one (counter-clockwise), then holes (clockwise)."""
+        nxt = {int(a): int(b) for a, b in self.boundary_edges}
+        loops, seen = [], set()
+        for start in sorted(nxt):
+            if start in seen:
+                continue
+            loop, v = [], start
+            while v not in seen:
+                seen.add(v)
+                loop.append(v)
+                v = nxt[v]
+            loops.append(np.array(loop, dtype=np.int64))
+        loops.sort(key=lambda lp: -abs(polygon_area(self._points[lp])))
+        return loops
+
+    @_cached
+    def neighbors(self) -> list[np.ndarray]:
+        """Sorted neighbour node indices of each node along mesh edges."""
+        nb: list[list[int]] = [[] for _ in range(self.n_nodes)]
+        for a, b in self.edges.tolist():
+            nb[a].append(b)
+            nb[b].append(a)
+        return [np.array(sorted(x), dtype=np.int64) for x in nb]
+
+    # ------------------------------------------------------------------ element geometry
+    @_cached
+    def Dm(self) -> np.ndarray:
+        """Rest edge matrices ``[X1-X0, X2-X0]`` as columns, (m, 2, 2)."""
+        X = self._points[self._triangles]
+        return np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]], axis=2)
+
+    @_cached
+    def Dm_inv(self) -> np.ndarray:
+        """Inverse rest edge matrices, (m, 2, 2)."""
+        return np.linalg.inv(self.Dm)
+
+    @_cached
+    def areas(self) -> np.ndarray:
+        """Rest triangle areas, (m,)."""
+        return 0.5 * np.linalg.det(self.Dm)
+
+    @property
+    def area(self) -> float:
+        return float(self.areas.sum())
+
+    def deformation_gradients(self, x: ArrayLike) -> np.ndarray:
+        """Deformation gradient ``F = Ds Dm^-1`` of each triangle for deformed nodes ``x`` (n, 2)."""
+        x = self._check_state(x)
+        Y = x[self._triangles]
+        Ds = np.stack([Y[:, 1] - Y[:, 0], Y[:, 2] - Y[:, 0]], axis=2)
+        return Ds @ self.Dm_inv
+
+    def jacobians(self, x: ArrayLike) -> np.ndarray:
+        """``J = det F`` of each triangle; ``J <= 0`` marks an inverted element."""
+        return np.linalg.det(self.deformation_gradients(x))
+
+    def boundary_crosses(self, x: ArrayLike) -> bool:
+        """Does the body overlap itself in configuration ``x``?
+
+        Elements can all stay upright (``J > 0``) while the body folds through itself; contact is not
+        modelled, so such a state is not physical. True when two boundary edges that share no node have a
+        point in common (a crossing, also one through a vertex, a vertex touching an edge, or collinear
+        edges overlapping), when neighbouring boundary edges fold back onto each other, or when the
+        triangles around a boundary node cover more than a full turn. Exact for the floating-point input
+        and O(B log B) in the number B of boundary edges (see :func:`segment_contacts`).
+        """
+        x = self._check_state(x)
+        return _overlap(x, self._triangles, self._boundary) is not None
+
+    def _check_state(self, x: ArrayLike, name: str = "x") -> np.ndarray:
+        return as_float_array(x, name, shape=(self.n_nodes, 2))
+
+    # ------------------------------------------------------------------ quality
+    @_cached
+    def angles(self) -> np.ndarray:
+        """Interior angles of each triangle in degrees, (m, 3)."""
+        X = self._points[self._triangles]
+        out = np.empty((self.n_triangles, 3))
+        for k in range(3):
+            a = X[:, (k + 1) % 3] - X[:, k]
+            b = X[:, (k + 2) % 3] - X[:, k]
+            cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+            out[:, k] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        return out
+
+    def quality(self) -> dict[str, float]:
+        """Quality figures: min/max angle (deg), max aspect ratio (longest edge / shortest altitude),
+        min and max area, mean edge length."""
+        X = self._points[self._triangles]
+        L = np.stack([np.linalg.norm(X[:, (k + 1) % 3] - X[:, k], axis=1) for k in range(3)], axis=1)
+        alt = 2 * self.areas / L.max(axis=1)
+        return {
+            "n_nodes": self.n_nodes,
+            "n_triangles": self.n_triangles,
+            "min_angle_deg": float(self.angles.min()),
+            "max_angle_deg": float(self.angles.max()),
+            "max_aspect_ratio": float((L.max(axis=1) / alt).max()),
+            "min_area": float(self.areas.min()),
+            "max_area": float(self.areas.max()),
+            "mean_edge_length": float(self.edge_lengths.mean()),
+        }
+
+    # ------------------------------------------------------------------ copies
+    def with_points(self, points: ArrayLike) -> "Mesh":
+        """A new mesh with the same triangles and new rest points (validated again)."""
+        return Mesh(points, self._triangles)
+
+    def relabel(self, perm: ArrayLike) -> "Mesh":
+        """The same mesh with node ``i`` renamed ``perm[i]`` (``perm`` a permutation of range(n))."""
+        perm = as_index_array(perm, "perm", n=self.n_nodes, shape=(self.n_nodes,))
+        if len(np.unique(perm)) != self.n_nodes:
+            raise ValueError("perm is not a permutation of the node indices")
+        pts = np.empty_like(self._points)
+        pts[perm] = self._points
+        return Mesh(pts, perm[self._triangles])
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_polygon(cls, outline: ArrayLike, max_area: float | None = None,
+                     holes: list[ArrayLike] | None = None, min_angle: float = 30.0, *,
+                     max_triangles: int = MAX_TRIANGLES) -> "Mesh":
+        """Quality-mesh a simple polygon (with optional polygonal holes) with Shewchuk's Triangle.
+
+        Parameters
+        ----------
+        outline : array_like, shape (k, 2)
+            Vertices of the outer boundary, either orientation.
+        max_area : float, optional
+            Largest triangle area, in the outline's units squared; default: the polygon's area / 200.
+            Honoured at any scale: the polygon is centred and scaled to unit size before meshing, so a
+            1 cm body given in metres or a body far from the origin meshes as finely as asked.
+        holes : list of array_like, optional
+            Polygons strictly inside the outline, neither touching it nor each other, and not nested
+            inside one another (a hole inside a hole would be a separate island of material).
+        min_angle : float
+            Smallest interior angle in degrees (Triangle guarantees up to about 33; at most 34). Every
+            corner of the outline (and every corner of the body at a hole) must be at least this wide,
+            since Triangle cannot split an input corner.
+        max_triangles : int
+            Refuse, before meshing, a request expected to make more triangles than this (the expectation
+            is ``1.6 x area / max_area``, what Triangle makes when the area bound governs). The default,
+            :data:`MAX_TRIANGLES` (2 million), bounds the time (seconds) and memory (about a GB) of
+            meshing and validation; pass a larger value to go beyond it.
+
+        Raises
+        ------
+        ValueError
+            A bad outline or hole (see :func:`check_polygon`), holes crossing, touching, outside the
+            outline or nested in one another, a corner narrower than ``min_angle``, ``min_angle`` above 34,
+            a non-positive ``max_area``, or a request over ``max_triangles``.
+
+        Example
+        -------
+        >>> m = Mesh.from_polygon([[0, 0], [2, 0], [2, 1], [0, 1]], max_area=0.05)
+        >>> m.quality()["min_angle_deg"] >= 30.0 - 1e-9
+        True
+        """
+        import shapely
+        import triangle as tr
+
+        outer = check_polygon(outline, "outline")
+        hole_polys = [check_polygon(h, f"holes[{i}]") for i, h in enumerate(holes or [])]
+        min_angle = positive_float(min_angle, "min_angle")
+        if min_angle > 34.0:
+            raise ValueError(f"min_angle must be <= 34 degrees for Triangle to terminate, got {min_angle}")
+        max_triangles = positive_int(max_triangles, "max_triangles")
+        names = ["outline"] + [f"holes[{i}]" for i in range(len(hole_polys))]
+        polys = [outer] + hole_polys
+        # scale-free coordinates: scaled by a power of two s to about unit size and shifted by a whole
+        # multiple of s next to the outline's centre, so the transform is exact (Sterbenz) and a body near
+        # the origin meshes exactly as it would unscaled
+        lo, hi = outer.min(axis=0), outer.max(axis=0)
+        s = float(2.0 ** np.ceil(np.log2(float(np.max(hi - lo)))))
+        centre = np.round(0.5 * (lo + hi) / s) * s
+        unit = [(p - centre) / s for p in polys]
+        area = polygon_area(unit[0]) - sum(polygon_area(h) for h in unit[1:])
+        if area <= 0.0:
+            raise ValueError("the holes cover the whole outline: no material is left to mesh")
+        if max_area is None:
+            unit_area = area / 200.0
+            max_area = unit_area * s * s
+        else:
+            max_area = positive_float(max_area, "max_area")
+            unit_area = max_area / (s * s)
+        expected = max(_TRIANGLES_PER_AREA * area / unit_area, float(sum(len(p) for p in polys)))
+        if expected > max_triangles:
+            raise ValueError(
+                f"max_area={max_area:.6g} would make about {expected:.3g} triangles (1.6 x area "
+                f"{area * s * s:.6g} / max_area), more than the limit max_triangles={int(max_triangles)}; "
+                f"pass a larger max_area, or raise the limit with max_triangles= (Mesh.from_polygon)")
+        # the rings may not meet: one segment soup of all of them, tested at once
+        ring_of = np.repeat(np.arange(len(unit)), [len(u) for u in unit])
+        segs = ring_segments([len(u) for u in unit])
+        hit = segment_contacts(np.vstack(unit), segs)
+        for i, j in hit:
+            a, b = int(ring_of[segs[i, 0]]), int(ring_of[segs[j, 0]])
+            if a != b and a == 0:
+                raise ValueError(f"{names[b]} is not inside the outline: they intersect or touch")
+            if a != b:
+                raise ValueError(f"{names[a]} and {names[b]} intersect or touch")
+        if hole_polys:
+            rings = [shapely.Polygon(u) for u in unit]
+            for i, u in enumerate(unit[1:]):
+                if not shapely.contains_xy(rings[0], u[0, 0], u[0, 1]):
+                    raise ValueError(f"holes[{i}] is not inside the outline")
+            tree = shapely.STRtree(rings[1:])
+            first = shapely.points(np.array([u[0] for u in unit[1:]]))
+            inner, container = tree.query(first, predicate="within")
+            for k in np.flatnonzero(inner != container):
+                raise ValueError(
+                    f"holes[{int(inner[k])}] lies inside holes[{int(container[k])}]: holes nested in holes "
+                    "are not supported (the material between them would be an island not joined to the "
+                    "body); mesh that island as a body of its own")
+        for r, (name, u) in enumerate(zip(names, unit)):
+            ang = corner_angles(u)
+            if r > 0:  # the body's angle at a hole corner is the outside of the hole's corner
+                ang = 360.0 - ang
+            k = int(np.argmin(ang))
+            if ang[k] < min_angle - 1e-9:
+                v = polys[r][k]
+                raise ValueError(
+                    f"{name} has a corner of {ang[k]:.4g} degrees at vertex {k} ({v[0]:.6g}, {v[1]:.6g}), "
+                    f"narrower than min_angle={min_angle:g}: Triangle cannot split an input corner, so that "
+                    f"angle cannot be met; pass min_angle <= {np.floor(ang[k] * 100) / 100:g} or widen the "
+                    "corner")
+        data = {"vertices": np.vstack(unit), "segments": segs}
+        if hole_polys:
+            data["holes"] = np.array([point_inside(h) for h in unit[1:]])
+        out = tr.triangulate(data, f"pq{_switch_number(min_angle)}a{_switch_number(unit_area)}Q")
+        tri = np.asarray(out["triangles"], dtype=np.int64)
+        if len(tri) > max_triangles:
+            raise ValueError(f"meshing made {len(tri)} triangles, more than the limit "
+                             f"max_triangles={int(max_triangles)} (small features or narrow gaps refine the "
+                             "mesh beyond the area bound); pass a larger max_area, or raise the limit with "
+                             "max_triangles= (Mesh.from_polygon)")
+        pts = np.asarray(out["vertices"], dtype=float) * s + centre
+        n_in = len(data["vertices"])
+        pts[:n_in] = np.vstack(polys)  # the input vertices exactly as given (Triangle keeps them first)
+        used = np.flatnonzero(np.bincount(tri.ravel(), minlength=len(pts)))
+        if len(used) != len(pts):  # drop vertices left outside (never expected with 'p')
+            remap = -np.ones(len(pts), dtype=np.int64)
+            remap[used] = np.arange(len(used))
+            pts, tri = pts[used], remap[tri]
+        d1, d2 = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
+        cw = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] < 0
+        tri[cw] = tri[cw][:, ::-1]
+        return cls(pts, tri)
+
+    @classmethod
+    def rectangle(cls, width: float, height: float, nx: int, ny: int,
+                  origin: tuple[float, float] = (0.0, 0.0), pattern: str = "alternating") -> "Mesh":
+        """A structured mesh of a rectangle with ``nx`` x ``ny`` cells, each split into two triangles.
+
+        ``pattern`` is ``"right"`` (all diagonals alike) or ``"alternating"`` (diagonals alternate, which
+        avoids a preferred direction).
+        """
+        width = positive_float(width, "width")
+        height = positive_float(height, "height")
+        for v, nm in ((nx, "nx"), (ny, "ny")):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"{nm} must be a positive integer, got {v!r}")
+        if pattern not in ("right", "alternating"):
+            raise ValueError(f"pattern must be 'right' or 'alternating', got {pattern!r}")
+        xs = origin[0] + np.linspace(0.0, width, nx + 1)
+        ys = origin[1] + np.linspace(0.0, height, ny + 1)
+        X, Y = np.meshgrid(xs, ys)
+        pts = np.column_stack([X.ravel(), Y.ravel()])
+        i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+        i, j = i.ravel(), j.ravel()
+        a = j * (nx + 1) + i
+        b, c, d = a + 1, a + nx + 2, a + nx + 1
+        right = np.ones_like(a, dtype=bool) if pattern == "right" else (i + j) % 2 == 0
+        first = np.where(right[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
+        second = np.where(right[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
+        tris = np.stack([first, second], axis=1).reshape(-1, 3)
+        return cls(pts, tris.astype(np.int64))
+
+
+def _validate_topology(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Validate a mesh's triangles; return the boundary mask of :func:`_edge_structure`."""
+    n, m = len(p), len(t)
+    rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
+    if rep.any():
+        k = int(np.argmax(rep))
+        raise ValueError(f"triangle {k} repeats a node: {t[k].tolist()}")
+    used = np.zeros(n, dtype=bool)
+    used[t.ravel()] = True
+    if not used.all():
+        raise ValueError(f"{int((~used).sum())} node(s) belong to no triangle (first: {int(np.argmin(used))}); "
+                         "remove unused nodes")
+    X = p[t]
+    d1, d2 = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    lmax = np.max(np.stack([np.linalg.norm(d1, axis=1), np.linalg.norm(d2, axis=1),
+                            np.linalg.norm(X[:, 2] - X[:, 1], axis=1)]), axis=0)
+    degenerate = np.abs(det) <= 1e-10 * lmax ** 2
+    if degenerate.any():
+        k = int(np.argmax(degenerate))
+        raise ValueError(f"triangle {k} {t[k].tolist()} is degenerate (zero area)")
+    neg = det < 0
+    if neg.all():
+        raise ValueError("all triangles are clockwise (inverted); pass triangles[:, ::-1] for "
+                         "counter-clockwise order")
+    if neg.any():
+        k = int(np.argmax(neg))
+        raise ValueError(f"mixed orientation: triangle {k} {t[k].tolist()} is clockwise (inverted) while "
+                         f"others are counter-clockwise; the mesh folds over")
+    return _edge_structure(t, n)
+
+
+def _edge_structure(t: np.ndarray, n: int) -> np.ndarray:
+    """Check how triangles share edges; return which directed edges ``[t01; t12; t20]`` lie on the boundary.
+
+    One sort of the undirected edge keys finds every problem: an edge in more than two triangles, two
+    triangles crossing an edge in the same direction (overlap or duplicate), and boundary nodes where
+    separate fans meet (bow-tie).
+    """
+    directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]).astype(np.int64)
+    lo, hi = np.minimum(directed[:, 0], directed[:, 1]), np.maximum(directed[:, 0], directed[:, 1])
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    same = k[1:] == k[:-1]
+    if (same[1:] & same[:-1]).any():
+        _refuse_duplicates(t)
+        e = int(k[1:-1][same[1:] & same[:-1]][0])
+        raise ValueError(f"non-manifold mesh: edge {[e // n, e % n]} is shared by more than two triangles")
+    twin = np.flatnonzero(same)  # order[twin] and order[twin + 1] are the two sides of an interior edge
+    start = directed[:, 0]
+    if (start[order[twin]] == start[order[twin + 1]]).any():
+        _refuse_duplicates(t)
+        raise ValueError("triangles overlap: two triangles traverse an edge in the same direction "
+                         "(the mesh folds over)")
+    shared = np.zeros(len(key), dtype=bool)
+    shared[order[twin]] = True
+    shared[order[twin + 1]] = True
+    boundary = ~shared
+    # boundary vertices must be manifold: at most one outgoing boundary edge each
+    out_count = np.bincount(start[boundary], minlength=n)
+    if (out_count > 1).any():
+        raise ValueError(f"non-manifold mesh: node {int(np.argmax(out_count > 1))} joins separate fans "
+                         "of triangles (bow-tie)")
+    return boundary
+
+
+def _refuse_duplicates(t: np.ndarray) -> None:
+    """Raise if the same three nodes form more than one triangle (checked on the error path only)."""
+    _, counts = np.unique(np.sort(t, axis=1), axis=0, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError("duplicate triangles: the same three nodes appear in more than one triangle")
+
+
+def _overlap(x: np.ndarray, t: np.ndarray, boundary: np.ndarray, rest: bool = False) -> str | None:
+    """Why the triangles ``t`` at positions ``x`` overlap each other, or None.
+
+    ``boundary`` marks the boundary among the directed edges ``[t01; t12; t20]``. Tested: the triangles
+    around a boundary node turning through more than 360 degrees, (at ``rest``) around an interior node
+    through a multiple of 360 other than one, and the boundary edges meeting anywhere but at shared nodes.
+    """
+    n = len(x)
+    directed = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+    # signed corner angles; their sum around a node is how far its fan of triangles turns
+    X = x[t]
+    turn = np.zeros(n)
+    for k in range(3):
+        u, v = X[:, (k + 1) % 3] - X[:, k], X[:, (k + 2) % 3] - X[:, k]
+        ang = np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], np.einsum("ij,ij->i", u, v))
+        turn += np.bincount(t[:, k], weights=ang, minlength=n)
+    on_bnd = np.zeros(n, dtype=bool)
+    on_bnd[directed[boundary, 0]] = True
+    over = on_bnd & (turn > 2 * np.pi * (1 + 1e-12))
+    if rest:
+        over |= ~on_bnd & (np.abs(turn - 2 * np.pi) > 0.5)
+    if over.any():
+        v = int(np.argmax(over))
+        return (f"the triangles around node {v} at ({x[v, 0]:.6g}, {x[v, 1]:.6g}) turn through "
+                f"{np.degrees(turn[v]):.1f} degrees, more than a full turn")
+    E = directed[boundary]
+    hit = segment_contacts(x, E)
+    if len(hit):
+        i, j = (int(v) for v in hit[0])
+        return (f"boundary edges {E[i].tolist()} and {E[j].tolist()} meet near ({x[E[i, 0], 0]:.6g}, "
+                f"{x[E[i, 0], 1]:.6g}) where they share no node (the boundary crosses or touches itself)")
+    return None

@@ -1,0 +1,120 @@
+"""Muscle units: cables routed along chains of mesh edges.
+
+A :class:`Muscle` is a simple path of mesh nodes ``(v0, ..., vk)``; consecutive nodes must share a mesh
+edge. A contraction ``a`` in ``[0, 1)`` shortens the muscle to ``(1 - a)`` of its rest length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..core.checks import as_float_array, as_index_array
+
+__all__ = ["Muscle", "check_muscles", "check_contractions"]
+
+
+@dataclass(frozen=True)
+class Muscle:
+    """A muscle unit along mesh edges.
+
+    Parameters
+    ----------
+    nodes : sequence of int
+        The path ``v0 ... vk`` (at least two nodes, no node twice).
+    name : str, optional
+        A label used in reports and figures.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, Muscle
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 2, 1, pattern="right")
+    >>> Muscle([0, 1, 2]).rest_length(mesh)
+    2.0
+    """
+
+    nodes: tuple[int, ...]
+    name: str | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        arr = as_index_array(np.asarray(list(self.nodes) if not isinstance(self.nodes, np.ndarray) else self.nodes),
+                             "muscle nodes", shape=(None,))
+        if len(arr) < 2:
+            raise ValueError(f"muscle {self._label()} needs at least two nodes, got {len(arr)}")
+        if len(np.unique(arr)) != len(arr):
+            vals, counts = np.unique(arr, return_counts=True)
+            raise ValueError(f"muscle {self._label()} repeats node {int(vals[counts > 1][0])}: "
+                             "a muscle is a simple path")
+        object.__setattr__(self, "nodes", tuple(int(v) for v in arr))
+
+    def _label(self) -> str:
+        return repr(self.name) if self.name else "path"
+
+    @property
+    def segments(self) -> np.ndarray:
+        """Consecutive node pairs (k, 2)."""
+        v = np.asarray(self.nodes, dtype=np.int64)
+        return np.column_stack([v[:-1], v[1:]])
+
+    def check_on(self, mesh) -> None:
+        """Raise ``ValueError`` unless every node is in ``mesh`` and every segment is a mesh edge."""
+        v = np.asarray(self.nodes)
+        if v.max() >= mesh.n_nodes:
+            raise ValueError(f"muscle {self._label()} has node {int(v.max())} out of range [0, {mesh.n_nodes})")
+        for a, b in self.segments.tolist():
+            if not mesh.has_edge(a, b):
+                raise ValueError(f"muscle {self._label()} leaves the mesh: segment ({a}, {b}) is not a mesh edge")
+
+    def segment_lengths(self, x: ArrayLike) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        s = self.segments
+        return np.linalg.norm(x[s[:, 1]] - x[s[:, 0]], axis=1)
+
+    def length(self, x: ArrayLike) -> float:
+        """Length of the path in configuration ``x`` (n, 2)."""
+        return float(self.segment_lengths(x).sum())
+
+    def rest_length(self, mesh) -> float:
+        return self.length(mesh.points)
+
+    def turning_angle(self, x: ArrayLike) -> float:
+        """Total absolute turning angle (radians) along the path in configuration ``x``."""
+        x = np.asarray(x, dtype=float)
+        d = np.diff(x[list(self.nodes)], axis=0)
+        if len(d) < 2:
+            return 0.0
+        ang = np.arctan2(d[:, 1], d[:, 0])
+        turn = np.diff(ang)
+        turn = (turn + np.pi) % (2 * np.pi) - np.pi
+        return float(np.abs(turn).sum())
+
+
+def check_muscles(mesh, muscles: Sequence[Muscle]) -> list[Muscle]:
+    """Validate a list of muscles against ``mesh``; accept plain node lists too."""
+    if isinstance(muscles, Muscle):
+        muscles = [muscles]
+    out = []
+    for i, m in enumerate(muscles):
+        if not isinstance(m, Muscle):
+            if isinstance(m, (str, bytes)) or not hasattr(m, "__len__"):
+                raise TypeError(f"muscles[{i}] must be a Muscle or a sequence of node indices, got {type(m).__name__}")
+            m = Muscle(tuple(m) if not isinstance(m, np.ndarray) else m)
+        m.check_on(mesh)
+        out.append(m)
+    return out
+
+
+def check_contractions(contractions: ArrayLike, n_muscles: int, a_max: float = 1.0) -> np.ndarray:
+    """Contractions as a float vector, one per muscle, each in ``[0, a_max)`` with ``a_max <= 1``."""
+    a = as_float_array(np.atleast_1d(np.asarray(contractions, dtype=float) if not isinstance(contractions, str)
+                                     else contractions), "contractions", shape=(None,))
+    if len(a) != n_muscles:
+        raise ValueError(f"contractions must have one value per muscle ({n_muscles}), got {len(a)}")
+    bad = (a < 0) | (a >= a_max)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"contractions[{i}] = {a[i]} is outside [0, {a_max:g})")
+    return a

@@ -1,0 +1,109 @@
+"""The ``mdsr`` command. Subcommands are registered by the modules that own them.
+
+Global options (before the subcommand): ``--version``; ``-v`` (more detail: ``-vv`` for debug output of the
+library's loggers) and ``-q`` (warnings and errors only, no progress bar). Library modules report through
+``logging.getLogger(__name__)``; this module is the only place that configures logging.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+
+def _register_all(sub) -> None:
+    from . import demo
+
+    demo.add_cli(sub)
+    # each module that owns a subcommand adds one line here: `from . import X; X.add_cli(sub)`
+    from . import photos; photos.add_cli(sub)  # noqa: E702
+    from . import run; run.add_cli(sub)  # noqa: E702
+    from . import study; study.add_cli(sub)  # noqa: E702
+    from .. import author; author.add_cli(sub)  # noqa: E702
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``mdsr`` argument parser with every subcommand registered (also used by the tests)."""
+    from .. import __version__
+
+    parser = argparse.ArgumentParser(prog="mdsr", description="Muscle-driven soft robot design toolkit")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
+                        help="print the package version and exit")
+    parser.add_argument("-v", "--verbose", action="count", default=0, dest="log_verbose",
+                        help="more detail (-vv: debug messages of the library)")
+    parser.add_argument("-q", "--quiet", action="store_true", dest="log_quiet",
+                        help="only warnings, errors and results: no progress lines or bar")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _register_all(sub)
+    return parser
+
+
+class _StderrHandler(logging.StreamHandler):
+    """A stream handler that writes to whatever ``sys.stderr`` is when a record comes (it may be replaced,
+    e.g. by a test's capture, after the handler was made)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.stream = sys.stderr
+        super().emit(record)
+
+
+def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
+    """Send the library's log records (logger ``mdsr_opt``) to stderr at the level the flags ask for.
+
+    Default INFO (progress messages), ``quiet`` WARNING, one ``-v`` keeps INFO with logger names, two or more
+    DEBUG. Returns the level. Only the command line calls this; a script configures logging itself.
+    """
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose >= 2 else logging.INFO)
+    logger = logging.getLogger("mdsr_opt")
+    for h in list(logger.handlers):
+        if getattr(h, "_mdsr_cli", False):
+            logger.removeHandler(h)
+    handler = _StderrHandler()
+    handler._mdsr_cli = True  # type: ignore[attr-defined]
+    fmt = "%(levelname)s %(name)s: %(message)s" if verbose else "%(message)s"
+    handler.setFormatter(logging.Formatter(fmt))
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    return level
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``mdsr`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
+
+    0: success; 1: the command ran but something it checked failed (a solve, a case); 2: bad input or an
+    unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.command_line = " ".join(["mdsr", *(sys.argv[1:] if argv is None else argv)])
+    configure_logging(args.log_verbose, args.log_quiet)
+    if args.log_quiet and hasattr(args, "quiet"):
+        args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
+    import matplotlib
+
+    matplotlib.use("Agg")  # the command line only writes files; importing mdsr_opt.plot leaves the backend alone
+    from ..scenes.rundir import noting_interrupts
+
+    try:
+        with noting_interrupts():
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        # Ctrl-C: stop at once with one line (no traceback); the commands' writers have removed their
+        # temporary files, the files already complete stay. 130 = 128 + SIGINT, as shells report it.
+        print(f"\nmdsr {args.command}: interrupted (Ctrl-C); files already complete are kept", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # `mdsr list | head`: the reader left; not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except (ValueError, TypeError, OSError) as exc:  # bad input, an unusable file or folder: one line
+        text = str(exc) if not isinstance(exc, OSError) or not exc.filename else \
+            f"{exc.strerror or type(exc).__name__}: {exc.filename}"
+        print(f"mdsr {args.command}: error: {text}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

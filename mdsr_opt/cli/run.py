@@ -1,0 +1,156 @@
+"""``mdsr list`` and ``mdsr run``: the problem library from the command line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..core.progress import progress_for_cli
+from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
+from ..scenes.runscene import n_units, parse_resolution, parse_seed, parse_size, run_entries, write_scene
+
+__all__ = ['add_cli']
+
+
+# ---------------------------------------------------------------------------------------------- the command
+def _doc_line(path: Path) -> str:
+    import ast
+
+    try:
+        doc = ast.get_docstring(ast.parse(path.read_text()))
+    except SyntaxError:
+        return "(cannot be parsed)"
+    return (doc or "").strip().split("\n")[0]
+
+
+def _cmd_list(a) -> int:
+    files = problem_files()
+    if not files:
+        print(f"no problem library found (looked in $MDSR_PROBLEMS, the installed package and the source checkout); "
+              f"run a scene file with `mdsr run PATH`")
+        return 1
+    print(f"problem library: {problems_dir()}")
+    w = max(len(n) for n in files)
+    for name, path in files.items():
+        line = f"  {name:<{w}}  {_doc_line(path)}"
+        if a.cases:
+            scene = build_from(path, "coarse")
+            kinds = ", ".join(f"{c.name} ({c.kind})" for c in scene.cases)
+            line += f"\n  {'':<{w}}  cases: {kinds}" + (
+                f"; animations: {', '.join(x.name for x in scene.animations)}" if scene.animations else "")
+        print(line)
+    for name, path in figure_scripts().items():
+        print(f"  {name:<{w}}  {_doc_line(path)} (figure)")
+    print("run one with: mdsr run NAME --out DIR   (or a scene file: mdsr run PATH.toml --out DIR)")
+    return 0
+
+
+def _cmd_run(a) -> int:
+    import time
+
+    names = list(a.scenes)
+    if names == ["all"]:
+        names = list_problems()
+        if not names:
+            raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
+    from ..scenes.rundir import RunFolder
+
+    t0 = time.perf_counter()
+    # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
+    # scene (all input errors), and only then any solving or writing
+    figs = figure_scripts()
+    if any(n in figs for n in names):  # a figure script runs on its own (e.g. mdsr run figure6)
+        if len(names) != 1:
+            raise ValueError(f"run a figure script ({', '.join(n for n in names if n in figs)}) on its own")
+        module = load_module(figs[names[0]])
+        with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+            folder.begin(getattr(module, "OUTPUTS", ()))
+            with progress_for_cli(a, 0, names[0], unit="step") as log:
+                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
+            folder.finish("complete" if code == 0 else "complete, some designs failed")
+        return code
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+        scenes = [get_problem(n, resolution=a.resolution) for n in names]
+        seen = set()
+        for s in scenes:
+            if s.name in seen:
+                raise ValueError(f"scene {s.name!r} is named twice")
+            seen.add(s.name)
+        if a.case:
+            for s in scenes:
+                for c in a.case:
+                    s.case(c)  # an unknown --case names the scene's cases
+        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
+        reports = []
+        with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
+                              unit="case") as log:
+            for k, scene in enumerate(scenes):
+                out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
+                if len(scenes) > 1:
+                    log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
+                reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
+                                           figures=not a.no_figures, animations=not a.no_animations,
+                                           mesh_format=a.format, photo_resolution=a.photo_size, log=log,
+                                           prototype=not a.no_prototype, prototype_seed=a.prototype_seed))
+        if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
+            from ..body.io import atomic_path
+            from ..scenes.prototype import validation_tables
+
+            with atomic_path(Path(a.out) / "tables.md") as tmp:
+                Path(tmp).write_text(validation_tables(reports))
+        folder.finish("complete" if all(r.success for r in reports) else "complete, some cases failed")
+    lines = reports[0].table().split("\n")
+    for r in reports[1:]:
+        lines += r.table().split("\n")[2:]
+    ok = all(r.success for r in reports)
+    n_cases = sum(len(r.cases) for r in reports)
+    n_bad = sum(not c.success for r in reports for c in r.cases)
+    print("\n" + "\n".join(lines))
+    for r in reports:
+        for c in r.cases:
+            if not c.success:
+                print(f"FAILED {r.scene}/{c.case}: {c.message}")
+        for name, an in r.animations.items():
+            if not an.get("success", False):
+                print(f"FAILED {r.scene}/{name} (animation): {an.get('message') or an.get('failed_frames')}")
+    print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
+          f"results in {a.out}; photographs are SYNTHETIC")
+    return 0 if ok else 1
+
+
+def add_cli(sub) -> None:
+    """Register ``mdsr list`` and ``mdsr run``."""
+    p = sub.add_parser("list", help="list the problem library (the paper's robots as scenes)")
+    p.add_argument("--cases", action="store_true", help="also build each scene (coarse) and list its cases")
+    p.set_defaults(func=_cmd_list)
+
+    q = sub.add_parser("run", help="run scenes through the whole pipeline: target, muscles, contractions, "
+                       "forward check, synthetic photograph, contour metrics, validation against a virtual prototype (the "
+                       "paper's Tables 2-4 in validation.md, and tables.md for several scenes); figures, meshes, JSON")
+    q.add_argument("scenes", nargs="+", metavar="NAME|PATH",
+                   help="library names (see mdsr list), 'all', problem scripts (.py) or scene files (.toml/.json)")
+    q.add_argument("--out", required=True,
+                   help="output folder (one sub-folder per scene when several); it must be new or empty, and "
+                   "is locked while the run writes into it: a second run into it stops with an error")
+    q.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr run in --out (only the files that run recorded; a "
+                   "folder holding other files is still refused). Without it a non-empty --out is refused, so "
+                   "one folder never mixes two runs")
+    q.add_argument("--resolution", type=parse_resolution, default=None,
+                   help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
+    q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
+    q.add_argument("--method", choices=("flattened", "nested", "derivative-free"), default=None,
+                   help="design method (default: the scene's, normally flattened)")
+    q.add_argument("--format", choices=("vtu", "vtk", "xdmf"), default="vtu", help="mesh files (default vtu)")
+    q.add_argument("--no-photos", action="store_true", help="skip the synthetic photographs and contour metrics")
+    q.add_argument("--photo-size", type=parse_size, default=(500, 500), metavar="WxH",
+                   help="size of the synthetic photographs in pixels (default 500x500, as in the paper)")
+    q.add_argument("--no-prototype", action="store_true",
+                   help="skip the virtual prototype (a 3x finer mesh, perturbed material, the exact cable, the "
+                   "synthetic camera) against which the paper's Tables 2-4 are computed (validation.md per scene, "
+                   "tables.md for several scenes)")
+    q.add_argument("--prototype-seed", type=parse_seed, default=0,
+                   help="seed of the virtual prototype's material perturbation and camera (default 0)")
+    q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
+    q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
+    q.add_argument("--quiet", action="store_true", help="print only the summary table")
+    q.set_defaults(func=_cmd_run)

@@ -1,0 +1,95 @@
+"""``mdsr study``: solver comparison studies from the command line."""
+
+from __future__ import annotations
+
+import math
+
+from ..core.progress import progress_for_cli
+from ..studies.problems import list_study_problems
+from ..studies.spec import FIDELITY_STUDY, STUDIES
+from ..studies.study import run_study
+
+__all__ = ['add_cli']
+
+
+# ============================================================================================== CLI
+def _csv_list(text: str | None, cast=str, flag: str = "the list"):
+    if text is None:
+        return None
+    items = [t.strip() for t in text.split(",") if t.strip()]
+    if not items:
+        raise ValueError(f"{flag}: expected a comma-separated list, got {text!r}")
+    out = []
+    for t in items:
+        try:
+            out.append(cast(t))
+        except ValueError:
+            kind = {int: "integers", float: "numbers"}.get(cast, "values")
+            raise ValueError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
+    return out
+
+
+def _cli(args) -> int:
+    if args.list or args.name is None:
+        from ..studies.fidelity import FIDELITY_CASES
+
+        for name, st in STUDIES.items():
+            runs, _refs, _capped = st.plan()
+            print(f"{name:<10} {len(runs):>4} runs  {st.description}")
+        print(f"{FIDELITY_STUDY:<10} {len(FIDELITY_CASES):>4} scenes  the coarsest mesh and simplest material "
+              "model within a tolerance, per scene")
+        print("\nproblems: " + ", ".join(list_study_problems()))
+        return 0
+    if args.out is None:
+        raise ValueError("give --out DIR for the study's table and charts")
+    from ..scenes.rundir import check_out_path
+
+    check_out_path(args.out)  # every argument before any work
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+    if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
+        raise ValueError(f"--timeout must be a positive number of seconds, got {args.timeout}")
+    if args.reference_resolution is not None and args.reference_resolution < 20:
+        raise ValueError(f"--reference-resolution must be at least 20 nodes, got {args.reference_resolution}")
+    scheduler = args.scheduler or ("local" if args.dask else None)
+    if args.name == FIDELITY_STUDY:
+        from ..studies.fidelity import fidelity_markdown, run_fidelity_study
+
+        kw = {"resolutions": _csv_list(args.resolutions, int, "--resolutions"),
+              "reference_resolution": args.reference_resolution}
+        with progress_for_cli(args, 0, "mdsr study fidelity", stream="stderr", unit="run") as log:
+            choices, _ = run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float, "--tol"),
+                                            scheduler=scheduler, workers=args.workers, progress=not args.quiet,
+                                            log=log, **{k: v for k, v in kw.items() if v is not None})
+        print(fidelity_markdown(choices), flush=True)
+        return 0
+    with progress_for_cli(args, 0, f"mdsr study {args.name}", stream="stderr", unit="run") as log:
+        res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int, "--resolutions"),
+                        methods=_csv_list(args.methods, str, "--methods"),
+                        problems=_csv_list(args.problems, str, "--problems"),
+                        materials=_csv_list(args.materials, str, "--materials"),
+                        reference_resolution=args.reference_resolution, timeout=args.timeout,
+                        scheduler=scheduler, workers=args.workers, progress=not args.quiet, log=log)
+    print(res.markdown())
+    return 0
+
+
+def add_cli(sub) -> None:
+    """Register ``mdsr study``."""
+    p = sub.add_parser("study", help="run a solver comparison study (mdsr study --list)",
+                       description="Run a solver comparison study: a tidy CSV, metadata and charts in --out.")
+    p.add_argument("name", nargs="?", help="study name (see --list)")
+    p.add_argument("--list", action="store_true", help="list the studies and problems")
+    p.add_argument("--out", help="output folder")
+    p.add_argument("--resolutions", help="comma-separated node counts, replacing the study's")
+    p.add_argument("--methods", help="comma-separated backends / design methods, replacing the study's")
+    p.add_argument("--problems", help="comma-separated problems, replacing the study's")
+    p.add_argument("--materials", help="comma-separated material models, replacing the study's")
+    p.add_argument("--reference-resolution", type=int, help="node count of the reference solutions")
+    p.add_argument("--timeout", type=float, help="seconds allowed per run")
+    p.add_argument("--tol", help="fidelity study: comma-separated tolerances (default 0.01,0.001)")
+    p.add_argument("--dask", action="store_true", help="run on a local Dask cluster (one worker per core)")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler (implies Dask)")
+    p.add_argument("--workers", type=int, help="workers of the local Dask cluster")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(func=_cli)

@@ -1,0 +1,1 @@
+"""Infrastructure shared by every stage: argument checks, result formatting, progress, statistics."""

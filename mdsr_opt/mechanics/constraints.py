@@ -1,0 +1,397 @@
+"""Exact muscle constraints: rope path lengths and rigid anchor patches at the muscles' ends.
+
+A muscle is a rope along a chain of mesh nodes ``v0 ... vk``. Its path length in a state ``x`` is
+
+``L_c(x) = sum_i |x_{v_{i+1}} - x_{v_i}|``                       (convex in ``x``)
+
+and the exact cable model of :func:`~mdsr_opt.solve_internal` asks ``L_c(x) <= (1 - a_c) L0_c`` (a rope can
+only pull), with the constraint's multiplier as the rope's tension ``tau_c >= 0``.
+
+**Anchor patches.** A rope that ends on one node pulls the body with a point force, under which a planar
+elastic body has no finite displacement: the end segments collapse further with every refinement. Each end
+is therefore anchored over a patch of physical size, the way a knot, bead or plate spreads the force: the
+body nodes within ``radius`` of the end node at rest (and connected to it through such nodes) move rigidly
+with it. The radius defaults to :data:`ANCHOR_FRACTION` of the body's size (its diameter at rest,
+:func:`body_size`), :func:`default_anchor_radius`; it is never a number of nodes. A node equally far from both
+ends of one muscle, or nearer the other end, is left out of an end's patch, so the two patches of a muscle
+never overlap. Patches of *different* muscles that share a node are merged into one rigid group.
+
+**Rigidity without extra variables.** For a group with nodes ``e`` (its first end node), ``r`` (the group
+node farthest from ``e``) and the others ``j``, with rest offsets ``U = X_r - X_e``, ``D_j = X_j - X_e`` and
+current ``u = x_r - x_e``:
+
+``x_j - x_e - A(u) D_j = 0``  with  ``A(u) = [[c, -s], [s, c]]``, ``c = u.U/|U|^2``, ``s = (U x u)/|U|^2``
+``(|u|^2 - |U|^2) / (2 |U|) = 0``
+
+``A(u)`` is the rotation-and-scale taking ``U`` to ``u``; the last row fixes the scale. These are ``2k - 3``
+independent equations for a group of ``k`` nodes (a rigid motion in the plane has 3 degrees of freedom),
+all linear in ``x`` except the scale row, and they keep the orientation (no reflection). A group of one
+node has no equation, of two nodes one (their distance).
+
+Constraint rows are ordered ropes first (one per muscle), then the rigid rows. Coordinates are interleaved
+``x0, y0, x1, y1, ...`` as in :mod:`mdsr_opt.model`. :class:`mdsr_opt.constrained.ConstrainedModel` puts
+these constraints into an equilibrium NLP.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh, Muscle
+>>> from mdsr_opt.mechanics.constraints import MuscleConstraints
+>>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+>>> bottom = [i for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0]
+>>> mc = MuscleConstraints(mesh, [Muscle(bottom)], radius=0.3)
+>>> mc.rest_lengths, mc.n_rigid > 0
+(array([4.]), True)
+>>> float(np.abs(mc.rigid(mesh.points)).max())
+0.0
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..core.checks import positive_float
+from ..body.muscles import check_muscles
+
+__all__ = ["ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
+           "rigid_groups",
+           "MuscleConstraints", "spring_stiffness", "segment_spring_parameters",
+           "spring_segments"]
+
+#: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
+ANCHOR_FRACTION = 0.04
+
+
+def body_size(mesh) -> float:
+    """The body's diameter at rest: the largest distance between two of its nodes.
+
+    Unlike the bounding-box diagonal (``mesh.size``) it does not change when the body is rotated; for an
+    axis-aligned rectangle the two agree.
+    """
+    cache = mesh.__dict__
+    if "_diameter" not in cache:
+        P = mesh.points
+        try:
+            from scipy.spatial import ConvexHull
+
+            V = P[ConvexHull(P).vertices]
+        except Exception:  # degenerate hull (collinear points): every node
+            V = P
+        d = 0.0
+        for i0 in range(0, len(V), 1024):
+            d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))
+        cache["_diameter"] = d
+    return cache["_diameter"]
+
+
+def default_anchor_radius(mesh) -> float:
+    """The default anchor radius: :data:`ANCHOR_FRACTION` (0.04) times :func:`body_size`, in length units."""
+    return ANCHOR_FRACTION * body_size(mesh)
+
+
+def _check_radius(mesh, radius) -> float:
+    if radius is None:
+        return default_anchor_radius(mesh)
+    return positive_float(radius, "anchor_radius", allow_zero=True)
+
+
+def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
+    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes."""
+    P = mesh.points
+    inside = (np.linalg.norm(P - P[centre], axis=1) <= radius) & keep
+    inside[centre] = True
+    nbrs = mesh.neighbors
+    seen, stack, out = {centre}, [centre], []
+    while stack:
+        v = stack.pop()
+        out.append(v)
+        for w in nbrs[v].tolist():
+            if inside[w] and w not in seen:
+                seen.add(w)
+                stack.append(w)
+    rest = sorted(set(out) - {centre}, key=lambda i: (float(np.linalg.norm(P[i] - P[centre])), i))
+    return [centre] + rest
+
+
+def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per muscle the node sets of its two end anchors, ``(start_patch, end_patch)``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    muscles : sequence of Muscle or node lists
+    radius : float, optional
+        Anchor radius in length units (default :func:`default_anchor_radius`); 0 anchors each end on its node.
+
+    Returns
+    -------
+    list of (ndarray, ndarray)
+        Each patch lists the end node first, then the body nodes within ``radius`` of it at rest, connected
+        to it through such nodes and strictly nearer to it than to the muscle's other end (so a muscle's two
+        patches never overlap), by increasing distance.
+    """
+    mus = check_muscles(mesh, muscles)
+    r = _check_radius(mesh, radius)
+    P = mesh.points
+    out = []
+    for m in mus:
+        s, e = m.nodes[0], m.nodes[-1]
+        ds = np.linalg.norm(P - P[s], axis=1)
+        de = np.linalg.norm(P - P[e], axis=1)
+        out.append((np.array(_ball(mesh, s, r, ds < de), dtype=np.int64),
+                    np.array(_ball(mesh, e, r, de < ds), dtype=np.int64)))
+    return out
+
+
+def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]:
+    """Anchor patches merged where patches of different muscles share a node: each group moves rigidly.
+
+    Groups of one node are dropped (they constrain nothing). Raises ``ValueError`` when merging would join
+    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that.
+    """
+    mus = check_muscles(mesh, muscles)
+    patches = anchor_patches(mesh, mus, radius)
+    flat = [p for pair in patches for p in pair]
+    parent = list(range(len(flat)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    owner: dict[int, int] = {}
+    for k, p in enumerate(flat):
+        for v in p.tolist():
+            if v in owner:
+                a, b = find(owner[v]), find(k)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+            else:
+                owner[v] = k
+    for c in range(len(mus)):
+        if find(2 * c) == find(2 * c + 1):
+            raise ValueError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
+                             "it could not contract; give a smaller anchor_radius")
+    groups: dict[int, list[int]] = {}
+    for k, p in enumerate(flat):
+        g = groups.setdefault(find(k), [])
+        g.extend(v for v in p.tolist() if v not in g)
+    return [np.array(g, dtype=np.int64) for _, g in sorted(groups.items()) if len(g) >= 2]
+
+
+def spring_stiffness(mesh, material, stiffness: float) -> float:
+    """Axial stiffness ``K = stiffness * E * thickness * body_size(mesh)`` (a force) of the dummy-spring muscles.
+
+    A muscle segment of rest length ``l0`` is a spring of stiffness ``K / l0``, so the springs of a muscle
+    together are an elastic rod of axial stiffness ``K`` whatever the mesh (see
+    :func:`segment_spring_parameters`).
+    """
+    return positive_float(stiffness, "stiffness") * material.E * material.thickness * body_size(mesh)
+
+
+def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: float,
+                              anchor_radius: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-edge ``(k, r)`` of the dummy-spring model with stiffness stated per unit rest length.
+
+    Each segment of rest length ``l0`` adds ``k/2 (l - (1 - a') l0)^2`` with ``k = K / l0`` and
+    ``K = stiffness * E * thickness * body_size(mesh)`` (:func:`spring_stiffness`): the energy of a muscle is then
+    ``K/2 * sum_i l0_i (l_i/l0_i - (1 - a'))^2``, a quadrature of ``K/2 * integral (stretch - (1 - a'))^2 ds``
+    that converges under refinement instead of softening as segments multiply.
+
+    Segments inside a rigid anchor patch (both nodes in one group of :func:`rigid_groups` for
+    ``anchor_radius``) carry no spring: they cannot shorten. The other segments are all shortened alike by
+    ``a' = a L0 / L0_free`` (``L0_free``: their total rest length), so that a muscle whose springs all reach
+    their rest lengths has contracted by exactly ``a`` along its whole chain, as the exact cable does.
+    Pass ``anchor_radius=0`` for the paper's plain model (every segment, ``a' = a``). Feed the result to
+    :meth:`~mdsr_opt.model.EnergyModel.params` as ``springs=``.
+
+    Raises
+    ------
+    ValueError
+        When ``a' >= 1`` (the anchors cover too much of a muscle for the contraction asked).
+    """
+    from .model import spring_parameters
+
+    mus = check_muscles(mesh, muscles)
+    a = np.asarray(contractions, dtype=float).reshape(-1)
+    ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)
+    return spring_parameters(mesh, mus, a * a_eff, ks)
+
+
+def spring_segments(mesh, material, muscles, stiffness: float, anchor_radius: float | None = None):
+    """``(per-muscle segment stiffness arrays, per-muscle factor L0 / L0_free)`` of the dummy springs (see
+    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch."""
+    mus = check_muscles(mesh, muscles)
+    K = spring_stiffness(mesh, material, stiffness)
+    group_of = np.full(mesh.n_nodes, -1)
+    for gi, g in enumerate(rigid_groups(mesh, mus, anchor_radius)):
+        group_of[g] = gi
+    ks, fac = [], []
+    for m in mus:
+        seg = m.segments
+        l0 = m.segment_lengths(mesh.points)
+        inside = (group_of[seg[:, 0]] >= 0) & (group_of[seg[:, 0]] == group_of[seg[:, 1]])
+        if inside.all():
+            raise ValueError(f"muscle {m._label()} lies inside its anchor patches: give a smaller anchor_radius")
+        ks.append(np.where(inside, 0.0, K / l0))
+        fac.append(l0.sum() / l0[~inside].sum())
+    return ks, np.array(fac)
+
+
+class MuscleConstraints:
+    """Rope lengths and rigid anchor patches of a set of muscles on one mesh, as CasADi and numpy functions.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    muscles : sequence of Muscle or node lists
+    radius : float, optional
+        Anchor radius (default :func:`default_anchor_radius`; 0 for single-node ends).
+
+    Attributes
+    ----------
+    n_muscles, n_rigid, n_constraints : int
+        Rope rows, rigid rows and their sum (rows are ropes first, then rigid).
+    rest_lengths : (n_muscles,) ndarray
+        ``L0`` per muscle along its node chain.
+    groups : list of ndarray
+        The rigid groups (see :func:`rigid_groups`).
+    dofs : ndarray
+        Sorted global coordinates (of the 2n) that any constraint involves.
+    radius : float
+    """
+
+    def __init__(self, mesh, muscles, radius: float | None = None):
+        self.mesh = mesh
+        self.muscles = check_muscles(mesh, muscles)
+        if not self.muscles:
+            raise ValueError("MuscleConstraints needs at least one muscle")
+        self.radius = _check_radius(mesh, radius)
+        self.groups = rigid_groups(mesh, self.muscles, self.radius)
+        n = mesh.n_nodes
+        self.n_dof = 2 * n
+        P = mesh.points
+        self.rest_lengths = np.array([m.rest_length(mesh) for m in self.muscles])
+        nodes = sorted(set(v for m in self.muscles for v in m.nodes) | set(v for g in self.groups for v in g.tolist()))
+        self.dofs = np.array([d for v in nodes for d in (2 * v, 2 * v + 1)], dtype=np.int64)
+        loc = {v: k for k, v in enumerate(nodes)}
+        nd = len(self.dofs)
+        xl = ca.SX.sym("xl", nd)
+
+        def pt(v):
+            return xl[2 * loc[v]:2 * loc[v] + 2]
+
+        rows = []
+        for m in self.muscles:
+            L = 0
+            for a, b in m.segments.tolist():
+                L += ca.sqrt(ca.sumsqr(pt(b) - pt(a)))
+            rows.append(L)
+        rigid = []
+        for g in self.groups:
+            e = int(g[0])
+            dist = np.linalg.norm(P[g] - P[e], axis=1)
+            r = int(g[int(np.argmax(dist))])
+            U = P[r] - P[e]
+            UU = float(U @ U)
+            u = pt(r) - pt(e)
+            c = (u[0] * U[0] + u[1] * U[1]) / UU
+            s = (U[0] * u[1] - U[1] * u[0]) / UU
+            for j in g.tolist():
+                if j in (e, r):
+                    continue
+                D = P[j] - P[e]
+                rigid.append(pt(j)[0] - pt(e)[0] - (c * D[0] - s * D[1]))
+                rigid.append(pt(j)[1] - pt(e)[1] - (s * D[0] + c * D[1]))
+            rigid.append((ca.sumsqr(u) - UU) / (2 * np.sqrt(UU)))
+        self.n_muscles = len(rows)
+        self.n_rigid = len(rigid)
+        self.n_constraints = self.n_muscles + self.n_rigid
+        g_all = ca.vertcat(*rows, *rigid)
+        lam = ca.SX.sym("lam", self.n_constraints)
+        self._g = ca.Function("muscle_g", [xl], [g_all])
+        self._J = ca.Function("muscle_jac", [xl], [ca.jacobian(g_all, xl)])
+        H = ca.hessian(ca.dot(lam, g_all), xl)[0]
+        self._H = ca.Function("muscle_hess", [xl, lam], [ca.triu(H)])
+        # (nd, 2n) selection: x_local = S x
+        self._S = sp.csr_matrix((np.ones(nd), (np.arange(nd), self.dofs)), shape=(nd, self.n_dof))
+        self._S_dm = _to_dm(self._S)
+
+    # ------------------------------------------------------------------ symbolic (SX or MX, length 2n)
+    def _local(self, x):
+        return x[self.dofs.tolist()]
+
+    def constraints_expr(self, x):
+        """All constraint rows, ropes first then rigid, as a CasADi column."""
+        return self._g(self._local(x))
+
+    def lengths_expr(self, x):
+        """Rope path lengths ``L_c(x)`` (n_muscles,)."""
+        return self.constraints_expr(x)[:self.n_muscles]
+
+    def rigid_expr(self, x):
+        """Rigid-patch residuals (n_rigid,): all zero iff every group moved rigidly, keeping orientation."""
+        return self.constraints_expr(x)[self.n_muscles:]
+
+    def jacobian_expr(self, x):
+        """Sparse Jacobian (n_constraints, 2n) of :meth:`constraints_expr`."""
+        return ca.mtimes(self._J(self._local(x)), self._S_dm)
+
+    def hessian_expr(self, x, lam):
+        """Upper triangle (2n, 2n) of ``sum_i lam_i * Hessian(g_i)`` (sparse; only anchors and ropes)."""
+        Hl = self._H(self._local(x), lam)
+        return ca.mtimes(ca.mtimes(self._S_dm.T, Hl), self._S_dm)
+
+    # ------------------------------------------------------------------ numeric (x as (n, 2) or (2n,))
+    def _xl(self, x) -> np.ndarray:
+        return np.asarray(x, dtype=float).reshape(-1)[self.dofs]
+
+    def values(self, x) -> np.ndarray:
+        """All constraint rows at ``x``."""
+        return np.asarray(self._g(self._xl(x))).ravel()
+
+    def lengths(self, x) -> np.ndarray:
+        """Rope path lengths at ``x`` (n_muscles,)."""
+        return self.values(x)[:self.n_muscles]
+
+    def rigid(self, x) -> np.ndarray:
+        """Rigid-patch residuals at ``x`` (n_rigid,)."""
+        return self.values(x)[self.n_muscles:]
+
+    def jacobian(self, x) -> sp.csr_matrix:
+        """Jacobian (n_constraints, 2n) at ``x`` as a scipy CSR matrix (rows: ropes, then rigid)."""
+        Jl = _to_scipy(self._J(self._xl(x)))
+        return (Jl @ self._S).tocsr()
+
+    def hessian(self, x, lam) -> sp.csc_matrix:
+        """``sum_i lam_i * Hessian(g_i)`` at ``x``, full symmetric (2n, 2n) scipy CSC matrix."""
+        lam = np.asarray(lam, dtype=float).reshape(-1)
+        if len(lam) != self.n_constraints:
+            raise ValueError(f"lam must have {self.n_constraints} entries, got {len(lam)}")
+        U = _to_scipy(self._H(self._xl(x), lam))
+        Hl = U + sp.triu(U, 1).T
+        return (self._S.T @ Hl @ self._S).tocsc()
+
+
+def _to_dm(S) -> ca.DM:
+    S = sp.csc_matrix(S)
+    S.sort_indices()
+    spars = ca.Sparsity(S.shape[0], S.shape[1], S.indptr.astype(np.int64).tolist(),
+                        S.indices.astype(np.int64).tolist())
+    return ca.DM(spars, S.data.tolist())
+
+
+def _to_scipy(M) -> sp.csc_matrix:
+    M = ca.DM(M)
+    s = M.sparsity()
+    return sp.csc_matrix((np.asarray(M.nonzeros(), dtype=float), np.asarray(s.row()), np.asarray(s.colind())),
+                         shape=(M.size1(), M.size2()))
+
+
+def check_anchor_radius(mesh, radius) -> float:
+    """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors."""
+    return _check_radius(mesh, radius)
+

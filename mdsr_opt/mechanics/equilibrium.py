@@ -1,0 +1,323 @@
+"""External and internal driving: ``solve_external`` (anchors and drags) and ``solve_internal``
+(muscles contracted in a free body), built on :mod:`mdsr_opt.mechanics.loadsteps`."""
+
+from __future__ import annotations
+
+import time
+from typing import Mapping, Sequence
+import numpy as np
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle, check_contractions, check_muscles
+from ..core.checks import as_index_array, positive_float
+from .align import align
+from .backends import CONSTRAINED_BACKENDS, supports_constraints
+from .constrained import ConstrainedModel
+from .constraints import MuscleConstraints, check_anchor_radius, rigid_groups, spring_segments, spring_stiffness
+from .drags import drag_path
+from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result
+from .model import get_model, spring_parameters
+from .result import EquilibriumResult
+from .stability import check_stability
+
+__all__ = ['solve_external', 'external_stability', 'solve_internal']
+
+
+# ---------------------------------------------------------------------------------- external driving
+def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | None,
+                   drags: Mapping[int, Sequence[float]] | tuple | None, *, backend: str = "ipopt",
+                   tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
+                   min_step: float = 1.0 / 256, verbose: bool = False,
+                   initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
+    """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors : node indices held at their rest positions.
+    drags : ``{node: (x, y)}`` (straight moves), ``(indices, positions (k, 2))``, a
+        :class:`~mdsr_opt.drags.RigidDrag` (rotate nodes through an angle about a centre, optionally with a
+        shift; load stepping follows the arc), or a list of dicts and RigidDrags.
+    backend : one of :func:`available_backends`.
+    tol, max_iter : solver tolerance and iteration cap per load step.
+    options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
+    min_step : smallest load fraction tried before giving up, in (0, 1].
+    verbose : print each accepted load step.
+    initial_guess : ``"predictor"`` (default: every load step starts from a Newton predictor, at rest the
+        linear-elastic solution), ``"rest"`` (each step starts from the current state, the rest shape at
+        first, with only the fixed nodes moved) or an (n, 2) state to start the first step from (its fixed
+        nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
+        combine them with ``min_step=1`` to forbid load stepping.
+
+    Returns
+    -------
+    EquilibriumResult
+        Only a stable equilibrium is a success: the Hessian on the free coordinates must be positive definite
+        (``stable``, ``stability``; inertia of a sparse factorisation, :func:`~mdsr_opt.stability.check_stability`).
+        At a saddle (e.g. the straight state of a compressed strip) the solve steps along the direction of
+        negative curvature (2 % of the body size) and re-solves, up to 4 times; ``success=False`` with the
+        reason when no stable state is found.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        On Ctrl-C (SIGINT) during the solve, within about a solver iteration.
+    """
+    check_mesh_material(mesh, material)
+    tol = check_common(tol, max_iter, backend, min_step)
+    predict, x_start = initial_guess_of(initial_guess, mesh)
+    n = mesh.n_nodes
+    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
+                         "anchors", n=n, shape=(None,))
+    if len(np.unique(anc)) != len(anc):
+        raise ValueError("anchors name a node more than once")
+    path = drag_path(drags, mesh)
+    didx = path.nodes
+    both = np.intersect1d(anc, didx)
+    if len(both):
+        raise ValueError(f"node {int(both[0])} is both anchored and dragged")
+    nodes = np.concatenate([anc, didx])
+    if len(nodes) == 0:
+        raise ValueError("external driving needs fixed nodes: give anchors and/or drags")
+    if len(nodes) < 2:
+        raise ValueError("external driving needs at least two fixed nodes (anchors + drags) to remove rigid "
+                         "motion; got 1")
+    t0 = time.perf_counter()
+    model = get_model(mesh, material)
+    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
+    p = model.params(material)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[2 * nodes] = True
+    fixed[2 * nodes + 1] = True
+    order = np.argsort(np.concatenate([2 * nodes, 2 * nodes + 1]))
+    anchored = mesh.points[anc]
+
+    def values_of(s):  # fixed coordinates at load s, in the order of the mask (anchors, then drag paths)
+        at = np.vstack([anchored, path.positions(s)])
+        return np.concatenate([at[:, 0], at[:, 1]])[order]
+
+    x, status, ok, iters, steps, t_solve, t_build = load_continuation(
+        mesh, model, lambda s: p, fixed, values_of, x_start, backend, tol, max_iter, options, min_step, verbose,
+        predict)
+    return equilibrium_result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
+                   backend, "external")
+
+
+def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
+    """Is ``x`` a stable equilibrium of external driving with these anchors and drags?
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors, drags : as in :func:`solve_external` (only which nodes are fixed matters here).
+    x : (n, 2) state, e.g. a design target.
+    lowest : also estimate the lowest eigenvalue of the free Hessian (see
+        :func:`~mdsr_opt.stability.check_stability`).
+
+    Returns
+    -------
+    check : StabilityCheck
+        Of the energy's Hessian on the free coordinates at ``x``.
+    residual : float
+        Max-norm of the energy gradient on the free coordinates relative to ``E t size`` (small at an
+        equilibrium).
+    """
+    check_mesh_material(mesh, material)
+    n = mesh.n_nodes
+    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
+                         "anchors", n=n, shape=(None,))
+    nodes = np.union1d(anc, drag_path(drags, mesh).nodes)
+    xflat = mesh._check_state(x).reshape(-1)
+    model = get_model(mesh, material)
+    p = model.params(material)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[2 * nodes] = fixed[2 * nodes + 1] = True
+    g = model.gradient(xflat, p)
+    residual = float(np.abs(g[~fixed]).max()) / (material.E * material.thickness * mesh.size) \
+        if (~fixed).any() else 0.0
+    return check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest), residual
+
+
+# ---------------------------------------------------------------------------------- internal driving
+def gauge_coordinates(mesh) -> tuple[int, int, int]:
+    """Three gauge coordinates (node i x & y, node j one coordinate), chosen from geometry alone."""
+    P = mesh.points
+    c = P.mean(0)
+    d = np.linalg.norm(P - c, axis=1)
+    i = int(np.lexsort((P[:, 1], P[:, 0], d))[0])
+    dj = np.linalg.norm(P - P[i], axis=1)
+    j = int(np.lexsort((P[:, 1], P[:, 0], -dj))[0])
+    v = P[j] - P[i]
+    comp = 1 if abs(v[0]) >= abs(v[1]) else 0
+    return 2 * i, 2 * i + 1, 2 * j + comp
+
+
+def _muscle_constraints(mesh, muscles, radius) -> MuscleConstraints:
+    """The mesh's cached :class:`MuscleConstraints` for these muscles and anchor radius."""
+    cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
+    key = (tuple(m.nodes for m in muscles), float(radius))
+    if key not in cache:
+        if len(cache) >= 16:
+            cache.pop(next(iter(cache)))
+        cache[key] = MuscleConstraints(mesh, muscles, radius)
+    return cache[key]
+
+
+def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
+    cache = emodel.__dict__.setdefault("_constrained_cache", {})
+    key = (id(mc), bool(ropes))
+    if key not in cache or cache[key].constraints is not mc:
+        if len(cache) >= 16:
+            cache.pop(next(iter(cache)))
+        cache[key] = ConstrainedModel(emodel, mc, ropes)
+    return cache[key]
+
+
+def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "cable",
+                   stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
+                   tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
+                   min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
+                   initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
+    """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
+
+    Parameters
+    ----------
+    muscles : list of :class:`Muscle` (or node lists) along mesh edges.
+    contractions : one value in ``[0, 1)`` per muscle.
+    model : ``"cable"`` (default) or ``"springs"``.
+
+        - ``"cable"``: an inextensible rope sliding along the muscle's node chain, pulled in by a servo:
+          ``min E_e(x)`` subject to ``L_c(x) <= (1 - a_c) L0_c`` for every muscle, solved exactly by the NLP
+          (no penalty). The tension is the constraint's multiplier, never compressive; a rope that would have
+          to push goes slack (``slack=True``, achieved < commanded).
+        - ``"springs"``: the paper's dummy springs, one per segment, with the stiffness stated per unit rest
+          length so the model does not depend on the mesh: a segment of rest length ``l0`` is a spring
+          ``k/2 (l - (1 - a) l0)^2`` with ``k = K / l0`` and ``K = stiffness * E * thickness * D`` (``D`` the body's diameter)
+          (a rod of axial stiffness ``K``; see
+          :func:`~mdsr_opt.muscle_constraints.segment_spring_parameters`).
+    stiffness : ``kappa`` of the springs model (ignored by the cable).
+    anchor_radius : radius (length units) of the rigid patch that anchors each muscle end: the body nodes
+        within it at rest move rigidly with the end node. Default
+        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (0.04 x the body's diameter); 0 ends each muscle
+        on its node alone. Used with both models.
+    backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
+        of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
+    align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
+    initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external` (the
+        three gauge coordinates of a given state are set to their rest values).
+
+    Returns
+    -------
+    EquilibriumResult
+        With, per muscle, ``commanded``, ``achieved`` (``1 - L/L0`` along the node chain in the returned
+        state), ``stroke`` (``achieved * L0``, length units), ``tension`` and ``slack``. Load stepping moves
+        the rope targets ``(1 - s a) L0`` (or the springs' rest lengths) with the load fraction ``s``. Only a
+        stable state is a success: the Hessian of the Lagrangian must be positive definite on the tangent
+        space of the active constraints (taut ropes, anchor patches; ``stable``, ``stability``).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> bottom = Muscle([int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0])
+    >>> res = solve_internal(mesh, NeoHookean(1.0, 0.3), [bottom], [0.3])
+    >>> res.success, round(float(res.achieved[0]), 6), round(float(res.stroke[0]), 6), bool(res.tension[0] > 0)
+    (True, 0.3, 1.2, True)
+    """
+    check_mesh_material(mesh, material)
+    tol = check_common(tol, max_iter, backend)
+    if model not in ("springs", "cable"):
+        raise ValueError(f"model must be 'springs' or 'cable', got {model!r}")
+    stiffness = positive_float(stiffness, "stiffness")
+    radius = check_anchor_radius(mesh, anchor_radius)
+    mus = check_muscles(mesh, muscles)
+    if not mus:
+        raise ValueError("internal driving needs at least one muscle")
+    a = check_contractions(contractions, len(mus))
+    predict, x_start = initial_guess_of(initial_guess, mesh)
+    n = mesh.n_nodes
+    # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
+    k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
+    if np.any(a * a_fac >= 1.0):
+        c = int(np.argmax(a * a_fac))
+        raise ValueError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
+                         f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
+    constrained = model == "cable" or len(rigid_groups(mesh, mus, radius)) > 0
+    if constrained and not supports_constraints(backend):
+        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
+        raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
+                         f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
+                                                                 ", or anchor_radius=0"))
+    t0 = time.perf_counter()
+    mc = _muscle_constraints(mesh, mus, radius)
+    emodel = get_model(mesh, material)
+    cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
+    t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
+    L0 = mc.rest_lengths
+    K = spring_stiffness(mesh, material, stiffness)
+
+    def p_energy(s):
+        if model == "springs":
+            return emodel.params(material, springs=spring_parameters(mesh, mus, s * a * a_fac, k_seg))
+        return emodel.params(material)
+
+    def p_of(s):
+        return cm.params(p_energy(s), (1.0 - s * a) * L0) if cm is not None else p_energy(s)
+
+    p_el0 = emodel.params(material)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[list(gauge_coordinates(mesh))] = True
+    X = mesh.points.reshape(-1).copy()
+    vals = X[fixed]
+    solver_model = cm if cm is not None else emodel
+    x, status, ok, iters, steps, t_solve, t_build = load_continuation(
+        mesh, solver_model, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step,
+        verbose, predict)
+    p1 = p_of(1.0)
+    p_el = p_el0
+    taut = np.ones(len(mus), dtype=bool)
+    if cm is not None:
+        lam, taut_c = cm.multipliers(x, p1, fixed)
+        if model == "cable":
+            taut = taut_c
+        p1 = cm.params(cm.split(p1)[0], cm.split(p1)[1], lam)
+        p_el = cm.params(p_el0, cm.split(p1)[1])
+    res = equilibrium_result(mesh, solver_model, material, p1, p_el, x, fixed, status, ok, iters, steps,
+                  t_model + t_build, t_solve, backend, "internal")
+    res.muscle_model = model
+    res.anchor_radius = radius
+    res.rest_lengths = L0.copy()
+    res.commanded = a.copy()
+    L = mc.lengths(x)
+    res.achieved = 1.0 - L / L0
+    res.stroke = L0 - L
+    if model == "cable":
+        res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
+        # slack: the path is shorter than the rope (a rope at its length with no load is taut, not slack)
+        res.slack = res.achieved > a + 1e-7
+    else:
+        # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
+        # chain's length since the anchored segments keep their rest lengths
+        res.tension = K * a_fac * (a - res.achieved)
+        res.slack = res.tension <= 0.0
+    if cm is not None and res.success:
+        _check_feasible(res, cm, x, p1, mesh)
+    if align_to_rest:
+        al = align(res.x, mesh.points)
+        res.x = al.apply(res.x)
+        res.rotation, res.translation = al.R, al.t
+    return res
+
+
+def _check_feasible(res, cm, x, p, mesh, rtol: float = 1e-7) -> None:
+    """Reject a constrained solution whose ropes are longer than their targets or whose anchors deformed."""
+    v = cm.values(x)
+    _, targets, _ = cm.split(p)
+    nt = cm.n_targets
+    over = float(np.max((v[:nt] - targets) / cm.constraints.rest_lengths)) if nt else 0.0
+    rig = float(np.abs(v[nt:]).max()) / mesh.size if len(v) > nt else 0.0
+    if over > rtol or rig > rtol:
+        res.success = False
+        res.status = f"{res.status}; rejected: rope longer than its target by {over:.3g} L0, anchor patch " \
+                     f"deformed by {rig:.3g} x size"

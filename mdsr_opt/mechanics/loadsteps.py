@@ -1,0 +1,291 @@
+"""Load stepping shared by external and internal driving: input checks, the Newton predictor, adaptive
+load fractions, the stability check with saddle escape, and the checked result."""
+
+from __future__ import annotations
+
+import time
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from ..body.mesh import Mesh
+from ..core.checks import positive_float
+from .backends import check_backend, interruptible, minimize
+from .drags import RigidDrag, drag_path
+from .result import EquilibriumResult
+from .stability import check_stability
+
+
+# ---------------------------------------------------------------------------------- input checks
+def check_mesh_material(mesh, material):
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
+    if not hasattr(material, "psi_expr") or not hasattr(material, "params"):
+        raise TypeError(f"material must be a material such as NeoHookean, got {type(material).__name__}")
+
+
+def parse_drags(drags, n) -> tuple[np.ndarray, np.ndarray]:
+    """``(indices, final positions (k, 2))`` of ``drags``; ``n`` is the mesh (or its node count when no drag
+    is a :class:`~mdsr_opt.drags.RigidDrag`, whose final positions depend on the rest positions)."""
+    if isinstance(n, Mesh):
+        path = drag_path(drags, n)
+    else:
+        path = drag_path(drags, _NodeCount(int(n)))
+        if any(isinstance(how, RigidDrag) for _, how in path.parts):
+            raise ValueError("rigid drags need the mesh: use mdsr_opt.drags.drag_path(drags, mesh)")
+    return path.nodes, path.final
+
+
+class _NodeCount:
+    """Stands in for a mesh when only the node count is known (rest positions unused by straight drags)."""
+
+    def __init__(self, n):
+        self.n_nodes = n
+        self.points = np.zeros((n, 2))
+
+
+def check_common(tol, max_iter, backend, min_step=None):
+    tol = positive_float(tol, "tol")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    check_backend(backend)
+    if min_step is not None:
+        _check_min_step(min_step)
+    return tol
+
+
+def _check_min_step(min_step) -> float:
+    """``min_step`` must be a number in (0, 1]: 0, NaN or a negative value would let load stepping halve
+    its step forever."""
+    if isinstance(min_step, bool) or not isinstance(min_step, (int, float, np.integer, np.floating)):
+        raise TypeError(f"min_step must be a number in (0, 1], got {type(min_step).__name__}")
+    if not (np.isfinite(min_step) and 0.0 < min_step <= 1.0):
+        raise ValueError(f"min_step must be in (0, 1] (the smallest load fraction tried), got {min_step!r}")
+    return float(min_step)
+
+
+def initial_guess_of(initial_guess, mesh) -> tuple[bool, np.ndarray]:
+    """``(predict, x_start)`` for ``initial_guess`` = ``"predictor"``, ``"rest"`` or an (n, 2) state."""
+    X = mesh.points.reshape(-1).copy()
+    if isinstance(initial_guess, str):
+        if initial_guess not in ("predictor", "rest"):
+            raise ValueError("initial_guess must be 'predictor', 'rest' or an (n, 2) array, "
+                             f"got {initial_guess!r}")
+        return initial_guess == "predictor", X
+    x0 = mesh._check_state(initial_guess)
+    if _min_J(mesh, x0.reshape(-1)) <= 0.0:
+        raise ValueError("initial_guess inverts an element (det F <= 0)")
+    return False, np.array(x0, dtype=float).reshape(-1)
+
+
+# ---------------------------------------------------------------------------------- core loop
+def _factor(model, p, x, fixed):
+    """Hessian blocks at ``x`` and an LU of the free block; cached for the rest state, whose factors every
+    repeated solve of a scene with new drags (same fixed nodes, same parameters) shares."""
+    at_rest = np.array_equal(x, model.mesh.points.reshape(-1))
+    key = (fixed.tobytes(), np.asarray(p, dtype=float).tobytes()) if at_rest else None
+    cache = model.__dict__.setdefault("_rest_factors", {})
+    if key is not None and key in cache:
+        return cache[key]
+    free = ~fixed
+    H = model.hessian(x, p)
+    Hff = H[free][:, free].tocsc()
+    # symmetric mode with a minimum-degree ordering: about twice as fast as spsolve's default here
+    lu = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    out = (H[free][:, fixed].tocsr(), lu)
+    if key is not None:
+        if len(cache) >= 8:
+            cache.pop(next(iter(cache)))
+        cache[key] = out
+    return out
+
+
+def _predict(model, p, x, fixed, values):
+    """Newton step from ``x`` with the fixed coordinates moved to ``values``: the linear-elastic solution at rest."""
+    if hasattr(model, "predict"):  # a constrained model linearises its constraints too (a KKT step)
+        return model.predict(p, x, fixed, values)
+    free = ~fixed
+    try:
+        Hfc, lu = _factor(model, p, x, fixed)
+    except RuntimeError:  # singular: e.g. a free island of nodes
+        return None
+    g = model.gradient(x, p)
+    dz = lu.solve(-(g[free] + Hfc @ (values - x[fixed])))
+    if not np.all(np.isfinite(dz)):
+        return None
+    y = x.copy()
+    y[free] += dz
+    y[fixed] = values
+    return y
+
+
+def _min_J(mesh, xflat):
+    return float(mesh.jacobians(xflat.reshape(-1, 2)).min())
+
+
+def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
+                  verbose, predict=True):
+    """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
+
+    With ``predict=False`` each load step starts from the current state with the fixed coordinates moved
+    (no Newton predictor): the "poor first guess" of the comparison studies. At full load the state must be
+    stable (:func:`_settle`): a saddle is left along its negative curvature, or the solve fails. A SIGINT
+    raises :class:`KeyboardInterrupt` (never a failed step)."""
+    min_step = _check_min_step(min_step)
+    with interruptible():
+        x = x_start.copy()
+        s, ds = 0.0, 1.0
+        steps, iters, t_solve, t_build = [], 0, 0.0, 0.0
+        status = "not started"
+        while s < 1.0 - 1e-12:
+            if ds < min_step:
+                return (x, f"load stepping stalled at fraction {s:.4g} ({status})", False, iters, steps, t_solve,
+                        t_build)
+            s_new = min(1.0, s + ds)
+            p = p_of(s_new)
+            vals = values_of(s_new)
+            t0 = time.perf_counter()
+            if predict:
+                guess = _predict(model, p, x, fixed, vals)
+            else:
+                guess = x.copy()
+                guess[fixed] = vals
+            t_solve += time.perf_counter() - t0
+            if guess is None or _min_J(mesh, guess) <= 0.0:
+                status = "predictor inverted an element" if predict else "first guess inverts an element"
+                ds /= 2
+                continue
+            out = minimize(model, p, guess, fixed, vals, backend=backend, tol=tol, max_iter=max_iter,
+                           options=options)
+            iters += out.iterations
+            t_solve += out.solve_time
+            t_build += out.build_time
+            status = out.status
+            if out.success and np.all(np.isfinite(out.x)) and _min_J(mesh, out.x) > 0.0:
+                x, s = out.x, s_new
+                steps.append(s)
+                if verbose:
+                    print(f"  load {s:.4f}: {out.status}, {out.iterations} iterations")
+                ds = min(2 * ds, 1.0 - s) if s < 1.0 else ds
+            else:
+                ds /= 2
+        x, note, ok, it, t = _settle(mesh, model, p_of(1.0), fixed, values_of(1.0), x, backend, tol, max_iter,
+                                     options, verbose)
+    return x, status + note, ok, iters + it, steps, t_solve + t, t_build
+
+
+#: saddle escape: re-solves from perturbed states, and the perturbation's largest node move / body size
+_RESTARTS = 4
+
+
+_KICK = 0.02
+
+
+def _stability_at(model, p, xflat, fixed):
+    """:class:`~mdsr_opt.stability.StabilityCheck` of the equilibrium ``xflat`` with ``fixed`` coordinates.
+
+    For a model with muscle constraints, the Hessian of the Lagrangian (least-squares multipliers) on the
+    tangent space of the active rows (rigid patches, taut ropes). The last check is cached on the model, so
+    the solve and its result share one factorisation."""
+    pk = np.concatenate(model.split(p)[:2]) if hasattr(model, "split") else p  # multipliers are refitted
+    key = (np.asarray(xflat, dtype=float).tobytes(), np.asarray(pk, dtype=float).tobytes(), fixed.tobytes())
+    cached = model.__dict__.get("_last_stability")
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    A = None
+    if hasattr(model, "multipliers"):  # a ConstrainedModel
+        lam, taut = model.multipliers(xflat, p, fixed)
+        pe, targets, _ = model.split(p)
+        H = model.hessian(xflat, model.params(pe, targets if model.n_targets else None, lam))
+        active = np.ones(model.n_rows, dtype=bool)
+        active[:model.n_targets] = taut
+        if active.any():
+            A = model.jacobian(xflat)[active]
+    else:
+        H = model.hessian(xflat, p)
+    chk = check_stability(H, ~fixed, A)
+    model.__dict__["_last_stability"] = (key, chk)
+    return chk
+
+
+def _kick(mesh, model, p, x, direction, scale=1.0):
+    """``x`` moved along ``+-direction`` by ``_KICK`` x the body size at the largest node move (smaller if an
+    element would invert), on the side of lower energy; None when no such state keeps every element upright."""
+    d = direction.reshape(-1, 2)
+    amp = scale * _KICK * mesh.size / max(float(np.linalg.norm(d, axis=1).max()), 1e-300)
+    best = None
+    for sign in (1.0, -1.0):
+        a = amp
+        for _ in range(8):
+            y = x + sign * a * direction
+            if _min_J(mesh, y) > 0.0:
+                e = model.energy(y, p)
+                if np.isfinite(e) and (best is None or e < best[0]):
+                    best = (e, y)
+                break
+            a /= 2
+    return None if best is None else best[1]
+
+
+def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, verbose):
+    """Only a stable equilibrium is a success: at a saddle, step along its negative curvature and re-solve.
+
+    Returns ``(x, status note, success, iterations, seconds)``."""
+    t0 = time.perf_counter()
+    chk = _stability_at(model, p, x, fixed)
+    iters, tries, scale = 0, 0, 1.0
+    while not chk.stable and tries < _RESTARTS and chk.direction is not None:
+        tries += 1
+        y = _kick(mesh, model, p, x, chk.direction, scale)
+        if y is None:
+            break
+        out = minimize(model, p, y, fixed, values, backend=backend, tol=tol, max_iter=max_iter, options=options)
+        iters += out.iterations
+        if not (out.success and np.all(np.isfinite(out.x)) and _min_J(mesh, out.x) > 0.0):
+            scale /= 2  # keep x and try a smaller kick
+            continue
+        if verbose:
+            print(f"  left a saddle (curvature {chk.curvature:.3g}): {out.status}, {out.iterations} iterations")
+        x = out.x
+        chk = _stability_at(model, p, x, fixed)
+    t = time.perf_counter() - t0
+    if chk.stable:
+        note = f"; left a saddle along its negative curvature ({tries} re-solve(s))" if tries else ""
+        return x, note, True, iters, t
+    what = (f"a saddle: {chk.n_negative} direction(s) of negative curvature (lowest {chk.curvature:.3g})"
+            if chk.n_negative else f"{chk.n_zero} zero-curvature direction(s)")
+    return (x, f"; rejected: not a stable equilibrium ({what}); {tries} re-solve(s) from perturbed states "
+               f"found no stable state", False, iters, t)
+
+
+def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
+            backend, mode, tol_residual=1e-5):
+    if hasattr(model, "grad_fn"):  # an EnergyModel: energy and gradient from one call
+        f, g = model.grad_fn(xflat, p)
+        energy, g = float(f), np.asarray(g).ravel()
+    else:
+        g, energy = model.gradient(xflat, p), model.energy(xflat, p)
+    scale = material.E * material.thickness * mesh.size
+    residual = float(np.abs(g[~fixed]).max()) / scale if (~fixed).any() else 0.0
+    mj = _min_J(mesh, xflat)
+    ok = bool(success and mj > 0 and residual <= tol_residual)
+    if success and not ok:
+        status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
+    chk = None
+    if ok or "not a stable equilibrium" in status:  # the continuation's check (cached), or a fresh one
+        chk = _stability_at(model, p, xflat, fixed)
+        if ok and not chk.stable:
+            ok = False
+            status = f"{status}; rejected: not a stable equilibrium ({chk.n_negative} negative, {chk.n_zero} " \
+                     "zero curvature directions)"
+    if ok and mesh.boundary_crosses(xflat.reshape(-1, 2)):
+        # every element upright, yet the body folds through itself: contact is not modelled
+        ok = False
+        status = f"{status}; rejected: the boundary crosses itself (self-contact is not modelled)"
+    same = p_elastic is p or np.array_equal(np.asarray(p_elastic), np.asarray(p))
+    return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=energy,
+                             elastic_energy=energy if same else model.energy(xflat, p_elastic), success=ok,
+                             status=status,
+                             iterations=iters, residual=residual, min_J=mj, steps=steps,
+                             build_time=t_build, solve_time=t_solve, backend=backend, mode=mode,
+                             stable=None if chk is None else chk.stable,
+                             stability=None if chk is None else chk.summary())

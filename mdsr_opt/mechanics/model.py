@@ -1,0 +1,392 @@
+"""Symbolic energies of a mesh, built once per topology and reused for every scene.
+
+The total energy is
+
+``E(x; p) = sum_e t A_e Psi(F_e(x)) + sum_edges k_ij/2 (|x_j - x_i| - r_ij l0_ij)^2 + sum_cables K_c/2 (L_c(x) - R_c)^2``
+
+with all node coordinates ``x`` (2n, interleaved ``x0, y0, x1, y1, ...``) as variables. Scenes differ
+only in numbers: fixed nodes become equal bounds (IPOPT turns them into parameters), per-edge spring
+stiffness ``k`` and rest-length factor ``r`` are parameters (zero stiffness where no muscle runs), and
+sliding cables carry their stiffness and target length as parameters.
+
+Derivatives: each term is one small SX function of a few nodes (a triangle, an edge, a cable) whose
+gradient and Hessian CasADi differentiates symbolically; ``Function.map`` evaluates them over all terms
+and constant sparse matrices scatter them into the global gradient and the upper triangle of the global
+Hessian. Building is linear in the mesh size and needs no symbolic differentiation of the global graph.
+
+Example
+-------
+>>> from mdsr_opt import Mesh, NeoHookean
+>>> from mdsr_opt.mechanics.model import get_model
+>>> mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+>>> model = get_model(mesh, NeoHookean(1.0, 0.3))
+>>> float(model.energy(mesh.points, model.params(NeoHookean(1.0, 0.3))))
+0.0
+"""
+
+from __future__ import annotations
+
+import numbers
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters"]
+
+
+def to_dm(S: sp.spmatrix) -> ca.DM:
+    S = sp.csc_matrix(S)
+    S.sort_indices()
+    spars = ca.Sparsity(S.shape[0], S.shape[1], S.indptr.astype(np.int64).tolist(),
+                        S.indices.astype(np.int64).tolist())
+    return ca.DM(spars, S.data.tolist())
+
+
+@dataclass
+class _Term:
+    """One family of energy terms: an SX function of ``d`` local dofs, mapped over ``N`` instances."""
+
+    name: str
+    dofs: np.ndarray  # (N, d) global dof indices
+    data: np.ndarray  # (N, nd) per-instance constants or per-instance parameters (see param_slice)
+    W: ca.Function  # (xloc, data, glob) -> scalar
+    WG: ca.Function  # -> (scalar, grad d)
+    H: ca.Function  # -> vec(hess) d*d
+
+
+def _make_term(name, d, data_sizes, ng, energy_of):
+    """SX functions ``(xl, *data, glob) -> W``, ``-> (W, grad)``, ``-> vec(Hessian)`` of one term.
+
+    Each per-instance datum is its own input (a row per datum when mapped), so the mapped call takes
+    rows of constants or slices of ``p`` without concatenating them in MX.
+    """
+    xl = ca.SX.sym("xl", d)
+    dl = [ca.SX.sym(f"d{i}", k) for i, k in enumerate(data_sizes)]
+    gl = ca.SX.sym("gl", ng)
+    w = energy_of(xl, dl, gl)
+    g = ca.gradient(w, xl)
+    h = ca.hessian(w, xl)[0]
+    args = [xl, *dl, gl]
+    return (ca.Function(f"{name}_W", args, [w]),
+            ca.Function(f"{name}_WG", args, [w, g]),
+            ca.Function(f"{name}_H", args, [ca.vec(ca.densify(h))]))
+
+
+def _element_energy(psi_expr):
+    def energy(xe, dl, mat):
+        dmi, area = dl
+        Ds = ca.horzcat(xe[2:4] - xe[0:2], xe[4:6] - xe[0:2])
+        F = ca.mtimes(Ds, ca.reshape(dmi, 2, 2))
+        return area * psi_expr(F, mat)
+    return energy
+
+
+def _spring_energy(xs, dl, _g):
+    l0, k, r = dl
+    l = ca.sqrt(ca.sumsqr(xs[2:4] - xs[0:2]))
+    return k / 2 * (l - r * l0) ** 2
+
+
+@dataclass(frozen=True)
+class TermFamily:
+    """One family of energy terms, described by numbers (see :meth:`EnergyModel.term_families`).
+
+    Attributes
+    ----------
+    name : str
+    dofs : (N, d) int ndarray
+        Global dof indices of each of the ``N`` instances.
+    W : casadi.Function
+        SX function ``(xl (d), *data, glob) -> w`` of one term.
+    data : tuple
+        Per datum input of ``W``: its ``(nd, N)`` constants, or None where it is read from ``p``.
+    data_index : tuple
+        Per datum input: ``(nd, N)`` indices into ``p``, or None where it is constant.
+    glob_index : (ng,) int ndarray
+        Indices into ``p`` of the input shared by all instances.
+    """
+
+    name: str
+    dofs: np.ndarray
+    W: ca.Function
+    data: tuple
+    data_index: tuple
+    glob_index: np.ndarray
+
+    def inputs(self, p, rows=None) -> list:
+        """The data and shared inputs of the mapped ``W`` over instances ``rows`` (all when None), for a
+        parameter vector ``p`` (a CasADi column: DM, SX or MX)."""
+        N = self.dofs.shape[0]
+        rows = np.arange(N) if rows is None else np.asarray(rows, dtype=np.int64)
+        out = []
+        for const, idx in zip(self.data, self.data_index):
+            if const is not None:
+                out.append(ca.DM(np.asarray(const)[:, rows]))
+            else:
+                sel = np.asarray(idx)[:, rows]
+                out.append(ca.reshape(p[sel.ravel(order="F").tolist()], sel.shape[0], sel.shape[1]))
+        out.append(p[self.glob_index.tolist()] if len(self.glob_index) else type(p)(0, 1))
+        return out
+
+
+class EnergyModel:
+    """Energy, gradient and Hessian of one mesh topology as CasADi Functions.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    material : NeoHookean | LinearElastic
+        Only its kind (``psi_expr``) is baked in; its numbers are parameters.
+    cables : sequence of node paths, optional
+        Sliding cables (one spring on each whole path). Empty for the per-segment spring model, which
+        needs no rebuild when muscles change.
+    expand : bool
+        Expand the mapped MX graphs to SX (faster evaluation, slower build).
+
+    Parameter vector ``p`` = ``[material params (2), k (n_edges), r (n_edges), K (n_cables),
+    R (n_cables)]``; see :meth:`params`.
+    """
+
+    def __init__(self, mesh, material, cables=(), expand: bool = False):
+        t0 = time.perf_counter()
+        self.mesh = mesh
+        self.material_kind = material.kind
+        self.cables = tuple(tuple(int(v) for v in c) for c in cables)
+        n, m = mesh.n_nodes, mesh.n_triangles
+        E = mesh.edges
+        self.n_dof = 2 * n
+        self.n_edges = len(E)
+        nc = len(self.cables)
+        self.n_params = 2 + 2 * self.n_edges + 2 * nc
+        self.x = ca.MX.sym("x", 2 * n)
+        self.p = ca.MX.sym("p", self.n_params)
+        mat = self.p[0:2]
+        k_e = self.p[2:2 + self.n_edges]
+        r_e = self.p[2 + self.n_edges:2 + 2 * self.n_edges]
+        K_c = self.p[2 + 2 * self.n_edges:2 + 2 * self.n_edges + nc]
+        R_c = self.p[2 + 2 * self.n_edges + nc:]
+
+        tri = mesh.triangles
+        elem_dofs = np.stack([2 * tri, 2 * tri + 1], axis=2).reshape(m, 6)
+        elem_data = np.column_stack([np.transpose(mesh.Dm_inv, (0, 2, 1)).reshape(m, 4), mesh.areas])
+        edge_dofs = np.stack([2 * E, 2 * E + 1], axis=2).reshape(len(E), 4)
+        self.elem_dofs = elem_dofs
+        self.edge_dofs = edge_dofs
+
+        # family: (dofs, W/WG/H functions, list of data rows (each nd_i x N), global params)
+        fam = []
+        eW, eWG, eH = _make_term("elem", 6, [4, 1], 2, _element_energy(material.psi_expr))
+        self.element_functions = (eW, eWG, eH)
+        self._elem_data = [elem_data[:, :4].T.copy(), elem_data[:, 4:].T.copy()]
+        fam.append((elem_dofs, eW, eWG, eH, [ca.DM(v) for v in self._elem_data], mat))
+        sW, sWG, sH = _make_term("spring", 4, [1, 1, 1], 0, _spring_energy)
+        self.spring_functions = (sW, sWG, sH)
+        fam.append((edge_dofs, sW, sWG, sH, [ca.DM(mesh.edge_lengths).T, k_e.T, r_e.T], ca.MX(0, 1)))
+        for c, path in enumerate(self.cables):
+            v = np.asarray(path)
+            d = 2 * len(v)
+
+            def cable_energy(xl, dl, _g, k=len(v)):
+                K, R = dl
+                L = 0
+                for i in range(k - 1):
+                    L += ca.sqrt(ca.sumsqr(xl[2 * i + 2:2 * i + 4] - xl[2 * i:2 * i + 2]))
+                return K / 2 * (L - R) ** 2
+
+            cW, cWG, cH = _make_term(f"cable{c}", d, [1, 1], 0, cable_energy)
+            dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, d)
+            fam.append((dofs, cW, cWG, cH, [K_c[c], R_c[c]], ca.MX(0, 1)))
+
+        # the cables' term functions, for :meth:`term_families`
+        self.cable_functions = tuple(f[1:4] for f in fam[2:])
+
+        # global Hessian sparsity (upper triangle) from all families
+        rows, cols, srcs = [], [], []
+        for fi, (dofs, *_r) in enumerate(fam):
+            N, d = dofs.shape
+            rr = np.broadcast_to(dofs[:, None, :], (N, d, d)).reshape(-1)  # vec(H) col-major: entry (i, j)
+            cc = np.broadcast_to(dofs[:, :, None], (N, d, d)).reshape(-1)  # at j*d + i -> row dofs[i]
+            keep = rr <= cc
+            rows.append(rr[keep])
+            cols.append(cc[keep])
+            srcs.append(np.nonzero(keep)[0])
+        allr, allc = np.concatenate(rows), np.concatenate(cols)
+        pattern = sp.csc_matrix((np.ones(len(allr)), (allr, allc)), shape=(2 * n, 2 * n))
+        pattern.sum_duplicates()
+        pattern.sort_indices()
+        nnz = pattern.nnz
+        self.hess_sparsity = ca.Sparsity(2 * n, 2 * n, pattern.indptr.tolist(), pattern.indices.tolist())
+        # CSC position lookup: key = col * 2n + row
+        col_of_nz = np.repeat(np.arange(2 * n), np.diff(pattern.indptr))
+        keys = col_of_nz.astype(np.int64) * (2 * n) + pattern.indices
+        order = np.argsort(keys)
+
+        W_tot, G_tot, H_tot = 0, 0, 0
+        W_only = 0
+        for fi, (dofs, W, WG, H, data, glob) in enumerate(fam):
+            N, d = dofs.shape
+            X = ca.reshape(self.x[dofs.reshape(-1).tolist()], d, N)
+            Wm, WGm, Hm = (f.map(N, "serial") for f in (W, WG, H))
+            W_only += ca.sum2(Wm(X, *data, glob))
+            w, g = WGm(X, *data, glob)
+            W_tot += ca.sum2(w)
+            Sg = sp.csr_matrix((np.ones(N * d), (dofs.reshape(-1), np.arange(N * d))), shape=(2 * n, N * d))
+            G_tot += ca.mtimes(to_dm(Sg), ca.vec(g))
+            k = np.searchsorted(keys[order], cols[fi].astype(np.int64) * (2 * n) + rows[fi])
+            nzpos = order[k]
+            Sh = sp.csr_matrix((np.ones(len(nzpos)), (nzpos, srcs[fi])), shape=(nnz, N * d * d))
+            H_tot += ca.mtimes(to_dm(Sh), ca.vec(Hm(X, *data, glob)))
+        Hmx = ca.MX(self.hess_sparsity, H_tot)
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", 0)
+        self.f_fn = ca.Function("energy", [self.x, self.p], [W_only], ["x", "p"], ["f"])
+        self.grad_fn = ca.Function("grad_f", [self.x, self.p], [W_tot, G_tot], ["x", "p"], ["f", "grad"])
+        self.hess_fn = ca.Function("energy_hess", [self.x, self.p], [Hmx], ["x", "p"], ["H"])
+        self.hess_lag_fn = ca.Function("hess_lag", [self.x, self.p, lam_f, lam_g], [lam_f * Hmx],
+                                       ["x", "p", "lam_f", "lam_g"], ["hess"])
+        # full symmetric version for solvers that require it (sqpmethod)
+        Hfull = Hmx + ca.triu(Hmx, False).T
+        self.hess_lag_full_fn = ca.Function("hess_lag_full", [self.x, self.p, lam_f, lam_g], [lam_f * Hfull],
+                                            ["x", "p", "lam_f", "lam_g"], ["hess"])
+        if expand:
+            self.hess_lag_full_fn = self.hess_lag_full_fn.expand()
+            self.f_fn = self.f_fn.expand()
+            self.grad_fn = self.grad_fn.expand()
+            self.hess_fn = self.hess_fn.expand()
+            self.hess_lag_fn = self.hess_lag_fn.expand()
+        self._solvers: dict = {}
+        self.build_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ parameters
+    def params(self, material, springs: tuple[np.ndarray, np.ndarray] | None = None,
+               cables: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """Assemble ``p`` from a material, optional per-edge ``(k, r)`` and per-cable ``(K, R)``."""
+        if material.kind != self.material_kind:
+            raise ValueError(f"this model was built for a {self.material_kind} material, got {material.kind}")
+        p = np.zeros(self.n_params)
+        p[0:2] = material.params
+        ne, nc = self.n_edges, len(self.cables)
+        p[2 + ne:2 + 2 * ne] = 1.0
+        if springs is not None:
+            p[2:2 + ne] = springs[0]
+            p[2 + ne:2 + 2 * ne] = springs[1]
+        if nc:
+            if cables is None:
+                raise ValueError("this model has cables: pass their (K, R)")
+            p[2 + 2 * ne:2 + 2 * ne + nc] = cables[0]
+            p[2 + 2 * ne + nc:] = cables[1]
+        return p
+
+    # ------------------------------------------------------------------ numeric evaluation
+    def energy(self, x, p) -> float:
+        return float(self.f_fn(np.asarray(x, float).reshape(-1), p))
+
+    def gradient(self, x, p) -> np.ndarray:
+        return np.asarray(self.grad_fn(np.asarray(x, float).reshape(-1), p)[1]).ravel()
+
+    def hessian(self, x, p) -> sp.csc_matrix:
+        """The full symmetric Hessian as a scipy CSC matrix."""
+        v = np.asarray(self.hess_fn(np.asarray(x, float).reshape(-1), p).nonzeros())
+        if not hasattr(self, "_full_pattern"):
+            self._full_pattern = _symmetric_pattern(self.hess_sparsity)
+        indptr, indices, src = self._full_pattern
+        return sp.csc_matrix((v[src], indices, indptr), shape=(self.n_dof, self.n_dof))
+
+    def newton_families(self) -> dict:
+        """Per-family ``(dofs, (W, WG, H), data_of(p))`` for element-wise numeric methods."""
+        if self.cables:
+            raise ValueError("the element-wise Newton baseline does not support sliding cables")
+        ne = self.n_edges
+        return {
+            "elem": (self.elem_dofs, self.element_functions, lambda p: self._elem_data),
+            "spring": (self.edge_dofs, self.spring_functions,
+                       lambda p: [self.mesh.edge_lengths[None, :], p[None, 2:2 + ne], p[None, 2 + ne:2 + 2 * ne]]),
+        }
+
+    def term_families(self) -> list["TermFamily"]:
+        """The energy's term families (elements, edge springs, each cable) as :class:`TermFamily` records.
+
+        Each record gives the instances' dofs, the per-term SX energy function and where its inputs come
+        from (constants, or entries of ``p``), so that other derived quantities (third derivatives,
+        derivatives with respect to parameters) can be assembled term by term like the model's own
+        gradient and Hessian.
+        """
+        ne, nc = self.n_edges, len(self.cables)
+        e = np.arange(ne)
+        out = [TermFamily("elem", self.elem_dofs, self.element_functions[0], tuple(self._elem_data),
+                          (None, None), np.array([0, 1])),
+               TermFamily("spring", self.edge_dofs, self.spring_functions[0],
+                          (self.mesh.edge_lengths[None, :].copy(), None, None),
+                          (None, (2 + e)[None, :], (2 + ne + e)[None, :]), np.zeros(0, dtype=np.int64))]
+        for c, path in enumerate(self.cables):
+            v = np.asarray(path)
+            dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, 2 * len(v))
+            out.append(TermFamily(f"cable{c}", dofs, self.cable_functions[c][0], (None, None),
+                                  (np.array([[2 + 2 * ne + c]]), np.array([[2 + 2 * ne + nc + c]])),
+                                  np.zeros(0, dtype=np.int64)))
+        return out
+
+    def solver(self, backend: str, options: dict, factory):
+        """``(solver, seconds spent building it now)``: built by ``factory(self)`` on first use, then cached
+        (later calls report 0 s, so timings count each build once)."""
+        key = (backend, repr(sorted(options.items())))
+        if key in self._solvers:
+            return self._solvers[key], 0.0
+        t0 = time.perf_counter()
+        s = factory(self)
+        self._solvers[key] = s
+        return s, time.perf_counter() - t0
+
+
+def _symmetric_pattern(upper: ca.Sparsity):
+    """CSC pattern of the full symmetric matrix and, per entry, the index of its upper-triangle value."""
+    colind = np.asarray(upper.colind())
+    row = np.asarray(upper.row())
+    col = np.repeat(np.arange(upper.size2()), np.diff(colind))
+    nz = np.arange(len(row))
+    off = row != col
+    R = np.concatenate([row, col[off]])
+    C = np.concatenate([col, row[off]])
+    S = np.concatenate([nz, nz[off]])
+    order = np.lexsort((R, C))
+    counts = np.bincount(C, minlength=upper.size2())
+    indptr = np.concatenate([[0], np.cumsum(counts)])
+    return indptr, R[order], S[order]
+
+
+def get_model(mesh, material, cables=(), expand: bool = False) -> EnergyModel:
+    """The cached :class:`EnergyModel` of ``mesh`` for the material's kind (and cables, if any)."""
+    cache = mesh.__dict__.setdefault("_model_cache", {})
+    key = (material.kind, tuple(tuple(int(v) for v in c) for c in cables), bool(expand))
+    if key not in cache:
+        cache[key] = EnergyModel(mesh, material, cables, expand=expand)
+    return cache[key]
+
+
+def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarray, np.ndarray]:
+    """Per-edge ``(k, r)`` of the per-segment ("dummy spring") muscle model.
+
+    Each muscle segment on edge ``e`` adds ``k_s/2 (l_e - (1 - a_c) l0_e)^2``; muscles sharing an edge
+    combine exactly into one spring with summed stiffness and stiffness-weighted mean factor.
+    ``stiffness`` is one absolute ``k_s`` for every segment, or a sequence with one array of per-segment
+    stiffnesses per muscle (see :func:`mdsr_opt.muscle_constraints.segment_spring_parameters`, which states
+    the stiffness per unit rest length so the model does not depend on the mesh).
+    """
+    k = np.zeros(len(mesh.edges))
+    kr = np.zeros(len(mesh.edges))
+    idx = mesh.edge_index
+    scalar = isinstance(stiffness, numbers.Real) or (isinstance(stiffness, np.ndarray) and stiffness.ndim == 0)
+    for c, (mus, a) in enumerate(zip(muscles, contractions)):
+        ks = np.full(len(mus.segments), float(stiffness)) if scalar else np.asarray(stiffness[c], dtype=float)
+        if ks.shape != (len(mus.segments),):
+            raise ValueError(f"stiffness[{c}] must have one value per segment ({len(mus.segments)}), "
+                             f"got shape {ks.shape}")
+        for (i, j), kk in zip(mus.segments.tolist(), ks.tolist()):
+            e = idx[(min(i, j), max(i, j))]
+            k[e] += kk
+            kr[e] += kk * (1.0 - a)
+    r = np.where(k > 0, kr / np.where(k > 0, k, 1.0), 1.0)
+    return k, r

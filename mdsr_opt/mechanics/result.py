@@ -1,0 +1,84 @@
+"""The outcome of an equilibrium solve (:class:`EquilibriumResult`) and its failure exception."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import numpy as np
+
+__all__ = ['SolverFailure', 'EquilibriumResult']
+
+
+class SolverFailure(RuntimeError):
+    """Raised by :meth:`EquilibriumResult.raise_on_failure` when a solve did not succeed."""
+
+
+@dataclass
+class EquilibriumResult:
+    """The outcome of an equilibrium solve.
+
+    Attributes
+    ----------
+    x : (n, 2) deformed node positions (the last accepted state if the solve failed).
+    energy : total energy at ``x`` (elastic plus muscle springs).
+    elastic_energy : strain energy of the body alone.
+    success : solver converged, residual small and no element inverted.
+    status : solver status text (or the reason for failure).
+    iterations : solver iterations summed over load steps.
+    residual : max-norm of the energy gradient over the free coordinates, relative to ``E t size``; with
+        muscle constraints that of the Lagrangian (least-squares multipliers): the KKT residual.
+    min_J : smallest element ``det F``.
+    steps : load fractions accepted (``[1.0]`` when no stepping was needed).
+    build_time, solve_time : seconds spent building the model/solver (0 when reused) and solving.
+    commanded, achieved, stroke, tension, slack, rest_lengths : internal driving, one entry per muscle: the
+        contraction asked; the contraction reached, ``1 - L/L0`` with ``L`` the node chain's length in ``x``;
+        the stroke ``achieved * L0`` (length units, what a servo winds in); the tension (cable: the rope
+        constraint's multiplier, never negative; springs: the springs' mean force
+        ``K L0/L0_free (a - achieved)``, negative when they push); slack (cable: the path is shorter than the
+        rope, so achieved > commanded at zero tension; springs: not pulling); ``L0``.
+    anchor_radius : internal driving: the radius of the rigid anchor patches at the muscles' ends.
+    """
+
+    x: np.ndarray
+    energy: float
+    elastic_energy: float
+    success: bool
+    status: str
+    iterations: int
+    residual: float
+    min_J: float
+    steps: list = field(default_factory=list)
+    build_time: float = 0.0
+    solve_time: float = 0.0
+    backend: str = "ipopt"
+    mode: str = "external"
+    rotation: np.ndarray | None = None  # internal driving: rotation applied to align with rest
+    translation: np.ndarray | None = None
+    muscle_model: str | None = None  # internal driving: "springs" or "cable"
+    stable: bool | None = None  # the free (reduced) Hessian is positive definite; None when not checked
+    stability: dict | None = None  # StabilityCheck.summary(): n_negative, n_zero, curvature, method, time
+    # internal driving, per muscle (see solve_internal):
+    commanded: np.ndarray | None = None  # contraction asked
+    achieved: np.ndarray | None = None  # 1 - L/L0 along the node chain in the returned state
+    stroke: np.ndarray | None = None  # achieved * L0 (length units): the rope length taken in
+    tension: np.ndarray | None = None  # rope tension (cable: the multiplier; springs: the rod force)
+    slack: np.ndarray | None = None  # cable: path shorter than the rope (achieved > commanded); springs: not pulling
+    rest_lengths: np.ndarray | None = None  # L0 per muscle
+    anchor_radius: float | None = None  # radius of the rigid anchor patches at the muscles' ends
+
+    def raise_on_failure(self) -> "EquilibriumResult":
+        if not self.success:
+            raise SolverFailure(f"{self.mode} driving with backend {self.backend!r} failed: {self.status} "
+                                f"(iterations {self.iterations}, residual {self.residual:.3g}, "
+                                f"min J {self.min_J:.3g})")
+        return self
+
+    def summary(self) -> dict:
+        out = {"mode": self.mode, "backend": self.backend, "success": self.success, "status": self.status,
+               "iterations": self.iterations, "energy": self.energy, "residual": self.residual,
+               "min_J": self.min_J, "n_steps": len(self.steps), "build_time": self.build_time,
+               "solve_time": self.solve_time, "stable": self.stable}
+        if self.achieved is not None:
+            out.update(muscle_model=self.muscle_model, anchor_radius=self.anchor_radius,
+                       **{k: [float(v) if k != "slack" else bool(v) for v in getattr(self, k)]
+                          for k in ("commanded", "achieved", "stroke", "tension", "slack")})
+        return out

@@ -1,0 +1,315 @@
+"""A synthetic camera: photograph-like images of simulated states, captioned SYNTHETIC."""
+
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..body.checks import check_mesh
+from ..core.checks import as_float_array, positive_float
+from ..core.results import to_jsonable
+from .compare import rotation_matrix
+from .contours import quadratic_basis
+from .folder import bytes_writer, write_together
+from .images import check_color, check_int
+
+__all__ = ['SyntheticPhoto', 'render_photo']
+
+
+# ----------------------------------------------------------------------------------------------- camera
+def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """uint8 mask (255 inside) of the pixels whose centres lie in any triangle; exact edge functions
+    (OpenCV's polygon filling adds up to a pixel along edges)."""
+    Hf, Wf = shape
+    mask = np.zeros(shape, dtype=np.uint8)
+    for tri in np.asarray(triangles):
+        P = pts[tri]
+        if (P[1, 0] - P[0, 0]) * (P[2, 1] - P[0, 1]) - (P[1, 1] - P[0, 1]) * (P[2, 0] - P[0, 0]) < 0:
+            P = P[::-1]
+        x0, y0 = np.maximum(np.floor(P.min(axis=0)).astype(int), 0)
+        x1, y1 = np.minimum(np.ceil(P.max(axis=0)).astype(int), [Wf - 1, Hf - 1])
+        if x1 < x0 or y1 < y0:
+            continue
+        gx, gy = np.meshgrid(np.arange(x0, x1 + 1, dtype=float), np.arange(y0, y1 + 1, dtype=float))
+        inside = np.ones(gx.shape, dtype=bool)
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            ex, ey = P[b] - P[a]
+            inside &= ex * (gy - P[a, 1]) - ey * (gx - P[a, 0]) >= 0
+        mask[y0:y1 + 1, x0:x1 + 1][inside] = 255
+    return mask
+
+
+def _apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    q = np.column_stack([pts, np.ones(len(pts))]) @ H.T
+    return q[:, :2] / q[:, 2:3]
+
+
+@dataclass(frozen=True, eq=False)
+class SyntheticPhoto:
+    """A rendered, photograph-like image of a simulated state. Always labelled synthetic.
+
+    Photos are equal only if they are the same object (``eq=False``: they hold arrays).
+
+    Attributes
+    ----------
+    image : numpy.ndarray
+        (H, W, 3) ``uint8`` RGB, with a visible ``SYNTHETIC`` caption in a corner.
+    world_to_pixel : numpy.ndarray
+        (3, 3) homography from simulation coordinates to pixel coordinates (see :meth:`to_pixels`).
+    metadata : dict
+        Rendering parameters; ``metadata["synthetic"]`` is always True.
+    """
+
+    image: np.ndarray = field(repr=False)
+    world_to_pixel: np.ndarray = field(repr=False)
+    metadata: dict = field(default_factory=dict)
+
+    @property
+    def synthetic(self) -> bool:
+        return True
+
+    def __repr__(self) -> str:
+        h, w = self.image.shape[:2]
+        return f"SyntheticPhoto({w}x{h} px, seed={self.metadata.get('seed')}, SYNTHETIC)"
+
+    def to_dict(self) -> dict:
+        """The metadata and the homography (not the pixels: :meth:`save` writes those) as a JSON-ready dict."""
+        return to_jsonable(dict(self.metadata, world_to_pixel=self.world_to_pixel, shape=self.image.shape))
+
+    def to_pixels(self, points: ArrayLike) -> np.ndarray:
+        """Map simulation coordinates (k, 2) to pixel coordinates (k, 2) of :attr:`image`."""
+        p = as_float_array(points, "points", shape=(None, 2))
+        return _apply_h(self.world_to_pixel, p)
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the image (PNG) and a ``.json`` sidecar with the metadata, as a pair.
+
+        The sidecar carries ``"synthetic": true`` so :func:`evaluate_folder` marks the case synthetic.
+        Both files are encoded first, written to temporary files and renamed together at the end (the
+        sidecar first), so a failure leaves neither a PNG without its sidecar nor an orphan sidecar.
+        """
+        path = Path(path)
+        write_together(self._writers(path))
+        return path
+
+    def _writers(self, path: Path) -> list[tuple[Path, Callable[[str], None]]]:
+        """The (path, writer) pairs of :meth:`save`, PNG first (so it is renamed last)."""
+        if path.suffix.lower() != ".png":
+            raise ValueError(f"synthetic photographs are saved as PNG; got {path.name}")
+        ok, buf = cv2.imencode(".png", cv2.cvtColor(self.image, cv2.COLOR_RGB2BGR))
+        if not ok:  # pragma: no cover - OpenCV failure
+            raise ValueError(f"could not encode {path.name} as PNG")
+        meta = dict(self.metadata, world_to_pixel=self.world_to_pixel.tolist())
+        return [(path, bytes_writer(buf.tobytes())),
+                (path.with_suffix(".json"), bytes_writer(json.dumps(meta, indent=2).encode()))]
+
+
+def render_photo(mesh, x: ArrayLike | None = None, *, resolution: tuple[int, int] = (500, 500), seed: int = 0,
+                 body_color: Any = (205, 95, 35), plate_color: Any = (226, 226, 218),
+                 grid_color: Any = (185, 187, 183), grid_spacing: float | None = None,
+                 margin: float = 0.12, rotation_deg: float = 0.0, tilt_deg: float = 1.0,
+                 lighting: float = 0.2, vignette: float = 0.1, blur_sigma: float = 0.8,
+                 noise_sigma: float = 3.0, supersample: int = 4) -> SyntheticPhoto:
+    """Render a simulated state as a photograph-like image: a synthetic camera over a grid plate.
+
+    The body (all triangles of ``mesh`` in state ``x``) is drawn in ``body_color`` on a plate with grid
+    lines, seen by a camera looking almost straight down (a perspective tilt of ``tilt_deg`` about a
+    random axis), under a lighting gradient and vignetting, then blurred and given Gaussian noise. The
+    caption ``SYNTHETIC`` is written in a corner that does not touch the body. Everything random comes
+    from ``seed``: the same arguments give the same image.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    x : array_like, shape (n, 2), optional
+        The state to photograph (default: the rest shape).
+    resolution : (width, height)
+        Image size in pixels: two integers, 32-8000.
+    seed : int
+        Non-negative seed of the tilt axis, light direction and noise.
+    body_color, plate_color, grid_color : (r, g, b) in 0-255
+    grid_spacing : float, optional
+        Grid pitch in simulation units (default: a tenth of the body's larger extent, rounded).
+    margin : float
+        Fraction of the image left free around the body on its tighter side (0 < margin < 0.45).
+    rotation_deg : float
+        Rotation of the body on the plate, counter-clockwise in the simulation frame.
+    tilt_deg : float
+        Camera tilt away from straight down (perspective), degrees, 0-20.
+    lighting, vignette : float
+        Strength of the linear lighting gradient and of the radial darkening.
+    blur_sigma, noise_sigma : float
+        Gaussian blur (pixels) and Gaussian noise (grey levels 0-255).
+    supersample : int
+        Anti-aliasing factor of the rasterisation, an integer 1-8.
+
+    Returns
+    -------
+    SyntheticPhoto
+
+    Raises
+    ------
+    TypeError
+        ``mesh`` is not a Mesh; ``resolution``, ``seed`` or ``supersample`` are not integers (no
+        silent truncation of 2.5 to 2); ``rotation_deg`` or another setting is not a real number.
+    ValueError
+        A setting out of range, or an ``x`` of the wrong shape or with NaN/inf.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> photo = render_photo(Mesh.rectangle(2.0, 1.0, 4, 2), resolution=(200, 120), seed=3)
+    >>> photo.image.shape, photo.metadata["synthetic"]
+    ((120, 200, 3), True)
+    """
+    mesh = check_mesh(mesh)
+    x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
+    if isinstance(resolution, (str, bytes)) or not hasattr(resolution, "__len__") or len(resolution) != 2:
+        raise ValueError(f"resolution must be (width, height), two integers, got {resolution!r}")
+    W, H = (check_int(v, "resolution", 1) for v in resolution)
+    if W < 32 or H < 32 or W > 8000 or H > 8000:
+        raise ValueError(f"resolution must lie between 32 and 8000 pixels per side, got {W} x {H}")
+    seed = check_int(seed, "seed", lo=0)
+    margin = positive_float(margin, "margin")
+    if margin >= 0.45:
+        raise ValueError(f"margin must be < 0.45, got {margin}")
+    tilt = positive_float(tilt_deg, "tilt_deg", allow_zero=True)
+    if tilt > 20.0:
+        raise ValueError(f"tilt_deg must be <= 20 degrees, got {tilt}")
+    for v, nm in ((lighting, "lighting"), (vignette, "vignette")):
+        if positive_float(v, nm, allow_zero=True) >= 1.0:
+            raise ValueError(f"{nm} must be < 1, got {v}")
+    blur = positive_float(blur_sigma, "blur_sigma", allow_zero=True)
+    noise = positive_float(noise_sigma, "noise_sigma", allow_zero=True)
+    ss = check_int(supersample, "supersample", 1, 8)
+    if isinstance(rotation_deg, (bool, np.bool_)) or not isinstance(rotation_deg, numbers.Real):
+        raise TypeError(f"rotation_deg must be a real number (degrees), got {type(rotation_deg).__name__}")
+    rot = float(rotation_deg)
+    if not math.isfinite(rot):
+        raise ValueError(f"rotation_deg must be finite, got {rotation_deg!r}")
+    body_rgb, plate_rgb, grid_rgb = (check_color(c) for c in (body_color, plate_color, grid_color))
+    rng = np.random.default_rng(seed)
+
+    # world -> pixel: rotate on the plate, mirror y, fit roughly, tilt the camera, then fit exactly
+    F = np.diag([1.0, -1.0])
+    lin = F @ rotation_matrix(math.radians(rot))
+    pts = x @ lin.T
+    ext = np.ptp(pts, axis=0)
+    if ext.max() <= 0:
+        raise ValueError("the state has no extent: all nodes coincide")
+    s0 = min(W, H) / ext.max()
+    S0 = np.eye(3)
+    S0[:2, :2] = s0 * lin
+    S0[:2, 2] = np.array([W / 2.0, H / 2.0]) - s0 * (pts.min(axis=0) + pts.max(axis=0)) / 2.0
+    f = 2.0 * max(W, H)
+    K = np.array([[f, 0, (W - 1) / 2.0], [0, f, (H - 1) / 2.0], [0, 0, 1.0]])
+    phi = rng.uniform(0.0, 2 * math.pi)
+    axis = np.array([math.cos(phi), math.sin(phi), 0.0])
+    R3, _ = cv2.Rodrigues(axis * math.radians(tilt))
+    T = K @ R3 @ np.linalg.inv(K)
+    HT = T @ S0
+    q = _apply_h(HT, x)
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    fit = min(W * (1 - 2 * margin) / (hi - lo)[0] if (hi - lo)[0] > 0 else np.inf,
+              H * (1 - 2 * margin) / (hi - lo)[1] if (hi - lo)[1] > 0 else np.inf)
+    Afit = np.array([[fit, 0, (W - 1) / 2.0 - fit * (lo[0] + hi[0]) / 2.0],
+                     [0, fit, (H - 1) / 2.0 - fit * (lo[1] + hi[1]) / 2.0], [0, 0, 1.0]])
+    Hw = Afit @ HT
+    Hw = Hw / Hw[2, 2]
+
+    # rasterise at ss x resolution; a pixel centre p maps to (p + 0.5) * ss - 0.5 on the fine canvas
+    shift = 4
+
+    def fine(p: np.ndarray) -> np.ndarray:
+        return np.round(((p + 0.5) * ss - 0.5) * (1 << shift)).astype(np.int32)
+
+    Wf, Hf = W * ss, H * ss
+    canvas = np.empty((Hf, Wf, 3), dtype=np.float32)
+    canvas[:] = plate_rgb
+    # the grid is fixed to the plate: plate coordinates are the simulation's rotated by rotation_deg,
+    # with a random phase (the plate is not aligned with the body's origin)
+    Rp = np.eye(3)
+    Rp[:2, :2] = rotation_matrix(math.radians(rot))
+    Hp = Hw @ np.linalg.inv(Rp)                      # plate -> pixel
+    corners = np.array([[-0.5, -0.5], [W - 0.5, -0.5], [W - 0.5, H - 0.5], [-0.5, H - 0.5]])
+    wc = _apply_h(np.linalg.inv(Hp), corners)
+    wlo, whi = wc.min(axis=0), wc.max(axis=0)
+    if grid_spacing is None:
+        e = float(np.ptp(x, axis=0).max()) / 10.0
+        mag = 10.0 ** math.floor(math.log10(e))
+        g = min((m * mag for m in (1.0, 2.0, 5.0, 10.0)), key=lambda v: abs(math.log(v / e)))
+    else:
+        g = positive_float(grid_spacing, "grid_spacing")
+    if float(((whi - wlo) / g).max()) > 2000:
+        raise ValueError(f"grid_spacing {g:g} draws more than 2000 grid lines; choose a larger spacing")
+    phase = rng.uniform(0.0, g, size=2)
+    thick = max(1, round(1.2 * ss * min(W, H) / 500.0))
+    for axis_k in (0, 1):
+        first = math.floor((wlo[axis_k] - phase[axis_k]) / g)
+        last = math.ceil((whi[axis_k] - phase[axis_k]) / g)
+        for k in range(first, last + 1):
+            a = np.empty((2, 2))
+            a[:, axis_k] = phase[axis_k] + k * g
+            a[:, 1 - axis_k] = (wlo[1 - axis_k], whi[1 - axis_k])
+            p0, p1 = fine(_apply_h(Hp, a))
+            cv2.line(canvas, tuple(int(v) for v in p0), tuple(int(v) for v in p1), grid_rgb.tolist(),
+                     thick, cv2.LINE_8, shift)
+    mask = _raster_triangles(_apply_h(Hw, x) * ss + (ss - 1) / 2.0, mesh.triangles, (Hf, Wf))
+    alpha = (mask.astype(np.float32) / 255.0)[..., None]
+    canvas = canvas * (1.0 - alpha) + body_rgb.astype(np.float32) * alpha
+    img = cv2.resize(canvas, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else canvas
+    coverage = cv2.resize(mask, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else mask
+
+    # light, optics, sensor
+    psi = rng.uniform(0.0, 2 * math.pi)
+    basis = quadratic_basis(H, W)
+    u, v = basis[..., 1], basis[..., 2]
+    light = 1.0 + lighting * (u * math.cos(psi) + v * math.sin(psi)) / 2.0 - vignette * (u * u + v * v) / 2.0
+    img = img * light[..., None].astype(np.float32)
+    if blur > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur)
+    if noise > 0:
+        img = img + rng.normal(0.0, noise, img.shape).astype(np.float32)
+    img = np.clip(np.round(img), 0, 255).astype(np.uint8)
+
+    # the caption, in the first corner whose box does not touch the (dilated) body
+    text = "SYNTHETIC"
+    font, fscale = cv2.FONT_HERSHEY_SIMPLEX, max(0.4, 0.5 * min(W, H) / 500.0)
+    fthick = max(1, round(min(W, H) / 400.0))
+    (tw, th), base = cv2.getTextSize(text, font, fscale, fthick)
+    pad = max(3, round(min(W, H) / 100.0))
+    body_px = cv2.dilate((coverage > 0).astype(np.uint8), np.ones((2 * pad + 1, 2 * pad + 1), np.uint8))
+    boxes = {"bottom-left": (pad, H - pad - th - base), "bottom-right": (W - pad - tw, H - pad - th - base),
+             "top-left": (pad, pad), "top-right": (W - pad - tw, pad)}
+    corner = None
+    for name, (bx, by) in boxes.items():
+        if bx < 0 or by < 0:
+            continue
+        if not body_px[by:by + th + base + 1, bx:bx + tw + 1].any():
+            corner = name
+            break
+    if corner is None:
+        raise ValueError("no image corner is free of the body for the 'SYNTHETIC' caption; increase "
+                         "margin or the resolution")
+    bx, by = boxes[corner]
+    cv2.putText(img, text, (bx, by + th), font, fscale, (20, 20, 20), fthick, cv2.LINE_AA)
+
+    meta = {
+        "synthetic": True, "generator": "mdsr_opt.evaluate.render_photo", "caption": text,
+        "caption_corner": corner, "caption_box": [int(bx), int(by), int(tw), int(th + base)],
+        "seed": seed,
+        "resolution": [W, H], "rotation_deg": rot, "tilt_deg": tilt,
+        "tilt_axis_deg": math.degrees(phi), "light_direction_deg": math.degrees(psi),
+        "lighting": float(lighting), "vignette": float(vignette), "blur_sigma": blur, "noise_sigma": noise,
+        "body_color": body_rgb.tolist(), "plate_color": plate_rgb.tolist(), "grid_spacing": g,
+    }
+    Hw.setflags(write=False)
+    return SyntheticPhoto(image=img, world_to_pixel=Hw, metadata=meta)

@@ -1,0 +1,202 @@
+"""Figures of routing and design: contraction graphs, routed muscles, designs, benchmarks."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+
+from .common import LEGEND_OUTSIDE, axes_or_new, plot_edges, plot_mesh, plot_muscles
+
+__all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'plot_design_benchmark']
+
+
+# --- routing (issue 3) ---
+def _edge_weights_of(mesh, graph):
+    return np.array([graph.edges[int(a), int(b)]["weight"] for a, b in mesh.edges])
+
+
+def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", lw=1.5, title=None,
+                           seeds=None):
+    """The contraction graph drawn over the target mesh, each edge coloured by its weight.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : (n, 2) array
+        Target node positions.
+    graph : networkx.Graph, optional
+        From :func:`mdsr_opt.routing.contraction_graph`; computed when omitted.
+    ax : matplotlib Axes, optional
+    cmap : str
+        A diverging colormap, centred on 0: contraction (w > 0) at the top end, elongation below.
+    seeds : sequence of (i, j), optional
+        Seed edges to outline in black.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    >>> fig = plot_contraction_graph(mesh, mesh.points * [0.9, 1.0])
+    """
+    fig, ax = axes_or_new(ax)
+    x = np.asarray(target, dtype=float)
+    ax.add_collection(PolyCollection(x[mesh.triangles], facecolors="#eeeeee", edgecolors="none"))
+    if graph is None:  # the graph's weights, (l0 - l) / l0 per mesh edge, without building the graph
+        l0 = mesh.edge_lengths
+        w = (l0 - np.linalg.norm(x[mesh.edges[:, 1]] - x[mesh.edges[:, 0]], axis=1)) / l0
+    else:
+        w = _edge_weights_of(mesh, graph)
+    m = float(np.abs(w).max()) or 1.0
+    plot_edges(x, mesh.edges, w, ax=ax, cmap=cmap, lw=lw, vmin=-m, vmax=m,
+               label="relative contraction $(l_0 - l)/l_0$")
+    if seeds is not None and len(seeds):
+        ax.add_collection(LineCollection(x[np.asarray(seeds)], colors="k", linewidths=lw * 2.2, zorder=3))
+    ax.set_title(title or "contraction graph (red: shortens, blue: stretches)", fontsize=10)
+    ax.autoscale_view()
+    return fig
+
+
+def plot_routing(mesh, target, result, axes=None, title=None):
+    """Routed muscles over the rest mesh (left) and the target mesh (right).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : (n, 2) array
+        Target node positions.
+    result : RoutingResult or sequence of Muscle
+        From :func:`mdsr_opt.routing.route_muscles`.
+    axes : pair of matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> from mdsr_opt.synthesis.routing import route_muscles
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    >>> fig = plot_routing(mesh, mesh.points * [0.8, 1.0], route_muscles(mesh, mesh.points * [0.8, 1.0]))
+    """
+    if axes is None:
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig = axes[0].figure
+    muscles = list(result)
+    x = np.asarray(target, dtype=float)
+    for ax, pos, name in ((axes[0], mesh.points, "rest"), (axes[1], x, "target")):
+        plot_mesh(mesh, pos, ax=ax, color="#dde6f0", edgecolor="#9aaabb")
+        if muscles:
+            plot_muscles(pos, muscles, ax=ax)
+            for m in muscles:
+                ends = pos[[m.nodes[0], m.nodes[-1]]]
+                ax.plot(ends[:, 0], ends[:, 1], "o", color="k", ms=3)
+        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh")
+    if muscles and len(muscles) <= 10:
+        axes[1].legend(fontsize=7, **LEGEND_OUTSIDE)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
+    """Routing time against mesh size (log-log), one line per series, with an optional budget.
+
+    ``series`` maps a name to ``(nodes, seconds)``; names ending in ``"cold"`` are drawn dashed.
+    ``budget`` (seconds) and ``budget_nodes`` draw the budget as a horizontal and a vertical line.
+    """
+    fig, ax = axes_or_new(ax, figsize=(7, 4.5))
+    for name, (nodes, t) in series.items():
+        ax.loglog(nodes, t, "o--" if name.endswith("cold") else "s-", label=name,
+                  alpha=0.6 if name.endswith("cold") else 1.0)
+    if budget is not None:
+        ax.axhline(budget, color="r", ls="--", lw=1, label=f"budget {budget:g} s")
+    if budget_nodes is not None:
+        ax.axvline(budget_nodes, color="0.5", ls=":", lw=1)
+    ax.set_xlabel("mesh nodes")
+    ax.set_ylabel("seconds")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=2, loc="upper left")  # explicit: "best" searches
+    ax.set_title("muscle routing time")
+    return fig
+
+
+def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
+    """Overlay a design's driven state (moved onto the target) on the target, with the muscles.
+
+    Parameters
+    ----------
+    mesh : the rest mesh.
+    result : ``DesignResult`` (``mdsr_opt.design``); its ``x_aligned`` is drawn.
+    target : (n, 2) target positions.
+    muscles : muscles to draw over the driven state.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> from mdsr_opt.synthesis.contractions import design_contractions
+    >>> mesh, mat, mus = Mesh.rectangle(4.0, 1.0, 16, 4), NeoHookean(1.0, 0.3), [Muscle(range(1, 16))]
+    >>> target = solve_internal(mesh, mat, mus, [0.15]).x
+    >>> fig = plot_design(mesh, design_contractions(mesh, mat, mus, target), target, mus)
+    >>> "difference" in fig.axes[0].get_title()
+    True
+    """
+    fig, ax = axes_or_new(ax)
+    plot_mesh(mesh, np.asarray(target), ax=ax, color="#cccccc", edgecolor="#999999", alpha=0.6, label="target")
+    plot_mesh(mesh, result.x_aligned, ax=ax, color="#8fb3d9", edgecolor="#335577", alpha=0.45,
+              label="driven (aligned)")
+    if len(muscles):
+        plot_muscles(result.x_aligned, muscles, ax=ax)
+    a = ", ".join(f"{c:.3f}" for c in result.contractions)
+    ok = "" if result.success else "  [FAILED]"
+    ax.set_title(title or f"{result.method}: a = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+    return fig
+
+
+def plot_design_benchmark(rows, traces=None, ax=None):
+    """Difference against time for the design methods (``tests/benchmarks/bench_design.py``).
+
+    ``rows``: dicts with ``method``, ``mesh``, ``muscles``, ``solve_time``, ``difference`` (one marker per run:
+    colour = method, marker = mesh size, size = muscle count). ``traces``: optional
+    ``{(mesh, muscles, method): [(t, difference), ...]}``; the best difference so far of the outer loops is
+    drawn as lines for the largest case present.
+    """
+    fig, ax = axes_or_new(ax, figsize=(7.5, 5))
+    colors = {"flattened": "#d62728", "nested": "#1f77b4", "derivative-free": "#2ca02c"}
+    markers = ["o", "s", "^", "D", "v"]
+    meshes = list(dict.fromkeys(r["mesh"] for r in rows))
+    floor = 1e-14
+    for r in rows:
+        ax.scatter(max(r["solve_time"], 1e-3), max(r["difference"], floor), color=colors.get(r["method"], "k"),
+                   marker=markers[meshes.index(r["mesh"]) % len(markers)], s=18 + 10 * r["muscles"],
+                   edgecolors="k" if r.get("success", True) else "none", linewidths=0.4, alpha=0.85)
+    if traces:
+        big = max(rows, key=lambda r: (r["nodes"], r["muscles"]))
+        for method, c in colors.items():
+            tr = traces.get((big["mesh"], big["muscles"], method))
+            if tr and len(tr) > 1:
+                t, d = np.array(tr).T
+                ax.plot(np.maximum(t, 1e-3), np.maximum(d, floor), "-", color=c, lw=0.8, alpha=0.6)
+        ax.text(0.01, 0.01, f"lines: progress on {big['mesh']} nodes, {big['muscles']} muscles",
+                transform=ax.transAxes, fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("solve time (s)")
+    ax.set_ylabel("final difference (length)")
+    for method, c in colors.items():
+        ax.scatter([], [], color=c, label=method)
+    for i, mname in enumerate(meshes):
+        ax.scatter([], [], color="grey", marker=markers[i % len(markers)], label=f"{mname} nodes")
+    ax.legend(fontsize=7, loc="upper right")
+    ax.set_title("contraction design: difference against time (marker size ~ muscle count)")
+    ax.grid(True, which="major", alpha=0.3)
+    return fig

@@ -1,0 +1,202 @@
+"""Figures of muscle routing across several targets: the paper's Figure 6 panels and convergence chart.
+
+Three functions, each taking plain data (no scene or study objects), each returning a matplotlib figure:
+
+- :func:`plot_layout_grid`: Figure 6a. One column per target; rows: the target (external driving, with
+  anchors and drag nodes), the contraction graph, and one row per routing (e.g. a smaller and a larger
+  ``K_a``) with the muscles over the target mesh.
+- :func:`plot_design_grid`: Figure 6b. The target, then one row per layout with the driven state after
+  the designed contractions drawn over the target.
+- :func:`plot_convergence`: Figure 6c. The design's difference against the optimiser iteration, both
+  layouts of each target in one panel.
+
+This module sets no backend and imports no scene or study code.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh
+>>> from mdsr_opt.synthesis.routing import route_muscles
+>>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+>>> t = mesh.points * [0.8, 1.0]
+>>> col = {"title": "shorten", "mesh": mesh, "target": t, "layouts": [route_muscles(mesh, t)],
+...        "row_labels": ["K_a = 4"]}
+>>> fig = plot_layout_grid([col])
+>>> len(fig.axes)
+3
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+
+__all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
+
+_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+
+
+def _mesh(ax, mesh, x, face="#e3e9f0", edge="#a9b6c4", alpha=1.0, lw=0.25):
+    ax.add_collection(PolyCollection(np.asarray(x)[mesh.triangles], facecolors=face, edgecolors=edge,
+                                     linewidths=lw, alpha=alpha))
+
+
+def _muscles(ax, x, muscles, lw=2.4, labels=True):
+    x = np.asarray(x)
+    for i, m in enumerate(muscles):
+        p = x[list(m.nodes)]
+        ax.plot(p[:, 0], p[:, 1], "-", color=_COLORS[i % len(_COLORS)], lw=lw, solid_capstyle="round",
+                label=f"l{i + 1}" if labels else None)
+        ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
+
+
+def _finish(ax):
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def plot_layout_grid(columns, title=None):
+    """Figure 6a: targets, contraction graphs and routed layouts, one column per target.
+
+    Parameters
+    ----------
+    columns : sequence of dict
+        Each with ``title`` (str), ``mesh`` (Mesh), ``target`` ((n, 2) array), ``layouts`` (sequence of
+        RoutingResult or of muscle lists, one per layout row), ``row_labels`` (one str per layout), and
+        optionally ``anchors`` and ``drag_nodes`` (node indices, drawn on the target) and ``weights``
+        (per-edge contraction, computed from the target when omitted).
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        ``2 + len(layouts)`` rows of axes per column (row A target, B contraction graph, then layouts).
+    """
+    columns = list(columns)
+    if not columns:
+        raise ValueError("plot_layout_grid needs at least one column")
+    n_lay = max(len(c["layouts"]) for c in columns)
+    rows = 2 + n_lay
+    fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns), 2.6 * rows), squeeze=False)
+    for j, c in enumerate(columns):
+        mesh, x = c["mesh"], np.asarray(c["target"], dtype=float)
+        ax = axes[0, j]
+        _mesh(ax, mesh, x)
+        for key, mark, col in (("anchors", "s", "k"), ("drag_nodes", "o", "#d62728")):
+            idx = np.asarray(c.get(key, ()), dtype=int)
+            if len(idx):
+                ax.plot(x[idx, 0], x[idx, 1], mark, color=col, ms=2.0)
+        ax.set_title(c["title"], fontsize=9)
+        _finish(ax)
+        ax = axes[1, j]
+        w = c.get("weights")
+        if w is None:
+            E = mesh.edges
+            l0 = mesh.edge_lengths
+            w = (l0 - np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1)) / l0
+        w = np.asarray(w)
+        m = float(np.abs(w).max()) or 1.0
+        lc = LineCollection(x[mesh.edges], cmap="coolwarm", linewidths=0.9)
+        lc.set_array(w)
+        lc.set_clim(-m, m)
+        ax.add_collection(lc)
+        _finish(ax)
+        for i, (lay, label) in enumerate(zip(c["layouts"], c["row_labels"])):
+            ax = axes[2 + i, j]
+            _mesh(ax, mesh, x, alpha=0.8)
+            mus = list(lay)
+            _muscles(ax, x, mus)
+            ax.set_title(f"{label}: {len(mus)} muscle(s)", fontsize=8)
+            if mus:
+                ax.legend(fontsize=6, loc="best", handlelength=1.2)
+            _finish(ax)
+    for i, name in enumerate(["A target", "B contraction graph"] + [f"{chr(67 + k)} layout" for k in range(n_lay)]):
+        axes[i, 0].set_ylabel(name, fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def plot_design_grid(columns, title=None):
+    """Figure 6b: the target, then each layout's driven state (designed contractions) over it.
+
+    Parameters
+    ----------
+    columns : sequence of dict
+        Each with ``title``, ``mesh``, ``target``, ``designs`` (one per layout: a dict with ``x`` the
+        driven state moved onto the target, ``muscles``, ``difference``, ``success``) and ``row_labels``.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    columns = list(columns)
+    if not columns:
+        raise ValueError("plot_design_grid needs at least one column")
+    n_lay = max(len(c["designs"]) for c in columns)
+    rows = 1 + n_lay
+    fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns), 2.6 * rows), squeeze=False)
+    for j, c in enumerate(columns):
+        mesh, y = c["mesh"], np.asarray(c["target"], dtype=float)
+        ax = axes[0, j]
+        _mesh(ax, mesh, y, face="#bbbbbb", edge="#888888")
+        ax.set_title(c["title"], fontsize=9)
+        _finish(ax)
+        for i, (d, label) in enumerate(zip(c["designs"], c["row_labels"])):
+            ax = axes[1 + i, j]
+            _mesh(ax, mesh, y, face="#bbbbbb", edge="none", alpha=0.45)
+            _mesh(ax, mesh, d["x"], face="#8fb3d9", edge="#335577", alpha=0.45, lw=0.2)
+            _muscles(ax, d["x"], d["muscles"], lw=1.8, labels=False)
+            flag = "" if d["success"] else " FAILED"
+            ax.set_title(f"{label}: D = {d['difference']:.3g}{flag}", fontsize=8)
+            _finish(ax)
+    axes[0, 0].set_ylabel("A target", fontsize=9)
+    for i in range(n_lay):
+        axes[1 + i, 0].set_ylabel(f"{chr(66 + i)} driven (layout {chr(67 + i)})", fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+def plot_convergence(panels, title=None, log=True):
+    """Figure 6c: the design's difference against the optimiser iteration, one panel per target.
+
+    Parameters
+    ----------
+    panels : sequence of dict
+        Each with ``title`` and ``traces``: a list of ``(label, iterations, differences)``; ``iterations``
+        and ``differences`` are equal-length sequences.
+    log : bool
+        Logarithmic difference axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    panels = list(panels)
+    if not panels:
+        raise ValueError("plot_convergence needs at least one panel")
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.3 * len(panels), 3.0), squeeze=False)
+    for ax, p in zip(axes[0], panels):
+        for i, (label, it, d) in enumerate(p["traces"]):
+            it, d = np.asarray(it, dtype=float), np.asarray(d, dtype=float)
+            if len(it) != len(d):
+                raise ValueError(f"{p['title']}, {label}: {len(it)} iterations but {len(d)} differences")
+            ax.plot(it, d, "-o", ms=2.5, lw=1.3, color=_COLORS[i % len(_COLORS)],
+                    label=f"{label} ({int(it[-1]) if len(it) else 0} it.)")
+        if log:
+            ax.set_yscale("log")
+        ax.set_title(p["title"], fontsize=9)
+        ax.set_xlabel("IPOPT iteration")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0, 0].set_ylabel("difference D (length)")
+    if title:
+        fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig

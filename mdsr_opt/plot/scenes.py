@@ -1,0 +1,149 @@
+"""Figures of scenes: regions, targets, and animations as GIFs."""
+
+from __future__ import annotations
+
+import os
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+
+from ..body.io import atomic_path
+from .common import LEGEND_OUTSIDE, axes_or_new, plot_mesh, plot_muscles
+
+__all__ = ['plot_scene', 'plot_target', 'save_animation']
+
+
+# --- problem library and scenes (issue 6) ---
+def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4):
+    """The rest mesh with its named node regions (``{name: node indices}``) marked in colour.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    >>> fig = plot_scene(mesh, {"left": [0, 5, 10]}, title="strip")
+    >>> fig.axes[0].get_legend_handles_labels()[1]
+    ['left']
+    """
+    fig, ax = axes_or_new(ax, figsize=(7, 4.5))
+    plot_mesh(mesh, None, ax=ax, color="#dde6f0", edgecolor="#9aaabb")
+    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (name, idx) in enumerate((regions or {}).items()):
+        p = mesh.points[np.asarray(idx, dtype=int)]
+        ax.plot(p[:, 0], p[:, 1], "o", ms=markersize, color=cyc[i % len(cyc)], label=name)
+    if regions:
+        ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+    ax.set_title(title or f"rest mesh: {mesh.n_nodes} nodes, {mesh.n_triangles} triangles", fontsize=9)
+    return fig
+
+
+def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, muscles=(), values=None,
+                ax=None, title=None, colorbar_label="strain energy density"):
+    """A target shape over the rest outline: anchors (black), drag nodes (red, with their paths from rest).
+
+    Parameters
+    ----------
+    mesh : the rest mesh; target : (n, 2) target positions.
+    anchors, drag_nodes : node indices; drag_positions : (d, 2) where the drags go (default: ``target``).
+    muscles : muscles to draw over the target (e.g. an internal-driving case's).
+    values : per-triangle values to colour the target by (e.g. strain energy density).
+    """
+    fig, ax = axes_or_new(ax, figsize=(7, 4.5))
+    x = np.asarray(target, dtype=float)
+    for loop in mesh.boundary_loops:
+        p = mesh.points[np.append(loop, loop[0])]
+        ax.plot(p[:, 0], p[:, 1], "-", color="#aaaaaa", lw=0.8)
+    plot_mesh(mesh, x, ax=ax, values=values, colorbar_label=colorbar_label if values is not None else None,
+              alpha=0.9)
+    anchors = np.asarray(anchors, dtype=int)
+    dn = np.asarray(drag_nodes, dtype=int)
+    if len(anchors):
+        ax.plot(x[anchors, 0], x[anchors, 1], "s", color="k", ms=3, label="anchors")
+    if len(dn):
+        dp = x[dn] if drag_positions is None else np.asarray(drag_positions, dtype=float)
+        segs = np.stack([mesh.points[dn], dp], axis=1)
+        ax.add_collection(LineCollection(segs, colors="#d62728", linewidths=0.5, alpha=0.5))
+        ax.plot(dp[:, 0], dp[:, 1], "o", color="#d62728", ms=3, label="drag points")
+    if len(muscles):
+        plot_muscles(x, muscles, ax=ax)
+    if len(anchors) or len(dn) or len(muscles):
+        ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+    ax.autoscale_view()
+    if title:
+        ax.set_title(title, fontsize=9)
+    return fig
+
+
+def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
+                   figsize=(6, 4), dpi=90) -> str:
+    """Write a sequence of states as an animated GIF (matplotlib's PillowWriter), atomically.
+
+    Parameters
+    ----------
+    mesh : the rest mesh; states : sequence of (n, 2) states, one per frame.
+    muscles : muscles drawn over every frame; activations : (frames, m) values in [0, 1] that set each
+        muscle's line width and opacity (e.g. contraction / a_max).
+    titles : one title per frame; fps : frames per second.
+    rest : draw the rest outline in grey behind every frame.
+
+    Returns the path. The GIF is written to a temporary file in the same folder and renamed.
+
+    Example
+    -------
+    >>> import os, tempfile
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = save_animation(mesh, [mesh.points, mesh.points * 1.1], os.path.join(d, "a.gif"))
+    ...     os.path.getsize(p) > 0
+    True
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    states = [np.asarray(s, dtype=float) for s in states]
+    if not states:
+        raise ValueError("an animation needs at least one state")
+    for i, s in enumerate(states):
+        if s.shape != (mesh.n_nodes, 2):
+            raise ValueError(f"states[{i}] must have shape ({mesh.n_nodes}, 2), got {s.shape}")
+    muscles = list(muscles)
+    act = None if activations is None else np.asarray(activations, dtype=float).reshape(len(states), -1)
+    allp = np.vstack(states + ([mesh.points] if rest else []))
+    lo, hi = allp.min(0), allp.max(0)
+    pad = 0.05 * float((hi - lo).max())
+    fig, ax = plt.subplots(figsize=figsize)
+    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    # the artists are made once and updated per frame (clearing the axes and redrawing everything made the
+    # GIFs the slowest part of a scene's figures)
+    if rest:
+        for loop in mesh.boundary_loops:
+            p = mesh.points[np.append(loop, loop[0])]
+            ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
+    body = PolyCollection(states[0][mesh.triangles], facecolors="#8fb3d9", edgecolors="#335577", linewidths=0.25)
+    ax.add_collection(body)
+    lines = [ax.plot([], [], "-", color=cyc[i % len(cyc)])[0] for i in range(len(muscles))]
+    paths = [list(m.nodes) for m in muscles]
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    title = ax.set_title("", fontsize=9)
+
+    def draw(k):
+        x = states[k]
+        body.set_verts(x[mesh.triangles])
+        for i, (line, p) in enumerate(zip(lines, paths)):
+            a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
+            line.set_data(x[p, 0], x[p, 1])
+            line.set_linewidth(0.8 + 2.5 * a)
+            line.set_alpha(0.35 + 0.65 * a)
+        title.set_text(titles[k] if titles is not None else f"frame {k + 1}/{len(states)}")
+        return []
+
+    path = os.fspath(path)
+    try:
+        with atomic_path(path, suffix=".gif") as tmp:
+            FuncAnimation(fig, draw, frames=len(states), blit=False).save(
+                tmp, writer=PillowWriter(fps=fps), dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path

@@ -1,0 +1,111 @@
+"""Animations of a scene: forward solves between designed contractions, frame by frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+import numpy as np
+
+from ..body.muscles import Muscle
+from .rundir import check_interrupt
+from .scene import Animation, Scene, UnknownName
+
+__all__ = ['AnimationResult', 'animate']
+
+
+@dataclass
+class AnimationResult:
+    """The frames of an :class:`Animation`: forward internal-driving solves of interpolated contractions.
+
+    Attributes
+    ----------
+    name : str
+    muscles : tuple of Muscle
+        The muscles of every case in the animation (each once).
+    contractions : (frames, m) ndarray
+        The contractions of every frame.
+    states : list of (n, 2) ndarrays
+        The equilibrium of every frame (aligned to the rest shape).
+    success : bool
+        Every frame's forward solve succeeded.
+    failed_frames : list of int
+    message : str
+        Why the animation could not be made (empty otherwise).
+    """
+
+    name: str
+    muscles: tuple = ()
+    contractions: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    states: list = field(default_factory=list)
+    success: bool = False
+    failed_frames: list = field(default_factory=list)
+    message: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-ready: no states (they are in the GIF), the muscles and per-frame contractions."""
+        return {"name": self.name, "success": self.success, "message": self.message,
+                "n_frames": len(self.states), "failed_frames": list(self.failed_frames),
+                "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
+                "contractions": np.asarray(self.contractions).tolist()}
+
+
+def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tuple]) -> AnimationResult:
+    """Forward-solve every frame of an animation.
+
+    Parameters
+    ----------
+    scene : Scene
+    animation : Animation or its name in ``scene.animations``.
+    designs : mapping of case name to ``(muscles, contractions)``
+        The designed muscles and contractions of every case the animation names (from :func:`run_case`:
+        ``(run.setup.muscles, run.design.contractions)``).
+
+    Each keyframe ``(case, f)`` sets that case's muscles to ``f`` times its contractions and every other
+    muscle to 0 (``"rest"`` sets all to 0); frames in between interpolate linearly. Muscles shared by
+    several cases (equal node paths) are one muscle.
+    """
+    from ..mechanics.equilibrium import solve_internal
+
+    if isinstance(animation, str):
+        found = [a for a in scene.animations if a.name == animation]
+        if not found:
+            raise UnknownName(f"scene {scene.name!r} has no animation {animation!r} "
+                              f"(animations: {', '.join(a.name for a in scene.animations) or 'none'})")
+        animation = found[0]
+    union: list[Muscle] = []
+    slots: dict[str, list[int]] = {}
+    for cname in animation.cases:
+        if cname not in designs:
+            return AnimationResult(animation.name, message=f"case {cname!r} has no design in this run")
+        mus, a = designs[cname]
+        if len(mus) != len(a):
+            raise ValueError(f"designs[{cname!r}]: {len(a)} contraction(s) for {len(mus)} muscle(s)")
+        idx = []
+        for m in mus:
+            if m not in union:
+                union.append(m)
+            idx.append(union.index(m))
+        slots[cname] = idx
+    a_of = {}
+    for cname, idx in slots.items():
+        v = np.zeros(len(union))
+        v[idx] = np.asarray(designs[cname][1], dtype=float)
+        a_of[cname] = v
+    keys = [np.zeros(len(union)) if c == "rest" else f * a_of[c] for c, f in animation.keyframes]
+    frames = []
+    for k0, k1 in zip(keys[:-1], keys[1:]):
+        for j in range(animation.frames_per_step):
+            frames.append(k0 + (k1 - k0) * j / animation.frames_per_step)
+    frames.append(keys[-1])
+    opts = scene.design_options
+    model, stiffness = opts.get("muscle_model", "cable"), opts.get("stiffness", 10.0)
+    states, fails = [], []
+    for i, a in enumerate(frames):
+        res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness,
+                             anchor_radius=opts.get("anchor_radius"))
+        check_interrupt()
+        if not res.success:
+            fails.append(i)
+        states.append(res.x)
+    return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails,
+                           "" if not fails else f"{len(fails)} forward solve(s) failed")

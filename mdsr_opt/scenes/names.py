@@ -1,0 +1,50 @@
+"""The names a run writes into its folder, and the check that case and animation names do not collide."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from .reader import SceneFileError
+
+__all__ = ['check_output_names']
+
+
+#: Names a case or animation may not take: "rest" is the rest pose in keyframes; "summary" names the run's
+#: summary files.
+RESERVED_NAMES = ("rest", "summary")
+
+
+def check_output_names(case_names: Sequence[str], animation_names: Sequence[str] = (), label: str = "scene",
+                       where: Sequence[str] | None = None) -> None:
+    """Refuse case and animation names whose files would collide with each other or with a run's own files
+    (:data:`RUN_FILES`; a case writes the folder ``<case>/``, an animation ``<name>.gif`` and
+    ``<name>.json``), also on case-insensitive file systems. ``where`` names each name's field (cases
+    first, then animations) for the message.
+    """
+    names = list(case_names) + list(animation_names)
+    fields = list(where) if where is not None else \
+        [f"case {c!r}" for c in case_names] + [f"animation {a!r}" for a in animation_names]
+    taken: dict[str, str] = {f.lower(): f"the run's own file {f!r}" for f in RUN_FILES}
+    for i, n in enumerate(names):
+        is_case = i < len(case_names)
+        kind = "case" if is_case else "animation"
+        if n.lower() in RESERVED_NAMES or n.lower().split(".")[0] in RESERVED_NAMES:
+            raise SceneFileError(f"{label}: {fields[i]}: the {kind} name {n!r} is reserved ('rest' is the rest "
+                                 "pose in keyframes, 'summary' names the run's summary files); choose another")
+        for entry in ([n] if is_case else [f"{n}.gif", f"{n}.json"]):
+            key = entry.lower()
+            if key in taken:
+                raise SceneFileError(f"{label}: {fields[i]}: the {kind} {n!r} would write {entry!r}, which is "
+                                     f"{taken[key]}; choose another name")
+            taken[key] = f"written by the {kind} {n!r}"
+
+
+def check_name(name, what: str) -> None:
+    if not isinstance(name, str) or not name:
+        raise TypeError(f"{what} must be a non-empty string, got {name!r}")
+    if not all(ch.isalnum() or ch in "_-." for ch in name) or name.startswith("."):
+        raise ValueError(f"{what} {name!r} may hold only letters, digits, '_', '-' and '.' (it names files)")
+
+
+#: Files every scene run writes directly into its folder; case folders and animation files go beside them.
+RUN_FILES = ("rest.png", "summary.json", "summary.md", "validation.md")

@@ -1,0 +1,352 @@
+"""A virtual prototype: photographs from a higher-fidelity model than the one used for design.
+
+The paper validates its simulations and designs against photographs of cast silicone prototypes
+(Tables 2-4). Photographing the design model's own driven state instead (a mirror) measures only how well
+the design converged. :class:`VirtualPrototype` stands in for the cast body with a *different* model:
+
+- a finer mesh of the same body: the scene rebuilt at ``refine`` times the design mesh's nodes (default
+  3x), so the discretisation differs;
+- the exact sliding-cable muscle (``model="cable"``), its node chain re-laid on the fine mesh through the
+  fine nodes nearest the design muscle's nodes (as a builder would place the tube);
+- material parameters perturbed within a stated range, drawn from ``seed``: Young's modulus by a factor in
+  ``[1 - e_range, 1 + e_range]`` and Poisson's ratio by a shift in ``[-nu_range, +nu_range]`` (kept in
+  [0.05, 0.49]). A uniform change of E alone does not change a shape driven by displacements or cable
+  lengths (every force scales with E); the change of nu does, and so do the mesh and the cable path;
+- the synthetic camera (:func:`~mdsr_opt.evaluate.render_photo`) with its own seed, a 2 degree tilt and a
+  rotation on the plate.
+
+The distances to these photographs therefore measure model error (discretisation, material uncertainty,
+muscle placement, camera), as the paper's do, not the design's convergence. They are still SYNTHETIC:
+no real body was cast or photographed.
+
+Example
+-------
+>>> from mdsr_opt.scenes.library import get_problem
+>>> scene = get_problem("one_muscle", resolution="coarse")
+>>> proto = VirtualPrototype.for_scene(scene, refine=2.0, seed=1)
+>>> proto.mesh.n_nodes > 1.5 * scene.mesh.n_nodes
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..core.checks import positive_float
+from ..body.muscles import Muscle
+
+__all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
+
+#: Node count of the prototype's mesh over the design mesh's.
+DEFAULT_REFINE = 3.0
+#: Relative range of the prototype's Young's modulus: E * U(1 - r, 1 + r).
+DEFAULT_E_RANGE = 0.10
+#: Range of the shift of the prototype's Poisson's ratio: nu + U(-r, r).
+DEFAULT_NU_RANGE = 0.05
+
+
+@dataclass(eq=False)
+class PrototypeShot:
+    """The prototype in one state and its photograph.
+
+    Attributes
+    ----------
+    x : (n_fine, 2) ndarray
+        The prototype's equilibrium (fine mesh).
+    success : bool
+        The prototype's solve succeeded.
+    status : str
+        Its status, or why it failed.
+    iterations : int
+    photo : SyntheticPhoto or None
+        The photograph (None when the solve failed).
+    """
+
+    x: np.ndarray
+    success: bool
+    status: str
+    iterations: int = 0
+    photo: Any = None
+
+
+@dataclass(eq=False)
+class VirtualPrototype:
+    """A scene's body rebuilt finer, with perturbed material, the exact cable and its own camera.
+
+    Build it with :meth:`for_scene`. Attributes: ``scene`` (the fine scene: same cases by name, anchors and
+    drags chosen by geometry), ``design_mesh`` (the design model's mesh), ``material`` (perturbed),
+    ``E_factor`` and ``nu_shift`` (the draws), ``refine``, ``e_range``, ``nu_range``, ``seed``,
+    ``camera`` (keyword arguments of :func:`~mdsr_opt.evaluate.render_photo`).
+    """
+
+    scene: Any
+    design_mesh: Any
+    material: Any
+    E_factor: float
+    nu_shift: float
+    refine: float
+    e_range: float
+    nu_range: float
+    seed: int
+    camera: dict = field(default_factory=dict)
+
+    @property
+    def mesh(self):
+        """The prototype's (fine) mesh."""
+        return self.scene.mesh
+
+    @classmethod
+    def for_scene(cls, scene, *, refine: float = DEFAULT_REFINE, e_range: float = DEFAULT_E_RANGE,
+                  nu_range: float = DEFAULT_NU_RANGE, seed: int = 0,
+                  photo_resolution: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
+        """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.Scene` built from the library, a
+        problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes).
+
+        Raises
+        ------
+        TypeError
+            ``scene`` is not a Scene; ``seed`` not an int.
+        ValueError
+            ``refine`` not in [1, 10], ``e_range`` not in [0, 0.5), ``nu_range`` not in [0, 0.2], a scene
+            without a source to rebuild from, or a fine scene whose cases differ from the design scene's.
+        """
+        from dataclasses import replace
+
+        from ..body.material import LinearElastic, NeoHookean
+        from .scene import Scene
+        from .library import get_problem
+
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+        refine = positive_float(refine, "refine")
+        if not 1.0 <= refine <= 10.0:
+            raise ValueError(f"refine must lie in [1, 10] (node count over the design mesh's), got {refine}")
+        e_range = positive_float(e_range, "e_range", allow_zero=True)
+        nu_range = positive_float(nu_range, "nu_range", allow_zero=True)
+        if e_range >= 0.5:
+            raise ValueError(f"e_range must lie in [0, 0.5), got {e_range}")
+        if nu_range > 0.2:
+            raise ValueError(f"nu_range must lie in [0, 0.2], got {nu_range}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise TypeError(f"seed must be a non-negative int, got {seed!r}")
+        if not scene.source:
+            raise ValueError(f"scene {scene.name!r} has no source file to rebuild a finer prototype from")
+        n_fine = int(round(refine * scene.mesh.n_nodes))
+        fine = get_problem(scene.source, resolution=n_fine)
+        if fine.case_names != scene.case_names:
+            raise ValueError(f"the prototype of {scene.name!r} has cases {fine.case_names}, the design scene "
+                             f"{scene.case_names}")
+        rng = np.random.default_rng([int(seed), 14])
+        f_E = 1.0 + e_range * (2.0 * rng.random() - 1.0)
+        d_nu = nu_range * (2.0 * rng.random() - 1.0)
+        m = scene.material
+        nu = float(np.clip(m.nu + d_nu, 0.05, 0.49))
+        kind = LinearElastic if isinstance(m, LinearElastic) else NeoHookean
+        material = kind(E=m.E * f_E, nu=nu, thickness=m.thickness)
+        fine = replace(fine, material=material)
+        camera = {"resolution": tuple(photo_resolution), "seed": 1000 + int(seed), "tilt_deg": 2.0,
+                  "rotation_deg": float(rng.uniform(-8.0, 8.0))}
+        return cls(scene=fine, design_mesh=scene.mesh, material=material, E_factor=float(f_E),
+                   nu_shift=float(nu - m.nu), refine=refine, e_range=e_range, nu_range=nu_range, seed=int(seed),
+                   camera=camera)
+
+    def describe(self) -> dict:
+        """The prototype's parameters (JSON-ready)."""
+        return {"nodes": int(self.mesh.n_nodes), "design_nodes": int(self.design_mesh.n_nodes),
+                "refine": self.refine, "material": self.material.kind if hasattr(self.material, "kind")
+                else type(self.material).__name__, "E": float(self.material.E), "nu": float(self.material.nu),
+                "E_factor": self.E_factor, "nu_shift": self.nu_shift, "e_range": self.e_range,
+                "nu_range": self.nu_range, "seed": self.seed, "muscle_model": "cable",
+                "camera": {k: list(v) if isinstance(v, tuple) else v for k, v in self.camera.items()},
+                "synthetic": True}
+
+    # ------------------------------------------------------------------------------------------------ muscles
+    def transfer_muscle(self, muscle: Muscle) -> Muscle:
+        """The design mesh's muscle laid on the prototype's mesh: through the fine nodes nearest its nodes
+        (on the boundary when the muscle runs along it), joined by shortest edge paths."""
+        from .select import edge_path
+
+        if not isinstance(muscle, Muscle):
+            muscle = Muscle(muscle)
+        X = self.design_mesh.points
+        nodes = np.asarray(muscle.nodes)
+        on_b = bool(np.isin(nodes, self.design_mesh.boundary_nodes).all())
+        far = 2.0 * float(np.mean(self.design_mesh.edge_lengths))
+        tries = [X[nodes], X[nodes[::2]] if len(nodes) > 4 else X[nodes], X[nodes[[0, len(nodes) // 2, -1]]]
+                 if len(nodes) > 2 else X[nodes], X[nodes[[0, -1]]]]
+        last = None
+        for wp in tries:
+            for boundary in ((True, False) if on_b else (False,)):
+                try:
+                    return edge_path(self.mesh, wp, name=muscle.name, boundary=boundary, tol=far)
+                except ValueError as exc:  # a path that folds back on itself: fewer waypoints
+                    last = exc
+        raise ValueError(f"muscle {muscle.name or ''} could not be laid on the prototype's mesh: {last}")
+
+    # ---------------------------------------------------------------------------------------------- states
+    def photograph(self, x) -> Any:
+        """The synthetic camera's photograph of the prototype in state ``x`` (fine mesh)."""
+        from ..photos.camera import render_photo
+
+        return render_photo(self.mesh, x, **self.camera)
+
+    def _shot(self, res, photo: bool) -> PrototypeShot:
+        shot = PrototypeShot(x=np.asarray(res.x).copy(), success=bool(res.success), status=str(res.status),
+                             iterations=int(res.iterations))
+        if shot.success and photo:
+            shot.photo = self.photograph(shot.x)
+        return shot
+
+    def external(self, case: str, photo: bool = True) -> PrototypeShot:
+        """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
+        mesh)."""
+        from ..mechanics.equilibrium import solve_external
+
+        c = self.scene.case(case)
+        if c.kind != "external":
+            raise ValueError(f"case {case!r} is internal driving; use internal()")
+        return self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo)
+
+    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True,
+                 anchor_radius: float | None = None) -> PrototypeShot:
+        """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh) at ``contractions``,
+        with the exact cable."""
+        from ..mechanics.equilibrium import solve_internal
+
+        a = np.asarray(contractions, dtype=float).ravel()
+        if len(a) != len(muscles):
+            raise ValueError(f"{len(a)} contraction(s) for {len(muscles)} muscle(s)")
+        if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
+            raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
+        fine = [self.transfer_muscle(m) for m in muscles]
+        res = solve_internal(self.mesh, self.material, fine, a, model="cable", anchor_radius=anchor_radius)
+        return self._shot(res, photo)
+
+
+def measure(design_mesh, x_design, photo) -> dict:
+    """Compare the design model's state with a photograph of the prototype, holes included.
+
+    Returns a dict of ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every loop, ``outer_mean_px`` (the
+    outer outline alone, the paper's measure) and ``n_unmatched`` holes."""
+    from ..photos.loops import compare_loops, simulated_loops
+    from ..photos.contours import contour_loops_from_image
+
+    r = compare_loops(simulated_loops(design_mesh, x_design), contour_loops_from_image(photo.image))
+    return {"mean_px": r.mean_px, "std_px": r.std_px, "max_px": r.max_px, "ratio": r.ratio,
+            "outer_mean_px": r.outer.mean_px, "outer_std_px": r.outer.std_px, "outer_ratio": r.outer.ratio,
+            "n_unmatched": r.n_unmatched}
+
+
+def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, prefix: str = "") -> tuple[dict, dict]:
+    """The paper's validation of one case against the virtual prototype.
+
+    ``driving`` (Table 2 for an external case, Table 3 for an internal one): the design model's simulation
+    of the case's own driving (``setup.target``) against a photograph of the prototype driven the same way
+    (the same anchors and drags; or the scene's muscles at the case's contractions). ``design`` (Table 4):
+    the target against a photograph of the prototype driven by the designed contractions of the designed
+    muscles (``design``, a :class:`~mdsr_opt.design.DesignResult`; skipped when None).
+
+    Returns
+    -------
+    (metrics, photos)
+        ``metrics``: ``{"driving": {...}, "design": {...}, "prototype": describe()}``, each entry with
+        ``table``, ``success``, ``status`` and, when the prototype's solve succeeded, :func:`measure`'s
+        figures; ``photos``: ``{"driving": SyntheticPhoto, "design": SyntheticPhoto}`` of those that exist.
+        A failed prototype solve or an unmeasurable photograph is reported in ``status``, never raised.
+    """
+    say = log or (lambda s: None)
+    case = setup.case
+    scene = setup.scene
+    out: dict = {"prototype": prototype.describe()}
+    photos: dict = {}
+    radius = scene.design_options.get("anchor_radius")
+
+    def run(key, table, make):
+        try:
+            shot = make()
+        except ValueError as exc:  # a muscle that cannot be laid on the fine mesh
+            out[key] = {"table": table, "success": False, "status": f"not built: {exc}"}
+            return
+        entry = {"table": table, "success": shot.success, "status": shot.status}
+        if shot.success:
+            try:
+                entry.update(measure(scene.mesh, setup.target, shot.photo))
+            except ValueError as exc:
+                entry.update(success=False, status=f"photograph could not be measured: {exc}")
+            else:
+                photos[key] = shot.photo
+        out[key] = entry
+        what = "external driving" if table == 2 else "internal driving" if table == 3 else "design"
+        if entry["success"]:
+            say(f"{prefix}virtual prototype ({what}, Table {table}): d = {entry['mean_px']:.2f} px over every "
+                f"loop (outline alone {entry['outer_mean_px']:.2f} px), ratio {100 * entry['ratio']:.2f} %")
+        else:
+            say(f"{prefix}virtual prototype ({what}, Table {table}): FAILED: {entry['status']}")
+
+    if case.kind == "external":
+        run("driving", 2, lambda: prototype.external(case.name))
+    else:
+        run("driving", 3, lambda: prototype.internal(scene.muscles, case.contractions, anchor_radius=radius))
+    if design is not None:
+        run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions, anchor_radius=radius))
+    return out, photos
+
+
+def _row(scene: str, case, entry: dict, extra: str) -> str:
+    if not entry or not entry.get("success"):
+        why = (entry or {}).get("status", "not run")
+        return f"| {scene} | {case} | {extra} | - | - | - | - | FAILED: {why} |"
+    return (f"| {scene} | {case} | {extra} | {entry['mean_px']:.2f} | {entry['std_px']:.2f} | "
+            f"{100 * entry['ratio']:.2f} | {entry['outer_mean_px']:.2f} | {entry['n_unmatched']} |")
+
+
+def validation_tables(reports: Sequence) -> str:
+    """Tables 2, 3 and 4 against the virtual prototype as Markdown, from scene reports (``SceneReport``
+    objects or their ``to_dict()``), one row per case that has the figures.
+
+    Table 2: external cases, the design model's external driving against the prototype driven the same way.
+    Table 3: internal cases (the muscle experiments), likewise with the scene's muscles. Table 4: external
+    cases, the target against the prototype driven by the designed muscles and contractions (an internal
+    case's design recovers its known contractions, so its Table 4 row would repeat Table 3)."""
+    def cases(r):
+        d = r if isinstance(r, dict) else r.to_dict()
+        return d["scene"], d["cases"]
+
+    head = ("| scene | case | {} | d (px) | sd (px) | ratio (%) | outline-only d (px) | unmatched holes |\n"
+            "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |")
+    t2, t3, t4 = [], [], []
+    proto = None
+    for r in reports:
+        name, cs = cases(r)
+        for c in cs:
+            p = ((c.get("photo") or {}).get("prototype")) or {}
+            if not p:
+                continue
+            proto = proto or p.get("prototype")
+            if c["kind"] == "external":
+                t2.append(_row(name, c["case"], p.get("driving"), "anchors + drags"))
+            else:
+                a = ", ".join(f"{v:.0%}" for v in (c.get("known_contractions") or []))
+                t3.append(_row(name, c["case"], p.get("driving"), a or "-"))
+            if "design" in p and c["kind"] == "external":  # an internal case's design repeats Table 3
+                a = ", ".join(f"{v:.3f}" for v in (c.get("contractions") or []))
+                t4.append(_row(name, c["case"], p.get("design"), a or "-"))
+    desc = ""
+    if proto:
+        desc = (f"Virtual prototype (SYNTHETIC photographs): a {proto['refine']:g}x finer mesh of each body, the "
+                f"exact sliding cable, E x U(1 +- {proto['e_range']:g}) and nu + U(+- {proto['nu_range']:g}) "
+                f"drawn from seed {proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
+                f"{proto['camera']['resolution'][0]}x{proto['camera']['resolution'][1]} px. d: mean distance of "
+                "the design model's boundary nodes (outline and holes) to the prototype photograph's contours; "
+                "ratio: d over sqrt(area) of the photographed outline.\n\n")
+    parts = ["# Validation against the virtual prototype (the paper's Tables 2-4)\n", desc]
+    for title, rows, col in (("Table 2: external driving, simulation vs prototype", t2, "driving"),
+                             ("Table 3: internal driving, simulation vs prototype", t3, "contractions"),
+                             ("Table 4: design target vs prototype driven by the design", t4,
+                              "designed contractions")):
+        parts.append(f"## {title}\n\n" + head.format(col) + "\n" + ("\n".join(rows) if rows else
+                                                                      "| (no case) | | | | | | | |") + "\n")
+    return "\n".join(parts)

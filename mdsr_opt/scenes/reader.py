@@ -1,0 +1,246 @@
+"""Reading and checking scene values: the field-naming reader of scene files and the checks of a
+scene's routing and design options (also used for scenes built in Python)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Mapping, Sequence
+import numpy as np
+
+__all__ = ['check_scene_options', 'SceneFileError']
+
+
+def check_scene_options(options, kind: str, label: str = "") -> dict:
+    """Check a scene's ``routing_options`` (``kind="routing"``) or ``design_options`` (``"design"``): every
+    key a keyword of :func:`~mdsr_opt.routing.route_muscles` / :func:`~mdsr_opt.design.design_contractions`,
+    every value in its range, solver ``options`` known to the solver. Returns a checked copy.
+
+    Raises ``SceneFileError`` (a ValueError) or ``TypeError`` naming ``label`` and the field.
+    """
+    if kind not in ("routing", "design"):
+        raise ValueError(f"kind must be 'routing' or 'design', got {kind!r}")
+    r = Reader(label or "scene")
+    if not isinstance(options, Mapping):
+        r.fail(f"{kind}_options", f"expected a dict, got {tname(options)}", TypeError)
+    arrays = {k: options[k] for k in ("initial", "weights") if kind == "design" and k in options}
+    rest = {k: v for k, v in options.items() if k not in arrays}
+    # per-problem arrays (initial, weights) are checked by design_contractions against the muscles and mesh
+    return {**scene_options(r, rest, kind), **arrays}
+
+
+class SceneFileError(ValueError):
+    """A scene file is malformed; the message names the file and the field."""
+
+
+class Reader:
+    """Field-path-aware checks for one scene file."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.label = path.name if isinstance(path, Path) else str(path)
+
+    def fail(self, where: str, msg: str, kind: type = SceneFileError):
+        err = kind(f"{self.label}: {where}: {msg}")
+        raise err
+
+    def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
+        import difflib
+
+        if not isinstance(d, Mapping):
+            self.fail(where, f"expected a table/object, got {tname(d)}", TypeError)
+        for k in d:
+            if k not in allowed:
+                close = difflib.get_close_matches(str(k), allowed, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(allowed)})"
+                self.fail(_join(where, k), f"unknown field{hint}")
+        for k in required:
+            if k not in d:
+                self.fail(_join(where, k), "missing (required)")
+        return dict(d)
+
+    def number(self, v, where: str, positive: bool = False) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            self.fail(where, f"expected a number, got {tname(v)}", TypeError)
+        v = float(v)
+        if not math.isfinite(v):
+            self.fail(where, f"must be finite, got {v}")
+        if positive and v <= 0:
+            self.fail(where, f"must be > 0, got {v}")
+        return v
+
+    def string(self, v, where: str) -> str:
+        if not isinstance(v, str) or not v:
+            self.fail(where, f"expected a non-empty string, got {tname(v)}", TypeError)
+        return v
+
+    def point(self, v, where: str) -> np.ndarray:
+        if not isinstance(v, (list, tuple)) or len(v) != 2:
+            self.fail(where, f"expected a point [x, y], got {v!r}", TypeError if not isinstance(v, (list, tuple))
+                      else SceneFileError)
+        return np.array([self.number(c, f"{where}[{i}]") for i, c in enumerate(v)])
+
+    def points(self, v, where: str, at_least: int = 1) -> np.ndarray:
+        if not isinstance(v, (list, tuple)):
+            self.fail(where, f"expected a list of points [[x, y], ...], got {tname(v)}", TypeError)
+        if len(v) < at_least:
+            self.fail(where, f"needs at least {at_least} point(s), got {len(v)}")
+        return np.array([self.point(p, f"{where}[{i}]") for i, p in enumerate(v)]).reshape(-1, 2)
+
+
+def _join(where: str, key) -> str:
+    return f"{where}.{key}" if where else str(key)
+
+
+def tname(v) -> str:
+    return "a list" if isinstance(v, list) else "a table" if isinstance(v, Mapping) else type(v).__name__
+
+
+def read_file(path: Path) -> dict:
+    suffix = path.suffix.lower()
+    text = path.read_bytes()
+    if suffix == ".json":
+        import json
+
+        try:
+            data = json.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise SceneFileError(f"{path.name}: not valid JSON: {exc}") from None
+    elif suffix == ".toml":
+        if sys.version_info >= (3, 11):
+            import tomllib
+        else:  # pragma: no cover - Python 3.10
+            import tomli as tomllib
+        try:
+            data = tomllib.loads(text.decode("utf-8"))
+        except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise SceneFileError(f"{path.name}: not valid TOML: {exc}") from None
+    else:
+        raise SceneFileError(f"{path.name}: a scene file ends in .toml or .json, not {suffix or 'nothing'}")
+    if not isinstance(data, dict):
+        raise SceneFileError(f"{path.name}: the top level must be a table/object, got {tname(data)}")
+    return data
+
+
+def scene_options(r: Reader, spec, where: str) -> dict:
+    import inspect
+
+    from ..synthesis.contractions import design_contractions
+    from ..synthesis.routing import route_muscles
+
+    fn = route_muscles if where == "routing" else design_contractions
+    allowed = [p.name for p in inspect.signature(fn).parameters.values() if p.kind == p.KEYWORD_ONLY]
+    if where == "design":
+        allowed = [a for a in allowed if a not in ("initial", "weights")]
+    opts = r.keys(spec, allowed, where)
+    checks = _ROUTING_CHECKS if where == "routing" else _DESIGN_CHECKS
+    for k, v in opts.items():
+        if k in checks:  # a keyword added to the function later and not known here passes unchecked
+            opts[k] = checks[k](r, v, f"{where}.{k}")
+    if where == "design" and "options" in opts:
+        opts["options"] = _solver_options(r, opts["options"], opts)
+    return opts
+
+
+def _real(lo: float, hi: float, lo_open: bool = False, hi_open: bool = False, what: str = ""):
+    def check(r: Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
+            rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+            r.fail(where, f"must lie in {rng}{what}, got {x:g}")
+        return x
+    return check
+
+
+def _positive(allow_zero: bool = False):
+    def check(r: Reader, v, where: str) -> float:
+        x = r.number(v, where)
+        if x < 0 or (x == 0 and not allow_zero):
+            r.fail(where, f"must be {'>= 0' if allow_zero else '> 0'}, got {x:g}")
+        return x
+    return check
+
+
+def _integer(minimum: int = 1):
+    def check(r: Reader, v, where: str) -> int:
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            r.fail(where, f"expected an integer, got {v!r}", TypeError)
+        if v < minimum:
+            r.fail(where, f"must be an integer >= {minimum}, got {v}")
+        return v
+    return check
+
+
+def _choice(*choices: str):
+    def check(r: Reader, v, where: str) -> str:
+        if v not in choices:
+            r.fail(where, f"must be one of {', '.join(map(repr, choices))}, got {v!r}",
+                   SceneFileError if isinstance(v, str) else TypeError)
+        return v
+    return check
+
+
+def _boolean(r: Reader, v, where: str) -> bool:
+    if not isinstance(v, bool):
+        r.fail(where, f"expected true or false, got {v!r}", TypeError)
+    return v
+
+
+def _table(r: Reader, v, where: str) -> dict:
+    if not isinstance(v, Mapping):
+        r.fail(where, f"expected a table of solver options, got {tname(v)}", TypeError)
+    return dict(v)
+
+
+#: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
+_DESIGN_CHECKS = {
+    "method": _choice("flattened", "nested", "derivative-free"),
+    "a_max": _real(0.0, 1.0, lo_open=True, hi_open=True, what=" (a fraction of the rest length)"),
+    "interior_weight": _real(0.3, 0.7),
+    "muscle_model": _choice("springs", "cable"),
+    "stiffness": _positive(),
+    "tol": _positive(),
+    "max_iter": _integer(1),
+    "hessian": _choice("exact", "gauss-newton"),
+    "scaling": _choice("auto", "size"),
+    "warm_start": _boolean,
+    "outer": _choice("nelder-mead", "powell"),
+    "options": _table,
+    "inner_tol": _positive(),
+    "verify": _boolean,
+    "gap_rtol": _positive(),
+    "derivatives": _choice("assembled", "casadi"),
+}
+
+
+_ROUTING_CHECKS = {
+    "K_a": _positive(allow_zero=True),
+    "K_b": _positive(allow_zero=True),
+    "K_h": _positive(allow_zero=True),
+    "n_seeds": _integer(1),
+    "max_muscles": _integer(1),
+    "min_length": _positive(allow_zero=True),
+    "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
+}
+
+
+def _solver_options(r: Reader, options: dict, design: dict) -> dict:
+    """``[design.options]``: IPOPT's options (flattened, without the ``ipopt.`` prefix) or scipy's
+    ``minimize`` options (nested: L-BFGS-B; derivative-free: Nelder-Mead or Powell), each checked against
+    the solver (:func:`~mdsr_opt.backends.check_options`)."""
+    from ..mechanics.backends import check_options
+
+    method = design.get("method", "flattened")
+    for k, v in options.items():
+        w = f"design.options.{k}"
+        try:
+            if method == "flattened":
+                check_options("ipopt", {f"ipopt.{k}": v})
+            else:
+                sp = "L-BFGS-B" if method == "nested" else \
+                    {"nelder-mead": "Nelder-Mead", "powell": "Powell"}[design.get("outer", "nelder-mead")]
+                check_options(f"scipy:{sp}", {k: v})
+        except (ValueError, TypeError) as exc:
+            r.fail(w, str(exc).replace("'ipopt.", "'"))
+    return options

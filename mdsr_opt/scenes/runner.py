@@ -1,0 +1,343 @@
+"""One case through the pipeline (target, routing, design, verification, photograph) and its files."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+import numpy as np
+
+from .cases import CaseSetup, prepare_case
+from .rundir import check_interrupt
+from .scene import Case, Scene
+
+__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'write_case']
+
+
+# ---------------------------------------------------------------------------------------------- the pipeline
+@dataclass
+class CaseReport:
+    """Key figures of one case run through the pipeline (JSON-ready scalars and short lists).
+
+    Attributes
+    ----------
+    scene, case, kind : names and ``"external"``/``"internal"``.
+    n_nodes, n_muscles : mesh size and number of muscles designed.
+    success : the target solve, the routing (at least one muscle) and the design all succeeded.
+    message : why not, when ``success`` is False.
+    target_success, target_status : the solve that made the target.
+    contractions : designed (commanded) contractions; known_contractions : internal cases' true ones.
+    achieved, stroke : per muscle, the contraction reached along its node chain in the driven state
+        (``1 - L/L0``) and the rope length pulled in (``achieved * L0``, length units).
+    contraction_error : internal cases: largest ``|designed - known|``.
+    difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
+        relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
+    initial_difference : difference at the design's starting point.
+    design_success, design_status, verified, gap : the design, its verification and the forward check's
+        largest node distance between the design's state and a fresh forward solve from rest.
+    routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
+        the fraction of the true muscles' edges that routing on the target covers.
+    photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
+        outline and holes with it (:func:`~mdsr_opt.evaluate.compare_loops`), ``self`` the driven state's
+        (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every
+        loop, ``outer_mean_px`` and ``mean_norm`` of the outline alone, and ``n_unmatched`` holes. These photograph the design model itself (a mirror). ``prototype``
+        (when a virtual prototype was given) holds the validation against a DIFFERENT, finer model
+        (:func:`~mdsr_opt.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
+        included.
+    times : seconds per stage; files : files written (relative to the scene's folder).
+    """
+
+    scene: str
+    case: str
+    kind: str
+    n_nodes: int
+    n_muscles: int = 0
+    success: bool = False
+    message: str = ""
+    target_success: bool = False
+    target_status: str = ""
+    contractions: list = field(default_factory=list)
+    achieved: list = field(default_factory=list)
+    stroke: list = field(default_factory=list)
+    known_contractions: list | None = None
+    contraction_error: float | None = None
+    difference: float | None = None
+    relative_difference: float | None = None
+    initial_difference: float | None = None
+    design_success: bool | None = None
+    design_status: str = ""
+    verified: bool | None = None
+    gap: float | None = None
+    routing: dict | None = None
+    photo: dict | None = None
+    times: dict = field(default_factory=dict)
+    files: list = field(default_factory=list)
+
+
+@dataclass
+class CaseRun:
+    """A case's report with the arrays behind it (the setup, the design, the photograph)."""
+
+    report: CaseReport
+    setup: CaseSetup | None = None
+    design: Any = None
+    photo: Any = None
+    comparison: Any = None
+    prototype_photos: dict = field(default_factory=dict)
+
+
+@dataclass
+class SceneReport:
+    """The outcome of :func:`run_scene`: one :class:`CaseReport` per case, animations, timing."""
+
+    scene: str
+    title: str
+    n_nodes: int
+    cases: list
+    animations: dict = field(default_factory=dict)
+    out: str = ""
+    time: float = 0.0
+
+    @property
+    def success(self) -> bool:
+        """Every case succeeded and every animation's forward solves succeeded."""
+        return all(c.success for c in self.cases) and all(a.get("success", False)
+                                                             for a in self.animations.values())
+
+    def table(self) -> str:
+        """A Markdown table of the key figures, one row per case."""
+        head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
+                "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
+        for c in self.cases:
+            a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
+            s = ", ".join(f"{v:.4g}" for v in c.stroke) if c.stroke else "-"
+            d = "-" if c.difference is None else f"{c.difference:.4g}"
+            r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
+            ok = "ok" if c.success else "FAILED"
+            ph = (c.photo or {}).get("target")
+            pd = "-" if not ph else f"{ph['mean_px']:.2f}"
+            pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
+            pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
+            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "-"
+            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
+                        f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        from dataclasses import asdict
+
+        return {"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
+                "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
+                "cases": [asdict(c) for c in self.cases], "animations": self.animations}
+
+
+def finite(v):
+    from ..synthesis.results import finite_or_none
+
+    return finite_or_none(v)
+
+
+def _edge_set(muscles) -> set:
+    return {(min(a, b), max(a, b)) for m in muscles for a, b in m.segments.tolist()}
+
+
+def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
+             photo_resolution: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
+             prefix: str = "", prototype: Any = None) -> CaseRun:
+    """Run one case through the pipeline (nothing is written).
+
+    Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
+    contractions (:func:`~mdsr_opt.design.design_contractions` with the scene's ``design_options``, its
+    verification being the forward check) -> SYNTHETIC photograph of the driven body and contour metrics
+    (:mod:`mdsr_opt.evaluate`).
+
+    With ``prototype`` (a :class:`~mdsr_opt.prototype.VirtualPrototype` of the scene) and ``photo``, the
+    case is also validated against the virtual prototype (:func:`~mdsr_opt.prototype.validate_case`): the
+    paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
+
+    A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
+    says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
+    """
+    import time
+
+    from ..synthesis.contractions import design_contractions
+
+    say = log or (lambda s: None)
+    if isinstance(case, str):
+        case = scene.case(case)
+    mesh = scene.mesh
+    rep = CaseReport(scene=scene.name, case=case.name, kind=case.kind, n_nodes=mesh.n_nodes)
+    run = CaseRun(report=rep)
+    t0 = time.perf_counter()
+    what = ("external driving" if case.kind == "external" else
+            f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
+    setup = prepare_case(scene, case)
+    check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
+    run.setup = setup
+    tr = setup.target_result
+    rep.target_success, rep.target_status = bool(tr.success), str(tr.status)
+    rep.times.update(setup.times)
+    say(f"{prefix}target by {what}: {tr.status} ({tr.iterations} iterations, {len(tr.steps)} load step(s), "
+        f"{setup.times['target']:.2f} s)")
+    if setup.routing is not None:
+        rr = setup.routing
+        rep.routing = {"n_units": rr.n_units,
+                       "muscles": [{"n_edges": s.n_edges, "contraction": s.contraction,
+                                    "nonuniformity": s.nonuniformity} for s in rr.stats]}
+        if case.kind == "internal":
+            # the muscle edges that contract in the target: an edge inside a muscle's rigid end patch keeps
+            # its length, so no routing can see it (it is counted apart as hidden)
+            true = _edge_set(scene.muscles)
+            X0, Y = scene.mesh.points, np.asarray(setup.target)
+            seen = {e for e in true
+                    if np.linalg.norm(Y[e[1]] - Y[e[0]]) < (1 - 1e-3) * np.linalg.norm(X0[e[1]] - X0[e[0]])}
+            rep.routing["recovered"] = len(seen & _edge_set(rr.muscles)) / max(len(seen), 1)
+            rep.routing["hidden_edges"] = len(true - seen)
+    if not tr.success:
+        rep.message = f"target solve failed: {tr.status}"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    if not setup.muscles:
+        why = "; ".join(setup.warnings) or "does the target shorten any edge?"
+        rep.message = f"routing found no muscle on the target ({why})"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    rep.n_muscles = len(setup.muscles)
+    if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
+        say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
+            f"({setup.times['routing']:.2f} s)")
+    opts = dict(scene.design_options)
+    if method is not None:
+        opts["method"] = method
+    t1 = time.perf_counter()
+    try:
+        res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
+        check_interrupt()
+    except RuntimeError as exc:  # a solver inside the design failed hard (SolverFailure, CasADi errors)
+        rep.message = f"design failed: {type(exc).__name__}: {exc}"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
+    run.design = res
+    rep.times["design"] = time.perf_counter() - t1
+    rep.contractions = [float(a) for a in res.contractions]
+    rep.achieved = [float(a) for a in res.achieved]
+    rep.stroke = [float(s) for s in res.stroke]
+    rep.difference = float(res.difference)
+    rep.relative_difference = float(res.difference) / mesh.size
+    rep.initial_difference = float(res.initial_difference)
+    rep.design_success, rep.design_status = bool(res.success), str(res.status)
+    if res.verification is not None:
+        rep.verified, rep.gap = bool(res.verification.passed), float(res.verification.gap)
+    if setup.known_contractions is not None:
+        rep.known_contractions = [float(a) for a in setup.known_contractions]
+        rep.contraction_error = float(np.abs(res.contractions - setup.known_contractions).max())
+    a = ", ".join(f"{v:.3f}" for v in res.contractions)
+    ach = ", ".join(f"{v:.3f}" for v in res.achieved)
+    st = ", ".join(f"{v:.4g}" for v in res.stroke)
+    say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
+        f"strokes [{st}], difference {res.difference:.3g} "
+        f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
+        f" ({rep.times['design']:.1f} s)")
+    if photo:
+        from ..photos.loops import compare_loops, simulated_loops
+        from ..photos.contours import contour_loops_from_image
+        from ..photos.camera import render_photo
+
+        t2 = time.perf_counter()
+        try:
+            ph = render_photo(mesh, res.x_aligned, resolution=photo_resolution, seed=0)
+            loops = contour_loops_from_image(ph.image)
+            # every boundary loop is measured: the outline and each hole against its photographed counterpart
+            cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
+            cmp_s = compare_loops(simulated_loops(mesh, res.x_aligned), loops)
+        except ValueError as exc:  # e.g. a body too thin to segment at this resolution
+            rep.photo = {"error": str(exc)}
+            say(f"{prefix}photograph: could not measure ({exc})")
+        else:
+            def figures(c):
+                return {"mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px, "ratio": c.ratio,
+                        "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
+                        "n_unmatched": c.n_unmatched}
+
+            rep.photo = {"synthetic": True, "resolution": list(photo_resolution),
+                         "target": figures(cmp_t), "self": figures(cmp_s)}
+            run.photo, run.comparison = ph, cmp_t.outer
+            say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
+                f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
+                f"{cmp_s.mean_px:.2f} px")
+        if prototype is not None:
+            from .prototype import validate_case
+
+            metrics, shots = validate_case(prototype, setup, res, log=say, prefix=prefix)
+            rep.photo = dict(rep.photo or {}, prototype=metrics)
+            run.prototype_photos = shots
+        rep.times["photo"] = time.perf_counter() - t2
+        check_interrupt()
+    rep.success = bool(res.success)
+    if not res.success:
+        rep.message = f"design not verified: {res.status}"
+    rep.times["total"] = time.perf_counter() - t0
+    return run
+
+
+def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
+    """Write a case's figures, meshes and photograph into ``folder``; returns the file names.
+
+    Files: ``target.png`` (target with anchors and drags), ``graph.png`` (contraction graph),
+    ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),
+    ``photo.png``/``photo.json`` (the SYNTHETIC photograph) and ``overlay.png`` (contour metrics), and the
+    meshes ``target.<fmt>`` and ``driven.<fmt>`` (states as displacements). Every file is written
+    atomically; what a failed stage did not produce is not written.
+    """
+    from .. import plot
+    from ..body.io import write_mesh
+    from ..synthesis.routing import contraction_graph
+
+    fmt = "." + mesh_format.lstrip(".")
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    setup, mesh, case = run.setup, scene.mesh, run.setup.case if run.setup else None
+    files: list[str] = []
+    if setup is None:
+        return files
+    mat = scene.material
+    x = setup.target
+    if setup.target_result.success:
+        energy = mat.psi(mesh.deformation_gradients(x))
+        title = (f"{scene.name} / {case.name}: target by "
+                 f"{'external driving' if case.kind == 'external' else 'internal driving'}")
+        fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
+                               drag_positions=case.drag_positions if len(case.drag_nodes) else None,
+                               muscles=setup.muscles if case.kind == "internal" else (), values=energy,
+                               title=title)
+        files.append(plot.save_figure(fig, folder / "target.png", close=True))
+        write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
+        files.append(str(folder / f"target{fmt}"))
+        graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
+        seeds = setup.routing.seeds if setup.routing is not None else None
+        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds),
+                                      folder / "graph.png", close=True))
+        if setup.muscles:
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png",
+                                          close=True))
+    if run.design is not None:
+        res = run.design
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png",
+                                      close=True))
+        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
+        files.append(str(folder / f"driven{fmt}"))
+    for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
+        files.append(str(ph.save(folder / f"prototype_{key}.png")))
+        files.append(str(folder / f"prototype_{key}.json"))
+    if run.photo is not None:
+        files.append(str(run.photo.save(folder / "photo.png")))
+        files.append(str(folder / "photo.json"))
+        fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
+                                title="target outline on the driven body's photo")
+        files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
+    return [os.path.relpath(f, folder.parent) for f in files]

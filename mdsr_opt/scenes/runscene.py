@@ -1,0 +1,276 @@
+"""A whole scene through the pipeline into a run folder (:func:`run_scene`), and problem scripts' main."""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+from ..core.progress import advance, progress_for_cli
+from .animate import animate
+from .names import RUN_FILES
+from .rundir import check_interrupt
+from .runner import CaseRun, SceneReport, finite, run_case, write_case
+from .scene import Scene
+
+__all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
+
+
+_LOG = logging.getLogger(__name__)
+
+
+def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
+              method: str | None = None, photos: bool = True, figures: bool = True,
+              animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+              log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
+              prototype: bool = True, prototype_seed: int = 0) -> SceneReport:
+    """Run the whole pipeline on a scene's cases and write everything into ``out``.
+
+    For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
+    forward check, SYNTHETIC photograph and contour metrics (:func:`run_case`), then its figures, meshes
+    and photograph into ``out/<case>/`` (:func:`write_case`). Then each animation (forward solves of
+    interpolated contractions) as ``out/<animation>.gif`` with ``out/<animation>.json``; the rest mesh
+    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table).
+
+    Parameters
+    ----------
+    scene : Scene
+    out : folder (created).
+    cases : names of the cases to run (default all); animations needing a case not run are skipped.
+    method : design method overriding the scene's ``design_options["method"]``.
+    photos, figures, animations : turn the photographs, the figures and the animations off.
+    mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
+    photo_resolution : (width, height) of the synthetic photographs.
+    log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
+    prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
+        (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
+        Tables 2-4 as ``out/validation.md``.
+    overwrite : bool
+        ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
+        (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
+        against a second run and removes the temporaries of an interrupted one).
+
+    Returns
+    -------
+    SceneReport
+        ``.success`` is False when a target solve, the routing, a design or an animation frame failed;
+        the reasons are in each case's ``message`` and in ``summary.json``. Nothing is hidden.
+
+    Raises
+    ------
+    OutputFolderError (a ValueError)
+        ``out`` is a file, cannot be written, holds other files (without ``overwrite``) or is locked by
+        another run.
+    KeyboardInterrupt
+        Passed on at once (never recorded as a failed case); the files already complete stay.
+    """
+    from .rundir import RunFolder, noting_interrupts
+
+    names = _check_run(scene, cases, mesh_format)
+    with noting_interrupts(), RunFolder(out, overwrite=overwrite,
+                                        command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
+        folder.begin(run_entries(scene, names))
+        report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
+                             animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
+                             log=log, prototype=prototype, prototype_seed=prototype_seed)
+        folder.finish("complete" if report.success else "complete, some cases failed")
+    return report
+
+
+def _check_run(scene, cases, mesh_format) -> tuple[str, ...]:
+    from ..body.io import FORMATS
+
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
+    if "." + str(mesh_format).lstrip(".") not in FORMATS or mesh_format.lstrip(".") == "msh":
+        raise ValueError(f"mesh_format must be 'vtu', 'vtk' or 'xdmf', got {mesh_format!r}")
+    if isinstance(cases, str):
+        cases = [cases]
+    names = scene.case_names if cases is None else tuple(dict.fromkeys(cases))
+    for c in names:
+        scene.case(c)  # KeyError naming the choices
+    return names
+
+
+def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
+    """The names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one folder per
+    case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+    names = scene.case_names if cases is None else tuple(cases)
+    out = list(RUN_FILES) + list(names)
+    for a in scene.animations:
+        out += [f"{a.name}.gif", f"{a.name}.json"]
+    if scene.gait is not None:
+        out.append(scene.gait.name)  # the gait's folder: layout, schedule, animation, fabrication files
+    return out
+
+
+def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
+                method: str | None = None, photos: bool = True, figures: bool = True,
+                animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+                log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
+                prototype_seed: int = 0) -> SceneReport:
+    """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
+    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
+    import time
+
+    from .. import plot
+    from ..body.io import atomic_path, write_json
+
+    names = _check_run(scene, cases, mesh_format)
+    say = log or (lambda s: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
+    if figures:
+        plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
+                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png",
+                         close=True)
+    proto = None
+    if photos and prototype:
+        from .prototype import VirtualPrototype
+
+        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_resolution=photo_resolution)
+        d = proto.describe()
+        say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
+            f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
+    runs: dict[str, CaseRun] = {}
+    for i, cname in enumerate(names):
+        prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+        check_interrupt()
+        run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
+                       prefix=prefix, prototype=proto)
+        if figures:
+            run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)
+        runs[cname] = run
+        advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
+    anim_out: dict[str, dict] = {}
+    if animations:
+        for anim in scene.animations:
+            if any(c not in runs for c in anim.cases):
+                continue
+            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
+                       if runs[c].design is not None}
+            res = animate(scene, anim, designs)
+            data = res.to_dict()
+            if res.states:
+                say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
+                    + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
+                       f"{res.failed_frames})"))
+                if figures:
+                    act = res.contractions / scene.design_options.get("a_max", 0.6)
+                    # titles state the contraction each frame reached along the muscles' node chains
+                    reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles]
+                               for x in res.states]
+                    titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
+                              + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
+                    plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
+                                        activations=act, titles=titles, fps=anim.fps)
+                    data["gif"] = f"{anim.name}.gif"
+            else:
+                say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
+            anim_out[anim.name] = data
+            write_json(out / f"{anim.name}.json", finite(data))
+            advance(log)
+    if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
+        gait_info = _run_gait(scene, out, runs, figures=figures, log=say)
+        if gait_info is not None:
+            anim_out[scene.gait.name] = gait_info
+    report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
+                         cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
+                         time=time.perf_counter() - t0)
+    summary = report.to_dict()
+    summary.update({"description": scene.description, "source": scene.source, "resolution": scene.resolution,
+                    "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
+                    "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
+                                 "thickness": scene.material.thickness},
+                    "routing_options": scene.routing_options, "design_options": scene.design_options,
+                    "photographs": "SYNTHETIC (rendered by mdsr_opt.evaluate.render_photo), not camera images"
+                    if photos else None,
+                    "expected": scene.expected})
+    write_json(out / "summary.json", finite(summary))
+    with atomic_path(out / "summary.md") as tmp:
+        Path(tmp).write_text(f"# {scene.title or scene.name}\n\n{report.table()}\n")
+    if proto is not None:
+        from .prototype import validation_tables
+
+        with atomic_path(out / "validation.md") as tmp:
+            Path(tmp).write_text(validation_tables([report]))
+    say(f"{scene.name}: {'all cases succeeded' if report.success else 'SOME CASES FAILED'} in {report.time:.1f} s; "
+        f"results in {out}")
+    return report
+
+
+def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
+    """The ``__main__`` of a problem script: ``[--out DIR] [--resolution R] [--case NAME ...]``.
+
+    Returns the process exit code: 0 when every case succeeded, 1 otherwise.
+    """
+    import argparse
+
+    p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
+    p.add_argument("--out", default=None, help="output folder (default: out/<scene>)")
+    p.add_argument("--resolution", default="medium", type=parse_resolution,
+                   help="coarse, medium, fine or a node count (default medium)")
+    p.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
+    p.add_argument("--method", default=None, choices=("flattened", "nested", "derivative-free"),
+                   help="design method (default: the scene's, normally flattened)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier run in --out (without it, a non-empty --out is refused)")
+    a = p.parse_args(argv)
+    try:
+        if a.out is not None:
+            from .rundir import check_out_path
+
+            check_out_path(a.out)
+        scene = build(resolution=a.resolution)
+        with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
+            rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method,
+                            overwrite=a.overwrite, log=log)
+    except KeyboardInterrupt:
+        print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, OSError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 2
+    print(rep.table())
+    return 0 if rep.success else 1
+
+
+def parse_resolution(text: str):
+    return int(text) if text.isdigit() else text
+
+
+def parse_seed(text: str) -> int:
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a non-negative integer, got {text!r}")
+    return v
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    import argparse
+
+    parts = text.lower().split("x")
+    if len(parts) != 2 or not all(p.isdigit() and int(p) >= 64 for p in parts):
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT with both at least 64, got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def n_units(scene: Scene, cases, animations: bool) -> int:
+    """Units of work of ``run_scene`` for the progress bar: one per case and per animation made."""
+    names = set(scene.case_names if cases is None else cases)
+    return len(names) + (sum(set(x.cases) <= names for x in scene.animations) if animations else 0)
+
+
+def _run_gait(scene: Scene, out, runs, figures: bool, log):
+    from ..synthesis.gait import run_gait
+
+    return run_gait(scene, out, runs, figures=figures, log=log)

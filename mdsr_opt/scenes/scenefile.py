@@ -1,0 +1,461 @@
+"""Scene files (TOML or JSON): :func:`load_scene`, every field checked and named on error."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Mapping
+import numpy as np
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+from .names import check_name, check_output_names
+from .reader import SceneFileError, Reader, read_file, scene_options, tname
+from .scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
+from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
+from .shapes import rigid_motion
+
+__all__ = ['load_scene', 'parse_units_and_gait']
+
+
+# ---------------------------------------------------------------------------------------------- scene files
+_TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
+             "cases", "animations", "expected", "units", "gait")
+
+
+_BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
+
+
+_MATERIAL_KEYS = ("model", "E", "nu", "thickness")
+
+
+_REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
+
+
+_MUSCLE_KEYS = ("name", "nodes", "path", "boundary")
+
+
+_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions")
+
+
+_DRAG_KEYS = ("nodes", "at", "to", "by", "rotate", "about")
+
+
+_ANIM_KEYS = ("name", "keyframes", "frames_per_step", "fps")
+
+
+def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> Scene:
+    """Read a scene file (TOML or JSON) into a :class:`Scene`, checking every field.
+
+    The format (TOML shown; JSON has the same structure)::
+
+        name = "finger"                       # required: letters, digits, _ - .
+        title = "A finger bent by its tip"    # optional, as is description
+
+        [body]                                # required: outline (+ holes) or mesh
+        outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
+        holes = [[[1, 0.4], [1.4, 0.4], [1.4, 0.6]]]
+        resolution = "coarse"                 # or a node count; or max_area = 0.02
+        # mesh = "finger.vtu"                 # a mesh file (any meshio format), relative to this file
+
+        [material]                            # optional: neo-hookean, E = 1, nu = 0.3, thickness = 1
+        model = "neo-hookean"                 # or "linear"
+        E = 1.0
+        nu = 0.4
+
+        [regions]                             # named node sets
+        base = { box = [-1, -1, 0, 2] }       # [xmin, ymin, xmax, ymax]
+        tip = { near = [4, 0.5], radius = 0.3, boundary = true }
+        # also: nodes = [...], polygon = [[x, y], ...], loop = 0 (a boundary loop)
+
+        [[muscles]]                           # optional; internal cases need them
+        name = "lower"
+        boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
+
+        [routing]                             # keyword arguments of route_muscles
+        max_muscles = 2
+        [design]                              # keyword arguments of design_contractions
+        a_max = 0.6
+
+        [[cases]]
+        name = "bend"
+        anchors = "base"                      # a region, node indices or [x, y] points
+        drags = [{ nodes = "tip", by = [-1.0, 1.5] },
+                 { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
+        [[cases]]
+        name = "contract"
+        contractions = [0.3]                  # an internal case: one per muscle
+
+        [[animations]]
+        name = "wave"
+        keyframes = [["rest", 0], ["bend", 1], ["rest", 0]]
+
+    Node references (``anchors``, a drag's ``nodes``, a region's ``nodes``) are a region name, a list of
+    region names, a list of node indices, or a list of ``[x, y]`` points, each snapped to the nearest node
+    (which must lie within one mean edge length). A drag moves its nodes ``to`` a point (one node; for
+    several, their centroid goes there), ``by`` a displacement, or ``rotate`` (degrees, anticlockwise)
+    ``about`` a point and then ``by``. Every error names the file and the field, e.g.
+    ``scene.toml: cases[1].drags[0].by: expected a point [x, y], got [1]``; unknown fields are errors
+    (with a suggestion).
+
+    Parameters
+    ----------
+    path : a ``.toml`` or ``.json`` file.
+    resolution : optional
+        Overrides the file's ``body.resolution`` (not ``max_area`` or a mesh file).
+
+    Raises
+    ------
+    FileNotFoundError
+        The file (or its mesh file) does not exist.
+    SceneFileError (a ValueError), TypeError
+        A malformed file.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no such scene file: {path}")
+    if path.is_dir():
+        raise SceneFileError(f"{path} is a folder, not a scene file (a .toml or .json file)")
+    try:
+        data = read_file(path)
+    except PermissionError:
+        raise SceneFileError(f"{path}: cannot read the scene file (permission denied)") from None
+    r = Reader(path)
+    top = r.keys(data, _TOP_KEYS, "", required=("name", "body", "cases"))
+    name = r.string(top["name"], "name")
+    try:
+        check_name(name, "name")
+    except ValueError as exc:
+        r.fail("name", str(exc))
+    mesh, res_used = _scene_mesh(r, top["body"], path, resolution)
+    material = _scene_material(r, top.get("material", {}))
+    regions: dict[str, np.ndarray] = {}
+    reg_in = top.get("regions", {})
+    r.keys(reg_in, list(reg_in) if isinstance(reg_in, Mapping) else (), "regions")
+    for rname, spec in reg_in.items():
+        regions[rname] = _scene_region(r, mesh, spec, f"regions.{rname}", regions)
+    muscles = None
+    if "muscles" in top:
+        mus_in = top["muscles"]
+        if not isinstance(mus_in, list):
+            r.fail("muscles", f"expected a list of muscles ([[muscles]] tables), got {tname(mus_in)}", TypeError)
+        muscles = tuple(_scene_muscle(r, mesh, m, f"muscles[{i}]", regions) for i, m in enumerate(mus_in))
+    routing = scene_options(r, top.get("routing", {}), "routing")
+    design = scene_options(r, top.get("design", {}), "design")
+    cases_in = top["cases"]
+    if not isinstance(cases_in, list) or not cases_in:
+        r.fail("cases", "expected a non-empty list of cases ([[cases]] tables)",
+               TypeError if not isinstance(cases_in, list) else SceneFileError)
+    cases = []
+    seen = set()
+    for i, c in enumerate(cases_in):
+        case = _scene_case(r, mesh, c, f"cases[{i}]", regions, muscles)
+        if case.name in seen:
+            r.fail(f"cases[{i}].name", f"{case.name!r} is used by an earlier case")
+        seen.add(case.name)
+        cases.append(case)
+    anims = []
+    for i, a in enumerate(top.get("animations", []) if isinstance(top.get("animations", []), list)
+                          else r.fail("animations", "expected a list of animations", TypeError)):
+        anims.append(_scene_animation(r, a, f"animations[{i}]", seen))
+    check_output_names([c.name for c in cases], [a.name for a in anims], path.name,
+                       [f"cases[{i}].name" for i in range(len(cases))]
+                       + [f"animations[{i}].name" for i in range(len(anims))])
+    units, gait = parse_units_and_gait(r, top, seen)  # issue 16
+    expected = top.get("expected", {})
+    if not isinstance(expected, Mapping):
+        r.fail("expected", f"expected a table, got {tname(expected)}", TypeError)
+    try:
+        return Scene(name=name, mesh=mesh, material=material, cases=tuple(cases),
+                     title=str(top.get("title", "")), description=str(top.get("description", "")),
+                     muscles=muscles, regions=regions, routing_options=routing, design_options=design,
+                     animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path),
+                     units=units, gait=gait)
+    except (ValueError, TypeError) as exc:  # cross-field checks of Scene (contraction counts...)
+        raise SceneFileError(f"{path.name}: {exc}") from None
+
+
+def _scene_mesh(r: Reader, body, path: Path, resolution) -> tuple[Mesh, int]:
+    b = r.keys(body, _BODY_KEYS, "body")
+    if ("outline" in b) == ("mesh" in b):
+        r.fail("body", "give exactly one of outline (a polygon) and mesh (a mesh file)")
+    if "mesh" in b:
+        for k in ("holes", "resolution", "max_area", "min_angle"):
+            if k in b:
+                r.fail(f"body.{k}", "only applies to an outline, not to a mesh file")
+        from ..body.io import read_mesh
+
+        mpath = path.parent / r.string(b["mesh"], "body.mesh")
+        if not mpath.exists():
+            raise FileNotFoundError(f"{path.name}: body.mesh: no such mesh file: {mpath}")
+        try:
+            return read_mesh(mpath).mesh, 0
+        except ValueError as exc:
+            r.fail("body.mesh", str(exc))
+    outline = r.points(b["outline"], "body.outline", at_least=3)
+    holes_in = b.get("holes", [])
+    if not isinstance(holes_in, list):
+        r.fail("body.holes", f"expected a list of polygons, got {tname(holes_in)}", TypeError)
+    holes = [r.points(h, f"body.holes[{i}]", at_least=3) for i, h in enumerate(holes_in)]
+    min_angle = r.number(b.get("min_angle", 30.0), "body.min_angle", positive=True)
+    if "max_area" in b and "resolution" in b:
+        r.fail("body", "give max_area or resolution, not both")
+    try:
+        if "max_area" in b:
+            return Mesh.from_polygon(outline, max_area=r.number(b["max_area"], "body.max_area", positive=True),
+                                     holes=holes, min_angle=min_angle), 0
+        res = resolution if resolution is not None else b.get("resolution", "medium")
+        try:
+            n = resolve_resolution(res)
+        except (ValueError, TypeError) as exc:
+            r.fail("body.resolution", str(exc), type(exc) if isinstance(exc, TypeError) else SceneFileError)
+        return mesh_polygon(outline, holes, resolution=n, min_angle=min_angle), n
+    except SceneFileError:
+        raise
+    except ValueError as exc:  # self-intersecting outline, hole outside, ...
+        r.fail("body.outline" if "holes" not in str(exc) else "body.holes", str(exc))
+
+
+def _scene_material(r: Reader, spec):
+    from ..body.material import LinearElastic, NeoHookean
+
+    m = r.keys(spec, _MATERIAL_KEYS, "material")
+    kinds = {"neo-hookean": NeoHookean, "neohookean": NeoHookean, "linear": LinearElastic}
+    model = m.get("model", "neo-hookean")
+    if model not in kinds:
+        r.fail("material.model", f"unknown material {model!r} (choose 'neo-hookean' or 'linear')")
+    vals = {k: r.number(m[k], f"material.{k}") for k in ("E", "nu", "thickness") if k in m}
+    try:
+        return kinds[model](vals.get("E", 1.0), vals.get("nu", 0.3), vals.get("thickness", 1.0))
+    except ValueError as exc:
+        field_ = next((k for k in ("E", "nu", "thickness") if str(exc).startswith(k)), "")
+        r.fail(f"material.{field_}" if field_ else "material", str(exc))
+
+
+def _node_ref(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> np.ndarray:
+    """A region name, region names, node indices or [x, y] points -> node indices."""
+    tol = float(mesh.edge_lengths.mean())
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v:
+        r.fail(where, f"expected a region name, node indices or [x, y] points, got {v!r}",
+               TypeError if not isinstance(v, list) else SceneFileError)
+    out = []
+    for i, item in enumerate(v):
+        w = f"{where}[{i}]"
+        if isinstance(item, str):
+            if item not in regions:
+                r.fail(w, f"unknown region {item!r} (regions: {', '.join(regions) or 'none defined'})")
+            out.extend(regions[item].tolist())
+        elif isinstance(item, bool):
+            r.fail(w, "expected a node index, a region name or a point, got a boolean", TypeError)
+        elif isinstance(item, int):
+            if not 0 <= item < mesh.n_nodes:
+                r.fail(w, f"node index {item} out of range [0, {mesh.n_nodes})")
+            out.append(item)
+        elif isinstance(item, list):
+            p = r.point(item, w)
+            try:
+                out.append(nearest_node(mesh, p, tol=tol))
+            except ValueError as exc:
+                r.fail(w, str(exc))
+        else:
+            r.fail(w, f"expected a node index, a region name or a point [x, y], got {tname(item)}", TypeError)
+    return np.unique(np.asarray(out, dtype=np.int64))
+
+
+def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.ndarray:
+    s = r.keys(spec, _REGION_KEYS, where)
+    sel = [k for k in ("nodes", "box", "near", "polygon", "loop") if k in s]
+    if len(sel) != 1:
+        r.fail(where, "give exactly one of nodes, box, near, polygon, loop (boundary = true may restrict it)")
+    kind = sel[0]
+    bnd = s.get("boundary", False)
+    if not isinstance(bnd, bool):
+        r.fail(f"{where}.boundary", f"expected true or false, got {bnd!r}", TypeError)
+    if "radius" in s and kind != "near":
+        r.fail(f"{where}.radius", "only applies to near")
+    if kind == "nodes":
+        idx = _node_ref(r, mesh, s["nodes"], f"{where}.nodes", regions)
+        if bnd:
+            idx = np.intersect1d(idx, mesh.boundary_nodes)
+    elif kind == "box":
+        v = s["box"]
+        if not isinstance(v, list) or len(v) != 4:
+            r.fail(f"{where}.box", f"expected [xmin, ymin, xmax, ymax], got {v!r}")
+        x0, y0, x1, y1 = (r.number(c, f"{where}.box[{i}]") for i, c in enumerate(v))
+        if x0 > x1 or y0 > y1:
+            r.fail(f"{where}.box", "needs xmin <= xmax and ymin <= ymax")
+        idx = nodes_in_box(mesh, x0, y0, x1, y1, boundary=bnd)
+    elif kind == "near":
+        p = r.point(s["near"], f"{where}.near")
+        if "radius" not in s:
+            r.fail(f"{where}.radius", "missing (required with near)")
+        idx = nodes_near(mesh, p, r.number(s["radius"], f"{where}.radius", positive=True), boundary=bnd)
+    elif kind == "polygon":
+        idx = nodes_in_polygon(mesh, r.points(s["polygon"], f"{where}.polygon", at_least=3), boundary=bnd)
+    else:
+        k = s["loop"]
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(mesh.boundary_loops):
+            r.fail(f"{where}.loop", f"expected a boundary loop index in [0, {len(mesh.boundary_loops)}), got {k!r}")
+        idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
+    if len(idx) == 0:
+        r.fail(where, "selects no node of the mesh")
+    return np.asarray(idx, dtype=np.int64)
+
+
+def _scene_muscle(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> Muscle:
+    m = r.keys(spec, _MUSCLE_KEYS, where)
+    sel = [k for k in ("nodes", "path", "boundary") if k in m]
+    if len(sel) != 1:
+        r.fail(where, "give exactly one of nodes (indices), path (waypoints) and boundary ({from, to, via})")
+    name = r.string(m["name"], f"{where}.name") if "name" in m else None
+    try:
+        if "nodes" in m:
+            v = m["nodes"]
+            if not isinstance(v, list) or any(isinstance(i, bool) or not isinstance(i, int) for i in v):
+                r.fail(f"{where}.nodes", "expected a list of node indices", TypeError)
+            mus = Muscle(tuple(v), name=name)
+            mus.check_on(mesh)
+            return mus
+        if "path" in m:
+            return edge_path(mesh, r.points(m["path"], f"{where}.path", at_least=2), name=name)
+        b = r.keys(m["boundary"], ("from", "to", "via"), f"{where}.boundary", required=("from", "to"))
+        via = r.point(b["via"], f"{where}.boundary.via") if "via" in b else None
+        return boundary_path(mesh, r.point(b["from"], f"{where}.boundary.from"),
+                             r.point(b["to"], f"{where}.boundary.to"), via=via, name=name)
+    except SceneFileError:
+        raise
+    except ValueError as exc:
+        r.fail(f"{where}.{sel[0]}", str(exc))
+
+
+def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles) -> Case:
+    c = r.keys(spec, _CASE_KEYS, where, required=("name",))
+    name = r.string(c["name"], f"{where}.name")
+    try:
+        check_name(name, "case name")
+    except ValueError as exc:
+        r.fail(f"{where}.name", str(exc))
+    desc = str(c.get("description", ""))
+    if "contractions" in c:
+        for k in ("anchors", "drags"):
+            if k in c:
+                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors or drags")
+        v = c["contractions"]
+        if not isinstance(v, list):
+            r.fail(f"{where}.contractions", f"expected a list of numbers, got {tname(v)}", TypeError)
+        a = [r.number(x, f"{where}.contractions[{i}]") for i, x in enumerate(v)]
+        if muscles is None:
+            r.fail(f"{where}.contractions", "an internal case needs muscles ([[muscles]])")
+        if len(a) != len(muscles):
+            r.fail(f"{where}.contractions", f"needs one value per muscle ({len(muscles)}), got {len(a)}")
+        for i, x in enumerate(a):
+            if not 0.0 <= x < 1.0:
+                r.fail(f"{where}.contractions[{i}]", f"must lie in [0, 1), got {x}")
+        return Case(name, contractions=a, description=desc)
+    anchors = (_node_ref(r, mesh, c["anchors"], f"{where}.anchors", regions) if "anchors" in c
+               else np.zeros(0, dtype=np.int64))
+    drags_in = c.get("drags", [])
+    if not isinstance(drags_in, list):
+        r.fail(f"{where}.drags", f"expected a list of drags, got {tname(drags_in)}", TypeError)
+    nodes, pos = [], []
+    for i, d in enumerate(drags_in):
+        idx, p = _scene_drag(r, mesh, d, f"{where}.drags[{i}]", regions)
+        nodes.append(idx)
+        pos.append(p)
+    dn = np.concatenate(nodes) if nodes else np.zeros(0, dtype=np.int64)
+    dp = np.vstack(pos) if pos else np.zeros((0, 2))
+    if len(np.unique(dn)) != len(dn):
+        vals, counts = np.unique(dn, return_counts=True)
+        r.fail(f"{where}.drags", f"node {int(vals[counts > 1][0])} is dragged twice")
+    both = np.intersect1d(anchors, dn)
+    if len(both):
+        r.fail(where, f"node {int(both[0])} is both anchored and dragged")
+    if len(anchors) + len(dn) < 2:
+        r.fail(where, "an external case needs at least two fixed nodes (anchors + drags); an internal case "
+               "needs contractions")
+    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc)
+
+
+def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple[np.ndarray, np.ndarray]:
+    d = r.keys(spec, _DRAG_KEYS, where)
+    if ("nodes" in d) == ("at" in d):
+        r.fail(where, "give exactly one of nodes (region, indices or points) and at (a point)")
+    idx = (_node_ref(r, mesh, d["nodes"], f"{where}.nodes", regions) if "nodes" in d
+           else _node_ref(r, mesh, [d["at"]], f"{where}.at", regions))
+    P = mesh.points[idx]
+    if "to" in d:
+        for k in ("by", "rotate", "about"):
+            if k in d:
+                r.fail(f"{where}.{k}", "cannot be combined with to")
+        return idx, P - P.mean(0) + r.point(d["to"], f"{where}.to")
+    if "by" not in d and "rotate" not in d:
+        r.fail(where, "say where the nodes go: to (a point), by (a displacement) or rotate (+ about)")
+    if "about" in d and "rotate" not in d:
+        r.fail(f"{where}.about", "only applies with rotate")
+    ang = math.radians(r.number(d["rotate"], f"{where}.rotate")) if "rotate" in d else 0.0
+    about = r.point(d["about"], f"{where}.about") if "about" in d else P.mean(0)
+    shift = r.point(d["by"], f"{where}.by") if "by" in d else np.zeros(2)
+    return idx, rigid_motion(P, ang, about, shift)
+
+
+def _scene_animation(r: Reader, spec, where: str, case_names: set) -> Animation:
+    a = r.keys(spec, _ANIM_KEYS, where, required=("name", "keyframes"))
+    kf = a["keyframes"]
+    if not isinstance(kf, list):
+        r.fail(f"{where}.keyframes", f"expected a list of [case, fraction] pairs, got {tname(kf)}", TypeError)
+    pairs = []
+    for i, k in enumerate(kf):
+        w = f"{where}.keyframes[{i}]"
+        if not isinstance(k, list) or len(k) != 2 or not isinstance(k[0], str):
+            r.fail(w, f"expected [case name, fraction], got {k!r}")
+        if k[0] != "rest" and k[0] not in case_names:
+            r.fail(w, f"unknown case {k[0]!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
+        pairs.append((k[0], r.number(k[1], f"{w}[1]")))
+    fps_ = a.get("frames_per_step", 6)
+    if isinstance(fps_, bool) or not isinstance(fps_, int) or fps_ < 1:
+        r.fail(f"{where}.frames_per_step", f"expected a positive integer, got {fps_!r}")
+    try:
+        return Animation(r.string(a["name"], f"{where}.name"), tuple(pairs), frames_per_step=fps_,
+                         fps=r.number(a.get("fps", 8.0), f"{where}.fps", positive=True))
+    except ValueError as exc:
+        r.fail(where, str(exc))
+
+
+# ---------------------------------------------------------------------------------------------- issue 16: units, gait
+_GAIT_KEYS = ("name", "poses", "frames_per_step", "max_muscles", "step_time", "cyclic", "fps")
+
+
+def parse_units_and_gait(r: Reader, top: Mapping, case_names: set):
+    """The scene file's ``units = "mm"`` and ``[gait]`` table (``name``, ``poses`` = case names or "rest",
+    ``frames_per_step``, ``max_muscles``, ``step_time``, ``cyclic``, ``fps``)."""
+    from ..synthesis.export import UNITS
+    from ..synthesis.gait import Gait
+
+    units = top.get("units", "mm")
+    if not isinstance(units, str) or units not in UNITS:
+        r.fail("units", f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
+    if "gait" not in top:
+        return units, None
+    g = r.keys(top["gait"], _GAIT_KEYS, "gait", required=("poses",))
+    poses = g["poses"]
+    if not isinstance(poses, list) or not poses or not all(isinstance(p, str) for p in poses):
+        r.fail("gait.poses", f"expected a non-empty list of case names, got {poses!r}")
+    for i, p in enumerate(poses):
+        if p != "rest" and p not in case_names:
+            r.fail(f"gait.poses[{i}]", f"unknown case {p!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
+    for key in ("frames_per_step", "max_muscles"):
+        v = g.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            r.fail(f"gait.{key}", f"expected a positive integer, got {v!r}")
+    if not isinstance(g.get("cyclic", True), bool):
+        r.fail("gait.cyclic", f"expected true or false, got {g['cyclic']!r}")
+    try:
+        return units, Gait(r.string(g.get("name", "gait"), "gait.name"), tuple(poses),
+                           frames_per_step=g.get("frames_per_step", 6), max_muscles=g.get("max_muscles"),
+                           step_time=r.number(g.get("step_time", 1.0), "gait.step_time", positive=True),
+                           cyclic=g.get("cyclic", True), fps=r.number(g.get("fps", 8.0), "gait.fps", positive=True))
+    except (ValueError, TypeError) as exc:
+        r.fail("gait", str(exc))

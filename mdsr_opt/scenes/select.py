@@ -1,0 +1,141 @@
+"""Node selection on a mesh for problem scripts: boxes, discs, polygons, nearest nodes, edge paths."""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+from ..core.checks import as_float_array
+
+__all__ = ['nodes_in_box', 'nodes_near', 'nearest_node', 'nodes_in_polygon', 'edge_path', 'boundary_path']
+
+
+# ---------------------------------------------------------------------------------------------- node selection
+def nodes_in_box(mesh: Mesh, xmin: float = -math.inf, ymin: float = -math.inf, xmax: float = math.inf,
+                 ymax: float = math.inf, boundary: bool = False) -> np.ndarray:
+    """Nodes with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (boundary nodes only with ``boundary``)."""
+    P = mesh.points
+    eps = 1e-9 * mesh.size
+    sel = (P[:, 0] >= xmin - eps) & (P[:, 0] <= xmax + eps) & (P[:, 1] >= ymin - eps) & (P[:, 1] <= ymax + eps)
+    idx = np.flatnonzero(sel)
+    if boundary:
+        idx = np.intersect1d(idx, mesh.boundary_nodes)
+    return idx.astype(np.int64)
+
+
+def nodes_near(mesh: Mesh, point: ArrayLike, radius: float, boundary: bool = False) -> np.ndarray:
+    """Nodes within ``radius`` of ``point`` (boundary nodes only with ``boundary``)."""
+    p = as_float_array(point, "point", shape=(2,))
+    idx = np.flatnonzero(np.linalg.norm(mesh.points - p, axis=1) <= radius)
+    if boundary:
+        idx = np.intersect1d(idx, mesh.boundary_nodes)
+    return idx.astype(np.int64)
+
+
+def nearest_node(mesh: Mesh, point: ArrayLike, boundary: bool = False, tol: float | None = None) -> int:
+    """The node nearest to ``point``; with ``tol``, a ``ValueError`` when it lies farther than ``tol``."""
+    p = as_float_array(point, "point", shape=(2,))
+    cand = mesh.boundary_nodes if boundary else np.arange(mesh.n_nodes)
+    d = np.linalg.norm(mesh.points[cand] - p, axis=1)
+    k = int(np.argmin(d))
+    if tol is not None and d[k] > tol:
+        raise ValueError(f"no {'boundary ' if boundary else ''}node within {tol:.3g} of {p.tolist()} "
+                         f"(nearest at {d[k]:.3g}): is the point on the body?")
+    return int(cand[k])
+
+
+def nodes_in_polygon(mesh: Mesh, polygon: ArrayLike, boundary: bool = False) -> np.ndarray:
+    """Nodes inside (or on) ``polygon``."""
+    from matplotlib.path import Path as _MplPath  # geometry only, no plotting
+
+    poly = as_float_array(polygon, "polygon", shape=(None, 2))
+    inside = _MplPath(poly).contains_points(mesh.points, radius=1e-9 * mesh.size) | \
+        _MplPath(poly).contains_points(mesh.points, radius=-1e-9 * mesh.size)
+    idx = np.flatnonzero(inside)
+    if boundary:
+        idx = np.intersect1d(idx, mesh.boundary_nodes)
+    return idx.astype(np.int64)
+
+
+def _snap(mesh: Mesh, p: np.ndarray, boundary: bool, tol: float | None, what: str) -> int:
+    """The node nearest ``p``; a ValueError naming ``what`` when it is farther than ``tol`` (default one mean
+    edge length)."""
+    tol = float(mesh.edge_lengths.mean()) if tol is None else float(tol)
+    k = nearest_node(mesh, p, boundary=boundary)
+    d = float(np.linalg.norm(mesh.points[k] - p))
+    if d > tol:
+        raise ValueError(f"{what} {p.tolist()} lies {d:.3g} from the nearest {'boundary ' if boundary else ''}node, "
+                         f"more than {tol:.3g} (one mean edge length): is it on the body?")
+    return k
+
+
+def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundary: bool = False,
+              tol: float | None = None) -> Muscle:
+    """A muscle through the nodes nearest to ``waypoints``, joined by shortest paths along mesh edges.
+
+    The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``), each of which must
+    lie within ``tol`` (default: one mean edge length) of its waypoint, else a ``ValueError`` names the
+    waypoint and the distance; consecutive ones are joined by the shortest edge path (Dijkstra on rest edge
+    lengths). The result must be a simple path.
+    """
+    import networkx as nx
+
+    wp = as_float_array(waypoints, "waypoints", shape=(None, 2))
+    if len(wp) < 2:
+        raise ValueError("a muscle path needs at least two waypoints")
+    G = _edge_graph(mesh)
+    ids = [_snap(mesh, p, boundary, tol, f"waypoint {i}") for i, p in enumerate(wp)]
+    path = [ids[0]]
+    for a, b in zip(ids[:-1], ids[1:]):
+        if a == b:
+            continue
+        path += nx.shortest_path(G, a, b, weight="length")[1:]
+    return Muscle(path, name=name)
+
+
+def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike | None = None,
+                  name: str | None = None, inset: int = 0, tol: float | None = None) -> Muscle:
+    """A muscle along a boundary loop from the boundary node nearest ``start`` to the one nearest ``end``.
+
+    ``start`` and ``end`` must lie within ``tol`` (default: one mean edge length) of a boundary node, else a
+    ``ValueError`` names the point and the distance. Of the two ways round the loop, the one passing
+    nearest ``via`` is taken (default: the shorter one). ``inset`` drops that many nodes at each end (a
+    muscle that stops short of a corner).
+    """
+    a = _snap(mesh, as_float_array(start, "start", shape=(2,)), True, tol, "start")
+    b = _snap(mesh, as_float_array(end, "end", shape=(2,)), True, tol, "end")
+    if a == b:
+        raise ValueError("start and end snap to the same boundary node")
+    for loop in mesh.boundary_loops:
+        loop = [int(v) for v in loop]
+        if a in loop and b in loop:
+            break
+    else:
+        raise ValueError("start and end lie on different boundary loops")
+    i, j = loop.index(a), loop.index(b)
+    k = len(loop)
+    fwd = [loop[(i + t) % k] for t in range((j - i) % k + 1)]
+    bwd = [loop[(i - t) % k] for t in range((i - j) % k + 1)]
+    if via is None:
+        path = min(fwd, bwd, key=lambda p: Muscle(p).rest_length(mesh))
+    else:
+        v = as_float_array(via, "via", shape=(2,))
+        path = min(fwd, bwd, key=lambda p: float(np.linalg.norm(mesh.points[p] - v, axis=1).min()))
+    if inset:
+        path = path[inset:-inset]
+    return Muscle(path, name=name)
+
+
+def _edge_graph(mesh: Mesh):
+    import networkx as nx
+
+    G = mesh.__dict__.get("_scene_edge_graph")
+    if G is None:
+        G = nx.Graph()
+        for (i, j), l0 in zip(mesh.edges.tolist(), mesh.edge_lengths.tolist()):
+            G.add_edge(i, j, length=l0)
+        mesh.__dict__["_scene_edge_graph"] = G
+    return G

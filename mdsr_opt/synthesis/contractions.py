@@ -1,0 +1,192 @@
+"""Driving-quantity design: :func:`design_contractions`, one entry for every method."""
+
+from __future__ import annotations
+
+import time
+from typing import Sequence
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+from ..core.checks import positive_float
+from ..mechanics.align import align
+from ..mechanics.constraints import check_anchor_radius
+from .nlp import run_flattened
+from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
+from .results import DesignResult, METHODS, report_muscles
+from .rivals import run_derivative_free, run_nested
+from .verify import verify_design
+
+__all__ = ['design_contractions']
+
+
+# ---------------------------------------------------------------------------------------------- public API
+def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
+                        method: str = "flattened", a_max: float = 0.6, initial: ArrayLike | None = None,
+                        weights: ArrayLike | None = None, interior_weight: float = 0.5,
+                        muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
+                        tol: float | None = None,
+                        max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
+                        warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
+                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
+                        derivatives: str = "assembled") -> DesignResult:
+    """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    muscles : sequence of Muscle (or node lists), at least one, along mesh edges.
+    target : (n, 2) array
+        Target node positions, in any pose (only the shape matters).
+    method : {"flattened", "nested", "derivative-free"}
+        See the module docstring.
+    a_max : float, default 0.6
+        Upper bound on every contraction, in ``(0, 1)``.
+    initial : (m,) array, optional
+        Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
+        clipped to ``[0, 0.9 a_max]``.
+    weights : (n,) array, optional
+        Node weights ``e_i``; default :func:`~mdsr_opt.align.node_weights` with ``interior_weight``.
+    interior_weight : float in [0.3, 0.7], default 0.5
+    muscle_model : {"cable", "springs"}, default "cable"
+        As in :func:`~mdsr_opt.solve_internal`: the exact rope (its path length is ``(1 - a) L0``, its
+        tension a multiplier) or the paper's per-segment dummy springs.
+    stiffness : float, default 10
+        Muscle spring stiffness relative to ``E t`` (springs only).
+    anchor_radius : float, optional
+        Radius of the rigid patch at each muscle end (a length, >= 0); default
+        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (a fraction of the body's size).
+    tol : float, optional
+        Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
+        (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).
+    max_iter : int, optional
+        IPOPT iterations (default 500), L-BFGS-B iterations (default 500), or function evaluations
+        (derivative-free, default ``400 * m``).
+    hessian : {"exact", "gauss-newton"}
+        Flattened only: the exact Hessian of the Lagrangian, or the objective's Gauss-Newton Hessian.
+    scaling : {"auto", "size"}
+        Flattened only: objective over ``sum(e) h^2`` and constraints over ``E t h`` (``h`` the mean edge
+        length), or the objective normalised by the body's size instead (for comparison studies).
+    warm_start : bool
+        Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
+    derivatives : {"assembled", "casadi"}
+        Flattened only: give IPOPT the NLP's exact derivatives assembled term by term from small per-term
+        functions (fast to build, linear in the mesh size), or build the NLP in SX and let CasADi
+        differentiate it (the reference; slow to build). Both are exact; iterates agree to rounding.
+    outer : {"nelder-mead", "powell"}
+        Derivative-free only: the scipy method.
+    options : dict, optional
+        Extra options for IPOPT (flattened, without the ``ipopt.`` prefix) or scipy's ``minimize``.
+    inner_tol : float
+        IPOPT tolerance of the forward solves.
+    verify : bool
+        Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only).
+    gap_rtol : float
+        Verification tolerance on the state gap, relative to ``mesh.size``.
+
+    Returns
+    -------
+    DesignResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        Bad input: target of the wrong shape, muscles not on the mesh, ``a_max`` outside (0, 1), an empty
+        muscle list, an unknown method.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> stretched = mesh.points * 1.1                     # muscles cannot stretch a body
+    >>> res = design_contractions(mesh, NeoHookean(1.0, 0.3), [Muscle(range(1, 16))], stretched)
+    >>> res.success, res.difference > 0.01
+    (True, True)
+    """
+    clock0 = time.perf_counter()
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    if hessian not in ("exact", "gauss-newton"):
+        raise ValueError(f"hessian must be 'exact' or 'gauss-newton', got {hessian!r}")
+    if scaling not in ("auto", "size"):
+        raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
+    if outer not in ("nelder-mead", "powell"):
+        raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+    if derivatives not in ("assembled", "casadi"):
+        raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
+    mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
+                                                    interior_weight, muscle_model, stiffness, initial)
+    anchor_radius = check_anchor_radius(mesh, anchor_radius)
+    m = len(mus)
+    if tol is None:
+        tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
+    tol = positive_float(tol, "tol")
+    if max_iter is None:
+        max_iter = 400 * m if method == "derivative-free" else 500
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    inner_tol = positive_float(inner_tol, "inner_tol")
+    gap_rtol = positive_float(gap_rtol, "gap_rtol")
+    if a0 is None:
+        a0 = initial_guess_of(mesh, mus, y, a_max)
+
+    prob = DesignProblem(mesh, material, mus, y, w, muscle_model, stiffness, a_max, anchor_radius)
+    fwd = ForwardSolver(prob, inner_tol, 200)
+    t_solve0 = time.perf_counter()
+
+    def clock():
+        return time.perf_counter() - t_solve0
+
+    build_time = prob.build_time
+    bt = 0.0
+    if method == "flattened":
+        out, status, iters, bt = run_flattened(prob, a0, fwd, tol, int(max_iter), hessian, scaling, warm_start,
+                                                options, clock, derivatives)
+        build_time += bt
+        kappa = None
+        if out is None:
+            x, a, ok, hist, d0 = fwd.x, a0, False, [], float("nan")
+        else:
+            x, a, ok, hist, d0 = out["x"], out["a"], out["success"], out["history"], out["initial_difference"]
+            kappa = out["kappa"]
+    else:
+        if method == "nested":
+            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, int(max_iter), options, clock)
+        else:
+            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, int(max_iter), outer, options, clock)
+        hist = obj.history
+        kappa = None
+        d0 = hist[0][1] if hist else float("nan")
+        if obj.best is None:
+            x, a, ok = fwd.x, a0, False
+        else:
+            _J, a, x = obj.best
+    build_time += fwd.build_time
+    x2 = x.reshape(-1, 2)
+    al_rest = align(x2, mesh.points)
+    x_rest = al_rest.apply(x2)
+    al = align(x_rest, y, w)
+    t_end = time.perf_counter()
+    if method == "flattened":  # seconds of solving: the NLP's build is not part of the trace
+        hist = [(t - bt, d) for t, d in hist] + [(t_end - t_solve0 - bt, al.difference)]
+    total = t_end - clock0
+    res = DesignResult(method=method, contractions=np.asarray(a, dtype=float).copy(), x=x_rest, rotation=al.R,
+                       translation=al.t, difference=al.difference, success=bool(ok), status=status,
+                       iterations=int(iters), n_forward=fwd.n_solves, inner_iterations=fwd.iterations,
+                       build_time=build_time, solve_time=total - build_time, time=total,
+                       initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
+                       a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist),
+                       anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy())
+    report_muscles(prob, res, x, kappa)
+    if not np.all(np.isfinite(res.x)) or mesh.jacobians(res.x).min() <= 0:
+        res.success = False
+        res.status += "; rejected: the design's state inverts an element"
+    if verify:
+        v = verify_design(mesh, material, mus, res, y, weights=w, gap_rtol=gap_rtol)
+        res.verification = v
+        if res.success and not v.passed:
+            res.success = False
+            res.status += f"; rejected by verification: {v.message}"
+    return res

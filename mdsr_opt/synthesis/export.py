@@ -1,0 +1,311 @@
+"""Fabrication files: the body and its muscle channels at true scale, and the muscle table.
+
+:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.poses.PosesResult`, a
+:class:`~mdsr_opt.design.DesignResult` or a mapping of pose names to DesignResults):
+
+``<name>.svg``
+    The body outline, its holes and every muscle channel (the centre line along the muscle's mesh edges,
+    drawn ``channel_width`` wide) at true scale: the ``viewBox`` is in the body's length unit and the
+    ``width``/``height`` attributes state the physical size, so a printer or laser cutter reproduces it 1:1.
+    Both ends of every channel are marked by a circle of the rigid end patch's radius (the cable model's
+    ``anchor_radius``, else 0.4 mean edge lengths); each muscle is labelled with its name.
+``<name>.dxf``
+    The same geometry through ezdxf (``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline, closed),
+    ``HOLES``, ``MUSCLES`` (one open LWPOLYLINE per muscle, its vertices the muscle's nodes at rest),
+    ``ENDS`` (circles) and ``LABELS`` (text).
+``<name>_muscles.csv``
+    One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs.
+
+Every number is in the body's length unit ``units`` (one of :data:`UNITS`, default ``"mm"``), and every
+column header says it. Tensions are forces in units of ``E * thickness * length`` (with ``E`` in N/mm^2 and
+lengths and thickness in mm, newtons). Input is checked completely before anything is written, and each
+file is written atomically, so bad input leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _stdio
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+from xml.sax.saxutils import escape
+
+import numpy as np
+
+from ..body.mesh import Mesh, polygon_area
+from ..body.muscles import Muscle, check_muscles
+
+__all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "export_fabrication"]
+
+#: Known length units and their size in metres.
+UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
+_DXF_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6, "um": 13}
+
+
+def check_units(units) -> str:
+    """``units`` if it is a known length unit (:data:`UNITS`); TypeError/ValueError naming the choices."""
+    if not isinstance(units, str):
+        raise TypeError(f"units must be a string (one of {', '.join(UNITS)}), got {type(units).__name__}")
+    if units not in UNITS:
+        raise ValueError(f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
+    return units
+
+
+@dataclass(eq=False)
+class FabricationData:
+    """Everything the fabrication files contain, checked (see :func:`fabrication_data`)."""
+
+    outline: np.ndarray           # (k, 2) outer boundary, counter-clockwise
+    holes: list                   # list of (k, 2)
+    muscles: tuple                # Muscle
+    paths: list                   # (len, 2) rest polylines
+    rest_lengths: np.ndarray      # (m,)
+    pose_names: tuple
+    contractions: np.ndarray      # (P, m)
+    strokes: np.ndarray           # (P, m)
+    tensions: np.ndarray          # (P, m), NaN where unknown
+    end_radius: float
+    channel_width: float
+    units: str
+
+
+def _from_design(d, muscles, mesh):
+    a = np.asarray(d.contractions, dtype=float).reshape(-1)
+    if len(a) != len(muscles):
+        raise ValueError(f"the design has {len(a)} contraction(s) for {len(muscles)} muscle(s)")
+    L0 = np.array([m.rest_length(mesh) for m in muscles])
+    st = getattr(d, "stroke", None)
+    st = a * L0 if st is None or np.size(st) != len(a) else np.asarray(st, dtype=float).reshape(-1)
+    tn = getattr(d, "tension", None)
+    tn = np.full(len(a), np.nan) if tn is None or np.size(tn) != len(a) else np.asarray(tn, float).reshape(-1)
+    return a, st, tn, getattr(d, "anchor_radius", None)
+
+
+def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
+                     channel_width: float | None = None) -> FabricationData:
+    """Collect and check the geometry and per-pose figures of a design (writes nothing).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The body at rest, in length unit ``units``.
+    design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None
+        None: the layout alone (no strokes).
+    muscles : the layout; required unless ``design`` is a PosesResult (which carries its own).
+    units : one of :data:`UNITS`.
+    channel_width : float, optional
+        Drawn width of a channel (length units); default 0.2 mean edge lengths.
+    """
+    from .poses import PosesResult
+
+    units = check_units(units)
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    if isinstance(design, PosesResult):
+        if design.states.shape[1] != mesh.n_nodes:
+            raise ValueError(f"the design is of a mesh with {design.states.shape[1]} nodes, not this one "
+                             f"({mesh.n_nodes})")
+        mus = list(design.muscles) if muscles is None else check_muscles(mesh, muscles)
+        names, A, S, T = design.names, design.contractions, design.strokes, design.tensions
+        radius = design.anchor_radius
+    else:
+        if muscles is None:
+            raise ValueError("give the muscles of the design (muscles=...): only a PosesResult carries its own")
+        mus = check_muscles(mesh, muscles)
+        if design is None:
+            items = {}
+        elif isinstance(design, Mapping):
+            items = dict(design)
+        elif hasattr(design, "contractions"):
+            items = {"design": design}
+        else:
+            raise TypeError("design must be a PosesResult, a DesignResult, a mapping of pose name to "
+                            f"DesignResult or None, got {type(design).__name__}")
+        rows = {k: _from_design(d, mus, mesh) for k, d in items.items()}
+        names = tuple(str(k) for k in rows)
+        m = len(mus)
+        A = np.array([r[0] for r in rows.values()]).reshape(len(rows), m)
+        S = np.array([r[1] for r in rows.values()]).reshape(len(rows), m)
+        T = np.array([r[2] for r in rows.values()]).reshape(len(rows), m)
+        radius = next((r[3] for r in rows.values() if r[3] is not None), None)
+    if not mus:
+        raise ValueError("the design has no muscles: nothing to fabricate")
+    h = float(mesh.edge_lengths.mean())
+    if channel_width is None:
+        channel_width = 0.2 * h
+    if not (isinstance(channel_width, (int, float)) and math.isfinite(channel_width) and channel_width > 0):
+        raise ValueError(f"channel_width must be a positive length, got {channel_width!r}")
+    loops = [mesh.points[np.asarray(lp)] for lp in mesh.boundary_loops]
+    areas = [polygon_area(p) for p in loops]
+    k = int(np.argmax(np.abs(areas)))
+    outline = loops[k] if areas[k] > 0 else loops[k][::-1]
+    holes = [p for i, p in enumerate(loops) if i != k]
+    P = mesh.points
+    return FabricationData(outline=outline, holes=holes, muscles=tuple(mus),
+                           paths=[P[list(mu.nodes)] for mu in mus],
+                           rest_lengths=np.array([mu.rest_length(mesh) for mu in mus]), pose_names=tuple(names),
+                           contractions=np.asarray(A, float), strokes=np.asarray(S, float),
+                           tensions=np.asarray(T, float),
+                           end_radius=float(radius) if radius else 0.4 * h, channel_width=float(channel_width),
+                           units=units)
+
+
+# ---------------------------------------------------------------------------------------------- writers
+def _label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """A label point beside the middle of a polyline, and the text direction."""
+    i = max(1, len(path) // 2)
+    a, b = path[i - 1], path[i]
+    d = (b - a) / (np.linalg.norm(b - a) or 1.0)
+    return (a + b) / 2 + offset * np.array([-d[1], d[0]]), d
+
+
+def _svg_text(fd: FabricationData, title: str) -> str:
+    allp = np.vstack([fd.outline] + fd.holes)
+    lo, hi = allp.min(0), allp.max(0)
+    size = float((hi - lo).max())
+    pad = 0.05 * size + fd.end_radius
+    W, H = float(hi[0] - lo[0] + 2 * pad), float(hi[1] - lo[1] + 2 * pad)
+    u = fd.units
+    scale, phys = (1.0, u) if u in ("mm", "cm", "in") else (UNITS[u] / 1e-3, "mm")
+
+    def xy(p):
+        return f"{p[0] - lo[0] + pad:.9g},{hi[1] - p[1] + pad:.9g}"
+
+    lw = 0.002 * size
+    fs = 0.035 * size
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           f'<svg xmlns="http://www.w3.org/2000/svg" version="1.1" width="{W * scale:.9g}{phys}" '
+           f'height="{H * scale:.9g}{phys}" viewBox="0 0 {W:.9g} {H:.9g}">',
+           f"<title>{escape(title)} (true scale, units: {u})</title>",
+           '<g id="body" fill="none" stroke="#000000" stroke-width="%.6g">' % lw]
+    for i, loop in enumerate([fd.outline] + fd.holes):
+        pts = " ".join(xy(p) for p in loop)
+        kind = "outline" if i == 0 else f"hole{i - 1}"
+        out.append(f'<polygon id="{kind}" class="{"outline" if i == 0 else "hole"}" points="{pts}"/>')
+    out.append("</g>")
+    out.append('<g id="muscles" fill="none" stroke-linecap="round" stroke-linejoin="round">')
+    colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
+    for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
+        c = colors[i % len(colors)]
+        pts = " ".join(xy(p) for p in path)
+        out.append(f'<polyline class="channel" points="{pts}" stroke="{c}" stroke-opacity="0.35" '
+                   f'stroke-width="{fd.channel_width:.9g}"/>')
+        out.append(f'<polyline class="muscle" id="{escape(mu.name)}" points="{pts}" stroke="{c}" '
+                   f'stroke-width="{lw:.6g}" data-rest-length="{fd.rest_lengths[i]:.9g}" data-units="{u}"/>')
+    out.append("</g>")
+    out.append(f'<g id="ends" fill="none" stroke-width="{lw:.6g}">')
+    for i, path in enumerate(fd.paths):
+        c = colors[i % len(colors)]
+        for p in (path[0], path[-1]):
+            x, y = xy(p).split(",")
+            out.append(f'<circle class="end" cx="{x}" cy="{y}" r="{fd.end_radius:.9g}" stroke="{c}"/>')
+    out.append("</g>")
+    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle">')
+    for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
+        p, _ = _label_at(path, 1.2 * fs)
+        x, y = xy(p).split(",")
+        out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i % len(colors)]}">{escape(mu.name)}</text>')
+    out.append("</g>")
+    out.append(f'<text x="{pad * 0.3:.6g}" y="{H - pad * 0.3:.6g}" font-family="sans-serif" font-size="{fs * 0.8:.6g}">'
+               f"{escape(title)}: {len(fd.muscles)} muscle channel(s), circles: channel ends; units: {u}</text>")
+    out.append("</svg>")
+    return "\n".join(out) + "\n"
+
+
+def _dxf_doc(fd: FabricationData):
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    doc.header["$INSUNITS"] = _DXF_INSUNITS[fd.units]
+    doc.header["$MEASUREMENT"] = 0 if fd.units == "in" else 1
+    for name, color in (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("ENDS", 5), ("LABELS", 3)):
+        doc.layers.add(name, color=color)
+    msp = doc.modelspace()
+    msp.add_lwpolyline([tuple(map(float, p)) for p in fd.outline], close=True, dxfattribs={"layer": "BODY"})
+    for h in fd.holes:
+        msp.add_lwpolyline([tuple(map(float, p)) for p in h], close=True, dxfattribs={"layer": "HOLES"})
+    size = float(np.ptp(fd.outline, axis=0).max())
+    for mu, path in zip(fd.muscles, fd.paths):
+        msp.add_lwpolyline([tuple(map(float, p)) for p in path], close=False,
+                           dxfattribs={"layer": "MUSCLES", "const_width": fd.channel_width})
+        for p in (path[0], path[-1]):
+            msp.add_circle(tuple(map(float, p)), fd.end_radius, dxfattribs={"layer": "ENDS"})
+        q, d = _label_at(path, 0.05 * size)
+        txt = msp.add_text(mu.name, height=0.035 * size, dxfattribs={"layer": "LABELS"})
+        txt.set_placement(tuple(map(float, q)))
+    return doc
+
+
+def _csv_text(fd: FabricationData) -> str:
+    u = fd.units
+    head = ["muscle", "edges", f"rest length [{u}]", f"start x [{u}]", f"start y [{u}]", f"end x [{u}]",
+            f"end y [{u}]"]
+    for p in fd.pose_names:
+        head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"tension {p} [E*t*{u}]"]
+    if fd.pose_names:
+        head += [f"max stroke [{u}]", f"max tension [E*t*{u}]"]
+    buf = _stdio.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(head)
+
+    def num(v):
+        return "" if not np.isfinite(v) else f"{v:.9g}"
+
+    for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
+        row = [mu.name, len(mu.nodes) - 1, num(fd.rest_lengths[i]), num(path[0, 0]), num(path[0, 1]),
+               num(path[-1, 0]), num(path[-1, 1])]
+        for k in range(len(fd.pose_names)):
+            row += [num(fd.strokes[k, i]), num(fd.contractions[k, i]), num(fd.tensions[k, i])]
+        if fd.pose_names:
+            t = fd.tensions[:, i]
+            row += [num(fd.strokes[:, i].max()), num(np.nanmax(t)) if np.isfinite(t).any() else ""]
+        w.writerow(row)
+    return buf.getvalue()
+
+
+def export_fabrication(mesh: Mesh, design, folder, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
+                       name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
+    """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The body at rest; its coordinates are lengths in ``units``.
+    design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None (layout only)
+    folder : output folder (created).
+    muscles : the layout (required unless ``design`` is a PosesResult).
+    units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
+    name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
+    channel_width : drawn channel width, length units (default 0.2 mean edge lengths).
+
+    Returns
+    -------
+    dict
+        ``{"svg": path, "dxf": path, "csv": path}``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Unknown units, a design of another mesh, missing muscles, a bad name: before anything is written.
+    """
+    from ..body.io import atomic_path
+
+    if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
+        raise ValueError(f"name must be a plain file stem, got {name!r}")
+    fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width)
+    svg = _svg_text(fd, name)
+    doc = _dxf_doc(fd)
+    table = _csv_text(fd)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
+    with atomic_path(paths["svg"]) as tmp:
+        Path(tmp).write_text(svg)
+    with atomic_path(paths["dxf"]) as tmp:
+        doc.saveas(tmp)
+    with atomic_path(paths["csv"]) as tmp:
+        Path(tmp).write_text(table)
+    return {k: os.fspath(v) for k, v in paths.items()}

@@ -1,0 +1,412 @@
+"""Gait schedules: the strokes of every muscle over a cyclic sequence of poses on one shared layout.
+
+:func:`gait_schedule` takes a :class:`~mdsr_opt.poses.PosesResult` (one layout, every pose's strokes) and a
+sequence of its poses, interpolates the strokes linearly between them and solves every frame forward. The
+schedule is written as a CSV actuation schedule in length units (:meth:`GaitSchedule.write_csv`), drawn as
+a chart (:func:`plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
+the scene runner's hook: layout, schedule, chart, GIF and fabrication files of a scene's :class:`Gait`.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+from .poses import PosesResult, check_budget
+
+__all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait"]
+
+
+# ---------------------------------------------------------------------------------------------- gait
+def _frames(value, name: str = "frames_per_step") -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be a positive integer, got {type(value).__name__}")
+    if value < 1:
+        raise ValueError(f"{name} must be a positive integer (frames per step), got {value}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class Gait:
+    """A cyclic sequence of a scene's poses played on one shared layout (the scene-file ``[gait]`` block).
+
+    Parameters
+    ----------
+    name : str
+        Output folder name (``out/<name>/``).
+    sequence : tuple of str
+        Case names in order; ``"rest"`` means every stroke zero. With ``cyclic`` the first pose closes the
+        cycle. Every case named (except ``"rest"``) is a pose of the shared layout.
+    frames_per_step : int
+        Frames from one pose to the next (the next excluded); total ``steps * frames_per_step + 1``.
+    max_muscles : int, optional
+        The shared layout's muscle budget.
+    step_time : float
+        Seconds from one pose to the next (the schedule's time axis).
+    cyclic : bool
+    fps : float
+        Frames per second of the GIF.
+    """
+
+    name: str
+    sequence: tuple
+    frames_per_step: int = 6
+    max_muscles: int | None = None
+    step_time: float = 1.0
+    cyclic: bool = True
+    fps: float = 8.0
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name or not all(c.isalnum() or c in "_-" for c in self.name):
+            raise ValueError(f"gait name must be letters, digits, '_' and '-', got {self.name!r}")
+        seq = tuple(str(s) for s in self.sequence)
+        if not seq:
+            raise ValueError(f"gait {self.name!r}: the pose sequence is empty")
+        if all(s == "rest" for s in seq):
+            raise ValueError(f"gait {self.name!r}: names no pose other than 'rest'")
+        if len(seq) < 2 and not self.cyclic:
+            raise ValueError(f"gait {self.name!r}: a non-cyclic gait needs at least two poses")
+        object.__setattr__(self, "sequence", seq)
+        object.__setattr__(self, "frames_per_step", _frames(self.frames_per_step))
+        check_budget(self.max_muscles)
+        if not (float(self.step_time) > 0 and math.isfinite(float(self.step_time))):
+            raise ValueError(f"gait {self.name!r}: step_time must be positive, got {self.step_time!r}")
+        if not (float(self.fps) > 0):
+            raise ValueError(f"gait {self.name!r}: fps must be positive, got {self.fps!r}")
+
+    @property
+    def poses(self) -> tuple[str, ...]:
+        """The poses named (no repeats, no ``"rest"``)."""
+        return tuple(dict.fromkeys(s for s in self.sequence if s != "rest"))
+
+
+@dataclass(eq=False)
+class GaitSchedule:
+    """The strokes of every muscle over a gait, and the forward-solved states.
+
+    Attributes
+    ----------
+    sequence : tuple of str
+        The keyframe poses in order (the cycle closed: last = first when cyclic).
+    frames_per_step : int
+    times : (F,) ndarray
+        Seconds (``step_time`` per step).
+    keyframes : (K,) int ndarray
+        Frame index of every keyframe.
+    labels : tuple of str
+        Per frame, the pose or ``"a->b 2/5"``.
+    muscle_names : tuple of str
+    rest_lengths : (m,) ndarray
+    strokes : (F, m) ndarray
+        Commanded strokes (length taken in by each muscle; linear between the designed poses).
+    achieved : (F, m) ndarray
+        Strokes the forward solve achieved (NaN when the solver gives none).
+    tensions : (F, m) ndarray
+    states : (F, n, 2) ndarray
+    success : (F,) bool ndarray
+    status : tuple of str
+    units : str
+        The length unit of every stroke.
+    """
+
+    sequence: tuple
+    frames_per_step: int
+    times: np.ndarray
+    keyframes: np.ndarray
+    labels: tuple
+    muscle_names: tuple
+    rest_lengths: np.ndarray
+    strokes: np.ndarray
+    achieved: np.ndarray
+    tensions: np.ndarray
+    states: np.ndarray
+    success: np.ndarray
+    status: tuple
+    units: str = "mm"
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.times)
+
+    @property
+    def contractions(self) -> np.ndarray:
+        return self.strokes / self.rest_lengths
+
+    def __repr__(self) -> str:
+        return (f"GaitSchedule({' -> '.join(self.sequence)}, {self.n_frames} frames, {len(self.muscle_names)} "
+                f"muscles, max stroke {np.nanmax(self.strokes):.4g} {self.units}, "
+                f"{int(self.success.sum())}/{self.n_frames} frames solved)")
+
+    def write_csv(self, path) -> str:
+        """The actuation schedule: one row per frame, strokes in ``units`` (atomically). Returns the path."""
+        from ..body.io import atomic_path
+
+        u = self.units
+        head = ["frame", "time [s]", "pose"] + [f"{n} stroke [{u}]" for n in self.muscle_names] + \
+            [f"{n} achieved [{u}]" for n in self.muscle_names] + ["solved"]
+        with atomic_path(path) as tmp:
+            with open(tmp, "w", newline="") as fh:
+                w = csv.writer(fh)
+                w.writerow(head)
+                for k in range(self.n_frames):
+                    w.writerow([k, f"{self.times[k]:.6g}", self.labels[k]]
+                               + [f"{v:.9g}" for v in self.strokes[k]]
+                               + ["" if not np.isfinite(v) else f"{v:.9g}" for v in self.achieved[k]]
+                               + [int(self.success[k])])
+        return os.fspath(path)
+
+
+def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[str], *, frames_per_step: int = 6,
+                  cyclic: bool = True, step_time: float = 1.0, units: str = "mm",
+                  solve_options: Mapping | None = None) -> GaitSchedule:
+    """The strokes of every muscle over a cyclic sequence of poses, every frame solved forward.
+
+    Keyframes take the designed strokes of their pose (``"rest"``: all zero). Between two keyframes the
+    pulling part of every stroke (``max(stroke, 0)``) is interpolated linearly over ``frames_per_step``
+    frames; a muscle that does not pull in a frame is released as far as either neighbouring pose needs
+    (``min(s_i, s_{i+1}, 0)``: the servo pays the rope out first, so the body can stretch along it). Each
+    frame is a forward internal-driving solve (:func:`~mdsr_opt.solve_internal` with the pulling muscles, the
+    layout's muscle model and anchor radius, warm-started from the previous frame, else from rest); a frame in which no
+    muscle pulls is the rest shape exactly. A released rope whose path in the solved frame is longer than
+    the rope paid out would be taut: that frame is reported as failed.
+
+    Parameters
+    ----------
+    mesh, material : the body of ``layout``.
+    layout : PosesResult from :func:`design_poses`.
+    sequence : pose names (or ``"rest"``), at least one.
+    frames_per_step : int >= 1
+    cyclic : bool
+        Close the cycle: the first keyframe is repeated at the end.
+    step_time : float
+        Seconds per step.
+    units : str
+        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.export.UNITS`).
+    solve_options : dict, optional
+        Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
+        tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
+        ropes, strokes of ~1e-3 of their length, leave residuals of ~1e-4 that the solve rejects).
+
+    Returns
+    -------
+    GaitSchedule
+        ``n_frames = steps * frames_per_step + 1``; a failed frame solve is reported in ``success`` and
+        ``status``.
+    """
+    from ..mechanics.equilibrium import solve_internal
+    from .export import check_units
+
+    if not isinstance(layout, PosesResult):
+        raise TypeError(f"layout must be a PosesResult (from design_poses), got {type(layout).__name__}")
+    if not isinstance(mesh, Mesh) or layout.states.shape[1] != mesh.n_nodes:
+        raise ValueError("mesh is not the body of this layout (node counts differ)")
+    fps_ = _frames(frames_per_step)
+    units = check_units(units)
+    if isinstance(sequence, str) or not isinstance(sequence, Sequence):
+        raise TypeError(f"sequence must be a list of pose names, got {type(sequence).__name__}")
+    seq = [str(s) for s in sequence]
+    if not seq:
+        raise ValueError("the gait's pose sequence is empty")
+    for s in seq:
+        if s != "rest":
+            layout.index(s)
+    if not (float(step_time) > 0):
+        raise ValueError(f"step_time must be positive, got {step_time!r}")
+    if cyclic:
+        seq = seq + [seq[0]]
+    if len(seq) < 2:
+        raise ValueError("a non-cyclic gait needs at least two poses")
+    opts = {"tol": 1e-10, **dict(solve_options or {})}  # the design's own forward tolerance
+    m = layout.n_muscles
+    key = [np.zeros(m) if s == "rest" else layout.strokes[layout.index(s)] for s in seq]
+    S, labels, kf = [], [], []
+    for i in range(len(seq) - 1):
+        kf.append(len(S))
+        lo, hi = key[i], key[i + 1]
+        for j in range(fps_):
+            if j == 0:
+                S.append(lo.copy())
+                labels.append(seq[i])
+                continue
+            pull = np.maximum(lo, 0) + (np.maximum(hi, 0) - np.maximum(lo, 0)) * j / fps_
+            S.append(np.where(pull > 0, pull, np.minimum(np.minimum(lo, hi), 0.0)))
+            labels.append(f"{seq[i]}->{seq[i + 1]} {j}/{fps_}")
+    kf.append(len(S))
+    S.append(key[-1].copy())
+    labels.append(seq[-1])
+    S = np.array(S)
+    L0 = layout.rest_lengths
+    F = len(S)
+    ach, ten = np.full((F, m), np.nan), np.full((F, m), np.nan)
+    states, ok, status = [], np.zeros(F, bool), []
+    x_prev = None
+    for k in range(F):
+        on = np.flatnonzero(S[k] > 0)
+        if not len(on):  # nothing pulls: the rest shape, exactly
+            x, ok[k], msg = mesh.points.copy(), True, "rest (no muscle pulls)"
+        else:
+            args = (mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999))
+            kw = dict(model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
+            # warm start only when the same muscles pull at least as hard as in the previous frame (from a
+            # tighter state the solver's first guess tends to invert an element; then it starts from rest)
+            warm = x_prev is not None and k > 0 and np.array_equal(on, np.flatnonzero(S[k - 1] > 0)) \
+                and bool(np.all(S[k, on] >= S[k - 1, on]))
+            r = solve_internal(*args, initial_guess=x_prev, **kw) if warm else None
+            if r is None or not r.success:  # the warm start can fail (a new set of pulling muscles): from rest
+                r = solve_internal(*args, **kw)
+            x, ok[k], msg = np.asarray(r.x, dtype=float), bool(r.success), str(r.status)
+            st, tn = getattr(r, "stroke", None), getattr(r, "tension", None)
+            ach[k, on] = st if st is not None and np.size(st) == len(on) else np.nan
+            ten[k, on] = tn if tn is not None and np.size(tn) == len(on) else np.nan
+            x_prev = r.x if r.success else None
+        off = np.flatnonzero(S[k] <= 0)
+        if len(off):  # released ropes: their length is L0 - stroke; the body's path must not exceed it
+            Lx = np.array([layout.muscles[i].length(x) for i in off])
+            ach[k, off], ten[k, off] = L0[off] - Lx, 0.0
+            over = Lx - (L0[off] - S[k, off])
+            if (over > 1e-6 * L0[off]).any():
+                i = int(np.argmax(over))
+                ok[k] = False
+                msg += (f"; released muscle {layout.muscles[off[i]].name} would be taut (its path exceeds the paid-out "
+                        f"rope by {over[i]:.3g} {units})")
+        states.append(x)
+        status.append(msg)
+    return GaitSchedule(sequence=tuple(seq), frames_per_step=fps_, times=np.arange(F) * float(step_time) / fps_,
+                        keyframes=np.array(kf), labels=tuple(labels),
+                        muscle_names=tuple(mu.name for mu in layout.muscles), rest_lengths=L0.copy(), strokes=S,
+                        achieved=ach, tensions=ten, states=np.array(states), success=ok, status=tuple(status),
+                        units=units)
+
+
+def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
+    """Chart of the strokes over time: one line per muscle (commanded solid, achieved dotted), the
+    keyframes marked with their poses. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(7.5, 3.8))
+    else:
+        fig = ax.figure
+    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    t = schedule.times
+    for i, n in enumerate(schedule.muscle_names):
+        c = cyc[i % len(cyc)]
+        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
+                f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
+        if np.isfinite(schedule.achieved[:, i]).any():
+            ax.plot(t, schedule.achieved[:, i], ":", color=c, lw=1.2)
+    top = float(np.nanmax(schedule.strokes)) if schedule.strokes.size else 1.0
+    for k in schedule.keyframes:
+        ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
+        ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
+    bad = ~schedule.success
+    if bad.any():
+        ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(f"stroke [{schedule.units}] (< 0: rope paid out)")
+    low = min(0.0, float(np.nanmin(schedule.strokes)))
+    ax.set_ylim(bottom=low - 0.08 * (top - low), top=top * 1.15 if top > 0 else 1.0)
+    ax.axhline(0.0, color="0.5", lw=0.6, zorder=0)
+    ax.set_title(title or f"actuation schedule: {' -> '.join(schedule.sequence)} "
+                 f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
+    return fig
+
+
+def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
+                        fps: float = 8.0) -> str:
+    """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.save_animation`)."""
+    from .. import plot
+
+    top = float(np.nanmax(schedule.contractions)) or 1.0
+    titles = [f"{title} {schedule.labels[k]} (t = {schedule.times[k]:.2f} s)".strip() for k in range(schedule.n_frames)]
+    return plot.save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
+                               activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
+
+
+def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> dict | None:
+    """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
+
+    Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.poses.design_poses`, the scene's routing and
+    design options, the budget ``gait.max_muscles``; the runner's own per-case routings and designs are the
+    separate layouts compared against), solves the schedule (:func:`gait_schedule`) and writes
+    ``layout.json``, ``schedule.csv``, ``schedule.png`` and ``<gait>.gif`` (with ``figures``) and the
+    fabrication files ``<scene>.svg``, ``<scene>.dxf``, ``<scene>_muscles.csv`` in ``scene.units``.
+
+    Parameters
+    ----------
+    scene : Scene with a ``gait``.
+    out : the run's folder.
+    runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
+    figures : write the chart and the GIF.
+    log : progress messages.
+
+    Returns
+    -------
+    dict or None
+        JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
+        None when a pose of the gait was not run (``--case``).
+    """
+    from pathlib import Path
+
+    from .export import export_fabrication
+    from ..body.io import write_json
+    from ..plot.common import save_figure
+    from .poses import design_poses
+
+    gait = scene.gait
+    say = log or (lambda s: None)
+    if any(c not in runs for c in gait.poses):
+        return None
+    folder = Path(out) / gait.name
+    info: dict = {"kind": "gait", "poses": list(gait.poses), "sequence": list(gait.sequence), "units": scene.units}
+    missing = [c for c in gait.poses if runs[c].setup is None or getattr(runs[c].setup, "target", None) is None]
+    if missing:
+        info.update(success=False, message=f"no target for pose(s) {', '.join(missing)}")
+        return info
+    targets = {c: runs[c].setup.target for c in gait.poses}
+    separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
+                if runs[c].design is not None and len(runs[c].setup.muscles)}
+    try:
+        res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
+                           routing_options=scene.routing_options, design_options=scene.design_options,
+                           separate=separate)
+        sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
+                            cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units)
+    except ValueError as exc:
+        info.update(success=False, message=str(exc))
+        say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
+        return info
+    files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
+    if figures:
+        files.append(save_figure(plot_schedule(sch, title=f"{scene.name} {gait.name}: strokes over time "
+                                               f"({sch.n_frames} frames; dotted: achieved)"), folder / "schedule.png"))
+        files.append(save_gait_animation(scene.mesh, sch, res.muscles, folder / f"{gait.name}.gif",
+                                         title=f"{scene.name} {gait.name}:", fps=gait.fps))
+    files += list(export_fabrication(scene.mesh, res, folder, units=scene.units, name=scene.name).values())
+    ok = res.all_success and bool(sch.success.all())
+    failed = [int(k) for k in np.flatnonzero(~sch.success)]
+    info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
+                differences=dict(zip(res.names, map(float, res.differences))),
+                separate_differences={n: (float(v) if np.isfinite(v) else None)
+                                      for n, v in zip(res.names, res.separate_differences)},
+                strokes={n: [float(v) for v in row] for n, row in zip(res.names, res.strokes)},
+                frames=sch.n_frames, failed_frames=failed,
+                message="" if ok else ("; ".join(f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
+                                                 if not o) + (f"; frames {failed} failed" if failed else "")),
+                times={k: float(v) for k, v in res.times.items()},
+                files=[os.path.relpath(f, folder.parent) for f in files])
+    write_json(folder / "gait.json", info)
+    say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
+        f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
+            f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
+        + f"; {sch.n_frames} frames" + ("" if ok else " - FAILED: " + info["message"]))
+    return info

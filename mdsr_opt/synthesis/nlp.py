@@ -1,0 +1,456 @@
+"""The flattened design NLP: states, contractions, alignment and rope multipliers in one IPOPT problem,
+with derivatives assembled term by term."""
+
+from __future__ import annotations
+
+import math
+import time
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..mechanics.model import to_dm
+from .problem import ForwardSolver, DesignProblem
+
+
+# ---------------------------------------------------------------------------------------------- assembled derivatives
+class _Assembly:
+    """A sparse matrix summed from vectors of term values by constant scatter matrices.
+
+    Each part is a column of values and, per scattered value, a target ``(row, col)``, the index of its
+    source in the column and an optional weight. The pattern is the union of all targets (CSC order is
+    ascending ``col * nrow + row``), and the matrix is ``sum_k S_k v_k`` on that pattern.
+    """
+
+    def __init__(self, nrow: int, ncol: int):
+        self.shape = (nrow, ncol)
+        self.parts: list = []
+        self._scatter = None
+
+    def add(self, values, rows, cols, src, weights=None):
+        """Scatter ``values[src[k]] * weights[k]`` to ``(rows[k], cols[k])``; targets with a negative row
+        or column are dropped."""
+        rows, cols, src = (np.asarray(v, dtype=np.int64) for v in (rows, cols, src))
+        weights = np.ones(len(rows)) if weights is None else np.asarray(weights, dtype=float)
+        keep = (rows >= 0) & (cols >= 0)
+        if keep.any():
+            self.parts.append((values, rows[keep], cols[keep], src[keep], weights[keep]))
+
+    def build(self, values: list | None = None) -> ca.MX:
+        """The assembled matrix; ``values`` (one column per part, the same sizes) replaces the parts' values,
+        reusing the scatter (for a second matrix with the same structure)."""
+        nrow, ncol = self.shape
+        if not self.parts:
+            return ca.MX(nrow, ncol)
+        if self._scatter is None:  # one scatter matrix from all parts' values, stacked
+            offsets = np.cumsum([0] + [p[0].numel() for p in self.parts])
+            keys = np.concatenate([p[2] * nrow + p[1] for p in self.parts])
+            src = np.concatenate([p[3] + o for p, o in zip(self.parts, offsets)])
+            wts = np.concatenate([p[4] for p in self.parts])
+            ukeys, nzpos = np.unique(keys, return_inverse=True)
+            colind = np.concatenate([[0], np.cumsum(np.bincount(ukeys // nrow, minlength=ncol))])
+            spars = ca.Sparsity(nrow, ncol, colind.tolist(), (ukeys % nrow).tolist())
+            S = sp.csr_matrix((wts, (nzpos.ravel(), src)), shape=(len(ukeys), offsets[-1]))
+            self._scatter = (spars, to_dm(S))
+        spars, S = self._scatter
+        vals = ca.vertcat(*([p[0] for p in self.parts] if values is None else values))
+        return ca.MX(spars, ca.mtimes(S, vals))
+
+
+def _block_targets(rmap: np.ndarray, cmap: np.ndarray, upper: bool):
+    """Targets of per-instance ``d x d`` blocks (``vec`` order, instance after instance): local entry
+    ``(i, j)`` of instance ``e`` goes to ``(rmap[e, i], cmap[e, j])``; entries mapped to -1 are dropped,
+    and with ``upper`` those below the diagonal too. Returns ``(rows, cols, src)``."""
+    N, d = rmap.shape
+    rr = np.broadcast_to(rmap[:, None, :], (N, d, d)).reshape(-1)
+    cc = np.broadcast_to(cmap[:, :, None], (N, d, d)).reshape(-1)
+    keep = (rr >= 0) & (cc >= 0)
+    if upper:
+        keep &= rr <= cc
+    src = np.nonzero(keep)[0]
+    return rr[keep], cc[keep], src
+
+
+def _param_targets(rmap: np.ndarray, idx: np.ndarray, B: sp.csr_matrix, col0: int):
+    """Targets of per-instance ``d x nd`` derivatives with respect to a parameter datum (``vec`` order,
+    instance after instance), chained with ``dp/da = B``: local entry ``(i, j)`` of instance ``e`` goes to
+    ``(rmap[e, i], col0 + c)`` with weight ``B[idx[j, e], c]`` for every nonzero of that row of ``B``.
+    Returns ``(rows, cols, src, weights)``."""
+    N, d = rmap.shape
+    nd = idx.shape[0]
+    e, j, i = (g.ravel() for g in np.meshgrid(np.arange(N), np.arange(nd), np.arange(d), indexing="ij"))
+    src = e * nd * d + j * d + i
+    q = idx[j, e]
+    row = rmap[e, i]
+    cnt = np.diff(B.indptr)[q]
+    rep = np.repeat(np.arange(len(q)), cnt)
+    k = B.indptr[q][rep] + (np.arange(len(rep)) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    rows, cols, srcs, wts = row[rep], col0 + B.indices[k], src[rep], B.data[k]
+    keep = rows >= 0
+    return rows[keep], cols[keep], srcs[keep], wts[keep]
+
+
+def _term_functions(fam, sens: list[int], exact: bool = True) -> dict:
+    """SX functions of one term family ``W(xl, *data, glob)`` for the flattened NLP.
+
+    ``g``: ``-> grad W``; ``gh``: ``-> (grad W, vec(Hessian W))``; ``lxx``: ``(xl, lam, *data, glob) ->
+    vec(d^2 (lam . grad W) / dxl^2)`` (third derivatives of ``W`` contracted with the local multipliers);
+    and, for the parameter data inputs ``sens`` (those moved by the contractions), ``dg``: ``->
+    [vec(d grad W / d datum)]`` and ``lxp``: ``(xl, lam, ...) -> [vec(d^2 (lam . grad W) / dxl d datum)]``.
+    Without ``exact`` (Gauss-Newton Hessian) the third-derivative functions ``lxx`` and ``lxp`` are omitted.
+    """
+    W = fam.W
+    d = W.size1_in(0)
+    xl = ca.SX.sym("xl", d)
+    lam = ca.SX.sym("lam", d)
+    dl = [ca.SX.sym(f"d{i}", W.size1_in(1 + i)) for i in range(W.n_in() - 2)]
+    gl = ca.SX.sym("gl", W.size1_in(W.n_in() - 1))
+    args, largs = [xl, *dl, gl], [xl, lam, *dl, gl]
+    w = W(*args)
+    gx = ca.gradient(w, xl)
+    lg = ca.gradient(ca.dot(lam, gx), xl)  # = Hessian(W) lam
+
+    def vec(e):
+        return ca.vec(ca.densify(e))
+
+    out = {"g": ca.Function(f"{fam.name}_g", args, [gx]),
+           "gh": ca.Function(f"{fam.name}_gh", args, [gx, vec(ca.jacobian(gx, xl))])}
+    if exact:
+        out["lxx"] = ca.Function(f"{fam.name}_lxx", largs, [vec(ca.jacobian(lg, xl))])
+    if sens:
+        out["dg"] = ca.Function(f"{fam.name}_dg", args, [vec(ca.jacobian(gx, dl[k])) for k in sens])
+        if exact:
+            out["lxp"] = ca.Function(f"{fam.name}_lxp", largs, [vec(ca.jacobian(lg, dl[k])) for k in sens])
+    return out
+
+
+def _mapped(fn: ca.Function, X, *args) -> list:
+    """Outputs (a list) of ``fn`` mapped serially over the columns of ``X`` (and of the per-instance args)."""
+    return fn.map(X.shape[1], "serial").call([X, *args])
+
+
+def _objective_terms(x, y, w, v, so, gauss_newton: bool):
+    """The alignment objective ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives, per node, as
+    vectorised MX expressions (``x``, ``y``: 2n; ``w``: n; ``v = [theta, t]``).
+
+    Returns ``f``, the gradient parts ``(g_x0, g_x1)`` (per node, 1 x n) and ``(g_theta, g_t0, g_t1)``, and
+    the Hessian parts as a dict ``{(a, b): 1 x n values}`` over the local variables ``a, b`` in ``x0, x1,
+    th, t0, t1`` (``a <= b``; entries of the ``(theta, t)`` block are per-node summands). With
+    ``gauss_newton`` the Hessian is ``2 so w_i J_i^T J_i`` (``J_i`` the residual's Jacobian)."""
+    X0, X1 = x[0::2].T, x[1::2].T
+    Y0, Y1 = y[0::2].T, y[1::2].T
+    W2 = 2 * so * w.T
+    c, s = ca.cos(v[0]), ca.sin(v[0])
+    rx = c * X0 - s * X1 + v[1] - Y0
+    ry = s * X0 + c * X1 + v[2] - Y1
+    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    f = so * ca.sum2(w.T * (rx ** 2 + ry ** 2))
+    gx = (W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry))
+    gv = (ca.sum2(W2 * (rx * px + ry * py)), ca.sum2(W2 * rx), ca.sum2(W2 * ry))
+    zero = 0 * W2
+    h = {("x0", "x0"): W2, ("x1", "x1"): W2,  # R^T R = I
+         ("x0", "th"): W2 * -X1, ("x1", "th"): W2 * X0,  # R^T dR/dtheta x_i = (-x_i1, x_i0)
+         ("x0", "t0"): W2 * c, ("x0", "t1"): W2 * s, ("x1", "t0"): W2 * -s, ("x1", "t1"): W2 * c,
+         ("th", "th"): W2 * (px ** 2 + py ** 2), ("th", "t0"): W2 * px, ("th", "t1"): W2 * py,
+         ("t0", "t0"): W2, ("t0", "t1"): zero, ("t1", "t1"): W2}
+    if not gauss_newton:  # the residual's curvature: r . d^2 r
+        h[("x0", "th")] += W2 * (-s * rx + c * ry)
+        h[("x1", "th")] += W2 * (-c * rx - s * ry)
+        h[("th", "th")] += W2 * -(rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
+    return f, gx, gv, h
+
+
+def _assembled_nlp(prob: DesignProblem, hessian: str):
+    """The flattened NLP with its derivatives assembled term by term.
+
+    Returns ``(nlp, functions)``: the NLP dict (MX) and the ``grad_f``, ``jac_g`` and ``hess_lag``
+    Functions for IPOPT, all exact:
+
+    - constraints ``sc grad_x E(x, p0 + B a)`` on the free coordinates: per-term gradients scattered;
+    - their Jacobian: in ``x``, the per-term Hessians scattered onto the free rows (both triangles); in
+      ``a``, the per-term derivatives of the gradient with respect to the parameter data, chained with
+      ``B``, over the terms whose parameters move with ``a`` (the muscles' springs or cables);
+    - the objective's gradient and Hessian: closed-form per-node expressions, vectorised;
+    - the Hessian of the Lagrangian (upper triangle): the objective's, plus the per-term third derivatives
+      of the energy contracted with the multipliers (``x-x``) and their parameter derivatives (``x-a``);
+      the ``a-a`` block is zero since the constraints are affine in ``a``.
+
+    Edge springs without a muscle have zero stiffness for every design of these muscles and are left out.
+    """
+    model, n, m = prob.model, prob.mesh.n_nodes, prob.m
+    blk = prob.block
+    nc = blk.nc
+    nx = 2 * n
+    nz = nx + m + 3 + nc
+    it = nx + m  # index of theta; t follows
+    ik = it + 3  # index of the muscle constraints' multipliers kappa
+    npar = model.n_params
+    z = ca.MX.sym("z", nz)
+    par = ca.MX.sym("par", 3 * n + npar + 2)
+    x, a, v, kap = z[:nx], z[nx:nx + m], z[it:ik], z[ik:]
+    y, w, p0 = par[:nx], par[nx:nx + n], par[nx + n:nx + n + npar]
+    so, sc = par[3 * n + npar], par[3 * n + npar + 1]
+    B = sp.csr_matrix(prob.B)
+    B.eliminate_zeros()
+    p = p0 + ca.mtimes(to_dm(B), a)
+    free = np.nonzero(prob.free)[0]
+    nfree = len(free)
+    cidx = np.full(nx, -1, dtype=np.int64)  # dof -> constraint row (-1: gauge)
+    cidx[free] = np.arange(nfree)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", nfree + nc)
+    P = sp.csr_matrix((np.ones(nfree), (free, np.arange(nfree))), shape=(nx, nfree))
+    lam_u = ca.mtimes(to_dm(P), lam_g[:nfree])  # the stationarity rows' multipliers per dof (0 on the gauge)
+    lam_x = sc * lam_u
+
+    # objective
+    exact = hessian == "exact"  # else Gauss-Newton: the objective's part only, no third derivatives
+    f, gx, gv, ho = _objective_terms(x, y, w, v, so, not exact)
+    # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
+    grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv, ca.MX(nc, 1)))
+    hess = _Assembly(nz, nz)
+    loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it), "t0": np.full(n, it + 1),
+           "t1": np.full(n, it + 2)}
+    for (ka, kb), val in ho.items():
+        hess.add(lam_f * val.T, loc[ka], loc[kb], np.arange(n))
+
+    # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
+    gval, gjac = _Assembly(nfree, 1), []  # the constraints, and their values from jac_g's term functions
+    jac = _Assembly(nfree + nc, nz)  # stationarity rows, then the muscle constraints' rows
+    ind = np.diff(B.indptr) > 0  # parameters moved by the contractions
+    for fam in model.term_families():
+        rows = np.arange(fam.dofs.shape[0])
+        if fam.name == "spring":  # data (l0, k, r): only springs with stiffness
+            rows = np.nonzero(prob.p0[fam.data_index[1][0]] != 0)[0]
+        if len(rows) == 0:
+            continue
+        if len(fam.glob_index) and ind[fam.glob_index].any():  # pragma: no cover - p(a) never moves material
+            raise NotImplementedError(f"{fam.name}: the shared parameters depend on the contractions")
+        sens = [k for k, idx in enumerate(fam.data_index) if idx is not None and ind[np.asarray(idx)[:, rows]].any()]
+        fn = _term_functions(fam, sens, exact)
+        dofs = fam.dofs[rows]
+        N, d = dofs.shape
+        X = ca.reshape(x[dofs.reshape(-1).tolist()], d, N)
+        L = ca.reshape(lam_x[dofs.reshape(-1).tolist()], d, N)
+        ins = fam.inputs(p, rows)
+        gtargets = (cidx[dofs].reshape(-1), np.zeros(N * d), np.arange(N * d))
+        gval.add(ca.vec(_mapped(fn["g"], X, *ins)[0]), *gtargets)
+        gl, Hl = _mapped(fn["gh"], X, *ins)
+        gjac.append(ca.vec(gl))
+        jac.add(sc * ca.vec(Hl), *_block_targets(cidx[dofs], dofs, upper=False))
+        if exact:
+            hess.add(ca.vec(_mapped(fn["lxx"], X, L, *ins)[0]), *_block_targets(dofs, dofs, upper=True))
+        if not sens:
+            continue
+        moving = np.zeros(N, dtype=bool)  # instances whose parameters move with a
+        for k in sens:
+            moving |= ind[np.asarray(fam.data_index[k])[:, rows]].any(axis=0)
+        sub = np.nonzero(moving)[0]
+        ds = dofs[sub]
+        Xs, Ls = (ca.reshape(u[ds.reshape(-1).tolist()], d, len(sub)) for u in (x, lam_x))
+        ins = fam.inputs(p, rows[sub])
+        dgv = _mapped(fn["dg"], Xs, *ins)
+        lxpv = _mapped(fn["lxp"], Xs, Ls, *ins) if exact else [None] * len(sens)
+        for k, dv, lv in zip(sens, dgv, lxpv):
+            idx = np.asarray(fam.data_index[k])[:, rows[sub]]
+            jac.add(sc * ca.vec(dv), *_param_targets(cidx[ds], idx, B, nx))
+            if exact:
+                hess.add(ca.vec(lv), *_param_targets(ds, idx, B, nx))
+    g_stat = sc * ca.densify(gval.build())
+    g_stat_j = sc * ca.densify(gval.build(gjac))
+    g, g_j = g_stat, g_stat_j
+    if nc:  # the muscle constraints: their rows, and J^T kappa in the stationarity rows
+        dl = blk.dofs
+        xl = x[dl.tolist()]
+        C, JTk = blk.val(xl, kap)
+        JTk_j, Jnz, Hknz = blk.jac(xl, kap)
+        extra, extra_j = _Assembly(nfree, 1), _Assembly(nfree, 1)
+        for asm, val in ((extra, JTk), (extra_j, JTk_j)):
+            asm.add(val, cidx[dl], np.zeros(blk.d), np.arange(blk.d))
+        arow = ca.vertcat(a, ca.MX(blk.n_rigid, 1)) if blk.rope else ca.MX(nc, 1)
+        g = ca.vertcat(g_stat + ca.densify(extra.build()), C + arow)
+        g_j = ca.vertcat(g_stat_j + ca.densify(extra_j.build()), C + arow)
+        jr, jc = np.asarray(blk.J_sp.row()), np.asarray(blk.J_sp.get_col())
+        hr, hc = np.asarray(blk.Hk_sp.row()), np.asarray(blk.Hk_sp.get_col())
+        jac.add(Hknz, cidx[dl[hr]], dl[hc], np.arange(len(hr)))  # d(J^T kappa)/dx
+        jac.add(Jnz, cidx[dl[jc]], ik + jr, np.arange(len(jr)))  # d(J^T kappa)/dkappa = J^T
+        jac.add(Jnz, nfree + jr, dl[jc], np.arange(len(jr)))  # dC/dx
+        if blk.rope:  # d(C + a)/da on the rope rows
+            jac.add(ca.MX(ca.DM.ones(m)), nfree + np.arange(m), nx + np.arange(m), np.arange(m))
+        gmap = np.concatenate([dl, ik + np.arange(nc)])
+        Hs = blk.H_sp
+        lam_l = lam_u[dl.tolist()]
+        if exact:
+            hess.add(blk.hess(xl, lam_l, kap, lam_g[nfree:]), gmap[np.asarray(Hs.row())],
+                     gmap[np.asarray(Hs.get_col())], np.arange(Hs.nnz()))
+
+    fns = {"grad_f": ca.Function("design_grad_f", [z, par], [f, grad_f], ["x", "p"], ["f", "grad"]),
+           "jac_g": ca.Function("design_jac_g", [z, par], [g_j, jac.build()],
+                                ["x", "p"], ["g", "jac"]),
+           "hess_lag": ca.Function("design_hess_lag", [z, par, lam_f, lam_g], [hess.build()],
+                                   ["x", "p", "lam_f", "lam_g"], ["hess"])}
+    return {"x": z, "p": par, "f": f, "g": g}, fns
+
+
+# ---------------------------------------------------------------------------------------------- flattened NLP
+def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_key: tuple, ipopt_opts: dict):
+    """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode, derivatives
+    and options.
+
+    Parameters of the NLP: target ``y`` (2n), weights (n), ``p0``, objective scale, constraint scale, so one
+    built solver serves any target, weights, material numbers and stiffness.
+
+    ``derivatives="assembled"`` gives IPOPT the derivatives assembled term by term
+    (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX and lets CasADi differentiate it.
+    """
+    mesh = prob.mesh
+    key = ("design-flattened", tuple(mu.nodes for mu in prob.muscles), prob.muscle_model, prob.material.kind,
+           prob.anchor_radius, hessian, derivatives, opts_key)
+    cache = mesh.__dict__.setdefault("_design_cache", {})
+    if key in cache:
+        return cache[key], 0.0
+    t0 = time.perf_counter()
+    opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
+    opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
+    if derivatives == "assembled":
+        nlp, fns = _assembled_nlp(prob, hessian)
+        opts.update(fns)
+        opts["calc_lam_p"] = False  # parameter multipliers are not used: skip their derivatives
+    else:
+        nlp, extra = _symbolic_nlp(prob, hessian)
+        opts.update(extra)
+    solver = ca.nlpsol("design_flattened", "ipopt", nlp, opts)
+    bt = time.perf_counter() - t0
+    cache[key] = solver
+    return solver, bt
+
+
+def _symbolic_nlp(prob: DesignProblem, hessian: str):
+    """The flattened NLP in SX; CasADi differentiates it (the energy's gradient expanded symbolically)."""
+    mesh, model = prob.mesh, prob.model
+    n, m = mesh.n_nodes, prob.m
+    x = ca.SX.sym("x", 2 * n)
+    a = ca.SX.sym("a", m)
+    th = ca.SX.sym("theta")
+    tt = ca.SX.sym("t", 2)
+    y = ca.SX.sym("y", 2 * n)
+    w = ca.SX.sym("w", n)
+    p0 = ca.SX.sym("p0", model.n_params)
+    so = ca.SX.sym("obj_scale")
+    sc = ca.SX.sym("con_scale")
+    B = sp.csc_matrix(prob.B)
+    Bdm = ca.DM(ca.Sparsity(B.shape[0], B.shape[1], B.indptr.tolist(), B.indices.tolist()), B.data.tolist())
+    g = model.grad_fn(x, p0 + ca.mtimes(Bdm, a))[1]
+    free = np.nonzero(prob.free)[0].tolist()
+    blk = prob.block
+    kap = ca.SX.sym("kappa", blk.nc)
+    G = sc * g[free]
+    if blk.nc:  # the muscle constraints, written from MuscleConstraints directly (not from the block)
+        mc = prob.constraints
+        parts = []
+        if blk.rope:
+            parts.append(mc.lengths_expr(x) / ca.DM(prob.L0) - 1.0 + a)
+        if blk.n_rigid:
+            parts.append(mc.rigid_expr(x) * ca.DM(blk.rigid_scale))
+        C = ca.vertcat(*parts)
+        Ca = C - (ca.vertcat(a, ca.SX(blk.n_rigid, 1)) if blk.rope else 0)  # the part that depends on x
+        G = ca.vertcat(G + ca.gradient(ca.dot(kap, Ca), x)[free], C)
+    Xm = ca.reshape(x, 2, n)
+    Ym = ca.reshape(y, 2, n)
+    c, s = ca.cos(th), ca.sin(th)
+    rx = c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :]
+    ry = s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :]
+    f = so * ca.dot(w, (rx ** 2 + ry ** 2).T)
+    z = ca.vertcat(x, a, th, tt, kap)
+    par = ca.vertcat(y, w, p0, so, sc)
+    extra = {}
+    if hessian == "gauss-newton":
+        # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
+        lam_f = ca.SX.sym("lam_f")
+        lam_g = ca.SX.sym("lam_g", G.numel())
+        r = ca.vertcat(ca.vec(rx * ca.sqrt(w).T), ca.vec(ry * ca.sqrt(w).T))
+        Jr = ca.jacobian(r, z)
+        Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
+        extra["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
+                                        ["x", "p", "lam_f", "lam_g"], ["hess"])
+    return {"x": z, "p": par, "f": f, "g": G}, extra
+
+
+def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
+                   derivatives="assembled"):
+    mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
+    ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone"}
+    ipopt_opts.update(ipopt_options or {})
+    solver, bt = _flattened_solver(prob, hessian, derivatives,
+                                   tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())), ipopt_opts)
+    t_start = time.perf_counter()
+    if warm_start:
+        x0, ok, status = fwd.solve(a0)
+        if not ok:
+            return None, f"warm start failed: {status}", 0, bt
+    else:
+        x0 = prob.X.copy()
+    J0, al0, _ = prob.objective(x0.reshape(-1, 2))
+    history = [(clock(), math.sqrt(J0) * prob.h)]
+    if scaling == "auto":
+        # a target far from reachable has J0 >> 1 (J grows as 1/h^2 under refinement): dividing by it keeps
+        # IPOPT's absolute tolerance a relative one (without it a 4k-node design stopped at "acceptable")
+        so, sc = 1.0 / (prob.W * prob.h ** 2) / max(1.0, J0), 1.0 / (prob.Et * prob.h)
+    else:  # "size": objective normalised by the body's size (the badly scaled variant, for comparisons)
+        so, sc = 1.0 / (prob.W * mesh.size ** 2), 1.0 / (prob.Et * prob.h)
+    blk = prob.block
+    a_start = np.asarray(a0, dtype=float).copy()
+    if warm_start and blk.nc:
+        # multipliers of the forward equilibrium (least squares); a rope the forward solve left slack
+        # starts at the contraction it reached, at zero tension
+        gs = prob.model.gradient(x0, prob.params(a_start)) * sc
+        kap0 = blk.multipliers(x0, gs, prob.free)
+        if blk.rope:
+            ach = prob.achieved(x0.reshape(-1, 2))
+            slack = ach < a_start - 1e-9
+            a_start[slack] = np.clip(ach[slack], 0.0, prob.a_max)
+            kap0[:m] = np.maximum(kap0[:m], 0.0)
+    else:
+        kap0 = np.zeros(blk.nc)
+    z0 = np.concatenate([x0, a_start, [al0.angle], al0.t, kap0])
+    lbz = np.full(len(z0), -np.inf)
+    ubz = np.full(len(z0), np.inf)
+    lbz[prob.gauge] = prob.X[prob.gauge]
+    ubz[prob.gauge] = prob.X[prob.gauge]
+    lbz[2 * n:2 * n + m] = 0.0
+    ubz[2 * n:2 * n + m] = prob.a_max
+    if blk.rope:  # a rope only pulls: tension >= 0
+        lbz[2 * n + m + 3:2 * n + 2 * m + 3] = 0.0
+    par = np.concatenate([prob.y.reshape(-1), prob.w, prob.p0, [so, sc]])
+    sol = solver(x0=z0, p=par, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
+    st = solver.stats()
+    z = np.asarray(sol["x"]).ravel()
+    # "Solved_To_Acceptable_Level" means IPOPT could not reach tol: not a success
+    ok = bool(st.get("success")) and st.get("return_status") == "Solve_Succeeded"
+    iters = int(st.get("iter_count", 0))
+    if ok and blk.rope:
+        # A slack rope sits on its bound tau = 0 where the interior point method converges slowly (a
+        # degenerate bound: its multiplier is about zero too, e.g. when the target is reachable), leaving
+        # tensions of ~1e-7 and contractions off by ~1e-6. Polish: fix the near-zero tensions at 0 (their
+        # ropes then only measure a = achieved contraction) and solve again from the solution; kept when
+        # it converges and the objective is no worse.
+        ik = 2 * n + m + 3
+        kr = z[ik:ik + m]
+        small = kr < 1e-4 * max(1.0, float(kr.max()))
+        if small.any():
+            lb2, ub2 = lbz.copy(), ubz.copy()
+            lb2[ik + np.nonzero(small)[0]] = 0.0
+            ub2[ik + np.nonzero(small)[0]] = 0.0
+            z2 = z.copy()
+            z2[ik + np.nonzero(small)[0]] = 0.0
+            sol2 = solver(x0=z2, p=par, lbx=lb2, ubx=ub2, lbg=0.0, ubg=0.0)
+            st2 = solver.stats()
+            iters += int(st2.get("iter_count", 0))
+            if st2.get("return_status") == "Solve_Succeeded" and \
+                    float(sol2["f"]) <= float(sol["f"]) * (1 + 1e-6) + 1e-14:
+                z = np.asarray(sol2["x"]).ravel()
+    out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
+           "kappa": z[2 * n + m + 3:],
+           "status": str(st.get("return_status", "unknown")), "iterations": iters,
+           "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
+    return out, out["status"], out["iterations"], bt

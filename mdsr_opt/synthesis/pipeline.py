@@ -1,0 +1,235 @@
+"""The whole design in one call: target, routing, contractions, verification (:func:`design`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Sequence
+import numpy as np
+
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle, check_muscles
+from ..mechanics.loadsteps import check_mesh_material
+from .contractions import design_contractions
+from .results import DesignResult, finite_or_none
+
+__all__ = ['PipelineResult', 'design', 'design_pipeline']
+
+
+# ---------------------------------------------------------------------------------------------- the pipeline
+@dataclass
+class PipelineResult:
+    """The whole design pipeline: target by external driving, routed muscles, contractions, verification.
+
+    Attributes
+    ----------
+    mesh : Mesh
+    material : NeoHookean or LinearElastic
+    anchors : (k,) int ndarray
+    drag_nodes, drag_positions : (d,) int and (d, 2) float ndarrays
+    target : (n, 2) ndarray
+        The external-driving equilibrium the design aims at.
+    external : dict
+        Summary of the external-driving solve (:meth:`EquilibriumResult.summary`).
+    muscles : tuple of Muscle
+    routing : dict or None
+        Routing knobs and per-muscle figures (None when muscles were given).
+    design : DesignResult
+    times : dict
+        Seconds per stage (``external``, ``routing``, ``design``, ``total``).
+    """
+
+    mesh: Mesh
+    material: Any
+    anchors: np.ndarray
+    drag_nodes: np.ndarray
+    drag_positions: np.ndarray
+    target: np.ndarray
+    external: dict
+    muscles: tuple
+    routing: dict | None
+    design: DesignResult
+    times: dict = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        """The design succeeded and was verified."""
+        return bool(self.design.success)
+
+    @property
+    def contractions(self) -> np.ndarray:
+        return self.design.contractions
+
+    def save(self, directory) -> str:
+        """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
+        into ``directory`` (created if missing), each atomically. Returns the JSON path."""
+        from ..body.io import write_json, write_mesh
+
+        directory = os.fspath(directory)
+        if not str(directory).strip():
+            raise ValueError("directory is empty: give a folder name")
+        if os.path.exists(directory) and not os.path.isdir(directory):
+            raise ValueError(f"{directory} is an existing file, not a folder")
+        os.makedirs(directory, exist_ok=True)
+        write_mesh(os.path.join(directory, "target.vtu"), self.mesh, x=self.target, material=self.material)
+        write_mesh(os.path.join(directory, "driven.vtu"), self.mesh, x=self.design.x_aligned,
+                   material=self.material)
+        mat = self.material
+        data = {
+            "format": "mdsr_opt.design/1",
+            "material": {"kind": mat.kind, "E": mat.E, "nu": mat.nu, "thickness": mat.thickness},
+            "anchors": self.anchors.tolist(), "drag_nodes": self.drag_nodes.tolist(),
+            "drag_positions": self.drag_positions.tolist(), "external": self.external,
+            "muscles": [{"nodes": list(mu.nodes), "name": mu.name} for mu in self.muscles],
+            "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
+            "meshes": {"target": "target.vtu", "driven": "driven.vtu"},
+        }
+        return write_json(os.path.join(directory, "design.json"), finite_or_none(data))
+
+    @classmethod
+    def load(cls, directory) -> "PipelineResult":
+        """Read a result written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``directory``, its ``design.json`` or a mesh file it names does not exist.
+        ValueError
+            ``directory`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
+            field missing or of the wrong kind, named); a mesh file cannot be read or does not match.
+        """
+        import json
+
+        from ..body.io import read_mesh
+        from ..body.material import LinearElastic, NeoHookean
+
+        directory = os.fspath(directory)
+        if not os.path.exists(directory):
+            raise FileNotFoundError(f"no such design result folder: {directory}")
+        if not os.path.isdir(directory):
+            raise ValueError(f"{directory} is a file; PipelineResult.load takes the folder written by save()")
+        path = os.path.join(directory, "design.json")
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no design.json in {directory}")
+        try:
+            with open(path, encoding="utf-8") as fh:
+                data = json.load(fh)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path} is damaged: not valid JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != "mdsr_opt.design/1":
+            fmt = data.get("format") if isinstance(data, dict) else None
+            raise ValueError(f"{path} is not a mdsr_opt design result (format {fmt!r})")
+        field_ = "meshes.target"
+        try:
+            mpath = os.path.join(directory, data["meshes"]["target"])
+            if not os.path.exists(mpath):
+                raise FileNotFoundError(f"{path}: the target mesh {mpath} is missing")
+            md = read_mesh(mpath)
+            field_ = "material"
+            m = data["material"]
+            kinds = {NeoHookean.kind: NeoHookean, LinearElastic.kind: LinearElastic}
+            if m["kind"] not in kinds:
+                raise ValueError(f"unknown material kind {m['kind']!r}")
+            material = kinds[m["kind"]](m["E"], m["nu"], m["thickness"])
+            field_ = "muscles"
+            muscles = tuple(Muscle(tuple(mu["nodes"]), name=mu.get("name")) for mu in data["muscles"])
+            for mu in muscles:
+                mu.check_on(md.mesh)
+            field_ = "anchors/drags"
+            kw = dict(anchors=np.asarray(data["anchors"], dtype=np.int64),
+                      drag_nodes=np.asarray(data["drag_nodes"], dtype=np.int64),
+                      drag_positions=np.asarray(data["drag_positions"], dtype=float).reshape(-1, 2))
+            field_ = "design"
+            design = DesignResult.from_dict(data["design"])
+            if design.x.shape != md.x.shape:
+                raise ValueError(f"the design's state has shape {design.x.shape}, the mesh {md.x.shape}")
+            field_ = "external/routing/times"
+            return cls(mesh=md.mesh, material=material, target=md.x, external=data["external"],
+                       muscles=muscles, routing=data["routing"], design=design, times=data.get("times", {}), **kw)
+        except FileNotFoundError:
+            raise
+        except KeyError as exc:
+            raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing (in {field_})") from None
+        except (TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise ValueError(f"{path} is damaged ({field_}): {exc}") from None
+
+
+def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
+           routing_options: dict | None = None, method: str = "flattened", external_options: dict | None = None,
+           **design_options) -> PipelineResult:
+    """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    anchors, drags : as in :func:`~mdsr_opt.solve_external`; their equilibrium is the target shape.
+    muscles : optional
+        Use these muscles instead of routing them.
+    routing_options : dict, optional
+        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
+    method : str
+        The design method (see :func:`design_contractions`).
+    external_options : dict, optional
+        Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
+    **design_options
+        Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
+        rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
+        contraction, the stroke (rope length pulled in) and the tension.
+
+    Returns
+    -------
+    PipelineResult
+        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(dir)``
+        writes JSON plus meshes and :meth:`PipelineResult.load` reads them back.
+
+    Raises
+    ------
+    SolverFailure
+        The external-driving solve (the target) failed.
+    ValueError
+        Routing found no muscle (e.g. a target that only stretches the body), or bad input.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, NeoHookean
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    >>> left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    >>> top_right = {i: (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    >>> out = design(mesh, NeoHookean(1.0, 0.3), left, top_right)
+    >>> out.success, out.design.difference < 0.05
+    (True, True)
+    """
+    from ..mechanics.loadsteps import parse_drags
+    from ..mechanics.equilibrium import solve_external
+
+    t0 = time.perf_counter()
+    check_mesh_material(mesh, material)
+    ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
+    ext.raise_on_failure()
+    t1 = time.perf_counter()
+    anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
+    didx, dpos = parse_drags(drags, mesh.n_nodes)
+    routing = None
+    if muscles is None:
+        from .routing import route_muscles
+
+        rr = route_muscles(mesh, ext.x, **(routing_options or {}))
+        mus = tuple(rr.muscles)
+        if not mus:
+            raise ValueError("routing found no muscle for this target (muscles can only contract: does the "
+                             "target shorten any edge?); pass muscles=... or relax routing_options")
+        routing = {"params": dict(rr.params), "stats": [asdict(s) for s in rr.stats], "n_units": rr.n_units}
+    else:
+        mus = tuple(check_muscles(mesh, muscles))
+    t2 = time.perf_counter()
+    res = design_contractions(mesh, material, mus, ext.x, method=method, **design_options)
+    t3 = time.perf_counter()
+    return PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
+                          target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
+                          times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
+
+
+#: The pipeline under a name that does not clash with the module ``mdsr_opt.design`` at package level.
+design_pipeline = design

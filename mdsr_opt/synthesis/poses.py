@@ -1,0 +1,495 @@
+"""One muscle layout for several poses, and the gait schedule that moves a body between them.
+
+A real muscle-driven robot carries one set of muscles and changes pose by changing their strokes.
+:func:`design_poses` lays ONE set of muscles for all the target poses of a body and designs each pose's
+strokes on it; :func:`~mdsr_opt.gait.gait_schedule` turns a cyclic sequence of those poses into an actuation schedule
+(the stroke of every muscle over time), solved forward frame by frame.
+
+Shared layout
+-------------
+The layout is the union of the poses' own routings, deduplicated, under a muscle budget:
+
+1. every pose is routed on its own target (:func:`~mdsr_opt.routing.route_muscles` with the same options),
+   giving each pose a ranked list of muscles (strongest first);
+2. the candidates are taken round-robin by rank (every pose's strongest muscle, then every pose's second
+   ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
+3. a candidate whose edges are at least ``overlap`` (default half) covered by a muscle already in the layout
+   is the same channel and is not added again (the pose is recorded as a source of the kept muscle);
+4. at most ``max_muscles`` are kept.
+
+Why not route once on a combined contraction graph (e.g. the largest contraction of each edge over the
+poses)? A muscle pulls in one direction: a combined graph mixes edges that contract in different poses, and
+the router, which follows uniformly contracted chains, can join a left-bend edge to a right-bend edge into
+one muscle that serves neither. The union keeps every muscle a chain that one pose contracts uniformly,
+and it can never need more muscles than the separate layouts together (it is their deduplicated union).
+
+Strokes per pose
+----------------
+With the layout fixed, the poses share no unknowns: every pose has its own state, contractions and rigid
+alignment, so a single flattened NLP over all poses is block diagonal. Measured side by side with the same
+stand-in machinery (``tests/benchmarks/bench_poses.py``: gecko, 555 nodes, 4 shared muscles, 2 poses, 4
+repeats), the joint NLP reaches the same optima (to 1e-11), takes 24 IPOPT iterations against 22 + 17 for
+the two NLPs apart, solves in about the same time (joint / per pose: 0.65-1.16, median about 1.0) and
+builds in about half the time (one solver instead of two). Solving is not faster, and the build saving is
+small next to the design module's own assembled NLPs, so the poses are designed one NLP per pose with
+:func:`~mdsr_opt.design.design_contractions` on the shared layout: the exact cable model, every pose
+verified on its own, and a pose that fails does not spoil the others.
+
+A muscle is *engaged* in a pose when its path shortens in that pose's target; the pose is designed with its
+engaged muscles only. The others are *released*: an inextensible rope held at its rest length would stop
+the body from stretching along it (a bent strip's convex side), so its servo pays the rope out to the path
+length of the designed state, a negative stroke at zero tension (reported in ``strokes``).
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh, NeoHookean
+>>> from mdsr_opt.synthesis.poses import design_poses
+>>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+>>> X = mesh.points
+>>> def bend(s):                                   # s = +1: bend up (left), -1: down (right)
+...     R = 3.0; phi = (X[:, 0] - 2.0) / R; r = R - s * (X[:, 1] - 0.5)
+...     return np.column_stack([r * np.sin(phi), s * (R - r * np.cos(phi))])
+>>> res = design_poses(mesh, NeoHookean(1.0, 0.3), {"left": bend(1), "right": bend(-1)})
+>>> res.n_muscles, int(res.separate_n_muscles.sum()), res.all_success
+(2, 2, True)
+>>> bool(np.all(res.differences <= 1.1 * res.separate_differences))
+True
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..core.checks import as_float_array
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+
+__all__ = ["Pose", "PosesResult", "design_poses", "shared_layout", "check_budget"]
+
+
+# ---------------------------------------------------------------------------------------------- inputs
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """A named target shape of a body.
+
+    Parameters
+    ----------
+    name : str
+    target : (n, 2) array
+        Target node positions (any rigid placement).
+    mesh : Mesh, optional
+        The body the target belongs to; when given, :func:`design_poses` checks that it is the same body.
+    """
+
+    name: str
+    target: np.ndarray
+    mesh: Mesh | None = None
+
+
+def _same_mesh(a: Mesh, b: Mesh) -> bool:
+    return a is b or (a.points.shape == b.points.shape and a.triangles.shape == b.triangles.shape
+                      and np.array_equal(a.triangles, b.triangles) and np.allclose(a.points, b.points, rtol=0,
+                                                                                   atol=1e-12 * a.size))
+
+
+def _check_poses(mesh: Mesh, poses) -> list[Pose]:
+    """Normalise ``poses`` (mapping name -> target, or a sequence of Pose / (name, target) / target)."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    if isinstance(poses, Mapping):
+        items = [Pose(str(k), v) for k, v in poses.items()]
+    elif isinstance(poses, (list, tuple)):
+        items = []
+        for i, p in enumerate(poses):
+            if isinstance(p, Pose):
+                items.append(p)
+            elif isinstance(p, tuple) and len(p) == 2 and isinstance(p[0], str):
+                items.append(Pose(p[0], p[1]))
+            else:
+                items.append(Pose(f"pose{i}", p))
+    else:
+        raise TypeError(f"poses must be a mapping of name to target or a list of poses, got {type(poses).__name__}")
+    if not items:
+        raise ValueError("poses is empty: give at least one target pose")
+    out, names = [], set()
+    for p in items:
+        if not p.name or p.name == "rest":
+            raise ValueError(f"pose name {p.name!r} is not allowed ('rest' means zero strokes in a gait)")
+        if p.name in names:
+            raise ValueError(f"pose name {p.name!r} is used twice")
+        names.add(p.name)
+        if p.mesh is not None and not _same_mesh(mesh, p.mesh):
+            raise ValueError(f"pose {p.name!r} belongs to a different mesh ({p.mesh.n_nodes} nodes) than the one "
+                             f"given ({mesh.n_nodes} nodes): all poses must be of the same mesh")
+        t = np.asarray(p.target, dtype=float) if not isinstance(p.target, str) else p.target
+        if np.ndim(t) != 2 or np.shape(t)[1] != 2 or np.shape(t)[0] != mesh.n_nodes:
+            raise ValueError(f"pose {p.name!r}: target has shape {np.shape(t)}, expected ({mesh.n_nodes}, 2); all "
+                             "poses must be of the same mesh")
+        out.append(Pose(p.name, as_float_array(t, f"pose {p.name!r} target", shape=(mesh.n_nodes, 2)), mesh))
+    return out
+
+
+def check_budget(max_muscles) -> int | None:
+    """The muscle budget: None (no limit) or an integer of at least 1 (TypeError, ValueError otherwise)."""
+    if max_muscles is None:
+        return None
+    if isinstance(max_muscles, bool) or not isinstance(max_muscles, (int, np.integer)):
+        raise TypeError(f"max_muscles must be an integer or None, got {type(max_muscles).__name__}")
+    if max_muscles < 1:
+        raise ValueError(f"max_muscles (the muscle budget) must be at least 1, got {max_muscles}")
+    return int(max_muscles)
+
+
+def _edges_of(m: Muscle) -> set:
+    n = m.nodes
+    return {(min(a, b), max(a, b)) for a, b in zip(n[:-1], n[1:])}
+
+
+# ---------------------------------------------------------------------------------------------- result
+@dataclass(eq=False)
+class PosesResult:
+    """One muscle layout for several poses and each pose's design on it.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The poses, in order.
+    muscles : tuple of Muscle
+        The shared layout.
+    rest_lengths : (m,) ndarray
+        Rest length of every shared muscle (length units of the mesh).
+    sources : tuple of tuple of str
+        For every shared muscle, the poses whose own routing produced it (first: the one it was taken from).
+    contractions, strokes, tensions : (P, m) ndarrays
+        Per pose and muscle: the designed contraction, the stroke (length taken in, ``a L0`` where the design
+        gives no ``stroke``) and the rope tension (NaN where the design gives none).
+    differences : (P,) ndarray
+        Difference index (weighted RMS node distance, a length) each pose reaches on the shared layout.
+    success : (P,) bool ndarray
+        Each pose's design succeeded (converged and verified).
+    status : tuple of str
+    states : (P, n, 2) ndarray
+        Each pose's designed state (aligned to rest).
+    separate_differences : (P,) ndarray
+        For comparison: the difference each pose reaches with its own separately routed layout (NaN when not
+        compared).
+    separate_n_muscles : (P,) int ndarray
+        How many muscles each separate layout has (their sum: what the separate layouts need in total).
+    engaged : (P, m) bool ndarray
+        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is paid out
+        to its path length in the designed state: a negative stroke, zero tension.
+    anchor_radius : float or None
+        Radius of the rigid end patches used by the designs.
+    muscle_model : str
+    max_muscles : int or None
+        The budget asked for.
+    times : dict
+        Seconds: ``routing``, ``shared`` (designs on the shared layout), ``separate``, ``total``.
+    designs : dict of str to DesignResult
+        The full per-pose designs (in memory only; empty after :meth:`load`).
+    """
+
+    names: tuple
+    muscles: tuple
+    rest_lengths: np.ndarray
+    sources: tuple
+    contractions: np.ndarray
+    strokes: np.ndarray
+    tensions: np.ndarray
+    differences: np.ndarray
+    success: np.ndarray
+    status: tuple
+    states: np.ndarray
+    separate_differences: np.ndarray
+    separate_n_muscles: np.ndarray
+    engaged: np.ndarray | None = None
+    anchor_radius: float | None = None
+    muscle_model: str = "cable"
+    max_muscles: int | None = None
+    times: dict = field(default_factory=dict)
+    designs: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n_muscles(self) -> int:
+        return len(self.muscles)
+
+    @property
+    def all_success(self) -> bool:
+        return bool(np.all(self.success))
+
+    def index(self, name: str) -> int:
+        """Position of pose ``name`` (ValueError naming the poses otherwise)."""
+        if name not in self.names:
+            raise ValueError(f"unknown pose {name!r} (poses: {', '.join(self.names)})")
+        return self.names.index(name)
+
+    def __repr__(self) -> str:
+        per = ", ".join(f"{n}: {d:.3g}" + ("" if not np.isfinite(s) else f" (sep. {s:.3g})")
+                        for n, d, s in zip(self.names, self.differences, self.separate_differences))
+        sep = int(self.separate_n_muscles.sum())
+        return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
+                f"difference {per}, success={self.all_success})")
+
+    def table(self) -> str:
+        """Per pose: difference on the shared layout and on its own, and the strokes."""
+        head = f"{'pose':<14} {'shared D':>10} {'own D':>10} {'own m':>5}  strokes"
+        rows = [head, "-" * len(head)]
+        for k, n in enumerate(self.names):
+            rows.append(f"{n:<14} {self.differences[k]:>10.4g} {self.separate_differences[k]:>10.4g} "
+                        f"{int(self.separate_n_muscles[k]):>5d}  " + " ".join(f"{s:.4g}" for s in self.strokes[k]))
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly (NaN as None); :meth:`from_dict` inverts it."""
+        def fin(a):
+            a = np.asarray(a, dtype=float)
+            return np.where(np.isfinite(a), a, np.nan).astype(object).tolist() if a.ndim else float(a)
+
+        def nan_none(v):
+            if isinstance(v, list):
+                return [nan_none(u) for u in v]
+            return None if isinstance(v, float) and not math.isfinite(v) else v
+
+        return {"names": list(self.names),
+                "muscles": [{"name": m.name, "nodes": list(m.nodes)} for m in self.muscles],
+                "rest_lengths": nan_none(fin(self.rest_lengths)), "sources": [list(s) for s in self.sources],
+                "contractions": nan_none(fin(self.contractions)), "strokes": nan_none(fin(self.strokes)),
+                "tensions": nan_none(fin(self.tensions)), "differences": nan_none(fin(self.differences)),
+                "success": [bool(s) for s in self.success], "status": list(self.status),
+                "states": np.asarray(self.states, dtype=float).tolist(),
+                "separate_differences": nan_none(fin(self.separate_differences)),
+                "separate_n_muscles": [int(v) for v in self.separate_n_muscles],
+                "engaged": np.asarray(self.engaged, dtype=bool).tolist(),
+                "anchor_radius": self.anchor_radius, "muscle_model": self.muscle_model,
+                "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()}}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PosesResult":
+        def arr(v, dtype=float):
+            return np.array([[np.nan if u is None else u for u in r] if isinstance(r, list) else
+                             (np.nan if r is None else r) for r in v], dtype=dtype)
+
+        m = len(d["muscles"])
+        P = len(d["names"])
+        return cls(names=tuple(d["names"]),
+                   muscles=tuple(Muscle(x["nodes"], name=x["name"]) for x in d["muscles"]),
+                   rest_lengths=arr(d["rest_lengths"]), sources=tuple(tuple(s) for s in d["sources"]),
+                   contractions=arr(d["contractions"]).reshape(P, m), strokes=arr(d["strokes"]).reshape(P, m),
+                   tensions=arr(d["tensions"]).reshape(P, m), differences=arr(d["differences"]),
+                   success=np.array(d["success"], dtype=bool), status=tuple(d["status"]),
+                   states=np.array(d["states"], dtype=float), separate_differences=arr(d["separate_differences"]),
+                   separate_n_muscles=np.array(d["separate_n_muscles"], dtype=int),
+                   engaged=np.array(d["engaged"], dtype=bool).reshape(P, m),
+                   anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
+                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})))
+
+    def save(self, path) -> str:
+        """Write :meth:`to_dict` as JSON (atomically). Returns the path."""
+        from ..body.io import write_json
+
+        return write_json(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path) -> "PosesResult":
+        """Read a result written by :meth:`save`."""
+        from ..body.io import read_json
+
+        return cls.from_dict(read_json(path))
+
+
+# ---------------------------------------------------------------------------------------------- design
+def _route(mesh, target, routing_options):
+    from .routing import RoutingWarning, route_muscles
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RoutingWarning)
+        return tuple(route_muscles(mesh, target, **routing_options))
+
+
+def _per_muscle(design, muscles, mesh):
+    """(stroke, tension) of a design, read from its per-muscle fields when it has them."""
+    a = np.asarray(design.contractions, dtype=float)
+    L0 = np.array([m.rest_length(mesh) for m in muscles])
+    stroke = getattr(design, "stroke", None)
+    stroke = a * L0 if stroke is None or np.size(stroke) != len(a) else np.asarray(stroke, dtype=float)
+    tension = getattr(design, "tension", None)
+    tension = np.full(len(a), np.nan) if tension is None or np.size(tension) != len(a) else \
+        np.asarray(tension, dtype=float)
+    return stroke, tension
+
+
+def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscles: int | None = None,
+                  overlap: float = 0.5) -> tuple[tuple[Muscle, ...], tuple[tuple[str, ...], ...]]:
+    """Merge per-pose layouts into one: round-robin by rank, duplicates dropped, at most ``max_muscles``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    layouts : mapping pose name -> muscles ranked strongest first (as :func:`~mdsr_opt.routing.route_muscles`
+        returns them).
+    max_muscles : int, optional
+        The budget (at least 1); default: no limit.
+    overlap : float in (0, 1]
+        A candidate whose edges are covered by a kept muscle to at least this fraction (of the shorter of
+        the two) is a duplicate.
+
+    Returns
+    -------
+    muscles : tuple of Muscle, named ``M0, M1, ...``
+    sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
+    """
+    budget = check_budget(max_muscles)
+    if not (0.0 < float(overlap) <= 1.0):
+        raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
+    kept: list[tuple[Muscle, set, list]] = []
+    depth = max((len(v) for v in layouts.values()), default=0)
+    for r in range(depth):
+        for name, mus in layouts.items():
+            if r >= len(mus):
+                continue
+            cand = mus[r] if isinstance(mus[r], Muscle) else Muscle(mus[r])
+            ce = _edges_of(cand)
+            dup = None
+            for k, (_, ke, src) in enumerate(kept):
+                if len(ce & ke) >= overlap * min(len(ce), len(ke)):
+                    dup = k
+                    break
+            if dup is not None:
+                if name not in kept[dup][2]:
+                    kept[dup][2].append(name)
+                continue
+            if budget is not None and len(kept) >= budget:
+                continue
+            kept.append((cand, ce, [name]))
+    muscles = tuple(Muscle(m.nodes, name=f"M{i}") for i, (m, _, _) in enumerate(kept))
+    for m in muscles:
+        m.check_on(mesh)
+    return muscles, tuple(tuple(s) for _, _, s in kept)
+
+
+def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
+                 routing_options: Mapping | None = None, design_options: Mapping | None = None,
+                 overlap: float = 0.5, compare: bool = True,
+                 separate: Mapping[str, tuple] | None = None) -> PosesResult:
+    """Route ONE muscle layout for all poses and design each pose's strokes on it.
+
+    See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
+    deduplicated, under a budget) and why each pose is one NLP on the shared layout.
+
+    Parameters
+    ----------
+    mesh, material : the body.
+    poses : mapping name -> (n, 2) target, or a list of :class:`Pose` / ``(name, target)`` / targets.
+        At least one; all of ``mesh`` (a :class:`Pose` carrying another mesh is refused).
+    max_muscles : int, optional
+        The muscle budget of the shared layout (at least 1); default: every non-duplicate muscle the poses'
+        routings give.
+    routing_options : dict, optional
+        Keywords of :func:`~mdsr_opt.routing.route_muscles`, used for every pose's own routing (a
+        ``max_muscles`` there limits each pose's own layout).
+    design_options : dict, optional
+        Keywords of :func:`~mdsr_opt.design.design_contractions` (``method``, ``a_max``, ``muscle_model``...).
+    overlap : float, default 0.5
+        Duplicate threshold of :func:`shared_layout`.
+    compare : bool, default True
+        Also design every pose on its own layout (the separate differences); without it those are NaN.
+    separate : mapping name -> (muscles, DesignResult), optional
+        Separate layouts and designs already made (e.g. by the scene runner) with the same options: they
+        are used instead of routing and designing again.
+
+    Returns
+    -------
+    PosesResult
+
+    Raises
+    ------
+    TypeError, ValueError
+        Before any work: an empty pose list, poses of a different mesh or shape, a budget below one, a
+        duplicated pose name, a bad overlap.
+    """
+    from .contractions import design_contractions
+    from ..body.material import LinearElastic, NeoHookean
+
+    t0 = time.perf_counter()
+    items = _check_poses(mesh, poses)
+    if not isinstance(material, (NeoHookean, LinearElastic)):
+        raise TypeError(f"material must be a NeoHookean or LinearElastic, got {type(material).__name__}")
+    budget = check_budget(max_muscles)
+    if not (0.0 < float(overlap) <= 1.0):
+        raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
+    ropt = dict(routing_options or {})
+    dopt = dict(design_options or {})
+    separate = dict(separate or {})
+    for k in separate:
+        if k not in {p.name for p in items}:
+            raise ValueError(f"separate names an unknown pose {k!r}")
+
+    own: dict[str, tuple] = {}
+    for p in items:
+        own[p.name] = tuple(separate[p.name][0]) if p.name in separate else _route(mesh, p.target, ropt)
+    t_route = time.perf_counter() - t0
+    muscles, sources = shared_layout(mesh, own, budget, overlap)
+    if not muscles:
+        raise ValueError("no pose contracts any edge enough to carry a muscle: nothing to route (poses: "
+                         + ", ".join(p.name for p in items) + ")")
+
+    t1 = time.perf_counter()
+    P, m = len(items), len(muscles)
+    L0 = np.array([mu.rest_length(mesh) for mu in muscles])
+    A, S, T = np.zeros((P, m)), np.zeros((P, m)), np.full((P, m), np.nan)
+    D, ok, status, states, designs = np.zeros(P), np.zeros(P, bool), [], [], {}
+    engaged = np.zeros((P, m), bool)
+    for k, p in enumerate(items):
+        # a muscle whose path lengthens in this pose is released (its rope paid out, slack)
+        engaged[k] = np.array([mu.length(p.target) for mu in muscles]) < L0 * (1.0 - 1e-9)
+        on = np.flatnonzero(engaged[k])
+        if not len(on):
+            x = mesh.points.copy()
+            from ..mechanics.align import align, node_weights
+
+            D[k] = align(x, p.target, node_weights(mesh)).difference
+            status.append("no muscle of the shared layout shortens in this pose: left at rest")
+        else:
+            d = design_contractions(mesh, material, [muscles[i] for i in on], p.target, **dopt)
+            designs[p.name] = d
+            x = np.asarray(d.x, dtype=float)
+            st, tn = _per_muscle(d, [muscles[i] for i in on], mesh)
+            A[k, on], S[k, on], T[k, on] = d.contractions, st, tn
+            D[k], ok[k] = d.difference, d.success
+            status.append(str(d.status))
+        off = np.flatnonzero(~engaged[k])
+        if len(off):  # released: the stroke that pays out exactly the path's length (negative), no tension
+            Lx = np.array([muscles[i].length(x) for i in off])
+            S[k, off] = L0[off] - Lx
+            A[k, off] = S[k, off] / L0[off]
+            T[k, off] = 0.0
+        states.append(x)
+    t_shared = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    Dsep = np.full(P, np.nan)
+    nsep = np.array([len(own[p.name]) for p in items], dtype=int)
+    if compare:
+        for k, p in enumerate(items):
+            if p.name in separate and separate[p.name][1] is not None:
+                Dsep[k] = float(separate[p.name][1].difference)
+            elif own[p.name]:
+                Dsep[k] = design_contractions(mesh, material, own[p.name], p.target, **dopt).difference
+    t_sep = time.perf_counter() - t2
+    radius = next((getattr(d, "anchor_radius", None) for d in designs.values()), None)
+    return PosesResult(names=tuple(p.name for p in items), muscles=muscles,
+                       rest_lengths=np.array([mu.rest_length(mesh) for mu in muscles]), sources=sources,
+                       contractions=A, strokes=S, tensions=T, differences=D, success=ok, status=tuple(status),
+                       states=np.array(states), separate_differences=Dsep, separate_n_muscles=nsep, engaged=engaged,
+                       anchor_radius=None if radius is None else float(radius),
+                       muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values())),
+                                                                          "muscle_model", "cable"))),
+                       max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
+                                                  "total": time.perf_counter() - t0}, designs=designs)

@@ -1,0 +1,300 @@
+"""The data a design shares between its methods: the design problem and its forward solver."""
+
+from __future__ import annotations
+
+import numbers
+import time
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..body.muscles import Muscle, check_muscles
+from ..core.checks import as_float_array, positive_float
+from ..mechanics.align import align, node_weights
+from ..mechanics.constraints import MuscleConstraints, check_anchor_radius, segment_spring_parameters, spring_segments, spring_stiffness
+from ..mechanics.equilibrium import gauge_coordinates, solve_internal
+from ..mechanics.loadsteps import check_mesh_material
+from ..mechanics.model import get_model
+
+
+# ---------------------------------------------------------------------------------------------- the problem
+class DesignProblem:
+    """Everything the three methods share: model, affine parameters ``p(a) = p0 + B a``, the muscle
+    constraints (rope lengths for the cable, rigid end patches for both models), gauge, weights, scales."""
+
+    def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max,
+                 anchor_radius=None):
+        self.mesh, self.material, self.muscles = mesh, material, muscles
+        self.y = target
+        self.w = weights
+        self.muscle_model = muscle_model
+        self.stiffness = stiffness
+        self.a_max = a_max
+        self.m = len(muscles)
+        n = mesh.n_nodes
+        t0 = time.perf_counter()
+        # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
+        # per-segment springs of the "springs" model, zero for the cable)
+        self.model = get_model(mesh, material)
+        self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
+        self.constraints = MuscleConstraints(mesh, muscles, self.anchor_radius)
+        self.build_time = time.perf_counter() - t0
+        self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
+
+        def params(a):  # the same parameters solve_internal builds (springs: stiffness per unit rest length)
+            if muscle_model == "springs":
+                return self.model.params(material, springs=segment_spring_parameters(
+                    mesh, material, muscles, a, stiffness, self.anchor_radius))
+            return self.model.params(material)
+
+        self.p0 = params(np.zeros(self.m))
+        # p is affine in a (springs: r_e = 1 - stiffness-weighted mean contraction; the cable: constant)
+        self.B = np.column_stack([params(np.eye(self.m)[c]) - self.p0 for c in range(self.m)])
+        self.fixed = np.zeros(2 * n, dtype=bool)
+        self.gauge = list(gauge_coordinates(mesh))
+        self.fixed[self.gauge] = True
+        self.free = ~self.fixed
+        self.X = mesh.points.reshape(-1).copy()
+        self.h = float(mesh.edge_lengths.mean())
+        self.Et = material.E * material.thickness
+        self.W = float(weights.sum())
+        self._block = None
+
+    @property
+    def block(self) -> "_ConstraintBlock":
+        """The muscle constraints as one sparse SX block (built on first use)."""
+        if self._block is None:
+            t0 = time.perf_counter()
+            self._block = _ConstraintBlock(self)
+            self.build_time += time.perf_counter() - t0
+        return self._block
+
+    def params(self, a) -> np.ndarray:
+        return self.p0 + self.B @ np.asarray(a, dtype=float)
+
+    def objective(self, x2):
+        """Scaled objective ``D / (sum e h^2)`` of a state (n, 2), its alignment, and ``dJ/dx`` (2n,)."""
+        al = align(x2, self.y, self.w)
+        r = x2 @ al.R.T + al.t - self.y
+        J = float((self.w * (r ** 2).sum(1)).sum()) / (self.W * self.h ** 2)
+        dJ = (2.0 / (self.W * self.h ** 2)) * (self.w[:, None] * (r @ al.R))  # envelope theorem: R, t optimal
+        return J, al, dJ.reshape(-1)
+
+    def dg_da(self, xflat) -> np.ndarray:
+        """``dg/da`` (2n, m): exact columns since the gradient is affine in ``p`` and ``p`` is affine in ``a``."""
+        g0 = self.model.gradient(xflat, self.p0)
+        return np.column_stack([self.model.gradient(xflat, self.p0 + self.B[:, c]) - g0 for c in range(self.m)])
+
+    def kkt_data(self, a, xflat):
+        """What a stability check of the driven state ``xflat`` at contractions ``a`` needs, all in units of
+        ``E t h`` (the NLP's scaling): ``(H, free, A, kappa, residual)`` with ``H`` the Hessian of the
+        Lagrangian ``E + kappa . C`` (scipy, (2n, 2n)), ``free`` the non-gauge dofs, ``A`` the Jacobian of
+        the active muscle constraints (anchor patches, taut ropes; None without constraints), ``kappa``
+        the least-squares multipliers and ``residual`` the max-norm of the Lagrangian's free gradient."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        sc = 1.0 / (self.Et * self.h)
+        p = self.params(a)
+        g = self.model.gradient(xflat, p) * sc
+        H = self.model.hessian(xflat, p) * sc
+        blk = self.block
+        if not blk.nc:
+            return H.tocsc(), self.free.copy(), None, np.zeros(0), float(np.abs(g[self.free]).max())
+        kap = blk.multipliers(xflat, g, self.free)
+        J = blk.jacobian(xflat)
+        act = np.ones(blk.nc, dtype=bool)
+        if blk.rope:  # a slack rope (no tension) constrains nothing
+            act[:self.m] = kap[:self.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
+        res = float(np.abs((g + J.T @ kap)[self.free]).max())
+        return (H + blk.hessian(xflat, kap)).tocsc(), self.free.copy(), J[np.nonzero(act)[0]], kap, res
+
+    def achieved(self, x2) -> np.ndarray:
+        """Achieved contraction ``1 - L / L0`` of every muscle along its node chain in state ``x2``."""
+        return 1.0 - np.array([mu.length(x2) for mu in self.muscles]) / self.L0
+
+    def tensions(self, a, xflat) -> np.ndarray:
+        """Per muscle pulling force in state ``xflat`` (force units, ``E t`` times a length).
+
+        The cable: the rope's tension, the multiplier of its length constraint, recovered from the
+        equilibrium by least squares (:meth:`_ConstraintBlock.multipliers`). Springs: the mean force of
+        the muscle's free segment springs, ``K a' (a - achieved)`` as :func:`~mdsr_opt.solve_internal`
+        reports it (positive when they pull)."""
+        if self.muscle_model == "cable":
+            g = self.model.gradient(xflat, self.params(a)) / (self.Et * self.h)
+            kap = self.block.multipliers(xflat, g, self.free)
+            return self.block.tension(kap)
+        x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
+        K = spring_stiffness(self.mesh, self.material, self.stiffness)
+        _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
+        return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+def _nonzeros(M: ca.SX) -> ca.SX:
+    """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
+    return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
+
+
+class _ConstraintBlock:
+    """The muscle constraints of the flattened NLP as one sparse SX block over the dofs they touch.
+
+    Rows: for the cable, one per rope, ``L_c(x) / L0_c - 1`` (the NLP adds ``+ a_c``: the equality
+    ``L_c = (1 - a_c) L0_c`` as a strain); then the rigid end-patch rows of
+    :class:`~mdsr_opt.muscle_constraints.MuscleConstraints`, each divided by the norm of its gradient at rest
+    (a length). With multipliers ``kappa`` (one per row) the stationarity conditions gain ``J(x)^T kappa``;
+    for a rope, ``kappa_c = tau_c L0_c / (E t h)`` (``tau_c`` the tension, :meth:`tension`).
+
+    Functions of the local dofs ``xl`` (sorted, so local order is global order):
+    ``val(xl, kappa) -> (C, J^T kappa)``; ``jac(xl, kappa) -> (J^T kappa, nz(J), nz(H_kappa))`` with
+    ``H_kappa = d^2 (kappa . C) / dxl^2`` (both triangles); ``hess(xl, lam, kappa, omega) -> nz(triu H)``,
+    the Hessian over ``(xl, kappa)`` of ``lam . J^T kappa + omega . C`` (the block's part of the NLP's
+    Lagrangian; the ``kappa``-``kappa`` block is zero).
+    """
+
+    def __init__(self, prob: "DesignProblem"):
+        mc = prob.constraints
+        n = prob.mesh.n_nodes
+        self.rope = prob.muscle_model == "cable"
+        self.n_rope = prob.m if self.rope else 0
+        self.n_rigid = int(mc.n_rigid)
+        self.nc = self.n_rope + self.n_rigid
+        self.L0 = prob.L0
+        self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
+        self.dofs = np.sort(np.asarray(mc.dofs, dtype=np.int64))  # ropes' and anchor groups' coordinates
+        d = len(self.dofs)
+        self.d = d
+        xl = ca.SX.sym("xl", d)
+        xf = ca.SX.zeros(2 * n)
+        if d:
+            xf[self.dofs.tolist()] = xl
+        parts = []
+        if self.rope:
+            parts.append(mc.lengths_expr(xf) / ca.DM(self.L0) - 1.0)
+        scale = np.ones(0)
+        if self.n_rigid:
+            raw = mc.rigid_expr(xf)
+            Jr = ca.Function("rigid_jac", [xl], [ca.jacobian(raw, xl)])(prob.X[self.dofs])
+            norms = np.sqrt(np.asarray(ca.sum2(Jr * Jr)).ravel())
+            if (norms <= 0).any():
+                raise ValueError("a rigid end-patch constraint has a zero gradient at rest (degenerate patch)")
+            scale = 1.0 / norms
+            parts.append(raw * ca.DM(scale))
+        self.rigid_scale = scale
+        C = ca.vertcat(*parts) if parts else ca.SX(0, 1)
+        kap = ca.SX.sym("kappa", self.nc)
+        lam = ca.SX.sym("lam", d)
+        om = ca.SX.sym("omega", self.nc)
+        J = ca.jacobian(C, xl)
+        JTk = ca.gradient(ca.dot(kap, C), xl) if self.nc else ca.SX(d, 1)
+        Hk = ca.hessian(ca.dot(kap, C), xl)[0] if self.nc else ca.SX(d, d)
+        phi = ca.dot(lam, JTk) + ca.dot(om, C)
+        Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
+        self.J_sp, self.Hk_sp, self.H_sp = J.sparsity(), Hk.sparsity(), Hphi.sparsity()
+        self.val = ca.Function("muscle_con_val", [xl, kap], [C, JTk])
+        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)])
+        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])
+        self.jac_num = ca.Function("muscle_con_J", [xl], [J])
+        self.hess_num = ca.Function("muscle_con_Hk", [xl, kap], [Hk])
+
+    def values(self, xflat) -> np.ndarray:
+        """The rows ``C(x)`` (without the NLP's ``+ a``)."""
+        return np.asarray(self.val(np.asarray(xflat)[self.dofs], np.zeros(self.nc))[0]).ravel()
+
+    def jacobian(self, xflat) -> sp.csr_matrix:
+        """``dC/dx`` as a scipy matrix ``(nc, 2n)``."""
+        Jl = self.jac_num(np.asarray(xflat)[self.dofs]).sparse()
+        Jl = sp.csr_matrix(Jl)
+        n2 = len(xflat)
+        return sp.csr_matrix((Jl.data, self.dofs[Jl.indices], Jl.indptr), shape=(self.nc, n2))
+
+    def hessian(self, xflat, kappa) -> sp.csr_matrix:
+        """``d^2 (kappa . C) / dx^2`` as a scipy matrix ``(2n, 2n)``."""
+        Hl = sp.coo_matrix(self.hess_num(np.asarray(xflat)[self.dofs], kappa).sparse())
+        n2 = len(xflat)
+        return sp.csr_matrix((Hl.data, (self.dofs[Hl.row], self.dofs[Hl.col])), shape=(n2, n2))
+
+    def multipliers(self, xflat, g_scaled, free=None) -> np.ndarray:
+        """Least-squares ``kappa`` with ``g_scaled + J^T kappa = 0`` on the free dofs (``g_scaled`` the
+        energy gradient over ``E t h``): the multipliers of an equilibrium, e.g. to warm-start the NLP."""
+        if self.nc == 0:
+            return np.zeros(0)
+        J = self.jacobian(xflat)
+        if free is not None:
+            J = J[:, np.nonzero(free)[0]]
+            g_scaled = np.asarray(g_scaled)[free]
+        A = (J @ J.T).tocsc()
+        return np.asarray(spla.spsolve(A, -(J @ g_scaled))).ravel()
+
+    def tension(self, kappa) -> np.ndarray:
+        """Rope tensions (force units) from the rope multipliers."""
+        return np.asarray(kappa)[:self.n_rope] * self.scale_t / self.L0[:self.n_rope]
+
+
+class ForwardSolver:
+    """Warm-started forward solves (:func:`~mdsr_opt.solve_internal` with the problem's muscle model and
+    anchor patches), each from the last accepted state, in the gauge frame (not aligned to rest)."""
+
+    def __init__(self, prob: DesignProblem, tol: float, max_iter: int):
+        self.prob = prob
+        self.tol, self.max_iter = tol, max_iter
+        self.a = np.zeros(prob.m)
+        self.x = prob.X.copy()  # the rest state is the equilibrium at a = 0
+        self.n_solves = 0
+        self.iterations = 0
+        self.build_time = 0.0
+
+    def solve(self, a) -> tuple[np.ndarray, bool, str]:
+        a = np.asarray(a, dtype=float).copy()
+        prob = self.prob
+        at_rest = self.n_solves == 0 or not np.any(self.a)
+        guess = "predictor" if at_rest else self.x.reshape(-1, 2)
+        res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
+                             model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
+                             tol=self.tol, max_iter=self.max_iter, align_to_rest=False, initial_guess=guess)
+        if self.n_solves == 0:
+            self.build_time += res.build_time
+        self.n_solves += 1
+        self.iterations += res.iterations
+        x = res.x.reshape(-1)
+        if res.success:
+            self.a, self.x = a, x
+        return x, bool(res.success), res.status
+
+
+# ---------------------------------------------------------------------------------------------- input checks
+def check_inputs(mesh, material, muscles, target, a_max, weights, interior_weight, muscle_model, stiffness,
+                  initial):
+    check_mesh_material(mesh, material)
+    if isinstance(muscles, Muscle):
+        muscles = [muscles]
+    if muscles is None or (hasattr(muscles, "__len__") and len(muscles) == 0):
+        raise ValueError("design needs at least one muscle: the muscle list is empty")
+    mus = check_muscles(mesh, muscles)
+    y = as_float_array(target, "target")
+    if y.shape != (mesh.n_nodes, 2):
+        raise ValueError(f"target must have shape ({mesh.n_nodes}, 2) (one position per mesh node), got {y.shape}")
+    if isinstance(a_max, bool) or not isinstance(a_max, numbers.Real):
+        raise TypeError(f"a_max must be a real number, got {type(a_max).__name__}")
+    a_max = float(a_max)
+    if not (0.0 < a_max < 1.0):
+        raise ValueError(f"a_max must lie in (0, 1) (a fraction of the rest length), got {a_max}")
+    if muscle_model not in ("springs", "cable"):
+        raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
+    stiffness = positive_float(stiffness, "stiffness")
+    if weights is None:
+        w = node_weights(mesh, interior_weight)
+    else:
+        w = as_float_array(weights, "weights", shape=(mesh.n_nodes,))
+        if (w < 0).any() or w.sum() <= 0:
+            raise ValueError("weights must be non-negative with a positive sum")
+    a0 = None
+    if initial is not None:
+        a0 = as_float_array(np.atleast_1d(initial), "initial", shape=(len(mus),))
+        if (a0 < 0).any() or (a0 > a_max).any():
+            raise ValueError(f"initial contractions must lie in [0, a_max = {a_max:g}], got {a0.tolist()}")
+    return mus, y, a_max, w, stiffness, a0
+
+
+def initial_guess_of(mesh, muscles, y, a_max) -> np.ndarray:
+    """Each muscle's geometric contraction in the target (``1 - L_target / L_rest``), clipped into the bounds."""
+    a = np.array([1.0 - mu.length(y) / mu.rest_length(mesh) for mu in muscles])
+    return np.clip(a, 0.0, 0.9 * a_max)

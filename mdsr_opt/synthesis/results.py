@@ -1,0 +1,264 @@
+"""Design results: :class:`DesignResult` (contractions, strokes, tensions, state) and :class:`Verification`."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+import numpy as np
+
+from .problem import DesignProblem
+
+__all__ = ['Verification', 'DesignResult']
+
+
+METHODS = ("flattened", "nested", "derivative-free")
+
+
+# ---------------------------------------------------------------------------------------------- results
+@dataclass
+class Verification:
+    """The independent check of a design.
+
+    Attributes
+    ----------
+    passed : bool
+        The forward re-solve succeeded, its gap to the design's state is within ``gap_tol`` and the design's
+        state is a strict minimum.
+    gap : float
+        Largest node distance between the design's state and the forward re-solve from rest at the same
+        contractions, after rigidly aligning the two (a length).
+    gap_tol : float
+        The tolerance on ``gap`` (a length: ``gap_rtol * mesh.size``).
+    forward_success, forward_status : bool, str
+        Outcome of the forward re-solve.
+    forward_difference : float
+        Difference index of the forward re-solve to the target.
+    residual : float
+        Max-norm of the energy gradient on the free coordinates at the design's state, relative to
+        ``E t size``.
+    positive_definite : bool
+        The free-coordinate Hessian at the design's state is positive definite (every pivot of its
+        symmetric factorisation is positive).
+    min_eigenvalue : float
+        Its smallest eigenvalue, relative to ``E t`` (negative: a saddle); see :func:`check_minimum`. When
+        the state is positive definite it is only estimated with ``verify_design(..., lowest=True)`` (an
+        eigen-solve, 30-100x the cost of the inertia) and is NaN otherwise; when it is not, the curvature
+        along the direction of negative curvature found (an upper bound on the smallest eigenvalue).
+    message : str
+        Why the check failed (empty when it passed).
+    time : float
+        Seconds spent verifying.
+    target_stable : bool or None
+        The target is a stable equilibrium of its external driving (None: anchors and drags not given).
+    """
+
+    passed: bool
+    gap: float
+    gap_tol: float
+    forward_success: bool
+    forward_status: str
+    forward_difference: float
+    residual: float
+    positive_definite: bool
+    min_eigenvalue: float
+    message: str = ""
+    time: float = 0.0
+    target_stable: bool | None = None
+
+
+@dataclass
+class DesignResult:
+    """Contractions found for a target, the driven state and how they were found.
+
+    Attributes
+    ----------
+    method : str
+        ``"flattened"``, ``"nested"`` or ``"derivative-free"``.
+    contractions : (m,) ndarray
+        One contraction per muscle, in ``[0, a_max]``.
+    x : (n, 2) ndarray
+        The driven equilibrium at ``contractions``, rigidly aligned to the rest shape (as
+        :func:`~mdsr_opt.solve_internal` returns it).
+    rotation, translation : (2, 2) and (2,) ndarrays
+        The best rigid motion taking ``x`` onto the target: ``x @ rotation.T + translation``.
+    difference : float
+        Weighted RMS node distance to the target after that motion (a length).
+    success : bool
+        The optimiser converged and the verification passed.
+    status : str
+        The optimiser's status, with the reason when the design was rejected.
+    iterations : int
+        Outer iterations (IPOPT iterations for ``"flattened"``).
+    n_forward : int
+        Forward (equilibrium) solves made, warm start included.
+    inner_iterations : int
+        Solver iterations summed over those forward solves.
+    build_time, solve_time, time : float
+        Seconds building models and solvers (0 when cached), optimising (warm start included), and their sum.
+    initial_contractions : (m,) ndarray
+        The starting point.
+    initial_difference : float
+        Difference of the warm-start state.
+    a_max : float
+        Upper bound on the contractions.
+    muscle_model : str
+        ``"cable"`` (the exact rope) or ``"springs"``.
+    stiffness : float
+        Spring stiffness relative to ``E t`` (springs only).
+    anchor_radius : float
+        Radius of the rigid patch at each muscle end (a length; see
+        :func:`~mdsr_opt.muscle_constraints.anchor_patches`).
+    rest_lengths : (m,) ndarray
+        Each muscle's rest length ``L0`` along its node chain.
+    achieved : (m,) ndarray
+        Achieved contraction ``1 - L / L0`` of every muscle along its node chain in ``x`` (the cable:
+        equal to ``contractions`` unless the rope is slack; springs: less, the springs stretch).
+    stroke : (m,) ndarray
+        The rope length each muscle pulls in, ``achieved * L0`` (a length; what a servo winds).
+    tension : (m,) ndarray
+        The muscle's pull (force: ``E t`` times a length). The cable: the rope's tension, the multiplier
+        of its length constraint (never negative). Springs: the mean force of its segment springs.
+    slack : (m,) bool ndarray
+        The muscle does not pull (tension about zero, or negative for springs).
+    verification : Verification or None
+        The independent check (None when ``verify=False``).
+    history : list of (float, float)
+        ``(seconds since start, difference)`` after each forward solve of the outer loop (nested,
+        derivative-free) or at start and end (flattened, whose iterates are not equilibria).
+    """
+
+    method: str
+    contractions: np.ndarray
+    x: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    difference: float
+    success: bool
+    status: str
+    iterations: int
+    n_forward: int
+    inner_iterations: int
+    build_time: float
+    solve_time: float
+    time: float
+    initial_contractions: np.ndarray
+    initial_difference: float
+    a_max: float
+    muscle_model: str = "cable"
+    stiffness: float = 10.0
+    verification: Verification | None = None
+    history: list = field(default_factory=list)
+    anchor_radius: float = float("nan")
+    rest_lengths: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    achieved: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    stroke: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    @property
+    def commanded(self) -> np.ndarray:
+        """The designed (commanded) contractions, the same as ``contractions``."""
+        return self.contractions
+
+    def muscle_table(self) -> str:
+        """One line per muscle: commanded and achieved contraction, stroke, tension, slack."""
+        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} {'tension':>10} slack"]
+        for i in range(len(self.contractions)):
+            def at(v, k=i):
+                return float(v[k]) if len(v) > k else float("nan")
+            sl = bool(self.slack[i]) if len(self.slack) > i else False
+            lines.append(f"{i:>6} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
+                         f"{at(self.stroke):>10.4g} {at(self.tension):>10.4g} {'yes' if sl else 'no'}")
+        return "\n".join(lines)
+
+    @property
+    def x_aligned(self) -> np.ndarray:
+        """The driven state moved onto the target: ``x @ rotation.T + translation``."""
+        return self.x @ self.rotation.T + self.translation
+
+    @property
+    def angle(self) -> float:
+        """Rotation angle (radians) of the motion onto the target."""
+        return float(math.atan2(self.rotation[1, 0], self.rotation[0, 0]))
+
+    def summary(self) -> dict:
+        """Scalars of the result (no arrays except the contractions), for tables and logs."""
+        v = self.verification
+        return {"method": self.method, "success": self.success, "status": self.status,
+                "muscle_model": self.muscle_model,
+                "contractions": [float(c) for c in self.contractions],
+                "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
+                "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
+                "anchor_radius": self.anchor_radius, "difference": self.difference,
+                "initial_difference": self.initial_difference, "iterations": self.iterations,
+                "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
+                "build_time": self.build_time, "solve_time": self.solve_time, "time": self.time,
+                "verified": None if v is None else v.passed, "gap": None if v is None else v.gap,
+                "min_eigenvalue": None if v is None or not np.isfinite(v.min_eigenvalue) else v.min_eigenvalue}
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dict (arrays as nested lists); :meth:`from_dict` inverts it."""
+        d = {}
+        for k, v in self.__dict__.items():
+            if isinstance(v, np.ndarray):
+                d[k] = v.tolist()
+            elif isinstance(v, Verification):
+                d[k] = asdict(v)
+            elif k == "history":
+                d[k] = [[float(a), float(b)] for a, b in v]
+            else:
+                d[k] = v
+        return finite_or_none(d)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "DesignResult":
+        d = {k: (float("nan") if v is None and k in ("difference", "initial_difference", "anchor_radius") else v)
+             for k, v in d.items()}
+        for k in ("contractions", "x", "rotation", "translation", "initial_contractions"):
+            d[k] = np.asarray(d[k], dtype=float)
+        for k in ("rest_lengths", "achieved", "stroke", "tension"):
+            if k in d:
+                d[k] = np.asarray([np.nan if v is None else v for v in d[k]], dtype=float)
+        if "slack" in d:
+            d["slack"] = np.asarray(d["slack"], dtype=bool)
+        if d.get("verification") is not None:
+            v = dict(d["verification"])
+            if v.get("min_eigenvalue") is None:  # not estimated (NaN, written as null)
+                v["min_eigenvalue"] = np.nan
+            d["verification"] = Verification(**v)
+        d["history"] = [tuple(h) for h in d.get("history", [])]
+        return cls(**d)
+
+
+def finite_or_none(o):
+    """Replace NaN/inf floats by None (JSON has no NaN), recursively."""
+    if isinstance(o, dict):
+        return {k: finite_or_none(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [finite_or_none(v) for v in o]
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return o
+
+
+def report_muscles(prob: DesignProblem, res: DesignResult, xflat, kappa) -> None:
+    """Fill the per-muscle fields of ``res``: achieved contraction, stroke, tension, slack."""
+    x2 = np.asarray(xflat, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(x2)):
+        return
+    res.achieved = prob.achieved(x2)
+    res.stroke = res.achieved * prob.L0
+    try:
+        if kappa is not None and prob.muscle_model == "cable":  # the NLP's own multipliers
+            res.tension = prob.block.tension(kappa)
+        else:
+            res.tension = prob.tensions(res.contractions, x2.reshape(-1))
+    except (RuntimeError, ValueError):  # pragma: no cover - singular least squares
+        res.tension = np.full(prob.m, np.nan)
+    tiny = 1e-7 * prob.Et * prob.h
+    res.slack = res.tension <= tiny

@@ -1,0 +1,120 @@
+"""The design's rivals for comparison studies: nested (adjoint gradients) and derivative-free."""
+
+from __future__ import annotations
+
+import math
+from typing import Callable
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .problem import ForwardSolver, DesignProblem
+
+
+# ---------------------------------------------------------------------------------------------- outer loops
+class _Outer:
+    """Objective of the reduced problem ``a -> J(x*(a))`` with a record of every evaluation."""
+
+    def __init__(self, prob: DesignProblem, fwd: ForwardSolver, clock: Callable[[], float], penalty: float = 1e6):
+        self.prob, self.fwd, self.clock = prob, fwd, clock
+        self.penalty = penalty
+        self.history: list[tuple[float, float]] = []
+        self.best: tuple[float, np.ndarray, np.ndarray] | None = None
+        self.failures: list[str] = []
+        self.n_eval = 0
+
+    def _eval(self, a):
+        a = np.clip(np.asarray(a, dtype=float), 0.0, self.prob.a_max)
+        x, ok, status = self.fwd.solve(a)
+        self.n_eval += 1
+        if not ok:
+            self.failures.append(status)
+            return None, a, x, None, None
+        J, al, dJ = self.prob.objective(x.reshape(-1, 2))
+        if self.best is None or J < self.best[0]:
+            self.best = (J, a.copy(), x.copy())
+        self.history.append((self.clock(), math.sqrt(self.best[0]) * self.prob.h))
+        return J, a, x, al, dJ
+
+    def value(self, a) -> float:
+        J, *_ = self._eval(a)
+        return self.penalty if J is None else J
+
+    def value_and_grad(self, a):
+        J, a, x, _al, dJ = self._eval(a)
+        if J is None:
+            raise _ForwardFailed(self.failures[-1])
+        return J, _reduced_gradient(self.prob, a, x, dJ)
+
+
+class _ForwardFailed(RuntimeError):
+    pass
+
+
+def _reduced_gradient(prob: DesignProblem, a, x, dJ) -> np.ndarray:
+    """``dJ/da`` at an equilibrium ``x`` of contractions ``a`` by the implicit-function theorem.
+
+    The equilibrium solves ``F(x, kappa; a) = [sc grad E(x, a) + J_C(x)^T kappa ; C(x) + E a] = 0`` on the
+    free dofs, with the active muscle constraints (the rigid end patches; the cable's taut ropes; a slack
+    rope's row drops out, and so does its contraction's influence). One adjoint solve with the symmetric
+    KKT matrix ``K = [[H, A^T], [A, 0]]`` (``H`` the Hessian of the Lagrangian) gives
+    ``dJ/da = -lambda^T dF/da`` with ``K lambda = [dJ/dx ; 0]``. Without constraints ``K = H``.
+    """
+    free = prob.free
+    sc = 1.0 / (prob.Et * prob.h)
+    p = prob.params(a)
+    H = prob.model.hessian(x, p) * sc
+    blk = prob.block
+    dFa = sc * prob.dg_da(x)[free]
+    if blk.nc:
+        kap = blk.multipliers(x, prob.model.gradient(x, p) * sc, free)
+        act = np.ones(blk.nc, dtype=bool)
+        if blk.rope:
+            act[:prob.m] = kap[:prob.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
+        H = (H + blk.hessian(x, kap)).tocsr()
+        A = blk.jacobian(x)[np.nonzero(act)[0]][:, np.nonzero(free)[0]]
+        K = sp.bmat([[H[free][:, free], A.T], [A, None]]).tocsc()
+        Ea = np.zeros((blk.nc, prob.m))
+        if blk.rope:
+            Ea[:prob.m] = np.eye(prob.m)
+        dFa = np.vstack([dFa, Ea[act]])
+        rhs = np.concatenate([dJ[free], np.zeros(int(act.sum()))])
+    else:
+        K = H[free][:, free].tocsc()
+        rhs = dJ[free]
+    lam = spla.spsolve(K, rhs)
+    return -(dFa.T @ lam)
+
+
+def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
+    from scipy.optimize import minimize
+
+    obj = _Outer(prob, fwd, clock)
+    opts = {"maxiter": max_iter, "ftol": tol ** 2, "gtol": tol}
+    opts.update(outer_options or {})
+    try:
+        res = minimize(obj.value_and_grad, a0, jac=True, method="L-BFGS-B",
+                       bounds=[(0.0, prob.a_max)] * prob.m, options=opts)
+    except _ForwardFailed as exc:
+        return obj, False, f"forward solve failed: {exc}", obj.n_eval
+    return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
+
+
+def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock):
+    from scipy.optimize import minimize
+
+    obj = _Outer(prob, fwd, clock)
+    bounds = [(0.0, prob.a_max)] * prob.m
+    if outer == "nelder-mead":
+        opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": tol ** 2, "adaptive": prob.m > 2}
+        opts.update(outer_options or {})
+        res = minimize(obj.value, a0, method="Nelder-Mead", bounds=bounds, options=opts)
+    else:
+        opts = {"maxfev": max_iter, "xtol": tol, "ftol": tol ** 2}
+        opts.update(outer_options or {})
+        res = minimize(obj.value, a0, method="Powell", bounds=bounds, options=opts)
+    ok = bool(res.success) and not obj.failures
+    status = f"{'Nelder-Mead' if outer == 'nelder-mead' else 'Powell'}: {res.message}"
+    if obj.failures:
+        status += f"; {len(obj.failures)} forward solve(s) failed ({obj.failures[-1]})"
+    return obj, ok, status, int(res.nit)

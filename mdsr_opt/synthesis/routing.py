@@ -1,0 +1,618 @@
+"""Muscle routing: the contraction graph of a target shape and the best-first muscle search.
+
+Given the rest mesh and a target configuration (typically the result of external driving), every mesh edge
+gets a weight, its relative contraction ``w = (l0 - l) / l0`` (positive: the edge shortens, negative: it
+stretches). :func:`contraction_graph` returns these as a networkx graph. :func:`route_muscles` lays
+muscle units along strongly and uniformly contracted, smooth chains of edges:
+
+1. **Regions and seeds.** A contracted region is a connected set of nodes touched by edges contracted by
+   at least ``seed_threshold * w_ref`` (``w_ref``: the contraction reached by the most contracted edges
+   of total rest length four mean edge lengths; one short edge at a corner would dominate ``w_max``),
+   counting only compression: an edge whose contraction is smaller than the largest principal stretch
+   of the triangles beside it is the sideways (Poisson) response of a stretched region, which a cable
+   cannot produce. Each region is seeded on its own with its ``n_seeds`` most contracted edges (a
+   global top-n would put every seed in the most contracted region).
+2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
+   continuation first, every turn within ``max_turn`` and every edge passing the same gate ``g <= 1`` as
+   growth (below), so no seed joins edges that contract very differently; each path is a muscle unit.
+3. **Growth and splicing.** Units grow from their endpoints by a best-first (A*-like) search. A step adds
+   a contracted edge ``e`` at an endpoint ``N`` (or joins another unit's endpoint through ``e``) and costs
+
+   ``g = K_a * g_a + K_b * (1 - cos(theta))``,
+
+   where ``g_a`` is the nonuniformity of the step: the largest squared relative deviation of a joined
+   part's mean contraction from the mean of the grown unit, ``max_p ((mean_p - mean) / mean)**2`` over
+   the parts (the unit, the edge, and the other unit when splicing), and ``theta`` the turn taken (for a
+   splice, the larger of the two turns at the joint). A step is allowed only if ``g <= 1`` and no turn
+   exceeds ``max_turn`` (the tortuosity rule, which seed paths obey too). Of all allowed steps the one
+   with the smallest ``f = g + K_h * h`` is taken, ``h`` being the shortest-path length along mesh edges
+   (rest lengths, in mean edge lengths) from the new endpoint to the nearest endpoint of another unit.
+   Joining another unit's endpoint splices the two (fewer, longer muscles). Growth ends when no step is
+   allowed.
+4. **Fragments and selection.** Units shorter than ``min_length`` are spliced into a neighbouring unit
+   end (within the tortuosity limit, and ``K_a * share * g_a <= 1`` with ``share`` the fragment's share
+   of the joined edges) or dropped; the result's ``dropped`` records each with the reason.
+   The rest are ranked by the contraction they capture (``sum w * l0``), and at most ``max_muscles`` kept.
+5. **Symmetry.** When the body is mirror-symmetric and the target contracts mirrored edges alike,
+   every step is taken together with its mirror image (:mod:`mdsr_opt.routing_symmetry`), so the
+   muscles are mirror pairs or their own mirror images, node for node.
+
+A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
+part of a muscle, neither as a seed nor by growth. A target that only stretches the body, contracts
+nothing by more than ``min_contraction``, or equals the rest shape (every edge length within a relative
+``1e-8``, up to a rigid motion) gives no muscles and a :class:`RoutingWarning` saying which.
+
+Why ``g_a`` is a relative mismatch (a change made for the paper's Figure 6)
+-----------------------------------------------------------------------------
+An earlier version took ``g_a = Var(w over the grown unit) / w_max**2``. The weights along a chain of
+contracted edges vary smoothly and lie in ``(0, w_max]``, so that variance stays below about
+``0.03 w_max**2`` for any unit: ``K_a * g_a`` reached the gate ``g <= 1`` only for ``K_a`` of about 30 to
+100, and below that ``K_a`` changed nothing (measured with that cost: tentacle/curl, tentacle/s_curve,
+gripper/close and humanoid/raise_arms routed identically for every ``K_a`` in 0.1 .. 10). Growth runs until no step is allowed, so ``K_a`` acts only through the gate, never
+through the order. The relative mismatch is dimensionless and of order one: an edge that contracts half
+as much as the unit costs ``0.25 K_a``. ``K_a`` then states how alike the parts of a muscle must be
+(within ``1/sqrt(K_a)`` of the mean at zero turn), and over ``K_a`` = 1 .. 30 a smaller value splices more
+units into fewer, longer muscles, as the paper reports. The paper's own ``g_a`` is the rise of the
+variance; a rise can be negative (an edge near the mean lowers the variance) and lets the variance creep
+over many steps, so it is not used.
+
+Deviations from the paper (and from the project's design notes), on purpose:
+
+* ``g_a`` as above.
+* ``h`` is the shortest-path length along mesh edges, not the Manhattan distance. The paper takes the
+  Manhattan distance because a muscle follows the lattice edges, so its length is closer to that than
+  to the straight-line distance. On a triangle mesh the length along mesh edges is exactly that path
+  length, and unlike a Manhattan distance (which depends on the x and y axes) it does not change when
+  the body is rotated: rotating mesh and target together gives the same muscles.
+* The tortuosity is a rule (``max_turn``) besides a cost: the paper wants smooth muscles; a rope that turns
+  sharply at a node rubs and cuts the silicone.
+
+The search itself lives in :mod:`mdsr_opt.routing_search` (:class:`~mdsr_opt.routing_search.Router`),
+the mirror symmetry in :mod:`mdsr_opt.routing_symmetry`, the quality table of the problem library in
+:mod:`mdsr_opt.routing_quality`.
+
+Determinism: ties are broken by rest geometry (edge midpoints, node coordinates), never by node index,
+and weights are compared on a grid of ``1e-9``, so the ~1e-16 round-off of a rigid motion of the target
+changes the order of two weights only if they straddle a grid boundary (in practice never; the tests
+check several motions). Relabelling the nodes or moving the target rigidly gives the same muscles.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh
+>>> from mdsr_opt.synthesis.routing import route_muscles
+>>> mesh = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+>>> target = mesh.points * [0.8, 1.0]          # shorten along x by 20 %
+>>> result = route_muscles(mesh, target)
+>>> len(result) > 0 and all(s.turning_angle == 0.0 for s in result.stats)
+True
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import warnings
+from dataclasses import asdict, dataclass, field
+
+import networkx as nx
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ..core.checks import as_float_array, positive_float
+from ..body.checks import check_mesh
+from ..body.mesh import Mesh
+from ..body.muscles import Muscle
+from ..core.results import format_value, to_jsonable
+from .routing_search import Router
+from .routing_symmetry import Reflection, find_reflections, weights_are_symmetric
+
+__all__ = [
+    "contraction_graph",
+    "edge_weights",
+    "route_muscles",
+    "RoutingResult",
+    "MuscleStats",
+    "RoutingWarning",
+    "DroppedUnit",
+    "largest_turn",
+]
+
+#: Weights are compared as integers on this grid (rigid-motion round-off is ~1e-16).
+_QUANTUM = 1e-9
+#: A target whose every edge length matches its rest length within this relative tolerance
+#: (``|l - l0| <= _REST_RTOL * l0``, i.e. ``|w| <= _REST_RTOL``) counts as the rest shape.
+_REST_RTOL = 1e-8
+
+
+class RoutingWarning(UserWarning):
+    """Routing found nothing to do (rest-shape or elongation-only target) or dropped every unit."""
+
+
+# ---------------------------------------------------------------------------------------------- input
+def _check_target(mesh: Mesh, target: ArrayLike) -> np.ndarray:
+    """The target as a finite (n, 2) float array without inverted triangles."""
+    x = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
+    J = mesh.jacobians(x)
+    bad = J <= 0.0
+    if bad.all():
+        raise ValueError(f"target inverts every triangle (det F <= 0 in all {mesh.n_triangles}); "
+                         "is it a mirror image of the body?")
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"target has {int(bad.sum())} inverted triangle(s) (det F <= 0), first: triangle "
+                         f"{k} {mesh.triangles[k].tolist()} with det F = {J[k]:.3g}; "
+                         "a physical target keeps every element positively oriented")
+    return x
+
+
+def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rest lengths, target lengths and relative contractions of ``mesh.edges``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : array_like, shape (n, 2)
+        Target node positions; must be finite and must not invert any triangle.
+
+    Returns
+    -------
+    l0, l, w : ndarray, shape (k,)
+        Rest length, target length and ``w = (l0 - l) / l0`` of each row of ``mesh.edges``. ``l0`` is
+        the mesh's cached ``edge_lengths`` and read-only (copy it to modify); ``l`` and ``w`` are new
+        arrays, so changing them affects nothing else.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(1.0, 1.0, 1, 1, pattern="right")
+    >>> l0, l, w = edge_weights(mesh, mesh.points * [0.5, 1.0])
+    >>> float(w.max())
+    0.5
+    """
+    mesh = check_mesh(mesh)
+    return _weights(mesh, _check_target(mesh, target))
+
+
+def _weights(mesh: Mesh, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    e = mesh.edges
+    l0 = mesh.edge_lengths
+    l = np.linalg.norm(x[e[:, 1]] - x[e[:, 0]], axis=1)
+    return l0, l, (l0 - l) / l0
+
+
+def contraction_graph(mesh: Mesh, target: ArrayLike) -> nx.Graph:
+    """The contraction graph of ``target`` over the rest ``mesh``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : array_like, shape (n, 2)
+        Target node positions (e.g. an external-driving equilibrium). Finite, no inverted triangle.
+
+    Returns
+    -------
+    networkx.Graph
+        One node per mesh node (attributes ``rest`` and ``target``: coordinate tuples) and one edge per
+        mesh edge with attributes ``rest_length``, ``target_length`` and ``weight`` =
+        ``(rest_length - target_length) / rest_length`` (positive: contraction, negative: elongation).
+        ``graph.graph`` holds ``w_max`` and ``w_min``. Note that weights can be negative, so the graph is
+        not meant for networkx shortest-path routines.
+
+    Raises
+    ------
+    TypeError
+        ``mesh`` is not a :class:`~mdsr_opt.Mesh` or ``target`` is not numeric.
+    ValueError
+        ``target`` has the wrong shape, contains NaN/inf, or inverts a triangle.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(2.0, 1.0, 2, 1)
+    >>> G = contraction_graph(mesh, mesh.points * [0.9, 1.0])
+    >>> round(G.edges[0, 1]["weight"], 6)
+    0.1
+    """
+    mesh = check_mesh(mesh)
+    x = _check_target(mesh, target)
+    return _graph(mesh, x, *_weights(mesh, x))
+
+
+def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarray) -> nx.Graph:
+    G = nx.Graph(w_max=float(w.max()), w_min=float(w.min()))
+    G.add_nodes_from((i, {"rest": tuple(p), "target": tuple(q)})
+                     for i, (p, q) in enumerate(zip(mesh.points.tolist(), x.tolist())))
+    G.add_edges_from((a, b, {"rest_length": r, "target_length": t, "weight": c})
+                     for (a, b), r, t, c in zip(mesh.edges.tolist(), l0.tolist(), l.tolist(), w.tolist()))
+    return G
+
+
+# ---------------------------------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class MuscleStats:
+    """Figures of one routed muscle.
+
+    Attributes
+    ----------
+    name : str
+        The muscle's name.
+    n_edges : int
+        Number of mesh edges along the path.
+    rest_length, target_length : float
+        Path length at rest and in the target.
+    contraction : float
+        ``1 - target_length / rest_length``: the contraction that would make the whole cable match the
+        target (a first guess for the design stage).
+    mean_weight : float
+        Mean relative contraction ``w`` of the path's edges.
+    nonuniformity : float
+        Variance of those weights (the paper's nonuniformity coefficient; 0 = perfectly uniform).
+    turning_angle : float
+        Total absolute turning of the path at rest, radians (0 = straight).
+    turning_angle_target : float
+        The same in the target configuration.
+    max_turn : float
+        The largest turn at any single node, at rest, radians (the tortuosity rule bounds it).
+    """
+
+    name: str
+    n_edges: int
+    rest_length: float
+    target_length: float
+    contraction: float
+    mean_weight: float
+    nonuniformity: float
+    turning_angle: float
+    turning_angle_target: float
+    max_turn: float = 0.0
+
+    def to_dict(self) -> dict:
+        """The figures as a JSON-ready dict."""
+        return to_jsonable(asdict(self))
+
+
+@dataclass(frozen=True)
+class DroppedUnit:
+    """A unit that is not a muscle of the result as it stood, and why.
+
+    Attributes
+    ----------
+    nodes : tuple of int
+        Its path when it was spliced, dropped or cut.
+    rest_length : float
+        Its rest length then.
+    reason : str
+        ``"spliced into ..."``, ``"dropped: ..."`` or ``"cut by max_muscles ..."``.
+    """
+
+    nodes: tuple
+    rest_length: float
+    reason: str
+
+    def to_dict(self) -> dict:
+        """The figures as a JSON-ready dict."""
+        return to_jsonable(asdict(self))
+
+
+@dataclass(frozen=True, eq=False)
+class RoutingResult:
+    """Muscles routed for a target, with their figures.
+
+    Iterating, ``len`` and indexing act on :attr:`muscles`, so ``for m in route_muscles(...)`` works.
+    Two results compare equal only if they are the same object (``eq=False``: the graph and the dict
+    have no meaningful ``==``); compare ``[m.nodes for m in result]`` instead.
+
+    Attributes
+    ----------
+    muscles : tuple of Muscle
+        The routed muscles, strongest first (by ``sum w * l0`` over their edges). Each path starts at the
+        end whose rest coordinates are lexicographically smaller.
+    stats : tuple of MuscleStats
+        One entry per muscle, same order.
+    graph : networkx.Graph
+        The contraction graph (see :func:`contraction_graph`).
+    seeds : tuple of (int, int)
+        The seed edges, most contracted first.
+    n_units : int
+        Units left when growth stopped, before ``min_length``/``max_muscles`` selection.
+    params : dict
+        The knobs used (``K_a``, ``K_b``, ``K_h``, ``n_seeds``, ``max_muscles``, ``min_length``,
+        ``min_contraction``, ``max_turn``, ``seed_threshold``, ``symmetry``).
+    dropped : tuple of DroppedUnit
+        Fragments shorter than ``min_length`` (spliced or dropped) and muscles cut by ``max_muscles``.
+    reflection : Reflection or None
+        The mirror symmetry the muscles were routed with (None: not symmetric, or switched off).
+    n_regions : int
+        Contracted regions that were seeded.
+    """
+
+    muscles: tuple[Muscle, ...]
+    stats: tuple[MuscleStats, ...]
+    graph: nx.Graph
+    seeds: tuple[tuple[int, int], ...] = ()
+    n_units: int = 0
+    params: dict = field(default_factory=dict)
+    dropped: tuple = ()
+    reflection: Reflection | None = None
+    n_regions: int = 0
+
+    def __iter__(self):
+        return iter(self.muscles)
+
+    def __len__(self) -> int:
+        return len(self.muscles)
+
+    def __getitem__(self, i):
+        return self.muscles[i]
+
+    def __repr__(self) -> str:
+        names = [m.name for m in self.muscles]
+        return (f"RoutingResult({len(self.muscles)} muscle(s) {format_value(names)}, edges "
+                f"{format_value([s.n_edges for s in self.stats])}, contractions "
+                f"{format_value([round(s.contraction, 4) for s in self.stats])}, n_units={self.n_units}, "
+                f"seeds={len(self.seeds)}, graph={self.graph.number_of_nodes()} nodes)")
+
+    def to_dict(self) -> dict:
+        """Muscles, their figures, seeds, unit count and knobs as a JSON-ready dict (the graph is left out:
+        :func:`contraction_graph` rebuilds it from the mesh and the target)."""
+        return to_jsonable({"muscles": list(self.muscles), "stats": [s.to_dict() for s in self.stats],
+                            "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params),
+                            "dropped": [asdict(d) for d in self.dropped]})
+
+    def table(self) -> str:
+        """The stats as a plain-text table (one row per muscle)."""
+        head = (f"{'muscle':<10} {'edges':>5} {'L0':>9} {'L':>9} {'contr.':>7} {'mean w':>8} "
+                f"{'var w':>9} {'turn':>7} {'max':>5}")
+        rows = [head, "-" * len(head)]
+        for s in self.stats:
+            rows.append(f"{s.name:<10} {s.n_edges:>5d} {s.rest_length:>9.4g} {s.target_length:>9.4g} "
+                        f"{s.contraction:>7.3f} {s.mean_weight:>8.4f} {s.nonuniformity:>9.2e} "
+                        f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
+        return "\n".join(rows)
+
+
+
+def _int_param(value, name: str, minimum: int = 1) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
+def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float = 4.0, K_h: float = 0.1,
+                  n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
+                  min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
+                  symmetry: str | bool = "auto") -> RoutingResult:
+    """Route muscle units along contracted, uniform, smooth chains of mesh edges.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The rest mesh.
+    target : array_like, shape (n, 2)
+        Target node positions (e.g. an external-driving equilibrium); finite, no inverted triangle.
+    K_a : float, default 4
+        Weight of nonuniformity ``g_a``, the largest squared relative deviation of a joined part's mean
+        contraction from the grown unit's mean (see the module docstring). A step is allowed only if
+        ``K_a * g_a + K_b * (1 - cos(theta)) <= 1``; at zero turn an edge may join a unit whose mean
+        contraction it matches within ``1/sqrt(K_a)``. Smaller: fewer, longer muscles (more splicing);
+        larger: more, shorter, more uniform ones.
+    K_b : float, default 4
+        Weight of tortuosity ``1 - cos(theta)`` of the turn taken.
+    K_h : float, default 0.1
+        Weight of the heuristic (shortest-path length along mesh edges to the nearest other unit's
+        endpoint, in mean edge lengths) in the best-first order.
+    n_seeds : int, default 8
+        Seed edges per contracted region: the region's ``n_seeds`` most contracted edges.
+    max_muscles : int, optional
+        Keep at most this many muscles (the strongest by ``sum w * l0``; mirror pairs are kept or cut
+        together); default: all. Cut muscles are listed in ``result.dropped``.
+    min_length : float, optional
+        Fragments with a smaller rest length are spliced into a neighbouring unit or dropped (the reason
+        is in ``result.dropped``); default: twice the mean rest edge length.
+    min_contraction : float, default 1e-3
+        Only edges with ``w > min_contraction`` are used (a cable cannot push).
+    max_turn : float, default 45
+        Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
+        and splice joints alike).
+    seed_threshold : float, default 0.6
+        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
+        region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
+        length four mean edge lengths (so one short edge at a corner cannot set it).
+    symmetry : {"auto", True, False}, default "auto"
+        Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
+        mirrored edges contract alike (within ``1e-6 * max|w|``). ``True`` requires that and raises
+        otherwise; ``False`` never does it.
+
+    Returns
+    -------
+    RoutingResult
+        Iterable of :class:`~mdsr_opt.Muscle`; ``.stats`` per muscle, ``.dropped`` the fragments and cut
+        muscles with the reason, ``.graph`` the contraction graph, ``.reflection`` the symmetry used.
+
+    Raises
+    ------
+    TypeError
+        ``mesh`` is not a Mesh, a knob has the wrong type, or ``target`` is not numeric.
+    ValueError
+        ``target`` has the wrong shape, contains NaN/inf or inverts a triangle; a knob is out of range;
+        ``symmetry=True`` for a body or target that is not mirror-symmetric.
+
+    Warns
+    -----
+    RoutingWarning
+        The target equals the rest shape (every edge length within a relative ``1e-8``, up to a rigid
+        motion), only stretches the body, contracts no edge by more than ``min_contraction``, or every
+        unit is shorter than ``min_length``. The message says which; the result is then empty.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+    >>> X = mesh.points
+    >>> R, phi = 3.0, (X[:, 0] - 2.0) / 3.0            # bend the strip about the centre line y = 0.5
+    >>> r = R - (X[:, 1] - 0.5)                          # the top side (y = 1) is on the inside
+    >>> target = np.column_stack([r * np.sin(phi), R - r * np.cos(phi)])
+    >>> result = route_muscles(mesh, target)
+    >>> bool(np.all(X[list(result[0].nodes), 1] > 0.5))  # the muscle runs on the concave side
+    True
+    """
+    mesh = check_mesh(mesh)
+    K_a = positive_float(K_a, "K_a", allow_zero=True)
+    K_b = positive_float(K_b, "K_b", allow_zero=True)
+    K_h = positive_float(K_h, "K_h", allow_zero=True)
+    n_seeds = _int_param(n_seeds, "n_seeds")
+    if max_muscles is not None:
+        max_muscles = _int_param(max_muscles, "max_muscles")
+    ell = float(mesh.edge_lengths.mean())
+    if min_length is None:
+        min_length = 2.0 * ell
+    else:
+        min_length = positive_float(min_length, "min_length", allow_zero=True)
+    min_contraction = positive_float(min_contraction, "min_contraction", allow_zero=True)
+    if min_contraction >= 1.0:
+        raise ValueError("min_contraction must be < 1 (a fraction of the rest length), "
+                         f"got {min_contraction}")
+    max_turn = positive_float(max_turn, "max_turn", allow_zero=True)
+    if max_turn > 180.0:
+        raise ValueError(f"max_turn must be <= 180 degrees, got {max_turn}")
+    seed_threshold = positive_float(seed_threshold, "seed_threshold")
+    if seed_threshold > 1.0:
+        raise ValueError(f"seed_threshold must be in (0, 1] (a fraction of the largest contraction), "
+                         f"got {seed_threshold}")
+    if symmetry not in ("auto", True, False):
+        raise ValueError(f"symmetry must be 'auto', True or False, got {symmetry!r}")
+    params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
+                  min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
+                  seed_threshold=seed_threshold, symmetry=symmetry)
+
+    x = _check_target(mesh, target)
+    l0, l, w = _weights(mesh, x)
+    graph = _graph(mesh, x, l0, l, w)
+
+    def empty(msg: str) -> RoutingResult:
+        warnings.warn(msg, RoutingWarning, stacklevel=3)
+        return RoutingResult((), (), graph, (), 0, params)
+
+    w_abs = float(np.abs(w).max())
+    if w_abs <= _REST_RTOL:
+        return empty(f"target equals the rest shape within tolerance (up to a rigid motion): no edge "
+                     f"length changes by more than {_REST_RTOL:g} of its rest length (largest "
+                     f"|w| = {w_abs:.3g}), so there is nothing for a muscle to do; no muscles routed")
+    reflection = None
+    if symmetry is not False:
+        reflection = next((m for m in find_reflections(mesh) if weights_are_symmetric(w, m)), None)
+        if symmetry is True and reflection is None:
+            raise ValueError("symmetry=True but the body is not mirror-symmetric or the target does not "
+                             "contract mirrored edges alike")
+    wq = np.rint(w / _QUANTUM).astype(np.int64)
+    if reflection is not None:  # exact symmetry of the quantised weights (floor of the pair's mean)
+        wq = (wq + wq[reflection.edge_map]) // 2
+    floor_q = int(round(min_contraction / _QUANTUM))
+    turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
+    router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
+    if not router.feasible.any():
+        w_top = float(w.max())
+        if w_top <= _REST_RTOL:
+            return empty(f"no edge contracts (largest relative stretch {-float(w.min()):.3g}): the "
+                         "target only stretches the body and a cable cannot push; no muscles routed")
+        return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
+                     f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
+                     "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
+    # the reference contraction: the largest w reached by edges of total rest length 4 mean edge lengths
+    # (not w_max, which a single short edge at a corner can dominate)
+    feas = np.flatnonzero(router.feasible)
+    order = feas[np.argsort(-wq[feas], kind="stable")]
+    reach = np.searchsorted(np.cumsum(l0[order]), 4.0 * ell)
+    w_ref_q = int(wq[order[min(reach, len(order) - 1)]])
+    threshold_q = max(floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
+    regions = router.regions(threshold_q, _compression_dominated(mesh, x, w))
+    seeds = router.seed_units(regions, n_seeds)
+    router.grow()
+    dropped = [DroppedUnit(p, L, why) for p, L, why in router.settle_fragments(min_length)]
+
+    E = mesh.edges
+    units = [U for U in router.units if U.alive]
+    found = []
+    for U in units:
+        path = list(U.path)
+        if tuple(router.XL[path[-1]]) < tuple(router.XL[path[0]]):
+            path.reverse()
+        ks = [router.edge_id(a, b) for a, b in zip(path[:-1], path[1:])]
+        strength = sum(router.wql[k] * l0[k] for k in ks)
+        found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, U.uid])
+    found.sort(key=lambda t: t[:3])
+    if max_muscles is not None:
+        kept, taken = [], set()
+        for f in found:
+            if f[5] in taken:
+                continue
+            orbit = [f] + [g for g in found if reflection is not None and g[5] != f[5]
+                           and g[5] == router.mirror_uid[f[5]]]
+            if len(kept) + len(orbit) <= max_muscles:
+                kept += orbit
+            else:
+                for g in orbit:
+                    L = float(sum(l0[k] for k in g[4]))
+                    dropped.append(DroppedUnit(tuple(g[3]), L, f"cut by max_muscles={max_muscles} (weaker "
+                                                                  "than the muscles kept; mirror pairs kept whole)"))
+            taken.update(g[5] for g in orbit)
+        found = sorted(kept, key=lambda t: t[:3])
+    seed_edges = tuple((int(E[k, 0]), int(E[k, 1])) for k in seeds)
+    if not found:
+        warnings.warn(f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length="
+                      f"{min_length:.4g}; no muscles routed (lower min_length, K_a or K_b)", RoutingWarning,
+                      stacklevel=2)
+        return RoutingResult((), (), graph, seed_edges, len(units), params, tuple(dropped), reflection,
+                             len(regions))
+
+    muscles, stats = [], []
+    for i, (_, _, _, path, ks, _) in enumerate(found):
+        m = Muscle(path, name=f"muscle {i}")
+        wk = w[ks]
+        L0, L = m.length(mesh.points), m.length(x)
+        muscles.append(m)
+        stats.append(MuscleStats(name=m.name, n_edges=len(ks), rest_length=L0, target_length=L,
+                                 contraction=1.0 - L / L0, mean_weight=float(wk.mean()),
+                                 nonuniformity=float(wk.var()), turning_angle=m.turning_angle(mesh.points),
+                                 turning_angle_target=m.turning_angle(x),
+                                 max_turn=largest_turn(mesh.points, path)))
+    return RoutingResult(tuple(muscles), tuple(stats), graph, seed_edges, len(units), params, tuple(dropped),
+                         reflection, len(regions))
+
+
+def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Edges whose contraction exceeds the largest principal stretch (``sigma_1 - 1``) of the triangles
+    beside them: compression, not the sideways (Poisson) response of a stretched region."""
+    sv = np.linalg.svd(mesh.deformation_gradients(x), compute_uv=False)
+    stretch = sv[:, 0] - 1.0
+    T = mesh.triangles
+    ei = mesh.edge_index
+    s_edge = np.full(len(mesh.edges), -np.inf)
+    for j in range(3):
+        a, b = T[:, j], T[:, (j + 1) % 3]
+        k = np.array([ei[(p, q) if p < q else (q, p)] for p, q in zip(a.tolist(), b.tolist())])
+        np.maximum.at(s_edge, k, stretch)
+    return w > s_edge
+
+
+def largest_turn(x: ArrayLike, path) -> float:
+    """The largest turning angle (radians) at any interior node of ``path`` in configuration ``x``.
+
+    Example
+    -------
+    >>> round(math.degrees(largest_turn([[0, 0], [1, 0], [2, 1]], [0, 1, 2])), 6)
+    45.0
+    """
+    x = np.asarray(x, dtype=float)
+    d = np.diff(x[list(path)], axis=0)
+    if len(d) < 2:
+        return 0.0
+    a, b = d[:-1], d[1:]
+    c = (a * b).sum(axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+    return float(np.arccos(np.clip(c, -1.0, 1.0)).max())

@@ -1,0 +1,126 @@
+"""The package's house rules, checked on its source: folders by stage, no import circles, small modules."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "mdsr_opt"
+MAX_LINES = 620  # "about 600 lines at most" per module
+
+#: the stages of the data flow, lowest first; a module may import from its own stage and lower ones only
+STAGES = ("core", "body", "mechanics", "plot", "synthesis", "photos", "scenes", "studies", "author", "cli")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in PKG.rglob("*.py"):
+        parts = p.relative_to(PKG).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(("mdsr_opt",) + parts)] = p
+    return out
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]):
+    """(imported module, imported names, line) for every import in the file, nested ones included."""
+    is_pkg = path.name == "__init__.py"
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = name.split(".") if is_pkg else name.split(".")[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if not target.startswith("mdsr_opt"):
+                continue
+            for a in node.names:
+                sub = f"{target}.{a.name}"
+                if sub in modules:  # `from . import plot`: the module itself
+                    yield sub, [], node.lineno
+                else:
+                    yield target, [a.name], node.lineno
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("mdsr_opt"):
+                    yield a.name, [], node.lineno
+
+
+def _graph():
+    modules = _modules()
+    g = nx.DiGraph()
+    for name, path in modules.items():
+        g.add_node(name)
+        for target, _names, _line in _imports(name, path, modules):
+            if target != name and target in modules:
+                g.add_edge(name, target)
+    return g, modules
+
+
+def test_every_module_is_small():
+    big = {n: len(p.read_text().splitlines()) for n, p in _modules().items()}
+    assert {n: k for n, k in big.items() if k > MAX_LINES} == {}
+
+
+def test_no_import_circles():
+    g, _ = _graph()
+    # a package's lazy __init__ imports nothing at the top; edges into a package are edges to its __init__
+    cycles = list(nx.simple_cycles(g))
+    assert cycles == []
+
+
+def test_stages_import_only_downwards():
+    g, _ = _graph()
+    rank = {s: i for i, s in enumerate(STAGES)}
+    bad = []
+    for a, b in g.edges:
+        sa, sb = a.split(".")[1:2], b.split(".")[1:2]
+        if not sa or not sb or sa[0] not in rank or sb[0] not in rank:
+            continue
+        if rank[sb[0]] > rank[sa[0]]:
+            bad.append(f"{a} -> {b}")
+    assert bad == []
+
+
+def test_figures_import_no_study_or_scene_code():
+    g, _ = _graph()
+    bad = [f"{a} -> {b}" for a, b in g.edges if a.startswith("mdsr_opt.plot")
+           and (b.startswith("mdsr_opt.studies") or b.startswith("mdsr_opt.scenes"))]
+    assert bad == []
+
+
+def test_no_module_uses_another_modules_private_names():
+    modules = _modules()
+    bad = []
+    for name, path in modules.items():
+        for target, names, line in _imports(name, path, modules):
+            if target == name:
+                continue
+            bad += [f"{name}:{line} imports {target}.{n}" for n in names
+                    if n.startswith("_") and not n.startswith("__")]
+    assert bad == []
+
+
+def test_top_level_holds_only_folders_and_the_entry_points():
+    files = sorted(p.name for p in PKG.glob("*.py"))
+    assert files == ["__init__.py", "__main__.py"]
+    assert sorted(p.name for p in PKG.iterdir() if p.is_dir() and p.name != "__pycache__") == sorted(STAGES)
+
+
+@pytest.mark.parametrize("name", ["design", "align", "plot", "scenes", "studies"])
+def test_package_level_names_do_not_clash_with_modules(name):
+    import importlib
+
+    import mdsr_opt
+
+    value = getattr(mdsr_opt, name, None)
+    if name in mdsr_opt.__all__:  # a public function of the package: never shadowed by a module
+        for mod in list(_modules()):
+            importlib.import_module(mod) if not mod.endswith("__main__") else None
+        assert callable(value) and not isinstance(value, type(mdsr_opt))
+    else:
+        assert not hasattr(mdsr_opt, "__all__") or name not in mdsr_opt.__all__
