@@ -119,10 +119,10 @@ def test_backends_without_constraints_are_refused_at_the_door():
         with pytest.raises(ValueError, match=f"backend '{backend}' cannot take constraints.*exact cable"):
             solve_internal(mesh, MAT, mus, [0.2], backend=backend)
         with pytest.raises(ValueError, match="rigid anchor patches.*anchor_radius=0"):
-            solve_internal(mesh, MAT, mus, [0.2], model="springs", backend=backend, anchor_radius=0.3)
+            solve_internal(mesh, MAT, mus, [0.2], muscle_model="springs", backend=backend, anchor_radius=0.3)
     # without anchor patches the springs need no constraints: the Newton baseline still runs
-    a = solve_internal(mesh, MAT, mus, [0.2], model="springs", backend="newton", anchor_radius=0)
-    b = solve_internal(mesh, MAT, mus, [0.2], model="springs", anchor_radius=0)
+    a = solve_internal(mesh, MAT, mus, [0.2], muscle_model="springs", backend="newton", anchor_radius=0)
+    b = solve_internal(mesh, MAT, mus, [0.2], muscle_model="springs", anchor_radius=0)
     assert a.success and np.abs(a.x - b.x).max() < 1e-6
 
 
@@ -135,7 +135,7 @@ def test_bad_anchor_radius_is_refused():
     # anchors covering half of a short muscle: the other half cannot take up a 60 % stroke
     for model in ("cable", "springs"):
         with pytest.raises(ValueError, match=r"shorten the rest by 1.2 >= 1; give a smaller anchor_radius"):
-            solve_internal(mesh, MAT, [row(mesh, 0.0, 0.0, 1.0)], [0.6], model=model, anchor_radius=0.3)
+            solve_internal(mesh, MAT, [row(mesh, 0.0, 0.0, 1.0)], [0.6], muscle_model=model, anchor_radius=0.3)
 
 
 # ------------------------------------------------------------------------------ anchor patches
@@ -188,7 +188,7 @@ def test_patches_of_different_muscles_that_touch_merge():
 def test_rigid_patches_stay_rigid(muscle_model):
     mesh = Mesh.rectangle(4.0, 1.0, 48, 12)
     mus = [row(mesh, 0.0), row(mesh, 0.5)]
-    res = solve_internal(mesh, MAT, mus, [0.3, 0.15], model=muscle_model)
+    res = solve_internal(mesh, MAT, mus, [0.3, 0.15], muscle_model=muscle_model)
     assert res.success, res.status
     groups = rigid_groups(mesh, mus, res.anchor_radius)
     assert len(groups) == 4 and all(len(g) >= 3 for g in groups)
@@ -268,7 +268,7 @@ def test_constraint_jacobian_and_hessian_match_finite_differences():
 def test_spring_contraction_does_not_depend_on_the_mesh(stiffness):
     def achieved(cells):
         mesh = Mesh.rectangle(4.0, 1.0, *cells)
-        res = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.3], model="springs", stiffness=stiffness)
+        res = solve_internal(mesh, MAT, [row(mesh, 0.0)], [0.3], muscle_model="springs", stiffness=stiffness)
         assert res.success, res.status
         return res.achieved[0]
 
@@ -280,7 +280,7 @@ def test_spring_contraction_does_not_depend_on_the_mesh(stiffness):
 def test_spring_contraction_does_not_depend_on_the_mesh_600_to_4k_nodes():  # about 2 s
     def achieved(cells):
         mesh = Mesh.rectangle(4.0, 1.0, *cells)
-        res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.5)], [0.3, 0.1], model="springs",
+        res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.5)], [0.3, 0.1], muscle_model="springs",
                              stiffness=1.0)
         assert res.success, res.status
         return res.achieved

@@ -22,7 +22,7 @@ def small():
 
 def test_springs_without_patches_match_dense(small):
     mesh, mus = small
-    fwd = solve_internal(mesh, MAT, mus, [0.2], model="springs", anchor_radius=0.0)
+    fwd = solve_internal(mesh, MAT, mus, [0.2], muscle_model="springs", anchor_radius=0.0)
     assert fwd.success and fwd.stable
     squeezed = mesh.points * [0.5, 1.0]  # compressed across: the Neo-Hookean Hessian is indefinite there
     free = np.ones(2 * mesh.n_nodes, bool)

@@ -19,7 +19,7 @@ from mdsr_opt.scenes.library import get_problem
 @pytest.fixture(scope="module")
 def face():
     scene = get_problem("face", resolution="coarse")
-    photo = render_photo(scene.mesh, resolution=(500, 500), seed=0)
+    photo = render_photo(scene.mesh, image_size=(500, 500), seed=0)
     return scene, photo
 
 

@@ -47,7 +47,7 @@ THETA, SHIFT = 0.5, np.array([0.3, -1.0])
 
 @pytest.fixture(scope="module")
 def target(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, muscle_model="cable")
     assert fwd.success
     return fwd.x @ rotation_matrix(THETA).T + SHIFT  # rotated and shifted: only the shape may matter
 
@@ -57,7 +57,7 @@ A_START = [0.05, 0.3]  # the cable's geometric guess is already the answer: star
 
 @pytest.mark.parametrize("method", METHODS)
 def test_recovers_known_contractions_and_rigid_motion(mesh, muscles, target, method):
-    res = design_contractions(mesh, MAT, muscles, target, method=method, initial=A_START)
+    res = design_contractions(mesh, MAT, muscles, target, method=method, initial_guess=A_START)
     assert res.success, res.status
     assert res.method == method and res.muscle_model == "cable"  # the default
     assert np.abs(res.contractions - A_TRUE).max() < (1e-6 if method == "flattened" else 1e-5)
@@ -72,8 +72,8 @@ def test_recovers_known_contractions_and_rigid_motion(mesh, muscles, target, met
 
 
 def test_cable_design_reports_commanded_achieved_stroke_and_tension(mesh, muscles, target):
-    res = design_contractions(mesh, MAT, muscles, target, initial=A_START)
-    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
+    res = design_contractions(mesh, MAT, muscles, target, initial_guess=A_START)
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, muscle_model="cable")
     L0 = np.array([m.rest_length(mesh) for m in muscles])
     assert res.rest_lengths == pytest.approx(L0, rel=1e-14)
     assert np.array_equal(res.commanded, res.contractions)
@@ -92,11 +92,11 @@ def test_cable_design_reports_commanded_achieved_stroke_and_tension(mesh, muscle
 
 
 def test_springs_design_recovers_and_reports_the_lower_achieved_contraction(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="springs")
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, muscle_model="springs")
     assert fwd.success
     y = fwd.x @ rotation_matrix(0.2).T + [1.0, 2.0]
     for method in ("flattened", "nested"):
-        res = design_contractions(mesh, MAT, muscles, y, muscle_model="springs", method=method, initial=A_START)
+        res = design_contractions(mesh, MAT, muscles, y, muscle_model="springs", method=method, initial_guess=A_START)
         assert res.success, res.status
         assert np.abs(res.contractions - A_TRUE).max() < 1e-5
         # springs stretch: the achieved contraction is less than the commanded one, as solve_internal says
@@ -113,21 +113,21 @@ def test_a_slack_rope_is_reported_at_zero_tension(mesh):
     y = fwd.x @ rotation_matrix(0.4).T
     b_len = 1 - B.length(fwd.x) / B.rest_length(mesh)
     for method in ("flattened", "nested"):
-        res = design_contractions(mesh, MAT, [A, B], y, method=method, initial=[0.1, 0.1])
+        res = design_contractions(mesh, MAT, [A, B], y, method=method, initial_guess=[0.1, 0.1])
         assert res.success, res.status
         assert res.contractions == pytest.approx([0.2, b_len], abs=1e-6)
         assert res.achieved == pytest.approx(res.contractions, abs=1e-9)
         assert list(res.slack) == [False, True]
         assert res.tension[0] == pytest.approx(fwd.tension[0], rel=1e-5) and abs(res.tension[1]) < 1e-8
     # the rest shape as target: nothing pulls
-    res = design_contractions(mesh, MAT, [A, B], mesh.points, initial=[0.2, 0.1])
+    res = design_contractions(mesh, MAT, [A, B], mesh.points, initial_guess=[0.2, 0.1])
     assert res.success and res.contractions == pytest.approx([0, 0], abs=1e-9) and res.slack.all()
 
 
 def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, model="cable")
+    fwd = solve_internal(mesh, MAT, muscles, A_TRUE, muscle_model="cable")
     y = fwd.x @ rotation_matrix(-1.0).T + [5.0, 5.0]
-    res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False, initial=A_START)
+    res = design_contractions(mesh, MAT, muscles, y, muscle_model="cable", warm_start=False, initial_guess=A_START)
     assert res.success, res.status
     assert np.abs(res.contractions - A_TRUE).max() < 1e-6
     assert res.angle == pytest.approx(-1.0, abs=1e-6)
@@ -135,7 +135,7 @@ def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
 
 
 def test_flattened_gauss_newton_hessian_recovers(mesh, muscles, target):
-    res = design_contractions(mesh, MAT, muscles, target, hessian="gauss-newton", initial=A_START)
+    res = design_contractions(mesh, MAT, muscles, target, hessian="gauss-newton", initial_guess=A_START)
     assert res.success, res.status
     assert np.abs(res.contractions - A_TRUE).max() < 1e-6
 
@@ -168,7 +168,7 @@ def test_unreachable_target_is_success_with_positive_difference(mesh, muscles, m
 
 
 def test_bounds_hold_and_become_active(mesh, muscles):
-    fwd = solve_internal(mesh, MAT, muscles, [0.35, 0.05], model="cable")
+    fwd = solve_internal(mesh, MAT, muscles, [0.35, 0.05], muscle_model="cable")
     for method in ("flattened", "nested"):
         res = design_contractions(mesh, MAT, muscles, fwd.x, method=method, a_max=0.25)
         assert res.success, res.status
@@ -211,9 +211,9 @@ def test_bad_input_gives_clear_errors(mesh, muscles, target):
     with pytest.raises(ValueError, match="method must be one of"):
         design_contractions(mesh, MAT, muscles, target, method="newton")
     with pytest.raises(ValueError, match=r"initial contractions must lie in \[0, a_max"):
-        design_contractions(mesh, MAT, muscles, target, initial=[0.7, 0.1])
+        design_contractions(mesh, MAT, muscles, target, initial_guess=[0.7, 0.1])
     with pytest.raises(ValueError, match=r"initial must have shape \(2\)"):
-        design_contractions(mesh, MAT, muscles, target, initial=[0.1])
+        design_contractions(mesh, MAT, muscles, target, initial_guess=[0.1])
     with pytest.raises(TypeError, match="mesh must be a mdsr_opt.Mesh"):
         design_contractions(mesh.points, MAT, muscles, target)
     with pytest.raises(TypeError, match="a_max must be a real number"):
@@ -229,7 +229,7 @@ def test_bad_input_gives_clear_errors(mesh, muscles, target):
 def test_check_minimum_detects_a_saddle(mesh, muscles):
     small = Mesh.rectangle(2.0, 1.0, 4, 2)
     mus = [Muscle([0, 1, 2])]
-    fwd = solve_internal(small, MAT, mus, [0.3], model="springs")
+    fwd = solve_internal(small, MAT, mus, [0.3], muscle_model="springs")
     pd, lam, res = check_minimum(small, MAT, mus, [0.3], fwd.x, muscle_model="springs")
     assert pd and lam > 0 and res < 1e-8
     squeezed = small.points * [0.5, 1.0]  # compressed across: the Neo-Hookean Hessian is indefinite
@@ -281,7 +281,7 @@ def test_failed_optimiser_is_not_success(mesh, muscles, target):
 
 
 def test_result_round_trips_through_json(mesh, muscles, target):
-    res = design_contractions(mesh, MAT, muscles, target, method="nested", initial=A_START)
+    res = design_contractions(mesh, MAT, muscles, target, method="nested", initial_guess=A_START)
     res.initial_difference = float("nan")  # JSON has no NaN: written as null
     text = json.dumps(res.to_dict(), allow_nan=False)
     back = DesignResult.from_dict(json.loads(text))

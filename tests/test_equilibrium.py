@@ -124,7 +124,7 @@ def _bottom_muscle(mesh):
 @pytest.mark.parametrize("muscle_model", ["springs", "cable"])
 def test_internal_contraction_bends_the_body(strip, material, muscle_model):
     mus = _bottom_muscle(strip)
-    res = solve_internal(strip, material, [mus], [0.5], model=muscle_model)
+    res = solve_internal(strip, material, [mus], [0.5], muscle_model=muscle_model)
     assert res.success and res.min_J > 0
     ratio = mus.length(res.x) / mus.rest_length(strip)
     if muscle_model == "cable":  # an inextensible rope: exactly the commanded length
@@ -140,8 +140,8 @@ def test_internal_contraction_bends_the_body(strip, material, muscle_model):
 
 def test_internal_stiffer_springs_track_the_contraction_closer(strip, material):
     mus = _bottom_muscle(strip)
-    soft = solve_internal(strip, material, [mus], [0.3], model="springs", stiffness=2.0)
-    stiff = solve_internal(strip, material, [mus], [0.3], model="springs", stiffness=50.0)
+    soft = solve_internal(strip, material, [mus], [0.3], muscle_model="springs", stiffness=2.0)
+    stiff = solve_internal(strip, material, [mus], [0.3], muscle_model="springs", stiffness=50.0)
     L0 = mus.rest_length(strip)
     assert abs(mus.length(stiff.x) / L0 - 0.7) < abs(mus.length(soft.x) / L0 - 0.7)
 
@@ -150,25 +150,25 @@ def test_internal_stiffer_springs_track_the_contraction_closer(strip, material):
 def test_internal_driving_invariant_under_rigid_motion_and_relabelling(material, muscle_model):
     mesh = Mesh.from_polygon([[0, 0], [3, 0], [3, 1], [0, 1]], max_area=0.04)
     mus = _bottom_muscle(mesh)
-    base = solve_internal(mesh, material, [mus], [0.35], model=muscle_model)
+    base = solve_internal(mesh, material, [mus], [0.35], muscle_model=muscle_model)
     assert base.success
     # rigid motion of the rest mesh
     R, t = rotation(0.9), np.array([5.0, -2.0])
     moved = mesh.with_points(mesh.points @ R.T + t)
-    res = solve_internal(moved, material, [mus], [0.35], model=muscle_model)
+    res = solve_internal(moved, material, [mus], [0.35], muscle_model=muscle_model)
     assert difference(res.x, base.x) < 1e-6
     assert res.energy == pytest.approx(base.energy, rel=1e-8)
     assert res.tension == pytest.approx(base.tension, rel=1e-6)
     # relabelling of nodes
     perm = np.random.default_rng(3).permutation(mesh.n_nodes)
     relab = mesh.relabel(perm)
-    res2 = solve_internal(relab, material, [Muscle(perm[list(mus.nodes)])], [0.35], model=muscle_model)
+    res2 = solve_internal(relab, material, [Muscle(perm[list(mus.nodes)])], [0.35], muscle_model=muscle_model)
     assert np.abs(res2.x[perm] - base.x).max() < 1e-6
 
 
 @pytest.mark.parametrize("muscle_model", ["cable", "springs"])
 def test_no_contraction_leaves_the_body_at_rest(strip, material, muscle_model):
-    res = solve_internal(strip, material, [_bottom_muscle(strip)], [0.0], model=muscle_model)
+    res = solve_internal(strip, material, [_bottom_muscle(strip)], [0.0], muscle_model=muscle_model)
     assert res.success and res.energy < 1e-20
     assert np.abs(res.x - strip.points).max() < 1e-9
     assert abs(res.tension[0]) < 1e-9 and abs(res.achieved[0]) < 1e-9
@@ -218,6 +218,6 @@ def test_internal_bad_input(strip, material):
     with pytest.raises(ValueError, match="repeats node"):
         Muscle([0, 1, 0])
     with pytest.raises(ValueError, match="model must be"):
-        solve_internal(strip, material, [mus], [0.1], model="rope")
+        solve_internal(strip, material, [mus], [0.1], muscle_model="rope")
     with pytest.raises(ValueError, match="stiffness"):
         solve_internal(strip, material, [mus], [0.1], stiffness=0.0)

@@ -48,7 +48,7 @@ def body():
 @pytest.fixture(scope="module")
 def photo(body):
     mesh, x = body
-    return render_photo(mesh, x, resolution=(500, 500), seed=0)
+    return render_photo(mesh, x, image_size=(500, 500), seed=0)
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +153,7 @@ def test_rotating_scaling_shifting_the_photo_barely_moves_normalised_mean(body, 
 
 def test_rotation_on_the_plate_is_recovered(body):
     mesh, x = body
-    ph = render_photo(mesh, x, resolution=(400, 400), seed=4, rotation_deg=40.0, margin=0.2)
+    ph = render_photo(mesh, x, image_size=(400, 400), seed=4, rotation_deg=40.0, margin=0.2)
     r = compare_contours(simulated_outline(mesh, x), contour_from_image(ph.image))
     assert r.angle_deg == pytest.approx(40.0, abs=1.0)
     assert r.mean_px < 1.0
@@ -190,7 +190,7 @@ def test_a_wrong_flip_y_scores_far_worse_on_an_asymmetric_body():
     """The T body is mirror-symmetric, so a mirrored outline fits it after a rotation; an L does not."""
     mesh = Mesh.from_polygon(OUTLINE_L, max_area=0.05)
     x = bend(mesh.points, 0.5)
-    ph = render_photo(mesh, x, resolution=(400, 400), seed=2)
+    ph = render_photo(mesh, x, image_size=(400, 400), seed=2)
     c = contour_from_image(ph.image)
     right = compare_contours(simulated_outline(mesh, x), c)
     mirrored = compare_contours(simulated_outline(mesh, x), c, flip_y=False)
@@ -233,7 +233,7 @@ def test_normalisation_is_stable_for_a_shape_without_a_long_axis():
 
 def test_px_per_unit_makes_a_size_error_visible(body):
     mesh, x = body
-    ph = render_photo(mesh, x, resolution=(500, 500), seed=0, tilt_deg=0.0)
+    ph = render_photo(mesh, x, image_size=(500, 500), seed=0, tilt_deg=0.0)
     c = contour_from_image(ph.image)
     scale = math.sqrt(abs(np.linalg.det(ph.world_to_pixel[:2, :2])))  # pixels per unit, as on a plate
     outline = simulated_outline(mesh, x)
@@ -440,9 +440,9 @@ def test_comparisons_and_photos_compare_by_identity(body, photo, contour):
 # ------------------------------------------------------------------------------------------ synthetic camera
 def test_camera_is_deterministic_and_labelled(body):
     mesh, x = body
-    a = render_photo(mesh, x, resolution=(320, 240), seed=5)
-    b = render_photo(mesh, x, resolution=(320, 240), seed=5)
-    c = render_photo(mesh, x, resolution=(320, 240), seed=6)
+    a = render_photo(mesh, x, image_size=(320, 240), seed=5)
+    b = render_photo(mesh, x, image_size=(320, 240), seed=5)
+    c = render_photo(mesh, x, image_size=(320, 240), seed=6)
     assert a.image.shape == (240, 320, 3) and a.image.dtype == np.uint8
     assert np.array_equal(a.image, b.image)
     assert np.array_equal(a.world_to_pixel, b.world_to_pixel)
@@ -470,7 +470,7 @@ def test_camera_pixel_transform_lands_on_the_body(body, photo):
 def test_camera_rejects_bad_settings(body):
     mesh, x = body
     with pytest.raises(ValueError, match="resolution"):
-        render_photo(mesh, x, resolution=(10, 10))
+        render_photo(mesh, x, image_size=(10, 10))
     for kw, exc, msg in [({"resolution": (400.5, 300)}, TypeError, "resolution must be an integer"),
                          ({"resolution": (400,)}, ValueError, "resolution must be"),
                          ({"resolution": "400x300"}, ValueError, "resolution must be"),
@@ -492,7 +492,7 @@ def test_camera_rejects_bad_settings(body):
 
 def test_saved_photo_round_trips_with_sidecar(tmp_path, body):
     mesh, x = body
-    ph = render_photo(mesh, x, resolution=(160, 120), seed=2)
+    ph = render_photo(mesh, x, image_size=(160, 120), seed=2)
     path = ph.save(tmp_path / "case.png")
     assert np.array_equal(load_image(path), ph.image)
     meta = json.loads((tmp_path / "case.json").read_text())
@@ -504,7 +504,7 @@ def test_saved_photo_round_trips_with_sidecar(tmp_path, body):
 
 def test_failed_save_leaves_neither_image_nor_sidecar(tmp_path, body, monkeypatch):
     mesh, x = body
-    ph = render_photo(mesh, x, resolution=(160, 120), seed=2)
+    ph = render_photo(mesh, x, image_size=(160, 120), seed=2)
     (tmp_path / "case.json").mkdir()  # the sidecar cannot be written
     with pytest.raises(ValueError, match="case.json: it is a folder"):
         ph.save(tmp_path / "case.png")

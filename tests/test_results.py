@@ -56,7 +56,7 @@ def test_contour_comparison_and_photo_repr_and_dict(plate):
     from mdsr_opt.photos.contours import contour_from_image
     from mdsr_opt.photos.camera import render_photo
 
-    photo = render_photo(plate, plate.points, resolution=(300, 300), seed=1)
+    photo = render_photo(plate, plate.points, image_size=(300, 300), seed=1)
     assert repr(photo) == "SyntheticPhoto(300x300 px, seed=1, SYNTHETIC)"
     assert json.loads(json.dumps(photo.to_dict()))["synthetic"] is True
     comp = compare_contours(simulated_outline(plate, plate.points), contour_from_image(photo.image))

@@ -84,7 +84,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     lower = sorted((i for i in range(mesh.n_nodes) if P[i, 1] < 1e-9), key=lambda i: P[i, 0])
     muscle = Muscle(lower, name="lower")
     for model in ("springs", "cable"):
-        res = solve_internal(mesh, mat, [muscle], [contraction], model=model)
+        res = solve_internal(mesh, mat, [muscle], [contraction], muscle_model=model)
         got, stroke, tension = float(res.achieved[0]), float(res.stroke[0]), float(res.tension[0])
         ratio = muscle.length(res.x) / muscle.rest_length(mesh)
         log(f"      {model}: {res.status}, {res.iterations} iterations; achieved contraction {got:.1%} "

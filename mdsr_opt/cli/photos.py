@@ -68,7 +68,7 @@ def _cmd_photograph(a) -> int:
     writers = []
     for f in files:  # render and encode everything first, then write the whole set at once
         data = read_mesh(f)
-        ph = render_photo(data.mesh, data.x, resolution=a.resolution, seed=a.seed, tilt_deg=a.tilt,
+        ph = render_photo(data.mesh, data.x, image_size=a.resolution, seed=a.seed, tilt_deg=a.tilt,
                           rotation_deg=a.rotation, noise_sigma=a.noise, blur_sigma=a.blur,
                           lighting=a.lighting)
         writers += ph._writers(Path(a.out) / f"{f.stem}.png")

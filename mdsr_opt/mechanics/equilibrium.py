@@ -7,6 +7,7 @@ import time
 from typing import Mapping, Sequence
 import numpy as np
 
+from ..core.deprecation import renamed_keywords
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_contractions, check_muscles
 from ..core.checks import as_index_array, positive_float
@@ -173,7 +174,8 @@ def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
     return cache[key]
 
 
-def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, model: str = "cable",
+@renamed_keywords(model="muscle_model")
+def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
@@ -184,7 +186,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     ----------
     muscles : list of :class:`Muscle` (or node lists) along mesh edges.
     contractions : one value in ``[0, 1)`` per muscle.
-    model : ``"cable"`` (default) or ``"springs"``.
+    muscle_model : ``"cable"`` (default) or ``"springs"`` (``model=`` is its deprecated spelling).
 
         - ``"cable"``: an inextensible rope sliding along the muscle's node chain, pulled in by a servo:
           ``min E_e(x)`` subject to ``L_c(x) <= (1 - a_c) L0_c`` for every muscle, solved exactly by the NLP
@@ -225,6 +227,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     >>> res.success, round(float(res.achieved[0]), 6), round(float(res.stroke[0]), 6), bool(res.tension[0] > 0)
     (True, 0.3, 1.2, True)
     """
+    model = muscle_model
     check_mesh_material(mesh, material)
     tol = check_common(tol, max_iter, backend)
     if model not in ("springs", "cable"):

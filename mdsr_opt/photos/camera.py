@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..core.deprecation import renamed_keywords
 from ..body.checks import check_mesh
 from ..core.checks import as_float_array, positive_float
 from ..core.results import to_jsonable
@@ -112,7 +113,8 @@ class SyntheticPhoto:
                 (path.with_suffix(".json"), bytes_writer(json.dumps(meta, indent=2).encode()))]
 
 
-def render_photo(mesh, x: ArrayLike | None = None, *, resolution: tuple[int, int] = (500, 500), seed: int = 0,
+@renamed_keywords(resolution="image_size")
+def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int] = (500, 500), seed: int = 0,
                  body_color: Any = (205, 95, 35), plate_color: Any = (226, 226, 218),
                  grid_color: Any = (185, 187, 183), grid_spacing: float | None = None,
                  margin: float = 0.12, rotation_deg: float = 0.0, tilt_deg: float = 1.0,
@@ -131,7 +133,8 @@ def render_photo(mesh, x: ArrayLike | None = None, *, resolution: tuple[int, int
     mesh : Mesh
     x : array_like, shape (n, 2), optional
         The state to photograph (default: the rest shape).
-    resolution : (width, height)
+    image_size : (width, height)
+        In pixels (``resolution=`` is its deprecated spelling; mesh resolutions count nodes).
         Image size in pixels: two integers, 32-8000.
     seed : int
         Non-negative seed of the tilt axis, light direction and noise.
@@ -170,6 +173,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, resolution: tuple[int, int
     >>> photo.image.shape, photo.metadata["synthetic"]
     ((120, 200, 3), True)
     """
+    resolution = image_size
     mesh = check_mesh(mesh)
     x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
     if isinstance(resolution, (str, bytes)) or not hasattr(resolution, "__len__") or len(resolution) != 2:

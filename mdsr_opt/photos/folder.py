@@ -149,7 +149,7 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     >>> mesh = Mesh.rectangle(3.0, 1.0, 6, 2)
     >>> with tempfile.TemporaryDirectory() as d:
     ...     _ = write_mesh(f"{d}/states/bent.vtu", mesh, x=mesh.points * [1.0, 0.8])
-    ...     _ = render_photo(mesh, mesh.points * [1.0, 0.8], resolution=(300, 200)).save(f"{d}/img/bent.png")
+    ...     _ = render_photo(mesh, mesh.points * [1.0, 0.8], image_size=(300, 200)).save(f"{d}/img/bent.png")
     ...     rows = evaluate_folder(f"{d}/img", f"{d}/states", out=f"{d}/out")
     >>> rows[0].case, rows[0].synthetic, bool(rows[0].comparison.mean_px < 1.0)
     ('bent', True, True)

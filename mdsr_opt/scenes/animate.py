@@ -101,7 +101,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     model, stiffness = opts.get("muscle_model", "cable"), opts.get("stiffness", 10.0)
     states, fails = [], []
     for i, a in enumerate(frames):
-        res = solve_internal(scene.mesh, scene.material, union, a, model=model, stiffness=stiffness,
+        res = solve_internal(scene.mesh, scene.material, union, a, muscle_model=model, stiffness=stiffness,
                              anchor_radius=opts.get("anchor_radius"))
         check_interrupt()
         if not res.success:

@@ -77,7 +77,7 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     else:
         known = case.contractions.copy()
         res = solve_internal(scene.mesh, scene.material, scene.muscles, known,
-                             model=scene.design_options.get("muscle_model", "cable"),
+                             muscle_model=scene.design_options.get("muscle_model", "cable"),
                              stiffness=scene.design_options.get("stiffness", 10.0),
                              anchor_radius=scene.design_options.get("anchor_radius"))
     t1 = time.perf_counter()

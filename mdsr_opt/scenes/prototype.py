@@ -147,7 +147,7 @@ class VirtualPrototype:
         kind = LinearElastic if isinstance(m, LinearElastic) else NeoHookean
         material = kind(E=m.E * f_E, nu=nu, thickness=m.thickness)
         fine = replace(fine, material=material)
-        camera = {"resolution": tuple(photo_resolution), "seed": 1000 + int(seed), "tilt_deg": 2.0,
+        camera = {"image_size": tuple(photo_resolution), "seed": 1000 + int(seed), "tilt_deg": 2.0,
                   "rotation_deg": float(rng.uniform(-8.0, 8.0))}
         return cls(scene=fine, design_mesh=scene.mesh, material=material, E_factor=float(f_E),
                    nu_shift=float(nu - m.nu), refine=refine, e_range=e_range, nu_range=nu_range, seed=int(seed),
@@ -222,7 +222,7 @@ class VirtualPrototype:
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
         fine = [self.transfer_muscle(m) for m in muscles]
-        res = solve_internal(self.mesh, self.material, fine, a, model="cable", anchor_radius=anchor_radius)
+        res = solve_internal(self.mesh, self.material, fine, a, muscle_model="cable", anchor_radius=anchor_radius)
         return self._shot(res, photo)
 
 
@@ -339,7 +339,7 @@ def validation_tables(reports: Sequence) -> str:
         desc = (f"Virtual prototype (SYNTHETIC photographs): a {proto['refine']:g}x finer mesh of each body, the "
                 f"exact sliding cable, E x U(1 +- {proto['e_range']:g}) and nu + U(+- {proto['nu_range']:g}) "
                 f"drawn from seed {proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
-                f"{proto['camera']['resolution'][0]}x{proto['camera']['resolution'][1]} px. d: mean distance of "
+                f"{proto['camera']['image_size'][0]}x{proto['camera']['image_size'][1]} px. d: mean distance of "
                 "the design model's boundary nodes (outline and holes) to the prototype photograph's contours; "
                 "ratio: d over sqrt(area) of the photographed outline.\n\n")
     parts = ["# Validation against the virtual prototype (the paper's Tables 2-4)\n", desc]

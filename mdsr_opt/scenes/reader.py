@@ -24,8 +24,10 @@ def check_scene_options(options, kind: str, label: str = "") -> dict:
     r = Reader(label or "scene")
     if not isinstance(options, Mapping):
         r.fail(f"{kind}_options", f"expected a dict, got {tname(options)}", TypeError)
-    arrays = {k: options[k] for k in ("initial", "weights") if kind == "design" and k in options}
+    arrays = {k: options[k] for k in ("initial_guess", "initial", "weights") if kind == "design" and k in options}
     rest = {k: v for k, v in options.items() if k not in arrays}
+    if "initial" in arrays:  # the first contractions' older spelling
+        arrays.setdefault("initial_guess", arrays.pop("initial"))
     # per-problem arrays (initial, weights) are checked by design_contractions against the muscles and mesh
     return {**scene_options(r, rest, kind), **arrays}
 
@@ -132,7 +134,7 @@ def scene_options(r: Reader, spec, where: str) -> dict:
     fn = route_muscles if where == "routing" else design_contractions
     allowed = [p.name for p in inspect.signature(fn).parameters.values() if p.kind == p.KEYWORD_ONLY]
     if where == "design":
-        allowed = [a for a in allowed if a not in ("initial", "weights")]
+        allowed = [a for a in allowed if a not in ("initial_guess", "weights")]
     opts = r.keys(spec, allowed, where)
     checks = _ROUTING_CHECKS if where == "routing" else _DESIGN_CHECKS
     for k, v in opts.items():

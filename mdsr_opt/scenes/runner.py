@@ -250,7 +250,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
 
         t2 = time.perf_counter()
         try:
-            ph = render_photo(mesh, res.x_aligned, resolution=photo_resolution, seed=0)
+            ph = render_photo(mesh, res.x_aligned, image_size=photo_resolution, seed=0)
             loops = contour_loops_from_image(ph.image)
             # every boundary loop is measured: the outline and each hole against its photographed counterpart
             cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)

@@ -163,7 +163,7 @@ def _solve_equilibrium(setup: Setup, material, spec: RunSpec, tol: float):
         kw["options"] = {"ipopt.max_wall_time": float(spec.timeout)}
     if setup.mode == "external":
         return solve_external(setup.mesh, material, setup.anchors, setup.drags, **kw)
-    return solve_internal(setup.mesh, material, setup.muscles, setup.contractions, model=setup.muscle_model,
+    return solve_internal(setup.mesh, material, setup.muscles, setup.contractions, muscle_model=setup.muscle_model,
                           stiffness=setup.stiffness, **kw)
 
 
@@ -265,7 +265,7 @@ def _run_design(setup: Setup, material, spec: RunSpec, mesh_time: float) -> dict
     from ..synthesis.contractions import design_contractions
     from ..mechanics.equilibrium import solve_internal
 
-    target = solve_internal(setup.mesh, material, setup.muscles, setup.contractions, model=setup.muscle_model,
+    target = solve_internal(setup.mesh, material, setup.muscles, setup.contractions, muscle_model=setup.muscle_model,
                             stiffness=setup.stiffness)
     if not target.success:
         raise RuntimeError(f"the design target did not solve: {target.status}")

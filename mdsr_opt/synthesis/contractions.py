@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..core.deprecation import renamed_keywords
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
@@ -22,8 +23,9 @@ __all__ = ['design_contractions']
 
 
 # ---------------------------------------------------------------------------------------------- public API
+@renamed_keywords(initial="initial_guess")
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
-                        method: str = "flattened", a_max: float = 0.6, initial: ArrayLike | None = None,
+                        method: str = "flattened", a_max: float = 0.6, initial_guess: ArrayLike | None = None,
                         weights: ArrayLike | None = None, interior_weight: float = 0.5,
                         muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
                         tol: float | None = None,
@@ -43,7 +45,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         See the module docstring.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``.
-    initial : (m,) array, optional
+    initial_guess : (m,) array, optional
+        First contractions (``initial=`` is its deprecated spelling).
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.
     weights : (n,) array, optional
@@ -105,6 +108,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     >>> res.success, res.difference > 0.01
     (True, True)
     """
+    initial = initial_guess
     clock0 = time.perf_counter()
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")

@@ -248,7 +248,7 @@ class ForwardSolver:
         at_rest = self.n_solves == 0 or not np.any(self.a)
         guess = "predictor" if at_rest else self.x.reshape(-1, 2)
         res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
-                             model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
+                             muscle_model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
                              tol=self.tol, max_iter=self.max_iter, align_to_rest=False, initial_guess=guess)
         if self.n_solves == 0:
             self.build_time += res.build_time

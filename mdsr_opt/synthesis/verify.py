@@ -117,7 +117,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
     prob = DesignProblem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
-    fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), model=result.muscle_model,
+    fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), muscle_model=result.muscle_model,
                          stiffness=result.stiffness, anchor_radius=radius, tol=1e-10)
     fx = fwd.x
     al = align(x, fx)

@@ -54,7 +54,7 @@ def make_case(size: str, m: int, seed: int = 0, model: str = "cable"):
     mus = muscles_for(nx, ny, m)
     rng = np.random.default_rng(seed + 17 * m)
     a_true = rng.uniform(0.05, 0.25, size=m)
-    fwd = solve_internal(mesh, MAT, mus, a_true, model=model)
+    fwd = solve_internal(mesh, MAT, mus, a_true, muscle_model=model)
     if not fwd.success:
         raise RuntimeError(f"forward solve for the target failed: {fwd.status}")
     th = 0.4
