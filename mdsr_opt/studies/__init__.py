@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import importlib
+from ..core.lazy import lazy_exports
 
 # public name -> module of this folder that owns it (imported lazily)
 _EXPORTS = {
@@ -37,15 +37,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    mod = _EXPORTS.get(name)
-    if mod is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{mod}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
