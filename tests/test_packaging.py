@@ -67,12 +67,14 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     assert any(n.endswith("licenses/LICENSE") for n in names)
 
     # a fresh virtual environment (system packages give casadi & co. without downloading), used from a
-    # folder that is not the checkout
+    # folder that is not the checkout; --ignore-installed because CI has already installed this very
+    # version into the system site-packages, which pip would otherwise call "already satisfied"
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
     bindir = venv / ("Scripts" if os.name == "nt" else "bin")
     py = bindir / "python"
-    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-index", str(wheel)], check=True,
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-index", "--no-deps",
+                    "--ignore-installed", str(wheel)], check=True,
                    env=_clean_env(), timeout=300)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()

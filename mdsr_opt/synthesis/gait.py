@@ -253,7 +253,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
             x, ok[k], msg = mesh.points.copy(), True, "rest (no muscle pulls)"
         else:
             args = (mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999))
-            kw = dict(model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
+            kw = dict(muscle_model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
             # warm start only when the same muscles pull at least as hard as in the previous frame (from a
             # tighter state the solver's first guess tends to invert an element; then it starts from rest)
             warm = x_prev is not None and k > 0 and np.array_equal(on, np.flatnonzero(S[k - 1] > 0)) \
