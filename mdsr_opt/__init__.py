@@ -1,13 +1,13 @@
 """mdsr_opt: kinematic modelling and computational design of muscle-driven soft robots.
 
 Data flows one way: mesh -> scene -> equilibrium -> target -> contraction graph -> muscles -> design ->
-evaluation. Public names are imported lazily from the module that owns them (see ``_EXPORTS``), so
+evaluation. Public names are imported lazily from the module that owns them (see ``_EXPORTS`` and :func:`mdsr_opt.core.lazy.lazy_exports`), so
 ``import mdsr_opt`` stays cheap and does not touch matplotlib. The command line is :mod:`mdsr_opt.cli`.
 """
 
 from __future__ import annotations
 
-import importlib
+from .core.lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -24,7 +24,7 @@ _EXPORTS = {
     "SolverFailure": "mechanics.result",
     "solve_external": "mechanics.equilibrium",
     "solve_internal": "mechanics.equilibrium",
-    "available_backends": "equilibrium",
+    "available_backends": "mechanics.backends",
     "RigidDrag": "mechanics.drags",
     "external_stability": "mechanics.equilibrium",
     "check_stability": "mechanics.stability",
@@ -98,13 +98,7 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS) + ["__version__"]
 
 
-def __getattr__(name: str):
-    mod = _EXPORTS.get(name)
-    if mod is None:
-        raise AttributeError(f"module 'mdsr_opt' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{mod}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__, _ = lazy_exports(__name__, _EXPORTS, globals())
 
 
 def __dir__():

@@ -124,3 +124,22 @@ def test_package_level_names_do_not_clash_with_modules(name):
         assert callable(value) and not isinstance(value, type(mdsr_opt))
     else:
         assert not hasattr(mdsr_opt, "__all__") or name not in mdsr_opt.__all__
+
+
+@pytest.mark.parametrize("package", ["mdsr_opt"] + [f"mdsr_opt.{s}" for s in STAGES])
+def test_every_public_name_resolves(package):
+    """Each name a package lists in ``__all__`` (or its lazy export table) imports and is the object of
+    that name in its owning module (a wrong module path in an export table is only found when used)."""
+    import importlib
+
+    pkg = importlib.import_module(package)
+    names = [n for n in getattr(pkg, "__all__", []) if not n.startswith("__")]
+    broken = []
+    for name in names:
+        try:
+            value = getattr(pkg, name)
+        except (AttributeError, ImportError) as exc:
+            broken.append(f"{name}: {exc}")
+            continue
+        assert value is not None, name
+    assert not broken, f"{package}: " + "; ".join(broken)
