@@ -257,7 +257,39 @@ MALFORMED = [
      r"animations\[0\]\.keyframes\[1\]: unknown case 'contrct'"),
     ("animation fraction", _set("animations/0/keyframes/1", ["contract", 2]), SceneFileError,
      r"animations\[0\]: .*outside \[0, 1\]"),
+    ("anchor radius sign", _set("design/anchor_radius", -1), SceneFileError, r"design\.anchor_radius: must be >= 0"),
+    ("anchor radius text", _set("design/anchor_radius", "big"), TypeError, r"design\.anchor_radius: expected a number"),
+    ("anchor radius size", _set("design/anchor_radius", 1e9), SceneFileError,
+     r".*design\.anchor_radius 1e\+09 is at least half the body's size"),
+    ("max turn", _set("routing/max_turn", 200), SceneFileError, r"routing\.max_turn: must lie in \[0, 180\]"),
+    ("seed threshold", _set("routing/seed_threshold", 2), SceneFileError,
+     r"routing\.seed_threshold: must lie in \(0, 1\]"),
+    ("symmetry", _set("routing/symmetry", "yes"), SceneFileError, r"routing\.symmetry: must be 'auto', true or false"),
+    ("huge drag", _set("cases/0/drags", [{"nodes": "tip", "by": [1e300, 0]}]), SceneFileError,
+     r".*case 'bend': a drag moves a node by 1e\+300, more than 10"),
+    ("gait named like a case", lambda d: d.update(gait={"name": "bend", "poses": ["bend", "rest"]}), SceneFileError,
+     r".*gait 'bend': the gait 'bend' would write 'bend', which is written by the case 'bend'"),
+    ("gait named summary", lambda d: d.update(gait={"name": "summary", "poses": ["bend", "rest"]}), SceneFileError,
+     r".*gait 'summary': the gait name 'summary' is reserved"),
 ]
+
+
+def test_every_scene_option_keyword_has_a_check():
+    """A keyword added to route_muscles or design_contractions must get its scene-file check (else a scene
+    file's value would only fail mid-run)."""
+    import inspect
+
+    from mdsr_opt.scenes.reader import scene_options, Reader
+    from mdsr_opt.synthesis.contractions import design_contractions
+    from mdsr_opt.synthesis.routing import route_muscles
+
+    for kind, fn in (("routing", route_muscles), ("design", design_contractions)):
+        for p in inspect.signature(fn).parameters.values():
+            if p.kind != p.KEYWORD_ONLY or p.name in ("initial_guess", "weights"):
+                continue
+            # a value of the wrong type is refused by the keyword's check (an unchecked keyword would pass)
+            with pytest.raises((SceneFileError, TypeError), match=rf"{kind}\.{p.name}: "):
+                scene_options(Reader("scene.toml"), {p.name: object()}, kind)
 
 
 @pytest.mark.parametrize("label, mutate, err, match", MALFORMED, ids=[m[0] for m in MALFORMED])

@@ -15,23 +15,24 @@ RESERVED_NAMES = ("rest", "summary")
 
 
 def check_output_names(case_names: Sequence[str], animation_names: Sequence[str] = (), label: str = "scene",
-                       where: Sequence[str] | None = None) -> None:
-    """Refuse case and animation names whose files would collide with each other or with a run's own files
+                       where: Sequence[str] | None = None, gait_names: Sequence[str] = ()) -> None:
+    """Refuse case, animation and gait names whose files would collide with each other or with a run's own files
     (:data:`RUN_FILES`; a case writes the folder ``<case>/``, an animation ``<name>.gif`` and
-    ``<name>.json``), also on case-insensitive file systems. ``where`` names each name's field (cases
-    first, then animations) for the message.
+    ``<name>.json``, a gait the folder ``<name>/``), also on case-insensitive file systems. ``where`` names
+    each name's field (cases first, then animations, then gaits) for the message.
     """
-    names = list(case_names) + list(animation_names)
+    names = list(case_names) + list(animation_names) + list(gait_names)
     fields = list(where) if where is not None else \
         [f"case {c!r}" for c in case_names] + [f"animation {a!r}" for a in animation_names]
+    fields += [f"gait {g!r}" for g in gait_names]  # ``where`` covers the cases and animations only
+    n_case, n_anim = len(case_names), len(animation_names)
     taken: dict[str, str] = {f.lower(): f"the run's own file {f!r}" for f in RUN_FILES}
     for i, n in enumerate(names):
-        is_case = i < len(case_names)
-        kind = "case" if is_case else "animation"
+        kind = "case" if i < n_case else "animation" if i < n_case + n_anim else "gait"
         if n.lower() in RESERVED_NAMES or n.lower().split(".")[0] in RESERVED_NAMES:
             raise SceneFileError(f"{label}: {fields[i]}: the {kind} name {n!r} is reserved ('rest' is the rest "
                                  "pose in keyframes, 'summary' names the run's summary files); choose another")
-        for entry in ([n] if is_case else [f"{n}.gif", f"{n}.json"]):
+        for entry in ([n] if kind != "animation" else [f"{n}.gif", f"{n}.json"]):
             key = entry.lower()
             if key in taken:
                 raise SceneFileError(f"{label}: {fields[i]}: the {kind} {n!r} would write {entry!r}, which is "

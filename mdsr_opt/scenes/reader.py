@@ -138,8 +138,9 @@ def scene_options(r: Reader, spec, where: str) -> dict:
     opts = r.keys(spec, allowed, where)
     checks = _ROUTING_CHECKS if where == "routing" else _DESIGN_CHECKS
     for k, v in opts.items():
-        if k in checks:  # a keyword added to the function later and not known here passes unchecked
-            opts[k] = checks[k](r, v, f"{where}.{k}")
+        if k not in checks:  # a keyword added to the function later must get its check here (a test says so)
+            r.fail(f"{where}.{k}", "is a keyword this version cannot check in a scene file; set it in Python")
+        opts[k] = checks[k](r, v, f"{where}.{k}")
     if where == "design" and "options" in opts:
         opts["options"] = _solver_options(r, opts["options"], opts)
     return opts
@@ -213,6 +214,8 @@ _DESIGN_CHECKS = {
     "verify": _boolean,
     "gap_rtol": _positive(),
     "derivatives": _choice("assembled", "casadi"),
+    # a length; its bound against the body's size is checked where the mesh is known (Scene)
+    "anchor_radius": _positive(allow_zero=True),
 }
 
 
@@ -224,7 +227,17 @@ _ROUTING_CHECKS = {
     "max_muscles": _integer(1),
     "min_length": _positive(allow_zero=True),
     "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
+    "max_turn": _real(0.0, 180.0, what=" (degrees)"),
+    "seed_threshold": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest contraction)"),
+    "symmetry": lambda r, v, where: _symmetry(r, v, where),
 }
+
+
+def _symmetry(r: Reader, v, where: str):
+    if not (isinstance(v, bool) or v == "auto"):
+        r.fail(where, f"must be 'auto', true or false, got {v!r}", TypeError if not isinstance(v, str) else
+               SceneFileError)
+    return v
 
 
 def _solver_options(r: Reader, options: dict, design: dict) -> dict:

@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, positive_int
+from ..mechanics.constraints import body_size
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -19,6 +20,9 @@ __all__ = ['UnknownName', 'Case', 'Animation', 'Scene', 'resolve_resolution', 's
 
 #: Named resolutions: approximate number of mesh nodes.
 RESOLUTIONS = {"coarse": 150, "medium": 600, "fine": 2400}
+
+#: A drag may move a node by at most this many body sizes (farther is a units mistake, not a target).
+MAX_DRAG_SIZES = 10.0
 
 
 #: Said in every problem script: the paper gives no geometry, so the shapes are ours.
@@ -214,6 +218,13 @@ class Scene:
                 if len(idx) and (idx.min() < 0 or idx.max() >= n):
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: {what} has a node out of range "
                                      f"[0, {n})")
+            if len(c.drag_nodes):
+                d = c.drag_positions - self.mesh.points[c.drag_nodes]
+                reach = float(np.hypot(d[:, 0], d[:, 1]).max())  # hypot: no overflow for absurd drags
+                if reach > MAX_DRAG_SIZES * body_size(self.mesh):
+                    raise ValueError(f"scene {self.name!r}, case {c.name!r}: a drag moves a node by {reach:.3g}, "
+                                     f"more than {MAX_DRAG_SIZES} times the body's size "
+                                     f"({body_size(self.mesh):.3g}); check the drag's units")
             both = np.intersect1d(c.anchors, c.drag_nodes)
             if len(both):
                 raise ValueError(f"scene {self.name!r}, case {c.name!r}: node {int(both[0])} is both anchored "
@@ -247,8 +258,13 @@ class Scene:
         check_units_and_gait(self)  # issue 16
         self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
         self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
+        radius = self.design_options.get("anchor_radius")
+        if radius is not None and radius >= 0.5 * body_size(self.mesh):
+            raise ValueError(f"scene {self.name!r}: design.anchor_radius {radius:g} is at least half the body's "
+                             f"size ({body_size(self.mesh):.3g}): a muscle's end patch would hold most of the body")
         self.expected = dict(self.expected)
-        check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}")
+        check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}",
+                           gait_names=[self.gait.name] if self.gait is not None else ())
 
     @property
     def case_names(self) -> tuple[str, ...]:
