@@ -305,19 +305,15 @@ def test_overlapping_rest_geometry_is_refused():
         Mesh(pts, tri)
 
 
-def test_boundary_crossing_check_scales():
-    """16k boundary edges: was 8.5 s (all pairs); a sweep-like tree query takes milliseconds."""
-    import time
-
+def test_boundary_crossing_check_on_16k_edges():
+    """16k boundary edges: a half-turn arc does not cross itself, a 2.2-turn coil does (its time against the
+    former all-pairs test is measured by tests/benchmarks/bench_guards.py, not here)."""
     from conftest import arc_map
 
     m = Mesh.rectangle(4.0, 0.01, 8000, 1)
     assert len(m.boundary_edges) == 16002
-    x = arc_map(m.points, angle=np.pi)
-    t0 = time.perf_counter()
-    assert not m.boundary_crosses(x)
+    assert not m.boundary_crosses(arc_map(m.points, angle=np.pi))
     assert m.boundary_crosses(arc_map(m.points, angle=2.2 * np.pi))
-    assert time.perf_counter() - t0 < 2.0
 
 
 def test_polygon_contacts_are_exact():
