@@ -28,8 +28,8 @@ import numpy as np
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
 
-MODELS = {"cable": dict(model="cable"), "springs": dict(model="springs"),
-          "springs-plain": dict(model="springs", anchor_radius=0.0)}
+MODELS = {"cable": dict(muscle_model="cable"), "springs": dict(muscle_model="springs"),
+          "springs-plain": dict(muscle_model="springs", anchor_radius=0.0)}
 
 
 def strip_mesh(nodes: int) -> Mesh:
