@@ -549,7 +549,7 @@ def design(tmp_path, body):
     for k in (0.5, 0.8):
         write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
     assert cli.main(["photograph", str(states), "--out", str(tmp_path / "images"), "--seed", "3",
-                     "--resolution", "400x400"]) == 0
+                     "--photo-size", "400x400"]) == 0
     return tmp_path
 
 

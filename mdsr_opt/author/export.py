@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..body.io import write_json, write_mesh
+from ..core.deprecation import renamed_keywords
 
 __all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS"]
 

@@ -144,6 +144,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         radius = next((r[3] for r in rows.values() if r[3] is not None), None)
     if not mus:
         raise ValueError("the design has no muscles: nothing to fabricate")
+    # every channel is labelled: an unnamed muscle is called m<k> (its place in the layout, from 1)
+    mus = [mu if mu.name else Muscle(mu.nodes, name=f"m{i + 1}") for i, mu in enumerate(mus)]
     h = float(mesh.edge_lengths.mean())
     if channel_width is None:
         channel_width = 0.2 * h
