@@ -204,7 +204,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     Returns
     -------
     PipelineResult
-        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(dir)``
+        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(out)``
         writes JSON plus meshes and :meth:`PipelineResult.load` reads them back.
 
     Raises
