@@ -444,7 +444,7 @@ def test_assembled_derivatives_match_finite_differences(model_kind, radius):
 
 @pytest.mark.parametrize("model_kind", ["cable", "springs"])
 def test_both_derivative_paths_give_the_same_design(mesh, muscles, target, model_kind):
-    kw = {"muscle_model": model_kind, "initial": A_START, "anchor_radius": 0.3, "verify": False}  # end patches
+    kw = {"muscle_model": model_kind, "initial_guess": A_START, "anchor_radius": 0.3, "verify": False}  # end patches
     ra = design_contractions(mesh, MAT, muscles, target, derivatives="assembled", **kw)
     rc = design_contractions(mesh, MAT, muscles, target, derivatives="casadi", **kw)
     assert ra.success and rc.success, (ra.status, rc.status)

@@ -469,11 +469,11 @@ def test_camera_pixel_transform_lands_on_the_body(body, photo):
 
 def test_camera_rejects_bad_settings(body):
     mesh, x = body
-    with pytest.raises(ValueError, match="resolution"):
+    with pytest.raises(ValueError, match="image_size must lie between 32 and 8000"):
         render_photo(mesh, x, image_size=(10, 10))
-    for kw, exc, msg in [({"resolution": (400.5, 300)}, TypeError, "resolution must be an integer"),
-                         ({"resolution": (400,)}, ValueError, "resolution must be"),
-                         ({"resolution": "400x300"}, ValueError, "resolution must be"),
+    for kw, exc, msg in [({"image_size": (400.5, 300)}, TypeError, "image_size must be an integer"),
+                         ({"image_size": (400,)}, ValueError, r"image_size must be \(width, height\)"),
+                         ({"image_size": "400x300"}, ValueError, r"image_size must be \(width, height\)"),
                          ({"seed": -1}, ValueError, "seed must be an integer >= 0"),
                          ({"seed": 1.5}, TypeError, "seed must be an integer"),
                          ({"supersample": 2.5}, TypeError, "supersample must be an integer"),
@@ -549,7 +549,7 @@ def design(tmp_path, body):
     for k in (0.5, 0.8):
         write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
     assert cli.main(["photograph", str(states), "--out", str(tmp_path / "images"), "--seed", "3",
-                     "--resolution", "400x400"]) == 0
+                     "--photo-size", "400x400"]) == 0
     return tmp_path
 
 

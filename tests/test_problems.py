@@ -29,7 +29,7 @@ def runs(name):
         scene = get_problem(name, resolution="coarse")
         out = {}
         for i, case in enumerate(scene.cases):
-            out[case.name] = run_case(scene, case, photo=(i == 0), photo_resolution=(300, 300))
+            out[case.name] = run_case(scene, case, photo=(i == 0), photo_size=(300, 300))
         _cache[name] = (scene, out)
     return _cache[name]
 

@@ -351,7 +351,7 @@ def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     assert s["success"] is True and s["photographs"].startswith("SYNTHETIC")
     contract = s["cases"][1]
     assert contract["contraction_error"] < 1e-6 and contract["known_contractions"] == [0.3]
-    assert contract["photo"]["resolution"] == [300, 300]
+    assert contract["photo"]["image_size"] == [300, 300]
     assert contract["photo"]["self"]["mean_px"] < 1.0               # the measuring floor at 300 px
     bend = s["cases"][0]
     assert bend["n_muscles"] == 1 and bend["difference"] <= bend["initial_difference"]

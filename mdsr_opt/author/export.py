@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..body.io import write_json, write_mesh
+from ..core.deprecation import renamed_keywords
 
 __all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS"]
 
@@ -75,8 +76,10 @@ def _plain(v):
     return v
 
 
-def save_scene(session, folder, name: str | None = None) -> list[str]:
-    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into ``folder``; returns the two paths.
+@renamed_keywords(folder="out")
+def save_scene(session, out, name: str | None = None) -> list[str]:
+    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created; ``folder=`` is its
+    deprecated spelling); returns the two paths.
 
     The file is read back with :func:`~mdsr_opt.load_scene` and compared with the session (mesh, anchors,
     drags, muscles); a mismatch raises ``RuntimeError`` rather than leaving a scene that would not
@@ -90,7 +93,7 @@ def save_scene(session, folder, name: str | None = None) -> list[str]:
     from ..scenes.scene import Case  # name check: letters, digits, _ - .
 
     Case(name, anchors=[0, 1])
-    folder = Path(folder)
+    folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     mesh_path = folder / f"{name}.mesh.vtu"
     scene_path = folder / f"{name}.json"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+import sys
 from pathlib import Path
 
 from ..photos.camera import render_photo
@@ -43,6 +45,16 @@ def _parse_ints(n: int, what: str, sep: str = ","):
     return parse
 
 
+class _Deprecated(argparse.Action):
+    """An old option spelling: stores like the new one and warns on stderr (one release)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        new = "--" + self.dest.replace("_", "-")
+        print(f"{parser.prog}: {option_string} is deprecated and will be removed in the next release; use {new}",
+              file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
 def _cmd_evaluate(a) -> int:
     extract = {"method": a.method, "body": a.body, "largest": a.largest}
     if a.color is not None:
@@ -68,7 +80,7 @@ def _cmd_photograph(a) -> int:
     writers = []
     for f in files:  # render and encode everything first, then write the whole set at once
         data = read_mesh(f)
-        ph = render_photo(data.mesh, data.x, image_size=a.resolution, seed=a.seed, tilt_deg=a.tilt,
+        ph = render_photo(data.mesh, data.x, image_size=a.photo_size, seed=a.seed, tilt_deg=a.tilt,
                           rotation_deg=a.rotation, noise_sigma=a.noise, blur_sigma=a.blur,
                           lighting=a.lighting)
         writers += ph._writers(Path(a.out) / f"{f.stem}.png")
@@ -110,8 +122,10 @@ def add_cli(sub) -> None:
     q.add_argument("states", help="a state mesh file or a folder of them")
     q.add_argument("--out", required=True, help="output folder for <state>.png and <state>.json")
     q.add_argument("--seed", type=int, default=0, help="random seed of noise and placement (default 0)")
-    q.add_argument("--resolution", type=_parse_ints(2, "resolution", "x"), default=(500, 500),
-                   help="WIDTHxHEIGHT (default 500x500)")
+    q.add_argument("--photo-size", type=_parse_ints(2, "photo size", "x"), default=(500, 500), metavar="WxH",
+                   help="size of the photographs in pixels (default 500x500), as `mdsr run --photo-size`")
+    q.add_argument("--resolution", type=_parse_ints(2, "resolution", "x"), dest="photo_size", metavar="WxH",
+                   action=_Deprecated, help="deprecated spelling of --photo-size (resolutions count mesh nodes)")
     q.add_argument("--tilt", type=float, default=1.0, help="camera tilt, degrees (default 1)")
     q.add_argument("--rotation", type=float, default=0.0, help="body rotation on the plate, degrees")
     q.add_argument("--noise", type=float, default=3.0, help="noise sigma, grey levels (default 3)")

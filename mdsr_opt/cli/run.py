@@ -89,7 +89,7 @@ def _cmd_run(a) -> int:
                     log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
                 reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                            figures=not a.no_figures, animations=not a.no_animations,
-                                           mesh_format=a.format, photo_resolution=a.photo_size, log=log,
+                                           mesh_format=a.format, photo_size=a.photo_size, log=log,
                                            prototype=not a.no_prototype, prototype_seed=a.prototype_seed))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path

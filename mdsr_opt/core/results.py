@@ -1,4 +1,4 @@
-"""Conventions shared by the result objects: a short ``repr`` and a JSON-ready ``to_dict``.
+"""Conventions shared by the result objects: a short ``repr``, a JSON-ready ``to_dict`` and ``save``/``load``.
 
 Result objects hold arrays of thousands of numbers; a dataclass's own ``repr`` prints all of them. The
 helpers here give every result the same manners:
@@ -6,7 +6,10 @@ helpers here give every result the same manners:
 - :func:`compact_repr` writes ``Name(field=value, ...)`` with arrays as ``array(shape, dtype)``, long
   sequences as their length and floats to four significant digits;
 - :func:`to_jsonable` turns arrays, numpy scalars, tuples, dataclasses and non-finite floats into what
-  :func:`json.dumps` accepts (NaN and infinities become ``None``).
+  :func:`json.dumps` accepts (NaN and infinities become ``None``);
+- :func:`save_fields` / :func:`load_fields` write a result holding states as one ``.npz`` file: every array
+  field exactly (dtype and bits), the other fields as JSON metadata with a format tag, so that
+  ``load(save(r))`` equals ``r`` and a damaged or foreign file is refused with a ``ValueError`` naming it.
 
 Example
 -------
@@ -25,12 +28,21 @@ Example
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
-from typing import Any, Sequence
+import os
+import tempfile
+import zipfile
+import zlib
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["compact_repr", "format_value", "to_jsonable"]
+__all__ = ["compact_repr", "format_value", "to_jsonable", "plain", "save_npz", "load_npz", "save_fields",
+           "load_fields"]
+
+#: Longest ``repr`` a result object prints (one line).
+MAX_REPR = 200
 
 
 def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:
@@ -61,10 +73,20 @@ def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:
     return text if len(text) <= max_chars else f"<{type(value).__name__}>"
 
 
-def compact_repr(obj: Any, fields: Sequence[str]) -> str:
-    """``TypeName(field=value, ...)`` over ``fields`` with :func:`format_value`."""
-    parts = ", ".join(f"{name}={format_value(getattr(obj, name))}" for name in fields)
-    return f"{type(obj).__name__}({parts})"
+def compact_repr(obj: Any, fields: Sequence[str], *, extra: Mapping[str, Any] | None = None,
+                 max_chars: int = MAX_REPR) -> str:
+    """``TypeName(field=value, ...)`` over ``fields`` (then ``extra`` name/value pairs) with
+    :func:`format_value`, one line of at most ``max_chars`` characters (the fields that do not fit are
+    left out and ``...`` says so)."""
+    items = [(name, getattr(obj, name)) for name in fields] + list((extra or {}).items())
+    head, parts = f"{type(obj).__name__}(", []
+    for name, value in items:
+        text = f"{name}={format_value(value, max_chars=40)}".replace("\n", " ")
+        if len(head) + len(", ".join(parts + [text])) + len(", ...)") > max_chars:
+            parts.append("...")
+            break
+        parts.append(text)
+    return head + ", ".join(parts) + ")"
 
 
 def to_jsonable(value: Any) -> Any:
@@ -88,3 +110,148 @@ def to_jsonable(value: Any) -> Any:
         v = float(value)
         return v if math.isfinite(v) else None
     return value
+
+
+# ---------------------------------------------------------------------------------------------- save / load
+def plain(value: Any) -> Any:
+    """``value`` as JSON types, exactly: numpy scalars as Python numbers, tuples as lists, dataclasses as
+    dicts of their fields; NaN and infinities are KEPT (the metadata of :func:`save_npz` is read back by
+    Python's :mod:`json`, which writes and reads them), arrays as nested lists."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    return value
+
+
+def save_npz(path: str | os.PathLike, kind: str, arrays: Mapping[str, np.ndarray], meta: Mapping) -> str:
+    """Write ``arrays`` (exactly) and ``meta`` (:func:`plain`, as JSON) into one ``.npz`` file, atomically.
+
+    The file carries the format tag ``mdsr_opt.<kind>/1``; :func:`load_npz` checks it. Returns the path.
+    """
+    path = os.fspath(path)
+    if not path.endswith(".npz"):
+        raise ValueError(f"a {kind} result is saved as a .npz file; got {path!r}")
+    if os.path.isdir(path):
+        raise ValueError(f"cannot write {path}: it is a folder")
+    text = json.dumps({"format": f"mdsr_opt.{kind}/1", "arrays": sorted(arrays), "fields": plain(dict(meta))})
+    payload = {f"a:{k}": np.asarray(v) for k, v in arrays.items()}
+    for k, v in payload.items():
+        if v.dtype.hasobject:
+            raise TypeError(f"array field {k[2:]!r} holds Python objects; it cannot be saved exactly")
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".npz", prefix=".tmp-", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, __meta__=np.array(text), **payload)
+        os.replace(tmp, path)
+    finally:
+        if os.path.lexists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def load_npz(path: str | os.PathLike, kind: str) -> tuple[dict, dict]:
+    """The ``(arrays, meta)`` written by :func:`save_npz` with format ``mdsr_opt.<kind>/1``.
+
+    Raises
+    ------
+    FileNotFoundError
+        No such file.
+    ValueError
+        The file (named) is not a ``.npz`` written by :func:`save_npz`, is damaged (truncated, a bad
+        checksum, an array missing), or holds another kind of result.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"no such {kind} result file: {path}")
+    if os.path.isdir(path):
+        raise ValueError(f"{path} is a folder, not a {kind} result file (.npz)")
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if not isinstance(loaded, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz archive")
+        with loaded as z:
+            if "__meta__" not in z.files:
+                raise ValueError("no mdsr_opt metadata in the archive")
+            head = json.loads(str(z["__meta__"][()]))
+            if not isinstance(head, dict):
+                raise ValueError("the metadata is not a JSON object")
+            fmt = head.get("format")
+            if fmt != f"mdsr_opt.{kind}/1":
+                raise _Foreign(f"{path} is not a mdsr_opt {kind} result (format {fmt!r})")
+            arrays = {name: z[f"a:{name}"] for name in head["arrays"]}
+            meta = head["fields"]
+    except _Foreign as exc:
+        raise ValueError(str(exc)) from None
+    except (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ValueError(f"{path} is damaged or not a mdsr_opt {kind} result file: {exc}") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path} is damaged: its fields are not a JSON object")
+    return arrays, meta
+
+
+class _Foreign(Exception):
+    pass
+
+
+def save_fields(obj: Any, path: str | os.PathLike, kind: str, *, skip: Sequence[str] = (),
+                extra_arrays: Mapping[str, np.ndarray] | None = None) -> str:
+    """Save a dataclass result with :func:`save_npz`: array fields as arrays, the others as metadata.
+
+    ``skip`` names fields left out (in memory only); ``extra_arrays`` are arrays stored under their own
+    names (the class's ``load`` turns them back into fields). Returns the path."""
+    arrays, meta = dict(extra_arrays or {}), {}
+    for f in dataclasses.fields(obj):
+        if f.name in skip:
+            continue
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray):
+            arrays[f.name] = value
+        else:
+            meta[f.name] = value
+    return save_npz(path, kind, arrays, meta)
+
+
+def load_fields(cls: type, path: str | os.PathLike, kind: str, *,
+                convert: Mapping[str, Callable[[Any], Any]] | None = None,
+                extra: Callable[[dict, dict], dict] | None = None) -> Any:
+    """Read a result written by :func:`save_fields` back into ``cls``.
+
+    ``convert`` maps a field name to a function turning its stored value back (tuples, nested
+    dataclasses); ``extra(arrays, fields)`` may rebuild fields from ``extra_arrays``. Every failure to
+    rebuild (a field missing, of the wrong kind) is a ``ValueError`` naming the file and the field.
+    """
+    arrays, meta = load_npz(path, kind)
+    path = os.fspath(path)
+    fields = {**meta, **arrays}
+    names = {f.name for f in dataclasses.fields(cls)}
+    name = "?"
+    try:
+        if extra is not None:
+            fields = extra(arrays, fields)
+        fields = {k: v for k, v in fields.items() if k in names}
+        required = [f.name for f in dataclasses.fields(cls) if f.init and f.default is dataclasses.MISSING
+                    and f.default_factory is dataclasses.MISSING]
+        missing = [k for k in required if k not in fields]
+        if missing:
+            raise ValueError(f"field {missing[0]!r} is missing")
+        for name, fn in (convert or {}).items():
+            if name in fields and fields[name] is not None:
+                fields[name] = fn(fields[name])
+        name = "?"
+        return cls(**fields)
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+        where = f" (field {name!r})" if name != "?" else ""
+        raise ValueError(f"{path} is damaged{where}: {exc}") from None

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 import numpy as np
+
+from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 
 __all__ = ['SolverFailure', 'EquilibriumResult']
 
@@ -64,6 +67,33 @@ class EquilibriumResult:
     slack: np.ndarray | None = None  # cable: path shorter than the rope (achieved > commanded); springs: not pulling
     rest_lengths: np.ndarray | None = None  # L0 per muscle
     anchor_radius: float | None = None  # radius of the rigid anchor patches at the muscles' ends
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("mode", "backend", "success", "iterations", "residual", "min_J", "energy", "x",
+                                   "status"))
+
+    def to_dict(self) -> dict:
+        """Every field as JSON-ready values (arrays as nested lists, NaN as None)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically.
+
+        Returns the path; :meth:`load` reads it back equal to this result."""
+        return save_fields(self, path, "equilibrium")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "EquilibriumResult":
+        """Read a result written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            No such file.
+        ValueError
+            The file (named) is damaged, not a ``.npz`` or holds another kind of result.
+        """
+        return load_fields(cls, path, "equilibrium")
 
     def raise_on_failure(self) -> "EquilibriumResult":
         if not self.success:

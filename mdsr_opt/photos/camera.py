@@ -133,9 +133,9 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     mesh : Mesh
     x : array_like, shape (n, 2), optional
         The state to photograph (default: the rest shape).
-    image_size : (width, height)
-        In pixels (``resolution=`` is its deprecated spelling; mesh resolutions count nodes).
-        Image size in pixels: two integers, 32-8000.
+    image_size : (int, int)
+        (width, height) of the image in pixels, each 32-8000 (``resolution=`` is its deprecated spelling;
+        mesh resolutions count nodes).
     seed : int
         Non-negative seed of the tilt axis, light direction and noise.
     body_color, plate_color, grid_color : (r, g, b) in 0-255
@@ -161,7 +161,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     Raises
     ------
     TypeError
-        ``mesh`` is not a Mesh; ``resolution``, ``seed`` or ``supersample`` are not integers (no
+        ``mesh`` is not a Mesh; ``image_size``, ``seed`` or ``supersample`` are not integers (no
         silent truncation of 2.5 to 2); ``rotation_deg`` or another setting is not a real number.
     ValueError
         A setting out of range, or an ``x`` of the wrong shape or with NaN/inf.
@@ -169,18 +169,17 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     Example
     -------
     >>> from mdsr_opt import Mesh
-    >>> photo = render_photo(Mesh.rectangle(2.0, 1.0, 4, 2), resolution=(200, 120), seed=3)
+    >>> photo = render_photo(Mesh.rectangle(2.0, 1.0, 4, 2), image_size=(200, 120), seed=3)
     >>> photo.image.shape, photo.metadata["synthetic"]
     ((120, 200, 3), True)
     """
-    resolution = image_size
     mesh = check_mesh(mesh)
     x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
-    if isinstance(resolution, (str, bytes)) or not hasattr(resolution, "__len__") or len(resolution) != 2:
-        raise ValueError(f"resolution must be (width, height), two integers, got {resolution!r}")
-    W, H = (check_int(v, "resolution", 1) for v in resolution)
+    if isinstance(image_size, (str, bytes)) or not hasattr(image_size, "__len__") or len(image_size) != 2:
+        raise ValueError(f"image_size must be (width, height), two integers, got {image_size!r}")
+    W, H = (check_int(v, "image_size", 1) for v in image_size)
     if W < 32 or H < 32 or W > 8000 or H > 8000:
-        raise ValueError(f"resolution must lie between 32 and 8000 pixels per side, got {W} x {H}")
+        raise ValueError(f"image_size must lie between 32 and 8000 pixels per side, got {W} x {H}")
     seed = check_int(seed, "seed", lo=0)
     margin = positive_float(margin, "margin")
     if margin >= 0.45:
@@ -302,7 +301,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
             break
     if corner is None:
         raise ValueError("no image corner is free of the body for the 'SYNTHETIC' caption; increase "
-                         "margin or the resolution")
+                         "margin or image_size")
     bx, by = boxes[corner]
     cv2.putText(img, text, (bx, by + th), font, fscale, (20, 20, 20), fthick, cv2.LINE_AA)
 
@@ -310,7 +309,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
         "synthetic": True, "generator": "mdsr_opt.evaluate.render_photo", "caption": text,
         "caption_corner": corner, "caption_box": [int(bx), int(by), int(tw), int(th + base)],
         "seed": seed,
-        "resolution": [W, H], "rotation_deg": rot, "tilt_deg": tilt,
+        "image_size": [W, H], "rotation_deg": rot, "tilt_deg": tilt,
         "tilt_axis_deg": math.degrees(phi), "light_direction_deg": math.degrees(psi),
         "lighting": float(lighting), "vignette": float(vignette), "blur_sigma": blur, "noise_sigma": noise,
         "body_color": body_rgb.tolist(), "plate_color": plate_rgb.tolist(), "grid_spacing": g,

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from ..body.io import FORMATS, atomic_path
+from ..core.results import compact_repr
 from .compare import ContourComparison, compare_contours, simulated_outline
 from .contours import contour_from_image
 from .images import IMAGE_SUFFIXES, load_image
@@ -62,6 +63,11 @@ class CaseResult:
     state: str
     synthetic: bool
     comparison: ContourComparison
+
+    def __repr__(self) -> str:
+        c = self.comparison
+        return compact_repr(self, ("case", "synthetic"), extra={
+            "mean_px": c.mean_px, "max_px": c.max_px, "ratio": c.ratio, "image": self.image, "state": self.state})
 
     def to_dict(self) -> dict:
         """The row with its comparison (arrays as lists) as a JSON-ready dict."""

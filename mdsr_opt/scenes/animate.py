@@ -7,6 +7,7 @@ from typing import Mapping
 import numpy as np
 
 from ..body.muscles import Muscle
+from ..core.results import compact_repr, load_fields, save_fields
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
 
@@ -41,12 +42,30 @@ class AnimationResult:
     failed_frames: list = field(default_factory=list)
     message: str = ""
 
+    def __repr__(self) -> str:
+        return compact_repr(self, ("name", "success"), extra={
+            "n_frames": len(self.states), "n_muscles": len(self.muscles), "failed_frames": self.failed_frames,
+            "contractions": np.asarray(self.contractions), "message": self.message})
+
     def to_dict(self) -> dict:
         """JSON-ready: no states (they are in the GIF), the muscles and per-frame contractions."""
         return {"name": self.name, "success": self.success, "message": self.message,
                 "n_frames": len(self.states), "failed_frames": list(self.failed_frames),
                 "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
                 "contractions": np.asarray(self.contractions).tolist()}
+
+    def save(self, path) -> str:
+        """Write the animation, its states included, as one ``.npz`` file (arrays exactly); returns the path.
+        :meth:`load` reads it back."""
+        states = np.asarray(self.states, dtype=float) if self.states else np.zeros((0, 0, 2))
+        return save_fields(self, path, "animation", skip=("states",), extra_arrays={"states": states})
+
+    @classmethod
+    def load(cls, path) -> "AnimationResult":
+        """Read an animation written by :meth:`save` (ValueError naming a damaged or foreign file)."""
+        return load_fields(cls, path, "animation", convert={
+            "muscles": lambda ms: tuple(Muscle(tuple(m["nodes"]), name=m["name"]) for m in ms),
+            "states": lambda s: [np.array(x) for x in s]})
 
 
 def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tuple]) -> AnimationResult:

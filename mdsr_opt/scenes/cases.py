@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 import numpy as np
 
+from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .scene import Case, Scene
 
 __all__ = ['CaseSetup', 'prepare_case']
@@ -49,6 +51,78 @@ class CaseSetup:
     def success(self) -> bool:
         """The target solve succeeded and there is at least one muscle."""
         return bool(self.target_result.success) and len(self.muscles) > 0
+
+    def __repr__(self) -> str:
+        return compact_repr(self, (), extra={
+            "scene": self.scene.name, "case": self.case.name, "kind": self.case.kind, "success": self.success,
+            "n_muscles": len(self.muscles), "target": self.target, "known_contractions": self.known_contractions})
+
+    def to_dict(self) -> dict:
+        """JSON-ready: scene and case names, the target, muscles, known contractions, the target solve, the
+        routing (without its graph), times and warnings."""
+        return to_jsonable({
+            "scene": self.scene.name, "case": self.case.name, "kind": self.case.kind, "success": self.success,
+            "n_nodes": self.scene.mesh.n_nodes, "target": self.target, "muscles": list(self.muscles),
+            "known_contractions": self.known_contractions, "target_result": self.target_result.to_dict(),
+            "routing": None if self.routing is None else self.routing.to_dict(), "times": self.times,
+            "warnings": self.warnings})
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the setup as one ``.npz`` file: the target, the known contractions and the target solve's
+        arrays exactly; muscles, times, warnings and the names of scene and case as metadata. The routing
+        (its contraction graph) is not written: :meth:`load` gives ``routing=None``. Returns the path."""
+        tr = self.target_result
+        arrays = {"target": np.asarray(self.target)}
+        if self.known_contractions is not None:
+            arrays["known_contractions"] = np.asarray(self.known_contractions)
+        tr_meta = {}
+        for name in tr.__dataclass_fields__:
+            value = getattr(tr, name)
+            if isinstance(value, np.ndarray):
+                arrays[f"target_result.{name}"] = value
+            else:
+                tr_meta[name] = value
+        meta = {"scene": self.scene.name, "case": self.case.name, "n_nodes": self.scene.mesh.n_nodes,
+                "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
+                "target_result": tr_meta, "times": self.times, "warnings": list(self.warnings)}
+        return save_npz(path, "case_setup", arrays, meta)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, scene: Scene) -> "CaseSetup":
+        """Read a setup written by :meth:`save` for ``scene`` (the same scene: name and node count are
+        checked; the case is looked up by name). ``routing`` is None.
+
+        Raises
+        ------
+        FileNotFoundError
+            No such file.
+        ValueError
+            The file (named) is damaged, not a ``.npz``, holds another kind of result or another scene's.
+        """
+        from ..body.muscles import Muscle
+        from ..mechanics.result import EquilibriumResult
+
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be the Scene the setup was made for, got {type(scene).__name__}")
+        arrays, meta = load_npz(path, "case_setup")
+        path = os.fspath(path)
+        try:
+            if meta["scene"] != scene.name or meta["n_nodes"] != scene.mesh.n_nodes:
+                raise ValueError(f"it is a setup of scene {meta['scene']!r} ({meta['n_nodes']} nodes), not of "
+                                 f"{scene.name!r} ({scene.mesh.n_nodes} nodes)")
+            if meta["case"] not in scene.case_names:
+                raise ValueError(f"scene {scene.name!r} has no case {meta['case']!r}")
+            case = scene.case(meta["case"])
+            trk = {k[len("target_result."):]: v for k, v in arrays.items() if k.startswith("target_result.")}
+            target_result = EquilibriumResult(**meta["target_result"], **trk)
+            return cls(scene=scene, case=case, target=arrays["target"],
+                       muscles=tuple(Muscle(tuple(m["nodes"]), name=m["name"]) for m in meta["muscles"]),
+                       known_contractions=arrays.get("known_contractions"), target_result=target_result,
+                       routing=None, times=dict(meta["times"]), warnings=list(meta["warnings"]))
+        except KeyError as exc:
+            raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing") from None
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise ValueError(f"{path}: cannot load the setup: {exc}") from None
 
 
 def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True) -> CaseSetup:

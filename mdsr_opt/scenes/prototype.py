@@ -6,7 +6,7 @@ the design converged. :class:`VirtualPrototype` stands in for the cast body with
 
 - a finer mesh of the same body: the scene rebuilt at ``refine`` times the design mesh's nodes (default
   3x), so the discretisation differs;
-- the exact sliding-cable muscle (``model="cable"``), its node chain re-laid on the fine mesh through the
+- the exact sliding-cable muscle (``muscle_model="cable"``), its node chain re-laid on the fine mesh through the
   fine nodes nearest the design muscle's nodes (as a builder would place the tube);
 - material parameters perturbed within a stated range, drawn from ``seed``: Young's modulus by a factor in
   ``[1 - e_range, 1 + e_range]`` and Poisson's ratio by a shift in ``[-nu_range, +nu_range]`` (kept in
@@ -36,6 +36,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core.checks import positive_float
+from ..core.deprecation import renamed_keywords
 from ..body.muscles import Muscle
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
@@ -99,11 +100,23 @@ class VirtualPrototype:
         return self.scene.mesh
 
     @classmethod
+    @renamed_keywords(photo_resolution="photo_size")
     def for_scene(cls, scene, *, refine: float = DEFAULT_REFINE, e_range: float = DEFAULT_E_RANGE,
                   nu_range: float = DEFAULT_NU_RANGE, seed: int = 0,
-                  photo_resolution: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
+                  photo_size: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
         """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.Scene` built from the library, a
         problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes).
+
+        Parameters
+        ----------
+        scene : Scene
+        refine, e_range, nu_range : float
+            Node count over the design mesh's; the relative spread of ``E`` and the spread of ``nu`` drawn.
+        seed : int
+            Seed of the material draw and of the camera.
+        photo_size : (int, int)
+            (width, height) of the prototype's photographs in pixels (``photo_resolution=`` is its deprecated
+            spelling).
 
         Raises
         ------
@@ -147,7 +160,7 @@ class VirtualPrototype:
         kind = LinearElastic if isinstance(m, LinearElastic) else NeoHookean
         material = kind(E=m.E * f_E, nu=nu, thickness=m.thickness)
         fine = replace(fine, material=material)
-        camera = {"image_size": tuple(photo_resolution), "seed": 1000 + int(seed), "tilt_deg": 2.0,
+        camera = {"image_size": tuple(photo_size), "seed": 1000 + int(seed), "tilt_deg": 2.0,
                   "rotation_deg": float(rng.uniform(-8.0, 8.0))}
         return cls(scene=fine, design_mesh=scene.mesh, material=material, E_factor=float(f_E),
                    nu_shift=float(nu - m.nu), refine=refine, e_range=e_range, nu_range=nu_range, seed=int(seed),

@@ -8,6 +8,8 @@ from pathlib import Path
 from typing import Any, Callable
 import numpy as np
 
+from ..core.deprecation import renamed_keywords
+from ..core.results import compact_repr, to_jsonable
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
 from .scene import Case, Scene
@@ -74,10 +76,22 @@ class CaseReport:
     times: dict = field(default_factory=dict)
     files: list = field(default_factory=list)
 
+    def __repr__(self) -> str:
+        return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
+                                   "contractions", "message"))
+
+    def to_dict(self) -> dict:
+        """Every field, JSON-ready (NaN as None)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
+
 
 @dataclass
 class CaseRun:
-    """A case's report with the arrays behind it (the setup, the design, the photograph)."""
+    """A case's report with the arrays behind it (the setup, the design, the photograph).
+
+    :func:`write_case` writes its files; :meth:`CaseSetup.save` and :meth:`DesignResult.save` save the
+    states it holds.
+    """
 
     report: CaseReport
     setup: CaseSetup | None = None
@@ -85,6 +99,22 @@ class CaseRun:
     photo: Any = None
     comparison: Any = None
     prototype_photos: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        r = self.report
+        return compact_repr(self, (), extra={"scene": r.scene, "case": r.case, "success": r.success,
+                                             "design": self.design is not None, "photo": self.photo is not None,
+                                             "difference": r.difference})
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the report, the setup's and the design's dicts, the photograph's metadata and the
+        comparison's figures (None for what the run did not make)."""
+        def d(obj):
+            return None if obj is None else obj.to_dict()
+
+        return to_jsonable({"report": self.report.to_dict(), "setup": d(self.setup), "design": d(self.design),
+                            "photo": d(self.photo), "comparison": d(self.comparison),
+                            "prototype_photos": {k: d(v) for k, v in self.prototype_photos.items()}})
 
 
 @dataclass
@@ -98,6 +128,12 @@ class SceneReport:
     animations: dict = field(default_factory=dict)
     out: str = ""
     time: float = 0.0
+
+    def __repr__(self) -> str:
+        n_ok = sum(bool(c.success) for c in self.cases)
+        return compact_repr(self, ("scene", "success"), extra={
+            "cases": f"{n_ok}/{len(self.cases)} ok", "animations": len(self.animations), "n_nodes": self.n_nodes,
+            "time": self.time, "out": self.out})
 
     @property
     def success(self) -> bool:
@@ -126,11 +162,12 @@ class SceneReport:
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
+        """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
         from dataclasses import asdict
 
-        return {"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
-                "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
-                "cases": [asdict(c) for c in self.cases], "animations": self.animations}
+        return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
+                            "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
+                            "cases": [asdict(c) for c in self.cases], "animations": self.animations})
 
 
 def finite(v):
@@ -143,8 +180,9 @@ def _edge_set(muscles) -> set:
     return {(min(a, b), max(a, b)) for m in muscles for a, b in m.segments.tolist()}
 
 
+@renamed_keywords(photo_resolution="photo_size")
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
-             photo_resolution: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
+             photo_size: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
              prefix: str = "", prototype: Any = None) -> CaseRun:
     """Run one case through the pipeline (nothing is written).
 
@@ -250,7 +288,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
 
         t2 = time.perf_counter()
         try:
-            ph = render_photo(mesh, res.x_aligned, image_size=photo_resolution, seed=0)
+            ph = render_photo(mesh, res.x_aligned, image_size=photo_size, seed=0)
             loops = contour_loops_from_image(ph.image)
             # every boundary loop is measured: the outline and each hole against its photographed counterpart
             cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
@@ -264,7 +302,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                         "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
                         "n_unmatched": c.n_unmatched}
 
-            rep.photo = {"synthetic": True, "resolution": list(photo_resolution),
+            rep.photo = {"synthetic": True, "image_size": list(photo_size),
                          "target": figures(cmp_t), "self": figures(cmp_s)}
             run.photo, run.comparison = ph, cmp_t.outer
             say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
@@ -285,8 +323,10 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     return run
 
 
-def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
-    """Write a case's figures, meshes and photograph into ``folder``; returns the file names.
+@renamed_keywords(folder="out")
+def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
+    """Write a case's figures, meshes and photograph into the folder ``out`` (created; ``folder=`` is its
+    deprecated spelling); returns the file names.
 
     Files: ``target.png`` (target with anchors and drags), ``graph.png`` (contraction graph),
     ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),
@@ -299,7 +339,7 @@ def write_case(scene: Scene, run: CaseRun, folder: str | os.PathLike, mesh_forma
     from ..synthesis.routing import contraction_graph
 
     fmt = "." + mesh_format.lstrip(".")
-    folder = Path(folder)
+    folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     setup, mesh, case = run.setup, scene.mesh, run.setup.case if run.setup else None
     files: list[str] = []

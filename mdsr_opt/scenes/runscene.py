@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
 from .names import RUN_FILES
@@ -21,9 +22,10 @@ __all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
 _LOG = logging.getLogger(__name__)
 
 
+@renamed_keywords(photo_resolution="photo_size")
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
-              animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+              animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
               log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
               prototype: bool = True, prototype_seed: int = 0) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
@@ -42,7 +44,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     method : design method overriding the scene's ``design_options["method"]``.
     photos, figures, animations : turn the photographs, the figures and the animations off.
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
-    photo_resolution : (width, height) of the synthetic photographs.
+    photo_size : (width, height) of the synthetic photographs, in pixels (``photo_resolution=`` is its
+        deprecated spelling).
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
@@ -73,7 +76,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
-                             animations=animations, mesh_format=mesh_format, photo_resolution=photo_resolution,
+                             animations=animations, mesh_format=mesh_format, photo_size=photo_size,
                              log=log, prototype=prototype, prototype_seed=prototype_seed)
         folder.finish("complete" if report.success else "complete, some cases failed")
     return report
@@ -106,9 +109,10 @@ def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
     return out
 
 
+@renamed_keywords(photo_resolution="photo_size")
 def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
                 method: str | None = None, photos: bool = True, figures: bool = True,
-                animations: bool = True, mesh_format: str = "vtu", photo_resolution: tuple[int, int] = (500, 500),
+                animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0) -> SceneReport:
     """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
@@ -132,7 +136,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     if photos and prototype:
         from .prototype import VirtualPrototype
 
-        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_resolution=photo_resolution)
+        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
         d = proto.describe()
         say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
             f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
@@ -140,7 +144,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
         check_interrupt()
-        run = run_case(scene, cname, method=method, photo=photos, photo_resolution=photo_resolution, log=say,
+        run = run_case(scene, cname, method=method, photo=photos, photo_size=photo_size, log=say,
                        prefix=prefix, prototype=proto)
         if figures:
             run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)

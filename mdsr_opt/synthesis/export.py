@@ -37,6 +37,8 @@ import numpy as np
 
 from ..body.mesh import Mesh, polygon_area
 from ..body.muscles import Muscle, check_muscles
+from ..core.deprecation import renamed_keywords
+from ..core.results import compact_repr, to_jsonable
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "export_fabrication"]
 
@@ -70,6 +72,15 @@ class FabricationData:
     end_radius: float
     channel_width: float
     units: str
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("units", "pose_names"), extra={
+            "n_muscles": len(self.muscles), "n_holes": len(self.holes), "outline": self.outline,
+            "strokes": self.strokes, "channel_width": self.channel_width})
+
+    def to_dict(self) -> dict:
+        """Every field, JSON-ready (arrays as nested lists, NaN as None, muscles as ``{nodes, name}``)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
 
 def _from_design(d, muscles, mesh):
@@ -133,6 +144,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         radius = next((r[3] for r in rows.values() if r[3] is not None), None)
     if not mus:
         raise ValueError("the design has no muscles: nothing to fabricate")
+    # every channel is labelled: an unnamed muscle is called m<k> (its place in the layout, from 1)
+    mus = [mu if mu.name else Muscle(mu.nodes, name=f"m{i + 1}") for i, mu in enumerate(mus)]
     h = float(mesh.edge_lengths.mean())
     if channel_width is None:
         channel_width = 0.2 * h
@@ -266,7 +279,8 @@ def _csv_text(fd: FabricationData) -> str:
     return buf.getvalue()
 
 
-def export_fabrication(mesh: Mesh, design, folder, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
+@renamed_keywords(folder="out")
+def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
                        name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
 
@@ -275,7 +289,8 @@ def export_fabrication(mesh: Mesh, design, folder, *, muscles: Sequence[Muscle] 
     mesh : Mesh
         The body at rest; its coordinates are lengths in ``units``.
     design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None (layout only)
-    folder : output folder (created).
+    out : str or path-like
+        Output folder (created). ``folder=`` is its deprecated spelling.
     muscles : the layout (required unless ``design`` is a PosesResult).
     units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
@@ -299,7 +314,7 @@ def export_fabrication(mesh: Mesh, design, folder, *, muscles: Sequence[Muscle] 
     svg = _svg_text(fd, name)
     doc = _dxf_doc(fd)
     table = _csv_text(fd)
-    folder = Path(folder)
+    folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     paths = {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
     with atomic_path(paths["svg"]) as tmp:

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .poses import PosesResult, check_budget
 
 __all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait"]
@@ -86,6 +87,14 @@ class Gait:
         """The poses named (no repeats, no ``"rest"``)."""
         return tuple(dict.fromkeys(s for s in self.sequence if s != "rest"))
 
+    def __repr__(self) -> str:
+        return compact_repr(self, ("name", "sequence", "frames_per_step", "max_muscles", "step_time", "cyclic",
+                                   "fps"))
+
+    def to_dict(self) -> dict:
+        """The settings, JSON-ready (the scene-file ``[gait]`` block's keys)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
+
 
 @dataclass(eq=False)
 class GaitSchedule:
@@ -140,9 +149,28 @@ class GaitSchedule:
         return self.strokes / self.rest_lengths
 
     def __repr__(self) -> str:
-        return (f"GaitSchedule({' -> '.join(self.sequence)}, {self.n_frames} frames, {len(self.muscle_names)} "
-                f"muscles, max stroke {np.nanmax(self.strokes):.4g} {self.units}, "
+        seq = " -> ".join(self.sequence)
+        if len(seq) > 60:
+            seq = f"{len(self.sequence)} keyframes"
+        top = float(np.nanmax(self.strokes)) if np.isfinite(self.strokes).any() else float("nan")
+        return (f"GaitSchedule({seq}, {self.n_frames} frames, {len(self.muscle_names)} "
+                f"muscles, max stroke {top:.4g} {self.units}, "
                 f"{int(self.success.sum())}/{self.n_frames} frames solved)")
+
+    def to_dict(self) -> dict:
+        """Every field, JSON-ready (arrays as nested lists, NaN as None)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the schedule, states included, as one ``.npz`` file (arrays exactly); returns the path.
+        :meth:`load` reads it back; :meth:`write_csv` writes the actuation table instead."""
+        return save_fields(self, path, "gait_schedule")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "GaitSchedule":
+        """Read a schedule written by :meth:`save` (ValueError naming a damaged or foreign file)."""
+        return load_fields(cls, path, "gait_schedule",
+                           convert={k: tuple for k in ("sequence", "labels", "muscle_names", "status")})
 
     def write_csv(self, path) -> str:
         """The actuation schedule: one row per frame, strokes in ``units`` (atomically). Returns the path."""

@@ -11,6 +11,8 @@ import numpy as np
 
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
+from ..core.deprecation import renamed_keywords
+from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
@@ -62,42 +64,63 @@ class PipelineResult:
     def contractions(self) -> np.ndarray:
         return self.design.contractions
 
-    def save(self, directory) -> str:
-        """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
-        into ``directory`` (created if missing), each atomically. Returns the JSON path."""
-        from ..body.io import write_json, write_mesh
+    def __repr__(self) -> str:
+        d = self.design
+        return compact_repr(self, ("success",), extra={
+            "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
+            "difference": d.difference, "contractions": d.contractions,
+            "total_time": self.times.get("total", float("nan"))})
 
-        directory = os.fspath(directory)
-        if not str(directory).strip():
-            raise ValueError("directory is empty: give a folder name")
-        if os.path.exists(directory) and not os.path.isdir(directory):
-            raise ValueError(f"{directory} is an existing file, not a folder")
-        os.makedirs(directory, exist_ok=True)
-        write_mesh(os.path.join(directory, "target.vtu"), self.mesh, x=self.target, material=self.material)
-        write_mesh(os.path.join(directory, "driven.vtu"), self.mesh, x=self.design.x_aligned,
-                   material=self.material)
+    def to_dict(self) -> dict:
+        """A JSON-ready dict (arrays as lists, NaN as None): what ``design.json`` holds, with the mesh
+        (``points``, ``triangles``) and the ``target`` state instead of the mesh files' names."""
+        data = self._data()
+        data["mesh"] = {"points": self.mesh.points.tolist(), "triangles": self.mesh.triangles.tolist()}
+        data["target"] = np.asarray(self.target).tolist()
+        return finite_or_none(data)
+
+    def _data(self) -> dict:
         mat = self.material
-        data = {
+        return {
             "format": "mdsr_opt.design/1",
             "material": {"kind": mat.kind, "E": mat.E, "nu": mat.nu, "thickness": mat.thickness},
             "anchors": self.anchors.tolist(), "drag_nodes": self.drag_nodes.tolist(),
             "drag_positions": self.drag_positions.tolist(), "external": self.external,
             "muscles": [{"nodes": list(mu.nodes), "name": mu.name} for mu in self.muscles],
             "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
-            "meshes": {"target": "target.vtu", "driven": "driven.vtu"},
         }
+
+    @renamed_keywords(directory="out")
+    def save(self, out: str | os.PathLike) -> str:
+        """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
+        into the folder ``out`` (created if missing; ``directory=`` is its deprecated spelling), each
+        atomically. Returns the JSON path."""
+        from ..body.io import write_json, write_mesh
+
+        directory = os.fspath(out)
+        if not str(directory).strip():
+            raise ValueError("out is empty: give a folder name")
+        if os.path.exists(directory) and not os.path.isdir(directory):
+            raise ValueError(f"{directory} is an existing file, not a folder")
+        os.makedirs(directory, exist_ok=True)
+        write_mesh(os.path.join(directory, "target.vtu"), self.mesh, x=self.target, material=self.material)
+        write_mesh(os.path.join(directory, "driven.vtu"), self.mesh, x=self.design.x_aligned,
+                   material=self.material)
+        data = dict(self._data(), meshes={"target": "target.vtu", "driven": "driven.vtu"})
         return write_json(os.path.join(directory, "design.json"), finite_or_none(data))
 
     @classmethod
-    def load(cls, directory) -> "PipelineResult":
-        """Read a result written by :meth:`save`.
+    @renamed_keywords(directory="path")
+    def load(cls, path: str | os.PathLike) -> "PipelineResult":
+        """Read a result written by :meth:`save` from its folder ``path`` (``directory=`` is the deprecated
+        spelling).
 
         Raises
         ------
         FileNotFoundError
-            ``directory``, its ``design.json`` or a mesh file it names does not exist.
+            ``path``, its ``design.json`` or a mesh file it names does not exist.
         ValueError
-            ``directory`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
+            ``path`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
             field missing or of the wrong kind, named); a mesh file cannot be read or does not match.
         """
         import json
@@ -105,7 +128,7 @@ class PipelineResult:
         from ..body.io import read_mesh
         from ..body.material import LinearElastic, NeoHookean
 
-        directory = os.fspath(directory)
+        directory = os.fspath(path)
         if not os.path.exists(directory):
             raise FileNotFoundError(f"no such design result folder: {directory}")
         if not os.path.isdir(directory):
@@ -181,7 +204,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     Returns
     -------
     PipelineResult
-        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(dir)``
+        ``.design`` holds contractions, driven state, alignment, difference and verification; ``.save(out)``
         writes JSON plus meshes and :meth:`PipelineResult.load` reads them back.
 
     Raises

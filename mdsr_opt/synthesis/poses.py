@@ -60,6 +60,7 @@ True
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -233,6 +234,8 @@ class PosesResult:
     def __repr__(self) -> str:
         per = ", ".join(f"{n}: {d:.3g}" + ("" if not np.isfinite(s) else f" (sep. {s:.3g})")
                         for n, d, s in zip(self.names, self.differences, self.separate_differences))
+        if len(per) > 90:  # many poses: the range, not one figure per pose (one short line)
+            per = f"{np.nanmin(self.differences):.3g}..{np.nanmax(self.differences):.3g}"
         sep = int(self.separate_n_muscles.sum())
         return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
                 f"difference {per}, success={self.all_success})")
@@ -291,17 +294,41 @@ class PosesResult:
                    max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})))
 
     def save(self, path) -> str:
-        """Write :meth:`to_dict` as JSON (atomically). Returns the path."""
+        """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
         from ..body.io import write_json
 
-        return write_json(path, self.to_dict())
+        return write_json(path, {"format": "mdsr_opt.poses/1", **self.to_dict()})
 
     @classmethod
     def load(cls, path) -> "PosesResult":
-        """Read a result written by :meth:`save`."""
+        """Read a result written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            No such file.
+        ValueError
+            The file (named) is not valid JSON, not a poses result, or damaged (a field missing or of the
+            wrong shape).
+        """
+        import json
+
         from ..body.io import read_json
 
-        return cls.from_dict(read_json(path))
+        try:
+            data = read_json(path)
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{os.fspath(path)} is damaged: not valid JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format", "mdsr_opt.poses/1") != "mdsr_opt.poses/1" \
+                or "names" not in data:
+            fmt = data.get("format") if isinstance(data, dict) else None
+            raise ValueError(f"{os.fspath(path)} is not a mdsr_opt poses result (format {fmt!r})")
+        try:
+            return cls.from_dict(data)
+        except KeyError as exc:
+            raise ValueError(f"{os.fspath(path)} is damaged: field {exc.args[0]!r} is missing") from None
+        except (TypeError, ValueError, AttributeError, IndexError) as exc:
+            raise ValueError(f"{os.fspath(path)} is damaged: {exc}") from None
 
 
 # ---------------------------------------------------------------------------------------------- design

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, field
 import numpy as np
 
+from ..core.results import compact_repr, load_fields, save_fields
 from .problem import DesignProblem
 
 __all__ = ['Verification', 'DesignResult']
@@ -65,6 +67,13 @@ class Verification:
     message: str = ""
     time: float = 0.0
     target_stable: bool | None = None
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("passed", "gap", "gap_tol", "residual", "positive_definite", "message"))
+
+    def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict (NaN as None)."""
+        return finite_or_none(asdict(self))
 
 
 @dataclass
@@ -156,6 +165,9 @@ class DesignResult:
     tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
+    def __repr__(self) -> str:
+        return compact_repr(self, ("method", "success", "difference", "contractions", "muscle_model", "x", "time"))
+
     @property
     def commanded(self) -> np.ndarray:
         """The designed (commanded) contractions, the same as ``contractions``."""
@@ -229,6 +241,28 @@ class DesignResult:
             d["verification"] = Verification(**v)
         d["history"] = [tuple(h) for h in d.get("history", [])]
         return cls(**d)
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically.
+
+        Returns the path; :meth:`load` reads it back equal to this result (:meth:`to_dict` is the JSON
+        view)."""
+        return save_fields(self, path, "design")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "DesignResult":
+        """Read a result written by :meth:`save`.
+
+        Raises
+        ------
+        FileNotFoundError
+            No such file.
+        ValueError
+            The file (named) is damaged, not a ``.npz`` or holds another kind of result.
+        """
+        return load_fields(cls, path, "design",
+                           convert={"verification": lambda v: Verification(**v),
+                                    "history": lambda h: [tuple(p) for p in h]})
 
 
 def finite_or_none(o):
