@@ -426,9 +426,9 @@ def evaluate_image(image: ArrayLike | str | os.PathLike, mesh, x: ArrayLike | No
 
     Example
     -------
-    >>> from mdsr_opt import Mesh
+    >>> from mdsr_opt import Mesh, render_photo
     >>> mesh = Mesh.rectangle(3.0, 1.0, 6, 2)
-    >>> r = evaluate_image(render_photo(mesh, resolution=(300, 200)).image, mesh)
+    >>> r = evaluate_image(render_photo(mesh, image_size=(300, 200)).image, mesh)
     >>> bool(r.mean_norm < 0.01)
     True
     """

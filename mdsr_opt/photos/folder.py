@@ -150,7 +150,7 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     Example
     -------
     >>> import tempfile
-    >>> from mdsr_opt import Mesh
+    >>> from mdsr_opt import Mesh, render_photo
     >>> from mdsr_opt.body.io import write_mesh
     >>> mesh = Mesh.rectangle(3.0, 1.0, 6, 2)
     >>> with tempfile.TemporaryDirectory() as d:

@@ -29,7 +29,7 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     >>> from mdsr_opt import Mesh
     >>> from mdsr_opt.photos.camera import render_photo; from mdsr_opt.photos.compare import evaluate_image
     >>> mesh = Mesh.rectangle(3.0, 1.0, 6, 2)
-    >>> photo = render_photo(mesh, resolution=(300, 200))
+    >>> photo = render_photo(mesh, image_size=(300, 200))
     >>> fig = plot_overlay(photo.image, mesh, mesh.points, evaluate_image(photo.image, mesh), synthetic=True)
     >>> fig.axes[0].get_title().endswith("(SYNTHETIC photograph)")
     True

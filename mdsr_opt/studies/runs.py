@@ -135,7 +135,9 @@ def boundary_overlaps(mesh: Mesh, x: np.ndarray) -> bool:
     Example
     -------
     >>> m = Mesh.rectangle(4.0, 1.0, 8, 2)
-    >>> boundary_overlaps(m, m.points), boundary_overlaps(m, _arc(m.points, 2 * np.pi * 1.1))
+    >>> coil = m.points * [1.0, 0.1]  # a thin strip wound 1.1 turns round a circle: it overlaps itself
+    >>> t, r = coil[:, 0] / 4.0 * 2 * np.pi * 1.1, 1.0 + coil[:, 1]
+    >>> boundary_overlaps(m, m.points), boundary_overlaps(m, np.c_[r * np.cos(t), r * np.sin(t)])
     (False, True)
     """
     return mesh.boundary_crosses(x)

@@ -93,7 +93,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
 
     Example
     -------
-    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean, design_contractions, solve_internal
     >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     >>> mat, mus = NeoHookean(1.0, 0.3), [Muscle(range(1, 16))]
     >>> target = solve_internal(mesh, mat, mus, [0.1]).x
