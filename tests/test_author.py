@@ -226,3 +226,41 @@ def test_cli_registers_author():
         main(["author", "--help"])
     assert e.value.code == 0
     assert main(["author", "no_such_robot", "--no-browser"]) == 2
+
+
+def test_drags_that_arrive_while_the_server_solves_are_dropped_but_the_latest():
+    """The page sends drags faster than the server solves: queued drags are replaced by the newest (counted
+    in ``dropped``), and the state the page gets answers the last drag it sent, not a stale one."""
+    import asyncio
+
+    from mdsr_opt.author.server import Page
+
+    sent = []
+
+    class FakeSocket:
+        async def send_text(self, text):
+            sent.append(json.loads(text))
+
+    async def scenario():
+        page = Page(FakeSocket(), {"out": "unused"})
+        page.enqueue({"type": "load", "body": {"kind": "problem", "name": "tentacle", "resolution": "coarse"}})
+        worker = asyncio.create_task(page.worker())
+        while not any(m["type"] == "state" for m in sent):  # the body is loaded and settled
+            await asyncio.sleep(0.01)
+        start = next(m for m in sent if m["type"] == "state")
+        base = np.array(start["drag_positions"])
+        for k in range(1, 21):  # 20 drags in one burst, before the worker can take any of them
+            page.enqueue({"type": "drag", "seq": k, "anchors": start["anchors"], "drag_nodes": start["drag_nodes"],
+                          "drag_positions": (base + 0.002 * k).tolist()})
+        while not any(m["type"] == "state" and m.get("seq") == 20 for m in sent):
+            await asyncio.sleep(0.01)
+        worker.cancel()
+        page.tmp.cleanup()
+        return page, base
+
+    page, base = asyncio.run(asyncio.wait_for(scenario(), timeout=120))
+    states = [m for m in sent if m["type"] == "state" and m.get("seq") is not None]
+    assert [m["seq"] for m in states] == [20]  # 19 stale drags never solved
+    assert page.dropped == 19 and states[-1]["dropped"] == 19
+    assert np.allclose(states[-1]["drag_positions"], base + 0.04) and states[-1]["success"]
+    assert not [m for m in sent if m["type"] == "error"]

@@ -223,3 +223,23 @@ def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsy
     assert run_main(build, ["--out", str(tmp_path / "o2"), "--case", "nope"]) == 2
     assert "has no case 'nope'" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()
+
+
+def test_several_scenes_write_tables_2_to_4_in_tables_md(tmp_path, capsys):
+    """``mdsr run A B`` writes one folder per scene and ``tables.md`` with the paper's Tables 2-4 (external
+    cases in Tables 2 and 4, internal ones in Table 3), a row per case of every scene."""
+    finger = (Path(__file__).parent / "data" / "finger.toml").read_text()
+    a, b = tmp_path / "finger.toml", tmp_path / "thumb.toml"
+    a.write_text(finger)
+    b.write_text(finger.replace('name = "finger"', 'name = "thumb"', 1))
+    out = tmp_path / "out"
+    code = main(["run", str(a), str(b), "--out", str(out), "--resolution", "coarse", "--no-figures",
+                 "--no-animations", "--photo-size", "200x200", "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["finger", "tables.md", "thumb"]
+    text = (out / "tables.md").read_text()
+    sections = text.split("Table ")
+    assert [s[0] for s in sections[1:]] == ["2", "3", "4"], text[:400]
+    for scene in ("finger", "thumb"):  # finger: bend is external (Tables 2, 4), contract internal (Table 3)
+        assert f"| {scene} | bend |" in sections[1] and f"| {scene} | bend |" in sections[3]
+        assert f"| {scene} | contract |" in sections[2] and f"| {scene} | contract |" not in sections[1]
