@@ -106,7 +106,7 @@ def run(args):
             for method in args.methods:
                 kw = {"muscle_model": model}
                 if args.start != "geometric":  # the cable's geometric guess is the answer of a reachable target
-                    kw["initial"] = np.full(m, float(args.start))
+                    kw["initial_guess"] = np.full(m, float(args.start))
                 if method == "derivative-free":
                     kw["max_iter"] = args.df_evals * m
                 if method == "flattened":
