@@ -53,7 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.checks import positive_float
-from ..body.muscles import check_muscles
+from ..body.muscles import Muscle, check_muscles
 
 __all__ = ["ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
            "rigid_groups",
@@ -89,6 +89,24 @@ def body_size(mesh) -> float:
 def default_anchor_radius(mesh) -> float:
     """The default anchor radius: :data:`ANCHOR_FRACTION` (0.04) times :func:`body_size`, in length units."""
     return ANCHOR_FRACTION * body_size(mesh)
+
+
+def _valid_muscles(mesh, muscles) -> list:
+    """:func:`~mdsr_opt.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
+    node chains checked on this mesh once is not walked edge by edge again (a design checks its muscles
+    through a dozen functions, ~1 ms each at 3k nodes)."""
+    seq = [muscles] if isinstance(muscles, Muscle) else muscles
+    if not isinstance(seq, (list, tuple)) or not seq or not all(isinstance(m, Muscle) for m in seq):
+        return check_muscles(mesh, muscles)
+    key = tuple(m.nodes for m in seq)
+    checked = mesh.__dict__.setdefault("_checked_muscle_chains", set())
+    if key not in checked:
+        out = check_muscles(mesh, seq)
+        if len(checked) >= 64:
+            checked.clear()
+        checked.add(key)
+        return out
+    return list(seq)
 
 
 def _check_radius(mesh, radius) -> float:
@@ -132,7 +150,7 @@ def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.
         to it through such nodes and strictly nearer to it than to the muscle's other end (so a muscle's two
         patches never overlap), by increasing distance.
     """
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     r = _check_radius(mesh, radius)
     P = mesh.points
     out = []
@@ -152,7 +170,7 @@ def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]
     the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that. The groups
     (read-only arrays) are cached on the mesh per node chains and radius.
     """
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     key = (tuple(m.nodes for m in mus), _check_radius(mesh, radius))
     cache = mesh.__dict__.setdefault("_rigid_group_cache", {})
     if key not in cache:
@@ -229,7 +247,7 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
     """
     from .model import spring_parameters
 
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     a = np.asarray(contractions, dtype=float).reshape(-1)
     ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)
     return spring_parameters(mesh, mus, a * a_eff, ks)
@@ -237,9 +255,24 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
 
 def spring_segments(mesh, material, muscles, stiffness: float, anchor_radius: float | None = None):
     """``(per-muscle segment stiffness arrays, per-muscle factor L0 / L0_free)`` of the dummy springs (see
-    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch."""
-    mus = check_muscles(mesh, muscles)
+    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch. Cached on the mesh
+    per node chains, radius and stiffness (the arrays are read-only)."""
+    mus = _valid_muscles(mesh, muscles)
     K = spring_stiffness(mesh, material, stiffness)
+    key = (tuple(m.nodes for m in mus), _check_radius(mesh, anchor_radius), K)
+    cache = mesh.__dict__.setdefault("_spring_segment_cache", {})
+    if key not in cache:
+        if len(cache) >= 32:
+            cache.pop(next(iter(cache)))
+        ks, fac = _spring_segments(mesh, mus, K, key[1])
+        for k in ks:
+            k.flags.writeable = False
+        cache[key] = (ks, fac)
+    ks, fac = cache[key]
+    return list(ks), fac.copy()
+
+
+def _spring_segments(mesh, mus, K, anchor_radius):
     group_of = np.full(mesh.n_nodes, -1)
     for gi, g in enumerate(rigid_groups(mesh, mus, anchor_radius)):
         group_of[g] = gi
@@ -283,7 +316,7 @@ class MuscleConstraints:
 
     def __init__(self, mesh, muscles, radius: float | None = None):
         self.mesh = mesh
-        self.muscles = check_muscles(mesh, muscles)
+        self.muscles = _valid_muscles(mesh, muscles)
         if not self.muscles:
             raise ValueError("MuscleConstraints needs at least one muscle")
         self.radius = _check_radius(mesh, radius)
@@ -545,7 +578,7 @@ def muscle_constraints(mesh, muscles, radius: float | None = None) -> MuscleCons
     :func:`~mdsr_opt.solve_internal` keeps its constraints in the same cache (same key), so a design, its
     forward solves and its verification share one set (and one built CasADi function of it).
     """
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     r = _check_radius(mesh, radius)
     cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
     key = (tuple(m.nodes for m in mus), float(r))
