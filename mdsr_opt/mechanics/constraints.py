@@ -116,20 +116,21 @@ def _check_radius(mesh, radius) -> float:
 
 
 def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
-    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes."""
+    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes,
+    by increasing distance (a breadth-first search over the mesh edges between such nodes: no per-node
+    neighbour lists, which cost 0.1 s to build at 3k nodes)."""
+    from scipy.sparse.csgraph import breadth_first_order
+
     P = mesh.points
-    inside = (np.linalg.norm(P - P[centre], axis=1) <= radius) & keep
+    dist = np.linalg.norm(P - P[centre], axis=1)
+    inside = (dist <= radius) & keep
     inside[centre] = True
-    nbrs = mesh.neighbors
-    seen, stack, out = {centre}, [centre], []
-    while stack:
-        v = stack.pop()
-        out.append(v)
-        for w in nbrs[v].tolist():
-            if inside[w] and w not in seen:
-                seen.add(w)
-                stack.append(w)
-    rest = sorted(set(out) - {centre}, key=lambda i: (float(np.linalg.norm(P[i] - P[centre])), i))
+    E = mesh.edges
+    E = E[inside[E[:, 0]] & inside[E[:, 1]]]
+    n = mesh.n_nodes
+    G = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    reach = breadth_first_order(G, centre, directed=False, return_predecessors=False)
+    rest = sorted((int(i) for i in reach if i != centre), key=lambda i: (float(dist[i]), i))
     return [centre] + rest
 
 
