@@ -271,6 +271,36 @@ def test_verification_rejects_wrong_states(mesh, muscles, target):
     assert "not a minimum" in v.message
 
 
+def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target):
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.synthesis.verify import _in_gauge_frame
+
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    v_design = verify_design(mesh, MAT, muscles, res, target)
+    v_rest = verify_design(mesh, MAT, muscles, res, target, start="rest")
+    assert v_design.passed and v_rest.passed
+    assert v_design.gap < 1e-9 * mesh.size and v_rest.gap < 1e-7 * mesh.size
+    assert v_design.forward_difference == pytest.approx(v_rest.forward_difference, abs=1e-8 * mesh.size)
+    with pytest.raises(ValueError, match="start must be"):
+        verify_design(mesh, MAT, muscles, res, target, start="target")
+    # the design's state in any pose is moved rigidly into the solver's gauge frame
+    moved = res.x @ rotation_matrix(2.5).T + [4.0, -3.0]
+    g = _in_gauge_frame(mesh, moved)
+    gauge = list(gauge_coordinates(mesh))
+    assert np.abs(g.reshape(-1)[gauge] - mesh.points.reshape(-1)[gauge]).max() < 1e-12
+    assert align(g, moved).difference < 1e-12  # congruent
+    assert _in_gauge_frame(mesh, mesh.points * [-1.0, 1.0]) is None  # a reflection inverts every element
+    # a state that cannot start a solve is verified from rest: a saddle guess still fails, from rest
+    folded = DesignResult.from_dict(res.to_dict())
+    folded.x = res.x.copy()
+    k = NY // 2 * (NX + 1) + NX // 2  # an interior node pushed through its neighbours
+    folded.x[k] += [0.0, 0.6]
+    assert mesh.jacobians(folded.x).min() < 0 and _in_gauge_frame(mesh, folded.x) is None
+    v = verify_design(mesh, MAT, muscles, folded, target)
+    assert v.forward_success and not v.passed and v.gap > v.gap_tol and not v.positive_definite
+    assert "inverts an element" in v.message
+
+
 def test_failed_optimiser_is_not_success(mesh, muscles, target):
     res = design_contractions(mesh, MAT, muscles, target, method="derivative-free", max_iter=5)
     assert not res.success

@@ -103,10 +103,12 @@ class ConstrainedModel:
     # ------------------------------------------------------------------ numeric evaluation
     def values(self, x) -> np.ndarray:
         """The NLP's constraint rows at ``x``."""
-        return self.constraints.values(x)[self.rows]
+        v = self.constraints.values(x)
+        return v if self.ropes else v[self.rows]
 
     def jacobian(self, x) -> sp.csr_matrix:
-        return self.constraints.jacobian(x)[self.rows]
+        J = self.constraints.jacobian(x)
+        return J if self.ropes else J[self.rows]
 
     def energy(self, x, p) -> float:
         return self.model.energy(x, self.split(p)[0])
@@ -168,31 +170,29 @@ class ConstrainedModel:
         (load stepping then tries a smaller load step)."""
         free = ~fixed
         pe, targets, _ = self.split(p)
-        # the Hessian of the Lagrangian at x, with x's own multipliers (every rope taken as at its length):
-        # under load the energy's Hessian alone can be indefinite where the ropes hold the body
-        lam_x, _ = self.multipliers(x, self.params(pe, self.values(x)[:self.n_targets] if self.n_targets else None),
-                                    fixed)
-        H = self.hessian(x, self.params(pe, targets if self.n_targets else None, lam_x))
-        Hff = H[free][:, free]
+        lin = self._linearisation(x, pe, fixed)
+        Hff, Hfc, g, J, c_x, lus = lin["Hff"], lin["Hfc"], lin["g"], lin["J"], lin["c"], lin["lu"]
         dfix = values - x[fixed]
-        g = self.model.gradient(x, pe)
-        rhs_x = -(g[free] + H[free][:, fixed] @ dfix)
-        J = self.jacobian(x)
-        c = self.values(x)
+        rhs_x = -(g[free] + Hfc @ dfix)
         lb, ub = self.bounds(p)
-        c = c - ub  # ropes: L - target; rigid: residual
+        c = c_x - ub  # ropes: L - target; rigid: residual
         keep = np.ones(self.n_rows, dtype=bool)
         if self.n_targets:  # a rope shorter than its target at the start is taken as slack
             keep[:self.n_targets] = c[:self.n_targets] > -1e-12 * self.constraints.rest_lengths
         for _ in range(3):
             Jk = J[keep]
             Jf, Jc = Jk[:, free], Jk[:, fixed]
-            K = sp.bmat([[Hff, Jf.T], [Jf, None]], format="csc")
             rhs = np.concatenate([rhs_x, -(c[keep] + Jc @ dfix)])
-            try:
-                sol = spla.splu(K).solve(rhs)  # COLAMD: 10x faster than MMD on this indefinite matrix
-            except RuntimeError:
+            kk = keep.tobytes()
+            if kk not in lus:  # the same state and active set (e.g. rest, at two load steps): one factorisation
+                K = sp.bmat([[Hff, Jf.T], [Jf, None]], format="csc")
+                try:
+                    lus[kk] = spla.splu(K)  # COLAMD: 10x faster than MMD on this indefinite matrix
+                except RuntimeError:
+                    lus[kk] = None
+            if lus[kk] is None:
                 return None
+            sol = lus[kk].solve(rhs)
             if not np.all(np.isfinite(sol)):
                 return None
             nk = int(keep[:self.n_targets].sum())
@@ -213,17 +213,41 @@ class ConstrainedModel:
             return None
         return y
 
-    def multipliers(self, x, p, fixed, rtol: float = 1e-7) -> tuple[np.ndarray, np.ndarray]:
+    def _linearisation(self, x, pe, fixed) -> dict:
+        """What :meth:`predict` needs at ``x`` besides the targets: the Hessian of the Lagrangian with
+        ``x``'s own multipliers (every rope taken as at its length: under load the energy's Hessian alone can
+        be indefinite where the ropes hold the body) split into free-free and free-fixed blocks, the energy
+        gradient, the constraints' Jacobian and values, and the KKT factorisations made so far (per active
+        set). The last one is kept: load stepping predicts from the same state again after a rejected step."""
+        x = np.asarray(x, dtype=float)
+        key = (x.tobytes(), np.asarray(pe, dtype=float).tobytes(), fixed.tobytes())
+        last = self.__dict__.get("_last_linearisation")
+        if last is not None and last[0] == key:
+            return last[1]
+        free = ~fixed
+        g = self.model.gradient(x, pe)
+        c = self.values(x)
+        lam_x, _ = self.multipliers(x, self.params(pe, c[:self.n_targets] if self.n_targets else None), fixed,
+                                    gradient=g)
+        H = self.hessian(x, self.params(pe, c[:self.n_targets] if self.n_targets else None, lam_x))
+        Hf = H[free]
+        lin = {"Hff": Hf[:, free], "Hfc": Hf[:, fixed], "g": g, "J": self.jacobian(x), "c": c, "lu": {}}
+        self.__dict__["_last_linearisation"] = (key, lin)
+        return lin
+
+    def multipliers(self, x, p, fixed, rtol: float = 1e-7, gradient=None) -> tuple[np.ndarray, np.ndarray]:
         """Least-squares multipliers at a solution ``x``: ``(lam (n_rows,), taut (n_targets,) bool)``.
 
         Ropes shorter than their target by more than ``rtol * L0`` are slack (multiplier 0); a taut rope
         whose fitted multiplier is negative is released and the fit repeated, so tensions are never
         compressive. The Lagrangian gradient with these multipliers (:meth:`gradient`) is the KKT residual.
+        ``gradient``: the energy gradient at ``x`` when the caller has it.
         """
-        free = ~fixed
         pe, targets, _ = self.split(p)
-        g = self.model.gradient(x, pe)[free]
-        J = self.jacobian(x)[:, free].tocsr()
+        # the fixed coordinates' columns zeroed rather than sliced out (the same products, 10x cheaper)
+        g = np.where(fixed, 0.0, self.model.gradient(x, pe) if gradient is None else gradient)
+        J = self.jacobian(x).tocsr(copy=True)
+        J.data[fixed[J.indices]] = 0.0
         active = np.ones(self.n_rows, dtype=bool)
         nt = self.n_targets
         if nt:

@@ -53,11 +53,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.checks import positive_float
-from ..body.muscles import check_muscles
+from ..body.muscles import Muscle, check_muscles
 
 __all__ = ["ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
            "rigid_groups",
-           "MuscleConstraints", "spring_stiffness", "segment_spring_parameters",
+           "MuscleConstraints", "muscle_constraints", "spring_stiffness", "segment_spring_parameters",
            "spring_segments"]
 
 #: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
@@ -91,6 +91,24 @@ def default_anchor_radius(mesh) -> float:
     return ANCHOR_FRACTION * body_size(mesh)
 
 
+def _valid_muscles(mesh, muscles) -> list:
+    """:func:`~mdsr_opt.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
+    node chains checked on this mesh once is not walked edge by edge again (a design checks its muscles
+    through a dozen functions, ~1 ms each at 3k nodes)."""
+    seq = [muscles] if isinstance(muscles, Muscle) else muscles
+    if not isinstance(seq, (list, tuple)) or not seq or not all(isinstance(m, Muscle) for m in seq):
+        return check_muscles(mesh, muscles)
+    key = tuple(m.nodes for m in seq)
+    checked = mesh.__dict__.setdefault("_checked_muscle_chains", set())
+    if key not in checked:
+        out = check_muscles(mesh, seq)
+        if len(checked) >= 64:
+            checked.clear()
+        checked.add(key)
+        return out
+    return list(seq)
+
+
 def _check_radius(mesh, radius) -> float:
     if radius is None:
         return default_anchor_radius(mesh)
@@ -98,20 +116,21 @@ def _check_radius(mesh, radius) -> float:
 
 
 def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
-    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes."""
+    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes,
+    by increasing distance (a breadth-first search over the mesh edges between such nodes: no per-node
+    neighbour lists, which cost 0.1 s to build at 3k nodes)."""
+    from scipy.sparse.csgraph import breadth_first_order
+
     P = mesh.points
-    inside = (np.linalg.norm(P - P[centre], axis=1) <= radius) & keep
+    dist = np.linalg.norm(P - P[centre], axis=1)
+    inside = (dist <= radius) & keep
     inside[centre] = True
-    nbrs = mesh.neighbors
-    seen, stack, out = {centre}, [centre], []
-    while stack:
-        v = stack.pop()
-        out.append(v)
-        for w in nbrs[v].tolist():
-            if inside[w] and w not in seen:
-                seen.add(w)
-                stack.append(w)
-    rest = sorted(set(out) - {centre}, key=lambda i: (float(np.linalg.norm(P[i] - P[centre])), i))
+    E = mesh.edges
+    E = E[inside[E[:, 0]] & inside[E[:, 1]]]
+    n = mesh.n_nodes
+    G = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    reach = breadth_first_order(G, centre, directed=False, return_predecessors=False)
+    rest = sorted((int(i) for i in reach if i != centre), key=lambda i: (float(dist[i]), i))
     return [centre] + rest
 
 
@@ -132,7 +151,7 @@ def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.
         to it through such nodes and strictly nearer to it than to the muscle's other end (so a muscle's two
         patches never overlap), by increasing distance.
     """
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     r = _check_radius(mesh, radius)
     P = mesh.points
     out = []
@@ -149,9 +168,23 @@ def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]
     """Anchor patches merged where patches of different muscles share a node: each group moves rigidly.
 
     Groups of one node are dropped (they constrain nothing). Raises ``ValueError`` when merging would join
-    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that.
+    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that. The groups
+    (read-only arrays) are cached on the mesh per node chains and radius.
     """
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
+    key = (tuple(m.nodes for m in mus), _check_radius(mesh, radius))
+    cache = mesh.__dict__.setdefault("_rigid_group_cache", {})
+    if key not in cache:
+        if len(cache) >= 32:
+            cache.pop(next(iter(cache)))
+        groups = _rigid_groups(mesh, mus, key[1])
+        for g in groups:
+            g.flags.writeable = False
+        cache[key] = groups
+    return list(cache[key])
+
+
+def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
     patches = anchor_patches(mesh, mus, radius)
     flat = [p for pair in patches for p in pair]
     parent = list(range(len(flat)))
@@ -215,7 +248,7 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
     """
     from .model import spring_parameters
 
-    mus = check_muscles(mesh, muscles)
+    mus = _valid_muscles(mesh, muscles)
     a = np.asarray(contractions, dtype=float).reshape(-1)
     ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)
     return spring_parameters(mesh, mus, a * a_eff, ks)
@@ -223,9 +256,24 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
 
 def spring_segments(mesh, material, muscles, stiffness: float, anchor_radius: float | None = None):
     """``(per-muscle segment stiffness arrays, per-muscle factor L0 / L0_free)`` of the dummy springs (see
-    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch."""
-    mus = check_muscles(mesh, muscles)
+    :func:`segment_spring_parameters`); stiffness is 0 on segments inside an anchor patch. Cached on the mesh
+    per node chains, radius and stiffness (the arrays are read-only)."""
+    mus = _valid_muscles(mesh, muscles)
     K = spring_stiffness(mesh, material, stiffness)
+    key = (tuple(m.nodes for m in mus), _check_radius(mesh, anchor_radius), K)
+    cache = mesh.__dict__.setdefault("_spring_segment_cache", {})
+    if key not in cache:
+        if len(cache) >= 32:
+            cache.pop(next(iter(cache)))
+        ks, fac = _spring_segments(mesh, mus, K, key[1])
+        for k in ks:
+            k.flags.writeable = False
+        cache[key] = (ks, fac)
+    ks, fac = cache[key]
+    return list(ks), fac.copy()
+
+
+def _spring_segments(mesh, mus, K, anchor_radius):
     group_of = np.full(mesh.n_nodes, -1)
     for gi, g in enumerate(rigid_groups(mesh, mus, anchor_radius)):
         group_of[g] = gi
@@ -260,13 +308,16 @@ class MuscleConstraints:
     groups : list of ndarray
         The rigid groups (see :func:`rigid_groups`).
     dofs : ndarray
-        Sorted global coordinates (of the 2n) that any constraint involves.
+        Sorted global coordinates (of the 2n) that any constraint involves; ``n_local`` their number (the
+        ``local_*`` methods take the state at these coordinates).
+    linear_rows : (n_constraints,) bool ndarray
+        Rows linear in the state (rigid rows other than each group's scale row).
     radius : float
     """
 
     def __init__(self, mesh, muscles, radius: float | None = None):
         self.mesh = mesh
-        self.muscles = check_muscles(mesh, muscles)
+        self.muscles = _valid_muscles(mesh, muscles)
         if not self.muscles:
             raise ValueError("MuscleConstraints needs at least one muscle")
         self.radius = _check_radius(mesh, radius)
@@ -275,58 +326,123 @@ class MuscleConstraints:
         self.n_dof = 2 * n
         P = mesh.points
         self.rest_lengths = np.array([m.rest_length(mesh) for m in self.muscles])
-        nodes = sorted(set(v for m in self.muscles for v in m.nodes) | set(v for g in self.groups for v in g.tolist()))
-        self.dofs = np.array([d for v in nodes for d in (2 * v, 2 * v + 1)], dtype=np.int64)
-        loc = {v: k for k, v in enumerate(nodes)}
+        node_set = set(v for m in self.muscles for v in m.nodes) | set(v for g in self.groups for v in g.tolist())
+        nodes = np.array(sorted(node_set), dtype=np.int64)
+        self.dofs = np.column_stack([2 * nodes, 2 * nodes + 1]).reshape(-1)
+        loc = np.full(n, -1, dtype=np.int64)
+        loc[nodes] = np.arange(len(nodes))
         nd = len(self.dofs)
-        xl = ca.SX.sym("xl", nd)
-
-        def pt(v):
-            return xl[2 * loc[v]:2 * loc[v] + 2]
-
-        rows = []
-        for m in self.muscles:
-            L = 0
-            for a, b in m.segments.tolist():
-                L += ca.sqrt(ca.sumsqr(pt(b) - pt(a)))
-            rows.append(L)
-        rigid = []
+        self.n_local = nd
+        self.n_muscles = len(self.muscles)
+        # ropes: segment (a, b) of muscle c adds |x_b - x_a| to row c (local node indices)
+        seg = np.concatenate([m.segments for m in self.muscles]).astype(np.int64)
+        self._seg_row = np.repeat(np.arange(self.n_muscles), [len(m.segments) for m in self.muscles])
+        self._seg_a, self._seg_b = loc[seg[:, 0]], loc[seg[:, 1]]
+        # rigid rows, per group: two linear rows per node j other than e and r, then the scale row. With
+        # u = x_r - x_e, alpha = U.D_j / |U|^2 and beta = (U_1 D_0 - U_0 D_1) / |U|^2 the rows
+        # x_j - x_e - A(u) D_j are  x_j0 - x_e0 - alpha u_0 - beta u_1  and  x_j1 - x_e1 + beta u_0 - alpha u_1
+        lr, lc, lv = [], [], []  # the linear rows' constant Jacobian (local columns)
+        sc_row, sc_e, sc_r, sc_UU = [], [], [], []
+        k = 0
         for g in self.groups:
             e = int(g[0])
             dist = np.linalg.norm(P[g] - P[e], axis=1)
             r = int(g[int(np.argmax(dist))])
             U = P[r] - P[e]
             UU = float(U @ U)
-            u = pt(r) - pt(e)
-            c = (u[0] * U[0] + u[1] * U[1]) / UU
-            s = (U[0] * u[1] - U[1] * u[0]) / UU
+            le, lrr = 2 * int(loc[e]), 2 * int(loc[r])
             for j in g.tolist():
                 if j in (e, r):
                     continue
                 D = P[j] - P[e]
-                rigid.append(pt(j)[0] - pt(e)[0] - (c * D[0] - s * D[1]))
-                rigid.append(pt(j)[1] - pt(e)[1] - (s * D[0] + c * D[1]))
-            rigid.append((ca.sumsqr(u) - UU) / (2 * np.sqrt(UU)))
-        self.n_muscles = len(rows)
-        self.n_rigid = len(rigid)
+                al = float(U @ D) / UU
+                be = float(U[1] * D[0] - U[0] * D[1]) / UU
+                lj = 2 * int(loc[j])
+                lr += [k] * 5 + [k + 1] * 5
+                lc += [lj, le, le + 1, lrr, lrr + 1, lj + 1, le + 1, le, lrr, lrr + 1]
+                lv += [1.0, -1.0 + al, be, -al, -be, 1.0, -1.0 + al, -be, be, -al]
+                k += 2
+            sc_row.append(k)
+            sc_e.append(le)
+            sc_r.append(lrr)
+            sc_UU.append(UU)
+            k += 1
+        self.n_rigid = k
         self.n_constraints = self.n_muscles + self.n_rigid
-        g_all = ca.vertcat(*rows, *rigid)
-        lam = ca.SX.sym("lam", self.n_constraints)
-        self._g = ca.Function("muscle_g", [xl], [g_all])
-        self._J = ca.Function("muscle_jac", [xl], [ca.jacobian(g_all, xl)])
-        H = ca.hessian(ca.dot(lam, g_all), xl)[0]
-        self._H = ca.Function("muscle_hess", [xl, lam], [ca.triu(H)])
+        self._lin = sp.csr_matrix((lv, (lr, lc)), shape=(k, nd))
+        self._sc_row = np.asarray(sc_row, dtype=np.int64)
+        self._sc_e, self._sc_r = np.asarray(sc_e, dtype=np.int64), np.asarray(sc_r, dtype=np.int64)
+        self._sc_UU = np.asarray(sc_UU, dtype=float)
         # (nd, 2n) selection: x_local = S x
         self._S = sp.csr_matrix((np.ones(nd), (np.arange(nd), self.dofs)), shape=(nd, self.n_dof))
-        self._S_dm = _to_dm(self._S)
+        self._sym = None
+        self._jpat = None
+        #: rows linear in the state (the rigid rows other than the scale rows): constant Jacobian, no curvature
+        self.linear_rows = np.zeros(self.n_constraints, dtype=bool)
+        self.linear_rows[self.n_muscles:] = True
+        self.linear_rows[self.n_muscles + self._sc_row] = False
 
     # ------------------------------------------------------------------ symbolic (SX or MX, length 2n)
+    def _functions(self):
+        """CasADi pieces, built on first use from the same closed forms as the numeric methods (both agree
+        to rounding): ``nl(xl)``, the nonlinear rows (ropes, then each group's scale row); ``P``, their
+        placement among all rows; ``Lin``, the constant Jacobian of the linear rows; ``H(xl, lam)``, the upper
+        triangle of ``sum_i lam_i Hessian(g_i)``; ``S``, the selection of the local coordinates. Keeping the
+        linear rows out of the SX function makes its Jacobian (CasADi's, for an NLP) 50x cheaper to build."""
+        if self._sym is None:
+            xl = ca.SX.sym("xl", self.n_local)
+            nl = self._nonlinear_expr(xl)
+            nm, ng = self.n_muscles, len(self._sc_row)
+            rows = np.concatenate([np.arange(nm), nm + self._sc_row])
+            P = _to_dm(sp.csr_matrix((np.ones(nm + ng), (rows, np.arange(nm + ng))),
+                                     shape=(self.n_constraints, nm + ng)))
+            lin = sp.vstack([sp.csr_matrix((nm, self.n_local)), self._lin], format="csr")
+            lam = ca.SX.sym("lam", self.n_constraints)
+            H = ca.hessian(ca.dot(ca.mtimes(P.T, lam), nl), xl)[0]
+            self._sym = {"nl": ca.Function("muscle_g_nonlinear", [xl], [nl]), "P": P, "Lin": _to_dm(lin),
+                         "P_sp": _to_scipy(P).tocsr(), "Lin_sp": lin,
+                         "H": ca.Function("muscle_hess", [xl, lam], [ca.triu(H)]), "S": _to_dm(self._S)}
+        return self._sym
+
+    def symbolic_parts(self) -> tuple:
+        """``(nl, P, Lin)`` with all rows ``= P nl(xl) + Lin xl``: ``nl`` the SX Function of the nonlinear rows
+        (ropes, then each rigid group's scale row) of the local coordinates, ``P`` (n_constraints, n_nl) their
+        placement and ``Lin`` (n_constraints, n_local) the linear rows' constant Jacobian, both scipy CSR."""
+        f = self._functions()
+        return f["nl"], f["P_sp"], f["Lin_sp"]
+
+    def _nonlinear_expr(self, xl):
+        """The rope lengths, then each rigid group's scale row (vectorised with sparse constant matrices)."""
+        nd, ns = self.n_local, len(self._seg_a)
+
+        def pick(idx, comp):  # (len(idx), nd) selection of local coordinate 2 idx + comp
+            return _to_dm(sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), 2 * idx + comp)),
+                                        shape=(len(idx), nd)))
+
+        dx = ca.mtimes(pick(self._seg_b, 0) - pick(self._seg_a, 0), xl)
+        dy = ca.mtimes(pick(self._seg_b, 1) - pick(self._seg_a, 1), xl)
+        agg = _to_dm(sp.csr_matrix((np.ones(ns), (self._seg_row, np.arange(ns))), shape=(self.n_muscles, ns)))
+        L = ca.mtimes(agg, ca.sqrt(dx ** 2 + dy ** 2))
+        if not len(self._sc_row):
+            return L
+        u0 = ca.mtimes(pick(self._sc_r // 2, 0) - pick(self._sc_e // 2, 0), xl)
+        u1 = ca.mtimes(pick(self._sc_r // 2, 1) - pick(self._sc_e // 2, 1), xl)
+        scale = (u0 ** 2 + u1 ** 2 - ca.DM(self._sc_UU)) / ca.DM(2 * np.sqrt(self._sc_UU))
+        return ca.vertcat(L, scale)
+
+    def local_expr(self, xl):
+        """All rows as a CasADi expression of the local coordinates ``xl`` (SX or MX of length
+        :attr:`n_local`: the state at :attr:`dofs`): the nonlinear rows through one SX function, the linear
+        rows as a constant sparse matrix times ``xl``."""
+        f = self._functions()
+        return ca.mtimes(f["P"], f["nl"](xl)) + ca.mtimes(f["Lin"], xl)
+
     def _local(self, x):
         return x[self.dofs.tolist()]
 
     def constraints_expr(self, x):
         """All constraint rows, ropes first then rigid, as a CasADi column."""
-        return self._g(self._local(x))
+        return self.local_expr(self._local(x))
 
     def lengths_expr(self, x):
         """Rope path lengths ``L_c(x)`` (n_muscles,)."""
@@ -338,20 +454,102 @@ class MuscleConstraints:
 
     def jacobian_expr(self, x):
         """Sparse Jacobian (n_constraints, 2n) of :meth:`constraints_expr`."""
-        return ca.mtimes(self._J(self._local(x)), self._S_dm)
+        fns = self._functions()
+        if "J" not in fns:
+            xl = ca.SX.sym("xl", self.n_local)
+            J = ca.mtimes(fns["P"], ca.jacobian(self._nonlinear_expr(xl), xl)) + fns["Lin"]
+            fns["J"] = ca.Function("muscle_jac", [xl], [J])
+        return ca.mtimes(fns["J"](self._local(x)), fns["S"])
 
     def hessian_expr(self, x, lam):
         """Upper triangle (2n, 2n) of ``sum_i lam_i * Hessian(g_i)`` (sparse; only anchors and ropes)."""
-        Hl = self._H(self._local(x), lam)
-        return ca.mtimes(ca.mtimes(self._S_dm.T, Hl), self._S_dm)
+        fns = self._functions()
+        Hl = fns["H"](self._local(x), lam)
+        return ca.mtimes(ca.mtimes(fns["S"].T, Hl), fns["S"])
 
     # ------------------------------------------------------------------ numeric (x as (n, 2) or (2n,))
     def _xl(self, x) -> np.ndarray:
         return np.asarray(x, dtype=float).reshape(-1)[self.dofs]
 
+    def _segments(self, xl):
+        """Per rope segment ``(d, |d|)`` with ``d = x_b - x_a`` (local state ``xl``)."""
+        X = xl.reshape(-1, 2)
+        d = X[self._seg_b] - X[self._seg_a]
+        return d, np.sqrt((d * d).sum(1))
+
+    def local_values(self, xl) -> np.ndarray:
+        """All constraint rows from the local coordinates ``xl`` (the state at :attr:`dofs`)."""
+        xl = np.asarray(xl, dtype=float)
+        _d, ln = self._segments(xl)
+        out = np.empty(self.n_constraints)
+        out[:self.n_muscles] = np.bincount(self._seg_row, ln, minlength=self.n_muscles)
+        if self.n_rigid:
+            rig = self._lin @ xl
+            X = xl.reshape(-1, 2)
+            u = X[self._sc_r // 2] - X[self._sc_e // 2]
+            rig[self._sc_row] = ((u * u).sum(1) - self._sc_UU) / (2 * np.sqrt(self._sc_UU))
+            out[self.n_muscles:] = rig
+        return out
+
+    def _jacobian_pattern(self):
+        """CSR pattern of :meth:`local_jacobian` and, per entry of its value list (ropes' ``b0, b1, a0, a1``
+        per segment, the linear rows, the scale rows' ``r0, r1, e0, e1``), the slot it adds to."""
+        if getattr(self, "_jpat", None) is None:
+            a2, b2 = 2 * self._seg_a, 2 * self._seg_b
+            lin = self._lin.tocoo()
+            e, r = self._sc_e, self._sc_r
+            rows = np.concatenate([np.tile(self._seg_row, 4), self.n_muscles + lin.row,
+                                   self.n_muscles + np.tile(self._sc_row, 4)])
+            cols = np.concatenate([b2, b2 + 1, a2, a2 + 1, lin.col, r, r + 1, e, e + 1])
+            key = rows * self.n_local + cols
+            ukey, slot = np.unique(key, return_inverse=True)
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(ukey // self.n_local,
+                                                                minlength=self.n_constraints))])
+            self._jpat = (indptr, ukey % self.n_local, slot.ravel(), lin.data)
+        return self._jpat
+
+    def local_jacobian(self, xl) -> sp.csr_matrix:
+        """Jacobian ``(n_constraints, n_local)`` with respect to the local coordinates (closed form)."""
+        xl = np.asarray(xl, dtype=float)
+        indptr, indices, slot, lin = self._jacobian_pattern()
+        d, ln = self._segments(xl)
+        t = d / ln[:, None]
+        X = xl.reshape(-1, 2)
+        u = X[self._sc_r // 2] - X[self._sc_e // 2]
+        v = u / np.sqrt(self._sc_UU)[:, None]
+        vals = np.concatenate([t[:, 0], t[:, 1], -t[:, 0], -t[:, 1], lin, v[:, 0], v[:, 1], -v[:, 0], -v[:, 1]])
+        data = np.bincount(slot, vals, minlength=len(indices))
+        return sp.csr_matrix((data, indices, indptr), shape=(self.n_constraints, self.n_local))
+
+    def local_hessian(self, xl, lam) -> sp.csr_matrix:
+        """``sum_i lam_i * Hessian(g_i)`` with respect to the local coordinates, full symmetric (closed form:
+        ``(I - t t^T) / |d|`` per rope segment, ``I / |U|`` per scale row; the other rigid rows are linear)."""
+        xl = np.asarray(xl, dtype=float)
+        lam = np.asarray(lam, dtype=float).reshape(-1)
+        d, ln = self._segments(xl)
+        t = d / ln[:, None]
+        w = lam[self._seg_row] / ln
+        K = w[:, None, None] * (np.eye(2)[None] - t[:, :, None] * t[:, None, :])  # (ns, 2, 2)
+        blocks = [(2 * self._seg_a, 2 * self._seg_a, K), (2 * self._seg_b, 2 * self._seg_b, K),
+                  (2 * self._seg_a, 2 * self._seg_b, -K), (2 * self._seg_b, 2 * self._seg_a, -K)]
+        if self.n_rigid:
+            ws = lam[self.n_muscles + self._sc_row] / np.sqrt(self._sc_UU)
+            I2 = ws[:, None, None] * np.eye(2)[None]
+            e, r = self._sc_e, self._sc_r
+            blocks += [(e, e, I2), (r, r, I2), (e, r, -I2), (r, e, -I2)]
+        rows, cols, vals = [], [], []
+        for r0, c0, B in blocks:
+            for i in range(2):
+                for j in range(2):
+                    rows.append(r0 + i)
+                    cols.append(c0 + j)
+                    vals.append(B[:, i, j])
+        rows, cols, vals = (np.concatenate(v) for v in (rows, cols, vals))
+        return sp.csr_matrix((vals, (rows, cols)), shape=(self.n_local, self.n_local))
+
     def values(self, x) -> np.ndarray:
         """All constraint rows at ``x``."""
-        return np.asarray(self._g(self._xl(x))).ravel()
+        return self.local_values(self._xl(x))
 
     def lengths(self, x) -> np.ndarray:
         """Rope path lengths at ``x`` (n_muscles,)."""
@@ -363,17 +561,33 @@ class MuscleConstraints:
 
     def jacobian(self, x) -> sp.csr_matrix:
         """Jacobian (n_constraints, 2n) at ``x`` as a scipy CSR matrix (rows: ropes, then rigid)."""
-        Jl = _to_scipy(self._J(self._xl(x)))
-        return (Jl @ self._S).tocsr()
+        Jl = self.local_jacobian(self._xl(x))
+        return sp.csr_matrix((Jl.data, self.dofs[Jl.indices], Jl.indptr), shape=(self.n_constraints, self.n_dof))
 
     def hessian(self, x, lam) -> sp.csc_matrix:
         """``sum_i lam_i * Hessian(g_i)`` at ``x``, full symmetric (2n, 2n) scipy CSC matrix."""
         lam = np.asarray(lam, dtype=float).reshape(-1)
         if len(lam) != self.n_constraints:
             raise ValueError(f"lam must have {self.n_constraints} entries, got {len(lam)}")
-        U = _to_scipy(self._H(self._xl(x), lam))
-        Hl = U + sp.triu(U, 1).T
-        return (self._S.T @ Hl @ self._S).tocsc()
+        Hl = self.local_hessian(self._xl(x), lam).tocoo()
+        return sp.csc_matrix((Hl.data, (self.dofs[Hl.row], self.dofs[Hl.col])), shape=(self.n_dof, self.n_dof))
+
+
+def muscle_constraints(mesh, muscles, radius: float | None = None) -> MuscleConstraints:
+    """The :class:`MuscleConstraints` of ``muscles`` on ``mesh``, cached on the mesh per node chains and radius.
+
+    :func:`~mdsr_opt.solve_internal` keeps its constraints in the same cache (same key), so a design, its
+    forward solves and its verification share one set (and one built CasADi function of it).
+    """
+    mus = _valid_muscles(mesh, muscles)
+    r = _check_radius(mesh, radius)
+    cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
+    key = (tuple(m.nodes for m in mus), float(r))
+    if key not in cache:
+        if len(cache) >= 16:
+            cache.pop(next(iter(cache)))
+        cache[key] = MuscleConstraints(mesh, mus, r)
+    return cache[key]
 
 
 def _to_dm(S) -> ca.DM:

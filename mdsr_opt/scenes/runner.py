@@ -37,7 +37,7 @@ class CaseReport:
         relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
     initial_difference : difference at the design's starting point.
     design_success, design_status, verified, gap : the design, its verification and the forward check's
-        largest node distance between the design's state and a fresh forward solve from rest.
+        largest node distance between the design's state and a fresh forward solve at its contractions.
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
         the fraction of the true muscles' edges that routing on the target covers.
     photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's

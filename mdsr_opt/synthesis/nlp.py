@@ -50,11 +50,24 @@ class _Assembly:
             ukeys, nzpos = np.unique(keys, return_inverse=True)
             colind = np.concatenate([[0], np.cumsum(np.bincount(ukeys // nrow, minlength=ncol))])
             spars = ca.Sparsity(nrow, ncol, colind.tolist(), (ukeys % nrow).tolist())
-            S = sp.csr_matrix((wts, (nzpos.ravel(), src)), shape=(len(ukeys), offsets[-1]))
-            self._scatter = (spars, to_dm(S))
+            self._scatter = (spars, _scatter_dm(nzpos.ravel(), src, wts, len(ukeys), int(offsets[-1])))
         spars, S = self._scatter
         vals = ca.vertcat(*([p[0] for p in self.parts] if values is None else values))
         return ca.MX(spars, ca.mtimes(S, vals))
+
+
+def _scatter_dm(rows: np.ndarray, cols: np.ndarray, wts: np.ndarray, nrow: int, ncol: int) -> ca.DM:
+    """The sparse DM ``S[rows[k], cols[k]] += wts[k]`` built in CSC order directly (one sort of the
+    entries; duplicates summed), without scipy's format conversions (about 2x faster at 10^5 entries)."""
+    key = cols * nrow + rows
+    order = np.argsort(key, kind="stable")
+    key, w = key[order], wts[order]
+    first = np.concatenate([[True], key[1:] != key[:-1]])
+    if not first.all():  # the same source to the same target twice: one entry, weights summed
+        w = np.add.reduceat(w, np.nonzero(first)[0])
+        key = key[first]
+    colind = np.concatenate([[0], np.cumsum(np.bincount(key // nrow, minlength=ncol))])
+    return ca.DM(ca.Sparsity(nrow, ncol, colind.tolist(), (key % nrow).tolist()), w)
 
 
 def _block_targets(rmap: np.ndarray, cmap: np.ndarray, upper: bool):
@@ -293,6 +306,15 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
 
 
 # ---------------------------------------------------------------------------------------------- flattened NLP
+#: IPOPT options of a warm-started design (the start is an equilibrium with its least-squares multipliers):
+#: a small first barrier parameter and bound push keep IPOPT near that start instead of recentring the
+#: contractions and tensions, and the least-squares estimate of the constraints' multipliers (a
+#: factorisation) is skipped. Measured on the 3k-node, 4-muscle case of bench_design (CPU seconds of the NLP
+#: solve, iterations): reachable target 0.70 s, 6 -> 0.23 s, 2; noisy target 0.87 s, 9 -> 0.72 s, 7; far
+#: start 1.43 s, 11 -> 1.02 s, 9; contractions equal to 1e-15.
+WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10, "constr_mult_init_max": 0.0}
+
+
 def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_key: tuple, ipopt_opts: dict):
     """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode, derivatives
     and options.
@@ -380,6 +402,8 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
                    derivatives="assembled"):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
     ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone"}
+    if warm_start:
+        ipopt_opts.update(WARM_START_OPTIONS)
     ipopt_opts.update(ipopt_options or {})
     solver, bt = _flattened_solver(prob, hessian, derivatives,
                                    tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())), ipopt_opts)

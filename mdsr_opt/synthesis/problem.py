@@ -12,7 +12,7 @@ import scipy.sparse.linalg as spla
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
-from ..mechanics.constraints import MuscleConstraints, check_anchor_radius, segment_spring_parameters, spring_segments, spring_stiffness
+from ..mechanics.constraints import check_anchor_radius, muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
 from ..mechanics.equilibrium import gauge_coordinates, solve_internal
 from ..mechanics.loadsteps import check_mesh_material
 from ..mechanics.model import get_model
@@ -38,7 +38,7 @@ class DesignProblem:
         # per-segment springs of the "springs" model, zero for the cable)
         self.model = get_model(mesh, material)
         self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
-        self.constraints = MuscleConstraints(mesh, muscles, self.anchor_radius)
+        self.constraints = muscle_constraints(mesh, muscles, self.anchor_radius)
         self.build_time = time.perf_counter() - t0
         self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
 
@@ -129,13 +129,20 @@ class DesignProblem:
         return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
 
 
+def _dm(M) -> ca.DM:
+    """A scipy sparse matrix as a sparse DM."""
+    M = sp.csc_matrix(M)
+    M.sort_indices()
+    return ca.DM(ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist()), M.data.tolist())
+
+
 def _nonzeros(M: ca.SX) -> ca.SX:
     """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
     return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
 
 
 class _ConstraintBlock:
-    """The muscle constraints of the flattened NLP as one sparse SX block over the dofs they touch.
+    """The muscle constraints of the flattened NLP as one sparse block over the dofs they touch.
 
     Rows: for the cable, one per rope, ``L_c(x) / L0_c - 1`` (the NLP adds ``+ a_c``: the equality
     ``L_c = (1 - a_c) L0_c`` as a strain); then the rigid end-patch rows of
@@ -143,74 +150,95 @@ class _ConstraintBlock:
     (a length). With multipliers ``kappa`` (one per row) the stationarity conditions gain ``J(x)^T kappa``;
     for a rope, ``kappa_c = tau_c L0_c / (E t h)`` (``tau_c`` the tension, :meth:`tension`).
 
-    Functions of the local dofs ``xl`` (sorted, so local order is global order):
-    ``val(xl, kappa) -> (C, J^T kappa)``; ``jac(xl, kappa) -> (J^T kappa, nz(J), nz(H_kappa))`` with
-    ``H_kappa = d^2 (kappa . C) / dxl^2`` (both triangles); ``hess(xl, lam, kappa, omega) -> nz(triu H)``,
-    the Hessian over ``(xl, kappa)`` of ``lam . J^T kappa + omega . C`` (the block's part of the NLP's
-    Lagrangian; the ``kappa``-``kappa`` block is zero).
+    Numbers (:meth:`values`, :meth:`jacobian`, :meth:`hessian`, :meth:`multipliers`) come from the
+    constraints' closed forms in numpy. The NLP's SX functions of the local dofs ``xl`` (sorted, so local
+    order is global order) are built on first use and cached with the constraints (one build per mesh,
+    muscles and model): ``val(xl, kappa) -> (C, J^T kappa)``; ``jac(xl, kappa) -> (J^T kappa, nz(J),
+    nz(H_kappa))`` with ``H_kappa = d^2 (kappa . C) / dxl^2`` (both triangles); ``hess(xl, lam, kappa, omega)
+    -> nz(triu H)``, the Hessian over ``(xl, kappa)`` of ``lam . J^T kappa + omega . C`` (the block's part of
+    the NLP's Lagrangian; the ``kappa``-``kappa`` block is zero). Sparsities ``J_sp``, ``Hk_sp``, ``H_sp``.
     """
 
     def __init__(self, prob: "DesignProblem"):
         mc = prob.constraints
-        n = prob.mesh.n_nodes
+        self.mc = mc
         self.rope = prob.muscle_model == "cable"
         self.n_rope = prob.m if self.rope else 0
         self.n_rigid = int(mc.n_rigid)
         self.nc = self.n_rope + self.n_rigid
         self.L0 = prob.L0
         self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
-        self.dofs = np.sort(np.asarray(mc.dofs, dtype=np.int64))  # ropes' and anchor groups' coordinates
-        d = len(self.dofs)
-        self.d = d
-        xl = ca.SX.sym("xl", d)
-        xf = ca.SX.zeros(2 * n)
-        if d:
-            xf[self.dofs.tolist()] = xl
-        parts = []
-        if self.rope:
-            parts.append(mc.lengths_expr(xf) / ca.DM(self.L0) - 1.0)
+        self.dofs = np.asarray(mc.dofs, dtype=np.int64)  # ropes' and anchor groups' coordinates, sorted
+        self.d = len(self.dofs)
+        self._rows = np.arange(mc.n_muscles - self.n_rope, mc.n_constraints)  # the constraints' rows used
         scale = np.ones(0)
         if self.n_rigid:
-            raw = mc.rigid_expr(xf)
-            Jr = ca.Function("rigid_jac", [xl], [ca.jacobian(raw, xl)])(prob.X[self.dofs])
-            norms = np.sqrt(np.asarray(ca.sum2(Jr * Jr)).ravel())
+            Jr = mc.local_jacobian(prob.X[self.dofs])[mc.n_muscles:]
+            norms = np.sqrt(np.asarray(Jr.multiply(Jr).sum(axis=1)).ravel())
             if (norms <= 0).any():
                 raise ValueError("a rigid end-patch constraint has a zero gradient at rest (degenerate patch)")
             scale = 1.0 / norms
-            parts.append(raw * ca.DM(scale))
         self.rigid_scale = scale
-        C = ca.vertcat(*parts) if parts else ca.SX(0, 1)
-        kap = ca.SX.sym("kappa", self.nc)
-        lam = ca.SX.sym("lam", d)
-        om = ca.SX.sym("omega", self.nc)
-        J = ca.jacobian(C, xl)
-        JTk = ca.gradient(ca.dot(kap, C), xl) if self.nc else ca.SX(d, 1)
-        Hk = ca.hessian(ca.dot(kap, C), xl)[0] if self.nc else ca.SX(d, d)
-        phi = ca.dot(lam, JTk) + ca.dot(om, C)
-        Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
-        self.J_sp, self.Hk_sp, self.H_sp = J.sparsity(), Hk.sparsity(), Hphi.sparsity()
-        self.val = ca.Function("muscle_con_val", [xl, kap], [C, JTk])
-        self.jac = ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)])
-        self.hess = ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])
-        self.jac_num = ca.Function("muscle_con_J", [xl], [J])
-        self.hess_num = ca.Function("muscle_con_Hk", [xl, kap], [Hk])
+        self.row_scale = np.concatenate([1.0 / self.L0[:self.n_rope], scale])
+        self.offset = np.concatenate([np.ones(self.n_rope), np.zeros(self.n_rigid)])
+        key = ("design-block", self.rope)
+        self._sym_cache = mc.__dict__.setdefault("_design_block_sx", {})
+        self._sym_key = key
 
+    # ------------------------------------------------------------------ the NLP's SX functions (lazy)
+    def _sym(self) -> dict:
+        cache, key = self._sym_cache, self._sym_key
+        if key not in cache:
+            cache[key] = self._build_sym()
+        return cache[key]
+
+    def _build_sym(self) -> dict:
+        d, nc = self.d, self.nc
+        nlf, P, Lin = self.mc.symbolic_parts()
+        R = sp.csr_matrix((self.row_scale, (np.arange(nc), self._rows)), shape=(nc, self.mc.n_constraints))
+        Pb, Linb = (R @ P).tocsr(), (R @ Lin).tocsr()
+        Pd, Ld = _dm(Pb), _dm(Linb)
+        xl = ca.SX.sym("xl", d)
+        kap = ca.SX.sym("kappa", nc)
+        lam = ca.SX.sym("lam", d)
+        om = ca.SX.sym("omega", nc)
+        nl = nlf(xl)
+        C = ca.mtimes(Pd, nl) + ca.mtimes(Ld, xl) - ca.DM(self.offset) if nc else ca.SX(0, 1)
+        # the linear rows have a constant Jacobian and no curvature: only the nonlinear ones are differentiated
+        J = ca.mtimes(Pd, ca.jacobian(nl, xl)) + Ld if nc else ca.SX(0, d)
+        kap_nl = ca.mtimes(Pd.T, kap)
+        JTk = ca.mtimes(J.T, kap) if nc else ca.SX(d, 1)
+        Hk = ca.hessian(ca.dot(kap_nl, nl), xl)[0] if nc else ca.SX(d, d)
+        # lam . J^T kappa + omega . C: its linear rows are linear in (xl, kappa) jointly, so drop out of the
+        # Hessian over (xl, kappa)
+        phi = ca.dot(lam, ca.gradient(ca.dot(kap_nl, nl), xl)) + ca.dot(ca.mtimes(Pd.T, om), nl)
+        Hphi = ca.triu(ca.hessian(phi, ca.vertcat(xl, kap))[0])
+        return {"J_sp": J.sparsity(), "Hk_sp": Hk.sparsity(), "H_sp": Hphi.sparsity(),
+                "val": ca.Function("muscle_con_val", [xl, kap], [C, JTk]),
+                "jac": ca.Function("muscle_con_jac", [xl, kap], [JTk, _nonzeros(J), _nonzeros(Hk)]),
+                "hess": ca.Function("muscle_con_hess", [xl, lam, kap, om], [_nonzeros(Hphi)])}
+
+    val = property(lambda self: self._sym()["val"])
+    jac = property(lambda self: self._sym()["jac"])
+    hess = property(lambda self: self._sym()["hess"])
+    J_sp = property(lambda self: self._sym()["J_sp"])
+    Hk_sp = property(lambda self: self._sym()["Hk_sp"])
+    H_sp = property(lambda self: self._sym()["H_sp"])
+
+    # ------------------------------------------------------------------ numbers
     def values(self, xflat) -> np.ndarray:
         """The rows ``C(x)`` (without the NLP's ``+ a``)."""
-        return np.asarray(self.val(np.asarray(xflat)[self.dofs], np.zeros(self.nc))[0]).ravel()
+        return self.mc.values(xflat)[self._rows] * self.row_scale - self.offset
 
     def jacobian(self, xflat) -> sp.csr_matrix:
         """``dC/dx`` as a scipy matrix ``(nc, 2n)``."""
-        Jl = self.jac_num(np.asarray(xflat)[self.dofs]).sparse()
-        Jl = sp.csr_matrix(Jl)
-        n2 = len(xflat)
-        return sp.csr_matrix((Jl.data, self.dofs[Jl.indices], Jl.indptr), shape=(self.nc, n2))
+        return (sp.diags(self.row_scale) @ self.mc.jacobian(xflat)[self._rows]).tocsr()
 
     def hessian(self, xflat, kappa) -> sp.csr_matrix:
         """``d^2 (kappa . C) / dx^2`` as a scipy matrix ``(2n, 2n)``."""
-        Hl = sp.coo_matrix(self.hess_num(np.asarray(xflat)[self.dofs], kappa).sparse())
-        n2 = len(xflat)
-        return sp.csr_matrix((Hl.data, (self.dofs[Hl.row], self.dofs[Hl.col])), shape=(n2, n2))
+        lam = np.zeros(self.mc.n_constraints)
+        lam[self._rows] = np.asarray(kappa, dtype=float) * self.row_scale
+        return self.mc.hessian(xflat, lam).tocsr()
 
     def multipliers(self, xflat, g_scaled, free=None) -> np.ndarray:
         """Least-squares ``kappa`` with ``g_scaled + J^T kappa = 0`` on the free dofs (``g_scaled`` the

@@ -28,8 +28,9 @@ class Verification:
         The forward re-solve succeeded, its gap to the design's state is within ``gap_tol`` and the design's
         state is a strict minimum.
     gap : float
-        Largest node distance between the design's state and the forward re-solve from rest at the same
-        contractions, after rigidly aligning the two (a length).
+        Largest node distance between the design's state and the forward re-solve at the same contractions
+        (started from the design's state, or from rest with ``verify_design(start="rest")``), after rigidly
+        aligning the two (a length).
     gap_tol : float
         The tolerance on ``gap`` (a length: ``gap_rtol * mesh.size``).
     forward_success, forward_status : bool, str

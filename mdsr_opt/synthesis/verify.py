@@ -11,7 +11,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array
 from ..mechanics.align import align, node_weights
-from ..mechanics.equilibrium import external_stability, solve_internal
+from ..mechanics.equilibrium import external_stability, gauge_coordinates, solve_internal
 from ..mechanics.loadsteps import check_mesh_material
 from ..mechanics.stability import check_stability
 from .problem import DesignProblem
@@ -71,16 +71,48 @@ def _stability(prob: DesignProblem, a, xflat, lowest: bool = True) -> tuple[bool
     return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
 
+def _in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
+    """``x`` (n, 2) moved rigidly into the gauge frame of :func:`~mdsr_opt.solve_internal` (its gauge
+    coordinates at their rest values), the rotation nearest the identity of the two that do it; None when
+    none does (node ``j`` nearer node ``i`` than its fixed coordinate needs) or ``x`` inverts an element."""
+    if not np.all(np.isfinite(x)) or mesh.jacobians(x).min() <= 0:
+        return None
+    gi, _gi1, gj = gauge_coordinates(mesh)
+    i, j, comp = gi // 2, gj // 2, gj % 2
+    P = mesh.points
+    w, v = x[j] - x[i], P[j] - P[i]
+    rho = float(np.hypot(*w))
+    if rho == 0.0 or abs(v[comp]) > rho:
+        return None
+    alpha = float(np.arctan2(w[1], w[0]))
+    if comp == 1:  # (R w)_1 = rho sin(theta + alpha) = v_1
+        base = float(np.arcsin(v[1] / rho))
+        cands = [base - alpha, np.pi - base - alpha]
+    else:  # (R w)_0 = rho cos(theta + alpha) = v_0
+        base = float(np.arccos(v[0] / rho))
+        cands = [base - alpha, -base - alpha]
+    th = min(cands, key=lambda t: abs(np.angle(np.exp(1j * t))))
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return (x - x[i]) @ R.T + P[i]
+
+
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
                   weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
-                  drags=None, lowest: bool = False) -> Verification:
+                  drags=None, lowest: bool = False, start: str = "design") -> Verification:
     """Check a design independently of how it was found.
 
-    Solves the forward internal-driving problem from rest at ``result.contractions``
-    (:func:`~mdsr_opt.solve_internal`), measures the largest node distance between that state and
-    ``result.x`` after rigid alignment, and checks that ``result.x`` is a strict minimum of the energy
-    (:func:`check_minimum`). Passes when the forward solve succeeded, the gap is at most
-    ``gap_rtol * mesh.size`` and the (reduced) Hessian is positive definite.
+    Solves the forward internal-driving problem at ``result.contractions`` (:func:`~mdsr_opt.solve_internal`:
+    energy minimised under the muscles' constraints, then its stability check), measures the largest node
+    distance between that state and ``result.x`` after rigid alignment, and checks that ``result.x`` is a
+    strict minimum of the energy (:func:`check_minimum`). Passes when the forward solve succeeded, the gap
+    is at most ``gap_rtol * mesh.size`` and the (reduced) Hessian is positive definite.
+
+    ``start="design"`` (default) starts the forward solve from the design's own state (moved rigidly into
+    the solver's gauge frame): the forward solver must find it to be a stable equilibrium at these
+    contractions, or move away from it (a gap) or fail. ``start="rest"`` load-steps from the rest shape
+    instead, which also asks that contracting the muscles from rest reaches this state rather than another
+    stable one (a body with several, e.g. buckled one way or the other), at about 10x the cost. A design
+    state that cannot start a solve (an inverted element) is verified from rest.
 
     When the target came from external driving, give its ``anchors`` and ``drags`` (as in
     :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
@@ -102,6 +134,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     True
     """
     t0 = time.perf_counter()
+    if start not in ("design", "rest"):
+        raise ValueError(f"start must be 'design' or 'rest', got {start!r}")
     check_mesh_material(mesh, material)
     mus = check_muscles(mesh, muscles)
     y = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
@@ -117,21 +151,29 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
     prob = DesignProblem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
+    guess = _in_gauge_frame(mesh, x) if start == "design" else None
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), muscle_model=result.muscle_model,
-                         stiffness=result.stiffness, anchor_radius=radius, tol=1e-10)
+                         stiffness=result.stiffness, anchor_radius=radius, tol=1e-10,
+                         initial_guess="predictor" if guess is None else guess)
     fx = fwd.x
     al = align(x, fx)
     gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max())
     fdiff = align(fx, y, w).difference
     # the design's own state, expressed in the gauge frame used by the model
     xg = x.reshape(-1)
-    pd, lam, residual = _stability(prob, a, xg, lowest=bool(lowest))
+    inverted = not np.all(np.isfinite(x)) or mesh.jacobians(x).min() <= 0
+    if inverted:  # no energy there (log det F): not a minimum, and no Hessian to factorise
+        pd, lam, residual = False, float("nan"), float("nan")
+    else:
+        pd, lam, residual = _stability(prob, a, xg, lowest=bool(lowest))
     msgs = []
     if not fwd.success:
         msgs.append(f"forward re-solve failed ({fwd.status})")
     if not np.isfinite(gap) or gap > gap_tol:
         msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
-    if not pd:
+    if inverted:
+        msgs.append("the design's state inverts an element (det F <= 0)")
+    elif not pd:
         msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
                     f"along its direction of negative curvature)")
     if target_check is not None and not target_check.stable:

@@ -14,14 +14,33 @@ Run:  python tests/benchmarks/bench_design.py --out bench_out
       python tests/benchmarks/bench_design.py --quick --derivatives casadi   # the flattened NLP's SX path
       python tests/benchmarks/bench_design.py --sizes 1k 3k --muscles 4 --methods flattened --models cable springs
                                                           # exact cable vs dummy springs: build, solve, verify
+      python tests/benchmarks/bench_design.py --case 3k4 --repeats 5 --against HEAD~3
+                                                          # the README's design figure: one fresh flattened
+                                                          # design (new mesh, verification included), stages,
+                                                          # medians, paired against an older commit
+
+``--case 3k4`` is the target of issue 13: a fresh flattened design at 3k nodes with 4 muscles, verification
+included. Each repeat runs in its own process (so nothing is cached but the imports and IPOPT's plugin, which
+the target's forward solve loads): the target is made, then the design is timed on a new Mesh of the same
+geometry. The stages are ``build`` (energy model, muscle constraints, NLP; ``DesignResult.build_time``),
+``warm start`` (the forward solve at the initial contractions), ``IPOPT`` (the rest of the solve time),
+``verify`` (``verification.time``), ``total`` (wall time of the call, verification included) and ``cpu``
+(the process's CPU time over the call: on a shared machine nearer the quiet wall time than ``total``). With
+``--against REF`` the same case runs with the package as committed at ``REF`` (extracted with ``git archive``),
+in alternating processes, and the results are compared (contractions, strokes, difference).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
+import statistics
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -88,7 +107,7 @@ def run(args):
             for method in args.methods:
                 kw = {"muscle_model": model}
                 if args.start != "geometric":  # the cable's geometric guess is the answer of a reachable target
-                    kw["initial"] = np.full(m, float(args.start))
+                    kw["initial_guess"] = np.full(m, float(args.start))
                 if method == "derivative-free":
                     kw["max_iter"] = args.df_evals * m
                 if method == "flattened":
@@ -187,7 +206,105 @@ def run(args):
     return rows
 
 
+# ---------------------------------------------------------------------------------------------- --case 3k4
+STAGES = ("build", "warm start", "IPOPT", "verify", "total", "cpu")
+
+
+def case_worker(size: str, m: int) -> dict:
+    """One fresh flattened design (new mesh, verification included) timed by stage; returns a dict."""
+    from mdsr_opt.synthesis import problem as problem_mod
+
+    mesh0, mus, a_true, target = make_case(size, m)
+    warm = [0.0]
+    solve0 = problem_mod.ForwardSolver.solve
+
+    def timed_solve(self, a):  # the flattened design's only forward solve is its warm start
+        t0, b0 = time.perf_counter(), self.build_time
+        try:
+            return solve0(self, a)
+        finally:  # its model build is counted in build_time: the warm start is the rest
+            warm[0] += time.perf_counter() - t0 - (self.build_time - b0)
+
+    problem_mod.ForwardSolver.solve = timed_solve
+    ny = SIZES[size]
+    mesh = Mesh.rectangle(4.0, 1.0, 4 * ny, ny)  # a new mesh: no model, constraints or solver cached on it
+    t0, c0 = time.perf_counter(), time.process_time()
+    res = design_contractions(mesh, MAT, mus, target)
+    total, cpu = time.perf_counter() - t0, time.process_time() - c0
+    v = res.verification
+    return {"build": res.build_time, "warm start": warm[0], "IPOPT": res.solve_time - warm[0],
+            "verify": v.time, "total": total, "cpu": cpu, "success": bool(res.success), "passed": bool(v.passed),
+            "iterations": int(res.iterations), "nodes": int(mesh.n_nodes), "difference": float(res.difference),
+            "contractions": [float(c) for c in res.contractions], "stroke": [float(c) for c in res.stroke],
+            "contraction_error": float(np.abs(res.contractions - a_true).max()), "gap": float(v.gap)}
+
+
+def _package_at(ref: str, dest: str) -> str:
+    """Extract the package as committed at ``ref`` into ``dest``; returns the folder to put on sys.path."""
+    root = subprocess.run(["git", "rev-parse", "--show-toplevel"], capture_output=True, text=True, check=True,
+                          cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip()
+    arch = subprocess.run(["git", "archive", ref, "mdsr_opt"], capture_output=True, check=True, cwd=root).stdout
+    subprocess.run(["tar", "-x", "-C", dest], input=arch, check=True)
+    return dest
+
+
+def _run_worker(pkg_root: str, size: str, m: int) -> dict:
+    env = dict(os.environ, PYTHONPATH=pkg_root + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, os.path.abspath(__file__), "--worker", size, str(m)], env=env,
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"worker failed ({pkg_root}):\n{out.stderr[-3000:]}")
+    return json.loads([ln for ln in out.stdout.splitlines() if ln.startswith("{")][-1])
+
+
+def run_case(args):
+    """``--case``: stage breakdown of fresh designs, medians over ``--repeats`` processes, paired with REF."""
+    size, m = {"3k4": ("3k", 4), "1k4": ("1k", 4), "300x4": ("300", 4)}[args.case]
+    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    versions = [("now", here)]
+    tmp = None
+    if args.against:
+        tmp = tempfile.TemporaryDirectory()
+        versions.insert(0, (args.against, _package_at(args.against, tmp.name)))
+    runs = {label: [] for label, _ in versions}
+    for r in range(args.repeats):
+        for label, root in versions:  # alternate, so both versions see the same machine load
+            runs[label].append(_run_worker(root, size, m))
+            rr = runs[label][-1]
+            print(f"  repeat {r + 1} {label:>12}: " + " ".join(f"{k} {rr[k]:.3f}" for k in STAGES) +
+                  f"  it {rr['iterations']} ok {rr['success']}", flush=True)
+    print(f"\nfresh flattened design, {runs[versions[0][0]][0]['nodes']} nodes, {m} muscles, verification "
+          f"included: medians of {args.repeats} runs, seconds")
+    print(f"{'version':>12} " + " ".join(f"{k:>10}" for k in STAGES) + f" {'iters':>6} {'ok':>3}")
+    med = {}
+    for label, _ in versions:
+        med[label] = {k: statistics.median(r[k] for r in runs[label]) for k in STAGES}
+        print(f"{label:>12} " + " ".join(f"{med[label][k]:>10.3f}" for k in STAGES) +
+              f" {runs[label][0]['iterations']:>6d} {'y' if all(r['success'] for r in runs[label]) else 'n':>3}")
+    if len(versions) == 2:
+        a, b = versions[0][0], versions[1][0]
+        print(f"{'ratio':>12} " + " ".join(f"{med[a][k] / max(med[b][k], 1e-12):>10.2f}" for k in STAGES)
+              + f"   ({a} / now)")
+        ra, rb = runs[a][0], runs[b][0]
+        rel = lambda u, v: float(np.max(np.abs(np.subtract(u, v)) / np.maximum(np.abs(v), 1e-12)))  # noqa: E731
+        print(f"agreement: contractions {rel(rb['contractions'], ra['contractions']):.2e} rel, strokes "
+              f"{rel(rb['stroke'], ra['stroke']):.2e} rel, difference {rel([rb['difference']], [ra['difference']]):.2e} "
+              "rel (differences near zero are compared in absolute terms below)")
+        print(f"  difference {ra['difference']:.6e} -> {rb['difference']:.6e}; |a - a_true| "
+              f"{ra['contraction_error']:.2e} -> {rb['contraction_error']:.2e}; gap {ra['gap']:.2e} -> {rb['gap']:.2e}")
+    os.makedirs(args.out, exist_ok=True)
+    path = os.path.join(args.out, f"design_case_{args.case}.json")
+    with open(path, "w") as fh:
+        json.dump({"case": args.case, "repeats": args.repeats, "medians": med, "runs": runs}, fh, indent=1)
+    print(f"wrote {path}")
+    if tmp is not None:
+        tmp.cleanup()
+
+
 def main(argv=None):
+    if argv is None and len(sys.argv) == 4 and sys.argv[1] == "--worker":  # one timed design, JSON on stdout
+        print(json.dumps(case_worker(sys.argv[2], int(sys.argv[3]))))
+        return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="bench_out", help="output folder (default bench_out)")
     ap.add_argument("--sizes", nargs="+", default=list(SIZES), choices=list(SIZES), help="mesh sizes to run")
@@ -206,7 +323,15 @@ def main(argv=None):
     ap.add_argument("--no-variants", action="store_true", help="skip the flattened variants")
     ap.add_argument("--variants", action="store_true",
                     help="run the flattened variants on 1k nodes, 4 muscles whatever the sizes")
-    run(ap.parse_args(argv))
+    ap.add_argument("--case", choices=["3k4", "1k4", "300x4"],
+                    help="one fresh flattened design by stage (see the module docstring); 3k4: issue 13's target")
+    ap.add_argument("--repeats", type=int, default=5, help="--case: processes per version (median reported)")
+    ap.add_argument("--against", metavar="REF", help="--case: also run the package as committed at this git ref")
+    args = ap.parse_args(argv)
+    if args.case:
+        run_case(args)
+    else:
+        run(args)
 
 
 if __name__ == "__main__":
