@@ -157,6 +157,29 @@ def test_unknown_ipopt_option_in_a_solve_is_a_value_error():
                        drags=(right, mesh.points[right] + [0.1, 0]), options={"ipopt.magic_speed": 2})
 
 
+@pytest.mark.parametrize("method, options, err, match", [
+    ("flattened", {"bogus_opt": 1}, ValueError, r"unknown ipopt option 'bogus_opt'"),
+    ("flattened", {"tol": "tight"}, ValueError, r"invalid value 'tight' for ipopt option 'tol'"),
+    ("flattened", [("tol", 1e-3)], TypeError, r"options must be a dict"),
+    ("nested", {"xatol": 1e-3}, ValueError, r"unknown scipy L-BFGS-B option 'xatol'"),
+    ("derivative-free", {"ftol": 1e-3}, ValueError, r"unknown scipy Nelder-Mead option 'ftol'"),
+])
+def test_design_solver_options_are_checked_at_the_door(method, options, err, match, monkeypatch):
+    """design_contractions(options=...) is checked before any model is built (never a CasADi error)."""
+    import mdsr_opt.synthesis.contractions as contractions
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    mus = [Muscle(np.flatnonzero(mesh.points[:, 1] == 1.0)[1:-1])]
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("a design problem was built before the options were checked")
+
+    monkeypatch.setattr(contractions, "DesignProblem", no_work)
+    with pytest.raises(err, match=match):
+        contractions.design_contractions(mesh, NeoHookean(1.0, 0.3), mus, mesh.points, method=method,
+                                         options=options)
+
+
 # ---------------------------------------------------------------------------------------------- waypoints
 def test_far_waypoints_are_refused_with_the_distance():
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)                   # mean edge length about 0.26
@@ -249,3 +272,16 @@ def test_study_arguments_are_named(tmp_path, capsys, args, words):
     assert main(["study", "quick", "--out", str(tmp_path / "s"), *args]) == 2
     assert words in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
+
+
+def test_an_anchor_radius_of_half_the_body_is_refused_at_every_door():
+    from mdsr_opt import design_contractions, solve_internal
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)  # body size (diameter) sqrt(17) = 4.12
+    mus = [Muscle(np.flatnonzero(mesh.points[:, 1] == 1.0)[1:-1])]
+    mat = NeoHookean(1.0, 0.3)
+    for call in (lambda: solve_internal(mesh, mat, mus, [0.1], anchor_radius=2.1),
+                 lambda: design_contractions(mesh, mat, mus, mesh.points, anchor_radius=1e9)):
+        with pytest.raises(ValueError, match=r"anchor_radius .* is at least half the body's size \(4\.12\)"):
+            call()
+    assert solve_internal(mesh, mat, mus, [0.1], anchor_radius=2.0).success  # just below the limit

@@ -55,7 +55,7 @@ import scipy.sparse as sp
 from ..core.checks import positive_float
 from ..body.muscles import Muscle, check_muscles
 
-__all__ = ["ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
+__all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius", "anchor_patches",
            "rigid_groups",
            "MuscleConstraints", "muscle_constraints", "spring_stiffness", "segment_spring_parameters",
            "spring_segments"]
@@ -107,6 +107,11 @@ def _valid_muscles(mesh, muscles) -> list:
         checked.add(key)
         return out
     return list(seq)
+
+
+#: An anchor radius must stay below this fraction of :func:`body_size` (a patch as wide as half the body
+#: would hold most of it rigid).
+MAX_ANCHOR_FRACTION = 0.5
 
 
 def _check_radius(mesh, radius) -> float:
@@ -606,6 +611,12 @@ def _to_scipy(M) -> sp.csc_matrix:
 
 
 def check_anchor_radius(mesh, radius) -> float:
-    """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors."""
-    return _check_radius(mesh, radius)
+    """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors, also
+    for a radius of :data:`MAX_ANCHOR_FRACTION` of :func:`body_size` or more (the solvers' and the design's
+    door; :func:`anchor_patches` itself takes any radius)."""
+    radius = _check_radius(mesh, radius)
+    if radius >= MAX_ANCHOR_FRACTION * body_size(mesh):
+        raise ValueError(f"anchor_radius {radius:g} is at least half the body's size ({body_size(mesh):.3g}): "
+                         "a muscle's end patch would hold most of the body")
+    return radius
 

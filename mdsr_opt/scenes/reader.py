@@ -243,19 +243,12 @@ def _symmetry(r: Reader, v, where: str):
 def _solver_options(r: Reader, options: dict, design: dict) -> dict:
     """``[design.options]``: IPOPT's options (flattened, without the ``ipopt.`` prefix) or scipy's
     ``minimize`` options (nested: L-BFGS-B; derivative-free: Nelder-Mead or Powell), each checked against
-    the solver (:func:`~mdsr_opt.backends.check_options`)."""
-    from ..mechanics.backends import check_options
+    the solver (:func:`~mdsr_opt.synthesis.contractions.check_design_options`)."""
+    from ..synthesis.contractions import check_design_options
 
-    method = design.get("method", "flattened")
     for k, v in options.items():
-        w = f"design.options.{k}"
         try:
-            if method == "flattened":
-                check_options("ipopt", {f"ipopt.{k}": v})
-            else:
-                sp = "L-BFGS-B" if method == "nested" else \
-                    {"nelder-mead": "Nelder-Mead", "powell": "Powell"}[design.get("outer", "nelder-mead")]
-                check_options(f"scipy:{sp}", {k: v})
+            check_design_options({k: v}, design.get("method", "flattened"), design.get("outer", "nelder-mead"))
         except (ValueError, TypeError) as exc:
-            r.fail(w, str(exc).replace("'ipopt.", "'"))
+            r.fail(f"design.options.{k}", str(exc))
     return options

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, positive_int
-from ..mechanics.constraints import body_size
+from ..mechanics.constraints import MAX_ANCHOR_FRACTION, body_size
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -259,7 +259,7 @@ class Scene:
         self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
         self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
         radius = self.design_options.get("anchor_radius")
-        if radius is not None and radius >= 0.5 * body_size(self.mesh):
+        if radius is not None and radius >= MAX_ANCHOR_FRACTION * body_size(self.mesh):
             raise ValueError(f"scene {self.name!r}: design.anchor_radius {radius:g} is at least half the body's "
                              f"size ({body_size(self.mesh):.3g}): a muscle's end patch would hold most of the body")
         self.expected = dict(self.expected)

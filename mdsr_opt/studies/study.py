@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 import numpy as np
 
+from ..mechanics.backends import interruptible
 from ..body.io import atomic_path, write_json
 from ..core.results import format_value, to_jsonable
 from ..core.stats import fit_slopes
@@ -152,6 +153,7 @@ def environment_info() -> dict:
             "machine": platform.machine(), "cpus": os.cpu_count()}
 
 
+@interruptible()
 def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resolutions: Sequence[int] | None = None,
               methods: Sequence[str] | None = None, problems: Sequence[str] | None = None,
               materials: Sequence[str] | None = None, reference_resolution: int | None = None,

@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.deprecation import renamed_keywords
+from ..mechanics.backends import check_options, interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
@@ -19,11 +20,12 @@ from .results import DesignResult, METHODS, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
 
-__all__ = ['design_contractions']
+__all__ = ['check_design_options', 'design_contractions']
 
 
 # ---------------------------------------------------------------------------------------------- public API
 @renamed_keywords(initial="initial_guess")
+@interruptible()  # Ctrl-C inside the design NLP (CasADi swallows it) raises KeyboardInterrupt
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
                         method: str = "flattened", a_max: float = 0.6, initial_guess: ArrayLike | None = None,
                         weights: ArrayLike | None = None, interior_weight: float = 0.5,
@@ -120,6 +122,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
     if derivatives not in ("assembled", "casadi"):
         raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
+    options = check_design_options(options, method, outer)
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
@@ -194,3 +197,37 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
             res.success = False
             res.status += f"; rejected by verification: {v.message}"
     return res
+
+
+def check_design_options(options, method: str = "flattened", outer: str = "nelder-mead") -> dict:
+    """Check a design's solver ``options`` before any work: IPOPT's options (without the ``ipopt.`` prefix)
+    for ``method="flattened"``, else those of ``scipy.optimize.minimize`` (L-BFGS-B for ``"nested"``,
+    Nelder-Mead or Powell for ``"derivative-free"`` after ``outer``).
+
+    Returns a copy (``{}`` for None). Raises ``TypeError`` for a non-mapping, ``ValueError`` naming an
+    unknown option or an invalid value (instead of a CasADi error when the solver is built).
+
+    Example
+    -------
+    >>> check_design_options({"max_cpu_time": 10.0})
+    {'max_cpu_time': 10.0}
+    >>> check_design_options({"bogus": 1})
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown ipopt option 'bogus'
+    """
+    if options is None:
+        return {}
+    if not hasattr(options, "items"):
+        raise TypeError(f"options must be a dict of solver options, got {type(options).__name__}")
+    options = dict(options)
+    if method == "flattened":
+        try:
+            check_options("ipopt", {f"ipopt.{k}": v for k, v in options.items()})
+        except (ValueError, TypeError) as exc:  # name the option as the caller spelled it (no prefix)
+            raise type(exc)(str(exc).replace("'ipopt.", "'")) from None
+    else:
+        scipy_method = "L-BFGS-B" if method == "nested" else \
+            {"nelder-mead": "Nelder-Mead", "powell": "Powell"}[outer]
+        check_options(f"scipy:{scipy_method}", options)
+    return options

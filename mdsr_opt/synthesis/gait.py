@@ -17,6 +17,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..mechanics.backends import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
@@ -191,6 +192,7 @@ class GaitSchedule:
         return os.fspath(path)
 
 
+@interruptible()
 def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[str], *, frames_per_step: int = 6,
                   cyclic: bool = True, step_time: float = 1.0, units: str = "mm",
                   solve_options: Mapping | None = None) -> GaitSchedule:

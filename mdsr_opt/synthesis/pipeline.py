@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 import numpy as np
 
+from ..mechanics.backends import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.deprecation import renamed_keywords
@@ -179,6 +180,7 @@ class PipelineResult:
             raise ValueError(f"{path} is damaged ({field_}): {exc}") from None
 
 
+@interruptible()
 def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
            routing_options: dict | None = None, method: str = "flattened", external_options: dict | None = None,
            **design_options) -> PipelineResult:

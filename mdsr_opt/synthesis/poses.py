@@ -68,6 +68,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..mechanics.backends import interruptible
 from ..core.checks import as_float_array
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
@@ -401,6 +402,7 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     return muscles, tuple(tuple(s) for _, _, s in kept)
 
 
+@interruptible()
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
                  overlap: float = 0.5, compare: bool = True,
