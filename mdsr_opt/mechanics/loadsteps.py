@@ -259,7 +259,10 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
 
 def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
             backend, mode, tol_residual=1e-5):
-    if hasattr(model, "grad_fn"):  # an EnergyModel: energy and gradient from one call
+    if getattr(model, "is_numeric", False):  # an EnergyModel in numpy: energy and gradient from one object
+        en = model.numeric(p)
+        energy, g = float(en.energy(xflat)), en.gradient(xflat)
+    elif hasattr(model, "grad_fn"):  # an EnergyModel: energy and gradient from one call
         f, g = model.grad_fn(xflat, p)
         energy, g = float(f), np.asarray(g).ravel()
     else:

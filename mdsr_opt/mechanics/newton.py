@@ -77,7 +77,7 @@ class NewtonEnergy:
         rest-length ratios.
     """
 
-    def __init__(self, model, p):
+    def __init__(self, model, p, geometry: "NewtonEnergy | None" = None):
         if getattr(model, "cables", ()):
             raise ValueError("the element-wise Newton baseline does not support sliding cables")
         if model.material_kind not in ("neo-hookean", "linear"):
@@ -89,23 +89,27 @@ class NewtonEnergy:
         self.kind = model.material_kind
         self.mu, self.lam = float(p[0]), float(p[1])
         self.tri = mesh.triangles
-        self.B = np.asarray(mesh.Dm_inv, dtype=float)  # (m, 2, 2)
-        self.area = np.asarray(mesh.areas, dtype=float)
-        # D: vec(F) (row-major F00, F01, F10, F11) from the 6 element dofs (x0, y0, x1, y1, x2, y2)
-        m = len(self.tri)
-        B = self.B
-        D = np.zeros((m, 4, 6))
-        for i in range(2):  # F_ij = sum_k Ds_ik B_kj, Ds_i0 = x1_i - x0_i, Ds_i1 = x2_i - x0_i
-            for j in range(2):
-                D[:, 2 * i + j, 2 + i] = B[:, 0, j]
-                D[:, 2 * i + j, 4 + i] = B[:, 1, j]
-                D[:, 2 * i + j, i] = -(B[:, 0, j] + B[:, 1, j])
-        self.D = D
-        self.DT = np.ascontiguousarray(np.swapaxes(D, 1, 2))
         self.elem_dofs = model.elem_dofs
+        if geometry is not None and geometry.tri is self.tri:  # same mesh: the parameter-free arrays
+            self.B, self.area, self.D, self.DT = geometry.B, geometry.area, geometry.D, geometry.DT
+        else:
+            self.B = np.asarray(mesh.Dm_inv, dtype=float)  # (m, 2, 2)
+            self.area = np.asarray(mesh.areas, dtype=float)
+            # D: vec(F) (row-major F00, F01, F10, F11) from the 6 element dofs (x0, y0, x1, y1, x2, y2)
+            m = len(self.tri)
+            B = self.B
+            D = np.zeros((m, 4, 6))
+            for i in range(2):  # F_ij = sum_k Ds_ik B_kj, Ds_i0 = x1_i - x0_i, Ds_i1 = x2_i - x0_i
+                for j in range(2):
+                    D[:, 2 * i + j, 2 + i] = B[:, 0, j]
+                    D[:, 2 * i + j, 4 + i] = B[:, 1, j]
+                    D[:, 2 * i + j, i] = -(B[:, 0, j] + B[:, 1, j])
+            self.D = D
+            self.DT = np.ascontiguousarray(np.swapaxes(D, 1, 2))
         ne = model.n_edges
         k, r = p[2:2 + ne], p[2 + ne:2 + 2 * ne]
         on = np.flatnonzero(k != 0.0)
+        self.spring_on = on  #: indices of the edges whose spring has a stiffness
         self.k, self.rl0 = k[on], r[on] * np.asarray(mesh.edge_lengths, dtype=float)[on]
         self.edges = np.asarray(mesh.edges)[on]
         self.edge_dofs = model.edge_dofs[on]
@@ -120,11 +124,16 @@ class NewtonEnergy:
         """The energy at ``x`` (flat, 2n); ``inf`` when a triangle is inverted (Neo-Hookean)."""
         F = self._F(x)
         if self.kind == "neo-hookean":
-            J = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-            if not (J > 0).all():
+            # in terms of F - I (tr F'F - 2 = |F - I|^2 + 2 tr(F - I), ln J = log1p(J - 1)): no cancellation
+            # of O(1) terms, so a state at rest has an energy of round-off squared, not of round-off
+            a, d = F[:, 0, 0] - 1.0, F[:, 1, 1] - 1.0
+            b, c = F[:, 0, 1], F[:, 1, 0]
+            Jm1 = a + d + (a * d - b * c)
+            if not (Jm1 > -1.0).all():
                 return np.inf
-            lnJ = np.log(J)
-            psi = self.mu / 2 * ((F * F).sum(axis=(1, 2)) - 2) - self.mu * lnJ + self.lam / 2 * lnJ ** 2
+            lnJ = np.log1p(Jm1)
+            psi = (self.mu / 2 * (a * a + b * b + c * c + d * d) + self.mu * ((a + d) - lnJ)
+                   + self.lam / 2 * lnJ ** 2)
         else:
             e = 0.5 * (F + np.swapaxes(F, 1, 2)) - np.eye(2)
             tr = e[:, 0, 0] + e[:, 1, 1]
@@ -212,6 +221,14 @@ class NewtonEnergy:
             gs, Hs = self._spring_terms(x, True, project)
             g += np.bincount(self.edge_dofs.ravel(), weights=gs.ravel(), minlength=self.n)
         return g, He, Hs
+
+    def hessian_blocks(self, x):
+        """The exact element Hessians (m, 6, 6) and spring Hessians (s, 4, 4) at ``x`` (their sum is the
+        Hessian), without the gradient."""
+        _P, A = self._stress_tangent(self._F(x), True)
+        He = (self.DT @ (A @ self.D)) * self.area[:, None, None]
+        Hs = self._spring_terms(x, True, False)[1] if len(self.k) else np.zeros((0, 4, 4))
+        return He, Hs
 
     def projected_blocks(self):
         """The projected element and spring blocks at the state of the last :meth:`element_blocks` call."""
