@@ -83,7 +83,7 @@ class HessianPattern:
         self.nnz = len(indices)
 
     def positions(self, nodes) -> np.ndarray:
-        """``(N, 2q, 2q)`` positions (into the CSC data) of the entries of the blocks of ``N`` terms on ``q``
+        """``(2q, 2q, N)`` positions (into the CSC data) of the entries of the blocks of ``N`` terms on ``q``
         nodes each: entry ``[2u + i, 2v + j]`` is row ``2 nodes[u] + i``, column ``2 nodes[v] + j``."""
         nodes = np.asarray(nodes, dtype=np.int64)
         N, q = nodes.shape
@@ -94,7 +94,7 @@ class HessianPattern:
         two_deg = 2 * self._deg[b]
         pos = (base[:, :, None, :, None] + np.arange(2)[None, None, :, None, None]
                + np.arange(2)[None, None, None, None, :] * two_deg[:, :, None, :, None])
-        return pos.reshape(N, 2 * q, 2 * q)
+        return np.ascontiguousarray(np.moveaxis(pos.reshape(N, 2 * q, 2 * q), 0, -1))
 
     def sparsity_upper(self) -> ca.Sparsity:
         """The upper triangle as a CasADi sparsity."""

@@ -276,8 +276,9 @@ class EnergyModel:
             from .assembly import HessianPattern
 
             pat = HessianPattern(self.mesh.n_nodes, self.mesh.edges)
+            # in the (d, d, N) layout of NewtonEnergy's blocks
             pat.elem_pos = pat.positions(self.mesh.triangles).reshape(-1)
-            pat.edge_pos = pat.positions(self.mesh.edges).reshape(len(self.mesh.edges), -1)
+            pat.edge_pos = pat.positions(self.mesh.edges).reshape(16, -1)
             self.__dict__["_hessian_pattern"] = pat
         return pat
 
@@ -289,7 +290,7 @@ class EnergyModel:
         He, Hs = en.hessian_blocks(np.asarray(x, dtype=float).reshape(-1))
         data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
         if len(Hs):
-            data += np.bincount(pat.edge_pos[en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
+            data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
         return data
 
     def energy(self, x, p) -> float:
