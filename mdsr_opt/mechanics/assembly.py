@@ -85,16 +85,15 @@ class HessianPattern:
     def positions(self, nodes) -> np.ndarray:
         """``(2q, 2q, N)`` positions (into the CSC data) of the entries of the blocks of ``N`` terms on ``q``
         nodes each: entry ``[2u + i, 2v + j]`` is row ``2 nodes[u] + i``, column ``2 nodes[v] + j``."""
-        nodes = np.asarray(nodes, dtype=np.int64)
-        N, q = nodes.shape
-        a = nodes[:, :, None]
-        b = np.broadcast_to(nodes[:, None, :], (N, q, q))
-        k = np.searchsorted(self._key, b * self._n + a)
-        base = 4 * self._colptr[b] + 2 * (k - self._colptr[b])  # (N, u, v)
-        two_deg = 2 * self._deg[b]
-        pos = (base[:, :, None, :, None] + np.arange(2)[None, None, :, None, None]
-               + np.arange(2)[None, None, None, None, :] * two_deg[:, :, None, :, None])
-        return np.ascontiguousarray(np.moveaxis(pos.reshape(N, 2 * q, 2 * q), 0, -1))
+        nodes = np.ascontiguousarray(np.asarray(nodes, dtype=np.int64).T)  # (q, N)
+        q, N = nodes.shape
+        cb = self._colptr[nodes]  # column starts of the block columns, (q, N)
+        k = np.searchsorted(self._key, nodes[None, :, :] * self._n + nodes[:, None, :])  # (u, v, N)
+        base = 2 * (k + cb[None, :, :])  # 4 colptr[b] + 2 (k - colptr[b])
+        two_deg = (2 * self._deg[nodes])[None, None, :, None, :]
+        pos = (base[:, None, :, None, :] + np.arange(2)[None, :, None, None, None]
+               + np.arange(2)[None, None, None, :, None] * two_deg)
+        return pos.reshape(2 * q, 2 * q, N)
 
     def sparsity_upper(self) -> ca.Sparsity:
         """The upper triangle as a CasADi sparsity."""

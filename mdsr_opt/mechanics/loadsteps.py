@@ -119,7 +119,14 @@ def _predict(model, p, x, fixed, values):
 
 
 def _min_J(mesh, xflat):
-    return float(mesh.jacobians(xflat.reshape(-1, 2)).min())
+    """The smallest ``J = det F = det Ds / det Dm`` over the triangles (``mesh.jacobians``, without the
+    batched 2 x 2 inverses and determinants)."""
+    t = mesh.triangles
+    x = np.asarray(xflat, dtype=float).reshape(-1)
+    xs, ys = x[0::2], x[1::2]
+    x0, y0 = xs[t[:, 0]], ys[t[:, 0]]
+    det_ds = (xs[t[:, 1]] - x0) * (ys[t[:, 2]] - y0) - (xs[t[:, 2]] - x0) * (ys[t[:, 1]] - y0)
+    return float((det_ds / (2.0 * mesh.areas)).min())
 
 
 def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
