@@ -62,6 +62,7 @@ class HessianPattern:
         self._key = np.unique(cols * n + rows)  # node-level CSC order: by column, then row
         node_row = self._key % n
         self._colptr = np.searchsorted(self._key // n, np.arange(n + 1)).astype(np.int64)
+        self.node_colptr, self.node_rows = self._colptr, node_row  #: the node graph (CSC, with diagonal)
         self._deg = np.diff(self._colptr)
         self._n = n
         N = 2 * n

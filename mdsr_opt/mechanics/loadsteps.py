@@ -88,15 +88,33 @@ def _factor(model, p, x, fixed):
         return cache[key]
     free = ~fixed
     H = model.hessian(x, p)
-    Hff = H[free][:, free].tocsc()
-    # symmetric mode with a minimum-degree ordering: about twice as fast as spsolve's default here
-    lu = spla.splu(Hff, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    if getattr(model, "is_numeric", False):  # the mesh's fill-reducing ordering, made once
+        fi = np.flatnonzero(free)
+        order = model.free_ordering(free)
+        lu = _Ordered(spla.splu(H[fi[order]][:, fi[order]].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                                options={"SymmetricMode": True}), order)
+    else:
+        # symmetric mode with a minimum-degree ordering: about twice as fast as spsolve's default here
+        lu = spla.splu(H[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
     out = (H[free][:, fixed].tocsr(), lu)
     if key is not None:
         if len(cache) >= 8:
             cache.pop(next(iter(cache)))
         cache[key] = out
     return out
+
+
+class _Ordered:
+    """A factorisation of ``M[order][:, order]`` solving with ``M``."""
+
+    def __init__(self, lu, order):
+        self.lu, self.order = lu, order
+
+    def solve(self, b):
+        out = np.empty_like(b)
+        out[self.order] = self.lu.solve(b[self.order])
+        return out
 
 
 def _predict(model, p, x, fixed, values):
@@ -209,7 +227,8 @@ def _stability_at(model, p, xflat, fixed):
             A = model.jacobian(xflat)[active]
     else:
         H = model.hessian(xflat, p)
-    chk = check_stability(H, ~fixed, A)
+    order = model.free_ordering(~fixed) if A is None and getattr(model, "is_numeric", False) else None
+    chk = check_stability(H, ~fixed, A, order=order)
     model.__dict__["_last_stability"] = (key, chk)
     return chk
 

@@ -293,6 +293,31 @@ class EnergyModel:
             data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
         return data
 
+    def free_ordering(self, free) -> np.ndarray:
+        """A fill-reducing ordering of the free coordinates (indices into them, ``free`` a mask over 2n):
+        approximate minimum degree of the node graph (CasADi's ``Sparsity.amd``, made once per mesh), each
+        node's two coordinates together. A sparse factorisation in this order (SuperLU ``NATURAL``) has the
+        fill of SuperLU's own minimum degree ordering without its cost (about 60 % of a factorisation at
+        30k nodes)."""
+        free = np.asarray(free, dtype=bool)
+        cache = self.__dict__.setdefault("_free_orderings", {})
+        key = free.tobytes()
+        if key not in cache:
+            node_order = self.__dict__.get("_node_order")
+            if node_order is None:
+                pat = self.hessian_pattern
+                n = self.mesh.n_nodes
+                S = ca.Sparsity(n, n, pat.node_colptr.tolist(), pat.node_rows.tolist())
+                node_order = self.__dict__["_node_order"] = np.asarray(S.amd(), dtype=np.int64)
+            dof = np.stack([2 * node_order, 2 * node_order + 1], axis=1).ravel()
+            newidx = np.full(self.n_dof, -1, dtype=np.int64)
+            newidx[free] = np.arange(int(free.sum()))
+            o = newidx[dof]
+            if len(cache) >= 8:
+                cache.pop(next(iter(cache)))
+            cache[key] = o[o >= 0]
+        return cache[key]
+
     def energy(self, x, p) -> float:
         """The energy at ``x`` (non-finite where a Neo-Hookean triangle is inverted)."""
         if self.is_numeric:
