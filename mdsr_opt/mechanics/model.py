@@ -1,4 +1,4 @@
-"""Symbolic energies of a mesh, built once per topology and reused for every scene.
+"""Energies of a mesh, made once per topology and reused for every scene.
 
 The total energy is
 
@@ -9,10 +9,20 @@ only in numbers: fixed nodes become equal bounds (IPOPT turns them into paramete
 stiffness ``k`` and rest-length factor ``r`` are parameters (zero stiffness where no muscle runs), and
 sliding cables carry their stiffness and target length as parameters.
 
-Derivatives: each term is one small SX function of a few nodes (a triangle, an edge, a cable) whose
-gradient and Hessian CasADi differentiates symbolically; ``Function.map`` evaluates them over all terms
-and constant sparse matrices scatter them into the global gradient and the upper triangle of the global
-Hessian. Building is linear in the mesh size and needs no symbolic differentiation of the global graph.
+Two evaluations of the same energy:
+
+* numeric (models without sliding cables, Neo-Hookean or linear material: :attr:`EnergyModel.is_numeric`):
+  :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and :meth:`~EnergyModel.hessian` in vectorised
+  numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`, scattered by
+  :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
+  (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`). Making the model costs a few array operations.
+* symbolic (``x``, ``p``, ``f_fn``, ``grad_fn``, ``hess_fn``, ``hess_lag_fn``, ``hess_lag_full_fn``: for
+  the design NLP, the constrained models, the other backends, and every model the numeric path does not
+  cover), built on first use: each term is one small SX function of a few nodes (a triangle, an edge, a
+  cable) whose gradient and Hessian CasADi differentiates symbolically; ``Function.map`` evaluates them
+  over all terms and constant sparse matrices scatter them into the global gradient and the upper
+  triangle of the global Hessian. Building is linear in the mesh size and needs no symbolic
+  differentiation of the global graph, but costs several solves on small meshes.
 
 Example
 -------
@@ -133,7 +143,8 @@ class TermFamily:
 
 
 class EnergyModel:
-    """Energy, gradient and Hessian of one mesh topology as CasADi Functions.
+    """Energy, gradient and Hessian of one mesh topology: numeric methods and (built on first use) CasADi
+    Functions; see the module docstring.
 
     Parameters
     ----------
@@ -148,6 +159,8 @@ class EnergyModel:
 
     Parameter vector ``p`` = ``[material params (2), k (n_edges), r (n_edges), K (n_cables),
     R (n_cables)]``; see :meth:`params`.
+
+    ``build_time`` counts the numeric set-up, plus the symbolic graph's build once something uses it.
     """
 
     def __init__(self, mesh, material, cables=(), expand: bool = False):

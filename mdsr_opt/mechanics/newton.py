@@ -11,9 +11,9 @@ semi-definite approximation of its Hessian with vectorised numpy (no per-element
   only springs with ``k != 0`` are evaluated.
 
 Assembly scatters the element blocks with one ``bincount`` into a fixed CSC pattern of the free-free
-Hessian, made once per model and set of fixed coordinates together with a fill-reducing ordering (from
-SuperLU's first factorisation); every later factorisation reuses that ordering (``permc_spec="NATURAL"`` on
-the symmetrically permuted matrix, symmetric mode). A backtracking (Armijo) line search keeps every
+Hessian, made once per model and set of fixed coordinates together with a fill-reducing ordering (the
+model's :meth:`~mdsr_opt.mechanics.model.EnergyModel.free_ordering`); every factorisation uses that
+ordering (``permc_spec="NATURAL"`` on the symmetrically permuted matrix, symmetric mode). A backtracking (Armijo) line search keeps every
 triangle un-inverted.
 
 Example
@@ -294,7 +294,7 @@ class _Pattern:
     """The CSC pattern of the free-free Hessian (permuted by a fill-reducing ordering), where each element
     and spring block entry lands in it, and the ordering, made once per model and fixed mask."""
 
-    def __init__(self, energy: NewtonEnergy, free: np.ndarray):
+    def __init__(self, energy: NewtonEnergy, free: np.ndarray, order: np.ndarray | None = None):
         n = energy.n
         newidx = np.full(n, -1, dtype=np.int64)
         self.free_idx = np.flatnonzero(free)
@@ -309,13 +309,15 @@ class _Pattern:
         keep = (rows >= 0) & (cols >= 0)
         self.keep = keep
         rows, cols = rows[keep], cols[keep]
-        # ordering: SuperLU's minimum degree on the pattern, once
-        S = sp.csc_matrix((np.ones(len(rows)), (rows, cols)), shape=(nf, nf))
-        S.sum_duplicates()
-        S = S + sp.identity(nf, format="csc") * (4.0 * abs(S).sum(axis=1).max())  # diagonally dominant: no pivoting
-        lu = spla.splu(S.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                       options={"SymmetricMode": True})
-        perm = np.asarray(lu.perm_c)  # SuperLU: Pc[i, perm_c[i]] = 1, i.e. old column i is new column perm_c[i]
+        if order is not None:  # the model's ordering (free coordinates at each new position)
+            perm = np.argsort(np.asarray(order))
+        else:  # SuperLU's minimum degree on the pattern, once
+            S = sp.csc_matrix((np.ones(len(rows)), (rows, cols)), shape=(nf, nf))
+            S.sum_duplicates()
+            S = S + sp.identity(nf, format="csc") * (4.0 * abs(S).sum(axis=1).max())  # diagonally dominant
+            lu = spla.splu(S.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                           options={"SymmetricMode": True})
+            perm = np.asarray(lu.perm_c)  # SuperLU: Pc[i, perm_c[i]] = 1: old column i is new column perm_c[i]
         self.order = np.argsort(perm)  # old index at each new position
         rp, cp = perm[rows], perm[cols]
         key = cp.astype(np.int64) * nf + rp
@@ -331,6 +333,13 @@ class _Pattern:
         vals = np.concatenate([He.ravel(), Hs.ravel()])[self.keep]
         data = np.bincount(self.pos, weights=vals, minlength=self.nnz)
         return sp.csc_matrix((data, self.indices, self.indptr), shape=(self.nf, self.nf))
+
+
+def _ordering(model, free):
+    """The model's fill-reducing ordering of the free coordinates (AMD of the node graph, each node's two
+    coordinates together: about 2.5x faster factorisations at 30k nodes than SuperLU's minimum degree on
+    the coordinates, with the same fill), or None for a model without one."""
+    return model.free_ordering(free) if hasattr(model, "free_ordering") else None
 
 
 def _newton_step(pat: _Pattern, He, Hs, g):
@@ -364,7 +373,7 @@ def projected_newton(model, p, x0, fixed, values, tol: float = 1e-8, max_iter: i
     key = fixed.tobytes()
     if key not in cache:
         cache.clear()  # one mask at a time: patterns are large
-        cache[key] = _Pattern(en, free)
+        cache[key] = _Pattern(en, free, _ordering(model, free))
     pat = cache[key]
     f = en.energy(x)
     status, success, it, scale = "max_iter", False, 0, None
@@ -416,7 +425,7 @@ def step_seconds(model, p, x, fixed, repeat: int = 5) -> float:
     fixed = np.asarray(fixed, dtype=bool)
     x = np.asarray(x, dtype=float).ravel()
     en = NewtonEnergy(model, p)
-    pat = _Pattern(en, ~fixed)
+    pat = _Pattern(en, ~fixed, _ordering(model, ~fixed))
     ts = []
     for _ in range(max(1, int(repeat))):
         t0 = time.perf_counter()
