@@ -10,6 +10,7 @@ import scipy.sparse.linalg as spla
 from ..body.mesh import Mesh
 from ..core.checks import positive_float
 from .backends import check_backend, interruptible, minimize
+from .blas import one_blas_thread
 from .drags import RigidDrag, drag_path
 from .result import EquilibriumResult
 from .stability import check_stability
@@ -156,7 +157,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
     stable (:func:`_settle`): a saddle is left along its negative curvature, or the solve fails. A SIGINT
     raises :class:`KeyboardInterrupt` (never a failed step)."""
     min_step = _check_min_step(min_step)
-    with interruptible():
+    with interruptible(), one_blas_thread():
         x = x_start.copy()
         s, ds = 0.0, 1.0
         steps, iters, t_solve, t_build = [], 0, 0.0, 0.0
@@ -301,7 +302,8 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
         status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
     chk = None
     if ok or "not a stable equilibrium" in status:  # the continuation's check (cached), or a fresh one
-        chk = _stability_at(model, p, xflat, fixed)
+        with one_blas_thread():
+            chk = _stability_at(model, p, xflat, fixed)
         if ok and not chk.stable:
             ok = False
             status = f"{status}; rejected: not a stable equilibrium ({chk.n_negative} negative, {chk.n_zero} " \

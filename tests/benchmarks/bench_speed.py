@@ -6,12 +6,12 @@ For each size (about 1k, 3k, 10k nodes; 30k with ``--big``) on a 4 x 1 strip (``
 * IPOPT (the default backend) on a fresh mesh object: model build, solve, iterations; then a repeated solve
   on the built model (new drags);
 * the ``newton`` backend (:mod:`mdsr_opt.newton`) on a fresh mesh object, same tolerance, through the same
-  ``solve_external`` pipeline (predictor, load steps, stability check; it also builds the CasADi model,
-  which the Newton iterations do not use): its wall time, its solver time alone, and the ratio
-  IPOPT fresh / newton fresh;
+  ``solve_external`` pipeline (predictor, load steps, stability check): its wall time, its solver time
+  alone, and the ratio IPOPT fresh / newton fresh;
 * the floor ``(iterations + 1) x (assembly + factorisation)``: the time of one vectorised assembly of the
-  gradient and Hessian plus one sparse factorisation with a reused ordering, at the solution, times IPOPT's
-  iterations plus one; and the multiples of the floor of the fresh and the repeated solve;
+  gradient and Hessian plus one sparse factorisation (and solve) with the mesh's reused ordering, at the
+  solution, with one BLAS thread as the solves run (:func:`mdsr_opt.mechanics.newton.step_seconds`), times
+  IPOPT's iterations plus one; and the multiples of the floor of the fresh and the repeated solve;
 * peak memory (unless ``--no-memory``): each backend's fresh solve runs alone in a new Python process,
   which reports its resident set after the imports and the mesh, and its peak during the solve. The
   whole process is measured, not ``tracemalloc``: that sees only allocations through Python's allocator
