@@ -165,3 +165,37 @@ def test_term_families_reproduce_energy_gradient_and_hessian(small):
     # the spring datum read from p is (k, r) on every edge; the cable's is (K, R)
     assert np.array_equal(np.asarray(fams[1].data_index[1]).ravel(), 2 + np.arange(model.n_edges))
     assert [float(v) for v in fams[2].inputs(ca.DM(p))[:2]] == [3.0, 0.4]
+
+
+@pytest.mark.parametrize("mat", [NeoHookean(E=2.0, nu=0.3, thickness=0.7), LinearElastic(E=1.5, nu=0.25)])
+def test_numeric_evaluation_matches_the_symbolic_model(small, mat):
+    # energy, gradient and Hessian come from vectorised numpy (model.is_numeric); the CasADi graph, built
+    # on first use of grad_fn / hess_fn, must give the same numbers, springs included
+    from mdsr_opt.mechanics.model import EnergyModel
+
+    model = EnergyModel(small, mat)
+    assert model.is_numeric and "_graph_fns" not in model.__dict__
+    x = _perturbed(small, seed=3).reshape(-1)
+    k = np.where(np.arange(model.n_edges) % 3 == 0, 2.5, 0.0)
+    r = np.linspace(0.8, 1.1, model.n_edges)
+    p = model.params(mat, springs=(k, r))
+    E_num, g_num, H_num = model.energy(x, p), model.gradient(x, p), model.hessian(x, p)
+    assert "_graph_fns" not in model.__dict__  # nothing symbolic built so far
+    f, g = model.grad_fn(x, p)
+    Hs = model.hess_fn(x, p)
+    assert E_num == pytest.approx(float(f), rel=1e-13)
+    np.testing.assert_allclose(g_num, np.asarray(g).ravel(), rtol=0, atol=1e-13 * np.abs(g_num).max())
+    up = np.asarray(ca.DM(Hs).full())
+    full = np.triu(up) + np.triu(up, 1).T
+    np.testing.assert_allclose(H_num.toarray(), full, rtol=0, atol=1e-12 * np.abs(full).max())
+    # the upper-triangle pattern IPOPT is given is the symbolic model's
+    assert model.hessian_pattern.sparsity_upper() == model.hess_sparsity
+
+
+def test_numeric_energy_at_rest_is_round_off_squared(small):
+    model = get_model(small, NeoHookean(E=1.0, nu=0.3))
+    p = model.params(NeoHookean(E=1.0, nu=0.3))
+    assert abs(model.energy(small.points + 1e-17, p)) < 1e-28
+    x = small.points.copy()
+    x[0] = x[1]  # a collapsed triangle: no finite energy
+    assert not np.isfinite(model.energy(x, p))

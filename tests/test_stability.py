@@ -223,3 +223,30 @@ def test_finsler_penalty_below_threshold_is_not_mistaken_for_a_saddle():
     c2 = check_stability(H2, np.ones(3, bool), A)
     assert not c2.stable and c2.n_negative == 1 and c2.curvature == pytest.approx(-eps)
     assert abs(c2.direction[1]) < 1e-12
+
+
+def test_given_ordering_gives_the_same_answer_and_direction():
+    # the mesh's fill-reducing ordering (EnergyModel.free_ordering) replaces SuperLU's own: the same inertia;
+    # the direction (mapped back to the original coordinates) is refined from other pivots, so it is close
+    # to, not equal to, the one without the ordering: both near the lowest mode
+    mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
+    mat = NeoHookean(1.0, 0.3)
+    P = mesh.points
+    fixed_nodes = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 10.0))
+    free = np.ones(2 * mesh.n_nodes, bool)
+    free[2 * fixed_nodes] = free[2 * fixed_nodes + 1] = False
+    model = get_model(mesh, mat)
+    order = model.free_ordering(free)
+    assert np.array_equal(np.sort(order), np.arange(free.sum())) and not np.array_equal(order, np.sort(order))
+    x = P.copy()
+    x[:, 0] *= 0.8  # a saddle
+    H = model.hessian(x.reshape(-1), model.params(mat))
+    a, b = check_stability(H, free), check_stability(H, free, order=order)
+    assert (a.stable, a.n_negative, a.n_zero) == (b.stable, b.n_negative, b.n_zero) == (False, a.n_negative, 0)
+    ev = np.linalg.eigvalsh(H[free][:, free].toarray())
+    assert b.curvature == pytest.approx(ev[0], rel=0.05) and a.curvature == pytest.approx(ev[0], rel=0.05)
+    v = b.direction
+    assert float(v @ (H @ v)) == pytest.approx(b.curvature, rel=1e-9) and b.curvature < 0
+    assert np.all(b.direction[~free] == 0.0)
+    with pytest.raises(ValueError, match="order must be a permutation"):
+        check_stability(H, free, order=order[:-1])

@@ -128,10 +128,12 @@ class Mesh:
     @cached_property
     def edges(self) -> np.ndarray:
         """Unique undirected edges (k, 2) with ``i < j``, sorted lexicographically."""
-        t = self._triangles
-        e = np.vstack([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-        e = np.sort(e, axis=1)
-        e = np.unique(e, axis=0)
+        t = self._triangles.astype(np.int64)
+        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
+        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
+        n = np.int64(max(len(self._points), 1))
+        key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))  # one integer per edge: sorts like (i, j)
+        e = np.stack([key // n, key % n], axis=1).astype(self._triangles.dtype)
         e.setflags(write=False)
         return e
 

@@ -91,9 +91,19 @@ class MinimizeOutcome:
 
 def _casadi_factory(plugin: str, opts: dict):
     def factory(model):
-        nlp = {"x": model.x, "p": model.p, "f": model.f_fn(model.x, model.p)}
         o = dict(opts)
         o["show_eval_warnings"] = False  # NaN from log J in a trial step is expected; IPOPT cuts the step
+        if plugin == "ipopt" and getattr(model, "is_numeric", False):
+            # energy, gradient and Hessian in vectorised numpy through callbacks: no symbolic graph to build
+            from .assembly import ipopt_functions
+
+            fns = ipopt_functions(model)
+            x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
+            o["grad_f"], o["hess_lag"] = fns["grad_f"], fns["hess_lag"]
+            o["no_nlp_grad"] = True  # only for multipliers of bounds and parameters, which are not used
+            return ca.nlpsol(f"equilibrium_{plugin.replace('-', '_')}", plugin,
+                             {"x": x, "p": p, "f": fns["f"](x, p)}, o)
+        nlp = {"x": model.x, "p": model.p, "f": model.f_fn(model.x, model.p)}
         if plugin == "ipopt":
             o["hess_lag"] = model.hess_lag_fn
             o["grad_f"] = model.grad_fn

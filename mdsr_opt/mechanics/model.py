@@ -1,4 +1,4 @@
-"""Symbolic energies of a mesh, built once per topology and reused for every scene.
+"""Energies of a mesh, made once per topology and reused for every scene.
 
 The total energy is
 
@@ -9,10 +9,20 @@ only in numbers: fixed nodes become equal bounds (IPOPT turns them into paramete
 stiffness ``k`` and rest-length factor ``r`` are parameters (zero stiffness where no muscle runs), and
 sliding cables carry their stiffness and target length as parameters.
 
-Derivatives: each term is one small SX function of a few nodes (a triangle, an edge, a cable) whose
-gradient and Hessian CasADi differentiates symbolically; ``Function.map`` evaluates them over all terms
-and constant sparse matrices scatter them into the global gradient and the upper triangle of the global
-Hessian. Building is linear in the mesh size and needs no symbolic differentiation of the global graph.
+Two evaluations of the same energy:
+
+* numeric (models without sliding cables, Neo-Hookean or linear material: :attr:`EnergyModel.is_numeric`):
+  :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and :meth:`~EnergyModel.hessian` in vectorised
+  numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`, scattered by
+  :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
+  (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`). Making the model costs a few array operations.
+* symbolic (``x``, ``p``, ``f_fn``, ``grad_fn``, ``hess_fn``, ``hess_lag_fn``, ``hess_lag_full_fn``: for
+  the design NLP, the constrained models, the other backends, and every model the numeric path does not
+  cover), built on first use: each term is one small SX function of a few nodes (a triangle, an edge, a
+  cable) whose gradient and Hessian CasADi differentiates symbolically; ``Function.map`` evaluates them
+  over all terms and constant sparse matrices scatter them into the global gradient and the upper
+  triangle of the global Hessian. Building is linear in the mesh size and needs no symbolic
+  differentiation of the global graph, but costs several solves on small meshes.
 
 Example
 -------
@@ -133,7 +143,8 @@ class TermFamily:
 
 
 class EnergyModel:
-    """Energy, gradient and Hessian of one mesh topology as CasADi Functions.
+    """Energy, gradient and Hessian of one mesh topology: numeric methods and (built on first use) CasADi
+    Functions; see the module docstring.
 
     Parameters
     ----------
@@ -148,117 +159,92 @@ class EnergyModel:
 
     Parameter vector ``p`` = ``[material params (2), k (n_edges), r (n_edges), K (n_cables),
     R (n_cables)]``; see :meth:`params`.
+
+    ``build_time`` counts the numeric set-up, plus the symbolic graph's build once something uses it.
     """
 
     def __init__(self, mesh, material, cables=(), expand: bool = False):
         t0 = time.perf_counter()
         self.mesh = mesh
         self.material_kind = material.kind
+        self._psi_expr = material.psi_expr
+        self._expand = bool(expand)
         self.cables = tuple(tuple(int(v) for v in c) for c in cables)
         n, m = mesh.n_nodes, mesh.n_triangles
         E = mesh.edges
         self.n_dof = 2 * n
         self.n_edges = len(E)
-        nc = len(self.cables)
-        self.n_params = 2 + 2 * self.n_edges + 2 * nc
-        self.x = ca.MX.sym("x", 2 * n)
-        self.p = ca.MX.sym("p", self.n_params)
-        mat = self.p[0:2]
-        k_e = self.p[2:2 + self.n_edges]
-        r_e = self.p[2 + self.n_edges:2 + 2 * self.n_edges]
-        K_c = self.p[2 + 2 * self.n_edges:2 + 2 * self.n_edges + nc]
-        R_c = self.p[2 + 2 * self.n_edges + nc:]
-
+        self.n_params = 2 + 2 * self.n_edges + 2 * len(self.cables)
         tri = mesh.triangles
-        elem_dofs = np.stack([2 * tri, 2 * tri + 1], axis=2).reshape(m, 6)
+        self.elem_dofs = np.stack([2 * tri, 2 * tri + 1], axis=2).reshape(m, 6)
+        self.edge_dofs = np.stack([2 * E, 2 * E + 1], axis=2).reshape(len(E), 4)
         elem_data = np.column_stack([np.transpose(mesh.Dm_inv, (0, 2, 1)).reshape(m, 4), mesh.areas])
-        edge_dofs = np.stack([2 * E, 2 * E + 1], axis=2).reshape(len(E), 4)
-        self.elem_dofs = elem_dofs
-        self.edge_dofs = edge_dofs
-
-        # family: (dofs, W/WG/H functions, list of data rows (each nd_i x N), global params)
-        fam = []
-        eW, eWG, eH = _make_term("elem", 6, [4, 1], 2, _element_energy(material.psi_expr))
-        self.element_functions = (eW, eWG, eH)
         self._elem_data = [elem_data[:, :4].T.copy(), elem_data[:, 4:].T.copy()]
-        fam.append((elem_dofs, eW, eWG, eH, [ca.DM(v) for v in self._elem_data], mat))
-        sW, sWG, sH = _make_term("spring", 4, [1, 1, 1], 0, _spring_energy)
-        self.spring_functions = (sW, sWG, sH)
-        fam.append((edge_dofs, sW, sWG, sH, [ca.DM(mesh.edge_lengths).T, k_e.T, r_e.T], ca.MX(0, 1)))
-        for c, path in enumerate(self.cables):
-            v = np.asarray(path)
-            d = 2 * len(v)
-
-            def cable_energy(xl, dl, _g, k=len(v)):
-                K, R = dl
-                L = 0
-                for i in range(k - 1):
-                    L += ca.sqrt(ca.sumsqr(xl[2 * i + 2:2 * i + 4] - xl[2 * i:2 * i + 2]))
-                return K / 2 * (L - R) ** 2
-
-            cW, cWG, cH = _make_term(f"cable{c}", d, [1, 1], 0, cable_energy)
-            dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, d)
-            fam.append((dofs, cW, cWG, cH, [K_c[c], R_c[c]], ca.MX(0, 1)))
-
-        # the cables' term functions, for :meth:`term_families`
-        self.cable_functions = tuple(f[1:4] for f in fam[2:])
-
-        # global Hessian sparsity (upper triangle) from all families
-        rows, cols, srcs = [], [], []
-        for fi, (dofs, *_r) in enumerate(fam):
-            N, d = dofs.shape
-            rr = np.broadcast_to(dofs[:, None, :], (N, d, d)).reshape(-1)  # vec(H) col-major: entry (i, j)
-            cc = np.broadcast_to(dofs[:, :, None], (N, d, d)).reshape(-1)  # at j*d + i -> row dofs[i]
-            keep = rr <= cc
-            rows.append(rr[keep])
-            cols.append(cc[keep])
-            srcs.append(np.nonzero(keep)[0])
-        allr, allc = np.concatenate(rows), np.concatenate(cols)
-        pattern = sp.csc_matrix((np.ones(len(allr)), (allr, allc)), shape=(2 * n, 2 * n))
-        pattern.sum_duplicates()
-        pattern.sort_indices()
-        nnz = pattern.nnz
-        self.hess_sparsity = ca.Sparsity(2 * n, 2 * n, pattern.indptr.tolist(), pattern.indices.tolist())
-        # CSC position lookup: key = col * 2n + row
-        col_of_nz = np.repeat(np.arange(2 * n), np.diff(pattern.indptr))
-        keys = col_of_nz.astype(np.int64) * (2 * n) + pattern.indices
-        order = np.argsort(keys)
-
-        W_tot, G_tot, H_tot = 0, 0, 0
-        W_only = 0
-        for fi, (dofs, W, WG, H, data, glob) in enumerate(fam):
-            N, d = dofs.shape
-            X = ca.reshape(self.x[dofs.reshape(-1).tolist()], d, N)
-            Wm, WGm, Hm = (f.map(N, "serial") for f in (W, WG, H))
-            W_only += ca.sum2(Wm(X, *data, glob))
-            w, g = WGm(X, *data, glob)
-            W_tot += ca.sum2(w)
-            Sg = sp.csr_matrix((np.ones(N * d), (dofs.reshape(-1), np.arange(N * d))), shape=(2 * n, N * d))
-            G_tot += ca.mtimes(to_dm(Sg), ca.vec(g))
-            k = np.searchsorted(keys[order], cols[fi].astype(np.int64) * (2 * n) + rows[fi])
-            nzpos = order[k]
-            Sh = sp.csr_matrix((np.ones(len(nzpos)), (nzpos, srcs[fi])), shape=(nnz, N * d * d))
-            H_tot += ca.mtimes(to_dm(Sh), ca.vec(Hm(X, *data, glob)))
-        Hmx = ca.MX(self.hess_sparsity, H_tot)
-        lam_f = ca.MX.sym("lam_f")
-        lam_g = ca.MX.sym("lam_g", 0)
-        self.f_fn = ca.Function("energy", [self.x, self.p], [W_only], ["x", "p"], ["f"])
-        self.grad_fn = ca.Function("grad_f", [self.x, self.p], [W_tot, G_tot], ["x", "p"], ["f", "grad"])
-        self.hess_fn = ca.Function("energy_hess", [self.x, self.p], [Hmx], ["x", "p"], ["H"])
-        self.hess_lag_fn = ca.Function("hess_lag", [self.x, self.p, lam_f, lam_g], [lam_f * Hmx],
-                                       ["x", "p", "lam_f", "lam_g"], ["hess"])
-        # full symmetric version for solvers that require it (sqpmethod)
-        Hfull = Hmx + ca.triu(Hmx, False).T
-        self.hess_lag_full_fn = ca.Function("hess_lag_full", [self.x, self.p, lam_f, lam_g], [lam_f * Hfull],
-                                            ["x", "p", "lam_f", "lam_g"], ["hess"])
-        if expand:
-            self.hess_lag_full_fn = self.hess_lag_full_fn.expand()
-            self.f_fn = self.f_fn.expand()
-            self.grad_fn = self.grad_fn.expand()
-            self.hess_fn = self.hess_fn.expand()
-            self.hess_lag_fn = self.hess_lag_fn.expand()
+        #: energy, gradient and Hessian evaluate in vectorised numpy (no symbolic graph needed)
+        self.is_numeric = not self.cables and self.material_kind in ("neo-hookean", "linear")
         self._solvers: dict = {}
         self.build_time = time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ symbolic model, built on first use
+    def _terms(self) -> dict:
+        """The per-term SX functions (cheap: a few small functions)."""
+        t = self.__dict__.get("_term_fns")
+        if t is None:
+            t = {"elem": _make_term("elem", 6, [4, 1], 2, _element_energy(self._psi_expr)),
+                 "spring": _make_term("spring", 4, [1, 1, 1], 0, _spring_energy)}
+            for c, path in enumerate(self.cables):
+                def cable_energy(xl, dl, _g, k=len(path)):
+                    K, R = dl
+                    L = 0
+                    for i in range(k - 1):
+                        L += ca.sqrt(ca.sumsqr(xl[2 * i + 2:2 * i + 4] - xl[2 * i:2 * i + 2]))
+                    return K / 2 * (L - R) ** 2
+
+                t[f"cable{c}"] = _make_term(f"cable{c}", 2 * len(path), [1, 1], 0, cable_energy)
+            self.__dict__["_term_fns"] = t
+        return t
+
+    @property
+    def element_functions(self):
+        """``(W, WG, H)`` SX functions of one triangle."""
+        return self._terms()["elem"]
+
+    @property
+    def spring_functions(self):
+        """``(W, WG, H)`` SX functions of one edge spring."""
+        return self._terms()["spring"]
+
+    @property
+    def cable_functions(self):
+        """Per cable, its ``(W, WG, H)`` SX functions."""
+        return tuple(self._terms()[f"cable{c}"] for c in range(len(self.cables)))
+
+    def _graph(self) -> dict:
+        """The symbolic model over the whole mesh (MX): built on the first use of ``x``, ``p``, ``f_fn``,
+        ``grad_fn``, ``hess_fn``, ``hess_lag_fn`` or ``hess_lag_full_fn``, and its time added to
+        ``build_time``."""
+        g = self.__dict__.get("_graph_fns")
+        if g is None:
+            t0 = time.perf_counter()
+            g = _build_graph(self)
+            self.__dict__["_graph_fns"] = g
+            self.build_time += time.perf_counter() - t0
+        return g
+
+    x = property(lambda self: self._graph()["x"], doc="MX symbol of the coordinates (2n).")
+    p = property(lambda self: self._graph()["p"], doc="MX symbol of the parameters.")
+    f_fn = property(lambda self: self._graph()["f_fn"], doc="CasADi Function ``(x, p) -> energy``.")
+    grad_fn = property(lambda self: self._graph()["grad_fn"], doc="``(x, p) -> (energy, gradient)``.")
+    hess_fn = property(lambda self: self._graph()["hess_fn"], doc="``(x, p) -> upper Hessian``.")
+    hess_lag_fn = property(lambda self: self._graph()["hess_lag_fn"],
+                           doc="``(x, p, lam_f, lam_g) -> lam_f * upper Hessian``.")
+    hess_lag_full_fn = property(lambda self: self._graph()["hess_lag_full_fn"],
+                                doc="``(x, p, lam_f, lam_g) -> lam_f * Hessian`` (full symmetric).")
+
+    @property
+    def hess_sparsity(self) -> ca.Sparsity:
+        """Sparsity of the upper triangle of the Hessian."""
+        return self._graph()["hess_sparsity"]
 
     # ------------------------------------------------------------------ parameters
     def params(self, material, springs: tuple[np.ndarray, np.ndarray] | None = None,
@@ -281,14 +267,89 @@ class EnergyModel:
         return p
 
     # ------------------------------------------------------------------ numeric evaluation
+    def numeric(self, p):
+        """The vectorised numpy energy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`) at parameters ``p``
+        (the last one is kept). Only for models with :attr:`is_numeric`."""
+        from .newton import NewtonEnergy
+
+        p = np.asarray(p, dtype=float).ravel()
+        cached = self.__dict__.get("_numeric")
+        if cached is not None and np.array_equal(cached[0], p):
+            return cached[1]
+        en = NewtonEnergy(self, p, geometry=cached[1] if cached is not None else None)
+        self.__dict__["_numeric"] = (p.copy(), en)
+        return en
+
+    @property
+    def hessian_pattern(self):
+        """:class:`~mdsr_opt.mechanics.assembly.HessianPattern` of the mesh, with where each element and edge
+        block entry lands (made on first use)."""
+        pat = self.__dict__.get("_hessian_pattern")
+        if pat is None:
+            from .assembly import HessianPattern
+
+            pat = HessianPattern(self.mesh.n_nodes, self.mesh.edges)
+            # in the (d, d, N) layout of NewtonEnergy's blocks
+            pat.elem_pos = pat.positions(self.mesh.triangles).reshape(-1)
+            pat.edge_pos = pat.positions(self.mesh.edges).reshape(16, -1)
+            self.__dict__["_hessian_pattern"] = pat
+        return pat
+
+    def hessian_data(self, x, p) -> np.ndarray:
+        """The values of the full symmetric Hessian in the CSC order of :attr:`hessian_pattern` (numeric
+        models only)."""
+        en = self.numeric(p)
+        pat = self.hessian_pattern
+        He, Hs = en.hessian_blocks(np.asarray(x, dtype=float).reshape(-1))
+        data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
+        if len(Hs):
+            data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
+        return data
+
+    def free_ordering(self, free) -> np.ndarray:
+        """A fill-reducing ordering of the free coordinates (indices into them, ``free`` a mask over 2n):
+        approximate minimum degree of the node graph (CasADi's ``Sparsity.amd``, made once per mesh), each
+        node's two coordinates together. A sparse factorisation in this order (SuperLU ``NATURAL``) has the
+        fill of SuperLU's own minimum degree ordering without its cost (about 60 % of a factorisation at
+        30k nodes)."""
+        free = np.asarray(free, dtype=bool)
+        cache = self.__dict__.setdefault("_free_orderings", {})
+        key = free.tobytes()
+        if key not in cache:
+            node_order = self.__dict__.get("_node_order")
+            if node_order is None:
+                pat = self.hessian_pattern
+                n = self.mesh.n_nodes
+                S = ca.Sparsity(n, n, pat.node_colptr.tolist(), pat.node_rows.tolist())
+                node_order = self.__dict__["_node_order"] = np.asarray(S.amd(), dtype=np.int64)
+            dof = np.stack([2 * node_order, 2 * node_order + 1], axis=1).ravel()
+            newidx = np.full(self.n_dof, -1, dtype=np.int64)
+            newidx[free] = np.arange(int(free.sum()))
+            o = newidx[dof]
+            if len(cache) >= 8:
+                cache.pop(next(iter(cache)))
+            cache[key] = o[o >= 0]
+        return cache[key]
+
     def energy(self, x, p) -> float:
+        """The energy at ``x`` (non-finite where a Neo-Hookean triangle is inverted)."""
+        if self.is_numeric:
+            with np.errstate(all="ignore"):
+                return float(self.numeric(p).energy(np.asarray(x, float).reshape(-1)))
         return float(self.f_fn(np.asarray(x, float).reshape(-1), p))
 
     def gradient(self, x, p) -> np.ndarray:
+        """The energy gradient (2n,) at ``x``."""
+        if self.is_numeric:
+            with np.errstate(all="ignore"):
+                return self.numeric(p).gradient(np.asarray(x, float).reshape(-1))
         return np.asarray(self.grad_fn(np.asarray(x, float).reshape(-1), p)[1]).ravel()
 
     def hessian(self, x, p) -> sp.csc_matrix:
         """The full symmetric Hessian as a scipy CSC matrix."""
+        if self.is_numeric:
+            with np.errstate(all="ignore"):
+                return self.hessian_pattern.matrix(self.hessian_data(x, p))
         v = np.asarray(self.hess_fn(np.asarray(x, float).reshape(-1), p).nonzeros())
         if not hasattr(self, "_full_pattern"):
             self._full_pattern = _symmetric_pattern(self.hess_sparsity)
@@ -339,6 +400,83 @@ class EnergyModel:
         s = factory(self)
         self._solvers[key] = s
         return s, time.perf_counter() - t0
+
+
+def _build_graph(model) -> dict:
+    """The MX model of the whole mesh: each term family's SX functions mapped over its instances and
+    scattered by constant sparse matrices into the global gradient and the upper triangle of the Hessian."""
+    mesh = model.mesh
+    n = mesh.n_nodes
+    ne, nc = model.n_edges, len(model.cables)
+    x = ca.MX.sym("x", 2 * n)
+    p = ca.MX.sym("p", model.n_params)
+    mat = p[0:2]
+    k_e = p[2:2 + ne]
+    r_e = p[2 + ne:2 + 2 * ne]
+    K_c = p[2 + 2 * ne:2 + 2 * ne + nc]
+    R_c = p[2 + 2 * ne + nc:]
+    terms = model._terms()
+    # family: (dofs, W/WG/H functions, list of data rows (each nd_i x N), global params)
+    fam = [(model.elem_dofs, *terms["elem"], [ca.DM(v) for v in model._elem_data], mat),
+           (model.edge_dofs, *terms["spring"], [ca.DM(mesh.edge_lengths).T, k_e.T, r_e.T], ca.MX(0, 1))]
+    for c, path in enumerate(model.cables):
+        v = np.asarray(path)
+        dofs = np.stack([2 * v, 2 * v + 1], axis=1).reshape(1, 2 * len(v))
+        fam.append((dofs, *terms[f"cable{c}"], [K_c[c], R_c[c]], ca.MX(0, 1)))
+
+    # global Hessian sparsity (upper triangle) from all families
+    rows, cols, srcs = [], [], []
+    for dofs, *_r in fam:
+        N, d = dofs.shape
+        rr = np.broadcast_to(dofs[:, None, :], (N, d, d)).reshape(-1)  # vec(H) col-major: entry (i, j)
+        cc = np.broadcast_to(dofs[:, :, None], (N, d, d)).reshape(-1)  # at j*d + i -> row dofs[i]
+        keep = rr <= cc
+        rows.append(rr[keep])
+        cols.append(cc[keep])
+        srcs.append(np.nonzero(keep)[0])
+    allr, allc = np.concatenate(rows), np.concatenate(cols)
+    pattern = sp.csc_matrix((np.ones(len(allr)), (allr, allc)), shape=(2 * n, 2 * n))
+    pattern.sum_duplicates()
+    pattern.sort_indices()
+    nnz = pattern.nnz
+    hess_sparsity = ca.Sparsity(2 * n, 2 * n, pattern.indptr.tolist(), pattern.indices.tolist())
+    # CSC position lookup: key = col * 2n + row
+    col_of_nz = np.repeat(np.arange(2 * n), np.diff(pattern.indptr))
+    keys = col_of_nz.astype(np.int64) * (2 * n) + pattern.indices
+    order = np.argsort(keys)
+
+    W_tot, G_tot, H_tot = 0, 0, 0
+    W_only = 0
+    for fi, (dofs, W, WG, H, data, glob) in enumerate(fam):
+        N, d = dofs.shape
+        X = ca.reshape(x[dofs.reshape(-1).tolist()], d, N)
+        Wm, WGm, Hm = (f.map(N, "serial") for f in (W, WG, H))
+        W_only += ca.sum2(Wm(X, *data, glob))
+        w, g = WGm(X, *data, glob)
+        W_tot += ca.sum2(w)
+        Sg = sp.csr_matrix((np.ones(N * d), (dofs.reshape(-1), np.arange(N * d))), shape=(2 * n, N * d))
+        G_tot += ca.mtimes(to_dm(Sg), ca.vec(g))
+        k = np.searchsorted(keys[order], cols[fi].astype(np.int64) * (2 * n) + rows[fi])
+        nzpos = order[k]
+        Sh = sp.csr_matrix((np.ones(len(nzpos)), (nzpos, srcs[fi])), shape=(nnz, N * d * d))
+        H_tot += ca.mtimes(to_dm(Sh), ca.vec(Hm(X, *data, glob)))
+    Hmx = ca.MX(hess_sparsity, H_tot)
+    lam_f = ca.MX.sym("lam_f")
+    lam_g = ca.MX.sym("lam_g", 0)
+    out = {"x": x, "p": p, "hess_sparsity": hess_sparsity,
+           "f_fn": ca.Function("energy", [x, p], [W_only], ["x", "p"], ["f"]),
+           "grad_fn": ca.Function("grad_f", [x, p], [W_tot, G_tot], ["x", "p"], ["f", "grad"]),
+           "hess_fn": ca.Function("energy_hess", [x, p], [Hmx], ["x", "p"], ["H"]),
+           "hess_lag_fn": ca.Function("hess_lag", [x, p, lam_f, lam_g], [lam_f * Hmx],
+                                      ["x", "p", "lam_f", "lam_g"], ["hess"])}
+    # full symmetric version for solvers that require it (sqpmethod)
+    Hfull = Hmx + ca.triu(Hmx, False).T
+    out["hess_lag_full_fn"] = ca.Function("hess_lag_full", [x, p, lam_f, lam_g], [lam_f * Hfull],
+                                          ["x", "p", "lam_f", "lam_g"], ["hess"])
+    if model._expand:
+        for key in ("f_fn", "grad_fn", "hess_fn", "hess_lag_fn", "hess_lag_full_fn"):
+            out[key] = out[key].expand()
+    return out
 
 
 def _symmetric_pattern(upper: ca.Sparsity):

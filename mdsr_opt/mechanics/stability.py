@@ -83,8 +83,8 @@ class StabilityCheck:
 class _Factor:
     """``P M P' = L D L'`` of a sparse symmetric matrix by SuperLU with symmetric diagonal pivoting."""
 
-    def __init__(self, M: sp.csc_matrix):
-        self.lu = spla.splu(M, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+    def __init__(self, M: sp.csc_matrix, ordered: bool = False):
+        self.lu = spla.splu(M, permc_spec="NATURAL" if ordered else "MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                             options={"SymmetricMode": True})
         self.symmetric = bool(np.array_equal(self.lu.perm_r, self.lu.perm_c))
         self.d = self.lu.U.diagonal()
@@ -152,19 +152,20 @@ def _inertia(fac: _Factor, rtol: float, scale: float) -> tuple[int, int]:
     return int(((d < 0) & ~zero).sum()), int(zero.sum())
 
 
-def _factor_inertia(M, rtol: float, scale: float):
+def _factor_inertia(M, rtol: float, scale: float, ordered: bool = False):
     """``(factor, (negative, zero), shifted)``. When the factorisation breaks down (exactly singular, or
     SuperLU pivoted off the diagonal) the inertia of ``M + tau I`` and ``M - tau I`` brackets the zero
-    eigenvalues (``shifted=True``, the factor of the lower one returned when it has a negative pivot)."""
+    eigenvalues (``shifted=True``, the factor of the lower one returned when it has a negative pivot).
+    ``ordered``: ``M`` is in a fill-reducing order already (no ordering of SuperLU's own)."""
     try:
-        fac = _Factor(M)
+        fac = _Factor(M, ordered)
         if fac.symmetric and np.all(np.isfinite(fac.d)):
             return fac, _inertia(fac, rtol, scale), False
     except RuntimeError:
         pass
     tau = max(rtol, 1e-12) * scale
     I = sp.identity(M.shape[0], format="csc")
-    lo, hi = _Factor((M + tau * I).tocsc()), _Factor((M - tau * I).tocsc())
+    lo, hi = _Factor((M + tau * I).tocsc(), ordered), _Factor((M - tau * I).tocsc(), ordered)
     n_neg = int((lo.d < 0).sum())
     n_zero = max(int((hi.d < 0).sum()) - n_neg, 0)
     return (lo if n_neg else hi), (n_neg, n_zero), True
@@ -182,7 +183,8 @@ def _rayleigh(M, v) -> float:
     return float(v @ (M @ v)) / vv if vv > 0 else 0.0
 
 
-def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> tuple[np.ndarray, "_Factor | None"]:
+def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6,
+            ordered: bool = False) -> tuple[np.ndarray, "_Factor | None"]:
     """Shifted inverse iteration from ``v`` towards the lowest mode of ``M``.
 
     The shift ``sigma`` is pushed below the lowest eigenvalue, which the inertia of ``M - sigma I`` certifies
@@ -196,7 +198,7 @@ def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> tuple[np.ndarray
 
     def below(sigma):  # the factor of M - sigma I when sigma is below every eigenvalue, else None
         try:
-            f = _Factor((M - sigma * I).tocsc())
+            f = _Factor((M - sigma * I).tocsc(), ordered)
         except RuntimeError:  # sigma is an eigenvalue
             return None
         return f if f.symmetric and not (f.d < 0).any() else None
@@ -230,7 +232,7 @@ def _refine(M: sp.csc_matrix, v: np.ndarray, steps: int = 6) -> tuple[np.ndarray
 
 
 def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = True,
-                    lowest: bool = False) -> StabilityCheck:
+                    lowest: bool = False, order=None) -> StabilityCheck:
     """Is ``H`` positive definite on the free coordinates (and the tangent space of active constraints)?
 
     Parameters
@@ -254,6 +256,10 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
         already made (of the matrix, or of the matrix shifted below its lowest eigenvalue), so a few
         iterations; below 100 free coordinates a dense solve of the small matrix. Off by default: the
         solvers only need the inertia.
+    order : int array, optional
+        A fill-reducing ordering of the free coordinates (a permutation of ``0 .. n_free - 1``, e.g.
+        :meth:`~mdsr_opt.mechanics.model.EnergyModel.free_ordering`), used by the factorisations instead of
+        SuperLU's own minimum degree ordering when there are no constraints. Same answer, less time.
 
     Returns
     -------
@@ -275,6 +281,12 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     n = len(idx)
     if n == 0:
         return StabilityCheck(True, 0, 0, None, None, "ldl-inertia", time.perf_counter() - t0)
+    ordered = order is not None and A is None
+    if ordered:  # everything below works on the free coordinates in this order; vdir[idx] maps them back
+        order = np.asarray(order)
+        if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
+            raise ValueError(f"order must be a permutation of the {n} free coordinates")
+        idx = idx[order]
     H = sp.csc_matrix(H)
     Hff = H[idx][:, idx].tocsc()
     Hff = (0.5 * (Hff + Hff.T)).tocsc()
@@ -305,7 +317,7 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     best, pre = None, None
     for attempt in range(1 if Af is None else 3):
         M = Hff if Af is None else (Hff + rho * AtA).tocsc()
-        fac, (n_neg, n_zero), shifted = _factor_inertia(M, rtol, h)
+        fac, (n_neg, n_zero), shifted = _factor_inertia(M, rtol, h, ordered)
         if shifted:
             method = "shifted-" + method.replace("shifted-", "")
         stable = n_neg == 0 and n_zero == 0
@@ -321,7 +333,7 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
             if r < mu:
                 best, mu = v, r
         if best is not None and n_neg:
-            refined, pre = _refine(M, best)
+            refined, pre = _refine(M, best, ordered=ordered)
             refined = _tangent(project, refined)
             if refined is not None and _rayleigh(Hff, refined) < mu:
                 best = refined
