@@ -6,7 +6,11 @@ CasADi solver happens once per model and backend; later solves reuse it.
 
 Backends
 --------
-``ipopt``         IPOPT, exact Hessian (scattered element Hessians), MUMPS. The default.
+``ipopt``         IPOPT, exact Hessian (scattered element Hessians), MUMPS. The default. Energy, gradient
+                  and Hessian are evaluated in vectorised numpy where the model allows it
+                  (:attr:`~mdsr_opt.mechanics.model.EnergyModel.is_numeric`), else symbolically.
+``ipopt-symbolic`` The same IPOPT problem with the energy's gradient and Hessian always from the symbolic
+                  CasADi model (the reference formulation; slower to build and to evaluate).
 ``ipopt-lbfgs``   IPOPT with a limited-memory quasi-Newton Hessian.
 ``sqpmethod``     CasADi's SQP method with the exact Hessian and the ``qrqp`` QP solver.
 ``uno``           The Uno solver shipped with the casadi wheel (exact Hessian derived by CasADi).
@@ -89,11 +93,11 @@ class MinimizeOutcome:
         return load_fields(cls, path, "minimize")
 
 
-def _casadi_factory(plugin: str, opts: dict):
+def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
     def factory(model):
         o = dict(opts)
         o["show_eval_warnings"] = False  # NaN from log J in a trial step is expected; IPOPT cuts the step
-        if plugin == "ipopt" and getattr(model, "is_numeric", False):
+        if plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False):
             # energy, gradient and Hessian in vectorised numpy through callbacks: no symbolic graph to build
             from .assembly import ipopt_functions
 
@@ -249,8 +253,9 @@ def interruptible():
         raise recorded()
 
 
-def _solve_casadi(plugin, opts, model, p, x0, fixed, values):
-    solver, build_time = model.solver(plugin, opts, _casadi_factory(plugin, opts))
+def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = False):
+    solver, build_time = model.solver(plugin + ("-symbolic" if symbolic else ""), opts,
+                                      _casadi_factory(plugin, opts, symbolic))
     lbx = np.full(model.n_dof, -np.inf)
     ubx = np.full(model.n_dof, np.inf)
     lbx[fixed] = values
@@ -315,6 +320,7 @@ def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
 BACKENDS = {
     "ipopt": "IPOPT, exact Hessian, MUMPS (default)",
     "ipopt-lbfgs": "IPOPT, limited-memory Hessian",
+    "ipopt-symbolic": "IPOPT, exact Hessian from the symbolic CasADi model (reference)",
     "sqpmethod": "CasADi sqpmethod (exact Hessian, qrqp)",
     "uno": "Uno through CasADi (exact Hessian)",
     "scipy": "scipy.optimize.minimize trust-constr with CasADi derivatives",
@@ -326,7 +332,7 @@ def available_backends() -> list[str]:
     """Names of the backends usable with this CasADi build."""
     out = []
     for name in BACKENDS:
-        plugin = {"ipopt-lbfgs": "ipopt"}.get(name, name)
+        plugin = {"ipopt-lbfgs": "ipopt", "ipopt-symbolic": "ipopt"}.get(name, name)
         if name in ("scipy", "newton") or ca.has_nlpsol(plugin):
             out.append(name)
     return out
@@ -458,7 +464,7 @@ def check_options(backend: str, options: Mapping | None) -> dict:
             if options:
                 raise ValueError(f"backend {backend!r} takes no options, got {', '.join(map(repr, options))}")
             return {}
-        plugin, verdict = {"ipopt-lbfgs": "ipopt"}.get(backend, backend), _casadi_verdict
+        plugin, verdict = {"ipopt-lbfgs": "ipopt", "ipopt-symbolic": "ipopt"}.get(backend, backend), _casadi_verdict
         method = plugin
     for name, value in options.items():
         key = (plugin, name, repr(value))
@@ -485,11 +491,11 @@ def _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options) -> M
     options = dict(options or {})
     if hasattr(model, "constraints"):
         return _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options)
-    if backend in ("ipopt", "ipopt-lbfgs"):
-        o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
+    if backend in ("ipopt", "ipopt-lbfgs", "ipopt-symbolic"):
+        o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")
         o.update(options)
-        return _solve_casadi("ipopt", o, model, p, x0, fixed, values)
+        return _solve_casadi("ipopt", o, model, p, x0, fixed, values, symbolic=backend == "ipopt-symbolic")
     if backend == "sqpmethod":
         o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
                                                 "error_on_fail": False},
@@ -506,8 +512,8 @@ def _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options) -> M
     return _solve_newton(model, p, x0, fixed, values, tol, max_iter)
 
 
-#: backends that accept constraints (exact cable, rigid anchor patches)
-CONSTRAINED_BACKENDS = ("ipopt", "ipopt-lbfgs", "sqpmethod", "uno")
+#: backends that accept constraints (exact cable, rigid anchor patches; constrained models are symbolic)
+CONSTRAINED_BACKENDS = ("ipopt", "ipopt-lbfgs", "ipopt-symbolic", "sqpmethod", "uno")
 
 
 def supports_constraints(backend: str) -> bool:
@@ -519,8 +525,8 @@ def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, o
     if not supports_constraints(backend):
         raise ValueError(f"backend {backend!r} cannot take constraints (exact cable ropes, rigid anchor "
                          f"patches); use one of {', '.join(CONSTRAINED_BACKENDS)}")
-    if backend in ("ipopt", "ipopt-lbfgs"):
-        o = _ipopt_opts(tol, max_iter if backend == "ipopt" else max(max_iter, 3000),
+    if backend in ("ipopt", "ipopt-lbfgs", "ipopt-symbolic"):
+        o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")
         o["calc_lam_p"] = False
         o.update(options)

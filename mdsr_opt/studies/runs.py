@@ -161,7 +161,7 @@ def _solve_equilibrium(setup: Setup, material, spec: RunSpec, tol: float):
     from ..mechanics.equilibrium import solve_external, solve_internal
 
     kw = dict(backend=spec.method, tol=tol, max_iter=spec.max_iter, **_guess_kwargs(setup, spec))
-    if spec.method in ("ipopt", "ipopt-lbfgs"):
+    if spec.method in ("ipopt", "ipopt-lbfgs", "ipopt-symbolic"):
         kw["options"] = {"ipopt.max_wall_time": float(spec.timeout)}
     if setup.mode == "external":
         return solve_external(setup.mesh, material, setup.anchors, setup.drags, **kw)

@@ -217,7 +217,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("speed", "speed against accuracy and scaling: stretch, 60 degree bend (at 90 degrees the 17k-node "
           "reference creases through itself) and contraction on meshes of about 100 to 4000 nodes against a "
           "17k-node reference, every backend and design method (slow ones capped)",
-          _QUICK_PROBLEMS, (100, 300, 1000, 4000), ("neo-hookean", "linear"), _ALL_BACKENDS + DESIGN_METHODS,
+          _QUICK_PROBLEMS, (100, 300, 1000, 4000), ("neo-hookean", "linear"),
+          _ALL_BACKENDS + ("ipopt-symbolic",) + DESIGN_METHODS,
           loads={"strip-bend": (60.0,)}, reference_resolution=16000, timeout=120.0,
           caps={"uno": 100, "ipopt-lbfgs": 300, "derivative-free": 1200, "nested": 1200, "flattened": 1200}),
     Study("stability", "where methods fail: drag size (stretch up to three widths, bends past 90 degrees), "
