@@ -276,8 +276,8 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
     from mdsr_opt.synthesis.verify import _in_gauge_frame
 
     res = design_contractions(mesh, MAT, muscles, target, verify=False)
-    v_design = verify_design(mesh, MAT, muscles, res, target)
-    v_rest = verify_design(mesh, MAT, muscles, res, target, start="rest")
+    v_design = verify_design(mesh, MAT, muscles, res, target, start="design")
+    v_rest = verify_design(mesh, MAT, muscles, res, target)  # the default: contracted from rest
     assert v_design.passed and v_rest.passed
     assert v_design.gap < 1e-9 * mesh.size and v_rest.gap < 1e-7 * mesh.size
     assert v_design.forward_difference == pytest.approx(v_rest.forward_difference, abs=1e-8 * mesh.size)
@@ -296,7 +296,7 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
     k = NY // 2 * (NX + 1) + NX // 2  # an interior node pushed through its neighbours
     folded.x[k] += [0.0, 0.6]
     assert mesh.jacobians(folded.x).min() < 0 and _in_gauge_frame(mesh, folded.x) is None
-    v = verify_design(mesh, MAT, muscles, folded, target)
+    v = verify_design(mesh, MAT, muscles, folded, target, start="design")
     assert v.forward_success and not v.passed and v.gap > v.gap_tol and not v.positive_definite
     assert "inverts an element" in v.message
 

@@ -29,7 +29,7 @@ class Verification:
         state is a strict minimum.
     gap : float
         Largest node distance between the design's state and the forward re-solve at the same contractions
-        (started from the design's state, or from rest with ``verify_design(start="rest")``), after rigidly
+        (started from rest, or from the design's state with ``verify_design(start="design")``), after rigidly
         aligning the two (a length).
     gap_tol : float
         The tolerance on ``gap`` (a length: ``gap_rtol * mesh.size``).
