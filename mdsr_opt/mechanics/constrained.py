@@ -17,7 +17,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .constraints import MuscleConstraints, body_size
+from .anchors import body_size
+from .constraints import MuscleConstraints
 
 __all__ = ["ConstrainedModel"]
 

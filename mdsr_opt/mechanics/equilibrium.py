@@ -14,7 +14,8 @@ from ..core.checks import as_index_array, positive_float
 from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
-from .constraints import MuscleConstraints, check_anchor_radius, rigid_groups, spring_segments, spring_stiffness
+from .anchors import check_anchor_radius, rigid_groups
+from .constraints import MuscleConstraints, spring_segments, spring_stiffness
 from .drags import drag_path
 from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result
 from .model import get_model, spring_parameters

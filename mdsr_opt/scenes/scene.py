@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, positive_int
-from ..mechanics.constraints import MAX_ANCHOR_FRACTION, body_size
+from ..mechanics.anchors import MAX_ANCHOR_FRACTION, body_size
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 

@@ -13,7 +13,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..mechanics.align import align
-from ..mechanics.constraints import check_anchor_radius
+from ..mechanics.anchors import check_anchor_radius
 from .nlp import run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, report_muscles

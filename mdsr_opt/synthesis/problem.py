@@ -12,7 +12,8 @@ import scipy.sparse.linalg as spla
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
-from ..mechanics.constraints import check_anchor_radius, muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
+from ..mechanics.anchors import check_anchor_radius
+from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
 from ..mechanics.equilibrium import gauge_coordinates, solve_internal
 from ..mechanics.loadsteps import check_mesh_material
 from ..mechanics.model import get_model

@@ -1,0 +1,204 @@
+"""Anchor patches: the rigid ends of a muscle, of a physical size.
+
+A rope that ends on one node pulls the body with a point force, under which a planar elastic body has no
+finite displacement: the end segments collapse further with every refinement. Each end is therefore anchored
+over a patch of physical size, the way a knot, bead or plate spreads the force: the body nodes within
+``radius`` of the end node at rest (and connected to it through such nodes) move rigidly with it. The radius
+defaults to :data:`ANCHOR_FRACTION` of the body's size (its diameter at rest, :func:`body_size`),
+:func:`default_anchor_radius`; it is never a number of nodes. A node equally far from both ends of one
+muscle, or nearer the other end, is left out of an end's patch, so the two patches of a muscle never
+overlap. Patches of *different* muscles that share a node are merged into one rigid group
+(:func:`rigid_groups`), which :class:`~mdsr_opt.mechanics.constraints.MuscleConstraints` keeps rigid.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh, Muscle
+>>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+>>> bottom = [i for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0]
+>>> (start, end), = anchor_patches(mesh, [Muscle(bottom)], radius=0.3)
+>>> sorted(start.tolist()), len(end)
+([0, 1, 17], 3)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..core.checks import positive_float
+from ..body.muscles import Muscle, check_muscles
+
+__all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius",
+           "anchor_radius_or_default", "valid_muscles", "anchor_patches", "rigid_groups"]
+
+#: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
+ANCHOR_FRACTION = 0.04
+
+
+def body_size(mesh) -> float:
+    """The body's diameter at rest: the largest distance between two of its nodes.
+
+    Unlike the bounding-box diagonal (``mesh.size``) it does not change when the body is rotated; for an
+    axis-aligned rectangle the two agree.
+    """
+    cache = mesh.__dict__
+    if "_diameter" not in cache:
+        P = mesh.points
+        try:
+            from scipy.spatial import ConvexHull
+
+            V = P[ConvexHull(P).vertices]
+        except Exception:  # degenerate hull (collinear points): every node
+            V = P
+        d = 0.0
+        for i0 in range(0, len(V), 1024):
+            d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))
+        cache["_diameter"] = d
+    return cache["_diameter"]
+
+
+def default_anchor_radius(mesh) -> float:
+    """The default anchor radius: :data:`ANCHOR_FRACTION` (0.04) times :func:`body_size`, in length units."""
+    return ANCHOR_FRACTION * body_size(mesh)
+
+
+def valid_muscles(mesh, muscles) -> list:
+    """:func:`~mdsr_opt.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
+    node chains checked on this mesh once is not walked edge by edge again (a design checks its muscles
+    through a dozen functions, ~1 ms each at 3k nodes)."""
+    seq = [muscles] if isinstance(muscles, Muscle) else muscles
+    if not isinstance(seq, (list, tuple)) or not seq or not all(isinstance(m, Muscle) for m in seq):
+        return check_muscles(mesh, muscles)
+    key = tuple(m.nodes for m in seq)
+    checked = mesh.__dict__.setdefault("_checked_muscle_chains", set())
+    if key not in checked:
+        out = check_muscles(mesh, seq)
+        if len(checked) >= 64:
+            checked.clear()
+        checked.add(key)
+        return out
+    return list(seq)
+
+
+#: An anchor radius must stay below this fraction of :func:`body_size` (a patch as wide as half the body
+#: would hold most of it rigid).
+MAX_ANCHOR_FRACTION = 0.5
+
+
+def anchor_radius_or_default(mesh, radius) -> float:
+    if radius is None:
+        return default_anchor_radius(mesh)
+    return positive_float(radius, "anchor_radius", allow_zero=True)
+
+
+def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
+    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes,
+    by increasing distance (a breadth-first search over the mesh edges between such nodes: no per-node
+    neighbour lists, which cost 0.1 s to build at 3k nodes)."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    P = mesh.points
+    dist = np.linalg.norm(P - P[centre], axis=1)
+    inside = (dist <= radius) & keep
+    inside[centre] = True
+    E = mesh.edges
+    E = E[inside[E[:, 0]] & inside[E[:, 1]]]
+    n = mesh.n_nodes
+    G = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    reach = breadth_first_order(G, centre, directed=False, return_predecessors=False)
+    rest = sorted((int(i) for i in reach if i != centre), key=lambda i: (float(dist[i]), i))
+    return [centre] + rest
+
+
+def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per muscle the node sets of its two end anchors, ``(start_patch, end_patch)``.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    muscles : sequence of Muscle or node lists
+    radius : float, optional
+        Anchor radius in length units (default :func:`default_anchor_radius`); 0 anchors each end on its node.
+
+    Returns
+    -------
+    list of (ndarray, ndarray)
+        Each patch lists the end node first, then the body nodes within ``radius`` of it at rest, connected
+        to it through such nodes and strictly nearer to it than to the muscle's other end (so a muscle's two
+        patches never overlap), by increasing distance.
+    """
+    mus = valid_muscles(mesh, muscles)
+    r = anchor_radius_or_default(mesh, radius)
+    P = mesh.points
+    out = []
+    for m in mus:
+        s, e = m.nodes[0], m.nodes[-1]
+        ds = np.linalg.norm(P - P[s], axis=1)
+        de = np.linalg.norm(P - P[e], axis=1)
+        out.append((np.array(_ball(mesh, s, r, ds < de), dtype=np.int64),
+                    np.array(_ball(mesh, e, r, de < ds), dtype=np.int64)))
+    return out
+
+
+def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]:
+    """Anchor patches merged where patches of different muscles share a node: each group moves rigidly.
+
+    Groups of one node are dropped (they constrain nothing). Raises ``ValueError`` when merging would join
+    the two ends of one muscle (it could then not contract); a smaller ``radius`` avoids that. The groups
+    (read-only arrays) are cached on the mesh per node chains and radius.
+    """
+    mus = valid_muscles(mesh, muscles)
+    key = (tuple(m.nodes for m in mus), anchor_radius_or_default(mesh, radius))
+    cache = mesh.__dict__.setdefault("_rigid_group_cache", {})
+    if key not in cache:
+        if len(cache) >= 32:
+            cache.pop(next(iter(cache)))
+        groups = _rigid_groups(mesh, mus, key[1])
+        for g in groups:
+            g.flags.writeable = False
+        cache[key] = groups
+    return list(cache[key])
+
+
+def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
+    patches = anchor_patches(mesh, mus, radius)
+    flat = [p for pair in patches for p in pair]
+    parent = list(range(len(flat)))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    owner: dict[int, int] = {}
+    for k, p in enumerate(flat):
+        for v in p.tolist():
+            if v in owner:
+                a, b = find(owner[v]), find(k)
+                if a != b:
+                    parent[max(a, b)] = min(a, b)
+            else:
+                owner[v] = k
+    for c in range(len(mus)):
+        if find(2 * c) == find(2 * c + 1):
+            raise ValueError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
+                             "it could not contract; give a smaller anchor_radius")
+    groups: dict[int, list[int]] = {}
+    for k, p in enumerate(flat):
+        g = groups.setdefault(find(k), [])
+        g.extend(v for v in p.tolist() if v not in g)
+    return [np.array(g, dtype=np.int64) for _, g in sorted(groups.items()) if len(g) >= 2]
+
+
+def check_anchor_radius(mesh, radius) -> float:
+    """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors, also
+    for a radius of :data:`MAX_ANCHOR_FRACTION` of :func:`body_size` or more (the solvers' and the design's
+    door; :func:`anchor_patches` itself takes any radius)."""
+    radius = anchor_radius_or_default(mesh, radius)
+    if radius >= MAX_ANCHOR_FRACTION * body_size(mesh):
+        raise ValueError(f"anchor_radius {radius:g} is at least half the body's size ({body_size(mesh):.3g}): "
+                         "a muscle's end patch would hold most of the body")
+    return radius
+
