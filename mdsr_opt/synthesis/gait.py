@@ -173,8 +173,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     frames; a muscle that does not pull in a frame is released as far as either neighbouring pose needs
     (``min(s_i, s_{i+1}, 0)``: the servo pays the rope out first, so the body can stretch along it). Each
     frame is a forward internal-driving solve (:func:`~mdsr_opt.solve_internal` with the pulling muscles, the
-    layout's muscle model and anchor radius, warm-started from the previous frame, else from rest); a frame in which no
-    muscle pulls is the rest shape exactly. A released rope whose path in the solved frame is longer than
+    layout's muscle model and anchor radius; from the previous frame's state only when that fails); frames with
+    equal strokes (a gait goes out and back) are solved once, and a frame in which no muscle pulls is the rest
+    shape exactly. A released rope whose path in the solved frame is longer than
     the rope paid out would be taut: that frame is reported as failed.
 
     Parameters
@@ -247,25 +248,30 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     ach, ten = np.full((F, m), np.nan), np.full((F, m), np.nan)
     states, ok, status = [], np.zeros(F, bool), []
     x_prev = None
+    solved: dict[bytes, tuple] = {}
     for k in range(F):
         on = np.flatnonzero(S[k] > 0)
-        if not len(on):  # nothing pulls: the rest shape, exactly
+        key = np.round(S[k], 12).tobytes()  # a gait goes out and back: equal strokes are solved once
+        if key in solved:
+            x, ok[k], msg, ach_on, ten_on = solved[key]
+            ach[k, on], ten[k, on] = ach_on, ten_on
+        elif not len(on):  # nothing pulls: the rest shape, exactly
             x, ok[k], msg = mesh.points.copy(), True, "rest (no muscle pulls)"
         else:
             args = (mesh, material, [layout.muscles[i] for i in on], np.clip(S[k, on] / L0[on], 0.0, 0.999))
             kw = dict(muscle_model=layout.muscle_model, anchor_radius=layout.anchor_radius, **opts)
-            # warm start only when the same muscles pull at least as hard as in the previous frame (from a
-            # tighter state the solver's first guess tends to invert an element; then it starts from rest)
-            warm = x_prev is not None and k > 0 and np.array_equal(on, np.flatnonzero(S[k - 1] > 0)) \
-                and bool(np.all(S[k, on] >= S[k - 1, on]))
-            r = solve_internal(*args, initial_guess=x_prev, **kw) if warm else None
-            if r is None or not r.success:  # the warm start can fail (a new set of pulling muscles): from rest
-                r = solve_internal(*args, **kw)
+            # from the default start (the solver's predictor from rest: 4-8 iterations here, where a warm
+            # start from the previous frame took 13-16 or failed); the warm start is the fallback
+            r = solve_internal(*args, **kw)
+            if not r.success and x_prev is not None:
+                w = solve_internal(*args, initial_guess=x_prev, **kw)
+                r = w if w.success else r
             x, ok[k], msg = np.asarray(r.x, dtype=float), bool(r.success), str(r.status)
             st, tn = getattr(r, "stroke", None), getattr(r, "tension", None)
             ach[k, on] = st if st is not None and np.size(st) == len(on) else np.nan
             ten[k, on] = tn if tn is not None and np.size(tn) == len(on) else np.nan
-            x_prev = r.x if r.success else None
+            solved[key] = (x, ok[k], msg, ach[k, on].copy(), ten[k, on].copy())
+        x_prev = x if ok[k] else None
         off = np.flatnonzero(S[k] <= 0)
         if len(off):  # released ropes: their length is L0 - stroke; the body's path must not exceed it
             Lx = np.array([layout.muscles[i].length(x) for i in off])
