@@ -116,9 +116,12 @@ def unsigned_distances(points: np.ndarray, contour: np.ndarray) -> np.ndarray:
 class _PolylineDistance:
     """Exact distances of points to one closed polyline, many times (the rotation search).
 
-    A KD-tree over the segments' midpoints: the nearest midpoint, at ``r0``, bounds a point's distance, so
-    its nearest segment has its midpoint within ``r0 + L/2`` (``L`` the longest segment); only those
-    segments (a ball query, a few per point) are measured exactly."""
+    A KD-tree over the segments' midpoints. Each point's ``k`` nearest midpoints are measured exactly; that
+    minimum ``d`` is the point's distance when the ``k``-th midpoint lies farther than ``d + L/2`` (``L``
+    the longest segment: no other segment can come closer). The few points where it does not are measured
+    against every segment whose midpoint lies within ``r0 + L/2`` (a ball query)."""
+
+    K = 6
 
     def __init__(self, contour: np.ndarray):
         from scipy.spatial import cKDTree
@@ -129,20 +132,32 @@ class _PolylineDistance:
         self.half = 0.5 * float(np.sqrt(self.dd.max()))
         self.tree = cKDTree(self.a + 0.5 * self.d)
 
+    def _exact(self, p: np.ndarray, seg: np.ndarray) -> np.ndarray:
+        """Squared distances of points ``p`` (..., 2) to segments ``seg`` (...)."""
+        a, d = self.a[seg], self.d[seg]
+        t = np.clip(((p - a) * d).sum(axis=-1) / self.dd[seg], 0.0, 1.0)
+        return ((p - a - t[..., None] * d) ** 2).sum(axis=-1)
+
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
         if len(points) == 0:
             return np.empty(0)
-        r0, _ = self.tree.query(points)
-        lists = self.tree.query_ball_point(points, r0 * (1 + 1e-12) + self.half + 1e-12)
-        lens = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
-        seg = np.fromiter((j for c in lists for j in c), dtype=np.int64, count=int(lens.sum()))
-        p = np.repeat(points, lens, axis=0)
-        a, d = self.a[seg], self.d[seg]
-        t = np.clip(((p - a) * d).sum(axis=1) / self.dd[seg], 0.0, 1.0)
-        dist2 = ((p - a - t[:, None] * d) ** 2).sum(axis=1)
-        starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
-        return np.sqrt(np.minimum.reduceat(dist2, starts))
+        k = min(self.K, len(self.a))
+        r, idx = self.tree.query(points, k=k)
+        r, idx = r.reshape(len(points), k), idx.reshape(len(points), k)
+        out = np.sqrt(self._exact(points[:, None, :], idx).min(axis=1))
+        if k == len(self.a):
+            return out  # every segment was measured
+        open_ = np.flatnonzero(r[:, -1] <= out + self.half + 1e-12)
+        if len(open_):
+            q = points[open_]
+            lists = self.tree.query_ball_point(q, r[open_, 0] * (1 + 1e-12) + self.half + 1e-12)
+            lens = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
+            seg = np.fromiter((j for c in lists for j in c), dtype=np.int64, count=int(lens.sum()))
+            dist2 = self._exact(np.repeat(q, lens, axis=0), seg)
+            starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
+            out[open_] = np.sqrt(np.minimum.reduceat(dist2, starts))
+        return out
 
 
 @dataclass(frozen=True, eq=False)
