@@ -118,8 +118,8 @@ class _PolylineDistance:
 
     A KD-tree over the segments' midpoints. Each point's ``k`` nearest midpoints are measured exactly; that
     minimum ``d`` is the point's distance when the ``k``-th midpoint lies farther than ``d + L/2`` (``L``
-    the longest segment: no other segment can come closer). The few points where it does not are measured
-    against every segment whose midpoint lies within ``r0 + L/2`` (a ball query)."""
+    the longest segment: no other segment can come closer). The points where it does not are measured
+    again with four times as many (at most every segment)."""
 
     K = 6
 
@@ -140,23 +140,20 @@ class _PolylineDistance:
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
-        if len(points) == 0:
-            return np.empty(0)
-        k = min(self.K, len(self.a))
-        r, idx = self.tree.query(points, k=k)
-        r, idx = r.reshape(len(points), k), idx.reshape(len(points), k)
-        out = np.sqrt(self._exact(points[:, None, :], idx).min(axis=1))
-        if k == len(self.a):
-            return out  # every segment was measured
-        open_ = np.flatnonzero(r[:, -1] <= out + self.half + 1e-12)
-        if len(open_):
-            q = points[open_]
-            lists = self.tree.query_ball_point(q, r[open_, 0] * (1 + 1e-12) + self.half + 1e-12)
-            lens = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
-            seg = np.fromiter((j for c in lists for j in c), dtype=np.int64, count=int(lens.sum()))
-            dist2 = self._exact(np.repeat(q, lens, axis=0), seg)
-            starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
-            out[open_] = np.sqrt(np.minimum.reduceat(dist2, starts))
+        out = np.empty(len(points))
+        todo = np.arange(len(points))
+        k = self.K
+        while len(todo):
+            # the k nearest midpoints; points far from the polyline (a poor rotation in the search) need more
+            k = min(k, len(self.a))
+            q = points[todo]
+            r, idx = self.tree.query(q, k=k)
+            r, idx = r.reshape(len(q), k), idx.reshape(len(q), k)
+            d = np.sqrt(self._exact(q[:, None, :], idx).min(axis=1))
+            done = (r[:, -1] > d + self.half + 1e-12) if k < len(self.a) else np.ones(len(q), bool)
+            out[todo[done]] = d[done]
+            todo = todo[~done]
+            k *= 4
         return out
 
 
