@@ -119,7 +119,7 @@ class _PolylineDistance:
     A KD-tree over the segments' midpoints. Each point's ``k`` nearest midpoints are measured exactly; that
     minimum ``d`` is the point's distance when the ``k``-th midpoint lies farther than ``d + L/2`` (``L``
     the longest segment: no other segment can come closer). The points where it does not are measured
-    again with four times as many (at most every segment)."""
+    against every segment whose midpoint lies within ``d + L/2`` (a count, then one bounded k-query)."""
 
     K = 6
 
@@ -138,22 +138,35 @@ class _PolylineDistance:
         t = np.clip(((p - a) * d).sum(axis=-1) / self.dd[seg], 0.0, 1.0)
         return ((p - a - t[..., None] * d) ** 2).sum(axis=-1)
 
+    def lower(self, points: np.ndarray) -> float:
+        """A lower bound of the mean distance of ``points``: a point's nearest segment has its midpoint
+        within ``L/2`` of the nearest point on it, so the point lies at least ``r0 - L/2`` from it (``r0``
+        the nearest midpoint's distance); lowered a little more for rounding."""
+        r0, _ = self.tree.query(np.asarray(points, dtype=float).reshape(-1, 2))
+        return float(np.maximum(r0 - self.half, 0.0).mean()) * (1 - 1e-9) - 1e-9
+
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
-        out = np.empty(len(points))
-        todo = np.arange(len(points))
-        k = self.K
-        while len(todo):
-            # the k nearest midpoints; points far from the polyline (a poor rotation in the search) need more
-            k = min(k, len(self.a))
+        n = len(self.a)
+        k = min(self.K, n)
+        r, idx = self.tree.query(points, k=k)
+        r, idx = r.reshape(len(points), k), idx.reshape(len(points), k)
+        out = np.sqrt(self._exact(points[:, None, :], idx).min(axis=1))
+        if k == n:
+            return out  # every segment was measured
+        todo = np.flatnonzero(r[:, -1] <= out + self.half + 1e-12)
+        if len(todo):
+            # the rest (points far from the polyline, as for a poor rotation in the search): every segment
+            # whose midpoint lies within d + L/2, d the distance found so far (padded: a midpoint exactly
+            # on the bound must not be missed)
             q = points[todo]
-            r, idx = self.tree.query(q, k=k)
-            r, idx = r.reshape(len(q), k), idx.reshape(len(q), k)
-            d = np.sqrt(self._exact(q[:, None, :], idx).min(axis=1))
-            done = (r[:, -1] > d + self.half + 1e-12) if k < len(self.a) else np.ones(len(q), bool)
-            out[todo[done]] = d[done]
-            todo = todo[~done]
-            k *= 4
+            bound = (out[todo] + self.half) * (1 + 1e-12) + 1e-12
+            kk = max(1, int(self.tree.query_ball_point(q, bound, return_length=True).max()))
+            r2, idx2 = self.tree.query(q, k=kk, distance_upper_bound=float(bound.max()) * (1 + 1e-12))
+            r2, idx2 = r2.reshape(len(q), kk), idx2.reshape(len(q), kk)
+            d2 = self._exact(q[:, None, :], np.minimum(idx2, n - 1))  # (missing neighbours have index n)
+            d2[r2 > bound[:, None]] = np.inf
+            out[todo] = np.minimum(out[todo], np.sqrt(d2.min(axis=1)))
         return out
 
 
@@ -363,10 +376,12 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
 
         to_contour = _PolylineDistance(M)  # one KD-tree for the whole rotation search
 
-        def cost(theta: float) -> float:
+        def placed(theta: float) -> np.ndarray:
             Aff = affine(theta)
-            p = S @ Aff[:, :2].T + Aff[:, 2]
-            return float(to_contour(p).mean())
+            return S @ Aff[:, :2].T + Aff[:, 2]
+
+        def cost(theta: float) -> float:
+            return float(to_contour(placed(theta)).mean())
 
         if registration == "segment":
             if segments is None:
@@ -388,7 +403,16 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
         else:
             _, ths = _moments(Sf)
             cands = [-ths + k * math.pi / 2 for k in range(4)] + [k * math.pi / 12 for k in range(24)]
-            costs = [cost(t) for t in cands]
+            # every candidate's exact cost is needed only if it can be the smallest: a candidate whose lower
+            # bound (:meth:`_PolylineDistance.lower`) exceeds the best cost so far is not measured
+            bounds = [to_contour.lower(placed(t)) for t in cands]
+            costs = [math.inf] * len(cands)
+            best = math.inf
+            for i in sorted(range(len(cands)), key=bounds.__getitem__):
+                if bounds[i] > best:
+                    break
+                costs[i] = cost(cands[i])
+                best = min(best, costs[i])
             theta = cands[int(np.argmin(costs))]
             if refine:
                 step = math.radians(8.0)
