@@ -87,10 +87,16 @@ def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, 
             v[m] += 1
         lo[dn] = np.maximum(lo[dn], v)
     s = np.flatnonzero(lo <= hi)
-    W1 = Wf + 1
-    n = Hf * W1
-    diff = np.bincount(row[s] * W1 + lo[s], minlength=n)[:n] - np.bincount(row[s] * W1 + hi[s] + 1, minlength=n)[:n]
-    mask[np.cumsum(diff.reshape(Hf, W1), axis=1)[:, :Wf] > 0] = 255
+    if not len(s):
+        return mask
+    row, lo, hi = row[s], lo[s], hi[s]
+    # the spans as +1/-1 steps in the rectangle they cover, summed along each row: covered where > 0
+    r0, c0 = int(row.min()), int(lo.min())
+    h, w = int(row.max()) + 1 - r0, int(hi.max()) + 2 - c0
+    n = h * w
+    steps = (np.bincount((row - r0) * w + lo - c0, minlength=n) - np.bincount((row - r0) * w + hi + 1 - c0, minlength=n))
+    cover = np.cumsum(steps.astype(np.int32).reshape(h, w), axis=1, dtype=np.int32)[:, :w - 1] > 0
+    mask[r0:r0 + h, c0:c0 + w - 1] = cover.view(np.uint8) * np.uint8(255)
     return mask
 
 
