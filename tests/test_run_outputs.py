@@ -128,3 +128,20 @@ def test_animation_solves_each_distinct_frame_once(monkeypatch):
     np.testing.assert_array_equal(res.states[0], mesh.points)
     reached = 1.0 - bottom.length(res.states[3]) / bottom.rest_length(mesh)
     assert abs(reached - 0.1) < 1e-4  # the keyframe reaches its contraction
+
+
+def test_warm_start_state_puts_the_gauge_at_rest_and_moves_rigidly():
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.synthesis.gait import warm_start_state
+
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    X = mesh.points
+    t = 0.4
+    R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    x = (X * [0.9, 1.05]) @ R.T + [3.0, -2.0]       # a deformed state, rotated and moved
+    y = warm_start_state(mesh, x)
+    g = list(gauge_coordinates(mesh))
+    np.testing.assert_allclose(y.reshape(-1)[g], X.reshape(-1)[g], atol=1e-12)
+    d = lambda z: np.linalg.norm(z[:, None] - z[None], axis=2)  # noqa: E731
+    np.testing.assert_allclose(d(y), d(x), atol=1e-12)
+    assert warm_start_state(mesh, np.zeros_like(X)) is None  # no rigid motion puts a collapsed state there

@@ -138,16 +138,17 @@ def time_scene(name: str, repeats: int, log=None) -> dict:
         undo = clock.install()
         try:
             with tempfile.TemporaryDirectory() as d:
-                t0 = clock.clock()
+                t0, w0, c0 = clock.clock(), time.perf_counter(), time.process_time()
                 rep = run_scene(scene, Path(d) / name, log=None)
                 total = clock.clock() - t0
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
         finally:
             clock.uninstall(undo)
         if not rep.success:
             print(f"  warning: {name} run {r} did not succeed", file=sys.stderr)
         row = dict(clock.totals)
         row["other"] += total - sum(clock.totals.values())
-        row.update(total=total, build=t_build)
+        row.update(total=total, build=t_build, wall=wall, cpu=cpu)
         if r == 0:
             row["warm-up"] = True
         rows.append(row)
@@ -155,7 +156,7 @@ def time_scene(name: str, repeats: int, log=None) -> dict:
             log(f"  {name} run {r}{' (warm-up)' if r == 0 else ''}: {total:.2f} s ("
                 + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
     timed = rows[1:] if repeats else rows
-    return {k: statistics.median(row[k] for row in timed) for k in STAGES + ("total", "build")}
+    return {k: statistics.median(row[k] for row in timed) for k in STAGES + ("total", "build", "wall", "cpu")}
 
 
 def time_cli(args: list[str]) -> float:
@@ -218,10 +219,11 @@ def main(argv=None) -> int:
         t_all = time_cli(["all"])
         print(f"  mdsr run all: {t_all:.1f} s wall ({load()})")
 
-    cols = ["scene", *STAGES, "run_scene", "build"] + (["cli"] if a.cli else [])
+    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "build"] + (["cli"] if a.cli or a.all else [])
     print("\n| " + " | ".join(cols) + " |\n|" + "---|" + "---:|" * (len(cols) - 1))
     for name, r in results.items():
-        vals = [r[k] for k in STAGES] + [r["total"], r["build"]] + ([r["cli"]] if a.cli else [])
+        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["build"]] \
+            + ([r.get("cli", float("nan"))] if a.cli or a.all else [])
         print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in vals) + " |")
     if t_all is not None:
         print(f"\nmdsr run all: {t_all:.1f} s")
@@ -233,10 +235,10 @@ def main(argv=None) -> int:
         w = csv.writer(fh)
         w.writerow(["label", *cols])
         for name, r in results.items():
-            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES] + [f"{r['total']:.4f}", f"{r['build']:.4f}"]
-                       + ([f"{r['cli']:.4f}"] if a.cli else []))
+            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "build")]
+                       + ([f"{r.get('cli', float('nan')):.4f}"] if a.cli or a.all else []))
         if t_all is not None:
-            w.writerow([a.label, "all"] + [""] * len(STAGES) + ["", ""] + ([f"{t_all:.4f}"] if a.cli else []))
+            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}"])
     _chart(results, out / "run.png", a.label, a.repeats, a.clock)
     print(f"wrote {out / 'run.csv'} and {out / 'run.png'}")
     return 0
