@@ -5,8 +5,9 @@ Targets (issue 13): ``mdsr run gecko`` and ``mdsr run humanoid`` at medium resol
 
 For each scene this builds it (medium resolution, timed apart as ``build``), then times
 :func:`mdsr_opt.scenes.runscene.run_scene` into a fresh temporary folder with everything on (photographs,
-virtual prototype, figures, animations, gait) and splits its wall clock into stages by wrapping the
-functions that do the work (each wrapper's *exclusive* time goes to its stage, so nothing is counted twice):
+virtual prototype, figures, animations, gait) and splits its time (wall clock, or with ``--clock cpu`` this
+process's CPU time, steadier when other jobs share the cores) into stages by wrapping the functions that do
+the work (each wrapper's *exclusive* time goes to its stage, so nothing is counted twice):
 
 - ``solves``: targets, routing, designs (their verification included), prototype solves, gait layouts;
 - ``anim solves``: the forward solves of the animation frames and of the gait schedule;
@@ -17,9 +18,10 @@ functions that do the work (each wrapper's *exclusive* time goes to its stage, s
 - ``other``: the rest (prototype mesh building, bookkeeping).
 
 ``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
-and CasADi's first-call costs) and reports medians. The medians per stage are printed as a table, written
-to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (in ``--out``, default
-``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
+and CasADi's first-call costs) and reports medians, with the whole run's ``wall`` and ``cpu`` seconds beside
+the per-stage clock's total (``run_scene``). The medians per stage are printed as a table, written
+to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` with ``--label``; in ``--out``,
+default ``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
 imports and scene building included) once per scene, and ``--all`` times ``mdsr run all`` once.
 
 The package and the problem library are imported from the source tree this script lives in (or ``--tree``,
@@ -28,6 +30,7 @@ e.g. an exported older commit, to measure before and after with the same script)
 Run:  python tests/benchmarks/bench_run.py                       # gecko and humanoid, 3 repeats
       python tests/benchmarks/bench_run.py --scenes gecko --repeats 1
       python tests/benchmarks/bench_run.py --cli --all
+      python tests/benchmarks/bench_run.py --tree /tmp/base --clock cpu --label before   # an older tree
 """
 
 from __future__ import annotations
@@ -190,11 +193,11 @@ def use_tree(root: Path) -> None:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--tree", default=str(ROOT), help="source tree to measure (default: this script's)")
-    p.add_argument("--scenes", nargs="+", default=["gecko", "humanoid"])
-    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--scenes", nargs="+", default=["gecko", "humanoid"], help="library scenes (default gecko humanoid)")
+    p.add_argument("--repeats", type=int, default=3, help="timed runs per scene after the warm-up (median)")
     p.add_argument("--cli", action="store_true", help="also time `python -m mdsr_opt run NAME` per scene")
     p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once")
-    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"))
+    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"), help="folder of the CSV and chart")
     p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
@@ -231,7 +234,8 @@ def main(argv=None) -> int:
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "run.csv", "w", newline="") as fh:
+    stem = f"run_{a.label}" if a.label else "run"
+    with open(out / f"{stem}.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["label", *cols])
         for name, r in results.items():
@@ -239,8 +243,8 @@ def main(argv=None) -> int:
                        + ([f"{r.get('cli', float('nan')):.4f}"] if a.cli or a.all else []))
         if t_all is not None:
             w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}"])
-    _chart(results, out / "run.png", a.label, a.repeats, a.clock)
-    print(f"wrote {out / 'run.csv'} and {out / 'run.png'}")
+    _chart(results, out / f"{stem}.png", a.label, a.repeats, a.clock)
+    print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")
     return 0
 
 
