@@ -199,6 +199,8 @@ def main(argv=None) -> int:
     p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once")
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"), help="folder of the CSV and chart")
     p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
+    p.add_argument("--before", default=None,
+                   help="a CSV of an earlier measurement (run_<label>.csv) drawn beside this one in the chart")
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
     a = p.parse_args(argv)
@@ -243,7 +245,17 @@ def main(argv=None) -> int:
                        + ([f"{r.get('cli', float('nan')):.4f}"] if a.cli or a.all else []))
         if t_all is not None:
             w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}"])
-    _chart(results, out / f"{stem}.png", a.label, a.repeats, a.clock)
+    bars = dict(results)
+    if a.before:
+        with open(a.before, newline="") as fh:
+            old = [r for r in csv.DictReader(fh) if r["scene"] in results and r["solves"]]
+        bars = {}
+        for name in results:
+            for r in old:
+                if r["scene"] == name:
+                    bars[f"{name} {r['label'] or 'before'}"] = {k: float(r[k]) for k in STAGES}
+            bars[f"{name} {a.label or 'now'}"] = results[name]
+    _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock)
     print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")
     return 0
 
