@@ -116,9 +116,12 @@ def unsigned_distances(points: np.ndarray, contour: np.ndarray) -> np.ndarray:
 class _PolylineDistance:
     """Exact distances of points to one closed polyline, many times (the rotation search).
 
-    A KD-tree over the segments' midpoints: the nearest midpoint, at ``r0``, bounds a point's distance, so
-    its nearest segment has its midpoint within ``r0 + L/2`` (``L`` the longest segment); only those
-    segments (a ball query, a few per point) are measured exactly."""
+    A KD-tree over the segments' midpoints. Each point's ``k`` nearest midpoints are measured exactly; that
+    minimum ``d`` is the point's distance when the ``k``-th midpoint lies farther than ``d + L/2`` (``L``
+    the longest segment: no other segment can come closer). The points where it does not are measured
+    against every segment whose midpoint lies within ``d + L/2`` (a count, then one bounded k-query)."""
+
+    K = 6
 
     def __init__(self, contour: np.ndarray):
         from scipy.spatial import cKDTree
@@ -129,20 +132,42 @@ class _PolylineDistance:
         self.half = 0.5 * float(np.sqrt(self.dd.max()))
         self.tree = cKDTree(self.a + 0.5 * self.d)
 
+    def _exact(self, p: np.ndarray, seg: np.ndarray) -> np.ndarray:
+        """Squared distances of points ``p`` (..., 2) to segments ``seg`` (...)."""
+        a, d = self.a[seg], self.d[seg]
+        t = np.clip(((p - a) * d).sum(axis=-1) / self.dd[seg], 0.0, 1.0)
+        return ((p - a - t[..., None] * d) ** 2).sum(axis=-1)
+
+    def lower(self, points: np.ndarray) -> float:
+        """A lower bound of the mean distance of ``points``: a point's nearest segment has its midpoint
+        within ``L/2`` of the nearest point on it, so the point lies at least ``r0 - L/2`` from it (``r0``
+        the nearest midpoint's distance); lowered a little more for rounding."""
+        r0, _ = self.tree.query(np.asarray(points, dtype=float).reshape(-1, 2))
+        return float(np.maximum(r0 - self.half, 0.0).mean()) * (1 - 1e-9) - 1e-9
+
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
-        if len(points) == 0:
-            return np.empty(0)
-        r0, _ = self.tree.query(points)
-        lists = self.tree.query_ball_point(points, r0 * (1 + 1e-12) + self.half + 1e-12)
-        lens = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
-        seg = np.fromiter((j for c in lists for j in c), dtype=np.int64, count=int(lens.sum()))
-        p = np.repeat(points, lens, axis=0)
-        a, d = self.a[seg], self.d[seg]
-        t = np.clip(((p - a) * d).sum(axis=1) / self.dd[seg], 0.0, 1.0)
-        dist2 = ((p - a - t[:, None] * d) ** 2).sum(axis=1)
-        starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
-        return np.sqrt(np.minimum.reduceat(dist2, starts))
+        n = len(self.a)
+        k = min(self.K, n)
+        r, idx = self.tree.query(points, k=k)
+        r, idx = r.reshape(len(points), k), idx.reshape(len(points), k)
+        out = np.sqrt(self._exact(points[:, None, :], idx).min(axis=1))
+        if k == n:
+            return out  # every segment was measured
+        todo = np.flatnonzero(r[:, -1] <= out + self.half + 1e-12)
+        if len(todo):
+            # the rest (points far from the polyline, as for a poor rotation in the search): every segment
+            # whose midpoint lies within d + L/2, d the distance found so far (padded: a midpoint exactly
+            # on the bound must not be missed)
+            q = points[todo]
+            bound = (out[todo] + self.half) * (1 + 1e-12) + 1e-12
+            kk = max(1, int(self.tree.query_ball_point(q, bound, return_length=True).max()))
+            r2, idx2 = self.tree.query(q, k=kk, distance_upper_bound=float(bound.max()) * (1 + 1e-12))
+            r2, idx2 = r2.reshape(len(q), kk), idx2.reshape(len(q), kk)
+            d2 = self._exact(q[:, None, :], np.minimum(idx2, n - 1))  # (missing neighbours have index n)
+            d2[r2 > bound[:, None]] = np.inf
+            out[todo] = np.minimum(out[todo], np.sqrt(d2.min(axis=1)))
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,10 +376,12 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
 
         to_contour = _PolylineDistance(M)  # one KD-tree for the whole rotation search
 
-        def cost(theta: float) -> float:
+        def placed(theta: float) -> np.ndarray:
             Aff = affine(theta)
-            p = S @ Aff[:, :2].T + Aff[:, 2]
-            return float(to_contour(p).mean())
+            return S @ Aff[:, :2].T + Aff[:, 2]
+
+        def cost(theta: float) -> float:
+            return float(to_contour(placed(theta)).mean())
 
         if registration == "segment":
             if segments is None:
@@ -376,7 +403,16 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
         else:
             _, ths = _moments(Sf)
             cands = [-ths + k * math.pi / 2 for k in range(4)] + [k * math.pi / 12 for k in range(24)]
-            costs = [cost(t) for t in cands]
+            # every candidate's exact cost is needed only if it can be the smallest: a candidate whose lower
+            # bound (:meth:`_PolylineDistance.lower`) exceeds the best cost so far is not measured
+            bounds = [to_contour.lower(placed(t)) for t in cands]
+            costs = [math.inf] * len(cands)
+            best = math.inf
+            for i in sorted(range(len(cands)), key=bounds.__getitem__):
+                if bounds[i] > best:
+                    break
+                costs[i] = cost(cands[i])
+                best = min(best, costs[i])
             theta = cands[int(np.argmin(costs))]
             if refine:
                 step = math.radians(8.0)

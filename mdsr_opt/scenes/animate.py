@@ -8,6 +8,7 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields
+from ..synthesis.gait import warm_start_state
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
 
@@ -119,12 +120,32 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     opts = scene.design_options
     model, stiffness = opts.get("muscle_model", "cable"), opts.get("stiffness", 10.0)
     states, fails = [], []
+    # An animation goes out and back (rest -> pose -> rest ...): frames with the same contractions are solved
+    # once (to 12 decimals; the way back computes them with other rounding) and the state reused. A frame in
+    # which nothing contracts is the rest shape exactly. A frame is started from the previous frame's state
+    # (moved to the solver's gauge: warm_start_state), else from the solver's default start.
+    solved: dict[bytes, tuple] = {}
+    prev = None
+    kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=opts.get("anchor_radius"))
     for i, a in enumerate(frames):
-        res = solve_internal(scene.mesh, scene.material, union, a, muscle_model=model, stiffness=stiffness,
-                             anchor_radius=opts.get("anchor_radius"))
-        check_interrupt()
-        if not res.success:
+        key = np.round(a, 12).tobytes()
+        if key not in solved:
+            if not np.any(a > 0):
+                solved[key] = (scene.mesh.points.copy(), True)
+            else:
+                guess = warm_start_state(scene.mesh, prev) if prev is not None else None
+                res = None
+                if guess is not None:
+                    res = solve_internal(scene.mesh, scene.material, union, a, initial_guess=guess, **kw)
+                    check_interrupt()
+                if res is None or not res.success:
+                    res = solve_internal(scene.mesh, scene.material, union, a, **kw)
+                    check_interrupt()
+                solved[key] = (res.x, bool(res.success))
+        x, ok = solved[key]
+        if not ok:
             fails.append(i)
-        states.append(res.x)
+        states.append(x.copy())
+        prev = x if ok and np.any(a > 0) else None
     return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails,
                            "" if not fails else f"{len(fails)} forward solve(s) failed")

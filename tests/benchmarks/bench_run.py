@@ -1,0 +1,287 @@
+"""Benchmark: where the time of ``mdsr run`` goes, per scene and per stage (issue 13).
+
+Targets (issue 13): ``mdsr run gecko`` and ``mdsr run humanoid`` at medium resolution with figures in under
+4 s each on a quiet machine, ``mdsr run all`` in under 90 s.
+
+For each scene this builds it (medium resolution, timed apart as ``build``), then times
+:func:`mdsr_opt.scenes.runscene.run_scene` into a fresh temporary folder with everything on (photographs,
+virtual prototype, figures, animations, gait) and splits its time (wall clock, or with ``--clock cpu`` this
+process's CPU time, steadier when other jobs share the cores) into stages by wrapping the functions that do
+the work (each wrapper's *exclusive* time goes to its stage, so nothing is counted twice):
+
+- ``solves``: targets, routing, designs (their verification included), prototype solves, gait layouts;
+- ``anim solves``: the forward solves of the animation frames and of the gait schedule;
+- ``photos/contours``: synthetic photographs, contour extraction and loop comparison;
+- ``figures``: PNG figures (building and saving);
+- ``GIFs``: the animated GIFs;
+- ``writing``: meshes, photographs, JSON and fabrication files;
+- ``other``: the rest (prototype mesh building, bookkeeping).
+
+``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
+and CasADi's first-call costs) and reports medians, with the whole run's ``wall`` and ``cpu`` seconds beside
+the per-stage clock's total (``run_scene``). The medians per stage are printed as a table, written
+to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` with ``--label``; in ``--out``,
+default ``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
+imports and scene building included) once per scene, and ``--all`` times ``mdsr run all`` once.
+
+The package and the problem library are imported from the source tree this script lives in (or ``--tree``,
+e.g. an exported older commit, to measure before and after with the same script).
+
+Run:  python tests/benchmarks/bench_run.py                       # gecko and humanoid, 3 repeats
+      python tests/benchmarks/bench_run.py --scenes gecko --repeats 1
+      python tests/benchmarks/bench_run.py --cli --all
+      python tests/benchmarks/bench_run.py --tree /tmp/base --clock cpu --label before   # an older tree
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import functools
+import importlib
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+STAGES = ("solves", "anim solves", "photos/contours", "figures", "GIFs", "writing", "other")
+
+# (module, attribute, stage): the stage None inherits the enclosing wrapper's stage ("solves" at top level)
+WRAPS = [
+    ("mdsr_opt.scenes.runner", "prepare_case", "solves"),
+    ("mdsr_opt.synthesis.contractions", "design_contractions", "solves"),
+    ("mdsr_opt.mechanics.equilibrium", "solve_internal", None),
+    ("mdsr_opt.mechanics.equilibrium", "solve_external", None),
+    ("mdsr_opt.synthesis.poses", "design_poses", "solves"),
+    ("mdsr_opt.scenes.prototype", "VirtualPrototype.for_scene", "other"),
+    ("mdsr_opt.scenes.runscene", "animate", "anim solves"),
+    ("mdsr_opt.synthesis.gait", "gait_schedule", "anim solves"),
+    ("mdsr_opt.photos.camera", "render_photo", "photos/contours"),
+    ("mdsr_opt.photos.contours", "contour_loops_from_image", "photos/contours"),
+    ("mdsr_opt.photos.loops", "compare_loops", "photos/contours"),
+    ("mdsr_opt.photos.loops", "simulated_loops", "photos/contours"),
+    ("mdsr_opt.scenes.runner", "write_case", "figures"),
+    ("mdsr_opt.plot", "plot_scene", "figures"),
+    ("mdsr_opt.plot", "save_figure", "figures"),
+    ("mdsr_opt.plot.common", "save_figure", "figures"),
+    ("mdsr_opt.synthesis.gait", "plot_schedule", "figures"),
+    ("mdsr_opt.plot", "save_animation", "GIFs"),
+    ("mdsr_opt.body.io", "write_mesh", "writing"),
+    ("mdsr_opt.body.io", "write_json", "writing"),
+    ("mdsr_opt.photos.camera", "SyntheticPhoto.save", "writing"),
+    ("mdsr_opt.synthesis.export", "export_fabrication", "writing"),
+    ("mdsr_opt.synthesis.poses", "PosesResult.save", "writing"),
+]
+
+
+class StageClock:
+    """Exclusive time per stage, from wrapped functions (a stack of open calls); ``clock`` is
+    ``time.perf_counter`` (wall) or ``time.process_time`` (CPU of this process: steadier on a busy machine)."""
+
+    clock = staticmethod(time.perf_counter)
+
+    def __init__(self):
+        self.stack: list[list] = []  # [stage, start, child seconds]
+        self.totals = dict.fromkeys(STAGES, 0.0)
+
+    def wrap(self, fn, stage):
+        @functools.wraps(fn)
+        def inner(*args, **kwargs):
+            st = stage or (self.stack[-1][0] if self.stack else "solves")
+            self.stack.append([st, self.clock(), 0.0])
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                s, t0, child = self.stack.pop()
+                dt = self.clock() - t0
+                self.totals[s] += dt - child
+                if self.stack:
+                    self.stack[-1][2] += dt
+
+        return inner
+
+    def install(self):
+        undo = []
+        for modname, attr, stage in WRAPS:
+            mod = importlib.import_module(modname)
+            owner, name = mod, attr
+            if "." in attr:
+                cls, name = attr.split(".")
+                owner = getattr(mod, cls)
+            raw = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name)
+            fn = getattr(owner, name)
+            new = self.wrap(fn, stage)
+            if isinstance(raw, classmethod):
+                new = classmethod(self.wrap(raw.__func__, stage))
+            undo.append((owner, name, raw))
+            setattr(owner, name, new)
+        return undo
+
+    @staticmethod
+    def uninstall(undo):
+        for owner, name, raw in reversed(undo):
+            setattr(owner, name, raw)
+
+
+def time_scene(name: str, repeats: int, log=None) -> dict:
+    """Medians over ``repeats`` runs of ``run_scene(name)`` (after one warm-up run): total and per stage."""
+    from mdsr_opt.scenes.library import get_problem
+    from mdsr_opt.scenes.runscene import run_scene
+
+    rows = []
+    for r in range(repeats + 1):
+        t0 = time.perf_counter()
+        scene = get_problem(name, resolution="medium")
+        t_build = time.perf_counter() - t0
+        clock = StageClock()
+        undo = clock.install()
+        try:
+            with tempfile.TemporaryDirectory() as d:
+                t0, w0, c0 = clock.clock(), time.perf_counter(), time.process_time()
+                rep = run_scene(scene, Path(d) / name, log=None)
+                total = clock.clock() - t0
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        finally:
+            clock.uninstall(undo)
+        if not rep.success:
+            print(f"  warning: {name} run {r} did not succeed", file=sys.stderr)
+        row = dict(clock.totals)
+        row["other"] += total - sum(clock.totals.values())
+        row.update(total=total, build=t_build, wall=wall, cpu=cpu)
+        if r == 0:
+            row["warm-up"] = True
+        rows.append(row)
+        if log:
+            log(f"  {name} run {r}{' (warm-up)' if r == 0 else ''}: {total:.2f} s ("
+                + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
+    timed = rows[1:] if repeats else rows
+    return {k: statistics.median(row[k] for row in timed) for k in STAGES + ("total", "build", "wall", "cpu")}
+
+
+def time_cli(args: list[str]) -> float:
+    """Wall clock of ``python -m mdsr_opt -q run ARGS --out <tmp>`` (imports included), from the repo root."""
+    root = Path(os.environ["MDSR_PROBLEMS"]).parent
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, "-m", "mdsr_opt", "-q", "run", *args, "--out", os.path.join(d, "out")],
+                           cwd=root, capture_output=True, text=True)
+        dt = time.perf_counter() - t0
+    if p.returncode != 0:
+        print(f"  warning: mdsr run {' '.join(args)} exited with {p.returncode}\n{p.stdout[-2000:]}{p.stderr[-2000:]}",
+              file=sys.stderr)
+    return dt
+
+
+def load() -> str:
+    try:
+        return "load averages " + ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:  # pragma: no cover
+        return "load unknown"
+
+
+def use_tree(root: Path) -> None:
+    """Import ``mdsr_opt`` and the problems from the source tree ``root`` (not an installed copy)."""
+    sys.path.insert(0, str(root))
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(root)] + [v for v in [os.environ.get("PYTHONPATH")] if v])
+    os.environ["MDSR_PROBLEMS"] = str(root / "problems")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--tree", default=str(ROOT), help="source tree to measure (default: this script's)")
+    p.add_argument("--scenes", nargs="+", default=["gecko", "humanoid"], help="library scenes (default gecko humanoid)")
+    p.add_argument("--repeats", type=int, default=3, help="timed runs per scene after the warm-up (median)")
+    p.add_argument("--cli", action="store_true", help="also time `python -m mdsr_opt run NAME` per scene")
+    p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once")
+    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"), help="folder of the CSV and chart")
+    p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
+    p.add_argument("--before", default=None,
+                   help="a CSV of an earlier measurement (run_<label>.csv) drawn beside this one in the chart")
+    p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
+                   help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
+    a = p.parse_args(argv)
+    use_tree(Path(a.tree).resolve())
+    if a.clock == "cpu":
+        StageClock.clock = staticmethod(time.process_time)
+    import mdsr_opt
+
+    print(f"mdsr_opt from {Path(mdsr_opt.__file__).parent}")
+
+    print(f"bench_run: {', '.join(a.scenes)}, {a.repeats} repeat(s) after a warm-up, {a.clock} clock; {load()}")
+    results = {}
+    for name in a.scenes:
+        results[name] = time_scene(name, a.repeats, log=print)
+        if a.cli:
+            results[name]["cli"] = time_cli([name])
+            print(f"  {name}: `mdsr run {name}` {results[name]['cli']:.2f} s wall ({load()})")
+    t_all = None
+    if a.all:
+        print(f"  mdsr run all: starting ({load()})")
+        t_all = time_cli(["all"])
+        print(f"  mdsr run all: {t_all:.1f} s wall ({load()})")
+
+    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "build"] + (["cli"] if a.cli or a.all else [])
+    print("\n| " + " | ".join(cols) + " |\n|" + "---|" + "---:|" * (len(cols) - 1))
+    for name, r in results.items():
+        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["build"]] \
+            + ([r.get("cli", float("nan"))] if a.cli or a.all else [])
+        print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in vals) + " |")
+    if t_all is not None:
+        print(f"\nmdsr run all: {t_all:.1f} s")
+    print(f"({a.clock} seconds, medians of {a.repeats}; target: run_scene/cli < 4 s per scene, run all < 90 s; {load()})")
+
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    stem = f"run_{a.label}" if a.label else "run"
+    with open(out / f"{stem}.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["label", *cols])
+        for name, r in results.items():
+            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "build")]
+                       + ([f"{r.get('cli', float('nan')):.4f}"] if a.cli or a.all else []))
+        if t_all is not None:
+            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}"])
+    bars = dict(results)
+    if a.before:
+        with open(a.before, newline="") as fh:
+            old = [r for r in csv.DictReader(fh) if r["scene"] in results and r["solves"]]
+        bars = {}
+        for name in results:
+            for r in old:
+                if r["scene"] == name:
+                    bars[f"{name} {r['label'] or 'before'}"] = {k: float(r[k]) for k in STAGES}
+            bars[f"{name} {a.label or 'now'}"] = results[name]
+    _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock)
+    print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")
+    return 0
+
+
+def _chart(results: dict, path: Path, label: str, repeats: int, clock: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(results)
+    fig, ax = plt.subplots(figsize=(7, 1.2 + 0.7 * len(names)))
+    left = [0.0] * len(names)
+    cmap = plt.get_cmap("tab10")
+    for i, st in enumerate(STAGES):
+        v = [results[n][st] for n in names]
+        ax.barh(names, v, left=left, color=cmap(i), label=st)
+        left = [l + x for l, x in zip(left, v)]
+    ax.axvline(4.0, color="k", ls="--", lw=1, label="target 4 s")
+    ax.set_xlabel(f"seconds (run_scene, median of {repeats}; {clock} clock)")
+    ax.set_title(f"mdsr run per stage{' - ' + label if label else ''}", fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    ax.invert_yaxis()
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,147 @@
+"""The faster paths of `mdsr run` give what the straightforward ones gave: the photograph's rasterisation,
+the contour distances, the tight figure box, the GIF writer and the reuse of solved animation frames."""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from mdsr_opt import Mesh, NeoHookean  # noqa: E402
+from mdsr_opt.photos.camera import _raster_triangles  # noqa: E402
+from mdsr_opt.photos.compare import _PolylineDistance, unsigned_distances  # noqa: E402
+from mdsr_opt.plot.common import tight_bbox  # noqa: E402
+from mdsr_opt.plot.scenes import save_animation  # noqa: E402
+
+
+def raster_reference(pts, triangles, shape):
+    """The per-pixel test: a pixel centre is inside when all three edge functions are >= 0."""
+    H, W = shape
+    mask = np.zeros(shape, dtype=np.uint8)
+    for tri in triangles:
+        P = pts[tri]
+        if (P[1, 0] - P[0, 0]) * (P[2, 1] - P[0, 1]) - (P[1, 1] - P[0, 1]) * (P[2, 0] - P[0, 0]) < 0:
+            P = P[::-1]
+        x0, y0 = np.maximum(np.floor(P.min(axis=0)).astype(int), 0)
+        x1, y1 = np.minimum(np.ceil(P.max(axis=0)).astype(int), [W - 1, H - 1])
+        if x1 < x0 or y1 < y0:
+            continue
+        gx, gy = np.meshgrid(np.arange(x0, x1 + 1, dtype=float), np.arange(y0, y1 + 1, dtype=float))
+        inside = np.ones(gx.shape, dtype=bool)
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            ex, ey = P[b] - P[a]
+            inside &= ex * (gy - P[a, 1]) - ey * (gx - P[a, 0]) >= 0
+        mask[y0:y1 + 1, x0:x1 + 1][inside] = 255
+    return mask
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_scanline_rasterisation_is_the_per_pixel_test(seed):
+    rng = np.random.default_rng(seed)
+    H, W = 40, 57
+    pts = rng.uniform(-6.0, 62.0, (25, 2))
+    if seed % 2:
+        pts = np.round(pts)             # vertices on pixel centres: centres exactly on edges
+    if seed % 3 == 0:
+        pts[:, 1] = np.round(pts[:, 1] / 5) * 5  # horizontal edges
+    tris = rng.integers(0, len(pts), (60, 3))
+    got = _raster_triangles(pts, tris, (H, W))
+    np.testing.assert_array_equal(got, raster_reference(pts, tris, (H, W)))
+    assert got.dtype == np.uint8 and set(np.unique(got)) <= {0, 255}
+
+
+def test_polyline_distances_are_exact_near_and_far():
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 2 * np.pi, 400, endpoint=False)
+    poly = np.column_stack([200 + 120 * np.cos(t) * (1 + 0.3 * np.cos(5 * t)), 200 + 80 * np.sin(t)])
+    pts = np.vstack([poly[::7] + rng.normal(0, 2.0, (58, 2)), rng.uniform(-400, 800, (300, 2))])
+    dist = _PolylineDistance(poly)
+    np.testing.assert_allclose(dist(pts), unsigned_distances(pts, poly), rtol=0, atol=1e-9)
+    assert dist.lower(pts) <= float(unsigned_distances(pts, poly).mean())
+    # a polyline of fewer segments than the neighbours asked for
+    np.testing.assert_allclose(_PolylineDistance(poly[:4])(pts), unsigned_distances(pts, poly[:4]), atol=1e-9)
+
+
+def test_tight_box_saves_what_bbox_inches_tight_saves():
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.plot([0, 1], [0, 2], label="a line with a long label")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside the axes, as the run's figures
+    ax.set_title("title")
+    images = []
+    for box in ("tight", tight_bbox(fig, 130)):
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=130, bbox_inches=box)
+        images.append(np.asarray(Image.open(buf)))
+    plt.close(fig)
+    assert images[0].shape == images[1].shape
+    np.testing.assert_array_equal(images[0], images[1])
+
+
+def test_gif_frames_follow_the_states(tmp_path):
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    states = [mesh.points * [1.0 + 0.1 * k, 1.0] for k in range(4)]
+    p = save_animation(mesh, states, tmp_path / "a.gif", titles=[f"t{k}" for k in range(4)], fps=5.0)
+    im = Image.open(p)
+    assert im.n_frames == 4 and im.info["loop"] == 0 and im.info["duration"] == 200
+    frames = []
+    for k in range(4):
+        im.seek(k)
+        frames.append(np.asarray(im.convert("RGB")).astype(int))
+    assert frames[0].shape == (360, 540, 3)
+    assert (frames[0][2, 2] == 255).all()        # the white figure background is kept exactly
+    assert np.abs(frames[3] - frames[0]).sum() > 0  # the body moved
+    with pytest.raises(ValueError, match="titles"):
+        save_animation(mesh, states, tmp_path / "b.gif", titles=["only one"])
+
+
+def test_animation_solves_each_distinct_frame_once(monkeypatch):
+    from mdsr_opt.body.muscles import Muscle
+    from mdsr_opt.mechanics import equilibrium
+    from mdsr_opt.scenes.animate import animate
+    from mdsr_opt.scenes.scene import Animation, Case, Scene
+
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    bottom = Muscle([int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0], name="b")
+    scene = Scene(name="s", mesh=mesh, material=NeoHookean(1.0, 0.3), cases=(Case("pull", contractions=[0.1]),),
+                  muscles=(bottom,),
+                  animations=(Animation("a", (("rest", 1.0), ("pull", 1.0), ("rest", 1.0)), frames_per_step=3),))
+    calls = []
+    real = equilibrium.solve_internal
+
+    def counting(*args, **kwargs):
+        calls.append(np.asarray(args[3], dtype=float).copy())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(equilibrium, "solve_internal", counting)
+    res = animate(scene, "a", {"pull": ((bottom,), np.array([0.1]))})
+    assert res.success and len(res.states) == 7
+    # rest, 1/3, 2/3, pull, 2/3, 1/3, rest: three distinct contracted frames, each solved once
+    assert len(calls) == 3
+    for k in (1, 2):
+        np.testing.assert_array_equal(res.states[k], res.states[6 - k])
+    np.testing.assert_array_equal(res.states[0], mesh.points)
+    reached = 1.0 - bottom.length(res.states[3]) / bottom.rest_length(mesh)
+    assert abs(reached - 0.1) < 1e-4  # the keyframe reaches its contraction
+
+
+def test_warm_start_state_puts_the_gauge_at_rest_and_moves_rigidly():
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.synthesis.gait import warm_start_state
+
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    X = mesh.points
+    t = 0.4
+    R = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    x = (X * [0.9, 1.05]) @ R.T + [3.0, -2.0]       # a deformed state, rotated and moved
+    y = warm_start_state(mesh, x)
+    g = list(gauge_coordinates(mesh))
+    np.testing.assert_allclose(y.reshape(-1)[g], X.reshape(-1)[g], atol=1e-12)
+    d = lambda z: np.linalg.norm(z[:, None] - z[None], axis=2)  # noqa: E731
+    np.testing.assert_allclose(d(y), d(x), atol=1e-12)
+    assert warm_start_state(mesh, np.zeros_like(X)) is None  # no rigid motion puts a collapsed state there
