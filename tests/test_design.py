@@ -528,3 +528,20 @@ def test_scene_table_prints_achieved_contractions_and_strokes():
     head, _sep, row = table.splitlines()
     assert "achieved contractions" in head and "strokes" in head
     assert "0.250, 0.200" in row and "0.5, 0.125" in row and "0.300" not in row  # achieved, not commanded
+
+
+def test_design_figure_title_states_the_contractions_reached():
+    """design.png never claims a contraction that was not reached: with the penalty springs the muscle
+    reaches less than commanded, and the title shows the reached value."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from mdsr_opt.plot.design import plot_design
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    mus = [Muscle(range(1, 16))]
+    target = solve_internal(mesh, MAT, mus, [0.2]).x
+    res = design_contractions(mesh, MAT, mus, target, muscle_model="springs", verify=False)
+    assert abs(res.achieved[0] - res.contractions[0]) > 5e-4  # springs: reached differs from commanded
+    title = plot_design(mesh, res, target, mus).axes[0].get_title()
+    assert f"achieved = [{res.achieved[0]:.3f}]" in title and f"{res.contractions[0]:.3f}" not in title

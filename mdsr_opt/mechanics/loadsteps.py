@@ -148,6 +148,12 @@ def _min_J(mesh, xflat):
     return float((det_ds / (2.0 * mesh.areas)).min())
 
 
+#: iterations a load step may take before it is halved (unless it is already within 4x of ``min_step``):
+#: a 50 % cable contraction at 600 nodes spent 400 of its 473 iterations on a full-load attempt that did not
+#: converge, then succeeded in two halves of 35 and 38 iterations
+STEP_ITER_CAP = 100
+
+
 def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
                   verbose, predict=True):
     """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
@@ -180,7 +186,10 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
                 status = "predictor inverted an element" if predict else "first guess inverts an element"
                 ds /= 2
                 continue
-            out = minimize(model, p, guess, fixed, vals, backend=backend, tol=tol, max_iter=max_iter,
+            # a step that needs many iterations is usually too long: give it STEP_ITER_CAP and halve it
+            # instead of spending the whole budget; near min_step the whole budget (nothing shorter to try)
+            cap = max_iter if ds < 4 * min_step else min(max_iter, STEP_ITER_CAP)
+            out = minimize(model, p, guess, fixed, vals, backend=backend, tol=tol, max_iter=cap,
                            options=options)
             iters += out.iterations
             t_solve += out.solve_time

@@ -146,7 +146,8 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
     >>> mesh, mat, mus = Mesh.rectangle(4.0, 1.0, 16, 4), NeoHookean(1.0, 0.3), [Muscle(range(1, 16))]
     >>> target = solve_internal(mesh, mat, mus, [0.15]).x
     >>> fig = plot_design(mesh, design_contractions(mesh, mat, mus, target), target, mus)
-    >>> "difference" in fig.axes[0].get_title()
+    >>> title = fig.axes[0].get_title()
+    >>> "difference" in title and "achieved = [0.150]" in title
     True
     """
     fig, ax = axes_or_new(ax)
@@ -155,9 +156,13 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
               label="driven (aligned)")
     if len(muscles):
         plot_muscles(result.x_aligned, muscles, ax=ax)
-    a = ", ".join(f"{c:.3f}" for c in result.contractions)
+    # the title states what the muscles reached (1 - L/L0 along each rope), never only what was commanded
+    reached = np.asarray(getattr(result, "achieved", ()), dtype=float)
+    shown = reached if reached.size == len(result.contractions) else np.asarray(result.contractions, dtype=float)
+    a = ", ".join("nan" if not np.isfinite(c) else f"{c:.3f}" for c in shown)
+    what = "achieved" if shown is reached else "a"
     ok = "" if result.success else "  [FAILED]"
-    ax.set_title(title or f"{result.method}: a = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
+    ax.set_title(title or f"{result.method}: {what} = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     return fig
 
