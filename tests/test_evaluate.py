@@ -729,8 +729,15 @@ def test_huge_kernel_is_refused_before_any_work(monkeypatch):
         mp.setattr(contours_mod, "cv2", _NoImageWork())
         mp.setattr(images_mod, "cv2", _NoImageWork())
         with pytest.raises(ValueError, match=r"kernel=1999 is too large for a 2000 x 2000 search region: at "
-                                             r"most 101 px \(MAX_KERNEL=101 px"):
+                                             r"most 101 px \(max_kernel=101 px"):
             contour_from_image(img, kernel=1999)
+        with pytest.raises(ValueError, match=r"max_kernel must be an integer >= 1"):
+            contour_from_image(img, kernel=5, max_kernel=0)
+    # the limit can be raised knowingly (up to a twentieth of the region's side, 99 px here would pass anyway)
+    with pytest.raises(ValueError, match=r"at most 21 px \(max_kernel=21 px"):
+        contour_from_image(img, kernel=51, max_kernel=21)
+    big_k = contour_from_image(img, kernel=51, max_kernel=51, subpixel=False)
+    assert big_k.min(axis=0).tolist() == [600, 500] and big_k.max(axis=0).tolist() == [1399, 1499]
     small = disc_image([(150, 100)], [50])  # 300 x 200: at most 200 // 20 = 10 -> 11 px
     with pytest.raises(ValueError, match="kernel=13 is too large for a 300 x 200 search region: at most 11 px"):
         body_mask(small, kernel=13)

@@ -107,7 +107,8 @@ def _default_kernel(h: int, w: int) -> int:
 
 def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None = None,
               color: Any = None, method: str = "auto", body: str = "auto", color_tol: float | None = None,
-              kernel: int | None = None, flatten: bool = True, max_pixels: int = MAX_PIXELS) -> np.ndarray:
+              kernel: int | None = None, flatten: bool = True, max_pixels: int = MAX_PIXELS,
+              max_kernel: int = MAX_KERNEL) -> np.ndarray:
     """Segment the body: a boolean mask of the image's shape (False outside ``roi``).
 
     Parameters
@@ -137,8 +138,11 @@ def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None
         Size (pixels, odd) of the elliptical kernel of the morphological opening and closing; default
         scales with the image (3 px at 500 px). An even size raises ``ValueError`` (it has no centre
         pixel and would shift the contour), a non-integer ``TypeError``, and so does a kernel over
-        :data:`MAX_KERNEL` (101 px) or over a twentieth of the region's smaller side (an opening with it
-        would erase every part of the body narrower than the kernel, and its cost grows with its size).
+        ``max_kernel`` (default :data:`MAX_KERNEL`, 101 px) or over a twentieth of the region's smaller side
+        (an opening with it would erase every part of the body narrower than the kernel, and its cost grows
+        with its size).
+    max_kernel : int
+        The largest kernel accepted (pixels; raise it knowingly: minutes for hundreds of pixels).
     flatten : bool
         Flatten the illumination before Otsu.
     max_pixels : int
@@ -155,14 +159,14 @@ def body_mask(image: ArrayLike | str | os.PathLike, *, roi: Sequence[int] | None
     """
     img, (x0, y0, w, h) = load_region(image, roi, max_pixels)
     m, _ = _segment(img[y0:y0 + h, x0:x0 + w], color=color, method=method, body=body,
-                    color_tol=color_tol, kernel=kernel, flatten=flatten)
+                    color_tol=color_tol, kernel=kernel, flatten=flatten, max_kernel=max_kernel)
     out = np.zeros(img.shape[:2], dtype=bool)
     out[y0:y0 + h, x0:x0 + w] = m
     return out
 
 
 def _segment(crop: np.ndarray, *, color: Any, method: str, body: str, color_tol: float | None,
-             kernel: int | None, flatten: bool) -> tuple[np.ndarray, np.ndarray]:
+             kernel: int | None, flatten: bool, max_kernel: int = MAX_KERNEL) -> tuple[np.ndarray, np.ndarray]:
     """Mask of a (cropped) uint8 image and a continuous score map for sub-pixel refinement."""
     h, w = crop.shape[:2]
     if method not in ("auto", "otsu", "adaptive", "color"):
@@ -180,6 +184,7 @@ def _segment(crop: np.ndarray, *, color: Any, method: str, body: str, color_tol:
     if int(crop.max()) - int(crop.min()) < 2:
         raise ValueError(f"image is uniform (all pixels about {int(crop.min())}): there is no body to "
                          "extract")
+    max_kernel = check_int(max_kernel, "max_kernel", lo=1)
     if kernel is None:
         k = _default_kernel(h, w)
     else:
@@ -188,10 +193,10 @@ def _segment(crop: np.ndarray, *, color: Any, method: str, body: str, color_tol:
             # an even elliptical kernel has no centre pixel: opening and closing shift the mask
             raise ValueError(f"kernel must be odd (an even kernel has no centre pixel and shifts the "
                              f"contour by about a pixel), got {k}; use {k - 1} or {k + 1}")
-        k_max = min(MAX_KERNEL, max(3, min(h, w) // 20) | 1)
+        k_max = min(max_kernel, max(3, min(h, w) // 20) | 1)
         if k > k_max:
             raise ValueError(f"kernel={k} is too large for a {w} x {h} search region: at most {k_max} px "
-                             f"(MAX_KERNEL={MAX_KERNEL} px, and a twentieth of the smaller side); an opening "
+                             f"(max_kernel={max_kernel} px, and a twentieth of the smaller side); an opening "
                              "with a larger kernel erases every part of the body narrower than the kernel, "
                              "and its cost grows with its size (minutes for hundreds of pixels)")
     sigma = max(0.8, min(h, w) / 600.0)
@@ -305,7 +310,8 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
                        color: Any = None, method: str = "auto", body: str = "auto",
                        color_tol: float | None = None, kernel: int | None = None, flatten: bool = True,
                        largest: bool = False, min_blob_fraction: float = 0.05,
-                       subpixel: bool = True, max_pixels: int = MAX_PIXELS) -> np.ndarray:
+                       subpixel: bool = True, max_pixels: int = MAX_PIXELS,
+                       max_kernel: int = MAX_KERNEL) -> np.ndarray:
     """Extract the body's outline from a photograph as (k, 2) pixel coordinates.
 
     The image is segmented by :func:`body_mask` (thresholding, opening and closing) and the external
@@ -319,7 +325,7 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     ----------
     image : array_like or path
         See :func:`load_image`.
-    roi, color, method, body, color_tol, kernel, flatten, max_pixels
+    roi, color, method, body, color_tol, kernel, flatten, max_pixels, max_kernel
         See :func:`body_mask`.
     largest : bool
         When several blobs of comparable size remain, or the only large blob touches the border, keep
@@ -356,11 +362,11 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     """
     return _extract_outline(image, roi=roi, color=color, method=method, body=body, color_tol=color_tol,
                             kernel=kernel, flatten=flatten, largest=largest, min_blob_fraction=min_blob_fraction,
-                            subpixel=subpixel, max_pixels=max_pixels)[0]
+                            subpixel=subpixel, max_pixels=max_pixels, max_kernel=max_kernel)[0]
 
 
 def _extract_outline(image, *, roi, color, method, body, color_tol, kernel, flatten, largest, min_blob_fraction,
-                     subpixel, max_pixels):
+                     subpixel, max_pixels, max_kernel=MAX_KERNEL):
     """:func:`contour_from_image`, also returning what hole extraction needs: ``(outline, mask (uint8,
     0/255, search region), score, the outline's integer contour, (x0, y0, w, h))``."""
     img, (x0, y0, w, h) = load_region(image, roi, max_pixels)
@@ -370,7 +376,7 @@ def _extract_outline(image, *, roi, color, method, body, color_tol, kernel, flat
     if frac > 1.0:
         raise ValueError(f"min_blob_fraction must lie in (0, 1], got {frac}")
     mask, score = _segment(img[y0:y0 + h, x0:x0 + w], color=color, method=method, body=body,
-                           color_tol=color_tol, kernel=kernel, flatten=flatten)
+                           color_tol=color_tol, kernel=kernel, flatten=flatten, max_kernel=max_kernel)
     m8 = mask.astype(np.uint8) * 255
     contours, _ = cv2.findContours(m8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     contours = [c.reshape(-1, 2) for c in contours if len(c) >= 3]
@@ -453,7 +459,7 @@ def contour_loops_from_image(image: ArrayLike | str | os.PathLike, *, min_hole_f
         raise ValueError(f"min_hole_fraction must lie in (0, 1), got {frac}")
     subpixel = check_bool(subpixel, "subpixel")
     opts = dict(roi=None, color=None, method="auto", body="auto", color_tol=None, kernel=None, flatten=True,
-                largest=False, min_blob_fraction=0.05, max_pixels=MAX_PIXELS)
+                largest=False, min_blob_fraction=0.05, max_pixels=MAX_PIXELS, max_kernel=MAX_KERNEL)
     unknown = set(extract) - set(opts)
     if unknown:
         raise TypeError(f"contour_loops_from_image got unknown option(s) {sorted(unknown)}; it takes "
