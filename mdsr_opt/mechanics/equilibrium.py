@@ -15,7 +15,7 @@ from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
-from .constraints import MuscleConstraints, spring_segments, spring_stiffness
+from .constraints import MuscleConstraints, muscle_constraints, spring_segments, spring_stiffness
 from .drags import drag_path
 from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result
 from .model import get_model, spring_parameters
@@ -155,14 +155,9 @@ def gauge_coordinates(mesh) -> tuple[int, int, int]:
 
 
 def _muscle_constraints(mesh, muscles, radius) -> MuscleConstraints:
-    """The mesh's cached :class:`MuscleConstraints` for these muscles and anchor radius."""
-    cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
-    key = (tuple(m.nodes for m in muscles), float(radius))
-    if key not in cache:
-        if len(cache) >= 16:
-            cache.pop(next(iter(cache)))
-        cache[key] = MuscleConstraints(mesh, muscles, radius)
-    return cache[key]
+    """The mesh's cached :class:`MuscleConstraints` for these muscles and anchor radius (one cache with the
+    design's: :func:`~mdsr_opt.mechanics.constraints.muscle_constraints`)."""
+    return muscle_constraints(mesh, muscles, radius)
 
 
 def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
