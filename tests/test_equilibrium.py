@@ -225,17 +225,20 @@ def test_internal_bad_input(strip, material):
 
 @pytest.mark.parametrize("material", [NeoHookean(1.0, 0.3), LinearElastic(1.0, 0.3)], ids=["neo-hookean", "linear"])
 def test_numeric_evaluation_matches_the_symbolic_model(material):
-    """The default IPOPT path evaluates energy, gradient and Hessian in numpy; ``ipopt-symbolic`` takes them
-    from the symbolic CasADi model. Same problem: same iterations, energies and states to round-off."""
+    """The default IPOPT path evaluates energy, gradient and Hessian in numpy (also beside the exact cable's
+    constraints); ``ipopt-symbolic`` takes them from the symbolic CasADi model. Same problem: same
+    iterations, energies and states to round-off, same rope tension."""
     mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
     P = mesh.points
     left, right = np.flatnonzero(P[:, 0] == 0), np.flatnonzero(P[:, 0] == 4)
     top = sorted(np.flatnonzero(P[:, 1] == 1), key=lambda i: P[i, 0])
     runs = {b: (solve_external(mesh, material, left, (right, P[right] + [0.5, 1.0]), backend=b, tol=1e-10),
-                solve_internal(mesh, material, [Muscle(top[2:-2])], [0.2], muscle_model="springs", backend=b))
+                solve_internal(mesh, material, [Muscle(top[2:-2])], [0.2], muscle_model="springs", backend=b),
+                solve_internal(mesh, material, [Muscle(top[2:-2])], [0.3], muscle_model="cable", backend=b))
             for b in ("ipopt", "ipopt-symbolic")}
     for num, sym in zip(runs["ipopt"], runs["ipopt-symbolic"]):
         assert num.success and sym.success and num.iterations == sym.iterations
         assert num.energy == pytest.approx(sym.energy, rel=1e-12)
-        assert np.abs(num.x - sym.x).max() < 1e-10
+        assert np.abs(num.x - sym.x).max() < 1e-8
+    assert runs["ipopt"][2].tension[0] == pytest.approx(runs["ipopt-symbolic"][2].tension[0], rel=1e-8)
     assert get_model(mesh, material).is_numeric  # the default path really is the numeric one here

@@ -118,33 +118,47 @@ def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
     return factory
 
 
-def _constrained_factory(plugin: str, opts: dict):
+def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
     """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
-        x, p = model.x, model.p
+        # IPOPT takes the energy's value, gradient and Hessian from numpy where the model allows it (the
+        # constraints stay symbolic: few nodes); "ipopt-symbolic" and the other plugins use the CasADi graph
+        numeric = plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False)
+        if numeric:
+            from .assembly import ipopt_functions
+
+            fns = ipopt_functions(model)
+            x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
+            f = fns["f"](x, p)
+        else:
+            x, p = model.x, model.p
+            f = model.f_fn(x, p)
         g = cmodel.nlp_constraints_expr(x)
-        nlp = {"x": x, "p": p, "f": model.f_fn(x, p), "g": g}
+        nlp = {"x": x, "p": p, "f": f, "g": g}
         o = dict(opts)
         o["show_eval_warnings"] = False
+        if numeric:  # the callbacks have no derivatives; nlp_grad only serves lam_x/lam_p, which are unused
+            o["no_nlp_grad"] = True
         if plugin in ("ipopt", "sqpmethod"):
             lam_f = ca.MX.sym("lam_f")
             lam_g = ca.MX.sym("lam_g", g.size1())
-            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g)
+            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g, numeric=numeric)
             if plugin == "sqpmethod":
                 H = H + ca.triu(H, False).T
             o["hess_lag"] = ca.Function("hess_lag_c", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"],
                                         ["hess"])
             if plugin == "ipopt":
-                o["grad_f"] = model.grad_fn
+                o["grad_f"] = fns["grad_f"] if numeric else model.grad_fn
         return ca.nlpsol(f"constrained_{plugin}", plugin, nlp, o)
     return factory
 
 
-def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values):
+def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
     """Solve with ropes as equalities first: if every rope's multiplier (tension) is >= 0 that is a KKT point
     of the inequality problem too; otherwise re-solve with the ropes as inequalities ``L <= target``."""
-    solver, build_time = cmodel.solver(plugin, opts, _constrained_factory(plugin, opts))
+    solver, build_time = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), opts,
+                                       _constrained_factory(plugin, opts, symbolic))
     pe = cmodel.split(p)[0]
     lbx = np.full(cmodel.n_dof, -np.inf)
     ubx = np.full(cmodel.n_dof, np.inf)
@@ -530,7 +544,7 @@ def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, o
                         limited_memory=backend == "ipopt-lbfgs")
         o["calc_lam_p"] = False
         o.update(options)
-        return _solve_constrained("ipopt", o, model, p, x0, fixed, values)
+        return _solve_constrained("ipopt", o, model, p, x0, fixed, values, symbolic=backend == "ipopt-symbolic")
     if backend == "sqpmethod":
         o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
                                                 "error_on_fail": False},

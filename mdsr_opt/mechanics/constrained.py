@@ -145,12 +145,20 @@ class ConstrainedModel:
         lb, ub = self.bounds(p, equality_ropes)
         return lb * self.row_scale, ub * self.row_scale
 
-    def hess_lag_upper(self, x, p, lam_f, lam_g):
+    def hess_lag_upper(self, x, p, lam_f, lam_g, numeric: bool = False):
         """Upper triangle of the Lagrangian's Hessian as a CasADi expression (for IPOPT's ``hess_lag``), with
-        ``lam_g`` the multipliers of :meth:`nlp_constraints_expr` (physical ones: ``row_scale * lam_g``)."""
+        ``lam_g`` the multipliers of :meth:`nlp_constraints_expr` (physical ones: ``row_scale * lam_g``).
+        ``numeric``: the energy's part from the model's numpy evaluation
+        (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`) instead of its symbolic graph."""
         lam_g = lam_g * ca.DM(self.row_scale)
         lam = lam_g if self.ropes else ca.vertcat(ca.MX(self.constraints.n_muscles, 1), lam_g)
-        return self.model.hess_lag_fn(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
+        if numeric:
+            from .assembly import ipopt_functions
+
+            energy = ipopt_functions(self.model)["hess_lag"]
+        else:
+            energy = self.model.hess_lag_fn
+        return energy(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
 
     def solver(self, backend: str, options: dict, factory):
         """``(solver, build seconds)``, cached per backend and options like the energy model's."""
