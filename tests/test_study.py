@@ -341,3 +341,22 @@ def test_cli_study(tmp_path, capsys):
     assert len(rows) == 2 * 2  # 2 methods x 2 materials
     assert {r["failure"] for r in rows} == {"none"}
     assert "| ipopt | 2 | 2 |" in capsys.readouterr().out
+
+
+def test_comparable_rows_of_a_timed_out_run_keep_identity_and_outcome_only():
+    """How far a run got before its time limit depends on the machine: two time-outs of the same run
+    compare equal; two finished runs that differ compare unequal."""
+    from mdsr_opt.studies.spec import STUDIES
+    from mdsr_opt.studies.study import StudyResult
+
+    base = {c: 0 for c in COLUMNS}
+    base.update(study="quick", problem="strip-contract", method="ipopt-lbfgs", nodes=85, success=False,
+                failure="time-out", status="load stepping stalled")
+
+    def result(**kw):
+        return StudyResult(STUDIES["quick"], [dict(base, **kw)], [])
+
+    assert result(iterations=27000, energy=1.0).comparable() == result(iterations=24466, energy=2.0).comparable()
+    assert result(nodes=85).comparable() != result(nodes=300).comparable()
+    done = dict(failure="none", success=True)
+    assert result(iterations=7, **done).comparable() != result(iterations=8, **done).comparable()

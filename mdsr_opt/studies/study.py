@@ -54,9 +54,13 @@ class StudyResult:
         return [r[name] for r in self.rows]
 
     def comparable(self) -> list[tuple]:
-        """The rows without their timing columns: equal for any two runs of the same study."""
+        """The rows without their timing columns: equal for any two runs of the same study. A run stopped by
+        its time limit ("time-out") keeps only what identifies it and its outcome: how far it got (its
+        iterations, steps and state) depends on the machine's speed at the time."""
         keep = [c for c in COLUMNS if c not in TIMING_COLUMNS]
-        return [tuple(r[c] for c in keep) for r in self.rows]
+        outcome = set(keep[:keep.index("nodes") + 1]) | {"success", "failure"}
+        return [tuple(r[c] if r["failure"] != "time-out" or c in outcome else None for c in keep)
+                for r in self.rows]
 
     def csv_text(self, rows: list | None = None) -> str:
         buf = io.StringIO()
