@@ -360,3 +360,7 @@ def test_comparable_rows_of_a_timed_out_run_keep_identity_and_outcome_only():
     assert result(nodes=85).comparable() != result(nodes=300).comparable()
     done = dict(failure="none", success=True)
     assert result(iterations=7, **done).comparable() != result(iterations=8, **done).comparable()
+    # a run that produced no number (NaN) compares equal to itself (a NaN read back from a worker is a new
+    # float object, and NaN != NaN)
+    err = dict(failure="error", energy=float("nan"))
+    assert result(**err).comparable() == result(**dict(err, energy=float("nan"))).comparable()

@@ -59,8 +59,12 @@ class StudyResult:
         iterations, steps and state) depends on the machine's speed at the time."""
         keep = [c for c in COLUMNS if c not in TIMING_COLUMNS]
         outcome = set(keep[:keep.index("nodes") + 1]) | {"success", "failure"}
-        return [tuple(r[c] if r["failure"] != "time-out" or c in outcome else None for c in keep)
-                for r in self.rows]
+
+        def value(r, c):  # NaN (a run that produced no number) compares equal to NaN here, as None
+            v = r[c] if r["failure"] != "time-out" or c in outcome else None
+            return None if isinstance(v, float) and math.isnan(v) else v
+
+        return [tuple(value(r, c) for c in keep) for r in self.rows]
 
     def csv_text(self, rows: list | None = None) -> str:
         buf = io.StringIO()
