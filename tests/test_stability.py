@@ -106,15 +106,20 @@ def test_no_free_coordinate_is_stable():
     assert c.stable and c.n_negative == 0
 
 
-def test_real_mesh_compressed_strip_inertia_matches_dense():
-    """The straight strip compressed by 20 % (a saddle) and the strip at rest (a minimum)."""
+def _clamped_strip():
+    """A 10 x 1 strip (40 x 4 cells) with both ends clamped: mesh, material, rest points, free mask, model."""
     mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
     mat = NeoHookean(1.0, 0.3)
     P = mesh.points
     fixed_nodes = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 10.0))
     free = np.ones(2 * mesh.n_nodes, bool)
     free[2 * fixed_nodes] = free[2 * fixed_nodes + 1] = False
-    model = get_model(mesh, mat)
+    return mesh, mat, P, free, get_model(mesh, mat)
+
+
+def test_real_mesh_compressed_strip_inertia_matches_dense():
+    """The straight strip compressed by 20 % (a saddle) and the strip at rest (a minimum)."""
+    mesh, mat, P, free, model = _clamped_strip()
     p = model.params(mat)
     # homogeneous compression x -> 0.8 x: the straight state (an equilibrium up to the Poisson bulge)
     x = P.copy()
@@ -187,13 +192,7 @@ def test_dependent_constraint_rows_are_reduced():
 @pytest.mark.parametrize("m", [0, 2])
 def test_lowest_when_unstable_is_the_lowest_eigenpair(m):
     """On a real (indefinite) mesh Hessian: the compressed strip, large enough for the LOBPCG path."""
-    mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
-    mat = NeoHookean(1.0, 0.3)
-    P = mesh.points
-    fixed_nodes = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 10.0))
-    free = np.ones(2 * mesh.n_nodes, bool)
-    free[2 * fixed_nodes] = free[2 * fixed_nodes + 1] = False
-    model = get_model(mesh, mat)
+    mesh, mat, P, free, model = _clamped_strip()
     x = P.copy()
     x[:, 0] *= 0.8
     H = model.hessian(x.reshape(-1), model.params(mat))
@@ -229,13 +228,7 @@ def test_given_ordering_gives_the_same_answer_and_direction():
     # the mesh's fill-reducing ordering (EnergyModel.free_ordering) replaces SuperLU's own: the same inertia;
     # the direction (mapped back to the original coordinates) is refined from other pivots, so it is close
     # to, not equal to, the one without the ordering: both near the lowest mode
-    mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
-    mat = NeoHookean(1.0, 0.3)
-    P = mesh.points
-    fixed_nodes = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 10.0))
-    free = np.ones(2 * mesh.n_nodes, bool)
-    free[2 * fixed_nodes] = free[2 * fixed_nodes + 1] = False
-    model = get_model(mesh, mat)
+    mesh, mat, P, free, model = _clamped_strip()
     order = model.free_ordering(free)
     assert np.array_equal(np.sort(order), np.arange(free.sum())) and not np.array_equal(order, np.sort(order))
     x = P.copy()

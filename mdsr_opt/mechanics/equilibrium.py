@@ -15,7 +15,7 @@ from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
-from .constraints import MuscleConstraints, muscle_constraints, spring_segments, spring_stiffness
+from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .drags import drag_path
 from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result
 from .model import get_model, spring_parameters
@@ -154,12 +154,6 @@ def gauge_coordinates(mesh) -> tuple[int, int, int]:
     return 2 * i, 2 * i + 1, 2 * j + comp
 
 
-def _muscle_constraints(mesh, muscles, radius) -> MuscleConstraints:
-    """The mesh's cached :class:`MuscleConstraints` for these muscles and anchor radius (one cache with the
-    design's: :func:`~mdsr_opt.mechanics.constraints.muscle_constraints`)."""
-    return muscle_constraints(mesh, muscles, radius)
-
-
 def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
     cache = emodel.__dict__.setdefault("_constrained_cache", {})
     key = (id(mc), bool(ropes))
@@ -249,7 +243,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                          f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
                                                                  ", or anchor_radius=0"))
     t0 = time.perf_counter()
-    mc = _muscle_constraints(mesh, mus, radius)
+    mc = muscle_constraints(mesh, mus, radius)  # one cache per mesh, shared with the design
     emodel = get_model(mesh, material)
     cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before

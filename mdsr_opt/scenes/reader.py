@@ -196,6 +196,13 @@ def _table(r: Reader, v, where: str) -> dict:
     return dict(v)
 
 
+def _symmetry(r: Reader, v, where: str):
+    if not (isinstance(v, bool) or v == "auto"):
+        r.fail(where, f"must be 'auto', true or false, got {v!r}", TypeError if not isinstance(v, str) else
+               SceneFileError)
+    return v
+
+
 #: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
 _DESIGN_CHECKS = {
     "method": _choice("flattened", "nested", "derivative-free"),
@@ -229,15 +236,8 @@ _ROUTING_CHECKS = {
     "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
     "max_turn": _real(0.0, 180.0, what=" (degrees)"),
     "seed_threshold": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest contraction)"),
-    "symmetry": lambda r, v, where: _symmetry(r, v, where),
+    "symmetry": _symmetry,
 }
-
-
-def _symmetry(r: Reader, v, where: str):
-    if not (isinstance(v, bool) or v == "auto"):
-        r.fail(where, f"must be 'auto', true or false, got {v!r}", TypeError if not isinstance(v, str) else
-               SceneFileError)
-    return v
 
 
 def _solver_options(r: Reader, options: dict, design: dict) -> dict:

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, positive_int
-from ..mechanics.anchors import MAX_ANCHOR_FRACTION, body_size
+from ..mechanics.anchors import body_size, check_anchor_radius
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -258,10 +258,11 @@ class Scene:
         check_units_and_gait(self)  # issue 16
         self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
         self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
-        radius = self.design_options.get("anchor_radius")
-        if radius is not None and radius >= MAX_ANCHOR_FRACTION * body_size(self.mesh):
-            raise ValueError(f"scene {self.name!r}: design.anchor_radius {radius:g} is at least half the body's "
-                             f"size ({body_size(self.mesh):.3g}): a muscle's end patch would hold most of the body")
+        if self.design_options.get("anchor_radius") is not None:  # the solvers' own check, against this body
+            try:
+                check_anchor_radius(self.mesh, self.design_options["anchor_radius"])
+            except ValueError as exc:
+                raise ValueError(f"scene {self.name!r}: design.{exc}") from None
         self.expected = dict(self.expected)
         check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}",
                            gait_names=[self.gait.name] if self.gait is not None else ())
