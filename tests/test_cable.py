@@ -96,6 +96,44 @@ def test_load_stepping_moves_the_rope_targets():
     assert np.abs(bad.achieved - s * a).max() < 1e-6
 
 
+def test_the_rope_predictor_never_starts_farther_from_the_ropes_targets():
+    """From rest, the linearised (KKT) step of a strongly contracted rope bends the strip and lengthens the
+    rope; the load step then starts from the current state instead. Away from rest, with a small load step,
+    the step is kept (its rope residual is second order)."""
+    from mdsr_opt.mechanics.constraints import muscle_constraints
+    from mdsr_opt.mechanics.constrained import ConstrainedModel
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+    from mdsr_opt.mechanics.model import get_model
+
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0)]
+    L0 = mus[0].rest_length(mesh)
+    res = solve_internal(mesh, MAT, mus, [0.2])
+    cm = ConstrainedModel(get_model(mesh, MAT), muscle_constraints(mesh, mus, None), ropes=True)
+    pe = cm.model.params(MAT)
+    fixed = np.zeros(2 * mesh.n_nodes, dtype=bool)
+    fixed[list(gauge_coordinates(mesh))] = True
+    X = mesh.points.reshape(-1)
+    for x, a in ((X, 0.5), (X, 0.3), (res.x.reshape(-1), 0.22)):
+        p = cm.params(pe, np.array([(1 - a) * L0]))
+        y = cm.predict(p, x, fixed, x[fixed])
+        r0, r1 = (abs(mus[0].length(z.reshape(-1, 2)) - (1 - a) * L0) / L0 for z in (x, y))
+        assert r1 <= r0 + 1e-15, (a, r0, r1)
+    assert r1 < 0.05 * r0  # the continuation step near a solution is a good prediction, and is kept
+
+
+def test_a_strong_contraction_from_rest_takes_one_load_step_and_agrees_with_small_steps():
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0)]
+    one = solve_internal(mesh, MAT, mus, [0.5])
+    assert one.success and one.steps == [1.0], (one.status, one.steps)
+    # a second path: an iteration cap that forces short load steps
+    r = solve_internal(mesh, MAT, mus, [0.5], max_iter=8)
+    assert r.success and len(r.steps) >= 2, (r.status, r.steps)
+    assert one.energy == pytest.approx(r.energy, rel=1e-7)  # both solved to IPOPT tol 1e-8
+    assert np.abs(one.achieved - 0.5).max() < 1e-6
+
+
 @pytest.mark.parametrize("backend", ["sqpmethod", "uno"])
 def test_other_constrained_backends_agree_with_ipopt(backend):
     from mdsr_opt.mechanics.backends import available_backends
