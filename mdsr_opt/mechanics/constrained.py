@@ -19,8 +19,9 @@ import scipy.sparse.linalg as spla
 
 from .anchors import body_size
 from .constraints import MuscleConstraints
+from .kkt import kkt_factor
 
-__all__ = ["ConstrainedModel", "kkt_factor"]
+__all__ = ["ConstrainedModel"]
 
 
 class ConstrainedModel:
@@ -289,60 +290,3 @@ class ConstrainedModel:
             active[neg] = False
         return lam, active[:nt]
 
-
-class _OrderedSolve:
-    """A factorisation of ``K[perm][:, perm]`` that solves with ``K``."""
-
-    def __init__(self, lu, perm):
-        self.lu, self.perm = lu, perm
-
-    def solve(self, rhs):
-        out = np.empty_like(rhs, dtype=float)
-        out[self.perm] = self.lu.solve(np.asarray(rhs, dtype=float)[self.perm])
-        return out
-
-
-def kkt_factor(H, J, order=None, rtol: float = 1e-8):
-    """A factorisation of the KKT matrix ``[[H, J'], [J, 0]]`` with a ``solve(rhs)`` method, or None when
-    it is singular.
-
-    With ``order`` (a fill-reducing ordering of ``H``'s rows, e.g.
-    :meth:`~mdsr_opt.mechanics.model.EnergyModel.free_ordering`) the unknowns are eliminated in that order,
-    each constraint row right after the last unknown it involves, by SuperLU without an ordering of its own
-    (symmetric mode, diagonal pivots preferred): its zero diagonal has become nonzero by then. Measured on the
-    load-stepping predictor of a 3k-node design with 4 cable muscles (6,101 unknowns, 326 constraint rows):
-    13 ms and 0.40 M factor entries against 44 ms and 0.88 M with SuperLU's COLAMD, solutions equal to
-    1e-12. A factorisation whose solution of a test right-hand side has a relative residual above ``rtol``
-    (a pivot that should not have been taken) is replaced by the COLAMD one, as is a failed one.
-    """
-    H = sp.csc_matrix(H)
-    J = sp.csr_matrix(J)
-    n, m = H.shape[0], J.shape[0]
-    K = sp.bmat([[H, J.T], [J, None]], format="csc") if m else H
-    if order is not None:
-        order = np.asarray(order, dtype=np.int64)
-        pos = np.empty(n, dtype=np.int64)
-        pos[order] = np.arange(n)
-        if m:  # key 2 * position for an unknown, 2 * (its last unknown's position) + 1 for a row
-            last = np.full(m, -1, dtype=np.int64)
-            rows = np.repeat(np.arange(m), np.diff(J.indptr))
-            np.maximum.at(last, rows, pos[J.indices])
-            keys = np.concatenate([2 * pos, 2 * last + 1])
-            perm = np.argsort(keys, kind="stable")
-        else:
-            perm = order
-        try:
-            lu = spla.splu(K[perm][:, perm].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.01,
-                           options={"SymmetricMode": True})
-            fac = _OrderedSolve(lu, perm)
-            b = np.random.default_rng(0).standard_normal(n + m)
-            with np.errstate(all="ignore"):
-                r = K @ fac.solve(b) - b
-            if np.all(np.isfinite(r)) and np.linalg.norm(r) <= rtol * np.linalg.norm(b):
-                return fac
-        except RuntimeError:
-            pass
-    try:
-        return spla.splu(K)  # COLAMD: 10x faster than MMD on this indefinite matrix
-    except RuntimeError:
-        return None

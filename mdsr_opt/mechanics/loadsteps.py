@@ -237,7 +237,10 @@ def _stability_at(model, p, xflat, fixed):
             A = model.jacobian(xflat)[active]
     else:
         H = model.hessian(xflat, p)
-    order = model.free_ordering(~fixed) if A is None and getattr(model, "is_numeric", False) else None
+    if A is None:
+        order = model.free_ordering(~fixed) if getattr(model, "is_numeric", False) else None
+    else:  # the KKT matrix of the constrained check is ordered from the energy model's ordering
+        order = model.model.free_ordering(~fixed)
     chk = check_stability(H, ~fixed, A, order=order)
     model.__dict__["_last_stability"] = (key, chk)
     return chk

@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .kkt import kkt_inertia
+
 __all__ = ["StabilityCheck", "check_stability"]
 
 
@@ -259,7 +261,9 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     order : int array, optional
         A fill-reducing ordering of the free coordinates (a permutation of ``0 .. n_free - 1``, e.g.
         :meth:`~mdsr_opt.mechanics.model.EnergyModel.free_ordering`), used by the factorisations instead of
-        SuperLU's own minimum degree ordering when there are no constraints. Same answer, less time.
+        SuperLU's own minimum degree ordering when there are no constraints; with constraints (and
+        ``lowest=False``) the inertia of the KKT matrix factored in that order answers first when it says
+        stable (:func:`~mdsr_opt.mechanics.kkt.kkt_inertia`). Same answer, less time.
 
     Returns
     -------
@@ -281,11 +285,12 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     n = len(idx)
     if n == 0:
         return StabilityCheck(True, 0, 0, None, None, "ldl-inertia", time.perf_counter() - t0)
-    ordered = order is not None and A is None
-    if ordered:  # everything below works on the free coordinates in this order; vdir[idx] maps them back
+    if order is not None:
         order = np.asarray(order)
         if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
             raise ValueError(f"order must be a permutation of the {n} free coordinates")
+    ordered = order is not None and A is None
+    if ordered:  # everything below works on the free coordinates in this order; vdir[idx] maps them back
         idx = idx[order]
     H = sp.csc_matrix(H)
     Hff = H[idx][:, idx].tocsc()
@@ -302,6 +307,12 @@ def check_stability(H, free, A=None, *, rtol: float = 1e-10, direction: bool = T
     if Af is not None:
         method = "ldl-inertia+finsler"
         Af = _independent_rows(Af)
+        if order is not None and not lowest:
+            # one factorisation of the KKT matrix in the mesh's order: its inertia answers "stable" at
+            # about half the cost of H + rho A'A with SuperLU's own ordering (3k nodes, 326 rows)
+            inertia = kkt_inertia(Hff, Af, order, rtol)
+            if inertia == (0, 0):
+                return StabilityCheck(True, 0, 0, None, None, "kkt-inertia", time.perf_counter() - t0)
         AAt = (Af @ Af.T).tocsc()
         aat = spla.splu(AAt)
 

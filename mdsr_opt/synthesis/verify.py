@@ -66,7 +66,7 @@ def _stability(prob: DesignProblem, a, xflat, lowest: bool = True) -> tuple[bool
     the Hessian is the Lagrangian's with least-squares multipliers, on the tangent space of the active
     rows (:meth:`DesignProblem.kkt_data`, in units of ``E t h``)."""
     H, free, A, _kap, res = prob.kkt_data(a, xflat)
-    chk = check_stability(H, free, A, lowest=lowest)
+    chk = check_stability(H, free, A, lowest=lowest, order=prob.model.free_ordering(free))
     lam = float(chk.curvature) * prob.h if chk.curvature is not None else (0.0 if not chk.stable else np.nan)
     return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
