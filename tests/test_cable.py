@@ -134,6 +134,26 @@ def test_a_strong_contraction_from_rest_takes_one_load_step_and_agrees_with_smal
     assert np.abs(one.achieved - 0.5).max() < 1e-6
 
 
+@pytest.mark.parametrize("pose", ["as returned", "rotated and shifted"])
+def test_an_earlier_result_in_any_pose_starts_a_solve(pose):
+    """initial_guess=<an earlier state> is moved rigidly into the solver's gauge frame: setting the three
+    gauge coordinates alone sheared the state (an inverted element, no solve) when it was not already there."""
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0), row(mesh, 1.0, 1.0, 3.0)]
+    r0 = solve_internal(mesh, MAT, mus, [0.1, 0.1])
+    x0 = r0.x
+    if pose != "as returned":
+        th = 0.7
+        R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        x0 = x0 @ R.T + [3.0, -2.0]
+    warm = solve_internal(mesh, MAT, mus, [0.12, 0.12], initial_guess=x0)
+    cold = solve_internal(mesh, MAT, mus, [0.12, 0.12])
+    assert warm.success and cold.success, (warm.status, cold.status)
+    assert warm.iterations < cold.iterations
+    assert warm.energy == pytest.approx(cold.energy, rel=1e-7)
+    assert np.abs(warm.x - cold.x).max() < 1e-5 * mesh.size  # both aligned to rest
+
+
 @pytest.mark.parametrize("backend", ["sqpmethod", "uno"])
 def test_other_constrained_backends_agree_with_ipopt(backend):
     from mdsr_opt.mechanics.backends import available_backends

@@ -22,7 +22,7 @@ from .model import get_model, spring_parameters
 from .result import EquilibriumResult
 from .stability import check_stability
 
-__all__ = ['solve_external', 'external_stability', 'solve_internal']
+__all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_frame', 'gauge_coordinates']
 
 
 # ---------------------------------------------------------------------------------- external driving
@@ -68,6 +68,10 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     check_mesh_material(mesh, material)
     tol = check_common(tol, max_iter, backend, min_step)
     predict, x_start = initial_guess_of(initial_guess, mesh)
+    if not isinstance(initial_guess, str):  # a state in any pose: moved rigidly into the solver's gauge frame
+        moved = in_gauge_frame(mesh, x_start.reshape(-1, 2))
+        if moved is not None:
+            x_start = moved.reshape(-1)
     n = mesh.n_nodes
     anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
                          "anchors", n=n, shape=(None,))
@@ -165,6 +169,34 @@ def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
 
 
 @renamed_keywords(model="muscle_model")
+def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
+    """``x`` (n, 2) moved rigidly into the gauge frame of :func:`solve_internal` (its gauge coordinates at
+    their rest values), the rotation nearest the identity of the two that do it; None when none does (node
+    ``j`` nearer node ``i`` than its fixed coordinate needs) or ``x`` inverts an element.
+
+    A state of the body in any pose (e.g. an earlier result, aligned to rest) starts a solve from here
+    without the shear that setting the three gauge coordinates alone would make."""
+    if not np.all(np.isfinite(x)) or mesh.jacobians(x).min() <= 0:
+        return None
+    gi, _gi1, gj = gauge_coordinates(mesh)
+    i, j, comp = gi // 2, gj // 2, gj % 2
+    P = mesh.points
+    w, v = x[j] - x[i], P[j] - P[i]
+    rho = float(np.hypot(*w))
+    if rho == 0.0 or abs(v[comp]) > rho:
+        return None
+    alpha = float(np.arctan2(w[1], w[0]))
+    if comp == 1:  # (R w)_1 = rho sin(theta + alpha) = v_1
+        base = float(np.arcsin(v[1] / rho))
+        cands = [base - alpha, np.pi - base - alpha]
+    else:  # (R w)_0 = rho cos(theta + alpha) = v_0
+        base = float(np.arccos(v[0] / rho))
+        cands = [base - alpha, -base - alpha]
+    th = min(cands, key=lambda t: abs(np.angle(np.exp(1j * t))))
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    return (x - x[i]) @ R.T + P[i]
+
+
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
@@ -195,8 +227,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
         of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
-    initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external` (the
-        three gauge coordinates of a given state are set to their rest values).
+    initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external`; a state
+        in any pose (e.g. an earlier result's ``x``) is moved rigidly into the solver's gauge frame
+        (:func:`in_gauge_frame`).
 
     Returns
     -------
@@ -229,6 +262,10 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         raise ValueError("internal driving needs at least one muscle")
     a = check_contractions(contractions, len(mus))
     predict, x_start = initial_guess_of(initial_guess, mesh)
+    if not isinstance(initial_guess, str):  # a state in any pose: moved rigidly into the solver's gauge frame
+        moved = in_gauge_frame(mesh, x_start.reshape(-1, 2))
+        if moved is not None:
+            x_start = moved.reshape(-1)
     n = mesh.n_nodes
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
     k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)

@@ -11,7 +11,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array
 from ..mechanics.align import align, node_weights
-from ..mechanics.equilibrium import external_stability, gauge_coordinates, solve_internal
+from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_internal
 from ..mechanics.loadsteps import check_mesh_material
 from ..mechanics.stability import check_stability
 from .problem import DesignProblem
@@ -71,31 +71,6 @@ def _stability(prob: DesignProblem, a, xflat, lowest: bool = True) -> tuple[bool
     return bool(chk.stable), lam, res * prob.h / prob.mesh.size
 
 
-def _in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
-    """``x`` (n, 2) moved rigidly into the gauge frame of :func:`~mdsr_opt.solve_internal` (its gauge
-    coordinates at their rest values), the rotation nearest the identity of the two that do it; None when
-    none does (node ``j`` nearer node ``i`` than its fixed coordinate needs) or ``x`` inverts an element."""
-    if not np.all(np.isfinite(x)) or mesh.jacobians(x).min() <= 0:
-        return None
-    gi, _gi1, gj = gauge_coordinates(mesh)
-    i, j, comp = gi // 2, gj // 2, gj % 2
-    P = mesh.points
-    w, v = x[j] - x[i], P[j] - P[i]
-    rho = float(np.hypot(*w))
-    if rho == 0.0 or abs(v[comp]) > rho:
-        return None
-    alpha = float(np.arctan2(w[1], w[0]))
-    if comp == 1:  # (R w)_1 = rho sin(theta + alpha) = v_1
-        base = float(np.arcsin(v[1] / rho))
-        cands = [base - alpha, np.pi - base - alpha]
-    else:  # (R w)_0 = rho cos(theta + alpha) = v_0
-        base = float(np.arccos(v[0] / rho))
-        cands = [base - alpha, -base - alpha]
-    th = min(cands, key=lambda t: abs(np.angle(np.exp(1j * t))))
-    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-    return (x - x[i]) @ R.T + P[i]
-
-
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
                   weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
                   drags=None, lowest: bool = False, start: str = "rest") -> Verification:
@@ -153,7 +128,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
     prob = DesignProblem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
-    guess = _in_gauge_frame(mesh, x) if start == "design" else None
+    guess = in_gauge_frame(mesh, x) if start == "design" else None
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), muscle_model=result.muscle_model,
                          stiffness=result.stiffness, anchor_radius=radius, tol=1e-10,
                          initial_guess="predictor" if guess is None else guess)
