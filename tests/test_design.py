@@ -273,7 +273,7 @@ def test_verification_rejects_wrong_states(mesh, muscles, target):
 
 def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target):
     from mdsr_opt.mechanics.equilibrium import gauge_coordinates
-    from mdsr_opt.synthesis.verify import _in_gauge_frame
+    from mdsr_opt.mechanics.equilibrium import in_gauge_frame
 
     res = design_contractions(mesh, MAT, muscles, target, verify=False)
     v_design = verify_design(mesh, MAT, muscles, res, target, start="design")
@@ -285,17 +285,17 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
         verify_design(mesh, MAT, muscles, res, target, start="target")
     # the design's state in any pose is moved rigidly into the solver's gauge frame
     moved = res.x @ rotation_matrix(2.5).T + [4.0, -3.0]
-    g = _in_gauge_frame(mesh, moved)
+    g = in_gauge_frame(mesh, moved)
     gauge = list(gauge_coordinates(mesh))
     assert np.abs(g.reshape(-1)[gauge] - mesh.points.reshape(-1)[gauge]).max() < 1e-12
     assert align(g, moved).difference < 1e-12  # congruent
-    assert _in_gauge_frame(mesh, mesh.points * [-1.0, 1.0]) is None  # a reflection inverts every element
+    assert in_gauge_frame(mesh, mesh.points * [-1.0, 1.0]) is None  # a reflection inverts every element
     # a state that cannot start a solve is verified from rest: a saddle guess still fails, from rest
     folded = DesignResult.from_dict(res.to_dict())
     folded.x = res.x.copy()
     k = NY // 2 * (NX + 1) + NX // 2  # an interior node pushed through its neighbours
     folded.x[k] += [0.0, 0.6]
-    assert mesh.jacobians(folded.x).min() < 0 and _in_gauge_frame(mesh, folded.x) is None
+    assert mesh.jacobians(folded.x).min() < 0 and in_gauge_frame(mesh, folded.x) is None
     v = verify_design(mesh, MAT, muscles, folded, target, start="design")
     assert v.forward_success and not v.passed and v.gap > v.gap_tol and not v.positive_definite
     assert "inverts an element" in v.message
