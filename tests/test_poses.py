@@ -52,6 +52,29 @@ def test_shared_layout_reproduces_each_pose_with_no_more_muscles(lr):
     assert "2 shared muscles" in repr(res) and len(repr(res)) < 300
 
 
+def test_a_pose_that_engages_exactly_its_own_layout_reuses_its_separate_design(lr):
+    """Each bend engages one muscle of the shared layout, its own routing's: given that design as
+    ``separate``, the pose's shared-layout design is that very result (no second NLP); a design recorded with
+    other options is not taken."""
+    from mdsr_opt import design_contractions
+
+    mesh, res = lr
+    targets = {"left": bend(mesh, 1), "right": bend(mesh, -1)}
+    own = {name: [res.muscles[int(i)] for i in np.flatnonzero(res.engaged[k])] for k, name in enumerate(res.names)}
+    sep = {name: (own[name], design_contractions(mesh, MAT, own[name], targets[name])) for name in res.names}
+    again = design_poses(mesh, MAT, targets, separate=sep)
+    for k, name in enumerate(again.names):
+        on = [again.muscles[int(i)].nodes for i in np.flatnonzero(again.engaged[k])]
+        assert on == [m.nodes for m in own[name]]
+        assert again.designs[name] is sep[name][1]
+        assert again.differences[k] == pytest.approx(res.differences[k], rel=1e-6)
+    other = {name: (own[name], design_contractions(mesh, MAT, own[name], targets[name], a_max=0.5))
+             for name in res.names}
+    fresh = design_poses(mesh, MAT, targets, separate=other)
+    assert all(fresh.designs[name] is not other[name][1] for name in res.names)
+    assert np.allclose(fresh.contractions, again.contractions, atol=1e-6)
+
+
 def test_result_round_trips_through_json(lr, tmp_path):
     _, res = lr
     p = res.save(tmp_path / "layout.json")

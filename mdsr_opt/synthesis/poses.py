@@ -431,7 +431,10 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         Also design every pose on its own layout (the separate differences); without it those are NaN.
     separate : mapping name -> (muscles, DesignResult), optional
         Separate layouts and designs already made (e.g. by the scene runner) with the same options: they
-        are used instead of routing and designing again.
+        are used instead of routing and designing again. A pose whose engaged muscles on the shared layout
+        are exactly its separate muscles (the same node chains in the same order) takes that design as its
+        shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness and anchor
+        radius are those of ``design_options``.
 
     Returns
     -------
@@ -486,7 +489,11 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             D[k] = align(x, p.target, node_weights(mesh)).difference
             status.append("no muscle of the shared layout shortens in this pose: left at rest")
         else:
-            d = design_contractions(mesh, material, [muscles[i] for i in on], p.target, **dopt)
+            sep = separate.get(p.name)
+            if sep is not None and _same_design(mesh, sep, [muscles[i] for i in on], dopt):
+                d = sep[1]  # the pose engages exactly its own layout: the same NLP, already solved
+            else:
+                d = design_contractions(mesh, material, [muscles[i] for i in on], p.target, **dopt)
             designs[p.name] = d
             x = np.asarray(d.x, dtype=float)
             st, tn = _per_muscle(d, [muscles[i] for i in on], mesh)
@@ -522,3 +529,21 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs)
+
+
+def _same_design(mesh, sep, engaged, dopt) -> bool:
+    """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
+    **dopt)`` would make (same muscles in the same order, same recorded options)?"""
+    from ..mechanics.anchors import anchor_radius_or_default
+
+    muscles, d = sep
+    if d is None or [tuple(m.nodes) for m in muscles] != [tuple(m.nodes) for m in engaged]:
+        return False
+    want = {"method": dopt.get("method", "flattened"), "a_max": float(dopt.get("a_max", 0.6)),
+            "muscle_model": dopt.get("muscle_model", "cable"), "stiffness": float(dopt.get("stiffness", 10.0))}
+    got = {"method": getattr(d, "method", None), "a_max": float(getattr(d, "a_max", np.nan)),
+           "muscle_model": getattr(d, "muscle_model", None), "stiffness": float(getattr(d, "stiffness", np.nan))}
+    if want != got or (dopt.get("verify", True) and getattr(d, "verification", None) is None):
+        return False
+    radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))
+    return bool(np.isclose(float(getattr(d, "anchor_radius", np.nan)), radius, rtol=1e-12, atol=0.0))
