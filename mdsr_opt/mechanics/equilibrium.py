@@ -68,10 +68,6 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     check_mesh_material(mesh, material)
     tol = check_common(tol, max_iter, backend, min_step)
     predict, x_start = initial_guess_of(initial_guess, mesh)
-    if not isinstance(initial_guess, str):  # a state in any pose: moved rigidly into the solver's gauge frame
-        moved = in_gauge_frame(mesh, x_start.reshape(-1, 2))
-        if moved is not None:
-            x_start = moved.reshape(-1)
     n = mesh.n_nodes
     anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
                          "anchors", n=n, shape=(None,))
@@ -168,7 +164,6 @@ def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
     return cache[key]
 
 
-@renamed_keywords(model="muscle_model")
 def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
     """``x`` (n, 2) moved rigidly into the gauge frame of :func:`solve_internal` (its gauge coordinates at
     their rest values), the rotation nearest the identity of the two that do it; None when none does (node
@@ -197,6 +192,7 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
     return (x - x[i]) @ R.T + P[i]
 
 
+@renamed_keywords(model="muscle_model")
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
