@@ -16,7 +16,7 @@ from PIL import Image  # noqa: E402
 from mdsr_opt import Mesh, NeoHookean  # noqa: E402
 from mdsr_opt.photos.camera import _raster_triangles  # noqa: E402
 from mdsr_opt.photos.compare import _PolylineDistance, unsigned_distances  # noqa: E402
-from mdsr_opt.plot.common import tight_bbox  # noqa: E402
+from mdsr_opt.plot.common import render_cropped, save_figure, tight_bbox  # noqa: E402
 from mdsr_opt.plot.scenes import save_animation  # noqa: E402
 
 
@@ -81,6 +81,70 @@ def test_tight_box_saves_what_bbox_inches_tight_saves():
     plt.close(fig)
     assert images[0].shape == images[1].shape
     np.testing.assert_array_equal(images[0], images[1])
+
+
+def _legend_figure(figsize=(5, 3)):
+    fig, ax = plt.subplots(figsize=figsize)
+    ax.plot([0, 1], [0, 2], label="a line with a long label")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside the figure, as the run's figures
+    ax.set_title("title")
+    ax.set_xlabel("time [s]")
+    return fig
+
+
+def _drawn_box(rgb, bg=255):
+    rows = np.flatnonzero((rgb != bg).any(axis=(1, 2)))
+    cols = np.flatnonzero((rgb != bg).any(axis=(0, 2)))
+    return rows[0], rows[-1], cols[0], cols[-1]
+
+
+def test_cropped_render_is_the_tight_crop_within_a_few_pixels():
+    fig = _legend_figure()
+    got = render_cropped(fig, 130)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    ref = np.asarray(Image.open(buf))[..., :3]
+    assert got is not None and got.dtype == np.uint8 and got.shape[2] == 3
+    # the tight box also holds the blank part of the text boxes (descenders): at most a few pixels
+    assert abs(got.shape[0] - ref.shape[0]) <= 4 and abs(got.shape[1] - ref.shape[1]) <= 4
+    pad = round(plt.rcParams["savefig.pad_inches"] * 130)
+    r0, r1, c0, c1 = _drawn_box(got)
+    assert (r0, c0) == (pad, pad) and (r1, c1) == (got.shape[0] - 1 - pad, got.shape[1] - 1 - pad)
+    # the same drawing: the drawn boxes of both images have (nearly) the same size
+    a, b = _drawn_box(got), _drawn_box(ref)
+    assert abs((a[1] - a[0]) - (b[1] - b[0])) <= 2 and abs((a[3] - a[2]) - (b[3] - b[2])) <= 2
+
+
+def test_cropped_render_has_the_pixels_of_a_plain_draw():
+    fig, ax = plt.subplots(figsize=(4, 3))  # everything inside the figure: a plain draw holds it all
+    ax.plot([0, 1], [0, 2], "r-")
+    ax.set_title("inside")
+    got = render_cropped(fig, 100)
+    fig.set_dpi(100)
+    fig.canvas.draw()
+    plain = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+    plt.close(fig)
+    pad = round(plt.rcParams["savefig.pad_inches"] * 100)
+    r0, r1, c0, c1 = _drawn_box(plain)
+    np.testing.assert_array_equal(got[pad:-pad, pad:-pad], plain[r0:r1 + 1, c0:c1 + 1])
+
+
+def test_save_figure_writes_the_cropped_png_and_falls_back_when_it_cannot_crop(tmp_path):
+    fig = _legend_figure()
+    p = save_figure(fig, tmp_path / "a.png")
+    im = Image.open(p)
+    assert im.mode == "RGB" and im.size[::-1] == render_cropped(fig, 130).shape[:2]
+    assert np.asarray(im).min() < 50  # not blank: the line, the text
+    fig.set_facecolor((1, 1, 1, 0))  # see-through: no background to crop against, savefig does it
+    assert render_cropped(fig, 130) is None
+    q = save_figure(fig, tmp_path / "b.png", close=True)
+    assert Image.open(q).mode == "RGBA"
+    big = plt.figure(figsize=(2, 2))  # a drawing reaching far outside the figure: savefig's tight box
+    big.text(-5.0, 0.5, "far left")
+    assert render_cropped(big, 50) is None
+    r = save_figure(big, tmp_path / "c.png", close=True, dpi=50)
+    assert np.asarray(Image.open(r).convert("L")).min() < 100  # the text, cropped by savefig's tight box
 
 
 def test_gif_frames_follow_the_states(tmp_path):

@@ -103,17 +103,85 @@ def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
     try:
         ext = os.path.splitext(path)[1] or ".png"
         png = ext.lower() == ".png"
-        # PNG (drawn by Agg): the tight box measured once (see tight_bbox), and zlib level 1 instead of
-        # Pillow's 6: the same pixels (lossless) in about 40 % less time for a photograph overlay, files up
-        # to 15 % larger. Vector formats measure their text with their own renderer: "tight" as before.
-        bbox = tight_bbox(fig, dpi) if png else "tight"
-        extra = {"pil_kwargs": {"compress_level": 1}} if png else {}
+        # PNG (drawn by Agg): drawn once on a canvas with a margin, cropped to its drawn pixels (see
+        # render_cropped) and encoded by Pillow at zlib level 1 (lossless, about 40 % less time than level 6,
+        # files up to 15 % larger). Vector formats measure their text with their own renderer: "tight".
+        rgb = render_cropped(fig, dpi) if png else None
         with atomic_path(path, suffix=ext) as tmp:
-            fig.savefig(tmp, dpi=dpi, bbox_inches=bbox, **extra)
+            if rgb is not None:
+                _write_png(rgb, tmp, dpi)
+            elif png:  # a figure render_cropped cannot handle: the tight box measured once, then savefig
+                fig.savefig(tmp, dpi=dpi, bbox_inches=tight_bbox(fig, dpi), pil_kwargs={"compress_level": 1})
+            else:
+                fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
     finally:
         if close:
             plt.close(fig)
     return path
+
+
+class _Grab:
+    """A file for ``savefig(format="rgba")``: keeps the renderer's (h, w, 4) buffer as an array."""
+
+    array = None
+
+    def write(self, data):
+        self.array = np.array(data, dtype=np.uint8, copy=True)
+        return len(data)
+
+    def seek(self, *args):  # pragma: no cover - matplotlib only checks that a file handle can seek
+        return 0
+
+
+def render_cropped(fig, dpi: float, margin: float = 2.0):
+    """``fig`` drawn once by Agg at ``dpi`` and cropped as ``savefig(bbox_inches="tight")`` crops it: an
+    (h, w, 3) uint8 RGB array, or None for a figure this cannot handle (another canvas, a layout engine, a
+    see-through background, nothing drawn, or a drawing reaching ``margin`` inches past the figure).
+
+    ``bbox_inches="tight"`` lays the figure out twice (once to measure every tick label, title and legend,
+    once to draw), which was 40 % of a figure's saving time. Here the figure is drawn once on a canvas
+    ``margin`` inches larger on every side (whole pixels, so every pixel lies where a plain draw puts it),
+    the drawing's box is read from the pixels that differ from the background and padded by
+    ``savefig.pad_inches``. The crop can differ from the text-box crop of ``"tight"`` by the few blank
+    pixels a text box reserves beyond its glyphs (descenders, line gap); nothing drawn is ever cut off.
+    """
+    import matplotlib as mpl
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_rgba
+    from matplotlib.transforms import Bbox
+
+    if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
+        return None
+    face = mpl.rcParams["savefig.facecolor"]
+    face = to_rgba(fig.get_facecolor() if isinstance(face, str) and face == "auto" else face)
+    if face[3] < 1.0 or mpl.rcParams["savefig.transparent"]:
+        return None
+    m = int(np.ceil(margin * dpi)) / dpi  # whole pixels
+    w, h = fig.get_size_inches()
+    grab = _Grab()
+    fig.savefig(grab, format="rgba", dpi=dpi, bbox_inches=Bbox.from_extents(-m, -m, w + m, h + m),
+                facecolor=face, edgecolor=fig.get_edgecolor())
+    img = grab.array
+    if img is None or img.ndim != 3:  # pragma: no cover - a matplotlib that writes the buffer otherwise
+        return None
+    bg = np.array([round(255 * c) for c in face], dtype=np.uint8).view(np.uint32)[0]
+    drawn = np.ascontiguousarray(img).view(np.uint32)[..., 0] != bg
+    rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
+    if not len(rows) or rows[0] == 0 or cols[0] == 0 or rows[-1] == img.shape[0] - 1 or cols[-1] == img.shape[1] - 1:
+        return None
+    pad = int(round(mpl.rcParams["savefig.pad_inches"] * dpi))
+    r0, r1 = max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, img.shape[0])
+    c0, c1 = max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, img.shape[1])
+    return np.ascontiguousarray(img[r0:r1, c0:c1, :3])
+
+
+def _write_png(rgb, path, dpi: float) -> None:
+    import matplotlib as mpl
+    from PIL import Image, PngImagePlugin
+
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", f"Matplotlib version{mpl.__version__}, https://matplotlib.org/")
+    Image.fromarray(rgb).save(path, format="png", compress_level=1, pnginfo=info, dpi=(dpi, dpi))
 
 
 def tight_bbox(fig, dpi: float):
@@ -124,7 +192,7 @@ def tight_bbox(fig, dpi: float):
     import matplotlib as mpl
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    if not isinstance(fig.canvas, FigureCanvasAgg) or fig.get_layout_engine() is not None:
+    if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
         return "tight"
     pad = mpl.rcParams["savefig.pad_inches"]
     old = fig.dpi
@@ -136,6 +204,15 @@ def tight_bbox(fig, dpi: float):
     finally:
         fig.dpi = old
     return box.padded(pad, pad)
+
+
+def _has_layout_engine(fig) -> bool:
+    """Whether a layout engine would move the axes when the figure is drawn (``fig.tight_layout()`` leaves a
+    placeholder engine behind that does nothing)."""
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+
+    engine = fig.get_layout_engine()
+    return engine is not None and not isinstance(engine, PlaceHolderLayoutEngine)
 
 
 def close_figure(fig) -> None:
