@@ -17,7 +17,7 @@ from mdsr_opt import Mesh, NeoHookean  # noqa: E402
 from mdsr_opt.photos.camera import _raster_triangles  # noqa: E402
 from mdsr_opt.photos.compare import _PolylineDistance, unsigned_distances  # noqa: E402
 from mdsr_opt.plot.common import render_cropped, save_figure, tight_bbox  # noqa: E402
-from mdsr_opt.plot.scenes import save_animation  # noqa: E402
+from mdsr_opt.plot.scenes import gif_palette, save_animation  # noqa: E402
 
 
 def raster_reference(pts, triangles, shape):
@@ -162,6 +162,40 @@ def test_gif_frames_follow_the_states(tmp_path):
     assert np.abs(frames[3] - frames[0]).sum() > 0  # the body moved
     with pytest.raises(ValueError, match="titles"):
         save_animation(mesh, states, tmp_path / "b.gif", titles=["only one"])
+
+
+def test_gif_palette_keeps_flat_colours_exact():
+    rng = np.random.default_rng(0)
+    frames = []
+    for k in range(7):  # flat colours plus noise-like antialiasing
+        f = np.full((40, 60, 3), 255, np.uint8)
+        f[5:30, 5 + k:40 + k] = (143, 179, 217)
+        f[10:12, :] = rng.integers(0, 256, (2, 60, 3))
+        frames.append(f)
+    pal = gif_palette(frames)
+    for f in frames:
+        q = np.asarray(Image.fromarray(f).quantize(palette=pal, dither=Image.Dither.NONE).convert("RGB"))
+        np.testing.assert_array_equal(q[20, 20], (143, 179, 217))  # the fill and the white stay exact
+        np.testing.assert_array_equal(q[35, 59], (255, 255, 255))
+    with pytest.raises(ValueError, match="at least one frame"):
+        gif_palette([])
+
+
+def test_gif_frames_are_close_to_the_drawn_frames(tmp_path):
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    states = [mesh.points * [1.0 + 0.1 * k, 1.0] for k in range(5)]
+    p = save_animation(mesh, states, tmp_path / "a.gif", titles=[f"t{k}" for k in range(5)])
+    im = Image.open(p)
+    assert im.n_frames == 5 and im.size == (540, 360)
+    im.seek(4)
+    last = np.asarray(im.convert("RGB")).astype(int)
+    # the body's fill colour is a palette colour, exactly; the body spans more width in the last frame
+    body = (np.abs(last - (143, 179, 217)).sum(-1) == 0)
+    assert body.sum() > 2000
+    im.seek(0)
+    first = np.asarray(im.convert("RGB")).astype(int)
+    width = lambda m: np.ptp(np.flatnonzero(m.any(axis=0)))  # noqa: E731
+    assert width(body) > 1.3 * width(np.abs(first - (143, 179, 217)).sum(-1) == 0)
 
 
 def test_animation_solves_each_distinct_frame_once(monkeypatch):

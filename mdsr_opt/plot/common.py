@@ -169,7 +169,7 @@ def render_cropped(fig, dpi: float, margin: float = 2.0):
     rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
     if not len(rows) or rows[0] == 0 or cols[0] == 0 or rows[-1] == img.shape[0] - 1 or cols[-1] == img.shape[1] - 1:
         return None
-    pad = int(round(mpl.rcParams["savefig.pad_inches"] * dpi))
+    pad = round(mpl.rcParams["savefig.pad_inches"] * dpi)
     r0, r1 = max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, img.shape[0])
     c0, c1 = max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, img.shape[1])
     return np.ascontiguousarray(img[r0:r1, c0:c1, :3])

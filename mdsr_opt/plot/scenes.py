@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.collections import LineCollection
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, plot_mesh, plot_muscles
@@ -95,6 +95,39 @@ def gif_frame(rgb: np.ndarray):
     return q
 
 
+def gif_palette(frames, n_sample: int = 6):
+    """One 256-colour palette for all the (h, w, 3) uint8 ``frames`` of an animation, as a ``P`` image for
+    ``Image.quantize(palette=...)``: :func:`gif_frame`'s palette of up to ``n_sample`` frames spread over the
+    animation, stacked. Mapping a frame to a fixed palette costs a twentieth of quantising it, and one
+    palette for every frame keeps flat colours from flickering between frames."""
+    frames = list(frames)
+    if not frames:
+        raise ValueError("gif_palette needs at least one frame")
+    pick = np.unique(np.linspace(0, len(frames) - 1, min(n_sample, len(frames))).round().astype(int))
+    return gif_frame(np.vstack([frames[k] for k in pick]))
+
+
+def _mesh_paths(mesh):
+    """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
+    in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
+    every triangle on its own (each inner edge twice): twice the drawing time of these two paths."""
+    from matplotlib.path import Path
+
+    tri, edges = np.asarray(mesh.triangles), np.asarray(mesh.edges)
+    tri_codes = np.tile(np.array([Path.MOVETO, Path.LINETO, Path.LINETO, Path.CLOSEPOLY], dtype=Path.code_type),
+                        len(tri))
+    edge_codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(edges))
+    closed = np.concatenate([tri, tri[:, :1]], axis=1)
+
+    def fill(x):
+        return Path(x[closed].reshape(-1, 2), tri_codes)
+
+    def edge(x):
+        return Path(x[edges].reshape(-1, 2), edge_codes)
+
+    return fill, edge
+
+
 def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
                    figsize=(6, 4), dpi=90) -> str:
     """Write a sequence of states as an animated GIF (looping, Pillow), atomically.
@@ -122,6 +155,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.patches import PathPatch
+    from PIL import Image
 
     states = [np.asarray(s, dtype=float) for s in states]
     if not states:
@@ -149,9 +184,14 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for loop in mesh.boundary_loops:
             p = mesh.points[np.append(loop, loop[0])]
             moving += ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
-    body = PolyCollection(states[0][mesh.triangles], facecolors="#8fb3d9", edgecolors="#335577", linewidths=0.25)
-    ax.add_collection(body)
-    moving.append(body)
+    fill_path, edge_path = _mesh_paths(mesh)
+    # the body: fill and edges as two compound paths (see _mesh_paths); the edges, drawn once each rather
+    # than twice, are 0.28 pt wide instead of 0.25 to keep the mesh's tone
+    body = PathPatch(fill_path(states[0]), facecolor="#8fb3d9", edgecolor="none")
+    edges = PathPatch(edge_path(states[0]), facecolor="none", edgecolor="#335577", linewidth=0.28)
+    for p in (body, edges):
+        ax.add_artist(p)  # not add_patch: its data-limit update walks every segment; the limits are set below
+    moving += [body, edges]
     lines = [ax.plot([], [], "-", color=cyc[i % len(cyc)])[0] for i in range(len(muscles))]
     moving += lines
     paths = [list(m.nodes) for m in muscles]
@@ -168,7 +208,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
 
     def frame(k):
         x = states[k]
-        body.set_verts(x[mesh.triangles])
+        body.set_path(fill_path(x))
+        edges.set_path(edge_path(x))
         for i, (line, p) in enumerate(zip(lines, paths)):
             a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
             line.set_data(x[p, 0], x[p, 1])
@@ -178,9 +219,12 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         canvas.restore_region(background)
         for a in moving:
             ax.draw_artist(a)
-        return gif_frame(np.asarray(canvas.buffer_rgba())[..., :3])
+        buf = canvas.buffer_rgba()
+        return Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), buf, "raw", "RGBA", 0, 1).convert("RGB")
 
-    images = [frame(k) for k in range(len(states))]
+    rgb = [frame(k) for k in range(len(states))]  # RGB copies: the canvas is drawn over for the next frame
+    palette = gif_palette([np.asarray(f) for f in rgb])
+    images = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in rgb]
     path = os.fspath(path)
     with atomic_path(path, suffix=".gif") as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),
