@@ -243,3 +243,22 @@ def test_warm_start_state_puts_the_gauge_at_rest_and_moves_rigidly():
     d = lambda z: np.linalg.norm(z[:, None] - z[None], axis=2)  # noqa: E731
     np.testing.assert_allclose(d(y), d(x), atol=1e-12)
     assert warm_start_state(mesh, np.zeros_like(X)) is None  # no rigid motion puts a collapsed state there
+
+
+def test_ticks_false_hides_the_coordinates_but_keeps_the_colour_bar():
+    from mdsr_opt.plot.design import plot_contraction_graph, plot_routing
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    t = mesh.points * [0.9, 1.0]
+    fig = plot_contraction_graph(mesh, t, ticks=False)
+    drawing, bar = fig.axes
+    assert len(drawing.get_xticks()) == 0 and len(drawing.get_yticks()) == 0
+    assert len(bar.get_yticks()) > 2 and "contraction" in bar.get_ylabel()
+    plt.close(fig)
+    fig = plot_contraction_graph(mesh, t)  # the default keeps them
+    assert len(fig.axes[0].get_xticks()) > 2
+    plt.close(fig)
+    fig = plot_routing(mesh, t, [], ticks=False)
+    assert all(len(ax.get_xticks()) == 0 and len(ax.get_yticks()) == 0 for ax in fig.axes)
+    assert [ax.get_title() for ax in fig.axes] == ["0 muscle(s) over the rest mesh", "0 muscle(s) over the target mesh"]
+    plt.close(fig)

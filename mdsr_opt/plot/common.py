@@ -9,7 +9,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.io import atomic_path
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure']
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -28,6 +28,15 @@ def panel_axes(fig, nrow, ncol, figsize):
     if fig is None:
         return plt.subplots(nrow, ncol, figsize=figsize, squeeze=False)
     return fig, fig.subplots(nrow, ncol, squeeze=False)
+
+
+def hide_ticks(*axes) -> None:
+    """No tick marks or tick labels on ``axes`` (the frame stays): for drawings whose coordinates another
+    figure of the same run already gives. Ticks are most of the cost of drawing an axes (each tick is a
+    handful of artists, each label a laid-out text): about 40 ms per axes at 130 dpi."""
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
 
 
 def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha=1.0, values=None,
@@ -104,12 +113,12 @@ def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
         ext = os.path.splitext(path)[1] or ".png"
         png = ext.lower() == ".png"
         # PNG (drawn by Agg): drawn once on a canvas with a margin, cropped to its drawn pixels (see
-        # render_cropped) and encoded by Pillow at zlib level 1 (lossless, about 40 % less time than level 6,
-        # files up to 15 % larger). Vector formats measure their text with their own renderer: "tight".
+        # render_cropped) and encoded losslessly at zlib level 1 (see _write_png). Vector formats measure
+        # their text with their own renderer: "tight".
         rgb = render_cropped(fig, dpi) if png else None
         with atomic_path(path, suffix=ext) as tmp:
             if rgb is not None:
-                _write_png(rgb, tmp, dpi)
+                _write_png(rgb, tmp)
             elif png:  # a figure render_cropped cannot handle: the tight box measured once, then savefig
                 fig.savefig(tmp, dpi=dpi, bbox_inches=tight_bbox(fig, dpi), pil_kwargs={"compress_level": 1})
             else:
@@ -175,13 +184,18 @@ def render_cropped(fig, dpi: float, margin: float = 2.0):
     return np.ascontiguousarray(img[r0:r1, c0:c1, :3])
 
 
-def _write_png(rgb, path, dpi: float) -> None:
-    import matplotlib as mpl
-    from PIL import Image, PngImagePlugin
+def _write_png(rgb, path) -> None:
+    """Write an (h, w, 3) uint8 RGB array as a PNG (lossless) with OpenCV: zlib level 1 with the run-length
+    strategy, which suits figures (flat colours) and photographs alike: half Pillow's time at its level 1
+    for a photograph overlay and 10 % smaller files; within 1 % of its size for line drawings."""
+    import cv2
 
-    info = PngImagePlugin.PngInfo()
-    info.add_text("Software", f"Matplotlib version{mpl.__version__}, https://matplotlib.org/")
-    Image.fromarray(rgb).save(path, format="png", compress_level=1, pnginfo=info, dpi=(dpi, dpi))
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]),
+                           [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
+    if not ok:  # pragma: no cover - OpenCV reports no reason
+        raise OSError(f"could not encode a {rgb.shape[1]}x{rgb.shape[0]} PNG for {path}")
+    with open(path, "wb") as fh:
+        fh.write(buf.tobytes())
 
 
 def tight_bbox(fig, dpi: float):
