@@ -67,7 +67,10 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     if len(muscles):
         plot_muscles(x, muscles, ax=ax)
     if len(anchors) or len(dn) or len(muscles):
-        ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+        # beside the axes unless the colour bar is there (it would cover the legend): then below them
+        where = LEGEND_OUTSIDE if values is None else {"loc": "upper center", "bbox_to_anchor": (0.5, -0.1),
+                                                       "ncol": 4, "borderaxespad": 0.0}
+        ax.legend(fontsize=7, **where)
     ax.autoscale_view()
     if title:
         ax.set_title(title, fontsize=9)
