@@ -196,6 +196,11 @@ def test_gif_frames_are_close_to_the_drawn_frames(tmp_path):
     first = np.asarray(im.convert("RGB")).astype(int)
     width = lambda m: np.ptp(np.flatnonzero(m.any(axis=0)))  # noqa: E731
     assert width(body) > 1.3 * width(np.abs(first - (143, 179, 217)).sum(-1) == 0)
+    # the title: dark text centred over the axes, above the frame's top spine
+    dark = first.sum(-1) < 200
+    spine = np.flatnonzero(dark.sum(axis=1) > 200)[0]  # the frame's top edge
+    ink = np.flatnonzero(dark[:spine].any(axis=0))
+    assert len(ink) > 5 and abs((ink[0] + ink[-1]) / 2 - 270) < 40 and ink[-1] - ink[0] < 60
 
 
 def test_animation_solves_each_distinct_frame_once(monkeypatch):
