@@ -217,7 +217,7 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     font = ImageFont.truetype(findfont(title.get_fontproperties()), title.get_fontsize() * fig.dpi / 72.0)
     tx, ty = title.get_transform().transform(title.get_position())
     anchor = (float(tx), canvas.get_width_height()[1] - float(ty) - 1.0)  # Agg sets text 1 px higher
-    ink = tuple(int(round(255 * c)) for c in to_rgba(title.get_color())[:3])
+    ink = tuple(round(255 * c) for c in to_rgba(title.get_color())[:3])
 
     def frame(k):
         x = states[k]
