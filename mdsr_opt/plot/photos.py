@@ -54,5 +54,5 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     text = f"{head}d = {comparison.mean_px:.2f} px, sd = {comparison.std_px:.2f} px"
     if synthetic:
         text += " (SYNTHETIC photograph)"
-    ax.set_title(text, fontsize=9)
+    ax.set_title(text, fontsize=9, y=1.0)  # placed, not searched (see plot_scene): pixels have no offset text
     return fig
