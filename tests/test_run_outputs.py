@@ -267,3 +267,21 @@ def test_ticks_false_hides_the_coordinates_but_keeps_the_colour_bar():
     assert all(len(ax.get_xticks()) == 0 and len(ax.get_yticks()) == 0 for ax in fig.axes)
     assert [ax.get_title() for ax in fig.axes] == ["0 muscle(s) over the rest mesh", "0 muscle(s) over the target mesh"]
     plt.close(fig)
+
+
+def test_plot_mesh_draws_one_colour_as_fill_and_edge_paths():
+    from mdsr_opt.plot.common import plot_mesh
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    x = mesh.points * [1.5, 1.0] + [3.0, -2.0]
+    fig, ax = plt.subplots()
+    plot_mesh(mesh, x, ax=ax, label="body")
+    fill, edges = ax.patches
+    assert len(fill.get_path().vertices) == 4 * mesh.n_triangles  # closed triangles, one path
+    assert len(edges.get_path().vertices) == 2 * len(mesh.edges)  # each mesh edge once
+    assert fill.get_label() == "body" and ax.get_legend_handles_labels()[1] == ["body"]
+    lo, hi = ax.get_xlim(), ax.get_ylim()  # autoscaled to the state (add_artist adds no data limits)
+    assert lo[0] <= 3.0 and lo[1] >= 6.0 and hi[0] <= -2.0 and hi[1] >= -1.0
+    plot_mesh(mesh, x, ax=ax, values=np.arange(mesh.n_triangles, dtype=float))  # per triangle: a collection
+    assert len(ax.collections[-1].get_paths()) == mesh.n_triangles
+    plt.close(fig)

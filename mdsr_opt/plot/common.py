@@ -6,10 +6,11 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks']
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks', 'mesh_paths']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -39,18 +40,46 @@ def hide_ticks(*axes) -> None:
         ax.set_yticks([])
 
 
+def mesh_paths(mesh):
+    """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
+    in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
+    every triangle on its own (each inner edge twice): twice the drawing time of these two paths."""
+    from matplotlib.path import Path
+
+    tri, edges = np.asarray(mesh.triangles), np.asarray(mesh.edges)
+    tri_codes = np.tile(np.array([Path.MOVETO, Path.LINETO, Path.LINETO, Path.CLOSEPOLY], dtype=Path.code_type),
+                        len(tri))
+    edge_codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(edges))
+    closed = np.concatenate([tri, tri[:, :1]], axis=1)
+
+    def fill(x):
+        return Path(x[closed].reshape(-1, 2), tri_codes)
+
+    def edge(x):
+        return Path(x[edges].reshape(-1, 2), edge_codes)
+
+    return fill, edge
+
+
 def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha=1.0, values=None,
               cmap="viridis", label=None, nodes=None, node_color="k", title=None, colorbar_label=None):
     """Draw ``mesh`` in configuration ``x`` (default: rest). ``values`` colours the triangles (per triangle)."""
     fig, ax = axes_or_new(ax)
     x = mesh.points if x is None else np.asarray(x)
-    polys = x[mesh.triangles]
-    pc = PolyCollection(polys, facecolors=color, edgecolors=edgecolor, linewidths=0.3, alpha=alpha, label=label)
-    if values is not None:
+    if values is not None:  # a colour per triangle: a collection
+        pc = PolyCollection(x[mesh.triangles], facecolors=color, edgecolors=edgecolor, linewidths=0.3, alpha=alpha,
+                            label=label)
         pc.set_array(np.asarray(values))
         pc.set_cmap(cmap)
         fig.colorbar(pc, ax=ax, label=colorbar_label)
-    ax.add_collection(pc)
+        ax.add_collection(pc)
+    else:  # one colour: two compound paths (mesh_paths), half the drawing time of a collection
+        fill, edges = mesh_paths(mesh)
+        ax.add_artist(PathPatch(fill(x), facecolor=color, edgecolor="none", alpha=alpha, label=label))
+        if edgecolor is not None and not (isinstance(edgecolor, str) and edgecolor.lower() == "none"):
+            # each edge drawn once (a collection strokes inner edges twice): 0.34 pt keeps the tone of 0.3
+            ax.add_artist(PathPatch(edges(x), facecolor="none", edgecolor=edgecolor, linewidth=0.34, alpha=alpha))
+        ax.update_datalim(x)  # add_artist leaves the data limits alone (add_patch would walk every segment)
     if nodes is not None and len(nodes):
         ax.plot(x[nodes, 0], x[nodes, 1], "o", color=node_color, ms=3)
     ax.set_aspect("equal")

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 
 from ..body.io import atomic_path
-from .common import LEGEND_OUTSIDE, axes_or_new, plot_mesh, plot_muscles
+from .common import LEGEND_OUTSIDE, axes_or_new, mesh_paths, plot_mesh, plot_muscles
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -112,27 +112,6 @@ def gif_palette(frames, n_sample: int = 6):
     return gif_frame(np.vstack([frames[k] for k in pick]))
 
 
-def _mesh_paths(mesh):
-    """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
-    in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
-    every triangle on its own (each inner edge twice): twice the drawing time of these two paths."""
-    from matplotlib.path import Path
-
-    tri, edges = np.asarray(mesh.triangles), np.asarray(mesh.edges)
-    tri_codes = np.tile(np.array([Path.MOVETO, Path.LINETO, Path.LINETO, Path.CLOSEPOLY], dtype=Path.code_type),
-                        len(tri))
-    edge_codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(edges))
-    closed = np.concatenate([tri, tri[:, :1]], axis=1)
-
-    def fill(x):
-        return Path(x[closed].reshape(-1, 2), tri_codes)
-
-    def edge(x):
-        return Path(x[edges].reshape(-1, 2), edge_codes)
-
-    return fill, edge
-
-
 def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
                    figsize=(6, 4), dpi=90) -> str:
     """Write a sequence of states as an animated GIF (looping, Pillow), atomically.
@@ -191,8 +170,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for loop in mesh.boundary_loops:
             p = mesh.points[np.append(loop, loop[0])]
             moving += ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
-    fill_path, edge_path = _mesh_paths(mesh)
-    # the body: fill and edges as two compound paths (see _mesh_paths); the edges, drawn once each rather
+    fill_path, edge_path = mesh_paths(mesh)
+    # the body: fill and edges as two compound paths (see common.mesh_paths); the edges, drawn once each rather
     # than twice, are 0.28 pt wide instead of 0.25 to keep the mesh's tone
     body = PathPatch(fill_path(states[0]), facecolor="#8fb3d9", edgecolor="none")
     edges = PathPatch(edge_path(states[0]), facecolor="none", edgecolor="#335577", linewidth=0.28)

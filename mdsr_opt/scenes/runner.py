@@ -382,6 +382,6 @@ def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))
         fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
-                                title="target outline on the driven body's photo")
+                                title="target outline on the driven body's photo", ticks=False)
         files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
     return [os.path.relpath(f, folder.parent) for f in files]
