@@ -221,13 +221,16 @@ def _render_crop(fig, dpi: float, margin: float = 2.0):
 
 def _write_png(rgba, path) -> None:
     """Write an (h, w, 4) uint8 RGBA array (opaque) as an RGB PNG (lossless) with OpenCV: zlib level 1 with
-    the run-length strategy, which suits figures (flat colours) and photographs alike: half Pillow's time at
-    its level 1 for a photograph overlay and 10 % smaller files; within 1 % of its size for line drawings."""
+    the run-length strategy and the Paeth filter on every row. Against Pillow at level 1 (adaptive filters):
+    a figure in 40 % and a photograph overlay in half the time, files as large (figures) or 10 % smaller
+    (overlay); trying every filter per row (libpng's default) doubled a figure's encoding time for 0.3 %."""
     import cv2
 
     bgr = cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR)
-    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 1,
-                                         cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # OpenCV >= 4.11
+        params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH]
+    ok, buf = cv2.imencode(".png", bgr, params)
     if not ok:  # pragma: no cover - OpenCV reports no reason
         raise OSError(f"could not encode a {rgba.shape[1]}x{rgba.shape[0]} PNG for {path}")
     with open(path, "wb") as fh:
