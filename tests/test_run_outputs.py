@@ -16,8 +16,8 @@ from PIL import Image  # noqa: E402
 from mdsr_opt import Mesh, NeoHookean  # noqa: E402
 from mdsr_opt.photos.camera import _raster_triangles  # noqa: E402
 from mdsr_opt.photos.compare import _PolylineDistance, unsigned_distances  # noqa: E402
-from mdsr_opt.plot.common import tight_bbox  # noqa: E402
-from mdsr_opt.plot.scenes import save_animation  # noqa: E402
+from mdsr_opt.plot.common import render_cropped, save_figure, tight_bbox  # noqa: E402
+from mdsr_opt.plot.scenes import gif_palette, save_animation  # noqa: E402
 
 
 def raster_reference(pts, triangles, shape):
@@ -83,6 +83,71 @@ def test_tight_box_saves_what_bbox_inches_tight_saves():
     np.testing.assert_array_equal(images[0], images[1])
 
 
+def _legend_figure(figsize=(5, 3)):
+    fig, ax = plt.subplots(figsize=figsize)
+    ax.plot([0, 1], [0, 2], label="a line with a long label")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))  # outside the figure, as the run's figures
+    ax.set_title("title")
+    ax.set_xlabel("time [s]")
+    return fig
+
+
+def _drawn_box(rgb, bg=255):
+    rows = np.flatnonzero((rgb != bg).any(axis=(1, 2)))
+    cols = np.flatnonzero((rgb != bg).any(axis=(0, 2)))
+    return rows[0], rows[-1], cols[0], cols[-1]
+
+
+def test_cropped_render_is_the_tight_crop_within_a_few_pixels():
+    fig = _legend_figure()
+    got = render_cropped(fig, 130)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    ref = np.asarray(Image.open(buf))[..., :3]
+    assert got is not None and got.dtype == np.uint8 and got.shape[2] == 3
+    # the tight box also holds the blank part of the text boxes (descenders): at most a few pixels
+    assert abs(got.shape[0] - ref.shape[0]) <= 4 and abs(got.shape[1] - ref.shape[1]) <= 4
+    pad = round(plt.rcParams["savefig.pad_inches"] * 130)
+    r0, r1, c0, c1 = _drawn_box(got)
+    assert (r0, c0) == (pad, pad) and (r1, c1) == (got.shape[0] - 1 - pad, got.shape[1] - 1 - pad)
+    # the same drawing: the drawn boxes of both images have (nearly) the same size
+    a, b = _drawn_box(got), _drawn_box(ref)
+    assert abs((a[1] - a[0]) - (b[1] - b[0])) <= 2 and abs((a[3] - a[2]) - (b[3] - b[2])) <= 2
+
+
+def test_cropped_render_has_the_pixels_of_a_plain_draw():
+    fig, ax = plt.subplots(figsize=(4, 3))  # everything inside the figure: a plain draw holds it all
+    ax.plot([0, 1], [0, 2], "r-")
+    ax.set_title("inside")
+    got = render_cropped(fig, 100)
+    fig.set_dpi(100)
+    fig.canvas.draw()
+    plain = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+    plt.close(fig)
+    pad = round(plt.rcParams["savefig.pad_inches"] * 100)
+    r0, r1, c0, c1 = _drawn_box(plain)
+    np.testing.assert_array_equal(got[pad:-pad, pad:-pad], plain[r0:r1 + 1, c0:c1 + 1])
+
+
+def test_save_figure_writes_the_cropped_png_and_falls_back_when_it_cannot_crop(tmp_path):
+    fig = _legend_figure()
+    p = save_figure(fig, tmp_path / "a.png")
+    im = Image.open(p)
+    assert im.mode == "RGB"
+    np.testing.assert_array_equal(np.asarray(im), render_cropped(fig, 130))  # lossless, channels in order
+    assert np.asarray(im).min() < 50  # not blank: the line, the text
+    fig.set_facecolor((1, 1, 1, 0))  # see-through: no background to crop against, savefig does it
+    assert render_cropped(fig, 130) is None
+    q = save_figure(fig, tmp_path / "b.png", close=True)
+    assert Image.open(q).mode == "RGBA"
+    big = plt.figure(figsize=(2, 2))  # a drawing reaching far outside the figure: savefig's tight box
+    big.text(-5.0, 0.5, "far left")
+    assert render_cropped(big, 50) is None
+    r = save_figure(big, tmp_path / "c.png", close=True, dpi=50)
+    assert np.asarray(Image.open(r).convert("L")).min() < 100  # the text, cropped by savefig's tight box
+
+
 def test_gif_frames_follow_the_states(tmp_path):
     mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
     states = [mesh.points * [1.0 + 0.1 * k, 1.0] for k in range(4)]
@@ -98,6 +163,45 @@ def test_gif_frames_follow_the_states(tmp_path):
     assert np.abs(frames[3] - frames[0]).sum() > 0  # the body moved
     with pytest.raises(ValueError, match="titles"):
         save_animation(mesh, states, tmp_path / "b.gif", titles=["only one"])
+
+
+def test_gif_palette_keeps_flat_colours_exact():
+    rng = np.random.default_rng(0)
+    frames = []
+    for k in range(7):  # flat colours plus noise-like antialiasing
+        f = np.full((40, 60, 3), 255, np.uint8)
+        f[5:30, 5 + k:40 + k] = (143, 179, 217)
+        f[10:12, :] = rng.integers(0, 256, (2, 60, 3))
+        frames.append(f)
+    pal = gif_palette(frames)
+    for f in frames:
+        q = np.asarray(Image.fromarray(f).quantize(palette=pal, dither=Image.Dither.NONE).convert("RGB"))
+        np.testing.assert_array_equal(q[20, 20], (143, 179, 217))  # the fill and the white stay exact
+        np.testing.assert_array_equal(q[35, 59], (255, 255, 255))
+    with pytest.raises(ValueError, match="at least one frame"):
+        gif_palette([])
+
+
+def test_gif_frames_are_close_to_the_drawn_frames(tmp_path):
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    states = [mesh.points * [1.0 + 0.1 * k, 1.0] for k in range(5)]
+    p = save_animation(mesh, states, tmp_path / "a.gif", titles=[f"t{k}" for k in range(5)])
+    im = Image.open(p)
+    assert im.n_frames == 5 and im.size == (540, 360)
+    im.seek(4)
+    last = np.asarray(im.convert("RGB")).astype(int)
+    # the body's fill colour is a palette colour, exactly; the body spans more width in the last frame
+    body = (np.abs(last - (143, 179, 217)).sum(-1) == 0)
+    assert body.sum() > 2000
+    im.seek(0)
+    first = np.asarray(im.convert("RGB")).astype(int)
+    width = lambda m: np.ptp(np.flatnonzero(m.any(axis=0)))  # noqa: E731
+    assert width(body) > 1.3 * width(np.abs(first - (143, 179, 217)).sum(-1) == 0)
+    # the title: dark text centred over the axes, above the frame's top spine
+    dark = first.sum(-1) < 200
+    spine = np.flatnonzero(dark.sum(axis=1) > 200)[0]  # the frame's top edge
+    ink = np.flatnonzero(dark[:spine].any(axis=0))
+    assert len(ink) > 5 and abs((ink[0] + ink[-1]) / 2 - 270) < 40 and ink[-1] - ink[0] < 60
 
 
 def test_animation_solves_each_distinct_frame_once(monkeypatch):
@@ -145,3 +249,40 @@ def test_warm_start_state_puts_the_gauge_at_rest_and_moves_rigidly():
     d = lambda z: np.linalg.norm(z[:, None] - z[None], axis=2)  # noqa: E731
     np.testing.assert_allclose(d(y), d(x), atol=1e-12)
     assert warm_start_state(mesh, np.zeros_like(X)) is None  # no rigid motion puts a collapsed state there
+
+
+def test_ticks_false_hides_the_coordinates_but_keeps_the_colour_bar():
+    from mdsr_opt.plot.design import plot_contraction_graph, plot_routing
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    t = mesh.points * [0.9, 1.0]
+    fig = plot_contraction_graph(mesh, t, ticks=False)
+    drawing, bar = fig.axes
+    assert len(drawing.get_xticks()) == 0 and len(drawing.get_yticks()) == 0
+    assert len(bar.get_yticks()) > 2 and "contraction" in bar.get_ylabel()
+    plt.close(fig)
+    fig = plot_contraction_graph(mesh, t)  # the default keeps them
+    assert len(fig.axes[0].get_xticks()) > 2
+    plt.close(fig)
+    fig = plot_routing(mesh, t, [], ticks=False)
+    assert all(len(ax.get_xticks()) == 0 and len(ax.get_yticks()) == 0 for ax in fig.axes)
+    assert [ax.get_title() for ax in fig.axes] == ["0 muscle(s) over the rest mesh", "0 muscle(s) over the target mesh"]
+    plt.close(fig)
+
+
+def test_plot_mesh_draws_one_colour_as_fill_and_edge_paths():
+    from mdsr_opt.plot.common import plot_mesh
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    x = mesh.points * [1.5, 1.0] + [3.0, -2.0]
+    fig, ax = plt.subplots()
+    plot_mesh(mesh, x, ax=ax, label="body")
+    fill, edges = ax.patches
+    assert len(fill.get_path().vertices) == 4 * mesh.n_triangles  # closed triangles, one path
+    assert len(edges.get_path().vertices) == 2 * len(mesh.edges)  # each mesh edge once
+    assert fill.get_label() == "body" and ax.get_legend_handles_labels()[1] == ["body"]
+    lo, hi = ax.get_xlim(), ax.get_ylim()  # autoscaled to the state (add_artist adds no data limits)
+    assert lo[0] <= 3.0 and lo[1] >= 6.0 and hi[0] <= -2.0 and hi[1] >= -1.0
+    plot_mesh(mesh, x, ax=ax, values=np.arange(mesh.n_triangles, dtype=float))  # per triangle: a collection
+    assert len(ax.collections[-1].get_paths()) == mesh.n_triangles
+    plt.close(fig)

@@ -6,10 +6,11 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure']
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks', 'mesh_paths']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -30,18 +31,55 @@ def panel_axes(fig, nrow, ncol, figsize):
     return fig, fig.subplots(nrow, ncol, squeeze=False)
 
 
+def hide_ticks(*axes) -> None:
+    """No tick marks or tick labels on ``axes`` (the frame stays): for drawings whose coordinates another
+    figure of the same run already gives. Ticks are most of the cost of drawing an axes (each tick is a
+    handful of artists, each label a laid-out text): about 40 ms per axes at 130 dpi."""
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+
+def mesh_paths(mesh):
+    """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
+    in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
+    every triangle on its own (each inner edge twice): twice the drawing time of these two paths."""
+    from matplotlib.path import Path
+
+    tri, edges = np.asarray(mesh.triangles), np.asarray(mesh.edges)
+    tri_codes = np.tile(np.array([Path.MOVETO, Path.LINETO, Path.LINETO, Path.CLOSEPOLY], dtype=Path.code_type),
+                        len(tri))
+    edge_codes = np.tile(np.array([Path.MOVETO, Path.LINETO], dtype=Path.code_type), len(edges))
+    closed = np.concatenate([tri, tri[:, :1]], axis=1)
+
+    def fill(x):
+        return Path(x[closed].reshape(-1, 2), tri_codes)
+
+    def edge(x):
+        return Path(x[edges].reshape(-1, 2), edge_codes)
+
+    return fill, edge
+
+
 def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha=1.0, values=None,
               cmap="viridis", label=None, nodes=None, node_color="k", title=None, colorbar_label=None):
     """Draw ``mesh`` in configuration ``x`` (default: rest). ``values`` colours the triangles (per triangle)."""
     fig, ax = axes_or_new(ax)
     x = mesh.points if x is None else np.asarray(x)
-    polys = x[mesh.triangles]
-    pc = PolyCollection(polys, facecolors=color, edgecolors=edgecolor, linewidths=0.3, alpha=alpha, label=label)
-    if values is not None:
+    if values is not None:  # a colour per triangle: a collection
+        pc = PolyCollection(x[mesh.triangles], facecolors=color, edgecolors=edgecolor, linewidths=0.3, alpha=alpha,
+                            label=label)
         pc.set_array(np.asarray(values))
         pc.set_cmap(cmap)
         fig.colorbar(pc, ax=ax, label=colorbar_label)
-    ax.add_collection(pc)
+        ax.add_collection(pc)
+    else:  # one colour: two compound paths (mesh_paths), half the drawing time of a collection
+        fill, edges = mesh_paths(mesh)
+        ax.add_artist(PathPatch(fill(x), facecolor=color, edgecolor="none", alpha=alpha, label=label))
+        if edgecolor is not None and not (isinstance(edgecolor, str) and edgecolor.lower() == "none"):
+            # each edge drawn once (a collection strokes inner edges twice): 0.34 pt keeps the tone of 0.3
+            ax.add_artist(PathPatch(edges(x), facecolor="none", edgecolor=edgecolor, linewidth=0.34, alpha=alpha))
+        ax.update_datalim(x)  # add_artist leaves the data limits alone (add_patch would walk every segment)
     if nodes is not None and len(nodes):
         ax.plot(x[nodes, 0], x[nodes, 1], "o", color=node_color, ms=3)
     ax.set_aspect("equal")
@@ -103,17 +141,100 @@ def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
     try:
         ext = os.path.splitext(path)[1] or ".png"
         png = ext.lower() == ".png"
-        # PNG (drawn by Agg): the tight box measured once (see tight_bbox), and zlib level 1 instead of
-        # Pillow's 6: the same pixels (lossless) in about 40 % less time for a photograph overlay, files up
-        # to 15 % larger. Vector formats measure their text with their own renderer: "tight" as before.
-        bbox = tight_bbox(fig, dpi) if png else "tight"
-        extra = {"pil_kwargs": {"compress_level": 1}} if png else {}
+        # PNG (drawn by Agg): drawn once on a canvas with a margin, cropped to its drawn pixels (see
+        # render_cropped) and encoded losslessly at zlib level 1 (see _write_png). Vector formats measure
+        # their text with their own renderer: "tight".
+        rgba = _render_crop(fig, dpi) if png else None
         with atomic_path(path, suffix=ext) as tmp:
-            fig.savefig(tmp, dpi=dpi, bbox_inches=bbox, **extra)
+            if rgba is not None:
+                _write_png(rgba, tmp)
+            elif png:  # a figure render_cropped cannot handle: the tight box measured once, then savefig
+                fig.savefig(tmp, dpi=dpi, bbox_inches=tight_bbox(fig, dpi), pil_kwargs={"compress_level": 1})
+            else:
+                fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
     finally:
         if close:
             plt.close(fig)
     return path
+
+
+class _Grab:
+    """A file for ``savefig(format="rgba")``: keeps the renderer's (h, w, 4) buffer as an array."""
+
+    array = None
+
+    def write(self, data):
+        self.array = np.asarray(data)  # a view of the renderer's buffer (nothing draws on it until cropped)
+        return len(data)
+
+    def seek(self, *args):  # pragma: no cover - matplotlib only checks that a file handle can seek
+        return 0
+
+
+def render_cropped(fig, dpi: float, margin: float = 2.0):
+    """``fig`` drawn once by Agg at ``dpi`` and cropped as ``savefig(bbox_inches="tight")`` crops it: an
+    (h, w, 3) uint8 RGB array, or None for a figure this cannot handle (another canvas, a layout engine, a
+    see-through background, nothing drawn, or a drawing reaching ``margin`` inches past the figure).
+
+    ``bbox_inches="tight"`` lays the figure out twice (once to measure every tick label, title and legend,
+    once to draw), which was 40 % of a figure's saving time. Here the figure is drawn once on a canvas
+    ``margin`` inches larger on every side (whole pixels, so every pixel lies where a plain draw puts it),
+    the drawing's box is read from the pixels that differ from the background and padded by
+    ``savefig.pad_inches``. The crop can differ from the text-box crop of ``"tight"`` by the few blank
+    pixels a text box reserves beyond its glyphs (descenders, line gap); nothing drawn is ever cut off.
+    """
+    crop = _render_crop(fig, dpi, margin)
+    return None if crop is None else np.ascontiguousarray(crop[..., :3])
+
+
+def _render_crop(fig, dpi: float, margin: float = 2.0):
+    """:func:`render_cropped`'s crop as an (h, w, 4) RGBA view of the renderer's buffer, or None."""
+    import matplotlib as mpl
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.colors import to_rgba
+    from matplotlib.transforms import Bbox
+
+    if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
+        return None
+    face = mpl.rcParams["savefig.facecolor"]
+    face = to_rgba(fig.get_facecolor() if isinstance(face, str) and face == "auto" else face)
+    if face[3] < 1.0 or mpl.rcParams["savefig.transparent"]:
+        return None
+    m = int(np.ceil(margin * dpi)) / dpi  # whole pixels
+    w, h = fig.get_size_inches()
+    grab = _Grab()
+    fig.savefig(grab, format="rgba", dpi=dpi, bbox_inches=Bbox.from_extents(-m, -m, w + m, h + m),
+                facecolor=face, edgecolor=fig.get_edgecolor())
+    img = grab.array
+    if img is None or img.ndim != 3:  # pragma: no cover - a matplotlib that writes the buffer otherwise
+        return None
+    bg = np.array([round(255 * c) for c in face], dtype=np.uint8).view(np.uint32)[0]
+    drawn = np.ascontiguousarray(img).view(np.uint32)[..., 0] != bg  # a contiguous buffer: no copy
+    rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
+    if not len(rows) or rows[0] == 0 or cols[0] == 0 or rows[-1] == img.shape[0] - 1 or cols[-1] == img.shape[1] - 1:
+        return None
+    pad = round(mpl.rcParams["savefig.pad_inches"] * dpi)
+    r0, r1 = max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, img.shape[0])
+    c0, c1 = max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, img.shape[1])
+    return img[r0:r1, c0:c1]
+
+
+def _write_png(rgba, path) -> None:
+    """Write an (h, w, 4) uint8 RGBA array (opaque) as an RGB PNG (lossless) with OpenCV: zlib level 1 with
+    the run-length strategy and the Paeth filter on every row. Against Pillow at level 1 (adaptive filters):
+    a figure in 40 % and a photograph overlay in half the time, files as large (figures) or 10 % smaller
+    (overlay); trying every filter per row (libpng's default) doubled a figure's encoding time for 0.3 %."""
+    import cv2
+
+    bgr = cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGR)
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE]
+    if hasattr(cv2, "IMWRITE_PNG_FILTER"):  # OpenCV >= 4.11
+        params += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH]
+    ok, buf = cv2.imencode(".png", bgr, params)
+    if not ok:  # pragma: no cover - OpenCV reports no reason
+        raise OSError(f"could not encode a {rgba.shape[1]}x{rgba.shape[0]} PNG for {path}")
+    with open(path, "wb") as fh:
+        fh.write(buf.tobytes())
 
 
 def tight_bbox(fig, dpi: float):
@@ -124,7 +245,7 @@ def tight_bbox(fig, dpi: float):
     import matplotlib as mpl
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    if not isinstance(fig.canvas, FigureCanvasAgg) or fig.get_layout_engine() is not None:
+    if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
         return "tight"
     pad = mpl.rcParams["savefig.pad_inches"]
     old = fig.dpi
@@ -136,6 +257,15 @@ def tight_bbox(fig, dpi: float):
     finally:
         fig.dpi = old
     return box.padded(pad, pad)
+
+
+def _has_layout_engine(fig) -> bool:
+    """Whether a layout engine would move the axes when the figure is drawn (``fig.tight_layout()`` leaves a
+    placeholder engine behind that does nothing)."""
+    from matplotlib.layout_engine import PlaceHolderLayoutEngine
+
+    engine = fig.get_layout_engine()
+    return engine is not None and not isinstance(engine, PlaceHolderLayoutEngine)
 
 
 def close_figure(fig) -> None:

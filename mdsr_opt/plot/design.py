@@ -6,7 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
-from .common import LEGEND_OUTSIDE, axes_or_new, plot_edges, plot_mesh, plot_muscles
+from .common import LEGEND_OUTSIDE, axes_or_new, hide_ticks, plot_edges, plot_mesh, plot_muscles
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'plot_design_benchmark']
 
@@ -17,7 +17,7 @@ def _edge_weights_of(mesh, graph):
 
 
 def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", lw=1.5, title=None,
-                           seeds=None):
+                           seeds=None, ticks=True):
     """The contraction graph drawn over the target mesh, each edge coloured by its weight.
 
     Parameters
@@ -33,6 +33,9 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", l
         A diverging colormap, centred on 0: contraction (w > 0) at the top end, elongation below.
     seeds : sequence of (i, j), optional
         Seed edges to outline in black.
+    ticks : bool, default True
+        Coordinate ticks on the drawing (the colour bar keeps its own); ``False`` for a run's figures,
+        whose coordinates the target figure gives.
 
     Returns
     -------
@@ -59,10 +62,12 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", l
         ax.add_collection(LineCollection(x[np.asarray(seeds)], colors="k", linewidths=lw * 2.2, zorder=3))
     ax.set_title(title or "contraction graph (red: shortens, blue: stretches)", fontsize=10)
     ax.autoscale_view()
+    if not ticks:
+        hide_ticks(ax)
     return fig
 
 
-def plot_routing(mesh, target, result, axes=None, title=None):
+def plot_routing(mesh, target, result, axes=None, title=None, ticks=True):
     """Routed muscles over the rest mesh (left) and the target mesh (right).
 
     Parameters
@@ -74,6 +79,8 @@ def plot_routing(mesh, target, result, axes=None, title=None):
     result : RoutingResult or sequence of Muscle
         From :func:`mdsr_opt.routing.route_muscles`.
     axes : pair of matplotlib Axes, optional
+    ticks : bool, default True
+        Coordinate ticks on both panels (``False``: a run's figures, see :func:`plot_contraction_graph`).
 
     Returns
     -------
@@ -103,6 +110,8 @@ def plot_routing(mesh, target, result, axes=None, title=None):
         axes[1].legend(fontsize=7, **LEGEND_OUTSIDE)
     if title:
         fig.suptitle(title)
+    if not ticks:
+        hide_ticks(*axes)
     return fig
 
 
@@ -128,7 +137,7 @@ def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
     return fig
 
 
-def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
+def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=True):
     """Overlay a design's driven state (moved onto the target) on the target, with the muscles.
 
     Parameters
@@ -137,6 +146,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
     result : ``DesignResult`` (``mdsr_opt.design``); its ``x_aligned`` is drawn.
     target : (n, 2) target positions.
     muscles : muscles to draw over the driven state.
+    ticks : coordinate ticks (``False``: a run's figures, see :func:`plot_contraction_graph`).
 
     Example
     -------
@@ -164,6 +174,8 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None):
     ok = "" if result.success else "  [FAILED]"
     ax.set_title(title or f"{result.method}: {what} = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+    if not ticks:
+        hide_ticks(ax)
     return fig
 
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.collections import PolyCollection
 
-from .common import axes_or_new
+from .common import axes_or_new, hide_ticks
 
 __all__ = ['plot_overlay']
 
 
 def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=None, mesh_color="#1f77b4",
-                 contour_color="#ffd400", cmap="magma_r"):
+                 contour_color="#ffd400", cmap="magma_r", ticks=True):
     """Draw the simulated mesh over the photograph it was compared with (``mdsr_opt.evaluate``).
 
     Parameters
@@ -20,6 +20,9 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     mesh, x : the mesh and its simulated state (simulation coordinates).
     comparison : ``ContourComparison``; its ``transform`` maps ``x`` into the image's pixels.
     synthetic : mark the figure as made from a synthetic (rendered) photograph.
+    ticks : pixel coordinates on the photograph's axes (the colour bar keeps its own); a run's figures
+        leave them out (the distances are in the colour bar and the title; ticks were a third of the
+        figure's drawing time).
 
     The mesh is drawn as triangle edges, the measured contour as a line and the simulated boundary
     nodes coloured by their distance to it (pixels).
@@ -54,5 +57,7 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     text = f"{head}d = {comparison.mean_px:.2f} px, sd = {comparison.std_px:.2f} px"
     if synthetic:
         text += " (SYNTHETIC photograph)"
-    ax.set_title(text, fontsize=9)
+    ax.set_title(text, fontsize=9, y=1.0)  # placed, not searched (see plot_scene): pixels have no offset text
+    if not ticks:
+        hide_ticks(ax)
     return fig

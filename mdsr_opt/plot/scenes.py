@@ -5,10 +5,10 @@ from __future__ import annotations
 import os
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.collections import LineCollection
 
 from ..body.io import atomic_path
-from .common import LEGEND_OUTSIDE, axes_or_new, plot_mesh, plot_muscles
+from .common import LEGEND_OUTSIDE, axes_or_new, mesh_paths, plot_mesh, plot_muscles
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -33,7 +33,9 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4):
         ax.plot(p[:, 0], p[:, 1], "o", ms=markersize, color=cyc[i % len(cyc)], label=name)
     if regions:
         ax.legend(fontsize=7, **LEGEND_OUTSIDE)
-    ax.set_title(title or f"rest mesh: {mesh.n_nodes} nodes, {mesh.n_triangles} triangles", fontsize=9)
+    # y=1.0: the title's place given, not searched (the search lays the y axis out once more before the draw,
+    # for an offset text a mesh's coordinates never have)
+    ax.set_title(title or f"rest mesh: {mesh.n_nodes} nodes, {mesh.n_triangles} triangles", fontsize=9, y=1.0)
     return fig
 
 
@@ -67,10 +69,13 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     if len(muscles):
         plot_muscles(x, muscles, ax=ax)
     if len(anchors) or len(dn) or len(muscles):
-        ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+        # beside the axes unless the colour bar is there (it would cover the legend): then below them
+        where = LEGEND_OUTSIDE if values is None else {"loc": "upper center", "bbox_to_anchor": (0.5, -0.1),
+                                                       "ncol": 4, "borderaxespad": 0.0}
+        ax.legend(fontsize=7, **where)
     ax.autoscale_view()
     if title:
-        ax.set_title(title, fontsize=9)
+        ax.set_title(title, fontsize=9, y=1.0)  # placed, not searched: see plot_scene
     return fig
 
 
@@ -93,6 +98,22 @@ def gif_frame(rgb: np.ndarray):
         pal[used, c] = np.bincount(idx, weights=src[:, c], minlength=256)[used] / n[used]
     q.putpalette(np.clip(np.round(pal), 0, 255).astype(np.uint8).ravel().tolist())
     return q
+
+
+def gif_palette(frames, n_sample: int = 6):
+    """One 256-colour palette for all the (h, w, 3) uint8 ``frames`` of an animation, as a ``P`` image for
+    ``Image.quantize(palette=...)``: :func:`gif_frame`'s palette of up to ``n_sample`` frames spread over the
+    animation, stacked. Mapping a frame to a fixed palette costs a twentieth of quantising it, and one
+    palette for every frame keeps flat colours from flickering between frames."""
+    frames = list(frames)
+    if not frames:
+        raise ValueError("gif_palette needs at least one frame")
+    pick = np.unique(np.linspace(0, len(frames) - 1, min(n_sample, len(frames))).round().astype(int))
+    # every second pixel of every second row of a frame (a quarter of the pixels: a quarter of the time);
+    # the first frame whole, so each of its colours (the flat fills, the background) is a palette colour
+    pixels = [np.asarray(frames[pick[0]]).reshape(-1, 3)] + [np.asarray(frames[k])[::2, ::2].reshape(-1, 3)
+                                                             for k in pick[1:]]
+    return gif_frame(np.concatenate(pixels)[:, None, :])  # one column of pixels: the palette ignores layout
 
 
 def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
@@ -122,6 +143,10 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.colors import to_rgba
+    from matplotlib.font_manager import findfont
+    from matplotlib.patches import PathPatch
+    from PIL import Image, ImageDraw, ImageFont
 
     states = [np.asarray(s, dtype=float) for s in states]
     if not states:
@@ -149,38 +174,57 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for loop in mesh.boundary_loops:
             p = mesh.points[np.append(loop, loop[0])]
             moving += ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
-    body = PolyCollection(states[0][mesh.triangles], facecolors="#8fb3d9", edgecolors="#335577", linewidths=0.25)
-    ax.add_collection(body)
-    moving.append(body)
+    fill_path, edge_path = mesh_paths(mesh)
+    # the body: fill and edges as two compound paths (see common.mesh_paths); the edges, drawn once each rather
+    # than twice, are 0.28 pt wide instead of 0.25 to keep the mesh's tone
+    body = PathPatch(fill_path(states[0]), facecolor="#8fb3d9", edgecolor="none")
+    edges = PathPatch(edge_path(states[0]), facecolor="none", edgecolor="#335577", linewidth=0.28)
+    for p in (body, edges):
+        ax.add_artist(p)  # not add_patch: its data-limit update walks every segment; the limits are set below
+    moving += [body, edges]
     lines = [ax.plot([], [], "-", color=cyc[i % len(cyc)])[0] for i in range(len(muscles))]
     moving += lines
     paths = [list(m.nodes) for m in muscles]
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal")
-    title = ax.set_title(titles[0] if titles is not None else "frame 1", fontsize=9)
-    moving.append(title)
+    names = titles if titles is not None else [f"frame {k + 1}/{len(states)}" for k in range(len(states))]
+    title = ax.set_title(names[0], fontsize=9)
+    title.set_animated(True)  # placed by matplotlib, drawn per frame by Pillow (see below)
     for a in moving:
         a.set_animated(True)
     moving.sort(key=lambda a: a.get_zorder())  # stable, as Axes.draw sorts its children
     canvas.draw()
     background = canvas.copy_from_bbox(fig.bbox)
+    # The titles: matplotlib's text drawing (laying out and rendering every glyph, twice per frame) was a
+    # quarter of a frame's time; Pillow draws them with the same font file and size, centred on the same
+    # baseline point, in a tenth of that.
+    font = ImageFont.truetype(findfont(title.get_fontproperties()), title.get_fontsize() * fig.dpi / 72.0)
+    tx, ty = title.get_transform().transform(title.get_position())
+    anchor = (float(tx), canvas.get_width_height()[1] - float(ty) - 1.0)  # Agg sets text 1 px higher
+    ink = tuple(round(255 * c) for c in to_rgba(title.get_color())[:3])
 
     def frame(k):
         x = states[k]
-        body.set_verts(x[mesh.triangles])
+        body.set_path(fill_path(x))
+        edges.set_path(edge_path(x))
         for i, (line, p) in enumerate(zip(lines, paths)):
             a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
             line.set_data(x[p, 0], x[p, 1])
             line.set_linewidth(0.8 + 2.5 * a)
             line.set_alpha(0.35 + 0.65 * a)
-        title.set_text(titles[k] if titles is not None else f"frame {k + 1}/{len(states)}")
         canvas.restore_region(background)
         for a in moving:
             ax.draw_artist(a)
-        return gif_frame(np.asarray(canvas.buffer_rgba())[..., :3])
+        buf = canvas.buffer_rgba()
+        im = Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), buf, "raw", "RGBA", 0, 1).convert("RGB")
+        title.set_text(names[k])  # the figure's own title follows the frame (for anyone drawing it)
+        ImageDraw.Draw(im).text(anchor, names[k], font=font, fill=ink, anchor="ms")
+        return im
 
-    images = [frame(k) for k in range(len(states))]
+    rgb = [frame(k) for k in range(len(states))]  # RGB copies: the canvas is drawn over for the next frame
+    palette = gif_palette([np.asarray(f) for f in rgb])
+    images = [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in rgb]
     path = os.fspath(path)
     with atomic_path(path, suffix=".gif") as tmp:
         images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps),

@@ -360,14 +360,18 @@ def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
         files.append(str(folder / f"target{fmt}"))
         graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
         seeds = setup.routing.seeds if setup.routing is not None else None
-        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds),
+        # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
+        # their ticks would be most of their drawing time
+        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
                                       folder / "graph.png", close=True))
         if setup.muscles:
-            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles), folder / "muscles.png",
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
+                                          folder / "muscles.png",
                                           close=True))
     if run.design is not None:
         res = run.design
-        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles), folder / "design.png",
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles, ticks=False),
+                                      folder / "design.png",
                                       close=True))
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
@@ -378,6 +382,6 @@ def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))
         fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
-                                title="target outline on the driven body's photo")
+                                title="target outline on the driven body's photo", ticks=False)
         files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
     return [os.path.relpath(f, folder.parent) for f in files]

@@ -381,7 +381,8 @@ def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
     ax.set_title(title or f"actuation schedule: {' -> '.join(schedule.sequence)} "
                  f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    fig.tight_layout()
+    # no tight_layout: it lays every text out once more (40 % of the chart's time), and the PNG is cropped
+    # to what is drawn anyway (mdsr_opt.plot.save_figure)
     return fig
 
 
@@ -452,7 +453,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> di
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     if figures:
         files.append(save_figure(plot_schedule(sch, title=f"{scene.name} {gait.name}: strokes over time "
-                                               f"({sch.n_frames} frames; dotted: achieved)"), folder / "schedule.png"))
+                                               f"({sch.n_frames} frames; dotted: achieved)"), folder / "schedule.png",
+                                 close=True))
         files.append(save_gait_animation(scene.mesh, sch, res.muscles, folder / f"{gait.name}.gif",
                                          title=f"{scene.name} {gait.name}:", fps=gait.fps))
     files += list(export_fabrication(scene.mesh, res, folder, units=scene.units, name=scene.name).values())
