@@ -143,3 +143,28 @@ def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
         assert len(tr["iterations"]) == row["iterations"] + 1
         assert tr["difference"][-1] == pytest.approx(row["difference"], rel=1e-12)
         assert math.isclose(tr["difference"][0], row["initial_difference"], rel_tol=1e-3)
+
+
+def test_layout_legends_sit_in_the_emptiest_corner_of_the_body():
+    """plot_layout_grid places each layout's legend in the corner over the fewest nodes (not by
+    matplotlib's loc="best", which tests every triangle of the mesh)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from mdsr_opt import Mesh, Muscle
+    from mdsr_opt.plot.routing import plot_layout_grid
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    X = mesh.points.copy()
+    # an L: the strip's right half turned up into a column at x in [2, 3], y in [0, 2]; of the four corners
+    # of the drawing ([0, 3] x [0, 2]) only the upper left one holds no node
+    right = X[:, 0] > 2.0
+    X[right] = np.column_stack([2.0 + (X[right, 1]), (X[right, 0] - 2.0) * 1.0])
+    bottom = [int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0 and mesh.points[i, 0] <= 2.0]
+    fig = plot_layout_grid([{"title": "L", "mesh": mesh, "target": X, "layouts": [[Muscle(bottom)]],
+                             "row_labels": ["C"]}])
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
+    assert len(legends) == 1
+    from matplotlib.legend import Legend
+
+    assert legends[0]._loc == Legend.codes["upper left"]
