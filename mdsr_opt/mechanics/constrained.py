@@ -177,7 +177,8 @@ class ConstrainedModel:
         :meth:`multipliers`): fixed coordinates moved to ``values``, the constraints linearised
         and met, ropes whose predicted tension is negative dropped (slack). None if the system is singular
         or the step would leave an element with less than a quarter of the smallest ``det F`` of ``x``
-        (load stepping then tries a smaller load step)."""
+        (load stepping then tries a smaller load step); ``x`` itself (fixed coordinates moved) when the step
+        leaves a rope farther from its target than ``x`` is."""
         free = ~fixed
         pe, targets, _ = self.split(p)
         lin = self._linearisation(x, pe, fixed)
@@ -221,7 +222,7 @@ class ConstrainedModel:
             # A rope contracted from straight: the linearised step bends the body (rotations to first order)
             # and lengthens what it meant to shorten, the farther the larger the step. Such a step is a worse
             # start than none: the current state (fixed coordinates moved) is returned instead. Measured on
-            # one_muscle and two_muscles at medium resolution (541/... nodes), 20-50 % contractions: 11-342
+            # one_muscle and two_muscles at medium resolution (541 and 567 nodes), 20-50 % contractions: 11-342
             # IPOPT iterations and up to 3 load steps with the step, 12-55 iterations in one step without,
             # the same equilibria.
             L0 = self.constraints.rest_lengths
