@@ -142,8 +142,15 @@ class _PolylineDistance:
         """A lower bound of the mean distance of ``points``: a point's nearest segment has its midpoint
         within ``L/2`` of the nearest point on it, so the point lies at least ``r0 - L/2`` from it (``r0``
         the nearest midpoint's distance); lowered a little more for rounding."""
-        r0, _ = self.tree.query(np.asarray(points, dtype=float).reshape(-1, 2))
-        return float(np.maximum(r0 - self.half, 0.0).mean()) * (1 - 1e-9) - 1e-9
+        return self.lower_many([points])[0]
+
+    def lower_many(self, point_sets) -> list[float]:
+        """:meth:`lower` of each array of ``point_sets``, from one tree query for all."""
+        sets = [np.asarray(p, dtype=float).reshape(-1, 2) for p in point_sets]
+        r0, _ = self.tree.query(np.concatenate(sets))
+        r0 = np.maximum(r0 - self.half, 0.0)
+        ends = np.cumsum([len(p) for p in sets])
+        return [float(r0[e - len(p):e].mean()) * (1 - 1e-9) - 1e-9 for p, e in zip(sets, ends)]
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
@@ -405,7 +412,7 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
             cands = [-ths + k * math.pi / 2 for k in range(4)] + [k * math.pi / 12 for k in range(24)]
             # every candidate's exact cost is needed only if it can be the smallest: a candidate whose lower
             # bound (:meth:`_PolylineDistance.lower`) exceeds the best cost so far is not measured
-            bounds = [to_contour.lower(placed(t)) for t in cands]
+            bounds = to_contour.lower_many([placed(t) for t in cands])
             costs = [math.inf] * len(cands)
             best = math.inf
             for i in sorted(range(len(cands)), key=bounds.__getitem__):
