@@ -77,7 +77,7 @@ def _illumination(gray: np.ndarray) -> np.ndarray:
     H, W = gray.shape
     f = min(1.0, 96.0 / max(H, W))
     sw, sh = max(8, round(W * f)), max(8, round(H * f))
-    small = cv2.resize(gray.astype(np.float32), (sw, sh), interpolation=cv2.INTER_AREA).astype(float)
+    small = cv2.resize(np.asarray(gray, dtype=np.float32), (sw, sh), interpolation=cv2.INTER_AREA).astype(float)
     A = quadratic_basis(sh, sw).reshape(-1, 6)
     z = small.ravel()
     # start from a frame along the image border (the plate, as a rule); then refit to the pixels
@@ -95,10 +95,16 @@ def _illumination(gray: np.ndarray) -> np.ndarray:
         use = bg
         coef = _fit(A[use], z[use])
     # evaluated by broadcasting a row and a column: one (H, W) array, not six (H, W) basis images
+    # c0 + c1 u + c2 v + c3 u u + c4 u v + c5 v v, added up in that order, with every term that depends on
+    # u or v alone worked out once per column or row: one (H, W) array, written in place
     u = ((np.arange(W) + 0.5) / W * 2.0 - 1.0)[None, :]
     v = ((np.arange(H) + 0.5) / H * 2.0 - 1.0)[:, None]
     c = coef
-    return np.maximum(c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v, 1.0)
+    out = (c[0] + c[1] * u) + c[2] * v
+    out += c[3] * u * u
+    out += np.multiply(c[4] * u, v)
+    out += c[5] * v * v
+    return np.maximum(out, 1.0, out=out)
 
 
 def _default_kernel(h: int, w: int) -> int:
@@ -277,7 +283,13 @@ def _refine_subpixel(contour: np.ndarray, blob: np.ndarray, score: np.ndarray, r
     nrm2 = float(axis @ axis)
     if nrm2 < 1e-6:
         return contour
-    proj = (((sc - c_out) @ axis) / nrm2).astype(np.float32) - 0.5   # > 0 inside the body
+    if score.ndim == 2:  # one channel: the product of one pair, as the matrix product below gives it
+        proj = score - c_out[0]
+        proj *= axis[0]
+    else:
+        proj = (sc - c_out) @ axis
+    proj /= nrm2
+    proj -= 0.5   # > 0 inside the body
     p = contour
     tang = np.roll(p, -2, axis=0) - np.roll(p, 2, axis=0)
     tl = np.linalg.norm(tang, axis=1)
