@@ -94,12 +94,15 @@ def _illumination(gray: np.ndarray) -> np.ndarray:
             break
         use = bg
         coef = _fit(A[use], z[use])
-    # evaluated by broadcasting a row and a column: one (H, W) array, not six (H, W) basis images
-    # c0 + c1 u + c2 v + c3 u u + c4 u v + c5 v v, added up in that order, with every term that depends on
-    # u or v alone worked out once per column or row: one (H, W) array, written in place
+    return _quadratic_field(coef, H, W)
+
+
+def _quadratic_field(c: np.ndarray, H: int, W: int) -> np.ndarray:
+    """``max(c0 + c1 u + c2 v + c3 u u + c4 u v + c5 v v, 1)`` over the (H, W) pixel centres (the quadratic
+    basis's u and v), added up in that order, by broadcasting a row and a column: every term of u or v alone
+    is worked out once per column or row, into one (H, W) array written in place."""
     u = ((np.arange(W) + 0.5) / W * 2.0 - 1.0)[None, :]
     v = ((np.arange(H) + 0.5) / H * 2.0 - 1.0)[:, None]
-    c = coef
     out = (c[0] + c[1] * u) + c[2] * v
     out += c[3] * u * u
     out += np.multiply(c[4] * u, v)
