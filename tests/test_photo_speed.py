@@ -169,3 +169,69 @@ def test_lower_bounds_together_are_the_bounds_one_by_one():
     sets = [np.random.default_rng(k).uniform(-200, 200, (50 + k, 2)) for k in range(5)]
     assert dist.lower_many(sets) == [dist.lower(p) for p in sets]
     assert all(b <= float(unsigned_distances(p, poly).mean()) for b, p in zip(dist.lower_many(sets), sets))
+
+
+def _old_refine(contour, blob, score, reach):
+    """The earlier _refine_subpixel: distance transforms, bands and projection over the whole image."""
+    from mdsr_opt.body.mesh import polygon_area
+
+    b8 = blob.astype(np.uint8)
+    d_in = cv2.distanceTransform(b8, cv2.DIST_L2, 3)
+    d_out = cv2.distanceTransform(1 - b8, cv2.DIST_L2, 3)
+    lo_band, hi_band = 2.5 * reach / 2.0, 6.0 * reach / 2.0
+    inner = (d_in > lo_band) & (d_in <= hi_band)
+    outer = (d_out > lo_band) & (d_out <= hi_band)
+    sc = score if score.ndim == 3 else score[..., None]
+    c_in, c_out = np.median(sc[inner], axis=0), np.median(sc[outer], axis=0)
+    axis = c_in - c_out
+    nrm2 = float(axis @ axis)
+    proj = (((sc - c_out) @ axis) / nrm2).astype(np.float32) - 0.5
+    p = contour
+    tang = np.roll(p, -2, axis=0) - np.roll(p, 2, axis=0)
+    tl = np.linalg.norm(tang, axis=1)
+    ok = tl > 1e-9
+    normal = np.zeros_like(p)
+    normal[ok] = np.column_stack([tang[ok, 1], -tang[ok, 0]]) / tl[ok, None]
+    if polygon_area(p) < 0:
+        normal = -normal
+    steps = np.linspace(-reach, reach, int(round(20 * reach)) + 1)
+    sx = (p[:, 0:1] + steps[None, :] * normal[:, 0:1]).astype(np.float32)
+    sy = (p[:, 1:2] + steps[None, :] * normal[:, 1:2]).astype(np.float32)
+    prof = cv2.remap(proj, sx, sy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    out = p.copy()
+    inside = prof > 0
+    change = inside[:, :-1] & ~inside[:, 1:]
+    centre = len(steps) // 2
+    rows = np.flatnonzero(ok & change.any(axis=1))
+    off = np.where(change[rows], np.abs(np.arange(change.shape[1]) + 0.5 - centre), np.inf)
+    j = np.argmin(off, axis=1)
+    a, b = prof[rows, j], prof[rows, j + 1]
+    same = a == b
+    frac = np.where(same, np.float32(0.5), a / np.where(same, np.float32(1.0), a - b))
+    out[rows] = p[rows] + (steps[j] + frac * (steps[j + 1] - steps[j]))[:, None] * normal[rows]
+    return out
+
+
+@pytest.mark.parametrize("color", [None, (205, 95, 35)])
+def test_refinement_in_the_blobs_box_is_the_whole_images(color):
+    """The outline and the holes (eyes, mouth) of the face, grey and colour scores, a body near the border:
+    the same points as the whole-image refinement."""
+    scene = get_problem("face", resolution="coarse")
+    for size, margin in (((400, 360), 0.12), ((300, 300), 0.02)):
+        img = camera.render_photo(scene.mesh, image_size=size, seed=3, margin=margin).image
+        _, m8, score, outer, _ = ct._extract_outline(
+            img, roi=None, color=color, method="auto", body="auto", color_tol=None, kernel=None, flatten=True,
+            largest=True, min_blob_fraction=0.05, subpixel=False, max_pixels=ct.MAX_PIXELS)
+        blob = np.zeros_like(m8)
+        cv2.drawContours(blob, [outer.reshape(-1, 1, 2)], 0, 1, thickness=cv2.FILLED)
+        enclosed = ((blob > 0) & (m8 == 0)).astype(np.uint8)
+        holes, _ = cv2.findContours(enclosed * 255, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        loops = [outer] + [h.reshape(-1, 2) for h in holes if len(h) > 20]
+        assert len(loops) >= 3
+        for loop in loops:
+            filled = np.zeros_like(m8)
+            cv2.drawContours(filled, [loop.reshape(-1, 1, 2)], 0, 1, thickness=cv2.FILLED)
+            c = loop.astype(float)
+            got = ct._refine_subpixel(c, filled > 0, score, reach=2.0)
+            np.testing.assert_array_equal(got, _old_refine(c, filled > 0, score, reach=2.0))
+            assert np.abs(got - c).max() > 0.05
