@@ -139,7 +139,8 @@ class _PolylineDistance:
         self.dd = np.maximum((self.d * self.d).sum(axis=1), 1e-300)
         self.half = 0.5 * float(np.sqrt(self.dd.max()))
         self.tree = cKDTree(self.a + 0.5 * self.d)
-        self.slack = self.half  # L/2: the fastest of L/8, L/4, L/2 and L on the 16 comparisons of a gecko and a humanoid run
+        # L/2: the fastest of L/8, L/4, L/2 and L on the 16 comparisons of a gecko and a humanoid run
+        self.slack = self.half
         self._last = None           # the previous call's points
         self._ref = None            # the points the kept segments were chosen around, and those segments
         self._keep = None
@@ -166,10 +167,12 @@ class _PolylineDistance:
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float).reshape(-1, 2)
-        if self._keep is not None and len(points) == len(self._ref) and self._moved(points, self._ref) <= self.slack:
+        if (self._keep is not None and len(points) == len(self._ref)
+                and self._moved(points, self._ref) <= self.slack):
             return np.sqrt(self._exact(points[:, None, :], self._keep).min(axis=1))
         out = self._kd(points)
-        if self._last is not None and len(points) == len(self._last) and self._moved(points, self._last) <= self.slack:
+        if (self._last is not None and len(points) == len(self._last)
+                and self._moved(points, self._last) <= self.slack):
             self._keep_near(points, out)
         self._last = points
         return out
