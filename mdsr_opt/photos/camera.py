@@ -27,19 +27,14 @@ __all__ = ['SyntheticPhoto', 'render_photo']
 
 
 # ----------------------------------------------------------------------------------------------- camera
-def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int], value: int = 255,
-                      out: np.ndarray | None = None) -> np.ndarray:
-    """uint8 mask (``value`` inside, 0 outside; into ``out`` when given) of the pixels whose centres lie
-    in any triangle; exact edge functions (OpenCV's polygon filling adds up to a pixel along edges).
-    Scanlines: per triangle and pixel row, the span of centres inside is found from each edge's crossing and
+def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int],
+                      value: int = 255) -> np.ndarray:
+    """uint8 mask (``value`` inside, 0 outside) of the pixels whose centres lie in any triangle; exact
+    edge functions (OpenCV's polygon filling adds up to a pixel along edges). Scanlines: per triangle and pixel row, the span of centres inside is found from each edge's crossing and
     checked with the edge function itself (so the mask is the per-pixel test's exactly); the spans of each
     row are merged into runs, and the runs (a few per row) are filled."""
     Hf, Wf = shape
-    if out is None:
-        mask = np.zeros(shape, dtype=np.uint8)
-    else:
-        mask = out
-        mask.fill(0)
+    mask = np.zeros(shape, dtype=np.uint8)
     P = np.asarray(pts, dtype=float)[np.asarray(triangles)]
     if not len(P):
         return mask
@@ -153,11 +148,10 @@ def _compose_counts(lines, thick, shift, body_fine, triangles, colors, size, ss)
     W, H = size
     Wf, Hf = W * ss, H * ss
     n = ss * ss
-    grid, body = _scratch((Hf, Wf))
-    grid.fill(0)
+    grid = np.zeros((Hf, Wf), dtype=np.uint8)
     for p0, p1 in lines:
         cv2.line(grid, p0, p1, n, thick, cv2.LINE_8, shift)
-    body = _raster_triangles(body_fine, triangles, (Hf, Wf), value=n, out=body)
+    body = _raster_triangles(body_fine, triangles, (Hf, Wf), value=n)
     grid = cv2.subtract(grid, body, dst=grid)  # grid pixels the body covers are the body's
     if ss > 1:
         grid = cv2.resize(grid, (W, H), interpolation=cv2.INTER_AREA)
@@ -169,19 +163,6 @@ def _compose_counts(lines, thick, shift, body_fine, triangles, colors, size, ss)
            + k[None, :, None] * body_rgb) / n
     img = np.take(lut.astype(np.float32).reshape(-1, 3), grid.astype(np.uint16) * np.uint16(n + 1) + body, axis=0)
     return img, body > 0
-
-
-_SCRATCH = threading.local()
-
-
-def _scratch(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Two uint8 work images of ``shape`` for :func:`_compose_counts`, kept per thread for the next photograph
-    of the same size: a fresh 4 MB image costs a thousand page faults (3-4 us each on the shared test
-    machine: more than the drawing), a kept one a memset."""
-    bufs = getattr(_SCRATCH, "bufs", None)
-    if bufs is None or bufs[0].shape != tuple(shape):
-        bufs = _SCRATCH.bufs = (np.empty(shape, dtype=np.uint8), np.empty(shape, dtype=np.uint8))
-    return bufs
 
 
 #: The sensor noise of the latest (seed, sigma, size)s: the noise of a photograph depends on its seed alone
