@@ -30,9 +30,10 @@ __all__ = ['SyntheticPhoto', 'render_photo']
 def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int],
                       value: int = 255) -> np.ndarray:
     """uint8 mask (``value`` inside, 0 outside) of the pixels whose centres lie in any triangle; exact
-    edge functions (OpenCV's polygon filling adds up to a pixel along edges). Scanlines: per triangle and pixel row, the span of centres inside is found from each edge's crossing and
-    checked with the edge function itself (so the mask is the per-pixel test's exactly); the spans of each
-    row are merged into runs, and the runs (a few per row) are filled."""
+    edge functions (OpenCV's polygon filling adds up to a pixel along edges). Scanlines: per triangle and
+    pixel row, the span of centres inside is found from each edge's crossing and checked with the edge
+    function itself (so the mask is the per-pixel test's exactly); the spans of each row are merged into
+    runs, and the runs (a few per row) are filled."""
     Hf, Wf = shape
     mask = np.zeros(shape, dtype=np.uint8)
     P = np.asarray(pts, dtype=float)[np.asarray(triangles)]
