@@ -6,6 +6,8 @@ import json
 import math
 import numbers
 import os
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -18,7 +20,6 @@ from ..body.checks import check_mesh
 from ..core.checks import as_float_array, positive_float
 from ..core.results import to_jsonable
 from .compare import rotation_matrix
-from .contours import quadratic_basis
 from .folder import bytes_writer, write_together
 from .images import check_color, check_int
 
@@ -26,11 +27,13 @@ __all__ = ['SyntheticPhoto', 'render_photo']
 
 
 # ----------------------------------------------------------------------------------------------- camera
-def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """uint8 mask (255 inside) of the pixels whose centres lie in any triangle; exact edge functions
-    (OpenCV's polygon filling adds up to a pixel along edges). Scanlines: per triangle and pixel row, the
-    span of centres inside is found from each edge's crossing and checked with the edge function itself
-    (so the mask is the per-pixel test's exactly), then all spans are filled at once."""
+def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, int],
+                      value: int = 255) -> np.ndarray:
+    """uint8 mask (``value`` inside, 0 outside) of the pixels whose centres lie in any triangle; exact
+    edge functions (OpenCV's polygon filling adds up to a pixel along edges). Scanlines: per triangle and
+    pixel row, the span of centres inside is found from each edge's crossing and checked with the edge
+    function itself (so the mask is the per-pixel test's exactly); the spans of each row are merged into
+    runs, and the runs (a few per row) are filled."""
     Hf, Wf = shape
     mask = np.zeros(shape, dtype=np.uint8)
     P = np.asarray(pts, dtype=float)[np.asarray(triangles)]
@@ -46,58 +49,147 @@ def _raster_triangles(pts: np.ndarray, triangles: np.ndarray, shape: tuple[int, 
     t = np.repeat(np.arange(len(P)), nrow)                              # (triangle, row) pairs
     row = lo_xy[t, 1] + np.arange(len(t)) - np.repeat(np.cumsum(nrow) - nrow, nrow)
     gy = row.astype(float)
-    x0, x1 = lo_xy[t, 0], hi_xy[t, 0]
+    x0, x1 = lo_xy[:, 0][t], hi_xy[:, 0][t]
     lo, hi = x0.copy(), x1.copy()
     for a, b in ((0, 1), (1, 2), (2, 0)):
-        A = P[t, a]
-        ex, ey = (P[t, b] - A).T
-        c = ex * (gy - A[:, 1])
-
-        def inside(gx, i):  # the per-pixel test of pairs i at columns gx, as the reference computes it
-            return c[i] - ey[i] * (gx.astype(float) - A[i, 0]) >= 0
-
+        # per pair, gathered from per-triangle columns (the same numbers as P[t, a] and P[t, b] - P[t, a])
+        ax_, ay_ = P[:, a, 0], P[:, a, 1]
+        Ax, Ay = ax_[t], ay_[t]
+        ex, ey = (P[:, b, 0] - ax_)[t], (P[:, b, 1] - ay_)[t]
+        c = ex * (gy - Ay)
         flat = ey == 0
         hi[flat & (c < 0)] = -1                                          # the whole row is outside
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            cut = np.clip(A[:, 0] + c / np.where(flat, 1.0, ey), x0 - 2.0, x1 + 2.0)
+            cut = np.clip(Ax + c / np.where(flat, 1.0, ey), x0 - 2.0, x1 + 2.0)
         up = np.flatnonzero(ey > 0)                                      # inside: gx <= cut
-        u = np.floor(cut[up]).astype(np.int64)
-        while True:
-            m = (u + 1 <= x1[up]) & inside(u + 1, up)
-            if not m.any():
-                break
-            u[m] += 1
-        while True:
-            m = (u >= x0[up]) & ~inside(u, up)
-            if not m.any():
-                break
-            u[m] -= 1
-        hi[up] = np.minimum(hi[up], u)
+        hi[up] = np.minimum(hi[up], _last_inside(np.floor(cut[up]).astype(np.int64), c[up], ey[up], Ax[up],
+                                                 x0[up], x1[up], 1))
         dn = np.flatnonzero(ey < 0)                                      # inside: gx >= cut
-        v = np.ceil(cut[dn]).astype(np.int64)
-        while True:
-            m = (v - 1 >= x0[dn]) & inside(v - 1, dn)
-            if not m.any():
-                break
-            v[m] -= 1
-        while True:
-            m = (v <= x1[dn]) & ~inside(v, dn)
-            if not m.any():
-                break
-            v[m] += 1
-        lo[dn] = np.maximum(lo[dn], v)
+        lo[dn] = np.maximum(lo[dn], _last_inside(np.ceil(cut[dn]).astype(np.int64), c[dn], ey[dn], Ax[dn],
+                                                 x1[dn], x0[dn], -1))
     s = np.flatnonzero(lo <= hi)
     if not len(s):
         return mask
-    row, lo, hi = row[s], lo[s], hi[s]
-    # the spans as +1/-1 steps in the rectangle they cover, summed along each row: covered where > 0
-    r0, c0 = int(row.min()), int(lo.min())
-    h, w = int(row.max()) + 1 - r0, int(hi.max()) + 2 - c0
-    n = h * w
-    steps = (np.bincount((row - r0) * w + lo - c0, minlength=n) - np.bincount((row - r0) * w + hi + 1 - c0, minlength=n))
-    cover = np.cumsum(steps.astype(np.int32).reshape(h, w), axis=1, dtype=np.int32)[:, :w - 1] > 0
-    mask[r0:r0 + h, c0:c0 + w - 1] = cover.view(np.uint8) * np.uint8(255)
+    # the spans of each row merged into runs: sorted by (row, lo, hi) in one packed key, a run ends where the
+    # next span starts beyond the farthest end so far (+1: touching spans join)
+    bits = max(Wf, Hf).bit_length() + 1
+    key = np.sort((row[s] << (2 * bits)) | (lo[s] << bits) | (hi[s] + 1))
+    rs, ls, he1 = key >> (2 * bits), (key >> bits) & ((1 << bits) - 1), key & ((1 << bits) - 1)
+    far = np.maximum.accumulate((rs << bits) | he1)                      # (row, end + 1) of the run so far
+    start = np.ones(len(key), dtype=bool)
+    start[1:] = ((rs[1:] << bits) | ls[1:]) > far[:-1]
+    first = np.flatnonzero(start)
+    last = np.append(first[1:], len(key)) - 1
+    v = np.uint8(value)
+    for r, l0, l1 in zip(rs[first].tolist(), ls[first].tolist(), (far[last] & ((1 << bits) - 1)).tolist()):
+        mask[r, l0:l1] = v
     return mask
+
+
+def _last_inside(u, c, ey, ax, near, far, step):
+    """The last column from ``u`` towards ``far`` (``step`` +1 or -1) whose centre passes the edge test
+    ``c - ey * (gx - ax) >= 0``, at most one step past ``near`` when none does: first forward while the next
+    column passes, then back while the column fails (the estimate ``u`` from the edge's crossing is almost
+    always right; only the pairs that move are tested again)."""
+    def inside(i, gx):
+        return c[i] - ey[i] * (gx.astype(float) - ax[i]) >= 0
+
+    i = np.arange(len(u))
+    while len(i):
+        nxt = u[i] + step
+        m = ((nxt <= far[i]) if step > 0 else (nxt >= far[i])) & inside(i, nxt)
+        i = i[m]
+        u[i] += step
+    i = np.arange(len(u))
+    while len(i):
+        m = ((u[i] >= near[i]) if step > 0 else (u[i] <= near[i])) & ~inside(i, u[i])
+        i = i[m]
+        u[i] -= step
+    return u
+
+
+def _compose_canvas(lines, thick, shift, body_fine, triangles, colors, size, ss):
+    """The plate, its grid lines and the body painted on a canvas ``ss`` times finer than the image and
+    averaged down (``INTER_AREA``): ``(image float32 (H, W, 3), covered (H, W) bool: pixels the body
+    touches)``. The general path (any colours, any ``ss``); :func:`_compose_counts` is the fast one."""
+    plate_rgb, grid_rgb, body_rgb = colors
+    W, H = size
+    Wf, Hf = W * ss, H * ss
+    # with whole-number colours every value on the fine canvas is whole (grid lines without anti-aliasing),
+    # so it is held in uint8 (a quarter of float32's memory traffic) and averaged down exactly
+    whole = all(bool(np.all(c == np.round(c))) for c in colors)
+    canvas = np.empty((Hf, Wf, 3), dtype=np.uint8 if whole else np.float32)
+    canvas[0] = plate_rgb
+    canvas[1:] = canvas[0]  # row by row: 20x faster than broadcasting a colour over every pixel
+    for p0, p1 in lines:
+        cv2.line(canvas, p0, p1, grid_rgb.tolist(), thick, cv2.LINE_8, shift)
+    mask = _raster_triangles(body_fine, triangles, (Hf, Wf))
+    # the mask is 0 or 255: blending by it is painting the body's colour where it is set
+    if whole:
+        paint = np.empty_like(canvas)
+        paint[0] = body_rgb
+        paint[1:] = paint[0]
+        canvas = cv2.copyTo(paint, mask, canvas)  # a tenth of the time of canvas[mask > 0] = body_rgb
+    else:
+        canvas[mask > 0] = body_rgb
+    canvas = canvas.astype(np.float32, copy=False)
+    img = cv2.resize(canvas, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else canvas
+    coverage = cv2.resize(mask, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else mask
+    return img, coverage > 0
+
+
+def _compose_counts(lines, thick, shift, body_fine, triangles, colors, size, ss):
+    """:func:`_compose_canvas` for whole-number colours and ``ss`` in 1, 2, 4, 8, with the same pixels from
+    counts instead of a colour canvas: each fine pixel is the body's, else a grid line's, else the plate's
+    colour, so an image pixel (the mean of its ``ss * ss`` fine pixels) is ``(n_plate * plate + n_grid *
+    grid + n_body * body) / ss**2``. The counts come from two one-channel masks whose set pixels hold
+    ``ss**2`` (their ``INTER_AREA`` average is the count, exactly); the means, whole numbers over a power of
+    two, are exact in float32 as ``INTER_AREA``'s are, so the image is the canvas path's bit for bit
+    (tests/test_photo_speed.py) at a third of the memory traffic and no float canvas."""
+    W, H = size
+    Wf, Hf = W * ss, H * ss
+    n = ss * ss
+    grid = np.zeros((Hf, Wf), dtype=np.uint8)
+    for p0, p1 in lines:
+        cv2.line(grid, p0, p1, n, thick, cv2.LINE_8, shift)
+    body = _raster_triangles(body_fine, triangles, (Hf, Wf), value=n)
+    grid = cv2.subtract(grid, body, dst=grid)  # grid pixels the body covers are the body's
+    if ss > 1:
+        grid = cv2.resize(grid, (W, H), interpolation=cv2.INTER_AREA)
+        body = cv2.resize(body, (W, H), interpolation=cv2.INTER_AREA)
+    # every (n_grid, n_body) pair's colour: whole numbers (< 2**14) over n, exact in float64 and float32
+    k = np.arange(n + 1, dtype=float)
+    plate_rgb, grid_rgb, body_rgb = (np.asarray(c, dtype=float) for c in colors)
+    lut = ((n - k[:, None, None] - k[None, :, None]) * plate_rgb + k[:, None, None] * grid_rgb
+           + k[None, :, None] * body_rgb) / n
+    img = np.take(lut.astype(np.float32).reshape(-1, 3), grid.astype(np.uint16) * np.uint16(n + 1) + body, axis=0)
+    return img, body > 0
+
+
+#: The sensor noise of the latest (seed, sigma, size)s: the noise of a photograph depends on its seed alone
+#: (the draws before it, tilt axis, grid phase and light direction, take a fixed count of numbers), and a run
+#: photographs many states with the same seed (each case's design and prototype photos). 750k Gaussian
+#: numbers take 10-20 ms; a copy from the cache 1 ms.
+_NOISE: OrderedDict = OrderedDict()
+_NOISE_LOCK = threading.Lock()
+
+
+def _sensor_noise(rng: np.random.Generator, seed: int, sigma: float, shape: tuple) -> np.ndarray:
+    """``rng.normal(0, sigma, shape)`` as float32, from ``rng`` (seeded with ``seed`` and at the state every
+    photograph with that seed reaches here) or from the cache; read-only."""
+    key = (seed, sigma, tuple(shape))
+    with _NOISE_LOCK:
+        hit = _NOISE.get(key)
+        if hit is not None:
+            _NOISE.move_to_end(key)
+            return hit
+    out = rng.normal(0.0, sigma, shape).astype(np.float32)
+    out.setflags(write=False)
+    with _NOISE_LOCK:
+        _NOISE[key] = out
+        while len(_NOISE) > 4:
+            _NOISE.popitem(last=False)
+    return out
 
 
 def _apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -287,12 +379,6 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
         return np.round(((p + 0.5) * ss - 0.5) * (1 << shift)).astype(np.int32)
 
     Wf, Hf = W * ss, H * ss
-    # with whole-number colours (the usual case) every value on the fine canvas is whole (grid lines without
-    # anti-aliasing), so it is held in uint8 (a quarter of float32's memory traffic) and averaged down exactly
-    whole = all(bool(np.all(c == np.round(c))) for c in (body_rgb, plate_rgb, grid_rgb))
-    canvas = np.empty((Hf, Wf, 3), dtype=np.uint8 if whole else np.float32)
-    canvas[0] = plate_rgb
-    canvas[1:] = canvas[0]  # row by row: 20x faster than broadcasting a colour over every pixel
     # the grid is fixed to the plate: plate coordinates are the simulation's rotated by rotation_deg,
     # with a random phase (the plate is not aligned with the body's origin)
     Rp = np.eye(3)
@@ -311,6 +397,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
         raise ValueError(f"grid_spacing {g:g} draws more than 2000 grid lines; choose a larger spacing")
     phase = rng.uniform(0.0, g, size=2)
     thick = max(1, round(1.2 * ss * min(W, H) / 500.0))
+    lines = []
     for axis_k in (0, 1):
         first = math.floor((wlo[axis_k] - phase[axis_k]) / g)
         last = math.ceil((whi[axis_k] - phase[axis_k]) / g)
@@ -319,32 +406,27 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
             a[:, axis_k] = phase[axis_k] + k * g
             a[:, 1 - axis_k] = (wlo[1 - axis_k], whi[1 - axis_k])
             p0, p1 = fine(_apply_h(Hp, a))
-            cv2.line(canvas, tuple(int(v) for v in p0), tuple(int(v) for v in p1), grid_rgb.tolist(),
-                     thick, cv2.LINE_8, shift)
-    mask = _raster_triangles(_apply_h(Hw, x) * ss + (ss - 1) / 2.0, mesh.triangles, (Hf, Wf))
-    # the mask is 0 or 255: blending by it is painting the body's colour where it is set
-    if whole:
-        paint = np.empty_like(canvas)
-        paint[0] = body_rgb
-        paint[1:] = paint[0]
-        canvas = cv2.copyTo(paint, mask, canvas)  # a tenth of the time of canvas[mask > 0] = body_rgb
+            lines.append((tuple(int(v) for v in p0), tuple(int(v) for v in p1)))
+    body_fine = _apply_h(Hw, x) * ss + (ss - 1) / 2.0
+    colors = (plate_rgb, grid_rgb, body_rgb)
+    if all(bool(np.all(c == np.round(c))) for c in colors) and ss in (1, 2, 4, 8):
+        img, covered = _compose_counts(lines, thick, shift, body_fine, mesh.triangles, colors, (W, H), ss)
     else:
-        canvas[mask > 0] = body_rgb
-    canvas = canvas.astype(np.float32, copy=False)
-    img = cv2.resize(canvas, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else canvas
-    coverage = cv2.resize(mask, (W, H), interpolation=cv2.INTER_AREA) if ss > 1 else mask
+        img, covered = _compose_canvas(lines, thick, shift, body_fine, mesh.triangles, colors, (W, H), ss)
 
     # light, optics, sensor
     psi = rng.uniform(0.0, 2 * math.pi)
-    basis = quadratic_basis(H, W)
-    u, v = basis[..., 1], basis[..., 2]
+    # pixel centres in [-1, 1] as a row and a column: the same numbers as the quadratic basis's u and v, and
+    # broadcasting them gives every pixel the same arithmetic at a fraction of the memory traffic
+    u = ((np.arange(W) + 0.5) / W * 2.0 - 1.0)[None, :]
+    v = ((np.arange(H) + 0.5) / H * 2.0 - 1.0)[:, None]
     light = 1.0 + lighting * (u * math.cos(psi) + v * math.sin(psi)) / 2.0 - vignette * (u * u + v * v) / 2.0
-    img = img * light[..., None].astype(np.float32)
+    img *= light[..., None].astype(np.float32)
     if blur > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur)
     if noise > 0:
-        img = img + rng.normal(0.0, noise, img.shape).astype(np.float32)
-    img = np.clip(np.round(img), 0, 255).astype(np.uint8)
+        img += _sensor_noise(rng, seed, noise, img.shape)
+    img = np.clip(np.round(img, out=img), 0, 255, out=img).astype(np.uint8)
 
     # the caption, in the first corner whose box does not touch the (dilated) body
     text = "SYNTHETIC"
@@ -352,7 +434,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     fthick = max(1, round(min(W, H) / 400.0))
     (tw, th), base = cv2.getTextSize(text, font, fscale, fthick)
     pad = max(3, round(min(W, H) / 100.0))
-    body_px = cv2.dilate((coverage > 0).astype(np.uint8), np.ones((2 * pad + 1, 2 * pad + 1), np.uint8))
+    body_px = cv2.dilate(covered.view(np.uint8), np.ones((2 * pad + 1, 2 * pad + 1), np.uint8))
     boxes = {"bottom-left": (pad, H - pad - th - base), "bottom-right": (W - pad - tw, H - pad - th - base),
              "top-left": (pad, pad), "top-right": (W - pad - tw, pad)}
     corner = None
