@@ -65,6 +65,7 @@ WRAPS = [
     ("mdsr_opt.photos.loops", "compare_loops", "photos/contours"),
     ("mdsr_opt.photos.loops", "simulated_loops", "photos/contours"),
     ("mdsr_opt.scenes.runner", "write_case", "figures"),
+    ("mdsr_opt.scenes.runscene", "write_case", "figures"),  # runscene calls it by its own name
     ("mdsr_opt.plot", "plot_scene", "figures"),
     ("mdsr_opt.plot", "save_figure", "figures"),
     ("mdsr_opt.plot.common", "save_figure", "figures"),
