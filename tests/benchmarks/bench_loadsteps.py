@@ -23,8 +23,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", nargs="+", default=["one_muscle", "two_muscles", "four_muscles"])
-    ap.add_argument("--resolution", default="medium")
+    ap.add_argument("--scenes", nargs="+", default=["one_muscle", "two_muscles", "four_muscles"],
+                    help="library scenes with internal-driving cases (default: the three muscle experiments)")
+    ap.add_argument("--resolution", default="medium", help="mesh resolution of the scenes (default medium)")
     ap.add_argument("--tree", default=str(ROOT), help="source tree to measure (default: this script's)")
     a = ap.parse_args(argv)
     sys.path.insert(0, a.tree)
