@@ -31,28 +31,16 @@ __all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_
 def warm_start_state(mesh: Mesh, x) -> np.ndarray | None:
     """A solved state ``x`` (aligned to rest, as the solvers return it) moved rigidly so that the solver's
     three gauge coordinates (:func:`~mdsr_opt.mechanics.equilibrium.gauge_coordinates`) have their rest
-    values: a first guess for a nearby solve (``initial_guess=``), which sets those coordinates to their rest
-    values and would otherwise tear the elements around them. None when no rigid motion does it.
+    values: a first guess for a nearby solve (``initial_guess=``). None when no rigid motion does it or
+    ``x`` inverts an element. The same as :func:`~mdsr_opt.mechanics.equilibrium.in_gauge_frame`, which
+    :func:`~mdsr_opt.solve_internal` now applies to any state given as ``initial_guess`` itself.
 
     A frame of an animation started from its neighbour's state this way takes 4-9 iterations where the
     default start needs 3-40 (and 473 at a 50 % contraction that load stepping from rest found hard).
     """
-    from ..mechanics.equilibrium import gauge_coordinates
+    from ..mechanics.equilibrium import in_gauge_frame
 
-    x = np.asarray(x, dtype=float).reshape(-1, 2)
-    P = mesh.points
-    gi, _, gj = gauge_coordinates(mesh)
-    i, j, comp = gi // 2, gj // 2, gj % 2
-    d, v = x[j] - x[i], P[j] - P[i]
-    L = float(np.hypot(d[0], d[1]))
-    if not np.isfinite(L) or L <= abs(v[comp]):
-        return None
-    w = np.empty(2)
-    w[comp] = v[comp]
-    w[1 - comp] = math.copysign(math.sqrt(L * L - v[comp] ** 2), v[1 - comp])
-    t = math.atan2(w[1], w[0]) - math.atan2(d[1], d[0])
-    R = np.array([[math.cos(t), -math.sin(t)], [math.sin(t), math.cos(t)]])
-    return (x - x[i]) @ R.T + P[i]
+    return in_gauge_frame(mesh, np.asarray(x, dtype=float).reshape(-1, 2))
 
 
 def _frames(value, name: str = "frames_per_step") -> int:
