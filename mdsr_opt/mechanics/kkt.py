@@ -34,12 +34,19 @@ def kkt_order(J, order) -> np.ndarray:
 
 class OrderedFactor:
     """SuperLU factor of ``K[perm][:, perm]`` that solves with ``K``; ``d`` the pivots (diagonal of ``U``),
-    ``symmetric`` whether only diagonal pivots were taken (then ``d`` gives the inertia)."""
+    ``symmetric`` whether only diagonal pivots were taken (then ``d`` gives the inertia). Both are worked
+    out when asked (``U`` is a copy of the factor): a solve needs neither."""
 
     def __init__(self, lu, perm):
         self.lu, self.perm = lu, perm
-        self.symmetric = bool(np.array_equal(lu.perm_r, lu.perm_c))
-        self.d = lu.U.diagonal()
+
+    @property
+    def symmetric(self) -> bool:
+        return bool(np.array_equal(self.lu.perm_r, self.lu.perm_c))
+
+    @property
+    def d(self) -> np.ndarray:
+        return self.lu.U.diagonal()
 
     def solve(self, rhs):
         out = np.empty(np.shape(rhs), dtype=float)

@@ -12,6 +12,7 @@ from ..core.checks import positive_float
 from .backends import check_backend, interruptible, minimize
 from .blas import one_blas_thread
 from .drags import RigidDrag, drag_path
+from .kkt import OrderedFactor
 from .result import EquilibriumResult
 from .stability import check_stability
 
@@ -92,7 +93,7 @@ def _factor(model, p, x, fixed):
     if getattr(model, "is_numeric", False):  # the mesh's fill-reducing ordering, made once
         fi = np.flatnonzero(free)
         order = model.free_ordering(free)
-        lu = _Ordered(spla.splu(H[fi[order]][:, fi[order]].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+        lu = OrderedFactor(spla.splu(H[fi[order]][:, fi[order]].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
                                 options={"SymmetricMode": True}), order)
     else:
         # symmetric mode with a minimum-degree ordering: about twice as fast as spsolve's default here
@@ -104,18 +105,6 @@ def _factor(model, p, x, fixed):
             cache.pop(next(iter(cache)))
         cache[key] = out
     return out
-
-
-class _Ordered:
-    """A factorisation of ``M[order][:, order]`` solving with ``M``."""
-
-    def __init__(self, lu, order):
-        self.lu, self.order = lu, order
-
-    def solve(self, b):
-        out = np.empty_like(b)
-        out[self.order] = self.lu.solve(b[self.order])
-        return out
 
 
 def _predict(model, p, x, fixed, values):
