@@ -534,16 +534,21 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
 def _same_design(mesh, sep, engaged, dopt) -> bool:
     """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
     **dopt)`` would make (same muscles in the same order, same recorded options)?"""
+    import inspect
+
     from ..mechanics.anchors import anchor_radius_or_default
+    from .contractions import design_contractions
 
     muscles, d = sep
     if d is None or [tuple(m.nodes) for m in muscles] != [tuple(m.nodes) for m in engaged]:
         return False
-    want = {"method": dopt.get("method", "flattened"), "a_max": float(dopt.get("a_max", 0.6)),
-            "muscle_model": dopt.get("muscle_model", "cable"), "stiffness": float(dopt.get("stiffness", 10.0))}
-    got = {"method": getattr(d, "method", None), "a_max": float(getattr(d, "a_max", np.nan)),
-           "muscle_model": getattr(d, "muscle_model", None), "stiffness": float(getattr(d, "stiffness", np.nan))}
-    if want != got or (dopt.get("verify", True) and getattr(d, "verification", None) is None):
-        return False
+    default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
+    for key in ("method", "a_max", "muscle_model", "stiffness", "verify"):
+        want = dopt.get(key, default[key].default)
+        if key == "verify":
+            if want and d.verification is None:
+                return False
+        elif getattr(d, key) != want:
+            return False
     radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))
-    return bool(np.isclose(float(getattr(d, "anchor_radius", np.nan)), radius, rtol=1e-12, atol=0.0))
+    return bool(np.isclose(float(d.anchor_radius), radius, rtol=1e-12, atol=0.0))
