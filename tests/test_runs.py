@@ -243,3 +243,36 @@ def test_several_scenes_write_tables_2_to_4_in_tables_md(tmp_path, capsys):
     for scene in ("finger", "thumb"):  # finger: bend is external (Tables 2, 4), contract internal (Table 3)
         assert f"| {scene} | bend |" in sections[1] and f"| {scene} | bend |" in sections[3]
         assert f"| {scene} | contract |" in sections[2] and f"| {scene} | contract |" not in sections[1]
+
+
+# ------------------------------------------------------------------------------------ figures beside solves
+def _without_times(v):
+    if isinstance(v, dict):
+        return {k: _without_times(x) for k, x in v.items() if k not in ("time", "times", "out")}
+    if isinstance(v, list):
+        return [_without_times(x) for x in v]
+    return v
+
+
+def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path):
+    """``run_scene(background=True)`` (figure jobs in forked children, where the machine allows it) writes
+    the same files, the same summary and the same file lists as the serial run; the gecko has cases, an
+    animation and a gait, so every kind of job is in it."""
+    from mdsr_opt.scenes.runscene import run_scene
+
+    # on one core (fork_is_safe() False) both runs are serial and this compares a run with itself; CI and
+    # the development machines have two cores, where the background path runs
+    scene = scenes.get_problem("gecko", resolution="coarse")
+    reports = {bg: run_scene(scene, tmp_path / str(bg), log=None, background=bg, prototype=False)
+               for bg in (True, False)}
+    a, b = tmp_path / "True", tmp_path / "False"
+    assert _files(a) == _files(b)
+    assert {"bend_left/design.png", "rest.png", "gait.gif", "walk/schedule.png", "walk/walk.gif"} <= set(_files(a))
+    assert [c.files for c in reports[True].cases] == [c.files for c in reports[False].cases]
+    assert all(c.files for c in reports[True].cases)
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    assert _without_times(sa) == _without_times(sb)
+    for name in ("bend_left/target.vtu", "walk/schedule.csv"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    la, lb = (json.loads((d / "walk" / "layout.json").read_text()) for d in (a, b))
+    assert _without_times(la) == _without_times(lb)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..core.background import BackgroundWriter
 from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -27,7 +29,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
               log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
-              prototype: bool = True, prototype_seed: int = 0) -> SceneReport:
+              prototype: bool = True, prototype_seed: int = 0, background: bool = True) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -50,6 +52,11 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
+    background : bool, default True
+        Draw and write each case's figures, meshes and photographs, and the animations' GIFs, in a forked
+        child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
+        Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
+        The files are the same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -77,7 +84,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_size=photo_size,
-                             log=log, prototype=prototype, prototype_seed=prototype_seed)
+                             log=log, prototype=prototype, prototype_seed=prototype_seed,
+                             background=background)
         folder.finish("complete" if report.success else "complete, some cases failed")
     return report
 
@@ -114,7 +122,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
-                prototype_seed: int = 0) -> SceneReport:
+                prototype_seed: int = 0, background: bool = True) -> SceneReport:
     """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
     holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
     import time
@@ -127,61 +135,63 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
-    if figures:
-        plot.save_figure(plot.plot_scene(scene.mesh, scene.regions, title=f"{scene.name}: rest mesh "
-                                         f"({scene.mesh.n_nodes} nodes) and regions"), out / "rest.png",
-                         close=True)
-    proto = None
-    if photos and prototype:
-        from .prototype import VirtualPrototype
-
-        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
-        d = proto.describe()
-        say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
-            f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
-    runs: dict[str, CaseRun] = {}
-    for i, cname in enumerate(names):
-        prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
-        check_interrupt()
-        run = run_case(scene, cname, method=method, photo=photos, photo_size=photo_size, log=say,
-                       prefix=prefix, prototype=proto)
+    # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
+    with BackgroundWriter(background and figures, prepare=_warm_up) as bg:
+        say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
-            run.report.files = write_case(scene, run, out / cname, mesh_format=mesh_format)
-        runs[cname] = run
-        advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
-    anim_out: dict[str, dict] = {}
-    if animations:
-        for anim in scene.animations:
-            if any(c not in runs for c in anim.cases):
-                continue
-            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
-                       if runs[c].design is not None}
-            res = animate(scene, anim, designs)
-            data = res.to_dict()
-            if res.states:
-                say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
-                    + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
-                       f"{res.failed_frames})"))
-                if figures:
-                    act = res.contractions / scene.design_options.get("a_max", 0.6)
-                    # titles state the contraction each frame reached along the muscles' node chains
-                    reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles]
-                               for x in res.states]
-                    titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
-                              + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
-                    plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
-                                        activations=act, titles=titles, fps=anim.fps)
-                    data["gif"] = f"{anim.name}.gif"
-            else:
-                say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
-            anim_out[anim.name] = data
-            write_json(out / f"{anim.name}.json", finite(data))
-            advance(log)
-    if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
-        gait_info = _run_gait(scene, out, runs, figures=figures, log=say)
-        if gait_info is not None:
-            anim_out[scene.gait.name] = gait_info
+            bg.submit(_write_rest, scene, out / "rest.png")
+        proto = None
+        if photos and prototype:
+            from .prototype import VirtualPrototype
+
+            proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
+            d = proto.describe()
+            say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
+                f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
+        runs: dict[str, CaseRun] = {}
+        for i, cname in enumerate(names):
+            prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+            check_interrupt()
+            run = run_case(scene, cname, method=method, photo=photos, photo_size=photo_size, log=say,
+                           prefix=prefix, prototype=proto)
+            if figures:  # the files are listed in the report when the job is done (bg.wait)
+                bg.submit(write_case, scene, run, out / cname, mesh_format=mesh_format,
+                          on_done=functools.partial(setattr, run.report, "files"))
+            runs[cname] = run
+            advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
+        anim_out: dict[str, dict] = {}
+        if animations:
+            for anim in scene.animations:
+                if any(c not in runs for c in anim.cases):
+                    continue
+                designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
+                           if runs[c].design is not None}
+                res = animate(scene, anim, designs)
+                data = res.to_dict()
+                if res.states:
+                    say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
+                        + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
+                           f"{res.failed_frames})"))
+                    if figures:
+                        act = res.contractions / scene.design_options.get("a_max", 0.6)
+                        # titles state the contraction each frame reached along the muscles' node chains
+                        reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles]
+                                   for x in res.states]
+                        titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
+                                  + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
+                        bg.submit(plot.save_animation, scene.mesh, res.states, out / f"{anim.name}.gif",
+                                  muscles=res.muscles, activations=act, titles=titles, fps=anim.fps)
+                        data["gif"] = f"{anim.name}.gif"
+                else:
+                    say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
+                anim_out[anim.name] = data
+                write_json(out / f"{anim.name}.json", finite(data))
+                advance(log)
+        if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
+            gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg)
+            if gait_info is not None:
+                anim_out[scene.gait.name] = gait_info
+        bg.wait()  # every case's files are known before the summary lists them
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
@@ -274,7 +284,22 @@ def n_units(scene: Scene, cases, animations: bool) -> int:
     return len(names) + (sum(set(x.cases) <= names for x in scene.animations) if animations else 0)
 
 
-def _run_gait(scene: Scene, out, runs, figures: bool, log):
+def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
     from ..synthesis.gait import run_gait
 
-    return run_gait(scene, out, runs, figures=figures, log=log)
+    return run_gait(scene, out, runs, figures=figures, log=log, writer=writer)
+
+
+def _warm_up() -> None:
+    from ..plot.common import warm_up
+
+    warm_up()
+
+
+def _write_rest(scene: Scene, path) -> str:
+    """``rest.png``: the rest mesh with its regions."""
+    from .. import plot
+
+    fig = plot.plot_scene(scene.mesh, scene.regions,
+                          title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
+    return plot.save_figure(fig, path, close=True)

@@ -385,7 +385,19 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
                                activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
 
 
-def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> dict | None:
+def _now(fn, *args, **kwargs):
+    """Run a write job here and now (``run_gait`` without a background writer)."""
+    return fn(*args, **kwargs)
+
+
+def _write_schedule(schedule: GaitSchedule, title: str, path) -> str:
+    """``schedule.png``: the strokes over time (:func:`plot_schedule`)."""
+    from ..plot.common import save_figure
+
+    return save_figure(plot_schedule(schedule, title=title), path, close=True)
+
+
+def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None) -> dict | None:
     """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
 
     Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.poses.design_poses`, the scene's routing and
@@ -401,6 +413,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> di
     runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
     figures : write the chart and the GIF.
     log : progress messages.
+    writer : :class:`~mdsr_opt.core.background.BackgroundWriter`, optional
+        Draws the chart and the GIF (its ``submit``); by default they are drawn here, one after the other.
 
     Returns
     -------
@@ -412,7 +426,6 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> di
 
     from .export import export_fabrication
     from ..body.io import write_json
-    from ..plot.common import save_figure
     from .poses import design_poses
 
     gait = scene.gait
@@ -440,11 +453,13 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None) -> di
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     if figures:
-        files.append(save_figure(plot_schedule(sch, title=f"{scene.name} {gait.name}: strokes over time "
-                                               f"({sch.n_frames} frames; dotted: achieved)"), folder / "schedule.png",
-                                 close=True))
-        files.append(save_gait_animation(scene.mesh, sch, res.muscles, folder / f"{gait.name}.gif",
-                                         title=f"{scene.name} {gait.name}:", fps=gait.fps))
+        submit = writer.submit if writer is not None else _now
+        chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
+        submit(_write_schedule, sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
+               "dotted: achieved)", chart)
+        submit(save_gait_animation, scene.mesh, sch, res.muscles, gif, title=f"{scene.name} {gait.name}:",
+               fps=gait.fps)
+        files += [str(chart), str(gif)]
     files += list(export_fabrication(scene.mesh, res, folder, units=scene.units, name=scene.name).values())
     ok = res.all_success and bool(sch.success.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]

@@ -15,7 +15,14 @@ the work (each wrapper's *exclusive* time goes to its stage, so nothing is count
 - ``figures``: PNG figures (building and saving);
 - ``GIFs``: the animated GIFs;
 - ``writing``: meshes, photographs, JSON and fabrication files;
+- ``waiting``: waiting for the figure jobs running in forked children beside the solves (``run_scene``'s
+  ``background``; a job's own stages run in its child and are not seen here, so with the background
+  writer ``figures``, ``GIFs`` and most ``writing`` show only what is left in this process);
 - ``other``: the rest (prototype mesh building, bookkeeping).
+
+``cpu`` is the CPU time of this process and of its finished children (the figure jobs), so it measures the
+work done, where ``wall`` measures the wait. ``--serial`` runs with ``background=False`` (everything in this
+process, one after the other), for a side-by-side comparison.
 
 ``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
 and CasADi's first-call costs) and reports medians, with the whole run's ``wall`` and ``cpu`` seconds beside
@@ -48,7 +55,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-STAGES = ("solves", "anim solves", "photos/contours", "figures", "GIFs", "writing", "other")
+STAGES = ("solves", "anim solves", "photos/contours", "figures", "GIFs", "writing", "waiting", "other")
 
 # (module, attribute, stage): the stage None inherits the enclosing wrapper's stage ("solves" at top level)
 WRAPS = [
@@ -76,6 +83,7 @@ WRAPS = [
     ("mdsr_opt.photos.camera", "SyntheticPhoto.save", "writing"),
     ("mdsr_opt.synthesis.export", "export_fabrication", "writing"),
     ("mdsr_opt.synthesis.poses", "PosesResult.save", "writing"),
+    ("mdsr_opt.core.background", "BackgroundWriter.wait", "waiting"),
 ]
 
 
@@ -108,7 +116,10 @@ class StageClock:
     def install(self):
         undo = []
         for modname, attr, stage in WRAPS:
-            mod = importlib.import_module(modname)
+            try:
+                mod = importlib.import_module(modname)
+            except ImportError:  # an older tree (--tree) without this module
+                continue
             owner, name = mod, attr
             if "." in attr:
                 cls, name = attr.split(".")
@@ -128,7 +139,13 @@ class StageClock:
             setattr(owner, name, raw)
 
 
-def time_scene(name: str, repeats: int, log=None) -> dict:
+def _cpu() -> float:
+    """CPU seconds of this process and its finished (reaped) children."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+def time_scene(name: str, repeats: int, log=None, serial: bool = False) -> dict:
     """Medians over ``repeats`` runs of ``run_scene(name)`` (after one warm-up run): total and per stage."""
     from mdsr_opt.scenes.library import get_problem
     from mdsr_opt.scenes.runscene import run_scene
@@ -142,10 +159,10 @@ def time_scene(name: str, repeats: int, log=None) -> dict:
         undo = clock.install()
         try:
             with tempfile.TemporaryDirectory() as d:
-                t0, w0, c0 = clock.clock(), time.perf_counter(), time.process_time()
-                rep = run_scene(scene, Path(d) / name, log=None)
+                t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
+                rep = run_scene(scene, Path(d) / name, log=None, **({"background": False} if serial else {}))
                 total = clock.clock() - t0
-                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                wall, cpu = time.perf_counter() - w0, _cpu() - c0
         finally:
             clock.uninstall(undo)
         if not rep.success:
@@ -202,6 +219,8 @@ def main(argv=None) -> int:
     p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
     p.add_argument("--before", default=None,
                    help="a CSV of an earlier measurement (run_<label>.csv) drawn beside this one in the chart")
+    p.add_argument("--serial", action="store_true",
+                   help="run_scene(background=False): figures drawn in this process after each solve")
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
     a = p.parse_args(argv)
@@ -212,10 +231,11 @@ def main(argv=None) -> int:
 
     print(f"mdsr_opt from {Path(mdsr_opt.__file__).parent}")
 
-    print(f"bench_run: {', '.join(a.scenes)}, {a.repeats} repeat(s) after a warm-up, {a.clock} clock; {load()}")
+    print(f"bench_run: {', '.join(a.scenes)}, {a.repeats} repeat(s) after a warm-up, {a.clock} clock"
+          f"{', serial' if a.serial else ''}; {load()}")
     results = {}
     for name in a.scenes:
-        results[name] = time_scene(name, a.repeats, log=print)
+        results[name] = time_scene(name, a.repeats, log=print, serial=a.serial)
         if a.cli:
             results[name]["cli"] = time_cli([name])
             print(f"  {name}: `mdsr run {name}` {results[name]['cli']:.2f} s wall ({load()})")
@@ -254,7 +274,7 @@ def main(argv=None) -> int:
         for name in results:
             for r in old:
                 if r["scene"] == name:
-                    bars[f"{name} {r['label'] or 'before'}"] = {k: float(r[k]) for k in STAGES}
+                    bars[f"{name} {r['label'] or 'before'}"] = {k: float(r.get(k) or 0) for k in STAGES}
             bars[f"{name} {a.label or 'now'}"] = results[name]
     _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock)
     print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")

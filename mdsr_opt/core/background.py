@@ -1,0 +1,241 @@
+"""Writing figures beside the solves: :class:`BackgroundWriter` runs write jobs in a forked child process.
+
+``mdsr run`` alternates solves (CasADi and IPOPT, one core) with drawing and writing their results
+(matplotlib, GIFs, meshes): half of a scene's time went to drawing while the second core stood idle. Threads
+do not help (neither CasADi nor matplotlib's Agg lets go of the GIL: a figure job in a thread beside a solve
+took as long as the two in a row). A forked child does: it starts with a copy of the parent's memory, so a
+job needs no pickling of results or scenes, draws on the second core while the parent solves the next case,
+and sends back only the job's return value.
+
+Rules that keep this safe and honest:
+
+- **A job runs in the background only where a fork is safe and pays**: on Linux, with at least two cores
+  available to this process, from the main thread with no other Python thread running (a thread holding a
+  lock at the fork would leave the child waiting for ever). Native threads idle in OpenBLAS's pool are
+  handled by OpenBLAS's own fork handlers. Anywhere else, and with ``enabled=False``, :meth:`submit` runs the
+  job at once in this process: the same files, the same results, only later.
+- **At most ``jobs`` children at a time** (default two: on two cores the parent solves while a child draws,
+  and where the parent has nothing left to do but wait, two children draw); a further :meth:`submit` first
+  waits for the oldest running one.
+- **Nothing is lost or hidden.** :meth:`wait` collects every finished job: its ``on_done`` callback gets the
+  job's return value; an exception in the child is raised again here (the child's traceback attached as a
+  note). Leaving the ``with`` block waits for every job; leaving it by an exception (Ctrl-C included) first
+  interrupts the children (SIGINT, so their atomic writes remove their temporary files), and a child that
+  has not stopped after ``grace`` seconds is killed.
+
+Example
+-------
+>>> done = []
+>>> with BackgroundWriter() as bg:
+...     bg.submit(sum, [1, 2, 3], on_done=done.append)
+>>> done
+[6]
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import sys
+import threading
+import time
+import traceback
+import warnings
+from dataclasses import dataclass
+from typing import Any, Callable
+
+__all__ = ["BackgroundWriter", "fork_is_safe"]
+
+
+def fork_is_safe() -> bool:
+    """Whether :class:`BackgroundWriter` may fork here: Linux, two or more cores available to this process,
+    called from the main thread with no other Python thread alive."""
+    if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
+        return False
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - Linux always has it
+        cores = os.cpu_count() or 1
+    return (cores >= 2 and threading.current_thread() is threading.main_thread()
+            and threading.active_count() == 1)
+
+
+@dataclass
+class _Job:
+    pid: int
+    fd: int
+    name: str
+    on_done: Callable[[Any], None] | None
+
+
+class BackgroundWriter:
+    """Run write jobs (figures, animations, files) in one forked child process at a time.
+
+    Parameters
+    ----------
+    enabled : bool, default True
+        Fork where it is safe (:func:`fork_is_safe`); ``False`` runs every job at once in this process.
+    jobs : int, default 2
+        Children running at once.
+    grace : float, default 10
+        Seconds an interrupted child gets to stop (and remove its temporary files) before it is killed.
+    prepare : callable, optional
+        Called once in this process before the first fork: work every job would otherwise repeat in its
+        child and lose with it (imports, caches; for figures :func:`mdsr_opt.plot.common.warm_up`).
+
+    Notes
+    -----
+    A job must not depend on anything the parent does after :meth:`submit` (the child sees the parent's
+    memory as it was at the fork) and must report through its return value, which is pickled back (file
+    names, small dicts); what it writes to disk is the point of it. ``background`` says whether jobs fork.
+    """
+
+    def __init__(self, enabled: bool = True, grace: float = 10.0, prepare: Callable[[], Any] | None = None,
+                 jobs: int = 2):
+        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+            raise ValueError(f"jobs must be a positive integer, not {jobs!r}")
+        self.jobs = jobs
+        self.background = bool(enabled) and fork_is_safe()
+        self.grace = float(grace)
+        self._prepare = prepare
+        self._jobs: list[_Job] = []
+
+    # -- the caller's side ------------------------------------------------------------------------------
+    def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
+               **kwargs) -> None:
+        """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for the
+        oldest child when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return value (at
+        :meth:`wait` for a child's job)."""
+        if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
+            result = fn(*args, **kwargs)
+            if on_done is not None:
+                on_done(result)
+            return
+        self.wait(self.jobs - 1)
+        if self._prepare is not None:
+            prepare, self._prepare = self._prepare, None
+            prepare()
+        sys.stdout.flush()
+        sys.stderr.flush()  # nothing buffered before the fork is written twice
+        r, w = os.pipe()
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns of fork() in a process with native threads; ours are OpenBLAS's idle
+            # pool, which OpenBLAS's fork handlers take care of (see the module's rules)
+            warnings.simplefilter("ignore", DeprecationWarning)
+            pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
+            os.close(r)
+            _child(w, fn, args, kwargs)
+        os.close(w)
+        self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
+
+    def wait(self, limit: int = 0) -> None:
+        """Wait until at most ``limit`` jobs are running; collect the finished ones (their ``on_done``
+        callbacks, and the first failure raised again with the child's traceback as a note)."""
+        while len(self._jobs) > limit:
+            job = self._jobs.pop(0)
+            status, value = self._collect(job)
+            if status == "error":
+                raise value
+            if job.on_done is not None:
+                job.on_done(value)
+
+    def __enter__(self) -> "BackgroundWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.wait(0)
+        else:
+            self.stop()
+        return False
+
+    def stop(self) -> None:
+        """Interrupt every running child (SIGINT), wait ``grace`` seconds for it, then kill it; their
+        results are dropped."""
+        jobs, self._jobs = self._jobs, []
+        for job in jobs:
+            _signal(job.pid, signal.SIGINT)
+        deadline = time.monotonic() + self.grace
+        for job in jobs:
+            while _reap(job.pid, block=False) is None:
+                if time.monotonic() > deadline:
+                    _signal(job.pid, signal.SIGKILL)
+                    _reap(job.pid, block=True)
+                    break
+                time.sleep(0.01)
+            os.close(job.fd)
+
+    # -- internals --------------------------------------------------------------------------------------
+    def _collect(self, job: _Job) -> tuple[str, Any]:
+        try:
+            data = _read_all(job.fd)
+        except BaseException:  # Ctrl-C while waiting: the child is still ours to stop
+            self._jobs.insert(0, job)
+            raise
+        os.close(job.fd)
+        code = _reap(job.pid, block=True)
+        try:
+            status, value, text = pickle.loads(data)
+        except Exception:  # noqa: BLE001 - no answer: the child died before it could send one
+            return "error", RuntimeError(f"the background job {job.name} (pid {job.pid}) ended without a "
+                                         f"result (exit status {code})")
+        if status == "error" and text and hasattr(value, "add_note"):
+            value.add_note(f"in the background job {job.name} (pid {job.pid}):\n{text.rstrip()}")
+        return status, value
+
+
+def _child(w: int, fn, args, kwargs) -> None:  # pragma: no cover - runs in the forked child
+    """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
+    returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
+    code = 1
+    try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
+        try:
+            payload = ("ok", fn(*args, **kwargs), "")
+            code = 0
+        except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent
+            payload = ("error", exc, traceback.format_exc())
+        try:
+            data = pickle.dumps(payload)
+        except Exception:  # noqa: BLE001 - an unpicklable result or exception: its text goes instead
+            kind = "error" if payload[0] == "error" else "unpicklable result"
+            data = pickle.dumps(("error", RuntimeError(f"{kind}: {payload[1]!r}"[:2000]), payload[2]))
+            code = 1
+        view = memoryview(data)
+        while view:
+            view = view[os.write(w, view):]
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001 - nothing may escape into the parent's code
+        pass
+    finally:
+        os._exit(code)
+
+
+def _read_all(fd: int) -> bytes:
+    chunks = []
+    while True:
+        chunk = os.read(fd, 1 << 16)
+        if not chunk:
+            return b"".join(chunks)
+        chunks.append(chunk)
+
+
+def _reap(pid: int, block: bool) -> int | None:
+    """The child's exit status once it has ended (None while it runs)."""
+    try:
+        done, status = os.waitpid(pid, 0 if block else os.WNOHANG)
+    except ChildProcessError:  # already reaped
+        return -1
+    if done == 0:
+        return None
+    return os.waitstatus_to_exitcode(status)
+
+
+def _signal(pid: int, sig) -> None:
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass

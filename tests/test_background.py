@@ -1,0 +1,127 @@
+"""The background writer (mdsr_opt.core.background): figure jobs in forked children beside the solves.
+
+Every test states what it expects both where this machine may fork (Linux, two or more cores, one thread)
+and where it may not (the jobs then run in this process): nothing is skipped.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from mdsr_opt.body.io import atomic_path
+from mdsr_opt.core.background import BackgroundWriter, fork_is_safe
+
+FORKS = fork_is_safe()
+
+
+def _pid(*_):
+    return os.getpid()
+
+
+def test_jobs_run_in_a_child_where_fork_is_safe_and_report_back(tmp_path):
+    got = []
+    with BackgroundWriter() as bg:
+        assert bg.background == FORKS
+        bg.submit(_pid, on_done=got.append)
+        bg.submit(lambda p: Path(p).write_text("x") and str(p), tmp_path / "a.txt", on_done=got.append)
+    assert len(got) == 2
+    assert (got[0] != os.getpid()) == FORKS  # the job ran elsewhere exactly when a fork was safe
+    assert got[1] == str(tmp_path / "a.txt") and (tmp_path / "a.txt").read_text() == "x"
+
+
+def test_disabled_writer_runs_each_job_at_once_in_this_process():
+    got = []
+    bg = BackgroundWriter(enabled=False)
+    bg.submit(_pid, on_done=got.append)
+    assert got == [os.getpid()] and not bg.background  # done before submit returned
+
+
+def test_a_second_thread_keeps_jobs_in_this_process():
+    stop = threading.Event()
+    t = threading.Thread(target=stop.wait)
+    t.start()
+    try:
+        assert not fork_is_safe()
+        got = []
+        with BackgroundWriter() as bg:
+            bg.submit(_pid, on_done=got.append)
+        assert got == [os.getpid()]
+    finally:
+        stop.set()
+        t.join()
+
+
+def _fail():
+    raise ValueError("the figure could not be drawn")
+
+
+def test_a_failing_job_raises_its_own_exception_with_the_childs_traceback():
+    with pytest.raises(ValueError, match="could not be drawn") as info:
+        with BackgroundWriter() as bg:
+            bg.submit(_fail)
+    if FORKS:
+        notes = "\n".join(getattr(info.value, "__notes__", []))
+        assert "in the background job _fail" in notes and "test_background.py" in notes
+
+
+def test_an_unpicklable_result_and_a_dead_child_are_reported_not_lost():
+    if not FORKS:  # in this process the result needs no pickling and nothing can die apart
+        got = []
+        with BackgroundWriter() as bg:
+            bg.submit(lambda: threading.Lock(), on_done=got.append)
+        assert len(got) == 1
+        return
+    with pytest.raises(RuntimeError, match="unpicklable result"):
+        with BackgroundWriter() as bg:
+            bg.submit(lambda: threading.Lock())
+    with pytest.raises(RuntimeError, match=r"ended without a result \(exit status 3\)"):
+        with BackgroundWriter() as bg:
+            bg.submit(os._exit, 3)
+
+
+def _slow(path, seconds):
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text("partial")
+        time.sleep(seconds)
+    return (time.monotonic(), str(path))
+
+
+def test_leaving_by_an_exception_stops_the_children_and_leaves_no_temporaries(tmp_path):
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with BackgroundWriter(grace=5.0) as bg:
+            bg.submit(_slow, tmp_path / "late.txt", 30.0)
+            time.sleep(0.3)  # the child is inside its atomic write
+            raise KeyboardInterrupt
+    assert time.monotonic() - t0 < 10.0  # not the job's 30 s
+    assert list(tmp_path.iterdir()) == []  # no file, no .tmp-* left by the interrupted child
+
+
+def _interval(seconds):
+    t = time.monotonic()
+    time.sleep(seconds)
+    return (t, time.monotonic())
+
+
+def test_at_most_jobs_children_run_at_once_and_prepare_runs_once_here():
+    prepared, spans = [], []
+    with BackgroundWriter(jobs=2, prepare=lambda: prepared.append(os.getpid())) as bg:
+        for _ in range(4):
+            bg.submit(_interval, 0.3, on_done=spans.append)
+    assert prepared == ([os.getpid()] if FORKS else [])  # in the parent, before the first fork only
+    assert len(spans) == 4
+    for t in (s for s, _ in spans):  # no moment covered by three jobs
+        assert sum(a <= t < b for a, b in spans) <= 2
+    if FORKS:  # two at a time: four 0.3 s jobs in about 0.6 s, not 1.2 s
+        assert max(b for _, b in spans) - min(a for a, _ in spans) < 1.1
+
+
+@pytest.mark.parametrize("jobs", [0, -1, 1.5, True, "2"])
+def test_bad_job_counts_are_refused(jobs):
+    with pytest.raises(ValueError, match="jobs must be a positive integer"):
+        BackgroundWriter(jobs=jobs)
