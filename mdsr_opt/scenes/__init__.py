@@ -49,6 +49,8 @@ _EXPORTS = {
     'run_scene': 'runscene',
     'seeds_for': 'scene',
     'write_case': 'runner',
+    'case_parts': 'runner',
+    'case_files': 'runner',
     'write_scene': 'runscene',
 }
 

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..core.deprecation import renamed_keywords
@@ -14,7 +15,7 @@ from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
-__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'write_case']
+__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'write_case', 'case_parts', 'case_files']
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -332,48 +333,81 @@ def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
     ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),
     ``photo.png``/``photo.json`` (the SYNTHETIC photograph) and ``overlay.png`` (contour metrics), and the
     meshes ``target.<fmt>`` and ``driven.<fmt>`` (states as displacements). Every file is written
-    atomically; what a failed stage did not produce is not written.
+    atomically; what a failed stage did not produce is not written. The work is that of
+    :func:`case_parts`, one part after the other.
     """
+    folder = Path(out)
+    return case_files([part() for part in case_parts(scene, run, folder, mesh_format)], folder)
+
+
+def case_files(parts: Sequence[Sequence[str]], out: str | os.PathLike) -> list[str]:
+    """The file names :func:`write_case` returns, from the paths its :func:`case_parts` wrote (in order)."""
+    parent = Path(out).parent
+    return [os.path.relpath(f, parent) for part in parts for f in part]
+
+
+def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list:
+    """:func:`write_case`'s work as independent parts of about equal drawing time: a list of functions
+    without arguments, each writing some of the case's files into ``out`` and returning their paths.
+
+    ``run_scene`` gives each part to its own background job (:class:`~mdsr_opt.core.background.
+    BackgroundWriter`), so that the last case's figures are drawn by two processes at once.
+    """
+    fmt = "." + mesh_format.lstrip(".")
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    if run.setup is None:
+        return []
+    return [functools.partial(_write_target, scene, run, folder, fmt),
+            functools.partial(_write_result, scene, run, folder, fmt)]
+
+
+def _write_target(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
+    """``target.png``, ``target.<fmt>``, ``graph.png`` and ``muscles.png``."""
     from .. import plot
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
 
-    fmt = "." + mesh_format.lstrip(".")
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    setup, mesh, case = run.setup, scene.mesh, run.setup.case if run.setup else None
+    setup, mesh, mat = run.setup, scene.mesh, scene.material
+    case, x = setup.case, setup.target
     files: list[str] = []
-    if setup is None:
+    if not setup.target_result.success:
         return files
-    mat = scene.material
+    energy = mat.psi(mesh.deformation_gradients(x))
+    title = (f"{scene.name} / {case.name}: target by "
+             f"{'external driving' if case.kind == 'external' else 'internal driving'}")
+    fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
+                           drag_positions=case.drag_positions if len(case.drag_nodes) else None,
+                           muscles=setup.muscles if case.kind == "internal" else (), values=energy,
+                           title=title)
+    files.append(plot.save_figure(fig, folder / "target.png", close=True))
+    write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
+    files.append(str(folder / f"target{fmt}"))
+    graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
+    seeds = setup.routing.seeds if setup.routing is not None else None
+    # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
+    # their ticks would be most of their drawing time
+    files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
+                                  folder / "graph.png", close=True))
+    if setup.muscles:
+        files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
+                                      folder / "muscles.png", close=True))
+    return files
+
+
+def _write_result(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
+    """``design.png``, ``driven.<fmt>``, the prototype's photographs, ``photo.png`` and ``overlay.png``."""
+    from .. import plot
+    from ..body.io import write_mesh
+
+    setup, mesh = run.setup, scene.mesh
     x = setup.target
-    if setup.target_result.success:
-        energy = mat.psi(mesh.deformation_gradients(x))
-        title = (f"{scene.name} / {case.name}: target by "
-                 f"{'external driving' if case.kind == 'external' else 'internal driving'}")
-        fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
-                               drag_positions=case.drag_positions if len(case.drag_nodes) else None,
-                               muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                               title=title)
-        files.append(plot.save_figure(fig, folder / "target.png", close=True))
-        write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
-        files.append(str(folder / f"target{fmt}"))
-        graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
-        seeds = setup.routing.seeds if setup.routing is not None else None
-        # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
-        # their ticks would be most of their drawing time
-        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
-                                      folder / "graph.png", close=True))
-        if setup.muscles:
-            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
-                                          folder / "muscles.png",
-                                          close=True))
+    files: list[str] = []
     if run.design is not None:
         res = run.design
         files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles, ticks=False),
-                                      folder / "design.png",
-                                      close=True))
-        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
+                                      folder / "design.png", close=True))
+        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=scene.material)
         files.append(str(folder / f"driven{fmt}"))
     for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
         files.append(str(ph.save(folder / f"prototype_{key}.png")))
@@ -384,4 +418,4 @@ def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
         fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
                                 title="target outline on the driven body's photo", ticks=False)
         files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
-    return [os.path.relpath(f, folder.parent) for f in files]
+    return files

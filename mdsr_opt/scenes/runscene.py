@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..core.background import BackgroundWriter
+from ..core.background import BackgroundWriter, frozen_heap
 from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt
-from .runner import CaseRun, SceneReport, finite, run_case, write_case
+from .runner import CaseRun, SceneReport, case_files, case_parts, finite, run_case
 from .scene import Scene
 
 __all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
@@ -136,7 +135,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
-    with BackgroundWriter(background and figures, prepare=_warm_up) as bg:
+    with frozen_heap(), BackgroundWriter(background and figures, prepare=_warm_up) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -149,14 +148,17 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
                 f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
         runs: dict[str, CaseRun] = {}
+        written: dict[str, list[list[str]]] = {}
         for i, cname in enumerate(names):
             prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
             check_interrupt()
             run = run_case(scene, cname, method=method, photo=photos, photo_size=photo_size, log=say,
                            prefix=prefix, prototype=proto)
-            if figures:  # the files are listed in the report when the job is done (bg.wait)
-                bg.submit(write_case, scene, run, out / cname, mesh_format=mesh_format,
-                          on_done=functools.partial(setattr, run.report, "files"))
+            if figures:  # write_case's parts, each a job: the files are known at bg.wait()
+                parts = case_parts(scene, run, out / cname, mesh_format)
+                written[cname] = [[] for _ in parts]
+                for part, paths in zip(parts, written[cname]):
+                    bg.submit(part, on_done=paths.extend)
             runs[cname] = run
             advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
         anim_out: dict[str, dict] = {}
@@ -192,6 +194,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if gait_info is not None:
                 anim_out[scene.gait.name] = gait_info
         bg.wait()  # every case's files are known before the summary lists them
+    for cname, parts in written.items():
+        runs[cname].report.files = case_files(parts, out / cname)
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)

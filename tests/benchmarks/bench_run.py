@@ -72,7 +72,8 @@ WRAPS = [
     ("mdsr_opt.photos.loops", "compare_loops", "photos/contours"),
     ("mdsr_opt.photos.loops", "simulated_loops", "photos/contours"),
     ("mdsr_opt.scenes.runner", "write_case", "figures"),
-    ("mdsr_opt.scenes.runscene", "write_case", "figures"),  # runscene calls it by its own name
+    ("mdsr_opt.scenes.runscene", "write_case", "figures"),  # older trees: runscene calls it by its own name
+    ("mdsr_opt.core.background", "BackgroundWriter.submit", "figures"),  # a job run here, or the fork's cost
     ("mdsr_opt.plot", "plot_scene", "figures"),
     ("mdsr_opt.plot", "save_figure", "figures"),
     ("mdsr_opt.plot.common", "save_figure", "figures"),
@@ -123,7 +124,9 @@ class StageClock:
             owner, name = mod, attr
             if "." in attr:
                 cls, name = attr.split(".")
-                owner = getattr(mod, cls)
+                owner = getattr(mod, cls, None)
+            if owner is None or not hasattr(owner, name):  # another tree (--tree) without it
+                continue
             raw = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name)
             fn = getattr(owner, name)
             new = self.wrap(fn, stage)
