@@ -125,3 +125,67 @@ def test_at_most_jobs_children_run_at_once_and_prepare_runs_once_here():
 def test_bad_job_counts_are_refused(jobs):
     with pytest.raises(ValueError, match="jobs must be a positive integer"):
         BackgroundWriter(jobs=jobs)
+
+
+def test_a_child_dies_with_its_parent(tmp_path):
+    """A run killed outright (SIGKILL) leaves no figure job writing on into its folder."""
+    import signal
+    import subprocess
+    import sys
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import os, sys, time\n"
+        "from mdsr_opt.core.background import BackgroundWriter\n"
+        "def job():\n"
+        "    print(os.getpid(), flush=True)\n"
+        "    time.sleep(60)\n"
+        "bg = BackgroundWriter()\n"
+        "print('forks' if bg.background else 'inline', flush=True)\n"
+        "bg.submit(job)\n")
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONPATH=str(root)))
+    try:
+        mode = proc.stdout.readline().strip()
+        child = int(proc.stdout.readline())
+        if mode == "inline":  # no fork here: the job is the parent itself
+            assert child == proc.pid
+        else:
+            assert child != proc.pid
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 10:
+            try:
+                os.kill(child, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError(f"the job's process {child} outlived its parent by 10 s")
+    finally:
+        proc.kill()
+
+
+def _open_files():
+    out = []
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            out.append(os.readlink(f"/proc/self/fd/{fd}"))
+        except OSError:
+            pass
+    return out
+
+
+def test_a_child_does_not_keep_the_run_folders_lock(tmp_path):
+    """The lock of an output folder goes with the run's own process: a figure job closes its copy."""
+    from mdsr_opt.scenes.rundir import LOCK_NAME, RunFolder
+
+    got = []
+    with RunFolder(tmp_path / "out"):
+        lock = str(tmp_path / "out" / LOCK_NAME)
+        assert lock in _open_files()  # held here
+        with BackgroundWriter() as bg:
+            bg.submit(_open_files, on_done=got.append)
+    assert (lock not in got[0]) == FORKS  # closed in a child; inline, the job is this process

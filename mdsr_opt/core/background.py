@@ -21,7 +21,9 @@ Rules that keep this safe and honest:
   job's return value; an exception in the child is raised again here (the child's traceback attached as a
   note). Leaving the ``with`` block waits for every job; leaving it by an exception (Ctrl-C included) first
   interrupts the children (SIGINT, so their atomic writes remove their temporary files), and a child that
-  has not stopped after ``grace`` seconds is killed.
+  has not stopped after ``grace`` seconds is killed. A child dies with its parent (a run killed outright
+  leaves no child writing into its folder), and closes its copy of the run folder's lock at once
+  (:mod:`mdsr_opt.scenes.rundir`).
 
 Example
 -------
@@ -140,6 +142,7 @@ class BackgroundWriter:
         sys.stdout.flush()
         sys.stderr.flush()  # nothing buffered before the fork is written twice
         r, w = os.pipe()
+        parent = os.getpid()
         with warnings.catch_warnings():
             # Python >= 3.12 warns of fork() in a process with native threads; ours are OpenBLAS's idle
             # pool, which OpenBLAS's fork handlers take care of (see the module's rules)
@@ -147,7 +150,7 @@ class BackgroundWriter:
             pid = os.fork()
         if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
             os.close(r)
-            _child(w, fn, args, kwargs)
+            _child(w, fn, args, kwargs, parent)
         os.close(w)
         self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
 
@@ -207,11 +210,26 @@ class BackgroundWriter:
         return status, value
 
 
-def _child(w: int, fn, args, kwargs) -> None:  # pragma: no cover - runs in the forked child
+def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked child
+    """Have the kernel kill this child when its parent dies (Linux ``PR_SET_PDEATHSIG``): a run killed
+    outright must not leave children writing into its folder after the next run has taken it over."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
+
+
+def _child(w: int, fn, args, kwargs, parent: int) -> None:  # pragma: no cover - runs in the forked child
     """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
     returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
     code = 1
     try:
+        _die_with_parent(parent)
         signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
         try:
             payload = ("ok", fn(*args, **kwargs), "")

@@ -50,6 +50,7 @@ _EXPORTS = {
     'seeds_for': 'scene',
     'write_case': 'runner',
     'case_parts': 'runner',
+    'measure_case': 'runner',
     'case_files': 'runner',
     'write_scene': 'runscene',
 }

@@ -51,6 +51,23 @@ MANIFEST_NAME = ".mdsr-run.json"
 _MANIFEST_FORMAT = "mdsr_opt.run_folder/1"
 _TMP_PREFIX = ".tmp-"  # io.atomic_path's temporaries
 
+#: the lock files this process holds open: a forked child (a figure job) closes its copies at once, so a
+#: folder's lock goes with the run's own process, never with a child that outlives it for a moment
+_HELD: set[int] = set()
+
+
+def _close_held_locks() -> None:  # pragma: no cover - runs in forked children
+    for fd in list(_HELD):
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _HELD.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_held_locks)
+
 
 class OutputFolderError(ValueError):
     """The output folder cannot be used: empty name, a file, unwritable, or holding other files."""
@@ -201,6 +218,7 @@ class RunFolder:
                 same = False
             if same:
                 self._fd = fd
+                _HELD.add(fd)
                 info = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command,
                         "started": time.strftime("%Y-%m-%d %H:%M:%S")}
                 os.ftruncate(fd, 0)
@@ -216,6 +234,7 @@ class RunFolder:
             os.remove(self.path / LOCK_NAME)  # still holding the lock: the next run re-creates the file
         except FileNotFoundError:  # pragma: no cover
             pass
+        _HELD.discard(self._fd)
         os.close(self._fd)
         self._fd = None
 

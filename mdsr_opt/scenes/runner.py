@@ -15,7 +15,8 @@ from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
-__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'write_case', 'case_parts', 'case_files']
+__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'measure_case', 'write_case', 'case_parts',
+           'case_files']
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -283,45 +284,61 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if photo:
-        from ..photos.loops import compare_loops, simulated_loops
-        from ..photos.contours import contour_loops_from_image
-        from ..photos.camera import render_photo
-
-        t2 = time.perf_counter()
-        try:
-            ph = render_photo(mesh, res.x_aligned, image_size=photo_size, seed=0)
-            loops = contour_loops_from_image(ph.image)
-            # every boundary loop is measured: the outline and each hole against its photographed counterpart
-            cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
-            cmp_s = compare_loops(simulated_loops(mesh, res.x_aligned), loops)
-        except ValueError as exc:  # e.g. a body too thin to segment at this resolution
-            rep.photo = {"error": str(exc)}
-            say(f"{prefix}photograph: could not measure ({exc})")
-        else:
-            def figures(c):
-                return {"mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px, "ratio": c.ratio,
-                        "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
-                        "n_unmatched": c.n_unmatched}
-
-            rep.photo = {"synthetic": True, "image_size": list(photo_size),
-                         "target": figures(cmp_t), "self": figures(cmp_s)}
-            run.photo, run.comparison = ph, cmp_t.outer
-            say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
-                f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
-                f"{cmp_s.mean_px:.2f} px")
-        if prototype is not None:
-            from .prototype import validate_case
-
-            metrics, shots = validate_case(prototype, setup, res, log=say, prefix=prefix)
-            rep.photo = dict(rep.photo or {}, prototype=metrics)
-            run.prototype_photos = shots
-        rep.times["photo"] = time.perf_counter() - t2
+        measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()
     rep.success = bool(res.success)
     if not res.success:
         rep.message = f"design not verified: {res.status}"
     rep.times["total"] = time.perf_counter() - t0
     return run
+
+
+def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (500, 500), prototype: Any = None,
+                 log: Callable[[str], None] | None = None, prefix: str = "") -> None:
+    """:func:`run_case`'s photograph stage, on a run whose design is done: a SYNTHETIC photograph of the
+    driven body, its contour metrics against the target and the driven body, and with ``prototype`` the
+    virtual prototype's validation. Fills ``run.report.photo`` and ``run.report.times["photo"]``,
+    ``run.photo``, ``run.comparison`` and ``run.prototype_photos``.
+    """
+    import time
+
+    from ..photos.camera import render_photo
+    from ..photos.contours import contour_loops_from_image
+    from ..photos.loops import compare_loops, simulated_loops
+
+    say = log or (lambda s: None)
+    rep, setup, res, mesh = run.report, run.setup, run.design, scene.mesh
+    if res is None:
+        raise ValueError(f"case {rep.case!r} has no design to photograph")
+    t2 = time.perf_counter()
+    try:
+        ph = render_photo(mesh, res.x_aligned, image_size=photo_size, seed=0)
+        loops = contour_loops_from_image(ph.image)
+        # every boundary loop is measured: the outline and each hole against its photographed counterpart
+        cmp_t = compare_loops(simulated_loops(mesh, setup.target), loops)
+        cmp_s = compare_loops(simulated_loops(mesh, res.x_aligned), loops)
+    except ValueError as exc:  # e.g. a body too thin to segment at this resolution
+        rep.photo = {"error": str(exc)}
+        say(f"{prefix}photograph: could not measure ({exc})")
+    else:
+        def figures(c):
+            return {"mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px, "ratio": c.ratio,
+                    "mean_norm": c.outer.mean_norm, "outer_mean_px": c.outer.mean_px,
+                    "n_unmatched": c.n_unmatched}
+
+        rep.photo = {"synthetic": True, "image_size": list(photo_size),
+                     "target": figures(cmp_t), "self": figures(cmp_s)}
+        run.photo, run.comparison = ph, cmp_t.outer
+        say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
+            f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
+            f"{cmp_s.mean_px:.2f} px")
+    if prototype is not None:
+        from .prototype import validate_case
+
+        metrics, shots = validate_case(prototype, setup, res, log=say, prefix=prefix)
+        rep.photo = dict(rep.photo or {}, prototype=metrics)
+        run.prototype_photos = shots
+    rep.times["photo"] = time.perf_counter() - t2
 
 
 @renamed_keywords(folder="out")
@@ -347,19 +364,38 @@ def case_files(parts: Sequence[Sequence[str]], out: str | os.PathLike) -> list[s
 
 
 def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list:
-    """:func:`write_case`'s work as independent parts of about equal drawing time: a list of functions
-    without arguments, each writing some of the case's files into ``out`` and returning their paths.
+    """:func:`write_case`'s work as two independent parts: functions without arguments, each writing some
+    of the case's files into ``out`` and returning their paths (in :func:`write_case`'s order). The first
+    draws the shapes (``target``, ``graph``, ``muscles``, ``design`` and the meshes), the second the
+    photographs (the prototype's, ``photo`` and ``overlay``: what :func:`measure_case` made).
 
     ``run_scene`` gives each part to its own background job (:class:`~mdsr_opt.core.background.
-    BackgroundWriter`), so that the last case's figures are drawn by two processes at once.
+    BackgroundWriter`), the second after the photograph stage in the same job, so that two processes
+    draw a case's files while the parent solves the next case.
     """
     fmt = "." + mesh_format.lstrip(".")
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     if run.setup is None:
         return []
-    return [functools.partial(_write_target, scene, run, folder, fmt),
-            functools.partial(_write_result, scene, run, folder, fmt)]
+    return [functools.partial(_write_shapes, scene, run, folder, fmt),
+            functools.partial(_write_photos, scene, run, folder)]
+
+
+def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
+    """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png``, ``design.png`` and
+    ``driven.<fmt>``."""
+    files = _write_target(scene, run, folder, fmt)
+    if run.design is not None:
+        from .. import plot
+        from ..body.io import write_mesh
+
+        res, mesh = run.design, scene.mesh
+        files.append(plot.save_figure(plot.plot_design(mesh, res, run.setup.target, run.setup.muscles,
+                                                       ticks=False), folder / "design.png", close=True))
+        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=scene.material)
+        files.append(str(folder / f"driven{fmt}"))
+    return files
 
 
 def _write_target(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
@@ -395,27 +431,18 @@ def _write_target(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
     return files
 
 
-def _write_result(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
-    """``design.png``, ``driven.<fmt>``, the prototype's photographs, ``photo.png`` and ``overlay.png``."""
+def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
+    """The virtual prototype's photographs, ``photo.png`` (with ``photo.json``) and ``overlay.png``."""
     from .. import plot
-    from ..body.io import write_mesh
 
-    setup, mesh = run.setup, scene.mesh
-    x = setup.target
     files: list[str] = []
-    if run.design is not None:
-        res = run.design
-        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles, ticks=False),
-                                      folder / "design.png", close=True))
-        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=scene.material)
-        files.append(str(folder / f"driven{fmt}"))
     for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
         files.append(str(ph.save(folder / f"prototype_{key}.png")))
         files.append(str(folder / f"prototype_{key}.json"))
     if run.photo is not None:
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))
-        fig = plot.plot_overlay(run.photo.image, mesh, x, run.comparison, synthetic=True,
+        fig = plot.plot_overlay(run.photo.image, scene.mesh, run.setup.target, run.comparison, synthetic=True,
                                 title="target outline on the driven body's photo", ticks=False)
         files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
     return files

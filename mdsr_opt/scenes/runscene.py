@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
@@ -14,7 +15,7 @@ from ..core.progress import advance, progress_for_cli
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt
-from .runner import CaseRun, SceneReport, case_files, case_parts, finite, run_case
+from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene
 
 __all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
@@ -135,7 +136,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
-    with frozen_heap(), BackgroundWriter(background and figures, prepare=_warm_up) as bg:
+    with frozen_heap(), BackgroundWriter(background and (figures or photos),
+                                         prepare=_warm_up if figures else None) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -152,13 +154,18 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
         for i, cname in enumerate(names):
             prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
             check_interrupt()
-            run = run_case(scene, cname, method=method, photo=photos, photo_size=photo_size, log=say,
-                           prefix=prefix, prototype=proto)
-            if figures:  # write_case's parts, each a job: the files are known at bg.wait()
-                parts = case_parts(scene, run, out / cname, mesh_format)
-                written[cname] = [[] for _ in parts]
-                for part, paths in zip(parts, written[cname]):
-                    bg.submit(part, on_done=paths.extend)
+            # the photograph stage (measure_case) and the case's files are background jobs: the report's
+            # photo entry, the files and the stage's messages arrive at bg.wait()
+            run = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+            parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
+            written[cname] = [[] for _ in range(2)]
+            if parts:  # the shapes first: the shorter job, collected first (see BackgroundWriter.wait)
+                bg.submit(parts[0], on_done=written[cname][0].extend)
+            if photos and run.design is not None:
+                bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
+                          on_done=functools.partial(_photo_done, run, written[cname][1], say))
+            elif parts:
+                bg.submit(parts[1], on_done=written[cname][1].extend)
             runs[cname] = run
             advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
         anim_out: dict[str, dict] = {}
@@ -194,8 +201,9 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if gait_info is not None:
                 anim_out[scene.gait.name] = gait_info
         bg.wait()  # every case's files are known before the summary lists them
-    for cname, parts in written.items():
-        runs[cname].report.files = case_files(parts, out / cname)
+    if figures:
+        for cname, parts in written.items():
+            runs[cname].report.files = case_files(parts, out / cname)
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
@@ -292,6 +300,26 @@ def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
     from ..synthesis.gait import run_gait
 
     return run_gait(scene, out, runs, figures=figures, log=log, writer=writer)
+
+
+def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write_result) -> dict:
+    """A case's photograph stage (:func:`~mdsr_opt.scenes.runner.measure_case`), then its result-side
+    files (``write_result``, a :func:`~mdsr_opt.scenes.runner.case_parts` part, or None): what the run's
+    report needs back from a background job."""
+    said: list[str] = []
+    measure_case(scene, run, photo_size=photo_size, prototype=proto, log=said.append, prefix=prefix)
+    files = write_result() if write_result is not None else []
+    return {"photo": run.report.photo, "time": run.report.times["photo"], "files": files, "log": said}
+
+
+def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
+    """Put a :func:`_photo_job`'s answer into the run (its report, its files, its messages)."""
+    run.report.photo = got["photo"]
+    run.report.times["photo"] = got["time"]
+    run.report.times["total"] = run.report.times.get("total", 0.0) + got["time"]
+    paths.extend(got["files"])
+    for line in got["log"]:
+        say(line)
 
 
 def _warm_up() -> None:
