@@ -149,8 +149,11 @@ class BackgroundWriter:
             warnings.simplefilter("ignore", DeprecationWarning)
             pid = os.fork()
         if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
-            os.close(r)
-            _child(w, fn, args, kwargs, parent)
+            try:
+                os.close(r)
+                _child(w, fn, args, kwargs, parent)
+            finally:
+                os._exit(1)  # _child leaves by os._exit itself; this is for anything raised before it
         os.close(w)
         self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
 
