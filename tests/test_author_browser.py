@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import threading
 import subprocess
 import sys
 import tempfile
@@ -52,9 +53,14 @@ def served(tmp_path_factory):
     from mdsr_opt.author import start_in_thread
 
     out = tmp_path_factory.mktemp("authored")
+    before = set(threading.enumerate())
     url, server = start_in_thread(PROBLEM, resolution=RESOLUTION, out=out)
     yield url, out
     server.should_exit = True
+    # the server's threads end before the next module's tests: a process with a stray thread may not fork
+    # (mdsr_opt.core.background), and test_background.py comes next
+    for t in set(threading.enumerate()) - before:
+        t.join(timeout=15)
 
 
 @pytest.fixture(scope="module")

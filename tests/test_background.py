@@ -16,21 +16,26 @@ import pytest
 from mdsr_opt.body.io import atomic_path
 from mdsr_opt.core.background import BackgroundWriter, fork_is_safe
 
-FORKS = fork_is_safe()
+
+
+@pytest.fixture
+def forks():
+    """Whether jobs fork in this test (a stray thread left by an earlier test would keep them here)."""
+    return fork_is_safe()
 
 
 def _pid(*_):
     return os.getpid()
 
 
-def test_jobs_run_in_a_child_where_fork_is_safe_and_report_back(tmp_path):
+def test_jobs_run_in_a_child_where_fork_is_safe_and_report_back(tmp_path, forks):
     got = []
     with BackgroundWriter() as bg:
-        assert bg.background == FORKS
+        assert bg.background == forks
         bg.submit(_pid, on_done=got.append)
         bg.submit(lambda p: Path(p).write_text("x") and str(p), tmp_path / "a.txt", on_done=got.append)
     assert len(got) == 2
-    assert (got[0] != os.getpid()) == FORKS  # the job ran elsewhere exactly when a fork was safe
+    assert (got[0] != os.getpid()) == forks  # the job ran elsewhere exactly when a fork was safe
     assert got[1] == str(tmp_path / "a.txt") and (tmp_path / "a.txt").read_text() == "x"
 
 
@@ -60,17 +65,17 @@ def _fail():
     raise ValueError("the figure could not be drawn")
 
 
-def test_a_failing_job_raises_its_own_exception_with_the_childs_traceback():
+def test_a_failing_job_raises_its_own_exception_with_the_childs_traceback(forks):
     with pytest.raises(ValueError, match="could not be drawn") as info:
         with BackgroundWriter() as bg:
             bg.submit(_fail)
-    if FORKS:
+    if forks:
         notes = "\n".join(getattr(info.value, "__notes__", []))
         assert "in the background job _fail" in notes and "test_background.py" in notes
 
 
-def test_an_unpicklable_result_and_a_dead_child_are_reported_not_lost():
-    if not FORKS:  # in this process the result needs no pickling and nothing can die apart
+def test_an_unpicklable_result_and_a_dead_child_are_reported_not_lost(forks):
+    if not forks:  # in this process the result needs no pickling and nothing can die apart
         got = []
         with BackgroundWriter() as bg:
             bg.submit(lambda: threading.Lock(), on_done=got.append)
@@ -108,16 +113,16 @@ def _interval(seconds):
     return (t, time.monotonic())
 
 
-def test_at_most_jobs_children_run_at_once_and_prepare_runs_once_here():
+def test_at_most_jobs_children_run_at_once_and_prepare_runs_once_here(forks):
     prepared, spans = [], []
     with BackgroundWriter(jobs=2, prepare=lambda: prepared.append(os.getpid())) as bg:
         for _ in range(4):
             bg.submit(_interval, 0.3, on_done=spans.append)
-    assert prepared == ([os.getpid()] if FORKS else [])  # in the parent, before the first fork only
+    assert prepared == ([os.getpid()] if forks else [])  # in the parent, before the first fork only
     assert len(spans) == 4
     for t in (s for s, _ in spans):  # no moment covered by three jobs
         assert sum(a <= t < b for a, b in spans) <= 2
-    if FORKS:  # two at a time: four 0.3 s jobs in about 0.6 s, not 1.2 s
+    if forks:  # two at a time: four 0.3 s jobs in about 0.6 s, not 1.2 s
         assert max(b for _, b in spans) - min(a for a, _ in spans) < 1.1
 
 
@@ -178,7 +183,7 @@ def _open_files():
     return out
 
 
-def test_a_child_does_not_keep_the_run_folders_lock(tmp_path):
+def test_a_child_does_not_keep_the_run_folders_lock(tmp_path, forks):
     """The lock of an output folder goes with the run's own process: a figure job closes its copy."""
     from mdsr_opt.scenes.rundir import LOCK_NAME, RunFolder
 
@@ -188,4 +193,4 @@ def test_a_child_does_not_keep_the_run_folders_lock(tmp_path):
         assert lock in _open_files()  # held here
         with BackgroundWriter() as bg:
             bg.submit(_open_files, on_done=got.append)
-    assert (lock not in got[0]) == FORKS  # closed in a child; inline, the job is this process
+    assert (lock not in got[0]) == forks  # closed in a child; inline, the job is this process
