@@ -276,3 +276,21 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     la, lb = (json.loads((d / "walk" / "layout.json").read_text()) for d in (a, b))
     assert _without_times(la) == _without_times(lb)
+
+
+@pytest.mark.parametrize("flags, background", [([], True), (["--serial"], False)])
+def test_serial_flag_keeps_the_figures_in_the_run_process(tmp_path, monkeypatch, flags, background):
+    import mdsr_opt.cli.run as cli_run
+
+    seen = {}
+    real = cli_run.write_scene
+
+    def spy(*args, **kwargs):
+        seen.update(kwargs)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cli_run, "write_scene", spy)
+    out = tmp_path / "o"
+    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-photos", *flags]) == 0
+    assert seen["background"] is background
+    assert (out / "bend" / "target.png").is_file()

@@ -90,7 +90,8 @@ def _cmd_run(a) -> int:
                 reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                            figures=not a.no_figures, animations=not a.no_animations,
                                            mesh_format=a.format, photo_size=a.photo_size, log=log,
-                                           prototype=not a.no_prototype, prototype_seed=a.prototype_seed))
+                                           prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
+                                           background=not a.serial))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables
@@ -152,5 +153,8 @@ def add_cli(sub) -> None:
                    help="seed of the virtual prototype's material perturbation and camera (default 0)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
+    q.add_argument("--serial", action="store_true",
+                   help="draw figures and measure photographs in this process after each solve, not in forked "
+                        "child processes beside the next solve (the files are the same)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)

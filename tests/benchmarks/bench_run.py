@@ -150,37 +150,51 @@ def _cpu() -> float:
 
 def time_scene(name: str, repeats: int, log=None, serial: bool = False) -> dict:
     """Medians over ``repeats`` runs of ``run_scene(name)`` (after one warm-up run): total and per stage."""
+    return time_modes(name, repeats, (serial,), log)[serial]
+
+
+def time_modes(name: str, repeats: int, modes=(False, True), log=None) -> dict:
+    """:func:`time_scene` for each mode of ``modes`` (``serial`` True or False), the modes alternating
+    within each repeat (a fair comparison on a shared machine): ``{serial: medians}``."""
+    rows: dict = {m: [] for m in modes}
+    for r in range(repeats + 1):
+        for serial in modes:
+            row = _one_run(name, serial)
+            if r == 0:
+                row["warm-up"] = True
+            rows[serial].append(row)
+            if log:
+                log(f"  {name}{' serial' if serial else ''} run {r}{' (warm-up)' if r == 0 else ''}: "
+                    f"{row['total']:.2f} s (" + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
+    keys = STAGES + ("total", "build", "wall", "cpu")
+    return {m: {k: statistics.median(row[k] for row in (rows[m][1:] if repeats else rows[m])) for k in keys}
+            for m in modes}
+
+
+def _one_run(name: str, serial: bool) -> dict:
+    """One timed ``run_scene(name)`` at medium resolution: seconds per stage and in all."""
     from mdsr_opt.scenes.library import get_problem
     from mdsr_opt.scenes.runscene import run_scene
 
-    rows = []
-    for r in range(repeats + 1):
-        t0 = time.perf_counter()
-        scene = get_problem(name, resolution="medium")
-        t_build = time.perf_counter() - t0
-        clock = StageClock()
-        undo = clock.install()
-        try:
-            with tempfile.TemporaryDirectory() as d:
-                t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
-                rep = run_scene(scene, Path(d) / name, log=None, **({"background": False} if serial else {}))
-                total = clock.clock() - t0
-                wall, cpu = time.perf_counter() - w0, _cpu() - c0
-        finally:
-            clock.uninstall(undo)
-        if not rep.success:
-            print(f"  warning: {name} run {r} did not succeed", file=sys.stderr)
-        row = dict(clock.totals)
-        row["other"] += total - sum(clock.totals.values())
-        row.update(total=total, build=t_build, wall=wall, cpu=cpu)
-        if r == 0:
-            row["warm-up"] = True
-        rows.append(row)
-        if log:
-            log(f"  {name} run {r}{' (warm-up)' if r == 0 else ''}: {total:.2f} s ("
-                + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
-    timed = rows[1:] if repeats else rows
-    return {k: statistics.median(row[k] for row in timed) for k in STAGES + ("total", "build", "wall", "cpu")}
+    t0 = time.perf_counter()
+    scene = get_problem(name, resolution="medium")
+    t_build = time.perf_counter() - t0
+    clock = StageClock()
+    undo = clock.install()
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
+            rep = run_scene(scene, Path(d) / name, log=None, **({"background": False} if serial else {}))
+            total = clock.clock() - t0
+            wall, cpu = time.perf_counter() - w0, _cpu() - c0
+    finally:
+        clock.uninstall(undo)
+    if not rep.success:
+        print(f"  warning: a run of {name} did not succeed", file=sys.stderr)
+    row = dict(clock.totals)
+    row["other"] += total - sum(clock.totals.values())
+    row.update(total=total, build=t_build, wall=wall, cpu=cpu)
+    return row
 
 
 def time_cli(args: list[str]) -> float:
@@ -224,6 +238,8 @@ def main(argv=None) -> int:
                    help="a CSV of an earlier measurement (run_<label>.csv) drawn beside this one in the chart")
     p.add_argument("--serial", action="store_true",
                    help="run_scene(background=False): figures drawn in this process after each solve")
+    p.add_argument("--both", action="store_true",
+                   help="time the background and the serial run alternately (rows NAME and NAME serial)")
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
     a = p.parse_args(argv)
@@ -238,7 +254,11 @@ def main(argv=None) -> int:
           f"{', serial' if a.serial else ''}; {load()}")
     results = {}
     for name in a.scenes:
-        results[name] = time_scene(name, a.repeats, log=print, serial=a.serial)
+        if a.both:
+            got = time_modes(name, a.repeats, (False, True), log=print)
+            results[name], results[f"{name} serial"] = got[False], got[True]
+        else:
+            results[name] = time_scene(name, a.repeats, log=print, serial=a.serial)
         if a.cli:
             results[name]["cli"] = time_cli([name])
             print(f"  {name}: `mdsr run {name}` {results[name]['cli']:.2f} s wall ({load()})")
