@@ -294,3 +294,47 @@ def test_serial_flag_keeps_the_figures_in_the_run_process(tmp_path, monkeypatch,
     assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-photos", *flags]) == 0
     assert seen["background"] is background
     assert (out / "bend" / "target.png").is_file()
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
+    """Ctrl-C in a terminal reaches the whole process group: the run and its forked figure jobs. The run
+    exits with 130 within seconds, the jobs are gone, no temporary file stays, the manifest says so."""
+    from mdsr_opt.core.background import fork_is_safe
+
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        t0, kids = time.monotonic(), []
+        while time.monotonic() - t0 < 60 and not kids and proc.poll() is None:
+            kids = _children(proc.pid)
+            time.sleep(0.02)
+        assert kids or not fork_is_safe(), "no figure job was forked"
+        os.killpg(proc.pid, signal.SIGINT)
+        assert proc.wait(timeout=30) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "interrupted (Ctrl-C)" in proc.stdout.read()
+    time.sleep(0.2)
+    alive = [k for k in kids if Path(f"/proc/{k}").exists()
+             and "zombie" not in Path(f"/proc/{k}/status").read_text()]
+    assert alive == []
+    assert [p.name for p in out.rglob(".tmp-*")] == []
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"

@@ -178,7 +178,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 res = animate(scene, anim, designs)
                 data = res.to_dict()
                 if res.states:
-                    say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
+                    say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, "
+                        f"{len(res.muscles)} muscle(s), "
                         + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
                            f"{res.failed_frames})"))
                     if figures:
