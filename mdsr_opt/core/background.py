@@ -143,19 +143,26 @@ class BackgroundWriter:
         sys.stderr.flush()  # nothing buffered before the fork is written twice
         r, w = os.pipe()
         parent = os.getpid()
-        with warnings.catch_warnings():
-            # Python >= 3.12 warns of fork() in a process with native threads; ours are OpenBLAS's idle
-            # pool, which OpenBLAS's fork handlers take care of (see the module's rules)
-            warnings.simplefilter("ignore", DeprecationWarning)
-            pid = os.fork()
-        if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
-            try:
-                os.close(r)
-                _child(w, fn, args, kwargs, parent)
-            finally:
-                os._exit(1)  # _child leaves by os._exit itself; this is for anything raised before it
-        os.close(w)
-        self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
+        # Ctrl-C is held back from the fork until the child is on the books: an interrupt inside the fork's
+        # own handlers (logging's, threading's) was printed as "Exception ignored" and lost, and one landing
+        # before the job is recorded would leave a child that stop() cannot reach
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            with warnings.catch_warnings():
+                # Python >= 3.12 warns of fork() in a process with native threads; ours are OpenBLAS's idle
+                # pool, which OpenBLAS's fork handlers take care of (see the module's rules)
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+            if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
+                try:
+                    os.close(r)
+                    _child(w, fn, args, kwargs, parent, mask)
+                finally:
+                    os._exit(1)  # _child leaves by os._exit itself; this is for anything raised before it
+            os.close(w)
+            self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a Ctrl-C held back arrives here
 
     def wait(self, limit: int = 0) -> None:
         """Wait until at most ``limit`` jobs are running; collect the finished ones (their ``on_done``
@@ -227,13 +234,14 @@ def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the for
         os._exit(1)
 
 
-def _child(w: int, fn, args, kwargs, parent: int) -> None:  # pragma: no cover - runs in the forked child
+def _child(w: int, fn, args, kwargs, parent: int, mask) -> None:  # pragma: no cover - in the forked child
     """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
     returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
     code = 1
     try:
         _die_with_parent(parent)
         signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # from here on (held back during the fork)
         try:
             payload = ("ok", fn(*args, **kwargs), "")
             code = 0
