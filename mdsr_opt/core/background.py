@@ -93,7 +93,7 @@ class _Job:
 
 
 class BackgroundWriter:
-    """Run write jobs (figures, animations, files) in one forked child process at a time.
+    """Run write jobs (figures, animations, files) in forked child processes, ``jobs`` at a time.
 
     Parameters
     ----------
@@ -128,8 +128,8 @@ class BackgroundWriter:
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
                **kwargs) -> None:
         """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for the
-        oldest child when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return value (at
-        :meth:`wait` for a child's job)."""
+        oldest child when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return
+        value (at :meth:`wait` for a child's job)."""
         if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
             result = fn(*args, **kwargs)
             if on_done is not None:
