@@ -383,23 +383,8 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
 
 
 def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
-    """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png``, ``design.png`` and
-    ``driven.<fmt>``."""
-    files = _write_target(scene, run, folder, fmt)
-    if run.design is not None:
-        from .. import plot
-        from ..body.io import write_mesh
-
-        res, mesh = run.design, scene.mesh
-        files.append(plot.save_figure(plot.plot_design(mesh, res, run.setup.target, run.setup.muscles,
-                                                       ticks=False), folder / "design.png", close=True))
-        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=scene.material)
-        files.append(str(folder / f"driven{fmt}"))
-    return files
-
-
-def _write_target(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
-    """``target.png``, ``target.<fmt>``, ``graph.png`` and ``muscles.png``."""
+    """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
+    ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
     from .. import plot
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
@@ -407,27 +392,32 @@ def _write_target(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
     setup, mesh, mat = run.setup, scene.mesh, scene.material
     case, x = setup.case, setup.target
     files: list[str] = []
-    if not setup.target_result.success:
-        return files
-    energy = mat.psi(mesh.deformation_gradients(x))
-    title = (f"{scene.name} / {case.name}: target by "
-             f"{'external driving' if case.kind == 'external' else 'internal driving'}")
-    fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
-                           drag_positions=case.drag_positions if len(case.drag_nodes) else None,
-                           muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                           title=title)
-    files.append(plot.save_figure(fig, folder / "target.png", close=True))
-    write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
-    files.append(str(folder / f"target{fmt}"))
-    graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
-    seeds = setup.routing.seeds if setup.routing is not None else None
-    # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
-    # their ticks would be most of their drawing time
-    files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
-                                  folder / "graph.png", close=True))
-    if setup.muscles:
-        files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
-                                      folder / "muscles.png", close=True))
+    if setup.target_result.success:
+        energy = mat.psi(mesh.deformation_gradients(x))
+        title = (f"{scene.name} / {case.name}: target by "
+                 f"{'external driving' if case.kind == 'external' else 'internal driving'}")
+        fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
+                               drag_positions=case.drag_positions if len(case.drag_nodes) else None,
+                               muscles=setup.muscles if case.kind == "internal" else (), values=energy,
+                               title=title)
+        files.append(plot.save_figure(fig, folder / "target.png", close=True))
+        write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
+        files.append(str(folder / f"target{fmt}"))
+        graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
+        seeds = setup.routing.seeds if setup.routing is not None else None
+        # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
+        # their ticks would be most of their drawing time
+        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
+                                      folder / "graph.png", close=True))
+        if setup.muscles:
+            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
+                                          folder / "muscles.png", close=True))
+    if run.design is not None:
+        res = run.design
+        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles, ticks=False),
+                                      folder / "design.png", close=True))
+        write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
+        files.append(str(folder / f"driven{fmt}"))
     return files
 
 
