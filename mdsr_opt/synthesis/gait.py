@@ -385,11 +385,6 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
                                activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
 
 
-def _now(fn, *args, **kwargs):
-    """Run a write job here and now (``run_gait`` without a background writer)."""
-    return fn(*args, **kwargs)
-
-
 def _write_schedule(schedule: GaitSchedule, title: str, path) -> str:
     """``schedule.png``: the strokes over time (:func:`plot_schedule`)."""
     from ..plot.common import save_figure
@@ -453,7 +448,9 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     if figures:
-        submit = writer.submit if writer is not None else _now
+        from ..core.background import BackgroundWriter
+
+        submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
         submit(_write_schedule, sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
                "dotted: achieved)", chart)
