@@ -194,3 +194,16 @@ def test_a_child_does_not_keep_the_run_folders_lock(tmp_path, forks):
         with BackgroundWriter() as bg:
             bg.submit(_open_files, on_done=got.append)
     assert (lock not in got[0]) == forks  # closed in a child; inline, the job is this process
+
+
+def test_a_drawn_progress_bar_starts_no_thread(forks):
+    """`mdsr run` in a terminal draws a tqdm bar; tqdm's monitor thread would stop every fork."""
+    import io
+
+    from mdsr_opt.core.progress import Progress
+
+    n = threading.active_count()
+    with Progress(3, "run", enabled=True, stream=io.StringIO()) as log:
+        log("a stage")
+        assert threading.active_count() == n
+        assert fork_is_safe() == forks

@@ -24,22 +24,18 @@ Example
 
 from __future__ import annotations
 
+import functools
 import sys
 from typing import Any, TextIO
 
 __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
 
 
+@functools.lru_cache(maxsize=None)
 def _quiet_class(tqdm):
     """tqdm without its monitor thread (which only adjusts how often a stalled bar redraws): a process with
     a second thread may not fork, and ``mdsr run`` forks its figure jobs (``mdsr_opt.core.background``)."""
-    global _QUIET
-    if _QUIET is None:
-        _QUIET = type("QuietTqdm", (tqdm,), {"monitor_interval": 0})
-    return _QUIET
-
-
-_QUIET = None
+    return type("QuietTqdm", (tqdm,), {"monitor_interval": 0})
 
 
 def _terminal_width() -> int:
