@@ -53,6 +53,33 @@ def test_numeric_rows_jacobian_hessian_equal_the_casadi_functions(radius):
         mc.hessian(x, lam[:-1])
 
 
+@pytest.mark.parametrize("radius", [0.0, 0.3])
+def test_third_derivative_and_hessian_products_of_the_rows(radius):
+    """``local_third_entries`` against central differences of ``local_hessian`` along ``v`` (error O(h^2));
+    ``local_hessian_product_entries`` against each row's Hessian times ``v``."""
+    import scipy.sparse as sp
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    mc = MuscleConstraints(mesh, _muscles(mesh), radius=radius)
+    rng = np.random.default_rng(5)
+    nl, nr = mc.n_local, mc.n_constraints
+    xl = (mesh.points + 0.05 * rng.standard_normal(mesh.points.shape)).reshape(-1)[mc.dofs]
+    lam, v = rng.standard_normal(nr), rng.standard_normal(nl)
+    r, c, t = mc.local_third_entries(xl, lam, v)
+    T = sp.csr_matrix((t, (r, c)), shape=(nl, nl)).toarray()
+    h = 1e-5
+    fd = (mc.local_hessian(xl + h * v, lam) - mc.local_hessian(xl - h * v, lam)).toarray() / (2 * h)
+    assert np.abs(T - fd).max() < 1e-7 * np.abs(T).max() and np.abs(T - T.T).max() < 1e-14
+    assert np.abs(T).max() > 1.0  # the ropes' third derivative is exercised
+    r2, c2, _ = mc.local_third_entries(xl + 1.0, 2 * lam, -v)  # rows and columns do not depend on the values
+    assert np.array_equal(r, r2) and np.array_equal(c, c2)
+    r, c, pv = mc.local_hessian_product_entries(xl, v)
+    M = sp.csr_matrix((pv, (r, c)), shape=(nl, nr)).toarray()
+    ref = np.column_stack([mc.local_hessian(xl, np.eye(nr)[i]) @ v for i in range(nr)])
+    assert np.abs(M - ref).max() < 1e-13 * np.abs(ref).max()
+    assert (np.abs(ref).max(axis=0) > 0).sum() == mc.n_muscles + (len(mc.groups) if radius else 0)
+
+
 def test_muscle_constraints_are_cached_per_mesh_muscles_and_radius():
     mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
     mus = _muscles(mesh)

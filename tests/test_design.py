@@ -441,6 +441,57 @@ def test_assembled_derivatives_match_casadi(model_kind, radius, hessian):
     assert np.all(H_a[n2 + 6:, n2 + 6:] == 0)  # and in the multipliers
 
 
+@pytest.mark.parametrize("radius", [0.0, 0.5])
+@pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
+def test_numeric_nlp_matches_casadi(radius, hessian):
+    """The numpy callbacks of the cable's NLP against CasADi's own derivatives of the SX NLP, at a random
+    point with random multipliers (end patches and point ends)."""
+    import casadi as ca
+    from mdsr_opt.synthesis.nlp_numeric import numeric_nlp, supports
+
+    D, prob, z, par, lam = _nlp_point("cable", radius)
+    assert supports(prob)
+    nlp, fn, _keep = numeric_nlp(prob, hessian)
+    snlp, extra = D._symbolic_nlp(prob, hessian)
+    zs, ps = snlp["x"], snlp["p"]
+    ref = ca.Function("ref", [zs, ps], [snlp["f"], ca.gradient(snlp["f"], zs), snlp["g"], ca.jacobian(snlp["g"], zs)])
+    f_s, gf_s, g_s, J_s = (np.array(ca.DM(v)) for v in ref(z, par))
+    lf, ls = ca.SX.sym("lam_f"), ca.SX.sym("lam_g", len(lam))
+    if hessian == "exact":
+        lag = lf * snlp["f"] + ca.dot(ls, snlp["g"])
+        H_s = np.array(ca.DM(ca.Function("H", [zs, ps, lf, ls], [ca.hessian(lag, zs)[0]])(z, par, 0.8, lam)))
+    else:
+        H_s = np.array(ca.DM(extra["hess_lag"](z, par, 0.8, lam)))
+        H_s = np.triu(H_s) + np.triu(H_s, 1).T
+    f_n, gf_n = (np.array(ca.DM(v)) for v in fn["grad_f"](z, par))
+    g_n, J_n = (np.array(ca.DM(v)) for v in fn["jac_g"](z, par))
+    f_nlp, g_nlp = (np.array(ca.DM(ca.Function("fg", [nlp["x"], nlp["p"]], [nlp[k]])(z, par))) for k in "fg")
+    Hu = np.array(ca.DM(fn["hess_lag"](z, par, 0.8, lam)))
+    assert np.all(np.tril(Hu, -1) == 0)  # the upper triangle only
+    H_n = np.triu(Hu) + np.triu(Hu, 1).T
+
+    def rel(u, v):
+        return np.abs(u - v).max() / np.abs(v).max()
+
+    assert rel(f_n, f_s) < 1e-13 and rel(f_nlp, f_s) < 1e-13 and rel(gf_n, gf_s) < 1e-13
+    assert rel(g_n, g_s) < 1e-13 and rel(g_nlp, g_s) < 1e-13
+    assert rel(J_n, J_s) < 1e-13
+    assert rel(H_n, H_s) < 1e-12
+    n2, nc = 2 * prob.mesh.n_nodes, prob.block.nc
+    if hessian == "exact":  # the x-kappa block (rope and scale-row curvature) is exercised
+        assert (np.abs(H_s[:n2, n2 + 6:]).max(axis=0) > 0).sum() >= prob.block.n_rope
+    assert J_n.shape == (int(prob.free.sum()) + nc, n2 + 6 + nc)
+
+
+def test_numeric_nlp_refuses_the_springs_model():
+    from mdsr_opt.synthesis.nlp_numeric import numeric_nlp, supports
+
+    _D, prob, _z, _par, _lam = _nlp_point("springs", 0.5)
+    assert not supports(prob)
+    with pytest.raises(ValueError, match="numeric energy that the contractions do not move"):
+        numeric_nlp(prob, "exact")
+
+
 @pytest.mark.parametrize("model_kind,radius", CASES)
 def test_assembled_derivatives_match_finite_differences(model_kind, radius):
     import casadi as ca
@@ -473,16 +524,18 @@ def test_assembled_derivatives_match_finite_differences(model_kind, radius):
 
 
 @pytest.mark.parametrize("model_kind", ["cable", "springs"])
-def test_both_derivative_paths_give_the_same_design(mesh, muscles, target, model_kind):
+def test_all_derivative_paths_give_the_same_design(mesh, muscles, target, model_kind):
     kw = {"muscle_model": model_kind, "initial_guess": A_START, "anchor_radius": 0.3, "verify": False}  # end patches
+    rn = design_contractions(mesh, MAT, muscles, target, derivatives="numeric", **kw)
     ra = design_contractions(mesh, MAT, muscles, target, derivatives="assembled", **kw)
     rc = design_contractions(mesh, MAT, muscles, target, derivatives="casadi", **kw)
-    assert ra.success and rc.success, (ra.status, rc.status)
+    assert rn.success and ra.success and rc.success, (rn.status, ra.status, rc.status)
     assert ra.difference < 0.05
-    assert ra.contractions == pytest.approx(rc.contractions, abs=1e-9)
-    assert ra.iterations == rc.iterations
-    with pytest.raises(ValueError, match="derivatives must be 'assembled' or 'casadi'"):
-        design_contractions(mesh, MAT, muscles, target, derivatives="numeric")
+    for r in (rn, ra):
+        assert r.contractions == pytest.approx(rc.contractions, abs=1e-9)
+        assert r.iterations == rc.iterations
+    with pytest.raises(ValueError, match="derivatives must be 'numeric', 'assembled' or 'casadi'"):
+        design_contractions(mesh, MAT, muscles, target, derivatives="symbolic")
 
 
 # ---------------------------------------------------------------------------------------------- refinement

@@ -29,6 +29,28 @@ def test_energy_gradient_hessian_match_the_casadi_model(mat):
     assert np.linalg.eigvalsh(en.hessian(x, project=True).toarray())[0] > -1e-12
 
 
+@pytest.mark.parametrize("mat", [NeoHookean(2.0, 0.3, thickness=0.7), LinearElastic(1.0, 0.25)])
+def test_third_derivative_matches_differences_of_the_hessian(mat):
+    """``third_data`` (elements and muscle springs) against central differences of the exact Hessian along a
+    random direction: error O(h^2), symmetric; zero for the linear material without springs."""
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    rng = np.random.default_rng(2)
+    x = (mesh.points + 0.03 * rng.standard_normal(mesh.points.shape)).ravel()
+    v = rng.standard_normal(x.shape)
+    model = get_model(mesh, mat)
+    for p in (model.params(mat), model.params(mat, spring_parameters(mesh, [Muscle(range(0, 12))], [0.2], 10.0))):
+        T = model.hessian_pattern.matrix(model.third_data(x, p, v)).toarray()
+        h = 1e-5
+        fd = (model.hessian(x + h * v, p) - model.hessian(x - h * v, p)).toarray() / (2 * h)
+        scale = max(np.abs(fd).max(), 1.0)
+        assert np.abs(T - fd).max() < 1e-7 * scale
+        assert np.abs(T - T.T).max() < 1e-12 * scale
+    if mat.kind == "linear":
+        assert np.abs(model.third_data(x, model.params(mat), v)).max() == 0.0
+    else:
+        assert np.abs(T).max() > 1.0
+
+
 def test_energy_is_infinite_for_an_inverted_triangle():
     mesh = Mesh.rectangle(1.0, 1.0, 1, 1)
     mat = NeoHookean(1.0, 0.3)

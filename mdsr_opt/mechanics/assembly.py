@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["HessianPattern", "ipopt_functions"]
+__all__ = ["BufferedFunction", "HessianPattern", "ipopt_functions"]
 
 
 class HessianPattern:
@@ -108,8 +108,20 @@ class HessianPattern:
         return sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
 
 
-class _Buffered(ca.Callback):
-    """A CasADi callback that evaluates ``fn(inputs) -> outputs`` on numpy views of CasADi's buffers."""
+class BufferedFunction(ca.Callback):
+    """A CasADi callback that evaluates ``fn(inputs, outputs)`` on numpy views of CasADi's buffers.
+
+    ``inputs`` are the nonzeros of each input (zeros for an input not given), ``outputs`` writable views
+    of each output's nonzeros, or None for an output the caller does not want; ``fn`` fills them in
+    place. Floating-point warnings are silenced: a trial step that inverts a triangle gives non-finite
+    values, which IPOPT answers by cutting the step.
+
+    Parameters
+    ----------
+    name : str
+    sp_in, sp_out : lists of casadi.Sparsity
+    fn : callable ``(inputs, outputs) -> None``
+    """
 
     def __init__(self, name, sp_in, sp_out, fn):
         ca.Callback.__init__(self)
@@ -168,9 +180,9 @@ def ipopt_functions(model) -> dict:
             m = ref()
             outs[0][:] = m.hessian_data(ins[0], ins[1])[m.hessian_pattern.upper] * ins[2][0]
 
-    fns = {"f": _Buffered("energy_num", [sx, sp_], [one], f),
-           "grad_f": _Buffered("grad_f_num", [sx, sp_], [one, sx], fg),
-           "hess_lag": _Buffered("hess_lag_num", [sx, sp_, one, ca.Sparsity(0, 1)],
+    fns = {"f": BufferedFunction("energy_num", [sx, sp_], [one], f),
+           "grad_f": BufferedFunction("grad_f_num", [sx, sp_], [one, sx], fg),
+           "hess_lag": BufferedFunction("hess_lag_num", [sx, sp_, one, ca.Sparsity(0, 1)],
                                  [model.hessian_pattern.sparsity_upper()], h)}
     model.__dict__["_ipopt_functions"] = fns
     return fns

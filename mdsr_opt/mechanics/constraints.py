@@ -365,19 +365,12 @@ class MuscleConstraints:
     def local_hessian(self, xl, lam) -> sp.csr_matrix:
         """``sum_i lam_i * Hessian(g_i)`` with respect to the local coordinates, full symmetric (closed form:
         ``(I - t t^T) / |d|`` per rope segment, ``I / |U|`` per scale row; the other rigid rows are linear)."""
-        xl = np.asarray(xl, dtype=float)
-        lam = np.asarray(lam, dtype=float).reshape(-1)
-        d, ln = self._segments(xl)
-        t = d / ln[:, None]
-        w = lam[self._seg_row] / ln
-        K = w[:, None, None] * (np.eye(2)[None] - t[:, :, None] * t[:, None, :])  # (ns, 2, 2)
-        blocks = [(2 * self._seg_a, 2 * self._seg_a, K), (2 * self._seg_b, 2 * self._seg_b, K),
-                  (2 * self._seg_a, 2 * self._seg_b, -K), (2 * self._seg_b, 2 * self._seg_a, -K)]
-        if self.n_rigid:
-            ws = lam[self.n_muscles + self._sc_row] / np.sqrt(self._sc_UU)
-            I2 = ws[:, None, None] * np.eye(2)[None]
-            e, r = self._sc_e, self._sc_r
-            blocks += [(e, e, I2), (r, r, I2), (e, r, -I2), (r, e, -I2)]
+        rows, cols, vals = self.local_hessian_entries(xl, lam)
+        return sp.csr_matrix((vals, (rows, cols)), shape=(self.n_local, self.n_local))
+
+    @staticmethod
+    def _pair_entries(blocks):
+        """``(rows, cols, vals)`` of 2 x 2 blocks ``(row0, col0, B (N, 2, 2))`` placed at ``(row0 + i, col0 + j)``."""
         rows, cols, vals = [], [], []
         for r0, c0, B in blocks:
             for i in range(2):
@@ -385,8 +378,73 @@ class MuscleConstraints:
                     rows.append(r0 + i)
                     cols.append(c0 + j)
                     vals.append(B[:, i, j])
-        rows, cols, vals = (np.concatenate(v) for v in (rows, cols, vals))
-        return sp.csr_matrix((vals, (rows, cols)), shape=(self.n_local, self.n_local))
+        return tuple(np.concatenate(v) for v in (rows, cols, vals))
+
+    def _pairs(self, K, S=None):
+        """The four blocks ``[[K, -K], [-K, K]]`` of each rope segment (``K`` (ns, 2, 2)) and, with ``S``, of
+        each scale row's pair ``(e, r)``."""
+        a, b = 2 * self._seg_a, 2 * self._seg_b
+        blocks = [(a, a, K), (b, b, K), (a, b, -K), (b, a, -K)]
+        if S is not None:
+            e, r = self._sc_e, self._sc_r
+            blocks += [(e, e, S), (r, r, S), (e, r, -S), (r, e, -S)]
+        return blocks
+
+    def local_hessian_entries(self, xl, lam) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`local_hessian` as ``(rows, cols, vals)`` (duplicates to be summed), with rows and columns
+        that depend only on the constraints (not on ``xl`` or ``lam``): for assembling into a fixed pattern."""
+        xl = np.asarray(xl, dtype=float)
+        lam = np.asarray(lam, dtype=float).reshape(-1)
+        d, ln = self._segments(xl)
+        t = d / ln[:, None]
+        w = lam[self._seg_row] / ln
+        K = w[:, None, None] * (np.eye(2)[None] - t[:, :, None] * t[:, None, :])  # (ns, 2, 2)
+        S = None
+        if self.n_rigid:
+            ws = lam[self.n_muscles + self._sc_row] / np.sqrt(self._sc_UU)
+            S = ws[:, None, None] * np.eye(2)[None]
+        return self._pair_entries(self._pairs(K, S))
+
+    def local_third_entries(self, xl, lam, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``sum_i lam_i D^3 g_i(xl)[v]`` (the derivative of :meth:`local_hessian` along the local direction
+        ``v``) as ``(rows, cols, vals)`` with fixed rows and columns. Only the ropes have one: a segment of
+        direction ``t``, length ``l`` and relative move ``dv`` gives ``-(q t' + t q' + (t . dv)(I - t t')) /
+        l^2`` with ``q = (I - t t') dv``; the scale rows are quadratic and the other rigid rows linear."""
+        xl = np.asarray(xl, dtype=float)
+        lam = np.asarray(lam, dtype=float).reshape(-1)
+        d, ln = self._segments(xl)
+        t = d / ln[:, None]
+        V = np.asarray(v, dtype=float).reshape(-1, 2)
+        dv = V[self._seg_b] - V[self._seg_a]
+        td = (t * dv).sum(1)
+        q = dv - td[:, None] * t
+        P = np.eye(2)[None] - t[:, :, None] * t[:, None, :]
+        K = -(lam[self._seg_row] / ln ** 2)[:, None, None] * (
+            q[:, :, None] * t[:, None, :] + t[:, :, None] * q[:, None, :] + td[:, None, None] * P)
+        return self._pair_entries(self._pairs(K))
+
+    def local_hessian_product_entries(self, xl, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The products ``Hessian(g_i)(xl) v`` of every row's Hessian with the local direction ``v``, as the
+        columns of an ``(n_local, n_constraints)`` matrix given by ``(rows, cols, vals)`` (fixed rows and
+        columns; the linear rows have none)."""
+        xl = np.asarray(xl, dtype=float)
+        d, ln = self._segments(xl)
+        t = d / ln[:, None]
+        V = np.asarray(v, dtype=float).reshape(-1, 2)
+        dv = V[self._seg_b] - V[self._seg_a]
+        kb = (dv - (t * dv).sum(1)[:, None] * t) / ln[:, None]  # (I - t t') dv / l: the product at b; -kb at a
+        rows = [2 * self._seg_b, 2 * self._seg_b + 1, 2 * self._seg_a, 2 * self._seg_a + 1]
+        cols = [self._seg_row] * 4
+        vals = [kb[:, 0], kb[:, 1], -kb[:, 0], -kb[:, 1]]
+        if self.n_rigid:
+            e, r = self._sc_e, self._sc_r
+            du = np.asarray(v, dtype=float).reshape(-1)
+            ks = np.column_stack([du[r] - du[e], du[r + 1] - du[e + 1]]) / np.sqrt(self._sc_UU)[:, None]
+            row = self.n_muscles + self._sc_row
+            rows += [r, r + 1, e, e + 1]
+            cols += [row] * 4
+            vals += [ks[:, 0], ks[:, 1], -ks[:, 0], -ks[:, 1]]
+        return tuple(np.concatenate(u) for u in (rows, cols, vals))
 
     def values(self, x) -> np.ndarray:
         """All constraint rows at ``x``."""

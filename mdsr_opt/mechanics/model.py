@@ -306,6 +306,18 @@ class EnergyModel:
             data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
         return data
 
+    def third_data(self, x, p, v) -> np.ndarray:
+        """The values of ``D^3 E(x)[v]`` (the Hessian's derivative along ``v``, symmetric) in the CSC order
+        of :attr:`hessian_pattern` (numeric models only; see
+        :meth:`~mdsr_opt.mechanics.newton.NewtonEnergy.third_blocks`)."""
+        en = self.numeric(p)
+        pat = self.hessian_pattern
+        He, Hs = en.third_blocks(x, v)
+        data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
+        if len(Hs):
+            data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
+        return data
+
     def free_ordering(self, free) -> np.ndarray:
         """A fill-reducing ordering of the free coordinates (indices into them, ``free`` a mask over 2n):
         approximate minimum degree of the node graph (CasADi's ``Sparsity.amd``, made once per mesh), each

@@ -255,6 +255,58 @@ class NewtonEnergy:
         Hs = self._spring_terms(x, True, False)[1] if len(self.k) else np.zeros((4, 4, 0))
         return self._element_hessians(A), Hs
 
+    def third_blocks(self, x, v):
+        """The exact third derivative of the energy along ``v``, ``D^3 E(x)[v]``, as element blocks (6, 6, m)
+        and spring blocks (4, 4, s) (their sum is the derivative of the Hessian along ``v``).
+
+        Neo-Hookean: with ``G = F^-T``, ``dF = F(v)`` (``F`` is linear in the coordinates) and
+        ``dG = -G dF' G``, the derivative of the tangent ``A_ijkl = mu d_ik d_jl + (mu - lam ln J) G_il G_kj
+        + lam G_ij G_kl`` is ``-lam (G:dF) G_il G_kj + (mu - lam ln J)(dG_il G_kj + G_il dG_kj)
+        + lam (dG_ij G_kl + G_ij dG_kl)``; a linear material has none. A spring ``k/2 (l - c)^2`` (``c``
+        its rest length) has ``k c / l^2 (q u' + u q' + (u . dv) (I - u u'))`` with ``u`` its direction,
+        ``dv`` the relative move along ``v`` and ``q = (I - u u') dv``.
+        """
+        x = np.asarray(x, dtype=float).reshape(-1)
+        v = np.asarray(v, dtype=float).reshape(-1)
+        m = self.tri.shape[0]
+        if self.kind == "neo-hookean":
+            F, dF = self._F(x), self._F(v)
+            f00, f01, f10, f11 = F[0, 0], F[0, 1], F[1, 0], F[1, 1]
+            J = f00 * f11 - f01 * f10
+            iJ = 1.0 / J
+            G = np.stack([np.stack([f11 * iJ, -f10 * iJ]), np.stack([-f01 * iJ, f00 * iJ])])  # F^-T
+            GT = np.swapaxes(G, 0, 1)
+            dG = -np.einsum("iam,bam,blm->ilm", G, dF, G)
+            dGT = np.swapaxes(dG, 0, 1)
+            tr = (G * dF).sum(axis=(0, 1))  # d ln J
+            c1 = self.mu - self.lam * np.log(J)
+            GG = G[:, None, None, :] * GT[None, :, :, None]  # G_il G_kj
+            dA = self.lam * (dG[:, :, None, None] * G[None, None] + G[:, :, None, None] * dG[None, None])
+            dA += c1 * (dG[:, None, None, :] * GT[None, :, :, None] + G[:, None, None, :] * dGT[None, :, :, None])
+            dA -= self.lam * tr * GG
+            He = self._element_hessians(dA)
+        else:
+            He = np.zeros((6, 6, m))
+        Hs = np.zeros((4, 4, 0))
+        if len(self.k):
+            X, V = x.reshape(-1, 2), v.reshape(-1, 2)
+            i, j = self.edges[:, 0], self.edges[:, 1]
+            d, dv = X[j] - X[i], V[j] - V[i]
+            l = np.maximum(np.linalg.norm(d, axis=1), 1e-300)
+            u = d / l[:, None]
+            ud = (u * dv).sum(1)
+            q = dv - ud[:, None] * u
+            P = np.eye(2)[None] - u[:, :, None] * u[:, None, :]
+            K = (self.k * self.rl0 / l ** 2)[:, None, None] * (
+                q[:, :, None] * u[:, None, :] + u[:, :, None] * q[:, None, :] + ud[:, None, None] * P)
+            H = np.empty((len(K), 4, 4))
+            H[:, :2, :2] = K
+            H[:, 2:, 2:] = K
+            H[:, :2, 2:] = -K
+            H[:, 2:, :2] = -K
+            Hs = np.ascontiguousarray(np.transpose(H, (1, 2, 0)))
+        return He, Hs
+
     def projected_blocks(self):
         """The projected element and spring blocks at the state of the last :meth:`element_blocks` call."""
         He = self._element_hessians(_project_tangent(self._A))

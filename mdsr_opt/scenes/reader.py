@@ -220,7 +220,7 @@ _DESIGN_CHECKS = {
     "inner_tol": _positive(),
     "verify": _boolean,
     "gap_rtol": _positive(),
-    "derivatives": _choice("assembled", "casadi"),
+    "derivatives": _choice("numeric", "assembled", "casadi"),
     # a length; its bound against the body's size is checked where the mesh is known (Scene)
     "anchor_radius": _positive(allow_zero=True),
 }

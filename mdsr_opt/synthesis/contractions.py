@@ -34,7 +34,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
                         inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
-                        derivatives: str = "assembled") -> DesignResult:
+                        derivatives: str = "numeric") -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
 
     Parameters
@@ -75,10 +75,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         length), or the objective normalised by the body's size instead (for comparison studies).
     warm_start : bool
         Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
-    derivatives : {"assembled", "casadi"}
-        Flattened only: give IPOPT the NLP's exact derivatives assembled term by term from small per-term
-        functions (fast to build, linear in the mesh size), or build the NLP in SX and let CasADi
-        differentiate it (the reference; slow to build). Both are exact; iterates agree to rounding.
+    derivatives : {"numeric", "assembled", "casadi"}
+        Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
+        nothing symbolic to build (the exact cable; the springs model, whose rest lengths move with the
+        contractions, gets ``"assembled"``); ``"assembled"``, an MX graph assembled term by term from small
+        per-term functions (linear in the mesh size); ``"casadi"``, the NLP in SX differentiated by CasADi
+        (the reference; slow to build). All are exact; iterates agree to rounding.
     outer : {"nelder-mead", "powell"}
         Derivative-free only: the scipy method.
     options : dict, optional
@@ -120,8 +122,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
     if outer not in ("nelder-mead", "powell"):
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
-    if derivatives not in ("assembled", "casadi"):
-        raise ValueError(f"derivatives must be 'assembled' or 'casadi', got {derivatives!r}")
+    if derivatives not in ("numeric", "assembled", "casadi"):
+        raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..mechanics.model import to_dm
+from .nlp_numeric import numeric_nlp, supports as numeric_supports
 from .problem import ForwardSolver, DesignProblem
 
 
@@ -322,10 +323,13 @@ def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_
     Parameters of the NLP: target ``y`` (2n), weights (n), ``p0``, objective scale, constraint scale, so one
     built solver serves any target, weights, material numbers and stiffness.
 
-    ``derivatives="assembled"`` gives IPOPT the derivatives assembled term by term
-    (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX and lets CasADi differentiate it.
+    ``derivatives="numeric"`` gives IPOPT numpy callbacks (:func:`~mdsr_opt.synthesis.nlp_numeric.numeric_nlp`)
+    where they apply (the exact cable), else what ``"assembled"`` gives: the derivatives assembled term by
+    term in MX (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX and lets CasADi differentiate it.
     """
     mesh = prob.mesh
+    if derivatives == "numeric" and not numeric_supports(prob):
+        derivatives = "assembled"
     key = ("design-flattened", tuple(mu.nodes for mu in prob.muscles), prob.muscle_model, prob.material.kind,
            prob.anchor_radius, hessian, derivatives, opts_key)
     cache = mesh.__dict__.setdefault("_design_cache", {})
@@ -334,7 +338,13 @@ def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_
     t0 = time.perf_counter()
     opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
     opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
-    if derivatives == "assembled":
+    if derivatives == "numeric":
+        nlp, fns, keep = numeric_nlp(prob, hessian)
+        opts.update(fns)
+        opts["calc_lam_p"] = False
+        opts["no_nlp_grad"] = True  # nlp_grad only serves the multipliers of bounds and parameters
+        mesh.__dict__.setdefault("_design_callbacks", {})[key] = keep  # alive as long as the solver
+    elif derivatives == "assembled":
         nlp, fns = _assembled_nlp(prob, hessian)
         opts.update(fns)
         opts["calc_lam_p"] = False  # parameter multipliers are not used: skip their derivatives
@@ -399,7 +409,7 @@ def _symbolic_nlp(prob: DesignProblem, hessian: str):
 
 
 def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
-                   derivatives="assembled"):
+                   derivatives="numeric"):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
     ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone"}
     if warm_start:

@@ -171,7 +171,8 @@ class _ConstraintBlock:
         self.scale_t = prob.Et * prob.h  # kappa -> tension: tau = kappa * Et h / L0
         self.dofs = np.asarray(mc.dofs, dtype=np.int64)  # ropes' and anchor groups' coordinates, sorted
         self.d = len(self.dofs)
-        self._rows = np.arange(mc.n_muscles - self.n_rope, mc.n_constraints)  # the constraints' rows used
+        #: the constraints' rows the block uses (all but the ropes for the springs model)
+        self.rows = np.arange(mc.n_muscles - self.n_rope, mc.n_constraints)
         scale = np.ones(0)
         if self.n_rigid:
             Jr = mc.local_jacobian(prob.X[self.dofs])[mc.n_muscles:]
@@ -196,7 +197,7 @@ class _ConstraintBlock:
     def _build_sym(self) -> dict:
         d, nc = self.d, self.nc
         nlf, P, Lin = self.mc.symbolic_parts()
-        R = sp.csr_matrix((self.row_scale, (np.arange(nc), self._rows)), shape=(nc, self.mc.n_constraints))
+        R = sp.csr_matrix((self.row_scale, (np.arange(nc), self.rows)), shape=(nc, self.mc.n_constraints))
         Pb, Linb = (R @ P).tocsr(), (R @ Lin).tocsr()
         Pd, Ld = _dm(Pb), _dm(Linb)
         xl = ca.SX.sym("xl", d)
@@ -229,16 +230,16 @@ class _ConstraintBlock:
     # ------------------------------------------------------------------ numbers
     def values(self, xflat) -> np.ndarray:
         """The rows ``C(x)`` (without the NLP's ``+ a``)."""
-        return self.mc.values(xflat)[self._rows] * self.row_scale - self.offset
+        return self.mc.values(xflat)[self.rows] * self.row_scale - self.offset
 
     def jacobian(self, xflat) -> sp.csr_matrix:
         """``dC/dx`` as a scipy matrix ``(nc, 2n)``."""
-        return (sp.diags(self.row_scale) @ self.mc.jacobian(xflat)[self._rows]).tocsr()
+        return (sp.diags(self.row_scale) @ self.mc.jacobian(xflat)[self.rows]).tocsr()
 
     def hessian(self, xflat, kappa) -> sp.csr_matrix:
         """``d^2 (kappa . C) / dx^2`` as a scipy matrix ``(2n, 2n)``."""
         lam = np.zeros(self.mc.n_constraints)
-        lam[self._rows] = np.asarray(kappa, dtype=float) * self.row_scale
+        lam[self.rows] = np.asarray(kappa, dtype=float) * self.row_scale
         return self.mc.hessian(xflat, lam).tocsr()
 
     def multipliers(self, xflat, g_scaled, free=None) -> np.ndarray:

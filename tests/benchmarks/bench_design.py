@@ -4,8 +4,8 @@ For 1, 2, 4 and 8 muscles on rectangle meshes of about 300, 1k and 3k nodes, a t
 the muscles by known amounts, rotating and shifting the result; each method designs the contractions from
 the same initial guess. Prints a table, writes ``design_bench.csv`` and ``design_bench.png`` (difference
 against time) to ``--out``. Also measures the flattened NLP's sensitivity to scaling, warm start, Hessian
-(exact vs Gauss-Newton) and derivatives (assembled term by term vs CasADi's symbolic ones) on the 1k-node,
-4-muscle case.
+(exact vs Gauss-Newton) and derivatives (numpy callbacks, MX assembled term by term, CasADi's symbolic
+ones) on the 1k-node, 4-muscle case.
 
 Run:  python tests/benchmarks/bench_design.py --out bench_out
       python tests/benchmarks/bench_design.py --quick          # 300 nodes only, 1-4 muscles
@@ -163,6 +163,7 @@ def run(args):
                           ("auto scaling, cold, exact", {"warm_start": False}),
                           ("size scaling, cold, exact", {"scaling": "size", "warm_start": False}),
                           ("auto scaling, warm, Gauss-Newton", {"hessian": "gauss-newton"}),
+                          ("MX-assembled derivatives, exact", {"derivatives": "assembled"}),
                           ("CasADi derivatives (SX), exact", {"derivatives": "casadi"}),
                           ("CasADi derivatives, Gauss-Newton", {"derivatives": "casadi",
                                                                 "hessian": "gauss-newton"}),
@@ -318,7 +319,7 @@ def main(argv=None):
                     help="initial contractions: 'geometric' (each muscle's 1 - L_target/L0) or one number for all")
     ap.add_argument("--models", nargs="+", default=["cable"], choices=["cable", "springs"],
                     help="muscle models (the target is made with the same model); rival comparisons use the first")
-    ap.add_argument("--derivatives", default="assembled", choices=["assembled", "casadi"],
+    ap.add_argument("--derivatives", default="numeric", choices=["numeric", "assembled", "casadi"],
                     help="the flattened NLP's derivatives (see design_contractions)")
     ap.add_argument("--no-variants", action="store_true", help="skip the flattened variants")
     ap.add_argument("--variants", action="store_true",

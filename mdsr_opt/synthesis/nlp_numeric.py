@@ -1,0 +1,302 @@
+"""The flattened design NLP evaluated in numpy: IPOPT through CasADi callbacks, no symbolic graph.
+
+The NLP is the one of :func:`~mdsr_opt.synthesis.nlp._assembled_nlp` (same variables, parameters,
+scaling, constraints and exact derivatives; iterates agree to rounding) but every function IPOPT calls is
+a :class:`~mdsr_opt.mechanics.assembly.BufferedFunction` that fills CasADi's buffers from vectorised
+numpy:
+
+- the energy's gradient, Hessian and third derivative along the multipliers
+  (:meth:`~mdsr_opt.mechanics.model.EnergyModel.third_data`) in the CSC order of the mesh's
+  :class:`~mdsr_opt.mechanics.assembly.HessianPattern`;
+- the muscle constraints' values, Jacobian, Hessian, third derivative and Hessian-vector products from
+  their closed forms (:class:`~mdsr_opt.mechanics.constraints.MuscleConstraints`);
+- the alignment objective ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives per node.
+
+Each sparse output is summed from its parts by one ``bincount`` into a pattern made once
+(:class:`SparseLayout`), so building the NLP costs index arithmetic only: at 3k nodes and 4 muscles
+about 30 ms, against about 0.5 s for the MX graph of the term-by-term assembly.
+
+It applies when the energy is numeric (Neo-Hookean or linear elastic, see
+:attr:`~mdsr_opt.mechanics.model.EnergyModel.is_numeric`) and does not depend on the contractions, that
+is for the exact cable (:func:`supports`); the per-segment springs, whose rest lengths move with the
+contractions, use the MX assembly.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..mechanics.assembly import BufferedFunction
+from .problem import DesignProblem
+
+__all__ = ["SparseLayout", "numeric_nlp", "supports"]
+
+
+def supports(prob: DesignProblem) -> bool:
+    """Whether :func:`numeric_nlp` applies: a numeric energy that the contractions do not move."""
+    return bool(getattr(prob.model, "is_numeric", False)) and not np.any(prob.B)
+
+
+class SparseLayout:
+    """A fixed sparse pattern summed from parts given as ``(rows, cols)`` index arrays.
+
+    :meth:`add` the parts in order (targets with a negative row or column are dropped, and with
+    ``upper`` those below the diagonal), then :meth:`finish`; :meth:`data` sums a list of value arrays,
+    one per part in the same order and of the same lengths, into the pattern's nonzeros (CSC order).
+
+    Example
+    -------
+    >>> lay = SparseLayout(2, 2, upper=True)
+    >>> lay.add([0, 1, 1], [0, 0, 1]); lay.add([0], [0])
+    >>> lay.finish().nnz(), lay.data([np.array([1.0, 5.0, 2.0]), np.array([3.0])]).tolist()
+    (2, [4.0, 2.0])
+    """
+
+    def __init__(self, nrow: int, ncol: int, upper: bool = False):
+        self.shape = (int(nrow), int(ncol))
+        self.upper = upper
+        self._parts: list = []
+        self._keep = None
+
+    def add(self, rows, cols) -> None:
+        rows = np.asarray(rows, dtype=np.int64).ravel()
+        cols = np.asarray(cols, dtype=np.int64).ravel()
+        if rows.shape != cols.shape:
+            raise ValueError(f"rows and cols differ in length: {rows.shape} and {cols.shape}")
+        self._parts.append((rows, cols))
+
+    def finish(self) -> ca.Sparsity:
+        nrow, ncol = self.shape
+        rows = np.concatenate([p[0] for p in self._parts]) if self._parts else np.zeros(0, np.int64)
+        cols = np.concatenate([p[1] for p in self._parts]) if self._parts else np.zeros(0, np.int64)
+        keep = (rows >= 0) & (cols >= 0)
+        if self.upper:
+            keep &= rows <= cols
+        key = cols[keep] * nrow + rows[keep]
+        ukey, slot = np.unique(key, return_inverse=True)
+        self._keep, self._slot = keep, slot.ravel()
+        self.nnz = len(ukey)
+        colind = np.concatenate([[0], np.cumsum(np.bincount(ukey // nrow, minlength=ncol))])
+        self.sparsity = ca.Sparsity(nrow, ncol, colind.tolist(), (ukey % nrow).tolist())
+        self.lengths = [len(p[0]) for p in self._parts]
+        return self.sparsity
+
+    def data(self, values) -> np.ndarray:
+        vals = np.concatenate([np.broadcast_to(np.asarray(v, dtype=float).ravel(), (n,))
+                               for v, n in zip(values, self.lengths)])
+        return np.bincount(self._slot, weights=vals[self._keep], minlength=self.nnz)
+
+
+def _objective(x, y, w, v, so, exact: bool):
+    """``(f, dfdx (2n,), dfdv (3,), Hessian parts)`` of ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` with
+    ``v = (theta, t0, t1)``. The Hessian parts are per-node arrays in the order of :data:`_OBJ_PARTS`
+    (the ``v``-``v`` ones summed over the nodes by the layout); without ``exact``, the Gauss-Newton
+    Hessian ``2 so w_i J_i' J_i`` (``J_i`` the residual's Jacobian)."""
+    X0, X1, Y0, Y1 = x[0::2], x[1::2], y[0::2], y[1::2]
+    c, s = np.cos(v[0]), np.sin(v[0])
+    rx = c * X0 - s * X1 + v[1] - Y0
+    ry = s * X0 + c * X1 + v[2] - Y1
+    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    W2 = 2.0 * so * w
+    f = so * float(w @ (rx * rx + ry * ry))
+    gx = np.empty_like(x)
+    gx[0::2], gx[1::2] = W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry)
+    gv = np.array([W2 @ (rx * px + ry * py), W2 @ rx, W2 @ ry])
+    h_xth0, h_xth1, h_thth = W2 * -X1, W2 * X0, W2 * (px * px + py * py)
+    if exact:  # the residual's curvature r . d^2 r
+        h_xth0 = h_xth0 + W2 * (-s * rx + c * ry)
+        h_xth1 = h_xth1 + W2 * (-c * rx - s * ry)
+        h_thth = h_thth - W2 * (rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
+    parts = [W2, W2, h_xth0, h_xth1, W2 * c, W2 * s, W2 * -s, W2 * c, h_thth, W2 * px, W2 * py, W2, W2]
+    return f, gx, gv, parts
+
+
+#: the objective's Hessian entries per node, as (row, col) local names: x0, x1 the node's coordinates
+_OBJ_PARTS = [("x0", "x0"), ("x1", "x1"), ("x0", "th"), ("x1", "th"), ("x0", "t0"), ("x0", "t1"), ("x1", "t0"),
+              ("x1", "t1"), ("th", "th"), ("th", "t0"), ("th", "t1"), ("t0", "t0"), ("t1", "t1")]
+
+
+class _NumericNLP:
+    """Index bookkeeping and the evaluation functions of the numeric NLP (see :func:`numeric_nlp`)."""
+
+    def __init__(self, prob: DesignProblem, exact: bool):
+        model, mesh = prob.model, prob.mesh
+        self.prob, self.model, self.exact = prob, model, exact
+        n, m = mesh.n_nodes, prob.m
+        blk = prob.block
+        self.blk, self.mc = blk, prob.constraints
+        nc = blk.nc
+        self.n, self.m, self.nc = n, m, nc
+        self.nx = nx = 2 * n
+        self.it = it = nx + m
+        self.ik = ik = it + 3
+        self.nz = nz = ik + nc
+        self.npar = model.n_params
+        self.free = np.nonzero(prob.free)[0]
+        nfree = self.nfree = len(self.free)
+        cidx = np.full(nx, -1, dtype=np.int64)  # dof -> stationarity row (-1: gauge)
+        cidx[self.free] = np.arange(nfree)
+        dl = self.dofs = np.asarray(blk.dofs, dtype=np.int64)  # the constraints' local dofs (global indices)
+        self.rows = np.asarray(blk.rows, dtype=np.int64)  # the constraints' rows the block uses
+        rowmap = np.full(self.mc.n_constraints, -1, dtype=np.int64)  # constraint row -> block row
+        rowmap[self.rows] = np.arange(nc)
+        self.row_scale = np.asarray(blk.row_scale, dtype=float)
+        pat = model.hessian_pattern
+        pcols = np.repeat(np.arange(pat.shape[1]), np.diff(pat.indptr))
+        prow = pat.indices.astype(np.int64)
+        z0 = np.zeros(self.mc.n_local)
+        lam0 = np.zeros(self.mc.n_constraints)
+        hr, hc, _ = self.mc.local_hessian_entries(prob.X[dl], lam0)
+        Jl = self.mc.local_jacobian(prob.X[dl])
+        jrow = np.repeat(np.arange(Jl.shape[0]), np.diff(Jl.indptr))
+        self._jkeep = rowmap[jrow] >= 0
+        jr, jc = rowmap[jrow[self._jkeep]], dl[Jl.indices[self._jkeep]]
+        self._jscale = self.row_scale[jr]
+
+        jac = self.jac = SparseLayout(nfree + nc, nz)
+        jac.add(cidx[prow], pcols)  # sc x energy Hessian
+        jac.add(cidx[dl[hr]], dl[hc])  # d(J' kappa)/dx
+        jac.add(cidx[jc], ik + jr)  # d(J' kappa)/dkappa = J'
+        jac.add(nfree + jr, jc)  # dC/dx
+        if blk.rope:  # d(C + a)/da on the rope rows
+            jac.add(nfree + np.arange(m), nx + np.arange(m))
+        jac.finish()
+
+        hess = self.hess = SparseLayout(nz, nz, upper=True)
+        loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it),
+               "t0": np.full(n, it + 1), "t1": np.full(n, it + 2)}
+        for a, b in _OBJ_PARTS:
+            hess.add(loc[a], loc[b])
+        if exact:
+            hess.add(prow, pcols)  # sc D^3 E [lam_u]
+            tr, tc, _ = self.mc.local_third_entries(prob.X[dl], lam0, z0)
+            hess.add(dl[tr], dl[tc])  # D^3 (kappa . C)[lam_u]
+            hess.add(dl[hr], dl[hc])  # omega . Hessian(C)
+            pr, pc, _ = self.mc.local_hessian_product_entries(prob.X[dl], z0)
+            hess.add(dl[pr], np.where(rowmap[pc] >= 0, ik + rowmap[pc], -1))  # d^2 (lam_u . J' kappa)/dx dkappa
+        hess.finish()
+        self.cidx = cidx
+
+    # ------------------------------------------------------------------ evaluation
+    def _split(self, z, par):
+        nx, m, it, ik, n = self.nx, self.m, self.it, self.ik, self.n
+        return (z[:nx], z[nx:it], z[it:ik], z[ik:], par[:nx], par[nx:nx + n], par[nx + n:nx + n + self.npar],
+                float(par[nx + n + self.npar]), float(par[nx + n + self.npar + 1]))
+
+    def _lam_rows(self, kappa) -> np.ndarray:
+        """Block multipliers as multipliers of all the constraints' rows (scaled as the block scales them)."""
+        lam = np.zeros(self.mc.n_constraints)
+        lam[self.rows] = np.asarray(kappa, dtype=float) * self.row_scale
+        return lam
+
+    def _jacobian_local(self, xl):
+        """The block's rows of the constraints' Jacobian, scaled: ``(data (entries), csr)``."""
+        Jl = self.mc.local_jacobian(xl)
+        return Jl.data[self._jkeep] * self._jscale, Jl
+
+    def constraints(self, z, par) -> np.ndarray:
+        x, a, _v, kap, _y, _w, p, _so, sc = self._split(z, par)
+        g = self.model.gradient(x, p) * sc
+        if self.nc:
+            xl = x[self.dofs]
+            lam = self._lam_rows(kap)
+            Jl = self.mc.local_jacobian(xl)
+            g[self.dofs] += Jl.T @ lam
+        out = np.empty(self.nfree + self.nc)
+        out[:self.nfree] = g[self.free]
+        if self.nc:
+            C = self.mc.local_values(xl)[self.rows] * self.row_scale - np.asarray(self.blk.offset, dtype=float)
+            if self.blk.rope:
+                C[:self.m] += a
+            out[self.nfree:] = C
+        return out
+
+    def jacobian(self, z, par) -> np.ndarray:
+        x, _a, _v, kap, _y, _w, p, _so, sc = self._split(z, par)
+        parts = [self.model.hessian_data(x, p) * sc]
+        if self.nc:
+            xl = x[self.dofs]
+            parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(kap))[2])
+            jd, _ = self._jacobian_local(xl)
+            parts += [jd, jd]
+            if self.blk.rope:
+                parts.append(np.ones(self.m))
+        else:
+            parts += [np.zeros(0)] * 3
+        return self.jac.data(parts)
+
+    def objective(self, z, par, grad: bool):
+        x, _a, v, _kap, y, w, _p, so, _sc = self._split(z, par)
+        f, gx, gv, _parts = _objective(x, y, w, v, so, self.exact)
+        if not grad:
+            return f, None
+        g = np.zeros(self.nz)
+        g[:self.nx] = gx
+        g[self.it:self.ik] = gv
+        return f, g
+
+    def hessian(self, z, par, lam_f, lam_g) -> np.ndarray:
+        x, _a, v, kap, y, w, p, so, sc = self._split(z, par)
+        _f, _gx, _gv, parts = _objective(x, y, w, v, so, self.exact)
+        parts = [lam_f * q for q in parts]
+        if self.exact:
+            lam_u = np.zeros(self.nx)
+            lam_u[self.free] = lam_g[:self.nfree]
+            parts.append(self.model.third_data(x, p, lam_u * sc))
+            xl, ul = x[self.dofs], lam_u[self.dofs]
+            parts.append(self.mc.local_third_entries(xl, self._lam_rows(kap), ul)[2])
+            parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(lam_g[self.nfree:]))[2])
+            _r, pc, pv = self.mc.local_hessian_product_entries(xl, ul)
+            full = np.zeros(self.mc.n_constraints)
+            full[self.rows] = self.row_scale
+            parts.append(pv * full[pc])
+        return self.hess.data(parts)
+
+
+def numeric_nlp(prob: DesignProblem, hessian: str):
+    """The flattened NLP with numpy callbacks: ``(nlp, functions)`` as :func:`~mdsr_opt.synthesis.nlp.
+    _assembled_nlp` returns them (``nlp`` over MX symbols ``x`` and ``p``; ``functions`` the ``grad_f``,
+    ``jac_g`` and ``hess_lag`` options of ``nlpsol``). Requires :func:`supports`."""
+    if not supports(prob):
+        raise ValueError("the numeric design NLP needs a numeric energy that the contractions do not move "
+                         "(the exact cable, a Neo-Hookean or linear elastic material)")
+    nlp = _NumericNLP(prob, hessian == "exact")
+    nz, npar, ng = nlp.nz, 3 * prob.mesh.n_nodes + nlp.npar + 2, nlp.nfree + nlp.nc
+    sz, sp_ = ca.Sparsity.dense(nz, 1), ca.Sparsity.dense(npar, 1)
+    one = ca.Sparsity.dense(1, 1)
+
+    def f(ins, outs):
+        outs[0][0] = nlp.objective(ins[0], ins[1], False)[0]
+
+    def g(ins, outs):
+        outs[0][:] = nlp.constraints(ins[0], ins[1])
+
+    def grad_f(ins, outs):
+        fv, gv = nlp.objective(ins[0], ins[1], outs[1] is not None)
+        if outs[0] is not None:
+            outs[0][0] = fv
+        if outs[1] is not None:
+            outs[1][:] = gv
+
+    def jac_g(ins, outs):
+        if outs[0] is not None:
+            outs[0][:] = nlp.constraints(ins[0], ins[1])
+        if outs[1] is not None:
+            outs[1][:] = nlp.jacobian(ins[0], ins[1])
+
+    def hess_lag(ins, outs):
+        if outs[0] is not None:
+            outs[0][:] = nlp.hessian(ins[0], ins[1], float(ins[2][0]), ins[3])
+
+    fns = {"f": BufferedFunction("design_f_num", [sz, sp_], [one], f),
+           "g": BufferedFunction("design_g_num", [sz, sp_], [ca.Sparsity.dense(ng, 1)], g),
+           "grad_f": BufferedFunction("design_grad_f_num", [sz, sp_], [one, sz], grad_f),
+           "jac_g": BufferedFunction("design_jac_g_num", [sz, sp_], [ca.Sparsity.dense(ng, 1), nlp.jac.sparsity],
+                                     jac_g),
+           "hess_lag": BufferedFunction("design_hess_lag_num", [sz, sp_, one, ca.Sparsity.dense(ng, 1)],
+                                        [nlp.hess.sparsity], hess_lag)}
+    zs, ps = ca.MX.sym("z", nz), ca.MX.sym("par", npar)
+    problem = {"x": zs, "p": ps, "f": fns["f"](zs, ps), "g": fns["g"](zs, ps)}
+    # the callbacks keep the evaluator alive; the solver keeps the callbacks
+    return problem, {k: fns[k] for k in ("grad_f", "jac_g", "hess_lag")}, fns
