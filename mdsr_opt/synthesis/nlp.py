@@ -1,5 +1,24 @@
-"""The flattened design NLP: states, contractions, alignment and rope multipliers in one IPOPT problem,
-with derivatives assembled term by term."""
+"""The flattened design NLP: state, contractions and muscle multipliers in one IPOPT problem.
+
+Variables ``z = [x (2n), a (m), kappa (nc)]``, parameters ``[y (2n), e (n), p0, so, sc]``::
+
+    min   so sum_i e_i |x_i - y_i|^2
+    s.t.  sc grad_x E(x, p0 + B a) + J(x)' kappa = 0   on the free coordinates
+          C(x) + [a; 0] = 0                            (rope strains, rigid end patches)
+          0 <= a <= a_max,  tension >= 0 (cable)
+
+The state's rigid pose is free: the energy and the muscle constraints do not change under a rigid motion,
+so the objective alone places ``x`` in its best alignment with the target, and the objective equals the
+aligned difference at every feasible point. The stationarity rows of the three gauge coordinates are left
+out: their residuals vanish with the others (the energy's gradient is orthogonal to rigid motions). Posed
+with an explicit rotation and translation instead, the alignment's three variables coupled to every node
+and made three dense rows in the KKT matrix: at 3k nodes and 4 muscles an IPOPT iteration took about 60 %
+longer (0.26 against 0.16 s for the two iterations of a reachable target).
+
+Three ways to give IPOPT the derivatives, all exact (iterates agree to rounding): numpy callbacks
+(:mod:`~mdsr_opt.synthesis.nlp_numeric`), an MX graph assembled term by term (:func:`_assembled_nlp`) and
+the NLP in SX differentiated by CasADi (:func:`_symbolic_nlp`).
+"""
 
 from __future__ import annotations
 
@@ -143,37 +162,6 @@ def _mapped(fn: ca.Function, X, *args) -> list:
     return fn.map(X.shape[1], "serial").call([X, *args])
 
 
-def _objective_terms(x, y, w, v, so, gauss_newton: bool):
-    """The alignment objective ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives, per node, as
-    vectorised MX expressions (``x``, ``y``: 2n; ``w``: n; ``v = [theta, t]``).
-
-    Returns ``f``, the gradient parts ``(g_x0, g_x1)`` (per node, 1 x n) and ``(g_theta, g_t0, g_t1)``, and
-    the Hessian parts as a dict ``{(a, b): 1 x n values}`` over the local variables ``a, b`` in ``x0, x1,
-    th, t0, t1`` (``a <= b``; entries of the ``(theta, t)`` block are per-node summands). With
-    ``gauss_newton`` the Hessian is ``2 so w_i J_i^T J_i`` (``J_i`` the residual's Jacobian)."""
-    X0, X1 = x[0::2].T, x[1::2].T
-    Y0, Y1 = y[0::2].T, y[1::2].T
-    W2 = 2 * so * w.T
-    c, s = ca.cos(v[0]), ca.sin(v[0])
-    rx = c * X0 - s * X1 + v[1] - Y0
-    ry = s * X0 + c * X1 + v[2] - Y1
-    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
-    f = so * ca.sum2(w.T * (rx ** 2 + ry ** 2))
-    gx = (W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry))
-    gv = (ca.sum2(W2 * (rx * px + ry * py)), ca.sum2(W2 * rx), ca.sum2(W2 * ry))
-    zero = 0 * W2
-    h = {("x0", "x0"): W2, ("x1", "x1"): W2,  # R^T R = I
-         ("x0", "th"): W2 * -X1, ("x1", "th"): W2 * X0,  # R^T dR/dtheta x_i = (-x_i1, x_i0)
-         ("x0", "t0"): W2 * c, ("x0", "t1"): W2 * s, ("x1", "t0"): W2 * -s, ("x1", "t1"): W2 * c,
-         ("th", "th"): W2 * (px ** 2 + py ** 2), ("th", "t0"): W2 * px, ("th", "t1"): W2 * py,
-         ("t0", "t0"): W2, ("t0", "t1"): zero, ("t1", "t1"): W2}
-    if not gauss_newton:  # the residual's curvature: r . d^2 r
-        h[("x0", "th")] += W2 * (-s * rx + c * ry)
-        h[("x1", "th")] += W2 * (-c * rx - s * ry)
-        h[("th", "th")] += W2 * -(rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
-    return f, gx, gv, h
-
-
 def _assembled_nlp(prob: DesignProblem, hessian: str):
     """The flattened NLP with its derivatives assembled term by term.
 
@@ -195,13 +183,12 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
     blk = prob.block
     nc = blk.nc
     nx = 2 * n
-    nz = nx + m + 3 + nc
-    it = nx + m  # index of theta; t follows
-    ik = it + 3  # index of the muscle constraints' multipliers kappa
+    nz = nx + m + nc
+    ik = nx + m  # index of the muscle constraints' multipliers kappa
     npar = model.n_params
     z = ca.MX.sym("z", nz)
     par = ca.MX.sym("par", 3 * n + npar + 2)
-    x, a, v, kap = z[:nx], z[nx:nx + m], z[it:ik], z[ik:]
+    x, a, kap = z[:nx], z[nx:nx + m], z[ik:]
     y, w, p0 = par[:nx], par[nx:nx + n], par[nx + n:nx + n + npar]
     so, sc = par[3 * n + npar], par[3 * n + npar + 1]
     B = sp.csr_matrix(prob.B)
@@ -219,14 +206,13 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
 
     # objective
     exact = hessian == "exact"  # else Gauss-Newton: the objective's part only, no third derivatives
-    f, gx, gv, ho = _objective_terms(x, y, w, v, so, not exact)
+    W2 = 2 * so * ca.repmat(w.T, 2, 1)  # (2, n): the objective's Hessian diagonal per coordinate
+    r = ca.reshape(x - y, 2, n)
+    f = so * ca.sum2(w.T * ca.sum1(r ** 2))
     # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
-    grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv, ca.MX(nc, 1)))
+    grad_f = ca.densify(ca.vertcat(ca.vec(W2 * r), ca.MX(m + nc, 1)))
     hess = _Assembly(nz, nz)
-    loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it), "t0": np.full(n, it + 1),
-           "t1": np.full(n, it + 2)}
-    for (ka, kb), val in ho.items():
-        hess.add(lam_f * val.T, loc[ka], loc[kb], np.arange(n))
+    hess.add(lam_f * ca.vec(W2), np.arange(nx), np.arange(nx), np.arange(nx))
 
     # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
     gval, gjac = _Assembly(nfree, 1), []  # the constraints, and their values from jac_g's term functions
@@ -363,8 +349,6 @@ def _symbolic_nlp(prob: DesignProblem, hessian: str):
     n, m = mesh.n_nodes, prob.m
     x = ca.SX.sym("x", 2 * n)
     a = ca.SX.sym("a", m)
-    th = ca.SX.sym("theta")
-    tt = ca.SX.sym("t", 2)
     y = ca.SX.sym("y", 2 * n)
     w = ca.SX.sym("w", n)
     p0 = ca.SX.sym("p0", model.n_params)
@@ -387,22 +371,16 @@ def _symbolic_nlp(prob: DesignProblem, hessian: str):
         C = ca.vertcat(*parts)
         Ca = C - (ca.vertcat(a, ca.SX(blk.n_rigid, 1)) if blk.rope else 0)  # the part that depends on x
         G = ca.vertcat(G + ca.gradient(ca.dot(kap, Ca), x)[free], C)
-    Xm = ca.reshape(x, 2, n)
-    Ym = ca.reshape(y, 2, n)
-    c, s = ca.cos(th), ca.sin(th)
-    rx = c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :]
-    ry = s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :]
-    f = so * ca.dot(w, (rx ** 2 + ry ** 2).T)
-    z = ca.vertcat(x, a, th, tt, kap)
+    r = ca.reshape(x - y, 2, n)
+    f = so * ca.dot(w, ca.sum1(r ** 2).T)
+    z = ca.vertcat(x, a, kap)
     par = ca.vertcat(y, w, p0, so, sc)
     extra = {}
     if hessian == "gauss-newton":
         # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
         lam_f = ca.SX.sym("lam_f")
         lam_g = ca.SX.sym("lam_g", G.numel())
-        r = ca.vertcat(ca.vec(rx * ca.sqrt(w).T), ca.vec(ry * ca.sqrt(w).T))
-        Jr = ca.jacobian(r, z)
-        Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
+        Hgn = ca.triu(ca.hessian(lam_f * f, z)[0])
         extra["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
                                         ["x", "p", "lam_f", "lam_g"], ["hess"])
     return {"x": z, "p": par, "f": f, "g": G}, extra
@@ -446,15 +424,15 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
             kap0[:m] = np.maximum(kap0[:m], 0.0)
     else:
         kap0 = np.zeros(blk.nc)
-    z0 = np.concatenate([x0, a_start, [al0.angle], al0.t, kap0])
+    # the state starts in its best alignment with the target (its rigid pose is a variable)
+    z0 = np.concatenate([al0.apply(x0.reshape(-1, 2)).reshape(-1), a_start, kap0])
     lbz = np.full(len(z0), -np.inf)
     ubz = np.full(len(z0), np.inf)
-    lbz[prob.gauge] = prob.X[prob.gauge]
-    ubz[prob.gauge] = prob.X[prob.gauge]
-    lbz[2 * n:2 * n + m] = 0.0
-    ubz[2 * n:2 * n + m] = prob.a_max
+    ik = 2 * n + m  # the multipliers kappa
+    lbz[2 * n:ik] = 0.0
+    ubz[2 * n:ik] = prob.a_max
     if blk.rope:  # a rope only pulls: tension >= 0
-        lbz[2 * n + m + 3:2 * n + 2 * m + 3] = 0.0
+        lbz[ik:ik + m] = 0.0
     par = np.concatenate([prob.y.reshape(-1), prob.w, prob.p0, [so, sc]])
     sol = solver(x0=z0, p=par, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
     st = solver.stats()
@@ -468,7 +446,6 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         # tensions of ~1e-7 and contractions off by ~1e-6. Polish: fix the near-zero tensions at 0 (their
         # ropes then only measure a = achieved contraction) and solve again from the solution; kept when
         # it converges and the objective is no worse.
-        ik = 2 * n + m + 3
         kr = z[ik:ik + m]
         small = kr < 1e-4 * max(1.0, float(kr.max()))
         if small.any():
@@ -484,7 +461,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
                     float(sol2["f"]) <= float(sol["f"]) * (1 + 1e-6) + 1e-14:
                 z = np.asarray(sol2["x"]).ravel()
     out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
-           "kappa": z[2 * n + m + 3:],
+           "kappa": z[ik:],
            "status": str(st.get("return_status", "unknown")), "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt

@@ -1,31 +1,34 @@
 """The flattened design NLP evaluated in numpy: IPOPT through CasADi callbacks, no symbolic graph.
 
-The NLP is the one of :func:`~mdsr_opt.synthesis.nlp._assembled_nlp` (same variables, parameters,
-scaling, constraints and exact derivatives; iterates agree to rounding) but every function IPOPT calls is
-a :class:`~mdsr_opt.mechanics.assembly.BufferedFunction` that fills CasADi's buffers from vectorised
-numpy:
+The NLP is the one :mod:`~mdsr_opt.synthesis.nlp` states (same variables, parameters, scaling,
+constraints and exact derivatives; iterates agree with its MX and SX forms to rounding), but every
+function IPOPT calls is a :class:`~mdsr_opt.mechanics.assembly.BufferedFunction` that fills CasADi's
+buffers from vectorised numpy:
 
 - the energy's gradient, Hessian and third derivative along the multipliers
   (:meth:`~mdsr_opt.mechanics.model.EnergyModel.third_data`) in the CSC order of the mesh's
   :class:`~mdsr_opt.mechanics.assembly.HessianPattern`;
 - the muscle constraints' values, Jacobian, Hessian, third derivative and Hessian-vector products from
   their closed forms (:class:`~mdsr_opt.mechanics.constraints.MuscleConstraints`);
-- the alignment objective ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives per node.
+- the objective ``so sum_i w_i |x_i - y_i|^2`` (the state's rigid pose is free, see
+  :mod:`~mdsr_opt.synthesis.nlp`): a diagonal Hessian.
 
 Each sparse output is summed from its parts by one ``bincount`` into a pattern made once
 (:class:`SparseLayout`), so building the NLP costs index arithmetic only: at 3k nodes and 4 muscles
 about 30 ms, against about 0.5 s for the MX graph of the term-by-term assembly.
 
 It applies when the energy is numeric (Neo-Hookean or linear elastic, see
-:attr:`~mdsr_opt.mechanics.model.EnergyModel.is_numeric`) and does not depend on the contractions, that
-is for the exact cable (:func:`supports`); the per-segment springs, whose rest lengths move with the
-contractions, use the MX assembly.
+:attr:`~mdsr_opt.mechanics.model.EnergyModel.is_numeric`) and the contractions move at most the
+springs' rest lengths (:func:`supports`): the exact cable and the per-segment springs. A spring
+``k/2 (l - r l0)^2`` whose ratio ``r`` moves with ``a`` adds ``-k l0 grad l dr/da`` to the Jacobian's
+``a`` columns and ``-k l0 Hessian(l) lam dr/da`` to the Lagrangian Hessian's ``x``-``a`` block.
 """
 
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 from ..mechanics.assembly import BufferedFunction
 from .problem import DesignProblem
@@ -33,9 +36,21 @@ from .problem import DesignProblem
 __all__ = ["SparseLayout", "numeric_nlp", "supports"]
 
 
+def _rest_ratio_rows(prob: DesignProblem) -> slice:
+    """Where the springs' rest-length ratios sit in the model's parameters."""
+    ne = prob.model.n_edges
+    return slice(2 + ne, 2 + 2 * ne)
+
+
 def supports(prob: DesignProblem) -> bool:
-    """Whether :func:`numeric_nlp` applies: a numeric energy that the contractions do not move."""
-    return bool(getattr(prob.model, "is_numeric", False)) and not np.any(prob.B)
+    """Whether :func:`numeric_nlp` applies: a numeric energy (Neo-Hookean or linear elastic, no sliding
+    cable) in which the contractions move at most the springs' rest lengths (the cable moves nothing, the
+    per-segment springs their rest lengths)."""
+    if not getattr(prob.model, "is_numeric", False):
+        return False
+    B = np.array(prob.B, dtype=float, copy=True)
+    B[_rest_ratio_rows(prob)] = 0.0
+    return not np.any(B)
 
 
 class SparseLayout:
@@ -88,35 +103,6 @@ class SparseLayout:
         return np.bincount(self._slot, weights=vals[self._keep], minlength=self.nnz)
 
 
-def _objective(x, y, w, v, so, exact: bool):
-    """``(f, dfdx (2n,), dfdv (3,), Hessian parts)`` of ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` with
-    ``v = (theta, t0, t1)``. The Hessian parts are per-node arrays in the order of :data:`_OBJ_PARTS`
-    (the ``v``-``v`` ones summed over the nodes by the layout); without ``exact``, the Gauss-Newton
-    Hessian ``2 so w_i J_i' J_i`` (``J_i`` the residual's Jacobian)."""
-    X0, X1, Y0, Y1 = x[0::2], x[1::2], y[0::2], y[1::2]
-    c, s = np.cos(v[0]), np.sin(v[0])
-    rx = c * X0 - s * X1 + v[1] - Y0
-    ry = s * X0 + c * X1 + v[2] - Y1
-    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
-    W2 = 2.0 * so * w
-    f = so * float(w @ (rx * rx + ry * ry))
-    gx = np.empty_like(x)
-    gx[0::2], gx[1::2] = W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry)
-    gv = np.array([W2 @ (rx * px + ry * py), W2 @ rx, W2 @ ry])
-    h_xth0, h_xth1, h_thth = W2 * -X1, W2 * X0, W2 * (px * px + py * py)
-    if exact:  # the residual's curvature r . d^2 r
-        h_xth0 = h_xth0 + W2 * (-s * rx + c * ry)
-        h_xth1 = h_xth1 + W2 * (-c * rx - s * ry)
-        h_thth = h_thth - W2 * (rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
-    parts = [W2, W2, h_xth0, h_xth1, W2 * c, W2 * s, W2 * -s, W2 * c, h_thth, W2 * px, W2 * py, W2, W2]
-    return f, gx, gv, parts
-
-
-#: the objective's Hessian entries per node, as (row, col) local names: x0, x1 the node's coordinates
-_OBJ_PARTS = [("x0", "x0"), ("x1", "x1"), ("x0", "th"), ("x1", "th"), ("x0", "t0"), ("x0", "t1"), ("x1", "t0"),
-              ("x1", "t1"), ("th", "th"), ("th", "t0"), ("th", "t1"), ("t0", "t0"), ("t1", "t1")]
-
-
 class _NumericNLP:
     """Index bookkeeping and the evaluation functions of the numeric NLP (see :func:`numeric_nlp`)."""
 
@@ -129,8 +115,7 @@ class _NumericNLP:
         nc = blk.nc
         self.n, self.m, self.nc = n, m, nc
         self.nx = nx = 2 * n
-        self.it = it = nx + m
-        self.ik = ik = it + 3
+        self.ik = ik = nx + m
         self.nz = nz = ik + nc
         self.npar = model.n_params
         self.free = np.nonzero(prob.free)[0]
@@ -161,13 +146,18 @@ class _NumericNLP:
         jac.add(nfree + jr, jc)  # dC/dx
         if blk.rope:  # d(C + a)/da on the rope rows
             jac.add(nfree + np.arange(m), nx + np.arange(m))
+        # springs: the rest-length ratio r_e of edge e moves with a_c by B[r_e, c] (every nonzero of B)
+        Br = sp.coo_matrix(np.asarray(prob.B)[_rest_ratio_rows(prob)])
+        self._se, self._sc_, self._sb = Br.row.astype(np.int64), Br.col.astype(np.int64), Br.data
+        E = np.asarray(mesh.edges, dtype=np.int64)[self._se]
+        self._sdofs = np.column_stack([2 * E[:, 1], 2 * E[:, 1] + 1, 2 * E[:, 0], 2 * E[:, 0] + 1])  # j, then i
+        self._sl0 = np.asarray(mesh.edge_lengths, dtype=float)[self._se]
+        acol = np.repeat(nx + self._sc_, 4)
+        jac.add(cidx[self._sdofs.ravel()], acol)  # sc d(grad E)/da
         jac.finish()
 
         hess = self.hess = SparseLayout(nz, nz, upper=True)
-        loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it),
-               "t0": np.full(n, it + 1), "t1": np.full(n, it + 2)}
-        for a, b in _OBJ_PARTS:
-            hess.add(loc[a], loc[b])
+        hess.add(np.arange(nx), np.arange(nx))  # the objective's diagonal
         if exact:
             hess.add(prow, pcols)  # sc D^3 E [lam_u]
             tr, tc, _ = self.mc.local_third_entries(prob.X[dl], lam0, z0)
@@ -175,14 +165,39 @@ class _NumericNLP:
             hess.add(dl[hr], dl[hc])  # omega . Hessian(C)
             pr, pc, _ = self.mc.local_hessian_product_entries(prob.X[dl], z0)
             hess.add(dl[pr], np.where(rowmap[pc] >= 0, ik + rowmap[pc], -1))  # d^2 (lam_u . J' kappa)/dx dkappa
+            hess.add(self._sdofs.ravel(), acol)  # sc d^2 (lam_u . grad E)/dx da
         hess.finish()
         self.cidx = cidx
 
     # ------------------------------------------------------------------ evaluation
     def _split(self, z, par):
-        nx, m, it, ik, n = self.nx, self.m, self.it, self.ik, self.n
-        return (z[:nx], z[nx:it], z[it:ik], z[ik:], par[:nx], par[nx:nx + n], par[nx + n:nx + n + self.npar],
+        nx, ik, n = self.nx, self.ik, self.n
+        return (z[:nx], z[nx:ik], z[ik:], par[:nx], par[nx:nx + n], par[nx + n:nx + n + self.npar],
                 float(par[nx + n + self.npar]), float(par[nx + n + self.npar + 1]))
+
+    def _params(self, p0, a) -> np.ndarray:
+        return p0 + self.prob.B @ a if len(self._se) else p0
+
+    def _spring_parts(self, x, p0, v=None) -> np.ndarray:
+        """Per moving spring (edge e, muscle c, weight b = dr_e/da_c), with ``d l / dr = 0`` and
+        ``d grad W / dr = -k l0 grad l``: the values ``-b k l0 grad l`` (``v`` None: the gradient's
+        derivative in ``a``, the Jacobian's ``a`` columns) or ``-b k l0 Hessian(l) v`` (the Lagrangian
+        Hessian's ``x``-``a`` block), at the edge's dofs ``(x_j, y_j, x_i, y_i)``, (4 per spring)."""
+        if not len(self._se):
+            return np.zeros(0)
+        X = x.reshape(-1, 2)
+        k = p0[2:2 + self.model.n_edges][self._se]  # the stiffness does not move with a
+        d = X[self._sdofs[:, 0] // 2] - X[self._sdofs[:, 2] // 2]
+        ln = np.sqrt((d * d).sum(1))
+        u = d / ln[:, None]
+        if v is None:
+            q = u
+        else:
+            V = v.reshape(-1, 2)
+            dv = V[self._sdofs[:, 0] // 2] - V[self._sdofs[:, 2] // 2]
+            q = (dv - (u * dv).sum(1)[:, None] * u) / ln[:, None]
+        c = -(self._sb * k * self._sl0)[:, None]
+        return np.column_stack([c * q, -c * q]).ravel()
 
     def _lam_rows(self, kappa) -> np.ndarray:
         """Block multipliers as multipliers of all the constraints' rows (scaled as the block scales them)."""
@@ -196,8 +211,8 @@ class _NumericNLP:
         return Jl.data[self._jkeep] * self._jscale, Jl
 
     def constraints(self, z, par) -> np.ndarray:
-        x, a, _v, kap, _y, _w, p, _so, sc = self._split(z, par)
-        g = self.model.gradient(x, p) * sc
+        x, a, kap, _y, _w, p0, _so, sc = self._split(z, par)
+        g = self.model.gradient(x, self._params(p0, a)) * sc
         if self.nc:
             xl = x[self.dofs]
             lam = self._lam_rows(kap)
@@ -213,37 +228,34 @@ class _NumericNLP:
         return out
 
     def jacobian(self, z, par) -> np.ndarray:
-        x, _a, _v, kap, _y, _w, p, _so, sc = self._split(z, par)
-        parts = [self.model.hessian_data(x, p) * sc]
-        if self.nc:
-            xl = x[self.dofs]
-            parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(kap))[2])
-            jd, _ = self._jacobian_local(xl)
-            parts += [jd, jd]
-            if self.blk.rope:
-                parts.append(np.ones(self.m))
-        else:
-            parts += [np.zeros(0)] * 3
+        x, a, kap, _y, _w, p0, _so, sc = self._split(z, par)
+        parts = [self.model.hessian_data(x, self._params(p0, a)) * sc]
+        xl = x[self.dofs]
+        parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(kap))[2])  # zeros without rows
+        jd, _ = self._jacobian_local(xl)
+        parts += [jd, jd]
+        if self.blk.rope:
+            parts.append(np.ones(self.m))
+        parts.append(sc * self._spring_parts(x, p0))
         return self.jac.data(parts)
 
     def objective(self, z, par, grad: bool):
-        x, _a, v, _kap, y, w, _p, so, _sc = self._split(z, par)
-        f, gx, gv, _parts = _objective(x, y, w, v, so, self.exact)
+        x, _a, _kap, y, w, _p, so, _sc = self._split(z, par)
+        r = (x - y).reshape(-1, 2)
+        f = so * float(w @ (r * r).sum(1))
         if not grad:
             return f, None
         g = np.zeros(self.nz)
-        g[:self.nx] = gx
-        g[self.it:self.ik] = gv
+        g[:self.nx] = (2.0 * so * w[:, None] * r).ravel()
         return f, g
 
     def hessian(self, z, par, lam_f, lam_g) -> np.ndarray:
-        x, _a, v, kap, y, w, p, so, sc = self._split(z, par)
-        _f, _gx, _gv, parts = _objective(x, y, w, v, so, self.exact)
-        parts = [lam_f * q for q in parts]
+        x, a, kap, _y, w, p0, so, sc = self._split(z, par)
+        parts = [np.repeat(2.0 * so * lam_f * w, 2)]
         if self.exact:
             lam_u = np.zeros(self.nx)
             lam_u[self.free] = lam_g[:self.nfree]
-            parts.append(self.model.third_data(x, p, lam_u * sc))
+            parts.append(self.model.third_data(x, self._params(p0, a), lam_u * sc))
             xl, ul = x[self.dofs], lam_u[self.dofs]
             parts.append(self.mc.local_third_entries(xl, self._lam_rows(kap), ul)[2])
             parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(lam_g[self.nfree:]))[2])
@@ -251,16 +263,32 @@ class _NumericNLP:
             full = np.zeros(self.mc.n_constraints)
             full[self.rows] = self.row_scale
             parts.append(pv * full[pc])
+            parts.append(sc * self._spring_parts(x, p0, lam_u))
         return self.hess.data(parts)
 
 
 def numeric_nlp(prob: DesignProblem, hessian: str):
-    """The flattened NLP with numpy callbacks: ``(nlp, functions)`` as :func:`~mdsr_opt.synthesis.nlp.
-    _assembled_nlp` returns them (``nlp`` over MX symbols ``x`` and ``p``; ``functions`` the ``grad_f``,
-    ``jac_g`` and ``hess_lag`` options of ``nlpsol``). Requires :func:`supports`."""
+    """The flattened NLP with numpy callbacks (requires :func:`supports`).
+
+    Parameters
+    ----------
+    prob : DesignProblem
+    hessian : {"exact", "gauss-newton"}
+        The Lagrangian's exact Hessian, or the objective's only (no third derivatives).
+
+    Returns
+    -------
+    nlp : dict
+        ``{"x", "p", "f", "g"}`` for ``casadi.nlpsol``, over MX symbols (``f`` and ``g`` are callbacks).
+    options : dict
+        The ``grad_f``, ``jac_g`` and ``hess_lag`` options of ``nlpsol``.
+    keep : dict
+        Every callback: keep it referenced as long as the solver lives (CasADi does not own them).
+    """
     if not supports(prob):
-        raise ValueError("the numeric design NLP needs a numeric energy that the contractions do not move "
-                         "(the exact cable, a Neo-Hookean or linear elastic material)")
+        raise ValueError("the numeric design NLP needs a numeric energy (a Neo-Hookean or linear elastic "
+                         "material, no sliding cable) whose parameters the contractions move at most in the "
+                         "springs' rest lengths")
     nlp = _NumericNLP(prob, hessian == "exact")
     nz, npar, ng = nlp.nz, 3 * prob.mesh.n_nodes + nlp.npar + 2, nlp.nfree + nlp.nc
     sz, sp_ = ca.Sparsity.dense(nz, 1), ca.Sparsity.dense(npar, 1)
@@ -298,5 +326,4 @@ def numeric_nlp(prob: DesignProblem, hessian: str):
                                         [nlp.hess.sparsity], hess_lag)}
     zs, ps = ca.MX.sym("z", nz), ca.MX.sym("par", npar)
     problem = {"x": zs, "p": ps, "f": fns["f"](zs, ps), "g": fns["g"](zs, ps)}
-    # the callbacks keep the evaluator alive; the solver keeps the callbacks
     return problem, {k: fns[k] for k in ("grad_f", "jac_g", "hess_lag")}, fns
