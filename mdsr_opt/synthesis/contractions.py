@@ -77,10 +77,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
     derivatives : {"numeric", "assembled", "casadi"}
         Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
-        nothing symbolic to build (the exact cable; the springs model, whose rest lengths move with the
-        contractions, gets ``"assembled"``); ``"assembled"``, an MX graph assembled term by term from small
-        per-term functions (linear in the mesh size); ``"casadi"``, the NLP in SX differentiated by CasADi
-        (the reference; slow to build). All are exact; iterates agree to rounding.
+        nothing symbolic to build; ``"assembled"``, an MX graph assembled term by term from small per-term
+        functions (linear in the mesh size); ``"casadi"``, the NLP in SX differentiated by CasADi (the
+        reference; slow to build). All are exact; iterates agree to rounding.
     outer : {"nelder-mead", "powell"}
         Derivative-free only: the scipy method.
     options : dict, optional

@@ -310,8 +310,9 @@ def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_
     built solver serves any target, weights, material numbers and stiffness.
 
     ``derivatives="numeric"`` gives IPOPT numpy callbacks (:func:`~mdsr_opt.synthesis.nlp_numeric.numeric_nlp`)
-    where they apply (the exact cable), else what ``"assembled"`` gives: the derivatives assembled term by
-    term in MX (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX and lets CasADi differentiate it.
+    where they apply (a Neo-Hookean or linear elastic body), else what ``"assembled"`` gives: the
+    derivatives assembled term by term in MX (:func:`_assembled_nlp`); ``"casadi"`` builds the NLP in SX
+    and lets CasADi differentiate it.
     """
     mesh = prob.mesh
     if derivatives == "numeric" and not numeric_supports(prob):
