@@ -20,6 +20,7 @@ import scipy.sparse.linalg as spla
 from .anchors import body_size
 from .constraints import MuscleConstraints
 from .kkt import kkt_factor
+from .loadsteps import min_jacobian
 
 __all__ = ["ConstrainedModel"]
 
@@ -215,8 +216,7 @@ class ConstrainedModel:
         y = np.array(x, dtype=float)
         y[free] += sol[:free.sum()]
         y[fixed] = values
-        j0 = float(self.mesh.jacobians(np.asarray(x, dtype=float).reshape(-1, 2)).min())
-        if self.mesh.jacobians(y.reshape(-1, 2)).min() < 0.25 * j0:
+        if min_jacobian(self.mesh, y) < 0.25 * lin["j0"]:
             return None
         if self.n_targets:
             # A rope contracted from straight: the linearised step bends the body (rotations to first order)
@@ -238,12 +238,19 @@ class ConstrainedModel:
         ``x``'s own multipliers (every rope taken as at its length: under load the energy's Hessian alone can
         be indefinite where the ropes hold the body) split into free-free and free-fixed blocks, the energy
         gradient, the constraints' Jacobian and values, and the KKT factorisations made so far (per active
-        set). The last one is kept: load stepping predicts from the same state again after a rejected step."""
+        set), and the smallest ``det F`` at ``x``. The last one is kept: load stepping predicts from the same
+        state again after a rejected step. So is the rest state's, per parameters and fixed coordinates: every
+        solve from rest starts there (a design's warm start and its verification, at other contractions)."""
         x = np.asarray(x, dtype=float)
         key = (x.tobytes(), np.asarray(pe, dtype=float).tobytes(), fixed.tobytes())
         last = self.__dict__.get("_last_linearisation")
         if last is not None and last[0] == key:
             return last[1]
+        at_rest = np.array_equal(x, self.mesh.points.reshape(-1))
+        rest = self.__dict__.setdefault("_rest_linearisations", {})
+        if at_rest and key in rest:
+            self.__dict__["_last_linearisation"] = (key, rest[key])
+            return rest[key]
         free = ~fixed
         g = self.model.gradient(x, pe)
         c = self.values(x)
@@ -251,8 +258,13 @@ class ConstrainedModel:
                                     gradient=g)
         H = self.hessian(x, self.params(pe, c[:self.n_targets] if self.n_targets else None, lam_x))
         Hf = H[free]
-        lin = {"Hff": Hf[:, free], "Hfc": Hf[:, fixed], "g": g, "J": self.jacobian(x), "c": c, "lu": {}}
+        lin = {"Hff": Hf[:, free], "Hfc": Hf[:, fixed], "g": g, "J": self.jacobian(x), "c": c, "lu": {},
+               "j0": min_jacobian(self.mesh, x)}
         self.__dict__["_last_linearisation"] = (key, lin)
+        if at_rest:
+            if len(rest) >= 4:
+                rest.pop(next(iter(rest)))
+            rest[key] = lin
         return lin
 
     def multipliers(self, x, p, fixed, rtol: float = 1e-7, gradient=None) -> tuple[np.ndarray, np.ndarray]:
