@@ -104,3 +104,22 @@ def test_a_second_solve_from_rest_factors_the_rest_state_once_and_finds_the_same
     other = Mesh.rectangle(4.0, 1.0, 24, 6)  # nothing cached on it
     ref = solve_internal(other, MAT, bottom_and_top(other), [0.15, 0.12])
     assert np.array_equal(ref.x, again.x) and ref.energy == again.energy
+
+
+def test_the_kept_multipliers_answer_only_their_own_state_targets_and_fixed_set(setup):
+    mesh, mus, cm, fixed, calls = setup
+    res = solve_internal(mesh, MAT, mus, [0.2, 0.1], align_to_rest=False)
+    x = res.x.reshape(-1)
+    pe = cm.model.params(MAT)
+    cases = [(x, targets(cm, [0.2, 0.1]), fixed), (x, targets(cm, [0.2, 0.1]), fixed),  # asked twice
+             (x, targets(cm, [0.1, 0.1]), fixed),  # other targets: the bottom rope is then slack
+             (x + 1e-4 * np.sin(np.arange(x.size)), targets(cm, [0.2, 0.1]), fixed),  # another state
+             (x, targets(cm, [0.2, 0.1]), np.roll(fixed, 4))]  # another fixed set
+    for xi, t, fx in cases:
+        lam, taut = cm.multipliers(xi, cm.params(pe, t), fx)
+        ref_lam, ref_taut = ConstrainedModel(cm.model, cm.constraints, ropes=True).multipliers(xi, cm.params(pe, t), fx)
+        assert np.array_equal(lam, ref_lam) and np.array_equal(taut, ref_taut)
+        lam[:] = 1e9  # the caller's copy: the kept answer is unchanged
+        taut[:] = False
+    lam, taut = cm.multipliers(x, cm.params(pe, targets(cm, [0.2, 0.1])), fixed)
+    assert np.all(taut) and np.all(lam[:2] > 0) and np.all(np.abs(lam) < 1e9)
