@@ -1,5 +1,6 @@
-"""What the forward (internal-driving) solves cache between calls, and that a cache answers only its own
-question: the rest state's linearisation and KKT factorisation of the constrained predictor."""
+"""What the forward (internal-driving) solves keep between calls, and that a kept answer answers only its
+own question (the rest state's linearisation and KKT factorisation, the last multipliers); the constraint
+Jacobian handed to IPOPT."""
 
 import numpy as np
 import pytest
@@ -123,3 +124,25 @@ def test_the_kept_multipliers_answer_only_their_own_state_targets_and_fixed_set(
         taut[:] = False
     lam, taut = cm.multipliers(x, cm.params(pe, targets(cm, [0.2, 0.1])), fixed)
     assert np.all(taut) and np.all(lam[:2] > 0) and np.all(np.abs(lam) < 1e9)
+
+
+@pytest.mark.parametrize("ropes", [True, False])
+def test_the_nlp_jacobian_given_to_ipopt_is_that_of_the_nlp_constraints(ropes):
+    import casadi as ca
+
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    # patches of a few nodes at each muscle end: rigid rows besides the ropes
+    cm = ConstrainedModel(get_model(mesh, MAT), muscle_constraints(mesh, bottom_and_top(mesh), 0.35), ropes=ropes)
+    assert cm.n_targets == (2 if ropes else 0) and cm.n_rows > cm.n_targets
+    x = ca.MX.sym("x", cm.n_dof)
+    mine = ca.Function("mine", [x], [cm.nlp_jacobian_expr(x)])
+    ad = ca.Function("ad", [x], [ca.jacobian(cm.nlp_constraints_expr(x), x)])
+    rng = np.random.default_rng(3)
+    X = mesh.points.reshape(-1)
+    for y in (X, X + 0.05 * rng.standard_normal(X.size)):
+        J1, J2 = mine(y), ad(y)
+        assert J1.shape == (cm.n_rows, cm.n_dof) == J2.shape
+        assert np.abs(np.asarray(J1.full()) - np.asarray(J2.full())).max() <= 1e-14
+        # and the numeric Jacobian, scaled as the NLP sees the rows
+        ref = (cm.jacobian(y).toarray() * cm.row_scale[:, None])
+        assert np.abs(np.asarray(J1.full()) - ref).max() <= 1e-12 * np.abs(ref).max()

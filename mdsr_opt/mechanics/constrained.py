@@ -25,6 +25,15 @@ from .loadsteps import min_jacobian
 __all__ = ["ConstrainedModel"]
 
 
+def _casadi_sparse(M) -> ca.DM:
+    """A scipy sparse matrix as a CasADi DM of the same sparsity (``ca.DM(M)`` itself converts entry by entry,
+    3 ms for a few thousand entries)."""
+    C = sp.csc_matrix(M, dtype=float)
+    C.sort_indices()
+    pattern = ca.Sparsity(C.shape[0], C.shape[1], C.indptr.tolist(), C.indices.tolist())
+    return ca.DM(pattern, C.data.tolist())
+
+
 class ConstrainedModel:
     """An :class:`~mdsr_opt.model.EnergyModel` whose minimisation carries muscle constraints.
 
@@ -141,6 +150,23 @@ class ConstrainedModel:
     def nlp_constraints_expr(self, x):
         """The rows as the NLP sees them: multiplied by :attr:`row_scale` (dimensionless)."""
         return self.constraints_expr(x) * ca.DM(self.row_scale)
+
+    def nlp_jacobian_expr(self, x):
+        """The Jacobian (n_rows, n_dof) of :meth:`nlp_constraints_expr` as a sparse CasADi expression of ``x``.
+
+        The nonlinear rows are differentiated on the local coordinates (an SX function of a few hundred
+        inputs), the linear rows are a constant matrix. Given to IPOPT as ``jac_g`` it spares ``nlpsol`` its
+        own differentiation through the MX graph: 17 ms against 31 ms to build a 3k-node solver with 4
+        ropes, the same iterates to rounding (solution 9e-16 apart, energy 5e-16 relative)."""
+        mc = self.constraints
+        nl, P, Lin = mc.symbolic_parts()
+        R = sp.diags(self.row_scale) @ sp.identity(mc.n_constraints, format="csr")[self.rows]
+        xl = ca.SX.sym("xl", mc.n_local)
+        Jl = ca.mtimes(_casadi_sparse(R @ P), ca.jacobian(nl(xl), xl)) + _casadi_sparse(R @ Lin)
+        local = ca.Function("muscle_jac_local", [xl], [Jl])
+        dofs = np.asarray(mc.dofs, dtype=np.int64)
+        S = sp.csc_matrix((np.ones(len(dofs)), (np.arange(len(dofs)), dofs)), shape=(len(dofs), self.n_dof))
+        return ca.mtimes(local(x[dofs.tolist()]), _casadi_sparse(S))
 
     def nlp_bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds` for :meth:`nlp_constraints_expr`."""
