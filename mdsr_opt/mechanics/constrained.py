@@ -288,7 +288,7 @@ class ConstrainedModel:
                "j0": min_jacobian(self.mesh, x)}
         self.__dict__["_last_linearisation"] = (key, lin)
         if at_rest:
-            if len(rest) >= 4:
+            if len(rest) >= 2:  # each holds a KKT factor (6 MB at 3k nodes); one per material and gauge is typical
                 rest.pop(next(iter(rest)))
             rest[key] = lin
         return lin
