@@ -141,6 +141,9 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
         o["show_eval_warnings"] = False
         if numeric:  # the callbacks have no derivatives; nlp_grad only serves lam_x/lam_p, which are unused
             o["no_nlp_grad"] = True
+            if cmodel.n_rows:  # the constraints' Jacobian from their local SX pieces: no AD of the MX graph
+                o["jac_g"] = ca.Function("jac_g_c", [x, p], [g, cmodel.nlp_jacobian_expr(x)], ["x", "p"],
+                                         ["g", "jac_g_x"])
         if plugin in ("ipopt", "sqpmethod"):
             lam_f = ca.MX.sym("lam_f")
             lam_g = ca.MX.sym("lam_g", g.size1())

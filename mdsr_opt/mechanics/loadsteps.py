@@ -74,7 +74,7 @@ def initial_guess_of(initial_guess, mesh) -> tuple[bool, np.ndarray]:
                              f"got {initial_guess!r}")
         return initial_guess == "predictor", X
     x0 = mesh._check_state(initial_guess)
-    if _min_J(mesh, x0.reshape(-1)) <= 0.0:
+    if min_jacobian(mesh, x0.reshape(-1)) <= 0.0:
         raise ValueError("initial_guess inverts an element (det F <= 0)")
     return False, np.array(x0, dtype=float).reshape(-1)
 
@@ -126,9 +126,20 @@ def _predict(model, p, x, fixed, values):
     return y
 
 
-def _min_J(mesh, xflat):
-    """The smallest ``J = det F = det Ds / det Dm`` over the triangles (``mesh.jacobians``, without the
-    batched 2 x 2 inverses and determinants)."""
+def min_jacobian(mesh, xflat) -> float:
+    """The smallest ``J = det F = det Ds / det Dm`` over the triangles.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    xflat : (2n,) or (n, 2) array of node positions.
+
+    Returns
+    -------
+    float
+        ``min J``, as ``mesh.jacobians(x).min()`` up to rounding, without its batched 2 x 2 inverses and
+        determinants (0.09 ms against 2.3 ms at 3k nodes); ``J <= 0`` marks an inverted element.
+    """
     t = mesh.triangles
     x = np.asarray(xflat, dtype=float).reshape(-1)
     xs, ys = x[0::2], x[1::2]
@@ -171,7 +182,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
                 guess = x.copy()
                 guess[fixed] = vals
             t_solve += time.perf_counter() - t0
-            if guess is None or _min_J(mesh, guess) <= 0.0:
+            if guess is None or min_jacobian(mesh, guess) <= 0.0:
                 status = "predictor inverted an element" if predict else "first guess inverts an element"
                 ds /= 2
                 continue
@@ -184,7 +195,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
             t_solve += out.solve_time
             t_build += out.build_time
             status = out.status
-            if out.success and np.all(np.isfinite(out.x)) and _min_J(mesh, out.x) > 0.0:
+            if out.success and np.all(np.isfinite(out.x)) and min_jacobian(mesh, out.x) > 0.0:
                 x, s = out.x, s_new
                 steps.append(s)
                 if verbose:
@@ -245,7 +256,7 @@ def _kick(mesh, model, p, x, direction, scale=1.0):
         a = amp
         for _ in range(8):
             y = x + sign * a * direction
-            if _min_J(mesh, y) > 0.0:
+            if min_jacobian(mesh, y) > 0.0:
                 e = model.energy(y, p)
                 if np.isfinite(e) and (best is None or e < best[0]):
                     best = (e, y)
@@ -268,7 +279,7 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
             break
         out = minimize(model, p, y, fixed, values, backend=backend, tol=tol, max_iter=max_iter, options=options)
         iters += out.iterations
-        if not (out.success and np.all(np.isfinite(out.x)) and _min_J(mesh, out.x) > 0.0):
+        if not (out.success and np.all(np.isfinite(out.x)) and min_jacobian(mesh, out.x) > 0.0):
             scale /= 2  # keep x and try a smaller kick
             continue
         if verbose:
@@ -297,7 +308,7 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
         g, energy = model.gradient(xflat, p), model.energy(xflat, p)
     scale = material.E * material.thickness * mesh.size
     residual = float(np.abs(g[~fixed]).max()) / scale if (~fixed).any() else 0.0
-    mj = _min_J(mesh, xflat)
+    mj = min_jacobian(mesh, xflat)
     ok = bool(success and mj > 0 and residual <= tol_residual)
     if success and not ok:
         status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
