@@ -297,8 +297,8 @@ def main(argv=None) -> int:
         for name in results:
             for r in old:
                 if r["scene"] == name:
-                    bars[f"{name} {r['label'] or 'before'}"] = {k: float(r.get(k) or 0) for k in STAGES}
-            bars[name if name.endswith(" serial") else f"{name} {a.label or 'now'}"] = results[name]
+                    bars[f"{name} ({r['label'] or 'before'})"] = {k: float(r.get(k) or 0) for k in STAGES}
+            bars[f"{name} ({a.label or 'now'})"] = results[name]
     _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock)
     print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")
     return 0
