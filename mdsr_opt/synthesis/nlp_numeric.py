@@ -148,11 +148,11 @@ class _NumericNLP:
             jac.add(nfree + np.arange(m), nx + np.arange(m))
         # springs: the rest-length ratio r_e of edge e moves with a_c by B[r_e, c] (every nonzero of B)
         Br = sp.coo_matrix(np.asarray(prob.B)[_rest_ratio_rows(prob)])
-        self._se, self._sc_, self._sb = Br.row.astype(np.int64), Br.col.astype(np.int64), Br.data
+        self._se, self._scol, self._sb = Br.row.astype(np.int64), Br.col.astype(np.int64), Br.data
         E = np.asarray(mesh.edges, dtype=np.int64)[self._se]
         self._sdofs = np.column_stack([2 * E[:, 1], 2 * E[:, 1] + 1, 2 * E[:, 0], 2 * E[:, 0] + 1])  # j, then i
         self._sl0 = np.asarray(mesh.edge_lengths, dtype=float)[self._se]
-        acol = np.repeat(nx + self._sc_, 4)
+        acol = np.repeat(nx + self._scol, 4)
         jac.add(cidx[self._sdofs.ravel()], acol)  # sc d(grad E)/da
         jac.finish()
 
