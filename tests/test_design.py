@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean, solve_internal
 from mdsr_opt.mechanics.align import align, node_weights
 from mdsr_opt.synthesis.results import METHODS, DesignResult
 from mdsr_opt.synthesis.pipeline import PipelineResult, design
@@ -368,8 +368,9 @@ def test_pipeline_rejects_a_target_without_contraction():
 CASES = [("springs", 0.0), ("cable", 0.0), ("springs", 0.5), ("cable", 0.5)]
 
 
-def _nlp_point(model_kind, radius, seed=1):
-    """A small flattened NLP (both derivative paths) and a random point, parameters and multipliers."""
+def _nlp_point(model_kind, radius, seed=1, material=MAT):
+    """A small flattened NLP (both derivative paths) and a random point, parameters and multipliers (with
+    the linear elastic material, the pinned pose's rotation and translation too)."""
     from mdsr_opt.synthesis import nlp as D
 
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
@@ -379,23 +380,25 @@ def _nlp_point(model_kind, radius, seed=1):
         mus = [Muscle([0, 1, 2, 3]), Muscle([5, 6, 7, 8]), Muscle([2 * 9 + i for i in range(4, 8)])]
     rng = np.random.default_rng(seed)
     y = mesh.points @ rotation_matrix(0.3).T + 0.05 * rng.standard_normal(mesh.points.shape)
-    prob = DesignProblem(mesh, MAT, mus, y, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=radius)
+    prob = DesignProblem(mesh, material, mus, y, node_weights(mesh), model_kind, 10.0, 0.6, anchor_radius=radius)
     blk = prob.block
     assert blk.n_rope == (3 if model_kind == "cable" else 0) and (blk.n_rigid > 0) == (radius > 0)
+    assert prob.free_pose == (material.kind == "neo-hookean") and prob.nv == (0 if prob.free_pose else 3)
     n = mesh.n_nodes
     z = np.concatenate([mesh.points.reshape(-1) + 0.03 * rng.standard_normal(2 * n), [0.1, 0.2, 0.15],
-                        rng.standard_normal(blk.nc)])
+                        [0.3, 0.1, -0.2][:prob.nv], rng.standard_normal(blk.nc)])
     par = np.concatenate([y.reshape(-1), node_weights(mesh), prob.p0, [0.7, 1.3]])
     lam = rng.standard_normal(int(prob.free.sum()) + blk.nc)
     return D, prob, z, par, lam
 
 
+@pytest.mark.parametrize("material", [MAT, LinearElastic(1.0, 0.3)], ids=["free-pose", "pinned-pose"])
 @pytest.mark.parametrize("model_kind,radius", CASES)
 @pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
-def test_assembled_derivatives_match_casadi(model_kind, radius, hessian):
+def test_assembled_derivatives_match_casadi(model_kind, radius, hessian, material):
     import casadi as ca
 
-    D, prob, z, par, lam = _nlp_point(model_kind, radius)
+    D, prob, z, par, lam = _nlp_point(model_kind, radius, material=material)
     nlp, fa = D._assembled_nlp(prob, hessian)
     snlp, extra = D._symbolic_nlp(prob, hessian)
     zs, ps = snlp["x"], snlp["p"]
@@ -429,27 +432,30 @@ def test_assembled_derivatives_match_casadi(model_kind, radius, hessian):
         assert np.abs(J_s[:nf, n2:n2 + 3]).max() == 0 and np.all(J_s[nf:nf + 3, n2:n2 + 3] == np.eye(3))
     nc = prob.block.nc
     if nc:  # every multiplier column of the stationarity rows is exercised
-        assert (np.abs(J_s[:nf, n2 + 3:]).max(axis=0) > 0).all() and J_s.shape[1] == n2 + 3 + nc
+        ik = n2 + 3 + prob.nv
+        assert (np.abs(J_s[:nf, ik:]).max(axis=0) > 0).all() and J_s.shape[1] == ik + nc
     assert rel(H_a, H_s) < 1e-13
     if hessian == "exact":
         if model_kind == "springs":
             assert (np.abs(H_s[:n2, n2:n2 + 3]).max(axis=0) > 1e-2).all()  # every x-a column is exercised
         if nc:  # x-kappa: the ropes' and the nonlinear (scale) rigid rows' curvature
-            cols = np.abs(H_s[:n2, n2 + 3:]).max(axis=0) > 0
+            cols = np.abs(H_s[:n2, n2 + 3 + prob.nv:]).max(axis=0) > 0
             assert cols[:prob.block.n_rope].all() and cols.sum() >= prob.block.n_rope + len(prob.constraints.groups)
     assert np.all(H_a[n2:n2 + 3, n2:n2 + 3] == 0)  # constraints affine in a
-    assert np.all(H_a[n2 + 3:, n2 + 3:] == 0)  # and in the multipliers
+    assert np.all(H_a[n2 + 3 + prob.nv:, n2 + 3 + prob.nv:] == 0)  # and in the multipliers
 
 
+@pytest.mark.parametrize("material", [MAT, LinearElastic(1.0, 0.3)], ids=["free-pose", "pinned-pose"])
 @pytest.mark.parametrize("model_kind,radius", CASES)
 @pytest.mark.parametrize("hessian", ["exact", "gauss-newton"])
-def test_numeric_nlp_matches_casadi(model_kind, radius, hessian):
+def test_numeric_nlp_matches_casadi(model_kind, radius, hessian, material):
     """The numpy callbacks of the NLP against CasADi's own derivatives of the SX NLP, at a random point with
-    random multipliers (end patches and point ends; springs shared by two muscles)."""
+    random multipliers (end patches and point ends; springs shared by two muscles; the free pose of the
+    Neo-Hookean body and the pinned pose, with rotation and translation, of the linear elastic one)."""
     import casadi as ca
     from mdsr_opt.synthesis.nlp_numeric import numeric_nlp, supports
 
-    D, prob, z, par, lam = _nlp_point(model_kind, radius)
+    D, prob, z, par, lam = _nlp_point(model_kind, radius, material=material)
     assert supports(prob)
     nlp, fn, _keep = numeric_nlp(prob, hessian)
     snlp, extra = D._symbolic_nlp(prob, hessian)
@@ -477,12 +483,58 @@ def test_numeric_nlp_matches_casadi(model_kind, radius, hessian):
     assert rel(g_n, g_s) < 1e-13 and rel(g_nlp, g_s) < 1e-13
     assert rel(J_n, J_s) < 1e-13
     assert rel(H_n, H_s) < 1e-12
-    n2, nc = 2 * prob.mesh.n_nodes, prob.block.nc
-    if hessian == "exact":  # the x-kappa block (rope and scale-row curvature) is exercised
-        assert (np.abs(H_s[:n2, n2 + 3:]).max(axis=0) > 0).sum() >= prob.block.n_rope
+    n2, nc, ik = 2 * prob.mesh.n_nodes, prob.block.nc, 2 * prob.mesh.n_nodes + 3 + prob.nv
+    if hessian == "exact":  # the x-kappa block: every rope's and every group's scale row's curvature
+        curved = np.abs(H_n[:n2, ik:]).max(axis=0) > 0
+        assert curved.sum() == prob.block.n_rope + (len(prob.constraints.groups) if radius else 0)
         if model_kind == "springs":  # and the springs' x-a block
-            assert (np.abs(H_s[:n2, n2:n2 + 3]).max(axis=0) > 1e-2).all()
-    assert J_n.shape == (int(prob.free.sum()) + nc, n2 + 3 + nc)
+            assert (np.abs(H_n[:n2, n2:n2 + 3]).max(axis=0) > 1e-2).all()
+    if not prob.free_pose:  # the rotation couples to every node
+        assert (np.abs(H_n[:n2:2, n2 + 3]) > 0).all()
+    assert J_n.shape == (int(prob.free.sum()) + nc, ik + nc)
+
+
+def _two_rows(nx=16, ny=4):
+    mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
+    return mesh, [Muscle([j * (nx + 1) + i for i in range(i0, i1 + 1)]) for j, i0, i1 in ((0, 1, 8), (ny, 8, 15))]
+
+
+@pytest.mark.parametrize("derivatives", ["numeric", "casadi"])
+def test_linear_elastic_design_recovers_its_contractions(derivatives):
+    """The linear elastic energy changes under rotation, so its NLP pins the pose and aligns with an explicit
+    rotation (a free pose found a state in another pose, off equilibrium: a = [0.183, 0.131] here)."""
+    mesh, mus = _two_rows()
+    mat = LinearElastic(1.0, 0.3)
+    fwd = solve_internal(mesh, mat, mus, [0.2, 0.12])
+    target = fwd.x @ rotation_matrix(2.0).T + [5.0, 3.0]
+    for verify in (False, True):
+        res = design_contractions(mesh, mat, mus, target, initial_guess=[0.05, 0.3], derivatives=derivatives,
+                                  verify=verify)
+        assert res.success, res.status
+        assert res.contractions == pytest.approx([0.2, 0.12], abs=1e-6)
+        assert res.difference < 1e-6
+
+
+@pytest.mark.parametrize("model_kind", ["cable", "springs"])
+def test_free_pose_design_at_the_gauges_degenerate_pose(model_kind):
+    """A target turned so that the gauge nodes' line is perpendicular to node j's gauge coordinate: had the
+    state followed the target there, the NLP's left-out rows would not follow from the others (a false
+    equilibrium held by forces on the gauge nodes passed as a success with a = [0.2042, 0.1192])."""
+    from mdsr_opt.mechanics.equilibrium import gauge_coordinates
+
+    mesh, mus = _two_rows()
+    a_true = [0.2, 0.12]
+    fwd = solve_internal(mesh, MAT, mus, a_true, muscle_model=model_kind)
+    gi, _gi1, gj = gauge_coordinates(mesh)
+    d = fwd.x[gj // 2] - fwd.x[gi // 2]
+    comp = gj % 2  # node j's gauge coordinate; the degenerate pose turns i-j perpendicular to it
+    phi = (np.pi / 2 if comp == 1 else 0.0) - np.arctan2(d[1], d[0])
+    for off in np.radians([-0.3, 0.0, 1.0]):
+        target = fwd.x @ rotation_matrix(phi + off).T + [0.3, -1.0]
+        res = design_contractions(mesh, MAT, mus, target, initial_guess=[0.05, 0.3], muscle_model=model_kind,
+                                  verify=False)
+        assert res.success, res.status
+        assert res.contractions == pytest.approx(a_true, abs=1e-5 if model_kind == "springs" else 1e-7)
 
 
 def test_numeric_nlp_refuses_a_symbolic_energy():

@@ -80,6 +80,8 @@ class NeoHookean(_Isotropic):
     """
 
     kind = "neo-hookean"
+    #: the energy does not change under a rigid rotation of the body (frame indifference)
+    rotation_invariant = True
 
     @staticmethod
     def psi_expr(F, params):
@@ -114,6 +116,7 @@ class LinearElastic(_Isotropic):
     """
 
     kind = "linear"
+    rotation_invariant = False
 
     @staticmethod
     def psi_expr(F, params):

@@ -7,13 +7,22 @@ Variables ``z = [x (2n), a (m), kappa (nc)]``, parameters ``[y (2n), e (n), p0, 
           C(x) + [a; 0] = 0                            (rope strains, rigid end patches)
           0 <= a <= a_max,  tension >= 0 (cable)
 
-The state's rigid pose is free: the energy and the muscle constraints do not change under a rigid motion,
-so the objective alone places ``x`` in its best alignment with the target, and the objective equals the
-aligned difference at every feasible point. The stationarity rows of the three gauge coordinates are left
-out: their residuals vanish with the others (the energy's gradient is orthogonal to rigid motions). Posed
-with an explicit rotation and translation instead, the alignment's three variables coupled to every node
-and made three dense rows in the KKT matrix: at 3k nodes and 4 muscles an IPOPT iteration took about 60 %
-longer (0.26 against 0.16 s for the two iterations of a reachable target).
+**The state's rigid pose is free** when the energy does not change under rigid motion (Neo-Hookean; the
+springs and the muscle constraints never do): the objective alone then places ``x`` in its best
+alignment with the target, and equals the aligned difference at every feasible point. The stationarity
+rows of the three gauge coordinates (node ``i``'s two, one of node ``j``'s) are left out, being implied
+by the others: the gradient is orthogonal to the rigid motions, which these three coordinates pin while
+node ``j``'s gauge coordinate is not perpendicular to ``i``-``j``. At a pose where it is, the rows left
+out are no longer implied: the constraints' Jacobian loses rank and a state held by opposite forces on
+``i`` and ``j`` becomes feasible. :func:`run_flattened` therefore moves the target into the warm start's
+frame (near the gauge frame, far from that pose) rather than the state to the target, and rejects a
+solution whose left-out rows do not vanish (:data:`GAUGE_RTOL`). Posed with an explicit rotation and
+translation instead, the alignment's three variables coupled to every node and made three dense rows in
+the KKT matrix: at 3k nodes and 4 muscles an IPOPT iteration took about 60 % longer.
+
+**A pinned pose** for a body whose energy changes under rotation (the linear elastic material): the
+gauge coordinates are fixed and ``z = [x, a, theta, t, kappa]`` with the objective
+``so sum_i e_i |R(theta) x_i + t - y_i|^2``.
 
 Three ways to give IPOPT the derivatives, all exact (iterates agree to rounding): numpy callbacks
 (:mod:`~mdsr_opt.synthesis.nlp_numeric`), an MX graph assembled term by term (:func:`_assembled_nlp`) and
@@ -162,6 +171,37 @@ def _mapped(fn: ca.Function, X, *args) -> list:
     return fn.map(X.shape[1], "serial").call([X, *args])
 
 
+def _objective_terms(x, y, w, v, so, gauss_newton: bool):
+    """The objective of the pinned pose ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives, per node, as
+    vectorised MX expressions (``x``, ``y``: 2n; ``w``: n; ``v = [theta, t]``).
+
+    Returns ``f``, the gradient parts ``(g_x0, g_x1)`` (per node, 1 x n) and ``(g_theta, g_t0, g_t1)``, and
+    the Hessian parts as a dict ``{(a, b): 1 x n values}`` over the local variables ``a, b`` in ``x0, x1,
+    th, t0, t1`` (``a <= b``; entries of the ``(theta, t)`` block are per-node summands). With
+    ``gauss_newton`` the Hessian is ``2 so w_i J_i^T J_i`` (``J_i`` the residual's Jacobian)."""
+    X0, X1 = x[0::2].T, x[1::2].T
+    Y0, Y1 = y[0::2].T, y[1::2].T
+    W2 = 2 * so * w.T
+    c, s = ca.cos(v[0]), ca.sin(v[0])
+    rx = c * X0 - s * X1 + v[1] - Y0
+    ry = s * X0 + c * X1 + v[2] - Y1
+    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    f = so * ca.sum2(w.T * (rx ** 2 + ry ** 2))
+    gx = (W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry))
+    gv = (ca.sum2(W2 * (rx * px + ry * py)), ca.sum2(W2 * rx), ca.sum2(W2 * ry))
+    zero = 0 * W2
+    h = {("x0", "x0"): W2, ("x1", "x1"): W2,  # R^T R = I
+         ("x0", "th"): W2 * -X1, ("x1", "th"): W2 * X0,  # R^T dR/dtheta x_i = (-x_i1, x_i0)
+         ("x0", "t0"): W2 * c, ("x0", "t1"): W2 * s, ("x1", "t0"): W2 * -s, ("x1", "t1"): W2 * c,
+         ("th", "th"): W2 * (px ** 2 + py ** 2), ("th", "t0"): W2 * px, ("th", "t1"): W2 * py,
+         ("t0", "t0"): W2, ("t0", "t1"): zero, ("t1", "t1"): W2}
+    if not gauss_newton:  # the residual's curvature: r . d^2 r
+        h[("x0", "th")] += W2 * (-s * rx + c * ry)
+        h[("x1", "th")] += W2 * (-c * rx - s * ry)
+        h[("th", "th")] += W2 * -(rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
+    return f, gx, gv, h
+
+
 def _assembled_nlp(prob: DesignProblem, hessian: str):
     """The flattened NLP with its derivatives assembled term by term.
 
@@ -183,12 +223,13 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
     blk = prob.block
     nc = blk.nc
     nx = 2 * n
-    nz = nx + m + nc
-    ik = nx + m  # index of the muscle constraints' multipliers kappa
+    it = nx + m  # the pinned pose's rotation and translation (none for a free pose)
+    ik = it + prob.nv  # index of the muscle constraints' multipliers kappa
+    nz = ik + nc
     npar = model.n_params
     z = ca.MX.sym("z", nz)
     par = ca.MX.sym("par", 3 * n + npar + 2)
-    x, a, kap = z[:nx], z[nx:nx + m], z[ik:]
+    x, a, v, kap = z[:nx], z[nx:nx + m], z[it:ik], z[ik:]
     y, w, p0 = par[:nx], par[nx:nx + n], par[nx + n:nx + n + npar]
     so, sc = par[3 * n + npar], par[3 * n + npar + 1]
     B = sp.csr_matrix(prob.B)
@@ -206,13 +247,21 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
 
     # objective
     exact = hessian == "exact"  # else Gauss-Newton: the objective's part only, no third derivatives
-    W2 = 2 * so * ca.repmat(w.T, 2, 1)  # (2, n): the objective's Hessian diagonal per coordinate
-    r = ca.reshape(x - y, 2, n)
-    f = so * ca.sum2(w.T * ca.sum1(r ** 2))
-    # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
-    grad_f = ca.densify(ca.vertcat(ca.vec(W2 * r), ca.MX(m + nc, 1)))
     hess = _Assembly(nz, nz)
-    hess.add(lam_f * ca.vec(W2), np.arange(nx), np.arange(nx), np.arange(nx))
+    if prob.free_pose:
+        W2 = 2 * so * ca.repmat(w.T, 2, 1)  # (2, n): the objective's Hessian diagonal per coordinate
+        r = ca.reshape(x - y, 2, n)
+        f = so * ca.sum2(w.T * ca.sum1(r ** 2))
+        # dense: with structural zeros (the a-entries) IPOPT through CasADi took wrong steps and failed
+        grad_f = ca.densify(ca.vertcat(ca.vec(W2 * r), ca.MX(m + nc, 1)))
+        hess.add(lam_f * ca.vec(W2), np.arange(nx), np.arange(nx), np.arange(nx))
+    else:
+        f, gx, gv, ho = _objective_terms(x, y, w, v, so, not exact)
+        grad_f = ca.densify(ca.vertcat(ca.vec(ca.vertcat(*gx)), ca.MX(m, 1), *gv, ca.MX(nc, 1)))
+        loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it),
+               "t0": np.full(n, it + 1), "t1": np.full(n, it + 2)}
+        for (ka, kb), val in ho.items():
+            hess.add(lam_f * val.T, loc[ka], loc[kb], np.arange(n))
 
     # constraints, their Jacobian, and their part of the Lagrangian's Hessian, term by term
     gval, gjac = _Assembly(nfree, 1), []  # the constraints, and their values from jac_g's term functions
@@ -381,19 +430,44 @@ def _symbolic_nlp(prob: DesignProblem, hessian: str):
         C = ca.vertcat(*parts)
         Ca = C - (ca.vertcat(a, ca.SX(blk.n_rigid, 1)) if blk.rope else 0)  # the part that depends on x
         G = ca.vertcat(G + ca.gradient(ca.dot(kap, Ca), x)[free], C)
-    r = ca.reshape(x - y, 2, n)
-    f = so * ca.dot(w, ca.sum1(r ** 2).T)
-    z = ca.vertcat(x, a, kap)
+    if prob.free_pose:
+        res = ca.reshape(x - y, 2, n)
+        z = ca.vertcat(x, a, kap)
+    else:  # the pinned pose: a rotation theta and translation t align the state
+        th, tt = ca.SX.sym("theta"), ca.SX.sym("t", 2)
+        Xm, Ym = ca.reshape(x, 2, n), ca.reshape(y, 2, n)
+        c, s = ca.cos(th), ca.sin(th)
+        res = ca.vertcat(c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :], s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :])
+        z = ca.vertcat(x, a, th, tt, kap)
+    f = so * ca.dot(w, ca.sum1(res ** 2).T)
     par = ca.vertcat(y, w, p0, so, sc)
     extra = {}
     if hessian == "gauss-newton":
-        # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy
+        # Hessian of the objective only (constrained Gauss-Newton): no third derivatives of the energy, and
+        # the residuals' Jacobian alone (2 so J' W J)
         lam_f = ca.SX.sym("lam_f")
         lam_g = ca.SX.sym("lam_g", G.numel())
-        Hgn = ca.triu(ca.hessian(lam_f * f, z)[0])
+        r = ca.vec(res * ca.repmat(ca.sqrt(w).T, 2, 1))
+        Jr = ca.jacobian(r, z)
+        Hgn = ca.triu(2 * so * lam_f * ca.mtimes(Jr.T, Jr))
         extra["hess_lag"] = ca.Function("design_hess_gn", [z, par, lam_f, lam_g], [Hgn],
                                         ["x", "p", "lam_f", "lam_g"], ["hess"])
     return {"x": z, "p": par, "f": f, "g": G}, extra
+
+
+#: largest residual (in units of ``E t h``) of the stationarity rows the free-pose NLP leaves out; a solution
+#: has them at round-off (1e-14 to 1e-12), a state held by forces on the gauge nodes (possible only at a
+#: degenerate pose) at 1e-3
+GAUGE_RTOL = 1e-7
+
+
+def _gauge_residual(prob: DesignProblem, x, a, kappa, sc) -> float:
+    """Max-norm of the left-out stationarity rows (the gauge coordinates) at a solution of the NLP."""
+    g = prob.model.gradient(x, prob.params(a)) * sc
+    blk = prob.block
+    if blk.nc:
+        g = g + blk.jacobian(x).T @ kappa
+    return float(np.abs(g[prob.gauge]).max())
 
 
 def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
@@ -435,16 +509,26 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
             kap0[:m] = np.maximum(kap0[:m], 0.0)
     else:
         kap0 = np.zeros(blk.nc)
-    # the state starts in its best alignment with the target (its rigid pose is a variable)
-    z0 = np.concatenate([al0.apply(x0.reshape(-1, 2)).reshape(-1), a_start, kap0])
+    ik = 2 * n + m + prob.nv  # the multipliers kappa
+    if prob.free_pose:
+        # the target moved into the start's frame (the aligned difference does not change): the state then
+        # stays near the solver's gauge frame, where the left-out gauge rows follow from the others (at a
+        # pose turning node j's gauge coordinate perpendicular to i-j they would not: see the module)
+        y = (prob.y - al0.t) @ al0.R
+        z0 = np.concatenate([x0, a_start, kap0])
+    else:
+        y = prob.y
+        z0 = np.concatenate([x0, a_start, [al0.angle], al0.t, kap0])
     lbz = np.full(len(z0), -np.inf)
     ubz = np.full(len(z0), np.inf)
-    ik = 2 * n + m  # the multipliers kappa
-    lbz[2 * n:ik] = 0.0
-    ubz[2 * n:ik] = prob.a_max
+    if not prob.free_pose:
+        lbz[prob.gauge] = prob.X[prob.gauge]
+        ubz[prob.gauge] = prob.X[prob.gauge]
+    lbz[2 * n:2 * n + m] = 0.0
+    ubz[2 * n:2 * n + m] = prob.a_max
     if blk.rope:  # a rope only pulls: tension >= 0
         lbz[ik:ik + m] = 0.0
-    par = np.concatenate([prob.y.reshape(-1), prob.w, prob.p0, [so, sc]])
+    par = np.concatenate([y.reshape(-1), prob.w, prob.p0, [so, sc]])
     sol = solver(x0=z0, p=par, lbx=lbz, ubx=ubz, lbg=0.0, ubg=0.0)
     st = solver.stats()
     z = np.asarray(sol["x"]).ravel()
@@ -471,8 +555,13 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
             if st2.get("return_status") == "Solve_Succeeded" and \
                     float(sol2["f"]) <= float(sol["f"]) * (1 + 1e-6) + 1e-14:
                 z = np.asarray(sol2["x"]).ravel()
+    status = str(st.get("return_status", "unknown"))
+    if ok and prob.free_pose:  # the left-out gauge rows must vanish with the others
+        gres = _gauge_residual(prob, z[:2 * n], z[2 * n:2 * n + m], z[ik:], sc)
+        if gres > GAUGE_RTOL:
+            ok = False
+            status += f"; rejected: the gauge coordinates are not in equilibrium (residual {gres:.3g})"
     out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
-           "kappa": z[ik:],
-           "status": str(st.get("return_status", "unknown")), "iterations": iters,
+           "kappa": z[ik:], "status": status, "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt

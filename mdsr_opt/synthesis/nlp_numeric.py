@@ -10,8 +10,9 @@ buffers from vectorised numpy:
   :class:`~mdsr_opt.mechanics.assembly.HessianPattern`;
 - the muscle constraints' values, Jacobian, Hessian, third derivative and Hessian-vector products from
   their closed forms (:class:`~mdsr_opt.mechanics.constraints.MuscleConstraints`);
-- the objective ``so sum_i w_i |x_i - y_i|^2`` (the state's rigid pose is free, see
-  :mod:`~mdsr_opt.synthesis.nlp`): a diagonal Hessian.
+- the objective ``so sum_i w_i |x_i - y_i|^2`` when the state's rigid pose is free (see
+  :mod:`~mdsr_opt.synthesis.nlp`): a diagonal Hessian; else ``so sum_i w_i |R(theta) x_i + t - y_i|^2``
+  and its derivatives per node.
 
 Each sparse output is summed from its parts by one ``bincount`` into a pattern made once
 (:class:`SparseLayout`), so building the NLP costs index arithmetic only: at 3k nodes and 4 muscles
@@ -103,6 +104,36 @@ class SparseLayout:
         return np.bincount(self._slot, weights=vals[self._keep], minlength=self.nnz)
 
 
+def _aligned_objective(x, y, w, v, so, exact: bool):
+    """The objective of the pinned pose (a body whose energy changes under rotation):
+    ``(f, dfdx (2n,), dfdv (3,), Hessian parts)`` of ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` with
+    ``v = (theta, t0, t1)``. The Hessian parts are per-node arrays in the order of :data:`_OBJ_PARTS`
+    (the ``v``-``v`` ones summed over the nodes by the layout); without ``exact``, the Gauss-Newton
+    Hessian ``2 so w_i J_i' J_i`` (``J_i`` the residual's Jacobian)."""
+    X0, X1, Y0, Y1 = x[0::2], x[1::2], y[0::2], y[1::2]
+    c, s = np.cos(v[0]), np.sin(v[0])
+    rx = c * X0 - s * X1 + v[1] - Y0
+    ry = s * X0 + c * X1 + v[2] - Y1
+    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    W2 = 2.0 * so * w
+    f = so * float(w @ (rx * rx + ry * ry))
+    gx = np.empty_like(x)
+    gx[0::2], gx[1::2] = W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry)
+    gv = np.array([W2 @ (rx * px + ry * py), W2 @ rx, W2 @ ry])
+    h_xth0, h_xth1, h_thth = W2 * -X1, W2 * X0, W2 * (px * px + py * py)
+    if exact:  # the residual's curvature r . d^2 r
+        h_xth0 = h_xth0 + W2 * (-s * rx + c * ry)
+        h_xth1 = h_xth1 + W2 * (-c * rx - s * ry)
+        h_thth = h_thth - W2 * (rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
+    parts = [W2, W2, h_xth0, h_xth1, W2 * c, W2 * s, W2 * -s, W2 * c, h_thth, W2 * px, W2 * py, W2, W2]
+    return f, gx, gv, parts
+
+
+#: the objective's Hessian entries per node, as (row, col) local names: x0, x1 the node's coordinates
+_OBJ_PARTS = [("x0", "x0"), ("x1", "x1"), ("x0", "th"), ("x1", "th"), ("x0", "t0"), ("x0", "t1"), ("x1", "t0"),
+              ("x1", "t1"), ("th", "th"), ("th", "t0"), ("th", "t1"), ("t0", "t0"), ("t1", "t1")]
+
+
 class _NumericNLP:
     """Index bookkeeping and the evaluation functions of the numeric NLP (see :func:`numeric_nlp`)."""
 
@@ -115,7 +146,8 @@ class _NumericNLP:
         nc = blk.nc
         self.n, self.m, self.nc = n, m, nc
         self.nx = nx = 2 * n
-        self.ik = ik = nx + m
+        self.it = it = nx + m  # the pinned pose's rotation and translation (none for a free pose)
+        self.ik = ik = it + prob.nv
         self.nz = nz = ik + nc
         self.npar = model.n_params
         self.free = np.nonzero(prob.free)[0]
@@ -157,7 +189,13 @@ class _NumericNLP:
         jac.finish()
 
         hess = self.hess = SparseLayout(nz, nz, upper=True)
-        hess.add(np.arange(nx), np.arange(nx))  # the objective's diagonal
+        if prob.free_pose:
+            hess.add(np.arange(nx), np.arange(nx))  # the objective's diagonal
+        else:
+            loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it),
+                   "t0": np.full(n, it + 1), "t1": np.full(n, it + 2)}
+            for a, b in _OBJ_PARTS:
+                hess.add(loc[a], loc[b])
         if exact:
             hess.add(prow, pcols)  # sc D^3 E [lam_u]
             tr, tc, _ = self.mc.local_third_entries(prob.X[dl], lam0, z0)
@@ -172,7 +210,7 @@ class _NumericNLP:
     # ------------------------------------------------------------------ evaluation
     def _split(self, z, par):
         nx, ik, n = self.nx, self.ik, self.n
-        return (z[:nx], z[nx:ik], z[ik:], par[:nx], par[nx:nx + n], par[nx + n:nx + n + self.npar],
+        return (z[:nx], z[nx:self.it], z[ik:], par[:nx], par[nx:nx + n], par[nx + n:nx + n + self.npar],
                 float(par[nx + n + self.npar]), float(par[nx + n + self.npar + 1]))
 
     def _params(self, p0, a) -> np.ndarray:
@@ -241,17 +279,28 @@ class _NumericNLP:
 
     def objective(self, z, par, grad: bool):
         x, _a, _kap, y, w, _p, so, _sc = self._split(z, par)
-        r = (x - y).reshape(-1, 2)
-        f = so * float(w @ (r * r).sum(1))
-        if not grad:
-            return f, None
-        g = np.zeros(self.nz)
-        g[:self.nx] = (2.0 * so * w[:, None] * r).ravel()
+        g = np.zeros(self.nz) if grad else None
+        if self.prob.free_pose:
+            r = (x - y).reshape(-1, 2)
+            f = so * float(w @ (r * r).sum(1))
+            if grad:
+                g[:self.nx] = (2.0 * so * w[:, None] * r).ravel()
+            return f, g
+        f, gx, gv, _parts = _aligned_objective(x, y, w, z[self.it:self.ik], so, self.exact)
+        if grad:
+            g[:self.nx] = gx
+            g[self.it:self.ik] = gv
         return f, g
 
+    def _objective_hessian(self, z, par, lam_f) -> list:
+        x, _a, _kap, y, w, _p, so, _sc = self._split(z, par)
+        if self.prob.free_pose:
+            return [np.repeat(2.0 * so * lam_f * w, 2)]
+        return [lam_f * q for q in _aligned_objective(x, y, w, z[self.it:self.ik], so, self.exact)[3]]
+
     def hessian(self, z, par, lam_f, lam_g) -> np.ndarray:
-        x, a, kap, _y, w, p0, so, sc = self._split(z, par)
-        parts = [np.repeat(2.0 * so * lam_f * w, 2)]
+        x, a, kap, _y, _w, p0, _so, sc = self._split(z, par)
+        parts = self._objective_hessian(z, par, lam_f)
         if self.exact:
             lam_u = np.zeros(self.nx)
             lam_u[self.free] = lam_g[:self.nfree]

@@ -60,6 +60,11 @@ class DesignProblem:
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
         self.W = float(weights.sum())
+        #: the flattened NLP leaves the state's rigid pose free when the energy does not change under rigid
+        #: motion (see :mod:`~mdsr_opt.synthesis.nlp`); else it pins the gauge and aligns the state with an
+        #: explicit rotation and translation (``nv = 3`` variables)
+        self.free_pose = bool(getattr(material, "rotation_invariant", False))
+        self.nv = 0 if self.free_pose else 3
         self._block = None
 
     @property
