@@ -496,7 +496,8 @@ def test_numeric_nlp_matches_casadi(model_kind, radius, hessian, material):
 
 def _two_rows(nx=16, ny=4):
     mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
-    return mesh, [Muscle([j * (nx + 1) + i for i in range(i0, i1 + 1)]) for j, i0, i1 in ((0, 1, 8), (ny, 8, 15))]
+    h = nx // 2
+    return mesh, [Muscle([j * (nx + 1) + i for i in range(i0, i1 + 1)]) for j, i0, i1 in ((0, 1, h), (ny, h, nx - 1))]
 
 
 @pytest.mark.parametrize("derivatives", ["numeric", "casadi"])
@@ -535,6 +536,22 @@ def test_free_pose_design_at_the_gauges_degenerate_pose(model_kind):
                                   verify=False)
         assert res.success, res.status
         assert res.contractions == pytest.approx(a_true, abs=1e-5 if model_kind == "springs" else 1e-7)
+
+
+def test_design_solvers_are_evicted_safely():
+    """More option sets than the per-mesh solver cache keeps: the oldest solvers and their callbacks go, and
+    a design with the first options again (rebuilt) gives the same answer as the first time."""
+    from mdsr_opt.synthesis.nlp import DESIGN_SOLVERS_KEPT
+
+    mesh, mus = _two_rows(8, 2)
+    target = solve_internal(mesh, MAT, mus, [0.2, 0.1]).x
+    first = design_contractions(mesh, MAT, mus, target, verify=False, options={"max_iter": 100})
+    for k in range(DESIGN_SOLVERS_KEPT + 2):
+        r = design_contractions(mesh, MAT, mus, target, verify=False, options={"max_iter": 101 + k})
+        assert r.success and r.contractions == pytest.approx(first.contractions, abs=1e-12)
+    again = design_contractions(mesh, MAT, mus, target, verify=False, options={"max_iter": 100})
+    assert again.success and np.array_equal(again.contractions, first.contractions)
+    assert again.build_time > 0  # rebuilt: the first solver was evicted
 
 
 def test_numeric_nlp_refuses_a_symbolic_energy():

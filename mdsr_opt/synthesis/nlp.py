@@ -360,6 +360,10 @@ WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10,
 MUMPS_ORDERING = 0
 
 
+#: flattened-design solvers kept per mesh (one per muscles, model, Hessian, derivatives and IPOPT options)
+DESIGN_SOLVERS_KEPT = 8
+
+
 def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_key: tuple, ipopt_opts: dict):
     """The flattened NLP's solver, cached on the mesh per muscles, muscle model, Hessian mode, derivatives
     and options.
@@ -379,26 +383,29 @@ def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_
            prob.anchor_radius, hessian, derivatives, opts_key)
     cache = mesh.__dict__.setdefault("_design_cache", {})
     if key in cache:
-        return cache[key], 0.0
+        return cache[key][0], 0.0
+    if len(cache) >= DESIGN_SOLVERS_KEPT:  # the oldest solver goes, with the callbacks it evaluates
+        cache.pop(next(iter(cache)))
     t0 = time.perf_counter()
     opts = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}
     opts.update({f"ipopt.{k}": v for k, v in ipopt_opts.items()})
     if derivatives == "numeric":
-        nlp, fns, keep = numeric_nlp(prob, hessian)
+        nlp, fns, keep = numeric_nlp(prob, hessian)  # the callbacks stay alive as long as the solver
         opts.update(fns)
         opts["calc_lam_p"] = False
         opts["no_nlp_grad"] = True  # nlp_grad only serves the multipliers of bounds and parameters
-        mesh.__dict__.setdefault("_design_callbacks", {})[key] = keep  # alive as long as the solver
     elif derivatives == "assembled":
+        keep = None
         nlp, fns = _assembled_nlp(prob, hessian)
         opts.update(fns)
         opts["calc_lam_p"] = False  # parameter multipliers are not used: skip their derivatives
     else:
+        keep = None
         nlp, extra = _symbolic_nlp(prob, hessian)
         opts.update(extra)
     solver = ca.nlpsol("design_flattened", "ipopt", nlp, opts)
     bt = time.perf_counter() - t0
-    cache[key] = solver
+    cache[key] = (solver, keep)
     return solver, bt
 
 
