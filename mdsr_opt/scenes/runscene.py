@@ -137,7 +137,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     t0 = time.perf_counter()
     # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
     with frozen_heap(), BackgroundWriter(background and (figures or photos),
-                                         prepare=functools.partial(_warm_up, figures, photos)) as bg:
+                                         prepare=functools.partial(_warm_up, figures, photos,
+                                                                   len(scene.mesh.boundary_loops) > 1)) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -323,18 +324,20 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
         say(line)
 
 
-def _warm_up(figures: bool, photos: bool) -> None:
+def _warm_up(figures: bool, photos: bool, holes: bool = True) -> None:
     """Before the first fork, once: what every background job would otherwise pay again in its child and
-    lose with it (a case's photograph stage took 1.1-1.3 s of CPU in a cold child, 0.6 s in a warm one)."""
+    lose with it (a case's photograph stage took 1.1-1.3 s of CPU in a cold child, 0.6 s in a warm one).
+    ``holes``: the body has holes, whose photographed counterparts are matched with scipy.optimize (0.2-0.4
+    s to import; a body without holes never imports it)."""
     import importlib
 
     if figures:
         from ..plot.common import warm_up
 
         warm_up()
-    if photos:  # the photograph stage's modules; scipy.optimize (loops' matching) alone is 0.2-0.3 s
+    if photos:  # the photograph stage's modules
         for name in ("..photos.camera", "..photos.contours", "..photos.loops", "..photos.compare",
-                     ".prototype", "scipy.optimize"):
+                     ".prototype") + (("scipy.optimize",) if holes else ()):
             importlib.import_module(name, __package__)
 
 
