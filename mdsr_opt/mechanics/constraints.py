@@ -50,6 +50,7 @@ import scipy.sparse as sp
 from ..core.checks import positive_float
 from .anchors import (ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, anchor_patches, anchor_radius_or_default, body_size,
                       check_anchor_radius, default_anchor_radius, rigid_groups, valid_muscles)
+from .segments import length_hessian_product, length_third
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius",
            "anchor_patches", "rigid_groups",
@@ -407,32 +408,22 @@ class MuscleConstraints:
 
     def local_third_entries(self, xl, lam, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``sum_i lam_i D^3 g_i(xl)[v]`` (the derivative of :meth:`local_hessian` along the local direction
-        ``v``) as ``(rows, cols, vals)`` with fixed rows and columns. Only the ropes have one: a segment of
-        direction ``t``, length ``l`` and relative move ``dv`` gives ``-(q t' + t q' + (t . dv)(I - t t')) /
-        l^2`` with ``q = (I - t t') dv``; the scale rows are quadratic and the other rigid rows linear."""
-        xl = np.asarray(xl, dtype=float)
+        ``v``) as ``(rows, cols, vals)`` with fixed rows and columns. Only the ropes have one, their segments'
+        :func:`~mdsr_opt.mechanics.segments.length_third`; the scale rows are quadratic and the other rigid
+        rows linear."""
         lam = np.asarray(lam, dtype=float).reshape(-1)
-        d, ln = self._segments(xl)
-        t = d / ln[:, None]
+        d, _ln = self._segments(np.asarray(xl, dtype=float))
         V = np.asarray(v, dtype=float).reshape(-1, 2)
-        dv = V[self._seg_b] - V[self._seg_a]
-        td = (t * dv).sum(1)
-        q = dv - td[:, None] * t
-        P = np.eye(2)[None] - t[:, :, None] * t[:, None, :]
-        K = -(lam[self._seg_row] / ln ** 2)[:, None, None] * (
-            q[:, :, None] * t[:, None, :] + t[:, :, None] * q[:, None, :] + td[:, None, None] * P)
+        K = lam[self._seg_row][:, None, None] * length_third(d, V[self._seg_b] - V[self._seg_a])
         return self._pair_entries(self._pairs(K))
 
     def local_hessian_product_entries(self, xl, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The products ``Hessian(g_i)(xl) v`` of every row's Hessian with the local direction ``v``, as the
         columns of an ``(n_local, n_constraints)`` matrix given by ``(rows, cols, vals)`` (fixed rows and
         columns; the linear rows have none)."""
-        xl = np.asarray(xl, dtype=float)
-        d, ln = self._segments(xl)
-        t = d / ln[:, None]
+        d, _ln = self._segments(np.asarray(xl, dtype=float))
         V = np.asarray(v, dtype=float).reshape(-1, 2)
-        dv = V[self._seg_b] - V[self._seg_a]
-        kb = (dv - (t * dv).sum(1)[:, None] * t) / ln[:, None]  # (I - t t') dv / l: the product at b; -kb at a
+        kb = length_hessian_product(d, V[self._seg_b] - V[self._seg_a])  # the product at b; -kb at a
         rows = [2 * self._seg_b, 2 * self._seg_b + 1, 2 * self._seg_a, 2 * self._seg_a + 1]
         cols = [self._seg_row] * 4
         vals = [kb[:, 0], kb[:, 1], -kb[:, 0], -kb[:, 1]]

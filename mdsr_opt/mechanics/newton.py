@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .segments import length_third, pair_blocks
+
 __all__ = ["NewtonEnergy", "projected_newton", "step_seconds"]
 
 
@@ -226,12 +228,7 @@ class NewtonEnergy:
             s = np.maximum(s, 0.0)
         uu = u[:, :, None] * u[:, None, :]
         K = self.k[:, None, None] * (uu + s[:, None, None] * (np.eye(2) - uu))
-        H = np.empty((len(K), 4, 4))
-        H[:, :2, :2] = K
-        H[:, 2:, 2:] = K
-        H[:, :2, 2:] = -K
-        H[:, 2:, :2] = -K
-        return g, np.ascontiguousarray(np.transpose(H, (1, 2, 0)))
+        return g, pair_blocks(K)
 
     def element_blocks(self, x, project: bool = True):
         """``(gradient (2n,), element Hessians (6, 6, m), spring Hessians (4, 4, s))`` at ``x``; projected
@@ -263,8 +260,8 @@ class NewtonEnergy:
         ``dG = -G dF' G``, the derivative of the tangent ``A_ijkl = mu d_ik d_jl + (mu - lam ln J) G_il G_kj
         + lam G_ij G_kl`` is ``-lam (G:dF) G_il G_kj + (mu - lam ln J)(dG_il G_kj + G_il dG_kj)
         + lam (dG_ij G_kl + G_ij dG_kl)``; a linear material has none. A spring ``k/2 (l - c)^2`` (``c``
-        its rest length) has ``k c / l^2 (q u' + u q' + (u . dv) (I - u u'))`` with ``u`` its direction,
-        ``dv`` the relative move along ``v`` and ``q = (I - u u') dv``.
+        its rest length) has ``-k c D^3 l [dv]`` (:func:`~mdsr_opt.mechanics.segments.length_third`, ``dv``
+        the relative move along ``v``).
         """
         x = np.asarray(x, dtype=float).reshape(-1)
         v = np.asarray(v, dtype=float).reshape(-1)
@@ -291,20 +288,7 @@ class NewtonEnergy:
         if len(self.k):
             X, V = x.reshape(-1, 2), v.reshape(-1, 2)
             i, j = self.edges[:, 0], self.edges[:, 1]
-            d, dv = X[j] - X[i], V[j] - V[i]
-            l = np.maximum(np.linalg.norm(d, axis=1), 1e-300)
-            u = d / l[:, None]
-            ud = (u * dv).sum(1)
-            q = dv - ud[:, None] * u
-            P = np.eye(2)[None] - u[:, :, None] * u[:, None, :]
-            K = (self.k * self.rl0 / l ** 2)[:, None, None] * (
-                q[:, :, None] * u[:, None, :] + u[:, :, None] * q[:, None, :] + ud[:, None, None] * P)
-            H = np.empty((len(K), 4, 4))
-            H[:, :2, :2] = K
-            H[:, 2:, 2:] = K
-            H[:, :2, 2:] = -K
-            H[:, 2:, :2] = -K
-            Hs = np.ascontiguousarray(np.transpose(H, (1, 2, 0)))
+            Hs = pair_blocks(-(self.k * self.rl0)[:, None, None] * length_third(X[j] - X[i], V[j] - V[i]))
         return He, Hs
 
     def projected_blocks(self):

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..mechanics.assembly import BufferedFunction
+from ..mechanics.segments import length_direction, length_hessian_product
 from .problem import DesignProblem
 
 __all__ = ["SparseLayout", "numeric_nlp", "supports"]
@@ -225,15 +226,12 @@ class _NumericNLP:
             return np.zeros(0)
         X = x.reshape(-1, 2)
         k = p0[2:2 + self.model.n_edges][self._se]  # the stiffness does not move with a
-        d = X[self._sdofs[:, 0] // 2] - X[self._sdofs[:, 2] // 2]
-        ln = np.sqrt((d * d).sum(1))
-        u = d / ln[:, None]
+        j, i = self._sdofs[:, 0] // 2, self._sdofs[:, 2] // 2
         if v is None:
-            q = u
+            q = length_direction(X[j] - X[i])[1]
         else:
             V = v.reshape(-1, 2)
-            dv = V[self._sdofs[:, 0] // 2] - V[self._sdofs[:, 2] // 2]
-            q = (dv - (u * dv).sum(1)[:, None] * u) / ln[:, None]
+            q = length_hessian_product(X[j] - X[i], V[j] - V[i])
         c = -(self._sb * k * self._sl0)[:, None]
         return np.column_stack([c * q, -c * q]).ravel()
 
