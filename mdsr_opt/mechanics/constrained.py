@@ -21,17 +21,9 @@ from .anchors import body_size
 from .constraints import MuscleConstraints
 from .kkt import kkt_factor
 from .loadsteps import min_jacobian
+from .model import to_dm
 
 __all__ = ["ConstrainedModel"]
-
-
-def _casadi_sparse(M) -> ca.DM:
-    """A scipy sparse matrix as a CasADi DM of the same sparsity (``ca.DM(M)`` itself converts entry by entry,
-    3 ms for a few thousand entries)."""
-    C = sp.csc_matrix(M, dtype=float)
-    C.sort_indices()
-    pattern = ca.Sparsity(C.shape[0], C.shape[1], C.indptr.tolist(), C.indices.tolist())
-    return ca.DM(pattern, C.data.tolist())
 
 
 class ConstrainedModel:
@@ -162,11 +154,11 @@ class ConstrainedModel:
         nl, P, Lin = mc.symbolic_parts()
         R = sp.diags(self.row_scale) @ sp.identity(mc.n_constraints, format="csr")[self.rows]
         xl = ca.SX.sym("xl", mc.n_local)
-        Jl = ca.mtimes(_casadi_sparse(R @ P), ca.jacobian(nl(xl), xl)) + _casadi_sparse(R @ Lin)
+        Jl = ca.mtimes(to_dm(R @ P), ca.jacobian(nl(xl), xl)) + to_dm(R @ Lin)
         local = ca.Function("muscle_jac_local", [xl], [Jl])
         dofs = np.asarray(mc.dofs, dtype=np.int64)
         S = sp.csc_matrix((np.ones(len(dofs)), (np.arange(len(dofs)), dofs)), shape=(len(dofs), self.n_dof))
-        return ca.mtimes(local(x[dofs.tolist()]), _casadi_sparse(S))
+        return ca.mtimes(local(x[dofs.tolist()]), to_dm(S))
 
     def nlp_bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds` for :meth:`nlp_constraints_expr`."""

@@ -50,6 +50,7 @@ import scipy.sparse as sp
 from ..core.checks import positive_float
 from .anchors import (ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, anchor_patches, anchor_radius_or_default, body_size,
                       check_anchor_radius, default_anchor_radius, rigid_groups, valid_muscles)
+from .model import to_dm
 from .segments import length_hessian_product, length_third
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius",
@@ -236,14 +237,14 @@ class MuscleConstraints:
             nl = self._nonlinear_expr(xl)
             nm, ng = self.n_muscles, len(self._sc_row)
             rows = np.concatenate([np.arange(nm), nm + self._sc_row])
-            P = _to_dm(sp.csr_matrix((np.ones(nm + ng), (rows, np.arange(nm + ng))),
+            P = to_dm(sp.csr_matrix((np.ones(nm + ng), (rows, np.arange(nm + ng))),
                                      shape=(self.n_constraints, nm + ng)))
             lin = sp.vstack([sp.csr_matrix((nm, self.n_local)), self._lin], format="csr")
             lam = ca.SX.sym("lam", self.n_constraints)
             H = ca.hessian(ca.dot(ca.mtimes(P.T, lam), nl), xl)[0]
-            self._sym = {"nl": ca.Function("muscle_g_nonlinear", [xl], [nl]), "P": P, "Lin": _to_dm(lin),
+            self._sym = {"nl": ca.Function("muscle_g_nonlinear", [xl], [nl]), "P": P, "Lin": to_dm(lin),
                          "P_sp": _to_scipy(P).tocsr(), "Lin_sp": lin,
-                         "H": ca.Function("muscle_hess", [xl, lam], [ca.triu(H)]), "S": _to_dm(self._S)}
+                         "H": ca.Function("muscle_hess", [xl, lam], [ca.triu(H)]), "S": to_dm(self._S)}
         return self._sym
 
     def symbolic_parts(self) -> tuple:
@@ -258,12 +259,12 @@ class MuscleConstraints:
         nd, ns = self.n_local, len(self._seg_a)
 
         def pick(idx, comp):  # (len(idx), nd) selection of local coordinate 2 idx + comp
-            return _to_dm(sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), 2 * idx + comp)),
+            return to_dm(sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), 2 * idx + comp)),
                                         shape=(len(idx), nd)))
 
         dx = ca.mtimes(pick(self._seg_b, 0) - pick(self._seg_a, 0), xl)
         dy = ca.mtimes(pick(self._seg_b, 1) - pick(self._seg_a, 1), xl)
-        agg = _to_dm(sp.csr_matrix((np.ones(ns), (self._seg_row, np.arange(ns))), shape=(self.n_muscles, ns)))
+        agg = to_dm(sp.csr_matrix((np.ones(ns), (self._seg_row, np.arange(ns))), shape=(self.n_muscles, ns)))
         L = ca.mtimes(agg, ca.sqrt(dx ** 2 + dy ** 2))
         if not len(self._sc_row):
             return L
@@ -478,14 +479,6 @@ def muscle_constraints(mesh, muscles, radius: float | None = None) -> MuscleCons
             cache.pop(next(iter(cache)))
         cache[key] = MuscleConstraints(mesh, mus, r)
     return cache[key]
-
-
-def _to_dm(S) -> ca.DM:
-    S = sp.csc_matrix(S)
-    S.sort_indices()
-    spars = ca.Sparsity(S.shape[0], S.shape[1], S.indptr.astype(np.int64).tolist(),
-                        S.indices.astype(np.int64).tolist())
-    return ca.DM(spars, S.data.tolist())
 
 
 def _to_scipy(M) -> sp.csc_matrix:

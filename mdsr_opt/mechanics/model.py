@@ -44,11 +44,13 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters"]
+__all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters", "to_dm"]
 
 
 def to_dm(S: sp.spmatrix) -> ca.DM:
-    S = sp.csc_matrix(S)
+    """A scipy sparse matrix as a CasADi DM with the same sparsity (``ca.DM(S)`` itself converts entry by
+    entry, milliseconds for a few thousand entries)."""
+    S = sp.csc_matrix(S, dtype=float)
     S.sort_indices()
     spars = ca.Sparsity(S.shape[0], S.shape[1], S.indptr.astype(np.int64).tolist(),
                         S.indices.astype(np.int64).tolist())
@@ -299,8 +301,11 @@ class EnergyModel:
         """The values of the full symmetric Hessian in the CSC order of :attr:`hessian_pattern` (numeric
         models only)."""
         en = self.numeric(p)
+        return self._pattern_data(en, *en.hessian_blocks(np.asarray(x, dtype=float).reshape(-1)))
+
+    def _pattern_data(self, en, He, Hs) -> np.ndarray:
+        """Element blocks (6, 6, m) and the springs' of ``en`` (4, 4, s) summed in :attr:`hessian_pattern`'s order."""
         pat = self.hessian_pattern
-        He, Hs = en.hessian_blocks(np.asarray(x, dtype=float).reshape(-1))
         data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
         if len(Hs):
             data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
@@ -311,12 +316,7 @@ class EnergyModel:
         of :attr:`hessian_pattern` (numeric models only; see
         :meth:`~mdsr_opt.mechanics.newton.NewtonEnergy.third_blocks`)."""
         en = self.numeric(p)
-        pat = self.hessian_pattern
-        He, Hs = en.third_blocks(x, v)
-        data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
-        if len(Hs):
-            data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
-        return data
+        return self._pattern_data(en, *en.third_blocks(x, v))
 
     def free_ordering(self, free) -> np.ndarray:
         """A fill-reducing ordering of the free coordinates (indices into them, ``free`` a mask over 2n):

@@ -16,7 +16,7 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
 from ..mechanics.equilibrium import gauge_coordinates, solve_internal
 from ..mechanics.loadsteps import check_mesh_material
-from ..mechanics.model import get_model
+from ..mechanics.model import get_model, to_dm
 
 
 # ---------------------------------------------------------------------------------------------- the problem
@@ -135,13 +135,6 @@ class DesignProblem:
         return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
 
 
-def _dm(M) -> ca.DM:
-    """A scipy sparse matrix as a sparse DM."""
-    M = sp.csc_matrix(M)
-    M.sort_indices()
-    return ca.DM(ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist()), M.data.tolist())
-
-
 def _nonzeros(M: ca.SX) -> ca.SX:
     """The structural nonzeros of ``M`` as a column (column-major order, as its sparsity lists them)."""
     return ca.vec(M.nz[:]) if M.nnz() else ca.SX(0, 1)
@@ -204,7 +197,7 @@ class _ConstraintBlock:
         nlf, P, Lin = self.mc.symbolic_parts()
         R = sp.csr_matrix((self.row_scale, (np.arange(nc), self.rows)), shape=(nc, self.mc.n_constraints))
         Pb, Linb = (R @ P).tocsr(), (R @ Lin).tocsr()
-        Pd, Ld = _dm(Pb), _dm(Linb)
+        Pd, Ld = to_dm(Pb), to_dm(Linb)
         xl = ca.SX.sym("xl", d)
         kap = ca.SX.sym("kappa", nc)
         lam = ca.SX.sym("lam", d)
