@@ -206,7 +206,6 @@ class _NumericNLP:
             hess.add(dl[pr], np.where(rowmap[pc] >= 0, ik + rowmap[pc], -1))  # d^2 (lam_u . J' kappa)/dx dkappa
             hess.add(self._sdofs.ravel(), acol)  # sc d^2 (lam_u . grad E)/dx da
         hess.finish()
-        self.cidx = cidx
 
     # ------------------------------------------------------------------ evaluation
     def _split(self, z, par):
@@ -241,10 +240,9 @@ class _NumericNLP:
         lam[self.rows] = np.asarray(kappa, dtype=float) * self.row_scale
         return lam
 
-    def _jacobian_local(self, xl):
-        """The block's rows of the constraints' Jacobian, scaled: ``(data (entries), csr)``."""
-        Jl = self.mc.local_jacobian(xl)
-        return Jl.data[self._jkeep] * self._jscale, Jl
+    def _jacobian_local(self, xl) -> np.ndarray:
+        """The nonzeros of the block's rows of the constraints' Jacobian, scaled (the layout's entries)."""
+        return self.mc.local_jacobian(xl).data[self._jkeep] * self._jscale
 
     def constraints(self, z, par) -> np.ndarray:
         x, a, kap, _y, _w, p0, _so, sc = self._split(z, par)
@@ -257,7 +255,7 @@ class _NumericNLP:
         out = np.empty(self.nfree + self.nc)
         out[:self.nfree] = g[self.free]
         if self.nc:
-            C = self.mc.local_values(xl)[self.rows] * self.row_scale - np.asarray(self.blk.offset, dtype=float)
+            C = self.blk.values(x)
             if self.blk.rope:
                 C[:self.m] += a
             out[self.nfree:] = C
@@ -268,7 +266,7 @@ class _NumericNLP:
         parts = [self.model.hessian_data(x, self._params(p0, a)) * sc]
         xl = x[self.dofs]
         parts.append(self.mc.local_hessian_entries(xl, self._lam_rows(kap))[2])  # zeros without rows
-        jd, _ = self._jacobian_local(xl)
+        jd = self._jacobian_local(xl)
         parts += [jd, jd]
         if self.blk.rope:
             parts.append(np.ones(self.m))
