@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import ast
 import inspect
 import io
@@ -159,6 +160,34 @@ def test_every_option_of_mdsr_has_help():
     assert len(seen) > 40 and {p[0][-1] for p in seen} >= {"run", "list", "study", "demo", "evaluate", "photograph"}
     missing = [f"{' '.join(p)} {opt}" for p, opt, h in seen if not h or not str(h).strip()]
     assert missing == []
+
+
+def test_each_subcommand_module_registers_what_the_owner_table_says():
+    import importlib
+    from mdsr_opt.cli.main import OWNERS, command_of
+
+    full = _subcommands(build_parser())
+    assert full == [c for _, cmds in OWNERS for c in cmds]
+    for module, cmds in OWNERS:
+        sub = argparse.ArgumentParser().add_subparsers()
+        importlib.import_module(module, "mdsr_opt.cli").add_cli(sub)
+        assert tuple(sub.choices) == cmds
+        for c in cmds:  # a named subcommand registers its own module only
+            assert _subcommands(build_parser(c)) == list(cmds)
+    assert _subcommands(build_parser("no-such-command")) == full  # argparse then lists every choice
+    assert command_of(["-q", "-vv", "run", "gecko"]) == "run"
+    assert command_of(["--version"]) is None and command_of(["--", "run"]) is None
+
+
+def _subcommands(parser):
+    return [name for a in parser._actions if isinstance(a, argparse._SubParsersAction) for name in a.choices]
+
+
+def test_mdsr_list_imports_no_other_subcommand_module():
+    code = ("import sys; from mdsr_opt.cli.main import main; main(['-q', 'list']); "
+            "print(sorted(m for m in sys.modules if m.startswith(('mdsr_opt.cli.', 'mdsr_opt.author'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "['mdsr_opt.cli.main', 'mdsr_opt.cli.run']"
 
 
 def test_every_add_argument_in_the_code_base_has_help():
