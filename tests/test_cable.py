@@ -64,6 +64,24 @@ def test_a_rope_that_would_have_to_push_goes_slack():
     assert res.residual < 1e-6
 
 
+def test_a_rope_short_at_the_start_skips_the_equality_solve(monkeypatch):
+    from mdsr_opt.mechanics import backends
+
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    # the second rope runs along the middle of the first, contracted less: the first's pull leaves it slack
+    mus = [row(mesh, 0.0), row(mesh, 0.0, 1.0, 3.0)]
+    res = solve_internal(mesh, MAT, mus, [0.3, 0.05])
+    assert res.success and list(res.slack) == [False, True] and res.tension[1] == 0.0
+    # the predictor left the second rope slack: only the inequality form was solved
+    forms = []
+    monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(cm.short_ropes(x0, p)) or (True, False))
+    both = solve_internal(mesh, MAT, mus, [0.3, 0.05])  # the equality form first, as before
+    assert both.success
+    assert [list(f) for f in forms] == [[False, True]]
+    np.testing.assert_allclose(res.x, both.x, atol=1e-9)  # the same start and form: the same equilibrium
+    assert res.iterations < both.iterations
+
+
 def test_an_opposing_rope_holds_with_positive_tension():
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     # the top rope is not pulled in (a = 0) but may not lengthen: it holds against the bottom one

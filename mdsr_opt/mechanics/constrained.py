@@ -110,6 +110,15 @@ class ConstrainedModel:
         v = self.constraints.values(x)
         return v if self.ropes else v[self.rows]
 
+    def short_ropes(self, x, p, rtol: float = 1e-7) -> np.ndarray:
+        """Ropes shorter than their targets at ``x`` by more than ``rtol * L0``: (n_targets,) bool.
+
+        Such a rope is slack there, unless the body stretches it back to its target."""
+        if not self.n_targets:
+            return np.zeros(0, dtype=bool)
+        _, targets, _ = self.split(p)
+        return self.values(x)[:self.n_targets] < targets - rtol * self.constraints.rest_lengths
+
     def jacobian(self, x) -> sp.csr_matrix:
         J = self.constraints.jacobian(x)
         return J if self.ropes else J[self.rows]
@@ -307,8 +316,7 @@ class ConstrainedModel:
         active = np.ones(self.n_rows, dtype=bool)
         nt = self.n_targets
         if nt:
-            L = self.values(x)[:nt]
-            active[:nt] = L >= targets - rtol * self.constraints.rest_lengths
+            active[:nt] = ~self.short_ropes(x, p, rtol)
         lam = np.zeros(self.n_rows)
         for _ in range(nt + 1):
             Ja = J[active]
