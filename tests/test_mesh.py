@@ -328,3 +328,23 @@ def test_polygon_contacts_are_exact():
     assert segment_contacts([[0, 0], [1, 1], [1, 0], [0, 1]], ring).tolist() == [[0, 2]]
     # folding back: edge 1 runs back along edge 0
     assert [0, 1] in segment_contacts([[0, 0], [2, 0], [1, 0], [1, 1]], ring).tolist()
+
+
+def test_edge_rows_find_every_edge_in_either_order_and_nothing_else():
+    mesh = Mesh.rectangle(3.0, 1.0, 12, 4)
+    e = mesh.edges
+    rng = np.random.default_rng(5)
+    rows = rng.permutation(len(e))
+    np.testing.assert_array_equal(mesh.edge_rows(e[rows, 0], e[rows, 1]), rows)
+    np.testing.assert_array_equal(mesh.edge_rows(e[rows, 1], e[rows, 0]), rows)  # either order
+    i = rng.integers(-3, mesh.n_nodes + 3, 4000)
+    j = rng.integers(-3, mesh.n_nodes + 3, 4000)
+    expect = [mesh.edge_index.get((min(a, b), max(a, b)), -1) if min(a, b) >= 0 else -1 for a, b in zip(i, j)]
+    np.testing.assert_array_equal(mesh.edge_rows(i, j), expect)  # non-edges, self pairs, out of range: -1
+    assert mesh.has_edge(int(e[7, 1]), int(e[7, 0])) and not mesh.has_edge(0, mesh.n_nodes - 1)
+    # relabelling the nodes moves the rows with the edges
+    perm = rng.permutation(mesh.n_nodes)
+    inv = np.argsort(perm)
+    moved = Mesh(mesh.points[perm], inv[mesh.triangles])
+    r = moved.edge_rows(inv[e[:, 0]], inv[e[:, 1]])
+    assert (r >= 0).all() and len(set(r.tolist())) == len(e)

@@ -139,11 +139,30 @@ class Mesh:
 
     @cached_property
     def edge_index(self) -> dict[tuple[int, int], int]:
-        """Map ``(i, j)`` with ``i < j`` to the row of :attr:`edges`."""
+        """Map ``(i, j)`` with ``i < j`` to the row of :attr:`edges` (for many single lookups in Python; see
+        :meth:`edge_rows` for arrays)."""
         return {(int(a), int(b)): k for k, (a, b) in enumerate(self.edges)}
 
+    @cached_property
+    def _edge_keys(self) -> np.ndarray:
+        e = self.edges.astype(np.int64)
+        return e[:, 0] * max(len(self._points), 1) + e[:, 1]  # sorted: edges are sorted lexicographically
+
+    def edge_rows(self, i: ArrayLike, j: ArrayLike) -> np.ndarray:
+        """The rows of :attr:`edges` joining nodes ``i[k]`` and ``j[k]`` (either order), -1 where the two
+        are not joined by an edge (or a node is out of range): one binary search per pair, no Python loop."""
+        i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
+        n = max(len(self._points), 1)
+        lo, hi = np.minimum(i, j), np.maximum(i, j)
+        keys = self._edge_keys
+        key = lo * n + hi
+        pos = np.minimum(np.searchsorted(keys, key), max(len(keys) - 1, 0))
+        ok = (lo >= 0) & (hi < n) & (len(keys) > 0)
+        ok &= keys[pos] == key if len(keys) else False
+        return np.where(ok, pos, -1)
+
     def has_edge(self, i: int, j: int) -> bool:
-        return (min(i, j), max(i, j)) in self.edge_index
+        return bool(self.edge_rows(i, j) >= 0)
 
     @_cached
     def edge_lengths(self) -> np.ndarray:

@@ -64,9 +64,11 @@ class Muscle:
         v = np.asarray(self.nodes)
         if v.max() >= mesh.n_nodes:
             raise ValueError(f"muscle {self._label()} has node {int(v.max())} out of range [0, {mesh.n_nodes})")
-        for a, b in self.segments.tolist():
-            if not mesh.has_edge(a, b):
-                raise ValueError(f"muscle {self._label()} leaves the mesh: segment ({a}, {b}) is not a mesh edge")
+        seg = self.segments
+        off = np.flatnonzero(mesh.edge_rows(seg[:, 0], seg[:, 1]) < 0)
+        if len(off):
+            a, b = (int(v) for v in seg[off[0]])
+            raise ValueError(f"muscle {self._label()} leaves the mesh: segment ({a}, {b}) is not a mesh edge")
 
     def segment_lengths(self, x: ArrayLike) -> np.ndarray:
         x = np.asarray(x, dtype=float)

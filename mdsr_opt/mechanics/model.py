@@ -527,16 +527,16 @@ def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarra
     """
     k = np.zeros(len(mesh.edges))
     kr = np.zeros(len(mesh.edges))
-    idx = mesh.edge_index
     scalar = isinstance(stiffness, numbers.Real) or (isinstance(stiffness, np.ndarray) and stiffness.ndim == 0)
     for c, (mus, a) in enumerate(zip(muscles, contractions)):
         ks = np.full(len(mus.segments), float(stiffness)) if scalar else np.asarray(stiffness[c], dtype=float)
         if ks.shape != (len(mus.segments),):
             raise ValueError(f"stiffness[{c}] must have one value per segment ({len(mus.segments)}), "
                              f"got shape {ks.shape}")
-        for (i, j), kk in zip(mus.segments.tolist(), ks.tolist()):
-            e = idx[(min(i, j), max(i, j))]
-            k[e] += kk
-            kr[e] += kk * (1.0 - a)
+        e = mesh.edge_rows(mus.segments[:, 0], mus.segments[:, 1])
+        if (e < 0).any():
+            raise ValueError(f"muscle {c} leaves the mesh: a segment is not a mesh edge")
+        np.add.at(k, e, ks)  # a muscle may run along an edge twice
+        np.add.at(kr, e, ks * (1.0 - a))
     r = np.where(k > 0, kr / np.where(k > 0, k, 1.0), 1.0)
     return k, r
