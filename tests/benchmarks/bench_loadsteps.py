@@ -7,8 +7,15 @@ seconds and the energy. The totals are the figures of issue 13's load-stepping c
 that moves a rope away from its target is dropped; a solve stopped by its iteration cap is not repeated in
 inequality form).
 
+``--strips`` instead solves 24 strips (4 x 1 rectangles of 1k and 3k nodes; 1, 2, 4 and 8 grid-row
+muscles; 3 draws of contractions in [0.05, 0.25]), where with 8 muscles two or three ropes end slack, each
+twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.backends.rope_forms` (a rope
+clearly shorter than its target at the start skips the equality form) and with the equality form always
+tried first (as before), and prints iterations, seconds and the energies' agreement.
+
 Run:  python tests/benchmarks/bench_loadsteps.py
       python tests/benchmarks/bench_loadsteps.py --tree /tmp/old   # an older tree (git archive REV mdsr_opt problems)
+      python tests/benchmarks/bench_loadsteps.py --strips
 """
 
 from __future__ import annotations
@@ -27,8 +34,12 @@ def main(argv=None) -> int:
                     help="library scenes with internal-driving cases (default: the three muscle experiments)")
     ap.add_argument("--resolution", default="medium", help="mesh resolution of the scenes (default medium)")
     ap.add_argument("--tree", default=str(ROOT), help="source tree to measure (default: this script's)")
+    ap.add_argument("--strips", action="store_true",
+                    help="rope forms with and without the slack start, on 24 grid-row strips (see above)")
     a = ap.parse_args(argv)
     sys.path.insert(0, a.tree)
+    if a.strips:
+        return strips()
     import mdsr_opt
     from mdsr_opt import get_problem, solve_internal
     from mdsr_opt.scenes.cases import prepare_case
@@ -54,6 +65,55 @@ def main(argv=None) -> int:
                 print(f"{name:<13} {case.name:<5} {label:<9} {mesh.n_nodes:>6} {r.iterations:>6} {steps:<20} "
                       f"{dt:>6.2f} {r.energy:>12.6g}", flush=True)
     print(f"total: {tot_it} IPOPT iterations, {tot_t:.2f} s CPU")
+    return 0
+
+
+def strips() -> int:
+    import numpy as np
+    from mdsr_opt import Mesh, NeoHookean, solve_internal
+    from mdsr_opt.mechanics import backends
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_design import SIZES, muscles_for
+
+    mat, hinted = NeoHookean(1.0, 0.3), backends.rope_forms
+
+    def equality_first(cmodel, p, x0):
+        return (True, False) if cmodel.n_targets else (False,)
+
+    print(f"{'nodes':>6} {'muscles':>7} {'draw':>4} | {'slack start: it':>15} {'s':>6} | {'equality first: it':>18} "
+          f"{'s':>6} | {'slack':>5} {'|dE|/E':>8}")
+    tot = {"new": [0, 0.0], "old": [0, 0.0]}
+    for size in ("1k", "3k"):
+        ny = SIZES[size]
+        mesh = Mesh.rectangle(4.0, 1.0, 4 * ny, ny)
+        for m in (1, 2, 4, 8):
+            mus = muscles_for(4 * ny, ny, m)
+            solve_internal(mesh, mat, mus, np.full(m, 0.05))  # the solver's build, outside the timing
+            for draw in range(3):
+                a = np.random.default_rng(draw + 10 * m).uniform(0.05, 0.25, size=m)
+                out = {}
+                for rep in range(2):
+                    for key, forms in (("new", hinted), ("old", equality_first))[::1 if rep == 0 else -1]:
+                        backends.rope_forms = forms
+                        try:
+                            t0 = time.perf_counter()
+                            r = solve_internal(mesh, mat, mus, a)
+                            dt = time.perf_counter() - t0
+                        finally:
+                            backends.rope_forms = hinted
+                        if not r.success:
+                            print(f"  {key}: FAILED {r.status}")
+                        out.setdefault(key, []).append((r.iterations, dt, r.energy, int(r.slack.sum())))
+                row = {k: (v[0][0], float(np.median([d for _, d, _, _ in v])), v[0][2], v[0][3]) for k, v in out.items()}
+                for k in tot:
+                    tot[k][0] += row[k][0]
+                    tot[k][1] += row[k][1]
+                de = abs(row["new"][2] - row["old"][2]) / abs(row["old"][2])
+                print(f"{mesh.n_nodes:>6} {m:>7} {draw:>4} | {row['new'][0]:>15} {row['new'][1]:>6.3f} | "
+                      f"{row['old'][0]:>18} {row['old'][1]:>6.3f} | {row['new'][3]:>5} {de:>8.1e}", flush=True)
+    print(f"total: slack start {tot['new'][0]} iterations, {tot['new'][1]:.2f} s; equality first {tot['old'][0]} "
+          f"iterations, {tot['old'][1]:.2f} s (medians of 2 alternating solves per case)")
     return 0
 
 
