@@ -64,7 +64,7 @@ def test_a_rope_that_would_have_to_push_goes_slack():
     assert res.residual < 1e-6
 
 
-def test_a_rope_short_at_the_start_skips_the_equality_solve(monkeypatch):
+def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch):
     from mdsr_opt.mechanics import backends
 
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
@@ -73,13 +73,16 @@ def test_a_rope_short_at_the_start_skips_the_equality_solve(monkeypatch):
     res = solve_internal(mesh, MAT, mus, [0.3, 0.05])
     assert res.success and list(res.slack) == [False, True] and res.tension[1] == 0.0
     # the predictor left the second rope slack: only the inequality form was solved
-    forms = []
-    monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(cm.short_ropes(x0, p)) or (True, False))
+    forms, hinted = [], backends.rope_forms
+    monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or (True, False))
     both = solve_internal(mesh, MAT, mus, [0.3, 0.05])  # the equality form first, as before
-    assert both.success
-    assert [list(f) for f in forms] == [[False, True]]
+    assert both.success and forms == [(False,)]
     np.testing.assert_allclose(res.x, both.x, atol=1e-9)  # the same start and form: the same equilibrium
     assert res.iterations < both.iterations
+    # a warm start with the second rope released (shorter than its new target) is no prediction: equality first
+    forms.clear()
+    again = solve_internal(mesh, MAT, mus, [0.3, 0.02], initial_guess=res.x)
+    assert again.success and forms == [(True, False)]
 
 
 def test_an_opposing_rope_holds_with_positive_tension():

@@ -158,30 +158,24 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
     return factory
 
 
-#: a rope shorter than its target by more than this fraction of its rest length at the start of a solve is
-#: taken as slack (:func:`rope_forms`). A rope a hair short (a warm start after a small release, the nested
-#: design's iterates near a rope's slack point) keeps the equality form, which meets a rope that ends at its
-#: length with no tension exactly, where the interior point method leaves errors of about 1e-5 in the state
-#: (a nested design then reported a slack rope's contraction 4.5e-5 off). The slack ropes the predictor
-#: leaves are short by far more: 1e-7 to 1e-2 gave the same iterations on the strips measured.
-SLACK_START_RTOL = 1e-3
-
-
 def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     """The forms of the rope rows :func:`_solve_constrained` tries from ``x0``, in order (True: ``L = target``,
     False: ``L <= target``).
 
     Ropes as equalities first: if every rope's multiplier (tension) is then >= 0, that is a KKT point of the
     inequality problem too, found without the interior point method's slow approach to a degenerate bound;
-    otherwise the inequality form, from the same start. A start where a rope is shorter than its target by
-    more than :data:`SLACK_START_RTOL` (the predictor found that it would push and left it slack; a muscle
-    released since the last state) takes the inequality form only: held at its length, such a rope makes
-    the equality solve long, and its answer is then discarded. Measured on 1k and 3k strips with 8
-    muscles, two or three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the equality
-    solve) against 8-17, the same equilibria."""
+    otherwise the inequality form, from the same start. A start made by the KKT predictor that left a rope
+    slack (its predicted tension was negative: :meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.
+    predicted_slack`) takes the inequality form only: held at its length, such a rope made the equality
+    solve long, and its answer was then discarded. Measured on 1k and 3k strips with 8 muscles, two or
+    three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the equality solve) against 8-17,
+    the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
+    where a released rope is short but usually pulls again) keep the equality form first: on gecko's gait
+    taking a short rope as slack cost 51 iterations against 42."""
     if not cmodel.n_targets:
         return (False,)
-    return (False,) if cmodel.short_ropes(x0, p, SLACK_START_RTOL).any() else (True, False)
+    slack = cmodel.predicted_slack(x0)
+    return (False,) if slack is not None and slack.any() else (True, False)
 
 
 def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):

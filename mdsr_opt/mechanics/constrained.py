@@ -258,7 +258,17 @@ class ConstrainedModel:
             if after.max() > before.max():
                 y = np.array(x, dtype=float)
                 y[fixed] = values
+                return y
+            self.__dict__["_predicted_slack"] = (y.tobytes(), ~keep[:self.n_targets])
         return y
+
+    def predicted_slack(self, x) -> np.ndarray | None:
+        """The ropes :meth:`predict` left slack (would push) in its last prediction, when ``x`` is that
+        prediction; None for any other state (a warm start, a state kept instead of a prediction)."""
+        last = self.__dict__.get("_predicted_slack")
+        if last is None or last[0] != np.asarray(x, dtype=float).tobytes():
+            return None
+        return last[1].copy()
 
     def _linearisation(self, x, pe, fixed) -> dict:
         """What :meth:`predict` needs at ``x`` besides the targets: the Hessian of the Lagrangian with

@@ -9,9 +9,9 @@ inequality form).
 
 ``--strips`` instead solves 24 strips (4 x 1 rectangles of 1k and 3k nodes; 1, 2, 4 and 8 grid-row
 muscles; 3 draws of contractions in [0.05, 0.25]), where with 8 muscles two or three ropes end slack, each
-twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.backends.rope_forms` (a rope
-clearly shorter than its target at the start skips the equality form) and with the equality form always
-tried first (as before), and prints iterations, seconds and the energies' agreement.
+twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.backends.rope_forms` (a
+predictor start that left a rope slack skips the equality form) and with the equality form always tried
+first (as before), and prints iterations, seconds and the energies' agreement.
 
 Run:  python tests/benchmarks/bench_loadsteps.py
       python tests/benchmarks/bench_loadsteps.py --tree /tmp/old   # an older tree (git archive REV mdsr_opt problems)
