@@ -119,7 +119,7 @@ def test_sigint_during_a_cable_solve_raises_keyboard_interrupt_promptly():
 
 def test_interruptible_reraises_a_swallowed_interrupt():
     """What CasADi does: the handler's KeyboardInterrupt is caught inside the call; the guard re-raises it."""
-    from mdsr_opt.mechanics.backends import interruptible
+    from mdsr_opt.core.guards import interruptible
 
     before = signal.getsignal(signal.SIGINT)
     swallowed = []
@@ -139,7 +139,7 @@ def test_interruptible_reraises_a_swallowed_interrupt():
 
 def test_an_error_replacing_a_swallowed_interrupt_becomes_the_interrupt():
     """A CasADi Function call interrupted outside a solver raises its own error: the interrupt wins."""
-    from mdsr_opt.mechanics.backends import interruptible
+    from mdsr_opt.core.guards import interruptible
 
     with pytest.raises(KeyboardInterrupt, match="interrupted") as info:
         with interruptible():

@@ -23,13 +23,7 @@ Backends
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import os
-import signal
-import sys
-import tempfile
-import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -39,6 +33,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+
+from ..core.guards import captured_stdout, interruptible, quiet_stdout
 
 __all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
            "supports_constraints", "interruptible", "check_options"]
@@ -195,7 +191,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
     for equality in rope_forms(cmodel, p, x0):
         lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
-        with interruptible(), _quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
+        with interruptible(), quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         total_t += time.perf_counter() - t0
         st = solver.stats()
@@ -230,72 +226,6 @@ def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
     return o
 
 
-@contextlib.contextmanager
-def _quiet_stdout(active: bool):
-    """Silence C-level stdout (Uno prints notes about fixed variables whatever its logger says)."""
-    if not active:
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(1)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
-
-
-@contextlib.contextmanager
-def interruptible():
-    """Make Ctrl-C (SIGINT) during a CasADi solve raise :class:`KeyboardInterrupt` when the solver returns.
-
-    CasADi catches the interrupt inside a solve: IPOPT then stops after the current iteration and reports
-    ``NonIpopt_Exception_Thrown`` (printing a ``KeyboardInterruptException`` warning), a status that other
-    errors share and that load stepping would take for a failed step. Inside this context a SIGINT is
-    recorded on its way to the previous handler, and the recorded :class:`KeyboardInterrupt` is raised
-    again on exit, so the solve's outcome is never used. Nesting is fine; outside the main thread (where
-    signal handlers cannot be set) and when SIGINT is ignored this does nothing.
-
-    Example
-    -------
-    >>> with interruptible():
-    ...     pass  # sol = solver(x0=..., lbx=..., ubx=...)
-    """
-    prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
-    if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
-        yield
-        return
-    caught: list[BaseException] = []
-
-    def handler(signum, frame):
-        try:
-            prev(signum, frame)
-        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the user's handler)
-            caught.append(exc)
-            raise
-
-    def recorded():
-        exc = caught[0]
-        if isinstance(exc, KeyboardInterrupt) and not exc.args:
-            exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
-        return exc
-
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
-        if caught:
-            raise recorded() from exc
-        raise
-    finally:
-        signal.signal(signal.SIGINT, prev)
-    if caught:
-        raise recorded()
-
-
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = False):
     solver, build_time = model.solver(plugin + ("-symbolic" if symbolic else ""), opts,
                                       _casadi_factory(plugin, opts, symbolic))
@@ -306,7 +236,7 @@ def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = Fa
     x0 = np.array(x0, dtype=float)
     x0[fixed] = values
     t0 = time.perf_counter()
-    with _quiet_stdout(plugin == "uno"):
+    with quiet_stdout(plugin == "uno"):
         sol = solver(x0=x0, p=p, lbx=lbx, ubx=ubx)
     solve_time = time.perf_counter() - t0
     st = solver.stats()
@@ -399,33 +329,13 @@ def check_backend(backend: str) -> str:
 _OPTION_VERDICTS: dict = {}  # (plugin, name, repr(value)) -> None (valid) or the error message
 
 
-@contextlib.contextmanager
-def _captured_stdout(sink: list):
-    """Capture C-level stdout (IPOPT prints why it rejects an option) into ``sink`` as one string."""
-    import io
-
-    sys.stdout.flush()
-    saved = os.dup(1)
-    text = io.StringIO()  # CasADi's Python build prints through sys.stdout, other builds to file descriptor 1
-    with tempfile.TemporaryFile(mode="w+b") as fh:
-        os.dup2(fh.fileno(), 1)
-        try:
-            with contextlib.redirect_stdout(text):
-                yield
-        finally:
-            os.dup2(saved, 1)
-            os.close(saved)
-            fh.seek(0)
-            sink.append(text.getvalue() + fh.read().decode("utf-8", "replace"))
-
-
 def _casadi_verdict(plugin: str, name: str, value) -> str | None:
     x = ca.SX.sym("x")
     opts = {"ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False} if plugin == "ipopt" else {}
     opts[name] = value
     printed: list[str] = []
     try:
-        with _captured_stdout(printed):
+        with captured_stdout(printed):
             ca.nlpsol("option_probe", plugin, {"x": x, "f": (x - 1) ** 2}, opts)
     except RuntimeError as exc:
         text = str(exc)

@@ -9,7 +9,8 @@ import scipy.sparse.linalg as spla
 
 from ..body.mesh import Mesh
 from ..core.checks import positive_float
-from .backends import check_backend, interruptible, minimize
+from ..core.guards import interruptible
+from .backends import check_backend, minimize
 from .blas import one_blas_thread
 from .drags import RigidDrag, drag_path
 from .kkt import OrderedFactor

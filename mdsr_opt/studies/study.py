@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 import numpy as np
 
-from ..mechanics.backends import interruptible
+from ..core.guards import interruptible
 from ..body.io import atomic_path, write_json
 from ..core.results import format_value, to_jsonable
 from ..core.stats import fit_slopes

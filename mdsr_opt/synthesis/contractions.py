@@ -8,7 +8,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.deprecation import renamed_keywords
-from ..mechanics.backends import check_options, interruptible
+from ..core.guards import interruptible
+from ..mechanics.backends import check_options
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float

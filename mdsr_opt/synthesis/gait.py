@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..mechanics.backends import interruptible
+from ..core.guards import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 import numpy as np
 
-from ..mechanics.backends import interruptible
+from ..core.guards import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.deprecation import renamed_keywords

@@ -68,7 +68,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..mechanics.backends import interruptible
+from ..core.guards import interruptible
 from ..core.checks import as_float_array
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
