@@ -162,8 +162,9 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     inequality problem too, found without the interior point method's slow approach to a degenerate bound;
     otherwise the inequality form, from the same start. A start made by the KKT predictor that left a rope
     slack (its predicted tension was negative: :meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.
-    predicted_slack`) takes the inequality form only: held at its length, such a rope made the equality
-    solve long, and its answer was then discarded. Measured on 1k and 3k strips with 8 muscles, two or
+    predicted_slack`) takes the inequality form first: held at its length, such a rope made the equality
+    solve long, and its answer was then discarded. The equality form follows only when the answer leaves a
+    rope undecided (:func:`_undecided_ropes`), where it is the more accurate. Measured on 1k and 3k strips with 8 muscles, two or
     three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the equality solve) against 8-17,
     the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
     where a released rope is short but usually pulls again) keep the equality form first: on gecko's gait
@@ -171,12 +172,13 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     if not cmodel.n_targets:
         return (False,)
     slack = cmodel.predicted_slack(x0)
-    return (False,) if slack is not None and slack.any() else (True, False)
+    return (False, True) if slack is not None and slack.any() else (True, False)
 
 
 def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
-    """Solve in the forms :func:`rope_forms` gives: the first that succeeds with no pushing rope is the
-    answer."""
+    """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
+    pushing is the answer; so is an inequality-form one, unless it leaves a rope undecided and the equality
+    form is still to come (it is then kept in case a rope pushes in the equality form)."""
     solver, build_time = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), opts,
                                        _constrained_factory(plugin, opts, symbolic))
     pe = cmodel.split(p)[0]
@@ -186,31 +188,62 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
     ubx[fixed] = values
     x0 = np.array(x0, dtype=float)
     x0[fixed] = values
-    total_t, total_it = 0.0, 0
     nt = cmodel.n_targets
-    for equality in rope_forms(cmodel, p, x0):
+    push_tol = 1e-9 * cmodel.force_scale(p)  # a rope at its length with no load: a multiplier of round-off size
+    clock = {"t": 0.0, "it": 0}
+
+    def run(start, equality):
         lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality)
         t0 = time.perf_counter()
         with interruptible(), quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
-            sol = solver(x0=x0, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-        total_t += time.perf_counter() - t0
+            sol = solver(x0=start, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        clock["t"] += time.perf_counter() - t0
         st = solver.stats()
-        status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
-        total_it += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
-                               if st.get("iterations") else 0))
+        clock["it"] += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
+                                  if st.get("iterations") else 0))
         lam = np.asarray(sol["lam_g"]).ravel() * cmodel.row_scale  # physical multipliers
-        ok = bool(st.get("success", False))
-        # a rope at its length with no load has a multiplier of round-off size, of either sign
-        if ok and (not equality or np.all(lam[:nt] >= -1e-9 * cmodel.force_scale(p))):
+        return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
+            bool(st.get("success", False)), lam
+
+    forms = rope_forms(cmodel, p, x0)
+    kept = None  # an inequality-form answer that the equality form may improve on
+    for k, equality in enumerate(forms):
+        sol, status, ok, lam = run(x0, equality)
+        if status == "Maximum_Iterations_Exceeded":
+            # not a rope that would push but a step too long: the other form, from the same start, only
+            # repeats the failure (a 50 % contraction at 541 nodes: twice 100 iterations and about 3,000
+            # energy evaluations each before load stepping halved the step)
             break
-        if equality and ok:
-            status = "a rope would push: re-solved with slack allowed"
-        elif equality and status == "Maximum_Iterations_Exceeded":
-            # not a rope that would push but a step too long: the inequality form, from the same start,
-            # only repeats the failure (a 50 % contraction at 541 nodes: twice 100 iterations and about
-            # 3,000 energy evaluations each before load stepping halved the step)
-            break
-    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, total_it, total_t, build_time, lam)
+        if equality:
+            if ok and np.all(lam[:nt] >= -push_tol):
+                break
+            if kept is not None:  # a rope pushes after all: the inequality form's answer stands
+                sol, status, ok, lam = kept
+                break
+            if ok:
+                status = "a rope would push: re-solved with slack allowed"
+        elif ok:
+            if k == len(forms) - 1 or not _undecided_ropes(cmodel, p, sol).any():
+                break
+            kept = (sol, status, ok, lam)
+    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build_time, lam)
+
+
+#: the band of rope lengths an inequality-form answer leaves undecided (:func:`_undecided_ropes`): shorter
+#: than the target by more than the slack tolerance of the multipliers' fit (1e-7 L0), by less than this
+UNDECIDED_RTOL = 1e-4
+
+
+def _undecided_ropes(cmodel, p, sol) -> np.ndarray:
+    """Ropes of an inequality-form answer that are neither at their length (within the 1e-7 L0 that
+    :meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.multipliers` allows a taut rope) nor clearly
+    slack (short by more than :data:`UNDECIDED_RTOL`): a rope ending at its length with almost no tension,
+    which the interior point method approaches slowly. On a strip whose second rope ended so (tension
+    0.0009 against 0.12), its answer stopped 9e-7 L0 short; the multipliers' fit took the rope for slack
+    and the Lagrangian residual of 2e-4 rejected the state. The equality form, tried next, meets it exactly
+    (:func:`_solve_constrained`)."""
+    x = np.asarray(sol["x"]).ravel()
+    return cmodel.short_ropes(x, p) & ~cmodel.short_ropes(x, p, UNDECIDED_RTOL)
 
 
 def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
@@ -489,6 +522,10 @@ def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, o
         o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
                         limited_memory=backend == "ipopt-lbfgs")
         o["calc_lam_p"] = False
+        # IPOPT relaxes inequality bounds by 1e-8 (relative) by default: a taut rope in the inequality form
+        # (another rope slack) then ended up to 1e-8 L0 longer than its target. Unrelaxed, it is never
+        # longer, and short by the barrier's 1e-10 to 3e-9 L0; same iterations on the strips measured.
+        o["ipopt.bound_relax_factor"] = 0.0
         o.update(options)
         return _solve_constrained("ipopt", o, model, p, x0, fixed, values, symbolic=backend == "ipopt-symbolic")
     if backend == "sqpmethod":

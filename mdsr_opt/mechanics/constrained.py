@@ -93,15 +93,15 @@ class ConstrainedModel:
         out[self.rows] = lam
         return out
 
-    def bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, p, equality_ropes=False) -> tuple[np.ndarray, np.ndarray]:
         """``(lbg, ubg)`` of the NLP's constraint rows: ropes ``<= target`` (``== target`` when
-        ``equality_ropes``), rigid rows ``== 0``."""
+        ``equality_ropes``: True for all, or a bool per rope), rigid rows ``== 0``."""
         _, targets, _ = self.split(p)
         lb = np.zeros(self.n_rows)
         ub = np.zeros(self.n_rows)
         if self.n_targets:
             ub[:self.n_targets] = targets
-            lb[:self.n_targets] = targets if equality_ropes else -np.inf
+            lb[:self.n_targets] = np.where(equality_ropes, targets, -np.inf)
         return lb, ub
 
     # ------------------------------------------------------------------ numeric evaluation
@@ -169,7 +169,7 @@ class ConstrainedModel:
         S = sp.csc_matrix((np.ones(len(dofs)), (np.arange(len(dofs)), dofs)), shape=(len(dofs), self.n_dof))
         return ca.mtimes(local(x[dofs.tolist()]), to_dm(S))
 
-    def nlp_bounds(self, p, equality_ropes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def nlp_bounds(self, p, equality_ropes=False) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds` for :meth:`nlp_constraints_expr`."""
         lb, ub = self.bounds(p, equality_ropes)
         return lb * self.row_scale, ub * self.row_scale
@@ -218,6 +218,8 @@ class ConstrainedModel:
         keep = np.ones(self.n_rows, dtype=bool)
         if self.n_targets:  # a rope shorter than its target at the start is taken as slack
             keep[:self.n_targets] = c[:self.n_targets] > -1e-12 * self.constraints.rest_lengths
+        pushing = np.zeros(self.n_targets, dtype=bool)  # dropped for a clearly negative predicted tension
+        push_tol = 1e-9 * self.force_scale(p)  # as _solve_constrained's: below it, a tension is round-off
         for _ in range(3):
             Jk = J[keep]
             Jf, Jc = Jk[:, free], Jk[:, fixed]
@@ -236,6 +238,7 @@ class ConstrainedModel:
                 break
             idx = np.nonzero(keep[:self.n_targets])[0]
             keep[idx[tau < 0]] = False
+            pushing[idx[tau < -push_tol]] = True  # tau: physical multipliers (J and c unscaled)
         # a linearised step that nearly inverts an element (a large contraction bends the body far) is a
         # poor start: report no prediction, so that load stepping takes a smaller load step instead.
         # Measured on 1k-10k node strips: IPOPT then needs 7-14 iterations in all, against up to 35 from a
@@ -259,12 +262,13 @@ class ConstrainedModel:
                 y = np.array(x, dtype=float)
                 y[fixed] = values
                 return y
-            self.__dict__["_predicted_slack"] = (y.tobytes(), ~keep[:self.n_targets])
+            self.__dict__["_predicted_slack"] = (y.tobytes(), pushing | (c[:self.n_targets] < -1e-12 * L0))
         return y
 
     def predicted_slack(self, x) -> np.ndarray | None:
-        """The ropes :meth:`predict` left slack (would push) in its last prediction, when ``x`` is that
-        prediction; None for any other state (a warm start, a state kept instead of a prediction)."""
+        """The ropes :meth:`predict` left slack in its last prediction (shorter than their targets at its
+        start, or pushing: a predicted tension below round-off, ``-1e-9`` x :meth:`force_scale`), when ``x``
+        is that prediction; None for any other state (a warm start, a state kept instead of a prediction)."""
         last = self.__dict__.get("_predicted_slack")
         if last is None or last[0] != np.asarray(x, dtype=float).tobytes():
             return None
