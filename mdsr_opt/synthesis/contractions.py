@@ -189,6 +189,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                        a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist),
                        anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy())
     report_muscles(prob, res, x, kappa)
+    if method != "flattened" and muscle_model == "cable" and res.slack.any():
+        # any contraction below the one its path reached leaves a rope slack with the same shape: report
+        # that one (the rope then just reaches its length, at zero tension), as the flattened design's
+        # polish does, rather than wherever the outer search stopped on the flat side
+        sl = res.slack & np.isfinite(res.achieved)
+        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, a_max)
     if not np.all(np.isfinite(res.x)) or mesh.jacobians(res.x).min() <= 0:
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
