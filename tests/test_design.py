@@ -124,6 +124,20 @@ def test_a_slack_rope_is_reported_at_zero_tension(mesh):
     assert res.success and res.contractions == pytest.approx([0, 0], abs=1e-9) and res.slack.all()
 
 
+@pytest.mark.parametrize("method", ["nested", pytest.param("derivative-free", marks=pytest.mark.slow)])  # 10 s
+def test_every_method_reports_a_slack_rope_at_the_contraction_its_path_reached(mesh, method):
+    # any contraction of B up to the one A's bend gives it leaves B slack with the same shape: the outer
+    # searches stopped anywhere on that flat side (0.02, 0.05, 0.088 from different starts); one answer
+    A, B = Muscle(range(1, 9)), Muscle(range(1, 16))
+    fwd = solve_internal(mesh, MAT, [A], [0.2])
+    b_len = 1 - B.length(fwd.x) / B.rest_length(mesh)
+    res = design_contractions(mesh, MAT, [A, B], fwd.x, method=method, initial_guess=[0.15, 0.02])
+    assert res.success, res.status
+    assert list(res.slack) == [False, True]
+    assert res.contractions[1] == pytest.approx(b_len, abs=1e-6)
+    assert res.contractions[1] == pytest.approx(res.achieved[1], abs=1e-12)
+
+
 def test_flattened_recovers_with_the_cable_model_and_from_rest(mesh, muscles):
     fwd = solve_internal(mesh, MAT, muscles, A_TRUE, muscle_model="cable")
     y = fwd.x @ rotation_matrix(-1.0).T + [5.0, 5.0]
