@@ -171,7 +171,7 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     taking a short rope as slack cost 51 iterations against 42."""
     if not cmodel.n_targets:
         return (False,)
-    slack = cmodel.predicted_slack(x0)
+    slack = cmodel.predicted_slack(x0, p)
     return (False, True) if slack is not None and slack.any() else (True, False)
 
 

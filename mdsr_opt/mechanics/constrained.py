@@ -262,17 +262,20 @@ class ConstrainedModel:
                 y = np.array(x, dtype=float)
                 y[fixed] = values
                 return y
-            self.__dict__["_predicted_slack"] = (y.tobytes(), pushing | (c[:self.n_targets] < -1e-12 * L0))
+            self.__dict__["_predicted_slack"] = (y.tobytes(), np.asarray(p, dtype=float).tobytes(),
+                                                 pushing | (c[:self.n_targets] < -1e-12 * L0))
         return y
 
-    def predicted_slack(self, x) -> np.ndarray | None:
+    def predicted_slack(self, x, p) -> np.ndarray | None:
         """The ropes :meth:`predict` left slack in its last prediction (shorter than their targets at its
         start, or pushing: a predicted tension below round-off, ``-1e-9`` x :meth:`force_scale`), when ``x``
-        is that prediction; None for any other state (a warm start, a state kept instead of a prediction)."""
+        is that prediction for the parameters ``p``; None for any other state or parameters (a warm start, a
+        state kept instead of a prediction)."""
         last = self.__dict__.get("_predicted_slack")
-        if last is None or last[0] != np.asarray(x, dtype=float).tobytes():
+        if last is None or last[0] != np.asarray(x, dtype=float).tobytes() or \
+                last[1] != np.asarray(p, dtype=float).tobytes():
             return None
-        return last[1].copy()
+        return last[2].copy()
 
     def _linearisation(self, x, pe, fixed) -> dict:
         """What :meth:`predict` needs at ``x`` besides the targets: the Hessian of the Lagrangian with
