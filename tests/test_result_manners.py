@@ -102,6 +102,27 @@ def test_equilibrium_result(equilibrium, tmp_path):
         res.save(tmp_path / "eq.json")
 
 
+def test_stability_check_and_alignment(strip, equilibrium):
+    from mdsr_opt.mechanics.align import align
+    from mdsr_opt.mechanics.stability import check_stability
+    import scipy.sparse as sp
+
+    H = sp.diags([2.0, -1.0, 3.0, 1.0]).tocsr()
+    chk = check_stability(H, np.array([True, True, True, False]))
+    check_repr(chk, "stable=False", "n_negative=1")
+    d = check_dict(chk)
+    assert d["stable"] is False and d["n_negative"] == 1 and len(d["direction"]) == 4
+    assert {k: d[k] for k in chk.summary()} == chk.summary()
+    mesh, _ = strip
+    th = 0.3
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    al = align(mesh.points, mesh.points @ R.T + [1.0, 2.0])
+    check_repr(al, "angle=", "difference=")
+    d = check_dict(al)
+    assert d["angle"] == pytest.approx(th, abs=1e-12) and d["t"] == pytest.approx([1.0, 2.0], abs=1e-12)
+    np.testing.assert_allclose(d["R"], R, atol=1e-12)
+
+
 def test_minimize_outcome(strip, tmp_path):
     from mdsr_opt.mechanics.backends import MinimizeOutcome, minimize
     from mdsr_opt.mechanics.model import get_model

@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.checks import as_float_array
+from ..core.results import compact_repr, to_jsonable
 
 __all__ = ["Alignment", "align", "difference", "node_weights"]
 
@@ -38,6 +39,14 @@ class Alignment:
 
     def apply(self, x: ArrayLike) -> np.ndarray:
         return np.asarray(x, dtype=float) @ self.R.T + self.t
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("angle", "t", "difference"))
+
+    def to_dict(self) -> dict:
+        """The rotation (matrix and angle in radians), translation and difference as JSON-ready values."""
+        return {"R": to_jsonable(self.R), "angle": self.angle, "t": to_jsonable(self.t),
+                "difference": to_jsonable(self.difference)}
 
 
 def _weights(w, n):

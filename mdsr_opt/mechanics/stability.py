@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..core.results import compact_repr, to_jsonable
 from .kkt import kkt_inertia
 
 __all__ = ["StabilityCheck", "check_stability"]
@@ -74,6 +75,13 @@ class StabilityCheck:
     curvature: float | None
     method: str
     time: float
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("stable", "n_negative", "n_zero", "curvature", "method", "direction"))
+
+    def to_dict(self) -> dict:
+        """Every field as JSON-ready values (the direction as a list, or None)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
     def summary(self) -> dict:
         """JSON-friendly figures (without the direction)."""
