@@ -106,6 +106,63 @@ def test_a_rope_predicted_slack_that_ends_at_its_length_is_met_exactly(monkeypat
     assert res.residual < 1e-8
 
 
+class _Forced:
+    """The constrained solver, with the outcome of one form's solves replaced (as IPOPT can report it)."""
+
+    def __init__(self, solver, inequality: bool, status: str):
+        self.solver, self.inequality, self.status, self.hit = solver, inequality, status, False
+
+    def __call__(self, **kw):
+        self.hit = bool(np.isinf(np.asarray(kw["lbg"])).any()) == self.inequality
+        return self.solver(**kw)
+
+    def stats(self):
+        st = dict(self.solver.stats())
+        if self.hit:
+            st.update(success=False, return_status=self.status)
+        return st
+
+
+def _force(monkeypatch, inequality, status):
+    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics.constrained import ConstrainedModel
+
+    solver = ConstrainedModel.solver
+    monkeypatch.setattr(ConstrainedModel, "solver",
+                        lambda self, b, o, f: (lambda r: (_Forced(r[0], inequality, status), r[1]))(solver(self, b, o, f)))
+    outcomes, solve = [], backends._solve_constrained
+
+    def spy(plugin, opts, cm, p, *args, **kw):
+        out = solve(plugin, opts, cm, p, *args, **kw)
+        outcomes.append((out, 1e-9 * cm.force_scale(p), cm.n_targets))
+        return out
+
+    monkeypatch.setattr(backends, "_solve_constrained", spy)
+    return outcomes
+
+
+def test_a_failed_inequality_form_is_never_replaced_by_a_pushing_rope(monkeypatch):
+    # the predictor leaves the second rope slack, the inequality form (first) fails, the equality form
+    # after it has the rope pushing: the step fails; no accepted step has a pushing rope
+    outcomes = _force(monkeypatch, inequality=True, status="Restoration_Failed")
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    res = solve_internal(mesh, MAT, [row(mesh, 0.0), row(mesh, 0.25)], [0.3, 0.05])
+    assert outcomes and not res.success
+    for out, tol, nt in outcomes:
+        assert not out.success or np.all(out.lam_g[:nt] >= -tol), (out.status, out.lam_g)
+
+
+def test_an_undecided_inequality_answer_stands_when_the_equality_form_hits_its_cap(monkeypatch):
+    outcomes = _force(monkeypatch, inequality=False, status="Maximum_Iterations_Exceeded")
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    P = mesh.points
+    mus = [Muscle(sorted(np.flatnonzero(np.isclose(P[:, 1], y)), key=lambda i: P[i, 0])[1:-1]) for y in (0.0, 0.5)]
+    res = solve_internal(mesh, MAT, mus, [0.4, 0.05])
+    # the inequality form's answer (second rope 9e-7 L0 short) is kept, not the capped equality solve's
+    assert outcomes[0][0].success and outcomes[0][0].status == "Solve_Succeeded"
+    assert np.abs(res.achieved - [0.4, 0.05]).max() < 1e-5
+
+
 def test_an_opposing_rope_holds_with_positive_tension():
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     # the top rope is not pulled in (a = 0) but may not lengthen: it holds against the bottom one

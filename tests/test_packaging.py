@@ -176,7 +176,10 @@ def test_each_subcommand_module_registers_what_the_owner_table_says():
             assert _subcommands(build_parser(c)) == list(cmds)
     assert _subcommands(build_parser("no-such-command")) == full  # argparse then lists every choice
     assert command_of(["-q", "-vv", "run", "gecko"]) == "run"
-    assert command_of(["--version"]) is None and command_of(["--", "run"]) is None
+    assert command_of(["--verb", "-qv", "--qui", "list"]) == "list"
+    for argv in (["--version"], ["--", "run"], ["-h", "run"], ["-vh", "list"], ["--he", "run"], ["-", "list"],
+                 ["-1", "list"], ["--ver", "run"], ["--bogus", "run"], []):
+        assert command_of(argv) is None, argv  # the full parser answers: help lists every subcommand
 
 
 def _subcommands(parser):

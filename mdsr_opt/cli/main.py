@@ -30,12 +30,17 @@ def _register(sub, command: str | None = None) -> None:
 
 
 def command_of(argv: list[str]) -> str | None:
-    """The subcommand named in ``argv`` (its first word that is not a global option), or None."""
+    """The subcommand named in ``argv``: its first word, after global options that take no value (``-v``,
+    ``-q``, ``-vq``, ``--verbose``, ``--quiet`` or a prefix of one of these two). None when anything else
+    comes first (``-h``, ``--version``, ``--``, ``-``, an unknown option): the full parser then answers."""
     for word in argv:
-        if word == "--":
+        if not word.startswith("-") or word == "-":
+            return None if word == "-" else word
+        long_ok = word.startswith("--") and len(word) > 2 and \
+            sum(name.startswith(word) for name in ("--verbose", "--quiet", "--version")) == 1 and \
+            not "--version".startswith(word)
+        if not (long_ok or (not word.startswith("--") and set(word[1:]) <= {"v", "q"})):
             return None
-        if not word.startswith("-"):
-            return word
     return None
 
 

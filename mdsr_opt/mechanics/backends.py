@@ -178,7 +178,8 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
 def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
     """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
     pushing is the answer; so is an inequality-form one, unless it leaves a rope undecided and the equality
-    form is still to come (it is then kept in case a rope pushes in the equality form)."""
+    form is still to come. An inequality-form outcome tried first (undecided, or failed short of the
+    iteration cap) stands when the equality form after it fails or has a rope pushing."""
     solver, build_time = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), opts,
                                        _constrained_factory(plugin, opts, symbolic))
     pe = cmodel.split(p)[0]
@@ -206,26 +207,28 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
             bool(st.get("success", False)), lam
 
     forms = rope_forms(cmodel, p, x0)
-    kept = None  # an inequality-form answer that the equality form may improve on
+    first = None  # an inequality-form outcome tried first: it stands unless the equality form does better
     for k, equality in enumerate(forms):
         sol, status, ok, lam = run(x0, equality)
-        if status == "Maximum_Iterations_Exceeded":
-            # not a rope that would push but a step too long: the other form, from the same start, only
-            # repeats the failure (a 50 % contraction at 541 nodes: twice 100 iterations and about 3,000
-            # energy evaluations each before load stepping halved the step)
-            break
+        last = k == len(forms) - 1
         if equality:
             if ok and np.all(lam[:nt] >= -push_tol):
                 break
-            if kept is not None:  # a rope pushes after all: the inequality form's answer stands
-                sol, status, ok, lam = kept
+            if first is not None:  # second, and no better (a rope pushes, or it failed)
+                sol, status, ok, lam = first
+                break
+            if status == "Maximum_Iterations_Exceeded":
+                # not a rope that would push but a step too long: the inequality form, from the same start,
+                # only repeats the failure (a 50 % contraction at 541 nodes: twice 100 iterations and about
+                # 3,000 energy evaluations each before load stepping halved the step)
                 break
             if ok:
-                status = "a rope would push: re-solved with slack allowed"
-        elif ok:
-            if k == len(forms) - 1 or not _undecided_ropes(cmodel, p, sol).any():
+                status, ok = "a rope would push: re-solved with slack allowed", False
+        else:
+            undecided = ok and not last and _undecided_ropes(cmodel, p, sol).any()
+            if last or status == "Maximum_Iterations_Exceeded" or (ok and not undecided):
                 break
-            kept = (sol, status, ok, lam)
+            first = (sol, status, ok, lam)  # failed, or a rope undecided: the equality form next
     return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build_time, lam)
 
 
