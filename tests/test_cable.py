@@ -64,27 +64,31 @@ def test_a_rope_that_would_have_to_push_goes_slack():
     assert res.residual < 1e-6
 
 
-def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch):
+@pytest.mark.parametrize("ropes, a", [([(0.0,), (0.0, 1.0, 3.0)], [0.3, 0.05]),
+                                      ([(0.0, 0.5, 4.0), (0.25, 0.0, 3.5)], [0.35, 0.15])],
+                         ids=["along-the-first", "above-the-first"])
+def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch, ropes, a):
     from mdsr_opt.mechanics import backends
 
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
-    # the second rope runs along the middle of the first, contracted less: the first's pull leaves it slack
-    mus = [row(mesh, 0.0), row(mesh, 0.0, 1.0, 3.0)]
-    res = solve_internal(mesh, MAT, mus, [0.3, 0.05])
+    # the second rope runs along the middle of the first (the predictor's step is taken) or a quarter up
+    # (the step is not: it lengthens the first rope), contracted less: the first's pull leaves it slack
+    mus = [row(mesh, *r) for r in ropes]
+    res = solve_internal(mesh, MAT, mus, a)
     assert res.success and list(res.slack) == [False, True] and res.tension[1] == 0.0
     # the taut rope is never longer than its target in the inequality form (IPOPT's default bound
     # relaxation left it 7.7e-9 L0 too long here)
-    assert 0.0 <= res.achieved[0] - 0.3 < 1e-8
+    assert 0.0 <= res.achieved[0] - a[0] < 1e-8
     # the predictor left the second rope slack: the inequality form, which decided it, was the only one solved
     forms, hinted = [], backends.rope_forms
     monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or (True, False))
-    both = solve_internal(mesh, MAT, mus, [0.3, 0.05])  # the equality form first, as before
+    both = solve_internal(mesh, MAT, mus, a)  # the equality form first, as before
     assert both.success and forms == [(False, True)]
     np.testing.assert_allclose(res.x, both.x, atol=1e-9)  # the same start and form: the same equilibrium
     assert res.iterations < both.iterations
     # a warm start with the second rope released (shorter than its new target) is no prediction: equality first
     forms.clear()
-    again = solve_internal(mesh, MAT, mus, [0.3, 0.02], initial_guess=res.x)
+    again = solve_internal(mesh, MAT, mus, [a[0], 0.02], initial_guess=res.x)
     assert again.success and forms == [(True, False)]
 
 

@@ -11,7 +11,8 @@ inequality form).
 muscles; 3 draws of contractions in [0.05, 0.25]), where with 8 muscles two or three ropes end slack, each
 twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.backends.rope_forms` (a
 predictor start that left a rope slack skips the equality form) and with the equality form always tried
-first (as before), and prints iterations, seconds and the energies' agreement.
+first (as before), and prints iterations, seconds and the energies' agreement; then the totals of both for
+30 random layouts of 2-4 ropes along rows of a 32 x 8 strip.
 
 Run:  python tests/benchmarks/bench_loadsteps.py
       python tests/benchmarks/bench_loadsteps.py --tree /tmp/old   # an older tree (git archive REV mdsr_opt problems)
@@ -70,7 +71,7 @@ def main(argv=None) -> int:
 
 def strips() -> int:
     import numpy as np
-    from mdsr_opt import Mesh, NeoHookean, solve_internal
+    from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
     from mdsr_opt.mechanics import backends
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -114,6 +115,33 @@ def strips() -> int:
                       f"{row['old'][0]:>18} {row['old'][1]:>6.3f} | {row['new'][3]:>5} {de:>8.1e}", flush=True)
     print(f"total: slack start {tot['new'][0]} iterations, {tot['new'][1]:.2f} s; equality first {tot['old'][0]} "
           f"iterations, {tot['old'][1]:.2f} s (medians of 2 alternating solves per case)")
+    # random layouts: 2-4 ropes along rows of a 32 x 8 strip, contractions in [0.02, 0.4] (seed 7)
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    P = mesh.points
+    rng = np.random.default_rng(7)
+    res = {"new": [0, 0, 0.0], "old": [0, 0, 0.0]}
+    for _ in range(30):
+        m = int(rng.integers(2, 5))
+        mus = []
+        for _j in range(m):
+            y, x0, x1 = rng.choice([0.0, 0.125, 0.25, 0.5, 0.75, 1.0]), rng.choice([0.0, 0.5, 1.0]), \
+                rng.choice([3.0, 3.5, 4.0])
+            sel = [int(i) for i in np.argsort(P[:, 0], kind="stable") if abs(P[i, 1] - y) < 1e-9 and x0 <= P[i, 0] <= x1]
+            mus.append(Muscle(sel))
+        a = rng.uniform(0.02, 0.4, size=m)
+        for key, forms in (("new", hinted), ("old", equality_first)):
+            backends.rope_forms = forms
+            try:
+                t0 = time.perf_counter()
+                r = solve_internal(mesh, mat, mus, a)
+                res[key][2] += time.perf_counter() - t0
+            finally:
+                backends.rope_forms = hinted
+            res[key][0] += r.iterations
+            res[key][1] += bool(r.success)
+    print(f"30 random layouts of 2-4 ropes (32 x 8 strip): slack start {res['new'][0]} iterations, {res['new'][1]} "
+          f"solved, {res['new'][2]:.1f} s; equality first {res['old'][0]} iterations, {res['old'][1]} solved, "
+          f"{res['old'][2]:.1f} s")
     return 0
 
 
