@@ -255,8 +255,8 @@ class ConstrainedModel:
             # one_muscle and two_muscles at medium resolution (541 and 567 nodes), 20-50 % contractions: 11-342
             # IPOPT iterations and up to 3 load steps with the step, 12-55 iterations in one step without,
             # the same equilibria. The ropes found slack are recorded for that state too (predicted_slack):
-            # 30 random layouts of 2-4 ropes on a strip took 354 IPOPT iterations in all (26 solved) with
-            # that, 3,274 (24) without, 8,208 (21) with the equality form always first (bench_loadsteps).
+            # 30 random layouts of 2-4 ropes on a strip took 340 IPOPT iterations in all (26 solved), against
+            # 8,208 (21 solved) with the equality form always first (bench_loadsteps.py --strips).
             L0 = self.constraints.rest_lengths
             before = np.abs(c_x[:self.n_targets] - ub[:self.n_targets]) / L0
             after = np.abs(self.values(y)[:self.n_targets] - ub[:self.n_targets]) / L0
