@@ -128,14 +128,18 @@ class Mesh:
     @cached_property
     def edges(self) -> np.ndarray:
         """Unique undirected edges (k, 2) with ``i < j``, sorted lexicographically."""
-        t = self._triangles.astype(np.int64)
-        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
-        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
-        n = np.int64(max(len(self._points), 1))
-        key = np.unique(np.minimum(a, b) * n + np.maximum(a, b))  # one integer per edge: sorts like (i, j)
+        n, key = max(len(self._points), 1), self._edge_keys
         e = np.stack([key // n, key % n], axis=1).astype(self._triangles.dtype)
         e.setflags(write=False)
         return e
+
+    @cached_property
+    def _edge_keys(self) -> np.ndarray:
+        """One integer per undirected edge, ``i n + j`` with ``i < j``, sorted (so sorts like ``(i, j)``)."""
+        t = self._triangles.astype(np.int64)
+        a = np.concatenate([t[:, 0], t[:, 1], t[:, 2]])
+        b = np.concatenate([t[:, 1], t[:, 2], t[:, 0]])
+        return np.unique(np.minimum(a, b) * max(len(self._points), 1) + np.maximum(a, b))
 
     @cached_property
     def edge_index(self) -> dict[tuple[int, int], int]:
@@ -143,23 +147,15 @@ class Mesh:
         :meth:`edge_rows` for arrays)."""
         return {(int(a), int(b)): k for k, (a, b) in enumerate(self.edges)}
 
-    @cached_property
-    def _edge_keys(self) -> np.ndarray:
-        e = self.edges.astype(np.int64)
-        return e[:, 0] * max(len(self._points), 1) + e[:, 1]  # sorted: edges are sorted lexicographically
-
     def edge_rows(self, i: ArrayLike, j: ArrayLike) -> np.ndarray:
         """The rows of :attr:`edges` joining nodes ``i[k]`` and ``j[k]`` (either order), -1 where the two
         are not joined by an edge (or a node is out of range): one binary search per pair, no Python loop."""
         i, j = np.asarray(i, dtype=np.int64), np.asarray(j, dtype=np.int64)
-        n = max(len(self._points), 1)
+        n, keys = max(len(self._points), 1), self._edge_keys  # a mesh has at least one triangle: keys
         lo, hi = np.minimum(i, j), np.maximum(i, j)
-        keys = self._edge_keys
         key = lo * n + hi
-        pos = np.minimum(np.searchsorted(keys, key), max(len(keys) - 1, 0))
-        ok = (lo >= 0) & (hi < n) & (len(keys) > 0)
-        ok &= keys[pos] == key if len(keys) else False
-        return np.where(ok, pos, -1)
+        pos = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+        return np.where((lo >= 0) & (hi < n) & (keys[pos] == key), pos, -1)
 
     def has_edge(self, i: int, j: int) -> bool:
         return bool(self.edge_rows(i, j) >= 0)

@@ -36,10 +36,11 @@ def command_of(argv: list[str]) -> str | None:
     for word in argv:
         if not word.startswith("-") or word == "-":
             return None if word == "-" else word
-        long_ok = word.startswith("--") and len(word) > 2 and \
-            sum(name.startswith(word) for name in ("--verbose", "--quiet", "--version")) == 1 and \
-            not "--version".startswith(word)
-        if not (long_ok or (not word.startswith("--") and set(word[1:]) <= {"v", "q"})):
+        if word.startswith("--"):  # argparse takes a prefix of one long option: this one or another?
+            if len(word) == 2 or [n for n in ("--verbose", "--quiet", "--version") if n.startswith(word)] \
+                    not in (["--verbose"], ["--quiet"]):
+                return None
+        elif not set(word[1:]) <= {"v", "q"}:
             return None
     return None
 

@@ -164,9 +164,9 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     slack (its predicted tension was negative: :meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.
     predicted_slack`) takes the inequality form first: held at its length, such a rope made the equality
     solve long, and its answer was then discarded. The equality form follows only when the answer leaves a
-    rope undecided (:func:`_undecided_ropes`), where it is the more accurate. Measured on 1k and 3k strips with 8 muscles, two or
-    three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the equality solve) against 8-17,
-    the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
+    rope undecided (:func:`_undecided_ropes`), where it is the more accurate. Measured on 1k and 3k strips
+    with 8 muscles, two or three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the
+    equality solve) against 8-17, the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
     where a released rope is short but usually pulls again) keep the equality form first: on gecko's gait
     taking a short rope as slack cost 51 iterations against 42."""
     if not cmodel.n_targets:

@@ -82,6 +82,16 @@ def strips() -> int:
     def equality_first(cmodel, p, x0):
         return (True, False) if cmodel.n_targets else (False,)
 
+    def solve(forms, mesh, mus, a):
+        """``(result, seconds)`` of one solve with ``forms`` as the rope forms."""
+        backends.rope_forms = forms
+        try:
+            t0 = time.perf_counter()
+            r = solve_internal(mesh, mat, mus, a)
+            return r, time.perf_counter() - t0
+        finally:
+            backends.rope_forms = hinted
+
     print(f"{'nodes':>6} {'muscles':>7} {'draw':>4} | {'slack start: it':>15} {'s':>6} | {'equality first: it':>18} "
           f"{'s':>6} | {'slack':>5} {'|dE|/E':>8}")
     tot = {"new": [0, 0.0], "old": [0, 0.0]}
@@ -96,13 +106,7 @@ def strips() -> int:
                 out = {}
                 for rep in range(2):
                     for key, forms in (("new", hinted), ("old", equality_first))[::1 if rep == 0 else -1]:
-                        backends.rope_forms = forms
-                        try:
-                            t0 = time.perf_counter()
-                            r = solve_internal(mesh, mat, mus, a)
-                            dt = time.perf_counter() - t0
-                        finally:
-                            backends.rope_forms = hinted
+                        r, dt = solve(forms, mesh, mus, a)
                         if not r.success:
                             print(f"  {key}: FAILED {r.status}")
                         out.setdefault(key, []).append((r.iterations, dt, r.energy, int(r.slack.sum())))
@@ -130,13 +134,8 @@ def strips() -> int:
             mus.append(Muscle(sel))
         a = rng.uniform(0.02, 0.4, size=m)
         for key, forms in (("new", hinted), ("old", equality_first)):
-            backends.rope_forms = forms
-            try:
-                t0 = time.perf_counter()
-                r = solve_internal(mesh, mat, mus, a)
-                res[key][2] += time.perf_counter() - t0
-            finally:
-                backends.rope_forms = hinted
+            r, dt = solve(forms, mesh, mus, a)
+            res[key][2] += dt
             res[key][0] += r.iterations
             res[key][1] += bool(r.success)
     print(f"30 random layouts of 2-4 ropes (32 x 8 strip): slack start {res['new'][0]} iterations, {res['new'][1]} "
