@@ -163,8 +163,8 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     otherwise the inequality form, from the same start. A start made by the KKT predictor that left a rope
     slack (its predicted tension was negative: :meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.
     predicted_slack`) takes the inequality form first: held at its length, such a rope made the equality
-    solve long, and its answer was then discarded. The equality form follows only when the answer leaves a
-    rope undecided (:func:`_undecided_ropes`), where it is the more accurate. Measured on 1k and 3k strips
+    solve long, and its answer was then discarded. A rope an inequality-form answer leaves undecided is then
+    settled by :func:`_decide_ropes`. Measured on 1k and 3k strips
     with 8 muscles, two or three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the
     equality solve) against 8-17, the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
     where a released rope is short but usually pulls again) keep the equality form first: on gecko's gait
@@ -177,10 +177,9 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
 
 def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
     """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
-    pushing is the answer; so is an inequality-form one, unless it leaves a rope undecided and the equality
-    form is still to come. An inequality-form outcome tried first (undecided, or failed short of the
-    iteration cap) stands when the equality form after it fails or has a rope pushing; after an undecided
-    answer the equality form starts from it (on a strip, 15 iterations in all against 33 from the start)."""
+    pushing is the answer; so is an inequality-form one, once :func:`_decide_ropes` has settled any rope it
+    left undecided. A failed inequality form tried first is followed by the equality form, whose answer
+    replaces it only when it succeeds with no rope pushing."""
     solver, build_time = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), opts,
                                        _constrained_factory(plugin, opts, symbolic))
     pe = cmodel.split(p)[0]
@@ -194,8 +193,8 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
     push_tol = 1e-9 * cmodel.force_scale(p)  # a rope at its length with no load: a multiplier of round-off size
     clock = {"t": 0.0, "it": 0}
 
-    def run(start, equality):
-        lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality)
+    def run(start, equality, released=None):
+        lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality, released=released)
         t0 = time.perf_counter()
         with interruptible(), quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=start, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
@@ -207,15 +206,14 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
         return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
             bool(st.get("success", False)), lam
 
-    forms = rope_forms(cmodel, p, x0)
-    first = None  # an inequality-form outcome tried first: it stands unless the equality form does better
-    for k, equality in enumerate(forms):
-        # after an undecided inequality answer the equality form starts from it (no bound to push away from)
-        start = np.asarray(first[0]["x"]).ravel() if first is not None and first[2] else x0
-        sol, status, ok, lam = run(start, equality)
-        last = k == len(forms) - 1
+    def pushing(lam, held):
+        return np.broadcast_to(held, (nt,)) & (lam[:nt] < -push_tol)
+
+    first = None  # a failed inequality form tried first: it stands unless the equality form does better
+    for equality in rope_forms(cmodel, p, x0):
+        sol, status, ok, lam = run(x0, equality)
         if equality:
-            if ok and np.all(lam[:nt] >= -push_tol):
+            if ok and not pushing(lam, True).any():
                 break
             if first is not None:  # second, and no better (a rope pushes, or it failed)
                 sol, status, ok, lam = first
@@ -228,11 +226,52 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
             if ok:
                 status, ok = "a rope would push: re-solved with slack allowed", False
         else:
-            undecided = ok and not last and _undecided_ropes(cmodel, p, sol).any()
-            if last or status == "Maximum_Iterations_Exceeded" or (ok and not undecided):
+            if ok:
+                decided = _decide_ropes(run, cmodel, p, sol, pushing)
+                if decided is not None:
+                    sol, status, ok, lam = decided
                 break
-            first = (sol, status, ok, lam)  # failed, or a rope undecided: the equality form next
+            if status == "Maximum_Iterations_Exceeded":
+                break
+            first = (sol, status, ok, lam)  # failed: the equality form next, if any
     return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build_time, lam)
+
+
+def _decide_ropes(run, cmodel, p, sol, pushing):
+    """Settle the ropes an inequality-form answer left undecided (:func:`_undecided_ropes`); None when it
+    left none, or when settling them fails (the answer then stands as it is).
+
+    The interior point method approaches a rope that ends at its length with almost no tension slowly, and
+    may stop with it short by 1e-6 to 1e-4 L0 and a spurious tension. From that answer, the ropes not
+    clearly slack are held at their lengths (the clearly slack ones keep their ``<=`` rows); a held rope
+    that then pushes, if it was an undecided one, is released (its row dropped) and the solve repeated,
+    and is accepted only if it ends no longer than its target. Measured: a strip whose second rope ends
+    taut with tension 0.0009 against 0.12 (held: met exactly); a 24 x 6 strip with 6 ropes, one of which
+    pushes with -3.4e-6 against tensions of 0.04 when held (released: it ends 9e-6 L0 short, at zero
+    tension), where the inequality answer had left it 5.9e-5 short with a tension of 4.5e-5 and a
+    Lagrangian residual of 1.1e-5 that rejected the state."""
+    x = np.asarray(sol["x"]).ravel()
+    undecided = _undecided_ropes(cmodel, p, sol)
+    if not undecided.any():
+        return None
+    held = ~cmodel.short_ropes(x, p, UNDECIDED_RTOL)
+    released = np.zeros_like(held)
+    for _ in range(2):
+        out = run(x, held, released)
+        if not out[2]:
+            return None
+        push = pushing(out[3], held)
+        if not push.any():
+            x = np.asarray(out[0]["x"]).ravel()
+            over = cmodel.values(x)[:cmodel.n_targets] - cmodel.split(p)[1]
+            if np.any(over[released] > 1e-9 * cmodel.constraints.rest_lengths[released]):
+                return None  # a released rope ends longer than its target: it was not slack
+            return out
+        if np.any(push & ~undecided):  # a rope the inequality form found taut would push: no settling it
+            return None
+        held, released = held & ~push, released | push
+        x = np.asarray(out[0]["x"]).ravel()
+    return None
 
 
 #: the band of rope lengths an inequality-form answer leaves undecided (:func:`_undecided_ropes`): shorter
@@ -246,7 +285,7 @@ def _undecided_ropes(cmodel, p, sol) -> np.ndarray:
     slack (short by more than :data:`UNDECIDED_RTOL`): a rope ending at its length with almost no tension,
     which the interior point method approaches slowly. On a strip whose second rope ended so (tension
     0.0009 against 0.12), its answer stopped 9e-7 L0 short; the multipliers' fit took the rope for slack
-    and the Lagrangian residual of 2e-4 rejected the state. The equality form, tried next, meets it exactly
+    and the Lagrangian residual of 2e-4 rejected the state. :func:`_decide_ropes`, holding it, meets it exactly
     (:func:`_solve_constrained`)."""
     x = np.asarray(sol["x"]).ravel()
     return cmodel.short_ropes(x, p) & ~cmodel.short_ropes(x, p, UNDECIDED_RTOL)

@@ -93,15 +93,19 @@ class ConstrainedModel:
         out[self.rows] = lam
         return out
 
-    def bounds(self, p, equality_ropes=False) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, p, equality_ropes=False, released=None) -> tuple[np.ndarray, np.ndarray]:
         """``(lbg, ubg)`` of the NLP's constraint rows: ropes ``<= target`` (``== target`` when
-        ``equality_ropes``: True for all, or a bool per rope), rigid rows ``== 0``."""
+        ``equality_ropes``: True for all, or a bool per rope; unbounded where the bool mask ``released``
+        is True), rigid rows ``== 0``."""
         _, targets, _ = self.split(p)
         lb = np.zeros(self.n_rows)
         ub = np.zeros(self.n_rows)
         if self.n_targets:
             ub[:self.n_targets] = targets
             lb[:self.n_targets] = np.where(equality_ropes, targets, -np.inf)
+            if released is not None:
+                ub[:self.n_targets][released] = np.inf
+                lb[:self.n_targets][released] = -np.inf
         return lb, ub
 
     # ------------------------------------------------------------------ numeric evaluation
@@ -169,9 +173,9 @@ class ConstrainedModel:
         S = sp.csc_matrix((np.ones(len(dofs)), (np.arange(len(dofs)), dofs)), shape=(len(dofs), self.n_dof))
         return ca.mtimes(local(x[dofs.tolist()]), to_dm(S))
 
-    def nlp_bounds(self, p, equality_ropes=False) -> tuple[np.ndarray, np.ndarray]:
+    def nlp_bounds(self, p, equality_ropes=False, released=None) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`bounds` for :meth:`nlp_constraints_expr`."""
-        lb, ub = self.bounds(p, equality_ropes)
+        lb, ub = self.bounds(p, equality_ropes, released)
         return lb * self.row_scale, ub * self.row_scale
 
     def hess_lag_upper(self, x, p, lam_f, lam_g, numeric: bool = False):
