@@ -319,9 +319,11 @@ def test_failed_optimiser_is_not_success(mesh, muscles, target):
     res = design_contractions(mesh, MAT, muscles, target, method="derivative-free", max_iter=5)
     assert not res.success
     assert "Maximum number" in res.status
-    res = design_contractions(mesh, MAT, muscles, target, max_iter=1)
+    res = design_contractions(mesh, MAT, muscles, target, max_iter=1, initial_guess=A_START)
     assert not res.success
     assert "Maximum_Iterations_Exceeded" in res.status
+    # (from the geometric guess, here the answer, one iteration suffices: the start is the solution)
+    assert design_contractions(mesh, MAT, muscles, target, max_iter=1).success
 
 
 def test_result_round_trips_through_json(mesh, muscles, target):
@@ -685,3 +687,69 @@ def test_design_figure_title_states_the_contractions_reached():
     assert abs(res.achieved[0] - res.contractions[0]) > 5e-4  # springs: reached differs from commanded
     title = plot_design(mesh, res, target, mus).axes[0].get_title()
     assert f"achieved = [{res.achieved[0]:.3f}]" in title and f"{res.contractions[0]:.3f}" not in title
+
+
+# ------------------------------------------------------------------------------ warm start from the target
+def test_the_warm_start_from_the_target_reaches_the_design_of_the_rest_start(mesh, muscles, target):
+    from_target = design_contractions(mesh, MAT, muscles, target)
+    from_rest = design_contractions(mesh, MAT, muscles, target, warm_start="rest")
+    assert from_target.success and from_rest.success
+    np.testing.assert_allclose(from_target.contractions, from_rest.contractions, atol=1e-9)
+    assert from_target.verification.passed and from_target.verification.gap < 1e-8
+    # a reachable target is the equilibrium at the geometric guess: one solve of a few iterations from it,
+    # against load steps from rest
+    assert from_target.inner_iterations < from_rest.inner_iterations
+    with pytest.raises(ValueError, match="warm_start must be"):
+        design_contractions(mesh, MAT, muscles, target, warm_start="target-ish")
+
+
+def test_the_forward_solver_starts_from_rest_when_the_given_shape_cannot_start_it(mesh, muscles, target):
+    prob = DesignProblem(mesh, MAT, muscles, target, node_weights(mesh), "cable", 10.0, 0.6)
+    fwd = ForwardSolver(prob, 1e-10, 200)
+    folded = target.copy()
+    folded[[0, 1]] = folded[[1, 0]]  # two corner nodes swapped: an inverted element
+    x, ok, _ = fwd.solve(A_TRUE, start=folded)
+    assert ok and fwd.started_from == "rest"
+    ref = solve_internal(mesh, MAT, muscles, A_TRUE, align_to_rest=False, tol=1e-10)
+    assert np.abs(x - ref.x.reshape(-1)).max() < 1e-8
+    fwd2 = ForwardSolver(prob, 1e-10, 200)
+    x2, ok2, _ = fwd2.solve(A_TRUE, start=target)
+    assert ok2 and fwd2.started_from == "target"
+    assert np.abs(align(x2.reshape(-1, 2), ref.x).apply(x2.reshape(-1, 2)) - ref.x).max() < 1e-8
+
+
+def test_a_design_warm_started_from_the_target_that_fails_is_repeated_from_rest(monkeypatch, mesh, muscles, target):
+    from mdsr_opt.synthesis import contractions
+    from mdsr_opt.synthesis.results import Verification
+
+    calls, verify = [], contractions.verify_design
+
+    def first_fails(*args, **kw):  # as if the forward re-solve from rest had reached another state
+        v = verify(*args, **kw)
+        calls.append(v)
+        if len(calls) == 1:
+            v = Verification(**{**v.__dict__, "passed": False, "message": "gap 0.3 between ..."})
+        return v
+
+    monkeypatch.setattr(contractions, "verify_design", first_fails)
+    res = design_contractions(mesh, MAT, muscles, target)
+    assert len(calls) == 2 and res.success and res.verification.passed
+    assert "warm-started from rest after the design warm-started from the target failed" in res.status
+    np.testing.assert_allclose(res.contractions, A_TRUE, atol=1e-7)
+
+
+def test_the_verification_takes_the_forward_check_only_for_the_same_state(monkeypatch, mesh, muscles, target):
+    from mdsr_opt.synthesis import verify as verify_mod
+
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    checks, stability = [], verify_mod._stability
+    monkeypatch.setattr(verify_mod, "_stability", lambda *a, **k: checks.append(1) or stability(*a, **k))
+    v = verify_design(mesh, MAT, muscles, res, target)
+    # the forward re-solve lands on the design's state: its own check answers, the residual is the state's
+    assert v.passed and v.gap <= verify_mod.SAME_STATE_RTOL * mesh.size and not checks
+    pd, _lam, residual = check_minimum(mesh, MAT, muscles, res.contractions, res.x)
+    assert v.positive_definite == pd and v.residual == pytest.approx(residual, rel=1e-6, abs=1e-15)
+    # a state off by more than that is checked itself
+    off = DesignResult(**{**res.__dict__, "x": res.x + 1e-6 * mesh.size * np.sin(np.arange(res.x.size)).reshape(-1, 2)})
+    v2 = verify_design(mesh, MAT, muscles, off, target)
+    assert checks and v2.gap > verify_mod.SAME_STATE_RTOL * mesh.size and v2.residual > 10 * v.residual

@@ -265,6 +265,8 @@ MALFORMED = [
     ("seed threshold", _set("routing/seed_threshold", 2), SceneFileError,
      r"routing\.seed_threshold: must lie in \(0, 1\]"),
     ("symmetry", _set("routing/symmetry", "yes"), SceneFileError, r"routing\.symmetry: must be 'auto', true or false"),
+    ("warm start", _set("design/warm_start", "target-ish"), SceneFileError,
+     r"design\.warm_start: must be 'target', 'rest', true or false"),
     ("huge drag", _set("cases/0/drags", [{"nodes": "tip", "by": [1e300, 0]}]), SceneFileError,
      r".*case 'bend': a drag moves a node by 1e\+300, more than 10"),
     ("gait named like a case", lambda d: d.update(gait={"name": "bend", "poses": ["bend", "rest"]}), SceneFileError,
@@ -375,3 +377,10 @@ def test_mdsr_run_reports_a_failed_case(tmp_path, capsys):
     s = json.loads((out / "summary.json").read_text())
     assert s["success"] is False and s["cases"][0]["target_success"] is True
     assert sorted(p.name for p in out.iterdir()) == [".mdsr-run.json", "summary.json", "summary.md"]
+
+
+def test_a_scene_file_may_choose_where_the_design_warm_start_starts():
+    from mdsr_opt.scenes.reader import scene_options, Reader
+
+    for v in ("target", "rest", True, False):
+        assert scene_options(Reader("scene.toml"), {"warm_start": v}, "design")["warm_start"] == v

@@ -196,11 +196,17 @@ def _table(r: Reader, v, where: str) -> dict:
     return dict(v)
 
 
-def _symmetry(r: Reader, v, where: str):
-    if not (isinstance(v, bool) or v == "auto"):
-        r.fail(where, f"must be 'auto', true or false, got {v!r}", TypeError if not isinstance(v, str) else
-               SceneFileError)
-    return v
+def _boolean_or(*choices: str):
+    """True, false or one of ``choices``."""
+    def check(r: Reader, v, where: str):
+        if not (isinstance(v, bool) or v in choices):
+            r.fail(where, f"must be {', '.join(map(repr, choices))}, true or false, got {v!r}",
+                   TypeError if not isinstance(v, str) else SceneFileError)
+        return v
+    return check
+
+
+_symmetry = _boolean_or("auto")
 
 
 #: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
@@ -214,7 +220,7 @@ _DESIGN_CHECKS = {
     "max_iter": _integer(1),
     "hessian": _choice("exact", "gauss-newton"),
     "scaling": _choice("auto", "size"),
-    "warm_start": _boolean,
+    "warm_start": _boolean_or("target", "rest"),
     "outer": _choice("nelder-mead", "powell"),
     "options": _table,
     "inner_tol": _positive(),

@@ -33,7 +33,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
-                        warm_start: bool = True, outer: str = "nelder-mead", options: dict | None = None,
+                        warm_start: bool | str = True, outer: str = "nelder-mead", options: dict | None = None,
                         inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
                         derivatives: str = "numeric") -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
@@ -74,8 +74,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     scaling : {"auto", "size"}
         Flattened only: objective over ``sum(e) h^2`` and constraints over ``E t h`` (``h`` the mean edge
         length), or the objective normalised by the body's size instead (for comparison studies).
-    warm_start : bool
-        Flattened only: start from a forward solve at ``initial`` (else from the rest shape).
+    warm_start : {True, "target", "rest", False}
+        Flattened only: start the NLP from an equilibrium at the initial contractions, found by a forward
+        solve started from the target shape (``True`` or ``"target"``; from rest when that solve fails, and
+        the whole design repeated from rest when it fails from there) or from rest (``"rest"``); ``False``
+        starts from the rest shape itself. The verification always solves from rest. Started from a
+        reachable target the forward solve takes one or two iterations instead of two load steps.
     derivatives : {"numeric", "assembled", "casadi"}
         Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
         nothing symbolic to build; ``"assembled"``, an MX graph assembled term by term from small per-term
@@ -122,6 +126,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
     if outer not in ("nelder-mead", "powell"):
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+    if not (isinstance(warm_start, bool) or warm_start in ("target", "rest")):
+        raise ValueError(f"warm_start must be True, False, 'target' or 'rest', got {warm_start!r}")
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
@@ -142,6 +148,29 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         a0 = initial_guess_of(mesh, mus, y, a_max)
 
     prob = DesignProblem(mesh, material, mus, y, w, muscle_model, stiffness, a_max, anchor_radius)
+    warm = "target" if warm_start is True else warm_start
+    args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
+            verify, gap_rtol)
+    res, fwd = _design(*args, warm=warm)
+    if method == "flattened" and not res.success and fwd.started_from == "target":
+        # the equilibrium found from the target may lie on another branch than the one reached from rest
+        # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
+        again, _ = _design(*args, warm="rest")
+        if again.success:
+            again.iterations += res.iterations
+            again.status += f" (warm-started from rest after the design warm-started from the target failed: " \
+                            f"{res.status})"
+            res = again
+        else:
+            res.status += f" (warm-started from rest, the design failed too: {again.status})"
+    return res
+
+
+def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
+            verify, gap_rtol, warm) -> tuple[DesignResult, ForwardSolver]:
+    """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start), checked and
+    verified; returns the result and the forward solver it used."""
+    mesh, material, mus, y, w = prob.mesh, prob.material, prob.muscles, prob.y, prob.w
     fwd = ForwardSolver(prob, inner_tol, 200)
     t_solve0 = time.perf_counter()
 
@@ -151,7 +180,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     build_time = prob.build_time
     bt = 0.0
     if method == "flattened":
-        out, status, iters, bt = run_flattened(prob, a0, fwd, tol, int(max_iter), hessian, scaling, warm_start,
+        out, status, iters, bt = run_flattened(prob, a0, fwd, tol, max_iter, hessian, scaling, warm,
                                                 options, clock, derivatives)
         build_time += bt
         kappa = None
@@ -162,9 +191,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
             kappa = out["kappa"]
     else:
         if method == "nested":
-            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, int(max_iter), options, clock)
+            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, max_iter, options, clock)
         else:
-            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, int(max_iter), outer, options, clock)
+            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, max_iter, outer, options, clock)
         hist = obj.history
         kappa = None
         d0 = hist[0][1] if hist else float("nan")
@@ -186,15 +215,15 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                        iterations=int(iters), n_forward=fwd.n_solves, inner_iterations=fwd.iterations,
                        build_time=build_time, solve_time=total - build_time, time=total,
                        initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
-                       a_max=a_max, muscle_model=muscle_model, stiffness=stiffness, history=list(hist),
+                       a_max=prob.a_max, muscle_model=prob.muscle_model, stiffness=prob.stiffness, history=list(hist),
                        anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy())
     report_muscles(prob, res, x, kappa)
-    if method != "flattened" and muscle_model == "cable" and res.slack.any():
+    if method != "flattened" and prob.muscle_model == "cable" and res.slack.any():
         # any contraction below the one its path reached leaves a rope slack with the same shape: report
         # that one (the rope then just reaches its length, at zero tension), as the flattened design's
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
-        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, a_max)
+        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
     if not np.all(np.isfinite(res.x)) or mesh.jacobians(res.x).min() <= 0:
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
@@ -204,7 +233,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         if res.success and not v.passed:
             res.success = False
             res.status += f"; rejected by verification: {v.message}"
-    return res
+    return res, fwd
 
 
 def check_design_options(options, method: str = "flattened", outer: str = "nelder-mead") -> dict:

@@ -14,8 +14,8 @@ from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
-from ..mechanics.equilibrium import gauge_coordinates, solve_internal
-from ..mechanics.loadsteps import check_mesh_material
+from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
+from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material
 from ..mechanics.model import get_model, to_dm
 
 
@@ -99,20 +99,28 @@ class DesignProblem:
         the active muscle constraints (anchor patches, taut ropes; None without constraints), ``kappa``
         the least-squares multipliers and ``residual`` the max-norm of the Lagrangian's free gradient."""
         xflat = np.asarray(xflat, dtype=float).reshape(-1)
-        sc = 1.0 / (self.Et * self.h)
-        p = self.params(a)
-        g = self.model.gradient(xflat, p) * sc
-        H = self.model.hessian(xflat, p) * sc
+        kap, J, res = self.stationarity(a, xflat)
+        H = self.model.hessian(xflat, self.params(a)) / (self.Et * self.h)
         blk = self.block
         if not blk.nc:
-            return H.tocsc(), self.free.copy(), None, np.zeros(0), float(np.abs(g[self.free]).max())
-        kap = blk.multipliers(xflat, g, self.free)
-        J = blk.jacobian(xflat)
+            return H.tocsc(), self.free.copy(), None, kap, res
         act = np.ones(blk.nc, dtype=bool)
         if blk.rope:  # a slack rope (no tension) constrains nothing
             act[:self.m] = kap[:self.m] > 1e-9 * max(1.0, float(np.abs(kap).max()))
-        res = float(np.abs((g + J.T @ kap)[self.free]).max())
         return (H + blk.hessian(xflat, kap)).tocsc(), self.free.copy(), J[np.nonzero(act)[0]], kap, res
+
+    def stationarity(self, a, xflat) -> tuple[np.ndarray, sp.csr_matrix | None, float]:
+        """``(kappa, J, residual)`` of the driven state ``xflat`` at contractions ``a`` in units of ``E t h``:
+        the least-squares multipliers of the muscle constraints, their Jacobian (None without constraints)
+        and the max-norm of the Lagrangian's free gradient (:meth:`kkt_data` without the Hessian)."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        g = self.model.gradient(xflat, self.params(a)) / (self.Et * self.h)
+        blk = self.block
+        if not blk.nc:
+            return np.zeros(0), None, float(np.abs(g[self.free]).max())
+        kap = blk.multipliers(xflat, g, self.free)
+        J = blk.jacobian(xflat)
+        return kap, J, float(np.abs((g + J.T @ kap)[self.free]).max())
 
     def achieved(self, x2) -> np.ndarray:
         """Achieved contraction ``1 - L / L0`` of every muscle along its node chain in state ``x2``."""
@@ -259,7 +267,10 @@ class _ConstraintBlock:
 
 class ForwardSolver:
     """Warm-started forward solves (:func:`~mdsr_opt.solve_internal` with the problem's muscle model and
-    anchor patches), each from the last accepted state, in the gauge frame (not aligned to rest)."""
+    anchor patches), each from the last accepted state, in the gauge frame (not aligned to rest).
+
+    ``started_from`` says where the first solve started: ``"rest"`` (load stepping with the predictor) or
+    ``"target"`` (a shape given to :meth:`solve`)."""
 
     def __init__(self, prob: DesignProblem, tol: float, max_iter: int):
         self.prob = prob
@@ -269,19 +280,37 @@ class ForwardSolver:
         self.n_solves = 0
         self.iterations = 0
         self.build_time = 0.0
+        self.started_from = None
 
-    def solve(self, a) -> tuple[np.ndarray, bool, str]:
-        a = np.asarray(a, dtype=float).copy()
+    def _run(self, a, guess, max_iter, min_step=1.0 / 256):
         prob = self.prob
-        at_rest = self.n_solves == 0 or not np.any(self.a)
-        guess = "predictor" if at_rest else self.x.reshape(-1, 2)
         res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
                              muscle_model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
-                             tol=self.tol, max_iter=self.max_iter, align_to_rest=False, initial_guess=guess)
+                             tol=self.tol, max_iter=max_iter, align_to_rest=False, initial_guess=guess,
+                             min_step=min_step)
         if self.n_solves == 0:
             self.build_time += res.build_time
         self.n_solves += 1
         self.iterations += res.iterations
+        return res
+
+    def solve(self, a, start=None) -> tuple[np.ndarray, bool, str]:
+        """The equilibrium at contractions ``a``: ``(x flat, success, status)``. The first solve starts
+        from ``start`` (an (n, 2) shape in any pose, moved rigidly into the gauge frame) when given, with at
+        most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` iterations (a load step's, so the same IPOPT
+        solver serves both) and no load stepping, and from rest when that fails or none
+        is given; later ones from the last accepted state."""
+        a = np.asarray(a, dtype=float).copy()
+        res = None
+        if self.started_from is None:
+            self.started_from = "rest"
+            guess = None if start is None else in_gauge_frame(self.prob.mesh, np.asarray(start, dtype=float))
+            if guess is not None:
+                res = self._run(a, guess, min(self.max_iter, STEP_ITER_CAP), min_step=1.0)
+                if res.success:
+                    self.started_from = "target"
+        if res is None or not res.success:  # from rest (no state accepted yet) or the last accepted state
+            res = self._run(a, "predictor" if not np.any(self.a) else self.x.reshape(-1, 2), self.max_iter)
         x = res.x.reshape(-1)
         if res.success:
             self.a, self.x = a, x
