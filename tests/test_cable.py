@@ -636,3 +636,35 @@ def test_the_nlp_hessian_is_the_lagrangians():
         e[k] = h
         col = (cm.gradient(x + e, p) - cm.gradient(x - e, p)) / (2 * h)
         assert np.abs(col - H[:, k].toarray().ravel()).max() < 1e-6
+
+
+def test_check_stability_false_skips_only_the_stability_check(monkeypatch):
+    from mdsr_opt.mechanics import loadsteps
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    mus = [row(mesh, 0.0), row(mesh, 1.0, 0.0, 2.0)]
+    checked = solve_internal(mesh, MAT, mus, [0.25, 0.1])
+    calls, stability_at = [], loadsteps._stability_at
+    monkeypatch.setattr(loadsteps, "_stability_at", lambda *a, **k: calls.append(1) or stability_at(*a, **k))
+    unchecked = solve_internal(mesh, MAT, mus, [0.25, 0.1], check_stability=False)
+    assert checked.success and checked.stable and unchecked.success and not calls
+    assert unchecked.stable is None and unchecked.stability is None
+    np.testing.assert_allclose(unchecked.x, checked.x, atol=1e-12)
+    with pytest.raises(TypeError, match="check_stability must be True or False"):
+        solve_internal(mesh, MAT, mus, [0.25, 0.1], check_stability="no")
+
+
+@pytest.mark.parametrize("model", ["cable", "springs"])
+def test_equality_rows_start_from_fitted_multipliers_with_the_same_answer(monkeypatch, model):
+    # all rows equalities (taut ropes, anchor patches): IPOPT starts from the multipliers fitted at the start
+    # instead of estimating them itself; the equilibrium is the same
+    from mdsr_opt.mechanics import backends
+
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0, 0.5, 3.5), row(mesh, 1.0, 0.5, 2.0)]
+    fitted = solve_internal(mesh, MAT, mus, [0.3, 0.1], muscle_model=model)
+    monkeypatch.setattr(backends, "WARM_MULTIPLIERS", {})
+    estimated = solve_internal(Mesh.rectangle(4.0, 1.0, 32, 8), MAT, mus, [0.3, 0.1], muscle_model=model)
+    assert fitted.success and estimated.success
+    np.testing.assert_allclose(fitted.x, estimated.x, atol=1e-9)
+    assert abs(fitted.iterations - estimated.iterations) <= 1

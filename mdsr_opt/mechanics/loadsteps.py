@@ -156,12 +156,13 @@ STEP_ITER_CAP = 100
 
 
 def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
-                  verbose, predict=True):
+                  verbose, predict=True, settle=True):
     """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
 
     With ``predict=False`` each load step starts from the current state with the fixed coordinates moved
     (no Newton predictor): the "poor first guess" of the comparison studies. At full load the state must be
-    stable (:func:`_settle`): a saddle is left along its negative curvature, or the solve fails. A SIGINT
+    stable (:func:`_settle`): a saddle is left along its negative curvature, or the solve fails; with
+    ``settle=False`` that check is skipped. A SIGINT
     raises :class:`KeyboardInterrupt` (never a failed step)."""
     min_step = _check_min_step(min_step)
     with interruptible(), one_blas_thread():
@@ -204,6 +205,8 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
                 ds = min(2 * ds, 1.0 - s) if s < 1.0 else ds
             else:
                 ds /= 2
+        if not settle:  # the caller takes any equilibrium (e.g. a warm start): no stability check
+            return x, status, True, iters, steps, t_solve, t_build
         x, note, ok, it, t = _settle(mesh, model, p_of(1.0), fixed, values_of(1.0), x, backend, tol, max_iter,
                                      options, verbose)
     return x, status + note, ok, iters + it, steps, t_solve + t, t_build
@@ -298,7 +301,7 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
 
 
 def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
-            backend, mode, tol_residual=1e-5):
+            backend, mode, tol_residual=1e-5, check_stability=True):
     if getattr(model, "is_numeric", False):  # an EnergyModel in numpy: energy and gradient from one object
         en = model.numeric(p)
         energy, g = float(en.energy(xflat)), en.gradient(xflat)
@@ -314,7 +317,7 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
     if success and not ok:
         status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
     chk = None
-    if ok or "not a stable equilibrium" in status:  # the continuation's check (cached), or a fresh one
+    if check_stability and (ok or "not a stable equilibrium" in status):  # the continuation's (cached), or fresh
         with one_blas_thread():
             chk = _stability_at(model, p, xflat, fixed)
         if ok and not chk.stable:
