@@ -193,6 +193,19 @@ def test_mdsr_list_imports_no_other_subcommand_module():
     assert out.stdout.strip().splitlines()[-1] == "['mdsr_opt.cli.main', 'mdsr_opt.cli.run']"
 
 
+@pytest.mark.parametrize("asked", [None, "2"])
+def test_the_command_runs_with_one_blas_thread_unless_the_environment_says_otherwise(asked):
+    # every OpenBLAS copy (numpy's, scipy's, CasADi's) as the `mdsr` command leaves it
+    code = ("from mdsr_opt.cli.main import main; main(['list']); "
+            "from mdsr_opt.mechanics.blas import _libraries; print([g() for g, _ in _libraries()])")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    if asked is not None:
+        env["OPENBLAS_NUM_THREADS"] = asked
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True, env=env)
+    counts = [int(c) for c in out.stdout.strip().splitlines()[-1].strip("[]").split(",")]
+    assert len(counts) == 3 and set(counts) == {1 if asked is None else int(asked)}
+
+
 def test_every_add_argument_in_the_code_base_has_help():
     # the parsers built elsewhere (problem scripts' run_main, the benchmark scripts) too
     files = [*ROOT.joinpath("mdsr_opt").rglob("*.py"), *ROOT.joinpath("problems").glob("*.py"),

@@ -91,6 +91,18 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
     return level
 
 
+def one_blas_thread_per_process() -> None:
+    """Ask OpenBLAS for one thread in this process and the figure jobs it forks, unless the environment
+    says otherwise (``OPENBLAS_NUM_THREADS``): read when numpy, scipy and CasADi load their copies, so it
+    takes effect only before the first of them is imported. The package's dense products are small (sparse
+    factorisations do the work, each under :func:`~mdsr_opt.mechanics.blas.one_blas_thread` anyway); an
+    idle second thread per library spins on a core the figure jobs need. ``mdsr run gecko``: 6.9 -> 6.6 s
+    (three alternating pairs on the 2-core development machine)."""
+    import os
+
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the ``mdsr`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
 
@@ -98,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
+    one_blas_thread_per_process()
     parser = build_parser(command_of(argv))
     args = parser.parse_args(argv)
     args.command_line = " ".join(["mdsr", *argv])
