@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 
 import numpy as np
 import pytest
@@ -732,10 +733,34 @@ def test_a_design_warm_started_from_the_target_that_fails_is_repeated_from_rest(
         return v
 
     monkeypatch.setattr(contractions, "verify_design", first_fails)
+    designs, design = [], contractions._design
+
+    def counted(*a, **k):  # each design's counters as it returned them
+        out = design(*a, **k)
+        designs.append((out[0].iterations, out[0].n_forward, out[0].inner_iterations, out[0].time))
+        return out
+
+    monkeypatch.setattr(contractions, "_design", counted)
+    t0 = time.perf_counter()
     res = design_contractions(mesh, MAT, muscles, target)
+    wall = time.perf_counter() - t0
     assert len(calls) == 2 and res.success and res.verification.passed
     assert "warm-started from rest after the design warm-started from the target failed" in res.status
     np.testing.assert_allclose(res.contractions, A_TRUE, atol=1e-7)
+    # the counters and the clock cover both designs
+    first, second = designs
+    assert (res.iterations, res.n_forward, res.inner_iterations) == tuple(np.add(first[:3], second[:3]))
+    assert first[3] < res.time <= wall
+    # an optimiser that stops short (no verification failure) is not repeated
+    designs.clear()
+    short = design_contractions(mesh, MAT, muscles, target, max_iter=1, initial_guess=A_START)
+    assert not short.success and len(designs) == 1
+
+
+def test_warm_start_takes_numpy_booleans_and_refuses_numbers(mesh, muscles, target):
+    assert design_contractions(mesh, MAT, muscles, target, warm_start=np.True_, verify=False).success
+    with pytest.raises(ValueError, match="warm_start must be True, False, 'target' or 'rest', got 1"):
+        design_contractions(mesh, MAT, muscles, target, warm_start=1)
 
 
 def test_the_verification_takes_the_forward_check_only_for_the_same_state(monkeypatch, mesh, muscles, target):

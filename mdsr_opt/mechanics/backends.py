@@ -155,9 +155,11 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
 
 
 #: IPOPT options of a constrained solve whose rows are all equalities, started from given multipliers
-#: (the least-squares ones of the start): IPOPT's own estimate factorises a system the size of the unknowns.
-#: Measured on 3k nodes with 4 ropes (two load steps of 4 iterations each): 0.292 -> 0.264 s, the same
-#: iterations and energy
+#: (the least-squares ones of the start, every row fitted: a rope shorter than its new target still pulls):
+#: IPOPT's own estimate factorises a system the size of the unknowns. Measured on 3k nodes with 4 ropes (two
+#: load steps of 4 iterations each): 0.292 -> 0.264 s, the same iterations and energy; 24 frames of a 32 x 8
+#: strip with 4 ropes, each from the last: 81 iterations, as with IPOPT's estimate (116 when ropes short at
+#: the start were fitted as slack). Options the caller gives take precedence.
 WARM_MULTIPLIERS = {"ipopt.warm_start_init_point": "yes"}
 
 
@@ -184,15 +186,15 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
 
 def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
     """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
-    pushing is the answer; so is an inequality-form one, once :func:`_decide_ropes` has settled any rope it
-    left undecided. A failed inequality form tried first is followed by the equality form, whose answer
-    replaces it only when it succeeds with no rope pushing."""
+    pushing is the answer; so is an inequality-form one, with any rope it left undecided settled by
+    :func:`_decide_ropes` when that succeeds (as it is otherwise). A failed inequality form tried first is
+    followed by the equality form, whose answer replaces it only when it succeeds with no rope pushing."""
     solvers, build = {}, [0.0]
 
     def solver_for(multipliers: bool):
         """The NLP's solver; with ``multipliers``, IPOPT's that starts from given constraint multipliers."""
         if multipliers not in solvers:
-            o = dict(opts, **(WARM_MULTIPLIERS if multipliers else {}))
+            o = dict(WARM_MULTIPLIERS, **opts) if multipliers else opts  # the caller's options win
             solvers[multipliers], bt = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), o,
                                                      _constrained_factory(plugin, o, symbolic))
             build[0] += bt
@@ -217,7 +219,7 @@ def _solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: boo
         # (a system the size of the rows) instead of by its own (one the size of the unknowns)
         warm = plugin == "ipopt" and bool(np.all(lbg == ubg))
         if warm:
-            kw["lam_g0"] = cmodel.multipliers(start, p, fixed)[0] / cmodel.row_scale
+            kw["lam_g0"] = cmodel.multipliers(start, p, fixed, ropes_only_pull=False)[0] / cmodel.row_scale
         solver = solver_for(warm)
         with interruptible(), quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=start, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **kw)
@@ -265,7 +267,7 @@ def _decide_ropes(run, cmodel, p, sol, pushing):
     left none, or when settling them fails (the answer then stands as it is).
 
     The interior point method approaches a rope that ends at its length with almost no tension slowly, and
-    may stop with it short by 1e-6 to 1e-4 L0 and a spurious tension. From that answer, the ropes not
+    may stop with it short by 1e-7 to 1e-4 L0 and a spurious tension. From that answer, the ropes not
     clearly slack are held at their lengths (the clearly slack ones keep their ``<=`` rows); a held rope
     that then pushes, if it was an undecided one, is released (its row dropped) and the solve repeated,
     and is accepted only if it ends no longer than its target. Measured: a strip whose second rope ends

@@ -316,18 +316,23 @@ class ConstrainedModel:
             rest[key] = lin
         return lin
 
-    def multipliers(self, x, p, fixed, rtol: float = 1e-7, gradient=None) -> tuple[np.ndarray, np.ndarray]:
+    def multipliers(self, x, p, fixed, rtol: float = 1e-7, gradient=None,
+                    ropes_only_pull: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Least-squares multipliers at a solution ``x``: ``(lam (n_rows,), taut (n_targets,) bool)``.
 
         Ropes shorter than their target by more than ``rtol * L0`` are slack (multiplier 0); a taut rope
         whose fitted multiplier is negative is released and the fit repeated, so tensions are never
         compressive. The Lagrangian gradient with these multipliers (:meth:`gradient`) is the KKT residual.
-        ``gradient``: the energy gradient at ``x`` when the caller has it. The last answer is kept (a solve's
-        stability check and its result ask at the same state).
+        ``ropes_only_pull=False`` fits every row at once, as an estimate at a state that is no solution
+        (e.g. a solve's start, where a rope shorter than its new target still pulls). ``gradient``: the
+        energy gradient at ``x`` when the caller has it. The last answer is kept (a solve's stability check
+        and its result ask at the same state).
         """
         pe, targets, _ = self.split(p)
+        if not ropes_only_pull:
+            rtol = np.inf
         key = (np.asarray(x, dtype=float).tobytes(), pe.tobytes(), targets.tobytes(), np.asarray(fixed).tobytes(),
-               float(rtol))
+               float(rtol), bool(ropes_only_pull))
         last = self.__dict__.get("_last_multipliers")
         if last is not None and last[0] == key:
             return last[1].copy(), last[2].copy()
@@ -352,7 +357,7 @@ class ConstrainedModel:
             lam[:] = 0.0
             lam[active] = la
             neg = np.nonzero(active[:nt] & (lam[:nt] < 0))[0]
-            if len(neg) == 0:
+            if len(neg) == 0 or not ropes_only_pull:
                 break
             active[neg] = False
         self.__dict__["_last_multipliers"] = (key, lam.copy(), active[:nt].copy())

@@ -76,10 +76,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         length), or the objective normalised by the body's size instead (for comparison studies).
     warm_start : {True, "target", "rest", False}
         Flattened only: start the NLP from an equilibrium at the initial contractions, found by a forward
-        solve started from the target shape (``True`` or ``"target"``; from rest when that solve fails, and
-        the whole design repeated from rest when it fails from there) or from rest (``"rest"``); ``False``
-        starts from the rest shape itself. The verification always solves from rest. Started from a
-        reachable target the forward solve takes one or two iterations instead of two load steps.
+        solve started from the target shape (``True`` or ``"target"``: any equilibrium, not checked for
+        stability; from rest, stable, when that solve fails; and the whole design repeated from rest when
+        its verification fails) or from rest (``"rest"``: the stable equilibrium load stepping reaches);
+        ``False`` starts from the rest shape itself. The verification always solves from rest. Started from
+        a reachable target the forward solve takes one or two iterations instead of two load steps.
     derivatives : {"numeric", "assembled", "casadi"}
         Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
         nothing symbolic to build; ``"assembled"``, an MX graph assembled term by term from small per-term
@@ -92,7 +93,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     inner_tol : float
         IPOPT tolerance of the forward solves.
     verify : bool
-        Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only).
+        Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only, and
+        nothing checks that the design's state is stable or reached from rest: the warm start from the
+        target is not checked for stability either).
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
 
@@ -126,7 +129,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"scaling must be 'auto' or 'size', got {scaling!r}")
     if outer not in ("nelder-mead", "powell"):
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
-    if not (isinstance(warm_start, bool) or warm_start in ("target", "rest")):
+    if isinstance(warm_start, np.bool_):
+        warm_start = bool(warm_start)
+    if not (isinstance(warm_start, bool) or (isinstance(warm_start, str) and warm_start in ("target", "rest"))):
         raise ValueError(f"warm_start must be True, False, 'target' or 'rest', got {warm_start!r}")
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
@@ -151,25 +156,33 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     warm = "target" if warm_start is True else warm_start
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol)
-    res, fwd = _design(*args, warm=warm)
-    if method == "flattened" and not res.success and fwd.started_from == "target":
+    res, fwd, rejected = _design(*args, warm=warm)
+    if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
         # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
-        again, _ = _design(*args, warm="rest")
+        again, _, _ = _design(*args, warm="rest")
+        first = res
         if again.success:
-            again.iterations += res.iterations
-            again.status += f" (warm-started from rest after the design warm-started from the target failed: " \
-                            f"{res.status})"
             res = again
+            res.status += f" (warm-started from rest after the design warm-started from the target failed " \
+                          f"its verification: {first.verification.message})"
         else:
             res.status += f" (warm-started from rest, the design failed too: {again.status})"
+        # the counters and clocks cover both designs; the history is the returned one's
+        res.iterations = first.iterations + again.iterations
+        res.n_forward = first.n_forward + again.n_forward
+        res.inner_iterations = first.inner_iterations + again.inner_iterations
+        res.time = time.perf_counter() - clock0
+        res.build_time = max(first.build_time, again.build_time)
+        res.solve_time = res.time - res.build_time
     return res
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, warm) -> tuple[DesignResult, ForwardSolver]:
+            verify, gap_rtol, warm) -> tuple[DesignResult, ForwardSolver, bool]:
     """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start), checked and
-    verified; returns the result and the forward solver it used."""
+    verified; returns the result, the forward solver it used and whether the verification rejected a
+    design the optimiser had found."""
     mesh, material, mus, y, w = prob.mesh, prob.material, prob.muscles, prob.y, prob.w
     fwd = ForwardSolver(prob, inner_tol, 200)
     t_solve0 = time.perf_counter()
@@ -233,7 +246,8 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         if res.success and not v.passed:
             res.success = False
             res.status += f"; rejected by verification: {v.message}"
-    return res, fwd
+            return res, fwd, True
+    return res, fwd, False
 
 
 def check_design_options(options, method: str = "flattened", outer: str = "nelder-mead") -> dict:

@@ -42,7 +42,9 @@ class Verification:
         ``E t size``.
     positive_definite : bool
         The free-coordinate Hessian at the design's state is positive definite (every pivot of its
-        symmetric factorisation is positive).
+        symmetric factorisation is positive); when the forward re-solve lands within
+        :data:`~mdsr_opt.synthesis.verify.SAME_STATE_RTOL` of the body's size of that state, the answer of
+        the re-solve's own stability check there.
     min_eigenvalue : float
         Its smallest eigenvalue, relative to ``E t`` (negative: a saddle); see :func:`check_minimum`. When
         the state is positive definite it is only estimated with ``verify_design(..., lowest=True)`` (an
