@@ -15,6 +15,7 @@ from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
+from ..mechanics.blas import one_blas_thread
 from .nlp import run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, report_muscles
@@ -27,6 +28,7 @@ __all__ = ['check_design_options', 'design_contractions']
 # ---------------------------------------------------------------------------------------------- public API
 @renamed_keywords(initial="initial_guess")
 @interruptible()  # Ctrl-C inside the design NLP (CasADi swallows it) raises KeyboardInterrupt
+@one_blas_thread()  # as the forward solves run: the design NLP's MUMPS too (see mdsr_opt.mechanics.blas)
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
                         method: str = "flattened", a_max: float = 0.6, initial_guess: ArrayLike | None = None,
                         weights: ArrayLike | None = None, interior_weight: float = 0.5,
