@@ -693,3 +693,30 @@ def test_fitted_multipliers_from_an_earlier_state_cost_no_iterations(monkeypatch
     estimated, x2 = run()
     np.testing.assert_allclose(x1, x2, atol=1e-8)
     assert fitted <= estimated + 2
+
+
+def test_two_cable_ropes_along_one_path_are_refused_at_the_door():
+    from mdsr_opt import design_contractions
+    from mdsr_opt.synthesis.results import DesignResult
+    from mdsr_opt.synthesis.verify import check_minimum, verify_design
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    rope = row(mesh, 0.0, 0.25, 2.75)
+    for twin in (Muscle(rope.nodes), Muscle(rope.nodes[::-1])):  # the same path, either direction
+        with pytest.raises(ValueError, match="muscles 0 and 1 run along the same path"):
+            solve_internal(mesh, MAT, [rope, twin], [0.2, 0.1])
+    # (it was a stall at load fraction 0 "predictor inverted an element", and a singular-factor traceback
+    # from inside scipy in a design)
+    single = solve_internal(mesh, MAT, [rope], [0.2])
+    with pytest.raises(ValueError, match="run along the same path"):
+        design_contractions(mesh, MAT, [rope, Muscle(rope.nodes)], single.x)
+    with pytest.raises(ValueError, match="run along the same path"):
+        check_minimum(mesh, MAT, [rope, Muscle(rope.nodes)], [0.2, 0.2], single.x)
+    res = design_contractions(mesh, MAT, [rope], single.x)
+    two = DesignResult(**{**res.__dict__, "contractions": np.array([0.2, 0.2])})
+    with pytest.raises(ValueError, match="run along the same path"):
+        verify_design(mesh, MAT, [rope, Muscle(rope.nodes)], two, single.x)
+    # dummy springs along one path are springs in parallel: allowed; ropes sharing only part of a path too
+    assert solve_internal(mesh, MAT, [rope, Muscle(rope.nodes)], [0.2, 0.1], muscle_model="springs").success
+    part = Muscle(rope.nodes[:-2])
+    assert solve_internal(mesh, MAT, [rope, part], [0.2, 0.1]).success

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 
 from ..core.checks import as_float_array, as_index_array
 
-__all__ = ["Muscle", "check_muscles", "check_contractions"]
+__all__ = ["Muscle", "check_muscles", "check_contractions", "check_distinct_ropes"]
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,12 @@ class Muscle:
         """Consecutive node pairs (k, 2)."""
         v = np.asarray(self.nodes, dtype=np.int64)
         return np.column_stack([v[:-1], v[1:]])
+
+    @property
+    def edges(self) -> frozenset:
+        """The mesh edges it runs along, each as ``(smaller node, larger node)``: its path regardless of
+        direction."""
+        return frozenset((min(a, b), max(a, b)) for a, b in zip(self.nodes[:-1], self.nodes[1:]))
 
     def check_on(self, mesh) -> None:
         """Raise ``ValueError`` unless every node is in ``mesh`` and every segment is a mesh edge."""
@@ -107,6 +113,18 @@ def check_muscles(mesh, muscles: Sequence[Muscle]) -> list[Muscle]:
         m.check_on(mesh)
         out.append(m)
     return out
+
+
+def check_distinct_ropes(muscles: Sequence[Muscle]) -> None:
+    """Raise ``ValueError`` when two muscles run along the same path (either direction). As exact cables
+    they are one length constraint twice: the tighter rope holds, the other hangs slack, and the solvers'
+    linear systems are singular. (Dummy springs along one path are springs in parallel: allowed.)"""
+    seen: dict = {}
+    for i, m in enumerate(muscles):
+        j = seen.setdefault(m.edges, i)
+        if j != i:
+            raise ValueError(f"muscles {j} and {i} run along the same path: as cable ropes they are one length "
+                             f"constraint twice (the tighter holds, the other hangs slack); give it once")
 
 
 def check_contractions(contractions: ArrayLike, n_muscles: int, a_max: float = 1.0) -> np.ndarray:

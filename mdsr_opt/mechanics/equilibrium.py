@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.deprecation import renamed_keywords
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle, check_contractions, check_muscles
+from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles
 from ..core.checks import as_index_array, positive_float
 from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
@@ -262,6 +262,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     mus = check_muscles(mesh, muscles)
     if not mus:
         raise ValueError("internal driving needs at least one muscle")
+    if model == "cable":
+        check_distinct_ropes(mus)
     a = check_contractions(contractions, len(mus))
     if not isinstance(check_stability, (bool, np.bool_)):
         raise TypeError(f"check_stability must be True or False, got {check_stability!r}")

@@ -150,8 +150,7 @@ def check_budget(max_muscles) -> int | None:
 
 
 def _edges_of(m: Muscle) -> set:
-    n = m.nodes
-    return {(min(a, b), max(a, b)) for a, b in zip(n[:-1], n[1:])}
+    return set(m.edges)
 
 
 # ---------------------------------------------------------------------------------------------- result

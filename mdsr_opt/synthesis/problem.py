@@ -9,7 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..body.muscles import Muscle, check_muscles
+from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
 from ..mechanics.anchors import check_anchor_radius
@@ -338,6 +338,8 @@ def check_inputs(mesh, material, muscles, target, a_max, weights, interior_weigh
         raise ValueError(f"a_max must lie in (0, 1) (a fraction of the rest length), got {a_max}")
     if muscle_model not in ("springs", "cable"):
         raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
+    if muscle_model == "cable":
+        check_distinct_ropes(mus)
     stiffness = positive_float(stiffness, "stiffness")
     if weights is None:
         w = node_weights(mesh, interior_weight)

@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle, check_muscles
+from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array
 from ..mechanics.align import align, node_weights
 from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_internal
@@ -57,6 +57,8 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
         raise ValueError("check_minimum needs at least one muscle")
     if muscle_model not in ("springs", "cable"):
         raise ValueError(f"muscle_model must be 'springs' or 'cable', got {muscle_model!r}")
+    if muscle_model == "cable":
+        check_distinct_ropes(mus)
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
     x = mesh._check_state(x)
     prob = DesignProblem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99,
@@ -126,6 +128,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     w = node_weights(mesh) if weights is None else as_float_array(weights, "weights", shape=(mesh.n_nodes,))
     if not isinstance(result, DesignResult):
         raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")
+    if result.muscle_model == "cable":
+        check_distinct_ropes(mus)
     a = np.asarray(result.contractions, dtype=float)
     x = mesh._check_state(result.x)
     radius = getattr(result, "anchor_radius", None)
