@@ -288,8 +288,8 @@ def _decide_ropes(run, cmodel, p, sol, pushing):
         push = pushing(out[3], held)
         if not push.any():
             x = np.asarray(out[0]["x"]).ravel()
-            over = cmodel.values(x)[:cmodel.n_targets] - cmodel.split(p)[1]
-            if np.any(over[released] > 1e-9 * cmodel.constraints.rest_lengths[released]):
+            # "shorter than its target by more than -1e-9 L0": no longer than it beyond round-off
+            if np.any(released & ~cmodel.short_ropes(x, p, -1e-9)):
                 return None  # a released rope ends longer than its target: it was not slack
             return out
         if np.any(push & ~undecided):  # a rope the inequality form found taut would push: no settling it

@@ -149,10 +149,6 @@ def check_budget(max_muscles) -> int | None:
     return int(max_muscles)
 
 
-def _edges_of(m: Muscle) -> set:
-    return set(m.edges)
-
-
 # ---------------------------------------------------------------------------------------------- result
 @dataclass(eq=False)
 class PosesResult:
@@ -375,14 +371,14 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
-    kept: list[tuple[Muscle, set, list]] = []
+    kept: list[tuple[Muscle, frozenset, list]] = []
     depth = max((len(v) for v in layouts.values()), default=0)
     for r in range(depth):
         for name, mus in layouts.items():
             if r >= len(mus):
                 continue
             cand = mus[r] if isinstance(mus[r], Muscle) else Muscle(mus[r])
-            ce = _edges_of(cand)
+            ce = cand.edges
             dup = None
             for k, (_, ke, src) in enumerate(kept):
                 if len(ce & ke) >= overlap * min(len(ce), len(ke)):

@@ -298,8 +298,8 @@ class ForwardSolver:
         """The equilibrium at contractions ``a``: ``(x flat, success, status)``. The first solve starts
         from ``start`` (an (n, 2) shape in any pose, moved rigidly into the gauge frame) when given, with at
         most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` iterations (a load step's, so the same IPOPT
-        solver serves both) and no load stepping, and from rest when that fails or none
-        is given; later ones from the last accepted state. The solve from ``start`` takes any equilibrium
+        solver serves both) and no load stepping, and from rest when that fails or none is given; later
+        ones from the last accepted state. The solve from ``start`` takes any equilibrium
         (``solve_internal(check_stability=False)``: a warm start whose design is verified from rest); the
         others only a stable one."""
         a = np.asarray(a, dtype=float).copy()
