@@ -193,6 +193,38 @@ def test_mdsr_list_imports_no_other_subcommand_module():
     assert out.stdout.strip().splitlines()[-1] == "['mdsr_opt.cli.main', 'mdsr_opt.cli.run']"
 
 
+def test_the_program_leaves_its_objects_out_of_the_exit_collections():
+    # the console script and `python -m mdsr_opt` go through console_main, which freezes the heap after the
+    # command (the interpreter's exit then skips walking it); main() itself, called by code that goes on, not
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts == {"mdsr": "mdsr_opt.cli:console_main"}
+    code = ("import gc, runpy, sys; from mdsr_opt.cli.main import main; main(['-q', 'list']); "
+            "print('main', gc.get_freeze_count()); sys.argv = ['mdsr', '-q', 'list']\n"
+            "try:\n    runpy.run_module('mdsr_opt', run_name='__main__')\n"
+            "except SystemExit as e:\n    print('program', e.code, gc.get_freeze_count() > 1000)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    lines = out.stdout.strip().splitlines()
+    assert "main 0" in lines and lines[-1] == "program 0 True"
+
+
+def test_a_problem_scripts_main_freezes_the_heap_only_for_its_own_arguments(tmp_path, monkeypatch, capsys):
+    import gc
+
+    from mdsr_opt.scenes.library import load_problem_module
+    from mdsr_opt.scenes.runscene import run_main
+
+    build = load_problem_module(ROOT / "problems" / "gripper.py").build
+    argv = ["--out", str(tmp_path / "o"), "--resolution", "coarse", "--case", "nope"]
+    assert gc.get_freeze_count() == 0
+    assert run_main(build, argv) == 2 and gc.get_freeze_count() == 0  # called from code: nothing frozen
+    monkeypatch.setattr(sys, "argv", ["gripper.py", *argv])
+    try:
+        assert run_main(build) == 2 and gc.get_freeze_count() > 1000  # the script's main: the process ends
+    finally:
+        gc.unfreeze()
+    assert "has no case 'nope'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("asked", [None, "2"])
 def test_the_command_runs_with_one_blas_thread_unless_the_environment_says_otherwise(asked):
     # every OpenBLAS copy (numpy's, scipy's, CasADi's) as the `mdsr` command leaves it

@@ -3,6 +3,6 @@
 
 from __future__ import annotations
 
-from .main import build_parser, configure_logging, main
+from .main import build_parser, configure_logging, console_main, main
 
-__all__ = ["build_parser", "configure_logging", "main"]
+__all__ = ["build_parser", "configure_logging", "console_main", "main"]

@@ -51,7 +51,7 @@ import warnings
 from dataclasses import dataclass
 from typing import Any, Callable
 
-__all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap"]
+__all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap", "skip_final_collection"]
 
 
 def fork_is_safe() -> bool:
@@ -84,6 +84,20 @@ def frozen_heap():
         yield
     finally:
         gc.unfreeze()
+
+
+def skip_final_collection() -> None:
+    """Leave every object alive now out of garbage collection for the rest of the process (``gc.freeze``),
+    for a command's last step before its process exits.
+
+    At exit the interpreter runs full collections while it tears its modules down, each walking every
+    object a run has left (some 150,000 after ``mdsr run gecko``): 0.45-0.5 s of the command's wall time,
+    against 0.08-0.09 s with the objects frozen (time from the command's return to the process's end,
+    three alternating runs). Memory is the system's to reclaim at exit; every file the commands write is
+    closed by then (atomic writes in ``with`` blocks). A caller that goes on working (a test, a notebook)
+    must not call this: cycles made before it would never be collected.
+    """
+    gc.freeze()
 
 
 @dataclass

@@ -234,8 +234,20 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
 def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
     """The ``__main__`` of a problem script: ``[--out DIR] [--resolution R] [--case NAME ...]``.
 
-    Returns the process exit code: 0 when every case succeeded, 1 otherwise.
+    Returns the process exit code: 0 when every case succeeded, 1 otherwise. With ``argv`` None (the
+    script's own arguments: the process ends next) the run's objects are left out of the interpreter's
+    exit collections (:func:`~mdsr_opt.core.background.skip_final_collection`); pass ``argv`` to call it
+    from code that goes on.
     """
+    code = _script_main(build, argv)
+    if argv is None:
+        from ..core.background import skip_final_collection
+
+        skip_final_collection()
+    return code
+
+
+def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int:
     import argparse
 
     p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
