@@ -40,7 +40,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 
-__all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "export_fabrication"]
+__all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 
 #: Known length units and their size in metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
@@ -280,6 +280,13 @@ def _csv_text(fd: FabricationData) -> str:
 
 
 @renamed_keywords(folder="out")
+def fabrication_files(out, name: str) -> dict[str, Path]:
+    """The files :func:`export_fabrication` writes for ``name`` into the folder ``out``:
+    ``{"svg": out/<name>.svg, "dxf": out/<name>.dxf, "csv": out/<name>_muscles.csv}``."""
+    folder = Path(out)
+    return {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
+
+
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
                        name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
@@ -314,9 +321,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     svg = _svg_text(fd, name)
     doc = _dxf_doc(fd)
     table = _csv_text(fd)
-    folder = Path(out)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
+    paths = fabrication_files(out, name)
+    Path(out).mkdir(parents=True, exist_ok=True)
     with atomic_path(paths["svg"]) as tmp:
         Path(tmp).write_text(svg)
     with atomic_path(paths["dxf"]) as tmp:

@@ -409,7 +409,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     figures : write the chart and the GIF.
     log : progress messages.
     writer : :class:`~mdsr_opt.core.background.BackgroundWriter`, optional
-        Draws the chart and the GIF (its ``submit``); by default they are drawn here, one after the other.
+        Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
+        this is done here, one after the other.
 
     Returns
     -------
@@ -419,7 +420,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     """
     from pathlib import Path
 
-    from .export import export_fabrication
+    from .export import export_fabrication, fabrication_files
     from ..body.io import write_json
     from .poses import design_poses
 
@@ -447,17 +448,19 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
-    if figures:
-        from ..core.background import BackgroundWriter
+    from ..core.background import BackgroundWriter
 
-        submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
+    submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
+    if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
         submit(_write_schedule, sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
                "dotted: achieved)", chart)
         submit(save_gait_animation, scene.mesh, sch, res.muscles, gif, title=f"{scene.name} {gait.name}:",
                fps=gait.fps)
         files += [str(chart), str(gif)]
-    files += list(export_fabrication(scene.mesh, res, folder, units=scene.units, name=scene.name).values())
+    # the fabrication files are a job too: importing the DXF writer (ezdxf) alone took 0.35-0.45 s
+    submit(export_fabrication, scene.mesh, res, folder, units=scene.units, name=scene.name)
+    files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
     info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
