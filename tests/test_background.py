@@ -39,6 +39,27 @@ def test_jobs_run_in_a_child_where_fork_is_safe_and_report_back(tmp_path, forks)
     assert got[1] == str(tmp_path / "a.txt") and (tmp_path / "a.txt").read_text() == "x"
 
 
+def _spin(seconds):
+    t0 = time.process_time()
+    while time.process_time() - t0 < seconds:
+        pass
+    return seconds
+
+
+def test_each_collected_child_reports_its_cpu_time(forks):
+    import functools
+
+    with BackgroundWriter() as bg:
+        bg.submit(_spin, 0.2)
+        bg.submit(functools.partial(_pid, 1))
+    if not forks:  # jobs ran here: no child to account for
+        assert bg.job_cpu == []
+        return
+    (n1, c1), (n2, c2) = bg.job_cpu
+    assert (n1, n2) == ("_spin", "_pid")  # a partial goes by its function's name
+    assert 0.2 <= c1 < 2.0 and c2 < c1  # the spinning child's own CPU seconds, from the kernel
+
+
 def test_disabled_writer_runs_each_job_at_once_in_this_process():
     got = []
     bg = BackgroundWriter(enabled=False)

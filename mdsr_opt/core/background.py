@@ -139,6 +139,9 @@ class BackgroundWriter:
         self.grace = float(grace)
         self._prepare = prepare
         self._jobs: list[_Job] = []
+        #: ``(job name, CPU seconds)`` of every child collected so far (user and system time of the forked
+        #: process, from the kernel's accounting): what the figure jobs cost beside the parent's own time
+        self.job_cpu: list[tuple[str, float]] = []
 
     # -- the caller's side ------------------------------------------------------------------------------
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
@@ -176,7 +179,7 @@ class BackgroundWriter:
                 finally:
                     os._exit(1)  # _child leaves by os._exit itself; this is for anything raised before it
             os.close(w)
-            self._jobs.append(_Job(pid, r, getattr(fn, "__name__", "job"), on_done))
+            self._jobs.append(_Job(pid, r, _name_of(fn), on_done))
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a Ctrl-C held back arrives here
 
@@ -225,7 +228,8 @@ class BackgroundWriter:
             self._jobs.insert(0, job)
             raise
         os.close(job.fd)
-        code = _reap(job.pid, block=True)
+        code, cpu = _reap(job.pid, block=True)
+        self.job_cpu.append((job.name, cpu))
         try:
             status, value, text = pickle.loads(data)
         except Exception:  # noqa: BLE001 - no answer: the child died before it could send one
@@ -234,6 +238,13 @@ class BackgroundWriter:
         if status == "error" and text and hasattr(value, "add_note"):
             value.add_note(f"in the background job {job.name} (pid {job.pid}):\n{text.rstrip()}")
         return status, value
+
+
+def _name_of(fn) -> str:
+    """A job's name in messages and :attr:`BackgroundWriter.job_cpu`: the function's (a partial's too)."""
+    while not hasattr(fn, "__name__") and hasattr(fn, "func"):  # functools.partial
+        fn = fn.func
+    return getattr(fn, "__name__", "job")
 
 
 def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked child
@@ -289,15 +300,15 @@ def _read_all(fd: int) -> bytes:
         chunks.append(chunk)
 
 
-def _reap(pid: int, block: bool) -> int | None:
-    """The child's exit status once it has ended (None while it runs)."""
+def _reap(pid: int, block: bool) -> tuple[int, float] | None:
+    """``(exit status, CPU seconds)`` of the child once it has ended (None while it runs)."""
     try:
-        done, status = os.waitpid(pid, 0 if block else os.WNOHANG)
+        done, status, usage = os.wait4(pid, 0 if block else os.WNOHANG)
     except ChildProcessError:  # already reaped
-        return -1
+        return -1, float("nan")
     if done == 0:
         return None
-    return os.waitstatus_to_exitcode(status)
+    return os.waitstatus_to_exitcode(status), usage.ru_utime + usage.ru_stime
 
 
 def _signal(pid: int, sig) -> None:

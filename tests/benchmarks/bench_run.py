@@ -21,7 +21,8 @@ the work (each wrapper's *exclusive* time goes to its stage, so nothing is count
 - ``other``: the rest (prototype mesh building, bookkeeping).
 
 ``cpu`` is the CPU time of this process and of its finished children (the figure jobs), so it measures the
-work done, where ``wall`` measures the wait. ``--serial`` runs with ``background=False`` (everything in this
+work done, where ``wall`` measures the wait; ``jobs cpu`` is the children's part of it, also printed per job
+function (``BackgroundWriter.job_cpu``): on two cores a run cannot end before its CPU seconds over two. ``--serial`` runs with ``background=False`` (everything in this
 process, one after the other), for a side-by-side comparison.
 
 ``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
@@ -30,7 +31,8 @@ the per-stage clock's total (``run_scene``). The medians per stage are printed a
 to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` with ``--label``; in ``--out``,
 default ``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
 imports and scene building included, with the modules' bytecode written first as an installation has it),
-the median of ``--repeats`` runs (at most 3) per scene, and ``--all`` times ``mdsr run all`` once.
+the median of ``--repeats`` runs (at most 3) per scene, with its CPU time (``cli cpu``: the command's and its
+figure jobs'), and ``--all`` times ``mdsr run all`` once.
 
 The package and the problem library are imported from the source tree this script lives in (or ``--tree``,
 e.g. an exported older commit, to measure before and after with the same script).
@@ -167,13 +169,19 @@ def time_modes(name: str, repeats: int, modes=(False, True), log=None) -> dict:
             if log:
                 log(f"  {name}{' serial' if serial else ''} run {r}{' (warm-up)' if r == 0 else ''}: "
                     f"{row['total']:.2f} s (" + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
-    keys = STAGES + ("total", "build", "wall", "cpu")
-    return {m: {k: statistics.median(row[k] for row in (rows[m][1:] if repeats else rows[m])) for k in keys}
-            for m in modes}
+    keys = STAGES + ("total", "build", "wall", "cpu", "jobs cpu")
+    out = {}
+    for m in modes:
+        timed = rows[m][1:] if repeats else rows[m]
+        out[m] = {k: statistics.median(row[k] for row in timed) for k in keys}
+        names = sorted({n for row in timed for n in row["jobs"]})
+        out[m]["jobs"] = {n: statistics.median(row["jobs"].get(n, 0.0) for row in timed) for n in names}
+    return out
 
 
 def _one_run(name: str, serial: bool) -> dict:
     """One timed ``run_scene(name)`` at medium resolution: seconds per stage and in all."""
+    from mdsr_opt.core.background import BackgroundWriter
     from mdsr_opt.scenes.library import get_problem
     from mdsr_opt.scenes.runscene import run_scene
 
@@ -182,6 +190,15 @@ def _one_run(name: str, serial: bool) -> dict:
     t_build = time.perf_counter() - t0
     clock = StageClock()
     undo = clock.install()
+    jobs: dict = {}  # CPU seconds of the forked figure jobs, summed per job function
+    exit0 = BackgroundWriter.__exit__
+
+    def exit_and_count(self, *exc):
+        for job, cpu in getattr(self, "job_cpu", ()):  # an older tree (--tree) does not count them
+            jobs[job] = jobs.get(job, 0.0) + cpu
+        return exit0(self, *exc)
+
+    BackgroundWriter.__exit__ = exit_and_count
     try:
         with tempfile.TemporaryDirectory() as d:
             t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
@@ -190,11 +207,12 @@ def _one_run(name: str, serial: bool) -> dict:
             wall, cpu = time.perf_counter() - w0, _cpu() - c0
     finally:
         clock.uninstall(undo)
+        BackgroundWriter.__exit__ = exit0
     if not rep.success:
         print(f"  warning: a run of {name} did not succeed", file=sys.stderr)
     row = dict(clock.totals)
     row["other"] += total - sum(clock.totals.values())
-    row.update(total=total, build=t_build, wall=wall, cpu=cpu)
+    row.update(total=total, build=t_build, wall=wall, cpu=cpu, jobs=jobs, **{"jobs cpu": sum(jobs.values())})
     return row
 
 
@@ -208,20 +226,26 @@ def compile_tree(root: Path) -> None:
         compileall.compile_dir(str(root / sub), quiet=1)
 
 
-def time_cli(args: list[str]) -> float:
-    """Wall clock of ``python -m mdsr_opt -q run ARGS --out <tmp>`` (imports included), from the repo root,
-    with the tree's bytecode written (:func:`compile_tree`)."""
+def time_cli(args: list[str]) -> tuple[float, float]:
+    """``(wall, cpu)`` seconds of ``python -m mdsr_opt -q run ARGS --out <tmp>`` (imports included), from the
+    repo root, with the tree's bytecode written (:func:`compile_tree`); ``cpu`` is the command's user and
+    system time with its figure jobs' (every process it forked and reaped)."""
+    import resource
+
     root = Path(os.environ["MDSR_PROBLEMS"]).parent
     compile_tree(root)
     with tempfile.TemporaryDirectory() as d:
+        r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         p = subprocess.run([sys.executable, "-m", "mdsr_opt", "-q", "run", *args, "--out", os.path.join(d, "out")],
                            cwd=root, capture_output=True, text=True)
         dt = time.perf_counter() - t0
+        r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     if p.returncode != 0:
         print(f"  warning: mdsr run {' '.join(args)} exited with {p.returncode}\n{p.stdout[-2000:]}{p.stderr[-2000:]}",
               file=sys.stderr)
-    return dt
+    return dt, cpu
 
 
 def load() -> str:
@@ -274,21 +298,28 @@ def main(argv=None) -> int:
             results[name] = time_scene(name, a.repeats, log=print, serial=a.serial)
         if a.cli:  # the command's wall clock is as noisy as the runs': the median of --repeats (at most 3)
             runs = [time_cli([name]) for _ in range(min(3, max(1, a.repeats)))]
-            results[name]["cli"] = statistics.median(runs)
+            results[name]["cli"] = statistics.median(t for t, _ in runs)
+            results[name]["cli cpu"] = statistics.median(c for _, c in runs)
             print(f"  {name}: `mdsr run {name}` {results[name]['cli']:.2f} s wall, median of "
-                  + ", ".join(f"{t:.2f}" for t in runs) + f" ({load()})")
+                  + ", ".join(f"{t:.2f}" for t, _ in runs) + f"; CPU {results[name]['cli cpu']:.2f} s, its figure "
+                  f"jobs' included ({load()})")
     t_all = None
     if a.all:
         print(f"  mdsr run all: starting ({load()})")
-        t_all = time_cli(["all"])
-        print(f"  mdsr run all: {t_all:.1f} s wall ({load()})")
+        t_all, c_all = time_cli(["all"])
+        print(f"  mdsr run all: {t_all:.1f} s wall, {c_all:.1f} s CPU ({load()})")
 
-    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "build"] + (["cli"] if a.cli or a.all else [])
+    cli_cols = ["cli", "cli cpu"] if a.cli or a.all else []
+    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "jobs cpu", "build"] + cli_cols
     print("\n| " + " | ".join(cols) + " |\n|" + "---|" + "---:|" * (len(cols) - 1))
     for name, r in results.items():
-        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["build"]] \
-            + ([r.get("cli", float("nan"))] if a.cli or a.all else [])
+        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["jobs cpu"], r["build"]] \
+            + [r.get(k, float("nan")) for k in cli_cols]
         print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in vals) + " |")
+    for name, r in results.items():  # where the forked jobs' CPU goes (on two cores, beside the parent's)
+        if r["jobs"]:
+            print(f"{name}: figure jobs' CPU by job (medians, s): "
+                  + ", ".join(f"{n} {v:.2f}" for n, v in sorted(r["jobs"].items(), key=lambda kv: -kv[1])))
     if t_all is not None:
         print(f"\nmdsr run all: {t_all:.1f} s")
     print(f"({a.clock} seconds, medians of {a.repeats}; target: run_scene/cli < 4 s per scene, run all < 90 s; {load()})")
@@ -300,10 +331,10 @@ def main(argv=None) -> int:
         w = csv.writer(fh)
         w.writerow(["label", *cols])
         for name, r in results.items():
-            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "build")]
-                       + ([f"{r.get('cli', float('nan')):.4f}"] if a.cli or a.all else []))
+            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "jobs cpu", "build")]
+                       + [f"{r.get(k, float('nan')):.4f}" for k in cli_cols])
         if t_all is not None:
-            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}"])
+            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 5) + [f"{t_all:.4f}", f"{c_all:.4f}"])
     bars = dict(results)
     if a.before:
         with open(a.before, newline="") as fh:
