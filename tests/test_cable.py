@@ -68,7 +68,7 @@ def test_a_rope_that_would_have_to_push_goes_slack():
                                       ([(0.0, 0.5, 4.0), (0.25, 0.0, 3.5)], [0.35, 0.15])],
                          ids=["along-the-first", "above-the-first"])
 def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch, ropes, a):
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     # the second rope runs along the middle of the first (the predictor's step is taken) or a quarter up
@@ -80,8 +80,8 @@ def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch,
     # relaxation left it 7.7e-9 L0 too long here)
     assert 0.0 <= res.achieved[0] - a[0] < 1e-8
     # the predictor left the second rope slack: the inequality form, which decided it, was the only one solved
-    forms, hinted = [], backends.rope_forms
-    monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or (True, False))
+    forms, hinted = [], ropesolve.rope_forms
+    monkeypatch.setattr(ropesolve, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or (True, False))
     both = solve_internal(mesh, MAT, mus, a)  # the equality form first, as before
     assert both.success and forms == [(False, True)]
     np.testing.assert_allclose(res.x, both.x, atol=1e-9)  # the same start and form: the same equilibrium
@@ -93,15 +93,15 @@ def test_a_rope_the_predictor_leaves_slack_skips_the_equality_solve(monkeypatch,
 
 
 def test_a_rope_predicted_slack_that_ends_at_its_length_is_met_exactly(monkeypatch):
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
     mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
     P = mesh.points
     mus = [Muscle(sorted(np.flatnonzero(np.isclose(P[:, 1], y)), key=lambda i: P[i, 0])[1:-1]) for y in (0.0, 0.5)]
     from mdsr_opt.mechanics.constrained import ConstrainedModel
 
-    forms, hinted = [], backends.rope_forms
-    monkeypatch.setattr(backends, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or forms[-1])
+    forms, hinted = [], ropesolve.rope_forms
+    monkeypatch.setattr(ropesolve, "rope_forms", lambda cm, p, x0: forms.append(hinted(cm, p, x0)) or forms[-1])
     calls, solver = [], ConstrainedModel.solver
 
     class Recording:  # each solve's start and answer
@@ -144,10 +144,10 @@ def test_ropes_an_inequality_answer_leaves_undecided_are_settled(monkeypatch, ny
     # several ropes on one strip, some slack: the inequality form stopped with one rope 1e-6 to 1e-4 L0
     # short and a spurious tension, and the state was rejected (Lagrangian residual 1e-4 to 1e-2); holding
     # every rope at its length (the old re-solve) made the clearly slack ones push
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
-    settled, decide = [], backends._decide_ropes
-    monkeypatch.setattr(backends, "_decide_ropes", lambda *a: settled.append(decide(*a)) or settled[-1])
+    settled, decide = [], ropesolve._decide_ropes
+    monkeypatch.setattr(ropesolve, "_decide_ropes", lambda *a: settled.append(decide(*a)) or settled[-1])
     mesh = Mesh.rectangle(4.0, 1.0, 4 * ny, ny)
     mus = grid_ropes(4 * ny, ny, m)
     a = np.random.default_rng(seed).uniform(0.05, 0.25, size=m)
@@ -180,20 +180,20 @@ class _Forced:
 
 
 def _force(monkeypatch, inequality, status):
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
     from mdsr_opt.mechanics.constrained import ConstrainedModel
 
     solver = ConstrainedModel.solver
     monkeypatch.setattr(ConstrainedModel, "solver",
                         lambda self, b, o, f: (lambda r: (_Forced(r[0], inequality, status), r[1]))(solver(self, b, o, f)))
-    outcomes, solve = [], backends._solve_constrained
+    outcomes, solve = [], ropesolve.solve_constrained
 
     def spy(plugin, opts, cm, p, *args, **kw):
         out = solve(plugin, opts, cm, p, *args, **kw)
         outcomes.append((out, 1e-9 * cm.force_scale(p), cm.n_targets))
         return out
 
-    monkeypatch.setattr(backends, "_solve_constrained", spy)
+    monkeypatch.setattr(ropesolve, "solve_constrained", spy)
     return outcomes
 
 
@@ -658,12 +658,12 @@ def test_check_stability_false_skips_only_the_stability_check(monkeypatch):
 def test_equality_rows_start_from_fitted_multipliers_with_the_same_answer(monkeypatch, model):
     # all rows equalities (taut ropes, anchor patches): IPOPT starts from the multipliers fitted at the start
     # instead of estimating them itself; the equilibrium is the same
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     mus = [row(mesh, 0.0, 0.5, 3.5), row(mesh, 1.0, 0.5, 2.0)]
     fitted = solve_internal(mesh, MAT, mus, [0.3, 0.1], muscle_model=model)
-    monkeypatch.setattr(backends, "WARM_MULTIPLIERS", {})
+    monkeypatch.setattr(ropesolve, "WARM_MULTIPLIERS", {})
     estimated = solve_internal(Mesh.rectangle(4.0, 1.0, 32, 8), MAT, mus, [0.3, 0.1], muscle_model=model)
     assert fitted.success and estimated.success
     np.testing.assert_allclose(fitted.x, estimated.x, atol=1e-9)
@@ -673,7 +673,7 @@ def test_equality_rows_start_from_fitted_multipliers_with_the_same_answer(monkey
 def test_fitted_multipliers_from_an_earlier_state_cost_no_iterations(monkeypatch):
     # frames each started from the last: a rope shorter than its new target still pulls at the start (fitted
     # as slack, its zero tension cost 116 IPOPT iterations against 81 on 24 such frames)
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     mus = [row(mesh, 0.0, 0.0, 2.0), row(mesh, 0.0, 2.0, 4.0), row(mesh, 1.0, 0.0, 2.0), row(mesh, 1.0, 2.0, 4.0)]
@@ -689,7 +689,7 @@ def test_fitted_multipliers_from_an_earlier_state_cost_no_iterations(monkeypatch
         return total, prev
 
     fitted, x1 = run()
-    monkeypatch.setattr(backends, "WARM_MULTIPLIERS", {})
+    monkeypatch.setattr(ropesolve, "WARM_MULTIPLIERS", {})
     estimated, x2 = run()
     np.testing.assert_allclose(x1, x2, atol=1e-8)
     assert fitted <= estimated + 2

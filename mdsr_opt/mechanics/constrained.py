@@ -223,7 +223,7 @@ class ConstrainedModel:
         if self.n_targets:  # a rope shorter than its target at the start is taken as slack
             keep[:self.n_targets] = c[:self.n_targets] > -1e-12 * self.constraints.rest_lengths
         pushing = np.zeros(self.n_targets, dtype=bool)  # dropped for a clearly negative predicted tension
-        push_tol = 1e-9 * self.force_scale(p)  # as _solve_constrained's: below it, a tension is round-off
+        push_tol = 1e-9 * self.force_scale(p)  # as solve_constrained's: below it, a tension is round-off
         for _ in range(3):
             Jk = J[keep]
             Jf, Jc = Jk[:, free], Jk[:, fixed]

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 
-__all__ = ['SolverFailure', 'EquilibriumResult']
+__all__ = ['SolverFailure', 'EquilibriumResult', 'MinimizeOutcome']
 
 
 class SolverFailure(RuntimeError):
@@ -112,3 +112,53 @@ class EquilibriumResult:
                        **{k: [float(v) if k != "slack" else bool(v) for v in getattr(self, k)]
                           for k in ("commanded", "achieved", "stroke", "tension", "slack")})
         return out
+
+
+@dataclass
+class MinimizeOutcome:
+    """What one backend's minimisation returned.
+
+    Attributes
+    ----------
+    x : (2n,) ndarray
+        The flattened coordinates reached.
+    success : bool
+    status : str
+    iterations : int
+    solve_time, build_time : float
+        Seconds solving and building the solver (0 when reused).
+    lam_g : ndarray or None
+        Constraint multipliers (constrained models only).
+    """
+
+    x: np.ndarray  # (2n,) flattened coordinates
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    build_time: float
+    lam_g: np.ndarray | None = None  # constraint multipliers (constrained models only)
+
+    def __repr__(self) -> str:
+        from ..core.results import compact_repr
+
+        return compact_repr(self, ("success", "iterations", "solve_time", "x", "lam_g", "status"))
+
+    def to_dict(self) -> dict:
+        """Every field as JSON-ready values (arrays as lists)."""
+        from ..core.results import to_jsonable
+
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
+
+    def save(self, path) -> str:
+        """Write the outcome as one ``.npz`` file (arrays exactly); :meth:`load` reads it back."""
+        from ..core.results import save_fields
+
+        return save_fields(self, path, "minimize")
+
+    @classmethod
+    def load(cls, path) -> "MinimizeOutcome":
+        """Read an outcome written by :meth:`save` (ValueError naming a damaged or foreign file)."""
+        from ..core.results import load_fields
+
+        return load_fields(cls, path, "minimize")

@@ -9,7 +9,7 @@ inequality form).
 
 ``--strips`` instead solves 24 strips (4 x 1 rectangles of 1k and 3k nodes; 1, 2, 4 and 8 grid-row
 muscles; 3 draws of contractions in [0.05, 0.25]), where with 8 muscles two or three ropes end slack, each
-twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.backends.rope_forms` (a
+twice in a row, alternating: with the rope forms of :func:`mdsr_opt.mechanics.ropesolve.rope_forms` (a
 predictor start that left a rope slack skips the equality form) and with the equality form always tried
 first (as before), and prints iterations, seconds and the energies' agreement; then the totals of both for
 30 random layouts of 2-4 ropes along rows of a 32 x 8 strip.
@@ -72,25 +72,25 @@ def main(argv=None) -> int:
 def strips() -> int:
     import numpy as np
     from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
-    from mdsr_opt.mechanics import backends
+    from mdsr_opt.mechanics import ropesolve
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_design import SIZES, muscles_for
 
-    mat, hinted = NeoHookean(1.0, 0.3), backends.rope_forms
+    mat, hinted = NeoHookean(1.0, 0.3), ropesolve.rope_forms
 
     def equality_first(cmodel, p, x0):
         return (True, False) if cmodel.n_targets else (False,)
 
     def solve(forms, mesh, mus, a):
         """``(result, seconds)`` of one solve with ``forms`` as the rope forms."""
-        backends.rope_forms = forms
+        ropesolve.rope_forms = forms
         try:
             t0 = time.perf_counter()
             r = solve_internal(mesh, mat, mus, a)
             return r, time.perf_counter() - t0
         finally:
-            backends.rope_forms = hinted
+            ropesolve.rope_forms = hinted
 
     print(f"{'nodes':>6} {'muscles':>7} {'draw':>4} | {'slack start: it':>15} {'s':>6} | {'equality first: it':>18} "
           f"{'s':>6} | {'slack':>5} {'|dE|/E':>8}")
