@@ -93,7 +93,6 @@ from __future__ import annotations
 import math
 import numbers
 import warnings
-from dataclasses import asdict, dataclass, field
 
 import networkx as nx
 import numpy as np
@@ -103,9 +102,9 @@ from ..core.checks import as_float_array, positive_float
 from ..body.checks import check_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.results import format_value, to_jsonable
+from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
-from .routing_symmetry import Reflection, find_reflections, weights_are_symmetric
+from .routing_symmetry import find_reflections, weights_are_symmetric
 
 __all__ = [
     "contraction_graph",
@@ -228,151 +227,6 @@ def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarr
     G.add_edges_from((a, b, {"rest_length": r, "target_length": t, "weight": c})
                      for (a, b), r, t, c in zip(mesh.edges.tolist(), l0.tolist(), l.tolist(), w.tolist()))
     return G
-
-
-# ---------------------------------------------------------------------------------------------- results
-@dataclass(frozen=True)
-class MuscleStats:
-    """Figures of one routed muscle.
-
-    Attributes
-    ----------
-    name : str
-        The muscle's name.
-    n_edges : int
-        Number of mesh edges along the path.
-    rest_length, target_length : float
-        Path length at rest and in the target.
-    contraction : float
-        ``1 - target_length / rest_length``: the contraction that would make the whole cable match the
-        target (a first guess for the design stage).
-    mean_weight : float
-        Mean relative contraction ``w`` of the path's edges.
-    nonuniformity : float
-        Variance of those weights (the paper's nonuniformity coefficient; 0 = perfectly uniform).
-    turning_angle : float
-        Total absolute turning of the path at rest, radians (0 = straight).
-    turning_angle_target : float
-        The same in the target configuration.
-    max_turn : float
-        The largest turn at any single node, at rest, radians (the tortuosity rule bounds it).
-    """
-
-    name: str
-    n_edges: int
-    rest_length: float
-    target_length: float
-    contraction: float
-    mean_weight: float
-    nonuniformity: float
-    turning_angle: float
-    turning_angle_target: float
-    max_turn: float = 0.0
-
-    def to_dict(self) -> dict:
-        """The figures as a JSON-ready dict."""
-        return to_jsonable(asdict(self))
-
-
-@dataclass(frozen=True)
-class DroppedUnit:
-    """A unit that is not a muscle of the result as it stood, and why.
-
-    Attributes
-    ----------
-    nodes : tuple of int
-        Its path when it was spliced, dropped or cut.
-    rest_length : float
-        Its rest length then.
-    reason : str
-        ``"spliced into ..."``, ``"dropped: ..."`` or ``"cut by max_muscles ..."``.
-    """
-
-    nodes: tuple
-    rest_length: float
-    reason: str
-
-    def to_dict(self) -> dict:
-        """The figures as a JSON-ready dict."""
-        return to_jsonable(asdict(self))
-
-
-@dataclass(frozen=True, eq=False)
-class RoutingResult:
-    """Muscles routed for a target, with their figures.
-
-    Iterating, ``len`` and indexing act on :attr:`muscles`, so ``for m in route_muscles(...)`` works.
-    Two results compare equal only if they are the same object (``eq=False``: the graph and the dict
-    have no meaningful ``==``); compare ``[m.nodes for m in result]`` instead.
-
-    Attributes
-    ----------
-    muscles : tuple of Muscle
-        The routed muscles, strongest first (by ``sum w * l0`` over their edges). Each path starts at the
-        end whose rest coordinates are lexicographically smaller.
-    stats : tuple of MuscleStats
-        One entry per muscle, same order.
-    graph : networkx.Graph
-        The contraction graph (see :func:`contraction_graph`).
-    seeds : tuple of (int, int)
-        The seed edges, most contracted first.
-    n_units : int
-        Units left when growth stopped, before ``min_length``/``max_muscles`` selection.
-    params : dict
-        The knobs used (``K_a``, ``K_b``, ``K_h``, ``n_seeds``, ``max_muscles``, ``min_length``,
-        ``min_contraction``, ``max_turn``, ``seed_threshold``, ``symmetry``).
-    dropped : tuple of DroppedUnit
-        Fragments shorter than ``min_length`` (spliced or dropped) and muscles cut by ``max_muscles``.
-    reflection : Reflection or None
-        The mirror symmetry the muscles were routed with (None: not symmetric, or switched off).
-    n_regions : int
-        Contracted regions that were seeded.
-    """
-
-    muscles: tuple[Muscle, ...]
-    stats: tuple[MuscleStats, ...]
-    graph: nx.Graph
-    seeds: tuple[tuple[int, int], ...] = ()
-    n_units: int = 0
-    params: dict = field(default_factory=dict)
-    dropped: tuple = ()
-    reflection: Reflection | None = None
-    n_regions: int = 0
-
-    def __iter__(self):
-        return iter(self.muscles)
-
-    def __len__(self) -> int:
-        return len(self.muscles)
-
-    def __getitem__(self, i):
-        return self.muscles[i]
-
-    def __repr__(self) -> str:
-        names = [m.name for m in self.muscles]
-        return (f"RoutingResult({len(self.muscles)} muscle(s) {format_value(names)}, edges "
-                f"{format_value([s.n_edges for s in self.stats])}, contractions "
-                f"{format_value([round(s.contraction, 4) for s in self.stats])}, n_units={self.n_units}, "
-                f"seeds={len(self.seeds)}, graph={self.graph.number_of_nodes()} nodes)")
-
-    def to_dict(self) -> dict:
-        """Muscles, their figures, seeds, unit count and knobs as a JSON-ready dict (the graph is left out:
-        :func:`contraction_graph` rebuilds it from the mesh and the target)."""
-        return to_jsonable({"muscles": list(self.muscles), "stats": [s.to_dict() for s in self.stats],
-                            "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params),
-                            "dropped": [asdict(d) for d in self.dropped]})
-
-    def table(self) -> str:
-        """The stats as a plain-text table (one row per muscle)."""
-        head = (f"{'muscle':<10} {'edges':>5} {'L0':>9} {'L':>9} {'contr.':>7} {'mean w':>8} "
-                f"{'var w':>9} {'turn':>7} {'max':>5}")
-        rows = [head, "-" * len(head)]
-        for s in self.stats:
-            rows.append(f"{s.name:<10} {s.n_edges:>5d} {s.rest_length:>9.4g} {s.target_length:>9.4g} "
-                        f"{s.contraction:>7.3f} {s.mean_weight:>8.4f} {s.nonuniformity:>9.2e} "
-                        f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
-        return "\n".join(rows)
-
 
 
 def _int_param(value, name: str, minimum: int = 1) -> int:
