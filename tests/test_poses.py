@@ -237,6 +237,29 @@ def test_run_scene_writes_the_gait_folder(tmp_path):
     np.testing.assert_allclose([float(r["stroke bend [cm]"]) for r in rows], lay.strokes[0], rtol=1e-8)
 
 
+@pytest.mark.parametrize("background", [True, False])
+def test_a_failed_fabrication_export_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background):
+    """The fabrication files are a background job: gait.json, which lists them, is written only once the
+    job has written them; a failed export fails the run (in the child or here) and leaves no gait.json."""
+    from test_scenes import finger_dict, write_json
+
+    import mdsr_opt.synthesis.export as export
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.scenes.runscene import run_scene
+
+    def broken(*args, **kwargs):
+        raise ValueError("the DXF writer broke")
+
+    monkeypatch.setattr(export, "export_fabrication", broken)
+    d = finger_dict()
+    d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 2}
+    scene = load_scene(write_json(tmp_path, d))
+    with pytest.raises(ValueError, match="the DXF writer broke"):
+        run_scene(scene, tmp_path / "out", cases=["bend"], photos=False, log=None, background=background)
+    folder = tmp_path / "out" / "wave"
+    assert (folder / "layout.json").exists() and not (folder / "gait.json").exists()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name, gait", [("gecko", "walk"), ("starfish", "swim_cycle")])
 def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait):

@@ -279,7 +279,6 @@ def _csv_text(fd: FabricationData) -> str:
     return buf.getvalue()
 
 
-@renamed_keywords(folder="out")
 def fabrication_files(out, name: str) -> dict[str, Path]:
     """The files :func:`export_fabrication` writes for ``name`` into the folder ``out``:
     ``{"svg": out/<name>.svg, "dxf": out/<name>.dxf, "csv": out/<name>_muscles.csv}``."""
@@ -287,6 +286,7 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
     return {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
 
 
+@renamed_keywords(folder="out")
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
                        name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.

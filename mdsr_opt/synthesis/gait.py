@@ -418,6 +418,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
         None when a pose of the gait was not run (``--case``).
     """
+    import copy
     from pathlib import Path
 
     from .export import export_fabrication, fabrication_files
@@ -458,8 +459,6 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         submit(save_gait_animation, scene.mesh, sch, res.muscles, gif, title=f"{scene.name} {gait.name}:",
                fps=gait.fps)
         files += [str(chart), str(gif)]
-    # the fabrication files are a job too: importing the DXF writer (ezdxf) alone took 0.35-0.45 s
-    submit(export_fabrication, scene.mesh, res, folder, units=scene.units, name=scene.name)
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
@@ -473,7 +472,11 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                                                  if not o) + (f"; frames {failed} failed" if failed else "")),
                 times={k: float(v) for k, v in res.times.items()},
                 files=[os.path.relpath(f, folder.parent) for f in files])
-    write_json(folder / "gait.json", info)
+    # the fabrication files are a job too (importing the DXF writer, ezdxf, alone took 0.35-0.45 s); gait.json,
+    # which lists them, is written once they are (at the writer's wait when the job runs in a child)
+    record = copy.deepcopy(info)
+    submit(export_fabrication, scene.mesh, res, folder, units=scene.units, name=scene.name,
+           on_done=lambda _paths: write_json(folder / "gait.json", record))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
