@@ -144,9 +144,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def console_main() -> int:
     """The ``mdsr`` program (the console script and ``python -m mdsr_opt``): :func:`main` on the process's
-    arguments, then its objects left out of the interpreter's exit collections
+    arguments, with its objects left out of the interpreter's exit collections
     (:func:`~mdsr_opt.core.background.skip_final_collection`), which took 0.4 s after ``mdsr run gecko``.
-    Returns :func:`main`'s exit code; code that calls the command and goes on calls :func:`main`."""
+    Returns :func:`main`'s exit code."""
     from ..core.background import skip_final_collection
 
     code = main()

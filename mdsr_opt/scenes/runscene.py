@@ -53,8 +53,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
     background : bool, default True
-        Draw and write each case's figures, meshes and photographs, and the animations' GIFs, in a forked
-        child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
+        Draw and write each case's figures, meshes and photographs, the animations' GIFs and the gait's
+        chart, GIF and fabrication files, in a forked child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
         Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
         The files are the same either way.
     overwrite : bool
@@ -235,9 +235,8 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
     """The ``__main__`` of a problem script: ``[--out DIR] [--resolution R] [--case NAME ...]``.
 
     Returns the process exit code: 0 when every case succeeded, 1 otherwise. With ``argv`` None (the
-    script's own arguments: the process ends next) the run's objects are left out of the interpreter's
-    exit collections (:func:`~mdsr_opt.core.background.skip_final_collection`); pass ``argv`` to call it
-    from code that goes on.
+    script's own arguments) the run's objects are left out of the interpreter's exit collections
+    (:func:`~mdsr_opt.core.background.skip_final_collection`, which acts only when the interpreter exits).
     """
     code = _script_main(build, argv)
     if argv is None:
