@@ -1,4 +1,4 @@
-"""Reading and writing meshes and states through meshio (the only meshio importer), and JSON results.
+"""Reading and writing meshes and states through meshio (the only module that uses it), and JSON results.
 
 States are written the way ParaView expects them: ``points`` are the rest positions and the point data
 ``displacement`` (3 components, z = 0) moves them to the deformed state ("Warp By Vector"). Cell data

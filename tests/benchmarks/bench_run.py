@@ -181,7 +181,6 @@ def time_modes(name: str, repeats: int, modes=(False, True), log=None) -> dict:
 
 def _one_run(name: str, serial: bool) -> dict:
     """One timed ``run_scene(name)`` at medium resolution: seconds per stage and in all."""
-    from mdsr_opt.core.background import BackgroundWriter
     from mdsr_opt.scenes.library import get_problem
     from mdsr_opt.scenes.runscene import run_scene
 
@@ -191,6 +190,10 @@ def _one_run(name: str, serial: bool) -> dict:
     clock = StageClock()
     undo = clock.install()
     jobs: dict = {}  # CPU seconds of the forked figure jobs, summed per job function
+    try:
+        from mdsr_opt.core.background import BackgroundWriter
+    except ImportError:  # an older tree (--tree) without the background writer
+        BackgroundWriter = type("NoWriter", (), {"__exit__": None})
     exit0 = BackgroundWriter.__exit__
 
     def exit_and_count(self, *exc):
