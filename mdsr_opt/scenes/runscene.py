@@ -53,8 +53,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
     background : bool, default True
-        Draw and write each case's figures, meshes and photographs, the animations' GIFs and the gait's
-        chart, GIF and fabrication files, in a forked child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
+        Draw and write each case's figures, meshes and photographs, make each animation (its frames'
+        forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files, in a forked
+        child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
         Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
         The files are the same either way.
     overwrite : bool
@@ -127,7 +128,6 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
     import time
 
-    from .. import plot
     from ..body.io import atomic_path, write_json
 
     names = _check_run(scene, cases, mesh_format)
@@ -176,28 +176,10 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                     continue
                 designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
                            if runs[c].design is not None}
-                res = animate(scene, anim, designs)
-                data = res.to_dict()
-                if res.states:
-                    say(f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, "
-                        f"{len(res.muscles)} muscle(s), "
-                        + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
-                           f"{res.failed_frames})"))
-                    if figures:
-                        act = res.contractions / scene.design_options.get("a_max", 0.6)
-                        # titles state the contraction each frame reached along the muscles' node chains
-                        reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles]
-                                   for x in res.states]
-                        titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
-                                  + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
-                        bg.submit(plot.save_animation, scene.mesh, res.states, out / f"{anim.name}.gif",
-                                  muscles=res.muscles, activations=act, titles=titles, fps=anim.fps)
-                        data["gif"] = f"{anim.name}.gif"
-                else:
-                    say(f"[{scene.name}] animation {anim.name}: not made ({res.message})")
-                anim_out[anim.name] = data
-                write_json(out / f"{anim.name}.json", finite(data))
-                advance(log)
+                # the frames' forward solves, the GIF and the JSON are one job, beside the gait's solves
+                anim_out[anim.name] = {}  # filled in when the job is done (the summary's order kept)
+                bg.submit(_animation_job, scene, anim, designs, out, figures,
+                          on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
         if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
             gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg)
             if gait_info is not None:
@@ -307,6 +289,40 @@ def n_units(scene: Scene, cases, animations: bool) -> int:
     """Units of work of ``run_scene`` for the progress bar: one per case and per animation made."""
     names = set(scene.case_names if cases is None else cases)
     return len(names) + (sum(set(x.cases) <= names for x in scene.animations) if animations else 0)
+
+
+def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) -> dict:
+    """An animation of the scene: its frames' forward solves (:func:`~mdsr_opt.scenes.animate.animate`), its
+    GIF (with ``figures``) and ``out/<animation>.json``; returns the JSON's data and the message to log."""
+    from .. import plot
+    from ..body.io import write_json
+
+    res = animate(scene, anim, designs)
+    data = res.to_dict()
+    if res.states:
+        said = (f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
+                + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
+                   f"{res.failed_frames})"))
+        if figures:
+            act = res.contractions / scene.design_options.get("a_max", 0.6)
+            # titles state the contraction each frame reached along the muscles' node chains
+            reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles] for x in res.states]
+            titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
+                      + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
+            plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
+                                activations=act, titles=titles, fps=anim.fps)
+            data["gif"] = f"{anim.name}.gif"
+    else:
+        said = f"[{scene.name}] animation {anim.name}: not made ({res.message})"
+    write_json(out / f"{anim.name}.json", finite(data))
+    return {"data": data, "log": said}
+
+
+def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
+    """Put an :func:`_animation_job`'s answer into the scene's report and say it."""
+    anim_out[name] = got["data"]
+    say(got["log"])
+    advance(log)
 
 
 def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
