@@ -14,7 +14,7 @@ Rules that keep this safe and honest:
   lock at the fork would leave the child waiting for ever). Native threads idle in OpenBLAS's pool are
   handled by OpenBLAS's own fork handlers. Anywhere else, and with ``enabled=False``, :meth:`submit` runs the
   job at once in this process: the same files, the same results, only later.
-- **At most ``jobs`` children at a time**; a further :meth:`submit` first waits for the oldest running one.
+- **At most ``jobs`` children at a time**; a further :meth:`submit` first waits for one to finish.
   The default, three, lets ``mdsr run`` hand over a case's two jobs while the previous case's photograph
   job still runs, so the parent goes on solving instead of waiting (``run_scene`` at medium resolution on
   two cores, the settings alternating in one process: gecko 3.70 s with three, 3.80 s with two, 4.6 s with
@@ -43,6 +43,7 @@ import contextlib
 import gc
 import os
 import pickle
+import select
 import signal
 import sys
 import threading
@@ -147,9 +148,9 @@ class BackgroundWriter:
     # -- the caller's side ------------------------------------------------------------------------------
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
                **kwargs) -> None:
-        """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for the
-        oldest child when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return
-        value (at :meth:`wait` for a child's job)."""
+        """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for a child
+        to finish when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return value
+        (at :meth:`wait` for a child's job)."""
         if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
             result = fn(*args, **kwargs)
             if on_done is not None:
@@ -186,9 +187,13 @@ class BackgroundWriter:
 
     def wait(self, limit: int = 0) -> None:
         """Wait until at most ``limit`` jobs are running; collect the finished ones (their ``on_done``
-        callbacks, and the first failure raised again with the child's traceback as a note)."""
+        callbacks, and the first failure raised again with the child's traceback as a note).
+
+        Jobs are collected as they finish, the oldest first among those done: a short job submitted after a
+        long one frees its place at once (collected in submission order, a finished job waited behind a
+        running one, and the parent with it)."""
         while len(self._jobs) > limit:
-            job = self._jobs.pop(0)
+            job = self._jobs.pop(self._first_done())
             status, value = self._collect(job)
             if status == "error":
                 raise value
@@ -222,6 +227,13 @@ class BackgroundWriter:
             os.close(job.fd)
 
     # -- internals --------------------------------------------------------------------------------------
+    def _first_done(self) -> int:
+        """Index of the oldest job whose child has answered (its pipe readable: a result or its end),
+        waiting until one has."""
+        fds = [job.fd for job in self._jobs]
+        ready, _, _ = select.select(fds, [], [])
+        return min(fds.index(fd) for fd in ready)
+
     def _collect(self, job: _Job) -> tuple[str, Any]:
         try:
             data = _read_all(job.fd)
