@@ -32,7 +32,8 @@ to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` w
 default ``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
 imports and scene building included, with the modules' bytecode written first as an installation has it),
 the median of ``--repeats`` runs (at most 3) per scene, with its CPU time (``cli cpu``: the command's and its
-figure jobs'), and ``--all`` times ``mdsr run all`` once.
+figure jobs'), and ``--all`` times ``mdsr run all`` once. ``--against REF`` runs the command as committed at ``REF`` too,
+alternating with this tree, ``--repeats`` times each, and prints both medians and their ratio.
 
 The package and the problem library are imported from the source tree this script lives in (or ``--tree``,
 e.g. an exported older commit, to measure before and after with the same script).
@@ -40,6 +41,7 @@ e.g. an exported older commit, to measure before and after with the same script)
 Run:  python tests/benchmarks/bench_run.py                       # gecko and humanoid, 3 repeats
       python tests/benchmarks/bench_run.py --scenes gecko --repeats 1
       python tests/benchmarks/bench_run.py --cli --all
+      python tests/benchmarks/bench_run.py --scenes gecko humanoid --repeats 8 --cli --against 1183579
       python tests/benchmarks/bench_run.py --tree /tmp/base --clock cpu --label before   # an older tree
 """
 
@@ -229,19 +231,20 @@ def compile_tree(root: Path) -> None:
         compileall.compile_dir(str(root / sub), quiet=1)
 
 
-def time_cli(args: list[str]) -> tuple[float, float]:
+def time_cli(args: list[str], root: Path | None = None) -> tuple[float, float]:
     """``(wall, cpu)`` seconds of ``python -m mdsr_opt -q run ARGS --out <tmp>`` (imports included), from the
-    repo root, with the tree's bytecode written (:func:`compile_tree`); ``cpu`` is the command's user and
-    system time with its figure jobs' (every process it forked and reaped)."""
+    tree ``root`` (default: the measured one), with the tree's bytecode written (:func:`compile_tree`); ``cpu``
+    is the command's user and system time with its figure jobs' (every process it forked and reaped)."""
     import resource
 
-    root = Path(os.environ["MDSR_PROBLEMS"]).parent
+    root = Path(os.environ["MDSR_PROBLEMS"]).parent if root is None else Path(root)
     compile_tree(root)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root)] + [v for v in [os.environ.get("PYTHONPATH")] if v]))
     with tempfile.TemporaryDirectory() as d:
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         p = subprocess.run([sys.executable, "-m", "mdsr_opt", "-q", "run", *args, "--out", os.path.join(d, "out")],
-                           cwd=root, capture_output=True, text=True)
+                           cwd=root, capture_output=True, text=True, env=env)
         dt = time.perf_counter() - t0
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
@@ -249,6 +252,28 @@ def time_cli(args: list[str]) -> tuple[float, float]:
         print(f"  warning: mdsr run {' '.join(args)} exited with {p.returncode}\n{p.stdout[-2000:]}{p.stderr[-2000:]}",
               file=sys.stderr)
     return dt, cpu
+
+
+def tree_at(ref: str, dest: str) -> Path:
+    """The package and the problem library as committed at ``ref`` (``git archive``), extracted into ``dest``."""
+    arch = subprocess.run(["git", "archive", ref, "mdsr_opt", "problems"], capture_output=True, check=True,
+                          cwd=ROOT).stdout
+    subprocess.run(["tar", "-x", "-C", dest], input=arch, check=True)
+    return Path(dest)
+
+
+def cli_against(name: str, ref_root: Path, repeats: int) -> dict:
+    """The command on ``name`` from the measured tree and from ``ref_root``, alternating, ``repeats`` times
+    each: medians and minima of wall and CPU seconds of both (a comparison on a shared machine)."""
+    runs: dict = {"now": [], "ref": []}
+    for _ in range(repeats):
+        runs["ref"].append(time_cli([name], root=ref_root))
+        runs["now"].append(time_cli([name]))
+    out = {}
+    for k, v in runs.items():
+        out[k] = {"wall": statistics.median(t for t, _ in v), "min": min(t for t, _ in v),
+                  "cpu": statistics.median(c for _, c in v)}
+    return out
 
 
 def load() -> str:
@@ -272,6 +297,9 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3, help="timed runs per scene after the warm-up (median)")
     p.add_argument("--cli", action="store_true", help="also time `python -m mdsr_opt run NAME` per scene")
     p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once")
+    p.add_argument("--against", default=None, metavar="REF",
+                   help="with --cli: time the command also as committed at REF (git), alternating with this "
+                        "tree, --repeats times each (not capped at 3)")
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"), help="folder of the CSV and chart")
     p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
     p.add_argument("--before", default=None,
@@ -284,6 +312,7 @@ def main(argv=None) -> int:
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
     a = p.parse_args(argv)
     use_tree(Path(a.tree).resolve())
+    ref_root = tree_at(a.against, tempfile.mkdtemp(prefix="bench_run_ref_")) if a.cli and a.against else None
     if a.clock == "cpu":
         StageClock.clock = staticmethod(time.process_time)
     import mdsr_opt
@@ -299,7 +328,14 @@ def main(argv=None) -> int:
             results[name], results[f"{name} serial"] = got[False], got[True]
         else:
             results[name] = time_scene(name, a.repeats, log=print, serial=a.serial)
-        if a.cli:  # the command's wall clock is as noisy as the runs': the median of --repeats (at most 3)
+        if a.cli and a.against:  # the command from this tree and from REF, alternating
+            got = cli_against(name, ref_root, max(1, a.repeats))
+            results[name]["cli"], results[name]["cli cpu"] = got["now"]["wall"], got["now"]["cpu"]
+            print(f"  {name}: `mdsr run {name}` {got['now']['wall']:.2f} s wall (fastest {got['now']['min']:.2f}), "
+                  f"CPU {got['now']['cpu']:.2f} s; at {a.against} {got['ref']['wall']:.2f} s (fastest "
+                  f"{got['ref']['min']:.2f}), CPU {got['ref']['cpu']:.2f} s: ratio "
+                  f"{got['now']['wall'] / got['ref']['wall']:.2f}; medians of {a.repeats} alternating runs ({load()})")
+        elif a.cli:  # the command's wall clock is as noisy as the runs': the median of --repeats (at most 3)
             runs = [time_cli([name]) for _ in range(min(3, max(1, a.repeats)))]
             results[name]["cli"] = statistics.median(t for t, _ in runs)
             results[name]["cli cpu"] = statistics.median(c for _, c in runs)
