@@ -331,6 +331,7 @@ def main(argv=None) -> int:
         if a.cli and a.against:  # the command from this tree and from REF, alternating
             got = cli_against(name, ref_root, max(1, a.repeats))
             results[name]["cli"], results[name]["cli cpu"] = got["now"]["wall"], got["now"]["cpu"]
+            results[name]["cli ref"], results[name]["cli ref cpu"] = got["ref"]["wall"], got["ref"]["cpu"]
             print(f"  {name}: `mdsr run {name}` {got['now']['wall']:.2f} s wall (fastest {got['now']['min']:.2f}), "
                   f"CPU {got['now']['cpu']:.2f} s; at {a.against} {got['ref']['wall']:.2f} s (fastest "
                   f"{got['ref']['min']:.2f}), CPU {got['ref']['cpu']:.2f} s: ratio "
@@ -348,7 +349,7 @@ def main(argv=None) -> int:
         t_all, c_all = time_cli(["all"])
         print(f"  mdsr run all: {t_all:.1f} s wall, {c_all:.1f} s CPU ({load()})")
 
-    cli_cols = ["cli", "cli cpu"] if a.cli or a.all else []
+    cli_cols = (["cli", "cli cpu"] if a.cli or a.all else []) + (["cli ref", "cli ref cpu"] if a.against else [])
     cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "jobs cpu", "build"] + cli_cols
     print("\n| " + " | ".join(cols) + " |\n|" + "---|" + "---:|" * (len(cols) - 1))
     for name, r in results.items():
@@ -383,13 +384,15 @@ def main(argv=None) -> int:
             for r in old:
                 if r["scene"] == name:
                     bars[f"{name} ({r['label'] or 'before'})"] = {k: float(r.get(k) or 0) for k in STAGES}
+                    if r.get("cli"):
+                        bars[f"{name} ({r['label'] or 'before'})"]["cli"] = float(r["cli"])
             bars[f"{name} ({a.label or 'now'})"] = results[name]
-    _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock)
+    _chart(bars, out / f"{stem}.png", a.label, a.repeats, a.clock, a.against)
     print(f"wrote {out / (stem + '.csv')} and {out / (stem + '.png')}")
     return 0
 
 
-def _chart(results: dict, path: Path, label: str, repeats: int, clock: str) -> None:
+def _chart(results: dict, path: Path, label: str, repeats: int, clock: str, against: str | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -403,8 +406,15 @@ def _chart(results: dict, path: Path, label: str, repeats: int, clock: str) -> N
         v = [results[n][st] for n in names]
         ax.barh(names, v, left=left, color=cmap(i), label=st)
         left = [l + x for l, x in zip(left, v)]
+    cli = [(i, results[n]["cli"]) for i, n in enumerate(names) if results[n].get("cli", float("nan")) > 0]
+    if cli:  # the whole command (imports, scene building, exit) where it was timed
+        ax.plot([v for _, v in cli], [i for i, _ in cli], "kD", ms=6, label="mdsr run (command)")
+    ref = [(i, results[n]["cli ref"]) for i, n in enumerate(names) if results[n].get("cli ref", float("nan")) > 0]
+    if ref:  # --against: the command as committed at REF, alternating with it in the same run
+        ax.plot([v for _, v in ref], [i for i, _ in ref], "D", mfc="white", mec="k", ms=6,
+                label=f"mdsr run at {against} (same run)")
     ax.axvline(4.0, color="k", ls="--", lw=1, label="target 4 s")
-    ax.set_xlabel(f"seconds (run_scene, median of {repeats}; {clock} clock)")
+    ax.set_xlabel(f"seconds (run_scene by stage, and the command, median of {repeats}; {clock} clock)")
     ax.set_title(f"mdsr run per stage{' - ' + label if label else ''}", fontsize=10)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     ax.invert_yaxis()
