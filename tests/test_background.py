@@ -76,6 +76,27 @@ def test_a_finished_job_frees_its_place_before_an_older_running_one(forks):
     assert done == (["short", "third", "long"] if forks else ["long", "short", "third"])
 
 
+def _late_file(path, seconds):
+    time.sleep(seconds)
+    Path(path).write_text("late")
+    return str(path)
+
+
+def _fail_now():
+    raise RuntimeError("this job failed")
+
+
+def test_a_failed_job_at_the_blocks_end_stops_the_other_children(tmp_path, forks):
+    # the failure is raised while the with-block's end waits: the job still running is interrupted, not left
+    # writing after the caller has been told the work failed
+    with pytest.raises(RuntimeError, match="this job failed"):
+        with BackgroundWriter() as bg:
+            bg.submit(_late_file, tmp_path / "late.txt", 1.5)
+            bg.submit(_fail_now)
+    time.sleep(2.0)
+    assert (tmp_path / "late.txt").exists() == (not forks)  # here (no fork) the first job ran to its end
+
+
 def test_disabled_writer_runs_each_job_at_once_in_this_process():
     got = []
     bg = BackgroundWriter(enabled=False)

@@ -50,7 +50,7 @@ import threading
 import time
 import traceback
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 __all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap", "skip_final_collection"]
@@ -108,6 +108,7 @@ class _Job:
     fd: int
     name: str
     on_done: Callable[[Any], None] | None
+    chunks: list = field(default_factory=list)  # the child's answer as read so far
 
 
 class BackgroundWriter:
@@ -193,8 +194,9 @@ class BackgroundWriter:
         long one frees its place at once (collected in submission order, a finished job waited behind a
         running one, and the parent with it)."""
         while len(self._jobs) > limit:
-            job = self._jobs.pop(self._first_done())
-            status, value = self._collect(job)
+            i = self._first_done()
+            job = self._jobs.pop(i)
+            status, value = self._collect(job, i)
             if status == "error":
                 raise value
             if job.on_done is not None:
@@ -205,7 +207,11 @@ class BackgroundWriter:
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
-            self.wait(0)
+            try:
+                self.wait(0)
+            except BaseException:  # a job's failure or Ctrl-C while waiting: the other children stop too
+                self.stop()
+                raise
         else:
             self.stop()
         return False
@@ -231,15 +237,19 @@ class BackgroundWriter:
         """Index of the oldest job whose child has answered (its pipe readable: a result or its end),
         waiting until one has."""
         fds = [job.fd for job in self._jobs]
-        ready, _, _ = select.select(fds, [], [])
-        return min(fds.index(fd) for fd in ready)
+        poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
+        for fd in fds:
+            poll.register(fd, select.POLLIN | select.POLLHUP | select.POLLERR)
+        ready = poll.poll()
+        return min(fds.index(fd) for fd, _ in ready)
 
-    def _collect(self, job: _Job) -> tuple[str, Any]:
+    def _collect(self, job: _Job, index: int = 0) -> tuple[str, Any]:
         try:
-            data = _read_all(job.fd)
-        except BaseException:  # Ctrl-C while waiting: the child is still ours to stop
-            self._jobs.insert(0, job)
+            _read_all(job.fd, job.chunks)
+        except BaseException:  # Ctrl-C while waiting: the child is still ours to stop, its answer kept so far
+            self._jobs.insert(index, job)
             raise
+        data = b"".join(job.chunks)
         os.close(job.fd)
         code, cpu = _reap(job.pid, block=True)
         self.job_cpu.append((job.name, cpu))
@@ -304,12 +314,12 @@ def _child(w: int, fn, args, kwargs, parent: int, mask) -> None:  # pragma: no c
         os._exit(code)
 
 
-def _read_all(fd: int) -> bytes:
-    chunks = []
+def _read_all(fd: int, chunks: list) -> None:
+    """Read ``fd`` to its end into ``chunks`` (what was read stays there if the reading is interrupted)."""
     while True:
         chunk = os.read(fd, 1 << 16)
         if not chunk:
-            return b"".join(chunks)
+            return
         chunks.append(chunk)
 
 
