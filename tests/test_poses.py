@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -237,20 +238,31 @@ def test_run_scene_writes_the_gait_folder(tmp_path):
     np.testing.assert_allclose([float(r["stroke bend [cm]"]) for r in rows], lay.strokes[0], rtol=1e-8)
 
 
+def _slow_broken_gif(*args, **kwargs):
+    time.sleep(1.5)  # the other gait jobs (chart, fabrication files) report first
+    raise ValueError("the DXF writer broke")
+
+
 @pytest.mark.parametrize("background", [True, False])
-def test_a_failed_fabrication_export_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background):
-    """The fabrication files are a background job: gait.json, which lists them, is written only once the
-    job has written them; a failed export fails the run (in the child or here) and leaves no gait.json."""
+@pytest.mark.parametrize("job", ["export", "gif"])
+def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background, job):
+    """The gait's chart, GIF and fabrication files are background jobs: gait.json, which lists their files,
+    is written only once every one of them has reported; one that fails fails the run (in the child or
+    here) and leaves no gait.json, even when the others finished before it."""
     from test_scenes import finger_dict, write_json
 
     import mdsr_opt.synthesis.export as export
+    import mdsr_opt.synthesis.gait as gait_mod
     from mdsr_opt.scenes.scenefile import load_scene
     from mdsr_opt.scenes.runscene import run_scene
 
     def broken(*args, **kwargs):
         raise ValueError("the DXF writer broke")
 
-    monkeypatch.setattr(export, "export_fabrication", broken)
+    if job == "export":
+        monkeypatch.setattr(export, "export_fabrication", broken)
+    else:
+        monkeypatch.setattr(gait_mod, "save_gait_animation", _slow_broken_gif)
     d = finger_dict()
     d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 2}
     scene = load_scene(write_json(tmp_path, d))

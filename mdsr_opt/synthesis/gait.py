@@ -410,7 +410,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     log : progress messages.
     writer : :class:`~mdsr_opt.core.background.BackgroundWriter`, optional
         Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
-        this is done here, one after the other.
+        this is done here, one after the other. ``gait.json``, which lists the files, is written when the
+        last of these jobs has reported: with a writer that forks, at its ``wait``.
 
     Returns
     -------
@@ -449,16 +450,18 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
-    from ..core.background import BackgroundWriter
-
-    submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
+    # the chart, the GIF and the fabrication files are jobs (importing the DXF writer, ezdxf, alone took
+    # 0.35-0.45 s); gait.json, which lists their files, is written once every one of them has reported (at
+    # the writer's wait when they run in children): a job that fails leaves no gait.json
+    jobs = []
     if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
-        submit(_write_schedule, sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
-               "dotted: achieved)", chart)
-        submit(save_gait_animation, scene.mesh, sch, res.muscles, gif, title=f"{scene.name} {gait.name}:",
-               fps=gait.fps)
+        jobs += [(_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
+                                         "dotted: achieved)", chart), {}),
+                 (save_gait_animation, (scene.mesh, sch, res.muscles, gif),
+                  {"title": f"{scene.name} {gait.name}:", "fps": gait.fps})]
         files += [str(chart), str(gif)]
+    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name}))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
@@ -472,11 +475,18 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                                                  if not o) + (f"; frames {failed} failed" if failed else "")),
                 times={k: float(v) for k, v in res.times.items()},
                 files=[os.path.relpath(f, folder.parent) for f in files])
-    # the fabrication files are a job too (importing the DXF writer, ezdxf, alone took 0.35-0.45 s); gait.json,
-    # which lists them, is written once they are (at the writer's wait when the job runs in a child)
-    record = copy.deepcopy(info)
-    submit(export_fabrication, scene.mesh, res, folder, units=scene.units, name=scene.name,
-           on_done=lambda _paths: write_json(folder / "gait.json", record))
+    record, waiting = copy.deepcopy(info), [len(jobs)]
+
+    def reported(_value):
+        waiting[0] -= 1
+        if not waiting[0]:
+            write_json(folder / "gait.json", record)
+
+    from ..core.background import BackgroundWriter
+
+    submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
+    for fn, args, kwargs in jobs:
+        submit(fn, *args, on_done=reported, **kwargs)
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
