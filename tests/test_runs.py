@@ -272,6 +272,9 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
     assert all(c.files for c in reports[True].cases)
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
     assert _without_times(sa) == _without_times(sb)
+    # in the same order too (an animation's entry is filled in when its job is done)
+    assert json.dumps(_without_times(sa)) == json.dumps(_without_times(sb))
+    assert list(sa["animations"]) == ["gait", "walk"]
     for name in ("bend_left/target.vtu", "walk/schedule.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     la, lb = (json.loads((d / "walk" / "layout.json").read_text()) for d in (a, b))

@@ -160,7 +160,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             run = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
             parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
             written[cname] = [[] for _ in range(2)]
-            if parts:  # the shapes first: the shorter job, collected first (see BackgroundWriter.wait)
+            if parts:
                 bg.submit(parts[0], on_done=written[cname][0].extend)
             if photos and run.design is not None:
                 bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,

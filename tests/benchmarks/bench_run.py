@@ -239,7 +239,8 @@ def time_cli(args: list[str], root: Path | None = None) -> tuple[float, float]:
 
     root = Path(os.environ["MDSR_PROBLEMS"]).parent if root is None else Path(root)
     compile_tree(root)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root)] + [v for v in [os.environ.get("PYTHONPATH")] if v]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(root)] + [v for v in [os.environ.get("PYTHONPATH")] if v]),
+               MDSR_PROBLEMS=str(root / "problems"))  # the tree's own problem library
     with tempfile.TemporaryDirectory() as d:
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
@@ -311,6 +312,8 @@ def main(argv=None) -> int:
     p.add_argument("--clock", choices=("wall", "cpu"), default="wall",
                    help="wall clock (default) or this process's CPU time (steadier when other jobs share the cores)")
     a = p.parse_args(argv)
+    if a.against and not a.cli:
+        p.error("--against compares the command: give --cli too")
     use_tree(Path(a.tree).resolve())
     ref_root = tree_at(a.against, tempfile.mkdtemp(prefix="bench_run_ref_")) if a.cli and a.against else None
     if a.clock == "cpu":
