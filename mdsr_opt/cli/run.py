@@ -154,7 +154,7 @@ def add_cli(sub) -> None:
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
     q.add_argument("--serial", action="store_true",
-                   help="draw figures and measure photographs in this process after each solve, not in forked "
-                        "child processes beside the next solve (the files are the same)")
+                   help="draw figures, measure photographs and make animations in this process after each "
+                        "solve, not in forked child processes beside the next solve (the files are the same)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)
