@@ -48,6 +48,7 @@ Run:  python tests/benchmarks/bench_run.py                       # gecko and hum
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import functools
 import importlib
@@ -181,6 +182,30 @@ def time_modes(name: str, repeats: int, modes=(False, True), log=None) -> dict:
     return out
 
 
+@contextlib.contextmanager
+def counting_job_cpu(jobs: dict):
+    """Within the block, the forked figure jobs' CPU seconds summed per job function into ``jobs``
+    (``BackgroundWriter.job_cpu``, read as each writer's block ends); nothing in an older tree (--tree)
+    without the writer or its accounting."""
+    try:
+        from mdsr_opt.core.background import BackgroundWriter
+    except ImportError:
+        yield
+        return
+    exit0 = BackgroundWriter.__exit__
+
+    def exit_and_count(self, *exc):
+        for job, cpu in getattr(self, "job_cpu", ()):
+            jobs[job] = jobs.get(job, 0.0) + cpu
+        return exit0(self, *exc)
+
+    BackgroundWriter.__exit__ = exit_and_count
+    try:
+        yield
+    finally:
+        BackgroundWriter.__exit__ = exit0
+
+
 def _one_run(name: str, serial: bool) -> dict:
     """One timed ``run_scene(name)`` at medium resolution: seconds per stage and in all."""
     from mdsr_opt.scenes.library import get_problem
@@ -193,26 +218,13 @@ def _one_run(name: str, serial: bool) -> dict:
     undo = clock.install()
     jobs: dict = {}  # CPU seconds of the forked figure jobs, summed per job function
     try:
-        from mdsr_opt.core.background import BackgroundWriter
-    except ImportError:  # an older tree (--tree) without the background writer
-        BackgroundWriter = type("NoWriter", (), {"__exit__": None})
-    exit0 = BackgroundWriter.__exit__
-
-    def exit_and_count(self, *exc):
-        for job, cpu in getattr(self, "job_cpu", ()):  # an older tree (--tree) does not count them
-            jobs[job] = jobs.get(job, 0.0) + cpu
-        return exit0(self, *exc)
-
-    BackgroundWriter.__exit__ = exit_and_count
-    try:
-        with tempfile.TemporaryDirectory() as d:
+        with counting_job_cpu(jobs), tempfile.TemporaryDirectory() as d:
             t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
             rep = run_scene(scene, Path(d) / name, log=None, **({"background": False} if serial else {}))
             total = clock.clock() - t0
             wall, cpu = time.perf_counter() - w0, _cpu() - c0
     finally:
         clock.uninstall(undo)
-        BackgroundWriter.__exit__ = exit0
     if not rep.success:
         print(f"  warning: a run of {name} did not succeed", file=sys.stderr)
     row = dict(clock.totals)
