@@ -348,3 +348,29 @@ def test_edge_rows_find_every_edge_in_either_order_and_nothing_else():
     moved = Mesh(mesh.points[perm], inv[mesh.triangles])
     r = moved.edge_rows(inv[e[:, 0]], inv[e[:, 1]])
     assert (r >= 0).all() and len(set(r.tolist())) == len(e)
+
+
+def test_a_mesh_pickles_without_its_solver_caches_and_solves_the_same_after():
+    """A mesh that has been solved on holds CasADi models and SuperLU factorisations in its caches, which
+    do not pickle; a pickle keeps the mesh and its derived arrays (read-only again) and drops those."""
+    import pickle
+
+    from mdsr_opt import Muscle, NeoHookean, solve_internal
+
+    m = Mesh.rectangle(4.0, 1.0, nx=12, ny=3)
+    mat = NeoHookean(E=1.0, nu=0.3)
+    top = np.flatnonzero(np.isclose(m.points[:, 1], 1.0))
+    muscle = Muscle(top[np.argsort(m.points[top, 0])])
+    first = solve_internal(m, mat, [muscle], [0.2])
+    assert first.success
+    assert any(k.endswith("_cache") for k in m.__dict__)  # what made pickling fail before
+    copy = pickle.loads(pickle.dumps(m))
+    assert not any(k.endswith("_cache") for k in copy.__dict__)
+    np.testing.assert_array_equal(copy.points, m.points)
+    np.testing.assert_array_equal(copy.triangles, m.triangles)
+    np.testing.assert_array_equal(copy.boundary_nodes, m.boundary_nodes)
+    for arr in (copy.points, copy.triangles, copy.edges, copy.areas):
+        assert not arr.flags.writeable
+    again = solve_internal(copy, mat, [muscle], [0.2])
+    assert again.success
+    np.testing.assert_allclose(again.x, first.x, rtol=0, atol=1e-9 * m.size)

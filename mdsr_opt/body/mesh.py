@@ -97,6 +97,23 @@ class Mesh:
         self._points = p
         self._triangles = t
 
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self):
+        """What a pickle keeps: the mesh and its derived arrays, without the solvers' caches (``*_cache``:
+        CasADi models and sparse factorisations, which neither pickle nor belong to the mesh's data; a copy
+        builds them again on first use)."""
+        d = {k: v for k, v in self.__dict__.items() if not k.endswith("_cache")}
+        return d, {name: getattr(self, name) for name in ("_points", "_triangles", "_boundary")}
+
+    def __setstate__(self, state) -> None:
+        d, slots = state
+        for name, value in slots.items():
+            value.setflags(write=False)  # an unpickled array is writeable again; a mesh's data is not
+            object.__setattr__(self, name, value)
+        for value in d.values():
+            _frozen(value)
+        self.__dict__.update(d)
+
     # ------------------------------------------------------------------ basic data
     @property
     def points(self) -> np.ndarray:
