@@ -46,27 +46,14 @@ import pickle
 import select
 import signal
 import sys
-import threading
 import time
-import traceback
 import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from .forking import child_main, fork_is_safe, read_all, reap, send_signal
+
 __all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap", "skip_final_collection"]
-
-
-def fork_is_safe() -> bool:
-    """Whether :class:`BackgroundWriter` may fork here: Linux, two or more cores available to this process,
-    called from the main thread with no other Python thread alive."""
-    if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
-        return False
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # pragma: no cover - Linux always has it
-        cores = os.cpu_count() or 1
-    return (cores >= 2 and threading.current_thread() is threading.main_thread()
-            and threading.active_count() == 1)
 
 
 @contextlib.contextmanager
@@ -178,9 +165,9 @@ class BackgroundWriter:
             if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
                 try:
                     os.close(r)
-                    _child(w, fn, args, kwargs, parent, mask)
+                    child_main(w, fn, args, kwargs, parent, mask)
                 finally:
-                    os._exit(1)  # _child leaves by os._exit itself; this is for anything raised before it
+                    os._exit(1)  # child_main leaves by os._exit itself; this is for anything raised before it
             os.close(w)
             self._jobs.append(_Job(pid, r, _name_of(fn), on_done))
         finally:
@@ -221,13 +208,13 @@ class BackgroundWriter:
         results are dropped."""
         jobs, self._jobs = self._jobs, []
         for job in jobs:
-            _signal(job.pid, signal.SIGINT)
+            send_signal(job.pid, signal.SIGINT)
         deadline = time.monotonic() + self.grace
         for job in jobs:
-            while _reap(job.pid, block=False) is None:
+            while reap(job.pid, block=False) is None:
                 if time.monotonic() > deadline:
-                    _signal(job.pid, signal.SIGKILL)
-                    _reap(job.pid, block=True)
+                    send_signal(job.pid, signal.SIGKILL)
+                    reap(job.pid, block=True)
                     break
                 time.sleep(0.01)
             os.close(job.fd)
@@ -245,13 +232,13 @@ class BackgroundWriter:
 
     def _collect(self, job: _Job, index: int = 0) -> tuple[str, Any]:
         try:
-            _read_all(job.fd, job.chunks)
+            read_all(job.fd, job.chunks)
         except BaseException:  # Ctrl-C while waiting: the child is still ours to stop, its answer kept so far
             self._jobs.insert(index, job)
             raise
         data = b"".join(job.chunks)
         os.close(job.fd)
-        code, cpu = _reap(job.pid, block=True)
+        code, cpu = reap(job.pid, block=True)
         self.job_cpu.append((job.name, cpu))
         try:
             status, value, text = pickle.loads(data)
@@ -270,72 +257,3 @@ def _name_of(fn) -> str:
     return getattr(fn, "__name__", "job")
 
 
-def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked child
-    """Have the kernel kill this child when its parent dies (Linux ``PR_SET_PDEATHSIG``): a run killed
-    outright must not leave children writing into its folder after the next run has taken it over."""
-    import ctypes
-
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent:  # the parent died before the request took effect
-        os._exit(1)
-
-
-def _child(w: int, fn, args, kwargs, parent: int, mask) -> None:  # pragma: no cover - in the forked child
-    """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
-    returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
-    code = 1
-    try:
-        _die_with_parent(parent)
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # from here on (held back during the fork)
-        try:
-            payload = ("ok", fn(*args, **kwargs), "")
-            code = 0
-        except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent
-            payload = ("error", exc, traceback.format_exc())
-        try:
-            data = pickle.dumps(payload)
-        except Exception:  # noqa: BLE001 - an unpicklable result or exception: its text goes instead
-            kind = "error" if payload[0] == "error" else "unpicklable result"
-            data = pickle.dumps(("error", RuntimeError(f"{kind}: {payload[1]!r}"[:2000]), payload[2]))
-            code = 1
-        view = memoryview(data)
-        while view:
-            view = view[os.write(w, view):]
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except BaseException:  # noqa: BLE001 - nothing may escape into the parent's code
-        pass
-    finally:
-        os._exit(code)
-
-
-def _read_all(fd: int, chunks: list) -> None:
-    """Read ``fd`` to its end into ``chunks`` (what was read stays there if the reading is interrupted)."""
-    while True:
-        chunk = os.read(fd, 1 << 16)
-        if not chunk:
-            return
-        chunks.append(chunk)
-
-
-def _reap(pid: int, block: bool) -> tuple[int, float] | None:
-    """``(exit status, CPU seconds)`` of the child once it has ended (None while it runs)."""
-    try:
-        done, status, usage = os.wait4(pid, 0 if block else os.WNOHANG)
-    except ChildProcessError:  # already reaped
-        return -1, float("nan")
-    if done == 0:
-        return None
-    return os.waitstatus_to_exitcode(status), usage.ru_utime + usage.ru_stime
-
-
-def _signal(pid: int, sig) -> None:
-    try:
-        os.kill(pid, sig)
-    except ProcessLookupError:
-        pass

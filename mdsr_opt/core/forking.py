@@ -1,0 +1,98 @@
+"""Forking a job's process: the low-level steps :mod:`mdsr_opt.core.background` builds on (when a fork is
+safe, the child's life from the fork to ``os._exit``, reading its answer, collecting it, signalling it).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import sys
+import threading
+import traceback
+
+__all__ = ["child_main", "die_with_parent", "fork_is_safe", "read_all", "reap", "send_signal"]
+
+
+def fork_is_safe() -> bool:
+    """Whether :class:`~mdsr_opt.core.background.BackgroundWriter` may fork here: Linux, two or more cores available to this process,
+    called from the main thread with no other Python thread alive."""
+    if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
+        return False
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - Linux always has it
+        cores = os.cpu_count() or 1
+    return (cores >= 2 and threading.current_thread() is threading.main_thread()
+            and threading.active_count() == 1)
+
+
+def die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked child
+    """Have the kernel kill this child when its parent dies (Linux ``PR_SET_PDEATHSIG``): a run killed
+    outright must not leave children writing into its folder after the next run has taken it over."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)
+
+
+def child_main(w: int, fn, args, kwargs, parent: int, mask) -> None:  # pragma: no cover - in the forked child
+    """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
+    returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
+    code = 1
+    try:
+        die_with_parent(parent)
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # from here on (held back during the fork)
+        try:
+            payload = ("ok", fn(*args, **kwargs), "")
+            code = 0
+        except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent
+            payload = ("error", exc, traceback.format_exc())
+        try:
+            data = pickle.dumps(payload)
+        except Exception:  # noqa: BLE001 - an unpicklable result or exception: its text goes instead
+            kind = "error" if payload[0] == "error" else "unpicklable result"
+            data = pickle.dumps(("error", RuntimeError(f"{kind}: {payload[1]!r}"[:2000]), payload[2]))
+            code = 1
+        view = memoryview(data)
+        while view:
+            view = view[os.write(w, view):]
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except BaseException:  # noqa: BLE001 - nothing may escape into the parent's code
+        pass
+    finally:
+        os._exit(code)
+
+
+def read_all(fd: int, chunks: list) -> None:
+    """Read ``fd`` to its end into ``chunks`` (what was read stays there if the reading is interrupted)."""
+    while True:
+        chunk = os.read(fd, 1 << 16)
+        if not chunk:
+            return
+        chunks.append(chunk)
+
+
+def reap(pid: int, block: bool) -> tuple[int, float] | None:
+    """``(exit status, CPU seconds)`` of the child once it has ended (None while it runs)."""
+    try:
+        done, status, usage = os.wait4(pid, 0 if block else os.WNOHANG)
+    except ChildProcessError:  # already reaped
+        return -1, float("nan")
+    if done == 0:
+        return None
+    return os.waitstatus_to_exitcode(status), usage.ru_utime + usage.ru_stime
+
+
+def send_signal(pid: int, sig) -> None:
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
