@@ -281,6 +281,42 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
     assert _without_times(la) == _without_times(lb)
 
 
+_REAL_REST = []
+
+
+def _rest_and_parent(scene, path):
+    """rest.png's job, which also leaves its process's parent next to the figure."""
+    Path(path).with_suffix(".ppid").write_text(str(os.getppid()))
+    return _REAL_REST[0](scene, path)
+
+
+def test_the_command_starts_the_jobs_server_before_the_scene_is_built(tmp_path, monkeypatch):
+    """`mdsr run` forks the jobs' server before it builds the scenes (so that matplotlib warms up beside
+    that), and the figure jobs are the server's children, not the command's."""
+    import mdsr_opt.cli.run as cli_run
+    from mdsr_opt.core.background import fork_is_safe
+    from mdsr_opt.scenes import runscene
+
+    forks = fork_is_safe()
+    kids_at_build = []
+    real = cli_run.get_problem
+
+    def spy(*args, **kwargs):
+        kids_at_build.append(_children(os.getpid()))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cli_run, "get_problem", spy)
+    monkeypatch.setattr(sys.modules[__name__], "_REAL_REST", [runscene._write_rest])
+    monkeypatch.setattr(runscene, "_write_rest", _rest_and_parent)
+    out = tmp_path / "o"
+    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-photos"]) == 0
+    (server,) = kids_at_build[0] if forks else [os.getpid()]
+    parent = int((out / "rest.ppid").read_text())
+    assert parent == (server if forks else os.getppid())
+    assert not forks or server != os.getpid()
+    assert (out / "rest.png").is_file() and _children(os.getpid()) == []  # the server has ended
+
+
 @pytest.mark.parametrize("flags, background", [([], True), (["--serial"], False)])
 def test_serial_flag_keeps_the_figures_in_the_run_process(tmp_path, monkeypatch, flags, background):
     import mdsr_opt.cli.run as cli_run
@@ -313,9 +349,20 @@ def _children(pid: int) -> list[int]:
     return out
 
 
+def _descendants(pid: int) -> list[int]:
+    """The processes below ``pid``: its children (the jobs' server among them), theirs (the jobs), ..."""
+    out, todo = [], [pid]
+    while todo:
+        kids = _children(todo.pop())
+        out += kids
+        todo += kids
+    return out
+
+
 def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
-    """Ctrl-C in a terminal reaches the whole process group: the run and its forked figure jobs. The run
-    exits with 130 within seconds, the jobs are gone, no temporary file stays, the manifest says so."""
+    """Ctrl-C in a terminal reaches the whole process group: the run, the jobs' server and the forked figure
+    jobs. The run exits with 130 within seconds, the server and the jobs are gone, no temporary file stays,
+    the manifest says so."""
     from mdsr_opt.core.background import fork_is_safe
 
     out = tmp_path / "out"
@@ -325,10 +372,11 @@ def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
                             start_new_session=True)
     try:
         t0, kids = time.monotonic(), []
-        while time.monotonic() - t0 < 60 and not kids and proc.poll() is None:
-            kids = _children(proc.pid)
+        # until a figure job runs: the server (a child) has forked one (a grandchild)
+        while time.monotonic() - t0 < 60 and len(kids) < 2 and proc.poll() is None:
+            kids = _descendants(proc.pid)
             time.sleep(0.02)
-        assert kids or not fork_is_safe(), "no figure job was forked"
+        assert len(kids) >= 2 or not fork_is_safe(), f"no figure job was forked: {kids}"
         os.killpg(proc.pid, signal.SIGINT)
         assert proc.wait(timeout=30) == 130
     finally:

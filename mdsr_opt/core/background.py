@@ -14,6 +14,12 @@ Rules that keep this safe and honest:
   lock at the fork would leave the child waiting for ever). Native threads idle in OpenBLAS's pool are
   handled by OpenBLAS's own fork handlers. Anywhere else, and with ``enabled=False``, :meth:`submit` runs the
   job at once in this process: the same files, the same results, only later.
+- **Jobs can start from a warm server** (``server=True``; :mod:`mdsr_opt.core.forkserver`): a process
+  forked early does the ``prepare`` work (matplotlib's import and warm-up, about 1 s) on the second core
+  while this process goes on with its own start (building the scene, the first solves), and forks each
+  job, which it receives pickled (a scene and a case pickle in a few milliseconds; a mesh leaves its
+  solver caches behind; the copies drew as fast as the originals). A job that does not pickle, or that the
+  server's process cannot load, is forked from this process as before.
 - **At most ``jobs`` children at a time**; a further :meth:`submit` first waits for one to finish.
   The default, three, lets ``mdsr run`` hand over a case's two jobs while the previous case's photograph
   job still runs, so the parent goes on solving instead of waiting (``run_scene`` at medium resolution on
@@ -52,6 +58,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from .forking import child_main, fork_is_safe, read_all, reap, send_signal
+from .forkserver import ForkServer, JobNotLoadable, shared_server
 
 __all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap", "skip_final_collection"]
 
@@ -96,6 +103,13 @@ class _Job:
     name: str
     on_done: Callable[[Any], None] | None
     chunks: list = field(default_factory=list)  # the child's answer as read so far
+    served: tuple | None = None  # (fn, args, kwargs) of a job a ForkServer forked: run here if it cannot be
+    ended: bool = False  # its pipe has been read to its end
+
+    def served_pid(self) -> int:
+        """A served job's child, once its pid has arrived (its answer's first 8 bytes; 0 before)."""
+        head = b"".join(self.chunks)[:8]
+        return int.from_bytes(head, "little") if len(head) == 8 else 0
 
 
 class BackgroundWriter:
@@ -111,7 +125,13 @@ class BackgroundWriter:
         Seconds an interrupted child gets to stop (and remove its temporary files) before it is killed.
     prepare : callable, optional
         Called once in this process before the first fork: work every job would otherwise repeat in its
-        child and lose with it (imports, caches; for figures :func:`mdsr_opt.plot.common.warm_up`).
+        child and lose with it (imports, caches; for figures :func:`mdsr_opt.plot.common.warm_up`). With
+        ``server`` it is the server's to call, beside this process's own work.
+    server : bool, default False
+        Fork the jobs from a :class:`~mdsr_opt.core.forkserver.ForkServer`: the one
+        :func:`~mdsr_opt.core.forkserver.serving` has started (which then calls ``prepare`` too), or else
+        one started now. A job that does not pickle is forked from this process (which then calls
+        ``prepare`` first).
 
     Notes
     -----
@@ -121,7 +141,7 @@ class BackgroundWriter:
     """
 
     def __init__(self, enabled: bool = True, grace: float = 10.0, prepare: Callable[[], Any] | None = None,
-                 jobs: int = 3):
+                 jobs: int = 3, server: bool = False):
         if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
             raise ValueError(f"jobs must be a positive integer, not {jobs!r}")
         self.jobs = jobs
@@ -129,6 +149,15 @@ class BackgroundWriter:
         self.grace = float(grace)
         self._prepare = prepare
         self._jobs: list[_Job] = []
+        self._server: ForkServer | None = None
+        self._own_server = False
+        if self.background and server:
+            self._server = shared_server()
+            if self._server is not None:
+                if prepare is not None:
+                    self._server.prepare(prepare)  # what this writer's jobs need beyond the server's warm-up
+            else:
+                self._server, self._own_server = ForkServer(prepare), True
         #: ``(job name, CPU seconds)`` of every child collected so far (user and system time of the forked
         #: process, from the kernel's accounting): what the figure jobs cost beside the parent's own time
         self.job_cpu: list[tuple[str, float]] = []
@@ -145,6 +174,15 @@ class BackgroundWriter:
                 on_done(result)
             return
         self.wait(self.jobs - 1)
+        if self._server is not None and self._server.alive:
+            fd = self._server.spawn(fn, args, kwargs)
+            if fd is not None:
+                self._jobs.append(_Job(0, fd, _name_of(fn), on_done, served=(fn, args, kwargs)))
+                return
+        self._fork(fn, args, kwargs, on_done)
+
+    def _fork(self, fn, args, kwargs, on_done) -> None:
+        """Fork a child of this process for the job (after ``prepare``, the first time)."""
         if self._prepare is not None:
             prepare, self._prepare = self._prepare, None
             prepare()
@@ -184,6 +222,10 @@ class BackgroundWriter:
             i = self._first_done()
             job = self._jobs.pop(i)
             status, value = self._collect(job, i)
+            if status == "error" and isinstance(value, JobNotLoadable) and job.served is not None:
+                fn, args, kwargs = job.served  # the server's process could not load it: fork it from here
+                self._fork(fn, args, kwargs, job.on_done)
+                continue
             if status == "error":
                 raise value
             if job.on_done is not None:
@@ -193,42 +235,63 @@ class BackgroundWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            try:
-                self.wait(0)
-            except BaseException:  # a job's failure or Ctrl-C while waiting: the other children stop too
+        try:
+            if exc_type is None:
+                try:
+                    self.wait(0)
+                except BaseException:  # a job's failure or Ctrl-C while waiting: the other children stop too
+                    self.stop()
+                    raise
+            else:
                 self.stop()
-                raise
-        else:
-            self.stop()
+        finally:
+            if self._own_server:
+                self._server.close()  # every job it forked has been collected or stopped
         return False
 
     def stop(self) -> None:
         """Interrupt every running child (SIGINT), wait ``grace`` seconds for it, then kill it; their
         results are dropped."""
         jobs, self._jobs = self._jobs, []
+        if self._server is not None and any(job.served is not None for job in jobs):
+            # no job it still holds starts now, and those it forked are interrupted (their death signal)
+            self._server.kill()
         for job in jobs:
-            send_signal(job.pid, signal.SIGINT)
+            if job.served is None:
+                send_signal(job.pid, signal.SIGINT)
         deadline = time.monotonic() + self.grace
         for job in jobs:
-            while reap(job.pid, block=False) is None:
-                if time.monotonic() > deadline:
-                    send_signal(job.pid, signal.SIGKILL)
-                    reap(job.pid, block=True)
-                    break
-                time.sleep(0.01)
+            if job.served is not None:
+                _drain(job, deadline)
+            else:
+                while reap(job.pid, block=False) is None:
+                    if time.monotonic() > deadline:
+                        send_signal(job.pid, signal.SIGKILL)
+                        reap(job.pid, block=True)
+                        break
+                    time.sleep(0.01)
             os.close(job.fd)
 
     # -- internals --------------------------------------------------------------------------------------
     def _first_done(self) -> int:
-        """Index of the oldest job whose child has answered (its pipe readable: a result or its end),
-        waiting until one has."""
-        fds = [job.fd for job in self._jobs]
-        poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
-        for fd in fds:
-            poll.register(fd, select.POLLIN | select.POLLHUP | select.POLLERR)
-        ready = poll.poll()
-        return min(fds.index(fd) for fd, _ in ready)
+        """Index of the oldest job whose child has answered to the end (its pipe closed), waiting until one
+        has; what the children send meanwhile is read into their jobs (a served child sends its pid first,
+        and an answer larger than the pipe's buffer comes in parts)."""
+        while True:
+            done = [i for i, job in enumerate(self._jobs) if job.ended]
+            if done:
+                return done[0]
+            poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
+            for job in self._jobs:
+                poll.register(job.fd, select.POLLIN | select.POLLHUP | select.POLLERR)
+            ready = {fd for fd, _ in poll.poll()}
+            for job in self._jobs:
+                if job.fd in ready:
+                    chunk = os.read(job.fd, 1 << 16)
+                    if chunk:
+                        job.chunks.append(chunk)
+                    else:
+                        job.ended = True
 
     def _collect(self, job: _Job, index: int = 0) -> tuple[str, Any]:
         try:
@@ -238,16 +301,40 @@ class BackgroundWriter:
             raise
         data = b"".join(job.chunks)
         os.close(job.fd)
-        code, cpu = reap(job.pid, block=True)
-        self.job_cpu.append((job.name, cpu))
+        if job.served is not None:  # a server's child: its pid first, its own CPU time in its answer
+            job.pid, data, code, cpu = job.served_pid(), data[8:], "unknown", float("nan")
+        else:
+            code, cpu = reap(job.pid, block=True)
         try:
-            status, value, text = pickle.loads(data)
+            status, value, text, own_cpu = pickle.loads(data)
         except Exception:  # noqa: BLE001 - no answer: the child died before it could send one
+            self.job_cpu.append((job.name, cpu))
             return "error", RuntimeError(f"the background job {job.name} (pid {job.pid}) ended without a "
                                          f"result (exit status {code})")
+        self.job_cpu.append((job.name, own_cpu if job.served is not None else cpu))
         if status == "error" and text and hasattr(value, "add_note"):
             value.add_note(f"in the background job {job.name} (pid {job.pid}):\n{text.rstrip()}")
         return status, value
+
+
+def _drain(job: _Job, deadline: float) -> None:
+    """Read a stopped served job's pipe to its end (its child has exited, or was never forked), killing the
+    child once ``deadline`` has passed."""
+    poll = select.poll()
+    poll.register(job.fd, select.POLLIN | select.POLLHUP | select.POLLERR)
+    killed = False
+    while True:
+        wait_ms = None if killed else max(0, int(1000 * (deadline - time.monotonic())))
+        if poll.poll(wait_ms):
+            chunk = os.read(job.fd, 1 << 16)
+            if not chunk:
+                return
+            job.chunks.append(chunk)
+        elif not killed:
+            pid = job.served_pid()
+            if pid:
+                send_signal(pid, signal.SIGKILL)
+            killed = True
 
 
 def _name_of(fn) -> str:

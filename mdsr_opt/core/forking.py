@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import os
 import pickle
+import resource
 import signal
 import sys
 import threading
 import traceback
 
-__all__ = ["child_main", "die_with_parent", "fork_is_safe", "read_all", "reap", "send_signal"]
+__all__ = ["child_main", "die_with_parent", "fork_is_safe", "read_all", "reap", "send_signal", "write_all"]
 
 
 def fork_is_safe() -> bool:
@@ -27,48 +28,60 @@ def fork_is_safe() -> bool:
             and threading.active_count() == 1)
 
 
-def die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked child
+def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:  # pragma: no cover - in the child
     """Have the kernel kill this child when its parent dies (Linux ``PR_SET_PDEATHSIG``): a run killed
-    outright must not leave children writing into its folder after the next run has taken it over."""
+    outright must not leave children writing into its folder after the next run has taken it over. A
+    jobs' server's children are interrupted instead (``sig`` ``SIGINT``: they remove their temporary
+    files), since the server is killed when the run stops, and dies with the run's process."""
     import ctypes
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+        libc.prctl(1, int(sig), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
     if os.getppid() != parent:  # the parent died before the request took effect
         os._exit(1)
 
 
-def child_main(w: int, fn, args, kwargs, parent: int, mask) -> None:  # pragma: no cover - in the forked child
-    """Run the job, send ``(status, value, traceback)`` through ``w`` and leave with ``os._exit`` (never
-    returning into the parent's stack, its ``finally`` blocks or its exit handlers)."""
+def child_main(w: int, fn, args, kwargs, parent: int, mask, served: bool = False) -> None:  # pragma: no cover
+    """Run the job, send ``(status, value, traceback, CPU seconds)`` through ``w`` and leave with
+    ``os._exit`` (never returning into the parent's stack, its ``finally`` blocks or its exit handlers).
+    A jobs' server's child (``served``) first sends its pid (8 bytes), and leaves at once if nobody reads."""
     code = 1
     try:
-        die_with_parent(parent)
+        die_with_parent(parent, signal.SIGINT if served else signal.SIGKILL)
         signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
+        if served:
+            os.write(w, os.getpid().to_bytes(8, "little"))  # BrokenPipeError: the run has stopped
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # from here on (held back during the fork)
         try:
             payload = ("ok", fn(*args, **kwargs), "")
             code = 0
         except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent
             payload = ("error", exc, traceback.format_exc())
+        use = resource.getrusage(resource.RUSAGE_SELF)
+        cpu = use.ru_utime + use.ru_stime
         try:
-            data = pickle.dumps(payload)
+            data = pickle.dumps(payload + (cpu,))
         except Exception:  # noqa: BLE001 - an unpicklable result or exception: its text goes instead
             kind = "error" if payload[0] == "error" else "unpicklable result"
-            data = pickle.dumps(("error", RuntimeError(f"{kind}: {payload[1]!r}"[:2000]), payload[2]))
+            data = pickle.dumps(("error", RuntimeError(f"{kind}: {payload[1]!r}"[:2000]), payload[2], cpu))
             code = 1
-        view = memoryview(data)
-        while view:
-            view = view[os.write(w, view):]
+        write_all(w, data)
         sys.stdout.flush()
         sys.stderr.flush()
     except BaseException:  # noqa: BLE001 - nothing may escape into the parent's code
         pass
     finally:
         os._exit(code)
+
+
+def write_all(fd: int, data: bytes) -> None:
+    """Write ``data`` to ``fd`` whole (a pipe takes it in parts)."""
+    view = memoryview(data)
+    while view:
+        view = view[os.write(fd, view):]
 
 
 def read_all(fd: int, chunks: list) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..core.background import BackgroundWriter, frozen_heap
+from ..core.forkserver import serving
 from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -57,7 +58,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files, in a forked
         child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
         Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
-        The files are the same either way.
+        The children are forked by a server process that warms matplotlib up beside the first solves
+        (:class:`~mdsr_opt.core.forkserver.ForkServer`; ``mdsr run`` starts it before building its
+        scenes). The files are the same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -136,9 +139,12 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
+    # the jobs fork from a warm server (started by the command before its scenes were built, or else now):
+    # matplotlib's import and warm-up run on the second core beside the solves (BackgroundWriter's server)
     with frozen_heap(), BackgroundWriter(background and (figures or photos),
-                                         prepare=functools.partial(_warm_up, figures, photos,
-                                                                   len(scene.mesh.boundary_loops) > 1)) as bg:
+                                         prepare=functools.partial(warm_up_jobs, figures, photos,
+                                                                   len(scene.mesh.boundary_loops) > 1),
+                                         server=True) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -246,10 +252,12 @@ def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int
             from .rundir import check_out_path
 
             check_out_path(a.out)
-        scene = build(resolution=a.resolution)
-        with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
-            rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case, method=a.method,
-                            overwrite=a.overwrite, log=log)
+        # the figure jobs' server warms up while the scene is built (see BackgroundWriter)
+        with serving(functools.partial(warm_up_jobs, True, True, holes=False)):
+            scene = build(resolution=a.resolution)
+            with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
+                rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
+                                method=a.method, overwrite=a.overwrite, log=log)
     except KeyboardInterrupt:
         print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
         return 130
@@ -351,22 +359,36 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
         say(line)
 
 
-def _warm_up(figures: bool, photos: bool, holes: bool = True) -> None:
-    """Before the first fork, once: what every background job would otherwise pay again in its child and
+#: what warm_up_jobs has done in this process
+_WARMED: set[str] = set()
+
+
+def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
+    """Once, in the process the background jobs fork from (this one, or their server: see
+    :class:`~mdsr_opt.core.background.ForkServer`): what every job would otherwise pay again in its child and
     lose with it (a case's photograph stage took 1.1-1.3 s of CPU in a cold child, 0.6 s in a warm one).
     ``holes``: the body has holes, whose photographed counterparts are matched with scipy.optimize (0.2-0.4
-    s to import; a body without holes never imports it)."""
+    s to import; a body without holes never imports it). What a process has warmed up once is not done
+    again (a server serves every scene of ``mdsr run all``)."""
     import importlib
 
-    if figures:
+    if figures and "figures" not in _WARMED:
         from ..plot.common import warm_up
 
         warm_up()
+        _WARMED.add("figures")
         importlib.import_module("meshio")  # each case's shapes job writes its meshes (0.12-0.15 s to import)
     if photos:  # the photograph stage's modules
         for name in ("..photos.camera", "..photos.contours", "..photos.loops", "..photos.compare",
                      ".prototype") + (("scipy.optimize",) if holes else ()):
             importlib.import_module(name, __package__)
+    if "pipeline" not in _WARMED:
+        # what a job's pickled inputs (a case's routing graph: networkx, 0.25 s) and its solves (animations,
+        # the prototype's photographs) import, for a server that has not run the pipeline itself
+        for name in ("networkx", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",
+                     "..mechanics.equilibrium", "..mechanics.newton", "..body.material", ".animate"):
+            importlib.import_module(name, __package__)
+        _WARMED.add("pipeline")
 
 
 def _write_rest(scene: Scene, path) -> str:

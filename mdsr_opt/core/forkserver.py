@@ -1,0 +1,259 @@
+"""The jobs' server: a process forked early that warms up beside its caller and forks the jobs it is sent.
+
+``mdsr run`` spent its first 1.5-2 s on one core: imports, building the scene, and matplotlib's import and
+warm-up, which every figure job needs and which had to be done in the process the jobs fork from. A
+:class:`ForkServer` started before the scene is built does that warm-up on the second core; the jobs,
+pickled, are forked from its warm memory. :class:`~mdsr_opt.core.background.BackgroundWriter` uses it with
+``server=True``; :func:`serving` shares one server between the writers of a command.
+
+The protocol: the caller sends each job as a memory file (``memfd_create``) with the write end of a pipe
+over a Unix socket (``SCM_RIGHTS``), so a send never waits for the server, not even while it prepares; the
+server forks a child for it, which sends its pid and then its answer through the pipe
+(:func:`~mdsr_opt.core.forking.child_main`). The caller never waits for the server itself.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import os
+import pickle
+import signal
+import socket
+import sys
+import time
+import warnings
+from typing import Any, Callable
+
+from .forking import child_main, die_with_parent, fork_is_safe, read_all, reap, send_signal, write_all
+
+__all__ = ["ForkServer", "JobNotLoadable", "load_job", "serving", "shared_server"]
+
+
+class ForkServer:
+    """A process forked now that calls ``prepare`` and then forks the jobs :meth:`spawn` sends it.
+
+    A job's arguments pickle in a few milliseconds (a :class:`~mdsr_opt.body.mesh.Mesh` leaves its solver
+    caches behind), and in ``mdsr run gecko`` the copies drew as fast as the originals. The server dies
+    with its caller (``SIGKILL``); its jobs are interrupted when it dies (``SIGINT``, so that they remove
+    their temporary files). Where a server cannot run (see :func:`~mdsr_opt.core.forking.fork_is_safe`; no
+    ``memfd_create``), :attr:`alive` is False and :meth:`spawn` returns None.
+    """
+
+    def __init__(self, prepare: Callable[[], Any] | None = None):
+        self.pid = 0
+        self._sock: socket.socket | None = None
+        self._used = False  # sent a job (close() then lets it collect its jobs; else it is killed at once)
+        if not (fork_is_safe() and hasattr(os, "memfd_create") and hasattr(socket, "send_fds")):
+            return
+        mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        parent = os.getpid()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # as in BackgroundWriter.submit
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+            if pid == 0:  # pragma: no cover - the server; never returns
+                try:
+                    mine.close()
+                    _serve(theirs, prepare, parent)
+                finally:
+                    os._exit(1)
+            theirs.close()
+            self.pid, self._sock = pid, mine
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+    @property
+    def alive(self) -> bool:
+        """Whether jobs can be sent (the server was started and has not been killed or lost)."""
+        return self._sock is not None
+
+    def spawn(self, fn: Callable[..., Any], args: tuple = (), kwargs: dict | None = None) -> int | None:
+        """Have the server fork a child that runs ``fn(*args, **kwargs)``; returns the read end of the
+        child's pipe (its pid as 8 bytes, then its pickled answer, as :class:`~mdsr_opt.core.background.BackgroundWriter` reads it),
+        or None when the job does not pickle or the server is gone (then run it otherwise)."""
+        r, w = os.pipe()
+        if self._send(b"j", (fn, args, kwargs or {}), w):
+            return r
+        os.close(r)
+        return None
+
+    def prepare(self, fn: Callable[[], Any]) -> bool:
+        """Have the server call ``fn()`` in its own process before it forks the jobs sent after this (more
+        imports, say); a failure there is ignored. False when ``fn`` does not pickle or the server is gone."""
+        return self._send(b"p", (fn, (), {}))
+
+    def _send(self, kind: bytes, job: tuple, w: int = -1) -> bool:
+        """Send a job (or a preparation, without ``w``): pickled into a memory file, whose descriptor travels
+        with ``w`` over the socket, so that sending never waits for the server (busy preparing, say).
+        Closes ``w`` (this process's copy) in any case."""
+        fd = -1
+        try:
+            if self._sock is None:
+                return False
+            try:
+                data = pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception:  # noqa: BLE001 - a lambda, a local function, an open file: not for the server
+                return False
+            fd = os.memfd_create("mdsr-job", os.MFD_CLOEXEC)
+            try:
+                write_all(fd, data)
+                socket.send_fds(self._sock, [kind], [fd] + ([w] if w >= 0 else []))
+            except OSError:  # the server is gone
+                self.kill()
+                return False
+            self._used = self._used or kind == b"j"
+            return True
+        finally:
+            for d in (fd, w):
+                if d >= 0:
+                    os.close(d)
+
+    def close(self, timeout: float = 2.0) -> None:
+        """End the server once every job it forked has ended: it collects them (their CPU time then counts
+        as the caller's children's, as with jobs forked directly) and exits; killed after ``timeout``
+        seconds (at once if it was never sent anything)."""
+        if self._sock is None:
+            return
+        if not self._used:
+            self.kill()
+            return
+        self._sock.close()
+        self._sock = None
+        deadline = time.monotonic() + timeout
+        while reap(self.pid, block=False) is None:
+            if time.monotonic() > deadline:
+                send_signal(self.pid, signal.SIGKILL)
+                reap(self.pid, block=True)
+                return
+            time.sleep(0.005)
+
+    def kill(self) -> None:
+        """End the server at once (the jobs it has not forked yet are dropped, those it forked are
+        interrupted)."""
+        if self._sock is None:
+            return
+        self._sock.close()
+        self._sock = None
+        send_signal(self.pid, signal.SIGKILL)
+        reap(self.pid, block=True)
+
+
+#: the servers :func:`serving` has started, innermost last
+_SERVING: list[ForkServer] = []
+
+
+def shared_server() -> ForkServer | None:
+    """The server of the innermost :func:`serving` block, if it is alive."""
+    return _SERVING[-1] if _SERVING and _SERVING[-1].alive else None
+
+
+@contextlib.contextmanager
+def serving(prepare: Callable[[], Any] | None = None):
+    """Within the block, every ``BackgroundWriter(server=True)`` forks its jobs from one
+    :class:`ForkServer`, started now with ``prepare``: a command starts it before its slow start (imports,
+    building scenes), and several scenes share its warm-up. Yields the server; kills it at the end."""
+    server = ForkServer(prepare)
+    _SERVING.append(server)
+    try:
+        yield server
+    except BaseException:
+        _SERVING.remove(server)
+        server.kill()
+        raise
+    _SERVING.remove(server)
+    server.close()
+
+
+class JobNotLoadable(Exception):
+    """A served job that the server's process could not unpickle (say, a function of a module the caller
+    imported after the server started): the caller forks it itself."""
+
+
+def load_job(fd: int):  # pragma: no cover - runs in a ForkServer's child
+    """Unpickle the job in memory file ``fd`` and run it."""
+    try:
+        fn, args, kwargs = _unpickle_file(fd)
+    except Exception as exc:  # noqa: BLE001 - any failure to load goes back as JobNotLoadable
+        raise JobNotLoadable(f"{type(exc).__name__}: {exc}") from None
+    return fn(*args, **kwargs)
+
+
+def _unpickle_file(fd: int):  # pragma: no cover - runs in a ForkServer or its child
+    """The object pickled in memory file ``fd`` (closed)."""
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        chunks: list = []
+        read_all(fd, chunks)
+    finally:
+        os.close(fd)
+    return pickle.loads(b"".join(chunks))
+
+
+def _reap_children(*_signal_args) -> None:  # pragma: no cover - the server's SIGCHLD handler
+    """Collect every ended child (so that its CPU time counts, and no zombie is left)."""
+    while True:
+        try:
+            pid, _status = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+
+
+def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cover - the server process
+    """The server's life: prepare, then fork one child per job received, until the caller closes the
+    socket (or dies, and the kernel kills us)."""
+    die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle; it kills us
+    signal.signal(signal.SIGCHLD, _reap_children)  # our children (the jobs), collected as they end
+    signal.pthread_sigmask(signal.SIG_SETMASK, set())
+    if prepare is not None:
+        try:
+            prepare()
+        except Exception:  # noqa: BLE001 - a warm-up that fails only leaves the jobs to do their own
+            pass
+    gc.freeze()  # the jobs' collections leave the server's heap alone (and its pages shared)
+    me = os.getpid()
+    while True:
+        try:
+            msg, fds, _flags, _addr = socket.recv_fds(sock, 1, 2)
+        except OSError:
+            break
+        if not msg:  # the caller closed its end
+            break
+        if msg == b"p" and len(fds) == 1:
+            try:
+                fn, args, kwargs = _unpickle_file(fds[0])
+                fn(*args, **kwargs)
+            except Exception:  # noqa: BLE001 - as with prepare
+                pass
+            continue
+        if msg != b"j" or len(fds) != 2:
+            for fd in fds:
+                os.close(fd)
+            continue
+        job, w = fds
+        try:
+            pid = os.fork()
+        except OSError:
+            pid = -1  # the caller reads the end of a pipe without an answer: a failed job
+        if pid == 0:
+            try:
+                sock.close()
+                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                child_main(w, load_job, (job,), {}, me, set(), served=True)
+            finally:
+                os._exit(1)
+        os.close(job)
+        os.close(w)
+    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+    while True:  # the last jobs: collected before we go, so that the caller's accounts have them
+        try:
+            os.wait()
+        except ChildProcessError:
+            break
+    os._exit(0)

@@ -1,0 +1,242 @@
+"""The jobs' server (mdsr_opt.core.background.ForkServer): a process forked early that warms up beside the
+caller and forks each job it is sent (pickled).
+
+Every test states what it expects both where this machine may fork and where it may not (the jobs then run
+in this process): nothing is skipped.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from mdsr_opt.core.background import BackgroundWriter, fork_is_safe
+from mdsr_opt.core.forkserver import ForkServer, serving
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: set by _remember in the process that calls it
+_MARK: list = []
+
+
+@pytest.fixture
+def forks():
+    return fork_is_safe()
+
+
+def _remember(value):
+    _MARK.append(value)
+
+
+def _where(*_):
+    """The job's process, its parent and what _remember has left there."""
+    return os.getpid(), os.getppid(), list(_MARK)
+
+
+def _wait_for(path, seconds=20.0):
+    """A prepare that waits for the caller to create ``path`` (which it can do only if it goes on)."""
+    t0 = time.monotonic()
+    while not Path(path).exists():
+        if time.monotonic() - t0 > seconds:
+            _MARK.append("timed out")
+            return
+        time.sleep(0.01)
+    _MARK.append("saw it")
+
+
+def _spin(seconds):
+    t0 = time.process_time()
+    while time.process_time() - t0 < seconds:
+        pass
+    return seconds
+
+
+def _fail():
+    raise RuntimeError("the job failed on purpose")
+
+
+def _late_write(path, seconds):
+    time.sleep(seconds)
+    Path(path).write_text("written")
+    return "done"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    return "zombie" not in status
+
+
+def test_served_jobs_start_from_the_server_which_prepared_them_not_from_the_caller(forks):
+    got = []
+    with BackgroundWriter(prepare=functools.partial(_remember, "prepared"), server=True) as bg:
+        server = bg._server if forks else None  # noqa: SLF001 - the test looks at whom the jobs came from
+        bg.submit(_where, on_done=got.append)
+        bg.submit(_where, on_done=got.append)
+    assert _MARK == []  # prepare never ran here
+    if not forks:  # no server where a fork is unsafe: the jobs ran here, unprepared
+        assert got == [(os.getpid(), os.getppid(), [])] * 2
+        return
+    for pid, ppid, mark in got:
+        assert ppid == server.pid != os.getpid() and pid != server.pid
+        assert mark == ["prepared"]  # the server's warm memory
+    assert not _alive(server.pid)  # the writer's own server ends with the writer
+
+
+def test_the_caller_goes_on_while_the_server_prepares(tmp_path, forks):
+    """The server's preparation runs beside the caller: here it waits for a file the caller writes only
+    after its submit has returned (a caller that waited for the preparation would make it time out)."""
+    go = tmp_path / "go"
+    got = []
+    with BackgroundWriter(prepare=functools.partial(_wait_for, go), server=True) as bg:
+        bg.submit(_where, on_done=got.append)
+        go.write_text("")
+    if forks:
+        assert got[0][2] == ["saw it"]
+    else:  # no server: nothing was prepared, the job ran here
+        assert got == [(os.getpid(), os.getppid(), [])]
+
+
+def test_a_job_that_does_not_pickle_is_forked_from_the_caller(forks):
+    got = []
+    with BackgroundWriter(server=True) as bg:
+        bg.submit(lambda: (os.getpid(), os.getppid()), on_done=got.append)
+    assert len(got) == 1
+    assert (got[0][1] == os.getpid()) == forks  # a child of this process (or this process itself)
+
+
+def test_a_job_the_server_cannot_load_is_forked_from_the_caller(tmp_path, forks, monkeypatch):
+    """A function of a module imported after the server started (here from a folder only the caller's
+    sys.path has) cannot be unpickled there: the caller runs it in its own child, with the same result."""
+    with serving() as server:
+        (tmp_path / "late_module_for_forkserver.py").write_text(
+            "import os\ndef where():\n    return os.getpid(), os.getppid()\n")
+        monkeypatch.syspath_prepend(str(tmp_path))
+        import late_module_for_forkserver as late
+
+        got = []
+        with BackgroundWriter(server=True) as bg:
+            bg.submit(late.where, on_done=got.append)
+        assert len(got) == 1
+        if forks:
+            assert got[0][1] == os.getpid() and server.alive  # forked here; the server goes on serving
+
+
+def test_a_served_job_reports_its_cpu_time(forks):
+    with BackgroundWriter(server=True) as bg:
+        bg.submit(_spin, 0.2)
+    if not forks:
+        assert bg.job_cpu == []
+        return
+    (name, cpu), = bg.job_cpu
+    assert name == "_spin" and 0.2 <= cpu < 2.0
+
+
+def test_a_served_jobs_failure_is_raised_and_stops_the_others(tmp_path, forks):
+    late = tmp_path / "late.txt"
+    with pytest.raises(RuntimeError, match="failed on purpose") as info:
+        with BackgroundWriter(server=True, grace=5.0) as bg:
+            bg.submit(_late_write, late, 3.0)
+            bg.submit(_fail)
+    if forks:
+        assert "in the background job _fail" in "".join(getattr(info.value, "__notes__", []))
+        time.sleep(3.5)
+        assert not late.exists()  # the slow job was stopped, not left writing
+    else:  # run here one after the other: the slow job wrote before the failing one ran
+        assert late.read_text() == "written"
+
+
+def test_a_lost_server_leaves_the_jobs_to_the_caller(forks):
+    got = []
+    with BackgroundWriter(server=True) as bg:
+        if forks:
+            os.kill(bg._server.pid, signal.SIGKILL)  # noqa: SLF001 - the server dies under the writer
+            time.sleep(0.2)
+        bg.submit(_where, on_done=got.append)
+    assert len(got) == 1 and (got[0][1] == os.getpid()) == forks
+
+
+def test_serving_shares_one_server_and_its_preparations_then_ends_it(forks):
+    got = []
+    with serving(functools.partial(_remember, "at start")) as server:
+        assert server.alive == forks
+        for k in range(2):
+            with BackgroundWriter(prepare=functools.partial(_remember, f"writer {k}"), server=True) as bg:
+                bg.submit(_where, on_done=got.append)
+        assert _MARK == []
+    if not forks:
+        assert [g[2] for g in got] == [[], []]
+        return
+    assert {g[1] for g in got} == {server.pid}  # both writers used the one server
+    assert got[0][2] == ["at start", "writer 0"] and got[1][2] == ["at start", "writer 0", "writer 1"]
+    time.sleep(0.1)
+    assert not server.alive and not _alive(server.pid)
+
+
+def test_spawn_refuses_what_does_not_pickle_and_a_dead_server():
+    server = ForkServer()
+    try:
+        if not server.alive:
+            assert server.spawn(_where) is None
+            return
+        assert server.spawn(lambda: 1) is None
+        assert server.prepare(lambda: 1) is False
+        server.kill()
+        assert server.spawn(_where) is None and not _alive(server.pid)
+    finally:
+        server.kill()
+
+
+def test_a_killed_caller_takes_its_server_and_the_served_jobs_with_it(tmp_path):
+    """A run killed outright (SIGKILL: no handler runs) must leave nothing writing: the server dies with it
+    and the jobs it forked are interrupted."""
+    late = tmp_path / "late.txt"
+    script = textwrap.dedent(f"""
+        import os, sys, time
+        sys.path.insert(0, {str(ROOT)!r})
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from mdsr_opt.core.background import BackgroundWriter
+        from test_forkserver import _late_write
+        bg = BackgroundWriter(server=True)
+        bg.__enter__()
+        bg.submit(_late_write, {str(late)!r}, 4.0)
+        print(bg.background, bg._server.pid if bg._server else 0, flush=True)
+        time.sleep(60)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        forked, server = proc.stdout.readline().split()
+        server = int(server)
+        time.sleep(0.5)  # the job has started
+        jobs = [int(p) for p in os.listdir("/proc") if p.isdigit() and _parent_of(int(p)) == server]
+        proc.kill()
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    time.sleep(1.0)
+    if forked != "True":  # the job ran in the caller at its submit, before anything could kill it
+        assert late.read_text() == "written"
+        return
+    assert len(jobs) == 1
+    assert not _alive(server) and not any(_alive(p) for p in jobs)
+    time.sleep(4.0)
+    assert not late.exists()
+
+
+def _parent_of(pid: int) -> int:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return -1
+    return int(stat.rsplit(")", 1)[1].split()[1])
