@@ -22,15 +22,18 @@ True
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial import cKDTree
 
 from ..body.checks import check_mesh
 from ..body.mesh import Mesh
 
 __all__ = ["Reflection", "find_reflection", "find_reflections", "weights_are_symmetric"]
+
+if TYPE_CHECKING:  # pragma: no cover
+    from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,6 +109,10 @@ def find_reflections(mesh: Mesh, rtol: float = 1e-6) -> list[Reflection]:
             nv = np.linalg.norm(v)
             if nv > 0:
                 dirs.append(v / nv)
+    # imported here: scipy.spatial takes 0.25 s to import, and unpickling a routing result (a figure job
+    # does, in a process that has not routed) should not pay it
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(X)
     tol = rtol * mesh.size
     out = []
