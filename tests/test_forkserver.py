@@ -1,4 +1,4 @@
-"""The jobs' server (mdsr_opt.core.background.ForkServer): a process forked early that warms up beside the
+"""The jobs' server (mdsr_opt.core.forkserver.ForkServer): a process forked early that warms up beside the
 caller and forks each job it is sent (pickled).
 
 Every test states what it expects both where this machine may fork and where it may not (the jobs then run
@@ -240,3 +240,96 @@ def _parent_of(pid: int) -> int:
     except OSError:
         return -1
     return int(stat.rsplit(")", 1)[1].split()[1])
+
+
+def _sleep_then(seconds, value):
+    time.sleep(seconds)
+    return value
+
+
+def test_a_job_sent_to_a_server_that_dies_before_forking_it_runs_from_the_caller(forks):
+    """The server is killed while it prepares, with a job queued: the job never started, so the caller runs
+    it itself (and the next ones too), instead of reporting a failure."""
+    got = []
+    with BackgroundWriter(prepare=functools.partial(time.sleep, 2.0), server=True) as bg:
+        bg.submit(_where, on_done=got.append)
+        if forks:
+            os.kill(bg._server.pid, signal.SIGKILL)  # noqa: SLF001
+        bg.submit(_where, on_done=got.append)
+    assert len(got) == 2
+    assert all(ppid == os.getpid() for _pid, ppid, _mark in got) == forks
+
+
+def test_the_server_ends_by_itself_when_the_caller_has_other_children(forks):
+    """A process forked by the caller later (a job forked directly, here a lambda) must not hold the
+    server's socket open: the server sees the end of its input, collects its jobs and exits by itself
+    (killed, it would have taken the full timeout first)."""
+    got = []
+    with serving() as server:
+        with BackgroundWriter(server=True) as bg:
+            bg.submit(_where, on_done=got.append)
+            bg.submit(lambda: _sleep_then(3.0, "slow"), on_done=got.append)  # a direct child, still running
+            bg.wait(1)
+            t0 = time.monotonic()
+    closed_in = time.monotonic() - t0
+    assert "slow" in got or not forks
+    if forks:
+        assert server.returncode == 0  # exited by itself: it was not killed after the timeout
+        assert closed_in < 2.0 + 3.0  # (the writer waited for its slow direct child, not the server)
+
+
+def test_ctrl_c_while_a_job_is_sent_leaves_no_descriptor_open(forks, monkeypatch):
+    import socket
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with BackgroundWriter(server=True) as bg:
+        before = len(os.listdir("/proc/self/fd"))
+        monkeypatch.setattr(socket, "send_fds", interrupted)
+        for _ in range(5):
+            with pytest.raises(KeyboardInterrupt) if forks else contextlib_null():
+                bg.submit(_where)
+        monkeypatch.undo()
+        assert len(os.listdir("/proc/self/fd")) == before
+        assert bg._jobs == [] or not forks  # noqa: SLF001 - nothing half-recorded
+
+
+def contextlib_null():
+    import contextlib
+
+    return contextlib.nullcontext()
+
+
+def _ignore_interrupts_and_sleep(path, seconds):
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    time.sleep(seconds)
+    Path(path).write_text("written")
+
+
+def test_a_served_job_that_ignores_the_interrupt_is_killed_after_the_grace(tmp_path, forks):
+    late = tmp_path / "late.txt"
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match="failed on purpose"):
+        with BackgroundWriter(server=True, grace=0.5) as bg:
+            bg.submit(_ignore_interrupts_and_sleep, late, 30.0 if forks else 0.0)
+            bg.submit(_sleep_then, 0.5, None)  # the first has started (and sent its pid) by then
+            bg.wait(1)
+            bg.submit(_fail)
+    if forks:
+        assert time.monotonic() - t0 < 15.0  # not the job's 30 s: killed once the grace had passed
+        time.sleep(0.5)
+        assert not late.exists()
+
+
+def _spin_in_a_subprocess(seconds):
+    code = f"import time\nt = time.process_time()\nwhile time.process_time() - t < {seconds}: pass\n"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_served_jobs_cpu_time_includes_what_it_waited_for(forks):
+    with BackgroundWriter(server=True) as bg:
+        bg.submit(_spin_in_a_subprocess, 0.3)
+    if forks:
+        (_name, cpu), = bg.job_cpu
+        assert cpu >= 0.3

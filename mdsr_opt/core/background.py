@@ -103,7 +103,7 @@ class _Job:
     name: str
     on_done: Callable[[Any], None] | None
     chunks: list = field(default_factory=list)  # the child's answer as read so far
-    served: tuple | None = None  # (fn, args, kwargs) of a job a ForkServer forked: run here if it cannot be
+    served: tuple | None = None  # a ForkServer's job: (fn, args, kwargs), for a fork from here if need be
     ended: bool = False  # its pipe has been read to its end
 
     def served_pid(self) -> int:
@@ -130,14 +130,18 @@ class BackgroundWriter:
     server : bool, default False
         Fork the jobs from a :class:`~mdsr_opt.core.forkserver.ForkServer`: the one
         :func:`~mdsr_opt.core.forkserver.serving` has started (which then calls ``prepare`` too), or else
-        one started now. A job that does not pickle is forked from this process (which then calls
-        ``prepare`` first).
+        one started now. A job that does not pickle, or that the server cannot load or start, is forked
+        from this process (which then calls ``prepare`` first). :meth:`stop` kills the server (a shared
+        one too: the writers after it start their own).
 
     Notes
     -----
     A job must not depend on anything the parent does after :meth:`submit` (the child sees the parent's
     memory as it was at the fork) and must report through its return value, which is pickled back (file
     names, small dicts); what it writes to disk is the point of it. ``background`` says whether jobs fork.
+    A served job gets its arguments as they were at :meth:`submit` (pickled) and everything else (modules,
+    their globals) as it was when the server started: a job must not depend on module state changed
+    after that either.
     """
 
     def __init__(self, enabled: bool = True, grace: float = 10.0, prepare: Callable[[], Any] | None = None,
@@ -159,7 +163,9 @@ class BackgroundWriter:
             else:
                 self._server, self._own_server = ForkServer(prepare), True
         #: ``(job name, CPU seconds)`` of every child collected so far (user and system time of the forked
-        #: process, from the kernel's accounting): what the figure jobs cost beside the parent's own time
+        #: process with the processes it waited for: from the kernel's accounting, or for a served job from
+        #: the child's own, which it sends with its answer; NaN when it sent none): what the figure jobs
+        #: cost beside the parent's own time
         self.job_cpu: list[tuple[str, float]] = []
 
     # -- the caller's side ------------------------------------------------------------------------------
@@ -175,10 +181,16 @@ class BackgroundWriter:
             return
         self.wait(self.jobs - 1)
         if self._server is not None and self._server.alive:
-            fd = self._server.spawn(fn, args, kwargs)
-            if fd is not None:
-                self._jobs.append(_Job(0, fd, _name_of(fn), on_done, served=(fn, args, kwargs)))
-                return
+            # Ctrl-C is held back until the job is on the books (as for a fork): stop() must know of every
+            # job the server may start
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            try:
+                fd = self._server.spawn(fn, args, kwargs)
+                if fd is not None:
+                    self._jobs.append(_Job(0, fd, _name_of(fn), on_done, served=(fn, args, kwargs)))
+                    return
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         self._fork(fn, args, kwargs, on_done)
 
     def _fork(self, fn, args, kwargs, on_done) -> None:
@@ -222,8 +234,10 @@ class BackgroundWriter:
             i = self._first_done()
             job = self._jobs.pop(i)
             status, value = self._collect(job, i)
-            if status == "error" and isinstance(value, JobNotLoadable) and job.served is not None:
-                fn, args, kwargs = job.served  # the server's process could not load it: fork it from here
+            if status == "not started":  # the server died or could not fork: this job, and the next, here
+                self._server.kill()
+            if status == "not started" or (status == "error" and isinstance(value, JobNotLoadable)):
+                fn, args, kwargs = job.served  # or the server's process could not load it: forked here
                 self._fork(fn, args, kwargs, job.on_done)
                 continue
             if status == "error":
@@ -302,7 +316,11 @@ class BackgroundWriter:
         data = b"".join(job.chunks)
         os.close(job.fd)
         if job.served is not None:  # a server's child: its pid first, its own CPU time in its answer
-            job.pid, data, code, cpu = job.served_pid(), data[8:], "unknown", float("nan")
+            job.pid = job.served_pid()
+            if not job.pid:  # no child ever started it (the server died, or refused to fork)
+                return "not started", None
+            data, cpu = data[8:], float("nan")
+            code = "unknown: a child of the jobs' server"
         else:
             code, cpu = reap(job.pid, block=True)
         try:
@@ -317,14 +335,15 @@ class BackgroundWriter:
         return status, value
 
 
-def _drain(job: _Job, deadline: float) -> None:
+def _drain(job: _Job, deadline: float, after_kill: float = 5.0) -> None:
     """Read a stopped served job's pipe to its end (its child has exited, or was never forked), killing the
-    child once ``deadline`` has passed."""
+    child once ``deadline`` has passed; gives up ``after_kill`` seconds later (a child whose pid never
+    came cannot be killed from here, nor waited for without end)."""
     poll = select.poll()
     poll.register(job.fd, select.POLLIN | select.POLLHUP | select.POLLERR)
     killed = False
     while True:
-        wait_ms = None if killed else max(0, int(1000 * (deadline - time.monotonic())))
+        wait_ms = max(0, int(1000 * ((deadline + (after_kill if killed else 0.0)) - time.monotonic())))
         if poll.poll(wait_ms):
             chunk = os.read(job.fd, 1 << 16)
             if not chunk:
@@ -335,6 +354,8 @@ def _drain(job: _Job, deadline: float) -> None:
             if pid:
                 send_signal(pid, signal.SIGKILL)
             killed = True
+        else:
+            return
 
 
 def _name_of(fn) -> str:

@@ -50,18 +50,21 @@ def child_main(w: int, fn, args, kwargs, parent: int, mask, served: bool = False
     A jobs' server's child (``served``) first sends its pid (8 bytes), and leaves at once if nobody reads."""
     code = 1
     try:
-        die_with_parent(parent, signal.SIGINT if served else signal.SIGKILL)
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # the parent's stop() interrupts us
-        if served:
+        # the parent's stop() interrupts us; set first, as a server's child inherits the server's SIG_IGN
+        # and must not lose the death signal asked for below
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        if served:  # first thing: a stopping caller then always knows whom to kill
             os.write(w, os.getpid().to_bytes(8, "little"))  # BrokenPipeError: the run has stopped
+        die_with_parent(parent, signal.SIGINT if served else signal.SIGKILL)
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # from here on (held back during the fork)
         try:
             payload = ("ok", fn(*args, **kwargs), "")
             code = 0
         except BaseException as exc:  # noqa: BLE001 - everything goes back to the parent
             payload = ("error", exc, traceback.format_exc())
-        use = resource.getrusage(resource.RUSAGE_SELF)
-        cpu = use.ru_utime + use.ru_stime
+        # the job's CPU time, with what it waited for (as the kernel's accounting of a child includes it)
+        cpu = sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                    resource.getrusage(resource.RUSAGE_CHILDREN)))
         try:
             data = pickle.dumps(payload + (cpu,))
         except Exception:  # noqa: BLE001 - an unpicklable result or exception: its text goes instead

@@ -21,8 +21,10 @@ import pickle
 import signal
 import socket
 import sys
+import threading
 import time
 import warnings
+import weakref
 from typing import Any, Callable
 
 from .forking import child_main, die_with_parent, fork_is_safe, read_all, reap, send_signal, write_all
@@ -42,6 +44,9 @@ class ForkServer:
 
     def __init__(self, prepare: Callable[[], Any] | None = None):
         self.pid = 0
+        #: how the server ended: 0 when it exited by itself (after collecting its jobs), -9 when killed;
+        #: None while it runs (or if it never started)
+        self.returncode: int | None = None
         self._sock: socket.socket | None = None
         self._used = False  # sent a job (close() then lets it collect its jobs; else it is killed at once)
         if not (fork_is_safe() and hasattr(os, "memfd_create") and hasattr(socket, "send_fds")):
@@ -61,9 +66,13 @@ class ForkServer:
                     _serve(theirs, prepare, parent)
                 finally:
                     os._exit(1)
-            theirs.close()
             self.pid, self._sock = pid, mine
+            _LIVE.add(self)
+        except BaseException:
+            mine.close()
+            raise
         finally:
+            theirs.close()
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
     @property
@@ -76,7 +85,12 @@ class ForkServer:
         child's pipe (its pid as 8 bytes, then its pickled answer, as :class:`~mdsr_opt.core.background.BackgroundWriter` reads it),
         or None when the job does not pickle or the server is gone (then run it otherwise)."""
         r, w = os.pipe()
-        if self._send(b"j", (fn, args, kwargs or {}), w):
+        try:
+            sent = self._send(b"j", (fn, args, kwargs or {}), w)
+        except BaseException:  # Ctrl-C while sending: nothing of it stays open here
+            os.close(r)
+            raise
+        if sent:
             return r
         os.close(r)
         return None
@@ -124,12 +138,17 @@ class ForkServer:
         self._sock.close()
         self._sock = None
         deadline = time.monotonic() + timeout
-        while reap(self.pid, block=False) is None:
-            if time.monotonic() > deadline:
+        try:
+            while (done := reap(self.pid, block=False)) is None:
+                if time.monotonic() > deadline:
+                    break
+                time.sleep(0.005)
+            else:
+                self.returncode = done[0]
+        finally:  # past the timeout, or interrupted while waiting
+            if self.returncode is None:
                 send_signal(self.pid, signal.SIGKILL)
-                reap(self.pid, block=True)
-                return
-            time.sleep(0.005)
+                self.returncode = reap(self.pid, block=True)[0]
 
     def kill(self) -> None:
         """End the server at once (the jobs it has not forked yet are dropped, those it forked are
@@ -139,11 +158,28 @@ class ForkServer:
         self._sock.close()
         self._sock = None
         send_signal(self.pid, signal.SIGKILL)
-        reap(self.pid, block=True)
+        self.returncode = reap(self.pid, block=True)[0]
 
 
 #: the servers :func:`serving` has started, innermost last
 _SERVING: list[ForkServer] = []
+#: the servers of this process with their sockets open
+_LIVE: weakref.WeakSet[ForkServer] = weakref.WeakSet()
+
+
+def _forget_servers() -> None:  # pragma: no cover - runs in every forked child
+    """In a forked child (a job, another server): close its copies of this process's servers' sockets. A
+    copy left open would keep a server from seeing its caller close the socket; and the servers are not
+    the child's to use."""
+    for server in list(_LIVE):
+        if server._sock is not None:
+            server._sock.close()
+            server._sock = None
+    _LIVE.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_servers)
 
 
 def shared_server() -> ForkServer | None:
@@ -155,7 +191,8 @@ def shared_server() -> ForkServer | None:
 def serving(prepare: Callable[[], Any] | None = None):
     """Within the block, every ``BackgroundWriter(server=True)`` forks its jobs from one
     :class:`ForkServer`, started now with ``prepare``: a command starts it before its slow start (imports,
-    building scenes), and several scenes share its warm-up. Yields the server; kills it at the end."""
+    building scenes), and several scenes share its warm-up. Yields the server; at the end closes it (after
+    an exception: kills it)."""
     server = ForkServer(prepare)
     _SERVING.append(server)
     try:
@@ -209,13 +246,15 @@ def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cov
     socket (or dies, and the kernel kills us)."""
     die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle; it kills us
-    signal.signal(signal.SIGCHLD, _reap_children)  # our children (the jobs), collected as they end
     signal.pthread_sigmask(signal.SIG_SETMASK, set())
     if prepare is not None:
         try:
             prepare()
         except Exception:  # noqa: BLE001 - a warm-up that fails only leaves the jobs to do their own
             pass
+    # our children (the jobs), collected as they end; set after prepare, whose subprocesses wait for
+    # their own children
+    signal.signal(signal.SIGCHLD, _reap_children)
     gc.freeze()  # the jobs' collections leave the server's heap alone (and its pages shared)
     me = os.getpid()
     while True:
@@ -237,10 +276,12 @@ def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cov
                 os.close(fd)
             continue
         job, w = fds
-        try:
-            pid = os.fork()
-        except OSError:
-            pid = -1  # the caller reads the end of a pipe without an answer: a failed job
+        pid = -1  # not forked: the caller reads the end of a pipe without a pid, and runs the job itself
+        if threading.active_count() == 1:  # a thread a preparation started would make a fork unsafe
+            try:
+                pid = os.fork()
+            except OSError:
+                pass
         if pid == 0:
             try:
                 sock.close()

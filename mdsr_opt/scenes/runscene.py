@@ -365,7 +365,7 @@ _WARMED: set[str] = set()
 
 def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
     """Once, in the process the background jobs fork from (this one, or their server: see
-    :class:`~mdsr_opt.core.background.ForkServer`): what every job would otherwise pay again in its child and
+    :class:`~mdsr_opt.core.forkserver.ForkServer`): what every job would otherwise pay again in its child and
     lose with it (a case's photograph stage took 1.1-1.3 s of CPU in a cold child, 0.6 s in a warm one).
     ``holes``: the body has holes, whose photographed counterparts are matched with scipy.optimize (0.2-0.4
     s to import; a body without holes never imports it). What a process has warmed up once is not done
