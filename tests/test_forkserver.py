@@ -333,3 +333,28 @@ def test_a_served_jobs_cpu_time_includes_what_it_waited_for(forks):
     if forks:
         (_name, cpu), = bg.job_cpu
         assert cpu >= 0.3
+
+
+def _interval(seconds, k):
+    t0 = time.time()
+    time.sleep(seconds)
+    return k, t0, time.time()
+
+
+def test_the_server_runs_at_most_jobs_children_and_submit_never_waits_for_a_slot(forks):
+    """Five 0.4 s jobs with a limit of two: submitting them all returns before the first has ended (they
+    wait in the server, not in the caller), no more than two ever run at once, and they start in order."""
+    got = []
+    with BackgroundWriter(server=True, jobs=2) as bg:
+        for k in range(5):
+            bg.submit(_interval, 0.4, k, on_done=got.append)
+        submitted = time.time()
+    assert sorted(k for k, _s, _e in got) == list(range(5))
+    if not forks:
+        return
+    got.sort()
+    assert submitted < min(end for _k, _start, end in got)
+    for k, start, _end in got:
+        assert sum(s <= start + 1e-3 and start < e for _k, s, e in got) <= 2  # running at its start
+        # in order: when job k starts, all but one of the jobs sent before it have ended
+        assert sum(e <= start + 1e-3 for _k, _s, e in got[:k]) >= k - 1

@@ -20,7 +20,8 @@ Rules that keep this safe and honest:
   job, which it receives pickled (a scene and a case pickle in a few milliseconds; a mesh leaves its
   solver caches behind; the copies drew as fast as the originals). A job that does not pickle, or that the
   server's process cannot load, is forked from this process as before.
-- **At most ``jobs`` children at a time**; a further :meth:`submit` first waits for one to finish.
+- **At most ``jobs`` children at a time**; a further :meth:`submit` first waits for one to finish (with a
+  server, the job waits in the server instead, and this process goes on at once).
   The default, three, lets ``mdsr run`` hand over a case's two jobs while the previous case's photograph
   job still runs, so the parent goes on solving instead of waiting (``run_scene`` at medium resolution on
   two cores, the settings alternating in one process: gecko 3.70 s with three, 3.80 s with two, 4.6 s with
@@ -161,7 +162,7 @@ class BackgroundWriter:
                 if prepare is not None:
                     self._server.prepare(prepare)  # what this writer's jobs need beyond the server's warm-up
             else:
-                self._server, self._own_server = ForkServer(prepare), True
+                self._server, self._own_server = ForkServer(prepare, jobs), True
         #: ``(job name, CPU seconds)`` of every child collected so far (user and system time of the forked
         #: process with the processes it waited for: from the kernel's accounting, or for a served job from
         #: the child's own, which it sends with its answer; NaN when it sent none): what the figure jobs
@@ -172,15 +173,18 @@ class BackgroundWriter:
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
                **kwargs) -> None:
         """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for a child
-        to finish when ``jobs`` are running), otherwise here and now. ``on_done`` receives the return value
-        (at :meth:`wait` for a child's job)."""
+        to finish when ``jobs`` are running; with a server, at once: the job waits there), otherwise here
+        and now. ``on_done`` receives the return value (at :meth:`wait`, or a later :meth:`submit`, for a
+        child's job)."""
         if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
             result = fn(*args, **kwargs)
             if on_done is not None:
                 on_done(result)
             return
-        self.wait(self.jobs - 1)
         if self._server is not None and self._server.alive:
+            # no waiting for a slot: the server starts its jobs as its own limit allows, and this process
+            # goes on (with the next solves); what has ended by now is collected
+            self._collect_ended()
             # Ctrl-C is held back until the job is on the books (as for a fork): stop() must know of every
             # job the server may start
             mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -191,6 +195,7 @@ class BackgroundWriter:
                     return
             finally:
                 signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        self.wait(self.jobs - 1)
         self._fork(fn, args, kwargs, on_done)
 
     def _fork(self, fn, args, kwargs, on_done) -> None:
@@ -222,6 +227,12 @@ class BackgroundWriter:
             self._jobs.append(_Job(pid, r, _name_of(fn), on_done))
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # a Ctrl-C held back arrives here
+
+    def _collect_ended(self) -> None:
+        """Collect the jobs whose children have ended, without waiting for any (read what is there)."""
+        self._read_ready(0)
+        while any(job.ended for job in self._jobs):
+            self.wait(len(self._jobs) - 1)
 
     def wait(self, limit: int = 0) -> None:
         """Wait until at most ``limit`` jobs are running; collect the finished ones (their ``on_done``
@@ -295,17 +306,22 @@ class BackgroundWriter:
             done = [i for i, job in enumerate(self._jobs) if job.ended]
             if done:
                 return done[0]
-            poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
-            for job in self._jobs:
+            self._read_ready(None)
+
+    def _read_ready(self, timeout_ms: int | None) -> None:
+        """Read what the running children have sent (waiting up to ``timeout_ms``; None: until one has)."""
+        poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
+        for job in self._jobs:
+            if not job.ended:
                 poll.register(job.fd, select.POLLIN | select.POLLHUP | select.POLLERR)
-            ready = {fd for fd, _ in poll.poll()}
-            for job in self._jobs:
-                if job.fd in ready:
-                    chunk = os.read(job.fd, 1 << 16)
-                    if chunk:
-                        job.chunks.append(chunk)
-                    else:
-                        job.ended = True
+        ready = {fd for fd, _ in poll.poll(timeout_ms)}
+        for job in self._jobs:
+            if job.fd in ready:
+                chunk = os.read(job.fd, 1 << 16)
+                if chunk:
+                    job.chunks.append(chunk)
+                else:
+                    job.ended = True
 
     def _collect(self, job: _Job, index: int = 0) -> tuple[str, Any]:
         try:

@@ -14,10 +14,12 @@ server forks a child for it, which sends its pid and then its answer through the
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import gc
 import os
 import pickle
+import select
 import signal
 import socket
 import sys
@@ -33,7 +35,9 @@ __all__ = ["ForkServer", "JobNotLoadable", "load_job", "serving", "shared_server
 
 
 class ForkServer:
-    """A process forked now that calls ``prepare`` and then forks the jobs :meth:`spawn` sends it.
+    """A process forked now that calls ``prepare`` and then forks the jobs :meth:`spawn` sends it, at most
+    ``jobs`` at a time (None: no limit); the others wait in the server, in order, so that sending a job
+    never waits for a slot.
 
     A job's arguments pickle in a few milliseconds (a :class:`~mdsr_opt.body.mesh.Mesh` leaves its solver
     caches behind), and in ``mdsr run gecko`` the copies drew as fast as the originals. The server dies
@@ -42,7 +46,9 @@ class ForkServer:
     ``memfd_create``), :attr:`alive` is False and :meth:`spawn` returns None.
     """
 
-    def __init__(self, prepare: Callable[[], Any] | None = None):
+    def __init__(self, prepare: Callable[[], Any] | None = None, jobs: int | None = 3):
+        if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1):
+            raise ValueError(f"jobs must be a positive integer or None, not {jobs!r}")
         self.pid = 0
         #: how the server ended: 0 when it exited by itself (after collecting its jobs), -9 when killed;
         #: None while it runs (or if it never started)
@@ -63,7 +69,7 @@ class ForkServer:
             if pid == 0:  # pragma: no cover - the server; never returns
                 try:
                     mine.close()
-                    _serve(theirs, prepare, parent)
+                    _serve(theirs, prepare, parent, jobs)
                 finally:
                     os._exit(1)
             self.pid, self._sock = pid, mine
@@ -188,12 +194,12 @@ def shared_server() -> ForkServer | None:
 
 
 @contextlib.contextmanager
-def serving(prepare: Callable[[], Any] | None = None):
+def serving(prepare: Callable[[], Any] | None = None, jobs: int | None = 3):
     """Within the block, every ``BackgroundWriter(server=True)`` forks its jobs from one
-    :class:`ForkServer`, started now with ``prepare``: a command starts it before its slow start (imports,
+    :class:`ForkServer`, started now with ``prepare`` and ``jobs``: a command starts it before its slow start (imports,
     building scenes), and several scenes share its warm-up. Yields the server; at the end closes it (after
     an exception: kills it)."""
-    server = ForkServer(prepare)
+    server = ForkServer(prepare, jobs)
     _SERVING.append(server)
     try:
         yield server
@@ -230,20 +236,9 @@ def _unpickle_file(fd: int):  # pragma: no cover - runs in a ForkServer or its c
     return pickle.loads(b"".join(chunks))
 
 
-def _reap_children(*_signal_args) -> None:  # pragma: no cover - the server's SIGCHLD handler
-    """Collect every ended child (so that its CPU time counts, and no zombie is left)."""
-    while True:
-        try:
-            pid, _status = os.waitpid(-1, os.WNOHANG)
-        except ChildProcessError:
-            return
-        if pid == 0:
-            return
-
-
-def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cover - the server process
-    """The server's life: prepare, then fork one child per job received, until the caller closes the
-    socket (or dies, and the kernel kills us)."""
+def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None:  # pragma: no cover
+    """The server's life: prepare, then fork the jobs received, at most ``limit`` at a time (the others
+    wait here, in order), until the caller closes the socket (or dies, and the kernel kills us)."""
     die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle; it kills us
     signal.pthread_sigmask(signal.SIG_SETMASK, set())
@@ -252,17 +247,63 @@ def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cov
             prepare()
         except Exception:  # noqa: BLE001 - a warm-up that fails only leaves the jobs to do their own
             pass
-    # our children (the jobs), collected as they end; set after prepare, whose subprocesses wait for
-    # their own children
-    signal.signal(signal.SIGCHLD, _reap_children)
+    # an ended child wakes the loop below through this pipe; set after prepare, whose subprocesses wait
+    # for their own children
+    wake_r, wake_w = os.pipe()
+    os.set_blocking(wake_r, False)
+    os.set_blocking(wake_w, False)
+    signal.set_wakeup_fd(wake_w)
+    signal.signal(signal.SIGCHLD, lambda *_: None)
     gc.freeze()  # the jobs' collections leave the server's heap alone (and its pages shared)
     me = os.getpid()
+    running: set[int] = set()
+    waiting: collections.deque = collections.deque()
+    poll = select.poll()
+    poll.register(sock.fileno(), select.POLLIN)
+    poll.register(wake_r, select.POLLIN)
     while True:
+        _collect_ended(running)
+        while waiting and (limit is None or len(running) < limit):
+            job, w = waiting.popleft()
+            pid = -1  # not forked: the caller reads the end of a pipe without a pid, and runs the job itself
+            if threading.active_count() == 1:  # a thread a preparation started would make a fork unsafe
+                try:
+                    pid = os.fork()
+                except OSError:
+                    pass
+            if pid == 0:
+                try:
+                    for fd in (sock.fileno(), wake_r, wake_w):
+                        os.close(fd)
+                    signal.set_wakeup_fd(-1)
+                    signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+                    for other_job, other_w in waiting:
+                        os.close(other_job)
+                        os.close(other_w)
+                    child_main(w, load_job, (job,), {}, me, set(), served=True)
+                finally:
+                    os._exit(1)
+            os.close(job)
+            os.close(w)
+            if pid > 0:
+                running.add(pid)
+        ready = {fd for fd, _ in poll.poll()}
+        if wake_r in ready:
+            try:
+                while os.read(wake_r, 512):
+                    pass
+            except BlockingIOError:
+                pass
+        if sock.fileno() not in ready:
+            continue
         try:
             msg, fds, _flags, _addr = socket.recv_fds(sock, 1, 2)
         except OSError:
-            break
-        if not msg:  # the caller closed its end
+            msg, fds = b"", []
+        if not msg:  # the caller closed its end: the jobs not started are dropped (their pipes end)
+            for job, w in waiting:
+                os.close(job)
+                os.close(w)
             break
         if msg == b"p" and len(fds) == 1:
             try:
@@ -270,27 +311,12 @@ def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cov
                 fn(*args, **kwargs)
             except Exception:  # noqa: BLE001 - as with prepare
                 pass
-            continue
-        if msg != b"j" or len(fds) != 2:
+        elif msg == b"j" and len(fds) == 2:
+            waiting.append((fds[0], fds[1]))
+        else:
             for fd in fds:
                 os.close(fd)
-            continue
-        job, w = fds
-        pid = -1  # not forked: the caller reads the end of a pipe without a pid, and runs the job itself
-        if threading.active_count() == 1:  # a thread a preparation started would make a fork unsafe
-            try:
-                pid = os.fork()
-            except OSError:
-                pass
-        if pid == 0:
-            try:
-                sock.close()
-                signal.signal(signal.SIGCHLD, signal.SIG_DFL)
-                child_main(w, load_job, (job,), {}, me, set(), served=True)
-            finally:
-                os._exit(1)
-        os.close(job)
-        os.close(w)
+    signal.set_wakeup_fd(-1)
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     while True:  # the last jobs: collected before we go, so that the caller's accounts have them
         try:
@@ -298,3 +324,16 @@ def _serve(sock: socket.socket, prepare, parent: int) -> None:  # pragma: no cov
         except ChildProcessError:
             break
     os._exit(0)
+
+
+def _collect_ended(running: set) -> None:  # pragma: no cover - in the server
+    """Collect the server's ended children (their CPU time then counts, and no zombie is left)."""
+    while running:
+        try:
+            pid, _status = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            running.clear()
+            return
+        if pid == 0:
+            return
+        running.discard(pid)

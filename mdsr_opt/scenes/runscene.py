@@ -380,15 +380,22 @@ def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
         importlib.import_module("meshio")  # each case's shapes job writes its meshes (0.12-0.15 s to import)
     if photos:  # the photograph stage's modules
         for name in ("..photos.camera", "..photos.contours", "..photos.loops", "..photos.compare",
-                     ".prototype") + (("scipy.optimize",) if holes else ()):
+                     ".prototype", "scipy.spatial") + (("scipy.optimize",) if holes else ()):
             importlib.import_module(name, __package__)
-    if "pipeline" not in _WARMED:
-        # what a job's pickled inputs (a case's routing graph: networkx, 0.25 s) and its solves (animations,
-        # the prototype's photographs) import, for a server that has not run the pipeline itself
-        for name in ("networkx", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",
-                     "..mechanics.equilibrium", "..mechanics.newton", "..body.material", ".animate"):
-            importlib.import_module(name, __package__)
-        _WARMED.add("pipeline")
+    import_pipeline()
+
+
+def import_pipeline() -> None:
+    """Import the pipeline's modules into a jobs' server: what a job's pickled inputs (a case's routing
+    graph: networkx, 0.25 s) and its solves (animations, the prototype's photographs; shapely checks that a
+    boundary does not cross itself) need. The command imports them too, beside the server: imported before
+    the server's fork instead, they kept the server from starting its warm-up, on which the first jobs
+    wait, for 0.6 s (a core then stood idle)."""
+    import importlib
+
+    for name in ("networkx", "shapely", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",
+                 "..mechanics.equilibrium", "..mechanics.newton", "..body.material", ".animate"):
+        importlib.import_module(name, __package__)
 
 
 def _write_rest(scene: Scene, path) -> str:
