@@ -6,9 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from ..photos.camera import render_photo
-from ..photos.folder import STATE_SUFFIXES, list_files, write_together, evaluate_folder
-from ..photos.images import check_color
 
 __all__ = ['add_cli']
 
@@ -16,6 +13,8 @@ __all__ = ['add_cli']
 # ----------------------------------------------------------------------------------------------- command
 def _parse_color(text: str):
     import argparse
+
+    from ..photos.images import check_color
 
     t = text.strip()
     if t.startswith("#"):
@@ -56,6 +55,8 @@ class _Deprecated(argparse.Action):
 
 
 def _cmd_evaluate(a) -> int:
+    from ..photos.folder import evaluate_folder
+
     extract = {"method": a.method, "body": a.body, "largest": a.largest}
     if a.color is not None:
         extract["color"] = a.color
@@ -70,7 +71,10 @@ def _cmd_evaluate(a) -> int:
 
 
 def _cmd_photograph(a) -> int:
+    # imported here, not with the parser (every command paid for the photographs' modules)
     from ..body.io import read_mesh
+    from ..photos.camera import render_photo
+    from ..photos.folder import STATE_SUFFIXES, list_files, write_together
 
     files = list_files(a.states, STATE_SUFFIXES, "state")
     stems = [f.stem for f in files]
