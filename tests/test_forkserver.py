@@ -358,3 +358,63 @@ def test_the_server_runs_at_most_jobs_children_and_submit_never_waits_for_a_slot
         assert sum(s <= start + 1e-3 and start < e for _k, s, e in got) <= 2  # running at its start
         # in order: when job k starts, all but one of the jobs sent before it have ended
         assert sum(e <= start + 1e-3 for _k, _s, e in got[:k]) >= k - 1
+
+
+def _write_after(path, seconds):
+    time.sleep(seconds)
+    Path(path).write_text("written")
+    return str(path)
+
+
+def test_ctrl_c_at_the_server_drops_its_queue_and_stops_the_caller(tmp_path, forks):
+    """A Ctrl-C reaches the server too: no job waiting there starts after it, and the caller learns of it
+    at its next collection (a KeyboardInterrupt), even if its own interrupt was swallowed (here it gets
+    none at all)."""
+    if not forks:
+        return
+    paths = [tmp_path / f"{k}.txt" for k in range(4)]
+    with pytest.raises(KeyboardInterrupt, match="dropped by an interrupt"):
+        with BackgroundWriter(server=True, jobs=1, grace=5.0) as bg:
+            for p in paths:
+                bg.submit(_write_after, p, 0.6)
+            time.sleep(0.3)  # the first job runs, the others wait in the server
+            os.kill(bg._server.pid, signal.SIGINT)  # noqa: SLF001
+    time.sleep(1.5)
+    assert [p.exists() for p in paths[1:]] == [False] * 3
+
+
+def test_the_caller_does_not_wait_behind_a_job_run_here_or_the_servers_queue(tmp_path, forks, monkeypatch):
+    """A job the server cannot load (run from here instead) and a job that does not pickle (forked from
+    here) each take a slot of their own: neither makes submit wait for the jobs queued in the server."""
+    if not forks:
+        return
+    with serving() as server:
+        (tmp_path / "late_module_for_forkserver_2.py").write_text(
+            "import time\ndef slow():\n    time.sleep(2.0)\n    return 'slow'\n")
+        monkeypatch.syspath_prepend(str(tmp_path))
+        import late_module_for_forkserver_2 as late
+
+        got, took = [], []
+        with BackgroundWriter(server=True, jobs=2) as bg:
+            bg.submit(late.slow, on_done=got.append)
+            for k in range(6):  # two rounds of three (the server's limit): 1.2 s
+                bg.submit(_sleep_then, 0.6, k, on_done=got.append)
+            time.sleep(0.3)  # the first has come back as not loadable by now
+            for fn in (lambda: "lambda", functools.partial(_sleep_then, 0.1, "after")):
+                t0 = time.monotonic()
+                bg.submit(fn, on_done=got.append)
+                took.append(time.monotonic() - t0)
+        assert sorted(map(str, got)) == sorted(["slow", "lambda", "after"] + [str(k) for k in range(6)])
+        assert max(took) < 0.8, took  # the queue alone would take 1.2 s, the job run from here 2 s
+        assert server.alive
+
+
+def test_no_more_than_four_times_jobs_wait_in_the_server(forks):
+    if not forks:
+        return
+    outstanding = []
+    with BackgroundWriter(server=True, jobs=1) as bg:
+        for k in range(10):
+            bg.submit(_sleep_then, 0.1, k)
+            outstanding.append(len(bg._jobs))  # noqa: SLF001
+    assert max(outstanding) <= 4 and bg._jobs == []  # noqa: SLF001

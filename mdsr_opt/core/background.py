@@ -121,7 +121,8 @@ class BackgroundWriter:
     enabled : bool, default True
         Fork where it is safe (:func:`fork_is_safe`); ``False`` runs every job at once in this process.
     jobs : int, default 3
-        Children running at once.
+        Children running at once: forked from here, or by a server this writer starts (a shared server
+        keeps to its own limit). At most ``4 * jobs`` jobs wait in a server.
     grace : float, default 10
         Seconds an interrupted child gets to stop (and remove its temporary files) before it is killed.
     prepare : callable, optional
@@ -183,8 +184,10 @@ class BackgroundWriter:
             return
         if self._server is not None and self._server.alive:
             # no waiting for a slot: the server starts its jobs as its own limit allows, and this process
-            # goes on (with the next solves); what has ended by now is collected
+            # goes on (with the next solves); what has ended by now is collected. At most 4 x jobs wait in
+            # the server (its queue, and the descriptors it holds, stay small)
             self._collect_ended()
+            self._wait_until(lambda: sum(job.served is not None for job in self._jobs) < 4 * self.jobs)
             # Ctrl-C is held back until the job is on the books (as for a fork): stop() must know of every
             # job the server may start
             mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -195,7 +198,7 @@ class BackgroundWriter:
                     return
             finally:
                 signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        self.wait(self.jobs - 1)
+        self._wait_until(lambda: sum(job.served is None for job in self._jobs) < self.jobs)
         self._fork(fn, args, kwargs, on_done)
 
     def _fork(self, fn, args, kwargs, on_done) -> None:
@@ -230,9 +233,15 @@ class BackgroundWriter:
 
     def _collect_ended(self) -> None:
         """Collect the jobs whose children have ended, without waiting for any (read what is there)."""
-        self._read_ready(0)
-        while any(job.ended for job in self._jobs):
-            self.wait(len(self._jobs) - 1)
+        while self._read_ready(0):
+            pass
+        while done := [i for i, job in enumerate(self._jobs) if job.ended]:
+            self._finish(done[0])
+
+    def _wait_until(self, ready: Callable[[], bool]) -> None:
+        """Collect jobs as they end until ``ready()``."""
+        while not ready():
+            self._finish(self._first_done())
 
     def wait(self, limit: int = 0) -> None:
         """Wait until at most ``limit`` jobs are running; collect the finished ones (their ``on_done``
@@ -242,19 +251,26 @@ class BackgroundWriter:
         long one frees its place at once (collected in submission order, a finished job waited behind a
         running one, and the parent with it)."""
         while len(self._jobs) > limit:
-            i = self._first_done()
-            job = self._jobs.pop(i)
-            status, value = self._collect(job, i)
-            if status == "not started":  # the server died or could not fork: this job, and the next, here
-                self._server.kill()
-            if status == "not started" or (status == "error" and isinstance(value, JobNotLoadable)):
-                fn, args, kwargs = job.served  # or the server's process could not load it: forked here
-                self._fork(fn, args, kwargs, job.on_done)
-                continue
-            if status == "error":
-                raise value
-            if job.on_done is not None:
-                job.on_done(value)
+            self._finish(self._first_done())
+
+    def _finish(self, i: int) -> None:
+        """Collect the ended job ``i``: its ``on_done`` gets its value, its failure is raised; a served job
+        that was never started, or that the server's process could not load, is forked from here."""
+        job = self._jobs.pop(i)
+        status, value = self._collect(job, i)
+        if status == "interrupted":  # the server dropped it at a Ctrl-C (which a solver may have swallowed)
+            raise KeyboardInterrupt(f"the background job {job.name} was dropped by an interrupt")
+        if status == "not started" or (status == "error" and isinstance(value, JobNotLoadable)):
+            if status == "not started":  # the server died or could not fork: it may take no more jobs
+                self._server.check()
+            fn, args, kwargs = job.served
+            self._wait_until(lambda: sum(j.served is None for j in self._jobs) < self.jobs)
+            self._fork(fn, args, kwargs, job.on_done)
+            return
+        if status == "error":
+            raise value
+        if job.on_done is not None:
+            job.on_done(value)
 
     def __enter__(self) -> "BackgroundWriter":
         return self
@@ -308,8 +324,9 @@ class BackgroundWriter:
                 return done[0]
             self._read_ready(None)
 
-    def _read_ready(self, timeout_ms: int | None) -> None:
-        """Read what the running children have sent (waiting up to ``timeout_ms``; None: until one has)."""
+    def _read_ready(self, timeout_ms: int | None) -> bool:
+        """Read what the running children have sent (waiting up to ``timeout_ms``; None: until one has);
+        whether anything was read."""
         poll = select.poll()  # not select.select: it refuses descriptors from 1024 on
         for job in self._jobs:
             if not job.ended:
@@ -322,6 +339,7 @@ class BackgroundWriter:
                     job.chunks.append(chunk)
                 else:
                     job.ended = True
+        return bool(ready)
 
     def _collect(self, job: _Job, index: int = 0) -> tuple[str, Any]:
         try:
@@ -332,9 +350,11 @@ class BackgroundWriter:
         data = b"".join(job.chunks)
         os.close(job.fd)
         if job.served is not None:  # a server's child: its pid first, its own CPU time in its answer
-            job.pid = job.served_pid()
-            if not job.pid:  # no child ever started it (the server died, or refused to fork)
+            if len(data) < 8:  # no child ever started it (the server died, or could not fork)
                 return "not started", None
+            job.pid = job.served_pid()
+            if not job.pid:  # pid 0: the server dropped it, at a Ctrl-C
+                return "interrupted", None
             data, cpu = data[8:], float("nan")
             code = "unknown: a child of the jobs' server"
         else:

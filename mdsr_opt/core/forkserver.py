@@ -135,7 +135,8 @@ class ForkServer:
     def close(self, timeout: float = 2.0) -> None:
         """End the server once every job it forked has ended: it collects them (their CPU time then counts
         as the caller's children's, as with jobs forked directly) and exits; killed after ``timeout``
-        seconds (at once if it was never sent anything)."""
+        seconds (at once if it was never sent anything). Jobs still waiting in it are dropped (their pipes
+        end without a pid): close it when every job sent has been collected."""
         if self._sock is None:
             return
         if not self._used:
@@ -155,6 +156,14 @@ class ForkServer:
             if self.returncode is None:
                 send_signal(self.pid, signal.SIGKILL)
                 self.returncode = reap(self.pid, block=True)[0]
+
+    def check(self) -> bool:
+        """Whether the server still runs; a server found dead is forgotten (:attr:`alive` False)."""
+        if self._sock is not None and (done := reap(self.pid, block=False)) is not None:
+            self._sock.close()
+            self._sock = None
+            self.returncode = done[0]
+        return self.alive
 
     def kill(self) -> None:
         """End the server at once (the jobs it has not forked yet are dropped, those it forked are
@@ -240,7 +249,11 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
     """The server's life: prepare, then fork the jobs received, at most ``limit`` at a time (the others
     wait here, in order), until the caller closes the socket (or dies, and the kernel kills us)."""
     die_with_parent(parent)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle; it kills us
+    # Ctrl-C (the terminal's, to the whole process group) ends the queue: no job waiting here starts
+    # after it, even while the caller is deep in a solve that delays its own KeyboardInterrupt; the server
+    # itself goes on until the caller's stop() kills it
+    interrupted: list = []
+    signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.pthread_sigmask(signal.SIG_SETMASK, set())
     if prepare is not None:
         try:
@@ -263,6 +276,9 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
     poll.register(wake_r, select.POLLIN)
     while True:
         _collect_ended(running)
+        if interrupted:
+            while waiting:  # pid 0 in its pipe: the caller knows the job was dropped by the interrupt
+                _drop(*waiting.popleft(), interrupted=True)
         while waiting and (limit is None or len(running) < limit):
             job, w = waiting.popleft()
             pid = -1  # not forked: the caller reads the end of a pipe without a pid, and runs the job itself
@@ -273,9 +289,9 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
                     pass
             if pid == 0:
                 try:
+                    signal.set_wakeup_fd(-1)
                     for fd in (sock.fileno(), wake_r, wake_w):
                         os.close(fd)
-                    signal.set_wakeup_fd(-1)
                     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
                     for other_job, other_w in waiting:
                         os.close(other_job)
@@ -301,9 +317,8 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
         except OSError:
             msg, fds = b"", []
         if not msg:  # the caller closed its end: the jobs not started are dropped (their pipes end)
-            for job, w in waiting:
-                os.close(job)
-                os.close(w)
+            while waiting:
+                _drop(*waiting.popleft(), interrupted=False)
             break
         if msg == b"p" and len(fds) == 1:
             try:
@@ -312,7 +327,10 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
             except Exception:  # noqa: BLE001 - as with prepare
                 pass
         elif msg == b"j" and len(fds) == 2:
-            waiting.append((fds[0], fds[1]))
+            if interrupted:
+                _drop(fds[0], fds[1], interrupted=True)
+            else:
+                waiting.append((fds[0], fds[1]))
         else:
             for fd in fds:
                 os.close(fd)
@@ -324,6 +342,18 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
         except ChildProcessError:
             break
     os._exit(0)
+
+
+def _drop(job: int, w: int, interrupted: bool) -> None:  # pragma: no cover - in the server
+    """Drop a job that waits in the server: its pipe ends, after pid 0 when it was dropped by Ctrl-C."""
+    try:
+        if interrupted:
+            os.write(w, bytes(8))
+    except OSError:  # the caller has stopped reading
+        pass
+    finally:
+        os.close(job)
+        os.close(w)
 
 
 def _collect_ended(running: set) -> None:  # pragma: no cover - in the server

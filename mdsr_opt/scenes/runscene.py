@@ -388,9 +388,9 @@ def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
 def import_pipeline() -> None:
     """Import the pipeline's modules into a jobs' server: what a job's pickled inputs (a case's routing
     graph: networkx, 0.25 s) and its solves (animations, the prototype's photographs; shapely checks that a
-    boundary does not cross itself) need. The command imports them too, beside the server: imported before
-    the server's fork instead, they kept the server from starting its warm-up, on which the first jobs
-    wait, for 0.6 s (a core then stood idle)."""
+    boundary does not cross itself) need. (The command imports them too, as it builds the scene: imported
+    before the server's fork instead, they kept the server from its warm-up, on which the first jobs wait,
+    for 0.6 s.)"""
     import importlib
 
     for name in ("networkx", "shapely", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",
