@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -265,6 +266,17 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
     scene = scenes.get_problem("gecko", resolution="coarse")
     reports = {bg: run_scene(scene, tmp_path / str(bg), log=None, background=bg, prototype=False)
                for bg in (True, False)}
+    # and with the jobs forked by a server (as in mdsr run): the same again
+    from mdsr_opt.core.forkserver import serving
+    from mdsr_opt.scenes.runscene import warm_up_jobs
+
+    with serving(functools.partial(warm_up_jobs, True, True)):
+        served = run_scene(scene, tmp_path / "served", log=None, prototype=False)
+    c = tmp_path / "served"
+    assert _files(c) == _files(tmp_path / "False")
+    assert [x.files for x in served.cases] == [x.files for x in reports[False].cases]
+    assert json.dumps(_without_times(json.loads((c / "summary.json").read_text()))) == json.dumps(
+        _without_times(json.loads((tmp_path / "False" / "summary.json").read_text())))
     a, b = tmp_path / "True", tmp_path / "False"
     assert _files(a) == _files(b)
     assert {"bend_left/design.png", "rest.png", "gait.gif", "walk/schedule.png", "walk/walk.gif"} <= set(_files(a))

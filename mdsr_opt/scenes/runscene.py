@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..core.background import BackgroundWriter, frozen_heap
-from ..core.forkserver import serving
+from ..core.forkserver import serving, shared_server
 from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -58,9 +58,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files, in a forked
         child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
         Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
-        The children are forked by a server process that warms matplotlib up beside the first solves
-        (:class:`~mdsr_opt.core.forkserver.ForkServer`; ``mdsr run`` starts it before building its
-        scenes). The files are the same either way.
+        Inside a :func:`~mdsr_opt.core.forkserver.serving` block (``mdsr run`` and problem scripts start
+        one before building their scenes) the children are forked by its server, which warms matplotlib
+        up beside the solves. The files are the same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -139,12 +139,13 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
-    # the jobs fork from a warm server (started by the command before its scenes were built, or else now):
-    # matplotlib's import and warm-up run on the second core beside the solves (BackgroundWriter's server)
+    # inside serving() (mdsr run, problem scripts) the jobs fork from its server, which warmed matplotlib
+    # up beside the scene's build; without one this process warms up (once: later runs here find it warm;
+    # a server of this run's own was 0.1-0.3 s slower for a second run in one process)
     with frozen_heap(), BackgroundWriter(background and (figures or photos),
                                          prepare=functools.partial(warm_up_jobs, figures, photos,
                                                                    len(scene.mesh.boundary_loops) > 1),
-                                         server=True) as bg:
+                                         server=shared_server() is not None) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
