@@ -183,6 +183,8 @@ def test_bad_out_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, out,
     (tmp_path / "FILE").write_text("x")
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("mdsr_opt.cli.run.get_problem", lambda *a, **k: pytest.fail("work started"))
+    monkeypatch.setattr("mdsr_opt.core.forkserver.ForkServer.__init__",
+                        lambda *a, **k: pytest.fail("the jobs' server started"))
     assert main(["run", str(FINGER), "--out", out]) == 2
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1

@@ -52,7 +52,7 @@ def _cmd_run(a) -> int:
         names = list_problems()
         if not names:
             raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
-    from ..scenes.rundir import RunFolder
+    from ..scenes.rundir import RunFolder, check_out_path
 
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
@@ -69,6 +69,7 @@ def _cmd_run(a) -> int:
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
     # the jobs' server first: it warms up while the scenes are built
+    check_out_path(a.out)  # a bad --out is refused before the jobs' server starts
     with _job_server(a), RunFolder(a.out, overwrite=a.overwrite,
                                    command=getattr(a, "command_line", "")) as folder:
         scenes = [get_problem(n, resolution=a.resolution) for n in names]

@@ -4,8 +4,8 @@
 (matplotlib, GIFs, meshes): half of a scene's time went to drawing while the second core stood idle. Threads
 do not help (neither CasADi nor matplotlib's Agg lets go of the GIL: a figure job in a thread beside a solve
 took as long as the two in a row). A forked child does: it starts with a copy of the parent's memory, so a
-job needs no pickling of results or scenes, draws on the second core while the parent solves the next case,
-and sends back only the job's return value.
+job needs no pickling of results or scenes (unless a server forks it: see below), draws on the second core
+while the parent solves the next case, and sends back only the job's return value.
 
 Rules that keep this safe and honest:
 
@@ -31,8 +31,8 @@ Rules that keep this safe and honest:
   note). Leaving the ``with`` block waits for every job; leaving it by an exception (Ctrl-C included) first
   interrupts the children (SIGINT, so their atomic writes remove their temporary files), and a child that
   has not stopped after ``grace`` seconds is killed. A child dies with its parent (a run killed outright
-  leaves no child writing into its folder), and closes its copy of the run folder's lock at once
-  (:mod:`mdsr_opt.scenes.rundir`).
+  leaves no child writing into its folder; a server's child is interrupted when its server dies, which
+  dies with the run), and closes its copy of the run folder's lock at once (:mod:`mdsr_opt.scenes.rundir`).
 
 Example
 -------
@@ -122,7 +122,8 @@ class BackgroundWriter:
         Fork where it is safe (:func:`fork_is_safe`); ``False`` runs every job at once in this process.
     jobs : int, default 3
         Children running at once: forked from here, or by a server this writer starts (a shared server
-        keeps to its own limit). At most ``4 * jobs`` jobs wait in a server.
+        keeps to its own limit). At most ``4 * jobs`` jobs sent to a server are outstanding (running or
+        waiting there); a further :meth:`submit` waits for one.
     grace : float, default 10
         Seconds an interrupted child gets to stop (and remove its temporary files) before it is killed.
     prepare : callable, optional
@@ -134,7 +135,7 @@ class BackgroundWriter:
         :func:`~mdsr_opt.core.forkserver.serving` has started (which then calls ``prepare`` too), or else
         one started now. A job that does not pickle, or that the server cannot load or start, is forked
         from this process (which then calls ``prepare`` first). :meth:`stop` kills the server (a shared
-        one too: the writers after it start their own).
+        one too: later writers with ``server=True`` start their own).
 
     Notes
     -----
@@ -174,8 +175,8 @@ class BackgroundWriter:
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
                **kwargs) -> None:
         """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for a child
-        to finish when ``jobs`` are running; with a server, at once: the job waits there), otherwise here
-        and now. ``on_done`` receives the return value (at :meth:`wait`, or a later :meth:`submit`, for a
+        to finish when ``jobs`` are running; with a server, without waiting for a slot: the job waits there,
+        unless ``4 * jobs`` are outstanding), otherwise here and now. ``on_done`` receives the return value (at :meth:`wait`, or a later :meth:`submit`, for a
         child's job)."""
         if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
             result = fn(*args, **kwargs)

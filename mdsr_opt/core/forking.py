@@ -1,5 +1,6 @@
-"""Forking a job's process: the low-level steps :mod:`mdsr_opt.core.background` builds on (when a fork is
-safe, the child's life from the fork to ``os._exit``, reading its answer, collecting it, signalling it).
+"""Forking a job's process: the low-level steps :mod:`mdsr_opt.core.background` and
+:mod:`mdsr_opt.core.forkserver` build on (when a fork is safe, the child's life from the fork to
+``os._exit``, reading its answer, collecting it, signalling it).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ __all__ = ["child_main", "die_with_parent", "fork_is_safe", "read_all", "reap", 
 
 
 def fork_is_safe() -> bool:
-    """Whether :class:`~mdsr_opt.core.background.BackgroundWriter` may fork here: Linux, two or more cores available to this process,
+    """Whether :class:`~mdsr_opt.core.background.BackgroundWriter` (or a
+    :class:`~mdsr_opt.core.forkserver.ForkServer`) may fork here: Linux, two or more cores available to this process,
     called from the main thread with no other Python thread alive."""
     if not sys.platform.startswith("linux") or not hasattr(os, "fork"):
         return False
@@ -50,8 +52,8 @@ def child_main(w: int, fn, args, kwargs, parent: int, mask, served: bool = False
     A jobs' server's child (``served``) first sends its pid (8 bytes), and leaves at once if nobody reads."""
     code = 1
     try:
-        # the parent's stop() interrupts us; set first, as a server's child inherits the server's SIG_IGN
-        # and must not lose the death signal asked for below
+        # the parent's stop() interrupts us; set first, as a server's child inherits the server's own
+        # SIGINT handler (which only notes the interrupt) and must not lose the death signal asked below
         signal.signal(signal.SIGINT, signal.default_int_handler)
         if served:  # first thing: a stopping caller then always knows whom to kill
             os.write(w, os.getpid().to_bytes(8, "little"))  # BrokenPipeError: the run has stopped

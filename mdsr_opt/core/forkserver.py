@@ -320,6 +320,8 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
             while waiting:
                 _drop(*waiting.popleft(), interrupted=False)
             break
+        for fd in fds:  # received descriptors are inheritable: a job's subprocesses must not hold them
+            os.set_inheritable(fd, False)
         if msg == b"p" and len(fds) == 1:
             try:
                 fn, args, kwargs = _unpickle_file(fds[0])

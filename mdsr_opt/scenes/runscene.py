@@ -58,9 +58,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files, in a forked
         child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
         Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
-        Inside a :func:`~mdsr_opt.core.forkserver.serving` block (``mdsr run`` and problem scripts start
-        one before building their scenes) the children are forked by its server, which warms matplotlib
-        up beside the solves. The files are the same either way.
+        Inside a :func:`~mdsr_opt.core.forkserver.serving` block (``mdsr run`` and problem scripts run
+        in one, started before they build their scenes) the children are forked by its server, which
+        warms matplotlib up beside the scene's build and first solves. The files are the same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -387,11 +387,11 @@ def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
 
 
 def import_pipeline() -> None:
-    """Import the pipeline's modules into a jobs' server: what a job's pickled inputs (a case's routing
-    graph: networkx, 0.25 s) and its solves (animations, the prototype's photographs; shapely checks that a
-    boundary does not cross itself) need. (The command imports them too, as it builds the scene: imported
-    before the server's fork instead, they kept the server from its warm-up, on which the first jobs wait,
-    for 0.6 s.)"""
+    """Import the pipeline's modules (part of :func:`warm_up_jobs`): what a job's pickled inputs (a case's
+    routing graph: networkx, 0.25 s) and its solves (animations, the prototype's photographs; shapely checks
+    that a boundary does not cross itself) need, in a jobs' server that has not run the pipeline itself.
+    (The command imports them too, as it builds the scene: imported before the server's fork instead,
+    they kept the server from its warm-up, on which the first jobs wait, for 0.6 s.)"""
     import importlib
 
     for name in ("networkx", "shapely", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",

@@ -110,7 +110,7 @@ def find_reflections(mesh: Mesh, rtol: float = 1e-6) -> list[Reflection]:
             if nv > 0:
                 dirs.append(v / nv)
     # imported here: scipy.spatial takes 0.25 s to import, and unpickling a routing result (a figure job
-    # does, in a process that has not routed) should not pay it
+    # does, in a jobs' server that has not routed) should not need it
     from scipy.spatial import cKDTree
 
     tree = cKDTree(X)
