@@ -91,6 +91,8 @@ WRAPS = [
     ("mdsr_opt.synthesis.export", "export_fabrication", "writing"),
     ("mdsr_opt.synthesis.poses", "PosesResult.save", "writing"),
     ("mdsr_opt.core.background", "BackgroundWriter.wait", "waiting"),
+    # a submit waiting for a slot (since the jobs' server: not through wait)
+    ("mdsr_opt.core.background", "BackgroundWriter._wait_until", "waiting"),
 ]
 
 
