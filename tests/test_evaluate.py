@@ -513,13 +513,13 @@ def test_failed_save_leaves_neither_image_nor_sidecar(tmp_path, body, monkeypatc
     def broken(tmp):  # the second file's writer fails after the first was written
         raise OSError("disk full")
 
-    real = ph._writers
+    real = ph.writers
 
     def writers(path):
         w = real(path)
         return [w[0], (w[1][0], broken)]
 
-    monkeypatch.setattr(evaluate.SyntheticPhoto, "_writers", lambda self, path: writers(path))
+    monkeypatch.setattr(evaluate.SyntheticPhoto, "writers", lambda self, path: writers(path))
     with pytest.raises(OSError, match="disk full"):
         ph.save(tmp_path / "other.png")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["case.json"]  # no PNG, no temporary file

@@ -87,7 +87,7 @@ def _cmd_photograph(a) -> int:
         ph = render_photo(data.mesh, data.x, image_size=a.photo_size, seed=a.seed, tilt_deg=a.tilt,
                           rotation_deg=a.rotation, noise_sigma=a.noise, blur_sigma=a.blur,
                           lighting=a.lighting)
-        writers += ph._writers(Path(a.out) / f"{f.stem}.png")
+        writers += ph.writers(Path(a.out) / f"{f.stem}.png")
     for path in write_together(writers):
         if path.suffix == ".png":
             print(f"wrote {path} (SYNTHETIC, seed {a.seed})")

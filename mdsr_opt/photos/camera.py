@@ -242,11 +242,13 @@ class SyntheticPhoto:
         sidecar first), so a failure leaves neither a PNG without its sidecar nor an orphan sidecar.
         """
         path = Path(path)
-        write_together(self._writers(path))
+        write_together(self.writers(path))
         return path
 
-    def _writers(self, path: Path) -> list[tuple[Path, Callable[[str], None]]]:
-        """The (path, writer) pairs of :meth:`save`, PNG first (so it is renamed last)."""
+    def writers(self, path: str | os.PathLike) -> list[tuple[Path, Callable[[str], None]]]:
+        """The (path, writer) pairs of :meth:`save`, encoded now, PNG first (so it is renamed last): for
+        writing several photographs together (:func:`~mdsr_opt.photos.folder.write_together`)."""
+        path = Path(path)
         if path.suffix.lower() != ".png":
             raise ValueError(f"synthetic photographs are saved as PNG; got {path.name}")
         ok, buf = cv2.imencode(".png", cv2.cvtColor(self.image, cv2.COLOR_RGB2BGR))
