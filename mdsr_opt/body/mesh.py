@@ -477,7 +477,7 @@ class Mesh:
 
 def _validate_topology(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     """Validate a mesh's triangles; return the boundary mask of :func:`_edge_structure`."""
-    n, m = len(p), len(t)
+    n = len(p)
     rep = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
     if rep.any():
         k = int(np.argmax(rep))

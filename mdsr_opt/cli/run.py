@@ -25,8 +25,8 @@ def _doc_line(path: Path) -> str:
 def _cmd_list(a) -> int:
     files = problem_files()
     if not files:
-        print(f"no problem library found (looked in $MDSR_PROBLEMS, the installed package and the source checkout); "
-              f"run a scene file with `mdsr run PATH`")
+        print("no problem library found (looked in $MDSR_PROBLEMS, the installed package and the source checkout); "
+              "run a scene file with `mdsr run PATH`")
         return 1
     print(f"problem library: {problems_dir()}")
     w = max(len(n) for n in files)

@@ -380,7 +380,6 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     def fine(p: np.ndarray) -> np.ndarray:
         return np.round(((p + 0.5) * ss - 0.5) * (1 << shift)).astype(np.int32)
 
-    Wf, Hf = W * ss, H * ss
     # the grid is fixed to the plate: plate coordinates are the simulation's rotated by rotation_deg,
     # with a random phase (the plate is not aligned with the body's origin)
     Rp = np.eye(3)
