@@ -81,12 +81,7 @@ def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
 def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = False):
     solver, build_time = model.solver(plugin + ("-symbolic" if symbolic else ""), opts,
                                       _casadi_factory(plugin, opts, symbolic))
-    lbx = np.full(model.n_dof, -np.inf)
-    ubx = np.full(model.n_dof, np.inf)
-    lbx[fixed] = values
-    ubx[fixed] = values
-    x0 = np.array(x0, dtype=float)
-    x0[fixed] = values
+    lbx, ubx, x0 = ropesolve.pinned_bounds(model.n_dof, x0, fixed, values)
     t0 = time.perf_counter()
     with quiet_stdout(plugin == "uno"):
         sol = solver(x0=x0, p=p, lbx=lbx, ubx=ubx)

@@ -17,7 +17,7 @@ import numpy as np
 from ..core.guards import interruptible, quiet_stdout
 from .result import MinimizeOutcome
 
-__all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "rope_forms", "solve_constrained"]
+__all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", "solve_constrained"]
 
 
 def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
@@ -89,6 +89,18 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     return (False, True) if slack is not None and slack.any() else (True, False)
 
 
+def pinned_bounds(n_dof: int, x0, fixed, values) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IPOPT's bounds for a solve with coordinates ``fixed`` pinned at ``values`` (both bounds equal, the
+    others free) and the start ``x0`` with them in place: ``(lbx, ubx, x0)``."""
+    lbx = np.full(n_dof, -np.inf)
+    ubx = np.full(n_dof, np.inf)
+    lbx[fixed] = values
+    ubx[fixed] = values
+    x0 = np.array(x0, dtype=float)
+    x0[fixed] = values
+    return lbx, ubx, x0
+
+
 def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool = False):
     """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
     pushing is the answer; so is an inequality-form one, with any rope it left undecided settled by
@@ -106,12 +118,7 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
         return solvers[multipliers]
 
     pe = cmodel.split(p)[0]
-    lbx = np.full(cmodel.n_dof, -np.inf)
-    ubx = np.full(cmodel.n_dof, np.inf)
-    lbx[fixed] = values
-    ubx[fixed] = values
-    x0 = np.array(x0, dtype=float)
-    x0[fixed] = values
+    lbx, ubx, x0 = pinned_bounds(cmodel.n_dof, x0, fixed, values)
     nt = cmodel.n_targets
     push_tol = 1e-9 * cmodel.force_scale(p)  # a rope at its length with no load: a multiplier of round-off size
     clock = {"t": 0.0, "it": 0}
