@@ -52,13 +52,11 @@ import os
 import pickle
 import select
 import signal
-import sys
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .forking import child_main, fork_is_safe, read_all, reap, send_signal
+from .forking import child_main, fork_is_safe, fork_quietly, read_all, reap, send_signal
 from .forkserver import ForkServer, JobNotLoadable, shared_server
 
 __all__ = ["BackgroundWriter", "fork_is_safe", "frozen_heap", "skip_final_collection"]
@@ -176,8 +174,8 @@ class BackgroundWriter:
                **kwargs) -> None:
         """Run ``fn(*args, **kwargs)``: in a forked child when :attr:`background` (after waiting for a child
         to finish when ``jobs`` are running; with a server, without waiting for a slot: the job waits there,
-        unless ``4 * jobs`` are outstanding), otherwise here and now. ``on_done`` receives the return value (at :meth:`wait`, or a later :meth:`submit`, for a
-        child's job)."""
+        unless ``4 * jobs`` are outstanding), otherwise here and now. ``on_done`` receives the return value
+        (at :meth:`wait`, or a later :meth:`submit`, for a child's job)."""
         if not self.background or not fork_is_safe():  # a thread started since: no fork from here on
             result = fn(*args, **kwargs)
             if on_done is not None:
@@ -199,16 +197,18 @@ class BackgroundWriter:
                     return
             finally:
                 signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-        self._wait_until(lambda: sum(job.served is None for job in self._jobs) < self.jobs)
+        self._wait_until(self._own_slot_free)
         self._fork(fn, args, kwargs, on_done)
+
+    def _own_slot_free(self) -> bool:
+        """Fewer than ``jobs`` children of this process itself are running (a server's do not count)."""
+        return sum(job.served is None for job in self._jobs) < self.jobs
 
     def _fork(self, fn, args, kwargs, on_done) -> None:
         """Fork a child of this process for the job (after ``prepare``, the first time)."""
         if self._prepare is not None:
             prepare, self._prepare = self._prepare, None
             prepare()
-        sys.stdout.flush()
-        sys.stderr.flush()  # nothing buffered before the fork is written twice
         r, w = os.pipe()
         parent = os.getpid()
         # Ctrl-C is held back from the fork until the child is on the books: an interrupt inside the fork's
@@ -216,11 +216,7 @@ class BackgroundWriter:
         # before the job is recorded would leave a child that stop() cannot reach
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            with warnings.catch_warnings():
-                # Python >= 3.12 warns of fork() in a process with native threads; ours are OpenBLAS's idle
-                # pool, which OpenBLAS's fork handlers take care of (see the module's rules)
-                warnings.simplefilter("ignore", DeprecationWarning)
-                pid = os.fork()
+            pid = fork_quietly()
             if pid == 0:  # pragma: no cover - the child (coverage does not follow it); never returns
                 try:
                     os.close(r)
@@ -265,7 +261,7 @@ class BackgroundWriter:
             if status == "not started":  # the server died or could not fork: it may take no more jobs
                 self._server.check()
             fn, args, kwargs = job.served
-            self._wait_until(lambda: sum(j.served is None for j in self._jobs) < self.jobs)
+            self._wait_until(self._own_slot_free)
             self._fork(fn, args, kwargs, job.on_done)
             return
         if status == "error":

@@ -12,8 +12,10 @@ import signal
 import sys
 import threading
 import traceback
+import warnings
 
-__all__ = ["child_main", "die_with_parent", "fork_is_safe", "read_all", "reap", "send_signal", "write_all"]
+__all__ = ["child_main", "die_with_parent", "fork_is_safe", "fork_quietly", "read_all", "reap", "send_signal",
+           "write_all"]
 
 
 def fork_is_safe() -> bool:
@@ -28,6 +30,17 @@ def fork_is_safe() -> bool:
         cores = os.cpu_count() or 1
     return (cores >= 2 and threading.current_thread() is threading.main_thread()
             and threading.active_count() == 1)
+
+
+def fork_quietly() -> int:
+    """``os.fork()`` after flushing stdout and stderr (nothing buffered before the fork is written twice),
+    without Python's (>= 3.12) warning of a fork in a process with native threads: ours are OpenBLAS's idle
+    pool, which OpenBLAS's fork handlers take care of. The caller holds Ctrl-C back around it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return os.fork()
 
 
 def die_with_parent(parent: int, sig: int = signal.SIGKILL) -> None:  # pragma: no cover - in the child

@@ -22,14 +22,12 @@ import pickle
 import select
 import signal
 import socket
-import sys
 import threading
 import time
-import warnings
 import weakref
 from typing import Any, Callable
 
-from .forking import child_main, die_with_parent, fork_is_safe, read_all, reap, send_signal, write_all
+from .forking import child_main, die_with_parent, fork_is_safe, fork_quietly, read_all, reap, send_signal, write_all
 
 __all__ = ["ForkServer", "JobNotLoadable", "load_job", "serving", "shared_server"]
 
@@ -59,13 +57,9 @@ class ForkServer:
             return
         mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         parent = os.getpid()
-        sys.stdout.flush()
-        sys.stderr.flush()
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # as in BackgroundWriter.submit
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)
-                pid = os.fork()
+            pid = fork_quietly()
             if pid == 0:  # pragma: no cover - the server; never returns
                 try:
                     mine.close()
@@ -88,8 +82,9 @@ class ForkServer:
 
     def spawn(self, fn: Callable[..., Any], args: tuple = (), kwargs: dict | None = None) -> int | None:
         """Have the server fork a child that runs ``fn(*args, **kwargs)``; returns the read end of the
-        child's pipe (its pid as 8 bytes, then its pickled answer, as :class:`~mdsr_opt.core.background.BackgroundWriter` reads it),
-        or None when the job does not pickle or the server is gone (then run it otherwise)."""
+        child's pipe (its pid as 8 bytes, then its pickled answer, as
+        :class:`~mdsr_opt.core.background.BackgroundWriter` reads it), or None when the job does not pickle
+        or the server is gone (then run it otherwise)."""
         r, w = os.pipe()
         try:
             sent = self._send(b"j", (fn, args, kwargs or {}), w)
@@ -142,8 +137,7 @@ class ForkServer:
         if not self._used:
             self.kill()
             return
-        self._sock.close()
-        self._sock = None
+        self._forget()
         deadline = time.monotonic() + timeout
         try:
             while (done := reap(self.pid, block=False)) is None:
@@ -160,18 +154,21 @@ class ForkServer:
     def check(self) -> bool:
         """Whether the server still runs; a server found dead is forgotten (:attr:`alive` False)."""
         if self._sock is not None and (done := reap(self.pid, block=False)) is not None:
-            self._sock.close()
-            self._sock = None
+            self._forget()
             self.returncode = done[0]
         return self.alive
+
+    def _forget(self) -> None:
+        """Close this end of the socket: no job is sent any more (:attr:`alive` False)."""
+        self._sock.close()
+        self._sock = None
 
     def kill(self) -> None:
         """End the server at once (the jobs it has not forked yet are dropped, those it forked are
         interrupted)."""
         if self._sock is None:
             return
-        self._sock.close()
-        self._sock = None
+        self._forget()
         send_signal(self.pid, signal.SIGKILL)
         self.returncode = reap(self.pid, block=True)[0]
 
@@ -187,9 +184,8 @@ def _forget_servers() -> None:  # pragma: no cover - runs in every forked child
     copy left open would keep a server from seeing its caller close the socket; and the servers are not
     the child's to use."""
     for server in list(_LIVE):
-        if server._sock is not None:
-            server._sock.close()
-            server._sock = None
+        if server.alive:
+            server._forget()
     _LIVE.clear()
 
 
