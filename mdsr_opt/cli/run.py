@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..core.progress import progress_for_cli
 from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
-from ..scenes.runscene import n_units, parse_resolution, parse_seed, parse_size, run_entries, write_scene
+from ..scenes.runscene import job_server, n_units, parse_resolution, parse_seed, parse_size, run_entries, write_scene
 
 __all__ = ['add_cli']
 
@@ -68,10 +68,10 @@ def _cmd_run(a) -> int:
                 code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
-    # the jobs' server first: it warms up while the scenes are built
     check_out_path(a.out)  # a bad --out is refused before the jobs' server starts
-    with _job_server(a), RunFolder(a.out, overwrite=a.overwrite,
-                                   command=getattr(a, "command_line", "")) as folder:
+    # the jobs' server first: it warms up while the scenes are built
+    with job_server(not a.no_figures, not a.no_photos, background=not a.serial), \
+            RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
         scenes = [get_problem(n, resolution=a.resolution) for n in names]
         seen = set()
         for s in scenes:
@@ -119,21 +119,6 @@ def _cmd_run(a) -> int:
     print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
           f"results in {a.out}; photographs are SYNTHETIC")
     return 0 if ok else 1
-
-
-def _job_server(a):
-    """The figure jobs' server (:func:`~mdsr_opt.core.forkserver.serving`), started before the scenes are
-    built so that matplotlib's import and warm-up run beside that (nothing for ``--serial`` or a run
-    without figures and photographs). A scene with holes adds its own import (``write_scene``'s writer)."""
-    import contextlib
-    import functools
-
-    from ..core.forkserver import serving
-    from ..scenes.runscene import warm_up_jobs
-
-    if a.serial or (a.no_figures and a.no_photos):
-        return contextlib.nullcontext()
-    return serving(functools.partial(warm_up_jobs, not a.no_figures, not a.no_photos, holes=False))
 
 
 def add_cli(sub) -> None:

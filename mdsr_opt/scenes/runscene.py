@@ -253,8 +253,7 @@ def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int
             from .rundir import check_out_path
 
             check_out_path(a.out)
-        # the figure jobs' server warms up while the scene is built (see BackgroundWriter)
-        with serving(functools.partial(warm_up_jobs, True, True, holes=False)):
+        with job_server():  # the figure jobs' server warms up while the scene is built
             scene = build(resolution=a.resolution)
             with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
                 rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
@@ -358,6 +357,19 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
     paths.extend(got["files"])
     for line in got["log"]:
         say(line)
+
+
+def job_server(figures: bool = True, photos: bool = True, background: bool = True):
+    """The context in which a command runs its scenes: a jobs' server
+    (:func:`~mdsr_opt.core.forkserver.serving`) warmed up with :func:`warm_up_jobs`, started now, before
+    the scenes are built, so that matplotlib's import and warm-up run beside that; nothing without
+    ``background`` or without figures and photographs. A scene with holes adds its own import (its
+    writer's preparation)."""
+    import contextlib
+
+    if not background or not (figures or photos):
+        return contextlib.nullcontext()
+    return serving(functools.partial(warm_up_jobs, figures, photos, holes=False))
 
 
 #: what warm_up_jobs has done in this process
