@@ -388,6 +388,19 @@ def test_body_size_is_rotation_invariant():
     assert body_size(mesh) == pytest.approx(np.hypot(4.0, 1.0))
 
 
+def test_body_size_is_the_largest_node_distance_of_any_body():
+    """The diameter from the boundary nodes is the largest distance between any two nodes (brute force), for
+    a body with a hole and a concave outline."""
+    from mdsr_opt.scenes.scene import mesh_polygon
+
+    outer = np.array([[0, 0], [6, 0], [6, 4], [4, 4], [3, 1.5], [2, 4], [0, 4]], float)  # a notch
+    hole = np.array([[1, 1], [2, 1], [2, 2], [1, 2]], float)
+    for mesh in (mesh_polygon(outer, holes=[hole], resolution=300), Mesh.rectangle(3.0, 2.0, 7, 5, pattern="right")):
+        P = mesh.points
+        brute = float(np.sqrt(((P[:, None, :] - P[None, :, :]) ** 2).sum(-1)).max())
+        assert body_size(mesh) == pytest.approx(brute, rel=1e-14)
+
+
 def test_patches_of_different_muscles_that_touch_merge():
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     left, right = row(mesh, 0.0, 0.0, 2.0), row(mesh, 0.0, 2.0, 4.0)  # share the node at x = 2

@@ -88,6 +88,17 @@ def test_units_go_into_every_file(tmp_path):
     assert float(root.get("width")[:-2]) == pytest.approx(1000 * float(root.get("viewBox").split()[2]))
 
 
+def test_names_with_markup_characters_stay_valid_svg(tmp_path):
+    """A muscle's name goes into an attribute (its id) and a label: quotes, <, > and & are escaped."""
+    mesh, mus = body()
+    odd = 'top "left" <a> & b\'s'
+    mus = [Muscle(mus[0].nodes, name=odd), *mus[1:]]
+    files = export_fabrication(mesh, None, tmp_path, muscles=mus, units="mm", name="p")
+    root = ET.parse(files["svg"]).getroot()  # parses: the file is well-formed XML
+    assert odd in [e.get("id") for e in root.iter(f"{SVG}polyline")]
+    assert odd in ["".join(e.itertext()) for e in root.iter(f"{SVG}text")]
+
+
 def test_a_real_design_exports_its_strokes_and_tensions(tmp_path):
     from mdsr_opt import NeoHookean, solve_internal
     from mdsr_opt.synthesis.contractions import design_contractions

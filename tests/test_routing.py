@@ -666,3 +666,48 @@ def test_find_reflection_maps_nodes_and_edges():
         E = mesh.edges
         assert np.array_equal(np.sort(r.node_map[E], axis=1), E[r.edge_map])
     assert find_reflections(Mesh.rectangle(4.0, 1.0, nx=16, ny=4, pattern="right")) == []
+
+
+def _brute_nearest_within(X, Y, tol):
+    d = np.hypot(Y[:, None, 0] - X[None, :, 0], Y[:, None, 1] - X[None, :, 1])
+    j = np.argmin(d, axis=1)  # the first of equally near points, as nearest_within's ties
+    dj = d[np.arange(len(Y)), j]
+    return np.where(dj <= tol, dj, np.inf), np.where(dj <= tol, j, -1)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_nearest_within_matches_brute_force(seed):
+    from mdsr_opt.synthesis.routing_symmetry import nearest_within
+
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(300, 2)) * 10.0 ** rng.uniform(-3, 3)
+    if seed % 2:
+        X = np.round(X / X.std()) * X.std()  # lattice points: many share a cell when tol is large, and ties
+        X = np.unique(X, axis=0)
+    for tol in np.array([1e-12, 1e-6, 1e-2, 0.3]) * np.ptp(X):
+        near = X[rng.integers(0, len(X), 200)] + rng.normal(size=(200, 2)) * tol
+        Y = np.vstack([near, rng.normal(size=(20, 2)) * 1e3 * np.ptp(X), [[1e300, -1e300]]])
+        d, i = nearest_within(X, Y, tol)
+        db, ib = _brute_nearest_within(X, Y, tol)
+        assert np.array_equal(np.isfinite(d), np.isfinite(db))
+        assert np.allclose(d[np.isfinite(d)], db[np.isfinite(db)], rtol=0, atol=1e-15 * np.ptp(X))
+        assert np.array_equal(i, ib)
+    d, i = nearest_within(X, np.array([[np.nan, 0.0], [np.inf, 1.0]]), 1.0)
+    assert np.isinf(d).all() and (i == -1).all()
+    with pytest.raises(ValueError, match="tol must be positive"):
+        nearest_within(X, X, 0.0)
+
+
+def test_find_reflections_of_a_body_built_turned_and_shifted():
+    """The node matching of a mirror axis works at any position, angle and scale of the body."""
+    from mdsr_opt.synthesis.routing_symmetry import find_reflections
+
+    base = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+    for scale, angle, shift in ((1e-3, 0.3, (5e-3, -2e-3)), (1e3, -1.1, (4e4, 7e3)), (1.0, 0.0, (0.0, 0.0))):
+        c, s = np.cos(angle), np.sin(angle)
+        mesh = base.with_points(scale * base.points @ np.array([[c, -s], [s, c]]).T + shift)
+        refl = find_reflections(mesh)
+        assert len(refl) == 2
+        for r in refl:
+            assert np.allclose(r.apply(mesh.points), mesh.points[r.node_map], atol=1e-9 * mesh.size)
+            assert np.array_equal(np.sort(r.node_map[mesh.edges], axis=1), mesh.edges[r.edge_map])

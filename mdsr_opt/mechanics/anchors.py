@@ -44,13 +44,10 @@ def body_size(mesh) -> float:
     """
     cache = mesh.__dict__
     if "_diameter" not in cache:
-        P = mesh.points
-        try:
-            from scipy.spatial import ConvexHull
-
-            V = P[ConvexHull(P).vertices]
-        except Exception:  # degenerate hull (collinear points): every node
-            V = P
+        # the farthest pair of nodes lies on the convex hull, whose vertices are boundary nodes (every node
+        # belongs to a triangle): the same maximum over O(sqrt n) nodes, without importing scipy.spatial
+        # (0.15-0.3 s, on the path of every scene's build)
+        V = mesh.points[mesh.boundary_nodes]
         d = 0.0
         for i0 in range(0, len(V), 1024):
             d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))

@@ -29,9 +29,9 @@ import io as _stdio
 import math
 import os
 from dataclasses import dataclass
+from html import escape  # quotes too: names also go into attributes
 from pathlib import Path
 from typing import Mapping, Sequence
-from xml.sax.saxutils import escape
 
 import numpy as np
 
