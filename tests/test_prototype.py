@@ -69,6 +69,40 @@ def test_external_case_gives_table_2_and_tables_render(one):
     assert f"{metrics['driving']['mean_px']:.2f}" in md
 
 
+def test_a_prototype_made_ready_serves_its_pickled_copies(one, monkeypatch):
+    """make_ready (what a jobs' server does) solves the cases' drivings once; a copy pickled from the
+    caller's prototype (a job's) is restored as the ready one, and validates exactly as a fresh one does."""
+    import copy
+    import pickle
+
+    from mdsr_opt.scenes import prototype as proto_mod
+
+    monkeypatch.setattr(proto_mod, "_READY", {})
+    scene = get_problem("one_muscle", resolution="coarse")
+    mine = VirtualPrototype.for_scene(scene, refine=2.0, seed=5)
+    server_copy = pickle.loads(pickle.dumps(mine))  # what the server's preparation unpickles
+    assert server_copy is not mine and server_copy.token == mine.token
+    assert server_copy.make_ready(scene) is server_copy
+    shots = {c: server_copy.drive(scene, c) for c in scene.case_names}
+    assert all(sh.success and sh.photo is not None for sh in shots.values())
+    job_copy = pickle.loads(pickle.dumps(mine))  # a job's copy, forked from the server: the ready one
+    assert job_copy is server_copy and job_copy.drive(scene, scene.case_names[0]) is shots[scene.case_names[0]]
+    # what a job validates with it is what a prototype nobody made ready gives
+    setup = prepare_case(scene, "a20")
+    fresh = VirtualPrototype.for_scene(scene, refine=2.0, seed=5)
+    assert fresh.token != mine.token
+    got, _ = validate_case(job_copy, setup)
+    want, _ = validate_case(fresh, setup)
+    assert got == want
+    # copies are other prototypes (their own tokens, no shots); at most READY_KEPT stay ready
+    for other in (copy.copy(mine), copy.deepcopy(mine)):
+        assert other.token != mine.token and pickle.loads(pickle.dumps(other)) is not server_copy
+    for seed in range(proto_mod.READY_KEPT):
+        VirtualPrototype.for_scene(scene, refine=1.5, seed=seed).make_ready(scene)
+    assert len(proto_mod._READY) == proto_mod.READY_KEPT and mine.token not in proto_mod._READY
+    assert pickle.loads(pickle.dumps(mine)) is not server_copy
+
+
 def test_bad_input_is_refused(one):
     scene, proto = one
     with pytest.raises(TypeError, match="must be a Scene"):

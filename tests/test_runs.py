@@ -295,6 +295,25 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
     assert _without_times(la) == _without_times(lb)
 
 
+def test_a_served_run_validates_against_the_prototype_as_a_serial_run(tmp_path):
+    """With a jobs' server the prototype's drivings are solved there once (VirtualPrototype.make_ready) and
+    the photograph jobs start from them: the validation tables and the summary are the serial run's."""
+    from mdsr_opt.core.forkserver import serving
+    from mdsr_opt.scenes.runscene import run_scene, warm_up_jobs
+
+    scene = scenes.get_problem("gecko", resolution="coarse")
+    serial = run_scene(scene, tmp_path / "serial", cases=["bend_left"], log=None, background=False)
+    with serving(functools.partial(warm_up_jobs, True, True)):
+        served = run_scene(scene, tmp_path / "served", cases=["bend_left"], log=None)
+    assert served.success and serial.success
+    a, b = tmp_path / "served", tmp_path / "serial"
+    assert (a / "validation.md").read_text() == (b / "validation.md").read_text()
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    assert json.dumps(_without_times(sa)) == json.dumps(_without_times(sb))
+    assert sa["cases"][0]["photo"]["prototype"]["driving"]["success"]
+    assert _files(a) == _files(b)
+
+
 _REAL_REST = []
 
 

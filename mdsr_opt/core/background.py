@@ -200,6 +200,15 @@ class BackgroundWriter:
         self._wait_until(self._own_slot_free)
         self._fork(fn, args, kwargs, on_done)
 
+    def prepare(self, fn: Callable[[], Any]) -> bool:
+        """Have the server this writer's jobs fork from call ``fn()`` in its own process, before it forks
+        the jobs submitted after this: work those jobs share, done once there (a run's virtual prototype,
+        say). True when sent; False (and nothing done) without a server, or when ``fn`` does not pickle:
+        the jobs then do the work themselves. A failure in ``fn`` is ignored there."""
+        if not self.background or self._server is None or not self._server.alive:
+            return False
+        return self._server.prepare(fn)
+
     def _own_slot_free(self) -> bool:
         """Fewer than ``jobs`` children of this process itself are running (a server's do not count)."""
         return sum(job.served is None for job in self._jobs) < self.jobs

@@ -30,6 +30,8 @@ True
 
 from __future__ import annotations
 
+import itertools
+import os
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -73,7 +75,29 @@ class PrototypeShot:
     photo: Any = None
 
 
-@dataclass(eq=False)
+#: prototypes made ready in this process (:meth:`VirtualPrototype.make_ready`), by token, the latest last: a
+#: pickled copy of one of them (a job's) is restored here as that prototype itself
+_READY: dict = {}
+#: how many stay ready (a run makes one per scene, and needs only the current one)
+READY_KEPT = 2
+_TOKENS = itertools.count()
+
+
+def _new_token() -> str:
+    return f"{os.getpid()}-{next(_TOKENS)}"
+
+
+def _restore(cls, token: str, state: dict):
+    """Unpickle a prototype: the one made ready in this process under ``token``, else a new object."""
+    ready = _READY.get(token)
+    if ready is not None:
+        return ready
+    obj = cls.__new__(cls)
+    obj.__dict__.update(state)
+    return obj
+
+
+@dataclass(eq=False, frozen=True)
 class VirtualPrototype:
     """A scene's body rebuilt finer, with perturbed material, the exact cable and its own camera.
 
@@ -93,6 +117,24 @@ class VirtualPrototype:
     nu_range: float
     seed: int
     camera: dict = field(default_factory=dict)
+    #: this prototype's name among the processes of a run: its pickled copies carry it (and only those: a
+    #: new or copied prototype gets its own), so that a process where it was made ready restores them as it
+    token: str = field(default_factory=_new_token, init=False, repr=False)
+
+    def __reduce__(self):
+        state = {k: v for k, v in self.__dict__.items() if not k.startswith("_")}  # not its solved shots
+        return _restore, (type(self), self.token, state)
+
+    def __copy__(self):  # a copy is another prototype: its own token (copy.copy would keep this one's)
+        from dataclasses import replace
+
+        return replace(self)
+
+    def __deepcopy__(self, memo):
+        import copy
+
+        fields = {k: copy.deepcopy(getattr(self, k), memo) for k in self.__dataclass_fields__ if k != "token"}
+        return type(self)(**fields)
 
     @property
     def mesh(self):
@@ -199,6 +241,44 @@ class VirtualPrototype:
                     last = exc
         raise ValueError(f"muscle {muscle.name or ''} could not be laid on the prototype's mesh: {last}")
 
+    # ---------------------------------------------------------------------------------------------- ready
+    def make_ready(self, scene, cases: Sequence[str] | None = None) -> "VirtualPrototype":
+        """Solve and photograph the prototype's driving of ``scene``'s cases (``cases``: these only; each
+        :meth:`drive`, the design scene's own driving, Tables 2 and 3, whatever the design) and keep the
+        shots, with the models those solves build on the fine mesh; and register the prototype in this
+        process, so that a copy of it unpickled here (a job's: see :mod:`mdsr_opt.core.forkserver`) is this
+        object, shots and models included. A driving that raises is left to the caller to repeat and report.
+        Returns self.
+
+        A jobs' server calls it (``mdsr run``): the photograph jobs it forks then start from these, where
+        each had solved its case's driving and built the fine mesh's models itself.
+        """
+        from .select import edge_graph
+
+        _READY.pop(self.token, None)
+        _READY[self.token] = self
+        while len(_READY) > READY_KEPT:
+            _READY.pop(next(iter(_READY)))
+        edge_graph(self.mesh)  # every design's muscles are laid on the fine mesh along it
+        for name in scene.case_names if cases is None else cases:
+            try:
+                self.drive(scene, name)
+            except ValueError:  # a muscle that cannot be laid on the fine mesh: the job says so
+                pass
+        return self
+
+    def drive(self, scene, case: str) -> PrototypeShot:
+        """The prototype driven as the design scene's case ``case`` says, photographed: its anchors and drags
+        (:meth:`external`) or the scene's muscles at the case's contractions (:meth:`internal`)."""
+        c = scene.case(case)
+        if c.kind == "external":
+            return self.external(case)
+        return self.internal(scene.muscles, c.contractions, anchor_radius=scene.design_options.get("anchor_radius"))
+
+    def _shots(self) -> dict:
+        """The shots solved so far, by the arguments that made them (the same arguments: the same shot)."""
+        return self.__dict__.setdefault("_solved", {})
+
     # ---------------------------------------------------------------------------------------------- states
     def photograph(self, x) -> Any:
         """The synthetic camera's photograph of the prototype in state ``x`` (fine mesh)."""
@@ -215,18 +295,22 @@ class VirtualPrototype:
 
     def external(self, case: str, photo: bool = True) -> PrototypeShot:
         """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
-        mesh)."""
+        mesh). Solved once: a second call returns the same shot."""
         from ..mechanics.equilibrium import solve_external
 
         c = self.scene.case(case)
         if c.kind != "external":
             raise ValueError(f"case {case!r} is internal driving; use internal()")
-        return self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo)
+        key = ("external", case, bool(photo))
+        if key not in self._shots():
+            self._shots()[key] = self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo)
+        return self._shots()[key]
 
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True,
                  anchor_radius: float | None = None) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh) at ``contractions``,
-        with the exact cable."""
+        with the exact cable. Solved once per muscles, contractions and radius: a second call returns the
+        same shot."""
         from ..mechanics.equilibrium import solve_internal
 
         a = np.asarray(contractions, dtype=float).ravel()
@@ -234,9 +318,14 @@ class VirtualPrototype:
             raise ValueError(f"{len(a)} contraction(s) for {len(muscles)} muscle(s)")
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
-        fine = [self.transfer_muscle(m) for m in muscles]
-        res = solve_internal(self.mesh, self.material, fine, a, muscle_model="cable", anchor_radius=anchor_radius)
-        return self._shot(res, photo)
+        key = ("internal", tuple(tuple(int(v) for v in (m.nodes if isinstance(m, Muscle) else m)) for m in muscles),
+               a.tobytes(), bool(photo), None if anchor_radius is None else float(anchor_radius))
+        if key not in self._shots():
+            fine = [self.transfer_muscle(m) for m in muscles]
+            res = solve_internal(self.mesh, self.material, fine, a, muscle_model="cable",
+                                 anchor_radius=anchor_radius)
+            self._shots()[key] = self._shot(res, photo)
+        return self._shots()[key]
 
 
 def measure(design_mesh, x_design, photo) -> dict:
@@ -299,10 +388,7 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         else:
             say(f"{prefix}virtual prototype ({what}, Table {table}): FAILED: {entry['status']}")
 
-    if case.kind == "external":
-        run("driving", 2, lambda: prototype.external(case.name))
-    else:
-        run("driving", 3, lambda: prototype.internal(scene.muscles, case.contractions, anchor_radius=radius))
+    run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case.name))
     if design is not None:
         run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions, anchor_radius=radius))
     return out, photos

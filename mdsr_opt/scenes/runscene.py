@@ -154,6 +154,10 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             from .prototype import VirtualPrototype
 
             proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
+            # the server solves and photographs the prototype's drivings (the cases', whatever the design),
+            # beside this process's designs; the photograph jobs it forks then start from them and from the
+            # fine mesh's models (see VirtualPrototype.make_ready)
+            bg.prepare(functools.partial(proto.make_ready, scene, names))
             d = proto.describe()
             say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
                 f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")

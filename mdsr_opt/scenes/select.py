@@ -10,7 +10,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import as_float_array
 
-__all__ = ['nodes_in_box', 'nodes_near', 'nearest_node', 'nodes_in_polygon', 'edge_path', 'boundary_path']
+__all__ = ['nodes_in_box', 'nodes_near', 'nearest_node', 'nodes_in_polygon', 'edge_path', 'edge_graph', 'boundary_path']
 
 
 # ---------------------------------------------------------------------------------------------- node selection
@@ -86,7 +86,7 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     wp = as_float_array(waypoints, "waypoints", shape=(None, 2))
     if len(wp) < 2:
         raise ValueError("a muscle path needs at least two waypoints")
-    G = _edge_graph(mesh)
+    G = edge_graph(mesh)
     ids = [_snap(mesh, p, boundary, tol, f"waypoint {i}") for i, p in enumerate(wp)]
     path = [ids[0]]
     for a, b in zip(ids[:-1], ids[1:]):
@@ -129,7 +129,9 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
     return Muscle(path, name=name)
 
 
-def _edge_graph(mesh: Mesh):
+def edge_graph(mesh: Mesh):
+    """The rest mesh's edges as a networkx graph (edge attribute ``length``: the rest length), built once
+    per mesh (kept on it) for :func:`edge_path`'s shortest paths."""
     import networkx as nx
 
     G = mesh.__dict__.get("_scene_edge_graph")
