@@ -401,6 +401,25 @@ def test_body_size_is_the_largest_node_distance_of_any_body():
         assert body_size(mesh) == pytest.approx(brute, rel=1e-14)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_convex_hull_matches_qhull(seed):
+    from scipy.spatial import ConvexHull
+
+    from mdsr_opt.mechanics.anchors import convex_hull
+
+    rng = np.random.default_rng(seed)
+    for _ in range(25):
+        P = rng.normal(size=(int(rng.integers(3, 400)), 2)) * 10.0 ** rng.uniform(-3, 3)
+        if seed % 2:
+            P = np.round(P / P.std()) * 2.0 ** rng.integers(-8, 8)  # a lattice (exact): points on hull edges
+        mine = convex_hull(P)
+        assert set(map(tuple, mine)) == set(map(tuple, P[ConvexHull(P).vertices]))
+        e, f = np.roll(mine, -1, 0) - mine, np.roll(mine, -2, 0) - np.roll(mine, -1, 0)
+        cross = e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]
+        assert (cross > 0).all()  # counter-clockwise, every turn a left one
+    assert convex_hull([[0, 0], [1, 1], [2, 2]]).tolist() == [[0, 0], [2, 2]]  # a line: its ends
+
+
 def test_patches_of_different_muscles_that_touch_merge():
     mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
     left, right = row(mesh, 0.0, 0.0, 2.0), row(mesh, 0.0, 2.0, 4.0)  # share the node at x = 2

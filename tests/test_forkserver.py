@@ -183,6 +183,25 @@ def test_serving_shares_one_server_and_its_preparations_then_ends_it(forks):
     assert not server.alive and not _alive(server.pid)
 
 
+def test_a_writers_preparation_reaches_the_jobs_submitted_after_it(forks):
+    """BackgroundWriter.prepare runs in the server between the jobs sent before and after it; without a
+    server it does nothing and says so."""
+    got = []
+    with serving() as server:
+        with BackgroundWriter(server=True) as bg:
+            bg.submit(_where, on_done=got.append)
+            assert bg.prepare(functools.partial(_remember, "prepared")) == forks
+            assert bg.prepare(lambda: None) is False  # does not pickle: not sent
+            bg.submit(_where, on_done=got.append)
+        assert _MARK == []  # not in this process
+    if forks:
+        assert {g[1] for g in got} == {server.pid}
+        assert [g[2] for g in got] == [[], ["prepared"]]
+    with BackgroundWriter(server=False) as bg:
+        assert bg.prepare(functools.partial(_remember, "here")) is False
+    assert _MARK == []
+
+
 def test_spawn_refuses_what_does_not_pickle_and_a_dead_server():
     server = ForkServer()
     try:

@@ -195,16 +195,21 @@ def test_mdsr_list_imports_no_other_subcommand_module():
 
 def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
     """`mdsr run` builds scenes, routes and solves; matplotlib (its figures), scipy.spatial (the photographs'
-    contour matching) and the XML tools stay out of the command's own process: the jobs' server imports
-    what the figure jobs need, beside the scene's build (each was 0.02-0.14 s on the command's path)."""
-    code = ("import sys; from mdsr_opt.cli.main import main\n"
-            f"code = main(['-q', 'run', 'gecko', '--resolution', 'coarse', '--no-prototype', '--no-animations', "
+    contour matching, the prototype's too) and the XML tools stay out of the command's own process: the
+    jobs' server imports what the figure jobs need, beside the scene's build (each was 0.02-0.14 s on the
+    command's path). The Agg backend it chooses for them through MPLBACKEND is not left behind."""
+    code = ("import os, sys; from mdsr_opt.cli.main import main\n"
+            f"code = main(['-q', 'run', 'gecko', '--resolution', 'coarse', '--no-animations', "
             f"'--out', {str(tmp_path / 'out')!r}])\n"
-            "print(code, sorted(m for m in ('matplotlib', 'scipy.spatial', 'xml.sax') if m in sys.modules))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True,
-                         env=_clean_env(), timeout=300)
-    assert out.stdout.strip().splitlines()[-1] == "0 []"
-    assert (tmp_path / "out" / "bend_left" / "overlay.png").stat().st_size > 1000  # the jobs drew
+            "print(code, sorted(m for m in ('matplotlib', 'scipy.spatial', 'xml.sax') if m in sys.modules), "
+            "os.environ.get('MPLBACKEND'))\n")
+    for backend in (None, "svg"):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True,
+                             env=_clean_env(**({"MPLBACKEND": backend} if backend else {})), timeout=300)
+        assert out.stdout.strip().splitlines()[-1] == f"0 [] {backend}"
+        assert (tmp_path / "out" / "bend_left" / "overlay.png").stat().st_size > 1000  # the jobs drew
+        assert "Table 4" in (tmp_path / "out" / "validation.md").read_text()
+        shutil.rmtree(tmp_path / "out")
 
 
 #: a check registered first runs last at exit (atexit is last in, first out): after any freeze registered later

@@ -103,6 +103,28 @@ def test_a_prototype_made_ready_serves_its_pickled_copies(one, monkeypatch):
     assert pickle.loads(pickle.dumps(mine)) is not server_copy
 
 
+def test_the_driving_is_the_callers_case(one):
+    """validate_case drives the prototype with the case in its setup (a case the caller built, under a new
+    name or an old one), not with the scene's case of that name; kept shots are read-only."""
+    import dataclasses
+
+    from mdsr_opt.scenes.prototype import measure
+    from mdsr_opt.scenes.scene import Case
+
+    scene, proto = one
+    for case in (dataclasses.replace(scene.case("a20"), contractions=np.array([0.35])),
+                 Case("custom", contractions=np.array([0.25]))):
+        setup = prepare_case(scene, case)
+        metrics, _ = validate_case(proto, setup)
+        shot = proto.internal(scene.muscles, case.contractions)
+        assert metrics["driving"]["success"] and shot.success
+        assert metrics["driving"]["mean_px"] == measure(scene.mesh, setup.target, shot.photo)["mean_px"]
+        assert not shot.x.flags.writeable and not shot.photo.image.flags.writeable
+    # bad muscles are refused before any kept shot is looked up
+    with pytest.raises(TypeError, match="muscle nodes must hold integers"):
+        proto.internal([np.asarray(scene.muscles[0].nodes, dtype=float)], [0.25])
+
+
 def test_bad_input_is_refused(one):
     scene, proto = one
     with pytest.raises(TypeError, match="must be a Scene"):

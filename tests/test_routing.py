@@ -694,8 +694,25 @@ def test_nearest_within_matches_brute_force(seed):
         assert np.array_equal(i, ib)
     d, i = nearest_within(X, np.array([[np.nan, 0.0], [np.inf, 1.0]]), 1.0)
     assert np.isinf(d).all() and (i == -1).all()
-    with pytest.raises(ValueError, match="tol must be positive"):
-        nearest_within(X, X, 0.0)
+    d, i = nearest_within(X, X[::-1], 0.0)  # tol 0: exact matches only
+    assert (d == 0).all() and np.array_equal(X[i], X[::-1])
+
+
+def test_nearest_within_ties_scales_and_bad_input():
+    from mdsr_opt.synthesis.routing_symmetry import nearest_within
+
+    g = np.arange(5.0)
+    X = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)[::-1].copy()  # a lattice, numbered backwards
+    Y = np.vstack([(X[:-1] + X[1:]) / 2, X[:5] + [0.5, 0.5]])  # midpoints: two or four nodes equally near
+    for scale in (1e-200, 1.0, 1e200, 1e305):
+        d, i = nearest_within(X * scale, Y * scale, 0.75 * scale)
+        db, ib = _brute_nearest_within(X * scale, Y * scale, 0.75 * scale)
+        assert np.array_equal(i, ib) and (i >= 0).all()  # ties go to the lower index
+        assert np.allclose(d, db, rtol=1e-12)
+    for bad, words in (((X, Y, -1.0), "tol must be >= 0"), ((np.c_[X, X[:, :1]], Y, 1.0), r"X must have shape \(n, 2\)"),
+                       ((X, Y[:, :1], 1.0), r"Y must have shape"), ((np.vstack([X, [np.nan, 0]]), Y, 1.0), "finite")):
+        with pytest.raises(ValueError, match=words):
+            nearest_within(*bad)
 
 
 def test_find_reflections_of_a_body_built_turned_and_shifted():
@@ -711,3 +728,4 @@ def test_find_reflections_of_a_body_built_turned_and_shifted():
         for r in refl:
             assert np.allclose(r.apply(mesh.points), mesh.points[r.node_map], atol=1e-9 * mesh.size)
             assert np.array_equal(np.sort(r.node_map[mesh.edges], axis=1), mesh.edges[r.edge_map])
+    assert len(find_reflections(Mesh.rectangle(4.0, 2.0, 8, 4), rtol=0.0)) == 2  # exact mirror images

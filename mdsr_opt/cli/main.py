@@ -8,6 +8,7 @@ library's loggers) and ``-q`` (warnings and errors only, no progress bar). Libra
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 
@@ -103,19 +104,31 @@ def one_blas_thread_per_process() -> None:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
-def use_agg() -> None:
-    """The command line only writes files: matplotlib's Agg backend (importing ``mdsr_opt.plot`` leaves the
-    backend alone). Chosen through ``MPLBACKEND`` while matplotlib is not imported yet, so that the command
-    does not import it: the figure jobs' server does (``mdsr run``), and importing it here (0.13 s) held up
-    the server's start. Figure jobs and subprocesses inherit the choice."""
+@contextlib.contextmanager
+def agg_backend():
+    """Within the block, matplotlib's backend is Agg (the command line only writes files; importing
+    ``mdsr_opt.plot`` leaves the backend alone). Chosen through ``MPLBACKEND`` while matplotlib is not
+    imported yet, so that the command need not import it: the figure jobs' server does (``mdsr run``), and
+    importing it here (0.13 s) held up the server's start. The processes forked or started within inherit
+    the choice; the variable is as it was after the block (a matplotlib imported within keeps Agg, as
+    ``matplotlib.use`` would have left it)."""
     import os
 
     if "matplotlib" in sys.modules:
         import matplotlib
 
         matplotlib.use("Agg")
-    else:
-        os.environ["MPLBACKEND"] = "Agg"
+        yield
+        return
+    before = os.environ.get("MPLBACKEND")
+    os.environ["MPLBACKEND"] = "Agg"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop("MPLBACKEND", None)
+        else:
+            os.environ["MPLBACKEND"] = before
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -132,11 +145,10 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.log_verbose, args.log_quiet)
     if args.log_quiet and hasattr(args, "quiet"):
         args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
-    use_agg()
     from ..scenes.rundir import noting_interrupts
 
     try:
-        with noting_interrupts():
+        with agg_backend(), noting_interrupts():
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         # Ctrl-C: stop at once with one line (no traceback); the commands' writers have removed their

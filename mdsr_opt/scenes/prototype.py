@@ -81,6 +81,8 @@ _READY: dict = {}
 #: how many stay ready (a run makes one per scene, and needs only the current one)
 READY_KEPT = 2
 _TOKENS = itertools.count()
+#: shots a prototype keeps (its cases' drivings and designs: a run asks for each once or twice)
+SHOTS_KEPT = 16
 
 
 def _new_token() -> str:
@@ -94,6 +96,8 @@ def _restore(cls, token: str, state: dict):
         return ready
     obj = cls.__new__(cls)
     obj.__dict__.update(state)
+    if token is None:  # pickled before prototypes had tokens: a prototype of its own
+        obj.__dict__["token"] = _new_token()
     return obj
 
 
@@ -123,7 +127,7 @@ class VirtualPrototype:
 
     def __reduce__(self):
         state = {k: v for k, v in self.__dict__.items() if not k.startswith("_")}  # not its solved shots
-        return _restore, (type(self), self.token, state)
+        return _restore, (type(self), getattr(self, "token", None), state)
 
     def __copy__(self):  # a copy is another prototype: its own token (copy.copy would keep this one's)
         from dataclasses import replace
@@ -267,17 +271,30 @@ class VirtualPrototype:
                 pass
         return self
 
-    def drive(self, scene, case: str) -> PrototypeShot:
-        """The prototype driven as the design scene's case ``case`` says, photographed: its anchors and drags
-        (:meth:`external`) or the scene's muscles at the case's contractions (:meth:`internal`)."""
-        c = scene.case(case)
+    def drive(self, scene, case) -> PrototypeShot:
+        """The prototype driven as the design scene's ``case`` (a Case, or the name of one of ``scene``'s)
+        says, photographed: the anchors and drags of the prototype's case of that name (:meth:`external`),
+        or the scene's muscles at the case's own contractions (:meth:`internal`)."""
+        c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
-            return self.external(case)
+            return self.external(c.name)
         return self.internal(scene.muscles, c.contractions, anchor_radius=scene.design_options.get("anchor_radius"))
 
-    def _shots(self) -> dict:
-        """The shots solved so far, by the arguments that made them (the same arguments: the same shot)."""
-        return self.__dict__.setdefault("_solved", {})
+    def _solved(self, key):
+        """The shot kept for ``key`` (the arguments that made it), or None."""
+        return self.__dict__.get("_shots", {}).get(key)
+
+    def _keep(self, shot_key, shot: PrototypeShot) -> PrototypeShot:
+        """Keep ``shot`` (read-only: callers share it) for ``shot_key``; at most :data:`SHOTS_KEPT`, the oldest
+        go first."""
+        shots = self.__dict__.setdefault("_shots", {})
+        shot.x.setflags(write=False)
+        if shot.photo is not None:
+            shot.photo.image.setflags(write=False)
+        shots[shot_key] = shot
+        while len(shots) > SHOTS_KEPT:
+            shots.pop(next(iter(shots)))
+        return shot
 
     # ---------------------------------------------------------------------------------------------- states
     def photograph(self, x) -> Any:
@@ -302,9 +319,10 @@ class VirtualPrototype:
         if c.kind != "external":
             raise ValueError(f"case {case!r} is internal driving; use internal()")
         key = ("external", case, bool(photo))
-        if key not in self._shots():
-            self._shots()[key] = self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo)
-        return self._shots()[key]
+        shot = self._solved(key)
+        if shot is None:
+            shot = self._keep(key, self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo))
+        return shot
 
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True,
                  anchor_radius: float | None = None) -> PrototypeShot:
@@ -318,14 +336,16 @@ class VirtualPrototype:
             raise ValueError(f"{len(a)} contraction(s) for {len(muscles)} muscle(s)")
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
-        key = ("internal", tuple(tuple(int(v) for v in (m.nodes if isinstance(m, Muscle) else m)) for m in muscles),
-               a.tobytes(), bool(photo), None if anchor_radius is None else float(anchor_radius))
-        if key not in self._shots():
+        muscles = [m if isinstance(m, Muscle) else Muscle(m) for m in muscles]  # checked before the look-up
+        key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo),
+               None if anchor_radius is None else float(anchor_radius))
+        shot = self._solved(key)
+        if shot is None:
             fine = [self.transfer_muscle(m) for m in muscles]
             res = solve_internal(self.mesh, self.material, fine, a, muscle_model="cable",
                                  anchor_radius=anchor_radius)
-            self._shots()[key] = self._shot(res, photo)
-        return self._shots()[key]
+            shot = self._keep(key, self._shot(res, photo))
+        return shot
 
 
 def measure(design_mesh, x_design, photo) -> dict:
@@ -347,7 +367,8 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
 
     ``driving`` (Table 2 for an external case, Table 3 for an internal one): the design model's simulation
     of the case's own driving (``setup.target``) against a photograph of the prototype driven the same way
-    (the same anchors and drags; or the scene's muscles at the case's contractions). ``design`` (Table 4):
+    (:meth:`VirtualPrototype.drive`: the anchors and drags of the prototype's case of that name; or the
+    scene's muscles at ``setup.case``'s contractions). ``design`` (Table 4):
     the target against a photograph of the prototype driven by the designed contractions of the designed
     muscles (``design``, a :class:`~mdsr_opt.design.DesignResult`; skipped when None).
 
@@ -388,7 +409,7 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         else:
             say(f"{prefix}virtual prototype ({what}, Table {table}): FAILED: {entry['status']}")
 
-    run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case.name))
+    run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case))
     if design is not None:
         run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions, anchor_radius=radius))
     return out, photos

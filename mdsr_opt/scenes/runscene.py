@@ -154,10 +154,6 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             from .prototype import VirtualPrototype
 
             proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
-            # the server solves and photographs the prototype's drivings (the cases', whatever the design),
-            # beside this process's designs; the photograph jobs it forks then start from them and from the
-            # fine mesh's models (see VirtualPrototype.make_ready)
-            bg.prepare(functools.partial(proto.make_ready, scene, names))
             d = proto.describe()
             say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
                 f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
@@ -174,6 +170,11 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if parts:
                 bg.submit(parts[0], on_done=written[cname][0].extend)
             if photos and run.design is not None:
+                if proto is not None:
+                    # the server solves and photographs the prototype's driving of the case (whatever the
+                    # design) beside the case's figures; the photograph job it forks next starts from that
+                    # and from the fine mesh's models, built once (see VirtualPrototype.make_ready)
+                    bg.prepare(functools.partial(proto.make_ready, scene, [cname]))
                 bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
                           on_done=functools.partial(_photo_done, run, written[cname][1], say))
             elif parts:
