@@ -418,6 +418,12 @@ def test_convex_hull_matches_qhull(seed):
         cross = e[:, 0] * f[:, 1] - e[:, 1] * f[:, 0]
         assert (cross > 0).all()  # counter-clockwise, every turn a left one
     assert convex_hull([[0, 0], [1, 1], [2, 2]]).tolist() == [[0, 0], [2, 2]]  # a line: its ends
+    assert convex_hull([[1, 1], [1, 1]]).tolist() == [[1, 1]]
+    tiny = convex_hull(np.array([[0, 0], [1, 0], [0.5, 3], [0.5, 1]]) * 1e-170)  # no underflow of the turns
+    assert len(tiny) == 3
+    for bad, words in (([[0, 0, 0]], r"shape \(m, 2\)"), ([[0, 0], [np.nan, 1]], "finite")):
+        with pytest.raises(ValueError, match=words):
+            convex_hull(bad)
 
 
 def test_patches_of_different_muscles_that_touch_merge():

@@ -186,17 +186,17 @@ def test_serving_shares_one_server_and_its_preparations_then_ends_it(forks):
 def test_a_writers_preparation_reaches_the_jobs_submitted_after_it(forks):
     """BackgroundWriter.prepare runs in the server between the jobs sent before and after it; without a
     server it does nothing and says so."""
-    got = []
+    got = {}
     with serving() as server:
         with BackgroundWriter(server=True) as bg:
-            bg.submit(_where, on_done=got.append)
+            bg.submit(_where, on_done=functools.partial(got.__setitem__, "before"))
             assert bg.prepare(functools.partial(_remember, "prepared")) == forks
             assert bg.prepare(lambda: None) is False  # does not pickle: not sent
-            bg.submit(_where, on_done=got.append)
+            bg.submit(_where, on_done=functools.partial(got.__setitem__, "after"))  # jobs end in any order
         assert _MARK == []  # not in this process
     if forks:
-        assert {g[1] for g in got} == {server.pid}
-        assert [g[2] for g in got] == [[], ["prepared"]]
+        assert {g[1] for g in got.values()} == {server.pid}
+        assert got["before"][2] == [] and got["after"][2] == ["prepared"]
     with BackgroundWriter(server=False) as bg:
         assert bg.prepare(functools.partial(_remember, "here")) is False
     assert _MARK == []

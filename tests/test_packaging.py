@@ -208,7 +208,8 @@ def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
                              env=_clean_env(**({"MPLBACKEND": backend} if backend else {})), timeout=300)
         assert out.stdout.strip().splitlines()[-1] == f"0 [] {backend}"
         assert (tmp_path / "out" / "bend_left" / "overlay.png").stat().st_size > 1000  # the jobs drew
-        assert "Table 4" in (tmp_path / "out" / "validation.md").read_text()
+        table4 = (tmp_path / "out" / "validation.md").read_text().split("## Table 4")[1]
+        assert "| gecko | bend_left |" in table4 and "FAILED" not in table4  # the prototype was photographed
         shutil.rmtree(tmp_path / "out")
 
 

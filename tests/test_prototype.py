@@ -103,6 +103,24 @@ def test_a_prototype_made_ready_serves_its_pickled_copies(one, monkeypatch):
     assert pickle.loads(pickle.dumps(mine)) is not server_copy
 
 
+def test_a_prototype_pickled_before_tokens_loads_as_a_prototype_of_its_own(one):
+    """A pickle made before prototypes had tokens (pickle's default: the object's __dict__) loads, gets a
+    token of its own and can be made ready."""
+    import pickle
+
+    scene, proto = one
+    state = {k: v for k, v in proto.__dict__.items() if k != "token" and not k.startswith("_")}
+
+    class OldStyle:
+        def __reduce__(self):
+            return object.__new__, (VirtualPrototype,), state
+
+    old = pickle.loads(pickle.dumps(OldStyle()))
+    assert isinstance(old, VirtualPrototype) and old.token and old.token != proto.token
+    assert pickle.loads(pickle.dumps(old)).token == old.token
+    assert old.describe() == proto.describe()
+
+
 def test_the_driving_is_the_callers_case(one):
     """validate_case drives the prototype with the case in its setup (a case the caller built, under a new
     name or an old one), not with the scene's case of that name; kept shots are read-only."""

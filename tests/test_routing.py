@@ -709,6 +709,13 @@ def test_nearest_within_ties_scales_and_bad_input():
         db, ib = _brute_nearest_within(X * scale, Y * scale, 0.75 * scale)
         assert np.array_equal(i, ib) and (i >= 0).all()  # ties go to the lower index
         assert np.allclose(d, db, rtol=1e-12)
+    # points of very different sizes beside a huge one: the distances are the points' own
+    X = np.array([[1e300, 0.0], [0.0, 0.0], [1e-30, 0.0]])
+    d, i = nearest_within(X, np.array([[1e-30, 0.0], [2e-30, 0.0], [1.0, 0.0]]), 1e-40)
+    assert i.tolist() == [2, -1, -1] and d[0] == 0.0
+    d, i = nearest_within(X, np.array([[1e-30, 0.0]]), 1.0)
+    assert i.tolist() == [2] and d[0] == 0.0
+    X = np.array([[0.0, 0.0], [1.0, 0.0], [1e305, 0.0]])
     for bad, words in (((X, Y, -1.0), "tol must be >= 0"), ((np.c_[X, X[:, :1]], Y, 1.0), r"X must have shape \(n, 2\)"),
                        ((X, Y[:, :1], 1.0), r"Y must have shape"), ((np.vstack([X, [np.nan, 0]]), Y, 1.0), "finite")):
         with pytest.raises(ValueError, match=words):

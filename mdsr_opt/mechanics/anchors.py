@@ -39,23 +39,33 @@ ANCHOR_FRACTION = 0.04
 def convex_hull(P) -> np.ndarray:
     """The vertices of the convex hull of points ``P`` (m, 2), counter-clockwise from the lowest-leftmost
     (Andrew's monotone chain; points on an edge of the hull are left out). Points all on a line: its two
-    ends; fewer than three points: themselves."""
-    P = np.asarray(P, dtype=float).reshape(-1, 2)
-    pts = P[np.lexsort((P[:, 1], P[:, 0]))].tolist()
-    if len(pts) < 3:
-        return np.array(pts).reshape(-1, 2)
+    ends; fewer than three distinct points: those."""
+    P = np.asarray(P, dtype=float)
+    if P.ndim != 2 or P.shape[1] != 2:
+        raise ValueError(f"points must have shape (m, 2), got {P.shape}")
+    if not np.isfinite(P).all():
+        raise ValueError("points must be finite")
+    P = np.unique(P, axis=0)  # sorted by x, then y
+    if len(P) < 3:
+        return P
+    # the turns are measured on the points moved to the origin and scaled by a power of 2 to about 1 (no
+    # underflow or overflow at any scale; the hull is the same)
+    Q = P - P[0]
+    span = float(np.abs(Q).max())
+    Q = (Q * 2.0 ** -int(np.frexp(span)[1])).tolist()
 
-    def chain(seq):
+    def chain(order):
         h: list = []
-        for p in seq:
-            while len(h) >= 2 and ((h[-1][0] - h[-2][0]) * (p[1] - h[-2][1])
-                                   - (h[-1][1] - h[-2][1]) * (p[0] - h[-2][0])) <= 0.0:
+        for k in order:
+            p = Q[k]
+            while len(h) >= 2 and ((Q[h[-1]][0] - Q[h[-2]][0]) * (p[1] - Q[h[-2]][1])
+                                   - (Q[h[-1]][1] - Q[h[-2]][1]) * (p[0] - Q[h[-2]][0])) <= 0.0:
                 h.pop()
-            h.append(p)
+            h.append(k)
         return h
 
-    hull = chain(pts)[:-1] + chain(reversed(pts))[:-1]
-    return np.array(hull) if len(hull) >= 2 else P
+    idx = range(len(P))
+    return P[chain(idx)[:-1] + chain(reversed(idx))[:-1]]
 
 
 def body_size(mesh) -> float:

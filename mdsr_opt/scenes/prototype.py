@@ -96,8 +96,6 @@ def _restore(cls, token: str, state: dict):
         return ready
     obj = cls.__new__(cls)
     obj.__dict__.update(state)
-    if token is None:  # pickled before prototypes had tokens: a prototype of its own
-        obj.__dict__["token"] = _new_token()
     return obj
 
 
@@ -127,7 +125,11 @@ class VirtualPrototype:
 
     def __reduce__(self):
         state = {k: v for k, v in self.__dict__.items() if not k.startswith("_")}  # not its solved shots
-        return _restore, (type(self), getattr(self, "token", None), state)
+        return _restore, (type(self), self.token, state)
+
+    def __setstate__(self, state):  # a pickle from before prototypes had tokens: a prototype of its own
+        self.__dict__.update(state)
+        self.__dict__.setdefault("token", _new_token())
 
     def __copy__(self):  # a copy is another prototype: its own token (copy.copy would keep this one's)
         from dataclasses import replace
@@ -281,12 +283,16 @@ class VirtualPrototype:
         return self.internal(scene.muscles, c.contractions, anchor_radius=scene.design_options.get("anchor_radius"))
 
     def _solved(self, key):
-        """The shot kept for ``key`` (the arguments that made it), or None."""
-        return self.__dict__.get("_shots", {}).get(key)
+        """The shot kept for ``key`` (the arguments that made it), or None; a shot asked for is kept longest."""
+        shots = self.__dict__.get("_shots", {})
+        shot = shots.pop(key, None)
+        if shot is not None:
+            shots[key] = shot
+        return shot
 
     def _keep(self, shot_key, shot: PrototypeShot) -> PrototypeShot:
-        """Keep ``shot`` (read-only: callers share it) for ``shot_key``; at most :data:`SHOTS_KEPT`, the oldest
-        go first."""
+        """Keep ``shot`` (read-only: callers share it) for ``shot_key``; at most :data:`SHOTS_KEPT`, the one
+        asked for least recently goes first."""
         shots = self.__dict__.setdefault("_shots", {})
         shot.x.setflags(write=False)
         if shot.photo is not None:

@@ -80,16 +80,17 @@ def nearest_within(X: np.ndarray, Y: np.ndarray, tol: float) -> tuple[np.ndarray
     dist, idx = np.full(len(Y), np.inf), np.full(len(Y), -1, dtype=np.int64)
     if not len(X) or not len(Y):
         return dist, idx
-    if float(np.abs(X).max()) > 1e150:  # far beyond any body: scaled (by a power of 2: exactly, ties kept)
-        big = 2.0 ** int(np.frexp(float(np.abs(X).max()))[1])  # so that the span and distances stay finite
-        d, i = nearest_within(X / big, Y / big, tol / big)
-        return d * big, i
-    lo = X.min(axis=0)
-    cell = max(2.0 * tol, 1e-8 * float(np.ptp(X, axis=0).max())) or 1.0
-    kx = np.floor((X - lo) / cell).astype(np.int64)  # at most 1e8 per axis: keys fit in int64
+    # the cells of points far beyond any body are found on coordinates scaled down (so that the span stays
+    # finite); the distances are always measured on the points themselves
+    big = float(np.abs(X).max())
+    scale = 2.0 ** -int(np.frexp(big)[1]) if big > 1e150 else 1.0
+    Xs = X * scale
+    lo = Xs.min(axis=0)
+    cell = max(2.0 * tol * scale, 1e-8 * float(np.ptp(Xs, axis=0).max())) or 1.0
+    kx = np.floor((Xs - lo) / cell).astype(np.int64)  # at most 1e8 per axis: keys fit in int64
     top = kx.max(axis=0)
     with np.errstate(over="ignore", invalid="ignore"):  # a query far off (or not finite) matches nothing
-        ky = np.floor((Y - lo) / cell)
+        ky = np.floor((Y * scale - lo) / cell)
     near = np.all(np.isfinite(ky) & (ky >= -1) & (ky <= top + 1), axis=1)
     ky = np.where(near[:, None], ky, -2).astype(np.int64)
     rows = int(top[1]) + 1
