@@ -170,11 +170,12 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if parts:
                 bg.submit(parts[0], on_done=written[cname][0].extend)
             if photos and run.design is not None:
-                if proto is not None:
+                if proto is not None and not bg.prepare(functools.partial(proto.make_ready, scene, [cname])):
                     # the server solves and photographs the prototype's driving of the case (whatever the
                     # design) beside the case's figures; the photograph job it forks next starts from that
-                    # and from the fine mesh's models, built once (see VirtualPrototype.make_ready)
-                    bg.prepare(functools.partial(proto.make_ready, scene, [cname]))
+                    # and from the fine mesh's models, built once (see VirtualPrototype.make_ready).
+                    # Without a server, this process does, and the jobs forked from it start from there
+                    proto.make_ready(scene, [cname])
                 bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
                           on_done=functools.partial(_photo_done, run, written[cname][1], say))
             elif parts:
