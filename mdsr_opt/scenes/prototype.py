@@ -120,7 +120,8 @@ class VirtualPrototype:
     seed: int
     camera: dict = field(default_factory=dict)
     #: this prototype's name among the processes of a run: its pickled copies carry it (and only those: a
-    #: new or copied prototype gets its own), so that a process where it was made ready restores them as it
+    #: new or copied prototype gets its own), so that a process where it was made ready restores each of
+    #: them as the ready prototype itself
     token: str = field(default_factory=_new_token, init=False, repr=False)
 
     def __reduce__(self):
@@ -256,8 +257,10 @@ class VirtualPrototype:
         object, shots and models included. A driving that raises is left to the caller to repeat and report.
         Returns self.
 
-        A jobs' server calls it (``mdsr run``): the photograph jobs it forks then start from these, where
-        each had solved its case's driving and built the fine mesh's models itself.
+        A run calls it for each case before the case's photograph job: in its jobs' server (``mdsr run``,
+        problem scripts), else in its own process. The photograph jobs forked from there start from these,
+        where each had solved its case's driving and built the fine mesh's models itself. At most
+        :data:`READY_KEPT` prototypes stay registered in a process (the latest).
         """
         from .select import edge_graph
 
