@@ -280,7 +280,7 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
             pid = -1  # not forked: the caller reads the end of a pipe without a pid, and runs the job itself
             if threading.active_count() == 1:  # a thread a preparation started would make a fork unsafe
                 try:
-                    pid = os.fork()
+                    pid = fork_quietly()  # as the caller's own forks: flushed, no warning of OpenBLAS's threads
                 except OSError:
                     pass
             if pid == 0:
