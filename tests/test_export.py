@@ -7,6 +7,7 @@ import xml.etree.ElementTree as ET
 from types import SimpleNamespace
 
 import ezdxf
+from ezdxf.lldxf.encoding import decode_dxf_unicode
 import numpy as np
 import pytest
 
@@ -52,20 +53,37 @@ def test_svg_dxf_csv_at_true_scale(tmp_path):
     assert len([e for e in root.iter(SVG + "circle") if e.get("class") == "end"]) == 2 * len(mus)
     assert [e.text for e in root.iter(SVG + "text") if e.get("class") == "label"] == ["bottom", "top", "diag"]
     assert len([e for e in root.iter(SVG + "polygon")]) == 2                # outline + hole
-    # DXF: reads back; same number of muscle polylines, lengths at true scale; unit mm
+    # DXF (R12, read by ezdxf, an independent reader): no audit errors; same number of muscle polylines,
+    # lengths at true scale, the channel width; closed outline and hole; unit mm
     doc = ezdxf.readfile(files["dxf"])
-    assert doc.header["$INSUNITS"] == 4
+    assert doc.dxfversion == "AC1009" and doc.header["$INSUNITS"] == 4 and doc.header["$MEASUREMENT"] == 1
+    assert not doc.audit().has_errors
+    colors = {ly.dxf.name: ly.dxf.color for ly in doc.layers}  # (the reader adds its own, e.g. Defpoints)
+    assert {k: colors.get(k) for k in ("BODY", "HOLES", "MUSCLES", "ENDS", "LABELS")} == \
+        {"BODY": 7, "HOLES": 7, "MUSCLES": 1, "ENDS": 5, "LABELS": 3}
     msp = doc.modelspace()
-    polys = msp.query('LWPOLYLINE[layer=="MUSCLES"]')
+    polys = msp.query('POLYLINE[layer=="MUSCLES"]')
     assert len(polys) == len(mus)
-    for pl, L in zip(polys, L0):
-        P = np.array([(p[0], p[1]) for p in pl.get_points()])
-        assert np.linalg.norm(np.diff(P, axis=0), axis=1).sum() == pytest.approx(L, rel=1e-6)
-    assert len(msp.query('LWPOLYLINE[layer=="BODY"]')) == 1 and len(msp.query('LWPOLYLINE[layer=="HOLES"]')) == 1
-    assert len(msp.query('CIRCLE[layer=="ENDS"]')) == 2 * len(mus)
+    fd_width = None
+    for pl, L, mu in zip(polys, L0, mus):
+        P = np.array([(p[0], p[1]) for p in pl.points()])
+        np.testing.assert_allclose(P, mesh.points[list(mu.nodes)], atol=1e-9)   # the nodes at rest
+        assert np.linalg.norm(np.diff(P, axis=0), axis=1).sum() == pytest.approx(L, rel=1e-9)
+        assert not pl.is_closed and pl.dxf.default_start_width == pl.dxf.default_end_width > 0
+        fd_width = pl.dxf.default_start_width
+    channels = [e for e in root.iter(SVG + "polyline") if e.get("class") == "channel"]
+    assert float(channels[0].get("stroke-width")) == pytest.approx(fd_width)   # as wide as the SVG's
+    body_, holes = msp.query('POLYLINE[layer=="BODY"]'), msp.query('POLYLINE[layer=="HOLES"]')
+    assert len(body_) == 1 and len(holes) == 1 and body_[0].is_closed and holes[0].is_closed
+    ends = msp.query('CIRCLE[layer=="ENDS"]')
+    assert len(ends) == 2 * len(mus)
+    np.testing.assert_allclose([tuple(c.dxf.center)[:2] for c in ends[:2]],
+                               mesh.points[[mus[0].nodes[0], mus[0].nodes[-1]]], atol=1e-9)
     assert sorted(t.dxf.text for t in msp.query("TEXT")) == ["bottom", "diag", "top"]
-    outline = np.array([(p[0], p[1]) for p in msp.query('LWPOLYLINE[layer=="BODY"]')[0].get_points()])
+    outline = np.array([(p[0], p[1]) for p in body_[0].points()])
     assert np.ptp(outline, axis=0) == pytest.approx([40, 10])
+    hole = np.array([(p[0], p[1]) for p in holes[0].points()])
+    assert np.ptp(hole, axis=0) == pytest.approx([4, 2])
     # CSV: units in every header with a length; strokes a * L0
     rows = list(csv.reader(open(files["csv"])))
     head = rows[0]
@@ -86,6 +104,23 @@ def test_units_go_into_every_file(tmp_path):
     files = export_fabrication(mesh, None, tmp_path / "m", muscles=mus, units="m", name="p")
     root = ET.parse(files["svg"]).getroot()   # metres: the physical size is written in mm
     assert float(root.get("width")[:-2]) == pytest.approx(1000 * float(root.get("viewBox").split()[2]))
+
+
+def test_dxf_labels_keep_any_name_on_one_line(tmp_path):
+    """A name goes into a DXF TEXT as one ASCII line: other characters as \\U+ escapes (decoded by the
+    reader), the control-code starters backslash and percent escaped too, line breaks as spaces, a character
+    beyond U+FFFF as ?."""
+    mesh, mus = body()
+    names = ["m\u00fcscle \u00e9t\u00e9 \u03bb", "50%%u off \\P", "two\nlines \U0001F600"]
+    mus = [Muscle(m.nodes, name=n) for m, n in zip(mus, names)]
+    files = export_fabrication(mesh, None, tmp_path, muscles=mus, units="mm", name="p")
+    raw = open(files["dxf"], "rb").read()
+    assert raw.isascii()
+    lines = raw.decode("ascii").split("\n")
+    assert lines[-1] == "" and lines[-2] == "EOF" and len(lines) % 2 == 1   # code/value pairs
+    # as a reader shows them: TEXT control codes (%%%) interpreted, then the \\U+ escapes decoded
+    texts = [decode_dxf_unicode(t.plain_text()) for t in ezdxf.readfile(files["dxf"]).modelspace().query("TEXT")]
+    assert texts == ["m\u00fcscle \u00e9t\u00e9 \u03bb", "50%%u off \\P", "two lines ?"]
 
 
 def test_names_with_markup_characters_stay_valid_svg(tmp_path):

@@ -450,8 +450,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
-    # the chart, the GIF and the fabrication files are jobs (importing the DXF writer, ezdxf, alone took
-    # 0.35-0.45 s); gait.json, which lists their files, is written once every one of them has reported (at
+    # the chart, the GIF and the fabrication files are jobs; gait.json, which lists their files, is written once every one of them has reported (at
     # the writer's wait when they run in children): a job that fails leaves no gait.json
     jobs = []
     if figures:
