@@ -314,6 +314,41 @@ def test_a_served_run_validates_against_the_prototype_as_a_serial_run(tmp_path):
     assert _files(a) == _files(b)
 
 
+def test_the_server_warms_the_photograph_stage_up_just_before_the_first_photograph_job(tmp_path, monkeypatch):
+    """The jobs' server's own warm-up leaves out the photograph stage (scipy.spatial and the photos
+    modules, 0.3 s), so that the first figure jobs start sooner; each scene sends it just before its first
+    photograph job, ahead of the prototype's preparation. Checked on the messages the server receives."""
+    from mdsr_opt.core import forkserver
+    from mdsr_opt.scenes.runscene import job_server, run_scene, warm_up_jobs
+
+    sent, started = [], []
+    real_send, real_init = forkserver.ForkServer._send, forkserver.ForkServer.__init__
+
+    def send(self, kind, job, w=-1):
+        fn = job[0]
+        sent.append((kind, getattr(fn, "func", fn).__name__, getattr(fn, "args", ())))
+        return real_send(self, kind, job, w)
+
+    def init(self, prepare=None, jobs=3):
+        started.append(prepare)
+        real_init(self, prepare, jobs)
+
+    monkeypatch.setattr(forkserver.ForkServer, "_send", send)
+    monkeypatch.setattr(forkserver.ForkServer, "__init__", init)
+    scene = scenes.get_problem("gecko", resolution="coarse")
+    with job_server():
+        rep = run_scene(scene, tmp_path / "out", cases=["bend_left"], log=None, animations=False)
+    assert rep.success
+    assert started[0].func is warm_up_jobs and started[0].args == (True, False)  # no photograph stage
+    names = [(k, n) for k, n, _ in sent]
+    photo_warm = [i for i, (k, n, args) in enumerate(sent) if n == "warm_up_jobs" and args[:2] == (False, True)]
+    assert len(photo_warm) == 1
+    i = photo_warm[0]
+    assert names.index((b"j", "_write_shapes")) < i < names.index((b"p", "make_ready")) < \
+        names.index((b"j", "_photo_job"))
+    assert all(args[1] is False for _k, n, args in sent[:i] if n == "warm_up_jobs")
+
+
 _REAL_REST = []
 
 

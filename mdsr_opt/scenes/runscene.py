@@ -142,10 +142,16 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     # inside serving() (mdsr run, problem scripts) the jobs fork from its server, which warmed matplotlib
     # up beside the scene's build; without one this process warms up (once: later runs here find it warm;
     # a server of this run's own was 0.1-0.3 s slower for a second run in one process)
+    served = shared_server() is not None
+    holes = len(scene.mesh.boundary_loops) > 1
+    # a server warms the photograph stage up (its imports: scipy.spatial and the photos modules, 0.3 s)
+    # just before the first photograph job, after forking the figure jobs sent before it, which need none
+    # of it; this process, forking the jobs itself, warms everything up before its first fork
+    photos_warm = not served
     with frozen_heap(), BackgroundWriter(background and (figures or photos),
-                                         prepare=functools.partial(warm_up_jobs, figures, photos,
-                                                                   len(scene.mesh.boundary_loops) > 1),
-                                         server=shared_server() is not None) as bg:
+                                         prepare=functools.partial(warm_up_jobs, figures, photos and not served,
+                                                                   holes),
+                                         server=served) as bg:
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -170,6 +176,9 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if parts:
                 bg.submit(parts[0], on_done=written[cname][0].extend)
             if photos and run.design is not None:
+                if not photos_warm:
+                    photos_warm = True
+                    bg.prepare(functools.partial(warm_up_jobs, False, True, holes))
                 if proto is not None and not bg.prepare(functools.partial(proto.make_ready, scene, [cname])):
                     # the server solves and photographs the prototype's driving of the case (whatever the
                     # design) beside the case's figures; the photograph job it forks next starts from that
@@ -367,15 +376,18 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
 
 def job_server(figures: bool = True, photos: bool = True, background: bool = True):
     """The context in which a command runs its scenes: a jobs' server
-    (:func:`~mdsr_opt.core.forkserver.serving`) warmed up with :func:`warm_up_jobs`, started now, before
-    the scenes are built, so that matplotlib's import and warm-up run beside that; nothing without
-    ``background`` or without figures and photographs. A scene with holes adds its own import (its
-    writer's preparation)."""
+    (:func:`~mdsr_opt.core.forkserver.serving`) warmed up with :func:`warm_up_jobs` (its figures' part),
+    started now, before the scenes are built, so that matplotlib's import and warm-up run beside that;
+    nothing without ``background`` or without figures and photographs. Each scene has the photograph
+    stage warmed up (with its own import for holes) just before its first photograph job
+    (:func:`write_scene`)."""
     import contextlib
 
     if not background or not (figures or photos):
         return contextlib.nullcontext()
-    return serving(functools.partial(warm_up_jobs, figures, photos, holes=False))
+    # the photograph stage's warm-up is each scene's, sent just before its first photograph job (see
+    # write_scene): the first figure jobs, which the server forks once this is done, do not wait for it
+    return serving(functools.partial(warm_up_jobs, figures, False, holes=False))
 
 
 #: what warm_up_jobs has done in this process
