@@ -31,11 +31,11 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..mechanics.assembly import BufferedFunction
+from ..mechanics.assembly import BufferedFunction, SparseLayout
 from ..mechanics.segments import length_direction, length_hessian_product
 from .problem import DesignProblem
 
-__all__ = ["SparseLayout", "numeric_nlp", "supports"]
+__all__ = ["numeric_nlp", "supports"]
 
 
 def _rest_ratio_rows(prob: DesignProblem) -> slice:
@@ -53,56 +53,6 @@ def supports(prob: DesignProblem) -> bool:
     B = np.array(prob.B, dtype=float, copy=True)
     B[_rest_ratio_rows(prob)] = 0.0
     return not np.any(B)
-
-
-class SparseLayout:
-    """A fixed sparse pattern summed from parts given as ``(rows, cols)`` index arrays.
-
-    :meth:`add` the parts in order (targets with a negative row or column are dropped, and with
-    ``upper`` those below the diagonal), then :meth:`finish`; :meth:`data` sums a list of value arrays,
-    one per part in the same order and of the same lengths, into the pattern's nonzeros (CSC order).
-
-    Example
-    -------
-    >>> lay = SparseLayout(2, 2, upper=True)
-    >>> lay.add([0, 1, 1], [0, 0, 1]); lay.add([0], [0])
-    >>> lay.finish().nnz(), lay.data([np.array([1.0, 5.0, 2.0]), np.array([3.0])]).tolist()
-    (2, [4.0, 2.0])
-    """
-
-    def __init__(self, nrow: int, ncol: int, upper: bool = False):
-        self.shape = (int(nrow), int(ncol))
-        self.upper = upper
-        self._parts: list = []
-        self._keep = None
-
-    def add(self, rows, cols) -> None:
-        rows = np.asarray(rows, dtype=np.int64).ravel()
-        cols = np.asarray(cols, dtype=np.int64).ravel()
-        if rows.shape != cols.shape:
-            raise ValueError(f"rows and cols differ in length: {rows.shape} and {cols.shape}")
-        self._parts.append((rows, cols))
-
-    def finish(self) -> ca.Sparsity:
-        nrow, ncol = self.shape
-        rows = np.concatenate([p[0] for p in self._parts]) if self._parts else np.zeros(0, np.int64)
-        cols = np.concatenate([p[1] for p in self._parts]) if self._parts else np.zeros(0, np.int64)
-        keep = (rows >= 0) & (cols >= 0)
-        if self.upper:
-            keep &= rows <= cols
-        key = cols[keep] * nrow + rows[keep]
-        ukey, slot = np.unique(key, return_inverse=True)
-        self._keep, self._slot = keep, slot.ravel()
-        self.nnz = len(ukey)
-        colind = np.concatenate([[0], np.cumsum(np.bincount(ukey // nrow, minlength=ncol))])
-        self.sparsity = ca.Sparsity(nrow, ncol, colind.tolist(), (ukey % nrow).tolist())
-        self.lengths = [len(p[0]) for p in self._parts]
-        return self.sparsity
-
-    def data(self, values) -> np.ndarray:
-        vals = np.concatenate([np.broadcast_to(np.asarray(v, dtype=float).ravel(), (n,))
-                               for v, n in zip(values, self.lengths)])
-        return np.bincount(self._slot, weights=vals[self._keep], minlength=self.nnz)
 
 
 def _aligned_objective(x, y, w, v, so, exact: bool):
