@@ -676,6 +676,52 @@ def test_the_nlp_hessian_is_the_lagrangians():
         assert np.abs(col - H[:, k].toarray().ravel()).max() < 1e-6
 
 
+@pytest.mark.parametrize("ropes", [True, False])
+def test_the_numeric_nlp_pieces_are_the_symbolic_ones(ropes):
+    """ConstrainedModel.numeric_functions (what IPOPT evaluates) against the SX pieces (rows, Jacobian,
+    Lagrangian Hessian, NLP-scaled) and against finite differences; with the rigid patches' scale rows,
+    whose node pairs need not be mesh edges; the springs' model keeps only the anchor rows."""
+    import casadi as ca
+
+    from mdsr_opt.mechanics.constrained import ConstrainedModel
+    from mdsr_opt.mechanics.model import get_model
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    mus = [row(mesh, 0.0), row(mesh, 0.5), row(mesh, 1.0, 0.0, 2.0)]
+    model = get_model(mesh, MAT)
+    cm = ConstrainedModel(model, MuscleConstraints(mesh, mus, radius=0.3), ropes=ropes)
+    assert cm.n_rows == cm.constraints.n_constraints - (0 if ropes else len(mus))
+    fns = cm.numeric_functions()
+    rng = np.random.default_rng(7)
+    x = mesh.points.reshape(-1) + 0.02 * rng.standard_normal(2 * mesh.n_nodes)
+    pe, lam = model.params(MAT), rng.standard_normal(cm.n_rows)
+    xs, lf, lg = model.x, ca.MX.sym("lf"), ca.MX.sym("lg", cm.n_rows)
+    sym = ca.Function("s", [xs, model.p, lf, lg], [cm.nlp_constraints_expr(xs), cm.nlp_jacobian_expr(xs),
+                                                   cm.hess_lag_upper(xs, model.p, lf, lg)])
+    g_s, J_s, H_s = (np.array(ca.DM(v)) for v in sym(x, pe, 0.7, lam))
+    g_n = np.array(ca.DM(fns["g"](x, pe))).ravel()
+    g2, J_n = fns["jac_g"](x, pe)
+    J_n, H_n = np.array(ca.DM(J_n)), np.array(ca.DM(fns["hess_lag"](x, pe, 0.7, lam)))
+    np.testing.assert_allclose(g_n, g_s.ravel(), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.array(ca.DM(g2)).ravel(), g_n, rtol=0, atol=0)
+    np.testing.assert_allclose(J_n, J_s, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(H_n, H_s, rtol=0, atol=1e-12)
+    assert np.all(np.tril(H_n, -1) == 0)  # IPOPT takes the upper triangle
+    # independent check: the Jacobian and the Lagrangian Hessian by central differences
+    h = 1e-6
+    H_full = H_n + np.triu(H_n, 1).T
+
+    def lag_grad(z):
+        return 0.7 * model.gradient(z, pe) + cm.jacobian(z).T @ (lam * cm.row_scale)
+
+    for k in rng.choice(2 * mesh.n_nodes, 10, replace=False):
+        e = np.zeros_like(x)
+        e[k] = h
+        dg = (np.array(ca.DM(fns["g"](x + e, pe))) - np.array(ca.DM(fns["g"](x - e, pe)))).ravel() / (2 * h)
+        assert np.abs(dg - J_n[:, k]).max() < 1e-7
+        assert np.abs((lag_grad(x + e) - lag_grad(x - e)) / (2 * h) - H_full[:, k]).max() < 1e-6
+
+
 def test_check_stability_false_skips_only_the_stability_check(monkeypatch):
     from mdsr_opt.mechanics import loadsteps
 

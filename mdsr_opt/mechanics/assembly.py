@@ -201,6 +201,23 @@ class SparseLayout:
                                for v, n in zip(values, self.lengths)])
         return np.bincount(self._slot, weights=vals[self._keep], minlength=self.nnz)
 
+    def positions(self, part: int) -> np.ndarray:
+        """Where each entry of the ``part``-th :meth:`add` (in order) lands among the nonzeros, -1 where it
+        was dropped: for callers that write a large part in place and add the others.
+
+        Example
+        -------
+        >>> lay = SparseLayout(2, 2, upper=True)
+        >>> lay.add([0, 1], [1, 0]); lay.add([1, 0], [1, 1]); _ = lay.finish()
+        >>> lay.positions(0).tolist(), lay.positions(1).tolist()
+        ([0, -1], [1, 0])
+        """
+        start = sum(self.lengths[:part])
+        keep = self._keep[start:start + self.lengths[part]]
+        out = np.full(len(keep), -1, dtype=np.int64)
+        out[keep] = self._slot[int(self._keep[:start].sum()):][:int(keep.sum())]
+        return out
+
 
 def ipopt_functions(model) -> dict:
     """``{"f": (x, p) -> f, "grad_f": (x, p) -> (f, grad), "hess_lag": (x, p, lam_f, lam_g) -> upper

@@ -24,37 +24,37 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
     """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
-        # IPOPT takes the energy's value, gradient and Hessian from numpy where the model allows it (the
-        # constraints stay symbolic: few nodes); "ipopt-symbolic" and the other plugins use the CasADi graph
+        # IPOPT takes the energy's and the constraints' values and derivatives from numpy where the model
+        # allows it (ConstrainedModel.numeric_functions: nothing symbolic to build); "ipopt-symbolic" and
+        # the other plugins use the CasADi graph
         numeric = plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False)
+        o = dict(opts)
+        o["show_eval_warnings"] = False
         if numeric:
             from .assembly import ipopt_functions
 
-            fns = ipopt_functions(model)
+            fns, cfns = ipopt_functions(model), cmodel.numeric_functions()
             x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
-            f = fns["f"](x, p)
-        else:
-            x, p = model.x, model.p
-            f = model.f_fn(x, p)
+            g = cfns["g"](x, p) if cmodel.n_rows else ca.MX(0, 1)
+            # the callbacks have no derivatives; nlp_grad only serves lam_x/lam_p, which are unused
+            o.update(no_nlp_grad=True, grad_f=fns["grad_f"], hess_lag=cfns["hess_lag"])
+            if cmodel.n_rows:
+                o["jac_g"] = cfns["jac_g"]
+            return ca.nlpsol(f"constrained_{plugin}", plugin, {"x": x, "p": p, "f": fns["f"](x, p), "g": g}, o)
+        x, p = model.x, model.p
+        f = model.f_fn(x, p)
         g = cmodel.nlp_constraints_expr(x)
         nlp = {"x": x, "p": p, "f": f, "g": g}
-        o = dict(opts)
-        o["show_eval_warnings"] = False
-        if numeric:  # the callbacks have no derivatives; nlp_grad only serves lam_x/lam_p, which are unused
-            o["no_nlp_grad"] = True
-            if cmodel.n_rows:  # the constraints' Jacobian from their local SX pieces: no AD of the MX graph
-                o["jac_g"] = ca.Function("jac_g_c", [x, p], [g, cmodel.nlp_jacobian_expr(x)], ["x", "p"],
-                                         ["g", "jac_g_x"])
         if plugin in ("ipopt", "sqpmethod"):
             lam_f = ca.MX.sym("lam_f")
             lam_g = ca.MX.sym("lam_g", g.size1())
-            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g, numeric=numeric)
+            H = cmodel.hess_lag_upper(x, p, lam_f, lam_g)
             if plugin == "sqpmethod":
                 H = H + ca.triu(H, False).T
             o["hess_lag"] = ca.Function("hess_lag_c", [x, p, lam_f, lam_g], [H], ["x", "p", "lam_f", "lam_g"],
                                         ["hess"])
             if plugin == "ipopt":
-                o["grad_f"] = fns["grad_f"] if numeric else model.grad_fn
+                o["grad_f"] = model.grad_fn
         return ca.nlpsol(f"constrained_{plugin}", plugin, nlp, o)
     return factory
 
