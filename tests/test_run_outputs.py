@@ -116,6 +116,36 @@ def test_cropped_render_is_the_tight_crop_within_a_few_pixels():
     assert abs((a[1] - a[0]) - (b[1] - b[0])) <= 2 and abs((a[3] - a[2]) - (b[3] - b[2])) <= 2
 
 
+def test_cropped_render_takes_a_larger_margin_only_when_the_drawing_needs_it():
+    """The first margin (1 in) serves a drawing that stays within it; a legend reaching farther is drawn
+    again with the next margin, to the same crop as a large margin gives; past the last one, None."""
+    from mdsr_opt.plot import common
+
+    def figure(label_chars):
+        fig, ax = plt.subplots(figsize=(3, 2))
+        ax.plot([0, 1], [0, 1], label="x" * label_chars)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        return fig
+
+    tries = []
+    real = common._draw_crop
+    common._draw_crop = lambda fig, dpi, m: tries.append(m) or real(fig, dpi, m)
+    try:
+        for chars, margins in ((2, [1.0]), (40, [1.0, 4.0])):
+            fig = figure(chars)
+            tries.clear()
+            got = render_cropped(fig, 100)
+            assert tries == margins
+            np.testing.assert_array_equal(got, render_cropped(fig, 100, margin=8.0))
+            plt.close(fig)
+        fig = figure(90)  # about 6 in past the figure: no margin of MARGINS holds it
+        assert render_cropped(fig, 100) is None and render_cropped(fig, 100, margin=9.0) is not None
+        plt.close(fig)
+    finally:
+        common._draw_crop = real
+    assert common.MARGINS == (1.0, 4.0)
+
+
 def test_cropped_render_has_the_pixels_of_a_plain_draw():
     fig, ax = plt.subplots(figsize=(4, 3))  # everything inside the figure: a plain draw holds it all
     ax.plot([0, 1], [0, 2], "r-")
