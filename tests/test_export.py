@@ -123,6 +123,58 @@ def test_dxf_labels_keep_any_name_on_one_line(tmp_path):
     assert texts == ["m\u00fcscle \u00e9t\u00e9 \u03bb", "50%%u off \\P", "two lines ?"]
 
 
+def test_dxf_carets_long_names_and_every_unit(tmp_path):
+    """Carets are escaped (``^J`` would be a line feed); a name is cut to R12's 255 characters on a whole
+    character; every unit gets its $INSUNITS code and inches $MEASUREMENT 0."""
+    mesh, mus = body()
+    names = ["a^Jb", "x^ y", "\u00e9" * 100]
+    mus = [Muscle(m.nodes, name=n) for m, n in zip(mus, names)]
+    files = export_fabrication(mesh, None, tmp_path, muscles=mus, units="mm", name="p")
+    texts = [decode_dxf_unicode(t.plain_text()) for t in ezdxf.readfile(files["dxf"]).modelspace().query("TEXT")]
+    assert texts[:2] == ["a^Jb", "x^ y"]
+    assert texts[2] == "\u00e9" * 36  # 36 escapes of 7 characters: 252 <= 255
+    codes = {"in": (1, 0), "mm": (4, 1), "cm": (5, 1), "m": (6, 1), "um": (13, 1)}
+    assert set(codes) == set(UNITS)
+    for unit, (code, metric) in codes.items():
+        doc = ezdxf.readfile(export_fabrication(mesh, None, tmp_path / unit, muscles=mus, units=unit)["dxf"])
+        assert (doc.header["$INSUNITS"], doc.header["$MEASUREMENT"]) == (code, metric)
+
+
+@pytest.mark.parametrize("scale", [1e-8, 1e6])
+def test_dxf_numbers_keep_their_digits_at_any_scale_and_the_extents_hold_everything(tmp_path, scale):
+    """No exponent and no digit lost, for a body in nanometres as in kilometres: the muscles' lengths read
+    back to 1e-9; $EXTMIN/$EXTMAX hold every circle and channel. A design's NaN anchor radius (none) gives
+    the default circles."""
+    mesh, mus = body()
+    mesh = Mesh(mesh.points * scale, mesh.triangles)
+    d = SimpleNamespace(contractions=np.zeros(len(mus)), anchor_radius=float("nan"))
+    files = export_fabrication(mesh, d, tmp_path, muscles=mus, units="m", name="p")
+    values = open(files["dxf"]).read().split("\n")[1::2]
+
+    def number(v):
+        try:
+            return float(v)
+        except ValueError:
+            return None
+
+    nums = [v for v in values if number(v) is not None]
+    assert len(nums) > 100 and all("e" not in v.lower() and np.isfinite(number(v)) for v in nums)
+    doc = ezdxf.readfile(files["dxf"])
+    assert not doc.audit().has_errors
+    msp = doc.modelspace()
+    for pl, mu in zip(msp.query('POLYLINE[layer=="MUSCLES"]'), mus):
+        P = np.array([(p[0], p[1]) for p in pl.points()])
+        assert np.linalg.norm(np.diff(P, axis=0), axis=1).sum() == pytest.approx(mu.rest_length(mesh), rel=1e-9)
+    ends = msp.query("CIRCLE")
+    r = ends[0].dxf.radius
+    assert r == pytest.approx(0.4 * mesh.edge_lengths.mean(), rel=1e-9)
+    lo, hi = np.array(doc.header["$EXTMIN"])[:2], np.array(doc.header["$EXTMAX"])[:2]
+    for c in ends:
+        ctr = np.array(tuple(c.dxf.center)[:2])
+        assert np.all(ctr - r >= lo - 1e-12 * scale) and np.all(ctr + r <= hi + 1e-12 * scale)
+    assert np.all(lo <= mesh.points.min(axis=0)) and np.all(hi >= mesh.points.max(axis=0))
+
+
 def test_names_with_markup_characters_stay_valid_svg(tmp_path):
     """A muscle's name goes into an attribute (its id) and a label: quotes, <, > and & are escaped."""
     mesh, mus = body()

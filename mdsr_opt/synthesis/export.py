@@ -162,7 +162,9 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                            rest_lengths=np.array([mu.rest_length(mesh) for mu in mus]), pose_names=tuple(names),
                            contractions=np.asarray(A, float), strokes=np.asarray(S, float),
                            tensions=np.asarray(T, float),
-                           end_radius=float(radius) if radius else 0.4 * h, channel_width=float(channel_width),
+                           # the end patches' radius, when the design has one (NaN: none; 0: points)
+                           end_radius=float(radius) if radius is not None and math.isfinite(radius) and radius > 0
+                           else 0.4 * h, channel_width=float(channel_width),
                            units=units)
 
 
@@ -233,17 +235,21 @@ _DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("ENDS", 5), ("LABELS"
 
 
 def _dxf_number(v: float) -> str:
-    """A coordinate as DXF wants it: fixed point (no exponent), 1e-10 of the unit, no trailing zeros."""
-    s = f"{float(v):.10f}".rstrip("0")
-    s = s + "0" if s.endswith(".") else s
+    """A finite number as DXF wants it: fixed point (no exponent), every digit of its shortest
+    round-tripping form (``5.619e-09`` is ``0.000000005619``)."""
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"a DXF coordinate must be finite, got {v}")
+    s = np.format_float_positional(v, trim="0")
     return "0.0" if s in ("-0.0", "0.0") else s
 
 
 def _dxf_string(text: str) -> str:
     """A DXF string value: one line (control characters become spaces), ASCII, other characters as the
     ``\\U+XXXX`` escapes that DXF readers decode (AutoCAD; ezdxf's ``decode_dxf_unicode``), a backslash
-    too; ``%`` as ``%%%``, since ``%%`` starts a TEXT's control codes (``%%u`` underlines); a character
-    beyond U+FFFF becomes ``?`` (the SVG and the CSV keep the name as it is)."""
+    and a caret too (``^J`` is a caret code); ``%`` as ``%%%``, since ``%%`` starts a TEXT's control codes
+    (``%%u`` underlines); a character beyond U+FFFF becomes ``?``. At most 255 characters, as R12's TEXT
+    takes (whole characters: an escape is never cut); the SVG and the CSV keep the name as it is."""
     out = []
     for ch in str(text):
         o = ord(ch)
@@ -251,13 +257,18 @@ def _dxf_string(text: str) -> str:
             out.append(" ")
         elif ch == "%":  # "%%%" is a literal percent sign ("%%u" would toggle underlining)
             out.append("%%%")
-        elif o < 127 and ch != "\\":
+        elif o < 127 and ch not in "\\^":  # ^ starts a caret code (^J: a line feed)
             out.append(ch)
         elif o <= 0xFFFF and not 0xD800 <= o <= 0xDFFF:
             out.append(f"\\U+{o:04X}")
         else:  # beyond four hex digits (an emoji, say) or a lone surrogate: no escape holds it
             out.append("?")
-    return "".join(out)
+    n, keep = 0, 0
+    for piece in out:
+        if n + len(piece) > 255:
+            break
+        n, keep = n + len(piece), keep + 1
+    return "".join(out[:keep])
 
 
 def _dxf_text(fd: FabricationData) -> str:
@@ -296,7 +307,13 @@ def _dxf_text(fd: FabricationData) -> str:
         g(0, "SEQEND")
         g(8, layer)
 
-    lo, hi = fd.outline.min(axis=0), fd.outline.max(axis=0)
+    size = float(np.ptp(fd.outline, axis=0).max())
+    labels = [_label_at(path, 0.05 * size)[0] for path in fd.paths]
+    # the drawing's extents: the outline, the channels at their width, the end circles, the labels' points
+    reach = max(fd.end_radius, 0.5 * fd.channel_width)
+    near = np.vstack([fd.outline] + [p - reach for p in fd.paths] + [p + reach for p in fd.paths]
+                     + [np.vstack(labels) + [0.0, 0.035 * size]])
+    lo, hi = near.min(axis=0), near.max(axis=0)
     g(0, "SECTION")
     g(2, "HEADER")
     g(9, "$ACADVER")
@@ -353,15 +370,13 @@ def _dxf_text(fd: FabricationData) -> str:
     polyline(fd.outline, "BODY", closed=True)
     for h in fd.holes:
         polyline(h, "HOLES", closed=True)
-    size = float(np.ptp(fd.outline, axis=0).max())
-    for mu, path in zip(fd.muscles, fd.paths):
+    for mu, path, q in zip(fd.muscles, fd.paths, labels):
         polyline(path, "MUSCLES", closed=False, width=fd.channel_width)
         for p in (path[0], path[-1]):
             g(0, "CIRCLE")
             g(8, "ENDS")
             xy(p)
             g(40, _dxf_number(fd.end_radius))
-        q, _ = _label_at(path, 0.05 * size)
         g(0, "TEXT")
         g(8, "LABELS")
         xy(q)
