@@ -141,6 +141,21 @@ def test_cropped_render_takes_a_larger_margin_only_when_the_drawing_needs_it():
         fig = figure(90)  # about 6 in past the figure: no margin of MARGINS holds it
         assert render_cropped(fig, 100) is None and render_cropped(fig, 100, margin=9.0) is not None
         plt.close(fig)
+        # pieces placed wholly outside the figure never reach a canvas's edge: the margins start beyond
+        # their anchors (a suptitle 1.2 in above, a text 3 in left of the axes, a legend anchored outside)
+        fig = figure(2)
+        fig.suptitle("above", y=1.4)
+        fig.axes[0].text(-1.2, 0.5, "left", transform=fig.axes[0].transAxes)
+        fig.axes[0].legend(loc="upper left", bbox_to_anchor=(2.5, 1.0))
+        tries.clear()
+        got = render_cropped(fig, 100)
+        assert tries == [pytest.approx(1.0 + common._reach(fig))] and common._reach(fig) > 2.5
+        np.testing.assert_array_equal(got, render_cropped(fig, 100, margin=12.0))
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        ref = np.asarray(Image.open(buf))
+        assert abs(got.shape[0] - ref.shape[0]) <= 4 and abs(got.shape[1] - ref.shape[1]) <= 4
+        plt.close(fig)
     finally:
         common._draw_crop = real
     assert common.MARGINS == (1.0, 4.0)
@@ -171,11 +186,17 @@ def test_save_figure_writes_the_cropped_png_and_falls_back_when_it_cannot_crop(t
     assert render_cropped(fig, 130) is None
     q = save_figure(fig, tmp_path / "b.png", close=True)
     assert Image.open(q).mode == "RGBA"
-    big = plt.figure(figsize=(2, 2))  # a drawing reaching far outside the figure: savefig's tight box
-    big.text(-5.0, 0.5, "far left")
+    far = plt.figure(figsize=(2, 2))  # a text placed far outside the figure: the margin starts beyond it
+    far.text(-5.0, 0.5, "far left")
+    got = render_cropped(far, 50)
+    assert got is not None and got.min() < 100 and got.shape[1] < 60  # the text alone (the figure is blank)
+    plt.close(far)
+    big = plt.figure(figsize=(2, 2))  # a drawing running on past every margin: savefig's tight box
+    big.text(0.5, 0.5, "x" * 300)
     assert render_cropped(big, 50) is None
     r = save_figure(big, tmp_path / "c.png", close=True, dpi=50)
-    assert np.asarray(Image.open(r).convert("L")).min() < 100  # the text, cropped by savefig's tight box
+    width = Image.open(r).size[0]
+    assert np.asarray(Image.open(r).convert("L")).min() < 100 and width > 50 * 20  # the whole text
 
 
 def test_gif_frames_follow_the_states(tmp_path):

@@ -172,10 +172,11 @@ class _Grab:
         return 0
 
 
-#: the canvas margins :func:`render_cropped` draws with, in inches, the next tried when the drawing (with
-#: ``savefig.pad_inches``) reaches the canvas's edge: the figures of ``mdsr run all`` reach at most 0.6 in past
-#: their box (a legend beside the axes), and a 1 in margin drew them in about 80 % of the time of a 2 in one
-#: (fewer pixels to clear, scan and page in)
+#: the canvas margins :func:`render_cropped` draws with, in inches beyond the farthest text, legend or axes
+#: placed outside the figure (:func:`_reach`), the next tried when the drawing (with ``savefig.pad_inches``)
+#: reaches the canvas's edge: the figures of ``mdsr run all`` reach at most 0.6 in past their box (a legend
+#: beside the axes), and a 1 in margin drew them in about 80 % of the time of a 2 in one (fewer pixels to
+#: clear, scan and page in)
 MARGINS = (1.0, 4.0)
 
 #: what :func:`_draw_crop` returns when the drawing reaches the canvas's edge
@@ -190,11 +191,12 @@ def render_cropped(fig, dpi: float, margin: float | None = None):
     ``bbox_inches="tight"`` lays the figure out twice (once to measure every tick label, title and legend,
     once to draw), which was 40 % of a figure's saving time. Here the figure is drawn once on a canvas
     ``margin`` inches larger on every side (whole pixels, so every pixel lies where a plain draw puts it;
-    default :data:`MARGINS` in turn, the next only when the drawing reached the edge of the canvas),
-    the drawing's box is read from the pixels that differ from the background and padded by
-    ``savefig.pad_inches``. The crop can differ from the text-box crop of ``"tight"`` by the few blank
-    pixels a text box reserves beyond its glyphs (descenders, line gap); nothing drawn is ever cut off, and
-    the margin never changes the crop.
+    default: :data:`MARGINS` beyond the farthest text, legend or axes placed outside the figure, in turn,
+    the next only when the drawing reached the edge of the canvas), the drawing's box is read from the
+    pixels that differ from the background and padded by ``savefig.pad_inches``. The crop can differ from
+    the text-box crop of ``"tight"`` by the few blank pixels a text box reserves beyond its glyphs
+    (descenders, line gap), and the margin never changes it. What is not seen: a line or patch drawn
+    unclipped wholly beyond the margin (a given ``margin`` is taken as it is), which ``"tight"`` would keep.
     """
     crop = _render_crop(fig, dpi, margin)
     return None if crop is None else np.ascontiguousarray(crop[..., :3])
@@ -202,11 +204,42 @@ def render_cropped(fig, dpi: float, margin: float | None = None):
 
 def _render_crop(fig, dpi: float, margin: float | None = None):
     """:func:`render_cropped`'s crop as an (h, w, 4) RGBA view of the renderer's buffer, or None."""
-    for m in (MARGINS if margin is None else (margin,)):
+    if margin is None:
+        reach = _reach(fig)
+        margins = tuple(m + reach for m in MARGINS)
+    else:
+        margins = (margin,)
+    for m in margins:
         crop = _draw_crop(fig, dpi, m)
         if crop is not _TOO_SMALL:
             return crop
     return None
+
+
+def _reach(fig) -> float:
+    """How far, in inches, the farthest anchor of a text (a suptitle, an axes' title or text), of a legend
+    (its ``bbox_to_anchor``) or an axes lies outside the figure's box; 0 when all lie inside. A drawing
+    whose pieces each start inside the canvas and run on to its edge is caught by that edge; one placed
+    wholly outside is not, unless the margin starts beyond its anchor. Affine transforms only: no layout."""
+    w, h = fig.get_size_inches()
+    to_inches = fig.dpi_scale_trans.inverted()
+    points = [fig.bbox.p0, fig.bbox.p1]
+    texts = list(fig.texts)
+    boxes = [lg.get_bbox_to_anchor() for lg in fig.legends]
+    for ax in fig.axes:
+        boxes.append(ax.bbox)
+        texts += list(ax.texts) + [ax.title, ax._left_title, ax._right_title]
+        if ax.get_legend() is not None:
+            boxes.append(ax.get_legend().get_bbox_to_anchor())
+    for t in texts:
+        if t.get_visible() and t.get_text():
+            points.append(t.get_transform().transform(t.get_position()))
+    for b in boxes:
+        points += [b.p0, b.p1]
+    q = to_inches.transform(np.asarray(points, dtype=float))
+    if not np.all(np.isfinite(q)):
+        return 0.0
+    return float(max(0.0, -q[:, 0].min(), -q[:, 1].min(), q[:, 0].max() - w, q[:, 1].max() - h))
 
 
 def _draw_crop(fig, dpi: float, margin: float):
