@@ -722,6 +722,32 @@ def test_the_numeric_nlp_pieces_are_the_symbolic_ones(ropes):
         assert np.abs((lag_grad(x + e) - lag_grad(x - e)) / (2 * h) - H_full[:, k]).max() < 1e-6
 
 
+def test_the_numeric_nlp_pieces_without_rows_and_their_lifetime():
+    """A model without rows (dummy springs, no anchor patches): the Hessian is the energy's alone and the
+    solve the plain minimisation's; the callbacks do not keep their model alive."""
+    import gc
+    import weakref
+
+    import casadi as ca
+
+    from mdsr_opt.mechanics.constrained import ConstrainedModel
+    from mdsr_opt.mechanics.model import get_model
+
+    mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
+    model = get_model(mesh, MAT)
+    cm = ConstrainedModel(model, MuscleConstraints(mesh, [row(mesh, 0.0)], radius=None), ropes=False)
+    assert cm.n_rows == 0
+    fns = cm.numeric_functions()
+    x = mesh.points.reshape(-1) * 1.01
+    pe = model.params(MAT)
+    H = np.array(ca.DM(fns["hess_lag"](x, pe, 1.0, np.zeros(0))))
+    np.testing.assert_allclose(H, np.triu(model.hessian(x, pe).toarray()), rtol=0, atol=1e-12)
+    ref = weakref.ref(cm)
+    del cm, fns
+    gc.collect()
+    assert ref() is None
+
+
 def test_check_stability_false_skips_only_the_stability_check(monkeypatch):
     from mdsr_opt.mechanics import loadsteps
 

@@ -179,20 +179,14 @@ class ConstrainedModel:
         lb, ub = self.bounds(p, equality_ropes, released)
         return lb * self.row_scale, ub * self.row_scale
 
-    def hess_lag_upper(self, x, p, lam_f, lam_g, numeric: bool = False):
+    def hess_lag_upper(self, x, p, lam_f, lam_g):
         """Upper triangle of the Lagrangian's Hessian as a CasADi expression (for IPOPT's ``hess_lag``), with
-        ``lam_g`` the multipliers of :meth:`nlp_constraints_expr` (physical ones: ``row_scale * lam_g``).
-        ``numeric``: the energy's part from the model's numpy evaluation
-        (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`) instead of its symbolic graph."""
+        ``lam_g`` the multipliers of :meth:`nlp_constraints_expr` (physical ones: ``row_scale * lam_g``): the
+        symbolic formulation (``"ipopt-symbolic"``, ``sqpmethod``); IPOPT's default takes
+        :meth:`numeric_functions`."""
         lam_g = lam_g * ca.DM(self.row_scale)
         lam = lam_g if self.ropes else ca.vertcat(ca.MX(self.constraints.n_muscles, 1), lam_g)
-        if numeric:
-            from .assembly import ipopt_functions
-
-            energy = ipopt_functions(self.model)["hess_lag"]
-        else:
-            energy = self.model.hess_lag_fn
-        return energy(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
+        return self.model.hess_lag_fn(x, p, lam_f, ca.MX(0, 1)) + self.constraints.hessian_expr(x, lam)
 
     def numeric_functions(self) -> dict:
         """The NLP's pieces in numpy, as CasADi callbacks (:class:`~mdsr_opt.mechanics.assembly.BufferedFunction`),
