@@ -178,7 +178,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if photos and run.design is not None:
                 if not photos_warm:
                     photos_warm = True
-                    bg.prepare(functools.partial(warm_up_jobs, False, True, holes))
+                    if not bg.prepare(functools.partial(warm_up_jobs, False, True, holes)) and bg.background:
+                        warm_up_jobs(False, True, holes)  # the server is gone: the jobs fork from here
                 if proto is not None and not bg.prepare(functools.partial(proto.make_ready, scene, [cname])):
                     # the server solves and photographs the prototype's driving of the case (whatever the
                     # design) beside the case's figures; the photograph job it forks next starts from that
