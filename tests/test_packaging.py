@@ -226,6 +226,28 @@ def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
         shutil.rmtree(tmp_path / "out")
 
 
+def test_main_imports_its_subcommand_with_the_collector_paused(monkeypatch, capsys):
+    """main() builds its parser (the subcommand's imports) with the collector paused, and leaves the
+    collector as it found it, on or off."""
+    import gc
+    import importlib
+
+    cli_main = importlib.import_module("mdsr_opt.cli.main")  # the module (mdsr_opt.cli.main is also a function)
+    seen = []
+    real = cli_main.build_parser
+    monkeypatch.setattr(cli_main, "build_parser", lambda command=None: seen.append(gc.isenabled()) or real(command))
+    was = gc.isenabled()
+    try:
+        for start in (True, False):
+            (gc.enable if start else gc.disable)()
+            assert cli_main.main(["-q", "list"]) == 0
+            assert gc.isenabled() is start
+    finally:
+        (gc.enable if was else gc.disable)()
+    assert seen == [False, False]
+    assert "gecko" in capsys.readouterr().out
+
+
 #: a check registered first runs last at exit (atexit is last in, first out): after any freeze registered later
 _EXIT_CHECK = ("import atexit, gc, sys\n"
                "atexit.register(lambda: print('at exit', gc.get_freeze_count() > 1000, flush=True))\n")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import functools
 import gc
 import os
 import pickle
@@ -252,10 +253,7 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
     signal.signal(signal.SIGINT, lambda *_: interrupted.append(True))
     signal.pthread_sigmask(signal.SIG_SETMASK, set())
     if prepare is not None:
-        try:
-            prepare()
-        except Exception:  # noqa: BLE001 - a warm-up that fails only leaves the jobs to do their own
-            pass
+        _prepare_frozen(prepare)
     # an ended child wakes the loop below through this pipe; set after prepare, whose subprocesses wait
     # for their own children
     wake_r, wake_w = os.pipe()
@@ -321,9 +319,10 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
         if msg == b"p" and len(fds) == 1:
             try:
                 fn, args, kwargs = _unpickle_file(fds[0])
-                fn(*args, **kwargs)
             except Exception:  # noqa: BLE001 - as with prepare
                 pass
+            else:
+                _prepare_frozen(functools.partial(fn, *args, **kwargs))
         elif msg == b"j" and len(fds) == 2:
             if interrupted:
                 _drop(fds[0], fds[1], interrupted=True)
@@ -340,6 +339,27 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
         except ChildProcessError:
             break
     os._exit(0)
+
+
+def _prepare_frozen(fn: Callable[[], Any]) -> None:  # pragma: no cover - in the server
+    """Call a preparation with the garbage collector paused, then freeze what it made (``gc.freeze``); a
+    failure is ignored (the jobs then do the work themselves).
+
+    A warm-up imports modules: some 100,000 objects, all living as long as the server, which the
+    collections during the imports traversed again and again (0.15-0.18 s of a 1.0-1.5 s warm-up in
+    ``mdsr run gecko``, timed with ``gc.callbacks``). Frozen, they are left alone by the server's later
+    collections and by its children's, which would otherwise write to them and so copy their pages. A
+    preparation leaves next to no garbage behind (a case's prototype: 8 unreachable objects of 2,000)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        fn()
+    except Exception:  # noqa: BLE001 - a preparation that fails only leaves the jobs to do its work
+        pass
+    finally:
+        gc.freeze()
+        if was:
+            gc.enable()
 
 
 def _drop(job: int, w: int, interrupted: bool) -> None:  # pragma: no cover - in the server
