@@ -227,24 +227,32 @@ def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
 
 
 def test_main_imports_its_subcommand_with_the_collector_paused(monkeypatch, capsys):
-    """main() builds its parser (the subcommand's imports) with the collector paused, and leaves the
-    collector as it found it, on or off."""
+    """main() builds its parser (the subcommand's imports) with the collector paused and freezes what it
+    made for the command's length; it leaves the collector as it found it, on or off, frozen or not."""
     import gc
     import importlib
 
     cli_main = importlib.import_module("mdsr_opt.cli.main")  # the module (mdsr_opt.cli.main is also a function)
-    seen = []
-    real = cli_main.build_parser
+    seen, frozen = [], []
+    real, real_run = cli_main.build_parser, cli_main._run
     monkeypatch.setattr(cli_main, "build_parser", lambda command=None: seen.append(gc.isenabled()) or real(command))
+    monkeypatch.setattr(cli_main, "_run", lambda *a: frozen.append(gc.get_freeze_count()) or real_run(*a))
     was = gc.isenabled()
+    assert gc.get_freeze_count() == 0
     try:
         for start in (True, False):
             (gc.enable if start else gc.disable)()
             assert cli_main.main(["-q", "list"]) == 0
-            assert gc.isenabled() is start
+            assert gc.isenabled() is start and gc.get_freeze_count() == 0  # as it found them
+        gc.freeze()  # a caller's own freeze is left alone: nothing more frozen, nothing unfrozen
+        n = gc.get_freeze_count()
+        assert cli_main.main(["-q", "list"]) == 0
+        assert n - 1000 < gc.get_freeze_count() <= n  # (frozen objects may still be freed)
     finally:
+        gc.unfreeze()
         (gc.enable if was else gc.disable)()
-    assert seen == [False, False]
+    assert seen == [False, False, False]
+    assert frozen[0] > 10000 and frozen[1] > 10000 and frozen[2] <= n  # the imports' objects, frozen meanwhile
     assert "gecko" in capsys.readouterr().out
 
 

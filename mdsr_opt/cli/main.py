@@ -141,14 +141,27 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
     # the subcommand's modules are imported here (0.4 s for `mdsr run`): their objects live as long as the
-    # command, so the collector, paused meanwhile, does not traverse them again and again
-    was = gc.isenabled()
+    # command, so the collector, paused meanwhile, does not traverse them again and again, and they are
+    # frozen for the command (unless the caller froze objects itself: its freeze is its own to undo).
+    # mdsr run gecko: the command's collections took 0.07-0.09 s, 0.03 s with them frozen
+    was, freeze = gc.isenabled(), not gc.get_freeze_count()
     gc.disable()
     try:
         parser = build_parser(command_of(argv))
     finally:
+        if freeze:
+            gc.freeze()
         if was:
             gc.enable()
+    try:
+        return _run(parser, argv)
+    finally:
+        if freeze:
+            gc.unfreeze()
+
+
+def _run(parser, argv: list[str]) -> int:
+    """:func:`main` once its parser is built."""
     args = parser.parse_args(argv)
     args.command_line = " ".join(["mdsr", *argv])
     configure_logging(args.log_verbose, args.log_quiet)
