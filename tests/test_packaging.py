@@ -294,7 +294,7 @@ def test_a_problem_scripts_main_freezes_the_heap_at_exit_only_for_its_own_argume
 def test_the_command_runs_with_one_blas_thread_unless_the_environment_says_otherwise(asked):
     # every OpenBLAS copy (numpy's, scipy's, CasADi's) as the `mdsr` command leaves it
     code = ("from mdsr_opt.cli.main import main; main(['list']); "
-            "from mdsr_opt.mechanics.blas import _libraries; print([g() for g, _ in _libraries()])")
+            "from mdsr_opt.mechanics.blas import _libraries; print([g() for g, *_ in _libraries()])")
     env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
     if asked is not None:
         env["OPENBLAS_NUM_THREADS"] = asked
