@@ -238,6 +238,18 @@ def test_preparations_run_with_the_collector_paused_and_what_they_made_frozen(fo
     assert tracked == [False, False]  # frozen: out of the collector's lists
 
 
+def test_a_preparation_that_fails_or_is_not_callable_leaves_the_server_serving(forks):
+    got = []
+    with serving() as server:
+        with BackgroundWriter(server=True) as bg:
+            bg.prepare(None)  # pickles, but cannot be called: ignored there, as a failing one is
+            bg.prepare(_fail)
+            bg.submit(_where, on_done=got.append)
+        if forks:
+            assert server.check() and got[0][1] == server.pid  # served by the server, still alive
+    assert len(got) == 1
+
+
 def test_spawn_refuses_what_does_not_pickle_and_a_dead_server():
     server = ForkServer()
     try:

@@ -256,6 +256,46 @@ def test_main_imports_its_subcommand_with_the_collector_paused(monkeypatch, caps
     assert "gecko" in capsys.readouterr().out
 
 
+def test_main_interrupted_in_its_imports_leaves_nothing_frozen(monkeypatch):
+    """Ctrl-C (or a failing import) while main() builds its parser: the freeze it made is undone."""
+    import gc
+    import importlib
+
+    cli_main = importlib.import_module("mdsr_opt.cli.main")
+
+    def interrupted(command=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_main, "build_parser", interrupted)
+    assert gc.get_freeze_count() == 0
+    with pytest.raises(KeyboardInterrupt):
+        cli_main.main(["-q", "list"])
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+
+
+def test_a_scene_written_inside_a_freeze_joins_it_and_is_handed_back_with_it():
+    """frozen_heap inside a caller's freeze (the command's): the objects made since are frozen too, and
+    nothing is unfrozen before the caller's own unfreeze."""
+    import gc
+
+    from mdsr_opt.core.background import frozen_heap
+
+    assert gc.get_freeze_count() == 0
+    with frozen_heap():
+        alone = gc.get_freeze_count()
+    assert alone > 0 and gc.get_freeze_count() == 0
+    gc.freeze()
+    try:
+        made = [[k] for k in range(5000)]  # tracked objects made after the caller's freeze
+        n = gc.get_freeze_count()
+        with frozen_heap():
+            assert gc.get_freeze_count() >= n + len(made)
+        assert gc.get_freeze_count() >= n + len(made)  # still the caller's to hand back
+    finally:
+        gc.unfreeze()
+    assert gc.get_freeze_count() == 0 and made
+
+
 #: a check registered first runs last at exit (atexit is last in, first out): after any freeze registered later
 _EXIT_CHECK = ("import atexit, gc, sys\n"
                "atexit.register(lambda: print('at exit', gc.get_freeze_count() > 1000, flush=True))\n")

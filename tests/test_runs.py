@@ -349,6 +349,27 @@ def test_the_server_warms_the_photograph_stage_up_just_before_the_first_photogra
     assert all(args[1] is False for _k, n, args in sent[:i] if n == "warm_up_jobs")
 
 
+def test_without_the_server_by_the_first_photograph_job_the_run_warms_the_stage_up_itself(tmp_path,
+                                                                                          monkeypatch):
+    """The server gone (its preparations refused) by a scene's first photograph job: the photograph stage is
+    warmed up in the run's process, from which the jobs then fork; never in a serial run."""
+    from mdsr_opt.core.background import BackgroundWriter
+    from mdsr_opt.scenes import runscene
+
+    calls = []
+    real = runscene.warm_up_jobs
+    monkeypatch.setattr(runscene, "warm_up_jobs", lambda *a: calls.append(a) or real(*a))
+    monkeypatch.setattr(BackgroundWriter, "prepare", lambda self, fn: False)
+    scene = scenes.get_problem("gecko", resolution="coarse")
+    with runscene.job_server():
+        rep = runscene.run_scene(scene, tmp_path / "served", cases=["bend_left"], log=None, animations=False)
+    assert rep.success and (False, True, False) in calls
+    calls.clear()
+    rep = runscene.run_scene(scene, tmp_path / "serial", cases=["bend_left"], log=None, animations=False,
+                             background=False)
+    assert rep.success and (False, True, False) not in calls
+
+
 _REAL_REST = []
 
 

@@ -147,15 +147,15 @@ def main(argv: list[str] | None = None) -> int:
     was, freeze = gc.isenabled(), not gc.get_freeze_count()
     gc.disable()
     try:
-        parser = build_parser(command_of(argv))
-    finally:
-        if freeze:
-            gc.freeze()
-        if was:
-            gc.enable()
-    try:
+        try:
+            parser = build_parser(command_of(argv))
+        finally:
+            if freeze:
+                gc.freeze()
+            if was:
+                gc.enable()
         return _run(parser, argv)
-    finally:
+    finally:  # also when the imports fail or are interrupted
         if freeze:
             gc.unfreeze()
 

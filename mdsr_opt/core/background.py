@@ -69,9 +69,12 @@ def frozen_heap():
 
     A run's long-lived objects (modules, the scene, caches: some 150,000 in ``mdsr run gecko``) made each
     full collection cost 0.1-0.25 s in the parent, and a forked child's collections would write to every
-    one of them and so copy their memory pages. Does nothing when the caller has frozen objects already.
+    one of them and so copy their memory pages. When the caller has frozen objects already (the ``mdsr``
+    command freezes its imports), the objects made since join them, and the caller's unfreeze hands all
+    back: freezing keeps nothing alive (reference counting still frees), it only spares the collections.
     """
     if gc.get_freeze_count():
+        gc.freeze()
         yield
         return
     gc.freeze()

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import functools
 import gc
 import os
 import pickle
@@ -321,8 +320,8 @@ def _serve(sock: socket.socket, prepare, parent: int, limit: int | None) -> None
                 fn, args, kwargs = _unpickle_file(fds[0])
             except Exception:  # noqa: BLE001 - as with prepare
                 pass
-            else:
-                _prepare_frozen(functools.partial(fn, *args, **kwargs))
+            else:  # (a preparation that is not callable fails inside, and is ignored too)
+                _prepare_frozen(lambda: fn(*args, **kwargs))
         elif msg == b"j" and len(fds) == 2:
             if interrupted:
                 _drop(fds[0], fds[1], interrupted=True)
