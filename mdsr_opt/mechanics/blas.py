@@ -46,11 +46,11 @@ def _candidates() -> list[str]:
 
 def _libraries() -> list:
     """``(get, set, keep)`` of every copy found: its thread-count functions, and whether
-    :func:`one_blas_thread` leaves it at one thread (CasADi's, the first candidate)."""
+    :func:`one_blas_thread` leaves it at one thread (CasADi's)."""
     global _LIBS
     if _LIBS is None:
         found = []
-        for k, path in enumerate(_candidates()):
+        for path in _candidates():
             try:
                 lib = ctypes.CDLL(path)  # a library already loaded is the same handle
             except OSError:

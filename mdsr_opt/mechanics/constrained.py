@@ -230,7 +230,8 @@ class ConstrainedModel:
         energy_is_all = bool(np.array_equal(epos, np.arange(hess.nnz)))  # (upper entries: none dropped)
 
         def rows(x):
-            return ref().constraints.values(x)[ref().rows] * ref().row_scale
+            m = ref()
+            return m.values(x) * m.row_scale
 
         def g(ins, outs):
             if outs[0] is not None:
