@@ -32,3 +32,37 @@ def _check_counts(libs):
     except RuntimeError:
         pass
     assert [int(get()) for get, *_ in libs] == after
+
+
+_ONE_COPY = r"""
+import ctypes, sys
+import casadi
+from mdsr_opt.mechanics.blas import one_blas_thread
+
+def solve():  # IPOPT's plugin loads CasADi's OpenBLAS (by its soname) for MUMPS
+    x = casadi.SX.sym("x")
+    s = casadi.nlpsol("s", "ipopt", {"x": x, "f": (x - 1) ** 2},
+                      {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes"})
+    s(x0=0)
+
+if sys.argv[1] == "ipopt-first":
+    solve()
+with one_blas_thread():
+    pass
+solve()
+copies = sorted({line.split(None, 5)[5].strip() for line in open("/proc/self/maps")
+                 if "libcasadi-tp-openblas" in line})
+print(len(copies), ctypes.CDLL(copies[0]).openblas_get_num_threads())
+"""
+
+
+def test_casadis_copy_is_the_one_mumps_uses_whichever_loads_first():
+    # the wheel ships CasADi's OpenBLAS as three separate files; opening another one than MUMPS's by its
+    # path had made a second copy, set to one thread while MUMPS's ran with two (one spinning beside solves)
+    import subprocess
+    import sys
+
+    for order in ("ipopt-first", "ours-first"):
+        out = subprocess.run([sys.executable, "-c", _ONE_COPY, order], capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert out.stdout.split()[-2:] == ["1", "1"], (order, out.stdout)  # one copy mapped, at one thread

@@ -22,6 +22,7 @@ import contextlib
 import ctypes
 import glob
 import os
+import re
 
 __all__ = ["one_blas_thread"]
 
@@ -32,12 +33,39 @@ _NAMES = (("openblas_get_num_threads", "openblas_set_num_threads"),
 _LIBS: list | None = None
 
 
+def _casadi_copies(folder: str) -> list[str]:
+    """CasADi's OpenBLAS as IPOPT's MUMPS uses it: the copies this process has mapped, else the file named
+    like its soname (``libcasadi-tp-openblas.so.0``).
+
+    The wheel ships the library three times, as separate files (``.so``, ``.so.0``, ``.so.0.3``). Opened by
+    the path of another file than the one MUMPS loaded by its soname, it is a second copy: its thread count
+    was set to one while MUMPS ran with two, whose idle thread spun beside every solve (0.13 CPU-s in a 3k
+    node design of 0.6 s) whenever the IPOPT plugin had loaded first."""
+    paths = sorted(glob.glob(os.path.join(folder, "libcasadi-tp-openblas.so*")))
+    mapped = _mapped(paths)
+    if mapped:
+        return mapped
+    soname = [p for p in paths if re.search(r"\.so\.\d+$", p)]
+    return (soname or paths)[:1]
+
+
+def _mapped(paths: list[str]) -> list[str]:
+    """Those of ``paths`` mapped into this process (Linux's ``/proc/self/maps``; elsewhere none)."""
+    try:
+        with open("/proc/self/maps") as f:
+            fields = [line.split(None, 5) for line in f]
+    except OSError:
+        return []
+    real = {os.path.realpath(f[5].strip()) for f in fields if len(f) == 6}
+    return [p for p in paths if os.path.realpath(p) in real]
+
+
 def _candidates() -> list[str]:
     import casadi
     import numpy
     import scipy
 
-    out = glob.glob(os.path.join(os.path.dirname(casadi.__file__), "libcasadi-tp-openblas.so*"))[:1]
+    out = _casadi_copies(os.path.dirname(casadi.__file__))
     for pkg in (numpy, scipy):
         libs = os.path.join(os.path.dirname(os.path.dirname(pkg.__file__)), f"{pkg.__name__}.libs")
         out += sorted(glob.glob(os.path.join(libs, "*openblas*.so*")))
