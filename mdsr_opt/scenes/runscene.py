@@ -388,7 +388,18 @@ def job_server(figures: bool = True, photos: bool = True, background: bool = Tru
         return contextlib.nullcontext()
     # the photograph stage's warm-up is each scene's, sent just before its first photograph job (see
     # write_scene): the first figure jobs, which the server forks once this is done, do not wait for it
-    return serving(functools.partial(warm_up_jobs, figures, False, holes=False))
+    return serving(functools.partial(warm_up_server, figures))
+
+
+def warm_up_server(figures: bool) -> None:
+    """The jobs' server's own warm-up (:func:`job_server`): :func:`warm_up_jobs` for the figures, with
+    matplotlib imported without its docstrings' property tables
+    (:func:`~mdsr_opt.plot.lean.without_property_docs`: 0.2 s of CPU before the first job can fork; the
+    server and its jobs only write files)."""
+    from ..plot.lean import without_property_docs
+
+    with without_property_docs():
+        warm_up_jobs(figures, False, holes=False)
 
 
 #: what warm_up_jobs has done in this process
