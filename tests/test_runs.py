@@ -319,7 +319,7 @@ def test_the_server_warms_the_photograph_stage_up_just_before_the_first_photogra
     modules, 0.3 s), so that the first figure jobs start sooner; each scene sends it just before its first
     photograph job, ahead of the prototype's preparation. Checked on the messages the server receives."""
     from mdsr_opt.core import forkserver
-    from mdsr_opt.scenes.runscene import job_server, run_scene, warm_up_jobs
+    from mdsr_opt.scenes.runscene import job_server, run_scene, warm_up_server
 
     sent, started = [], []
     real_send, real_init = forkserver.ForkServer._send, forkserver.ForkServer.__init__
@@ -339,7 +339,8 @@ def test_the_server_warms_the_photograph_stage_up_just_before_the_first_photogra
     with job_server():
         rep = run_scene(scene, tmp_path / "out", cases=["bend_left"], log=None, animations=False)
     assert rep.success
-    assert started[0].func is warm_up_jobs and started[0].args == (True, False)  # no photograph stage
+    # the figures' part only (warm_up_server: warm_up_jobs(figures, False), no photograph stage)
+    assert started[0].func is warm_up_server and started[0].args == (True,)
     names = [(k, n) for k, n, _ in sent]
     photo_warm = [i for i, (k, n, args) in enumerate(sent) if n == "warm_up_jobs" and args[:2] == (False, True)]
     assert len(photo_warm) == 1
