@@ -35,6 +35,7 @@ import numpy as np
 from ..core.guards import captured_stdout, interruptible, quiet_stdout
 from . import ropesolve
 from .result import MinimizeOutcome
+from .stability import STEP_RTOL, ipopt_certifies_minimum
 
 __all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
            "supports_constraints", "interruptible", "check_options"]
@@ -89,8 +90,10 @@ def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = Fa
     st = solver.stats()
     status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
     iters = int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1] if st.get("iterations") else 0))
+    # no constraints, only pinned coordinates: IPOPT's inertia test is the stability check's question
+    cert = plugin == "ipopt" and ipopt_certifies_minimum(st, opts, STEP_RTOL * model.mesh.size)
     return MinimizeOutcome(np.asarray(sol["x"]).ravel(), bool(st.get("success", False)), status, iters,
-                           solve_time, build_time)
+                           solve_time, build_time, certified=cert)
 
 
 def _free_problem(model, p, fixed, values, x0):

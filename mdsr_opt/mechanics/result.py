@@ -129,6 +129,9 @@ class MinimizeOutcome:
         Seconds solving and building the solver (0 when reused).
     lam_g : ndarray or None
         Constraint multipliers (constrained models only).
+    certified : bool
+        IPOPT's last factorisation showed ``x`` a strict local minimum
+        (:func:`~mdsr_opt.mechanics.stability.ipopt_certifies_minimum`): load stepping skips its own check.
     """
 
     x: np.ndarray  # (2n,) flattened coordinates
@@ -138,6 +141,7 @@ class MinimizeOutcome:
     solve_time: float
     build_time: float
     lam_g: np.ndarray | None = None  # constraint multipliers (constrained models only)
+    certified: bool = False  # a strict minimum by IPOPT's own inertia test (see the docstring)
 
     def __repr__(self) -> str:
         from ..core.results import compact_repr

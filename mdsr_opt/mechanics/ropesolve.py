@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.guards import interruptible, quiet_stdout
 from .result import MinimizeOutcome
+from .stability import STEP_RTOL, ipopt_certifies_minimum
 
 __all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", "solve_constrained"]
 
@@ -122,6 +123,7 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
     nt = cmodel.n_targets
     push_tol = 1e-9 * cmodel.force_scale(p)  # a rope at its length with no load: a multiplier of round-off size
     clock = {"t": 0.0, "it": 0}
+    step_tol = STEP_RTOL * cmodel.mesh.size
 
     def run(start, equality, released=None):
         lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality, released=released)
@@ -140,20 +142,24 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
         clock["it"] += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
                                   if st.get("iterations") else 0))
         lam = np.asarray(sol["lam_g"]).ravel() * cmodel.row_scale  # physical multipliers
+        # every row an equality (no slack variable's barrier in IPOPT's matrix): its inertia test certifies
+        # the state a strict minimum or leaves the question to the stability check
+        cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and \
+            ipopt_certifies_minimum(st, dict(WARM_MULTIPLIERS, **opts) if warm else opts, step_tol)
         return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
-            bool(st.get("success", False)), lam
+            bool(st.get("success", False)), lam, cert
 
     def pushing(lam, held):
         return np.broadcast_to(held, (nt,)) & (lam[:nt] < -push_tol)
 
     first = None  # a failed inequality form tried first: it stands unless the equality form does better
     for equality in rope_forms(cmodel, p, x0):
-        sol, status, ok, lam = run(x0, equality)
+        sol, status, ok, lam, cert = run(x0, equality)
         if equality:
             if ok and not pushing(lam, True).any():
                 break
             if first is not None:  # second, and no better (a rope pushes, or it failed)
-                sol, status, ok, lam = first
+                sol, status, ok, lam, cert = first
                 break
             if status == "Maximum_Iterations_Exceeded":
                 # not a rope that would push but a step too long: the inequality form, from the same start,
@@ -166,12 +172,13 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
             if ok:
                 decided = _decide_ropes(run, cmodel, p, sol, pushing)
                 if decided is not None:
-                    sol, status, ok, lam = decided
+                    sol, status, ok, lam, cert = decided
                 break
             if status == "Maximum_Iterations_Exceeded":
                 break
-            first = (sol, status, ok, lam)  # failed: the equality form next, if any
-    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build[0], lam)
+            first = (sol, status, ok, lam, cert)  # failed: the equality form next, if any
+    return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build[0], lam,
+                           certified=bool(ok and cert))
 
 
 def _decide_ropes(run, cmodel, p, sol, pushing):
