@@ -14,9 +14,9 @@ from mdsr_opt.synthesis.verify import check_minimum
 MAT = NeoHookean(1.0, 0.3)
 
 
-def _stats(rg=(0.0, 0.0, 0.0), dn=(0.0, 1e-3, 1e-11), status="Solve_Succeeded", success=True):
+def _stats(rg=(0.0, 0.0, 0.0), dn=(0.0, 1e-3, 1e-11), ap=(0.0, 1.0, 1.0), status="Solve_Succeeded", success=True):
     return {"success": success, "return_status": status,
-            "iterations": {"regularization_size": list(rg), "d_norm": list(dn)}}
+            "iterations": {"regularization_size": list(rg), "d_norm": list(dn), "alpha_pr": list(ap)}}
 
 
 def test_certificate_needs_a_last_step_without_regularisation_that_moved_the_state_little():
@@ -24,18 +24,37 @@ def test_certificate_needs_a_last_step_without_regularisation_that_moved_the_sta
     assert not ipopt_certifies_minimum(_stats(rg=(0.0, 0.0, 1e-4)), {}, 1e-8)  # wrong inertia, corrected
     assert not ipopt_certifies_minimum(_stats(dn=(0.0, 1e-3, 1e-5)), {}, 1e-8)  # factorised too far away
     assert not ipopt_certifies_minimum(_stats(dn=(0.0, 1e-3, np.nan)), {}, 1e-8)
-    assert not ipopt_certifies_minimum(_stats(rg=(0.0,), dn=(0.0,)), {}, 1e-8)  # no step: no factorisation
+    assert not ipopt_certifies_minimum(_stats(rg=(0.0,), dn=(0.0,), ap=(0.0,)), {}, 1e-8)  # no step taken
+    assert not ipopt_certifies_minimum(_stats(ap=(0.0, 1.0, 0.5)), {}, 1e-8)  # a shortened last step
     assert not ipopt_certifies_minimum(_stats(status="Solved_To_Acceptable_Level"), {}, 1e-8)
     assert not ipopt_certifies_minimum(_stats(success=False), {}, 1e-8)
     assert not ipopt_certifies_minimum({"success": True, "return_status": "Solve_Succeeded"}, {}, 1e-8)
 
 
-@pytest.mark.parametrize("option, value", [("ipopt.hessian_approximation", "limited-memory"),
-                                           ("ipopt.linear_solver", "ma27"), ("ipopt.neg_curv_test_tol", 1e-8),
-                                           ("ipopt.fixed_variable_treatment", "relax_bounds")])
+@pytest.mark.parametrize("option, value", [("hessian_approximation", "limited-memory"), ("linear_solver", "ma27"),
+                                           ("neg_curv_test_tol", 1e-8), ("fixed_variable_treatment", "relax_bounds"),
+                                           ("hessian_constant", "yes"), ("obj_scaling_factor", -1.0),
+                                           ("an_option_added_later", 1)])
 def test_certificate_only_under_the_inertia_test_it_relies_on(option, value):
-    assert ipopt_certifies_minimum(_stats(), {"ipopt.fixed_variable_treatment": "make_parameter_nodual"}, 1e-8)
-    assert not ipopt_certifies_minimum(_stats(), {option: value}, 1e-8)
+    ours = {"ipopt.fixed_variable_treatment": "make_parameter_nodual", "ipopt.tol": 1e-10, "print_time": False,
+            "ipopt.warm_start_init_point": "yes", "ipopt": {"print_level": 0}}
+    assert ipopt_certifies_minimum(_stats(), ours, 1e-8)
+    assert not ipopt_certifies_minimum(_stats(), {**ours, f"ipopt.{option}": value}, 1e-8)
+    assert not ipopt_certifies_minimum(_stats(), {**ours, "ipopt": {option: value}}, 1e-8)  # nested, as CasADi takes it
+
+
+def test_a_quasi_newton_hessian_given_nested_is_not_certified_at_a_saddle():
+    """Review finding: the nested form {"ipopt": {...}} hid a limited-memory Hessian (positive definite,
+    never regularised) from the certificate, which then called the compressed strip's straight saddle stable."""
+    mesh = Mesh.rectangle(10.0, 1.0, 40, 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 10.0)
+    res = solve_external(mesh, MAT, left, {int(i): (P[i, 0] - 2.0, P[i, 1]) for i in right}, tol=1e-10,
+                         options={"ipopt": {"hessian_approximation": "limited-memory", "acceptable_iter": 0}})
+    assert res.stability is not None and res.stability["method"] != "ipopt-inertia"
+    if res.success:  # left the saddle: the factorisation's verdict, checked again here
+        assert external_stability(mesh, MAT, left, {int(i): (P[i, 0] - 2.0, P[i, 1]) for i in right},
+                                  res.x)[0].stable
 
 
 def _strip_muscles(mesh, nx, ny):
@@ -102,3 +121,20 @@ def test_a_saddle_ipopt_converges_to_is_not_certified(monkeypatch):
     assert res.stability["method"] == "ldl-inertia"
     rg, step = seen[-1]
     assert rg > 0 and step < 1.0  # small enough a step: the regularisation is what refused the certificate
+
+
+def test_a_rope_without_tension_leaves_the_question_to_the_factorisation(monkeypatch):
+    """Review finding: a rope held at its length with no tension could also shorten, so IPOPT's tangent
+    space (every rope held) is too small to certify the state. With IPOPT's verdict forced to "certified",
+    only that rule decides: at rest (both ropes at their lengths, no tension) the factorisation answers;
+    with both ropes pulling, the certificate does."""
+    import mdsr_opt.mechanics.ropesolve as ropesolve
+
+    monkeypatch.setattr(ropesolve, "ipopt_certifies_minimum", lambda *a: True)
+    nx, ny = 24, 6
+    mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
+    mus = [Muscle(list(range(1, nx))), Muscle([ny * (nx + 1) + i for i in range(1, nx)])]
+    rest = solve_internal(mesh, MAT, mus, [0.0, 0.0], tol=1e-10)
+    assert rest.success and rest.stability["method"] != "ipopt-inertia"
+    pulled = solve_internal(mesh, MAT, mus, [0.2, 0.0], tol=1e-10)
+    assert pulled.success and not pulled.slack.any() and pulled.stability["method"] == "ipopt-inertia"

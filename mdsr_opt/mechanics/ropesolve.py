@@ -142,9 +142,10 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
         clock["it"] += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
                                   if st.get("iterations") else 0))
         lam = np.asarray(sol["lam_g"]).ravel() * cmodel.row_scale  # physical multipliers
-        # every row an equality (no slack variable's barrier in IPOPT's matrix): its inertia test certifies
-        # the state a strict minimum or leaves the question to the stability check
-        cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and \
+        # every row an equality (no slack variable's barrier in IPOPT's matrix) and every rope pulling (a rope
+        # with no tension could also shorten: IPOPT's tangent space would be too small): its inertia test
+        # certifies the state a strict minimum or leaves the question to the stability check
+        cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and bool(np.all(lam[:nt] > push_tol)) and \
             ipopt_certifies_minimum(st, dict(WARM_MULTIPLIERS, **opts) if warm else opts, step_tol)
         return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
             bool(st.get("success", False)), lam, cert

@@ -100,10 +100,34 @@ class StabilityCheck:
 #: are 1e-10 to 1e-9 of it: quadratic convergence)
 STEP_RTOL = 1e-8
 
-#: the IPOPT options under which its inertia test is the one :func:`ipopt_certifies_minimum` relies on
-_IPOPT_DEFAULTS = {"ipopt.hessian_approximation": "exact", "ipopt.linear_solver": "mumps",
-                   "ipopt.neg_curv_test_tol": 0.0}
-_FIXED_AS_PARAMETERS = ("make_parameter", "make_parameter_nodual")
+#: IPOPT options (without the ``ipopt.`` prefix) that leave its inertia test what
+#: :func:`ipopt_certifies_minimum` relies on, with the values allowed (None: any); any other IPOPT option
+#: (``hessian_constant``, ``obj_scaling_factor``, another linear solver or Hessian, ...) refuses it
+_IPOPT_ALLOWED = {
+    "hessian_approximation": ("exact",), "linear_solver": ("mumps",),
+    "fixed_variable_treatment": ("make_parameter", "make_parameter_nodual"),
+    **{k: None for k in (
+        "tol", "max_iter", "acceptable_tol", "acceptable_iter", "dual_inf_tol", "constr_viol_tol",
+        "compl_inf_tol", "acceptable_dual_inf_tol", "acceptable_constr_viol_tol", "acceptable_compl_inf_tol",
+        "max_cpu_time", "max_wall_time", "print_level", "sb", "print_timing_statistics", "print_user_options",
+        "print_frequency_iter", "output_file", "file_print_level", "mu_strategy", "mu_init", "mu_target",
+        "bound_relax_factor", "bound_push", "bound_frac", "warm_start_init_point", "warm_start_bound_push",
+        "warm_start_bound_frac", "warm_start_mult_bound_push", "constr_mult_init_max", "bound_mult_init_val",
+        "mumps_pivot_order", "mumps_mem_percent", "mumps_scaling", "mumps_permuting_scaling")}}
+
+
+def _ipopt_options(options: dict) -> dict | None:
+    """IPOPT's own options among CasADi ``nlpsol`` ``options`` (``ipopt.NAME`` keys and a nested ``"ipopt"``
+    dictionary), by name; None when they cannot be read as such."""
+    out = {}
+    for key, value in options.items():
+        if key == "ipopt":
+            if not isinstance(value, dict):
+                return None
+            out.update(value)
+        elif isinstance(key, str) and key.startswith("ipopt."):
+            out[key[len("ipopt."):]] = value
+    return out
 
 
 def ipopt_certifies_minimum(stats: dict, options: dict, step_tol: float) -> bool:
@@ -117,24 +141,33 @@ def ipopt_certifies_minimum(stats: dict, options: dict, step_tol: float) -> bool
     row rank) by Sylvester's law, and for ``dc > 0`` (``J`` rank-deficient) because ``W + J'J / dc`` is then
     positive definite, which certifies it (Finsler's lemma) -- the question :func:`check_stability` answers.
 
-    So: a successful solve (``Solve_Succeeded``) with the exact Hessian and MUMPS's inertia (IPOPT's
-    defaults; ``neg_curv_test_tol`` 0) whose last step needed no ``dw`` (``stats["iterations"]
-    ["regularization_size"]``) and moved the state by at most ``step_tol`` (``d_norm``): that factorisation
-    was made at the state before the last step, this close to the one returned. False otherwise (no step
-    taken, a quasi-Newton Hessian, another option), when :func:`check_stability` has to answer.
+    So: a successful solve (``Solve_Succeeded``) under IPOPT options that keep that test (the exact Hessian,
+    MUMPS's inertia: see ``_IPOPT_ALLOWED``; ``options`` as given to ``nlpsol``) whose last iteration took
+    the full step (``alpha_pr`` 1) without ``dw`` (``stats["iterations"]["regularization_size"]``) and moved
+    the state by at most ``step_tol`` (``d_norm``): that factorisation was made at the state before the last
+    step, this close to the one returned. False otherwise (no step taken, a quasi-Newton or constant
+    Hessian, an unknown option), when :func:`check_stability` has to answer.
+
+    The factorisation is IPOPT's: a state within about ``step_tol`` times the Hessian's rate of change of a
+    zero curvature (at the edge of buckling) is not told apart as :func:`check_stability` does.
     """
     if not stats.get("success") or stats.get("return_status") != "Solve_Succeeded":
         return False
-    for key, default in _IPOPT_DEFAULTS.items():
-        if options.get(key, default) != default:
+    opts = _ipopt_options(options)
+    if opts is None:
+        return False
+    for key, value in opts.items():
+        if key not in _IPOPT_ALLOWED:
             return False
-    if options.get("ipopt.fixed_variable_treatment", "make_parameter") not in _FIXED_AS_PARAMETERS:
-        return False
+        allowed = _IPOPT_ALLOWED[key]
+        if allowed is not None and value not in allowed:
+            return False
     it = stats.get("iterations") or {}
-    rg, dn = it.get("regularization_size"), it.get("d_norm")
-    if not rg or not dn or len(rg) < 2 or len(dn) < 2:  # no step: no factorisation
+    rg, dn, ap = it.get("regularization_size"), it.get("d_norm"), it.get("alpha_pr")
+    if not rg or not dn or not ap or min(len(rg), len(dn), len(ap)) < 2:  # no step: no factorisation
         return False
-    return float(rg[-1]) == 0.0 and bool(np.isfinite(dn[-1])) and float(dn[-1]) <= step_tol
+    return float(rg[-1]) == 0.0 and float(ap[-1]) == 1.0 and bool(np.isfinite(dn[-1])) and \
+        float(dn[-1]) <= step_tol
 
 
 def certified_minimum() -> StabilityCheck:

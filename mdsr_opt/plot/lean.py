@@ -24,7 +24,9 @@ def _no_table(artist) -> str:
 @contextlib.contextmanager
 def without_property_docs():
     """Within the block, the matplotlib artist classes being defined (imported) get a one-line note where
-    their property tables would be (``matplotlib.artist.kwdoc``, swapped for the block). Nothing changes
+    their property tables would be (``matplotlib.artist.kwdoc``, swapped for the block); so do, for the rest
+    of the process, docstrings that substitute a table made within it (``%(Line2D:kwdoc)s``, kept by
+    matplotlib once made). Nothing changes
     when ``matplotlib.artist`` was imported already (its classes have their tables: an interactive user's
     process keeps them). Only docstrings are affected: drawing, setters and their signatures are as they
     were.
