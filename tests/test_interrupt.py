@@ -161,3 +161,33 @@ def test_sigint_during_a_design_raises_keyboard_interrupt_promptly():
     assert "returned" not in out, out
     assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
     assert elapsed < 5.0, f"exit took {elapsed:.2f} s after SIGINT"
+
+
+def test_a_requested_stop_is_raised_when_a_solve_returns_in_that_thread_only():
+    """core.guards.request_stop: a time budget set from another thread stops the run at the end of its
+    next solve (an asynchronous exception alone can be swallowed inside a solver's Python callback)."""
+    import threading
+
+    from mdsr_opt.core.guards import cancel_stop, interruptible, request_stop
+
+    class Budget(BaseException):
+        pass
+
+    me = threading.get_ident()
+    request_stop(me + 1, Budget)  # another thread's request
+    try:
+        with interruptible():
+            pass
+        request_stop(me, Budget)
+        with pytest.raises(Budget, match="stop requested"):
+            with interruptible():
+                pass
+        with pytest.raises(Budget):  # also when the solve itself failed
+            with interruptible():
+                raise RuntimeError("evaluation failed")
+        cancel_stop(me)
+        with interruptible():
+            pass
+    finally:
+        cancel_stop(me)
+        cancel_stop(me + 1)

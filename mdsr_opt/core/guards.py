@@ -10,7 +10,29 @@ import sys
 import tempfile
 import threading
 
-__all__ = ["interruptible", "quiet_stdout", "captured_stdout"]
+__all__ = ["interruptible", "quiet_stdout", "captured_stdout", "request_stop", "cancel_stop"]
+
+#: thread id -> the exception :func:`interruptible` raises when a solve in that thread returns
+_STOPS: dict[int, type] = {}
+
+
+def request_stop(thread_id: int, exc_type: type) -> None:
+    """Make the next solve of thread ``thread_id`` that returns inside :func:`interruptible` raise
+    ``exc_type`` (until :func:`cancel_stop`): a time budget set from another thread. An asynchronous exception
+    alone can land in a solver's Python callback, where CasADi turns it into a failed evaluation that load
+    stepping takes for a failed step."""
+    _STOPS[int(thread_id)] = exc_type
+
+
+def cancel_stop(thread_id: int) -> None:
+    """Withdraw :func:`request_stop` for thread ``thread_id``."""
+    _STOPS.pop(int(thread_id), None)
+
+
+def _raise_requested_stop() -> None:
+    exc_type = _STOPS.get(threading.get_ident())
+    if exc_type is not None:
+        raise exc_type("stop requested during a solve")
 
 
 @contextlib.contextmanager
@@ -50,6 +72,7 @@ def interruptible():
     prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
     if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
         yield
+        _raise_requested_stop()
         return
     caught: list[BaseException] = []
 
@@ -72,11 +95,13 @@ def interruptible():
     except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
         if caught:
             raise recorded() from exc
+        _raise_requested_stop()
         raise
     finally:
         signal.signal(signal.SIGINT, prev)
     if caught:
         raise recorded()
+    _raise_requested_stop()
 
 
 @contextlib.contextmanager
