@@ -191,3 +191,61 @@ def test_a_requested_stop_is_raised_when_a_solve_returns_in_that_thread_only():
     finally:
         cancel_stop(me)
         cancel_stop(me + 1)
+
+
+def test_a_requested_stop_replaces_a_failed_solve_in_a_worker_thread_too():
+    """Review finding: off the main thread (Dask's workers) a solve that failed because of the stop stayed a
+    RuntimeError, which a caller could swallow."""
+    import threading
+
+    from mdsr_opt.core.guards import cancel_stop, interruptible, request_stop
+
+    class Budget(BaseException):
+        pass
+
+    seen = []
+
+    def work():
+        me = threading.get_ident()
+        request_stop(me, Budget)
+        try:
+            with interruptible():
+                raise RuntimeError("evaluation failed")
+        except BaseException as exc:  # noqa: BLE001 - what reached the caller
+            seen.append(type(exc))
+        finally:
+            cancel_stop(me)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert seen == [Budget]
+
+
+def test_a_run_whose_deadline_fires_leaves_no_stop_for_the_next_run_on_its_thread(monkeypatch):
+    """Review finding: the budget's RunTimeout can be raised on the first line of the deadline's __exit__,
+    before it withdrew the stop; every later run on the thread then failed at its first solve. Simulated by
+    an __exit__ that raises first; the run is a time-out and the next one is unaffected."""
+    import threading
+
+    from mdsr_opt.core import guards
+    from mdsr_opt.studies import runs
+    from mdsr_opt.studies.spec import Study
+
+    real_exit = runs._Deadline.__exit__
+
+    def exit_interrupted(self, *exc):
+        real_exit(self, *exc)
+        guards.request_stop(self.tid, runs.RunTimeout)  # as if fired before the withdrawal
+        self.fired = True
+        raise runs.RunTimeout()
+
+    runs_, _refs, _skipped = Study("t", "stop", ("strip-stretch",), (300,), methods=("ipopt",)).plan()
+    spec = runs_[0]
+    monkeypatch.setattr(runs._Deadline, "__exit__", exit_interrupted)
+    first = runs.execute_run(spec)
+    assert first.row["failure"] == "time-out"
+    monkeypatch.setattr(runs._Deadline, "__exit__", real_exit)
+    assert threading.get_ident() not in guards._STOPS
+    second = runs.execute_run(spec)
+    assert second.row["success"], second.row["status"]

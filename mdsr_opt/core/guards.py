@@ -71,7 +71,11 @@ def interruptible():
     """
     prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
     if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
-        yield
+        try:
+            yield
+        except Exception:  # a failed solve: a requested stop is what stopped it
+            _raise_requested_stop()
+            raise
         _raise_requested_stop()
         return
     caught: list[BaseException] = []

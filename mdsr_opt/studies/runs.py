@@ -253,6 +253,8 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
         else:
             fields.update(status=f"{type(exc).__name__}: {exc}".replace("\n", " ")[:300], failure="error",
                           success=False)
+    finally:  # here, not in the deadline's __exit__: its RunTimeout can be raised on that method's first line
+        cancel_stop(threading.get_ident())
     from ..scenes.rundir import check_interrupt
 
     check_interrupt()  # a Ctrl-C that a solver turned into a failed solve stops the study, never a failed row
