@@ -65,10 +65,12 @@ class StabilityCheck:
     curvature : float or None
         ``d' H d / d' d`` along ``direction`` (in the units of ``H``).
     method : str
-        ``"ldl-inertia"`` (one factorisation), ``"ldl-inertia+finsler"`` (constrained), with the prefix
-        ``"shifted-"`` when the factorisation broke down (exactly singular: two factorisations shifted by
-        ``+-tau``) and the suffix ``"-uncertified"`` when a constrained state stayed indefinite for every
-        ``rho`` tried without a tangent direction of negative curvature (reported as not stable).
+        ``"ldl-inertia"`` (one factorisation), ``"kkt-inertia"`` (constrained: one factorisation of the KKT
+        matrix, when it shows a stable state), ``"ldl-inertia+finsler"`` (constrained, otherwise), with the
+        prefix ``"shifted-"`` when the factorisation broke down (exactly singular: two factorisations shifted
+        by ``+-tau``) and the suffix ``"-uncertified"`` when a constrained state stayed indefinite for every
+        ``rho`` tried without a tangent direction of negative curvature (reported as not stable); or
+        ``"ipopt-inertia"``: the IPOPT solve that reached the state certified it (:func:`certified_minimum`).
     time : float
         Seconds spent.
     """
