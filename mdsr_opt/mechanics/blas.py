@@ -51,9 +51,10 @@ def _casadi_copies(folder: str) -> list[str]:
 
 def _mapped(paths: list[str]) -> list[str]:
     """Those of ``paths`` mapped into this process (Linux's ``/proc/self/maps``; elsewhere none)."""
+    names = {os.path.basename(p) for p in paths}
     try:
-        with open("/proc/self/maps") as f:
-            fields = [line.split(None, 5) for line in f]
+        with open("/proc/self/maps") as f:  # only the lines of these files' names are resolved
+            fields = [line.split(None, 5) for line in f if any(n in line for n in names)]
     except OSError:
         return []
     real = {os.path.realpath(f[5].strip()) for f in fields if len(f) == 6}

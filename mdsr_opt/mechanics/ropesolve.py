@@ -109,10 +109,14 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
     followed by the equality form, whose answer replaces it only when it succeeds with no rope pushing."""
     solvers, build = {}, [0.0]
 
+    def options_for(multipliers: bool) -> dict:
+        """The options of :func:`solver_for`'s solver (the caller's win over WARM_MULTIPLIERS)."""
+        return dict(WARM_MULTIPLIERS, **opts) if multipliers else opts
+
     def solver_for(multipliers: bool):
         """The NLP's solver; with ``multipliers``, IPOPT's that starts from given constraint multipliers."""
         if multipliers not in solvers:
-            o = dict(WARM_MULTIPLIERS, **opts) if multipliers else opts  # the caller's options win
+            o = options_for(multipliers)
             solvers[multipliers], bt = cmodel.solver(plugin + ("-symbolic" if symbolic else ""), o,
                                                      _constrained_factory(plugin, o, symbolic))
             build[0] += bt
@@ -146,7 +150,7 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
         # with no tension could also shorten: IPOPT's tangent space would be too small): its inertia test
         # certifies the state a strict minimum or leaves the question to the stability check
         cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and bool(np.all(lam[:nt] > push_tol)) and \
-            ipopt_certifies_minimum(st, dict(WARM_MULTIPLIERS, **opts) if warm else opts, step_tol)
+            ipopt_certifies_minimum(st, options_for(warm), step_tol)
         return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
             bool(st.get("success", False)), lam, cert
 
