@@ -243,12 +243,13 @@ def test_load_stepping_moves_the_rope_targets():
     assert np.abs(res.achieved - a).max() < 1e-6
     assert res.min_J > 0
     # a cap too tight to finish: the failure is reported, and the last accepted state has its ropes at
-    # exactly s * a for the last accepted fraction s
+    # s * a for the last accepted fraction s (solved to the intermediate steps' tolerance, whose rope rows
+    # IPOPT meets to its constr_viol_tol, 1e-4 of a rope's rest length; a step of 1/16 is 0.0375 here)
     bad = solve_internal(mesh, MAT, mus, a, max_iter=2, min_step=1 / 16)
     assert not bad.success and "stalled" in bad.status
     s = bad.steps[-1]
     assert 0 < s < 1
-    assert np.abs(bad.achieved - s * a).max() < 1e-6
+    assert np.abs(bad.achieved - s * a).max() < 1e-4
 
 
 def test_the_rope_predictor_never_starts_farther_from_the_ropes_targets():
