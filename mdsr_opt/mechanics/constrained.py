@@ -425,8 +425,9 @@ class ConstrainedModel:
             if Ja.shape[0] == 0:
                 break
             A = (Ja @ Ja.T).tocsc()
-            try:
-                la = spla.splu(A).solve(-(Ja @ g))
+            try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
+                la = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                               options={"SymmetricMode": True}).solve(-(Ja @ g))
             except RuntimeError:
                 la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
             lam[:] = 0.0

@@ -17,7 +17,7 @@ from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
 from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .drags import drag_path
-from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result
+from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result, min_jacobian
 from .model import get_model, spring_parameters
 from .result import EquilibriumResult
 from .stability import check_stability
@@ -171,7 +171,7 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
 
     A state of the body in any pose (e.g. an earlier result, aligned to rest) starts a solve from here
     without the shear that setting the three gauge coordinates alone would make."""
-    if not np.all(np.isfinite(x)) or mesh.jacobians(x).min() <= 0:
+    if not np.all(np.isfinite(x)) or min_jacobian(mesh, x) <= 0:
         return None
     gi, _gi1, gj = gauge_coordinates(mesh)
     i, j, comp = gi // 2, gj // 2, gj % 2
