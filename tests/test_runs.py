@@ -479,3 +479,39 @@ def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
     assert alive == []
     assert [p.name for p in out.rglob(".tmp-*")] == []
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"
+
+
+def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, monkeypatch):
+    """The run's longest job (an animation's frames and GIF) goes out right after the design of the last
+    case it shows, ahead of that case's own figure jobs; the summary keeps the scene's order of animations."""
+    import numpy as np
+
+    from mdsr_opt import Mesh, NeoHookean
+    from mdsr_opt.body.muscles import Muscle
+    from mdsr_opt.core.background import BackgroundWriter
+    from mdsr_opt.scenes import runscene
+    from mdsr_opt.scenes.scene import Animation, Case, Scene
+
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    row = lambda y: Muscle([int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == y])  # noqa: E731
+    scene = Scene(name="s", mesh=mesh, material=NeoHookean(1.0, 0.3), muscles=(row(0.0), row(1.0)),
+                  cases=(Case("a", contractions=[0.1, 0.0]), Case("b", contractions=[0.0, 0.1])),
+                  animations=(Animation("both", (("rest", 1.0), ("a", 1.0), ("b", 1.0)), frames_per_step=2),
+                              Animation("first", (("rest", 1.0), ("a", 1.0)), frames_per_step=2)))
+    sent = []
+    real = BackgroundWriter.submit
+
+    def submit(self, fn, *args, **kwargs):
+        name = getattr(fn, "__name__", None) or fn.func.__name__
+        sent.append((name, args[1].name if name == "_animation_job" else None))
+        return real(self, fn, *args, **kwargs)
+
+    monkeypatch.setattr(BackgroundWriter, "submit", submit)
+    rep = runscene.run_scene(scene, tmp_path / "out", log=None, photos=False, background=False)
+    assert rep.success
+    shapes = [i for i, (n, _) in enumerate(sent) if n == "_write_shapes"]  # case a's, then case b's
+    first, both = sent.index(("_animation_job", "first")), sent.index(("_animation_job", "both"))
+    assert len(shapes) == 2 and shapes[0] > first and shapes[0] < both < shapes[1]
+    assert list(rep.animations) == ["both", "first"]
+    assert all(rep.animations[k]["success"] and rep.animations[k]["gif"] == f"{k}.gif" for k in ("both", "first"))

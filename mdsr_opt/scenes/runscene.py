@@ -165,12 +165,25 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
         runs: dict[str, CaseRun] = {}
         written: dict[str, list[list[str]]] = {}
+        # an animation (its frames' forward solves, GIF and JSON) is one job, the run's longest: it is sent
+        # as soon as the last of its cases is designed, ahead of that case's figure and photograph jobs, so
+        # that it runs beside them instead of ending the run alone on one core
+        anim_out: dict[str, dict] = {}
+        waiting = [a for a in scene.animations if all(c in names for c in a.cases)] if animations else []
+        for anim in waiting:
+            anim_out[anim.name] = {}  # filled in when its job is done (the summary keeps the scene's order)
         for i, cname in enumerate(names):
             prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
             check_interrupt()
             # the photograph stage (measure_case) and the case's files are background jobs: the report's
             # photo entry, the files and the stage's messages arrive at bg.wait()
-            run = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+            for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
+                waiting.remove(anim)
+                designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
+                           if runs[c].design is not None}
+                bg.submit(_animation_job, scene, anim, designs, out, figures,
+                          on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
             parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
             written[cname] = [[] for _ in range(2)]
             if parts:
@@ -190,19 +203,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                           on_done=functools.partial(_photo_done, run, written[cname][1], say))
             elif parts:
                 bg.submit(parts[1], on_done=written[cname][1].extend)
-            runs[cname] = run
             advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
-        anim_out: dict[str, dict] = {}
-        if animations:
-            for anim in scene.animations:
-                if any(c not in runs for c in anim.cases):
-                    continue
-                designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
-                           if runs[c].design is not None}
-                # the frames' forward solves, the GIF and the JSON are one job, beside the gait's solves
-                anim_out[anim.name] = {}  # filled in when the job is done (the summary's order kept)
-                bg.submit(_animation_job, scene, anim, designs, out, figures,
-                          on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
         if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
             gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg)
             if gait_info is not None:
