@@ -305,6 +305,9 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
     assert np.abs(g.reshape(-1)[gauge] - mesh.points.reshape(-1)[gauge]).max() < 1e-12
     assert align(g, moved).difference < 1e-12  # congruent
     assert in_gauge_frame(mesh, mesh.points * [-1.0, 1.0]) is None  # a reflection inverts every element
+    for bad in (np.vstack([moved, moved[:1]]), moved.reshape(-1)):  # one node too many; flattened
+        with pytest.raises(ValueError, match=r"x must have shape"):
+            in_gauge_frame(mesh, bad)
     # a state that cannot start a solve is verified from rest: a saddle guess still fails, from rest
     folded = DesignResult.from_dict(res.to_dict())
     folded.x = res.x.copy()

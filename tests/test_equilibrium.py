@@ -248,7 +248,7 @@ def test_numeric_evaluation_matches_the_symbolic_model(material):
 
 def test_load_steps_before_the_last_use_the_looser_tolerance_and_reach_the_same_state(monkeypatch):
     """A 32 x 8 strip with 4 grid-row ropes at 35 %: two load steps. The first is solved to
-    loadsteps.INTERMEDIATE_TOL, the last to the solve's own tolerance; the equilibrium is the one every
+    loadsteps.INTERNAL_INTERMEDIATE_TOL, the last to the solve's own tolerance; the equilibrium is the one every
     step at the solve's tolerance reaches."""
     import mdsr_opt.mechanics.loadsteps as loadsteps
 
@@ -270,9 +270,32 @@ def test_load_steps_before_the_last_use_the_looser_tolerance_and_reach_the_same_
     monkeypatch.setattr(loadsteps, "minimize", spy)
     res = solve_internal(mesh, NeoHookean(1.0, 0.3), mus, [0.35] * 4, tol=1e-10, align_to_rest=False)
     assert res.success and res.steps == [0.5, 1.0]
-    assert tols == [loadsteps.INTERMEDIATE_TOL, 1e-10] and loadsteps.INTERMEDIATE_TOL > 1e-10
-    monkeypatch.setattr(loadsteps, "INTERMEDIATE_TOL", 0.0)  # every step at 1e-10
+    assert tols == [loadsteps.INTERNAL_INTERMEDIATE_TOL, 1e-10] and loadsteps.INTERNAL_INTERMEDIATE_TOL > 1e-10
+    monkeypatch.setattr(loadsteps, "INTERNAL_INTERMEDIATE_TOL", 0.0)  # every step at 1e-10
     ref = solve_internal(mesh, NeoHookean(1.0, 0.3), mus, [0.35] * 4, tol=1e-10, align_to_rest=False)
     assert ref.success and ref.steps == [0.5, 1.0]
     assert abs(res.energy - ref.energy) <= 1e-10 * abs(ref.energy)
     assert np.abs(res.x - ref.x).max() <= 1e-8 * mesh.size
+
+
+def test_external_load_steps_before_the_last_keep_the_tighter_intermediate_tolerance(monkeypatch):
+    """External driving solves its steps before the last to loadsteps.INTERMEDIATE_TOL (1e-6), not to the
+    internal driving's looser one: a drag through a bifurcation passes its states on the unstable branch."""
+    import mdsr_opt.mechanics.loadsteps as loadsteps
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] < 1e-9), np.flatnonzero(P[:, 0] > 4 - 1e-9)
+    tols = []
+    real = loadsteps.minimize
+
+    def spy(*args, **kw):
+        tols.append(kw["tol"])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(loadsteps, "minimize", spy)
+    drags = {int(i): (P[i, 0] + 12.0, P[i, 1]) for i in right}  # stretched to 4x: two load steps with 8 iterations
+    res = solve_external(mesh, NeoHookean(1.0, 0.3), left, drags, tol=1e-10, max_iter=8)
+    assert res.success and res.steps == [0.5, 1.0]
+    assert tols == [loadsteps.INTERMEDIATE_TOL, 1e-10]
+    assert loadsteps.INTERMEDIATE_TOL == 1e-6 and loadsteps.INTERNAL_INTERMEDIATE_TOL > loadsteps.INTERMEDIATE_TOL

@@ -55,3 +55,35 @@ def test_a_process_with_scipy_imported_first_or_a_submodule_loaded_keeps_it():
     # a lazy submodule loaded before the clone is imported stays in the clone (it costs nothing)
     loaded = _run("import numpy.ma, mdsr_opt, scipy.sparse" + _REPORT)
     assert "ma" in loaded["clone"] and "f2py" not in loaded["clone"]
+
+
+_EDITABLE_LIKE = '''
+import importlib.machinery as m, importlib.util, os, sys
+ROOT = os.path.dirname(os.path.dirname(importlib.util.find_spec("scipy").origin))
+LOADERS = [(m.ExtensionFileLoader, s) for s in m.EXTENSION_SUFFIXES] + [(m.SourceFileLoader, ".py")]
+
+class Finder:  # serves scipy as an editable install's finder does: packages' paths lead nowhere
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] != "scipy":
+            return None
+        base = os.path.join(ROOT, *name.split("."))
+        for loader, suf in LOADERS:
+            init = os.path.join(base, "__init__" + suf)
+            if os.path.isfile(init):
+                spec = importlib.util.spec_from_file_location(name, init, loader=loader(name, init),
+                                                              submodule_search_locations=["/nowhere"])
+                return spec
+            if os.path.isfile(base + suf):
+                return importlib.util.spec_from_file_location(name, base + suf, loader=loader(name, base + suf))
+        return None
+
+sys.meta_path.insert(0, Finder())
+'''
+
+
+def test_scipy_served_by_another_finder_on_the_meta_path_is_found_through_it():
+    """The finder asks the finders after it (an editable SciPy's, say), and leaves sys.meta_path alone while
+    the import system walks it: taking itself off there made the import skip the next finder."""
+    out = _run(_EDITABLE_LIKE + "import mdsr_opt, scipy.sparse" + _REPORT)
+    assert out["sparse_works"] == 3.0 and out["finders"] == 0
+    assert "numpy.f2py" not in out["loaded"]

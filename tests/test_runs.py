@@ -498,7 +498,8 @@ def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, mon
     scene = Scene(name="s", mesh=mesh, material=NeoHookean(1.0, 0.3), muscles=(row(0.0), row(1.0)),
                   cases=(Case("a", contractions=[0.1, 0.0]), Case("b", contractions=[0.0, 0.1])),
                   animations=(Animation("both", (("rest", 1.0), ("a", 1.0), ("b", 1.0)), frames_per_step=2),
-                              Animation("first", (("rest", 1.0), ("a", 1.0)), frames_per_step=2)))
+                              Animation("first", (("rest", 1.0), ("a", 1.0)), frames_per_step=2),
+                              Animation("still", (("rest", 1.0), ("rest", 1.0)), frames_per_step=1)))
     sent = []
     real = BackgroundWriter.submit
 
@@ -513,5 +514,10 @@ def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, mon
     shapes = [i for i, (n, _) in enumerate(sent) if n == "_write_shapes"]  # case a's, then case b's
     first, both = sent.index(("_animation_job", "first")), sent.index(("_animation_job", "both"))
     assert len(shapes) == 2 and shapes[0] > first and shapes[0] < both < shapes[1]
-    assert list(rep.animations) == ["both", "first"]
-    assert all(rep.animations[k]["success"] and rep.animations[k]["gif"] == f"{k}.gif" for k in ("both", "first"))
+    assert sent.index(("_animation_job", "still")) < sent.index(("_write_shapes", None))  # no case: at once
+    assert list(rep.animations) == ["both", "first", "still"]
+    assert all(rep.animations[k]["success"] and rep.animations[k]["gif"] == f"{k}.gif" for k in rep.animations)
+    # with no case run, the animation of the rest shape alone is still made
+    rest_only = runscene.run_scene(scene, tmp_path / "none", cases=[], log=None, photos=False, figures=False,
+                                   background=False)
+    assert list(rest_only.animations) == ["still"] and rest_only.animations["still"]["n_frames"] == 2

@@ -1,22 +1,22 @@
 """SciPy imported without NumPy's lazily loaded submodules.
 
 ``scipy.sparse`` (1.14 and later) imports SciPy's copy of ``array_api_compat``, whose NumPy namespace is a
-clone of ``numpy``: it runs ``from numpy import *`` and reads every name ``dir(numpy)`` lists. Since NumPy 2
-those names include submodules that NumPy loads only when first used (``numpy.f2py``, ``numpy.testing``,
-``numpy.ma``, ``numpy.polynomial``, ...), so the clone imports them all: 0.17 of the 0.46 s that
-``import mdsr_opt.cli.run`` took here, on every command's way to its first solve. None of them belongs to
-the array API, and SciPy reaches them through ``numpy`` itself, never through the clone.
+clone of ``numpy``: it imports every name of ``numpy.__all__`` and reads every name ``dir(numpy)`` lists.
+Since NumPy 2 those names include submodules that NumPy loads only when first used (``numpy.f2py``,
+``numpy.testing``, ``numpy.ma``, ``numpy.polynomial``, ...), so the clone imports them all: 0.17 of the 0.46
+s that ``import mdsr_opt.cli.run`` took here, on every command's way to its first solve. None of them
+belongs to the array API, and SciPy reaches them through ``numpy`` itself, never through the clone.
 
 :func:`install` (called when ``mdsr_opt`` is imported) puts a finder on ``sys.meta_path`` that, when that
 clone's module is imported, hides those submodules from ``numpy.__all__`` and ``dir(numpy)`` while the
 module runs, and restores both at once. Nothing else changes: NumPy still loads each submodule on first
-use, and a process that imported SciPy before ``mdsr_opt`` keeps what it has.
+use, and a process that imported SciPy before ``mdsr_opt`` keeps what it has. (While the clone's module
+runs, about 0.1 s, another thread that lists ``numpy``'s names would miss those submodules too.)
 """
 
 from __future__ import annotations
 
 import importlib.abc
-import importlib.machinery
 import sys
 
 __all__ = ["install", "LAZY_SUBMODULES", "CLONE"]
@@ -54,16 +54,25 @@ class _Loader(importlib.abc.Loader):
                 numpy.__all__ = names
             if callable(listing):
                 numpy.__dir__ = listing
+            uninstall()  # here, not in find_spec: the import system is done walking sys.meta_path
 
 
 class _Finder(importlib.abc.MetaPathFinder):
-    """Finds :data:`CLONE` the usual way and wraps its loader (once: the finder then leaves)."""
+    """Finds :data:`CLONE` with the finders after it on ``sys.meta_path`` and wraps its loader (once)."""
+
+    served = False
 
     def find_spec(self, name, path=None, target=None):
-        if name != CLONE:
+        if name != CLONE or self.served:
             return None
-        uninstall()
-        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        self.served = True  # a failed or repeated import goes the usual way
+        finders = list(sys.meta_path)
+        spec = None
+        for finder in finders[finders.index(self) + 1:] if self in finders else finders:
+            find = getattr(finder, "find_spec", None)
+            spec = find(name, path, target) if find is not None else None
+            if spec is not None:
+                break
         if spec is not None and spec.loader is not None and hasattr(spec.loader, "exec_module"):
             spec.loader = _Loader(spec.loader)
         return spec

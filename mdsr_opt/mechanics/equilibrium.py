@@ -17,7 +17,9 @@ from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
 from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .drags import drag_path
-from .loadsteps import check_common, check_mesh_material, load_continuation, initial_guess_of, equilibrium_result, min_jacobian
+from . import loadsteps
+from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
+                        min_jacobian)
 from .model import get_model, spring_parameters
 from .result import EquilibriumResult
 from .stability import check_stability
@@ -171,6 +173,9 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
 
     A state of the body in any pose (e.g. an earlier result, aligned to rest) starts a solve from here
     without the shear that setting the three gauge coordinates alone would make."""
+    x = np.asarray(x, dtype=float)
+    if x.shape != (mesh.n_nodes, 2):
+        raise ValueError(f"x must have shape ({mesh.n_nodes}, 2), got {x.shape}")
     if not np.all(np.isfinite(x)) or min_jacobian(mesh, x) <= 0:
         return None
     gi, _gi1, gj = gauge_coordinates(mesh)
@@ -309,7 +314,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     solver_model = cm if cm is not None else emodel
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
         mesh, solver_model, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step,
-        verbose, predict, settle=bool(check_stability))
+        verbose, predict, settle=bool(check_stability), intermediate_tol=loadsteps.INTERNAL_INTERMEDIATE_TOL)
     p1 = p_of(1.0)
     p_el = p_el0
     taut = np.ones(len(mus), dtype=bool)

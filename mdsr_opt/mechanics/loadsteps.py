@@ -150,13 +150,21 @@ def min_jacobian(mesh, xflat) -> float:
 
 
 #: IPOPT's tolerance for the load steps before the last, when the solve's own is tighter: their states only
-#: start the next step (the last is solved to the solve's own tolerance). Measured on 24 strips of 1k and
-#: 3k nodes with 1-8 ropes and the muscle scenes' cases on their meshes and prototypes: at tol 1e-10, 896
-#: IPOPT iterations against 914 with 1e-6 and 915 with every step at 1e-10; at tol 1e-8, 878 against 895;
-#: on 30 random layouts of 2-4 ropes on a 32 x 8 strip 293 against 302; no case took more iterations, and
-#: the equilibria agree to 1e-11 in energy. The 3k-node, 4-rope design's verification takes 6 iterations
-#: (7 with 1e-6, 8 with 1e-10)
-INTERMEDIATE_TOL = 1e-3
+#: start the next step (the last is solved to the solve's own tolerance). External driving (anchors, drags)
+#: keeps 1e-6: a drag that buckles the body passes its states along the unstable unbuckled branch, and
+#: from a loosely converged one the last step ran off along the buckling mode (on 27 buckled strips with
+#: iteration caps of 8-20, 15 solves succeeded with 1e-3 or 1e-4 against 17 with 1e-6; with the default cap
+#: all the same)
+INTERMEDIATE_TOL = 1e-6
+
+#: The same for internal driving (muscles: :func:`~mdsr_opt.solve_internal`). Measured on 24 strips of 1k
+#: and 3k nodes with 1-8 ropes and the muscle scenes' cases on their meshes and prototypes: at tol 1e-10,
+#: 896 IPOPT iterations against 914 with 1e-6 and 915 with every step at 1e-10; at tol 1e-8, 878 against
+#: 895; on 30 random layouts of 2-4 ropes on a 32 x 8 strip 293 against 302; on 36 strips squeezed by one
+#: or two ropes under iteration caps of 6-200, 545 against 664, the same successes; no case took more
+#: iterations, and the equilibria agree to 1e-11 in energy. The 3k-node, 4-rope design's verification
+#: takes 6 iterations (7 with 1e-6, 8 with 1e-10)
+INTERNAL_INTERMEDIATE_TOL = 1e-3
 
 #: iterations a load step may take before it is halved (unless it is already within 4x of ``min_step``):
 #: a 50 % cable contraction at 600 nodes spent 400 of its 473 iterations on a full-load attempt that did not
@@ -165,8 +173,11 @@ STEP_ITER_CAP = 100
 
 
 def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
-                  verbose, predict=True, settle=True):
+                  verbose, predict=True, settle=True, intermediate_tol=None):
     """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
+
+    Load steps before the last are solved to ``intermediate_tol`` (default :data:`INTERMEDIATE_TOL`) when
+    ``tol`` is tighter.
 
     With ``predict=False`` each load step starts from the current state with the fixed coordinates moved
     (no Newton predictor): the "poor first guess" of the comparison studies. At full load the state must be
@@ -174,6 +185,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
     ``settle=False`` that check is skipped. A SIGINT
     raises :class:`KeyboardInterrupt` (never a failed step)."""
     min_step = _check_min_step(min_step)
+    loose = INTERMEDIATE_TOL if intermediate_tol is None else float(intermediate_tol)
     with interruptible(), one_blas_thread():
         x = x_start.copy()
         s, ds = 0.0, 1.0
@@ -202,7 +214,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
             # instead of spending the whole budget; near min_step the whole budget (nothing shorter to try)
             cap = max_iter if ds < 4 * min_step else min(max_iter, STEP_ITER_CAP)
             out = minimize(model, p, guess, fixed, vals, backend=backend,
-                           tol=tol if s_new >= 1.0 else max(tol, INTERMEDIATE_TOL), max_iter=cap,
+                           tol=tol if s_new >= 1.0 else max(tol, loose), max_iter=cap,
                            options=options)
             iters += out.iterations
             t_solve += out.solve_time

@@ -22,7 +22,8 @@ class EquilibriumResult:
     Attributes
     ----------
     x : (n, 2) deformed node positions (the last accepted state if the solve failed: a load step before the
-        last is solved only to :data:`~mdsr_opt.mechanics.loadsteps.INTERMEDIATE_TOL` when ``tol`` is tighter).
+        last is solved only to :data:`~mdsr_opt.mechanics.loadsteps.INTERMEDIATE_TOL`, or for internal driving
+        :data:`~mdsr_opt.mechanics.loadsteps.INTERNAL_INTERMEDIATE_TOL`, when ``tol`` is tighter).
     energy : total energy at ``x`` (elastic plus muscle springs).
     elastic_energy : strain energy of the body alone.
     success : solver converged, residual small and no element inverted.

@@ -344,7 +344,7 @@ def warm_up(modules=("design", "photos", "scenes")) -> None:
 
     for name in modules:
         importlib.import_module(f"{__package__}.{name}")
-    importlib.import_module("cv2")  # the PNG encoder (_write_png): 0.07-0.09 s in each job that imported it itself
+    importlib.import_module("cv2")  # the PNG encoder (_write_png): 0.07-0.09 s in each job importing it
     fig, ax = plt.subplots(figsize=(2, 1.5))
     try:
         lc = LineCollection([[(0, 0), (1, 1)]], array=np.array([0.5]), cmap="coolwarm")

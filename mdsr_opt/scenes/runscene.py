@@ -172,18 +172,23 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
         waiting = [a for a in scene.animations if all(c in names for c in a.cases)] if animations else []
         for anim in waiting:
             anim_out[anim.name] = {}  # filled in when its job is done (the summary keeps the scene's order)
-        for i, cname in enumerate(names):
-            prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
-            check_interrupt()
-            # the photograph stage (measure_case) and the case's files are background jobs: the report's
-            # photo entry, the files and the stage's messages arrive at bg.wait()
-            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+
+        def send_animations():  # those whose cases have all run (an animation of the rest shape: at once)
             for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
                 waiting.remove(anim)
                 designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
                            if runs[c].design is not None}
                 bg.submit(_animation_job, scene, anim, designs, out, figures,
                           on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
+
+        send_animations()
+        for i, cname in enumerate(names):
+            prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+            check_interrupt()
+            # the photograph stage (measure_case) and the case's files are background jobs: the report's
+            # photo entry, the files and the stage's messages arrive at bg.wait()
+            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+            send_animations()
             parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
             written[cname] = [[] for _ in range(2)]
             if parts:
