@@ -246,6 +246,21 @@ def test_numeric_evaluation_matches_the_symbolic_model(material):
     assert get_model(mesh, material).is_numeric  # the default path really is the numeric one here
 
 
+def _step_tolerances(monkeypatch) -> list:
+    """The tolerance of every load step's solve, in order, as load stepping asks for it."""
+    import mdsr_opt.mechanics.loadsteps as loadsteps
+
+    tols = []
+    real = loadsteps.minimize
+
+    def spy(*args, **kw):
+        tols.append(kw["tol"])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(loadsteps, "minimize", spy)
+    return tols
+
+
 def test_load_steps_before_the_last_use_the_looser_tolerance_and_reach_the_same_state(monkeypatch):
     """A 32 x 8 strip with 4 grid-row ropes at 35 %: two load steps. The first is solved to
     loadsteps.INTERNAL_INTERMEDIATE_TOL, the last to the solve's own tolerance; the equilibrium is the one every
@@ -260,14 +275,7 @@ def test_load_steps_before_the_last_use_the_looser_tolerance_and_reach_the_same_
         return Muscle([j * (nx + 1) + i for i in range(i0, i1 + 1)])
 
     mus = [row(0, 1, h), row(ny, h, nx - 1), row(0, h, nx - 1), row(ny, 1, h)]
-    tols = []
-    real = loadsteps.minimize
-
-    def spy(*args, **kw):
-        tols.append(kw["tol"])
-        return real(*args, **kw)
-
-    monkeypatch.setattr(loadsteps, "minimize", spy)
+    tols = _step_tolerances(monkeypatch)
     res = solve_internal(mesh, NeoHookean(1.0, 0.3), mus, [0.35] * 4, tol=1e-10, align_to_rest=False)
     assert res.success and res.steps == [0.5, 1.0]
     assert tols == [loadsteps.INTERNAL_INTERMEDIATE_TOL, 1e-10] and loadsteps.INTERNAL_INTERMEDIATE_TOL > 1e-10
@@ -286,14 +294,7 @@ def test_external_load_steps_before_the_last_keep_the_tighter_intermediate_toler
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     P = mesh.points
     left, right = np.flatnonzero(P[:, 0] < 1e-9), np.flatnonzero(P[:, 0] > 4 - 1e-9)
-    tols = []
-    real = loadsteps.minimize
-
-    def spy(*args, **kw):
-        tols.append(kw["tol"])
-        return real(*args, **kw)
-
-    monkeypatch.setattr(loadsteps, "minimize", spy)
+    tols = _step_tolerances(monkeypatch)
     drags = {int(i): (P[i, 0] + 12.0, P[i, 1]) for i in right}  # stretched to 4x: two load steps with 8 iterations
     res = solve_external(mesh, NeoHookean(1.0, 0.3), left, drags, tol=1e-10, max_iter=8)
     assert res.success and res.steps == [0.5, 1.0]
