@@ -34,7 +34,7 @@ import numpy as np
 
 from ..core.guards import captured_stdout, interruptible, quiet_stdout
 from . import ropesolve
-from .result import MinimizeOutcome
+from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 
 __all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
@@ -88,8 +88,7 @@ def _solve_casadi(plugin, opts, model, p, x0, fixed, values, symbolic: bool = Fa
         sol = solver(x0=x0, p=p, lbx=lbx, ubx=ubx)
     solve_time = time.perf_counter() - t0
     st = solver.stats()
-    status = str(st.get("return_status", st.get("unified_return_status", "unknown")))
-    iters = int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1] if st.get("iterations") else 0))
+    status, iters = solver_status(st)
     # no constraints, only pinned coordinates: IPOPT's inertia test is the stability check's question
     cert = plugin == "ipopt" and ipopt_certifies_minimum(st, opts, STEP_RTOL * model.mesh.size)
     return MinimizeOutcome(np.asarray(sol["x"]).ravel(), bool(st.get("success", False)), status, iters,

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 
-__all__ = ['SolverFailure', 'EquilibriumResult', 'MinimizeOutcome']
+__all__ = ['SolverFailure', 'EquilibriumResult', 'MinimizeOutcome', 'solver_status']
 
 
 class SolverFailure(RuntimeError):
@@ -168,3 +168,11 @@ class MinimizeOutcome:
         from ..core.results import load_fields
 
         return load_fields(cls, path, "minimize")
+
+
+def solver_status(stats: dict) -> tuple[str, int]:
+    """``(return status, iterations)`` from a CasADi ``nlpsol``'s ``stats()``: IPOPT's ``return_status`` and
+    ``iter_count``, or another plugin's ``unified_return_status`` and last ``iterations["iter"]``."""
+    status = str(stats.get("return_status", stats.get("unified_return_status", "unknown")))
+    its = stats.get("iterations")
+    return status, int(stats.get("iter_count", its.get("iter", [0])[-1] if its else 0))

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.guards import interruptible, quiet_stdout
-from .result import MinimizeOutcome
+from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 
 __all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", "solve_constrained"]
@@ -143,16 +143,15 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
             sol = solver(x0=start, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **kw)
         clock["t"] += time.perf_counter() - t0
         st = solver.stats()
-        clock["it"] += int(st.get("iter_count", st.get("iterations", {}).get("iter", [0])[-1]
-                                  if st.get("iterations") else 0))
+        status, its = solver_status(st)
+        clock["it"] += its
         lam = np.asarray(sol["lam_g"]).ravel() * cmodel.row_scale  # physical multipliers
         # every row an equality (no slack variable's barrier in IPOPT's matrix) and every rope pulling (a rope
         # with no tension could also shorten: IPOPT's tangent space would be too small): its inertia test
         # certifies the state a strict minimum or leaves the question to the stability check
         cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and bool(np.all(lam[:nt] > push_tol)) and \
             ipopt_certifies_minimum(st, options_for(warm), step_tol)
-        return sol, str(st.get("return_status", st.get("unified_return_status", "unknown"))), \
-            bool(st.get("success", False)), lam, cert
+        return sol, status, bool(st.get("success", False)), lam, cert
 
     def pushing(lam, held):
         return np.broadcast_to(held, (nt,)) & (lam[:nt] < -push_tol)
