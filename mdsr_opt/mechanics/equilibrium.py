@@ -19,7 +19,7 @@ from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .drags import drag_path
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
-                        min_jacobian)
+                        upright)
 from .model import get_model, spring_parameters
 from .result import EquilibriumResult
 from .stability import check_stability
@@ -176,7 +176,7 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
     x = np.asarray(x, dtype=float)
     if x.shape != (mesh.n_nodes, 2):
         raise ValueError(f"x must have shape ({mesh.n_nodes}, 2), got {x.shape}")
-    if not np.all(np.isfinite(x)) or min_jacobian(mesh, x) <= 0:
+    if not upright(mesh, x):
         return None
     gi, _gi1, gj = gauge_coordinates(mesh)
     i, j, comp = gi // 2, gj // 2, gj % 2

@@ -149,6 +149,12 @@ def min_jacobian(mesh, xflat) -> float:
     return float((det_ds / (2.0 * mesh.areas)).min())
 
 
+def upright(mesh, xflat) -> bool:
+    """Every coordinate of ``xflat`` ((2n,) or (n, 2)) finite and every element upright (:func:`min_jacobian`
+    > 0): a state with an energy, from which a solve can start."""
+    return bool(np.all(np.isfinite(xflat))) and min_jacobian(mesh, xflat) > 0.0
+
+
 #: IPOPT's tolerance for the load steps before the last, when the solve's own is tighter: their states only
 #: start the next step (the last is solved to the solve's own tolerance). External driving (anchors, drags)
 #: keeps 1e-6: a drag that buckles the body passes its states along the unstable unbuckled branch, and
@@ -220,7 +226,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
             t_solve += out.solve_time
             t_build += out.build_time
             status = out.status
-            if out.success and np.all(np.isfinite(out.x)) and min_jacobian(mesh, out.x) > 0.0:
+            if out.success and upright(mesh, out.x):
                 x, s, certified = out.x, s_new, out.certified
                 steps.append(s)
                 if verbose:
@@ -317,7 +323,7 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
             break
         out = minimize(model, p, y, fixed, values, backend=backend, tol=tol, max_iter=max_iter, options=options)
         iters += out.iterations
-        if not (out.success and np.all(np.isfinite(out.x)) and min_jacobian(mesh, out.x) > 0.0):
+        if not (out.success and upright(mesh, out.x)):
             scale /= 2  # keep x and try a smaller kick
             continue
         if verbose:

@@ -333,8 +333,9 @@ def close_figure(fig) -> None:
 
 def warm_up(modules=("design", "photos", "scenes")) -> None:
     """Pay matplotlib's first-use costs now, in this process: import the figure modules (``modules`` of
-    this package) and OpenCV (the PNG encoder), and draw one small figure with what the run's figures hold (tick labels, a title, a
-    colour bar with a mathtext label, a legend) to fill the font, text-size and mathtext caches.
+    this package) and OpenCV (the PNG encoder), and draw one small figure with what the run's figures hold
+    (tick labels, a title, a colour bar with a mathtext label, a legend) to fill the font, text-size and
+    mathtext caches.
 
     A process that forks figure jobs (:class:`~mdsr_opt.core.background.BackgroundWriter`) calls it once
     before the first fork: each child starts from the parent's memory, so without it every child paid these

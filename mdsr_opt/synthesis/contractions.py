@@ -16,7 +16,7 @@ from ..core.checks import positive_float
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
-from ..mechanics.loadsteps import min_jacobian
+from ..mechanics.loadsteps import upright
 from .nlp import run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, report_muscles
@@ -240,7 +240,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
-    if not np.all(np.isfinite(res.x)) or min_jacobian(mesh, res.x) <= 0:
+    if not upright(mesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
     if verify:

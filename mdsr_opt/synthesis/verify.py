@@ -12,7 +12,7 @@ from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array
 from ..mechanics.align import align, node_weights
 from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_internal
-from ..mechanics.loadsteps import check_mesh_material, min_jacobian
+from ..mechanics.loadsteps import check_mesh_material, upright
 from ..mechanics.stability import check_stability
 from .problem import DesignProblem
 from .results import DesignResult, Verification
@@ -149,7 +149,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     fdiff = align(fx, y, w).difference
     # the design's own state, expressed in the gauge frame used by the model
     xg = x.reshape(-1)
-    inverted = not np.all(np.isfinite(x)) or min_jacobian(mesh, x) <= 0
+    inverted = not upright(mesh, x)
     if inverted:  # no energy there (log det F): not a minimum, and no Hessian to factorise
         pd, lam, residual = False, float("nan"), float("nan")
     elif fwd.success and gap <= SAME_STATE_RTOL * mesh.size and not lowest:
