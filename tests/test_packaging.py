@@ -9,6 +9,7 @@ import io
 import logging
 import os
 import shutil
+import site
 import subprocess
 import sys
 import zipfile
@@ -67,13 +68,21 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
                    if line.startswith("Requires-Dist:"))  # dask only as an extra
     assert any(n.endswith("licenses/LICENSE") for n in names)
 
-    # a fresh virtual environment (system packages give casadi & co. without downloading), used from a
-    # folder that is not the checkout; --ignore-installed because CI has already installed this very
-    # version into the system site-packages, which pip would otherwise call "already satisfied"
+    # a fresh virtual environment that sees the dependencies of the interpreter running the tests (casadi & co.
+    # without downloading), used from a folder that is not the checkout. `--system-site-packages` would show
+    # the BASE interpreter's packages, which lack them when the suite itself runs inside a venv; so the new
+    # venv gets a .pth file naming this interpreter's site-packages folders (appended after its own, and
+    # without running their .pth files, so an editable install of the checkout stays invisible).
+    # --ignore-installed because CI has already installed this very version, which pip would otherwise call
+    # "already satisfied"
     venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)], check=True, timeout=120)
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     bindir = venv / ("Scripts" if os.name == "nt" else "bin")
     py = bindir / "python"
+    purelib = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    outer = [p for p in dict.fromkeys(site.getsitepackages() + [site.getusersitepackages()]) if Path(p).is_dir()]
+    Path(purelib, "mdsr_test_outer_site.pth").write_text("\n".join(outer) + "\n")
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-index", "--no-deps",
                     "--ignore-installed", str(wheel)], check=True,
                    env=_clean_env(), timeout=300)
