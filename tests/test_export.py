@@ -108,10 +108,10 @@ def test_units_go_into_every_file(tmp_path):
 
 def test_dxf_labels_keep_any_name_on_one_line(tmp_path):
     """A name goes into a DXF TEXT as one ASCII line: other characters as \\U+ escapes (decoded by the
-    reader), the control-code starters backslash and percent escaped too, line breaks as spaces, a character
-    beyond U+FFFF as ?."""
+    reader), the control-code starters backslash and percent escaped too, a character beyond U+FFFF as ?.
+    (A line break never reaches it: a muscle name may hold no control character, tests/test_input_classes.py.)"""
     mesh, mus = body()
-    names = ["m\u00fcscle \u00e9t\u00e9 \u03bb", "50%%u off \\P", "two\nlines \U0001F600"]
+    names = ["m\u00fcscle \u00e9t\u00e9 \u03bb", "50%%u off \\P", "two lines \U0001F600"]
     mus = [Muscle(m.nodes, name=n) for m, n in zip(mus, names)]
     files = export_fabrication(mesh, None, tmp_path, muscles=mus, units="mm", name="p")
     raw = open(files["dxf"], "rb").read()

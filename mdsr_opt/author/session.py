@@ -28,6 +28,7 @@ import scipy.sparse.linalg as spla
 from ..synthesis.contractions import design_contractions
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
+from ..core.checks import node_indices
 from ..mechanics.model import get_model
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
@@ -171,17 +172,7 @@ class Session:
         """Node ids as an int array; ValueError naming ``what`` for non-integers or ids out of range."""
         if not isinstance(nodes, (list, tuple, np.ndarray)):
             raise TypeError(f"{what}: expected a list of node ids, got {type(nodes).__name__}")
-        out = []
-        for v in nodes:
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-                raise TypeError(f"{what}: node id {v!r} is not an integer")
-            if not 0 <= int(v) < self.n_nodes:
-                raise ValueError(f"{what}: node id {int(v)} out of range [0, {self.n_nodes})")
-            out.append(int(v))
-        idx = np.asarray(out, dtype=np.int64)
-        if len(np.unique(idx)) != len(idx):
-            raise ValueError(f"{what}: a node id is repeated")
-        return idx
+        return node_indices(nodes, what, n=self.n_nodes)  # the check of every entry point's node lists
 
     def check_points(self, pts, what: str) -> np.ndarray:
         """(k, 2) finite coordinates within ``FAR`` body sizes of the body."""

@@ -1,8 +1,13 @@
-"""The check that an argument is a :class:`~mdsr_opt.body.mesh.Mesh`, naming the argument."""
+"""Checks of arguments against a body: that it is a :class:`~mdsr_opt.body.mesh.Mesh`, and that a target
+shape of it is one a body can take."""
 
 from __future__ import annotations
 
-__all__ = ['check_mesh']
+import numpy as np
+
+from ..core.checks import as_float_array
+
+__all__ = ['check_mesh', 'check_target_shape']
 
 
 def check_mesh(mesh, name: str = "mesh"):
@@ -12,3 +17,34 @@ def check_mesh(mesh, name: str = "mesh"):
     if not isinstance(mesh, Mesh):
         raise TypeError(f"{name} must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
     return mesh
+
+
+def check_target_shape(mesh, target, name: str = "target") -> np.ndarray:
+    """The target shape of a design as a finite ``(n, 2)`` float array in which every triangle keeps its
+    orientation: the one check of every design entry point (routing, :func:`~mdsr_opt.design_contractions`
+    and its rivals, the pipeline, :func:`~mdsr_opt.synthesis.poses.design_poses`).
+
+    Raises
+    ------
+    TypeError
+        Not an array of numbers.
+    ValueError
+        The wrong shape, NaN or inf, a mirror image of the body (every triangle inverted), or some triangles
+        inverted or degenerate (``det F <= 0``; the first is named).
+    """
+    x = as_float_array(target, name, shape=(mesh.n_nodes, 2))
+    J = mesh.jacobians(x)
+    bad = J <= 0.0
+    if (J == 0.0).all():
+        raise ValueError(f"{name} flattens every triangle (det F = 0 in all {mesh.n_triangles}): its nodes lie on "
+                         "a line or a point")
+    if bad.all():
+        raise ValueError(f"{name} inverts every triangle (det F <= 0 in all {mesh.n_triangles}): is it a mirror "
+                         "image of the body? A body cannot turn itself over in its plane")
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"{name} has {int(bad.sum())} inverted triangle(s) (det F <= 0), first: triangle {k} "
+                         f"{mesh.triangles[k].tolist()} with det F = {J[k]:.3g}"
+                         + (" (degenerate: its corners on a line)" if J[k] == 0 else "")
+                         + "; a physical target keeps every element positively oriented")
+    return x

@@ -319,5 +319,10 @@ def write_json(path, data) -> str:
 
 
 def read_json(path):
-    with open(os.fspath(path)) as fh:
-        return json.load(fh)
+    """The JSON file ``path`` parsed (UTF-8); a ``ValueError`` naming the file when it nests deeper than the
+    parser's stack, instead of a ``RecursionError``."""
+    with open(os.fspath(path), encoding="utf-8") as fh:
+        try:
+            return json.load(fh)
+        except RecursionError:
+            raise ValueError(f"{os.fspath(path)}: lists and objects are nested too deeply to read") from None

@@ -12,7 +12,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.checks import as_float_array, as_index_array
+from ..core.checks import as_float_array, as_index_array, check_label
 
 __all__ = ["Muscle", "check_muscles", "check_contractions", "check_distinct_ropes"]
 
@@ -26,7 +26,8 @@ class Muscle:
     nodes : sequence of int
         The path ``v0 ... vk`` (at least two nodes, no node twice).
     name : str, optional
-        A label used in reports and figures.
+        A label used in reports, figures and fabrication files: no control characters or line breaks
+        (:func:`~mdsr_opt.core.checks.check_label`).
 
     Example
     -------
@@ -40,7 +41,7 @@ class Muscle:
     name: str | None = field(default=None, compare=False)
 
     def __post_init__(self):
-        arr = as_index_array(np.asarray(list(self.nodes) if not isinstance(self.nodes, np.ndarray) else self.nodes),
+        arr = as_index_array(list(self.nodes) if not isinstance(self.nodes, np.ndarray) else self.nodes,
                              "muscle nodes", shape=(None,))
         if len(arr) < 2:
             raise ValueError(f"muscle {self._label()} needs at least two nodes, got {len(arr)}")
@@ -49,6 +50,8 @@ class Muscle:
             raise ValueError(f"muscle {self._label()} repeats node {int(vals[counts > 1][0])}: "
                              "a muscle is a simple path")
         object.__setattr__(self, "nodes", tuple(int(v) for v in arr))
+        if self.name is not None:  # it labels the muscle in SVG, DXF and CSV files
+            check_label(self.name, "muscle name")
 
     def _label(self) -> str:
         return repr(self.name) if self.name else "path"

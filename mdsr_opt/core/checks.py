@@ -1,12 +1,15 @@
-"""Argument checks shared by every stage: arrays of the right shape, positive numbers, indices."""
+"""Argument checks shared by every stage: arrays of the right shape, positive numbers, indices, node lists,
+names and file stems."""
 
 from __future__ import annotations
 
 import numbers
+import unicodedata
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ['as_float_array', 'as_index_array', 'positive_float', 'positive_int']
+__all__ = ['as_float_array', 'as_index_array', 'node_indices', 'positive_float', 'positive_int', 'check_label',
+           'check_stem']
 
 
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
@@ -30,7 +33,13 @@ def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | 
 
 def as_index_array(value: ArrayLike, name: str, n: int | None = None,
                    shape: tuple[int | None, ...] | None = None) -> np.ndarray:
-    """Return ``value`` as an int64 array of node indices, each in ``[0, n)`` when ``n`` is given."""
+    """Return ``value`` as an int64 array of node indices, each in ``[0, n)`` when ``n`` is given.
+
+    Integers only: a float array is refused even when every value is whole (``16.0``; a float index is
+    usually a computed position, and ``16.9`` must never become 16), and so are booleans, also inside a
+    list (``[True, 3]`` would read as ``[1, 3]``)."""
+    if isinstance(value, (list, tuple)) and _holds_bool(value):
+        raise TypeError(f"{name} must hold integer node indices, got a boolean")
     arr = np.asarray(value)
     if arr.size == 0:
         arr = arr.astype(np.int64)
@@ -48,6 +57,100 @@ def as_index_array(value: ArrayLike, name: str, n: int | None = None,
             bad = lo if lo < 0 else hi
             raise ValueError(f"{name} has node index {bad} out of range [0, {n})")
     return arr
+
+
+def _holds_bool(value) -> bool:
+    """Is there a bool (Python or numpy) anywhere in the nested lists/tuples ``value``?"""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, (list, tuple)):
+            stack.extend(v)
+        elif isinstance(v, (bool, np.bool_)):
+            return True
+    return False
+
+
+def _first_non_integer(value):
+    """The first boolean or float of a flat list or array (a non-whole one first for arrays), else None."""
+    if isinstance(value, (list, tuple)):
+        return next((v for v in value if isinstance(v, (bool, np.bool_, float, np.floating))), None)
+    if isinstance(value, np.ndarray) and value.size:
+        flat = value.reshape(-1)
+        if flat.dtype == bool:
+            return flat[0]
+        if np.issubdtype(flat.dtype, np.floating):
+            off = flat[~np.isfinite(flat) | (flat % 1 != 0)]
+            return off[0] if len(off) else flat[0]
+    return None
+
+
+def node_indices(value, name: str, n: int | None = None) -> np.ndarray:
+    """The one check of a list of node indices (anchors, drag nodes, a rigid drag's nodes): a 1-D int64
+    array of integers, each in ``[0, n)`` when ``n`` is given, none named twice. A scalar integer is a list
+    of one. A float is refused even when it is whole (``16.0``: a float index is usually a computed
+    position, and ``16.9`` must never become 16); so are booleans and NaN.
+
+    Raises
+    ------
+    TypeError
+        Not integers (floats, booleans, strings); the message names the first bad value.
+    ValueError
+        Not one-dimensional, an index out of range, or a node named twice (the message names it).
+    """
+    if isinstance(value, (numbers.Integral, np.integer)) and not isinstance(value, (bool, np.bool_)):
+        value = [value]
+    bad = _first_non_integer(value)
+    if isinstance(bad, (bool, np.bool_)):
+        raise TypeError(f"{name}: node index {bool(bad)!r} is a boolean, not an integer")
+    if bad is not None:
+        whole = bool(np.isfinite(bad) and float(bad).is_integer())
+        raise TypeError(f"{name}: node index {float(bad)!r} is not an integer" + (
+            " (a float: node indices must be integers, cast with int())" if whole else ""))
+    arr = as_index_array(value, name, n=n, shape=(None,))
+    if len(arr) > 1:
+        srt = np.sort(arr)
+        dup = srt[1:][srt[1:] == srt[:-1]]
+        if len(dup):
+            raise ValueError(f"{name}: node {int(dup[0])} is repeated (give each node once)")
+    return arr
+
+
+#: Unicode categories refused in names that go into files: control characters (NUL, ESC, line feed, tab ...),
+#: lone surrogates (not encodable as UTF-8) and the line and paragraph separators.
+_BAD_CATEGORIES = ("Cc", "Cs", "Zl", "Zp")
+
+
+def check_label(value, what: str) -> str:
+    """A name written into files (a muscle's label in SVG, DXF and CSV; a pose's column): a string without
+    control characters, lone surrogates or line breaks. Markup characters (``<``, ``&``, quotes) are allowed:
+    the writers escape them.
+
+    Raises ``TypeError`` for a non-string, ``ValueError`` naming the first bad character and its position.
+    """
+    if not isinstance(value, str):
+        raise TypeError(f"{what} must be a string, got {type(value).__name__}")
+    for i, ch in enumerate(value):
+        if unicodedata.category(ch) in _BAD_CATEGORIES:
+            raise ValueError(f"{what} {value!r} holds the control character U+{ord(ch):04X} at position {i}: "
+                             "names go into files (SVG, DXF, CSV) and may hold no control characters or line "
+                             "breaks")
+    return value
+
+
+#: Characters no file name may hold on some supported system (Windows refuses these).
+_STEM_FORBIDDEN = '/\\<>:"|?*'
+
+
+def check_stem(value, what: str = "name") -> str:
+    """A file stem (``<stem>.svg``): a non-empty :func:`check_label` string with no path separator and no
+    character a Windows file name refuses (``/ \\ < > : " | ? *``), not starting with a dot."""
+    check_label(value, what)
+    bad = next((c for c in value if c in _STEM_FORBIDDEN), None)
+    if not value or value.startswith(".") or bad is not None:
+        why = f"holds {bad!r}" if bad is not None else "is empty" if not value else "starts with a dot"
+        raise ValueError(f"{what} must be a plain file stem (no folder, no path separator), got {value!r}: it {why}")
+    return value
 
 
 def _check_shape(arr: np.ndarray, shape: tuple[int | None, ...], name: str) -> None:

@@ -195,7 +195,8 @@ def load_npz(path: str | os.PathLike, kind: str) -> tuple[dict, dict]:
             meta = head["fields"]
     except _Foreign as exc:
         raise ValueError(str(exc)) from None
-    except (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
+    except (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile, zlib.error,
+            RecursionError) as exc:  # RecursionError: metadata nested deeper than the JSON parser's stack
         raise ValueError(f"{path} is damaged or not a mdsr_opt {kind} result file: {exc}") from None
     if not isinstance(meta, dict):
         raise ValueError(f"{path} is damaged: its fields are not a JSON object")

@@ -28,7 +28,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..core.checks import as_float_array, as_index_array
+from ..core.checks import as_float_array, node_indices
 
 __all__ = ["RigidDrag", "DragPath", "drag_path"]
 
@@ -59,10 +59,7 @@ class RigidDrag:
     shift: tuple = (0.0, 0.0)
 
     def __post_init__(self):
-        try:
-            nodes = tuple(int(i) for i in np.asarray(self.nodes).reshape(-1))
-        except (TypeError, ValueError):
-            raise TypeError(f"RigidDrag nodes must be integer node indices, got {self.nodes!r}") from None
+        nodes = tuple(int(i) for i in node_indices(self.nodes, "RigidDrag nodes"))
         if not nodes:
             raise ValueError("RigidDrag needs at least one node")
         a = self.angle
@@ -119,14 +116,13 @@ def _looks_like_pairs(drags) -> bool:
 def _one(d, n):
     """``(indices, RigidDrag or final positions)`` of one drag item."""
     if isinstance(d, RigidDrag):
-        idx = as_index_array(np.array(d.nodes), "RigidDrag nodes", n=n, shape=(None,))
-        return idx, d
+        return node_indices(np.array(d.nodes), "RigidDrag nodes", n=n), d
     if isinstance(d, Mapping):
         keys = list(d.keys())
         if any(not _is_scalar_int(k) for k in keys):
             bad = next(k for k in keys if not _is_scalar_int(k))
             raise TypeError(f"drags keys must be integer node indices, got {bad!r}; {_FORMS}")
-        idx = as_index_array(np.array(keys, dtype=np.int64), "drags (node indices)", n=n, shape=(None,))
+        idx = node_indices(np.array(keys, dtype=np.int64), "drags (node indices)", n=n)
         pos = as_float_array([d[k] for k in keys], "drags (positions)", shape=(len(keys), 2)) \
             if keys else np.zeros((0, 2))
         return idx, pos
@@ -141,7 +137,11 @@ def drag_path(drags, mesh) -> DragPath:
     TypeError
         ``drags`` is none of the accepted forms (e.g. a list of ``(node, (x, y))`` pairs).
     ValueError
-        A node index out of range, a node dragged twice, or positions of the wrong shape.
+        A node index out of range, a node dragged twice (in any form, even to the same place), or positions
+        of the wrong shape.
+
+    Node indices are checked by :func:`~mdsr_opt.core.checks.node_indices` in every form: integers only (a
+    float such as ``16.0`` is refused, never rounded), in range, each node once.
     """
     n = mesh.n_nodes
     parts = []
@@ -156,7 +156,7 @@ def drag_path(drags, mesh) -> DragPath:
         if len(drags) == 2 and not any(isinstance(d, (Mapping, RigidDrag)) for d in drags):
             if _is_scalar_int(drags[0]):
                 raise TypeError(f"{_FORMS}; got a single (node, position) pair: write {{node: (x, y)}}")
-            idx = as_index_array(drags[0], "drags[0] (node indices)", n=n, shape=(None,))
+            idx = node_indices(drags[0], "drags[0] (node indices)", n=n)
             pos = as_float_array(drags[1], "drags[1] (positions)", shape=(len(idx), 2))
             items = [dict(zip(idx.tolist(), pos))] if len(idx) else []
         else:
@@ -171,8 +171,13 @@ def drag_path(drags, mesh) -> DragPath:
         all_idx.append(idx)
         k += len(idx)
     nodes = np.concatenate(all_idx) if all_idx else np.zeros(0, dtype=np.int64)
+    path = DragPath(nodes=nodes.astype(np.int64), rest=mesh.points[nodes].astype(float).reshape(-1, 2),
+                    parts=parts)
     if len(np.unique(nodes)) != len(nodes):
         u, c = np.unique(nodes, return_counts=True)
-        raise ValueError(f"drags name node {int(u[c > 1][0])} more than once")
-    return DragPath(nodes=nodes.astype(np.int64), rest=mesh.points[nodes].astype(float).reshape(-1, 2),
-                    parts=parts)
+        k = int(u[c > 1][0])
+        at = path.final[nodes == k]
+        where = "to the same place" if np.all(at == at[0]) else \
+            "to " + " and to ".join(f"({p[0]:.6g}, {p[1]:.6g})" for p in at)
+        raise ValueError(f"drags name node {k} more than once ({where}): give each node once")
+    return path

@@ -10,7 +10,7 @@ import numpy as np
 from ..core.deprecation import renamed_keywords
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles
-from ..core.checks import as_index_array, positive_float
+from ..core.checks import node_indices, positive_float
 from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
@@ -41,7 +41,10 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     anchors : node indices held at their rest positions.
     drags : ``{node: (x, y)}`` (straight moves), ``(indices, positions (k, 2))``, a
         :class:`~mdsr_opt.drags.RigidDrag` (rotate nodes through an angle about a centre, optionally with a
-        shift; load stepping follows the arc), or a list of dicts and RigidDrags.
+        shift; load stepping follows the arc), or a list of dicts and RigidDrags. In every form, and in
+        ``anchors``, node indices are integers (a float, even ``16.0``, is refused), in range and each given
+        once, also when dragged twice to the same place (:func:`~mdsr_opt.core.checks.node_indices`); no node
+        is both anchored and dragged.
     backend : one of :func:`available_backends`.
     tol, max_iter : solver tolerance and iteration cap per load step.
     options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
@@ -71,10 +74,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     tol = check_common(tol, max_iter, backend, min_step)
     predict, x_start = initial_guess_of(initial_guess, mesh)
     n = mesh.n_nodes
-    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
-                         "anchors", n=n, shape=(None,))
-    if len(np.unique(anc)) != len(anc):
-        raise ValueError("anchors name a node more than once")
+    anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=n)
     path = drag_path(drags, mesh)
     didx = path.nodes
     both = np.intersect1d(anc, didx)
@@ -128,8 +128,7 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     """
     check_mesh_material(mesh, material)
     n = mesh.n_nodes
-    anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
-                         "anchors", n=n, shape=(None,))
+    anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=n)
     nodes = np.union1d(anc, drag_path(drags, mesh).nodes)
     xflat = mesh._check_state(x).reshape(-1)
     model = get_model(mesh, material)

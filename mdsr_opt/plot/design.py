@@ -6,6 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
+from ..body.fingerprint import check_same_mesh
 from .common import LEGEND_OUTSIDE, axes_or_new, hide_ticks, plot_edges, plot_mesh, plot_muscles
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'plot_design_benchmark']
@@ -160,6 +161,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     >>> "difference" in title and "achieved = [0.150]" in title
     True
     """
+    check_same_mesh(mesh, getattr(result, "rest_mesh", None), "the design")  # drawn on the body it was made on
     fig, ax = axes_or_new(ax)
     plot_mesh(mesh, np.asarray(target), ax=ax, color="#cccccc", edgecolor="#999999", alpha=0.6, label="target")
     plot_mesh(mesh, result.x_aligned, ax=ax, color="#8fb3d9", edgecolor="#335577", alpha=0.45,

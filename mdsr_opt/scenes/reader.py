@@ -99,9 +99,26 @@ def tname(v) -> str:
     return "a list" if isinstance(v, list) else "a table" if isinstance(v, Mapping) else type(v).__name__
 
 
+#: The deepest nesting of tables and lists a scene file may have (a scene needs five or so).
+MAX_DEPTH = 64
+#: The largest scene file read, in bytes (a big body belongs in a mesh file, ``body.mesh``).
+MAX_BYTES = 64 * 2 ** 20
+
+
 def read_file(path: Path) -> dict:
+    """The parsed TOML or JSON scene file: a dict, at most :data:`MAX_BYTES` large and :data:`MAX_DEPTH`
+    deep (``SceneFileError`` naming the file otherwise, never a ``RecursionError``)."""
     suffix = path.suffix.lower()
+    if suffix not in (".json", ".toml"):
+        raise SceneFileError(f"{path.name}: a scene file ends in .toml or .json, not {suffix or 'nothing'}")
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise SceneFileError(f"{path.name}: the scene file is {size / 2 ** 20:.1f} MB, more than the "
+                             f"{MAX_BYTES // 2 ** 20} MB a scene file may have (give a large body as a mesh file, "
+                             "body.mesh)")
     text = path.read_bytes()
+    too_deep = SceneFileError(f"{path.name}: tables and lists are nested more than {MAX_DEPTH} deep; a scene "
+                              "file needs only a few levels")
     if suffix == ".json":
         import json
 
@@ -109,7 +126,9 @@ def read_file(path: Path) -> dict:
             data = json.loads(text.decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise SceneFileError(f"{path.name}: not valid JSON: {exc}") from None
-    elif suffix == ".toml":
+        except RecursionError:  # nested deeper than the parser's stack
+            raise too_deep from None
+    else:
         if sys.version_info >= (3, 11):
             import tomllib
         else:  # pragma: no cover - Python 3.10
@@ -118,11 +137,27 @@ def read_file(path: Path) -> dict:
             data = tomllib.loads(text.decode("utf-8"))
         except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
             raise SceneFileError(f"{path.name}: not valid TOML: {exc}") from None
-    else:
-        raise SceneFileError(f"{path.name}: a scene file ends in .toml or .json, not {suffix or 'nothing'}")
+        except RecursionError:
+            raise too_deep from None
     if not isinstance(data, dict):
         raise SceneFileError(f"{path.name}: the top level must be a table/object, got {tname(data)}")
+    if _depth_exceeds(data, MAX_DEPTH):  # parsed, but deeper than any later walk of it should go
+        raise too_deep
     return data
+
+
+def _depth_exceeds(data, limit: int) -> bool:
+    """Do the nested dicts and lists of ``data`` go more than ``limit`` levels deep? (No recursion.)"""
+    stack = [(data, 1)]
+    while stack:
+        v, d = stack.pop()
+        if d > limit:
+            return True
+        if isinstance(v, Mapping):
+            stack.extend((u, d + 1) for u in v.values() if isinstance(u, (Mapping, list)))
+        elif isinstance(v, list):
+            stack.extend((u, d + 1) for u in v if isinstance(u, (Mapping, list)))
+    return False
 
 
 def scene_options(r: Reader, spec, where: str) -> dict:

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike
 
 from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
-from ..core.checks import as_float_array, as_index_array, positive_int
+from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
 from ..mechanics.anchors import body_size, check_anchor_radius
 from .names import check_name, check_output_names
 from .reader import check_scene_options
@@ -78,8 +78,8 @@ class Case:
             if not mus or not all(isinstance(m, Muscle) for m in mus):
                 raise TypeError(f"case {self.name!r}: muscles must be a non-empty sequence of Muscle")
             object.__setattr__(self, "muscles", mus)
-        anc = as_index_array(np.asarray(self.anchors), f"case {self.name!r}: anchors", shape=(None,))
-        dn = as_index_array(np.asarray(self.drag_nodes), f"case {self.name!r}: drag_nodes", shape=(None,))
+        anc = node_indices(self.anchors, f"case {self.name!r}: anchors")
+        dn = node_indices(self.drag_nodes, f"case {self.name!r}: drag_nodes")
         dp = as_float_array(np.asarray(self.drag_positions, dtype=float).reshape(-1, 2) if np.size(
             self.drag_positions) else np.zeros((0, 2)), f"case {self.name!r}: drag_positions", shape=(len(dn), 2))
         object.__setattr__(self, "anchors", anc)

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..core.checks import check_label
 from .names import check_name, check_output_names
 from .reader import SceneFileError, Reader, read_file, scene_options, tname
 from .scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
@@ -311,6 +312,11 @@ def _scene_muscle(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> Mus
     if len(sel) != 1:
         r.fail(where, "give exactly one of nodes (indices), path (waypoints) and boundary ({from, to, via})")
     name = r.string(m["name"], f"{where}.name") if "name" in m else None
+    if name is not None:
+        try:
+            check_label(name, "muscle name")
+        except ValueError as exc:
+            r.fail(f"{where}.name", str(exc))
     try:
         if "nodes" in m:
             v = m["nodes"]

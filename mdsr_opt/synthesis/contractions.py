@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike
 from ..core.deprecation import renamed_keywords
 from ..core.guards import interruptible
 from ..mechanics.backends import check_options
+from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
@@ -109,8 +110,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     Raises
     ------
     TypeError, ValueError
-        Bad input: target of the wrong shape, muscles not on the mesh, ``a_max`` outside (0, 1), an empty
-        muscle list, an unknown method.
+        Bad input: a target of the wrong shape, with NaN or inf, or inverting a triangle (a mirror image
+        inverts all; :func:`~mdsr_opt.body.checks.check_target_shape`, the check of every design entry
+        point), muscles not on the mesh, ``a_max`` outside (0, 1), an empty muscle list, an unknown method.
 
     Example
     -------
@@ -232,7 +234,8 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
                        build_time=build_time, solve_time=total - build_time, time=total,
                        initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
                        a_max=prob.a_max, muscle_model=prob.muscle_model, stiffness=prob.stiffness, history=list(hist),
-                       anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy())
+                       anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy(),
+                       rest_mesh=mesh_fingerprint(mesh))
     report_muscles(prob, res, x, kappa)
     if method != "flattened" and prob.muscle_model == "cable" and res.slack.any():
         # any contraction below the one its path reached leaves a rope slack with the same shape: report

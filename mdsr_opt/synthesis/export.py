@@ -29,14 +29,16 @@ import io as _stdio
 import math
 import os
 from dataclasses import dataclass
-from html import escape  # quotes too: names also go into attributes
+import re
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh, polygon_area
 from ..body.muscles import Muscle, check_muscles
+from ..core.checks import check_stem
 from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 
@@ -83,16 +85,31 @@ class FabricationData:
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
 
-def _from_design(d, muscles, mesh):
+def _from_design(d, muscles, mesh, what="the design"):
     a = np.asarray(d.contractions, dtype=float).reshape(-1)
     if len(a) != len(muscles):
-        raise ValueError(f"the design has {len(a)} contraction(s) for {len(muscles)} muscle(s)")
+        raise ValueError(f"{what} has {len(a)} contraction(s) for {len(muscles)} muscle(s)")
     L0 = np.array([m.rest_length(mesh) for m in muscles])
+    _check_rest_lengths(getattr(d, "rest_lengths", None), L0, muscles, what)
     st = getattr(d, "stroke", None)
     st = a * L0 if st is None or np.size(st) != len(a) else np.asarray(st, dtype=float).reshape(-1)
     tn = getattr(d, "tension", None)
     tn = np.full(len(a), np.nan) if tn is None or np.size(tn) != len(a) else np.asarray(tn, float).reshape(-1)
     return a, st, tn, getattr(d, "anchor_radius", None)
+
+
+def _check_rest_lengths(recorded, L0, muscles, what) -> None:
+    """The rest lengths a result recorded must be those of ``muscles`` on this mesh (another mesh, or
+    another layout of as many muscles, would pair its strokes with the wrong lengths)."""
+    if recorded is None or np.size(recorded) != len(L0):
+        return
+    rec = np.asarray(recorded, dtype=float).reshape(-1)
+    off = np.flatnonzero(np.isfinite(rec) & ~np.isclose(rec, L0, rtol=1e-7, atol=0.0))
+    if len(off):
+        i = int(off[0])
+        raise ValueError(f"{what} was made with muscle {muscles[i].name or i!r} of rest length {rec[i]:.6g}; on this "
+                         f"mesh with these muscles it is {L0[i]:.6g}: give the mesh and the muscles the design "
+                         "was made with")
 
 
 def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
@@ -119,13 +136,14 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         if design.states.shape[1] != mesh.n_nodes:
             raise ValueError(f"the design is of a mesh with {design.states.shape[1]} nodes, not this one "
                              f"({mesh.n_nodes})")
+        check_same_mesh(mesh, design.rest_mesh, "the layout")
         mus = list(design.muscles) if muscles is None else check_muscles(mesh, muscles)
+        _check_rest_lengths(design.rest_lengths, np.array([mu.rest_length(mesh) for mu in mus]), mus, "the layout")
         names, A, S, T = design.names, design.contractions, design.strokes, design.tensions
         radius = design.anchor_radius
     else:
         if muscles is None:
             raise ValueError("give the muscles of the design (muscles=...): only a PosesResult carries its own")
-        mus = check_muscles(mesh, muscles)
         if design is None:
             items = {}
         elif isinstance(design, Mapping):
@@ -135,7 +153,11 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         else:
             raise TypeError("design must be a PosesResult, a DesignResult, a mapping of pose name to "
                             f"DesignResult or None, got {type(design).__name__}")
-        rows = {k: _from_design(d, mus, mesh) for k, d in items.items()}
+        what = {k: "the design" if len(items) == 1 else f"the design of {k!r}" for k in items}
+        for k, d in items.items():  # the body first: muscles checked on another body would mislead
+            check_same_mesh(mesh, getattr(d, "rest_mesh", None), what[k])
+        mus = check_muscles(mesh, muscles)
+        rows = {k: _from_design(d, mus, mesh, what[k]) for k, d in items.items()}
         names = tuple(str(k) for k in rows)
         m = len(mus)
         A = np.array([r[0] for r in rows.values()]).reshape(len(rows), m)
@@ -175,6 +197,18 @@ def _label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
     a, b = path[i - 1], path[i]
     d = (b - a) / (np.linalg.norm(b - a) or 1.0)
     return (a + b) / 2 + offset * np.array([-d[1], d[0]]), d
+
+
+#: Characters XML 1.0 does not allow in a document (C0 controls but tab, line feed and carriage return;
+#: lone surrogates; U+FFFE and U+FFFF): names are checked at the door, and these never reach the SVG anyway.
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def escape(text) -> str:
+    """``text`` as XML character data or an attribute value: ``& < > " '`` as entities, any character XML
+    does not allow replaced by U+FFFD (so the SVG always parses)."""
+    t = str(text).replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return _NOT_XML.sub("\ufffd", t.replace('"', "&quot;").replace("'", "&#x27;"))
 
 
 def _svg_text(fd: FabricationData, title: str) -> str:
@@ -446,12 +480,13 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     Raises
     ------
     TypeError, ValueError
-        Unknown units, a design of another mesh, missing muscles, a bad name: before anything is written.
+        Unknown units, a design of another mesh (:func:`~mdsr_opt.body.fingerprint.check_same_mesh`) or of
+        other muscles, missing muscles, a name that is no plain file stem
+        (:func:`~mdsr_opt.core.checks.check_stem`): before anything is written.
     """
     from ..body.io import atomic_path
 
-    if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
-        raise ValueError(f"name must be a plain file stem, got {name!r}")
+    check_stem(name, "name")  # no path separator, no control character: before anything is written
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width)
     svg = _svg_text(fd, name)
     dxf = _dxf_text(fd)
@@ -459,9 +494,9 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     paths = fabrication_files(out, name)
     Path(out).mkdir(parents=True, exist_ok=True)
     with atomic_path(paths["svg"]) as tmp:
-        Path(tmp).write_text(svg)
+        Path(tmp).write_text(svg, encoding="utf-8")  # as its XML declaration says, on every platform
     with atomic_path(paths["dxf"]) as tmp:
         Path(tmp).write_text(dxf, encoding="ascii")
     with atomic_path(paths["csv"]) as tmp:
-        Path(tmp).write_text(table)
+        Path(tmp).write_text(table, encoding="utf-8")
     return {k: os.fspath(v) for k, v in paths.items()}

@@ -18,6 +18,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..core.guards import interruptible
+from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
@@ -140,6 +141,9 @@ class GaitSchedule:
     status : tuple of str
     units : str
         The length unit of every stroke.
+    rest_mesh : dict or None
+        The fingerprint of the mesh the schedule was solved on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`);
+        :func:`save_gait_animation` refuses another mesh (None: not recorded, not checked).
     """
 
     sequence: tuple
@@ -156,6 +160,7 @@ class GaitSchedule:
     success: np.ndarray
     status: tuple
     units: str = "mm"
+    rest_mesh: dict | None = None
 
     @property
     def n_frames(self) -> int:
@@ -252,8 +257,12 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
 
     if not isinstance(layout, PosesResult):
         raise TypeError(f"layout must be a PosesResult (from design_poses), got {type(layout).__name__}")
-    if not isinstance(mesh, Mesh) or layout.states.shape[1] != mesh.n_nodes:
-        raise ValueError("mesh is not the body of this layout (node counts differ)")
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    if layout.states.shape[1] != mesh.n_nodes:
+        raise ValueError(f"mesh is not the body of this layout: the layout's states have {layout.states.shape[1]} "
+                         f"nodes, the mesh {mesh.n_nodes}")
+    check_same_mesh(mesh, layout.rest_mesh, "the layout")
     fps_ = _frames(frames_per_step)
     units = check_units(units)
     if isinstance(sequence, str) or not isinstance(sequence, Sequence):
@@ -334,7 +343,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                         keyframes=np.array(kf), labels=tuple(labels),
                         muscle_names=tuple(mu.name for mu in layout.muscles), rest_lengths=L0.copy(), strokes=S,
                         achieved=ach, tensions=ten, states=np.array(states), success=ok, status=tuple(status),
-                        units=units)
+                        units=units, rest_mesh=mesh_fingerprint(mesh))
 
 
 def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
@@ -376,8 +385,16 @@ def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
 
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
                         fps: float = 8.0) -> str:
-    """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.save_animation`)."""
+    """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.save_animation`); ``mesh`` must be
+    the body the schedule was solved on."""
     from .. import plot
+
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    if schedule.states.shape[1:] != (mesh.n_nodes, 2):
+        raise ValueError(f"mesh is not the body of this schedule: its states have {schedule.states.shape[1]} "
+                         f"nodes, the mesh {mesh.n_nodes}")
+    check_same_mesh(mesh, schedule.rest_mesh, "the gait schedule")
 
     top = float(np.nanmax(schedule.contractions)) or 1.0
     titles = [f"{title} {schedule.labels[k]} (t = {schedule.times[k]:.2f} s)".strip() for k in range(schedule.n_frames)]

@@ -9,6 +9,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core.guards import interruptible
+from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.deprecation import renamed_keywords
@@ -141,6 +142,8 @@ class PipelineResult:
                 data = json.load(fh)
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ValueError(f"{path} is damaged: not valid JSON ({exc})") from None
+        except RecursionError:
+            raise ValueError(f"{path} is damaged: lists and objects nested too deeply to read") from None
         if not isinstance(data, dict) or data.get("format") != "mdsr_opt.design/1":
             fmt = data.get("format") if isinstance(data, dict) else None
             raise ValueError(f"{path} is not a mdsr_opt design result (format {fmt!r})")
@@ -168,6 +171,7 @@ class PipelineResult:
             design = DesignResult.from_dict(data["design"])
             if design.x.shape != md.x.shape:
                 raise ValueError(f"the design's state has shape {design.x.shape}, the mesh {md.x.shape}")
+            check_same_mesh(md.mesh, design.rest_mesh, "the design")  # the saved mesh is the design's body
             field_ = "external/routing/times"
             return cls(mesh=md.mesh, material=material, target=md.x, external=data["external"],
                        muscles=muscles, routing=data["routing"], design=design, times=data.get("times", {}), **kw)
@@ -234,7 +238,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     ext.raise_on_failure()
     t1 = time.perf_counter()
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
-    didx, dpos = parse_drags(drags, mesh.n_nodes)
+    didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
         from .routing import route_muscles

@@ -69,7 +69,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..core.guards import interruptible
-from ..core.checks import as_float_array
+from ..body.checks import check_target_shape
+from ..body.fingerprint import check_same_mesh, mesh_fingerprint
+from ..core.checks import check_label
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 
@@ -122,6 +124,7 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
         raise ValueError("poses is empty: give at least one target pose")
     out, names = [], set()
     for p in items:
+        check_label(p.name, "pose name")  # it heads columns of the muscle table and the schedule
         if not p.name or p.name == "rest":
             raise ValueError(f"pose name {p.name!r} is not allowed ('rest' means zero strokes in a gait)")
         if p.name in names:
@@ -134,7 +137,8 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
         if np.ndim(t) != 2 or np.shape(t)[1] != 2 or np.shape(t)[0] != mesh.n_nodes:
             raise ValueError(f"pose {p.name!r}: target has shape {np.shape(t)}, expected ({mesh.n_nodes}, 2); all "
                              "poses must be of the same mesh")
-        out.append(Pose(p.name, as_float_array(t, f"pose {p.name!r} target", shape=(mesh.n_nodes, 2)), mesh))
+        # the check of every design's target (finite, no inverted triangle), before any pose is routed
+        out.append(Pose(p.name, check_target_shape(mesh, t, f"pose {p.name!r}: target"), mesh))
     return out
 
 
@@ -191,6 +195,10 @@ class PosesResult:
         Seconds: ``routing``, ``shared`` (designs on the shared layout), ``separate``, ``total``.
     designs : dict of str to DesignResult
         The full per-pose designs (in memory only; empty after :meth:`load`).
+    rest_mesh : dict or None
+        The fingerprint of the mesh the layout was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
+        saved with it; :func:`~mdsr_opt.gait.gait_schedule` and :func:`~mdsr_opt.export.export_fabrication`
+        refuse another mesh (None: not recorded, not checked).
     """
 
     names: tuple
@@ -212,6 +220,7 @@ class PosesResult:
     max_muscles: int | None = None
     times: dict = field(default_factory=dict)
     designs: dict = field(default_factory=dict, repr=False)
+    rest_mesh: dict | None = None
 
     @property
     def n_muscles(self) -> int:
@@ -267,7 +276,8 @@ class PosesResult:
                 "separate_n_muscles": [int(v) for v in self.separate_n_muscles],
                 "engaged": np.asarray(self.engaged, dtype=bool).tolist(),
                 "anchor_radius": self.anchor_radius, "muscle_model": self.muscle_model,
-                "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()}}
+                "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()},
+                "rest_mesh": self.rest_mesh}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PosesResult":
@@ -287,7 +297,7 @@ class PosesResult:
                    separate_n_muscles=np.array(d["separate_n_muscles"], dtype=int),
                    engaged=np.array(d["engaged"], dtype=bool).reshape(P, m),
                    anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
-                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})))
+                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"))
 
     def save(self, path) -> str:
         """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
@@ -438,8 +448,10 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     Raises
     ------
     TypeError, ValueError
-        Before any work: an empty pose list, poses of a different mesh or shape, a budget below one, a
-        duplicated pose name, a bad overlap.
+        Before any work: an empty pose list, poses of a different mesh or shape, a target that is no shape
+        of the body (:func:`~mdsr_opt.body.checks.check_target_shape`), a pose name with a control
+        character, a separate design made on another mesh, a budget below one, a duplicated pose name, a
+        bad overlap.
     """
     from .contractions import design_contractions
     from ..body.material import LinearElastic, NeoHookean
@@ -457,6 +469,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     for k in separate:
         if k not in {p.name for p in items}:
             raise ValueError(f"separate names an unknown pose {k!r}")
+        sep_design = separate[k][1] if isinstance(separate[k], (tuple, list)) and len(separate[k]) == 2 else None
+        check_same_mesh(mesh, getattr(sep_design, "rest_mesh", None), f"the separate design of pose {k!r}")
 
     own: dict[str, tuple] = {}
     for p in items:
@@ -523,7 +537,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values())),
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
-                                                  "total": time.perf_counter() - t0}, designs=designs)
+                                                  "total": time.perf_counter() - t0}, designs=designs,
+                       rest_mesh=mesh_fingerprint(mesh))
 
 
 def _same_design(mesh, sep, engaged, dopt) -> bool:

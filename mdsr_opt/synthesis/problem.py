@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..body.checks import check_target_shape
 from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
@@ -328,9 +329,7 @@ def check_inputs(mesh, material, muscles, target, a_max, weights, interior_weigh
     if muscles is None or (hasattr(muscles, "__len__") and len(muscles) == 0):
         raise ValueError("design needs at least one muscle: the muscle list is empty")
     mus = check_muscles(mesh, muscles)
-    y = as_float_array(target, "target")
-    if y.shape != (mesh.n_nodes, 2):
-        raise ValueError(f"target must have shape ({mesh.n_nodes}, 2) (one position per mesh node), got {y.shape}")
+    y = check_target_shape(mesh, target)  # finite, (n, 2), no inverted triangle: every design's door
     if isinstance(a_max, bool) or not isinstance(a_max, numbers.Real):
         raise TypeError(f"a_max must be a real number, got {type(a_max).__name__}")
     a_max = float(a_max)

@@ -137,6 +137,10 @@ class DesignResult:
     history : list of (float, float)
         ``(seconds since start, difference)`` after each forward solve of the outer loop (nested,
         derivative-free) or at start and end (flattened, whose iterates are not equilibria).
+    rest_mesh : dict or None
+        The fingerprint of the mesh the design was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
+        saved and loaded with the result: functions taking a mesh with the result refuse another body
+        (None: not recorded, not checked).
     """
 
     method: str
@@ -166,6 +170,7 @@ class DesignResult:
     stroke: np.ndarray = field(default_factory=lambda: np.zeros(0))
     tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    rest_mesh: dict | None = None
 
     def __repr__(self) -> str:
         return compact_repr(self, ("method", "success", "difference", "contractions", "muscle_model", "x", "time"))

@@ -98,8 +98,8 @@ import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.checks import as_float_array, positive_float
-from ..body.checks import check_mesh
+from ..core.checks import positive_float
+from ..body.checks import check_mesh, check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
@@ -129,22 +129,6 @@ class RoutingWarning(UserWarning):
 
 
 # ---------------------------------------------------------------------------------------------- input
-def _check_target(mesh: Mesh, target: ArrayLike) -> np.ndarray:
-    """The target as a finite (n, 2) float array without inverted triangles."""
-    x = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
-    J = mesh.jacobians(x)
-    bad = J <= 0.0
-    if bad.all():
-        raise ValueError(f"target inverts every triangle (det F <= 0 in all {mesh.n_triangles}); "
-                         "is it a mirror image of the body?")
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise ValueError(f"target has {int(bad.sum())} inverted triangle(s) (det F <= 0), first: triangle "
-                         f"{k} {mesh.triangles[k].tolist()} with det F = {J[k]:.3g}; "
-                         "a physical target keeps every element positively oriented")
-    return x
-
-
 def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rest lengths, target lengths and relative contractions of ``mesh.edges``.
 
@@ -171,7 +155,7 @@ def edge_weights(mesh: Mesh, target: ArrayLike) -> tuple[np.ndarray, np.ndarray,
     0.5
     """
     mesh = check_mesh(mesh)
-    return _weights(mesh, _check_target(mesh, target))
+    return _weights(mesh, check_target_shape(mesh, target))
 
 
 def _weights(mesh: Mesh, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -216,7 +200,7 @@ def contraction_graph(mesh: Mesh, target: ArrayLike) -> nx.Graph:
     0.1
     """
     mesh = check_mesh(mesh)
-    x = _check_target(mesh, target)
+    x = check_target_shape(mesh, target)
     return _graph(mesh, x, *_weights(mesh, x))
 
 
@@ -345,7 +329,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
                   seed_threshold=seed_threshold, symmetry=symmetry)
 
-    x = _check_target(mesh, target)
+    x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
     graph = _graph(mesh, x, l0, l, w)
 

@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array
@@ -128,6 +129,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     w = node_weights(mesh) if weights is None else as_float_array(weights, "weights", shape=(mesh.n_nodes,))
     if not isinstance(result, DesignResult):
         raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")
+    check_same_mesh(mesh, result.rest_mesh, "the design")  # a design of this body, not a copy scaled or moved
     if result.muscle_model == "cable":
         check_distinct_ropes(mus)
     a = np.asarray(result.contractions, dtype=float)
