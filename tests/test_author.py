@@ -250,7 +250,7 @@ def test_drags_that_arrive_while_the_server_solves_are_dropped_but_the_latest():
             sent.append(json.loads(text))
 
     async def scenario():
-        page = Page(FakeSocket(), {"out": "unused"})
+        page = Page(FakeSocket(), {"out": "unused", "folders": (), "written": set()})
         page.enqueue({"type": "load", "body": {"kind": "problem", "name": "tentacle", "resolution": "coarse"}})
         worker = asyncio.create_task(page.worker())
         while not any(m["type"] == "state" for m in sent):  # the body is loaded and settled
