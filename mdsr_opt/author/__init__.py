@@ -30,7 +30,7 @@ from pathlib import Path
 
 __all__ = ["serve", "start_in_thread", "add_cli", "body_spec"]
 
-_MISSING = ("mdsr author needs the web server packages (starlette, uvicorn): "
+_MISSING = ("the web server packages for mdsr author are missing (starlette, uvicorn): "
             "python -m pip install \"mdsr_opt[author]\"")
 
 
