@@ -119,7 +119,11 @@ def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", 
     _require()
     spec = body if isinstance(body, dict) or body is None else body_spec(body, resolution)
     sock = _bind(host, port)
-    app, url, _ = _app(spec, sock, host, body, out, allow_dirs)
+    try:
+        app, url, _ = _app(spec, sock, host, body, out, allow_dirs)
+    except BaseException:
+        sock.close()
+        raise
     server = _server(app, sock, quiet=True)
     th = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     th.start()
