@@ -212,6 +212,15 @@ def test_loopback_detection():
     assert not _is_loopback("0.0.0.0") and not _is_loopback("192.168.1.5")
 
 
+def test_allowed_hosts_are_the_loopback_names_with_the_port():
+    from mdsr_opt.author.guard import allowed_hosts
+
+    assert allowed_hosts("127.0.0.1", 8123) == {"127.0.0.1:8123", "localhost:8123", "[::1]:8123"}
+    assert "[::1]:9" in allowed_hosts("::1", 9) and "localhost" in allowed_hosts("localhost", 80)
+    assert "10.0.0.5:9" in allowed_hosts("10.0.0.5", 9) and "evil.example:9" not in allowed_hosts("10.0.0.5", 9)
+    assert allowed_hosts("0.0.0.0", 9) is None  # a wildcard bind: the token is the only check (and a warning)
+
+
 def test_non_loopback_host_warns(capsys, monkeypatch):
     import mdsr_opt.author as author
 
@@ -250,7 +259,7 @@ def test_drags_that_arrive_while_the_server_solves_are_dropped_but_the_latest():
             sent.append(json.loads(text))
 
     async def scenario():
-        page = Page(FakeSocket(), {"out": "unused"})
+        page = Page(FakeSocket(), {"out": "unused", "folders": (), "written": set()})
         page.enqueue({"type": "load", "body": {"kind": "problem", "name": "tentacle", "resolution": "coarse"}})
         worker = asyncio.create_task(page.worker())
         while not any(m["type"] == "state" for m in sent):  # the body is loaded and settled

@@ -66,6 +66,7 @@ def served(tmp_path_factory):
 @pytest.fixture(scope="module")
 def page(served):
     url, _ = served
+    assert "?token=" in url  # the address mdsr author prints and opens
     drv = open_browser()
     drv.get(url)
     wait(drv, "const s = mdsrAuthor.state(); return s !== null && s.settled && !mdsrAuthor.busy();")
@@ -173,15 +174,18 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     assert case["n_muscles"] == len(routing["muscles"])
     np.testing.assert_allclose(case["contractions"], design["contractions"], rtol=0, atol=1e-9)
     assert abs(case["difference"] - design["difference"]) <= 1e-9
-    # downloads: figures, meshes, results and the scene as a zip
+    # downloads: figures, meshes, results and the scene as a zip (with the token, as the page's cookie has it)
     url, _ = served
     sid = page.execute_script("return mdsrAuthor.sid();")
     import io
     import urllib.request
     import zipfile
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url)
 
     def get(what):
-        with urllib.request.urlopen(f"{url}download/{sid}/{what}", timeout=120) as r:
+        with urllib.request.urlopen(f"http://{u.netloc}/download/{sid}/{what}?{u.query}", timeout=120) as r:
             return r.read()
 
     for png in ("target.png", "graph.png", "muscles.png", "design.png"):
@@ -200,6 +204,56 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     assert shot.stat().st_size > 10_000
 
 
+def test_replacing_a_file_the_page_did_not_write_asks_on_the_page(page, served):
+    _, out = served
+    theirs = Path(out) / "theirs.json"
+    theirs.write_text("the user's own file")
+    idle(page)
+    name = page.find_element(By.ID, "save-name")
+    name.clear()
+    name.send_keys("theirs")
+    page.find_element(By.ID, "save").click()
+    ask = wait(page, "return mdsrAuthor.confirmation();")
+    box = page.find_element(By.ID, "confirm")
+    assert box.is_displayed() and "theirs.json" in box.text and "replace?" in box.text
+    assert ask["files"] == [str(theirs)] and theirs.read_text() == "the user's own file"
+    page.find_element(By.ID, "confirm-no").click()
+    assert not box.is_displayed() and theirs.read_text() == "the user's own file"
+    assert not (Path(out) / "theirs.mesh.vtu").exists()
+    page.find_element(By.ID, "save").click()
+    wait(page, "return mdsrAuthor.confirmation();")
+    page.find_element(By.ID, "confirm-yes").click()
+    saved = wait(page, "const s = mdsrAuthor.saved(); return s && s.files[0].endsWith('theirs.json') ? s : null;")
+    assert Path(saved["files"][0]) == theirs.resolve() and json.loads(theirs.read_text())["name"] == "theirs"
+    assert not box.is_displayed()
+
+
+def test_a_page_of_another_origin_is_refused_even_with_the_token(page, served):
+    url, _ = served
+    from urllib.parse import urlsplit
+
+    u = urlsplit(url)
+    own = page.current_window_handle
+    page.switch_to.new_window("tab")
+    try:
+        page.get(f"http://localhost:{u.port}/")  # another origin of the same server: no cookie, no token
+        assert "missing or wrong token" in page.find_element(By.TAG_NAME, "body").text
+        page.execute_script("window.closed_with = null; const ws = new WebSocket(arguments[0]);"
+                            "ws.onclose = (e) => { window.closed_with = [e.code, e.reason]; };",
+                            f"ws://{u.netloc}/ws?{u.query}")
+        code, reason = wait(page, "return window.closed_with;")
+        assert code == 1008 and "foreign page" in reason
+    finally:
+        page.close()
+        page.switch_to.window(own)
+    st = idle(page)  # the own page still works: a new settle with its fixed nodes comes back
+    page.execute_script("window.before = mdsrAuthor.state(); mdsrAuthor.send({type: 'fixed', seq: mdsrAuthor.seq(),"
+                        " anchors: arguments[0], drag_nodes: arguments[1], drag_positions: arguments[2]});",
+                        st["anchors"], st["drag_nodes"], st["drag_positions"])
+    wait(page, "return mdsrAuthor.state() !== window.before;")
+    assert idle(page)["success"]
+
+
 def errors_after(page, n0):
     return page.execute_script(f"return mdsrAuthor.errors().slice({n0});")
 
@@ -214,6 +268,9 @@ def errors_after(page, n0):
      "self-intersecting"),
     ('{"type": "route", "K_a": "ten", "K_b": 4}', "K_a must be a number"),
     ('{"type": "load", "body": {"kind": "problem", "name": "no_such_robot"}}', "unknown problem"),
+    ('{"type": "load", "body": {"kind": "path", "path": "payload.py"}}', "does not run Python files"),
+    ('{"type": "load", "body": {"kind": "path", "path": "/etc/passwd.json"}}', "outside the folders"),
+    ('{"type": "ping", "x": ' + "[" * 5000 + "]" * 5000 + "}", "nested too deeply"),
 ])
 def test_bad_message_is_named_on_the_page_and_server_keeps_serving(page, raw, words):
     n0 = len(page.execute_script("return mdsrAuthor.errors();"))

@@ -7,14 +7,21 @@ routes muscles, designs their contractions and compares target and driven shape,
 as a scene file that ``mdsr run`` reproduces. The server is Starlette on uvicorn (``pip install
 "mdsr_opt[author]"``); the page's scripts are served locally and work offline.
 
-Modules: :mod:`.session` (the state and the solves), :mod:`.server` (the web app), :mod:`.export` (scene
-file, figures, meshes, results), :mod:`.outline` (SVG/JSON outlines). Start it from Python with
-:func:`serve`, or in a thread for tests with :func:`start_in_thread`.
+Only the page ``mdsr author`` opened can use the server: the address it prints carries a per-session
+secret (``?token=...``), and requests with a foreign ``Host`` or ``Origin`` are refused (:mod:`.guard`).
+The page opens files only in the folders named on the command line (:mod:`.files`), runs no Python file,
+and replaces no file it did not write without asking.
+
+Modules: :mod:`.session` (the state and the solves), :mod:`.server` (the web app), :mod:`.guard` (who
+may use it), :mod:`.files` (what the page may open), :mod:`.export` (scene file, figures, meshes,
+results), :mod:`.outline` (SVG/JSON outlines). Start it from Python with :func:`serve`, or in a thread
+for tests with :func:`start_in_thread`.
 """
 
 from __future__ import annotations
 
 import ipaddress
+import secrets
 import socket
 import sys
 import threading
@@ -23,8 +30,8 @@ from pathlib import Path
 
 __all__ = ["serve", "start_in_thread", "add_cli", "body_spec"]
 
-_MISSING = ("mdsr author needs the web server packages: pip install \"mdsr_opt[author]\" "
-            "(starlette and uvicorn[standard])")
+_MISSING = ("the web server packages for mdsr author are missing (starlette, uvicorn): "
+            "python -m pip install \"mdsr_opt[author]\"")
 
 
 def _require():
@@ -80,24 +87,44 @@ def _server(app, sock, quiet: bool):
 
     from .server import MAX_MESSAGE
 
-    # no per-message deflate: on the loopback, compressing a 3k-node state costs more than sending it
+    # no per-message deflate: on the loopback, compressing a 3k-node state costs more than sending it;
+    # no proxy headers: nothing stands between the page and this server
     config = uvicorn.Config(app, log_level="warning" if quiet else "info", ws_max_size=2 * MAX_MESSAGE,
-                            ws_ping_interval=None, ws_per_message_deflate=False, lifespan="off")
+                            ws_ping_interval=None, ws_per_message_deflate=False, lifespan="off",
+                            proxy_headers=False, server_header=False)
     return uvicorn.Server(config)
 
 
-def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", port: int = 0,
-                    out="authored", resolution=None):
-    """Start the server in a daemon thread; returns ``(url, server)`` (stop with ``server.should_exit = True``).
-
-    ``body`` is what ``mdsr author`` takes (a name or path) or a load spec dict.
-    """
-    _require()
+def _app(spec, sock, host: str, body, out, allow_dirs):
+    """The guarded app for the bound ``sock`` and the page's address with its token."""
+    from .files import readable_folders
+    from .guard import allowed_hosts
     from .server import make_app
 
+    h, p = sock.getsockname()[:2]
+    token = secrets.token_urlsafe(32)
+    folders = readable_folders(body if isinstance(body, str) else None, out, allow_dirs)
+    app = make_app(spec, out, token=token, port=p, hosts=allowed_hosts(host, p), folders=folders)
+    shown = "127.0.0.1" if h in ("0.0.0.0", "::") else (f"[{h}]" if ":" in h else h)
+    return app, f"http://{shown}:{p}/?token={token}", folders
+
+
+def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", port: int = 0,
+                    out="authored", resolution=None, allow_dirs=()):
+    """Start the server in a daemon thread; returns ``(url, server)`` (stop with ``server.should_exit = True``).
+
+    ``body`` is what ``mdsr author`` takes (a name or path) or a load spec dict; ``url`` is the page's
+    address with its token (``http://127.0.0.1:<port>/?token=...``), as ``mdsr author`` prints it.
+    """
+    _require()
     spec = body if isinstance(body, dict) or body is None else body_spec(body, resolution)
     sock = _bind(host, port)
-    server = _server(make_app(spec, out), sock, quiet=True)
+    try:
+        app, url, _ = _app(spec, sock, host, body, out, allow_dirs)
+    except BaseException:
+        sock.close()
+        raise
+    server = _server(app, sock, quiet=True)
     th = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     th.start()
     t0 = time.time()
@@ -105,38 +132,42 @@ def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", 
         if time.time() - t0 > 30 or not th.is_alive():
             raise RuntimeError("the author server did not start")
         time.sleep(0.02)
-    h, p = sock.getsockname()[:2]
-    return f"http://{h if ':' not in h else f'[{h}]'}:{p}/", server
+    return url, server
 
 
 def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, open_browser: bool = True,
-          out="authored", resolution=None) -> int:
+          out="authored", resolution=None, allow_dirs=()) -> int:
     """Serve the authoring page until interrupted (what ``mdsr author`` runs).
 
     Parameters
     ----------
-    body : library problem name, scene file (``.toml``/``.json``) or outline file (``.svg``/``.json``).
+    body : library problem name, problem script (``.py``), scene file (``.toml``/``.json``) or outline
+        file (``.svg``/``.json``).
     host : address to bind; loopback by default (any other address is announced with a warning).
     port : 0 picks a free port.
     open_browser : open the page in the default browser.
     out : folder for saved scene files.
     resolution : node count (or coarse/medium/fine) for the body.
+    allow_dirs : more folders whose scene, outline and mesh files the page may open by path (besides
+        ``body``'s folder and ``out``).
     """
     _require()
     import webbrowser
 
-    from .server import make_app
-
     spec = body_spec(body, resolution)
     if not _is_loopback(host):
         print(f"mdsr author: WARNING: listening on {host}, not the loopback address: anyone who can reach "
-              "this machine can use the page and save files into the output folder", file=sys.stderr)
+              "this machine and has the address below (with its token) can use the page and save files into "
+              "the output folder", file=sys.stderr)
     sock = _bind(host, port)
-    h, p = sock.getsockname()[:2]
-    url = f"http://{'127.0.0.1' if h in ('0.0.0.0', '::') else h}:{p}/"
-    print(f"mdsr author: serving {body or 'an empty page'} on {url} (scene files go to {Path(out).resolve()}); "
-          "Ctrl-C stops", flush=True)
-    server = _server(make_app(spec, out), sock, quiet=False)
+    try:
+        app, url, folders = _app(spec, sock, host, body, out, allow_dirs)
+    except BaseException:
+        sock.close()
+        raise
+    print(f"mdsr author: serving {body or 'an empty page'} on {url} (scene files go to {Path(out).resolve()}; "
+          f"the page may open files in {', '.join(map(str, folders))}); Ctrl-C stops", flush=True)
+    server = _server(app, sock, quiet=False)
     if open_browser:
         threading.Timer(0.8, webbrowser.open, args=(url,)).start()
     try:
@@ -147,13 +178,18 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
 
 
 def _cmd(a) -> int:
+    try:
+        _require()
+    except ImportError as exc:  # one line and the install command, no traceback
+        print(f"mdsr author: error: {exc}", file=sys.stderr)
+        return 2
     import matplotlib
 
     matplotlib.use("Agg")  # figures are drawn in worker threads for downloads
     if not 0 <= a.port <= 65535:
         raise ValueError(f"--port must be in [0, 65535], got {a.port}")
     return serve(a.body, host=a.host, port=a.port, open_browser=not a.no_browser, out=a.out,
-                 resolution=a.resolution)
+                 resolution=a.resolution, allow_dirs=a.allow_dir)
 
 
 def add_cli(sub) -> None:
@@ -170,4 +206,7 @@ def add_cli(sub) -> None:
     p.add_argument("--port", type=int, default=0, help="port (default 0: a free port)")
     p.add_argument("--no-browser", action="store_true", help="do not open a browser; just print the address")
     p.add_argument("--out", default="authored", help="folder for saved scene files (default ./authored)")
+    p.add_argument("--allow-dir", action="append", default=[], metavar="DIR",
+                   help="another folder whose scene, outline and mesh files the page may open (repeatable; "
+                   "it may always open those in the BODY file's folder and in --out)")
     p.set_defaults(func=_cmd)

@@ -20,7 +20,7 @@ import numpy as np
 from ..body.io import write_json, write_mesh
 from ..core.deprecation import renamed_keywords
 
-__all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS"]
+__all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS", "WouldReplace"]
 
 #: What the page can download: file name -> description.
 DOWNLOADS = {
@@ -70,6 +70,14 @@ def scene_dict(session, name: str, mesh_file: str) -> dict:
     return d
 
 
+class WouldReplace(FileExistsError):
+    """:func:`save_scene` would replace files it was not allowed to (``paths``); nothing was written."""
+
+    def __init__(self, paths):
+        self.paths = [os.fspath(p) for p in paths]
+        super().__init__(f"{', '.join(self.paths)} already exist{'s' if len(self.paths) == 1 else ''}")
+
+
 def _plain(v):
     if isinstance(v, (np.floating, np.integer, np.bool_)):
         return v.item()
@@ -77,9 +85,13 @@ def _plain(v):
 
 
 @renamed_keywords(folder="out")
-def save_scene(session, out, name: str | None = None) -> list[str]:
+def save_scene(session, out, name: str | None = None, *, overwrite=True) -> list[str]:
     """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created; ``folder=`` is its
     deprecated spelling); returns the two paths.
+
+    ``overwrite``: ``True`` replaces existing files; ``False``, or a function of a path returning whether
+    that existing file may be replaced, raises :class:`WouldReplace` (before anything is written) for the
+    existing files it may not replace.
 
     The file is read back with :func:`~mdsr_opt.load_scene` and compared with the session (mesh, anchors,
     drags, muscles); a mismatch raises ``RuntimeError`` rather than leaving a scene that would not
@@ -97,6 +109,10 @@ def save_scene(session, out, name: str | None = None) -> list[str]:
     folder.mkdir(parents=True, exist_ok=True)
     mesh_path = folder / f"{name}.mesh.vtu"
     scene_path = folder / f"{name}.json"
+    if overwrite is not True:
+        keep = [p for p in (scene_path, mesh_path) if p.exists() and not (overwrite and overwrite(p))]
+        if keep:
+            raise WouldReplace(keep)
     write_mesh(mesh_path, session.mesh)
     write_json(scene_path, scene_dict(session, name, mesh_path.name))
     back = load_scene(scene_path)

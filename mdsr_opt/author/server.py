@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import json
 import math
 import os
@@ -26,20 +27,35 @@ __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 
 #: Largest websocket message the server reads (bytes of text); larger ones get an error message.
 MAX_MESSAGE = 4 * 1024 * 1024
+#: Deepest nesting of lists and objects in a message (the page's deepest, an outline's holes, is 5).
+MAX_DEPTH = 16
 STATIC = Path(__file__).with_name("static")
 _SESSIONS: "collections.OrderedDict[str, object]" = collections.OrderedDict()
 _KEEP_SESSIONS = 16
 
 
 # ---------------------------------------------------------------------------------------------- bodies
-def load_body(spec: dict):
+def load_body(spec: dict, folders=None):
     """A :class:`~mdsr_opt.author.session.Session` from a load request (or the command line's argument).
 
     ``spec``: ``{"kind": "problem", "name", "resolution"}``, ``{"kind": "path", "path", "resolution"}``
     (a scene file or outline file on disk), ``{"kind": "scene", "filename", "text"}`` (an uploaded scene
     file), ``{"kind": "outline", "outline", "holes", "resolution"}`` or ``{"kind": "outline_file",
     "filename", "text", "resolution"}``.
+
+    ``folders``: ``None`` for the command line's own argument (which may also be a problem script); for a
+    request from the page, the folders it may read (:func:`~mdsr_opt.author.files.readable_folders`): a
+    problem is then a library name, a path must be a scene or outline file inside them, and so must a
+    scene's mesh file (:mod:`.files`).
     """
+    try:
+        return _load_body(spec, folders)
+    except RecursionError:
+        raise ValueError(f"{spec.get('kind')}: the file is nested too deeply to be a scene or an outline") from None
+
+
+def _load_body(spec: dict, folders):
+    from .files import check_scene_refs, page_file
     from .outline import check_outline, parse_outline
     from .session import MAX_NODES, Session
 
@@ -57,21 +73,30 @@ def load_body(spec: dict):
         if n > MAX_NODES:
             raise ValueError(f"resolution {n} is above the page's limit of {MAX_NODES} nodes")
     if kind == "problem":
+        from ..scenes.library import list_problems
+
         name = spec.get("name")
         if not isinstance(name, str) or not name or "/" in name or "\\" in name or name.startswith("."):
             raise ValueError(f"problem name must be a library name, got {name!r}")
+        if folders is not None and name not in list_problems():
+            raise ValueError(f"unknown problem {name!r}; the library has: {', '.join(list_problems())}")
         return Session.from_problem(name, res)
     if kind == "path":
-        p = Path(str(spec.get("path")))
-        if not p.exists():
-            raise FileNotFoundError(f"no such file: {p}")
+        if folders is not None:
+            p = page_file(spec.get("path"), folders)
+        else:
+            p = Path(str(spec.get("path")))
+            if not p.exists():
+                raise FileNotFoundError(f"no such file: {p}")
         if p.suffix.lower() == ".svg" or p.suffix.lower() == ".json" and not _is_scene_json(p):
             outline, holes = parse_outline(p.name, p.read_text())
             return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
-        if p.suffix.lower() == ".py":
+        if p.suffix.lower() == ".py":  # the command line's problem script (page_file refuses these)
             from ..scenes.library import get_problem
 
             return Session.from_scene(get_problem(p, resolution=res))
+        if folders is not None:
+            check_scene_refs(p, folders)
         return Session.from_scene_file(p, res)
     if kind == "scene":
         fname, text = _file_fields(spec)
@@ -81,11 +106,8 @@ def load_body(spec: dict):
         with tempfile.TemporaryDirectory() as d:
             path = Path(d) / Path(fname).name
             path.write_text(text)
-            try:
-                return Session.from_scene_file(path, res)
-            except FileNotFoundError as exc:
-                raise ValueError(f"{exc} (a scene with a mesh file: start `mdsr author PATH` instead of "
-                                 "uploading it)") from None
+            check_scene_refs(path, (), shown=Path(fname).name)
+            return Session.from_scene_file(path, res)
     if kind == "outline_file":
         fname, text = _file_fields(spec)
         outline, holes = parse_outline(fname, text)
@@ -174,14 +196,15 @@ class Page:
         await self.ws.send_text(json.dumps(obj, allow_nan=False, default=_json_default))
 
     async def error(self, message: str, request=None) -> None:
-        await self.send({"type": "error", "message": message, "request": request})
+        await self.send(_error(message, request))
 
-    def enqueue(self, msg: dict) -> None:
-        if msg.get("type") == "drag" and self.queue and self.queue[-1].get("type") == "drag":
-            self.queue[-1] = msg  # keep only the latest drag: the page moved on
+    def enqueue(self, msg: dict, trusted: bool = False) -> None:
+        """Queue a request; ``trusted``: the server's own (the command line's body), not the page's."""
+        if msg.get("type") == "drag" and self.queue and self.queue[-1][0].get("type") == "drag":
+            self.queue[-1] = (msg, trusted)  # keep only the latest drag: the page moved on
             self.dropped += 1
         else:
-            self.queue.append(msg)
+            self.queue.append((msg, trusted))
         self.wake.set()
 
     async def worker(self) -> None:
@@ -189,23 +212,34 @@ class Page:
             await self.wake.wait()
             self.wake.clear()
             while self.queue:
-                msg = self.queue.popleft()
+                msg, trusted = self.queue.popleft()
+                t = msg.get("type")
                 try:
-                    reply = await asyncio.to_thread(self.handle, msg)
-                except (ValueError, TypeError, KeyError, FileNotFoundError, RuntimeError) as exc:
+                    reply = await asyncio.to_thread(self.handle, msg, trusted)
+                except RecursionError:  # a RuntimeError: named before the general case below
+                    reply = [_error(f"{t}: nested too deeply", t)]
+                except (ValueError, TypeError, KeyError, OSError, RuntimeError) as exc:
                     text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
-                    await self.error(f"{msg.get('type')}: {text}", msg.get("type"))
-                    continue
+                    if isinstance(exc, OSError) and exc.filename and not isinstance(exc, FileExistsError):
+                        text = f"{exc.strerror or type(exc).__name__}: {exc.filename}"
+                    reply = [_error(f"{t}: {text}", t)]
+                except MemoryError:
+                    reply = [_error(f"{t}: out of memory (a body too finely meshed? choose fewer nodes)", t)]
                 except Exception as exc:  # never let one request take the server down
                     traceback.print_exc(file=sys.stderr)
-                    await self.error(f"{msg.get('type')}: internal error {type(exc).__name__}: {exc}",
-                                     msg.get("type"))
-                    continue
+                    reply = [_error(f"{t}: internal error {type(exc).__name__}: {exc}", t)]
                 for r in reply:
-                    await self.send(r)
+                    try:
+                        await self.send(r)
+                    except (ValueError, TypeError, RecursionError) as exc:  # a reply JSON cannot hold
+                        await self.error(f"{t}: cannot send the reply: {exc}", t)
 
-    def handle(self, msg: dict) -> list[dict]:
-        """Serve one request (in a worker thread); returns the messages to send."""
+    def handle(self, msg: dict, trusted: bool = False) -> list[dict]:
+        """Serve one request (in a worker thread); returns the messages to send.
+
+        ``trusted``: the request is the server's own (the body named on the command line); a request from
+        the page loads only what :mod:`.files` allows.
+        """
         t = msg["type"]
         if t == "ping":
             return [{"type": "pong", "n_nodes": None if self.session is None else self.session.n_nodes}]
@@ -213,7 +247,7 @@ class Page:
             spec = msg.get("body")
             if not isinstance(spec, dict):
                 raise TypeError("load message: 'body' must be an object")
-            self.session = load_body(spec)
+            self.session = load_body(spec, None if trusted else self.app["folders"])
             _SESSIONS[self.sid] = self.session
             while len(_SESSIONS) > _KEEP_SESSIONS:
                 _SESSIONS.popitem(last=False)
@@ -240,12 +274,20 @@ class Page:
             out = s.run_design(method=method, muscle_model=model, a_max=_number(msg, "a_max", 0.0, 1.0))
             return [dict(type="design", **out)]
         if t == "save":
-            from .export import save_scene
+            from .export import WouldReplace, save_scene
 
             name = msg.get("name") or s.name
             if not isinstance(name, str):
                 raise TypeError(f"save name must be a string, got {name!r}")
-            files = save_scene(s, self.app["out"], name)
+            written = self.app["written"]  # the files this server wrote: replaced without asking
+            may = True if msg.get("confirm") is True else (lambda p: p.resolve() in written)
+            try:
+                files = save_scene(s, self.app["out"], name, overwrite=may)
+            except WouldReplace as exc:
+                return [{"type": "confirm", "action": "save", "name": name, "files": exc.paths,
+                         "message": f"{exc} and {'was' if len(exc.paths) == 1 else 'were'} not written by "
+                                    "this page: replace?"}]
+            written.update(Path(f).resolve() for f in files)
             return [{"type": "saved", "files": [os.path.abspath(f) for f in files],
                      "download": f"/download/{self.sid}/scene.zip"}]
         raise ValueError(f"unknown message type {t!r}")
@@ -257,6 +299,10 @@ class Page:
                  drag_nodes=s.drag_nodes.tolist(), drag_positions=s.drag_positions.tolist(),
                  settled=s.target is not None)
         return d
+
+
+def _error(message: str, request=None) -> dict:
+    return {"type": "error", "message": message, "request": request if isinstance(request, str) else None}
 
 
 def _json_default(o):
@@ -280,19 +326,43 @@ def _parse(raw) -> dict:
         msg = json.loads(text, parse_constant=lambda c: float("nan"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"malformed message (not JSON): {exc}") from None
+    except RecursionError:
+        raise ValueError(f"malformed message: nested too deeply (limit {MAX_DEPTH} levels)") from None
     if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
         raise ValueError("malformed message: expected a JSON object with a string 'type'")
+    if _depth(msg) > MAX_DEPTH:
+        raise ValueError(f"malformed message: nested too deeply (limit {MAX_DEPTH} levels)")
     return msg
 
 
+def _depth(obj) -> int:
+    """How deeply lists and objects nest in ``obj`` (a scalar: 0), without recursion."""
+    deepest, todo = 0, [(obj, 1)]
+    while todo:
+        o, d = todo.pop()
+        if isinstance(o, dict):
+            o = o.values()
+        elif not isinstance(o, list):
+            continue
+        deepest = max(deepest, d)
+        if d <= MAX_DEPTH:
+            todo.extend((v, d + 1) for v in o if isinstance(v, (dict, list)))
+    return deepest
+
+
 # ---------------------------------------------------------------------------------------------- the app
-def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
-    """The Starlette application.
+def make_app(initial: dict | None = None, out: str | os.PathLike = "authored", *, token: str, port: int,
+             hosts: frozenset | None, folders=None):
+    """The Starlette application behind its access checks (:class:`~mdsr_opt.author.guard.Guard`).
 
     Parameters
     ----------
     initial : a :func:`load_body` spec loaded when a page connects (``None``: the page starts empty).
     out : folder where ``save`` writes scene files.
+    token : the session's secret that every request must present (:mod:`.guard`).
+    port : the port the server listens on.
+    hosts : the ``Host`` values accepted (:func:`~mdsr_opt.author.guard.allowed_hosts`; ``None``: any).
+    folders : the folders whose files the page may open by path (default: ``out``; see :mod:`.files`).
     """
     from starlette.applications import Starlette
     from starlette.responses import FileResponse, JSONResponse, Response
@@ -302,9 +372,12 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
 
     from ..scenes.library import list_problems
     from .export import DOWNLOADS, download
+    from .files import readable_folders
+    from .guard import Guard
     from .session import design_defaults
 
-    state = {"out": os.fspath(out), "initial": initial}
+    folders = readable_folders(None, out) if folders is None else tuple(Path(f).resolve() for f in folders)
+    state = {"out": os.fspath(out), "initial": initial, "folders": folders, "written": set()}
 
     async def index(request):
         return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
@@ -313,7 +386,8 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
         return JSONResponse({"problems": list_problems(), "downloads": DOWNLOADS,
                              "design": {k: v for k, v in design_defaults().items()
                                         if isinstance(v, (int, float, str))},
-                             "max_message": MAX_MESSAGE, "out": os.path.abspath(state["out"])})
+                             "max_message": MAX_MESSAGE, "out": os.path.abspath(state["out"]),
+                             "folders": [os.fspath(f) for f in folders]})
 
     async def get_download(request):
         sid, what = request.path_params["sid"], request.path_params["what"]
@@ -334,7 +408,7 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
         await page.send({"type": "hello", "sid": page.sid})
         task = asyncio.create_task(page.worker())
         if state["initial"] is not None:
-            page.enqueue({"type": "load", "body": state["initial"]})
+            page.enqueue({"type": "load", "body": state["initial"]}, trusted=True)
         try:
             while True:
                 raw = await ws.receive()
@@ -348,10 +422,14 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored"):
                 page.enqueue(msg)
         except WebSocketDisconnect:
             pass
+        except Exception:  # never drop the page without a close frame
+            traceback.print_exc(file=sys.stderr)
+            with contextlib.suppress(Exception):
+                await ws.close(code=1011, reason="internal error (see the server's output)")
         finally:
             task.cancel()
             page.tmp.cleanup()
 
     routes = [Route("/", index), Route("/api/info", info), Route("/download/{sid}/{what}", get_download),
               WebSocketRoute("/ws", ws_endpoint), Mount("/static", StaticFiles(directory=STATIC), name="static")]
-    return Starlette(routes=routes)
+    return Guard(Starlette(routes=routes), token, port, hosts)

@@ -30,9 +30,13 @@ TARGETS = {600: 10.0, 3000: 4.0}
 
 
 def _client(url):
+    """A websocket as the page opens it: its own origin, the token from the page's address."""
+    from urllib.parse import urlsplit
+
     from websockets.sync.client import connect
 
-    return connect(url.replace("http", "ws", 1) + "ws", max_size=None, compression=None)
+    u = urlsplit(url)
+    return connect(f"ws://{u.netloc}/ws?{u.query}", origin=f"http://{u.netloc}", max_size=None, compression=None)
 
 
 def _recv(ws, kind, timeout=300):

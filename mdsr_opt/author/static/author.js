@@ -15,7 +15,7 @@
     anchors: new Set(),
     handles: new Map(),    // node -> {group, pos: [x, y]}
     group: 0,
-    graph: null, routing: null, design: null, saved: null,
+    graph: null, routing: null, design: null, saved: null, confirm: null,
     nLive: 0, seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
     view: { s: 1, ox: 0, oy: 0 },
     pointer: null, op: null, pivot: null,
@@ -23,12 +23,22 @@
   };
 
   // ------------------------------------------------------------------ websocket
+  // the session's secret: in the address mdsr author opened (?token=...), kept for reloads of this tab
+  const TOKEN = new URLSearchParams(location.search).get("token") || sessionStorage.getItem("mdsr-author-token");
+  if (TOKEN) sessionStorage.setItem("mdsr-author-token", TOKEN);
+
   function connect() {
     const proto = location.protocol === "https:" ? "wss" : "ws";
-    const ws = new WebSocket(`${proto}://${location.host}/ws`);
+    const query = TOKEN ? `?token=${encodeURIComponent(TOKEN)}` : "";
+    const ws = new WebSocket(`${proto}://${location.host}/ws${query}`);
     S.ws = ws;
     ws.onmessage = (ev) => onMessage(JSON.parse(ev.data));
     ws.onclose = (ev) => {
+      if (ev.code === 1008) {  // refused (token, origin or host): trying again would not help
+        status(`refused by the server: ${ev.reason}`);
+        showError(`the server refused this page: ${ev.reason}`);
+        return;
+      }
       status(`connection closed (${ev.code}${ev.reason ? ": " + ev.reason : ""}); reconnecting...`);
       if (ev.code === 1009) showError("the last message was too large for the server and was refused");
       setTimeout(connect, 1000);
@@ -69,7 +79,8 @@
     if (m.type === "graph") { S.graph = m.weights; render(); return; }
     if (m.type === "routing") { S.routing = m; S.design = null; S.graph = null; for (const w of m.warnings) showError(w); updateTable(); render(); return; }
     if (m.type === "design") { S.design = m; if (!m.success) showError(`design not verified: ${m.status}`); updateTable(); render(); return; }
-    if (m.type === "saved") { S.saved = m; $("saved").textContent = "saved: " + m.files.join(", "); return; }
+    if (m.type === "saved") { S.saved = m; S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "saved: " + m.files.join(", "); return; }
+    if (m.type === "confirm") { S.confirm = m; $("confirm-text").textContent = m.message; $("confirm").hidden = false; return; }
   }
 
   function onBody(m) {
@@ -85,7 +96,7 @@
     if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
     $("save-name").value = m.name;
     if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
-    $("saved").textContent = "";
+    $("saved").textContent = ""; S.confirm = null; $("confirm").hidden = true;
     updateTable(); drawButtons(); updateDownloads();
     fit(m.points.concat(m.drag_positions));
     S.needFit = true;
@@ -480,12 +491,16 @@
   };
   $("design").onclick = () => send({ type: "design", method: $("method").value, muscle_model: $("muscle_model").value, a_max: Number($("a_max").value) });
   $("save").onclick = () => send({ type: "save", name: $("save-name").value.trim() || null });
+  // the server asks before it replaces a file this page did not write: only the user's click confirms
+  $("confirm-yes").onclick = () => { if (S.confirm) send({ type: "save", name: S.confirm.name, confirm: true }); S.confirm = null; $("confirm").hidden = true; };
+  $("confirm-no").onclick = () => { S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "not saved: the existing file was kept"; };
 
   window.addEventListener("resize", () => { resize(); render(); });
 
   // ------------------------------------------------------------------ for tests and scripting
   window.mdsrAuthor = {
     state: () => S.state, body: () => S.body, graph: () => S.graph, sid: () => S.sid, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
+    confirmation: () => S.confirm,
     errors: () => S.errors.slice(), lastError: () => S.lastError, pong: () => S.pong,
     busy: () => S.inflight !== null || S.op !== null || S.pendingDrag,
     seq: () => S.seq, nLive: () => S.nLive,
@@ -498,13 +513,16 @@
   // ------------------------------------------------------------------ start
   resize();
   render();
-  fetch("/api/info").then((r) => r.json()).then((info) => {
+  fetch("/api/info").then((r) => {
+    if (!r.ok) return r.text().then((t) => { throw new Error(t.trim() || `HTTP ${r.status}`); });
+    return r.json();
+  }).then((info) => {
     S.info = info;
     const sel = $("problem");
     for (const p of info.problems) { const o = document.createElement("option"); o.textContent = p; sel.appendChild(o); }
     if (info.design.muscle_model) setSelect("muscle_model", info.design.muscle_model);
     updateDownloads();
     connect();
-  });
+  }).catch((e) => { status(String(e.message || e)); showError(String(e.message || e)); });
   setInterval(() => { if (S.state) updateStatus(); }, 1000);
 })();
