@@ -1,4 +1,5 @@
 import os
+import re
 
 import numpy as np
 import pytest
@@ -170,3 +171,66 @@ def test_failing_rename_leaves_no_temporary_file(tmp_path):
             target.mkdir()  # the target turns into a directory before the rename
             (target / "keep").write_text("")
     assert os.listdir(tmp_path) == ["r.json"] and os.listdir(target) == ["keep"]
+
+
+# ------------------------------------------------------------------------------------ data names
+#: names each format writes and reads back unchanged
+KEPT = {
+    ".vtk": ["weight_1", "a'b", "a>b", "Dehnung_é", "応力", "a/b:c"],
+    ".vtu": ["a b", " lead", "a'b", "a>b", "Dehnung_é", "応力", "a\u2028b"],
+    ".xdmf": ["a<b&c\"d", "a b", "a'b", "Dehnung_é", "応力", "a]]>b"],
+    ".msh": ["a<b&c", "a b", "a'b", "Dehnung_é", "応力"],
+}
+#: names each format cannot carry, with what the message says
+REFUSED = {
+    ".vtk": [("a b", r"holds ' ': a \.vtk file cannot carry whitespace .* or write \.vtu, \.xdmf, \.msh"),
+             ("a\u00a0b", r"holds '\\xa0': a \.vtk file cannot carry whitespace")],
+    ".vtu": [("a<b", r"holds '<': a \.vtu file cannot carry '<', '&' or '\"' .* or write \.vtk, \.xdmf, \.msh"),
+             ("a&b", r"holds '&'"), ('a"b', r"holds '\"'.*or write \.vtk, \.xdmf$")],
+    ".xdmf": [],
+    ".msh": [('a"b', r"holds '\"': a \.msh file cannot carry '\"' .* or write \.vtk, \.xdmf$")],
+}
+
+
+@pytest.mark.parametrize("ext", [".vtk", ".vtu", ".xdmf", ".msh"])
+def test_data_names_round_trip_or_are_refused_at_the_door(tmp_path, body, ext):
+    """meshio writes VTU names into XML attributes unescaped ('<', '&', '"' make the file unreadable), Gmsh
+    names between quotes ('"' is dropped) and VTK names as words (whitespace splits them): each writer takes
+    exactly the names its format gives back, and refuses the rest before writing anything."""
+    mesh, x = body
+    names = KEPT[ext]
+    pdata = {n: np.arange(mesh.n_nodes, dtype=float) + k for k, n in enumerate(names)}
+    cdata = {n: np.arange(mesh.n_triangles, dtype=float) - k for k, n in enumerate(names)}
+    back = read_mesh(write_mesh(tmp_path / f"m{ext}", mesh, x=x, point_data=pdata, cell_data=cdata))
+    assert set(names) <= set(back.point_data) and set(names) <= set(back.cell_data)
+    for k, n in enumerate(names):
+        np.testing.assert_array_equal(back.point_data[n], np.arange(mesh.n_nodes) + k)
+        np.testing.assert_array_equal(back.cell_data[n], np.arange(mesh.n_triangles) - k)
+    common = [("a\x01b", r"holds the control character '\\x01', which no mesh format keeps"),
+              ("a\tb", r"holds the control character '\\t'"), ("a\nb", r"holds the control character '\\n'"),
+              ("", "empty name"), ("gmsh:tag", r"names starting with 'gmsh:' are Gmsh's own tags")]
+    for name, match in REFUSED[ext] + common:
+        for data in ("point_data", "cell_data"):
+            n = mesh.n_nodes if data == "point_data" else mesh.n_triangles
+            with pytest.raises(ValueError, match=rf"{data}\[{re.escape(repr(name))}\]:? {match}"
+                               if name else rf"{data} has an empty name"):
+                write_mesh(tmp_path / f"bad{ext}", mesh, **{data: {name: np.zeros(n)}})
+    assert sorted(os.listdir(tmp_path)) == [f"m{ext}"]  # nothing written by the refusals
+
+
+def test_data_names_clashing_with_written_fields_or_not_strings_are_refused(tmp_path, body):
+    mesh, x = body
+    mat = NeoHookean(1.0, 0.3)
+    with pytest.raises(ValueError, match=r"point_data\['displacement'\] would overwrite the 'displacement'"):
+        write_mesh(tmp_path / "a.vtu", mesh, x=x, point_data={"displacement": np.zeros((mesh.n_nodes, 2))})
+    with pytest.raises(ValueError, match=r"cell_data\['energy_density'\] would overwrite"):
+        write_mesh(tmp_path / "a.vtu", mesh, x=x, material=mat, cell_data={"energy_density": np.zeros(mesh.n_triangles)})
+    with pytest.raises(TypeError, match=r"point_data names must be strings, got int 3"):
+        write_mesh(tmp_path / "a.vtu", mesh, point_data={3: np.zeros(mesh.n_nodes)})
+    assert os.listdir(tmp_path) == []
+    # without a state, 'displacement' is the state itself (read back as x), and 'J' is free
+    u = np.full((mesh.n_nodes, 2), 0.25)
+    back = read_mesh(write_mesh(tmp_path / "u.vtu", mesh, point_data={"displacement": u},
+                                cell_data={"J": np.ones(mesh.n_triangles)}))
+    np.testing.assert_allclose(back.x, mesh.points + 0.25, atol=1e-12)
+    np.testing.assert_array_equal(back.cell_data["J"], 1.0)

@@ -116,6 +116,42 @@ def _format_of(path) -> str:
     return FORMATS[ext]
 
 
+#: Characters each format cannot carry in a data name and read back as written (besides control
+#: characters, refused for all): meshio writes VTU names into XML attributes unescaped, Gmsh names
+#: between double quotes, and legacy VTK names as whitespace-separated words.
+_NAME_FORBIDS = {
+    "vtk": ("whitespace", str.isspace),
+    "vtu": ("'<', '&' or '\"'", lambda c: c in '<&"'),
+    "gmsh": ("'\"'", lambda c: c == '"'),
+}
+
+
+def _check_name(name, kind: str, fmt: str, ext: str, taken: tuple[str, ...]) -> None:
+    """Refuse a point or cell data name that ``fmt`` cannot write and read back unchanged."""
+    import unicodedata
+
+    if not isinstance(name, str):
+        raise TypeError(f"{kind} names must be strings, got {type(name).__name__} {name!r}")
+    if not name:
+        raise ValueError(f"{kind} has an empty name; give every array a name")
+    if name in taken:
+        raise ValueError(f"{kind}[{name!r}] would overwrite the {name!r} that write_mesh writes itself "
+                         "(from x and material); rename it")
+    if name.startswith("gmsh:"):
+        raise ValueError(f"{kind}[{name!r}]: names starting with 'gmsh:' are Gmsh's own tags, which read_mesh "
+                         "leaves out; rename it")
+    bad = next((c for c in name if unicodedata.category(c) == "Cc"), None)
+    if bad is not None:
+        raise ValueError(f"{kind}[{name!r}] holds the control character {bad!r}, which no mesh format keeps; "
+                         "rename it")
+    what, forbids = _NAME_FORBIDS.get(fmt, ("", lambda c: False))
+    bad = next((c for c in name if forbids(c)), None)
+    if bad is not None:
+        fits = ", ".join(e for e, f in FORMATS.items() if f not in _NAME_FORBIDS or not _NAME_FORBIDS[f][1](bad))
+        raise ValueError(f"{kind}[{name!r}] holds {bad!r}: a {ext} file cannot carry {what} in a data name and "
+                         f"be read back as written; rename it, or write {fits}")
+
+
 def _pad3(v: np.ndarray) -> np.ndarray:
     return np.column_stack([v, np.zeros(len(v))])
 
@@ -139,8 +175,11 @@ def write_mesh(path, mesh: Mesh, x=None, point_data: dict | None = None, cell_da
         ``mesh`` is not a :class:`Mesh`.
     ValueError
         An unsupported extension, a ``path`` that is a directory (or under a file), data of the wrong
-        shape or with NaN/inf. Nothing is written then, and no temporary file is left behind (not after
-        an interrupt either).
+        shape or with NaN/inf, or a data name the format cannot write and read back as written: empty,
+        with a control character, starting with ``gmsh:``, one of the names written from ``x`` and
+        ``material`` (``displacement``, ``J``, ``energy_density``) when those are given, or holding
+        whitespace (``.vtk``), ``<``, ``&`` or ``"`` (``.vtu``) or ``"`` (``.msh``). Nothing is written
+        then, and no temporary file is left behind (not after an interrupt either).
     """
     import meshio
 
@@ -148,6 +187,12 @@ def write_mesh(path, mesh: Mesh, x=None, point_data: dict | None = None, cell_da
         raise TypeError(f"mesh must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
     check_target(path)
     fmt = _format_of(path)
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    for name in point_data or {}:
+        _check_name(name, "point_data", fmt, ext, ("displacement",) if x is not None else ())
+    for name in cell_data or {}:
+        taken = () if x is None else ("J", "energy_density") if material is not None else ("J",)
+        _check_name(name, "cell_data", fmt, ext, taken)
     pdata, cdata = {}, {}
     if x is not None:
         x = mesh._check_state(x)

@@ -26,9 +26,6 @@ __all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_
 
 #: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
 MAX_TRIANGLES = 2_000_000
-#: Triangles per unit of ``area / max_area`` that Triangle makes when the area bound governs (measured:
-#: 1.55 at min_angle 20, 1.58 at 30, 1.71 at 33, on squares, strips and discs of 1e3 to 1e6 triangles).
-_TRIANGLES_PER_AREA = 1.6
 
 
 def _frozen(value):
@@ -48,15 +45,6 @@ def _cached(fn):
         return _frozen(fn(self))
 
     return cached_property(compute)
-
-
-def _switch_number(value: float) -> str:
-    """A number as Triangle's command line reads it: digits and a point, never an exponent.
-
-    Triangle's switch parser takes only ``0-9`` and ``.`` after ``a`` or ``q``; ``1e-05`` would be read as
-    ``1`` (and ``e`` as another switch), which silently meshes far coarser than asked.
-    """
-    return np.format_float_positional(float(value), trim="-")
 
 
 class Mesh:
@@ -332,12 +320,17 @@ class Mesh:
             Polygons strictly inside the outline, neither touching it nor each other, and not nested
             inside one another (a hole inside a hole would be a separate island of material).
         min_angle : float
-            Smallest interior angle in degrees (Triangle guarantees up to about 33; at most 34). Every
-            corner of the outline (and every corner of the body at a hole) must be at least this wide,
-            since Triangle cannot split an input corner.
+            Smallest interior angle in degrees, at most 34 (Triangle may not terminate above). Every
+            triangle meets it: Triangle leaves a few narrower ones next to input corners narrower than 60
+            degrees, and a refinement pass splits them. Every corner of the outline (and every corner of
+            the body at a hole) must be at least this wide, since Triangle cannot split an input corner.
         max_triangles : int
-            Refuse, before meshing, a request expected to make more triangles than this (the expectation
-            is ``1.6 x area / max_area``, what Triangle makes when the area bound governs). The default,
+            Refuse, before meshing, a request expected to make more triangles than this. The expectation
+            adds ``1.6 x area / max_area`` (what Triangle makes where the area bound governs), the
+            triangles that thin parts need (a part ``w`` wide needs triangles about ``w`` across: a strip
+            of length ``L`` takes about ``2 L / w``, whatever ``max_area``) and a few at each edge shorter
+            than ``sqrt(max_area)`` (see :func:`mdsr_opt.body.triangulate.expected_triangles`). Triangle
+            is also stopped after adding this many points, so no request can exhaust memory. The default,
             :data:`MAX_TRIANGLES` (2 million), bounds the time (seconds) and memory (about a GB) of
             meshing and validation; pass a larger value to go beyond it.
 
@@ -346,7 +339,20 @@ class Mesh:
         ValueError
             A bad outline or hole (see :func:`check_polygon`), holes crossing, touching, outside the
             outline or nested in one another, a corner narrower than ``min_angle``, ``min_angle`` above 34,
-            a non-positive ``max_area``, or a request over ``max_triangles``.
+            a non-positive ``max_area``, or a request over ``max_triangles`` (the message names the thin
+            part that drives the count, its width and place, and the width the limit allows).
+
+        Warns
+        -----
+        UserWarning
+            An angle below ``min_angle`` remains after the repair passes (not seen on fuzzed outlines);
+            the message gives the smallest angle and where it is.
+
+        Notes
+        -----
+        Scale-free: the polygon is centred, scaled to unit size and rounded to 2**-40 of its size before
+        Triangle sees it, so a polygon scaled by any factor (with ``max_area`` scaled by its square) meshes
+        into the same triangles. The outline's and holes' vertices come back exactly as given.
 
         Example
         -------
@@ -354,8 +360,12 @@ class Mesh:
         >>> m.quality()["min_angle_deg"] >= 30.0 - 1e-9
         True
         """
+        import warnings
+
         import shapely
-        import triangle as tr
+
+        from .triangulate import (TRIANGLES_PER_AREA, expected_triangles, quality_triangulation,
+                                  too_many_triangles, triangle_min_angles)
 
         outer = check_polygon(outline, "outline")
         hole_polys = [check_polygon(h, f"holes[{i}]") for i, h in enumerate(holes or [])]
@@ -365,38 +375,40 @@ class Mesh:
         max_triangles = positive_int(max_triangles, "max_triangles")
         names = ["outline"] + [f"holes[{i}]" for i in range(len(hole_polys))]
         polys = [outer] + hole_polys
-        # scale-free coordinates: scaled by a power of two s to about unit size and shifted by a whole
-        # multiple of s next to the outline's centre, so the transform is exact (Sterbenz) and a body near
-        # the origin meshes exactly as it would unscaled
+        # scale-free coordinates: centred, scaled to unit size and rounded to a grid of 2**-40, so the same
+        # polygon at any scale or place gives Triangle the same numbers (and the same mesh)
         lo, hi = outer.min(axis=0), outer.max(axis=0)
-        s = float(2.0 ** np.ceil(np.log2(float(np.max(hi - lo)))))
-        centre = np.round(0.5 * (lo + hi) / s) * s
-        unit = [(p - centre) / s for p in polys]
+        s = float(np.max(hi - lo))
+        centre = 0.5 * (lo + hi)
+        unit = [np.round((p - centre) / s * 2.0 ** 40) * 2.0 ** -40 for p in polys]
         area = polygon_area(unit[0]) - sum(polygon_area(h) for h in unit[1:])
         if area <= 0.0:
             raise ValueError("the holes cover the whole outline: no material is left to mesh")
         if max_area is None:
-            unit_area = area / 200.0
+            unit_area = float(f"{area / 200.0:.12g}")
             max_area = unit_area * s * s
         else:
             max_area = positive_float(max_area, "max_area")
-            unit_area = max_area / (s * s)
-        expected = max(_TRIANGLES_PER_AREA * area / unit_area, float(sum(len(p) for p in polys)))
+            unit_area = float(f"{max_area / (s * s):.12g}")  # the same digits at every scale
+        expected = max(TRIANGLES_PER_AREA * area / unit_area, float(sum(len(p) for p in polys)))
         if expected > max_triangles:
             raise ValueError(
                 f"max_area={max_area:.6g} would make about {expected:.3g} triangles (1.6 x area "
                 f"{area * s * s:.6g} / max_area), more than the limit max_triangles={int(max_triangles)}; "
                 f"pass a larger max_area, or raise the limit with max_triangles= (Mesh.from_polygon)")
-        # the rings may not meet: one segment soup of all of them, tested at once
+        # the rings may not meet: one segment soup of all of them, tested at once (a ring meeting itself
+        # here came within 2**-41 of the outline's size of itself, closer than the grid above resolves)
         ring_of = np.repeat(np.arange(len(unit)), [len(u) for u in unit])
         segs = ring_segments([len(u) for u in unit])
         hit = segment_contacts(np.vstack(unit), segs)
         for i, j in hit:
             a, b = int(ring_of[segs[i, 0]]), int(ring_of[segs[j, 0]])
-            if a != b and a == 0:
+            if a == b:
+                raise ValueError(f"{names[a]} comes within {2.0 ** -41 * s:.3g} (a 2e12th of the outline's "
+                                 "size) of itself: too close to mesh; widen the gap")
+            if a == 0:
                 raise ValueError(f"{names[b]} is not inside the outline: they intersect or touch")
-            if a != b:
-                raise ValueError(f"{names[a]} and {names[b]} intersect or touch")
+            raise ValueError(f"{names[a]} and {names[b]} intersect or touch")
         if hole_polys:
             rings = [shapely.Polygon(u) for u in unit]
             for i, u in enumerate(unit[1:]):
@@ -422,19 +434,32 @@ class Mesh:
                     f"narrower than min_angle={min_angle:g}: Triangle cannot split an input corner, so that "
                     f"angle cannot be met; pass min_angle <= {np.floor(ang[k] * 100) / 100:g} or widen the "
                     "corner")
-        data = {"vertices": np.vstack(unit), "segments": segs}
-        if hole_polys:
-            data["holes"] = np.array([point_inside(h) for h in unit[1:]])
-        out = tr.triangulate(data, f"pq{_switch_number(min_angle)}a{_switch_number(unit_area)}Q")
-        tri = np.asarray(out["triangles"], dtype=np.int64)
-        if len(tri) > max_triangles:
-            raise ValueError(f"meshing made {len(tri)} triangles, more than the limit "
+        expected, thin = expected_triangles(unit, unit_area, limit=max_triangles)
+        if expected > max_triangles:
+            raise ValueError(too_many_triangles(expected, thin, names, s, centre, max_area, max_triangles))
+        hole_points = np.array([point_inside(h) for h in unit[1:]]) if hole_polys else None
+        v, tri, on_segment, capped = quality_triangulation(np.vstack(unit), segs, hole_points, min_angle, unit_area,
+                                               max_steiner=max_triangles)
+        if capped or len(tri) > max_triangles:
+            made = "stopped at the limit after adding" if capped else "made"
+            raise ValueError(f"meshing {made} {len(tri)} triangles, more than the limit "
                              f"max_triangles={int(max_triangles)} (small features or narrow gaps refine the "
                              "mesh beyond the area bound); pass a larger max_area, or raise the limit with "
                              "max_triangles= (Mesh.from_polygon)")
-        pts = np.asarray(out["vertices"], dtype=float) * s + centre
-        n_in = len(data["vertices"])
-        pts[:n_in] = np.vstack(polys)  # the input vertices exactly as given (Triangle keeps them first)
+        ang = triangle_min_angles(v, tri)
+        if ang.min() < min_angle - 1e-6:
+            c = v[tri[int(np.argmin(ang))]].mean(axis=0) * s + centre
+            warnings.warn(f"the mesh's smallest angle is {ang.min():.4g} degrees, in the triangle centred at "
+                          f"({c[0]:.6g}, {c[1]:.6g}), below min_angle={min_angle:g}", UserWarning, stacklevel=2)
+        pts = v * s + centre
+        n_in = sum(len(p) for p in polys)
+        given = np.vstack(polys)
+        pts[:n_in] = given  # the input vertices exactly as given (Triangle keeps them first)
+        k = np.flatnonzero(on_segment >= 0)  # points on the boundary: onto the segments as given
+        i, j = segs[on_segment[k], 0], segs[on_segment[k], 1]
+        ua, ub = v[i], v[j]
+        t = np.einsum("ij,ij->i", v[k] - ua, ub - ua) / np.einsum("ij,ij->i", ub - ua, ub - ua)
+        pts[k] = given[i] + t[:, None] * (given[j] - given[i])
         used = np.flatnonzero(np.bincount(tri.ravel(), minlength=len(pts)))
         if len(used) != len(pts):  # drop vertices left outside (never expected with 'p')
             remap = -np.ones(len(pts), dtype=np.int64)
