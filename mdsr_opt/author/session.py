@@ -159,7 +159,8 @@ class Session:
         for what, p in [("outline", out)] + [(f"hole {i + 1}", h) for i, h in enumerate(hs)]:
             if p.ndim != 2 or p.shape[1] != 2 or not np.all(np.isfinite(p)):
                 raise ValueError(f"{what}: expected finite [x, y] points")
-        mesh = mesh_polygon(out, hs, resolution=n)
+        # a thin part that would need far more triangles than the page's node limit is refused before meshing
+        mesh = mesh_polygon(out, hs, resolution=n, max_triangles=4 * MAX_NODES)
         return cls(name=name, mesh=mesh, material=material or NeoHookean(1.0, 0.3), source="outline",
                    outline=out.tolist(), holes=[h.tolist() for h in hs], resolution=n)
 
