@@ -67,6 +67,7 @@ def test_problem_script_by_path():
 
 @pytest.mark.parametrize("bad, err, match", [("tiny", ValueError, "resolution must be one of"),
                                              (5, ValueError, "at least 20 nodes"),
+                                             (99999999, ValueError, "at most 200000 nodes .a solve's memory"),
                                              (2.5, TypeError, "integer node count")])
 def test_resolution_is_checked(bad, err, match):
     with pytest.raises(err, match=match):
