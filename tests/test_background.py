@@ -231,27 +231,29 @@ def test_a_child_dies_with_its_parent(tmp_path):
         proc.kill()
 
 
-def _open_files():
-    out = []
-    for fd in os.listdir("/proc/self/fd"):
-        try:
-            out.append(os.readlink(f"/proc/self/fd/{fd}"))
-        except OSError:
-            pass
-    return out
+def _sleep_and_report(seconds):
+    time.sleep(seconds)
+    return os.getpid()
 
 
 def test_a_child_does_not_keep_the_run_folders_lock(tmp_path, forks):
-    """The lock of an output folder goes with the run's own process: a figure job closes its copy."""
-    from mdsr_opt.scenes.rundir import LOCK_NAME, RunFolder
+    """The lock of an output folder goes with the run's own process: once the run has let the folder go, a
+    figure job it forked that is still running does not keep the next run out."""
+    from mdsr_opt.scenes.rundir import RunFolder
 
-    got = []
-    with RunFolder(tmp_path / "out"):
-        lock = str(tmp_path / "out" / LOCK_NAME)
-        assert lock in _open_files()  # held here
-        with BackgroundWriter() as bg:
-            bg.submit(_open_files, on_done=got.append)
-    assert (lock not in got[0]) == forks  # closed in a child; inline, the job is this process
+    out = tmp_path / "out"
+    bg = BackgroundWriter()
+    with RunFolder(out) as folder:
+        folder.begin([])
+        bg.__enter__()
+        bg.submit(_sleep_and_report, 1.0, on_done=lambda _: None)
+    try:
+        t0 = time.monotonic()
+        with RunFolder(out, overwrite=True) as again:  # the job is still sleeping
+            again.begin([])
+        assert time.monotonic() - t0 < 0.5
+    finally:
+        bg.__exit__(None, None, None)
 
 
 def test_a_drawn_progress_bar_starts_no_thread(forks):

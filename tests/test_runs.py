@@ -15,7 +15,8 @@ import pytest
 
 from mdsr_opt import scenes
 from mdsr_opt.cli.main import main
-from mdsr_opt.scenes.rundir import LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError, RunFolder, check_out_path
+from mdsr_opt.scenes.rundir import (HOLDER_NAME, JOURNAL_NAME, LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError,
+                                    RunFolder, check_out_path)
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
@@ -24,10 +25,10 @@ STRIP = {"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], 
          "cases": [{"name": "bend", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.8, 1.2]}]}]}
 
 
-def _start(*args) -> subprocess.Popen:
+def _start(*args, session: bool = False) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
     return subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", *map(str, args)], cwd=ROOT, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=session)
 
 
 def _wait_for_line(proc: subprocess.Popen, words: str, timeout: float = 60.0) -> list[str]:
@@ -46,6 +47,19 @@ def _wait_for_line(proc: subprocess.Popen, words: str, timeout: float = 60.0) ->
 
 def _files(folder: Path) -> list[str]:
     return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def _lock_is_free(folder: Path) -> bool:
+    """Nobody holds the folder's lock (its file may stay) and no holder is recorded."""
+    from filelock import FileLock, Timeout
+
+    lock = FileLock(str(folder / LOCK_NAME), timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        return False
+    lock.release()
+    return not (folder / HOLDER_NAME).exists()
 
 
 # ---------------------------------------------------------------------------------------------- interrupts
@@ -68,7 +82,8 @@ def test_ctrl_c_stops_a_real_run_with_exit_130(tmp_path):
     assert "summary.json" not in files                                      # the case is not "failed"
     manifest = json.loads((out / MANIFEST_NAME).read_text())
     assert manifest["status"] == "interrupted"
-    assert not (out / LOCK_NAME).exists()
+    assert _lock_is_free(out)
+    assert sorted(manifest["files"]) == sorted(f for f in files if not f.startswith(".mdsr"))  # what it wrote
 
 
 def test_an_interrupt_swallowed_by_a_solver_still_stops_the_run(tmp_path, monkeypatch):
@@ -110,15 +125,24 @@ def test_two_concurrent_runs_cannot_mix_and_a_crashed_run_leaves_no_lock(tmp_pat
     second = _start(strip, "--out", out, "--overwrite", "--no-photos")
     _out2, err2 = second.communicate(timeout=60)
     assert second.returncode == 2
-    assert f"another mdsr run is writing into this folder (pid {first.pid}" in err2
+    assert f"another mdsr process is writing into this folder (pid {first.pid}" in err2
     assert "strip" not in (out / MANIFEST_NAME).read_text()
     first.send_signal(signal.SIGKILL)                  # a crash: the lock goes with the process
     first.wait(timeout=30)
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "running"
+    # a plain run into it is told what the folder holds: an interrupted run's files
+    before = _files(out)
+    proc = subprocess.run([sys.executable, "-m", "mdsr_opt", "run", str(strip), "--out", str(out), "--no-photos"],
+                          cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)), capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert (f"--out {out} holds the files of an interrupted mdsr command (`mdsr run {FINGER} --out {out}"
+            in proc.stderr), proc.stderr
+    assert "which stopped without finishing); pass --overwrite to replace it" in proc.stderr
+    assert [f for f in _files(out) if f != HOLDER_NAME] == [f for f in before if f != HOLDER_NAME]  # stale holder gone
     # the next run takes the folder over and replaces the crashed run's files completely
     assert main(["run", str(strip), "--out", str(out), "--overwrite", "--no-photos"]) == 0
     files = _files(out)
-    assert all(f in (MANIFEST_NAME, "rest.png", "summary.json", "summary.md") or f.startswith("bend/")
+    assert all(f in (LOCK_NAME, MANIFEST_NAME, "rest.png", "summary.json", "summary.md") or f.startswith("bend/")
                for f in files), files
     assert json.loads((out / "summary.json").read_text())["scene"] == "strip"
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "complete"
@@ -132,7 +156,7 @@ def test_a_second_run_is_refused_without_overwrite_and_replaces_the_first_with_i
     first = _files(out)
     assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 2
     err = capsys.readouterr().err
-    assert f"--out {out} holds an earlier mdsr run (`mdsr run {strip}" in err
+    assert f"--out {out} holds an earlier mdsr output (`mdsr run {strip}" in err
     assert "complete); pass --overwrite to replace it, or choose a new folder" in err
     assert _files(out) == first
     # a re-run whose case now fails leaves nothing of the earlier run beside its summary
@@ -153,7 +177,7 @@ def test_refusal_message_and_foreign_files(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "already holds 1 entry ('notes.txt'); choose a new or empty folder" in err
     assert main(["run", str(FINGER), "--out", str(out), "--overwrite"]) == 2
-    assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
+    assert "holds 'notes.txt', which no earlier mdsr command wrote there" in capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]     # untouched, no lock left
 
 
@@ -163,14 +187,165 @@ def test_a_stale_lock_file_does_not_block(tmp_path):
     (out / LOCK_NAME).write_text(json.dumps({"pid": 999999, "host": "gone"}))
     with RunFolder(out) as f:
         f.begin(["x"])
-    assert not (out / LOCK_NAME).exists()
+    assert _lock_is_free(out)
 
 
 def test_a_held_lock_names_the_holder(tmp_path):
     with RunFolder(tmp_path / "out", command="mdsr run gecko") as f:
-        with pytest.raises(FolderBusy, match=rf"another mdsr run is writing .*pid {os.getpid()}.*mdsr run gecko"):
+        with pytest.raises(FolderBusy, match=rf"another mdsr process is writing .*pid {os.getpid()}.*mdsr run gecko"):
             RunFolder(tmp_path / "out").__enter__()
         f.begin([])
+
+
+def test_overwrite_removes_the_earlier_runs_files_and_keeps_the_users(tmp_path, capsys):
+    """Issue 31: `--overwrite` removed a whole case folder, with the notes a user had put into it."""
+    out = tmp_path / "out"
+    strip = tmp_path / "strip.json"
+    strip.write_text(json.dumps(STRIP))
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--serial"]) == 0
+    first = json.loads((out / MANIFEST_NAME).read_text())
+    assert first["files"] and all((out / f).is_file() for f in first["files"])   # files, never folders
+    assert "bend" not in first["files"] and first["dirs"] == ["bend"]
+    (out / "bend" / "lab_notes.txt").write_text("day 3: the tip curls")
+    (out / "README.txt").write_text("mine too")
+    old_summary = (out / "summary.json").stat().st_ino
+    # the same scene with its case renamed: the earlier case's files must all go, the notes stay
+    strip.write_text(json.dumps(dict(STRIP, cases=[dict(STRIP["cases"][0], name="curl")])))
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--serial", "--overwrite"]) == 0
+    assert (out / "bend" / "lab_notes.txt").read_text() == "day 3: the tip curls"
+    assert (out / "README.txt").read_text() == "mine too"
+    assert sorted(p.name for p in (out / "bend").iterdir()) == ["lab_notes.txt"]  # the run's own files gone
+    assert (out / "summary.json").stat().st_ino != old_summary                 # replaced
+    second = json.loads((out / MANIFEST_NAME).read_text())
+    assert second["status"] == "complete" and second["dirs"] == ["curl"]
+    assert sorted(second["files"]) == [f for f in _files(out) if not f.startswith(".mdsr")
+                                       and f not in ("README.txt", "bend/lab_notes.txt")]
+    # and once more: the folder a user keeps files in is not removed, the run's empty one is
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--serial", "--overwrite"]) == 0
+    assert (out / "bend" / "lab_notes.txt").exists() and (out / "curl").is_dir()
+
+
+def test_a_killed_run_is_reported_as_interrupted_and_overwrite_removes_what_it_wrote(tmp_path):
+    out = tmp_path / "out"
+    first = _start(FINGER, "--out", out, "--resolution", "300", session=True)
+    _wait_for_line(first, "[finger 1/2 bend] virtual prototype (design")  # figures, meshes, photographs written
+    first.send_signal(signal.SIGKILL)
+    first.wait(timeout=30)
+    t0 = time.monotonic()  # its figure jobs are interrupted when it dies: wait until they are gone
+    while time.monotonic() - t0 < 30:
+        try:
+            os.killpg(first.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    written = [f for f in _files(out) if not f.startswith(".mdsr")]
+    assert any(f.startswith("bend/") for f in written)
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "running"
+    (out / "bend" / "lab_notes.txt").write_text("mine")
+    with pytest.raises(OutputFolderError, match=r"holds the files of an interrupted mdsr command \(`mdsr run .*"
+                                                r"which stopped without finishing\); pass --overwrite"):
+        RunFolder(out).__enter__()
+    with RunFolder(out, overwrite=True) as f:
+        f.begin(["summary.md"])
+        assert [f for f in _files(out) if not f.startswith(".mdsr")] == ["bend/lab_notes.txt"]
+    assert [p.name for p in out.iterdir() if p.is_dir()] == ["bend"]  # the folders it made are gone
+    assert _lock_is_free(out)
+
+
+def test_a_manifest_killed_before_its_first_file_and_one_of_an_older_version(tmp_path):
+    """A manifest saying "running" whose lock nobody holds (a killed run: simulated) is reported as
+    interrupted; an older version's manifest names folders, whose files --overwrite cannot tell apart."""
+    out = tmp_path / "out"
+    (out / "bend").mkdir(parents=True)
+    (out / "bend" / "shape.png").write_text("run")
+    (out / "bend" / "notes.txt").write_text("mine")
+    (out / MANIFEST_NAME).write_text(json.dumps({"format": "mdsr_opt.run_folder/2", "status": "running",
+                                                 "command": "mdsr run x", "started": "2026-01-01 10:00:00",
+                                                 "claims": ["bend"], "files": [], "dirs": ["bend"]}))
+    (out / JOURNAL_NAME).write_text("bend/shape.png\n")
+    with pytest.raises(OutputFolderError, match=r"interrupted mdsr command \(`mdsr run x`, started 2026-01-01"):
+        RunFolder(out).__enter__()
+    with RunFolder(out, overwrite=True) as f:
+        f.begin(["bend"])
+    assert _files(out) == [LOCK_NAME, MANIFEST_NAME, "bend/notes.txt"]
+    # version 1 listed the names directly in the folder: a folder among them is refused, nothing removed
+    (out / MANIFEST_NAME).write_text(json.dumps({"format": "mdsr_opt.run_folder/1", "status": "complete",
+                                                 "command": "mdsr run x", "claims": ["bend", "summary.md"]}))
+    (out / "summary.md").write_text("run")
+    with pytest.raises(OutputFolderError, match=r"earlier mdsr version, names the folder\(s\) 'bend' but not the "
+                                                r"files in them, so --overwrite cannot tell its files from yours"):
+        RunFolder(out, overwrite=True).__enter__()
+    assert _files(out) == [LOCK_NAME, MANIFEST_NAME, "bend/notes.txt", "summary.md"]
+
+
+def test_overwrite_removes_nothing_outside_the_folder_or_of_the_users(tmp_path):
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    out.mkdir()
+    elsewhere.mkdir()
+    (tmp_path / "victim.txt").write_text("keep")
+    (elsewhere / "x.png").write_text("keep")
+    (out / "link").symlink_to(elsewhere, target_is_directory=True)
+    (out / MANIFEST_NAME).write_text(json.dumps({"format": "mdsr_opt.run_folder/2", "status": "complete",
+                                                 "command": "forged", "claims": [],
+                                                 "files": ["../victim.txt", str(tmp_path / "victim.txt"),
+                                                           "link/x.png", MANIFEST_NAME], "dirs": ["..", "link"]}))
+    with RunFolder(out, overwrite=True) as f:
+        f.begin(["result.txt"])
+        (out / "result.txt").write_text("earlier")
+    assert (tmp_path / "victim.txt").read_text() == "keep" and (elsewhere / "x.png").read_text() == "keep"
+    # a file of the user's with the name of one the run writes is refused, before anything is removed
+    (out / "summary.md").write_text("mine")
+    with pytest.raises(OutputFolderError, match="holds 'summary.md', which no earlier mdsr command wrote there and "
+                                                "which this command writes; move it"):
+        with RunFolder(out, overwrite=True) as f:
+            f.begin(["result.txt", "summary.md"])
+    assert (out / "summary.md").read_text() == "mine" and (out / "result.txt").read_text() == "earlier"
+    with pytest.raises(OutputFolderError, match="holds 'summary.md', which no earlier mdsr command wrote there"):
+        RunFolder(out, overwrite=True, claims=["summary.md"]).__enter__()  # known at once: refused at once
+    assert _lock_is_free(out)
+
+
+def test_sigterm_stops_a_run_as_ctrl_c_does_with_exit_143(tmp_path):
+    out = tmp_path / "out"
+    proc = _start(FINGER, "--out", out, "--resolution", "400")
+    _wait_for_line(proc, "[finger 1/2 bend] design")
+    proc.send_signal(signal.SIGTERM)
+    _stdout, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143
+    assert err.strip().splitlines()[-1] == "mdsr run: interrupted (SIGTERM); files already complete are kept"
+    assert "Traceback" not in err
+    assert not [f for f in _files(out) if Path(f).name.startswith(".tmp-")]
+    assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"
+    assert _lock_is_free(out)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--resolution", "99999999"], "argument --resolution: resolution must be at most 200000 nodes"),
+    (["--photo-size", "100000x100000"], "argument --photo-size: the photograph must lie between 64 and 8000 pixels"),
+    (["--photo-size", "8001x500"], "argument --photo-size: the photograph must lie between 64 and 8000 pixels"),
+    (["--photo-size", "63x500"], "argument --photo-size: the photograph must lie between 64 and 8000 pixels"),
+])
+def test_huge_resolutions_and_photo_sizes_are_refused_at_the_door(tmp_path, capsys, args, words):
+    with pytest.raises(SystemExit) as exc:
+        main(["run", str(FINGER), "--out", str(tmp_path / "o"), *args])
+    assert exc.value.code == 2
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_run_scene_refuses_a_photo_size_out_of_range_before_any_work(tmp_path, monkeypatch):
+    from mdsr_opt.body.mesh import MAX_RESOLUTION
+    from mdsr_opt.photos.size import MAX_PHOTO_SIDE
+
+    scene = scenes.get_problem(str(FINGER), resolution="coarse")
+    monkeypatch.setattr("mdsr_opt.scenes.runscene.write_scene", lambda *a, **k: pytest.fail("work started"))
+    for size, exc in [((100000, 100000), ValueError), ((MAX_PHOTO_SIDE + 1, 500), ValueError),
+                      ((20, 500), ValueError), ((500.0, 500), TypeError), ((500,), ValueError)]:
+        with pytest.raises(exc, match="photo_size must"):
+            scenes.run_scene(scene, tmp_path / "o", photo_size=size)
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(ValueError, match=f"resolution must be at most {MAX_RESOLUTION} nodes"):
+        scenes.get_problem(str(FINGER), resolution=MAX_RESOLUTION + 1)
 
 
 @pytest.mark.parametrize("out, words", [
@@ -222,7 +397,7 @@ def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsy
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     assert run_main(build, ["--out", str(out), "--resolution", "coarse", "--overwrite"]) == 2
-    assert "holds 'notes.txt', which no earlier mdsr run wrote there" in capsys.readouterr().err
+    assert "holds 'notes.txt', which no earlier mdsr command wrote there" in capsys.readouterr().err
     assert run_main(build, ["--out", str(tmp_path / "o2"), "--case", "nope"]) == 2
     assert "has no case 'nope'" in capsys.readouterr().err
     assert not (tmp_path / "o2").exists()

@@ -67,6 +67,7 @@ def test_problem_script_by_path():
 
 @pytest.mark.parametrize("bad, err, match", [("tiny", ValueError, "resolution must be one of"),
                                              (5, ValueError, "at least 20 nodes"),
+                                             (99999999, ValueError, "at most 200000 nodes .a solve's memory"),
                                              (2.5, TypeError, "integer node count")])
 def test_resolution_is_checked(bad, err, match):
     with pytest.raises(err, match=match):
@@ -345,10 +346,11 @@ def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     per_case = ["design.png", "driven.vtu", "graph.png", "muscles.png", "overlay.png", "photo.json", "photo.png",
                 "target.png", "target.vtu"] + [f"prototype_{k}.{e}" for k in ("design", "driving") for e in ("json", "png")]
     assert files == sorted([f"{c}/{f}" for c in ("bend", "contract") for f in per_case]
-                           + [".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json", "summary.md",
-                              "validation.md"])
+                           + [".mdsr-lock", ".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json",
+                              "summary.md", "validation.md"])
     manifest = json.loads((out / ".mdsr-run.json").read_text())
     assert manifest["status"] == "complete" and "bend" in manifest["claims"]
+    assert manifest["files"] == [f for f in files if not f.startswith(".mdsr")]  # every file it wrote, by name
     s = json.loads((out / "summary.json").read_text())
     assert s["success"] is True and s["photographs"].startswith("SYNTHETIC")
     contract = s["cases"][1]
@@ -376,7 +378,7 @@ def test_mdsr_run_reports_a_failed_case(tmp_path, capsys):
     assert "FAILED strip/stretch: routing found no muscle" in text and "cable cannot push" in text
     s = json.loads((out / "summary.json").read_text())
     assert s["success"] is False and s["cases"][0]["target_success"] is True
-    assert sorted(p.name for p in out.iterdir()) == [".mdsr-run.json", "summary.json", "summary.md"]
+    assert sorted(p.name for p in out.iterdir()) == [".mdsr-lock", ".mdsr-run.json", "summary.json", "summary.md"]
 
 
 def test_a_scene_file_may_choose_where_the_design_warm_start_starts():

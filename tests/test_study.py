@@ -307,7 +307,7 @@ def test_bad_names_list_the_valid_ones():
         run_study("quick", materials=["rubber"])
     with pytest.raises(ValueError, match="unknown first guess 'zero'; valid: predictor, no-predictor, rest"):
         Study("t", "", ("strip-bend",), (30,), guesses=("zero",))
-    with pytest.raises(ValueError, match="resolutions must be integers >= 4"):
+    with pytest.raises(ValueError, match="resolutions: 2 is not a node count from 4 to 200000"):
         run_study("quick", resolutions=[2])
     with pytest.raises(ValueError, match="loads given for 'strip-bend', which is not among its problems"):
         Study("t", "", ("strip-stretch",), (30,), loads={"strip-bend": (1.0,)})
@@ -341,6 +341,106 @@ def test_cli_study(tmp_path, capsys):
     assert len(rows) == 2 * 2  # 2 methods x 2 materials
     assert {r["failure"] for r in rows} == {"none"}
     assert "| ipopt | 2 | 2 |" in capsys.readouterr().out
+
+
+TINY = ["--resolutions", "30", "--methods", "ipopt", "--problems", "strip-stretch", "--materials", "linear",
+        "--reference-resolution", "100", "--quiet"]
+
+
+def _no_solves(monkeypatch):
+    def fail(*a, **k):
+        pytest.fail("the study started solving")
+
+    monkeypatch.setattr("mdsr_opt.studies.study.run_all", fail)
+    monkeypatch.setattr("mdsr_opt.studies.fidelity.run_all", fail)
+
+
+def test_a_study_follows_the_folder_rules_of_a_run(tmp_path, capsys, monkeypatch):
+    """Issue 31: `mdsr study --out` overwrote a user's quick.csv without a word."""
+    out = tmp_path / "q"
+    out.mkdir()
+    (out / "quick.csv").write_text("my own table")
+    with monkeypatch.context() as m:
+        _no_solves(m)
+        for extra in ([], ["--overwrite"]):
+            assert main(["study", "quick", "--out", str(out), *TINY, *extra]) == 2
+            err = capsys.readouterr().err
+            assert ("already holds 1 entry ('quick.csv'); choose a new or empty folder" in err if not extra else
+                    "holds 'quick.csv', which no earlier mdsr command wrote there" in err), err
+        assert main(["study", "fidelity", "--out", str(out), "--resolutions", "30", "--quiet"]) == 2
+        assert "already holds 1 entry ('quick.csv')" in capsys.readouterr().err
+        with pytest.raises(ValueError, match="already holds 1 entry"):
+            run_study("quick", out=out, resolutions=[30], progress=False)
+    assert sorted(p.name for p in out.iterdir()) == ["quick.csv"]
+    assert (out / "quick.csv").read_text() == "my own table"
+    # a study's own folder: refused without --overwrite, replaced (its listed files only) with it
+    new = tmp_path / "new"
+    assert main(["study", "quick", "--out", str(new), *TINY]) == 0
+    manifest = read_json(new / ".mdsr-run.json")
+    assert manifest["status"] == "complete" and "quick.csv" in manifest["files"]
+    assert manifest["command"].endswith(f"study quick --out {new} " + " ".join(TINY))
+    capsys.readouterr()
+    (new / "notes.md").write_text("mine")
+    with monkeypatch.context() as m:
+        _no_solves(m)
+        assert main(["study", "quick", "--out", str(new), *TINY]) == 2
+    assert "holds an earlier mdsr output (`" in capsys.readouterr().err
+    before = (new / "quick.csv").stat().st_ino
+
+    def stopped(*a, **k):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:  # an interrupted study leaves the earlier one as it was
+        m.setattr("mdsr_opt.studies.study.run_all", stopped)
+        assert main(["study", "quick", "--out", str(new), *TINY, "--overwrite"]) == 130
+    assert (new / "quick.csv").stat().st_ino == before and read_json(new / ".mdsr-run.json") == manifest
+    assert main(["study", "quick", "--out", str(new), *TINY, "--overwrite", "--methods", "newton"]) == 0
+    with open(new / "quick.csv") as fh:
+        assert {r["method"] for r in csv.DictReader(fh)} == {"newton"}
+    assert (new / "quick.csv").stat().st_ino != before and (new / "notes.md").read_text() == "mine"
+
+
+def test_a_second_study_into_a_folder_being_written_is_refused_at_once(tmp_path, capsys, monkeypatch):
+    from mdsr_opt.scenes.rundir import RunFolder
+
+    out = tmp_path / "q"
+    _no_solves(monkeypatch)
+    with RunFolder(out, command="mdsr study quick --out q") as held:  # the first study, still running
+        held.begin(["quick.csv"])
+        assert main(["study", "quick", "--out", str(out), *TINY]) == 2
+        err = capsys.readouterr().err
+        assert f"another mdsr process is writing into this folder (pid {os.getpid()}" in err
+        assert "`mdsr study quick --out q`" in err
+        assert main(["study", "quick", "--out", str(out), *TINY, "--overwrite"]) == 2
+        assert "another mdsr process is writing" in capsys.readouterr().err
+        with pytest.raises(ValueError, match="another mdsr process is writing into this folder"):
+            run_study("quick", out=out, resolutions=[30], progress=False, overwrite=True)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--resolutions", "30,99999999"], "--resolutions must be node counts from 4 to 200000"),
+    (["--resolutions", "3"], "--resolutions must be node counts from 4 to 200000"),
+    (["--reference-resolution", "99999999"], "--reference-resolution must be a node count from 20 to 200000"),
+])
+def test_huge_node_counts_are_refused_at_the_door(tmp_path, capsys, monkeypatch, args, words):
+    _no_solves(monkeypatch)
+    for name in ("quick", "fidelity"):
+        assert main(["study", name, "--out", str(tmp_path / "q"), *args]) == 2
+        err = capsys.readouterr().err
+        assert words in err and "memory" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "q").exists()
+
+
+def test_huge_node_counts_are_refused_by_the_python_study_too():
+    for kw in ({"resolutions": [30, 10**8]}, {"reference_resolution": 10**8}, {"reference_resolution": 2}):
+        with pytest.raises(ValueError, match="is not a node count from 4 to 200000 .a solve's memory"):
+            run_study("quick", progress=False, **kw)
+    with pytest.raises(ValueError, match="reference_resolution: 99999999 is not a node count"):
+        Study("t", "", ("strip-stretch",), (30,), reference_resolution=99999999)
+    from mdsr_opt.studies.fidelity import choose_fidelity
+
+    with pytest.raises(ValueError, match="resolutions: 100000000 is not a node count"):
+        choose_fidelity("strip-stretch", 0.01, resolutions=(30, 10**8), progress=False)
 
 
 def test_comparable_rows_of_a_timed_out_run_keep_identity_and_outcome_only():

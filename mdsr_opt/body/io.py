@@ -19,6 +19,7 @@ True
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -31,7 +32,7 @@ from ..core.checks import as_float_array
 from .mesh import Mesh
 
 __all__ = ["write_mesh", "read_mesh", "MeshData", "write_json", "read_json", "atomic_path", "check_target",
-           "FORMATS"]
+           "FORMATS", "noting_writes"]
 
 FORMATS = {".vtk": "vtk", ".vtu": "vtu", ".xdmf": "xdmf", ".msh": "gmsh"}
 
@@ -71,6 +72,47 @@ def check_target(path) -> str:
     return path
 
 
+#: folders (absolute, with a trailing separator) whose completed files are noted, each with its journal
+_JOURNALS: dict[str, str] = {}
+
+
+@contextlib.contextmanager
+def noting_writes(folder, journal):
+    """Within the block, note every file that :class:`atomic_path` completes under ``folder``: its path
+    relative to ``folder`` (with ``/``) is appended as one line to the file ``journal`` (of the innermost
+    such folder, when they nest).
+
+    Processes forked within the block (figure jobs) note their files too: each line is one small write to a
+    file opened for appending, so lines from several processes never mix. A run folder
+    (:class:`~mdsr_opt.scenes.rundir.RunFolder`) so knows every file its run completed, even after the run
+    was killed outright.
+    """
+    key = os.path.join(os.path.abspath(os.fspath(folder)), "")
+    _JOURNALS[key] = os.path.abspath(os.fspath(journal))
+    try:
+        yield
+    finally:
+        _JOURNALS.pop(key, None)
+
+
+def _note_written(path: str) -> None:
+    """Append ``path`` to the journal of the innermost noted folder that holds it."""
+    full = os.path.abspath(path)
+    roots = [r for r in _JOURNALS if full.startswith(r)]
+    if not roots:
+        return
+    root = max(roots, key=len)
+    line = os.fsencode(full[len(root):].replace(os.sep, "/")) + b"\n"
+    try:
+        fd = os.open(_JOURNALS[root], os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            os.write(fd, line)
+        finally:
+            os.close(fd)
+    except OSError:  # the journal is a help; the file itself is written
+        pass
+
+
 class atomic_path:
     """Context manager yielding a temporary path beside ``path``; renamed onto ``path`` on success only.
 
@@ -103,6 +145,8 @@ class atomic_path:
             if exc_type is None:
                 _public_mode(self.tmp)
                 os.replace(self.tmp, self.path)
+                if _JOURNALS:
+                    _note_written(self.path)
         finally:
             if self.tmp is not None and os.path.lexists(self.tmp):
                 os.remove(self.tmp)

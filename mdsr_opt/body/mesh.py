@@ -22,10 +22,15 @@ from numpy.typing import ArrayLike
 from ..core.checks import as_float_array, as_index_array, positive_float, positive_int
 from .polygons import check_polygon, corner_angles, point_inside, polygon_area, ring_segments, segment_contacts  # polygon_area, check_polygon, segment_contacts: re-exported
 
-__all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES"]
+__all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES",
+           "MAX_RESOLUTION"]
 
 #: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
 MAX_TRIANGLES = 2_000_000
+#: The largest node count a resolution may ask for (scenes, studies, the command line): the memory of a solve
+#: grows about in proportion to the nodes (one IPOPT solve of a 66k-node strip peaked at 1 GB), so 200k
+#: nodes need about 3 GB, and a mistyped resolution is refused at once instead of exhausting the memory.
+MAX_RESOLUTION = 200_000
 
 
 def _frozen(value):

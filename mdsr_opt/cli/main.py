@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import gc
 import logging
+import signal
 import sys
 
 
@@ -136,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``mdsr`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
 
     0: success; 1: the command ran but something it checked failed (a solve, a case); 2: bad input or an
-    unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C.
+    unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C;
+    143: stopped by SIGTERM.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
@@ -167,16 +169,18 @@ def _run(parser, argv: list[str]) -> int:
     configure_logging(args.log_verbose, args.log_quiet)
     if args.log_quiet and hasattr(args, "quiet"):
         args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
-    from ..scenes.rundir import noting_interrupts
+    from ..scenes.rundir import interrupt_signal, noting_interrupts, recording_command
 
     try:
-        with agg_backend(), noting_interrupts():
+        with agg_backend(), noting_interrupts(sigterm=True), recording_command(args.command_line):
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        # Ctrl-C: stop at once with one line (no traceback); the commands' writers have removed their
-        # temporary files, the files already complete stay. 130 = 128 + SIGINT, as shells report it.
-        print(f"\nmdsr {args.command}: interrupted (Ctrl-C); files already complete are kept", file=sys.stderr)
-        return 130
+        # Ctrl-C or SIGTERM: stop at once with one line (no traceback); the commands' writers have removed
+        # their temporary files, the files already complete stay. 128 + the signal, as shells report it.
+        term = interrupt_signal() == signal.SIGTERM
+        print(f"\nmdsr {args.command}: interrupted ({'SIGTERM' if term else 'Ctrl-C'}); files already complete "
+              "are kept", file=sys.stderr)
+        return 143 if term else 130
     except BrokenPipeError:  # `mdsr list | head`: the reader left; not an error of ours
         import os
 

@@ -52,7 +52,7 @@ def _cmd_run(a) -> int:
         names = list_problems()
         if not names:
             raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
-    from ..scenes.rundir import RunFolder, check_out_path
+    from ..scenes.rundir import RunFolder
 
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
@@ -68,10 +68,11 @@ def _cmd_run(a) -> int:
                 code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
-    check_out_path(a.out)  # a bad --out is refused before the jobs' server starts
-    # the jobs' server first: it warms up while the scenes are built
-    with job_server(not a.no_figures, not a.no_photos, background=not a.serial), \
-            RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+    # the folder first (a busy or used --out is refused before the jobs' server starts, and the server's
+    # jobs, forked from it, note the files they write there), then the jobs' server: it warms up while the
+    # scenes are built
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder, \
+            job_server(not a.no_figures, not a.no_photos, background=not a.serial):
         scenes = [get_problem(n, resolution=a.resolution) for n in names]
         seen = set()
         for s in scenes:
@@ -136,9 +137,9 @@ def add_cli(sub) -> None:
                    help="output folder (one sub-folder per scene when several); it must be new or empty, and "
                    "is locked while the run writes into it: a second run into it stops with an error")
     q.add_argument("--overwrite", action="store_true",
-                   help="replace the files of an earlier mdsr run in --out (only the files that run recorded; a "
-                   "folder holding other files is still refused). Without it a non-empty --out is refused, so "
-                   "one folder never mixes two runs")
+                   help="replace the files of an earlier mdsr run or study in --out: only the files its manifest "
+                   "lists are removed, any other file there stays (a folder holding files but no manifest is "
+                   "refused). Without it a non-empty --out is refused, so one folder never mixes two runs")
     q.add_argument("--resolution", type=parse_resolution, default=None,
                    help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
     q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")

@@ -51,22 +51,30 @@ def _cli(args) -> int:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
         raise ValueError(f"--timeout must be a positive number of seconds, got {args.timeout}")
-    if args.reference_resolution is not None and args.reference_resolution < 20:
-        raise ValueError(f"--reference-resolution must be at least 20 nodes, got {args.reference_resolution}")
+    from ..body.mesh import MAX_RESOLUTION
+
+    why = f"a solve's memory grows with the nodes: about 3 GB at {MAX_RESOLUTION}"
+    if args.reference_resolution is not None and not 20 <= args.reference_resolution <= MAX_RESOLUTION:
+        raise ValueError(f"--reference-resolution must be a node count from 20 to {MAX_RESOLUTION} ({why}), "
+                         f"got {args.reference_resolution}")
+    resolutions = _csv_list(args.resolutions, int, "--resolutions")
+    for r in resolutions or ():
+        if not 4 <= r <= MAX_RESOLUTION:
+            raise ValueError(f"--resolutions must be node counts from 4 to {MAX_RESOLUTION} ({why}), got {r}")
     scheduler = args.scheduler or ("local" if args.dask else None)
     if args.name == FIDELITY_STUDY:
         from ..studies.fidelity import fidelity_markdown, run_fidelity_study
 
-        kw = {"resolutions": _csv_list(args.resolutions, int, "--resolutions"),
-              "reference_resolution": args.reference_resolution}
+        kw = {"resolutions": resolutions, "reference_resolution": args.reference_resolution}
         with progress_for_cli(args, 0, "mdsr study fidelity", stream="stderr", unit="run") as log:
             choices, _ = run_fidelity_study(args.out, tolerances=_csv_list(args.tol, float, "--tol"),
                                             scheduler=scheduler, workers=args.workers, progress=not args.quiet,
-                                            log=log, **{k: v for k, v in kw.items() if v is not None})
+                                            log=log, overwrite=args.overwrite,
+                                            **{k: v for k, v in kw.items() if v is not None})
         print(fidelity_markdown(choices), flush=True)
         return 0
     with progress_for_cli(args, 0, f"mdsr study {args.name}", stream="stderr", unit="run") as log:
-        res = run_study(args.name, out=args.out, resolutions=_csv_list(args.resolutions, int, "--resolutions"),
+        res = run_study(args.name, out=args.out, overwrite=args.overwrite, resolutions=resolutions,
                         methods=_csv_list(args.methods, str, "--methods"),
                         problems=_csv_list(args.problems, str, "--problems"),
                         materials=_csv_list(args.materials, str, "--materials"),
@@ -82,7 +90,11 @@ def add_cli(sub) -> None:
                        description="Run a solver comparison study: a tidy CSV, metadata and charts in --out.")
     p.add_argument("name", nargs="?", help="study name (see --list)")
     p.add_argument("--list", action="store_true", help="list the studies and problems")
-    p.add_argument("--out", help="output folder")
+    p.add_argument("--out", help="output folder; it must be new or empty, and is locked while the study runs: "
+                   "a second command into it stops with an error")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr run or study in --out (only the files its manifest "
+                   "lists; a folder holding other files but no manifest is still refused)")
     p.add_argument("--resolutions", help="comma-separated node counts, replacing the study's")
     p.add_argument("--methods", help="comma-separated backends / design methods, replacing the study's")
     p.add_argument("--problems", help="comma-separated problems, replacing the study's")

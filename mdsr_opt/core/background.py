@@ -32,7 +32,7 @@ Rules that keep this safe and honest:
   interrupts the children (SIGINT, so their atomic writes remove their temporary files), and a child that
   has not stopped after ``grace`` seconds is killed. A child dies with its parent (a run killed outright
   leaves no child writing into its folder; a server's child is interrupted when its server dies, which
-  dies with the run), and closes its copy of the run folder's lock at once (:mod:`mdsr_opt.scenes.rundir`).
+  dies with the run); the run folder's lock goes with the run's own process (:mod:`mdsr_opt.scenes.rundir`).
 
 Example
 -------

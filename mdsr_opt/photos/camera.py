@@ -22,6 +22,7 @@ from ..core.results import to_jsonable
 from .compare import rotation_matrix
 from .folder import bytes_writer, write_together
 from .images import check_color, check_int
+from .size import check_photo_size
 
 __all__ = ['SyntheticPhoto', 'render_photo']
 
@@ -321,11 +322,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     """
     mesh = check_mesh(mesh)
     x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
-    if isinstance(image_size, (str, bytes)) or not hasattr(image_size, "__len__") or len(image_size) != 2:
-        raise ValueError(f"image_size must be (width, height), two integers, got {image_size!r}")
-    W, H = (check_int(v, "image_size", 1) for v in image_size)
-    if W < 32 or H < 32 or W > 8000 or H > 8000:
-        raise ValueError(f"image_size must lie between 32 and 8000 pixels per side, got {W} x {H}")
+    W, H = check_photo_size(image_size, "image_size")
     seed = check_int(seed, "seed", lo=0)
     margin = positive_float(margin, "margin")
     if margin >= 0.45:

@@ -17,7 +17,7 @@ from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
-from .scene import Scene
+from .scene import Scene, resolve_resolution
 
 __all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
 
@@ -82,7 +82,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     """
     from .rundir import RunFolder, noting_interrupts
 
-    names = _check_run(scene, cases, mesh_format)
+    names = _check_run(scene, cases, mesh_format, photo_size)
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
         folder.begin(run_entries(scene, names))
@@ -94,8 +94,11 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     return report
 
 
-def _check_run(scene, cases, mesh_format) -> tuple[str, ...]:
+def _check_run(scene, cases, mesh_format, photo_size=(500, 500)) -> tuple[str, ...]:
     from ..body.io import FORMATS
+    from ..photos.size import check_photo_size
+
+    check_photo_size(photo_size, "photo_size")
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
@@ -133,7 +136,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
 
     from ..body.io import atomic_path, write_json
 
-    names = _check_run(scene, cases, mesh_format)
+    names = _check_run(scene, cases, mesh_format, photo_size)
     say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -291,7 +294,16 @@ def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int
 
 
 def parse_resolution(text: str):
-    return int(text) if text.isdigit() else text
+    """``--resolution``: a name (checked with the scene) or a node count from 20 to
+    :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
+    import argparse
+
+    if not text.isdigit():
+        return text
+    try:
+        return resolve_resolution(int(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def parse_seed(text: str) -> int:
@@ -307,12 +319,18 @@ def parse_seed(text: str) -> int:
 
 
 def parse_size(text: str) -> tuple[int, int]:
+    """``--photo-size WxH``: each side from 64 to :data:`~mdsr_opt.photos.size.MAX_PHOTO_SIDE` pixels."""
     import argparse
 
+    from ..photos.size import check_photo_size
+
     parts = text.lower().split("x")
-    if len(parts) != 2 or not all(p.isdigit() and int(p) >= 64 for p in parts):
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT with both at least 64, got {text!r}")
-    return int(parts[0]), int(parts[1])
+    if len(parts) != 2 or not all(p.isdigit() for p in parts):
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, got {text!r}")
+    try:
+        return check_photo_size((int(parts[0]), int(parts[1])), "the photograph", lo=64)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def n_units(scene: Scene, cases, animations: bool) -> int:

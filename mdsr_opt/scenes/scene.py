@@ -8,7 +8,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..body.mesh import MAX_TRIANGLES, Mesh, check_polygon, polygon_area
+from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
 from ..mechanics.anchors import body_size, check_anchor_radius
@@ -285,7 +285,8 @@ class Scene:
 
 # ---------------------------------------------------------------------------------------------- resolution
 def resolve_resolution(resolution: str | int) -> int:
-    """The approximate node count for ``resolution`` (a name of :data:`RESOLUTIONS` or an integer >= 20)."""
+    """The approximate node count for ``resolution`` (a name of :data:`RESOLUTIONS` or an integer from 20
+    to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`)."""
     if isinstance(resolution, str):
         if resolution not in RESOLUTIONS:
             raise ValueError(f"resolution must be one of {', '.join(map(repr, RESOLUTIONS))} or a node count, "
@@ -295,6 +296,9 @@ def resolve_resolution(resolution: str | int) -> int:
         raise TypeError(f"resolution must be a name or an integer node count, got {type(resolution).__name__}")
     if resolution < 20:
         raise ValueError(f"resolution must be at least 20 nodes, got {resolution}")
+    if resolution > MAX_RESOLUTION:
+        raise ValueError(f"resolution must be at most {MAX_RESOLUTION} nodes (a solve's memory grows with the "
+                         f"nodes: about 3 GB at {MAX_RESOLUTION}), got {resolution}")
     return int(resolution)
 
 

@@ -37,7 +37,7 @@ from ..core.results import compact_repr, to_jsonable
 from .problems import MATERIALS, get_problem
 from .runs import RunOutcome, fill_accuracy, run_all
 from .spec import Study
-from .study import StudyResult, environment_info
+from .study import StudyResult, environment_info, output_folder
 
 _LOG = logging.getLogger(__name__)
 
@@ -205,15 +205,17 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                        cases: Sequence[tuple[str, float]] = FIDELITY_CASES,
                        resolutions: Sequence[int] = (30, 100, 300, 1000), reference_resolution: int = 4000,
                        method: str = "ipopt", scheduler: Any = None, workers: int | None = None,
-                       progress: bool = True, figures: bool = True,
-                       log: Callable[[str], Any] | None = None) -> tuple[list[FidelityChoice], StudyResult]:
+                       progress: bool = True, figures: bool = True, log: Callable[[str], Any] | None = None,
+                       overwrite: bool = False) -> tuple[list[FidelityChoice], StudyResult]:
     """The fidelity study: :func:`choose_fidelity` for each scene in ``cases`` and each tolerance.
 
     All candidates of all scenes run as one sweep (Neo-Hookean and linear, every resolution), measured against
     a Neo-Hookean reference at ``reference_resolution`` nodes; then each (scene, tolerance) is picked.
     With ``out`` it writes ``fidelity.csv`` (one row per choice), ``fidelity_runs.csv`` (every candidate),
-    ``fidelity.json``, ``fidelity.md`` and ``fidelity.png``. Progress messages go to ``log`` (default: this
-    module's logger) unless ``progress`` is False; ``fidelity_markdown(choices)`` gives the table.
+    ``fidelity.json``, ``fidelity.md`` and ``fidelity.png``; ``out`` follows :func:`run_study`'s rules
+    (new or empty, locked while the study runs; ``overwrite`` replaces an earlier mdsr output's listed files).
+    Progress messages go to ``log`` (default: this module's logger) unless ``progress`` is False;
+    ``fidelity_markdown(choices)`` gives the table.
     """
     tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
     loads: dict = {}
@@ -226,6 +228,14 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                timeout=120.0)
     if log is None or not progress:
         log = _LOG.info if progress else None
+    names = [f"fidelity{x}" for x in (".csv", "_runs.csv", ".md", ".json")] + (["fidelity.png"] if figures else [])
+    with output_folder(out, overwrite, names) as folder:
+        return _run_fidelity(st, out, tolerances, cases, scheduler, workers, figures, log,
+                             lambda: folder.begin(names))
+
+
+def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures, log, begin):
+    """:func:`run_fidelity_study` once its sweep is defined and its folder taken."""
     t0 = time.perf_counter()
     runs, refs, _ = st.plan()
     outs = run_all(refs + runs, scheduler, workers, log)
@@ -247,6 +257,7 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
                       "the choice"}
     res = StudyResult(st, rows, [o.row for o in ref_out], meta)
     if out is not None:
+        begin()  # the earlier output's files go only now, when the new ones are ready
         out = os.fspath(out)
         os.makedirs(out, exist_ok=True)
         table = [c.summary() for c in choices]

@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Iterable, Mapping
 import numpy as np
 
+from ..body.mesh import MAX_RESOLUTION
 from .problems import MATERIALS, check_name, build_setup, get_problem
 
 __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
@@ -31,6 +32,13 @@ GUESSES = ("predictor", "no-predictor", "rest", "noisy")
 
 
 DESIGN_METHODS = ("flattened", "nested", "derivative-free")
+
+
+def _check_nodes(r, what: str) -> None:
+    """Refuse a node count that is not an integer from 4 to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
+    if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 4 <= r <= MAX_RESOLUTION:
+        raise ValueError(f"{what}: {r!r} is not a node count from 4 to {MAX_RESOLUTION} (a solve's memory grows "
+                         f"with the nodes: about 3 GB at {MAX_RESOLUTION})")
 
 
 # ============================================================================================== studies
@@ -95,8 +103,7 @@ class Study:
         for p in self.problems:
             get_problem(p)
         for r in self.resolutions:
-            if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or r < 4:
-                raise ValueError(f"study {self.name!r}: resolutions must be integers >= 4 (node counts), got {r!r}")
+            _check_nodes(r, f"study {self.name!r}: resolutions")
         object.__setattr__(self, "resolutions", tuple(sorted(int(r) for r in self.resolutions)))
         for m in self.materials:
             check_name(m, MATERIALS, "material")
@@ -119,6 +126,8 @@ class Study:
                     raise ValueError(f"study {self.name!r}: {exc}") from None
         if self.reference_resolution is None:
             object.__setattr__(self, "reference_resolution", self.resolutions[-1])
+        _check_nodes(self.reference_resolution, f"study {self.name!r}: reference_resolution")
+        object.__setattr__(self, "reference_resolution", int(self.reference_resolution))
         if isinstance(self.timeout, bool) or not (isinstance(self.timeout, (int, float)) and self.timeout > 0):
             raise ValueError(f"study {self.name!r}: timeout must be a positive number of seconds, "
                              f"got {self.timeout!r}")

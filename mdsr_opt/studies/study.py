@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import logging
@@ -20,7 +21,7 @@ from ..core.stats import fit_slopes
 from .runs import fill_accuracy, run_all
 from .spec import COLUMNS, FAILURES, Study, TIMING_COLUMNS, get_study
 
-__all__ = ['StudyResult', 'run_study']
+__all__ = ['StudyResult', 'run_study', 'output_folder']
 
 
 _LOG = logging.getLogger(__name__)
@@ -150,6 +151,22 @@ def _jsonable(o):
     return o
 
 
+@contextlib.contextmanager
+def output_folder(out, overwrite: bool, names: Sequence[str]):
+    """``out`` guarded as a run's folder for the block (:class:`~mdsr_opt.scenes.rundir.RunFolder`): locked
+    against a second writer at once, and new or empty, or with ``overwrite`` holding an earlier mdsr output
+    (checked at once too; ``names`` are the files the study writes). Yields the folder, or None without
+    ``out``; call its ``begin(names)`` just before writing: the earlier output's listed files are removed
+    then, so a study that fails or is interrupted leaves the folder as it was."""
+    if out is None:
+        yield None
+        return
+    from ..scenes.rundir import RunFolder
+
+    with RunFolder(out, overwrite=overwrite, claims=names) as folder:
+        yield folder
+
+
 def environment_info() -> dict:
     import casadi
     import scipy
@@ -166,7 +183,8 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
               methods: Sequence[str] | None = None, problems: Sequence[str] | None = None,
               materials: Sequence[str] | None = None, reference_resolution: int | None = None,
               timeout: float | None = None, scheduler: Any = None, workers: int | None = None,
-              progress: bool = True, figures: bool = True, log: Callable[[str], Any] | None = None) -> StudyResult:
+              progress: bool = True, figures: bool = True, log: Callable[[str], Any] | None = None,
+              overwrite: bool = False) -> StudyResult:
     """Run a study and (with ``out``) write its table, metadata and charts.
 
     Parameters
@@ -174,7 +192,12 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     study : str or Study
         A name from :func:`list_studies` or a :class:`Study`.
     out : path, optional
-        Folder for the outputs (:meth:`StudyResult.write`).
+        Folder for the outputs (:meth:`StudyResult.write`). It must be new or empty; it is locked while the
+        study runs (a second study into it is refused at once).
+    overwrite : bool
+        Replace an earlier mdsr output in ``out``: only the files its manifest ``.mdsr-run.json`` lists are
+        removed, once this study's own files are ready (a study that fails leaves them); a folder holding
+        files but no manifest is still refused.
     resolutions, methods, problems, materials, reference_resolution, timeout : optional
         Override the study's axes (e.g. the quick study at its smallest size: ``resolutions=[30]``).
     scheduler : None, "local", "inprocess", an address or a ``distributed.Client``
@@ -192,7 +215,9 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     Raises
     ------
     ValueError
-        An unknown study, problem, backend, material or guess (the message lists the valid ones).
+        An unknown study, problem, backend, material or guess (the message lists the valid ones), a node count
+        out of range, or an ``out`` that cannot be used (:class:`~mdsr_opt.scenes.rundir.OutputFolderError`:
+        a file, not writable, holding other files, or being written by another process).
     """
     st = get_study(study).with_options(resolutions=resolutions, methods=methods, problems=problems,
                                        materials=materials, reference_resolution=reference_resolution,
@@ -202,6 +227,20 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     elif not progress:
         log = None
     runs, refs, capped = st.plan()
+    names = [f"{st.name}{x}" for x in (".csv", "_references.csv", ".md", ".json")]
+    names += [f"{st.name}_{x}.png" for x in ("pareto", "scaling", "success")] if figures else []
+    with output_folder(out, overwrite, names) as folder:
+        res = _run_planned(st, runs, refs, capped, scheduler, workers, log)
+        if folder is not None:
+            folder.begin(names)
+            paths = res.write(out, figures=figures)
+            if log:
+                log(f"wrote {', '.join(sorted(os.path.basename(p) for p in paths.values()))} to {out}")
+    return res
+
+
+def _run_planned(st: Study, runs: list, refs: list, capped: list, scheduler, workers, log) -> StudyResult:
+    """:func:`run_study` once its study is planned: the runs, their accuracy and the metadata."""
     t0 = time.perf_counter()
     if log:
         name = scheduler if isinstance(scheduler, str) else "client"
@@ -230,9 +269,4 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
             "wall_time": time.perf_counter() - t0, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "environment": environment_info(), "columns": list(COLUMNS), "timing_columns": list(TIMING_COLUMNS),
             "identical_means": "all columns except the timing columns are equal"}
-    res = StudyResult(st, rows, [o.row for o in ref_out], meta)
-    if out is not None:
-        paths = res.write(out, figures=figures)
-        if log:
-            log(f"wrote {', '.join(sorted(os.path.basename(p) for p in paths.values()))} to {out}")
-    return res
+    return StudyResult(st, rows, [o.row for o in ref_out], meta)
