@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from ..core.errors import InputError
 from ..core.progress import progress_for_cli
 
 __all__ = ['add_cli']
@@ -15,14 +16,14 @@ def _csv_list(text: str | None, cast=str, flag: str = "the list"):
         return None
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
-        raise ValueError(f"{flag}: expected a comma-separated list, got {text!r}")
+        raise InputError(f"{flag}: expected a comma-separated list, got {text!r}")
     out = []
     for t in items:
         try:
             out.append(cast(t))
         except ValueError:
             kind = {int: "integers", float: "numbers"}.get(cast, "values")
-            raise ValueError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
+            raise InputError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
     return out
 
 
@@ -43,16 +44,16 @@ def _cli(args) -> int:
         print("\nproblems: " + ", ".join(list_study_problems()))
         return 0
     if args.out is None:
-        raise ValueError("give --out DIR for the study's table and charts")
+        raise InputError("give --out DIR for the study's table and charts")
     from ..scenes.rundir import check_out_path
 
     check_out_path(args.out)  # every argument before any work
     if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+        raise InputError(f"--workers must be at least 1, got {args.workers}")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
-        raise ValueError(f"--timeout must be a positive number of seconds, got {args.timeout}")
+        raise InputError(f"--timeout must be a positive number of seconds, got {args.timeout}")
     if args.reference_resolution is not None and args.reference_resolution < 20:
-        raise ValueError(f"--reference-resolution must be at least 20 nodes, got {args.reference_resolution}")
+        raise InputError(f"--reference-resolution must be at least 20 nodes, got {args.reference_resolution}")
     scheduler = args.scheduler or ("local" if args.dask else None)
     if args.name == FIDELITY_STUDY:
         from ..studies.fidelity import fidelity_markdown, run_fidelity_study

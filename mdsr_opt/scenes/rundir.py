@@ -41,6 +41,8 @@ import time
 from pathlib import Path
 from typing import Iterable
 
+from ..core.errors import InputError
+
 __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "check_out_path", "LOCK_NAME", "MANIFEST_NAME",
            "remove_temporaries", "noting_interrupts", "check_interrupt"]
 
@@ -69,7 +71,7 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_close_held_locks)
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(InputError):
     """The output folder cannot be used: empty name, a file, unwritable, or holding other files."""
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 import numpy as np
 
+from ..core.errors import checking_input
 from ..core.guards import interruptible
 from ..body.io import atomic_path, write_json
 from ..core.results import format_value, to_jsonable
@@ -192,16 +193,18 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     Raises
     ------
     ValueError
-        An unknown study, problem, backend, material or guess (the message lists the valid ones).
+        An unknown study, problem, backend, material or guess (the message lists the valid ones): an
+        :class:`~mdsr_opt.core.errors.InputError`.
     """
-    st = get_study(study).with_options(resolutions=resolutions, methods=methods, problems=problems,
-                                       materials=materials, reference_resolution=reference_resolution,
-                                       timeout=timeout)
+    with checking_input():  # the study and its overrides: bad input, before any run
+        st = get_study(study).with_options(resolutions=resolutions, methods=methods, problems=problems,
+                                           materials=materials, reference_resolution=reference_resolution,
+                                           timeout=timeout)
+        runs, refs, capped = st.plan()
     if log is None:
         log = _LOG.info if progress else None
     elif not progress:
         log = None
-    runs, refs, capped = st.plan()
     t0 = time.perf_counter()
     if log:
         name = scheduler if isinstance(scheduler, str) else "client"
