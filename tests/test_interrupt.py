@@ -182,7 +182,7 @@ def test_sigint_during_solve_raises_keyboard_interrupt_promptly(backend):
     assert "returned" not in out  # no result (neither success nor a failed step) was returned
     assert rc != 0
     assert "KeyboardInterrupt" in err.strip().splitlines()[-1]
-    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 @pytest.mark.slow
@@ -190,7 +190,7 @@ def test_sigint_during_a_cable_solve_raises_keyboard_interrupt_promptly():
     rc, out, err, elapsed = _run_and_interrupt("ipopt", script=_LONG_INTERNAL)
     assert "returned" not in out
     assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1]
-    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 def test_interruptible_reraises_a_swallowed_interrupt():
@@ -236,7 +236,7 @@ def test_sigint_during_a_design_raises_keyboard_interrupt_promptly():
     assert "KeyboardInterruptException" in err  # CasADi's note: the interrupt landed inside IPOPT
     assert "returned" not in out, out
     assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
-    assert elapsed < 5.0, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 def test_a_requested_stop_is_raised_when_a_solve_returns_in_that_thread_only():

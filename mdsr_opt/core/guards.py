@@ -12,7 +12,9 @@ restoration phase, and a load-stepping loop with a failed step. So the record is
 iteration callbacks (:func:`stop_requested`; IPOPT, sqpmethod and Uno stop at the next iteration), the numpy
 callbacks and the package's own loops (:func:`check_stop`) look at it, and the block raises the recorded
 :class:`KeyboardInterrupt` when the solver returns, so its outcome is never used. A previous handler that
-does not raise (a program's own) is left to decide: nothing is recorded and the solve goes on.
+does not raise (a program's own) is left to decide: nothing is recorded and the solve goes on. A process
+that was started with SIGINT ignored (a background job of a non-interactive shell, ``nohup``) is not
+interrupted by it, in a solve or elsewhere: Python then raises no :class:`KeyboardInterrupt` at all.
 
 :func:`request_stop` is the same stop asked for from another thread (a study's time budget).
 """
@@ -29,7 +31,7 @@ import threading
 __all__ = ["interruptible", "stop_requested", "check_stop", "quiet_stdout", "captured_stdout", "request_stop",
            "cancel_stop"]
 
-#: thread id -> the exception :func:`interruptible` raises when a solve in that thread returns
+#: thread id -> the exception that stops a solve of that thread (see :func:`request_stop`)
 _STOPS: dict[int, type] = {}
 
 #: what the SIGINT handler of an :func:`interruptible` block raised (at most one exception), kept until the
