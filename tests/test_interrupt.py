@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -78,6 +79,81 @@ print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
 """
 
 
+# the issue's case: a strip's left end clamped, its right end turned by 60 degrees and moved, solved again and
+# again with other turns until interrupted (so the solve is running at any delay, on any machine). Each
+# finished solve prints its time; "ready" comes before the first, whose model build is part of the solve
+_REPEATED_EXTERNAL = r"""
+import time
+import numpy as np
+from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external
+mesh = Mesh.rectangle(4, 1, {nx}, {ny})
+P = mesh.points
+left = np.flatnonzero(P[:, 0] == 0.0)
+right = np.flatnonzero(P[:, 0] == 4.0)
+mat = NeoHookean(1.0, 0.3)
+print("ready", flush=True)
+for k in range(1000):
+    turn = RigidDrag(right, np.deg2rad(60 - 5 * (k % 4)), (4.0, 0.5), (-1.0, 0.5))
+    res = solve_external(mesh, mat, left, turn, backend="{backend}")
+    print("returned", res.success, time.time(), flush=True)
+"""
+
+
+def _interrupt_repeated(backend, nx, ny, delay):
+    """Run :data:`_REPEATED_EXTERNAL`, SIGINT ``delay`` s after it is ready; ``(returncode, stdout, stderr,
+    seconds from the signal to the exit, the signal's time.time())``."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, "-c", _REPEATED_EXTERNAL.format(nx=nx, ny=ny, backend=backend)],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert line.strip() == "ready", (line, proc.stderr.read())
+        time.sleep(delay)
+        assert proc.poll() is None, proc.stderr.read()
+        proc.send_signal(signal.SIGINT)
+        t_sig, wall = time.perf_counter(), time.time()
+        out, err = proc.communicate(timeout=60)
+        elapsed = time.perf_counter() - t_sig
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out, err, elapsed, wall
+
+
+def _assert_stopped(rc, out, err, elapsed, wall):
+    late = [ln for ln in out.splitlines() if ln.startswith("returned") and float(ln.split()[2]) > wall]
+    assert not late, f"a solve returned after the interrupt: {late}"
+    assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
+
+
+def test_sigint_into_a_10k_node_external_solve_from_a_script_stops_it():
+    """Issue 31: SIGINT into a script's solve_external (10k nodes; its model build included) raises
+    KeyboardInterrupt within 2 s, and no solve returns after it."""
+    _assert_stopped(*_interrupt_repeated("ipopt", 200, 50, 0.3))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay", [0.3, 1.5, 3.0])
+def test_sigint_into_a_20k_node_external_solve_from_a_script_stops_it(delay):
+    """The issue's own case: ``Mesh.rectangle(4, 1, 280, 70)`` (19,951 nodes), interrupted at several
+    moments (the model build, the predictor, IPOPT's iterations, the stability check)."""
+    _assert_stopped(*_interrupt_repeated("ipopt", 280, 70, delay))
+
+
+def test_sigint_into_a_newton_backend_solve_from_a_script_stops_it():
+    _assert_stopped(*_interrupt_repeated("newton", 200, 50, 1.0))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend,nx,ny", [("newton", 280, 70), ("sqpmethod", 100, 25), ("scipy", 100, 25),
+                                           ("ipopt-symbolic", 140, 35), ("ipopt-lbfgs", 200, 50),
+                                           ("uno", 16, 4)])
+def test_sigint_into_an_external_solve_stops_every_backend(backend, nx, ny):
+    _assert_stopped(*_interrupt_repeated(backend, nx, ny, 1.5))
+
+
 def _run_and_interrupt(backend, nx=200, ny=20, delay=1.0, script=_LONG_SOLVE):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.Popen([sys.executable, "-c", script.format(nx=nx, ny=ny, backend=backend)],
@@ -106,7 +182,7 @@ def test_sigint_during_solve_raises_keyboard_interrupt_promptly(backend):
     assert "returned" not in out  # no result (neither success nor a failed step) was returned
     assert rc != 0
     assert "KeyboardInterrupt" in err.strip().splitlines()[-1]
-    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 @pytest.mark.slow
@@ -114,7 +190,7 @@ def test_sigint_during_a_cable_solve_raises_keyboard_interrupt_promptly():
     rc, out, err, elapsed = _run_and_interrupt("ipopt", script=_LONG_INTERNAL)
     assert "returned" not in out
     assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1]
-    assert elapsed < 2.5, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 def test_interruptible_reraises_a_swallowed_interrupt():
@@ -160,7 +236,7 @@ def test_sigint_during_a_design_raises_keyboard_interrupt_promptly():
     assert "KeyboardInterruptException" in err  # CasADi's note: the interrupt landed inside IPOPT
     assert "returned" not in out, out
     assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
-    assert elapsed < 5.0, f"exit took {elapsed:.2f} s after SIGINT"
+    assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
 def test_a_requested_stop_is_raised_when_a_solve_returns_in_that_thread_only():
@@ -249,3 +325,158 @@ def test_a_run_whose_deadline_fires_leaves_no_stop_for_the_next_run_on_its_threa
     assert threading.get_ident() not in guards._STOPS
     second = runs.execute_run(spec)
     assert second.row["success"], second.row["status"]
+
+
+# ------------------------------------------------------------------ interrupts a solver swallowed (in process)
+def _swallowed_sigint():
+    """Ctrl-C whose KeyboardInterrupt something swallowed (as CasADi turns an exception in a Python callback
+    into a failed evaluation, or a loop catches a CasADi error that replaced it)."""
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.5)  # the handler runs here
+    except KeyboardInterrupt:
+        return
+    raise AssertionError("SIGINT raised no KeyboardInterrupt")
+
+
+def _pinned_strip(nx=12, ny=3):
+    """A strip's model with its left end clamped and its right end moved, the rest at rest: ``minimize``'s
+    inputs for a solve of several iterations."""
+    from mdsr_opt import Mesh, NeoHookean
+    from mdsr_opt.mechanics.model import get_model
+
+    mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
+    P = mesh.points
+    ends = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 4.0))
+    fixed = np.zeros(2 * mesh.n_nodes, dtype=bool)
+    fixed[2 * ends] = fixed[2 * ends + 1] = True
+    moved = P.copy()
+    moved[P[:, 0] == 4.0] += (0.5, 1.5)
+    mat = NeoHookean(1.0, 0.3)
+    model = get_model(mesh, mat)
+    return model, model.params(mat), P.reshape(-1), fixed, moved.reshape(-1)[fixed]
+
+
+def _backends():
+    from mdsr_opt.mechanics.backends import available_backends
+
+    return available_backends()
+
+
+@pytest.mark.parametrize("backend", _backends())
+def test_a_swallowed_interrupt_stops_the_next_solve_at_its_first_iteration(backend):
+    """After a Ctrl-C inside an interruptible block, a solve of every backend stops at its first iteration
+    and raises KeyboardInterrupt instead of returning (a whole solve ran before, and returned)."""
+    from mdsr_opt.core.guards import interruptible
+    from mdsr_opt.mechanics.backends import minimize
+
+    assert minimize(*_pinned_strip(), backend=backend, tol=1e-10).iterations >= 5  # not a trivial solve
+    model, p, x0, fixed, values = _pinned_strip()  # the same on a model of its own: its solvers' stats below
+    returned = []
+    with pytest.raises(KeyboardInterrupt, match="interrupted"):
+        with interruptible():
+            _swallowed_sigint()
+            returned.append(minimize(model, p, x0, fixed, values, backend=backend, tol=1e-10))
+    assert returned == []
+    for solver in model._solvers.values():  # CasADi's plugins: stopped, not run to their (successful) end
+        st = solver.stats()
+        assert not st["success"], (backend, st)
+        if "User_Requested_Stop" in str(st.get("return_status")):  # the iteration callback stopped it
+            assert st["iter_count"] == 0
+
+
+def test_an_interrupt_swallowed_inside_an_evaluation_stops_ipopt_at_once(monkeypatch):
+    """The issue's suspect: a KeyboardInterrupt raised inside IPOPT's numpy callback and swallowed there. No
+    evaluation follows it, and the solve raises KeyboardInterrupt (it used to run to its end first)."""
+    from mdsr_opt.mechanics.backends import minimize
+
+    model, p, x0, fixed, values = _pinned_strip(40, 10)
+    real = type(model).numeric
+    calls = {"n": 0, "after": 0}
+
+    def numeric(p_):
+        calls["n"] += 1
+        if calls["n"] == 6:
+            _swallowed_sigint()
+        elif calls["n"] > 6:
+            calls["after"] += 1
+        return real(model, p_)
+
+    monkeypatch.setattr(model, "numeric", numeric)
+    with pytest.raises(KeyboardInterrupt, match="interrupted"):
+        minimize(model, p, x0, fixed, values, tol=1e-12, max_iter=1000)
+    assert calls["n"] >= 6 and calls["after"] == 0
+
+
+@pytest.mark.parametrize("method", ["flattened", "nested", "derivative-free"])
+def test_a_swallowed_interrupt_stops_every_design_method(method, monkeypatch):
+    """Ctrl-C swallowed at the design's first forward solve: the design raises KeyboardInterrupt, no result."""
+    from mdsr_opt import Mesh, Muscle, NeoHookean, design_contractions, solve_internal
+    from mdsr_opt.synthesis import problem
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    top = sorted(np.flatnonzero(P[:, 1] == 1.0), key=lambda i: P[i, 0])
+    mus = [Muscle(top[2:-2])]
+    mat = NeoHookean(1.0, 0.3)
+    target = solve_internal(mesh, mat, mus, [0.2]).x
+    real = problem.solve_internal
+    calls = []
+
+    def interrupted_solve(*a, **k):
+        calls.append(1)
+        if len(calls) == 1:
+            _swallowed_sigint()
+        return real(*a, **k)
+
+    monkeypatch.setattr(problem, "solve_internal", interrupted_solve)
+    with pytest.raises(KeyboardInterrupt, match="interrupted"):
+        design_contractions(mesh, mat, mus, target, method=method, verify=False)
+    assert len(calls) == 1  # that forward solve raised: the design went no further
+
+
+def test_an_ignored_sigint_stays_ignored():
+    """A process started with SIGINT ignored (a background job of a non-interactive shell, nohup) is not
+    interrupted by it, in a solve or elsewhere: the guard installs nothing and raises nothing."""
+    from mdsr_opt.core.guards import interruptible, stop_requested
+
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with interruptible():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)
+            assert not stop_requested()
+        assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def test_a_requested_stop_stops_a_solve_at_its_first_iteration():
+    """A study's time budget (request_stop from another thread) stops the solve of its thread at the next
+    iteration, not at the solve's end."""
+    import threading
+
+    from mdsr_opt.core.guards import cancel_stop, request_stop
+    from mdsr_opt.mechanics.backends import minimize
+
+    class Budget(BaseException):
+        pass
+
+    model, p, x0, fixed, values = _pinned_strip()
+    seen = []
+
+    def work():
+        me = threading.get_ident()
+        request_stop(me, Budget)
+        try:
+            minimize(model, p, x0, fixed, values, tol=1e-10)
+        except BaseException as exc:  # noqa: BLE001 - what reached the caller
+            seen.append(type(exc))
+        finally:
+            cancel_stop(me)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert seen == [Budget]
+    assert [s.stats()["success"] for s in model._solvers.values()] == [False]  # stopped, not run to its end

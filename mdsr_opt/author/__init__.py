@@ -28,6 +28,8 @@ import threading
 import time
 from pathlib import Path
 
+from ..core.errors import InputError, checking_input
+
 __all__ = ["serve", "start_in_thread", "add_cli", "body_spec"]
 
 _MISSING = ("the web server packages for mdsr author are missing (starlette, uvicorn): "
@@ -77,7 +79,7 @@ def _bind(host: str, port: int) -> socket.socket:
         sock.bind((host, port))
     except OSError as exc:
         sock.close()
-        raise ValueError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+        raise InputError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
     sock.listen(64)
     return sock
 
@@ -154,7 +156,8 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
     _require()
     import webbrowser
 
-    spec = body_spec(body, resolution)
+    with checking_input():  # the body (a name or a file) and its resolution: bad input, before serving
+        spec = body_spec(body, resolution)
     if not _is_loopback(host):
         print(f"mdsr author: WARNING: listening on {host}, not the loopback address: anyone who can reach "
               "this machine and has the address below (with its token) can use the page and save files into "
@@ -187,7 +190,7 @@ def _cmd(a) -> int:
 
     matplotlib.use("Agg")  # figures are drawn in worker threads for downloads
     if not 0 <= a.port <= 65535:
-        raise ValueError(f"--port must be in [0, 65535], got {a.port}")
+        raise InputError(f"--port must be in [0, 65535], got {a.port}")
     return serve(a.body, host=a.host, port=a.port, open_browser=not a.no_browser, out=a.out,
                  resolution=a.resolution, allow_dirs=a.allow_dir)
 

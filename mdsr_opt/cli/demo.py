@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from ..core.errors import InputError, InputTypeError
 from ..core.progress import progress_for_cli
 
 __all__ = ["finger_outline", "run_demo", "add_cli"]
@@ -45,13 +46,13 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     # every argument before any work: meshing and solving take seconds
     for name, v in (("max_area", max_area), ("contraction", contraction)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-            raise TypeError(f"{name} must be a number, got {type(v).__name__}")
+            raise InputTypeError(f"{name} must be a number, got {type(v).__name__}")
         if not np.isfinite(v):
-            raise ValueError(f"{name} must be finite, got {v}")
+            raise InputError(f"{name} must be finite, got {v}")
     if not 0.0 <= contraction < 1.0:
-        raise ValueError(f"contraction {contraction} is outside [0, 1) (a fraction of the muscle's rest length)")
+        raise InputError(f"contraction {contraction} is outside [0, 1) (a fraction of the muscle's rest length)")
     if max_area <= 0:
-        raise ValueError(f"max_area must be > 0, got {max_area}")
+        raise InputError(f"max_area must be > 0, got {max_area}")
     check_out_path(out)
     os.makedirs(out, exist_ok=True)
     t_all = time.perf_counter()

@@ -3,6 +3,15 @@
 Global options (before the subcommand): ``--version``; ``-v`` (more detail: ``-vv`` for debug output of the
 library's loggers) and ``-q`` (warnings and errors only, no progress bar). Library modules report through
 ``logging.getLogger(__name__)``; this module is the only place that configures logging.
+
+Exit codes: 0 success; 1 the command ran but something it checked failed (a solve, a case), or a bug;
+2 bad input; 130 Ctrl-C. Bad input is told from a bug by design (:mod:`mdsr_opt.core.errors`), not by
+the exception's built-in type: each command checks its arguments and loads its scenes inside
+:func:`~mdsr_opt.core.errors.checking_input` before any work, and the public functions it then calls
+check their own doors so too (or raise :class:`~mdsr_opt.core.errors.InputError` for bad input found
+later, e.g. an unusable output folder); those errors and ``OSError`` are one line with exit code 2. Any
+other exception, e.g. a ``TypeError`` or ``ValueError`` from deep inside a solve, is a bug: its traceback
+is printed, exit code 1.
 """
 
 from __future__ import annotations
@@ -136,9 +145,9 @@ def agg_backend():
 def main(argv: list[str] | None = None) -> int:
     """Run the ``mdsr`` command with ``argv`` (default: ``sys.argv[1:]``); returns the exit code.
 
-    0: success; 1: the command ran but something it checked failed (a solve, a case); 2: bad input or an
-    unusable file or folder (one line on stderr, nothing written); 130: interrupted by Ctrl-C;
-    143: stopped by SIGTERM.
+    0: success; 1: the command ran but something it checked failed (a solve, a case), or a bug of the package
+    (its traceback on stderr); 2: bad input or an unusable file or folder (one line on stderr, nothing
+    written); 130: interrupted by Ctrl-C; 143: stopped by SIGTERM.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
@@ -186,11 +195,12 @@ def _run(parser, argv: list[str]) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except (ValueError, TypeError, OSError) as exc:  # bad input, an unusable file or folder: one line
-        text = str(exc) if not isinstance(exc, OSError) or not exc.filename else \
-            f"{exc.strerror or type(exc).__name__}: {exc.filename}"
-        print(f"mdsr {args.command}: error: {text}", file=sys.stderr)
-        return 2
+    except Exception as exc:  # noqa: BLE001 - bad input or an unusable file: one line, 2; a bug: its traceback, 1
+        from ..core.errors import exit_report
+
+        code, text = exit_report(f"mdsr {args.command}", exc)
+        print(text, file=sys.stderr)
+        return code
 
 
 def console_main() -> int:

@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..core.errors import InputError, checking_input
 
 __all__ = ['add_cli']
 
@@ -76,14 +77,16 @@ def _cmd_photograph(a) -> int:
     from ..photos.camera import render_photo
     from ..photos.folder import STATE_SUFFIXES, list_files, write_together
 
-    files = list_files(a.states, STATE_SUFFIXES, "state")
+    with checking_input():  # the states named: bad input
+        files = list_files(a.states, STATE_SUFFIXES, "state")
     stems = [f.stem for f in files]
     twice = sorted({st for st in stems if stems.count(st) > 1})
     if twice:
-        raise ValueError(f"two state files for case(s) {', '.join(twice)}: each would give {twice[0]}.png")
+        raise InputError(f"two state files for case(s) {', '.join(twice)}: each would give {twice[0]}.png")
     writers = []
     for f in files:  # render and encode everything first, then write the whole set at once
-        data = read_mesh(f)
+        with checking_input():  # a state file that cannot be read: bad input
+            data = read_mesh(f)
         ph = render_photo(data.mesh, data.x, image_size=a.photo_size, seed=a.seed, tilt_deg=a.tilt,
                           rotation_deg=a.rotation, noise_sigma=a.noise, blur_sigma=a.blur,
                           lighting=a.lighting)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..core.errors import InputError, checking_input
 from ..core.progress import progress_for_cli
 from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
+from ..scenes.scene import resolve_resolution
 from ..scenes.runscene import job_server, n_units, parse_resolution, parse_seed, parse_size, run_entries, write_scene
 
 __all__ = ['add_cli']
@@ -33,7 +35,8 @@ def _cmd_list(a) -> int:
     for name, path in files.items():
         line = f"  {name:<{w}}  {_doc_line(path)}"
         if a.cases:
-            scene = build_from(path, "coarse")
+            with checking_input():  # a problem script that does not build: its author's input
+                scene = build_from(path, "coarse")
             kinds = ", ".join(f"{c.name} ({c.kind})" for c in scene.cases)
             line += f"\n  {'':<{w}}  cases: {kinds}" + (
                 f"; animations: {', '.join(x.name for x in scene.animations)}" if scene.animations else "")
@@ -51,17 +54,20 @@ def _cmd_run(a) -> int:
     if names == ["all"]:
         names = list_problems()
         if not names:
-            raise ValueError("no problem library found: `mdsr run all` needs the problems/ folder")
+            raise InputError("no problem library found: `mdsr run all` needs the problems/ folder")
     from ..scenes.rundir import RunFolder
 
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
-    # scene (all input errors), and only then any solving or writing
+    # scene (all input errors, inside checking_input), and only then any solving or writing
     figs = figure_scripts()
     if any(n in figs for n in names):  # a figure script runs on its own (e.g. mdsr run figure6)
         if len(names) != 1:
-            raise ValueError(f"run a figure script ({', '.join(n for n in names if n in figs)}) on its own")
-        module = load_module(figs[names[0]])
+            raise InputError(f"run a figure script ({', '.join(n for n in names if n in figs)}) on its own")
+        with checking_input():
+            module = load_module(figs[names[0]])
+            if a.resolution is not None:
+                resolve_resolution(a.resolution)
         with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
             folder.begin(getattr(module, "OUTPUTS", ()))
             with progress_for_cli(a, 0, names[0], unit="step") as log:
@@ -73,16 +79,17 @@ def _cmd_run(a) -> int:
     # scenes are built
     with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder, \
             job_server(not a.no_figures, not a.no_photos, background=not a.serial):
-        scenes = [get_problem(n, resolution=a.resolution) for n in names]
-        seen = set()
-        for s in scenes:
-            if s.name in seen:
-                raise ValueError(f"scene {s.name!r} is named twice")
-            seen.add(s.name)
-        if a.case:
+        with checking_input():  # building the scenes checks them: bad input, before any work
+            scenes = [get_problem(n, resolution=a.resolution) for n in names]
+            seen = set()
             for s in scenes:
-                for c in a.case:
-                    s.case(c)  # an unknown --case names the scene's cases
+                if s.name in seen:
+                    raise ValueError(f"scene {s.name!r} is named twice")
+                seen.add(s.name)
+            if a.case:
+                for s in scenes:
+                    for c in a.case:
+                        s.case(c)  # an unknown --case names the scene's cases
         folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
         reports = []
         with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",

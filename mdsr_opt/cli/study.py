@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from ..core.errors import InputError
 from ..core.progress import progress_for_cli
 
 __all__ = ['add_cli']
@@ -15,14 +16,14 @@ def _csv_list(text: str | None, cast=str, flag: str = "the list"):
         return None
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
-        raise ValueError(f"{flag}: expected a comma-separated list, got {text!r}")
+        raise InputError(f"{flag}: expected a comma-separated list, got {text!r}")
     out = []
     for t in items:
         try:
             out.append(cast(t))
         except ValueError:
             kind = {int: "integers", float: "numbers"}.get(cast, "values")
-            raise ValueError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
+            raise InputError(f"{flag}: expected comma-separated {kind}, got {t!r}") from None
     return out
 
 
@@ -43,24 +44,24 @@ def _cli(args) -> int:
         print("\nproblems: " + ", ".join(list_study_problems()))
         return 0
     if args.out is None:
-        raise ValueError("give --out DIR for the study's table and charts")
+        raise InputError("give --out DIR for the study's table and charts")
     from ..scenes.rundir import check_out_path
 
     check_out_path(args.out)  # every argument before any work
     if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+        raise InputError(f"--workers must be at least 1, got {args.workers}")
     if args.timeout is not None and not (math.isfinite(args.timeout) and args.timeout > 0):
-        raise ValueError(f"--timeout must be a positive number of seconds, got {args.timeout}")
+        raise InputError(f"--timeout must be a positive number of seconds, got {args.timeout}")
     from ..body.mesh import MAX_RESOLUTION
 
     why = f"a solve's memory grows with the nodes: about 3 GB at {MAX_RESOLUTION}"
     if args.reference_resolution is not None and not 20 <= args.reference_resolution <= MAX_RESOLUTION:
-        raise ValueError(f"--reference-resolution must be a node count from 20 to {MAX_RESOLUTION} ({why}), "
+        raise InputError(f"--reference-resolution must be a node count from 20 to {MAX_RESOLUTION} ({why}), "
                          f"got {args.reference_resolution}")
     resolutions = _csv_list(args.resolutions, int, "--resolutions")
     for r in resolutions or ():
         if not 4 <= r <= MAX_RESOLUTION:
-            raise ValueError(f"--resolutions must be node counts from 4 to {MAX_RESOLUTION} ({why}), got {r}")
+            raise InputError(f"--resolutions must be node counts from 4 to {MAX_RESOLUTION} ({why}), got {r}")
     scheduler = args.scheduler or ("local" if args.dask else None)
     if args.name == FIDELITY_STUDY:
         from ..studies.fidelity import fidelity_markdown, run_fidelity_study

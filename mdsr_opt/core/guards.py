@@ -1,5 +1,23 @@
-"""Guards around calls into C solvers: Ctrl-C during a CasADi solve, and the C-level standard output
-that solvers print to whatever Python's ``sys.stdout`` says."""
+"""Guards around calls into C solvers: Ctrl-C during a solve, and the C-level standard output that solvers
+print to whatever Python's ``sys.stdout`` says.
+
+How Ctrl-C stops a solve
+------------------------
+:func:`interruptible` installs, for the length of a solve and on the main thread only, a SIGINT handler that
+calls the previous one (Python's default raises :class:`KeyboardInterrupt` where the program is) and records
+what it raised; the previous handler is put back when the block ends. The exception raised where the signal
+landed is not enough: inside a CasADi solve it lands in a Python callback (the numpy energy, the iteration
+callback), where CasADi may turn it into a failed evaluation that the solver answers with a shorter step or a
+restoration phase, and a load-stepping loop with a failed step. So the record is also a flag: the solvers'
+iteration callbacks (:func:`stop_requested`; IPOPT, sqpmethod and Uno stop at the next iteration), the numpy
+callbacks and the package's own loops (:func:`check_stop`) look at it, and the block raises the recorded
+:class:`KeyboardInterrupt` when the solver returns, so its outcome is never used. A previous handler that
+does not raise (a program's own) is left to decide: nothing is recorded and the solve goes on. A process
+that was started with SIGINT ignored (a background job of a non-interactive shell, ``nohup``) is not
+interrupted by it, in a solve or elsewhere: Python then raises no :class:`KeyboardInterrupt` at all.
+
+:func:`request_stop` is the same stop asked for from another thread (a study's time budget).
+"""
 
 from __future__ import annotations
 
@@ -10,17 +28,25 @@ import sys
 import tempfile
 import threading
 
-__all__ = ["interruptible", "quiet_stdout", "captured_stdout", "request_stop", "cancel_stop"]
+__all__ = ["interruptible", "stop_requested", "check_stop", "quiet_stdout", "captured_stdout", "request_stop",
+           "cancel_stop"]
 
-#: thread id -> the exception :func:`interruptible` raises when a solve in that thread returns
+#: thread id -> the exception that stops a solve of that thread (see :func:`request_stop`)
 _STOPS: dict[int, type] = {}
+
+#: what the SIGINT handler of an :func:`interruptible` block raised (at most one exception), kept until the
+#: outermost block on the main thread ends
+_SIGINT: list[BaseException] = []
+
+#: nesting depth of :func:`interruptible` blocks that installed their handler (main thread only)
+_DEPTH = [0]
 
 
 def request_stop(thread_id: int, exc_type: type) -> None:
-    """Make the next solve of thread ``thread_id`` that returns inside :func:`interruptible` raise
-    ``exc_type`` (until :func:`cancel_stop`): a time budget set from another thread. An asynchronous exception
-    alone can land in a solver's Python callback, where CasADi turns it into a failed evaluation that load
-    stepping takes for a failed step."""
+    """Make the solve of thread ``thread_id`` inside :func:`interruptible` stop at its next iteration and
+    raise ``exc_type`` (until :func:`cancel_stop`): a time budget set from another thread. An asynchronous
+    exception alone can land in a solver's Python callback, where CasADi turns it into a failed evaluation
+    that load stepping takes for a failed step."""
     _STOPS[int(thread_id)] = exc_type
 
 
@@ -33,6 +59,87 @@ def _raise_requested_stop() -> None:
     exc_type = _STOPS.get(threading.get_ident())
     if exc_type is not None:
         raise exc_type("stop requested during a solve")
+
+
+def _on_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def _recorded() -> BaseException:
+    exc = _SIGINT[0]
+    if isinstance(exc, KeyboardInterrupt) and not exc.args:
+        exc = _SIGINT[0] = KeyboardInterrupt("interrupted (SIGINT) during a solve")
+    return exc
+
+
+def stop_requested() -> bool:
+    """Should the solve running in this thread stop now? True after a SIGINT inside :func:`interruptible`
+    (main thread) or a :func:`request_stop` for this thread. What solvers' iteration callbacks ask."""
+    return bool(_SIGINT) and _on_main_thread() or threading.get_ident() in _STOPS
+
+
+def check_stop() -> None:
+    """Raise the recorded :class:`KeyboardInterrupt` (or the requested stop) if :func:`stop_requested`: for
+    loops and callbacks inside a solve, where an interrupt raised earlier may have been swallowed (an
+    evaluation CasADi reported as failed, a factorisation taken as singular)."""
+    if _SIGINT and _on_main_thread():
+        raise _recorded()
+    _raise_requested_stop()
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Make Ctrl-C (SIGINT) during a solve stop it and raise :class:`KeyboardInterrupt`, never a result.
+
+    See the module docstring: within the block a SIGINT goes to the previous handler, and what that raises
+    (Python's default: :class:`KeyboardInterrupt`) is recorded; the solvers' iteration callbacks then stop
+    at the next iteration (:func:`stop_requested`) and the block raises the recorded exception when the
+    solver returns, also when the solve swallowed it or failed because of it. The handler is installed on
+    the main thread only (signal handlers cannot be set elsewhere) and not when SIGINT is ignored or left
+    to the system's default; a stop asked for by :func:`request_stop` is raised in any thread. Nesting is
+    fine: the record is kept until the outermost block ends.
+
+    Example
+    -------
+    >>> with interruptible():
+    ...     pass  # sol = solver(x0=..., lbx=..., ubx=...)
+    """
+    prev = signal.getsignal(signal.SIGINT) if _on_main_thread() else None
+    if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
+        try:
+            yield
+        except Exception:  # a failed solve: a requested stop is what stopped it
+            _raise_requested_stop()
+            raise
+        _raise_requested_stop()
+        return
+
+    def handler(signum, frame):
+        try:
+            prev(signum, frame)
+        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the program's handler)
+            if not _SIGINT:
+                _SIGINT.append(exc)
+            raise
+
+    signal.signal(signal.SIGINT, handler)
+    _DEPTH[0] += 1
+    try:
+        yield
+    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
+        if _SIGINT:
+            raise _recorded() from exc
+        _raise_requested_stop()
+        raise
+    finally:
+        signal.signal(signal.SIGINT, prev)
+        _DEPTH[0] -= 1
+        pending = _recorded() if _SIGINT else None
+        if _DEPTH[0] == 0:
+            _SIGINT.clear()
+    if pending is not None:
+        raise pending
+    _raise_requested_stop()
 
 
 @contextlib.contextmanager
@@ -51,61 +158,6 @@ def quiet_stdout(active: bool):
         os.dup2(saved, 1)
         os.close(saved)
         os.close(devnull)
-
-
-@contextlib.contextmanager
-def interruptible():
-    """Make Ctrl-C (SIGINT) during a CasADi solve raise :class:`KeyboardInterrupt` when the solver returns.
-
-    CasADi catches the interrupt inside a solve: IPOPT then stops after the current iteration and reports
-    ``NonIpopt_Exception_Thrown`` (printing a ``KeyboardInterruptException`` warning), a status that other
-    errors share and that load stepping would take for a failed step. Inside this context a SIGINT is
-    recorded on its way to the previous handler, and the recorded :class:`KeyboardInterrupt` is raised
-    again on exit, so the solve's outcome is never used. Nesting is fine; outside the main thread (where
-    signal handlers cannot be set) and when SIGINT is ignored this does nothing.
-
-    Example
-    -------
-    >>> with interruptible():
-    ...     pass  # sol = solver(x0=..., lbx=..., ubx=...)
-    """
-    prev = signal.getsignal(signal.SIGINT) if threading.current_thread() is threading.main_thread() else None
-    if not callable(prev):  # not the main thread, SIG_IGN or SIG_DFL: nothing to record
-        try:
-            yield
-        except Exception:  # a failed solve: a requested stop is what stopped it
-            _raise_requested_stop()
-            raise
-        _raise_requested_stop()
-        return
-    caught: list[BaseException] = []
-
-    def handler(signum, frame):
-        try:
-            prev(signum, frame)
-        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the user's handler)
-            caught.append(exc)
-            raise
-
-    def recorded():
-        exc = caught[0]
-        if isinstance(exc, KeyboardInterrupt) and not exc.args:
-            exc = KeyboardInterrupt("interrupted (SIGINT) during a solve")
-        return exc
-
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield
-    except Exception as exc:  # e.g. a CasADi Function call whose error replaced the interrupt it swallowed
-        if caught:
-            raise recorded() from exc
-        _raise_requested_stop()
-        raise
-    finally:
-        signal.signal(signal.SIGINT, prev)
-    if caught:
-        raise recorded()
-    _raise_requested_stop()
 
 
 @contextlib.contextmanager

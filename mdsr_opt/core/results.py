@@ -38,6 +38,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .errors import InputError
+
 __all__ = ["compact_repr", "format_value", "to_jsonable", "plain", "save_npz", "load_npz", "save_fields",
            "load_fields"]
 
@@ -143,7 +145,7 @@ def save_npz(path: str | os.PathLike, kind: str, arrays: Mapping[str, np.ndarray
     if not path.endswith(".npz"):
         raise ValueError(f"a {kind} result is saved as a .npz file; got {path!r}")
     if os.path.isdir(path):
-        raise ValueError(f"cannot write {path}: it is a folder")
+        raise InputError(f"cannot write {path}: it is a folder")
     text = json.dumps({"format": f"mdsr_opt.{kind}/1", "arrays": sorted(arrays), "fields": plain(dict(meta))})
     payload = {f"a:{k}": np.asarray(v) for k, v in arrays.items()}
     for k, v in payload.items():

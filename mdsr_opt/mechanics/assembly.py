@@ -35,6 +35,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.guards import check_stop
+
 __all__ = ["BufferedFunction", "HessianPattern", "SparseLayout", "ipopt_functions"]
 
 
@@ -114,7 +116,8 @@ class BufferedFunction(ca.Callback):
     ``inputs`` are the nonzeros of each input (zeros for an input not given), ``outputs`` writable views
     of each output's nonzeros, or None for an output the caller does not want; ``fn`` fills them in
     place. Floating-point warnings are silenced: a trial step that inverts a triangle gives non-finite
-    values, which IPOPT answers by cutting the step.
+    values, which IPOPT answers by cutting the step. After Ctrl-C inside
+    :func:`~mdsr_opt.core.guards.interruptible` an evaluation raises the :class:`KeyboardInterrupt` instead.
 
     Parameters
     ----------
@@ -144,6 +147,7 @@ class BufferedFunction(ca.Callback):
         return True
 
     def eval_buffer(self, arg, res):
+        check_stop()  # Ctrl-C inside the solve: no more evaluations (the solver stops at its next iteration)
         ins = [np.zeros(s.nnz()) if a is None else np.frombuffer(a, dtype=np.float64)
                for a, s in zip(arg, self._sp_in)]
         outs = [None if r is None else np.frombuffer(r, dtype=np.float64) for r in res]  # None: not wanted

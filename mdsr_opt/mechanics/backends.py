@@ -32,9 +32,10 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
-from ..core.guards import captured_stdout, interruptible, quiet_stdout
+from ..core.guards import captured_stdout, check_stop, interruptible, quiet_stdout
 from . import ropesolve
 from .result import MinimizeOutcome, solver_status
+from .stopping import with_stop_callback
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 
 __all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
@@ -45,6 +46,7 @@ def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
     def factory(model):
         o = dict(opts)
         o["show_eval_warnings"] = False  # NaN from log J in a trial step is expected; IPOPT cuts the step
+        o = with_stop_callback(o)  # Ctrl-C stops the solver at its next iteration
         if plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False):
             # energy, gradient and Hessian in vectorised numpy through callbacks: no symbolic graph to build
             from .assembly import ipopt_functions
@@ -114,6 +116,7 @@ def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
     free, base, full = _free_problem(model, p, fixed, values, x0)
 
     def fun(z):
+        check_stop()  # an interrupt swallowed in a CasADi evaluation stops trust-constr here
         f, g = model.grad_fn(full(z), p)
         f = float(f)
         if not np.isfinite(f):

@@ -8,6 +8,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..core.deprecation import renamed_keywords
+from ..core.guards import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles
 from ..core.checks import node_indices, positive_float
@@ -28,6 +29,7 @@ __all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_f
 
 
 # ---------------------------------------------------------------------------------- external driving
+@interruptible()  # Ctrl-C anywhere in the solve raises KeyboardInterrupt, never a result
 def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | None,
                    drags: Mapping[int, Sequence[float]] | tuple | None, *, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
@@ -197,6 +199,7 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
 
 
 @renamed_keywords(model="muscle_model")
+@interruptible()  # Ctrl-C anywhere in the solve raises KeyboardInterrupt, never a result
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,

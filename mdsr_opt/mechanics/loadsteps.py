@@ -9,7 +9,7 @@ import scipy.sparse.linalg as spla
 
 from ..body.mesh import Mesh
 from ..core.checks import positive_float
-from ..core.guards import interruptible
+from ..core.guards import check_stop, interruptible
 from .backends import check_backend, minimize
 from .blas import one_blas_thread
 from .drags import RigidDrag, drag_path
@@ -199,6 +199,7 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
         status = "not started"
         certified = False  # the last accepted step's state: a strict minimum by IPOPT's inertia test
         while s < 1.0 - 1e-12:
+            check_stop()  # an interrupt a step swallowed (e.g. in a predictor's CasADi call) stops here
             if ds < min_step:
                 return (x, f"load stepping stalled at fraction {s:.4g} ({status})", False, iters, steps, t_solve,
                         t_build)
@@ -317,6 +318,7 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
     chk = _stability_at(model, p, x, fixed)
     iters, tries, scale = 0, 0, 1.0
     while not chk.stable and tries < _RESTARTS and chk.direction is not None:
+        check_stop()
         tries += 1
         y = _kick(mesh, model, p, x, chk.direction, scale)
         if y is None:

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..core.guards import check_stop
 from .segments import length_third, pair_blocks
 
 __all__ = ["NewtonEnergy", "projected_newton", "step_seconds"]
@@ -416,6 +417,7 @@ def projected_newton(model, p, x0, fixed, values, tol: float = 1e-8, max_iter: i
     if not np.isfinite(f):
         return x, False, "the first guess inverts a triangle", 0, time.perf_counter() - t0
     for it in range(1, max_iter + 1):
+        check_stop()  # Ctrl-C inside minimize's interruptible block (see mdsr_opt.core.guards)
         g_all, He, Hs = en.element_blocks(x, project=False)
         g = g_all[free]
         gn = float(np.abs(g).max()) if g.size else 0.0

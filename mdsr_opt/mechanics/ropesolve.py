@@ -17,6 +17,7 @@ import numpy as np
 from ..core.guards import interruptible, quiet_stdout
 from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
+from .stopping import with_stop_callback
 
 __all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", "solve_constrained"]
 
@@ -29,7 +30,7 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
         # allows it (ConstrainedModel.numeric_functions: nothing symbolic to build); "ipopt-symbolic" and
         # the other plugins use the CasADi graph
         numeric = plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False)
-        o = dict(opts)
+        o = with_stop_callback(opts)  # Ctrl-C stops the solver at its next iteration
         o["show_eval_warnings"] = False
         if numeric:
             from .assembly import ipopt_functions

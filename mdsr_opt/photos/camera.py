@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 from ..core.deprecation import renamed_keywords
 from ..body.checks import check_mesh
 from ..core.checks import as_float_array, positive_float
+from ..core.errors import InputError, checking_input
 from ..core.results import to_jsonable
 from .compare import rotation_matrix
 from .folder import bytes_writer, write_together
@@ -320,28 +321,29 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     >>> photo.image.shape, photo.metadata["synthetic"]
     ((120, 200, 3), True)
     """
-    mesh = check_mesh(mesh)
-    x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
-    W, H = check_photo_size(image_size, "image_size")
-    seed = check_int(seed, "seed", lo=0)
-    margin = positive_float(margin, "margin")
-    if margin >= 0.45:
-        raise ValueError(f"margin must be < 0.45, got {margin}")
-    tilt = positive_float(tilt_deg, "tilt_deg", allow_zero=True)
-    if tilt > 20.0:
-        raise ValueError(f"tilt_deg must be <= 20 degrees, got {tilt}")
-    for v, nm in ((lighting, "lighting"), (vignette, "vignette")):
-        if positive_float(v, nm, allow_zero=True) >= 1.0:
-            raise ValueError(f"{nm} must be < 1, got {v}")
-    blur = positive_float(blur_sigma, "blur_sigma", allow_zero=True)
-    noise = positive_float(noise_sigma, "noise_sigma", allow_zero=True)
-    ss = check_int(supersample, "supersample", 1, 8)
-    if isinstance(rotation_deg, (bool, np.bool_)) or not isinstance(rotation_deg, numbers.Real):
-        raise TypeError(f"rotation_deg must be a real number (degrees), got {type(rotation_deg).__name__}")
-    rot = float(rotation_deg)
-    if not math.isfinite(rot):
-        raise ValueError(f"rotation_deg must be finite, got {rotation_deg!r}")
-    body_rgb, plate_rgb, grid_rgb = (check_color(c) for c in (body_color, plate_color, grid_color))
+    with checking_input():  # every argument before any drawing: bad input
+        mesh = check_mesh(mesh)
+        x = mesh.points if x is None else as_float_array(x, "x", shape=(mesh.n_nodes, 2))
+        W, H = check_photo_size(image_size, "image_size")
+        seed = check_int(seed, "seed", lo=0)
+        margin = positive_float(margin, "margin")
+        if margin >= 0.45:
+            raise ValueError(f"margin must be < 0.45, got {margin}")
+        tilt = positive_float(tilt_deg, "tilt_deg", allow_zero=True)
+        if tilt > 20.0:
+            raise ValueError(f"tilt_deg must be <= 20 degrees, got {tilt}")
+        for v, nm in ((lighting, "lighting"), (vignette, "vignette")):
+            if positive_float(v, nm, allow_zero=True) >= 1.0:
+                raise ValueError(f"{nm} must be < 1, got {v}")
+        blur = positive_float(blur_sigma, "blur_sigma", allow_zero=True)
+        noise = positive_float(noise_sigma, "noise_sigma", allow_zero=True)
+        ss = check_int(supersample, "supersample", 1, 8)
+        if isinstance(rotation_deg, (bool, np.bool_)) or not isinstance(rotation_deg, numbers.Real):
+            raise TypeError(f"rotation_deg must be a real number (degrees), got {type(rotation_deg).__name__}")
+        rot = float(rotation_deg)
+        if not math.isfinite(rot):
+            raise ValueError(f"rotation_deg must be finite, got {rotation_deg!r}")
+        body_rgb, plate_rgb, grid_rgb = (check_color(c) for c in (body_color, plate_color, grid_color))
     rng = np.random.default_rng(seed)
 
     # world -> pixel: rotate on the plate, mirror y, fit roughly, tilt the camera, then fit exactly
@@ -350,7 +352,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     pts = x @ lin.T
     ext = np.ptp(pts, axis=0)
     if ext.max() <= 0:
-        raise ValueError("the state has no extent: all nodes coincide")
+        raise InputError("the state has no extent: all nodes coincide")
     s0 = min(W, H) / ext.max()
     S0 = np.eye(3)
     S0[:2, :2] = s0 * lin

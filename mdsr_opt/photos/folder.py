@@ -16,6 +16,7 @@ import numpy as np
 
 from ..body.io import FORMATS, atomic_path
 from ..core.results import compact_repr
+from ..core.errors import InputError, checking_input
 from .compare import ContourComparison, compare_contours, simulated_outline
 from .contours import contour_from_image
 from .images import IMAGE_SUFFIXES, load_image
@@ -36,7 +37,7 @@ def write_together(writers: Sequence[tuple[Path, Callable[[str], None]]]) -> lis
     paths = [Path(p) for p, _ in writers]
     for p in paths:  # the likeliest rename failure, caught before anything is written
         if p.is_dir():
-            raise ValueError(f"cannot write {p}: it is a folder")
+            raise InputError(f"cannot write {p}: it is a folder")
     if len(set(paths)) != len(paths):
         raise ValueError(f"the same file would be written twice: {sorted(str(p) for p in paths)}")
     with contextlib.ExitStack() as stack:
@@ -145,7 +146,8 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     ValueError
         No images or states, an image without a state (or two states for one case), or any error while
         reading, extracting or comparing a case: the message starts with ``case '<name>':`` and the
-        original exception is chained (``__cause__``).
+        original exception is chained (``__cause__``). An :class:`~mdsr_opt.core.errors.InputError` (bad
+        input) except for a ``TypeError`` in a case (a bug).
 
     Example
     -------
@@ -162,25 +164,26 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     """
     from ..body.io import read_mesh
 
-    if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
-        raise ValueError(f"name must be a plain file stem, got {name!r}")
-    image_files = list_files(images, IMAGE_SUFFIXES, "image")
-    state_files = list_files(states, STATE_SUFFIXES, "state")
-    by_stem: dict[str, Path] = {}
-    for f in state_files:
-        if f.stem in by_stem:
-            raise ValueError(f"two state files for case {f.stem!r}: {by_stem[f.stem].name} and {f.name}")
-        by_stem[f.stem] = f
-    missing = [f.name for f in image_files if f.stem not in by_stem]
-    if missing:
-        raise ValueError(f"no state file for image(s) {', '.join(missing)} (states are matched by file name "
-                         f"without extension; available: {', '.join(sorted(by_stem)) or 'none'})")
+    with checking_input():  # the arguments and the folders: bad input, before any work
+        if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
+            raise ValueError(f"name must be a plain file stem, got {name!r}")
+        image_files = list_files(images, IMAGE_SUFFIXES, "image")
+        state_files = list_files(states, STATE_SUFFIXES, "state")
+        by_stem: dict[str, Path] = {}
+        for f in state_files:
+            if f.stem in by_stem:
+                raise ValueError(f"two state files for case {f.stem!r}: {by_stem[f.stem].name} and {f.name}")
+            by_stem[f.stem] = f
+        missing = [f.name for f in image_files if f.stem not in by_stem]
+        if missing:
+            raise ValueError(f"no state file for image(s) {', '.join(missing)} (states are matched by file name "
+                             f"without extension; available: {', '.join(sorted(by_stem)) or 'none'})")
     seen: set[str] = set()
     results, overlays = [], []
     for img_path in image_files:
         case = img_path.stem
         if case in seen:
-            raise ValueError(f"two images for case {case!r}")
+            raise InputError(f"two images for case {case!r}")
         seen.add(case)
         try:
             data = read_mesh(by_stem[case])
@@ -189,8 +192,10 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
             comp = compare_contours(simulated_outline(data.mesh, data.x), contour, **(compare or {}))
         except (ValueError, TypeError, OSError, cv2.error) as exc:
             # one type for every per-case failure (re-raising type(exc) breaks for exceptions whose
-            # constructors need more arguments); the original is chained
-            raise ValueError(f"case {case!r}: {exc}") from exc
+            # constructors need more arguments); the original is chained. A case's files that cannot be
+            # read, or in which no body is found, are bad input; a TypeError is a bug, named with its case
+            kind = ValueError if isinstance(exc, TypeError) else InputError
+            raise kind(f"case {case!r}: {exc}") from exc
         results.append(CaseResult(case, str(img_path), str(by_stem[case]), _is_synthetic(img_path), comp))
         if figures:
             overlays.append((image, data.mesh, data.x, comp, results[-1].synthetic))

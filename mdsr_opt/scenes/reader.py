@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Mapping, Sequence
 import numpy as np
 
+from ..core.errors import InputError
+
 __all__ = ['check_scene_options', 'SceneFileError']
 
 
@@ -32,7 +34,7 @@ def check_scene_options(options, kind: str, label: str = "") -> dict:
     return {**scene_options(r, rest, kind), **arrays}
 
 
-class SceneFileError(ValueError):
+class SceneFileError(InputError):
     """A scene file is malformed; the message names the file and the field."""
 
 

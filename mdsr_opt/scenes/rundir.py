@@ -49,6 +49,8 @@ import time
 from pathlib import Path, PurePosixPath
 from typing import Iterable
 
+from ..core.errors import InputError
+
 __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "Terminated", "check_out_path", "LOCK_NAME",
            "MANIFEST_NAME", "remove_temporaries", "noting_interrupts", "check_interrupt", "interrupt_signal",
            "recording_command"]
@@ -67,7 +69,7 @@ _FORMAT_1 = "mdsr_opt.run_folder/1"  # listed the names directly in the folder, 
 _TMP_PREFIX = ".tmp-"  # io.atomic_path's temporaries
 
 
-class OutputFolderError(ValueError):
+class OutputFolderError(InputError):
     """The output folder cannot be used: empty name, a file, unwritable, or holding other files."""
 
 

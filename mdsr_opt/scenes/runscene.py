@@ -11,6 +11,7 @@ from typing import Callable, Sequence
 
 from ..core.background import BackgroundWriter, frozen_heap
 from ..core.forkserver import serving, shared_server
+from ..core.errors import checking_input, exit_report
 from ..core.deprecation import renamed_keywords
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -279,16 +280,18 @@ def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int
 
             check_out_path(a.out)
         with job_server():  # the figure jobs' server warms up while the scene is built
-            scene = build(resolution=a.resolution)
+            with checking_input():  # building the scene checks it: bad input, before any work
+                scene = build(resolution=a.resolution)
             with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
                 rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
                                 method=a.method, overwrite=a.overwrite, log=log)
     except KeyboardInterrupt:
         print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
         return 130
-    except (ValueError, TypeError, OSError) as exc:
-        print(f"{p.prog}: error: {exc}", file=sys.stderr)
-        return 2
+    except Exception as exc:  # noqa: BLE001 - bad input: one line, 2; a bug: its traceback, 1
+        code, text = exit_report(p.prog, exc)
+        print(text, file=sys.stderr)
+        return code
     print(rep.table())
     return 0 if rep.success else 1
 

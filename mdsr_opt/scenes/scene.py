@@ -11,6 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh, check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
+from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
 from .names import check_name, check_output_names
 from .reader import check_scene_options
@@ -30,9 +31,10 @@ SHAPES_ARE_OURS = ("The shapes are drawn by the mdsr_opt authors from the paper'
                    "geometry); they are not the paper's meshes.")
 
 
-class UnknownName(KeyError, ValueError):
+class UnknownName(KeyError, InputError):
     """An unknown problem, case or region name; the message lists the choices. It is a ``KeyError`` (a
-    lookup) and a ``ValueError`` (bad input), so the ``mdsr`` command reports it like other bad input."""
+    lookup) and an :class:`~mdsr_opt.core.errors.InputError` (a ``ValueError``: bad input), so the ``mdsr``
+    command reports it like other bad input."""
 
     def __str__(self) -> str:
         return str(self.args[0]) if self.args else ""

@@ -33,6 +33,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..body.io import atomic_path, write_json
+from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
 from .problems import MATERIALS, get_problem
 from .runs import RunOutcome, fill_accuracy, run_all
@@ -217,15 +218,16 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
     Progress messages go to ``log`` (default: this module's logger) unless ``progress`` is False;
     ``fidelity_markdown(choices)`` gives the table.
     """
-    tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
-    loads: dict = {}
-    for p, load in cases:
-        get_problem(p)
-        loads.setdefault(p, []).append(float(load))
-    st = Study("fidelity", "coarsest mesh and simplest material model within a tolerance, per scene",
-               tuple(loads), tuple(resolutions), tuple(MATERIALS), (method,),
-               loads={k: tuple(v) for k, v in loads.items()}, reference_resolution=reference_resolution,
-               timeout=120.0)
+    with checking_input():  # the scenes and the study's axes: bad input, before any run
+        tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
+        loads: dict = {}
+        for p, load in cases:
+            get_problem(p)
+            loads.setdefault(p, []).append(float(load))
+        st = Study("fidelity", "coarsest mesh and simplest material model within a tolerance, per scene",
+                   tuple(loads), tuple(resolutions), tuple(MATERIALS), (method,),
+                   loads={k: tuple(v) for k, v in loads.items()}, reference_resolution=reference_resolution,
+                   timeout=120.0)
     if log is None or not progress:
         log = _LOG.info if progress else None
     names = [f"fidelity{x}" for x in (".csv", "_runs.csv", ".md", ".json")] + (["fidelity.png"] if figures else [])
@@ -237,7 +239,8 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
 def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures, log, begin):
     """:func:`run_fidelity_study` once its sweep is defined and its folder taken."""
     t0 = time.perf_counter()
-    runs, refs, _ = st.plan()
+    with checking_input():  # the plan checks the axes
+        runs, refs, _ = st.plan()
     outs = run_all(refs + runs, scheduler, workers, log)
     ref_out, run_out = outs[:len(refs)], outs[len(refs):]
     fill_accuracy(run_out, {(o.row["problem"], o.row["load"]): o for o in ref_out})

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..body.mesh import Mesh
 from ..core.guards import cancel_stop, request_stop
+from ..core.errors import InputError
 from ..core.progress import advance, expect
 from ..core.results import format_value, to_jsonable
 from .problems import Setup, build_setup
@@ -369,7 +370,7 @@ def _executor(scheduler, workers: int | None):
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:
-        raise ValueError("Dask runs need the optional dask extra, which is not installed: "
+        raise InputError("Dask runs need the optional dask extra, which is not installed: "
                          f"pip install \"mdsr_opt[dask]\" ({exc})") from None
     if not isinstance(scheduler, str):
         return scheduler, None

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 import numpy as np
 
+from ..core.errors import checking_input
 from ..core.guards import interruptible
 from ..body.io import atomic_path, write_json
 from ..core.results import format_value, to_jsonable
@@ -216,17 +217,19 @@ def run_study(study: str | Study, *, out: str | os.PathLike | None = None, resol
     ------
     ValueError
         An unknown study, problem, backend, material or guess (the message lists the valid ones), a node count
-        out of range, or an ``out`` that cannot be used (:class:`~mdsr_opt.scenes.rundir.OutputFolderError`:
-        a file, not writable, holding other files, or being written by another process).
+        out of range (an :class:`~mdsr_opt.core.errors.InputError`), or an ``out`` that cannot be used
+        (:class:`~mdsr_opt.scenes.rundir.OutputFolderError`: a file, not writable, holding other files, or being
+        written by another process).
     """
-    st = get_study(study).with_options(resolutions=resolutions, methods=methods, problems=problems,
-                                       materials=materials, reference_resolution=reference_resolution,
-                                       timeout=timeout)
+    with checking_input():  # the study and its overrides: bad input, before any run
+        st = get_study(study).with_options(resolutions=resolutions, methods=methods, problems=problems,
+                                           materials=materials, reference_resolution=reference_resolution,
+                                           timeout=timeout)
+        runs, refs, capped = st.plan()
     if log is None:
         log = _LOG.info if progress else None
     elif not progress:
         log = None
-    runs, refs, capped = st.plan()
     names = [f"{st.name}{x}" for x in (".csv", "_references.csv", ".md", ".json")]
     names += [f"{st.name}_{x}.png" for x in ("pareto", "scaling", "success")] if figures else []
     with output_folder(out, overwrite, names) as folder:

@@ -38,6 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..mechanics.model import to_dm
+from ..mechanics.stopping import with_stop_callback
 from .nlp_numeric import numeric_nlp, supports as numeric_supports
 from .problem import ForwardSolver, DesignProblem
 
@@ -408,7 +409,7 @@ def _flattened_solver(prob: DesignProblem, hessian: str, derivatives: str, opts_
         keep = None
         nlp, extra = _symbolic_nlp(prob, hessian)
         opts.update(extra)
-    solver = ca.nlpsol("design_flattened", "ipopt", nlp, opts)
+    solver = ca.nlpsol("design_flattened", "ipopt", nlp, with_stop_callback(opts))  # Ctrl-C: next iteration
     bt = time.perf_counter() - t0
     cache[key] = (solver, keep)
     return solver, bt
