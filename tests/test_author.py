@@ -133,7 +133,9 @@ def test_route_and_design_need_a_settled_target(tentacle):
 def test_outline_session_and_resolution_limit():
     s = Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=120)
     assert 90 < s.n_nodes < 150 and s.source == "outline"
-    with pytest.raises(ValueError, match="limit"):
+    with pytest.raises(ValueError, match="above the page's limit of 20000 nodes"):
+        Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=50_000)
+    with pytest.raises(ValueError, match="resolution must be at most 200000 nodes"):
         Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=10 ** 6)
 
 
@@ -205,8 +207,8 @@ def test_load_body_errors():
         load_body({"kind": "problem", "name": "../etc"})
     with pytest.raises(ValueError, match="unknown body kind"):
         load_body({"kind": "pdf"})
-    with pytest.raises(ValueError, match="limit"):
-        load_body({"kind": "problem", "name": "tentacle", "resolution": 10 ** 6})
+    with pytest.raises(ValueError, match="limit of 20000 nodes"):
+        load_body({"kind": "problem", "name": "tentacle", "resolution": 50_000})
     with pytest.raises(FileNotFoundError, match="no such file"):
         body_spec("missing/scene.toml")
 
