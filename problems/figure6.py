@@ -43,8 +43,8 @@ import numpy as np
 #: (tests/benchmarks/bench_routing.py prints it): the smaller value is where units splice into fewer,
 #: longer muscles, the larger where they stay apart or stop short.
 TARGETS = (
-    ("tentacle", "curl", (4.0, 16.0)),
-    ("tentacle", "s_curve", (4.0, 32.0)),
+    ("tentacle", "curl", (1.0, 8.0)),
+    ("tentacle", "s_curve", (1.0, 8.0)),
     ("gripper", "close", (4.0, 16.0)),
     ("humanoid", "raise_arms", (1.0, 4.0)),
     ("humanoid", "lean", (0.5, 4.0)),

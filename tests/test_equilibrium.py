@@ -62,13 +62,15 @@ def test_bend_past_ninety_degrees(strip, material):
 
 
 def test_energy_converges_under_refinement(material):
-    """A smooth boundary motion (no corner singularity): energy differences shrink like h^2."""
+    """A smooth boundary motion (no corner singularity): energy differences shrink like h^2. Nested structured
+    meshes (h halves exactly); unstructured ones of halving area are not nested, and their energy differences
+    scatter around the rate (0.43 and 0.04 for three successive pairs)."""
     def phi(X):
         return np.column_stack([X[:, 0] + 0.15 * np.sin(np.pi * X[:, 1]), X[:, 1] + 0.2 * np.sin(np.pi * X[:, 0] / 2)])
 
     energies = []
-    for area in (0.08, 0.02, 0.005):
-        mesh = Mesh.from_polygon([[0, 0], [2, 0], [2, 1], [0, 1]], max_area=area)
+    for k in (4, 8, 16):
+        mesh = Mesh.rectangle(2.0, 1.0, 2 * k, k)
         bnd = mesh.boundary_nodes
         res = solve_external(mesh, material, None, (bnd, phi(mesh.points[bnd])))
         assert res.success
