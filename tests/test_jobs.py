@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import subprocess
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -134,3 +136,42 @@ def test_process_pool_has_workers_only_where_they_pay():
             with process_pool(bad):
                 pass
     assert start_method() in multiprocessing.get_all_start_methods()
+
+
+_KILLED = """
+import multiprocessing, os, time
+from concurrent.futures import ProcessPoolExecutor
+from mdsr_opt.core.jobs import _start_worker, start_method, worker_environment
+pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context(start_method()), initializer=_start_worker,
+                           initargs=(worker_environment(), ()))
+busy = pool.submit(time.sleep, 30)  # one worker in a job
+idle = pool.submit(os.getpid).result()  # the other done with its job
+print(idle, *[p.pid for p in multiprocessing.active_children()], flush=True)
+time.sleep(60)
+"""
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="looks processes up with os.kill(pid, 0)")
+def test_a_process_killed_outright_leaves_no_worker_behind():
+    """The process that made the pool dies without shutting it down (SIGKILL): its workers, the busy one and
+    the idle one, end within seconds instead of waiting for jobs for ever."""
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED], stdout=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[1])
+    try:
+        idle, *pids = [int(p) for p in proc.stdout.readline().split()]
+    finally:
+        proc.kill()
+        proc.wait()
+    assert len(pids) == 2 and idle in pids and proc.pid not in pids
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(map(_exists, pids)):
+        time.sleep(0.05)
+    assert [p for p in pids if _exists(p)] == []

@@ -57,10 +57,20 @@ def worker_environment() -> dict[str, str]:
     return {"OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"), "MPLBACKEND": "Agg"}
 
 
-def _start_worker(env: dict[str, str], modules: tuple[str, ...]) -> None:
-    """A worker's initializer: :func:`worker_environment`'s variables, then the jobs' ``modules``."""
-    import importlib
+def _exit_with_parent() -> None:
+    """Wait for the process that started this worker to end, then end this worker at once: a run killed
+    outright (no shutdown of its pool) leaves no worker behind, idle or writing into its folder."""
+    multiprocessing.parent_process().join()
+    os._exit(1)
 
+
+def _start_worker(env: dict[str, str], modules: tuple[str, ...]) -> None:
+    """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
+    variables, then the jobs' ``modules``."""
+    import importlib
+    import threading
+
+    threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
     os.environ.update(env)
     if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set
         from threadpoolctl import threadpool_limits
