@@ -25,11 +25,10 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import multiprocessing
 import os
 import pickle
 import sys
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from concurrent.futures import wait as wait_for
 from typing import Any, Callable, Iterator, Sequence
 
@@ -60,6 +59,8 @@ def worker_environment() -> dict[str, str]:
 def _exit_with_parent() -> None:
     """Wait for the process that started this worker to end, then end this worker at once: a run killed
     outright (no shutdown of its pool) leaves no worker behind, idle or writing into its folder."""
+    import multiprocessing
+
     multiprocessing.parent_process().join()
     os._exit(1)
 
@@ -88,8 +89,11 @@ def _start_worker(env: dict[str, str], modules: tuple[str, ...]) -> None:
 def process_pool(workers: int | None = None, modules: Sequence[str] = ()) -> Iterator[Executor | None]:
     """A pool of ``workers`` processes for write jobs (default: one per available core), or None with
     ``workers`` 0 or a single core (nothing to gain beside this process). ``modules``: what the jobs
-    import, imported by each worker as it starts (with 'forkserver', once by the server the workers are
-    forked from). Shut down when the block ends: jobs not started are cancelled, running ones finish.
+    import, imported by each worker as it starts; with 'forkserver' those of other packages (matplotlib,
+    the solvers) are imported once by the server the workers are forked from, while this package's own
+    are left to the workers, which import them from this process's ``sys.path`` (the server has the
+    interpreter's default one). Shut down when the block ends: jobs not started are cancelled, running
+    ones finish.
     """
     if workers is None:
         workers = available_cores()
@@ -98,9 +102,13 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = ()) -> Ite
     if workers == 0 or available_cores() < 2:
         yield None
         return
+    import multiprocessing  # here: `mdsr list` and the serial paths need neither
+    from concurrent.futures import ProcessPoolExecutor
+
     context = multiprocessing.get_context(start_method())
     if context.get_start_method() == "forkserver":
-        context.set_forkserver_preload(list(modules))
+        ours = __name__.split(".")[0]
+        context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules)))
     try:

@@ -27,11 +27,12 @@ _LOG = logging.getLogger(__name__)
 
 #: what the jobs of a run import (figures, meshes, photographs, the prototype's and the animations' solves):
 #: the workers of its pool import them as they start (see :func:`~mdsr_opt.core.jobs.process_pool`)
-JOB_MODULES = ("matplotlib.pyplot", "meshio", "networkx", "shapely", "cv2", "mdsr_opt.plot.scenes",
-               "mdsr_opt.plot.design", "mdsr_opt.plot.photos", "mdsr_opt.mechanics.equilibrium",
-               "mdsr_opt.synthesis.routing", "mdsr_opt.synthesis.gait", "mdsr_opt.synthesis.export",
-               "mdsr_opt.photos.camera", "mdsr_opt.photos.contours", "mdsr_opt.photos.loops",
-               "mdsr_opt.scenes.prototype", "mdsr_opt.scenes.animate", "mdsr_opt.scenes.runscene")
+JOB_MODULES = ("numpy", "scipy.sparse.linalg", "scipy.spatial", "casadi", "networkx", "shapely", "cv2", "meshio",
+               "matplotlib.pyplot", "mdsr_opt.plot.scenes", "mdsr_opt.plot.design", "mdsr_opt.plot.photos",
+               "mdsr_opt.mechanics.equilibrium", "mdsr_opt.synthesis.routing", "mdsr_opt.synthesis.gait",
+               "mdsr_opt.synthesis.export", "mdsr_opt.photos.camera", "mdsr_opt.photos.contours",
+               "mdsr_opt.photos.loops", "mdsr_opt.scenes.prototype", "mdsr_opt.scenes.animate",
+               "mdsr_opt.scenes.runscene")
 
 
 @renamed_keywords(photo_resolution="photo_size")
