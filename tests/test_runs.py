@@ -299,6 +299,15 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
     assert _files(a) == _files(b)
 
 
+def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
+    from mdsr_opt.scenes.runscene import write_scene
+
+    scene = scenes.get_problem("one_muscle", resolution="coarse")
+    with pytest.raises(TypeError, match="pool must be a concurrent.futures.Executor or None, got int"):
+        write_scene(scene, tmp_path / "out", pool=2)
+    assert not (tmp_path / "out").exists()
+
+
 def _rest_and_pid(scene, path):
     """rest.png's job, which also leaves the id of its process next to the figure."""
     from mdsr_opt import plot

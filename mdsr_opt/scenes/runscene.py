@@ -144,6 +144,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     from ..body.io import atomic_path, write_json
 
     names = _check_run(scene, cases, mesh_format)
+    if pool is not None and not isinstance(pool, Executor):
+        raise TypeError(f"pool must be a concurrent.futures.Executor or None, got {type(pool).__name__}")
     say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
