@@ -7,10 +7,7 @@ evaluation. Public names are imported lazily from the module that owns them (see
 
 from __future__ import annotations
 
-from .core import lean_scipy
 from .core.lazy import lazy_exports
-
-lean_scipy.install()  # SciPy's NumPy clone without NumPy's lazy submodules (0.17 s of every command's start)
 
 __version__ = "0.1.0"
 

@@ -143,3 +143,69 @@ def test_every_public_name_resolves(package):
             continue
         assert value is not None, name
     assert not broken, f"{package}: " + "; ".join(broken)
+
+
+
+#: modules that exist only on POSIX systems: never imported when a module of the package is imported
+POSIX_ONLY = {"resource", "fcntl", "termios", "pwd", "grp"}
+#: process machinery the package does without (import hooks, heap freezing, /proc, bare forks)
+MACHINERY = {("gc", "freeze"), ("gc", "disable"), ("sys", "meta_path"), ("os", "fork")}
+
+
+def _import_time_nodes(tree: ast.AST):
+    """The nodes a module runs when it is imported: everything outside function bodies (class bodies run,
+    and so do decorators and default values)."""
+    todo = list(ast.iter_child_nodes(tree))
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            todo += node.decorator_list + node.args.defaults + [d for d in node.args.kw_defaults if d]
+            continue
+        if isinstance(node, ast.Lambda):
+            continue
+        yield node
+        todo += ast.iter_child_nodes(node)
+
+
+def _posix_imports(source: str) -> list[str]:
+    """``line module`` of every import of a POSIX-only module that runs at import time."""
+    found = []
+    for node in _import_time_nodes(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [f"{node.lineno} {a.name}" for a in node.names if a.name.split(".")[0] in POSIX_ONLY]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module.split(".")[0] in POSIX_ONLY:
+            found.append(f"{node.lineno} {node.module}")
+    return found
+
+
+def _machinery(source: str) -> list[str]:
+    """``line what`` of every use of :data:`MACHINERY` or mention of /proc/self, anywhere in the source."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
+                and (node.value.id, node.attr) in MACHINERY:
+            found.append(f"{node.lineno} {node.value.id}.{node.attr}")
+        elif isinstance(node, ast.ImportFrom) and any((node.module, a.name) in MACHINERY for a in node.names):
+            found.append(f"{node.lineno} from {node.module} import")
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and "/proc/self" in node.value:
+            found.append(f"{node.lineno} {node.value[:40]!r}")
+    return found
+
+
+def test_no_module_imports_a_posix_only_module_at_import_time():
+    # the check itself: top level, in a try or a class body counts; inside a function it does not
+    assert sorted(_posix_imports("import os\ntry:\n    import fcntl\nexcept ImportError:\n    pass\n"
+                                 "class A:\n    from resource import getrusage\n"
+                                 "def f():\n    import pwd\n")) == ["3 fcntl", "7 resource"]
+    bad = {name: found for name, path in _modules().items() if (found := _posix_imports(path.read_text()))}
+    assert bad == {}
+
+
+def test_no_module_uses_process_machinery():
+    """No gc.freeze or gc.disable, no import hook on sys.meta_path, nothing read from /proc/self, no os.fork,
+    anywhere in the package (at import time or not)."""
+    assert sorted(_machinery("import gc, os\ndef f():\n    gc.freeze()\n    open('/proc/self/maps')\n"
+                             "    return os.fork()\nfrom sys import meta_path\n")) == [
+        "3 gc.freeze", "4 '/proc/self/maps'", "5 os.fork", "6 from sys import"]
+    bad = {name: found for name, path in _modules().items() if (found := _machinery(path.read_text()))}
+    assert bad == {}

@@ -57,8 +57,7 @@ def served(tmp_path_factory):
     url, server = start_in_thread(PROBLEM, resolution=RESOLUTION, out=out)
     yield url, out
     server.should_exit = True
-    # the server's threads end before the next module's tests: a process with a stray thread may not fork
-    # (mdsr_opt.core.background), and test_background.py comes next
+    # the server's threads end before the next module's tests
     for t in set(threading.enumerate()) - before:
         t.join(timeout=15)
 

@@ -217,9 +217,9 @@ def test_mdsr_list_imports_no_other_subcommand_module():
 
 def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
     """`mdsr run` builds scenes, routes and solves; matplotlib (its figures), scipy.spatial (the photographs'
-    contour matching, the prototype's too) and the XML tools stay out of the command's own process: the
-    jobs' server imports what the figure jobs need, beside the scene's build (each was 0.02-0.14 s on the
-    command's path). The Agg backend it chooses for them through MPLBACKEND is not left behind."""
+    contour matching, the prototype's too) and the XML tools stay out of the command's own process: its
+    worker processes import what the figure jobs need. The Agg backend it chooses through MPLBACKEND is not
+    left behind."""
     code = ("import os, sys; from mdsr_opt.cli.main import main\n"
             f"code = main(['-q', 'run', 'gecko', '--resolution', 'coarse', '--no-animations', "
             f"'--out', {str(tmp_path / 'out')!r}])\n"
@@ -235,121 +235,55 @@ def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
         shutil.rmtree(tmp_path / "out")
 
 
-def test_main_imports_its_subcommand_with_the_collector_paused(monkeypatch, capsys):
-    """main() builds its parser (the subcommand's imports) with the collector paused and freezes what it
-    made for the command's length; it leaves the collector as it found it, on or off, frozen or not."""
-    import gc
-    import importlib
-
-    cli_main = importlib.import_module("mdsr_opt.cli.main")  # the module (mdsr_opt.cli.main is also a function)
-    seen, frozen = [], []
-    real, real_run = cli_main.build_parser, cli_main._run
-    monkeypatch.setattr(cli_main, "build_parser", lambda command=None: seen.append(gc.isenabled()) or real(command))
-    monkeypatch.setattr(cli_main, "_run", lambda *a: frozen.append(gc.get_freeze_count()) or real_run(*a))
-    was = gc.isenabled()
-    assert gc.get_freeze_count() == 0
-    try:
-        for start in (True, False):
-            (gc.enable if start else gc.disable)()
-            assert cli_main.main(["-q", "list"]) == 0
-            assert gc.isenabled() is start and gc.get_freeze_count() == 0  # as it found them
-        gc.freeze()  # a caller's own freeze is left alone: nothing more frozen, nothing unfrozen
-        n = gc.get_freeze_count()
-        assert cli_main.main(["-q", "list"]) == 0
-        assert n - 1000 < gc.get_freeze_count() <= n  # (frozen objects may still be freed)
-    finally:
-        gc.unfreeze()
-        (gc.enable if was else gc.disable)()
-    assert seen == [False, False, False]
-    assert frozen[0] > 10000 and frozen[1] > 10000 and frozen[2] <= n  # the imports' objects, frozen meanwhile
-    assert "gecko" in capsys.readouterr().out
-
-
-def test_main_interrupted_in_its_imports_leaves_nothing_frozen(monkeypatch):
-    """Ctrl-C (or a failing import) while main() builds its parser: the freeze it made is undone."""
-    import gc
-    import importlib
-
-    cli_main = importlib.import_module("mdsr_opt.cli.main")
-
-    def interrupted(command=None):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(cli_main, "build_parser", interrupted)
-    assert gc.get_freeze_count() == 0
-    with pytest.raises(KeyboardInterrupt):
-        cli_main.main(["-q", "list"])
-    assert gc.get_freeze_count() == 0 and gc.isenabled()
-
-
-def test_a_scene_written_inside_a_freeze_joins_it_and_is_handed_back_with_it():
-    """frozen_heap inside a caller's freeze (the command's): the objects made since are frozen too, and
-    nothing is unfrozen before the caller's own unfreeze."""
-    import gc
-
-    from mdsr_opt.core.background import frozen_heap
-
-    assert gc.get_freeze_count() == 0
-    with frozen_heap():
-        alone = gc.get_freeze_count()
-    assert alone > 0 and gc.get_freeze_count() == 0
-    gc.freeze()
-    try:
-        made = [[k] for k in range(5000)]  # tracked objects made after the caller's freeze
-        n = gc.get_freeze_count()
-        with frozen_heap():
-            assert gc.get_freeze_count() >= n + len(made)
-        assert gc.get_freeze_count() >= n + len(made)  # still the caller's to hand back
-    finally:
-        gc.unfreeze()
-    assert gc.get_freeze_count() == 0 and made
-
-
-#: a check registered first runs last at exit (atexit is last in, first out): after any freeze registered later
-_EXIT_CHECK = ("import atexit, gc, sys\n"
-               "atexit.register(lambda: print('at exit', gc.get_freeze_count() > 1000, flush=True))\n")
-
-
-def test_the_program_leaves_its_objects_out_of_the_exit_collections():
-    # the console script and `python -m mdsr_opt` go through console_main, which has the heap frozen when the
-    # interpreter exits (its final collections then skip it); nothing is frozen before, and main() alone not
-    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
-    assert scripts == {"mdsr": "mdsr_opt.cli:console_main"}
-    program = _EXIT_CHECK + ("import runpy; sys.argv = ['mdsr', '-q', 'list']\n"
-                             "try:\n    runpy.run_module('mdsr_opt', run_name='__main__')\n"
-                             "except SystemExit as e:\n    print('returned', e.code, gc.get_freeze_count())")
-    plain = _EXIT_CHECK + "from mdsr_opt.cli.main import main; print('returned', main(['-q', 'list']), gc.get_freeze_count())"
-    for code, frozen in ((program, True), (plain, False)):
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
-        assert out.stdout.strip().splitlines()[-2:] == ["returned 0 0", f"at exit {frozen}"]
-
-
-def test_a_problem_scripts_main_freezes_the_heap_at_exit_only_for_its_own_arguments(tmp_path):
-    script = ROOT / "problems" / "gripper.py"
-    argv = ["--out", str(tmp_path / "o"), "--resolution", "coarse", "--case", "nope"]
-    for own, frozen in ((True, True), (False, False)):  # sys.argv (the script's main) or argv given by code
-        call = "run_main(build)" if own else f"run_main(build, {argv!r})"
-        code = _EXIT_CHECK + (f"sys.argv = ['gripper.py', *{argv!r}]\n"
-                              "from mdsr_opt.scenes.library import load_problem_module\n"
-                              "from mdsr_opt.scenes.runscene import run_main\n"
-                              f"build = load_problem_module({str(script)!r}).build\n"
-                              f"print('returned', {call}, gc.get_freeze_count())")
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
-        assert out.stdout.strip().splitlines()[-2:] == ["returned 2 0", f"at exit {frozen}"], out.stderr[-2000:]
-        assert "has no case 'nope'" in out.stderr
-
-
 @pytest.mark.parametrize("asked", [None, "2"])
 def test_the_command_runs_with_one_blas_thread_unless_the_environment_says_otherwise(asked):
-    # every OpenBLAS copy (numpy's, scipy's, CasADi's) as the `mdsr` command leaves it
-    code = ("from mdsr_opt.cli.main import main; main(['list']); "
-            "from mdsr_opt.mechanics.blas import _libraries; print([g() for g, *_ in _libraries()])")
+    # every OpenBLAS copy threadpoolctl sees (numpy's, scipy's) as the `mdsr` command leaves it, and the
+    # variable its worker processes and CasADi's bundled copy (which threadpoolctl does not see) read
+    code = ("from mdsr_opt.cli.main import main; main(['list']); import os, numpy, scipy.sparse.linalg; "
+            "from threadpoolctl import threadpool_info; from mdsr_opt.core.jobs import worker_environment; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], worker_environment()['OPENBLAS_NUM_THREADS'], "
+            "[i['num_threads'] for i in threadpool_info() if i['user_api'] == 'blas'])")
     env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
     if asked is not None:
         env["OPENBLAS_NUM_THREADS"] = asked
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True, env=env)
-    counts = [int(c) for c in out.stdout.strip().splitlines()[-1].strip("[]").split(",")]
-    assert len(counts) == 3 and set(counts) == {1 if asked is None else int(asked)}
+    n = "1" if asked is None else asked
+    variable, worker, counts = out.stdout.strip().splitlines()[-1].split(" ", 2)
+    assert variable == worker == n
+    assert len(counts.strip("[]").split(",")) == 2 and set(map(int, counts.strip("[]").split(","))) == {int(n)}
+
+
+#: the start of a process without the POSIX-only modules (as on Windows): importing one fails, os.fork is gone;
+#: the pool's workers are spawned, as on Windows and macOS
+_WITHOUT_POSIX = ("import os, sys\n"
+                  "for name in ('resource', 'fcntl', 'termios', 'pwd', 'grp'):\n"
+                  "    sys.modules[name] = None\n"
+                  "del os.fork\n"
+                  "import mdsr_opt.core.jobs as jobs\n"
+                  "jobs.start_method = lambda: 'spawn'\n"
+                  "from mdsr_opt.cli.main import main\n"
+                  "print('exit', main(sys.argv[1:]))\n")
+
+
+def _without_posix(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", _WITHOUT_POSIX, *args], capture_output=True, text=True, cwd=ROOT,
+                          env=_clean_env(), timeout=300)
+
+
+def test_the_command_starts_and_lists_without_posix_only_modules():
+    version = _without_posix("--version")
+    assert version.returncode == 0 and version.stdout.strip() == f"mdsr {mdsr_opt.__version__}", version.stderr
+    listed = _without_posix("-q", "list")
+    assert listed.returncode == 0, listed.stderr[-2000:]
+    assert "gecko" in listed.stdout and listed.stdout.strip().endswith("exit 0")
+
+
+def test_a_run_without_posix_only_modules_writes_its_files(tmp_path):
+    out = tmp_path / "out"
+    run = _without_posix("-q", "run", "one_muscle", "--resolution", "coarse", "--case", "a20", "--no-animations",
+                         "--photo-size", "200x200", "--out", str(out))
+    assert run.returncode == 0 and run.stdout.strip().endswith("exit 0"), run.stderr[-2000:]
+    assert (out / "a20" / "design.png").stat().st_size > 1000 and (out / "summary.json").is_file()
 
 
 def test_every_add_argument_in_the_code_base_has_help():

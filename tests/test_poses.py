@@ -243,11 +243,15 @@ def _slow_broken_gif(*args, **kwargs):
     raise ValueError("the DXF writer broke")
 
 
+def _broken_export(*args, **kwargs):  # a module's function: a worker process finds it by name
+    raise ValueError("the DXF writer broke")
+
+
 @pytest.mark.parametrize("background", [True, False])
 @pytest.mark.parametrize("job", ["export", "gif"])
 def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background, job):
     """The gait's chart, GIF and fabrication files are background jobs: gait.json, which lists their files,
-    is written only once every one of them has reported; one that fails fails the run (in the child or
+    is written only once every one of them has reported; one that fails fails the run (in a worker or
     here) and leaves no gait.json, even when the others finished before it."""
     from test_scenes import finger_dict, write_json
 
@@ -256,11 +260,8 @@ def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monke
     from mdsr_opt.scenes.scenefile import load_scene
     from mdsr_opt.scenes.runscene import run_scene
 
-    def broken(*args, **kwargs):
-        raise ValueError("the DXF writer broke")
-
     if job == "export":
-        monkeypatch.setattr(export, "export_fabrication", broken)
+        monkeypatch.setattr(export, "export_fabrication", _broken_export)
     else:
         monkeypatch.setattr(gait_mod, "save_gait_animation", _slow_broken_gif)
     d = finger_dict()

@@ -69,56 +69,21 @@ def test_external_case_gives_table_2_and_tables_render(one):
     assert f"{metrics['driving']['mean_px']:.2f}" in md
 
 
-def test_a_prototype_made_ready_serves_its_pickled_copies(one, monkeypatch):
-    """make_ready (what a jobs' server does) solves the cases' drivings once; a copy pickled from the
-    caller's prototype (a job's) is restored as the ready one, and validates exactly as a fresh one does."""
-    import copy
+def test_a_pickled_prototype_leaves_its_shots_behind_and_validates_as_the_original(one):
+    """A photograph job gets the run's prototype pickled: the copy carries its parameters, not the shots the
+    original has solved and kept, and validates a case exactly as the original does."""
     import pickle
 
-    from mdsr_opt.scenes import prototype as proto_mod
-
-    monkeypatch.setattr(proto_mod, "_READY", {})
-    scene = get_problem("one_muscle", resolution="coarse")
-    mine = VirtualPrototype.for_scene(scene, refine=2.0, seed=5)
-    server_copy = pickle.loads(pickle.dumps(mine))  # what the server's preparation unpickles
-    assert server_copy is not mine and server_copy.token == mine.token
-    assert server_copy.make_ready(scene) is server_copy
-    shots = {c: server_copy.drive(scene, c) for c in scene.case_names}
-    assert all(sh.success and sh.photo is not None for sh in shots.values())
-    job_copy = pickle.loads(pickle.dumps(mine))  # a job's copy, forked from the server: the ready one
-    assert job_copy is server_copy and job_copy.drive(scene, scene.case_names[0]) is shots[scene.case_names[0]]
-    # what a job validates with it is what a prototype nobody made ready gives
+    scene, mine = one
+    shot = mine.drive(scene, "a20")
+    assert shot.success and mine.drive(scene, "a20") is shot  # kept
+    copy = pickle.loads(pickle.dumps(mine))
+    assert copy is not mine and copy.describe() == mine.describe()
+    assert "_shots" in mine.__dict__ and "_shots" not in copy.__dict__
     setup = prepare_case(scene, "a20")
-    fresh = VirtualPrototype.for_scene(scene, refine=2.0, seed=5)
-    assert fresh.token != mine.token
-    got, _ = validate_case(job_copy, setup)
-    want, _ = validate_case(fresh, setup)
-    assert got == want
-    # copies are other prototypes (their own tokens, no shots); at most READY_KEPT stay ready
-    for other in (copy.copy(mine), copy.deepcopy(mine)):
-        assert other.token != mine.token and pickle.loads(pickle.dumps(other)) is not server_copy
-    for seed in range(proto_mod.READY_KEPT):
-        VirtualPrototype.for_scene(scene, refine=1.5, seed=seed).make_ready(scene)
-    assert len(proto_mod._READY) == proto_mod.READY_KEPT and mine.token not in proto_mod._READY
-    assert pickle.loads(pickle.dumps(mine)) is not server_copy
-
-
-def test_a_prototype_pickled_before_tokens_loads_as_a_prototype_of_its_own(one):
-    """A pickle made before prototypes had tokens (pickle's default: the object's __dict__) loads, gets a
-    token of its own and can be made ready."""
-    import pickle
-
-    scene, proto = one
-    state = {k: v for k, v in proto.__dict__.items() if k != "token" and not k.startswith("_")}
-
-    class OldStyle:
-        def __reduce__(self):
-            return object.__new__, (VirtualPrototype,), state
-
-    old = pickle.loads(pickle.dumps(OldStyle()))
-    assert isinstance(old, VirtualPrototype) and old.token and old.token != proto.token
-    assert pickle.loads(pickle.dumps(old)).token == old.token
-    assert old.describe() == proto.describe()
+    got, _ = validate_case(copy, setup)
+    want, _ = validate_case(mine, setup)
+    assert got == want and got["driving"]["success"]
 
 
 def test_the_driving_is_the_callers_case(one):

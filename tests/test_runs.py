@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import signal
@@ -358,8 +357,7 @@ def test_bad_out_is_one_line_before_any_work(tmp_path, capsys, monkeypatch, out,
     (tmp_path / "FILE").write_text("x")
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr("mdsr_opt.cli.run.get_problem", lambda *a, **k: pytest.fail("work started"))
-    monkeypatch.setattr("mdsr_opt.core.forkserver.ForkServer.__init__",
-                        lambda *a, **k: pytest.fail("the jobs' server started"))
+    monkeypatch.setattr("mdsr_opt.cli.run.scene_pool", lambda *a, **k: pytest.fail("the workers' pool started"))
     assert main(["run", str(FINGER), "--out", out]) == 2
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1
@@ -433,27 +431,16 @@ def _without_times(v):
 
 
 def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path):
-    """``run_scene(background=True)`` (figure jobs in forked children, where the machine allows it) writes
-    the same files, the same summary and the same file lists as the serial run; the gecko has cases, an
-    animation and a gait, so every kind of job is in it."""
+    """``run_scene(background=True)`` (figure jobs in a pool of worker processes, where the machine has two
+    cores) writes the same files, the same summary and the same file lists as the serial run; the gecko has
+    cases, an animation and a gait, so every kind of job is in it."""
     from mdsr_opt.scenes.runscene import run_scene
 
-    # on one core (fork_is_safe() False) both runs are serial and this compares a run with itself; CI and
-    # the development machines have two cores, where the background path runs
+    # on one core both runs are serial and this compares a run with itself; CI and the development
+    # machines have two cores, where the pool runs the jobs
     scene = scenes.get_problem("gecko", resolution="coarse")
     reports = {bg: run_scene(scene, tmp_path / str(bg), log=None, background=bg, prototype=False)
                for bg in (True, False)}
-    # and with the jobs forked by a server (as in mdsr run): the same again
-    from mdsr_opt.core.forkserver import serving
-    from mdsr_opt.scenes.runscene import warm_up_jobs
-
-    with serving(functools.partial(warm_up_jobs, True, True)):
-        served = run_scene(scene, tmp_path / "served", log=None, prototype=False)
-    c = tmp_path / "served"
-    assert _files(c) == _files(tmp_path / "False")
-    assert [x.files for x in served.cases] == [x.files for x in reports[False].cases]
-    assert json.dumps(_without_times(json.loads((c / "summary.json").read_text()))) == json.dumps(
-        _without_times(json.loads((tmp_path / "False" / "summary.json").read_text())))
     a, b = tmp_path / "True", tmp_path / "False"
     assert _files(a) == _files(b)
     assert {"bend_left/design.png", "rest.png", "gait.gif", "walk/schedule.png", "walk/walk.gif"} <= set(_files(a))
@@ -470,18 +457,16 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
     assert _without_times(la) == _without_times(lb)
 
 
-def test_a_served_run_validates_against_the_prototype_as_a_serial_run(tmp_path):
-    """With a jobs' server the prototype's drivings are solved there once (VirtualPrototype.make_ready) and
-    the photograph jobs start from them: the validation tables and the summary are the serial run's."""
-    from mdsr_opt.core.forkserver import serving
-    from mdsr_opt.scenes.runscene import run_scene, warm_up_jobs
+def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path):
+    """The photograph jobs get the prototype pickled and solve its drivings in a worker: the validation
+    tables and the summary are the serial run's."""
+    from mdsr_opt.scenes.runscene import run_scene
 
     scene = scenes.get_problem("gecko", resolution="coarse")
     serial = run_scene(scene, tmp_path / "serial", cases=["bend_left"], log=None, background=False)
-    with serving(functools.partial(warm_up_jobs, True, True)):
-        served = run_scene(scene, tmp_path / "served", cases=["bend_left"], log=None)
-    assert served.success and serial.success
-    a, b = tmp_path / "served", tmp_path / "serial"
+    parallel = run_scene(scene, tmp_path / "parallel", cases=["bend_left"], log=None)
+    assert parallel.success and serial.success
+    a, b = tmp_path / "parallel", tmp_path / "serial"
     assert (a / "validation.md").read_text() == (b / "validation.md").read_text()
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
     assert json.dumps(_without_times(sa)) == json.dumps(_without_times(sb))
@@ -489,102 +474,30 @@ def test_a_served_run_validates_against_the_prototype_as_a_serial_run(tmp_path):
     assert _files(a) == _files(b)
 
 
-def test_the_server_warms_the_photograph_stage_up_just_before_the_first_photograph_job(tmp_path, monkeypatch):
-    """The jobs' server's own warm-up leaves out the photograph stage (scipy.spatial and the photos
-    modules, 0.3 s), so that the first figure jobs start sooner; each scene sends it just before its first
-    photograph job, ahead of the prototype's preparation. Checked on the messages the server receives."""
-    from mdsr_opt.core import forkserver
-    from mdsr_opt.scenes.runscene import job_server, run_scene, warm_up_server
+def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
+    from mdsr_opt.scenes.runscene import write_scene
 
-    sent, started = [], []
-    real_send, real_init = forkserver.ForkServer._send, forkserver.ForkServer.__init__
-
-    def send(self, kind, job, w=-1):
-        fn = job[0]
-        sent.append((kind, getattr(fn, "func", fn).__name__, getattr(fn, "args", ())))
-        return real_send(self, kind, job, w)
-
-    def init(self, prepare=None, jobs=3):
-        started.append(prepare)
-        real_init(self, prepare, jobs)
-
-    monkeypatch.setattr(forkserver.ForkServer, "_send", send)
-    monkeypatch.setattr(forkserver.ForkServer, "__init__", init)
-    scene = scenes.get_problem("gecko", resolution="coarse")
-    with job_server():
-        rep = run_scene(scene, tmp_path / "out", cases=["bend_left"], log=None, animations=False)
-    assert rep.success
-    # the figures' part only (warm_up_server: warm_up_jobs(figures, False), no photograph stage)
-    assert started[0].func is warm_up_server and started[0].args == (True,)
-    names = [(k, n) for k, n, _ in sent]
-    photo_warm = [i for i, (k, n, args) in enumerate(sent) if n == "warm_up_jobs" and args[:2] == (False, True)]
-    assert len(photo_warm) == 1
-    i = photo_warm[0]
-    assert names.index((b"j", "_write_shapes")) < i < names.index((b"p", "make_ready")) < \
-        names.index((b"j", "_photo_job"))
-    assert all(args[1] is False for _k, n, args in sent[:i] if n == "warm_up_jobs")
+    scene = scenes.get_problem("one_muscle", resolution="coarse")
+    with pytest.raises(TypeError, match="pool must be a concurrent.futures.Executor or None, got int"):
+        write_scene(scene, tmp_path / "out", pool=2)
+    assert not (tmp_path / "out").exists()
 
 
-def test_without_the_server_by_the_first_photograph_job_the_run_warms_the_stage_up_itself(tmp_path,
-                                                                                          monkeypatch):
-    """The server gone (its preparations refused) by a scene's first photograph job: the photograph stage is
-    warmed up in the run's process, from which the jobs then fork; never in a serial run."""
-    from mdsr_opt.core.background import BackgroundWriter
-    from mdsr_opt.scenes import runscene
+def _rest_and_pid(scene, path):
+    """rest.png's job, which also leaves the id of its process next to the figure."""
+    from mdsr_opt import plot
 
-    calls = []
-    real = runscene.warm_up_jobs
-    monkeypatch.setattr(runscene, "warm_up_jobs", lambda *a: calls.append(a) or real(*a))
-    monkeypatch.setattr(BackgroundWriter, "prepare", lambda self, fn: False)
-    scene = scenes.get_problem("gecko", resolution="coarse")
-    with runscene.job_server():
-        rep = runscene.run_scene(scene, tmp_path / "served", cases=["bend_left"], log=None, animations=False)
-    assert rep.success and (False, True, False) in calls
-    calls.clear()
-    rep = runscene.run_scene(scene, tmp_path / "serial", cases=["bend_left"], log=None, animations=False,
-                             background=False)
-    assert rep.success and (False, True, False) not in calls
+    Path(path).with_suffix(".pid").write_text(str(os.getpid()))
+    return plot.save_figure(plot.plot_scene(scene.mesh, scene.regions), path, close=True)
 
 
-_REAL_REST = []
-
-
-def _rest_and_parent(scene, path):
-    """rest.png's job, which also leaves its process's parent next to the figure."""
-    Path(path).with_suffix(".ppid").write_text(str(os.getppid()))
-    return _REAL_REST[0](scene, path)
-
-
-def test_the_command_starts_the_jobs_server_before_the_scene_is_built(tmp_path, monkeypatch):
-    """`mdsr run` forks the jobs' server before it builds the scenes (so that matplotlib warms up beside
-    that), and the figure jobs are the server's children, not the command's."""
+@pytest.mark.parametrize("flags, parallel", [([], True), (["--serial"], False)])
+def test_the_figures_are_drawn_in_workers_unless_serial(tmp_path, monkeypatch, flags, parallel):
+    """`mdsr run` sends its figure jobs to a pool of worker processes (on two or more cores), shared by its
+    scenes; `--serial` draws them in the command's own process. The files are there either way."""
     import mdsr_opt.cli.run as cli_run
-    from mdsr_opt.core.background import fork_is_safe
+    from mdsr_opt.core.jobs import available_cores
     from mdsr_opt.scenes import runscene
-
-    forks = fork_is_safe()
-    kids_at_build = []
-    real = cli_run.get_problem
-
-    def spy(*args, **kwargs):
-        kids_at_build.append(_children(os.getpid()))
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(cli_run, "get_problem", spy)
-    monkeypatch.setattr(sys.modules[__name__], "_REAL_REST", [runscene._write_rest])
-    monkeypatch.setattr(runscene, "_write_rest", _rest_and_parent)
-    out = tmp_path / "o"
-    assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-photos"]) == 0
-    (server,) = kids_at_build[0] if forks else [os.getpid()]
-    parent = int((out / "rest.ppid").read_text())
-    assert parent == (server if forks else os.getppid())
-    assert not forks or server != os.getpid()
-    assert (out / "rest.png").is_file() and _children(os.getpid()) == []  # the server has ended
-
-
-@pytest.mark.parametrize("flags, background", [([], True), (["--serial"], False)])
-def test_serial_flag_keeps_the_figures_in_the_run_process(tmp_path, monkeypatch, flags, background):
-    import mdsr_opt.cli.run as cli_run
 
     seen = {}
     real = cli_run.write_scene
@@ -594,10 +507,13 @@ def test_serial_flag_keeps_the_figures_in_the_run_process(tmp_path, monkeypatch,
         return real(*args, **kwargs)
 
     monkeypatch.setattr(cli_run, "write_scene", spy)
+    monkeypatch.setattr(runscene, "_write_rest", _rest_and_pid)
     out = tmp_path / "o"
     assert main(["run", str(FINGER), "--out", str(out), "--resolution", "coarse", "--no-photos", *flags]) == 0
-    assert seen["background"] is background
-    assert (out / "bend" / "target.png").is_file()
+    pooled = parallel and available_cores() >= 2
+    assert seen["background"] is pooled and (seen["pool"] is not None) is pooled
+    assert (int((out / "rest.pid").read_text()) != os.getpid()) is pooled
+    assert (out / "bend" / "target.png").is_file() and (out / "rest.png").is_file()
 
 
 def _children(pid: int) -> list[int]:
@@ -615,7 +531,7 @@ def _children(pid: int) -> list[int]:
 
 
 def _descendants(pid: int) -> list[int]:
-    """The processes below ``pid``: its children (the jobs' server among them), theirs (the jobs), ..."""
+    """The processes below ``pid``: its children (the pool's server among them), theirs (the workers), ..."""
     out, todo = [], [pid]
     while todo:
         kids = _children(todo.pop())
@@ -624,12 +540,17 @@ def _descendants(pid: int) -> list[int]:
     return out
 
 
-def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
-    """Ctrl-C in a terminal reaches the whole process group: the run, the jobs' server and the forked figure
-    jobs. The run exits with 130 within seconds, the server and the jobs are gone, no temporary file stays,
-    the manifest says so."""
-    from mdsr_opt.core.background import fork_is_safe
+def _alive(pid: int) -> bool:
+    try:
+        return "zombie" not in Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
 
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the run's processes in /proc")
+def test_ctrl_c_in_the_terminal_stops_the_run_and_its_workers(tmp_path):
+    """Ctrl-C in a terminal reaches the whole process group: the run and its worker processes. The run
+    exits with 130 within seconds, its processes are gone, no temporary file stays, the manifest says so."""
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
@@ -637,21 +558,22 @@ def test_ctrl_c_in_the_terminal_stops_the_run_and_its_figure_jobs(tmp_path):
                             start_new_session=True)
     try:
         t0, kids = time.monotonic(), []
-        # until a figure job runs: the server (a child) has forked one (a grandchild)
-        while time.monotonic() - t0 < 60 and len(kids) < 2 and proc.poll() is None:
-            kids = _descendants(proc.pid)
+        # until a worker runs: the pool's server (a child) has forked one (a grandchild)
+        while time.monotonic() - t0 < 60 and not any(_children(k) for k in _children(proc.pid)) \
+                and proc.poll() is None:
             time.sleep(0.02)
-        assert len(kids) >= 2 or not fork_is_safe(), f"no figure job was forked: {kids}"
+        kids = _descendants(proc.pid)
+        assert len(kids) >= 2, f"no worker was started: {kids}"
         os.killpg(proc.pid, signal.SIGINT)
         assert proc.wait(timeout=30) == 130
     finally:
         if proc.poll() is None:
             proc.kill()
     assert "interrupted (Ctrl-C)" in proc.stdout.read()
-    time.sleep(0.2)
-    alive = [k for k in kids if Path(f"/proc/{k}").exists()
-             and "zombie" not in Path(f"/proc/{k}/status").read_text()]
-    assert alive == []
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 10 and any(_alive(k) for k in kids):
+        time.sleep(0.05)
+    assert [k for k in kids if _alive(k)] == []
     assert [p.name for p in out.rglob(".tmp-*")] == []
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"
 
@@ -663,7 +585,7 @@ def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, mon
 
     from mdsr_opt import Mesh, NeoHookean
     from mdsr_opt.body.muscles import Muscle
-    from mdsr_opt.core.background import BackgroundWriter
+    from mdsr_opt.core.jobs import Jobs
     from mdsr_opt.scenes import runscene
     from mdsr_opt.scenes.scene import Animation, Case, Scene
 
@@ -676,14 +598,14 @@ def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, mon
                               Animation("first", (("rest", 1.0), ("a", 1.0)), frames_per_step=2),
                               Animation("still", (("rest", 1.0), ("rest", 1.0)), frames_per_step=1)))
     sent = []
-    real = BackgroundWriter.submit
+    real = Jobs.submit
 
     def submit(self, fn, *args, **kwargs):
         name = getattr(fn, "__name__", None) or fn.func.__name__
         sent.append((name, args[1].name if name == "_animation_job" else None))
         return real(self, fn, *args, **kwargs)
 
-    monkeypatch.setattr(BackgroundWriter, "submit", submit)
+    monkeypatch.setattr(Jobs, "submit", submit)
     rep = runscene.run_scene(scene, tmp_path / "out", log=None, photos=False, background=False)
     assert rep.success
     shapes = [i for i, (n, _) in enumerate(sent) if n == "_write_shapes"]  # case a's, then case b's

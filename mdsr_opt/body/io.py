@@ -31,7 +31,7 @@ import numpy as np
 from ..core.checks import as_float_array
 from .mesh import Mesh
 
-__all__ = ["write_mesh", "read_mesh", "MeshData", "write_json", "read_json", "atomic_path", "check_target",
+__all__ = ["write_mesh", "read_mesh", "MeshData", "write_json", "read_json", "atomic_path", "noted_folders", "adopt_noted_folders", "check_target",
            "FORMATS", "noting_writes"]
 
 FORMATS = {".vtk": "vtk", ".vtu": "vtu", ".xdmf": "xdmf", ".msh": "gmsh"}
@@ -82,8 +82,9 @@ def noting_writes(folder, journal):
     relative to ``folder`` (with ``/``) is appended as one line to the file ``journal`` (of the innermost
     such folder, when they nest).
 
-    Processes forked within the block (figure jobs) note their files too: each line is one small write to a
-    file opened for appending, so lines from several processes never mix. A run folder
+    Worker processes note their files too once they adopt this process's folders (:func:`noted_folders`,
+    :func:`adopt_noted_folders`, which a run's process pool does as each worker starts): each line is one
+    small write to a file opened for appending, so lines from several processes never mix. A run folder
     (:class:`~mdsr_opt.scenes.rundir.RunFolder`) so knows every file its run completed, even after the run
     was killed outright.
     """
@@ -93,6 +94,17 @@ def noting_writes(folder, journal):
         yield
     finally:
         _JOURNALS.pop(key, None)
+
+
+def noted_folders() -> dict[str, str]:
+    """The folders whose completed files are being noted here, each with its journal (a copy, picklable)."""
+    return dict(_JOURNALS)
+
+
+def adopt_noted_folders(folders: dict[str, str]) -> None:
+    """In a worker process: note completed files into the journals of ``folders`` (from :func:`noted_folders`
+    in the process that started it), for as long as the worker lives."""
+    _JOURNALS.update(folders)
 
 
 def _note_written(path: str) -> None:

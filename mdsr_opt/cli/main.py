@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import gc
 import logging
 import signal
 import sys
@@ -104,12 +103,12 @@ def configure_logging(verbose: int = 0, quiet: bool = False) -> int:
 
 
 def one_blas_thread_per_process() -> None:
-    """Ask OpenBLAS for one thread in this process and the figure jobs it forks, unless the environment
-    says otherwise (``OPENBLAS_NUM_THREADS``): read when numpy, scipy and CasADi load their copies, so it
-    takes effect only before the first of them is imported. The package's dense products are small (sparse
-    factorisations do the work, each under :func:`~mdsr_opt.mechanics.blas.one_blas_thread` anyway); an
-    idle second thread per library spins on a core the figure jobs need. ``mdsr run gecko``: 6.9 -> 6.6 s
-    (three alternating pairs on the 2-core development machine)."""
+    """Ask OpenBLAS for one thread in this process and the worker processes it starts, unless the
+    environment says otherwise (``OPENBLAS_NUM_THREADS``): read when numpy, scipy and CasADi load their
+    copies, so it takes effect only before the first of them is imported (CasADi's bundled copy, which
+    threadpoolctl does not see, has no other portable setting). The package's dense products are small
+    (sparse factorisations do the work, each under :func:`~mdsr_opt.mechanics.blas.one_blas_thread`
+    anyway); an idle second thread per library spins on a core the figure jobs need."""
     import os
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -119,10 +118,8 @@ def one_blas_thread_per_process() -> None:
 def agg_backend():
     """Within the block, matplotlib's backend is Agg (the command line only writes files; importing
     ``mdsr_opt.plot`` leaves the backend alone). Chosen through ``MPLBACKEND`` while matplotlib is not
-    imported yet, so that the command need not import it: the figure jobs' server does (``mdsr run``), and
-    importing it here (0.13 s) held up the server's start. The processes forked or started within inherit
-    the choice; the variable is as it was after the block (a matplotlib imported within keeps Agg, as
-    ``matplotlib.use`` would have left it)."""
+    imported yet, so that the command need not import it; the variable is as it was after the block (a
+    matplotlib imported within keeps Agg, as ``matplotlib.use`` would have left it)."""
     import os
 
     if "matplotlib" in sys.modules:
@@ -151,24 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
-    # the subcommand's modules are imported here (0.4 s for `mdsr run`): their objects live as long as the
-    # command, so the collector, paused meanwhile, does not traverse them again and again, and they are
-    # frozen for the command (unless the caller froze objects itself: its freeze is its own to undo).
-    # mdsr run gecko: the command's collections took 0.07-0.09 s, 0.03 s with them frozen
-    was, freeze = gc.isenabled(), not gc.get_freeze_count()
-    gc.disable()
-    try:
-        try:
-            parser = build_parser(command_of(argv))
-        finally:
-            if freeze:
-                gc.freeze()
-            if was:
-                gc.enable()
-        return _run(parser, argv)
-    finally:  # also when the imports fail or are interrupted
-        if freeze:
-            gc.unfreeze()
+    return _run(build_parser(command_of(argv)), argv)
 
 
 def _run(parser, argv: list[str]) -> int:
@@ -205,14 +185,8 @@ def _run(parser, argv: list[str]) -> int:
 
 def console_main() -> int:
     """The ``mdsr`` program (the console script and ``python -m mdsr_opt``): :func:`main` on the process's
-    arguments, with its objects left out of the interpreter's exit collections
-    (:func:`~mdsr_opt.core.background.skip_final_collection`), which took 0.4 s after ``mdsr run gecko``.
-    Returns :func:`main`'s exit code."""
-    from ..core.background import skip_final_collection
-
-    code = main()
-    skip_final_collection()
-    return code
+    arguments. Returns :func:`main`'s exit code."""
+    return main()
 
 
 if __name__ == "__main__":  # pragma: no cover

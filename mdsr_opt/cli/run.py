@@ -8,7 +8,7 @@ from ..core.errors import InputError, checking_input
 from ..core.progress import progress_for_cli
 from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
 from ..scenes.scene import resolve_resolution
-from ..scenes.runscene import job_server, n_units, parse_resolution, parse_seed, parse_size, run_entries, write_scene
+from ..scenes.runscene import n_units, parse_resolution, parse_seed, parse_size, run_entries, scene_pool, write_scene
 
 __all__ = ['add_cli']
 
@@ -74,11 +74,11 @@ def _cmd_run(a) -> int:
                 code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
-    # the folder first (a busy or used --out is refused before the jobs' server starts, and the server's
-    # jobs, forked from it, note the files they write there), then the jobs' server: it warms up while the
-    # scenes are built
+    parallel = not a.serial and not (a.no_figures and a.no_photos)
+    # the folder first (a busy or used --out is refused before any work), then one pool of worker processes
+    # for every scene's jobs, shut down before the folder is released
     with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder, \
-            job_server(not a.no_figures, not a.no_photos, background=not a.serial):
+            scene_pool(None if parallel else 0) as pool:
         with checking_input():  # building the scenes checks them: bad input, before any work
             scenes = [get_problem(n, resolution=a.resolution) for n in names]
             seen = set()
@@ -102,7 +102,7 @@ def _cmd_run(a) -> int:
                                            figures=not a.no_figures, animations=not a.no_animations,
                                            mesh_format=a.format, photo_size=a.photo_size, log=log,
                                            prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
-                                           background=not a.serial))
+                                           background=pool is not None, pool=pool))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables
@@ -166,6 +166,6 @@ def add_cli(sub) -> None:
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
     q.add_argument("--serial", action="store_true",
                    help="draw figures, measure photographs and make animations in this process after each "
-                        "solve, not in forked child processes beside the next solve (the files are the same)")
+                        "solve, not in worker processes beside the next solve (the files are the same)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)

@@ -24,18 +24,10 @@ Example
 
 from __future__ import annotations
 
-import functools
 import sys
 from typing import Any, TextIO
 
 __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
-
-
-@functools.lru_cache(maxsize=None)
-def _quiet_class(tqdm):
-    """tqdm without its monitor thread (which only adjusts how often a stalled bar redraws): a process with
-    a second thread may not fork, and ``mdsr run`` forks its figure jobs (``mdsr_opt.core.background``)."""
-    return type("QuietTqdm", (tqdm,), {"monitor_interval": 0})
 
 
 def _terminal_width() -> int:
@@ -92,7 +84,7 @@ class Progress:
         self._stream = stream
         self.verbose = bool(verbose)
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled
-        self._bar = _quiet_class(tqdm)(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
+        self._bar = tqdm(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
                          **({"dynamic_ncols": True} if _terminal_width() > 0 else {"ncols": 100, "nrows": 24}),
                          leave=True, smoothing=0.1)
         self.total = total

@@ -10,8 +10,7 @@ from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks', 'mesh_paths',
-           'warm_up']
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks', 'mesh_paths']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -329,31 +328,3 @@ def _has_layout_engine(fig) -> bool:
 def close_figure(fig) -> None:
     """Close ``fig`` (release it from pyplot); the counterpart of ``save_figure(..., close=True)``."""
     plt.close(fig)
-
-
-def warm_up(modules=("design", "photos", "scenes")) -> None:
-    """Pay matplotlib's first-use costs now, in this process: import the figure modules (``modules`` of
-    this package) and OpenCV (the PNG encoder), and draw one small figure with what the run's figures hold
-    (tick labels, a title, a colour bar with a mathtext label, a legend) to fill the font, text-size and
-    mathtext caches.
-
-    A process that forks figure jobs (:class:`~mdsr_opt.core.background.BackgroundWriter`) calls it once
-    before the first fork: each child starts from the parent's memory, so without it every child paid these
-    costs again (a case's figures took 1.9 s in a cold child against 0.8 s in a warm one) and lost them.
-    """
-    import importlib
-
-    for name in modules:
-        importlib.import_module(f"{__package__}.{name}")
-    importlib.import_module("cv2")  # the PNG encoder (_write_png): 0.07-0.09 s in each job importing it
-    fig, ax = plt.subplots(figsize=(2, 1.5))
-    try:
-        lc = LineCollection([[(0, 0), (1, 1)]], array=np.array([0.5]), cmap="coolwarm")
-        ax.add_collection(lc)
-        fig.colorbar(lc, ax=ax, label="relative contraction $(l_0 - l)/l_0$")
-        ax.plot([0, 1], [1, 0], label="muscle 0")
-        ax.legend(**LEGEND_OUTSIDE)
-        ax.set_title("warm-up: 0.123 [1.5, 2.5] (SYNTHETIC)")
-        render_cropped(fig, 130)
-    finally:
-        plt.close(fig)

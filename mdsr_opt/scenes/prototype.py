@@ -30,8 +30,6 @@ True
 
 from __future__ import annotations
 
-import itertools
-import os
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -75,28 +73,8 @@ class PrototypeShot:
     photo: Any = None
 
 
-#: prototypes made ready in this process (:meth:`VirtualPrototype.make_ready`), by token, the latest last: a
-#: pickled copy of one of them (a job's) is restored here as that prototype itself
-_READY: dict = {}
-#: how many stay ready (a run makes one per scene, and needs only the current one)
-READY_KEPT = 2
-_TOKENS = itertools.count()
 #: shots a prototype keeps (its cases' drivings and designs: a run asks for each once or twice)
 SHOTS_KEPT = 16
-
-
-def _new_token() -> str:
-    return f"{os.getpid()}-{next(_TOKENS)}"
-
-
-def _restore(cls, token: str, state: dict):
-    """Unpickle a prototype: the one made ready in this process under ``token``, else a new object."""
-    ready = _READY.get(token)
-    if ready is not None:
-        return ready
-    obj = cls.__new__(cls)
-    obj.__dict__.update(state)
-    return obj
 
 
 @dataclass(eq=False, frozen=True)
@@ -119,29 +97,9 @@ class VirtualPrototype:
     nu_range: float
     seed: int
     camera: dict = field(default_factory=dict)
-    #: this prototype's name among the processes of a run: its pickled copies carry it (and only those: a
-    #: new or copied prototype gets its own), so that a process where it was made ready restores each of
-    #: them as the ready prototype itself
-    token: str = field(default_factory=_new_token, init=False, repr=False)
 
-    def __reduce__(self):
-        state = {k: v for k, v in self.__dict__.items() if not k.startswith("_")}  # not its solved shots
-        return _restore, (type(self), self.token, state)
-
-    def __setstate__(self, state):  # a pickle from before prototypes had tokens: a prototype of its own
-        self.__dict__.update(state)
-        self.__dict__.setdefault("token", _new_token())
-
-    def __copy__(self):  # a copy is another prototype: its own token (copy.copy would keep this one's)
-        from dataclasses import replace
-
-        return replace(self)
-
-    def __deepcopy__(self, memo):
-        import copy
-
-        fields = {k: copy.deepcopy(getattr(self, k), memo) for k in self.__dataclass_fields__ if k != "token"}
-        return type(self)(**fields)
+    def __getstate__(self):  # pickled without the shots it keeps (see _keep)
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
 
     @property
     def mesh(self):
@@ -247,34 +205,6 @@ class VirtualPrototype:
                 except ValueError as exc:  # a path that folds back on itself: fewer waypoints
                     last = exc
         raise ValueError(f"muscle {muscle.name or ''} could not be laid on the prototype's mesh: {last}")
-
-    # ---------------------------------------------------------------------------------------------- ready
-    def make_ready(self, scene, cases: Sequence[str] | None = None) -> "VirtualPrototype":
-        """Solve and photograph the prototype's driving of ``scene``'s cases (``cases``: these only; each
-        :meth:`drive`, the design scene's own driving, Tables 2 and 3, whatever the design) and keep the
-        shots, with the models those solves build on the fine mesh; and register the prototype in this
-        process, so that a copy of it unpickled here (a job's: see :mod:`mdsr_opt.core.forkserver`) is this
-        object, shots and models included. A driving that raises is left to the caller to repeat and report.
-        Returns self.
-
-        A run calls it for each case before the case's photograph job: in its jobs' server (``mdsr run``,
-        problem scripts), else in its own process. The photograph jobs forked from there start from these,
-        where each had solved its case's driving and built the fine mesh's models itself. At most
-        :data:`READY_KEPT` prototypes stay registered in a process (the latest).
-        """
-        from .select import edge_graph
-
-        _READY.pop(self.token, None)
-        _READY[self.token] = self
-        while len(_READY) > READY_KEPT:
-            _READY.pop(next(iter(_READY)))
-        edge_graph(self.mesh)  # every design's muscles are laid on the fine mesh along it
-        for name in scene.case_names if cases is None else cases:
-            try:
-                self.drive(scene, name)
-            except ValueError:  # a muscle that cannot be laid on the fine mesh: the job says so
-                pass
-        return self
 
     def drive(self, scene, case) -> PrototypeShot:
         """The prototype driven as the design scene's ``case`` (a Case, or the name of one of ``scene``'s)

@@ -259,10 +259,12 @@ class _Earlier:
             self.claims = _listed(data.get("claims"))
             self.files = sorted(set(names) | set(_journal(folder)))
             dirs = set(_listed(data.get("dirs")))
-            if self.killed:  # it never listed its folders: those of its files that were not there before it
+            if self.killed:  # it never listed its folders: those of its files that were not there before it,
+                # and the claimed folders it had made before their first file was complete (only empty ones go)
                 kept = set(_listed(data.get("dirs_before"))) | {""}
                 dirs |= {str(PurePosixPath(f).parents[i]) for f in self.files
                          for i in range(len(PurePosixPath(f).parts) - 1)} - kept
+                dirs |= {c for c in self.claims if (folder / c).is_dir() and not (folder / c).is_symlink()} - kept
             self.dirs = sorted(d for d in dirs if _under(d, self.claims))
 
     def describe(self) -> str:

@@ -369,9 +369,9 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
     draws the shapes (``target``, ``graph``, ``muscles``, ``design`` and the meshes), the second the
     photographs (the prototype's, ``photo`` and ``overlay``: what :func:`measure_case` made).
 
-    ``run_scene`` gives each part to its own background job (:class:`~mdsr_opt.core.background.
-    BackgroundWriter`), the second after the photograph stage in the same job, so that two processes
-    draw a case's files while the parent solves the next case.
+    ``run_scene`` gives each part to its own job (:class:`~mdsr_opt.core.jobs.Jobs`), the second after
+    the photograph stage in the same job, so that two processes draw a case's files while the parent
+    solves the next case.
     """
     fmt = "." + mesh_format.lstrip(".")
     folder = Path(out)

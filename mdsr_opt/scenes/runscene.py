@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import os
 import sys
+from concurrent.futures import Executor
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..core.background import BackgroundWriter, frozen_heap
-from ..core.forkserver import serving, shared_server
 from ..core.errors import checking_input, exit_report
 from ..core.deprecation import renamed_keywords
+from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
 from .names import RUN_FILES
@@ -20,10 +21,29 @@ from .rundir import check_interrupt
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
-__all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main']
+__all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main', 'scene_pool']
 
 
 _LOG = logging.getLogger(__name__)
+
+#: what the jobs of a run import (figures, meshes, photographs, the prototype's and the animations' solves):
+#: the workers of its pool import them as they start (see :func:`~mdsr_opt.core.jobs.process_pool`)
+JOB_MODULES = ("numpy", "scipy.sparse.linalg", "scipy.spatial", "casadi", "networkx", "shapely", "cv2", "meshio",
+               "matplotlib.pyplot", "mdsr_opt.plot.scenes", "mdsr_opt.plot.design", "mdsr_opt.plot.photos",
+               "mdsr_opt.mechanics.equilibrium", "mdsr_opt.synthesis.routing", "mdsr_opt.synthesis.gait",
+               "mdsr_opt.synthesis.export", "mdsr_opt.photos.camera", "mdsr_opt.photos.contours",
+               "mdsr_opt.photos.loops", "mdsr_opt.scenes.prototype", "mdsr_opt.scenes.animate",
+               "mdsr_opt.scenes.runscene")
+
+
+def scene_pool(workers: int | None = None):
+    """:func:`~mdsr_opt.core.jobs.process_pool` for a scene's figure, photograph and animation jobs: its
+    workers import :data:`JOB_MODULES` and note the files they complete in this process's run folders (made
+    inside a :class:`~mdsr_opt.scenes.rundir.RunFolder`, so ``--overwrite`` and a killed run's clean-up know
+    them)."""
+    from ..body.io import adopt_noted_folders, noted_folders
+
+    return process_pool(workers, JOB_MODULES, setup=(adopt_noted_folders, (noted_folders(),)))
 
 
 @renamed_keywords(photo_resolution="photo_size")
@@ -56,12 +76,10 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         Tables 2-4 as ``out/validation.md``.
     background : bool, default True
         Draw and write each case's figures, meshes and photographs, make each animation (its frames'
-        forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files, in a forked
-        child process while the next solves run (:class:`~mdsr_opt.core.background.BackgroundWriter`: on
-        Linux with two or more cores; elsewhere, and with ``False``, one after the other in this process).
-        Inside a :func:`~mdsr_opt.core.forkserver.serving` block (``mdsr run`` and problem scripts run
-        in one, started before they build their scenes) the children are forked by its server, which
-        warms matplotlib up beside the scene's build and first solves. The files are the same either way.
+        forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files in worker
+        processes while the next solves run (:func:`~mdsr_opt.core.jobs.process_pool`: with two or more
+        cores; on one core, and with ``False``, one after the other in this process). The files are the
+        same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
@@ -130,32 +148,27 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
-                prototype_seed: int = 0, background: bool = True) -> SceneReport:
+                prototype_seed: int = 0, background: bool = True, pool: Executor | None = None) -> SceneReport:
     """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
-    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result."""
+    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result; ``pool`` (with
+    ``background``) is the process pool to send the jobs to (``mdsr run`` shares one between its scenes;
+    None: one of this call's own)."""
     import time
 
     from ..body.io import atomic_path, write_json
 
     names = _check_run(scene, cases, mesh_format, photo_size)
+    if pool is not None and not isinstance(pool, Executor):
+        raise TypeError(f"pool must be a concurrent.futures.Executor or None, got {type(pool).__name__}")
     say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    # figures drawn beside the next solves (see run_scene), matplotlib warmed up in this process once
-    # inside serving() (mdsr run, problem scripts) the jobs fork from its server, which warmed matplotlib
-    # up beside the scene's build; without one this process warms up (once: later runs here find it warm;
-    # a server of this run's own was 0.1-0.3 s slower for a second run in one process)
-    served = shared_server() is not None
-    holes = len(scene.mesh.boundary_loops) > 1
-    # a server warms the photograph stage up (its imports: scipy.spatial and the photos modules, 0.3 s)
-    # just before the first photograph job, after forking the figure jobs sent before it, which need none
-    # of it; this process, forking the jobs itself, warms everything up before its first fork
-    photos_warm = not served
-    with frozen_heap(), BackgroundWriter(background and (figures or photos),
-                                         prepare=functools.partial(warm_up_jobs, figures, photos and not served,
-                                                                   holes),
-                                         server=served) as bg:
+    parallel = background and (figures or photos)
+    with contextlib.ExitStack() as stack:
+        if parallel and pool is None:
+            pool = stack.enter_context(scene_pool())
+        bg = stack.enter_context(Jobs(pool if parallel else None))
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
             bg.submit(_write_rest, scene, out / "rest.png")
@@ -198,16 +211,6 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             if parts:
                 bg.submit(parts[0], on_done=written[cname][0].extend)
             if photos and run.design is not None:
-                if not photos_warm:
-                    photos_warm = True
-                    if not bg.prepare(functools.partial(warm_up_jobs, False, True, holes)) and bg.background:
-                        warm_up_jobs(False, True, holes)  # the server is gone: the jobs fork from here
-                if proto is not None and not bg.prepare(functools.partial(proto.make_ready, scene, [cname])):
-                    # the server solves and photographs the prototype's driving of the case (whatever the
-                    # design) beside the case's figures; the photograph job it forks next starts from that
-                    # and from the fine mesh's models, built once (see VirtualPrototype.make_ready).
-                    # Without a server, this process does, and the jobs forked from it start from there
-                    proto.make_ready(scene, [cname])
                 bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
                           on_done=functools.partial(_photo_done, run, written[cname][1], say))
             elif parts:
@@ -249,19 +252,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
 def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
     """The ``__main__`` of a problem script: ``[--out DIR] [--resolution R] [--case NAME ...]``.
 
-    Returns the process exit code: 0 when every case succeeded, 1 otherwise. With ``argv`` None (the
-    script's own arguments) the run's objects are left out of the interpreter's exit collections
-    (:func:`~mdsr_opt.core.background.skip_final_collection`, which acts only when the interpreter exits).
+    Returns the process exit code: 0 when every case succeeded, 1 otherwise.
     """
-    code = _script_main(build, argv)
-    if argv is None:
-        from ..core.background import skip_final_collection
-
-        skip_final_collection()
-    return code
-
-
-def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int:
     import argparse
 
     p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
@@ -279,12 +271,11 @@ def _script_main(build: Callable[..., Scene], argv: Sequence[str] | None) -> int
             from .rundir import check_out_path
 
             check_out_path(a.out)
-        with job_server():  # the figure jobs' server warms up while the scene is built
-            with checking_input():  # building the scene checks it: bad input, before any work
-                scene = build(resolution=a.resolution)
-            with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
-                rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
-                                method=a.method, overwrite=a.overwrite, log=log)
+        with checking_input():  # building the scene checks it: bad input, before any work
+            scene = build(resolution=a.resolution)
+        with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
+            rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
+                            method=a.method, overwrite=a.overwrite, log=log)
     except KeyboardInterrupt:
         print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
         return 130
@@ -385,7 +376,7 @@ def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
 def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write_result) -> dict:
     """A case's photograph stage (:func:`~mdsr_opt.scenes.runner.measure_case`), then its result-side
     files (``write_result``, a :func:`~mdsr_opt.scenes.runner.case_parts` part, or None): what the run's
-    report needs back from a background job."""
+    report needs back from a job run in a worker."""
     said: list[str] = []
     measure_case(scene, run, photo_size=photo_size, prototype=proto, log=said.append, prefix=prefix)
     files = write_result() if write_result is not None else []
@@ -400,72 +391,6 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
     paths.extend(got["files"])
     for line in got["log"]:
         say(line)
-
-
-def job_server(figures: bool = True, photos: bool = True, background: bool = True):
-    """The context in which a command runs its scenes: a jobs' server
-    (:func:`~mdsr_opt.core.forkserver.serving`) warmed up with :func:`warm_up_jobs` (its figures' part),
-    started now, before the scenes are built, so that matplotlib's import and warm-up run beside that;
-    nothing without ``background`` or without figures and photographs. Each scene has the photograph
-    stage warmed up (with its own import for holes) just before its first photograph job
-    (:func:`write_scene`)."""
-    import contextlib
-
-    if not background or not (figures or photos):
-        return contextlib.nullcontext()
-    # the photograph stage's warm-up is each scene's, sent just before its first photograph job (see
-    # write_scene): the first figure jobs, which the server forks once this is done, do not wait for it
-    return serving(functools.partial(warm_up_server, figures))
-
-
-def warm_up_server(figures: bool) -> None:
-    """The jobs' server's own warm-up (:func:`job_server`): :func:`warm_up_jobs` for the figures, with
-    matplotlib imported without its docstrings' property tables
-    (:func:`~mdsr_opt.plot.lean.without_property_docs`: 0.2 s of CPU before the first job can fork; the
-    server and its jobs only write files)."""
-    from ..plot.lean import without_property_docs
-
-    with without_property_docs():
-        warm_up_jobs(figures, False, holes=False)
-
-
-#: what warm_up_jobs has done in this process
-_WARMED: set[str] = set()
-
-
-def warm_up_jobs(figures: bool, photos: bool, holes: bool = True) -> None:
-    """Once, in the process the background jobs fork from (this one, or their server: see
-    :class:`~mdsr_opt.core.forkserver.ForkServer`): what every job would otherwise pay again in its child and
-    lose with it (a case's photograph stage took 1.1-1.3 s of CPU in a cold child, 0.6 s in a warm one).
-    ``holes``: the body has holes, whose photographed counterparts are matched with scipy.optimize (0.2-0.4
-    s to import; a body without holes never imports it). What a process has warmed up once is not done
-    again (a server serves every scene of ``mdsr run all``)."""
-    import importlib
-
-    if figures and "figures" not in _WARMED:
-        from ..plot.common import warm_up
-
-        warm_up()
-        _WARMED.add("figures")
-        importlib.import_module("meshio")  # each case's shapes job writes its meshes (0.12-0.15 s to import)
-    if photos:  # the photograph stage's modules
-        for name in ("..photos.camera", "..photos.contours", "..photos.loops", "..photos.compare",
-                     ".prototype", "scipy.spatial") + (("scipy.optimize",) if holes else ()):
-            importlib.import_module(name, __package__)
-    import_pipeline()
-
-
-def import_pipeline() -> None:
-    """Import the pipeline's modules (part of :func:`warm_up_jobs`): what a job's pickled inputs (a case's
-    routing graph: networkx, 0.25 s) and its solves (animations, the prototype's photographs; shapely checks
-    that a boundary does not cross itself) need, in a jobs' server that has not run the pipeline itself.
-    (The command imports them too, as it builds the scene: imported before the server's fork instead,
-    they kept the server from its warm-up, on which the first jobs wait, for 0.6 s.)"""
-    import importlib
-
-    for name in ("networkx", "shapely", "..synthesis.routing", "..synthesis.contractions", "..synthesis.gait",
-                 "..mechanics.equilibrium", "..mechanics.newton", "..body.material", ".animate"):
-        importlib.import_module(name, __package__)
 
 
 def _write_rest(scene: Scene, path) -> str:

@@ -425,10 +425,10 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
     figures : write the chart and the GIF.
     log : progress messages.
-    writer : :class:`~mdsr_opt.core.background.BackgroundWriter`, optional
+    writer : :class:`~mdsr_opt.core.jobs.Jobs`, optional
         Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
         this is done here, one after the other. ``gait.json``, which lists the files, is written when the
-        last of these jobs has reported: with a writer that forks, at its ``wait``.
+        last of these jobs has reported: with a pool's jobs, at the writer's ``wait``.
 
     Returns
     -------
@@ -468,7 +468,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; gait.json, which lists their files, is written once every one of them has reported (at
-    # the writer's wait when they run in children): a job that fails leaves no gait.json
+    # the writer's wait when they run in workers): a job that fails leaves no gait.json
     jobs = []
     if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
@@ -498,11 +498,11 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         if not waiting[0]:
             write_json(folder / "gait.json", record)
 
-    from ..core.background import BackgroundWriter
-
-    submit = (writer or BackgroundWriter(enabled=False)).submit  # disabled: each job here and now
     for fn, args, kwargs in jobs:
-        submit(fn, *args, on_done=reported, **kwargs)
+        if writer is not None:
+            writer.submit(fn, *args, on_done=reported, **kwargs)
+        else:
+            reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))

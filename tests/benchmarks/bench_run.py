@@ -15,14 +15,15 @@ the work (each wrapper's *exclusive* time goes to its stage, so nothing is count
 - ``figures``: PNG figures (building and saving);
 - ``GIFs``: the animated GIFs;
 - ``writing``: meshes, photographs, JSON and fabrication files;
-- ``waiting``: waiting for the figure jobs running in forked children beside the solves (``run_scene``'s
-  ``background``; a job's own stages run in its child and are not seen here, so with the background
-  writer ``figures``, ``GIFs`` and most ``writing`` show only what is left in this process);
+- ``waiting``: waiting for the figure jobs running in worker processes beside the solves (``run_scene``'s
+  ``background``; a job's own stages run in its worker and are not seen here, so with the pool
+  ``figures``, ``GIFs`` and most ``writing`` show only what is left in this process);
 - ``other``: the rest (prototype mesh building, bookkeeping).
 
-``cpu`` is the CPU time of this process and of its finished children (the figure jobs), so it measures the
-work done, where ``wall`` measures the wait; ``jobs cpu`` is the children's part of it, also printed per job
-function (``BackgroundWriter.job_cpu``): on two cores a run cannot end before its CPU seconds over two. ``--serial`` runs with ``background=False`` (everything in this
+``cpu`` is the CPU time of this process and of its finished children, so it measures the work done, where
+``wall`` measures the wait; ``jobs cpu`` is the forked figure jobs' part of it in trees that had them (per job
+function, ``BackgroundWriter.job_cpu``; a pool's workers are not counted): on two cores a run cannot end
+before its CPU seconds over two. ``--serial`` runs with ``background=False`` (everything in this
 process, one after the other), for a side-by-side comparison.
 
 ``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
@@ -79,7 +80,8 @@ WRAPS = [
     ("mdsr_opt.photos.loops", "simulated_loops", "photos/contours"),
     ("mdsr_opt.scenes.runner", "write_case", "figures"),
     ("mdsr_opt.scenes.runscene", "write_case", "figures"),  # older trees: runscene calls it by its own name
-    ("mdsr_opt.core.background", "BackgroundWriter.submit", "figures"),  # a job run here, or the fork's cost
+    ("mdsr_opt.core.background", "BackgroundWriter.submit", "figures"),  # older trees: a job run here, or a fork
+    ("mdsr_opt.core.jobs", "Jobs.submit", "figures"),  # a job run here, or sending it to the pool
     ("mdsr_opt.plot", "plot_scene", "figures"),
     ("mdsr_opt.plot", "save_figure", "figures"),
     ("mdsr_opt.plot.common", "save_figure", "figures"),
@@ -91,8 +93,9 @@ WRAPS = [
     ("mdsr_opt.synthesis.export", "export_fabrication", "writing"),
     ("mdsr_opt.synthesis.poses", "PosesResult.save", "writing"),
     ("mdsr_opt.core.background", "BackgroundWriter.wait", "waiting"),
-    # a submit waiting for a slot (since the jobs' server: not through wait)
+    # a submit waiting for a slot (older trees, with the jobs' server: not through wait)
     ("mdsr_opt.core.background", "BackgroundWriter._wait_until", "waiting"),
+    ("mdsr_opt.core.jobs", "Jobs.wait", "waiting"),
 ]
 
 

@@ -1,0 +1,197 @@
+"""Write jobs beside the solves: a standard process pool, or the jobs one after the other in this process.
+
+``mdsr run`` alternates solves (CasADi and IPOPT, one core) with drawing and writing their results
+(matplotlib, GIFs, meshes, photographs). Threads do not help (CasADi and matplotlib's Agg hold the GIL);
+worker processes do. :func:`process_pool` makes a :class:`concurrent.futures.ProcessPoolExecutor` with an
+explicit start method (:func:`start_method`: never a plain fork of a process that runs solver threads);
+:class:`Jobs` sends a run's jobs to it, or runs each at once in this process when there is no pool. The
+files are the same either way.
+
+A job is a module-level function with picklable arguments, pickled when it is submitted (so that it sees
+its arguments as they were then) and run in a worker; its return value comes back pickled. A worker runs
+with one OpenBLAS thread unless ``OPENBLAS_NUM_THREADS`` says otherwise (CasADi's bundled OpenBLAS, which
+threadpoolctl does not see, reads the variable when it loads) and with matplotlib's Agg backend.
+
+Example
+-------
+>>> done = []
+>>> with Jobs() as jobs:  # no pool: each job here and now
+...     jobs.submit(sum, [1, 2, 3], on_done=done.append)
+>>> done
+[6]
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import os
+import pickle
+import sys
+from concurrent.futures import Executor
+from concurrent.futures import wait as wait_for
+from typing import Any, Callable, Iterator, Sequence
+
+__all__ = ["Jobs", "available_cores", "process_pool", "start_method"]
+
+
+def start_method() -> str:
+    """The start method of the pool's workers: 'forkserver' on Linux (each worker forked from a server
+    process that has imported the jobs' modules once), 'spawn' elsewhere (macOS's system libraries are not
+    safe to fork, Windows cannot). Neither shares threads or locks with this process."""
+    return "forkserver" if sys.platform.startswith("linux") else "spawn"
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its affinity where the platform tells, else the machine's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # macOS, Windows
+        return os.cpu_count() or 1
+
+
+def worker_environment() -> dict[str, str]:
+    """What a worker sets before its first import: one OpenBLAS thread (unless this process's environment
+    asks for another count) and matplotlib's Agg backend (workers only write files)."""
+    return {"OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"), "MPLBACKEND": "Agg"}
+
+
+def _exit_with_parent() -> None:
+    """Wait for the process that started this worker to end, then end this worker at once: a run killed
+    outright (no shutdown of its pool) leaves no worker behind, idle or writing into its folder."""
+    import multiprocessing
+
+    multiprocessing.parent_process().join()
+    os._exit(1)
+
+
+def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None = None) -> None:
+    """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
+    variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
+    import importlib
+    import threading
+
+    threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
+    os.environ.update(env)
+    if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(int(env["OPENBLAS_NUM_THREADS"]), user_api="blas")
+    if "matplotlib" in sys.modules:
+        import matplotlib
+
+        matplotlib.use("Agg")
+    for name in modules:
+        importlib.import_module(name)
+    if setup is not None:
+        fn, args = setup
+        fn(*args)
+
+
+@contextlib.contextmanager
+def process_pool(workers: int | None = None, modules: Sequence[str] = (),
+                 setup: tuple | None = None) -> Iterator[Executor | None]:
+    """A pool of ``workers`` processes for write jobs (default: one per available core), or None with
+    ``workers`` 0 or a single core (nothing to gain beside this process). ``modules``: what the jobs
+    import, imported by each worker as it starts; with 'forkserver' those of other packages (matplotlib,
+    the solvers) are imported once by the server the workers are forked from, while this package's own
+    are left to the workers, which import them from this process's ``sys.path`` (the server has the
+    interpreter's default one). ``setup``: a picklable ``(function, args)`` each worker calls after those
+    imports. Shut down when the block ends: jobs not started are cancelled, running ones finish.
+    """
+    if workers is None:
+        workers = available_cores()
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise ValueError(f"workers must be a non-negative integer, not {workers!r}")
+    if workers == 0 or available_cores() < 2:
+        yield None
+        return
+    import multiprocessing  # here: `mdsr list` and the serial paths need neither
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context(start_method())
+    if context.get_start_method() == "forkserver":
+        ours = __name__.split(".")[0]
+        context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
+    pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
+                               initargs=(worker_environment(), tuple(modules), setup))
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _call(job: bytes) -> Any:
+    """Run a pickled job in a worker."""
+    fn, args, kwargs = pickle.loads(job)
+    return fn(*args, **kwargs)
+
+
+class Jobs:
+    """A run's write jobs: sent to ``pool`` (a :class:`concurrent.futures.Executor`), or with None each
+    run at once in this process.
+
+    :meth:`submit` sends a job and collects the jobs done so far; :meth:`wait` collects all of them. A
+    job's ``on_done`` gets its return value, in the order the jobs were submitted; a job's exception is
+    raised again here (with the worker's traceback as its cause). Leaving the ``with`` block waits for every
+    job; leaving it by an exception (a failed job, Ctrl-C) cancels the jobs not yet started and waits for
+    the running ones, whose outcome is dropped.
+    """
+
+    def __init__(self, pool: Executor | None = None):
+        self.pool = pool
+        self._pending: collections.deque = collections.deque()
+
+    @property
+    def parallel(self) -> bool:
+        """Whether jobs run in other processes."""
+        return self.pool is not None
+
+    def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
+               **kwargs) -> None:
+        """Run ``fn(*args, **kwargs)``: in the pool, or here and now without one. ``on_done`` receives the
+        return value (for a pool's job, at a later :meth:`submit` or at :meth:`wait`)."""
+        if self.pool is None:
+            value = fn(*args, **kwargs)
+            if on_done is not None:
+                on_done(value)
+            return
+        try:
+            job = pickle.dumps((fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+        except (pickle.PicklingError, AttributeError, TypeError) as exc:
+            raise TypeError(f"the job {getattr(fn, '__name__', fn)!r} cannot be sent to a worker process (a job "
+                            f"is a module-level function with picklable arguments): {exc}") from exc
+        self._pending.append((self.pool.submit(_call, job), on_done))
+        self._collect(block=False)
+
+    def wait(self) -> None:
+        """Wait for every job submitted; pass each one's value to its ``on_done``."""
+        self._collect(block=True)
+
+    def _collect(self, block: bool) -> None:
+        while self._pending and (block or self._pending[0][0].done()):
+            future, on_done = self._pending[0]
+            value = future.result()
+            self._pending.popleft()
+            if on_done is not None:
+                on_done(value)
+
+    def stop(self) -> None:
+        """Cancel the jobs not yet started and wait for the running ones; their results are dropped."""
+        pending, self._pending = self._pending, collections.deque()
+        futures = [f for f, _ in pending if not f.cancel()]
+        wait_for(futures)
+
+    def __enter__(self) -> "Jobs":
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            try:
+                self.wait()
+            except BaseException:
+                self.stop()
+                raise
+        else:
+            self.stop()
+        return False

@@ -1,0 +1,177 @@
+"""Write jobs beside the solves (mdsr_opt.core.jobs): a standard process pool, or each job here and now."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from mdsr_opt.core.jobs import Jobs, available_cores, process_pool, start_method, worker_environment
+
+
+@pytest.fixture(scope="module")
+def pool():
+    """One worker (so that jobs queue behind each other), started as process_pool starts them."""
+    from mdsr_opt.core.jobs import _start_worker
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context(start_method()), initializer=_start_worker,
+                             initargs=(worker_environment(), ())) as p:
+        yield p
+
+
+def _pid_and(value):
+    return os.getpid(), value
+
+
+def _fail(message):
+    raise ValueError(message)
+
+
+def _touch_after(path, seconds):
+    time.sleep(seconds)
+    Path(path).write_text("done")
+    return str(path)
+
+
+def _seen_by_worker():
+    import matplotlib
+
+    return {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "MPLBACKEND")} | {
+        "backend": matplotlib.get_backend().lower()}
+
+
+def test_without_a_pool_each_job_runs_here_and_now():
+    done = []
+    with Jobs() as jobs:
+        assert not jobs.parallel
+        jobs.submit(_pid_and, 3, on_done=done.append)
+        assert done == [(os.getpid(), 3)]  # at once, in this process
+        with pytest.raises(ValueError, match="broke here"):
+            jobs.submit(_fail, "broke here")
+        jobs.submit(lambda: 1, on_done=done.append)  # nothing is pickled here
+    assert done[-1] == 1
+
+
+def test_jobs_run_in_a_worker_and_report_in_the_order_they_were_sent(pool):
+    done = []
+    with Jobs(pool) as jobs:
+        assert jobs.parallel
+        for k in range(5):
+            jobs.submit(_pid_and, k, on_done=done.append)
+    assert [v for _, v in done] == list(range(5))
+    assert {pid for pid, _ in done} != {os.getpid()} and len({pid for pid, _ in done}) == 1
+
+
+def test_a_job_gets_its_arguments_as_they_were_when_it_was_sent(pool):
+    done, arg = [], [1, 2]
+    with Jobs(pool) as jobs:
+        jobs.submit(_touch_after, os.devnull, 0.3)  # the next job waits behind this one
+        jobs.submit(_pid_and, arg, on_done=done.append)
+        arg.append(3)
+    assert done[0][1] == [1, 2]
+
+
+def test_a_failed_job_raises_its_own_error_with_the_workers_traceback(pool):
+    with pytest.raises(ValueError, match="the writer broke") as info:
+        with Jobs(pool) as jobs:
+            jobs.submit(_fail, "the writer broke")
+    assert "_fail" in str(info.value.__cause__)  # the worker's traceback
+
+
+def test_a_job_that_cannot_be_sent_is_refused_at_once(pool):
+    with Jobs(pool) as jobs:
+        with pytest.raises(TypeError, match="cannot be sent to a worker process .*module-level function"):
+            jobs.submit(lambda: 1)
+        with pytest.raises(TypeError, match="'_pid_and' cannot be sent"):
+            jobs.submit(_pid_and, (x for x in ()))  # a generator does not pickle
+
+
+def test_leaving_by_an_error_cancels_the_jobs_not_started(pool, tmp_path):
+    with pytest.raises(KeyboardInterrupt):
+        with Jobs(pool) as jobs:
+            jobs.submit(_touch_after, tmp_path / "first", 0.5)
+            for k in range(6):
+                jobs.submit(_touch_after, tmp_path / f"later{k}", 0.0)
+            time.sleep(0.2)  # the first job runs
+            raise KeyboardInterrupt
+    # the running job finished before the block was left, and so did those the pool had already put in its
+    # workers' queue (concurrent.futures counts them as running: at most one more than there are workers);
+    # the others never started
+    written = sorted(p.name for p in tmp_path.iterdir())
+    assert written in (["first"], ["first", "later0"], ["first", "later0", "later1"])
+    time.sleep(0.3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == written
+
+
+@pytest.mark.parametrize("asked", [None, "3"])
+def test_workers_run_with_one_blas_thread_and_agg_unless_asked(monkeypatch, asked):
+    if asked is None:
+        monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", asked)
+    monkeypatch.setenv("MPLBACKEND", "svg")  # this process's choice is not the workers'
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as plain:
+        from mdsr_opt.core.jobs import _start_worker
+
+        plain.submit(_start_worker, worker_environment(), ()).result()  # as process_pool's initializer does
+        seen = plain.submit(_seen_by_worker).result()
+    assert seen == {"OPENBLAS_NUM_THREADS": asked or "1", "MPLBACKEND": "Agg", "backend": "agg"}
+
+
+def test_process_pool_has_workers_only_where_they_pay():
+    with process_pool(0) as none:
+        assert none is None
+    with process_pool(2) as pool:
+        assert (pool is None) is (available_cores() < 2)
+        if pool is not None:
+            assert pool.submit(os.getpid).result() != os.getpid()
+    for bad in (-1, True, 1.5):
+        with pytest.raises(ValueError, match="workers must be a non-negative integer"):
+            with process_pool(bad):
+                pass
+    assert start_method() in multiprocessing.get_all_start_methods()
+
+
+_KILLED = """
+import multiprocessing, os, time
+from concurrent.futures import ProcessPoolExecutor
+from mdsr_opt.core.jobs import _start_worker, start_method, worker_environment
+pool = ProcessPoolExecutor(2, mp_context=multiprocessing.get_context(start_method()), initializer=_start_worker,
+                           initargs=(worker_environment(), ()))
+busy = pool.submit(time.sleep, 30)  # one worker in a job
+idle = pool.submit(os.getpid).result()  # the other done with its job
+print(idle, *[p.pid for p in multiprocessing.active_children()], flush=True)
+time.sleep(60)
+"""
+
+
+def _exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="looks processes up with os.kill(pid, 0)")
+def test_a_process_killed_outright_leaves_no_worker_behind():
+    """The process that made the pool dies without shutting it down (SIGKILL): its workers, the busy one and
+    the idle one, end within seconds instead of waiting for jobs for ever."""
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED], stdout=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[1])
+    try:
+        idle, *pids = [int(p) for p in proc.stdout.readline().split()]
+    finally:
+        proc.kill()
+        proc.wait()
+    assert len(pids) == 2 and idle in pids and proc.pid not in pids
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(map(_exists, pids)):
+        time.sleep(0.05)
+    assert [p for p in pids if _exists(p)] == []
