@@ -21,6 +21,7 @@ from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
                         upright)
 from .model import get_model, spring_parameters
+from .residual import kkt_residual
 from .result import EquilibriumResult
 from .stability import check_stability
 
@@ -104,7 +105,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         mesh, model, lambda s: p, fixed, values_of, x_start, backend, tol, max_iter, options, min_step, verbose,
         predict)
     return equilibrium_result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
-                   backend, "external")
+                   backend, "external", tol)
 
 
 def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
@@ -318,14 +319,17 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     p1 = p_of(1.0)
     p_el = p_el0
     taut = np.ones(len(mus), dtype=bool)
-    if cm is not None:
-        lam, taut_c = cm.multipliers(x, p1, fixed)
+    residual = None
+    if cm is not None:  # the multipliers of the tolerance contract's residual (ropes within tol of their targets)
+        kkt = kkt_residual(cm, x, p1, fixed, tol, material.E * material.thickness * mesh.size)
+        lam, residual = kkt.lam, kkt.value
         if model == "cable":
-            taut = taut_c
+            taut = kkt.taut
         p1 = cm.params(cm.split(p1)[0], cm.split(p1)[1], lam)
         p_el = cm.params(p_el0, cm.split(p1)[1])
     res = equilibrium_result(mesh, solver_model, material, p1, p_el, x, fixed, status, ok, iters, steps,
-                  t_model + t_build, t_solve, backend, "internal", check_stability=bool(check_stability))
+                  t_model + t_build, t_solve, backend, "internal", tol, check_stability=bool(check_stability),
+                  residual=residual)
     res.muscle_model = model
     res.anchor_radius = radius
     res.rest_lengths = L0.copy()
@@ -336,14 +340,14 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     if model == "cable":
         res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
         # slack: the path is shorter than the rope (a rope at its length with no load is taut, not slack)
-        res.slack = res.achieved > a + 1e-7
+        res.slack = res.achieved > a + tol
     else:
         # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
         # chain's length since the anchored segments keep their rest lengths
         res.tension = K * a_fac * (a - res.achieved)
         res.slack = res.tension <= 0.0
     if cm is not None and res.success:
-        _check_feasible(res, cm, x, p1, mesh)
+        _check_feasible(res, cm, x, p1, mesh, tol)
     if align_to_rest:
         al = align(res.x, mesh.points)
         res.x = al.apply(res.x)
@@ -351,8 +355,10 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     return res
 
 
-def _check_feasible(res, cm, x, p, mesh, rtol: float = 1e-7) -> None:
-    """Reject a constrained solution whose ropes are longer than their targets or whose anchors deformed."""
+def _check_feasible(res, cm, x, p, mesh, rtol: float) -> None:
+    """Reject a constrained solution whose ropes are longer than their targets by more than ``rtol L0`` or
+    whose anchors deformed by more than ``rtol`` x size (the violation part of the scaled KKT residual,
+    :func:`~mdsr_opt.mechanics.residual.kkt_residual`, named)."""
     v = cm.values(x)
     _, targets, _ = cm.split(p)
     nt = cm.n_targets

@@ -1,0 +1,194 @@
+"""What a solve's ``tol`` means: the scaled KKT residual, the one test every accepted state passes.
+
+An equilibrium of external or internal driving is accepted at tolerance ``tol`` when its scaled KKT residual
+(:func:`kkt_residual`) is at most ``tol``:
+
+``r(x) = max(stationarity, violation)``
+
+- ``stationarity = |grad E(x) + J(x)' lam|_inf / (E t S)`` over the free coordinates (``E t S`` a force:
+  Young's modulus times thickness times the body's size ``S = mesh.size``), with ``lam`` the least-squares
+  multipliers of the constraints (:meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.multipliers`): every
+  rigid anchor-patch row, and every rope whose path is within ``tol * L0`` of its target and whose fitted
+  tension is not negative (a rope shorter than that carries no tension: complementarity to ``tol``);
+  without constraints the energy gradient alone;
+- ``violation = max((L_c - T_c)_+ / L0_c, |c_rigid| / S)``: how far a rope is longer than its target
+  (a strain) and how far an anchor patch is from rigid (a length over ``S``).
+
+Every place that accepts a state tests this same number against the solve's ``tol``: each load step
+(:func:`~mdsr_opt.mechanics.loadsteps.load_continuation`), the saddle escape's re-solves, the result's own
+check (:func:`~mdsr_opt.mechanics.loadsteps.equilibrium_result`: ``residual``) and the design's
+verification. IPOPT is asked for the same measure (its unscaled dual infeasibility, constraint violation
+and complementarity all at most ``tol``, :func:`ipopt_tolerances`); since its multipliers are its own, not
+the least-squares ones, a state it returns above ``tol`` is polished by Newton steps on the KKT system
+(:func:`meet_tolerance`) and rejected only if they do not bring it down. A state accepted at ``tol`` is
+therefore accepted again by :func:`kkt_residual` at ``tol``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .kkt import kkt_factor
+
+__all__ = ["Residual", "kkt_residual", "meet_tolerance", "ipopt_tolerances", "stiffness_of"]
+
+
+def ipopt_tolerances(tol: float) -> dict:
+    """IPOPT options that make its termination test the scaled KKT residual at ``tol`` (on top of its own
+    ``tol`` on its scaled problem): unscaled dual infeasibility, constraint violation and complementarity."""
+    return {"ipopt.tol": tol, "ipopt.dual_inf_tol": tol, "ipopt.constr_viol_tol": tol,
+            "ipopt.compl_inf_tol": tol}
+
+
+def stiffness_of(p_energy) -> float:
+    """``E t`` from an energy parameter vector whose first two entries are ``mu t`` and ``lam t``
+    (:meth:`~mdsr_opt.mechanics.model.EnergyModel.params`)."""
+    mu, lam = float(p_energy[0]), float(p_energy[1])
+    return mu * (3.0 * lam + 2.0 * mu) / (lam + mu)
+
+
+@dataclass
+class Residual:
+    """The scaled KKT residual of a state (see the module docstring).
+
+    Attributes
+    ----------
+    value : float
+        ``max(stationarity, violation)``: what ``tol`` bounds.
+    stationarity, violation : float
+    lam : ndarray or None
+        The constraints' multipliers (physical units; None without constraints).
+    taut : ndarray or None
+        Per rope, whether it carries tension in ``lam``.
+    """
+
+    value: float
+    stationarity: float
+    violation: float
+    lam: np.ndarray | None = None
+    taut: np.ndarray | None = None
+
+
+def _force(model, p, force) -> float:
+    if force is not None:
+        return float(force)
+    pe = model.split(p)[0] if hasattr(model, "split") else p
+    return stiffness_of(pe) * model.mesh.size
+
+
+def kkt_residual(model, x, p, fixed, tol: float, force: float | None = None,
+                 gradient: np.ndarray | None = None) -> Residual:
+    """The scaled KKT residual of the state ``x`` (2n,) of ``model`` with parameters ``p`` (a constrained
+    model's: energy parameters and rope targets; its multipliers are refitted) and ``fixed`` coordinates.
+
+    ``tol`` decides which ropes may pull (those within ``tol * L0`` of their targets); ``force`` is the
+    force scale, ``E t S`` (default: from ``p`` and the mesh); ``gradient`` the energy gradient at ``x``
+    when the caller has it."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    free = ~np.asarray(fixed, dtype=bool)
+    F = _force(model, p, force)
+    if not hasattr(model, "multipliers"):  # no constraints: the energy gradient
+        g = model.gradient(x, p) if gradient is None else gradient
+        s = float(np.abs(g[free]).max()) / F if free.any() else 0.0
+        return Residual(s, s, 0.0)
+    pe, targets, _ = model.split(p)
+    g = model.model.gradient(x, pe) if gradient is None else gradient
+    lam, taut = model.multipliers(x, model.params(pe, targets if model.n_targets else None), fixed,
+                                  rtol=float(tol), gradient=g)
+    gl = g + model.jacobian(x).T @ lam if model.n_rows else g
+    s = float(np.abs(gl[free]).max()) / F if free.any() else 0.0
+    v = model.values(x)
+    nt = model.n_targets
+    over = float(np.max((v[:nt] - targets) / model.constraints.rest_lengths[:nt], initial=0.0))
+    rigid = float(np.abs(v[nt:]).max(initial=0.0)) / model.mesh.size
+    viol = max(over, rigid, 0.0)
+    return Residual(max(s, viol), s, viol, lam, taut)
+
+
+def _newton_step(model, x, p, fixed, lam, active):
+    """One Newton step on the KKT system from ``x``: ``(y, lam, active)`` or None when it is singular.
+
+    The Hessian is the Lagrangian's with the multipliers ``lam``; every rigid row and the ropes in
+    ``active`` are linearised and met; a rope whose new multiplier is negative is released and the step
+    made again. Returns the new state, its multipliers and the ropes held."""
+    free = ~fixed
+    constrained = hasattr(model, "multipliers")
+    if constrained:
+        pe, targets, _ = model.split(p)
+        emodel = model.model
+        H = model.hessian(x, model.params(pe, targets if model.n_targets else None, lam))
+        g = emodel.gradient(x, pe)
+        J = model.jacobian(x).tocsr()
+        c = model.values(x) - model.bounds(p)[1]  # ropes: L - target; rigid rows: their values
+        rows = np.ones(model.n_rows, dtype=bool)
+        rows[:model.n_targets] = active
+        nt = model.n_targets
+    else:
+        emodel = model
+        H, g = model.hessian(x, p), model.gradient(x, p)
+        J, c, rows, nt = sp.csr_matrix((0, len(x))), np.zeros(0), np.zeros(0, dtype=bool), 0
+    Hf = H.tocsr()[free][:, free]
+    order = emodel.free_ordering(free) if getattr(emodel, "is_numeric", False) else None
+    for _ in range(nt + 1):
+        fac = kkt_factor(Hf, J[rows][:, free], order)
+        if fac is None:
+            return None
+        sol = fac.solve(np.concatenate([-g[free], -c[rows]]))
+        if not np.all(np.isfinite(sol)):
+            return None
+        new = np.zeros(len(rows))
+        new[rows] = sol[free.sum():]
+        neg = np.nonzero(rows[:nt] & (new[:nt] < 0.0))[0]
+        if len(neg) == 0:
+            break
+        rows[neg] = False
+    y = x.copy()
+    y[free] += sol[:free.sum()]
+    return y, new, rows[:nt].copy()
+
+
+def meet_tolerance(model, x, p, fixed, tol: float, force: float | None = None, upright=None, lam=None,
+                   max_steps: int = 3) -> tuple[np.ndarray, Residual, bool]:
+    """``x`` (2n,) or a state polished from it, its :func:`kkt_residual` and whether it was polished.
+
+    A state above ``tol`` takes up to ``max_steps`` Newton steps on the KKT system (:func:`_newton_step`);
+    each is kept while it lowers the residual and keeps every element upright (``upright(y)``, when
+    given). The first step holds the ropes within ``sqrt(tol) L0`` of their targets (or longer) and those
+    whose tension (``lam``, the solver's multipliers, else fitted with every rope) relative to ``E t S`` is
+    at least their distance to the target relative to ``L0`` (the interior point's estimate of its active
+    set); a held rope that would push is released (:func:`_newton_step`). A solver
+    that stops just short of ``tol`` in this measure (its own multipliers or scaling differ) so still
+    returns a state that meets it."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    fixed = np.asarray(fixed, dtype=bool)
+    F = _force(model, p, force)
+    res = kkt_residual(model, x, p, fixed, tol, F)
+    if res.value <= tol or not np.isfinite(res.value):
+        return x, res, False
+    active = None
+    if hasattr(model, "multipliers"):
+        pe, targets, _ = model.split(p)
+        if lam is None:
+            lam = model.multipliers(x, model.params(pe, targets if model.n_targets else None), fixed,
+                                    ropes_only_pull=False)[0]
+        nt = model.n_targets
+        short = (targets - model.values(x)[:nt]) / model.constraints.rest_lengths[:nt]
+        active = (short <= np.sqrt(tol)) | (np.asarray(lam)[:nt] / F >= short)
+    polished = False
+    for _ in range(max_steps):
+        step = _newton_step(model, x, p, fixed, lam, active)
+        if step is None:
+            break
+        y, lam_y, active_y = step
+        if not np.all(np.isfinite(y)) or (upright is not None and not upright(y)):
+            break
+        r2 = kkt_residual(model, y, p, fixed, tol, F)
+        if not r2.value < res.value:
+            break
+        x, res, polished, lam, active = y, r2, True, lam_y, active_y
+        if res.value <= tol:
+            break
+    return x, res, polished
