@@ -24,6 +24,7 @@ from .model import get_model, spring_parameters
 from .residual import kkt_residual
 from .result import EquilibriumResult
 from .stability import check_stability
+from .units import Units
 
 __all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_frame', 'gauge_coordinates']
 
@@ -88,6 +89,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         raise ValueError("external driving needs at least two fixed nodes (anchors + drags) to remove rigid "
                          "motion; got 1")
     t0 = time.perf_counter()
+    units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
+    mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
     p = model.params(material)
@@ -98,14 +101,15 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     anchored = mesh.points[anc]
 
     def values_of(s):  # fixed coordinates at load s, in the order of the mask (anchors, then drag paths)
-        at = np.vstack([anchored, path.positions(s)])
+        at = np.vstack([anchored, units.to_unit(path.positions(s))])
         return np.concatenate([at[:, 0], at[:, 1]])[order]
 
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
-        mesh, model, lambda s: p, fixed, values_of, x_start, backend, tol, max_iter, options, min_step, verbose,
-        predict)
-    return equilibrium_result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
-                   backend, "external", tol)
+        mesh, model, lambda s: p, fixed, values_of, units.state_in(x_start), backend, tol, max_iter, options,
+        min_step, verbose, predict)
+    return units.equilibrium_out(equilibrium_result(
+        mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve, backend,
+        "external", tol))
 
 
 def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
@@ -132,7 +136,9 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     anc = as_index_array(np.zeros(0, dtype=np.int64) if anchors is None else np.asarray(anchors),
                          "anchors", n=n, shape=(None,))
     nodes = np.union1d(anc, drag_path(drags, mesh).nodes)
-    xflat = mesh._check_state(x).reshape(-1)
+    units = Units(mesh, material)  # checked on the unit body (size 1, E t = 1)
+    xflat = units.state_in(mesh._check_state(x).reshape(-1))
+    mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     p = model.params(material)
     fixed = np.zeros(2 * n, dtype=bool)
@@ -140,7 +146,7 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     g = model.gradient(xflat, p)
     residual = float(np.abs(g[~fixed]).max()) / (material.E * material.thickness * mesh.size) \
         if (~fixed).any() else 0.0
-    return check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest), residual
+    return units.stability_out(check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest)), residual
 
 
 # ---------------------------------------------------------------------------------- internal driving
@@ -279,6 +285,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         if moved is not None:
             x_start = moved.reshape(-1)
     n = mesh.n_nodes
+    units = Units(mesh, material)  # solved on the unit body (size and E t about 1), mapped back
+    mesh, material = units.unit_mesh, units.unit_material
+    radius_given, radius, x_start = radius, units.to_unit(radius), units.state_in(x_start)
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
     k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
     if np.any(a * a_fac >= 1.0):
@@ -287,7 +296,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                          f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
     constrained = model == "cable" or len(rigid_groups(mesh, mus, radius)) > 0
     if constrained and not supports_constraints(backend):
-        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
+        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius_given:g})"
         raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
                          f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
                                                                  ", or anchor_radius=0"))
@@ -352,7 +361,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         al = align(res.x, mesh.points)
         res.x = al.apply(res.x)
         res.rotation, res.translation = al.R, al.t
-    return res
+    return units.equilibrium_out(res)
 
 
 def _check_feasible(res, cm, x, p, mesh, rtol: float) -> None:

@@ -38,9 +38,10 @@ __all__ = ["Residual", "kkt_residual", "meet_tolerance", "ipopt_tolerances", "st
 
 def ipopt_tolerances(tol: float) -> dict:
     """IPOPT options that make its termination test the scaled KKT residual at ``tol`` (on top of its own
-    ``tol`` on its scaled problem): unscaled dual infeasibility, constraint violation and complementarity."""
-    return {"ipopt.tol": tol, "ipopt.dual_inf_tol": tol, "ipopt.constr_viol_tol": tol,
-            "ipopt.compl_inf_tol": tol}
+    ``tol`` on its scaled problem): unscaled dual infeasibility, constraint violation and complementarity
+    at most ``tol`` (never looser than IPOPT's defaults, 1, 1e-4 and 1e-4, which a loose ``tol`` keeps)."""
+    return {"ipopt.tol": tol, "ipopt.dual_inf_tol": min(tol, 1.0), "ipopt.constr_viol_tol": min(tol, 1e-4),
+            "ipopt.compl_inf_tol": min(tol, 1e-4)}
 
 
 def stiffness_of(p_energy) -> float:
@@ -108,12 +109,20 @@ def kkt_residual(model, x, p, fixed, tol: float, force: float | None = None,
     return Residual(max(s, viol), s, viol, lam, taut)
 
 
-def _newton_step(model, x, p, fixed, lam, active):
+#: a state being polished (:func:`meet_tolerance`) takes Newton steps until its residual is this fraction of
+#: the tolerance (or they stop lowering it): one step more than ``tol`` itself needs, so that the state is
+#: not accepted right at the tolerance
+POLISH_MARGIN = 1e-2
+
+
+def _newton_step(model, x, p, fixed, lam, active, tol):
     """One Newton step on the KKT system from ``x``: ``(y, lam, active)`` or None when it is singular.
 
     The Hessian is the Lagrangian's with the multipliers ``lam``; every rigid row and the ropes in
-    ``active`` are linearised and met; a rope whose new multiplier is negative is released and the step
-    made again. Returns the new state, its multipliers and the ropes held."""
+    ``active`` are linearised and met. The ropes held are then corrected as an active set on the
+    linearisation: a held rope whose new multiplier is negative is released, a released one the step
+    would leave longer than its target (by more than ``tol L0 / 10``) is held, and the step made again
+    (at most ``2 m + 1`` times for ``m`` ropes). Returns the new state, its multipliers and the ropes held."""
     free = ~fixed
     constrained = hasattr(model, "multipliers")
     if constrained:
@@ -126,27 +135,34 @@ def _newton_step(model, x, p, fixed, lam, active):
         rows = np.ones(model.n_rows, dtype=bool)
         rows[:model.n_targets] = active
         nt = model.n_targets
+        L0 = model.constraints.rest_lengths[:nt]
     else:
         emodel = model
         H, g = model.hessian(x, p), model.gradient(x, p)
-        J, c, rows, nt = sp.csr_matrix((0, len(x))), np.zeros(0), np.zeros(0, dtype=bool), 0
+        J, c, rows, nt, L0 = sp.csr_matrix((0, len(x))), np.zeros(0), np.zeros(0, dtype=bool), 0, np.zeros(0)
     Hf = H.tocsr()[free][:, free]
+    Jf = J[:, free]
     order = emodel.free_ordering(free) if getattr(emodel, "is_numeric", False) else None
-    for _ in range(nt + 1):
-        fac = kkt_factor(Hf, J[rows][:, free], order)
+    nf = int(free.sum())
+    for _ in range(2 * nt + 1):
+        fac = kkt_factor(Hf, Jf[rows], order)
         if fac is None:
             return None
         sol = fac.solve(np.concatenate([-g[free], -c[rows]]))
         if not np.all(np.isfinite(sol)):
             return None
         new = np.zeros(len(rows))
-        new[rows] = sol[free.sum():]
-        neg = np.nonzero(rows[:nt] & (new[:nt] < 0.0))[0]
-        if len(neg) == 0:
+        new[rows] = sol[nf:]
+        neg = rows[:nt] & (new[:nt] < 0.0)
+        if neg.any():
+            rows[:nt] &= ~neg
+            continue
+        over = ~rows[:nt] & ((c[:nt] + Jf[:nt] @ sol[:nf]) > 0.1 * tol * L0)
+        if not over.any():
             break
-        rows[neg] = False
+        rows[:nt] |= over
     y = x.copy()
-    y[free] += sol[:free.sum()]
+    y[free] += sol[:nf]
     return y, new, rows[:nt].copy()
 
 
@@ -154,9 +170,9 @@ def meet_tolerance(model, x, p, fixed, tol: float, force: float | None = None, u
                    max_steps: int = 3) -> tuple[np.ndarray, Residual, bool]:
     """``x`` (2n,) or a state polished from it, its :func:`kkt_residual` and whether it was polished.
 
-    A state above ``tol`` takes up to ``max_steps`` Newton steps on the KKT system (:func:`_newton_step`);
-    each is kept while it lowers the residual and keeps every element upright (``upright(y)``, when
-    given). The first step holds the ropes within ``sqrt(tol) L0`` of their targets (or longer) and those
+    A state above ``tol`` takes up to ``max_steps`` Newton steps on the KKT system (:func:`_newton_step`),
+    until its residual is below :data:`POLISH_MARGIN` x ``tol``; each is kept while it lowers the residual
+    and keeps every element upright (``upright(y)``, when given). The first step holds the ropes within ``sqrt(tol) L0`` of their targets (or longer) and those
     whose tension (``lam``, the solver's multipliers, else fitted with every rope) relative to ``E t S`` is
     at least their distance to the target relative to ``L0`` (the interior point's estimate of its active
     set); a held rope that would push is released (:func:`_newton_step`). A solver
@@ -178,8 +194,8 @@ def meet_tolerance(model, x, p, fixed, tol: float, force: float | None = None, u
         short = (targets - model.values(x)[:nt]) / model.constraints.rest_lengths[:nt]
         active = (short <= np.sqrt(tol)) | (np.asarray(lam)[:nt] / F >= short)
     polished = False
-    for _ in range(max_steps):
-        step = _newton_step(model, x, p, fixed, lam, active)
+    for _ in range(max_steps):  # once polishing, aim below the tolerance: a margin for re-checks
+        step = _newton_step(model, x, p, fixed, lam, active, tol)
         if step is None:
             break
         y, lam_y, active_y = step
@@ -189,6 +205,6 @@ def meet_tolerance(model, x, p, fixed, tol: float, force: float | None = None, u
         if not r2.value < res.value:
             break
         x, res, polished, lam, active = y, r2, True, lam_y, active_y
-        if res.value <= tol:
+        if res.value <= POLISH_MARGIN * tol:
             break
     return x, res, polished
