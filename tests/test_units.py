@@ -122,6 +122,31 @@ def test_the_rival_design_methods_do_not_depend_on_units(method):
         np.testing.assert_allclose(u, v, atol=agree)
 
 
+def test_poses_do_not_depend_on_units():
+    """One layout for two bends, designed in SI units and at the unit scale: the same muscles, strokes,
+    tensions and differences in dimensionless form."""
+    from mdsr_opt.synthesis.poses import design_poses
+
+    out = []
+    for L, E, t in ((1.0, 1.0, 1.0), SCALES["SI (4 mm strip, 1 MPa, 1 mm)"]):
+        mesh, mat = _body(L, E, t)
+        X = mesh.points / L
+
+        def bend(s):
+            R = 3.0
+            phi, r = (X[:, 0] - 2.0) / R, R - s * (X[:, 1] - 0.5)
+            return L * np.column_stack([r * np.sin(phi), s * (R - r * np.cos(phi))])
+
+        res = design_poses(mesh, mat, {"left": bend(1), "right": bend(-1)})
+        assert res.all_success
+        S = mesh.size
+        out.append(([m.nodes for m in res.muscles], res.contractions, res.strokes / S,
+                    res.tensions / (E * t * S), res.differences / S))
+    assert out[0][0] == out[1][0]
+    for u, v in zip(out[0][1:], out[1][1:]):
+        np.testing.assert_allclose(u, v, rtol=AGREE, atol=AGREE)
+
+
 def test_unit_copies_are_exact_powers_of_two_and_cached():
     mesh, mat = _body(1e-3, 1e6, 1e-3)
     u = Units(mesh, mat)

@@ -45,7 +45,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         :class:`~mdsr_opt.drags.RigidDrag` (rotate nodes through an angle about a centre, optionally with a
         shift; load stepping follows the arc), or a list of dicts and RigidDrags.
     backend : one of :func:`available_backends`.
-    tol, max_iter : solver tolerance and iteration cap per load step.
+    tol : the tolerance contract (:mod:`~mdsr_opt.mechanics.residual`): a success has its scaled KKT residual
+        (the max-norm of the free energy gradient relative to ``E t size``; ``residual``) at most ``tol``,
+        in any units (the solve runs on the body scaled to a reference size and unit stiffness,
+        :mod:`~mdsr_opt.mechanics.units`, and its results are mapped back).
+    max_iter : iteration cap per load step.
     options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
     min_step : smallest load fraction tried before giving up, in (0, 1].
     verbose : print each accepted load step.
@@ -234,6 +238,11 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         on its node alone. Used with both models.
     backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
         of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
+    tol : the tolerance contract (:mod:`~mdsr_opt.mechanics.residual`): a success has its scaled KKT residual
+        at most ``tol`` (``residual``: the Lagrangian's free gradient relative to ``E t size`` with the ropes
+        pulling only within ``tol L0`` of their targets, and the ropes' and anchor patches' violation), in
+        any units (solved on the body's unit copy, :mod:`~mdsr_opt.mechanics.units`); a state re-checked with
+        :func:`~mdsr_opt.synthesis.verify.check_minimum` at ``tol`` meets it too.
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
     initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external`; a state
         in any pose (e.g. an earlier result's ``x``) is moved rigidly into the solver's gauge frame
@@ -348,8 +357,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     res.stroke = L0 - L
     if model == "cable":
         res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
-        # slack: the path is shorter than the rope (a rope at its length with no load is taut, not slack)
-        res.slack = res.achieved > a + tol
+        # slack: no tension and the path shorter than the rope (a rope at its length with no load is taut,
+        # not slack; one a little short that still pulls, within the tolerance contract, is taut)
+        res.slack = ~taut & (res.achieved > a + tol)
     else:
         # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
         # chain's length since the anchored segments keep their rest lengths

@@ -8,20 +8,26 @@ An equilibrium of external or internal driving is accepted at tolerance ``tol`` 
 - ``stationarity = |grad E(x) + J(x)' lam|_inf / (E t S)`` over the free coordinates (``E t S`` a force:
   Young's modulus times thickness times the body's size ``S = mesh.size``), with ``lam`` the least-squares
   multipliers of the constraints (:meth:`~mdsr_opt.mechanics.constrained.ConstrainedModel.multipliers`): every
-  rigid anchor-patch row, and every rope whose path is within ``tol * L0`` of its target and whose fitted
+  rigid anchor-patch row, and every rope whose path is within ``tol L0`` of its target and whose fitted
   tension is not negative (a rope shorter than that carries no tension: complementarity to ``tol``);
   without constraints the energy gradient alone;
 - ``violation = max((L_c - T_c)_+ / L0_c, |c_rigid| / S)``: how far a rope is longer than its target
   (a strain) and how far an anchor patch is from rigid (a length over ``S``).
 
-Every place that accepts a state tests this same number against the solve's ``tol``: each load step
+Every place that accepts a state tests this same number against the solve's ``tol``: the last load step
 (:func:`~mdsr_opt.mechanics.loadsteps.load_continuation`), the saddle escape's re-solves, the result's own
 check (:func:`~mdsr_opt.mechanics.loadsteps.equilibrium_result`: ``residual``) and the design's
 verification. IPOPT is asked for the same measure (its unscaled dual infeasibility, constraint violation
-and complementarity all at most ``tol``, :func:`ipopt_tolerances`); since its multipliers are its own, not
-the least-squares ones, a state it returns above ``tol`` is polished by Newton steps on the KKT system
-(:func:`meet_tolerance`) and rejected only if they do not bring it down. A state accepted at ``tol`` is
-therefore accepted again by :func:`kkt_residual` at ``tol``.
+and complementarity at most ``tol`` too, :func:`ipopt_tolerances`); since its multipliers are its own, a
+state it returns above ``tol`` is polished by Newton steps on the KKT system (:func:`meet_tolerance`) and
+rejected only if they do not bring it down. A state accepted at ``tol`` is therefore accepted again by
+:func:`kkt_residual` at ``tol``.
+
+A rope that pulls must be at its length to ``tol``, not only to the product of its shortness and tension
+that an interior point method bounds: IPOPT's answers with a rope in the inequality form (its barrier
+keeps a taut rope short by 1e-8 to 1e-7 L0 at tol 1e-8) and those with a rope ending at its length with
+almost no tension (short by up to 1e-4 L0, the state as far off) are polished; a product measure would
+accept both as they are.
 """
 
 from __future__ import annotations
@@ -85,7 +91,7 @@ def kkt_residual(model, x, p, fixed, tol: float, force: float | None = None,
     """The scaled KKT residual of the state ``x`` (2n,) of ``model`` with parameters ``p`` (a constrained
     model's: energy parameters and rope targets; its multipliers are refitted) and ``fixed`` coordinates.
 
-    ``tol`` decides which ropes may pull (those within ``tol * L0`` of their targets); ``force`` is the
+    ``tol`` decides which ropes may pull (those within ``tol L0`` of their targets); ``force`` is the
     force scale, ``E t S`` (default: from ``p`` and the mesh); ``gradient`` the energy gradient at ``x``
     when the caller has it."""
     x = np.asarray(x, dtype=float).reshape(-1)
