@@ -192,7 +192,8 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start) of the unit problem
     ``prob``, checked, mapped to the caller's ``units`` and verified there; returns the result, the forward
     solver it used and whether the verification rejected a design the optimiser had found."""
-    mesh, material, mus, y, w = prob.mesh, prob.material, prob.muscles, prob.y, prob.w
+    mesh = units.mesh  # the caller's body; the design runs on its unit copy, umesh
+    umesh, mus, y, w = prob.mesh, prob.muscles, prob.y, prob.w
     fwd = ForwardSolver(prob, inner_tol, 200)
     t_solve0 = time.perf_counter()
 
@@ -224,10 +225,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         else:
             _J, a, x = obj.best
     build_time += fwd.build_time
-    if upright(mesh, x):  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
+    if upright(umesh, x):  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
         x = prob.polished(a, x, min(inner_tol, VERIFY_TOL))
     x2 = x.reshape(-1, 2)
-    al_rest = align(x2, mesh.points)
+    al_rest = align(x2, umesh.points)
     x_rest = al_rest.apply(x2)
     al = align(x_rest, y, w)
     t_end = time.perf_counter()
@@ -248,12 +249,12 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
-    if not upright(mesh, res.x):
+    if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
     res = _in_units(res, units)
     if verify:
-        v = verify_design(units.mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
+        v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL))
         res.verification = v
         if res.success and not v.passed:
