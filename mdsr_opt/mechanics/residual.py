@@ -178,12 +178,12 @@ def meet_tolerance(model, x, p, fixed, tol: float, force: float | None = None, u
 
     A state above ``tol`` takes up to ``max_steps`` Newton steps on the KKT system (:func:`_newton_step`),
     until its residual is below :data:`POLISH_MARGIN` x ``tol``; each is kept while it lowers the residual
-    and keeps every element upright (``upright(y)``, when given). The first step holds the ropes within ``sqrt(tol) L0`` of their targets (or longer) and those
-    whose tension (``lam``, the solver's multipliers, else fitted with every rope) relative to ``E t S`` is
-    at least their distance to the target relative to ``L0`` (the interior point's estimate of its active
-    set); a held rope that would push is released (:func:`_newton_step`). A solver
-    that stops just short of ``tol`` in this measure (its own multipliers or scaling differ) so still
-    returns a state that meets it."""
+    and keeps every element upright (``upright(y)``, when given). The first step holds the ropes within
+    ``sqrt(tol) L0`` of their targets (or longer) and those whose tension (``lam``, the solver's
+    multipliers, else fitted with every rope) relative to ``E t S`` is at least their distance to the
+    target relative to ``L0`` (the interior point's estimate of its active set); the steps correct that
+    set on the linearisation (:func:`_newton_step`). A solver that stops just short of ``tol`` in this
+    measure (its own multipliers or scaling differ) so still returns a state that meets it."""
     x = np.asarray(x, dtype=float).reshape(-1)
     fixed = np.asarray(fixed, dtype=bool)
     F = _force(model, p, force)

@@ -73,10 +73,18 @@ def unit_mesh(mesh):
     return um
 
 
+def _stiffness_units(material) -> tuple[float, float]:
+    """The powers of two ``E`` and the thickness are divided by (1 for a material that is no dataclass,
+    which cannot be copied with other numbers)."""
+    if not dataclasses.is_dataclass(material):
+        return 1.0, 1.0
+    return power_of_two(material.E), power_of_two(material.thickness)
+
+
 def unit_material(material):
     """The material with ``E`` and ``thickness`` divided by their nearest powers of two (the same kind and
     Poisson's ratio; the material itself when both powers are 1)."""
-    e, t = power_of_two(material.E), power_of_two(material.thickness)
+    e, t = _stiffness_units(material)
     if e == 1.0 and t == 1.0:
         return material
     return dataclasses.replace(material, E=material.E / e, thickness=material.thickness / t)
@@ -95,7 +103,8 @@ class Units:
         self.unit_material = unit_material(material)
         self.identity = self.unit_mesh is mesh and self.unit_material is material
         self.length = length_unit(mesh)
-        self.stiffness = power_of_two(material.E) * power_of_two(material.thickness)
+        e, t = _stiffness_units(material)
+        self.stiffness = e * t
         self.force = self.stiffness * self.length
         self.energy = self.force * self.length
 
