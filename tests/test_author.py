@@ -82,12 +82,14 @@ def test_live_drag_is_warm_and_agrees_with_a_cold_solve(tentacle):
     assert st.live and st.success and not st.warm_failed
     # every later drag reuses the model and the solvers built so far: nothing new is built
     from mdsr_opt.mechanics.model import get_model
+    from mdsr_opt.mechanics.units import Units
 
-    model = get_model(tentacle.mesh, tentacle.material)
+    unit = Units(tentacle.mesh, tentacle.material)  # the solves build on the body's unit copy
+    model = get_model(unit.unit_mesh, unit.unit_material)
     built = dict(model._solvers)
     s.set_fixed(s.anchors, s.drag_nodes, s.drag_positions + 0.5 * shift)
     st = s.drag()
-    assert st.live and st.success and get_model(tentacle.mesh, tentacle.material) is model
+    assert st.live and st.success and get_model(unit.unit_mesh, unit.unit_material) is model
     assert model._solvers.keys() == built.keys() and all(model._solvers[k] is built[k] for k in built)
     assert s.target is None  # a live state is not a target until it is settled
     ref = solve_external(tentacle.mesh, tentacle.material, s.anchors, (s.drag_nodes, s.drag_positions))

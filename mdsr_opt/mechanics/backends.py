@@ -34,6 +34,7 @@ import numpy as np
 
 from ..core.guards import captured_stdout, check_stop, interruptible, quiet_stdout
 from . import ropesolve
+from .residual import ipopt_tolerances
 from .result import MinimizeOutcome, solver_status
 from .stopping import with_stop_callback
 from .stability import STEP_RTOL, ipopt_certifies_minimum
@@ -69,7 +70,9 @@ def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
 
 
 def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
-    o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": tol,
+    # the unscaled tolerances too: IPOPT's own "tol" bounds its scaled problem (gradient-based scaling), the
+    # package accepts the scaled KKT residual at tol (mdsr_opt.mechanics.residual)
+    o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", **ipopt_tolerances(tol),
          "ipopt.max_iter": max_iter, "ipopt.linear_solver": linear_solver, "error_on_fail": False,
          # multipliers of bounds and parameters are not used: skip their extra derivative evaluations
          "calc_lam_p": False, "calc_lam_x": False,

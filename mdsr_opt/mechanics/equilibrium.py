@@ -22,8 +22,10 @@ from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
                         upright)
 from .model import get_model, spring_parameters
+from .residual import kkt_residual
 from .result import EquilibriumResult
 from .stability import check_stability
+from .units import Units
 
 __all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_frame', 'gauge_coordinates']
 
@@ -48,7 +50,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         once, also when dragged twice to the same place (:func:`~mdsr_opt.core.checks.node_indices`); no node
         is both anchored and dragged.
     backend : one of :func:`available_backends`.
-    tol, max_iter : solver tolerance and iteration cap per load step.
+    tol : the tolerance contract (:mod:`~mdsr_opt.mechanics.residual`): a success has its scaled KKT residual
+        (the max-norm of the free energy gradient relative to ``E t size``; ``residual``) at most ``tol``,
+        in any units (the solve runs on the body scaled to a reference size and unit stiffness,
+        :mod:`~mdsr_opt.mechanics.units`, and its results are mapped back).
+    max_iter : iteration cap per load step.
     options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
     min_step : smallest load fraction tried before giving up, in (0, 1].
     verbose : print each accepted load step.
@@ -89,6 +95,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         raise ValueError("external driving needs at least two fixed nodes (anchors + drags) to remove rigid "
                          "motion; got 1")
     t0 = time.perf_counter()
+    units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
+    mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
     p = model.params(material)
@@ -99,14 +107,15 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     anchored = mesh.points[anc]
 
     def values_of(s):  # fixed coordinates at load s, in the order of the mask (anchors, then drag paths)
-        at = np.vstack([anchored, path.positions(s)])
+        at = np.vstack([anchored, units.to_unit(path.positions(s))])
         return np.concatenate([at[:, 0], at[:, 1]])[order]
 
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
-        mesh, model, lambda s: p, fixed, values_of, x_start, backend, tol, max_iter, options, min_step, verbose,
-        predict)
-    return equilibrium_result(mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve,
-                   backend, "external")
+        mesh, model, lambda s: p, fixed, values_of, units.state_in(x_start), backend, tol, max_iter, options,
+        min_step, verbose, predict)
+    return units.equilibrium_out(equilibrium_result(
+        mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve, backend,
+        "external", tol))
 
 
 def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
@@ -132,7 +141,9 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     n = mesh.n_nodes
     anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=n)
     nodes = np.union1d(anc, drag_path(drags, mesh).nodes)
-    xflat = mesh._check_state(x).reshape(-1)
+    units = Units(mesh, material)  # checked on the unit body (size 1, E t = 1)
+    xflat = units.state_in(mesh._check_state(x).reshape(-1))
+    mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     p = model.params(material)
     fixed = np.zeros(2 * n, dtype=bool)
@@ -140,7 +151,7 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     g = model.gradient(xflat, p)
     residual = float(np.abs(g[~fixed]).max()) / (material.E * material.thickness * mesh.size) \
         if (~fixed).any() else 0.0
-    return check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest), residual
+    return units.stability_out(check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest)), residual
 
 
 # ---------------------------------------------------------------------------------- internal driving
@@ -229,6 +240,11 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         on its node alone. Used with both models.
     backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
         of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
+    tol : the tolerance contract (:mod:`~mdsr_opt.mechanics.residual`): a success has its scaled KKT residual
+        at most ``tol`` (``residual``: the Lagrangian's free gradient relative to ``E t size`` with the ropes
+        pulling only within ``tol L0`` of their targets, and the ropes' and anchor patches' violation), in
+        any units (solved on the body's unit copy, :mod:`~mdsr_opt.mechanics.units`); a state re-checked with
+        :func:`~mdsr_opt.synthesis.verify.check_minimum` at ``tol`` meets it too.
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
     initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external`; a state
         in any pose (e.g. an earlier result's ``x``) is moved rigidly into the solver's gauge frame
@@ -280,6 +296,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         if moved is not None:
             x_start = moved.reshape(-1)
     n = mesh.n_nodes
+    units = Units(mesh, material)  # solved on the unit body (size and E t about 1), mapped back
+    mesh, material = units.unit_mesh, units.unit_material
+    radius_given, radius, x_start = radius, units.to_unit(radius), units.state_in(x_start)
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
     k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
     if np.any(a * a_fac >= 1.0):
@@ -288,7 +307,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                          f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
     constrained = model == "cable" or len(rigid_groups(mesh, mus, radius)) > 0
     if constrained and not supports_constraints(backend):
-        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius:g})"
+        why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius_given:g})"
         raise ValueError(f"backend {backend!r} cannot take constraints, which {why} needs; use one of "
                          f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
                                                                  ", or anchor_radius=0"))
@@ -320,14 +339,17 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     p1 = p_of(1.0)
     p_el = p_el0
     taut = np.ones(len(mus), dtype=bool)
-    if cm is not None:
-        lam, taut_c = cm.multipliers(x, p1, fixed)
+    residual = None
+    if cm is not None:  # the multipliers of the tolerance contract's residual (ropes within tol of their targets)
+        kkt = kkt_residual(cm, x, p1, fixed, tol, material.E * material.thickness * mesh.size)
+        lam, residual = kkt.lam, kkt.value
         if model == "cable":
-            taut = taut_c
+            taut = kkt.taut
         p1 = cm.params(cm.split(p1)[0], cm.split(p1)[1], lam)
         p_el = cm.params(p_el0, cm.split(p1)[1])
     res = equilibrium_result(mesh, solver_model, material, p1, p_el, x, fixed, status, ok, iters, steps,
-                  t_model + t_build, t_solve, backend, "internal", check_stability=bool(check_stability))
+                  t_model + t_build, t_solve, backend, "internal", tol, check_stability=bool(check_stability),
+                  residual=residual)
     res.muscle_model = model
     res.anchor_radius = radius
     res.rest_lengths = L0.copy()
@@ -337,24 +359,27 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     res.stroke = L0 - L
     if model == "cable":
         res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
-        # slack: the path is shorter than the rope (a rope at its length with no load is taut, not slack)
-        res.slack = res.achieved > a + 1e-7
+        # slack: no tension and the path shorter than the rope (a rope at its length with no load is taut,
+        # not slack; one a little short that still pulls, within the tolerance contract, is taut)
+        res.slack = ~taut & (res.achieved > a + tol)
     else:
         # the springs' mean force over the free segments, K (L_free / L0_free - (1 - a')), from the whole
         # chain's length since the anchored segments keep their rest lengths
         res.tension = K * a_fac * (a - res.achieved)
         res.slack = res.tension <= 0.0
     if cm is not None and res.success:
-        _check_feasible(res, cm, x, p1, mesh)
+        _check_feasible(res, cm, x, p1, mesh, tol)
     if align_to_rest:
         al = align(res.x, mesh.points)
         res.x = al.apply(res.x)
         res.rotation, res.translation = al.R, al.t
-    return res
+    return units.equilibrium_out(res)
 
 
-def _check_feasible(res, cm, x, p, mesh, rtol: float = 1e-7) -> None:
-    """Reject a constrained solution whose ropes are longer than their targets or whose anchors deformed."""
+def _check_feasible(res, cm, x, p, mesh, rtol: float) -> None:
+    """Reject a constrained solution whose ropes are longer than their targets by more than ``rtol L0`` or
+    whose anchors deformed by more than ``rtol`` x size (the violation part of the scaled KKT residual,
+    :func:`~mdsr_opt.mechanics.residual.kkt_residual`, named)."""
     v = cm.values(x)
     _, targets, _ = cm.split(p)
     nt = cm.n_targets

@@ -14,6 +14,7 @@ from .backends import check_backend, minimize
 from .blas import one_blas_thread
 from .drags import RigidDrag, drag_path
 from .kkt import OrderedFactor
+from .residual import kkt_residual, meet_tolerance
 from .result import EquilibriumResult
 from .stability import certified_minimum, check_stability
 
@@ -220,9 +221,11 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
             # a step that needs many iterations is usually too long: give it STEP_ITER_CAP and halve it
             # instead of spending the whole budget; near min_step the whole budget (nothing shorter to try)
             cap = max_iter if ds < 4 * min_step else min(max_iter, STEP_ITER_CAP)
-            out = minimize(model, p, guess, fixed, vals, backend=backend,
-                           tol=tol if s_new >= 1.0 else max(tol, loose), max_iter=cap,
-                           options=options)
+            if s_new >= 1.0:  # the state returned: held to the tolerance contract
+                out = solve_step(mesh, model, p, guess, fixed, vals, backend, tol, cap, options)
+            else:  # a state that only starts the next step, solved to a looser tolerance
+                out = minimize(model, p, guess, fixed, vals, backend=backend, tol=max(tol, loose), max_iter=cap,
+                               options=options)
             iters += out.iterations
             t_solve += out.solve_time
             t_build += out.build_time
@@ -240,6 +243,24 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
         x, note, ok, it, t = _settle(mesh, model, p_of(1.0), fixed, values_of(1.0), x, backend, tol, max_iter,
                                      options, verbose, certified)
     return x, status + note, ok, iters + it, steps, t_solve + t, t_build
+
+
+def solve_step(mesh, model, p, guess, fixed, values, backend, tol, max_iter, options):
+    """One solve of a load step (:func:`~mdsr_opt.mechanics.backends.minimize`) held to the tolerance
+    contract: a state the backend calls converged is accepted only when its scaled KKT residual
+    (:func:`~mdsr_opt.mechanics.residual.kkt_residual`) is at most ``tol``, after Newton polishing if it
+    stopped short (:func:`~mdsr_opt.mechanics.residual.meet_tolerance`); otherwise it is a failure naming
+    the residual. A polished state loses IPOPT's certificate of a minimum (the stability check decides)."""
+    out = minimize(model, p, guess, fixed, values, backend=backend, tol=tol, max_iter=max_iter, options=options)
+    if out.success and upright(mesh, out.x):
+        x, res, polished = meet_tolerance(model, out.x, p, fixed, tol, upright=lambda y: upright(mesh, y),
+                                          lam=out.lam_g)
+        if polished:
+            out.x, out.certified = x, False
+        if not res.value <= tol:
+            out.success = False
+            out.status += f"; rejected: residual {res.value:.3g} > tol {tol:.3g}"
+    return out
 
 
 #: saddle escape: re-solves from perturbed states, and the perturbation's largest node move / body size
@@ -323,7 +344,7 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
         y = _kick(mesh, model, p, x, chk.direction, scale)
         if y is None:
             break
-        out = minimize(model, p, y, fixed, values, backend=backend, tol=tol, max_iter=max_iter, options=options)
+        out = solve_step(mesh, model, p, y, fixed, values, backend, tol, max_iter, options)
         iters += out.iterations
         if not (out.success and upright(mesh, out.x)):
             scale /= 2  # keep x and try a smaller kick
@@ -343,7 +364,11 @@ def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, v
 
 
 def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status, success, iters, steps, t_build, t_solve,
-            backend, mode, tol_residual=1e-5, check_stability=True):
+            backend, mode, tol, check_stability=True, residual=None):
+    """The checked :class:`EquilibriumResult` of a state: a success only when the solve succeeded, every
+    element is upright, the scaled KKT residual is at most ``tol`` (``residual``, the value of
+    :func:`~mdsr_opt.mechanics.residual.kkt_residual` when the caller has it: with constraints; else the
+    energy gradient's) and the state is stable (unless ``check_stability=False``)."""
     if getattr(model, "is_numeric", False):  # an EnergyModel in numpy: energy and gradient from one object
         en = model.numeric(p)
         energy, g = float(en.energy(xflat)), en.gradient(xflat)
@@ -351,13 +376,14 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
         f, g = model.grad_fn(xflat, p)
         energy, g = float(f), np.asarray(g).ravel()
     else:
-        g, energy = model.gradient(xflat, p), model.energy(xflat, p)
-    scale = material.E * material.thickness * mesh.size
-    residual = float(np.abs(g[~fixed]).max()) / scale if (~fixed).any() else 0.0
+        g, energy = None, model.energy(xflat, p)
+    if residual is None:
+        residual = kkt_residual(model, xflat, p, fixed, tol, material.E * material.thickness * mesh.size,
+                                gradient=g).value
     mj = min_jacobian(mesh, xflat)
-    ok = bool(success and mj > 0 and residual <= tol_residual)
+    ok = bool(success and mj > 0 and residual <= tol)
     if success and not ok:
-        status = f"{status}; rejected: residual {residual:.3g}, min J {mj:.3g}"
+        status = f"{status}; rejected: residual {residual:.3g} (tol {tol:.3g}), min J {mj:.3g}"
     chk = None
     if check_stability and (ok or "not a stable equilibrium" in status):  # the continuation's (cached), or fresh
         with one_blas_thread():

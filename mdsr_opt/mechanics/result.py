@@ -29,8 +29,10 @@ class EquilibriumResult:
     success : solver converged, residual small and no element inverted.
     status : solver status text (or the reason for failure).
     iterations : solver iterations summed over load steps.
-    residual : max-norm of the energy gradient over the free coordinates, relative to ``E t size``; with
-        muscle constraints that of the Lagrangian (least-squares multipliers): the KKT residual.
+    residual : the scaled KKT residual (:func:`~mdsr_opt.mechanics.residual.kkt_residual`): the max-norm of
+        the energy gradient over the free coordinates, relative to ``E t size``; with muscle constraints that
+        of the Lagrangian (least-squares multipliers, ropes pulling only within ``tol L0`` of their targets)
+        or the constraints' violation, whichever is larger. At most ``tol`` in a success.
     min_J : smallest element ``det F``.
     steps : load fractions accepted (``[1.0]`` when no stepping was needed).
     build_time, solve_time : seconds spent building the model/solver (0 when reused) and solving.

@@ -18,6 +18,7 @@ from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
 from ..mechanics.loadsteps import upright
+from ..mechanics.units import Units
 from .nlp import run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, report_muscles
@@ -95,7 +96,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     options : dict, optional
         Extra options for IPOPT (flattened, without the ``ipopt.`` prefix) or scipy's ``minimize``.
     inner_tol : float
-        IPOPT tolerance of the forward solves.
+        Tolerance of the forward solves (the scaled KKT residual of :func:`~mdsr_opt.solve_internal`); the
+        verification uses it too, or the solver's default 1e-8 when that is tighter.
     verify : bool
         Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only, and
         nothing checks that the design's state is stable or reached from rest: the warm start from the
@@ -157,10 +159,14 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if a0 is None:
         a0 = initial_guess_of(mesh, mus, y, a_max)
 
-    prob = DesignProblem(mesh, material, mus, y, w, muscle_model, stiffness, a_max, anchor_radius)
+    # designed on the unit body (size and E t about 1: every tolerance means the same in any units), the
+    # result mapped back to the caller's units before its verification
+    units = Units(mesh, material)
+    prob = DesignProblem(units.unit_mesh, units.unit_material, mus, units.state_in(y), w, muscle_model, stiffness,
+                         a_max, units.to_unit(anchor_radius))
     warm = "target" if warm_start is True else warm_start
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol)
+            verify, gap_rtol, units)
     res, fwd, rejected = _design(*args, warm=warm)
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
@@ -184,11 +190,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, warm) -> tuple[DesignResult, ForwardSolver, bool]:
-    """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start), checked and
-    verified; returns the result, the forward solver it used and whether the verification rejected a
-    design the optimiser had found."""
-    mesh, material, mus, y, w = prob.mesh, prob.material, prob.muscles, prob.y, prob.w
+            verify, gap_rtol, units, warm) -> tuple[DesignResult, ForwardSolver, bool]:
+    """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start) of the unit problem
+    ``prob``, checked, mapped to the caller's ``units`` and verified there; returns the result, the forward
+    solver it used and whether the verification rejected a design the optimiser had found."""
+    mesh = units.mesh  # the caller's body; the design runs on its unit copy, umesh
+    umesh, mus, y, w = prob.mesh, prob.muscles, prob.y, prob.w
     fwd = ForwardSolver(prob, inner_tol, 200)
     t_solve0 = time.perf_counter()
 
@@ -220,8 +227,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         else:
             _J, a, x = obj.best
     build_time += fwd.build_time
+    if upright(umesh, x):  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
+        x = prob.polished(a, x, min(inner_tol, VERIFY_TOL))
     x2 = x.reshape(-1, 2)
-    al_rest = align(x2, mesh.points)
+    al_rest = align(x2, umesh.points)
     x_rest = al_rest.apply(x2)
     al = align(x_rest, y, w)
     t_end = time.perf_counter()
@@ -243,17 +252,40 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
-    if not upright(mesh, res.x):
+    if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
+    res = _in_units(res, units)
     if verify:
-        v = verify_design(mesh, material, mus, res, y, weights=w, gap_rtol=gap_rtol)
+        v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
+                          tol=min(inner_tol, VERIFY_TOL))
         res.verification = v
         if res.success and not v.passed:
             res.success = False
             res.status += f"; rejected by verification: {v.message}"
             return res, fwd, True
     return res, fwd, False
+
+
+#: the verification's tolerance when the forward solves' ``inner_tol`` is looser: ``solve_internal``'s
+#: default, so that a verified design solves forward with the defaults too
+VERIFY_TOL = 1e-8
+
+
+def _in_units(res: DesignResult, units) -> DesignResult:
+    """A design of the unit problem in the caller's units (in place; returned): lengths times
+    ``units.length``, tensions times ``units.force``."""
+    if units.identity:
+        return res
+    L = units.length
+    res.x = res.x * L
+    res.translation = res.translation * L
+    res.difference, res.initial_difference = res.difference * L, res.initial_difference * L
+    res.history = [(t, d * L) for t, d in res.history]
+    res.anchor_radius = res.anchor_radius * L
+    res.rest_lengths, res.stroke = res.rest_lengths * L, res.stroke * L
+    res.tension = res.tension * units.force
+    return res
 
 
 def check_design_options(options, method: str = "flattened", outer: str = "nelder-mead") -> dict:

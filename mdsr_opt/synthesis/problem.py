@@ -16,8 +16,10 @@ from ..mechanics.align import align, node_weights
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
 from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
-from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material
+from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
+from ..mechanics.constrained import ConstrainedModel
 from ..mechanics.model import get_model, to_dm
+from ..mechanics.residual import kkt_residual, meet_tolerance
 
 
 # ---------------------------------------------------------------------------------------------- the problem
@@ -122,6 +124,44 @@ class DesignProblem:
         kap = blk.multipliers(xflat, g, self.free)
         J = blk.jacobian(xflat)
         return kap, J, float(np.abs((g + J.T @ kap)[self.free]).max())
+
+    def _contract(self, a):
+        """``(model, p)`` of the tolerance contract at contractions ``a``: the energy model or, with muscle
+        constraints, a :class:`~mdsr_opt.mechanics.constrained.ConstrainedModel` with the rope targets."""
+        cable = self.muscle_model == "cable"
+        if not cable and not self.constraints.n_rigid:
+            return self.model, self.params(a)
+        cm = self.__dict__.get("_constrained")
+        if cm is None:
+            cm = self.__dict__["_constrained"] = ConstrainedModel(self.model, self.constraints, cable)
+        return cm, cm.params(self.params(a), (1.0 - np.asarray(a, dtype=float)) * self.L0 if cable else None)
+
+    def polished(self, a, xflat, tol: float) -> np.ndarray:
+        """The driven state ``xflat`` at contractions ``a`` in the solver's gauge frame, polished by Newton
+        steps on the KKT system when its scaled KKT residual is above ``tol``
+        (:func:`~mdsr_opt.mechanics.residual.meet_tolerance`): the design NLP meets its equilibrium rows to
+        its own tolerance and scaling, the verification asks the forward solver's measure."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        moved = in_gauge_frame(self.mesh, xflat.reshape(-1, 2))
+        if moved is None:
+            return xflat
+        model, p = self._contract(a)
+        return meet_tolerance(model, moved.reshape(-1), p, self.fixed, tol, self.Et * self.mesh.size,
+                              upright=lambda y: upright(self.mesh, y))[0]
+
+    def kkt_residual(self, a, xflat, tol: float) -> float:
+        """The scaled KKT residual of the driven state ``xflat`` at contractions ``a``, as
+        :func:`~mdsr_opt.solve_internal` accepts its states at ``tol``
+        (:func:`~mdsr_opt.mechanics.residual.kkt_residual`: the Lagrangian's free gradient over ``E t size``,
+        ropes pulling only within ``tol L0`` of their targets, and the constraints' violation), evaluated
+        in the solver's gauge frame (:func:`~mdsr_opt.mechanics.equilibrium.in_gauge_frame`: a state aligned
+        to rest is checked where the solver had it)."""
+        xflat = np.asarray(xflat, dtype=float).reshape(-1)
+        moved = in_gauge_frame(self.mesh, xflat.reshape(-1, 2))
+        if moved is not None:
+            xflat = moved.reshape(-1)
+        model, p = self._contract(a)
+        return kkt_residual(model, xflat, p, self.fixed, tol, self.Et * self.mesh.size).value
 
     def achieved(self, x2) -> np.ndarray:
         """Achieved contraction ``1 - L / L0`` of every muscle along its node chain in state ``x2``."""

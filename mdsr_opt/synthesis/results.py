@@ -25,7 +25,7 @@ class Verification:
     ----------
     passed : bool
         The forward re-solve succeeded, its gap to the design's state is within ``gap_tol`` and the design's
-        state is a strict minimum.
+        state is an equilibrium (``residual`` within the verification's ``tol``) and a strict minimum.
     gap : float
         Largest node distance between the design's state and the forward re-solve at the same contractions
         (started from rest, or from the design's state with ``verify_design(start="design")``), after rigidly
@@ -37,8 +37,10 @@ class Verification:
     forward_difference : float
         Difference index of the forward re-solve to the target.
     residual : float
-        Max-norm of the energy gradient on the free coordinates at the design's state, relative to
-        ``E t size``.
+        The scaled KKT residual of the design's state at its contractions
+        (:func:`~mdsr_opt.mechanics.residual.kkt_residual`: the max-norm of the Lagrangian's gradient on the
+        free coordinates relative to ``E t size``, and the constraints' violation), at most the
+        verification's ``tol`` when it passed.
     positive_definite : bool
         The free-coordinate Hessian at the design's state is positive definite (every pivot of its
         symmetric factorisation is positive); when the forward re-solve lands within

@@ -10,11 +10,13 @@ from numpy.typing import ArrayLike
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
-from ..core.checks import as_float_array
+from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
+from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_internal
 from ..mechanics.loadsteps import check_mesh_material, upright
 from ..mechanics.stability import check_stability
+from ..mechanics.units import Units
 from .problem import DesignProblem
 from .results import DesignResult, Verification
 
@@ -28,7 +30,8 @@ SAME_STATE_RTOL = 1e-9
 
 def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
                   muscle_model: str = "cable", stiffness: float = 10.0,
-                  anchor_radius: float | None = None, lowest: bool = True) -> tuple[bool, float, float]:
+                  anchor_radius: float | None = None, lowest: bool = True,
+                  tol: float = 1e-8) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
     With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
@@ -38,10 +41,14 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     is positive definite, from the inertia of a sparse symmetric factorisation
     (:func:`~mdsr_opt.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
     relative to ``E t`` (when positive definite an estimate by LOBPCG preconditioned by the factor; else the
-    curvature along the direction of most negative curvature found, an upper bound); and the max-norm of the
-    free gradient of the Lagrangian relative to ``E t size``. With ``lowest=False`` the eigenvalue estimate
-    is skipped when the state is positive definite (NaN returned; the inertia alone decides, 30-100x cheaper
-    at thousands of nodes).
+    curvature along the direction of most negative curvature found, an upper bound); and the scaled KKT
+    residual that :func:`~mdsr_opt.solve_internal` accepts its states by
+    (:func:`~mdsr_opt.mechanics.residual.kkt_residual`: the max-norm of the free gradient of the Lagrangian
+    relative to ``E t size``, ropes pulling only within ``tol L0`` of their targets, and the constraints'
+    violation): a state ``solve_internal`` returned as a success at ``tol`` has it at most ``tol``. With
+    ``lowest=False`` the eigenvalue estimate is skipped when the state is positive definite (NaN returned;
+    the inertia alone decides, 30-100x cheaper at thousands of nodes). The check runs on the body scaled to
+    unit size and stiffness (:class:`~mdsr_opt.mechanics.units.Units`).
 
     Example
     -------
@@ -61,34 +68,40 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     if muscle_model == "cable":
         check_distinct_ropes(mus)
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
-    x = mesh._check_state(x)
-    prob = DesignProblem(mesh, material, mus, x, np.ones(mesh.n_nodes), muscle_model, stiffness, 0.99,
-                    anchor_radius=anchor_radius)
-    return _stability(prob, a, x.reshape(-1), lowest=bool(lowest))
+    tol = positive_float(tol, "tol")
+    radius = check_anchor_radius(mesh, anchor_radius)
+    units = Units(mesh, material)  # checked on the unit body (size and E t about 1)
+    x = units.state_in(mesh._check_state(x))
+    prob = DesignProblem(units.unit_mesh, units.unit_material, mus, x, np.ones(mesh.n_nodes), muscle_model,
+                         stiffness, 0.99, anchor_radius=units.to_unit(radius))
+    return _stability(prob, a, x.reshape(-1), tol, lowest=bool(lowest))
 
 
-def _stability(prob: DesignProblem, a, xflat, lowest: bool = True) -> tuple[bool, float, float]:
+def _stability(prob: DesignProblem, a, xflat, tol: float, lowest: bool = True) -> tuple[bool, float, float]:
     """``(positive_definite, min_eigenvalue / (E t), residual)`` at ``xflat`` (see :func:`check_minimum`).
 
     The gauge coordinates are pinned (the energy is invariant under rigid motion); with muscle constraints
     the Hessian is the Lagrangian's with least-squares multipliers, on the tangent space of the active
     rows (:meth:`DesignProblem.kkt_data`, in units of ``E t h``)."""
-    H, free, A, _kap, res = prob.kkt_data(a, xflat)
+    H, free, A, _kap, _res = prob.kkt_data(a, xflat)
     chk = check_stability(H, free, A, lowest=lowest, order=prob.model.free_ordering(free))
     lam = float(chk.curvature) * prob.h if chk.curvature is not None else (0.0 if not chk.stable else np.nan)
-    return bool(chk.stable), lam, res * prob.h / prob.mesh.size
+    return bool(chk.stable), lam, prob.kkt_residual(a, xflat, tol)
 
 
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
                   weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
-                  drags=None, lowest: bool = False, start: str = "rest") -> Verification:
+                  drags=None, lowest: bool = False, start: str = "rest", tol: float = 1e-10) -> Verification:
     """Check a design independently of how it was found.
 
     Solves the forward internal-driving problem at ``result.contractions`` (:func:`~mdsr_opt.solve_internal`:
     energy minimised under the muscles' constraints, then its stability check), measures the largest node
     distance between that state and ``result.x`` after rigid alignment, and checks that ``result.x`` is a
-    strict minimum of the energy (:func:`check_minimum`). Passes when the forward solve succeeded, the gap
-    is at most ``gap_rtol * mesh.size`` and the (reduced) Hessian is positive definite.
+    strict minimum of the energy (:func:`check_minimum`). Passes when the forward solve succeeded at ``tol``,
+    the gap is at most ``gap_rtol * mesh.size``, the design's state is an equilibrium at ``tol`` (its scaled
+    KKT residual, the measure ``solve_internal`` accepts its states by, at most ``tol``) and the (reduced)
+    Hessian is positive definite. ``tol`` (default 1e-10) is at least as tight as ``solve_internal``'s
+    default, so a verified design solves forward as a success with ``solve_internal``'s defaults too.
 
     ``start="rest"`` (default) load-steps from the rest shape, as a servo pulling the ropes from rest would:
     it asks that contracting the muscles from rest reaches this state rather than another stable one (a
@@ -133,33 +146,40 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     if result.muscle_model == "cable":
         check_distinct_ropes(mus)
     a = np.asarray(result.contractions, dtype=float)
+    tol = positive_float(tol, "tol")
     x = mesh._check_state(result.x)
     radius = getattr(result, "anchor_radius", None)
     radius = None if radius is None or not np.isfinite(radius) else float(radius)
+    radius = check_anchor_radius(mesh, radius)
     target_check = None
     if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
-    prob = DesignProblem(mesh, material, mus, y, w, result.muscle_model, result.stiffness, 0.99, anchor_radius=radius)
     gap_tol = gap_rtol * mesh.size
+    # the checks run on the unit body (size and E t about 1); lengths are reported in the caller's units
+    units = Units(mesh, material)
+    L, size = units.length, mesh.size
+    mesh, material, x = units.unit_mesh, units.unit_material, units.state_in(x)
+    prob = DesignProblem(mesh, material, mus, units.state_in(y), w, result.muscle_model, result.stiffness, 0.99,
+                         anchor_radius=units.to_unit(radius))
     guess = in_gauge_frame(mesh, x) if start == "design" else None
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), muscle_model=result.muscle_model,
-                         stiffness=result.stiffness, anchor_radius=radius, tol=1e-10,
+                         stiffness=result.stiffness, anchor_radius=prob.anchor_radius, tol=tol,
                          initial_guess="predictor" if guess is None else guess)
     fx = fwd.x
     al = align(x, fx)
-    gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max())
-    fdiff = align(fx, y, w).difference
+    gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max()) * L
+    fdiff = align(fx, prob.y, w).difference * L
     # the design's own state, expressed in the gauge frame used by the model
     xg = x.reshape(-1)
     inverted = not upright(mesh, x)
     if inverted:  # no energy there (log det F): not a minimum, and no Hessian to factorise
         pd, lam, residual = False, float("nan"), float("nan")
-    elif fwd.success and gap <= SAME_STATE_RTOL * mesh.size and not lowest:
+    elif fwd.success and gap <= SAME_STATE_RTOL * size and not lowest:
         # the forward solve reached the design's state (up to a rigid motion, which leaves the energy and
         # its curvature as they are) and found it a strict minimum: its check answers for both
-        pd, lam, residual = True, np.nan, prob.stationarity(a, xg)[2] * prob.h / mesh.size
+        pd, lam, residual = True, np.nan, prob.kkt_residual(a, xg, tol)
     else:
-        pd, lam, residual = _stability(prob, a, xg, lowest=bool(lowest))
+        pd, lam, residual = _stability(prob, a, xg, tol, lowest=bool(lowest))
     msgs = []
     if not fwd.success:
         msgs.append(f"forward re-solve failed ({fwd.status})")
@@ -167,9 +187,13 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
     if inverted:
         msgs.append("the design's state inverts an element (det F <= 0)")
-    elif not pd:
-        msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
-                    f"along its direction of negative curvature)")
+    else:
+        if not residual <= tol:
+            msgs.append(f"the design's state is not an equilibrium at its contractions (scaled KKT residual "
+                        f"{residual:.3g} > tol {tol:.3g})")
+        if not pd:
+            msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
+                        f"along its direction of negative curvature)")
     if target_check is not None and not target_check.stable:
         msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
                     f"direction(s) of negative curvature, {target_check.n_zero} zero)")
