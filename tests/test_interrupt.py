@@ -78,6 +78,23 @@ res = design_contractions(mesh, mat, mus, target, **kw)
 print("returned", res.success, res.status, time.perf_counter() - t0, flush=True)
 """
 
+# the same design, whose process sends itself SIGINT from inside IPOPT's third iteration of the second design
+# (the iteration callback is the one place Python runs between IPOPT's iterations): no timing guess, so the
+# interrupt lands inside IPOPT however busy the machine is
+_DESIGN_SIGNALLED_INSIDE_IPOPT = _LONG_DESIGN.replace(
+    'print("ready"',
+    "import os, signal\n"
+    "import mdsr_opt.mechanics.stopping as stopping\n"
+    "_asked, _calls = stopping.stop_requested, []\n"
+    "def _third_iteration_signals():\n"
+    "    _calls.append(1)\n"
+    "    if len(_calls) == 3:\n"
+    "        print('signal', time.time(), flush=True)\n"
+    "        os.kill(os.getpid(), signal.SIGINT)\n"
+    "    return _asked()\n"
+    "stopping.stop_requested = _third_iteration_signals\n"
+    'print("ready"')
+
 
 # the issue's case: a strip's left end clamped, its right end turned by 60 degrees and moved, solved again and
 # again with other turns until interrupted (so the solve is running at any delay, on any machine). Each
@@ -232,10 +249,16 @@ def test_an_error_replacing_a_swallowed_interrupt_becomes_the_interrupt():
 
 def test_sigint_during_a_design_raises_keyboard_interrupt_promptly():
     """The flattened design's IPOPT call: CasADi swallows the interrupt; the design raises it, no result."""
-    rc, out, err, elapsed = _run_and_interrupt("ipopt", nx=120, ny=30, script=_LONG_DESIGN)
-    assert "KeyboardInterruptException" in err  # CasADi's note: the interrupt landed inside IPOPT
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    out, err = subprocess.Popen([sys.executable, "-c", _DESIGN_SIGNALLED_INSIDE_IPOPT.format(nx=120, ny=30)],
+                                cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True).communicate(timeout=300)
+    t_exit = time.time()
+    sent = [line.split() for line in out.splitlines() if line.startswith("signal")]
+    assert len(sent) == 1, (out, err[-2000:])  # the signal was sent from inside the second design's IPOPT
     assert "returned" not in out, out
-    assert rc != 0 and "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
+    assert "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
+    elapsed = t_exit - float(sent[0][1])
     assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
