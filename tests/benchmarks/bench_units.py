@@ -143,7 +143,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--resolve", action="store_true", help="item 6: re-solves of verified designs (see above)")
     ap.add_argument("--scaled", action="store_true", help="item 7: scaled copies of cable solves (see above)")
-    ap.add_argument("--seeds", nargs="+", type=int, default=[3])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[3], help="random seeds of the generated cases")
     ap.add_argument("--cases", type=int, default=20, help="random cases per body and seed")
     ap.add_argument("--tree", default=str(ROOT), help="source tree to measure (default: this script's)")
     a = ap.parse_args(argv)
