@@ -209,3 +209,20 @@ def test_no_module_uses_process_machinery():
         "3 gc.freeze", "4 '/proc/self/maps'", "5 os.fork", "6 from sys import"]
     bad = {name: found for name, path in _modules().items() if (found := _machinery(path.read_text()))}
     assert bad == {}
+
+
+#: warnings that announce an old spelling kept for a while: nothing was released, so none is kept
+DEPRECATIONS = {"DeprecationWarning", "PendingDeprecationWarning", "FutureWarning"}
+
+
+def test_no_module_keeps_deprecated_spellings():
+    """No module issues (or names) a deprecation warning, and the keyword-renaming shim is gone."""
+    bad = []
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            ident = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else None
+            if ident in DEPRECATIONS:
+                bad.append(f"{name}:{node.lineno} {ident}")
+    assert bad == []
+    assert not (PKG / "core" / "deprecation.py").exists()
+    assert not any("deprecat" in p.read_text().lower() for p in _modules().values())

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from ..body.io import write_json, write_mesh
-from ..core.deprecation import renamed_keywords
 
 __all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS", "WouldReplace"]
 
@@ -84,10 +83,9 @@ def _plain(v):
     return v
 
 
-@renamed_keywords(folder="out")
 def save_scene(session, out, name: str | None = None, *, overwrite=True) -> list[str]:
-    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created; ``folder=`` is its
-    deprecated spelling); returns the two paths.
+    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created); returns the two
+    paths.
 
     ``overwrite``: ``True`` replaces existing files; ``False``, or a function of a path returning whether
     that existing file may be replaced, raises :class:`WouldReplace` (before anything is written) for the

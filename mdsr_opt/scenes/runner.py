@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 import numpy as np
 
-from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
@@ -182,7 +181,6 @@ def _edge_set(muscles) -> set:
     return {(min(a, b), max(a, b)) for m in muscles for a, b in m.segments.tolist()}
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
              photo_size: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
              prefix: str = "", prototype: Any = None) -> CaseRun:
@@ -341,10 +339,9 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
     rep.times["photo"] = time.perf_counter() - t2
 
 
-@renamed_keywords(folder="out")
 def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
-    """Write a case's figures, meshes and photograph into the folder ``out`` (created; ``folder=`` is its
-    deprecated spelling); returns the file names.
+    """Write a case's figures, meshes and photograph into the folder ``out`` (created); returns the file
+    names.
 
     Files: ``target.png`` (target with anchors and drags), ``graph.png`` (contraction graph),
     ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..core.errors import checking_input, exit_report
-from ..core.deprecation import renamed_keywords
 from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -46,7 +45,6 @@ def scene_pool(workers: int | None = None):
     return process_pool(workers, JOB_MODULES, setup=(adopt_noted_folders, (noted_folders(),)))
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
@@ -68,8 +66,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     method : design method overriding the scene's ``design_options["method"]``.
     photos, figures, animations : turn the photographs, the figures and the animations off.
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
-    photo_size : (width, height) of the synthetic photographs, in pixels (``photo_resolution=`` is its
-        deprecated spelling).
+    photo_size : (width, height) of the synthetic photographs, in pixels.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
@@ -143,7 +140,6 @@ def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
     return out
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),

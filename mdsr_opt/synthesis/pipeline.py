@@ -12,7 +12,6 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
-from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material
 from .contractions import design_contractions
@@ -91,11 +90,9 @@ class PipelineResult:
             "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
         }
 
-    @renamed_keywords(directory="out")
     def save(self, out: str | os.PathLike) -> str:
         """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
-        into the folder ``out`` (created if missing; ``directory=`` is its deprecated spelling), each
-        atomically. Returns the JSON path."""
+        into the folder ``out`` (created if missing), each atomically. Returns the JSON path."""
         from ..body.io import write_json, write_mesh
 
         directory = os.fspath(out)
@@ -111,10 +108,8 @@ class PipelineResult:
         return write_json(os.path.join(directory, "design.json"), finite_or_none(data))
 
     @classmethod
-    @renamed_keywords(directory="path")
     def load(cls, path: str | os.PathLike) -> "PipelineResult":
-        """Read a result written by :meth:`save` from its folder ``path`` (``directory=`` is the deprecated
-        spelling).
+        """Read a result written by :meth:`save` from its folder ``path``.
 
         Raises
         ------
