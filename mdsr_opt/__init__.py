@@ -39,7 +39,6 @@ _EXPORTS = {
     "difference": "mechanics.align",
     "node_weights": "mechanics.align",
     "design_contractions": "synthesis.contractions",
-    "design": "synthesis.pipeline",
     "design_pipeline": "synthesis.pipeline",
     "verify_design": "synthesis.verify",
     "check_minimum": "synthesis.verify",

@@ -12,7 +12,6 @@ _EXPORTS = {
     'PipelineResult': 'pipeline',
     'Verification': 'results',
     'check_minimum': 'verify',
-    'design': 'pipeline',
     'design_contractions': 'contractions',
     'design_pipeline': 'pipeline',
     'verify_design': 'verify',

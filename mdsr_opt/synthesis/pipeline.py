@@ -1,4 +1,4 @@
-"""The whole design in one call: target, routing, contractions, verification (:func:`design`)."""
+"""The whole design in one call: target, routing, contractions, verification (:func:`design_pipeline`)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from ..mechanics.loadsteps import check_mesh_material
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
 
-__all__ = ['PipelineResult', 'design', 'design_pipeline']
+__all__ = ['PipelineResult', 'design_pipeline']
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -179,9 +179,9 @@ class PipelineResult:
 
 
 @interruptible()
-def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
-           routing_options: dict | None = None, method: str = "flattened", external_options: dict | None = None,
-           **design_options) -> PipelineResult:
+def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
+                    routing_options: dict | None = None, method: str = "flattened",
+                    external_options: dict | None = None, **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -220,7 +220,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     >>> left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
     >>> top_right = {i: (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
-    >>> out = design(mesh, NeoHookean(1.0, 0.3), left, top_right)
+    >>> out = design_pipeline(mesh, NeoHookean(1.0, 0.3), left, top_right)
     >>> out.success, out.design.difference < 0.05
     (True, True)
     """
@@ -253,6 +253,3 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
                           target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
                           times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
 
-
-#: The pipeline under a name that does not clash with the module ``mdsr_opt.design`` at package level.
-design_pipeline = design
