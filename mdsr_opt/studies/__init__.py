@@ -26,7 +26,7 @@ _EXPORTS = {
     'boundary_overlaps': 'runs',
     'build_setup': 'problems',
     'execute_run': 'runs',
-    'get_problem': 'problems',
+    'get_study_problem': 'problems',
     'get_study': 'spec',
     'interpolate': 'runs',
     'list_studies': 'spec',
