@@ -141,7 +141,9 @@ def results_dict(session) -> dict:
 
 def download(session, what: str, tmpdir) -> tuple[bytes, str]:
     """The bytes and media type of one download (see :data:`DOWNLOADS`); ValueError when not available yet."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.design import plot_contraction_graph, plot_design, plot_routing
+    from ..plot.scenes import plot_target
 
     if what not in DOWNLOADS:
         raise ValueError(f"unknown download {what!r} (choose from {', '.join(DOWNLOADS)})")
@@ -169,16 +171,16 @@ def download(session, what: str, tmpdir) -> tuple[bytes, str]:
         write_mesh(path, mesh, x=session.design.x_aligned, material=session.material)
     else:
         if what == "target.png":
-            fig = plot.plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
-                                   drag_positions=session.drag_positions if len(session.drag_nodes) else None,
-                                   title=f"{session.name}: target")
+            fig = plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
+                              drag_positions=session.drag_positions if len(session.drag_nodes) else None,
+                              title=f"{session.name}: target")
         elif what == "graph.png":
-            fig = plot.plot_contraction_graph(mesh, x)
+            fig = plot_contraction_graph(mesh, x)
         elif what == "muscles.png":
             if not session.muscles:
                 raise ValueError("muscles.png: no muscles yet")
-            fig = plot.plot_routing(mesh, x, session.muscles)
+            fig = plot_routing(mesh, x, session.muscles)
         else:
-            fig = plot.plot_design(mesh, session.design, x, session.muscles)
-        plot.save_figure(fig, path)
+            fig = plot_design(mesh, session.design, x, session.muscles)
+        save_figure(fig, path)
     return path.read_bytes(), "image/png" if what.endswith(".png") else "application/octet-stream"

@@ -109,7 +109,7 @@ class VirtualPrototype:
     def for_scene(cls, scene, *, refine: float = DEFAULT_REFINE, e_range: float = DEFAULT_E_RANGE,
                   nu_range: float = DEFAULT_NU_RANGE, seed: int = 0,
                   photo_size: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
-        """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.Scene` built from the library, a
+        """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.scene.Scene` built from the library, a
         problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes).
 
         Parameters

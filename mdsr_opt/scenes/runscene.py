@@ -332,7 +332,7 @@ def n_units(scene: Scene, cases, animations: bool) -> int:
 def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) -> dict:
     """An animation of the scene: its frames' forward solves (:func:`~mdsr_opt.scenes.animate.animate`), its
     GIF (with ``figures``) and ``out/<animation>.json``; returns the JSON's data and the message to log."""
-    from .. import plot
+    from ..plot.scenes import save_animation
     from ..body.io import write_json
 
     res = animate(scene, anim, designs)
@@ -347,8 +347,8 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
             reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles] for x in res.states]
             titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
                       + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
-            plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
-                                activations=act, titles=titles, fps=anim.fps)
+            save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
+                           activations=act, titles=titles, fps=anim.fps)
             data["gif"] = f"{anim.name}.gif"
     else:
         said = f"[{scene.name}] animation {anim.name}: not made ({res.message})"
@@ -391,8 +391,9 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
 
 def _write_rest(scene: Scene, path) -> str:
     """``rest.png``: the rest mesh with its regions."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.scenes import plot_scene
 
-    fig = plot.plot_scene(scene.mesh, scene.regions,
-                          title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
-    return plot.save_figure(fig, path, close=True)
+    fig = plot_scene(scene.mesh, scene.regions,
+                     title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
+    return save_figure(fig, path, close=True)
