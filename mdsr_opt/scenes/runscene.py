@@ -1,4 +1,9 @@
-"""A whole scene through the pipeline into a run folder (:func:`run_scene`), and problem scripts' main."""
+"""A whole scene through the pipeline into a run folder (:func:`run_scene`, the one way to run a scene from
+Python), and problem scripts' command line (:func:`run_main`).
+
+:func:`write_scene`, :func:`run_entries` and :func:`scene_pool` are the internals that ``run_scene`` and
+``mdsr run`` share (``mdsr run`` guards one folder and one worker pool for several scenes); they are not
+part of the public API."""
 
 from __future__ import annotations
 
@@ -20,7 +25,7 @@ from .rundir import check_interrupt
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
-__all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main', 'scene_pool']
+__all__ = ['run_scene', 'run_main']
 
 
 _LOG = logging.getLogger(__name__)
@@ -129,8 +134,8 @@ def _check_run(scene, cases, mesh_format, photo_size=(500, 500)) -> tuple[str, .
 
 
 def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
-    """The names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one folder per
-    case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+    """Internal: the names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one
+    folder per case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
     names = scene.case_names if cases is None else tuple(cases)
     out = list(RUN_FILES) + list(names)
     for a in scene.animations:
@@ -145,10 +150,11 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0, background: bool = True, pool: Executor | None = None) -> SceneReport:
-    """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
-    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result; ``pool`` (with
-    ``background``) is the process pool to send the jobs to (``mdsr run`` shares one between its scenes;
-    None: one of this call's own)."""
+    """Internal: the body of :func:`run_scene` without the folder's guard, for ``run_scene`` and ``mdsr run``
+    (call :func:`run_scene` instead). Runs and writes into ``out`` as it stands (the caller holds a
+    :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
+    is the process pool to send the jobs to (``mdsr run`` shares one between its scenes; None: one of this
+    call's own)."""
     import time
 
     from ..body.io import atomic_path, write_json
