@@ -139,6 +139,53 @@ def test_stage_packages_re_export_nothing():
     assert bad == []
 
 
+def _stub_names() -> dict[str, str]:
+    """public name -> module, as ``mdsr_opt/__init__.pyi`` lists them (what type checkers see)."""
+    out: dict[str, str] = {}
+    for node in ast.parse((PKG / "__init__.pyi").read_text()).body:
+        if isinstance(node, ast.ImportFrom):
+            assert node.level == 1 and node.module, ast.unparse(node)
+            for a in node.names:
+                assert a.asname in (None, a.name), f"{a.name} renamed to {a.asname}"  # no second name
+                assert a.name not in out, f"{a.name} listed twice"
+                out[a.name] = f"mdsr_opt.{node.module}"
+    return out
+
+
+def test_the_stub_and_the_runtime_exports_agree():
+    """Type checkers read ``__init__.pyi``; ``import mdsr_opt`` exports the same names, each the object of
+    its defining module, and no object under two names."""
+    import importlib
+
+    import mdsr_opt
+
+    stub = _stub_names()
+    assert len(stub) >= 60
+    assert sorted(mdsr_opt.__all__) == sorted([*stub, "__version__"])
+    assert dir(mdsr_opt) == sorted(mdsr_opt.__all__)
+    objects = {}
+    for name, module in stub.items():
+        value = getattr(mdsr_opt, name)
+        assert value is getattr(importlib.import_module(module), name)
+        assert getattr(value, "__module__", module) == module, f"{name} is defined in {value.__module__}"
+        assert id(value) not in objects, f"{name} and {objects.get(id(value))} are one object"
+        objects[id(value)] = name
+    with pytest.raises(AttributeError):
+        mdsr_opt.design  # noqa: B018  (the pipeline has one name: design_pipeline)
+
+
+def test_importing_the_package_imports_no_numerics():
+    """``import mdsr_opt`` reads the stub and imports nothing heavy (numpy, CasADi, matplotlib...)."""
+    import subprocess
+    import sys
+
+    heavy = ("numpy", "scipy", "casadi", "matplotlib", "networkx", "cv2", "meshio", "shapely")
+    code = ("import sys, mdsr_opt; print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
+            f"{heavy!r} or m.startswith('mdsr_opt.'))))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=PKG.parent, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == []
+
+
 @pytest.mark.parametrize("package", ["mdsr_opt"] + [f"mdsr_opt.{s}" for s in STAGES])
 def test_every_public_name_resolves(package):
     """Each name a package lists in ``__all__`` (or its lazy export table) imports and is the object of

@@ -61,7 +61,7 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     # the problem library is inside the package, not a top-level `problems` package in site-packages
     assert "mdsr_opt/problems/gecko.py" in names and "mdsr_opt/problems/one_muscle.py" in names
     assert not any(n.startswith("problems/") for n in names)
-    assert "mdsr_opt/py.typed" in names
+    assert "mdsr_opt/py.typed" in names and "mdsr_opt/__init__.pyi" in names  # the stub: read at import time
     meta = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
     assert "License-Expression: MIT" in meta and f"Version: {mdsr_opt.__version__}" in meta
     assert 'Provides-Extra: dask' in meta and "tqdm" in meta
