@@ -139,6 +139,29 @@ def test_stage_packages_re_export_nothing():
     assert bad == []
 
 
+def test_a_modules_public_names_are_its_own():
+    """A module's ``__all__`` lists only what it defines: an object imported from another module stays
+    public there alone (one public path per object besides the package's top level)."""
+    bad = []
+    for name, path in _modules().items():
+        if name == "mdsr_opt":  # the package's own names: its stub (see the tests below)
+            continue
+        body = ast.parse(path.read_text()).body
+        defined: set[str] = set()
+        listed: list[str] = []
+        for node in body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                defined.add(node.name)
+            elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+                for t in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                    if isinstance(t, ast.Name):
+                        defined.add(t.id)
+                        if t.id == "__all__":
+                            listed = list(ast.literal_eval(node.value))
+        bad += [f"{name}.{n}" for n in listed if n not in defined]
+    assert bad == []
+
+
 def _stub_names() -> dict[str, str]:
     """public name -> module, as ``mdsr_opt/__init__.pyi`` lists them (what type checkers see)."""
     out: dict[str, str] = {}

@@ -124,7 +124,8 @@ def test_stability_check_and_alignment(strip, equilibrium):
 
 
 def test_minimize_outcome(strip, tmp_path):
-    from mdsr_opt.mechanics.backends import MinimizeOutcome, minimize
+    from mdsr_opt.mechanics.backends import minimize
+    from mdsr_opt.mechanics.result import MinimizeOutcome
     from mdsr_opt.mechanics.model import get_model
 
     mesh, _ = strip

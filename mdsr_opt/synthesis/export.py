@@ -36,7 +36,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..body.fingerprint import check_same_mesh
-from ..body.mesh import Mesh, polygon_area
+from ..body.mesh import Mesh
+from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.results import compact_repr, to_jsonable
