@@ -126,6 +126,89 @@ def test_package_level_names_do_not_clash_with_modules(name):
         assert not hasattr(mdsr_opt, "__all__") or name not in mdsr_opt.__all__
 
 
+def test_stage_packages_re_export_nothing():
+    """One public name per object: a stage's ``__init__`` is its docstring only (``author``'s holds the
+    server's own code), so a function is reached at the top level (what a user calls) or in its module."""
+    bad = []
+    for stage in STAGES:
+        body = ast.parse((PKG / stage / "__init__.py").read_text()).body
+        if stage == "author":
+            bad += [f"author: {ast.unparse(n)}" for n in body if isinstance(n, ast.ImportFrom) and n.level == 1]
+        elif not (len(body) == 1 and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)):
+            bad.append(f"{stage}: {len(body)} statements")
+    assert bad == []
+
+
+def test_a_modules_public_names_are_its_own():
+    """A module's ``__all__`` lists only what it defines: an object imported from another module stays
+    public there alone (one public path per object besides the package's top level)."""
+    bad = []
+    for name, path in _modules().items():
+        if name == "mdsr_opt":  # the package's own names: its stub (see the tests below)
+            continue
+        body = ast.parse(path.read_text()).body
+        defined: set[str] = set()
+        listed: list[str] = []
+        for node in body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                defined.add(node.name)
+            elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+                for t in node.targets if isinstance(node, ast.Assign) else [node.target]:
+                    if isinstance(t, ast.Name):
+                        defined.add(t.id)
+                        if t.id == "__all__":
+                            listed = list(ast.literal_eval(node.value))
+        bad += [f"{name}.{n}" for n in listed if n not in defined]
+    assert bad == []
+
+
+def _stub_names() -> dict[str, str]:
+    """public name -> module, as ``mdsr_opt/__init__.pyi`` lists them (what type checkers see)."""
+    out: dict[str, str] = {}
+    for node in ast.parse((PKG / "__init__.pyi").read_text()).body:
+        if isinstance(node, ast.ImportFrom):
+            assert node.level == 1 and node.module, ast.unparse(node)
+            for a in node.names:
+                assert a.asname in (None, a.name), f"{a.name} renamed to {a.asname}"  # no second name
+                assert a.name not in out, f"{a.name} listed twice"
+                out[a.name] = f"mdsr_opt.{node.module}"
+    return out
+
+
+def test_the_stub_and_the_runtime_exports_agree():
+    """Type checkers read ``__init__.pyi``; ``import mdsr_opt`` exports the same names, each the object of
+    its defining module, and no object under two names."""
+    import importlib
+
+    import mdsr_opt
+
+    stub = _stub_names()
+    assert len(stub) >= 60
+    assert sorted(mdsr_opt.__all__) == sorted([*stub, "__version__"])
+    assert dir(mdsr_opt) == sorted(mdsr_opt.__all__)
+    objects = {}
+    for name, module in stub.items():
+        value = getattr(mdsr_opt, name)
+        assert value is getattr(importlib.import_module(module), name)
+        assert getattr(value, "__module__", module) == module, f"{name} is defined in {value.__module__}"
+        assert id(value) not in objects, f"{name} and {objects.get(id(value))} are one object"
+        objects[id(value)] = name
+    with pytest.raises(AttributeError):
+        mdsr_opt.design  # noqa: B018  (the pipeline has one name: design_pipeline)
+
+
+def test_importing_the_package_imports_no_numerics():
+    """``import mdsr_opt`` reads the stub and imports nothing heavy (numpy, CasADi, matplotlib...)."""
+    import subprocess
+    import sys
+
+    heavy = ("numpy", "scipy", "casadi", "matplotlib", "networkx", "cv2", "meshio", "shapely")
+    code = ("import sys, mdsr_opt; print(' '.join(sorted(m for m in sys.modules if m.split('.')[0] in "
+            f"{heavy!r} or m.startswith('mdsr_opt.'))))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=PKG.parent, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == []
+
+
 @pytest.mark.parametrize("package", ["mdsr_opt"] + [f"mdsr_opt.{s}" for s in STAGES])
 def test_every_public_name_resolves(package):
     """Each name a package lists in ``__all__`` (or its lazy export table) imports and is the object of
@@ -209,3 +292,20 @@ def test_no_module_uses_process_machinery():
         "3 gc.freeze", "4 '/proc/self/maps'", "5 os.fork", "6 from sys import"]
     bad = {name: found for name, path in _modules().items() if (found := _machinery(path.read_text()))}
     assert bad == {}
+
+
+#: warnings that announce an old spelling kept for a while: nothing was released, so none is kept
+DEPRECATIONS = {"DeprecationWarning", "PendingDeprecationWarning", "FutureWarning"}
+
+
+def test_no_module_keeps_deprecated_spellings():
+    """No module issues (or names) a deprecation warning, and the keyword-renaming shim is gone."""
+    bad = []
+    for name, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            ident = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else None
+            if ident in DEPRECATIONS:
+                bad.append(f"{name}:{node.lineno} {ident}")
+    assert bad == []
+    assert not (PKG / "core" / "deprecation.py").exists()
+    assert not any("deprecat" in p.read_text().lower() for p in _modules().values())

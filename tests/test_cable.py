@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
-from mdsr_opt.mechanics.constraints import MuscleConstraints, anchor_patches, body_size, default_anchor_radius, rigid_groups, segment_spring_parameters
+from mdsr_opt.mechanics.anchors import anchor_patches, body_size, default_anchor_radius, rigid_groups
+from mdsr_opt.mechanics.constraints import MuscleConstraints, segment_spring_parameters
 
 MAT = NeoHookean(E=1.0, nu=0.3)
 

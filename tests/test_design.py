@@ -12,7 +12,7 @@ import pytest
 from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean, solve_internal
 from mdsr_opt.mechanics.align import align, node_weights
 from mdsr_opt.synthesis.results import METHODS, DesignResult
-from mdsr_opt.synthesis.pipeline import PipelineResult, design
+from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
 from mdsr_opt.synthesis.problem import ForwardSolver, DesignProblem
 from mdsr_opt.synthesis.rivals import _Outer
 from mdsr_opt.synthesis.verify import check_minimum, verify_design
@@ -350,7 +350,7 @@ def test_pipeline_designs_saves_and_reloads(tmp_path):
     mesh = Mesh.rectangle(4.0, 1.0, NX, NY)
     left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
     right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
-    out = design(mesh, MAT, left, right, routing_options={"max_muscles": 2})
+    out = design_pipeline(mesh, MAT, left, right, routing_options={"max_muscles": 2})
     assert out.success, out.design.status
     assert out.design.muscle_model == "cable"  # the pipeline's default too
     assert 1 <= len(out.muscles) <= 2 and out.routing is not None
@@ -379,7 +379,7 @@ def test_pipeline_rejects_a_target_without_contraction():
     left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
     pull = {i: (x + 0.4, y) for i, (x, y) in enumerate(mesh.points) if x == 4.0}  # stretches only
     with pytest.warns(UserWarning), pytest.raises(ValueError, match="routing found no muscle"):
-        design(mesh, MAT, left, pull)
+        design_pipeline(mesh, MAT, left, pull)
 
 
 # ---------------------------------------------------------------------------------------------- assembled derivatives

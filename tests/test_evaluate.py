@@ -16,13 +16,12 @@ import pytest
 from scipy import ndimage
 
 from mdsr_opt import Mesh
-from mdsr_opt import cli
-from mdsr_opt import photos as evaluate
+from mdsr_opt.cli.main import main as cli_main
 from mdsr_opt.photos.contours import body_mask, contour_from_image
 from mdsr_opt.photos.compare import compare_contours, evaluate_image, simulated_outline
 from mdsr_opt.photos.folder import evaluate_folder
 from mdsr_opt.photos.images import load_image
-from mdsr_opt.photos.camera import render_photo
+from mdsr_opt.photos.camera import SyntheticPhoto, render_photo
 from mdsr_opt.body.io import write_mesh
 
 # a T-shaped body (a trunk with a neck), as in the paper's humanoid-like test pieces
@@ -519,7 +518,7 @@ def test_failed_save_leaves_neither_image_nor_sidecar(tmp_path, body, monkeypatc
         w = real(path)
         return [w[0], (w[1][0], broken)]
 
-    monkeypatch.setattr(evaluate.SyntheticPhoto, "writers", lambda self, path: writers(path))
+    monkeypatch.setattr(SyntheticPhoto, "writers", lambda self, path: writers(path))
     with pytest.raises(OSError, match="disk full"):
         ph.save(tmp_path / "other.png")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["case.json"]  # no PNG, no temporary file
@@ -548,14 +547,14 @@ def design(tmp_path, body):
     states = tmp_path / "states"
     for k in (0.5, 0.8):
         write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
-    assert cli.main(["photograph", str(states), "--out", str(tmp_path / "images"), "--seed", "3",
+    assert cli_main(["photograph", str(states), "--out", str(tmp_path / "images"), "--seed", "3",
                      "--photo-size", "400x400"]) == 0
     return tmp_path
 
 
 def test_batch_command_writes_csv_and_markdown(design, capsys):
     out = design / "out"
-    assert cli.main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out),
+    assert cli_main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out),
                      "--figures"]) == 0
     rows = list(csv.DictReader((out / "evaluation.csv").open()))
     assert [r["case"] for r in rows] == ["bend_0.5", "bend_0.8"]
@@ -588,7 +587,7 @@ def test_batch_error_leaves_previous_table_untouched(design, capsys):
     write_mesh(design / "states" / "zz_broken.vtu", mesh)
     with pytest.raises(ValueError, match="case 'zz_broken'.*cannot decode"):
         evaluate_folder(design / "images", design / "states", out=out)
-    assert cli.main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out)]) == 2
+    assert cli_main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out)]) == 2
     assert "cannot decode" in capsys.readouterr().err
     assert (out / "evaluation.csv").read_text() == "old table\n"
     assert sorted(p.name for p in out.iterdir()) == ["evaluation.csv"]
@@ -618,10 +617,10 @@ def test_batch_writes_figures_and_tables_together(design, monkeypatch):
     out = design / "out"
     out.mkdir()
     (out / "evaluation.csv").write_text("old table\n")
-    from mdsr_opt import plot
+    from mdsr_opt.plot import common
 
     calls = []
-    real = plot.save_figure
+    real = common.save_figure
 
     def failing_second(fig, path):
         calls.append(path)
@@ -632,12 +631,12 @@ def test_batch_writes_figures_and_tables_together(design, monkeypatch):
             raise RuntimeError("figure failed")
         return real(fig, path)
 
-    monkeypatch.setattr(plot, "save_figure", failing_second)
+    monkeypatch.setattr(common, "save_figure", failing_second)
     with pytest.raises(RuntimeError, match="figure failed"):
         evaluate_folder(design / "images", design / "states", out=out, figures=True)
     assert sorted(p.name for p in out.iterdir()) == ["evaluation.csv"]  # no table, no first figure
     assert (out / "evaluation.csv").read_text() == "old table\n"
-    monkeypatch.setattr(plot, "save_figure", real)
+    monkeypatch.setattr(common, "save_figure", real)
     evaluate_folder(design / "images", design / "states", out=out, figures=True)
     assert sorted(p.name for p in out.iterdir()) == ["bend_0.5_overlay.png", "bend_0.8_overlay.png",
                                                      "evaluation.csv", "evaluation.md"]
@@ -649,7 +648,7 @@ def test_photograph_command_writes_all_or_nothing(tmp_path, body, capsys):
     for k in (0.5, 0.8):
         write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
     (tmp_path / "images" / "bend_0.8.png").mkdir(parents=True)  # the second photo cannot be written
-    assert cli.main(["photograph", str(states), "--out", str(tmp_path / "images")]) == 2
+    assert cli_main(["photograph", str(states), "--out", str(tmp_path / "images")]) == 2
     assert "bend_0.8.png: it is a folder" in capsys.readouterr().err
     assert sorted(p.name for p in (tmp_path / "images").iterdir()) == ["bend_0.8.png"]
 

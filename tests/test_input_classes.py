@@ -129,12 +129,12 @@ def test_saved_and_loaded_results_keep_their_mesh(made, tmp_path):
 
 def test_pipeline_result_keeps_its_mesh_and_refuses_a_foreign_one(tmp_path):
     from mdsr_opt.body.io import write_mesh
-    from mdsr_opt.synthesis.pipeline import PipelineResult, design
+    from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
 
     mesh = strip()
     left = np.flatnonzero(mesh.points[:, 0] == 0.0)
     right = np.flatnonzero(mesh.points[:, 0] == 4.0)
-    out = design(mesh, MAT, left, {int(i): mesh.points[i] + [-0.3, -0.4] for i in right})
+    out = design_pipeline(mesh, MAT, left, {int(i): mesh.points[i] + [-0.3, -0.4] for i in right})
     out.save(tmp_path / "run")
     back = PipelineResult.load(tmp_path / "run")
     assert back.design.rest_mesh == out.design.rest_mesh == mesh_fingerprint(mesh)
@@ -305,14 +305,14 @@ def test_scene_files_take_integer_node_indices_only(tmp_path):
 
 
 def test_the_pipeline_takes_rigid_drags():
-    """design() parsed its drags by node count only, so a RigidDrag failed after the external solve."""
-    from mdsr_opt.synthesis.pipeline import design
+    """design_pipeline() parsed its drags by node count only, so a RigidDrag failed after the external solve."""
+    from mdsr_opt.synthesis.pipeline import design_pipeline
 
     mesh = strip()
     left = np.flatnonzero(mesh.points[:, 0] == 0.0)
     right = np.flatnonzero(mesh.points[:, 0] == 4.0)
     rd = RigidDrag(right, 0.4, (4.0, 0.0), shift=(-0.6, 0.0))
-    out = design(mesh, MAT, left, rd, verify=False)
+    out = design_pipeline(mesh, MAT, left, rd, verify=False)
     np.testing.assert_array_equal(out.drag_nodes, right)
     np.testing.assert_allclose(out.drag_positions, drag_path(rd, mesh).final, atol=1e-12)
     np.testing.assert_allclose(out.target[right], out.drag_positions, atol=1e-9)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh
-from mdsr_opt.body.mesh import polygon_area
+from mdsr_opt.body.polygons import polygon_area
 
 
 def test_rectangle_counts_and_area():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import importlib
 import inspect
 import io
 import logging
@@ -60,7 +61,7 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     # the problem library is inside the package, not a top-level `problems` package in site-packages
     assert "mdsr_opt/problems/gecko.py" in names and "mdsr_opt/problems/one_muscle.py" in names
     assert not any(n.startswith("problems/") for n in names)
-    assert "mdsr_opt/py.typed" in names
+    assert "mdsr_opt/py.typed" in names and "mdsr_opt/__init__.pyi" in names  # the stub: read at import time
     meta = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
     assert "License-Expression: MIT" in meta and f"Version: {mdsr_opt.__version__}" in meta
     assert 'Provides-Extra: dask' in meta and "tqdm" in meta
@@ -93,7 +94,7 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
         return subprocess.run([str(bindir / "mdsr"), *args], cwd=elsewhere, env=_clean_env(),
                               capture_output=True, text=True, timeout=300)
 
-    where = subprocess.run([str(py), "-c", "import mdsr_opt, mdsr_opt.scenes as s; "
+    where = subprocess.run([str(py), "-c", "import mdsr_opt, mdsr_opt.scenes.library as s; "
                             "print(mdsr_opt.__file__); print(s.problems_dir())"],
                            cwd=elsewhere, env=_clean_env(), capture_output=True, text=True, check=True)
     init, lib = where.stdout.split("\n")[:2]
@@ -392,7 +393,9 @@ def test_importing_plot_keeps_the_matplotlib_backend():
     code = ("import matplotlib\n"
             "matplotlib.use('svg')\n"
             "before = matplotlib.get_backend()\n"
-            "import mdsr_opt.plot, mdsr_opt.scenes, mdsr_opt.photos, mdsr_opt.studies\n"
+            "import mdsr_opt.plot.common, mdsr_opt.plot.design, mdsr_opt.plot.photos, mdsr_opt.plot.routing\n"
+            "import mdsr_opt.plot.scenes, mdsr_opt.plot.studies, mdsr_opt.scenes.runscene, mdsr_opt.photos.folder\n"
+            "import mdsr_opt.studies.study\n"
             "print(before, matplotlib.get_backend())\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_clean_env(), capture_output=True, text=True,
                        check=True, timeout=120)
@@ -400,7 +403,7 @@ def test_importing_plot_keeps_the_matplotlib_backend():
     # and without any choice made: importing the module does not settle the backend
     code = ("import matplotlib\n"
             "b0 = matplotlib.get_backend()\n"
-            "import mdsr_opt.plot\n"
+            "import mdsr_opt.plot.common\n"
             "print(b0, matplotlib.get_backend())\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=_clean_env(), capture_output=True, text=True,
                        check=True, timeout=120)
@@ -412,21 +415,25 @@ def test_plot_functions_take_an_axes_and_return_the_figure(tmp_path):
     import matplotlib.pyplot as plt
 
     from mdsr_opt import Mesh
-    from mdsr_opt import plot
+    from mdsr_opt.plot.common import plot_edges, plot_mesh, save_figure
 
-    funcs = {n: getattr(plot, n) for n in plot.__all__ if n.startswith("plot_")}
+    # the figures of every stage (plot.routing's are multi-panel grids of several targets: they make their own)
+    funcs = {}
+    for stage in ("common", "design", "photos", "scenes", "studies"):
+        mod = importlib.import_module(f"mdsr_opt.plot.{stage}")
+        funcs.update({n: f for n, f in vars(mod).items() if n.startswith("plot_") and f.__module__ == mod.__name__})
     assert len(funcs) >= 10
     lacking = [n for n, f in funcs.items() if not {"ax", "axes", "fig"} & set(inspect.signature(f).parameters)]
     assert lacking == []
 
     mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
     fig, ax = plt.subplots()
-    assert plot.plot_mesh(mesh, ax=ax) is fig
-    assert plot.plot_edges(mesh.points, mesh.edges, mesh.edge_lengths, ax=ax) is fig
-    path = plot.save_figure(fig, tmp_path / "mine.png")
+    assert plot_mesh(mesh, ax=ax) is fig
+    assert plot_edges(mesh.points, mesh.edges, mesh.edge_lengths, ax=ax) is fig
+    path = save_figure(fig, tmp_path / "mine.png")
     assert os.path.getsize(path) > 1000
     assert plt.fignum_exists(fig.number)  # the caller's figure stays open
-    plot.save_figure(fig, tmp_path / "mine.svg", close=True)
+    save_figure(fig, tmp_path / "mine.svg", close=True)
     assert not plt.fignum_exists(fig.number) and (tmp_path / "mine.svg").read_text().startswith("<?xml")
 
 

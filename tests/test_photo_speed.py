@@ -173,7 +173,7 @@ def test_lower_bounds_together_are_the_bounds_one_by_one():
 
 def _old_refine(contour, blob, score, reach):
     """The earlier _refine_subpixel: distance transforms, bands and projection over the whole image."""
-    from mdsr_opt.body.mesh import polygon_area
+    from mdsr_opt.body.polygons import polygon_area
 
     b8 = blob.astype(np.uint8)
     d_in = cv2.distanceTransform(b8, cv2.DIST_L2, 3)

@@ -124,7 +124,8 @@ def test_stability_check_and_alignment(strip, equilibrium):
 
 
 def test_minimize_outcome(strip, tmp_path):
-    from mdsr_opt.mechanics.backends import MinimizeOutcome, minimize
+    from mdsr_opt.mechanics.backends import minimize
+    from mdsr_opt.mechanics.result import MinimizeOutcome
     from mdsr_opt.mechanics.model import get_model
 
     mesh, _ = strip
@@ -178,13 +179,13 @@ def test_design_result_and_verification(designed, tmp_path):
 
 
 def test_pipeline_result(tmp_path):
-    from mdsr_opt import design
+    from mdsr_opt import design_pipeline
     from mdsr_opt.synthesis.pipeline import PipelineResult
 
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
     left = np.flatnonzero(mesh.points[:, 0] == 0.0)
     drags = {int(i): (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
-    res = design(mesh, MAT, left, drags, muscles=[Muscle(range(1, 8))])
+    res = design_pipeline(mesh, MAT, left, drags, muscles=[Muscle(range(1, 8))])
     check_repr(res, "success=", "n_nodes=27", "n_muscles=1", "difference=")
     d = check_dict(res)
     assert d["format"] == "mdsr_opt.design/1" and len(d["target"]) == mesh.n_nodes

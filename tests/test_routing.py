@@ -8,7 +8,8 @@ import pytest
 
 from conftest import arc_map, rotation
 from mdsr_opt import Mesh, Muscle
-from mdsr_opt.synthesis.routing import MuscleStats, RoutingResult, RoutingWarning, contraction_graph, edge_weights, route_muscles
+from mdsr_opt.synthesis.routing import RoutingWarning, contraction_graph, edge_weights, route_muscles
+from mdsr_opt.synthesis.routing_result import MuscleStats, RoutingResult
 
 
 # ------------------------------------------------------------------------------------------ targets

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from mdsr_opt import scenes
+from mdsr_opt import get_problem, prepare_case, run_case, run_scene
 from mdsr_opt.cli.main import main
 from mdsr_opt.scenes.rundir import (HOLDER_NAME, JOURNAL_NAME, LOCK_NAME, MANIFEST_NAME, FolderBusy, OutputFolderError,
                                     RunFolder, check_out_path)
@@ -89,7 +89,7 @@ def test_an_interrupt_swallowed_by_a_solver_still_stops_the_run(tmp_path, monkey
     """CasADi turns Ctrl-C inside IPOPT into a failed solve; the run must stop, not record a failed case."""
     from mdsr_opt.scenes import rundir
 
-    real = scenes.prepare_case
+    real = prepare_case
 
     def swallowed(*a, **k):
         setup = real(*a, **k)
@@ -108,10 +108,10 @@ def test_keyboard_interrupt_is_not_caught_as_a_case_failure(tmp_path, monkeypatc
     def boom(*a, **k):
         raise KeyboardInterrupt
 
-    scene = scenes.get_problem(str(FINGER), resolution="coarse")
+    scene = get_problem(str(FINGER), resolution="coarse")
     monkeypatch.setattr("mdsr_opt.synthesis.contractions.design_contractions", boom)
     with pytest.raises(KeyboardInterrupt):
-        scenes.run_case(scene, "bend", photo=False)
+        run_case(scene, "bend", photo=False)
 
 
 # ---------------------------------------------------------------------------------------------- folders
@@ -336,15 +336,15 @@ def test_run_scene_refuses_a_photo_size_out_of_range_before_any_work(tmp_path, m
     from mdsr_opt.body.mesh import MAX_RESOLUTION
     from mdsr_opt.photos.size import MAX_PHOTO_SIDE
 
-    scene = scenes.get_problem(str(FINGER), resolution="coarse")
+    scene = get_problem(str(FINGER), resolution="coarse")
     monkeypatch.setattr("mdsr_opt.scenes.runscene.write_scene", lambda *a, **k: pytest.fail("work started"))
     for size, exc in [((100000, 100000), ValueError), ((MAX_PHOTO_SIDE + 1, 500), ValueError),
                       ((20, 500), ValueError), ((500.0, 500), TypeError), ((500,), ValueError)]:
         with pytest.raises(exc, match="photo_size must"):
-            scenes.run_scene(scene, tmp_path / "o", photo_size=size)
+            run_scene(scene, tmp_path / "o", photo_size=size)
     assert not (tmp_path / "o").exists()
     with pytest.raises(ValueError, match=f"resolution must be at most {MAX_RESOLUTION} nodes"):
-        scenes.get_problem(str(FINGER), resolution=MAX_RESOLUTION + 1)
+        get_problem(str(FINGER), resolution=MAX_RESOLUTION + 1)
 
 
 @pytest.mark.parametrize("out, words", [
@@ -438,7 +438,7 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
 
     # on one core both runs are serial and this compares a run with itself; CI and the development
     # machines have two cores, where the pool runs the jobs
-    scene = scenes.get_problem("gecko", resolution="coarse")
+    scene = get_problem("gecko", resolution="coarse")
     reports = {bg: run_scene(scene, tmp_path / str(bg), log=None, background=bg, prototype=False)
                for bg in (True, False)}
     a, b = tmp_path / "True", tmp_path / "False"
@@ -462,7 +462,7 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
     tables and the summary are the serial run's."""
     from mdsr_opt.scenes.runscene import run_scene
 
-    scene = scenes.get_problem("gecko", resolution="coarse")
+    scene = get_problem("gecko", resolution="coarse")
     serial = run_scene(scene, tmp_path / "serial", cases=["bend_left"], log=None, background=False)
     parallel = run_scene(scene, tmp_path / "parallel", cases=["bend_left"], log=None)
     assert parallel.success and serial.success
@@ -477,7 +477,7 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
 def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
     from mdsr_opt.scenes.runscene import write_scene
 
-    scene = scenes.get_problem("one_muscle", resolution="coarse")
+    scene = get_problem("one_muscle", resolution="coarse")
     with pytest.raises(TypeError, match="pool must be a concurrent.futures.Executor or None, got int"):
         write_scene(scene, tmp_path / "out", pool=2)
     assert not (tmp_path / "out").exists()
@@ -485,10 +485,11 @@ def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
 
 def _rest_and_pid(scene, path):
     """rest.png's job, which also leaves the id of its process next to the figure."""
-    from mdsr_opt import plot
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.scenes import plot_scene
 
     Path(path).with_suffix(".pid").write_text(str(os.getpid()))
-    return plot.save_figure(plot.plot_scene(scene.mesh, scene.regions), path, close=True)
+    return save_figure(plot_scene(scene.mesh, scene.regions), path, close=True)
 
 
 @pytest.mark.parametrize("flags, parallel", [([], True), (["--serial"], False)])

@@ -281,10 +281,10 @@ def test_pareto_front_and_slopes():
 
 
 def test_problem_library_scenes_are_study_problems():
-    from mdsr_opt import scenes
+    from mdsr_opt import get_problem, list_problems
 
-    name = scenes.list_problems()[0]
-    sc = scenes.get_problem(name, resolution=150)
+    name = list_problems()[0]
+    sc = get_problem(name, resolution=150)
     case = sc.cases[0]
     assert f"{name}/{case.name}" in list_study_problems()
     s = build_setup(f"{name}/{case.name}", 150, 0.5)

@@ -15,7 +15,7 @@ import pytest
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external
 from mdsr_opt.mechanics.backends import check_options
 from mdsr_opt.cli.main import main
-from mdsr_opt.synthesis.pipeline import PipelineResult, design
+from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
 from mdsr_opt.scenes.scene import Animation, Case, Scene
 from mdsr_opt.scenes.reader import SceneFileError
 from mdsr_opt.scenes.select import boundary_path, edge_path
@@ -210,7 +210,7 @@ def saved(tmp_path_factory):
     left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
     right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
     d = tmp_path_factory.mktemp("saved") / "result"
-    design(mesh, NeoHookean(1.0, 0.3), left, right, muscles=[Muscle(range(1, 8))]).save(d)
+    design_pipeline(mesh, NeoHookean(1.0, 0.3), left, right, muscles=[Muscle(range(1, 8))]).save(d)
     return d
 
 

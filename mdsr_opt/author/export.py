@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from ..body.io import write_json, write_mesh
-from ..core.deprecation import renamed_keywords
 
 __all__ = ["scene_dict", "save_scene", "download", "DOWNLOADS", "WouldReplace"]
 
@@ -84,10 +83,9 @@ def _plain(v):
     return v
 
 
-@renamed_keywords(folder="out")
 def save_scene(session, out, name: str | None = None, *, overwrite=True) -> list[str]:
-    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created; ``folder=`` is its
-    deprecated spelling); returns the two paths.
+    """Write ``<name>.json`` and ``<name>.mesh.vtu`` into the folder ``out`` (created); returns the two
+    paths.
 
     ``overwrite``: ``True`` replaces existing files; ``False``, or a function of a path returning whether
     that existing file may be replaced, raises :class:`WouldReplace` (before anything is written) for the
@@ -143,7 +141,9 @@ def results_dict(session) -> dict:
 
 def download(session, what: str, tmpdir) -> tuple[bytes, str]:
     """The bytes and media type of one download (see :data:`DOWNLOADS`); ValueError when not available yet."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.design import plot_contraction_graph, plot_design, plot_routing
+    from ..plot.scenes import plot_target
 
     if what not in DOWNLOADS:
         raise ValueError(f"unknown download {what!r} (choose from {', '.join(DOWNLOADS)})")
@@ -171,16 +171,16 @@ def download(session, what: str, tmpdir) -> tuple[bytes, str]:
         write_mesh(path, mesh, x=session.design.x_aligned, material=session.material)
     else:
         if what == "target.png":
-            fig = plot.plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
-                                   drag_positions=session.drag_positions if len(session.drag_nodes) else None,
-                                   title=f"{session.name}: target")
+            fig = plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
+                              drag_positions=session.drag_positions if len(session.drag_nodes) else None,
+                              title=f"{session.name}: target")
         elif what == "graph.png":
-            fig = plot.plot_contraction_graph(mesh, x)
+            fig = plot_contraction_graph(mesh, x)
         elif what == "muscles.png":
             if not session.muscles:
                 raise ValueError("muscles.png: no muscles yet")
-            fig = plot.plot_routing(mesh, x, session.muscles)
+            fig = plot_routing(mesh, x, session.muscles)
         else:
-            fig = plot.plot_design(mesh, session.design, x, session.muscles)
-        plot.save_figure(fig, path)
+            fig = plot_design(mesh, session.design, x, session.muscles)
+        save_figure(fig, path)
     return path.read_bytes(), "image/png" if what.endswith(".png") else "application/octet-stream"

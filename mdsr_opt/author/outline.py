@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from ..body.mesh import check_polygon, polygon_area
+from ..body.polygons import check_polygon, polygon_area
 
 __all__ = ["parse_outline", "MAX_POINTS"]
 

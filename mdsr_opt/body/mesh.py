@@ -20,10 +20,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.checks import as_float_array, as_index_array, positive_float, positive_int
-from .polygons import check_polygon, corner_angles, point_inside, polygon_area, ring_segments, segment_contacts  # polygon_area, check_polygon, segment_contacts: re-exported
+from .polygons import check_polygon, corner_angles, point_inside, polygon_area, ring_segments, segment_contacts
 
-__all__ = ["Mesh", "polygon_area", "check_polygon", "segment_contacts", "corner_angles", "MAX_TRIANGLES",
-           "MAX_RESOLUTION"]
+__all__ = ["Mesh", "MAX_TRIANGLES", "MAX_RESOLUTION"]
 
 #: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
 MAX_TRIANGLES = 2_000_000

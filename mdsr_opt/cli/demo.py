@@ -36,7 +36,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     """Run the demo into ``out``; ``log`` takes the progress messages (default: this module's logger)."""
     log = log or logging.getLogger(__name__).info
     from ..body import io
-    from .. import plot
+    from ..plot.common import plot_mesh, plot_muscles, save_figure
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..body.material import NeoHookean
     from ..body.mesh import Mesh
@@ -75,10 +75,10 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     log(f"      {ext.status}: {ext.iterations} iterations in {len(ext.steps)} load step(s), "
         f"{ext.solve_time:.2f} s")
     summary["external"] = ext.summary()
-    fig = plot.plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label="energy density",
-                         nodes=np.append(base, tip), title="external driving: anchored base, dragged tip")
-    plot.plot_mesh(mesh, None, ax=fig.axes[0], color="none", edgecolor="#bbbbbb", alpha=0.6)
-    plot.save_figure(fig, os.path.join(out, "external.png"), close=True)
+    fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label="energy density",
+                    nodes=np.append(base, tip), title="external driving: anchored base, dragged tip")
+    plot_mesh(mesh, None, ax=fig.axes[0], color="none", edgecolor="#bbbbbb", alpha=0.6)
+    save_figure(fig, os.path.join(out, "external.png"), close=True)
     io.write_mesh(os.path.join(out, "external.vtu"), mesh, x=ext.x, material=mat)
 
     log(f"[3/4] internal driving: a muscle along the lower side is commanded to contract by {contraction:.0%}")
@@ -93,10 +93,10 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
             + (", rope slack" if res.slack[0] else ""))
         summary[f"internal_{model}"] = {**res.summary(), "muscle_length_ratio": ratio}
         # the title states what the muscle reached, never a command it did not reach
-        fig = plot.plot_mesh(mesh, res.x, values=io_energy(mesh, mat, res.x), colorbar_label="energy density",
-                             title=f"{model}: contraction {got:.1%}, stroke {stroke:.3g}")
-        plot.plot_muscles(res.x, [muscle], ax=fig.axes[0])
-        plot.save_figure(fig, os.path.join(out, f"internal_{model}.png"), close=True)
+        fig = plot_mesh(mesh, res.x, values=io_energy(mesh, mat, res.x), colorbar_label="energy density",
+                        title=f"{model}: contraction {got:.1%}, stroke {stroke:.3g}")
+        plot_muscles(res.x, [muscle], ax=fig.axes[0])
+        save_figure(fig, os.path.join(out, f"internal_{model}.png"), close=True)
         io.write_mesh(os.path.join(out, f"internal_{model}.vtu"), mesh, x=res.x, material=mat)
 
     log("[4/4] writing summary.json")

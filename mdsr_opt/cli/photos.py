@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from ..core.errors import InputError, checking_input
@@ -13,8 +12,6 @@ __all__ = ['add_cli']
 
 # ----------------------------------------------------------------------------------------------- command
 def _parse_color(text: str):
-    import argparse
-
     from ..photos.images import check_color
 
     t = text.strip()
@@ -31,8 +28,6 @@ def _parse_color(text: str):
 
 
 def _parse_ints(n: int, what: str, sep: str = ","):
-    import argparse
-
     def parse(text: str):
         try:
             vals = tuple(int(v) for v in text.lower().split(sep))
@@ -43,16 +38,6 @@ def _parse_ints(n: int, what: str, sep: str = ","):
         return vals
 
     return parse
-
-
-class _Deprecated(argparse.Action):
-    """An old option spelling: stores like the new one and warns on stderr (one release)."""
-
-    def __call__(self, parser, namespace, values, option_string=None):
-        new = "--" + self.dest.replace("_", "-")
-        print(f"{parser.prog}: {option_string} is deprecated and will be removed in the next release; use {new}",
-              file=sys.stderr)
-        setattr(namespace, self.dest, values)
 
 
 def _cmd_evaluate(a) -> int:
@@ -131,8 +116,6 @@ def add_cli(sub) -> None:
     q.add_argument("--seed", type=int, default=0, help="random seed of noise and placement (default 0)")
     q.add_argument("--photo-size", type=_parse_ints(2, "photo size", "x"), default=(500, 500), metavar="WxH",
                    help="size of the photographs in pixels (default 500x500), as `mdsr run --photo-size`")
-    q.add_argument("--resolution", type=_parse_ints(2, "resolution", "x"), dest="photo_size", metavar="WxH",
-                   action=_Deprecated, help="deprecated spelling of --photo-size (resolutions count mesh nodes)")
     q.add_argument("--tilt", type=float, default=1.0, help="camera tilt, degrees (default 1)")
     q.add_argument("--rotation", type=float, default=0.0, help="body rotation on the plate, degrees")
     q.add_argument("--noise", type=float, default=3.0, help="noise sigma, grey levels (default 3)")

@@ -39,8 +39,8 @@ from .result import MinimizeOutcome, solver_status
 from .stopping import with_stop_callback
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 
-__all__ = ["MinimizeOutcome", "BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize",
-           "supports_constraints", "interruptible", "check_options"]
+__all__ = ["BACKENDS", "CONSTRAINED_BACKENDS", "available_backends", "minimize", "supports_constraints",
+           "check_options"]
 
 
 def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):

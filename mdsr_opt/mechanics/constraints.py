@@ -48,14 +48,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.checks import positive_float
-from .anchors import (ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, anchor_patches, anchor_radius_or_default, body_size,
-                      check_anchor_radius, default_anchor_radius, rigid_groups, valid_muscles)
+from .anchors import anchor_radius_or_default, body_size, rigid_groups, valid_muscles
 from .model import to_dm
 from .segments import length_hessian_product, length_third
 
-__all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius",
-           "anchor_patches", "rigid_groups",
-           "MuscleConstraints", "muscle_constraints", "spring_stiffness", "segment_spring_parameters",
+__all__ = ["MuscleConstraints", "muscle_constraints", "spring_stiffness", "segment_spring_parameters",
            "spring_segments"]
 
 def spring_stiffness(mesh, material, stiffness: float) -> float:
@@ -140,7 +137,7 @@ class MuscleConstraints:
     mesh : Mesh
     muscles : sequence of Muscle or node lists
     radius : float, optional
-        Anchor radius (default :func:`default_anchor_radius`; 0 for single-node ends).
+        Anchor radius (default :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius`; 0 for single-node ends).
 
     Attributes
     ----------

@@ -7,7 +7,6 @@ import time
 from typing import Mapping, Sequence
 import numpy as np
 
-from ..core.deprecation import renamed_keywords
 from ..core.guards import interruptible
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles
@@ -209,7 +208,6 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
     return (x - x[i]) @ R.T + P[i]
 
 
-@renamed_keywords(model="muscle_model")
 @interruptible()  # Ctrl-C anywhere in the solve raises KeyboardInterrupt, never a result
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
@@ -222,7 +220,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     ----------
     muscles : list of :class:`Muscle` (or node lists) along mesh edges.
     contractions : one value in ``[0, 1)`` per muscle.
-    muscle_model : ``"cable"`` (default) or ``"springs"`` (``model=`` is its deprecated spelling).
+    muscle_model : ``"cable"`` (default) or ``"springs"``.
 
         - ``"cable"``: an inextensible rope sliding along the muscle's node chain, pulled in by a servo:
           ``min E_e(x)`` subject to ``L_c(x) <= (1 - a_c) L0_c`` for every muscle, solved exactly by the NLP

@@ -15,7 +15,6 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.deprecation import renamed_keywords
 from ..body.checks import check_mesh
 from ..core.checks import as_float_array, positive_float
 from ..core.errors import InputError, checking_input
@@ -261,7 +260,6 @@ class SyntheticPhoto:
                 (path.with_suffix(".json"), bytes_writer(json.dumps(meta, indent=2).encode()))]
 
 
-@renamed_keywords(resolution="image_size")
 def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int] = (500, 500), seed: int = 0,
                  body_color: Any = (205, 95, 35), plate_color: Any = (226, 226, 218),
                  grid_color: Any = (185, 187, 183), grid_spacing: float | None = None,
@@ -282,8 +280,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     x : array_like, shape (n, 2), optional
         The state to photograph (default: the rest shape).
     image_size : (int, int)
-        (width, height) of the image in pixels, each 32-8000 (``resolution=`` is its deprecated spelling;
-        mesh resolutions count nodes).
+        (width, height) of the image in pixels, each 32-8000.
     seed : int
         Non-negative seed of the tilt axis, light direction and noise.
     body_color, plate_color, grid_color : (r, g, b) in 0-255

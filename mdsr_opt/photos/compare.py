@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.checks import check_mesh
-from ..body.mesh import polygon_area
+from ..body.polygons import polygon_area
 from ..core.checks import as_float_array, positive_float
 from ..core.results import compact_repr, to_jsonable
 from .contours import contour_from_image

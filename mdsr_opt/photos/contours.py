@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..body.mesh import polygon_area
+from ..body.polygons import polygon_area
 from ..core.checks import positive_float
 from .images import MAX_PIXELS, check_bool, check_color, check_int, load_region
 

@@ -203,16 +203,17 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
         out = Path(out)
         writers = _table_writers(results, out / f"{name}.csv", out / f"{name}.md")
         if figures:
-            from .. import plot
+            from ..plot.common import close_figure, save_figure
+            from ..plot.photos import plot_overlay
 
             # render every figure to PNG bytes now (one figure open at a time), write with the tables
             with tempfile.TemporaryDirectory() as scratch:
                 for k, ((image, mesh, x, comp, synth), row) in enumerate(zip(overlays, results)):
-                    fig = plot.plot_overlay(image, mesh, x, comp, synthetic=synth, title=row.case)
+                    fig = plot_overlay(image, mesh, x, comp, synthetic=synth, title=row.case)
                     try:
-                        png = Path(plot.save_figure(fig, Path(scratch, f"{k}.png")))
+                        png = Path(save_figure(fig, Path(scratch, f"{k}.png")))
                     finally:
-                        plot.close_figure(fig)
+                        close_figure(fig)
                     writers.insert(k, (out / f"{row.case}_overlay.png", bytes_writer(png.read_bytes())))
         write_together(writers)
     return results

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.checks import check_mesh
-from ..body.mesh import polygon_area
+from ..body.polygons import polygon_area
 from ..core.checks import as_float_array
 from ..core.results import compact_repr
 from .compare import ContourComparison, as_contour, signed_distances, unsigned_distances, compare_contours

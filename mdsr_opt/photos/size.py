@@ -1,5 +1,5 @@
 """The size of a synthetic photograph: its limits, checked at the door by every entry point (the camera,
-:func:`~mdsr_opt.scenes.run_scene`, ``mdsr run --photo-size``)."""
+:func:`~mdsr_opt.scenes.runscene.run_scene`, ``mdsr run --photo-size``)."""
 
 from __future__ import annotations
 

@@ -36,7 +36,6 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..core.checks import positive_float
-from ..core.deprecation import renamed_keywords
 from ..body.muscles import Muscle
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
@@ -107,11 +106,10 @@ class VirtualPrototype:
         return self.scene.mesh
 
     @classmethod
-    @renamed_keywords(photo_resolution="photo_size")
     def for_scene(cls, scene, *, refine: float = DEFAULT_REFINE, e_range: float = DEFAULT_E_RANGE,
                   nu_range: float = DEFAULT_NU_RANGE, seed: int = 0,
                   photo_size: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
-        """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.Scene` built from the library, a
+        """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.scene.Scene` built from the library, a
         problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes).
 
         Parameters
@@ -122,8 +120,7 @@ class VirtualPrototype:
         seed : int
             Seed of the material draw and of the camera.
         photo_size : (int, int)
-            (width, height) of the prototype's photographs in pixels (``photo_resolution=`` is its deprecated
-            spelling).
+            (width, height) of the prototype's photographs in pixels.
 
         Raises
         ------

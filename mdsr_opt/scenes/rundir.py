@@ -1,7 +1,7 @@
 """Output folders of a run or study: one writer at a time, never two outputs mixed, a user's files kept.
 
 A :class:`RunFolder` guards the folder a command writes into (``mdsr run --out DIR``, ``mdsr study --out
-DIR``, :func:`~mdsr_opt.scenes.run_scene`, :func:`~mdsr_opt.studies.study.run_study`):
+DIR``, :func:`~mdsr_opt.scenes.runscene.run_scene`, :func:`~mdsr_opt.studies.study.run_study`):
 
 - **One writer.** The folder is locked (``DIR/.mdsr-lock`` through the ``filelock`` package: an operating
   system lock, which goes with the process however it ends, so a killed run leaves no lock that needs

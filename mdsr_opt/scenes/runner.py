@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 import numpy as np
 
-from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
@@ -182,7 +181,6 @@ def _edge_set(muscles) -> set:
     return {(min(a, b), max(a, b)) for m in muscles for a, b in m.segments.tolist()}
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
              photo_size: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
              prefix: str = "", prototype: Any = None) -> CaseRun:
@@ -341,10 +339,9 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
     rep.times["photo"] = time.perf_counter() - t2
 
 
-@renamed_keywords(folder="out")
 def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
-    """Write a case's figures, meshes and photograph into the folder ``out`` (created; ``folder=`` is its
-    deprecated spelling); returns the file names.
+    """Write a case's figures, meshes and photograph into the folder ``out`` (created); returns the file
+    names.
 
     Files: ``target.png`` (target with anchors and drags), ``graph.png`` (contraction graph),
     ``muscles.png`` (muscles over rest and target), ``design.png`` (driven state over the target),
@@ -385,7 +382,9 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
 def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
     """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
     ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.design import plot_contraction_graph, plot_design, plot_routing
+    from ..plot.scenes import plot_target
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
 
@@ -396,26 +395,26 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
         energy = mat.psi(mesh.deformation_gradients(x))
         title = (f"{scene.name} / {case.name}: target by "
                  f"{'external driving' if case.kind == 'external' else 'internal driving'}")
-        fig = plot.plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
-                               drag_positions=case.drag_positions if len(case.drag_nodes) else None,
-                               muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                               title=title)
-        files.append(plot.save_figure(fig, folder / "target.png", close=True))
+        fig = plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
+                          drag_positions=case.drag_positions if len(case.drag_nodes) else None,
+                          muscles=setup.muscles if case.kind == "internal" else (), values=energy,
+                          title=title)
+        files.append(save_figure(fig, folder / "target.png", close=True))
         write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
         files.append(str(folder / f"target{fmt}"))
         graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
         seeds = setup.routing.seeds if setup.routing is not None else None
         # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
         # their ticks would be most of their drawing time
-        files.append(plot.save_figure(plot.plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
-                                      folder / "graph.png", close=True))
+        files.append(save_figure(plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
+                                 folder / "graph.png", close=True))
         if setup.muscles:
-            files.append(plot.save_figure(plot.plot_routing(mesh, x, setup.muscles, ticks=False),
-                                          folder / "muscles.png", close=True))
+            files.append(save_figure(plot_routing(mesh, x, setup.muscles, ticks=False),
+                                     folder / "muscles.png", close=True))
     if run.design is not None:
         res = run.design
-        files.append(plot.save_figure(plot.plot_design(mesh, res, x, setup.muscles, ticks=False),
-                                      folder / "design.png", close=True))
+        files.append(save_figure(plot_design(mesh, res, x, setup.muscles, ticks=False),
+                                 folder / "design.png", close=True))
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
     return files
@@ -423,7 +422,8 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
 
 def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
     """The virtual prototype's photographs, ``photo.png`` (with ``photo.json``) and ``overlay.png``."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.photos import plot_overlay
 
     files: list[str] = []
     for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
@@ -432,7 +432,7 @@ def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
     if run.photo is not None:
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))
-        fig = plot.plot_overlay(run.photo.image, scene.mesh, run.setup.target, run.comparison, synthetic=True,
-                                title="target outline on the driven body's photo", ticks=False)
-        files.append(plot.save_figure(fig, folder / "overlay.png", close=True))
+        fig = plot_overlay(run.photo.image, scene.mesh, run.setup.target, run.comparison, synthetic=True,
+                           title="target outline on the driven body's photo", ticks=False)
+        files.append(save_figure(fig, folder / "overlay.png", close=True))
     return files

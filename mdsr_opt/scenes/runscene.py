@@ -1,4 +1,9 @@
-"""A whole scene through the pipeline into a run folder (:func:`run_scene`), and problem scripts' main."""
+"""A whole scene through the pipeline into a run folder (:func:`run_scene`, the one way to run a scene from
+Python), and problem scripts' command line (:func:`run_main`).
+
+:func:`write_scene`, :func:`run_entries` and :func:`scene_pool` are the internals that ``run_scene`` and
+``mdsr run`` share (``mdsr run`` guards one folder and one worker pool for several scenes); they are not
+part of the public API."""
 
 from __future__ import annotations
 
@@ -12,7 +17,6 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from ..core.errors import checking_input, exit_report
-from ..core.deprecation import renamed_keywords
 from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
 from .animate import animate
@@ -21,7 +25,7 @@ from .rundir import check_interrupt
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
-__all__ = ['run_scene', 'run_entries', 'write_scene', 'run_main', 'scene_pool']
+__all__ = ['run_scene', 'run_main']
 
 
 _LOG = logging.getLogger(__name__)
@@ -46,7 +50,6 @@ def scene_pool(workers: int | None = None):
     return process_pool(workers, JOB_MODULES, setup=(adopt_noted_folders, (noted_folders(),)))
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
@@ -68,8 +71,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     method : design method overriding the scene's ``design_options["method"]``.
     photos, figures, animations : turn the photographs, the figures and the animations off.
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
-    photo_size : (width, height) of the synthetic photographs, in pixels (``photo_resolution=`` is its
-        deprecated spelling).
+    photo_size : (width, height) of the synthetic photographs, in pixels.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
         (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
@@ -132,8 +134,8 @@ def _check_run(scene, cases, mesh_format, photo_size=(500, 500)) -> tuple[str, .
 
 
 def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
-    """The names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one folder per
-    case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+    """Internal: the names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one
+    folder per case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
     names = scene.case_names if cases is None else tuple(cases)
     out = list(RUN_FILES) + list(names)
     for a in scene.animations:
@@ -143,16 +145,16 @@ def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
     return out
 
 
-@renamed_keywords(photo_resolution="photo_size")
 def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | None = None,
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0, background: bool = True, pool: Executor | None = None) -> SceneReport:
-    """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
-    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result; ``pool`` (with
-    ``background``) is the process pool to send the jobs to (``mdsr run`` shares one between its scenes;
-    None: one of this call's own)."""
+    """Internal: the body of :func:`run_scene` without the folder's guard, for ``run_scene`` and ``mdsr run``
+    (call :func:`run_scene` instead). Runs and writes into ``out`` as it stands (the caller holds a
+    :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
+    is the process pool to send the jobs to (``mdsr run`` shares one between its scenes; None: one of this
+    call's own)."""
     import time
 
     from ..body.io import atomic_path, write_json
@@ -336,7 +338,7 @@ def n_units(scene: Scene, cases, animations: bool) -> int:
 def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) -> dict:
     """An animation of the scene: its frames' forward solves (:func:`~mdsr_opt.scenes.animate.animate`), its
     GIF (with ``figures``) and ``out/<animation>.json``; returns the JSON's data and the message to log."""
-    from .. import plot
+    from ..plot.scenes import save_animation
     from ..body.io import write_json
 
     res = animate(scene, anim, designs)
@@ -351,8 +353,8 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
             reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles] for x in res.states]
             titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
                       + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
-            plot.save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
-                                activations=act, titles=titles, fps=anim.fps)
+            save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
+                           activations=act, titles=titles, fps=anim.fps)
             data["gif"] = f"{anim.name}.gif"
     else:
         said = f"[{scene.name}] animation {anim.name}: not made ({res.message})"
@@ -395,8 +397,9 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
 
 def _write_rest(scene: Scene, path) -> str:
     """``rest.png``: the rest mesh with its regions."""
-    from .. import plot
+    from ..plot.common import save_figure
+    from ..plot.scenes import plot_scene
 
-    fig = plot.plot_scene(scene.mesh, scene.regions,
-                          title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
-    return plot.save_figure(fig, path, close=True)
+    fig = plot_scene(scene.mesh, scene.regions,
+                     title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
+    return save_figure(fig, path, close=True)

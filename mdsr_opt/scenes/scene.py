@@ -8,7 +8,8 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh, check_polygon, polygon_area
+from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh
+from ..body.polygons import check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
 from ..core.errors import InputError

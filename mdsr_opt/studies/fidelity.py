@@ -35,7 +35,7 @@ import numpy as np
 from ..body.io import atomic_path, write_json
 from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
-from .problems import MATERIALS, get_problem
+from .problems import MATERIALS, get_study_problem
 from .runs import RunOutcome, fill_accuracy, run_all
 from .spec import Study
 from .study import StudyResult, environment_info, output_folder
@@ -179,7 +179,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
     -------
     FidelityChoice
     """
-    prob = get_problem(problem)
+    prob = get_study_problem(problem)
     load = prob.default_load if load is None else float(load)
     tol = float(tol)
     if not (math.isfinite(tol) and tol > 0):
@@ -222,7 +222,7 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
         tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
         loads: dict = {}
         for p, load in cases:
-            get_problem(p)
+            get_study_problem(p)
             loads.setdefault(p, []).append(float(load))
         st = Study("fidelity", "coarsest mesh and simplest material model within a tolerance, per scene",
                    tuple(loads), tuple(resolutions), tuple(MATERIALS), (method,),
@@ -281,9 +281,10 @@ def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures
             fh.write(fidelity_markdown(choices))
         write_json(os.path.join(out, "fidelity.json"), {**meta, "choices": table})
         if figures:
-            from .. import plot
+            from ..plot.common import save_figure
+            from ..plot.studies import plot_fidelity
 
-            plot.save_figure(plot.plot_fidelity(rows, table), os.path.join(out, "fidelity.png"), close=True)
+            save_figure(plot_fidelity(rows, table), os.path.join(out, "fidelity.png"), close=True)
         if log:
             log(f"wrote fidelity.csv, fidelity_runs.csv, fidelity.md, fidelity.json"
                 f"{', fidelity.png' if figures else ''} to {out}")

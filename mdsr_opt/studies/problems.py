@@ -11,7 +11,7 @@ from ..body.material import LinearElastic, NeoHookean
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 
-__all__ = ['Setup', 'StudyProblem', 'list_study_problems', 'get_problem', 'build_setup']
+__all__ = ['Setup', 'StudyProblem', 'list_study_problems', 'get_study_problem', 'build_setup']
 
 
 #: Material models by name, simplest first (the fidelity helper tries them in this order).
@@ -164,15 +164,15 @@ def _scene_problem(name: str) -> StudyProblem | None:
     if "/" not in name:
         return None
     try:
-        from .. import scenes
+        from ..scenes.library import get_problem, list_problems
     except ImportError:  # pragma: no cover - the library is optional
         return None
     scene_name, case_name = name.split("/", 1)
-    if scene_name not in scenes.list_problems():
+    if scene_name not in list_problems():
         return None
 
     def build(resolution: int, load: float) -> Setup:
-        sc = scenes.get_problem(scene_name, resolution=int(resolution))
+        sc = get_problem(scene_name, resolution=int(resolution))
         case = sc.case(case_name)
         mat = sc.material
         opts = sc.design_options
@@ -185,7 +185,7 @@ def _scene_problem(name: str) -> StudyProblem | None:
                      drags=(case.drag_nodes, rest + load * (case.drag_positions - rest)), **common)
 
     try:
-        sc = scenes.get_problem(scene_name, resolution="coarse")
+        sc = get_problem(scene_name, resolution="coarse")
         case = sc.case(case_name)
     except (KeyError, ValueError):
         return None
@@ -197,19 +197,19 @@ def list_study_problems() -> list[str]:
     """Names of the study problems: the built-in strips, then ``scene/case`` of the problem library."""
     names = list(PROBLEMS)
     try:
-        from .. import scenes
+        from ..scenes.library import get_problem, list_problems
     except ImportError:  # pragma: no cover
         return names
-    for s in scenes.list_problems():
+    for s in list_problems():
         try:
-            sc = scenes.get_problem(s, resolution="coarse")
+            sc = get_problem(s, resolution="coarse")
         except Exception:  # pragma: no cover - a broken library script must not break the study list
             continue
         names += [f"{s}/{c}" for c in sc.case_names]
     return names
 
 
-def get_problem(name: str) -> StudyProblem:
+def get_study_problem(name: str) -> StudyProblem:
     """A study problem by name; an unknown name is an error that lists the valid ones."""
     if not isinstance(name, str):
         raise TypeError(f"problem name must be a string, got {type(name).__name__}")
@@ -223,7 +223,7 @@ def get_problem(name: str) -> StudyProblem:
 
 def build_setup(problem: str, resolution: int, load: float | None = None) -> Setup:
     """Build problem ``problem`` at ``resolution`` (approximate node count) and ``load`` (default: its own)."""
-    p = get_problem(problem)
+    p = get_study_problem(problem)
     return p.build(int(resolution), p.default_load if load is None else float(load))
 
 

@@ -7,7 +7,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..body.mesh import MAX_RESOLUTION
-from .problems import MATERIALS, check_name, build_setup, get_problem
+from .problems import MATERIALS, check_name, build_setup, get_study_problem
 
 __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
 
@@ -101,7 +101,7 @@ class Study:
                 raise ValueError(f"study {self.name!r}: {k} is empty")
             object.__setattr__(self, k, v)
         for p in self.problems:
-            get_problem(p)
+            get_study_problem(p)
         for r in self.resolutions:
             _check_nodes(r, f"study {self.name!r}: resolutions")
         object.__setattr__(self, "resolutions", tuple(sorted(int(r) for r in self.resolutions)))
@@ -121,7 +121,7 @@ class Study:
         for p in self.problems:  # a bad load is an error now, not in the middle of a sweep
             for load in self.loads_of(p):
                 try:
-                    get_problem(p).build(self.resolutions[0], load)
+                    get_study_problem(p).build(self.resolutions[0], load)
                 except ValueError as exc:
                     raise ValueError(f"study {self.name!r}: {exc}") from None
         if self.reference_resolution is None:
@@ -146,7 +146,7 @@ class Study:
         return replace(self, **changes)
 
     def loads_of(self, problem: str) -> tuple:
-        return self.loads.get(problem, (get_problem(problem).default_load,))
+        return self.loads.get(problem, (get_study_problem(problem).default_load,))
 
     def plan(self) -> tuple[list["RunSpec"], list["RunSpec"], list[dict]]:
         """``(runs, references, capped)``: the runs in table order, the reference solves, and the
@@ -154,7 +154,7 @@ class Study:
         runs, refs, capped = [], [], []
         nodes_of = {}
         for p in self.problems:
-            prob = get_problem(p)
+            prob = get_study_problem(p)
             for load in self.loads_of(p):
                 refs.append(RunSpec(self.name, p, load, "predictor", "neo-hookean", "ipopt",
                                     self.reference_resolution, self.timeout * 4, 3000, "reference", self.seed))

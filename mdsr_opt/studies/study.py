@@ -122,15 +122,15 @@ class StudyResult:
             paths[key] = p
         paths["json"] = write_json(os.path.join(out, f"{name}.json"), _jsonable(self.meta))
         if figures:
-            from .. import plot
+            from ..plot.common import save_figure
+            from ..plot.studies import plot_study_pareto, plot_study_scaling, plot_study_success
 
-            paths["pareto"] = plot.save_figure(plot.plot_study_pareto(self.rows, title=name),
-                                               os.path.join(out, f"{name}_pareto.png"), close=True)
-            paths["scaling"] = plot.save_figure(plot.plot_study_scaling(self.rows, fit_slopes(self.rows),
-                                                                        title=name),
-                                                os.path.join(out, f"{name}_scaling.png"), close=True)
-            paths["success"] = plot.save_figure(plot.plot_study_success(self.rows, title=name),
-                                                os.path.join(out, f"{name}_success.png"), close=True)
+            paths["pareto"] = save_figure(plot_study_pareto(self.rows, title=name),
+                                          os.path.join(out, f"{name}_pareto.png"), close=True)
+            paths["scaling"] = save_figure(plot_study_scaling(self.rows, fit_slopes(self.rows), title=name),
+                                           os.path.join(out, f"{name}_scaling.png"), close=True)
+            paths["success"] = save_figure(plot_study_success(self.rows, title=name),
+                                           os.path.join(out, f"{name}_success.png"), close=True)
         return paths
 
 

@@ -7,7 +7,6 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.deprecation import renamed_keywords
 from ..core.guards import interruptible
 from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
@@ -29,7 +28,6 @@ __all__ = ['check_design_options', 'design_contractions']
 
 
 # ---------------------------------------------------------------------------------------------- public API
-@renamed_keywords(initial="initial_guess")
 @interruptible()  # Ctrl-C inside the design NLP (CasADi swallows it) raises KeyboardInterrupt
 @one_blas_thread()  # as the forward solves run: the design NLP's MUMPS too (see mdsr_opt.mechanics.blas)
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
@@ -54,7 +52,6 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``.
     initial_guess : (m,) array, optional
-        First contractions (``initial=`` is its deprecated spelling).
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.
     weights : (n,) array, optional

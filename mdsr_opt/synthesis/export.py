@@ -36,10 +36,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..body.fingerprint import check_same_mesh
-from ..body.mesh import Mesh, polygon_area
+from ..body.mesh import Mesh
+from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
-from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
@@ -455,7 +455,6 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
     return {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
 
 
-@renamed_keywords(folder="out")
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
                        name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
@@ -466,7 +465,7 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         The body at rest; its coordinates are lengths in ``units``.
     design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None (layout only)
     out : str or path-like
-        Output folder (created). ``folder=`` is its deprecated spelling.
+        Output folder (created).
     muscles : the layout (required unless ``design`` is a PosesResult).
     units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.

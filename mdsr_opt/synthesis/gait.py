@@ -379,15 +379,15 @@ def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
                  f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     # no tight_layout: it lays every text out once more (40 % of the chart's time), and the PNG is cropped
-    # to what is drawn anyway (mdsr_opt.plot.save_figure)
+    # to what is drawn anyway (mdsr_opt.plot.common.save_figure)
     return fig
 
 
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
                         fps: float = 8.0) -> str:
-    """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.save_animation`); ``mesh`` must be
+    """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.scenes.save_animation`); ``mesh`` must be
     the body the schedule was solved on."""
-    from .. import plot
+    from ..plot.scenes import save_animation
 
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
@@ -398,8 +398,8 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
 
     top = float(np.nanmax(schedule.contractions)) or 1.0
     titles = [f"{title} {schedule.labels[k]} (t = {schedule.times[k]:.2f} s)".strip() for k in range(schedule.n_frames)]
-    return plot.save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
-                               activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
+    return save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
+                          activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
 
 
 def _write_schedule(schedule: GaitSchedule, title: str, path) -> str:

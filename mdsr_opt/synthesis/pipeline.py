@@ -1,4 +1,4 @@
-"""The whole design in one call: target, routing, contractions, verification (:func:`design`)."""
+"""The whole design in one call: target, routing, contractions, verification (:func:`design_pipeline`)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,12 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
-from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
 
-__all__ = ['PipelineResult', 'design', 'design_pipeline']
+__all__ = ['PipelineResult', 'design_pipeline']
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -91,11 +90,9 @@ class PipelineResult:
             "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
         }
 
-    @renamed_keywords(directory="out")
     def save(self, out: str | os.PathLike) -> str:
         """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
-        into the folder ``out`` (created if missing; ``directory=`` is its deprecated spelling), each
-        atomically. Returns the JSON path."""
+        into the folder ``out`` (created if missing), each atomically. Returns the JSON path."""
         from ..body.io import write_json, write_mesh
 
         directory = os.fspath(out)
@@ -111,10 +108,8 @@ class PipelineResult:
         return write_json(os.path.join(directory, "design.json"), finite_or_none(data))
 
     @classmethod
-    @renamed_keywords(directory="path")
     def load(cls, path: str | os.PathLike) -> "PipelineResult":
-        """Read a result written by :meth:`save` from its folder ``path`` (``directory=`` is the deprecated
-        spelling).
+        """Read a result written by :meth:`save` from its folder ``path``.
 
         Raises
         ------
@@ -184,9 +179,9 @@ class PipelineResult:
 
 
 @interruptible()
-def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
-           routing_options: dict | None = None, method: str = "flattened", external_options: dict | None = None,
-           **design_options) -> PipelineResult:
+def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
+                    routing_options: dict | None = None, method: str = "flattened",
+                    external_options: dict | None = None, **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -225,7 +220,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     >>> left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
     >>> top_right = {i: (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
-    >>> out = design(mesh, NeoHookean(1.0, 0.3), left, top_right)
+    >>> out = design_pipeline(mesh, NeoHookean(1.0, 0.3), left, top_right)
     >>> out.success, out.design.difference < 0.05
     (True, True)
     """
@@ -258,6 +253,3 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
                           target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
                           times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
 
-
-#: The pipeline under a name that does not clash with the module ``mdsr_opt.design`` at package level.
-design_pipeline = design

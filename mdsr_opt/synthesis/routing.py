@@ -110,10 +110,7 @@ __all__ = [
     "contraction_graph",
     "edge_weights",
     "route_muscles",
-    "RoutingResult",
-    "MuscleStats",
     "RoutingWarning",
-    "DroppedUnit",
     "largest_turn",
 ]
 

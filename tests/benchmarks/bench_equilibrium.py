@@ -77,9 +77,11 @@ def run(sizes, backends, scene_kind, repeat, caps, log=print):
 
 
 def chart(rows, path):
-    from mdsr_opt import plot
+    import matplotlib.pyplot as plt
 
-    fig, axes = plot.plt.subplots(1, 2, figsize=(11, 4.2))
+    from mdsr_opt.plot.common import save_figure
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for b in sorted({r["backend"] for r in rows}):
         rr = sorted((r for r in rows if r["backend"] == b), key=lambda r: r["nodes"])
         n = [r["nodes"] for r in rr]
@@ -96,7 +98,7 @@ def chart(rows, path):
         ax.set_ylabel("seconds")
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=8)
-    plot.save_figure(fig, path)
+    save_figure(fig, path)
 
 
 def main(argv=None):

@@ -46,7 +46,7 @@ def _check_internal(res, mesh, mus):
     """The check exactly as solve_internal runs it (uncached): multipliers, Lagrangian Hessian, Finsler."""
     from mdsr_opt.mechanics.equilibrium import _constrained_model, gauge_coordinates, _muscle_constraints
     from mdsr_opt.mechanics.loadsteps import _stability_at
-    from mdsr_opt.mechanics.constraints import check_anchor_radius
+    from mdsr_opt.mechanics.anchors import check_anchor_radius
 
     emodel = get_model(mesh, MAT)
     mc = _muscle_constraints(mesh, mus, check_anchor_radius(mesh, None))
