@@ -207,10 +207,8 @@ class LinearElastic(_Isotropic):
              + lam * np.einsum("ij,kl->ijkl", I2, I2))
         return P, C[..., None]
 
-    @staticmethod
-    def tangent_derivative(F, dF, mu, lam):
-        """None: the tangent is constant."""
-        return None
+    #: the tangent is constant: no derivative
+    tangent_derivative = None
 
     def psi(self, F, params=None):
         p = self.params if params is None else params
@@ -223,8 +221,10 @@ class LinearElastic(_Isotropic):
 
 def numeric_law(material) -> bool:
     """Whether ``material`` states its law in closed form (``density``, ``stress_tangent`` and
-    ``tangent_derivative``), so that the energy models can evaluate it in vectorised numpy."""
-    return all(callable(getattr(material, k, None)) for k in ("density", "stress_tangent", "tangent_derivative"))
+    ``tangent_derivative``, None for a constant tangent), so that the energy models can evaluate it in
+    vectorised numpy."""
+    return all(callable(getattr(material, k, None)) for k in ("density", "stress_tangent")) and (
+        hasattr(material, "tangent_derivative"))
 
 
 Material = NeoHookean | LinearElastic

@@ -13,8 +13,8 @@ Two evaluations of the same energy:
 
 * numeric (models without sliding cables, of a material with closed forms such as Neo-Hookean or linear:
   :attr:`EnergyModel.is_numeric`): :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and
-  :meth:`~EnergyModel.hessian` in vectorised numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`, scattered by
-  :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
+  :meth:`~EnergyModel.hessian` in vectorised numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`,
+  scattered by :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
   (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`). Making the model costs a few array operations.
 * symbolic (``x``, ``p``, ``f_fn``, ``grad_fn``, ``hess_fn``, ``hess_lag_fn``, ``hess_lag_full_fn``: for
   the design NLP, the constrained models, the other backends, and every model the numeric path does not
@@ -26,10 +26,10 @@ Two evaluations of the same energy:
 
 Both evaluate the same statements, each written once: the material's density
 (:meth:`~mdsr_opt.body.material.NeoHookean.density`) and the spring energy
-(:func:`~mdsr_opt.mechanics.segments.spring_energy`). The symbolic model differentiates them with CasADi and is
-the reference; the numeric one evaluates their closed-form derivatives, which tests check against it (energy,
-gradient, Hessian and third derivative at random states, for every material and muscle model) and against
-finite differences.
+(:func:`~mdsr_opt.mechanics.segments.spring_energy`). The symbolic model differentiates them with CasADi
+and is the reference; the numeric one evaluates their closed-form derivatives, which tests check against it
+(energy, gradient, Hessian and third derivative at random states, for every material with and without
+muscle springs) and against finite differences.
 
 Example
 -------

@@ -6,8 +6,9 @@ semi-definite approximation of its Hessian with vectorised numpy (no per-element
 
 * elements: ``F = Ds B`` (``B = Dm^-1``), the energy density, first Piola stress ``P`` and the 4 x 4 tangent
   ``dP/dF`` in the material's closed forms (:mod:`mdsr_opt.body.material`, where the law is stated once and
-  checked against CasADi's derivatives of it); the tangent is projected to positive semi-definite per element (batched 4 x 4 ``eigh``), so the
-  element Hessian ``area D' (dP/dF)+ D`` is positive semi-definite too;
+  checked against CasADi's derivatives of it); the tangent is projected to positive semi-definite per
+  element (batched 4 x 4 ``eigh``), so the element Hessian ``area D' (dP/dF)+ D`` is positive semi-definite
+  too;
 * springs ``k/2 (l - r l0)^2``: the 2 x 2 block ``k (u u' + max(1 - r l0 / l, 0) (I - u u'))``;
   only springs with ``k != 0`` are evaluated.
 
@@ -232,8 +233,10 @@ class NewtonEnergy:
         """
         x = np.asarray(x, dtype=float).reshape(-1)
         v = np.asarray(v, dtype=float).reshape(-1)
-        dA = self.law.tangent_derivative(self._F(x), self._F(v), self.mu, self.lam)
-        He = np.zeros((6, 6, self.tri.shape[0])) if dA is None else self._element_hessians(dA)
+        if self.law.tangent_derivative is None:  # a constant tangent
+            He = np.zeros((6, 6, self.tri.shape[0]))
+        else:
+            He = self._element_hessians(self.law.tangent_derivative(self._F(x), self._F(v), self.mu, self.lam))
         Hs = np.zeros((4, 4, 0))
         if len(self.k):
             X, V = x.reshape(-1, 2), v.reshape(-1, 2)
