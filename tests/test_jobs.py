@@ -131,8 +131,10 @@ def test_process_pool_has_workers_only_where_they_pay():
         assert (pool is None) is (available_cores() < 2)
         if pool is not None:
             assert pool.submit(os.getpid).result() != os.getpid()
-    for bad in (-1, True, 1.5):
-        with pytest.raises(ValueError, match="workers must be a non-negative integer"):
+    for bad, kind, words in ((-1, ValueError, "workers must be an integer >= 0, got -1"),
+                             (True, TypeError, "workers must be an integer, got bool"),
+                             (1.5, TypeError, "workers must be an integer, got float")):
+        with pytest.raises(kind, match=words):
             with process_pool(bad):
                 pass
     assert start_method() in multiprocessing.get_all_start_methods()

@@ -199,3 +199,45 @@ def test_numeric_energy_at_rest_is_round_off_squared(small):
     x = small.points.copy()
     x[0] = x[1]  # a collapsed triangle: no finite energy
     assert not np.isfinite(model.energy(x, p))
+
+
+@pytest.mark.parametrize("mat", [NeoHookean(E=2.0, nu=0.3, thickness=0.7), LinearElastic(E=1.5, nu=0.25)])
+def test_closed_forms_of_every_material_match_casadis_derivatives_of_its_density(mat):
+    """A material's law is stated once (``density``); the numpy ``psi``, the symbolic ``psi_expr`` and the
+    closed-form stress, tangent and tangent derivative the numeric models use must agree with CasADi's
+    derivatives of ``psi_expr`` at random deformation gradients, and the stress with central differences."""
+    from mdsr_opt.body.material import numeric_law
+
+    assert numeric_law(mat)
+    rng = np.random.default_rng(5)
+    F = np.eye(2)[:, :, None] + 0.35 * rng.standard_normal((2, 2, 200))
+    F = F[:, :, F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0] > 0.2][:, :, :40]  # (2, 2, m), elements last
+    dF = rng.standard_normal(F.shape)
+    mu, lam = mat.params
+    f, df = ca.SX.sym("f", 4), ca.SX.sym("df", 4)  # vec(F), column-major: F00, F10, F01, F11
+    psi = mat.psi_expr(ca.reshape(f, 2, 2), ca.DM(mat.params))
+    P = ca.gradient(psi, f)
+    A = ca.jacobian(P, f)
+    dA = ca.jacobian(ca.mtimes(A, df), f)  # D A [dF] (A is symmetric)
+    ad = ca.Function("ad", [f, df], [psi, P, A, dA])
+    P_cf, A_cf = mat.stress_tangent(F, mu, lam)
+    dA_cf = None if mat.tangent_derivative is None else mat.tangent_derivative(F, dF, mu, lam)
+    Fm = np.moveaxis(F, -1, 0)  # (m, 2, 2)
+    # the one density through its three doors: numpy psi, CasADi psi_expr, and the Newton energy's call
+    np.testing.assert_allclose(mat.psi(Fm), [float(ad(Fe.T.ravel(), 0)[0]) for Fe in Fm], rtol=1e-13, atol=1e-15)
+    h = 1e-6
+    for e in range(F.shape[-1]):
+        v, dv = F[:, :, e].T.ravel(), dF[:, :, e].T.ravel()  # column-major vec
+        psi_e, P_e, A_e, dA_e = (np.asarray(ca.DM(u)) for u in ad(v, dv))
+        scale = max(1.0, np.abs(A_e).max())
+        # P_ij at vec index i + 2 j; A[i, j, k, l] at (i + 2 j, k + 2 l)
+        assert np.abs(P_cf[:, :, e] - P_e.reshape(2, 2, order="F")).max() < 1e-12 * scale
+        Ae = A_cf[..., min(e, A_cf.shape[-1] - 1)]
+        assert np.abs(Ae.transpose(1, 0, 3, 2).reshape(4, 4) - A_e).max() < 1e-12 * scale
+        dAe = np.zeros((2, 2, 2, 2)) if dA_cf is None else dA_cf[..., e]
+        assert np.abs(dAe.transpose(1, 0, 3, 2).reshape(4, 4) - dA_e).max() < 1e-11 * scale
+        fd = np.array([(mat.psi(F[:, :, e] + h * E) - mat.psi(F[:, :, e] - h * E)) / (2 * h)
+                       for E in np.eye(4).reshape(4, 2, 2)]).reshape(2, 2)
+        assert np.abs(fd - P_cf[:, :, e]).max() < 1e-7 * scale
+    if dA_cf is None:  # a constant tangent: CasADi finds no third derivative either
+        assert np.abs(np.asarray(ca.DM(ad(F[:, :, 0].T.ravel(), dF[:, :, 0].T.ravel())[3]))).max() == 0.0

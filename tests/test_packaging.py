@@ -384,7 +384,7 @@ def test_progress_off_prints_messages_or_nothing():
         log("one line")
         log.advance()
     assert out.getvalue() == "one line\n" and log.n == 1
-    with pytest.raises(ValueError, match="total must be a non-negative int"):
+    with pytest.raises(ValueError, match="total must be an integer >= 0, got -1"):
         Progress(-1)
 
 

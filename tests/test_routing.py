@@ -512,9 +512,9 @@ def test_weak_contraction_is_not_called_stretching(grid_strip):
     ({"K_a": -1.0}, ValueError, "K_a must be >= 0"),
     ({"K_b": float("nan")}, ValueError, "K_b must be finite"),
     ({"K_h": "1"}, TypeError, "K_h must be a real number"),
-    ({"n_seeds": 0}, ValueError, "n_seeds must be >= 1"),
+    ({"n_seeds": 0}, ValueError, "n_seeds must be an integer >= 1"),
     ({"n_seeds": 2.5}, TypeError, "n_seeds must be an integer"),
-    ({"max_muscles": 0}, ValueError, "max_muscles must be >= 1"),
+    ({"max_muscles": 0}, ValueError, "max_muscles must be an integer >= 1"),
     ({"min_length": -0.1}, ValueError, "min_length must be >= 0"),
     ({"min_contraction": 1.0}, ValueError, "min_contraction must be < 1"),
 ])

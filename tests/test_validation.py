@@ -275,13 +275,14 @@ def test_study_arguments_are_named(tmp_path, capsys, args, words):
 
 
 def test_an_anchor_radius_of_half_the_body_is_refused_at_every_door():
-    from mdsr_opt import design_contractions, solve_internal
+    from mdsr_opt import check_minimum, design_contractions, solve_internal
 
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)  # body size (diameter) sqrt(17) = 4.12
     mus = [Muscle(np.flatnonzero(mesh.points[:, 1] == 1.0)[1:-1])]
     mat = NeoHookean(1.0, 0.3)
     for call in (lambda: solve_internal(mesh, mat, mus, [0.1], anchor_radius=2.1),
-                 lambda: design_contractions(mesh, mat, mus, mesh.points, anchor_radius=1e9)):
+                 lambda: design_contractions(mesh, mat, mus, mesh.points, anchor_radius=1e9),
+                 lambda: check_minimum(mesh, mat, mus, [0.1], mesh.points, anchor_radius=2.1)):
         with pytest.raises(ValueError, match=r"anchor_radius .* is at least half the body's size \(4\.12\)"):
             call()
     assert solve_internal(mesh, mat, mus, [0.1], anchor_radius=2.0).success  # just below the limit

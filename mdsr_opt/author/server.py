@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.checks import check_int
+
 __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 
 #: Largest websocket message the server reads (bytes of text); larger ones get an error message.
@@ -262,8 +264,8 @@ class Page:
             return [{"type": "graph", "weights": s.graph_weights()}]
         if t == "route":
             mm = msg.get("max_muscles")
-            if mm is not None and (isinstance(mm, bool) or not isinstance(mm, int) or mm < 1 or mm > 100):
-                raise ValueError(f"max_muscles must be an integer from 1 to 100 (or empty), got {mm!r}")
+            if mm is not None:
+                mm = check_int(mm, "max_muscles (or empty)", 1, 100)
             out = s.route(_number(msg, "K_a", lo=0.0, hi=1e6), _number(msg, "K_b", lo=0.0, hi=1e6), mm)
             return [dict(type="routing", **out)]
         if t == "design":

@@ -1,9 +1,22 @@
 """Hyperelastic materials as scalar energy densities ``Psi(F)`` (per unit rest area, times thickness).
 
-Each material is a frozen dataclass with validated parameters. ``psi(F, params)`` works on a 2x2 CasADi
-SX/MX matrix or on numpy arrays of shape (..., 2, 2); stresses and tangents come from automatic
-differentiation in :mod:`mdsr_opt.model`. ``params`` is the numeric parameter vector the symbolic model
-takes at solve time, so one built model serves any stiffness.
+Each material is a frozen dataclass with validated parameters. Its law is stated once, in
+:meth:`~NeoHookean.density`: an expression in the entries of ``F - I`` and the numbers ``(mu, lam)`` built
+from arithmetic alone (and a ``log1p`` the caller passes), so the same lines evaluate numpy arrays and
+CasADi symbols. Everything else derives from it:
+
+* :meth:`~NeoHookean.psi_expr` (CasADi, symbolic parameters): the symbolic energy model
+  (:mod:`mdsr_opt.mechanics.model`), whose stresses and tangents CasADi differentiates -- the reference;
+* :meth:`~NeoHookean.psi` (numpy, any batch shape) and the vectorised energy of
+  :class:`~mdsr_opt.mechanics.newton.NewtonEnergy`;
+* the closed-form first Piola stress, tangent ``dP/dF`` and its derivative along a direction
+  (:meth:`~NeoHookean.stress_tangent`, :meth:`~NeoHookean.tangent_derivative`), which the numeric energy
+  model, the Newton backend and the design's numpy callbacks evaluate for speed; tests check them against
+  CasADi's derivatives of :meth:`~NeoHookean.psi_expr` and against finite differences.
+
+``params`` is the numeric parameter vector ``[mu t, lam t]`` the models take at solve time, so one built
+model serves any stiffness. A material of another kind needs only ``kind``, ``params`` and ``psi_expr``:
+the models then evaluate it symbolically.
 """
 
 from __future__ import annotations
@@ -15,7 +28,7 @@ import numpy as np
 
 from ..core.checks import positive_float
 
-__all__ = ["NeoHookean", "LinearElastic", "Material"]
+__all__ = ["NeoHookean", "LinearElastic", "Material", "numeric_law"]
 
 
 def _lame(E: float, nu: float) -> tuple[float, float]:
@@ -84,11 +97,63 @@ class NeoHookean(_Isotropic):
     rotation_invariant = True
 
     @staticmethod
+    def density(a, b, c, d, mu, lam, log1p=np.log1p):
+        """``Psi`` at ``F = I + [[a, b], [c, d]]`` (numpy arrays or CasADi symbols; ``log1p`` of their kind).
+
+        Written in ``F - I`` (``tr F'F - 2 = |F - I|^2 + 2 tr(F - I)``, ``ln J = log1p(J - 1)``): no
+        cancellation of O(1) terms, so a state at rest has an energy of round-off squared, not of round-off.
+        Not finite where ``J <= 0``.
+        """
+        lnJ = log1p(a + d + (a * d - b * c))
+        return mu / 2 * (a * a + b * b + c * c + d * d) + mu * ((a + d) - lnJ) + lam / 2 * lnJ ** 2
+
+    @staticmethod
     def psi_expr(F, params):
         """Energy density for a 2x2 symbolic ``F`` and symbolic ``params = [mu, lam]``."""
-        J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
-        lnJ = ca.log(J)
-        return params[0] / 2 * (ca.sumsqr(F) - 2) - params[0] * lnJ + params[1] / 2 * lnJ ** 2
+        return NeoHookean.density(F[0, 0] - 1, F[0, 1], F[1, 0], F[1, 1] - 1, params[0], params[1], ca.log1p)
+
+    @staticmethod
+    def stress_tangent(F, mu, lam, tangent: bool = True):
+        """Closed-form first Piola stress ``P = dPsi/dF`` (2, 2, m) and, with ``tangent``, ``A[i, j, k, l] =
+        dP_ij / dF_kl`` (2, 2, 2, 2, m) of deformation gradients ``F`` (2, 2, m), elements last.
+
+        With ``G = F^-T``: ``P = mu F + (lam ln J - mu) G`` and ``A_ijkl = mu d_ik d_jl + (mu - lam ln J)
+        G_il G_kj + lam G_ij G_kl``.
+        """
+        f00, f01, f10, f11 = F[0, 0], F[0, 1], F[1, 0], F[1, 1]
+        J = f00 * f11 - f01 * f10
+        lnJ = np.log(J)
+        iJ = 1.0 / J
+        G = np.stack([np.stack([f11 * iJ, -f10 * iJ]), np.stack([-f01 * iJ, f00 * iJ])])  # F^-T
+        P = mu * F + (lam * lnJ - mu) * G
+        if not tangent:
+            return P, None
+        A = lam * (G[:, :, None, None] * G[None, None])
+        A += (mu - lam * lnJ) * (G[:, None, None, :] * np.swapaxes(G, 0, 1)[None, :, :, None])
+        for i in range(2):
+            for j in range(2):
+                A[i, j, i, j] += mu
+        return P, A
+
+    @staticmethod
+    def tangent_derivative(F, dF, mu, lam):
+        """The derivative of the tangent ``A`` of :meth:`stress_tangent` along ``dF`` (both (2, 2, m)):
+        ``-lam (G:dF) G_il G_kj + (mu - lam ln J)(dG_il G_kj + G_il dG_kj) + lam (dG_ij G_kl + G_ij dG_kl)``
+        with ``dG = -G dF' G``; (2, 2, 2, 2, m)."""
+        f00, f01, f10, f11 = F[0, 0], F[0, 1], F[1, 0], F[1, 1]
+        J = f00 * f11 - f01 * f10
+        iJ = 1.0 / J
+        G = np.stack([np.stack([f11 * iJ, -f10 * iJ]), np.stack([-f01 * iJ, f00 * iJ])])  # F^-T
+        GT = np.swapaxes(G, 0, 1)
+        dG = -np.einsum("iam,bam,blm->ilm", G, dF, G)
+        dGT = np.swapaxes(dG, 0, 1)
+        tr = (G * dF).sum(axis=(0, 1))  # d ln J
+        c1 = mu - lam * np.log(J)
+        GG = G[:, None, None, :] * GT[None, :, :, None]  # G_il G_kj
+        dA = lam * (dG[:, :, None, None] * G[None, None] + G[:, :, None, None] * dG[None, None])
+        dA += c1 * (dG[:, None, None, :] * GT[None, :, :, None] + G[:, None, None, :] * dGT[None, :, :, None])
+        dA -= lam * tr * GG
+        return dA
 
     def psi(self, F, params=None):
         """``Psi(F)`` (times thickness) for a CasADi 2x2 matrix or a numpy array (..., 2, 2).
@@ -99,11 +164,10 @@ class NeoHookean(_Isotropic):
         if _is_symbolic(F):
             return self.psi_expr(F, p)
         F = np.asarray(F, dtype=float)
-        J = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+        a, b, c, d = F[..., 0, 0] - 1, F[..., 0, 1], F[..., 1, 0], F[..., 1, 1] - 1
         with np.errstate(divide="ignore", invalid="ignore"):
-            lnJ = np.where(J > 0, np.log(np.where(J > 0, J, 1.0)), np.nan)
-            out = p[0] / 2 * (np.sum(F ** 2, axis=(-2, -1)) - 2) - p[0] * lnJ + p[1] / 2 * lnJ ** 2
-        out = np.where(J > 0, out, np.inf)
+            out = self.density(a, b, c, d, p[0], p[1])
+        out = np.where(a + d + (a * d - b * c) > -1, out, np.inf)
         return float(out) if out.ndim == 0 else out
 
 
@@ -119,21 +183,48 @@ class LinearElastic(_Isotropic):
     rotation_invariant = False
 
     @staticmethod
+    def density(a, b, c, d, mu, lam, log1p=None):
+        """``Psi`` at ``F = I + [[a, b], [c, d]]`` (numpy arrays or CasADi symbols; ``log1p`` unused)."""
+        s = 0.5 * (b + c)
+        return mu * (a * a + d * d + 2 * s * s) + lam / 2 * (a + d) ** 2
+
+    @staticmethod
     def psi_expr(F, params):
-        e00, e11 = F[0, 0] - 1, F[1, 1] - 1
-        e01 = (F[0, 1] + F[1, 0]) / 2
-        tr = e00 + e11
-        return params[0] * (e00 ** 2 + e11 ** 2 + 2 * e01 ** 2) + params[1] / 2 * tr ** 2
+        return LinearElastic.density(F[0, 0] - 1, F[0, 1], F[1, 0], F[1, 1] - 1, params[0], params[1])
+
+    @staticmethod
+    def stress_tangent(F, mu, lam, tangent: bool = True):
+        """As :meth:`NeoHookean.stress_tangent`: ``P = 2 mu eps + lam tr(eps) I`` and the constant tangent
+        (2, 2, 2, 2, 1)."""
+        tr = F[0, 0] + F[1, 1] - 2.0
+        s = 0.5 * (F[0, 1] + F[1, 0])
+        P = np.stack([np.stack([2 * mu * (F[0, 0] - 1.0) + lam * tr, 2 * mu * s]),
+                      np.stack([2 * mu * s, 2 * mu * (F[1, 1] - 1.0) + lam * tr])])
+        if not tangent:
+            return P, None
+        I2 = np.eye(2)
+        C = (mu * (np.einsum("ik,jl->ijkl", I2, I2) + np.einsum("il,jk->ijkl", I2, I2))
+             + lam * np.einsum("ij,kl->ijkl", I2, I2))
+        return P, C[..., None]
+
+    #: the tangent is constant: no derivative
+    tangent_derivative = None
 
     def psi(self, F, params=None):
         p = self.params if params is None else params
         if _is_symbolic(F):
             return self.psi_expr(F, p)
         F = np.asarray(F, dtype=float)
-        eps = 0.5 * (F + np.swapaxes(F, -1, -2)) - np.eye(2)
-        tr = eps[..., 0, 0] + eps[..., 1, 1]
-        out = p[0] * np.sum(eps ** 2, axis=(-2, -1)) + p[1] / 2 * tr ** 2
+        out = self.density(F[..., 0, 0] - 1, F[..., 0, 1], F[..., 1, 0], F[..., 1, 1] - 1, p[0], p[1])
         return float(out) if out.ndim == 0 else out
+
+
+def numeric_law(material) -> bool:
+    """Whether ``material`` states its law in closed form (``density``, ``stress_tangent`` and
+    ``tangent_derivative``, None for a constant tangent), so that the energy models can evaluate it in
+    vectorised numpy."""
+    return all(callable(getattr(material, k, None)) for k in ("density", "stress_tangent")) and (
+        hasattr(material, "tangent_derivative"))
 
 
 Material = NeoHookean | LinearElastic

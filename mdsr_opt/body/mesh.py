@@ -484,9 +484,7 @@ class Mesh:
         """
         width = positive_float(width, "width")
         height = positive_float(height, "height")
-        for v, nm in ((nx, "nx"), (ny, "ny")):
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"{nm} must be a positive integer, got {v!r}")
+        nx, ny = positive_int(nx, "nx"), positive_int(ny, "ny")
         if pattern not in ("right", "alternating"):
             raise ValueError(f"pattern must be 'right' or 'alternating', got {pattern!r}")
         xs = origin[0] + np.linspace(0.0, width, nx + 1)

@@ -8,8 +8,8 @@ import unicodedata
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ['as_float_array', 'as_index_array', 'node_indices', 'positive_float', 'positive_int', 'check_label',
-           'check_stem']
+__all__ = ['as_float_array', 'as_index_array', 'node_indices', 'positive_float', 'positive_int', 'check_int',
+           'integer_range', 'check_label', 'check_stem']
 
 
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
@@ -171,10 +171,44 @@ def positive_float(value, name: str, allow_zero: bool = False) -> float:
     return v
 
 
-def positive_int(value, name: str) -> int:
-    """An integer >= 1 (not a bool, not a float that happens to be whole)."""
+def integer_range(lo: int | None = None, hi: int | None = None) -> str:
+    """The words for an integer in ``[lo, hi]`` (either end open when None): ``"an integer >= 0"``,
+    ``"an integer in 1..8"``, ...; the messages of :func:`check_int`."""
+    if lo is None and hi is None:
+        return "an integer"
+    if hi is None:
+        return f"an integer >= {lo}"
+    return f"an integer <= {hi}" if lo is None else f"an integer in {lo}..{hi}"
+
+
+def check_int(value, name: str, lo: int | None = None, hi: int | None = None) -> int:
+    """The one check of an integer argument: a Python or numpy integer (not a bool, not a float that happens
+    to be whole) within ``[lo, hi]`` (either end open when None), as an ``int``.
+
+    Raises ``TypeError`` for a value that is not an integer, ``ValueError`` for one out of range, both naming
+    ``name``.
+
+    Example
+    -------
+    >>> check_int(3, "n_seeds", 1)
+    3
+    >>> check_int(0, "n_seeds", 1)
+    Traceback (most recent call last):
+    ...
+    ValueError: n_seeds must be an integer >= 1, got 0
+    """
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
-    if value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value}")
-    return int(value)
+    v = int(value)
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise ValueError(f"{name} must be {integer_range(lo, hi)}, got {v}")
+    return v
+
+
+def positive_int(value, name: str) -> int:
+    """An integer >= 1 (not a bool, not a float that happens to be whole): :func:`check_int` worded for
+    counts (``"must be a positive integer"``)."""
+    v = check_int(value, name)
+    if v < 1:
+        raise ValueError(f"{name} must be a positive integer, got {v}")
+    return v

@@ -32,6 +32,8 @@ from concurrent.futures import Executor
 from concurrent.futures import wait as wait_for
 from typing import Any, Callable, Iterator, Sequence
 
+from .checks import check_int
+
 __all__ = ["Jobs", "available_cores", "process_pool", "start_method"]
 
 
@@ -101,8 +103,7 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     """
     if workers is None:
         workers = available_cores()
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
-        raise ValueError(f"workers must be a non-negative integer, not {workers!r}")
+    workers = check_int(workers, "workers", 0)
     if workers == 0 or available_cores() < 2:
         yield None
         return

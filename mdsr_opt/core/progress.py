@@ -27,6 +27,8 @@ from __future__ import annotations
 import sys
 from typing import Any, TextIO
 
+from .checks import check_int
+
 __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
 
 
@@ -79,8 +81,7 @@ class Progress:
                  stream: TextIO | None | str = "stdout", verbose: bool = False, unit: str = "step") -> None:
         from tqdm import tqdm
 
-        if not isinstance(total, int) or isinstance(total, bool) or total < 0:
-            raise ValueError(f"total must be a non-negative int, got {total!r}")
+        total = check_int(total, "total", 0)
         self._stream = stream
         self.verbose = bool(verbose)
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled

@@ -116,9 +116,9 @@ MAX_ANCHOR_FRACTION = 0.5
 
 
 def anchor_radius_or_default(mesh, radius) -> float:
-    if radius is None:
-        return default_anchor_radius(mesh)
-    return positive_float(radius, "anchor_radius", allow_zero=True)
+    """``radius`` as a float, or :func:`default_anchor_radius` for None: for the functions behind the doors,
+    which take the radius :func:`check_anchor_radius` checked (or any radius, see :func:`anchor_patches`)."""
+    return default_anchor_radius(mesh) if radius is None else float(radius)
 
 
 def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
@@ -222,10 +222,18 @@ def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
 
 
 def check_anchor_radius(mesh, radius) -> float:
-    """``radius`` as a float in length units (None gives :func:`default_anchor_radius`); clear errors, also
-    for a radius of :data:`MAX_ANCHOR_FRACTION` of :func:`body_size` or more (the solvers' and the design's
-    door; :func:`anchor_patches` itself takes any radius)."""
-    radius = anchor_radius_or_default(mesh, radius)
+    """The one check of an anchor radius: ``radius`` as a float in length units (None gives
+    :func:`default_anchor_radius`); clear errors for a value that is no real number, negative, not finite,
+    or :data:`MAX_ANCHOR_FRACTION` of :func:`body_size` or more.
+
+    Called at the doors only (:func:`~mdsr_opt.solve_internal`, :func:`~mdsr_opt.design_contractions`,
+    :func:`~mdsr_opt.verify_design`, :func:`~mdsr_opt.check_minimum`, :class:`~mdsr_opt.Scene`); the
+    functions behind them (the design problem, the muscle constraints, :func:`anchor_patches`) take the
+    radius as given.
+    """
+    if radius is None:
+        return default_anchor_radius(mesh)
+    radius = positive_float(radius, "anchor_radius", allow_zero=True)
     if radius >= MAX_ANCHOR_FRACTION * body_size(mesh):
         raise ValueError(f"anchor_radius {radius:g} is at least half the body's size ({body_size(mesh):.3g}): "
                          "a muscle's end patch would hold most of the body")

@@ -156,6 +156,11 @@ BACKENDS = {
 }
 
 
+def _plugin(backend: str) -> str:
+    """The CasADi plugin of a backend (the IPOPT variants differ in options and derivatives)."""
+    return "ipopt" if backend in ("ipopt-lbfgs", "ipopt-symbolic") else backend
+
+
 def available_backends() -> list[str]:
     """Names of the backends usable with this CasADi build."""
     return list(_available())
@@ -167,8 +172,7 @@ def _available() -> tuple[str, ...]:
     # solve checks its backend (4.5 ms of a 30 ms warm-started solve at 555 nodes)
     out = []
     for name in BACKENDS:
-        plugin = {"ipopt-lbfgs": "ipopt", "ipopt-symbolic": "ipopt"}.get(name, name)
-        if name in ("scipy", "newton") or ca.has_nlpsol(plugin):
+        if name in ("scipy", "newton") or ca.has_nlpsol(_plugin(name)):
             out.append(name)
     return tuple(out)
 
@@ -279,7 +283,7 @@ def check_options(backend: str, options: Mapping | None) -> dict:
             if options:
                 raise ValueError(f"backend {backend!r} takes no options, got {', '.join(map(repr, options))}")
             return {}
-        plugin, verdict = {"ipopt-lbfgs": "ipopt", "ipopt-symbolic": "ipopt"}.get(backend, backend), _casadi_verdict
+        plugin, verdict = _plugin(backend), _casadi_verdict
         method = plugin
     for name, value in options.items():
         key = (plugin, name, repr(value))
@@ -303,28 +307,37 @@ def minimize(model, p, x0, fixed, values, backend="ipopt", tol=1e-8, max_iter=50
 
 
 def _minimize(model, p, x0, fixed, values, backend, tol, max_iter, options) -> MinimizeOutcome:
-    options = dict(options or {})
-    if hasattr(model, "constraints"):
-        return _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options)
-    if backend in ("ipopt", "ipopt-lbfgs", "ipopt-symbolic"):
-        o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
-                        limited_memory=backend == "ipopt-lbfgs")
-        o.update(options)
-        return _solve_casadi("ipopt", o, model, p, x0, fixed, values, symbolic=backend == "ipopt-symbolic")
-    if backend == "sqpmethod":
-        o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
-                                                "error_on_fail": False},
-             "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
-             "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
-        o.update(options)
-        return _solve_casadi("sqpmethod", o, model, p, x0, fixed, values)
-    if backend == "uno":
-        o = {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}
-        o.update(options)
-        return _solve_casadi("uno", o, model, p, x0, fixed, values)
+    constrained = hasattr(model, "constraints")
+    if constrained and not supports_constraints(backend):
+        raise ValueError(f"backend {backend!r} cannot take constraints (exact cable ropes, rigid anchor "
+                         f"patches); use one of {', '.join(CONSTRAINED_BACKENDS)}")
     if backend == "scipy":
         return _solve_scipy(model, p, x0, fixed, values, tol, max_iter)
-    return _solve_newton(model, p, x0, fixed, values, tol, max_iter)
+    if backend == "newton":
+        return _solve_newton(model, p, x0, fixed, values, tol, max_iter)
+    o = _casadi_options(backend, tol, max_iter, constrained)
+    o.update(options or {})
+    solve = ropesolve.solve_constrained if constrained else _solve_casadi
+    return solve(_plugin(backend), o, model, p, x0, fixed, values, symbolic=backend == "ipopt-symbolic")
+
+
+def _casadi_options(backend: str, tol, max_iter, constrained: bool) -> dict:
+    """The ``nlpsol`` options of a CasADi backend (the caller's options go on top)."""
+    if _plugin(backend) == "ipopt":
+        o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
+                        limited_memory=backend == "ipopt-lbfgs")
+        if constrained:
+            # IPOPT relaxes inequality bounds by 1e-8 (relative) by default: a taut rope in the inequality
+            # form (another rope slack) then ended up to 1e-8 L0 longer than its target. Unrelaxed, it is
+            # never longer, and short by the barrier's 1e-10 to 3e-9 L0; same iterations on the strips measured.
+            o["ipopt.bound_relax_factor"] = 0.0
+        return o
+    if backend == "sqpmethod":
+        return {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
+                                                   "error_on_fail": False},
+                "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
+                "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
+    return {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}  # uno
 
 
 #: backends that accept constraints (exact cable, rigid anchor patches; constrained models are symbolic)
@@ -334,30 +347,3 @@ CONSTRAINED_BACKENDS = ("ipopt", "ipopt-lbfgs", "ipopt-symbolic", "sqpmethod", "
 def supports_constraints(backend: str) -> bool:
     """Can ``backend`` solve with muscle constraints (exact cable ropes, rigid anchor patches)?"""
     return backend in CONSTRAINED_BACKENDS
-
-
-def _minimize_constrained(model, p, x0, fixed, values, backend, tol, max_iter, options):
-    if not supports_constraints(backend):
-        raise ValueError(f"backend {backend!r} cannot take constraints (exact cable ropes, rigid anchor "
-                         f"patches); use one of {', '.join(CONSTRAINED_BACKENDS)}")
-    if backend in ("ipopt", "ipopt-lbfgs", "ipopt-symbolic"):
-        o = _ipopt_opts(tol, max_iter if backend != "ipopt-lbfgs" else max(max_iter, 3000),
-                        limited_memory=backend == "ipopt-lbfgs")
-        o["calc_lam_p"] = False
-        # IPOPT relaxes inequality bounds by 1e-8 (relative) by default: a taut rope in the inequality form
-        # (another rope slack) then ended up to 1e-8 L0 longer than its target. Unrelaxed, it is never
-        # longer, and short by the barrier's 1e-10 to 3e-9 L0; same iterations on the strips measured.
-        o["ipopt.bound_relax_factor"] = 0.0
-        o.update(options)
-        return ropesolve.solve_constrained("ipopt", o, model, p, x0, fixed, values,
-                                           symbolic=backend == "ipopt-symbolic")
-    if backend == "sqpmethod":
-        o = {"qpsol": "qrqp", "qpsol_options": {"print_iter": False, "print_header": False,
-                                                "error_on_fail": False},
-             "print_header": False, "print_iteration": False, "print_status": False, "print_time": False,
-             "max_iter": max_iter, "tol_du": tol, "tol_pr": tol, "error_on_fail": False}
-        o.update(options)
-        return ropesolve.solve_constrained("sqpmethod", o, model, p, x0, fixed, values)
-    o = {"print_time": False, "error_on_fail": False, "uno.logger": "SILENT"}
-    o.update(options)
-    return ropesolve.solve_constrained("uno", o, model, p, x0, fixed, values)

@@ -8,7 +8,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..body.mesh import Mesh
-from ..core.checks import positive_float
+from ..core.checks import positive_float, positive_int
 from ..core.guards import check_stop, interruptible
 from .backends import check_backend, minimize
 from .blas import one_blas_thread
@@ -49,8 +49,7 @@ class _NodeCount:
 
 def check_common(tol, max_iter, backend, min_step=None):
     tol = positive_float(tol, "tol")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    positive_int(max_iter, "max_iter")
     check_backend(backend)
     if min_step is not None:
         _check_min_step(min_step)

@@ -11,10 +11,10 @@ sliding cables carry their stiffness and target length as parameters.
 
 Two evaluations of the same energy:
 
-* numeric (models without sliding cables, Neo-Hookean or linear material: :attr:`EnergyModel.is_numeric`):
-  :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and :meth:`~EnergyModel.hessian` in vectorised
-  numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`, scattered by
-  :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
+* numeric (models without sliding cables, of a material with closed forms such as Neo-Hookean or linear:
+  :attr:`EnergyModel.is_numeric`): :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and
+  :meth:`~EnergyModel.hessian` in vectorised numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`,
+  scattered by :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
   (:func:`~mdsr_opt.mechanics.assembly.ipopt_functions`). Making the model costs a few array operations.
 * symbolic (``x``, ``p``, ``f_fn``, ``grad_fn``, ``hess_fn``, ``hess_lag_fn``, ``hess_lag_full_fn``: for
   the design NLP, the constrained models, the other backends, and every model the numeric path does not
@@ -23,6 +23,13 @@ Two evaluations of the same energy:
   over all terms and constant sparse matrices scatter them into the global gradient and the upper
   triangle of the global Hessian. Building is linear in the mesh size and needs no symbolic
   differentiation of the global graph, but costs several solves on small meshes.
+
+Both evaluate the same statements, each written once: the material's density
+(:meth:`~mdsr_opt.body.material.NeoHookean.density`) and the spring energy
+(:func:`~mdsr_opt.mechanics.segments.spring_energy`). The symbolic model differentiates them with CasADi
+and is the reference; the numeric one evaluates their closed-form derivatives, which tests check against it
+(energy, gradient, Hessian and third derivative at random states, for every material with and without
+muscle springs) and against finite differences.
 
 Example
 -------
@@ -43,6 +50,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+
+from ..body.material import numeric_law
+from .segments import spring_energy
 
 __all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters", "to_dm"]
 
@@ -98,8 +108,7 @@ def _element_energy(psi_expr):
 
 def _spring_energy(xs, dl, _g):
     l0, k, r = dl
-    l = ca.sqrt(ca.sumsqr(xs[2:4] - xs[0:2]))
-    return k / 2 * (l - r * l0) ** 2
+    return spring_energy(ca.sqrt(ca.sumsqr(xs[2:4] - xs[0:2])), k, r * l0)
 
 
 @dataclass(frozen=True)
@@ -169,6 +178,8 @@ class EnergyModel:
         t0 = time.perf_counter()
         self.mesh = mesh
         self.material_kind = material.kind
+        #: the material's class: its closed forms evaluate the numeric model (see :func:`numeric_law`)
+        self.material_law = type(material)
         self._psi_expr = material.psi_expr
         self._expand = bool(expand)
         self.cables = tuple(tuple(int(v) for v in c) for c in cables)
@@ -183,7 +194,7 @@ class EnergyModel:
         elem_data = np.column_stack([np.transpose(mesh.Dm_inv, (0, 2, 1)).reshape(m, 4), mesh.areas])
         self._elem_data = [elem_data[:, :4].T.copy(), elem_data[:, 4:].T.copy()]
         #: energy, gradient and Hessian evaluate in vectorised numpy (no symbolic graph needed)
-        self.is_numeric = not self.cables and self.material_kind in ("neo-hookean", "linear")
+        self.is_numeric = not self.cables and numeric_law(material)
         self._solvers: dict = {}
         self.build_time = time.perf_counter() - t0
 
@@ -200,7 +211,7 @@ class EnergyModel:
                     L = 0
                     for i in range(k - 1):
                         L += ca.sqrt(ca.sumsqr(xl[2 * i + 2:2 * i + 4] - xl[2 * i:2 * i + 2]))
-                    return K / 2 * (L - R) ** 2
+                    return spring_energy(L, K, R)
 
                 t[f"cable{c}"] = _make_term(f"cable{c}", 2 * len(path), [1, 1], 0, cable_energy)
             self.__dict__["_term_fns"] = t
@@ -367,17 +378,6 @@ class EnergyModel:
             self._full_pattern = _symmetric_pattern(self.hess_sparsity)
         indptr, indices, src = self._full_pattern
         return sp.csc_matrix((v[src], indices, indptr), shape=(self.n_dof, self.n_dof))
-
-    def newton_families(self) -> dict:
-        """Per-family ``(dofs, (W, WG, H), data_of(p))`` for element-wise numeric methods."""
-        if self.cables:
-            raise ValueError("the element-wise Newton baseline does not support sliding cables")
-        ne = self.n_edges
-        return {
-            "elem": (self.elem_dofs, self.element_functions, lambda p: self._elem_data),
-            "spring": (self.edge_dofs, self.spring_functions,
-                       lambda p: [self.mesh.edge_lengths[None, :], p[None, 2:2 + ne], p[None, 2 + ne:2 + 2 * ne]]),
-        }
 
     def term_families(self) -> list["TermFamily"]:
         """The energy's term families (elements, edge springs, each cable) as :class:`TermFamily` records.

@@ -4,9 +4,11 @@ The energy of an :class:`~mdsr_opt.model.EnergyModel` without sliding cables is 
 (Neo-Hookean or linear elastic) and edge springs. This module evaluates it, its gradient and a positive
 semi-definite approximation of its Hessian with vectorised numpy (no per-element Python or CasADi call):
 
-* elements: ``F = Ds B`` (``B = Dm^-1``), first Piola stress ``P`` and the 4 x 4 tangent ``dP/dF`` in closed
-  form; the tangent is projected to positive semi-definite per element (batched 4 x 4 ``eigh``), so the
-  element Hessian ``area D' (dP/dF)+ D`` is positive semi-definite too;
+* elements: ``F = Ds B`` (``B = Dm^-1``), the energy density, first Piola stress ``P`` and the 4 x 4 tangent
+  ``dP/dF`` in the material's closed forms (:mod:`mdsr_opt.body.material`, where the law is stated once and
+  checked against CasADi's derivatives of it); the tangent is projected to positive semi-definite per
+  element (batched 4 x 4 ``eigh``), so the element Hessian ``area D' (dP/dF)+ D`` is positive semi-definite
+  too;
 * springs ``k/2 (l - r l0)^2``: the 2 x 2 block ``k (u u' + max(1 - r l0 / l, 0) (I - u u'))``;
   only springs with ``k != 0`` are evaluated.
 
@@ -36,8 +38,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..body.material import numeric_law
 from ..core.guards import check_stop
-from .segments import length_third, pair_blocks
+from .segments import length_third, pair_blocks, spring_energy
 
 __all__ = ["NewtonEnergy", "projected_newton", "step_seconds"]
 
@@ -83,13 +86,14 @@ class NewtonEnergy:
     def __init__(self, model, p, geometry: "NewtonEnergy | None" = None):
         if getattr(model, "cables", ()):
             raise ValueError("the element-wise Newton baseline does not support sliding cables")
-        if model.material_kind not in ("neo-hookean", "linear"):
-            raise ValueError(f"the newton backend supports neo-hookean and linear materials, got "
-                             f"{model.material_kind!r}")
+        if not numeric_law(model.material_law):
+            raise ValueError(f"the newton backend needs a material with a closed-form law (such as NeoHookean or "
+                             f"LinearElastic), got {model.material_kind!r}")
         mesh = model.mesh
         p = np.asarray(p, dtype=float).ravel()
         self.n = model.n_dof
         self.kind = model.material_kind
+        self.law = model.material_law  #: the material's closed forms (density, stress and tangent)
         self.mu, self.lam = float(p[0]), float(p[1])
         self.tri = mesh.triangles
         self.elem_dofs = model.elem_dofs
@@ -128,56 +132,21 @@ class NewtonEnergy:
     def energy(self, x) -> float:
         """The energy at ``x`` (flat, 2n); ``inf`` when a triangle is inverted (Neo-Hookean)."""
         F = self._F(x)
-        a, d = F[0, 0] - 1.0, F[1, 1] - 1.0
-        b, c = F[0, 1], F[1, 0]
-        if self.kind == "neo-hookean":
-            # in terms of F - I (tr F'F - 2 = |F - I|^2 + 2 tr(F - I), ln J = log1p(J - 1)): no cancellation
-            # of O(1) terms, so a state at rest has an energy of round-off squared, not of round-off
-            Jm1 = a + d + (a * d - b * c)
-            if not (Jm1 > -1.0).all():
-                return np.inf
-            lnJ = np.log1p(Jm1)
-            psi = (self.mu / 2 * (a * a + b * b + c * c + d * d) + self.mu * ((a + d) - lnJ)
-                   + self.lam / 2 * lnJ ** 2)
-        else:
-            s = 0.5 * (b + c)
-            psi = self.mu * (a * a + d * d + 2 * s * s) + self.lam / 2 * (a + d) ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):  # an inverted triangle: not finite
+            psi = self.law.density(F[0, 0] - 1.0, F[0, 1], F[1, 0], F[1, 1] - 1.0, self.mu, self.lam)
         W = float(self.area @ psi)
+        if not np.isfinite(W):
+            return np.inf
         if len(self.k):
             X = x.reshape(-1, 2)
             l = np.linalg.norm(X[self.edges[:, 1]] - X[self.edges[:, 0]], axis=1)
-            W += float(0.5 * (self.k * (l - self.rl0) ** 2).sum())
+            W += float(spring_energy(l, self.k, self.rl0).sum())
         return W
 
     def _stress_tangent(self, F, tangent: bool):
-        """``(P (2, 2, m), dP/dF (2, 2, 2, 2, m) or None)``: ``A[i, j, k, l] = dP_ij / dF_kl``."""
-        mu, lam = self.mu, self.lam
-        if self.kind == "neo-hookean":
-            f00, f01, f10, f11 = F[0, 0], F[0, 1], F[1, 0], F[1, 1]
-            J = f00 * f11 - f01 * f10
-            lnJ = np.log(J)
-            iJ = 1.0 / J
-            G = np.stack([np.stack([f11 * iJ, -f10 * iJ]), np.stack([-f01 * iJ, f00 * iJ])])  # F^-T
-            P = mu * F + (lam * lnJ - mu) * G
-            if not tangent:
-                return P, None
-            # dP_ij/dF_kl = mu d_ik d_jl + (mu - lam lnJ) G_il G_kj + lam G_ij G_kl
-            A = lam * (G[:, :, None, None] * G[None, None])
-            A += (mu - lam * lnJ) * (G[:, None, None, :] * np.swapaxes(G, 0, 1)[None, :, :, None])
-            for i in range(2):
-                for j in range(2):
-                    A[i, j, i, j] += mu
-            return P, A
-        tr = F[0, 0] + F[1, 1] - 2.0
-        s = 0.5 * (F[0, 1] + F[1, 0])
-        P = np.stack([np.stack([2 * mu * (F[0, 0] - 1.0) + lam * tr, 2 * mu * s]),
-                      np.stack([2 * mu * s, 2 * mu * (F[1, 1] - 1.0) + lam * tr])])
-        if not tangent:
-            return P, None
-        I2 = np.eye(2)
-        C = (mu * (np.einsum("ik,jl->ijkl", I2, I2) + np.einsum("il,jk->ijkl", I2, I2))
-             + lam * np.einsum("ij,kl->ijkl", I2, I2))
-        return P, C[..., None]
+        """``(P (2, 2, m), dP/dF (2, 2, 2, 2, m) or None)``: ``A[i, j, k, l] = dP_ij / dF_kl`` (the material's
+        closed forms)."""
+        return self.law.stress_tangent(F, self.mu, self.lam, tangent)
 
     def _element_gradient(self, P) -> np.ndarray:
         """The elements' contribution to the gradient (2n,) from their stresses."""
@@ -257,34 +226,17 @@ class NewtonEnergy:
         """The exact third derivative of the energy along ``v``, ``D^3 E(x)[v]``, as element blocks (6, 6, m)
         and spring blocks (4, 4, s) (their sum is the derivative of the Hessian along ``v``).
 
-        Neo-Hookean: with ``G = F^-T``, ``dF = F(v)`` (``F`` is linear in the coordinates) and
-        ``dG = -G dF' G``, the derivative of the tangent ``A_ijkl = mu d_ik d_jl + (mu - lam ln J) G_il G_kj
-        + lam G_ij G_kl`` is ``-lam (G:dF) G_il G_kj + (mu - lam ln J)(dG_il G_kj + G_il dG_kj)
-        + lam (dG_ij G_kl + G_ij dG_kl)``; a linear material has none. A spring ``k/2 (l - c)^2`` (``c``
-        its rest length) has ``-k c D^3 l [dv]`` (:func:`~mdsr_opt.mechanics.segments.length_third`, ``dv``
-        the relative move along ``v``).
+        An element has ``area Bh' dA Bh`` with ``dA`` the derivative of the tangent along ``dF = F(v)`` (``F``
+        is linear in the coordinates; the material's ``tangent_derivative``, none for a linear material). A
+        spring ``k/2 (l - c)^2`` (``c`` its rest length) has ``-k c D^3 l [dv]``
+        (:func:`~mdsr_opt.mechanics.segments.length_third`, ``dv`` the relative move along ``v``).
         """
         x = np.asarray(x, dtype=float).reshape(-1)
         v = np.asarray(v, dtype=float).reshape(-1)
-        m = self.tri.shape[0]
-        if self.kind == "neo-hookean":
-            F, dF = self._F(x), self._F(v)
-            f00, f01, f10, f11 = F[0, 0], F[0, 1], F[1, 0], F[1, 1]
-            J = f00 * f11 - f01 * f10
-            iJ = 1.0 / J
-            G = np.stack([np.stack([f11 * iJ, -f10 * iJ]), np.stack([-f01 * iJ, f00 * iJ])])  # F^-T
-            GT = np.swapaxes(G, 0, 1)
-            dG = -np.einsum("iam,bam,blm->ilm", G, dF, G)
-            dGT = np.swapaxes(dG, 0, 1)
-            tr = (G * dF).sum(axis=(0, 1))  # d ln J
-            c1 = self.mu - self.lam * np.log(J)
-            GG = G[:, None, None, :] * GT[None, :, :, None]  # G_il G_kj
-            dA = self.lam * (dG[:, :, None, None] * G[None, None] + G[:, :, None, None] * dG[None, None])
-            dA += c1 * (dG[:, None, None, :] * GT[None, :, :, None] + G[:, None, None, :] * dGT[None, :, :, None])
-            dA -= self.lam * tr * GG
-            He = self._element_hessians(dA)
+        if self.law.tangent_derivative is None:  # a constant tangent
+            He = np.zeros((6, 6, self.tri.shape[0]))
         else:
-            He = np.zeros((6, 6, m))
+            He = self._element_hessians(self.law.tangent_derivative(self._F(x), self._F(v), self.mu, self.lam))
         Hs = np.zeros((4, 4, 0))
         if len(self.k):
             X, V = x.reshape(-1, 2), v.reshape(-1, 2)

@@ -1,4 +1,5 @@
-"""Closed-form derivatives of a segment's length, shared by the edge springs and the ropes.
+"""A spring's energy and the closed-form derivatives of a segment's length, shared by the edge springs and
+the ropes.
 
 For a segment ``d = x_b - x_a`` of length ``l = |d|`` and direction ``u = d / l``, with ``P = I - u u'``:
 ``grad l = u`` (at ``b``; ``-u`` at ``a``), ``Hessian l = P / l`` and, along a relative move ``dv``, the
@@ -21,7 +22,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["length_direction", "length_hessian_product", "length_third", "pair_blocks"]
+__all__ = ["spring_energy", "length_direction", "length_hessian_product", "length_third", "pair_blocks"]
+
+
+def spring_energy(length, k, rest):
+    """``k/2 (length - rest)^2``: the one statement of a spring's energy (numpy arrays or CasADi symbols), for
+    the edge springs of the per-segment muscles and the sliding cables (``length`` their path length)."""
+    return k / 2 * (length - rest) ** 2
 
 
 def length_direction(d) -> tuple[np.ndarray, np.ndarray]:

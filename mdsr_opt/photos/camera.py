@@ -16,12 +16,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.checks import check_mesh
-from ..core.checks import as_float_array, positive_float
+from ..core.checks import as_float_array, check_int, positive_float
 from ..core.errors import InputError, checking_input
 from ..core.results import to_jsonable
 from .compare import rotation_matrix
 from .folder import bytes_writer, write_together
-from .images import check_color, check_int
+from .images import check_color
 from .size import check_photo_size
 
 __all__ = ['SyntheticPhoto', 'render_photo']

@@ -11,10 +11,10 @@ from numpy.typing import ArrayLike
 
 from ..body.checks import check_mesh
 from ..body.polygons import polygon_area
-from ..core.checks import as_float_array, positive_float
+from ..core.checks import as_float_array, check_int, positive_float
 from ..core.results import compact_repr, to_jsonable
 from .contours import contour_from_image
-from .images import check_bool, check_int
+from .images import check_bool
 
 __all__ = ['simulated_outline', 'ContourComparison', 'compare_contours', 'evaluate_image']
 

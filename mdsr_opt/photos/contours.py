@@ -11,8 +11,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.polygons import polygon_area
-from ..core.checks import positive_float
-from .images import MAX_PIXELS, check_bool, check_color, check_int, load_region
+from ..core.checks import check_int, positive_float
+from .images import MAX_PIXELS, check_bool, check_color, load_region
 
 __all__ = ['body_mask', 'contour_from_image', 'contour_loops_from_image']
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import numbers
 import os
 import warnings
 from pathlib import Path
@@ -12,7 +11,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.checks import as_float_array
+from ..core.checks import as_float_array, check_int
 
 __all__ = ['load_image']
 
@@ -30,17 +29,6 @@ def check_bool(value: Any, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be True or False, got {type(value).__name__} {value!r}")
     return bool(value)
-
-
-def check_int(value: Any, name: str, lo: int | None = None, hi: int | None = None) -> int:
-    """An integer (not bool, not a float that happens to be whole) within [lo, hi]."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
-    v = int(value)
-    if (lo is not None and v < lo) or (hi is not None and v > hi):
-        rng = f">= {lo}" if hi is None else f"in {lo}..{hi}"
-        raise ValueError(f"{name} must be an integer {rng}, got {v}")
-    return v
 
 
 # ----------------------------------------------------------------------------------------------- images

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-import numbers
+from ..core.checks import check_int
 
 __all__ = ["MIN_PHOTO_SIDE", "MAX_PHOTO_SIDE", "check_photo_size"]
 
@@ -21,10 +21,7 @@ def check_photo_size(size, name: str = "image_size", lo: int = MIN_PHOTO_SIDE) -
     """
     if isinstance(size, (str, bytes)) or not hasattr(size, "__len__") or len(size) != 2:
         raise ValueError(f"{name} must be (width, height), two integers, got {size!r}")
-    for v in size:
-        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
-            raise TypeError(f"{name} must be an integer pair (pixels), got {type(v).__name__} {v!r}")
-    W, H = (int(v) for v in size)
+    W, H = (check_int(v, name) for v in size)
     if not (lo <= W <= MAX_PHOTO_SIDE and lo <= H <= MAX_PHOTO_SIDE):
         raise ValueError(f"{name} must lie between {lo} and {MAX_PHOTO_SIDE} pixels per side (measuring a "
                          f"photograph takes about 60 MB per megapixel), got {W} x {H}")

@@ -35,7 +35,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..core.checks import positive_float
+from ..core.checks import check_int, positive_float
 from ..body.muscles import Muscle
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
@@ -147,8 +147,7 @@ class VirtualPrototype:
             raise ValueError(f"e_range must lie in [0, 0.5), got {e_range}")
         if nu_range > 0.2:
             raise ValueError(f"nu_range must lie in [0, 0.2], got {nu_range}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise TypeError(f"seed must be a non-negative int, got {seed!r}")
+        seed = check_int(seed, "seed", 0)
         if not scene.source:
             raise ValueError(f"scene {scene.name!r} has no source file to rebuild a finer prototype from")
         n_fine = int(round(refine * scene.mesh.n_nodes))

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 import numpy as np
 
+from ..core.checks import check_int, integer_range
 from ..core.errors import InputError
 
 __all__ = ['check_scene_options', 'SceneFileError']
@@ -73,6 +74,15 @@ class Reader:
         if positive and v <= 0:
             self.fail(where, f"must be > 0, got {v}")
         return v
+
+    def integer(self, v, where: str, lo: int | None = 1, hi: int | None = None) -> int:
+        """:func:`~mdsr_opt.core.checks.check_int`, its failures reported at ``where`` in the file."""
+        try:
+            return check_int(v, where, lo, hi)
+        except TypeError:
+            self.fail(where, f"expected an integer, got {v!r}", TypeError)
+        except ValueError:
+            self.fail(where, f"must be {integer_range(lo, hi)}, got {v}")
 
     def string(self, v, where: str) -> str:
         if not isinstance(v, str) or not v:
@@ -204,11 +214,7 @@ def _positive(allow_zero: bool = False):
 
 def _integer(minimum: int = 1):
     def check(r: Reader, v, where: str) -> int:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
-            r.fail(where, f"expected an integer, got {v!r}", TypeError)
-        if v < minimum:
-            r.fail(where, f"must be an integer >= {minimum}, got {v}")
-        return v
+        return r.integer(v, where, minimum)
     return check
 
 

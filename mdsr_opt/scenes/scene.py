@@ -135,9 +135,7 @@ class Animation:
         for c, f in kf:
             if not (0.0 <= f <= 1.0):
                 raise ValueError(f"animation {self.name!r}: keyframe fraction {f} for {c!r} is outside [0, 1]")
-        if isinstance(self.frames_per_step, bool) or not isinstance(self.frames_per_step, int) \
-                or self.frames_per_step < 1:
-            raise ValueError(f"animation {self.name!r}: frames_per_step must be a positive integer")
+        positive_int(self.frames_per_step, f"animation {self.name!r}: frames_per_step")
         object.__setattr__(self, "keyframes", kf)
 
     @property

@@ -297,9 +297,7 @@ def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.
     elif kind == "polygon":
         idx = nodes_in_polygon(mesh, r.points(s["polygon"], f"{where}.polygon", at_least=3), boundary=bnd)
     else:
-        k = s["loop"]
-        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(mesh.boundary_loops):
-            r.fail(f"{where}.loop", f"expected a boundary loop index in [0, {len(mesh.boundary_loops)}), got {k!r}")
+        k = r.integer(s["loop"], f"{where}.loop (a boundary loop index)", 0, len(mesh.boundary_loops) - 1)
         idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
     if len(idx) == 0:
         r.fail(where, "selects no node of the mesh")
@@ -320,8 +318,10 @@ def _scene_muscle(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> Mus
     try:
         if "nodes" in m:
             v = m["nodes"]
-            if not isinstance(v, list) or any(isinstance(i, bool) or not isinstance(i, int) for i in v):
+            if not isinstance(v, list):
                 r.fail(f"{where}.nodes", "expected a list of node indices", TypeError)
+            for j, i in enumerate(v):
+                r.integer(i, f"{where}.nodes[{j}]", None)  # the range: the muscle's own check, which names it
             mus = Muscle(tuple(v), name=name)
             mus.check_on(mesh)
             return mus
@@ -420,9 +420,7 @@ def _scene_animation(r: Reader, spec, where: str, case_names: set) -> Animation:
         if k[0] != "rest" and k[0] not in case_names:
             r.fail(w, f"unknown case {k[0]!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
         pairs.append((k[0], r.number(k[1], f"{w}[1]")))
-    fps_ = a.get("frames_per_step", 6)
-    if isinstance(fps_, bool) or not isinstance(fps_, int) or fps_ < 1:
-        r.fail(f"{where}.frames_per_step", f"expected a positive integer, got {fps_!r}")
+    fps_ = r.integer(a.get("frames_per_step", 6), f"{where}.frames_per_step", 1)
     try:
         return Animation(r.string(a["name"], f"{where}.name"), tuple(pairs), frames_per_step=fps_,
                          fps=r.number(a.get("fps", 8.0), f"{where}.fps", positive=True))
@@ -453,9 +451,8 @@ def parse_units_and_gait(r: Reader, top: Mapping, case_names: set):
         if p != "rest" and p not in case_names:
             r.fail(f"gait.poses[{i}]", f"unknown case {p!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
     for key in ("frames_per_step", "max_muscles"):
-        v = g.get(key)
-        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
-            r.fail(f"gait.{key}", f"expected a positive integer, got {v!r}")
+        if g.get(key) is not None:
+            r.integer(g[key], f"gait.{key}", 1)
     if not isinstance(g.get("cyclic", True), bool):
         r.fail("gait.cyclic", f"expected true or false, got {g['cyclic']!r}")
     try:

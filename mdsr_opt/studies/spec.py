@@ -7,6 +7,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..body.mesh import MAX_RESOLUTION
+from ..core.checks import positive_int
 from .problems import MATERIALS, check_name, build_setup, get_study_problem
 
 __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
@@ -131,8 +132,7 @@ class Study:
         if isinstance(self.timeout, bool) or not (isinstance(self.timeout, (int, float)) and self.timeout > 0):
             raise ValueError(f"study {self.name!r}: timeout must be a positive number of seconds, "
                              f"got {self.timeout!r}")
-        if isinstance(self.max_iter, bool) or not isinstance(self.max_iter, (int, np.integer)) or self.max_iter < 1:
-            raise ValueError(f"study {self.name!r}: max_iter must be a positive integer, got {self.max_iter!r}")
+        positive_int(self.max_iter, f"study {self.name!r}: max_iter")
         object.__setattr__(self, "caps", dict(self.caps))
 
     def with_options(self, **changes) -> "Study":

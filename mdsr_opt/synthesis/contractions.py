@@ -12,7 +12,7 @@ from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_float
+from ..core.checks import positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
@@ -149,8 +149,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     tol = positive_float(tol, "tol")
     if max_iter is None:
         max_iter = 400 * m if method == "derivative-free" else 500
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    max_iter = positive_int(max_iter, "max_iter")
     inner_tol = positive_float(inner_tol, "inner_tol")
     gap_rtol = positive_float(gap_rtol, "gap_rtol")
     if a0 is None:

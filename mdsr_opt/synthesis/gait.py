@@ -21,6 +21,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..core.checks import positive_int
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .poses import PosesResult, check_budget
 
@@ -45,11 +46,7 @@ def warm_start_state(mesh: Mesh, x) -> np.ndarray | None:
 
 
 def _frames(value, name: str = "frames_per_step") -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be a positive integer, got {type(value).__name__}")
-    if value < 1:
-        raise ValueError(f"{name} must be a positive integer (frames per step), got {value}")
-    return int(value)
+    return positive_int(value, name)
 
 
 @dataclass(frozen=True)

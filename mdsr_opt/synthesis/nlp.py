@@ -24,9 +24,17 @@ the KKT matrix: at 3k nodes and 4 muscles an IPOPT iteration took about 60 % lon
 gauge coordinates are fixed and ``z = [x, a, theta, t, kappa]`` with the objective
 ``so sum_i e_i |R(theta) x_i + t - y_i|^2``.
 
-Three ways to give IPOPT the derivatives, all exact (iterates agree to rounding): numpy callbacks
-(:mod:`~mdsr_opt.synthesis.nlp_numeric`), an MX graph assembled term by term (:func:`_assembled_nlp`) and
-the NLP in SX differentiated by CasADi (:func:`_symbolic_nlp`).
+Three ways to give IPOPT the derivatives (``derivatives=`` of the design), all exact, iterates agreeing to
+rounding, and all from the same statements: the material's density and the spring energy (see
+:mod:`~mdsr_opt.mechanics.model`), the muscle constraints (:mod:`~mdsr_opt.mechanics.constraints`) and the
+pinned pose's residual (:mod:`~mdsr_opt.synthesis.objective`):
+
+* ``"casadi"`` (:func:`_symbolic_nlp`): the NLP in SX, differentiated by CasADi -- the reference;
+* ``"assembled"`` (:func:`_assembled_nlp`): an MX graph summed term by term from CasADi's derivatives of each
+  term's SX function, with the objective's closed-form derivatives; the fallback of ``"numeric"``;
+* ``"numeric"`` (:mod:`~mdsr_opt.synthesis.nlp_numeric`): numpy callbacks evaluating the closed forms.
+
+Tests compare the last two with the first at random points (values, Jacobian, Hessian of the Lagrangian).
 """
 
 from __future__ import annotations
@@ -39,6 +47,7 @@ import scipy.sparse as sp
 
 from ..mechanics.model import to_dm
 from ..mechanics.stopping import with_stop_callback
+from . import objective as pinned
 from .nlp_numeric import numeric_nlp, supports as numeric_supports
 from .problem import ForwardSolver, DesignProblem
 
@@ -173,34 +182,19 @@ def _mapped(fn: ca.Function, X, *args) -> list:
 
 
 def _objective_terms(x, y, w, v, so, gauss_newton: bool):
-    """The objective of the pinned pose ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives, per node, as
-    vectorised MX expressions (``x``, ``y``: 2n; ``w``: n; ``v = [theta, t]``).
+    """The objective of the pinned pose ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` and its derivatives per
+    node (:mod:`~mdsr_opt.synthesis.objective`) as vectorised MX rows (``x``, ``y``: 2n; ``w``: n;
+    ``v = [theta, t]``).
 
     Returns ``f``, the gradient parts ``(g_x0, g_x1)`` (per node, 1 x n) and ``(g_theta, g_t0, g_t1)``, and
     the Hessian parts as a dict ``{(a, b): 1 x n values}`` over the local variables ``a, b`` in ``x0, x1,
-    th, t0, t1`` (``a <= b``; entries of the ``(theta, t)`` block are per-node summands). With
-    ``gauss_newton`` the Hessian is ``2 so w_i J_i^T J_i`` (``J_i`` the residual's Jacobian)."""
+    th, t0, t1`` (entries of the ``(theta, t)`` block are per-node summands)."""
     X0, X1 = x[0::2].T, x[1::2].T
-    Y0, Y1 = y[0::2].T, y[1::2].T
-    W2 = 2 * so * w.T
     c, s = ca.cos(v[0]), ca.sin(v[0])
-    rx = c * X0 - s * X1 + v[1] - Y0
-    ry = s * X0 + c * X1 + v[2] - Y1
-    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    rx, ry = pinned.residual(X0, X1, y[0::2].T, y[1::2].T, c, s, v[1], v[2])
     f = so * ca.sum2(w.T * (rx ** 2 + ry ** 2))
-    gx = (W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry))
-    gv = (ca.sum2(W2 * (rx * px + ry * py)), ca.sum2(W2 * rx), ca.sum2(W2 * ry))
-    zero = 0 * W2
-    h = {("x0", "x0"): W2, ("x1", "x1"): W2,  # R^T R = I
-         ("x0", "th"): W2 * -X1, ("x1", "th"): W2 * X0,  # R^T dR/dtheta x_i = (-x_i1, x_i0)
-         ("x0", "t0"): W2 * c, ("x0", "t1"): W2 * s, ("x1", "t0"): W2 * -s, ("x1", "t1"): W2 * c,
-         ("th", "th"): W2 * (px ** 2 + py ** 2), ("th", "t0"): W2 * px, ("th", "t1"): W2 * py,
-         ("t0", "t0"): W2, ("t0", "t1"): zero, ("t1", "t1"): W2}
-    if not gauss_newton:  # the residual's curvature: r . d^2 r
-        h[("x0", "th")] += W2 * (-s * rx + c * ry)
-        h[("x1", "th")] += W2 * (-c * rx - s * ry)
-        h[("th", "th")] += W2 * -(rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
-    return f, gx, gv, h
+    gx, gv, parts = pinned.derivatives(X0, X1, rx, ry, 2 * so * w.T, c, s, not gauss_newton)
+    return f, gx, tuple(ca.sum2(q) for q in gv), dict(zip(pinned.HESSIAN_PARTS, parts))
 
 
 def _assembled_nlp(prob: DesignProblem, hessian: str):
@@ -449,8 +443,8 @@ def _symbolic_nlp(prob: DesignProblem, hessian: str):
     else:  # the pinned pose: a rotation theta and translation t align the state
         th, tt = ca.SX.sym("theta"), ca.SX.sym("t", 2)
         Xm, Ym = ca.reshape(x, 2, n), ca.reshape(y, 2, n)
-        c, s = ca.cos(th), ca.sin(th)
-        res = ca.vertcat(c * Xm[0, :] - s * Xm[1, :] + tt[0] - Ym[0, :], s * Xm[0, :] + c * Xm[1, :] + tt[1] - Ym[1, :])
+        res = ca.vertcat(*pinned.residual(Xm[0, :], Xm[1, :], Ym[0, :], Ym[1, :], ca.cos(th), ca.sin(th),
+                                          tt[0], tt[1]))
         z = ca.vertcat(x, a, th, tt, kap)
     f = so * ca.dot(w, ca.sum1(res ** 2).T)
     par = ca.vertcat(y, w, p0, so, sc)

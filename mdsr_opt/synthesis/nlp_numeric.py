@@ -33,6 +33,7 @@ import scipy.sparse as sp
 
 from ..mechanics.assembly import BufferedFunction, SparseLayout
 from ..mechanics.segments import length_direction, length_hessian_product
+from . import objective as pinned
 from .problem import DesignProblem
 
 __all__ = ["numeric_nlp", "supports"]
@@ -58,31 +59,18 @@ def supports(prob: DesignProblem) -> bool:
 def _aligned_objective(x, y, w, v, so, exact: bool):
     """The objective of the pinned pose (a body whose energy changes under rotation):
     ``(f, dfdx (2n,), dfdv (3,), Hessian parts)`` of ``so sum_i w_i |R(theta) x_i + t - y_i|^2`` with
-    ``v = (theta, t0, t1)``. The Hessian parts are per-node arrays in the order of :data:`_OBJ_PARTS`
-    (the ``v``-``v`` ones summed over the nodes by the layout); without ``exact``, the Gauss-Newton
-    Hessian ``2 so w_i J_i' J_i`` (``J_i`` the residual's Jacobian)."""
-    X0, X1, Y0, Y1 = x[0::2], x[1::2], y[0::2], y[1::2]
+    ``v = (theta, t0, t1)`` (:mod:`~mdsr_opt.synthesis.objective`). The Hessian parts are per-node arrays in
+    the order of :data:`~mdsr_opt.synthesis.objective.HESSIAN_PARTS` (the ``v``-``v`` ones summed over the
+    nodes by the layout); without ``exact``, the Gauss-Newton Hessian."""
+    X0, X1 = x[0::2], x[1::2]
     c, s = np.cos(v[0]), np.sin(v[0])
-    rx = c * X0 - s * X1 + v[1] - Y0
-    ry = s * X0 + c * X1 + v[2] - Y1
-    px, py = -s * X0 - c * X1, c * X0 - s * X1  # dR/dtheta x_i
+    rx, ry = pinned.residual(X0, X1, y[0::2], y[1::2], c, s, v[1], v[2])
     W2 = 2.0 * so * w
     f = so * float(w @ (rx * rx + ry * ry))
+    (g0, g1), gv, parts = pinned.derivatives(X0, X1, rx, ry, W2, c, s, exact)
     gx = np.empty_like(x)
-    gx[0::2], gx[1::2] = W2 * (c * rx + s * ry), W2 * (-s * rx + c * ry)
-    gv = np.array([W2 @ (rx * px + ry * py), W2 @ rx, W2 @ ry])
-    h_xth0, h_xth1, h_thth = W2 * -X1, W2 * X0, W2 * (px * px + py * py)
-    if exact:  # the residual's curvature r . d^2 r
-        h_xth0 = h_xth0 + W2 * (-s * rx + c * ry)
-        h_xth1 = h_xth1 + W2 * (-c * rx - s * ry)
-        h_thth = h_thth - W2 * (rx * (c * X0 - s * X1) + ry * (s * X0 + c * X1))
-    parts = [W2, W2, h_xth0, h_xth1, W2 * c, W2 * s, W2 * -s, W2 * c, h_thth, W2 * px, W2 * py, W2, W2]
-    return f, gx, gv, parts
-
-
-#: the objective's Hessian entries per node, as (row, col) local names: x0, x1 the node's coordinates
-_OBJ_PARTS = [("x0", "x0"), ("x1", "x1"), ("x0", "th"), ("x1", "th"), ("x0", "t0"), ("x0", "t1"), ("x1", "t0"),
-              ("x1", "t1"), ("th", "th"), ("th", "t0"), ("th", "t1"), ("t0", "t0"), ("t1", "t1")]
+    gx[0::2], gx[1::2] = g0, g1
+    return f, gx, np.array([q.sum() for q in gv]), parts
 
 
 class _NumericNLP:
@@ -145,7 +133,7 @@ class _NumericNLP:
         else:
             loc = {"x0": 2 * np.arange(n), "x1": 2 * np.arange(n) + 1, "th": np.full(n, it),
                    "t0": np.full(n, it + 1), "t1": np.full(n, it + 2)}
-            for a, b in _OBJ_PARTS:
+            for a, b in pinned.HESSIAN_PARTS:
                 hess.add(loc[a], loc[b])
         if exact:
             hess.add(prow, pcols)  # sc D^3 E [lam_u]

@@ -71,7 +71,7 @@ import numpy as np
 from ..core.guards import interruptible
 from ..body.checks import check_target_shape
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
-from ..core.checks import check_label
+from ..core.checks import check_int, check_label
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 
@@ -146,11 +146,7 @@ def check_budget(max_muscles) -> int | None:
     """The muscle budget: None (no limit) or an integer of at least 1 (TypeError, ValueError otherwise)."""
     if max_muscles is None:
         return None
-    if isinstance(max_muscles, bool) or not isinstance(max_muscles, (int, np.integer)):
-        raise TypeError(f"max_muscles must be an integer or None, got {type(max_muscles).__name__}")
-    if max_muscles < 1:
-        raise ValueError(f"max_muscles (the muscle budget) must be at least 1, got {max_muscles}")
-    return int(max_muscles)
+    return check_int(max_muscles, "max_muscles (the muscle budget, or None)", 1)
 
 
 # ---------------------------------------------------------------------------------------------- result

@@ -13,7 +13,7 @@ from ..body.checks import check_target_shape
 from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
-from ..mechanics.anchors import check_anchor_radius
+from ..mechanics.anchors import anchor_radius_or_default
 from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
 from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
 from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
@@ -41,7 +41,7 @@ class DesignProblem:
         # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
         # per-segment springs of the "springs" model, zero for the cable)
         self.model = get_model(mesh, material)
-        self.anchor_radius = check_anchor_radius(mesh, anchor_radius)
+        self.anchor_radius = anchor_radius_or_default(mesh, anchor_radius)  # checked by the callers, at their doors
         self.constraints = muscle_constraints(mesh, muscles, self.anchor_radius)
         self.build_time = time.perf_counter() - t0
         self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)

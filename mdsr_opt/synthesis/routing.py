@@ -91,14 +91,13 @@ True
 from __future__ import annotations
 
 import math
-import numbers
 import warnings
 
 import networkx as nx
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core.checks import positive_float
+from ..core.checks import check_int, positive_float
 from ..body.checks import check_mesh, check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
@@ -210,14 +209,6 @@ def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarr
     return G
 
 
-def _int_param(value, name: str, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    return int(value)
-
-
 def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float = 4.0, K_h: float = 0.1,
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
                   min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
@@ -301,9 +292,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     K_a = positive_float(K_a, "K_a", allow_zero=True)
     K_b = positive_float(K_b, "K_b", allow_zero=True)
     K_h = positive_float(K_h, "K_h", allow_zero=True)
-    n_seeds = _int_param(n_seeds, "n_seeds")
+    n_seeds = check_int(n_seeds, "n_seeds", 1)
     if max_muscles is not None:
-        max_muscles = _int_param(max_muscles, "max_muscles")
+        max_muscles = check_int(max_muscles, "max_muscles", 1)
     ell = float(mesh.edge_lengths.mean())
     if min_length is None:
         min_length = 2.0 * ell
