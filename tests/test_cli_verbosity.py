@@ -1,0 +1,64 @@
+"""Issue 36: the command line does what the README says (-v logger names, -vv debug messages), the progress
+bar counts every stage that takes time, and results work together (export, sub-results, saved scenes)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+FINGER = ROOT / "tests" / "data" / "finger.toml"
+
+
+def _mdsr(tmp_path, *flags):
+    cmd = [sys.executable, "-m", "mdsr_opt", *flags, "run", str(FINGER), "--out", str(tmp_path / "out"),
+           "--resolution", "coarse", "--no-figures", "--no-animations", "--no-prototype", "--case", "contract"]
+    env = {**__import__("os").environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.splitlines(), done.stderr.splitlines()
+
+
+def test_verbosity_flags_add_logger_names_then_debug_lines(tmp_path):
+    plain_out, plain_err = _mdsr(tmp_path / "a")
+    v_out, v_err = _mdsr(tmp_path / "b", "-v")
+    vv_out, vv_err = _mdsr(tmp_path / "c", "-vv")
+    said = [line for line in plain_out if line.startswith("[finger")]
+    assert said and not any(line.startswith("INFO ") for line in plain_out)
+    # -v: the same messages, each led by its level and the module that said it
+    named = [line for line in v_out if line.startswith(("INFO mdsr_opt.scenes.runner: [finger",
+                                                       "INFO mdsr_opt.scenes.runscene: [finger"))]
+    assert len(named) == len(said)
+    assert not any(line.startswith("DEBUG") for line in plain_err + v_err)
+    # -vv: debug records of the library too (one per equilibrium solve, the case's stage times)
+    debug = [line for line in vv_err if line.startswith("DEBUG mdsr_opt.")]
+    assert any("mechanics.loadsteps: internal solve on" in line and "iteration(s)" in line for line in debug)
+    assert any("scenes.runner: [finger 1/1 contract] stage times: target" in line for line in debug)
+    assert len([line for line in vv_out if line.startswith("INFO mdsr_opt.")]) == \
+        len([line for line in v_out if line.startswith("INFO mdsr_opt.")]) == len(plain_out) - len(
+            [line for line in plain_out if not line.startswith(("[finger", "finger: "))])
+
+
+@pytest.mark.parametrize("photos, figures", [(True, True), (False, True), (True, False)])
+def test_progress_total_counts_every_stage_that_ran(tmp_path, photos, figures):
+    from mdsr_opt.core.progress import Progress
+    from mdsr_opt.scenes.runscene import n_units, run_scene
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    scene = load_scene(FINGER, resolution="coarse")
+    done = []
+
+    class Counting(Progress):
+        def advance(self, n=1):
+            done.append(n)
+            super().advance(n)
+
+    total = n_units(scene, None, True, photos=photos, figures=figures)
+    # two cases (solves, photograph, figures each) and one animation
+    assert total == 2 * (1 + photos + figures) + 1
+    with Counting(total, "finger", enabled=False, stream=None) as log:
+        rep = run_scene(scene, tmp_path / "out", photos=photos, figures=figures, prototype=False,
+                        background=False, log=log)
+        assert rep.success
+        assert log.n == log.total == total == sum(done)  # never past 100 %, and 100 % only at the end
