@@ -62,3 +62,56 @@ def test_progress_total_counts_every_stage_that_ran(tmp_path, photos, figures):
                         background=False, log=log)
         assert rep.success
         assert log.n == log.total == total == sum(done)  # never past 100 %, and 100 % only at the end
+
+
+@pytest.fixture(scope="module")
+def pipeline_result():
+    from mdsr_opt import Mesh, NeoHookean, design_pipeline
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    return design_pipeline(mesh, NeoHookean(1.0, 0.3), left, right, routing_options={"max_muscles": 2})
+
+
+def test_export_fabrication_takes_a_pipeline_result(pipeline_result, tmp_path):
+    from mdsr_opt import export_fabrication
+
+    res = pipeline_result
+    files = export_fabrication(res.mesh, res, tmp_path / "fab", units="cm", name="strip")
+    assert sorted(Path(f).name for f in files.values()) == ["strip.dxf", "strip.svg", "strip_muscles.csv"]
+    rows = Path(files["csv"]).read_text().splitlines()
+    assert len(rows) == 1 + len(res.muscles)  # a header, one row per muscle of the pipeline's layout
+    # the same files as with the design and its muscles given apart
+    apart = export_fabrication(res.mesh, res.design, tmp_path / "apart", muscles=res.muscles, units="cm",
+                               name="strip")
+    assert Path(apart["csv"]).read_text() == Path(files["csv"]).read_text()
+    with pytest.raises(ValueError, match=r"a DesignResult or a mapping of them does not record its muscles"):
+        export_fabrication(res.mesh, res.design, tmp_path / "none")
+    assert not (tmp_path / "none").exists()
+
+
+def test_pipeline_sub_results_are_result_objects_and_round_trip(pipeline_result, tmp_path):
+    import json
+
+    from mdsr_opt.mechanics.result import EquilibriumResult
+    from mdsr_opt.synthesis.pipeline import PipelineResult
+    from mdsr_opt.synthesis.routing_result import RoutingResult
+
+    res = pipeline_result
+    assert isinstance(res.routing, RoutingResult) and isinstance(res.external, EquilibriumResult)
+    table = res.routing.table().splitlines()
+    assert len(table) == 2 + len(res.muscles) and table[0].startswith("muscle")
+    assert repr(res.routing).startswith(f"RoutingResult({len(res.muscles)} muscle(s)")
+    assert repr(res.external).startswith("EquilibriumResult(mode='external'")
+    assert res.external.x is not None and res.external.success
+    data = json.loads(json.dumps(res.to_dict(), allow_nan=False))  # JSON-ready
+    assert data["routing"]["n_units"] == res.routing.n_units and data["external"]["status"] == res.external.status
+    back = PipelineResult.load(Path(res.save(tmp_path / "r")).parent)
+    assert isinstance(back.routing, RoutingResult) and back.routing.table() == res.routing.table()
+    assert back.routing.to_dict() == res.routing.to_dict()
+    assert back.routing.graph.number_of_edges() == res.routing.graph.number_of_edges()
+    assert isinstance(back.external, EquilibriumResult)
+    assert {k: v for k, v in back.external.to_dict().items() if k != "x"} == \
+        {k: v for k, v in res.external.to_dict().items() if k != "x"}
+    assert back.external.x is not back.target and abs(back.external.x - res.target).max() < 1e-12
