@@ -1,6 +1,7 @@
 """Issue 36: the command line does what the README says (-v logger names, -vv debug messages), the progress
 bar counts every stage that takes time, and results work together (export, sub-results, saved scenes)."""
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -115,3 +116,52 @@ def test_pipeline_sub_results_are_result_objects_and_round_trip(pipeline_result,
     assert {k: v for k, v in back.external.to_dict().items() if k != "x"} == \
         {k: v for k, v in res.external.to_dict().items() if k != "x"}
     assert back.external.x is not back.target and abs(back.external.x - res.target).max() < 1e-12
+
+
+def _strings(value):
+    if isinstance(value, dict):
+        for v in value.values():
+            yield from _strings(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _strings(v)
+    elif isinstance(value, str):
+        yield value
+
+
+@pytest.mark.parametrize("origin", ["problem", "scene file"])
+def test_a_saved_scene_holds_no_path_of_the_machine(origin, tmp_path):
+    import json
+    import re
+    import shutil
+
+    pytest.importorskip("starlette")
+    from mdsr_opt import get_problem, load_scene
+    from mdsr_opt.author.export import save_scene
+    from mdsr_opt.author.session import Session
+
+    if origin == "problem":
+        scene = get_problem("tentacle", resolution="coarse")  # its source: the script's absolute path
+    else:
+        shutil.copy(FINGER, tmp_path / "finger.toml")
+        scene = load_scene(tmp_path / "finger.toml", resolution="coarse")
+    assert Path(scene.source).is_absolute()
+    s = Session.from_scene(scene)
+    s.settle()
+    files = save_scene(s, tmp_path / "saved", "authored")
+    data = json.loads(Path(files[0]).read_text())
+    text = list(_strings(data))
+    assert not [t for t in text if re.match(r"^(/|[A-Za-z]:[\\/]|\\\\)", t)]
+    assert not [t for t in text if str(tmp_path) in t or sys.prefix in t or str(ROOT) in t]
+    assert data["description"].endswith(f"from {Path(scene.source).name}.")
+    assert load_scene(files[0]).cases[0].name == "authored"  # still a scene mdsr run reproduces
+
+
+def test_the_page_save_box_starts_empty():
+    html = (ROOT / "mdsr_opt" / "author" / "static" / "index.html").read_text()
+    js = (ROOT / "mdsr_opt" / "author" / "static" / "author.js").read_text()
+    box = re.search(r'<input id="save-name"[^>]*>', html).group(0)
+    assert "value=" not in box and "placeholder=" in box
+    # the page shows the body's name as the placeholder, never as the box's text (typing would append to it)
+    assert re.findall(r'\$\("save-name"\)\.value = ([^;]+);', js) == ['""']
+    assert '$("save-name").placeholder = m.name' in js
