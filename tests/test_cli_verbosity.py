@@ -165,3 +165,23 @@ def test_the_page_save_box_starts_empty():
     # the page shows the body's name as the placeholder, never as the box's text (typing would append to it)
     assert re.findall(r'\$\("save-name"\)\.value = ([^;]+);', js) == ['""']
     assert '$("save-name").placeholder = m.name' in js
+
+
+def test_the_scene_format_is_documented_once_with_every_key(tmp_path):
+    import textwrap
+
+    from mdsr_opt.scenes import scenefile
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    doc = load_scene.__doc__
+    example = textwrap.dedent(doc.split("::\n", 1)[1].split("\n\n    Node references")[0])
+    (tmp_path / "doc.toml").write_text(example)
+    scene = load_scene(tmp_path / "doc.toml")  # the documented example is itself a valid scene file
+    assert scene.units == "mm" and scene.gait is not None and scene.gait.name == "walk"
+    assert scene.gait.sequence == ("bend", "rest", "contract") and scene.expected == {"n_muscles": 2}
+    # every key the reader accepts is named in the example
+    keys = [k for name in dir(scenefile) if name.endswith("_KEYS") for k in getattr(scenefile, name)]
+    assert len(keys) > 40
+    assert [k for k in keys if not re.search(rf"\b{k}\b", example)] == []
+    readme = (ROOT / "README.md").read_text()
+    assert "Every section is in the docstring of `mdsr_opt.scenes.scenefile.load_scene`" in readme
