@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import zipfile
 from pathlib import Path
 
@@ -40,7 +41,8 @@ def scene_dict(session, name: str, mesh_file: str) -> dict:
     d = {
         "name": name,
         "title": f"{name}: authored with mdsr author",
-        "description": f"Authored on the mdsr author page from {session.source or session.name}.",
+        # the file's name alone: a scene file holds no path of the machine it was saved on
+        "description": f"Authored on the mdsr author page from {_file_name(session.source) or session.name}.",
         "body": {"mesh": mesh_file},
         "material": {"model": mat.kind, "E": float(mat.E), "nu": float(mat.nu),
                      "thickness": float(mat.thickness)},
@@ -75,6 +77,11 @@ class WouldReplace(FileExistsError):
     def __init__(self, paths):
         self.paths = [os.fspath(p) for p in paths]
         super().__init__(f"{', '.join(self.paths)} already exist{'s' if len(self.paths) == 1 else ''}")
+
+
+def _file_name(source) -> str:
+    """The last part of a path (``/``- or ``\\``-separated, whichever platform wrote it): no folder."""
+    return re.split(r"[\\/]", str(source or "").rstrip("\\/"))[-1]
 
 
 def _plain(v):

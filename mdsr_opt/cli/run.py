@@ -92,8 +92,9 @@ def _cmd_run(a) -> int:
                         s.case(c)  # an unknown --case names the scene's cases
         folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
         reports = []
-        with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations) for s in scenes), "mdsr run",
-                              unit="case") as log:
+        with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations, photos=not a.no_photos,
+                                             figures=not a.no_figures) for s in scenes),
+                              "mdsr run", unit="stage") as log:
             for k, scene in enumerate(scenes):
                 out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
                 if len(scenes) > 1:

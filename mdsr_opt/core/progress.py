@@ -7,7 +7,8 @@ unit is done through :func:`expect` and :func:`advance`. These two are no-ops fo
 ``print``, so library code calls them unconditionally and stays free of any terminal handling.
 
 The bar is drawn on stderr only when stderr is a terminal (tqdm's own rule); otherwise, and with a bar when
-``verbose`` is set, the messages are printed one per line as before.
+``verbose`` is set, the messages are printed one per line as before. With ``names`` (``mdsr -v``) each line
+starts with its level and the name of the module that said it, as the library's log records do.
 
 Example
 -------
@@ -75,15 +76,20 @@ class Progress:
         the rest shows as the bar's current stage).
     unit : str
         tqdm's unit name.
+    names : bool
+        Start every printed line with ``INFO <module>: `` (``WARNING`` for a warning or a failure), the
+        module being the one that called the callback: the format of the log records under ``mdsr -v``.
     """
 
     def __init__(self, total: int = 0, desc: str = "", *, enabled: bool | None = None,
-                 stream: TextIO | None | str = "stdout", verbose: bool = False, unit: str = "step") -> None:
+                 stream: TextIO | None | str = "stdout", verbose: bool = False, unit: str = "step",
+                 names: bool = False) -> None:
         from tqdm import tqdm
 
         total = check_int(total, "total", 0)
         self._stream = stream
         self.verbose = bool(verbose)
+        self.names = bool(names)
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled
         self._bar = tqdm(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
                          **({"dynamic_ncols": True} if _terminal_width() > 0 else {"ncols": 100, "nrows": 24}),
@@ -102,16 +108,19 @@ class Progress:
 
     def __call__(self, message: str) -> None:
         """Log one message: the bar's current stage, and a printed line (see ``verbose``)."""
-        message = str(message)
+        text = message = str(message)
         out = self._out()
+        loud = "FAILED" in message or message.lower().startswith(("warning", "error"))
+        if self.names:
+            caller = sys._getframe(1).f_globals.get("__name__", "?")
+            message = f"{'WARNING' if loud else 'INFO'} {caller}: {message}"
         if not self.active:
             if out is not None:
                 print(message, file=out, flush=True)
             return
-        first = message.strip().splitlines()[0] if message.strip() else ""
+        first = text.strip().splitlines()[0] if text.strip() else ""
         self._bar.set_postfix_str(first if len(first) <= 48 else first[:45] + "...", refresh=True)
-        loud = self.verbose or "FAILED" in message or message.lower().startswith(("warning", "error"))
-        if loud and out is not None:
+        if (loud or self.verbose) and out is not None:
             self._bar.write(message, file=out)
 
     def advance(self, n: int = 1) -> None:
@@ -141,7 +150,9 @@ class Progress:
 def progress_for_cli(args: Any, total: int, desc: str, *, stream: str = "stdout", unit: str = "step",
                      bar: bool = True) -> Progress:
     """The :class:`Progress` a subcommand uses: off with ``-q``/``--quiet`` (messages dropped too), a bar on
-    a terminal (unless ``bar=False``), messages printed above it with ``-v``."""
+    a terminal (unless ``bar=False``), messages printed above it with ``-v`` and each line led by its level
+    and module's name (``-v``, ``-vv``)."""
     quiet = bool(getattr(args, "quiet", False) or getattr(args, "log_quiet", False))
     return Progress(total, desc, enabled=False if (quiet or not bar) else None, stream=None if quiet else stream,
-                    verbose=bool(getattr(args, "log_verbose", 0)), unit=unit)
+                    verbose=bool(getattr(args, "log_verbose", 0)), unit=unit,
+                    names=bool(getattr(args, "log_verbose", 0)))

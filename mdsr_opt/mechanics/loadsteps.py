@@ -3,6 +3,7 @@ load fractions, the stability check with saddle escape, and the checked result."
 
 from __future__ import annotations
 
+import logging
 import time
 import numpy as np
 import scipy.sparse.linalg as spla
@@ -17,6 +18,8 @@ from .kkt import OrderedFactor
 from .residual import kkt_residual, meet_tolerance
 from .result import EquilibriumResult
 from .stability import certified_minimum, check_stability
+
+_LOG = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------------------- input checks
@@ -396,6 +399,9 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
         ok = False
         status = f"{status}; rejected: the boundary crosses itself (self-contact is not modelled)"
     same = p_elastic is p or np.array_equal(np.asarray(p_elastic), np.asarray(p))
+    _LOG.debug("%s solve on %d nodes (%s): %s, %s iteration(s) in %d load step(s), residual %.3g (tol %.3g), "
+               "min J %.3g, build %.3f s, solve %.3f s", mode, mesh.n_nodes, backend, status, iters, len(steps or ()),
+               residual, tol, mj, t_build, t_solve)
     return EquilibriumResult(x=xflat.reshape(-1, 2).copy(), energy=energy,
                              elastic_energy=energy if same else model.energy(xflat, p_elastic), success=ok,
                              status=status,

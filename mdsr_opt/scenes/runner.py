@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,6 +17,8 @@ from .scene import Case, Scene
 
 __all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'measure_case', 'write_case', 'case_parts',
            'case_files']
+
+_LOG = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------------------------------- the pipeline
@@ -288,6 +291,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if not res.success:
         rep.message = f"design not verified: {res.status}"
     rep.times["total"] = time.perf_counter() - t0
+    _LOG.debug("%sstage times: %s", prefix, ", ".join(f"{k} {v:.3f} s" for k, v in rep.times.items()))
     return run
 
 

@@ -208,20 +208,26 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             # photo entry, the files and the stage's messages arrive at bg.wait()
             run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
             send_animations()
+            advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
             parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
             written[cname] = [[] for _ in range(2)]
             if parts:
-                bg.submit(parts[0], on_done=written[cname][0].extend)
+                bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
+            elif figures:
+                advance(log)  # no files to draw: the case's figure stage is done
             if photos and run.design is not None:
                 bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
-                          on_done=functools.partial(_photo_done, run, written[cname][1], say))
-            elif parts:
-                bg.submit(parts[1], on_done=written[cname][1].extend)
-            advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable)
+                          on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
+            else:
+                if parts:
+                    bg.submit(parts[1], on_done=written[cname][1].extend)
+                if photos:
+                    advance(log)  # no design to photograph: the case's photograph stage is done
         if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
             gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg)
             if gait_info is not None:
                 anim_out[scene.gait.name] = gait_info
+            advance(log)
         bg.wait()  # every case's files are known before the summary lists them
     if figures:
         for cname, parts in written.items():
@@ -275,7 +281,7 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
             check_out_path(a.out)
         with checking_input():  # building the scene checks it: bad input, before any work
             scene = build(resolution=a.resolution)
-        with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="case") as log:
+        with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="stage") as log:
             rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
                             method=a.method, overwrite=a.overwrite, log=log)
     except KeyboardInterrupt:
@@ -329,10 +335,15 @@ def parse_size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def n_units(scene: Scene, cases, animations: bool) -> int:
-    """Units of work of ``run_scene`` for the progress bar: one per case and per animation made."""
+def n_units(scene: Scene, cases, animations: bool, photos: bool = True, figures: bool = True) -> int:
+    """Units of work of ``run_scene`` for the progress bar, one per stage that takes time: per case its
+    solves (target, routing, design), with ``photos`` its photograph stage, with ``figures`` its figures and
+    meshes; one per animation made and, with ``animations``, one for the scene's gait."""
     names = set(scene.case_names if cases is None else cases)
-    return len(names) + (sum(set(x.cases) <= names for x in scene.animations) if animations else 0)
+    n = len(names) * (1 + bool(photos) + bool(figures))
+    if animations:
+        n += sum(set(x.cases) <= names for x in scene.animations) + (scene.gait is not None)
+    return n
 
 
 def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) -> dict:
@@ -385,14 +396,22 @@ def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write
     return {"photo": run.report.photo, "time": run.report.times["photo"], "files": files, "log": said}
 
 
-def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
-    """Put a :func:`_photo_job`'s answer into the run (its report, its files, its messages)."""
+def _photo_done(run: CaseRun, paths: list, say, log, got: dict) -> None:
+    """Put a :func:`_photo_job`'s answer into the run (its report, its files, its messages); one more unit
+    of ``log``'s progress done."""
     run.report.photo = got["photo"]
     run.report.times["photo"] = got["time"]
     run.report.times["total"] = run.report.times.get("total", 0.0) + got["time"]
     paths.extend(got["files"])
     for line in got["log"]:
         say(line)
+    advance(log)
+
+
+def _files_done(paths: list, log, got: list) -> None:
+    """Note the files a case's figure job wrote; one more unit of ``log``'s progress done."""
+    paths.extend(got)
+    advance(log)
 
 
 def _write_rest(scene: Scene, path) -> str:

@@ -49,15 +49,20 @@ _ANIM_KEYS = ("name", "keyframes", "frames_per_step", "fps")
 def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> Scene:
     """Read a scene file (TOML or JSON) into a :class:`Scene`, checking every field.
 
-    The format (TOML shown; JSON has the same structure)::
+    This docstring is the one full description of the format: every key a scene file may hold, each
+    section shown with its keys (TOML shown; JSON has the same structure)::
 
         name = "finger"                       # required: letters, digits, _ - .
         title = "A finger bent by its tip"    # optional, as is description
+        units = "mm"                          # optional: the length unit of every coordinate (mm, cm, m,
+                                              # um, in; default mm), carried into the gait's schedule and
+                                              # the fabrication files (SVG, DXF, CSV)
 
         [body]                                # required: outline (+ holes) or mesh
         outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
         holes = [[[1, 0.4], [1.4, 0.4], [1.4, 0.6]]]
         resolution = "coarse"                 # or a node count; or max_area = 0.02
+        min_angle = 30                        # optional: smallest triangle angle, degrees (default 30)
         # mesh = "finger.vtu"                 # a mesh file (any meshio format), relative to this file
 
         [material]                            # optional: neo-hookean, E = 1, nu = 0.3, thickness = 1
@@ -79,8 +84,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
 
-        [[cases]]
+        [[cases]]                             # required: at least one
         name = "bend"
+        description = "tip dragged up"        # optional
         anchors = "base"                      # a region, node indices or [x, y] points
         drags = [{ nodes = "tip", by = [-1.0, 1.5] },
                  { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
@@ -88,9 +94,20 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         name = "contract"
         contractions = [0.3]                  # an internal case: one per muscle
 
-        [[animations]]
+        [[animations]]                        # optional: forward solves between cases, as a GIF
         name = "wave"
-        keyframes = [["rest", 0], ["bend", 1], ["rest", 0]]
+        keyframes = [["rest", 0], ["bend", 1], ["rest", 0]]   # [case or "rest", weight]
+        frames_per_step = 6                   # optional (default 6), as is fps = 8
+
+        [gait]                                # optional: the cases as poses of ONE shared muscle layout,
+        name = "walk"                         # played in a cycle (default name "gait": out/<name>/)
+        poses = ["bend", "rest", "contract"]  # required: case names or "rest", in order
+        max_muscles = 4                       # optional: the shared layout's muscle budget
+        frames_per_step = 6                   # optional (default 6); step_time = 1.0 (seconds per pose),
+        cyclic = true                         # fps = 8 (of the GIF) and cyclic (default true) too
+
+        [expected]                            # optional: key figures the scene is known to reach
+        n_muscles = 2                         # (copied into summary.json; documentation and tests)
 
     Node references (``anchors``, a drag's ``nodes``, a region's ``nodes``) are a region name, a list of
     region names, a list of node indices, or a list of ``[x, y]`` points, each snapped to the nearest node

@@ -120,18 +120,24 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     ----------
     mesh : Mesh
         The body at rest, in length unit ``units``.
-    design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None
+    design : PosesResult, PipelineResult, DesignResult, mapping of pose name -> DesignResult, or None
         None: the layout alone (no strokes).
-    muscles : the layout; required unless ``design`` is a PosesResult (which carries its own).
+    muscles : the layout; required unless ``design`` knows its own (a PosesResult, a PipelineResult, or any
+        result with a ``muscles`` attribute), which it then replaces.
     units : one of :data:`UNITS`.
     channel_width : float, optional
         Drawn width of a channel (length units); default 0.2 mean edge lengths.
     """
+    from .pipeline import PipelineResult
     from .poses import PosesResult
 
     units = check_units(units)
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    if isinstance(design, PipelineResult):  # the design with the muscles it was made for
+        design, muscles = design.design, design.muscles if muscles is None else muscles
+    elif muscles is None and not isinstance(design, (PosesResult, Mapping)):
+        muscles = getattr(design, "muscles", None)  # a result that records its muscles
     if isinstance(design, PosesResult):
         if design.states.shape[1] != mesh.n_nodes:
             raise ValueError(f"the design is of a mesh with {design.states.shape[1]} nodes, not this one "
@@ -143,7 +149,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         radius = design.anchor_radius
     else:
         if muscles is None:
-            raise ValueError("give the muscles of the design (muscles=...): only a PosesResult carries its own")
+            raise ValueError("give the muscles of the design (muscles=...): a DesignResult or a mapping of them "
+                             "does not record its muscles (a PipelineResult and a PosesResult do)")
         if design is None:
             items = {}
         elif isinstance(design, Mapping):
@@ -151,8 +158,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         elif hasattr(design, "contractions"):
             items = {"design": design}
         else:
-            raise TypeError("design must be a PosesResult, a DesignResult, a mapping of pose name to "
-                            f"DesignResult or None, got {type(design).__name__}")
+            raise TypeError("design must be a PosesResult, a PipelineResult, a DesignResult, a mapping of pose "
+                            f"name to DesignResult or None, got {type(design).__name__}")
         what = {k: "the design" if len(items) == 1 else f"the design of {k!r}" for k in items}
         for k, d in items.items():  # the body first: muscles checked on another body would mislead
             check_same_mesh(mesh, getattr(d, "rest_mesh", None), what[k])
@@ -463,10 +470,11 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     ----------
     mesh : Mesh
         The body at rest; its coordinates are lengths in ``units``.
-    design : PosesResult, DesignResult, mapping of pose name -> DesignResult, or None (layout only)
+    design : PosesResult, PipelineResult, DesignResult, mapping of pose name -> DesignResult, or None (layout
+        only)
     out : str or path-like
         Output folder (created).
-    muscles : the layout (required unless ``design`` is a PosesResult).
+    muscles : the layout (required unless ``design`` knows its own: a PosesResult, a PipelineResult).
     units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
     channel_width : drawn channel width, length units (default 0.2 mean edge lengths).

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, Sequence
 import numpy as np
 
@@ -14,8 +14,10 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material
+from ..mechanics.result import EquilibriumResult
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
+from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -33,11 +35,13 @@ class PipelineResult:
     drag_nodes, drag_positions : (d,) int and (d, 2) float ndarrays
     target : (n, 2) ndarray
         The external-driving equilibrium the design aims at.
-    external : dict
-        Summary of the external-driving solve (:meth:`EquilibriumResult.summary`).
+    external : EquilibriumResult
+        The external-driving solve (its ``x`` is ``target``).
     muscles : tuple of Muscle
-    routing : dict or None
-        Routing knobs and per-muscle figures (None when muscles were given).
+    routing : RoutingResult or None
+        The routing: muscles, per-muscle figures (``.table()``), knobs (None when muscles were given). A
+        loaded result's has the contraction graph rebuilt from the mesh and the target, and no
+        ``reflection``.
     design : DesignResult
     times : dict
         Seconds per stage (``external``, ``routing``, ``design``, ``total``).
@@ -49,9 +53,9 @@ class PipelineResult:
     drag_nodes: np.ndarray
     drag_positions: np.ndarray
     target: np.ndarray
-    external: dict
+    external: EquilibriumResult
     muscles: tuple
-    routing: dict | None
+    routing: RoutingResult | None
     design: DesignResult
     times: dict = field(default_factory=dict)
 
@@ -85,9 +89,11 @@ class PipelineResult:
             "format": "mdsr_opt.design/1",
             "material": {"kind": mat.kind, "E": mat.E, "nu": mat.nu, "thickness": mat.thickness},
             "anchors": self.anchors.tolist(), "drag_nodes": self.drag_nodes.tolist(),
-            "drag_positions": self.drag_positions.tolist(), "external": self.external,
+            "drag_positions": self.drag_positions.tolist(),
+            "external": {k: v for k, v in self.external.to_dict().items() if k != "x"},  # x: the target
             "muscles": [{"nodes": list(mu.nodes), "name": mu.name} for mu in self.muscles],
-            "routing": self.routing, "design": self.design.to_dict(), "times": self.times,
+            "routing": None if self.routing is None else self.routing.to_dict(), "design": self.design.to_dict(),
+            "times": self.times,
         }
 
     def save(self, out: str | os.PathLike) -> str:
@@ -168,14 +174,45 @@ class PipelineResult:
                 raise ValueError(f"the design's state has shape {design.x.shape}, the mesh {md.x.shape}")
             check_same_mesh(md.mesh, design.rest_mesh, "the design")  # the saved mesh is the design's body
             field_ = "external/routing/times"
-            return cls(mesh=md.mesh, material=material, target=md.x, external=data["external"],
-                       muscles=muscles, routing=data["routing"], design=design, times=data.get("times", {}), **kw)
+            external = _equilibrium_from(data["external"], md.x)
+            routing = None if data["routing"] is None else _routing_from(data["routing"], muscles, md.mesh, md.x)
+            return cls(mesh=md.mesh, material=material, target=md.x, external=external,
+                       muscles=muscles, routing=routing, design=design, times=data.get("times", {}), **kw)
         except FileNotFoundError:
             raise
         except KeyError as exc:
             raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing (in {field_})") from None
         except (TypeError, ValueError, AttributeError, IndexError) as exc:
             raise ValueError(f"{path} is damaged ({field_}): {exc}") from None
+
+
+def _equilibrium_from(data: dict, x: np.ndarray) -> EquilibriumResult:
+    """The external solve saved in ``design.json`` (its fields but ``x``, the target): an
+    :class:`EquilibriumResult` again."""
+    if not isinstance(data, dict):
+        raise TypeError(f"external is a {type(data).__name__}, not an object")
+    known = EquilibriumResult.__dataclass_fields__
+    fields = {k: v for k, v in data.items() if k in known and k != "x"}
+    for k in ("rotation", "translation", "commanded", "achieved", "stroke", "tension", "slack", "rest_lengths"):
+        if fields.get(k) is not None:
+            fields[k] = np.asarray(fields[k], dtype=bool if k == "slack" else float)
+    fields.setdefault("elastic_energy", fields.get("energy"))
+    return EquilibriumResult(x=np.asarray(x, dtype=float).copy(), **fields)
+
+
+def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) -> RoutingResult:
+    """The routing saved in ``design.json`` (:meth:`RoutingResult.to_dict`): a :class:`RoutingResult` of
+    ``muscles`` again, its contraction graph rebuilt from ``mesh`` and ``target``."""
+    from .routing import contraction_graph
+
+    if not isinstance(data, dict):
+        raise TypeError(f"routing is a {type(data).__name__}, not an object")
+    return RoutingResult(muscles=tuple(muscles), stats=tuple(MuscleStats(**st) for st in data["stats"]),
+                         graph=contraction_graph(mesh, target),
+                         seeds=tuple(tuple(int(i) for i in sd) for sd in data.get("seeds", ())),
+                         n_units=int(data.get("n_units", 0)), params=dict(data.get("params", {})),
+                         dropped=tuple(DroppedUnit(nodes=tuple(d["nodes"]), rest_length=float(d["rest_length"]),
+                                                   reason=str(d["reason"])) for d in data.get("dropped", ())))
 
 
 @interruptible()
@@ -243,13 +280,13 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         if not mus:
             raise ValueError("routing found no muscle for this target (muscles can only contract: does the "
                              "target shorten any edge?); pass muscles=... or relax routing_options")
-        routing = {"params": dict(rr.params), "stats": [asdict(s) for s in rr.stats], "n_units": rr.n_units}
+        routing = rr
     else:
         mus = tuple(check_muscles(mesh, muscles))
     t2 = time.perf_counter()
     res = design_contractions(mesh, material, mus, ext.x, method=method, **design_options)
     t3 = time.perf_counter()
     return PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
-                          target=ext.x.copy(), external=ext.summary(), muscles=mus, routing=routing, design=res,
+                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
                           times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
 

@@ -94,7 +94,7 @@
     if (m.design.a_max != null) $("a_max").value = m.design.a_max;
     if (m.design.method) setSelect("method", m.design.method);
     if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
-    $("save-name").value = m.name;
+    $("save-name").value = ""; $("save-name").placeholder = m.name;  // empty: Save uses the body's name
     if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
     $("saved").textContent = ""; S.confirm = null; $("confirm").hidden = true;
     updateTable(); drawButtons(); updateDownloads();
