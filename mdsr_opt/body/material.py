@@ -2,7 +2,7 @@
 
 Each material is a frozen dataclass with validated parameters. ``psi(F, params)`` works on a 2x2 CasADi
 SX/MX matrix or on numpy arrays of shape (..., 2, 2); stresses and tangents come from automatic
-differentiation in :mod:`mdsr_opt.model`. ``params`` is the numeric parameter vector the symbolic model
+differentiation in :mod:`mdsr_opt.mechanics.model`. ``params`` is the numeric parameter vector the symbolic model
 takes at solve time, so one built model serves any stiffness.
 """
 

@@ -93,7 +93,7 @@ def default_anchor_radius(mesh) -> float:
 
 
 def valid_muscles(mesh, muscles) -> list:
-    """:func:`~mdsr_opt.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
+    """:func:`~mdsr_opt.body.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
     node chains checked on this mesh once is not walked edge by edge again (a design checks its muscles
     through a dozen functions, ~1 ms each at 3k nodes)."""
     seq = [muscles] if isinstance(muscles, Muscle) else muscles

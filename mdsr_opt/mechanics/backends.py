@@ -1,6 +1,6 @@
 """Minimisers of a model's energy with some coordinates held fixed: one function per backend.
 
-Every backend takes the same inputs (an :class:`~mdsr_opt.model.EnergyModel`, parameters ``p``, a first
+Every backend takes the same inputs (an :class:`~mdsr_opt.mechanics.model.EnergyModel`, parameters ``p``, a first
 guess, a mask of fixed coordinates and their values) and returns a :class:`MinimizeOutcome`. Building a
 CasADi solver happens once per model and backend; later solves reuse it. A model with muscle
 constraints (exact cable ropes, rigid anchor patches) is solved by :mod:`~mdsr_opt.mechanics.ropesolve`.
@@ -17,7 +17,7 @@ Backends
 ``uno``           The Uno solver shipped with the casadi wheel (exact Hessian derived by CasADi).
 ``scipy``         ``scipy.optimize.minimize(method="trust-constr")`` on the free coordinates with
                   CasADi-generated gradient and sparse Hessian: the baseline a user might write.
-``newton``        A projected Newton method in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised element
+``newton``        A projected Newton method in numpy/scipy (:mod:`mdsr_opt.mechanics.newton`): vectorised element
                   terms projected to positive semi-definite, one fill-reducing ordering reused by every
                   sparse factorisation, backtracking line search.
 """
@@ -135,7 +135,7 @@ def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
 
 
 def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
-    """Projected Newton in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised assembly, one ordering reused."""
+    """Projected Newton in numpy/scipy (:mod:`mdsr_opt.mechanics.newton`): vectorised assembly, one ordering reused."""
     from .newton import projected_newton
 
     x, success, status, it, seconds = projected_newton(model, p, x0, fixed, values, tol=tol, max_iter=max_iter)

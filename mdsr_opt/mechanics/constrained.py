@@ -1,9 +1,9 @@
 """An energy model whose minimisation carries muscle constraints (exact cable ropes, rigid anchor patches).
 
-:class:`ConstrainedModel` wraps an :class:`~mdsr_opt.model.EnergyModel` and a
-:class:`~mdsr_opt.muscle_constraints.MuscleConstraints` with the interface the load-stepping loop of
-:mod:`mdsr_opt.equilibrium` uses (``energy``, ``gradient``, ``hessian``, ``solver``, ``predict``), so that
-:func:`mdsr_opt.backends.minimize` solves ``min E(x)`` subject to the constraints. Its parameter vector
+:class:`ConstrainedModel` wraps an :class:`~mdsr_opt.mechanics.model.EnergyModel` and a
+:class:`~mdsr_opt.mechanics.constraints.MuscleConstraints` with the interface the load-stepping loop of
+:mod:`mdsr_opt.mechanics.equilibrium` uses (``energy``, ``gradient``, ``hessian``, ``solver``, ``predict``), so that
+:func:`mdsr_opt.mechanics.backends.minimize` solves ``min E(x)`` subject to the constraints. Its parameter vector
 carries the rope targets (they move with the load fraction) and multipliers (for the Lagrangian's gradient
 and Hessian, e.g. the KKT residual and the stability check of a result).
 """
@@ -28,14 +28,14 @@ __all__ = ["ConstrainedModel"]
 
 
 class ConstrainedModel:
-    """An :class:`~mdsr_opt.model.EnergyModel` whose minimisation carries muscle constraints.
+    """An :class:`~mdsr_opt.mechanics.model.EnergyModel` whose minimisation carries muscle constraints.
 
     The objective is the model's energy; the constraints are the rigid anchor rows of ``constraints`` and,
     with ``ropes=True`` (the exact cable), one rope row per muscle, ``L_c(x) <= target_c``. The parameter
     vector is ``p = [energy params, rope targets (n_targets), multipliers (n_rows)]``: the multipliers enter
     :meth:`gradient` and :meth:`hessian`, which are those of the Lagrangian
     ``E(x) + sum_i lam_i g_i(x)`` (with zero multipliers, those of the energy), so a KKT point has zero
-    :meth:`gradient` on the free coordinates. :func:`mdsr_opt.backends.minimize` recognises this class and
+    :meth:`gradient` on the free coordinates. :func:`mdsr_opt.mechanics.backends.minimize` recognises this class and
     passes the constraints to the NLP.
 
     Parameters

@@ -24,8 +24,8 @@ all linear in ``x`` except the scale row, and they keep the orientation (no refl
 node has no equation, of two nodes one (their distance).
 
 Constraint rows are ordered ropes first (one per muscle), then the rigid rows. Coordinates are interleaved
-``x0, y0, x1, y1, ...`` as in :mod:`mdsr_opt.model`. :class:`mdsr_opt.constrained.ConstrainedModel` puts
-these constraints into an equilibrium NLP.
+``x0, y0, x1, y1, ...`` as in :mod:`mdsr_opt.mechanics.model`.
+:class:`mdsr_opt.mechanics.constrained.ConstrainedModel` puts these constraints into an equilibrium NLP.
 
 Example
 -------
@@ -82,7 +82,7 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
     ``a' = a L0 / L0_free`` (``L0_free``: their total rest length), so that a muscle whose springs all reach
     their rest lengths has contracted by exactly ``a`` along its whole chain, as the exact cable does.
     Pass ``anchor_radius=0`` for the paper's plain model (every segment, ``a' = a``). Feed the result to
-    :meth:`~mdsr_opt.model.EnergyModel.params` as ``springs=``.
+    :meth:`~mdsr_opt.mechanics.model.EnergyModel.params` as ``springs=``.
 
     Raises
     ------

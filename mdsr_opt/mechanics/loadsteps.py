@@ -28,13 +28,13 @@ def check_mesh_material(mesh, material):
 
 def parse_drags(drags, n) -> tuple[np.ndarray, np.ndarray]:
     """``(indices, final positions (k, 2))`` of ``drags``; ``n`` is the mesh (or its node count when no drag
-    is a :class:`~mdsr_opt.drags.RigidDrag`, whose final positions depend on the rest positions)."""
+    is a :class:`~mdsr_opt.mechanics.drags.RigidDrag`, whose final positions depend on the rest positions)."""
     if isinstance(n, Mesh):
         path = drag_path(drags, n)
     else:
         path = drag_path(drags, _NodeCount(int(n)))
         if any(isinstance(how, RigidDrag) for _, how in path.parts):
-            raise ValueError("rigid drags need the mesh: use mdsr_opt.drags.drag_path(drags, mesh)")
+            raise ValueError("rigid drags need the mesh: use mdsr_opt.mechanics.drags.drag_path(drags, mesh)")
     return path.nodes, path.final
 
 
@@ -250,7 +250,7 @@ _KICK = 0.02
 
 
 def _stability_at(model, p, xflat, fixed):
-    """:class:`~mdsr_opt.stability.StabilityCheck` of the equilibrium ``xflat`` with ``fixed`` coordinates.
+    """:class:`~mdsr_opt.mechanics.stability.StabilityCheck` of the equilibrium ``xflat`` with ``fixed`` coordinates.
 
     For a model with muscle constraints, the Hessian of the Lagrangian (least-squares multipliers) on the
     tangent space of the active rows (rigid patches, taut ropes). The last check is cached on the model, so

@@ -522,7 +522,7 @@ def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarra
     Each muscle segment on edge ``e`` adds ``k_s/2 (l_e - (1 - a_c) l0_e)^2``; muscles sharing an edge
     combine exactly into one spring with summed stiffness and stiffness-weighted mean factor.
     ``stiffness`` is one absolute ``k_s`` for every segment, or a sequence with one array of per-segment
-    stiffnesses per muscle (see :func:`mdsr_opt.muscle_constraints.segment_spring_parameters`, which states
+    stiffnesses per muscle (see :func:`mdsr_opt.mechanics.constraints.segment_spring_parameters`, which states
     the stiffness per unit rest length so the model does not depend on the mesh).
     """
     k = np.zeros(len(mesh.edges))

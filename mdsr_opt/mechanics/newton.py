@@ -1,6 +1,6 @@
 """A projected Newton method in numpy/scipy: the ``newton`` backend, written to be fast.
 
-The energy of an :class:`~mdsr_opt.model.EnergyModel` without sliding cables is a sum over triangles
+The energy of an :class:`~mdsr_opt.mechanics.model.EnergyModel` without sliding cables is a sum over triangles
 (Neo-Hookean or linear elastic) and edge springs. This module evaluates it, its gradient and a positive
 semi-definite approximation of its Hessian with vectorised numpy (no per-element Python or CasADi call):
 
@@ -69,7 +69,7 @@ def _psd4(A: np.ndarray) -> np.ndarray:
 
 
 class NewtonEnergy:
-    """Vectorised energy, gradient and projected Hessian of an :class:`~mdsr_opt.model.EnergyModel`.
+    """Vectorised energy, gradient and projected Hessian of an :class:`~mdsr_opt.mechanics.model.EnergyModel`.
 
     Parameters
     ----------

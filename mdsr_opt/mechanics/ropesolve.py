@@ -23,7 +23,7 @@ __all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", 
 
 
 def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
-    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.mechanics.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
         # IPOPT takes the energy's and the constraints' values and derivatives from numpy where the model

@@ -451,7 +451,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     cv2.putText(img, text, (bx, by + th), font, fscale, (20, 20, 20), fthick, cv2.LINE_AA)
 
     meta = {
-        "synthetic": True, "generator": "mdsr_opt.evaluate.render_photo", "caption": text,
+        "synthetic": True, "generator": "mdsr_opt.photos.camera.render_photo", "caption": text,
         "caption_corner": corner, "caption_box": [int(bx), int(by), int(tw), int(th + base)],
         "seed": seed,
         "image_size": [W, H], "rotation_deg": rot, "tilt_deg": tilt,

@@ -36,7 +36,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     Parameters
     ----------
     rows : list of dict
-        Rows of :class:`mdsr_opt.study.StudyResult`.
+        Rows of :class:`mdsr_opt.studies.study.StudyResult`.
     axes : sequence of Axes, optional
     title : str, optional
 
@@ -84,7 +84,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
 def plot_study_scaling(rows, slopes=None, ax=None, title=None):
     """Time against node count on log-log axes, one colour per method, with the fitted power law.
 
-    ``slopes``: ``{method: (slope, intercept, n)}`` from :func:`mdsr_opt.study.fit_slopes` (computed when
+    ``slopes``: ``{method: (slope, intercept, n)}`` from :func:`mdsr_opt.core.stats.fit_slopes` (computed when
     omitted); the legend gives each slope. Only successful runs are drawn.
     """
     from ..core.stats import fit_slopes

@@ -129,7 +129,7 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     """Solve a case's target and lay its muscles: the input of any design method.
 
     External cases: :func:`~mdsr_opt.solve_external` with the case's anchors and drags, then
-    :func:`~mdsr_opt.routing.route_muscles` with the scene's ``routing_options`` (unless the scene gives
+    :func:`~mdsr_opt.synthesis.routing.route_muscles` with the scene's ``routing_options`` (unless the scene gives
     muscles). Internal cases: :func:`~mdsr_opt.solve_internal` with the scene's muscles at the case's
     contractions, using the scene's ``design_options`` ``muscle_model`` and ``stiffness`` so the design can
     recover them exactly; routing runs as a diagnostic when ``route_internal``.

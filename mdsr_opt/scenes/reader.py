@@ -16,8 +16,9 @@ __all__ = ['check_scene_options', 'SceneFileError']
 
 def check_scene_options(options, kind: str, label: str = "") -> dict:
     """Check a scene's ``routing_options`` (``kind="routing"``) or ``design_options`` (``"design"``): every
-    key a keyword of :func:`~mdsr_opt.routing.route_muscles` / :func:`~mdsr_opt.design.design_contractions`,
-    every value in its range, solver ``options`` known to the solver. Returns a checked copy.
+    key a keyword of :func:`~mdsr_opt.synthesis.routing.route_muscles` /
+    :func:`~mdsr_opt.synthesis.contractions.design_contractions`, every value in its range, solver
+    ``options`` known to the solver. Returns a checked copy.
 
     Raises ``SceneFileError`` (a ValueError) or ``TypeError`` naming ``label`` and the field.
     """

@@ -43,11 +43,11 @@ class CaseReport:
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
         the fraction of the true muscles' edges that routing on the target covers.
     photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
-        outline and holes with it (:func:`~mdsr_opt.evaluate.compare_loops`), ``self`` the driven state's
+        outline and holes with it (:func:`~mdsr_opt.photos.loops.compare_loops`), ``self`` the driven state's
         (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every
         loop, ``outer_mean_px`` and ``mean_norm`` of the outline alone, and ``n_unmatched`` holes. These photograph the design model itself (a mirror). ``prototype``
         (when a virtual prototype was given) holds the validation against a DIFFERENT, finer model
-        (:func:`~mdsr_opt.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
+        (:func:`~mdsr_opt.scenes.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     """
@@ -189,12 +189,12 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     """Run one case through the pipeline (nothing is written).
 
     Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
-    contractions (:func:`~mdsr_opt.design.design_contractions` with the scene's ``design_options``, its
+    contractions (:func:`~mdsr_opt.synthesis.contractions.design_contractions` with the scene's ``design_options``, its
     verification being the forward check) -> SYNTHETIC photograph of the driven body and contour metrics
-    (:mod:`mdsr_opt.evaluate`).
+    (:mod:`mdsr_opt.photos`).
 
-    With ``prototype`` (a :class:`~mdsr_opt.prototype.VirtualPrototype` of the scene) and ``photo``, the
-    case is also validated against the virtual prototype (:func:`~mdsr_opt.prototype.validate_case`): the
+    With ``prototype`` (a :class:`~mdsr_opt.scenes.prototype.VirtualPrototype` of the scene) and ``photo``, the
+    case is also validated against the virtual prototype (:func:`~mdsr_opt.scenes.prototype.validate_case`): the
     paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
 
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``

@@ -72,7 +72,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         deprecated spelling).
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
-        (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
+        (:class:`~mdsr_opt.scenes.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
     background : bool, default True
         Draw and write each case's figures, meshes and photographs, make each animation (its frames'
@@ -82,7 +82,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
-        (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
+        (only those it recorded; see :class:`~mdsr_opt.scenes.rundir.RunFolder`, which also locks the folder
         against a second run and removes the temporaries of an interrupted one).
 
     Returns
@@ -150,7 +150,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0, background: bool = True, pool: Executor | None = None) -> SceneReport:
     """:func:`run_scene` without the folder's guard: runs and writes into ``out`` as it stands (the caller
-    holds a :class:`~mdsr_opt.rundir.RunFolder`). Same parameters and result; ``pool`` (with
+    holds a :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with
     ``background``) is the process pool to send the jobs to (``mdsr run`` shares one between its scenes;
     None: one of this call's own)."""
     import time
@@ -233,7 +233,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                     "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
                                  "thickness": scene.material.thickness},
                     "routing_options": scene.routing_options, "design_options": scene.design_options,
-                    "photographs": "SYNTHETIC (rendered by mdsr_opt.evaluate.render_photo), not camera images"
+                    "photographs": "SYNTHETIC (rendered by mdsr_opt.photos.camera.render_photo), not camera images"
                     if photos else None,
                     "expected": scene.expected})
     write_json(out / "summary.json", finite(summary))

@@ -164,9 +164,9 @@ class Scene:
     regions : dict of str to int arrays
         Named node sets (for figures and scene files).
     routing_options : dict
-        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles`.
+        Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles`.
     design_options : dict
-        Keyword arguments for :func:`~mdsr_opt.design.design_contractions` (``method``, ``a_max``,
+        Keyword arguments for :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
         ``muscle_model``, ``stiffness`` ...).
     animations : tuple of Animation
     expected : dict
@@ -176,10 +176,10 @@ class Scene:
     source : str
         The file the scene came from.
     units : str
-        The length unit of the mesh coordinates (one of :data:`mdsr_opt.export.UNITS`, default ``"mm"``),
+        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`, default ``"mm"``),
         carried into the gait schedule and the fabrication files.
-    gait : mdsr_opt.gait.Gait, optional
-        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.gait.run_gait`).
+    gait : mdsr_opt.synthesis.gait.Gait, optional
+        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
     """
 
     name: str
@@ -363,7 +363,8 @@ def check_units_and_gait(scene: Scene) -> None:
     if scene.gait is None:
         return
     if not isinstance(scene.gait, Gait):
-        raise TypeError(f"scene {scene.name!r}: gait must be a mdsr_opt.gait.Gait, got {type(scene.gait).__name__}")
+        raise TypeError(f"scene {scene.name!r}: gait must be a mdsr_opt.synthesis.gait.Gait, "
+                        f"got {type(scene.gait).__name__}")
     names = scene.case_names
     for c in scene.gait.poses:
         if c not in names:

@@ -158,7 +158,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
     Parameters
     ----------
     problem : str
-        A study problem (:func:`mdsr_opt.study.list_study_problems`).
+        A study problem (:func:`mdsr_opt.studies.problems.list_study_problems`).
     tol : float
         Largest node error allowed, as a fraction of the body's size.
     load : float, optional
@@ -173,7 +173,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
         A known fine solution to measure errors against. By default the reference is the problem solved
         with Neo-Hookean by IPOPT (tight tolerance) at ``reference_resolution`` (default: the finest
         candidate), so the finest model has error 0.
-    scheduler, workers : as in :func:`mdsr_opt.study.run_study` (the candidates run in parallel on Dask).
+    scheduler, workers : as in :func:`mdsr_opt.studies.study.run_study` (the candidates run in parallel on Dask).
 
     Returns
     -------

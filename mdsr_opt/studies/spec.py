@@ -241,7 +241,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
 )}
 
 
-#: The fidelity study (run by :func:`mdsr_opt.fidelity.run_fidelity_study`): problems with loads.
+#: The fidelity study (run by :func:`mdsr_opt.studies.fidelity.run_fidelity_study`): problems with loads.
 FIDELITY_STUDY = "fidelity"
 
 
@@ -255,6 +255,6 @@ def get_study(name: str | Study) -> Study:
     if isinstance(name, Study):
         return name
     if name == FIDELITY_STUDY:
-        raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.fidelity.run_fidelity_study "
+        raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.studies.fidelity.run_fidelity_study "
                          "(or `mdsr study fidelity`)")
     return STUDIES[check_name(name, list_studies(), "study")]

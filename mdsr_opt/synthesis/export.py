@@ -1,7 +1,7 @@
 """Fabrication files: the body and its muscle channels at true scale, and the muscle table.
 
-:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.poses.PosesResult`, a
-:class:`~mdsr_opt.design.DesignResult` or a mapping of pose names to DesignResults):
+:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.synthesis.poses.PosesResult`, a
+:class:`~mdsr_opt.synthesis.results.DesignResult` or a mapping of pose names to DesignResults):
 
 ``<name>.svg``
     The body outline, its holes and every muscle channel (the centre line along the muscle's mesh edges,

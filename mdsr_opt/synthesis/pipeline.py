@@ -196,7 +196,7 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     muscles : optional
         Use these muscles instead of routing them.
     routing_options : dict, optional
-        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
+        Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
     method : str
         The design method (see :func:`design_contractions`).
     external_options : dict, optional

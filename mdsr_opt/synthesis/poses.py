@@ -2,14 +2,14 @@
 
 A real muscle-driven robot carries one set of muscles and changes pose by changing their strokes.
 :func:`design_poses` lays ONE set of muscles for all the target poses of a body and designs each pose's
-strokes on it; :func:`~mdsr_opt.gait.gait_schedule` turns a cyclic sequence of those poses into an actuation schedule
-(the stroke of every muscle over time), solved forward frame by frame.
+strokes on it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` turns a cyclic sequence of those poses into an
+actuation schedule (the stroke of every muscle over time), solved forward frame by frame.
 
 Shared layout
 -------------
 The layout is the union of the poses' own routings, deduplicated, under a muscle budget:
 
-1. every pose is routed on its own target (:func:`~mdsr_opt.routing.route_muscles` with the same options),
+1. every pose is routed on its own target (:func:`~mdsr_opt.synthesis.routing.route_muscles` with the same options),
    giving each pose a ranked list of muscles (strongest first);
 2. the candidates are taken round-robin by rank (every pose's strongest muscle, then every pose's second
    ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
@@ -32,7 +32,7 @@ repeats), the joint NLP reaches the same optima (to 1e-11), takes 24 IPOPT itera
 the two NLPs apart, solves in about the same time (joint / per pose: 0.65-1.16, median about 1.0) and
 builds in about half the time (one solver instead of two). Solving is not faster, and the build saving is
 small next to the design module's own assembled NLPs, so the poses are designed one NLP per pose with
-:func:`~mdsr_opt.design.design_contractions` on the shared layout: the exact cable model, every pose
+:func:`~mdsr_opt.synthesis.contractions.design_contractions` on the shared layout: the exact cable model, every pose
 verified on its own, and a pose that fails does not spoil the others.
 
 A muscle is *engaged* in a pose when its path shortens in that pose's target; the pose is designed with its
@@ -197,8 +197,8 @@ class PosesResult:
         The full per-pose designs (in memory only; empty after :meth:`load`).
     rest_mesh : dict or None
         The fingerprint of the mesh the layout was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
-        saved with it; :func:`~mdsr_opt.gait.gait_schedule` and :func:`~mdsr_opt.export.export_fabrication`
-        refuse another mesh (None: not recorded, not checked).
+        saved with it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` and
+        :func:`~mdsr_opt.synthesis.export.export_fabrication` refuse another mesh (None: not recorded, not checked).
     """
 
     names: tuple
@@ -365,7 +365,7 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     Parameters
     ----------
     mesh : Mesh
-    layouts : mapping pose name -> muscles ranked strongest first (as :func:`~mdsr_opt.routing.route_muscles`
+    layouts : mapping pose name -> muscles ranked strongest first (as :func:`~mdsr_opt.synthesis.routing.route_muscles`
         returns them).
     max_muscles : int, optional
         The budget (at least 1); default: no limit.
@@ -426,10 +426,11 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         The muscle budget of the shared layout (at least 1); default: every non-duplicate muscle the poses'
         routings give.
     routing_options : dict, optional
-        Keywords of :func:`~mdsr_opt.routing.route_muscles`, used for every pose's own routing (a
+        Keywords of :func:`~mdsr_opt.synthesis.routing.route_muscles`, used for every pose's own routing (a
         ``max_muscles`` there limits each pose's own layout).
     design_options : dict, optional
-        Keywords of :func:`~mdsr_opt.design.design_contractions` (``method``, ``a_max``, ``muscle_model``...).
+        Keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
+        ``muscle_model``...).
     overlap : float, default 0.5
         Duplicate threshold of :func:`shared_layout`.
     compare : bool, default True

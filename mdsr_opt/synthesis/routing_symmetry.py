@@ -1,7 +1,7 @@
 """Mirror symmetry of a mesh and of a contraction field, for symmetric muscle routing.
 
 :func:`find_reflection` looks for a reflection that maps the rest mesh onto itself (node for node, edge
-for edge). :func:`~mdsr_opt.routing.route_muscles` uses it: when the body is mirror-symmetric and the
+for edge). :func:`~mdsr_opt.synthesis.routing.route_muscles` uses it: when the body is mirror-symmetric and the
 target contracts mirrored edges alike, the muscles are routed in mirrored pairs (or as single muscles
 that are their own mirror image), so a symmetric target gets symmetric muscles.
 

@@ -36,7 +36,7 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
 
     Returns ``(positive_definite, min_eigenvalue, residual)``: whether the (reduced) free-coordinate Hessian
     is positive definite, from the inertia of a sparse symmetric factorisation
-    (:func:`~mdsr_opt.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
+    (:func:`~mdsr_opt.mechanics.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
     relative to ``E t`` (when positive definite an estimate by LOBPCG preconditioned by the factor; else the
     curvature along the direction of most negative curvature found, an upper bound); and the max-norm of the
     free gradient of the Lagrangian relative to ``E t size``. With ``lowest=False`` the eigenvalue estimate
@@ -101,7 +101,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
 
     When the target came from external driving, give its ``anchors`` and ``drags`` (as in
     :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
-    (:func:`~mdsr_opt.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
+    (:func:`~mdsr_opt.mechanics.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
     is a shape no body holds; ``target_stable`` reports it.
 
     The minimum test is the inertia of one sparse factorisation; ``lowest=True`` also estimates the smallest
