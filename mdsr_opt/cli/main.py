@@ -31,7 +31,7 @@ OWNERS = ((".demo", ("demo",)), (".photos", ("evaluate", "photograph")), (".run"
 
 def _register(sub, command: str | None = None) -> None:
     """Register the subcommands: all of them, or with ``command`` only its owner's (its module alone is
-    imported: ``mdsr run`` then skips the photograph, demo, study and authoring modules, 0.2-0.25 s)."""
+    imported: ``mdsr run`` then skips the photograph, demo, study and authoring modules)."""
     import importlib
 
     known = any(command in cmds for _, cmds in OWNERS)

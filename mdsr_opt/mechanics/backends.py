@@ -74,7 +74,7 @@ def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
          # multipliers of bounds and parameters are not used: skip their extra derivative evaluations
          "calc_lam_p": False, "calc_lam_x": False,
          # fixed coordinates become parameters without bound multipliers: about half the gradient calls,
-         # solve 9-10 % faster with the same iterates (measured at 3k and 10k nodes)
+         # the same iterates
          "ipopt.fixed_variable_treatment": "make_parameter_nodual"}
     if limited_memory:
         o["ipopt.hessian_approximation"] = "limited-memory"
@@ -160,8 +160,7 @@ def available_backends() -> list[str]:
 
 @functools.lru_cache(maxsize=None)
 def _available() -> tuple[str, ...]:
-    # asked once per process: CasADi looks for each plugin's library (about 0.5 ms a plugin), and every
-    # solve checks its backend (4.5 ms of a 30 ms warm-started solve at 555 nodes)
+    # asked once per process: CasADi looks for each plugin's library, and every solve checks its backend
     out = []
     for name in BACKENDS:
         plugin = {"ipopt-lbfgs": "ipopt", "ipopt-symbolic": "ipopt"}.get(name, name)

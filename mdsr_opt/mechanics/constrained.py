@@ -162,8 +162,7 @@ class ConstrainedModel:
 
         The nonlinear rows are differentiated on the local coordinates (an SX function of a few hundred
         inputs), the linear rows are a constant matrix. Given to IPOPT as ``jac_g`` it spares ``nlpsol`` its
-        own differentiation through the MX graph: 17 ms against 31 ms to build a 3k-node solver with 4
-        ropes, the same iterates to rounding (solution 9e-16 apart, energy 5e-16 relative)."""
+        own differentiation through the MX graph (a quicker build), with the same iterates to rounding."""
         mc = self.constraints
         nl, P, Lin = mc.symbolic_parts()
         R = sp.diags(self.row_scale) @ sp.identity(mc.n_constraints, format="csr")[self.rows]
@@ -194,8 +193,8 @@ class ConstrainedModel:
         ``(x, p) -> (rows, Jacobian)``; ``"hess_lag"``, ``(x, p, lam_f, lam_g) ->`` the upper triangle of the
         Lagrangian's Hessian (as :meth:`hess_lag_upper`; the energy's from
         :func:`~mdsr_opt.mechanics.assembly.ipopt_functions`, the constraints' closed forms), ``p`` the
-        energy's parameters. Nothing symbolic is built: a 3k-node solver with 4 ropes took 0.03-0.05 s more
-        to build with the constraints' SX pieces, for the same iterates to rounding."""
+        energy's parameters. Nothing symbolic is built (the constraints' SX pieces give the same iterates to
+        rounding, at a longer build)."""
         cached = self.__dict__.get("_numeric_functions")
         if cached is not None:
             return cached

@@ -236,7 +236,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         (:func:`in_gauge_frame`).
     check_stability : bool
         Check that the equilibrium reached is stable, leaving a saddle along its negative curvature (the
-        default). ``False`` skips the check (one sparse factorisation, 0.04 s at 3k nodes): ``success`` then
+        default). ``False`` skips the check (one sparse factorisation): ``success`` then
         means a converged equilibrium with every element upright, which may be a saddle (``stable`` is
         None). For warm starts, such as the flattened design's, whose result is verified later.
 

@@ -139,7 +139,7 @@ def min_jacobian(mesh, xflat) -> float:
     -------
     float
         ``min J``, as ``mesh.jacobians(x).min()`` up to rounding, without its batched 2 x 2 inverses and
-        determinants (0.09 ms against 2.3 ms at 3k nodes); ``J <= 0`` marks an inverted element.
+        determinants; ``J <= 0`` marks an inverted element.
     """
     t = mesh.triangles
     x = np.asarray(xflat, dtype=float).reshape(-1)
@@ -308,8 +308,8 @@ def _kick(mesh, model, p, x, direction, scale=1.0):
 def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, verbose, certified=False):
     """Only a stable equilibrium is a success: at a saddle, step along its negative curvature and re-solve.
     ``certified``: the solve that reached ``x`` showed it a strict minimum itself
-    (:func:`~mdsr_opt.mechanics.stability.ipopt_certifies_minimum`), which is then its check (made once
-    instead of again: 17 ms per solve at 600-1,700 nodes, 45 ms at 3k with 4 ropes).
+    (:func:`~mdsr_opt.mechanics.stability.ipopt_certifies_minimum`), which is then its check (made once,
+    not again).
 
     Returns ``(x, status note, success, iterations, seconds)``."""
     t0 = time.perf_counter()

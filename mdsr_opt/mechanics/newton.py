@@ -374,8 +374,8 @@ class _Pattern:
 
 def _ordering(model, free):
     """The model's fill-reducing ordering of the free coordinates (AMD of the node graph, each node's two
-    coordinates together: about 2.5x faster factorisations at 30k nodes than SuperLU's minimum degree on
-    the coordinates, with the same fill), or None for a model without one."""
+    coordinates together: quicker factorisations of large meshes than SuperLU's minimum degree on the
+    coordinates, with the same fill), or None for a model without one."""
     return model.free_ordering(free) if hasattr(model, "free_ordering") else None
 
 

@@ -63,10 +63,10 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
 
 #: IPOPT options of a constrained solve whose rows are all equalities, started from given multipliers
 #: (the least-squares ones of the start, every row fitted: a rope shorter than its new target still pulls):
-#: IPOPT's own estimate factorises a system the size of the unknowns. Measured on 3k nodes with 4 ropes (two
-#: load steps of 4 iterations each): 0.292 -> 0.264 s, the same iterations and energy; 24 frames of a 32 x 8
-#: strip with 4 ropes, each from the last: 81 iterations, as with IPOPT's estimate (116 when ropes short at
-#: the start were fitted as slack). Options the caller gives take precedence.
+#: IPOPT's own estimate factorises a system the size of the unknowns; these need the same iterations and
+#: reach the same energy (24 frames of a 32 x 8 strip with 4 ropes, each from the last: 81 iterations, as
+#: with IPOPT's estimate; 116 when ropes short at the start were fitted as slack). Options the caller gives
+#: take precedence.
 WARM_MULTIPLIERS = {"ipopt.warm_start_init_point": "yes"}
 
 

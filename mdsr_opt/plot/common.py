@@ -34,7 +34,7 @@ def panel_axes(fig, nrow, ncol, figsize):
 def hide_ticks(*axes) -> None:
     """No tick marks or tick labels on ``axes`` (the frame stays): for drawings whose coordinates another
     figure of the same run already gives. Ticks are most of the cost of drawing an axes (each tick is a
-    handful of artists, each label a laid-out text): about 40 ms per axes at 130 dpi."""
+    handful of artists, each label a laid-out text)."""
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])

@@ -34,7 +34,7 @@ class _Deadline:
 
     A timer thread sets an asynchronous exception on the running thread; C code (an IPOPT solve) finishes its
     call first. Raised inside a solver's Python callback, CasADi would turn it into a failed evaluation that
-    load stepping takes for a failed step and goes on (an L-BFGS run of a 0.5 s budget ran 16 s so): the
+    load stepping takes for a failed step and goes on, far past the deadline: the
     timer also asks every solve that returns to raise it (:func:`~mdsr_opt.core.guards.request_stop`).
     Leaving the block cancels both and clears an exception that was set but not yet raised, so nothing leaks
     past the block. No tracing: runs are not slowed down.

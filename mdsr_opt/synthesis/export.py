@@ -312,8 +312,8 @@ def _dxf_text(fd: FabricationData) -> str:
     carries the channel width (groups 40/41). R12 has no unit variable: ``$INSUNITS`` (R2000's) is
     written for the readers that honour it (ezdxf, QCAD/LibreCAD); AutoCAD reports it as unknown and
     ignores it, as it does any header variable newer than the file. The SVG and the CSV state the unit
-    as well. Writing it here instead of through ezdxf (whose import alone took 0.25-0.3 s of
-    a 0.3 s fabrication job in ``mdsr run gecko``) keeps the whole export at a few milliseconds."""
+    as well. It is written here, not through ezdxf, whose import alone costs more than the whole
+    export."""
     lines: list[str] = []
 
     def g(code: int, value) -> None:

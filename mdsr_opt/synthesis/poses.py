@@ -29,11 +29,11 @@ With the layout fixed, the poses share no unknowns: every pose has its own state
 alignment, so a single flattened NLP over all poses is block diagonal. Measured side by side with the same
 stand-in machinery (``tests/benchmarks/bench_poses.py``: gecko, 555 nodes, 4 shared muscles, 2 poses, 4
 repeats), the joint NLP reaches the same optima (to 1e-11), takes 24 IPOPT iterations against 22 + 17 for
-the two NLPs apart, solves in about the same time (joint / per pose: 0.65-1.16, median about 1.0) and
-builds in about half the time (one solver instead of two). Solving is not faster, and the build saving is
-small next to the design module's own assembled NLPs, so the poses are designed one NLP per pose with
-:func:`~mdsr_opt.synthesis.contractions.design_contractions` on the shared layout: the exact cable model, every pose
-verified on its own, and a pose that fails does not spoil the others.
+the two NLPs apart, solves in about the same time and builds in about half the time (one solver instead
+of two). Solving is not faster, and the build saving is small next to the design module's own assembled
+NLPs, so the poses are designed one NLP per pose with
+:func:`~mdsr_opt.synthesis.contractions.design_contractions` on the shared layout: the exact cable model,
+every pose verified on its own, and a pose that fails does not spoil the others.
 
 A muscle is *engaged* in a pose when its path shortens in that pose's target; the pose is designed with its
 engaged muscles only. The others are *released*: an inextensible rope held at its rest length would stop
