@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import plot
 from ..body.io import write_json, write_mesh
 from ..core.deprecation import renamed_keywords
 
@@ -143,8 +144,6 @@ def results_dict(session) -> dict:
 
 def download(session, what: str, tmpdir) -> tuple[bytes, str]:
     """The bytes and media type of one download (see :data:`DOWNLOADS`); ValueError when not available yet."""
-    from .. import plot
-
     if what not in DOWNLOADS:
         raise ValueError(f"unknown download {what!r} (choose from {', '.join(DOWNLOADS)})")
     tmp = Path(tmpdir)

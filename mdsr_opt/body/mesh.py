@@ -15,6 +15,7 @@ Example
 from __future__ import annotations
 
 from functools import cached_property, wraps
+import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -365,8 +366,6 @@ class Mesh:
         >>> m.quality()["min_angle_deg"] >= 30.0 - 1e-9
         True
         """
-        import warnings
-
         import shapely
 
         from .triangulate import (TRIANGLES_PER_AREA, expected_triangles, quality_triangulation,

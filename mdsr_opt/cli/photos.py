@@ -13,8 +13,6 @@ __all__ = ['add_cli']
 
 # ----------------------------------------------------------------------------------------------- command
 def _parse_color(text: str):
-    import argparse
-
     from ..photos.images import check_color
 
     t = text.strip()
@@ -31,8 +29,6 @@ def _parse_color(text: str):
 
 
 def _parse_ints(n: int, what: str, sep: str = ","):
-    import argparse
-
     def parse(text: str):
         try:
             vals = tuple(int(v) for v in text.lower().split(sep))

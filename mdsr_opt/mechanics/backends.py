@@ -34,6 +34,8 @@ import numpy as np
 
 from ..core.guards import captured_stdout, check_stop, interruptible, quiet_stdout
 from . import ropesolve
+from .assembly import ipopt_functions
+from .newton import projected_newton
 from .result import MinimizeOutcome, solver_status
 from .stopping import with_stop_callback
 from .stability import STEP_RTOL, ipopt_certifies_minimum
@@ -49,8 +51,6 @@ def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
         o = with_stop_callback(o)  # Ctrl-C stops the solver at its next iteration
         if plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False):
             # energy, gradient and Hessian in vectorised numpy through callbacks: no symbolic graph to build
-            from .assembly import ipopt_functions
-
             fns = ipopt_functions(model)
             x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
             o["grad_f"], o["hess_lag"] = fns["grad_f"], fns["hess_lag"]
@@ -136,8 +136,6 @@ def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
 
 def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
     """Projected Newton in numpy/scipy (:mod:`mdsr_opt.mechanics.newton`): vectorised assembly, one ordering reused."""
-    from .newton import projected_newton
-
     x, success, status, it, seconds = projected_newton(model, p, x0, fixed, values, tol=tol, max_iter=max_iter)
     return MinimizeOutcome(x, success, status, it, seconds, 0.0)
 

@@ -19,6 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .anchors import body_size
+from .assembly import BufferedFunction, SparseLayout
 from .constraints import MuscleConstraints
 from .kkt import kkt_factor
 from .loadsteps import min_jacobian
@@ -198,7 +199,6 @@ class ConstrainedModel:
         cached = self.__dict__.get("_numeric_functions")
         if cached is not None:
             return cached
-        from .assembly import BufferedFunction, SparseLayout
 
         ref = weakref.ref(self)  # the model keeps these alive; they must not keep the model alive
         mc, n, nr = self.constraints, self.n_dof, self.n_rows

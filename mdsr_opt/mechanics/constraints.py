@@ -50,7 +50,7 @@ import scipy.sparse as sp
 from ..core.checks import positive_float
 from .anchors import (ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, anchor_patches, anchor_radius_or_default, body_size,
                       check_anchor_radius, default_anchor_radius, rigid_groups, valid_muscles)
-from .model import to_dm
+from .model import to_dm, spring_parameters
 from .segments import length_hessian_product, length_third
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "default_anchor_radius", "check_anchor_radius",
@@ -89,8 +89,6 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
     ValueError
         When ``a' >= 1`` (the anchors cover too much of a muscle for the contraction asked).
     """
-    from .model import spring_parameters
-
     mus = valid_muscles(mesh, muscles)
     a = np.asarray(contractions, dtype=float).reshape(-1)
     ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)

@@ -44,6 +44,9 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from .assembly import HessianPattern
+from .newton import NewtonEnergy
+
 __all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters", "to_dm"]
 
 
@@ -272,8 +275,6 @@ class EnergyModel:
     def numeric(self, p):
         """The vectorised numpy energy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`) at parameters ``p``
         (the last one is kept). Only for models with :attr:`is_numeric`."""
-        from .newton import NewtonEnergy
-
         p = np.asarray(p, dtype=float).ravel()
         cached = self.__dict__.get("_numeric")
         if cached is not None and np.array_equal(cached[0], p):
@@ -288,8 +289,6 @@ class EnergyModel:
         block entry lands (made on first use)."""
         pat = self.__dict__.get("_hessian_pattern")
         if pat is None:
-            from .assembly import HessianPattern
-
             pat = HessianPattern(self.mesh.n_nodes, self.mesh.edges)
             # in the (d, d, N) layout of NewtonEnergy's blocks
             pat.elem_pos = pat.positions(self.mesh.triangles).reshape(-1)

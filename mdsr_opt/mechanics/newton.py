@@ -37,6 +37,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..core.guards import check_stop
+from .blas import one_blas_thread
 from .segments import length_third, pair_blocks
 
 __all__ = ["NewtonEnergy", "projected_newton", "step_seconds"]
@@ -465,11 +466,9 @@ def step_seconds(model, p, x, fixed, repeat: int = 5) -> float:
     en = NewtonEnergy(model, p)
     pat = _Pattern(en, ~fixed, _ordering(model, ~fixed))
     ts = []
-    from .blas import one_blas_thread  # as the solves run (see mdsr_opt.mechanics.blas)
-
     for _ in range(max(1, int(repeat))):
         t0 = time.perf_counter()
-        with one_blas_thread():
+        with one_blas_thread():  # as the solves run (see mdsr_opt.mechanics.blas)
             g, He, Hs = en.element_blocks(x, project=False)
             H = pat.matrix(He, Hs)
             lu = spla.splu(H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})

@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.guards import interruptible, quiet_stdout
+from .assembly import ipopt_functions
 from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 from .stopping import with_stop_callback
@@ -33,8 +34,6 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
         o = with_stop_callback(opts)  # Ctrl-C stops the solver at its next iteration
         o["show_eval_warnings"] = False
         if numeric:
-            from .assembly import ipopt_functions
-
             fns, cfns = ipopt_functions(model), cmodel.numeric_functions()
             x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
             g = cfns["g"](x, p) if cmodel.n_rows else ca.MX(0, 1)

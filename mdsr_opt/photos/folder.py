@@ -14,7 +14,8 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ..body.io import FORMATS, atomic_path
+from .. import plot
+from ..body.io import FORMATS, atomic_path, read_mesh
 from ..core.results import compact_repr
 from ..core.errors import InputError, checking_input
 from .compare import ContourComparison, compare_contours, simulated_outline
@@ -162,8 +163,6 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     >>> rows[0].case, rows[0].synthetic, bool(rows[0].comparison.mean_px < 1.0)
     ('bent', True, True)
     """
-    from ..body.io import read_mesh
-
     with checking_input():  # the arguments and the folders: bad input, before any work
         if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
             raise ValueError(f"name must be a plain file stem, got {name!r}")
@@ -203,8 +202,6 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
         out = Path(out)
         writers = _table_writers(results, out / f"{name}.csv", out / f"{name}.md")
         if figures:
-            from .. import plot
-
             # render every figure to PNG bytes now (one figure open at a time), write with the tables
             with tempfile.TemporaryDirectory() as scratch:
                 for k, ((image, mesh, x, comp, synth), row) in enumerate(zip(overlays, results)):

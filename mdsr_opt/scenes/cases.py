@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+import time
 from typing import Any
+import warnings
 import numpy as np
 
+from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .scene import Case, Scene
 
@@ -99,7 +102,6 @@ class CaseSetup:
         ValueError
             The file (named) is damaged, not a ``.npz``, holds another kind of result or another scene's.
         """
-        from ..body.muscles import Muscle
         from ..mechanics.result import EquilibriumResult
 
         if not isinstance(scene, Scene):
@@ -136,9 +138,6 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
 
     A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty.
     """
-    import time
-    import warnings
-
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..synthesis.routing import RoutingWarning, route_muscles
 

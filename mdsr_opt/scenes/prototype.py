@@ -30,7 +30,7 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -38,6 +38,7 @@ import numpy as np
 from ..core.checks import positive_float
 from ..core.deprecation import renamed_keywords
 from ..body.muscles import Muscle
+from .select import edge_path
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
 
@@ -133,8 +134,6 @@ class VirtualPrototype:
             ``refine`` not in [1, 10], ``e_range`` not in [0, 0.5), ``nu_range`` not in [0, 0.2], a scene
             without a source to rebuild from, or a fine scene whose cases differ from the design scene's.
         """
-        from dataclasses import replace
-
         from ..body.material import LinearElastic, NeoHookean
         from .scene import Scene
         from .library import get_problem
@@ -187,8 +186,6 @@ class VirtualPrototype:
     def transfer_muscle(self, muscle: Muscle) -> Muscle:
         """The design mesh's muscle laid on the prototype's mesh: through the fine nodes nearest its nodes
         (on the boundary when the muscle runs along it), joined by shortest edge paths."""
-        from .select import edge_path
-
         if not isinstance(muscle, Muscle):
             muscle = Muscle(muscle)
         X = self.design_mesh.points

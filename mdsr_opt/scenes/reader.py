@@ -3,6 +3,9 @@ scene's routing and design options (also used for scenes built in Python)."""
 
 from __future__ import annotations
 
+import difflib
+import inspect
+import json
 import math
 import sys
 from pathlib import Path
@@ -51,8 +54,6 @@ class Reader:
         raise err
 
     def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
-        import difflib
-
         if not isinstance(d, Mapping):
             self.fail(where, f"expected a table/object, got {tname(d)}", TypeError)
         for k in d:
@@ -123,8 +124,6 @@ def read_file(path: Path) -> dict:
     too_deep = SceneFileError(f"{path.name}: tables and lists are nested more than {MAX_DEPTH} deep; a scene "
                               "file needs only a few levels")
     if suffix == ".json":
-        import json
-
         try:
             data = json.loads(text.decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -164,8 +163,6 @@ def _depth_exceeds(data, limit: int) -> bool:
 
 
 def scene_options(r: Reader, spec, where: str) -> dict:
-    import inspect
-
     from ..synthesis.contractions import design_contractions
     from ..synthesis.routing import route_muscles
 

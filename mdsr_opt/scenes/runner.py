@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import functools
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, asdict
 from pathlib import Path
+import time
 from typing import Any, Callable, Sequence
 import numpy as np
 
+from .. import plot
 from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
 from .cases import CaseSetup, prepare_case
@@ -165,8 +167,6 @@ class SceneReport:
 
     def to_dict(self) -> dict:
         """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
-        from dataclasses import asdict
-
         return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
                             "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
                             "cases": [asdict(c) for c in self.cases], "animations": self.animations})
@@ -200,8 +200,6 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
     says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
     """
-    import time
-
     from ..synthesis.contractions import design_contractions
 
     say = log or (lambda s: None)
@@ -300,8 +298,6 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
     virtual prototype's validation. Fills ``run.report.photo`` and ``run.report.times["photo"]``,
     ``run.photo``, ``run.comparison`` and ``run.prototype_photos``.
     """
-    import time
-
     from ..photos.camera import render_photo
     from ..photos.contours import contour_loops_from_image
     from ..photos.loops import compare_loops, simulated_loops
@@ -385,7 +381,6 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
 def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
     """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
     ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
-    from .. import plot
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
 
@@ -423,8 +418,6 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
 
 def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
     """The virtual prototype's photographs, ``photo.png`` (with ``photo.json``) and ``overlay.png``."""
-    from .. import plot
-
     files: list[str] = []
     for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
         files.append(str(ph.save(folder / f"prototype_{key}.png")))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import functools
 import logging
@@ -9,15 +10,18 @@ import os
 import sys
 from concurrent.futures import Executor
 from pathlib import Path
+import time
 from typing import Callable, Sequence
 
+from .. import plot
 from ..core.errors import checking_input, exit_report
 from ..core.deprecation import renamed_keywords
 from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
+from ..synthesis.gait import run_gait
 from .animate import animate
 from .names import RUN_FILES
-from .rundir import check_interrupt
+from .rundir import check_interrupt, RunFolder, noting_interrupts
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
@@ -99,8 +103,6 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     KeyboardInterrupt
         Passed on at once (never recorded as a failed case); the files already complete stay.
     """
-    from .rundir import RunFolder, noting_interrupts
-
     names = _check_run(scene, cases, mesh_format, photo_size)
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
@@ -153,8 +155,6 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     holds a :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with
     ``background``) is the process pool to send the jobs to (``mdsr run`` shares one between its scenes;
     None: one of this call's own)."""
-    import time
-
     from ..body.io import atomic_path, write_json
 
     names = _check_run(scene, cases, mesh_format, photo_size)
@@ -254,8 +254,6 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 
     Returns the process exit code: 0 when every case succeeded, 1 otherwise.
     """
-    import argparse
-
     p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
     p.add_argument("--out", default=None, help="output folder (default: out/<scene>)")
     p.add_argument("--resolution", default="medium", type=parse_resolution,
@@ -290,8 +288,6 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 def parse_resolution(text: str):
     """``--resolution``: a name (checked with the scene) or a node count from 20 to
     :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
-    import argparse
-
     if not text.isdigit():
         return text
     try:
@@ -301,8 +297,6 @@ def parse_resolution(text: str):
 
 
 def parse_seed(text: str) -> int:
-    import argparse
-
     try:
         v = int(text)
     except ValueError:
@@ -314,8 +308,6 @@ def parse_seed(text: str) -> int:
 
 def parse_size(text: str) -> tuple[int, int]:
     """``--photo-size WxH``: each side from 64 to :data:`~mdsr_opt.photos.size.MAX_PHOTO_SIDE` pixels."""
-    import argparse
-
     from ..photos.size import check_photo_size
 
     parts = text.lower().split("x")
@@ -336,7 +328,6 @@ def n_units(scene: Scene, cases, animations: bool) -> int:
 def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) -> dict:
     """An animation of the scene: its frames' forward solves (:func:`~mdsr_opt.scenes.animate.animate`), its
     GIF (with ``figures``) and ``out/<animation>.json``; returns the JSON's data and the message to log."""
-    from .. import plot
     from ..body.io import write_json
 
     res = animate(scene, anim, designs)
@@ -368,8 +359,6 @@ def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
 
 
 def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
-    from ..synthesis.gait import run_gait
-
     return run_gait(scene, out, runs, figures=figures, log=log, writer=writer)
 
 
@@ -395,8 +384,6 @@ def _photo_done(run: CaseRun, paths: list, say, got: dict) -> None:
 
 def _write_rest(scene: Scene, path) -> str:
     """``rest.png``: the rest mesh with its regions."""
-    from .. import plot
-
     fig = plot.plot_scene(scene.mesh, scene.regions,
                           title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
     return plot.save_figure(fig, path, close=True)

@@ -13,6 +13,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
+from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -357,7 +358,6 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
 def check_units_and_gait(scene: Scene) -> None:
     """Check a scene's ``units`` (a known length unit) and ``gait`` (a Gait naming its cases)."""
     from ..synthesis.export import check_units
-    from ..synthesis.gait import Gait
 
     scene.units = check_units(scene.units)
     if scene.gait is None:

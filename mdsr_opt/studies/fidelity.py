@@ -23,6 +23,8 @@ Example
 
 from __future__ import annotations
 
+import csv
+import io
 import logging
 import math
 import os
@@ -32,7 +34,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from .. import plot
 from ..body.io import atomic_path, write_json
+from ..body.mesh import Mesh
 from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
 from .problems import MATERIALS, get_problem
@@ -133,8 +137,6 @@ def pick_fidelity(rows: Sequence[dict], problem: str, load: float, tol: float, r
 
 def _reference_outcome(reference) -> RunOutcome:
     """A known fine solution ``(mesh, x)`` or ``(points, triangles, x)`` as a reference outcome."""
-    from ..body.mesh import Mesh
-
     if isinstance(reference, (tuple, list)) and len(reference) == 2 and isinstance(reference[0], Mesh):
         pts, tri, x = reference[0].points, reference[0].triangles, reference[1]
     elif isinstance(reference, (tuple, list)) and len(reference) == 3:
@@ -265,8 +267,6 @@ def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures
         os.makedirs(out, exist_ok=True)
         table = [c.summary() for c in choices]
         keys = list(table[0])
-        import csv
-        import io
 
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=keys, lineterminator="\n")
@@ -281,8 +281,6 @@ def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures
             fh.write(fidelity_markdown(choices))
         write_json(os.path.join(out, "fidelity.json"), {**meta, "choices": table})
         if figures:
-            from .. import plot
-
             plot.save_figure(plot.plot_fidelity(rows, table), os.path.join(out, "fidelity.png"), close=True)
         if log:
             log(f"wrote fidelity.csv, fidelity_runs.csv, fidelity.md, fidelity.json"

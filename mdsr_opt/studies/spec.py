@@ -7,6 +7,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..body.mesh import MAX_RESOLUTION
+from ..mechanics.backends import available_backends
 from .problems import MATERIALS, check_name, build_setup, get_problem
 
 __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
@@ -90,8 +91,6 @@ class Study:
     seed: int = 0
 
     def __post_init__(self):
-        from ..mechanics.backends import available_backends
-
         for k in ("problems", "resolutions", "materials", "methods", "guesses"):
             v = getattr(self, k)
             if isinstance(v, (str, bytes)) or not isinstance(v, Iterable):

@@ -36,11 +36,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..body.fingerprint import check_same_mesh
+from ..body.io import atomic_path
 from ..body.mesh import Mesh, polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr, to_jsonable
+from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 
@@ -127,8 +129,6 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     channel_width : float, optional
         Drawn width of a channel (length units); default 0.2 mean edge lengths.
     """
-    from .poses import PosesResult
-
     units = check_units(units)
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
@@ -484,8 +484,6 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         other muscles, missing muscles, a name that is no plain file stem
         (:func:`~mdsr_opt.core.checks.check_stem`): before anything is written.
     """
-    from ..body.io import atomic_path
-
     check_stem(name, "name")  # no path separator, no control character: before anything is written
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width)
     svg = _svg_text(fd, name)

@@ -9,14 +9,17 @@ the scene runner's hook: layout, schedule, chart, GIF and fabrication files of a
 
 from __future__ import annotations
 
+import copy
 import csv
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from .. import plot
 from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
@@ -387,8 +390,6 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
                         fps: float = 8.0) -> str:
     """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.save_animation`); ``mesh`` must be
     the body the schedule was solved on."""
-    from .. import plot
-
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     if schedule.states.shape[1:] != (mesh.n_nodes, 2):
@@ -436,9 +437,6 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
         None when a pose of the gait was not run (``--case``).
     """
-    import copy
-    from pathlib import Path
-
     from .export import export_fabrication, fabrication_files
     from ..body.io import write_json
     from .poses import design_poses

@@ -2,21 +2,25 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Sequence
 import numpy as np
 
+from ..body.io import read_mesh
+from ..body.material import LinearElastic, NeoHookean
 from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.deprecation import renamed_keywords
 from ..core.results import compact_repr
-from ..mechanics.loadsteps import check_mesh_material
+from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
+from .routing import route_muscles
 
 __all__ = ['PipelineResult', 'design', 'design_pipeline']
 
@@ -124,11 +128,6 @@ class PipelineResult:
             ``path`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
             field missing or of the wrong kind, named); a mesh file cannot be read or does not match.
         """
-        import json
-
-        from ..body.io import read_mesh
-        from ..body.material import LinearElastic, NeoHookean
-
         directory = os.fspath(path)
         if not os.path.exists(directory):
             raise FileNotFoundError(f"no such design result folder: {directory}")
@@ -229,7 +228,6 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     >>> out.success, out.design.difference < 0.05
     (True, True)
     """
-    from ..mechanics.loadsteps import parse_drags
     from ..mechanics.equilibrium import solve_external
 
     t0 = time.perf_counter()
@@ -241,8 +239,6 @@ def design(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | 
     didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
-        from .routing import route_muscles
-
         rr = route_muscles(mesh, ext.x, **(routing_options or {}))
         mus = tuple(rr.muscles)
         if not mus:

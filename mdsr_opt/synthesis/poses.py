@@ -59,6 +59,8 @@ True
 
 from __future__ import annotations
 
+import inspect
+import json
 import math
 import os
 import time
@@ -317,8 +319,6 @@ class PosesResult:
             The file (named) is not valid JSON, not a poses result, or damaged (a field missing or of the
             wrong shape).
         """
-        import json
-
         from ..body.io import read_json
 
         try:
@@ -545,8 +545,6 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
 def _same_design(mesh, sep, engaged, dopt) -> bool:
     """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
     **dopt)`` would make (same muscles in the same order, same recorded options)?"""
-    import inspect
-
     from ..mechanics.anchors import anchor_radius_or_default
     from .contractions import design_contractions
 
