@@ -1,4 +1,4 @@
-"""Contour evaluation with holes (mdsr_opt.evaluate.contour_loops_from_image / compare_loops).
+"""Contour evaluation with holes (mdsr_opt.photos.contours.contour_loops_from_image / compare_loops).
 
 The photographs come from the synthetic camera; the face is the problem library's (coarse, ~300 nodes).
 """

@@ -1,4 +1,4 @@
-"""Tests of mdsr_opt.evaluate: contour extraction, contour metrics, the synthetic camera, the batch table.
+"""Tests of mdsr_opt.photos: contour extraction, contour metrics, the synthetic camera, the batch table.
 
 Every photograph here comes from the synthetic camera (``render_photo``) or is drawn with numpy.
 """

@@ -1,4 +1,4 @@
-"""Fabrication files (mdsr_opt.export): SVG and DXF at true scale, the muscle CSV, units."""
+"""Fabrication files (mdsr_opt.synthesis.export): SVG and DXF at true scale, the muscle CSV, units."""
 
 from __future__ import annotations
 

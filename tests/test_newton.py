@@ -1,4 +1,4 @@
-"""The vectorised projected Newton backend (mdsr_opt.newton): exact derivatives, projection, energies."""
+"""The vectorised projected Newton backend (mdsr_opt.mechanics.newton): exact derivatives, projection, energies."""
 
 from __future__ import annotations
 

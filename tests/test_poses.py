@@ -1,4 +1,4 @@
-"""One muscle layout for several poses (mdsr_opt.poses) and the gait schedule (mdsr_opt.gait)."""
+"""One muscle layout for several poses (mdsr_opt.synthesis.poses) and the gait schedule (mdsr_opt.synthesis.gait)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The virtual prototype (mdsr_opt.prototype): a different, finer model photographed instead of a mirror."""
+"""The virtual prototype (mdsr_opt.scenes.prototype): a different, finer model photographed instead of a mirror."""
 
 from __future__ import annotations
 

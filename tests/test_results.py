@@ -1,4 +1,4 @@
-"""Result objects print short and serialise to JSON (mdsr_opt.results conventions)."""
+"""Result objects print short and serialise to JSON (mdsr_opt.core.results conventions)."""
 
 from __future__ import annotations
 

@@ -24,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.checks import check_int
+from .files import check_scene_refs, page_file, readable_folders
+from .guard import Guard
 
 __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 
@@ -57,7 +59,6 @@ def load_body(spec: dict, folders=None):
 
 
 def _load_body(spec: dict, folders):
-    from .files import check_scene_refs, page_file
     from .outline import check_outline, parse_outline
     from .session import MAX_NODES, Session
 
@@ -374,8 +375,6 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored", *
 
     from ..scenes.library import list_problems
     from .export import DOWNLOADS, download
-    from .files import readable_folders
-    from .guard import Guard
     from .session import design_defaults
 
     folders = readable_folders(None, out) if folders is None else tuple(Path(f).resolve() for f in folders)

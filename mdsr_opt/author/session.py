@@ -21,10 +21,12 @@ import inspect
 import math
 import time
 from dataclasses import dataclass, field
+import warnings
 
 import numpy as np
 import scipy.sparse.linalg as spla
 
+from ..body.material import NeoHookean
 from ..synthesis.contractions import design_contractions
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
@@ -149,8 +151,6 @@ class Session:
     def from_outline(cls, outline, holes=(), resolution: str | int = 600, name: str = "authored",
                      material=None) -> "Session":
         """A polygon (with holes) meshed with about ``resolution`` nodes; Neo-Hookean E = 1, nu = 0.3."""
-        from ..body.material import NeoHookean
-
         n = resolve_resolution(_resolution(resolution))
         if n > MAX_NODES:
             raise ValueError(f"resolution {n} is above the page's limit of {MAX_NODES} nodes")
@@ -329,8 +329,6 @@ class Session:
 
     def route(self, K_a: float, K_b: float, max_muscles: int | None) -> dict:
         """Route muscles on the target with these knobs (the scene's other routing options kept)."""
-        import warnings
-
         target = self._need_target()
         opts = dict(self.routing_options)
         opts.setdefault("n_seeds", seeds_for(self.mesh))

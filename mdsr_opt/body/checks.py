@@ -6,14 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.checks import as_float_array
+from .mesh import Mesh
 
 __all__ = ['check_mesh', 'check_target_shape']
 
 
 def check_mesh(mesh, name: str = "mesh"):
     """Return ``mesh`` if it is a :class:`mdsr_opt.Mesh`, else raise ``TypeError`` naming ``name``."""
-    from .mesh import Mesh  # here, not at the top: mesh.py imports this module
-
     if not isinstance(mesh, Mesh):
         raise TypeError(f"{name} must be a mdsr_opt.Mesh, got {type(mesh).__name__}")
     return mesh

@@ -23,6 +23,7 @@ import contextlib
 import json
 import os
 import tempfile
+import unicodedata
 import warnings
 from dataclasses import dataclass, field
 
@@ -184,8 +185,6 @@ _NAME_FORBIDS = {
 
 def _check_name(name, kind: str, fmt: str, ext: str, taken: tuple[str, ...]) -> None:
     """Refuse a point or cell data name that ``fmt`` cannot write and read back unchanged."""
-    import unicodedata
-
     if not isinstance(name, str):
         raise TypeError(f"{kind} names must be strings, got {type(name).__name__} {name!r}")
     if not name:

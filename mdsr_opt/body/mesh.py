@@ -15,6 +15,7 @@ Example
 from __future__ import annotations
 
 from functools import cached_property, wraps
+import warnings
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -27,7 +28,7 @@ __all__ = ["Mesh", "MAX_TRIANGLES", "MAX_RESOLUTION"]
 #: Default limit of :meth:`Mesh.from_polygon` on the number of triangles (raise it with ``max_triangles=``).
 MAX_TRIANGLES = 2_000_000
 #: The largest node count a resolution may ask for (scenes, studies, the command line): the memory of a solve
-#: grows about in proportion to the nodes (one IPOPT solve of a 66k-node strip peaked at 1 GB), so 200k
+#: grows about in proportion to the nodes (about 15 kB a node in an IPOPT solve), so 200k
 #: nodes need about 3 GB, and a mistyped resolution is refused at once instead of exhausting the memory.
 MAX_RESOLUTION = 200_000
 
@@ -364,8 +365,6 @@ class Mesh:
         >>> m.quality()["min_angle_deg"] >= 30.0 - 1e-9
         True
         """
-        import warnings
-
         import shapely
 
         from .triangulate import (TRIANGLES_PER_AREA, expected_triangles, quality_triangulation,

@@ -32,6 +32,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import shapely
+import triangle as tr
+
+from .polygons import corner_angles
 
 __all__ = ["ThinPart", "expected_triangles", "too_many_triangles", "quality_triangulation",
            "triangle_min_angles", "TRIANGLES_PER_AREA"]
@@ -89,8 +93,6 @@ def _narrower(body, r: float, mitre_limit: float) -> tuple[object, float]:
     all); that leaves out a sliver ``r / 2**20`` wide of each thin part. Where GEOS still finds edges too
     close to decide (a ``TopologyException``), the difference is taken on a grid of ``r / 2**20``.
     """
-    import shapely
-
     b = shapely.simplify(body, r / 8.0, preserve_topology=True)
     opened = _opening(b, r, mitre_limit, grow=1.0 + 2.0 ** -20)
     if not opened.is_valid:  # the grown pieces may touch: GEOS then returns an invalid multipolygon
@@ -125,11 +127,6 @@ def expected_triangles(rings: list[np.ndarray], max_area: float, limit: float) -
         The part narrower than ``sqrt(max_area)`` that adds most triangles, or None if there is none; its
         width is measured to 0.1 % when ``count`` exceeds ``limit``, else to about 20 %.
     """
-    import shapely
-    import shapely.errors
-
-    from .polygons import corner_angles
-
     body = shapely.Polygon(rings[0], holes=rings[1:])
     area, perimeter = float(body.area), float(body.length)
     h = float(np.sqrt(max_area))
@@ -263,8 +260,6 @@ def quality_triangulation(vertices: np.ndarray, segments: np.ndarray, holes: np.
     An angle may still be below ``min_angle`` if the repair passes run out of points or passes (never seen
     on fuzzed outlines); the caller measures the result.
     """
-    import triangle as tr
-
     n_in = len(vertices)
     q, a = _switch_number(min_angle), _switch_number(max_area)
     data = {"vertices": vertices, "segments": segments, "segment_markers": np.arange(len(segments)) + 2}

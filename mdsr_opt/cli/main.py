@@ -18,9 +18,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import logging
+import os
 import signal
 import sys
+
+from .. import __version__
 
 
 #: the modules that register subcommands (each has ``add_cli(sub)``) and the subcommands each one adds, in
@@ -31,9 +35,7 @@ OWNERS = ((".demo", ("demo",)), (".photos", ("evaluate", "photograph")), (".run"
 
 def _register(sub, command: str | None = None) -> None:
     """Register the subcommands: all of them, or with ``command`` only its owner's (its module alone is
-    imported: ``mdsr run`` then skips the photograph, demo, study and authoring modules, 0.2-0.25 s)."""
-    import importlib
-
+    imported: ``mdsr run`` then skips the photograph, demo, study and authoring modules)."""
     known = any(command in cmds for _, cmds in OWNERS)
     for module, cmds in OWNERS:
         if not known or command in cmds:
@@ -59,8 +61,6 @@ def command_of(argv: list[str]) -> str | None:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``mdsr`` argument parser with every subcommand registered (also used by the tests); with
     ``command`` (a subcommand's name) only that subcommand's module registers its subcommands."""
-    from .. import __version__
-
     parser = argparse.ArgumentParser(prog="mdsr", description="Muscle-driven soft robot design toolkit")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
                         help="print the package version and exit")
@@ -109,8 +109,6 @@ def one_blas_thread_per_process() -> None:
     threadpoolctl does not see, has no other portable setting). The package's dense products are small
     (sparse factorisations do the work, each under :func:`~mdsr_opt.mechanics.blas.one_blas_thread`
     anyway); an idle second thread per library spins on a core the figure jobs need."""
-    import os
-
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
@@ -120,8 +118,6 @@ def agg_backend():
     ``mdsr_opt.plot`` leaves the backend alone). Chosen through ``MPLBACKEND`` while matplotlib is not
     imported yet, so that the command need not import it; the variable is as it was after the block (a
     matplotlib imported within keeps Agg, as ``matplotlib.use`` would have left it)."""
-    import os
-
     if "matplotlib" in sys.modules:
         import matplotlib
 

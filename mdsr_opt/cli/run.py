@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import ast
 from pathlib import Path
+import time
 
 from ..core.errors import InputError, checking_input
 from ..core.progress import progress_for_cli
 from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
+from ..scenes.rundir import RunFolder
 from ..scenes.scene import resolve_resolution
 from ..scenes.runscene import n_units, parse_resolution, parse_seed, parse_size, run_entries, scene_pool, write_scene
 
@@ -15,8 +18,6 @@ __all__ = ['add_cli']
 
 # ---------------------------------------------------------------------------------------------- the command
 def _doc_line(path: Path) -> str:
-    import ast
-
     try:
         doc = ast.get_docstring(ast.parse(path.read_text()))
     except SyntaxError:
@@ -48,14 +49,11 @@ def _cmd_list(a) -> int:
 
 
 def _cmd_run(a) -> int:
-    import time
-
     names = list(a.scenes)
     if names == ["all"]:
         names = list_problems()
         if not names:
             raise InputError("no problem library found: `mdsr run all` needs the problems/ folder")
-    from ..scenes.rundir import RunFolder
 
     t0 = time.perf_counter()
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every

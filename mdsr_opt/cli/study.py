@@ -28,7 +28,7 @@ def _csv_list(text: str | None, cast=str, flag: str = "the list"):
 
 
 def _cli(args) -> int:
-    # imported here, not with the parser: defining the studies takes 0.1 s that every other command paid
+    # imported here, not with the parser: only this command needs the studies' definitions
     from ..studies.problems import list_study_problems
     from ..studies.spec import FIDELITY_STUDY, STUDIES
     from ..studies.study import run_study

@@ -22,6 +22,7 @@ interrupted by it, in a solve or elsewhere: Python then raises no :class:`Keyboa
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import signal
 import sys
@@ -163,8 +164,6 @@ def quiet_stdout(active: bool):
 @contextlib.contextmanager
 def captured_stdout(sink: list):
     """Capture C-level stdout (IPOPT prints why it rejects an option) into ``sink`` as one string."""
-    import io
-
     sys.stdout.flush()
     saved = os.dup(1)
     text = io.StringIO()  # CasADi's Python build prints through sys.stdout, other builds to file descriptor 1

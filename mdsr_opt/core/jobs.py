@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import importlib
 import os
 import pickle
 import sys
-from concurrent.futures import Executor
-from concurrent.futures import wait as wait_for
+from concurrent.futures import Executor, wait as wait_for
+import threading
 from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
@@ -70,9 +71,6 @@ def _exit_with_parent() -> None:
 def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None = None) -> None:
     """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
     variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
-    import importlib
-    import threading
-
     threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
     os.environ.update(env)
     if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set

@@ -25,6 +25,7 @@ Example
 
 from __future__ import annotations
 
+import os
 import sys
 from typing import Any, TextIO
 
@@ -35,8 +36,6 @@ __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
 
 def _terminal_width() -> int:
     """Columns of the terminal on stderr; 0 when unknown (some pseudo-terminals report a 0 x 0 size)."""
-    import os
-
     try:
         return os.get_terminal_size(sys.stderr.fileno()).columns
     except (OSError, ValueError, AttributeError):

@@ -77,8 +77,8 @@ def body_size(mesh) -> float:
     cache = mesh.__dict__
     if "_diameter" not in cache:
         # the farthest pair of nodes are vertices of the convex hull, which are boundary nodes (every node
-        # belongs to a triangle): the hull of those, without importing scipy.spatial (0.15-0.3 s, on the
-        # path of every scene's build)
+        # belongs to a triangle): the hull of those, without importing scipy.spatial on the path of every
+        # scene's build
         V = convex_hull(mesh.points[mesh.boundary_nodes])
         d = 0.0
         for i0 in range(0, len(V), 1024):
@@ -93,9 +93,9 @@ def default_anchor_radius(mesh) -> float:
 
 
 def valid_muscles(mesh, muscles) -> list:
-    """:func:`~mdsr_opt.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
+    """:func:`~mdsr_opt.body.muscles.check_muscles`, remembered per mesh for lists of :class:`Muscle`: a list of
     node chains checked on this mesh once is not walked edge by edge again (a design checks its muscles
-    through a dozen functions, ~1 ms each at 3k nodes)."""
+    through a dozen functions)."""
     seq = [muscles] if isinstance(muscles, Muscle) else muscles
     if not isinstance(seq, (list, tuple)) or not seq or not all(isinstance(m, Muscle) for m in seq):
         return check_muscles(mesh, muscles)
@@ -123,8 +123,8 @@ def anchor_radius_or_default(mesh, radius) -> float:
 
 def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
     """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes,
-    by increasing distance (a breadth-first search over the mesh edges between such nodes: no per-node
-    neighbour lists, which cost 0.1 s to build at 3k nodes)."""
+    by increasing distance (a breadth-first search over the mesh edges between such nodes, without building
+    per-node neighbour lists)."""
     from scipy.sparse.csgraph import breadth_first_order
 
     P = mesh.points

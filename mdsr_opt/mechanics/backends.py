@@ -1,6 +1,6 @@
 """Minimisers of a model's energy with some coordinates held fixed: one function per backend.
 
-Every backend takes the same inputs (an :class:`~mdsr_opt.model.EnergyModel`, parameters ``p``, a first
+Every backend takes the same inputs (an :class:`~mdsr_opt.mechanics.model.EnergyModel`, parameters ``p``, a first
 guess, a mask of fixed coordinates and their values) and returns a :class:`MinimizeOutcome`. Building a
 CasADi solver happens once per model and backend; later solves reuse it. A model with muscle
 constraints (exact cable ropes, rigid anchor patches) is solved by :mod:`~mdsr_opt.mechanics.ropesolve`.
@@ -17,7 +17,7 @@ Backends
 ``uno``           The Uno solver shipped with the casadi wheel (exact Hessian derived by CasADi).
 ``scipy``         ``scipy.optimize.minimize(method="trust-constr")`` on the free coordinates with
                   CasADi-generated gradient and sparse Hessian: the baseline a user might write.
-``newton``        A projected Newton method in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised element
+``newton``        A projected Newton method in numpy/scipy (:mod:`mdsr_opt.mechanics.newton`): vectorised element
                   terms projected to positive semi-definite, one fill-reducing ordering reused by every
                   sparse factorisation, backtracking line search.
 """
@@ -35,6 +35,8 @@ import numpy as np
 from ..core.guards import captured_stdout, check_stop, interruptible, quiet_stdout
 from . import ropesolve
 from .residual import ipopt_tolerances
+from .assembly import ipopt_functions
+from .newton import projected_newton
 from .result import MinimizeOutcome, solver_status
 from .stopping import with_stop_callback
 from .stability import STEP_RTOL, ipopt_certifies_minimum
@@ -50,8 +52,6 @@ def _casadi_factory(plugin: str, opts: dict, symbolic: bool = False):
         o = with_stop_callback(o)  # Ctrl-C stops the solver at its next iteration
         if plugin == "ipopt" and not symbolic and getattr(model, "is_numeric", False):
             # energy, gradient and Hessian in vectorised numpy through callbacks: no symbolic graph to build
-            from .assembly import ipopt_functions
-
             fns = ipopt_functions(model)
             x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
             o["grad_f"], o["hess_lag"] = fns["grad_f"], fns["hess_lag"]
@@ -77,7 +77,7 @@ def _ipopt_opts(tol, max_iter, limited_memory=False, linear_solver="mumps"):
          # multipliers of bounds and parameters are not used: skip their extra derivative evaluations
          "calc_lam_p": False, "calc_lam_x": False,
          # fixed coordinates become parameters without bound multipliers: about half the gradient calls,
-         # solve 9-10 % faster with the same iterates (measured at 3k and 10k nodes)
+         # the same iterates
          "ipopt.fixed_variable_treatment": "make_parameter_nodual"}
     if limited_memory:
         o["ipopt.hessian_approximation"] = "limited-memory"
@@ -138,9 +138,7 @@ def _solve_scipy(model, p, x0, fixed, values, tol, max_iter):
 
 
 def _solve_newton(model, p, x0, fixed, values, tol, max_iter):
-    """Projected Newton in numpy/scipy (:mod:`mdsr_opt.newton`): vectorised assembly, one ordering reused."""
-    from .newton import projected_newton
-
+    """Projected Newton in numpy/scipy (:mod:`mdsr_opt.mechanics.newton`): vectorised assembly, one ordering reused."""
     x, success, status, it, seconds = projected_newton(model, p, x0, fixed, values, tol=tol, max_iter=max_iter)
     return MinimizeOutcome(x, success, status, it, seconds, 0.0)
 
@@ -168,8 +166,7 @@ def available_backends() -> list[str]:
 
 @functools.lru_cache(maxsize=None)
 def _available() -> tuple[str, ...]:
-    # asked once per process: CasADi looks for each plugin's library (about 0.5 ms a plugin), and every
-    # solve checks its backend (4.5 ms of a 30 ms warm-started solve at 555 nodes)
+    # asked once per process: CasADi looks for each plugin's library, and every solve checks its backend
     out = []
     for name in BACKENDS:
         if name in ("scipy", "newton") or ca.has_nlpsol(_plugin(name)):

@@ -1,8 +1,8 @@
 """One BLAS thread during a solve: sparse factorisations are not worth two threads fighting over cores.
 
-scipy's SuperLU and numpy's products call OpenBLAS, each its own bundled copy. With two threads on a
-machine whose cores are busy with other work, the threads wait for each other: IPOPT's solve at 30k nodes
-measured 2.5 s with the default threads and 0.9 s with one, on a 2-core machine while other processes ran.
+scipy's SuperLU and numpy's products call OpenBLAS, each its own bundled copy. With several threads on
+cores busy with other work, the threads wait for each other, and a large solve takes several times as long
+as with one thread.
 :func:`one_blas_thread` limits every BLAS library that threadpoolctl finds loaded to one thread for the
 duration of a ``with`` block and restores the previous counts afterwards.
 

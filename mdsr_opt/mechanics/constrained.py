@@ -1,9 +1,9 @@
 """An energy model whose minimisation carries muscle constraints (exact cable ropes, rigid anchor patches).
 
-:class:`ConstrainedModel` wraps an :class:`~mdsr_opt.model.EnergyModel` and a
-:class:`~mdsr_opt.muscle_constraints.MuscleConstraints` with the interface the load-stepping loop of
-:mod:`mdsr_opt.equilibrium` uses (``energy``, ``gradient``, ``hessian``, ``solver``, ``predict``), so that
-:func:`mdsr_opt.backends.minimize` solves ``min E(x)`` subject to the constraints. Its parameter vector
+:class:`ConstrainedModel` wraps an :class:`~mdsr_opt.mechanics.model.EnergyModel` and a
+:class:`~mdsr_opt.mechanics.constraints.MuscleConstraints` with the interface the load-stepping loop of
+:mod:`mdsr_opt.mechanics.equilibrium` uses (``energy``, ``gradient``, ``hessian``, ``solver``, ``predict``), so that
+:func:`mdsr_opt.mechanics.backends.minimize` solves ``min E(x)`` subject to the constraints. Its parameter vector
 carries the rope targets (they move with the load fraction) and multipliers (for the Lagrangian's gradient
 and Hessian, e.g. the KKT residual and the stability check of a result).
 """
@@ -19,6 +19,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .anchors import body_size
+from .assembly import BufferedFunction, SparseLayout
 from .constraints import MuscleConstraints
 from .kkt import kkt_factor
 from .loadsteps import min_jacobian
@@ -28,14 +29,14 @@ __all__ = ["ConstrainedModel"]
 
 
 class ConstrainedModel:
-    """An :class:`~mdsr_opt.model.EnergyModel` whose minimisation carries muscle constraints.
+    """An :class:`~mdsr_opt.mechanics.model.EnergyModel` whose minimisation carries muscle constraints.
 
     The objective is the model's energy; the constraints are the rigid anchor rows of ``constraints`` and,
     with ``ropes=True`` (the exact cable), one rope row per muscle, ``L_c(x) <= target_c``. The parameter
     vector is ``p = [energy params, rope targets (n_targets), multipliers (n_rows)]``: the multipliers enter
     :meth:`gradient` and :meth:`hessian`, which are those of the Lagrangian
     ``E(x) + sum_i lam_i g_i(x)`` (with zero multipliers, those of the energy), so a KKT point has zero
-    :meth:`gradient` on the free coordinates. :func:`mdsr_opt.backends.minimize` recognises this class and
+    :meth:`gradient` on the free coordinates. :func:`mdsr_opt.mechanics.backends.minimize` recognises this class and
     passes the constraints to the NLP.
 
     Parameters
@@ -162,8 +163,7 @@ class ConstrainedModel:
 
         The nonlinear rows are differentiated on the local coordinates (an SX function of a few hundred
         inputs), the linear rows are a constant matrix. Given to IPOPT as ``jac_g`` it spares ``nlpsol`` its
-        own differentiation through the MX graph: 17 ms against 31 ms to build a 3k-node solver with 4
-        ropes, the same iterates to rounding (solution 9e-16 apart, energy 5e-16 relative)."""
+        own differentiation through the MX graph (a quicker build), with the same iterates to rounding."""
         mc = self.constraints
         nl, P, Lin = mc.symbolic_parts()
         R = sp.diags(self.row_scale) @ sp.identity(mc.n_constraints, format="csr")[self.rows]
@@ -194,12 +194,11 @@ class ConstrainedModel:
         ``(x, p) -> (rows, Jacobian)``; ``"hess_lag"``, ``(x, p, lam_f, lam_g) ->`` the upper triangle of the
         Lagrangian's Hessian (as :meth:`hess_lag_upper`; the energy's from
         :func:`~mdsr_opt.mechanics.assembly.ipopt_functions`, the constraints' closed forms), ``p`` the
-        energy's parameters. Nothing symbolic is built: a 3k-node solver with 4 ropes took 0.03-0.05 s more
-        to build with the constraints' SX pieces, for the same iterates to rounding."""
+        energy's parameters. Nothing symbolic is built (the constraints' SX pieces give the same iterates to
+        rounding, at a longer build)."""
         cached = self.__dict__.get("_numeric_functions")
         if cached is not None:
             return cached
-        from .assembly import BufferedFunction, SparseLayout
 
         ref = weakref.ref(self)  # the model keeps these alive; they must not keep the model alive
         mc, n, nr = self.constraints, self.n_dof, self.n_rows

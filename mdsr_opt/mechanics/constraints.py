@@ -24,8 +24,8 @@ all linear in ``x`` except the scale row, and they keep the orientation (no refl
 node has no equation, of two nodes one (their distance).
 
 Constraint rows are ordered ropes first (one per muscle), then the rigid rows. Coordinates are interleaved
-``x0, y0, x1, y1, ...`` as in :mod:`mdsr_opt.model`. :class:`mdsr_opt.constrained.ConstrainedModel` puts
-these constraints into an equilibrium NLP.
+``x0, y0, x1, y1, ...`` as in :mod:`mdsr_opt.mechanics.model`.
+:class:`mdsr_opt.mechanics.constrained.ConstrainedModel` puts these constraints into an equilibrium NLP.
 
 Example
 -------
@@ -48,8 +48,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..core.checks import positive_float
-from .anchors import anchor_radius_or_default, body_size, rigid_groups, valid_muscles
-from .model import to_dm
+from .anchors import (anchor_radius_or_default, body_size,
+                      rigid_groups, valid_muscles)
+from .model import to_dm, spring_parameters
 from .segments import length_hessian_product, length_third
 
 __all__ = ["MuscleConstraints", "muscle_constraints", "spring_stiffness", "segment_spring_parameters",
@@ -79,15 +80,13 @@ def segment_spring_parameters(mesh, material, muscles, contractions, stiffness: 
     ``a' = a L0 / L0_free`` (``L0_free``: their total rest length), so that a muscle whose springs all reach
     their rest lengths has contracted by exactly ``a`` along its whole chain, as the exact cable does.
     Pass ``anchor_radius=0`` for the paper's plain model (every segment, ``a' = a``). Feed the result to
-    :meth:`~mdsr_opt.model.EnergyModel.params` as ``springs=``.
+    :meth:`~mdsr_opt.mechanics.model.EnergyModel.params` as ``springs=``.
 
     Raises
     ------
     ValueError
         When ``a' >= 1`` (the anchors cover too much of a muscle for the contraction asked).
     """
-    from .model import spring_parameters
-
     mus = valid_muscles(mesh, muscles)
     a = np.asarray(contractions, dtype=float).reshape(-1)
     ks, a_eff = spring_segments(mesh, material, mus, stiffness, anchor_radius)

@@ -43,7 +43,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     mesh, material : the body.
     anchors : node indices held at their rest positions.
     drags : ``{node: (x, y)}`` (straight moves), ``(indices, positions (k, 2))``, a
-        :class:`~mdsr_opt.drags.RigidDrag` (rotate nodes through an angle about a centre, optionally with a
+        :class:`~mdsr_opt.mechanics.drags.RigidDrag` (rotate nodes through an angle about a centre, optionally with a
         shift; load stepping follows the arc), or a list of dicts and RigidDrags. In every form, and in
         ``anchors``, node indices are integers (a float, even ``16.0``, is refused), in range and each given
         once, also when dragged twice to the same place (:func:`~mdsr_opt.core.checks.node_indices`); no node
@@ -67,7 +67,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     -------
     EquilibriumResult
         Only a stable equilibrium is a success: the Hessian on the free coordinates must be positive definite
-        (``stable``, ``stability``; inertia of a sparse factorisation, :func:`~mdsr_opt.stability.check_stability`).
+        (``stable``, ``stability``; inertia of a sparse factorisation,
+        :func:`~mdsr_opt.mechanics.stability.check_stability`).
         At a saddle (e.g. the straight state of a compressed strip) the solve steps along the direction of
         negative curvature (2 % of the body size) and re-solves, up to 4 times; ``success=False`` with the
         reason when no stable state is found.
@@ -126,7 +127,7 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     anchors, drags : as in :func:`solve_external` (only which nodes are fixed matters here).
     x : (n, 2) state, e.g. a design target.
     lowest : also estimate the lowest eigenvalue of the free Hessian (see
-        :func:`~mdsr_opt.stability.check_stability`).
+        :func:`~mdsr_opt.mechanics.stability.check_stability`).
 
     Returns
     -------
@@ -230,14 +231,14 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
           length so the model does not depend on the mesh: a segment of rest length ``l0`` is a spring
           ``k/2 (l - (1 - a) l0)^2`` with ``k = K / l0`` and ``K = stiffness * E * thickness * D`` (``D`` the body's diameter)
           (a rod of axial stiffness ``K``; see
-          :func:`~mdsr_opt.muscle_constraints.segment_spring_parameters`).
+          :func:`~mdsr_opt.mechanics.constraints.segment_spring_parameters`).
     stiffness : ``kappa`` of the springs model (ignored by the cable).
     anchor_radius : radius (length units) of the rigid patch that anchors each muscle end: the body nodes
         within it at rest move rigidly with the end node. Default
-        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (0.04 x the body's diameter); 0 ends each muscle
+        :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` (0.04 x the body's diameter); 0 ends each muscle
         on its node alone. Used with both models.
     backend : one of :func:`available_backends`; with constraints (the cable, or any anchor patch) only those
-        of :data:`~mdsr_opt.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
+        of :data:`~mdsr_opt.mechanics.backends.CONSTRAINED_BACKENDS` (not ``"newton"`` or ``"scipy"``).
     tol : the tolerance contract (:mod:`~mdsr_opt.mechanics.residual`): a success has its scaled KKT residual
         at most ``tol`` (``residual``: the Lagrangian's free gradient relative to ``E t size`` with the ropes
         pulling only within ``tol L0`` of their targets, and the ropes' and anchor patches' violation), in
@@ -249,7 +250,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         (:func:`in_gauge_frame`).
     check_stability : bool
         Check that the equilibrium reached is stable, leaving a saddle along its negative curvature (the
-        default). ``False`` skips the check (one sparse factorisation, 0.04 s at 3k nodes): ``success`` then
+        default). ``False`` skips the check (one sparse factorisation): ``success`` then
         means a converged equilibrium with every element upright, which may be a saddle (``stable`` is
         None). For warm starts, such as the flattened design's, whose result is verified later.
 

@@ -66,10 +66,10 @@ def kkt_factor(H, J, order=None, rtol: float = 1e-8):
 
     With ``order`` (a fill-reducing ordering of ``H``'s rows, e.g.
     :meth:`~mdsr_opt.mechanics.model.EnergyModel.free_ordering`) the factorisation is SuperLU's without an
-    ordering of its own in :func:`kkt_order` (symmetric mode, diagonal pivots preferred). Measured on the
-    load-stepping predictor of a 3k-node design with 4 cable muscles (6,101 unknowns, 326 constraint rows):
-    13 ms and 0.40 M factor entries against 44 ms and 0.88 M with SuperLU's COLAMD, solutions equal to
-    1e-12. A factorisation whose solution of a test right-hand side has a relative residual above ``rtol``
+    ordering of its own in :func:`kkt_order` (symmetric mode, diagonal pivots preferred). On the
+    load-stepping predictor of a 3k-node design with 4 cable muscles (6,101 unknowns, 326 constraint rows)
+    it has 0.40 M factor entries against 0.88 M with SuperLU's COLAMD, solutions equal to 1e-12. A
+    factorisation whose solution of a test right-hand side has a relative residual above ``rtol``
     (a pivot that should not have been taken) is replaced by the COLAMD one, as is a failed one.
     """
     K = _kkt(H, J)
@@ -86,7 +86,7 @@ def kkt_factor(H, J, order=None, rtol: float = 1e-8):
         except RuntimeError:
             pass
     try:
-        return spla.splu(K)  # COLAMD: 10x faster than MMD on this indefinite matrix
+        return spla.splu(K)  # COLAMD, not MMD, on this indefinite matrix
     except RuntimeError:
         return None
 

@@ -32,13 +32,13 @@ def check_mesh_material(mesh, material):
 
 def parse_drags(drags, n) -> tuple[np.ndarray, np.ndarray]:
     """``(indices, final positions (k, 2))`` of ``drags``; ``n`` is the mesh (or its node count when no drag
-    is a :class:`~mdsr_opt.drags.RigidDrag`, whose final positions depend on the rest positions)."""
+    is a :class:`~mdsr_opt.mechanics.drags.RigidDrag`, whose final positions depend on the rest positions)."""
     if isinstance(n, Mesh):
         path = drag_path(drags, n)
     else:
         path = drag_path(drags, _NodeCount(int(n)))
         if any(isinstance(how, RigidDrag) for _, how in path.parts):
-            raise ValueError("rigid drags need the mesh: use mdsr_opt.drags.drag_path(drags, mesh)")
+            raise ValueError("rigid drags need the mesh: use mdsr_opt.mechanics.drags.drag_path(drags, mesh)")
     return path.nodes, path.final
 
 
@@ -142,7 +142,7 @@ def min_jacobian(mesh, xflat) -> float:
     -------
     float
         ``min J``, as ``mesh.jacobians(x).min()`` up to rounding, without its batched 2 x 2 inverses and
-        determinants (0.09 ms against 2.3 ms at 3k nodes); ``J <= 0`` marks an inverted element.
+        determinants; ``J <= 0`` marks an inverted element.
     """
     t = mesh.triangles
     x = np.asarray(xflat, dtype=float).reshape(-1)
@@ -273,7 +273,7 @@ _KICK = 0.02
 
 
 def _stability_at(model, p, xflat, fixed):
-    """:class:`~mdsr_opt.stability.StabilityCheck` of the equilibrium ``xflat`` with ``fixed`` coordinates.
+    """:class:`~mdsr_opt.mechanics.stability.StabilityCheck` of the equilibrium ``xflat`` with ``fixed`` coordinates.
 
     For a model with muscle constraints, the Hessian of the Lagrangian (least-squares multipliers) on the
     tangent space of the active rows (rigid patches, taut ropes). The last check is cached on the model, so
@@ -331,8 +331,8 @@ def _kick(mesh, model, p, x, direction, scale=1.0):
 def _settle(mesh, model, p, fixed, values, x, backend, tol, max_iter, options, verbose, certified=False):
     """Only a stable equilibrium is a success: at a saddle, step along its negative curvature and re-solve.
     ``certified``: the solve that reached ``x`` showed it a strict minimum itself
-    (:func:`~mdsr_opt.mechanics.stability.ipopt_certifies_minimum`), which is then its check (made once
-    instead of again: 17 ms per solve at 600-1,700 nodes, 45 ms at 3k with 4 ropes).
+    (:func:`~mdsr_opt.mechanics.stability.ipopt_certifies_minimum`), which is then its check (made once,
+    not again).
 
     Returns ``(x, status note, success, iterations, seconds)``."""
     t0 = time.perf_counter()

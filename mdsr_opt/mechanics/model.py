@@ -53,6 +53,8 @@ import scipy.sparse as sp
 
 from ..body.material import numeric_law
 from .segments import spring_energy
+from .assembly import HessianPattern
+from .newton import NewtonEnergy
 
 __all__ = ["EnergyModel", "TermFamily", "get_model", "spring_parameters", "to_dm"]
 
@@ -283,8 +285,6 @@ class EnergyModel:
     def numeric(self, p):
         """The vectorised numpy energy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`) at parameters ``p``
         (the last one is kept). Only for models with :attr:`is_numeric`."""
-        from .newton import NewtonEnergy
-
         p = np.asarray(p, dtype=float).ravel()
         cached = self.__dict__.get("_numeric")
         if cached is not None and np.array_equal(cached[0], p):
@@ -299,8 +299,6 @@ class EnergyModel:
         block entry lands (made on first use)."""
         pat = self.__dict__.get("_hessian_pattern")
         if pat is None:
-            from .assembly import HessianPattern
-
             pat = HessianPattern(self.mesh.n_nodes, self.mesh.edges)
             # in the (d, d, N) layout of NewtonEnergy's blocks
             pat.elem_pos = pat.positions(self.mesh.triangles).reshape(-1)
@@ -522,7 +520,7 @@ def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarra
     Each muscle segment on edge ``e`` adds ``k_s/2 (l_e - (1 - a_c) l0_e)^2``; muscles sharing an edge
     combine exactly into one spring with summed stiffness and stiffness-weighted mean factor.
     ``stiffness`` is one absolute ``k_s`` for every segment, or a sequence with one array of per-segment
-    stiffnesses per muscle (see :func:`mdsr_opt.muscle_constraints.segment_spring_parameters`, which states
+    stiffnesses per muscle (see :func:`mdsr_opt.mechanics.constraints.segment_spring_parameters`, which states
     the stiffness per unit rest length so the model does not depend on the mesh).
     """
     k = np.zeros(len(mesh.edges))

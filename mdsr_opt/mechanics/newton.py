@@ -1,6 +1,6 @@
 """A projected Newton method in numpy/scipy: the ``newton`` backend, written to be fast.
 
-The energy of an :class:`~mdsr_opt.model.EnergyModel` without sliding cables is a sum over triangles
+The energy of an :class:`~mdsr_opt.mechanics.model.EnergyModel` without sliding cables is a sum over triangles
 (Neo-Hookean or linear elastic) and edge springs. This module evaluates it, its gradient and a positive
 semi-definite approximation of its Hessian with vectorised numpy (no per-element Python or CasADi call):
 
@@ -40,6 +40,7 @@ import scipy.sparse.linalg as spla
 
 from ..body.material import numeric_law
 from ..core.guards import check_stop
+from .blas import one_blas_thread
 from .segments import length_third, pair_blocks, spring_energy
 
 __all__ = ["NewtonEnergy", "projected_newton", "step_seconds"]
@@ -72,7 +73,7 @@ def _psd4(A: np.ndarray) -> np.ndarray:
 
 
 class NewtonEnergy:
-    """Vectorised energy, gradient and projected Hessian of an :class:`~mdsr_opt.model.EnergyModel`.
+    """Vectorised energy, gradient and projected Hessian of an :class:`~mdsr_opt.mechanics.model.EnergyModel`.
 
     Parameters
     ----------
@@ -326,8 +327,8 @@ class _Pattern:
 
 def _ordering(model, free):
     """The model's fill-reducing ordering of the free coordinates (AMD of the node graph, each node's two
-    coordinates together: about 2.5x faster factorisations at 30k nodes than SuperLU's minimum degree on
-    the coordinates, with the same fill), or None for a model without one."""
+    coordinates together: quicker factorisations of large meshes than SuperLU's minimum degree on the
+    coordinates, with the same fill), or None for a model without one."""
     return model.free_ordering(free) if hasattr(model, "free_ordering") else None
 
 
@@ -417,11 +418,9 @@ def step_seconds(model, p, x, fixed, repeat: int = 5) -> float:
     en = NewtonEnergy(model, p)
     pat = _Pattern(en, ~fixed, _ordering(model, ~fixed))
     ts = []
-    from .blas import one_blas_thread  # as the solves run (see mdsr_opt.mechanics.blas)
-
     for _ in range(max(1, int(repeat))):
         t0 = time.perf_counter()
-        with one_blas_thread():
+        with one_blas_thread():  # as the solves run (see mdsr_opt.mechanics.blas)
             g, He, Hs = en.element_blocks(x, project=False)
             H = pat.matrix(He, Hs)
             lu = spla.splu(H, permc_spec="NATURAL", diag_pivot_thresh=0.0, options={"SymmetricMode": True})

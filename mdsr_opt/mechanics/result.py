@@ -148,27 +148,19 @@ class MinimizeOutcome:
     certified: bool = False  # a strict minimum by IPOPT's own inertia test (see the docstring)
 
     def __repr__(self) -> str:
-        from ..core.results import compact_repr
-
         return compact_repr(self, ("success", "iterations", "solve_time", "x", "lam_g", "status"))
 
     def to_dict(self) -> dict:
         """Every field as JSON-ready values (arrays as lists)."""
-        from ..core.results import to_jsonable
-
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
     def save(self, path) -> str:
         """Write the outcome as one ``.npz`` file (arrays exactly); :meth:`load` reads it back."""
-        from ..core.results import save_fields
-
         return save_fields(self, path, "minimize")
 
     @classmethod
     def load(cls, path) -> "MinimizeOutcome":
         """Read an outcome written by :meth:`save` (ValueError naming a damaged or foreign file)."""
-        from ..core.results import load_fields
-
         return load_fields(cls, path, "minimize")
 
 

@@ -15,6 +15,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.guards import interruptible, quiet_stdout
+from .assembly import ipopt_functions
 from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 from .stopping import with_stop_callback
@@ -23,7 +24,7 @@ __all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", 
 
 
 def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
-    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.constrained.ConstrainedModel`."""
+    """NLP ``min E(x) s.t. g(x)`` of a :class:`~mdsr_opt.mechanics.constrained.ConstrainedModel`."""
     def factory(cmodel):
         model = cmodel.model
         # IPOPT takes the energy's and the constraints' values and derivatives from numpy where the model
@@ -33,8 +34,6 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
         o = with_stop_callback(opts)  # Ctrl-C stops the solver at its next iteration
         o["show_eval_warnings"] = False
         if numeric:
-            from .assembly import ipopt_functions
-
             fns, cfns = ipopt_functions(model), cmodel.numeric_functions()
             x, p = ca.MX.sym("x", model.n_dof), ca.MX.sym("p", model.n_params)
             g = cfns["g"](x, p) if cmodel.n_rows else ca.MX(0, 1)
@@ -63,10 +62,10 @@ def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
 
 #: IPOPT options of a constrained solve whose rows are all equalities, started from given multipliers
 #: (the least-squares ones of the start, every row fitted: a rope shorter than its new target still pulls):
-#: IPOPT's own estimate factorises a system the size of the unknowns. Measured on 3k nodes with 4 ropes (two
-#: load steps of 4 iterations each): 0.292 -> 0.264 s, the same iterations and energy; 24 frames of a 32 x 8
-#: strip with 4 ropes, each from the last: 81 iterations, as with IPOPT's estimate (116 when ropes short at
-#: the start were fitted as slack). Options the caller gives take precedence.
+#: IPOPT's own estimate factorises a system the size of the unknowns; these need the same iterations and
+#: reach the same energy (24 frames of a 32 x 8 strip with 4 ropes, each from the last: 81 iterations, as
+#: with IPOPT's estimate; 116 when ropes short at the start were fitted as slack). Options the caller gives
+#: take precedence.
 WARM_MULTIPLIERS = {"ipopt.warm_start_init_point": "yes"}
 
 

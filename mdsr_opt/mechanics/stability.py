@@ -36,8 +36,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+import warnings
 
 import numpy as np
+from scipy.linalg import lapack
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -235,7 +237,6 @@ def _independent_rows(Af: sp.csr_matrix) -> sp.csr_matrix:
             return Af
     except RuntimeError:
         pass
-    from scipy.linalg import lapack
 
     Gd = G.toarray()
     _, piv, rank, _ = lapack.dpstrf(Gd, tol=1e-10 * float(np.abs(np.diag(Gd)).max()))
@@ -487,7 +488,6 @@ def _lowest(Hff, project, A_free=None, pre: "_Factor | None" = None, x0=None, k:
     X = np.column_stack(cols)
     M = spla.LinearOperator((n, n), matvec=lambda v: project(pre.lu.solve(np.ravel(v))), dtype=float)
     Y = None if A_free is None else A_free.T.toarray()
-    import warnings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

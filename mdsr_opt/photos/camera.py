@@ -121,7 +121,7 @@ def _compose_canvas(lines, thick, shift, body_fine, triangles, colors, size, ss)
     whole = all(bool(np.all(c == np.round(c))) for c in colors)
     canvas = np.empty((Hf, Wf, 3), dtype=np.uint8 if whole else np.float32)
     canvas[0] = plate_rgb
-    canvas[1:] = canvas[0]  # row by row: 20x faster than broadcasting a colour over every pixel
+    canvas[1:] = canvas[0]  # row by row: far cheaper than broadcasting a colour over every pixel
     for p0, p1 in lines:
         cv2.line(canvas, p0, p1, grid_rgb.tolist(), thick, cv2.LINE_8, shift)
     mask = _raster_triangles(body_fine, triangles, (Hf, Wf))
@@ -169,8 +169,8 @@ def _compose_counts(lines, thick, shift, body_fine, triangles, colors, size, ss)
 
 #: The sensor noise of the latest (seed, sigma, size)s: the noise of a photograph depends on its seed alone
 #: (the draws before it, tilt axis, grid phase and light direction, take a fixed count of numbers), and a run
-#: photographs many states with the same seed (each case's design and prototype photos). 750k Gaussian
-#: numbers take 10-20 ms; a copy from the cache 1 ms.
+#: photographs many states with the same seed (each case's design and prototype photos): a copy from the
+#: cache is much cheaper than drawing the Gaussian numbers again.
 _NOISE: OrderedDict = OrderedDict()
 _NOISE_LOCK = threading.Lock()
 
@@ -448,7 +448,7 @@ def render_photo(mesh, x: ArrayLike | None = None, *, image_size: tuple[int, int
     cv2.putText(img, text, (bx, by + th), font, fscale, (20, 20, 20), fthick, cv2.LINE_AA)
 
     meta = {
-        "synthetic": True, "generator": "mdsr_opt.evaluate.render_photo", "caption": text,
+        "synthetic": True, "generator": "mdsr_opt.photos.camera.render_photo", "caption": text,
         "caption_corner": corner, "caption_box": [int(bx), int(by), int(tw), int(th + base)],
         "seed": seed,
         "image_size": [W, H], "rotation_deg": rot, "tilt_deg": tilt,

@@ -131,8 +131,7 @@ class _PolylineDistance:
     #: most segments a point keeps for the converging search (more: it uses the tree)
     KEEP_MAX = 48
     #: cap of the midpoint distances in :meth:`lower`, in half segment lengths (8: a few pixels, several
-    #: times a good registration's mean distance; the 16 comparisons of a gecko and a humanoid run took
-    #: 367, 378, 338 and 327 ms uncapped and capped at 32, 16 and 8)
+    #: times a good registration's mean distance)
     CAP = 8.0
 
     def __init__(self, contour: np.ndarray):

@@ -69,8 +69,8 @@ def _quadratic_basis(h: int, w: int) -> np.ndarray:
 
 def _fit(A: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Least-squares coefficients of ``A c ~ z`` for a few well-conditioned columns (the quadratic basis):
-    the normal equations summed without BLAS and a 6 x 6 solve. ``np.linalg.lstsq`` on the (9216, 6) system
-    took 7 ms with two BLAS threads sharing two busy cores against 0.9 ms with one."""
+    the normal equations summed without BLAS and a 6 x 6 solve (``np.linalg.lstsq`` goes through BLAS,
+    whose threads wait for each other on busy cores)."""
     return np.linalg.solve(np.einsum("ij,ik->jk", A, A), np.einsum("ij,i->j", A, z))
 
 
@@ -103,7 +103,7 @@ def _quadratic_field(c: np.ndarray, H: int, W: int) -> np.ndarray:
     """``max(c0 + c1 u + c2 v + c3 u u + c4 u v + c5 v v, 1)`` over the (H, W) pixel centres (the quadratic
     basis's u and v), added up in that order, by broadcasting a row and a column: every term of u or v alone
     is worked out once per column or row, into one (H, W) array written in place (a fresh (H, W)
-    temporary costs a page fault per 4 kB, 3-4 us each on the shared test machine)."""
+    temporary costs a page fault per 4 kB)."""
     u = ((np.arange(W) + 0.5) / W * 2.0 - 1.0)[None, :]
     v = ((np.arange(H) + 0.5) / H * 2.0 - 1.0)[:, None]
     out = (c[0] + c[1] * u) + c[2] * v

@@ -14,7 +14,7 @@ from typing import Any, Callable, Sequence
 import cv2
 import numpy as np
 
-from ..body.io import FORMATS, atomic_path
+from ..body.io import FORMATS, atomic_path, read_mesh
 from ..core.results import compact_repr
 from ..core.errors import InputError, checking_input
 from .compare import ContourComparison, compare_contours, simulated_outline
@@ -24,14 +24,14 @@ from .images import IMAGE_SUFFIXES, load_image
 __all__ = ['CaseResult', 'evaluate_folder', 'write_table']
 
 
-#: State files are the mesh formats of :mod:`mdsr_opt.io` (so a ``case.svg`` figure beside ``case.vtu``
+#: State files are the mesh formats of :mod:`mdsr_opt.body.io` (so a ``case.svg`` figure beside ``case.vtu``
 #: is not taken for a second state).
 STATE_SUFFIXES = tuple(FORMATS)
 
 
 def write_together(writers: Sequence[tuple[Path, Callable[[str], None]]]) -> list[Path]:
     """Write several files as one: each ``write(tmp)`` fills a temporary file beside its target
-    (:class:`mdsr_opt.io.atomic_path`), and only when every write has succeeded are they all renamed onto
+    (:class:`mdsr_opt.body.io.atomic_path`), and only when every write has succeeded are they all renamed onto
     their targets, last writer first. An error in any write leaves no file changed and no temporary file
     behind; only a failing rename (e.g. a target that is a folder) could leave part of the set renamed."""
     paths = [Path(p) for p, _ in writers]
@@ -119,7 +119,7 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
         ``case.*`` in ``states``. A ``case.json`` sidecar with ``"synthetic": true`` (written by
         :meth:`SyntheticPhoto.save`) marks the case synthetic in the table.
     states : folder or list of mesh files
-        States in a format of :mod:`mdsr_opt.io` (``.vtu``, ``.vtk``, ``.xdmf``, ``.msh``; rest mesh plus
+        States in a format of :mod:`mdsr_opt.body.io` (``.vtu``, ``.vtk``, ``.xdmf``, ``.msh``; rest mesh plus
         ``displacement``, or points holding the deformed state). Other files in a states folder (a
         ``case.svg`` figure, say) are ignored.
     out : folder, optional
@@ -162,8 +162,6 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     >>> rows[0].case, rows[0].synthetic, bool(rows[0].comparison.mean_px < 1.0)
     ('bent', True, True)
     """
-    from ..body.io import read_mesh
-
     with checking_input():  # the arguments and the folders: bad input, before any work
         if not isinstance(name, str) or not name or any(c in name for c in "/\\") or name.startswith("."):
             raise ValueError(f"name must be a plain file stem, got {name!r}")
@@ -281,6 +279,6 @@ def _table_writers(results: Sequence[CaseResult], csv_path: str | os.PathLike,
         if any(row["source"] == "synthetic" for row in rows):
             lines.append("")
             lines.append("**SYNTHETIC**: rows marked synthetic compare with images rendered by the synthetic "
-                         "camera (mdsr_opt.evaluate.render_photo), not with photographs of a prototype.")
+                         "camera (mdsr_opt.photos.camera.render_photo), not with photographs of a prototype.")
         writers.append((Path(md_path), bytes_writer(("\n".join(lines) + "\n").encode())))
     return writers

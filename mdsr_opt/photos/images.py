@@ -18,7 +18,7 @@ __all__ = ['load_image']
 
 #: Default limit on the pixels of the searched region (the image, or its ``roi``) of
 #: :func:`contour_from_image` and :func:`body_mask`; raise it with ``max_pixels=``. Extraction takes
-#: about 0.3 s and 60 MB per megapixel, so 25 megapixels (a 6000 x 4000 photograph) need about 1.5 GB.
+#: about 60 MB per megapixel, so 25 megapixels (a 6000 x 4000 photograph) need about 1.5 GB.
 MAX_PIXELS = 25_000_000
 
 

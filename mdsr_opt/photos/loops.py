@@ -101,7 +101,7 @@ def compare_loops(simulated: Sequence[ArrayLike], measured: Sequence[ArrayLike],
     cs = [centre_radius(c) for c in Sp]
     cm = [centre_radius(c) for c in Mh]
     pairs: dict[int, int] = {}
-    if Sp and Mh:  # holes on both sides (scipy.optimize, 0.2-0.4 s to import, only then)
+    if Sp and Mh:  # holes on both sides (scipy.optimize imported only then)
         from scipy.optimize import linear_sum_assignment
 
         C = np.array([[np.linalg.norm(a[0] - b[0]) for b in cm] for a in cs])

@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 import os
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import to_rgba
+from matplotlib.layout_engine import PlaceHolderLayoutEngine
+from matplotlib.path import Path
+import matplotlib as mpl
 import matplotlib.pyplot as plt
+from matplotlib.transforms import Bbox
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
@@ -34,7 +40,7 @@ def panel_axes(fig, nrow, ncol, figsize):
 def hide_ticks(*axes) -> None:
     """No tick marks or tick labels on ``axes`` (the frame stays): for drawings whose coordinates another
     figure of the same run already gives. Ticks are most of the cost of drawing an axes (each tick is a
-    handful of artists, each label a laid-out text): about 40 ms per axes at 130 dpi."""
+    handful of artists, each label a laid-out text)."""
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
@@ -44,8 +50,6 @@ def mesh_paths(mesh):
     """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
     in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
     every triangle on its own (each inner edge twice): twice the drawing time of these two paths."""
-    from matplotlib.path import Path
-
     tri, edges = np.asarray(mesh.triangles), np.asarray(mesh.edges)
     tri_codes = np.tile(np.array([Path.MOVETO, Path.LINETO, Path.LINETO, Path.CLOSEPOLY], dtype=Path.code_type),
                         len(tri))
@@ -243,11 +247,6 @@ def _reach(fig) -> float:
 
 def _draw_crop(fig, dpi: float, margin: float):
     """One try of :func:`_render_crop` with ``margin``: the crop, None, or :data:`_TOO_SMALL`."""
-    import matplotlib as mpl
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.colors import to_rgba
-    from matplotlib.transforms import Bbox
-
     if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
         return None
     face = mpl.rcParams["savefig.facecolor"]
@@ -299,9 +298,6 @@ def tight_bbox(fig, dpi: float):
     measured with an Agg renderer at ``dpi``; ``"tight"`` itself for a figure this cannot measure (another
     canvas, a layout engine). Given as a box, ``savefig`` draws the figure once instead of twice: for
     "tight" it first draws it without rendering to place every text, which ``get_tightbbox`` does too."""
-    import matplotlib as mpl
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
     if not isinstance(fig.canvas, FigureCanvasAgg) or _has_layout_engine(fig):
         return "tight"
     pad = mpl.rcParams["savefig.pad_inches"]
@@ -319,8 +315,6 @@ def tight_bbox(fig, dpi: float):
 def _has_layout_engine(fig) -> bool:
     """Whether a layout engine would move the axes when the figure is drawn (``fig.tight_layout()`` leaves a
     placeholder engine behind that does nothing)."""
-    from matplotlib.layout_engine import PlaceHolderLayoutEngine
-
     engine = fig.get_layout_engine()
     return engine is not None and not isinstance(engine, PlaceHolderLayoutEngine)
 

@@ -28,7 +28,7 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", l
     target : (n, 2) array
         Target node positions.
     graph : networkx.Graph, optional
-        From :func:`mdsr_opt.routing.contraction_graph`; computed when omitted.
+        From :func:`mdsr_opt.synthesis.routing.contraction_graph`; computed when omitted.
     ax : matplotlib Axes, optional
     cmap : str
         A diverging colormap, centred on 0: contraction (w > 0) at the top end, elongation below.
@@ -78,7 +78,7 @@ def plot_routing(mesh, target, result, axes=None, title=None, ticks=True):
     target : (n, 2) array
         Target node positions.
     result : RoutingResult or sequence of Muscle
-        From :func:`mdsr_opt.routing.route_muscles`.
+        From :func:`mdsr_opt.synthesis.routing.route_muscles`.
     axes : pair of matplotlib Axes, optional
     ticks : bool, default True
         Coordinate ticks on both panels (``False``: a run's figures, see :func:`plot_contraction_graph`).

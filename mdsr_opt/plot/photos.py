@@ -12,7 +12,7 @@ __all__ = ['plot_overlay']
 
 def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=None, mesh_color="#1f77b4",
                  contour_color="#ffd400", cmap="magma_r", ticks=True):
-    """Draw the simulated mesh over the photograph it was compared with (``mdsr_opt.evaluate``).
+    """Draw the simulated mesh over the photograph it was compared with (``mdsr_opt.photos``).
 
     Parameters
     ----------

@@ -54,7 +54,7 @@ def _muscles(ax, x, muscles, lw=2.4, labels=True):
 def _emptiest_corner(x) -> str:
     """The corner of the drawing (a third of its width, a quarter of its height) over the fewest nodes of
     ``x``: where the legend goes. Matplotlib's ``loc="best"`` tests every triangle of the mesh against
-    every candidate place (10 s of the 20 s of ``mdsr run figure6``)."""
+    every candidate place, which takes longer than the rest of the figure on a fine mesh."""
     P = np.asarray(x, dtype=float)
     lo, hi = P.min(axis=0), P.max(axis=0)
     u = (P - lo) / np.maximum(hi - lo, 1e-300)

@@ -3,9 +3,15 @@
 from __future__ import annotations
 
 import os
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import to_rgba
+from matplotlib.figure import Figure
+from matplotlib.font_manager import findfont
+from matplotlib.patches import PathPatch
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
+from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, mesh_paths, plot_mesh, plot_muscles
@@ -83,8 +89,6 @@ def gif_frame(rgb: np.ndarray):
     """An (h, w, 3) uint8 frame as a 256-colour PIL image for a GIF: Pillow's fast octree quantiser (a tenth
     of the time of its default median cut) and one Lloyd step that moves every palette colour to the mean of
     the pixels it stands for (so the white background and the flat fills keep their exact colours)."""
-    from PIL import Image
-
     rgb = np.ascontiguousarray(rgb)
     q = Image.fromarray(rgb).quantize(256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
     idx = np.asarray(q).ravel()
@@ -141,13 +145,6 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     ...     os.path.getsize(p) > 0
     True
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.colors import to_rgba
-    from matplotlib.font_manager import findfont
-    from matplotlib.patches import PathPatch
-    from PIL import Image, ImageDraw, ImageFont
-
     states = [np.asarray(s, dtype=float) for s in states]
     if not states:
         raise ValueError("an animation needs at least one state")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from matplotlib.colors import ListedColormap
+from matplotlib.patches import Patch
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..core.stats import fit_slopes, pareto_front
 from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes
 
 __all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plot_fidelity']
@@ -36,7 +39,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     Parameters
     ----------
     rows : list of dict
-        Rows of :class:`mdsr_opt.study.StudyResult`.
+        Rows of :class:`mdsr_opt.studies.study.StudyResult`.
     axes : sequence of Axes, optional
     title : str, optional
 
@@ -44,8 +47,6 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     -------
     matplotlib.figure.Figure
     """
-    from ..core.stats import pareto_front
-
     kinds = [k for k in ("equilibrium", "design") if any(r["kind"] == k for r in rows)]
     if axes is None:
         fig, axes = plt.subplots(1, len(kinds), figsize=(6.5 * len(kinds), 4.8), squeeze=False)
@@ -84,11 +85,9 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
 def plot_study_scaling(rows, slopes=None, ax=None, title=None):
     """Time against node count on log-log axes, one colour per method, with the fitted power law.
 
-    ``slopes``: ``{method: (slope, intercept, n)}`` from :func:`mdsr_opt.study.fit_slopes` (computed when
+    ``slopes``: ``{method: (slope, intercept, n)}`` from :func:`mdsr_opt.core.stats.fit_slopes` (computed when
     omitted); the legend gives each slope. Only successful runs are drawn.
     """
-    from ..core.stats import fit_slopes
-
     fig, ax = axes_or_new(ax, figsize=(7, 5))
     slopes = fit_slopes(rows) if slopes is None else slopes
     methods = list(dict.fromkeys(r["method"] for r in rows))
@@ -136,8 +135,6 @@ def plot_study_success(rows, title=None, max_cols=2, fig=None):
     first guess, mesh, material; columns), each cell coloured by its failure reason and labelled with the
     iteration count. Empty cells were not run (a node cap, or a design method on an equilibrium problem).
     ``fig``: an empty figure to draw the panels into (default: a new one). Returns the figure."""
-    from matplotlib.patches import Patch
-
     problems = list(dict.fromkeys(r["problem"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     keys = ("load", "guess", "resolution", "material")
@@ -155,7 +152,6 @@ def plot_study_success(rows, title=None, max_cols=2, fig=None):
     size = (max(4.0, 0.42 * w + 2.2) * ncol, 0.38 * len(methods) * nrow + 2.4)
     fig, axes = panel_axes(fig, nrow, ncol, size)
     codes = {f: i for i, f in enumerate(_STUDY_FAILURE_COLORS)}
-    from matplotlib.colors import ListedColormap
 
     cmap = ListedColormap(list(_STUDY_FAILURE_COLORS.values())).with_extremes(bad="#f3f3f3")
     for ax, p in zip(axes.ravel(), problems):

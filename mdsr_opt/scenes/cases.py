@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+import time
 from typing import Any
+import warnings
 import numpy as np
 
+from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .scene import Case, Scene
 
@@ -99,7 +102,6 @@ class CaseSetup:
         ValueError
             The file (named) is damaged, not a ``.npz``, holds another kind of result or another scene's.
         """
-        from ..body.muscles import Muscle
         from ..mechanics.result import EquilibriumResult
 
         if not isinstance(scene, Scene):
@@ -129,16 +131,13 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     """Solve a case's target and lay its muscles: the input of any design method.
 
     External cases: :func:`~mdsr_opt.solve_external` with the case's anchors and drags, then
-    :func:`~mdsr_opt.routing.route_muscles` with the scene's ``routing_options`` (unless the scene gives
+    :func:`~mdsr_opt.synthesis.routing.route_muscles` with the scene's ``routing_options`` (unless the scene gives
     muscles). Internal cases: :func:`~mdsr_opt.solve_internal` with the scene's muscles at the case's
     contractions, using the scene's ``design_options`` ``muscle_model`` and ``stiffness`` so the design can
     recover them exactly; routing runs as a diagnostic when ``route_internal``.
 
     A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty.
     """
-    import time
-    import warnings
-
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..synthesis.routing import RoutingWarning, route_muscles
 

@@ -12,7 +12,7 @@ the design converged. :class:`VirtualPrototype` stands in for the cast body with
   ``[1 - e_range, 1 + e_range]`` and Poisson's ratio by a shift in ``[-nu_range, +nu_range]`` (kept in
   [0.05, 0.49]). A uniform change of E alone does not change a shape driven by displacements or cable
   lengths (every force scales with E); the change of nu does, and so do the mesh and the cable path;
-- the synthetic camera (:func:`~mdsr_opt.evaluate.render_photo`) with its own seed, a 2 degree tilt and a
+- the synthetic camera (:func:`~mdsr_opt.photos.camera.render_photo`) with its own seed, a 2 degree tilt and a
   rotation on the plate.
 
 The distances to these photographs therefore measure model error (discretisation, material uncertainty,
@@ -30,13 +30,14 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
 
 from ..core.checks import check_int, positive_float
 from ..body.muscles import Muscle
+from .select import edge_path
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
 
@@ -83,7 +84,7 @@ class VirtualPrototype:
     Build it with :meth:`for_scene`. Attributes: ``scene`` (the fine scene: same cases by name, anchors and
     drags chosen by geometry), ``design_mesh`` (the design model's mesh), ``material`` (perturbed),
     ``E_factor`` and ``nu_shift`` (the draws), ``refine``, ``e_range``, ``nu_range``, ``seed``,
-    ``camera`` (keyword arguments of :func:`~mdsr_opt.evaluate.render_photo`).
+    ``camera`` (keyword arguments of :func:`~mdsr_opt.photos.camera.render_photo`).
     """
 
     scene: Any
@@ -130,8 +131,6 @@ class VirtualPrototype:
             ``refine`` not in [1, 10], ``e_range`` not in [0, 0.5), ``nu_range`` not in [0, 0.2], a scene
             without a source to rebuild from, or a fine scene whose cases differ from the design scene's.
         """
-        from dataclasses import replace
-
         from ..body.material import LinearElastic, NeoHookean
         from .scene import Scene
         from .library import get_problem
@@ -183,8 +182,6 @@ class VirtualPrototype:
     def transfer_muscle(self, muscle: Muscle) -> Muscle:
         """The design mesh's muscle laid on the prototype's mesh: through the fine nodes nearest its nodes
         (on the boundary when the muscle runs along it), joined by shortest edge paths."""
-        from .select import edge_path
-
         if not isinstance(muscle, Muscle):
             muscle = Muscle(muscle)
         X = self.design_mesh.points
@@ -305,7 +302,7 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
     (:meth:`VirtualPrototype.drive`: the anchors and drags of the prototype's case of that name; or the
     scene's muscles at ``setup.case``'s contractions). ``design`` (Table 4):
     the target against a photograph of the prototype driven by the designed contractions of the designed
-    muscles (``design``, a :class:`~mdsr_opt.design.DesignResult`; skipped when None).
+    muscles (``design``, a :class:`~mdsr_opt.synthesis.results.DesignResult`; skipped when None).
 
     Returns
     -------

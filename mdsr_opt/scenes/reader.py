@@ -3,6 +3,9 @@ scene's routing and design options (also used for scenes built in Python)."""
 
 from __future__ import annotations
 
+import difflib
+import inspect
+import json
 import math
 import sys
 from pathlib import Path
@@ -17,8 +20,9 @@ __all__ = ['check_scene_options', 'SceneFileError']
 
 def check_scene_options(options, kind: str, label: str = "") -> dict:
     """Check a scene's ``routing_options`` (``kind="routing"``) or ``design_options`` (``"design"``): every
-    key a keyword of :func:`~mdsr_opt.routing.route_muscles` / :func:`~mdsr_opt.design.design_contractions`,
-    every value in its range, solver ``options`` known to the solver. Returns a checked copy.
+    key a keyword of :func:`~mdsr_opt.synthesis.routing.route_muscles` /
+    :func:`~mdsr_opt.synthesis.contractions.design_contractions`, every value in its range, solver
+    ``options`` known to the solver. Returns a checked copy.
 
     Raises ``SceneFileError`` (a ValueError) or ``TypeError`` naming ``label`` and the field.
     """
@@ -51,8 +55,6 @@ class Reader:
         raise err
 
     def keys(self, d, allowed: Sequence[str], where: str, required: Sequence[str] = ()) -> dict:
-        import difflib
-
         if not isinstance(d, Mapping):
             self.fail(where, f"expected a table/object, got {tname(d)}", TypeError)
         for k in d:
@@ -132,8 +134,6 @@ def read_file(path: Path) -> dict:
     too_deep = SceneFileError(f"{path.name}: tables and lists are nested more than {MAX_DEPTH} deep; a scene "
                               "file needs only a few levels")
     if suffix == ".json":
-        import json
-
         try:
             data = json.loads(text.decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -173,8 +173,6 @@ def _depth_exceeds(data, limit: int) -> bool:
 
 
 def scene_options(r: Reader, spec, where: str) -> dict:
-    import inspect
-
     from ..synthesis.contractions import design_contractions
     from ..synthesis.routing import route_muscles
 

@@ -17,7 +17,7 @@ DIR``, :func:`~mdsr_opt.scenes.runscene.run_scene`, :func:`~mdsr_opt.studies.stu
   until the run ends. A manifest that says ``"running"`` in a folder whose lock nobody holds is the record
   of a run that was killed (``kill -9``, a power cut): it is reported as interrupted, and ``overwrite``
   removes the files it had written.
-- **Nothing partial.** Every file is written through a temporary file (:class:`~mdsr_opt.io.atomic_path`);
+- **Nothing partial.** Every file is written through a temporary file (:class:`~mdsr_opt.body.io.atomic_path`);
   when the run stops (an error, Ctrl-C, SIGTERM) the temporaries it left are removed, the files already
   complete stay, and the manifest's ``status`` says ``"interrupted"`` or ``"failed: ..."``.
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, asdict
 from pathlib import Path
+import time
 from typing import Any, Callable, Sequence
 import numpy as np
 
@@ -45,11 +46,11 @@ class CaseReport:
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
         the fraction of the true muscles' edges that routing on the target covers.
     photo : contour metrics of the SYNTHETIC photograph of the driven body: ``target`` compares the target's
-        outline and holes with it (:func:`~mdsr_opt.evaluate.compare_loops`), ``self`` the driven state's
+        outline and holes with it (:func:`~mdsr_opt.photos.loops.compare_loops`), ``self`` the driven state's
         (the measuring chain's floor); each with ``mean_px``, ``std_px``, ``max_px``, ``ratio`` over every
         loop, ``outer_mean_px`` and ``mean_norm`` of the outline alone, and ``n_unmatched`` holes. These photograph the design model itself (a mirror). ``prototype``
         (when a virtual prototype was given) holds the validation against a DIFFERENT, finer model
-        (:func:`~mdsr_opt.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
+        (:func:`~mdsr_opt.scenes.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     """
@@ -167,8 +168,6 @@ class SceneReport:
 
     def to_dict(self) -> dict:
         """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
-        from dataclasses import asdict
-
         return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
                             "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
                             "cases": [asdict(c) for c in self.cases], "animations": self.animations})
@@ -190,19 +189,17 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     """Run one case through the pipeline (nothing is written).
 
     Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
-    contractions (:func:`~mdsr_opt.design.design_contractions` with the scene's ``design_options``, its
+    contractions (:func:`~mdsr_opt.synthesis.contractions.design_contractions` with the scene's ``design_options``, its
     verification being the forward check) -> SYNTHETIC photograph of the driven body and contour metrics
-    (:mod:`mdsr_opt.evaluate`).
+    (:mod:`mdsr_opt.photos`).
 
-    With ``prototype`` (a :class:`~mdsr_opt.prototype.VirtualPrototype` of the scene) and ``photo``, the
-    case is also validated against the virtual prototype (:func:`~mdsr_opt.prototype.validate_case`): the
+    With ``prototype`` (a :class:`~mdsr_opt.scenes.prototype.VirtualPrototype` of the scene) and ``photo``, the
+    case is also validated against the virtual prototype (:func:`~mdsr_opt.scenes.prototype.validate_case`): the
     paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
 
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
     says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
     """
-    import time
-
     from ..synthesis.contractions import design_contractions
 
     say = log or (lambda s: None)
@@ -302,8 +299,6 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
     virtual prototype's validation. Fills ``run.report.photo`` and ``run.report.times["photo"]``,
     ``run.photo``, ``run.comparison`` and ``run.prototype_photos``.
     """
-    import time
-
     from ..photos.camera import render_photo
     from ..photos.contours import contour_loops_from_image
     from ..photos.loops import compare_loops, simulated_loops

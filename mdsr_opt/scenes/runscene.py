@@ -7,6 +7,7 @@ part of the public API."""
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import functools
 import logging
@@ -14,14 +15,16 @@ import os
 import sys
 from concurrent.futures import Executor
 from pathlib import Path
+import time
 from typing import Callable, Sequence
 
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
+from ..synthesis.gait import run_gait
 from .animate import animate
 from .names import RUN_FILES
-from .rundir import check_interrupt
+from .rundir import check_interrupt, RunFolder, noting_interrupts
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
@@ -74,7 +77,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     photo_size : (width, height) of the synthetic photographs, in pixels.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
-        (:class:`~mdsr_opt.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
+        (:class:`~mdsr_opt.scenes.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
     background : bool, default True
         Draw and write each case's figures, meshes and photographs, make each animation (its frames'
@@ -84,7 +87,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         same either way.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
-        (only those it recorded; see :class:`~mdsr_opt.rundir.RunFolder`, which also locks the folder
+        (only those it recorded; see :class:`~mdsr_opt.scenes.rundir.RunFolder`, which also locks the folder
         against a second run and removes the temporaries of an interrupted one).
 
     Returns
@@ -101,8 +104,6 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     KeyboardInterrupt
         Passed on at once (never recorded as a failed case); the files already complete stay.
     """
-    from .rundir import RunFolder, noting_interrupts
-
     names = _check_run(scene, cases, mesh_format, photo_size)
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
@@ -155,8 +156,6 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
     is the process pool to send the jobs to (``mdsr run`` shares one between its scenes; None: one of this
     call's own)."""
-    import time
-
     from ..body.io import atomic_path, write_json
 
     names = _check_run(scene, cases, mesh_format, photo_size)
@@ -241,7 +240,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                     "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
                                  "thickness": scene.material.thickness},
                     "routing_options": scene.routing_options, "design_options": scene.design_options,
-                    "photographs": "SYNTHETIC (rendered by mdsr_opt.evaluate.render_photo), not camera images"
+                    "photographs": "SYNTHETIC (rendered by mdsr_opt.photos.camera.render_photo), not camera images"
                     if photos else None,
                     "expected": scene.expected})
     write_json(out / "summary.json", finite(summary))
@@ -262,8 +261,6 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 
     Returns the process exit code: 0 when every case succeeded, 1 otherwise.
     """
-    import argparse
-
     p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
     p.add_argument("--out", default=None, help="output folder (default: out/<scene>)")
     p.add_argument("--resolution", default="medium", type=parse_resolution,
@@ -298,8 +295,6 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 def parse_resolution(text: str):
     """``--resolution``: a name (checked with the scene) or a node count from 20 to
     :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
-    import argparse
-
     if not text.isdigit():
         return text
     try:
@@ -309,8 +304,6 @@ def parse_resolution(text: str):
 
 
 def parse_seed(text: str) -> int:
-    import argparse
-
     try:
         v = int(text)
     except ValueError:
@@ -322,8 +315,6 @@ def parse_seed(text: str) -> int:
 
 def parse_size(text: str) -> tuple[int, int]:
     """``--photo-size WxH``: each side from 64 to :data:`~mdsr_opt.photos.size.MAX_PHOTO_SIDE` pixels."""
-    import argparse
-
     from ..photos.size import check_photo_size
 
     parts = text.lower().split("x")
@@ -381,8 +372,6 @@ def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
 
 
 def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
-    from ..synthesis.gait import run_gait
-
     return run_gait(scene, out, runs, figures=figures, log=log, writer=writer)
 
 

@@ -14,6 +14,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
+from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -163,9 +164,9 @@ class Scene:
     regions : dict of str to int arrays
         Named node sets (for figures and scene files).
     routing_options : dict
-        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles`.
+        Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles`.
     design_options : dict
-        Keyword arguments for :func:`~mdsr_opt.design.design_contractions` (``method``, ``a_max``,
+        Keyword arguments for :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
         ``muscle_model``, ``stiffness`` ...).
     animations : tuple of Animation
     expected : dict
@@ -175,10 +176,10 @@ class Scene:
     source : str
         The file the scene came from.
     units : str
-        The length unit of the mesh coordinates (one of :data:`mdsr_opt.export.UNITS`, default ``"mm"``),
+        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`, default ``"mm"``),
         carried into the gait schedule and the fabrication files.
-    gait : mdsr_opt.gait.Gait, optional
-        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.gait.run_gait`).
+    gait : mdsr_opt.synthesis.gait.Gait, optional
+        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
     """
 
     name: str
@@ -356,13 +357,13 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
 def check_units_and_gait(scene: Scene) -> None:
     """Check a scene's ``units`` (a known length unit) and ``gait`` (a Gait naming its cases)."""
     from ..synthesis.export import check_units
-    from ..synthesis.gait import Gait
 
     scene.units = check_units(scene.units)
     if scene.gait is None:
         return
     if not isinstance(scene.gait, Gait):
-        raise TypeError(f"scene {scene.name!r}: gait must be a mdsr_opt.gait.Gait, got {type(scene.gait).__name__}")
+        raise TypeError(f"scene {scene.name!r}: gait must be a mdsr_opt.synthesis.gait.Gait, "
+                        f"got {type(scene.gait).__name__}")
     names = scene.case_names
     for c in scene.gait.poses:
         if c not in names:

@@ -11,6 +11,7 @@ import numpy as np
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import check_label
+from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
 from .reader import SceneFileError, Reader, read_file, scene_options, tname
 from .scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
@@ -453,7 +454,6 @@ def parse_units_and_gait(r: Reader, top: Mapping, case_names: set):
     """The scene file's ``units = "mm"`` and ``[gait]`` table (``name``, ``poses`` = case names or "rest",
     ``frames_per_step``, ``max_muscles``, ``step_time``, ``cyclic``, ``fps``)."""
     from ..synthesis.export import UNITS
-    from ..synthesis.gait import Gait
 
     units = top.get("units", "mm")
     if not isinstance(units, str) or units not in UNITS:

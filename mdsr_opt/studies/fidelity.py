@@ -23,6 +23,8 @@ Example
 
 from __future__ import annotations
 
+import csv
+import io
 import logging
 import math
 import os
@@ -33,6 +35,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..body.io import atomic_path, write_json
+from ..body.mesh import Mesh
 from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
 from .problems import MATERIALS, get_study_problem
@@ -133,8 +136,6 @@ def pick_fidelity(rows: Sequence[dict], problem: str, load: float, tol: float, r
 
 def _reference_outcome(reference) -> RunOutcome:
     """A known fine solution ``(mesh, x)`` or ``(points, triangles, x)`` as a reference outcome."""
-    from ..body.mesh import Mesh
-
     if isinstance(reference, (tuple, list)) and len(reference) == 2 and isinstance(reference[0], Mesh):
         pts, tri, x = reference[0].points, reference[0].triangles, reference[1]
     elif isinstance(reference, (tuple, list)) and len(reference) == 3:
@@ -158,7 +159,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
     Parameters
     ----------
     problem : str
-        A study problem (:func:`mdsr_opt.study.list_study_problems`).
+        A study problem (:func:`mdsr_opt.studies.problems.list_study_problems`).
     tol : float
         Largest node error allowed, as a fraction of the body's size.
     load : float, optional
@@ -173,7 +174,7 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
         A known fine solution to measure errors against. By default the reference is the problem solved
         with Neo-Hookean by IPOPT (tight tolerance) at ``reference_resolution`` (default: the finest
         candidate), so the finest model has error 0.
-    scheduler, workers : as in :func:`mdsr_opt.study.run_study` (the candidates run in parallel on Dask).
+    scheduler, workers : as in :func:`mdsr_opt.studies.study.run_study` (the candidates run in parallel on Dask).
 
     Returns
     -------
@@ -265,8 +266,6 @@ def _run_fidelity(st: Study, out, tolerances, cases, scheduler, workers, figures
         os.makedirs(out, exist_ok=True)
         table = [c.summary() for c in choices]
         keys = list(table[0])
-        import csv
-        import io
 
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=keys, lineterminator="\n")

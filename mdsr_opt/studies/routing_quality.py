@@ -38,6 +38,7 @@ import numpy as np
 
 from ..body.io import atomic_path
 from ..body.muscles import Muscle
+from ..synthesis.routing import edge_weights, RoutingWarning, route_muscles
 
 __all__ = ["QualityRow", "routing_quality", "write_quality_table", "edge_muscles"]
 
@@ -64,8 +65,6 @@ class QualityRow:
 
 def edge_muscles(mesh, target, min_contraction: float = 1e-3) -> list[Muscle]:
     """One two-node muscle per mesh edge that ``target`` contracts by more than ``min_contraction``."""
-    from ..synthesis.routing import edge_weights
-
     _, _, w = edge_weights(mesh, target)
     return [Muscle((int(a), int(b)), name=f"edge {k}") for k, (a, b) in enumerate(mesh.edges.tolist())
             if w[k] > min_contraction]
@@ -111,7 +110,6 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
         ``success`` is False (and ``status`` says why) when the target, the routing or a design failed.
     """
     from ..synthesis.contractions import design_contractions
-    from ..synthesis.routing import RoutingWarning, route_muscles
     from ..scenes.library import get_problem
     from ..scenes.cases import prepare_case
 

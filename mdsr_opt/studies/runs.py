@@ -11,12 +11,17 @@ import time
 import zlib
 from dataclasses import dataclass
 import numpy as np
+import scipy.sparse.linalg as spla
 
 from ..body.mesh import Mesh
 from ..core.guards import cancel_stop, request_stop
 from ..core.errors import InputError
 from ..core.progress import advance, expect
 from ..core.results import format_value, to_jsonable
+from ..mechanics.align import align
+from ..mechanics.model import get_model, spring_parameters
+from ..scenes.rundir import check_interrupt
+from ..synthesis.verify import check_minimum
 from .problems import Setup, build_setup
 from .spec import RunSpec
 
@@ -34,7 +39,7 @@ class _Deadline:
 
     A timer thread sets an asynchronous exception on the running thread; C code (an IPOPT solve) finishes its
     call first. Raised inside a solver's Python callback, CasADi would turn it into a failed evaluation that
-    load stepping takes for a failed step and goes on (an L-BFGS run of a 0.5 s budget ran 16 s so): the
+    load stepping takes for a failed step and goes on, far past the deadline: the
     timer also asks every solve that returns to raise it (:func:`~mdsr_opt.core.guards.request_stop`).
     Leaving the block cancels both and clears an exception that was set but not yet raised, so nothing leaks
     past the block. No tracing: runs are not slowed down.
@@ -104,8 +109,6 @@ def _fixed_mask(setup: Setup) -> np.ndarray:
 def _positive_definite(H) -> bool:
     """Is the sparse symmetric ``H`` positive definite? Signs of the pivots of a symmetric factorisation
     (Sylvester's law of inertia), or the smallest eigenvalue when SuperLU pivots off the diagonal."""
-    import scipy.sparse.linalg as spla
-
     H = H.tocsc()
     try:
         lu = spla.splu(H, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
@@ -121,12 +124,9 @@ def _positive_definite(H) -> bool:
 def _is_minimum(setup: Setup, material, res) -> bool:
     """Is the equilibrium ``res`` a strict minimum of its energy (fixed nodes / gauge pinned)?"""
     if setup.mode == "internal":
-        from ..synthesis.verify import check_minimum
-
         pd, _lam, _r = check_minimum(setup.mesh, material, setup.muscles, setup.contractions, res.x,
                                      muscle_model=setup.muscle_model, stiffness=setup.stiffness, lowest=False)
         return bool(pd)
-    from ..mechanics.model import get_model
 
     model = get_model(setup.mesh, material)
     free = ~_fixed_mask(setup)
@@ -177,8 +177,6 @@ def _solve_equilibrium(setup: Setup, material, spec: RunSpec, tol: float):
 
 
 def _internal_energy(setup: Setup, material, a, x) -> float:
-    from ..mechanics.model import get_model, spring_parameters
-
     model = get_model(setup.mesh, material)
     k = setup.stiffness * material.E * material.thickness
     p = model.params(material, springs=spring_parameters(setup.mesh, setup.muscles, a, k))
@@ -256,7 +254,6 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
                           success=False)
     finally:  # here, not in the deadline's __exit__: its RunTimeout can be raised on that method's first line
         cancel_stop(threading.get_ident())
-    from ..scenes.rundir import check_interrupt
 
     check_interrupt()  # a Ctrl-C that a solver turned into a failed solve stops the study, never a failed row
     wall = time.perf_counter() - t_start
@@ -339,8 +336,6 @@ def state_error(points: np.ndarray, x: np.ndarray, ref_points: np.ndarray, ref_t
     """Largest node distance between state ``x`` (on rest ``points``) and the reference state interpolated at
     those rest points, over the reference body's size (its bounding-box diagonal). ``free_body``: compare
     after the best rigid motion of ``x`` onto the reference (internal driving has no fixed frame)."""
-    from ..mechanics.align import align
-
     y = interpolate(ref_points, ref_triangles, ref_x, points)
     x = np.asarray(x, dtype=float)
     if free_body:

@@ -9,6 +9,7 @@ import numpy as np
 from ..body.mesh import MAX_RESOLUTION
 from ..core.checks import positive_int
 from .problems import MATERIALS, check_name, build_setup, get_study_problem
+from ..mechanics.backends import available_backends
 
 __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
 
@@ -91,8 +92,6 @@ class Study:
     seed: int = 0
 
     def __post_init__(self):
-        from ..mechanics.backends import available_backends
-
         for k in ("problems", "resolutions", "materials", "methods", "guesses"):
             v = getattr(self, k)
             if isinstance(v, (str, bytes)) or not isinstance(v, Iterable):
@@ -241,7 +240,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
 )}
 
 
-#: The fidelity study (run by :func:`mdsr_opt.fidelity.run_fidelity_study`): problems with loads.
+#: The fidelity study (run by :func:`mdsr_opt.studies.fidelity.run_fidelity_study`): problems with loads.
 FIDELITY_STUDY = "fidelity"
 
 
@@ -255,6 +254,6 @@ def get_study(name: str | Study) -> Study:
     if isinstance(name, Study):
         return name
     if name == FIDELITY_STUDY:
-        raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.fidelity.run_fidelity_study "
+        raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.studies.fidelity.run_fidelity_study "
                          "(or `mdsr study fidelity`)")
     return STUDIES[check_name(name, list_studies(), "study")]

@@ -12,13 +12,17 @@ import platform
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
+import casadi
 import numpy as np
+import scipy
 
+from .. import __version__
 from ..core.errors import checking_input
 from ..core.guards import interruptible
 from ..body.io import atomic_path, write_json
 from ..core.results import format_value, to_jsonable
 from ..core.stats import fit_slopes
+from ..scenes.rundir import RunFolder
 from .runs import fill_accuracy, run_all
 from .spec import COLUMNS, FAILURES, Study, TIMING_COLUMNS, get_study
 
@@ -162,18 +166,12 @@ def output_folder(out, overwrite: bool, names: Sequence[str]):
     if out is None:
         yield None
         return
-    from ..scenes.rundir import RunFolder
 
     with RunFolder(out, overwrite=overwrite, claims=names) as folder:
         yield folder
 
 
 def environment_info() -> dict:
-    import casadi
-    import scipy
-
-    from .. import __version__
-
     return {"mdsr_opt": __version__, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "casadi": casadi.__version__, "platform": platform.platform(),
             "machine": platform.machine(), "cpus": os.cpu_count()}

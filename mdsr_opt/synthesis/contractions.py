@@ -55,7 +55,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.
     weights : (n,) array, optional
-        Node weights ``e_i``; default :func:`~mdsr_opt.align.node_weights` with ``interior_weight``.
+        Node weights ``e_i``; default :func:`~mdsr_opt.mechanics.align.node_weights` with ``interior_weight``.
     interior_weight : float in [0.3, 0.7], default 0.5
     muscle_model : {"cable", "springs"}, default "cable"
         As in :func:`~mdsr_opt.solve_internal`: the exact rope (its path length is ``(1 - a) L0``, its
@@ -64,7 +64,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         Muscle spring stiffness relative to ``E t`` (springs only).
     anchor_radius : float, optional
         Radius of the rigid patch at each muscle end (a length, >= 0); default
-        :func:`~mdsr_opt.muscle_constraints.default_anchor_radius` (a fraction of the body's size).
+        :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` (a fraction of the body's size).
     tol : float, optional
         Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
         (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).

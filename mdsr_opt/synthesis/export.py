@@ -1,7 +1,7 @@
 """Fabrication files: the body and its muscle channels at true scale, and the muscle table.
 
-:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.poses.PosesResult`, a
-:class:`~mdsr_opt.design.DesignResult` or a mapping of pose names to DesignResults):
+:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.synthesis.poses.PosesResult`, a
+:class:`~mdsr_opt.synthesis.results.DesignResult` or a mapping of pose names to DesignResults):
 
 ``<name>.svg``
     The body outline, its holes and every muscle channel (the centre line along the muscle's mesh edges,
@@ -36,11 +36,13 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..body.fingerprint import check_same_mesh
+from ..body.io import atomic_path
 from ..body.mesh import Mesh
 from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.results import compact_repr, to_jsonable
+from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 
@@ -129,7 +131,6 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         Drawn width of a channel (length units); default 0.2 mean edge lengths.
     """
     from .pipeline import PipelineResult
-    from .poses import PosesResult
 
     units = check_units(units)
     if not isinstance(mesh, Mesh):
@@ -319,8 +320,8 @@ def _dxf_text(fd: FabricationData) -> str:
     carries the channel width (groups 40/41). R12 has no unit variable: ``$INSUNITS`` (R2000's) is
     written for the readers that honour it (ezdxf, QCAD/LibreCAD); AutoCAD reports it as unknown and
     ignores it, as it does any header variable newer than the file. The SVG and the CSV state the unit
-    as well. Writing it here instead of through ezdxf (whose import alone took 0.25-0.3 s of
-    a 0.3 s fabrication job in ``mdsr run gecko``) keeps the whole export at a few milliseconds."""
+    as well. It is written here, not through ezdxf, whose import alone costs more than the whole
+    export."""
     lines: list[str] = []
 
     def g(code: int, value) -> None:
@@ -491,8 +492,6 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         other muscles, missing muscles, a name that is no plain file stem
         (:func:`~mdsr_opt.core.checks.check_stem`): before anything is written.
     """
-    from ..body.io import atomic_path
-
     check_stem(name, "name")  # no path separator, no control character: before anything is written
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width)
     svg = _svg_text(fd, name)

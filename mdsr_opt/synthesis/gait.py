@@ -1,6 +1,6 @@
 """Gait schedules: the strokes of every muscle over a cyclic sequence of poses on one shared layout.
 
-:func:`gait_schedule` takes a :class:`~mdsr_opt.poses.PosesResult` (one layout, every pose's strokes) and a
+:func:`gait_schedule` takes a :class:`~mdsr_opt.synthesis.poses.PosesResult` (one layout, every pose's strokes) and a
 sequence of its poses, interpolates the strokes linearly between them and solves every frame forward. The
 schedule is written as a CSV actuation schedule in length units (:meth:`GaitSchedule.write_csv`), drawn as
 a chart (:func:`plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
@@ -9,10 +9,12 @@ the scene runner's hook: layout, schedule, chart, GIF and fabrication files of a
 
 from __future__ import annotations
 
+import copy
 import csv
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -237,7 +239,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     step_time : float
         Seconds per step.
     units : str
-        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.export.UNITS`).
+        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`).
     solve_options : dict, optional
         Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
         tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
@@ -409,7 +411,7 @@ def _write_schedule(schedule: GaitSchedule, title: str, path) -> str:
 def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None) -> dict | None:
     """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
 
-    Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.poses.design_poses`, the scene's routing and
+    Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.synthesis.poses.design_poses`, the scene's routing and
     design options, the budget ``gait.max_muscles``; the runner's own per-case routings and designs are the
     separate layouts compared against), solves the schedule (:func:`gait_schedule`) and writes
     ``layout.json``, ``schedule.csv``, ``schedule.png`` and ``<gait>.gif`` (with ``figures``) and the
@@ -433,9 +435,6 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
         None when a pose of the gait was not run (``--case``).
     """
-    import copy
-    from pathlib import Path
-
     from .export import export_fabrication, fabrication_files
     from ..body.io import write_json
     from .poses import design_poses

@@ -97,7 +97,7 @@ class _Assembly:
 
 def _scatter_dm(rows: np.ndarray, cols: np.ndarray, wts: np.ndarray, nrow: int, ncol: int) -> ca.DM:
     """The sparse DM ``S[rows[k], cols[k]] += wts[k]`` built in CSC order directly (one sort of the
-    entries; duplicates summed), without scipy's format conversions (about 2x faster at 10^5 entries)."""
+    entries; duplicates summed), without scipy's format conversions."""
     key = cols * nrow + rows
     order = np.argsort(key, kind="stable")
     key, w = key[order], wts[order]
@@ -340,11 +340,10 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
 #: IPOPT options of a warm-started design (the start is an equilibrium with its least-squares multipliers):
 #: a small first barrier parameter and bound push keep IPOPT near that start instead of recentring the
 #: contractions and tensions, and the least-squares estimate of the constraints' multipliers (a
-#: factorisation) is skipped. Measured on the 3k-node, 4-muscle case of bench_design (CPU seconds of the NLP
-#: solve, iterations): reachable target 0.70 s, 6 -> 0.23 s, 2; noisy target 0.87 s, 9 -> 0.72 s, 7; far
-#: start 1.43 s, 11 -> 1.02 s, 9; contractions equal to 1e-15. The bounds' multipliers start at 1e-8
-#: instead of 1 (the start's bounds are inactive but for slack ropes and contractions at 0): a reachable
-#: target then takes 1 iteration instead of 2 (0.15 -> 0.09 s at 3k nodes, 4 muscles); over 16 cases of
+#: factorisation) is skipped. On the 3k-node, 4-muscle case of bench_design that takes IPOPT iterations
+#: from 6 to 2 (reachable target), 9 to 7 (noisy target) and 11 to 9 (far start), contractions equal to
+#: 1e-15. The bounds' multipliers start at 1e-8 instead of 1 (the start's bounds are inactive but for slack
+#: ropes and contractions at 0): a reachable target then takes 1 iteration instead of 2; over 16 cases of
 #: bench_design's strips (300-3k nodes, 2-8 muscles; reachable, noisy, far start and stretched targets) 97
 #: iterations against 117, the same contractions to 1e-11.
 WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10, "constr_mult_init_max": 0.0,
@@ -352,11 +351,9 @@ WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10,
 
 
 #: MUMPS's fill-reducing ordering for the design's KKT matrices: approximate minimum degree (0) instead of
-#: MUMPS's automatic choice. Measured on bench_design's strips with 4 muscles, the design's IPOPT call
-#: (medians of 3, alternating, same iterations unless noted), automatic -> AMD: 300 nodes 0.035 -> 0.026 s
-#: (reachable target) and 0.067 -> 0.051 s (noisy target); 1k 0.110 -> 0.054 and 0.282 -> 0.102 s; 3k
-#: 0.160 -> 0.147 and 0.334 -> 0.313 s; 10k reachable 0.80 s with AMD, noisy 29.5 s in 33 iterations ->
-#: 6.0 s in 18. QAMD (6) was close to AMD, METIS, PORD, AMF and SCOTCH slower.
+#: MUMPS's automatic choice, which on bench_design's strips with 4 muscles (300 to 10k nodes) made the
+#: design's IPOPT call slower at every size, with the same iterations except at 10k nodes (noisy target: 33
+#: iterations against 18 with AMD). QAMD (6) was close to AMD; METIS, PORD, AMF and SCOTCH were slower.
 MUMPS_ORDERING = 0
 
 
@@ -489,7 +486,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
                                    tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())), ipopt_opts)
     t_start = time.perf_counter()
     if warm_start:
-        # from the target any equilibrium will do (no stability check: 0.04 s at 3k nodes), since the design
+        # from the target any equilibrium will do (no stability check), since the design
         # is verified from rest and repeated from rest if that fails; from rest, the stable one
         x0, ok, status = fwd.solve(a0, start=prob.y if warm_start == "target" else None)
         if not ok:

@@ -15,8 +15,8 @@ buffers from vectorised numpy:
   and its derivatives per node.
 
 Each sparse output is summed from its parts by one ``bincount`` into a pattern made once
-(:class:`SparseLayout`), so building the NLP costs index arithmetic only: at 3k nodes and 4 muscles
-about 30 ms, against about 0.5 s for the MX graph of the term-by-term assembly.
+(:class:`SparseLayout`), so building the NLP costs index arithmetic only, no MX graph of a term-by-term
+assembly.
 
 It applies when the energy is numeric (Neo-Hookean or linear elastic, see
 :attr:`~mdsr_opt.mechanics.model.EnergyModel.is_numeric`) and the contractions move at most the

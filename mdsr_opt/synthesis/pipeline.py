@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 import numpy as np
 
+from ..body.io import read_mesh
+from ..body.material import LinearElastic, NeoHookean
 from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.results import compact_repr
-from ..mechanics.loadsteps import check_mesh_material
+from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
 from .contractions import design_contractions
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
+from .routing import route_muscles
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -125,11 +129,6 @@ class PipelineResult:
             ``path`` is a file; ``design.json`` is not valid JSON, not a design result, or damaged (a
             field missing or of the wrong kind, named); a mesh file cannot be read or does not match.
         """
-        import json
-
-        from ..body.io import read_mesh
-        from ..body.material import LinearElastic, NeoHookean
-
         directory = os.fspath(path)
         if not os.path.exists(directory):
             raise FileNotFoundError(f"no such design result folder: {directory}")
@@ -228,7 +227,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     muscles : optional
         Use these muscles instead of routing them.
     routing_options : dict, optional
-        Keyword arguments for :func:`~mdsr_opt.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
+        Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
     method : str
         The design method (see :func:`design_contractions`).
     external_options : dict, optional
@@ -261,7 +260,6 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     >>> out.success, out.design.difference < 0.05
     (True, True)
     """
-    from ..mechanics.loadsteps import parse_drags
     from ..mechanics.equilibrium import solve_external
 
     t0 = time.perf_counter()
@@ -273,8 +271,6 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
-        from .routing import route_muscles
-
         rr = route_muscles(mesh, ext.x, **(routing_options or {}))
         mus = tuple(rr.muscles)
         if not mus:

@@ -2,14 +2,14 @@
 
 A real muscle-driven robot carries one set of muscles and changes pose by changing their strokes.
 :func:`design_poses` lays ONE set of muscles for all the target poses of a body and designs each pose's
-strokes on it; :func:`~mdsr_opt.gait.gait_schedule` turns a cyclic sequence of those poses into an actuation schedule
-(the stroke of every muscle over time), solved forward frame by frame.
+strokes on it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` turns a cyclic sequence of those poses into an
+actuation schedule (the stroke of every muscle over time), solved forward frame by frame.
 
 Shared layout
 -------------
 The layout is the union of the poses' own routings, deduplicated, under a muscle budget:
 
-1. every pose is routed on its own target (:func:`~mdsr_opt.routing.route_muscles` with the same options),
+1. every pose is routed on its own target (:func:`~mdsr_opt.synthesis.routing.route_muscles` with the same options),
    giving each pose a ranked list of muscles (strongest first);
 2. the candidates are taken round-robin by rank (every pose's strongest muscle, then every pose's second
    ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
@@ -29,11 +29,11 @@ With the layout fixed, the poses share no unknowns: every pose has its own state
 alignment, so a single flattened NLP over all poses is block diagonal. Measured side by side with the same
 stand-in machinery (``tests/benchmarks/bench_poses.py``: gecko, 555 nodes, 4 shared muscles, 2 poses, 4
 repeats), the joint NLP reaches the same optima (to 1e-11), takes 24 IPOPT iterations against 22 + 17 for
-the two NLPs apart, solves in about the same time (joint / per pose: 0.65-1.16, median about 1.0) and
-builds in about half the time (one solver instead of two). Solving is not faster, and the build saving is
-small next to the design module's own assembled NLPs, so the poses are designed one NLP per pose with
-:func:`~mdsr_opt.design.design_contractions` on the shared layout: the exact cable model, every pose
-verified on its own, and a pose that fails does not spoil the others.
+the two NLPs apart, solves in about the same time and builds in about half the time (one solver instead
+of two). Solving is not faster, and the build saving is small next to the design module's own assembled
+NLPs, so the poses are designed one NLP per pose with
+:func:`~mdsr_opt.synthesis.contractions.design_contractions` on the shared layout: the exact cable model,
+every pose verified on its own, and a pose that fails does not spoil the others.
 
 A muscle is *engaged* in a pose when its path shortens in that pose's target; the pose is designed with its
 engaged muscles only. The others are *released*: an inextensible rope held at its rest length would stop
@@ -59,6 +59,8 @@ True
 
 from __future__ import annotations
 
+import inspect
+import json
 import math
 import os
 import time
@@ -193,8 +195,8 @@ class PosesResult:
         The full per-pose designs (in memory only; empty after :meth:`load`).
     rest_mesh : dict or None
         The fingerprint of the mesh the layout was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
-        saved with it; :func:`~mdsr_opt.gait.gait_schedule` and :func:`~mdsr_opt.export.export_fabrication`
-        refuse another mesh (None: not recorded, not checked).
+        saved with it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` and
+        :func:`~mdsr_opt.synthesis.export.export_fabrication` refuse another mesh (None: not recorded, not checked).
     """
 
     names: tuple
@@ -313,8 +315,6 @@ class PosesResult:
             The file (named) is not valid JSON, not a poses result, or damaged (a field missing or of the
             wrong shape).
         """
-        import json
-
         from ..body.io import read_json
 
         try:
@@ -361,7 +361,7 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     Parameters
     ----------
     mesh : Mesh
-    layouts : mapping pose name -> muscles ranked strongest first (as :func:`~mdsr_opt.routing.route_muscles`
+    layouts : mapping pose name -> muscles ranked strongest first (as :func:`~mdsr_opt.synthesis.routing.route_muscles`
         returns them).
     max_muscles : int, optional
         The budget (at least 1); default: no limit.
@@ -422,10 +422,11 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         The muscle budget of the shared layout (at least 1); default: every non-duplicate muscle the poses'
         routings give.
     routing_options : dict, optional
-        Keywords of :func:`~mdsr_opt.routing.route_muscles`, used for every pose's own routing (a
+        Keywords of :func:`~mdsr_opt.synthesis.routing.route_muscles`, used for every pose's own routing (a
         ``max_muscles`` there limits each pose's own layout).
     design_options : dict, optional
-        Keywords of :func:`~mdsr_opt.design.design_contractions` (``method``, ``a_max``, ``muscle_model``...).
+        Keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
+        ``muscle_model``...).
     overlap : float, default 0.5
         Duplicate threshold of :func:`shared_layout`.
     compare : bool, default True
@@ -540,8 +541,6 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
 def _same_design(mesh, sep, engaged, dopt) -> bool:
     """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
     **dopt)`` would make (same muscles in the same order, same recorded options)?"""
-    import inspect
-
     from ..mechanics.anchors import anchor_radius_or_default
     from .contractions import design_contractions
 

@@ -194,7 +194,7 @@ class _ConstraintBlock:
 
     Rows: for the cable, one per rope, ``L_c(x) / L0_c - 1`` (the NLP adds ``+ a_c``: the equality
     ``L_c = (1 - a_c) L0_c`` as a strain); then the rigid end-patch rows of
-    :class:`~mdsr_opt.muscle_constraints.MuscleConstraints`, each divided by the norm of its gradient at rest
+    :class:`~mdsr_opt.mechanics.constraints.MuscleConstraints`, each divided by the norm of its gradient at rest
     (a length). With multipliers ``kappa`` (one per row) the stationarity conditions gain ``J(x)^T kappa``;
     for a rope, ``kappa_c = tau_c L0_c / (E t h)`` (``tau_c`` the tension, :meth:`tension`).
 

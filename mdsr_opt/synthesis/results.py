@@ -121,7 +121,7 @@ class DesignResult:
         Spring stiffness relative to ``E t`` (springs only).
     anchor_radius : float
         Radius of the rigid patch at each muscle end (a length; see
-        :func:`~mdsr_opt.muscle_constraints.anchor_patches`).
+        :func:`~mdsr_opt.mechanics.anchors.anchor_patches`).
     rest_lengths : (m,) ndarray
         Each muscle's rest length ``L0`` along its node chain.
     achieved : (m,) ndarray

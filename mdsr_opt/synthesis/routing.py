@@ -34,7 +34,7 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    of the joined edges) or dropped; the result's ``dropped`` records each with the reason.
    The rest are ranked by the contraction they capture (``sum w * l0``), and at most ``max_muscles`` kept.
 5. **Symmetry.** When the body is mirror-symmetric and the target contracts mirrored edges alike,
-   every step is taken together with its mirror image (:mod:`mdsr_opt.routing_symmetry`), so the
+   every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
 
 A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
@@ -67,9 +67,10 @@ Deviations from the paper (and from the project's design notes), on purpose:
 * The tortuosity is a rule (``max_turn``) besides a cost: the paper wants smooth muscles; a rope that turns
   sharply at a node rubs and cuts the silicone.
 
-The search itself lives in :mod:`mdsr_opt.routing_search` (:class:`~mdsr_opt.routing_search.Router`),
-the mirror symmetry in :mod:`mdsr_opt.routing_symmetry`, the quality table of the problem library in
-:mod:`mdsr_opt.routing_quality`.
+The search itself lives in :mod:`mdsr_opt.synthesis.routing_search`
+(:class:`~mdsr_opt.synthesis.routing_search.Router`), the mirror symmetry in
+:mod:`mdsr_opt.synthesis.routing_symmetry`, the quality table of the problem library in
+:mod:`mdsr_opt.studies.routing_quality`.
 
 Determinism: ties are broken by rest geometry (edge midpoints, node coordinates), never by node index,
 and weights are compared on a grid of ``1e-9``, so the ~1e-16 round-off of a rigid motion of the target

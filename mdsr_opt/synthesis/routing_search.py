@@ -1,10 +1,10 @@
-"""The best-first muscle search behind :func:`mdsr_opt.routing.route_muscles` (see its module docstring).
+"""The best-first muscle search behind :func:`mdsr_opt.synthesis.routing.route_muscles` (see its module docstring).
 
 :class:`Router` holds one routing run: the quantised contraction weights, the units (simple paths with exact
 integer sums of their weights), the contracted regions and their seed units, the growth steps with their
 cost ``g = K_a * g_a + K_b * (1 - cos theta)`` and heuristic, the mirror-image steps of symmetric routing,
 and the fragment rule. Every ordering uses rest geometry, never node indices. The module is internal to
-the routing; :func:`mdsr_opt.routing.route_muscles` is the public entry.
+the routing; :func:`mdsr_opt.synthesis.routing.route_muscles` is the public entry.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Mirror symmetry of a mesh and of a contraction field, for symmetric muscle routing.
 
 :func:`find_reflection` looks for a reflection that maps the rest mesh onto itself (node for node, edge
-for edge). :func:`~mdsr_opt.routing.route_muscles` uses it: when the body is mirror-symmetric and the
+for edge). :func:`~mdsr_opt.synthesis.routing.route_muscles` uses it: when the body is mirror-symmetric and the
 target contracts mirrored edges alike, the muscles are routed in mirrored pairs (or as single muscles
 that are their own mirror image), so a symmetric target gets symmetric muscles.
 
@@ -66,7 +66,7 @@ def nearest_within(X: np.ndarray, Y: np.ndarray, tol: float) -> tuple[np.ndarray
     A hash of ``X`` on a grid of square cells at least ``tol`` wide (``2 tol``, or 1e-8 of the points'
     span if larger): a point within ``tol`` of a query lies in one of the 3 x 3 cells around the query's.
     Where a query has a match this is a k-d tree's nearest neighbour, without importing ``scipy.spatial``
-    (0.14 s, on the path of every symmetric body's routing).
+    on the path of every symmetric body's routing.
     """
     X, Y = np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
     for name, P in (("X", X), ("Y", Y)):

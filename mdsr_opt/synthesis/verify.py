@@ -24,7 +24,7 @@ __all__ = ['check_minimum', 'verify_design']
 
 #: a forward re-solve that lands this close to the design's state (after rigid alignment, relative to the
 #: body's size; both solved to 1e-10, they agree to about 1e-13 at 3k nodes) is that state: its stability
-#: check is the design's (:func:`verify_design`), which saves a factorisation (0.03-0.05 s at 3k nodes)
+#: check is the design's (:func:`verify_design`), which saves a factorisation
 SAME_STATE_RTOL = 1e-9
 
 
@@ -39,7 +39,7 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
 
     Returns ``(positive_definite, min_eigenvalue, residual)``: whether the (reduced) free-coordinate Hessian
     is positive definite, from the inertia of a sparse symmetric factorisation
-    (:func:`~mdsr_opt.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
+    (:func:`~mdsr_opt.mechanics.stability.check_stability`, no eigen-solve of the Hessian); its smallest eigenvalue
     relative to ``E t`` (when positive definite an estimate by LOBPCG preconditioned by the factor; else the
     curvature along the direction of most negative curvature found, an upper bound); and the scaled KKT
     residual that :func:`~mdsr_opt.solve_internal` accepts its states by
@@ -108,13 +108,12 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     body with several, e.g. buckled one way or the other). ``start="design"`` starts the forward solve from
     the design's own state (moved rigidly into the solver's gauge frame) instead: the forward solver must
     find it a stable equilibrium at these contractions, or move away from it (a gap) or fail; it does not
-    check that the state is reached from rest, at about a third of the cost (3k nodes, 4 muscles: 0.21 s
-    against 0.63 s under load). A design state that cannot start a solve (an inverted element) is verified
-    from rest.
+    check that the state is reached from rest, at about a third of the cost. A design state that cannot start
+    a solve (an inverted element) is verified from rest.
 
     When the target came from external driving, give its ``anchors`` and ``drags`` (as in
     :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
-    (:func:`~mdsr_opt.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
+    (:func:`~mdsr_opt.mechanics.equilibrium.external_stability`), since a saddle (e.g. an unbuckled compressed strip)
     is a shape no body holds; ``target_stable`` reports it.
 
     The minimum test is the inertia of one sparse factorisation; ``lowest=True`` also estimates the smallest

@@ -19,7 +19,7 @@ Usage::
     python tests/benchmarks/bench_routing.py --quality --out bench_out   # routing-quality table
     python tests/benchmarks/bench_routing.py --ka-sweep                  # K_a sweep of the Figure 6 targets
 
-``--quality`` runs :func:`mdsr_opt.routing_quality.routing_quality` over every case of the problem library
+``--quality`` runs :func:`mdsr_opt.studies.routing_quality.routing_quality` over every case of the problem library
 (coarse, or ``--resolution``) and writes ``routing_quality.csv`` and ``routing_quality.md``. ``--ka-sweep``
 routes the five Figure 6 targets at K_a = 0.5 .. 32 and prints the muscle counts and edge counts, the
 sweep the Figure 6 K_a pairs were chosen from.

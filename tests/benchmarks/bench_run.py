@@ -21,16 +21,15 @@ the work (each wrapper's *exclusive* time goes to its stage, so nothing is count
 - ``other``: the rest (prototype mesh building, bookkeeping).
 
 ``cpu`` is the CPU time of this process and of its finished children, so it measures the work done, where
-``wall`` measures the wait; ``jobs cpu`` is the forked figure jobs' part of it in trees that had them (per job
-function, ``BackgroundWriter.job_cpu``; a pool's workers are not counted): on two cores a run cannot end
-before its CPU seconds over two. ``--serial`` runs with ``background=False`` (everything in this
+``wall`` measures the wait (a pool's workers are not counted): on two cores a run cannot end before its CPU
+seconds over two. ``--serial`` runs with ``background=False`` (everything in this
 process, one after the other), for a side-by-side comparison.
 
 ``--repeats`` runs each scene that many times (in one process, after a warm-up run that pays the imports
 and CasADi's first-call costs) and reports medians, with the whole run's ``wall`` and ``cpu`` seconds beside
 the per-stage clock's total (``run_scene``). The medians per stage are printed as a table, written
 to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` with ``--label``; in ``--out``,
-default ``tests/benchmarks/run``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
+default ``bench_out``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
 imports and scene building included, with the modules' bytecode written first as an installation has it),
 the median of ``--repeats`` runs (at most 3) per scene, with its CPU time (``cli cpu``: the command's and its
 figure jobs'), and ``--all`` times ``mdsr run all`` once. ``--against REF`` runs the command as committed at ``REF`` too,
@@ -42,14 +41,13 @@ e.g. an exported older commit, to measure before and after with the same script)
 Run:  python tests/benchmarks/bench_run.py                       # gecko and humanoid, 3 repeats
       python tests/benchmarks/bench_run.py --scenes gecko --repeats 1
       python tests/benchmarks/bench_run.py --cli --all
-      python tests/benchmarks/bench_run.py --scenes gecko humanoid --repeats 8 --cli --against 1183579
+      python tests/benchmarks/bench_run.py --scenes gecko humanoid --repeats 8 --cli --against main
       python tests/benchmarks/bench_run.py --tree /tmp/base --clock cpu --label before   # an older tree
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import functools
 import importlib
@@ -80,7 +78,6 @@ WRAPS = [
     ("mdsr_opt.photos.loops", "simulated_loops", "photos/contours"),
     ("mdsr_opt.scenes.runner", "write_case", "figures"),
     ("mdsr_opt.scenes.runscene", "write_case", "figures"),  # older trees: runscene calls it by its own name
-    ("mdsr_opt.core.background", "BackgroundWriter.submit", "figures"),  # older trees: a job run here, or a fork
     ("mdsr_opt.core.jobs", "Jobs.submit", "figures"),  # a job run here, or sending it to the pool
     ("mdsr_opt.plot", "plot_scene", "figures"),
     ("mdsr_opt.plot", "save_figure", "figures"),
@@ -92,9 +89,6 @@ WRAPS = [
     ("mdsr_opt.photos.camera", "SyntheticPhoto.save", "writing"),
     ("mdsr_opt.synthesis.export", "export_fabrication", "writing"),
     ("mdsr_opt.synthesis.poses", "PosesResult.save", "writing"),
-    ("mdsr_opt.core.background", "BackgroundWriter.wait", "waiting"),
-    # a submit waiting for a slot (older trees, with the jobs' server: not through wait)
-    ("mdsr_opt.core.background", "BackgroundWriter._wait_until", "waiting"),
     ("mdsr_opt.core.jobs", "Jobs.wait", "waiting"),
 ]
 
@@ -177,38 +171,12 @@ def time_modes(name: str, repeats: int, modes=(False, True), log=None) -> dict:
             if log:
                 log(f"  {name}{' serial' if serial else ''} run {r}{' (warm-up)' if r == 0 else ''}: "
                     f"{row['total']:.2f} s (" + ", ".join(f"{k} {row[k]:.2f}" for k in STAGES) + ")")
-    keys = STAGES + ("total", "build", "wall", "cpu", "jobs cpu")
+    keys = STAGES + ("total", "build", "wall", "cpu")
     out = {}
     for m in modes:
         timed = rows[m][1:] if repeats else rows[m]
         out[m] = {k: statistics.median(row[k] for row in timed) for k in keys}
-        names = sorted({n for row in timed for n in row["jobs"]})
-        out[m]["jobs"] = {n: statistics.median(row["jobs"].get(n, 0.0) for row in timed) for n in names}
     return out
-
-
-@contextlib.contextmanager
-def counting_job_cpu(jobs: dict):
-    """Within the block, the forked figure jobs' CPU seconds summed per job function into ``jobs``
-    (``BackgroundWriter.job_cpu``, read as each writer's block ends); nothing in an older tree (--tree)
-    without the writer or its accounting."""
-    try:
-        from mdsr_opt.core.background import BackgroundWriter
-    except ImportError:
-        yield
-        return
-    exit0 = BackgroundWriter.__exit__
-
-    def exit_and_count(self, *exc):
-        for job, cpu in getattr(self, "job_cpu", ()):
-            jobs[job] = jobs.get(job, 0.0) + cpu
-        return exit0(self, *exc)
-
-    BackgroundWriter.__exit__ = exit_and_count
-    try:
-        yield
-    finally:
-        BackgroundWriter.__exit__ = exit0
 
 
 def _one_run(name: str, serial: bool) -> dict:
@@ -221,9 +189,8 @@ def _one_run(name: str, serial: bool) -> dict:
     t_build = time.perf_counter() - t0
     clock = StageClock()
     undo = clock.install()
-    jobs: dict = {}  # CPU seconds of the forked figure jobs, summed per job function
     try:
-        with counting_job_cpu(jobs), tempfile.TemporaryDirectory() as d:
+        with tempfile.TemporaryDirectory() as d:
             t0, w0, c0 = clock.clock(), time.perf_counter(), _cpu()
             rep = run_scene(scene, Path(d) / name, log=None, **({"background": False} if serial else {}))
             total = clock.clock() - t0
@@ -234,7 +201,7 @@ def _one_run(name: str, serial: bool) -> dict:
         print(f"  warning: a run of {name} did not succeed", file=sys.stderr)
     row = dict(clock.totals)
     row["other"] += total - sum(clock.totals.values())
-    row.update(total=total, build=t_build, wall=wall, cpu=cpu, jobs=jobs, **{"jobs cpu": sum(jobs.values())})
+    row.update(total=total, build=t_build, wall=wall, cpu=cpu)
     return row
 
 
@@ -318,7 +285,7 @@ def main(argv=None) -> int:
     p.add_argument("--against", default=None, metavar="REF",
                    help="with --cli: time the command also as committed at REF (git), alternating with this "
                         "tree, --repeats times each (not capped at 3)")
-    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "run"), help="folder of the CSV and chart")
+    p.add_argument("--out", default="bench_out", help="folder of the CSV and chart (default bench_out)")
     p.add_argument("--label", default="", help="a label for this measurement in the CSV and chart")
     p.add_argument("--before", default=None,
                    help="a CSV of an earlier measurement (run_<label>.csv) drawn beside this one in the chart")
@@ -370,16 +337,12 @@ def main(argv=None) -> int:
         print(f"  mdsr run all: {t_all:.1f} s wall, {c_all:.1f} s CPU ({load()})")
 
     cli_cols = (["cli", "cli cpu"] if a.cli or a.all else []) + (["cli ref", "cli ref cpu"] if a.against else [])
-    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "jobs cpu", "build"] + cli_cols
+    cols = ["scene", *STAGES, "run_scene", "wall", "cpu", "build"] + cli_cols
     print("\n| " + " | ".join(cols) + " |\n|" + "---|" + "---:|" * (len(cols) - 1))
     for name, r in results.items():
-        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["jobs cpu"], r["build"]] \
+        vals = [r[k] for k in STAGES] + [r["total"], r["wall"], r["cpu"], r["build"]] \
             + [r.get(k, float("nan")) for k in cli_cols]
         print(f"| {name} | " + " | ".join(f"{v:.2f}" for v in vals) + " |")
-    for name, r in results.items():  # where the forked jobs' CPU goes (on two cores, beside the parent's)
-        if r["jobs"]:
-            print(f"{name}: figure jobs' CPU by job (medians, s): "
-                  + ", ".join(f"{n} {v:.2f}" for n, v in sorted(r["jobs"].items(), key=lambda kv: -kv[1])))
     if t_all is not None:
         print(f"\nmdsr run all: {t_all:.1f} s")
     print(f"({a.clock} seconds, medians of {a.repeats}; target: run_scene/cli < 4 s per scene, run all < 90 s; {load()})")
@@ -391,10 +354,10 @@ def main(argv=None) -> int:
         w = csv.writer(fh)
         w.writerow(["label", *cols])
         for name, r in results.items():
-            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "jobs cpu", "build")]
+            w.writerow([a.label, name] + [f"{r[k]:.4f}" for k in STAGES + ("total", "wall", "cpu", "build")]
                        + [f"{r.get(k, float('nan')):.4f}" for k in cli_cols])
         if t_all is not None:
-            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 5) + [f"{t_all:.4f}", f"{c_all:.4f}"])
+            w.writerow([a.label, "all"] + [""] * (len(STAGES) + 4) + [f"{t_all:.4f}", f"{c_all:.4f}"])
     bars = dict(results)
     if a.before:
         with open(a.before, newline="") as fh:

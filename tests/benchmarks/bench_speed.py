@@ -5,7 +5,7 @@ For each size (about 1k, 3k, 10k nodes; 30k with ``--big``) on a 4 x 1 strip (``
 
 * IPOPT (the default backend) on a fresh mesh object: model build, solve, iterations; then a repeated solve
   on the built model (new drags);
-* the ``newton`` backend (:mod:`mdsr_opt.newton`) on a fresh mesh object, same tolerance, through the same
+* the ``newton`` backend (:mod:`mdsr_opt.mechanics.newton`) on a fresh mesh object, same tolerance, through the same
   ``solve_external`` pipeline (predictor, load steps, stability check): its wall time, its solver time
   alone, and the ratio IPOPT fresh / newton fresh;
 * the floor ``(iterations + 1) x (assembly + factorisation)``: the time of one vectorised assembly of the
