@@ -1,4 +1,4 @@
-"""Driving-quantity design (mdsr_opt.design): recovery, bounds, reachability, numbering, verification, I/O."""
+"""Driving-quantity design (mdsr_opt.synthesis.contractions): recovery, bounds, reachability, numbering, verification, I/O."""
 
 from __future__ import annotations
 

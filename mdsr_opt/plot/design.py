@@ -144,7 +144,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     Parameters
     ----------
     mesh : the rest mesh.
-    result : ``DesignResult`` (``mdsr_opt.design``); its ``x_aligned`` is drawn.
+    result : ``DesignResult`` (``mdsr_opt.synthesis.results``); its ``x_aligned`` is drawn.
     target : (n, 2) target positions.
     muscles : muscles to draw over the driven state.
     ticks : coordinate ticks (``False``: a run's figures, see :func:`plot_contraction_graph`).
