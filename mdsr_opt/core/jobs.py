@@ -29,8 +29,8 @@ import importlib
 import os
 import pickle
 import sys
-from concurrent.futures import Executor, wait as wait_for
 import threading
+from concurrent.futures import Executor, wait as wait_for
 from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
@@ -114,10 +114,24 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
         context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
+    # start the workers now, from a thread: starting one waits until the forkserver has imported the
+    # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile
+    # instead of waiting at its first job
+    starter = threading.Thread(target=_start_workers, args=(pool,), name="start-workers", daemon=True)
+    starter.start()
     try:
         yield pool
     finally:
+        starter.join()
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _start_workers(pool: Executor) -> None:
+    """Make ``pool`` start its worker processes (by a job that does nothing)."""
+    try:
+        pool.submit(os.getpid)
+    except RuntimeError:  # the pool was shut down first (its block ended at once)
+        pass
 
 
 def _call(job: bytes) -> Any:
