@@ -8,6 +8,7 @@ and drags; routing and design run from the page and the saved scene file must re
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import threading
 import subprocess
@@ -44,7 +45,12 @@ def open_browser():
     from selenium.webdriver.chrome.service import Service
 
     driver_path = shutil.which("chromedriver") or "/usr/bin/chromedriver"
-    assert Path(driver_path).exists(), "chromium-driver is missing: apt-get install -y chromium chromium-driver"
+    browser = shutil.which("chromium") or "/usr/bin/chromium"
+    if not (Path(driver_path).exists() and Path(browser).exists()):
+        hint = "Chromium and its driver are missing: apt-get install -y chromium chromium-driver"
+        if os.environ.get("CI"):  # .ci/run installs them: there a missing browser is a failure
+            pytest.fail(hint)
+        pytest.skip(hint)  # a newcomer's machine without a browser: the page's other tests still run
     return webdriver.Chrome(service=Service(driver_path), options=chrome_options())
 
 
