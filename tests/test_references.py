@@ -59,8 +59,16 @@ def _instance_attribute(cls: type, name: str) -> bool:
 
 
 def resolves(dotted: str) -> bool:
-    """Import the longest module prefix of ``dotted``, then look up the rest as attributes."""
+    """Import the longest module prefix of ``dotted``, then look up the rest as attributes.
+
+    ``mdsr_opt.problems`` is the checkout's top-level ``problems/`` folder, which only an installed package
+    (or an editable install) has inside ``mdsr_opt``: a test run from a checkout over a regular install
+    imports the source tree's ``mdsr_opt``, so its paths are resolved in that folder instead."""
     parts = dotted.split(".")
+    if parts[:2] == ["mdsr_opt", "problems"]:
+        if len(parts) == 2:
+            return (ROOT / "problems" / "__init__.py").is_file()
+        return (ROOT / "problems" / f"{parts[2]}.py").is_file()  # a problem script (its names unchecked)
     for i in range(len(parts), 0, -1):
         name = ".".join(parts[:i])
         try:
@@ -88,6 +96,8 @@ def test_the_resolver_tells_real_paths_from_stale_ones():
     assert not resolves(pkg + ".evaluate.render_photo")  # the old flat layout
     assert not resolves(pkg + ".mechanics.equilibrium.no_such_function")
     assert not resolves(pkg + ".mechanics.model.EnergyModel.no_such_attribute")
+    assert resolves(pkg + ".problems") and resolves(pkg + ".problems.gecko")  # the checkout's problems/
+    assert not resolves(pkg + ".problems.no_such_robot")
     refs = _references()
     assert len(refs) > 50 and "mdsr_opt.photos.camera.render_photo" in refs
 
