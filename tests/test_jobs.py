@@ -177,3 +177,13 @@ def test_a_process_killed_outright_leaves_no_worker_behind():
     while time.monotonic() < deadline and any(map(_exists, pids)):
         time.sleep(0.05)
     assert [p for p in pids if _exists(p)] == []
+
+
+def _niceness():
+    return os.nice(0)
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="process priorities are POSIX's (Windows: normal priority)")
+def test_workers_yield_the_cores_to_the_process_that_waits_for_them(pool):
+    # the jobs' process runs the solves, the critical path: its workers run at a lower priority
+    assert pool.submit(_niceness).result(timeout=60) == min(os.nice(0) + 15, 19)

@@ -72,6 +72,8 @@ def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | 
     """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
     variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
     threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
+    if hasattr(os, "nice"):  # POSIX: the jobs yield the cores to the process that waits for them, whose
+        os.nice(15)  # solves are the run's critical path (Windows: normal priority)
     os.environ.update(env)
     if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set
         from threadpoolctl import threadpool_limits
