@@ -368,7 +368,7 @@ class Mesh:
         import shapely
 
         from .triangulate import (TRIANGLES_PER_AREA, expected_triangles, quality_triangulation,
-                                  too_many_triangles, triangle_min_angles)
+                                  to_given_coordinates, too_many_triangles, triangle_min_angles)
 
         outer = check_polygon(outline, "outline")
         hole_polys = [check_polygon(h, f"holes[{i}]") for i, h in enumerate(holes or [])]
@@ -454,24 +454,7 @@ class Mesh:
             c = v[tri[int(np.argmin(ang))]].mean(axis=0) * s + centre
             warnings.warn(f"the mesh's smallest angle is {ang.min():.4g} degrees, in the triangle centred at "
                           f"({c[0]:.6g}, {c[1]:.6g}), below min_angle={min_angle:g}", UserWarning, stacklevel=2)
-        pts = v * s + centre
-        n_in = sum(len(p) for p in polys)
-        given = np.vstack(polys)
-        pts[:n_in] = given  # the input vertices exactly as given (Triangle keeps them first)
-        k = np.flatnonzero(on_segment >= 0)  # points on the boundary: onto the segments as given
-        i, j = segs[on_segment[k], 0], segs[on_segment[k], 1]
-        ua, ub = v[i], v[j]
-        t = np.einsum("ij,ij->i", v[k] - ua, ub - ua) / np.einsum("ij,ij->i", ub - ua, ub - ua)
-        pts[k] = given[i] + t[:, None] * (given[j] - given[i])
-        used = np.flatnonzero(np.bincount(tri.ravel(), minlength=len(pts)))
-        if len(used) != len(pts):  # drop vertices left outside (never expected with 'p')
-            remap = -np.ones(len(pts), dtype=np.int64)
-            remap[used] = np.arange(len(used))
-            pts, tri = pts[used], remap[tri]
-        d1, d2 = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
-        cw = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] < 0
-        tri[cw] = tri[cw][:, ::-1]
-        return cls(pts, tri)
+        return cls(*to_given_coordinates(v, tri, on_segment, segs, np.vstack(polys), s, centre))
 
     @classmethod
     def rectangle(cls, width: float, height: float, nx: int, ny: int,

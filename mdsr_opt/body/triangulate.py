@@ -37,7 +37,7 @@ import triangle as tr
 
 from .polygons import corner_angles
 
-__all__ = ["ThinPart", "expected_triangles", "too_many_triangles", "quality_triangulation",
+__all__ = ["ThinPart", "expected_triangles", "too_many_triangles", "quality_triangulation", "to_given_coordinates",
            "triangle_min_angles", "TRIANGLES_PER_AREA"]
 
 #: Triangles per unit of ``area / max_area`` that Triangle makes when the area bound governs (measured:
@@ -288,3 +288,28 @@ def quality_triangulation(vertices: np.ndarray, segments: np.ndarray, holes: np.
     on_segment[sub[ours, 1]] = marker[ours]
     on_segment[:n_in] = -1
     return v, t, on_segment, len(v) - n_in >= int(max_steiner)
+
+
+def to_given_coordinates(v: np.ndarray, tri: np.ndarray, on_segment: np.ndarray, segs: np.ndarray,
+                         given: np.ndarray, scale: float, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A triangulation of the unit-size copy of a polygon (:func:`quality_triangulation`'s vertices ``v``,
+    triangles ``tri`` and the input segment each vertex lies on, or -1) in the polygon's own coordinates:
+    scaled by ``scale`` and moved by ``centre``, the input vertices ``given`` exactly as given (Triangle keeps
+    them first), boundary points put onto the given segments, unused vertices dropped, every triangle
+    counter-clockwise. Returns ``(points, triangles)``."""
+    pts = v * scale + centre
+    pts[:len(given)] = given
+    k = np.flatnonzero(on_segment >= 0)
+    i, j = segs[on_segment[k], 0], segs[on_segment[k], 1]
+    ua, ub = v[i], v[j]
+    t = np.einsum("ij,ij->i", v[k] - ua, ub - ua) / np.einsum("ij,ij->i", ub - ua, ub - ua)
+    pts[k] = given[i] + t[:, None] * (given[j] - given[i])
+    used = np.flatnonzero(np.bincount(tri.ravel(), minlength=len(pts)))
+    if len(used) != len(pts):  # vertices left outside (never expected with 'p')
+        remap = -np.ones(len(pts), dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        pts, tri = pts[used], remap[tri]
+    d1, d2 = pts[tri[:, 1]] - pts[tri[:, 0]], pts[tri[:, 2]] - pts[tri[:, 0]]
+    cw = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0] < 0
+    tri[cw] = tri[cw][:, ::-1]
+    return pts, tri
