@@ -292,24 +292,20 @@ def test_a_requested_stop_is_raised_when_a_solve_returns_in_that_thread_only():
         cancel_stop(me + 1)
 
 
-def test_a_requested_stop_replaces_a_failed_solve_in_a_worker_thread_too():
-    """Review finding: off the main thread (Dask's workers) a solve that failed because of the stop stayed a
-    RuntimeError, which a caller could swallow."""
+def _raised_in_a_thread_asked_to_stop(fn, stop) -> list:
+    """The types of what ``fn()`` raised, run in a new thread for which ``stop`` was requested (as a study's
+    time budget requests it for the thread of its run)."""
     import threading
 
-    from mdsr_opt.core.guards import cancel_stop, interruptible, request_stop
-
-    class Budget(BaseException):
-        pass
+    from mdsr_opt.core.guards import cancel_stop, request_stop
 
     seen = []
 
     def work():
         me = threading.get_ident()
-        request_stop(me, Budget)
+        request_stop(me, stop)
         try:
-            with interruptible():
-                raise RuntimeError("evaluation failed")
+            fn()
         except BaseException as exc:  # noqa: BLE001 - what reached the caller
             seen.append(type(exc))
         finally:
@@ -318,7 +314,22 @@ def test_a_requested_stop_replaces_a_failed_solve_in_a_worker_thread_too():
     t = threading.Thread(target=work)
     t.start()
     t.join()
-    assert seen == [Budget]
+    return seen
+
+
+def test_a_requested_stop_replaces_a_failed_solve_in_a_worker_thread_too():
+    """Review finding: off the main thread (Dask's workers) a solve that failed because of the stop stayed a
+    RuntimeError, which a caller could swallow."""
+    from mdsr_opt.core.guards import interruptible
+
+    class Budget(BaseException):
+        pass
+
+    def failed_solve():
+        with interruptible():
+            raise RuntimeError("evaluation failed")
+
+    assert _raised_in_a_thread_asked_to_stop(failed_solve, Budget) == [Budget]
 
 
 def test_a_run_whose_deadline_fires_leaves_no_stop_for_the_next_run_on_its_thread(monkeypatch):
@@ -477,29 +488,12 @@ def test_an_ignored_sigint_stays_ignored():
 def test_a_requested_stop_stops_a_solve_at_its_first_iteration():
     """A study's time budget (request_stop from another thread) stops the solve of its thread at the next
     iteration, not at the solve's end."""
-    import threading
-
-    from mdsr_opt.core.guards import cancel_stop, request_stop
     from mdsr_opt.mechanics.backends import minimize
 
     class Budget(BaseException):
         pass
 
     model, p, x0, fixed, values = _pinned_strip()
-    seen = []
-
-    def work():
-        me = threading.get_ident()
-        request_stop(me, Budget)
-        try:
-            minimize(model, p, x0, fixed, values, tol=1e-10)
-        except BaseException as exc:  # noqa: BLE001 - what reached the caller
-            seen.append(type(exc))
-        finally:
-            cancel_stop(me)
-
-    t = threading.Thread(target=work)
-    t.start()
-    t.join()
-    assert seen == [Budget]
+    solve = lambda: minimize(model, p, x0, fixed, values, tol=1e-10)  # noqa: E731
+    assert _raised_in_a_thread_asked_to_stop(solve, Budget) == [Budget]
     assert [s.stats()["success"] for s in model._solvers.values()] == [False]  # stopped, not run to its end
