@@ -119,14 +119,21 @@ for k in range(1000):
 def _interrupt_repeated(backend, nx, ny, delay):
     """Run :data:`_REPEATED_EXTERNAL`, SIGINT ``delay`` s after it is ready; ``(returncode, stdout, stderr,
     seconds from the signal to the exit, the signal's time.time())``."""
+    return _interrupt_script(_REPEATED_EXTERNAL, backend, nx, ny, delay)
+
+
+def _interrupt_script(script, backend, nx, ny, delay):
+    """Run ``script`` (formatted with ``nx``, ``ny``, ``backend``) and send it SIGINT ``delay`` s after it
+    prints ``ready`` (or the delay that line names); ``(returncode, stdout, stderr, seconds from the signal
+    to the exit, the signal's time.time())``."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", _REPEATED_EXTERNAL.format(nx=nx, ny=ny, backend=backend)],
+    proc = subprocess.Popen([sys.executable, "-c", script.format(nx=nx, ny=ny, backend=backend)],
                             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
-        assert line.strip() == "ready", (line, proc.stderr.read())
-        time.sleep(delay)
-        assert proc.poll() is None, proc.stderr.read()
+        assert line.split()[:1] == ["ready"], (line, proc.stderr.read())
+        time.sleep(float(line.split()[1]) if len(line.split()) > 1 else delay)  # the script may know better
+        assert proc.poll() is None, "the solve ended before the interrupt: make it longer"
         proc.send_signal(signal.SIGINT)
         t_sig, wall = time.perf_counter(), time.time()
         out, err = proc.communicate(timeout=60)
@@ -172,23 +179,7 @@ def test_sigint_into_an_external_solve_stops_every_backend(backend, nx, ny):
 
 
 def _run_and_interrupt(backend, nx=200, ny=20, delay=1.0, script=_LONG_SOLVE):
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, "-c", script.format(nx=nx, ny=ny, backend=backend)],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        line = proc.stdout.readline()
-        assert line.split()[:1] == ["ready"], (line, proc.stderr.read())
-        time.sleep(float(line.split()[1]) if len(line.split()) > 1 else delay)  # the script may know better
-        assert proc.poll() is None, "the solve ended before the interrupt: make it longer"
-        proc.send_signal(signal.SIGINT)
-        t_sig = time.perf_counter()
-        out, err = proc.communicate(timeout=60)
-        elapsed = time.perf_counter() - t_sig
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return proc.returncode, out, err, elapsed
+    return _interrupt_script(script, backend, nx, ny, delay)[:4]
 
 
 @pytest.mark.parametrize("backend", ["ipopt", pytest.param("newton", marks=pytest.mark.slow)])

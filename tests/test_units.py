@@ -15,9 +15,9 @@ defaults.
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
-import networkx as nx
 import numpy as np
 import pytest
 
@@ -169,24 +169,13 @@ def _strip():
 
 
 def _random_muscles(mesh, rng, m):
-    """``m`` ropes along shortest edge paths between random boundary nodes far apart."""
-    G = nx.Graph()
-    for i, j in mesh.edges:
-        G.add_edge(int(i), int(j), weight=float(np.linalg.norm(mesh.points[i] - mesh.points[j])))
-    B = mesh.boundary_nodes
-    mus, used = [], set()
-    for _ in range(50):
-        if len(mus) == m:
-            break
-        a, b = rng.choice(B, 2, replace=False)
-        if np.linalg.norm(mesh.points[a] - mesh.points[b]) < 0.4 * mesh.size:
-            continue
-        path = nx.shortest_path(G, int(a), int(b), weight="weight")
-        key = frozenset(zip(path[:-1], path[1:]))
-        if key not in used:
-            used.add(key)
-            mus.append(Muscle(path))
-    return mus
+    """``m`` ropes along shortest edge paths between random boundary nodes far apart: the generator of
+    ``tests/benchmarks/bench_units.py``, whose figures these tests check on a few seeds."""
+    path = Path(__file__).parent / "benchmarks" / "bench_units.py"
+    spec = importlib.util.spec_from_file_location("bench_units", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench.random_ropes(mesh, rng, m)
 
 
 @pytest.mark.parametrize("seed", [1, 20, 31])
