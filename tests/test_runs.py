@@ -619,3 +619,12 @@ def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, mon
     rest_only = runscene.run_scene(scene, tmp_path / "none", cases=[], log=None, photos=False, figures=False,
                                    background=False)
     assert list(rest_only.animations) == ["still"] and rest_only.animations["still"]["n_frames"] == 2
+
+
+def test_a_manifest_nested_too_deeply_is_no_manifest_of_ours(tmp_path):
+    # a crafted .mdsr-run.json (nested past the parser's stack) is a file the folder holds, not a crash
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / MANIFEST_NAME).write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(OutputFolderError, match=r"\.mdsr-run\.json"):
+        RunFolder(out).__enter__()

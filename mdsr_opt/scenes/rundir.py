@@ -39,7 +39,6 @@ mdsr_opt.scenes.rundir.OutputFolderError: --out ... holds an earlier mdsr output
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import socket
@@ -49,6 +48,7 @@ import time
 from pathlib import Path, PurePosixPath
 from typing import Iterable
 
+from ..body.io import read_json
 from ..core.errors import InputError
 
 __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "Terminated", "check_out_path", "LOCK_NAME",
@@ -276,8 +276,8 @@ class _Earlier:
 
 def _read_earlier(folder: Path) -> _Earlier | None:
     try:
-        data = json.loads((folder / MANIFEST_NAME).read_text())
-    except (OSError, ValueError):
+        data = read_json(folder / MANIFEST_NAME)
+    except (OSError, ValueError):  # unreadable, not JSON, or nested too deeply: no manifest of ours
         return None
     if not isinstance(data, dict) or data.get("format") not in (_MANIFEST_FORMAT, _FORMAT_1):
         return None
@@ -286,7 +286,7 @@ def _read_earlier(folder: Path) -> _Earlier | None:
 
 def _holder(path: Path) -> str:
     try:
-        info = json.loads(path.read_text())
+        info = read_json(path)
         return (f"pid {info.get('pid')} on {info.get('host')}, `{info.get('command', '?')}`, since "
                 f"{info.get('started', '?')}")
     except (OSError, ValueError, AttributeError):
