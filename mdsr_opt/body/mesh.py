@@ -21,7 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.checks import as_float_array, as_index_array, positive_float, positive_int
-from .polygons import check_polygon, corner_angles, point_inside, polygon_area, ring_segments, segment_contacts
+from .polygons import (check_polygon, corner_angles, point_inside, polygon_area, ring_segments,
+                       segment_contacts, triangle_angles)
 
 __all__ = ["Mesh", "MAX_TRIANGLES", "MAX_RESOLUTION"]
 
@@ -266,14 +267,7 @@ class Mesh:
     @_cached
     def angles(self) -> np.ndarray:
         """Interior angles of each triangle in degrees, (m, 3)."""
-        X = self._points[self._triangles]
-        out = np.empty((self.n_triangles, 3))
-        for k in range(3):
-            a = X[:, (k + 1) % 3] - X[:, k]
-            b = X[:, (k + 2) % 3] - X[:, k]
-            cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-            out[:, k] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-        return out
+        return triangle_angles(self._points, self._triangles)
 
     def quality(self) -> dict[str, float]:
         """Quality figures: min/max angle (deg), max aspect ratio (longest edge / shortest altitude),

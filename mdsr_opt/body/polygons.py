@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 from ..core.checks import as_float_array
 
 __all__ = ["polygon_area", "segment_contacts", "ring_segments", "check_polygon", "corner_angles",
-           "point_inside"]
+           "point_inside", "triangle_angles"]
 
 
 def polygon_area(poly: np.ndarray) -> float:
@@ -149,3 +149,15 @@ def point_inside(poly: np.ndarray) -> np.ndarray:
     d1, d2 = v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]]
     areas = np.abs(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])
     return v[tri[int(np.argmax(areas))]].mean(axis=0)
+
+
+def triangle_angles(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """The interior angles of each triangle, in degrees, (m, 3): the one at each of its corners."""
+    X = vertices[triangles]
+    out = np.empty((len(triangles), 3))
+    for k in range(3):
+        a = X[:, (k + 1) % 3] - X[:, k]
+        b = X[:, (k + 2) % 3] - X[:, k]
+        cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+        out[:, k] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return out

@@ -35,7 +35,7 @@ import numpy as np
 import shapely
 import triangle as tr
 
-from .polygons import corner_angles
+from .polygons import corner_angles, triangle_angles
 
 __all__ = ["ThinPart", "expected_triangles", "too_many_triangles", "quality_triangulation", "to_given_coordinates",
            "triangle_min_angles", "TRIANGLES_PER_AREA"]
@@ -211,14 +211,7 @@ def too_many_triangles(expected: float, thin: ThinPart | None, names: list[str],
 
 def triangle_min_angles(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """The smallest interior angle of each triangle, in degrees."""
-    X = vertices[triangles]
-    out = np.full(len(triangles), 180.0)
-    for k in range(3):
-        a = X[:, (k + 1) % 3] - X[:, k]
-        b = X[:, (k + 2) % 3] - X[:, k]
-        cos = np.einsum("ij,ij->i", a, b) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-        out = np.minimum(out, np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
-    return out
+    return triangle_angles(vertices, triangles).min(axis=1)
 
 
 def _switch_number(value: float) -> str:
