@@ -148,9 +148,8 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
     p = model.params(material)
     fixed = np.zeros(2 * n, dtype=bool)
     fixed[2 * nodes] = fixed[2 * nodes + 1] = True
-    g = model.gradient(xflat, p)
-    residual = float(np.abs(g[~fixed]).max()) / (material.E * material.thickness * mesh.size) \
-        if (~fixed).any() else 0.0
+    residual = kkt_residual(model, xflat, p, fixed, 0.0,
+                            force=material.E * material.thickness * mesh.size).value
     return units.stability_out(check_stability(model.hessian(xflat, p), ~fixed, lowest=lowest)), residual
 
 
