@@ -327,3 +327,31 @@ def test_design_recovers_a_contraction_of_a_compressible_sheet(derivatives):
     assert target.success
     res = design_contractions(mesh, mat, mus, target.x, derivatives=derivatives)
     assert res.success and abs(float(np.ravel(res.contractions)[0]) - 0.2) < 1e-6
+
+
+class _DetSheet:
+    """An incompressible Neo-Hookean sheet stated independently, with CasADi's ``det`` and ``trace`` and no
+    closed forms: a material of another kind (``kind``, ``params``, ``psi_expr`` only)."""
+
+    kind = "test-det-sheet"
+    E, nu, thickness = 3.0, 0.5, 1.0
+    params = np.array([1.0, 0.0])
+
+    @staticmethod
+    def psi_expr(F, p):
+        import casadi as ca
+
+        return p[0] / 2 * (ca.trace(ca.mtimes(F.T, F)) + ca.det(F) ** -2 - 3)
+
+
+def test_a_symbolic_material_matches_the_closed_form_sheet_and_newton_refuses_it_by_name():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    left = np.flatnonzero(mesh.points[:, 0] < 1e-9)
+    right = np.flatnonzero(mesh.points[:, 0] > 4 - 1e-9)
+    drag = (right, mesh.points[right] + [1.0, 0.3])
+    a = solve_external(mesh, _DetSheet(), left, drag)
+    b = solve_external(mesh, NeoHookean(3.0, 0.5, plane="stress"), left, drag)
+    assert a.success and b.success and np.abs(a.x - b.x).max() < 1e-9
+    assert a.energy == pytest.approx(b.energy, rel=1e-12)
+    with pytest.raises(ValueError, match="got 'test-det-sheet'; use backend='ipopt'"):
+        solve_external(mesh, _DetSheet(), left, drag, backend="newton")
