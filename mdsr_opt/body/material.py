@@ -112,6 +112,16 @@ class _Law:
         """Energy density for a 2x2 symbolic ``F`` and symbolic ``params`` (two entries)."""
         return self.law.density(F[0, 0] - 1, F[0, 1], F[1, 0], F[1, 1] - 1, params[0], params[1], ca.log1p)
 
+    def stretch3(self, F):
+        """The out-of-plane stretch (thickness ratio) at deformation gradients ``F`` (..., 2, 2): 1 in plane
+        strain, ``1/J`` for an incompressible sheet, the stretch of zero normal stress for a compressible one;
+        ``nan`` where ``J <= 0``."""
+        F = np.asarray(F, dtype=float)
+        J = F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.where(J > 0, self.law.stretch3(np.where(J > 0, J, 1.0), *self.params), np.nan)
+        return float(out) if out.ndim == 0 else out
+
     def psi(self, F, params=None):
         """``Psi(F)`` (times thickness) for a CasADi 2x2 matrix or a numpy array (..., 2, 2).
 
@@ -130,6 +140,10 @@ class _Law:
 
 class _PlaneStrainNeoHookean:
     """``Psi(F) = mu/2 (tr F^T F - 2) - mu ln J + lam/2 (ln J)^2`` (the plane-strain law)."""
+
+    @staticmethod
+    def stretch3(J, mu, lam):
+        return np.ones_like(np.asarray(J, dtype=float))
 
     @staticmethod
     def density(a, b, c, d, mu, lam, log1p=np.log1p):

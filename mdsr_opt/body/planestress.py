@@ -91,6 +91,10 @@ class InvariantLaw:
         """``(W_a, W_J, W_aa, W_aJ, W_JJ, W_aaa, W_aaJ, W_aJJ, W_JJJ)`` at invariants ``a``, ``J`` (arrays)."""
         raise NotImplementedError
 
+    def stretch3(self, J, mu, lam):
+        """The out-of-plane stretch ``l3`` at in-plane area ratio ``J`` (numpy arrays)."""
+        raise NotImplementedError
+
     def _invariants(self, F):
         a = (F * F).sum(axis=(0, 1))
         J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
@@ -164,6 +168,9 @@ class IncompressibleLaw(InvariantLaw):
             W = W + k / 2 * (x * iJ2 + (e * (2 + e)) ** 3 * iJ2 * iJ2)
         return W
 
+    def stretch3(self, J, mu, lam):
+        return 1.0 / np.asarray(J, dtype=float)
+
     def partials(self, a, J, mu, lam):
         k2 = lam if self.mooney else 0.0
         x = a + J ** -2 - 3.0
@@ -198,6 +205,10 @@ class CompressibleNeoHookeanLaw(InvariantLaw):
         q = lnJ + s
         return (mu / 2 * (a * a + b * b + c * c + d * d) + mu * ((a + d) - lnJ)
                 + mu / 2 * (expm1(2 * s) - 2 * s) + lam / 2 * q * q)
+
+    def stretch3(self, J, mu, lam):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.exp(log_stretch(np.log(np.asarray(J, dtype=float)), mu, lam))
 
     def partials(self, a, J, mu, lam):
         with np.errstate(invalid="ignore", divide="ignore"):
