@@ -3,7 +3,13 @@ and imports each name from its module on first use (``lazy_loader.attach_stub``)
 
 # the body: meshes, materials, muscles, mesh files
 from .body.io import read_mesh as read_mesh, write_mesh as write_mesh
-from .body.material import LinearElastic as LinearElastic, NeoHookean as NeoHookean
+from .body.material import (
+    LinearElastic as LinearElastic,
+    MooneyRivlin as MooneyRivlin,
+    NeoHookean as NeoHookean,
+    Yeoh as Yeoh,
+)
+from .body.silicone import silicone as silicone
 from .body.mesh import Mesh as Mesh
 from .body.polygons import check_polygon as check_polygon
 from .body.muscles import Muscle as Muscle

@@ -11,6 +11,12 @@ middle of the trunk: the spine maps onto circular arcs (``arc_map``) of total an
 middle of the trunk is anchored, and the head, the tail and the four feet are dragged to where that
 bend puts them.
 
+Material: ``NeoHookean(E=1.0, nu=0.4)`` in plane strain, in units where E = 1 (E scales forces and energies
+only: drag- and stroke-driven shapes do not depend on it). Plane strain at nu = 0.4 is the law the library's
+results were made and checked with, kept so they stay comparable; a cast silicone robot is a thin, nearly
+incompressible sheet (``NeoHookean(1.0, 0.5, plane="stress")`` or ``silicone(...)``), which moves no node of
+these cases by more than 0.4 % of the largest motion (default resolution).
+
 Run ``python problems/gecko.py --out out/gecko`` or ``mdsr run gecko --out out/gecko``.
 """
 

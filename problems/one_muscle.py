@@ -10,6 +10,13 @@ shape alone, a problem with a known answer, and routing on the shape is compared
 The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no geometry); they
 are not the paper's meshes.
 
+Material: the body's material of ``tentacle.py``, ``NeoHookean(E=1.0, nu=0.4)`` in plane strain, in units
+where E = 1 (E scales forces and energies only: drag- and stroke-driven shapes do not depend on it). Plane
+strain at nu = 0.4 is the law the library's results were made and checked with, kept so they stay comparable;
+a cast silicone robot is a thin, nearly incompressible sheet (``NeoHookean(1.0, 0.5, plane="stress")`` or
+``silicone(...)``), which moves no node of these cases by more than 1.2 % of the largest motion (default
+resolution).
+
 Run ``python problems/one_muscle.py --out out/one_muscle`` or ``mdsr run one_muscle --out out/one_muscle``.
 """
 

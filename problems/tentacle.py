@@ -11,6 +11,12 @@ The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it g
 are not the paper's meshes. The base (x = 0) is anchored; the dragged nodes are carried rigidly by the
 bent centre line's frame (``arc_rigid``).
 
+Material: ``NeoHookean(E=1.0, nu=0.4)`` in plane strain, in units where E = 1 (E scales forces and energies
+only: drag- and stroke-driven shapes do not depend on it). Plane strain at nu = 0.4 is the law the library's
+results were made and checked with, kept so they stay comparable; a cast silicone robot is a thin, nearly
+incompressible sheet (``NeoHookean(1.0, 0.5, plane="stress")`` or ``silicone(...)``), which moves no node of
+these cases by more than 0.3 % of the largest motion (default resolution).
+
 Run ``python problems/tentacle.py --out out/tentacle`` or ``mdsr run tentacle --out out/tentacle``.
 """
 

@@ -4,7 +4,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from mdsr_opt import LinearElastic, Mesh, Muscle, NeoHookean
+from mdsr_opt import LinearElastic, Mesh, MooneyRivlin, Muscle, NeoHookean, Yeoh
 from mdsr_opt.mechanics.model import get_model, spring_parameters
 
 from conftest import rotation
@@ -201,7 +201,10 @@ def test_numeric_energy_at_rest_is_round_off_squared(small):
     assert not np.isfinite(model.energy(x, p))
 
 
-@pytest.mark.parametrize("mat", [NeoHookean(E=2.0, nu=0.3, thickness=0.7), LinearElastic(E=1.5, nu=0.25)])
+@pytest.mark.parametrize("mat", [NeoHookean(E=2.0, nu=0.3, thickness=0.7), LinearElastic(E=1.5, nu=0.25),
+                                 NeoHookean(2.0, 0.45, 0.7, plane="stress"), NeoHookean(2.0, 0.5, plane="stress"),
+                                 Yeoh(0.5, 0.1, -0.004, 0.7), MooneyRivlin(0.4, 0.1),
+                                 LinearElastic(1.5, 0.5, plane="stress")], ids=lambda m: m.kind[:24])
 def test_closed_forms_of_every_material_match_casadis_derivatives_of_its_density(mat):
     """A material's law is stated once (``density``); the numpy ``psi``, the symbolic ``psi_expr`` and the
     closed-form stress, tangent and tangent derivative the numeric models use must agree with CasADi's

@@ -37,6 +37,8 @@ DOWNLOADS = {
 
 def scene_dict(session, name: str, mesh_file: str) -> dict:
     """The scene file's content for ``session`` (body = ``mesh_file``, one external case ``authored``)."""
+    from ..scenes.scenefile import material_table
+
     mat = session.material
     d = {
         "name": name,
@@ -44,8 +46,7 @@ def scene_dict(session, name: str, mesh_file: str) -> dict:
         # the file's name alone: a scene file holds no path of the machine it was saved on
         "description": f"Authored on the mdsr author page from {_file_name(session.source) or session.name}.",
         "body": {"mesh": mesh_file},
-        "material": {"model": mat.kind, "E": float(mat.E), "nu": float(mat.nu),
-                     "thickness": float(mat.thickness)},
+        "material": material_table(mat),
     }
     if session.muscles:
         d["muscles"] = [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}

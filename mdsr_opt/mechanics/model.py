@@ -11,7 +11,8 @@ sliding cables carry their stiffness and target length as parameters.
 
 Two evaluations of the same energy:
 
-* numeric (models without sliding cables, of a material with closed forms such as Neo-Hookean or linear:
+* numeric (models without sliding cables, of a material with closed forms, as every material of
+  :mod:`mdsr_opt.body.material` has:
   :attr:`EnergyModel.is_numeric`): :meth:`~EnergyModel.energy`, :meth:`~EnergyModel.gradient` and
   :meth:`~EnergyModel.hessian` in vectorised numpy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`,
   scattered by :class:`~mdsr_opt.mechanics.assembly.HessianPattern`); IPOPT takes them through CasADi callbacks
@@ -162,8 +163,8 @@ class EnergyModel:
     Parameters
     ----------
     mesh : Mesh
-    material : NeoHookean | LinearElastic
-        Only its kind (``psi_expr``) is baked in; its numbers are parameters.
+    material : NeoHookean | LinearElastic | Yeoh | MooneyRivlin
+        Only its kind (``psi_expr``, its law) is baked in; its numbers are parameters.
     cables : sequence of node paths, optional
         Sliding cables (one spring on each whole path). Empty for the per-segment spring model, which
         needs no rebuild when muscles change.
@@ -180,8 +181,9 @@ class EnergyModel:
         t0 = time.perf_counter()
         self.mesh = mesh
         self.material_kind = material.kind
-        #: the material's class: its closed forms evaluate the numeric model (see :func:`numeric_law`)
-        self.material_law = type(material)
+        #: the material (the first of its kind): its closed forms evaluate the numeric model (see
+        #: :func:`numeric_law`); they take the numbers from ``p``, never from the material
+        self.material_law = material
         self._psi_expr = material.psi_expr
         self._expand = bool(expand)
         self.cables = tuple(tuple(int(v) for v in c) for c in cables)

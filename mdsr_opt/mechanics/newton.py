@@ -1,7 +1,8 @@
 """A projected Newton method in numpy/scipy: the ``newton`` backend, written to be fast.
 
 The energy of an :class:`~mdsr_opt.mechanics.model.EnergyModel` without sliding cables is a sum over triangles
-(Neo-Hookean or linear elastic) and edge springs. This module evaluates it, its gradient and a positive
+(any material with closed forms: Neo-Hookean in plane strain or stress, Yeoh, Mooney-Rivlin, linear elastic)
+and edge springs. This module evaluates it, its gradient and a positive
 semi-definite approximation of its Hessian with vectorised numpy (no per-element Python or CasADi call):
 
 * elements: ``F = Ds B`` (``B = Dm^-1``), the energy density, first Piola stress ``P`` and the 4 x 4 tangent
@@ -78,18 +79,19 @@ class NewtonEnergy:
     Parameters
     ----------
     model : EnergyModel
-        A model without sliding cables, of a Neo-Hookean or linear elastic material.
+        A model without sliding cables, of a material with closed forms (:func:`numeric_law`).
     p : (n_params,) array
-        The model's parameters (:meth:`EnergyModel.params`): ``[mu t, lam t]``, spring stiffnesses and
-        rest-length ratios.
+        The model's parameters (:meth:`EnergyModel.params`): the material's two (``[mu t, lam t]`` for
+        Neo-Hookean), spring stiffnesses and rest-length ratios.
     """
 
     def __init__(self, model, p, geometry: "NewtonEnergy | None" = None):
         if getattr(model, "cables", ()):
             raise ValueError("the element-wise Newton baseline does not support sliding cables")
         if not numeric_law(model.material_law):
-            raise ValueError(f"the newton backend needs a material with a closed-form law (such as NeoHookean or "
-                             f"LinearElastic), got {model.material_kind!r}")
+            raise ValueError(f"the newton backend needs a material with a closed-form law (density, stress_tangent, "
+                             f"tangent_derivative: every material of mdsr_opt.body.material), got "
+                             f"{model.material_kind!r}; use backend='ipopt', which evaluates any psi_expr")
         mesh = model.mesh
         p = np.asarray(p, dtype=float).ravel()
         self.n = model.n_dof

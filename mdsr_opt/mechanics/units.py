@@ -83,10 +83,13 @@ def _stiffness_units(material) -> tuple[float, float]:
 
 def unit_material(material):
     """The material with ``E`` and ``thickness`` divided by their nearest powers of two (the same kind and
-    Poisson's ratio; the material itself when both powers are 1)."""
+    Poisson's ratio; the material itself when both powers are 1). A material stated by other constants
+    (Yeoh, Mooney-Rivlin) scales them all by its ``scaled(factor, thickness)``."""
     e, t = _stiffness_units(material)
     if e == 1.0 and t == 1.0:
         return material
+    if callable(getattr(material, "scaled", None)):
+        return material.scaled(1.0 / e, material.thickness / t)
     return dataclasses.replace(material, E=material.E / e, thickness=material.thickness / t)
 
 

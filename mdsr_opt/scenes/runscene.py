@@ -18,6 +18,7 @@ from pathlib import Path
 import time
 from typing import Callable, Sequence
 
+from ..body.material import material_dict
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, process_pool
 from ..core.progress import advance, progress_for_cli
@@ -237,8 +238,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     summary = report.to_dict()
     summary.update({"description": scene.description, "source": scene.source, "resolution": scene.resolution,
                     "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
-                    "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
-                                 "thickness": scene.material.thickness},
+                    "material": material_dict(scene.material),
                     "routing_options": scene.routing_options, "design_options": scene.design_options,
                     "photographs": "SYNTHETIC (rendered by mdsr_opt.photos.camera.render_photo), not camera images"
                     if photos else None,

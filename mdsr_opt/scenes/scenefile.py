@@ -18,7 +18,7 @@ from .scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
 from .shapes import rigid_motion
 
-__all__ = ['load_scene', 'parse_units_and_gait']
+__all__ = ['load_scene', 'material_table', 'parse_units_and_gait']
 
 
 # ---------------------------------------------------------------------------------------------- scene files
@@ -29,7 +29,7 @@ _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "mus
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
 
 
-_MATERIAL_KEYS = ("model", "E", "nu", "thickness")
+_MATERIAL_KEYS = ("model", "E", "nu", "thickness", "plane", "silicone", "C1", "C2", "C3", "C10", "C01")
 
 
 _REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
@@ -67,9 +67,11 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         # mesh = "finger.vtu"                 # a mesh file (any meshio format), relative to this file
 
         [material]                            # optional: neo-hookean, E = 1, nu = 0.3, thickness = 1
-        model = "neo-hookean"                 # or "linear"
+        model = "neo-hookean"                 # or "linear"; "yeoh" (C1, C2, C3), "mooney-rivlin" (C10, C01)
         E = 1.0
         nu = 0.4
+        plane = "strain"                      # or "stress": a thin sheet (nu up to 0.5)
+        # silicone = "dragon-skin-30"         # a preset sheet (mdsr_opt.body.silicone; Pa), with thickness
 
         [regions]                             # named node sets
         base = { box = [-1, -1, 0, 2] }       # [xmin, ymin, xmax, ymax]
@@ -236,20 +238,68 @@ def _scene_mesh(r: Reader, body, path: Path, resolution) -> tuple[Mesh, int]:
         r.fail("body.outline" if "holes" not in str(exc) else "body.holes", str(exc))
 
 
+def material_table(material) -> dict:
+    """The ``[material]`` table of a scene file that reads back as ``material`` (the inverse of the reader)."""
+    from ..body.material import LinearElastic, MooneyRivlin, NeoHookean, Yeoh
+
+    t = float(material.thickness)
+    if isinstance(material, Yeoh):
+        return {"model": "yeoh", "C1": material.C1, "C2": material.C2, "C3": material.C3, "thickness": t}
+    if isinstance(material, MooneyRivlin):
+        return {"model": "mooney-rivlin", "C10": material.C10, "C01": material.C01, "thickness": t}
+    if isinstance(material, (NeoHookean, LinearElastic)):
+        return {"model": "linear" if isinstance(material, LinearElastic) else "neo-hookean",
+                "E": float(material.E), "nu": float(material.nu), "thickness": t, "plane": material.plane}
+    raise TypeError(f"a scene file cannot hold a {type(material).__name__} material")
+
+
 def _scene_material(r: Reader, spec):
-    from ..body.material import LinearElastic, NeoHookean
+    from ..body.material import LinearElastic, MooneyRivlin, NeoHookean, Yeoh
+    from ..body.silicone import silicone
 
     m = r.keys(spec, _MATERIAL_KEYS, "material")
-    kinds = {"neo-hookean": NeoHookean, "neohookean": NeoHookean, "linear": LinearElastic}
+    kinds = {"neo-hookean": NeoHookean, "neohookean": NeoHookean, "linear": LinearElastic, "yeoh": Yeoh,
+             "mooney-rivlin": MooneyRivlin}
+    own = {NeoHookean: ("E", "nu", "thickness", "plane"), LinearElastic: ("E", "nu", "thickness", "plane"),
+           Yeoh: ("C1", "C2", "C3", "thickness"), MooneyRivlin: ("C10", "C01", "thickness")}
+    if "silicone" in m:
+        extra = sorted(set(m) - {"silicone", "thickness", "model"})
+        if extra:
+            r.fail(f"material.{extra[0]}", "a silicone preset takes only a thickness (and model = 'yeoh' or "
+                   "'neo-hookean')")
+        law = m.get("model", "yeoh")
+        try:
+            return silicone(m["silicone"], r.number(m.get("thickness", 1.0), "material.thickness"),
+                            law=law if law != "neohookean" else "neo-hookean")
+        except (TypeError, ValueError) as exc:
+            field_ = "model" if str(exc).startswith("law") else "silicone"
+            r.fail(f"material.{field_}", str(exc), type(exc) if isinstance(exc, TypeError) else SceneFileError)
     model = m.get("model", "neo-hookean")
     if model not in kinds:
-        r.fail("material.model", f"unknown material {model!r} (choose 'neo-hookean' or 'linear')")
-    vals = {k: r.number(m[k], f"material.{k}") for k in ("E", "nu", "thickness") if k in m}
+        r.fail("material.model", f"unknown material {model!r} (choose 'neo-hookean', 'linear', 'yeoh' or "
+                                 f"'mooney-rivlin')")
+    cls = kinds[model]
+    extra = sorted(set(m) - set(own[cls]) - {"model"})
+    if extra:
+        r.fail(f"material.{extra[0]}", f"not a parameter of a {model} material (it takes "
+                                       f"{', '.join(own[cls])})")
+    vals = {k: r.number(m[k], f"material.{k}") for k in own[cls] if k in m and k != "plane"}
     try:
-        return kinds[model](vals.get("E", 1.0), vals.get("nu", 0.3), vals.get("thickness", 1.0))
-    except ValueError as exc:
-        field_ = next((k for k in ("E", "nu", "thickness") if str(exc).startswith(k)), "")
-        r.fail(f"material.{field_}" if field_ else "material", str(exc))
+        if cls in (NeoHookean, LinearElastic):
+            return cls(vals.get("E", 1.0), vals.get("nu", 0.3), vals.get("thickness", 1.0),
+                       m.get("plane", "strain"))
+        if cls is Yeoh:
+            if "C1" not in vals:
+                r.fail("material.C1", "a yeoh material needs C1")
+            return Yeoh(vals["C1"], vals.get("C2", 0.0), vals.get("C3", 0.0), vals.get("thickness", 1.0))
+        if "C10" not in vals:
+            r.fail("material.C10", "a mooney-rivlin material needs C10")
+        return MooneyRivlin(vals["C10"], vals.get("C01", 0.0), vals.get("thickness", 1.0))
+    except (TypeError, ValueError) as exc:
+        field_ = next((k for k in (*own[cls], "C10 + C01") if str(exc).startswith(k)), "")
+        field_ = "C10" if field_ == "C10 + C01" else field_
+        r.fail(f"material.{field_}" if field_ else "material", str(exc),
+               TypeError if isinstance(exc, TypeError) else SceneFileError)
 
 
 def _node_ref(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> np.ndarray:

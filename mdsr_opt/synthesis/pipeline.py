@@ -10,7 +10,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..body.io import read_mesh
-from ..body.material import LinearElastic, NeoHookean
+from ..body.material import material_dict, material_from_dict
 from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
@@ -34,7 +34,7 @@ class PipelineResult:
     Attributes
     ----------
     mesh : Mesh
-    material : NeoHookean or LinearElastic
+    material : NeoHookean, LinearElastic, Yeoh or MooneyRivlin
     anchors : (k,) int ndarray
     drag_nodes, drag_positions : (d,) int and (d, 2) float ndarrays
     target : (n, 2) ndarray
@@ -91,7 +91,7 @@ class PipelineResult:
         mat = self.material
         return {
             "format": "mdsr_opt.design/1",
-            "material": {"kind": mat.kind, "E": mat.E, "nu": mat.nu, "thickness": mat.thickness},
+            "material": material_dict(mat),
             "anchors": self.anchors.tolist(), "drag_nodes": self.drag_nodes.tolist(),
             "drag_positions": self.drag_positions.tolist(),
             "external": {k: v for k, v in self.external.to_dict().items() if k != "x"},  # x: the target
@@ -155,10 +155,7 @@ class PipelineResult:
             md = read_mesh(mpath)
             field_ = "material"
             m = data["material"]
-            kinds = {NeoHookean.kind: NeoHookean, LinearElastic.kind: LinearElastic}
-            if m["kind"] not in kinds:
-                raise ValueError(f"unknown material kind {m['kind']!r}")
-            material = kinds[m["kind"]](m["E"], m["nu"], m["thickness"])
+            material = material_from_dict(m)
             field_ = "muscles"
             muscles = tuple(Muscle(tuple(mu["nodes"]), name=mu.get("name")) for mu in data["muscles"])
             for mu in muscles:

@@ -451,12 +451,13 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         bad overlap.
     """
     from .contractions import design_contractions
-    from ..body.material import LinearElastic, NeoHookean
+    from ..body.material import Material
 
     t0 = time.perf_counter()
     items = _check_poses(mesh, poses)
-    if not isinstance(material, (NeoHookean, LinearElastic)):
-        raise TypeError(f"material must be a NeoHookean or LinearElastic, got {type(material).__name__}")
+    if not isinstance(material, Material):
+        raise TypeError(f"material must be a NeoHookean, LinearElastic, Yeoh or MooneyRivlin, got "
+                        f"{type(material).__name__}")
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
