@@ -7,28 +7,38 @@ energies are in joules and rope tensions in newtons (any other length unit ``L``
 
 Sources
 -------
-* Ecoflex 00-30, Ecoflex 00-50, Dragon Skin 10 (Medium), Dragon Skin 20, Dragon Skin 30 (Smooth-On): Yeoh
-  constants fitted here (linear least squares on the relative error of the incompressible uniaxial
-  nominal stress ``2 (l - l^-2)(C1 + 2 C2 x + 3 C3 x^2)``, ``x = l^2 + 2/l - 3``) to the ASTM D412 tensile
-  tests of L. Marechal, P. Balland, L. Lindenroth, F. Petrou, C. Kontovounisios and F. Bello, "Toward a
-  common framework and database of materials for soft robotics", Soft Robotics 8(3), 284-297 (2021) (the
-  Soft Robotics Materials Database, Open Database License): engineering strains 25-300 %, where the fits
-  stay within 5 % of the measured stress. Below 25 % the crosshead-derived strains of those tests include
-  the grips' settling, and the fits exceed the measured stress by 8-20 % at 11 % strain. Smooth-On's
-  technical bulletins state higher 100 % moduli (Ecoflex 00-30: 10 psi, 69 kPa, against 30 kPa measured;
-  Dragon Skin 30: 86 psi, 593 kPa, against 437 kPa): a cast part can differ from these by tens of per cent
-  with mixing, degassing, cure and age, so measure the batch a robot is made of where it matters.
-  ``C3 < 0`` in every fit: past about 400 % strain the laws soften, outside the data.
-* Sylgard 184 (Dow, 10:1): Young's modulus 1.32 MPa cured at room temperature (25 C), rising to 2.97 MPa
-  cured at 200 C: I. D. Johnston, D. K. McCluskey, C. K. L. Tan and M. C. Tracey, "Mechanical
-  characterization of bulk Sylgard 184 for microfluidics and microengineering", J. Micromech. Microeng.
-  24, 035017 (2014). A Neo-Hookean sheet (``C1 = E/6``, ``C2 = C3 = 0``).
+* Ecoflex 00-30, Ecoflex 00-50, Dragon Skin 10 Medium, Dragon Skin 20, Dragon Skin 30 (Smooth-On): Yeoh
+  constants fitted here to the uniaxial tensile curves of the Soft Robotics Materials Database,
+  L. Marechal, P. Balland, L. Lindenroth, F. Petrou, C. Kontovounisios and F. Bello, "Toward a common
+  framework and database of materials for soft robotics", Soft Robotics 8(3), 284-297 (2021),
+  doi:10.1089/soro.2019.0115; data files ``Tensile-Tests-Data/<name>.csv`` of
+  github.com/LucMarechal/Soft-Robotics-Materials-Database (commit 0f67d88995fe), columns "Engineering
+  Strain" and "Engineering Stress (MPa)": ASTM D412 dumbbells 3 x 6 mm, 33 mm long, pulled at 450 mm/min,
+  strain derived from the crosshead displacement (the files' headers). The fit: the twelve rows at 25, 50,
+  ..., 300 % strain (t = 1.1, 2.2, ..., 13.2 s; tests/test_materials.py lists them), linear least squares
+  on the relative error of the incompressible uniaxial nominal stress ``2 (l - l^-2)(C1 + 2 C2 x +
+  3 C3 x^2)``, ``x = l^2 + 2/l - 3``, constants rounded to three significant figures. They stay within
+  5.5 % of the measured stress from 50 to 300 % strain; at 25 % they exceed it by up to 8.1 % (Ecoflex
+  00-30 7.4 %, Dragon Skin 20 8.1 %) and at 11 % by 8-21 %. The small-strain end is the least certain part
+  of these tests (crosshead strain includes the grips' settling; the Ecoflex files start with a negative
+  stress at 4 % strain), so the small-strain moduli ``E = 6 C1`` (45, 62, 131, 370, 553 kPa) are
+  extrapolations.
+  ``C3 < 0`` in every fit: the laws' uniaxial stress stops rising at 326-334 % strain (Dragon Skin) and
+  424-432 % (Ecoflex), outside the data; do not stretch these presets past 300 %. They are independent
+  fits of the paper's data, not the coefficients its authors fitted. A cast part differs from a test
+  specimen with mixing, degassing, cure and age: measure the batch a robot is made of where it matters.
+* Sylgard 184 (Dow): Young's modulus 1.32 MPa, the low end of the 1.32-2.97 MPa that I. D. Johnston
+  et al., "Mechanical characterization of bulk Sylgard 184 for microfluidics and microengineering",
+  J. Micromech. Microeng. 24(3), 035017 (2014), doi:10.1088/0960-1317/24/3/035017, report for curing
+  temperatures from 25 to 200 C (abstract), the cooler the cure the softer (as R. Moucka et al., Sci. Rep.
+  2021, doi:10.1038/s41598-021-98694-2, sum it up). A Neo-Hookean sheet (``C1 = E/6``, ``C2 = C3 = 0``);
+  cured hot, Sylgard 184 is up to 2.25 times stiffer.
 
 Example
 -------
 >>> m = silicone("ecoflex-00-30", thickness=2e-3)
 >>> m.kind.startswith("yeoh"), round(m.E / 1e3, 1)   # small-strain Young's modulus, kPa
-(True, 44.8)
+(True, 44.9)
 """
 
 from __future__ import annotations
@@ -37,13 +47,13 @@ from .material import NeoHookean, Yeoh
 
 __all__ = ["silicone", "SILICONES"]
 
-#: name -> (C1, C2, C3) in Pa (see the module's sources)
+#: name -> (C1, C2, C3) in Pa (see the module's sources: fits to Marechal et al. 2021, Johnston et al. 2014)
 SILICONES: dict[str, tuple[float, float, float]] = {
-    "ecoflex-00-30": (7.47e3, 168.0, -3.6),
-    "ecoflex-00-50": (10.30e3, 329.0, -6.1),
-    "dragon-skin-10": (21.7e3, 2.75e3, -74.9),
-    "dragon-skin-20": (61.4e3, 6.96e3, -187.0),
-    "dragon-skin-30": (91.9e3, 8.01e3, -216.0),
+    "ecoflex-00-30": (7.48e3, 164.0, -3.38),
+    "ecoflex-00-50": (10.3e3, 324.0, -5.98),
+    "dragon-skin-10": (21.8e3, 2.71e3, -73.8),
+    "dragon-skin-20": (61.7e3, 6.83e3, -183.0),
+    "dragon-skin-30": (92.2e3, 7.86e3, -212.0),
     "sylgard-184": (1.32e6 / 6.0, 0.0, 0.0),
 }
 
