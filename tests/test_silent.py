@@ -58,7 +58,7 @@ def test_an_idle_muscle_is_dropped_and_the_design_made_again():
     assert res.success and len(res.contractions) == 1 and res.contractions[0] == pytest.approx(0.15, abs=1e-6)
     assert "idle" in dropped[0].reason and "upper" in res.status and "dropped" in res.status
     # a threshold of 0 keeps every muscle
-    res0, kept0, dropped0 = design_active(mesh, MAT, [lower, upper], target, idle_contraction=0.0)
+    _, kept0, dropped0 = design_active(mesh, MAT, [lower, upper], target, idle_contraction=0.0)
     assert len(kept0) == 2 and dropped0 == ()
 
 

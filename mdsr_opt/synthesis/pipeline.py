@@ -332,6 +332,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         from .bands import stroke_bands
 
         out.bands = stroke_bands(out, **(band_options or {}), **design_options)
+        res.stroke_band = out.bands.band.copy()
         times["bands"] = time.perf_counter() - t3
     times["total"] = time.perf_counter() - t0
     return out
