@@ -25,7 +25,7 @@ from mdsr_opt.synthesis.results import MuscleWarning
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
-QUIET_RUN = ("--serial", "--no-photos", "--no-figures", "--no-animations", "--no-prototype", "--no-bands", "--quiet")
+QUIET_RUN = ("--serial", "--no-photos", "--no-figures", "--no-animations", "--no-prototype", "--quiet")
 MAT = NeoHookean(1.0, 0.3)
 
 
@@ -138,20 +138,27 @@ def test_mdsr_run_fails_a_case_too_far_from_its_target_and_goes_on(tmp_path, cap
     assert cases["bend"]["design_success"] is True  # the design itself converged and was verified
     assert cases["contract"]["success"]
     assert "FAILED finger/bend" in capsys.readouterr().out
-    assert main(["run", str(FINGER), "--out", str(tmp_path / "p"), *QUIET_RUN]) == 0  # default 5 %: both ok
+    assert main(["run", str(FINGER), "--out", str(tmp_path / "p"), "--bands", *QUIET_RUN]) == 0  # 5 %: both ok
+    for c in _summary(tmp_path / "p")["cases"]:
+        assert len(c["stroke_band"]) == 1 and c["stroke_band"][0][0] <= c["stroke"][0] <= c["stroke_band"][0][1]
+    assert "] |" in (tmp_path / "p" / "summary.md").read_text()  # the strokes' column shows [low, high]
+    assert _summary(out)["cases"][0]["stroke_band"] == []  # off unless asked for
 
 
 def test_scene_file_acceptance_section(tmp_path):
     from mdsr_opt.scenes.runner import run_case
     from mdsr_opt.scenes.scenefile import load_scene
 
-    text = FINGER.read_text() + "\n[acceptance]\nmax_difference = 0.02\nbands = false\n"
+    text = FINGER.read_text() + "\n[acceptance]\nmax_difference = 0.02\nbands = true\n"
     (tmp_path / "f.toml").write_text(text)
     scene = load_scene(tmp_path / "f.toml")
-    assert scene.acceptance == {"max_difference": 0.02, "idle_contraction": IDLE_CONTRACTION, "bands": False}
+    assert scene.acceptance == {"max_difference": 0.02, "idle_contraction": IDLE_CONTRACTION, "bands": True}
     rep = run_case(scene, "bend", photo=False).report
-    assert not rep.success and "max_difference 2 %" in rep.message and rep.stroke_band == []
-    assert run_case(scene, "bend", photo=False, max_difference=0.05).report.success
+    assert not rep.success and "max_difference 2 %" in rep.message
+    (lo, hi), = rep.stroke_band
+    assert lo <= rep.stroke[0] <= hi and lo < hi
+    again = run_case(scene, "bend", photo=False, max_difference=0.05, bands=False).report
+    assert again.success and again.stroke_band == []
     (tmp_path / "g.toml").write_text(FINGER.read_text() + "\n[acceptance]\nmax_diference = 0.02\n")
     with pytest.raises(ValueError, match="unknown key 'max_diference'"):
         load_scene(tmp_path / "g.toml")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import ast
 from pathlib import Path
 import time
@@ -102,7 +103,7 @@ def _cmd_run(a) -> int:
                                            mesh_format=a.format, photo_size=a.photo_size, log=log,
                                            prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
                                            background=pool is not None, pool=pool,
-                                           max_difference=a.max_difference, bands=False if a.no_bands else None))
+                                           max_difference=a.max_difference, bands=a.bands))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables
@@ -131,8 +132,6 @@ def _cmd_run(a) -> int:
 
 def _fraction(text: str) -> float:
     """``--max-difference``: a positive fraction of the size."""
-    import argparse
-
     from ..synthesis.acceptance import check_max_difference
 
     try:
@@ -182,7 +181,9 @@ def add_cli(sub) -> None:
     q.add_argument("--max-difference", type=_fraction, default=None, metavar="FRACTION",
                    help="a case whose design differs from its target by more than this fraction of the body's "
                    "size fails (default: the scene's [acceptance] max_difference, else 0.05)")
-    q.add_argument("--no-bands", action="store_true",
-                   help="skip the strokes' uncertainty bands (fixture size, Poisson's ratio, a refined mesh)")
+    q.add_argument("--bands", action=argparse.BooleanOptionalAction, default=None,
+                   help="compute every stroke's uncertainty band (fixture size +-25 %%, Poisson's ratio +-0.05, "
+                   "the mesh refined once): 4-5 more designs per case (default: the scene's [acceptance] bands, "
+                   "else off)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)

@@ -186,7 +186,7 @@ class Scene:
         of the size, default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`), ``idle_contraction``
         (muscles designed below it are dropped, default
         :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`) and ``bands`` (compute the strokes'
-        uncertainty bands, default True).
+        uncertainty bands, default :data:`~mdsr_opt.synthesis.acceptance.BANDS`).
     """
 
     name: str
@@ -299,12 +299,12 @@ def check_acceptance(acceptance, label: str = "acceptance") -> dict:
     """A scene's ``acceptance`` with every key filled in: ``max_difference`` (> 0, a fraction of the size),
     ``idle_contraction`` (in [0, 1)) and ``bands`` (bool). TypeError/ValueError naming ``label`` and the key
     otherwise (an unknown key too)."""
-    from ..synthesis.acceptance import (IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,
+    from ..synthesis.acceptance import (BANDS, IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,
                                         check_max_difference)
 
     if not isinstance(acceptance, dict):
         raise TypeError(f"{label} must be a dict, got {type(acceptance).__name__}")
-    known = {"max_difference": MAX_DIFFERENCE, "idle_contraction": IDLE_CONTRACTION, "bands": True}
+    known = {"max_difference": MAX_DIFFERENCE, "idle_contraction": IDLE_CONTRACTION, "bands": BANDS}
     for k in acceptance:
         if k not in known:
             raise ValueError(f"{label}: unknown key {k!r} (keys: {', '.join(known)})")

@@ -87,7 +87,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [acceptance]                          # optional: what a case's design must show to succeed
         max_difference = 0.05                 # difference over the size (default 0.05)
         idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)
-        bands = true                          # strokes' uncertainty bands (default true)
+        bands = true                          # strokes' uncertainty bands (default false)
 
         [[cases]]                             # required: at least one
         name = "bend"

@@ -28,7 +28,7 @@ from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..core.results import to_jsonable
 
-__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "DroppedMuscle", "design_active", "difference_failure",
+__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
            "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
@@ -37,6 +37,11 @@ IDLE_CONTRACTION = 1e-3
 #: the largest difference to the target, as a fraction of the body's size (``mesh.size``), with which a
 #: case of ``mdsr run`` is a success
 MAX_DIFFERENCE = 0.05
+
+#: whether ``mdsr run`` and the scene runner compute every stroke's uncertainty band unless told
+#: (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: four to five more designs per case, 3-6 times the
+#: design's own time on the library's coarse scenes; ``--bands`` or a scene's ``[acceptance] bands = true``)
+BANDS = False
 
 
 @dataclass(frozen=True)

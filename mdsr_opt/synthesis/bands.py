@@ -35,7 +35,8 @@ from ..core.errors import LayoutError
 from ..mechanics.anchors import check_anchor_radius
 from ..core.results import compact_repr, to_jsonable
 
-__all__ = ["RADIUS_RTOL", "NU_TOL", "MAX_REFINED_NODES", "StrokeBands", "refine_mesh", "stroke_bands"]
+__all__ = ["RADIUS_RTOL", "NU_TOL", "MAX_REFINED_NODES", "NU_CAP", "BAND_MAX_ITER", "StrokeBands", "refine_mesh",
+           "stroke_bands"]
 
 #: the default tolerance of the fixture size, relative to ``anchor_radius``
 RADIUS_RTOL = 0.25
@@ -45,6 +46,9 @@ NU_TOL = 0.05
 MAX_REFINED_NODES = 20000
 #: the largest Poisson's ratio a band's material takes (0.5 is incompressible, outside the models)
 NU_CAP = 0.49
+#: the optimiser's iterations a band's design may take (it starts at the designed contractions; one that
+#: needs more is left out of the band, and named in its notes), unless ``max_iter`` is given
+BAND_MAX_ITER = 100
 
 
 @dataclass(eq=False)
@@ -171,7 +175,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
     max_refined_nodes : int, default :data:`MAX_REFINED_NODES`
     **design_options
         Other keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``tol``,
-        ``options``...), as given to the design.
+        ``options``...), as given to the design; ``max_iter`` defaults to :data:`BAND_MAX_ITER`.
 
     Returns
     -------
@@ -220,6 +224,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
     opts = {k: v for k, v in design_options.items() if k not in ("initial_guess", "anchor_radius")}
     opts.update(method=design.method, a_max=design.a_max, muscle_model=design.muscle_model,
                 stiffness=design.stiffness)
+    opts.setdefault("max_iter", BAND_MAX_ITER)
     notes: list[str] = []
 
     def strokes(what, msh, mat, ms, y, radius):
