@@ -214,3 +214,23 @@ def test_gait_reports_each_keyframe_reached_or_not():
     full = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)}, compare=False)
     both = gait_schedule(mesh, MAT, full, ["left", "right"], frames_per_step=2)
     assert both.reached.all() and f"{both.n_frames}/{both.n_frames} frames solved" in repr(both)
+
+
+def test_the_page_drops_an_idle_muscle_and_says_so():
+    from mdsr_opt.author.session import Session
+
+    s = Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=120)
+    X = s.mesh.points
+    left = np.flatnonzero(X[:, 0] < 1e-9)
+    right = np.flatnonzero(X[:, 0] > 4 - 1e-9)
+    c, si = np.cos(np.pi / 3), np.sin(np.pi / 3)  # the end turned 60 degrees up about (0, 0.5): the top
+    tip = (X[right] - [0, 0.5]) @ np.array([[c, si], [-si, c]]) + [0, 0.5]  # shortens, the bottom lengthens
+    s.set_fixed(left, right, tip)
+    assert s.settle().success
+    bottom = [int(i) for i in np.argsort(X[:, 0]) if X[i, 1] < 1e-9]
+    top = [int(i) for i in np.argsort(X[:, 0]) if X[i, 1] > 1 - 1e-9]
+    s.muscles = (Muscle(bottom[1:-1], name="bottom"), Muscle(top[1:-1], name="top"))
+    s.routed_target = s.target.copy()  # as the page's Route button leaves it
+    out = s.run_design()
+    assert [r["name"] for r in out["muscles"]] == ["top"] and [d["name"] for d in out["dropped"]] == ["bottom"]
+    assert out["success"] and out["saturated"] == [] and "dropped" in out["status"]
