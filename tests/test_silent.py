@@ -234,3 +234,17 @@ def test_the_page_drops_an_idle_muscle_and_says_so():
     out = s.run_design()
     assert [r["name"] for r in out["muscles"]] == ["top"] and [d["name"] for d in out["dropped"]] == ["bottom"]
     assert out["success"] and out["saturated"] == [] and "dropped" in out["status"]
+
+
+def test_a_case_whose_only_muscle_is_idle_fails(tmp_path):
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    # the finger's one given muscle runs along its top; turning the tip down lengthens it: it cannot help
+    droop = ('[[cases]]\nname = "droop"\nanchors = "base"\n'
+             'drags = [{ nodes = "tip", rotate = -30, about = [0, 0.5] }]\n\n[[cases]]\nname = "contract"')
+    (tmp_path / "f.toml").write_text(FINGER.read_text().replace('[[cases]]\nname = "contract"', droop))
+    rep = run_case(load_scene(tmp_path / "f.toml"), "droop", photo=False).report
+    assert rep.design_success is False and not rep.success
+    assert rep.message.startswith("design failed:") and "every muscle is idle" in rep.message
+    assert rep.contractions == [pytest.approx(0.0, abs=IDLE_CONTRACTION)]

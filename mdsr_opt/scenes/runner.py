@@ -340,7 +340,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     far = difference_failure(res.difference, mesh.size, accept["max_difference"])
     rep.success = bool(res.success) and not far
     if not res.success:
-        rep.message = f"design not verified: {res.status}"
+        rep.message = f"design {'not verified' if 'verification' in res.status else 'failed'}: {res.status}"
     elif far:
         rep.message = f"design too far from the target: {far}"
         say(f"{prefix}FAILED: {rep.message}")
