@@ -168,8 +168,8 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
 
 
 def _designed(design_contractions, mesh, material, mus, target, opts):
-    """One design and the warnings it issued (held back: only the design kept issues them)."""
+    """One design and the warnings it issued (held back: only the design kept issues them; the caller's
+    filters still apply, so a warning turned into an error raises here)."""
     with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
         res = design_contractions(mesh, material, mus, target, **opts)
     return res, list(caught)
