@@ -248,3 +248,11 @@ def test_a_case_whose_only_muscle_is_idle_fails(tmp_path):
     assert rep.design_success is False and not rep.success
     assert rep.message.startswith("design failed:") and "every muscle is idle" in rep.message
     assert rep.contractions == [pytest.approx(0.0, abs=IDLE_CONTRACTION)]
+
+
+@pytest.mark.parametrize("value", ["0", "-0.1", "five"])
+def test_a_bad_max_difference_is_bad_input(tmp_path, capsys, value):
+    with pytest.raises(SystemExit) as exc:  # argparse's own one-line error, exit 2, before any work
+        main(["run", str(FINGER), "--out", str(tmp_path / "o"), "--max-difference", value, *QUIET_RUN])
+    assert exc.value.code == 2 and "--max-difference" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
