@@ -4,9 +4,11 @@ An optimiser that converges has found the best contractions for the layout it wa
 robot. Two outcomes used to pass unnoticed:
 
 - an *idle* muscle, designed to a contraction below :data:`IDLE_CONTRACTION` (a rope a workshop would
-  mould, thread and fix for nothing). :func:`design_active` drops it from the layout and designs again,
-  and says so (:class:`DroppedMuscle`); when every muscle is idle the design does not move the body and
-  is no success.
+  mould, thread and fix for nothing). It is not always harmless: a rope held at its rest length stops the
+  body from stretching along it, and the bound ``a >= 0`` keeps the design from paying it out, so the
+  layout without it can only reach the target as closely or closer. :func:`design_active` drops it and
+  designs again, and says so (:class:`DroppedMuscle`); when every muscle is idle the design does not move
+  the body and is no success.
 - a difference to the target larger than a stated fraction of the body's size: :data:`MAX_DIFFERENCE`,
   the default bound of :func:`difference_failure`, with which ``mdsr run`` fails a case.
 
@@ -135,6 +137,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
 
     thr = check_idle_contraction(idle_contraction)
     mus = tuple(muscles)
+    where = np.arange(len(mus))  # each kept muscle's place in the layout given (names unnamed ones)
     opts = dict(design_options)
     dropped: list[DroppedMuscle] = []
     res, caught = _designed(design_contractions, mesh, material, mus, target, opts)
@@ -149,7 +152,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                            f"idle_contraction {thr:g}): the design does not move the body")
             break
         keep = np.flatnonzero(~idle)
-        gone = [DroppedMuscle(name=mu.name or f"#{i}", nodes=tuple(int(n) for n in mu.nodes),
+        gone = [DroppedMuscle(name=mu.name or f"#{where[i]}", nodes=tuple(int(n) for n in mu.nodes),
                               contraction=float(a[i]), reason=f"idle: designed contraction {a[i]:.3g} below "
                               f"idle_contraction {thr:g}") for i, mu in enumerate(mus) if idle[i]]
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
@@ -161,7 +164,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
             break
         dropped += gone
         again.status += f"; idle muscle(s) {names} dropped and the design made again"
-        res, caught, mus = again, caught_again, tuple(mus[i] for i in keep)
+        res, caught, mus, where = again, caught_again, tuple(mus[i] for i in keep), where[keep]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return res, mus, tuple(dropped)
