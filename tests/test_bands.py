@@ -110,6 +110,8 @@ def test_pipeline_band_in_the_table_the_csv_and_the_figure(tmp_path):
     np.testing.assert_allclose(back.stroke_band, band)
     back = DesignResult.load(out.design.save(tmp_path / "d.npz"))
     np.testing.assert_allclose(back.stroke_band, band)
+    with pytest.raises(ValueError, match="band_options: unknown key 'nu_tolerance'"):
+        design_pipeline(mesh, MAT, left, right, bands=True, band_options={"nu_tolerance": 0.1})
     plain = design_pipeline(mesh, MAT, left, right)
     assert plain.bands is None and plain.design.stroke_band.shape == (0, 2)
     plain_csv = Path(export_fabrication(mesh, plain, tmp_path / "p", name="plate")["csv"])

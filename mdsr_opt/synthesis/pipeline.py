@@ -264,7 +264,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         Also compute every stroke's uncertainty band (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: a
         few more designs, one on a refined mesh), in ``.bands`` and ``.design.stroke_band``.
     band_options : dict, optional
-        Keywords of ``stroke_bands`` (``radius_tol``, ``nu_tol``, ``refine``).
+        Keywords of ``stroke_bands`` (``radius_tol``, ``nu_tol``, ``refine``, ``max_refined_nodes``,
+        ``max_iter``).
     **design_options
         Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
         rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
@@ -305,6 +306,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
     if band_options is not None and not isinstance(band_options, dict):
         raise TypeError(f"band_options must be a dict, got {type(band_options).__name__}")
+    unknown = set(band_options or {}) - {"radius_tol", "nu_tol", "refine", "max_refined_nodes", "max_iter"}
+    if unknown:
+        raise ValueError(f"band_options: unknown key {sorted(unknown)[0]!r} (keys: radius_tol, nu_tol, refine, "
+                         "max_refined_nodes, max_iter)")
     ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
     ext.raise_on_failure()
     t1 = time.perf_counter()
@@ -331,7 +336,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     if bands and res.success:
         from .bands import stroke_bands
 
-        out.bands = stroke_bands(out, **(band_options or {}), **design_options)
+        out.bands = stroke_bands(out, **{**design_options, **(band_options or {})})
         res.stroke_band = out.bands.band.copy()
         times["bands"] = time.perf_counter() - t3
     times["total"] = time.perf_counter() - t0
