@@ -27,7 +27,9 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..body.material import NeoHookean
+from ..synthesis.acceptance import design_active
 from ..synthesis.contractions import design_contractions
+from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
@@ -120,6 +122,7 @@ class Session:
     design: object = None
     design_params: dict = field(default_factory=dict)
     log: list = field(default_factory=list)
+    dropped: tuple = ()  # idle muscles the last design took out of the layout (DroppedMuscle)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -339,6 +342,7 @@ class Session:
             warnings.simplefilter("always", RoutingWarning)
             rr = route_muscles(self.mesh, target, **opts)
         self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
+        self.dropped = ()
         self.routed_target = target.copy()
         return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in rr.muscles],
                 "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
@@ -356,7 +360,11 @@ class Session:
             raise ValueError("the target changed since the muscles were routed: route again")
         opts = dict(self.design_options)
         opts.update({k: v for k, v in params.items() if v is not None})
-        res = design_contractions(self.mesh, self.material, self.muscles, target, **opts)
+        # an idle muscle is dropped from the layout and the design made again; the summary says so
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it
+            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **opts)
+        self.muscles = tuple(kept)
         self.design, self.design_params = res, opts
         return self.design_summary()
 
@@ -387,7 +395,9 @@ class Session:
                 "contractions": [float(a) for a in res.contractions], "difference": _num(res.difference),
                 "relative_difference": _num(res.difference / self.mesh.size),
                 "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
-                "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params)}
+                "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params),
+                "saturated": [m.name for m, sat in zip(self.muscles, res.saturated) if sat],
+                "dropped": [d.to_dict() for d in self.dropped]}
 
 
 def _path_length(p: np.ndarray) -> float:

@@ -8,7 +8,7 @@ import numpy as np
 from ..core.checks import as_float_array
 from .mesh import Mesh
 
-__all__ = ['check_mesh', 'check_target_shape']
+__all__ = ['check_mesh', 'check_target_shape', 'solved_state']
 
 
 def check_mesh(mesh, name: str = "mesh"):
@@ -18,20 +18,41 @@ def check_mesh(mesh, name: str = "mesh"):
     return mesh
 
 
+def solved_state(target, name: str = "target"):
+    """``target`` itself, or the state ``x`` of a solve's result (an object with ``x`` and ``success``, such as
+    an :class:`~mdsr_opt.mechanics.result.EquilibriumResult`) when that solve succeeded.
+
+    Raises
+    ------
+    ValueError
+        ``target`` is the result of a failed solve (its state is no equilibrium: a design for it would be
+        a design for a shape the body was never shown to take).
+    """
+    if hasattr(target, "x") and hasattr(target, "success") and not isinstance(target, np.ndarray):
+        if not bool(target.success):
+            status = getattr(target, "status", "")
+            raise ValueError(f"{name} is the result of a failed solve ({status or 'success=False'}): its state is "
+                             "not an equilibrium; solve the target again (other drags, load steps, tol) and give "
+                             "a successful result or its x")
+        return target.x
+    return target
+
+
 def check_target_shape(mesh, target, name: str = "target") -> np.ndarray:
     """The target shape of a design as a finite ``(n, 2)`` float array in which every triangle keeps its
     orientation: the one check of every design entry point (routing, :func:`~mdsr_opt.design_contractions`
-    and its rivals, the pipeline, :func:`~mdsr_opt.synthesis.poses.design_poses`).
+    and its rivals, the pipeline, :func:`~mdsr_opt.synthesis.poses.design_poses`). A solve's result is taken
+    for its state ``x`` (:func:`solved_state`).
 
     Raises
     ------
     TypeError
         Not an array of numbers.
     ValueError
-        The wrong shape, NaN or inf, a mirror image of the body (every triangle inverted), or some triangles
-        inverted or degenerate (``det F <= 0``; the first is named).
+        The result of a failed solve, the wrong shape, NaN or inf, a mirror image of the body (every triangle
+        inverted), or some triangles inverted or degenerate (``det F <= 0``; the first is named).
     """
-    x = as_float_array(target, name, shape=(mesh.n_nodes, 2))
+    x = as_float_array(solved_state(target, name), name, shape=(mesh.n_nodes, 2))
     J = mesh.jacobians(x)
     bad = J <= 0.0
     if (J == 0.0).all():

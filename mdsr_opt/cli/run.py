@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import ast
 from pathlib import Path
 import time
@@ -101,7 +102,8 @@ def _cmd_run(a) -> int:
                                            figures=not a.no_figures, animations=not a.no_animations,
                                            mesh_format=a.format, photo_size=a.photo_size, log=log,
                                            prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
-                                           background=pool is not None, pool=pool))
+                                           background=pool is not None, pool=pool,
+                                           max_difference=a.max_difference, bands=a.bands))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables
@@ -126,6 +128,16 @@ def _cmd_run(a) -> int:
     print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
           f"results in {a.out}; photographs are SYNTHETIC")
     return 0 if ok else 1
+
+
+def _fraction(text: str) -> float:
+    """``--max-difference``: a positive fraction of the size."""
+    from ..synthesis.acceptance import check_max_difference
+
+    try:
+        return check_max_difference(float(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a positive fraction of the size, got {text!r} ({exc})") from None
 
 
 def add_cli(sub) -> None:
@@ -166,5 +178,12 @@ def add_cli(sub) -> None:
     q.add_argument("--serial", action="store_true",
                    help="draw figures, measure photographs and make animations in this process after each "
                         "solve, not in worker processes beside the next solve (the files are the same)")
+    q.add_argument("--max-difference", type=_fraction, default=None, metavar="FRACTION",
+                   help="a case whose design differs from its target by more than this fraction of the body's "
+                   "size fails (default: the scene's [acceptance] max_difference, else 0.05)")
+    q.add_argument("--bands", action=argparse.BooleanOptionalAction, default=None,
+                   help="compute every stroke's uncertainty band (fixture size +-25 %%, Poisson's ratio +-0.05, "
+                   "the mesh refined once): 4-5 more designs per case (default: the scene's [acceptance] bands, "
+                   "else off)")
     q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)

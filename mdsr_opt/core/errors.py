@@ -28,7 +28,7 @@ from __future__ import annotations
 import contextlib
 import traceback
 
-__all__ = ["InputError", "InputTypeError", "checking_input", "exit_report"]
+__all__ = ["InputError", "InputTypeError", "LayoutError", "checking_input", "exit_report"]
 
 
 class InputError(ValueError):
@@ -38,6 +38,13 @@ class InputError(ValueError):
 
 class InputTypeError(InputError, TypeError):
     """An input of the wrong type (an :class:`InputError` that is also a ``TypeError``)."""
+
+
+class LayoutError(ValueError):
+    """A muscle layout that cannot work on its body: a muscle's end patches joined through other muscles'
+    patches, or covering so much of it that it cannot contract. A routed layout can be one (the data a stage
+    made, not the user's input): ``mdsr run`` fails the case and goes on (exit code 1); a function given
+    such muscles raises it as the ``ValueError`` it is."""
 
 
 @contextlib.contextmanager

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.errors import LayoutError
 from ..core.checks import positive_float
 from ..body.muscles import Muscle, check_muscles
 
@@ -212,8 +213,8 @@ def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
                 owner[v] = k
     for c in range(len(mus)):
         if find(2 * c) == find(2 * c + 1):
-            raise ValueError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
-                             "it could not contract; give a smaller anchor_radius")
+            raise LayoutError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
+                              "it could not contract; give a smaller anchor_radius")
     groups: dict[int, list[int]] = {}
     for k, p in enumerate(flat):
         g = groups.setdefault(find(k), [])

@@ -47,6 +47,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from ..core.errors import LayoutError
 from ..core.checks import positive_float
 from .anchors import (anchor_radius_or_default, body_size,
                       rigid_groups, valid_muscles)
@@ -122,7 +123,7 @@ def _spring_segments(mesh, mus, K, anchor_radius):
         l0 = m.segment_lengths(mesh.points)
         inside = (group_of[seg[:, 0]] >= 0) & (group_of[seg[:, 0]] == group_of[seg[:, 1]])
         if inside.all():
-            raise ValueError(f"muscle {m._label()} lies inside its anchor patches: give a smaller anchor_radius")
+            raise LayoutError(f"muscle {m._label()} lies inside its anchor patches: give a smaller anchor_radius")
         ks.append(np.where(inside, 0.0, K / l0))
         fac.append(l0.sum() / l0[~inside].sum())
     return ks, np.array(fac)

@@ -174,7 +174,13 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     a = ", ".join("nan" if not np.isfinite(c) else f"{c:.3f}" for c in shown)
     what = "achieved" if shown is reached else "a"
     ok = "" if result.success else "  [FAILED]"
-    ax.set_title(title or f"{result.method}: {what} = [{a}], difference {result.difference:.3g}{ok}", fontsize=9)
+    # a stroke with its uncertainty band (synthesis.bands) when the design carries one
+    band = np.asarray(getattr(result, "stroke_band", ()), dtype=float).reshape(-1, 2)
+    strokes = np.asarray(getattr(result, "stroke", ()), dtype=float)
+    extra = ("\nstrokes " + ", ".join(f"{v:.3g} [{lo:.3g}, {hi:.3g}]" for v, (lo, hi) in zip(strokes, band))
+             if len(band) and len(band) == len(strokes) else "")
+    ax.set_title(title or f"{result.method}: {what} = [{a}], difference {result.difference:.3g}{ok}{extra}",
+                 fontsize=9)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     if not ticks:
         hide_ticks(ax)

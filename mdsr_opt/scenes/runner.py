@@ -9,9 +9,12 @@ from dataclasses import dataclass, field, asdict
 from pathlib import Path
 import time
 from typing import Any, Callable, Sequence
+import warnings
 import numpy as np
 
+from ..core.errors import LayoutError
 from ..core.results import compact_repr, to_jsonable
+from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
 from .scene import Case, Scene
@@ -53,6 +56,10 @@ class CaseReport:
         (:func:`~mdsr_opt.scenes.prototype.validate_case`): ``driving`` (Table 2/3) and ``design`` (Table 4), holes
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
+    dropped : muscles taken out of the layout after a design (idle ones: name, nodes, contraction, reason).
+    saturated : names (or indices) of the muscles whose designed contraction is at ``a_max``.
+    stroke_band : per muscle the stroke's (low, high) under the fabrication's uncertainties, when computed
+        (:func:`~mdsr_opt.synthesis.bands.stroke_bands`); band_notes : what the band left out, and why.
     """
 
     scene: str
@@ -80,6 +87,10 @@ class CaseReport:
     photo: dict | None = None
     times: dict = field(default_factory=dict)
     files: list = field(default_factory=list)
+    dropped: list = field(default_factory=list)
+    saturated: list = field(default_factory=list)
+    stroke_band: list = field(default_factory=list)
+    band_notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -153,10 +164,13 @@ class SceneReport:
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
-            s = ", ".join(f"{v:.4g}" for v in c.stroke) if c.stroke else "-"
+            s = ", ".join(f"{v:.4g}" + (f" [{b[0]:.4g}, {b[1]:.4g}]" if len(c.stroke_band) == len(c.stroke) else "")
+                          for v, b in zip(c.stroke, c.stroke_band or [()] * len(c.stroke))) if c.stroke else "-"
             d = "-" if c.difference is None else f"{c.difference:.4g}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
             ok = "ok" if c.success else "FAILED"
+            ok += f" (saturated {', '.join(map(str, c.saturated))})" if c.saturated else ""
+            ok += f" (dropped {', '.join(d['name'] for d in c.dropped)})" if c.dropped else ""
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
@@ -185,7 +199,8 @@ def _edge_set(muscles) -> set:
 
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
              photo_size: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
-             prefix: str = "", prototype: Any = None) -> CaseRun:
+             prefix: str = "", prototype: Any = None, max_difference: float | None = None,
+             bands: bool | None = None) -> CaseRun:
     """Run one case through the pipeline (nothing is written).
 
     Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
@@ -197,21 +212,42 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     case is also validated against the virtual prototype (:func:`~mdsr_opt.scenes.prototype.validate_case`): the
     paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
 
+    What counts as a success is the scene's ``acceptance`` (:func:`~mdsr_opt.scenes.scene.check_acceptance`):
+    the design's difference within ``max_difference`` of the size (this keyword overrides the scene's), no
+    idle muscle (an external case's muscles designed below ``idle_contraction`` are dropped and the design
+    made again, :func:`~mdsr_opt.synthesis.acceptance.design_active`; an internal case keeps the scene's
+    layout, whose known contractions are the answer); a saturated muscle is reported in ``saturated``.
+    With ``bands`` (default: the scene's ``acceptance["bands"]``) every stroke gets its uncertainty band
+    (:func:`~mdsr_opt.synthesis.bands.stroke_bands`).
+
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
-    says where and why. Bad input (``TypeError``/``ValueError`` from the checks) still raises.
+    says where and why; a stage that refuses the case's own data (a routed layout whose end patches
+    join, say) is such a failure. Bad arguments (``TypeError``/``ValueError`` from the checks at the door)
+    still raise.
     """
-    from ..synthesis.contractions import design_contractions
+    from ..synthesis.acceptance import check_max_difference, design_active, difference_failure
 
     say = log or (lambda s: None)
     if isinstance(case, str):
         case = scene.case(case)
+    accept = dict(scene.acceptance)
+    if max_difference is not None:
+        accept["max_difference"] = check_max_difference(max_difference)
+    if bands is not None:
+        accept["bands"] = bool(bands)
     mesh = scene.mesh
     rep = CaseReport(scene=scene.name, case=case.name, kind=case.kind, n_nodes=mesh.n_nodes)
     run = CaseRun(report=rep)
     t0 = time.perf_counter()
     what = ("external driving" if case.kind == "external" else
             f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
-    setup = prepare_case(scene, case)
+    try:
+        setup = prepare_case(scene, case)
+    except LayoutError as exc:  # the scene's muscles cannot make this case's target (their end patches)
+        rep.message = f"target refused: {exc}"
+        rep.times["total"] = time.perf_counter() - t0
+        say(f"{prefix}FAILED: {rep.message}")
+        return run
     check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
     run.setup = setup
     tr = setup.target_result
@@ -252,15 +288,28 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()
+    idle = accept["idle_contraction"] if case.kind == "external" else 0.0
     try:
-        res = design_contractions(mesh, scene.material, setup.muscles, setup.target, **opts)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", MuscleWarning)  # reported in the case's ``saturated``
+            res, kept, dropped = design_active(mesh, scene.material, setup.muscles, setup.target,
+                                               idle_contraction=idle, **opts)
         check_interrupt()
-    except RuntimeError as exc:  # a solver inside the design failed hard (SolverFailure, CasADi errors)
-        rep.message = f"design failed: {type(exc).__name__}: {exc}"
+    except (RuntimeError, LayoutError) as exc:
+        # a solver inside the design failed hard (SolverFailure, CasADi errors), or the design refused the
+        # case's layout (end patches joined through other muscles', say): this case fails, the others go on
+        what = "failed" if isinstance(exc, RuntimeError) else "refused"
+        rep.message = f"design {what}: {type(exc).__name__}: {exc}"
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
         return run
     run.design = res
+    if dropped:
+        setup.muscles = kept
+        rep.n_muscles = len(kept)
+        rep.dropped = [d.to_dict() for d in dropped]
+        say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
+    rep.saturated = [mu.name or i for i, mu in enumerate(kept) if res.saturated[i]]
     rep.times["design"] = time.perf_counter() - t1
     rep.contractions = [float(a) for a in res.contractions]
     rep.achieved = [float(a) for a in res.achieved]
@@ -281,15 +330,45 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"strokes [{st}], difference {res.difference:.3g} "
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
+    if rep.saturated:
+        say(f"{prefix}saturated at a_max = {res.a_max:g}: {', '.join(map(str, rep.saturated))}")
+    if accept["bands"] and res.success:
+        _bands(scene, run, opts, say, prefix)
     if photo:
         measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()
-    rep.success = bool(res.success)
+    far = difference_failure(res.difference, mesh.size, accept["max_difference"])
+    rep.success = bool(res.success) and not far
     if not res.success:
-        rep.message = f"design not verified: {res.status}"
+        rep.message = f"design {'not verified' if 'verification' in res.status else 'failed'}: {res.status}"
+    elif far:
+        rep.message = f"design too far from the target: {far}"
+        say(f"{prefix}FAILED: {rep.message}")
     rep.times["total"] = time.perf_counter() - t0
     _LOG.debug("%sstage times: %s", prefix, ", ".join(f"{k} {v:.3f} s" for k, v in rep.times.items()))
     return run
+
+
+def _bands(scene: Scene, run: CaseRun, opts: dict, say, prefix: str) -> None:
+    """The strokes' uncertainty bands of a run's design, into its design and report."""
+    from ..synthesis.bands import stroke_bands
+
+    rep, res = run.report, run.design
+    t = time.perf_counter()
+    try:
+        b = stroke_bands(scene.mesh, scene.material, run.setup.muscles, run.setup.target, res,
+                         **{k: v for k, v in opts.items() if k != "initial_guess"})
+    except (RuntimeError, LayoutError) as exc:  # reported, never hiding the design
+        rep.band_notes = [f"no band: {type(exc).__name__}: {exc}"]
+        say(f"{prefix}stroke bands: not computed ({exc})")
+    else:
+        res.stroke_band = b.band.copy()
+        rep.stroke_band = [[float(lo), float(hi)] for lo, hi in b.band]
+        rep.band_notes = list(b.notes)
+        say(f"{prefix}stroke bands: " + ", ".join(f"{s:.4g} [{lo:.4g}, {hi:.4g}]" for s, (lo, hi)
+                                                  in zip(b.nominal, b.band))
+            + "".join(f"; {n}" for n in b.notes))
+    rep.times["bands"] = time.perf_counter() - t
 
 
 def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (500, 500), prototype: Any = None,

@@ -58,7 +58,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
               log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
-              prototype: bool = True, prototype_seed: int = 0, background: bool = True) -> SceneReport:
+              prototype: bool = True, prototype_seed: int = 0, background: bool = True,
+              max_difference: float | None = None, bands: bool | None = None) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -90,12 +91,18 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.scenes.rundir.RunFolder`, which also locks the folder
         against a second run and removes the temporaries of an interrupted one).
+    max_difference : float, optional
+        A case whose difference exceeds this fraction of the size fails (default: the scene's
+        ``acceptance``, :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE` unless it says otherwise).
+    bands : bool, optional
+        Compute every stroke's uncertainty band (default: the scene's ``acceptance["bands"]``).
 
     Returns
     -------
     SceneReport
-        ``.success`` is False when a target solve, the routing, a design or an animation frame failed;
-        the reasons are in each case's ``message`` and in ``summary.json``. Nothing is hidden.
+        ``.success`` is False when a target solve, the routing, a design (refused, not verified, or
+        farther from its target than ``max_difference``) or an animation frame failed; the reasons are in
+        each case's ``message`` and in ``summary.json``; the other cases still run. Nothing is hidden.
 
     Raises
     ------
@@ -105,23 +112,26 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     KeyboardInterrupt
         Passed on at once (never recorded as a failed case); the files already complete stay.
     """
-    names = _check_run(scene, cases, mesh_format, photo_size)
+    names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
         folder.begin(run_entries(scene, names))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_size=photo_size,
                              log=log, prototype=prototype, prototype_seed=prototype_seed,
-                             background=background)
+                             background=background, max_difference=max_difference, bands=bands)
         folder.finish("complete" if report.success else "complete, some cases failed")
     return report
 
 
-def _check_run(scene, cases, mesh_format, photo_size=(500, 500)) -> tuple[str, ...]:
+def _check_run(scene, cases, mesh_format, photo_size=(500, 500), max_difference=None) -> tuple[str, ...]:
     from ..body.io import FORMATS
     from ..photos.size import check_photo_size
+    from ..synthesis.acceptance import check_max_difference
 
     check_photo_size(photo_size, "photo_size")
+    if max_difference is not None:
+        check_max_difference(max_difference)
 
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
@@ -151,7 +161,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 method: str | None = None, photos: bool = True, figures: bool = True,
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
-                prototype_seed: int = 0, background: bool = True, pool: Executor | None = None) -> SceneReport:
+                prototype_seed: int = 0, background: bool = True, pool: Executor | None = None,
+                max_difference: float | None = None, bands: bool | None = None) -> SceneReport:
     """Internal: the body of :func:`run_scene` without the folder's guard, for ``run_scene`` and ``mdsr run``
     (call :func:`run_scene` instead). Runs and writes into ``out`` as it stands (the caller holds a
     :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
@@ -159,7 +170,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     call's own)."""
     from ..body.io import atomic_path, write_json
 
-    names = _check_run(scene, cases, mesh_format, photo_size)
+    names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
     if pool is not None and not isinstance(pool, Executor):
         raise TypeError(f"pool must be a concurrent.futures.Executor or None, got {type(pool).__name__}")
     say = log or (lambda s: None)
@@ -206,7 +217,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             check_interrupt()
             # the photograph stage (measure_case) and the case's files are background jobs: the report's
             # photo entry, the files and the stage's messages arrive at bg.wait()
-            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix)
+            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
+                                         max_difference=max_difference, bands=bands)
             send_animations()
             advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
             parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
@@ -240,6 +252,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                     "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
                     "material": material_dict(scene.material),
                     "routing_options": scene.routing_options, "design_options": scene.design_options,
+                    "acceptance": dict(scene.acceptance, **({} if max_difference is None else
+                                                           {"max_difference": max_difference})),
                     "photographs": "SYNTHETIC (rendered by mdsr_opt.photos.camera.render_photo), not camera images"
                     if photos else None,
                     "expected": scene.expected})

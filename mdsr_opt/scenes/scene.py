@@ -18,7 +18,8 @@ from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
-__all__ = ['UnknownName', 'Case', 'Animation', 'Scene', 'resolve_resolution', 'seeds_for', 'mesh_polygon', 'check_units_and_gait']
+__all__ = ['UnknownName', 'Case', 'Animation', 'Scene', 'resolve_resolution', 'seeds_for', 'mesh_polygon', 'check_units_and_gait',
+           'check_acceptance']
 
 
 #: Named resolutions: approximate number of mesh nodes.
@@ -180,6 +181,12 @@ class Scene:
         carried into the gait schedule and the fabrication files.
     gait : mdsr_opt.synthesis.gait.Gait, optional
         A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
+    acceptance : dict
+        What a case's design must show to succeed (:func:`check_acceptance`): ``max_difference`` (a fraction
+        of the size, default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`), ``idle_contraction``
+        (muscles designed below it are dropped, default
+        :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`) and ``bands`` (compute the strokes'
+        uncertainty bands, default :data:`~mdsr_opt.synthesis.acceptance.BANDS`).
     """
 
     name: str
@@ -198,6 +205,7 @@ class Scene:
     source: str = ""
     units: str = "mm"
     gait: Any = None
+    acceptance: dict = field(default_factory=dict)
 
     def __post_init__(self):
         from ..mechanics.loadsteps import check_mesh_material
@@ -266,6 +274,7 @@ class Scene:
             except ValueError as exc:
                 raise ValueError(f"scene {self.name!r}: design.{exc}") from None
         self.expected = dict(self.expected)
+        self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance")
         check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}",
                            gait_names=[self.gait.name] if self.gait is not None else ())
 
@@ -286,6 +295,28 @@ class Scene:
 
 
 # ---------------------------------------------------------------------------------------------- resolution
+def check_acceptance(acceptance, label: str = "acceptance") -> dict:
+    """A scene's ``acceptance`` with every key filled in: ``max_difference`` (> 0, a fraction of the size),
+    ``idle_contraction`` (in [0, 1)) and ``bands`` (bool). TypeError/ValueError naming ``label`` and the key
+    otherwise (an unknown key too)."""
+    from ..synthesis.acceptance import (BANDS, IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,
+                                        check_max_difference)
+
+    if not isinstance(acceptance, dict):
+        raise TypeError(f"{label} must be a dict, got {type(acceptance).__name__}")
+    known = {"max_difference": MAX_DIFFERENCE, "idle_contraction": IDLE_CONTRACTION, "bands": BANDS}
+    for k in acceptance:
+        if k not in known:
+            raise ValueError(f"{label}: unknown key {k!r} (keys: {', '.join(known)})")
+    out = {**known, **acceptance}
+    out["max_difference"] = check_max_difference(out["max_difference"], f"{label}.max_difference")
+    out["idle_contraction"] = check_idle_contraction(out["idle_contraction"], f"{label}.idle_contraction")
+    if not isinstance(out["bands"], (bool, np.bool_)):
+        raise TypeError(f"{label}.bands must be true or false, got {type(out['bands']).__name__}")
+    out["bands"] = bool(out["bands"])
+    return out
+
+
 def resolve_resolution(resolution: str | int) -> int:
     """The approximate node count for ``resolution`` (a name of :data:`RESOLUTIONS` or an integer from 20
     to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`)."""

@@ -14,7 +14,7 @@ from ..core.checks import check_label
 from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
 from .reader import SceneFileError, Reader, read_file, scene_options, tname
-from .scene import Animation, Case, Scene, mesh_polygon, resolve_resolution
+from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
 from .shapes import rigid_motion
 
@@ -23,7 +23,7 @@ __all__ = ['load_scene', 'material_table', 'parse_units_and_gait']
 
 # ---------------------------------------------------------------------------------------------- scene files
 _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
-             "cases", "animations", "expected", "units", "gait")
+             "cases", "animations", "expected", "units", "gait", "acceptance")
 
 
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
@@ -86,6 +86,10 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         max_muscles = 2
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
+        [acceptance]                          # optional: what a case's design must show to succeed
+        max_difference = 0.05                 # difference over the size (default 0.05)
+        idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)
+        bands = true                          # strokes' uncertainty bands (default false)
 
         [[cases]]                             # required: at least one
         name = "bend"
@@ -187,12 +191,18 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     expected = top.get("expected", {})
     if not isinstance(expected, Mapping):
         r.fail("expected", f"expected a table, got {tname(expected)}", TypeError)
+    acceptance = top.get("acceptance", {})
+    try:
+        acceptance = check_acceptance(dict(acceptance) if isinstance(acceptance, Mapping) else acceptance,
+                                      f"{path.name}: acceptance")
+    except ValueError as exc:
+        raise SceneFileError(str(exc)) from None
     try:
         return Scene(name=name, mesh=mesh, material=material, cases=tuple(cases),
                      title=str(top.get("title", "")), description=str(top.get("description", "")),
                      muscles=muscles, regions=regions, routing_options=routing, design_options=design,
                      animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path),
-                     units=units, gait=gait)
+                     units=units, gait=gait, acceptance=acceptance)
     except (ValueError, TypeError) as exc:  # cross-field checks of Scene (contraction counts...)
         raise SceneFileError(f"{path.name}: {exc}") from None
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
@@ -20,11 +21,11 @@ from ..mechanics.loadsteps import upright
 from ..mechanics.units import Units
 from .nlp import run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
-from .results import DesignResult, METHODS, report_muscles
+from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
 
-__all__ = ['check_design_options', 'design_contractions']
+__all__ = ['check_design_options', 'design_contractions', 'warn_saturated']
 
 
 # ---------------------------------------------------------------------------------------------- public API
@@ -105,6 +106,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     Returns
     -------
     DesignResult
+        A muscle whose contraction ends at ``a_max`` is flagged in ``saturated`` and named in a
+        :class:`~mdsr_opt.synthesis.results.MuscleWarning`.
 
     Raises
     ------
@@ -182,7 +185,19 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.time = time.perf_counter() - clock0
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
+    if res.saturated.any():
+        warn_saturated(res, mus)
     return res
+
+
+def warn_saturated(res: DesignResult, muscles) -> None:
+    """Warn (:class:`~mdsr_opt.synthesis.results.MuscleWarning`) naming the muscles of ``res`` whose
+    contraction is at ``a_max`` (:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated`)."""
+    sat = np.flatnonzero(res.saturated)
+    names = ", ".join(f"{muscles[i].name or i} (a = {res.contractions[i]:.4g})" for i in sat)
+    warnings.warn(f"muscle(s) {names} saturated at a_max = {res.a_max:g}: the design is the best within the "
+                  "bound, not the target; raise a_max, add muscles or accept the difference "
+                  f"{res.difference:.3g}", MuscleWarning, stacklevel=5)
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,

@@ -14,7 +14,9 @@
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
     nodes at rest, its width the channel width), ``ENDS`` (circles) and ``LABELS`` (text).
 ``<name>_muscles.csv``
-    One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs.
+    One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
+    last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
+    each pose's stroke band (``stroke <pose> low``, ``stroke <pose> high``).
 
 Every number is in the body's length unit ``units`` (one of :data:`UNITS`, default ``"mm"``), and every
 column header says it. Tensions are forces in units of ``E * thickness * length`` (with ``E`` in N/mm^2 and
@@ -76,6 +78,7 @@ class FabricationData:
     end_radius: float
     channel_width: float
     units: str
+    stroke_bands: np.ndarray | None = None  # (P, m, 2) low/high stroke per pose and muscle; None: not computed
 
     def __repr__(self) -> str:
         return compact_repr(self, ("units", "pose_names"), extra={
@@ -147,7 +150,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         mus = list(design.muscles) if muscles is None else check_muscles(mesh, muscles)
         _check_rest_lengths(design.rest_lengths, np.array([mu.rest_length(mesh) for mu in mus]), mus, "the layout")
         names, A, S, T = design.names, design.contractions, design.strokes, design.tensions
-        radius = design.anchor_radius
+        radius, bands = design.anchor_radius, None
     else:
         if muscles is None:
             raise ValueError("give the muscles of the design (muscles=...): a DesignResult or a mapping of them "
@@ -166,6 +169,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
             check_same_mesh(mesh, getattr(d, "rest_mesh", None), what[k])
         mus = check_muscles(mesh, muscles)
         rows = {k: _from_design(d, mus, mesh, what[k]) for k, d in items.items()}
+        bands = [np.asarray(getattr(d, "stroke_band", ()), dtype=float).reshape(-1, 2) for d in items.values()]
+        bands = np.array([b if len(b) == len(mus) else np.full((len(mus), 2), np.nan) for b in bands])
         names = tuple(str(k) for k in rows)
         m = len(mus)
         A = np.array([r[0] for r in rows.values()]).reshape(len(rows), m)
@@ -195,7 +200,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                            # the end patches' radius, when the design has one (NaN: none; 0: points)
                            end_radius=float(radius) if radius is not None and math.isfinite(radius) and radius > 0
                            else 0.4 * h, channel_width=float(channel_width),
-                           units=units)
+                           units=units,
+                           stroke_bands=bands if bands is not None and np.isfinite(bands).any() else None)
 
 
 # ---------------------------------------------------------------------------------------------- writers
@@ -437,6 +443,8 @@ def _csv_text(fd: FabricationData) -> str:
         head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"tension {p} [E*t*{u}]"]
     if fd.pose_names:
         head += [f"max stroke [{u}]", f"max tension [E*t*{u}]"]
+    if fd.stroke_bands is not None:  # the strokes' uncertainty bands (synthesis.bands), last
+        head += [f"stroke {p} {e} [{u}]" for p in fd.pose_names for e in ("low", "high")]
     buf = _stdio.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
@@ -452,6 +460,8 @@ def _csv_text(fd: FabricationData) -> str:
         if fd.pose_names:
             t = fd.tensions[:, i]
             row += [num(fd.strokes[:, i].max()), num(np.nanmax(t)) if np.isfinite(t).any() else ""]
+        if fd.stroke_bands is not None:
+            row += [num(v) for k in range(len(fd.pose_names)) for v in fd.stroke_bands[k, i]]
         w.writerow(row)
     return buf.getvalue()
 

@@ -13,7 +13,7 @@ import copy
 import csv
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -25,6 +25,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_int
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
+from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
 
 __all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait",
@@ -143,6 +144,13 @@ class GaitSchedule:
     rest_mesh : dict or None
         The fingerprint of the mesh the schedule was solved on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`);
         :func:`save_gait_animation` refuses another mesh (None: not recorded, not checked).
+    keyframe_differences : (K,) ndarray
+        Per keyframe, the difference (a length) its pose reaches on the layout (0 for ``"rest"``).
+    reached : (K,) bool ndarray
+        Per keyframe, its pose was reached: the pose's design succeeded, its difference is within
+        ``max_difference`` of the body's size and the keyframe's frame solved.
+    max_difference : float
+        That bound, a fraction of the body's size.
     """
 
     sequence: tuple
@@ -160,10 +168,18 @@ class GaitSchedule:
     status: tuple
     units: str = "mm"
     rest_mesh: dict | None = None
+    keyframe_differences: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    reached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    max_difference: float = float("nan")
 
     @property
     def n_frames(self) -> int:
         return len(self.times)
+
+    @property
+    def unreached(self) -> tuple[str, ...]:
+        """The poses of the keyframes not reached (no repeats)."""
+        return tuple(dict.fromkeys(self.sequence[k] for k in np.flatnonzero(~np.asarray(self.reached, bool))))
 
     @property
     def contractions(self) -> np.ndarray:
@@ -175,8 +191,20 @@ class GaitSchedule:
             seq = f"{len(self.sequence)} keyframes"
         top = float(np.nanmax(self.strokes)) if np.isfinite(self.strokes).any() else float("nan")
         return (f"GaitSchedule({seq}, {self.n_frames} frames, {len(self.muscle_names)} "
-                f"muscles, max stroke {top:.4g} {self.units}, "
-                f"{int(self.success.sum())}/{self.n_frames} frames solved)")
+                f"muscles, max stroke {top:.4g} {self.units}, {self.outcome()})")
+
+    def outcome(self) -> str:
+        """One phrase: the frames solved, or, when a keyframe's pose was not reached, the frames solved and
+        reaching their pose and the poses never reached."""
+        solved = np.asarray(self.success, bool).copy()
+        if not self.unreached:
+            return f"{int(solved.sum())}/{self.n_frames} frames solved"
+        kf = np.asarray(self.keyframes, dtype=int)
+        solved[kf[~np.asarray(self.reached, bool)]] = False
+        d = {self.sequence[k]: self.keyframe_differences[k] for k in np.flatnonzero(~self.reached)}
+        return (f"{int(solved.sum())}/{self.n_frames} frames solved and reaching their pose; pose(s) "
+                + ", ".join(f"{p} (difference {v:.3g})" for p, v in d.items())
+                + f" NOT reached (max_difference {100 * self.max_difference:g} % of the size)")
 
     def to_dict(self) -> dict:
         """Every field, JSON-ready (arrays as nested lists, NaN as None)."""
@@ -215,7 +243,7 @@ class GaitSchedule:
 @interruptible()
 def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[str], *, frames_per_step: int = 6,
                   cyclic: bool = True, step_time: float = 1.0, units: str = "mm",
-                  solve_options: Mapping | None = None) -> GaitSchedule:
+                  solve_options: Mapping | None = None, max_difference: float | None = None) -> GaitSchedule:
     """The strokes of every muscle over a cyclic sequence of poses, every frame solved forward.
 
     Keyframes take the designed strokes of their pose (``"rest"``: all zero). Between two keyframes the
@@ -244,6 +272,10 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
         tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
         ropes, strokes of ~1e-3 of their length, leave residuals of ~1e-4 that the solve rejects).
+    max_difference : float, optional
+        A keyframe's pose is reached when its design succeeded, its difference is at most this fraction of
+        the body's size (default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`) and its frame
+        solved (``reached``; the summary names the poses not reached).
 
     Returns
     -------
@@ -274,6 +306,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
             layout.index(s)
     if not (float(step_time) > 0):
         raise ValueError(f"step_time must be positive, got {step_time!r}")
+    max_difference = MAX_DIFFERENCE if max_difference is None else check_max_difference(max_difference)
     if cyclic:
         seq = seq + [seq[0]]
     if len(seq) < 2:
@@ -338,11 +371,16 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                         f"rope by {over[i]:.3g} {units})")
         states.append(x)
         status.append(msg)
+    # a keyframe reaches its pose when the pose's design succeeded on the layout within max_difference
+    kd = np.array([0.0 if s == "rest" else float(layout.differences[layout.index(s)]) for s in seq])
+    designed = np.array([s == "rest" or bool(layout.success[layout.index(s)]) for s in seq])
+    reached = designed & (kd <= max_difference * mesh.size) & ok[np.array(kf)]
     return GaitSchedule(sequence=tuple(seq), frames_per_step=fps_, times=np.arange(F) * float(step_time) / fps_,
                         keyframes=np.array(kf), labels=tuple(labels),
                         muscle_names=tuple(mu.name for mu in layout.muscles), rest_lengths=L0.copy(), strokes=S,
                         achieved=ach, tensions=ten, states=np.array(states), success=ok, status=tuple(status),
-                        units=units, rest_mesh=mesh_fingerprint(mesh))
+                        units=units, rest_mesh=mesh_fingerprint(mesh), keyframe_differences=kd, reached=reached,
+                        max_difference=float(max_difference))
 
 
 def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
@@ -432,7 +470,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     Returns
     -------
     dict or None
-        JSON-friendly summary with ``success`` (every pose designed and every frame solved) and the files;
+        JSON-friendly summary with ``success`` (every pose designed, every frame solved, every keyframe's pose
+        reached: ``reached``, ``unreached``) and the files;
         None when a pose of the gait was not run (``--case``).
     """
     from .export import export_fabrication, fabrication_files
@@ -457,7 +496,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                            routing_options=scene.routing_options, design_options=scene.design_options,
                            separate=separate)
         sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
-                            cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units)
+                            cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units,
+                            max_difference=getattr(scene, "acceptance", {}).get("max_difference"))
     except ValueError as exc:
         info.update(success=False, message=str(exc))
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
@@ -475,7 +515,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         files += [str(chart), str(gif)]
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name}))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
-    ok = res.all_success and bool(sch.success.all())
+    ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
     info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),
@@ -483,8 +523,10 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                                       for n, v in zip(res.names, res.separate_differences)},
                 strokes={n: [float(v) for v in row] for n, row in zip(res.names, res.strokes)},
                 frames=sch.n_frames, failed_frames=failed,
+                reached=[bool(r) for r in sch.reached], unreached=list(sch.unreached),
                 message="" if ok else ("; ".join(f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
-                                                 if not o) + (f"; frames {failed} failed" if failed else "")),
+                                                 if not o) + (f"; frames {failed} failed" if failed else "")
+                                       + (f"; {sch.outcome()}" if sch.unreached else "")),
                 times={k: float(v) for k, v in res.times.items()},
                 files=[os.path.relpath(f, folder.parent) for f in files])
     record, waiting = copy.deepcopy(info), [len(jobs)]
@@ -502,5 +544,5 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
-        + f"; {sch.n_frames} frames" + ("" if ok else " - FAILED: " + info["message"]))
+        + f"; {sch.outcome()}" + ("" if ok else " - FAILED: " + info["message"]))
     return info

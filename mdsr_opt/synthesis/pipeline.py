@@ -18,7 +18,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
-from .contractions import design_contractions
+from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import route_muscles
@@ -48,7 +48,13 @@ class PipelineResult:
         ``reflection``.
     design : DesignResult
     times : dict
-        Seconds per stage (``external``, ``routing``, ``design``, ``total``).
+        Seconds per stage (``external``, ``routing``, ``design``, ``total``; ``bands`` when computed).
+    dropped : tuple of DroppedMuscle
+        Muscles taken out of the layout after a design, with the reason (an idle muscle:
+        :func:`~mdsr_opt.synthesis.acceptance.design_active`); ``muscles`` are those kept.
+    bands : StrokeBands or None
+        The strokes' uncertainty bands (:func:`~mdsr_opt.synthesis.bands.stroke_bands`), when asked for
+        (``design.stroke_band`` holds their ranges).
     """
 
     mesh: Mesh
@@ -62,6 +68,8 @@ class PipelineResult:
     routing: RoutingResult | None
     design: DesignResult
     times: dict = field(default_factory=dict)
+    dropped: tuple = ()
+    bands: Any = None
 
     @property
     def success(self) -> bool:
@@ -77,7 +85,16 @@ class PipelineResult:
         return compact_repr(self, ("success",), extra={
             "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
             "difference": d.difference, "contractions": d.contractions,
+            **({"saturated": [int(i) for i in np.flatnonzero(d.saturated)]} if d.saturated.any() else {}),
+            **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
             "total_time": self.times.get("total", float("nan"))})
+
+    def table(self) -> str:
+        """The stroke table (:meth:`DesignResult.muscle_table`, with the stroke bands when computed), then
+        one line per dropped muscle."""
+        lines = [self.design.muscle_table()]
+        lines += [f"dropped {m.name}: {m.reason}" for m in self.dropped]
+        return "\n".join(lines)
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (arrays as lists, NaN as None): what ``design.json`` holds, with the mesh
@@ -97,7 +114,8 @@ class PipelineResult:
             "external": {k: v for k, v in self.external.to_dict().items() if k != "x"},  # x: the target
             "muscles": [{"nodes": list(mu.nodes), "name": mu.name} for mu in self.muscles],
             "routing": None if self.routing is None else self.routing.to_dict(), "design": self.design.to_dict(),
-            "times": self.times,
+            "times": self.times, "dropped_muscles": [m.to_dict() for m in self.dropped],
+            "bands": None if self.bands is None else self.bands.to_dict(),
         }
 
     def save(self, out: str | os.PathLike) -> str:
@@ -172,8 +190,13 @@ class PipelineResult:
             field_ = "external/routing/times"
             external = _equilibrium_from(data["external"], md.x)
             routing = None if data["routing"] is None else _routing_from(data["routing"], muscles, md.mesh, md.x)
+            field_ = "dropped_muscles"
+            dropped = tuple(DroppedMuscle(name=str(d["name"]), nodes=tuple(int(n) for n in d["nodes"]),
+                                          contraction=float(d["contraction"]), reason=str(d["reason"]))
+                            for d in data.get("dropped_muscles", ()))
             return cls(mesh=md.mesh, material=material, target=md.x, external=external,
-                       muscles=muscles, routing=routing, design=design, times=data.get("times", {}), **kw)
+                       muscles=muscles, routing=routing, design=design, times=data.get("times", {}),
+                       dropped=dropped, **kw)
         except FileNotFoundError:
             raise
         except KeyError as exc:
@@ -214,7 +237,8 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
 @interruptible()
 def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
                     routing_options: dict | None = None, method: str = "flattened",
-                    external_options: dict | None = None, **design_options) -> PipelineResult:
+                    external_options: dict | None = None, idle_contraction: float = IDLE_CONTRACTION,
+                    bands: bool = False, band_options: dict | None = None, **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -229,10 +253,21 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         The design method (see :func:`design_contractions`).
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
+    idle_contraction : float, default :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`
+        A muscle designed to a contraction below it is idle: dropped from the layout and the design made
+        again (:func:`~mdsr_opt.synthesis.acceptance.design_active`; ``.dropped`` lists it). 0 keeps every
+        muscle. When every muscle is idle the design is no success.
+    bands : bool, default False
+        Also compute every stroke's uncertainty band (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: a
+        few more designs, one on a refined mesh), in ``.bands`` and ``.design.stroke_band``.
+    band_options : dict, optional
+        Keywords of ``stroke_bands`` (``radius_tol``, ``nu_tol``, ``refine``, ``max_refined_nodes``,
+        ``max_iter``).
     **design_options
         Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
         rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
-        contraction, the stroke (rope length pulled in) and the tension.
+        contraction, the stroke (rope length pulled in) and the tension; a muscle at ``a_max`` is flagged
+        (``.design.saturated``, a :class:`~mdsr_opt.synthesis.results.MuscleWarning`).
 
     Returns
     -------
@@ -259,8 +294,19 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     """
     from ..mechanics.equilibrium import solve_external
 
+    from .acceptance import check_idle_contraction
+
     t0 = time.perf_counter()
     check_mesh_material(mesh, material)
+    idle_contraction = check_idle_contraction(idle_contraction)
+    if not isinstance(bands, (bool, np.bool_)):
+        raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
+    if band_options is not None and not isinstance(band_options, dict):
+        raise TypeError(f"band_options must be a dict, got {type(band_options).__name__}")
+    unknown = set(band_options or {}) - {"radius_tol", "nu_tol", "refine", "max_refined_nodes", "max_iter"}
+    if unknown:
+        raise ValueError(f"band_options: unknown key {sorted(unknown)[0]!r} (keys: radius_tol, nu_tol, refine, "
+                         "max_refined_nodes, max_iter)")
     ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
     ext.raise_on_failure()
     t1 = time.perf_counter()
@@ -277,9 +323,19 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     else:
         mus = tuple(check_muscles(mesh, muscles))
     t2 = time.perf_counter()
-    res = design_contractions(mesh, material, mus, ext.x, method=method, **design_options)
+    res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
+                                      **design_options)
     t3 = time.perf_counter()
-    return PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
-                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
-                          times={"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2, "total": t3 - t0})
+    times = {"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2}
+    out = PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
+                         target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
+                         times=times, dropped=dropped)
+    if bands and res.success:
+        from .bands import stroke_bands
+
+        out.bands = stroke_bands(out, **{**design_options, **(band_options or {})})
+        res.stroke_band = out.bands.band.copy()
+        times["bands"] = time.perf_counter() - t3
+    times["total"] = time.perf_counter() - t0
+    return out
 

@@ -71,7 +71,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..core.guards import interruptible
-from ..body.checks import check_target_shape
+from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import check_int, check_label
 from ..body.mesh import Mesh
@@ -135,7 +135,8 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
         if p.mesh is not None and not _same_mesh(mesh, p.mesh):
             raise ValueError(f"pose {p.name!r} belongs to a different mesh ({p.mesh.n_nodes} nodes) than the one "
                              f"given ({mesh.n_nodes} nodes): all poses must be of the same mesh")
-        t = np.asarray(p.target, dtype=float) if not isinstance(p.target, str) else p.target
+        t = solved_state(p.target, f"pose {p.name!r}: target")  # a failed solve's result is refused here
+        t = np.asarray(t, dtype=float) if not isinstance(t, str) else t
         if np.ndim(t) != 2 or np.shape(t)[1] != 2 or np.shape(t)[0] != mesh.n_nodes:
             raise ValueError(f"pose {p.name!r}: target has shape {np.shape(t)}, expected ({mesh.n_nodes}, 2); all "
                              "poses must be of the same mesh")
@@ -417,7 +418,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     ----------
     mesh, material : the body.
     poses : mapping name -> (n, 2) target, or a list of :class:`Pose` / ``(name, target)`` / targets.
-        At least one; all of ``mesh`` (a :class:`Pose` carrying another mesh is refused).
+        At least one; all of ``mesh`` (a :class:`Pose` carrying another mesh is refused). A target may be a
+        solve's result (an :class:`~mdsr_opt.mechanics.result.EquilibriumResult`): its ``x``, refused when the
+        solve failed.
     max_muscles : int, optional
         The muscle budget of the shared layout (at least 1); default: every non-duplicate muscle the poses'
         routings give.
@@ -445,8 +448,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     Raises
     ------
     TypeError, ValueError
-        Before any work: an empty pose list, poses of a different mesh or shape, a target that is no shape
-        of the body (:func:`~mdsr_opt.body.checks.check_target_shape`), a pose name with a control
+        Before any work: an empty pose list, a target from a failed solve, poses of a different mesh or
+        shape, a target that is no shape of the body (:func:`~mdsr_opt.body.checks.check_target_shape`), a pose name with a control
         character, a separate design made on another mesh, a budget below one, a duplicated pose name, a
         bad overlap.
     """

@@ -10,10 +10,19 @@ import numpy as np
 from ..core.results import compact_repr, load_fields, save_fields
 from .problem import DesignProblem
 
-__all__ = ['Verification', 'DesignResult']
+__all__ = ['Verification', 'DesignResult', 'MuscleWarning', 'SATURATION_TOL']
 
 
 METHODS = ("flattened", "nested", "derivative-free")
+
+#: a designed contraction within this of ``a_max`` is saturated (:attr:`DesignResult.saturated`): the
+#: muscle would pull further if it could, so the body reaches less than the layout could with more stroke
+SATURATION_TOL = 1e-3
+
+
+class MuscleWarning(UserWarning):
+    """A designed muscle is saturated (its contraction at ``a_max``): the design's shape is the best within
+    the bound, not the target's; raise ``a_max``, add muscles or accept the difference."""
 
 
 # ---------------------------------------------------------------------------------------------- results
@@ -143,6 +152,10 @@ class DesignResult:
         The fingerprint of the mesh the design was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
         saved and loaded with the result: functions taking a mesh with the result refuse another body
         (None: not recorded, not checked).
+    stroke_band : (m, 2) ndarray
+        Per muscle the (low, high) range of the stroke under the fabrication's uncertainties (fixture size,
+        Poisson's ratio, mesh refinement; :func:`~mdsr_opt.synthesis.bands.stroke_bands`); empty (shape
+        ``(0, 2)``) when not computed.
     """
 
     method: str
@@ -173,9 +186,18 @@ class DesignResult:
     tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rest_mesh: dict | None = None
+    stroke_band: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def __repr__(self) -> str:
-        return compact_repr(self, ("method", "success", "difference", "contractions", "muscle_model", "x", "time"))
+        extra = {"saturated": [int(i) for i in np.flatnonzero(self.saturated)]} if self.saturated.any() else {}
+        extra.update(muscle_model=self.muscle_model, x=self.x, time=self.time)
+        return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """(m,) bool: the muscle's contraction is at ``a_max`` (within :data:`SATURATION_TOL`)."""
+        a = np.asarray(self.contractions, dtype=float)
+        return np.isfinite(a) & (a >= float(self.a_max) - SATURATION_TOL)
 
     @property
     def commanded(self) -> np.ndarray:
@@ -183,15 +205,26 @@ class DesignResult:
         return self.contractions
 
     def muscle_table(self) -> str:
-        """One line per muscle: commanded and achieved contraction, stroke, tension, slack."""
-        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} {'tension':>10} slack"]
+        """One line per muscle: commanded and achieved contraction, stroke (with its band when computed),
+        tension, slack, saturated."""
+        band = np.asarray(self.stroke_band, dtype=float).reshape(-1, 2)
+        has_band = len(band) == len(self.contractions) and len(band) > 0
+        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} "
+                 + (f"{'stroke band':>21} " if has_band else "") + f"{'tension':>10} slack saturated"]
+        sat = self.saturated
         for i in range(len(self.contractions)):
             def at(v, k=i):
                 return float(v[k]) if len(v) > k else float("nan")
             sl = bool(self.slack[i]) if len(self.slack) > i else False
+            b = f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} " if has_band else ""
             lines.append(f"{i:>6} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
-                         f"{at(self.stroke):>10.4g} {at(self.tension):>10.4g} {'yes' if sl else 'no'}")
+                         f"{at(self.stroke):>10.4g} {b}{at(self.tension):>10.4g} {'yes' if sl else 'no':>5} "
+                         f"{'YES' if sat[i] else 'no':>9}")
         return "\n".join(lines)
+
+    def table(self) -> str:
+        """The stroke table: :meth:`muscle_table`."""
+        return self.muscle_table()
 
     @property
     def x_aligned(self) -> np.ndarray:
@@ -211,6 +244,8 @@ class DesignResult:
                 "contractions": [float(c) for c in self.contractions],
                 "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
                 "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
+                "saturated": [bool(s) for s in self.saturated],
+                "stroke_band": [[float(lo), float(hi)] for lo, hi in np.asarray(self.stroke_band).reshape(-1, 2)],
                 "anchor_radius": self.anchor_radius, "difference": self.difference,
                 "initial_difference": self.initial_difference, "iterations": self.iterations,
                 "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
@@ -243,6 +278,9 @@ class DesignResult:
                 d[k] = np.asarray([np.nan if v is None else v for v in d[k]], dtype=float)
         if "slack" in d:
             d["slack"] = np.asarray(d["slack"], dtype=bool)
+        if "stroke_band" in d:
+            d["stroke_band"] = np.asarray([[np.nan if v is None else v for v in row] for row in d["stroke_band"]],
+                                          dtype=float).reshape(-1, 2)
         if d.get("verification") is not None:
             v = dict(d["verification"])
             if v.get("min_eigenvalue") is None:  # not estimated (NaN, written as null)

@@ -1,0 +1,178 @@
+"""What a design must show before it counts as one: no idle muscle, and a shape close enough to the target.
+
+An optimiser that converges has found the best contractions for the layout it was given; that is not yet a
+robot. Two outcomes used to pass unnoticed:
+
+- an *idle* muscle, designed to a contraction below :data:`IDLE_CONTRACTION` (a rope a workshop would
+  mould, thread and fix for nothing). It is not always harmless: a rope held at its rest length stops the
+  body from stretching along it, and the bound ``a >= 0`` keeps the design from paying it out, so the
+  layout without it can only reach the target as closely or closer. :func:`design_active` drops it and
+  designs again, and says so (:class:`DroppedMuscle`); when every muscle is idle the design does not move
+  the body and is no success.
+- a difference to the target larger than a stated fraction of the body's size: :data:`MAX_DIFFERENCE`,
+  the default bound of :func:`difference_failure`, with which ``mdsr run`` fails a case.
+
+A muscle at ``a_max`` is flagged by the design itself
+(:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated` and a
+:class:`~mdsr_opt.synthesis.results.MuscleWarning`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ..body.muscles import Muscle
+from ..core.checks import positive_float
+from ..core.results import to_jsonable
+
+__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
+           "check_idle_contraction", "check_max_difference"]
+
+#: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
+IDLE_CONTRACTION = 1e-3
+
+#: the largest difference to the target, as a fraction of the body's size (``mesh.size``), with which a
+#: case of ``mdsr run`` is a success
+MAX_DIFFERENCE = 0.05
+
+#: whether ``mdsr run`` and the scene runner compute every stroke's uncertainty band unless told
+#: (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: four to five more designs per case, 3-6 times the
+#: design's own time on the library's coarse scenes; ``--bands`` or a scene's ``[acceptance] bands = true``)
+BANDS = False
+
+
+@dataclass(frozen=True)
+class DroppedMuscle:
+    """A muscle taken out of a layout after its design, and why.
+
+    Attributes
+    ----------
+    name : str
+        Its name (or ``"#<k>"``, its place in the layout given, when unnamed).
+    nodes : tuple of int
+        Its path.
+    contraction : float
+        The contraction it was designed to before it was dropped.
+    reason : str
+    """
+
+    name: str
+    nodes: tuple
+    contraction: float
+    reason: str
+
+    def to_dict(self) -> dict:
+        """The fields, JSON-ready."""
+        return to_jsonable(asdict(self))
+
+
+def check_idle_contraction(value, name: str = "idle_contraction") -> float:
+    """``value`` as a contraction threshold in ``[0, 1)`` (0: drop nothing); TypeError/ValueError naming
+    ``name`` otherwise."""
+    v = positive_float(value, name, allow_zero=True)
+    if v >= 1.0:
+        raise ValueError(f"{name} must lie in [0, 1) (a fraction of the rope's rest length), got {v:g}")
+    return v
+
+
+def check_max_difference(value, name: str = "max_difference") -> float:
+    """``value`` as a fraction of the body's size, ``> 0`` (``inf``: no bound); TypeError/ValueError naming
+    ``name`` otherwise."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
+        return math.inf
+    return positive_float(value, name)
+
+
+def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE) -> str:
+    """Why a design's ``difference`` (a length) to its target is too large for a body of ``size``, or ``""``
+    when it is within ``max_difference * size``.
+
+    Example
+    -------
+    >>> difference_failure(0.01, 1.0)
+    ''
+    >>> difference_failure(0.12, 2.0, 0.05)
+    'difference 0.12 is 6.00 % of the size 2, more than max_difference 5 %'
+    """
+    d = float(difference)
+    if math.isfinite(d) and d <= max_difference * size:
+        return ""
+    rel = f"{100 * d / size:.2f} %" if math.isfinite(d) else "not finite"
+    return f"difference {d:.3g} is {rel} of the size {size:.3g}, more than max_difference {100 * max_difference:g} %"
+
+
+def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_contraction: float = IDLE_CONTRACTION,
+                  **design_options):
+    """:func:`~mdsr_opt.synthesis.contractions.design_contractions`, then every idle muscle (designed
+    contraction below ``idle_contraction``) dropped from the layout and the design made again on the others
+    (started from their contractions), until no muscle is idle.
+
+    Parameters
+    ----------
+    mesh, material, muscles, target : as for ``design_contractions``.
+    idle_contraction : float in [0, 1), default :data:`IDLE_CONTRACTION`
+        The threshold (0: keep every muscle).
+    **design_options
+        Keywords of ``design_contractions``.
+
+    Returns
+    -------
+    design : DesignResult
+        The design of the muscles kept. Its ``status`` names what was dropped. When every muscle is idle,
+        nothing is dropped and ``success`` is False (the design does not move the body); when the design
+        without the idle muscles fails, the design with them is returned, its ``status`` saying so.
+    muscles : tuple of Muscle
+        The muscles kept (those of ``design``).
+    dropped : tuple of DroppedMuscle
+
+    Only the warnings of the design returned are issued (a
+    :class:`~mdsr_opt.synthesis.results.MuscleWarning` for a saturated muscle, for instance).
+    """
+    from .contractions import design_contractions
+
+    thr = check_idle_contraction(idle_contraction)
+    mus = tuple(muscles)
+    where = np.arange(len(mus))  # each kept muscle's place in the layout given (names unnamed ones)
+    opts = dict(design_options)
+    dropped: list[DroppedMuscle] = []
+    res, caught = _designed(design_contractions, mesh, material, mus, target, opts)
+    while res.success and thr > 0:
+        a = np.asarray(res.contractions, dtype=float)
+        idle = np.isfinite(a) & (a < thr)
+        if not idle.any():
+            break
+        if idle.all():
+            res.success = False
+            res.status += (f"; every muscle is idle (contractions {', '.join(f'{v:.3g}' for v in a)} below "
+                           f"idle_contraction {thr:g}): the design does not move the body")
+            break
+        keep = np.flatnonzero(~idle)
+        gone = [DroppedMuscle(name=mu.name or f"#{where[i]}", nodes=tuple(int(n) for n in mu.nodes),
+                              contraction=float(a[i]), reason=f"idle: designed contraction {a[i]:.3g} below "
+                              f"idle_contraction {thr:g}") for i, mu in enumerate(mus) if idle[i]]
+        again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
+                                        dict(opts, initial_guess=a[keep]))
+        names = ", ".join(g.name for g in gone)
+        if not again.success:
+            res.status += (f"; idle muscle(s) {names} kept: the design without them failed "
+                           f"({again.status})")
+            break
+        dropped += gone
+        again.status += f"; idle muscle(s) {names} dropped and the design made again"
+        res, caught, mus, where = again, caught_again, tuple(mus[i] for i in keep), where[keep]
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return res, mus, tuple(dropped)
+
+
+def _designed(design_contractions, mesh, material, mus, target, opts):
+    """One design and the warnings it issued (held back: only the design kept issues them; the caller's
+    filters still apply, so a warning turned into an error raises here)."""
+    with warnings.catch_warnings(record=True) as caught:
+        res = design_contractions(mesh, material, mus, target, **opts)
+    return res, list(caught)
