@@ -235,7 +235,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
     summary = report.to_dict()
-    summary.update({"description": scene.description, "source": scene.source, "resolution": scene.resolution,
+    summary.update({"description": scene.description, "source": portable_source(scene.source, out),
+                    "resolution": scene.resolution,
                     "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
                     "material": {"kind": scene.material.kind, "E": scene.material.E, "nu": scene.material.nu,
                                  "thickness": scene.material.thickness},
@@ -254,6 +255,22 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     say(f"{scene.name}: {'all cases succeeded' if report.success else 'SOME CASES FAILED'} in {report.time:.1f} s; "
         f"results in {out}")
     return report
+
+
+def portable_source(source: str, out) -> str:
+    """The scene's source as ``summary.json`` records it: a path relative to the output folder ``out`` when
+    the source lies in it or beside it (at most one ``..``), else only its file name; never an absolute
+    path, which would name the machine's folders (a user's home, a virtual environment)."""
+    if not source:
+        return ""
+    src = Path(source)
+    if not src.is_absolute():
+        src = Path.cwd() / src
+    try:
+        rel = Path(os.path.relpath(src, Path(out).resolve()))
+    except ValueError:  # another drive (Windows)
+        return src.name
+    return rel.as_posix() if rel.parts[:2] != ("..", "..") else src.name
 
 
 def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
