@@ -15,15 +15,26 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
-from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, muscle_color, muscle_label
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color, muscle_label
 
 __all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
-           'mesh_paths']
+           'coordinate_axes', 'mesh_paths']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
 # loc="best" search, which re-runs on every draw and was 11-32 % of a scene's figure time.
 LEGEND_OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+
+
+def legend_below(ax, ncol: int = 4, fontsize: float = 7, drop: float = 0.5):
+    """A legend centred under ``ax``, ``drop`` inches below its bottom edge: clear of the x tick labels and
+    axis label, of a colour bar beside the axes and of the drawing (also with an equal aspect ratio, where a
+    place given in axes fractions moves with the drawn box)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    below = ax.transAxes + ScaledTranslation(0.0, -drop, ax.figure.dpi_scale_trans)
+    return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
+                     ncol=ncol, borderaxespad=0.0)
 
 
 def axes_or_new(ax=None, figsize=(6, 4)):
@@ -46,6 +57,19 @@ def hide_ticks(*axes) -> None:
     for ax in axes:
         ax.set_xticks([])
         ax.set_yticks([])
+
+
+def coordinate_axes(ax, units=None, ticks=True) -> None:
+    """Label a drawing's axes ``x (unit)``, ``y (unit)`` (:func:`.style.label_coordinates`); with ``ticks``
+    False, three ticks a side instead of matplotlib's many (a run's figures: ticks are most of the cost of
+    drawing an axes, and the target figure of the same case has them all)."""
+    from matplotlib.ticker import MaxNLocator
+
+    label_coordinates(ax, units)
+    ax.tick_params(labelsize=8)
+    if not ticks:
+        ax.xaxis.set_major_locator(MaxNLocator(3))
+        ax.yaxis.set_major_locator(MaxNLocator(3))
 
 
 def mesh_paths(mesh):
