@@ -300,3 +300,18 @@ def test_drags_that_arrive_while_the_server_solves_are_dropped_but_the_latest():
     assert page.dropped == 19 and states[-1]["dropped"] == 19
     assert np.allclose(states[-1]["drag_positions"], base + 0.04) and states[-1]["success"]
     assert not [m for m in sent if m["type"] == "error"]
+
+
+def test_serve_says_where_files_go(capsys, monkeypatch, tmp_path):
+    import mdsr_opt.author as author
+
+    class NoServer:
+        def run(self, sockets):
+            for s in sockets:
+                s.close()
+
+    monkeypatch.setattr(author, "_server", lambda app, sock, quiet: NoServer())
+    assert author.serve(None, port=0, open_browser=False, out=str(tmp_path / "saved")) == 0
+    out = capsys.readouterr().out
+    assert f"Save writes scene files to {(tmp_path / 'saved').resolve()} (--out)" in out
+    assert "downloads: your browser's download folder" in out and "token=" in out
