@@ -109,7 +109,7 @@ def test_schedule_csv_and_chart(lr, tmp_path):
     assert [float(v) for v in rows[1][3:5]] == [0.0, 0.0]          # rest
     np.testing.assert_allclose([float(v) for v in rows[3][3:5]], res.strokes[0], rtol=1e-8)
     fig = plot_schedule(sch)
-    assert fig.axes[0].get_ylabel().startswith("stroke [cm]")
+    assert fig.axes[0].get_ylabel().startswith("stroke (cm")  # quantity (unit), as every figure
     assert np.all(sch.states[0] == mesh.points)
 
 

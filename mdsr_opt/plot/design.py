@@ -114,7 +114,7 @@ def plot_routing(mesh, target, result, axes=None, title=None, ticks=True, units=
             for m in muscles:
                 ends = pos[[m.nodes[0], m.nodes[-1]]]
                 ax.plot(ends[:, 0], ends[:, 1], "o", color="k", ms=3)
-        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh")
+        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh", fontsize=10)
     if muscles and len(muscles) <= 10:
         axes[1].legend(fontsize=7, **LEGEND_OUTSIDE)
     if title:
