@@ -97,7 +97,8 @@ def test_figure6_panels_use_the_muscle_names_one_colour_scale_and_units(strip):
              "row_labels": ["K_a = 4"]}]
     fig = plot_layout_grid(cols)
     axes = np.array(fig.axes).reshape(3, 2)
-    assert _legend(axes[2, 0]) == {"M1": muscle_color(0), "M2": muscle_color(1)}
+    assert axes[2, 0].get_legend() is None  # one legend for the row, beside its last panel
+    assert _legend(axes[2, 1]) == {"M1": muscle_color(0), "M2": muscle_color(1)}
     clims = {ax.collections[-1].get_clim() for ax in axes[1]}
     assert len(clims) == 1  # the contraction-graph row shares one colour scale
     bar, = axes[1, -1].child_axes  # with its colour bar, the height of the panel

@@ -32,8 +32,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
+from matplotlib.lines import Line2D
+
+from .common import legend_below
 from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color, muscle_label,
-                    symmetric_limits, unit_label)
+                    muscle_name, symmetric_limits, unit_label)
 
 __all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
 
@@ -50,20 +53,6 @@ def _muscles(ax, x, muscles, lw=2.4, labels=True):
         ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color(i), lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)
         ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
-
-
-def _emptiest_corner(x) -> str:
-    """The corner of the drawing (a third of its width, a quarter of its height) over the fewest nodes of
-    ``x``: where the legend goes. Matplotlib's ``loc="best"`` tests every triangle of the mesh against
-    every candidate place, which takes longer than the rest of the figure on a fine mesh."""
-    P = np.asarray(x, dtype=float)
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    u = (P - lo) / np.maximum(hi - lo, 1e-300)
-    right, top = u[:, 0] > 2 / 3, u[:, 1] > 3 / 4
-    left, bottom = u[:, 0] < 1 / 3, u[:, 1] < 1 / 4
-    count = {"upper right": right & top, "upper left": left & top, "lower left": left & bottom,
-             "lower right": right & bottom}
-    return min(count, key=lambda k: int(count[k].sum()))  # ties: the first, upper right
 
 
 def _finish(ax):
@@ -128,10 +117,8 @@ def plot_layout_grid(columns, title=None):
             ax = axes[2 + i, j]
             _mesh(ax, mesh, x, alpha=0.8)
             mus = list(lay)
-            _muscles(ax, x, mus)
+            _muscles(ax, x, mus, labels=False)
             ax.set_title(f"{label}: {len(mus)} muscle(s)", fontsize=8)
-            if mus:
-                ax.legend(fontsize=6, loc=_emptiest_corner(x), handlelength=1.2)
             _finish(ax)
     for i, name in enumerate(["A target", "B contraction graph"] + [f"{chr(67 + k)} layout" for k in range(n_lay)]):
         axes[i, 0].set_ylabel(name, fontsize=9)
@@ -140,6 +127,18 @@ def plot_layout_grid(columns, title=None):
     fig.tight_layout()
     # after the layout (an inset is not laid out): the row's colour bar beside its last panel
     add_colorbar(axes[1, -1], lc, axis_label("$(l_0 - l)/l_0$", "1"), width=0.05)
+    # one legend per layout row, beside its last panel: over no drawing, the muscles' names and colours
+    # as in every figure (a name the columns do not share is the muscle's place, M<k>)
+    for i in range(n_lay):
+        lays = [list(c["layouts"][i]) for c in columns if i < len(c["layouts"])]
+        names = []
+        for k in range(max((len(m) for m in lays), default=0)):
+            own = {muscle_label(m[k], k) for m in lays if k < len(m)}
+            names.append(own.pop() if len(own) == 1 else muscle_name(k))
+        if names:
+            handles = [Line2D([], [], color=muscle_color(k), lw=2.4) for k in range(len(names))]
+            axes[2 + i, -1].legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
+                                   borderaxespad=0.0, handlelength=1.5)
     return fig
 
 
@@ -219,7 +218,7 @@ def plot_convergence(panels, title=None, log=True):
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
+        legend_below(ax, ncol=1, drop=0.45)  # under the panel: never over a trace
     axes[0, 0].set_ylabel(axis_label("difference D", panels[0].get("units")))
     if title:
         fig.suptitle(title, fontsize=11)
