@@ -143,3 +143,28 @@ def test_scene_figures_label_their_axes_and_save_vector_copies(strip, tmp_path):
     with pytest.raises(ValueError, match="vector figure format must be one of pdf, svg, got 'eps'"):
         save_figure(plt.figure(), tmp_path / "n.png", vector="eps", close=True)
     assert not (tmp_path / "n.png").exists()
+
+
+def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path, capsys):
+    import json
+
+    from mdsr_opt.cli.main import main
+
+    strip = tmp_path / "strip.json"
+    strip.write_text(json.dumps({
+        "name": "strip", "units": "cm", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+        "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+        "cases": [{"name": "bend", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.8, 1.2]}]}]}))
+    out = tmp_path / "out"
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--vector", "--serial"]) == 0
+    pngs = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.png"))
+    assert "rest.png" in pngs and "bend/design.png" in pngs
+    for p in pngs:
+        assert (out / p).with_suffix(".pdf").read_bytes()[:5] == b"%PDF-", p
+    summary = json.loads((out / "summary.json").read_text())
+    assert "bend/design.pdf" in summary["cases"][0]["files"]  # listed with the case's files
+    assert main(["run", str(strip), "--out", str(tmp_path / "svg"), "--no-photos", "--vector",
+                 "--vector-format", "svg", "--serial"]) == 0
+    assert (tmp_path / "svg" / "bend" / "design.svg").exists() and not (tmp_path / "svg" / "rest.pdf").exists()
+    assert main(["run", "figure6", "--out", str(tmp_path / "f6"), "--vector"]) == 2  # said, not ignored
+    assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "f6").exists()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import inspect
+
 import ast
 from pathlib import Path
 import time
@@ -67,10 +69,15 @@ def _cmd_run(a) -> int:
             module = load_module(figs[names[0]])
             if a.resolution is not None:
                 resolve_resolution(a.resolution)
+            extra = {}
+            if vector is not None:  # passed on to a figure script that takes it, else said at the door
+                if "vector" not in inspect.signature(module.run_figure).parameters:
+                    raise InputError(f"{names[0]} writes no vector figures: run it without --vector")
+                extra["vector"] = vector
         with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
             folder.begin(getattr(module, "OUTPUTS", ()))
             with progress_for_cli(a, 0, names[0], unit="step") as log:
-                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
+                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log, **extra))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
     parallel = not a.serial and not (a.no_figures and a.no_photos)
