@@ -485,7 +485,7 @@ def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def _rest_and_pid(scene, path):
+def _rest_and_pid(scene, path, vector=None):
     """rest.png's job, which also leaves the id of its process next to the figure."""
     from mdsr_opt.plot.common import save_figure
     from mdsr_opt.plot.scenes import plot_scene
