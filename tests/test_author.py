@@ -315,3 +315,18 @@ def test_serve_says_where_files_go(capsys, monkeypatch, tmp_path):
     out = capsys.readouterr().out
     assert f"Save writes scene files to {(tmp_path / 'saved').resolve()} (--out)" in out
     assert "downloads: your browser's download folder" in out and "token=" in out
+
+
+def test_downloaded_figures_name_the_scenes_unit(tentacle, monkeypatch, tmp_path):
+    """The page's figure downloads label their axes in the scene's unit (a drawn outline: body units)."""
+    import mdsr_opt.plot.common as common
+    from mdsr_opt.author.export import download
+
+    s = Session.from_scene(tentacle)
+    assert s.units == tentacle.units
+    s.settle()
+    labels = []
+    monkeypatch.setattr(common, "save_figure", lambda fig, path, **kw: (labels.append(fig.axes[0].get_xlabel()),
+                                                                       open(path, "wb").write(b"png")))
+    data, media = download(s, "graph.png", tmp_path)
+    assert labels == [f"x ({tentacle.units})"] and media == "image/png"

@@ -125,6 +125,7 @@ class Session:
     design: object = None
     design_params: dict = field(default_factory=dict)
     log: list = field(default_factory=list)
+    units: str = ""  # the scene's length unit, named on the figures' axes ("" for a drawn outline)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -132,7 +133,7 @@ class Session:
         """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
         s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
                 resolution=scene.resolution, routing_options=dict(scene.routing_options),
-                design_options=dict(scene.design_options))
+                design_options=dict(scene.design_options), units=scene.units)
         ext = [c for c in scene.cases if c.kind == "external"]
         if case is not None:
             ext = [scene.case(case)]
