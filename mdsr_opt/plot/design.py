@@ -141,7 +141,7 @@ def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
     ax.set_xlabel(axis_label("mesh nodes", "count"))
     ax.set_ylabel(axis_label("routing time", "s"))
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="upper left")  # explicit: "best" searches
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no line (and no "best" search)
     ax.set_title("muscle routing time")
     return fig
 
@@ -240,7 +240,7 @@ def plot_design_benchmark(rows, traces=None, ax=None):
         ax.scatter([], [], color=c, label=method)
     for i, mname in enumerate(meshes):
         ax.scatter([], [], color="grey", marker=markers[i % len(markers)], label=f"{mname} nodes")
-    ax.legend(fontsize=7, loc="upper right")
-    ax.set_title("contraction design: difference against time (marker size ~ muscle count)")
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no marker
+    ax.set_title("contraction design: difference against time (marker size ~ muscle count)", fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
     return fig

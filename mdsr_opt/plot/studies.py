@@ -115,7 +115,7 @@ def plot_study_scaling(rows, slopes=None, ax=None, title=None):
     ax.set_title(f"study {title}: time against nodes (fitted time ~ nodes^slope)" if title else
                  "time against nodes (fitted time ~ nodes^slope)", fontsize=9)
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no run
     return fig
 
 
