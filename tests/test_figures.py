@@ -168,3 +168,24 @@ def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path, capsys):
     assert (tmp_path / "svg" / "bend" / "design.svg").exists() and not (tmp_path / "svg" / "rest.pdf").exists()
     assert main(["run", "figure6", "--out", str(tmp_path / "f6"), "--vector"]) == 2  # said, not ignored
     assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "f6").exists()
+
+
+def test_gif_frames_are_large_and_draw_idle_muscles_in_their_colour(strip, tmp_path):
+    from PIL import Image
+
+    from mdsr_opt.plot.scenes import save_animation
+
+    mesh, muscles, target = strip
+    states = [mesh.points, target]
+    p = save_animation(mesh, states, tmp_path / "a.gif", muscles=muscles, activations=[[0.0, 0.0], [1.0, 0.2]],
+                       titles=["rest", "pose"])
+    im = Image.open(p)
+    assert im.size[0] >= 800 and im.size[1] >= 500
+    red = np.array([0xd6, 0x27, 0x28])  # M1's colour (plot.style)
+    counts = []
+    for k in range(2):
+        im.seek(k)
+        rgb = np.asarray(im.convert("RGB")).astype(int)
+        counts.append(int((np.abs(rgb - red).sum(-1) < 60).sum()))
+    # idle in the first frame, yet drawn in full colour (thinner than when it pulls), beside the legend's swatch
+    assert counts[0] > 300 and counts[1] > counts[0]

@@ -7,6 +7,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 from matplotlib.font_manager import findfont
+from matplotlib import patheffects
 from matplotlib.patches import PathPatch
 import matplotlib.pyplot as plt
 import numpy as np
@@ -229,8 +230,9 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for i, (line, p) in enumerate(zip(lines, paths)):
             a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
             line.set_data(x[p, 0], x[p, 1])
-            line.set_linewidth(1.6 + 3.0 * a)  # idle: thin but drawn in full colour
-            line.set_alpha(0.8 + 0.2 * a)
+            w = 2.2 + 2.6 * a  # idle: thinner, but in full colour on a white rim, clear on the body's blue
+            line.set_linewidth(w)
+            line.set_path_effects([patheffects.Stroke(linewidth=w + 1.6, foreground="white"), patheffects.Normal()])
         canvas.restore_region(background)
         for a in moving:
             ax.draw_artist(a)
