@@ -306,8 +306,8 @@ class Session:
         """Corrector steps from the predicted state ``y``, until the scaled residual is at most
         :attr:`PREVIEW_TOL`: with the chord predictor's factorised tangent while the residual halves each
         step, else with the tangent refactorised at the current state (a Newton step; that factorisation is
-        then reused by the next updates). A live state, or None (an inverted element, no convergence within
-        :attr:`PREVIEW_STEPS`)."""
+        then reused by the next updates). A live state, or None (an inverted element, a boundary crossing
+        itself, no convergence within :attr:`PREVIEW_STEPS`)."""
         fixed = self._fixed_mask()
         free = ~fixed
         c = self.__dict__.get("_chord")
@@ -326,6 +326,8 @@ class Session:
                 return None
             if r <= self.PREVIEW_TOL:
                 x = z.reshape(-1, 2)
+                if self.mesh.boundary_crosses(x):  # solve_external's own check names the crossing
+                    return None
                 return SolveReport(x=x.copy(), success=True, status=f"preview (residual {r:.1e})", iterations=k,
                                    residual=r, min_J=float(self.mesh.jacobians(x).min()), crossing=False,
                                    inverted=[], live=True, solve_time=time.perf_counter() - t0)
