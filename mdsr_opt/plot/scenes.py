@@ -9,14 +9,13 @@ from matplotlib.figure import Figure
 from matplotlib.font_manager import findfont
 from matplotlib import patheffects
 from matplotlib.patches import PathPatch
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
-from .style import BODY, LIGHT, REST_LINE, muscle_color, muscle_label
+from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, muscle_color, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -36,10 +35,9 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4, units=None
     """
     fig, ax = axes_or_new(ax, figsize=(7, 4.5))
     plot_mesh(mesh, None, ax=ax, color=LIGHT["face"], edgecolor=LIGHT["edge"])
-    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, (name, idx) in enumerate((regions or {}).items()):
         p = mesh.points[np.asarray(idx, dtype=int)]
-        ax.plot(p[:, 0], p[:, 1], "o", ms=markersize, color=cyc[i % len(cyc)], label=name)
+        ax.plot(p[:, 0], p[:, 1], "s", ms=markersize, color=REGION_COLORS[i % len(REGION_COLORS)], label=name)
     if regions:
         ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     # y=1.0: the title's place given, not searched (the search lays the y axis out once more before the draw,

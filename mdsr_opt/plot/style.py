@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MUSCLE_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
+__all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
            "muscle_color", "muscle_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
@@ -35,6 +35,10 @@ MUSCLE_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b
 
 #: AutoCAD colour index nearest to each of :data:`MUSCLE_COLORS` (DXF entities carry an ACI colour)
 _ACI = (1, 5, 3, 30, 200, 34, 221, 4, 50, 170)
+
+#: Named node regions (a scene's rest figure): ColorBrewer's Dark2, drawn as squares, so that a region is
+#: never taken for a muscle of the same colour
+REGION_COLORS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d", "#666666")
 
 #: A driven (simulated) body: face and edge colour
 BODY = {"face": "#8fb3d9", "edge": "#335577"}
