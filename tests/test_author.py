@@ -327,6 +327,6 @@ def test_downloaded_figures_name_the_scenes_unit(tentacle, monkeypatch, tmp_path
     s.settle()
     labels = []
     monkeypatch.setattr(common, "save_figure", lambda fig, path, **kw: (labels.append(fig.axes[0].get_xlabel()),
-                                                                       open(path, "wb").write(b"png")))
-    data, media = download(s, "graph.png", tmp_path)
+                                                                       Path(path).write_bytes(b"png")))
+    _, media = download(s, "graph.png", tmp_path)
     assert labels == [f"x ({tentacle.units})"] and media == "image/png"

@@ -4,18 +4,19 @@ one name and one colour in the design figure, the schedule, Figure 6's panels an
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from types import SimpleNamespace
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
-from matplotlib.colors import to_hex  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.colors import to_hex
 
-from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal  # noqa: E402
-from mdsr_opt.plot.style import muscle_color, muscle_name  # noqa: E402
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.plot.style import muscle_color, muscle_name
 
 UNIT = re.compile(r"\(([^()]+)\)\s*$")  # "quantity (unit)"
 
@@ -79,10 +80,10 @@ def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip,
     plt.close(fig)
 
     files = export_fabrication(mesh, res, tmp_path, muscles=muscles, units="mm", name="strip")
-    svg = open(files["svg"]).read()
+    svg = Path(files["svg"]).read_text()
     found = dict(re.findall(r'<polyline class="muscle" id="([^"]+)" points="[^"]*" stroke="([^"]+)"', svg))
     assert found == want
-    dxf = open(files["dxf"]).read().split("\n")
+    dxf = Path(files["dxf"]).read_text().split("\n")
     texts = [i for i, v in enumerate(dxf) if v.strip() == "TEXT"]
     # each label: its layer, then group 62 with the ACI colour of the muscle's figure colour (red, blue)
     assert [dxf[i + 3].strip() for i in texts] == ["62"] * 2 and [int(dxf[i + 4]) for i in texts] == [1, 5]
@@ -139,7 +140,7 @@ def test_scene_figures_label_their_axes_and_save_vector_copies(strip, tmp_path):
     assert fig.axes[0].get_xlabel() == "x (body units)"  # no unit given: said so
     p = save_figure(fig, tmp_path / "m.png", vector=("pdf", "svg"), close=True)
     assert figure_paths(p, ("pdf", "svg")) == [str(tmp_path / f"m.{e}") for e in ("png", "pdf", "svg")]
-    assert open(tmp_path / "m.pdf", "rb").read(5) == b"%PDF-" and "<svg" in open(tmp_path / "m.svg").read()
+    assert (tmp_path / "m.pdf").read_bytes()[:5] == b"%PDF-" and "<svg" in (tmp_path / "m.svg").read_text()
     with pytest.raises(ValueError, match="vector figure format must be one of pdf, svg, got 'eps'"):
         save_figure(plt.figure(), tmp_path / "n.png", vector="eps", close=True)
     assert not (tmp_path / "n.png").exists()
