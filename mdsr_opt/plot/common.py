@@ -120,7 +120,7 @@ def plot_mesh(mesh, x=None, ax=None, color=BODY["face"], edgecolor=BODY["edge"],
     ax.set_aspect("equal")
     ax.autoscale_view()
     if title:
-        ax.set_title(title)
+        ax.set_title(title, fontsize=10)
     return fig
 
 
