@@ -188,9 +188,10 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     return fig
 
 
-def design_title(result, muscles=(), units=None, per_line: int = 4) -> str:
+def design_title(result, muscles=(), units=None, per_line: int = 3) -> str:
     """A design's title: method, difference with its unit, then per muscle the commanded contraction and
-    the achieved one (``M1 0.150 -> 0.148``), ``per_line`` muscles to a line."""
+    the achieved one (``M1 0.150 -> 0.148``): on the same line for one or two muscles, else ``per_line``
+    muscles to a line under a heading line (the title stays about as wide as the drawing)."""
     from .style import muscle_label, muscle_name
 
     a = np.asarray(result.contractions, dtype=float)
@@ -199,11 +200,13 @@ def design_title(result, muscles=(), units=None, per_line: int = 4) -> str:
     names = names or [muscle_name(i) for i in range(a.size)]
     text = commanded_achieved(a, reached if reached.size == a.size else None, names)
     parts = text.split(", ") if text else []
-    rows = [", ".join(parts[k:k + per_line]) for k in range(0, len(parts), per_line)]
     ok = "" if result.success else "  [FAILED]"
     head = f"{result.method}: difference D = {result.difference:.3g} {unit_label(units)}{ok}"
-    what = "contraction commanded \u2192 achieved: " if reached.size == a.size else "contraction commanded: "
-    return "\n".join([head, what + (rows[0] if rows else "none")] + rows[1:])
+    what = "contraction commanded \u2192 achieved:" if reached.size == a.size else "contraction commanded:"
+    if len(parts) <= 2:
+        return f"{head}\n{what} {', '.join(parts) or 'none'}"
+    rows = [", ".join(parts[k:k + per_line]) for k in range(0, len(parts), per_line)]
+    return "\n".join([head, what] + rows)
 
 
 def plot_design_benchmark(rows, traces=None, ax=None):
