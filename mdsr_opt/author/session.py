@@ -13,10 +13,9 @@ Two kinds of solve:
   at the scaled residual :attr:`Session.PREVIEW_TOL` -- no solver set-up, no stability check. When the
   preview inverts an element or does not reach that residual, ``solve_external`` takes over from the
   predicted state (no load stepping), and when that fails, the settled solve below.
-* **settled** (:meth:`Session.settle`): the exact equilibrium, ``solve_external(mesh, material, anchors,
-  drags)`` at its default tolerance with its stability check, started from the last live state when
-  there is one (a few Newton iterations after a drag) and with its defaults (load stepping from rest)
-  otherwise or when that fails. A released drag is settled.
+* **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
+  defaults, exactly what ``mdsr run`` solves for the saved scene's target (the same numbers, bit for bit;
+  a warm start would reach the same equilibrium only to the tolerance). A released drag is settled.
 """
 
 from __future__ import annotations
@@ -235,21 +234,13 @@ class Session:
                            min_J=1.0, crossing=False, inverted=[], live=False)
 
     def settle(self) -> SolveReport:
-        """The exact equilibrium for the session's anchors and drags (the scene's target): ``solve_external``
-        at its default tolerance, started from the last live state after a drag, else (or when that start
-        fails) with its defaults."""
+        """``solve_external`` with the session's anchors and drags and its defaults (the scene's target)."""
         t0 = time.perf_counter()
         why = self._ready()
         if why:
             self.state = self._rest_report(why)
             return self.state
-        drags = (self.drag_nodes, self.drag_positions)
-        prev = self.state
-        res = None
-        if prev is not None and prev.success and prev.live:
-            res = solve_external(self.mesh, self.material, self.anchors, drags, initial_guess=prev.x, min_step=1.0)
-        if res is None or not res.success:
-            res = solve_external(self.mesh, self.material, self.anchors, drags)
+        res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions))
         self.state = self._report(res, live=False, warm_failed=False, t0=t0)
         self.target = res.x.copy() if res.success else None
         return self.state
