@@ -364,3 +364,58 @@ def test_draw_outline_anchor_drag_on_the_page(page):
     mesh = Mesh(P, body["triangles"])
     ref = solve_external(mesh, NeoHookean(1.0, 0.3), st["anchors"], (st["drag_nodes"], st["drag_positions"]))
     assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8
+
+
+#: Loose bounds for the 600-node drag below (issue 36 asks >= 30 updates/s and a settle within 0.3 s;
+#: tests/benchmarks/bench_author.py measures them; a shared CI machine gets this much room)
+MIN_RATE, MAX_SETTLE_S = 10.0, 1.5
+
+
+def test_drag_on_a_600_node_body_updates_at_interactive_rates(tmp_path):
+    from mdsr_opt.author import start_in_thread
+
+    url, server = start_in_thread(PROBLEM, resolution=600, out=tmp_path)
+    drv = open_browser()
+    try:
+        drv.get(url)
+        wait(drv, "const s = mdsrAuthor.state(); return s !== null && s.settled && !mdsrAuthor.busy();")
+        assert drv.execute_script("return mdsrAuthor.body().points.length;") > 500
+        drv.find_element(By.CSS_SELECTOR, "input[name=tool][value=move]").click()
+        drv.set_script_timeout(60)
+        # two seconds of mouse moves at the display's frame rate, then the release
+        got = drv.execute_async_script("""
+          const done = arguments[arguments.length - 1];
+          const c = document.getElementById('canvas'), r = c.getBoundingClientRect();
+          const [sx, sy] = mdsrAuthor.screenOf(mdsrAuthor.state().drag_nodes[0]);
+          const ev = (target, type, x, y) => target.dispatchEvent(new MouseEvent(type,
+              {clientX: r.left + x, clientY: r.top + y, button: 0, bubbles: true}));
+          ev(c, 'mousedown', sx, sy);
+          const n0 = mdsrAuthor.nLive(), t0 = performance.now();
+          let moves = 0;
+          function step() {
+            const t = performance.now() - t0;
+            if (t < 2000) {
+              moves += 1;
+              ev(c, 'mousemove', sx + 25 * Math.sin(t / 300), sy + 15 * (1 - Math.cos(t / 300)));
+              requestAnimationFrame(step);
+              return;
+            }
+            const rate = (mdsrAuthor.nLive() - n0) / (t / 1000);
+            ev(window, 'mouseup', sx, sy);
+            const t1 = performance.now();
+            (function poll() {
+              const s = mdsrAuthor.state();
+              if (!mdsrAuthor.busy() && s && !s.live && s.seq === mdsrAuthor.seq())
+                done({rate: rate, settle: (performance.now() - t1) / 1000, success: s.success, moves: moves});
+              else setTimeout(poll, 5);
+            })();
+          }
+          requestAnimationFrame(step);
+        """)
+    finally:
+        drv.quit()
+        server.should_exit = True
+    print(f"600-node drag in the browser: {got['rate']:.1f} updates/s ({got['moves']} mouse moves), settled "
+          f"{1e3 * got['settle']:.0f} ms after the release")
+    assert got["success"] and got["moves"] > 20
+    assert got["rate"] >= MIN_RATE and got["settle"] <= MAX_SETTLE_S

@@ -104,12 +104,12 @@ def test_schedule_csv_and_chart(lr, tmp_path):
     mesh, res = lr
     sch = gait_schedule(mesh, MAT, res, ["rest", "left"], frames_per_step=2, units="cm")
     rows = list(csv.reader(open(sch.write_csv(tmp_path / "s.csv"))))
-    assert rows[0][:4] == ["frame", "time [s]", "pose", "M0 stroke [cm]"]
+    assert rows[0][:4] == ["frame", "time [s]", "pose", "M1 stroke [cm]"]
     assert len(rows) == 1 + 5
     assert [float(v) for v in rows[1][3:5]] == [0.0, 0.0]          # rest
     np.testing.assert_allclose([float(v) for v in rows[3][3:5]], res.strokes[0], rtol=1e-8)
     fig = plot_schedule(sch)
-    assert fig.axes[0].get_ylabel().startswith("stroke [cm]")
+    assert fig.axes[0].get_ylabel().startswith("stroke (cm")  # quantity (unit), as every figure
     assert np.all(sch.states[0] == mesh.points)
 
 

@@ -545,7 +545,7 @@ def test_figures(grid_strip, tmp_path):
     fig = plot_routing(grid_strip, t, res)
     assert len(fig.axes) == 2
     for ax, pos in zip(fig.axes, (grid_strip.points, t)):
-        line = [ln for ln in ax.get_lines() if ln.get_label() == "muscle 0"][0]
+        line = [ln for ln in ax.get_lines() if ln.get_label() == "M1"][0]  # plot.style.muscle_name(0)
         assert np.allclose(line.get_xydata(), pos[list(res[0].nodes)])
     save_figure(fig, tmp_path / "routing.png")
     assert (tmp_path / "routing.png").stat().st_size > 1000

@@ -145,26 +145,33 @@ def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
         assert math.isclose(tr["difference"][0], row["initial_difference"], rel_tol=1e-3)
 
 
-def test_layout_legends_sit_in_the_emptiest_corner_of_the_body():
-    """plot_layout_grid places each layout's legend in the corner over the fewest nodes (not by
-    matplotlib's loc="best", which tests every triangle of the mesh)."""
+def test_layout_legends_sit_beside_the_rows_never_over_a_drawing():
+    """plot_layout_grid gives each layout row one legend, beside its last panel: it covers no drawing (the
+    body, wherever its empty corner is) and names the muscles as every figure does (issue 36)."""
     import matplotlib
 
     matplotlib.use("Agg")
+    from matplotlib.colors import to_hex
+
     from mdsr_opt import Mesh, Muscle
     from mdsr_opt.plot.routing import plot_layout_grid
 
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     X = mesh.points.copy()
-    # an L: the strip's right half turned up into a column at x in [2, 3], y in [0, 2]; of the four corners
-    # of the drawing ([0, 3] x [0, 2]) only the upper left one holds no node
-    right = X[:, 0] > 2.0
+    right = X[:, 0] > 2.0  # an L: the strip's right half turned up into a column
     X[right] = np.column_stack([2.0 + (X[right, 1]), (X[right, 0] - 2.0) * 1.0])
     bottom = [int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0 and mesh.points[i, 0] <= 2.0]
-    fig = plot_layout_grid([{"title": "L", "mesh": mesh, "target": X, "layouts": [[Muscle(bottom)]],
-                             "row_labels": ["C"]}])
-    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
-    assert len(legends) == 1
-    from matplotlib.legend import Legend
-
-    assert legends[0]._loc == Legend.codes["upper left"]
+    top = [int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 1.0 and mesh.points[i, 0] <= 2.0]
+    col = {"title": "L", "mesh": mesh, "target": X, "layouts": [[Muscle(bottom)], [Muscle(bottom), Muscle(top)]],
+           "row_labels": ["C", "D"]}
+    fig = plot_layout_grid([col, dict(col, title="L2")])
+    fig.canvas.draw()
+    axes = np.array(fig.axes).reshape(4, 2)
+    legends = [(ax, ax.get_legend()) for ax in fig.axes if ax.get_legend() is not None]
+    assert [ax for ax, _ in legends] == [axes[2, 1], axes[3, 1]]  # one per layout row, on its last panel
+    for ax, leg in legends:
+        box = leg.get_window_extent()
+        assert box.x0 >= ax.get_window_extent().x1  # beside the panel, over no drawing
+    d = legends[1][1]
+    assert [t.get_text() for t in d.get_texts()] == ["M1", "M2"]
+    assert [to_hex(h.get_color()) for h in d.legend_handles] == ["#d62728", "#1f77b4"]

@@ -153,6 +153,8 @@ def test_a_second_run_is_refused_without_overwrite_and_replaces_the_first_with_i
     strip.write_text(json.dumps(STRIP))
     assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 0
     first = _files(out)
+    # the scene's source is recorded relative to the output folder, not as a machine path
+    assert json.loads((out / "summary.json").read_text())["source"] == "../strip.json"
     assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 2
     err = capsys.readouterr().err
     assert f"--out {out} holds an earlier mdsr output (`mdsr run {strip}" in err
@@ -483,7 +485,7 @@ def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def _rest_and_pid(scene, path):
+def _rest_and_pid(scene, path, vector=None):
     """rest.png's job, which also leaves the id of its process next to the figure."""
     from mdsr_opt.plot.common import save_figure
     from mdsr_opt.plot.scenes import plot_scene
@@ -628,3 +630,14 @@ def test_a_manifest_nested_too_deeply_is_no_manifest_of_ours(tmp_path):
     (out / MANIFEST_NAME).write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(OutputFolderError, match=r"\.mdsr-run\.json"):
         RunFolder(out).__enter__()
+
+
+def test_summary_records_the_scene_source_without_machine_paths(tmp_path):
+    from mdsr_opt.scenes.runscene import portable_source
+
+    out = tmp_path / "runs" / "a"
+    assert portable_source(str(out / "scene.toml"), out) == "scene.toml"           # inside the folder
+    assert portable_source(str(tmp_path / "runs" / "s.toml"), out) == "../s.toml"  # beside it
+    far = tmp_path / "venv" / "lib" / "site-packages" / "problems" / "one_muscle.py"
+    assert portable_source(str(far), out) == "one_muscle.py"                      # elsewhere: the name only
+    assert portable_source("", out) == ""

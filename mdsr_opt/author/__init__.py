@@ -168,8 +168,11 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
     except BaseException:
         sock.close()
         raise
-    print(f"mdsr author: serving {body or 'an empty page'} on {url} (scene files go to {Path(out).resolve()}; "
-          f"the page may open files in {', '.join(map(str, folders))}); Ctrl-C stops", flush=True)
+    print(f"mdsr author: serving {body or 'an empty page'} on {url}\n"
+          f"  Save writes scene files to {Path(out).resolve()} (--out)\n"
+          f"  figures, meshes and the scene bundle are downloads: your browser's download folder\n"
+          f"  the page may open files in {', '.join(map(str, folders))}\n"
+          f"  Ctrl-C stops", flush=True)
     server = _server(app, sock, quiet=False)
     if open_browser:
         threading.Timer(0.8, webbrowser.open, args=(url,)).start()

@@ -173,6 +173,7 @@ def download(session, what: str, tmpdir) -> tuple[bytes, str]:
     elif x is None:
         raise ValueError(f"{what}: no settled target yet")
     path = tmp / what
+    units = session.units or None  # the figures' axes: the scene's unit, else "body units"
     if what == "target.vtu":
         write_mesh(path, mesh, x=x, material=session.material)
     elif what == "driven.vtu":
@@ -181,14 +182,14 @@ def download(session, what: str, tmpdir) -> tuple[bytes, str]:
         if what == "target.png":
             fig = plot_target(mesh, x, anchors=session.anchors, drag_nodes=session.drag_nodes,
                               drag_positions=session.drag_positions if len(session.drag_nodes) else None,
-                              title=f"{session.name}: target")
+                              title=f"{session.name}: target", units=units)
         elif what == "graph.png":
-            fig = plot_contraction_graph(mesh, x)
+            fig = plot_contraction_graph(mesh, x, units=units)
         elif what == "muscles.png":
             if not session.muscles:
                 raise ValueError("muscles.png: no muscles yet")
-            fig = plot_routing(mesh, x, session.muscles)
+            fig = plot_routing(mesh, x, session.muscles, units=units)
         else:
-            fig = plot_design(mesh, session.design, x, session.muscles)
+            fig = plot_design(mesh, session.design, x, session.muscles, units=units)
         save_figure(fig, path)
     return path.read_bytes(), "image/png" if what.endswith(".png") else "application/octet-stream"

@@ -7,12 +7,15 @@ Everything numerical goes through the public API: :func:`~mdsr_opt.solve_externa
 
 Two kinds of solve:
 
-* **live** (:meth:`Session.drag`): while the mouse moves, start from the last shown state moved by one
-  Newton predictor step toward the new drag positions, and call ``solve_external`` with that state as its
-  first guess and no load stepping. This is a few Newton iterations. When the predictor inverts an element
-  or the solve fails, fall back to the settled solve below.
+* **live** (:meth:`Session.drag`): while the mouse moves, a *preview*: the last shown state moved by one
+  chord-Newton predictor step toward the new drag positions, then a few corrector steps with the same
+  factorised tangent (reused across updates, refreshed every :attr:`Session.REFRESH` updates), stopped
+  at the scaled residual :attr:`Session.PREVIEW_TOL` -- no solver set-up, no stability check. When the
+  preview inverts an element or does not reach that residual, ``solve_external`` takes over from the
+  predicted state (no load stepping), and when that fails, the settled solve below.
 * **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
-  defaults, exactly what ``mdsr run`` solves for the saved scene's target. A released drag is settled.
+  defaults, exactly what ``mdsr run`` solves for the saved scene's target (the same numbers, bit for bit;
+  a warm start would reach the same equilibrium only to the tolerance). A released drag is settled.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
+from ..mechanics.anchors import body_size
 from ..mechanics.model import get_model
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
@@ -123,6 +127,7 @@ class Session:
     design_params: dict = field(default_factory=dict)
     log: list = field(default_factory=list)
     dropped: tuple = ()  # idle muscles the last design took out of the layout (DroppedMuscle)
+    units: str = ""  # the scene's length unit, named on the figures' axes ("" for a drawn outline)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -130,7 +135,7 @@ class Session:
         """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
         s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
                 resolution=scene.resolution, routing_options=dict(scene.routing_options),
-                design_options=dict(scene.design_options))
+                design_options=dict(scene.design_options), units=scene.units)
         ext = [c for c in scene.cases if c.kind == "external"]
         if case is not None:
             ext = [scene.case(case)]
@@ -260,6 +265,11 @@ class Session:
             guess = self._predict(prev.x, fresh)
             if guess is None:
                 continue
+            rep = self._preview(guess, t0)
+            if rep is not None:
+                self.state = rep
+                self.target = None
+                return rep
             res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
                                  initial_guess=guess, min_step=1.0)
             if res.success:
@@ -276,6 +286,60 @@ class Session:
 
     #: Live updates before the chord predictor's tangent is refactored at the current state.
     REFRESH = 6
+    #: A live preview's largest scaled residual (free gradient over ``E * thickness * size``) and its
+    #: corrector steps; the settled solve then meets ``solve_external``'s default tolerance.
+    PREVIEW_TOL = 1e-4
+    PREVIEW_STEPS = 6
+
+    def _fixed_mask(self) -> np.ndarray:
+        fixed = np.zeros((self.n_nodes, 2), dtype=bool)
+        fixed[np.concatenate([self.anchors, self.drag_nodes])] = True
+        return fixed.reshape(-1)
+
+    def _preview(self, y: np.ndarray, t0: float) -> SolveReport | None:
+        """Corrector steps from the predicted state ``y``, until the scaled residual is at most
+        :attr:`PREVIEW_TOL`: with the chord predictor's factorised tangent while the residual halves each
+        step, else with the tangent refactorised at the current state (a Newton step; that factorisation is
+        then reused by the next updates). A live state, or None (an inverted element, a boundary crossing
+        itself, no convergence within :attr:`PREVIEW_STEPS`)."""
+        fixed = self._fixed_mask()
+        free = ~fixed
+        c = self.__dict__.get("_chord")
+        if c is None or c[0] != fixed.tobytes():
+            return None
+        lu = c[1]
+        model = get_model(self.mesh, self.material)
+        p = model.params(self.material)
+        scale = float(self.material.E) * float(self.material.thickness) * body_size(self.mesh)
+        z = y.reshape(-1).copy()
+        last = np.inf
+        for k in range(self.PREVIEW_STEPS + 1):
+            g = model.gradient(z, p)[free]
+            r = float(np.abs(g).max()) / scale if g.size else 0.0
+            if not np.isfinite(r):
+                return None
+            if r <= self.PREVIEW_TOL:
+                x = z.reshape(-1, 2)
+                if self.mesh.boundary_crosses(x):  # solve_external's own check names the crossing
+                    return None
+                return SolveReport(x=x.copy(), success=True, status=f"preview (residual {r:.1e})", iterations=k,
+                                   residual=r, min_J=float(self.mesh.jacobians(x).min()), crossing=False,
+                                   inverted=[], live=True, solve_time=time.perf_counter() - t0)
+            if k == self.PREVIEW_STEPS:
+                return None
+            if r > 0.5 * last:  # the old tangent no longer contracts: a Newton step at this state
+                t = self._tangent(z.reshape(-1, 2), fixed, True)
+                if t is None:
+                    return None
+                lu = t[0]
+            last = r
+            dz = lu.solve(-g)
+            if not np.all(np.isfinite(dz)):
+                return None
+            z[free] += dz
+            if self.mesh.jacobians(z.reshape(-1, 2)).min() <= 0:
+                return None
+        return None
 
     def _tangent(self, x: np.ndarray, fixed: np.ndarray, fresh: bool):
         key = fixed.tobytes()

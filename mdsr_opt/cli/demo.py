@@ -36,7 +36,8 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     """Run the demo into ``out``; ``log`` takes the progress messages (default: this module's logger)."""
     log = log or logging.getLogger(__name__).info
     from ..body import io
-    from ..plot.common import plot_mesh, plot_muscles, save_figure
+    from ..plot.common import coordinate_axes, legend_below, plot_mesh, plot_muscles, save_figure
+    from ..plot.style import axis_label, commanded_achieved, shared_limits
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..body.material import NeoHookean
     from ..body.mesh import Mesh
@@ -75,15 +76,18 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     log(f"      {ext.status}: {ext.iterations} iterations in {len(ext.steps)} load step(s), "
         f"{ext.solve_time:.2f} s")
     summary["external"] = ext.summary()
-    fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label="energy density",
+    energy_label = axis_label("strain energy density", "units of E")
+    fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label=energy_label,
                     nodes=np.append(base, tip), title="external driving: anchored base, dragged tip")
     plot_mesh(mesh, None, ax=fig.axes[0], color="none", edgecolor="#bbbbbb", alpha=0.6)
+    coordinate_axes(fig.axes[0])
     save_figure(fig, os.path.join(out, "external.png"), close=True)
     io.write_mesh(os.path.join(out, "external.vtu"), mesh, x=ext.x, material=mat)
 
     log(f"[3/4] internal driving: a muscle along the lower side is commanded to contract by {contraction:.0%}")
     lower = sorted((i for i in range(mesh.n_nodes) if P[i, 1] < 1e-9), key=lambda i: P[i, 0])
-    muscle = Muscle(lower, name="lower")
+    muscle = Muscle(lower)  # M1, as every figure and drawing names it
+    results = {}
     for model in ("springs", "cable"):
         res = solve_internal(mesh, mat, [muscle], [contraction], muscle_model=model)
         got, stroke, tension = float(res.achieved[0]), float(res.stroke[0]), float(res.tension[0])
@@ -92,10 +96,19 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
             f"(commanded {contraction:.0%}), stroke {stroke:.3f}, tension {tension:.3g}"
             + (", rope slack" if res.slack[0] else ""))
         summary[f"internal_{model}"] = {**res.summary(), "muscle_length_ratio": ratio}
-        # the title states what the muscle reached, never a command it did not reach
-        fig = plot_mesh(mesh, res.x, values=io_energy(mesh, mat, res.x), colorbar_label="energy density",
-                        title=f"{model}: contraction {got:.1%}, stroke {stroke:.3g}")
+        results[model] = res
+    # the two muscle models' panels are compared: one colour scale for both
+    energies = {m: io_energy(mesh, mat, r.x) for m, r in results.items()}
+    lo, hi = shared_limits(*energies.values())
+    for model, res in results.items():
+        # the title states the commanded contraction beside the one the muscle reached
+        fig = plot_mesh(mesh, res.x, values=energies[model], colorbar_label=energy_label, vmin=lo, vmax=hi,
+                        title=f"{model}: contraction commanded \u2192 achieved "
+                              f"{commanded_achieved([contraction], res.achieved)}, "
+                              f"stroke {float(res.stroke[0]):.3g} body units")
         plot_muscles(res.x, [muscle], ax=fig.axes[0])
+        legend_below(fig.axes[0], ncol=1)
+        coordinate_axes(fig.axes[0])
         save_figure(fig, os.path.join(out, f"internal_{model}.png"), close=True)
         io.write_mesh(os.path.join(out, f"internal_{model}.vtu"), mesh, x=res.x, material=mat)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import inspect
 from pathlib import Path
 import time
 
@@ -57,6 +58,7 @@ def _cmd_run(a) -> int:
             raise InputError("no problem library found: `mdsr run all` needs the problems/ folder")
 
     t0 = time.perf_counter()
+    vector = a.vector_format if a.vector else None
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
     # scene (all input errors, inside checking_input), and only then any solving or writing
     figs = figure_scripts()
@@ -67,10 +69,15 @@ def _cmd_run(a) -> int:
             module = load_module(figs[names[0]])
             if a.resolution is not None:
                 resolve_resolution(a.resolution)
+            extra = {}
+            if vector is not None:  # passed on to a figure script that takes it, else said at the door
+                if "vector" not in inspect.signature(module.run_figure).parameters:
+                    raise InputError(f"{names[0]} writes no vector figures: run it without --vector")
+                extra["vector"] = vector
         with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
             folder.begin(getattr(module, "OUTPUTS", ()))
             with progress_for_cli(a, 0, names[0], unit="step") as log:
-                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log))
+                code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log, **extra))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
     parallel = not a.serial and not (a.no_figures and a.no_photos)
@@ -89,7 +96,7 @@ def _cmd_run(a) -> int:
                 for s in scenes:
                     for c in a.case:
                         s.case(c)  # an unknown --case names the scene's cases
-        folder.begin(run_entries(scenes[0], a.case) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
+        folder.begin(run_entries(scenes[0], a.case, vector=vector) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
         reports = []
         with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations, photos=not a.no_photos,
                                              figures=not a.no_figures) for s in scenes),
@@ -103,7 +110,7 @@ def _cmd_run(a) -> int:
                                            mesh_format=a.format, photo_size=a.photo_size, log=log,
                                            prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
                                            background=pool is not None, pool=pool,
-                                           max_difference=a.max_difference, bands=a.bands))
+                                           max_difference=a.max_difference, bands=a.bands, vector=vector))
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables
@@ -175,6 +182,11 @@ def add_cli(sub) -> None:
                    help="seed of the virtual prototype's material perturbation and camera (default 0)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
     q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
+    q.add_argument("--vector", action="store_true",
+                   help="also write every figure as a vector file beside its PNG, for papers (PDF unless "
+                        "--vector-format svg); GIFs stay GIFs")
+    q.add_argument("--vector-format", choices=("pdf", "svg"), default="pdf",
+                   help="the format of --vector's files (default pdf)")
     q.add_argument("--serial", action="store_true",
                    help="draw figures, measure photographs and make animations in this process after each "
                         "solve, not in worker processes beside the next solve (the files are the same)")

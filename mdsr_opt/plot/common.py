@@ -15,13 +15,26 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color, muscle_label
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks', 'mesh_paths']
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
+           'coordinate_axes', 'mesh_paths']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
 # loc="best" search, which re-runs on every draw and was 11-32 % of a scene's figure time.
 LEGEND_OUTSIDE = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "borderaxespad": 0.0}
+
+
+def legend_below(ax, ncol: int = 4, fontsize: float = 7, drop: float = 0.5):
+    """A legend centred under ``ax``, ``drop`` inches below its bottom edge: clear of the x tick labels and
+    axis label, of a colour bar beside the axes and of the drawing (also with an equal aspect ratio, where a
+    place given in axes fractions moves with the drawn box)."""
+    from matplotlib.transforms import ScaledTranslation
+
+    below = ax.transAxes + ScaledTranslation(0.0, -drop, ax.figure.dpi_scale_trans)
+    return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
+                     ncol=ncol, borderaxespad=0.0)
 
 
 def axes_or_new(ax=None, figsize=(6, 4)):
@@ -46,6 +59,19 @@ def hide_ticks(*axes) -> None:
         ax.set_yticks([])
 
 
+def coordinate_axes(ax, units=None, ticks=True) -> None:
+    """Label a drawing's axes ``x (unit)``, ``y (unit)`` (:func:`.style.label_coordinates`); with ``ticks``
+    False, three ticks a side instead of matplotlib's many (a run's figures: ticks are most of the cost of
+    drawing an axes, and the target figure of the same case has them all)."""
+    from matplotlib.ticker import MaxNLocator
+
+    label_coordinates(ax, units)
+    ax.tick_params(labelsize=8)
+    if not ticks:
+        ax.xaxis.set_major_locator(MaxNLocator(3))
+        ax.yaxis.set_major_locator(MaxNLocator(3))
+
+
 def mesh_paths(mesh):
     """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
     in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes
@@ -65,9 +91,12 @@ def mesh_paths(mesh):
     return fill, edge
 
 
-def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha=1.0, values=None,
-              cmap="viridis", label=None, nodes=None, node_color="k", title=None, colorbar_label=None):
-    """Draw ``mesh`` in configuration ``x`` (default: rest). ``values`` colours the triangles (per triangle)."""
+def plot_mesh(mesh, x=None, ax=None, color=BODY["face"], edgecolor=BODY["edge"], alpha=1.0, values=None,
+              cmap=ENERGY_CMAP, label=None, nodes=None, node_color="k", title=None, colorbar_label=None,
+              vmin=None, vmax=None):
+    """Draw ``mesh`` in configuration ``x`` (default: rest). ``values`` colours the triangles (per triangle),
+    on the scale ``vmin``..``vmax`` when given (panels to compare share one: :func:`.style.shared_limits`),
+    with a colour bar the height of the axes (:func:`.style.add_colorbar`)."""
     fig, ax = axes_or_new(ax)
     x = mesh.points if x is None else np.asarray(x)
     if values is not None:  # a colour per triangle: a collection
@@ -75,7 +104,9 @@ def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha
                             label=label)
         pc.set_array(np.asarray(values))
         pc.set_cmap(cmap)
-        fig.colorbar(pc, ax=ax, label=colorbar_label)
+        if vmin is not None or vmax is not None:
+            pc.set_clim(vmin, vmax)
+        add_colorbar(ax, pc, colorbar_label)
         ax.add_collection(pc)
     else:  # one colour: two compound paths (mesh_paths), half the drawing time of a collection
         fill, edges = mesh_paths(mesh)
@@ -89,7 +120,7 @@ def plot_mesh(mesh, x=None, ax=None, color="#8fb3d9", edgecolor="#335577", alpha
     ax.set_aspect("equal")
     ax.autoscale_view()
     if title:
-        ax.set_title(title)
+        ax.set_title(title, fontsize=10)
     return fig
 
 
@@ -103,27 +134,29 @@ def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, v
         lc.set_clim(vmin, vmax)
     ax.add_collection(lc)
     if label:
-        fig.colorbar(lc, ax=ax, label=label)
+        add_colorbar(ax, lc, label)
     ax.set_aspect("equal")
     ax.autoscale_view()
     return fig
 
 
 def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
-    """Draw muscle paths over configuration ``x``."""
+    """Draw muscle paths over configuration ``x``: muscle ``i`` in :func:`.style.muscle_color` ``(i)``,
+    labelled :func:`.style.muscle_label` (its name, else ``M<i+1>``), as in every figure and drawing."""
     fig, ax = axes_or_new(ax)
     x = np.asarray(x)
-    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, m in enumerate(muscles):
-        c = (colors[i] if colors is not None else cyc[i % len(cyc)])
+        c = (colors[i] if colors is not None else muscle_color(i))
         p = x[list(m.nodes)]
-        ax.plot(p[:, 0], p[:, 1], "-", color=c, lw=lw, label=(m.name or f"muscle {i}") if labels else None)
+        ax.plot(p[:, 0], p[:, 1], "-", color=c, lw=lw, solid_capstyle="round",
+                label=muscle_label(m, i) if labels else None)
     ax.set_aspect("equal")
     return fig
 
 
-def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
-    """Write ``fig`` to ``path`` through a temporary file, so no partial file is left.
+def save_figure(fig, path, *, close: bool = False, dpi: float = 130, vector=None) -> str:
+    """Write ``fig`` to ``path`` through a temporary file, so no partial file is left; with ``vector``, a
+    vector copy beside it (same name, ``.pdf`` or ``.svg``) for papers.
 
     Parameters
     ----------
@@ -135,14 +168,21 @@ def save_figure(fig, path, *, close: bool = False, dpi: float = 130) -> str:
         figures in a loop passes ``True``; a figure you still want to show stays open by default.
     dpi : float
         Resolution of raster formats.
+    vector : bool, str or sequence of str, optional
+        Also write the figure in these vector formats beside ``path`` (:func:`.style.figure_formats`:
+        ``True`` is PDF; ``"svg"``, ``"pdf"`` or both). :func:`figure_paths` names every file written.
 
     Returns
     -------
     str
-        The path written.
+        The path written (the first; the vector copies follow :func:`figure_paths`).
     """
     path = os.fspath(path)
+    extra = figure_paths(path, vector)[1:]  # checked before anything is written
     try:
+        for other in extra:
+            with atomic_path(other, suffix=os.path.splitext(other)[1]) as tmp:
+                fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=os.path.splitext(other)[1][1:])
         ext = os.path.splitext(path)[1] or ".png"
         png = ext.lower() == ".png"
         # PNG (drawn by Agg): drawn once on a canvas with a margin, cropped to its drawn pixels (see
@@ -317,6 +357,14 @@ def _has_layout_engine(fig) -> bool:
     placeholder engine behind that does nothing)."""
     engine = fig.get_layout_engine()
     return engine is not None and not isinstance(engine, PlaceHolderLayoutEngine)
+
+
+def figure_paths(path, vector=None) -> list[str]:
+    """Every file :func:`save_figure` writes for ``path`` and ``vector``: ``path``, then one per vector
+    format with the same stem (``design.png`` and ``vector=True``: ``design.png``, ``design.pdf``)."""
+    path = os.fspath(path)
+    stem, ext = os.path.splitext(path)
+    return [path] + [f"{stem}.{f}" for f in figure_formats(vector) if f != ext.lower().lstrip(".")]
 
 
 def close_figure(fig) -> None:

@@ -7,9 +7,11 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
-from .common import LEGEND_OUTSIDE, axes_or_new, hide_ticks, plot_edges, plot_mesh, plot_muscles
+from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
+from .style import BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, symmetric_limits, unit_label
 
-__all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'plot_design_benchmark']
+__all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'design_title',
+           'plot_design_benchmark']
 
 
 # --- routing (issue 3) ---
@@ -17,8 +19,8 @@ def _edge_weights_of(mesh, graph):
     return np.array([graph.edges[int(a), int(b)]["weight"] for a, b in mesh.edges])
 
 
-def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", lw=1.5, title=None,
-                           seeds=None, ticks=True):
+def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap=CONTRACTION_CMAP, lw=1.5, title=None,
+                           seeds=None, ticks=True, units=None, limit=None):
     """The contraction graph drawn over the target mesh, each edge coloured by its weight.
 
     Parameters
@@ -36,7 +38,12 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", l
         Seed edges to outline in black.
     ticks : bool, default True
         Coordinate ticks on the drawing (the colour bar keeps its own); ``False`` for a run's figures,
-        whose coordinates the target figure gives.
+        whose coordinates the target figure gives: three ticks a side.
+    units : str, optional
+        The length unit of the coordinates, named on the axes (default ``"body units"``).
+    limit : float, optional
+        The colour scale runs from ``-limit`` to ``limit`` (panels to compare pass one:
+        :func:`mdsr_opt.plot.style.symmetric_limits`); default the largest weight drawn.
 
     Returns
     -------
@@ -56,19 +63,18 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap="coolwarm", l
         w = (l0 - np.linalg.norm(x[mesh.edges[:, 1]] - x[mesh.edges[:, 0]], axis=1)) / l0
     else:
         w = _edge_weights_of(mesh, graph)
-    m = float(np.abs(w).max()) or 1.0
+    m = symmetric_limits(w)[1] if limit is None else float(limit)
     plot_edges(x, mesh.edges, w, ax=ax, cmap=cmap, lw=lw, vmin=-m, vmax=m,
-               label="relative contraction $(l_0 - l)/l_0$")
+               label=axis_label("relative contraction $(l_0 - l)/l_0$", "1"))
     if seeds is not None and len(seeds):
         ax.add_collection(LineCollection(x[np.asarray(seeds)], colors="k", linewidths=lw * 2.2, zorder=3))
     ax.set_title(title or "contraction graph (red: shortens, blue: stretches)", fontsize=10)
     ax.autoscale_view()
-    if not ticks:
-        hide_ticks(ax)
+    coordinate_axes(ax, units, ticks)
     return fig
 
 
-def plot_routing(mesh, target, result, axes=None, title=None, ticks=True):
+def plot_routing(mesh, target, result, axes=None, title=None, ticks=True, units=None):
     """Routed muscles over the rest mesh (left) and the target mesh (right).
 
     Parameters
@@ -82,6 +88,8 @@ def plot_routing(mesh, target, result, axes=None, title=None, ticks=True):
     axes : pair of matplotlib Axes, optional
     ticks : bool, default True
         Coordinate ticks on both panels (``False``: a run's figures, see :func:`plot_contraction_graph`).
+    units : str, optional
+        The length unit of the coordinates (default ``"body units"``).
 
     Returns
     -------
@@ -100,19 +108,19 @@ def plot_routing(mesh, target, result, axes=None, title=None, ticks=True):
     muscles = list(result)
     x = np.asarray(target, dtype=float)
     for ax, pos, name in ((axes[0], mesh.points, "rest"), (axes[1], x, "target")):
-        plot_mesh(mesh, pos, ax=ax, color="#dde6f0", edgecolor="#9aaabb")
+        plot_mesh(mesh, pos, ax=ax, color=LIGHT["face"], edgecolor=LIGHT["edge"])
         if muscles:
             plot_muscles(pos, muscles, ax=ax)
             for m in muscles:
                 ends = pos[[m.nodes[0], m.nodes[-1]]]
                 ax.plot(ends[:, 0], ends[:, 1], "o", color="k", ms=3)
-        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh")
+        ax.set_title(f"{len(muscles)} muscle(s) over the {name} mesh", fontsize=10)
     if muscles and len(muscles) <= 10:
         axes[1].legend(fontsize=7, **LEGEND_OUTSIDE)
     if title:
         fig.suptitle(title)
-    if not ticks:
-        hide_ticks(*axes)
+    for ax in axes:
+        coordinate_axes(ax, units, ticks)
     return fig
 
 
@@ -130,16 +138,20 @@ def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
         ax.axhline(budget, color="r", ls="--", lw=1, label=f"budget {budget:g} s")
     if budget_nodes is not None:
         ax.axvline(budget_nodes, color="0.5", ls=":", lw=1)
-    ax.set_xlabel("mesh nodes")
-    ax.set_ylabel("seconds")
+    ax.set_xlabel(axis_label("mesh nodes", "count"))
+    ax.set_ylabel(axis_label("routing time", "s"))
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="upper left")  # explicit: "best" searches
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no line (and no "best" search)
     ax.set_title("muscle routing time")
     return fig
 
 
-def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=True):
+def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=True, units=None):
     """Overlay a design's driven state (moved onto the target) on the target, with the muscles.
+
+    The title gives, per muscle (named and coloured as in every figure: :mod:`mdsr_opt.plot.style`), the
+    commanded contraction and the one the muscle reached (``1 - L/L0`` along its path), and the difference
+    to the target in the coordinates' unit.
 
     Parameters
     ----------
@@ -148,6 +160,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     target : (n, 2) target positions.
     muscles : muscles to draw over the driven state.
     ticks : coordinate ticks (``False``: a run's figures, see :func:`plot_contraction_graph`).
+    units : the coordinates' length unit, on the axes and the difference (default ``"body units"``).
 
     Example
     -------
@@ -158,33 +171,50 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     >>> target = solve_internal(mesh, mat, mus, [0.15]).x
     >>> fig = plot_design(mesh, design_contractions(mesh, mat, mus, target), target, mus)
     >>> title = fig.axes[0].get_title()
-    >>> "difference" in title and "achieved = [0.150]" in title
+    >>> "difference D = " in title and "M1 0.150 \u2192 0.150" in title
     True
     """
     check_same_mesh(mesh, getattr(result, "rest_mesh", None), "the design")  # drawn on the body it was made on
     fig, ax = axes_or_new(ax)
-    plot_mesh(mesh, np.asarray(target), ax=ax, color="#cccccc", edgecolor="#999999", alpha=0.6, label="target")
-    plot_mesh(mesh, result.x_aligned, ax=ax, color="#8fb3d9", edgecolor="#335577", alpha=0.45,
+    plot_mesh(mesh, np.asarray(target), ax=ax, color=TARGET["face"], edgecolor=TARGET["edge"], alpha=0.6,
+              label="target")
+    plot_mesh(mesh, result.x_aligned, ax=ax, color=BODY["face"], edgecolor=BODY["edge"], alpha=0.45,
               label="driven (aligned)")
     if len(muscles):
         plot_muscles(result.x_aligned, muscles, ax=ax)
-    # the title states what the muscles reached (1 - L/L0 along each rope), never only what was commanded
+    ax.set_title(title or design_title(result, muscles, units), fontsize=9)
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+    coordinate_axes(ax, units, ticks)
+    return fig
+
+
+def design_title(result, muscles=(), units=None, per_line: int = 3) -> str:
+    """A design's title: method, difference with its unit, then per muscle the commanded contraction and
+    the achieved one (``M1 0.150 -> 0.148``): on the same line for one or two muscles, else ``per_line``
+    muscles to a line under a heading line (the title stays about as wide as the drawing)."""
+    from .style import muscle_label, muscle_name
+
+    a = np.asarray(result.contractions, dtype=float)
     reached = np.asarray(getattr(result, "achieved", ()), dtype=float)
-    shown = reached if reached.size == len(result.contractions) else np.asarray(result.contractions, dtype=float)
-    a = ", ".join("nan" if not np.isfinite(c) else f"{c:.3f}" for c in shown)
-    what = "achieved" if shown is reached else "a"
+    names = [muscle_label(m, i) for i, m in enumerate(muscles)] if len(muscles) == a.size else None
+    names = names or [muscle_name(i) for i in range(a.size)]
+    text = commanded_achieved(a, reached if reached.size == a.size else None, names)
+    parts = text.split(", ") if text else []
     ok = "" if result.success else "  [FAILED]"
+    head = f"{result.method}: difference D = {result.difference:.3g} {unit_label(units)}{ok}"
+    what = "contraction commanded \u2192 achieved:" if reached.size == a.size else "contraction commanded:"
     # a stroke with its uncertainty band (synthesis.bands) when the design carries one
     band = np.asarray(getattr(result, "stroke_band", ()), dtype=float).reshape(-1, 2)
-    strokes = np.asarray(getattr(result, "stroke", ()), dtype=float)
-    extra = ("\nstrokes " + ", ".join(f"{v:.3g} [{lo:.3g}, {hi:.3g}]" for v, (lo, hi) in zip(strokes, band))
-             if len(band) and len(band) == len(strokes) else "")
-    ax.set_title(title or f"{result.method}: {what} = [{a}], difference {result.difference:.3g}{ok}{extra}",
-                 fontsize=9)
-    ax.legend(fontsize=7, **LEGEND_OUTSIDE)
-    if not ticks:
-        hide_ticks(ax)
-    return fig
+    strokes = np.asarray(getattr(result, "stroke", ()), dtype=float).reshape(-1)
+    tail = []
+    if len(band) and len(band) == len(strokes) == len(names):
+        cells = [f"{n} {v:.3g} [{lo:.3g}, {hi:.3g}]" for n, v, (lo, hi) in zip(names, strokes, band)]
+        tail = [f"stroke {unit_label(units)} [band]:"] + [", ".join(cells[k:k + per_line])
+                                                         for k in range(0, len(cells), per_line)]
+    if len(parts) <= 2:
+        return "\n".join([f"{head}\n{what} {', '.join(parts) or 'none'}"] + tail)
+    rows = [", ".join(parts[k:k + per_line]) for k in range(0, len(parts), per_line)]
+    return "\n".join([head, what] + rows + tail)
 
 
 def plot_design_benchmark(rows, traces=None, ax=None):
@@ -215,13 +245,13 @@ def plot_design_benchmark(rows, traces=None, ax=None):
                 transform=ax.transAxes, fontsize=7)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("solve time (s)")
-    ax.set_ylabel("final difference (length)")
+    ax.set_xlabel(axis_label("solve time", "s"))
+    ax.set_ylabel(axis_label("final difference D", None))
     for method, c in colors.items():
         ax.scatter([], [], color=c, label=method)
     for i, mname in enumerate(meshes):
         ax.scatter([], [], color="grey", marker=markers[i % len(markers)], label=f"{mname} nodes")
-    ax.legend(fontsize=7, loc="upper right")
-    ax.set_title("contraction design: difference against time (marker size ~ muscle count)")
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no marker
+    ax.set_title("contraction design: difference against time (marker size ~ muscle count)", fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
     return fig

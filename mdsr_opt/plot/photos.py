@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.collections import PolyCollection
 
-from .common import axes_or_new, hide_ticks
+from .common import axes_or_new, hide_ticks, legend_below
+from .style import CONTOUR, CONTOUR_EDGE, DISTANCE_CMAP, add_colorbar, axis_label
 
 __all__ = ['plot_overlay']
 
 
 def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=None, mesh_color="#1f77b4",
-                 contour_color="#ffd400", cmap="magma_r", ticks=True):
+                 contour_color=CONTOUR, cmap=DISTANCE_CMAP, ticks=True):
     """Draw the simulated mesh over the photograph it was compared with (``mdsr_opt.photos``).
 
     Parameters
@@ -24,8 +25,9 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
         leave them out (the distances are in the colour bar and the title; ticks were a third of the
         figure's drawing time).
 
-    The mesh is drawn as triangle edges, the measured contour as a line and the simulated boundary
-    nodes coloured by their distance to it (pixels).
+    The mesh is drawn as triangle edges, the measured contour as a bright line on a black rim (visible on
+    grey, white and black) and the simulated boundary nodes coloured by their distance to it (pixels), with
+    a colour bar the height of the photograph and the legend below it.
 
     Example
     -------
@@ -44,15 +46,20 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     ax.add_collection(PolyCollection(P[mesh.triangles], facecolors="none", edgecolors=mesh_color,
                                      linewidths=0.4, alpha=0.9))
     m = np.vstack([comparison.measured_px, comparison.measured_px[:1]])
-    ax.plot(m[:, 0], m[:, 1], "-", color=contour_color, lw=1.2, label="measured contour")
+    from matplotlib import patheffects
+
+    rim = [patheffects.Stroke(linewidth=3.2, foreground=CONTOUR_EDGE), patheffects.Normal()]
+    ax.plot(m[:, 0], m[:, 1], "-", color=contour_color, lw=1.6, label="measured contour", path_effects=rim)
     s = comparison.simulated_px
     sc = ax.scatter(s[:, 0], s[:, 1], c=comparison.distances_px, cmap=cmap, s=10, zorder=3,
                     label="simulated boundary nodes")
-    fig.colorbar(sc, ax=ax, shrink=0.7, label="distance to contour (px)")
+    add_colorbar(ax, sc, axis_label("distance to contour", "px"))
     ax.set_xlim(-0.5, img.shape[1] - 0.5)
     ax.set_ylim(img.shape[0] - 0.5, -0.5)
     ax.set_aspect("equal")
-    ax.legend(fontsize=7, loc="upper right")
+    ax.set_xlabel(axis_label("image x", "px"), fontsize=8)
+    ax.set_ylabel(axis_label("image y", "px"), fontsize=8)
+    legend_below(ax, ncol=2, drop=0.5 if ticks else 0.3)
     head = f"{title}: " if title else ""
     text = f"{head}d = {comparison.mean_px:.2f} px, sd = {comparison.std_px:.2f} px"
     if synthetic:

@@ -32,9 +32,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
-__all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
+from matplotlib.lines import Line2D
 
-_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+from .common import legend_below
+from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color, muscle_label,
+                    muscle_name, symmetric_limits, unit_label)
+
+__all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
 
 
 def _mesh(ax, mesh, x, face="#e3e9f0", edge="#a9b6c4", alpha=1.0, lw=0.25):
@@ -46,23 +50,9 @@ def _muscles(ax, x, muscles, lw=2.4, labels=True):
     x = np.asarray(x)
     for i, m in enumerate(muscles):
         p = x[list(m.nodes)]
-        ax.plot(p[:, 0], p[:, 1], "-", color=_COLORS[i % len(_COLORS)], lw=lw, solid_capstyle="round",
-                label=f"l{i + 1}" if labels else None)
+        ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color(i), lw=lw, solid_capstyle="round",
+                label=muscle_label(m, i) if labels else None)
         ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
-
-
-def _emptiest_corner(x) -> str:
-    """The corner of the drawing (a third of its width, a quarter of its height) over the fewest nodes of
-    ``x``: where the legend goes. Matplotlib's ``loc="best"`` tests every triangle of the mesh against
-    every candidate place, which takes longer than the rest of the figure on a fine mesh."""
-    P = np.asarray(x, dtype=float)
-    lo, hi = P.min(axis=0), P.max(axis=0)
-    u = (P - lo) / np.maximum(hi - lo, 1e-300)
-    right, top = u[:, 0] > 2 / 3, u[:, 1] > 3 / 4
-    left, bottom = u[:, 0] < 1 / 3, u[:, 1] < 1 / 4
-    count = {"upper right": right & top, "upper left": left & top, "lower left": left & bottom,
-             "lower right": right & bottom}
-    return min(count, key=lambda k: int(count[k].sum()))  # ties: the first, upper right
 
 
 def _finish(ax):
@@ -81,7 +71,9 @@ def plot_layout_grid(columns, title=None):
         Each with ``title`` (str), ``mesh`` (Mesh), ``target`` ((n, 2) array), ``layouts`` (sequence of
         RoutingResult or of muscle lists, one per layout row), ``row_labels`` (one str per layout), and
         optionally ``anchors`` and ``drag_nodes`` (node indices, drawn on the target) and ``weights``
-        (per-edge contraction, computed from the target when omitted).
+        (per-edge contraction, computed from the target when omitted). Row B shares one colour scale
+        across the columns, with its colour bar beside the last panel; muscles are named and coloured as in
+        every figure (:mod:`mdsr_opt.plot.style`).
     title : str, optional
 
     Returns
@@ -94,7 +86,17 @@ def plot_layout_grid(columns, title=None):
         raise ValueError("plot_layout_grid needs at least one column")
     n_lay = max(len(c["layouts"]) for c in columns)
     rows = 2 + n_lay
-    fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns), 2.6 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns) + 0.6, 2.6 * rows), squeeze=False)
+    weights = []
+    for c in columns:
+        w = c.get("weights")
+        if w is None:
+            x = np.asarray(c["target"], dtype=float)
+            E, l0 = c["mesh"].edges, c["mesh"].edge_lengths
+            w = (l0 - np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1)) / l0
+        weights.append(np.asarray(w, dtype=float))
+    lo, hi = symmetric_limits(*weights)  # one scale for the row: the columns compare
+    lc = None
     for j, c in enumerate(columns):
         mesh, x = c["mesh"], np.asarray(c["target"], dtype=float)
         ax = axes[0, j]
@@ -106,32 +108,37 @@ def plot_layout_grid(columns, title=None):
         ax.set_title(c["title"], fontsize=9)
         _finish(ax)
         ax = axes[1, j]
-        w = c.get("weights")
-        if w is None:
-            E = mesh.edges
-            l0 = mesh.edge_lengths
-            w = (l0 - np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1)) / l0
-        w = np.asarray(w)
-        m = float(np.abs(w).max()) or 1.0
-        lc = LineCollection(x[mesh.edges], cmap="coolwarm", linewidths=0.9)
-        lc.set_array(w)
-        lc.set_clim(-m, m)
+        lc = LineCollection(x[mesh.edges], cmap=CONTRACTION_CMAP, linewidths=0.9)
+        lc.set_array(weights[j])
+        lc.set_clim(lo, hi)
         ax.add_collection(lc)
         _finish(ax)
         for i, (lay, label) in enumerate(zip(c["layouts"], c["row_labels"])):
             ax = axes[2 + i, j]
             _mesh(ax, mesh, x, alpha=0.8)
             mus = list(lay)
-            _muscles(ax, x, mus)
+            _muscles(ax, x, mus, labels=False)
             ax.set_title(f"{label}: {len(mus)} muscle(s)", fontsize=8)
-            if mus:
-                ax.legend(fontsize=6, loc=_emptiest_corner(x), handlelength=1.2)
             _finish(ax)
     for i, name in enumerate(["A target", "B contraction graph"] + [f"{chr(67 + k)} layout" for k in range(n_lay)]):
         axes[i, 0].set_ylabel(name, fontsize=9)
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
+    # after the layout (an inset is not laid out): the row's colour bar beside its last panel
+    add_colorbar(axes[1, -1], lc, axis_label("$(l_0 - l)/l_0$", "1"), width=0.05)
+    # one legend per layout row, beside its last panel: over no drawing, the muscles' names and colours
+    # as in every figure (a name the columns do not share is the muscle's place, M<k>)
+    for i in range(n_lay):
+        lays = [list(c["layouts"][i]) for c in columns if i < len(c["layouts"])]
+        names = []
+        for k in range(max((len(m) for m in lays), default=0)):
+            own = {muscle_label(m[k], k) for m in lays if k < len(m)}
+            names.append(own.pop() if len(own) == 1 else muscle_name(k))
+        if names:
+            handles = [Line2D([], [], color=muscle_color(k), lw=2.4) for k in range(len(names))]
+            axes[2 + i, -1].legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
+                                   borderaxespad=0.0, handlelength=1.5)
     return fig
 
 
@@ -142,7 +149,8 @@ def plot_design_grid(columns, title=None):
     ----------
     columns : sequence of dict
         Each with ``title``, ``mesh``, ``target``, ``designs`` (one per layout: a dict with ``x`` the
-        driven state moved onto the target, ``muscles``, ``difference``, ``success``) and ``row_labels``.
+        driven state moved onto the target, ``muscles``, ``difference``, ``success``) and ``row_labels``;
+        optionally ``units``, the coordinates' length unit (default ``"body units"``).
 
     Returns
     -------
@@ -162,11 +170,11 @@ def plot_design_grid(columns, title=None):
         _finish(ax)
         for i, (d, label) in enumerate(zip(c["designs"], c["row_labels"])):
             ax = axes[1 + i, j]
-            _mesh(ax, mesh, y, face="#bbbbbb", edge="none", alpha=0.45)
-            _mesh(ax, mesh, d["x"], face="#8fb3d9", edge="#335577", alpha=0.45, lw=0.2)
+            _mesh(ax, mesh, y, face=TARGET["face"], edge="none", alpha=0.45)
+            _mesh(ax, mesh, d["x"], face=BODY["face"], edge=BODY["edge"], alpha=0.45, lw=0.2)
             _muscles(ax, d["x"], d["muscles"], lw=1.8, labels=False)
             flag = "" if d["success"] else " FAILED"
-            ax.set_title(f"{label}: D = {d['difference']:.3g}{flag}", fontsize=8)
+            ax.set_title(f"{label}: D = {d['difference']:.3g} {unit_label(c.get('units'))}{flag}", fontsize=8)
             _finish(ax)
     axes[0, 0].set_ylabel("A target", fontsize=9)
     for i in range(n_lay):
@@ -184,7 +192,8 @@ def plot_convergence(panels, title=None, log=True):
     ----------
     panels : sequence of dict
         Each with ``title`` and ``traces``: a list of ``(label, iterations, differences)``; ``iterations``
-        and ``differences`` are equal-length sequences.
+        and ``differences`` are equal-length sequences; optionally ``units``, the length unit of the
+        differences (default ``"body units"``).
     log : bool
         Logarithmic difference axis.
 
@@ -201,15 +210,16 @@ def plot_convergence(panels, title=None, log=True):
             it, d = np.asarray(it, dtype=float), np.asarray(d, dtype=float)
             if len(it) != len(d):
                 raise ValueError(f"{p['title']}, {label}: {len(it)} iterations but {len(d)} differences")
-            ax.plot(it, d, "-o", ms=2.5, lw=1.3, color=_COLORS[i % len(_COLORS)],
+            # layouts, not muscles: greys and markers (the muscle colours name muscles only)
+            ax.plot(it, d, "-" + "osD^v"[i % 5], ms=2.5, lw=1.3, color=("#222222", "#888888", "#555555")[i % 3],
                     label=f"{label} ({int(it[-1]) if len(it) else 0} it.)")
         if log:
             ax.set_yscale("log")
         ax.set_title(p["title"], fontsize=9)
-        ax.set_xlabel("IPOPT iteration")
+        ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-    axes[0, 0].set_ylabel("difference D (length)")
+        legend_below(ax, ncol=1, drop=0.45)  # under the panel: never over a trace
+    axes[0, 0].set_ylabel(axis_label("difference D", panels[0].get("units")))
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()

@@ -7,21 +7,23 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 from matplotlib.font_manager import findfont
+from matplotlib import patheffects
 from matplotlib.patches import PathPatch
-import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
-from .common import LEGEND_OUTSIDE, axes_or_new, mesh_paths, plot_mesh, plot_muscles
+from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
+from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, muscle_color, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
 
 # --- problem library and scenes (issue 6) ---
-def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4):
-    """The rest mesh with its named node regions (``{name: node indices}``) marked in colour.
+def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4, units=None):
+    """The rest mesh with its named node regions (``{name: node indices}``) marked in colour; axes in
+    ``units`` (default ``"body units"``).
 
     Example
     -------
@@ -32,21 +34,22 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4):
     ['left']
     """
     fig, ax = axes_or_new(ax, figsize=(7, 4.5))
-    plot_mesh(mesh, None, ax=ax, color="#dde6f0", edgecolor="#9aaabb")
-    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    plot_mesh(mesh, None, ax=ax, color=LIGHT["face"], edgecolor=LIGHT["edge"])
     for i, (name, idx) in enumerate((regions or {}).items()):
         p = mesh.points[np.asarray(idx, dtype=int)]
-        ax.plot(p[:, 0], p[:, 1], "o", ms=markersize, color=cyc[i % len(cyc)], label=name)
+        ax.plot(p[:, 0], p[:, 1], "s", ms=markersize, color=REGION_COLORS[i % len(REGION_COLORS)], label=name)
     if regions:
         ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     # y=1.0: the title's place given, not searched (the search lays the y axis out once more before the draw,
     # for an offset text a mesh's coordinates never have)
     ax.set_title(title or f"rest mesh: {mesh.n_nodes} nodes, {mesh.n_triangles} triangles", fontsize=9, y=1.0)
+    coordinate_axes(ax, units)
     return fig
 
 
 def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, muscles=(), values=None,
-                ax=None, title=None, colorbar_label="strain energy density"):
+                ax=None, title=None, colorbar_label="strain energy density (units of E)", units=None,
+                ticks=True):
     """A target shape over the rest outline: anchors (black), drag nodes (red, with their paths from rest).
 
     Parameters
@@ -54,13 +57,16 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     mesh : the rest mesh; target : (n, 2) target positions.
     anchors, drag_nodes : node indices; drag_positions : (d, 2) where the drags go (default: ``target``).
     muscles : muscles to draw over the target (e.g. an internal-driving case's).
-    values : per-triangle values to colour the target by (e.g. strain energy density).
+    values : per-triangle values to colour the target by (e.g. strain energy density), with a colour bar
+        the height of the axes.
+    units : the coordinates' length unit, on the axes (default ``"body units"``); ticks : coordinate ticks
+        (``False``: three a side).
     """
     fig, ax = axes_or_new(ax, figsize=(7, 4.5))
     x = np.asarray(target, dtype=float)
     for loop in mesh.boundary_loops:
         p = mesh.points[np.append(loop, loop[0])]
-        ax.plot(p[:, 0], p[:, 1], "-", color="#aaaaaa", lw=0.8)
+        ax.plot(p[:, 0], p[:, 1], "-", color=REST_LINE, lw=0.8)
     plot_mesh(mesh, x, ax=ax, values=values, colorbar_label=colorbar_label if values is not None else None,
               alpha=0.9)
     anchors = np.asarray(anchors, dtype=int)
@@ -76,10 +82,12 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
         plot_muscles(x, muscles, ax=ax)
     if len(anchors) or len(dn) or len(muscles):
         # beside the axes unless the colour bar is there (it would cover the legend): then below them
-        where = LEGEND_OUTSIDE if values is None else {"loc": "upper center", "bbox_to_anchor": (0.5, -0.1),
-                                                       "ncol": 4, "borderaxespad": 0.0}
-        ax.legend(fontsize=7, **where)
+        if values is None:
+            ax.legend(fontsize=7, **LEGEND_OUTSIDE)
+        else:
+            legend_below(ax)
     ax.autoscale_view()
+    coordinate_axes(ax, units, ticks)
     if title:
         ax.set_title(title, fontsize=9, y=1.0)  # placed, not searched: see plot_scene
     return fig
@@ -121,17 +129,20 @@ def gif_palette(frames, n_sample: int = 6):
 
 
 def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
-                   figsize=(6, 4), dpi=90) -> str:
+                   figsize=(8.0, 5.0), dpi=110, units=None) -> str:
     """Write a sequence of states as an animated GIF (looping, Pillow), atomically.
 
     Parameters
     ----------
     mesh : the rest mesh; states : sequence of (n, 2) states, one per frame.
-    muscles : muscles drawn over every frame; activations : (frames, m) values in [0, 1] that set each
-        muscle's line width and opacity (e.g. contraction / a_max).
+    muscles : muscles drawn over every frame, named and coloured as in every figure (a legend beside the
+        drawing; :mod:`mdsr_opt.plot.style`); activations : (frames, m) values in [0, 1] that set each
+        muscle's line width (e.g. contraction / a_max): an idle muscle stays drawn, thin and opaque.
     titles : one title per frame; fps : frames per second.
     rest : draw the rest outline in grey behind every frame.
-    figsize, dpi : the frame size in inches and its resolution (pixels = figsize * dpi).
+    figsize, dpi : the frame size in inches and its resolution (pixels = figsize * dpi; by default
+        880 x 550).
+    units : the coordinates' length unit, on the axes (default ``"body units"``).
 
     Returns the path. The GIF is written to a temporary file in the same folder and renamed.
 
@@ -161,8 +172,9 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     # an Agg figure of its own (no pyplot: nothing to close, whatever the interactive backend)
     fig = Figure(figsize=figsize, dpi=dpi)
     canvas = FigureCanvasAgg(fig)
+    # room on the right for the muscles' legend
+    fig.subplots_adjust(left=0.09, right=0.84 if muscles else 0.97, bottom=0.12, top=0.9)
     ax = fig.subplots()
-    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     # Blitting: the axes, ticks and labels are drawn once; per frame only the moving artists are drawn over
     # a copy of that background (a full draw per frame, twice through FuncAnimation + PillowWriter, made
     # the GIFs the slowest part of a run). The moving artists are drawn in the order a full draw uses.
@@ -170,23 +182,31 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     if rest:
         for loop in mesh.boundary_loops:
             p = mesh.points[np.append(loop, loop[0])]
-            moving += ax.plot(p[:, 0], p[:, 1], "-", color="#bbbbbb", lw=0.8)
+            moving += ax.plot(p[:, 0], p[:, 1], "-", color=REST_LINE, lw=0.9)
     fill_path, edge_path = mesh_paths(mesh)
     # the body: fill and edges as two compound paths (see common.mesh_paths); the edges, drawn once each rather
     # than twice, are 0.28 pt wide instead of 0.25 to keep the mesh's tone
-    body = PathPatch(fill_path(states[0]), facecolor="#8fb3d9", edgecolor="none")
-    edges = PathPatch(edge_path(states[0]), facecolor="none", edgecolor="#335577", linewidth=0.28)
+    body = PathPatch(fill_path(states[0]), facecolor=BODY["face"], edgecolor="none")
+    edges = PathPatch(edge_path(states[0]), facecolor="none", edgecolor=BODY["edge"], linewidth=0.28)
     for p in (body, edges):
         ax.add_artist(p)  # not add_patch: its data-limit update walks every segment; the limits are set below
     moving += [body, edges]
-    lines = [ax.plot([], [], "-", color=cyc[i % len(cyc)])[0] for i in range(len(muscles))]
+    lines = [ax.plot([], [], "-", color=muscle_color(i), solid_capstyle="round", zorder=3)[0]
+             for i in range(len(muscles))]
     moving += lines
+    if muscles:  # the legend is drawn once, with the background: proxies, not the moving lines
+        from matplotlib.lines import Line2D
+
+        ax.legend([Line2D([], [], color=muscle_color(i), lw=3) for i in range(len(muscles))],
+                  [muscle_label(m, i) for i, m in enumerate(muscles)], fontsize=9, **LEGEND_OUTSIDE)
     paths = [list(m.nodes) for m in muscles]
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal")
+    coordinate_axes(ax, units)
+    ax.tick_params(labelsize=8)
     names = titles if titles is not None else [f"frame {k + 1}/{len(states)}" for k in range(len(states))]
-    title = ax.set_title(names[0], fontsize=9)
+    title = ax.set_title(names[0], fontsize=12)
     title.set_animated(True)  # placed by matplotlib, drawn per frame by Pillow (see below)
     for a in moving:
         a.set_animated(True)
@@ -208,8 +228,9 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for i, (line, p) in enumerate(zip(lines, paths)):
             a = 1.0 if act is None else float(np.clip(act[k, i], 0.0, 1.0))
             line.set_data(x[p, 0], x[p, 1])
-            line.set_linewidth(0.8 + 2.5 * a)
-            line.set_alpha(0.35 + 0.65 * a)
+            w = 2.2 + 2.6 * a  # idle: thinner, but in full colour on a white rim, clear on the body's blue
+            line.set_linewidth(w)
+            line.set_path_effects([patheffects.Stroke(linewidth=w + 1.6, foreground="white"), patheffects.Normal()])
         canvas.restore_region(background)
         for a in moving:
             ax.draw_artist(a)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
+from matplotlib.ticker import NullFormatter
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -49,11 +50,13 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     """
     kinds = [k for k in ("equilibrium", "design") if any(r["kind"] == k for r in rows)]
     if axes is None:
-        fig, axes = plt.subplots(1, len(kinds), figsize=(6.5 * len(kinds), 4.8), squeeze=False)
+        # wspace: room between the panels for the left panel's legend (placed beside its axes)
+        fig, axes = plt.subplots(1, len(kinds), figsize=(7.5 * len(kinds), 4.8), squeeze=False,
+                                 gridspec_kw={"wspace": 0.9})
         axes = axes[0]
     fig = axes[0].figure
     colors = _study_colors(list(dict.fromkeys(r["method"] for r in rows)))
-    ylabels = {"equilibrium": "max node error / body size (vs reference)", "design": "max contraction error"}
+    ylabels = {"equilibrium": "max node error / body size (-)", "design": "max contraction error (-)"}
     for ax, kind in zip(axes, kinds):
         rs = [r for r in rows if r["kind"] == kind and np.isfinite(r["error"])]
         for m in dict.fromkeys(r["method"] for r in rs):
@@ -72,6 +75,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
                            color=c, marker="x", s=18, alpha=0.6, label=None if ok else f"{m} (failed)")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap on a short range
         ax.set_xlabel("build + solve time (s)")
         ax.set_ylabel(ylabels[kind])
         ax.set_title(f"{kind}: accuracy against time (x = failed run)", fontsize=9)
@@ -111,7 +115,7 @@ def plot_study_scaling(rows, slopes=None, ax=None, title=None):
     ax.set_title(f"study {title}: time against nodes (fitted time ~ nodes^slope)" if title else
                  "time against nodes (fitted time ~ nodes^slope)", fontsize=9)
     ax.grid(True, which="both", alpha=0.25)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no run
     return fig
 
 

@@ -438,7 +438,7 @@ def case_files(parts: Sequence[Sequence[str]], out: str | os.PathLike) -> list[s
     return [os.path.relpath(f, parent) for part in parts for f in part]
 
 
-def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list:
+def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu", vector=None) -> list:
     """:func:`write_case`'s work as two independent parts: functions without arguments, each writing some
     of the case's files into ``out`` and returning their paths (in :func:`write_case`'s order). The first
     draws the shapes (``target``, ``graph``, ``muscles``, ``design`` and the meshes), the second the
@@ -446,21 +446,22 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
 
     ``run_scene`` gives each part to its own job (:class:`~mdsr_opt.core.jobs.Jobs`), the second after
     the photograph stage in the same job, so that two processes draw a case's files while the parent
-    solves the next case.
+    solves the next case. ``vector``: every figure also as PDF/SVG beside its PNG
+    (:func:`mdsr_opt.plot.common.save_figure`).
     """
     fmt = "." + mesh_format.lstrip(".")
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     if run.setup is None:
         return []
-    return [functools.partial(_write_shapes, scene, run, folder, fmt),
-            functools.partial(_write_photos, scene, run, folder)]
+    return [functools.partial(_write_shapes, scene, run, folder, fmt, vector),
+            functools.partial(_write_photos, scene, run, folder, vector)]
 
 
-def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[str]:
+def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=None) -> list[str]:
     """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
     ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
-    from ..plot.common import save_figure
+    from ..plot.common import figure_paths, save_figure
     from ..plot.design import plot_contraction_graph, plot_design, plot_routing
     from ..plot.scenes import plot_target
     from ..body.io import write_mesh
@@ -469,6 +470,12 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
     setup, mesh, mat = run.setup, scene.mesh, scene.material
     case, x = setup.case, setup.target
     files: list[str] = []
+    units = scene.units
+
+    def save(fig, name):  # the PNG, and with vector its PDF/SVG beside it: every path listed
+        save_figure(fig, folder / name, close=True, vector=vector)
+        files.extend(figure_paths(folder / name, vector))
+
     if setup.target_result.success:
         energy = mat.psi(mesh.deformation_gradients(x))
         title = (f"{scene.name} / {case.name}: target by "
@@ -476,31 +483,28 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str) -> list[st
         fig = plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
                           drag_positions=case.drag_positions if len(case.drag_nodes) else None,
                           muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                          title=title)
-        files.append(save_figure(fig, folder / "target.png", close=True))
+                          title=title, units=units)
+        save(fig, "target.png")
         write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
         files.append(str(folder / f"target{fmt}"))
         graph = setup.routing.graph if setup.routing is not None else contraction_graph(mesh, x)
         seeds = setup.routing.seeds if setup.routing is not None else None
         # graph, muscles and design draw the target's frame again: its coordinates are on target.png, and
         # their ticks would be most of their drawing time
-        files.append(save_figure(plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False),
-                                 folder / "graph.png", close=True))
+        save(plot_contraction_graph(mesh, x, graph, seeds=seeds, ticks=False, units=units), "graph.png")
         if setup.muscles:
-            files.append(save_figure(plot_routing(mesh, x, setup.muscles, ticks=False),
-                                     folder / "muscles.png", close=True))
+            save(plot_routing(mesh, x, setup.muscles, ticks=False, units=units), "muscles.png")
     if run.design is not None:
         res = run.design
-        files.append(save_figure(plot_design(mesh, res, x, setup.muscles, ticks=False),
-                                 folder / "design.png", close=True))
+        save(plot_design(mesh, res, x, setup.muscles, ticks=False, units=units), "design.png")
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
     return files
 
 
-def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
+def _write_photos(scene: Scene, run: CaseRun, folder: Path, vector=None) -> list[str]:
     """The virtual prototype's photographs, ``photo.png`` (with ``photo.json``) and ``overlay.png``."""
-    from ..plot.common import save_figure
+    from ..plot.common import figure_paths, save_figure
     from ..plot.photos import plot_overlay
 
     files: list[str] = []
@@ -512,5 +516,6 @@ def _write_photos(scene: Scene, run: CaseRun, folder: Path) -> list[str]:
         files.append(str(folder / "photo.json"))
         fig = plot_overlay(run.photo.image, scene.mesh, run.setup.target, run.comparison, synthetic=True,
                            title="target outline on the driven body's photo", ticks=False)
-        files.append(save_figure(fig, folder / "overlay.png", close=True))
+        save_figure(fig, folder / "overlay.png", close=True, vector=vector)
+        files.extend(figure_paths(folder / "overlay.png", vector))
     return files

@@ -59,7 +59,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
               log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
               prototype: bool = True, prototype_seed: int = 0, background: bool = True,
-              max_difference: float | None = None, bands: bool | None = None) -> SceneReport:
+              max_difference: float | None = None, bands: bool | None = None, vector=None) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
     For every case (or those named in ``cases``): target, contraction graph, muscles, contractions,
@@ -87,6 +87,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         processes while the next solves run (:func:`~mdsr_opt.core.jobs.process_pool`: with two or more
         cores; on one core, and with ``False``, one after the other in this process). The files are the
         same either way.
+    vector : bool, str or sequence of str, optional
+        Every figure also as a vector file beside its PNG, for papers: ``True`` a PDF, ``"svg"`` an SVG
+        (:func:`mdsr_opt.plot.style.figure_formats`; ``mdsr run --vector``). GIFs stay GIFs.
     overwrite : bool
         ``out`` must be empty or new; with ``overwrite`` the files of an earlier run there are removed first
         (only those it recorded; see :class:`~mdsr_opt.scenes.rundir.RunFolder`, which also locks the folder
@@ -115,11 +118,11 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
-        folder.begin(run_entries(scene, names))
+        folder.begin(run_entries(scene, names, vector=vector))
         report = write_scene(scene, out, cases=names, method=method, photos=photos, figures=figures,
                              animations=animations, mesh_format=mesh_format, photo_size=photo_size,
                              log=log, prototype=prototype, prototype_seed=prototype_seed,
-                             background=background, max_difference=max_difference, bands=bands)
+                             background=background, max_difference=max_difference, bands=bands, vector=vector)
         folder.finish("complete" if report.success else "complete, some cases failed")
     return report
 
@@ -145,11 +148,14 @@ def _check_run(scene, cases, mesh_format, photo_size=(500, 500), max_difference=
     return names
 
 
-def run_entries(scene: Scene, cases: Sequence[str] | None = None) -> list[str]:
-    """Internal: the names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES`, one
-    folder per case run and ``<animation>.gif`` / ``<animation>.json`` per animation."""
+def run_entries(scene: Scene, cases: Sequence[str] | None = None, vector=None) -> list[str]:
+    """Internal: the names a run of ``scene`` may write directly into its folder: :data:`RUN_FILES` (with
+    ``vector``, ``rest.pdf``/``rest.svg`` too), one folder per case run and ``<animation>.gif`` /
+    ``<animation>.json`` per animation."""
+    from ..plot.style import figure_formats
+
     names = scene.case_names if cases is None else tuple(cases)
-    out = list(RUN_FILES) + list(names)
+    out = list(RUN_FILES) + [f"rest.{f}" for f in figure_formats(vector)] + list(names)
     for a in scene.animations:
         out += [f"{a.name}.gif", f"{a.name}.json"]
     if scene.gait is not None:
@@ -162,15 +168,17 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0, background: bool = True, pool: Executor | None = None,
-                max_difference: float | None = None, bands: bool | None = None) -> SceneReport:
+                max_difference: float | None = None, bands: bool | None = None, vector=None) -> SceneReport:
     """Internal: the body of :func:`run_scene` without the folder's guard, for ``run_scene`` and ``mdsr run``
     (call :func:`run_scene` instead). Runs and writes into ``out`` as it stands (the caller holds a
     :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
     is the process pool to send the jobs to (``mdsr run`` shares one between its scenes; None: one of this
     call's own)."""
     from ..body.io import atomic_path, write_json
+    from ..plot.style import figure_formats
 
     names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
+    figure_formats(vector)  # a bad vector format: ValueError before any work
     if pool is not None and not isinstance(pool, Executor):
         raise TypeError(f"pool must be a concurrent.futures.Executor or None, got {type(pool).__name__}")
     say = log or (lambda s: None)
@@ -184,7 +192,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
         bg = stack.enter_context(Jobs(pool if parallel else None))
         say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
         if figures:
-            bg.submit(_write_rest, scene, out / "rest.png")
+            bg.submit(_write_rest, scene, out / "rest.png", vector)
         proto = None
         if photos and prototype:
             from .prototype import VirtualPrototype
@@ -221,7 +229,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                                          max_difference=max_difference, bands=bands)
             send_animations()
             advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
-            parts = case_parts(scene, run, out / cname, mesh_format) if figures else []
+            parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
             written[cname] = [[] for _ in range(2)]
             if parts:
                 bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
@@ -236,7 +244,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 if photos:
                     advance(log)  # no design to photograph: the case's photograph stage is done
         if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
-            gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg)
+            gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector)
             if gait_info is not None:
                 anim_out[scene.gait.name] = gait_info
             advance(log)
@@ -248,7 +256,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
                          time=time.perf_counter() - t0)
     summary = report.to_dict()
-    summary.update({"description": scene.description, "source": scene.source, "resolution": scene.resolution,
+    summary.update({"description": scene.description, "source": portable_source(scene.source, out),
+                    "resolution": scene.resolution,
                     "mesh": {k: float(v) for k, v in scene.mesh.quality().items()},
                     "material": material_dict(scene.material),
                     "routing_options": scene.routing_options, "design_options": scene.design_options,
@@ -268,6 +277,22 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
     say(f"{scene.name}: {'all cases succeeded' if report.success else 'SOME CASES FAILED'} in {report.time:.1f} s; "
         f"results in {out}")
     return report
+
+
+def portable_source(source: str, out) -> str:
+    """The scene's source as ``summary.json`` records it: a path relative to the output folder ``out`` when
+    the source lies in it or beside it (at most one ``..``), else only its file name; never an absolute
+    path, which would name the machine's folders (a user's home, a virtual environment)."""
+    if not source:
+        return ""
+    src = Path(source)
+    if not src.is_absolute():
+        src = Path.cwd() / src
+    try:
+        rel = Path(os.path.relpath(src, Path(out).resolve()))
+    except ValueError:  # another drive (Windows)
+        return src.name
+    return rel.as_posix() if rel.parts[:2] != ("..", "..") else src.name
 
 
 def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
@@ -355,6 +380,7 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
     """An animation of the scene: its frames' forward solves (:func:`~mdsr_opt.scenes.animate.animate`), its
     GIF (with ``figures``) and ``out/<animation>.json``; returns the JSON's data and the message to log."""
     from ..plot.scenes import save_animation
+    from ..plot.style import commanded_achieved, muscle_label
     from ..body.io import write_json
 
     res = animate(scene, anim, designs)
@@ -365,12 +391,13 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
                    f"{res.failed_frames})"))
         if figures:
             act = res.contractions / scene.design_options.get("a_max", 0.6)
-            # titles state the contraction each frame reached along the muscles' node chains
+            # titles state per muscle the contraction commanded and the one reached along its node chain
             reached = [[1.0 - m.length(x) / m.rest_length(scene.mesh) for m in res.muscles] for x in res.states]
-            titles = [f"{scene.name} {anim.name}: frame {k + 1}/{len(act)}, achieved ["
-                      + ", ".join(f"{v:.2f}" for v in f) + "]" for k, f in enumerate(reached)]
+            names = [muscle_label(m, i) for i, m in enumerate(res.muscles)]
+            titles = [f"{anim.name} {k + 1}/{len(act)}: " + commanded_achieved(res.contractions[k], f, names, ".2f")
+                      for k, f in enumerate(reached)]
             save_animation(scene.mesh, res.states, out / f"{anim.name}.gif", muscles=res.muscles,
-                           activations=act, titles=titles, fps=anim.fps)
+                           activations=act, titles=titles, fps=anim.fps, units=scene.units)
             data["gif"] = f"{anim.name}.gif"
     else:
         said = f"[{scene.name}] animation {anim.name}: not made ({res.message})"
@@ -385,8 +412,8 @@ def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
     advance(log)
 
 
-def _run_gait(scene: Scene, out, runs, figures: bool, log, writer):
-    return run_gait(scene, out, runs, figures=figures, log=log, writer=writer)
+def _run_gait(scene: Scene, out, runs, figures: bool, log, writer, vector=None):
+    return run_gait(scene, out, runs, figures=figures, log=log, writer=writer, vector=vector)
 
 
 def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write_result) -> dict:
@@ -417,11 +444,11 @@ def _files_done(paths: list, log, got: list) -> None:
     advance(log)
 
 
-def _write_rest(scene: Scene, path) -> str:
-    """``rest.png``: the rest mesh with its regions."""
+def _write_rest(scene: Scene, path, vector=None) -> str:
+    """``rest.png``: the rest mesh with its regions (with ``vector``, a PDF/SVG beside it)."""
     from ..plot.common import save_figure
     from ..plot.scenes import plot_scene
 
-    fig = plot_scene(scene.mesh, scene.regions,
+    fig = plot_scene(scene.mesh, scene.regions, units=scene.units,
                      title=f"{scene.name}: rest mesh ({scene.mesh.n_nodes} nodes) and regions")
-    return save_figure(fig, path, close=True)
+    return save_figure(fig, path, close=True, vector=vector)

@@ -44,6 +44,7 @@ from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.results import compact_repr, to_jsonable
+from ..plot.style import dxf_color, muscle_color, muscle_name
 from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
@@ -179,8 +180,9 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         radius = next((r[3] for r in rows.values() if r[3] is not None), None)
     if not mus:
         raise ValueError("the design has no muscles: nothing to fabricate")
-    # every channel is labelled: an unnamed muscle is called m<k> (its place in the layout, from 1)
-    mus = [mu if mu.name else Muscle(mu.nodes, name=f"m{i + 1}") for i, mu in enumerate(mus)]
+    # every channel is labelled: an unnamed muscle is called M<k> (its place in the layout, from 1), as in
+    # every figure (mdsr_opt.plot.style.muscle_name)
+    mus = [mu if mu.name else Muscle(mu.nodes, name=muscle_name(i)) for i, mu in enumerate(mus)]
     h = float(mesh.edge_lengths.mean())
     if channel_width is None:
         channel_width = 0.2 * h
@@ -250,9 +252,9 @@ def _svg_text(fd: FabricationData, title: str) -> str:
         out.append(f'<polygon id="{kind}" class="{"outline" if i == 0 else "hole"}" points="{pts}"/>')
     out.append("</g>")
     out.append('<g id="muscles" fill="none" stroke-linecap="round" stroke-linejoin="round">')
-    colors = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
+    colors = [muscle_color(i) for i in range(len(fd.muscles))]  # the figures' colours (plot.style)
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
-        c = colors[i % len(colors)]
+        c = colors[i]
         pts = " ".join(xy(p) for p in path)
         out.append(f'<polyline class="channel" points="{pts}" stroke="{c}" stroke-opacity="0.35" '
                    f'stroke-width="{fd.channel_width:.9g}"/>')
@@ -261,7 +263,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     out.append("</g>")
     out.append(f'<g id="ends" fill="none" stroke-width="{lw:.6g}">')
     for i, path in enumerate(fd.paths):
-        c = colors[i % len(colors)]
+        c = colors[i]
         for p in (path[0], path[-1]):
             x, y = xy(p).split(",")
             out.append(f'<circle class="end" cx="{x}" cy="{y}" r="{fd.end_radius:.9g}" stroke="{c}"/>')
@@ -270,7 +272,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
         p, _ = _label_at(path, 1.2 * fs)
         x, y = xy(p).split(",")
-        out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i % len(colors)]}">{escape(mu.name)}</text>')
+        out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i]}">{escape(mu.name)}</text>')
     out.append("</g>")
     out.append(f'<text x="{pad * 0.3:.6g}" y="{H - pad * 0.3:.6g}" font-family="sans-serif" font-size="{fs * 0.8:.6g}">'
                f"{escape(title)}: {len(fd.muscles)} muscle channel(s), circles: channel ends; units: {u}</text>")
@@ -339,9 +341,11 @@ def _dxf_text(fd: FabricationData) -> str:
         g(20, _dxf_number(p[1]))
         g(30, "0.0")
 
-    def polyline(points, layer: str, closed: bool, width: float = 0.0) -> None:
+    def polyline(points, layer: str, closed: bool, width: float = 0.0, color: int | None = None) -> None:
         g(0, "POLYLINE")
         g(8, layer)
+        if color is not None:
+            g(62, color)
         g(66, 1)  # vertices follow
         xy((0.0, 0.0))
         g(70, 1 if closed else 0)
@@ -418,15 +422,18 @@ def _dxf_text(fd: FabricationData) -> str:
     polyline(fd.outline, "BODY", closed=True)
     for h in fd.holes:
         polyline(h, "HOLES", closed=True)
-    for mu, path, q in zip(fd.muscles, fd.paths, labels):
-        polyline(path, "MUSCLES", closed=False, width=fd.channel_width)
+    for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
+        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
+        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
         for p in (path[0], path[-1]):
             g(0, "CIRCLE")
             g(8, "ENDS")
+            g(62, dxf_color(i))
             xy(p)
             g(40, _dxf_number(fd.end_radius))
         g(0, "TEXT")
         g(8, "LABELS")
+        g(62, dxf_color(i))
         xy(q)
         g(40, _dxf_number(0.035 * size))
         g(1, _dxf_string(mu.name))

@@ -384,18 +384,19 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
 
 
 def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
-    """Chart of the strokes over time: one line per muscle (commanded solid, achieved dotted), the
-    keyframes marked with their poses. Returns the figure."""
+    """Chart of the strokes over time: one line per muscle (commanded solid, achieved dotted), named and
+    coloured as in every figure (:mod:`mdsr_opt.plot.style`), the keyframes marked with their poses.
+    Returns the figure."""
     import matplotlib.pyplot as plt
+    from ..plot.style import muscle_color
 
     if ax is None:
         fig, ax = plt.subplots(figsize=(7.5, 3.8))
     else:
         fig = ax.figure
-    cyc = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     t = schedule.times
     for i, n in enumerate(schedule.muscle_names):
-        c = cyc[i % len(cyc)]
+        c = muscle_color(i)
         ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
                 f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
         if np.isfinite(schedule.achieved[:, i]).any():
@@ -407,8 +408,8 @@ def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
     bad = ~schedule.success
     if bad.any():
         ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(f"stroke [{schedule.units}] (< 0: rope paid out)")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"stroke ({schedule.units}; < 0: rope paid out)")
     low = min(0.0, float(np.nanmin(schedule.strokes)))
     ax.set_ylim(bottom=low - 0.08 * (top - low), top=top * 1.15 if top > 0 else 1.0)
     ax.axhline(0.0, color="0.5", lw=0.6, zorder=0)
@@ -436,17 +437,19 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
     top = float(np.nanmax(schedule.contractions)) or 1.0
     titles = [f"{title} {schedule.labels[k]} (t = {schedule.times[k]:.2f} s)".strip() for k in range(schedule.n_frames)]
     return save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
-                          activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps)
+                          activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps,
+                          units=schedule.units)
 
 
-def _write_schedule(schedule: GaitSchedule, title: str, path) -> str:
-    """``schedule.png``: the strokes over time (:func:`plot_schedule`)."""
+def _write_schedule(schedule: GaitSchedule, title: str, path, vector=None) -> str:
+    """``schedule.png``: the strokes over time (:func:`plot_schedule`); with ``vector`` a PDF/SVG beside it."""
     from ..plot.common import save_figure
 
-    return save_figure(plot_schedule(schedule, title=title), path, close=True)
+    return save_figure(plot_schedule(schedule, title=title), path, close=True, vector=vector)
 
 
-def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None) -> dict | None:
+def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None,
+             vector=None) -> dict | None:
     """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
 
     Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.synthesis.poses.design_poses`, the scene's routing and
@@ -461,6 +464,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     out : the run's folder.
     runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
     figures : write the chart and the GIF.
+    vector : with ``figures``, also write the chart as PDF/SVG (:func:`mdsr_opt.plot.common.save_figure`).
     log : progress messages.
     writer : :class:`~mdsr_opt.core.jobs.Jobs`, optional
         Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
@@ -509,10 +513,12 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
         jobs += [(_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
-                                         "dotted: achieved)", chart), {}),
+                                         "dotted: achieved)", chart), {"vector": vector}),
                  (save_gait_animation, (scene.mesh, sch, res.muscles, gif),
                   {"title": f"{scene.name} {gait.name}:", "fps": gait.fps})]
-        files += [str(chart), str(gif)]
+        from ..plot.common import figure_paths
+
+        files += figure_paths(chart, vector) + [str(gif)]
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name}))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())

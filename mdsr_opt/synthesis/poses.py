@@ -76,6 +76,7 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import check_int, check_label
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..plot.style import muscle_name
 
 __all__ = ["Pose", "PosesResult", "design_poses", "shared_layout", "check_budget"]
 
@@ -372,7 +373,7 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
 
     Returns
     -------
-    muscles : tuple of Muscle, named ``M0, M1, ...``
+    muscles : tuple of Muscle, named ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure)
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
@@ -398,7 +399,7 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
             if budget is not None and len(kept) >= budget:
                 continue
             kept.append((cand, ce, [name]))
-    muscles = tuple(Muscle(m.nodes, name=f"M{i}") for i, (m, _, _) in enumerate(kept))
+    muscles = tuple(Muscle(m.nodes, name=muscle_name(i)) for i, (m, _, _) in enumerate(kept))
     for m in muscles:
         m.check_on(mesh)
     return muscles, tuple(tuple(s) for _, _, s in kept)

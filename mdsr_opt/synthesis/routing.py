@@ -102,6 +102,7 @@ from ..core.checks import check_int, positive_float
 from ..body.checks import check_mesh, check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..plot.style import muscle_name
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
@@ -400,7 +401,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
     muscles, stats = [], []
     for i, (_, _, _, path, ks, _) in enumerate(found):
-        m = Muscle(path, name=f"muscle {i}")
+        m = Muscle(path, name=muscle_name(i))  # M1, M2, ...: the name every figure and drawing uses
         wk = w[ks]
         L0, L = m.length(mesh.points), m.length(x)
         muscles.append(m)

@@ -1,0 +1,192 @@
+"""One visual language (issue 36): every figure kind labels its axes with quantity and unit, and a muscle has
+one name and one colour in the design figure, the schedule, Figure 6's panels and the fabrication SVG/DXF."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from types import SimpleNamespace
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from matplotlib.colors import to_hex
+
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.plot.style import muscle_color, muscle_name
+
+UNIT = re.compile(r"\(([^()]+)\)\s*$")  # "quantity (unit)"
+
+
+def _has_unit(label: str) -> bool:
+    return bool(label) and bool(UNIT.search(label))
+
+
+def _legend(ax) -> dict:
+    """{label: colour} of the muscle lines in ``ax``'s legend."""
+    leg = ax.get_legend()
+    return {t.get_text(): to_hex(h.get_color()) for t, h in zip(leg.get_texts(), leg.legend_handles)
+            if t.get_text().startswith("M")}
+
+
+@pytest.fixture(scope="module")
+def strip():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    bottom = [i for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0]
+    top = [i for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 1.0]
+    muscles = [Muscle([int(i) for i in bottom[1:-1]]), Muscle([int(i) for i in top[1:-1]])]
+    target = solve_internal(mesh, NeoHookean(1.0, 0.3), muscles, [0.12, 0.04]).x
+    return mesh, muscles, target
+
+
+def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip, tmp_path):
+    from mdsr_opt.plot.design import plot_design
+    from mdsr_opt.synthesis.contractions import design_contractions
+    from mdsr_opt.synthesis.export import export_fabrication
+    from mdsr_opt.synthesis.gait import plot_schedule
+
+    mesh, muscles, target = strip
+    res = design_contractions(mesh, NeoHookean(1.0, 0.3), muscles, target)
+    want = {muscle_name(i): muscle_color(i) for i in range(2)}
+    assert want == {"M1": "#d62728", "M2": "#1f77b4"}
+
+    fig = plot_design(mesh, res, target, muscles, units="mm")
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "x (mm)" and ax.get_ylabel() == "y (mm)"
+    title = ax.get_title()
+    assert f"difference D = {res.difference:.3g} mm" in title
+    for i in range(2):  # commanded beside achieved
+        assert f"M{i + 1} {res.contractions[i]:.3f} \u2192 {res.achieved[i]:.3f}" in title
+    assert _legend(ax) == want
+    plt.close(fig)
+
+    t = np.linspace(0.0, 1.0, 5)
+    strokes = np.outer(t, [0.3, 0.1])
+    sched = SimpleNamespace(times=t, muscle_names=("M1", "M2"), strokes=strokes, achieved=strokes * 0.98,
+                            rest_lengths=np.array([3.5, 3.5]), units="mm", keyframes=[0, 4], labels=["rest"] * 5,
+                            success=np.ones(5, bool), sequence=("rest", "pose"), n_frames=5)
+    fig = plot_schedule(sched)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "time (s)" and ax.get_ylabel().startswith("stroke (mm")
+    got = {t.get_text().split()[0]: to_hex(h.get_color())
+           for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)}
+    assert got == want
+    # the achieved strokes are drawn beside the commanded ones, dotted, in the muscle's colour
+    dotted = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":"]
+    assert sorted(to_hex(ln.get_color()) for ln in dotted) == sorted(want.values())
+    plt.close(fig)
+
+    files = export_fabrication(mesh, res, tmp_path, muscles=muscles, units="mm", name="strip")
+    svg = Path(files["svg"]).read_text()
+    found = dict(re.findall(r'<polyline class="muscle" id="([^"]+)" points="[^"]*" stroke="([^"]+)"', svg))
+    assert found == want
+    dxf = Path(files["dxf"]).read_text().split("\n")
+    texts = [i for i, v in enumerate(dxf) if v.strip() == "TEXT"]
+    # each label: its layer, then group 62 with the ACI colour of the muscle's figure colour (red, blue)
+    assert [dxf[i + 3].strip() for i in texts] == ["62"] * 2 and [int(dxf[i + 4]) for i in texts] == [1, 5]
+
+
+def test_figure6_panels_use_the_muscle_names_one_colour_scale_and_units(strip):
+    from mdsr_opt.plot.routing import plot_convergence, plot_design_grid, plot_layout_grid
+
+    mesh, muscles, target = strip
+    cols = [{"title": "a", "mesh": mesh, "target": target, "layouts": [muscles], "row_labels": ["K_a = 4"]},
+            {"title": "b", "mesh": mesh, "target": mesh.points * [0.9, 1.0], "layouts": [muscles[:1]],
+             "row_labels": ["K_a = 4"]}]
+    fig = plot_layout_grid(cols)
+    axes = np.array(fig.axes).reshape(3, 2)
+    assert axes[2, 0].get_legend() is None  # one legend for the row, beside its last panel
+    assert _legend(axes[2, 1]) == {"M1": muscle_color(0), "M2": muscle_color(1)}
+    clims = {ax.collections[-1].get_clim() for ax in axes[1]}
+    assert len(clims) == 1  # the contraction-graph row shares one colour scale
+    bar, = axes[1, -1].child_axes  # with its colour bar, the height of the panel
+    assert "l_0" in bar.get_ylabel() and _has_unit(bar.get_ylabel())
+    fig.canvas.draw()
+    a, b = axes[1, -1].get_window_extent(), bar.get_window_extent()
+    assert abs(a.height - b.height) < 2 and b.x0 >= a.x1
+    plt.close(fig)
+
+    d = {"x": target, "muscles": muscles, "difference": 0.01, "success": True}
+    fig = plot_design_grid([{"title": "a", "mesh": mesh, "target": target, "designs": [d], "row_labels": ["C"],
+                             "units": "cm"}])
+    assert fig.axes[1].get_title() == "C: D = 0.01 cm"
+    plt.close(fig)
+    fig = plot_convergence([{"title": "a", "traces": [("C", [0, 1, 2], [1.0, 0.1, 0.01])], "units": "cm"}])
+    ax = fig.axes[0]
+    assert ax.get_ylabel() == "difference D (cm)" and _has_unit(ax.get_xlabel())
+    plt.close(fig)
+
+
+def test_scene_figures_label_their_axes_and_save_vector_copies(strip, tmp_path):
+    from mdsr_opt.plot.common import figure_paths, save_figure
+    from mdsr_opt.plot.design import plot_contraction_graph, plot_routing
+    from mdsr_opt.plot.scenes import plot_scene, plot_target
+
+    mesh, muscles, target = strip
+    for fig in (plot_contraction_graph(mesh, target, units="cm", ticks=False),
+                plot_routing(mesh, target, muscles, units="cm"),
+                plot_target(mesh, target, anchors=[0], muscles=muscles, values=np.ones(mesh.n_triangles),
+                            units="cm"),
+                plot_scene(mesh, {"left": [0]}, units="cm")):
+        for ax in fig.axes:
+            assert ax.get_xlabel() == "x (cm)" and ax.get_ylabel() == "y (cm)"
+            for bar in ax.child_axes:  # colour bars: a quantity with its unit, the height of the axes
+                assert _has_unit(bar.get_ylabel())
+        plt.close(fig)
+    fig = plot_routing(mesh, target, muscles)
+    assert fig.axes[0].get_xlabel() == "x (body units)"  # no unit given: said so
+    p = save_figure(fig, tmp_path / "m.png", vector=("pdf", "svg"), close=True)
+    assert figure_paths(p, ("pdf", "svg")) == [str(tmp_path / f"m.{e}") for e in ("png", "pdf", "svg")]
+    assert (tmp_path / "m.pdf").read_bytes()[:5] == b"%PDF-" and "<svg" in (tmp_path / "m.svg").read_text()
+    with pytest.raises(ValueError, match="vector figure format must be one of pdf, svg, got 'eps'"):
+        save_figure(plt.figure(), tmp_path / "n.png", vector="eps", close=True)
+    assert not (tmp_path / "n.png").exists()
+
+
+def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path, capsys):
+    import json
+
+    from mdsr_opt.cli.main import main
+
+    strip = tmp_path / "strip.json"
+    strip.write_text(json.dumps({
+        "name": "strip", "units": "cm", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+        "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+        "cases": [{"name": "bend", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.8, 1.2]}]}]}))
+    out = tmp_path / "out"
+    assert main(["run", str(strip), "--out", str(out), "--no-photos", "--vector", "--serial"]) == 0
+    pngs = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.png"))
+    assert "rest.png" in pngs and "bend/design.png" in pngs
+    for p in pngs:
+        assert (out / p).with_suffix(".pdf").read_bytes()[:5] == b"%PDF-", p
+    summary = json.loads((out / "summary.json").read_text())
+    assert "bend/design.pdf" in summary["cases"][0]["files"]  # listed with the case's files
+    assert main(["run", str(strip), "--out", str(tmp_path / "svg"), "--no-photos", "--vector",
+                 "--vector-format", "svg", "--serial"]) == 0
+    assert (tmp_path / "svg" / "bend" / "design.svg").exists() and not (tmp_path / "svg" / "rest.pdf").exists()
+    assert main(["run", "figure6", "--out", str(tmp_path / "f6"), "--vector"]) == 2  # said, not ignored
+    assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "f6").exists()
+
+
+def test_gif_frames_are_large_and_draw_idle_muscles_in_their_colour(strip, tmp_path):
+    from PIL import Image
+
+    from mdsr_opt.plot.scenes import save_animation
+
+    mesh, muscles, target = strip
+    states = [mesh.points, target]
+    p = save_animation(mesh, states, tmp_path / "a.gif", muscles=muscles, activations=[[0.0, 0.0], [1.0, 0.2]],
+                       titles=["rest", "pose"])
+    im = Image.open(p)
+    assert im.size[0] >= 800 and im.size[1] >= 500
+    red = np.array([0xd6, 0x27, 0x28])  # M1's colour (plot.style)
+    counts = []
+    for k in range(2):
+        im.seek(k)
+        rgb = np.asarray(im.convert("RGB")).astype(int)
+        counts.append(int((np.abs(rgb - red).sum(-1) < 60).sum()))
+    # idle in the first frame, yet drawn in full colour (thinner than when it pulls), beside the legend's swatch
+    assert counts[0] > 300 and counts[1] > counts[0]
