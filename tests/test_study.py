@@ -18,7 +18,7 @@ from mdsr_opt.cli.main import main
 from mdsr_opt.studies.fidelity import choose_fidelity, pick_fidelity
 from mdsr_opt.body.io import read_json
 from mdsr_opt.studies.spec import COLUMNS, FAILURES, TIMING_COLUMNS, Study, get_study
-from mdsr_opt.studies.runs import _classify, boundary_overlaps, interpolate, state_error
+from mdsr_opt.studies.runs import classify_failure, boundary_overlaps, interpolate, state_error
 from mdsr_opt.studies.problems import build_setup, list_study_problems
 from mdsr_opt.core.stats import fit_slopes, pareto_front
 from mdsr_opt.studies.study import run_study
@@ -171,15 +171,17 @@ def test_time_out_stops_a_slow_run():
     assert r["wall_time"] < 5.0  # L-BFGS needs over 10 s here; the budget stops it
 
 
-def test_saddle_is_detected_past_buckling():
+def test_a_buckled_strip_crossing_itself_is_self_contact_not_a_saddle():
     st = Study("t", "buckling", ("strip-compress",), (300,), methods=("ipopt", "newton"),
                loads={"strip-compress": (0.05, 0.3)}, reference_resolution=300)
     res = run_study(st, progress=False)
     by = {(r["load"], r["method"]): r for r in res.rows}
     for m in ("ipopt", "newton"):
         assert by[(0.05, m)]["failure"] == "none"
-        # the solver converges (its own status says so) to the straight, unbuckled state: a saddle
-        assert by[(0.3, m)]["failure"] == "saddle" and not by[(0.3, m)]["stable"]
+        # the solver reaches the straight, unbuckled state (a saddle), leaves it along its negative curvature
+        # and buckles so far that the strip crosses itself: a self-contact failure, not a saddle
+        assert "left a saddle" in by[(0.3, m)]["status"]
+        assert by[(0.3, m)]["failure"] == "self-contact" and not by[(0.3, m)]["stable"]
         assert by[(0.3, m)]["residual"] < 1e-5
 
 
@@ -188,12 +190,43 @@ def test_self_overlap_is_a_failure():
     assert not boundary_overlaps(mesh, _arc(mesh.points, np.pi))          # half a circle: a clean U
     assert boundary_overlaps(mesh, _arc(mesh.points, 2.2 * np.pi))        # past a full turn: the ends cross
     assert mesh.jacobians(_arc(mesh.points, 2.2 * np.pi)).min() > 0      # ... with every triangle upright
-    assert _classify(True, "Solve_Succeeded", 0.5, True, True, 1.0, 10.0) == "self-overlap"
+    _classify = classify_failure
+    assert _classify(True, "Solve_Succeeded", 0.5, True, True, 1.0, 10.0) == "self-contact"
     assert _classify(True, "Solve_Succeeded", 0.5, False, False, 1.0, 10.0) == "saddle"
     assert _classify(True, "Solve_Succeeded", 0.5, True, False, 11.0, 10.0) == "time-out"
     assert _classify(False, "load stepping stalled (predictor inverted an element)", 0.5, False, False, 1.0,
                      10.0) == "inverted elements"
-    assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "no convergence"
+    assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "iteration limit"
+    assert _classify(False, "Infeasible_Problem_Detected", 0.5, False, False, 1.0, 10.0) == "no convergence"
+    # a solve that left a saddle and was then rejected for crossing itself is self-contact, not a saddle
+    assert _classify(False, "Solve_Succeeded; left a saddle along its negative curvature (1 re-solve(s)); "
+                     "rejected: the boundary crosses itself (self-contact is not modelled)", 0.5, False, True, 1.0,
+                     10.0) == "self-contact"
+    assert _classify(False, "Solve_Succeeded; rejected: not a stable equilibrium (a saddle: 1 direction(s) of "
+                     "negative curvature (lowest -0.1)); 3 re-solve(s) from perturbed states found no stable state",
+                     0.5, False, False, 1.0, 10.0) == "saddle"
+
+
+def test_a_strip_buckled_to_the_mirror_branch_is_not_an_error():
+    """Compressed past buckling, a strip buckles up or down: the same solution reflected, equal energy."""
+    from mdsr_opt.studies.problems import get_study_problem
+    from mdsr_opt.studies.runs import RunOutcome, fill_accuracy
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    X = mesh.points
+    up = np.column_stack([X[:, 0] * 0.8, X[:, 1] + 0.6 * np.sin(np.pi * X[:, 0] / 4.0)])
+    mirror = get_study_problem("strip-compress").mirror
+    partner = [int(np.argmin(np.linalg.norm(X - q, axis=1))) for q in mirror(X)]
+    down = mirror(up[partner])  # the mirror branch: node i where the mirror of its partner's node sits
+    assert np.abs(down - up).max() > 0.5  # far apart node by node
+    row = {"kind": "equilibrium", "problem": "strip-compress", "load": 0.2, "energy": 1.0, "success": True}
+    ref = RunOutcome(-1, dict(row), up, X, mesh.triangles)
+    run = RunOutcome(0, dict(row), down, X)
+    fill_accuracy([run], {("strip-compress", 0.2): ref})
+    assert run.row["branch"] == "mirror" and run.row["error"] < 1e-12 and run.row["energy_error"] == 0.0
+    other = RunOutcome(0, dict(row, problem="strip-bend"), down, X)  # no mirror symmetry declared
+    fill_accuracy([other], {("strip-bend", 0.2): ref})
+    assert other.row["branch"] == "same" and other.row["error"] > 0.1
 
 
 def test_poor_guess_failure_is_inverted_elements():

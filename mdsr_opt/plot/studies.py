@@ -15,7 +15,7 @@ __all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plo
 
 # --- solver comparison studies (issue 7) ---
 _STUDY_FAILURE_COLORS = {"none": "#2ca02c", "no convergence": "#ff7f0e", "inverted elements": "#d62728",
-                         "self-overlap": "#e377c2", "saddle": "#9467bd", "time-out": "#7f7f7f",
+                         "self-contact": "#e377c2", "iteration limit": "#bcbd22", "saddle": "#9467bd", "time-out": "#7f7f7f",
                          "error": "#111111"}
 
 

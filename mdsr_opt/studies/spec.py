@@ -17,15 +17,19 @@ __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
 #: Columns of a study table, in order.
 COLUMNS = ("study", "problem", "kind", "load", "guess", "material", "method", "resolution", "nodes",
            "build_time", "solve_time", "wall_time", "iterations", "steps", "energy", "energy_error", "error",
-           "min_J", "residual", "stable", "overlap", "success", "failure", "status")
+           "min_J", "residual", "stable", "overlap", "success", "failure", "status", "branch")
 
 
 #: Columns that measure time and so differ between runs of the same study.
 TIMING_COLUMNS = ("build_time", "solve_time", "wall_time")
 
 
-#: Failure reasons, in the order charts list them.
-FAILURES = ("none", "no convergence", "inverted elements", "self-overlap", "saddle", "time-out", "error")
+#: Failure reasons, in the order charts list them: ``iteration limit`` (the solver stopped at its cap),
+#: ``no convergence`` (any other failed solve), ``inverted elements``, ``self-contact`` (the boundary crosses
+#: itself: contact is not modelled), ``saddle`` (a converged state that is not a minimum of the energy),
+#: ``time-out`` (the run's budget), ``error`` (an exception).
+FAILURES = ("none", "iteration limit", "no convergence", "inverted elements", "self-contact", "saddle", "time-out",
+            "error")
 
 
 #: First guesses: the default predictor with load steps; no predictor with load steps; one solve from rest;
