@@ -7,6 +7,7 @@ reference), serially and on a two-process Dask LocalCluster.
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 
@@ -332,7 +333,7 @@ def test_problem_library_scenes_are_study_problems():
 
 # ------------------------------------------------------------------------------------ bad input, CLI
 def test_bad_names_list_the_valid_ones():
-    with pytest.raises(ValueError, match="unknown study 'slow'; valid: quick, speed, stability, fidelity"):
+    with pytest.raises(ValueError, match="unknown study 'slow'; valid: quick, speed, stability, fidelity, recommend"):
         run_study("slow")
     with pytest.raises(ValueError, match=r"unknown method \(backend or design method\) 'ipopt2'; valid: ipopt"):
         run_study("quick", methods=["ipopt2"])
@@ -497,3 +498,52 @@ def test_comparable_rows_of_a_timed_out_run_keep_identity_and_outcome_only():
     # float object, and NaN != NaN)
     err = dict(failure="error", energy=float("nan"))
     assert result(**err).comparable() == result(**dict(err, energy=float("nan"))).comparable()
+
+
+# ------------------------------------------------------------------------------------ recommendation per scene
+def test_a_recommendation_study_on_two_library_scenes_writes_its_table(tmp_path, capsys):
+    """`mdsr study recommend`: per scene (never pooled), the backend and mesh of least cost within the
+    tolerance, measured against a finer-mesh reference; one CSV row and one chart per scene."""
+    from mdsr_opt.cli.main import main
+    from mdsr_opt.studies.recommend import pick_recommendation
+
+    out = tmp_path / "rec"
+    code = main(["study", "recommend", "--scenes", "gripper,one_muscle", "--methods", "ipopt,newton",
+                 "--resolutions", "40,90", "--tol", "0.05", "--out", str(out), "--quiet"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    with open(out / "recommend.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert [r["scene"] for r in table] == ["gripper", "one_muscle"]
+    with open(out / "recommend_runs.csv") as fh:
+        runs = list(csv.DictReader(fh))
+    assert {r["problem"].split("/")[0] for r in runs} == {"gripper", "one_muscle"}
+    ref_nodes = json.loads((out / "recommend.json").read_text())["study"]["reference_resolution"]
+    assert ref_nodes == 4 * 90  # a finer mesh than every candidate: no run is its own reference
+    assert all(float(r["error"]) > 0.0 for r in runs if r["success"] == "True")
+    # newton has no rope constraint: the cable-driven one_muscle cases fail with it, and say why
+    assert all(r["failure"] != "none" for r in runs if r["problem"].startswith("one_muscle") and r["method"] == "newton")
+    for row in table:
+        rows = [dict(r, success=r["success"] == "True", error=float(r["error"]), stroke_error=float(r["stroke_error"]),
+                     build_time=float(r["build_time"]), solve_time=float(r["solve_time"]), nodes=int(r["nodes"]),
+                     resolution=int(r["resolution"])) for r in runs if r["problem"].split("/")[0] == row["scene"]]
+        again = pick_recommendation(rows, row["scene"], 0.05)
+        assert (again.method, again.resolution, again.met) == (row["method"], int(row["resolution"]),
+                                                                row["met"] == "True")
+        if again.met:  # within the tolerance on every case, and nothing within it is cheaper
+            assert float(row["error"]) <= 0.05
+        assert f"| {row['scene']} |" in printed
+        assert (out / f"recommend_{row['scene']}.png").stat().st_size > 5000
+    assert table[1]["method"] == "ipopt"  # the only backend that solves one_muscle's cable cases
+
+
+def test_recommendation_refuses_bad_input_before_any_run(tmp_path):
+    from mdsr_opt.studies.recommend import run_recommendation
+
+    with pytest.raises(ValueError, match="unknown library scene 'nope'"):
+        run_recommendation(tmp_path / "a", scenes=["gripper", "nope"])
+    with pytest.raises(ValueError, match="tol must be a positive number"):
+        run_recommendation(tmp_path / "a", scenes=["gripper"], tol=0.0)
+    with pytest.raises(ValueError, match="must be finer than the finest candidate"):
+        run_recommendation(tmp_path / "a", scenes=["gripper"], resolutions=(90,), reference_resolution=90)
+    assert not (tmp_path / "a").exists()

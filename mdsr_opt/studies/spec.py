@@ -248,9 +248,13 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
 FIDELITY_STUDY = "fidelity"
 
 
+#: The recommendation study (run by :func:`mdsr_opt.studies.recommend.run_recommendation`): per library scene.
+RECOMMEND = "recommend"
+
+
 def list_studies() -> list[str]:
     """Names of the registered studies (sweeps and the fidelity study)."""
-    return list(STUDIES) + [FIDELITY_STUDY]
+    return list(STUDIES) + [FIDELITY_STUDY, RECOMMEND]
 
 
 def get_study(name: str | Study) -> Study:
@@ -260,4 +264,7 @@ def get_study(name: str | Study) -> Study:
     if name == FIDELITY_STUDY:
         raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.studies.fidelity.run_fidelity_study "
                          "(or `mdsr study fidelity`)")
+    if name == RECOMMEND:
+        raise ValueError("'recommend' is not a sweep: run it with mdsr_opt.studies.recommend.run_recommendation "
+                         "(or `mdsr study recommend`)")
     return STUDIES[check_name(name, list_studies(), "study")]
