@@ -66,3 +66,20 @@ def test_motion_recovered_measure():
         face_module.motion_recovered(X, T, T, [])
     with pytest.raises(ValueError, match=r"\(n, 2\)"):
         face_module.motion_recovered(X, T[:2], T, [0])
+
+
+def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scene):
+    """problems/face_expressions.py: design_poses lays the face's one layout (the scene's cases' muscles), and
+    all four expressions reach 70 % of their motion on it; its JSON names every muscle's node chain."""
+    from mdsr_opt.body.io import read_json
+
+    fig = load_problem_module(problems_dir() / "face_expressions.py")
+    assert fig.run_figure(tmp_path, resolution="coarse", log=lambda s: None) == 0
+    data = read_json(tmp_path / "expressions.json")
+    chains = {m["name"]: tuple(m["nodes"]) for m in data["layout"]}
+    assert chains == {m.name: tuple(m.nodes) for c in scene.cases for m in c.muscles}
+    assert [e["expression"] for e in data["expressions"]] == ["smile", "frown", "wink", "pucker"]
+    for e, case in zip(data["expressions"], scene.cases):
+        assert e["success"] and e["motion_recovered"] >= 0.70, e
+        assert e["muscles"] == [m.name for m in case.muscles]  # the case pulls the muscles its pose pulls
+    assert (tmp_path / "expressions.png").stat().st_size > 20000
