@@ -39,7 +39,6 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..body.io import atomic_path, write_json
-from ..body.mesh import MAX_RESOLUTION
 from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
 from .problems import build_setup, list_study_problems
@@ -55,8 +54,6 @@ RECOMMEND_STUDY = RECOMMEND
 DEFAULT_SCENES = ("gripper", "tentacle")
 DEFAULT_BACKENDS = ("ipopt", "sqpmethod", "ipopt-lbfgs")
 DEFAULT_RESOLUTIONS = (100, 300, 1000)
-#: the reference mesh over the finest candidate when none is given
-REFERENCE_FACTOR = 4
 
 
 @dataclass
@@ -215,8 +212,6 @@ def run_recommendation(out: str | os.PathLike | None = None, *, scenes: Sequence
                 raise ValueError(f"{name} must be a positive number, got {v!r}")
         problems = _scene_problems(scenes)
         resolutions = tuple(resolutions)
-        if reference_resolution is None and resolutions:
-            reference_resolution = min(MAX_RESOLUTION, REFERENCE_FACTOR * max(int(r) for r in resolutions))
         st = Study(RECOMMEND_STUDY, "which backend and mesh reach a shape or stroke tolerance at least cost, "
                    "per library scene", tuple(problems), resolutions, ("neo-hookean",), tuple(backends),
                    reference_resolution=reference_resolution, timeout=float(timeout))

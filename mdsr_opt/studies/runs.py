@@ -374,7 +374,8 @@ def fill_accuracy(outcomes: list[RunOutcome], refs: dict) -> None:
     mesh), and ``branch``: for a problem with a mirror symmetry (:attr:`StudyProblem.mirror`) a buckled run
     is compared with the reference and with its mirror image, and the nearer one counts ("same" or
     "mirror"; the two branches have the same energy, so ``energy_error`` tells a mirror branch from another
-    mode). Rows without a reference keep ``branch`` "-"."""
+    mode). Rows without a reference on a finer mesh than their own keep ``error`` and ``energy_error`` NaN
+    and ``branch`` "-"."""
     from .problems import get_study_problem
 
     for o in outcomes:
@@ -383,6 +384,8 @@ def fill_accuracy(outcomes: list[RunOutcome], refs: dict) -> None:
             continue
         ref = refs.get((r["problem"], r["load"]))
         if ref is None or o.x is None or not ref.row["success"]:
+            continue
+        if len(ref.points) <= len(o.points):  # not a finer mesh: the same discrete solution measures nothing
             continue
         r["error"] = state_error(o.points, o.x, ref.points, ref.triangles, ref.x, o.free_body)
         r["branch"] = "same"

@@ -40,6 +40,16 @@ GUESSES = ("predictor", "no-predictor", "rest", "noisy")
 DESIGN_METHODS = ("flattened", "nested", "derivative-free")
 
 
+#: the default reference mesh: this many times the finest resolution of a study
+REFERENCE_FACTOR = 4
+
+
+def default_reference(resolutions) -> int:
+    """The default reference resolution of a study on ``resolutions``: :data:`REFERENCE_FACTOR` times the
+    finest, at most :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
+    return int(min(MAX_RESOLUTION, REFERENCE_FACTOR * max(int(r) for r in resolutions)))
+
+
 def _check_nodes(r, what: str) -> None:
     """Refuse a node count that is not an integer from 4 to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
     if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or not 4 <= r <= MAX_RESOLUTION:
@@ -69,7 +79,10 @@ class Study:
     guesses : tuple of str
         First guesses (:data:`GUESSES`) for equilibrium methods; design methods always run once.
     reference_resolution : int or None
-        Mesh of the reference solutions (Neo-Hookean, IPOPT, tight tolerance); default: the finest resolution.
+        Mesh of the reference solutions (Neo-Hookean, IPOPT, tight tolerance); default
+        :data:`REFERENCE_FACTOR` times the finest resolution (at most the largest mesh allowed). A run is
+        measured only against a reference on a finer mesh than its own (else its ``error`` stays NaN: the
+        same discrete solution measures nothing).
     timeout : float
         Seconds allowed per run.
     max_iter : int
@@ -129,7 +142,7 @@ class Study:
                 except ValueError as exc:
                     raise ValueError(f"study {self.name!r}: {exc}") from None
         if self.reference_resolution is None:
-            object.__setattr__(self, "reference_resolution", self.resolutions[-1])
+            object.__setattr__(self, "reference_resolution", default_reference(self.resolutions))
         _check_nodes(self.reference_resolution, f"study {self.name!r}: reference_resolution")
         object.__setattr__(self, "reference_resolution", int(self.reference_resolution))
         if isinstance(self.timeout, bool) or not (isinstance(self.timeout, (int, float)) and self.timeout > 0):
@@ -144,7 +157,7 @@ class Study:
         if "problems" in changes and "loads" not in changes:  # keep the loads of the problems that remain
             changes["loads"] = {k: v for k, v in self.loads.items() if k in changes["problems"]}
         if "resolutions" in changes and "reference_resolution" not in changes and \
-                self.reference_resolution == self.resolutions[-1]:
+                self.reference_resolution == default_reference(self.resolutions):
             changes["reference_resolution"] = None
         return replace(self, **changes)
 
