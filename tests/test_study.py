@@ -132,9 +132,13 @@ def test_quick_study_measures_accuracy(quick):
                r["method"] == "ipopt")
     nhb = next(r for r in nh if r["problem"] == "strip-bend" and r["method"] == "ipopt")
     assert lin["error"] > 10 * nhb["error"]
-    # design methods recover the known contraction
+    # design methods recover the known contraction from a target solved on the finer reference mesh: within
+    # the coarse mesh's discretisation, not to rounding (that would be the same discrete solution again), and
+    # all three the same design
     des = [r for r in rows if r["kind"] == "design" and r["material"] == "neo-hookean"]
-    assert len(des) == 3 and all(r["success"] and r["error"] < 1e-6 for r in des)
+    assert len(des) == 3 and all(r["success"] and 1e-4 < r["error"] < 0.05 for r in des)
+    errs = [r["error"] for r in des]
+    assert max(errs) - min(errs) < 1e-4
 
 
 def test_quick_study_files(quick):

@@ -192,7 +192,8 @@ class Study:
                                     continue
                             for g in (("predictor",) if design else self.guesses):
                                 runs.append(RunSpec(self.name, p, load, g, mat, m, r, float(self.timeout),
-                                                    self.max_iter, "run", self.seed))
+                                                    self.max_iter, "run", self.seed,
+                                                    reference_resolution=self.reference_resolution))
         return runs, refs, capped
 
     def to_dict(self) -> dict:
@@ -216,6 +217,8 @@ class RunSpec:
     max_iter: int
     role: str = "run"  # or "reference"
     seed: int = 0
+    #: the study's reference mesh: a design run's target is the reference solved there (a finer mesh)
+    reference_resolution: int | None = None
 
     @property
     def kind(self) -> str:
