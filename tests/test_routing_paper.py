@@ -87,6 +87,26 @@ def test_readme_figure6_sentences_are_the_findings_of_the_stored_run():
     assert _readme_figure6_sentences() == " ".join(figure6.findings(rows))
 
 
+def test_figure6c_charts_equilibria_at_every_iterate():
+    """Every point of a Figure 6c trace is the difference of an equilibrium: iteration 0 at the design's start,
+    the last at its result; the contractions in between are the IPOPT iterates (the design stopped there)."""
+    from mdsr_opt.synthesis.routing import route_muscles
+
+    scene = get_problem("tentacle", resolution="coarse")
+    target = prepare_case(scene, "curl").target
+    muscles = route_muscles(scene.mesh, target, K_a=1.0, **figure6.ROUTING).muscles
+    res, tr = figure6.design_layout(scene, target, muscles)
+    assert res.success and all(tr["solved"])
+    assert tr["iterations"][0] == 0 and tr["iterations"][-1] == res.iterations
+    assert np.all(np.diff(tr["iterations"]) > 0)
+    assert tr["difference"][0] == pytest.approx(res.initial_difference, rel=1e-3)
+    assert tr["difference"][-1] == pytest.approx(res.difference, rel=1e-6)
+    A = np.array(tr["contractions"])
+    assert A.shape == (len(tr["iterations"]), len(muscles))
+    assert np.allclose(A[0], res.initial_contractions) and np.allclose(A[-1], res.contractions)
+    assert np.abs(np.diff(A, axis=0)).max() > 1e-6  # the iterates move: not the end point repeated
+
+
 def test_findings_count_what_the_table_says():
     def row(t, lay, m, it, d, up):
         return {"target": t, "layout": lay, "muscles": m, "iterations": it, "difference": d, "equilibrium_rises": up}
