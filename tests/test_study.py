@@ -202,6 +202,9 @@ def test_self_overlap_is_a_failure():
     assert _classify(False, "load stepping stalled (predictor inverted an element)", 0.5, False, False, 1.0,
                      10.0) == "inverted elements"
     assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "iteration limit"
+    for cap in ("max_iter", "status 1: STOP: TOTAL NO. OF ITERATIONS REACHED LIMIT",  # newton, scipy L-BFGS-B
+                "load stepping stalled at step 3 (Maximum_Iterations_Exceeded)"):
+        assert _classify(False, cap, 0.5, False, False, 1.0, 10.0) == "iteration limit", cap
     assert _classify(False, "Infeasible_Problem_Detected", 0.5, False, False, 1.0, 10.0) == "no convergence"
     # a solve that left a saddle and was then rejected for crossing itself is self-contact, not a saddle
     assert _classify(False, "Solve_Succeeded; left a saddle along its negative curvature (1 re-solve(s)); "

@@ -157,7 +157,7 @@ _SADDLE_WORDS = ("not a stable equilibrium", "not a minimum of the energy")
 
 #: words of a status that stopped at the solver's iteration cap (IPOPT, CasADi's SQP, scipy, Newton)
 _LIMIT_WORDS = ("maximum_iterations_exceeded", "max_iter", "maximum number of iterations", "iteration limit",
-                "iterations exceeded")
+                "iterations exceeded", "iterations reached limit", "maximum number of function evaluations")
 
 
 def classify_failure(success: bool, status: str, min_J: float, stable: bool, overlap: bool, wall: float,
