@@ -13,15 +13,18 @@ This script is a figure, not a scene: it has no ``build`` but a ``run_figure(out
 
 - ``figure6a.png``: targets (row A), contraction graphs (B), the layouts at the smaller (C) and larger (D) K_a;
 - ``figure6b.png``: the target and the driven state of each layout over it;
-- ``figure6c.png``: difference against IPOPT iteration for both layouts of each target;
+- ``figure6c.png``: difference against IPOPT iteration for both layouts of each target, each point the
+  difference of the equilibrium at that iterate's contractions;
 - ``table1.csv`` and ``table1.md``: strokes and contractions per muscle, difference and iterations;
-- ``figure6.json``: the same numbers and each design's trace.
+- ``figure6.json``: the same numbers and each design's trace;
+- ``findings.txt``: the sentences the README states about Figure 6, computed from the table
+  (:func:`findings`).
 
-The convergence trace comes from IPOPT's own iteration log (``file_print_level`` 5): the objective at
-iterate k, converted to a difference by the final design (``D_k = D * sqrt(f_k / f_end)``, the objective
-is ``D**2`` up to a constant factor). The iterates of the flattened NLP are not equilibria until it
-converges (the log's ``inf_pr`` is saved beside it), so the early points are not the difference of a
-physical state.
+The iterates of the flattened NLP are not equilibria until it converges (their states violate the
+equilibrium constraints), so Figure 6c does not chart them: it takes each iterate's contractions
+(:func:`iterate_contractions`) and solves the body forward at them, warm-started from the previous
+iterate's equilibrium (:func:`equilibrium_trace`). Every point is the difference of a physical state; such
+a trace need not fall monotonically (Table 1's ``equilibrium_rises``).
 
 Run ``python problems/figure6.py --out out/figure6`` or ``mdsr run figure6 --out out/figure6``.
 """
@@ -31,9 +34,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-import re
 import sys
-import tempfile
 import time
 import warnings
 
@@ -52,9 +53,6 @@ TARGETS = (
 
 #: Routing knobs shared by all ten layouts (the paper's 5-10 seeds per region, at most 4 muscles l1..l4).
 ROUTING = {"K_b": 4.0, "K_h": 0.1, "n_seeds": 8, "max_muscles": 4, "max_turn": 45.0}
-
-_ITER_LINE = re.compile(r"^\s*(\d+)r?\s+([-+]?\d\.\d+e[-+]\d+)\s+(\d\.\d+e[-+]\d+)\s")
-
 
 def route_targets(resolution="medium"):
     """Solve the five targets and route each at its two K_a values.
@@ -88,41 +86,65 @@ def route_targets(resolution="medium"):
     return out
 
 
-def read_ipopt_log(path):
-    """IPOPT's iteration table from an ``output_file`` log: (iterations, objective, inf_pr) arrays.
-
-    A restarted count (several tables) keeps the last run only.
-    """
-    its, obj, inf = [], [], []
-    with open(path) as fh:
-        for line in fh:
-            m = _ITER_LINE.match(line)
-            if m:
-                k = int(m.group(1))
-                if its and k <= its[-1]:
-                    its, obj, inf = [], [], []
-                its.append(k)
-                obj.append(float(m.group(2)))
-                inf.append(float(m.group(3)))
-    return np.array(its, dtype=int), np.array(obj), np.array(inf)
-
-
 def design_layout(scene, target, muscles):
-    """Design the contractions of ``muscles`` for ``target`` (the scene's design options, flattened NLP),
-    with IPOPT's iteration log turned into a trace. Returns ``(DesignResult, trace dict)``."""
+    """Design the contractions of ``muscles`` for ``target`` (the scene's design options, flattened NLP) and
+    chart its convergence in equilibria (:func:`equilibrium_trace`). Returns ``(DesignResult, trace dict)``."""
     from mdsr_opt.synthesis.contractions import design_contractions
 
     opts = {k: v for k, v in scene.design_options.items() if k != "method"}
-    with tempfile.TemporaryDirectory() as tmp:
-        log = os.path.join(tmp, "ipopt.log")
-        res = design_contractions(scene.mesh, scene.material, muscles, target, method="flattened",
-                                  options={"output_file": log, "file_print_level": 5}, **opts)
-        its, f, inf = read_ipopt_log(log) if os.path.exists(log) else (np.zeros(0, int), np.zeros(0), np.zeros(0))
-    if len(f) and f[-1] > 0 and np.isfinite(res.difference):
-        d = res.difference * np.sqrt(np.maximum(f, 0.0) / f[-1])
-    else:
-        d = np.full(len(f), np.nan)
-    return res, {"iterations": its.tolist(), "difference": d.tolist(), "inf_pr": inf.tolist()}
+    res = design_contractions(scene.mesh, scene.material, muscles, target, method="flattened", **opts)
+    return res, equilibrium_trace(scene, target, muscles, res, opts)
+
+
+def iterate_contractions(scene, target, muscles, res, opts):
+    """The contractions of every IPOPT iterate of the flattened design ``res``: iterate 0 is its start,
+    iterate k the design stopped after k iterations (``max_iter=k``, the same start and options: IPOPT is
+    deterministic, so it is iterate k of the full run), until one converges. The polish of slack ropes
+    (a second, short solve) is not an iterate of the main run; the last entry is the design's own
+    contractions, at the design's iteration count (the polish's iterations included). Returns ``(iterations, contractions (K+1, m))``."""
+    from mdsr_opt.synthesis.contractions import design_contractions
+
+    warm = "rest" if "warm-started from rest after" in str(res.status) else True
+    its, A = [0], [np.asarray(res.initial_contractions, dtype=float)]
+    for k in range(1, max(int(res.iterations), 1)):
+        r = design_contractions(scene.mesh, scene.material, muscles, target, method="flattened",
+                                max_iter=k, verify=False, warm_start=warm,
+                                **{key: v for key, v in opts.items() if key not in ("verify", "warm_start")})
+        if r.success:  # converged within k iterations: the rest is the design's own end point
+            break
+        its.append(k)
+        A.append(np.asarray(r.contractions, dtype=float))
+    its.append(max(int(res.iterations), its[-1] + 1))  # the polish's iterations counted, as in Table 1
+    A.append(np.asarray(res.contractions, dtype=float))
+    return np.array(its), np.array(A)
+
+
+def equilibrium_trace(scene, target, muscles, res, opts):
+    """Figure 6c's trace: at every IPOPT iterate, the difference of the EQUILIBRIUM at that iterate's
+    contractions (the flattened NLP's own iterates violate the equilibrium constraints until it converges).
+
+    Each iterate's contractions (:func:`iterate_contractions`) are solved forward
+    (:func:`~mdsr_opt.mechanics.equilibrium.solve_internal`, the design's muscle model, stiffness and anchor
+    radius), warm-started from the previous iterate's equilibrium, and the result aligned onto the target
+    with the design's node weights. Returns a dict of lists: ``iterations``, ``difference`` (NaN where the
+    forward solve failed), ``contractions``, ``solved`` and ``status``.
+    """
+    from mdsr_opt.mechanics.align import align, node_weights
+    from mdsr_opt.mechanics.equilibrium import solve_internal
+
+    its, A = iterate_contractions(scene, target, muscles, res, opts)
+    w = node_weights(scene.mesh, opts.get("interior_weight", 0.5))
+    guess, D, ok, status = "predictor", [], [], []
+    for a in A:
+        eq = solve_internal(scene.mesh, scene.material, muscles, a, muscle_model=res.muscle_model,
+                            stiffness=res.stiffness, anchor_radius=res.anchor_radius, initial_guess=guess)
+        ok.append(bool(eq.success))
+        status.append(str(eq.status))
+        D.append(float(align(eq.x, target, w).difference) if eq.success else float("nan"))
+        if eq.success:
+            guess = np.asarray(eq.x, dtype=float)
+    return {"iterations": its.tolist(), "difference": D, "contractions": A.tolist(), "solved": ok,
+            "status": status}
 
 
 def table_rows(runs):
@@ -138,11 +160,66 @@ def table_rows(runs):
                 row[f"a{i + 1}"] = a
                 row[f"stroke{i + 1}"] = None if a is None else a * L0[i]
             row["idle"] = int(sum(float(a) < 1e-3 for a in res.contractions))
+            tr = r["traces"][j]
+            d = np.asarray(tr["difference"], dtype=float)
             row.update({"difference": res.difference, "relative_difference": res.difference / r["scene"].mesh.size,
                         "initial_difference": res.initial_difference, "iterations": res.iterations,
-                        "success": bool(res.success), "status": res.status})
+                        "success": bool(res.success), "status": res.status,
+                        "equilibrium_start": float(d[0]), "equilibrium_rises": rises(d),
+                        "equilibria_solved": bool(all(tr["solved"]))})
             rows.append(row)
     return rows
+
+
+#: a rise of the equilibrium trace: the difference grows by more than this fraction from one iterate to the next
+RISE = 1e-3
+
+
+def rises(differences) -> int:
+    """How many times an equilibrium trace's difference grows by more than :data:`RISE` (relative) from one
+    iterate to the next (a failed forward solve, NaN, counts as no rise)."""
+    d = np.asarray(differences, dtype=float)
+    return int(np.sum(d[1:] > d[:-1] * (1.0 + RISE)))
+
+
+def _count(k: int, n: int) -> str:
+    return f"{k} of {n}"
+
+
+def findings(rows) -> list[str]:
+    """The sentences the README states about Figure 6, computed from Table 1's rows (dicts or a CSV's
+    strings): how the muscle counts of the two layouts compare, which layout converges in fewer IPOPT
+    iterations and reaches the smaller difference, and how often the equilibrium trace of Figure 6c rises."""
+    def num(r, k, cast=float):
+        return cast(r[k]) if not isinstance(r[k], str) else cast(float(r[k]))
+
+    pairs = {}
+    for r in rows:
+        pairs.setdefault(r["target"], {})[r["layout"]] = r
+    n = len(pairs)
+    fewer, same, more = [], 0, 0
+    for p in pairs.values():
+        c, d = num(p["C"], "muscles", int), num(p["D"], "muscles", int)
+        if c == d:
+            same += 1
+        else:
+            more += c > d
+            fewer.append((p["C"], p["D"]) if c < d else (p["D"], p["C"]))
+    counts = f"for {_count(len(fewer) - more, n)} targets and as many for {same}"
+    counts += f" (more for {more})" if more else ""
+    out = [f"The smaller `K_a` gives fewer muscles {counts}."]
+    k = len(fewer)
+    if k:
+        its = [(num(a, "iterations", int), num(b, "iterations", int)) for a, b in fewer]
+        lt, eq = sum(x < y for x, y in its), sum(x == y for x, y in its)
+        smaller = sum(num(a, "difference") < num(b, "difference") for a, b in fewer)
+        out.append(f"Where the counts differ, the layout with fewer muscles converges in fewer IPOPT iterations "
+                   f"for {_count(lt, k)}, in as many for {eq} and in more for {k - lt - eq}; it reaches the "
+                   f"smaller difference for {_count(smaller, k)}.")
+    up = sum(num(r, "equilibrium_rises", int) > 0 for r in rows)
+    out.append(f"Figure 6c charts the difference of the equilibrium at each iterate's contractions; it rises "
+               f"after an iteration in {_count(up, len(rows))} designs.")
+    return out
 
 
 def _fmt(v):
@@ -166,20 +243,22 @@ def write_table(rows, csv_path, md_path):
     with atomic_path(csv_path) as tmp:
         with open(tmp, "w") as fh:
             fh.write(buf.getvalue())
-    show = [k for k in keys if k not in ("status", "total_length", "initial_difference")]
+    show = [k for k in keys if k not in ("status", "total_length", "initial_difference", "equilibria_solved")]
     lines = ["| " + " | ".join(show) + " |", "|" + "---|" * len(show)]
     lines += ["| " + " | ".join(_fmt(r[k]) for k in show) + " |" for r in rows]
     note = ("\n\nstrokeN = aN * L0 of muscle lN (rest length, the length the servo pulls); idle = muscles the "
             "design leaves at a < 0.001 (routed, but not worth building for this target); difference = "
             "weighted RMS node distance to the target after rigid alignment (a length), relative = over the "
-            "body's size; iterations = IPOPT iterations of the flattened design.\n")
+            "body's size; iterations = IPOPT iterations of the flattened design; equilibrium_start = difference of the "
+            "equilibrium at the design's starting contractions, equilibrium_rises = iterates after which the "
+            "difference of the equilibrium at the iterate's contractions grows (Figure 6c).\n")
     with atomic_path(md_path) as tmp:
         with open(tmp, "w") as fh:
             fh.write("# Table 1: contractions of the Figure 6 layouts\n\n" + "\n".join(lines) + note)
 
 
 # the files run_figure writes into its folder (an ``mdsr run`` records them in the run folder's manifest)
-OUTPUTS = ("figure6a.png", "figure6b.png", "figure6c.png", "table1.csv", "table1.md", "figure6.json")
+OUTPUTS = ("figure6a.png", "figure6b.png", "figure6c.png", "table1.csv", "table1.md", "figure6.json", "findings.txt")
 
 
 def run_figure(out, resolution="medium", log=print) -> int:
@@ -194,7 +273,7 @@ def run_figure(out, resolution="medium", log=print) -> int:
 
     if "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
-    from mdsr_opt.body.io import write_json
+    from mdsr_opt.body.io import atomic_path, write_json
     from mdsr_opt.plot.common import save_figure
     from mdsr_opt.plot.routing import plot_convergence, plot_design_grid, plot_layout_grid
 
@@ -228,8 +307,8 @@ def run_figure(out, resolution="medium", log=print) -> int:
     panels = [{"title": c["title"], "traces": [(f"{lab}, {len(lay)} m.", t["iterations"], t["difference"])
                                                for lab, lay, t in zip(c["row_labels"], r["layouts"], r["traces"])]}
               for c, r in zip(cols, runs)]
-    files.append(save_figure(plot_convergence(panels, title="Figure 6c: difference against IPOPT iteration "
-                                                            "(flattened design)"),
+    files.append(save_figure(plot_convergence(panels, title="Figure 6c: difference of the equilibrium at each "
+                                                            "IPOPT iterate's contractions (flattened design)"),
                              os.path.join(out, "figure6c.png")))
     rows = table_rows(runs)
     write_table(rows, os.path.join(out, "table1.csv"), os.path.join(out, "table1.md"))
@@ -240,6 +319,13 @@ def run_figure(out, resolution="medium", log=print) -> int:
                      "muscles": [list(m.nodes) for m in lay], "dropped": [d.reason for d in lay.dropped],
                      "trace": t} for r in runs for K_a, lay, t in zip(r["K_a"], r["layouts"], r["traces"])]})
     files.append(os.path.join(out, "figure6.json"))
+    found = findings(rows)
+    with atomic_path(os.path.join(out, "findings.txt")) as tmp:
+        with open(tmp, "w") as fh:
+            fh.write("\n".join(found) + "\n")
+    files.append(os.path.join(out, "findings.txt"))
+    for line in found:
+        log(line)
     ok = all(row["success"] for row in rows)
     log(f"figure6: {sum(row['success'] for row in rows)}/{len(rows)} designs succeeded in "
         f"{time.perf_counter() - t0:.1f} s; wrote {', '.join(os.path.basename(f) for f in files)} to {out}")

@@ -42,8 +42,8 @@ def test_library_lists_every_scene_of_the_paper():
 def test_factory_builds_a_coarse_scene(name):
     scene = get_problem(name, resolution="coarse")
     assert isinstance(scene, Scene) and scene.name == name
-    # coarse is about 150 nodes (the face asks for at least 300 to resolve its mouth corners)
-    lo, hi = (240, 360) if name == "face" else (120, 180)
+    # coarse is about 150 nodes (the face asks for 600, where its one layout makes all four expressions)
+    lo, hi = (480, 690) if name == "face" else (120, 180)
     assert lo <= scene.mesh.n_nodes <= hi
     assert scene.mesh.quality()["min_angle_deg"] >= 30.0 - 1e-6
     assert "drawn by the mdsr_opt authors" in open(scene.source).read()
@@ -56,6 +56,8 @@ def test_factory_builds_a_coarse_scene(name):
 def test_external_scene_designs_succeed(name):
     scene, out = runs(name)
     cap = scene.routing_options.get("max_muscles", 99)
+    if name == "face":  # the cap is each expression's own routing's; a case pulls any muscle of their union
+        cap = len({m.name for c in scene.cases for m in c.muscles})
     for cname, run in out.items():
         r = run.report
         assert r.target_success, f"{cname}: {r.target_status}"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -66,21 +67,59 @@ def test_figure_scripts_are_not_scenes():
         get_problem("figure6")
 
 
-def test_read_ipopt_log_keeps_the_last_table(tmp_path):
-    log = tmp_path / "ipopt.log"
-    log.write_text(
-        "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls\n"
-        "   0  4.0000000e-01 1.00e-10 2.2e-02  -1.0 0.00e+00    -  0.00e+00 0.00e+00   0\n"
-        "   1  3.0000000e-01 5.80e-02 1.9e+00  -1.7 3.09e-01    -  6.03e-01 1.00e+00f  1\n"
-        "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls\n"
-        "   0  2.0000000e-01 1.00e-10 2.2e-02  -1.0 0.00e+00    -  0.00e+00 0.00e+00   0\n"
-        "   1r 1.0000000e-01 2.00e-03 1.9e+00  -1.7 3.09e-01    -  6.03e-01 1.00e+00f  1\n"
-        "   2  5.0000000e-02 1.00e-14 1.9e-13 -11.0 3.09e-09    -  1.00e+00 1.00e+00h  1\n"
-        "\nNumber of Iterations....: 2\n")
-    its, f, inf = figure6.read_ipopt_log(log)
-    assert its.tolist() == [0, 1, 2]
-    assert f == pytest.approx([0.2, 0.1, 0.05])
-    assert inf == pytest.approx([1e-10, 2e-3, 1e-14])
+ROOT = Path(__file__).resolve().parents[1]
+#: Table 1 of the default (medium) `mdsr run figure6`, whose findings the README states
+STORED_TABLE = ROOT / "tests" / "data" / "figure6_table1.csv"
+MARK = "`findings.txt`: the next three sentences, computed from its default run's table."
+
+
+def _readme_figure6_sentences() -> str:
+    """The README's sentences about Figure 6's results: after MARK, up to the next topic."""
+    text = " ".join((ROOT / "README.md").read_text().split())
+    start = text.index(MARK) + len(MARK)
+    return text[start:text.index("`routing_quality()`", start)].strip()
+
+
+def test_readme_figure6_sentences_are_the_findings_of_the_stored_run():
+    with open(STORED_TABLE) as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 10
+    assert _readme_figure6_sentences() == " ".join(figure6.findings(rows))
+
+
+def test_figure6c_charts_equilibria_at_every_iterate():
+    """Every point of a Figure 6c trace is the difference of an equilibrium: iteration 0 at the design's start,
+    the last at its result; the contractions in between are the IPOPT iterates (the design stopped there)."""
+    from mdsr_opt.synthesis.routing import route_muscles
+
+    scene = get_problem("tentacle", resolution="coarse")
+    target = prepare_case(scene, "curl").target
+    muscles = route_muscles(scene.mesh, target, K_a=1.0, **figure6.ROUTING).muscles
+    res, tr = figure6.design_layout(scene, target, muscles)
+    assert res.success and all(tr["solved"])
+    assert tr["iterations"][0] == 0 and tr["iterations"][-1] == res.iterations
+    assert np.all(np.diff(tr["iterations"]) > 0)
+    assert tr["difference"][0] == pytest.approx(res.initial_difference, rel=1e-3)
+    assert tr["difference"][-1] == pytest.approx(res.difference, rel=1e-6)
+    A = np.array(tr["contractions"])
+    assert A.shape == (len(tr["iterations"]), len(muscles))
+    assert np.allclose(A[0], res.initial_contractions) and np.allclose(A[-1], res.contractions)
+    assert np.abs(np.diff(A, axis=0)).max() > 1e-6  # the iterates move: not the end point repeated
+
+
+def test_findings_count_what_the_table_says():
+    def row(t, lay, m, it, d, up):
+        return {"target": t, "layout": lay, "muscles": m, "iterations": it, "difference": d, "equilibrium_rises": up}
+
+    rows = [row("a", "C", 1, 5, 0.2, 0), row("a", "D", 2, 7, 0.1, 1),   # fewer: fewer iterations, larger D
+            row("b", "C", 2, 6, 0.1, 0), row("b", "D", 2, 6, 0.1, 0),   # same count
+            row("c", "C", 3, 4, 0.05, 2), row("c", "D", 1, 4, 0.06, 0)]  # smaller K_a gives MORE: ties
+    s = figure6.findings(rows)
+    assert s[0] == "The smaller `K_a` gives fewer muscles for 1 of 3 targets and as many for 1 (more for 1)."
+    assert "fewer IPOPT iterations for 1 of 2, in as many for 1 and in more for 0" in s[1]
+    assert "smaller difference for 0 of 2" in s[1]
+    assert s[2].endswith("rises after an iteration in 2 of 6 designs.")
+    assert figure6.rises([0.3, 0.2, 0.25, 0.25, np.nan, 0.1]) == 1
 
 
 def test_routing_quality_rows_and_tables(tmp_path):
@@ -119,13 +158,13 @@ def test_routing_quality_rejects_bad_cases_before_any_work():
 
 
 @pytest.mark.slow
-def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
+def test_mdsr_run_figure6_writes_panels_table_chart_and_the_readme_findings(tmp_path):
     from mdsr_opt.cli.main import main
 
-    code = main(["run", "figure6", "--out", str(tmp_path), "--resolution", "coarse", "--quiet"])
+    code = main(["run", "figure6", "--out", str(tmp_path), "--quiet"])  # the default resolution: the README's
     assert code == 0
-    for f in ("figure6a.png", "figure6b.png", "figure6c.png", "table1.csv", "table1.md", "figure6.json"):
-        assert (tmp_path / f).stat().st_size > 500, f
+    for f in figure6.OUTPUTS:
+        assert (tmp_path / f).stat().st_size > 100, f
     with open(tmp_path / "table1.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == 10 and {r["layout"] for r in rows} == {"C", "D"}
@@ -135,14 +174,20 @@ def test_mdsr_run_figure6_writes_panels_table_and_chart(tmp_path):
         for i in range(1, n + 1):  # stroke = contraction x rest length, within [0, a_max]
             assert 0.0 <= float(r[f"a{i}"]) <= 0.6 + 1e-9
             assert float(r[f"stroke{i}"]) >= 0.0
+    found = (tmp_path / "findings.txt").read_text().split("\n")[:-1]
+    assert found == figure6.findings(rows)
+    assert " ".join(found) == _readme_figure6_sentences()  # the README states this run's numbers
     from mdsr_opt.body.io import read_json
 
     data = read_json(tmp_path / "figure6.json")
     for lay, row in zip(data["layouts"], data["rows"]):
         tr = lay["trace"]
-        assert len(tr["iterations"]) == row["iterations"] + 1
-        assert tr["difference"][-1] == pytest.approx(row["difference"], rel=1e-12)
+        assert all(tr["solved"]) and tr["iterations"][0] == 0
+        assert tr["iterations"][-1] == row["iterations"]
+        # every point is an equilibrium's difference: the first at the start, the last at the design
+        assert tr["difference"][-1] == pytest.approx(row["difference"], rel=1e-6)
         assert math.isclose(tr["difference"][0], row["initial_difference"], rel_tol=1e-3)
+        assert figure6.rises(tr["difference"]) == row["equilibrium_rises"]
 
 
 def test_layout_legends_sit_beside_the_rows_never_over_a_drawing():

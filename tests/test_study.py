@@ -7,6 +7,7 @@ reference), serially and on a two-process Dask LocalCluster.
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 
@@ -18,7 +19,7 @@ from mdsr_opt.cli.main import main
 from mdsr_opt.studies.fidelity import choose_fidelity, pick_fidelity
 from mdsr_opt.body.io import read_json
 from mdsr_opt.studies.spec import COLUMNS, FAILURES, TIMING_COLUMNS, Study, get_study
-from mdsr_opt.studies.runs import _classify, boundary_overlaps, interpolate, state_error
+from mdsr_opt.studies.runs import classify_failure, boundary_overlaps, interpolate, state_error
 from mdsr_opt.studies.problems import build_setup, list_study_problems
 from mdsr_opt.core.stats import fit_slopes, pareto_front
 from mdsr_opt.studies.study import run_study
@@ -131,9 +132,13 @@ def test_quick_study_measures_accuracy(quick):
                r["method"] == "ipopt")
     nhb = next(r for r in nh if r["problem"] == "strip-bend" and r["method"] == "ipopt")
     assert lin["error"] > 10 * nhb["error"]
-    # design methods recover the known contraction
+    # design methods recover the known contraction from a target solved on the finer reference mesh: within
+    # the coarse mesh's discretisation, not to rounding (that would be the same discrete solution again), and
+    # all three the same design
     des = [r for r in rows if r["kind"] == "design" and r["material"] == "neo-hookean"]
-    assert len(des) == 3 and all(r["success"] and r["error"] < 1e-6 for r in des)
+    assert len(des) == 3 and all(r["success"] and 1e-4 < r["error"] < 0.05 for r in des)
+    errs = [r["error"] for r in des]
+    assert max(errs) - min(errs) < 1e-4
 
 
 def test_quick_study_files(quick):
@@ -171,15 +176,17 @@ def test_time_out_stops_a_slow_run():
     assert r["wall_time"] < 5.0  # L-BFGS needs over 10 s here; the budget stops it
 
 
-def test_saddle_is_detected_past_buckling():
+def test_a_buckled_strip_crossing_itself_is_self_contact_not_a_saddle():
     st = Study("t", "buckling", ("strip-compress",), (300,), methods=("ipopt", "newton"),
                loads={"strip-compress": (0.05, 0.3)}, reference_resolution=300)
     res = run_study(st, progress=False)
     by = {(r["load"], r["method"]): r for r in res.rows}
     for m in ("ipopt", "newton"):
         assert by[(0.05, m)]["failure"] == "none"
-        # the solver converges (its own status says so) to the straight, unbuckled state: a saddle
-        assert by[(0.3, m)]["failure"] == "saddle" and not by[(0.3, m)]["stable"]
+        # the solver reaches the straight, unbuckled state (a saddle), leaves it along its negative curvature
+        # and buckles so far that the strip crosses itself: a self-contact failure, not a saddle
+        assert "left a saddle" in by[(0.3, m)]["status"]
+        assert by[(0.3, m)]["failure"] == "self-contact" and not by[(0.3, m)]["stable"]
         assert by[(0.3, m)]["residual"] < 1e-5
 
 
@@ -188,12 +195,47 @@ def test_self_overlap_is_a_failure():
     assert not boundary_overlaps(mesh, _arc(mesh.points, np.pi))          # half a circle: a clean U
     assert boundary_overlaps(mesh, _arc(mesh.points, 2.2 * np.pi))        # past a full turn: the ends cross
     assert mesh.jacobians(_arc(mesh.points, 2.2 * np.pi)).min() > 0      # ... with every triangle upright
-    assert _classify(True, "Solve_Succeeded", 0.5, True, True, 1.0, 10.0) == "self-overlap"
+    _classify = classify_failure
+    assert _classify(True, "Solve_Succeeded", 0.5, True, True, 1.0, 10.0) == "self-contact"
     assert _classify(True, "Solve_Succeeded", 0.5, False, False, 1.0, 10.0) == "saddle"
     assert _classify(True, "Solve_Succeeded", 0.5, True, False, 11.0, 10.0) == "time-out"
     assert _classify(False, "load stepping stalled (predictor inverted an element)", 0.5, False, False, 1.0,
                      10.0) == "inverted elements"
-    assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "no convergence"
+    assert _classify(False, "Maximum_Iterations_Exceeded", 0.5, False, False, 1.0, 10.0) == "iteration limit"
+    for cap in ("max_iter", "status 1: STOP: TOTAL NO. OF ITERATIONS REACHED LIMIT",  # newton, scipy L-BFGS-B
+                "load stepping stalled at step 3 (Maximum_Iterations_Exceeded)"):
+        assert _classify(False, cap, 0.5, False, False, 1.0, 10.0) == "iteration limit", cap
+    assert _classify(False, "Infeasible_Problem_Detected", 0.5, False, False, 1.0, 10.0) == "no convergence"
+    # a solve that left a saddle and was then rejected for crossing itself is self-contact, not a saddle
+    assert _classify(False, "Solve_Succeeded; left a saddle along its negative curvature (1 re-solve(s)); "
+                     "rejected: the boundary crosses itself (self-contact is not modelled)", 0.5, False, True, 1.0,
+                     10.0) == "self-contact"
+    assert _classify(False, "Solve_Succeeded; rejected: not a stable equilibrium (a saddle: 1 direction(s) of "
+                     "negative curvature (lowest -0.1)); 3 re-solve(s) from perturbed states found no stable state",
+                     0.5, False, False, 1.0, 10.0) == "saddle"
+
+
+def test_a_strip_buckled_to_the_mirror_branch_is_not_an_error():
+    """Compressed past buckling, a strip buckles up or down: the same solution reflected, equal energy."""
+    from mdsr_opt.studies.runs import RunOutcome, fill_accuracy
+
+    def buckled(P, s):  # s = +1 up, -1 down: the mirror image of the other about y = 1/2
+        return np.column_stack([P[:, 0] * 0.8, P[:, 1] + s * 0.6 * np.sin(np.pi * P[:, 0] / 4.0)])
+
+    fine, coarse = Mesh.rectangle(4.0, 1.0, 32, 8), Mesh.rectangle(4.0, 1.0, 16, 4)
+    row = {"kind": "equilibrium", "problem": "strip-compress", "load": 0.2, "energy": 1.0, "success": True}
+    ref = RunOutcome(-1, dict(row), buckled(fine.points, 1), fine.points, fine.triangles)
+    down = buckled(coarse.points, -1)
+    assert np.abs(down - buckled(coarse.points, 1)).max() > 1.0  # far apart node by node
+    run = RunOutcome(0, dict(row), down, coarse.points)
+    fill_accuracy([run], {("strip-compress", 0.2): ref})
+    assert run.row["branch"] == "mirror" and run.row["error"] < 1e-3 and run.row["energy_error"] == 0.0
+    other = RunOutcome(0, dict(row, problem="strip-bend"), down, coarse.points)  # no mirror symmetry declared
+    fill_accuracy([other], {("strip-bend", 0.2): ref})
+    assert other.row["branch"] == "same" and other.row["error"] > 0.1
+    same = RunOutcome(0, dict(row), down, fine.points)  # on the reference's own mesh: not measured
+    fill_accuracy([same], {("strip-compress", 0.2): ref})
+    assert "branch" not in same.row and "error" not in same.row
 
 
 def test_poor_guess_failure_is_inverted_elements():
@@ -299,7 +341,7 @@ def test_problem_library_scenes_are_study_problems():
 
 # ------------------------------------------------------------------------------------ bad input, CLI
 def test_bad_names_list_the_valid_ones():
-    with pytest.raises(ValueError, match="unknown study 'slow'; valid: quick, speed, stability, fidelity"):
+    with pytest.raises(ValueError, match="unknown study 'slow'; valid: quick, speed, stability, fidelity, recommend"):
         run_study("slow")
     with pytest.raises(ValueError, match=r"unknown method \(backend or design method\) 'ipopt2'; valid: ipopt"):
         run_study("quick", methods=["ipopt2"])
@@ -464,3 +506,52 @@ def test_comparable_rows_of_a_timed_out_run_keep_identity_and_outcome_only():
     # float object, and NaN != NaN)
     err = dict(failure="error", energy=float("nan"))
     assert result(**err).comparable() == result(**dict(err, energy=float("nan"))).comparable()
+
+
+# ------------------------------------------------------------------------------------ recommendation per scene
+def test_a_recommendation_study_on_two_library_scenes_writes_its_table(tmp_path, capsys):
+    """`mdsr study recommend`: per scene (never pooled), the backend and mesh of least cost within the
+    tolerance, measured against a finer-mesh reference; one CSV row and one chart per scene."""
+    from mdsr_opt.cli.main import main
+    from mdsr_opt.studies.recommend import pick_recommendation
+
+    out = tmp_path / "rec"
+    code = main(["study", "recommend", "--scenes", "gripper,one_muscle", "--methods", "ipopt,newton",
+                 "--resolutions", "40,90", "--tol", "0.05", "--out", str(out), "--quiet"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    with open(out / "recommend.csv") as fh:
+        table = list(csv.DictReader(fh))
+    assert [r["scene"] for r in table] == ["gripper", "one_muscle"]
+    with open(out / "recommend_runs.csv") as fh:
+        runs = list(csv.DictReader(fh))
+    assert {r["problem"].split("/")[0] for r in runs} == {"gripper", "one_muscle"}
+    ref_nodes = json.loads((out / "recommend.json").read_text())["study"]["reference_resolution"]
+    assert ref_nodes == 4 * 90  # a finer mesh than every candidate: no run is its own reference
+    assert all(float(r["error"]) > 0.0 for r in runs if r["success"] == "True")
+    # newton has no rope constraint: the cable-driven one_muscle cases fail with it, and say why
+    assert all(r["failure"] != "none" for r in runs if r["problem"].startswith("one_muscle") and r["method"] == "newton")
+    for row in table:
+        rows = [dict(r, success=r["success"] == "True", error=float(r["error"]), stroke_error=float(r["stroke_error"]),
+                     build_time=float(r["build_time"]), solve_time=float(r["solve_time"]), nodes=int(r["nodes"]),
+                     resolution=int(r["resolution"])) for r in runs if r["problem"].split("/")[0] == row["scene"]]
+        again = pick_recommendation(rows, row["scene"], 0.05)
+        assert (again.method, again.resolution, again.met) == (row["method"], int(row["resolution"]),
+                                                                row["met"] == "True")
+        if again.met:  # within the tolerance on every case, and nothing within it is cheaper
+            assert float(row["error"]) <= 0.05
+        assert f"| {row['scene']} |" in printed
+        assert (out / f"recommend_{row['scene']}.png").stat().st_size > 5000
+    assert table[1]["method"] == "ipopt"  # the only backend that solves one_muscle's cable cases
+
+
+def test_recommendation_refuses_bad_input_before_any_run(tmp_path):
+    from mdsr_opt.studies.recommend import run_recommendation
+
+    with pytest.raises(ValueError, match="unknown library scene 'nope'"):
+        run_recommendation(tmp_path / "a", scenes=["gripper", "nope"])
+    with pytest.raises(ValueError, match="tol must be a positive number"):
+        run_recommendation(tmp_path / "a", scenes=["gripper"], tol=0.0)
+    with pytest.raises(ValueError, match="must be finer than the finest candidate"):
+        run_recommendation(tmp_path / "a", scenes=["gripper"], resolutions=(90,), reference_resolution=90)
+    assert not (tmp_path / "a").exists()

@@ -41,6 +41,10 @@ def _cli(args) -> int:
             print(f"{name:<10} {len(runs):>4} runs  {st.description}")
         print(f"{FIDELITY_STUDY:<10} {len(FIDELITY_CASES):>4} scenes  the coarsest mesh and simplest material "
               "model within a tolerance, per scene")
+        from ..studies.recommend import DEFAULT_SCENES, RECOMMEND_STUDY
+
+        print(f"{RECOMMEND_STUDY:<10} {len(DEFAULT_SCENES):>4} scenes  which backend and mesh reach a shape or "
+              "stroke tolerance at least cost, per library scene (--scenes)")
         print("\nproblems: " + ", ".join(list_study_problems()))
         return 0
     if args.out is None:
@@ -63,6 +67,27 @@ def _cli(args) -> int:
         if not 4 <= r <= MAX_RESOLUTION:
             raise InputError(f"--resolutions must be node counts from 4 to {MAX_RESOLUTION} ({why}), got {r}")
     scheduler = args.scheduler or ("local" if args.dask else None)
+    from ..studies.recommend import RECOMMEND_STUDY
+
+    if args.name == RECOMMEND_STUDY:
+        from ..studies.recommend import recommendation_markdown, run_recommendation
+
+        kw = {"scenes": _csv_list(args.scenes, str, "--scenes"), "backends": _csv_list(args.methods, str, "--methods"),
+              "resolutions": resolutions, "reference_resolution": args.reference_resolution,
+              "timeout": args.timeout}
+        tols = _csv_list(args.tol, float, "--tol")
+        if tols is not None and len(tols) != 1:
+            raise InputError(f"--tol: the recommend study takes one shape tolerance, got {args.tol!r}")
+        if tols:
+            kw["tol"] = tols[0]
+        if args.stroke_tol is not None:
+            kw["stroke_tol"] = args.stroke_tol
+        with progress_for_cli(args, 0, "mdsr study recommend", stream="stderr", unit="run") as log:
+            recs, _ = run_recommendation(args.out, scheduler=scheduler, workers=args.workers,
+                                         progress=not args.quiet, log=log, overwrite=args.overwrite,
+                                         **{k: v for k, v in kw.items() if v is not None})
+        print(recommendation_markdown(recs), flush=True)
+        return 0
     if args.name == FIDELITY_STUDY:
         from ..studies.fidelity import fidelity_markdown, run_fidelity_study
 
@@ -102,7 +127,10 @@ def add_cli(sub) -> None:
     p.add_argument("--materials", help="comma-separated material models, replacing the study's")
     p.add_argument("--reference-resolution", type=int, help="node count of the reference solutions")
     p.add_argument("--timeout", type=float, help="seconds allowed per run")
-    p.add_argument("--tol", help="fidelity study: comma-separated tolerances (default 0.01,0.001)")
+    p.add_argument("--tol", help="fidelity study: comma-separated tolerances (default 0.01,0.001); recommend "
+                   "study: the shape tolerance (default 0.01)")
+    p.add_argument("--stroke-tol", type=float, help="recommend study: the stroke tolerance (default 0.05)")
+    p.add_argument("--scenes", help="recommend study: comma-separated library scenes (default gripper,tentacle)")
     p.add_argument("--dask", action="store_true", help="run on a local Dask cluster (one worker per core)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler (implies Dask)")
     p.add_argument("--workers", type=int, help="workers of the local Dask cluster")

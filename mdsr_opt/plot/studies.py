@@ -11,12 +11,13 @@ import numpy as np
 from ..core.stats import fit_slopes, pareto_front
 from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes
 
-__all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plot_fidelity']
+__all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plot_fidelity',
+           'plot_recommendation']
 
 
 # --- solver comparison studies (issue 7) ---
 _STUDY_FAILURE_COLORS = {"none": "#2ca02c", "no convergence": "#ff7f0e", "inverted elements": "#d62728",
-                         "self-overlap": "#e377c2", "saddle": "#9467bd", "time-out": "#7f7f7f",
+                         "self-contact": "#e377c2", "iteration limit": "#bcbd22", "saddle": "#9467bd", "time-out": "#7f7f7f",
                          "error": "#111111"}
 
 
@@ -244,5 +245,51 @@ def plot_fidelity(rows, choices, title=None, max_cols=3, fig=None):
     for ax in axes.ravel()[len(scenes):]:
         ax.axis("off")
     fig.suptitle(title or "fidelity: error against the finest model (x = failed; circles = chosen)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_recommendation(rows, rec, ax=None, floor=1e-8):
+    """One scene's recommendation chart: for every backend (colour) and mesh (label: nodes), the worst error
+    over the scene's cases against the summed build + solve time, the tolerance as a dashed line and the
+    recommendation circled. A combination with a failed case is a cross labelled with its failure reasons.
+
+    ``rows``: the scene's run rows (``method``, ``resolution``, ``nodes``, ``error``, ``success``,
+    ``failure``, ``build_time``, ``solve_time``); ``rec``: the recommendation as a dict (``scene``, ``tol``,
+    ``met``, ``method``, ``resolution``). Returns the figure.
+    """
+    fig, ax = axes_or_new(ax, figsize=(7.5, 4.8))
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    colors = _study_colors(methods)
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["method"], r["resolution"]), []).append(r)
+    for (m, res), g in groups.items():
+        t = max(sum(r["build_time"] + r["solve_time"] for r in g), 1e-4)
+        errs = [r["error"] for r in g if np.isfinite(r["error"])]
+        e = max(max(errs) if errs else 1.0, floor)
+        nodes = max(r["nodes"] for r in g)
+        fails = sorted({r["failure"] for r in g if not r["success"]})
+        if fails:
+            ax.scatter([t], [e], marker="x", s=40, color=colors[m])
+            ax.annotate(f"{nodes}: {', '.join(fails)}", (t, e), fontsize=6, xytext=(4, -8),
+                        textcoords="offset points", color=colors[m])
+        else:
+            ax.scatter([t], [e], s=28, color=colors[m])
+            ax.annotate(str(nodes), (t, e), fontsize=6, xytext=(4, 3), textcoords="offset points")
+        if (m, res) == (rec["method"], rec["resolution"]):
+            ax.scatter([t], [e], s=200, facecolors="none", edgecolors="k", linewidths=1.4)
+    for m in methods:
+        ax.scatter([], [], color=colors[m], s=28, label=m)
+    ax.axhline(rec["tol"], ls="--", color="grey", lw=0.9, label=f"tolerance {rec['tol']:g}")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("build + solve time summed over the cases (s)")
+    ax.set_ylabel("worst node error / body size (finer-mesh reference)")
+    pick = (f"recommended {rec['method']} at {rec['resolution']} (circled)" if rec["met"] else
+            "no backend and mesh met the tolerance (closest circled)")
+    ax.set_title(f"{rec['scene']}: {pick}; labels: nodes; x = a case failed", fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     fig.tight_layout()
     return fig

@@ -34,6 +34,8 @@ class CaseReport:
     ----------
     scene, case, kind : names and ``"external"``/``"internal"``.
     n_nodes, n_muscles : mesh size and number of muscles designed.
+    muscles : per muscle designed, its ``name`` and node chain ``nodes`` (the layout, so two cases on one
+        layout show it).
     success : the target solve, the routing (at least one muscle) and the design all succeeded.
     message : why not, when ``success`` is False.
     target_success, target_status : the solve that made the target.
@@ -67,6 +69,7 @@ class CaseReport:
     kind: str
     n_nodes: int
     n_muscles: int = 0
+    muscles: list = field(default_factory=list)
     success: bool = False
     message: str = ""
     target_success: bool = False
@@ -281,6 +284,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     rep.n_muscles = len(setup.muscles)
+    rep.muscles = [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in setup.muscles]
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")

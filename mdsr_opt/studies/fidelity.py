@@ -1,8 +1,8 @@
 """Fidelity: model no more than a scene needs.
 
 :func:`choose_fidelity` solves a scene with every candidate mesh resolution and material model, measures
-each solution against a reference (by default the finest candidate mesh with the full Neo-Hookean model, or a
-known fine solution you pass), and picks **the coarsest mesh, and on it the simplest material model**, whose
+each solution against a reference (by default a mesh four times finer than the finest candidate with the
+full Neo-Hookean model, or a known fine solution you pass), and picks **the coarsest mesh, and on it the simplest material model**, whose
 largest node error stays within a stated tolerance (a fraction of the body's size). It reports the saving in
 time and nodes against the finest model (Neo-Hookean on the finest candidate mesh).
 
@@ -172,8 +172,9 @@ def choose_fidelity(problem: str, tol: float, *, load: float | None = None,
         The equilibrium backend for every candidate.
     reference : (mesh, x) or (points, triangles, x), optional
         A known fine solution to measure errors against. By default the reference is the problem solved
-        with Neo-Hookean by IPOPT (tight tolerance) at ``reference_resolution`` (default: the finest
-        candidate), so the finest model has error 0.
+        with Neo-Hookean by IPOPT (tight tolerance) at ``reference_resolution`` (default: a mesh
+        :data:`~mdsr_opt.studies.spec.REFERENCE_FACTOR` times finer than the finest candidate; a candidate on
+        a mesh as fine as the reference is not measured).
     scheduler, workers : as in :func:`mdsr_opt.studies.study.run_study` (the candidates run in parallel on Dask).
 
     Returns

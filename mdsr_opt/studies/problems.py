@@ -78,6 +78,9 @@ class StudyProblem:
         What ``load`` means, for tables and charts.
     design : bool
         Internal driving with known contractions: design methods can recover them.
+    mirror : callable ``(k, 2) -> (k, 2)`` or None
+        A reflection that maps the problem (rest body, supports and loads) onto itself: its solutions come
+        in mirror pairs (a strip buckled up or down), compared as one (:func:`~mdsr_opt.studies.runs.fill_accuracy`).
     """
 
     name: str
@@ -86,6 +89,7 @@ class StudyProblem:
     default_load: float
     load_label: str
     design: bool = False
+    mirror: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 def _strip_mesh(resolution: int) -> Mesh:
@@ -110,6 +114,11 @@ def _arc(points: np.ndarray, angle: float) -> np.ndarray:
     th = points[:, 0] / L * angle
     rr = R - points[:, 1]
     return np.column_stack([rr * np.sin(th), R - rr * np.cos(th)])
+
+
+def _strip_mirror(p: np.ndarray) -> np.ndarray:
+    """The reflection of the study strip about its mid-line ``y = W / 2``."""
+    return np.column_stack([p[:, 0], STRIP[1] - p[:, 1]])
 
 
 def _stretch(resolution: int, load: float) -> Setup:
@@ -145,11 +154,11 @@ def _contract(resolution: int, load: float) -> Setup:
 #: The study's own problems (a 4 x 1 strip, E = 1, nu = 0.3).
 PROBLEMS: dict[str, StudyProblem] = {p.name: p for p in (
     StudyProblem("strip-stretch", "left end anchored, right end pulled along the strip by `load` widths",
-                 _stretch, 1.0, "stretch (widths)"),
+                 _stretch, 1.0, "stretch (widths)", mirror=_strip_mirror),
     StudyProblem("strip-bend", "left end anchored, right end dragged onto a circular arc of `load` degrees",
                  _bend, 90.0, "bend (degrees)"),
     StudyProblem("strip-compress", "left end anchored, right end pushed towards it by `load` lengths "
-                 "(buckles beyond about 0.2)", _compress, 0.3, "compression (lengths)"),
+                 "(buckles beyond about 0.2)", _compress, 0.3, "compression (lengths)", mirror=_strip_mirror),
     StudyProblem("strip-contract", "free strip, a muscle along its lower edge contracts by `load`; design "
                  "methods recover the contraction", _contract, 0.3, "contraction", design=True),
 )}

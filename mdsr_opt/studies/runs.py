@@ -25,7 +25,8 @@ from ..synthesis.verify import check_minimum
 from .problems import Setup, build_setup
 from .spec import RunSpec
 
-__all__ = ['RunTimeout', 'boundary_overlaps', 'RunOutcome', 'execute_run', 'interpolate', 'state_error']
+__all__ = ['RunTimeout', 'boundary_overlaps', 'RunOutcome', 'execute_run', 'interpolate', 'state_error',
+           'classify_failure', 'fill_accuracy', 'run_all']
 
 
 # ============================================================================================== one run
@@ -150,17 +151,34 @@ def boundary_overlaps(mesh: Mesh, x: np.ndarray) -> bool:
     return mesh.boundary_crosses(x)
 
 
-def _classify(success: bool, status: str, min_J: float, stable: bool, overlap: bool, wall: float,
-              timeout: float) -> str:
+#: words of a status that rejects a converged state for its curvature (the solvers' and the design
+#: verification's own wording; "left a saddle" in a status is a saddle the solver escaped, not a failure)
+_SADDLE_WORDS = ("not a stable equilibrium", "not a minimum of the energy")
+
+#: words of a status that stopped at the solver's iteration cap (IPOPT, CasADi's SQP, scipy, Newton)
+_LIMIT_WORDS = ("maximum_iterations_exceeded", "max_iter", "maximum number of iterations", "iteration limit",
+                "iterations exceeded", "iterations reached limit", "maximum number of function evaluations")
+
+
+def classify_failure(success: bool, status: str, min_J: float, stable: bool, overlap: bool, wall: float,
+                     timeout: float) -> str:
+    """A run's failure reason (:data:`~mdsr_opt.studies.spec.FAILURES`) from its outcome and its solver's
+    status: the time budget first, then self-contact (a state whose boundary crosses itself, or a solve
+    rejected for it, whatever else its status says), then a converged state's curvature (``saddle``), then
+    inverted elements, the iteration cap and any other failure (``no convergence``)."""
     s = status.lower()
     if wall > timeout or "walltime" in s or "cputime" in s or "time limit" in s:
         return "time-out"
+    if (success and overlap) or "crosses itself" in s:
+        return "self-contact"
     if success:
-        return "self-overlap" if overlap else ("none" if stable else "saddle")
+        return "none" if stable else "saddle"
+    if any(w in s for w in _SADDLE_WORDS):
+        return "saddle"
     if "invert" in s or min_J <= 0:
         return "inverted elements"
-    if "saddle" in s:  # a design rejected by its verification
-        return "saddle"
+    if any(w in s for w in _LIMIT_WORDS):
+        return "iteration limit"
     return "no convergence"
 
 
@@ -224,7 +242,7 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
     x = None
     fields = dict(build_time=mesh_time, solve_time=0.0, iterations=0, steps=0, energy=math.nan,
                   energy_error=math.nan, error=math.nan, min_J=math.nan, residual=math.nan, stable=False,
-                  overlap=False, success=False, failure="error", status="")
+                  overlap=False, success=False, failure="error", status="", branch="-")
     tol = 1e-10 if spec.role == "reference" else 1e-8
     raised = False
     deadline = _Deadline(spec.timeout)
@@ -259,7 +277,7 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
     wall = time.perf_counter() - t_start
     fields["wall_time"] = wall
     if not raised:
-        fields["failure"] = _classify(fields["success"], fields["status"], fields["min_J"], fields["stable"],
+        fields["failure"] = classify_failure(fields["success"], fields["status"], fields["min_J"], fields["stable"],
                                       fields["overlap"], wall, spec.timeout)
         fields["success"] = fields["failure"] == "none"
     row.update(fields)
@@ -267,20 +285,55 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
                       mesh.triangles if spec.role == "reference" else None, setup.mode == "internal")
 
 
+#: design targets solved on reference meshes, per process: ``{(problem, resolution, load): (points, triangles, x)}``
+_TARGETS: dict = {}
+
+
+def _design_target(setup: Setup, material, spec: RunSpec) -> tuple[np.ndarray, float]:
+    """A design run's target on its own mesh and the target's energy there: the internal-driving
+    equilibrium at the known contractions solved on the study's reference mesh (Neo-Hookean; a finer mesh,
+    so the recovered contraction measures the run mesh's discretisation too, not a copy of its own
+    solution) and interpolated at the run's rest nodes. Without a finer reference mesh, the run's own (in its
+    material), with its energy (NaN otherwise)."""
+    from ..mechanics.equilibrium import solve_internal
+
+    ref_res = spec.reference_resolution
+    if ref_res is not None:
+        key = (spec.problem, int(ref_res), float(spec.load))
+        if key not in _TARGETS:
+            ref = build_setup(spec.problem, ref_res, spec.load)
+            if ref.mesh.n_nodes > setup.mesh.n_nodes:
+                t = solve_internal(ref.mesh, ref.material("neo-hookean"), ref.muscles, ref.contractions,
+                                   muscle_model=ref.muscle_model, stiffness=ref.stiffness)
+                if not t.success:
+                    raise RuntimeError(f"the design target did not solve on the reference mesh: {t.status}")
+                _TARGETS[key] = (ref.mesh.points, ref.mesh.triangles, np.asarray(t.x, dtype=float))
+            else:
+                _TARGETS[key] = None
+        if _TARGETS[key] is not None:
+            pts, tri, x = _TARGETS[key]
+            return interpolate(pts, tri, x, setup.mesh.points), math.nan
+    t = solve_internal(setup.mesh, material, setup.muscles, setup.contractions, muscle_model=setup.muscle_model,
+                       stiffness=setup.stiffness)
+    if not t.success:
+        raise RuntimeError(f"the design target did not solve: {t.status}")
+    return np.asarray(t.x, dtype=float), float(t.energy)
+
+
 def _run_design(setup: Setup, material, spec: RunSpec, mesh_time: float) -> dict:
-    """A design recovery: the target is the internal-driving equilibrium at the known contractions on the same
-    mesh; the error is the largest contraction error."""
+    """A design recovery: the target is the internal-driving equilibrium at the known contractions, solved on
+    the study's reference mesh (:func:`_design_target`); the error is the largest contraction error."""
     from ..synthesis.contractions import design_contractions
     from ..mechanics.equilibrium import solve_internal
 
-    target = solve_internal(setup.mesh, material, setup.muscles, setup.contractions, muscle_model=setup.muscle_model,
-                            stiffness=setup.stiffness)
-    if not target.success:
-        raise RuntimeError(f"the design target did not solve: {target.status}")
-    res = design_contractions(setup.mesh, material, setup.muscles, target.x, method=spec.method,
+    target_x, e_ref = _design_target(setup, material, spec)
+    res = design_contractions(setup.mesh, material, setup.muscles, target_x, method=spec.method,
                               muscle_model=setup.muscle_model, stiffness=setup.stiffness)
     v = res.verification
-    e_ref = float(target.energy)
+    if not math.isfinite(e_ref):  # the energy of the known contractions on the run's own mesh
+        own = solve_internal(setup.mesh, material, setup.muscles, setup.contractions,
+                             muscle_model=setup.muscle_model, stiffness=setup.stiffness)
+        e_ref = float(own.energy) if own.success else math.nan
     energy = _internal_energy(setup, material, res.contractions, res.x)
     return dict(build_time=mesh_time + res.build_time, solve_time=float(res.solve_time),  # not verification
                 iterations=int(res.iterations), steps=int(res.n_forward), energy=energy,
@@ -332,11 +385,18 @@ def interpolate(points: np.ndarray, triangles: np.ndarray, values: np.ndarray, q
 
 
 def state_error(points: np.ndarray, x: np.ndarray, ref_points: np.ndarray, ref_triangles: np.ndarray,
-                ref_x: np.ndarray, free_body: bool = False) -> float:
+                ref_x: np.ndarray, free_body: bool = False, mirror=None) -> float:
     """Largest node distance between state ``x`` (on rest ``points``) and the reference state interpolated at
     those rest points, over the reference body's size (its bounding-box diagonal). ``free_body``: compare
-    after the best rigid motion of ``x`` onto the reference (internal driving has no fixed frame)."""
-    y = interpolate(ref_points, ref_triangles, ref_x, points)
+    after the best rigid motion of ``x`` onto the reference (internal driving has no fixed frame).
+
+    ``mirror``: a reflection ``(k, 2) -> (k, 2)`` that maps the problem (rest body and loads) onto itself;
+    the run is then compared with the reference's mirror image ``mirror(ref(mirror(p)))`` instead (a strip
+    buckled down against a reference buckled up: the same solution, reflected)."""
+    query = np.asarray(points, dtype=float) if mirror is None else mirror(np.asarray(points, dtype=float))
+    y = interpolate(ref_points, ref_triangles, ref_x, query)
+    if mirror is not None:
+        y = mirror(y)
     x = np.asarray(x, dtype=float)
     if free_body:
         x = align(x, y).apply(x)
@@ -345,6 +405,14 @@ def state_error(points: np.ndarray, x: np.ndarray, ref_points: np.ndarray, ref_t
 
 
 def fill_accuracy(outcomes: list[RunOutcome], refs: dict) -> None:
+    """Fill the equilibrium rows' ``error`` and ``energy_error`` against their problem's reference (a finer
+    mesh), and ``branch``: for a problem with a mirror symmetry (:attr:`StudyProblem.mirror`) a buckled run
+    is compared with the reference and with its mirror image, and the nearer one counts ("same" or
+    "mirror"; the two branches have the same energy, so ``energy_error`` tells a mirror branch from another
+    mode). Rows without a reference on a finer mesh than their own keep ``error`` and ``energy_error`` NaN
+    and ``branch`` "-"."""
+    from .problems import get_study_problem
+
     for o in outcomes:
         r = o.row
         if r["kind"] != "equilibrium":
@@ -352,7 +420,15 @@ def fill_accuracy(outcomes: list[RunOutcome], refs: dict) -> None:
         ref = refs.get((r["problem"], r["load"]))
         if ref is None or o.x is None or not ref.row["success"]:
             continue
+        if len(ref.points) <= len(o.points):  # not a finer mesh: the same discrete solution measures nothing
+            continue
         r["error"] = state_error(o.points, o.x, ref.points, ref.triangles, ref.x, o.free_body)
+        r["branch"] = "same"
+        mirror = getattr(get_study_problem(r["problem"]), "mirror", None)
+        if mirror is not None:
+            e = state_error(o.points, o.x, ref.points, ref.triangles, ref.x, o.free_body, mirror)
+            if e < r["error"]:
+                r["error"], r["branch"] = e, "mirror"
         e = ref.row["energy"]
         if np.isfinite(r["energy"]):
             r["energy_error"] = abs(r["energy"] - e) / abs(e) if e else abs(r["energy"])

@@ -17,15 +17,19 @@ __all__ = ['Study', 'RunSpec', 'list_studies', 'get_study']
 #: Columns of a study table, in order.
 COLUMNS = ("study", "problem", "kind", "load", "guess", "material", "method", "resolution", "nodes",
            "build_time", "solve_time", "wall_time", "iterations", "steps", "energy", "energy_error", "error",
-           "min_J", "residual", "stable", "overlap", "success", "failure", "status")
+           "min_J", "residual", "stable", "overlap", "success", "failure", "status", "branch")
 
 
 #: Columns that measure time and so differ between runs of the same study.
 TIMING_COLUMNS = ("build_time", "solve_time", "wall_time")
 
 
-#: Failure reasons, in the order charts list them.
-FAILURES = ("none", "no convergence", "inverted elements", "self-overlap", "saddle", "time-out", "error")
+#: Failure reasons, in the order charts list them: ``iteration limit`` (the solver stopped at its cap),
+#: ``no convergence`` (any other failed solve), ``inverted elements``, ``self-contact`` (the boundary crosses
+#: itself: contact is not modelled), ``saddle`` (a converged state that is not a minimum of the energy),
+#: ``time-out`` (the run's budget), ``error`` (an exception).
+FAILURES = ("none", "iteration limit", "no convergence", "inverted elements", "self-contact", "saddle", "time-out",
+            "error")
 
 
 #: First guesses: the default predictor with load steps; no predictor with load steps; one solve from rest;
@@ -34,6 +38,16 @@ GUESSES = ("predictor", "no-predictor", "rest", "noisy")
 
 
 DESIGN_METHODS = ("flattened", "nested", "derivative-free")
+
+
+#: the default reference mesh: this many times the finest resolution of a study
+REFERENCE_FACTOR = 4
+
+
+def default_reference(resolutions) -> int:
+    """The default reference resolution of a study on ``resolutions``: :data:`REFERENCE_FACTOR` times the
+    finest, at most :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`."""
+    return int(min(MAX_RESOLUTION, REFERENCE_FACTOR * max(int(r) for r in resolutions)))
 
 
 def _check_nodes(r, what: str) -> None:
@@ -65,7 +79,10 @@ class Study:
     guesses : tuple of str
         First guesses (:data:`GUESSES`) for equilibrium methods; design methods always run once.
     reference_resolution : int or None
-        Mesh of the reference solutions (Neo-Hookean, IPOPT, tight tolerance); default: the finest resolution.
+        Mesh of the reference solutions (Neo-Hookean, IPOPT, tight tolerance); default
+        :data:`REFERENCE_FACTOR` times the finest resolution (at most the largest mesh allowed). A run is
+        measured only against a reference on a finer mesh than its own (else its ``error`` stays NaN: the
+        same discrete solution measures nothing).
     timeout : float
         Seconds allowed per run.
     max_iter : int
@@ -125,7 +142,7 @@ class Study:
                 except ValueError as exc:
                     raise ValueError(f"study {self.name!r}: {exc}") from None
         if self.reference_resolution is None:
-            object.__setattr__(self, "reference_resolution", self.resolutions[-1])
+            object.__setattr__(self, "reference_resolution", default_reference(self.resolutions))
         _check_nodes(self.reference_resolution, f"study {self.name!r}: reference_resolution")
         object.__setattr__(self, "reference_resolution", int(self.reference_resolution))
         if isinstance(self.timeout, bool) or not (isinstance(self.timeout, (int, float)) and self.timeout > 0):
@@ -140,7 +157,7 @@ class Study:
         if "problems" in changes and "loads" not in changes:  # keep the loads of the problems that remain
             changes["loads"] = {k: v for k, v in self.loads.items() if k in changes["problems"]}
         if "resolutions" in changes and "reference_resolution" not in changes and \
-                self.reference_resolution == self.resolutions[-1]:
+                self.reference_resolution == default_reference(self.resolutions):
             changes["reference_resolution"] = None
         return replace(self, **changes)
 
@@ -175,7 +192,8 @@ class Study:
                                     continue
                             for g in (("predictor",) if design else self.guesses):
                                 runs.append(RunSpec(self.name, p, load, g, mat, m, r, float(self.timeout),
-                                                    self.max_iter, "run", self.seed))
+                                                    self.max_iter, "run", self.seed,
+                                                    reference_resolution=self.reference_resolution))
         return runs, refs, capped
 
     def to_dict(self) -> dict:
@@ -199,6 +217,8 @@ class RunSpec:
     max_iter: int
     role: str = "run"  # or "reference"
     seed: int = 0
+    #: the study's reference mesh: a design run's target is the reference solved there (a finer mesh)
+    reference_resolution: int | None = None
 
     @property
     def kind(self) -> str:
@@ -244,9 +264,13 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
 FIDELITY_STUDY = "fidelity"
 
 
+#: The recommendation study (run by :func:`mdsr_opt.studies.recommend.run_recommendation`): per library scene.
+RECOMMEND = "recommend"
+
+
 def list_studies() -> list[str]:
     """Names of the registered studies (sweeps and the fidelity study)."""
-    return list(STUDIES) + [FIDELITY_STUDY]
+    return list(STUDIES) + [FIDELITY_STUDY, RECOMMEND]
 
 
 def get_study(name: str | Study) -> Study:
@@ -256,4 +280,7 @@ def get_study(name: str | Study) -> Study:
     if name == FIDELITY_STUDY:
         raise ValueError("'fidelity' is not a sweep: run it with mdsr_opt.studies.fidelity.run_fidelity_study "
                          "(or `mdsr study fidelity`)")
+    if name == RECOMMEND:
+        raise ValueError("'recommend' is not a sweep: run it with mdsr_opt.studies.recommend.run_recommendation "
+                         "(or `mdsr study recommend`)")
     return STUDIES[check_name(name, list_studies(), "study")]
