@@ -50,8 +50,9 @@ TARGETS = (
     ("humanoid", "lean", (0.5, 4.0)),
 )
 
-#: Routing knobs shared by all ten layouts (the paper's 5-10 seeds per region, at most 4 muscles l1..l4).
-ROUTING = {"K_b": 4.0, "K_h": 0.1, "n_seeds": 8, "max_muscles": 4, "max_turn": 45.0}
+#: Routing knobs shared by all ten layouts (the paper's 5-10 seeds per region, at most 4 muscles l1..l4); the
+#: paper's search on the whole contraction graph (``fabrication=False``: no channel clearance, no fixtures).
+ROUTING = {"K_b": 4.0, "K_h": 0.1, "n_seeds": 8, "max_muscles": 4, "max_turn": 45.0, "fabrication": False}
 
 _ITER_LINE = re.compile(r"^\s*(\d+)r?\s+([-+]?\d\.\d+e[-+]\d+)\s+(\d\.\d+e[-+]\d+)\s")
 

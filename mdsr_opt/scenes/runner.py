@@ -249,6 +249,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
     opts = dict(scene.design_options)
+    if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
+            setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
+        opts["anchor_radius"] = setup.routing.fixture_radius
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()
