@@ -209,3 +209,23 @@ def test_fabrication_svg_draws_channels_walls_and_fixtures_inside(tmp_path):
     for m in out.muscles:
         band = shapely.LineString(P[list(m.nodes)]).buffer(0.5 * fab.channel_diameter + fab.wall)
         assert poly.contains(band), m.name
+
+
+def test_page_route_design_save_and_run_agree_on_the_tentacle(tmp_path):
+    """The issue's page path: Route on ``tentacle``, Design, save the scene; the design uses the fixtures the
+    ropes were fitted to (no anchor error), and the saved scene designs to the same contractions."""
+    from mdsr_opt import get_problem, run_case
+    from mdsr_opt.author.export import save_scene
+    from mdsr_opt.author.session import Session
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    s = Session.from_scene(get_problem("tentacle", resolution="coarse"))
+    s.settle()
+    routed = s.route(4.0, 4.0, None)
+    assert routed["fixture_radius"] == pytest.approx(s.routing.fixture_radius)
+    summary = s.run_design()
+    assert s.design.anchor_radius == pytest.approx(s.routing.fixture_radius) and s.design.success, summary
+    back = load_scene(save_scene(s, tmp_path, "authored")[0])
+    run = run_case(back, "authored", photo=False)
+    assert run.report.success, run.report.message
+    assert np.allclose(run.design.contractions, s.design.contractions, atol=1e-6)

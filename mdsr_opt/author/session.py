@@ -32,6 +32,7 @@ from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.model import get_model
+from ..synthesis.fabrication import check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
@@ -335,16 +336,18 @@ class Session:
         opts.update(K_a=float(K_a), K_b=float(K_b), max_muscles=max_muscles)
         if max_muscles is None:
             opts.pop("max_muscles")
+        fab = check_fabrication(opts.get("fabrication"), self.design_options.get("anchor_radius"))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RoutingWarning)
-            rr = route_muscles(self.mesh, target, **opts)
+            rr = route_muscles(self.mesh, target, **dict(opts, fabrication=fab))
         self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
         self.routed_target = target.copy()
         return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in rr.muscles],
                 "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
                            "nonuniformity": s.nonuniformity} for s in rr.stats],
                 "n_units": rr.n_units, "params": {k: v for k, v in opts.items()},
-                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]}
+                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)],
+                "notes": list(rr.notes), "fixture_radius": rr.fixture_radius}
 
     def run_design(self, **params) -> dict:
         """Design the contractions of the routed muscles for the target (``params``: method, a_max,
@@ -356,6 +359,9 @@ class Session:
             raise ValueError("the target changed since the muscles were routed: route again")
         opts = dict(self.design_options)
         opts.update({k: v for k, v in params.items() if v is not None})
+        if self.routing is not None and self.routing.fixture_radius is not None and tuple(self.muscles) == tuple(
+                self.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
+            opts["anchor_radius"] = self.routing.fixture_radius
         res = design_contractions(self.mesh, self.material, self.muscles, target, **opts)
         self.design, self.design_params = res, opts
         return self.design_summary()

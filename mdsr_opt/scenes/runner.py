@@ -223,7 +223,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rr = setup.routing
         rep.routing = {"n_units": rr.n_units,
                        "muscles": [{"n_edges": s.n_edges, "contraction": s.contraction,
-                                    "nonuniformity": s.nonuniformity} for s in rr.stats]}
+                                    "nonuniformity": s.nonuniformity} for s in rr.stats],
+                       # what made the ropes buildable (ends moved inward, ropes dropped, fixtures shrunk)
+                       "fixture_radius": rr.fixture_radius, "notes": list(rr.notes)}
         if case.kind == "internal":
             # the muscle edges that contract in the target: an edge inside a muscle's rigid end patch keeps
             # its length, so no routing can see it (it is counted apart as hidden)

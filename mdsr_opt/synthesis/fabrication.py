@@ -45,7 +45,7 @@ import numpy as np
 from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
-           "boundary_distance", "check_fabrication"]
+           "boundary_distance", "body_depth", "check_fabrication"]
 
 #: Default channel diameter, as a fraction of the body's diameter.
 CHANNEL_FRACTION = 0.01
@@ -142,7 +142,8 @@ def check_fabrication(fabrication, anchor_radius=None) -> Fabrication:
                              f"{', '.join(f.name for f in fields(Fabrication))}")
         fab = Fabrication(**dict(fabrication))
     else:
-        raise TypeError(f"fabrication must be a Fabrication, a dict of its fields or None, got "
+        raise TypeError(f"fabrication must be a Fabrication, a dict of its fields, None (the defaults) or False "
+                        f"(route_muscles: the search alone), got "
                         f"{type(fabrication).__name__}")
     if anchor_radius is not None:
         if fab.fixture_radius is None:

@@ -499,9 +499,9 @@ def _admissible_edges(mesh: Mesh, fab: Fabrication, clearance: float) -> np.ndar
 
 
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
-    """:func:`route_muscles` for a design that must not fail on the routing's own choices: when no routed rope
-    keeps room for its end fixtures with the default ``K_a`` (4), route again with ``K_a = 1`` (fewer, longer
-    ropes, which fixtures fit), and say so first in ``result.notes``. A ``K_a`` the caller gave, or
+    """:func:`route_muscles` for a design that must not fail on the routing's own choices: when no rope is kept
+    with the default ``K_a`` (4) -- none keeps room for its end fixtures, or every unit inside the body is a
+    fragment -- route again with ``K_a = 1`` (fewer, longer ropes), and say so first in ``result.notes``. A ``K_a`` the caller gave, or
     ``fabrication=False``, is used as given. Warnings of the kept routing are re-emitted.
 
     Example
@@ -518,11 +518,11 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
         return rr, caught
 
     rr, caught = attempt(options)
-    if not len(rr) and rr.notes and "K_a" not in options and options.get("fabrication") is not False:
+    if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
         if len(again):
-            note = ("no rope routed with K_a=4 kept room for its end fixtures (" + "; ".join(rr.notes)
-                    + "): routed again with K_a=1 (fewer, longer ropes)")
+            why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
+            note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
             rr, caught = replace(again, notes=(note,) + again.notes), caught2
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)

@@ -36,7 +36,7 @@ from ..body.muscles import Muscle
 from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance
 
-__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures"]
+__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius"]
 
 #: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
 MIN_FREE_FRACTION = 2.0 / 3.0
@@ -158,3 +158,26 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
                     f"{r_min:.4g}) so that {len(trial.kept) - len(fit.kept)} more rope(s) keep room for them")
             return FixtureFit(trial.kept, trial.radius, (note,) + trial.notes, trial.dropped)
     return low  # not reached: the ladder ends at r_min
+
+
+def common_fixture_radius(mesh, muscles, fabrication: Fabrication) -> float:
+    """One fixture radius for ropes fitted apart (the layouts of several cases driven together, as in an
+    animation): the largest size on the ladder from ``fixture_radius`` down to ``min_fixture_radius`` at which
+    every rope keeps both fixtures as it is (no end moved, none dropped); ``min_fixture_radius`` if none.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    muscles : sequence of Muscle or node sequences
+    fabrication : Fabrication
+        With every field set (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`).
+    """
+    dist = boundary_distance(mesh)
+    paths = [list(getattr(m, "nodes", m)) for m in muscles]
+    r0, r_min = fabrication.fixture_radius, fabrication.min_fixture_radius
+    for k in range(N_SHRINK_STEPS + 1):
+        r = r0 * (r_min / r0) ** (k / N_SHRINK_STEPS) if r_min > 0 else r0 * (1.0 - k / N_SHRINK_STEPS)
+        fit = _fit_at(mesh, paths, r, fabrication.wall, dist)
+        if not fit.dropped and not fit.notes:
+            return float(r)
+    return float(r_min)
