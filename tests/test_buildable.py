@@ -229,3 +229,49 @@ def test_page_route_design_save_and_run_agree_on_the_tentacle(tmp_path):
     run = run_case(back, "authored", photo=False)
     assert run.report.success, run.report.message
     assert np.allclose(run.design.contractions, s.design.contractions, atol=1e-6)
+
+
+def _library_cases():
+    from mdsr_opt import get_problem, list_problems
+
+    out = []
+    for n in list_problems():
+        scene = get_problem(n, resolution="coarse")
+        # the routed cases (the face's muscles are the scene's own, given on its outline)
+        out += [(n, c.name) for c in scene.cases if c.kind == "external" and scene.muscles is None
+                and c.muscles is None]
+    return out
+
+
+def _check_library_case(name, case):
+    """A library case at its default resolution: designed with buildable ropes (shapely on the mesh's own
+    outline and holes)."""
+    from mdsr_opt import get_problem, run_case
+    from mdsr_opt.mechanics.anchors import body_size
+
+    scene = get_problem(name)
+    run = run_case(scene, case, photo=False)
+    assert run.report.success, run.report.message
+    P, loops = scene.mesh.points, scene.mesh.boundary_loops
+    poly = Polygon(P[loops[0]], [P[lp] for lp in loops[1:]])
+    D = body_size(scene.mesh)
+    fab = run.setup.routing.fabrication
+    need = max(0.5 * fab.channel_diameter + fab.wall, MIN_INSET_FRACTION * D)
+    r_f = run.design.anchor_radius
+    assert r_f == pytest.approx(run.setup.routing.fixture_radius)
+    for m in run.setup.muscles:
+        Q = P[list(m.nodes)]
+        assert shapely.distance(shapely.points(Q), poly.boundary).min() >= need * (1 - 1e-9), m.name
+        for end in (Q[0], Q[-1]):
+            assert poly.contains(Point(end).buffer(r_f + fab.wall, 64)), m.name
+    return run.report.difference / D
+
+
+def test_a_library_scene_at_its_resolution_is_buildable():
+    assert _check_library_case("gripper", "close") < 0.03
+
+
+@pytest.mark.slow
+def test_every_external_library_case_is_buildable():
+    rel = {f"{n}/{c}": _check_library_case(n, c) for n, c in _library_cases()}
+    assert max(rel.values()) < 0.05, rel  # the largest: tentacle/curl, 4.6 %

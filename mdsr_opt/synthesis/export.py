@@ -139,13 +139,15 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         a PipelineResult was routed with, else the defaults for this body. The fixtures' radius is the
         design's ``anchor_radius`` when it has one.
     """
-    from .fabrication import check_fabrication
+    from .fabrication import Fabrication, check_fabrication
     from .pipeline import PipelineResult
 
     units = check_units(units)
     if fabrication is None and isinstance(design, PipelineResult) and design.routing is not None:
         fabrication = design.routing.fabrication
     fab = check_fabrication(fabrication)
+    if fab is False:  # routed without a fabrication: the defaults' channel, wall and fixtures are drawn
+        fab = Fabrication()
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for

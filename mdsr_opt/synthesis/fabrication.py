@@ -127,10 +127,13 @@ class Fabrication:
         return asdict(self)
 
 
-def check_fabrication(fabrication, anchor_radius=None) -> Fabrication:
+def check_fabrication(fabrication, anchor_radius=None) -> Fabrication | bool:
     """``fabrication`` as a :class:`Fabrication`: one, a mapping of its fields (a scene file's
-    ``[fabrication]`` table), or None (all defaults). ``anchor_radius``, when given, is the fixture radius if
+    ``[fabrication]`` table), or None (all defaults); False (no fabrication: the routing search alone) is
+    returned as it is. ``anchor_radius``, when given, is the fixture radius if
     the spec leaves it open; a spec that states another one is refused (the two name one thing)."""
+    if fabrication is False or isinstance(fabrication, np.bool_) and not fabrication:
+        return False  # the routing search alone (route_muscles), passed on as given
     if fabrication is None:
         fab = Fabrication()
     elif isinstance(fabrication, Fabrication):

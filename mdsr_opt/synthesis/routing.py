@@ -330,10 +330,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                          f"got {seed_threshold}")
     if symmetry not in ("auto", True, False):
         raise ValueError(f"symmetry must be 'auto', True or False, got {symmetry!r}")
-    if fabrication is False:
+    fab = check_fabrication(fabrication)
+    if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
     else:
-        fab = check_fabrication(fabrication).for_body(mesh)
+        fab = fab.for_body(mesh)
         clearance = fab.clearance(mesh)
         adm_edges = _admissible_edges(mesh, fab, clearance)
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
@@ -437,8 +438,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         found = sorted(kept, key=lambda t: t[:3])
     seed_edges = tuple((int(E[k, 0]), int(E[k, 1])) for k in seeds)
     if not found:
+        inside = "" if fab is None else (
+            f"; the ropes lie at least {clearance:.4g} inside the body, and on a mesh this coarse (mean edge length "
+            f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
         why = (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
-               "no muscles routed (lower min_length, K_a or K_b)") if not fit.notes else (
+               f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
                "no routed rope keeps room for its end fixtures: " + "; ".join(fit.notes)
                + " (give a smaller fixture_radius or min_fixture_radius, or a finer mesh)")
         warnings.warn(why, RoutingWarning, stacklevel=2)
