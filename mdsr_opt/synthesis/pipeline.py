@@ -44,7 +44,9 @@ class PipelineResult:
         The external-driving solve (its ``x`` is ``target``).
     muscles : tuple of Muscle
     routing : RoutingResult or None
-        The routing: muscles, per-muscle figures (``.table()``), knobs (None when muscles were given). A
+        The routing: muscles, per-muscle figures (``.table()``), knobs, the fabrication, the fixture radius
+        the design used and ``notes`` (what was resolved to make the ropes buildable; None when muscles
+        were given). A
         loaded result's has the contraction graph rebuilt from the mesh and the target, and no
         ``reflection``.
     design : DesignResult

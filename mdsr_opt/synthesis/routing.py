@@ -37,6 +37,16 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
 
+Channels inside the body (``fabrication``, :class:`~mdsr_opt.synthesis.fabrication.Fabrication`): a rope
+runs in a moulded channel with a wall around it, so only edges whose two nodes lie at least
+``channel_diameter / 2 + wall`` (and 2 % of the body's diameter) inside the outline and every hole can carry
+one. The search runs on those edges only, rather than offsetting routes inward or refining a band along the
+boundary: the rule is then exact on the mesh (every rope node has its clearance, on the very nodes the
+design and the fabrication files use), costs nothing, and changes no node; a mesh with no such edge is
+refused with the mean edge length and the channel and wall that would work. The routed ropes are then fitted
+to their end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of
+``result.notes``. ``fabrication=False`` is the search alone, on every edge.
+
 A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
 part of a muscle, neither as a seed nor by growth. A target that only stretches the body, contracts
 nothing by more than ``min_contraction``, or equals the rest shape (every edge length within a relative
