@@ -274,3 +274,32 @@ def test_a_library_scene_at_its_resolution_is_buildable():
 def test_every_external_library_case_is_buildable():
     rel = {f"{n}/{c}": _check_library_case(n, c) for n, c in _library_cases()}
     assert max(rel.values()) < 0.05, rel  # the largest: tentacle/curl, 4.6 %
+
+
+def test_one_layout_for_several_poses_is_buildable():
+    """design_poses routes each pose inside the body and designs the shared layout with one fixture size that
+    every shared rope keeps its fixtures with."""
+    from mdsr_opt import design_poses
+    from mdsr_opt.synthesis.routing_fixtures import common_fixture_radius
+
+    outline = [(0, 0), (120, 0), (120, 30), (0, 30)]
+    mesh = Mesh.from_polygon(np.array(outline, float), max_area=120 * 30 / 900)
+    X = mesh.points
+
+    def bend(s):
+        phi, r = (X[:, 0] - 60.0) / 90.0, 90.0 - s * (X[:, 1] - 15.0)
+        return np.column_stack([r * np.sin(phi), s * (90.0 - r * np.cos(phi))])
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = design_poses(mesh, NeoHookean(1.0, 0.4), {"left": bend(1), "right": bend(-1)}, compare=False)
+    assert res.all_success
+    poly = Polygon(outline)
+    fab = Fabrication().for_body(mesh)
+    assert res.anchor_radius == pytest.approx(common_fixture_radius(mesh, res.muscles, fab))
+    need = max(0.5 * fab.channel_diameter + fab.wall, MIN_INSET_FRACTION * 123.69)
+    for m in res.muscles:
+        Q = X[list(m.nodes)]
+        assert shapely.distance(shapely.points(Q), poly.boundary).min() >= need * (1 - 1e-9)
+        for end in (Q[0], Q[-1]):
+            assert poly.contains(Point(end).buffer(res.anchor_radius + fab.wall, 64))
