@@ -30,6 +30,7 @@ from .mechanics.stability import check_stability as check_stability, StabilityCh
 # from target to robot: routing, design, verification, poses, gaits, fabrication files
 from .synthesis.contractions import design_contractions as design_contractions
 from .synthesis.export import export_fabrication as export_fabrication
+from .synthesis.fabrication import Fabrication as Fabrication
 from .synthesis.gait import Gait as Gait, gait_schedule as gait_schedule, GaitSchedule as GaitSchedule
 from .synthesis.pipeline import design_pipeline as design_pipeline, PipelineResult as PipelineResult
 from .synthesis.poses import design_poses as design_poses, Pose as Pose, PosesResult as PosesResult

@@ -51,8 +51,9 @@ TARGETS = (
     ("humanoid", "lean", (0.5, 4.0)),
 )
 
-#: Routing knobs shared by all ten layouts (the paper's 5-10 seeds per region, at most 4 muscles l1..l4).
-ROUTING = {"K_b": 4.0, "K_h": 0.1, "n_seeds": 8, "max_muscles": 4, "max_turn": 45.0}
+#: Routing knobs shared by all ten layouts (the paper's 5-10 seeds per region, at most 4 muscles l1..l4); the
+#: paper's search on the whole contraction graph (``fabrication=False``: no channel clearance, no fixtures).
+ROUTING = {"K_b": 4.0, "K_h": 0.1, "n_seeds": 8, "max_muscles": 4, "max_turn": 45.0, "fabrication": False}
 
 def route_targets(resolution="medium"):
     """Solve the five targets and route each at its two K_a values.

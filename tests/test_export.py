@@ -13,6 +13,7 @@ import pytest
 
 from mdsr_opt import Mesh, Muscle
 from mdsr_opt.synthesis.export import UNITS, check_units, export_fabrication
+from mdsr_opt.synthesis.fabrication import Fabrication
 
 SVG = "{http://www.w3.org/2000/svg}"
 
@@ -165,9 +166,9 @@ def test_dxf_numbers_keep_their_digits_at_any_scale_and_the_extents_hold_everyth
     for pl, mu in zip(msp.query('POLYLINE[layer=="MUSCLES"]'), mus):
         P = np.array([(p[0], p[1]) for p in pl.points()])
         assert np.linalg.norm(np.diff(P, axis=0), axis=1).sum() == pytest.approx(mu.rest_length(mesh), rel=1e-9)
-    ends = msp.query("CIRCLE")
+    ends = msp.query('CIRCLE[layer=="ENDS"]')
     r = ends[0].dxf.radius
-    assert r == pytest.approx(0.4 * mesh.edge_lengths.mean(), rel=1e-9)
+    assert r == pytest.approx(Fabrication().for_body(mesh).fixture_radius, rel=1e-9)  # the default fixture
     lo, hi = np.array(doc.header["$EXTMIN"])[:2], np.array(doc.header["$EXTMAX"])[:2]
     for c in ends:
         ctr = np.array(tuple(c.dxf.center)[:2])

@@ -43,12 +43,14 @@ def test_shared_layout_reproduces_each_pose_with_no_more_muscles(lr):
     assert res.n_muscles <= int(res.separate_n_muscles.sum())
     assert np.all(np.isfinite(res.separate_differences))
     assert np.all(res.differences <= 1.10 * res.separate_differences)
-    # each bend pulls with the muscle on its concave side, the other rope is paid out (negative stroke)
+    # each bend pulls with the muscle on its concave side, the other rope is slack: its channel lies between
+    # the centre line and the convex side (a wall's width inside the outline), and the one-rope bend also
+    # shortens the strip, so its path shortens a little (0.11 of the engaged rope's 0.65) at zero tension
     for k, name in enumerate(res.names):
         assert res.engaged[k].sum() == 1
         i = int(np.flatnonzero(res.engaged[k])[0])
-        assert res.strokes[k, i] > 0.5                       # ~0.92 of a 4-long muscle
-        assert np.all(res.strokes[k, ~res.engaged[k]] < 0)
+        assert res.strokes[k, i] > 0.5                       # ~0.65 of a 3.5-long muscle
+        assert np.all(res.strokes[k, ~res.engaged[k]] < 0.25 * res.strokes[k, i])
         assert np.all(res.tensions[k, ~res.engaged[k]] == 0)
     assert "2 shared muscles" in repr(res) and len(repr(res)) < 300
 
@@ -137,7 +139,8 @@ def test_units_propagate_body_in_millimetres():
         out.append(design_poses(mesh, MAT, {"left": bend(mesh, 1, scale)}, compare=False))
     np.testing.assert_allclose(out[1].contractions, out[0].contractions, rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(out[1].strokes, 10.0 * out[0].strokes, rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(out[1].rest_lengths, [40.0])
+    # 40 mm less a node at each end: the ends moved inward so that the fixtures fit inside the strip
+    np.testing.assert_allclose(out[1].rest_lengths, [35.0])
     sch = gait_schedule(strip(10.0), MAT, out[1], ["rest", "left"], frames_per_step=1, cyclic=False, units="mm")
     assert sch.units == "mm" and "mm" in repr(sch)
     np.testing.assert_allclose(sch.strokes[-1], out[1].strokes[0])

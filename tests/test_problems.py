@@ -24,9 +24,15 @@ _cache: dict = {}
 
 
 def runs(name):
-    """Build ``name`` at coarse resolution and run every case once per test session (photo on the first)."""
+    """Build ``name`` at coarse resolution and run every case once per test session (photo on the first).
+
+    The routing is the paper's search on the whole contraction graph (``fabrication=False``): these tests
+    reproduce the paper's experiments, whose muscles lie on the outline, on meshes (~150 nodes) too coarse
+    for ropes in channels inside; buildable layouts of the library are checked at its default resolution in
+    ``test_buildable.py``."""
     if name not in _cache:
         scene = get_problem(name, resolution="coarse")
+        scene.routing_options["fabrication"] = False
         out = {}
         for i, case in enumerate(scene.cases):
             out[case.name] = run_case(scene, case, photo=(i == 0), photo_size=(300, 300))

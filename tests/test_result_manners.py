@@ -199,7 +199,7 @@ def test_pipeline_result(tmp_path):
 def poses():
     from mdsr_opt.synthesis.poses import design_poses
 
-    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 4)  # rows inside off the centre line: the ropes' channels need them
     X = mesh.points
 
     def bend(s):

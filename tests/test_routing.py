@@ -116,7 +116,7 @@ def test_contraction_graph_is_invariant_to_rigid_motion(body):
 def test_bent_strip_muscle_on_the_concave_side_analytic(grid_strip):
     X = grid_strip.points
     for sign in (+1, -1):  # bend up (top side concave), then down (bottom side concave)
-        res = route_muscles(grid_strip, arc(X, sign * 3.0, 0.5))
+        res = route_muscles(grid_strip, arc(X, sign * 3.0, 0.5), fabrication=False)
         assert len(res) >= 1
         for m in res:
             side = sign * (X[list(m.nodes), 1] - 0.5)
@@ -153,7 +153,7 @@ def test_uniform_shortening_gives_straight_muscles_along_the_axis():
         for axis in (0, 1):
             scale = np.ones(2)
             scale[axis] = 0.8
-            res = route_muscles(mesh, X * scale)
+            res = route_muscles(mesh, X * scale, fabrication=False)
             assert len(res) >= 1
             for m, s in zip(res, res.stats):
                 assert s.turning_angle == 0.0 and s.turning_angle_target == 0.0
@@ -201,12 +201,12 @@ def test_splicing_joins_separate_seed_units():
     X = mesh.points
     peaks = lambda s: 0.2 + 0.1 * np.exp(-((s - 1.5) / 0.3) ** 2) + 0.1 * np.exp(-((s - 4.5) / 0.3) ** 2)
     t = bend(X, peaks, 6.0, 0.5)
-    res = route_muscles(mesh, t, K_a=4.0, seed_threshold=0.9)
+    res = route_muscles(mesh, t, K_a=4.0, seed_threshold=0.9, fabrication=False)
     assert res.n_regions == 2  # two contracted regions, each seeded ...
     assert len(res) == 1 and res.n_units == 1  # ... spliced into one muscle
     assert np.ptp(X[list(res[0].nodes), 0]) == pytest.approx(6.0)
     # a designer who wants uniform muscles (large K_a) keeps them apart: one muscle on each peak
-    strict = route_muscles(mesh, t, K_a=100.0, seed_threshold=0.9, min_length=0.0)
+    strict = route_muscles(mesh, t, K_a=100.0, seed_threshold=0.9, min_length=0.0, fabrication=False)
     assert len(strict) >= 2 and all(np.ptp(X[list(m.nodes), 0]) < 3.0 for m in strict)
     for peak in (1.5, 4.5):  # each peak has a muscle of its own
         assert any(np.ptp(X[list(m.nodes), 0]) < 3.0 and X[list(m.nodes), 0].min() <= peak <= X[list(m.nodes), 0].max()
@@ -274,11 +274,11 @@ def test_rotating_mesh_and_target_together_changes_nothing(body, name):
     (a Manhattan distance would)."""
     t = family(body)[name]
     for kw in ({"K_a": 1.0, "K_b": 1.0, "n_seeds": 10}, {}):
-        ref = route_muscles(body, t, **kw)
+        ref = route_muscles(body, t, **kw, fabrication=False)
         assert sum(len(m.nodes) for m in ref) >= 20
         for deg in (10.0, 30.0, 45.0, 90.0, 137.0, 200.0):
             R = rotation(np.radians(deg))
-            out = route_muscles(Mesh(body.points @ R.T, body.triangles), t @ R.T, **kw)
+            out = route_muscles(Mesh(body.points @ R.T, body.triangles), t @ R.T, **kw, fabrication=False)
             assert canonical(out) == canonical(ref), f"{name}, {kw}, rotated by {deg} degrees"
             assert {frozenset(e) for e in out.seeds} == {frozenset(e) for e in ref.seeds}
 
@@ -392,7 +392,7 @@ def test_seeds_are_the_most_contracted_edges(body):
     t = family(body)["bend, curvature x1..4"]
     wmap = edge_weight_map(body, t)
     for n in (1, 5, 10):
-        res = route_muscles(body, t, n_seeds=n)
+        res = route_muscles(body, t, n_seeds=n, fabrication=False)
         assert len(res.seeds) == n
         ws = [wmap[e] for e in res.seeds]
         others = [w for e, w in wmap.items() if e not in set(res.seeds)]
@@ -403,16 +403,16 @@ def test_seeds_are_the_most_contracted_edges(body):
 def test_max_muscles_keeps_the_strongest_and_min_length_drops_short_ones(body):
     t = family(body)["shorten 50 deg"]
     wmap = edge_weight_map(body, t)
-    full = route_muscles(body, t, n_seeds=10, min_length=0.0)
+    full = route_muscles(body, t, n_seeds=10, min_length=0.0, fabrication=False)
     assert len(full) >= 4
     strength = [float(np.sum(path_weights(m, wmap) * np.diff(np.cumsum(np.r_[0, np.linalg.norm(
         np.diff(body.points[list(m.nodes)], axis=0), axis=1)])))) for m in full]
     assert strength == sorted(strength, reverse=True)
-    top2 = route_muscles(body, t, n_seeds=10, min_length=0.0, max_muscles=2)
+    top2 = route_muscles(body, t, n_seeds=10, min_length=0.0, max_muscles=2, fabrication=False)
     assert [m.nodes for m in top2] == [m.nodes for m in full][:2]
     assert len(top2.dropped) == len(full) - 2 and all("max_muscles=2" in d.reason for d in top2.dropped)
     cut = float(np.median([s.rest_length for s in full.stats]))
-    long_only = route_muscles(body, t, n_seeds=10, min_length=cut)
+    long_only = route_muscles(body, t, n_seeds=10, min_length=cut, fabrication=False)
     assert all(s.rest_length >= cut for s in long_only.stats)
     # every fragment shorter than min_length is recorded, spliced or dropped, with the reason
     assert long_only.dropped and all(d.rest_length < cut for d in long_only.dropped)

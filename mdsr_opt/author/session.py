@@ -38,6 +38,7 @@ from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
 from ..mechanics.model import get_model
+from ..synthesis.fabrication import check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
@@ -402,9 +403,10 @@ class Session:
         opts.update(K_a=float(K_a), K_b=float(K_b), max_muscles=max_muscles)
         if max_muscles is None:
             opts.pop("max_muscles")
+        fab = check_fabrication(opts.get("fabrication"), self.design_options.get("anchor_radius"))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RoutingWarning)
-            rr = route_muscles(self.mesh, target, **opts)
+            rr = route_muscles(self.mesh, target, **dict(opts, fabrication=fab))
         self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
         self.dropped = ()
         self.routed_target = target.copy()
@@ -412,7 +414,8 @@ class Session:
                 "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
                            "nonuniformity": s.nonuniformity} for s in rr.stats],
                 "n_units": rr.n_units, "params": {k: v for k, v in opts.items()},
-                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]}
+                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)],
+                "notes": list(rr.notes), "fixture_radius": rr.fixture_radius}
 
     def run_design(self, **params) -> dict:
         """Design the contractions of the routed muscles for the target (``params``: method, a_max,
@@ -424,6 +427,9 @@ class Session:
             raise ValueError("the target changed since the muscles were routed: route again")
         opts = dict(self.design_options)
         opts.update({k: v for k, v in params.items() if v is not None})
+        if self.routing is not None and self.routing.fixture_radius is not None and tuple(self.muscles) == tuple(
+                self.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
+            opts["anchor_radius"] = self.routing.fixture_radius
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it

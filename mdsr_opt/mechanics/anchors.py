@@ -31,7 +31,8 @@ from ..core.checks import positive_float
 from ..body.muscles import Muscle, check_muscles
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "convex_hull", "default_anchor_radius", "check_anchor_radius",
-           "anchor_radius_or_default", "valid_muscles", "anchor_patches", "rigid_groups"]
+           "anchor_radius_or_default", "valid_muscles", "anchor_patches", "rigid_groups",
+           "patch_groups"]
 
 #: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
 ANCHOR_FRACTION = 0.04
@@ -192,7 +193,27 @@ def rigid_groups(mesh, muscles, radius: float | None = None) -> list[np.ndarray]
 
 
 def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
-    patches = anchor_patches(mesh, mus, radius)
+    groups, joined = patch_groups(mesh, mus, radius)
+    if joined:
+        c = joined[0]
+        raise LayoutError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
+                         "it could not contract; give a smaller anchor_radius")
+    return groups
+
+
+def patch_groups(mesh, muscles, radius: float | None = None) -> tuple[list[np.ndarray], list[int]]:
+    """The anchor patches merged where patches of different muscles share a node, and the muscles whose two
+    ends fall into one merged group (which could then not contract); raises nothing.
+
+    Returns
+    -------
+    groups : list of ndarray
+        The merged groups of two nodes or more (each moves rigidly), in the order of their first patch.
+    joined : list of int
+        Indices of the muscles whose two end patches are in one group, in order.
+    """
+    mus = valid_muscles(mesh, muscles)
+    patches = anchor_patches(mesh, mus, anchor_radius_or_default(mesh, radius))
     flat = [p for pair in patches for p in pair]
     parent = list(range(len(flat)))
 
@@ -211,15 +232,12 @@ def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
                     parent[max(a, b)] = min(a, b)
             else:
                 owner[v] = k
-    for c in range(len(mus)):
-        if find(2 * c) == find(2 * c + 1):
-            raise LayoutError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
-                              "it could not contract; give a smaller anchor_radius")
+    joined = [c for c in range(len(mus)) if find(2 * c) == find(2 * c + 1)]
     groups: dict[int, list[int]] = {}
     for k, p in enumerate(flat):
         g = groups.setdefault(find(k), [])
         g.extend(v for v in p.tolist() if v not in g)
-    return [np.array(g, dtype=np.int64) for _, g in sorted(groups.items()) if len(g) >= 2]
+    return [np.array(g, dtype=np.int64) for _, g in sorted(groups.items()) if len(g) >= 2], joined
 
 
 def check_anchor_radius(mesh, radius) -> float:

@@ -126,7 +126,15 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     # (moved to the solver's gauge: warm_start_state), else from the solver's default start.
     solved: dict[bytes, tuple] = {}
     prev = None
-    kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=opts.get("anchor_radius"))
+    radius = opts.get("anchor_radius")
+    if radius is None and scene.muscles is None and scene.routing_options.get("fabrication") is not False:
+        # routed layouts fit their own fixtures: one size all the driven ropes keep theirs with
+        from ..synthesis.fabrication import check_fabrication
+        from ..synthesis.routing_fixtures import common_fixture_radius
+
+        fab = check_fabrication(scene.routing_options.get("fabrication")).for_body(scene.mesh)
+        radius = common_fixture_radius(scene.mesh, union, fab)
+    kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=radius)
     for i, a in enumerate(frames):
         key = np.round(a, 12).tobytes()
         if key not in solved:

@@ -139,7 +139,8 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty.
     """
     from ..mechanics.equilibrium import solve_external, solve_internal
-    from ..synthesis.routing import RoutingWarning, route_muscles
+    from ..synthesis.fabrication import check_fabrication
+    from ..synthesis.routing import RoutingWarning, route_for_design
 
     if isinstance(case, str):
         case = scene.case(case)
@@ -163,7 +164,10 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
         if case.kind == "external" and (scene.muscles is None or own) or case.kind == "internal" and route_internal:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", RoutingWarning)
-                routing = route_muscles(scene.mesh, res.x, **scene.routing_options)
+                ropts = dict(scene.routing_options)  # the fixtures are the design's anchor patches
+                ropts["fabrication"] = check_fabrication(ropts.get("fabrication"),
+                                                         scene.design_options.get("anchor_radius"))
+                routing = route_for_design(scene.mesh, res.x, **ropts)
             notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
         if own:
             muscles = tuple(case.muscles)

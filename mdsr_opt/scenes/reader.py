@@ -250,6 +250,28 @@ def _boolean_or(*choices: str):
 _symmetry = _boolean_or("auto")
 
 
+def fabrication_table(r: Reader, v, where: str):
+    """A scene's fabrication: a table of :class:`~mdsr_opt.synthesis.fabrication.Fabrication`'s fields (or
+    one, or False: the routing search alone); kept as a plain table of the fields given (the scene file
+    the page saves writes it back)."""
+    from dataclasses import fields as dc_fields
+
+    from ..synthesis.fabrication import Fabrication
+
+    if v is False or isinstance(v, np.bool_) and not v:
+        return False
+    if isinstance(v, Fabrication):
+        v = {k: x for k, x in v.to_dict().items() if x is not None}
+    names = [f.name for f in dc_fields(Fabrication)]
+    table = r.keys(v, names, where)
+    out = {k: _positive(allow_zero=True)(r, x, f"{where}.{k}") for k, x in table.items()}
+    try:
+        Fabrication(**out)
+    except (TypeError, ValueError) as exc:
+        r.fail(where, str(exc).replace("Fabrication: ", ""))
+    return out
+
+
 #: Scene-file checks of ``[design]`` (the ranges design_contractions enforces) and ``[routing]``.
 _DESIGN_CHECKS = {
     "method": _choice("flattened", "nested", "derivative-free"),
@@ -284,6 +306,7 @@ _ROUTING_CHECKS = {
     "max_turn": _real(0.0, 180.0, what=" (degrees)"),
     "seed_threshold": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest contraction)"),
     "symmetry": _symmetry,
+    "fabrication": fabrication_table,
 }
 
 

@@ -262,7 +262,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rr = setup.routing
         rep.routing = {"n_units": rr.n_units,
                        "muscles": [{"n_edges": s.n_edges, "contraction": s.contraction,
-                                    "nonuniformity": s.nonuniformity} for s in rr.stats]}
+                                    "nonuniformity": s.nonuniformity} for s in rr.stats],
+                       # what made the ropes buildable (ends moved inward, ropes dropped, fixtures shrunk)
+                       "fixture_radius": rr.fixture_radius, "notes": list(rr.notes)}
         if case.kind == "internal":
             # the muscle edges that contract in the target: an edge inside a muscle's rigid end patch keeps
             # its length, so no routing can see it (it is counted apart as hidden)
@@ -289,6 +291,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
     opts = dict(scene.design_options)
+    if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
+            setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
+        opts["anchor_radius"] = setup.routing.fixture_radius
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()

@@ -13,7 +13,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_label
 from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
-from .reader import SceneFileError, Reader, read_file, scene_options, tname
+from .reader import SceneFileError, Reader, read_file, scene_options, tname, fabrication_table
 from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
 from .shapes import rigid_motion
@@ -23,7 +23,7 @@ __all__ = ['load_scene', 'material_table', 'parse_units_and_gait']
 
 # ---------------------------------------------------------------------------------------------- scene files
 _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
-             "cases", "animations", "expected", "units", "gait", "acceptance")
+             "cases", "animations", "expected", "units", "gait", "acceptance", "fabrication")
 
 
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
@@ -84,6 +84,11 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
 
         [routing]                             # keyword arguments of route_muscles
         max_muscles = 2
+        [fabrication]                         # optional: channel, wall and end fixtures, in `units`
+        channel_diameter = 1.0                # each default: a fraction of the body's diameter D (channel
+        wall = 1.0                            # 1 %, wall 1 %, fixture 4 %, smallest fixture 1.5 %); ropes
+        fixture_radius = 4.0                  # lie >= channel/2 + wall (and 2 % of D) inside the body;
+        min_fixture_radius = 1.5              # fixture_radius is the design's anchor_radius
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
         [acceptance]                          # optional: what a case's design must show to succeed
@@ -167,6 +172,10 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
             r.fail("muscles", f"expected a list of muscles ([[muscles]] tables), got {tname(mus_in)}", TypeError)
         muscles = tuple(_scene_muscle(r, mesh, m, f"muscles[{i}]", regions) for i, m in enumerate(mus_in))
     routing = scene_options(r, top.get("routing", {}), "routing")
+    if "fabrication" in top:  # the [fabrication] table: the routing's (and, through it, the design's)
+        if "fabrication" in routing:
+            r.fail("fabrication", "is given twice: as [fabrication] and as routing.fabrication; keep one")
+        routing["fabrication"] = fabrication_table(r, top["fabrication"], "fabrication")
     design = scene_options(r, top.get("design", {}), "design")
     cases_in = top["cases"]
     if not isinstance(cases_in, list) or not cases_in:

@@ -4,15 +4,19 @@
 :class:`~mdsr_opt.synthesis.results.DesignResult` or a mapping of pose names to DesignResults):
 
 ``<name>.svg``
-    The body outline, its holes and every muscle channel (the centre line along the muscle's mesh edges,
-    drawn ``channel_width`` wide) at true scale: the ``viewBox`` is in the body's length unit and the
-    ``width``/``height`` attributes state the physical size, so a printer or laser cutter reproduces it 1:1.
-    Both ends of every channel are marked by a circle of the rigid end patch's radius (the cable model's
-    ``anchor_radius``, else 0.4 mean edge lengths); each muscle is labelled with its name.
+    The body outline, its holes and every muscle channel at true scale: the centre line along the muscle's
+    mesh edges, the channel drawn ``channel_width`` wide (the fabrication's ``channel_diameter``) and around
+    it its wall band (``channel_width + 2 wall`` wide, class ``wall``). The ``viewBox`` is in the body's
+    length unit and the ``width``/``height`` attributes state the physical size, so a printer or laser cutter
+    reproduces it 1:1. Both ends of every channel carry their fixture: a circle of the fixture's radius
+    (the design's ``anchor_radius``, class ``end``) and one of that radius plus the wall (class
+    ``end-wall``); each muscle is labelled with its name.
 ``<name>.dxf``
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
-    nodes at rest, its width the channel width), ``ENDS`` (circles) and ``LABELS`` (text).
+    nodes at rest, its width the channel width), ``WALLS`` (the same polylines as wide as the channel and
+    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles)
+    and ``LABELS`` (text).
 ``<name>_muscles.csv``
     One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
@@ -79,6 +83,7 @@ class FabricationData:
     end_radius: float
     channel_width: float
     units: str
+    wall: float = 0.0
     stroke_bands: np.ndarray | None = None  # (P, m, 2) low/high stroke per pose and muscle; None: not computed
 
     def __repr__(self) -> str:
@@ -119,7 +124,7 @@ def _check_rest_lengths(recorded, L0, muscles, what) -> None:
 
 
 def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
-                     channel_width: float | None = None) -> FabricationData:
+                     channel_width: float | None = None, fabrication=None) -> FabricationData:
     """Collect and check the geometry and per-pose figures of a design (writes nothing).
 
     Parameters
@@ -132,11 +137,21 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         result with a ``muscles`` attribute), which it then replaces.
     units : one of :data:`UNITS`.
     channel_width : float, optional
-        Drawn width of a channel (length units); default 0.2 mean edge lengths.
+        Drawn width of a channel (length units); default the fabrication's ``channel_diameter``.
+    fabrication : Fabrication or dict of its fields, optional
+        Channel, wall and fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`); default: the one
+        a PipelineResult was routed with, else the defaults for this body. The fixtures' radius is the
+        design's ``anchor_radius`` when it has one.
     """
+    from .fabrication import Fabrication, check_fabrication
     from .pipeline import PipelineResult
 
     units = check_units(units)
+    if fabrication is None and isinstance(design, PipelineResult) and design.routing is not None:
+        fabrication = design.routing.fabrication
+    fab = check_fabrication(fabrication)
+    if fab is False:  # routed without a fabrication: the defaults' channel, wall and fixtures are drawn
+        fab = Fabrication()
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
@@ -184,8 +199,9 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     # every figure (mdsr_opt.plot.style.muscle_name)
     mus = [mu if mu.name else Muscle(mu.nodes, name=muscle_name(i)) for i, mu in enumerate(mus)]
     h = float(mesh.edge_lengths.mean())
+    fab = fab.for_body(mesh)
     if channel_width is None:
-        channel_width = 0.2 * h
+        channel_width = fab.channel_diameter if fab.channel_diameter > 0 else 0.2 * h
     if not (isinstance(channel_width, (int, float)) and math.isfinite(channel_width) and channel_width > 0):
         raise ValueError(f"channel_width must be a positive length, got {channel_width!r}")
     loops = [mesh.points[np.asarray(lp)] for lp in mesh.boundary_loops]
@@ -201,8 +217,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                            tensions=np.asarray(T, float),
                            # the end patches' radius, when the design has one (NaN: none; 0: points)
                            end_radius=float(radius) if radius is not None and math.isfinite(radius) and radius > 0
-                           else 0.4 * h, channel_width=float(channel_width),
-                           units=units,
+                           else fab.fixture_radius if fab.fixture_radius > 0 else 0.4 * h,
+                           channel_width=float(channel_width), units=units, wall=float(fab.wall),
                            stroke_bands=bands if bands is not None and np.isfinite(bands).any() else None)
 
 
@@ -231,7 +247,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     allp = np.vstack([fd.outline] + fd.holes)
     lo, hi = allp.min(0), allp.max(0)
     size = float((hi - lo).max())
-    pad = 0.05 * size + fd.end_radius
+    pad = 0.05 * size + fd.end_radius + fd.wall
     W, H = float(hi[0] - lo[0] + 2 * pad), float(hi[1] - lo[1] + 2 * pad)
     u = fd.units
     scale, phys = (1.0, u) if u in ("mm", "cm", "in") else (UNITS[u] / 1e-3, "mm")
@@ -256,6 +272,9 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
         c = colors[i]
         pts = " ".join(xy(p) for p in path)
+        if fd.wall > 0:
+            out.append(f'<polyline class="wall" points="{pts}" stroke="{c}" stroke-opacity="0.12" '
+                       f'stroke-width="{fd.channel_width + 2 * fd.wall:.9g}"/>')
         out.append(f'<polyline class="channel" points="{pts}" stroke="{c}" stroke-opacity="0.35" '
                    f'stroke-width="{fd.channel_width:.9g}"/>')
         out.append(f'<polyline class="muscle" id="{escape(mu.name)}" points="{pts}" stroke="{c}" '
@@ -267,6 +286,9 @@ def _svg_text(fd: FabricationData, title: str) -> str:
         for p in (path[0], path[-1]):
             x, y = xy(p).split(",")
             out.append(f'<circle class="end" cx="{x}" cy="{y}" r="{fd.end_radius:.9g}" stroke="{c}"/>')
+            if fd.wall > 0:
+                out.append(f'<circle class="end-wall" cx="{x}" cy="{y}" r="{fd.end_radius + fd.wall:.9g}" '
+                           f'stroke="{c}" stroke-dasharray="{2 * lw:.6g}"/>')
     out.append("</g>")
     out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle">')
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
@@ -275,13 +297,14 @@ def _svg_text(fd: FabricationData, title: str) -> str:
         out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i]}">{escape(mu.name)}</text>')
     out.append("</g>")
     out.append(f'<text x="{pad * 0.3:.6g}" y="{H - pad * 0.3:.6g}" font-family="sans-serif" font-size="{fs * 0.8:.6g}">'
-               f"{escape(title)}: {len(fd.muscles)} muscle channel(s), circles: channel ends; units: {u}</text>")
+               f"{escape(title)}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
+               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls; units: {u}</text>")
     out.append("</svg>")
     return "\n".join(out) + "\n"
 
 
 #: DXF layers: name and ACI colour (7 white/black, 1 red, 5 blue, 3 green)
-_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("ENDS", 5), ("LABELS", 3))
+_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("WALLS", 8), ("ENDS", 5), ("LABELS", 3))
 
 
 def _dxf_number(v: float) -> str:
@@ -362,7 +385,7 @@ def _dxf_text(fd: FabricationData) -> str:
     size = float(np.ptp(fd.outline, axis=0).max())
     labels = [_label_at(path, 0.05 * size)[0] for path in fd.paths]
     # the drawing's extents: the outline, the channels at their width, the end circles, the labels' points
-    reach = max(fd.end_radius, 0.5 * fd.channel_width)
+    reach = max(fd.end_radius, 0.5 * fd.channel_width) + fd.wall
     near = np.vstack([fd.outline] + [p - reach for p in fd.paths] + [p + reach for p in fd.paths]
                      + [np.vstack(labels) + [0.0, 0.035 * size]])
     lo, hi = near.min(axis=0), near.max(axis=0)
@@ -424,6 +447,8 @@ def _dxf_text(fd: FabricationData) -> str:
         polyline(h, "HOLES", closed=True)
     for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
         # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
+        if fd.wall > 0:
+            polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
         polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
         for p in (path[0], path[-1]):
             g(0, "CIRCLE")
@@ -431,6 +456,11 @@ def _dxf_text(fd: FabricationData) -> str:
             g(62, dxf_color(i))
             xy(p)
             g(40, _dxf_number(fd.end_radius))
+            if fd.wall > 0:
+                g(0, "CIRCLE")
+                g(8, "WALLS")
+                xy(p)
+                g(40, _dxf_number(fd.end_radius + fd.wall))
         g(0, "TEXT")
         g(8, "LABELS")
         g(62, dxf_color(i))
@@ -481,7 +511,7 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
 
 
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
-                       name: str = "robot", channel_width: float | None = None) -> dict[str, str]:
+                       name: str = "robot", channel_width: float | None = None, fabrication=None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
 
     Parameters
@@ -495,7 +525,9 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     muscles : the layout (required unless ``design`` knows its own: a PosesResult, a PipelineResult).
     units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
-    channel_width : drawn channel width, length units (default 0.2 mean edge lengths).
+    channel_width : drawn channel width, length units (default the fabrication's ``channel_diameter``).
+    fabrication : Fabrication or dict of its fields (default: a PipelineResult's, else the defaults for the
+        body): the channels' walls and the end fixtures drawn.
 
     Returns
     -------
@@ -510,7 +542,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         (:func:`~mdsr_opt.core.checks.check_stem`): before anything is written.
     """
     check_stem(name, "name")  # no path separator, no control character: before anything is written
-    fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width)
+    fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width,
+                          fabrication=fabrication)
     svg = _svg_text(fd, name)
     dxf = _dxf_text(fd)
     table = _csv_text(fd)

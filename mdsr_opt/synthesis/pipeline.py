@@ -21,7 +21,8 @@ from ..mechanics.result import EquilibriumResult
 from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
-from .routing import route_muscles
+from .routing import route_for_design
+from .fabrication import Fabrication, check_fabrication
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -43,7 +44,9 @@ class PipelineResult:
         The external-driving solve (its ``x`` is ``target``).
     muscles : tuple of Muscle
     routing : RoutingResult or None
-        The routing: muscles, per-muscle figures (``.table()``), knobs (None when muscles were given). A
+        The routing: muscles, per-muscle figures (``.table()``), knobs, the fabrication, the fixture radius
+        the design used and ``notes`` (what was resolved to make the ropes buildable; None when muscles
+        were given). A
         loaded result's has the contraction graph rebuilt from the mesh and the target, and no
         ``reflection``.
     design : DesignResult
@@ -230,6 +233,8 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
                          graph=contraction_graph(mesh, target),
                          seeds=tuple(tuple(int(i) for i in sd) for sd in data.get("seeds", ())),
                          n_units=int(data.get("n_units", 0)), params=dict(data.get("params", {})),
+                         fabrication=None if data.get("fabrication") is None else Fabrication(**data["fabrication"]),
+                         fixture_radius=data.get("fixture_radius"), notes=tuple(map(str, data.get("notes", ()))),
                          dropped=tuple(DroppedUnit(nodes=tuple(d["nodes"]), rest_length=float(d["rest_length"]),
                                                    reason=str(d["reason"])) for d in data.get("dropped", ())))
 
@@ -237,8 +242,9 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
 @interruptible()
 def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
                     routing_options: dict | None = None, method: str = "flattened",
-                    external_options: dict | None = None, idle_contraction: float = IDLE_CONTRACTION,
-                    bands: bool = False, band_options: dict | None = None, **design_options) -> PipelineResult:
+                    external_options: dict | None = None, fabrication=None,
+                    idle_contraction: float = IDLE_CONTRACTION, bands: bool = False,
+                    band_options: dict | None = None, **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -253,6 +259,12 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         The design method (see :func:`design_contractions`).
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
+    fabrication : Fabrication or dict of its fields, optional
+        Channel, wall and end fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`, default: its
+        defaults for this body). Routed ropes keep their clearance inside the body and are fitted to their
+        fixtures (``routing.notes`` lists what was resolved), and the design's ``anchor_radius`` is the
+        fixture radius they fit with (``routing.fixture_radius``). An ``anchor_radius`` given here is the
+        fixture radius.
     idle_contraction : float, default :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`
         A muscle designed to a contraction below it is idle: dropped from the layout and the design made
         again (:func:`~mdsr_opt.synthesis.acceptance.design_active`; ``.dropped`` lists it). 0 keeps every
@@ -307,6 +319,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     if unknown:
         raise ValueError(f"band_options: unknown key {sorted(unknown)[0]!r} (keys: radius_tol, nu_tol, refine, "
                          "max_refined_nodes, max_iter)")
+    ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
+    ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
     ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
     ext.raise_on_failure()
     t1 = time.perf_counter()
@@ -314,12 +328,13 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
-        rr = route_muscles(mesh, ext.x, **(routing_options or {}))
+        rr = route_for_design(mesh, ext.x, **ropts)
         mus = tuple(rr.muscles)
         if not mus:
             raise ValueError("routing found no muscle for this target (muscles can only contract: does the "
                              "target shorten any edge?); pass muscles=... or relax routing_options")
         routing = rr
+        design_options["anchor_radius"] = rr.fixture_radius  # the fixtures the ropes fit with
     else:
         mus = tuple(check_muscles(mesh, muscles))
     t2 = time.perf_counter()

@@ -76,6 +76,8 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import check_int, check_label
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from .fabrication import check_fabrication
+from .routing_fixtures import common_fixture_radius
 from ..plot.style import muscle_name
 
 __all__ = ["Pose", "PosesResult", "design_poses", "shared_layout", "check_budget"]
@@ -467,6 +469,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
     ropt = dict(routing_options or {})
     dopt = dict(design_options or {})
+    # the ropes are fitted to their end fixtures, which are the design's anchor patches
+    ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
     separate = dict(separate or {})
     for k in separate:
         if k not in {p.name for p in items}:
@@ -482,6 +486,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if not muscles:
         raise ValueError("no pose contracts any edge enough to carry a muscle: nothing to route (poses: "
                          + ", ".join(p.name for p in items) + ")")
+    if dopt.get("anchor_radius") is None and ropt["fabrication"] is not False:
+        # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
+        dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, ropt["fabrication"].for_body(mesh))
 
     t1 = time.perf_counter()
     P, m = len(items), len(muscles)

@@ -37,6 +37,16 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
 
+Channels inside the body (``fabrication``, :class:`~mdsr_opt.synthesis.fabrication.Fabrication`): a rope
+runs in a moulded channel with a wall around it, so only edges whose two nodes lie at least
+``channel_diameter / 2 + wall`` (and 2 % of the body's diameter) inside the outline and every hole can carry
+one. The search runs on those edges only, rather than offsetting routes inward or refining a band along the
+boundary: the rule is then exact on the mesh (every rope node has its clearance, on the very nodes the
+design and the fabrication files use), costs nothing, and changes no node; a mesh with no such edge is
+refused with the mean edge length and the channel and wall that would work. The routed ropes are then fitted
+to their end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of
+``result.notes``. ``fabrication=False`` is the search alone, on every edge.
+
 A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
 part of a muscle, neither as a seed nor by growth. A target that only stretches the body, contracts
 nothing by more than ``min_contraction``, or equals the rest shape (every edge length within a relative
@@ -93,6 +103,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import replace
 
 import networkx as nx
 import numpy as np
@@ -103,6 +114,8 @@ from ..body.checks import check_mesh, check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..plot.style import muscle_name
+from .fabrication import MIN_INSET_FRACTION, Fabrication, body_depth, boundary_distance, check_fabrication
+from .routing_fixtures import FixtureFit, fit_fixtures
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
@@ -113,6 +126,7 @@ __all__ = [
     "route_muscles",
     "RoutingWarning",
     "largest_turn",
+    "route_for_design",
 ]
 
 #: Weights are compared as integers on this grid (rigid-motion round-off is ~1e-16).
@@ -214,7 +228,8 @@ def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarr
 def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float = 4.0, K_h: float = 0.1,
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
                   min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
-                  symmetry: str | bool = "auto") -> RoutingResult:
+                  symmetry: str | bool = "auto", fabrication: Fabrication | dict | bool | None = None
+                  ) -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
     Parameters
@@ -255,6 +270,15 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
         mirrored edges contract alike (within ``1e-6 * max|w|``). ``True`` requires that and raises
         otherwise; ``False`` never does it.
+    fabrication : Fabrication or dict of its fields, optional
+        The channel, wall and end fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`; default:
+        its defaults for this body). Ropes run only on edges whose two nodes lie at least
+        ``channel_diameter / 2 + wall`` (and 2 % of the body's diameter) inside the outline and every hole,
+        and the routed ropes are fitted to their end fixtures (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`:
+        ends moved inward, stubs and joined ropes dropped, fixtures shrunk), each step recorded in
+        ``result.notes``; ``result.fixture_radius`` is the fixture radius to design with (``anchor_radius``).
+        ``False``: the search alone, on every edge of the contraction graph (ropes may lie on the outline;
+        for studies of the search, not for a robot to build).
 
     Returns
     -------
@@ -268,7 +292,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         ``mesh`` is not a Mesh, a knob has the wrong type, or ``target`` is not numeric.
     ValueError
         ``target`` has the wrong shape, contains NaN/inf or inverts a triangle; a knob is out of range;
-        ``symmetry=True`` for a body or target that is not mirror-symmetric.
+        ``symmetry=True`` for a body or target that is not mirror-symmetric; a mesh too coarse to hold a
+        channel with its wall (no edge with both nodes far enough inside): the message gives the mean edge
+        length and the channel and wall that would work.
 
     Warns
     -----
@@ -315,6 +341,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                          f"got {seed_threshold}")
     if symmetry not in ("auto", True, False):
         raise ValueError(f"symmetry must be 'auto', True or False, got {symmetry!r}")
+    fab = check_fabrication(fabrication)
+    if fab is False:
+        fab, clearance, adm_edges = None, 0.0, None
+    else:
+        fab = fab.for_body(mesh)
+        clearance = fab.clearance(mesh)
+        adm_edges = _admissible_edges(mesh, fab, clearance)
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
                   seed_threshold=seed_threshold, symmetry=symmetry)
@@ -325,7 +358,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
     def empty(msg: str) -> RoutingResult:
         warnings.warn(msg, RoutingWarning, stacklevel=3)
-        return RoutingResult((), (), graph, (), 0, params)
+        return RoutingResult((), (), graph, (), 0, params, fabrication=fab,
+                             fixture_radius=None if fab is None else fab.fixture_radius)
 
     w_abs = float(np.abs(w).max())
     if w_abs <= _REST_RTOL:
@@ -343,9 +377,14 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         wq = (wq + wq[reflection.edge_map]) // 2
     floor_q = int(round(min_contraction / _QUANTUM))
     turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
-    router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
+    router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection, adm_edges)
     if not router.feasible.any():
         w_top = float(w.max())
+        if fab is not None and (wq > floor_q).any():
+            return empty(f"no edge at least {clearance:.4g} inside the outline and the holes (the channel's "
+                         f"half width {0.5 * fab.channel_diameter:.4g} plus its wall {fab.wall:.4g}, at least "
+                         f"{MIN_INSET_FRACTION:.0%} of the body's size) contracts by more than min_contraction="
+                         f"{min_contraction:g}; no muscles routed")
         if w_top <= _REST_RTOL:
             return empty(f"no edge contracts (largest relative stretch {-float(w.min()):.3g}): the "
                          "target only stretches the body and a cable cannot push; no muscles routed")
@@ -375,6 +414,23 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         strength = sum(router.wql[k] * l0[k] for k in ks)
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, U.uid])
     found.sort(key=lambda t: t[:3])
+    if fab is None:
+        fit = FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ())
+    else:
+        fit = fit_fixtures(mesh, [f[3] for f in found], fab)
+    for i, why in fit.dropped:
+        L = float(sum(l0[k] for k in found[i][4]))
+        dropped.append(DroppedUnit(tuple(found[i][3]), L, f"dropped: {why}"))
+    refit = []
+    for i, path in fit.kept:
+        path = list(path)
+        if tuple(router.XL[path[-1]]) < tuple(router.XL[path[0]]):
+            path.reverse()
+        ks = [router.edge_id(a, b) for a, b in zip(path[:-1], path[1:])]
+        strength = sum(router.wql[k] * l0[k] for k in ks)
+        refit.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, found[i][5]])
+    found = sorted(refit, key=lambda t: t[:3])
+    extra = dict(fabrication=fab, fixture_radius=fit.radius, notes=fit.notes)
     if max_muscles is not None:
         kept, taken = [], set()
         for f in found:
@@ -393,11 +449,16 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         found = sorted(kept, key=lambda t: t[:3])
     seed_edges = tuple((int(E[k, 0]), int(E[k, 1])) for k in seeds)
     if not found:
-        warnings.warn(f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length="
-                      f"{min_length:.4g}; no muscles routed (lower min_length, K_a or K_b)", RoutingWarning,
-                      stacklevel=2)
+        inside = "" if fab is None else (
+            f"; the ropes lie at least {clearance:.4g} inside the body, and on a mesh this coarse (mean edge length "
+            f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
+        why = (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
+               f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
+               "no routed rope keeps room for its end fixtures: " + "; ".join(fit.notes)
+               + " (give a smaller fixture_radius or min_fixture_radius, or a finer mesh)")
+        warnings.warn(why, RoutingWarning, stacklevel=2)
         return RoutingResult((), (), graph, seed_edges, len(units), params, tuple(dropped), reflection,
-                             len(regions))
+                             len(regions), **extra)
 
     muscles, stats = [], []
     for i, (_, _, _, path, ks, _) in enumerate(found):
@@ -411,7 +472,76 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                                  turning_angle_target=m.turning_angle(x),
                                  max_turn=largest_turn(mesh.points, path)))
     return RoutingResult(tuple(muscles), tuple(stats), graph, seed_edges, len(units), params, tuple(dropped),
-                         reflection, len(regions))
+                         reflection, len(regions), **extra)
+
+
+def _admissible_edges(mesh: Mesh, fab: Fabrication, clearance: float) -> np.ndarray:
+    """The edges a rope may run on: both nodes at least ``clearance`` inside the outline and every hole.
+
+    Only whole mesh edges far enough inside are used (no band refined, no route offset inward): the rope
+    then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
+    mesh -- every rope node has its clearance, which an offset route or a refined band would have to
+    re-establish after moving nodes. The price is a mesh fine enough to have edges inside; one that has none
+    is refused here, with the numbers that would work."""
+    dist = boundary_distance(mesh)
+    tol = 1e-12 * float(dist.max() if len(dist) else 0.0)
+    ok = dist >= clearance - tol
+    E = mesh.edges
+    adm = ok[E[:, 0]] & ok[E[:, 1]]
+    if adm.any():
+        return adm
+    from ..mechanics.anchors import body_size
+
+    D = body_size(mesh)
+    deepest = float(np.minimum(dist[E[:, 0]], dist[E[:, 1]]).max())
+    h = float(mesh.edge_lengths.mean())
+    R = body_depth(mesh)
+    inset = MIN_INSET_FRACTION * D
+    msg = (f"the mesh is too coarse to hold a channel with its wall: every rope node must lie at least "
+           f"{clearance:.4g} inside the outline and the holes (channel_diameter {fab.channel_diameter:.4g} / 2 + "
+           f"wall {fab.wall:.4g}, and at least {MIN_INSET_FRACTION:.0%} of the body's size, {inset:.4g}), but no "
+           f"mesh edge has both nodes that deep (the deepest edge: {deepest:.4g}; mean edge length {h:.4g}). ")
+    ways = []
+    if R > clearance:
+        ways.append(f"a finer mesh, mean edge length at most {(R - clearance) / 2:.3g} (the body is "
+                    f"{R:.4g} deep at its deepest point)")
+    if deepest >= inset:
+        ways.append(f"a smaller channel and wall: channel_diameter / 2 + wall <= {deepest:.4g} on this mesh")
+    if not ways:
+        ways.append(f"a thicker body: it is {R:.4g} deep at its deepest point, less than the "
+                    f"{MIN_INSET_FRACTION:.0%} inset {inset:.4g} plus an edge")
+    raise ValueError(msg + "Would work: " + "; or ".join(ways))
+
+
+def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
+    """:func:`route_muscles` for a design that must not fail on the routing's own choices: when no rope is kept
+    with the default ``K_a`` (4) -- none keeps room for its end fixtures, or every unit inside the body is a
+    fragment -- route again with ``K_a = 1`` (fewer, longer ropes), and say so first in ``result.notes``. A ``K_a`` the caller gave, or
+    ``fabrication=False``, is used as given. Warnings of the kept routing are re-emitted.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    >>> len(route_for_design(mesh, mesh.points * [0.8, 1.0])) >= 1
+    True
+    """
+    def attempt(opts):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            rr = route_muscles(mesh, target, **opts)
+        return rr, caught
+
+    rr, caught = attempt(options)
+    if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
+        again, caught2 = attempt(dict(options, K_a=1.0))
+        if len(again):
+            why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
+            note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
+            rr, caught = replace(again, notes=(note,) + again.notes), caught2
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return rr
 
 
 def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ import networkx as nx
 
 from ..body.muscles import Muscle
 from ..core.results import format_value, to_jsonable
+from .fabrication import Fabrication
 from .routing_symmetry import Reflection
 
 __all__ = ["MuscleStats", "DroppedUnit", "RoutingResult"]
@@ -112,6 +113,15 @@ class RoutingResult:
         The mirror symmetry the muscles were routed with (None: not symmetric, or switched off).
     n_regions : int
         Contracted regions that were seeded.
+    fabrication : Fabrication or None
+        The channel, wall and fixtures the ropes were routed for, every field set (None: a result saved
+        before routing knew them).
+    fixture_radius : float or None
+        The end fixtures' radius the ropes fit with: the ``anchor_radius`` to design with (smaller than
+        ``fabrication.fixture_radius`` when the fixtures were shrunk to keep ropes).
+    notes : tuple of str
+        The resolutions that made the ropes buildable (ends moved inward, ropes dropped and why, fixtures
+        shrunk), one sentence each (see :mod:`mdsr_opt.synthesis.routing_fixtures`).
     """
 
     muscles: tuple[Muscle, ...]
@@ -123,6 +133,9 @@ class RoutingResult:
     dropped: tuple = ()
     reflection: Reflection | None = None
     n_regions: int = 0
+    fabrication: Fabrication | None = None
+    fixture_radius: float | None = None
+    notes: tuple = ()
 
     def __iter__(self):
         return iter(self.muscles)
@@ -145,7 +158,9 @@ class RoutingResult:
         :func:`contraction_graph` rebuilds it from the mesh and the target)."""
         return to_jsonable({"muscles": list(self.muscles), "stats": [s.to_dict() for s in self.stats],
                             "seeds": list(self.seeds), "n_units": self.n_units, "params": dict(self.params),
-                            "dropped": [asdict(d) for d in self.dropped]})
+                            "dropped": [asdict(d) for d in self.dropped],
+                            "fabrication": None if self.fabrication is None else self.fabrication.to_dict(),
+                            "fixture_radius": self.fixture_radius, "notes": list(self.notes)})
 
     def table(self) -> str:
         """The stats as a plain-text table (one row per muscle)."""

@@ -54,7 +54,7 @@ class Router:
     """One routing run; all orderings use rest geometry, never node indices."""
 
     def __init__(self, mesh: Mesh, wq: np.ndarray, K_a: float, K_b: float, K_h: float, floor_q: int,
-                 ell: float, turn_limit: float, mirror=None):
+                 ell: float, turn_limit: float, mirror=None, admissible: np.ndarray | None = None):
         self.mesh = mesh
         self.X = mesh.points
         self.XL = mesh.points.tolist()
@@ -62,7 +62,8 @@ class Router:
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
         self.wql = self.wq.tolist()
-        self.feasible = self.wq > floor_q
+        # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
+        self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
         mid = 0.5 * (self.X[E[:, 0]] + self.X[E[:, 1]])
         self.midl = mid.tolist()

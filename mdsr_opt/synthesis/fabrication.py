@@ -1,0 +1,190 @@
+"""What a workshop can build: the rope's channel, the wall around it and the end fixtures (:class:`Fabrication`).
+
+A rope runs in a moulded channel of diameter ``channel_diameter`` with a ``wall`` of material around it, and
+ends on a fixture (a bead, a knot, a washer plate) of radius ``fixture_radius``. A rope node is admissible
+when it lies at least :meth:`Fabrication.clearance` inside the outline and every hole: half the channel plus
+the wall, and never less than :data:`MIN_INSET_FRACTION` (2 %) of the body's diameter; an end fixture fits
+when its disk of radius ``fixture_radius + wall`` lies inside the body. ``fixture_radius`` is what the
+design calls ``anchor_radius`` (the rigid end patch is the fixture). The routing may shrink the fixtures down
+to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`).
+
+Defaults: fractions of the body's size, not millimetres
+-------------------------------------------------------
+Every length is in the body's own unit. A field left None takes a default that is a fraction of the body's
+diameter ``D`` (:func:`~mdsr_opt.mechanics.anchors.body_size`): channel 1 % of ``D``, wall 1 %, fixture
+radius 4 % (:data:`~mdsr_opt.mechanics.anchors.ANCHOR_FRACTION`, the design's default ``anchor_radius``),
+smallest fixture 1.5 %. For the cast silicone bodies these tools are made for (50 to 200 mm across; 100 mm
+typical) that is a 1 mm core pin for a 0.3-0.5 mm braided line, a 1 mm wall, an 8 mm washer or bead and a
+3 mm knot at the smallest -- what a workshop uses. They are fractions and not millimetres converted to the
+scene's ``units`` because a scene's unit is often nominal: the library's bodies are 4 "mm" strips that
+stand for any size, and 1 mm channels would not fit in them at all, while a body given in metres or inches
+gets the same proportions. A workshop with its own parts gives them in the body's unit
+(``Fabrication(channel_diameter=1.2, wall=1.5, fixture_radius=3.0)`` for a body in mm, or the scene file's
+``[fabrication]`` table).
+
+Example
+-------
+>>> from mdsr_opt import Mesh
+>>> mesh = Mesh.rectangle(100.0, 60.0, 20, 12)               # a 100 x 60 mm plate (diameter 116.6 mm)
+>>> fab = Fabrication().for_body(mesh)
+>>> round(fab.channel_diameter, 3), round(fab.wall, 3), round(fab.fixture_radius, 3)
+(1.166, 1.166, 4.665)
+>>> round(Fabrication(channel_diameter=2.0, wall=2.0).clearance(mesh), 3)   # 2/2 + 2 = 3 > 2 % of 116.6
+3.0
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Mapping
+
+import numpy as np
+
+from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
+
+__all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
+           "boundary_distance", "body_depth", "check_fabrication"]
+
+#: Default channel diameter, as a fraction of the body's diameter.
+CHANNEL_FRACTION = 0.01
+#: Default wall around a channel or a fixture, as a fraction of the body's diameter.
+WALL_FRACTION = 0.01
+#: Default smallest fixture the routing may shrink an end to, as a fraction of the body's diameter.
+MIN_FIXTURE_FRACTION = 0.015
+#: Every rope node lies at least this fraction of the body's diameter inside the outline and the holes.
+MIN_INSET_FRACTION = 0.02
+
+
+@dataclass(frozen=True)
+class Fabrication:
+    """The channel, wall and end fixtures a workshop builds the robot with (lengths in the body's unit).
+
+    Parameters
+    ----------
+    channel_diameter : float, optional
+        Diameter of the moulded channel a rope runs in (>= 0); default 1 % of the body's diameter.
+    wall : float, optional
+        Least material around a channel and around a fixture (>= 0); default 1 % of the diameter.
+    fixture_radius : float, optional
+        Radius of the fixture (bead, knot, plate) at each rope end, which is the design's ``anchor_radius``
+        (>= 0); default 4 % of the diameter.
+    min_fixture_radius : float, optional
+        The smallest fixture the routing may shrink the ends to when the full size does not fit (>= 0, at
+        most ``fixture_radius``); default 1.5 % of the diameter, or ``fixture_radius`` if that is smaller.
+        Give ``min_fixture_radius = fixture_radius`` to forbid shrinking.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A field that is not a real number, negative or not finite (the message names it), or
+        ``min_fixture_radius > fixture_radius``.
+    """
+
+    channel_diameter: float | None = None
+    wall: float | None = None
+    fixture_radius: float | None = None
+    min_fixture_radius: float | None = None
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, numbers.Real):
+                raise TypeError(f"Fabrication: {f.name} must be a length (a real number), got {type(v).__name__}")
+            if not math.isfinite(float(v)) or float(v) < 0:
+                raise ValueError(f"Fabrication: {f.name} must be a finite length >= 0, got {v!r}")
+            object.__setattr__(self, f.name, float(v))
+        if (self.fixture_radius is not None and self.min_fixture_radius is not None
+                and self.min_fixture_radius > self.fixture_radius):
+            raise ValueError(f"Fabrication: min_fixture_radius {self.min_fixture_radius:g} is larger than "
+                             f"fixture_radius {self.fixture_radius:g}")
+
+    def for_body(self, mesh) -> "Fabrication":
+        """This spec with every field set: the defaults (fractions of ``mesh``'s diameter) for those left None.
+
+        Raises ``ValueError`` for a fixture at least half the body's size (it would hold most of it)."""
+        D = body_size(mesh)
+        r = ANCHOR_FRACTION * D if self.fixture_radius is None else self.fixture_radius
+        if r >= MAX_ANCHOR_FRACTION * D:
+            raise ValueError(f"Fabrication: fixture_radius {r:g} is at least half the body's size ({D:.3g}): a "
+                             "muscle's end fixture would hold most of the body")
+        r_min = min(r, MIN_FIXTURE_FRACTION * D) if self.min_fixture_radius is None else self.min_fixture_radius
+        return Fabrication(channel_diameter=CHANNEL_FRACTION * D if self.channel_diameter is None
+                           else self.channel_diameter, wall=WALL_FRACTION * D if self.wall is None else self.wall,
+                           fixture_radius=r, min_fixture_radius=r_min)
+
+    def clearance(self, mesh) -> float:
+        """How far inside the outline and the holes every rope node lies: ``channel_diameter / 2 + wall``, at
+        least :data:`MIN_INSET_FRACTION` of the body's diameter."""
+        f = self.for_body(mesh)
+        return max(0.5 * f.channel_diameter + f.wall, MIN_INSET_FRACTION * body_size(mesh))
+
+    def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict (None: the default)."""
+        return asdict(self)
+
+
+def check_fabrication(fabrication, anchor_radius=None) -> Fabrication | bool:
+    """``fabrication`` as a :class:`Fabrication`: one, a mapping of its fields (a scene file's
+    ``[fabrication]`` table), or None (all defaults); False (no fabrication: the routing search alone) is
+    returned as it is. ``anchor_radius``, when given, is the fixture radius if
+    the spec leaves it open; a spec that states another one is refused (the two name one thing)."""
+    if fabrication is False or isinstance(fabrication, np.bool_) and not fabrication:
+        return False  # the routing search alone (route_muscles), passed on as given
+    if fabrication is None:
+        fab = Fabrication()
+    elif isinstance(fabrication, Fabrication):
+        fab = fabrication
+    elif isinstance(fabrication, Mapping):
+        unknown = sorted(set(map(str, fabrication)) - {f.name for f in fields(Fabrication)})
+        if unknown:
+            raise ValueError(f"fabrication: unknown field(s) {', '.join(unknown)}; expected "
+                             f"{', '.join(f.name for f in fields(Fabrication))}")
+        fab = Fabrication(**dict(fabrication))
+    else:
+        raise TypeError(f"fabrication must be a Fabrication, a dict of its fields, None (the defaults) or False "
+                        f"(route_muscles: the search alone), got "
+                        f"{type(fabrication).__name__}")
+    if anchor_radius is not None:
+        if fab.fixture_radius is None:
+            fab = replace(fab, fixture_radius=float(anchor_radius))
+            if fab.min_fixture_radius is not None and fab.min_fixture_radius > fab.fixture_radius:
+                fab = replace(fab, min_fixture_radius=fab.fixture_radius)
+        elif not math.isclose(fab.fixture_radius, float(anchor_radius), rel_tol=1e-12, abs_tol=0.0):
+            raise ValueError(f"anchor_radius {float(anchor_radius):g} and fabrication.fixture_radius "
+                             f"{fab.fixture_radius:g} differ: they are one thing (the end fixture's radius); "
+                             "give one of them")
+    return fab
+
+
+def boundary_distance(mesh) -> np.ndarray:
+    """Each node's distance at rest from the body's boundary (the outline and every hole), read-only and cached
+    on the mesh; boundary nodes have 0."""
+    cache = mesh.__dict__
+    if "_boundary_distance" not in cache:
+        import shapely
+        from shapely.geometry import MultiLineString
+
+        P = mesh.points
+        rings = MultiLineString([np.vstack([P[lp], P[lp[:1]]]) for lp in mesh.boundary_loops])
+        d = shapely.distance(shapely.points(P), rings)
+        d[mesh.boundary_nodes] = 0.0
+        d.flags.writeable = False
+        cache["_boundary_distance"] = d
+    return cache["_boundary_distance"]
+
+
+def body_depth(mesh) -> float:
+    """The radius of the largest disk inside the body at rest (outline minus holes)."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    P = mesh.points
+    loops = mesh.boundary_loops
+    poly = Polygon(P[loops[0]], [P[lp] for lp in loops[1:]])
+    if not poly.is_valid:
+        poly = poly.buffer(0)
+    return float(shapely.maximum_inscribed_circle(poly, 1e-4 * body_size(mesh)).length)

@@ -1,0 +1,183 @@
+"""End fixtures that fit: the routed ropes made buildable with the fixture at each end (:func:`fit_fixtures`).
+
+The routing (:func:`~mdsr_opt.synthesis.routing.route_muscles`) lays ropes on nodes at least the channel's
+clearance inside the body (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.clearance`). Each rope then
+needs a fixture of radius ``r_f`` (its ``fixture_radius``, the design's ``anchor_radius``) at both ends, and
+the routing, not the user, chose the ropes, so it resolves every conflict itself instead of refusing the
+design. The resolutions, in order, each recorded as a sentence in the routing's ``notes``:
+
+1. **Fixtures inside.** An end whose fixture disk (radius ``r_f + wall``) would reach outside the outline or
+   into a hole is moved inward along its rope, node by node, to the first node with room; a rope with no
+   such node keeps no muscle.
+2. **Stubs.** A rope shorter than two fixture diameters (``4 r_f``), or whose free part (the rope outside its
+   two rigid end patches) is less than :data:`MIN_FREE_FRACTION` of it, is no muscle: its fixtures would
+   hold most of it, and a contraction of 0.6 (the design's ``a_max``) would have to shorten the free part
+   by more than itself.
+3. **Joined fixtures.** Fixtures of different ropes that overlap are one rigid part (they are merged, which
+   is the physical meaning of two ropes knotted to one plate). When such merging joins the two ends of one
+   rope, that rope could not contract: the weakest rope of the merged part is dropped (routed ropes come
+   strongest first), and the check runs again.
+4. **Shrinking.** When the steps above lose a rope at ``r_f`` but would keep more with the smallest
+   fixture ``min_fixture_radius``, the fixtures of all ropes shrink to the largest size (on a geometric
+   ladder of :data:`N_SHRINK_STEPS` sizes from ``r_f`` down to that minimum) that keeps as many. One size
+   holds for every end, since the design takes one ``anchor_radius``.
+
+Ropes that share an end node cannot occur (routing gives each node to one unit); ropes whose ends lie close
+are merged through their fixtures (step 3), not spliced into one rope.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..body.muscles import Muscle
+from ..mechanics.anchors import patch_groups
+from .fabrication import Fabrication, boundary_distance
+
+__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius"]
+
+#: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
+MIN_FREE_FRACTION = 2.0 / 3.0
+#: Fixture sizes tried between ``fixture_radius`` and ``min_fixture_radius`` when ropes would be lost.
+N_SHRINK_STEPS = 8
+
+
+@dataclass(frozen=True)
+class FixtureFit:
+    """The outcome of :func:`fit_fixtures`.
+
+    Attributes
+    ----------
+    kept : tuple of (int, tuple of int)
+        Per kept rope: its index among the input paths and its (possibly shortened) node path.
+    radius : float
+        The fixture radius the ropes fit with (``fixture_radius``, or smaller down to ``min_fixture_radius``).
+    notes : tuple of str
+        One sentence per resolution (an end moved inward, a rope dropped and why, the fixtures shrunk).
+    dropped : tuple of (int, str)
+        Per dropped rope: its input index and the reason.
+    """
+
+    kept: tuple
+    radius: float
+    notes: tuple
+    dropped: tuple
+
+
+def _where(P, path) -> str:
+    a, b = P[path[0]], P[path[-1]]
+    return f"the rope from ({a[0]:.4g}, {a[1]:.4g}) to ({b[0]:.4g}, {b[1]:.4g})"
+
+
+def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray) -> FixtureFit:
+    P = mesh.points
+    need = r + wall
+    notes, dropped, work = [], [], []
+    for i, p in enumerate(paths):
+        k, j = 0, len(p) - 1
+        while k < len(p) and dist[p[k]] < need:
+            k += 1
+        while j > k and dist[p[j]] < need:
+            j -= 1
+        if j - k < 1:
+            why = (f"no node of it lies {need:.4g} inside the body (fixture radius {r:.4g} + wall {wall:.4g}), "
+                   "so no end fixture fits")
+            dropped.append((i, why))
+            notes.append(f"{_where(P, p)} dropped: {why}")
+            continue
+        if k or j < len(p) - 1:
+            notes.append(f"{_where(P, p)}: ends moved inward by {k} and {len(p) - 1 - j} node(s) so that its "
+                         f"fixtures (radius {r:.4g} + wall {wall:.4g}) lie inside the body")
+        work.append((i, tuple(p[k:j + 1])))
+    while work:
+        mus = [Muscle(p) for _, p in work]
+        L = np.array([m.rest_length(mesh) for m in mus])
+        groups, joined = patch_groups(mesh, mus, r)
+        group_of = np.full(mesh.n_nodes, -1)
+        for gi, g in enumerate(groups):
+            group_of[g] = gi
+        free = np.empty(len(mus))
+        for c, m in enumerate(mus):
+            seg = m.segments
+            inside = (group_of[seg[:, 0]] >= 0) & (group_of[seg[:, 0]] == group_of[seg[:, 1]])
+            free[c] = m.segment_lengths(P)[~inside].sum() / L[c]
+        stub = [c for c in range(len(mus)) if L[c] < 4.0 * r or free[c] < MIN_FREE_FRACTION]
+        if stub:
+            c = stub[-1]  # the weakest first: dropping it may free another's fixtures
+            why = (f"too short for two fixtures of radius {r:.4g}: rest length {L[c]:.4g}, of which "
+                   f"{free[c]:.0%} lies outside its end fixtures (at least {4 * r:.4g} and "
+                   f"{MIN_FREE_FRACTION:.0%} needed)")
+        elif joined:
+            c0 = joined[0]
+            g = group_of[work[c0][1][0]]
+            members = [c for c, (_, p) in enumerate(work) if group_of[p[0]] == g or group_of[p[-1]] == g]
+            c = max(members)
+            why = ("its two fixtures are joined through the fixtures of other ropes (one rigid part), so it "
+                   "could not contract" if c == c0 else
+                   f"its fixture joins the two fixtures of {_where(P, work[c0][1])} through other fixtures "
+                   "(one rigid part), which could then not contract; the weaker rope is dropped")
+        else:
+            break
+        i, p = work.pop(c)
+        dropped.append((i, why))
+        notes.append(f"{_where(P, p)} dropped: {why}")
+    return FixtureFit(tuple(work), float(r), tuple(notes), tuple(dropped))
+
+
+def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
+    """Make routed ropes buildable with their end fixtures (see the module docstring).
+
+    Parameters
+    ----------
+    mesh : Mesh
+    paths : sequence of node sequences
+        The routed ropes, strongest first.
+    fabrication : Fabrication
+        With every field set (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`).
+
+    Returns
+    -------
+    FixtureFit
+    """
+    dist = boundary_distance(mesh)
+    paths = [list(p) for p in paths]
+    r0, r_min, wall = fabrication.fixture_radius, fabrication.min_fixture_radius, fabrication.wall
+    fit = _fit_at(mesh, paths, r0, wall, dist)
+    if len(fit.kept) == len(paths) or r_min >= r0:
+        return fit
+    low = _fit_at(mesh, paths, r_min, wall, dist)
+    if len(low.kept) <= len(fit.kept):
+        return fit
+    for k in range(1, N_SHRINK_STEPS + 1):
+        r = r0 * (r_min / r0) ** (k / N_SHRINK_STEPS) if r_min > 0 else r0 * (1.0 - k / N_SHRINK_STEPS)
+        trial = low if k == N_SHRINK_STEPS else _fit_at(mesh, paths, r, wall, dist)
+        if len(trial.kept) >= len(low.kept):
+            note = (f"fixtures shrunk from radius {r0:.4g} to {trial.radius:.4g} (the smallest allowed is "
+                    f"{r_min:.4g}) so that {len(trial.kept) - len(fit.kept)} more rope(s) keep room for them")
+            return FixtureFit(trial.kept, trial.radius, (note,) + trial.notes, trial.dropped)
+    return low  # not reached: the ladder ends at r_min
+
+
+def common_fixture_radius(mesh, muscles, fabrication: Fabrication) -> float:
+    """One fixture radius for ropes fitted apart (the layouts of several cases driven together, as in an
+    animation): the largest size on the ladder from ``fixture_radius`` down to ``min_fixture_radius`` at which
+    every rope keeps both fixtures as it is (no end moved, none dropped); ``min_fixture_radius`` if none.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    muscles : sequence of Muscle or node sequences
+    fabrication : Fabrication
+        With every field set (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`).
+    """
+    dist = boundary_distance(mesh)
+    paths = [list(getattr(m, "nodes", m)) for m in muscles]
+    r0, r_min = fabrication.fixture_radius, fabrication.min_fixture_radius
+    for k in range(N_SHRINK_STEPS + 1):
+        r = r0 * (r_min / r0) ** (k / N_SHRINK_STEPS) if r_min > 0 else r0 * (1.0 - k / N_SHRINK_STEPS)
+        fit = _fit_at(mesh, paths, r, fabrication.wall, dist)
+        if not fit.dropped and not fit.notes:
+            return float(r)
+    return float(r_min)
