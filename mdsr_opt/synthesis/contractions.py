@@ -160,6 +160,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     units = Units(mesh, material)
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, units.state_in(y), w, muscle_model, stiffness,
                          a_max, units.to_unit(anchor_radius))
+    # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
+    a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units)
@@ -247,7 +249,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # that one (the rope then just reaches its length, at zero tension), as the flattened design's
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
-        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
+        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"

@@ -5,7 +5,7 @@ Variables ``z = [x (2n), a (m), kappa (nc)]``, parameters ``[y (2n), e (n), p0, 
     min   so sum_i e_i |x_i - y_i|^2
     s.t.  sc grad_x E(x, p0 + B a) + J(x)' kappa = 0   on the free coordinates
           C(x) + [a; 0] = 0                            (rope strains, rigid end patches)
-          0 <= a <= a_max,  tension >= 0 (cable)
+          0 <= a <= a_upper,  tension >= 0 (cable)   (a_upper: a_max or the free-length cap)
 
 **The state's rigid pose is free** when the energy does not change under rigid motion (Neo-Hookean; the
 springs and the muscle constraints never do): the objective alone then places ``x`` in its best
@@ -511,7 +511,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         if blk.rope:
             ach = prob.achieved(x0.reshape(-1, 2))
             slack = ach < a_start - 1e-9
-            a_start[slack] = np.clip(ach[slack], 0.0, prob.a_max)
+            a_start[slack] = np.clip(ach[slack], 0.0, prob.a_upper[slack])
             kap0[:m] = np.maximum(kap0[:m], 0.0)
     else:
         kap0 = np.zeros(blk.nc)
@@ -531,7 +531,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         lbz[prob.gauge] = prob.X[prob.gauge]
         ubz[prob.gauge] = prob.X[prob.gauge]
     lbz[2 * n:2 * n + m] = 0.0
-    ubz[2 * n:2 * n + m] = prob.a_max
+    ubz[2 * n:2 * n + m] = prob.a_upper
     if blk.rope:  # a rope only pulls: tension >= 0
         lbz[ik:ik + m] = 0.0
     par = np.concatenate([y.reshape(-1), prob.w, prob.p0, [so, sc]])
@@ -567,7 +567,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         if gres > GAUGE_RTOL:
             ok = False
             status += f"; rejected: the gauge coordinates are not in equilibrium (residual {gres:.3g})"
-    out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_max), "success": ok,
+    out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_upper), "success": ok,
            "kappa": z[ik:], "status": status, "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt

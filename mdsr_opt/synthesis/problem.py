@@ -59,6 +59,9 @@ class DesignProblem:
         self.gauge = list(gauge_coordinates(mesh))
         self.fixed[self.gauge] = True
         self.free = ~self.fixed
+        #: per muscle the largest contraction the design may give: ``a_max``, or less where the end patches
+        #: hold most of the rope (:func:`contraction_caps`)
+        self.a_upper = contraction_caps(mesh, material, muscles, stiffness, self.anchor_radius, a_max)
         self.X = mesh.points.reshape(-1).copy()
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
@@ -182,6 +185,25 @@ class DesignProblem:
         K = spring_stiffness(self.mesh, self.material, self.stiffness)
         _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
         return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+#: the largest share of its free length (the part outside its two end patches) by which a design may shorten
+#: a rope: a contraction ``a`` of a rope whose patches hold the share ``1 - 1/f`` of its rest length
+#: shortens the free part by ``a f``, and at ``a f -> 1`` the free part and the silicone around it are
+#: crushed to nothing. Without the cap a short rope between two patches (0.41 long, patches of radius
+#: 0.165: ``f = 4.3``) drove the flattened design of a 4 x 1 strip at 4.3k nodes to ``a f = 0.94`` through
+#: iterates that inverted elements (500 IPOPT iterations, no convergence); a rope in the middle of a body
+#: (``f`` about 1) is never held by it.
+FREE_SHORTENING_MAX = 0.5
+
+
+def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max) -> np.ndarray:
+    """Per muscle the upper bound of its contraction in a design: ``min(a_max, FREE_SHORTENING_MAX / f)``
+    with ``f = L0 / L0_free`` the rope's rest length over its length outside its end patches
+    (:func:`~mdsr_opt.mechanics.constraints.spring_segments`; a rope on a rigid group's edges only is
+    refused there)."""
+    _ks, fac = spring_segments(mesh, material, muscles, stiffness, anchor_radius)
+    return np.minimum(float(a_max), FREE_SHORTENING_MAX / np.asarray(fac, dtype=float))
 
 
 def _nonzeros(M: ca.SX) -> ca.SX:
