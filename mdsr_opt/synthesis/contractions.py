@@ -18,7 +18,7 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
 from ..mechanics.loadsteps import upright
 from ..mechanics.units import Units
-from .nlp import run_flattened
+from .nlp import ACCEPTABLE, run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, report_muscles
 from .rivals import run_derivative_free, run_nested
@@ -50,7 +50,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     method : {"flattened", "nested", "derivative-free"}
         See the module docstring.
     a_max : float, default 0.6
-        Upper bound on every contraction, in ``(0, 1)``.
+        Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
+        one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part shortens by at most half.
     initial_guess : (m,) array, optional
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.
@@ -98,7 +99,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     verify : bool
         Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only, and
         nothing checks that the design's state is stable or reached from rest: the warm start from the
-        target is not checked for stability either).
+        target is not checked for stability either). A flattened design that IPOPT ends at its acceptable
+        tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
 
@@ -254,6 +256,9 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
     res = _in_units(res, units)
+    if res.success and not verify and status.startswith(ACCEPTABLE):
+        res.success = False
+        res.status += "; not verified (verify=False), so IPOPT's acceptable exit is not a success"
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL))
