@@ -34,9 +34,13 @@ _B = _bench()
 MAT, driving, strip = _B.MAT, _B.driving, _B.strip
 
 
-def _design(ny: int):
+#: the issue's turn and shift of the right end, and two others of the same kind (the class, not the example)
+DRAGS = [(0.6, (-0.6, 1.0)), (-0.5, (-0.5, -0.8)), (1.0, (-1.0, 1.2))]
+
+
+def _design(ny: int, angle: float = 0.6, shift=(-0.6, 1.0)):
     mesh = strip(ny)
-    anchors, drags = driving(mesh)
+    anchors, drags = driving(mesh, angle, shift)
     return mesh, design_pipeline(mesh, MAT, anchors, drags)
 
 
@@ -53,8 +57,9 @@ def _check(mesh, out):
     assert np.all(d.contractions <= d.a_max + 1e-12)
 
 
-def test_strip_designs_at_2k_nodes():
-    mesh, out = _design(22)  # 89 x 23 nodes
+@pytest.mark.parametrize("angle, shift", DRAGS)
+def test_strip_designs_at_2k_nodes(angle, shift):
+    mesh, out = _design(22, angle, shift)  # 89 x 23 nodes
     _check(mesh, out)
     assert len(out.muscles) == 3
 
@@ -98,8 +103,8 @@ def test_acceptable_exit_with_passed_verification_is_a_success():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("ny", [44, 64])  # 8k and 16.7k nodes
-def test_strip_designs_on_fine_meshes(ny):
-    mesh, out = _design(ny)
+@pytest.mark.parametrize("ny, angle, shift", [(44, *DRAGS[0]), (44, *DRAGS[2]), (64, *DRAGS[0])])  # 8k, 16.7k nodes
+def test_strip_designs_on_fine_meshes(ny, angle, shift):
+    mesh, out = _design(ny, angle, shift)
     _check(mesh, out)
     assert len(out.muscles) <= 4

@@ -40,12 +40,13 @@ def strip(ny: int, jitter: float = 0.2, seed: int = 0) -> Mesh:
     return Mesh(p, mesh.triangles)
 
 
-def driving(mesh: Mesh):
-    """``(anchors, drags)``: the left end clamped, the right end turned and moved rigidly."""
+def driving(mesh: Mesh, angle: float = ANGLE, shift=SHIFT):
+    """``(anchors, drags)``: the left end clamped, the right end turned by ``angle`` about its centre and
+    moved by ``shift``, rigidly."""
     p = mesh.points
     left = np.flatnonzero(p[:, 0] < 1e-12)
     right = np.flatnonzero(p[:, 0] > LENGTH - 1e-12)
-    return left, RigidDrag(right, ANGLE, (LENGTH, WIDTH / 2), shift=SHIFT)
+    return left, RigidDrag(right, angle, (LENGTH, WIDTH / 2), shift=shift)
 
 
 def newton_time(ny: int, backend: str) -> tuple[float, bool, np.ndarray]:
