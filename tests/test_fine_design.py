@@ -55,6 +55,11 @@ def _check(mesh, out):
     _ks, fac = spring_segments(mesh, MAT, list(out.muscles), d.stiffness, d.anchor_radius)
     assert np.all(d.contractions * fac <= max(d.a_max, FREE_SHORTENING_MAX) + 1e-9)
     assert np.all(d.contractions <= d.a_max + 1e-12)
+    # a contraction held at its cap is named in the status
+    at_cap = np.flatnonzero((d.contractions * fac >= max(d.a_max, FREE_SHORTENING_MAX) - 1e-3 * fac)
+                            & (d.contractions < d.a_max - 1e-3))
+    for c in at_cap:
+        assert f"muscle {c} a = " in d.status
 
 
 @pytest.mark.parametrize("angle, shift", DRAGS)
@@ -62,6 +67,8 @@ def test_strip_designs_at_2k_nodes(angle, shift):
     mesh, out = _design(22, angle, shift)  # 89 x 23 nodes
     _check(mesh, out)
     assert len(out.muscles) == 3
+    if angle == 0.6:  # the short rope at the dragged corner would crush its free part: held at its cap
+        assert "at the free-length cap" in out.design.status
 
 
 def test_routing_does_not_multiply_muscles_under_refinement():

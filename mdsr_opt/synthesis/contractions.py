@@ -253,6 +253,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
+    capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
+    if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
+        res.status += "; at the free-length cap (their end patches hold most of the rope, contraction_caps): " \
+                      + ", ".join(f"muscle {int(c)} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
