@@ -357,6 +357,14 @@ WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10,
 MUMPS_ORDERING = 0
 
 
+#: IPOPT's relaxation of the variable bounds (its default 1e-8 lets a contraction end 1e-8 beyond its bound):
+#: none, so a contraction at ``a_max``, at its cap or at 0 is the one the ropes' lengths were solved for.
+#: With the default, clipping it back left the rope 1e-8 L0 off its target, which the forward solver's
+#: measure reads as a slack rope (scaled KKT residual 1e-3), and the design's state took a Newton polish
+#: (strip of bench_fine_design, 16.7k nodes, two ropes at their caps: 1.2 s of 10 s CPU; same iterations)
+BOUND_RELAX = 0.0
+
+
 #: flattened-design solvers kept per mesh (one per muscles, model, Hessian, derivatives and IPOPT options)
 DESIGN_SOLVERS_KEPT = 8
 
@@ -483,7 +491,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
                    derivatives="numeric"):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
     ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone",
-                  "mumps_pivot_order": MUMPS_ORDERING}
+                  "mumps_pivot_order": MUMPS_ORDERING, "bound_relax_factor": BOUND_RELAX}
     if warm_start:
         ipopt_opts.update(WARM_START_OPTIONS)
     ipopt_opts.update(ipopt_options or {})
