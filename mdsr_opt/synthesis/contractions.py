@@ -19,7 +19,7 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
 from ..mechanics.loadsteps import upright
 from ..mechanics.units import Units
-from .nlp import run_flattened
+from .nlp import ACCEPTABLE, run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
@@ -51,7 +51,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     method : {"flattened", "nested", "derivative-free"}
         See the module docstring.
     a_max : float, default 0.6
-        Upper bound on every contraction, in ``(0, 1)``.
+        Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
+        one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
+        shortens by at most ``max(a_max, 0.6)``.
     initial_guess : (m,) array, optional
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.
@@ -99,7 +101,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     verify : bool
         Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only, and
         nothing checks that the design's state is stable or reached from rest: the warm start from the
-        target is not checked for stability either).
+        target is not checked for stability either). A flattened design that IPOPT ends at its acceptable
+        tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
 
@@ -163,6 +166,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     units = Units(mesh, material)
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, units.state_in(y), w, muscle_model, stiffness,
                          a_max, units.to_unit(anchor_radius))
+    # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
+    a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units)
@@ -262,11 +267,18 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # that one (the rope then just reaches its length, at zero tension), as the flattened design's
         # polish does, rather than wherever the outer search stopped on the flat side
         sl = res.slack & np.isfinite(res.achieved)
-        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_max)
+        res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
+    capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
+    if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
+        res.status += "; at the free-length cap (their end patches hold most of the rope, contraction_caps): " \
+                      + ", ".join(f"muscle {int(c)} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
     res = _in_units(res, units)
+    if res.success and not verify and status.startswith(ACCEPTABLE):
+        res.success = False
+        res.status += "; not verified (verify=False), so IPOPT's acceptable exit is not a success"
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL))

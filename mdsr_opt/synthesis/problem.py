@@ -59,6 +59,9 @@ class DesignProblem:
         self.gauge = list(gauge_coordinates(mesh))
         self.fixed[self.gauge] = True
         self.free = ~self.fixed
+        #: per muscle the largest contraction the design may give: ``a_max``, or less where the end patches
+        #: hold most of the rope (:func:`contraction_caps`)
+        self.a_upper = contraction_caps(mesh, material, muscles, stiffness, self.anchor_radius, a_max)
         self.X = mesh.points.reshape(-1).copy()
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
@@ -182,6 +185,35 @@ class DesignProblem:
         K = spring_stiffness(self.mesh, self.material, self.stiffness)
         _ks, a_fac = spring_segments(self.mesh, self.material, self.muscles, self.stiffness, self.anchor_radius)
         return K * a_fac * (np.asarray(a, dtype=float) - self.achieved(x2))
+
+
+#: the largest share of its free length (the part outside its two end patches) by which a design may shorten
+#: a rope when ``a_max`` is smaller: a contraction ``a`` of a rope whose patches hold the share ``1 - 1/f``
+#: of its rest length shortens the free part by ``a f``, and at ``a f -> 1`` the free part and the silicone
+#: around it are crushed to nothing. Without a cap a short rope between two patches (0.41 long, patches of
+#: radius 0.165: ``f = 4.3``) drove the flattened design of a 4 x 1 strip at 4.3k nodes through iterates
+#: that inverted elements (500 IPOPT iterations, no convergence), and at 8k nodes to ``a f = 0.94``.
+FREE_SHORTENING_MAX = 0.6
+
+
+def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max) -> np.ndarray:
+    """Per muscle the upper bound of its contraction in a design, ``min(a_max, s / f)``: no rope's free part
+    shortens by more than ``s = max(a_max, FREE_SHORTENING_MAX)``, ``f = L0 / L0_free`` the rope's rest
+    length over its length outside its end patches
+    (:func:`~mdsr_opt.mechanics.constraints.spring_segments`). A rope without patch segments (``f = 1``)
+    keeps ``a_max``.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh, Muscle, NeoHookean
+    >>> mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    >>> long, short = Muscle(range(0, 33)), Muscle(range(265, 270))  # 4 and 0.5 long, bottom and top edge
+    >>> contraction_caps(mesh, NeoHookean(1.0, 0.3), [long, short], 10.0, 0.125, 0.6).round(4).tolist()
+    [0.5625, 0.3]
+    """
+    _ks, fac = spring_segments(mesh, material, muscles, stiffness, anchor_radius)
+    s = max(float(a_max), FREE_SHORTENING_MAX)
+    return np.minimum(float(a_max), s / np.asarray(fac, dtype=float))
 
 
 def _nonzeros(M: ca.SX) -> ca.SX:

@@ -24,7 +24,7 @@ class _Outer:
         self.n_eval = 0
 
     def _eval(self, a):
-        a = np.clip(np.asarray(a, dtype=float), 0.0, self.prob.a_max)
+        a = np.clip(np.asarray(a, dtype=float), 0.0, self.prob.a_upper)
         x, ok, status = self.fwd.solve(a)
         self.n_eval += 1
         if not ok:
@@ -94,7 +94,7 @@ def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
     opts.update(outer_options or {})
     try:
         res = minimize(obj.value_and_grad, a0, jac=True, method="L-BFGS-B",
-                       bounds=[(0.0, prob.a_max)] * prob.m, options=opts)
+                       bounds=[(0.0, u) for u in prob.a_upper], options=opts)
     except _ForwardFailed as exc:
         return obj, False, f"forward solve failed: {exc}", obj.n_eval
     return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
@@ -104,7 +104,7 @@ def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, cloc
     from scipy.optimize import minimize
 
     obj = _Outer(prob, fwd, clock)
-    bounds = [(0.0, prob.a_max)] * prob.m
+    bounds = [(0.0, u) for u in prob.a_upper]
     if outer == "nelder-mead":
         opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": tol ** 2, "adaptive": prob.m > 2}
         opts.update(outer_options or {})

@@ -131,13 +131,17 @@ class Router:
             out.setdefault(int(lab[E[idx[j], 0]]), []).append(int(idx[j]))
         return list(out.values())  # dicts keep insertion order: the region of the strongest edge first
 
-    def seed_units(self, regions: list[list[int]], n_seeds: int) -> list[int]:
+    def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
         """First units, region by region: the region's ``n_seeds`` most contracted edges are its seeds; each
         connected component of them is cut into simple paths, straightest continuation first and every
-        turn within the tortuosity limit; in symmetric mode each path comes with its mirror image.
-        Returns the seed edges, region by region, strongest first."""
+        turn within the tortuosity limit; in symmetric mode each path comes with its mirror image. A path
+        is started only from a seed edge farther than ``spacing`` (a length) from every node of the units
+        made before it: on a fine mesh the most contracted edges of a region lie in several parallel rows
+        a cell apart, which would otherwise each become a muscle. Returns the seed edges, region by region,
+        strongest first."""
         E = self.mesh.edges
         seeds = []
+        taken = np.zeros(self.mesh.n_nodes, dtype=bool)  # nodes of the units made so far
         for edges in regions:
             top = edges[:n_seeds]
             seeds += top
@@ -153,6 +157,9 @@ class Router:
                     a, b = (int(v) for v in E[k0])
                     if k0 not in pool or self.owner[a] != -1 or self.owner[b] != -1:
                         continue
+                    if spacing > 0 and taken.any() and \
+                            np.min(np.linalg.norm(self.X[taken] - self.midl[k0], axis=1)) < spacing:
+                        continue
                     path = self._extract_path(k0, pool)
                     if not path:
                         continue
@@ -163,6 +170,7 @@ class Router:
                             paths.append(mirror)
                     for p in paths:
                         self._new_unit(p)
+                        taken[p] = True
                         pool.difference_update(self.edge_id(u, v) for u, v in zip(p[:-1], p[1:]))
                     if len(paths) == 2:
                         self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1

@@ -1,0 +1,103 @@
+"""Benchmark: the design pipeline on fine meshes, against a Newton solve of the target (issue 32, item 4).
+
+The case: a 4 x 1 strip (structured cells, interior nodes jittered), its left end clamped, its right end
+turned by 0.6 rad about its centre and moved by (-0.6, 1.0). The target is that external-driving
+equilibrium; no muscle layout reaches it exactly. ``design_pipeline`` with its defaults routes the muscles
+and designs their contractions. Beside it, in the same process, the target itself is solved by the
+project's Newton backend and by ``solve_external``'s default (IPOPT); the ratio is the pipeline's time over
+the faster of the two, in wall time and in process CPU time (single-threaded BLAS: on a shared machine the
+CPU time is nearer the quiet wall time).
+
+Run:  python tests/benchmarks/bench_fine_design.py                     # 2.4k, 8k, 16k nodes
+      python tests/benchmarks/bench_fine_design.py --ny 24 32 36 44 64 70
+      python tests/benchmarks/bench_fine_design.py --ny 32 --ipopt-print 5   # the design NLP's log
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external
+from mdsr_opt.synthesis.pipeline import design_pipeline
+
+MAT = NeoHookean(1.0, 0.3)
+LENGTH, WIDTH = 4.0, 1.0
+ANGLE, SHIFT = 0.6, (-0.6, 1.0)
+
+
+def strip(ny: int, jitter: float = 0.2, seed: int = 0) -> Mesh:
+    """The 4 x 1 strip with ``4 ny`` x ``ny`` cells; interior nodes moved by up to ``jitter`` cell sizes."""
+    nx = 4 * ny
+    mesh = Mesh.rectangle(LENGTH, WIDTH, nx, ny)
+    p = mesh.points.copy()
+    inside = (p[:, 0] > 1e-12) & (p[:, 0] < LENGTH - 1e-12) & (p[:, 1] > 1e-12) & (p[:, 1] < WIDTH - 1e-12)
+    rng = np.random.default_rng(seed)
+    p[inside] += rng.uniform(-jitter, jitter, size=(int(inside.sum()), 2)) * (WIDTH / ny)
+    return Mesh(p, mesh.triangles)
+
+
+def driving(mesh: Mesh, angle: float = ANGLE, shift=SHIFT):
+    """``(anchors, drags)``: the left end clamped, the right end turned by ``angle`` about its centre and
+    moved by ``shift``, rigidly."""
+    p = mesh.points
+    left = np.flatnonzero(p[:, 0] < 1e-12)
+    right = np.flatnonzero(p[:, 0] > LENGTH - 1e-12)
+    return left, RigidDrag(right, angle, (LENGTH, WIDTH / 2), shift=shift)
+
+
+def newton_time(ny: int, backend: str) -> tuple[float, bool, np.ndarray]:
+    """Seconds of ``solve_external`` of the target by ``backend`` on a new mesh (its model built too)."""
+    mesh = strip(ny)
+    anchors, drags = driving(mesh)
+    t0, c0 = time.perf_counter(), time.process_time()
+    ext = solve_external(mesh, MAT, anchors, drags, backend=backend)
+    return (time.perf_counter() - t0, time.process_time() - c0), bool(ext.success), ext.x
+
+
+def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
+    t_newton, ok_n, xn = newton_time(ny, "newton")
+    t_ipopt, ok_i, xi = newton_time(ny, "ipopt")
+    mesh = strip(ny)  # a new Mesh: nothing cached from the target solves
+    anchors, drags = driving(mesh)
+    opts = dict(design_options)
+    if ipopt_print:
+        opts["options"] = {"print_level": ipopt_print}
+    t0, c0 = time.perf_counter(), time.process_time()
+    out = design_pipeline(mesh, MAT, anchors, drags, **opts)
+    t_design, c_design = time.perf_counter() - t0, time.process_time() - c0
+    d = out.design
+    ok = [t for t, good in ((t_newton, ok_n), (t_ipopt, ok_i)) if good]
+    ref = min(ok) if ok else (math.nan, math.nan)
+    cref = min(c for _, c in ok) if ok else math.nan
+    return {"ny": ny, "nodes": mesh.n_nodes, "design_s": t_design, "newton_s": t_newton[0], "ipopt_s": t_ipopt[0],
+            "ratio": t_design / ref[0], "design_cpu": c_design, "newton_cpu": t_newton[1], "ipopt_cpu": t_ipopt[1],
+            "cpu_ratio": c_design / cref, "diff_rel": d.difference / mesh.size, "success": out.success,
+            "status": d.status, "iters": d.iterations, "muscles": [len(mu.nodes) for mu in out.muscles],
+            "times": out.times, "verified": None if d.verification is None else d.verification.passed,
+            "newton_agree": float(np.abs(xn - xi).max()) if ok_n and ok_i else math.nan}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--ny", type=int, nargs="+", default=[24, 44, 64], help="cells across (nodes ~ 4 ny^2)")
+    ap.add_argument("--ipopt-print", type=int, default=0)
+    args = ap.parse_args(argv)
+    head = f"{'nodes':>6} {'design s':>9} {'newton s':>9} {'ipopt s':>8} {'ratio':>6} {'cpu ratio':>9} " \
+           f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
+    print(head, flush=True)
+    for ny in args.ny:
+        r = run(ny, args.ipopt_print)
+        print(f"{r['nodes']:6d} {r['design_s']:9.2f} {r['newton_s']:9.2f} {r['ipopt_s']:8.2f} {r['ratio']:6.2f} "
+              f"{r['cpu_ratio']:9.2f} {r['diff_rel']:9.4f} {str(r['success']):>5} {r['iters']:5d}  {r['muscles']} {r['status']}",
+              flush=True)
+        print(f"{'':6} stages {({k: round(v, 2) for k, v in r['times'].items()})}, verified {r['verified']}; "
+              f"CPU s: design {r['design_cpu']:.2f}, newton {r['newton_cpu']:.2f}, ipopt {r['ipopt_cpu']:.2f}",
+              flush=True)
+
+
+if __name__ == "__main__":
+    main()
