@@ -196,7 +196,10 @@ def test_design_poses_refuses_a_failed_target():
         design_contractions(mesh, MAT, [Muscle(range(1, 16))], failed)
     ok = solve_internal(mesh, MAT, [Muscle(range(1, 16))], [0.1])
     res = design_poses(mesh, MAT, {"up": ok}, compare=False)  # a successful solve's result is its state
-    assert res.all_success and res.differences[0] < 1e-6
+    same = design_poses(mesh, MAT, {"up": ok.x}, compare=False)
+    # (the target's rope ran on the outline; routed ropes keep inside the body, so the pose is near, not exact)
+    assert res.all_success and res.differences[0] == pytest.approx(same.differences[0], rel=1e-9, abs=1e-12)
+    assert res.differences[0] < 0.05 * mesh.size
 
 
 def test_gait_reports_each_keyframe_reached_or_not():
