@@ -3,8 +3,8 @@
 An optimiser that converges has found the best contractions for the layout it was given; that is not yet a
 robot. Two outcomes used to pass unnoticed:
 
-- an *idle* muscle, designed to a contraction below :data:`IDLE_CONTRACTION` (a rope a workshop would
-  mould, thread and fix for nothing). It is not always harmless: a rope held at its rest length stops the
+- an *idle* muscle, designed to a contraction below :data:`IDLE_CONTRACTION`, or a rope slack at the
+  designed state (no tension): a rope a workshop would mould, thread and fix for nothing. It is not always harmless: a rope held at its rest length stops the
   body from stretching along it, and the bound ``a >= 0`` keeps the design from paying it out, so the
   layout without it can only reach the target as closely or closer. :func:`design_active` drops it and
   designs again, and says so (:class:`DroppedMuscle`); when every muscle is idle the design does not move
@@ -107,16 +107,22 @@ def difference_failure(difference: float, size: float, max_difference: float = M
 
 
 def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_contraction: float = IDLE_CONTRACTION,
-                  **design_options):
+                  drop_slack: bool | None = None, **design_options):
     """:func:`~mdsr_opt.synthesis.contractions.design_contractions`, then every idle muscle (designed
-    contraction below ``idle_contraction``) dropped from the layout and the design made again on the others
-    (started from their contractions), until no muscle is idle.
+    contraction below ``idle_contraction``, or a rope slack at the designed state) dropped from the layout
+    and the design made again on the others (started from their contractions), until no muscle is idle.
+
+    A slack rope carries no tension at the designed state: its length constraint is inactive there, so the
+    layout without it has the same equilibrium, and a workshop would build and drive it for nothing.
 
     Parameters
     ----------
     mesh, material, muscles, target : as for ``design_contractions``.
     idle_contraction : float in [0, 1), default :data:`IDLE_CONTRACTION`
-        The threshold (0: keep every muscle).
+        The threshold (0 and ``drop_slack=False``: keep every muscle).
+    drop_slack : bool, optional
+        Also drop the ropes the design reports ``slack`` (no tension); default: when ``idle_contraction > 0``.
+        Only exact cables (``muscle_model="cable"``, the default) count: a spring under compression pushes.
     **design_options
         Keywords of ``design_contractions``.
 
@@ -136,14 +142,18 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     from .contractions import design_contractions
 
     thr = check_idle_contraction(idle_contraction)
+    drop_slack = (thr > 0 if drop_slack is None else bool(drop_slack)) and \
+        design_options.get("muscle_model", "cable") == "cable"
     mus = tuple(muscles)
     where = np.arange(len(mus))  # each kept muscle's place in the layout given (names unnamed ones)
     opts = dict(design_options)
     dropped: list[DroppedMuscle] = []
     res, caught = _designed(design_contractions, mesh, material, mus, target, opts)
-    while res.success and thr > 0:
+    while res.success and (thr > 0 or drop_slack):
         a = np.asarray(res.contractions, dtype=float)
-        idle = np.isfinite(a) & (a < thr)
+        slack = np.asarray(getattr(res, "slack", ()), dtype=bool).reshape(-1)
+        slack = slack if drop_slack and slack.shape == a.shape else np.zeros(a.shape, dtype=bool)
+        idle = (np.isfinite(a) & (a < thr)) | slack
         if not idle.any():
             break
         if idle.all():
@@ -154,7 +164,9 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
         keep = np.flatnonzero(~idle)
         gone = [DroppedMuscle(name=mu.name or f"#{where[i]}", nodes=tuple(int(n) for n in mu.nodes),
                               contraction=float(a[i]), reason=f"idle: designed contraction {a[i]:.3g} below "
-                              f"idle_contraction {thr:g}") for i, mu in enumerate(mus) if idle[i]]
+                              f"idle_contraction {thr:g}" if a[i] < thr else f"idle: slack at the designed "
+                              f"state (contraction {a[i]:.3g}, no tension): it does not pull")
+                for i, mu in enumerate(mus) if idle[i]]
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
                                         dict(opts, initial_guess=a[keep]))
         names = ", ".join(g.name for g in gone)
