@@ -187,3 +187,24 @@ def _niceness():
 def test_workers_yield_the_cores_to_the_process_that_waits_for_them(pool):
     # the jobs' process runs the solves, the critical path: its workers run at a lower priority
     assert pool.submit(_niceness).result(timeout=60) == min(os.nice(0) + 15, 19)
+
+
+def test_run_scene_from_a_plain_script_without_a_main_guard_runs_once(tmp_path):
+    """Pool workers ('spawn'/'forkserver') run a plain script again as they start; run_scene called from an
+    unguarded script therefore keeps its jobs in this process (the README's code blocks are such scripts),
+    and the script's own lines run once."""
+    script = tmp_path / "design.py"
+    script.write_text(
+        "from mdsr_opt import get_problem, run_scene\n"
+        "from mdsr_opt.core.jobs import main_is_plain_script\n"
+        "print('START', main_is_plain_script(), flush=True)\n"
+        "scene = get_problem('one_muscle', resolution='coarse')\n"
+        "report = run_scene(scene, 'out', cases=['a30'], photos=False, animations=False, log=None)\n"
+        "print('DONE', report.success, flush=True)\n")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]), OPENBLAS_NUM_THREADS="1")
+    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("START") == 1 and "START True" in proc.stdout
+    assert "DONE True" in proc.stdout and (tmp_path / "out" / "a30" / "design.png").is_file()
+

@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
 
-__all__ = ["Jobs", "available_cores", "process_pool", "start_method"]
+__all__ = ["Jobs", "available_cores", "main_is_plain_script", "process_pool", "start_method"]
 
 
 def start_method() -> str:
@@ -43,6 +43,15 @@ def start_method() -> str:
     process that has imported the jobs' modules once), 'spawn' elsewhere (macOS's system libraries are not
     safe to fork, Windows cannot). Neither shares threads or locks with this process."""
     return "forkserver" if sys.platform.startswith("linux") else "spawn"
+
+
+def main_is_plain_script() -> bool:
+    """Whether this process runs a plain script file (``python my_design.py``): the pool's workers ('spawn'
+    or 'forkserver') run such a script again as they start, so one without an ``if __name__ ==
+    "__main__":`` guard would start its work again in every worker. Interactive sessions, notebooks and
+    modules run with ``python -m`` are not plain scripts."""
+    main = sys.modules.get("__main__")
+    return getattr(main, "__spec__", None) is None and getattr(main, "__file__", None) is not None
 
 
 def available_cores() -> int:

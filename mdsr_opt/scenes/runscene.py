@@ -20,7 +20,7 @@ from typing import Callable, Sequence
 
 from ..body.material import material_dict
 from ..core.errors import checking_input, exit_report
-from ..core.jobs import Jobs, process_pool
+from ..core.jobs import Jobs, main_is_plain_script, process_pool
 from ..core.progress import advance, progress_for_cli
 from ..synthesis.gait import run_gait
 from .animate import animate
@@ -58,7 +58,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
               method: str | None = None, photos: bool = True, figures: bool = True,
               animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
               log: Callable[[str], None] | None = _LOG.info, overwrite: bool = False,
-              prototype: bool = True, prototype_seed: int = 0, background: bool = True,
+              prototype: bool = True, prototype_seed: int = 0, background: bool | None = None,
               max_difference: float | None = None, bands: bool | None = None, vector=None) -> SceneReport:
     """Run the whole pipeline on a scene's cases and write everything into ``out``.
 
@@ -81,12 +81,14 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     prototype, prototype_seed : with ``photos``, validate every case against a virtual prototype
         (:class:`~mdsr_opt.scenes.prototype.VirtualPrototype`, drawn from ``prototype_seed``) and write the paper's
         Tables 2-4 as ``out/validation.md``.
-    background : bool, default True
+    background : bool, optional
         Draw and write each case's figures, meshes and photographs, make each animation (its frames'
         forward solves, GIF and JSON) and write the gait's chart, GIF and fabrication files in worker
         processes while the next solves run (:func:`~mdsr_opt.core.jobs.process_pool`: with two or more
         cores; on one core, and with ``False``, one after the other in this process). The files are the
-        same either way.
+        same either way. Default: True, except when called from a plain script file
+        (:func:`~mdsr_opt.core.jobs.main_is_plain_script`), whose workers would run the script again: pass
+        True from a script whose work sits under ``if __name__ == "__main__":``.
     vector : bool, str or sequence of str, optional
         Every figure also as a vector file beside its PNG, for papers: ``True`` a PDF, ``"svg"`` an SVG
         (:func:`mdsr_opt.plot.style.figure_formats`; ``mdsr run --vector``). GIFs stay GIFs.
@@ -116,6 +118,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         Passed on at once (never recorded as a failed case); the files already complete stay.
     """
     names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
+    if background is None:
+        background = not main_is_plain_script()
     with noting_interrupts(), RunFolder(out, overwrite=overwrite,
                                         command=f"run_scene({scene.name!r}, {os.fspath(out)!r})") as folder:
         folder.begin(run_entries(scene, names, vector=vector))
@@ -319,7 +323,8 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
             scene = build(resolution=a.resolution)
         with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="stage") as log:
             rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
-                            method=a.method, overwrite=a.overwrite, log=log)
+                            method=a.method, overwrite=a.overwrite, log=log,
+                            background=True)  # a problem script calls run_main under its __main__ guard
     except KeyboardInterrupt:
         print(f"{p.prog}: interrupted; the files already complete are kept", file=sys.stderr)
         return 130
