@@ -581,6 +581,30 @@ def test_ctrl_c_in_the_terminal_stops_the_run_and_its_workers(tmp_path):
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "interrupted"
 
 
+@pytest.mark.parametrize("delay", [0.3, 0.9])
+def test_an_early_ctrl_c_in_the_terminal_prints_one_line_and_no_traceback(tmp_path, delay):
+    """Ctrl-C from the terminal while the worker pool's server is still starting (importing its modules):
+    the run stops with 130 and its one-line message; no process of the pool prints a traceback."""
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 60 and not _children(proc.pid) and proc.poll() is None:
+            time.sleep(0.01)  # until the pool's server runs
+        time.sleep(delay)
+        os.killpg(proc.pid, signal.SIGINT)
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = proc.stdout.read()
+    assert code == 130, text[-3000:]
+    assert "interrupted (Ctrl-C)" in text and "Traceback" not in text, text[-3000:]
+
+
 def test_an_animation_is_sent_as_soon_as_its_last_case_is_designed(tmp_path, monkeypatch):
     """The run's longest job (an animation's frames and GIF) goes out right after the design of the last
     case it shows, ahead of that case's own figure jobs; the summary keeps the scene's order of animations."""
