@@ -193,7 +193,8 @@ def plot_convergence(panels, title=None, log=True):
     panels : sequence of dict
         Each with ``title`` and ``traces``: a list of ``(label, iterations, differences)``; ``iterations``
         and ``differences`` are equal-length sequences; optionally ``units``, the length unit of the
-        differences (default ``"body units"``).
+        differences (default ``"body units"``). Panels in one unit share the first panel's axis label;
+        panels in different units each label their own.
     log : bool
         Logarithmic difference axis.
 
@@ -219,7 +220,9 @@ def plot_convergence(panels, title=None, log=True):
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)
         legend_below(ax, ncol=1, drop=0.45)  # under the panel: never over a trace
-    axes[0, 0].set_ylabel(axis_label("difference D", panels[0].get("units")))
+    units = [unit_label(p.get("units")) for p in panels]
+    for ax, u in zip(axes[0], units) if len(set(units)) > 1 else [(axes[0, 0], units[0])]:
+        ax.set_ylabel(axis_label("difference D", u))
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
