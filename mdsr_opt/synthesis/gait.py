@@ -29,7 +29,13 @@ from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
 
 __all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait",
-           "warm_start_state"]
+           "warm_start_state", "ZERO_STROKE"]
+
+#: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest
+#: length (in the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's
+#: zero stroke at about -1e-16 of the length; the same 1e-9 is the threshold at which
+#: :func:`~mdsr_opt.synthesis.poses.design_poses` counts a muscle's path as shortening.
+ZERO_STROKE = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------- gait
@@ -253,7 +259,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     frame is a forward internal-driving solve (:func:`~mdsr_opt.solve_internal` with the pulling muscles, the
     layout's muscle model and anchor radius, warm-started from the previous frame (:func:`warm_start_state`),
     else from rest); frames with equal strokes (a gait goes out and back) are solved once, and a frame in
-    which no muscle pulls is the rest shape exactly. A released rope whose path in the solved frame is longer than
+    which no muscle pulls is the rest shape exactly. A stroke within :data:`ZERO_STROKE` of its rope's length of
+    zero is zero: in a frame where another muscle pulls, that rope is held at its rest length (solved with
+    contraction 0), as the pose's design held it. A released rope whose path in the solved frame is longer than
     the rope paid out would be taut: that frame is reported as failed.
 
     Parameters
@@ -331,13 +339,15 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     labels.append(seq[-1])
     S = np.array(S)
     L0 = layout.rest_lengths
+    S[np.abs(S) <= ZERO_STROKE * L0] = 0.0  # round-off about zero: a held rope, not a paid-out one
     F = len(S)
     ach, ten = np.full((F, m), np.nan), np.full((F, m), np.nan)
     states, ok, status = [], np.zeros(F, bool), []
     x_prev = None
     solved: dict[bytes, tuple] = {}
     for k in range(F):
-        on = np.flatnonzero(S[k] > 0)
+        # the muscles solved: those that pull and, when any does, those held at their rest length
+        on = np.flatnonzero(S[k] >= 0) if (S[k] > 0).any() else np.empty(0, dtype=int)
         key = np.round(S[k], 12).tobytes()  # a gait goes out and back: equal strokes are solved once
         if key in solved:
             x, ok[k], msg, ach_on, ten_on = solved[key]
@@ -359,7 +369,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
             ten[k, on] = tn if tn is not None and np.size(tn) == len(on) else np.nan
             solved[key] = (x, ok[k], msg, ach[k, on].copy(), ten[k, on].copy())
         x_prev = x if ok[k] else None
-        off = np.flatnonzero(S[k] <= 0)
+        off = np.setdiff1d(np.arange(m), on)
         if len(off):  # released ropes: their length is L0 - stroke; the body's path must not exceed it
             Lx = np.array([layout.muscles[i].length(x) for i in off])
             ach[k, off], ten[k, off] = L0[off] - Lx, 0.0
