@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, NeoHookean
-from mdsr_opt.synthesis.gait import Gait, gait_schedule, plot_schedule
+from mdsr_opt.plot.design import plot_schedule
+from mdsr_opt.synthesis.gait import Gait, gait_schedule
 from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses, shared_layout
 
 MAT = NeoHookean(1.0, 0.3)

@@ -3,7 +3,7 @@
 :func:`gait_schedule` takes a :class:`~mdsr_opt.synthesis.poses.PosesResult` (one layout, every pose's strokes) and a
 sequence of its poses, interpolates the strokes linearly between them and solves every frame forward. The
 schedule is written as a CSV actuation schedule in length units (:meth:`GaitSchedule.write_csv`), drawn as
-a chart (:func:`plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
+a chart (:func:`mdsr_opt.plot.design.plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
 the scene runner's hook: layout, schedule, chart, GIF and fabrication files of a scene's :class:`Gait`.
 """
 
@@ -28,8 +28,8 @@ from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
 
-__all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait",
-           "warm_start_state", "ZERO_STROKE"]
+__all__ = ["Gait", "GaitSchedule", "gait_schedule", "save_gait_animation", "run_gait", "warm_start_state",
+           "ZERO_STROKE"]
 
 #: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest
 #: length (in the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's
@@ -393,44 +393,6 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                         max_difference=float(max_difference))
 
 
-def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
-    """Chart of the strokes over time: one line per muscle (commanded solid, achieved dotted), named and
-    coloured as in every figure (:mod:`mdsr_opt.plot.style`), the keyframes marked with their poses.
-    Returns the figure."""
-    import matplotlib.pyplot as plt
-    from ..plot.style import muscle_color
-
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(7.5, 3.8))
-    else:
-        fig = ax.figure
-    t = schedule.times
-    for i, n in enumerate(schedule.muscle_names):
-        c = muscle_color(i)
-        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
-                f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
-        if np.isfinite(schedule.achieved[:, i]).any():
-            ax.plot(t, schedule.achieved[:, i], ":", color=c, lw=1.2)
-    top = float(np.nanmax(schedule.strokes)) if schedule.strokes.size else 1.0
-    for k in schedule.keyframes:
-        ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
-        ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
-    bad = ~schedule.success
-    if bad.any():
-        ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel(f"stroke ({schedule.units}; < 0: rope paid out)")
-    low = min(0.0, float(np.nanmin(schedule.strokes)))
-    ax.set_ylim(bottom=low - 0.08 * (top - low), top=top * 1.15 if top > 0 else 1.0)
-    ax.axhline(0.0, color="0.5", lw=0.6, zorder=0)
-    ax.set_title(title or f"actuation schedule: {' -> '.join(schedule.sequence)} "
-                 f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    # no tight_layout: it lays every text out once more (40 % of the chart's time), and the PNG is cropped
-    # to what is drawn anyway (mdsr_opt.plot.common.save_figure)
-    return fig
-
-
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
                         fps: float = 8.0) -> str:
     """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.scenes.save_animation`); ``mesh`` must be
@@ -452,8 +414,10 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
 
 
 def _write_schedule(schedule: GaitSchedule, title: str, path, vector=None) -> str:
-    """``schedule.png``: the strokes over time (:func:`plot_schedule`); with ``vector`` a PDF/SVG beside it."""
+    """``schedule.png``: the strokes over time (:func:`~mdsr_opt.plot.design.plot_schedule`); with ``vector`` a
+    PDF/SVG beside it."""
     from ..plot.common import save_figure
+    from ..plot.design import plot_schedule
 
     return save_figure(plot_schedule(schedule, title=title), path, close=True, vector=vector)
 
