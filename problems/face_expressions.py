@@ -121,8 +121,10 @@ def run_figure(out, resolution="medium", log=print, vector=None) -> int:
                      "designs": [{"x": d.x_aligned if d is not None else scene.mesh.points,
                                   "muscles": [res.muscles[i] for i in on], "difference": r["difference"],
                                   "success": r["success"]}]})
-    fig = plot_design_grid(cols, title=f"One face, one layout of {res.n_muscles} muscles (M0..M{res.n_muscles - 1}): "
-                                       "each expression's target (top) and the face its strokes drive (bottom)")
+    names = f"{res.muscles[0].name}..{res.muscles[-1].name}" if res.n_muscles > 1 else res.muscles[0].name
+    fig = plot_design_grid(cols, title=f"One face, one layout of {res.n_muscles} muscles ({names}): each expression's "
+                                       "target (top) and the face its strokes drive (bottom)",
+                           row_names=["target", "driven by its strokes"])
     save_figure(fig, os.path.join(out, "expressions.png"), close=True, vector=vector)
     files = figure_paths(os.path.join(out, "expressions.png"), vector)
     files.append(write_json(os.path.join(out, "expressions.json"), {

@@ -326,7 +326,7 @@ def run_figure(out, resolution="medium", log=print, vector=None) -> int:
                            "success": d.success} for d, lay in zip(r["designs"], r["layouts"])]}
              for c, r in zip(cols, runs)]
     save(plot_design_grid(dcols, title="Figure 6b: driven by the designed contractions (blue) over the target "
-                                       "(grey)"), "figure6b.png")
+                                       "(grey)", row_names=["target", "layout C, driven", "layout D, driven"]), "figure6b.png")
     panels = [{"title": c["title"], "units": c["units"],
                "traces": [(f"{lab}, {len(lay)} m.", t["iterations"], t["difference"])
                           for lab, lay, t in zip(c["row_labels"], r["layouts"], r["traces"])]}

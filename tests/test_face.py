@@ -75,10 +75,12 @@ def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scen
 
     import mdsr_opt.plot.common as common
 
-    titles, save = [], common.save_figure
+    titles, rows, save = [], [], common.save_figure
 
-    def recording(figure, path, **kw):  # the drawn figure's panel titles, then the real save
+    def recording(figure, path, **kw):  # the drawn figure's panel titles and row names, then the real save
         titles.extend(ax.get_title() for ax in figure.axes)
+        rows.extend(ax.get_ylabel() for ax in figure.axes if ax.get_ylabel())
+        titles.append(figure.get_suptitle())
         return save(figure, path, **kw)
 
     monkeypatch.setattr(common, "save_figure", recording)
@@ -87,6 +89,9 @@ def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scen
     assert "<svg" in (tmp_path / "expressions.svg").read_text()  # the vector copy beside the PNG
     driven = [t for t in titles if ": D = " in t]
     assert len(driven) == 4 and all(t.split(": D = ")[1].split()[1] == scene.units for t in driven), driven
+    assert rows == ["target", "driven by its strokes"]  # no "layout C" of Figure 6 in the face's figure
+    n = len(read_json(tmp_path / "layout.json")["muscles"])
+    assert f"one layout of {n} muscles (M1..M{n})" in titles[-1], titles[-1]
     data = read_json(tmp_path / "expressions.json")
     chains = {m["name"]: tuple(m["nodes"]) for m in data["layout"]}
     assert chains == {m.name: tuple(m.nodes) for c in scene.cases for m in c.muscles}

@@ -116,7 +116,17 @@ def test_figure6_panels_use_the_muscle_names_one_colour_scale_and_units(strip):
     fig = plot_design_grid([{"title": "a", "mesh": mesh, "target": target, "designs": [d], "row_labels": ["C"],
                              "units": "cm"}])
     assert fig.axes[1].get_title() == "C: D = 0.01 cm"
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "driven"]  # rows named plainly
     plt.close(fig)
+    col = {"title": "a", "mesh": mesh, "target": target, "designs": [d, d], "row_labels": ["C", "D"]}
+    fig = plot_design_grid([col])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "driven, layout 1", "driven, layout 2"]
+    plt.close(fig)
+    fig = plot_design_grid([col], row_names=["target", "layout C, driven", "layout D, driven"])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "layout C, driven", "layout D, driven"]
+    plt.close(fig)
+    with pytest.raises(ValueError, match="2 row names for 3 rows"):
+        plot_design_grid([col], row_names=["target", "driven"])
     fig = plot_convergence([{"title": "a", "traces": [("C", [0, 1, 2], [1.0, 0.1, 0.01])], "units": "cm"}])
     ax = fig.axes[0]
     assert ax.get_ylabel() == "difference D (cm)" and _has_unit(ax.get_xlabel())
@@ -249,7 +259,8 @@ def test_figure6_vector_copies_and_differences_in_the_scenes_unit(tmp_path, monk
     for f in ("figure6a", "figure6b", "figure6c"):
         assert (out / f"{f}.pdf").read_bytes()[:5] == b"%PDF-" and f"{f}.pdf" in files and f"{f}.png" in files
     unit = get_problem("tentacle", resolution="coarse").units
-    (_, titles_b, _), = [t for t in texts if t[0] == "figure6b.png"]
+    (_, titles_b, ylabels_b), = [t for t in texts if t[0] == "figure6b.png"]
+    assert [y for y in ylabels_b if y] == ["target", "layout C, driven", "layout D, driven"]
     driven = [t for t in titles_b if ": D = " in t]
     assert len(driven) == 10 and all(re.search(rf"D = [0-9.e+-]+ {unit}\b", t) for t in driven), driven
     (_, _, ylabels_c), = [t for t in texts if t[0] == "figure6c.png"]
