@@ -209,7 +209,7 @@ class GaitSchedule:
         solved[kf[~np.asarray(self.reached, bool)]] = False
         d = {self.sequence[k]: self.keyframe_differences[k] for k in np.flatnonzero(~self.reached)}
         return (f"{int(solved.sum())}/{self.n_frames} frames solved and reaching their pose; pose(s) "
-                + ", ".join(f"{p} (difference {v:.3g})" for p, v in d.items())
+                + ", ".join(f"{p} (difference {v:.3g} {self.units})" for p, v in d.items())
                 + f" NOT reached (max_difference {100 * self.max_difference:g} % of the size)")
 
     def to_dict(self) -> dict:
@@ -522,7 +522,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         else:
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
-        f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
+        f"{int(res.separate_n_muscles.sum())}), difference ({scene.units}) " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
         + f"; {sch.outcome()}" + ("" if ok else " - FAILED: " + info["message"]))
     return info
