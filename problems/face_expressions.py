@@ -15,7 +15,8 @@ This script is a figure, not a scene: ``mdsr run face_expressions --out DIR`` ca
   with the layout's muscles it pulls (bottom);
 - ``expressions.json``: the layout (each muscle's name and node chain) and per expression the muscles it
   pulls, their contractions and strokes, the difference, the motion recovered and the nodes measured;
-- ``layout.json``: the :class:`~mdsr_opt.synthesis.poses.PosesResult`.
+- ``layout.json``: the :class:`~mdsr_opt.synthesis.poses.PosesResult`;
+- with ``--vector``, ``expressions.pdf`` (or ``.svg``) beside the PNG.
 
 Run ``python problems/face_expressions.py --out out/face_expressions``.
 """
@@ -75,8 +76,21 @@ def expression_rows(scene, face, targets, res) -> list[dict]:
     return rows
 
 
-def run_figure(out, resolution="medium", log=print) -> int:
+def run_figure(out, resolution="medium", log=print, vector=None) -> int:
     """Lay the face's one layout, design its four expressions and draw them into folder ``out``.
+
+    Parameters
+    ----------
+    out : str or path-like
+        The folder written.
+    resolution : str or int
+        The face's resolution (``"coarse"``, ``"medium"``, ``"fine"`` or a node count).
+    log : callable
+        Receives one line per expression and a summary.
+    vector : bool, str or sequence of str, optional
+        The figure also as a vector file beside its PNG (:func:`mdsr_opt.plot.style.figure_formats`:
+        ``True`` a PDF, ``"svg"`` an SVG; ``mdsr run face_expressions --vector``). A bad format is a
+        ValueError before any work.
 
     Returns
     -------
@@ -88,9 +102,11 @@ def run_figure(out, resolution="medium", log=print) -> int:
     if "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     from mdsr_opt.body.io import write_json
-    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.common import figure_paths, save_figure
     from mdsr_opt.plot.routing import plot_design_grid
+    from mdsr_opt.plot.style import figure_formats
 
+    figure_formats(vector)  # a bad vector format: ValueError before any work
     t0 = time.perf_counter()
     os.makedirs(out, exist_ok=True)
     scene, face, targets, res = design_expressions(resolution)
@@ -100,14 +116,17 @@ def run_figure(out, resolution="medium", log=print) -> int:
         d = res.designs.get(r["expression"])
         on = np.flatnonzero(res.engaged[k])
         cols.append({"title": f"{r['expression']}: {100 * r['motion_recovered']:.0f} % of its motion",
-                     "mesh": scene.mesh, "target": targets[r["expression"]],
+                     "mesh": scene.mesh, "target": targets[r["expression"]], "units": scene.units,
                      "row_labels": [f"pulls {', '.join(r['muscles'])}"],
                      "designs": [{"x": d.x_aligned if d is not None else scene.mesh.points,
                                   "muscles": [res.muscles[i] for i in on], "difference": r["difference"],
                                   "success": r["success"]}]})
-    fig = plot_design_grid(cols, title=f"One face, one layout of {res.n_muscles} muscles (M0..M{res.n_muscles - 1}): "
-                                       "each expression's target (top) and the face its strokes drive (bottom)")
-    files = [save_figure(fig, os.path.join(out, "expressions.png"), close=True)]
+    names = f"{res.muscles[0].name}..{res.muscles[-1].name}" if res.n_muscles > 1 else res.muscles[0].name
+    fig = plot_design_grid(cols, title=f"One face, one layout of {res.n_muscles} muscles ({names}): each expression's "
+                                       "target (top) and the face its strokes drive (bottom)",
+                           row_names=["target", "driven by its strokes"])
+    save_figure(fig, os.path.join(out, "expressions.png"), close=True, vector=vector)
+    files = figure_paths(os.path.join(out, "expressions.png"), vector)
     files.append(write_json(os.path.join(out, "expressions.json"), {
         "resolution": resolution, "nodes": scene.mesh.n_nodes, "required": REQUIRED,
         "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes], "sources": list(s)}
@@ -131,8 +150,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=os.path.join("out", "face_expressions"), help="output folder")
     p.add_argument("--resolution", default="medium",
                    type=lambda s: int(s) if s.isdigit() else s, help="coarse, medium (default), fine or a node count")
+    p.add_argument("--vector", choices=("pdf", "svg"), help="also write the figure in this vector format")
     a = p.parse_args(argv)
-    return run_figure(a.out, resolution=a.resolution)
+    return run_figure(a.out, resolution=a.resolution, vector=a.vector)
 
 
 if __name__ == "__main__":

@@ -26,6 +26,9 @@ equilibrium constraints), so Figure 6c does not chart them: it takes each iterat
 iterate's equilibrium (:func:`equilibrium_trace`). Every point is the difference of a physical state; such
 a trace need not fall monotonically (Table 1's ``equilibrium_rises``).
 
+With ``--vector`` (``run_figure(vector=...)``) each figure is also written as a PDF (or SVG) beside its PNG.
+Differences are lengths in each scene's unit (:attr:`~mdsr_opt.scenes.scene.Scene.units`), as the figures say.
+
 Run ``python problems/figure6.py --out out/figure6`` or ``mdsr run figure6 --out out/figure6``.
 """
 
@@ -262,8 +265,21 @@ def write_table(rows, csv_path, md_path):
 OUTPUTS = ("figure6a.png", "figure6b.png", "figure6c.png", "table1.csv", "table1.md", "figure6.json", "findings.txt")
 
 
-def run_figure(out, resolution="medium", log=print) -> int:
+def run_figure(out, resolution="medium", log=print, vector=None) -> int:
     """Route, design and draw Figure 6 and Table 1 into folder ``out``.
+
+    Parameters
+    ----------
+    out : str or path-like
+        The folder written.
+    resolution : str or int
+        The scenes' resolution (``"coarse"``, ``"medium"``, ``"fine"`` or a node count).
+    log : callable
+        Receives one progress line per design and the findings.
+    vector : bool, str or sequence of str, optional
+        Every figure also as a vector file beside its PNG (:func:`mdsr_opt.plot.style.figure_formats`:
+        ``True`` a PDF, ``"svg"`` an SVG; ``mdsr run figure6 --vector``). A bad format is a ValueError
+        before any work.
 
     Returns
     -------
@@ -275,9 +291,11 @@ def run_figure(out, resolution="medium", log=print) -> int:
     if "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     from mdsr_opt.body.io import atomic_path, write_json
-    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.common import figure_paths, save_figure
     from mdsr_opt.plot.routing import plot_convergence, plot_design_grid, plot_layout_grid
+    from mdsr_opt.plot.style import figure_formats
 
+    figure_formats(vector)  # a bad vector format: ValueError before any work
     t0 = time.perf_counter()
     os.makedirs(out, exist_ok=True)
     runs = route_targets(resolution)
@@ -294,23 +312,28 @@ def run_figure(out, resolution="medium", log=print) -> int:
     labels = lambda r: [f"K_a = {k:g}" for k in r["K_a"]]  # noqa: E731
     cols = [{"title": f"{r['scene'].name}/{r['case'].name}", "mesh": r["scene"].mesh, "target": r["target"],
              "anchors": r["case"].anchors, "drag_nodes": r["case"].drag_nodes, "layouts": r["layouts"],
-             "row_labels": labels(r)} for r in runs]
-    files = [save_figure(plot_layout_grid(cols, title="Figure 6a: targets, contraction graphs, layouts at "
-                                                      "a smaller (C) and a larger (D) K_a"),
-                         os.path.join(out, "figure6a.png"))]
+             "row_labels": labels(r), "units": r["scene"].units} for r in runs]
+    files = []
+
+    def save(fig, name):  # the PNG, and with vector its PDF/SVG beside it: every path listed
+        save_figure(fig, os.path.join(out, name), close=True, vector=vector)
+        files.extend(figure_paths(os.path.join(out, name), vector))
+
+    save(plot_layout_grid(cols, title="Figure 6a: targets, contraction graphs, layouts at "
+                                      "a smaller (C) and a larger (D) K_a"), "figure6a.png")
     dcols = [{"title": c["title"], "mesh": c["mesh"], "target": c["target"], "row_labels": c["row_labels"],
+              "units": c["units"],
               "designs": [{"x": d.x_aligned, "muscles": lay.muscles, "difference": d.difference,
                            "success": d.success} for d, lay in zip(r["designs"], r["layouts"])]}
              for c, r in zip(cols, runs)]
-    files.append(save_figure(plot_design_grid(dcols, title="Figure 6b: driven by the designed contractions "
-                                                           "(blue) over the target (grey)"),
-                             os.path.join(out, "figure6b.png")))
-    panels = [{"title": c["title"], "traces": [(f"{lab}, {len(lay)} m.", t["iterations"], t["difference"])
-                                               for lab, lay, t in zip(c["row_labels"], r["layouts"], r["traces"])]}
+    save(plot_design_grid(dcols, title="Figure 6b: driven by the designed contractions (blue) over the target "
+                                       "(grey)", row_names=["target", "layout C, driven", "layout D, driven"]), "figure6b.png")
+    panels = [{"title": c["title"], "units": c["units"],
+               "traces": [(f"{lab}, {len(lay)} m.", t["iterations"], t["difference"])
+                          for lab, lay, t in zip(c["row_labels"], r["layouts"], r["traces"])]}
               for c, r in zip(cols, runs)]
-    files.append(save_figure(plot_convergence(panels, title="Figure 6c: difference of the equilibrium at each "
-                                                            "IPOPT iterate's contractions (flattened design)"),
-                             os.path.join(out, "figure6c.png")))
+    save(plot_convergence(panels, title="Figure 6c: difference of the equilibrium at each IPOPT iterate's "
+                                        "contractions (flattened design)"), "figure6c.png")
     rows = table_rows(runs)
     write_table(rows, os.path.join(out, "table1.csv"), os.path.join(out, "table1.md"))
     files += [os.path.join(out, "table1.csv"), os.path.join(out, "table1.md")]
@@ -340,8 +363,9 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=os.path.join("out", "figure6"), help="output folder (default out/figure6)")
     p.add_argument("--resolution", default="medium",
                    type=lambda s: int(s) if s.isdigit() else s, help="coarse, medium (default), fine or a node count")
+    p.add_argument("--vector", choices=("pdf", "svg"), help="also write every figure in this vector format")
     a = p.parse_args(argv)
-    code = run_figure(a.out, resolution=a.resolution)
+    code = run_figure(a.out, resolution=a.resolution, vector=a.vector)
     with open(os.path.join(a.out, "table1.md")) as fh:
         print(fh.read())
     return code

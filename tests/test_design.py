@@ -674,6 +674,10 @@ def test_scene_table_prints_achieved_contractions_and_strokes():
     head, _sep, row = table.splitlines()
     assert "achieved contractions" in head and "strokes" in head
     assert "0.250, 0.200" in row and "0.5, 0.125" in row and "0.300" not in row  # achieved, not commanded
+    # lengths carry their unit in every cell: the scene's, else body units (as the figures say)
+    assert "| 0.5, 0.125 body units |" in row and "| 0.01 body units |" in row
+    row = SceneReport(scene="s", title="t", n_nodes=10, cases=[c], units="cm").table().splitlines()[2]
+    assert "| 0.5, 0.125 cm |" in row and "| 0.01 cm |" in row
 
 
 def test_design_figure_title_states_the_contractions_reached():

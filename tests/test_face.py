@@ -68,13 +68,30 @@ def test_motion_recovered_measure():
         face_module.motion_recovered(X, T[:2], T, [0])
 
 
-def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scene):
+def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scene, monkeypatch):
     """problems/face_expressions.py: design_poses lays the face's one layout (the scene's cases' muscles), and
     all four expressions reach 70 % of their motion on it; its JSON names every muscle's node chain."""
     from mdsr_opt.body.io import read_json
 
+    import mdsr_opt.plot.common as common
+
+    titles, rows, save = [], [], common.save_figure
+
+    def recording(figure, path, **kw):  # the drawn figure's panel titles and row names, then the real save
+        titles.extend(ax.get_title() for ax in figure.axes)
+        rows.extend(ax.get_ylabel() for ax in figure.axes if ax.get_ylabel())
+        titles.append(figure.get_suptitle())
+        return save(figure, path, **kw)
+
+    monkeypatch.setattr(common, "save_figure", recording)
     fig = load_problem_module(problems_dir() / "face_expressions.py")
-    assert fig.run_figure(tmp_path, resolution="coarse", log=lambda s: None) == 0
+    assert fig.run_figure(tmp_path, resolution="coarse", log=lambda s: None, vector="svg") == 0
+    assert "<svg" in (tmp_path / "expressions.svg").read_text()  # the vector copy beside the PNG
+    driven = [t for t in titles if ": D = " in t]
+    assert len(driven) == 4 and all(t.split(": D = ")[1].split()[1] == scene.units for t in driven), driven
+    assert rows == ["target", "driven by its strokes"]  # no "layout C" of Figure 6 in the face's figure
+    n = len(read_json(tmp_path / "layout.json")["muscles"])
+    assert f"one layout of {n} muscles (M1..M{n})" in titles[-1], titles[-1]
     data = read_json(tmp_path / "expressions.json")
     chains = {m["name"]: tuple(m["nodes"]) for m in data["layout"]}
     assert chains == {m.name: tuple(m.nodes) for c in scene.cases for m in c.muscles}

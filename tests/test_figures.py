@@ -45,8 +45,11 @@ def strip():
 def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip, tmp_path):
     from mdsr_opt.plot.design import plot_design
     from mdsr_opt.synthesis.contractions import design_contractions
+    from mdsr_opt.synthesis import gait
     from mdsr_opt.synthesis.export import export_fabrication
-    from mdsr_opt.synthesis.gait import plot_schedule
+    from mdsr_opt.plot.design import plot_schedule
+
+    assert not hasattr(gait, "plot_schedule")  # the chart lives with the figures, no alias left behind
 
     mesh, muscles, target = strip
     res = design_contractions(mesh, NeoHookean(1.0, 0.3), muscles, target)
@@ -113,10 +116,24 @@ def test_figure6_panels_use_the_muscle_names_one_colour_scale_and_units(strip):
     fig = plot_design_grid([{"title": "a", "mesh": mesh, "target": target, "designs": [d], "row_labels": ["C"],
                              "units": "cm"}])
     assert fig.axes[1].get_title() == "C: D = 0.01 cm"
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "driven"]  # rows named plainly
     plt.close(fig)
+    col = {"title": "a", "mesh": mesh, "target": target, "designs": [d, d], "row_labels": ["C", "D"]}
+    fig = plot_design_grid([col])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "driven, layout 1", "driven, layout 2"]
+    plt.close(fig)
+    fig = plot_design_grid([col], row_names=["target", "layout C, driven", "layout D, driven"])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["target", "layout C, driven", "layout D, driven"]
+    plt.close(fig)
+    with pytest.raises(ValueError, match="2 row names for 3 rows"):
+        plot_design_grid([col], row_names=["target", "driven"])
     fig = plot_convergence([{"title": "a", "traces": [("C", [0, 1, 2], [1.0, 0.1, 0.01])], "units": "cm"}])
     ax = fig.axes[0]
     assert ax.get_ylabel() == "difference D (cm)" and _has_unit(ax.get_xlabel())
+    plt.close(fig)
+    fig = plot_convergence([{"title": t, "traces": [("C", [0, 1], [1.0, 0.1])], "units": u}
+                            for t, u in (("a", "cm"), ("b", "cm"), ("c", "mm"))])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["difference D (cm)", "difference D (cm)", "difference D (mm)"]
     plt.close(fig)
 
 
@@ -146,7 +163,7 @@ def test_scene_figures_label_their_axes_and_save_vector_copies(strip, tmp_path):
     assert not (tmp_path / "n.png").exists()
 
 
-def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path, capsys):
+def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path):
     import json
 
     from mdsr_opt.cli.main import main
@@ -167,8 +184,87 @@ def test_mdsr_run_vector_writes_a_pdf_beside_every_png(tmp_path, capsys):
     assert main(["run", str(strip), "--out", str(tmp_path / "svg"), "--no-photos", "--vector",
                  "--vector-format", "svg", "--serial"]) == 0
     assert (tmp_path / "svg" / "bend" / "design.svg").exists() and not (tmp_path / "svg" / "rest.pdf").exists()
-    assert main(["run", "figure6", "--out", str(tmp_path / "f6"), "--vector"]) == 2  # said, not ignored
-    assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "f6").exists()
+
+
+_FIGURE_SCRIPT = """
+import os
+
+OUTPUTS = ("a.png", "a.json")
+
+
+def run_figure(out, resolution="medium", log=print{vector}):
+    import matplotlib.pyplot as plt
+    from mdsr_opt.plot.common import save_figure
+
+    save_figure(plt.figure(), os.path.join(out, "a.png"), close=True{pass_vector})
+    with open(os.path.join(out, "a.json"), "w") as fh:
+        fh.write("{{}}")
+    return 0
+"""
+
+
+def test_mdsr_run_passes_vector_to_a_figure_script_that_takes_it(tmp_path, capsys, monkeypatch):
+    """``mdsr run FIGURE --vector``: the script's vector copies are written and listed in the run folder's
+    manifest; a script without a ``vector`` argument is refused at the door, before any folder is made."""
+    import json
+
+    from mdsr_opt.cli.main import main
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    (lib / "takes.py").write_text(_FIGURE_SCRIPT.format(vector=", vector=None", pass_vector=", vector=vector"))
+    (lib / "plain.py").write_text(_FIGURE_SCRIPT.format(vector="", pass_vector=""))
+    monkeypatch.setenv("MDSR_PROBLEMS", str(lib))
+    assert main(["run", "takes", "--out", str(tmp_path / "t"), "--vector", "--vector-format", "svg"]) == 0
+    assert "<svg" in (tmp_path / "t" / "a.svg").read_text()
+    files = json.loads((tmp_path / "t" / ".mdsr-run.json").read_text())["files"]
+    assert files == ["a.json", "a.png", "a.svg"]
+    assert main(["run", "plain", "--out", str(tmp_path / "p"), "--vector"]) == 2  # said, not ignored
+    assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "p").exists()
+
+
+@pytest.mark.parametrize("script", ["figure6", "face_expressions"])
+def test_figure_scripts_take_vector_and_refuse_a_bad_format_before_any_work(script, tmp_path):
+    import inspect
+
+    from mdsr_opt.scenes.library import figure_scripts, load_module
+
+    module = load_module(figure_scripts()[script])
+    assert "vector" in inspect.signature(module.run_figure).parameters
+    with pytest.raises(ValueError, match="vector figure format must be one of pdf, svg, got 'eps'"):
+        module.run_figure(tmp_path / "out", resolution="coarse", log=lambda s: None, vector="eps")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_figure6_vector_copies_and_differences_in_the_scenes_unit(tmp_path, monkeypatch):
+    """Figure 6 at the coarse resolution with --vector: a PDF beside every PNG, listed in the manifest, and
+    the differences of 6b and 6c labelled with the scenes' length unit, not a bare number."""
+    import json
+
+    import mdsr_opt.plot.common as common
+    from mdsr_opt.cli.main import main
+    from mdsr_opt.scenes.library import get_problem
+
+    texts, save = [], common.save_figure
+
+    def recording(fig, path, **kw):
+        texts.append((Path(path).name, [ax.get_title() for ax in fig.axes], [ax.get_ylabel() for ax in fig.axes]))
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(common, "save_figure", recording)
+    out = tmp_path / "f6"
+    assert main(["run", "figure6", "--out", str(out), "--resolution", "coarse", "--vector", "--quiet"]) == 0
+    files = json.loads((out / ".mdsr-run.json").read_text())["files"]
+    for f in ("figure6a", "figure6b", "figure6c"):
+        assert (out / f"{f}.pdf").read_bytes()[:5] == b"%PDF-" and f"{f}.pdf" in files and f"{f}.png" in files
+    unit = get_problem("tentacle", resolution="coarse").units
+    (_, titles_b, ylabels_b), = [t for t in texts if t[0] == "figure6b.png"]
+    assert [y for y in ylabels_b if y] == ["target", "layout C, driven", "layout D, driven"]
+    driven = [t for t in titles_b if ": D = " in t]
+    assert len(driven) == 10 and all(re.search(rf"D = [0-9.e+-]+ {unit}\b", t) for t in driven), driven
+    (_, _, ylabels_c), = [t for t in texts if t[0] == "figure6c.png"]
+    assert ylabels_c[0] == f"difference D ({unit})"
 
 
 def test_gif_frames_are_large_and_draw_idle_muscles_in_their_colour(strip, tmp_path):

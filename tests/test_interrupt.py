@@ -488,3 +488,52 @@ def test_a_requested_stop_stops_a_solve_at_its_first_iteration():
     solve = lambda: minimize(model, p, x0, fixed, values, tol=1e-10)  # noqa: E731
     assert _raised_in_a_thread_asked_to_stop(solve, Budget) == [Budget]
     assert [s.stats()["success"] for s in model._solvers.values()] == [False]  # stopped, not run to its end
+
+
+def test_a_stop_inside_a_line_search_refuses_the_evaluations_quietly(capfd):
+    """A stop requested (a study's time budget) while IPOPT's L-BFGS line search evaluates the energy: IPOPT
+    answers each refused evaluation with a shorter step, about a thousand of them before it gives up. They
+    are refused quietly (NaN), not each by a Python exception that CasADi prints with all its inputs: that
+    printing made a 0.5 s budget run for 5-6 s. Counted, not timed: the solve raises the stop and prints
+    nothing, for stops landing at several evaluations, at least one of them inside a line search."""
+    import threading
+
+    from mdsr_opt.core.guards import cancel_stop, request_stop
+    from mdsr_opt.mechanics.backends import minimize
+
+    class Budget(BaseException):
+        pass
+
+    churned = 0
+    for at in range(41, 47):
+        model, p, x0, fixed, values = _pinned_strip(60, 15)
+        real = type(model).numeric
+        calls = [0]
+
+        def numeric(p_):
+            calls[0] += 1
+            if calls[0] == at:
+                request_stop(threading.get_ident(), Budget)
+            return real(model, p_)
+
+        model.numeric = numeric
+        seen = []
+
+        def work():
+            try:
+                minimize(model, p, x0, fixed, values, tol=1e-12, max_iter=3000, backend="ipopt-lbfgs")
+            except BaseException as exc:  # noqa: BLE001 - what reached the caller
+                seen.append(type(exc))
+            finally:
+                cancel_stop(threading.get_ident())
+
+        capfd.readouterr()
+        t = threading.Thread(target=work)
+        t.start()
+        t.join()
+        assert seen == [Budget], at
+        err = capfd.readouterr().err
+        assert "Traceback" not in err and "nlp_f" not in err, (at, err[:300])
+        (solver,) = model._solvers.values()
+        churned += solver.stats()["n_call_nlp_f"] > 500  # the line search's refused evaluations
+    assert churned >= 1

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, NeoHookean
-from mdsr_opt.synthesis.gait import Gait, gait_schedule, plot_schedule
+from mdsr_opt.plot.design import plot_schedule
+from mdsr_opt.synthesis.gait import Gait, gait_schedule
 from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses, shared_layout
 
 MAT = NeoHookean(1.0, 0.3)
@@ -113,6 +114,53 @@ def test_schedule_csv_and_chart(lr, tmp_path):
     fig = plot_schedule(sch)
     assert fig.axes[0].get_ylabel().startswith("stroke (cm")  # quantity (unit), as every figure
     assert np.all(sch.states[0] == mesh.points)
+
+
+def _held_top_layout(top_stroke):
+    """A strip curled by its bottom edge's muscle (contraction 0.15) while its top edge's muscle holds the top at
+    its rest length (contraction 0, in tension): one pose, its top stroke given."""
+    from mdsr_opt import Muscle, solve_internal
+    from mdsr_opt.body.fingerprint import mesh_fingerprint
+
+    mesh = strip()
+    P = mesh.points
+
+    def edge(y, name):
+        idx = np.flatnonzero(np.isclose(P[:, 1], y))
+        return Muscle(idx[np.argsort(P[idx, 0])], name=name)
+
+    mus = (edge(0.0, "bottom"), edge(1.0, "top"))
+    L0 = np.array([m.rest_length(mesh) for m in mus])
+    eq = solve_internal(mesh, MAT, list(mus), [0.15, 0.0])
+    assert eq.success and eq.tension[1] > 0  # the top rope pulls at zero stroke
+    res = PosesResult(names=("curl",), muscles=mus, rest_lengths=L0, sources=(("curl",), ("curl",)),
+                      contractions=np.array([[0.15, top_stroke / L0[1]]]),
+                      strokes=np.array([[0.15 * L0[0], top_stroke]]), tensions=np.full((1, 2), np.nan),
+                      differences=np.array([0.0]), success=np.array([True]), status=("ok",),
+                      states=np.array([eq.x]), separate_differences=np.array([np.nan]),
+                      separate_n_muscles=np.array([2]), engaged=np.array([[True, True]]),
+                      rest_mesh=mesh_fingerprint(mesh))
+    return mesh, res, eq
+
+
+def test_a_pulled_muscle_left_at_zero_stroke_is_held_not_released():
+    """A pose's zero stroke stored as -5e-16 (round-off) is a rope held at its rest length: every frame
+    solves it at contraction 0 and the keyframe is the pose's state; a real pay-out (1e-3 of the length,
+    far beyond ZERO_STROKE) is still a released rope, and the body's path along it makes it taut."""
+    from mdsr_opt.synthesis.gait import ZERO_STROKE
+
+    mesh, res, eq = _held_top_layout(-5e-16)
+    assert 5e-16 < ZERO_STROKE * res.rest_lengths[1]
+    sch = gait_schedule(mesh, MAT, res, ["rest", "curl"], frames_per_step=2, cyclic=False)
+    assert sch.success.all(), sch.status
+    assert sch.strokes[-1, 1] == 0.0  # said as zero, not -5e-16
+    np.testing.assert_allclose(sch.states[-1], eq.x, atol=1e-6)
+    np.testing.assert_allclose(sch.achieved[1:, 1], 0.0, atol=1e-6 * res.rest_lengths[1])
+    assert (sch.tensions[1:, 1] > 0).all()  # held, and pulling
+
+    mesh, res, _ = _held_top_layout(-1e-3 * res.rest_lengths[1])
+    sch = gait_schedule(mesh, MAT, res, ["rest", "curl"], frames_per_step=2, cyclic=False)
+    assert not sch.success[-1] and "released muscle top would be taut" in sch.status[-1]
 
 
 def test_budget_of_one_keeps_the_strongest_muscle():

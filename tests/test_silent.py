@@ -122,6 +122,8 @@ def test_difference_failure_names_the_fraction():
     assert difference_failure(0.049, 1.0) == ""
     assert "5.10 %" in difference_failure(0.051, 1.0) and "max_difference 5 %" in difference_failure(0.051, 1.0)
     assert "not finite" in difference_failure(float("nan"), 1.0)
+    assert difference_failure(0.051, 1.0, units="cm").startswith("difference 0.051 cm is 5.10 % of the size 1 cm")
+    assert "difference 0.051 body units" in difference_failure(0.051, 1.0)  # no unit known: said so
 
 
 # ---------------------------------------------------------------------------------------------- mdsr run
@@ -141,7 +143,7 @@ def test_mdsr_run_fails_a_case_too_far_from_its_target_and_goes_on(tmp_path, cap
     assert main(["run", str(FINGER), "--out", str(tmp_path / "p"), "--bands", *QUIET_RUN]) == 0  # 5 %: both ok
     for c in _summary(tmp_path / "p")["cases"]:
         assert len(c["stroke_band"]) == 1 and c["stroke_band"][0][0] <= c["stroke"][0] <= c["stroke_band"][0][1]
-    assert "] |" in (tmp_path / "p" / "summary.md").read_text()  # the strokes' column shows [low, high]
+    assert "] mm |" in (tmp_path / "p" / "summary.md").read_text()  # the strokes' column: [low, high] unit
     assert _summary(out)["cases"][0]["stroke_band"] == []  # off unless asked for
 
 
@@ -153,8 +155,12 @@ def test_scene_file_acceptance_section(tmp_path):
     (tmp_path / "f.toml").write_text(text)
     scene = load_scene(tmp_path / "f.toml")
     assert scene.acceptance == {"max_difference": 0.02, "idle_contraction": IDLE_CONTRACTION, "bands": True}
-    rep = run_case(scene, "bend", photo=False).report
+    lines = []
+    rep = run_case(scene, "bend", photo=False, log=lines.append).report
     assert not rep.success and "max_difference 2 %" in rep.message
+    assert f"difference {rep.difference:.3g} {scene.units} is" in rep.message  # the scene's unit, as its figures
+    design, = [s for s in lines if "design (" in s]
+    assert f"difference {rep.difference:.3g} {scene.units} (" in design and f"] {scene.units}," in design
     (lo, hi), = rep.stroke_band
     assert lo <= rep.stroke[0] <= hi and lo < hi
     again = run_case(scene, "bend", photo=False, max_difference=0.05, bands=False).report
@@ -214,6 +220,7 @@ def test_gait_reports_each_keyframe_reached_or_not():
     text = repr(sch)
     assert f"{sch.n_frames}/{sch.n_frames} frames solved" not in text
     assert "right (difference" in text and "NOT reached" in text
+    assert f"right (difference {sch.keyframe_differences[1]:.3g} mm)" in text  # the schedule's unit
     full = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)}, compare=False)
     both = gait_schedule(mesh, MAT, full, ["left", "right"], frames_per_step=2)
     assert both.reached.all() and f"{both.n_frames}/{both.n_frames} frames solved" in repr(both)

@@ -75,7 +75,7 @@ def _cmd_run(a) -> int:
                     raise InputError(f"{names[0]} writes no vector figures: run it without --vector")
                 extra["vector"] = vector
         with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
-            folder.begin(getattr(module, "OUTPUTS", ()))
+            folder.begin(figure_outputs(getattr(module, "OUTPUTS", ()), vector))
             with progress_for_cli(a, 0, names[0], unit="step") as log:
                 code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log, **extra))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
@@ -135,6 +135,20 @@ def _cmd_run(a) -> int:
     print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
           f"results in {a.out}; photographs are SYNTHETIC")
     return 0 if ok else 1
+
+
+def figure_outputs(outputs, vector=None) -> list[str]:
+    """The files a figure script writes: its ``OUTPUTS``, and with ``vector`` each PNG's vector copy beside
+    it (``figure6a.png`` and ``vector="pdf"``: ``figure6a.png``, ``figure6a.pdf``)."""
+    from ..plot.style import figure_formats
+
+    out = []
+    for name in outputs:
+        out.append(name)
+        stem, ext = name.rsplit(".", 1) if "." in name else (name, "")
+        if ext.lower() == "png":
+            out += [f"{stem}.{f}" for f in figure_formats(vector)]
+    return out
 
 
 def _fraction(text: str) -> float:

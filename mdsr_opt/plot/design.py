@@ -1,4 +1,4 @@
-"""Figures of routing and design: contraction graphs, routed muscles, designs, benchmarks."""
+"""Figures of routing and design: contraction graphs, routed muscles, designs, benchmarks, gait schedules."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
-from .style import BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, symmetric_limits, unit_label
+from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, muscle_color,
+                    symmetric_limits, unit_label)
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'design_title',
-           'plot_design_benchmark']
+           'plot_design_benchmark', 'plot_schedule']
 
 
 # --- routing (issue 3) ---
@@ -254,4 +255,41 @@ def plot_design_benchmark(rows, traces=None, ax=None):
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)  # beside the axes: over no marker
     ax.set_title("contraction design: difference against time (marker size ~ muscle count)", fontsize=10)
     ax.grid(True, which="major", alpha=0.3)
+    return fig
+
+
+# --- gait schedules (synthesis.gait) ---
+def plot_schedule(schedule, ax=None, title: str | None = None):
+    """Chart of a gait's strokes over time: one line per muscle (commanded solid, achieved dotted), named and
+    coloured as in every figure (:mod:`mdsr_opt.plot.style`), the keyframes marked with their poses.
+    ``schedule`` is a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its fields are read; nothing of the
+    synthesis stage is imported). Returns the figure."""
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(7.5, 3.8))
+    else:
+        fig = ax.figure
+    t = schedule.times
+    for i, n in enumerate(schedule.muscle_names):
+        c = muscle_color(i)
+        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
+                f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
+        if np.isfinite(schedule.achieved[:, i]).any():
+            ax.plot(t, schedule.achieved[:, i], ":", color=c, lw=1.2)
+    top = float(np.nanmax(schedule.strokes)) if schedule.strokes.size else 1.0
+    for k in schedule.keyframes:
+        ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
+        ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
+    bad = ~schedule.success
+    if bad.any():
+        ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"stroke ({schedule.units}; < 0: rope paid out)")
+    low = min(0.0, float(np.nanmin(schedule.strokes)))
+    ax.set_ylim(bottom=low - 0.08 * (top - low), top=top * 1.15 if top > 0 else 1.0)
+    ax.axhline(0.0, color="0.5", lw=0.6, zorder=0)
+    ax.set_title(title or f"actuation schedule: {' -> '.join(schedule.sequence)} "
+                 f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    # no tight_layout: it lays every text out once more (40 % of the chart's time), and the PNG is cropped
+    # to what is drawn anyway (mdsr_opt.plot.common.save_figure)
     return fig

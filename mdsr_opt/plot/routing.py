@@ -142,15 +142,20 @@ def plot_layout_grid(columns, title=None):
     return fig
 
 
-def plot_design_grid(columns, title=None):
+def plot_design_grid(columns, title=None, row_names=None):
     """Figure 6b: the target, then each layout's driven state (designed contractions) over it.
 
     Parameters
     ----------
     columns : sequence of dict
         Each with ``title``, ``mesh``, ``target``, ``designs`` (one per layout: a dict with ``x`` the
-        driven state moved onto the target, ``muscles``, ``difference``, ``success``) and ``row_labels``;
-        optionally ``units``, the coordinates' length unit (default ``"body units"``).
+        driven state moved onto the target, ``muscles``, ``difference``, ``success``) and ``row_labels``
+        (one per design, heading its panel); optionally ``units``, the coordinates' length unit (default
+        ``"body units"``).
+    title : str, optional
+    row_names : sequence of str, optional
+        The rows' names beside the first column: the target row's, then one per design row. Default
+        ``"target"``, then ``"driven"`` (one design row) or ``"driven, layout 1"``, ``"driven, layout 2"``...
 
     Returns
     -------
@@ -161,6 +166,12 @@ def plot_design_grid(columns, title=None):
         raise ValueError("plot_design_grid needs at least one column")
     n_lay = max(len(c["designs"]) for c in columns)
     rows = 1 + n_lay
+    if row_names is None:
+        row_names = ["target"] + (["driven"] if n_lay == 1 else [f"driven, layout {k + 1}" for k in range(n_lay)])
+    row_names = [str(n) for n in row_names]
+    if len(row_names) != rows:
+        raise ValueError(f"plot_design_grid: {len(row_names)} row names for {rows} rows (the target's, then one "
+                         f"per design row)")
     fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns), 2.6 * rows), squeeze=False)
     for j, c in enumerate(columns):
         mesh, y = c["mesh"], np.asarray(c["target"], dtype=float)
@@ -176,9 +187,8 @@ def plot_design_grid(columns, title=None):
             flag = "" if d["success"] else " FAILED"
             ax.set_title(f"{label}: D = {d['difference']:.3g} {unit_label(c.get('units'))}{flag}", fontsize=8)
             _finish(ax)
-    axes[0, 0].set_ylabel("A target", fontsize=9)
-    for i in range(n_lay):
-        axes[1 + i, 0].set_ylabel(f"{chr(66 + i)} driven (layout {chr(67 + i)})", fontsize=9)
+    for i, name in enumerate(row_names):
+        axes[i, 0].set_ylabel(name, fontsize=9)
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
@@ -193,7 +203,8 @@ def plot_convergence(panels, title=None, log=True):
     panels : sequence of dict
         Each with ``title`` and ``traces``: a list of ``(label, iterations, differences)``; ``iterations``
         and ``differences`` are equal-length sequences; optionally ``units``, the length unit of the
-        differences (default ``"body units"``).
+        differences (default ``"body units"``). Panels in one unit share the first panel's axis label;
+        panels in different units each label their own.
     log : bool
         Logarithmic difference axis.
 
@@ -219,7 +230,9 @@ def plot_convergence(panels, title=None, log=True):
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)
         legend_below(ax, ncol=1, drop=0.45)  # under the panel: never over a trace
-    axes[0, 0].set_ylabel(axis_label("difference D", panels[0].get("units")))
+    units = [unit_label(p.get("units")) for p in panels]
+    for ax, u in zip(axes[0], units) if len(set(units)) > 1 else [(axes[0, 0], units[0])]:
+        ax.set_ylabel(axis_label("difference D", u))
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()

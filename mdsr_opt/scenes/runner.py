@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.errors import LayoutError
 from ..core.results import compact_repr, to_jsonable
+from ..plot.style import unit_label
 from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
@@ -138,7 +139,8 @@ class CaseRun:
 
 @dataclass
 class SceneReport:
-    """The outcome of :func:`run_scene`: one :class:`CaseReport` per case, animations, timing."""
+    """The outcome of :func:`run_scene`: one :class:`CaseReport` per case, animations, timing, and the
+    scene's length ``units`` in which :meth:`table` quotes differences and strokes (``""``: body units)."""
 
     scene: str
     title: str
@@ -147,6 +149,7 @@ class SceneReport:
     animations: dict = field(default_factory=dict)
     out: str = ""
     time: float = 0.0
+    units: str = ""
 
     def __repr__(self) -> str:
         n_ok = sum(bool(c.success) for c in self.cases)
@@ -161,7 +164,10 @@ class SceneReport:
                                                              for a in self.animations.values())
 
     def table(self) -> str:
-        """A Markdown table of the key figures, one row per case."""
+        """A Markdown table of the key figures, one row per case; differences and strokes carry the scene's
+        unit in every cell (:func:`~mdsr_opt.plot.style.unit_label`), so tables of scenes in different units
+        can be joined."""
+        u = unit_label(self.units)
         head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
                 "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
@@ -169,7 +175,8 @@ class SceneReport:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
             s = ", ".join(f"{v:.4g}" + (f" [{b[0]:.4g}, {b[1]:.4g}]" if len(c.stroke_band) == len(c.stroke) else "")
                           for v, b in zip(c.stroke, c.stroke_band or [()] * len(c.stroke))) if c.stroke else "-"
-            d = "-" if c.difference is None else f"{c.difference:.4g}"
+            s += f" {u}" if c.stroke else ""
+            d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
             ok = "ok" if c.success else "FAILED"
             ok += f" (saturated {', '.join(map(str, c.saturated))})" if c.saturated else ""
@@ -335,8 +342,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     a = ", ".join(f"{v:.3f}" for v in res.contractions)
     ach = ", ".join(f"{v:.3f}" for v in res.achieved)
     st = ", ".join(f"{v:.4g}" for v in res.stroke)
+    u = unit_label(scene.units)
     say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
-        f"strokes [{st}], difference {res.difference:.3g} "
+        f"strokes [{st}] {u}, difference {res.difference:.3g} {u} "
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if rep.saturated:
@@ -346,7 +354,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if photo:
         measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()
-    far = difference_failure(res.difference, mesh.size, accept["max_difference"])
+    far = difference_failure(res.difference, mesh.size, accept["max_difference"], units=scene.units)
     rep.success = bool(res.success) and not far
     if not res.success:
         rep.message = f"design {'not verified' if 'verification' in res.status else 'failed'}: {res.status}"

@@ -258,7 +258,7 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             runs[cname].report.files = case_files(parts, out / cname)
     report = SceneReport(scene=scene.name, title=scene.title, n_nodes=scene.mesh.n_nodes,
                          cases=[runs[c].report for c in names], animations=anim_out, out=str(out),
-                         time=time.perf_counter() - t0)
+                         time=time.perf_counter() - t0, units=scene.units)
     summary = report.to_dict()
     summary.update({"description": scene.description, "source": portable_source(scene.source, out),
                     "resolution": scene.resolution,

@@ -88,22 +88,26 @@ def check_max_difference(value, name: str = "max_difference") -> float:
     return positive_float(value, name)
 
 
-def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE) -> str:
+def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE,
+                       units: str | None = None) -> str:
     """Why a design's ``difference`` (a length) to its target is too large for a body of ``size``, or ``""``
-    when it is within ``max_difference * size``.
+    when it is within ``max_difference * size``. Lengths are quoted in ``units`` (default ``"body units"``).
 
     Example
     -------
     >>> difference_failure(0.01, 1.0)
     ''
-    >>> difference_failure(0.12, 2.0, 0.05)
-    'difference 0.12 is 6.00 % of the size 2, more than max_difference 5 %'
+    >>> difference_failure(0.12, 2.0, 0.05, units="mm")
+    'difference 0.12 mm is 6.00 % of the size 2 mm, more than max_difference 5 %'
     """
-    d = float(difference)
+    from ..plot.style import unit_label
+
+    d, u = float(difference), unit_label(units)
     if math.isfinite(d) and d <= max_difference * size:
         return ""
     rel = f"{100 * d / size:.2f} %" if math.isfinite(d) else "not finite"
-    return f"difference {d:.3g} is {rel} of the size {size:.3g}, more than max_difference {100 * max_difference:g} %"
+    return (f"difference {d:.3g} {u} is {rel} of the size {size:.3g} {u}, more than max_difference "
+            f"{100 * max_difference:g} %")
 
 
 def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_contraction: float = IDLE_CONTRACTION,

@@ -3,7 +3,7 @@
 :func:`gait_schedule` takes a :class:`~mdsr_opt.synthesis.poses.PosesResult` (one layout, every pose's strokes) and a
 sequence of its poses, interpolates the strokes linearly between them and solves every frame forward. The
 schedule is written as a CSV actuation schedule in length units (:meth:`GaitSchedule.write_csv`), drawn as
-a chart (:func:`plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
+a chart (:func:`mdsr_opt.plot.design.plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
 the scene runner's hook: layout, schedule, chart, GIF and fabrication files of a scene's :class:`Gait`.
 """
 
@@ -28,8 +28,14 @@ from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
 
-__all__ = ["Gait", "GaitSchedule", "gait_schedule", "plot_schedule", "save_gait_animation", "run_gait",
-           "warm_start_state"]
+__all__ = ["Gait", "GaitSchedule", "gait_schedule", "save_gait_animation", "run_gait", "warm_start_state",
+           "ZERO_STROKE"]
+
+#: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest
+#: length (in the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's
+#: zero stroke at about -1e-16 of the length; the same 1e-9 is the threshold at which
+#: :func:`~mdsr_opt.synthesis.poses.design_poses` counts a muscle's path as shortening.
+ZERO_STROKE = 1e-9
 
 
 # ---------------------------------------------------------------------------------------------- gait
@@ -203,7 +209,7 @@ class GaitSchedule:
         solved[kf[~np.asarray(self.reached, bool)]] = False
         d = {self.sequence[k]: self.keyframe_differences[k] for k in np.flatnonzero(~self.reached)}
         return (f"{int(solved.sum())}/{self.n_frames} frames solved and reaching their pose; pose(s) "
-                + ", ".join(f"{p} (difference {v:.3g})" for p, v in d.items())
+                + ", ".join(f"{p} (difference {v:.3g} {self.units})" for p, v in d.items())
                 + f" NOT reached (max_difference {100 * self.max_difference:g} % of the size)")
 
     def to_dict(self) -> dict:
@@ -253,7 +259,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     frame is a forward internal-driving solve (:func:`~mdsr_opt.solve_internal` with the pulling muscles, the
     layout's muscle model and anchor radius, warm-started from the previous frame (:func:`warm_start_state`),
     else from rest); frames with equal strokes (a gait goes out and back) are solved once, and a frame in
-    which no muscle pulls is the rest shape exactly. A released rope whose path in the solved frame is longer than
+    which no muscle pulls is the rest shape exactly. A stroke within :data:`ZERO_STROKE` of its rope's length of
+    zero is zero: in a frame where another muscle pulls, that rope is held at its rest length (solved with
+    contraction 0), as the pose's design held it. A released rope whose path in the solved frame is longer than
     the rope paid out would be taut: that frame is reported as failed.
 
     Parameters
@@ -331,13 +339,15 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     labels.append(seq[-1])
     S = np.array(S)
     L0 = layout.rest_lengths
+    S[np.abs(S) <= ZERO_STROKE * L0] = 0.0  # round-off about zero: a held rope, not a paid-out one
     F = len(S)
     ach, ten = np.full((F, m), np.nan), np.full((F, m), np.nan)
     states, ok, status = [], np.zeros(F, bool), []
     x_prev = None
     solved: dict[bytes, tuple] = {}
     for k in range(F):
-        on = np.flatnonzero(S[k] > 0)
+        # the muscles solved: those that pull and, when any does, those held at their rest length
+        on = np.flatnonzero(S[k] >= 0) if (S[k] > 0).any() else np.empty(0, dtype=int)
         key = np.round(S[k], 12).tobytes()  # a gait goes out and back: equal strokes are solved once
         if key in solved:
             x, ok[k], msg, ach_on, ten_on = solved[key]
@@ -359,7 +369,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
             ten[k, on] = tn if tn is not None and np.size(tn) == len(on) else np.nan
             solved[key] = (x, ok[k], msg, ach[k, on].copy(), ten[k, on].copy())
         x_prev = x if ok[k] else None
-        off = np.flatnonzero(S[k] <= 0)
+        off = np.setdiff1d(np.arange(m), on)
         if len(off):  # released ropes: their length is L0 - stroke; the body's path must not exceed it
             Lx = np.array([layout.muscles[i].length(x) for i in off])
             ach[k, off], ten[k, off] = L0[off] - Lx, 0.0
@@ -383,44 +393,6 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                         max_difference=float(max_difference))
 
 
-def plot_schedule(schedule: GaitSchedule, ax=None, title: str | None = None):
-    """Chart of the strokes over time: one line per muscle (commanded solid, achieved dotted), named and
-    coloured as in every figure (:mod:`mdsr_opt.plot.style`), the keyframes marked with their poses.
-    Returns the figure."""
-    import matplotlib.pyplot as plt
-    from ..plot.style import muscle_color
-
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(7.5, 3.8))
-    else:
-        fig = ax.figure
-    t = schedule.times
-    for i, n in enumerate(schedule.muscle_names):
-        c = muscle_color(i)
-        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
-                f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
-        if np.isfinite(schedule.achieved[:, i]).any():
-            ax.plot(t, schedule.achieved[:, i], ":", color=c, lw=1.2)
-    top = float(np.nanmax(schedule.strokes)) if schedule.strokes.size else 1.0
-    for k in schedule.keyframes:
-        ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
-        ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
-    bad = ~schedule.success
-    if bad.any():
-        ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel(f"stroke ({schedule.units}; < 0: rope paid out)")
-    low = min(0.0, float(np.nanmin(schedule.strokes)))
-    ax.set_ylim(bottom=low - 0.08 * (top - low), top=top * 1.15 if top > 0 else 1.0)
-    ax.axhline(0.0, color="0.5", lw=0.6, zorder=0)
-    ax.set_title(title or f"actuation schedule: {' -> '.join(schedule.sequence)} "
-                 f"({schedule.n_frames} frames; dotted: achieved)", fontsize=9)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    # no tight_layout: it lays every text out once more (40 % of the chart's time), and the PNG is cropped
-    # to what is drawn anyway (mdsr_opt.plot.common.save_figure)
-    return fig
-
-
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
                         fps: float = 8.0) -> str:
     """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.scenes.save_animation`); ``mesh`` must be
@@ -442,8 +414,10 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
 
 
 def _write_schedule(schedule: GaitSchedule, title: str, path, vector=None) -> str:
-    """``schedule.png``: the strokes over time (:func:`plot_schedule`); with ``vector`` a PDF/SVG beside it."""
+    """``schedule.png``: the strokes over time (:func:`~mdsr_opt.plot.design.plot_schedule`); with ``vector`` a
+    PDF/SVG beside it."""
     from ..plot.common import save_figure
+    from ..plot.design import plot_schedule
 
     return save_figure(plot_schedule(schedule, title=title), path, close=True, vector=vector)
 
@@ -548,7 +522,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         else:
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
-        f"{int(res.separate_n_muscles.sum())}), difference " + ", ".join(
+        f"{int(res.separate_n_muscles.sum())}), difference ({scene.units}) " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
         + f"; {sch.outcome()}" + ("" if ok else " - FAILED: " + info["message"]))
     return info

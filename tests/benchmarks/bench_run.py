@@ -82,7 +82,7 @@ WRAPS = [
     ("mdsr_opt.plot", "plot_scene", "figures"),
     ("mdsr_opt.plot", "save_figure", "figures"),
     ("mdsr_opt.plot.common", "save_figure", "figures"),
-    ("mdsr_opt.synthesis.gait", "plot_schedule", "figures"),
+    ("mdsr_opt.plot.design", "plot_schedule", "figures"),
     ("mdsr_opt.plot", "save_animation", "GIFs"),
     ("mdsr_opt.body.io", "write_mesh", "writing"),
     ("mdsr_opt.body.io", "write_json", "writing"),
