@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ctypes
 import logging
 import math
 import os
@@ -36,14 +35,14 @@ class RunTimeout(BaseException):
 
 
 class _Deadline:
-    """Raise :class:`RunTimeout` in the current thread ``seconds`` from now (at its next Python instruction).
+    """Stop the current thread's run ``seconds`` from now with :class:`RunTimeout`.
 
-    A timer thread sets an asynchronous exception on the running thread; C code (an IPOPT solve) finishes its
-    call first. Raised inside a solver's Python callback, CasADi would turn it into a failed evaluation that
-    load stepping takes for a failed step and goes on, far past the deadline: the
-    timer also asks every solve that returns to raise it (:func:`~mdsr_opt.core.guards.request_stop`).
-    Leaving the block cancels both and clears an exception that was set but not yet raised, so nothing leaks
-    past the block. No tracing: runs are not slowed down.
+    A timer thread asks the thread's solves to stop at their next iteration and raise it
+    (:func:`~mdsr_opt.core.guards.request_stop`; checked by every solver's iteration callback and between
+    load steps). A run whose work ended past the deadline without meeting such a check raises it as the
+    block ends, so it is a time-out either way. Leaving the block withdraws the request. No tracing and no
+    asynchronous exceptions: runs are not slowed down, and Python code is never interrupted at an arbitrary
+    instruction.
     """
 
     def __init__(self, seconds: float):
@@ -54,7 +53,6 @@ class _Deadline:
             if not self.done:
                 self.fired = True
                 request_stop(self.tid, RunTimeout)
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self.tid), ctypes.py_object(RunTimeout))
 
     def __enter__(self):
         self.tid = threading.get_ident()
@@ -69,9 +67,9 @@ class _Deadline:
         with self.lock:
             self.done = True
             self.timer.cancel()
-            if self.fired:
-                cancel_stop(self.tid)
-                ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(self.tid), None)
+        cancel_stop(self.tid)
+        if self.fired and exc_type is None:
+            raise RunTimeout(f"the run ended after its {self.seconds:g} s budget")
         return False
 
 
@@ -270,7 +268,7 @@ def execute_run(spec: RunSpec, index: int = 0) -> RunOutcome:
         else:
             fields.update(status=f"{type(exc).__name__}: {exc}".replace("\n", " ")[:300], failure="error",
                           success=False)
-    finally:  # here, not in the deadline's __exit__: its RunTimeout can be raised on that method's first line
+    finally:
         cancel_stop(threading.get_ident())
 
     check_interrupt()  # a Ctrl-C that a solver turned into a failed solve stops the study, never a failed row
