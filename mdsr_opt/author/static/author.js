@@ -104,7 +104,7 @@
     const notes = $("routing-notes"); notes.innerHTML = "";
     const lines = m.notes.slice();
     if (m.fixture_radius != null) lines.unshift(`end fixtures: radius ${fmt(m.fixture_radius)}`);
-    if (m.deleted.length) lines.push(`deleted: ${m.deleted.join(", ")} (design again)`);
+    if (m.deleted.length) { lines.push(`deleted: ${m.deleted.join(", ")}`); showHint(`${m.deleted[m.deleted.length - 1]} deleted: Design again for this layout`); }
     for (const t of lines) { const li = document.createElement("li"); li.textContent = t; notes.appendChild(li); }
     updateTable(); render();
   }
