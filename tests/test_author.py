@@ -428,6 +428,14 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     assert run.report.success, run.report.message
     np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)
     assert abs(run.report.difference - page["difference"]) <= 1e-9
+    assert page["acceptance"] == "" and run.report.success  # the page says what mdsr run will say
+    assert back.units == "mm" and back.acceptance == s.acceptance  # the scene's unit and [acceptance] kept
+    # a stricter [acceptance]: the page names the failure mdsr run reports for the saved scene
+    s.acceptance = dict(s.acceptance, max_difference=1e-4)
+    strict = s.run_design()
+    assert "more than max_difference 0.01 %" in strict["acceptance"]
+    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "authored", photo=False)
+    assert not run.report.success and strict["acceptance"] in run.report.message
     # the saved scene loads on the page again with its channel and routes without a conflict of radii
     s2 = Session.from_scene_file(files[0])
     assert s2.fabrication_shown()["channel_diameter"] == 0.1

@@ -49,6 +49,10 @@ def scene_dict(session, name: str, mesh_file: str) -> dict:
         "body": {"mesh": mesh_file},
         "material": material_table(mat),
     }
+    if session.units:
+        d["units"] = session.units
+    if session.acceptance:
+        d["acceptance"] = {k: _plain(v) for k, v in session.acceptance.items()}
     if session.muscles:
         d["muscles"] = [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}
                         for i, m in enumerate(session.muscles)]

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..body.material import NeoHookean
-from ..synthesis.acceptance import design_active
+from ..synthesis.acceptance import design_active, difference_failure
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
@@ -133,6 +133,7 @@ class Session:
     #: False: the routing search alone), saved as the scene's [fabrication] table
     fabrication: dict | bool | None = None
     deleted: tuple = ()  # names of the routed muscles the user deleted
+    acceptance: dict = field(default_factory=dict)  # the scene's [acceptance] (mdsr run's; saved with the scene)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -140,7 +141,8 @@ class Session:
         """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
         s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
                 resolution=scene.resolution, routing_options=dict(scene.routing_options),
-                design_options=dict(scene.design_options), units=scene.units)
+                design_options=dict(scene.design_options), units=scene.units,
+                acceptance=dict(getattr(scene, "acceptance", None) or {}))
         ext = [c for c in scene.cases if c.kind == "external"]
         if case is not None:
             ext = [scene.case(case)]
@@ -521,7 +523,8 @@ class Session:
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it
-            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **opts)
+            idle = {k: self.acceptance[k] for k in ("idle_contraction",) if k in self.acceptance}  # as mdsr run
+            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **idle, **opts)
         self.muscles = tuple(kept)
         self.design, self.design_params = res, opts
         return self.design_summary()
@@ -556,6 +559,9 @@ class Session:
                 "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params),
                 "saturated": [m.name for m, sat in zip(self.muscles, res.saturated) if sat],
                 "dropped": [d.to_dict() for d in self.dropped],
+                # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
+                "acceptance": difference_failure(res.difference, self.mesh.size,
+                                                 *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance]),
                 "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles]}
 
 

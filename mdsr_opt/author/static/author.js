@@ -83,7 +83,8 @@
     if (m.type === "routing") return onRouting(m);
     if (m.type === "design") {
       S.design = m; if (m.layout) setMuscles(m.layout);
-      if (!m.success) showError(`design not verified: ${m.status}`); updateTable(); render(); return;
+      if (!m.success) showError(`design not verified: ${m.status}`);
+      else if (m.acceptance) showError(`design too far from the target for mdsr run: ${m.acceptance}`); updateTable(); render(); return;
     }
     if (m.type === "saved") { S.saved = m; S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "saved: " + m.files.join(", "); return; }
     if (m.type === "confirm") { S.confirm = m; $("confirm-text").textContent = m.message; $("confirm").hidden = false; return; }
@@ -233,7 +234,8 @@
       const d = S.design.difference;
       tr.innerHTML = `<td colspan="${cols.length + 1}">difference ${d == null ? "-" : d.toExponential(3)} ` +
         `(${S.design.relative_difference == null ? "-" : (100 * S.design.relative_difference).toFixed(2)} % of size), ` +
-        `${S.design.success ? "verified" : "NOT verified"}</td>`;
+        `${S.design.success ? "verified" : "NOT verified"}` +
+        (S.design.acceptance ? `; mdsr run fails it: ${S.design.acceptance}` : "") + "</td>";
       t.appendChild(tr);
     }
   }
