@@ -181,8 +181,8 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     pa, pb = (page.execute_script(f"return mdsrAuthor.screenOf({int(v)});") for v in (a, b))
     canvas = page.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
-    ActionChains(page).move_to_element_with_offset(canvas, int(round((pa[0] + pb[0]) / 2 - w / 2)),
-                                                   int(round((pa[1] + pb[1]) / 2 - h / 2))).click().perform()
+    ActionChains(page).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
+                                                   round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
     assert page.execute_script("return mdsrAuthor.selected();") == victim["name"]
     page.find_element(By.ID, "delete-muscle").click()
     routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.deleted.length && r;")
