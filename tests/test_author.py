@@ -330,3 +330,154 @@ def test_downloaded_figures_name_the_scenes_unit(tentacle, monkeypatch, tmp_path
                                                                        Path(path).write_bytes(b"png")))
     _, media = download(s, "graph.png", tmp_path)
     assert labels == [f"x ({tentacle.units})"] and media == "image/png"
+
+
+# ------------------------------------------------------------------------------------------ fabrication and deletion
+def test_the_page_shows_the_bodys_fabrication_defaults(tentacle):
+    from mdsr_opt.author.server import body_message
+    from mdsr_opt.mechanics.anchors import body_size
+    from mdsr_opt.synthesis.fabrication import Fabrication
+
+    s = Session.from_scene(tentacle)
+    shown = body_message(s)["fabrication"]
+    assert shown == Fabrication().for_body(tentacle.mesh).to_dict()  # the class's defaults, read
+    D = body_size(tentacle.mesh)
+    assert np.isclose(shown["channel_diameter"], 0.01 * D) and np.isclose(shown["fixture_radius"], 0.04 * D)
+    assert body_message(s)["units"] == "mm"
+    # a scene's own [fabrication] is what the page shows (the fields it leaves open: the body's defaults)
+    s2 = Session.from_scene(tentacle)
+    s2.routing_options["fabrication"] = {"channel_diameter": 0.2, "wall": 0.05}
+    shown2 = body_message(s2)["fabrication"]
+    assert shown2["channel_diameter"] == 0.2 and shown2["wall"] == 0.05
+    assert shown2["fixture_radius"] == shown["fixture_radius"]
+
+
+def test_route_uses_the_pages_channel_and_reports_its_notes(tentacle):
+    from mdsr_opt.synthesis.fabrication import boundary_distance
+
+    s = Session.from_scene(tentacle)
+    s.settle()
+    d = boundary_distance(tentacle.mesh)
+    counts, notes = [], []
+    for channel, wall in ((0.1, 0.05), (0.3, 0.08)):
+        out = s.route(10.0, 4.0, None, {"channel_diameter": channel, "wall": wall})
+        assert out["fabrication"]["channel_diameter"] == channel and out["fabrication"]["wall"] == wall
+        assert out["notes"] == list(s.routing.notes)  # what made the ropes buildable, shown on the page
+        notes += out["notes"]
+        assert min(d[list(m.nodes)].min() for m in s.muscles) >= channel / 2 + wall - 1e-12
+        assert out["fixture_radius"] <= out["fabrication"]["fixture_radius"]
+        counts.append(len(out["muscles"]))
+    assert 1 <= counts[1] < counts[0]  # a wider channel leaves room for fewer ropes
+    assert any("fixtures shrunk" in t for t in notes)
+
+
+@pytest.mark.parametrize("fab, err, words", [
+    ({"channel_diameter": -1.0}, ValueError, "channel_diameter must be a finite length >= 0"),
+    ({"wall": "abc"}, TypeError, "wall must be a length"),
+    ({"wall": True}, TypeError, "wall must be a length"),
+    ({"channel": 1.0}, ValueError, "unknown field"),
+    ({"fixture_radius": 0.05, "min_fixture_radius": 0.1}, ValueError, "larger than fixture_radius"),
+    ({"fixture_radius": 100.0}, ValueError, "half the body"),
+    ("0.1", TypeError, "object of lengths"),
+])
+def test_bad_fabrication_fields_are_named_before_routing(tentacle, fab, err, words):
+    s = Session.from_scene(tentacle)
+    s.settle()
+    with pytest.raises(err, match=words):
+        s.route(10.0, 4.0, None, fab)
+    assert s.routing is None
+
+
+def test_deleting_a_muscle_drops_the_design_and_keeps_the_fixtures(tentacle):
+    s = Session.from_scene(tentacle)
+    s.settle()
+    out = s.route(10.0, 4.0, None, {"channel_diameter": 0.1})
+    names = [m["name"] for m in out["muscles"]]
+    assert len(names) >= 2
+    s.run_design()
+    out = s.delete_muscle(names[1])
+    assert [m["name"] for m in out["muscles"]] == names[:1] + names[2:] and out["deleted"] == [names[1]]
+    assert [st["name"] for st in out["stats"]] == names[:1] + names[2:]
+    assert s.design is None  # designed again before it is shown or saved
+    with pytest.raises(ValueError, match="no muscle 'nope'"):
+        s.delete_muscle("nope")
+    d = s.run_design()
+    assert d["params"]["anchor_radius"] == s.routing.fixture_radius  # the fixtures the ropes were fitted to
+    assert [m["name"] for m in d["layout"]] == names[:1] + names[2:]
+
+
+def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp_path):
+    """The scene the page saves after a channel size and a deletion: `mdsr run`'s case runner designs the same
+    muscles to the same contractions."""
+    from mdsr_opt.scenes.runner import run_case
+
+    s = Session.from_scene(tentacle)
+    s.settle()
+    fab = {"channel_diameter": 0.1, "wall": 0.07}
+    names = [m["name"] for m in s.route(10.0, 4.0, None, fab)["muscles"]]
+    s.delete_muscle(names[0])
+    page = s.run_design()
+    files = save_scene(s, tmp_path, "fab_deleted")
+    data = json.loads(Path(files[0]).read_text())
+    assert data["fabrication"] == fab and "fabrication" not in data.get("routing", {})
+    assert data["design"]["anchor_radius"] == s.routing.fixture_radius
+    back = load_scene(files[0])
+    assert back.routing_options["fabrication"] == fab
+    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles] and len(back.muscles) == len(names) - 1
+    run = run_case(back, "authored", photo=False)
+    assert run.report.success, run.report.message
+    np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)
+    assert abs(run.report.difference - page["difference"]) <= 1e-9
+    assert page["acceptance"] == "" and run.report.success  # the page says what mdsr run will say
+    assert back.units == "mm" and back.acceptance == s.acceptance  # the scene's unit and [acceptance] kept
+    # a stricter [acceptance]: the page names the failure mdsr run reports for the saved scene
+    s.acceptance = dict(s.acceptance, max_difference=1e-4)
+    strict = s.run_design()
+    assert "more than max_difference 0.01 %" in strict["acceptance"]
+    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "authored", photo=False)
+    assert not run.report.success and strict["acceptance"] in run.report.message
+    # the saved scene loads on the page again with its channel and routes without a conflict of radii
+    s2 = Session.from_scene_file(files[0])
+    assert s2.fabrication_shown()["channel_diameter"] == 0.1
+    s2.settle()
+    assert s2.route(10.0, 4.0, None)["fabrication"]["wall"] == 0.07
+
+
+def test_bad_route_and_delete_messages_get_error_replies_and_the_page_stays_served():
+    import asyncio
+
+    from mdsr_opt.author.server import Page
+
+    sent = []
+
+    class FakeSocket:
+        async def send_text(self, text):
+            sent.append(json.loads(text))
+
+    bad = [{"type": "route", "K_a": 10, "K_b": 4, "fabrication": {"channel_diameter": -0.5}},
+           {"type": "route", "K_a": 10, "K_b": 4, "fabrication": {"channel_diameter": "wide"}},
+           {"type": "route", "K_a": 10, "K_b": 4, "fabrication": [1, 2]},
+           {"type": "delete_muscle", "name": "M9"},
+           {"type": "delete_muscle", "name": 3}]
+
+    async def scenario():
+        page = Page(FakeSocket(), {"out": "unused", "folders": (), "written": set()})
+        page.enqueue({"type": "load", "body": {"kind": "problem", "name": "tentacle", "resolution": "coarse"}})
+        worker = asyncio.create_task(page.worker())
+        page.enqueue({"type": "route", "K_a": 10, "K_b": 4, "fabrication": {"channel_diameter": 0.1}})
+        for m in bad:
+            page.enqueue(m)
+        page.enqueue({"type": "ping"})
+        while not any(m["type"] == "pong" for m in sent):
+            await asyncio.sleep(0.01)
+        worker.cancel()
+        page.tmp.cleanup()
+
+    asyncio.run(asyncio.wait_for(scenario(), timeout=120))
+    errors = [m["message"] for m in sent if m["type"] == "error"]
+    assert len(errors) == len(bad), errors
+    for text, words in zip(errors, ["channel_diameter must be a finite length >= 0", "channel_diameter must be a length",
+                                    "object of lengths", "no muscle 'M9'", "muscle name must be a string"]):
+        assert words in text
+    routed = [m for m in sent if m["type"] == "routing"]
+    assert len(routed) == 1 and routed[0]["fabrication"]["channel_diameter"] == 0.1

@@ -1,8 +1,8 @@
 """The authoring page (``mdsr author``) in a real headless browser: Debian's chromium + chromedriver via selenium.
 
 Real mouse events drag a point; the state the page shows must equal ``solve_external`` with the same anchors
-and drags; routing and design run from the page and the saved scene file must reproduce them with
-``python -m mdsr_opt run``; bad messages get a message on the page and the server keeps answering.
+and drags; routing (with a channel size set on the page), a muscle's deletion and design run from the page and
+the saved scene file must reproduce them with ``python -m mdsr_opt run``; bad messages get a message on the page and the server keeps answering.
 """
 
 from __future__ import annotations
@@ -146,15 +146,48 @@ def test_rotation_drag_rotates_the_group_about_the_pivot(page):
 
 def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     _, out = served
+    # the body afresh (its own case): routed with a channel size set on the page, it has a stub to delete
+    page.find_element(By.ID, "resolution").send_keys(RESOLUTION)
+    page.execute_script("document.getElementById('problem').value = arguments[0];", PROBLEM)
+    seq = page.execute_script("return mdsrAuthor.seq();")
+    page.find_element(By.ID, "load-problem").click()
+    wait(page, "const s = mdsrAuthor.state(); return s && s.settled && s.seq === null && !mdsrAuthor.busy() "
+               f"&& mdsrAuthor.seq() === {seq} && mdsrAuthor.routing() === null;")
     st = idle(page)
+    assert np.array_equal(st["anchors"], get_problem(PROBLEM, resolution=RESOLUTION).cases[0].anchors)
     page.find_element(By.ID, "show-graph").click()
     weights = wait(page, "return mdsrAuthor.graph();")
     scene0 = get_problem(PROBLEM, resolution=RESOLUTION)
     G = contraction_graph(scene0.mesh, np.asarray(st["x"]))
     assert np.allclose(weights, [G.edges[int(a), int(b)]["weight"] for a, b in scene0.mesh.edges], rtol=0, atol=1e-12)
+    # the fabrication fields show the body's defaults (Fabrication.for_body); the user sets a channel size
+    from mdsr_opt.synthesis.fabrication import Fabrication
+
+    fab = Fabrication().for_body(scene0.mesh).to_dict()
+    for k, v in fab.items():
+        assert float(page.find_element(By.ID, k).get_attribute("value")) == v
+    channel = page.find_element(By.ID, "channel_diameter")
+    channel.clear()
+    channel.send_keys("0.1")
     page.find_element(By.ID, "route").click()
-    routing = wait(page, "return mdsrAuthor.routing();")
-    assert len(routing["muscles"]) >= 1
+    routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.fabrication.channel_diameter === 0.1 && r;")
+    assert len(routing["muscles"]) >= 3
+    shown_notes = page.find_element(By.ID, "routing-notes").text
+    assert f"radius {routing['fixture_radius']:.4g}" in shown_notes and all(t in shown_notes for t in routing["notes"])
+    # select a muscle on the canvas with the Muscle tool and delete it
+    page.find_element(By.CSS_SELECTOR, "input[name=tool][value=muscle]").click()
+    victim = min(routing["muscles"], key=lambda m: len(m["nodes"]))  # the shortest rope: a stub
+    a, b = victim["nodes"][len(victim["nodes"]) // 2 - 1: len(victim["nodes"]) // 2 + 1]
+    pa, pb = (page.execute_script(f"return mdsrAuthor.screenOf({int(v)});") for v in (a, b))
+    canvas = page.find_element(By.ID, "canvas")
+    w, h = canvas.size["width"], canvas.size["height"]
+    ActionChains(page).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
+                                                   round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
+    assert page.execute_script("return mdsrAuthor.selected();") == victim["name"]
+    page.find_element(By.ID, "delete-muscle").click()
+    routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.deleted.length && r;")
+    assert routing["deleted"] == [victim["name"]] and victim["name"] not in [m["name"] for m in routing["muscles"]]
+    assert page.execute_script("return mdsrAuthor.design();") is None
     page.find_element(By.ID, "design").click()
     design = wait(page, "return mdsrAuthor.design();", timeout=180)
     assert design["success"], design["status"]
@@ -169,7 +202,10 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     scene = load_scene(scene_file)
     setup = prepare_case(scene, "authored")
     assert np.array_equal(setup.target, np.asarray(st["x"]))
-    assert [list(m.nodes) for m in setup.muscles] == [m["nodes"] for m in routing["muscles"]]
+    assert [list(m.nodes) for m in setup.muscles] == [m["nodes"] for m in routing["muscles"]]  # less the deleted
+    saved_fab = json.loads(scene_file.read_text())["fabrication"]
+    assert saved_fab == dict(fab, channel_diameter=0.1) and scene.routing_options["fabrication"] == saved_fab
+    assert scene.design_options["anchor_radius"] == routing["fixture_radius"]
     # ... and `mdsr run` designs the same contractions
     res = subprocess.run([sys.executable, "-m", "mdsr_opt", "run", str(scene_file), "--out", str(tmp_path / "run"),
                           "--no-photos", "--no-figures", "--no-animations", "--quiet"], cwd=ROOT,

@@ -3,9 +3,10 @@
 The scene file is JSON in the format :func:`~mdsr_opt.load_scene` reads. Its body is the session's mesh,
 written next to it as ``<name>.mesh.vtu`` (binary float64, so the nodes and their numbering come back
 exactly and node ids stay valid); anchors are node ids; each drag is one node moved ``to`` its exact
-position; routed muscles are node lists (so ``mdsr run`` uses them instead of routing again); routing
-and design options are the ones the page used, the muscle model written out so a changed default cannot
-change the result.
+position; routed muscles are node lists, without the ones the user deleted (so ``mdsr run`` uses them
+instead of routing again); routing and design options are the ones the page used, the muscle model written
+out so a changed default cannot change the result; the channel, wall and fixture sizes are the
+``[fabrication]`` table, and the design's ``anchor_radius`` is the fixture radius the ropes were fitted to.
 """
 
 from __future__ import annotations
@@ -48,13 +49,23 @@ def scene_dict(session, name: str, mesh_file: str) -> dict:
         "body": {"mesh": mesh_file},
         "material": material_table(mat),
     }
+    if session.units:
+        d["units"] = session.units
+    if session.acceptance:
+        d["acceptance"] = {k: _plain(v) for k, v in session.acceptance.items()}
     if session.muscles:
         d["muscles"] = [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}
                         for i, m in enumerate(session.muscles)]
-    routing = session.routing_params or session.routing_options
+    routing = dict(session.routing_params or session.routing_options)
+    fab = session.fabrication if session.routing is not None else routing.get("fabrication")
+    routing.pop("fabrication", None)  # written as the [fabrication] table
     if routing:
         d["routing"] = {k: _plain(v) for k, v in routing.items() if v is not None}
+    if fab is False or fab:
+        d["fabrication"] = fab if fab is False else {k: float(v) for k, v in fab.items() if v is not None}
     design = dict(session.design_params or session.design_options)
+    if session.fixture_radius is not None:  # the routed ropes' fixtures (shrunk when they had to be)
+        design["anchor_radius"] = float(session.fixture_radius)
     if session.design is not None:
         design["muscle_model"] = session.design.muscle_model
         design["stiffness"] = float(session.design.stiffness)
@@ -128,7 +139,9 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True) -> list
             and np.array_equal(np.sort(case.anchors), np.sort(session.anchors))
             and np.array_equal(case.drag_nodes, session.drag_nodes)
             and np.array_equal(case.drag_positions, session.drag_positions)
-            and [tuple(m.nodes) for m in (back.muscles or ())] == [tuple(m.nodes) for m in session.muscles])
+            and [tuple(m.nodes) for m in (back.muscles or ())] == [tuple(m.nodes) for m in session.muscles]
+            and back.routing_options.get("fabrication") == scene_dict(session, name, "")
+            .get("fabrication"))
     if not same:
         raise RuntimeError(f"{scene_path} does not read back as the session (please report this)")
     return [os.fspath(scene_path), os.fspath(mesh_path)]

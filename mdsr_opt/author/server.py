@@ -1,8 +1,9 @@
 """The ``mdsr author`` server: a Starlette app (served by uvicorn) with one websocket per page.
 
-The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route``, ``design``, ``save``,
-``ping``); the server answers with ``body``, ``state``, ``graph``, ``routing``, ``design``, ``saved``,
-``pong`` or ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
+The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route`` (with its ``fabrication``:
+channel, wall and fixture sizes), ``delete_muscle``, ``design``, ``save``, ``ping``); the server answers with
+``body``, ``state``, ``graph``, ``routing`` (also after a deletion), ``design``, ``saved``, ``pong`` or
+``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
 a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``). Bad
 input of any kind is answered with an ``error`` message naming the problem, and the server keeps serving.
 """
@@ -159,6 +160,7 @@ def body_message(s) -> dict:
             "drag_positions": s.drag_positions.tolist(),
             "routing": {"K_a": ro.get("K_a", 10.0), "K_b": ro.get("K_b", 4.0), "max_muscles": ro.get("max_muscles")},
             "design": {k: (v if isinstance(v, (int, float, str)) else None) for k, v in dd.items()},
+            "fabrication": s.fabrication_shown(), "units": s.units,
             "material": {"model": s.material.kind, "E": s.material.E, "nu": s.material.nu}}
 
 
@@ -267,8 +269,13 @@ class Page:
             mm = msg.get("max_muscles")
             if mm is not None:
                 mm = check_int(mm, "max_muscles (or empty)", 1, 100)
-            out = s.route(_number(msg, "K_a", lo=0.0, hi=1e6), _number(msg, "K_b", lo=0.0, hi=1e6), mm)
+            fab = msg.get("fabrication")
+            if fab is not None:  # checked at the door: a bad length is named before any routing
+                fab = s.check_fabrication_fields(fab)
+            out = s.route(_number(msg, "K_a", lo=0.0, hi=1e6), _number(msg, "K_b", lo=0.0, hi=1e6), mm, fab)
             return [dict(type="routing", **out)]
+        if t == "delete_muscle":
+            return [dict(type="routing", **s.delete_muscle(msg.get("name")))]
         if t == "design":
             method, model = msg.get("method"), msg.get("muscle_model")
             for k, v in (("method", method), ("muscle_model", model)):

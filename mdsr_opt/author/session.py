@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..body.material import NeoHookean
-from ..synthesis.acceptance import design_active
+from ..synthesis.acceptance import design_active, difference_failure
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
@@ -38,7 +38,7 @@ from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
 from ..mechanics.model import get_model
-from ..synthesis.fabrication import check_fabrication
+from ..synthesis.fabrication import Fabrication, check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
@@ -129,6 +129,11 @@ class Session:
     log: list = field(default_factory=list)
     dropped: tuple = ()  # idle muscles the last design took out of the layout (DroppedMuscle)
     units: str = ""  # the scene's length unit, named on the figures' axes ("" for a drawn outline)
+    #: the channel, wall and fixtures the last routing used: a dict of the fields given (None: the defaults;
+    #: False: the routing search alone), saved as the scene's [fabrication] table
+    fabrication: dict | bool | None = None
+    deleted: tuple = ()  # names of the routed muscles the user deleted
+    acceptance: dict = field(default_factory=dict)  # the scene's [acceptance] (mdsr run's; saved with the scene)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -136,7 +141,8 @@ class Session:
         """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
         s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
                 resolution=scene.resolution, routing_options=dict(scene.routing_options),
-                design_options=dict(scene.design_options), units=scene.units)
+                design_options=dict(scene.design_options), units=scene.units,
+                acceptance=dict(getattr(scene, "acceptance", None) or {}))
         ext = [c for c in scene.cases if c.kind == "external"]
         if case is not None:
             ext = [scene.case(case)]
@@ -395,27 +401,112 @@ class Session:
         G = contraction_graph(self.mesh, self._need_target())
         return [float(G.edges[int(a), int(b)]["weight"]) for a, b in self.mesh.edges]
 
-    def route(self, K_a: float, K_b: float, max_muscles: int | None) -> dict:
-        """Route muscles on the target with these knobs (the scene's other routing options kept)."""
+    def fabrication_shown(self) -> dict:
+        """The channel, wall and fixture sizes the next routing uses, every field set (in the body's unit).
+
+        The page's fields when it routed, else the scene's ``[fabrication]`` (its fixture radius the design's
+        ``anchor_radius`` if the scene gives one), each field left open taking
+        :meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`'s default for this body."""
+        spec = self.fabrication if self.routing is not None else self.routing_options.get("fabrication")
+        fab = self._fabrication(spec)
+        return (fab if fab is not False else Fabrication()).for_body(self.mesh).to_dict()
+
+    def _fabrication(self, spec):
+        """``spec`` (a dict of Fabrication's fields, None or False) checked against the design's anchor_radius
+        (which a fixture radius given here replaces: the page's field is that radius)."""
+        given = spec if isinstance(spec, dict) else {}
+        r = None if given.get("fixture_radius") is not None else self.design_options.get("anchor_radius")
+        return check_fabrication(spec, r)
+
+    def check_fabrication_fields(self, spec) -> dict:
+        """The page's fabrication fields as a dict of the ones given (ValueError/TypeError naming a bad one).
+
+        ``spec``: a dict with any of ``channel_diameter``, ``wall``, ``fixture_radius``,
+        ``min_fixture_radius``, each a length >= 0 in the body's unit or None (the default for this body)."""
+        if not isinstance(spec, dict):
+            raise TypeError(f"fabrication must be an object of lengths, got {type(spec).__name__}")
+        names = [f for f in Fabrication.__dataclass_fields__]
+        unknown = sorted(set(map(str, spec)) - set(names))
+        if unknown:
+            raise ValueError(f"fabrication: unknown field(s) {', '.join(unknown)}; expected {', '.join(names)}")
+        out = {}
+        for k in names:
+            v = spec.get(k)
+            if v is None or v == "":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise TypeError(f"fabrication: {k} must be a length (a number >= 0), got {v!r}")
+            if not math.isfinite(float(v)) or float(v) < 0:
+                raise ValueError(f"fabrication: {k} must be a finite length >= 0, got {v!r}")
+            out[k] = float(v)
+        self._fabrication(out).for_body(self.mesh)  # min above fixture, a fixture half the body: refused here
+        return out
+
+    def route(self, K_a: float, K_b: float, max_muscles: int | None, fabrication: dict | None = None) -> dict:
+        """Route muscles on the target with these knobs (the scene's other routing options kept).
+
+        ``fabrication``: the channel, wall and fixture sizes (:meth:`check_fabrication_fields`; fields left out
+        take their defaults for this body); None keeps the scene's ``[fabrication]``."""
         target = self._need_target()
         opts = dict(self.routing_options)
         opts.setdefault("n_seeds", seeds_for(self.mesh))
         opts.update(K_a=float(K_a), K_b=float(K_b), max_muscles=max_muscles)
         if max_muscles is None:
             opts.pop("max_muscles")
-        fab = check_fabrication(opts.get("fabrication"), self.design_options.get("anchor_radius"))
+        spec = opts.pop("fabrication", None)
+        if fabrication is not None:
+            spec = self.check_fabrication_fields(fabrication)
+        fab = self._fabrication(spec)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RoutingWarning)
             rr = route_muscles(self.mesh, target, **dict(opts, fabrication=fab))
         self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
+        self.fabrication = spec
         self.dropped = ()
+        self.deleted = ()
         self.routed_target = target.copy()
-        return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in rr.muscles],
+        out = self.routing_message()
+        out["warnings"] = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
+        return out
+
+    def routing_message(self) -> dict:
+        """The routed muscles still in the layout, their figures, the routing's notes (ends moved, stubs dropped,
+        fixtures shrunk), the fixture radius and fabrication used, and the muscles the user deleted."""
+        rr = self.routing
+        names = {m.name for m in self.muscles}
+        return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles],
                 "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
-                           "nonuniformity": s.nonuniformity} for s in rr.stats],
-                "n_units": rr.n_units, "params": {k: v for k, v in opts.items()},
-                "warnings": [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)],
-                "notes": list(rr.notes), "fixture_radius": rr.fixture_radius}
+                           "nonuniformity": s.nonuniformity} for s in rr.stats if s.name in names],
+                "n_units": rr.n_units, "params": {k: v for k, v in self.routing_params.items()},
+                "notes": list(rr.notes), "fixture_radius": rr.fixture_radius,
+                "fabrication": None if rr.fabrication is None else rr.fabrication.to_dict(),
+                "deleted": list(self.deleted), "warnings": []}
+
+    def delete_muscle(self, name: str) -> dict:
+        """Take the muscle ``name`` out of the layout; the design is dropped (design again)."""
+        if not isinstance(name, str):
+            raise TypeError(f"muscle name must be a string, got {name!r}")
+        if self.routing is None and not self.muscles:
+            raise ValueError("no muscles yet: route muscles first")
+        left = tuple(m for m in self.muscles if m.name != name)
+        if len(left) == len(self.muscles):
+            raise ValueError(f"no muscle {name!r} in the layout (muscles: "
+                             f"{', '.join(str(m.name) for m in self.muscles) or 'none'})")
+        self.muscles, self.design, self.dropped = left, None, ()
+        self.deleted = self.deleted + (name,)
+        return self.routing_message() if self.routing is not None else {
+            "muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in left], "stats": [],
+            "notes": [], "fixture_radius": None, "deleted": list(self.deleted), "warnings": []}
+
+    @property
+    def fixture_radius(self) -> float | None:
+        """The end-fixture radius the routed muscles were fitted to (the design's ``anchor_radius``), while every
+        muscle of the layout is a routed one (after deletions too); else None."""
+        rr = self.routing
+        if rr is None or rr.fixture_radius is None or not self.muscles:
+            return None
+        routed = {tuple(m.nodes) for m in rr.muscles}
+        return rr.fixture_radius if all(tuple(m.nodes) in routed for m in self.muscles) else None
 
     def run_design(self, **params) -> dict:
         """Design the contractions of the routed muscles for the target (``params``: method, a_max,
@@ -427,13 +518,13 @@ class Session:
             raise ValueError("the target changed since the muscles were routed: route again")
         opts = dict(self.design_options)
         opts.update({k: v for k, v in params.items() if v is not None})
-        if self.routing is not None and self.routing.fixture_radius is not None and tuple(self.muscles) == tuple(
-                self.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
-            opts["anchor_radius"] = self.routing.fixture_radius
+        if self.fixture_radius is not None:  # routed muscles: designed with the end fixtures they were fitted to
+            opts["anchor_radius"] = self.fixture_radius
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it
-            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **opts)
+            idle = {k: self.acceptance[k] for k in ("idle_contraction",) if k in self.acceptance}  # as mdsr run
+            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **idle, **opts)
         self.muscles = tuple(kept)
         self.design, self.design_params = res, opts
         return self.design_summary()
@@ -467,7 +558,11 @@ class Session:
                 "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
                 "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params),
                 "saturated": [m.name for m, sat in zip(self.muscles, res.saturated) if sat],
-                "dropped": [d.to_dict() for d in self.dropped]}
+                "dropped": [d.to_dict() for d in self.dropped],
+                # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
+                "acceptance": difference_failure(res.difference, self.mesh.size,
+                                                 *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance]),
+                "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles]}
 
 
 def _path_length(p: np.ndarray) -> float:

@@ -13,7 +13,8 @@ those the server dropped as stale.
     python tests/benchmarks/bench_author.py --out bench_out
     python tests/benchmarks/bench_author.py --sizes 600,3000 --step 0.01,0.03 --screenshot tests/benchmarks/author_page.png
 
-``--screenshot`` also drives the page in headless chromium (route, design, overlay view) and saves a PNG.
+``--screenshot`` also drives the page in headless chromium (route, delete the shortest rope, design, overlay
+view) and saves a PNG.
 """
 
 from __future__ import annotations
@@ -108,7 +109,8 @@ def measure(nodes: int, step: float, updates: int, log=print) -> dict:
 
 
 def screenshot(path: str) -> str:
-    """Drive the page in headless chromium (tentacle, route, design, overlay) and save a PNG at ``path``."""
+    """Drive the page in headless chromium (tentacle, route, delete the shortest rope, design, overlay) and save
+    a PNG at ``path``."""
     import shutil
     import tempfile
 
@@ -123,7 +125,7 @@ def screenshot(path: str) -> str:
     opts.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                 "--window-size=1150,800", f"--user-data-dir={tempfile.mkdtemp()}"):
+                 "--window-size=1150,1000", f"--user-data-dir={tempfile.mkdtemp()}"):
         opts.add_argument(flag)
     drv = webdriver.Chrome(service=Service(shutil.which("chromedriver") or "/usr/bin/chromedriver"), options=opts)
 
@@ -140,7 +142,11 @@ def screenshot(path: str) -> str:
         drv.get(url)
         wait("const s = mdsrAuthor.state(); return s && s.settled && !mdsrAuthor.busy();")
         drv.find_element(By.ID, "route").click()
-        wait("return mdsrAuthor.routing();")
+        routing = wait("return mdsrAuthor.routing();")
+        stub = min(routing["muscles"], key=lambda m: len(m["nodes"]))["name"]  # the shortest rope: deleted
+        drv.find_element(By.CSS_SELECTOR, f"#muscle-table tr[data-name='{stub}']").click()
+        drv.find_element(By.ID, "delete-muscle").click()
+        wait("const r = mdsrAuthor.routing(); return r && r.deleted.length;")
         drv.find_element(By.ID, "design").click()
         wait("return mdsrAuthor.design();")
         drv.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()

@@ -16,6 +16,9 @@
     handles: new Map(),    // node -> {group, pos: [x, y]}
     group: 0,
     graph: null, routing: null, design: null, saved: null, confirm: null,
+    muscles: [],           // the layout: routed muscles less the deleted ones (and those a design dropped)
+    selected: null,        // name of the selected muscle (Delete muscle removes it)
+    colors: new Map(),     // muscle name -> colour index, fixed when routed
     nLive: 0, seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
     view: { s: 1, ox: 0, oy: 0 },
     pointer: null, op: null, pivot: null,
@@ -77,14 +80,53 @@
     if (m.type === "body") return onBody(m);
     if (m.type === "state") return onState(m);
     if (m.type === "graph") { S.graph = m.weights; render(); return; }
-    if (m.type === "routing") { S.routing = m; S.design = null; S.graph = null; for (const w of m.warnings) showError(w); updateTable(); render(); return; }
-    if (m.type === "design") { S.design = m; if (!m.success) showError(`design not verified: ${m.status}`); updateTable(); render(); return; }
+    if (m.type === "routing") return onRouting(m);
+    if (m.type === "design") {
+      S.design = m; if (m.layout) setMuscles(m.layout);
+      if (!m.success) showError(`design not verified: ${m.status}`);
+      else if (m.acceptance) showError(`design too far from the target for mdsr run: ${m.acceptance}`); updateTable(); render(); return;
+    }
     if (m.type === "saved") { S.saved = m; S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "saved: " + m.files.join(", "); return; }
     if (m.type === "confirm") { S.confirm = m; $("confirm-text").textContent = m.message; $("confirm").hidden = false; return; }
   }
 
+  function setMuscles(list) {
+    S.muscles = list;
+    if (S.selected !== null && !list.some((u) => u.name === S.selected)) S.selected = null;
+    $("delete-muscle").disabled = S.selected === null;
+  }
+  function muscleColor(name) { return MUSCLE_COLORS[(S.colors.has(name) ? S.colors.get(name) : 0) % MUSCLE_COLORS.length]; }
+
+  function onRouting(m) {  // a new routing, or the layout after a deletion (the design is then gone)
+    S.routing = m; S.design = null; S.graph = null;
+    if (!m.deleted.length) { S.colors = new Map(m.muscles.map((u, i) => [u.name, i])); S.selected = null; }
+    setMuscles(m.muscles);
+    for (const w of m.warnings) showError(w);
+    const notes = $("routing-notes"); notes.innerHTML = "";
+    const lines = m.notes.slice();
+    if (m.fixture_radius != null) lines.unshift(`end fixtures: radius ${fmt(m.fixture_radius)}`);
+    if (m.deleted.length) { lines.push(`deleted: ${m.deleted.join(", ")}`); showHint(`${m.deleted[m.deleted.length - 1]} deleted: Design again for this layout`); }
+    for (const t of lines) { const li = document.createElement("li"); li.textContent = t; notes.appendChild(li); }
+    updateTable(); render();
+  }
+  const fmt = (v) => Number(v.toPrecision(4)).toString();
+
+  // the fabrication fields: lengths in the body's unit, empty for the body's default
+  const FAB = ["channel_diameter", "wall", "fixture_radius", "min_fixture_radius"];
+  function fabrication() {
+    const out = {};
+    for (const k of FAB) {
+      if ($(k).validity.badInput) { showError(`${k}: not a number (give a length, or leave it empty for the default)`); return null; }
+      const v = $(k).value.trim(); out[k] = v === "" ? null : Number(v);
+    }
+    return out;
+  }
+
   function onBody(m) {
     S.body = m; S.graph = null; S.routing = null; S.design = null; S.saved = null; S.draw = null; S.pivot = null;
+    S.muscles = []; S.selected = null; S.colors = new Map(); $("delete-muscle").disabled = true; $("routing-notes").innerHTML = "";
+    for (const k of FAB) { $(k).value = m.fabrication[k] == null ? "" : m.fabrication[k]; $(k).placeholder = "default"; }
+    $("fab-units").textContent = m.units ? `lengths in ${m.units}` : "lengths in body units";
     S.anchors = new Set(m.anchors);
     S.handles = new Map();
     m.drag_nodes.forEach((i, k) => S.handles.set(i, { group: 0, pos: m.drag_positions[k] }));
@@ -168,6 +210,7 @@
     const t = $("muscle-table");
     t.innerHTML = "";
     const rows = S.design ? S.design.muscles : (S.routing ? S.routing.stats.map((s) => ({ name: s.name, geo: s.contraction })) : []);
+    $("delete-muscle").disabled = S.selected === null;
     if (!rows.length) return;
     const has = (k) => rows.some((r) => r[k] !== undefined);
     const cols = S.design
@@ -177,9 +220,12 @@
     const head = document.createElement("tr");
     head.innerHTML = "<th>muscle</th>" + cols.map((c) => `<th>${c[1]}</th>`).join("");
     t.appendChild(head);
-    rows.forEach((r, i) => {
+    rows.forEach((r) => {
       const tr = document.createElement("tr");
-      const sw = `<span class="swatch" style="background:${MUSCLE_COLORS[i % MUSCLE_COLORS.length]}"></span>`;
+      tr.className = "muscle" + (r.name === S.selected ? " selected" : "");
+      tr.dataset.name = r.name;
+      tr.onclick = () => selectMuscle(r.name === S.selected ? null : r.name);
+      const sw = `<span class="swatch" style="background:${muscleColor(r.name)}"></span>`;
       tr.innerHTML = `<td>${sw}${r.name}</td>` + cols.map((c) => `<td>${r[c[0]] == null ? "-" : r[c[0]].toFixed(4)}</td>`).join("");
       t.appendChild(tr);
     });
@@ -188,7 +234,8 @@
       const d = S.design.difference;
       tr.innerHTML = `<td colspan="${cols.length + 1}">difference ${d == null ? "-" : d.toExponential(3)} ` +
         `(${S.design.relative_difference == null ? "-" : (100 * S.design.relative_difference).toFixed(2)} % of size), ` +
-        `${S.design.success ? "verified" : "NOT verified"}</td>`;
+        `${S.design.success ? "verified" : "NOT verified"}` +
+        (S.design.acceptance ? `; mdsr run fails it: ${S.design.acceptance}` : "") + "</td>";
       t.appendChild(tr);
     }
   }
@@ -268,17 +315,44 @@
     return `rgb(${Math.round(255 - 80 * t)},${Math.round(240 - 200 * t)},${Math.round(160 - 140 * t)})`;
   }
   function drawMuscles(x, muscles, lw) {
-    muscles.forEach((m, i) => {
-      ctx.beginPath();
-      m.nodes.forEach((v, k) => { const p = toScreen(x[v]); k ? ctx.lineTo(p[0], p[1]) : ctx.moveTo(p[0], p[1]); });
-      ctx.strokeStyle = MUSCLE_COLORS[i % MUSCLE_COLORS.length]; ctx.lineWidth = lw; ctx.stroke();
+    muscles.forEach((m) => {
+      const sel = m.name === S.selected;
+      for (const [color, w] of sel ? [["#ffd23f", lw + 6], [muscleColor(m.name), lw + 1]] : [[muscleColor(m.name), lw]]) {
+        ctx.beginPath();
+        m.nodes.forEach((v, k) => { const p = toScreen(x[v]); k ? ctx.lineTo(p[0], p[1]) : ctx.moveTo(p[0], p[1]); });
+        ctx.strokeStyle = color; ctx.lineWidth = w; ctx.lineJoin = "round"; ctx.stroke();
+      }
     });
+  }
+  function muscleAt(q, maxPx) {  // the muscle drawn nearest the screen point q (within maxPx), or null
+    const x = S.design && document.querySelector("input[name=view]:checked").value === "overlay" ? S.design.x_aligned : shown();
+    let best = null, bd = maxPx;
+    for (const m of S.muscles) {
+      for (let k = 0; k + 1 < m.nodes.length; k++) {
+        const a = toScreen(x[m.nodes[k]]), b = toScreen(x[m.nodes[k + 1]]);
+        const dx = b[0] - a[0], dy = b[1] - a[1], L2 = dx * dx + dy * dy;
+        const t = L2 > 0 ? Math.max(0, Math.min(1, ((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / L2)) : 0;
+        const d = Math.hypot(q[0] - a[0] - t * dx, q[1] - a[1] - t * dy);
+        if (d <= bd) { bd = d; best = m.name; }
+      }
+    }
+    return best;
+  }
+  function selectMuscle(name) {
+    S.selected = name;
+    $("delete-muscle").disabled = name === null;
+    if (name !== null) showHint(`${name} selected: Delete muscle (or the Delete key) takes it out of the layout`);
+    updateTable(); render();
+  }
+  function deleteSelected() {
+    if (S.selected === null) return;
+    send({ type: "delete_muscle", name: S.selected });
   }
 
   function legend(view) {
     const items = [["#b9d0ea", "target (shown state)", "fill"], ["#9aa5b1", "rest outline (dashed)", "dash"],
                    ["#111", "anchor", "square"], [GROUP_COLORS[0], "drag node", "dot"]];
-    if (S.routing) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
+    if (S.muscles.length) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
     if (S.design && view === "overlay") items.push(["#f4a261", "driven by the design (aligned)", "fill"]);
     if (S.graph && $("show-graph").checked) items.push(["#d62728", "contracted edge", "line"], ["#1f77b4", "elongated edge", "line"]);
     if (S.design && view === "difference") items.push(["rgb(175,40,20)", "far from target", "fill"]);
@@ -323,7 +397,7 @@
         drawMesh(xd, "#f4a261", null, 0.35);
         for (const loop of B.boundary) { path(xd, loop); ctx.strokeStyle = "#c2410c"; ctx.lineWidth = 1.5; ctx.stroke(); }
       }
-      if (S.routing) drawMuscles(S.design && view === "overlay" ? S.design.x_aligned : x, S.routing.muscles, 3);
+      if (S.muscles.length) drawMuscles(S.design && view === "overlay" ? S.design.x_aligned : x, S.muscles, 3);
       ctx.fillStyle = "#111";
       for (const i of S.anchors) { const p = toScreen(B.points[i]); ctx.fillRect(p[0] - 3, p[1] - 3, 6, 6); }
       const groups = new Map();
@@ -377,6 +451,7 @@
     handle: "Click or brush nodes to make them drag nodes of the current group (Shift removes).",
     move: "Press near a drag node and move: its group follows; the equilibrium updates live.",
     rotate: "Shift-click sets the pivot (default: the group's centroid); press near a drag node and move to rotate its group.",
+    muscle: "Click a muscle to select it (or its row in the table); Delete muscle takes it out of the layout.",
   };
   function local(ev) { const r = canvas.getBoundingClientRect(); return [ev.clientX - r.left, ev.clientY - r.top]; }
 
@@ -401,6 +476,7 @@
     const q = local(ev), tool = currentTool();
     if (S.draw) { S.draw.cur.push(toWorld(q)); drawButtons(); render(); return; }
     if (!S.body) return;
+    if (tool === "muscle") { selectMuscle(muscleAt(q, 10)); return; }
     if (tool === "anchor" || tool === "handle") {
       S.op = { kind: "paint", tool, remove: ev.shiftKey, changed: paint(q, tool, ev.shiftKey) };
     } else {
@@ -486,9 +562,16 @@
   }
   $("show-graph").addEventListener("change", () => { if ($("show-graph").checked && !S.graph) send({ type: "graph" }); render(); });
   $("route").onclick = () => {
-    const mm = $("max_muscles").value.trim();
-    send({ type: "route", K_a: Number($("K_a").value), K_b: Number($("K_b").value), max_muscles: mm === "" ? null : Number(mm) });
+    const mm = $("max_muscles").value.trim(), fab = fabrication();
+    if (fab === null) return;
+    send({ type: "route", K_a: Number($("K_a").value), K_b: Number($("K_b").value), max_muscles: mm === "" ? null : Number(mm),
+           fabrication: fab });
   };
+  $("delete-muscle").onclick = deleteSelected;
+  window.addEventListener("keydown", (ev) => {
+    const tag = document.activeElement ? document.activeElement.tagName : "";
+    if ((ev.key === "Delete" || ev.key === "Backspace") && tag !== "INPUT" && tag !== "SELECT" && tag !== "TEXTAREA") deleteSelected();
+  });
   $("design").onclick = () => send({ type: "design", method: $("method").value, muscle_model: $("muscle_model").value, a_max: Number($("a_max").value) });
   $("save").onclick = () => send({ type: "save", name: $("save-name").value.trim() || null });
   // the server asks before it replaces a file this page did not write: only the user's click confirms
@@ -500,6 +583,7 @@
   // ------------------------------------------------------------------ for tests and scripting
   window.mdsrAuthor = {
     state: () => S.state, body: () => S.body, graph: () => S.graph, sid: () => S.sid, routing: () => S.routing, design: () => S.design, saved: () => S.saved,
+    muscles: () => S.muscles, selected: () => S.selected,
     confirmation: () => S.confirm,
     errors: () => S.errors.slice(), lastError: () => S.lastError, pong: () => S.pong,
     busy: () => S.inflight !== null || S.op !== null || S.pendingDrag,
