@@ -9,9 +9,8 @@ the turnings up to segment ``i``, so the segment tensions are ``T_i = tau exp(-m
 on the body is ``sum_i T_i grad l_i(x)``, and its length is held: ``sum_i l_i(x) = (1 - a) L0``.
 
 With ``mu = 0`` every segment carries ``tau`` and the rope is the exact sliding cable of
-:func:`~mdsr_opt.mechanics.equilibrium.solve_internal`. The turning angles are those of the current state; the
-Newton solve of :mod:`~mdsr_opt.mechanics.quadsolve` holds them fixed within one linearisation (a
-fixed-point update), so a converged state satisfies the capstan law at its own angles.
+:func:`~mdsr_opt.mechanics.equilibrium.solve_internal`. The turning angles are those of the current state, and
+:meth:`CapstanRope.weight_coupling` gives the change of the force through them for a Newton matrix.
 
 Example
 -------
@@ -92,9 +91,52 @@ class CapstanRope:
         """``exp(-mu theta_i)``: each segment's tension over the pulled end's."""
         return np.exp(-self.mu * turning_angles(x, self.chain))
 
+    def weight_coupling(self, x, n_nodes: int) -> sp.csr_matrix:
+        """``M = sum_i grad l_i (grad w_i)^T`` (2n, 2n), the change of the rope's force ``sum_i w_i grad l_i``
+        through its weights ``w_i = exp(-mu theta_i(x))`` (the turning of the path), so that a Newton step
+        sees how friction changes as the rope bends. ``grad theta_i`` sums the gradients of the turning angles
+        at the nodes before segment ``i``; at a straight node (no turning) the angle's gradient is taken as 0.
+        Dense over the rope's nodes, zero elsewhere."""
+        c = self.chain
+        k = len(c) - 1
+        n2 = 2 * n_nodes
+        if self.mu == 0.0 or k < 2:
+            return sp.csr_matrix((n2, n2))
+        x = np.asarray(x, dtype=float).reshape(-1, 2)
+        d = np.diff(x[c], axis=0)
+        ln = np.linalg.norm(d, axis=1)
+        u = d / ln[:, None]
+        w = self.weights(x)
+        m = 2 * (k + 1)
+        Gl = np.zeros((k, m))  # grad l_i over the chain's coordinates
+        idx = np.arange(k)
+        Gl[idx, 2 * idx], Gl[idx, 2 * idx + 1] = -u[:, 0], -u[:, 1]
+        Gl[idx, 2 * idx + 2], Gl[idx, 2 * idx + 3] = u[:, 0], u[:, 1]
+        a, b = d[:-1], d[1:]  # the turn at chain node j (1 .. k-1) between segments j-1 and j
+        cr = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+        dt = (a * b).sum(1)
+        sgn = np.sign(cr)
+        den = cr ** 2 + dt ** 2
+        # d atan2(cr, dt) = (dt d cr - cr d dt) / den, with d cr/da = (b_y, -b_x), d cr/db = (-a_y, a_x)
+        ga = (dt[:, None] * np.column_stack([b[:, 1], -b[:, 0]]) - cr[:, None] * b) * (sgn / den)[:, None]
+        gb = (dt[:, None] * np.column_stack([-a[:, 1], a[:, 0]]) - cr[:, None] * a) * (sgn / den)[:, None]
+        A = np.zeros((k - 1, m))  # grad of the turning angle at node j = 1 .. k-1
+        j = np.arange(1, k)
+        # a = x_j - x_{j-1}, b = x_{j+1} - x_j
+        A[j - 1, 2 * (j - 1)], A[j - 1, 2 * (j - 1) + 1] = -ga[:, 0], -ga[:, 1]
+        A[j - 1, 2 * j], A[j - 1, 2 * j + 1] = ga[:, 0] - gb[:, 0], ga[:, 1] - gb[:, 1]
+        A[j - 1, 2 * (j + 1)], A[j - 1, 2 * (j + 1) + 1] = gb[:, 0], gb[:, 1]
+        # grad w_i = -mu w_i sum_{j <= i} A_j: M = -mu sum_j (sum_{i >= j} w_i grad l_i) A_j^T
+        S = np.cumsum((w[:, None] * Gl)[::-1], axis=0)[::-1]  # S[i] = sum_{i' >= i} w_i' grad l_i'
+        Mloc = -self.mu * (S[1:].T @ A)
+        dofs = np.column_stack([2 * c, 2 * c + 1]).ravel()
+        rows = np.repeat(dofs, m)
+        cols = np.tile(dofs, m)
+        return sp.csr_matrix((Mloc.ravel(), (rows, cols)), shape=(n2, n2))
+
     def forces(self, x, weights, n_nodes: int) -> tuple[np.ndarray, np.ndarray, sp.csr_matrix]:
         """For segment weights ``w``: ``f = sum_i w_i grad l_i`` and ``g = sum_i grad l_i`` (2n,) and
-        ``H = sum_i w_i hess l_i`` (2n, 2n), the weights held fixed."""
+        ``H = sum_i w_i hess l_i`` (2n, 2n), the weights held fixed (see :meth:`weight_coupling`)."""
         x = np.asarray(x, dtype=float).reshape(-1, 2)
         a, b = self.chain[:-1], self.chain[1:]
         d = x[b] - x[a]

@@ -3,9 +3,9 @@
 A linear mesh (:class:`~mdsr_opt.body.mesh.Mesh`) becomes a quadratic one by a node at the middle of every
 edge, boundary edges included (the edges stay straight). The displacement is then piecewise quadratic; the
 deformation gradient of an element, ``F = sum_a x_a (grad N_a)^T``, is linear over it, and the energy
-``sum_e t A_e sum_q w_q Psi(F(xi_q))`` is integrated with the 3-point rule at ``(1/6, 1/6), (2/3, 1/6),
-(1/6, 2/3)`` (weights 1/3 of the area), exact for polynomials of degree 2 such as ``|grad u|^2`` of a
-quadratic ``u``. ``order=1`` gives the linear (3-node, one point) element of the design model, on the same
+``sum_e t A_e sum_q w_q Psi(F(xi_q))`` is integrated with the symmetric 6-point rule, exact for polynomials of
+degree 4 (``|grad u|^2`` of a quadratic ``u`` has degree 2; the extra points, nearer the vertices, let the
+energy see an element squeezed at a corner, where a 3-point rule is blind). ``order=1`` gives the linear (3-node, one point) element of the design model, on the same
 code path, so the two can be compared.
 
 The material enters only through its energy density: ``material.psi_expr(F, params)`` with a CasADi 2x2
@@ -41,8 +41,11 @@ from ..body.mesh import Mesh
 
 __all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh"]
 
-#: Quadrature points (reference coordinates) of the quadratic element; each has weight 1/3 of the area.
-QUAD_POINTS = np.array([[1.0 / 6.0, 1.0 / 6.0], [2.0 / 3.0, 1.0 / 6.0], [1.0 / 6.0, 2.0 / 3.0]])
+_A, _B = 0.445948490915965, 0.091576213509771
+#: Quadrature points (reference coordinates) of the quadratic element: the symmetric 6-point rule, exact for
+#: polynomials of degree 4 (weights :data:`QUAD_WEIGHTS`, fractions of the area).
+QUAD_POINTS = np.array([[_A, _A], [1 - 2 * _A, _A], [_A, 1 - 2 * _A], [_B, _B], [1 - 2 * _B, _B], [_B, 1 - 2 * _B]])
+QUAD_WEIGHTS = np.array([0.223381589678011] * 3 + [0.109951743655322] * 3)
 
 
 def midnode_table(mesh: Mesh) -> np.ndarray:
@@ -106,7 +109,7 @@ def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
              4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
              4 * (L[0] * dL[2] + L[2] * dL[0])]
         out.append(np.array(g))
-    return np.array(out), np.full(3, 1.0 / 3.0)
+    return np.array(out), QUAD_WEIGHTS
 
 
 @dataclass(frozen=True)
@@ -168,6 +171,12 @@ class QuadraticModel:
         nn = self.elements.shape[1]
         dofs = np.stack([2 * self.elements, 2 * self.elements + 1], axis=2).reshape(-1, 2 * nn)
         self._data = _ElementData(G=G, w=areas[:, None] * wq[None, :], dofs=dofs)
+        if self.order == 2:  # shape-function gradients at the three vertices, (m, 3, 6, 2)
+            dL = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+            gv = np.array([[(4 * L[0] - 1) * dL[0], (4 * L[1] - 1) * dL[1], (4 * L[2] - 1) * dL[2],
+                            4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
+                            4 * (L[0] * dL[2] + L[2] * dL[0])] for L in np.eye(3)])
+            self._vertex_gradients = np.einsum("vak,mkj->mvaj", gv, Dm_inv)
         self._fun = self._element_function(nn, len(wq))
         self._mapped = None
         #: evaluate with the material's closed-form stress and tangent where it has them (else CasADi)
@@ -211,16 +220,10 @@ class QuadraticModel:
         x = self._state(x)
         if not np.all(self.jacobians(x) > 0.0):
             return False
-        if self.order == 2:  # det F at the vertices, from the vertex gradients
-            dL = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
-            for L in np.eye(3):
-                g = np.array([(4 * L[0] - 1) * dL[0], (4 * L[1] - 1) * dL[1], (4 * L[2] - 1) * dL[2],
-                              4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
-                              4 * (L[0] * dL[2] + L[2] * dL[0])])
-                Gv = np.einsum("ak,mkj->maj", g, self.mesh.Dm_inv)
-                F = np.einsum("mai,maj->mij", x[self.elements], Gv)
-                if not np.all(np.linalg.det(F) > 0.0):
-                    return False
+        if self.order == 2:  # det F at the vertices, where the linear F of a quadratic element is extreme
+            F = np.einsum("mai,mvaj->mvij", x[self.elements], self._vertex_gradients)
+            if not np.all(np.linalg.det(F) > 0.0):
+                return False
         return True
 
     def _state(self, x) -> np.ndarray:

@@ -9,8 +9,9 @@ Both are solved by Newton's method on the equilibrium equations with load contin
   ``(1 - s a_c) L0_c``; unknowns the reduced coordinates ``q`` of the body whose fixtures move rigidly
   (:class:`~mdsr_opt.mechanics.fixtures.RigidReduction`) less a three-coordinate gauge, and each rope's
   pulled-end tension ``tau_c``; equations ``P^T (grad E + sum_c tau_c sum_i w_ci grad l_ci) = 0`` and
-  ``sum_i l_ci = (1 - s a_c) L0_c`` (DESIGN.md section 4). The capstan weights ``w_ci`` are updated from each
-  iterate and held fixed within its linear solve. A rope that would push (``tau_c < 0``) goes slack: its
+  ``sum_i l_ci = (1 - s a_c) L0_c`` (DESIGN.md section 4). The capstan weights ``w_ci`` depend on the
+  state through the path's turning; the Newton matrix includes that dependence
+  (:meth:`~mdsr_opt.mechanics.capstan.CapstanRope.weight_coupling`). A rope that would push (``tau_c < 0``) goes slack: its
   equation is dropped and its tension set to 0 until its path is longer than the rope again.
 
 Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
@@ -291,7 +292,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 gx = gx + tau[c] * f
                 res_c[c] = (rope.length(x) - targets[c]) / L0[c]
                 if jac:
-                    Kx = Kx + tau[c] * H
+                    Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
                     cols.append(f)
                     rows.append(g / L0[c])
             P = red.jacobian(q)
