@@ -120,3 +120,18 @@ def test_bad_input_is_refused(strip):
         quadratic_chain(mesh, [0, 2], mesh.n_nodes + np.arange(len(mesh.edges)))
     with pytest.raises(ValueError, match="overlaps"):
         RigidReduction(mesh.points, [np.array([0, 1]), np.array([1, 2])])
+
+
+def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
+    mesh, bottom = strip
+    model = QuadraticModel(mesh, MAT, order=2)
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    first = solve_quadratic_internal(model, ropes, [0.1], groups)
+    cold = solve_quadratic_internal(model, ropes, [0.2], groups)
+    warm = solve_quadratic_internal(model, ropes, [0.2], groups, start=first)
+    assert first.success and cold.success and warm.success
+    assert np.abs(warm.x - cold.x).max() < 1e-7 and warm.tension[0] == pytest.approx(cold.tension[0], rel=1e-7)
+    with pytest.raises(ValueError, match="start must be"):
+        solve_quadratic_internal(model, ropes, [0.2], [], start=first)

@@ -208,7 +208,7 @@ class QuadraticModel:
         """``F`` at every quadrature point, (m, nq, 2, 2), of the state ``x`` ((N, 2) or (2N,))."""
         x = self._state(x)
         xe = x[self.elements]  # (m, nn, 2)
-        return np.einsum("mai,mqaj->mqij", xe, self._data.G)
+        return np.matmul(xe.transpose(0, 2, 1)[:, None], self._data.G)  # (m, nq, 2, 2)
 
     def jacobians(self, x) -> np.ndarray:
         """``det F`` at every quadrature point, (m, nq)."""
@@ -221,7 +221,7 @@ class QuadraticModel:
         if not np.all(self.jacobians(x) > 0.0):
             return False
         if self.order == 2:  # det F at the vertices, where the linear F of a quadratic element is extreme
-            F = np.einsum("mai,mvaj->mvij", x[self.elements], self._vertex_gradients)
+            F = np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients)
             if not np.all(np.linalg.det(F) > 0.0):
                 return False
         return True
@@ -264,12 +264,17 @@ class QuadraticModel:
         psi = np.where(J > 0, psi, np.nan).reshape(m, nq)
         w = d.w
         e = (w * psi).sum(1)
-        P = P.reshape(2, 2, m, nq)
-        g = np.einsum("ijmq,mqaj,mq->mai", P, d.G, w, optimize=True).reshape(m, 2 * nn)
+        G = d.G.reshape(m * nq, nn, 2)                                          # (n, a, j)
+        Pw = (P * w.reshape(-1)).transpose(2, 0, 1)                               # (n, i, j), weighted
+        g = np.matmul(G, Pw.transpose(0, 2, 1)).reshape(m, nq, nn, 2).sum(1).reshape(m, 2 * nn)  # (m, a i)
         H = None
         if need == 2:
-            A = np.broadcast_to(A, (2, 2, 2, 2, m * nq)).reshape(2, 2, 2, 2, m, nq)
-            H = np.einsum("ijklmq,mqaj,mqbl,mq->maibk", A, d.G, d.G, w, optimize=True).reshape(m, 2 * nn, 2 * nn)
+            A = np.broadcast_to(A, (2, 2, 2, 2, m * nq)) * w.reshape(-1)
+            At = A.transpose(4, 1, 0, 2, 3).reshape(m * nq, 2, 8)                 # (n, j, i k l)
+            C = np.matmul(G, At).reshape(m * nq, nn * 4, 2)                      # (n, a i k, l)
+            Hq = np.matmul(C, G.transpose(0, 2, 1))                               # (n, a i k, b)
+            Hq = Hq.reshape(m, nq, nn, 2, 2, nn).sum(1)                           # (m, a, i, k, b)
+            H = Hq.transpose(0, 1, 2, 4, 3).reshape(m, 2 * nn, 2 * nn)
         return e, g, H
 
     def energy(self, x, params=None) -> float:

@@ -58,8 +58,11 @@ class QuadraticResult:
         Internal driving: each rope's tension at its pulled end and at its far end, and its total turning
         angle (rad).
     slack : (c,) bool ndarray
-    achieved : (c,) ndarray
-        ``1 - L / L0`` of each rope's path.
+    achieved, commanded : (c,) ndarray
+        ``1 - L / L0`` of each rope's path; the contractions asked for.
+    state : ndarray or None
+        Internal driving, on success: the solver's unknowns (reduced coordinates in its gauge, tensions), to
+        start another solve from (``start=``).
     """
 
     x: np.ndarray
@@ -73,6 +76,8 @@ class QuadraticResult:
     turning: np.ndarray = field(default_factory=lambda: np.zeros(0))
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     achieved: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    commanded: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray | None = None
 
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int):
@@ -111,9 +116,13 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     return z, norm <= tol, max_iter, norm
 
 
+#: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
+INTERMEDIATE_TOL = 1e-6
+
+
 def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25):
-    """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(s, z_start) -> (z, converged,
-    iterations, residual)``. Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
+    """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(s, z_start, final) -> (z, converged,
+    iterations, residual)`` (``final`` at ``s = 1``). Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
     load fraction reached)."""
     s, z, ds = 0.0, z0, first_step
     prev = None  # (s, z) of the step before, for a secant predictor
@@ -124,9 +133,9 @@ def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: f
         start = z
         if prev is not None and s > prev[0]:
             start = z + (t - s) / (s - prev[0]) * (z - prev[1])
-        zt, conv, it, res = solve_at(t, start)
+        zt, conv, it, res = solve_at(t, start, t >= 1.0)
         if not conv and start is not z:  # the predictor overshot: from the last state
-            zt, conv, it2, res = solve_at(t, z)
+            zt, conv, it2, res = solve_at(t, z, t >= 1.0)
             it += it2
         iters += it
         if conv:
@@ -199,7 +208,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         x[free] = z
         return x
 
-    def solve_at(s, z0):
+    def solve_at(s, z0, final):
         def system(z, jac):
             x = full(s, z)
             if jac:
@@ -207,7 +216,8 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 return g[free] / fs, K[free][:, free] / fs
             return model.energy_gradient(x)[1][free] / fs, None
 
-        return _newton(system, z0, lambda z: model.upright(full(s, z)), tol, max_iter)
+        return _newton(system, z0, lambda z: model.upright(full(s, z)), tol if final else max(tol, INTERMEDIATE_TOL),
+                       max_iter)
 
     z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step)
     x = full(s, z)
@@ -230,11 +240,14 @@ def _gauge(red: RigidReduction) -> np.ndarray:
 
 def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope], contractions,
                              fixtures: Sequence[np.ndarray] = (), *, tol: float = 1e-9, max_iter: int = 30,
-                             min_step: float = 1.0 / 256, align_to_rest: bool = True) -> QuadraticResult:
+                             min_step: float = 1.0 / 256, align_to_rest: bool = True,
+                             start: QuadraticResult | None = None) -> QuadraticResult:
     """Internal driving of ``model`` by ``ropes`` (chains of its nodes, pulled at their first node, with
     capstan friction) contracted by ``contractions`` (fractions of their rest lengths), the nodes of each of
     ``fixtures`` (disjoint node groups, an end node first: see
-    :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly.
+    :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
+    the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
+    of from rest.
 
     Raises
     ------
@@ -271,8 +284,9 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         q[keep] = z[:nk]
         return q, z[nk:]
 
-    def solve_at(s, z0):
-        targets = (1.0 - s * a) * L0
+    def solve_at(s, z0, final):
+        targets = (1.0 - (a0 + s * (a - a0))) * L0
+        tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
 
         def system(z, jac):
             q, tau = split(z)
@@ -309,7 +323,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         def ok(z):
             return model.upright(red.x_of(split(z)[0]))
 
-        z, conv, it, res = _newton(system, z0, ok, tol, max_iter)
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -323,11 +337,18 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 break
             active[:] = new
             z = np.concatenate([z[:nk], np.where(active, np.maximum(tau, 0.0), 0.0)])
-            z, conv, it2, res = _newton(system, z, ok, tol, max_iter)
+            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter)
             it += it2
         return z, conv, it, res
 
     z0 = np.concatenate([q_rest[keep], np.zeros(nc)])
+    a0 = np.zeros(nc)
+    if start is not None:  # a solved state of the same ropes and fixtures: continue from its contractions
+        if not isinstance(start, QuadraticResult) or start.state is None or len(start.state) != len(z0) \
+                or len(start.commanded) != nc:
+            raise ValueError("start must be a QuadraticResult of solve_quadratic_internal with the same model, "
+                             "ropes and fixtures")
+        z0, a0 = start.state.copy(), start.commanded.copy()
     z, _s, conv, iters, steps, res, status = _continue(solve_at, z0, min_step)
     q, tau = split(z)
     x = red.x_of(q)
@@ -338,4 +359,5 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         x = align(x, X).apply(x)
     return QuadraticResult(x=x, success=bool(conv), status=status, iterations=iters, steps=steps,
                            residual=float(res), tension=tau.copy(), end_tension=tau * w_end, turning=turn,
-                           slack=~active, achieved=1.0 - L / L0)
+                           slack=~active, achieved=1.0 - L / L0, commanded=a.copy(),
+                           state=z.copy() if conv else None)
