@@ -44,6 +44,7 @@ True
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -72,6 +73,11 @@ SILICONE_NU = 0.49
 DEFAULT_ROPE_FRICTION = 0.3
 #: Element order of the prototype (quadratic triangles).
 DEFAULT_ORDER = 2
+
+
+#: True while :func:`prototype_material` stands in for plane stress by its plane-strain equivalent (the tables
+#: say so); set False when it returns the plane-stress material.
+PLANE_STRESS_PLACEHOLDER = True
 
 
 def prototype_material(E: float, nu: float, thickness: float = 1.0):
@@ -148,7 +154,7 @@ class VirtualPrototype:
     :func:`prototype_material`), ``E_factor`` and ``nu_shift`` (the draws), ``nu`` (the silicone's Poisson
     ratio), ``refine``, ``refined_by`` (``"re-meshed"`` or ``"split"``), ``e_range``, ``nu_range``,
     ``friction``, ``fixture_radius``, ``order``, ``seed``, ``camera`` (keyword arguments of
-    :func:`~mdsr_opt.photos.camera.render_photo`).
+    :func:`~mdsr_opt.photos.camera.render_photo`), ``nu_drawn`` (False when ``material`` was given).
     """
 
     scene: Any
@@ -168,6 +174,7 @@ class VirtualPrototype:
     order: int
     seed: int
     camera: dict = field(default_factory=dict)
+    nu_drawn: bool = True
 
     def __getstate__(self):  # pickled without the shots and the model it keeps (see _keep, model)
         return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
@@ -248,20 +255,22 @@ class VirtualPrototype:
         f_E = 1.0 + e_range * (2.0 * rng.random() - 1.0)
         d_nu = nu_range * (2.0 * rng.random() - 1.0)
         m = scene.material
+        given = material
         if material is None:
             nu = float(min(SILICONE_NU + d_nu, 0.499))
             material = prototype_material(m.E * f_E, nu, m.thickness)
         else:
             nu = float(getattr(material, "nu", float("nan")))
             d_nu = 0.0
-            if hasattr(material, "E") and hasattr(material, "nu"):
-                material = type(material)(E=material.E * f_E, nu=material.nu, thickness=material.thickness)
+            if hasattr(material, "E") and dataclasses.is_dataclass(material):
+                material = dataclasses.replace(material, E=material.E * f_E)
         camera = {"image_size": tuple(photo_size), "seed": 1000 + int(seed), "tilt_deg": 2.0,
                   "rotation_deg": float(rng.uniform(-8.0, 8.0))}
         return cls(scene=fine, mesh=mesh, fixed=fixed, design_mesh=scene.mesh, material=material,
                    E_factor=float(f_E), nu_shift=float(nu - SILICONE_NU) if d_nu else 0.0, nu=nu, refine=refine,
                    refined_by=how, e_range=e_range, nu_range=nu_range, friction=friction,
-                   fixture_radius=float(radius), order=int(order), seed=int(seed), camera=camera)
+                   fixture_radius=float(radius), order=int(order), seed=int(seed), camera=camera,
+                   nu_drawn=given is None)
 
     def describe(self) -> dict:
         """The prototype's parameters (JSON-ready). ``nodes`` counts every node of the quadratic mesh
@@ -272,6 +281,7 @@ class VirtualPrototype:
                 "elements": "quadratic (6-node)" if self.order == 2 else "linear (3-node)",
                 "material": self.material.kind if hasattr(self.material, "kind") else type(self.material).__name__,
                 "silicone_nu": self.nu, "E": float(self.material.E), "nu": float(self.material.nu),
+                "plane_stress_placeholder": bool(PLANE_STRESS_PLACEHOLDER and self.nu_drawn),
                 "E_factor": self.E_factor, "nu_shift": self.nu_shift, "e_range": self.e_range,
                 "nu_range": self.nu_range, "seed": self.seed, "muscle_model": "capstan rope",
                 "rope_friction": self.friction, "fixture_radius": self.fixture_radius,
@@ -364,7 +374,8 @@ class VirtualPrototype:
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
         capstan friction pulled at its first node, ending on fixtures of radius ``fixture_radius``) at
-        ``contractions``. Solved once per muscles and contractions: a second call returns the same shot."""
+        ``contractions`` (rounded to 1e-9). Solved once per muscles and contractions: a second call returns the
+        same shot."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
         from ..mechanics.fixtures import fixture_groups
         from ..mechanics.quadsolve import solve_quadratic_internal
@@ -375,6 +386,9 @@ class VirtualPrototype:
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
         muscles = [m if isinstance(m, Muscle) else Muscle(m) for m in muscles]  # checked before the look-up
+        # solved at the contractions rounded to 1e-9 (a rope length change of 1e-9 L0): a design that
+        # recovers a case's known contractions to that precision is the same shot, whichever is asked first
+        a = np.round(a, 9)
         key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo))
         shot = self._solved(key)
         if shot is None:
@@ -501,6 +515,8 @@ def validation_tables(reports: Sequence) -> str:
             "the exact sliding cable"
         nu = (f"silicone with nu = {proto['silicone_nu']:.3f} (drawn in {SILICONE_NU:g} +- {proto['nu_range']:g}, "
               "at most 0.499)" if "silicone_nu" in proto else f"nu + U(+- {proto['nu_range']:g})")
+        if proto.get("plane_stress_placeholder"):
+            nu += " as a plane-stress sheet (for now its small-strain plane-strain equivalent)"
         desc = (f"Virtual prototype (SYNTHETIC photographs): {elements} triangles on a {proto['refine']:g}x finer "
                 f"mesh of each body, {nu}, {rope}, E x U(1 +- {proto['e_range']:g}) drawn from seed "
                 f"{proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
