@@ -120,9 +120,10 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
 INTERMEDIATE_TOL = 1e-6
 
 
-def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25):
-    """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(s, z_start, final) -> (z, converged,
-    iterations, residual)`` (``final`` at ``s = 1``). Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
+def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25,
+              secant: bool = True):
+    """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(t, z_start, final, s) -> (z, converged,
+    iterations, residual)`` for a step from the equilibrium at ``s`` to ``t`` (``final`` at ``t = 1``). Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
     load fraction reached)."""
     s, z, ds = 0.0, z0, first_step
     prev = None  # (s, z) of the step before, for a secant predictor
@@ -131,11 +132,11 @@ def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: f
     while s < 1.0:
         t = min(1.0, s + ds)
         start = z
-        if prev is not None and s > prev[0]:
+        if secant and prev is not None and s > prev[0]:  # else solve_at predicts from the state at s
             start = z + (t - s) / (s - prev[0]) * (z - prev[1])
-        zt, conv, it, res = solve_at(t, start, t >= 1.0)
+        zt, conv, it, res = solve_at(t, start, t >= 1.0, s)
         if not conv and start is not z:  # the predictor overshot: from the last state
-            zt, conv, it2, res = solve_at(t, z, t >= 1.0)
+            zt, conv, it2, res = solve_at(t, z, t >= 1.0, s)
             it += it2
         iters += it
         if conv:
@@ -208,18 +209,33 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         x[free] = z
         return x
 
-    def solve_at(s, z0, final):
+    fixed_idx = np.flatnonzero(fixed)
+
+    def solve_at(t, z0, final, s):
         def system(z, jac):
-            x = full(s, z)
+            x = full(t, z)
             if jac:
                 _e, g, K = model.evaluate(x)
                 return g[free] / fs, K[free][:, free] / fs
             return model.energy_gradient(x)[1][free] / fs, None
 
-        return _newton(system, z0, lambda z: model.upright(full(s, z)), tol if final else max(tol, INTERMEDIATE_TOL),
-                       max_iter)
+        def ok(z):
+            return model.upright(full(t, z))
 
-    z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step)
+        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
+        K = model.evaluate(full(s, z0))[2]
+        try:
+            lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                           options={"SymmetricMode": True})
+            dz = lu.solve(-(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+        except RuntimeError:
+            dz = np.zeros_like(z0)
+        for frac in (1.0, 0.5, 0.25, 0.0):
+            if ok(z0 + frac * dz):
+                break
+        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter)
+
+    z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
     x = full(s, z)
     return QuadraticResult(x=x.reshape(-1, 2), success=bool(conv), status=status, iterations=iters, steps=steps,
                            residual=float(res))
@@ -284,7 +300,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         q[keep] = z[:nk]
         return q, z[nk:]
 
-    def solve_at(s, z0, final):
+    def solve_at(s, z0, final, _s_from):
         targets = (1.0 - (a0 + s * (a - a0))) * L0
         tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
 
