@@ -134,6 +134,23 @@ def test_a_scene_without_an_outline_to_remesh_is_split_finer():
     np.testing.assert_allclose(shot.x[dn[:len(c.drag_nodes)]], c.drag_positions, atol=1e-12)
 
 
+def test_a_fixture_holds_at_least_the_ring_of_elements_at_the_rope_end(one):
+    """A fixture smaller than the mesh would be a point force: its radius on the mesh is at least the
+    longest edge at the rope's end, so every end holds a rigid ring of nodes; a larger radius is kept."""
+    from mdsr_opt.mechanics.fixtures import fixture_groups
+
+    scene, proto = one
+    tiny = VirtualPrototype.for_scene(scene, refine=2.5, seed=3, fixture_radius=1e-3)
+    fine = [tiny.transfer_muscle(m) for m in scene.muscles]
+    r = tiny.fixture_radius_on_mesh(fine)
+    ends = [fine[0].nodes[0], fine[0].nodes[-1]]
+    edges = tiny.mesh.edges[np.isin(tiny.mesh.edges, ends).any(1)]
+    assert r == pytest.approx(1.001 * tiny.mesh.edge_lengths[tiny.mesh.edge_rows(edges[:, 0], edges[:, 1])].max())
+    groups = fixture_groups(tiny.mesh, fine, r)
+    assert len(groups) == 2 and all(len(g) >= 4 for g in groups)
+    assert proto.fixture_radius_on_mesh(fine) == proto.fixture_radius > r
+
+
 def test_bad_input_is_refused(one):
     scene, proto = one
     with pytest.raises(TypeError, match="must be a Scene"):

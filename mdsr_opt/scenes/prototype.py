@@ -15,9 +15,9 @@ the design model in what a real robot differs:
 - a rope with capstan friction in its channel (:mod:`~mdsr_opt.mechanics.capstan`), coefficient ``friction``
   (default :data:`DEFAULT_ROPE_FRICTION`), pulled at its muscle's first node: its tension falls as
   ``exp(-mu theta)`` along the route;
-- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius): every
-  node within it, edge midpoints included, moves rigidly with the end node
-  (:mod:`~mdsr_opt.mechanics.fixtures`);
+- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius, and at
+  least the mesh's edge at the rope's end, :meth:`VirtualPrototype.fixture_radius_on_mesh`): every node
+  within it, edge midpoints included, moves rigidly with the end node (:mod:`~mdsr_opt.mechanics.fixtures`);
 - the muscle's node chain re-laid on the fine mesh through the fine nodes nearest the design muscle's nodes
   (as a builder would place the tube); Young's modulus drawn within ``e_range`` (it scales every force, so
   it changes no shape driven by drags or rope strokes);
@@ -371,6 +371,16 @@ class VirtualPrototype:
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
+    def fixture_radius_on_mesh(self, fine_muscles) -> float:
+        """The fixtures' radius on the prototype's mesh: ``fixture_radius``, but at least the longest mesh edge
+        at a rope's end (times 1.001), so that every fixture holds its end node's ring of elements. A fixture
+        smaller than the mesh would be a point force, under which a planar body has no finite displacement
+        and quadratic elements fold at the rope's end."""
+        E, L = self.mesh.edges, self.mesh.edge_lengths
+        ends = np.array([n for m in fine_muscles for n in (m.nodes[0], m.nodes[-1])])
+        at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
+        return float(max(self.fixture_radius, 1.001 * L[at_end].max())) if at_end.any() else self.fixture_radius
+
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
         capstan friction pulled at its first node, ending on fixtures of radius ``fixture_radius``) at
@@ -394,7 +404,7 @@ class VirtualPrototype:
         if shot is None:
             fine = [self.transfer_muscle(m) for m in muscles]
             mid = self.mesh.n_nodes + np.arange(len(self.mesh.edges)) if self.order == 2 else None
-            groups = fixture_groups(self.mesh, fine, self.fixture_radius, mid)
+            groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine), mid)
             ropes = [CapstanRope(quadratic_chain(self.mesh, m.nodes, mid) if mid is not None else m.nodes,
                                  self.friction) for m in fine]
             res = solve_quadratic_internal(self.model, ropes, a, groups)
