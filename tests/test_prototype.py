@@ -135,8 +135,9 @@ def test_a_scene_without_an_outline_to_remesh_is_split_finer():
 
 
 def test_a_fixture_holds_at_least_the_ring_of_elements_at_the_rope_end(one):
-    """A fixture smaller than the mesh would be a point force: its radius on the mesh is at least the
-    longest edge at the rope's end, so every end holds a rigid ring of nodes; a larger radius is kept."""
+    """A fixture smaller than the mesh would be a point force: where the radius holds no node besides a
+    rope's end, the radius on the mesh is the longest edge at the ropes' ends, so every end holds a rigid
+    ring of nodes; a radius that holds nodes is kept."""
     from mdsr_opt.mechanics.fixtures import fixture_groups
 
     scene, proto = one

@@ -15,9 +15,10 @@ the design model in what a real robot differs:
 - a rope with capstan friction in its channel (:mod:`~mdsr_opt.mechanics.capstan`), coefficient ``friction``
   (default :data:`DEFAULT_ROPE_FRICTION`), pulled at its muscle's first node: its tension falls as
   ``exp(-mu theta)`` along the route;
-- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius, and at
-  least the mesh's edge at the rope's end, :meth:`VirtualPrototype.fixture_radius_on_mesh`): every node
-  within it, edge midpoints included, moves rigidly with the end node (:mod:`~mdsr_opt.mechanics.fixtures`);
+- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius; a ring
+  of elements where that holds no node besides a rope's end, :meth:`VirtualPrototype.fixture_radius_on_mesh`):
+  every node within it, edge midpoints included, moves rigidly with the end node
+  (:mod:`~mdsr_opt.mechanics.fixtures`);
 - the muscle's node chain re-laid on the fine mesh through the fine nodes nearest the design muscle's nodes
   (as a builder would place the tube); Young's modulus drawn within ``e_range`` (it scales every force, so
   it changes no shape driven by drags or rope strokes);
@@ -372,14 +373,18 @@ class VirtualPrototype:
         return shot
 
     def fixture_radius_on_mesh(self, fine_muscles) -> float:
-        """The fixtures' radius on the prototype's mesh: ``fixture_radius``, but at least the longest mesh edge
-        at a rope's end (times 1.001), so that every fixture holds its end node's ring of elements. A fixture
-        smaller than the mesh would be a point force, under which a planar body has no finite displacement
-        and quadratic elements fold at the rope's end."""
+        """The fixtures' radius on the prototype's mesh: ``fixture_radius``, unless a rope's end would hold no
+        other node within it; then the longest mesh edge at the ropes' ends (times 1.001), so that every
+        fixture holds its end node's ring of elements. A fixture smaller than the mesh would be a point
+        force, under which a planar body has no finite displacement and quadratic elements fold at the
+        rope's end."""
         E, L = self.mesh.edges, self.mesh.edge_lengths
         ends = np.array([n for m in fine_muscles for n in (m.nodes[0], m.nodes[-1])])
+        shortest = [L[(E == e).any(1)].min() for e in ends]
+        if not ends.size or min(shortest) <= self.fixture_radius:
+            return self.fixture_radius
         at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
-        return float(max(self.fixture_radius, 1.001 * L[at_end].max())) if at_end.any() else self.fixture_radius
+        return float(max(self.fixture_radius, 1.001 * L[at_end].max()))
 
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
