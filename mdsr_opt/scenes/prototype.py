@@ -526,8 +526,8 @@ def validation_tables(reports: Sequence) -> str:
     if proto:
         elements = proto.get("elements", "linear (3-node)")
         rope = (f"ropes with capstan friction mu = {proto['rope_friction']:g} pulled at the muscle's first node, "
-                f"end fixtures of radius {proto['fixture_radius']:.3g}") if "rope_friction" in proto else \
-            "the exact sliding cable"
+                "end fixtures of each scene's anchor radius (a ring of elements where that radius holds no "
+                "node)") if "rope_friction" in proto else "the exact sliding cable"
         nu = (f"silicone with nu = {proto['silicone_nu']:.3f} (drawn in {SILICONE_NU:g} +- {proto['nu_range']:g}, "
               "at most 0.499)" if "silicone_nu" in proto else f"nu + U(+- {proto['nu_range']:g})")
         if proto.get("plane_stress_placeholder"):
