@@ -189,8 +189,8 @@ def add_cli(sub) -> None:
     q.add_argument("--photo-size", type=parse_size, default=(500, 500), metavar="WxH",
                    help="size of the synthetic photographs in pixels (default 500x500, as in the paper)")
     q.add_argument("--no-prototype", action="store_true",
-                   help="skip the virtual prototype (a 3x finer mesh, perturbed material, the exact cable, the "
-                   "synthetic camera) against which the paper's Tables 2-4 are computed (validation.md per scene, "
+                   help="skip the virtual prototype (quadratic elements on a 2x finer mesh, silicone, ropes with "
+                   "capstan friction on end fixtures, the synthetic camera) against which the paper's Tables 2-4 are computed (validation.md per scene, "
                    "tables.md for several scenes)")
     q.add_argument("--prototype-seed", type=parse_seed, default=0,
                    help="seed of the virtual prototype's material perturbation and camera (default 0)")

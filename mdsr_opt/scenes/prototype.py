@@ -1,23 +1,38 @@
-"""A virtual prototype: photographs from a higher-fidelity model than the one used for design.
+"""A virtual prototype: photographs from an independent, higher-fidelity model instead of the design model.
 
 The paper validates its simulations and designs against photographs of cast silicone prototypes
 (Tables 2-4). Photographing the design model's own driven state instead (a mirror) measures only how well
-the design converged. :class:`VirtualPrototype` stands in for the cast body with a *different* model:
+the design converged. :class:`VirtualPrototype` stands in for the cast body with a model that differs from
+the design model in what a real robot differs:
 
-- a finer mesh of the same body: the scene rebuilt at ``refine`` times the design mesh's nodes (default
-  3x), so the discretisation differs;
-- the exact sliding-cable muscle (``muscle_model="cable"``), its node chain re-laid on the fine mesh through the
-  fine nodes nearest the design muscle's nodes (as a builder would place the tube);
-- material parameters perturbed within a stated range, drawn from ``seed``: Young's modulus by a factor in
-  ``[1 - e_range, 1 + e_range]`` and Poisson's ratio by a shift in ``[-nu_range, +nu_range]`` (kept in
-  [0.05, 0.49]). A uniform change of E alone does not change a shape driven by displacements or cable
-  lengths (every force scales with E); the change of nu does, and so do the mesh and the cable path;
+- quadratic (6-node) triangles (:mod:`~mdsr_opt.mechanics.quadratic`) instead of linear ones, on a finer
+  mesh: the scene rebuilt from its outline at ``refine`` times the design mesh's nodes (default 2x; with
+  the edge midpoints about 8x the design model's nodes), or,
+  for a scene with no outline to re-mesh (a mesh file, ``max_area``, no source), every triangle split into
+  four (:func:`~mdsr_opt.mechanics.quadratic.split_mesh`);
+- nearly incompressible silicone, a sheet in plane stress: :func:`prototype_material`, Poisson's ratio
+  :data:`SILICONE_NU` (drawn within ``nu_range``), whatever material the design scene uses;
+- a rope with capstan friction in its channel (:mod:`~mdsr_opt.mechanics.capstan`), coefficient ``friction``
+  (default :data:`DEFAULT_ROPE_FRICTION`), pulled at its muscle's first node: its tension falls as
+  ``exp(-mu theta)`` along the route;
+- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius; a ring
+  of elements where that holds no node besides a rope's end, :meth:`VirtualPrototype.fixture_radius_on_mesh`):
+  every node within it, edge midpoints included, moves rigidly with the end node
+  (:mod:`~mdsr_opt.mechanics.fixtures`);
+- the muscle's node chain re-laid on the fine mesh through the fine nodes nearest the design muscle's nodes
+  (as a builder would place the tube); Young's modulus drawn within ``e_range`` (it scales every force, so
+  it changes no shape driven by drags or rope strokes);
 - the synthetic camera (:func:`~mdsr_opt.photos.camera.render_photo`) with its own seed, a 2 degree tilt and a
-  rotation on the plate.
+  rotation on the plate, photographing the quadratic state (its nodes drawn as the split mesh).
 
-The distances to these photographs therefore measure model error (discretisation, material uncertainty,
-muscle placement, camera), as the paper's do, not the design's convergence. They are still SYNTHETIC:
-no real body was cast or photographed.
+What each table then measures. Table 2 (external driving: the design model's drag-driven state against the
+prototype dragged alike): discretisation (element order, mesh) and material law only, no muscles; the
+fixtures and friction do not enter. Table 3 (internal driving: the muscle experiments at known contractions)
+and Table 4 (the design target against the prototype driven by the designed muscles and contractions):
+all of the above plus rope friction, the fixtures' size and the re-laid rope path. None contains gravity,
+out-of-plane (3-D) deformation or bending of the sheet, contact (self-contact, the table, obstacles), the
+channel's own compliance or the rope's stretch, viscoelasticity, or a real camera's lens and lighting; the
+photographs are SYNTHETIC: no body was cast or photographed.
 
 Example
 -------
@@ -30,8 +45,10 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -39,14 +56,43 @@ from ..core.checks import check_int, positive_float
 from ..body.muscles import Muscle
 from .select import edge_path
 
-__all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE", "measure", "validate_case", "validation_tables"]
+__all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE",
+           "DEFAULT_ROPE_FRICTION", "SILICONE_NU", "prototype_material", "measure", "validate_case",
+           "validation_tables"]
 
-#: Node count of the prototype's mesh over the design mesh's.
-DEFAULT_REFINE = 3.0
+#: Node count of the prototype's vertex mesh over the design mesh's; its quadratic elements add a node on
+#: every edge, so the prototype has about 4 x 2 = 8 times the design model's nodes.
+DEFAULT_REFINE = 2.0
 #: Relative range of the prototype's Young's modulus: E * U(1 - r, 1 + r).
 DEFAULT_E_RANGE = 0.10
-#: Range of the shift of the prototype's Poisson's ratio: nu + U(-r, r).
+#: Range of the shift of the prototype's Poisson's ratio: SILICONE_NU + U(-r, r), at most 0.499.
 DEFAULT_NU_RANGE = 0.05
+#: Poisson's ratio of cast silicone rubber: nearly incompressible.
+SILICONE_NU = 0.49
+#: Coefficient of friction between the rope and its channel (capstan law). An assumed value for a braided
+#: line in a cast silicone channel, not a measurement; ``friction=`` states another.
+DEFAULT_ROPE_FRICTION = 0.3
+#: Element order of the prototype (quadratic triangles).
+DEFAULT_ORDER = 2
+
+
+#: True while :func:`prototype_material` stands in for plane stress by its plane-strain equivalent (the tables
+#: say so); set False when it returns the plane-stress material.
+PLANE_STRESS_PLACEHOLDER = True
+
+
+def prototype_material(E: float, nu: float, thickness: float = 1.0):
+    """The prototype's silicone sheet: Neo-Hookean, Young's modulus ``E``, Poisson's ratio ``nu`` (nearly
+    incompressible), thickness ``thickness``, in plane stress.
+
+    PLACEHOLDER until :mod:`mdsr_opt.body.material` has plane stress (issue 34 item 1): today's plane-strain
+    Neo-Hookean with the plane-stress sheet's small-strain equivalents ``E' = E (1 + 2 nu) / (1 + nu)^2`` and
+    ``nu' = nu / (1 + nu)`` (the same in-plane Lame constants at small strain; at large strain the laws
+    differ). Switch the body to ``NeoHookean(E, nu, thickness=thickness, plane="stress")`` when that exists.
+    """
+    from ..body.material import NeoHookean
+
+    return NeoHookean(E=E * (1.0 + 2.0 * nu) / (1.0 + nu) ** 2, nu=nu / (1.0 + nu), thickness=thickness)
 
 
 @dataclass(eq=False)
@@ -56,7 +102,7 @@ class PrototypeShot:
     Attributes
     ----------
     x : (n_fine, 2) ndarray
-        The prototype's equilibrium (fine mesh).
+        The prototype's equilibrium (every node of its quadratic mesh: vertices, then edge midpoints).
     success : bool
         The prototype's solve succeeded.
     status : str
@@ -77,63 +123,113 @@ class PrototypeShot:
 SHOTS_KEPT = 16
 
 
+def _fine_body(scene, n_fine: int):
+    """The prototype's vertex mesh and the fixed nodes of each external case on it: the scene rebuilt from
+    its source at ``n_fine`` nodes, or, when that does not refine it (a mesh file, ``max_area``, no source),
+    every triangle split into four. Returns ``(fine scene or the scene, mesh, {case: (anchors, drag nodes,
+    drag positions)}, how)``."""
+    from ..mechanics.quadratic import extend_prescribed, split_mesh
+    from .library import get_problem
+
+    fine = get_problem(scene.source, resolution=n_fine) if scene.source else None
+    if fine is not None and fine.mesh.n_nodes >= 1.2 * scene.mesh.n_nodes:
+        if fine.case_names != scene.case_names:
+            raise ValueError(f"the prototype of {scene.name!r} has cases {fine.case_names}, the design scene "
+                             f"{scene.case_names}")
+        fixed = {c.name: (c.anchors, c.drag_nodes, c.drag_positions) for c in fine.cases if c.kind == "external"}
+        return fine, fine.mesh, fixed, "re-meshed"
+    mesh = split_mesh(scene.mesh)
+    fixed = {c.name: extend_prescribed(scene.mesh, c.anchors, c.drag_nodes, c.drag_positions)
+             for c in scene.cases if c.kind == "external"}
+    return scene, mesh, fixed, "split"
+
+
 @dataclass(eq=False, frozen=True)
 class VirtualPrototype:
-    """A scene's body rebuilt finer, with perturbed material, the exact cable and its own camera.
+    """A scene's body rebuilt finer on quadratic triangles, of silicone, with frictional ropes on fixtures
+    and its own camera.
 
-    Build it with :meth:`for_scene`. Attributes: ``scene`` (the fine scene: same cases by name, anchors and
-    drags chosen by geometry), ``design_mesh`` (the design model's mesh), ``material`` (perturbed),
-    ``E_factor`` and ``nu_shift`` (the draws), ``refine``, ``e_range``, ``nu_range``, ``seed``,
-    ``camera`` (keyword arguments of :func:`~mdsr_opt.photos.camera.render_photo`).
+    Build it with :meth:`for_scene`. Attributes: ``scene`` (the fine scene, or the design scene when its mesh
+    was split), ``mesh`` (the fine vertex mesh), ``fixed`` (per external case its anchors, drag nodes and
+    positions on ``mesh``), ``design_mesh`` (the design model's mesh), ``material`` (the silicone model,
+    :func:`prototype_material`), ``E_factor`` and ``nu_shift`` (the draws), ``nu`` (the silicone's Poisson
+    ratio), ``refine``, ``refined_by`` (``"re-meshed"`` or ``"split"``), ``e_range``, ``nu_range``,
+    ``friction``, ``fixture_radius``, ``order``, ``seed``, ``camera`` (keyword arguments of
+    :func:`~mdsr_opt.photos.camera.render_photo`), ``nu_drawn`` (False when ``material`` was given).
     """
 
     scene: Any
+    mesh: Any
+    fixed: dict
     design_mesh: Any
     material: Any
     E_factor: float
     nu_shift: float
+    nu: float
     refine: float
+    refined_by: str
     e_range: float
     nu_range: float
+    friction: float
+    fixture_radius: float
+    order: int
     seed: int
     camera: dict = field(default_factory=dict)
+    nu_drawn: bool = True
 
-    def __getstate__(self):  # pickled without the shots it keeps (see _keep)
+    def __getstate__(self):  # pickled without the shots and the model it keeps (see _keep, model)
         return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
 
     @property
-    def mesh(self):
-        """The prototype's (fine) mesh."""
-        return self.scene.mesh
+    def model(self):
+        """The prototype's elastic model (:class:`~mdsr_opt.mechanics.quadratic.QuadraticModel`), built once."""
+        if "_model" not in self.__dict__:
+            from ..mechanics.quadratic import QuadraticModel
+
+            self.__dict__["_model"] = QuadraticModel(self.mesh, self.material, self.order)
+        return self.__dict__["_model"]
 
     @classmethod
     def for_scene(cls, scene, *, refine: float = DEFAULT_REFINE, e_range: float = DEFAULT_E_RANGE,
-                  nu_range: float = DEFAULT_NU_RANGE, seed: int = 0,
-                  photo_size: tuple[int, int] = (500, 500)) -> "VirtualPrototype":
+                  nu_range: float = DEFAULT_NU_RANGE, seed: int = 0, photo_size: tuple[int, int] = (500, 500),
+                  friction: float = DEFAULT_ROPE_FRICTION, fixture_radius: float | None = None,
+                  order: int = DEFAULT_ORDER, material=None) -> "VirtualPrototype":
         """The virtual prototype of ``scene`` (a :class:`~mdsr_opt.scenes.scene.Scene` built from the library, a
-        problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes).
+        problem script or a scene file: it is rebuilt from its source at ``refine`` times its nodes, or split
+        when it cannot be re-meshed).
 
         Parameters
         ----------
         scene : Scene
         refine, e_range, nu_range : float
-            Node count over the design mesh's; the relative spread of ``E`` and the spread of ``nu`` drawn.
+            Node count over the design mesh's; the relative spread of ``E`` and the spread of the silicone's
+            ``nu`` drawn.
         seed : int
             Seed of the material draw and of the camera.
         photo_size : (int, int)
             (width, height) of the prototype's photographs in pixels.
+        friction : float
+            Coefficient of friction of the ropes in their channels (capstan law), in [0, 2].
+        fixture_radius : float, optional
+            Radius of the end fixtures in length units (default: the scene's ``anchor_radius``, else
+            :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` of the design mesh).
+        order : 1 or 2
+            Element order (2: quadratic triangles; 1 for comparisons only).
+        material : optional
+            The prototype's material, replacing the silicone of :func:`prototype_material` (then no ``nu``
+            is drawn; ``E`` is still scaled).
 
         Raises
         ------
         TypeError
             ``scene`` is not a Scene; ``seed`` not an int.
         ValueError
-            ``refine`` not in [1, 10], ``e_range`` not in [0, 0.5), ``nu_range`` not in [0, 0.2], a scene
-            without a source to rebuild from, or a fine scene whose cases differ from the design scene's.
+            ``refine`` not in [1, 10], ``e_range`` not in [0, 0.5), ``nu_range`` not in [0, 0.2], ``friction``
+            not in [0, 2], a bad ``fixture_radius`` or ``order``, or a fine scene whose cases differ from
+            the design scene's.
         """
-        from ..body.material import LinearElastic, NeoHookean
+        from ..mechanics.anchors import check_anchor_radius
         from .scene import Scene
-        from .library import get_problem
 
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a Scene, got {type(scene).__name__}")
@@ -146,35 +242,50 @@ class VirtualPrototype:
             raise ValueError(f"e_range must lie in [0, 0.5), got {e_range}")
         if nu_range > 0.2:
             raise ValueError(f"nu_range must lie in [0, 0.2], got {nu_range}")
+        friction = positive_float(friction, "friction", allow_zero=True)
+        if friction > 2.0:
+            raise ValueError(f"friction (the rope's capstan coefficient) must lie in [0, 2], got {friction}")
+        if isinstance(order, bool) or order not in (1, 2):
+            raise ValueError(f"order must be 1 or 2, got {order!r}")
         seed = check_int(seed, "seed", 0)
-        if not scene.source:
-            raise ValueError(f"scene {scene.name!r} has no source file to rebuild a finer prototype from")
-        n_fine = int(round(refine * scene.mesh.n_nodes))
-        fine = get_problem(scene.source, resolution=n_fine)
-        if fine.case_names != scene.case_names:
-            raise ValueError(f"the prototype of {scene.name!r} has cases {fine.case_names}, the design scene "
-                             f"{scene.case_names}")
+        if fixture_radius is None:
+            fixture_radius = scene.design_options.get("anchor_radius")
+        radius = check_anchor_radius(scene.mesh, fixture_radius)
+        fine, mesh, fixed, how = _fine_body(scene, int(round(refine * scene.mesh.n_nodes)))
         rng = np.random.default_rng([int(seed), 14])
         f_E = 1.0 + e_range * (2.0 * rng.random() - 1.0)
         d_nu = nu_range * (2.0 * rng.random() - 1.0)
         m = scene.material
-        nu = float(np.clip(m.nu + d_nu, 0.05, 0.49))
-        kind = LinearElastic if isinstance(m, LinearElastic) else NeoHookean
-        material = kind(E=m.E * f_E, nu=nu, thickness=m.thickness)
-        fine = replace(fine, material=material)
+        given = material
+        if material is None:
+            nu = float(min(SILICONE_NU + d_nu, 0.499))
+            material = prototype_material(m.E * f_E, nu, m.thickness)
+        else:
+            nu = float(getattr(material, "nu", float("nan")))
+            d_nu = 0.0
+            if hasattr(material, "E") and dataclasses.is_dataclass(material):
+                material = dataclasses.replace(material, E=material.E * f_E)
         camera = {"image_size": tuple(photo_size), "seed": 1000 + int(seed), "tilt_deg": 2.0,
                   "rotation_deg": float(rng.uniform(-8.0, 8.0))}
-        return cls(scene=fine, design_mesh=scene.mesh, material=material, E_factor=float(f_E),
-                   nu_shift=float(nu - m.nu), refine=refine, e_range=e_range, nu_range=nu_range, seed=int(seed),
-                   camera=camera)
+        return cls(scene=fine, mesh=mesh, fixed=fixed, design_mesh=scene.mesh, material=material,
+                   E_factor=float(f_E), nu_shift=float(nu - SILICONE_NU) if d_nu else 0.0, nu=nu, refine=refine,
+                   refined_by=how, e_range=e_range, nu_range=nu_range, friction=friction,
+                   fixture_radius=float(radius), order=int(order), seed=int(seed), camera=camera,
+                   nu_drawn=given is None)
 
     def describe(self) -> dict:
-        """The prototype's parameters (JSON-ready)."""
-        return {"nodes": int(self.mesh.n_nodes), "design_nodes": int(self.design_mesh.n_nodes),
-                "refine": self.refine, "material": self.material.kind if hasattr(self.material, "kind")
-                else type(self.material).__name__, "E": float(self.material.E), "nu": float(self.material.nu),
+        """The prototype's parameters (JSON-ready). ``nodes`` counts every node of the quadratic mesh
+        (vertices and edge midpoints), ``vertex_nodes`` those of its linear mesh."""
+        n_all = self.mesh.n_nodes + (len(self.mesh.edges) if self.order == 2 else 0)
+        return {"nodes": int(n_all), "vertex_nodes": int(self.mesh.n_nodes), "design_nodes": int(self.design_mesh.n_nodes),
+                "refine": self.refine, "refined_by": self.refined_by,
+                "elements": "quadratic (6-node)" if self.order == 2 else "linear (3-node)",
+                "material": self.material.kind if hasattr(self.material, "kind") else type(self.material).__name__,
+                "silicone_nu": self.nu, "E": float(self.material.E), "nu": float(self.material.nu),
+                "plane_stress_placeholder": bool(PLANE_STRESS_PLACEHOLDER and self.nu_drawn),
                 "E_factor": self.E_factor, "nu_shift": self.nu_shift, "e_range": self.e_range,
-                "nu_range": self.nu_range, "seed": self.seed, "muscle_model": "cable",
+                "nu_range": self.nu_range, "seed": self.seed, "muscle_model": "capstan rope",
+                "rope_friction": self.friction, "fixture_radius": self.fixture_radius,
                 "camera": {k: list(v) if isinstance(v, tuple) else v for k, v in self.camera.items()},
                 "synthetic": True}
 
@@ -206,7 +317,7 @@ class VirtualPrototype:
         c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
             return self.external(c.name)
-        return self.internal(scene.muscles, c.contractions, anchor_radius=scene.design_options.get("anchor_radius"))
+        return self.internal(scene.muscles, c.contractions)
 
     def _solved(self, key):
         """The shot kept for ``key`` (the arguments that made it), or None; a shot asked for is kept longest."""
@@ -233,7 +344,7 @@ class VirtualPrototype:
         """The synthetic camera's photograph of the prototype in state ``x`` (fine mesh)."""
         from ..photos.camera import render_photo
 
-        return render_photo(self.mesh, x, **self.camera)
+        return render_photo(self.model.display_mesh, x, **self.camera)
 
     def _shot(self, res, photo: bool) -> PrototypeShot:
         shot = PrototypeShot(x=np.asarray(res.x).copy(), success=bool(res.success), status=str(res.status),
@@ -244,24 +355,45 @@ class VirtualPrototype:
 
     def external(self, case: str, photo: bool = True) -> PrototypeShot:
         """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
-        mesh). Solved once: a second call returns the same shot."""
-        from ..mechanics.equilibrium import solve_external
+        mesh, carried to the edge midpoints). Solved once: a second call returns the same shot."""
+        from ..mechanics.quadratic import extend_prescribed
+        from ..mechanics.quadsolve import solve_quadratic_external
 
-        c = self.scene.case(case)
-        if c.kind != "external":
-            raise ValueError(f"case {case!r} is internal driving; use internal()")
+        if case not in self.fixed:
+            raise ValueError(f"case {case!r} is internal driving or unknown; use internal() (external cases: "
+                             f"{', '.join(self.fixed) or 'none'})")
         key = ("external", case, bool(photo))
         shot = self._solved(key)
         if shot is None:
-            shot = self._keep(key, self._shot(solve_external(self.mesh, self.material, c.anchors, c.drags), photo))
+            anchors, dn, dp = self.fixed[case]
+            if self.order == 2:
+                anchors, dn, dp = extend_prescribed(self.mesh, anchors, dn, dp)
+            res = solve_quadratic_external(self.model, anchors, dn, dp)
+            shot = self._keep(key, self._shot(res, photo))
         return shot
 
-    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True,
-                 anchor_radius: float | None = None) -> PrototypeShot:
-        """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh) at ``contractions``,
-        with the exact cable. Solved once per muscles, contractions and radius: a second call returns the
+    def fixture_radius_on_mesh(self, fine_muscles) -> float:
+        """The fixtures' radius on the prototype's mesh: ``fixture_radius``, unless a rope's end would hold no
+        other node within it; then the longest mesh edge at the ropes' ends (times 1.001), so that every
+        fixture holds its end node's ring of elements. A fixture smaller than the mesh would be a point
+        force, under which a planar body has no finite displacement and quadratic elements fold at the
+        rope's end."""
+        E, L = self.mesh.edges, self.mesh.edge_lengths
+        ends = np.array([n for m in fine_muscles for n in (m.nodes[0], m.nodes[-1])])
+        shortest = [L[(E == e).any(1)].min() for e in ends]
+        if not ends.size or min(shortest) <= self.fixture_radius:
+            return self.fixture_radius
+        at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
+        return float(max(self.fixture_radius, 1.001 * L[at_end].max()))
+
+    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True) -> PrototypeShot:
+        """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
+        capstan friction pulled at its first node, ending on fixtures of radius ``fixture_radius``) at
+        ``contractions`` (rounded to 1e-9). Solved once per muscles and contractions: a second call returns the
         same shot."""
-        from ..mechanics.equilibrium import solve_internal
+        from ..mechanics.capstan import CapstanRope, quadratic_chain
+        from ..mechanics.fixtures import fixture_groups
+        from ..mechanics.quadsolve import solve_quadratic_internal
 
         a = np.asarray(contractions, dtype=float).ravel()
         if len(a) != len(muscles):
@@ -269,13 +401,18 @@ class VirtualPrototype:
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
         muscles = [m if isinstance(m, Muscle) else Muscle(m) for m in muscles]  # checked before the look-up
-        key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo),
-               None if anchor_radius is None else float(anchor_radius))
+        # solved at the contractions rounded to 1e-9 (a rope length change of 1e-9 L0): a design that
+        # recovers a case's known contractions to that precision is the same shot, whichever is asked first
+        a = np.round(a, 9)
+        key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo))
         shot = self._solved(key)
         if shot is None:
             fine = [self.transfer_muscle(m) for m in muscles]
-            res = solve_internal(self.mesh, self.material, fine, a, muscle_model="cable",
-                                 anchor_radius=anchor_radius)
+            mid = self.mesh.n_nodes + np.arange(len(self.mesh.edges)) if self.order == 2 else None
+            groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine), mid)
+            ropes = [CapstanRope(quadratic_chain(self.mesh, m.nodes, mid) if mid is not None else m.nodes,
+                                 self.friction) for m in fine]
+            res = solve_quadratic_internal(self.model, ropes, a, groups)
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
@@ -317,7 +454,6 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
     scene = setup.scene
     out: dict = {"prototype": prototype.describe()}
     photos: dict = {}
-    radius = scene.design_options.get("anchor_radius")
 
     def run(key, table, make):
         try:
@@ -343,7 +479,7 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
 
     run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case))
     if design is not None:
-        run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions, anchor_radius=radius))
+        run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions))
     return out, photos
 
 
@@ -388,12 +524,22 @@ def validation_tables(reports: Sequence) -> str:
                 t4.append(_row(name, c["case"], p.get("design"), a or "-"))
     desc = ""
     if proto:
-        desc = (f"Virtual prototype (SYNTHETIC photographs): a {proto['refine']:g}x finer mesh of each body, the "
-                f"exact sliding cable, E x U(1 +- {proto['e_range']:g}) and nu + U(+- {proto['nu_range']:g}) "
-                f"drawn from seed {proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
+        elements = proto.get("elements", "linear (3-node)")
+        rope = (f"ropes with capstan friction mu = {proto['rope_friction']:g} pulled at the muscle's first node, "
+                "end fixtures of each scene's anchor radius (a ring of elements where that radius holds no "
+                "node)") if "rope_friction" in proto else "the exact sliding cable"
+        nu = (f"silicone with nu = {proto['silicone_nu']:.3f} (drawn in {SILICONE_NU:g} +- {proto['nu_range']:g}, "
+              "at most 0.499)" if "silicone_nu" in proto else f"nu + U(+- {proto['nu_range']:g})")
+        if proto.get("plane_stress_placeholder"):
+            nu += " as a plane-stress sheet (for now its small-strain plane-strain equivalent)"
+        desc = (f"Virtual prototype (SYNTHETIC photographs): {elements} triangles on a {proto['refine']:g}x finer "
+                f"mesh of each body, {nu}, {rope}, E x U(1 +- {proto['e_range']:g}) drawn from seed "
+                f"{proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
                 f"{proto['camera']['image_size'][0]}x{proto['camera']['image_size'][1]} px. d: mean distance of "
                 "the design model's boundary nodes (outline and holes) to the prototype photograph's contours; "
-                "ratio: d over sqrt(area) of the photographed outline.\n\n")
+                "ratio: d over sqrt(area) of the photographed outline. Table 2 contains the element order, the "
+                "mesh and the material law; Tables 3 and 4 also the rope friction, the fixtures and the re-laid "
+                "rope path. None contains gravity, 3-D (out-of-plane) deformation or contact.\n\n")
     parts = ["# Validation against the virtual prototype (the paper's Tables 2-4)\n", desc]
     for title, rows, col in (("Table 2: external driving, simulation vs prototype", t2, "driving"),
                              ("Table 3: internal driving, simulation vs prototype", t3, "contractions"),

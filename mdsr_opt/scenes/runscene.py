@@ -204,7 +204,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
             proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
             d = proto.describe()
             say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
-                f"E x {d['E_factor']:.3f}, nu {d['nu']:.3f} ({d['nu_shift']:+.3f}), exact cable, seed {d['seed']}")
+                f"{d['elements']} elements, silicone nu {d['silicone_nu']:.3f}, E x {d['E_factor']:.3f}, rope friction "
+                f"{d['rope_friction']:g}, fixtures of radius {d['fixture_radius']:.3g}, seed {d['seed']}")
         runs: dict[str, CaseRun] = {}
         written: dict[str, list[list[str]]] = {}
         # an animation (its frames' forward solves, GIF and JSON) is one job, the run's longest: it is sent

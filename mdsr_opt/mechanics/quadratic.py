@@ -1,0 +1,296 @@
+"""Quadratic (6-node) triangles: the mesh upgrade and the elastic energy of the virtual prototype.
+
+A linear mesh (:class:`~mdsr_opt.body.mesh.Mesh`) becomes a quadratic one by a node at the middle of every
+edge, boundary edges included (the edges stay straight). The displacement is then piecewise quadratic; the
+deformation gradient of an element, ``F = sum_a x_a (grad N_a)^T``, is linear over it, and the energy
+``sum_e t A_e sum_q w_q Psi(F(xi_q))`` is integrated with the symmetric 6-point rule, exact for polynomials of
+degree 4 (``|grad u|^2`` of a quadratic ``u`` has degree 2; the extra points, nearer the vertices, let the
+energy see an element squeezed at a corner, where a 3-point rule is blind). ``order=1`` gives the linear (3-node, one point) element of the design model, on the same
+code path, so the two can be compared.
+
+The material enters only through its energy density: ``material.psi_expr(F, params)`` with a CasADi 2x2
+``F`` and the numeric vector ``material.params``, so any material of :mod:`mdsr_opt.body.material` (or one
+with the same two members) works. CasADi differentiates one element's energy twice; the element gradients and
+Hessians are evaluated for all elements at once and assembled into sparse arrays.
+
+:func:`split_mesh` refines a linear mesh by splitting every triangle into four through the same edge
+midpoints (node numbers ``n + row of mesh.edges``): the split mesh has exactly the nodes of the quadratic
+mesh, so it draws and photographs a quadratic state, and refines a mesh that has no outline to re-mesh.
+
+Example
+-------
+>>> import numpy as np
+>>> from mdsr_opt import Mesh, NeoHookean
+>>> model = QuadraticModel(Mesh.rectangle(2.0, 1.0, 2, 1), NeoHookean(1.0, 0.3))
+>>> model.n_nodes, model.elements.shape
+(15, (4, 6))
+>>> abs(model.energy(model.points)) < 1e-24
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..body.material import numeric_law
+from ..body.mesh import Mesh
+
+__all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh"]
+
+_A, _B = 0.445948490915965, 0.091576213509771
+#: Quadrature points (reference coordinates) of the quadratic element: the symmetric 6-point rule, exact for
+#: polynomials of degree 4 (weights :data:`QUAD_WEIGHTS`, fractions of the area).
+QUAD_POINTS = np.array([[_A, _A], [1 - 2 * _A, _A], [_A, 1 - 2 * _A], [_B, _B], [1 - 2 * _B, _B], [_B, 1 - 2 * _B]])
+QUAD_WEIGHTS = np.array([0.223381589678011] * 3 + [0.109951743655322] * 3)
+
+
+def midnode_table(mesh: Mesh) -> np.ndarray:
+    """Per triangle the indices of its three edge-midpoint nodes (edges 0-1, 1-2, 2-0), numbered
+    ``mesh.n_nodes + row`` of :attr:`~mdsr_opt.body.mesh.Mesh.edges`; (m, 3)."""
+    t = mesh.triangles
+    rows = mesh.edge_rows(t[:, [0, 1, 2]].ravel(), t[:, [1, 2, 0]].ravel()).reshape(-1, 3)
+    return mesh.n_nodes + rows
+
+
+def split_mesh(mesh: Mesh) -> Mesh:
+    """``mesh`` refined by splitting every triangle into four through its edge midpoints.
+
+    The nodes of ``mesh`` keep their indices; the midpoint of edge ``k`` (a row of ``mesh.edges``) is node
+    ``mesh.n_nodes + k``. The result has the nodes of :class:`QuadraticModel`'s mesh of ``mesh``."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    P, E = mesh.points, mesh.edges
+    pts = np.vstack([P, 0.5 * (P[E[:, 0]] + P[E[:, 1]])])
+    t, m = mesh.triangles, midnode_table(mesh)
+    a, b, c, ab, bc, ca_ = t[:, 0], t[:, 1], t[:, 2], m[:, 0], m[:, 1], m[:, 2]
+    tris = np.concatenate([np.column_stack([a, ab, ca_]), np.column_stack([ab, b, bc]),
+                           np.column_stack([ca_, bc, c]), np.column_stack([ab, bc, ca_])])
+    return Mesh(pts, tris)
+
+
+def extend_prescribed(mesh: Mesh, anchors, drag_nodes, drag_positions):
+    """Anchors and drags of ``mesh`` carried to the nodes of :func:`split_mesh` (and of the quadratic mesh):
+    the midpoint of an edge joining two anchors is anchored, that of an edge joining two dragged nodes is
+    dragged to the middle of their targets (a drag along a straight edge stays straight).
+
+    Returns ``(anchors, drag_nodes, drag_positions)`` on the refined nodes (old indices kept)."""
+    n = mesh.n_nodes
+    anchors = np.asarray(anchors, dtype=np.int64).ravel()
+    dn = np.asarray(drag_nodes, dtype=np.int64).ravel()
+    dp = np.asarray(drag_positions, dtype=float).reshape(-1, 2)
+    E = mesh.edges
+    is_anchor = np.zeros(n, dtype=bool)
+    is_anchor[anchors] = True
+    target = np.full((n, 2), np.nan)
+    target[dn] = dp
+    both_a = is_anchor[E[:, 0]] & is_anchor[E[:, 1]]
+    both_d = np.isfinite(target[E[:, 0], 0]) & np.isfinite(target[E[:, 1], 0])
+    new_a = np.concatenate([anchors, n + np.flatnonzero(both_a)])
+    k = np.flatnonzero(both_d)
+    new_dn = np.concatenate([dn, n + k])
+    new_dp = np.vstack([dp, 0.5 * (target[E[k, 0]] + target[E[k, 1]])])
+    return new_a, new_dn, new_dp
+
+
+def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shape-function gradients in reference coordinates at the quadrature points, (nq, nn, 2), and the
+    weights (fractions of the element's area), (nq,)."""
+    if order == 1:
+        return np.array([[[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]]]), np.array([1.0])
+    dL = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+    out = []
+    for xi, eta in QUAD_POINTS:
+        L = np.array([1.0 - xi - eta, xi, eta])
+        g = [(4 * L[0] - 1) * dL[0], (4 * L[1] - 1) * dL[1], (4 * L[2] - 1) * dL[2],
+             4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
+             4 * (L[0] * dL[2] + L[2] * dL[0])]
+        out.append(np.array(g))
+    return np.array(out), QUAD_WEIGHTS
+
+
+@dataclass(frozen=True)
+class _ElementData:
+    G: np.ndarray        # (m, nq, nn, 2): physical shape-function gradients at the quadrature points
+    w: np.ndarray        # (m, nq): area x quadrature weight
+    dofs: np.ndarray     # (m, 2 nn): global coordinates of each element, node-interleaved
+
+
+class QuadraticModel:
+    """The elastic energy of a body on quadratic (``order=2``) or linear (``order=1``) triangles.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The linear mesh; its nodes keep their indices, the edge midpoints follow (:func:`midnode_table`).
+    material : a material of :mod:`mdsr_opt.body.material` (``psi_expr`` and ``params``).
+    order : 1 or 2
+    numeric : bool
+        Evaluate with the material's closed-form stress and tangent when it states them
+        (:func:`~mdsr_opt.body.material.numeric_law`, two parameters); otherwise, or with ``False``, with
+        CasADi's derivatives of ``psi_expr`` (the reference; tests compare the two).
+
+    Attributes
+    ----------
+    mesh, material, order
+    points : (N, 2) ndarray
+        Rest positions of every node (vertices, then edge midpoints for ``order=2``).
+    elements : (m, 3 or 6) ndarray
+        Per element its vertices then, for ``order=2``, its midpoints on edges 0-1, 1-2, 2-0.
+    display_mesh : Mesh
+        A linear mesh on exactly these nodes (:func:`split_mesh` for ``order=2``), to draw and photograph.
+    """
+
+    def __init__(self, mesh: Mesh, material, order: int = 2, numeric: bool = True):
+        if not isinstance(mesh, Mesh):
+            raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+        if isinstance(order, bool) or order not in (1, 2):
+            raise ValueError(f"order must be 1 (linear) or 2 (quadratic triangles), got {order!r}")
+        if not callable(getattr(material, "psi_expr", None)) or not hasattr(material, "params"):
+            raise TypeError(f"material must have psi_expr(F, params) and params, got {type(material).__name__}")
+        self.mesh, self.material, self.order = mesh, material, int(order)
+        self.params = np.asarray(material.params, dtype=float).ravel()
+        if order == 2:
+            E = mesh.edges
+            P = mesh.points
+            self.points = np.vstack([P, 0.5 * (P[E[:, 0]] + P[E[:, 1]])])
+            self.elements = np.hstack([mesh.triangles, midnode_table(mesh)]).astype(np.int64)
+            self.display_mesh = split_mesh(mesh)
+        else:
+            self.points = mesh.points.copy()
+            self.elements = mesh.triangles.astype(np.int64)
+            self.display_mesh = mesh
+        self.points.setflags(write=False)
+        self.n_nodes = len(self.points)
+        dref, wq = _reference_gradients(self.order)
+        Dm_inv, areas = mesh.Dm_inv, mesh.areas
+        G = np.einsum("qak,mkj->mqaj", dref, Dm_inv)
+        nn = self.elements.shape[1]
+        dofs = np.stack([2 * self.elements, 2 * self.elements + 1], axis=2).reshape(-1, 2 * nn)
+        self._data = _ElementData(G=G, w=areas[:, None] * wq[None, :], dofs=dofs)
+        if self.order == 2:  # shape-function gradients at the three vertices, (m, 3, 6, 2)
+            dL = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
+            gv = np.array([[(4 * L[0] - 1) * dL[0], (4 * L[1] - 1) * dL[1], (4 * L[2] - 1) * dL[2],
+                            4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
+                            4 * (L[0] * dL[2] + L[2] * dL[0])] for L in np.eye(3)])
+            self._vertex_gradients = np.einsum("vak,mkj->mvaj", gv, Dm_inv)
+        self._fun = self._element_function(nn, len(wq))
+        self._mapped = None
+        #: evaluate with the material's closed-form stress and tangent where it has them (else CasADi)
+        self.numeric = bool(numeric) and numeric_law(material)
+        rows = np.repeat(dofs, 2 * nn, axis=1).ravel()
+        cols = np.tile(dofs, (1, 2 * nn)).ravel()
+        self._pattern = (rows, cols)
+
+    def _element_function(self, nn: int, nq: int):
+        """CasADi function ``(xe, G, w, p) -> (energy, gradient, Hessian)`` of one element."""
+        xe = ca.SX.sym("xe", 2 * nn)
+        G = ca.SX.sym("G", nn * 2, nq)  # column q: the nn x 2 gradients, row-major
+        w = ca.SX.sym("w", nq)
+        p = ca.SX.sym("p", len(self.params))
+        e = 0
+        for q in range(nq):
+            F = ca.SX.zeros(2, 2)
+            for a in range(nn):
+                for i in range(2):
+                    for j in range(2):
+                        F[i, j] += xe[2 * a + i] * G[2 * a + j, q]
+            e += w[q] * self.material.psi_expr(F, p)
+        g = ca.gradient(e, xe)
+        H = ca.hessian(e, xe)[0]
+        return ca.Function("element", [xe, G, w, p], [e, g, H])
+
+    # ------------------------------------------------------------------------------------------- geometry
+    def deformation_gradients(self, x) -> np.ndarray:
+        """``F`` at every quadrature point, (m, nq, 2, 2), of the state ``x`` ((N, 2) or (2N,))."""
+        x = self._state(x)
+        xe = x[self.elements]  # (m, nn, 2)
+        return np.matmul(xe.transpose(0, 2, 1)[:, None], self._data.G)  # (m, nq, 2, 2)
+
+    def jacobians(self, x) -> np.ndarray:
+        """``det F`` at every quadrature point, (m, nq)."""
+        return np.linalg.det(self.deformation_gradients(x))
+
+    def upright(self, x) -> bool:
+        """No element inverted at a quadrature point or at a node (``det F > 0`` at the vertices too, where
+        the linear ``F`` of a quadratic element is extreme)."""
+        x = self._state(x)
+        if not np.all(self.jacobians(x) > 0.0):
+            return False
+        if self.order == 2:  # det F at the vertices, where the linear F of a quadratic element is extreme
+            F = np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients)
+            if not np.all(np.linalg.det(F) > 0.0):
+                return False
+        return True
+
+    def _state(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.size != 2 * self.n_nodes:
+            raise ValueError(f"a state of this model has {self.n_nodes} nodes (shape ({self.n_nodes}, 2)), "
+                             f"got shape {x.shape}")
+        return x.reshape(-1, 2)
+
+    # --------------------------------------------------------------------------------------------- energy
+    def _evaluate(self, x, params=None, need: int = 2):
+        """Per element energies (m,), gradients (m, 2nn) and, for ``need=2``, Hessians (m, 2nn, 2nn)."""
+        p = self.params if params is None else np.asarray(params, dtype=float).ravel()
+        if self.numeric and len(p) == 2:
+            return self._evaluate_numeric(x, p, need)
+        x = self._state(x)
+        d = self._data
+        m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
+        if self._mapped is None:
+            self._mapped = self._fun.map(m)
+        xe = x.reshape(-1)[d.dofs].T                                                 # (2nn, m)
+        Gc = d.G.reshape(m, nq, nn * 2).transpose(2, 0, 1).reshape(nn * 2, m * nq)  # (2nn, m nq)
+        e, g, H = self._mapped(xe, Gc, d.w.T, np.repeat(p[:, None], m, axis=1))
+        k = 2 * nn
+        H = np.asarray(H).reshape(k, m, k).transpose(1, 0, 2) if need == 2 else None
+        return np.asarray(e).ravel(), np.asarray(g).T, H
+
+    def _evaluate_numeric(self, x, p, need: int):
+        """:meth:`_evaluate` from the material's closed-form stress and tangent (``numeric_law``)."""
+        d = self._data
+        m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
+        F = self.deformation_gradients(x)                                      # (m, nq, 2, 2)
+        Fl = F.transpose(2, 3, 0, 1).reshape(2, 2, m * nq)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            psi = self.material.density(Fl[0, 0] - 1, Fl[0, 1], Fl[1, 0], Fl[1, 1] - 1, p[0], p[1])
+            P, A = self.material.stress_tangent(Fl, p[0], p[1], need == 2)
+        J = Fl[0, 0] * Fl[1, 1] - Fl[0, 1] * Fl[1, 0]
+        psi = np.where(J > 0, psi, np.nan).reshape(m, nq)
+        w = d.w
+        e = (w * psi).sum(1)
+        G = d.G.reshape(m * nq, nn, 2)                                          # (n, a, j)
+        Pw = (P * w.reshape(-1)).transpose(2, 0, 1)                               # (n, i, j), weighted
+        g = np.matmul(G, Pw.transpose(0, 2, 1)).reshape(m, nq, nn, 2).sum(1).reshape(m, 2 * nn)  # (m, a i)
+        H = None
+        if need == 2:
+            A = np.broadcast_to(A, (2, 2, 2, 2, m * nq)) * w.reshape(-1)
+            At = A.transpose(4, 1, 0, 2, 3).reshape(m * nq, 2, 8)                 # (n, j, i k l)
+            C = np.matmul(G, At).reshape(m * nq, nn * 4, 2)                      # (n, a i k, l)
+            Hq = np.matmul(C, G.transpose(0, 2, 1))                               # (n, a i k, b)
+            Hq = Hq.reshape(m, nq, nn, 2, 2, nn).sum(1)                           # (m, a, i, k, b)
+            H = Hq.transpose(0, 1, 2, 4, 3).reshape(m, 2 * nn, 2 * nn)
+        return e, g, H
+
+    def energy(self, x, params=None) -> float:
+        """Total elastic energy of the state ``x`` (NaN or inf where an element is inverted)."""
+        return float(self._evaluate(x, params, 0)[0].sum())
+
+    def energy_gradient(self, x, params=None) -> tuple[float, np.ndarray]:
+        """The energy and its gradient (2N,) (node-interleaved coordinates)."""
+        e, g, _ = self._evaluate(x, params, 1)
+        out = np.bincount(self._data.dofs.ravel(), g.ravel(), 2 * self.n_nodes)
+        return float(e.sum()), out
+
+    def evaluate(self, x, params=None) -> tuple[float, np.ndarray, sp.csr_matrix]:
+        """The energy, its gradient (2N,) and its Hessian (2N, 2N) (sparse) at ``x``."""
+        e, g, H = self._evaluate(x, params, 2)
+        n2 = 2 * self.n_nodes
+        grad = np.bincount(self._data.dofs.ravel(), g.ravel(), n2)
+        K = sp.csr_matrix((H.ravel(), self._pattern), shape=(n2, n2))
+        return float(e.sum()), grad, K

@@ -1,0 +1,379 @@
+"""Equilibria of the quadratic-element body (:class:`~mdsr_opt.mechanics.quadratic.QuadraticModel`): external
+driving, and ropes with capstan friction ending on rigid fixtures.
+
+Both are solved by Newton's method on the equilibrium equations with load continuation:
+
+* :func:`solve_quadratic_external`: anchors held, drag nodes moved along straight lines with the load
+  fraction ``s``; unknowns the free coordinates; ``grad E = 0`` on them.
+* :func:`solve_quadratic_internal`: ropes (:class:`~mdsr_opt.mechanics.capstan.CapstanRope`) pulled to
+  ``(1 - s a_c) L0_c``; unknowns the reduced coordinates ``q`` of the body whose fixtures move rigidly
+  (:class:`~mdsr_opt.mechanics.fixtures.RigidReduction`) less a three-coordinate gauge, and each rope's
+  pulled-end tension ``tau_c``; equations ``P^T (grad E + sum_c tau_c sum_i w_ci grad l_ci) = 0`` and
+  ``sum_i l_ci = (1 - s a_c) L0_c`` (DESIGN.md section 4). The capstan weights ``w_ci`` depend on the
+  state through the path's turning; the Newton matrix includes that dependence
+  (:meth:`~mdsr_opt.mechanics.capstan.CapstanRope.weight_coupling`). A rope that would push (``tau_c < 0``) goes slack: its
+  equation is dropped and its tension set to 0 until its path is longer than the rope again.
+
+Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
+with an element inverted at a quadrature point or a vertex. A load step that fails is halved (down to
+``min_step``). Success means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the
+stiffness times the body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
+follows the branch from rest.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .align import align
+from .capstan import CapstanRope, turning_angles
+from .fixtures import RigidReduction
+from .quadratic import QuadraticModel
+
+__all__ = ["QuadraticResult", "solve_quadratic_external", "solve_quadratic_internal"]
+
+
+@dataclass(eq=False)
+class QuadraticResult:
+    """An equilibrium of :mod:`~mdsr_opt.mechanics.quadsolve`.
+
+    Attributes
+    ----------
+    x : (N, 2) ndarray
+        Node positions (vertices, then edge midpoints); internal driving: aligned to rest.
+    success : bool
+    status : str
+    iterations : int
+        Newton iterations over all load steps.
+    steps : int
+        Accepted load steps.
+    residual : float
+        The largest scaled residual at the returned state.
+    tension, end_tension, turning : (c,) ndarray
+        Internal driving: each rope's tension at its pulled end and at its far end, and its total turning
+        angle (rad).
+    slack : (c,) bool ndarray
+    achieved, commanded : (c,) ndarray
+        ``1 - L / L0`` of each rope's path; the contractions asked for.
+    state : ndarray or None
+        Internal driving, on success: the solver's unknowns (reduced coordinates in its gauge, tensions), to
+        start another solve from (``start=``).
+    """
+
+    x: np.ndarray
+    success: bool
+    status: str
+    iterations: int = 0
+    steps: int = 0
+    residual: float = float("nan")
+    tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    end_tension: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    turning: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    achieved: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    commanded: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    state: np.ndarray | None = None
+
+
+def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int):
+    """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
+    residual)``."""
+    z = z0.copy()
+    if not ok(z):
+        return z, False, 0, float("inf")
+    r, J = system(z, True)
+    norm = float(np.abs(r).max()) if r.size else 0.0
+    for it in range(max_iter):
+        if norm <= tol:
+            return z, True, it, norm
+        try:
+            lu = spla.splu(J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                           options={"SymmetricMode": True})  # a fill-reducing order for a symmetric pattern
+            dz = lu.solve(-r)
+        except RuntimeError:  # an exactly singular matrix
+            return z, False, it, norm
+        if not np.isfinite(dz).all():
+            return z, False, it, norm
+        phi = float(r @ r)
+        alpha = 1.0
+        for _ in range(12):
+            zt = z + alpha * dz
+            if ok(zt):
+                rt, _unused = system(zt, False)
+                if np.isfinite(rt).all() and float(rt @ rt) <= (1.0 - 1e-4 * alpha) * phi:
+                    break
+            alpha *= 0.5
+        else:
+            return z, False, it, norm
+        z = zt
+        r, J = system(z, True)
+        norm = float(np.abs(r).max()) if r.size else 0.0
+    return z, norm <= tol, max_iter, norm
+
+
+#: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
+INTERMEDIATE_TOL = 1e-6
+
+
+def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25,
+              secant: bool = True):
+    """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(t, z_start, final, s) -> (z, converged,
+    iterations, residual)`` for a step from the equilibrium at ``s`` to ``t`` (``final`` at ``t = 1``). Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
+    load fraction reached)."""
+    s, z, ds = 0.0, z0, first_step
+    prev = None  # (s, z) of the step before, for a secant predictor
+    iters = steps = 0
+    res = 0.0
+    while s < 1.0:
+        t = min(1.0, s + ds)
+        start = z
+        if secant and prev is not None and s > prev[0]:  # else solve_at predicts from the state at s
+            start = z + (t - s) / (s - prev[0]) * (z - prev[1])
+        zt, conv, it, res = solve_at(t, start, t >= 1.0, s)
+        if not conv and start is not z:  # the predictor overshot: from the last state
+            zt, conv, it2, res = solve_at(t, z, t >= 1.0, s)
+            it += it2
+        iters += it
+        if conv:
+            prev, s, z = (s, z), t, zt
+            steps += 1
+            if it <= 6:
+                ds = min(1.0, 1.5 * ds)
+        else:
+            ds *= 0.5
+            if ds < min_step:
+                return z, s, False, iters, steps, res, (f"load step {s:.4g} -> {t:.4g} failed (residual {res:.3g}) "
+                                                     f"with the smallest step {min_step:g}")
+    return z, s, True, iters, steps, res, "converged"
+
+
+def _checks(tol, max_iter, min_step):
+    tol = float(tol)
+    if not (np.isfinite(tol) and 0.0 < tol < 1.0):
+        raise ValueError(f"tol must lie in (0, 1), got {tol}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
+        raise ValueError(f"max_iter must be a positive integer, got {max_iter!r}")
+    min_step = float(min_step)
+    if not 0.0 < min_step <= 1.0:
+        raise ValueError(f"min_step must lie in (0, 1], got {min_step}")
+    return tol, int(max_iter), min_step
+
+
+def _force_scale(model: QuadraticModel) -> float:
+    return float(np.abs(model.params).max()) * float(model.mesh.size)
+
+
+def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_positions, *, tol: float = 1e-9,
+                             max_iter: int = 30, min_step: float = 1.0 / 256) -> QuadraticResult:
+    """External driving of ``model``: nodes ``anchors`` held at rest, ``drag_nodes`` moved to
+    ``drag_positions`` (node indices of the model, midpoints included: see
+    :func:`~mdsr_opt.mechanics.quadratic.extend_prescribed`).
+
+    Raises
+    ------
+    ValueError
+        Node indices out of range or given twice, positions of the wrong shape or not finite, fewer than two
+        fixed nodes, or bad ``tol``, ``max_iter``, ``min_step``.
+    """
+    if not isinstance(model, QuadraticModel):
+        raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
+    tol, max_iter, min_step = _checks(tol, max_iter, min_step)
+    n = model.n_nodes
+    anc = np.asarray(anchors, dtype=np.int64).ravel()
+    dn = np.asarray(drag_nodes, dtype=np.int64).ravel()
+    dp = np.asarray(drag_positions, dtype=float).reshape(-1, 2)
+    fixed_nodes = np.concatenate([anc, dn])
+    if len(dp) != len(dn):
+        raise ValueError(f"{len(dn)} drag node(s) but {len(dp)} position(s)")
+    if not np.isfinite(dp).all():
+        raise ValueError("drag positions must be finite")
+    if len(fixed_nodes) < 2 or len(np.unique(fixed_nodes)) != len(fixed_nodes):
+        raise ValueError("external driving needs at least two fixed nodes (anchors + drags), each given once")
+    if fixed_nodes.min() < 0 or fixed_nodes.max() >= n:
+        raise ValueError(f"node indices must lie in [0, {n})")
+    X = model.points.reshape(-1)
+    fixed = np.zeros(2 * n, dtype=bool)
+    fixed[np.concatenate([2 * fixed_nodes, 2 * fixed_nodes + 1])] = True
+    free = np.flatnonzero(~fixed)
+    target = X.copy()
+    target[np.concatenate([2 * dn, 2 * dn + 1])] = np.concatenate([dp[:, 0], dp[:, 1]])
+    fs = _force_scale(model)
+
+    def full(s, z):
+        x = X + s * (target - X)
+        x[free] = z
+        return x
+
+    fixed_idx = np.flatnonzero(fixed)
+
+    def solve_at(t, z0, final, s):
+        def system(z, jac):
+            x = full(t, z)
+            if jac:
+                _e, g, K = model.evaluate(x)
+                return g[free] / fs, K[free][:, free] / fs
+            return model.energy_gradient(x)[1][free] / fs, None
+
+        def ok(z):
+            return model.upright(full(t, z))
+
+        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
+        K = model.evaluate(full(s, z0))[2]
+        try:
+            lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                           options={"SymmetricMode": True})
+            dz = lu.solve(-(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+        except RuntimeError:
+            dz = np.zeros_like(z0)
+        for frac in (1.0, 0.5, 0.25, 0.0):
+            if ok(z0 + frac * dz):
+                break
+        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter)
+
+    z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
+    x = full(s, z)
+    return QuadraticResult(x=x.reshape(-1, 2), success=bool(conv), status=status, iterations=iters, steps=steps,
+                           residual=float(res))
+
+
+def _gauge(red: RigidReduction) -> np.ndarray:
+    """Three reduced coordinates that fix the rigid motion: an own node near the centroid (x and y) and one
+    coordinate of the own node farthest from it (across the line joining them)."""
+    X = red.X
+    own = red.own if len(red.own) >= 2 else np.arange(red.n)
+    c = X.mean(0)
+    i = int(own[np.lexsort((X[own, 1], X[own, 0], np.linalg.norm(X[own] - c, axis=1)))[0]])
+    j = int(own[np.lexsort((X[own, 1], X[own, 0], -np.linalg.norm(X[own] - X[i], axis=1)))[0]])
+    v = X[j] - X[i]
+    comp = 1 if abs(v[0]) >= abs(v[1]) else 0
+    return np.array([red.q_index[i], red.q_index[i] + 1, red.q_index[j] + comp])
+
+
+def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope], contractions,
+                             fixtures: Sequence[np.ndarray] = (), *, tol: float = 1e-9, max_iter: int = 30,
+                             min_step: float = 1.0 / 256, align_to_rest: bool = True,
+                             start: QuadraticResult | None = None) -> QuadraticResult:
+    """Internal driving of ``model`` by ``ropes`` (chains of its nodes, pulled at their first node, with
+    capstan friction) contracted by ``contractions`` (fractions of their rest lengths), the nodes of each of
+    ``fixtures`` (disjoint node groups, an end node first: see
+    :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
+    the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
+    of from rest.
+
+    Raises
+    ------
+    ValueError
+        No rope, a rope node out of range, contractions not one per rope in ``[0, 1)``, overlapping fixtures,
+        or bad ``tol``, ``max_iter``, ``min_step``.
+    """
+    if not isinstance(model, QuadraticModel):
+        raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
+    tol, max_iter, min_step = _checks(tol, max_iter, min_step)
+    ropes = list(ropes)
+    if not ropes or not all(isinstance(r, CapstanRope) for r in ropes):
+        raise ValueError("internal driving needs at least one CapstanRope")
+    n = model.n_nodes
+    for r in ropes:
+        if r.chain.max() >= n:
+            raise ValueError(f"rope node {int(r.chain.max())} out of range for {n} nodes")
+    a = np.asarray(contractions, dtype=float).ravel()
+    if len(a) != len(ropes) or not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
+        raise ValueError(f"contractions must be one value in [0, 1) per rope ({len(ropes)}), got {a.tolist()}")
+    red = RigidReduction(model.points, fixtures)
+    gauge = _gauge(red)
+    keep = np.setdiff1d(np.arange(red.n_q), gauge)
+    nk = len(keep)
+    X = model.points
+    L0 = np.array([r.length(X) for r in ropes])
+    q_rest = red.rest_q()
+    nc = len(ropes)
+    fs = _force_scale(model)
+    active = np.ones(nc, dtype=bool)  # a slack rope's equation is tau_c = 0
+
+    def split(z):
+        q = q_rest.copy()
+        q[keep] = z[:nk]
+        return q, z[nk:]
+
+    def solve_at(s, z0, final, _s_from):
+        targets = (1.0 - (a0 + s * (a - a0))) * L0
+        tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
+
+        def system(z, jac):
+            q, tau = split(z)
+            x = red.x_of(q)
+            if jac:
+                _e, gx, Kx = model.evaluate(x)
+            else:
+                gx, Kx = model.energy_gradient(x)[1], None
+            cols, rows, res_c = [], [], np.zeros(nc)
+            for c, rope in enumerate(ropes):
+                if not active[c]:
+                    res_c[c] = tau[c]
+                    cols.append(np.zeros(2 * n))
+                    rows.append(np.zeros(2 * n))
+                    continue
+                f, g, H = rope.forces(x, rope.weights(x), n)
+                gx = gx + tau[c] * f
+                res_c[c] = (rope.length(x) - targets[c]) / L0[c]
+                if jac:
+                    Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
+                    cols.append(f)
+                    rows.append(g / L0[c])
+            P = red.jacobian(q)
+            rq = np.concatenate([(P.T @ gx)[keep] / fs, res_c])
+            if not jac:
+                return rq, None
+            Kq = (P.T @ Kx @ P + red.curvature(q, gx))[keep][:, keep] / fs
+            C = (P.T @ np.column_stack(cols))[keep] / fs                  # tension columns
+            R = (sp.csr_matrix(np.column_stack(rows).T) @ P)[:, keep]     # rope length rows
+            D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
+            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
+            return rq, J
+
+        def ok(z):
+            return model.upright(red.x_of(split(z)[0]))
+
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter)
+        for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
+            if not conv:
+                break
+            q, tau = split(z)
+            x = red.x_of(q)
+            lengths = np.array([r.length(x) for r in ropes])
+            new = active.copy()
+            new[active & (tau < 0)] = False
+            new[~active & (lengths > targets * (1 + tol))] = True
+            if (new == active).all():
+                break
+            active[:] = new
+            z = np.concatenate([z[:nk], np.where(active, np.maximum(tau, 0.0), 0.0)])
+            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter)
+            it += it2
+        return z, conv, it, res
+
+    z0 = np.concatenate([q_rest[keep], np.zeros(nc)])
+    a0 = np.zeros(nc)
+    if start is not None:  # a solved state of the same ropes and fixtures: continue from its contractions
+        if not isinstance(start, QuadraticResult) or start.state is None or len(start.state) != len(z0) \
+                or len(start.commanded) != nc:
+            raise ValueError("start must be a QuadraticResult of solve_quadratic_internal with the same model, "
+                             "ropes and fixtures")
+        z0, a0 = start.state.copy(), start.commanded.copy()
+    z, _s, conv, iters, steps, res, status = _continue(solve_at, z0, min_step)
+    q, tau = split(z)
+    x = red.x_of(q)
+    turn = np.array([turning_angles(x, r.chain)[-1] for r in ropes])
+    w_end = np.array([r.weights(x)[-1] for r in ropes])
+    L = np.array([r.length(x) for r in ropes])
+    if align_to_rest:
+        x = align(x, X).apply(x)
+    return QuadraticResult(x=x, success=bool(conv), status=status, iterations=iters, steps=steps,
+                           residual=float(res), tension=tau.copy(), end_tension=tau * w_end, turning=turn,
+                           slack=~active, achieved=1.0 - L / L0, commanded=a.copy(),
+                           state=z.copy() if conv else None)

@@ -1,0 +1,137 @@
+"""A rope with capstan friction in its channel, ending on rigid fixtures (mdsr_opt.mechanics.capstan, fixtures,
+quadsolve): mu = 0 is the exact cable, and the tension falls by exp(-mu theta) along a curved channel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.mechanics.capstan import CapstanRope, quadratic_chain, turning_angles
+from mdsr_opt.mechanics.fixtures import RigidReduction, fixture_groups
+from mdsr_opt.mechanics.quadratic import QuadraticModel
+from mdsr_opt.mechanics.quadsolve import solve_quadratic_internal
+
+MAT = NeoHookean(1.0, 0.3)
+
+
+@pytest.fixture(scope="module")
+def strip():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    bottom = [int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0]
+    return mesh, bottom
+
+
+def test_frictionless_rope_is_the_exact_cable_of_solve_internal(strip):
+    """mu = 0 on linear elements with the anchor patches of solve_internal as fixtures: the same state (both
+    aligned to rest) and the same tension, to the solvers' tolerances."""
+    mesh, bottom = strip
+    muscle = Muscle(bottom)
+    for radius, a in ((0.3, 0.3), (0.0, 0.2)):
+        ref = solve_internal(mesh, MAT, [muscle], [a], anchor_radius=radius)
+        groups = fixture_groups(mesh, [muscle], radius)
+        assert (len(groups) == 2) == (radius > 0)
+        res = solve_quadratic_internal(QuadraticModel(mesh, MAT, order=1), [CapstanRope(bottom, 0.0)], [a], groups)
+        assert res.success and ref.success
+        assert np.abs(res.x - ref.x).max() < 1e-6 * mesh.size
+        assert res.tension[0] == pytest.approx(ref.tension[0], rel=1e-6)
+        assert res.end_tension[0] == pytest.approx(res.tension[0], rel=1e-14)
+        assert res.achieved[0] == pytest.approx(a, abs=1e-8)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_end_tension_falls_by_the_capstan_law_on_a_curved_channel(strip, order):
+    """A rope along the bottom edge and up the right edge (a channel turning through about 90 degrees),
+    pulled at its bottom-left end, mu = 0.4, point ends. The elastic forces holding its two ends are the
+    rope's end tensions: their ratio is exp(-mu theta), theta the total turning of the deformed path measured
+    here from its nodes."""
+    mesh, bottom = strip
+    P = mesh.points
+    right = [int(i) for i in np.argsort(P[:, 1]) if P[i, 0] == 4.0][1:]
+    nodes = bottom + right
+    model = QuadraticModel(mesh, MAT, order=order)
+    chain = quadratic_chain(mesh, nodes, mesh.n_nodes + np.arange(len(mesh.edges))) if order == 2 else nodes
+    mu = 0.4
+    res = solve_quadratic_internal(model, [CapstanRope(chain, mu)], [0.1])
+    assert res.success, res.status
+    x = res.x
+    d = np.diff(x[chain], axis=0)
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    theta = float(np.sum(np.arccos(np.clip((u[:-1] * u[1:]).sum(1), -1.0, 1.0))))
+    assert 1.2 < theta < 3.5 and res.turning[0] == pytest.approx(theta, rel=1e-9)
+    g = model.energy_gradient(x)[1].reshape(-1, 2)
+    pull, far = g[chain[0]], g[chain[-1]]
+    np.testing.assert_allclose(pull, res.tension[0] * u[0], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(far, -res.end_tension[0] * u[-1], rtol=1e-6, atol=1e-9)
+    assert np.linalg.norm(far) / np.linalg.norm(pull) == pytest.approx(np.exp(-mu * theta), rel=1e-6)
+    # against the frictionless rope at the same contraction: the far end is pulled less
+    free = solve_quadratic_internal(model, [CapstanRope(chain, 0.0)], [0.1])
+    assert free.success and res.end_tension[0] < 0.8 * free.end_tension[0]
+
+
+def test_fixture_nodes_move_rigidly_with_their_end_node(strip):
+    mesh, bottom = strip
+    muscle = Muscle(bottom)
+    model = QuadraticModel(mesh, MAT, order=2)
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [muscle], 0.45, mid)
+    assert len(groups) == 2 and all((g >= mesh.n_nodes).any() for g in groups)  # midpoints inside too
+    res = solve_quadratic_internal(model, [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)], [0.25], groups)
+    assert res.success, res.status
+    X, x = model.points, res.x
+    for g in groups:
+        D0 = np.linalg.norm(X[g][:, None] - X[g][None], axis=2)
+        D = np.linalg.norm(x[g][:, None] - x[g][None], axis=2)
+        assert np.abs(D - D0).max() < 1e-10
+    # the body outside the fixtures deforms
+    rest = np.setdiff1d(np.arange(model.n_nodes), np.concatenate(groups))
+    assert np.abs(np.linalg.norm(x[rest] - x[rest].mean(0), axis=1)
+                  - np.linalg.norm(X[rest] - X[rest].mean(0), axis=1)).max() > 0.05
+
+
+def test_turning_angles_and_reduction_by_hand():
+    x = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    np.testing.assert_allclose(turning_angles(x, [0, 1, 2, 3]), [0.0, np.pi / 2, np.pi])
+    np.testing.assert_allclose(CapstanRope([0, 1, 2, 3], 0.5).weights(x), np.exp(-0.5 * np.array([0, 1, 2]) * np.pi / 2))
+    red = RigidReduction(x, [np.array([1, 2, 3])])
+    q = red.rest_q()
+    q[-1] = 0.3
+    P = red.jacobian(q).toarray()
+    h = 1e-7
+    for k in range(red.n_q):
+        dq = np.zeros(red.n_q)
+        dq[k] = h
+        np.testing.assert_allclose((red.x_of(q + dq) - red.x_of(q - dq)).ravel() / (2 * h), P[:, k], atol=1e-7)
+    np.testing.assert_allclose(red.q_of(red.x_of(q)), q, atol=1e-14)
+
+
+def test_bad_input_is_refused(strip):
+    mesh, bottom = strip
+    model = QuadraticModel(mesh, MAT, order=1)
+    with pytest.raises(ValueError, match="at least two distinct nodes"):
+        CapstanRope([3, 3])
+    with pytest.raises(ValueError, match="mu"):
+        CapstanRope(bottom, -0.1)
+    with pytest.raises(ValueError, match="at least one CapstanRope"):
+        solve_quadratic_internal(model, [], [])
+    with pytest.raises(ValueError, match="one value in \\[0, 1\\) per rope"):
+        solve_quadratic_internal(model, [CapstanRope(bottom)], [1.2])
+    with pytest.raises(ValueError, match="not joined by a mesh edge"):
+        quadratic_chain(mesh, [0, 2], mesh.n_nodes + np.arange(len(mesh.edges)))
+    with pytest.raises(ValueError, match="overlaps"):
+        RigidReduction(mesh.points, [np.array([0, 1]), np.array([1, 2])])
+
+
+def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
+    mesh, bottom = strip
+    model = QuadraticModel(mesh, MAT, order=2)
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    first = solve_quadratic_internal(model, ropes, [0.1], groups)
+    cold = solve_quadratic_internal(model, ropes, [0.2], groups)
+    warm = solve_quadratic_internal(model, ropes, [0.2], groups, start=first)
+    assert first.success and cold.success and warm.success
+    assert np.abs(warm.x - cold.x).max() < 1e-7 and warm.tension[0] == pytest.approx(cold.tension[0], rel=1e-7)
+    with pytest.raises(ValueError, match="start must be"):
+        solve_quadratic_internal(model, ropes, [0.2], [], start=first)
