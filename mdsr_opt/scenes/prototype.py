@@ -76,23 +76,14 @@ DEFAULT_ROPE_FRICTION = 0.3
 DEFAULT_ORDER = 2
 
 
-#: True while :func:`prototype_material` stands in for plane stress by its plane-strain equivalent (the tables
-#: say so); set False when it returns the plane-stress material.
-PLANE_STRESS_PLACEHOLDER = True
-
-
 def prototype_material(E: float, nu: float, thickness: float = 1.0):
-    """The prototype's silicone sheet: Neo-Hookean, Young's modulus ``E``, Poisson's ratio ``nu`` (nearly
-    incompressible), thickness ``thickness``, in plane stress.
-
-    PLACEHOLDER until :mod:`mdsr_opt.body.material` has plane stress (issue 34 item 1): today's plane-strain
-    Neo-Hookean with the plane-stress sheet's small-strain equivalents ``E' = E (1 + 2 nu) / (1 + nu)^2`` and
-    ``nu' = nu / (1 + nu)`` (the same in-plane Lame constants at small strain; at large strain the laws
-    differ). Switch the body to ``NeoHookean(E, nu, thickness=thickness, plane="stress")`` when that exists.
-    """
+    """The prototype's silicone sheet: a compressible Neo-Hookean sheet in plane stress (the out-of-plane
+    stretch that frees the sheet's faces, :class:`~mdsr_opt.body.material.NeoHookean` with
+    ``plane="stress"``), Young's modulus ``E``, Poisson's ratio ``nu`` (nearly incompressible), thickness
+    ``thickness``."""
     from ..body.material import NeoHookean
 
-    return NeoHookean(E=E * (1.0 + 2.0 * nu) / (1.0 + nu) ** 2, nu=nu / (1.0 + nu), thickness=thickness)
+    return NeoHookean(E=E, nu=nu, thickness=thickness, plane="stress")
 
 
 @dataclass(eq=False)
@@ -282,7 +273,7 @@ class VirtualPrototype:
                 "elements": "quadratic (6-node)" if self.order == 2 else "linear (3-node)",
                 "material": self.material.kind if hasattr(self.material, "kind") else type(self.material).__name__,
                 "silicone_nu": self.nu, "E": float(self.material.E), "nu": float(self.material.nu),
-                "plane_stress_placeholder": bool(PLANE_STRESS_PLACEHOLDER and self.nu_drawn),
+                "plane": getattr(self.material, "plane", "strain"),
                 "E_factor": self.E_factor, "nu_shift": self.nu_shift, "e_range": self.e_range,
                 "nu_range": self.nu_range, "seed": self.seed, "muscle_model": "capstan rope",
                 "rope_friction": self.friction, "fixture_radius": self.fixture_radius,
@@ -530,8 +521,8 @@ def validation_tables(reports: Sequence) -> str:
                 "node)") if "rope_friction" in proto else "the exact sliding cable"
         nu = (f"silicone with nu = {proto['silicone_nu']:.3f} (drawn in {SILICONE_NU:g} +- {proto['nu_range']:g}, "
               "at most 0.499)" if "silicone_nu" in proto else f"nu + U(+- {proto['nu_range']:g})")
-        if proto.get("plane_stress_placeholder"):
-            nu += " as a plane-stress sheet (for now its small-strain plane-strain equivalent)"
+        if proto.get("plane") == "stress":
+            nu += " as a plane-stress sheet"
         desc = (f"Virtual prototype (SYNTHETIC photographs): {elements} triangles on a {proto['refine']:g}x finer "
                 f"mesh of each body, {nu}, {rope}, E x U(1 +- {proto['e_range']:g}) drawn from seed "
                 f"{proto['seed']}, camera tilt {proto['camera']['tilt_deg']:g} deg at "
