@@ -216,6 +216,21 @@ def _folding(x, p, a, b, shared_a) -> np.ndarray:
     return cos > np.cos(np.radians(FOLD_ANGLE))
 
 
+def _outside_angle(x, seg, pos) -> np.ndarray:
+    """Per node, the angle (radians, in ``[0, 2 pi)``) outside the body between its two boundary edges in the
+    state ``x`` (``2 pi`` off the boundary)."""
+    out = np.full(len(pos), 2 * np.pi)
+    nxt = np.full(len(pos), -1, dtype=np.int64)
+    prv = np.full(len(pos), -1, dtype=np.int64)
+    nxt[seg[:, 0]] = seg[:, 1]
+    prv[seg[:, 1]] = seg[:, 0]
+    c = np.flatnonzero((nxt >= 0) & (prv >= 0))
+    u, v = x[nxt[c]] - x[c], x[prv[c]] - x[c]
+    inside = np.mod(np.arctan2(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0], (u * v).sum(1)), 2 * np.pi)
+    out[c] = 2 * np.pi - inside
+    return out
+
+
 def _point_segment(p, a, b):
     """``(distance, t, signed line distance)`` of points ``p`` to segments ``(a, b)`` (body on the left)."""
     d = b - a
@@ -244,17 +259,18 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
     pts, w, labels, consts = [], [], [], []
     seglen = max(float(max(np.hypot(*(s[seg[:, 1]] - s[seg[:, 0]]).T).max() for s in states)), 1e-300)
 
-    def near_pairs(P, pidx):  # (point index, segment index) pairs within radius in some state
-        found = set()
+    def near_pairs(P):  # (point index, segment index) pairs within radius in some state
+        found = []
         for s, Pt in zip(states, P):
-            mid = 0.5 * (s[seg[:, 0]] + s[seg[:, 1]])
-            tree = cKDTree(mid)
-            for i, lst in enumerate(tree.query_ball_point(Pt, radius + 0.5 * seglen)):
-                for j in lst:
-                    found.add((i, j))
+            mid = cKDTree(0.5 * (s[seg[:, 0]] + s[seg[:, 1]]))
+            M = cKDTree(Pt).sparse_distance_matrix(mid, radius + 0.5 * seglen, output_type="ndarray")
+            if len(M):
+                found.append(np.column_stack([M["i"], M["j"]]).astype(np.int64))
         if not found:
             return np.zeros((0, 2), dtype=np.int64)
-        arr = np.array(sorted(found), dtype=np.int64)
+        both = np.vstack(found)
+        key = np.unique(both[:, 0] * len(seg) + both[:, 1])
+        arr = np.column_stack([key // len(seg), key % len(seg)])
         keep = np.zeros(len(arr), dtype=bool)
         for s, Pt in zip(states, P):
             dist, _, _ = _point_segment(Pt[arr[:, 0]], s[seg[arr[:, 1], 0]], s[seg[arr[:, 1], 1]])
@@ -262,7 +278,7 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
         return arr[keep]
 
     if self_contact and len(bnodes):
-        arr = near_pairs([s[bnodes] for s in states], bnodes)
+        arr = near_pairs([s[bnodes] for s in states])
         if len(arr):
             p, a, b = bnodes[arr[:, 0]], seg[arr[:, 1], 0], seg[arr[:, 1], 1]
             ok = ~_near_along_boundary(pos, p, a, b, hops=0)
@@ -278,9 +294,10 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
                 w.append((0.0, 0.0))
                 labels.append((4 if f else 0, -1))
     if self_contact and len(seg):
-        # the interior neighbours of a segment's end nodes stay inside it: with every element upright, the
-        # triangles around a boundary node can still fold over each other (a kink of a wrinkling side), an
-        # interior node passing out through a boundary segment next to it
+        # the interior neighbours of a segment's end nodes stay inside it where the boundary folds (its outside
+        # angle below FOLD_ANGLE): with every element upright, the triangles around a boundary node can still
+        # fold over each other (a kink of a wrinkling side), an interior node passing out through a boundary
+        # segment next to it
         inner = _inner_pairs(mesh, seg, pos)
         if len(inner):
             q, si = inner[:, 0], inner[:, 1]
@@ -289,7 +306,8 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
             for s in states:
                 close |= _point_segment(s[q], s[a], s[b])[0] < radius
             _, t, g = _point_segment(xr[q], xr[a], xr[b])
-            ok = close & (g <= tol) & (t >= -DELTA) & (t <= 1 + DELTA)
+            folded = _outside_angle(xr, seg, pos) < np.radians(FOLD_ANGLE)
+            ok = close & (g <= tol) & (t >= -DELTA) & (t <= 1 + DELTA) & (folded[a] | folded[b])
             for qq, aa, bb in zip(q[ok], a[ok], b[ok]):
                 pts.append((qq, bb, aa))  # the segment reversed: its inner side is the gap's positive side
                 w.append((0.0, 0.0))
@@ -318,7 +336,7 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
             labels.append((1, k))
         C = ob.corners()
         if len(C):
-            arr = near_pairs([np.broadcast_to(C, C.shape) for _ in states], None)
+            arr = near_pairs([C for _ in states])
             if len(arr):
                 _, t, g = _point_segment(C[arr[:, 0]], xr[seg[arr[:, 1], 0]], xr[seg[arr[:, 1], 1]])
                 ok = (g >= -tol) & (t >= -DELTA) & (t <= 1 + DELTA)
