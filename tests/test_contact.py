@@ -184,3 +184,67 @@ def test_contact_inputs_refused_at_the_door():
     with pytest.raises(ValueError, match="normal"):
         HalfPlane((0, 0), (0, 0))
     assert P.shape[1] == 2
+
+
+def _gripper():
+    """The library's gripper body (coarse) with two muscles along its inner rim: contracted, they close it."""
+    from pathlib import Path
+
+    from mdsr_opt.scenes.library import load_problem_module
+    from mdsr_opt.scenes.select import boundary_path
+
+    g = load_problem_module(Path(__file__).resolve().parents[1] / "problems" / "gripper.py")
+    mesh, mat = g.body("coarse")
+    ri, half = g.R0 - g.WIDTH / 2, g.OPENING / 2
+
+    def rim(a0, a1):
+        return ri * np.array([np.cos(a0), np.sin(a0)]), ri * np.array([np.cos(a1), np.sin(a1)])
+
+    upper = boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ri * np.array([0.0, 1.0]), name="upper")
+    lower = boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ri * np.array([0.0, -1.0]),
+                          name="lower")
+    return mesh, mat, [upper, lower]
+
+
+def test_gripper_jaws_meet_with_self_contact_in_internal_driving():
+    from mdsr_opt import solve_internal
+
+    mesh, mat, muscles = _gripper()
+    plain = solve_internal(mesh, mat, muscles, [0.3, 0.3])
+    assert not plain.success and "crosses itself" in plain.status
+    res = solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True)
+    assert res.success and res.stable and res.residual <= 1e-8, res.status
+    assert _outline(mesh, res.x).is_valid and not mesh.boundary_crosses(res.x)
+    assert _min_gap(mesh, res.x) >= res.contact["gap"] * (1 - 1e-6)
+    assert any(p["kind"] == "self" and p["force"] > 0 for p in res.contact["pairs"])
+    assert np.allclose(res.achieved, 0.3, atol=1e-7) and np.all(res.tension > 0)
+    # the contact forces are internal: they sum to zero
+    assert np.abs(np.sum(res.contact["node_forces"], axis=0)).max() < 1e-9
+
+
+def test_gripper_holds_a_disk_with_friction():
+    from mdsr_opt import solve_internal
+    from mdsr_opt.mechanics.grip import free_disk, grip_report
+
+    mesh, mat, muscles = _gripper()
+    res, disk, info = free_disk(lambda d: solve_internal(mesh, mat, muscles, [0.3, 0.3], obstacles=[d]),
+                                Disk((0.0, 0.0), 1.1))
+    assert info["converged"], info
+    assert res.success and res.stable, res.status
+    N = np.array([p["force"] for p in res.contact["pairs"] if p["kind"] == "obstacle"])
+    assert len(N) >= 2 and N.min() > 0
+    # a free disk: the contacts' net force on it vanishes and the body's mount (gauge) holds nothing
+    assert np.linalg.norm(res.contact["obstacle_forces"][0]) <= 1e-3 * N.max()
+    assert np.linalg.norm(res.contact["gauge_force"]) <= 1e-3 * N.max()
+    # no body node inside the disk (shapely: the outline's overlap with it is within the chords' sagitta)
+    assert np.linalg.norm(res.x - disk.center, axis=1).min() >= disk.radius
+    g3, g1 = grip_report(res.x, res.contact, disk, 0.3), grip_report(res.x, res.contact, disk, 1.0)
+    g0 = grip_report(res.x, res.contact, disk, 0.0)
+    assert g0["holding_force"] == 0.0 and g3["holding_force"] > 0
+    # friction forces scale with mu, and no load beyond mu times the normal forces is held
+    assert np.allclose(np.array(g1["resisted"]), np.array(g3["resisted"]) / 0.3, rtol=0.05)
+    assert max(g3["resisted"]) <= 0.3 * N.sum()
+    w = g3["holding_force"]
+    assert grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -0.9 * w))["held"]
+    assert not grip_report(res.x, res.contact, disk, 0.0, load=(0.0, -0.9 * w))["held"]
+    assert not grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -3.0 * max(g3["resisted"])))["held"]

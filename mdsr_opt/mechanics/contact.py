@@ -22,9 +22,10 @@ The multiplier of a row is its contact force (normal, along ``n``; a force ``f n
 Example
 -------
 >>> import numpy as np
->>> rows = ContactRows(np.array([[0.0, 1.0, 0.0, 0.0, 1.0, 0.0]]).reshape(1, 6)[:, :0].reshape(0, 6), 0)
->>> rows.n_rows
-0
+>>> x = np.array([[0.5, 0.2], [0.0, 0.0], [1.0, 0.0]])    # node 0 above the segment (1, 2)
+>>> rows = ContactRows([[0, 2, 1]], 3)                      # (2 -> 1: the body below, on its left)
+>>> rows.values(x).round(6).tolist(), rows.projections(x).round(6).tolist()
+([0.2], [0.5])
 """
 
 from __future__ import annotations
@@ -155,9 +156,8 @@ class ContactRows:
 
 
 def boundary_segments(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """``(segments (b, 2) with the body on the left, hop (n, n) sparse? no: loop position arrays)``:
-    the boundary segments and, per boundary node, ``(loop id, position in loop, loop length)`` (n, 3),
-    -1 off the boundary."""
+    """``(segments (b, 2), pos (n, 3))``: the boundary segments with the body on their left and, per node,
+    ``(loop id, position in the loop, loop length)``, -1 off the boundary (cached on the mesh)."""
     cached = mesh.__dict__.get("_contact_boundary")
     if cached is not None:
         return cached
