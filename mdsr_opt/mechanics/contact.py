@@ -33,7 +33,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
 __all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments"]
 
@@ -251,6 +250,8 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
     Self-contact pairs a boundary node with every boundary segment not its own (at a straight or convex
     boundary its neighbours project beyond the segment's ends and are left out; at a fold they are not);
     obstacles add their rows for boundary nodes (and a polygon's corners against body segments)."""
+    from scipy.spatial import cKDTree  # on first use: a solve without contact never loads it
+
     xr = np.asarray(x_ref, dtype=float).reshape(-1, 2)
     states = [np.asarray(s, dtype=float).reshape(-1, 2) for s in states] or [xr]
     n = mesh.n_nodes
