@@ -248,3 +248,51 @@ def test_gripper_holds_a_disk_with_friction():
     assert grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -0.9 * w))["held"]
     assert not grip_report(res.x, res.contact, disk, 0.0, load=(0.0, -0.9 * w))["held"]
     assert not grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -3.0 * max(g3["resisted"])))["held"]
+
+
+def test_friction_term_derivatives_match_finite_differences():
+    from mdsr_opt.mechanics.friction import FrictionTerm
+
+    rng = np.random.default_rng(5)
+    t = rng.normal(size=(3, 2))
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    ft = FrictionTerm(np.array([0, 2, 3]), t, rng.normal(size=8), np.array([0.5, 1.0, 2.0]), 0.4, 0.05)
+    x = rng.normal(size=8)
+    g, H = ft.gradient(x), ft.hessian(x).toarray()
+    h = 1e-6
+    for k in range(8):
+        e = np.zeros(8)
+        e[k] = h
+        assert (ft.energy(x + e) - ft.energy(x - e)) / (2 * h) == pytest.approx(g[k], abs=1e-7)
+        assert np.allclose((ft.gradient(x + e) - ft.gradient(x - e)) / (2 * h), H[:, k], atol=1e-6)
+    assert np.all(np.abs(ft.forces(x)) < 0.4 * ft.N)  # never beyond mu N
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.2, 1.0])
+def test_strip_pressed_and_sheared_on_ground_with_coulomb_friction(mu):
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0] + 0.3, P[i, 1] - 0.3) for i in top}
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.05), (0.0, 1.0))], friction=mu)
+    assert res.success and res.stable and res.residual <= 1e-8, res.status
+    fr = res.contact["friction"]
+    load = _drag_reaction(mesh, res.x, top)
+    # the ground takes the whole load, normal and tangential (friction included)
+    assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-8)
+    assert res.x[:, 1].min() >= -0.05
+    dx = res.x[bottom, 0] - P[bottom, 0]
+    if mu == 0.0:
+        assert abs(load[0]) < 1e-8 and fr is None
+        assert dx.min() > 0.05  # frictionless: the bottom slides with the top
+        return
+    F, N, slip = np.array(fr["tangential"]), np.array(fr["normal"]), np.array(fr["slipping"])
+    assert np.all(np.abs(F) <= mu * N * (1 + 1e-9) + 1e-12)  # inside the friction cone
+    assert load[0] > 0.01  # the shear reaches the ground through friction
+    stick = ~slip & (N > 0)
+    assert stick.sum() >= 3
+    # sticking nodes do not slide in the (last) load step: a creep of order eps
+    assert np.abs(np.array(fr["step_slide"])[stick]).max() < 10 * fr["eps"]
+    assert np.abs(np.array(fr["step_slide"])[slip]).min() > 10 * fr["eps"] if slip.any() else True
+    if mu == 0.2:
+        assert slip.sum() > 0  # at mu 0.2 part of the bottom slides

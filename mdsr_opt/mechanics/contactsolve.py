@@ -29,6 +29,7 @@ from shapely.geometry import Point, Polygon
 from ..core.guards import check_stop, interruptible
 from .assembly import ipopt_functions
 from .contact import ContactRows, broad_phase
+from .friction import EPS as FRICTION_EPS, FrictionTerm, friction_expr, friction_params
 from .kkt import kkt_factor
 from .loadsteps import min_jacobian, upright
 from .residual import Residual, ipopt_tolerances
@@ -43,11 +44,13 @@ __all__ = ["ContactSpec", "ContactProblem", "contact_residual", "polish", "conta
 
 @dataclass
 class ContactSpec:
-    """What contact a solve models (on the unit body): ``obstacles`` (list), ``self_contact`` and ``gap``."""
+    """What contact a solve models (on the unit body): ``obstacles`` (list), ``self_contact``, ``gap`` and
+    ``friction``."""
 
     obstacles: list
     self_contact: bool
     gap: float
+    friction: float = 0.0  #: Coulomb coefficient between body and obstacles (:mod:`~mdsr_opt.mechanics.friction`)
 
     @property
     def active(self) -> bool:
@@ -64,6 +67,29 @@ class ContactProblem:
         seg = mesh.boundary_edges
         self.h = float(np.mean(np.hypot(*(mesh.points[seg[:, 1]] - mesh.points[seg[:, 0]]).T)))
         self._solvers: dict = {}
+        self.friction_term = None  # the step's FrictionTerm (contact_step sets it), None without friction
+        self.normal_lag: dict = {}  # row key -> the normal force the friction of the next solve takes
+        self.lag_error = 0.0  # the last step's relative change of the lagged normal forces
+
+    def friction_rows(self, rows: ContactRows) -> np.ndarray:
+        """The rows that carry friction: a body node against an obstacle (none without friction)."""
+        if self.spec.friction <= 0 or not rows.n_rows:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(rows.labels[:, 0] == 1)
+
+    def friction_for(self, rows: ContactRows, x0, N) -> FrictionTerm | None:
+        """The :class:`~mdsr_opt.mechanics.friction.FrictionTerm` of ``rows`` from the step's start ``x0`` with
+        lagged normal forces ``N`` (one per friction row); None without friction rows."""
+        sel = self.friction_rows(rows)
+        if not len(sel):
+            return None
+        z = np.concatenate([np.asarray(x0, dtype=float).reshape(-1), rows.consts.reshape(-1)]).reshape(-1, 2)
+        pts = rows.pts[sel]
+        disk = rows.w[sel, 0] == 1.0
+        t = np.where(disk[:, None], z[pts[:, 0]] - z[pts[:, 1]], z[pts[:, 2]] - z[pts[:, 1]])
+        t[disk] = np.column_stack([-t[disk, 1], t[disk, 0]])
+        t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
+        return FrictionTerm(pts[:, 0], t, x0, N, self.spec.friction, FRICTION_EPS * self.mesh.size)
 
     # ------------------------------------------------------------------ pieces
     def split(self, p):
@@ -126,9 +152,13 @@ class ContactProblem:
         else:
             fe, ge = model.grad_fn(x, p)
         prox = rho / 2 * ca.sumsqr(x - xr)
-        f = fe + prox
-        P = ca.vertcat(p, xr, rho)
-        o["grad_f"] = ca.Function("contact_grad_f", [x, P], [f, ge + rho * (x - xr)], ["x", "p"], ["f", "grad"])
+        fsel = self.friction_rows(rows)
+        FP = ca.MX.sym("fp", 2 + 5 * len(fsel))
+        fr = friction_expr(x, rows.pts[fsel, 0], FP)
+        f = fe + prox + fr
+        P = ca.vertcat(p, xr, rho, FP)
+        gf = ge + rho * (x - xr) + (ca.gradient(fr, x) if len(fsel) else 0)
+        o["grad_f"] = ca.Function("contact_grad_f", [x, P], [f, gf], ["x", "p"], ["f", "grad"])
         gc = rows.expr(x)
         Jc = ca.jacobian(gc, x)
         lam_c = lam_g[nm:]
@@ -151,6 +181,8 @@ class ContactProblem:
         if g.size1():
             o["jac_g"] = ca.Function("contact_jac_g", [x, P], [g, J])
         Hp = lam_f * rho * ca.DM(ca.Sparsity.diag(n), 1.0)
+        if len(fsel):
+            Hp = Hp + lam_f * ca.triu(ca.hessian(fr, x)[0])
         o["hess_lag"] = ca.Function("contact_hess_lag", [x, P, lam_f, lam_g], [He + Hc + Hp],
                                     ["x", "p", "lam_f", "lam_g"], ["hess"])
         solver = ca.nlpsol("contact_equilibrium", "ipopt", {"x": x, "p": P, "f": f, "g": g}, o)
@@ -176,7 +208,9 @@ class ContactProblem:
         t0 = time.perf_counter()
         with interruptible():
             rho, xr = (0.0, x0) if prox is None else prox
-            sol = solver(x0=x0, p=np.concatenate([pe, np.asarray(xr, dtype=float).reshape(-1), [rho]]), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+            fterm = self.friction_term
+            fp = friction_params(fterm) if fterm is not None and len(self.friction_rows(rows)) else np.zeros(2)
+            sol = solver(x0=x0, p=np.concatenate([pe, np.asarray(xr, dtype=float).reshape(-1), [rho], fp]), lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         st = solver.stats()
         status, its = solver_status(st)
         lam = np.asarray(sol["lam_g"]).ravel()
@@ -199,6 +233,8 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
     cm, S = prob.cm, prob.mesh.size
     pe, targets = prob.split(p)
     g = prob.model.gradient(x, pe)
+    if prob.friction_term is not None:
+        g = g + prob.friction_term.gradient(x)
     gf = np.where(free, g, 0.0)
     nm = cm.n_rows if cm is not None else 0
     nt = cm.n_targets if cm is not None else 0
@@ -278,6 +314,8 @@ def polish(prob: ContactProblem, rows, x, p, fixed, tol, force, lam=None, steps:
         Hf = H.tocsr()[free][:, free]
         J, c = _rows(prob, rows, x, p)
         g = prob.model.gradient(x, pe)
+        if prob.friction_term is not None:
+            g = g + prob.friction_term.gradient(x)
         sol = None
         Jfree = J[:, free]
         for _ in range(8):
@@ -321,6 +359,8 @@ def _hessian(prob, rows, x, p, lam):
     pe, targets = prob.split(p)
     nm = cm.n_rows if cm is not None else 0
     H = cm.hessian(x, cm.params(pe, targets, lam[:nm])) if cm is not None else prob.model.hessian(x, pe)
+    if prob.friction_term is not None:
+        H = (H + prob.friction_term.hessian(x)).tocsc()
     if rows.n_rows:
         H = (H + rows.hessian(x, -lam[nm:])).tocsc()
     return H
@@ -352,6 +392,8 @@ def _lagrangian(prob, rows, x, p, fixed, res, fc):
     else:
         H = prob.model.hessian(x, pe)
         Jm, cmv = None, np.zeros(0)
+    if prob.friction_term is not None:
+        H = (H + prob.friction_term.hessian(x)).tocsc()
     if rows.n_rows:
         H = (H + rows.hessian(x, -fc)).tocsc()
         pushing = fc > 0

@@ -14,6 +14,7 @@ from .blas import one_blas_thread
 from .contact import DELTA, ContactRows
 from ..core.checks import positive_float
 from .contactsolve import ContactProblem, ContactSpec, row_key, merge_rows, contact_stability, polish
+from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
 from .loadsteps import INTERMEDIATE_TOL, equilibrium_result, min_jacobian, predict_state, solve_step, upright
 from .obstacles import check_obstacles
 
@@ -39,9 +40,13 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
     nm = prob.cm.n_rows if prob.cm is not None else 0
     start = guess
     out = None
-    for _ in range(MAX_REFRESH):
+    lags = 0
+    for _ in range(MAX_REFRESH + LAG_ITER):
         check_stop()
         step_tol = tol if final else max(tol, loose)
+        fsel = prob.friction_rows(rows)
+        lagged = np.array([prob.normal_lag.get(row_key(rows, i), 0.0) for i in fsel])
+        prob.friction_term = prob.friction_for(rows, x_ref, lagged)
         if rho > 0:
             out = prob.minimize(rows, p, start, fixed, vals, step_tol, max_iter, options, (rho, x_ref))
             lam_c = out.lam_g[nm:]
@@ -73,6 +78,20 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
                 new = merge_rows(new, _empty(prob), drop)
         grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
         if why is None and not grew:
+            if len(fsel):  # the lagged normal forces: solved again until they stop changing
+                N = lam_c[fsel]
+                change = float(np.abs(N - lagged).max()) / max(float(N.max()), 1e-300)
+                for i, Ni in zip(fsel, N):
+                    prob.normal_lag[row_key(rows, i)] = float(Ni)
+                prob.lag_error = change
+                if change > LAG_RTOL and lags < LAG_ITER:
+                    lags += 1
+                    start = x1
+                    continue
+                if change > LAG_RTOL:
+                    out.success = False
+                    out.status += f"; the lagged normal forces still change by {change:.3g} after {lags} solves"
+                    break
             out.iterations, out.solve_time, out.build_time = its, t_solve, t_build
             return out, rows
         if why is not None and not grew:
@@ -274,7 +293,29 @@ def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: 
         if sel.any():
             per_ob[k] = -(rows.jacobian(x)[sel].T @ fc[sel]).reshape(-1, 2).sum(0)
     act = fc > 0
-    return {"gap": prob.spec.gap * length,
+    fr = None
+    if prob.friction_term is not None and prob.spec.friction > 0:  # the friction force on the body: -grad D
+        tf = prob.friction_term  # with the lagged normal forces the equilibrium holds with
+        if len(tf.nodes) == len(prob.friction_rows(rows)):
+            gfr = tf.gradient(x).reshape(-1, 2)
+            node_f = node_f - gfr
+            sel = prob.friction_rows(rows)
+            for k in range(len(prob.spec.obstacles)):
+                mine = rows.labels[sel, 1] == k
+                per_ob[k] += np.array([np.sum(tf.forces(x)[mine] * tf.t[mine, 0]),
+                                       np.sum(tf.forces(x)[mine] * tf.t[mine, 1])])
+    term = prob.friction_term
+    if prob.spec.friction > 0:
+        sel = prob.friction_rows(rows)
+        if term is not None and len(term.nodes) != len(sel):
+            term = None
+        fr = {"mu": prob.spec.friction, "eps": FRICTION_EPS * prob.mesh.size * length, "lag_error": prob.lag_error,
+              "nodes": [] if term is None else term.nodes.tolist(),
+              "tangential": [] if term is None else (term.forces(x) * force).tolist(),
+              "normal": [] if term is None else (term.N * force).tolist(),
+              "slipping": [] if term is None else term.slipping(x).tolist(),
+              "step_slide": [] if term is None else (term.tangential_move(x) * length).tolist()}
+    return {"gap": prob.spec.gap * length, "friction": fr,
             "pairs": [{"kind": _KINDS[int(rows.labels[i, 0])], "nodes": nodes[i].tolist(),
                        "obstacle": int(rows.labels[i, 1]), "gap": float(g[i]) * length,
                        "force": float(fc[i]) * force} for i in np.flatnonzero(act)],
@@ -284,7 +325,7 @@ def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: 
             "total_force": float(fc[act].sum()) * force}
 
 
-def contact_spec(units, obstacles, contact, contact_gap, backend):
+def contact_spec(units, obstacles, contact, contact_gap, backend, friction=0.0):
     """The :class:`~mdsr_opt.mechanics.contactsolve.ContactSpec` of a solve's keywords on its unit body
     (``obstacles`` checked by :func:`~mdsr_opt.mechanics.obstacles.check_obstacles` against the body at rest),
     refused at the door when contact is asked of a backend other than ``"ipopt"``."""
@@ -295,7 +336,13 @@ def contact_spec(units, obstacles, contact, contact_gap, backend):
         gap = DEFAULT_GAP * units.unit_mesh.size
     else:
         gap = units.to_unit(positive_float(contact_gap, "contact_gap"))
-    spec = ContactSpec([o.scaled(1.0 / units.length, np.zeros(2)) for o in obs], bool(contact), float(gap))
+    if isinstance(friction, bool) or not isinstance(friction, (int, float, np.integer, np.floating)) or \
+            not np.isfinite(friction) or friction < 0:
+        raise ValueError(f"friction must be a number >= 0 (Coulomb's coefficient), got {friction!r}")
+    if friction > 0 and not obs:
+        raise ValueError("friction acts between the body and obstacles: give obstacles")
+    spec = ContactSpec([o.scaled(1.0 / units.length, np.zeros(2)) for o in obs], bool(contact), float(gap),
+                       float(friction))
     if spec.active and backend != "ipopt":
         raise ValueError(f"contact (obstacles or contact=True) is solved with backend 'ipopt' only, got {backend!r}")
     return spec

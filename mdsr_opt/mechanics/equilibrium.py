@@ -37,7 +37,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, verbose: bool = False,
                    initial_guess: str | np.ndarray = "predictor", obstacles=None, contact: bool = False,
-                   contact_gap: float | None = None) -> EquilibriumResult:
+                   contact_gap: float | None = None, friction: float = 0.0) -> EquilibriumResult:
     """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
 
     Parameters
@@ -72,6 +72,10 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         node and the boundary segments it touches. Off by default (each load step then also looks for
         candidate pairs).
     contact_gap : the gap kept by every contact, length units (default 1e-4 x the body's size).
+    friction : Coulomb's coefficient between the body and the obstacles (default 0: frictionless):
+        quasi-static, a lagged smoothed potential per load step (:mod:`~mdsr_opt.mechanics.friction`, which
+        states its error); ``contact["friction"]`` then gives each touching node's tangential force and
+        whether it slips.
 
     Returns
     -------
@@ -109,7 +113,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                          "motion; got 1")
     t0 = time.perf_counter()
     units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
-    spec = contact_spec(units, obstacles, contact, contact_gap, backend)
+    spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
@@ -233,7 +237,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
                    initial_guess: str | np.ndarray = "predictor", check_stability: bool = True,
-                   obstacles=None, contact: bool = False, contact_gap: float | None = None) -> EquilibriumResult:
+                   obstacles=None, contact: bool = False, contact_gap: float | None = None,
+                   friction: float = 0.0) -> EquilibriumResult:
     """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
 
     Parameters
@@ -272,7 +277,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         default). ``False`` skips the check (one sparse factorisation): ``success`` then
         means a converged equilibrium with every element upright, which may be a saddle (``stable`` is
         None). For warm starts, such as the flattened design's, whose result is verified later.
-    obstacles, contact, contact_gap : contact, as in :func:`solve_external`. With obstacles the body is held
+    obstacles, contact, contact_gap, friction : contact, as in :func:`solve_external`. With obstacles the body is held
         at its three gauge coordinates (at rest) in the obstacles' frame and not aligned to rest; the net force
         the gauge holds is then ``contact["gauge_force"]`` (zero when the contacts balance the body).
 
@@ -318,7 +323,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
             x_start = moved.reshape(-1)
     n = mesh.n_nodes
     units = Units(mesh, material)  # solved on the unit body (size and E t about 1), mapped back
-    spec = contact_spec(units, obstacles, contact, contact_gap, backend)
+    spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     mesh, material = units.unit_mesh, units.unit_material
     radius_given, radius, x_start = radius, units.to_unit(radius), units.state_in(x_start)
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
