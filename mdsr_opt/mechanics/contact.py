@@ -13,8 +13,9 @@ Points are body nodes (variables) or fixed points (obstacles). The line distance
 segment while ``p`` projects inside it; a pair is made only for a point that projects within
 ``[-DELTA, 1 + DELTA]`` of the segment and lies on its outer side in the state the step starts from
 (:func:`broad_phase`), and the pairs are refreshed between solves, so a point that slides past a segment's end
-is held by the next segment. A point may rest against the extended line up to ``DELTA`` times a segment's
-length beyond its end.
+is held by the next segment (a pair that pushes a point beyond ``[-DELTA, 1 + DELTA]`` is dropped and the step
+solved again). A point may rest against the extended line up to ``DELTA`` times a segment's length beyond
+its end.
 
 The multiplier of a row is its contact force (normal, along ``n``; a force ``f n`` on ``p`` and
 ``-f n (1 - t)``, ``-f n t`` on ``a`` and ``b`` at the projection ``t``).
@@ -43,7 +44,8 @@ DELTA = 0.25
 def _functions():
     """CasADi SX functions of one row, mapped later: ``g(z, w)``, ``dg/dz`` and ``d2g/dz2`` with
     ``z = (p, a, b)`` and ``w = (kind, r)`` (kind 0 node-segment, 1 disk centred at ``a``, 2 node-line: the
-    node-segment formula on the whole line through ``a`` and ``b``, a half-plane)."""
+    node-segment formula on the whole line through ``a`` and ``b``, a half-plane; 3 angle: ``r`` times the
+    angle outside the body at ``a`` between its boundary neighbours ``p`` and ``b``, in ``(0, 2 pi]``)."""
     cached = globals().get("_FNS")
     if cached is not None:
         return cached
@@ -53,7 +55,9 @@ def _functions():
     d = b - a
     ns = (d[1] * (p[0] - a[0]) - d[0] * (p[1] - a[1])) / ca.sqrt(ca.dot(d, d))
     dk = ca.sqrt(ca.dot(p - a, p - a)) - w[1]
-    g = ca.if_else(ca.fabs(w[0] - 1.0) < 0.5, dk, ns)
+    u, v = p - a, b - a  # the angle row: outside angle at a from p (previous node) to b (next node)
+    ang = w[1] * (np.pi + ca.atan2(-(u[0] * v[1] - u[1] * v[0]), -ca.dot(u, v)))
+    g = ca.if_else(ca.fabs(w[0] - 1.0) < 0.5, dk, ca.if_else(ca.fabs(w[0] - 3.0) < 0.5, ang, ns))
     fns = (ca.Function("contact_gap", [z, w], [g]), ca.Function("contact_gap_jac", [z, w], [ca.jacobian(g, z)]),
            ca.Function("contact_gap_hess", [z, w], [ca.hessian(g, z)[0]]))
     globals()["_FNS"] = fns
@@ -70,10 +74,11 @@ class ContactRows:
         ``consts[j]``.
     n_nodes : int
     consts : (k, 2) fixed points (obstacles).
-    w : (N, 2) per row ``(kind, radius)``: kind 0 node-segment, 1 disk (centre ``a``), 2 node-line.
+    w : (N, 2) per row ``(kind, radius)``: kind 0 node-segment, 1 disk (centre ``a``), 2 node-line, 3 angle
+        (``radius``: the length the angle is scaled by).
     labels : (N, 2) int per row ``(kind code, obstacle index or -1)``; kind codes: 0 self, 1 node-obstacle,
-        2 obstacle corner-body segment, 3 an interior node kept inside a boundary segment next to it, 4 a
-        boundary node and the segment next to it at a fold (held whatever its projection).
+        2 obstacle corner-body segment, 3 an interior node kept inside a boundary segment next to it, 4 the
+        outside angle at a boundary node (a crease).
     """
 
     def __init__(self, pts, n_nodes, consts=None, w=None, labels=None):
@@ -199,20 +204,29 @@ def _inner_pairs(mesh, seg, pos) -> np.ndarray:
     return arr
 
 
-#: the outside angle (degrees) at a boundary node below which its neighbours are held off each other's
-#: segments whatever their projection
+#: the outside angle (degrees) at a boundary node below which it is a crease: its angle is kept positive
+#: (and its interior neighbours inside the segments next to it)
 FOLD_ANGLE = 150.0
 
 
-def _folding(x, p, a, b, shared_a) -> np.ndarray:
-    """For node ``p`` next to segment ``(a, b)`` along the boundary (next to ``a`` where ``shared_a``, else to
-    ``b``): whether the angle at that node between ``p`` and the segment's other end is below
-    :data:`FOLD_ANGLE`."""
-    c = np.where(shared_a, a, b)
-    o = np.where(shared_a, b, a)
-    u, v = x[p] - x[c], x[o] - x[c]
-    cos = (u * v).sum(1) / np.maximum(np.hypot(*u.T) * np.hypot(*v.T), 1e-300)
-    return cos > np.cos(np.radians(FOLD_ANGLE))
+def _loop_neighbours(seg, n) -> tuple[np.ndarray, np.ndarray]:
+    """``(next, previous)`` boundary node of each node (-1 off the boundary)."""
+    nxt = np.full(n, -1, dtype=np.int64)
+    prv = np.full(n, -1, dtype=np.int64)
+    nxt[seg[:, 0]] = seg[:, 1]
+    prv[seg[:, 1]] = seg[:, 0]
+    return nxt, prv
+
+
+def _edge_scale(mesh, seg, pos) -> np.ndarray:
+    """Per boundary node the mean rest length of its two boundary edges (the length an angle row is scaled
+    by, so that its gap is a length like the others')."""
+    P = mesh.points
+    ln = np.hypot(*(P[seg[:, 1]] - P[seg[:, 0]]).T)
+    out = np.zeros(len(pos))
+    np.add.at(out, seg[:, 0], 0.5 * ln)
+    np.add.at(out, seg[:, 1], 0.5 * ln)
+    return out
 
 
 def _outside_angle(x, seg, pos) -> np.ndarray:
@@ -284,16 +298,26 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
             p, a, b = bnodes[arr[:, 0]], seg[arr[:, 1], 0], seg[arr[:, 1], 1]
             ok = ~_near_along_boundary(pos, p, a, b, hops=0)
             _, t, g = _point_segment(xr[p], xr[a], xr[b])
-            # a neighbour of the segment (its line passes through their shared node) is held while the
-            # outside angle between them is below FOLD_ANGLE: a fold closing at one node
-            nbr = _near_along_boundary(pos, p, a, b, hops=1)
-            ok &= (g >= -tol) & (((t >= -DELTA) & (t <= 1 + DELTA)) |
-                                 (nbr & (g > 0) & _folding(xr, p, a, b, _near_along_boundary(pos, p, a, a, hops=1))))
-            fold = nbr
-            for q, aa, bb, f in zip(p[ok], a[ok], b[ok], fold[ok]):
+            ok &= (g >= -tol) & (t >= -DELTA) & (t <= 1 + DELTA)
+            for q, aa, bb in zip(p[ok], a[ok], b[ok]):
                 pts.append((q, aa, bb))
                 w.append((0.0, 0.0))
-                labels.append((4 if f else 0, -1))
+                labels.append((0, -1))
+        # creases: the outside angle at a boundary node kept positive where it folds (below FOLD_ANGLE) in some
+        # state, or where it went through zero in one (from below 5 pi / 4 in the reference state to above
+        # 3 pi / 2): a boundary folding at one node, its two edges closing onto each other
+        nxt, prv = _loop_neighbours(seg, len(pos))
+        ref = _outside_angle(xr, seg, pos)
+        crease = np.zeros(len(pos), dtype=bool)
+        for s_ in states:
+            o = _outside_angle(s_, seg, pos)
+            crease |= (o < np.radians(FOLD_ANGLE)) | ((o > 1.5 * np.pi) & (ref < 1.25 * np.pi))
+        crease &= ref < 2 * np.pi
+        h = _edge_scale(mesh, seg, pos)
+        for c in np.flatnonzero(crease):
+            pts.append((prv[c], c, nxt[c]))
+            w.append((3.0, h[c]))
+            labels.append((4, -1))
     if self_contact and len(seg):
         # the interior neighbours of a segment's end nodes stay inside it where the boundary folds (its outside
         # angle below FOLD_ANGLE): with every element upright, the triangles around a boundary node can still

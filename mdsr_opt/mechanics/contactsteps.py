@@ -272,7 +272,7 @@ def _out(x, status, ok, iters, steps, t_solve, t_build, rows, res=None, forces=N
             "build_time": t_build, "rows": rows, "residual": res, "forces": forces, "stability": chk}
 
 
-_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "fold"}
+_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "crease"}
 
 
 def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: float = 1.0) -> dict:
