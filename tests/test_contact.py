@@ -19,16 +19,18 @@ def _outline(mesh, x):
 
 
 def _min_gap(mesh, x):
-    """The smallest distance between a boundary node and a boundary segment not its own (shapely)."""
+    """The smallest distance between a boundary node and a boundary segment that shares no node with its own
+    two segments (shapely); a crease between neighbouring segments is held by its angle row instead."""
     x = np.asarray(x)
     seg = mesh.boundary_edges
     best = np.inf
     lines = [LineString(x[s]) for s in seg]
     tree = shapely.STRtree(lines)
+    near = {int(q): set(seg[(seg == q).any(1)].ravel().tolist()) for q in mesh.boundary_nodes}
     for q in mesh.boundary_nodes:
         pt = Point(x[q])
         for j in tree.query(pt.buffer(0.2)):
-            if q in seg[j]:
+            if near[int(q)] & set(seg[j].tolist()):
                 continue
             best = min(best, pt.distance(lines[j]))
     return best

@@ -408,9 +408,8 @@ def contact_stability(prob, rows, x, p, fixed, res, fc):
     """:func:`~mdsr_opt.mechanics.stability.check_stability` of the Lagrangian on the tangent space of the
     active rows (rigid patches, taut ropes, contacts that push)."""
     H, A, _ = _lagrangian(prob, rows, x, p, fixed, res, fc)
-    order = None
-    if getattr(prob.model, "is_numeric", False) and A.shape[0] == 0:
-        order = prob.model.free_ordering(~fixed)
+    # the mesh's fill-reducing ordering: the free block's factorisation, or with active rows the KKT matrix's
+    order = prob.model.free_ordering(~fixed) if getattr(prob.model, "is_numeric", False) else None
     return check_stability(H, ~fixed, A if A.shape[0] else None, order=order)
 
 
