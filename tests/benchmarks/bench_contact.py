@@ -71,7 +71,7 @@ def gripper():
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--nx", type=int, default=40, help="cells along the strip (nx/4 across)")
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=3, help="runs per solve (the best is reported)")
     args = ap.parse_args(argv)
     print(f"{'scene':10s} {'case':20s} {'plain s':>9s} {'ok':>3s} {'contact s':>10s} {'ok':>3s} {'ratio':>6s} "
           f"{'pairs':>5s}  status (contact)")
