@@ -19,18 +19,23 @@ def _outline(mesh, x):
 
 
 def _min_gap(mesh, x):
-    """The smallest distance between a boundary node and a boundary segment that shares no node with its own
-    two segments (shapely); a crease between neighbouring segments is held by its angle row instead."""
+    """The smallest distance between a boundary node and a boundary segment with no end within two boundary
+    edges of it (shapely); a crease (the boundary folded at one node) is held by its angle row instead, which keeps
+    the gap along the edges' rest lengths."""
     x = np.asarray(x)
     seg = mesh.boundary_edges
     best = np.inf
     lines = [LineString(x[s]) for s in seg]
     tree = shapely.STRtree(lines)
-    near = {int(q): set(seg[(seg == q).any(1)].ravel().tolist()) for q in mesh.boundary_nodes}
+    near = {}
+    for loop in mesh.boundary_loops:
+        m = len(loop)
+        for k, q in enumerate(loop):
+            near[int(q)] = {int(loop[(k + d) % m]) for d in range(-2, 3)}
     for q in mesh.boundary_nodes:
         pt = Point(x[q])
         for j in tree.query(pt.buffer(0.2)):
-            if near[int(q)] & set(seg[j].tolist()):
+            if set(seg[j].tolist()) & near[int(q)]:
                 continue
             best = min(best, pt.distance(lines[j]))
     return best
