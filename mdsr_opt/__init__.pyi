@@ -24,6 +24,7 @@ from .mechanics.equilibrium import (
     solve_internal as solve_internal,
 )
 from .mechanics.model import EnergyModel as EnergyModel, get_model as get_model
+from .mechanics.obstacles import Disk as Disk, HalfPlane as HalfPlane, Obstacle as Obstacle
 from .mechanics.result import EquilibriumResult as EquilibriumResult, SolverFailure as SolverFailure
 from .mechanics.stability import check_stability as check_stability, StabilityCheck as StabilityCheck
 

@@ -17,6 +17,7 @@ from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
 from .constraints import muscle_constraints, spring_segments, spring_stiffness
+from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
@@ -36,7 +37,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                    drags: Mapping[int, Sequence[float]] | tuple | None, *, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, verbose: bool = False,
-                   initial_guess: str | np.ndarray = "predictor") -> EquilibriumResult:
+                   initial_guess: str | np.ndarray = "predictor", obstacles=None, contact: bool = False,
+                   contact_gap: float | None = None, friction: float = 0.0) -> EquilibriumResult:
     """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
 
     Parameters
@@ -63,10 +65,25 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         first, with only the fixed nodes moved) or an (n, 2) state to start the first step from (its fixed
         nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
         combine them with ``min_step=1`` to forbid load stepping.
+    obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle`
+        Rigid obstacles the body's boundary may touch but not enter (frictionless); none may hold a node at
+        rest. See :mod:`~mdsr_opt.mechanics.contactsolve`.
+    contact : bool
+        Model self-contact of the boundary (outline and holes): no crossing, a gap kept between a boundary
+        node and the boundary segments it touches. Off by default (each load step then also looks for
+        candidate pairs).
+    contact_gap : the gap kept by every contact, length units (default 1e-4 x the body's size).
+    friction : Coulomb's coefficient between the body and the obstacles (default 0: frictionless):
+        quasi-static, a lagged smoothed potential per load step (:mod:`~mdsr_opt.mechanics.friction`, which
+        states its error); ``contact["friction"]`` then gives each touching node's tangential force and
+        whether it slips.
 
     Returns
     -------
     EquilibriumResult
+        With contact modelled, ``contact`` holds the active pairs and their normal forces (the gap
+        constraints' multipliers), the contact force on each node and on each obstacle; the residual takes
+        the contact forces in, and stability is checked on the tangent space of the pushing contacts.
         Only a stable equilibrium is a success: the Hessian on the free coordinates must be positive definite
         (``stable``, ``stability``; inertia of a sparse factorisation,
         :func:`~mdsr_opt.mechanics.stability.check_stability`).
@@ -97,6 +114,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                          "motion; got 1")
     t0 = time.perf_counter()
     units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
+    spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
@@ -111,6 +129,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         at = np.vstack([anchored, units.to_unit(path.positions(s))])
         return np.concatenate([at[:, 0], at[:, 1]])[order]
 
+    if spec.active:
+        res, _lam = solve_with_contact(mesh, model, material, lambda s: p, fixed, values_of, units.state_in(x_start),
+                                       spec, tol, max_iter, options, min_step, verbose, predict, "external", units,
+                                       t_model=t_model)
+        return units.equilibrium_out(res)
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
         mesh, model, lambda s: p, fixed, values_of, units.state_in(x_start), backend, tol, max_iter, options,
         min_step, verbose, predict)
@@ -214,7 +237,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
-                   initial_guess: str | np.ndarray = "predictor", check_stability: bool = True) -> EquilibriumResult:
+                   initial_guess: str | np.ndarray = "predictor", check_stability: bool = True,
+                   obstacles=None, contact: bool = False, contact_gap: float | None = None,
+                   friction: float = 0.0) -> EquilibriumResult:
     """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
 
     Parameters
@@ -253,6 +278,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         default). ``False`` skips the check (one sparse factorisation): ``success`` then
         means a converged equilibrium with every element upright, which may be a saddle (``stable`` is
         None). For warm starts, such as the flattened design's, whose result is verified later.
+    obstacles, contact, contact_gap, friction : contact, as in :func:`solve_external`. With obstacles the body is held
+        at its three gauge coordinates (at rest) in the obstacles' frame and not aligned to rest; the net force
+        the gauge holds is then ``contact["gauge_force"]`` (zero when the contacts balance the body).
 
     Returns
     -------
@@ -296,6 +324,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
             x_start = moved.reshape(-1)
     n = mesh.n_nodes
     units = Units(mesh, material)  # solved on the unit body (size and E t about 1), mapped back
+    spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     mesh, material = units.unit_mesh, units.unit_material
     radius_given, radius, x_start = radius, units.to_unit(radius), units.state_in(x_start)
     # the chain inside the anchor patches keeps its length: the rest must take up the whole stroke
@@ -332,6 +361,23 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     X = mesh.points.reshape(-1).copy()
     vals = X[fixed]
     solver_model = cm if cm is not None else emodel
+    if spec.active:
+        res, lam = solve_with_contact(mesh, emodel, material, p_of, fixed, lambda s: vals, x_start, spec, tol,
+                                      max_iter, options, min_step, verbose, predict, "internal", units, cm=cm,
+                                      settle=bool(check_stability), loose=loadsteps.INTERNAL_INTERMEDIATE_TOL,
+                                      p_elastic=p_el0 if cm is None else None, t_model=t_model)
+        if spec.obstacles:
+            align_to_rest = False  # the body stays in the obstacles' frame, held at its gauge
+            g = emodel.gradient(res.x.reshape(-1), p_energy(1.0)) - (np.asarray(res.contact["node_forces"]).reshape(-1)
+                                                                     / units.force)
+            if cm is not None and lam is not None:
+                g = g + cm.jacobian(res.x.reshape(-1)).T @ lam
+            # the force the gauge exerts on the body: what balances the rest at its fixed coordinates
+            gx, gy = g[0::2][fixed[0::2]].sum(), g[1::2][fixed[1::2]].sum()
+            res.contact["gauge_force"] = [float(gx) * units.force, float(gy) * units.force]
+        taut = np.ones(len(mus), dtype=bool) if lam is None else lam[:len(mus)] > 0
+        return _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol,
+                             align_to_rest)
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
         mesh, solver_model, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step,
         verbose, predict, settle=bool(check_stability), intermediate_tol=loadsteps.INTERNAL_INTERMEDIATE_TOL)
@@ -339,6 +385,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     p_el = p_el0
     taut = np.ones(len(mus), dtype=bool)
     residual = None
+    lam = None
     if cm is not None:  # the multipliers of the tolerance contract's residual (ropes within tol of their targets)
         kkt = kkt_residual(cm, x, p1, fixed, tol, material.E * material.thickness * mesh.size)
         lam, residual = kkt.lam, kkt.value
@@ -349,6 +396,13 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     res = equilibrium_result(mesh, solver_model, material, p1, p_el, x, fixed, status, ok, iters, steps,
                   t_model + t_build, t_solve, backend, "internal", tol, check_stability=bool(check_stability),
                   residual=residual)
+    return _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol,
+                         align_to_rest)
+
+
+def _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol, align_to_rest):
+    """The muscles' part of an internal driving result, aligned to rest if asked, in the user's units."""
+    x = res.x.reshape(-1)
     res.muscle_model = model
     res.anchor_radius = radius
     res.rest_lengths = L0.copy()
@@ -370,4 +424,6 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         al = align(res.x, mesh.points)
         res.x = al.apply(res.x)
         res.rotation, res.translation = al.R, al.t
+        if res.contact is not None:  # the contact forces turn with the body
+            res.contact["node_forces"] = (np.asarray(res.contact["node_forces"]) @ al.R.T).tolist()
     return units.equilibrium_out(res)

@@ -130,6 +130,12 @@ def _predict(model, p, x, fixed, values):
     return y
 
 
+def predict_state(model, p, x, fixed, values):
+    """The load-stepping predictor: a Newton (KKT, for a constrained model) step from ``x`` with the fixed
+    coordinates moved to ``values`` (the linear-elastic solution at rest); None when it fails."""
+    return _predict(model, p, x, fixed, values)
+
+
 def min_jacobian(mesh, xflat) -> float:
     """The smallest ``J = det F = det Ds / det Dm`` over the triangles.
 

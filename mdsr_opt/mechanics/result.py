@@ -43,6 +43,10 @@ class EquilibriumResult:
         ``K L0/L0_free (a - achieved)``, negative when they push); slack (cable: the path is shorter than the
         rope, so achieved > commanded at zero tension; springs: not pulling); ``L0``.
     anchor_radius : internal driving: the radius of the rigid anchor patches at the muscles' ends.
+    contact : with contact modelled (``obstacles``, ``contact=True``): the gap kept, the active pairs (kind,
+        nodes, obstacle, gap, normal force: the multipliers), the contact force on each node, the force on
+        each obstacle and the candidates' count (:func:`~mdsr_opt.mechanics.contactsteps.contact_report`);
+        None otherwise.
     """
 
     x: np.ndarray
@@ -71,6 +75,7 @@ class EquilibriumResult:
     slack: np.ndarray | None = None  # cable: path shorter than the rope (achieved > commanded); springs: not pulling
     rest_lengths: np.ndarray | None = None  # L0 per muscle
     anchor_radius: float | None = None  # radius of the rigid anchor patches at the muscles' ends
+    contact: dict | None = None  # with contact modelled: active pairs and forces (see the docstring)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("mode", "backend", "success", "iterations", "residual", "min_J", "energy", "x",

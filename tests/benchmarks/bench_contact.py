@@ -1,0 +1,88 @@
+"""What contact costs: solves with and without ``contact=True`` / ``obstacles`` on scenes that never touch and
+on scenes that touch, side by side (best of ``--repeat`` runs each, after one warm-up).
+
+Scenes that never touch (both settings reach the same state): a 4 x 1 strip clamped at its left end and
+pulled 10 % (external), pushed 5 % (below buckling), and the same strip bent by a 30 % rope along its bottom
+(internal), with a disk far away as an obstacle. Scenes that touch: the strip pressed onto the ground, the
+strip clamped at both ends and pushed 30 % and 50 % (it buckles and folds onto itself; rejected without
+contact), and the library gripper's jaws closing with inner-rim muscles at 30 %.
+
+    python tests/benchmarks/bench_contact.py            # 40 x 10 strips (451 nodes)
+    python tests/benchmarks/bench_contact.py --nx 80 --repeat 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mdsr_opt import Disk, HalfPlane, Mesh, Muscle, NeoHookean, solve_external, solve_internal
+
+MAT = NeoHookean(1.0, 0.3)
+
+
+def _best(fn, repeat):
+    fn()  # warm-up: models and solvers built once per mesh
+    times, res = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        res = fn()
+        times.append(time.perf_counter() - t0)
+    return min(times), res
+
+
+def scenes(nx: int):
+    mesh = Mesh.rectangle(4.0, 1.0, nx, nx // 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    top = np.flatnonzero(P[:, 1] == 1.0)
+    far = [Disk((2.0, -5.0), 1.0)]
+    bottom = Muscle([int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 0.0])
+
+    def ext(drags, anchors=left, **kw):
+        return lambda: solve_external(mesh, MAT, anchors, drags, **kw)
+
+    pull = {int(i): (P[i, 0] + 0.4, P[i, 1]) for i in right}
+    push = {f: {int(i): (P[i, 0] - 4 * f, P[i, 1]) for i in right} for f in (0.05, 0.3, 0.5)}
+    press = {int(i): (P[i, 0], P[i, 1] - 0.3) for i in top}
+    ground = [HalfPlane((0.0, -0.05), (0.0, 1.0))]
+    yield "no touch", "pull 10 %", ext(pull), ext(pull, contact=True, obstacles=far)
+    yield "no touch", "push 5 %", ext(push[0.05]), ext(push[0.05], contact=True, obstacles=far)
+    yield ("no touch", "rope 30 %", lambda: solve_internal(mesh, MAT, [bottom], [0.3]),
+           lambda: solve_internal(mesh, MAT, [bottom], [0.3], contact=True))
+    yield "touch", "press on ground", None, ext(press, anchors=None, obstacles=ground)
+    yield "touch", "push 30 %", ext(push[0.3]), ext(push[0.3], contact=True)
+    yield "touch", "push 50 %", ext(push[0.5]), ext(push[0.5], contact=True)
+
+
+def gripper():
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from test_contact import _gripper
+
+    mesh, mat, muscles = _gripper()
+    return ("touch", "gripper jaws 30 %", lambda: solve_internal(mesh, mat, muscles, [0.3, 0.3]),
+            lambda: solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--nx", type=int, default=40, help="cells along the strip (nx/4 across)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per solve (the best is reported)")
+    args = ap.parse_args(argv)
+    print(f"{'scene':10s} {'case':20s} {'plain s':>9s} {'ok':>3s} {'contact s':>10s} {'ok':>3s} {'ratio':>6s} "
+          f"{'pairs':>5s}  status (contact)")
+    for kind, name, plain, contact in [*scenes(args.nx), gripper()]:
+        tp, rp = _best(plain, args.repeat) if plain is not None else (float("nan"), None)
+        tc, rc = _best(contact, args.repeat)
+        ok_p = "-" if rp is None else ("yes" if rp.success else "no")
+        print(f"{kind:10s} {name:20s} {tp:9.3f} {ok_p:>3s} {tc:10.3f} {'yes' if rc.success else 'no':>3s} "
+              f"{tc / tp:6.2f} {len(rc.contact['pairs']):5d}  {rc.status[:60]}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

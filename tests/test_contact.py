@@ -1,0 +1,305 @@
+"""Contact: rigid obstacles and self-contact of the boundary (issue 35), each result checked independently
+(shapely for crossings and gaps, the energy gradient for force balance, finite differences for the gap
+rows' derivatives)."""
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import LineString, Point, Polygon
+
+from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, Obstacle, solve_external
+from mdsr_opt.mechanics.contact import ContactRows
+from mdsr_opt.mechanics.model import get_model
+
+MAT = NeoHookean(1.0, 0.3)
+
+
+def _outline(mesh, x):
+    return Polygon(np.asarray(x)[mesh.boundary_loops[0]])
+
+
+def _min_gap(mesh, x):
+    """The smallest distance between a boundary node and a boundary segment with no end within two boundary
+    edges of it (shapely); a crease (the boundary folded at one node) is held by its angle row instead, which keeps
+    the gap along the edges' rest lengths."""
+    x = np.asarray(x)
+    seg = mesh.boundary_edges
+    best = np.inf
+    lines = [LineString(x[s]) for s in seg]
+    tree = shapely.STRtree(lines)
+    near = {}
+    for loop in mesh.boundary_loops:
+        m = len(loop)
+        for k, q in enumerate(loop):
+            near[int(q)] = {int(loop[(k + d) % m]) for d in range(-2, 3)}
+    for q in mesh.boundary_nodes:
+        pt = Point(x[q])
+        for j in tree.query(pt.buffer(0.2)):
+            if set(seg[j].tolist()) & near[int(q)]:
+                continue
+            best = min(best, pt.distance(lines[j]))
+    return best
+
+
+def _drag_reaction(mesh, x, nodes):
+    """The total force the drags exert on the body: the energy gradient summed over the dragged nodes."""
+    model = get_model(mesh, MAT)
+    g = model.gradient(np.asarray(x).reshape(-1), model.params(MAT)).reshape(-1, 2)
+    return g[nodes].sum(0)
+
+
+def _push(mesh, frac):
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == P[:, 0].max())
+    return left, {int(i): (P[i, 0] - frac * 4.0, P[i, 1]) for i in right}, right
+
+
+def test_gap_rows_derivatives_match_finite_differences():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 1, (5, 2))
+    rows = ContactRows(np.array([[0, 1, 2], [3, 5, 6], [4, 7, 8]]), 5,
+                       consts=np.array([[0.2, -0.5], [1.3, -0.4], [0.5, 2.0], [9.0, 9.0]]),
+                       w=np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.7]]))
+    x = x.reshape(-1)
+    J = rows.jacobian(x).toarray()
+    lam = np.array([0.7, -1.3, 2.1])
+    H = rows.hessian(x, lam).toarray()
+    h = 1e-6
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h
+        fd = (rows.values(x + e) - rows.values(x - e)) / (2 * h)
+        assert np.allclose(J[:, k], fd, atol=1e-7)
+        fdh = ((rows.jacobian(x + e).T @ lam) - (rows.jacobian(x - e).T @ lam)) / (2 * h)
+        assert np.allclose(H[:, k], fdh, atol=1e-6)
+    # the node-segment gap is the signed distance from the segment's line (outside: right of a -> b)
+    p, a, b = x.reshape(-1, 2)[[0, 1, 2]]
+    d = b - a
+    assert rows.values(x)[0] == pytest.approx((d[1] * (p - a)[0] - d[0] * (p - a)[1]) / np.hypot(*d))
+
+
+def test_strip_pressed_onto_ground_rests_on_it_and_reactions_balance():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    top = np.flatnonzero(P[:, 1] == 1.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.3) for i in top}
+    level = -0.05
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, level), (0.0, 1.0))])
+    assert res.success and res.stable, res.status
+    assert res.residual <= 1e-8
+    gap = res.contact["gap"]
+    assert gap == pytest.approx(1e-4 * mesh.size)
+    y = res.x[:, 1]
+    assert y.min() >= level + gap * (1 - 1e-6)  # no node below the ground (nor inside the gap)
+    bottom = np.flatnonzero(P[:, 1] == 0.0)
+    assert np.allclose(y[bottom], level + gap, atol=1e-9)  # the whole bottom rests on it
+    assert len(res.contact["pairs"]) == len(bottom)
+    assert all(p["force"] > 0 for p in res.contact["pairs"])
+    # the force on the ground equals the load the drags apply, and the contact forces on the nodes sum to it
+    load = _drag_reaction(mesh, res.x, top)
+    assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-9)
+    assert np.allclose(-np.sum(res.contact["node_forces"], axis=0), load, rtol=1e-6, atol=1e-9)
+    assert load[1] < -0.5 and abs(load[0]) < 1e-6
+
+
+def test_contact_off_by_default_and_on_changes_nothing_when_nothing_touches():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    left, drags, _ = _push(mesh, 0.05)
+    plain = solve_external(mesh, MAT, left, drags)
+    assert plain.contact is None
+    on = solve_external(mesh, MAT, left, drags, contact=True, obstacles=[Disk((2.0, -3.0), 1.0)])
+    assert on.success and plain.success
+    assert on.contact["pairs"] == [] and on.contact["total_force"] == 0.0
+    assert np.abs(on.x - plain.x).max() < 1e-6  # the same equilibrium, both within tol 1e-8
+    assert on.energy == pytest.approx(plain.energy, rel=1e-8)
+
+
+def _check_push(mesh, frac):
+    left, drags, right = _push(mesh, frac)
+    res = solve_external(mesh, MAT, left, drags, contact=True)
+    assert res.success, res.status
+    assert res.stable and res.residual <= 1e-8
+    poly = _outline(mesh, res.x)
+    assert poly.is_valid  # shapely: the outline does not cross itself
+    assert not mesh.boundary_crosses(res.x)
+    assert _min_gap(mesh, res.x) >= res.contact["gap"] - 1e-8 * mesh.size  # the gap, to the tolerance
+    return res, right
+
+
+def test_strip_clamped_at_both_ends_pushed_30_percent_folds_without_crossing():
+    mesh = Mesh.rectangle(4.0, 1.0, 40, 10)
+    left, drags, _ = _push(mesh, 0.3)
+    plain = solve_external(mesh, MAT, left, drags)
+    assert not plain.success and "crosses itself" in plain.status
+    res, _ = _check_push(mesh, 0.3)
+    assert len(res.contact["pairs"]) > 0 and res.contact["total_force"] > 0
+    assert all(p["kind"] in ("self", "fold", "inner") for p in res.contact["pairs"])
+
+
+@pytest.mark.slow
+def test_strip_pushed_10_to_50_percent_energy_continuous():
+    mesh = Mesh.rectangle(4.0, 1.0, 40, 10)
+    pushes = np.round(np.arange(0.10, 0.501, 0.05), 2)
+    energies, forces = [], []
+    for frac in pushes:
+        res, right = _check_push(mesh, frac)
+        energies.append(res.energy)
+        forces.append(_drag_reaction(mesh, res.x, right)[0])
+    energies, forces = np.array(energies), np.array(forces)
+    assert np.all(np.diff(energies) > 0)
+    # continuous in the push: each rise is the work of the end's force (trapezoid rule, dx = -0.2 per 0.05)
+    work = -0.5 * (forces[1:] + forces[:-1]) * 0.05 * 4.0
+    assert np.allclose(np.diff(energies), work, rtol=0.25)
+
+
+def test_disk_obstacle_holds_a_strip_bent_over_it():
+    mesh = Mesh.rectangle(4.0, 0.5, 32, 4)
+    P = mesh.points
+    ends = np.flatnonzero((P[:, 0] == 0.0) | (P[:, 0] == 4.0))
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.6) for i in ends}
+    disk = Disk((2.0, -0.55), 0.5)
+    res = solve_external(mesh, MAT, None, drags, obstacles=[disk])
+    assert res.success and res.stable, res.status
+    poly = _outline(mesh, res.x)
+    # shapely: the body and the disk overlap by nothing more than the chords between nodes cut off
+    h = 4.0 / 32
+    assert poly.intersection(Point(2.0, -0.55).buffer(0.5, 256)).area < 0.5 * h ** 3
+    assert np.linalg.norm(res.x - [2.0, -0.55], axis=1).min() >= 0.5 + res.contact["gap"] * (1 - 1e-6)
+    load = _drag_reaction(mesh, res.x, ends)
+    assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-9)
+    assert load[1] < 0
+
+
+def test_contact_inputs_refused_at_the_door():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    P = mesh.points
+    left, drags, _ = _push(mesh, 0.1)
+    with pytest.raises(ValueError, match="holds node"):
+        solve_external(mesh, MAT, left, drags, obstacles=[Disk((2.0, 0.5), 0.2)])
+    with pytest.raises(ValueError, match="convex"):
+        Obstacle([(0, 0), (2, 0), (1, 0.2), (2, 1), (0, 1)])
+    with pytest.raises(TypeError, match="obstacles"):
+        solve_external(mesh, MAT, left, drags, obstacles=[(0.0, 0.0)])
+    with pytest.raises(TypeError, match="contact must be True or False"):
+        solve_external(mesh, MAT, left, drags, contact="yes")
+    with pytest.raises(ValueError, match="ipopt"):
+        solve_external(mesh, MAT, left, drags, contact=True, backend="newton")
+    with pytest.raises(ValueError, match="contact_gap"):
+        solve_external(mesh, MAT, left, drags, contact=True, contact_gap=-1.0)
+    with pytest.raises(ValueError, match="radius"):
+        Disk((0, 0), 0.0)
+    with pytest.raises(ValueError, match="normal"):
+        HalfPlane((0, 0), (0, 0))
+    assert P.shape[1] == 2
+
+
+def _gripper():
+    """The library's gripper body (coarse) with two muscles along its inner rim: contracted, they close it."""
+    from pathlib import Path
+
+    from mdsr_opt.scenes.library import load_problem_module
+    from mdsr_opt.scenes.select import boundary_path
+
+    g = load_problem_module(Path(__file__).resolve().parents[1] / "problems" / "gripper.py")
+    mesh, mat = g.body("coarse")
+    ri, half = g.R0 - g.WIDTH / 2, g.OPENING / 2
+
+    def rim(a0, a1):
+        return ri * np.array([np.cos(a0), np.sin(a0)]), ri * np.array([np.cos(a1), np.sin(a1)])
+
+    upper = boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ri * np.array([0.0, 1.0]), name="upper")
+    lower = boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ri * np.array([0.0, -1.0]),
+                          name="lower")
+    return mesh, mat, [upper, lower]
+
+
+def test_gripper_jaws_meet_with_self_contact_in_internal_driving():
+    from mdsr_opt import solve_internal
+
+    mesh, mat, muscles = _gripper()
+    plain = solve_internal(mesh, mat, muscles, [0.3, 0.3])
+    assert not plain.success and "crosses itself" in plain.status
+    res = solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True)
+    assert res.success and res.stable and res.residual <= 1e-8, res.status
+    assert _outline(mesh, res.x).is_valid and not mesh.boundary_crosses(res.x)
+    assert _min_gap(mesh, res.x) >= res.contact["gap"] - 1e-8 * mesh.size
+    assert any(p["kind"] == "self" and p["force"] > 0 for p in res.contact["pairs"])
+    assert np.allclose(res.achieved, 0.3, atol=1e-7) and np.all(res.tension > 0)
+    # the contact forces are internal: they sum to zero
+    assert np.abs(np.sum(res.contact["node_forces"], axis=0)).max() < 1e-9
+
+
+def test_gripper_holds_a_disk_with_friction():
+    from mdsr_opt import solve_internal
+    from mdsr_opt.mechanics.grip import free_disk, grip_report
+
+    mesh, mat, muscles = _gripper()
+    res, disk, info = free_disk(lambda d: solve_internal(mesh, mat, muscles, [0.3, 0.3], obstacles=[d]),
+                                Disk((0.0, 0.0), 1.1))
+    assert info["converged"], info
+    assert res.success and res.stable, res.status
+    N = np.array([p["force"] for p in res.contact["pairs"] if p["kind"] == "obstacle"])
+    assert len(N) >= 2 and N.min() > 0
+    # a free disk: the contacts' net force on it vanishes and the body's mount (gauge) holds nothing
+    assert np.linalg.norm(res.contact["obstacle_forces"][0]) <= 1e-3 * N.max()
+    assert np.linalg.norm(res.contact["gauge_force"]) <= 1e-3 * N.max()
+    # no body node inside the disk (shapely: the outline's overlap with it is within the chords' sagitta)
+    assert np.linalg.norm(res.x - disk.center, axis=1).min() >= disk.radius
+    g3, g1 = grip_report(res.x, res.contact, disk, 0.3), grip_report(res.x, res.contact, disk, 1.0)
+    g0 = grip_report(res.x, res.contact, disk, 0.0)
+    assert g0["holding_force"] == 0.0 and g3["holding_force"] > 0
+    # friction forces scale with mu, and no load beyond mu times the normal forces is held
+    assert np.allclose(np.array(g1["resisted"]), np.array(g3["resisted"]) / 0.3, rtol=0.05)
+    assert max(g3["resisted"]) <= 0.3 * N.sum()
+    w = g3["holding_force"]
+    assert grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -0.9 * w))["held"]
+    assert not grip_report(res.x, res.contact, disk, 0.0, load=(0.0, -0.9 * w))["held"]
+    assert not grip_report(res.x, res.contact, disk, 0.3, load=(0.0, -3.0 * max(g3["resisted"])))["held"]
+
+
+def test_friction_term_derivatives_match_finite_differences():
+    from mdsr_opt.mechanics.friction import FrictionTerm
+
+    rng = np.random.default_rng(5)
+    t = rng.normal(size=(3, 2))
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    ft = FrictionTerm(np.array([0, 2, 3]), t, rng.normal(size=8), np.array([0.5, 1.0, 2.0]), 0.4, 0.05)
+    x = rng.normal(size=8)
+    g, H = ft.gradient(x), ft.hessian(x).toarray()
+    h = 1e-6
+    for k in range(8):
+        e = np.zeros(8)
+        e[k] = h
+        assert (ft.energy(x + e) - ft.energy(x - e)) / (2 * h) == pytest.approx(g[k], abs=1e-7)
+        assert np.allclose((ft.gradient(x + e) - ft.gradient(x - e)) / (2 * h), H[:, k], atol=1e-6)
+    assert np.all(np.abs(ft.forces(x)) < 0.4 * ft.N)  # never beyond mu N
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.2, 1.0])
+def test_strip_pressed_and_sheared_on_ground_with_coulomb_friction(mu):
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0] + 0.3, P[i, 1] - 0.3) for i in top}
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.05), (0.0, 1.0))], friction=mu)
+    assert res.success and res.stable and res.residual <= 1e-8, res.status
+    fr = res.contact["friction"]
+    load = _drag_reaction(mesh, res.x, top)
+    # the ground takes the whole load, normal and tangential (friction included)
+    assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-8)
+    assert res.x[:, 1].min() >= -0.05
+    dx = res.x[bottom, 0] - P[bottom, 0]
+    if mu == 0.0:
+        assert abs(load[0]) < 1e-8 and fr is None
+        assert dx.min() > 0.05  # frictionless: the bottom slides with the top
+        return
+    F, N, slip = np.array(fr["tangential"]), np.array(fr["normal"]), np.array(fr["slipping"])
+    assert np.all(np.abs(F) <= mu * N * (1 + 1e-9) + 1e-12)  # inside the friction cone
+    assert load[0] > 0.01  # the shear reaches the ground through friction
+    stick = ~slip & (N > 0)
+    assert stick.sum() >= 3
+    # sticking nodes do not slide in the (last) load step: a creep of order eps
+    assert np.abs(np.array(fr["step_slide"])[stick]).max() < 10 * fr["eps"]
+    assert np.abs(np.array(fr["step_slide"])[slip]).min() > 10 * fr["eps"] if slip.any() else True
+    if mu == 0.2:
+        assert slip.sum() > 0  # at mu 0.2 part of the bottom slides
