@@ -51,7 +51,8 @@ def design_expressions(resolution="medium"):
     face = _face_module()
     scene = get_problem("face", resolution=resolution)
     routing = {**scene.routing_options, **face.EXPRESSION_ROUTING}
-    layout, targets = face.one_layout(scene.mesh, scene.material, scene.cases, routing)
+    layout, targets = face.one_layout(scene.mesh, scene.material, scene.cases, routing,
+                                      scene.design_options.get("anchor_radius"))
     res = design_poses(scene.mesh, scene.material, {c: targets[c] for c in scene.case_names},
                        routing_options=routing, design_options=scene.design_options, compare=False)
     if [tuple(m.nodes) for m in res.muscles] != [tuple(m.nodes) for m in layout]:

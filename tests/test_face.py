@@ -100,3 +100,26 @@ def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scen
         assert e["success"] and e["motion_recovered"] >= 0.70, e
         assert e["muscles"] == [m.name for m in case.muscles]  # the case pulls the muscles its pose pulls
     assert (tmp_path / "expressions.png").stat().st_size > 20000
+
+
+def test_the_one_layout_runs_inside_the_body(scene):
+    """Issue 32: every rope node at least max(channel/2 + wall, 2 % of the diameter) inside the outline and the
+    holes (shapely, on the mesh's own boundary), with the default fabrication; fixtures of the design's size."""
+    from shapely.geometry import Point, Polygon
+
+    from mdsr_opt.mechanics.anchors import body_size
+    from mdsr_opt.synthesis.fabrication import MIN_INSET_FRACTION, Fabrication
+
+    P, loops = scene.mesh.points, scene.mesh.boundary_loops
+    poly = Polygon(P[loops[0]], [P[lp] for lp in loops[1:]])
+    fab = Fabrication().for_body(scene.mesh)
+    need = max(0.5 * fab.channel_diameter + fab.wall, MIN_INSET_FRACTION * body_size(scene.mesh))
+    nodes = {i for c in scene.cases for m in c.muscles for i in m.nodes}
+    inset = min(poly.boundary.distance(Point(P[i])) for i in nodes)
+    assert all(poly.contains(Point(P[i])) for i in nodes) and inset >= need - 1e-9, (inset, need)
+    # the wink's rope rings the left eye: it passes above and below the eye's centre
+    wink = next(c for c in scene.cases if c.name == "wink")
+    lx, ly = -face_module.EYE_C[0], face_module.EYE_C[1]
+    near = [P[list(m.nodes)] for m in wink.muscles
+            if np.linalg.norm((P[list(m.nodes)] - (lx, ly)) / (1.0, 0.6), axis=1).max() < 1.5]
+    assert any((q[:, 1] > ly).any() and (q[:, 1] < ly).any() and (np.abs(q[:, 0] - lx) < 0.3).any() for q in near)

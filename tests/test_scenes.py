@@ -265,6 +265,8 @@ MALFORMED = [
     ("max turn", _set("routing/max_turn", 200), SceneFileError, r"routing\.max_turn: must lie in \[0, 180\]"),
     ("seed threshold", _set("routing/seed_threshold", 2), SceneFileError,
      r"routing\.seed_threshold: must lie in \(0, 1\]"),
+    ("compression ratio", _set("routing/compression_ratio", 0), SceneFileError,
+     r"routing\.compression_ratio: must lie in \(0, 1\]"),
     ("symmetry", _set("routing/symmetry", "yes"), SceneFileError, r"routing\.symmetry: must be 'auto', true or false"),
     ("warm start", _set("design/warm_start", "target-ish"), SceneFileError,
      r"design\.warm_start: must be 'target', 'rest', true or false"),

@@ -305,6 +305,7 @@ _ROUTING_CHECKS = {
     "min_contraction": _real(0.0, 1.0, hi_open=True, what=" (a fraction of the rest length)"),
     "max_turn": _real(0.0, 180.0, what=" (degrees)"),
     "seed_threshold": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest contraction)"),
+    "compression_ratio": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest principal stretch)"),
     "symmetry": _symmetry,
     "fabrication": fabrication_table,
 }

@@ -236,8 +236,8 @@ def _graph(mesh: Mesh, x: np.ndarray, l0: np.ndarray, l: np.ndarray, w: np.ndarr
 def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float = 4.0, K_h: float = 0.1,
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
                   min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
-                  symmetry: str | bool = "auto", fabrication: Fabrication | dict | bool | None = None
-                  ) -> RoutingResult:
+                  symmetry: str | bool = "auto", fabrication: Fabrication | dict | bool | None = None,
+                  compression_ratio: float = 1.0) -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
     Parameters
@@ -287,6 +287,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         ``result.notes``; ``result.fixture_radius`` is the fixture radius to design with (``anchor_radius``).
         ``False``: the search alone, on every edge of the contraction graph (ropes may lie on the outline;
         for studies of the search, not for a robot to build).
+    compression_ratio : float in (0, 1], default 1
+        An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
+        principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
+        Poisson response of a stretched region, at most ``nu`` times its stretch, seeds nothing). Around a
+        hole drawn shut (an eye, a mouth) the hoop contraction a ring-shaped rope makes comes with a
+        radial stretch of about the same size, so no edge there passes 1; about 0.5 admits it while still
+        rejecting the Poisson response of a material with ``nu`` below 0.5.
 
     Returns
     -------
@@ -344,6 +351,10 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     if max_turn > 180.0:
         raise ValueError(f"max_turn must be <= 180 degrees, got {max_turn}")
     seed_threshold = positive_float(seed_threshold, "seed_threshold")
+    compression_ratio = positive_float(compression_ratio, "compression_ratio")
+    if compression_ratio > 1.0:
+        raise ValueError(f"compression_ratio must be in (0, 1] (a fraction of the largest principal stretch "
+                         f"beside an edge), got {compression_ratio}")
     if seed_threshold > 1.0:
         raise ValueError(f"seed_threshold must be in (0, 1] (a fraction of the largest contraction), "
                          f"got {seed_threshold}")
@@ -358,7 +369,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         adm_edges = _admissible_edges(mesh, fab, clearance)
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
-                  seed_threshold=seed_threshold, symmetry=symmetry)
+                  seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio)
 
     x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
@@ -406,7 +417,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     reach = np.searchsorted(np.cumsum(l0[order]), 4.0 * ell)
     w_ref_q = int(wq[order[min(reach, len(order) - 1)]])
     threshold_q = max(floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
-    regions = router.regions(threshold_q, _compression_dominated(mesh, x, w))
+    regions = router.regions(threshold_q, _compression_dominated(mesh, x, w, compression_ratio))
     seeds = router.seed_units(regions, n_seeds, SEED_SPACING * body_size(mesh))
     router.grow()
     dropped = [DroppedUnit(p, L, why) for p, L, why in router.settle_fragments(min_length)]
@@ -552,9 +563,9 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
     return rr
 
 
-def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Edges whose contraction exceeds the largest principal stretch (``sigma_1 - 1``) of the triangles
-    beside them: compression, not the sideways (Poisson) response of a stretched region."""
+def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: float = 1.0) -> np.ndarray:
+    """Edges whose contraction exceeds ``ratio`` times the largest principal stretch (``sigma_1 - 1``) of the
+    triangles beside them: compression, not the sideways (Poisson) response of a stretched region."""
     sv = np.linalg.svd(mesh.deformation_gradients(x), compute_uv=False)
     stretch = sv[:, 0] - 1.0
     T = mesh.triangles
@@ -564,7 +575,7 @@ def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray) -> np.ndarr
         a, b = T[:, j], T[:, (j + 1) % 3]
         k = np.array([ei[(p, q) if p < q else (q, p)] for p, q in zip(a.tolist(), b.tolist())])
         np.maximum.at(s_edge, k, stretch)
-    return w > s_edge
+    return w > ratio * s_edge
 
 
 def largest_turn(x: ArrayLike, path) -> float:

@@ -106,7 +106,7 @@ class RoutingResult:
         Units left when growth stopped, before ``min_length``/``max_muscles`` selection.
     params : dict
         The knobs used (``K_a``, ``K_b``, ``K_h``, ``n_seeds``, ``max_muscles``, ``min_length``,
-        ``min_contraction``, ``max_turn``, ``seed_threshold``, ``symmetry``).
+        ``min_contraction``, ``max_turn``, ``seed_threshold``, ``symmetry``, ``compression_ratio``).
     dropped : tuple of DroppedUnit
         Fragments shorter than ``min_length`` (spliced or dropped) and muscles cut by ``max_muscles``.
     reflection : Reflection or None
