@@ -83,7 +83,16 @@ def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | 
     variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
     threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
     signal.signal(signal.SIGINT, signal.default_int_handler)  # the server ignores Ctrl-C (_start_server):
-    # a worker stops on it, as the run does
+    # a worker stops on it, as the run does; one interrupted while it starts ends quietly (the run reports
+    # the interrupt; the pool's own report would be a traceback)
+    try:
+        _prepare_worker(env, modules, setup)
+    except KeyboardInterrupt:
+        os._exit(1)
+
+
+def _prepare_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None) -> None:
+    """:func:`_start_worker`'s work after its watch and handler are set."""
     if hasattr(os, "nice"):  # POSIX: the jobs yield the cores to the process that waits for them, whose
         os.nice(15)  # solves are the run's critical path (Windows: normal priority)
     os.environ.update(env)
