@@ -416,7 +416,7 @@ def test_several_scenes_write_tables_2_to_4_in_tables_md(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["finger", "tables.md", "thumb"]
     text = (out / "tables.md").read_text()
-    sections = text.split("Table ")
+    sections = text.split("\n## Table ")  # the headings (the description above them names tables too)
     assert [s[0] for s in sections[1:]] == ["2", "3", "4"], text[:400]
     for scene in ("finger", "thumb"):  # finger: bend is external (Tables 2, 4), contract internal (Table 3)
         assert f"| {scene} | bend |" in sections[1] and f"| {scene} | bend |" in sections[3]

@@ -148,8 +148,8 @@ def run(names, nodes):
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--nodes", type=int, default=700)
-    ap.add_argument("--bodies", nargs="*", default=None)
+    ap.add_argument("--nodes", type=int, default=700, help="nodes each body is meshed with (default 700)")
+    ap.add_argument("--bodies", nargs="*", default=None, help="names of the bodies to run (default: all eight)")
     ap.add_argument("--tree", default=None, help="import mdsr_opt from this folder instead of the checkout")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(Path(args.tree).resolve()) if args.tree else str(ROOT))

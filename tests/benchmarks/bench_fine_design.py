@@ -84,7 +84,7 @@ def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ny", type=int, nargs="+", default=[24, 44, 64], help="cells across (nodes ~ 4 ny^2)")
-    ap.add_argument("--ipopt-print", type=int, default=0)
+    ap.add_argument("--ipopt-print", type=int, default=0, help="IPOPT print level of the design NLP (0: silent)")
     args = ap.parse_args(argv)
     head = f"{'nodes':>6} {'design s':>9} {'newton s':>9} {'ipopt s':>8} {'ratio':>6} {'cpu ratio':>9} " \
            f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
