@@ -237,7 +237,7 @@ def test_relabelling_and_rigid_motion_change_nothing(body, seed, name):
     t2[perm] = t
     moved = t2 @ rotation(rng.uniform(0, 2 * np.pi)).T + rng.normal(scale=10.0, size=2)
     out = route_muscles(relabelled, moved, K_a=1.0, K_b=1.0, n_seeds=10)
-    assert sum(len(m.nodes) for m in ref) >= 20
+    assert sum(len(m.nodes) for m in ref) >= 10  # ropes to compare (inside the body: fewer nodes than on the outline)
     assert [tuple(perm[list(m.nodes)]) for m in ref] == [m.nodes for m in out]
     assert {tuple(sorted(perm[list(e)])) for e in ref.seeds} == {tuple(sorted(e)) for e in out.seeds}
     for a, b in zip(ref.stats, out.stats):
@@ -275,7 +275,7 @@ def test_rotating_mesh_and_target_together_changes_nothing(body, name):
     t = family(body)[name]
     for kw in ({"K_a": 1.0, "K_b": 1.0, "n_seeds": 10}, {}):
         ref = route_muscles(body, t, **kw, fabrication=False)
-        assert sum(len(m.nodes) for m in ref) >= 20
+        assert sum(len(m.nodes) for m in ref) >= 10  # ropes to compare (inside the body: fewer nodes than on the outline)
         for deg in (10.0, 30.0, 45.0, 90.0, 137.0, 200.0):
             R = rotation(np.radians(deg))
             out = route_muscles(Mesh(body.points @ R.T, body.triangles), t @ R.T, **kw, fabrication=False)

@@ -561,7 +561,8 @@ class Session:
                 "dropped": [d.to_dict() for d in self.dropped],
                 # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
                 "acceptance": difference_failure(res.difference, self.mesh.size,
-                                                 *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance]),
+                                                 *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance],
+                                                 units=self.units or None),
                 "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles]}
 
 

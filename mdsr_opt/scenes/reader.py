@@ -306,6 +306,7 @@ _ROUTING_CHECKS = {
     "max_turn": _real(0.0, 180.0, what=" (degrees)"),
     "seed_threshold": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest contraction)"),
     "compression_ratio": _real(0.0, 1.0, lo_open=True, what=" (a fraction of the largest principal stretch)"),
+    "inset": _positive(allow_zero=True),
     "symmetry": _symmetry,
     "fabrication": fabrication_table,
 }

@@ -237,7 +237,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
                   min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
                   symmetry: str | bool = "auto", fabrication: Fabrication | dict | bool | None = None,
-                  compression_ratio: float = 1.0) -> RoutingResult:
+                  compression_ratio: float = 1.0, inset: float | None = None) -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
     Parameters
@@ -287,6 +287,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         ``result.notes``; ``result.fixture_radius`` is the fixture radius to design with (``anchor_radius``).
         ``False``: the search alone, on every edge of the contraction graph (ropes may lie on the outline;
         for studies of the search, not for a robot to build).
+    inset : float, optional
+        Lay every rope node at least this far inside the outline and the holes, when that is more than the
+        fabrication's clearance (half the channel plus the wall, at least 2 % of the body's size): a deeper
+        route on which end fixtures fit (:func:`route_for_design` tries ``min_fixture_radius + wall`` when
+        ropes were lost for lack of room at their ends). Ignored with ``fabrication=False``.
     compression_ratio : float in (0, 1], default 1
         An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
         principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
@@ -366,10 +371,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     else:
         fab = fab.for_body(mesh)
         clearance = fab.clearance(mesh)
+        if inset is not None:
+            clearance = max(clearance, positive_float(inset, "inset", allow_zero=True))
         adm_edges = _admissible_edges(mesh, fab, clearance)
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
-                  seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio)
+                  seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio,
+                  inset=None if inset is None else float(inset))
 
     x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
@@ -552,6 +560,19 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
         return rr, caught
 
     rr, caught = attempt(options)
+    fab = check_fabrication(options.get("fabrication"))
+    if fab is not False and options.get("inset") is None and rr.notes:
+        # ropes were dropped or shortened for their end fixtures: route deeper inside, where the smallest
+        # fixture fits at any rope node, and keep that routing if it keeps more ropes
+        f = fab.for_body(mesh)
+        deep, caught_deep = attempt(dict(options, inset=f.min_fixture_radius + f.wall,
+                                         fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
+        if len(deep) > len(rr):
+            note = (f"{len(rr)} rope(s) kept at the fabrication's clearance; routed again with every rope node "
+                    f"{f.min_fixture_radius + f.wall:.4g} inside the body and the smallest fixtures, radius "
+                    f"{f.min_fixture_radius:.4g}: "
+                    f"{len(deep)} kept")
+            rr, caught = replace(deep, notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
         if len(again):
