@@ -59,7 +59,7 @@ class CaseReport:
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     dropped : muscles taken out of the layout after a design (idle ones: name, nodes, contraction, reason).
-    saturated : names (or indices) of the muscles whose designed contraction is at ``a_max``.
+    saturated : names (``M1``, ... or their own) of the muscles whose designed contraction is at ``a_max``.
     stroke_band : per muscle the stroke's (low, high) under the fabrication's uncertainties, when computed
         (:func:`~mdsr_opt.synthesis.bands.stroke_bands`); band_notes : what the band left out, and why.
     """
@@ -318,7 +318,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.n_muscles = len(kept)
         rep.dropped = [d.to_dict() for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
-    rep.saturated = [mu.name or i for i, mu in enumerate(kept) if res.saturated[i]]
+    rep.saturated = res.saturated_names
     rep.times["design"] = time.perf_counter() - t1
     rep.contractions = [float(a) for a in res.contractions]
     rep.achieved = [float(a) for a in res.achieved]

@@ -48,7 +48,7 @@ from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.results import compact_repr, to_jsonable
-from ..plot.style import dxf_color, muscle_color, muscle_name
+from ..plot.style import dxf_color, muscle_color, muscle_label, muscle_name
 from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
@@ -118,7 +118,7 @@ def _check_rest_lengths(recorded, L0, muscles, what) -> None:
     off = np.flatnonzero(np.isfinite(rec) & ~np.isclose(rec, L0, rtol=1e-7, atol=0.0))
     if len(off):
         i = int(off[0])
-        raise ValueError(f"{what} was made with muscle {muscles[i].name or i!r} of rest length {rec[i]:.6g}; on this "
+        raise ValueError(f"{what} was made with muscle {muscle_label(muscles[i], i)!r} of rest length {rec[i]:.6g}; on this "
                          f"mesh with these muscles it is {L0[i]:.6g}: give the mesh and the muscles the design "
                          "was made with")
 

@@ -88,7 +88,7 @@ class PipelineResult:
         return compact_repr(self, ("success",), extra={
             "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
             "difference": d.difference, "contractions": d.contractions,
-            **({"saturated": [int(i) for i in np.flatnonzero(d.saturated)]} if d.saturated.any() else {}),
+            **({"saturated": d.saturated_names} if d.saturated.any() else {}),
             **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
             "total_time": self.times.get("total", float("nan"))})
 

@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields
+from ..plot.style import muscle_name
 from .problem import DesignProblem
 
 __all__ = ['Verification', 'DesignResult', 'MuscleWarning', 'SATURATION_TOL']
@@ -156,6 +157,9 @@ class DesignResult:
         Per muscle the (low, high) range of the stroke under the fabrication's uncertainties (fixture size,
         Poisson's ratio, mesh refinement; :func:`~mdsr_opt.synthesis.bands.stroke_bands`); empty (shape
         ``(0, 2)``) when not computed.
+    muscle_names : tuple of str
+        The muscles' names (their own, else ``M1, M2, ...``): :attr:`names` reads them, tables, reprs and
+        warnings use them.
     """
 
     method: str
@@ -187,9 +191,10 @@ class DesignResult:
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rest_mesh: dict | None = None
     stroke_band: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    muscle_names: tuple = ()
 
     def __repr__(self) -> str:
-        extra = {"saturated": [int(i) for i in np.flatnonzero(self.saturated)]} if self.saturated.any() else {}
+        extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
         extra.update(muscle_model=self.muscle_model, x=self.x, time=self.time)
         return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
 
@@ -198,6 +203,21 @@ class DesignResult:
         """(m,) bool: the muscle's contraction is at ``a_max`` (within :data:`SATURATION_TOL`)."""
         a = np.asarray(self.contractions, dtype=float)
         return np.isfinite(a) & (a >= float(self.a_max) - SATURATION_TOL)
+
+    @property
+    def names(self) -> tuple:
+        """The muscles' names, as every figure, drawing and table calls them: ``muscle_names`` when it
+        names every muscle, else ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`)."""
+        n = len(self.contractions)
+        if len(self.muscle_names) == n:
+            return tuple(str(v) for v in self.muscle_names)
+        return tuple(muscle_name(i) for i in range(n))
+
+    @property
+    def saturated_names(self) -> list:
+        """The names (:attr:`names`) of the saturated muscles."""
+        names = self.names
+        return [names[i] for i in np.flatnonzero(self.saturated)]
 
     @property
     def commanded(self) -> np.ndarray:
@@ -209,7 +229,9 @@ class DesignResult:
         tension, slack, saturated."""
         band = np.asarray(self.stroke_band, dtype=float).reshape(-1, 2)
         has_band = len(band) == len(self.contractions) and len(band) > 0
-        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} "
+        names = self.names
+        w = max([6] + [len(v) for v in names])
+        lines = [f"{'muscle':>{w}} {'commanded':>10} {'achieved':>9} {'stroke':>10} "
                  + (f"{'stroke band':>21} " if has_band else "") + f"{'tension':>10} slack saturated"]
         sat = self.saturated
         for i in range(len(self.contractions)):
@@ -217,7 +239,7 @@ class DesignResult:
                 return float(v[k]) if len(v) > k else float("nan")
             sl = bool(self.slack[i]) if len(self.slack) > i else False
             b = f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} " if has_band else ""
-            lines.append(f"{i:>6} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
+            lines.append(f"{names[i]:>{w}} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
                          f"{at(self.stroke):>10.4g} {b}{at(self.tension):>10.4g} {'yes' if sl else 'no':>5} "
                          f"{'YES' if sat[i] else 'no':>9}")
         return "\n".join(lines)
@@ -240,7 +262,7 @@ class DesignResult:
         """Scalars of the result (no arrays except the contractions), for tables and logs."""
         v = self.verification
         return {"method": self.method, "success": self.success, "status": self.status,
-                "muscle_model": self.muscle_model,
+                "muscle_model": self.muscle_model, "muscles": list(self.names),
                 "contractions": [float(c) for c in self.contractions],
                 "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
                 "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
@@ -287,6 +309,7 @@ class DesignResult:
                 v["min_eigenvalue"] = np.nan
             d["verification"] = Verification(**v)
         d["history"] = [tuple(h) for h in d.get("history", [])]
+        d["muscle_names"] = tuple(d.get("muscle_names", ()))
         return cls(**d)
 
     def save(self, path: str | os.PathLike) -> str:
@@ -309,7 +332,7 @@ class DesignResult:
         """
         return load_fields(cls, path, "design",
                            convert={"verification": lambda v: Verification(**v),
-                                    "history": lambda h: [tuple(p) for p in h]})
+                                    "history": lambda h: [tuple(p) for p in h], "muscle_names": tuple})
 
 
 def finite_or_none(o):
