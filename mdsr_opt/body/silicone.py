@@ -80,6 +80,7 @@ def silicone(name: str, thickness: float = 1.0, law: str = "yeoh"):
     Returns
     -------
     Yeoh or NeoHookean
+        With ``stress_unit="Pa"``: tensions of a body in known length units are then reported in newtons.
 
     Raises
     ------
@@ -97,5 +98,5 @@ def silicone(name: str, thickness: float = 1.0, law: str = "yeoh"):
         raise ValueError(f"law must be one of {', '.join(_LAWS)}, got {law!r}")
     C1, C2, C3 = SILICONES[key]
     if law == "neo-hookean":
-        return NeoHookean(E=6.0 * C1, nu=0.5, thickness=thickness, plane="stress")
-    return Yeoh(C1, C2, C3, thickness)
+        return NeoHookean(E=6.0 * C1, nu=0.5, thickness=thickness, plane="stress", stress_unit="Pa")
+    return Yeoh(C1, C2, C3, thickness, stress_unit="Pa")

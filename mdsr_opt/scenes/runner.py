@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 
 from ..core.errors import LayoutError
+from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
@@ -62,6 +63,10 @@ class CaseReport:
     saturated : names (``M1``, ... or their own) of the muscles whose designed contraction is at ``a_max``.
     stroke_band : per muscle the stroke's (low, high) under the fabrication's uncertainties, when computed
         (:func:`~mdsr_opt.synthesis.bands.stroke_bands`); band_notes : what the band left out, and why.
+    tension : per muscle the rope's tension at the design, in ``units["tension"]``.
+    units : ``{"stroke": ..., "tension": ...}``: the unit of the strokes (the scene's ``units``) and of the
+        tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
+        ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
     """
 
     scene: str
@@ -93,6 +98,8 @@ class CaseReport:
     dropped: list = field(default_factory=list)
     saturated: list = field(default_factory=list)
     stroke_band: list = field(default_factory=list)
+    tension: list = field(default_factory=list)
+    units: dict = field(default_factory=dict)
     band_notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
@@ -162,8 +169,9 @@ class SceneReport:
 
     def table(self) -> str:
         """A Markdown table of the key figures, one row per case."""
-        head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
+        su = next((c.units["stroke"] for c in self.cases if c.units), None)
+        head = (f"| scene | case | kind | nodes | muscles | achieved contractions | strokes ({length_unit(su)}) | "
+                "difference | diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
@@ -313,6 +321,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     run.design = res
+    res.units = scene.units
     if dropped:
         setup.muscles = kept
         rep.n_muscles = len(kept)
@@ -323,6 +332,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.contractions = [float(a) for a in res.contractions]
     rep.achieved = [float(a) for a in res.achieved]
     rep.stroke = [float(s) for s in res.stroke]
+    rep.tension = [float(t) for t in res.tensions_in_unit()]
+    rep.units = {"stroke": length_unit(res.units), "tension": res.tension_unit}
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / mesh.size
     rep.initial_difference = float(res.initial_difference)
@@ -335,8 +346,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     a = ", ".join(f"{v:.3f}" for v in res.contractions)
     ach = ", ".join(f"{v:.3f}" for v in res.achieved)
     st = ", ".join(f"{v:.4g}" for v in res.stroke)
+    tn = ", ".join(f"{v:.4g}" for v in res.tensions_in_unit())
     say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
-        f"strokes [{st}], difference {res.difference:.3g} "
+        f"strokes [{st}] {length_unit(res.units)}, tensions [{tn}] {res.tension_unit}, difference {res.difference:.3g} "
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if rep.saturated:

@@ -192,6 +192,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
     res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    res.stress_unit = getattr(material, "stress_unit", None)
     if res.saturated.any():
         warn_saturated(res, mus)
     return res

@@ -15,6 +15,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
+from ..core.quantities import check_length_unit
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
@@ -244,7 +245,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                     routing_options: dict | None = None, method: str = "flattened",
                     external_options: dict | None = None, fabrication=None,
                     idle_contraction: float = IDLE_CONTRACTION, bands: bool = False,
-                    band_options: dict | None = None, **design_options) -> PipelineResult:
+                    band_options: dict | None = None, units: str | None = None,
+                    **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -275,6 +277,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     band_options : dict, optional
         Keywords of ``stroke_bands`` (``radius_tol``, ``nu_tol``, ``refine``, ``max_refined_nodes``,
         ``max_iter``).
+    units : str, optional
+        The length unit of the mesh's coordinates (``"mm"``...: :data:`~mdsr_opt.synthesis.export.UNITS`),
+        recorded in ``.design.units``: tables give strokes in it, tensions in N for a material with a
+        ``stress_unit`` (a silicone preset), and the fabrication files default to it. None: body units.
     **design_options
         Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
         rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
@@ -310,6 +316,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
 
     t0 = time.perf_counter()
     check_mesh_material(mesh, material)
+    units = check_length_unit(units)
     idle_contraction = check_idle_contraction(idle_contraction)
     if not isinstance(bands, (bool, np.bool_)):
         raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
@@ -340,6 +347,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     t2 = time.perf_counter()
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
+    res.units = units
     t3 = time.perf_counter()
     times = {"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2}
     out = PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,

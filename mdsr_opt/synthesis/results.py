@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields
+from ..core.quantities import length_unit, tension_unit
 from ..plot.style import muscle_name
 from .problem import DesignProblem
 
@@ -160,6 +161,12 @@ class DesignResult:
     muscle_names : tuple of str
         The muscles' names (their own, else ``M1, M2, ...``): :attr:`names` reads them, tables, reprs and
         warnings use them.
+    units : str or None
+        The length unit of the body (a scene's ``units``: ``"mm"``...), None when not known: strokes are
+        lengths in it.
+    stress_unit : str or None
+        The unit of the material's constants (``"Pa"`` for the silicone presets), None when dimensionless:
+        with ``units`` it gives the tensions in newtons (:meth:`tensions_in_unit`).
     """
 
     method: str
@@ -192,6 +199,8 @@ class DesignResult:
     rest_mesh: dict | None = None
     stroke_band: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     muscle_names: tuple = ()
+    units: str | None = None
+    stress_unit: str | None = None
 
     def __repr__(self) -> str:
         extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
@@ -226,13 +235,19 @@ class DesignResult:
 
     def muscle_table(self) -> str:
         """One line per muscle: commanded and achieved contraction, stroke (with its band when computed),
-        tension, slack, saturated."""
+        tension, slack, saturated; strokes in :attr:`units` (else body units), tensions in N when the
+        material's stress unit and the length unit are known, else in units of ``E*t*length``
+        (:func:`~mdsr_opt.core.quantities.tension_unit`)."""
         band = np.asarray(self.stroke_band, dtype=float).reshape(-1, 2)
         has_band = len(band) == len(self.contractions) and len(band) > 0
         names = self.names
         w = max([6] + [len(v) for v in names])
-        lines = [f"{'muscle':>{w}} {'commanded':>10} {'achieved':>9} {'stroke':>10} "
-                 + (f"{'stroke band':>21} " if has_band else "") + f"{'tension':>10} slack saturated"]
+        lu = length_unit(self.units)
+        tu, factor = tension_unit(self.stress_unit, self.units)
+        sh, th = f"stroke ({lu})", f"tension ({tu})"
+        ws, wt = max(10, len(sh)), max(10, len(th))
+        lines = [f"{'muscle':>{w}} {'commanded':>10} {'achieved':>9} {sh:>{ws}} "
+                 + (f"{'stroke band':>21} " if has_band else "") + f"{th:>{wt}} slack saturated"]
         sat = self.saturated
         for i in range(len(self.contractions)):
             def at(v, k=i):
@@ -240,9 +255,20 @@ class DesignResult:
             sl = bool(self.slack[i]) if len(self.slack) > i else False
             b = f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} " if has_band else ""
             lines.append(f"{names[i]:>{w}} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
-                         f"{at(self.stroke):>10.4g} {b}{at(self.tension):>10.4g} {'yes' if sl else 'no':>5} "
-                         f"{'YES' if sat[i] else 'no':>9}")
+                         f"{at(self.stroke):>{ws}.4g} {b}{factor * at(self.tension):>{wt}.4g} "
+                         f"{'yes' if sl else 'no':>5} {'YES' if sat[i] else 'no':>9}")
         return "\n".join(lines)
+
+    @property
+    def tension_unit(self) -> str:
+        """The unit :meth:`tensions_in_unit` gives: ``"N"`` when the material's stress unit and the length
+        unit are known, else ``"units of E*t*<length>"``."""
+        return tension_unit(self.stress_unit, self.units)[0]
+
+    def tensions_in_unit(self) -> np.ndarray:
+        """The tensions in :attr:`tension_unit` (``tension`` is in the material's and the body's units,
+        ``E * t * length``)."""
+        return tension_unit(self.stress_unit, self.units)[1] * np.asarray(self.tension, dtype=float)
 
     def table(self) -> str:
         """The stroke table: :meth:`muscle_table`."""
@@ -259,13 +285,15 @@ class DesignResult:
         return float(math.atan2(self.rotation[1, 0], self.rotation[0, 0]))
 
     def summary(self) -> dict:
-        """Scalars of the result (no arrays except the contractions), for tables and logs."""
+        """Scalars of the result (no arrays except the per-muscle lists), for tables and logs: strokes and
+        tensions in the units ``units`` names (tensions in N when the material and length units are known)."""
         v = self.verification
         return {"method": self.method, "success": self.success, "status": self.status,
                 "muscle_model": self.muscle_model, "muscles": list(self.names),
+                "units": {"stroke": length_unit(self.units), "tension": self.tension_unit},
                 "contractions": [float(c) for c in self.contractions],
                 "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
-                "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
+                "tension": [float(c) for c in self.tensions_in_unit()], "slack": [bool(s) for s in self.slack],
                 "saturated": [bool(s) for s in self.saturated],
                 "stroke_band": [[float(lo), float(hi)] for lo, hi in np.asarray(self.stroke_band).reshape(-1, 2)],
                 "anchor_radius": self.anchor_radius, "difference": self.difference,
