@@ -67,3 +67,24 @@ def test_the_pipeline_repr_and_table_use_the_names():
         out = design_pipeline(mesh, MAT, left, right, muscles=[lower, upper], a_max=0.05)
     assert out.design.saturated.tolist() == [True, False] and "saturated=['M1']" in repr(out)
     assert [r.split()[0] for r in out.table().splitlines()[1:3]] == ["M1", "M2"]
+
+
+def test_a_union_of_layouts_names_every_muscle_once():
+    from mdsr_opt.scenes.animate import union_of_layouts
+
+    a, b, c = Muscle(range(1, 16)), Muscle(range(69, 84)), Muscle(range(18, 33))
+    union, slots = union_of_layouts({"left": [a, b], "right": [Muscle(b.nodes, name="other"), c]})
+    # b is the same path in both cases: one muscle, named as the first case names it (M2); c is "right"'s M2
+    assert [m.name for m in union] == ["M1", "left:M2", "right:M2"] and slots == {"left": [0, 1], "right": [1, 2]}
+    union, _ = union_of_layouts({"left": [Muscle(a.nodes, name="belly")], "right": [c]})
+    assert [m.name for m in union] == ["belly", "M1"]
+
+
+def test_a_gait_and_an_animation_may_not_share_a_name():
+    from mdsr_opt.scenes.names import check_output_names
+    from mdsr_opt.scenes.reader import SceneFileError
+
+    check_output_names(["bend"], ["gait"], gait_names=["walk"])
+    with pytest.raises(SceneFileError, match="the gait 'Walk' has the name of the animation 'walk'"):
+        check_output_names(["bend"], ["walk"], gait_names=["Walk"])
+
