@@ -298,7 +298,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     SolverFailure
         The external-driving solve (the target) failed.
     ValueError
-        Routing found no muscle (e.g. a target that only stretches the body), or bad input.
+        Routing found no muscle (e.g. a target that only stretches the body), or bad input (no drags, at
+        the door).
 
     Example
     -------
@@ -328,11 +329,14 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          "max_refined_nodes, max_iter)")
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
+    didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
+    if len(didx) == 0:
+        raise ValueError("drags is empty: design_pipeline's target is the body dragged by its drags "
+                         "({node: (x, y)}), so with none it is the rest shape and there is nothing to design")
     ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
     ext.raise_on_failure()
     t1 = time.perf_counter()
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
-    didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
         rr = route_for_design(mesh, ext.x, **ropts)
