@@ -101,3 +101,19 @@ def test_mdsr_run_logs_and_summarises_strokes_and_tensions_with_units(tmp_path, 
     case = json.loads((out / "summary.json").read_text())["cases"][0]
     assert case["units"] == {"stroke": "mm", "tension": "units of E*t*mm"} and len(case["tension"]) == len(case["stroke"])
     assert "strokes (mm)" in (out / "summary.md").read_text()
+
+
+def test_a_scene_file_states_its_stress_unit(tmp_path):
+    from mdsr_opt.scenes.reader import SceneFileError
+    from mdsr_opt.scenes.scenefile import load_scene, material_table
+
+    src = FINGER.read_text()
+    path = tmp_path / "f.toml"
+    path.write_text(src.replace("nu = 0.4\n", 'nu = 0.4\nstress_unit = "kPa"\n'))
+    scene = load_scene(path)
+    assert scene.material.stress_unit == "kPa" and scene.units == "mm"
+    assert material_table(scene.material)["stress_unit"] == "kPa"
+    assert material_table(silicone("dragon-skin-30"))["stress_unit"] == "Pa"
+    path.write_text(src.replace("nu = 0.4\n", 'nu = 0.4\nstress_unit = "psi"\n'))
+    with pytest.raises(SceneFileError, match="material.stress_unit: unknown stress_unit 'psi'"):
+        load_scene(path)
