@@ -14,6 +14,7 @@ from mdsr_opt import Mesh, NeoHookean, solve_external
 from mdsr_opt.body.silicone import silicone
 from mdsr_opt.cli.main import main
 from mdsr_opt.scenes.library import get_problem
+from mdsr_opt.studies.problems import get_study_problem
 from mdsr_opt.studies.recommend import run_recommendation
 from mdsr_opt.synthesis.pipeline import design_pipeline
 from mdsr_opt.synthesis.routing import RoutingWarning, route_muscles
@@ -47,6 +48,7 @@ def test_recommend_takes_a_scene_file(tmp_path):
     (lambda: get_problem("onemuscle"), "did you mean 'one_muscle'?"),
     (lambda: silicone("ecoflex-30"), "did you mean 'ecoflex-00-30'?"),
     (lambda: run_recommendation(None, scenes=["gripr"]), "did you mean 'gripper'?"),
+    (lambda: get_study_problem("strip-bnd"), "did you mean 'strip-bend'?"),
 ])
 def test_unknown_names_get_a_did_you_mean(call, hint):
     with pytest.raises(ValueError) as exc:

@@ -235,7 +235,12 @@ def get_study_problem(name: str) -> StudyProblem:
         return PROBLEMS[name]
     p = _scene_problem(name)
     if p is None:
-        raise ValueError(f"unknown study problem {name!r}; valid: {', '.join(list_study_problems())}")
+        import difflib
+
+        valid = list_study_problems()
+        close = difflib.get_close_matches(name, valid, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown study problem {name!r}{hint}; valid: {', '.join(valid)}")
     return p
 
 
