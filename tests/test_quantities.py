@@ -117,3 +117,14 @@ def test_a_scene_file_states_its_stress_unit(tmp_path):
     path.write_text(src.replace("nu = 0.4\n", 'nu = 0.4\nstress_unit = "psi"\n'))
     with pytest.raises(SceneFileError, match="material.stress_unit: unknown stress_unit 'psi'"):
         load_scene(path)
+
+
+def test_export_takes_the_material_for_a_design_that_records_no_stress_unit(tmp_path):
+    mesh, mus = strip_mm()
+    target = solve_internal(mesh, NeoHookean(1.0, 0.3), [mus], [0.1]).x
+    d = design_contractions(mesh, NeoHookean(1.0, 0.3), [mus], target)
+    d.stress_unit = None  # as a PosesResult: no stress unit of its own
+    files = export_fabrication(mesh, {"bend": d}, tmp_path, muscles=[mus], units="mm",
+                               material=NeoHookean(1.0, 0.3, stress_unit="MPa"))
+    rows = list(csv.DictReader(open(files["csv"])))
+    assert float(rows[0]["tension bend [N]"]) == pytest.approx(d.tension[0], rel=1e-8)  # MPa x mm^2 = N

@@ -138,7 +138,7 @@ def _known(design, name: str):
 
 
 def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
-                     channel_width: float | None = None, fabrication=None) -> FabricationData:
+                     channel_width: float | None = None, fabrication=None, material=None) -> FabricationData:
     """Collect and check the geometry and per-pose figures of a design (writes nothing).
 
     Parameters
@@ -159,6 +159,9 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         Channel, wall and fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`); default: the one
         a PipelineResult was routed with, else the defaults for this body. The fixtures' radius is the
         design's ``anchor_radius`` when it has one.
+    material : optional
+        The body's material, for the unit of the tensions (its ``stress_unit``) when the design does not
+        record it (a PosesResult); with a known length unit, tensions are then in N.
     """
     from .fabrication import Fabrication, check_fabrication
     from .pipeline import PipelineResult
@@ -170,7 +173,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         raise ValueError(f"units={units!r}, but the design was made in {known}: the mesh's coordinates are in "
                          f"{known} (leave units out, or give units={known!r})")
     units = None if units is None else check_units(units)
-    t_unit, t_factor = tension_unit(_known(design, "stress_unit"), units)
+    t_unit, t_factor = tension_unit(_known(design, "stress_unit") or getattr(material, "stress_unit", None), units)
     if fabrication is None and isinstance(design, PipelineResult) and design.routing is not None:
         fabrication = design.routing.fabrication
     fab = check_fabrication(fabrication)
@@ -535,7 +538,8 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
 
 
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
-                       name: str = "robot", channel_width: float | None = None, fabrication=None) -> dict[str, str]:
+                       name: str = "robot", channel_width: float | None = None, fabrication=None,
+                       material=None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
 
     Parameters
@@ -554,6 +558,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     channel_width : drawn channel width, length units (default the fabrication's ``channel_diameter``).
     fabrication : Fabrication or dict of its fields (default: a PipelineResult's, else the defaults for the
         body): the channels' walls and the end fixtures drawn.
+    material : optional: the body's material, for the tensions' unit when the design does not record it
+        (:func:`fabrication_data`).
 
     Returns
     -------
@@ -569,7 +575,7 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     """
     check_stem(name, "name")  # no path separator, no control character: before anything is written
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width,
-                          fabrication=fabrication)
+                          fabrication=fabrication, material=material)
     svg = _svg_text(fd, name)
     dxf = _dxf_text(fd)
     table = _csv_text(fd)

@@ -520,7 +520,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         from ..plot.common import figure_paths
 
         files += figure_paths(chart, vector) + [str(gif)]
-    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name}))
+    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,
+                                                                   "material": scene.material}))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
