@@ -74,10 +74,13 @@ def test_a_union_of_layouts_names_every_muscle_once():
 
     a, b, c = Muscle(range(1, 16)), Muscle(range(69, 84)), Muscle(range(18, 33))
     union, slots = union_of_layouts({"left": [a, b], "right": [Muscle(b.nodes, name="other"), c]})
-    # b is the same path in both cases: one muscle, named as the first case names it (M2); c is "right"'s M2
-    assert [m.name for m in union] == ["M1", "left:M2", "right:M2"] and slots == {"left": [0, 1], "right": [1, 2]}
+    # b is the same path in both cases: one muscle, named as the first case names it (M2); names collide
+    # (left's M2 and right's M2 = c), so every muscle of one case only carries its case
+    assert [m.name for m in union] == ["left:M1", "M2", "right:M2"] and slots == {"left": [0, 1], "right": [1, 2]}
     union, _ = union_of_layouts({"left": [Muscle(a.nodes, name="belly")], "right": [c]})
-    assert [m.name for m in union] == ["belly", "M1"]
+    assert [m.name for m in union] == ["belly", "M1"]  # no collision: the names as they are
+    union, _ = union_of_layouts({"left": [a, b], "right": [c]})  # gecko: left M1, M2 and right M1
+    assert [m.name for m in union] == ["left:M1", "left:M2", "right:M1"]
 
 
 def test_a_gait_and_an_animation_may_not_share_a_name():
@@ -88,3 +91,13 @@ def test_a_gait_and_an_animation_may_not_share_a_name():
     with pytest.raises(SceneFileError, match="the gait 'Walk' has the name of the animation 'walk'"):
         check_output_names(["bend"], ["walk"], gait_names=["Walk"])
 
+
+
+def test_long_animation_titles_wrap_at_a_comma():
+    from mdsr_opt.plot.scenes import wrap_title
+
+    t = "gait 6/21: bend_left:M1 0.54 → 0.54, bend_right:M1 0.00 → 0.01, bend_right:M2 0.00 → 0.01"
+    lines = wrap_title(t, 76).split("\n")
+    assert len(lines) == 2 and all(len(s) <= 76 for s in lines) and lines[0].endswith("0.01,")
+    assert "".join(s if s.endswith(",") is False else s + " " for s in lines) == t
+    assert wrap_title("frame 1/3", 76) == "frame 1/3"

@@ -156,10 +156,11 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
 def union_of_layouts(layouts: Mapping[str, Sequence[Muscle]]) -> tuple[tuple, dict]:
     """The muscles of several cases' layouts, each once, with names unique in the union.
 
-    A muscle whose node path is another case's is the same muscle (it keeps the first case's name). A name
-    that two different muscles of the union would share (``M1`` of two separately routed cases) is
-    prefixed by its case: ``bend_left:M1``, ``bend_right:M1``; unnamed muscles are named by their place in
-    their case's layout (:func:`~mdsr_opt.plot.style.muscle_label`) first.
+    A muscle whose node path is in several cases' layouts is one muscle and keeps its name. When names
+    collide (``M1`` of two separately routed cases), every muscle of one case only is prefixed by its case
+    (``bend_left:M1``, ``bend_right:M1``, ``bend_right:M2``), so that no name reads as another case's;
+    unnamed muscles are named by their place in their case's layout
+    (:func:`~mdsr_opt.plot.style.muscle_label`) first.
 
     Returns
     -------
@@ -168,7 +169,8 @@ def union_of_layouts(layouts: Mapping[str, Sequence[Muscle]]) -> tuple[tuple, di
         Per case, the places in ``union`` of its layout's muscles, in order.
     """
     union: list[Muscle] = []
-    source: list[tuple[str, str]] = []  # (case, the muscle's name in its case)
+    source: list[tuple[str, str]] = []  # (first case, the muscle's name there)
+    cases_of: list[set] = []
     slots: dict[str, list[int]] = {}
     for cname, mus in layouts.items():
         idx = []
@@ -176,11 +178,15 @@ def union_of_layouts(layouts: Mapping[str, Sequence[Muscle]]) -> tuple[tuple, di
             if m not in union:  # equal node paths are one muscle (Muscle compares its nodes only)
                 union.append(m)
                 source.append((cname, muscle_label(m, i)))
-            idx.append(union.index(m))
+                cases_of.append(set())
+            k = union.index(m)
+            cases_of[k].add(cname)
+            idx.append(k)
         slots[cname] = idx
-    count: dict[str, int] = {}
-    for _, own in source:
-        count[own] = count.get(own, 0) + 1
-    named = tuple(Muscle(m.nodes, name=own if count[own] == 1 else f"{cname}:{own}")
-                  for m, (cname, own) in zip(union, source))
-    return named, slots
+    names = [own for _, own in source]
+    if len(set(names)) < len(names):
+        names = [own if len(cases_of[k]) > 1 else f"{c}:{own}" for k, (c, own) in enumerate(source)]
+        for k, n in enumerate(names):  # a shared muscle's name another one still carries: its first case too
+            if names.count(n) > 1:
+                names[k] = f"{source[k][0]}:{n}" if ":" not in n else f"{n}#{k + 1}"
+    return tuple(Muscle(m.nodes, name=n) for m, n in zip(union, names)), slots
