@@ -101,3 +101,14 @@ def test_long_animation_titles_wrap_at_a_comma():
     assert len(lines) == 2 and all(len(s) <= 76 for s in lines) and lines[0].endswith("0.01,")
     assert "".join(s if s.endswith(",") is False else s + " " for s in lines) == t
     assert wrap_title("frame 1/3", 76) == "frame 1/3"
+
+
+def test_mechanics_errors_name_the_muscle_as_figures_do():
+    from mdsr_opt.core.errors import LayoutError
+
+    mesh = strip()
+    lower, upper = unnamed(mesh)
+    with pytest.raises(LayoutError, match=r"^muscle M1: its anchor patches cover"):
+        solve_internal(mesh, MAT, [lower, upper], [0.5, 0.5], anchor_radius=1.9)
+    with pytest.raises(LayoutError, match=r"^muscle belly: its anchor patches cover"):
+        solve_internal(mesh, MAT, [Muscle(lower.nodes, name="belly")], [0.5], anchor_radius=1.9)
