@@ -99,7 +99,7 @@ def test_pipeline_band_in_the_table_the_csv_and_the_figure(tmp_path):
     assert band.shape == (len(out.muscles), 2)
     assert np.all(band[:, 0] <= out.design.stroke) and np.all(out.design.stroke <= band[:, 1])
     assert "stroke band" in out.table() and f"{band[0, 0]:.4g} .. {band[0, 1]:.4g}" in out.table()
-    files = export_fabrication(mesh, out, tmp_path, name="plate")
+    files = export_fabrication(mesh, out, tmp_path, name="plate", units="mm")
     rows = list(csv.reader(Path(files["csv"]).read_text().splitlines()))
     assert rows[0][-2:] == ["stroke design low [mm]", "stroke design high [mm]"]
     assert [float(v) for v in rows[1][-2:]] == pytest.approx(band[0], rel=1e-8)

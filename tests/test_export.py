@@ -88,7 +88,7 @@ def test_svg_dxf_csv_at_true_scale(tmp_path):
     # CSV: units in every header with a length; strokes a * L0
     rows = list(csv.reader(open(files["csv"])))
     head = rows[0]
-    assert head[2] == "rest length [mm]" and "stroke up [mm]" in head and "tension down [E*t*mm]" in head
+    assert head[2] == "rest length [mm]" and "stroke up [mm]" in head and "tension down [units of E*t*mm]" in head
     assert [r[0] for r in rows[1:]] == ["bottom", "top", "diag"]
     col = head.index("stroke up [mm]")
     np.testing.assert_allclose([float(r[col]) for r in rows[1:]], np.array([0.1, 0.0, 0.2]) * L0, rtol=1e-8)
@@ -202,7 +202,7 @@ def test_a_real_design_exports_its_strokes_and_tensions(tmp_path):
     assert float(rows[0]["stroke design [mm]"]) == pytest.approx(expect, rel=1e-8)
     assert float(rows[0]["stroke design [mm]"]) == pytest.approx(0.2 * 3.5, rel=1e-4)   # 14 edges of 0.25
     if getattr(res, "tension", None) is not None:
-        assert float(rows[0]["tension design [E*t*mm]"]) > 0
+        assert float(rows[0]["tension design [units of E*t*mm]"]) > 0
 
 
 @pytest.mark.parametrize("kw, kind, words", [

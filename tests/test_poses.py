@@ -278,7 +278,7 @@ def test_run_scene_writes_the_gait_folder(tmp_path):
     info = rep.animations["wave"]
     assert info["success"], info.get("message")
     folder = tmp_path / "out" / "wave"
-    names = {"layout.json", "schedule.csv", "schedule.png", "wave.gif", "gait.json", f"{scene.name}.svg",
+    names = {"layout.json", "schedule.csv", "schedule.png", "wave.gif", "wave.json", f"{scene.name}.svg",
              f"{scene.name}.dxf", f"{scene.name}_muscles.csv"}
     assert names <= {p.name for p in folder.iterdir()}
     assert info["frames"] == 5 and info["n_muscles"] <= info["separate_n_muscles"]
@@ -301,9 +301,9 @@ def _broken_export(*args, **kwargs):  # a module's function: a worker process fi
 @pytest.mark.parametrize("background", [True, False])
 @pytest.mark.parametrize("job", ["export", "gif"])
 def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background, job):
-    """The gait's chart, GIF and fabrication files are background jobs: gait.json, which lists their files,
+    """The gait's chart, GIF and fabrication files are background jobs: wave.json (<gait>.json), which lists their files,
     is written only once every one of them has reported; one that fails fails the run (in a worker or
-    here) and leaves no gait.json, even when the others finished before it."""
+    here) and leaves no wave.json, even when the others finished before it."""
     from test_scenes import finger_dict, write_json
 
     import mdsr_opt.synthesis.export as export
@@ -321,7 +321,7 @@ def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monke
     with pytest.raises(ValueError, match="the DXF writer broke"):
         run_scene(scene, tmp_path / "out", cases=["bend"], photos=False, log=None, background=background)
     folder = tmp_path / "out" / "wave"
-    assert (folder / "layout.json").exists() and not (folder / "gait.json").exists()
+    assert (folder / "layout.json").exists() and not (folder / "wave.json").exists()
 
 
 @pytest.mark.slow

@@ -163,3 +163,5 @@ def test_gecko_gait_alternates_left_and_right():
     assert res.states[15][head, 1].mean() < rest_y - 0.1     # keyframe 4: bent right
     assert np.abs(res.states[-1] - scene.mesh.points).max() < 1e-6   # back at rest
     assert res.contractions.shape == (21, len(res.muscles))
+    names = [m.name for m in res.muscles]  # the two cases' separately routed M1, M2: unique in the union
+    assert len(set(names)) == len(names) and "bend_left:M1" in names and "bend_right:M1" in names

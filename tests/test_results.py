@@ -14,7 +14,9 @@ from mdsr_opt.core.results import format_value, to_jsonable
 
 def test_helpers_summarise_arrays_and_make_json():
     assert format_value(np.zeros((4000, 2))) == "array((4000, 2), float64)"
-    assert format_value(np.array([1.0, 2.0])) == "[1., 2.]"
+    assert format_value(np.array([1.0, 2.0])) == "[1, 2]" == format_value([1.0, 2.0])
+    assert format_value(np.full(7, 0.25)) == "[" + ", ".join(["0.25"] * 7) + "]"  # 7 muscles: values too
+    assert format_value(np.zeros(54)) == "array((54,), float64)"
     assert format_value(list(range(50))) == "<50 items>"
     assert format_value(0.123456789) == "0.1235"
     d = to_jsonable({"a": np.arange(3, dtype=np.int64), "b": (np.float32(1.5), math.inf), "c": np.bool_(True)})

@@ -36,7 +36,7 @@ def test_registry_finds_the_repository_problems():
 
 
 def test_unknown_problem_names_the_library():
-    with pytest.raises(UnknownName, match=r"unknown problem 'geko'; the library has: .*gecko"):
+    with pytest.raises(UnknownName, match=r"unknown problem 'geko' \(did you mean 'gecko'\?\); the library has: .*gecko"):
         get_problem("geko")
     assert issubclass(UnknownName, KeyError) and issubclass(UnknownName, ValueError)
 

@@ -96,7 +96,7 @@ def test_a_contraction_at_a_max_is_flagged_and_warned():
     with pytest.warns(MuscleWarning, match=r"lower .*saturated at a_max = 0\.1"):
         res = design_contractions(mesh, MAT, [lower], target, a_max=0.1)
     assert res.success and res.saturated.tolist() == [True]
-    assert "saturated=[0]" in repr(res) and res.summary()["saturated"] == [True]
+    assert "saturated=['lower']" in repr(res) and res.summary()["saturated"] == [True]
     assert "YES" in res.muscle_table()
     with warnings.catch_warnings():
         warnings.simplefilter("error", MuscleWarning)  # below a_max: no warning

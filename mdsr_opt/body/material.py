@@ -31,7 +31,7 @@ evaluate it symbolically.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 import numbers
 
@@ -39,6 +39,7 @@ import casadi as ca
 import numpy as np
 
 from ..core.checks import positive_float
+from ..core.quantities import check_stress_unit
 from .planestress import CompressibleNeoHookeanLaw, IncompressibleLaw
 
 __all__ = ["NeoHookean", "LinearElastic", "Yeoh", "MooneyRivlin", "Material", "numeric_law", "material_dict",
@@ -215,6 +216,8 @@ class _Isotropic:
     nu: float
     thickness: float = 1.0
     plane: str = "strain"
+    #: the unit of ``E`` (:data:`~mdsr_opt.core.quantities.STRESS_UNITS`, ``"Pa"``...), None: dimensionless
+    stress_unit: str | None = field(default=None, compare=False)
 
     #: whether ``nu = 0.5`` (incompressible) is allowed in plane stress
     _stress_incompressible = True
@@ -234,6 +237,7 @@ class _Isotropic:
         object.__setattr__(self, "E", E)
         object.__setattr__(self, "nu", nu)
         object.__setattr__(self, "thickness", positive_float(self.thickness, "thickness"))
+        object.__setattr__(self, "stress_unit", check_stress_unit(self.stress_unit))
 
     @property
     def mu(self) -> float:
@@ -388,6 +392,8 @@ class Yeoh(_Law):
     C2: float = 0.0
     C3: float = 0.0
     thickness: float = 1.0
+    #: the unit of the constants (``"Pa"`` for the silicone presets), None: dimensionless
+    stress_unit: str | None = field(default=None, compare=False)
 
     nu = 0.5
     plane = "stress"
@@ -397,6 +403,7 @@ class Yeoh(_Law):
         object.__setattr__(self, "C2", _real(self.C2, "C2 (Yeoh)"))
         object.__setattr__(self, "C3", _real(self.C3, "C3 (Yeoh)"))
         object.__setattr__(self, "thickness", positive_float(self.thickness, "thickness"))
+        object.__setattr__(self, "stress_unit", check_stress_unit(self.stress_unit))
 
     @property
     def mu(self) -> float:
@@ -443,6 +450,8 @@ class MooneyRivlin(_Law):
     C10: float
     C01: float = 0.0
     thickness: float = 1.0
+    #: the unit of the constants (``"Pa"``...), None: dimensionless
+    stress_unit: str | None = field(default=None, compare=False)
 
     nu = 0.5
     plane = "stress"
@@ -457,6 +466,7 @@ class MooneyRivlin(_Law):
         object.__setattr__(self, "C10", c10)
         object.__setattr__(self, "C01", c01)
         object.__setattr__(self, "thickness", positive_float(self.thickness, "thickness"))
+        object.__setattr__(self, "stress_unit", check_stress_unit(self.stress_unit))
 
     @property
     def mu(self) -> float:
@@ -496,6 +506,8 @@ def material_dict(material) -> dict:
     incompressible laws), ``plane`` and the law's own constants; :func:`material_from_dict` reads it back."""
     out = {"kind": material.kind, "E": float(material.E), "nu": float(material.nu),
            "thickness": float(material.thickness), "plane": getattr(material, "plane", "strain")}
+    if getattr(material, "stress_unit", None):
+        out["stress_unit"] = material.stress_unit
     if isinstance(material, Yeoh):
         out.update(C1=material.C1, C2=material.C2, C3=material.C3)
     elif isinstance(material, MooneyRivlin):
@@ -512,14 +524,15 @@ def material_from_dict(data: dict):
     if not isinstance(kind, str):
         raise ValueError(f"a material record needs a kind, got {kind!r}")
     t = data.get("thickness", 1.0)
+    su = data.get("stress_unit")
     if kind.startswith("yeoh"):
-        return Yeoh(data["C1"], data.get("C2", 0.0), data.get("C3", 0.0), t)
+        return Yeoh(data["C1"], data.get("C2", 0.0), data.get("C3", 0.0), t, stress_unit=su)
     if kind == MooneyRivlin.kind:
-        return MooneyRivlin(data["C10"], data.get("C01", 0.0), t)
+        return MooneyRivlin(data["C10"], data.get("C01", 0.0), t, stress_unit=su)
     plane = data.get("plane", "stress" if "plane-stress" in kind else "strain")
     if kind.startswith("neo-hookean"):
-        return NeoHookean(data["E"], data["nu"], t, plane)
+        return NeoHookean(data["E"], data["nu"], t, plane, stress_unit=su)
     if kind == LinearElastic.kind:
-        return LinearElastic(data["E"], data["nu"], t, plane)
+        return LinearElastic(data["E"], data["nu"], t, plane, stress_unit=su)
     raise ValueError(f"unknown material kind {kind!r} (known: neo-hookean[-plane-stress[-incompressible]], "
                      f"linear, yeoh(...), mooney-rivlin)")

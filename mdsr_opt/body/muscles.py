@@ -14,7 +14,20 @@ from numpy.typing import ArrayLike
 
 from ..core.checks import as_float_array, as_index_array, check_label
 
-__all__ = ["Muscle", "check_muscles", "check_contractions", "check_distinct_ropes"]
+__all__ = ["Muscle", "check_muscles", "check_contractions", "check_distinct_ropes", "default_muscle_name",
+           "label_of"]
+
+
+def default_muscle_name(i: int) -> str:
+    """The name of an unnamed muscle ``i`` (0-based place in its layout): ``"M1"``, ``"M2"``... (every
+    figure, file, table and message uses it: :func:`mdsr_opt.plot.style.muscle_name`)."""
+    return f"M{int(i) + 1}"
+
+
+def label_of(muscles, i: int) -> str:
+    """The label of the ``i``-th of ``muscles`` (Muscles or node lists): its name, else ``M<i+1>``."""
+    m = muscles[i]
+    return m.label(i) if isinstance(m, Muscle) else default_muscle_name(i)
 
 
 @dataclass(frozen=True)
@@ -55,6 +68,10 @@ class Muscle:
 
     def _label(self) -> str:
         return repr(self.name) if self.name else "path"
+
+    def label(self, i: int) -> str:
+        """The muscle's name, else :func:`default_muscle_name` ``(i)``, ``i`` its place in the layout."""
+        return str(self.name) if self.name else default_muscle_name(i)
 
     @property
     def segments(self) -> np.ndarray:

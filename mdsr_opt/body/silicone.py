@@ -43,6 +43,8 @@ Example
 
 from __future__ import annotations
 
+import difflib
+
 from .material import NeoHookean, Yeoh
 
 __all__ = ["silicone", "SILICONES"]
@@ -80,6 +82,7 @@ def silicone(name: str, thickness: float = 1.0, law: str = "yeoh"):
     Returns
     -------
     Yeoh or NeoHookean
+        With ``stress_unit="Pa"``: tensions of a body in known length units are then reported in newtons.
 
     Raises
     ------
@@ -92,10 +95,12 @@ def silicone(name: str, thickness: float = 1.0, law: str = "yeoh"):
         raise TypeError(f"the silicone's name must be a string, got {type(name).__name__}")
     key = _key(name)
     if key not in SILICONES:
-        raise ValueError(f"unknown silicone {name!r}; known: {', '.join(SILICONES)}")
+        close = difflib.get_close_matches(key, list(SILICONES), n=1, cutoff=0.5)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown silicone {name!r}{hint}; known: {', '.join(SILICONES)}")
     if law not in _LAWS:
         raise ValueError(f"law must be one of {', '.join(_LAWS)}, got {law!r}")
     C1, C2, C3 = SILICONES[key]
     if law == "neo-hookean":
-        return NeoHookean(E=6.0 * C1, nu=0.5, thickness=thickness, plane="stress")
-    return Yeoh(C1, C2, C3, thickness)
+        return NeoHookean(E=6.0 * C1, nu=0.5, thickness=thickness, plane="stress", stress_unit="Pa")
+    return Yeoh(C1, C2, C3, thickness, stress_unit="Pa")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 
 from ..core.errors import InputError
@@ -110,29 +111,76 @@ def _cli(args) -> int:
     return 0
 
 
+#: The options of ``mdsr study``: flag -> add_argument keywords
+_OPTIONS = {
+    "--list": dict(action="store_true", help="list the studies and problems"),
+    "--out": dict(help="output folder; it must be new or empty, and is locked while the study runs: a second "
+                  "command into it stops with an error"),
+    "--overwrite": dict(action="store_true", help="replace the files of an earlier mdsr run or study in --out (only "
+                        "the files its manifest lists; a folder holding other files but no manifest is still "
+                        "refused)"),
+    "--resolutions": dict(help="comma-separated node counts, replacing the study's"),
+    "--methods": dict(help="comma-separated backends / design methods, replacing the study's"),
+    "--problems": dict(help="comma-separated problems, replacing the study's"),
+    "--materials": dict(help="comma-separated material models, replacing the study's"),
+    "--reference-resolution": dict(type=int, help="node count of the reference solutions"),
+    "--timeout": dict(type=float, help="seconds allowed per run"),
+    "--tol": dict(help="fidelity study: comma-separated tolerances (default 0.01,0.001); recommend study: the "
+                  "shape tolerance (default 0.01)"),
+    "--stroke-tol": dict(type=float, help="recommend study: the stroke tolerance (default 0.05)"),
+    "--scenes": dict(help="recommend study: comma-separated library scenes or scene file paths (.toml/.json/.py) "
+                     "(default gripper,tentacle)"),
+    "--dask": dict(action="store_true", help="run on a local Dask cluster (one worker per core)"),
+    "--scheduler": dict(help="address of a running Dask scheduler (implies Dask)"),
+    "--workers": dict(type=int, help="workers of the local Dask cluster"),
+    "--quiet": dict(action="store_true", help="no progress lines"),
+}
+
+#: The options of ``mdsr study recommend`` (the others of ``mdsr study`` do not apply to it)
+_RECOMMEND_OPTIONS = ("--out", "--overwrite", "--scenes", "--methods", "--resolutions", "--reference-resolution",
+                      "--tol", "--stroke-tol", "--timeout", "--dask", "--scheduler", "--workers", "--quiet")
+
+
+def recommend_parser() -> argparse.ArgumentParser:
+    """A parser whose help is ``mdsr study recommend --help``: what the study does and writes, and only the
+    options of ``mdsr study`` that apply to it."""
+    p = argparse.ArgumentParser(
+        prog="mdsr study recommend", add_help=False,
+        description="Which backend and which mesh reach a shape (--tol) and stroke (--stroke-tol) tolerance at "
+                    "least cost, per scene (a library scene or a scene file): every case of each scene is "
+                    "solved by every backend (--methods) at every node count (--resolutions) and compared with "
+                    "a finer reference. Writes into --out: recommend.csv (one row per scene), "
+                    "recommend_runs.csv (every run), recommend.md, recommend.json and a chart "
+                    "recommend_<scene>.png per scene; prints the table.")
+    for flag in _RECOMMEND_OPTIONS:
+        p.add_argument(flag, **_OPTIONS[flag])
+    return p
+
+
+class _StudyHelp(argparse.Action):
+    """``-h``/``--help``: the help of the study named before it (``mdsr study recommend --help``), else of
+    ``mdsr study``."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from ..studies.spec import RECOMMEND
+
+        if getattr(namespace, "name", None) == RECOMMEND:
+            recommend_parser().print_help()
+        else:
+            parser.print_help()
+        parser.exit()
+
+
 def add_cli(sub) -> None:
     """Register ``mdsr study``."""
-    p = sub.add_parser("study", help="run a solver comparison study (mdsr study --list)",
-                       description="Run a solver comparison study: a tidy CSV, metadata and charts in --out.")
+    p = sub.add_parser("study", help="run a solver comparison study (mdsr study --list)", add_help=False,
+                       description="Run a solver comparison study: a tidy CSV, metadata and charts in --out. "
+                                   "mdsr study recommend --help: that study's own help.")
+    p.add_argument("-h", "--help", action=_StudyHelp, help="show this help (after a study's name: its help) and exit")
     p.add_argument("name", nargs="?", help="study name (see --list)")
-    p.add_argument("--list", action="store_true", help="list the studies and problems")
-    p.add_argument("--out", help="output folder; it must be new or empty, and is locked while the study runs: "
-                   "a second command into it stops with an error")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace the files of an earlier mdsr run or study in --out (only the files its manifest "
-                   "lists; a folder holding other files but no manifest is still refused)")
-    p.add_argument("--resolutions", help="comma-separated node counts, replacing the study's")
-    p.add_argument("--methods", help="comma-separated backends / design methods, replacing the study's")
-    p.add_argument("--problems", help="comma-separated problems, replacing the study's")
-    p.add_argument("--materials", help="comma-separated material models, replacing the study's")
-    p.add_argument("--reference-resolution", type=int, help="node count of the reference solutions")
-    p.add_argument("--timeout", type=float, help="seconds allowed per run")
-    p.add_argument("--tol", help="fidelity study: comma-separated tolerances (default 0.01,0.001); recommend "
-                   "study: the shape tolerance (default 0.01)")
-    p.add_argument("--stroke-tol", type=float, help="recommend study: the stroke tolerance (default 0.05)")
-    p.add_argument("--scenes", help="recommend study: comma-separated library scenes (default gripper,tentacle)")
-    p.add_argument("--dask", action="store_true", help="run on a local Dask cluster (one worker per core)")
-    p.add_argument("--scheduler", help="address of a running Dask scheduler (implies Dask)")
-    p.add_argument("--workers", type=int, help="workers of the local Dask cluster")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    for flag, kw in _OPTIONS.items():
+        p.add_argument(flag, **kw)
     p.set_defaults(func=_cli)

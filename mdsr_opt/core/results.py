@@ -3,8 +3,9 @@
 Result objects hold arrays of thousands of numbers; a dataclass's own ``repr`` prints all of them. The
 helpers here give every result the same manners:
 
-- :func:`compact_repr` writes ``Name(field=value, ...)`` with arrays as ``array(shape, dtype)``, long
-  sequences as their length and floats to four significant digits;
+- :func:`compact_repr` writes ``Name(field=value, ...)`` with short 1-D numeric arrays (at most
+  :data:`MAX_VALUES`: one value per muscle) as their values, like lists, other arrays as
+  ``array(shape, dtype)``, long sequences as their length and floats to four significant digits;
 - :func:`to_jsonable` turns arrays, numpy scalars, tuples, dataclasses and non-finite floats into what
   :func:`json.dumps` accepts (NaN and infinities become ``None``);
 - :func:`save_fields` / :func:`load_fields` write a result holding states as one ``.npz`` file: every array
@@ -46,12 +47,17 @@ __all__ = ["compact_repr", "format_value", "to_jsonable", "plain", "save_npz", "
 #: Longest ``repr`` a result object prints (one line).
 MAX_REPR = 200
 
+#: A 1-D numeric array of at most this many values (one per muscle, say) prints its values, a longer one
+#: its shape: ``contractions=[0.1, 0.2, ...]`` for up to 16 muscles, ``x=array((54,), float64)`` for a state.
+MAX_VALUES = 16
+
 
 def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:
     """A short text for one field's value (see the module docstring)."""
     if isinstance(value, np.ndarray):
-        if value.size <= max_items and value.ndim <= 1:
-            return np.array2string(value, precision=4, separator=", ")
+        if value.ndim == 1 and value.size <= MAX_VALUES and value.dtype.kind in "biuf":
+            # per-muscle figures (contractions, strokes...): their values, as a list prints them
+            return "[" + ", ".join(format_value(v) for v in value.tolist()) + "]"
         return f"array({tuple(value.shape)}, {value.dtype})"
     if isinstance(value, (bool, np.bool_)):
         return repr(bool(value))
@@ -65,6 +71,10 @@ def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:
     if isinstance(value, dict):
         return f"{{{len(value)} keys}}" if len(repr(value)) > max_chars else repr(value)
     if isinstance(value, (list, tuple)):
+        if 0 < len(value) <= MAX_VALUES and all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool)
+                                                for v in value):  # numbers, one per muscle: as an array
+            inner = ", ".join(format_value(v) for v in value)
+            return f"({inner}{',' if len(value) == 1 else ''})" if isinstance(value, tuple) else f"[{inner}]"
         if len(value) <= max_items and all(isinstance(v, (int, float, str, bool, np.number)) for v in value):
             inner = ", ".join(format_value(v) for v in value)
             text = f"({inner}{',' if len(value) == 1 else ''})" if isinstance(value, tuple) else f"[{inner}]"

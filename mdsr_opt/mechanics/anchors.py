@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from ..core.errors import LayoutError
 from ..core.checks import positive_float
-from ..body.muscles import Muscle, check_muscles
+from ..body.muscles import Muscle, check_muscles, label_of
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "convex_hull", "default_anchor_radius", "check_anchor_radius",
            "anchor_radius_or_default", "valid_muscles", "anchor_patches", "rigid_groups",
@@ -196,8 +196,8 @@ def _rigid_groups(mesh, mus, radius: float) -> list[np.ndarray]:
     groups, joined = patch_groups(mesh, mus, radius)
     if joined:
         c = joined[0]
-        raise LayoutError(f"the anchor patches of muscle {c} are joined through other muscles' anchors, so "
-                         "it could not contract; give a smaller anchor_radius")
+        raise LayoutError(f"the anchor patches of muscle {label_of(mus, c)} are joined through other muscles' "
+                          "anchors, so it could not contract; give a smaller anchor_radius")
     return groups
 
 

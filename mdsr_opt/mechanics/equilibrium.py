@@ -10,7 +10,7 @@ import numpy as np
 from ..core.errors import LayoutError
 from ..core.guards import interruptible
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles
+from ..body.muscles import Muscle, check_contractions, check_distinct_ropes, check_muscles, label_of
 from ..core.checks import node_indices, positive_float
 from .align import align
 from .backends import CONSTRAINED_BACKENDS, supports_constraints
@@ -331,8 +331,8 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     k_seg, a_fac = spring_segments(mesh, material, mus, stiffness, radius)
     if np.any(a * a_fac >= 1.0):
         c = int(np.argmax(a * a_fac))
-        raise LayoutError(f"muscle {c}: its anchor patches cover so much of it that a contraction of {a[c]:g} "
-                          f"would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
+        raise LayoutError(f"muscle {label_of(mus, c)}: its anchor patches cover so much of it that a contraction "
+                          f"of {a[c]:g} would shorten the rest by {a[c] * a_fac[c]:.3g} >= 1; give a smaller anchor_radius")
     constrained = model == "cable" or len(rigid_groups(mesh, mus, radius)) > 0
     if constrained and not supports_constraints(backend):
         why = "the exact cable" if model == "cable" else f"the rigid anchor patches (anchor_radius={radius_given:g})"

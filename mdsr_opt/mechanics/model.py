@@ -53,6 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..body.material import numeric_law
+from ..body.muscles import label_of
 from .segments import spring_energy
 from .assembly import HessianPattern
 from .newton import NewtonEnergy
@@ -535,7 +536,7 @@ def spring_parameters(mesh, muscles, contractions, stiffness) -> tuple[np.ndarra
                              f"got shape {ks.shape}")
         e = mesh.edge_rows(mus.segments[:, 0], mus.segments[:, 1])
         if (e < 0).any():
-            raise ValueError(f"muscle {c} leaves the mesh: a segment is not a mesh edge")
+            raise ValueError(f"muscle {label_of(muscles, c)} leaves the mesh: a segment is not a mesh edge")
         np.add.at(k, e, ks)  # unbuffered: a row given twice adds up twice
         np.add.at(kr, e, ks * (1.0 - a))
     r = np.where(k > 0, kr / np.where(k > 0, k, 1.0), 1.0)

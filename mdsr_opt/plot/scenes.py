@@ -128,6 +128,21 @@ def gif_palette(frames, n_sample: int = 6):
     return gif_frame(np.concatenate(pixels)[:, None, :])  # one column of pixels: the palette ignores layout
 
 
+def wrap_title(text: str, width: int) -> str:
+    """``text`` on as few lines of at most ``width`` characters as its ``", "``-separated parts allow."""
+    if len(text) <= width:
+        return text
+    lines, line = [], ""
+    for part in text.split(", "):
+        piece = part if not line else f"{line}, {part}"
+        if len(piece) > width and line:
+            lines.append(line + ",")
+            line = part
+        else:
+            line = piece
+    return "\n".join(lines + [line])
+
+
 def save_animation(mesh, states, path, muscles=(), activations=None, titles=None, fps=8.0, rest=True,
                    figsize=(8.0, 5.0), dpi=110, units=None) -> str:
     """Write a sequence of states as an animated GIF (looping, Pillow), atomically.
@@ -172,8 +187,10 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     # an Agg figure of its own (no pyplot: nothing to close, whatever the interactive backend)
     fig = Figure(figsize=figsize, dpi=dpi)
     canvas = FigureCanvasAgg(fig)
-    # room on the right for the muscles' legend
-    fig.subplots_adjust(left=0.09, right=0.84 if muscles else 0.97, bottom=0.12, top=0.9)
+    # room on the right for the muscles' legend, as wide as its longest name (9 pt text beside a 3 pt line)
+    longest = max((len(muscle_label(m, i)) for i, m in enumerate(muscles)), default=0)
+    right = min(0.84, 0.97 - (34.0 + 5.6 * longest) / (72.0 * figsize[0])) if muscles else 0.97
+    fig.subplots_adjust(left=0.09, right=max(right, 0.6), bottom=0.12, top=0.88)
     ax = fig.subplots()
     # Blitting: the axes, ticks and labels are drawn once; per frame only the moving artists are drawn over
     # a copy of that background (a full draw per frame, twice through FuncAnimation + PillowWriter, made
@@ -206,6 +223,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     coordinate_axes(ax, units)
     ax.tick_params(labelsize=8)
     names = titles if titles is not None else [f"frame {k + 1}/{len(states)}" for k in range(len(states))]
+    # a title longer than the frame is wide (many muscles, long names) goes on two lines, broken at a comma
+    names = [wrap_title(t, int(72.0 * figsize[0] / 7.5)) for t in names]
     title = ax.set_title(names[0], fontsize=12)
     title.set_animated(True)  # placed by matplotlib, drawn per frame by Pillow (see below)
     for a in moving:

@@ -15,12 +15,15 @@ This module is the one place that owns
 - the file formats figures are written in (:func:`figure_formats`): PNG, and with the vector option a PDF
   or SVG beside it (:func:`mdsr_opt.plot.common.save_figure`).
 
-It imports only matplotlib's colour helpers, so every stage at or above ``plot`` can use it.
+It imports only matplotlib's colour helpers and the muscles' default name (:mod:`mdsr_opt.body.muscles`), so every
+stage at or above ``plot`` can use it.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from ..body.muscles import default_muscle_name
 
 __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
@@ -67,7 +70,7 @@ VECTOR_FORMATS = ("pdf", "svg")
 
 def muscle_name(i: int) -> str:
     """The name of muscle ``i`` (0-based place in its layout) in every figure and file: ``"M1"``, ``"M2"``..."""
-    return f"M{int(i) + 1}"
+    return default_muscle_name(i)
 
 
 def muscle_label(muscle, i: int) -> str:

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Sequence
 import numpy as np
 
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields
+from ..plot.style import muscle_label
 from ..synthesis.gait import warm_start_state
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
@@ -92,20 +93,13 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
             raise UnknownName(f"scene {scene.name!r} has no animation {animation!r} "
                               f"(animations: {', '.join(a.name for a in scene.animations) or 'none'})")
         animation = found[0]
-    union: list[Muscle] = []
-    slots: dict[str, list[int]] = {}
     for cname in animation.cases:
         if cname not in designs:
             return AnimationResult(animation.name, message=f"case {cname!r} has no design in this run")
         mus, a = designs[cname]
         if len(mus) != len(a):
             raise ValueError(f"designs[{cname!r}]: {len(a)} contraction(s) for {len(mus)} muscle(s)")
-        idx = []
-        for m in mus:
-            if m not in union:
-                union.append(m)
-            idx.append(union.index(m))
-        slots[cname] = idx
+    union, slots = union_of_layouts({c: designs[c][0] for c in animation.cases})
     a_of = {}
     for cname, idx in slots.items():
         v = np.zeros(len(union))
@@ -157,3 +151,42 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
         prev = x if ok and np.any(a > 0) else None
     return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails,
                            "" if not fails else f"{len(fails)} forward solve(s) failed")
+
+
+def union_of_layouts(layouts: Mapping[str, Sequence[Muscle]]) -> tuple[tuple, dict]:
+    """The muscles of several cases' layouts, each once, with names unique in the union.
+
+    A muscle whose node path is in several cases' layouts is one muscle and keeps its name. When names
+    collide (``M1`` of two separately routed cases), every muscle of one case only is prefixed by its case
+    (``bend_left:M1``, ``bend_right:M1``, ``bend_right:M2``), so that no name reads as another case's;
+    unnamed muscles are named by their place in their case's layout
+    (:func:`~mdsr_opt.plot.style.muscle_label`) first.
+
+    Returns
+    -------
+    union : tuple of Muscle
+    slots : dict
+        Per case, the places in ``union`` of its layout's muscles, in order.
+    """
+    union: list[Muscle] = []
+    source: list[tuple[str, str]] = []  # (first case, the muscle's name there)
+    cases_of: list[set] = []
+    slots: dict[str, list[int]] = {}
+    for cname, mus in layouts.items():
+        idx = []
+        for i, m in enumerate(mus):
+            if m not in union:  # equal node paths are one muscle (Muscle compares its nodes only)
+                union.append(m)
+                source.append((cname, muscle_label(m, i)))
+                cases_of.append(set())
+            k = union.index(m)
+            cases_of[k].add(cname)
+            idx.append(k)
+        slots[cname] = idx
+    names = [own for _, own in source]
+    if len(set(names)) < len(names):
+        names = [own if len(cases_of[k]) > 1 else f"{c}:{own}" for k, (c, own) in enumerate(source)]
+        for k, n in enumerate(names):  # a shared muscle's name another one still carries: its first case too
+            if names.count(n) > 1:
+                names[k] = f"{source[k][0]}:{n}" if ":" not in n else f"{n}#{k + 1}"
+    return tuple(Muscle(m.nodes, name=n) for m, n in zip(union, names)), slots

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import importlib.util
 import os
 import sys
@@ -145,5 +146,7 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
     if s not in files:
         where = problems_dir()
         lib = ", ".join(files) if files else f"none found (problems folder: {where})"
-        raise UnknownName(f"unknown problem {s!r}; the library has: {lib}")
+        close = difflib.get_close_matches(s, list(files), n=1, cutoff=0.6)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise UnknownName(f"unknown problem {s!r}{hint}; the library has: {lib}")
     return build_from(files[s], "medium" if resolution is None else resolution)

@@ -18,7 +18,8 @@ def check_output_names(case_names: Sequence[str], animation_names: Sequence[str]
                        where: Sequence[str] | None = None, gait_names: Sequence[str] = ()) -> None:
     """Refuse case, animation and gait names whose files would collide with each other or with a run's own files
     (:data:`RUN_FILES`; a case writes the folder ``<case>/``, an animation ``<name>.gif`` and
-    ``<name>.json``, a gait the folder ``<name>/``), also on case-insensitive file systems. ``where`` names
+    ``<name>.json``, a gait the folder ``<name>/`` with ``<name>.gif`` and ``<name>.json``; a gait and an
+    animation may not share a name), also on case-insensitive file systems. ``where`` names
     each name's field (cases first, then animations, then gaits) for the message.
     """
     names = list(case_names) + list(animation_names) + list(gait_names)
@@ -27,6 +28,12 @@ def check_output_names(case_names: Sequence[str], animation_names: Sequence[str]
     fields += [f"gait {g!r}" for g in gait_names]  # ``where`` covers the cases and animations only
     n_case, n_anim = len(case_names), len(animation_names)
     taken: dict[str, str] = {f.lower(): f"the run's own file {f!r}" for f in RUN_FILES}
+    anims = {a.lower(): a for a in animation_names}
+    for i, g in enumerate(gait_names):  # a gait writes <gait>/<gait>.gif and .json; an animation <name>.gif and
+        if g.lower() in anims:          # .json; summary.json lists both under their names: one name, one thing
+            raise SceneFileError(f"{label}: {fields[n_case + n_anim + i]}: the gait {g!r} has the name of the "
+                                 f"animation {anims[g.lower()]!r}: two different things would share the name "
+                                 "(and summary.json's entry); choose another name")
     for i, n in enumerate(names):
         kind = "case" if i < n_case else "animation" if i < n_case + n_anim else "gait"
         if n.lower() in RESERVED_NAMES or n.lower().split(".")[0] in RESERVED_NAMES:

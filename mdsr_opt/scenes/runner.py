@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 
 from ..core.errors import LayoutError
+from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import unit_label
 from ..synthesis.results import MuscleWarning
@@ -60,9 +61,13 @@ class CaseReport:
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     dropped : muscles taken out of the layout after a design (idle ones: name, nodes, contraction, reason).
-    saturated : names (or indices) of the muscles whose designed contraction is at ``a_max``.
+    saturated : names (``M1``, ... or their own) of the muscles whose designed contraction is at ``a_max``.
     stroke_band : per muscle the stroke's (low, high) under the fabrication's uncertainties, when computed
         (:func:`~mdsr_opt.synthesis.bands.stroke_bands`); band_notes : what the band left out, and why.
+    tension : per muscle the rope's tension at the design, in ``units["tension"]``.
+    units : ``{"stroke": ..., "tension": ...}``: the unit of the strokes (the scene's ``units``) and of the
+        tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
+        ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
     """
 
     scene: str
@@ -94,6 +99,8 @@ class CaseReport:
     dropped: list = field(default_factory=list)
     saturated: list = field(default_factory=list)
     stroke_band: list = field(default_factory=list)
+    tension: list = field(default_factory=list)
+    units: dict = field(default_factory=dict)
     band_notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
@@ -320,16 +327,19 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     run.design = res
+    res.units = scene.units
     if dropped:
         setup.muscles = kept
         rep.n_muscles = len(kept)
         rep.dropped = [d.to_dict() for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
-    rep.saturated = [mu.name or i for i, mu in enumerate(kept) if res.saturated[i]]
+    rep.saturated = res.saturated_names
     rep.times["design"] = time.perf_counter() - t1
     rep.contractions = [float(a) for a in res.contractions]
     rep.achieved = [float(a) for a in res.achieved]
     rep.stroke = [float(s) for s in res.stroke]
+    rep.tension = [float(t) for t in res.tensions_in_unit()]
+    rep.units = {"stroke": length_unit(res.units), "tension": res.tension_unit}
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / mesh.size
     rep.initial_difference = float(res.initial_difference)
@@ -343,8 +353,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     ach = ", ".join(f"{v:.3f}" for v in res.achieved)
     st = ", ".join(f"{v:.4g}" for v in res.stroke)
     u = unit_label(scene.units)
+    tn = ", ".join(f"{v:.4g}" for v in res.tensions_in_unit())
     say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
-        f"strokes [{st}] {u}, difference {res.difference:.3g} {u} "
+        f"strokes [{st}] {u}, tensions [{tn}] {res.tension_unit}, difference {res.difference:.3g} {u} "
         f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
         f" ({rep.times['design']:.1f} s)")
     if rep.saturated:

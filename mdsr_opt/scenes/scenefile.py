@@ -29,7 +29,8 @@ _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "mus
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
 
 
-_MATERIAL_KEYS = ("model", "E", "nu", "thickness", "plane", "silicone", "C1", "C2", "C3", "C10", "C01")
+_MATERIAL_KEYS = ("model", "E", "nu", "thickness", "plane", "silicone", "C1", "C2", "C3", "C10", "C01",
+                  "stress_unit")
 
 
 _REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
@@ -71,6 +72,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         E = 1.0
         nu = 0.4
         plane = "strain"                      # or "stress": a thin sheet (nu up to 0.5)
+        # stress_unit = "Pa"                  # optional: the unit of E (or C1...): tensions then in N
         # silicone = "dragon-skin-30"         # a preset sheet (mdsr_opt.body.silicone; Pa), with thickness
 
         [regions]                             # named node sets
@@ -262,13 +264,14 @@ def material_table(material) -> dict:
     from ..body.material import LinearElastic, MooneyRivlin, NeoHookean, Yeoh
 
     t = float(material.thickness)
+    su = {"stress_unit": material.stress_unit} if getattr(material, "stress_unit", None) else {}
     if isinstance(material, Yeoh):
-        return {"model": "yeoh", "C1": material.C1, "C2": material.C2, "C3": material.C3, "thickness": t}
+        return {"model": "yeoh", "C1": material.C1, "C2": material.C2, "C3": material.C3, "thickness": t, **su}
     if isinstance(material, MooneyRivlin):
-        return {"model": "mooney-rivlin", "C10": material.C10, "C01": material.C01, "thickness": t}
+        return {"model": "mooney-rivlin", "C10": material.C10, "C01": material.C01, "thickness": t, **su}
     if isinstance(material, (NeoHookean, LinearElastic)):
         return {"model": "linear" if isinstance(material, LinearElastic) else "neo-hookean",
-                "E": float(material.E), "nu": float(material.nu), "thickness": t, "plane": material.plane}
+                "E": float(material.E), "nu": float(material.nu), "thickness": t, "plane": material.plane, **su}
     raise TypeError(f"a scene file cannot hold a {type(material).__name__} material")
 
 
@@ -298,24 +301,27 @@ def _scene_material(r: Reader, spec):
         r.fail("material.model", f"unknown material {model!r} (choose 'neo-hookean', 'linear', 'yeoh' or "
                                  f"'mooney-rivlin')")
     cls = kinds[model]
-    extra = sorted(set(m) - set(own[cls]) - {"model"})
+    extra = sorted(set(m) - set(own[cls]) - {"model", "stress_unit"})
     if extra:
         r.fail(f"material.{extra[0]}", f"not a parameter of a {model} material (it takes "
                                        f"{', '.join(own[cls])})")
     vals = {k: r.number(m[k], f"material.{k}") for k in own[cls] if k in m and k != "plane"}
+    su = m.get("stress_unit")
     try:
         if cls in (NeoHookean, LinearElastic):
             return cls(vals.get("E", 1.0), vals.get("nu", 0.3), vals.get("thickness", 1.0),
-                       m.get("plane", "strain"))
+                       m.get("plane", "strain"), stress_unit=su)
         if cls is Yeoh:
             if "C1" not in vals:
                 r.fail("material.C1", "a yeoh material needs C1")
-            return Yeoh(vals["C1"], vals.get("C2", 0.0), vals.get("C3", 0.0), vals.get("thickness", 1.0))
+            return Yeoh(vals["C1"], vals.get("C2", 0.0), vals.get("C3", 0.0), vals.get("thickness", 1.0),
+                        stress_unit=su)
         if "C10" not in vals:
             r.fail("material.C10", "a mooney-rivlin material needs C10")
-        return MooneyRivlin(vals["C10"], vals.get("C01", 0.0), vals.get("thickness", 1.0))
+        return MooneyRivlin(vals["C10"], vals.get("C01", 0.0), vals.get("thickness", 1.0), stress_unit=su)
     except (TypeError, ValueError) as exc:
-        field_ = next((k for k in (*own[cls], "C10 + C01") if str(exc).startswith(k)), "")
+        field_ = next((k for k in (*own[cls], "C10 + C01", "unknown stress_unit") if str(exc).startswith(k)), "")
+        field_ = "stress_unit" if field_ == "unknown stress_unit" else field_
         field_ = "C10" if field_ == "C10 + C01" else field_
         r.fail(f"material.{field_}" if field_ else "material", str(exc),
                TypeError if isinstance(exc, TypeError) else SceneFileError)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Callable
 import numpy as np
@@ -176,8 +178,8 @@ def _scene_problem(name: str) -> StudyProblem | None:
         from ..scenes.library import get_problem, list_problems
     except ImportError:  # pragma: no cover - the library is optional
         return None
-    scene_name, case_name = name.split("/", 1)
-    if scene_name not in list_problems():
+    scene_name, case_name = name.rsplit("/", 1)  # "<library scene>/<case>" or "<scene file path>/<case>"
+    if scene_name not in list_problems() and not (is_scene_path(scene_name) and os.path.isfile(scene_name)):
         return None
 
     def build(resolution: int, load: float) -> Setup:
@@ -198,8 +200,15 @@ def _scene_problem(name: str) -> StudyProblem | None:
         case = sc.case(case_name)
     except (KeyError, ValueError):
         return None
-    return StudyProblem(name, f"problem library: scene {scene_name!r}, case {case_name!r}", build, 1.0,
+    where = "scene file" if is_scene_path(scene_name) else "problem library: scene"
+    return StudyProblem(name, f"{where} {scene_name!r}, case {case_name!r}", build, 1.0,
                         "load (x case)", design=case.kind == "internal")
+
+
+def is_scene_path(name: str) -> bool:
+    """Whether a scene named on the command line is a file (a scene file or a problem script, as
+    :func:`~mdsr_opt.scenes.library.get_problem` reads it), not a library name."""
+    return Path(name).suffix.lower() in (".py", ".toml", ".json")
 
 
 def list_study_problems() -> list[str]:
@@ -226,7 +235,12 @@ def get_study_problem(name: str) -> StudyProblem:
         return PROBLEMS[name]
     p = _scene_problem(name)
     if p is None:
-        raise ValueError(f"unknown study problem {name!r}; valid: {', '.join(list_study_problems())}")
+        import difflib
+
+        valid = list_study_problems()
+        close = difflib.get_close_matches(name, valid, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown study problem {name!r}{hint}; valid: {', '.join(valid)}")
     return p
 
 

@@ -34,6 +34,7 @@ import math
 import os
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -41,7 +42,7 @@ import numpy as np
 from ..body.io import atomic_path, write_json
 from ..core.errors import checking_input
 from ..core.results import compact_repr, to_jsonable
-from .problems import build_setup, list_study_problems
+from .problems import build_setup, is_scene_path, list_study_problems
 from .runs import fill_accuracy, run_all
 from .spec import FAILURES, RECOMMEND, Study
 from .study import StudyResult, environment_info, output_folder
@@ -112,7 +113,7 @@ def pick_recommendation(rows: Sequence[dict], scene: str, tol: float, stroke_tol
     for name, v in (("tol", tol), ("stroke_tol", stroke_tol)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise ValueError(f"{name} must be a positive number, got {v!r}")
-    rs = [r for r in rows if r["problem"].split("/", 1)[0] == scene]
+    rs = [r for r in rows if r["problem"].rsplit("/", 1)[0] == scene]
     if not rs:
         raise ValueError(f"no runs of scene {scene!r}")
     cases = sorted({r["problem"] for r in rs})
@@ -172,17 +173,37 @@ def _fill_strokes(outcomes, refs: dict) -> None:
         r["stroke_error"] = float(np.abs(_strokes(s, o.x) - ref).max() / max(np.abs(ref).max(), 1e-300))
 
 
+def scene_stem(scene: str) -> str:
+    """The name a scene's files take: a library scene's name, a scene file's stem (``scenes/ring.toml`` ->
+    ``ring``)."""
+    return Path(scene).stem if is_scene_path(scene) else scene
+
+
 def _scene_problems(scenes: Sequence[str]) -> list[str]:
+    import difflib
+
+    from ..scenes.library import get_problem
+
     known = list_study_problems()
     out = []
     for sc in scenes:
         if not isinstance(sc, str):
             raise TypeError(f"scene names must be strings, got {sc!r}")
-        mine = [p for p in known if p.split("/", 1)[0] == sc and "/" in p]
+        if is_scene_path(sc):  # a user's scene file or problem script, as mdsr run and get_problem take it
+            out += [f"{sc}/{c}" for c in get_problem(sc, resolution="coarse").case_names]
+            continue
+        mine = [p for p in known if p.rsplit("/", 1)[0] == sc and "/" in p]
         if not mine:
-            names = sorted({p.split("/", 1)[0] for p in known if "/" in p})
-            raise ValueError(f"unknown library scene {sc!r}; valid: {', '.join(names)}")
+            names = sorted({p.rsplit("/", 1)[0] for p in known if "/" in p})
+            close = difflib.get_close_matches(sc, names, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ValueError(f"unknown library scene {sc!r}{hint}; valid: {', '.join(names)}, or the path of a "
+                             "scene file (.toml/.json) or problem script (.py)")
         out += mine
+    stems = [scene_stem(sc) for sc in scenes]
+    twice = sorted({s for s in stems if stems.count(s) > 1})
+    if twice:
+        raise ValueError(f"two scenes named {twice[0]!r}: their charts would share recommend_{twice[0]}.png")
     return out
 
 
@@ -225,7 +246,7 @@ def run_recommendation(out: str | os.PathLike | None = None, *, scenes: Sequence
     if log is None or not progress:
         log = print if progress and log is None else (log if progress else None)
     names = [f"recommend{x}" for x in (".csv", "_runs.csv", ".md", ".json")]
-    names += [f"recommend_{s}.png" for s in scenes] if figures else []
+    names += [f"recommend_{scene_stem(s)}.png" for s in scenes] if figures else []
     with output_folder(out, overwrite, names) as folder:
         t0 = time.perf_counter()
         outs = run_all(refs + runs, scheduler, workers, log)
@@ -279,8 +300,9 @@ def _write(out, recs, res, meta, scenes, figures, log) -> None:
         from ..plot.studies import plot_recommendation
 
         for sc, rec in zip(scenes, table):
-            rows = [r for r in res.rows if r["problem"].split("/", 1)[0] == sc]
-            save_figure(plot_recommendation(rows, rec), os.path.join(out, f"recommend_{sc}.png"), close=True)
+            rows = [r for r in res.rows if r["problem"].rsplit("/", 1)[0] == sc]
+            save_figure(plot_recommendation(rows, rec), os.path.join(out, f"recommend_{scene_stem(sc)}.png"),
+                        close=True)
     if log:
         log(f"wrote recommend.csv, recommend_runs.csv, recommend.md, recommend.json"
             f"{', ' + ', '.join(f'recommend_{s}.png' for s in scenes) if figures else ''} to {out}")

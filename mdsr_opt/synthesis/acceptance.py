@@ -29,6 +29,7 @@ import numpy as np
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..core.results import to_jsonable
+from ..plot.style import muscle_label, muscle_name
 
 __all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
            "check_idle_contraction", "check_max_difference"]
@@ -53,7 +54,8 @@ class DroppedMuscle:
     Attributes
     ----------
     name : str
-        Its name (or ``"#<k>"``, its place in the layout given, when unnamed).
+        Its name (or ``"M<k+1>"``, its place ``k`` in the layout given, when unnamed:
+        :func:`mdsr_opt.plot.style.muscle_label`).
     nodes : tuple of int
         Its path.
     contraction : float
@@ -148,8 +150,11 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     thr = check_idle_contraction(idle_contraction)
     drop_slack = (thr > 0 if drop_slack is None else bool(drop_slack)) and \
         design_options.get("muscle_model", "cable") == "cable"
-    mus = tuple(muscles)
-    where = np.arange(len(mus))  # each kept muscle's place in the layout given (names unnamed ones)
+    # unnamed muscles are named by their place in the layout given (M1, M2, ...), so that a muscle keeps its
+    # name in the design made again without the idle ones
+    mus = tuple(Muscle(mu.nodes, name=muscle_name(i)) if isinstance(mu, Muscle) and not mu.name else mu
+                for i, mu in enumerate(muscles))
+    where = np.arange(len(mus))
     opts = dict(design_options)
     dropped: list[DroppedMuscle] = []
     res, caught = _designed(design_contractions, mesh, material, mus, target, opts)
@@ -166,7 +171,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                            f"idle_contraction {thr:g}): the design does not move the body")
             break
         keep = np.flatnonzero(~idle)
-        gone = [DroppedMuscle(name=mu.name or f"#{where[i]}", nodes=tuple(int(n) for n in mu.nodes),
+        gone = [DroppedMuscle(name=muscle_label(mu, where[i]), nodes=tuple(int(n) for n in mu.nodes),
                               contraction=float(a[i]), reason=f"idle: designed contraction {a[i]:.3g} below "
                               f"idle_contraction {thr:g}" if a[i] < thr else f"idle: slack at the designed "
                               f"state (contraction {a[i]:.3g}, no tension): it does not pull")

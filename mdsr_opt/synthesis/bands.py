@@ -34,6 +34,7 @@ from ..core.checks import positive_float, positive_int
 from ..core.errors import LayoutError
 from ..mechanics.anchors import check_anchor_radius
 from ..core.results import compact_repr, to_jsonable
+from ..plot.style import muscle_label
 
 __all__ = ["RADIUS_RTOL", "NU_TOL", "MAX_REFINED_NODES", "NU_CAP", "BAND_MAX_ITER", "StrokeBands", "refine_mesh",
            "stroke_bands"]
@@ -58,7 +59,7 @@ class StrokeBands:
     Attributes
     ----------
     names : tuple of str
-        The muscles (their names, or ``"#<k>"``).
+        The muscles (their names, or ``"M<k+1>"``: :func:`mdsr_opt.plot.style.muscle_label`).
     nominal : (m,) ndarray
         The designed strokes (a length).
     band : (m, 2) ndarray
@@ -282,6 +283,6 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
         contributions[src] = np.column_stack([stack.min(axis=0), stack.max(axis=0)])
     down = sum((c[:, 0] for c in contributions.values()), np.zeros_like(s0))
     up = sum((c[:, 1] for c in contributions.values()), np.zeros_like(s0))
-    return StrokeBands(names=tuple(mu.name or f"#{i}" for i, mu in enumerate(mus)), nominal=s0.copy(),
+    return StrokeBands(names=tuple(muscle_label(mu, i) for i, mu in enumerate(mus)), nominal=s0.copy(),
                        band=np.column_stack([s0 + down, s0 + up]), contributions=contributions, values=values,
                        notes=tuple(notes), time=time.perf_counter() - t0)

@@ -19,6 +19,7 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
 from ..mechanics.loadsteps import upright
 from ..mechanics.units import Units
+from ..plot.style import muscle_label
 from .nlp import ACCEPTABLE, run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
@@ -190,6 +191,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.time = time.perf_counter() - clock0
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
+    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    res.stress_unit = getattr(material, "stress_unit", None)
     if res.saturated.any():
         warn_saturated(res, mus)
     return res
@@ -199,7 +202,7 @@ def warn_saturated(res: DesignResult, muscles) -> None:
     """Warn (:class:`~mdsr_opt.synthesis.results.MuscleWarning`) naming the muscles of ``res`` whose
     contraction is at ``a_max`` (:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated`)."""
     sat = np.flatnonzero(res.saturated)
-    names = ", ".join(f"{muscles[i].name or i} (a = {res.contractions[i]:.4g})" for i in sat)
+    names = ", ".join(f"{muscle_label(muscles[i], i)} (a = {res.contractions[i]:.4g})" for i in sat)
     warnings.warn(f"muscle(s) {names} saturated at a_max = {res.a_max:g}: the design is the best within the "
                   "bound, not the target; raise a_max, add muscles or accept the difference "
                   f"{res.difference:.3g}", MuscleWarning, stacklevel=5)
@@ -271,7 +274,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
     if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
         res.status += "; at the free-length cap (their end patches hold most of the rope, contraction_caps): " \
-                      + ", ".join(f"muscle {int(c)} a = {prob.a_upper[c]:.4g}" for c in capped)
+                      + ", ".join(f"{muscle_label(mus[c], int(c))} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"

@@ -22,9 +22,11 @@
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
     each pose's stroke band (``stroke <pose> low``, ``stroke <pose> high``).
 
-Every number is in the body's length unit ``units`` (one of :data:`UNITS`, default ``"mm"``), and every
-column header says it. Tensions are forces in units of ``E * thickness * length`` (with ``E`` in N/mm^2 and
-lengths and thickness in mm, newtons). Input is checked completely before anything is written, and each
+Every number is in the body's length unit ``units`` (one of :data:`UNITS`; default the design's own
+``units``, a scene's, else "body units": a drawing whose unit is not known says so and is never labelled
+mm), and every column header says it. Tensions are in newtons when the material's ``stress_unit`` (the
+silicone presets: Pa) and the length unit are known, else in units of ``E * thickness * length``
+(:func:`~mdsr_opt.core.quantities.tension_unit`). Input is checked completely before anything is written, and each
 file is written atomically, so bad input leaves nothing behind.
 """
 
@@ -47,14 +49,15 @@ from ..body.mesh import Mesh
 from ..body.polygons import polygon_area
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
+from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
-from ..plot.style import dxf_color, muscle_color, muscle_name
+from ..plot.style import dxf_color, muscle_color, muscle_label, muscle_name
 from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 
 #: Known length units and their size in metres.
-UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
+UNITS = LENGTH_UNITS
 _DXF_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6, "um": 13}
 
 
@@ -82,9 +85,10 @@ class FabricationData:
     tensions: np.ndarray          # (P, m), NaN where unknown
     end_radius: float
     channel_width: float
-    units: str
+    units: str | None             # None: body units (not known)
     wall: float = 0.0
     stroke_bands: np.ndarray | None = None  # (P, m, 2) low/high stroke per pose and muscle; None: not computed
+    tension_unit: str = "units of E*t*length"  # the unit of ``tensions`` (N when known)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("units", "pose_names"), extra={
@@ -118,13 +122,23 @@ def _check_rest_lengths(recorded, L0, muscles, what) -> None:
     off = np.flatnonzero(np.isfinite(rec) & ~np.isclose(rec, L0, rtol=1e-7, atol=0.0))
     if len(off):
         i = int(off[0])
-        raise ValueError(f"{what} was made with muscle {muscles[i].name or i!r} of rest length {rec[i]:.6g}; on this "
+        raise ValueError(f"{what} was made with muscle {muscle_label(muscles[i], i)!r} of rest length {rec[i]:.6g}; on this "
                          f"mesh with these muscles it is {L0[i]:.6g}: give the mesh and the muscles the design "
                          "was made with")
 
 
-def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
-                     channel_width: float | None = None, fabrication=None) -> FabricationData:
+def _known(design, name: str):
+    """The design's own ``units`` or ``stress_unit`` (None when it records none)."""
+    from .pipeline import PipelineResult
+
+    if isinstance(design, PipelineResult):
+        return getattr(design.design, name, None) or getattr(design.material, name, None)
+    items = list(design.values()) if isinstance(design, Mapping) else [design]
+    return next((v for v in (getattr(d, name, None) for d in items) if isinstance(v, str) and v), None)
+
+
+def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
+                     channel_width: float | None = None, fabrication=None, material=None) -> FabricationData:
     """Collect and check the geometry and per-pose figures of a design (writes nothing).
 
     Parameters
@@ -135,18 +149,31 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         None: the layout alone (no strokes).
     muscles : the layout; required unless ``design`` knows its own (a PosesResult, a PipelineResult, or any
         result with a ``muscles`` attribute), which it then replaces.
-    units : one of :data:`UNITS`.
+    units : one of :data:`UNITS`, optional
+        Default: the design's (``design.units``, a scene's ``units`` or ``design_pipeline(units=...)``), else
+        None: "body units" (the drawing says so; a DXF carries no unit). A unit other than the design's is
+        refused.
     channel_width : float, optional
         Drawn width of a channel (length units); default the fabrication's ``channel_diameter``.
     fabrication : Fabrication or dict of its fields, optional
         Channel, wall and fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`); default: the one
         a PipelineResult was routed with, else the defaults for this body. The fixtures' radius is the
         design's ``anchor_radius`` when it has one.
+    material : optional
+        The body's material, for the unit of the tensions (its ``stress_unit``) when the design does not
+        record it (a PosesResult); with a known length unit, tensions are then in N.
     """
     from .fabrication import Fabrication, check_fabrication
     from .pipeline import PipelineResult
 
-    units = check_units(units)
+    known = _known(design, "units")
+    if units is None:
+        units = known
+    elif known is not None and check_units(units) != known:
+        raise ValueError(f"units={units!r}, but the design was made in {known}: the mesh's coordinates are in "
+                         f"{known} (leave units out, or give units={known!r})")
+    units = None if units is None else check_units(units)
+    t_unit, t_factor = tension_unit(_known(design, "stress_unit") or getattr(material, "stress_unit", None), units)
     if fabrication is None and isinstance(design, PipelineResult) and design.routing is not None:
         fabrication = design.routing.fabrication
     fab = check_fabrication(fabrication)
@@ -214,7 +241,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                            paths=[P[list(mu.nodes)] for mu in mus],
                            rest_lengths=np.array([mu.rest_length(mesh) for mu in mus]), pose_names=tuple(names),
                            contractions=np.asarray(A, float), strokes=np.asarray(S, float),
-                           tensions=np.asarray(T, float),
+                           tensions=t_factor * np.asarray(T, float), tension_unit=t_unit,
                            # the end patches' radius, when the design has one (NaN: none; 0: points)
                            end_radius=float(radius) if radius is not None and math.isfinite(radius) and radius > 0
                            else fab.fixture_radius if fab.fixture_radius > 0 else 0.4 * h,
@@ -249,8 +276,8 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     size = float((hi - lo).max())
     pad = 0.05 * size + fd.end_radius + fd.wall
     W, H = float(hi[0] - lo[0] + 2 * pad), float(hi[1] - lo[1] + 2 * pad)
-    u = fd.units
-    scale, phys = (1.0, u) if u in ("mm", "cm", "in") else (UNITS[u] / 1e-3, "mm")
+    u = length_unit(fd.units)
+    scale, phys = (1.0, u) if u in ("mm", "cm", "in") else (UNITS[u] / 1e-3, "mm") if u in UNITS else (1.0, "")
 
     def xy(p):
         return f"{p[0] - lo[0] + pad:.9g},{hi[1] - p[1] + pad:.9g}"
@@ -260,7 +287,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            f'<svg xmlns="http://www.w3.org/2000/svg" version="1.1" width="{W * scale:.9g}{phys}" '
            f'height="{H * scale:.9g}{phys}" viewBox="0 0 {W:.9g} {H:.9g}">',
-           f"<title>{escape(title)} (true scale, units: {u})</title>",
+           f"<title>{escape(title)} ({'true scale, ' if fd.units else ''}units: {u})</title>",
            '<g id="body" fill="none" stroke="#000000" stroke-width="%.6g">' % lw]
     for i, loop in enumerate([fd.outline] + fd.holes):
         pts = " ".join(xy(p) for p in loop)
@@ -394,7 +421,7 @@ def _dxf_text(fd: FabricationData) -> str:
     g(9, "$ACADVER")
     g(1, "AC1009")
     g(9, "$INSUNITS")
-    g(70, _DXF_INSUNITS[fd.units])
+    g(70, _DXF_INSUNITS.get(fd.units, 0))  # 0: unitless
     g(9, "$MEASUREMENT")
     g(70, 0 if fd.units == "in" else 1)
     g(9, "$EXTMIN")
@@ -473,13 +500,13 @@ def _dxf_text(fd: FabricationData) -> str:
 
 
 def _csv_text(fd: FabricationData) -> str:
-    u = fd.units
+    u, tu = length_unit(fd.units), fd.tension_unit
     head = ["muscle", "edges", f"rest length [{u}]", f"start x [{u}]", f"start y [{u}]", f"end x [{u}]",
             f"end y [{u}]"]
     for p in fd.pose_names:
-        head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"tension {p} [E*t*{u}]"]
+        head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"tension {p} [{tu}]"]
     if fd.pose_names:
-        head += [f"max stroke [{u}]", f"max tension [E*t*{u}]"]
+        head += [f"max stroke [{u}]", f"max tension [{tu}]"]
     if fd.stroke_bands is not None:  # the strokes' uncertainty bands (synthesis.bands), last
         head += [f"stroke {p} {e} [{u}]" for p in fd.pose_names for e in ("low", "high")]
     buf = _stdio.StringIO()
@@ -510,8 +537,9 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
     return {"svg": folder / f"{name}.svg", "dxf": folder / f"{name}.dxf", "csv": folder / f"{name}_muscles.csv"}
 
 
-def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str = "mm",
-                       name: str = "robot", channel_width: float | None = None, fabrication=None) -> dict[str, str]:
+def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
+                       name: str = "robot", channel_width: float | None = None, fabrication=None,
+                       material=None) -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
 
     Parameters
@@ -523,11 +551,15 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     out : str or path-like
         Output folder (created).
     muscles : the layout (required unless ``design`` knows its own: a PosesResult, a PipelineResult).
-    units : one of :data:`UNITS` (default ``"mm"``): the unit of every number written.
+    units : one of :data:`UNITS`, optional: the unit of every number written. Default: the design's own
+        (a scene's ``units``, ``design_pipeline(units=...)``), else "body units" (said in every file; a DXF
+        without a unit), never an invented mm. A unit other than the design's is refused.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
     channel_width : drawn channel width, length units (default the fabrication's ``channel_diameter``).
     fabrication : Fabrication or dict of its fields (default: a PipelineResult's, else the defaults for the
         body): the channels' walls and the end fixtures drawn.
+    material : optional: the body's material, for the tensions' unit when the design does not record it
+        (:func:`fabrication_data`).
 
     Returns
     -------
@@ -543,7 +575,7 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     """
     check_stem(name, "name")  # no path separator, no control character: before anything is written
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width,
-                          fabrication=fabrication)
+                          fabrication=fabrication, material=material)
     svg = _svg_text(fd, name)
     dxf = _dxf_text(fd)
     table = _csv_text(fd)

@@ -442,7 +442,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     log : progress messages.
     writer : :class:`~mdsr_opt.core.jobs.Jobs`, optional
         Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
-        this is done here, one after the other. ``gait.json``, which lists the files, is written when the
+        this is done here, one after the other. ``<gait>.json``, which lists the files, is written when the
         last of these jobs has reported: with a pool's jobs, at the writer's ``wait``.
 
     Returns
@@ -481,8 +481,9 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
-    # the chart, the GIF and the fabrication files are jobs; gait.json, which lists their files, is written once every one of them has reported (at
-    # the writer's wait when they run in workers): a job that fails leaves no gait.json
+    # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
+    # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at
+    # the writer's wait when they run in workers): a job that fails leaves none
     jobs = []
     if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
@@ -493,7 +494,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         from ..plot.common import figure_paths
 
         files += figure_paths(chart, vector) + [str(gif)]
-    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name}))
+    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,
+                                                                   "material": scene.material}))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
@@ -514,7 +516,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     def reported(_value):
         waiting[0] -= 1
         if not waiting[0]:
-            write_json(folder / "gait.json", record)
+            write_json(folder / f"{gait.name}.json", record)
 
     for fn, args, kwargs in jobs:
         if writer is not None:

@@ -15,6 +15,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
+from ..core.quantities import check_length_unit
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
@@ -88,7 +89,7 @@ class PipelineResult:
         return compact_repr(self, ("success",), extra={
             "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
             "difference": d.difference, "contractions": d.contractions,
-            **({"saturated": [int(i) for i in np.flatnonzero(d.saturated)]} if d.saturated.any() else {}),
+            **({"saturated": d.saturated_names} if d.saturated.any() else {}),
             **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
             "total_time": self.times.get("total", float("nan"))})
 
@@ -244,7 +245,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                     routing_options: dict | None = None, method: str = "flattened",
                     external_options: dict | None = None, fabrication=None,
                     idle_contraction: float = IDLE_CONTRACTION, bands: bool = False,
-                    band_options: dict | None = None, **design_options) -> PipelineResult:
+                    band_options: dict | None = None, units: str | None = None,
+                    **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
     Parameters
@@ -275,6 +277,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     band_options : dict, optional
         Keywords of ``stroke_bands`` (``radius_tol``, ``nu_tol``, ``refine``, ``max_refined_nodes``,
         ``max_iter``).
+    units : str, optional
+        The length unit of the mesh's coordinates (``"mm"``...: :data:`~mdsr_opt.synthesis.export.UNITS`),
+        recorded in ``.design.units``: tables give strokes in it, tensions in N for a material with a
+        ``stress_unit`` (a silicone preset), and the fabrication files default to it. None: body units.
     **design_options
         Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
         rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
@@ -292,7 +298,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     SolverFailure
         The external-driving solve (the target) failed.
     ValueError
-        Routing found no muscle (e.g. a target that only stretches the body), or bad input.
+        Routing found no muscle (e.g. a target that only stretches the body), or bad input (no drags, at
+        the door).
 
     Example
     -------
@@ -310,6 +317,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
 
     t0 = time.perf_counter()
     check_mesh_material(mesh, material)
+    units = check_length_unit(units)
     idle_contraction = check_idle_contraction(idle_contraction)
     if not isinstance(bands, (bool, np.bool_)):
         raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
@@ -321,11 +329,14 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          "max_refined_nodes, max_iter)")
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
+    didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
+    if len(didx) == 0:
+        raise ValueError("drags is empty: design_pipeline's target is the body dragged by its drags "
+                         "({node: (x, y)}), so with none it is the rest shape and there is nothing to design")
     ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
     ext.raise_on_failure()
     t1 = time.perf_counter()
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
-    didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     routing = None
     if muscles is None:
         rr = route_for_design(mesh, ext.x, **ropts)
@@ -340,6 +351,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     t2 = time.perf_counter()
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
+    res.units = units
     t3 = time.perf_counter()
     times = {"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2}
     out = PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,

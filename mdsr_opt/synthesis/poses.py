@@ -78,7 +78,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from .fabrication import check_fabrication
 from .routing_fixtures import common_fixture_radius
-from ..plot.style import muscle_name
+from ..plot.style import muscle_label, muscle_name
 
 __all__ = ["Pose", "PosesResult", "design_poses", "shared_layout", "check_budget"]
 
@@ -249,7 +249,8 @@ class PosesResult:
 
     def table(self) -> str:
         """Per pose: difference on the shared layout and on its own, and the strokes."""
-        head = f"{'pose':<14} {'shared D':>10} {'own D':>10} {'own m':>5}  strokes"
+        head = f"{'pose':<14} {'shared D':>10} {'own D':>10} {'own m':>5}  strokes " + \
+            f"({', '.join(muscle_label(m, i) for i, m in enumerate(self.muscles))})"
         rows = [head, "-" * len(head)]
         for k, n in enumerate(self.names):
             rows.append(f"{n:<14} {self.differences[k]:>10.4g} {self.separate_differences[k]:>10.4g} "

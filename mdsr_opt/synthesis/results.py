@@ -8,6 +8,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields
+from ..core.quantities import length_unit, tension_unit
+from ..plot.style import muscle_name
 from .problem import DesignProblem
 
 __all__ = ['Verification', 'DesignResult', 'MuscleWarning', 'SATURATION_TOL']
@@ -156,6 +158,15 @@ class DesignResult:
         Per muscle the (low, high) range of the stroke under the fabrication's uncertainties (fixture size,
         Poisson's ratio, mesh refinement; :func:`~mdsr_opt.synthesis.bands.stroke_bands`); empty (shape
         ``(0, 2)``) when not computed.
+    muscle_names : tuple of str
+        The muscles' names (their own, else ``M1, M2, ...``): :attr:`names` reads them, tables, reprs and
+        warnings use them.
+    units : str or None
+        The length unit of the body (a scene's ``units``: ``"mm"``...), None when not known: strokes are
+        lengths in it.
+    stress_unit : str or None
+        The unit of the material's constants (``"Pa"`` for the silicone presets), None when dimensionless:
+        with ``units`` it gives the tensions in newtons (:meth:`tensions_in_unit`).
     """
 
     method: str
@@ -187,9 +198,12 @@ class DesignResult:
     slack: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     rest_mesh: dict | None = None
     stroke_band: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    muscle_names: tuple = ()
+    units: str | None = None
+    stress_unit: str | None = None
 
     def __repr__(self) -> str:
-        extra = {"saturated": [int(i) for i in np.flatnonzero(self.saturated)]} if self.saturated.any() else {}
+        extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
         extra.update(muscle_model=self.muscle_model, x=self.x, time=self.time)
         return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
 
@@ -200,27 +214,61 @@ class DesignResult:
         return np.isfinite(a) & (a >= float(self.a_max) - SATURATION_TOL)
 
     @property
+    def names(self) -> tuple:
+        """The muscles' names, as every figure, drawing and table calls them: ``muscle_names`` when it
+        names every muscle, else ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`)."""
+        n = len(self.contractions)
+        if len(self.muscle_names) == n:
+            return tuple(str(v) for v in self.muscle_names)
+        return tuple(muscle_name(i) for i in range(n))
+
+    @property
+    def saturated_names(self) -> list:
+        """The names (:attr:`names`) of the saturated muscles."""
+        names = self.names
+        return [names[i] for i in np.flatnonzero(self.saturated)]
+
+    @property
     def commanded(self) -> np.ndarray:
         """The designed (commanded) contractions, the same as ``contractions``."""
         return self.contractions
 
     def muscle_table(self) -> str:
         """One line per muscle: commanded and achieved contraction, stroke (with its band when computed),
-        tension, slack, saturated."""
+        tension, slack, saturated; strokes in :attr:`units` (else body units), tensions in N when the
+        material's stress unit and the length unit are known, else in units of ``E*t*length``
+        (:func:`~mdsr_opt.core.quantities.tension_unit`)."""
         band = np.asarray(self.stroke_band, dtype=float).reshape(-1, 2)
         has_band = len(band) == len(self.contractions) and len(band) > 0
-        lines = [f"{'muscle':>6} {'commanded':>10} {'achieved':>9} {'stroke':>10} "
-                 + (f"{'stroke band':>21} " if has_band else "") + f"{'tension':>10} slack saturated"]
+        names = self.names
+        w = max([6] + [len(v) for v in names])
+        lu = length_unit(self.units)
+        tu, factor = tension_unit(self.stress_unit, self.units)
+        sh, th = f"stroke ({lu})", f"tension ({tu})"
+        ws, wt = max(10, len(sh)), max(10, len(th))
+        lines = [f"{'muscle':>{w}} {'commanded':>10} {'achieved':>9} {sh:>{ws}} "
+                 + (f"{'stroke band':>21} " if has_band else "") + f"{th:>{wt}} slack saturated"]
         sat = self.saturated
         for i in range(len(self.contractions)):
             def at(v, k=i):
                 return float(v[k]) if len(v) > k else float("nan")
             sl = bool(self.slack[i]) if len(self.slack) > i else False
             b = f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} " if has_band else ""
-            lines.append(f"{i:>6} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
-                         f"{at(self.stroke):>10.4g} {b}{at(self.tension):>10.4g} {'yes' if sl else 'no':>5} "
-                         f"{'YES' if sat[i] else 'no':>9}")
+            lines.append(f"{names[i]:>{w}} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
+                         f"{at(self.stroke):>{ws}.4g} {b}{factor * at(self.tension):>{wt}.4g} "
+                         f"{'yes' if sl else 'no':>5} {'YES' if sat[i] else 'no':>9}")
         return "\n".join(lines)
+
+    @property
+    def tension_unit(self) -> str:
+        """The unit :meth:`tensions_in_unit` gives: ``"N"`` when the material's stress unit and the length
+        unit are known, else ``"units of E*t*<length>"``."""
+        return tension_unit(self.stress_unit, self.units)[0]
+
+    def tensions_in_unit(self) -> np.ndarray:
+        """The tensions in :attr:`tension_unit` (``tension`` is in the material's and the body's units,
+        ``E * t * length``)."""
+        return tension_unit(self.stress_unit, self.units)[1] * np.asarray(self.tension, dtype=float)
 
     def table(self) -> str:
         """The stroke table: :meth:`muscle_table`."""
@@ -237,13 +285,15 @@ class DesignResult:
         return float(math.atan2(self.rotation[1, 0], self.rotation[0, 0]))
 
     def summary(self) -> dict:
-        """Scalars of the result (no arrays except the contractions), for tables and logs."""
+        """Scalars of the result (no arrays except the per-muscle lists), for tables and logs: strokes and
+        tensions in the units ``units`` names (tensions in N when the material and length units are known)."""
         v = self.verification
         return {"method": self.method, "success": self.success, "status": self.status,
-                "muscle_model": self.muscle_model,
+                "muscle_model": self.muscle_model, "muscles": list(self.names),
+                "units": {"stroke": length_unit(self.units), "tension": self.tension_unit},
                 "contractions": [float(c) for c in self.contractions],
                 "achieved": [float(c) for c in self.achieved], "stroke": [float(c) for c in self.stroke],
-                "tension": [float(c) for c in self.tension], "slack": [bool(s) for s in self.slack],
+                "tension": [float(c) for c in self.tensions_in_unit()], "slack": [bool(s) for s in self.slack],
                 "saturated": [bool(s) for s in self.saturated],
                 "stroke_band": [[float(lo), float(hi)] for lo, hi in np.asarray(self.stroke_band).reshape(-1, 2)],
                 "anchor_radius": self.anchor_radius, "difference": self.difference,
@@ -287,6 +337,7 @@ class DesignResult:
                 v["min_eigenvalue"] = np.nan
             d["verification"] = Verification(**v)
         d["history"] = [tuple(h) for h in d.get("history", [])]
+        d["muscle_names"] = tuple(d.get("muscle_names", ()))
         return cls(**d)
 
     def save(self, path: str | os.PathLike) -> str:
@@ -309,7 +360,7 @@ class DesignResult:
         """
         return load_fields(cls, path, "design",
                            convert={"verification": lambda v: Verification(**v),
-                                    "history": lambda h: [tuple(p) for p in h]})
+                                    "history": lambda h: [tuple(p) for p in h], "muscle_names": tuple})
 
 
 def finite_or_none(o):

@@ -479,8 +479,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         inside = "" if fab is None else (
             f"; the ropes lie at least {clearance:.4g} inside the body, and on a mesh this coarse (mean edge length "
             f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
-        why = (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
-               f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
+        why = ("no edge of the target contracts enough to seed a muscle unit (muscles can only contract; a "
+               "target that stretches the body shortens edges only slightly, across the stretch), so no "
+               "muscles are routed: does the target shorten any edge?") if not units and not dropped \
+            else (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
+                  f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
                "no routed rope keeps room for its end fixtures: " + "; ".join(fit.notes)
                + " (give a smaller fixture_radius or min_fixture_radius, or a finer mesh)")
         warnings.warn(why, RoutingWarning, stacklevel=2)

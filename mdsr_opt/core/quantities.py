@@ -1,0 +1,65 @@
+"""The units a user reads beside a length or a rope's tension.
+
+A body's coordinates are lengths in a unit (a scene's ``units``: :data:`LENGTH_UNITS`) or in none ("body
+units"); a material's constants are stresses in a unit (``stress_unit``: :data:`STRESS_UNITS`, the
+silicone presets' pascals) or in none (the dimensionless library materials, ``E = 1``). A rope's tension is
+a stress times the sheet's thickness times a length: in newtons when both units are known
+(:func:`tension_unit`; ``Pa x mm^2 = 1e-6 N``), else in "units of E*t*length".
+
+Example
+-------
+>>> tension_unit("Pa", "mm")
+('N', 1e-06)
+>>> tension_unit(None, "mm")
+('units of E*t*mm', 1.0)
+>>> length_unit(None)
+'body units'
+"""
+
+from __future__ import annotations
+
+__all__ = ["LENGTH_UNITS", "STRESS_UNITS", "BODY_UNITS", "check_length_unit", "check_stress_unit", "length_unit",
+           "tension_unit"]
+
+#: Known length units and their size in metres.
+LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
+
+#: Known stress units and their size in pascals.
+STRESS_UNITS = {"Pa": 1.0, "kPa": 1e3, "MPa": 1e6}
+
+#: A length whose unit is not known
+BODY_UNITS = "body units"
+
+
+def check_length_unit(value) -> str | None:
+    """``value`` if it is None or a known length unit (:data:`LENGTH_UNITS`); TypeError/ValueError naming
+    them."""
+    if value is None:
+        return None
+    if not isinstance(value, str):
+        raise TypeError(f"units must be a string (one of {', '.join(LENGTH_UNITS)}), got {type(value).__name__}")
+    if value not in LENGTH_UNITS:
+        raise ValueError(f"unknown units {value!r}: expected one of {', '.join(LENGTH_UNITS)}")
+    return value
+
+
+def check_stress_unit(value) -> str | None:
+    """``value`` if it is None or a known stress unit (:data:`STRESS_UNITS`); ValueError naming them."""
+    if value is None or (isinstance(value, str) and value in STRESS_UNITS):
+        return value
+    raise ValueError(f"unknown stress_unit {value!r}: expected None (dimensionless) or one of "
+                     f"{', '.join(STRESS_UNITS)}")
+
+
+def length_unit(units: str | None) -> str:
+    """The unit a length is read in: ``units``, or :data:`BODY_UNITS` when there is none."""
+    return str(units) if units else BODY_UNITS
+
+
+def tension_unit(stress_unit: str | None, units: str | None) -> tuple[str, float]:
+    """``(label, factor)``: a tension computed in the material's and the body's units (``E * t * length``)
+    times ``factor`` is in ``label``: ``("N", ...)`` when both units are known (:data:`STRESS_UNITS`,
+    :data:`LENGTH_UNITS`), else ``("units of E*t*<length unit>", 1.0)``."""
+    if stress_unit in STRESS_UNITS and units in LENGTH_UNITS:
+        return "N", STRESS_UNITS[stress_unit] * LENGTH_UNITS[units] ** 2
+    return f"units of E*t*{units if units else 'length'}", 1.0
