@@ -405,8 +405,14 @@ class ConstrainedModel:
         pe, targets, _ = self.split(p)
         if not ropes_only_pull:
             rtol = np.inf
-        key = (np.asarray(x, dtype=float).tobytes(), pe.tobytes(), targets.tobytes(), np.asarray(fixed).tobytes(),
-               float(rtol), bool(ropes_only_pull))
+        active = np.ones(self.n_rows, dtype=bool)
+        nt = self.n_targets
+        if nt:
+            active[:nt] = ~self.short_ropes(x, p, rtol)
+        # the fit depends on the targets and rtol only through the ropes taken as taut: a state checked at two
+        # tolerances (a solve's residual, then its stability) with the same taut ropes is fitted once
+        key = (np.asarray(x, dtype=float).tobytes(), pe.tobytes(), active.tobytes(), np.asarray(fixed).tobytes(),
+               bool(ropes_only_pull))
         last = self.__dict__.get("_last_multipliers")
         if last is not None and last[0] == key:
             return last[1].copy(), last[2].copy()
@@ -414,10 +420,6 @@ class ConstrainedModel:
         g = np.where(fixed, 0.0, self.model.gradient(x, pe) if gradient is None else gradient)
         J = self.jacobian(x).tocsr(copy=True)
         J.data[fixed[J.indices]] = 0.0
-        active = np.ones(self.n_rows, dtype=bool)
-        nt = self.n_targets
-        if nt:
-            active[:nt] = ~self.short_ropes(x, p, rtol)
         lam = np.zeros(self.n_rows)
         for _ in range(nt + 1):
             Ja = J[active]
