@@ -331,7 +331,15 @@ class _ConstraintBlock:
             J = J[:, np.nonzero(free)[0]]
             g_scaled = np.asarray(g_scaled)[free]
         A = (J @ J.T).tocsc()
-        return np.asarray(spla.spsolve(A, -(J @ g_scaled))).ravel()
+        rhs = -(J @ g_scaled)
+        try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
+            kap = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                            options={"SymmetricMode": True}).solve(rhs)
+            if np.all(np.isfinite(kap)):
+                return kap
+        except RuntimeError:
+            pass
+        return np.asarray(spla.spsolve(A, rhs)).ravel()  # a breakdown: the general solve
 
     def tension(self, kappa) -> np.ndarray:
         """Rope tensions (force units) from the rope multipliers."""
