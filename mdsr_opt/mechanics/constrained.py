@@ -21,7 +21,7 @@ import scipy.sparse.linalg as spla
 from .anchors import body_size
 from .assembly import BufferedFunction, SparseLayout
 from .constraints import MuscleConstraints
-from .kkt import kkt_factor
+from .kkt import kkt_factor, least_squares_multipliers
 from .loadsteps import min_jacobian
 from .model import to_dm
 
@@ -425,12 +425,14 @@ class ConstrainedModel:
             Ja = J[active]
             if Ja.shape[0] == 0:
                 break
-            A = (Ja @ Ja.T).tocsc()
-            try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
-                la = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                               options={"SymmetricMode": True}).solve(-(Ja @ g))
-            except RuntimeError:
-                la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
+            la = least_squares_multipliers(Ja, g)  # the augmented system: no dense block per anchor patch
+            if la is None:  # it broke down (e.g. dependent rows): the normal equations
+                A = (Ja @ Ja.T).tocsc()
+                try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
+                    la = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                   options={"SymmetricMode": True}).solve(-(Ja @ g))
+                except RuntimeError:
+                    la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
             lam[:] = 0.0
             lam[active] = la
             neg = np.nonzero(active[:nt] & (lam[:nt] < 0))[0]

@@ -18,6 +18,7 @@ from ..mechanics.constraints import muscle_constraints, segment_spring_parameter
 from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
 from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
 from ..mechanics.constrained import ConstrainedModel
+from ..mechanics.kkt import least_squares_multipliers
 from ..mechanics.model import get_model, to_dm
 from ..mechanics.residual import kkt_residual, meet_tolerance
 
@@ -330,6 +331,9 @@ class _ConstraintBlock:
         if free is not None:
             J = J[:, np.nonzero(free)[0]]
             g_scaled = np.asarray(g_scaled)[free]
+        kap = least_squares_multipliers(J, g_scaled)  # the augmented system, else the normal equations
+        if kap is not None:
+            return kap
         A = (J @ J.T).tocsc()
         rhs = -(J @ g_scaled)
         try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
