@@ -374,6 +374,24 @@ def test_pipeline_designs_saves_and_reloads(tmp_path):
         PipelineResult.load(tmp_path)
 
 
+def test_pipeline_target_by_newton_agrees_with_ipopt():
+    """Without a backend the pipeline solves its target with Newton: the same stable equilibrium as IPOPT's
+    to the tolerance contract; a backend given in external_options is used as given."""
+    from mdsr_opt import solve_external
+    mesh = Mesh.rectangle(4.0, 1.0, NX, NY)
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    right = {i: (x - 0.3, y - 0.5) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    mus = [_row(0, 1, 8), _row(NY, 8, 15)]
+    out = design_pipeline(mesh, MAT, left, right, muscles=mus, verify=False)
+    ref = solve_external(mesh, MAT, left, right)  # solve_external's default: IPOPT
+    assert out.external.backend == "newton" and ref.backend == "ipopt"
+    assert out.external.success and out.external.stable and out.external.residual <= 1e-8
+    assert np.abs(out.target - ref.x).max() < 1e-6 * mesh.size
+    given = design_pipeline(mesh, MAT, left, right, muscles=mus, verify=False, external_options={"backend": "ipopt"})
+    assert given.external.backend == "ipopt"
+    assert np.abs(given.design.contractions - out.design.contractions).max() < 1e-5
+
+
 def test_pipeline_rejects_a_target_without_contraction():
     mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
     left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]

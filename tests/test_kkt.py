@@ -9,7 +9,7 @@ from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
 from mdsr_opt.mechanics.constrained import ConstrainedModel
 from mdsr_opt.mechanics.constraints import muscle_constraints
 from mdsr_opt.mechanics.equilibrium import gauge_coordinates
-from mdsr_opt.mechanics.kkt import kkt_factor, kkt_inertia, kkt_order
+from mdsr_opt.mechanics.kkt import kkt_factor, kkt_inertia, kkt_order, least_squares_multipliers
 from mdsr_opt.mechanics.model import get_model
 from mdsr_opt.mechanics.stability import check_stability
 
@@ -70,6 +70,32 @@ def test_kkt_factor_solves_like_a_dense_solve():
     assert np.abs(fac.solve(b) - ref).max() <= 1e-9 * np.abs(ref).max()
     # without an order (SuperLU's COLAMD) the same solution
     assert np.abs(kkt_factor(Hf, Jf).solve(b) - ref).max() <= 1e-9 * np.abs(ref).max()
+
+
+def test_least_squares_multipliers_match_a_dense_least_squares_fit():
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    P = mesh.points
+    mus = [Muscle(sorted(np.flatnonzero(np.isclose(P[:, 1], y)), key=lambda i: P[i, 0])[1:-1]) for y in (0.0, 0.5)]
+    mc = muscle_constraints(mesh, mus, 0.4)
+    assert mc.n_rigid > 20  # anchor patches: rows sharing their reference nodes
+    rng = np.random.default_rng(3)
+    x = (P + 0.01 * rng.standard_normal(P.shape)).reshape(-1)
+    free = np.ones(2 * mesh.n_nodes, dtype=bool)
+    free[list(gauge_coordinates(mesh))] = False
+    Jf = sp.csr_matrix(mc.jacobian(x))[:, free]
+    for g in (rng.standard_normal(Jf.shape[1]), np.zeros(Jf.shape[1])):
+        ref = np.linalg.lstsq(Jf.T.toarray(), -g, rcond=None)[0]
+        lam = least_squares_multipliers(Jf, g)
+        assert lam is not None and np.abs(lam - ref).max() <= 1e-10 * max(np.abs(ref).max(), 1.0)
+    # columns all shared by several rows (no row can be paired with a column of its own): still the fit
+    D = sp.csr_matrix(rng.standard_normal((4, 6)))
+    g = rng.standard_normal(6)
+    lam = least_squares_multipliers(D, g)
+    assert np.allclose(lam, np.linalg.lstsq(D.T.toarray(), -g, rcond=None)[0], atol=1e-10)
+    # a dependent row: None (the caller's normal equations then), or a least-squares solution all the same
+    Dd = sp.vstack([D, D[0] + D[1]]).tocsr()
+    lam = least_squares_multipliers(Dd, g)
+    assert lam is None or np.abs(Dd @ (g + Dd.T @ lam)).max() <= 1e-8 * np.abs(g).max()
 
 
 @pytest.mark.parametrize("shift", [0.0, -1.0, -3.0])

@@ -21,7 +21,7 @@ import scipy.sparse.linalg as spla
 from .anchors import body_size
 from .assembly import BufferedFunction, SparseLayout
 from .constraints import MuscleConstraints
-from .kkt import kkt_factor
+from .kkt import kkt_factor, least_squares_multipliers
 from .loadsteps import min_jacobian
 from .model import to_dm
 
@@ -405,8 +405,14 @@ class ConstrainedModel:
         pe, targets, _ = self.split(p)
         if not ropes_only_pull:
             rtol = np.inf
-        key = (np.asarray(x, dtype=float).tobytes(), pe.tobytes(), targets.tobytes(), np.asarray(fixed).tobytes(),
-               float(rtol), bool(ropes_only_pull))
+        active = np.ones(self.n_rows, dtype=bool)
+        nt = self.n_targets
+        if nt:
+            active[:nt] = ~self.short_ropes(x, p, rtol)
+        # the fit depends on the targets and rtol only through the ropes taken as taut: a state checked at two
+        # tolerances (a solve's residual, then its stability) with the same taut ropes is fitted once
+        key = (np.asarray(x, dtype=float).tobytes(), pe.tobytes(), active.tobytes(), np.asarray(fixed).tobytes(),
+               bool(ropes_only_pull))
         last = self.__dict__.get("_last_multipliers")
         if last is not None and last[0] == key:
             return last[1].copy(), last[2].copy()
@@ -414,21 +420,19 @@ class ConstrainedModel:
         g = np.where(fixed, 0.0, self.model.gradient(x, pe) if gradient is None else gradient)
         J = self.jacobian(x).tocsr(copy=True)
         J.data[fixed[J.indices]] = 0.0
-        active = np.ones(self.n_rows, dtype=bool)
-        nt = self.n_targets
-        if nt:
-            active[:nt] = ~self.short_ropes(x, p, rtol)
         lam = np.zeros(self.n_rows)
         for _ in range(nt + 1):
             Ja = J[active]
             if Ja.shape[0] == 0:
                 break
-            A = (Ja @ Ja.T).tocsc()
-            try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
-                la = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                               options={"SymmetricMode": True}).solve(-(Ja @ g))
-            except RuntimeError:
-                la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
+            la = least_squares_multipliers(Ja, g)  # the augmented system: no dense block per anchor patch
+            if la is None:  # it broke down (e.g. dependent rows): the normal equations
+                A = (Ja @ Ja.T).tocsc()
+                try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
+                    la = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                   options={"SymmetricMode": True}).solve(-(Ja @ g))
+                except RuntimeError:
+                    la = np.linalg.lstsq(Ja.T.toarray(), -g, rcond=None)[0]
             lam[:] = 0.0
             lam[active] = la
             neg = np.nonzero(active[:nt] & (lam[:nt] < 0))[0]

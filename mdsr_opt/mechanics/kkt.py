@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["kkt_order", "kkt_factor", "kkt_inertia"]
+__all__ = ["kkt_order", "kkt_factor", "kkt_inertia", "least_squares_multipliers"]
 
 
 def kkt_order(J, order) -> np.ndarray:
@@ -114,3 +114,50 @@ def kkt_inertia(H, J, order, rtol: float = 1e-10):
         return None
     n_neg = int((d < 0).sum()) - m  # each row of a full-rank J adds one negative pivot
     return None if n_neg < 0 else (n_neg, 0)
+
+
+def least_squares_multipliers(J, g, rtol: float = 1e-10):
+    """``lam`` minimising ``|g + J' lam|`` (``J`` of full row rank), or None when the factorisation below
+    breaks down or its solution has a relative residual above ``rtol`` (the caller then solves the normal
+    equations ``J J' lam = -J g``).
+
+    Solved as the augmented system ``[[I, J'], [J, 0]] [r; lam] = [-g; 0]`` on the columns ``J`` involves,
+    factorised with diagonal pivots in an order that eliminates each row right after a column only that
+    row involves (a node of an anchor patch: the row's pivot is then ``-J_kc^2``), the other columns
+    next and the rows without such a column last. The normal equations couple every row of a patch through
+    its two reference nodes (a dense block per patch); this order keeps that coupling to the reference
+    nodes' few columns.
+    """
+    J = sp.csr_matrix(J, copy=True)
+    J.eliminate_zeros()
+    g = np.asarray(g, dtype=float)
+    m = J.shape[0]
+    cols = np.unique(J.indices)
+    if m == 0 or len(cols) == 0:
+        return None
+    Jc = J[:, cols].tocsr()
+    nc = len(cols)
+    rows = np.repeat(np.arange(m), np.diff(Jc.indptr))
+    big = np.abs(Jc.data) >= 1e-3 * np.maximum.reduceat(np.abs(Jc.data), Jc.indptr[:-1])[rows]
+    solo = (np.bincount(Jc.indices, minlength=nc)[Jc.indices] == 1) & big  # alone in their column, no tiny pivot
+    own = np.full(m, -1, dtype=np.int64)
+    own[rows[solo]] = Jc.indices[solo]
+    paired = own >= 0
+    rest = np.ones(nc, dtype=bool)
+    rest[own[paired]] = False
+    order = np.concatenate([np.stack([own[paired], nc + np.flatnonzero(paired)], axis=1).ravel(),
+                            np.flatnonzero(rest), nc + np.flatnonzero(~paired)])
+    K = sp.bmat([[sp.identity(nc, format="csr"), Jc.T], [Jc, None]], format="csc")
+    rhs = np.concatenate([-g[cols], np.zeros(m)])
+    try:
+        lu = spla.splu(K[order][:, order].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
+                       options={"SymmetricMode": True})
+    except RuntimeError:
+        return None
+    sol = np.empty(nc + m)
+    with np.errstate(all="ignore"):
+        sol[order] = lu.solve(rhs[order])
+        r = K @ sol - rhs
+    if not (np.all(np.isfinite(r)) and np.linalg.norm(r) <= rtol * max(np.linalg.norm(rhs), 1e-300)):
+        return None
+    return sol[nc:]

@@ -231,9 +231,9 @@ def _independent_rows(Af: sp.csr_matrix) -> sp.csr_matrix:
     pivoted Cholesky (LAPACK ``dpstrf``) of the small ``m x m`` Gram matrix when its sparse LU finds it
     singular."""
     G = (Af @ Af.T).tocsc()
-    try:
-        d = spla.splu(G).U.diagonal()
-        if np.abs(d).min() > 1e-10 * np.abs(d).max():
+    try:  # G is symmetric positive semidefinite: diagonal pivots in a minimum-degree order (as a Cholesky)
+        d = spla.splu(G, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}).U.diagonal()
+        if np.all(np.isfinite(d)) and np.abs(d).min() > 1e-10 * np.abs(d).max():
             return Af
     except RuntimeError:
         pass

@@ -240,6 +240,16 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
                                                    reason=str(d["reason"])) for d in data.get("dropped", ())))
 
 
+def _target(mesh, material, anchors, drags, opts: dict, solve_external) -> EquilibriumResult:
+    """The target: ``solve_external`` with ``opts``. Without a ``backend`` in ``opts`` the project's Newton
+    backend solves it first (no constraints here: it meets the same tolerance contract and stability
+    check as IPOPT, with one ordering reused), and IPOPT (``solve_external``'s default) when Newton fails."""
+    if "backend" in opts:
+        return solve_external(mesh, material, anchors, drags, **opts)
+    ext = solve_external(mesh, material, anchors, drags, backend="newton", **opts)
+    return ext if ext.success else solve_external(mesh, material, anchors, drags, **opts)
+
+
 @interruptible()
 def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
                     routing_options: dict | None = None, method: str = "flattened",
@@ -260,7 +270,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     method : str
         The design method (see :func:`design_contractions`).
     external_options : dict, optional
-        Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...).
+        Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...). Without a
+        ``backend`` the target is solved by ``"newton"``, and by IPOPT when Newton fails.
     fabrication : Fabrication or dict of its fields, optional
         Channel, wall and end fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`, default: its
         defaults for this body). Routed ropes keep their clearance inside the body and are fitted to their
@@ -333,7 +344,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     if len(didx) == 0:
         raise ValueError("drags is empty: design_pipeline's target is the body dragged by its drags "
                          "({node: (x, y)}), so with none it is the rest shape and there is nothing to design")
-    ext = solve_external(mesh, material, anchors, drags, **(external_options or {}))
+    ext = _target(mesh, material, anchors, drags, dict(external_options or {}), solve_external)
     ext.raise_on_failure()
     t1 = time.perf_counter()
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)

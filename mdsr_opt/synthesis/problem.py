@@ -18,6 +18,7 @@ from ..mechanics.constraints import muscle_constraints, segment_spring_parameter
 from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
 from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
 from ..mechanics.constrained import ConstrainedModel
+from ..mechanics.kkt import least_squares_multipliers
 from ..mechanics.model import get_model, to_dm
 from ..mechanics.residual import kkt_residual, meet_tolerance
 
@@ -330,8 +331,19 @@ class _ConstraintBlock:
         if free is not None:
             J = J[:, np.nonzero(free)[0]]
             g_scaled = np.asarray(g_scaled)[free]
+        kap = least_squares_multipliers(J, g_scaled)  # the augmented system, else the normal equations
+        if kap is not None:
+            return kap
         A = (J @ J.T).tocsc()
-        return np.asarray(spla.spsolve(A, -(J @ g_scaled))).ravel()
+        rhs = -(J @ g_scaled)
+        try:  # J J' is symmetric positive (semi)definite: diagonal pivots in a minimum-degree order
+            kap = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                            options={"SymmetricMode": True}).solve(rhs)
+            if np.all(np.isfinite(kap)):
+                return kap
+        except RuntimeError:
+            pass
+        return np.asarray(spla.spsolve(A, rhs)).ravel()  # a breakdown: the general solve
 
     def tension(self, kappa) -> np.ndarray:
         """Rope tensions (force units) from the rope multipliers."""
