@@ -112,6 +112,18 @@ def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(out), QUAD_WEIGHTS
 
 
+def _assembly_plan(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSR pattern of the sparse matrix summing entries at ``(rows, cols)`` (n x n), computed once per mesh:
+    returns ``(slot, indices, indptr)`` with ``slot[k]`` the position in the CSR data of entry ``k``, so that a
+    matrix of these entries is ``np.bincount(slot, values, len(indices))`` with ``indices`` and ``indptr``
+    (columns sorted and unique in each row)."""
+    key = rows.astype(np.int64) * n + cols
+    uniq, slot = np.unique(key, return_inverse=True)
+    indices = (uniq % n).astype(np.int32)
+    indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+    return slot.ravel(), indices, indptr
+
+
 @dataclass(frozen=True)
 class _ElementData:
     G: np.ndarray        # (m, nq, nn, 2): physical shape-function gradients at the quadrature points
@@ -183,7 +195,7 @@ class QuadraticModel:
         self.numeric = bool(numeric) and numeric_law(material)
         rows = np.repeat(dofs, 2 * nn, axis=1).ravel()
         cols = np.tile(dofs, (1, 2 * nn)).ravel()
-        self._pattern = (rows, cols)
+        self._pattern = _assembly_plan(rows, cols, 2 * self.n_nodes)
 
     def _element_function(self, nn: int, nq: int):
         """CasADi function ``(xe, G, w, p) -> (energy, gradient, Hessian)`` of one element."""
@@ -292,5 +304,8 @@ class QuadraticModel:
         e, g, H = self._evaluate(x, params, 2)
         n2 = 2 * self.n_nodes
         grad = np.bincount(self._data.dofs.ravel(), g.ravel(), n2)
-        K = sp.csr_matrix((H.ravel(), self._pattern), shape=(n2, n2))
+        slot, indices, indptr = self._pattern
+        data = np.bincount(slot, H.ravel(), len(indices))
+        K = sp.csr_matrix((data, indices, indptr), shape=(n2, n2))
+        K.has_sorted_indices = True  # the plan's columns are sorted and unique in every row
         return float(e.sum()), grad, K

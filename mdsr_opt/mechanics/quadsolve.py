@@ -80,9 +80,38 @@ class QuadraticResult:
     state: np.ndarray | None = None
 
 
-def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int):
+class _Ordering:
+    """Sparse LU solves that find a fill-reducing column order (minimum degree on ``A^T + A``) at the first
+    factorisation and reuse it for later matrices of the same shape: the Newton matrices of one solve share
+    their pattern up to entries that happen to vanish (a rope's friction coupling at a straight node; all its
+    terms while its tension is 0). A matrix with more stored entries than the one ordered gets a new order.
+    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix."""
+
+    def __init__(self):
+        self.inv = None  # the order as an index array: row/column k of the ordered matrix is inv[k]
+        self.key = None  # (shape, stored entries) of the matrix the order was found for
+
+    def solve(self, J, rhs: np.ndarray) -> np.ndarray:
+        """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
+        opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
+        J = sp.csc_matrix(J)
+        if self.inv is None or self.key[0] != J.shape or J.nnz > self.key[1]:
+            lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
+            self.inv, self.key = np.argsort(lu.perm_c), (J.shape, J.nnz)
+            return lu.solve(rhs)
+        inv = self.inv
+        Jp = J[:, inv].tocsr()[inv].tocsc()
+        out = np.empty_like(rhs)
+        out[inv] = spla.splu(Jp, permc_spec="NATURAL", **opts).solve(rhs[inv])
+        return out
+
+
+def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
+            order: _Ordering | None = None):
     """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``."""
+    residual)``. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
+    solve)."""
+    order = order if order is not None else _Ordering()
     z = z0.copy()
     if not ok(z):
         return z, False, 0, float("inf")
@@ -92,9 +121,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         if norm <= tol:
             return z, True, it, norm
         try:
-            lu = spla.splu(J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                           options={"SymmetricMode": True})  # a fill-reducing order for a symmetric pattern
-            dz = lu.solve(-r)
+            dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
             return z, False, it, norm
         if not np.isfinite(dz).all():
@@ -117,7 +144,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
 
 
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
-INTERMEDIATE_TOL = 1e-6
+INTERMEDIATE_TOL = 1e-3
 
 
 def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25,
@@ -210,6 +237,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         return x
 
     fixed_idx = np.flatnonzero(fixed)
+    order = _Ordering()
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
@@ -225,15 +253,13 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
         K = model.evaluate(full(s, z0))[2]
         try:
-            lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                           options={"SymmetricMode": True})
-            dz = lu.solve(-(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(K[free][:, free], -(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
             if ok(z0 + frac * dz):
                 break
-        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter)
+        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
     z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
     x = full(s, z)
@@ -288,6 +314,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     gauge = _gauge(red)
     keep = np.setdiff1d(np.arange(red.n_q), gauge)
     nk = len(keep)
+    select = sp.csr_matrix((np.ones(nk), (keep, np.arange(nk))), shape=(red.n_q, nk))  # z -> q (gauge left out)
+    order = _Ordering()
     X = model.points
     L0 = np.array([r.length(X) for r in ropes])
     q_rest = red.rest_q()
@@ -325,13 +353,14 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                     Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
                     cols.append(f)
                     rows.append(g / L0[c])
-            P = red.jacobian(q)
-            rq = np.concatenate([(P.T @ gx)[keep] / fs, res_c])
+            P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
+            rq = np.concatenate([(P.T @ gx) / fs, res_c])
             if not jac:
                 return rq, None
-            Kq = (P.T @ Kx @ P + red.curvature(q, gx))[keep][:, keep] / fs
-            C = (P.T @ np.column_stack(cols))[keep] / fs                  # tension columns
-            R = (sp.csr_matrix(np.column_stack(rows).T) @ P)[:, keep]     # rope length rows
+            PT = P.T.tocsr()
+            Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
+            C = (PT @ np.column_stack(cols)) / fs                          # tension columns
+            R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
             D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
             J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
             return rq, J
@@ -339,7 +368,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         def ok(z):
             return model.upright(red.x_of(split(z)[0]))
 
-        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter)
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -353,7 +382,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 break
             active[:] = new
             z = np.concatenate([z[:nk], np.where(active, np.maximum(tau, 0.0), 0.0)])
-            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter)
+            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter, order)
             it += it2
         return z, conv, it, res
 
