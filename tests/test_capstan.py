@@ -164,3 +164,31 @@ def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_
     assert np.abs(fast.x - fast_again.x).max() == 0.0
     assert np.abs(fast.x - strict.x).max() < 1e-7 * mesh.size
     assert fast.tension[0] == pytest.approx(strict.tension[0], rel=1e-6)
+
+
+def test_a_solve_from_a_coarser_models_state_reaches_the_load_stepped_state(strip):
+    """guess=: the linear-element equilibrium carried to the quadratic nodes starts one Newton solve at the
+    full load; it reaches the load-stepped equilibrium in fewer iterations. A folded guess falls back to
+    load steps; a guess of the wrong shape is refused."""
+    from mdsr_opt.mechanics.quadratic import transfer_state
+
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    coarse = solve_quadratic_internal(QuadraticModel(mesh, MAT, order=1), [CapstanRope(bottom, 0.3)], [0.3],
+                                      fixture_groups(mesh, [Muscle(bottom)], 0.3))
+    stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
+    guessed = solve_quadratic_internal(model, ropes, [0.3], groups,
+                                       guess=transfer_state(mesh, coarse.x, model.points))
+    assert stepped.success and guessed.success and "predicted" in guessed.status and guessed.steps == 1
+    assert guessed.iterations < stepped.iterations
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * mesh.size
+    assert guessed.tension[0] == pytest.approx(stepped.tension[0], rel=1e-6)
+    folded = model.points.copy()
+    folded[:, 1] *= -1.0  # a mirror image: every element inverted
+    back = solve_quadratic_internal(model, ropes, [0.3], groups, guess=folded)
+    assert back.success and "predicted" not in back.status and np.abs(back.x - stepped.x).max() < 1e-7 * mesh.size
+    with pytest.raises(ValueError, match="guess must be"):
+        solve_quadratic_internal(model, ropes, [0.3], groups, guess=coarse.x)

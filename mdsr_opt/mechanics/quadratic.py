@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from ..body.material import numeric_law
 from ..body.mesh import Mesh
 
-__all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh"]
+__all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh", "transfer_state"]
 
 _A, _B = 0.445948490915965, 0.091576213509771
 #: Quadrature points (reference coordinates) of the quadratic element: the symmetric 6-point rule, exact for
@@ -70,6 +70,44 @@ def split_mesh(mesh: Mesh) -> Mesh:
     tris = np.concatenate([np.column_stack([a, ab, ca_]), np.column_stack([ab, b, bc]),
                            np.column_stack([ca_, bc, c]), np.column_stack([ab, bc, ca_])])
     return Mesh(pts, tris)
+
+
+def transfer_state(mesh: Mesh, x, points) -> np.ndarray:
+    """A state ``x`` (n, 2) of the linear ``mesh`` carried to other rest ``points`` (k, 2) of the same body
+    (another mesh of it): the displacement interpolated linearly in the triangle of ``mesh`` that holds each
+    point; a point outside every triangle (a boundary meshed differently) takes the displacement of the
+    nearest node of ``mesh``. Returns (k, 2) positions."""
+    from matplotlib.tri import LinearTriInterpolator, Triangulation
+    from scipy.spatial import cKDTree
+
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    x = np.asarray(x, dtype=float)
+    pts = np.asarray(points, dtype=float)
+    if x.shape != mesh.points.shape or not np.isfinite(x).all():
+        raise ValueError(f"x must be finite positions of the mesh's {mesh.n_nodes} nodes, got shape {x.shape}")
+    if pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all():
+        raise ValueError(f"points must be finite (k, 2) positions, got shape {pts.shape}")
+    P, T = mesh.points, mesh.triangles
+    u = x - P
+    tri = Triangulation(P[:, 0], P[:, 1], T)
+    out = pts.copy()
+    inside = np.ones(len(pts), dtype=bool)
+    for c in range(2):
+        v = LinearTriInterpolator(tri, u[:, c])(pts[:, 0], pts[:, 1])
+        inside &= ~np.ma.getmaskarray(v)
+        out[:, c] += np.ma.filled(v, 0.0)
+    outside = np.flatnonzero(~inside)
+    nearest = cKDTree(P).query(pts[outside])[1] if outside.size else []
+    for k, node in zip(outside, nearest):  # the affine extension of the best triangle at the nearest node
+        cand = T[(T == node).any(1)]
+        A = P[cand]                                             # (c, 3, 2)
+        M = np.stack([A[:, 1] - A[:, 0], A[:, 2] - A[:, 0]], axis=2)  # columns: the two edge vectors
+        l12 = np.linalg.solve(M, (pts[k] - A[:, 0])[:, :, None])[:, :, 0]
+        lam = np.column_stack([1.0 - l12.sum(1), l12])
+        best = int(np.argmax(lam.min(1)))
+        out[k] = pts[k] + lam[best] @ u[cand[best]]
+    return out
 
 
 def extend_prescribed(mesh: Mesh, anchors, drag_nodes, drag_positions):

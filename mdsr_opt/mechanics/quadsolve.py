@@ -280,16 +280,52 @@ def _gauge(red: RigidReduction) -> np.ndarray:
     return np.array([red.q_index[i], red.q_index[i] + 1, red.q_index[j] + comp])
 
 
+def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
+    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
+    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
+    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
+    state has an inverted element."""
+    X = red.X
+    i, j = int(np.flatnonzero(red.q_index == gauge[0])[0]), int(np.flatnonzero(red.q_index == gauge[2] - (gauge[2] % 2))[0])
+    comp = int(gauge[2] % 2)
+    d, D = guess[j] - guess[i], X[j] - X[i]
+    rho, phi = float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))
+    ratio = D[comp] / rho if rho > 0 else 2.0
+    if abs(ratio) > 1.0:
+        return None
+    if comp == 1:  # rho sin(theta + phi) = D_y, with the x component of D's sign
+        psi = np.arcsin(ratio)
+        psi = psi if D[0] >= 0 else np.pi - psi
+    else:          # rho cos(theta + phi) = D_x, with the y component of D's sign
+        psi = np.arccos(ratio)
+        psi = psi if D[1] >= 0 else -psi
+    th = psi - phi
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    x = (guess - guess[i]) @ R.T + X[i]
+    q = red.q_of(x)
+    x = red.x_of(q)
+    if not model.upright(x):  # made rigid at its fixtures, the state folds there
+        return None
+    P = red.jacobian(q)
+    gq = (P.T @ model.energy_gradient(x)[1])[keep]
+    C = np.column_stack([(P.T @ r.forces(x, r.weights(x), model.n_nodes)[0])[keep] for r in ropes])
+    tau = np.maximum(np.linalg.lstsq(C, -gq, rcond=None)[0], 0.0)
+    return np.concatenate([q[keep], tau])
+
+
 def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope], contractions,
                              fixtures: Sequence[np.ndarray] = (), *, tol: float = 1e-9, max_iter: int = 30,
                              min_step: float = 1.0 / 256, align_to_rest: bool = True,
-                             start: QuadraticResult | None = None) -> QuadraticResult:
+                             start: QuadraticResult | None = None, guess=None) -> QuadraticResult:
     """Internal driving of ``model`` by ``ropes`` (chains of its nodes, pulled at their first node, with
     capstan friction) contracted by ``contractions`` (fractions of their rest lengths), the nodes of each of
     ``fixtures`` (disjoint node groups, an end node first: see
     :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
-    of from rest.
+    of from rest. With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
+    equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
+    converge (or the predicted state has an inverted element) the load is stepped as without it. The result
+    is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
 
     Raises
     ------
@@ -300,6 +336,11 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
+    if guess is not None:
+        guess = np.asarray(guess, dtype=float)
+        if guess.shape != (model.n_nodes, 2) or not np.isfinite(guess).all():
+            raise ValueError(f"guess must be finite node positions of shape ({model.n_nodes}, 2), "
+                             f"got shape {guess.shape}")
     ropes = list(ropes)
     if not ropes or not all(isinstance(r, CapstanRope) for r in ropes):
         raise ValueError("internal driving needs at least one CapstanRope")
@@ -322,6 +363,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     nc = len(ropes)
     fs = _force_scale(model)
     active = np.ones(nc, dtype=bool)  # a slack rope's equation is tau_c = 0
+    predictor_iters = 0
 
     def split(z):
         q = q_rest.copy()
@@ -394,7 +436,21 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             raise ValueError("start must be a QuadraticResult of solve_quadratic_internal with the same model, "
                              "ropes and fixtures")
         z0, a0 = start.state.copy(), start.commanded.copy()
-    z, _s, conv, iters, steps, res, status = _continue(solve_at, z0, min_step)
+    done = None
+    if guess is not None:  # one Newton solve at the full load from the predicted state; else load steps
+        zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
+        if zg is not None:
+            zt, conv, it, res = solve_at(1.0, zg, True, 0.0)
+            if conv:
+                done = (zt, 1.0, True, it, 1, res, "converged (from the predicted state)")
+            else:
+                active[:] = True
+                predictor_iters = it
+    if done is None:
+        done = _continue(solve_at, z0, min_step)
+        if guess is not None and predictor_iters:
+            done = done[:3] + (done[3] + predictor_iters,) + done[4:]
+    z, _s, conv, iters, steps, res, status = done
     q, tau = split(z)
     x = red.x_of(q)
     turn = np.array([turning_angles(x, r.chain)[-1] for r in ropes])
