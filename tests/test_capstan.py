@@ -135,3 +135,60 @@ def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
     assert np.abs(warm.x - cold.x).max() < 1e-7 and warm.tension[0] == pytest.approx(cold.tension[0], rel=1e-7)
     with pytest.raises(ValueError, match="start must be"):
         solve_quadratic_internal(model, ropes, [0.2], [], start=first)
+
+
+def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_state(strip, monkeypatch):
+    """Intermediate load steps to quadsolve.INTERMEDIATE_TOL and LU factorisations in an order found once per
+    solve (quadsolve._Ordering) give the state of every step solved to 1e-9 with a fresh order each time."""
+    import scipy.sparse.linalg as spla
+
+    from mdsr_opt.mechanics import quadsolve
+
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    fast = solve_quadratic_internal(model, ropes, [0.25], groups)
+    orders = []
+    real = spla.splu
+    monkeypatch.setattr(quadsolve.spla, "splu", lambda A, permc_spec=None, **k: orders.append(permc_spec)
+                        or real(A, permc_spec=permc_spec, **k))
+    fast_again = solve_quadratic_internal(model, ropes, [0.25], groups)
+    assert "NATURAL" in orders and orders.count("MMD_AT_PLUS_A") < len(orders) / 2  # the order is reused
+    monkeypatch.setattr(quadsolve, "INTERMEDIATE_TOL", 1e-9)
+    monkeypatch.setattr(quadsolve._Ordering, "solve", lambda self, J, rhs: real(
+        J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs))
+    strict = solve_quadratic_internal(model, ropes, [0.25], groups)
+    assert fast.success and strict.success and fast.residual <= 1e-9
+    assert np.abs(fast.x - fast_again.x).max() == 0.0
+    assert np.abs(fast.x - strict.x).max() < 1e-7 * mesh.size
+    assert fast.tension[0] == pytest.approx(strict.tension[0], rel=1e-6)
+
+
+def test_a_solve_from_a_coarser_models_state_reaches_the_load_stepped_state(strip):
+    """guess=: the linear-element equilibrium carried to the quadratic nodes starts one Newton solve at the
+    full load; it reaches the load-stepped equilibrium in fewer iterations. A folded guess falls back to
+    load steps; a guess of the wrong shape is refused."""
+    from mdsr_opt.mechanics.quadratic import transfer_state
+
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    coarse = solve_quadratic_internal(QuadraticModel(mesh, MAT, order=1), [CapstanRope(bottom, 0.3)], [0.3],
+                                      fixture_groups(mesh, [Muscle(bottom)], 0.3))
+    stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
+    guessed = solve_quadratic_internal(model, ropes, [0.3], groups,
+                                       guess=transfer_state(mesh, coarse.x, model.points))
+    assert stepped.success and guessed.success and "predicted" in guessed.status and guessed.steps == 1
+    assert guessed.iterations < stepped.iterations
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * mesh.size
+    assert guessed.tension[0] == pytest.approx(stepped.tension[0], rel=1e-6)
+    folded = model.points.copy()
+    folded[:, 1] *= -1.0  # a mirror image: every element inverted
+    back = solve_quadratic_internal(model, ropes, [0.3], groups, guess=folded)
+    assert back.success and "predicted" not in back.status and np.abs(back.x - stepped.x).max() < 1e-7 * mesh.size
+    with pytest.raises(ValueError, match="guess must be"):
+        solve_quadratic_internal(model, ropes, [0.3], groups, guess=coarse.x)

@@ -186,3 +186,19 @@ def test_mdsr_run_writes_the_validation_tables(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["run", "one_muscle", "--out", str(tmp_path / "bad"), "--prototype-seed", "-1"])
     assert "non-negative integer" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+def test_a_shot_started_from_the_design_state_is_the_load_stepped_shot(one):
+    """internal(guess=the design model's equilibrium) (what validate_case passes) gives the load-stepped shot
+    to the solver's tolerance, in fewer Newton iterations; a guess of another mesh is refused."""
+    scene, _proto = one
+    setup = prepare_case(scene, "a30")
+    a = setup.case.contractions
+    stepped = VirtualPrototype.for_scene(scene, refine=2.5, seed=3).internal(scene.muscles, a, photo=False)
+    proto = VirtualPrototype.for_scene(scene, refine=2.5, seed=3)
+    guessed = proto.internal(scene.muscles, a, photo=False, guess=setup.target)
+    assert stepped.success and guessed.success and "predicted" in guessed.status
+    assert guessed.iterations < stepped.iterations
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * scene.mesh.size
+    with pytest.raises(ValueError, match="guess must be"):
+        proto.internal(scene.muscles, [0.25], photo=False, guess=proto.model.points)

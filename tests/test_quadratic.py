@@ -141,3 +141,37 @@ def test_bad_input_is_refused():
         solve_quadratic_external(model, [0, 99], [], np.zeros((0, 2)))
     with pytest.raises(ValueError, match="shape"):
         model.energy(np.zeros((3, 2)))
+
+
+def test_hessian_assembled_into_its_precomputed_pattern_equals_the_summed_element_blocks():
+    """QuadraticModel.evaluate sums the element Hessians into a CSR pattern computed once per mesh: the same
+    matrix as summing the blocks entry by entry (COO), sorted, with no duplicate entries."""
+    import scipy.sparse as sp
+
+    mesh = Mesh.rectangle(2.0, 1.0, 5, 3)
+    model = QuadraticModel(mesh, MAT)
+    x = model.points + 0.05 * np.sin(3.0 * model.points[:, ::-1])
+    _e, _g, K = model.evaluate(x)
+    H = model._evaluate(x)[2]
+    dofs = np.stack([2 * model.elements, 2 * model.elements + 1], axis=2).reshape(len(model.elements), -1)
+    k = dofs.shape[1]
+    ref = sp.coo_matrix((H.ravel(), (np.repeat(dofs, k, axis=1).ravel(), np.tile(dofs, (1, k)).ravel())),
+                        shape=K.shape).tocsr()
+    assert K.has_canonical_format and K.nnz == ref.nnz
+    assert abs(K - ref).max() <= 1e-14 * abs(ref).max()
+
+
+def test_transfer_state_carries_an_affine_state_exactly_inside_and_outside_the_mesh():
+    """transfer_state interpolates the displacement linearly: an affine state of one mesh arrives exactly at
+    the nodes of another mesh of the body and at points just outside it (a boundary meshed differently)."""
+    from mdsr_opt.mechanics.quadratic import transfer_state
+
+    coarse = Mesh.rectangle(2.0, 1.0, 4, 2)
+    A, b = np.array([[1.1, 0.3], [-0.2, 0.9]]), np.array([0.5, -0.25])
+    pts = np.vstack([QuadraticModel(Mesh.rectangle(2.0, 1.0, 7, 5), MAT).points, [[2.02, 0.5], [-0.01, -0.01]]])
+    out = transfer_state(coarse, coarse.points @ A.T + b, pts)
+    assert np.abs(out - (pts @ A.T + b)).max() < 1e-12
+    with pytest.raises(ValueError, match="x must be"):
+        transfer_state(coarse, pts, pts)
+    with pytest.raises(ValueError, match="points must be"):
+        transfer_state(coarse, coarse.points, pts[:, :1])

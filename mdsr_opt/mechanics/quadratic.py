@@ -39,7 +39,7 @@ import scipy.sparse as sp
 from ..body.material import numeric_law
 from ..body.mesh import Mesh
 
-__all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh"]
+__all__ = ["QUAD_POINTS", "QuadraticModel", "extend_prescribed", "midnode_table", "split_mesh", "transfer_state"]
 
 _A, _B = 0.445948490915965, 0.091576213509771
 #: Quadrature points (reference coordinates) of the quadratic element: the symmetric 6-point rule, exact for
@@ -70,6 +70,44 @@ def split_mesh(mesh: Mesh) -> Mesh:
     tris = np.concatenate([np.column_stack([a, ab, ca_]), np.column_stack([ab, b, bc]),
                            np.column_stack([ca_, bc, c]), np.column_stack([ab, bc, ca_])])
     return Mesh(pts, tris)
+
+
+def transfer_state(mesh: Mesh, x, points) -> np.ndarray:
+    """A state ``x`` (n, 2) of the linear ``mesh`` carried to other rest ``points`` (k, 2) of the same body
+    (another mesh of it): the displacement interpolated linearly in the triangle of ``mesh`` that holds each
+    point; a point outside every triangle (a boundary meshed differently) takes the displacement of the
+    nearest node of ``mesh``. Returns (k, 2) positions."""
+    from matplotlib.tri import LinearTriInterpolator, Triangulation
+    from scipy.spatial import cKDTree
+
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    x = np.asarray(x, dtype=float)
+    pts = np.asarray(points, dtype=float)
+    if x.shape != mesh.points.shape or not np.isfinite(x).all():
+        raise ValueError(f"x must be finite positions of the mesh's {mesh.n_nodes} nodes, got shape {x.shape}")
+    if pts.ndim != 2 or pts.shape[1] != 2 or not np.isfinite(pts).all():
+        raise ValueError(f"points must be finite (k, 2) positions, got shape {pts.shape}")
+    P, T = mesh.points, mesh.triangles
+    u = x - P
+    tri = Triangulation(P[:, 0], P[:, 1], T)
+    out = pts.copy()
+    inside = np.ones(len(pts), dtype=bool)
+    for c in range(2):
+        v = LinearTriInterpolator(tri, u[:, c])(pts[:, 0], pts[:, 1])
+        inside &= ~np.ma.getmaskarray(v)
+        out[:, c] += np.ma.filled(v, 0.0)
+    outside = np.flatnonzero(~inside)
+    nearest = cKDTree(P).query(pts[outside])[1] if outside.size else []
+    for k, node in zip(outside, nearest):  # the affine extension of the best triangle at the nearest node
+        cand = T[(T == node).any(1)]
+        A = P[cand]                                             # (c, 3, 2)
+        M = np.stack([A[:, 1] - A[:, 0], A[:, 2] - A[:, 0]], axis=2)  # columns: the two edge vectors
+        l12 = np.linalg.solve(M, (pts[k] - A[:, 0])[:, :, None])[:, :, 0]
+        lam = np.column_stack([1.0 - l12.sum(1), l12])
+        best = int(np.argmax(lam.min(1)))
+        out[k] = pts[k] + lam[best] @ u[cand[best]]
+    return out
 
 
 def extend_prescribed(mesh: Mesh, anchors, drag_nodes, drag_positions):
@@ -110,6 +148,18 @@ def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
              4 * (L[0] * dL[2] + L[2] * dL[0])]
         out.append(np.array(g))
     return np.array(out), QUAD_WEIGHTS
+
+
+def _assembly_plan(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSR pattern of the sparse matrix summing entries at ``(rows, cols)`` (n x n), computed once per mesh:
+    returns ``(slot, indices, indptr)`` with ``slot[k]`` the position in the CSR data of entry ``k``, so that a
+    matrix of these entries is ``np.bincount(slot, values, len(indices))`` with ``indices`` and ``indptr``
+    (columns sorted and unique in each row)."""
+    key = rows.astype(np.int64) * n + cols
+    uniq, slot = np.unique(key, return_inverse=True)
+    indices = (uniq % n).astype(np.int32)
+    indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
+    return slot.ravel(), indices, indptr
 
 
 @dataclass(frozen=True)
@@ -183,7 +233,7 @@ class QuadraticModel:
         self.numeric = bool(numeric) and numeric_law(material)
         rows = np.repeat(dofs, 2 * nn, axis=1).ravel()
         cols = np.tile(dofs, (1, 2 * nn)).ravel()
-        self._pattern = (rows, cols)
+        self._pattern = _assembly_plan(rows, cols, 2 * self.n_nodes)
 
     def _element_function(self, nn: int, nq: int):
         """CasADi function ``(xe, G, w, p) -> (energy, gradient, Hessian)`` of one element."""
@@ -292,5 +342,8 @@ class QuadraticModel:
         e, g, H = self._evaluate(x, params, 2)
         n2 = 2 * self.n_nodes
         grad = np.bincount(self._data.dofs.ravel(), g.ravel(), n2)
-        K = sp.csr_matrix((H.ravel(), self._pattern), shape=(n2, n2))
+        slot, indices, indptr = self._pattern
+        data = np.bincount(slot, H.ravel(), len(indices))
+        K = sp.csr_matrix((data, indices, indptr), shape=(n2, n2))
+        K.has_sorted_indices = True  # the plan's columns are sorted and unique in every row
         return float(e.sum()), grad, K

@@ -80,9 +80,38 @@ class QuadraticResult:
     state: np.ndarray | None = None
 
 
-def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int):
+class _Ordering:
+    """Sparse LU solves that find a fill-reducing column order (minimum degree on ``A^T + A``) at the first
+    factorisation and reuse it for later matrices of the same shape: the Newton matrices of one solve share
+    their pattern up to entries that happen to vanish (a rope's friction coupling at a straight node; all its
+    terms while its tension is 0). A matrix with more stored entries than the one ordered gets a new order.
+    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix."""
+
+    def __init__(self):
+        self.inv = None  # the order as an index array: row/column k of the ordered matrix is inv[k]
+        self.key = None  # (shape, stored entries) of the matrix the order was found for
+
+    def solve(self, J, rhs: np.ndarray) -> np.ndarray:
+        """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
+        opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
+        J = sp.csc_matrix(J)
+        if self.inv is None or self.key[0] != J.shape or J.nnz > self.key[1]:
+            lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
+            self.inv, self.key = np.argsort(lu.perm_c), (J.shape, J.nnz)
+            return lu.solve(rhs)
+        inv = self.inv
+        Jp = J[:, inv].tocsr()[inv].tocsc()
+        out = np.empty_like(rhs)
+        out[inv] = spla.splu(Jp, permc_spec="NATURAL", **opts).solve(rhs[inv])
+        return out
+
+
+def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
+            order: _Ordering | None = None):
     """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``."""
+    residual)``. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
+    solve)."""
+    order = order if order is not None else _Ordering()
     z = z0.copy()
     if not ok(z):
         return z, False, 0, float("inf")
@@ -92,9 +121,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         if norm <= tol:
             return z, True, it, norm
         try:
-            lu = spla.splu(J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                           options={"SymmetricMode": True})  # a fill-reducing order for a symmetric pattern
-            dz = lu.solve(-r)
+            dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
             return z, False, it, norm
         if not np.isfinite(dz).all():
@@ -117,7 +144,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
 
 
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
-INTERMEDIATE_TOL = 1e-6
+INTERMEDIATE_TOL = 1e-3
 
 
 def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25,
@@ -210,6 +237,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         return x
 
     fixed_idx = np.flatnonzero(fixed)
+    order = _Ordering()
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
@@ -225,15 +253,13 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
         K = model.evaluate(full(s, z0))[2]
         try:
-            lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                           options={"SymmetricMode": True})
-            dz = lu.solve(-(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(K[free][:, free], -(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
             if ok(z0 + frac * dz):
                 break
-        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter)
+        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
     z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
     x = full(s, z)
@@ -254,16 +280,52 @@ def _gauge(red: RigidReduction) -> np.ndarray:
     return np.array([red.q_index[i], red.q_index[i] + 1, red.q_index[j] + comp])
 
 
+def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
+    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
+    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
+    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
+    state has an inverted element."""
+    X = red.X
+    i, j = int(np.flatnonzero(red.q_index == gauge[0])[0]), int(np.flatnonzero(red.q_index == gauge[2] - (gauge[2] % 2))[0])
+    comp = int(gauge[2] % 2)
+    d, D = guess[j] - guess[i], X[j] - X[i]
+    rho, phi = float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))
+    ratio = D[comp] / rho if rho > 0 else 2.0
+    if abs(ratio) > 1.0:
+        return None
+    if comp == 1:  # rho sin(theta + phi) = D_y, with the x component of D's sign
+        psi = np.arcsin(ratio)
+        psi = psi if D[0] >= 0 else np.pi - psi
+    else:          # rho cos(theta + phi) = D_x, with the y component of D's sign
+        psi = np.arccos(ratio)
+        psi = psi if D[1] >= 0 else -psi
+    th = psi - phi
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    x = (guess - guess[i]) @ R.T + X[i]
+    q = red.q_of(x)
+    x = red.x_of(q)
+    if not model.upright(x):  # made rigid at its fixtures, the state folds there
+        return None
+    P = red.jacobian(q)
+    gq = (P.T @ model.energy_gradient(x)[1])[keep]
+    C = np.column_stack([(P.T @ r.forces(x, r.weights(x), model.n_nodes)[0])[keep] for r in ropes])
+    tau = np.maximum(np.linalg.lstsq(C, -gq, rcond=None)[0], 0.0)
+    return np.concatenate([q[keep], tau])
+
+
 def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope], contractions,
                              fixtures: Sequence[np.ndarray] = (), *, tol: float = 1e-9, max_iter: int = 30,
                              min_step: float = 1.0 / 256, align_to_rest: bool = True,
-                             start: QuadraticResult | None = None) -> QuadraticResult:
+                             start: QuadraticResult | None = None, guess=None) -> QuadraticResult:
     """Internal driving of ``model`` by ``ropes`` (chains of its nodes, pulled at their first node, with
     capstan friction) contracted by ``contractions`` (fractions of their rest lengths), the nodes of each of
     ``fixtures`` (disjoint node groups, an end node first: see
     :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
-    of from rest.
+    of from rest. With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
+    equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
+    converge (or the predicted state has an inverted element) the load is stepped as without it. The result
+    is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
 
     Raises
     ------
@@ -274,6 +336,11 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
+    if guess is not None:
+        guess = np.asarray(guess, dtype=float)
+        if guess.shape != (model.n_nodes, 2) or not np.isfinite(guess).all():
+            raise ValueError(f"guess must be finite node positions of shape ({model.n_nodes}, 2), "
+                             f"got shape {guess.shape}")
     ropes = list(ropes)
     if not ropes or not all(isinstance(r, CapstanRope) for r in ropes):
         raise ValueError("internal driving needs at least one CapstanRope")
@@ -288,12 +355,15 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     gauge = _gauge(red)
     keep = np.setdiff1d(np.arange(red.n_q), gauge)
     nk = len(keep)
+    select = sp.csr_matrix((np.ones(nk), (keep, np.arange(nk))), shape=(red.n_q, nk))  # z -> q (gauge left out)
+    order = _Ordering()
     X = model.points
     L0 = np.array([r.length(X) for r in ropes])
     q_rest = red.rest_q()
     nc = len(ropes)
     fs = _force_scale(model)
     active = np.ones(nc, dtype=bool)  # a slack rope's equation is tau_c = 0
+    predictor_iters = 0
 
     def split(z):
         q = q_rest.copy()
@@ -325,13 +395,14 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                     Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
                     cols.append(f)
                     rows.append(g / L0[c])
-            P = red.jacobian(q)
-            rq = np.concatenate([(P.T @ gx)[keep] / fs, res_c])
+            P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
+            rq = np.concatenate([(P.T @ gx) / fs, res_c])
             if not jac:
                 return rq, None
-            Kq = (P.T @ Kx @ P + red.curvature(q, gx))[keep][:, keep] / fs
-            C = (P.T @ np.column_stack(cols))[keep] / fs                  # tension columns
-            R = (sp.csr_matrix(np.column_stack(rows).T) @ P)[:, keep]     # rope length rows
+            PT = P.T.tocsr()
+            Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
+            C = (PT @ np.column_stack(cols)) / fs                          # tension columns
+            R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
             D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
             J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
             return rq, J
@@ -339,7 +410,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         def ok(z):
             return model.upright(red.x_of(split(z)[0]))
 
-        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter)
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -353,7 +424,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 break
             active[:] = new
             z = np.concatenate([z[:nk], np.where(active, np.maximum(tau, 0.0), 0.0)])
-            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter)
+            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter, order)
             it += it2
         return z, conv, it, res
 
@@ -365,7 +436,21 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             raise ValueError("start must be a QuadraticResult of solve_quadratic_internal with the same model, "
                              "ropes and fixtures")
         z0, a0 = start.state.copy(), start.commanded.copy()
-    z, _s, conv, iters, steps, res, status = _continue(solve_at, z0, min_step)
+    done = None
+    if guess is not None:  # one Newton solve at the full load from the predicted state; else load steps
+        zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
+        if zg is not None:
+            zt, conv, it, res = solve_at(1.0, zg, True, 0.0)
+            if conv:
+                done = (zt, 1.0, True, it, 1, res, "converged (from the predicted state)")
+            else:
+                active[:] = True
+                predictor_iters = it
+    if done is None:
+        done = _continue(solve_at, z0, min_step)
+        if guess is not None and predictor_iters:
+            done = done[:3] + (done[3] + predictor_iters,) + done[4:]
+    z, _s, conv, iters, steps, res, status = done
     q, tau = split(z)
     x = red.x_of(q)
     turn = np.array([turning_angles(x, r.chain)[-1] for r in ropes])

@@ -301,14 +301,14 @@ class VirtualPrototype:
                     last = exc
         raise ValueError(f"muscle {muscle.name or ''} could not be laid on the prototype's mesh: {last}")
 
-    def drive(self, scene, case) -> PrototypeShot:
+    def drive(self, scene, case, guess=None) -> PrototypeShot:
         """The prototype driven as the design scene's ``case`` (a Case, or the name of one of ``scene``'s)
         says, photographed: the anchors and drags of the prototype's case of that name (:meth:`external`),
-        or the scene's muscles at the case's own contractions (:meth:`internal`)."""
+        or the scene's muscles at the case's own contractions (:meth:`internal`, ``guess`` passed on)."""
         c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
             return self.external(c.name)
-        return self.internal(scene.muscles, c.contractions)
+        return self.internal(scene.muscles, c.contractions, guess=guess)
 
     def _solved(self, key):
         """The shot kept for ``key`` (the arguments that made it), or None; a shot asked for is kept longest."""
@@ -377,11 +377,16 @@ class VirtualPrototype:
         at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
         return float(max(self.fixture_radius, 1.001 * L[at_end].max()))
 
-    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True) -> PrototypeShot:
+    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True, guess=None) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
         capstan friction pulled at its first node, ending on fixtures of radius ``fixture_radius``) at
         ``contractions`` (rounded to 1e-9). Solved once per muscles and contractions: a second call returns the
-        same shot."""
+        same shot. ``guess``, a state of the design mesh near the answer (the design model's equilibrium at
+        these contractions), is carried to the prototype's nodes
+        (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and the solve starts there at the full load,
+        stepping the load as without it when that fails
+        (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
+        tolerance, found sooner."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
         from ..mechanics.fixtures import fixture_groups
         from ..mechanics.quadsolve import solve_quadratic_internal
@@ -392,6 +397,11 @@ class VirtualPrototype:
         if not np.isfinite(a).all() or (a < 0).any() or (a >= 1).any():
             raise ValueError(f"contractions must lie in [0, 1), got {a.tolist()}")
         muscles = [m if isinstance(m, Muscle) else Muscle(m) for m in muscles]  # checked before the look-up
+        if guess is not None:
+            guess = np.asarray(guess, dtype=float)
+            if guess.shape != self.design_mesh.points.shape or not np.isfinite(guess).all():
+                raise ValueError(f"guess must be finite positions of the design mesh's {self.design_mesh.n_nodes} "
+                                 f"nodes, got shape {guess.shape}")
         # solved at the contractions rounded to 1e-9 (a rope length change of 1e-9 L0): a design that
         # recovers a case's known contractions to that precision is the same shot, whichever is asked first
         a = np.round(a, 9)
@@ -403,7 +413,12 @@ class VirtualPrototype:
             groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine), mid)
             ropes = [CapstanRope(quadratic_chain(self.mesh, m.nodes, mid) if mid is not None else m.nodes,
                                  self.friction) for m in fine]
-            res = solve_quadratic_internal(self.model, ropes, a, groups)
+            start = None
+            if guess is not None:
+                from ..mechanics.quadratic import transfer_state
+
+                start = transfer_state(self.design_mesh, guess, self.model.points)
+            res = solve_quadratic_internal(self.model, ropes, a, groups, guess=start)
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
@@ -468,9 +483,15 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         else:
             say(f"{prefix}virtual prototype ({what}, Table {table}): FAILED: {entry['status']}")
 
-    run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case))
+    def near(x):  # a design-model equilibrium starts the prototype's solve (the same state, found sooner)
+        x = None if x is None else np.asarray(x, dtype=float)
+        return x if x is not None and x.shape == prototype.design_mesh.points.shape and np.isfinite(x).all() else None
+
+    run("driving", 2 if case.kind == "external" else 3,
+        lambda: prototype.drive(scene, case, guess=near(setup.target)))
     if design is not None:
-        run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions))
+        run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions,
+                                                    guess=near(getattr(design, "x", None))))
     return out, photos
 
 
