@@ -202,3 +202,20 @@ def test_a_shot_started_from_the_design_state_is_the_load_stepped_shot(one):
     assert np.abs(guessed.x - stepped.x).max() < 1e-7 * scene.mesh.size
     with pytest.raises(ValueError, match="guess must be"):
         proto.internal(scene.muscles, [0.25], photo=False, guess=proto.model.points)
+
+
+@pytest.mark.slow
+def test_table_4_lays_the_designed_ropes_with_the_fixtures_they_were_fitted_to():
+    """A routed design's ropes carry the fixture size the routing fitted them to (smaller than the scene's
+    anchor radius when fixtures were shrunk); the prototype's Table 4 shot uses it. At the scene's radius
+    the gecko's bend_right ropes had their fixtures joined and the shot was 'not built'."""
+    from mdsr_opt import get_problem
+    from mdsr_opt.scenes.runner import measure_case, run_case
+
+    scene = get_problem("gecko")
+    run = run_case(scene, "bend_right", photo=False)
+    assert run.design.anchor_radius < scene.design_options.get("anchor_radius", np.inf)
+    measure_case(scene, run, prototype=VirtualPrototype.for_scene(scene))
+    table4 = run.report.photo["prototype"]["design"]
+    assert table4["success"], table4["status"]
+    assert 0 < table4["mean_px"] < 10

@@ -363,21 +363,23 @@ class VirtualPrototype:
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
-    def fixture_radius_on_mesh(self, fine_muscles) -> float:
+    def fixture_radius_on_mesh(self, fine_muscles, radius: float | None = None) -> float:
         """The fixtures' radius on the prototype's mesh: ``fixture_radius``, unless a rope's end would hold no
         other node within it; then the longest mesh edge at the ropes' ends (times 1.001), so that every
         fixture holds its end node's ring of elements. A fixture smaller than the mesh would be a point
         force, under which a planar body has no finite displacement and quadratic elements fold at the
         rope's end."""
+        r = self.fixture_radius if radius is None else float(radius)
         E, L = self.mesh.edges, self.mesh.edge_lengths
         ends = np.array([n for m in fine_muscles for n in (m.nodes[0], m.nodes[-1])])
         shortest = [L[(E == e).any(1)].min() for e in ends]
-        if not ends.size or min(shortest) <= self.fixture_radius:
-            return self.fixture_radius
+        if not ends.size or min(shortest) <= r:
+            return r
         at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
-        return float(max(self.fixture_radius, 1.001 * L[at_end].max()))
+        return float(max(r, 1.001 * L[at_end].max()))
 
-    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True, guess=None) -> PrototypeShot:
+    def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True, guess=None,
+                 fixture_radius: float | None = None) -> PrototypeShot:
         """The prototype driven by the design mesh's ``muscles`` (laid on the fine mesh, each a rope with
         capstan friction pulled at its first node, ending on fixtures of radius ``fixture_radius``) at
         ``contractions`` (rounded to 1e-9). Solved once per muscles and contractions: a second call returns the
@@ -386,7 +388,9 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and the solve starts there at the full load,
         stepping the load as without it when that fails
         (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
-        tolerance, found sooner."""
+        tolerance, found sooner. ``fixture_radius``: the ends' fixtures for these muscles (default
+        ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
+        be smaller)."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
         from ..mechanics.fixtures import fixture_groups
         from ..mechanics.quadsolve import solve_quadratic_internal
@@ -405,12 +409,13 @@ class VirtualPrototype:
         # solved at the contractions rounded to 1e-9 (a rope length change of 1e-9 L0): a design that
         # recovers a case's known contractions to that precision is the same shot, whichever is asked first
         a = np.round(a, 9)
-        key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo))
+        radius = self.fixture_radius if fixture_radius is None else float(fixture_radius)
+        key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo), radius)
         shot = self._solved(key)
         if shot is None:
             fine = [self.transfer_muscle(m) for m in muscles]
             mid = self.mesh.n_nodes + np.arange(len(self.mesh.edges)) if self.order == 2 else None
-            groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine), mid)
+            groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine, radius), mid)
             ropes = [CapstanRope(quadratic_chain(self.mesh, m.nodes, mid) if mid is not None else m.nodes,
                                  self.friction) for m in fine]
             start = None
@@ -490,8 +495,10 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
     run("driving", 2 if case.kind == "external" else 3,
         lambda: prototype.drive(scene, case, guess=near(setup.target)))
     if design is not None:
+        r_design = getattr(design, "anchor_radius", None)  # the fixtures the designed ropes were fitted to
         run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions,
-                                                    guess=near(getattr(design, "x", None))))
+                                                    guess=near(getattr(design, "x", None)),
+                                                    fixture_radius=r_design if r_design else None))
     return out, photos
 
 
