@@ -550,15 +550,20 @@ def _alive(pid: int) -> bool:
         return False
 
 
+def _gecko_in_its_own_group(out) -> subprocess.Popen:
+    """``mdsr run gecko --out out`` in a new process group (as a terminal's foreground job), output merged."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the run's processes in /proc")
 def test_ctrl_c_in_the_terminal_stops_the_run_and_its_workers(tmp_path):
     """Ctrl-C in a terminal reaches the whole process group: the run and its worker processes. The run
     exits with 130 within seconds, its processes are gone, no temporary file stays, the manifest says so."""
     out = tmp_path / "out"
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    proc = _gecko_in_its_own_group(out)
     try:
         t0, kids = time.monotonic(), []
         # until a worker runs: the pool's server (a child) has forked one (a grandchild)
@@ -586,10 +591,7 @@ def test_an_early_ctrl_c_in_the_terminal_prints_one_line_and_no_traceback(tmp_pa
     """Ctrl-C from the terminal while the worker pool's server is still starting (importing its modules):
     the run stops with 130 and its one-line message; no process of the pool prints a traceback."""
     out = tmp_path / "out"
-    env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "run", "gecko", "--out", str(out)], cwd=ROOT,
-                            env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    proc = _gecko_in_its_own_group(out)
     try:
         t0 = time.monotonic()
         while time.monotonic() - t0 < 60 and not _children(proc.pid) and proc.poll() is None:
