@@ -145,14 +145,9 @@ def run_figure(out, resolution="medium", log=print, vector=None) -> int:
 
 
 def main(argv=None) -> int:
-    import argparse
+    from mdsr_opt.scenes.runscene import figure_arguments
 
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--out", default=os.path.join("out", "face_expressions"), help="output folder")
-    p.add_argument("--resolution", default="medium",
-                   type=lambda s: int(s) if s.isdigit() else s, help="coarse, medium (default), fine or a node count")
-    p.add_argument("--vector", choices=("pdf", "svg"), help="also write the figure in this vector format")
-    a = p.parse_args(argv)
+    a = figure_arguments("face_expressions", __doc__.split("\n")[0], argv)
     return run_figure(a.out, resolution=a.resolution, vector=a.vector)
 
 

@@ -29,7 +29,7 @@ from .rundir import check_interrupt, RunFolder, noting_interrupts
 from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
 from .scene import Scene, resolve_resolution
 
-__all__ = ['run_scene', 'run_main']
+__all__ = ['run_scene', 'run_main', 'figure_arguments']
 
 
 _LOG = logging.getLogger(__name__)
@@ -298,6 +298,19 @@ def portable_source(source: str, out) -> str:
     except ValueError:  # another drive (Windows)
         return src.name
     return rel.as_posix() if rel.parts[:2] != ("..", "..") else src.name
+
+
+def figure_arguments(name: str, description: str, argv: Sequence[str] | None = None):
+    """The command line of a figure script (``mdsr run figure6`` runs it too): ``[--out DIR] [--resolution R]
+    [--vector {pdf,svg}]``, parsed from ``argv``; ``--out`` defaults to ``out/<name>``."""
+    import argparse
+
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--out", default=os.path.join("out", name), help=f"output folder (default out/{name})")
+    p.add_argument("--resolution", default="medium", type=lambda s: int(s) if s.isdigit() else s,
+                   help="coarse, medium (default), fine or a node count")
+    p.add_argument("--vector", choices=("pdf", "svg"), help="also write every figure in this vector format")
+    return p.parse_args(argv)
 
 
 def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> int:
