@@ -175,3 +175,35 @@ def test_transfer_state_carries_an_affine_state_exactly_inside_and_outside_the_m
         transfer_state(coarse, pts, pts)
     with pytest.raises(ValueError, match="points must be"):
         transfer_state(coarse, coarse.points, pts[:, :1])
+
+
+def test_vertex_jacobians_see_a_curved_edge_fold_the_quadrature_points_miss():
+    mesh = Mesh.rectangle(1.0, 1.0, 2, 2)
+    model = QuadraticModel(mesh, MAT, 2)
+    x = model.points.copy()
+    e = 0
+    a, b = model.elements[e][:2]
+    mid = model.elements[e][3:]
+    # the midpoint node of edge (a, b) slid along it by 0.3 of its length: x(t) along the edge has
+    # slope 1 + 4 (0.3) (1 - 2t), negative at b (t = 1), positive at the quadrature points
+    k = [m for m in mid if np.allclose(model.points[m], 0.5 * (model.points[a] + model.points[b]))][0]
+    x[k] = model.points[k] + 0.3 * (model.points[b] - model.points[a])
+    jv, jq = model.vertex_jacobians(x)[e], model.jacobians(x)[e]
+    assert jq.min() > 0.1 and jv.min() == pytest.approx(-0.2, abs=1e-9)  # folded at a vertex only
+    assert not model.upright(x)
+    np.testing.assert_allclose(model.vertex_jacobians(model.points), 1.0, rtol=1e-12)
+    lin = QuadraticModel(mesh, MAT, 1)
+    np.testing.assert_allclose(lin.vertex_jacobians(lin.points), lin.jacobians(lin.points)[:, :1].repeat(3, 1))
+
+
+def test_a_solve_refused_by_an_inverting_step_says_which_element_and_where():
+    mesh = Mesh.rectangle(1.0, 1.0, 3, 3)
+    model = QuadraticModel(mesh, MAT, 2)
+    n0 = mesh.n_nodes
+    left = np.flatnonzero(model.points[:n0, 0] < 1e-9)
+    far = int(np.flatnonzero((model.points[:n0, 0] > 1 - 1e-9) & (model.points[:n0, 1] > 1 - 1e-9))[0])
+    # the top right corner dragged through the body to beyond the left side: it cannot stay upright
+    res = solve_quadratic_external(model, left, [far], [[-0.5, -0.5]], min_step=1.0 / 16)
+    assert not res.success
+    assert "the last trial step inverted element" in res.status
+    assert ("at a vertex" in res.status) or ("at a quadrature point" in res.status)

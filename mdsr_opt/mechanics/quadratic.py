@@ -264,16 +264,22 @@ class QuadraticModel:
         """``det F`` at every quadrature point, (m, nq)."""
         return np.linalg.det(self.deformation_gradients(x))
 
+    def vertex_jacobians(self, x) -> np.ndarray:
+        """``det F`` at the three vertices of every element, (m, 3) (order 1: the element's constant
+        ``det F``, repeated)."""
+        x = self._state(x)
+        if self.order == 2:  # the linear F of a quadratic element is extreme at its vertices
+            return np.linalg.det(np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients))
+        return np.repeat(self.jacobians(x)[:, :1], 3, axis=1)
+
     def upright(self, x) -> bool:
         """No element inverted at a quadrature point or at a node (``det F > 0`` at the vertices too, where
         the linear ``F`` of a quadratic element is extreme)."""
         x = self._state(x)
         if not np.all(self.jacobians(x) > 0.0):
             return False
-        if self.order == 2:  # det F at the vertices, where the linear F of a quadratic element is extreme
-            F = np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients)
-            if not np.all(np.linalg.det(F) > 0.0):
-                return False
+        if self.order == 2 and not np.all(self.vertex_jacobians(x) > 0.0):
+            return False
         return True
 
     def _state(self, x) -> np.ndarray:

@@ -16,8 +16,9 @@ Both are solved by Newton's method on the equilibrium equations with load contin
 
 Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
 with an element inverted at a quadrature point or a vertex. A load step that fails is halved (down to
-``min_step``). Success means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the
-stiffness times the body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
+``min_step``); the failure status names the element the last refused trial state inverted, if any. Success
+means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the stiffness times the
+body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
 follows the branch from rest.
 """
 
@@ -143,6 +144,34 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     return z, norm <= tol, max_iter, norm
 
 
+class _Upright:
+    """``model.upright`` of the node positions ``x_of(z)``, remembering the last state it refused: which
+    element, inverted at a quadrature point or only at a vertex (a quadratic element whose curved edge
+    folds), so that a failure can say why Newton's steps were refused."""
+
+    def __init__(self, model: QuadraticModel, x_of: Callable):
+        self.model, self.x_of, self.refused = model, x_of, None
+
+    def __call__(self, z) -> bool:
+        x = self.x_of(z)
+        if self.model.upright(x):
+            self.refused = None
+            return True
+        jq = self.model.jacobians(x).min(1)
+        jv = self.model.vertex_jacobians(x).min(1)
+        e = int(np.argmin(np.minimum(jq, jv)))
+        self.refused = (e, "a quadrature point" if jq[e] <= 0.0 else "a vertex", self.model.elements[e][:3])
+        return False
+
+    def why(self) -> str:
+        """Text for a failure status: the element the last refused trial state inverted, or ''."""
+        if self.refused is None:
+            return ""
+        e, where, nodes = self.refused
+        return (f"; the last trial step inverted element {e} (nodes {', '.join(str(int(k)) for k in nodes)}) "
+                f"at {where}")
+
+
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
 INTERMEDIATE_TOL = 1e-3
 
@@ -238,6 +267,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
 
     fixed_idx = np.flatnonzero(fixed)
     order = _Ordering()
+    guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
@@ -247,8 +277,8 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 return g[free] / fs, K[free][:, free] / fs
             return model.energy_gradient(x)[1][free] / fs, None
 
-        def ok(z):
-            return model.upright(full(t, z))
+        ok = _Upright(model, lambda z: full(t, z))
+        guard[0] = ok
 
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
         K = model.evaluate(full(s, z0))[2]
@@ -262,6 +292,8 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
     z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
+    if not conv and guard[0] is not None:
+        status += guard[0].why()
     x = full(s, z)
     return QuadraticResult(x=x.reshape(-1, 2), success=bool(conv), status=status, iterations=iters, steps=steps,
                            residual=float(res))
@@ -363,6 +395,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     nc = len(ropes)
     fs = _force_scale(model)
     active = np.ones(nc, dtype=bool)  # a slack rope's equation is tau_c = 0
+    guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
     predictor_iters = 0
 
     def split(z):
@@ -407,8 +440,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
             return rq, J
 
-        def ok(z):
-            return model.upright(red.x_of(split(z)[0]))
+        ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
+        guard[0] = ok
 
         z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
@@ -451,6 +484,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         if guess is not None and predictor_iters:
             done = done[:3] + (done[3] + predictor_iters,) + done[4:]
     z, _s, conv, iters, steps, res, status = done
+    if not conv and guard[0] is not None:
+        status += guard[0].why()
     q, tau = split(z)
     x = red.x_of(q)
     turn = np.array([turning_angles(x, r.chain)[-1] for r in ropes])
