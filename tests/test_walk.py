@@ -200,3 +200,21 @@ def test_bad_input_is_refused_at_the_door(kw, msg):
     S = args.pop("strokes")
     with pytest.raises(ValueError, match=msg):
         walk(mesh, MAT, mus, S, **args)
+
+
+def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.walk import plot_walk
+
+    mesh, mus, feet = _inchworm(8, 2)
+    r = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=2, feet_groups=feet, touching=INCH_T)
+    fig = plot_walk(r)
+    ax = fig.axes[0]
+    dist = [ln for ln in ax.lines if ln.get_label() == "centroid distance"][0]
+    assert np.allclose(dist.get_xdata(), [0, 1, 2])
+    assert np.allclose(dist.get_ydata(), np.concatenate([[0.0], np.cumsum(r.distance)]), rtol=1e-9, atol=1e-12)
+    assert "displacement (mm)" == ax.get_ylabel()
+    path = save_figure(fig, tmp_path / "walk.png", close=True)
+    assert (tmp_path / "walk.png").stat().st_size > 1000 and path.endswith("walk.png")

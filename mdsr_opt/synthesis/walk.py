@@ -178,7 +178,7 @@ class WalkResult:
     cycle_frames : int
         Frames per cycle (``states[c * cycle_frames]`` ends cycle ``c``).
     displacement : (cycles, 2) ndarray
-        The centroid's (lumped-area weighted) displacement in each cycle.
+        The displacement of the body's centre of area (nodes weighted by lumped area) in each cycle.
     rotation : (cycles,) ndarray
         The body's best-fit rotation in each cycle (radians, counter-clockwise).
     slipping : (F, n) bool ndarray
@@ -194,6 +194,10 @@ class WalkResult:
     loads : (F, n) ndarray
         The normal force on each node in each frame (zero where a foot is lifted).
     units : str
+    centroids : (F, 2) ndarray
+        The centre of area in each frame relative to the cycle's first frame (``states[1]``).
+    turns : (F,) ndarray
+        The best-fit rotation in each frame relative to ``states[1]`` (radians, unwrapped).
     """
 
     states: np.ndarray
@@ -210,6 +214,8 @@ class WalkResult:
     eps: float
     loads: np.ndarray
     units: str = "mm"
+    centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    turns: np.ndarray = field(default_factory=lambda: np.zeros(0))
     iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     time: float = 0.0
 
@@ -420,8 +426,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     muN_of = float(mu) * np.vstack([np.tile(frame_loads, (cycles, 1)), frame_loads[:1]]) / un.force
     eps = EPS * un.unit_mesh.size
     rho = 0.0 if mu > 0 else 1.0  # with mu = 0 the vanishing drag of the docstring (weights: the loads)
-    share = node_loads(mesh, 1.0, feet)
-    wdrag = np.repeat(share if mu == 0 else np.zeros(mesh.n_nodes), 2) * (1e-6 if mu == 0 else 0.0)
+    wdrag = np.repeat(node_loads(mesh, 1.0, feet), 2) * 1e-6 if mu == 0 else np.zeros(2 * mesh.n_nodes)
     full = np.vstack([np.tile(S, (cycles, 1)), S[:1]])
     states, ok, status, its = [X.copy()], [True], ["start"], [0]
     slip = [np.zeros(mesh.n_nodes, dtype=bool)]
@@ -440,12 +445,12 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
         its.append(itk)
     states = np.array(states)
     strokes_all = np.vstack([np.zeros(len(mus)), full])
-    disp, rot = [], []
-    for c in range(cycles):
-        a, b = states[1 + c * F], states[1 + (c + 1) * F]
-        d, r = rigid_motion(a, b, share)
-        disp.append(d)
-        rot.append(r)
+    area = node_loads(mesh, 1.0)  # the body's centre of area and best-fit rotation, whatever touches
+    track = [rigid_motion(states[1], y, area) for y in states]
+    centroids = np.array([d for d, _ in track])
+    turns = np.unwrap(np.array([r for _, r in track]))
+    ends = 1 + F * np.arange(cycles + 1)
+    disp, rot = np.diff(centroids[ends], axis=0), np.diff(turns[ends])
     slip = np.array(slip)
     loads_all = np.vstack([frame_loads[:1], np.tile(frame_loads, (cycles, 1)), frame_loads[:1]])
     feet_slip = {k: np.zeros(len(states), dtype=bool) for k in groups}
@@ -454,8 +459,8 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
         for k, v in groups.items():
             cap = float(mu) * loads_all[i, v].sum()
             feet_slip[k][i] = cap > 0 and np.hypot(*f[v].sum(0)) >= SLIP * cap
-    return WalkResult(states=states, strokes=strokes_all, cycle_frames=F, displacement=np.array(disp),
-                      rotation=np.array(rot), slipping=slip, feet_slipping=feet_slip, success=np.array(ok),
+    return WalkResult(states=states, strokes=strokes_all, cycle_frames=F, displacement=disp,
+                      rotation=rot, centroids=centroids, turns=turns, slipping=slip, feet_slipping=feet_slip, success=np.array(ok),
                       status=tuple(status), mu=float(mu), weight=W, eps=EPS * mesh.size, loads=loads_all, units=units,
                       iterations=np.array(its), time=time.perf_counter() - t0)
 
