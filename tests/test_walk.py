@@ -218,3 +218,15 @@ def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):
     assert "displacement (mm)" == ax.get_ylabel()
     path = save_figure(fig, tmp_path / "walk.png", close=True)
     assert (tmp_path / "walk.png").stat().st_size > 1000 and path.endswith("walk.png")
+
+
+def test_foot_groups_are_the_connected_pieces():
+    from mdsr_opt.synthesis.walk import foot_groups
+
+    mesh, P = _strip(16, 4)
+    left, right = np.flatnonzero(P[:, 0] < 0.3), np.flatnonzero(P[:, 0] > 3.7)
+    g = foot_groups(mesh, np.concatenate([right, left]))
+    assert list(g) == ["foot 1", "foot 2"]
+    assert set(g["foot 1"]) == set(left) and set(g["foot 2"]) == set(right)
+    with pytest.raises(ValueError, match="feet must be node indices"):
+        foot_groups(mesh, [])

@@ -53,7 +53,8 @@ from ..mechanics.result import solver_status
 from ..mechanics.stopping import with_stop_callback
 from ..mechanics.units import Units
 
-__all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "node_loads", "rigid_motion", "EPS", "SLIP"]
+__all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "foot_groups", "node_loads",
+           "rigid_motion", "EPS", "SLIP"]
 
 #: the smoothing length of the ground's friction potential, relative to the body's size
 EPS = 1e-6
@@ -476,3 +477,56 @@ def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> Wa
     if kwargs.get("start") is None and bool(schedule.success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays
     return walk(mesh, material, muscles, S, **kwargs)
+
+
+def foot_groups(mesh: Mesh, nodes) -> dict:
+    """The connected pieces (along mesh edges) of a node set, as named feet ``{"foot 1": nodes, ...}``, numbered
+    by their centres from left to right (then bottom to top)."""
+    from scipy.sparse.csgraph import connected_components
+
+    v = np.unique(np.asarray(nodes, dtype=np.int64).reshape(-1))
+    if not len(v) or v.min() < 0 or v.max() >= mesh.n_nodes:
+        raise ValueError(f"feet must be node indices in [0, {mesh.n_nodes}), at least one")
+    E = np.asarray(mesh.edges, dtype=np.int64)
+    inside = np.zeros(mesh.n_nodes, dtype=bool)
+    inside[v] = True
+    E = E[inside[E].all(1)]
+    pos = np.full(mesh.n_nodes, -1)
+    pos[v] = np.arange(len(v))
+    A = sp.coo_matrix((np.ones(len(E)), (pos[E[:, 0]], pos[E[:, 1]])), shape=(len(v), len(v)))
+    k, lab = connected_components(A, directed=False)
+    parts = [v[lab == i] for i in range(k)]
+    parts.sort(key=lambda g: tuple(np.round(mesh.points[g].mean(0), 9)))
+    return {f"foot {i + 1}": g for i, g in enumerate(parts)}
+
+
+def walk_scene(scene, layout, *, sequence=None, frames_per_step: int | None = None, feet: str | None = "all",
+               **kwargs) -> tuple:
+    """A scene's gait walked on the table: the schedule of ``layout`` (a
+    :class:`~mdsr_opt.synthesis.poses.PosesResult` laid for the scene's gait, e.g. ``layout.json`` of
+    ``mdsr run``) solved by :func:`~mdsr_opt.synthesis.gait.gait_schedule`, then :func:`walk_gait`.
+
+    ``feet="all"`` (default): the weight on every node by lumped area (a sheet lying flat); ``feet="region"``:
+    on the scene's ``"feet"`` region alone; either way the pieces of that region are the named feet whose
+    slipping is reported (:func:`foot_groups`). ``sequence`` and ``frames_per_step`` default to the scene's
+    ``[gait]``; ``kwargs`` go to :func:`walk` (``mu``, ``cycles``, ``touching``...). Returns
+    ``(schedule, WalkResult)``."""
+    from .gait import gait_schedule
+
+    gait = getattr(scene, "gait", None)
+    if gait is None and (sequence is None or frames_per_step is None):
+        raise ValueError(f"scene {getattr(scene, 'name', '?')!r} has no [gait]: give sequence and frames_per_step")
+    if feet not in ("all", "region"):
+        raise ValueError(f"feet must be 'all' or 'region', got {feet!r}")
+    region = dict(getattr(scene, "regions", {}) or {}).get("feet")
+    if feet == "region" and region is None:
+        raise ValueError(f"scene {scene.name!r} names no 'feet' region")
+    seq = list(gait.sequence if sequence is None else sequence)
+    fps = gait.frames_per_step if frames_per_step is None else frames_per_step
+    sch = gait_schedule(scene.mesh, scene.material, layout, seq, frames_per_step=fps, units=scene.units)
+    if region is not None:
+        kwargs.setdefault("feet_groups", foot_groups(scene.mesh, region))
+    if feet == "region":
+        kwargs.setdefault("feet", region)
+    kwargs.setdefault("anchor_radius", layout.anchor_radius)
+    return sch, walk_gait(scene.mesh, scene.material, sch, layout.muscles, **kwargs)
