@@ -62,6 +62,9 @@ EPS = 1e-6
 SLIP = 0.99
 #: the smoothing length a frame's solve starts from (relative to the size), continued down to :data:`EPS`
 EPS_START = 1e-2
+#: a failed solve is done again with a drag ``r/2 sum_k a_k |x_k - x0_k|^2`` on every node (``a_k`` its share of the
+#: area; unit body), ``r`` relaxed along this path, then without it from there
+DRAG_PATH = (1e-2, 1e-4, 1e-6)
 #: a frame whose solve fails is split in halves at most this many times
 MAX_SPLITS = 4
 #: default weight of the body, a fraction of ``E t size`` (its stiffness times its size)
@@ -285,18 +288,33 @@ class _FrameSolver:
         o["hess_lag"] = ca.Function("walk_hess_lag", [x, P, lam_f, lam_g],
                                     [He + lam_f * ca.triu(ca.hessian(fr, x)[0])],
                                     ["x", "p", "lam_f", "lam_g"], ["hess"])
-        self.solver = ca.nlpsol("walk_frame", "ipopt", {"x": x, "p": P, "f": fe + fr, "g": g}, o)
+        nlp = {"x": x, "p": P, "f": fe + fr, "g": g}
+        self.solver = ca.nlpsol("walk_frame", "ipopt", nlp, o)
+        self.warm = ca.nlpsol("walk_frame_warm", "ipopt", nlp, {
+            **o, "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-9,
+            "ipopt.warm_start_bound_push": 1e-12, "ipopt.warm_start_mult_bound_push": 1e-12})
+        self.lam, self.x_last = None, None
+        self.area = node_loads(mesh, 1.0)
         self.material = material
 
     def solve(self, x_start, x0, strokes, muN, eps, rho, w):
         p = self.cm.params(self.emodel.params(self.material), self.L0 - strokes)
         lbg, ubg = self.cm.nlp_bounds(p)
-        with interruptible():
-            sol = self.solver(x0=x_start, p=np.concatenate([self.cm.split(p)[0], x0, muN, [eps, rho], w]),
-                              lbg=lbg, ubg=ubg)
-        st = self.solver.stats()
+        P = np.concatenate([self.cm.split(p)[0], x0, muN, [eps, rho], w])
+        warm = self.lam is not None and np.array_equal(x_start, self.x_last)
+        with interruptible():  # from the last solution: IPOPT warm-started with its multipliers
+            sol = (self.warm if warm else self.solver)(x0=x_start, p=P, lbg=lbg, ubg=ubg,
+                                                       **({"lam_g0": self.lam} if warm else {}))
+            st = (self.warm if warm else self.solver).stats()
+            if warm and not st.get("success", False):  # a cold start instead
+                sol = self.solver(x0=x_start, p=P, lbg=lbg, ubg=ubg)
+                st = self.solver.stats()
         status, its = solver_status(st)
-        return np.asarray(sol["x"]).ravel(), bool(st.get("success", False)), status, its
+        x = np.asarray(sol["x"]).ravel()
+        ok = bool(st.get("success", False))
+        if ok:
+            self.lam, self.x_last = np.asarray(sol["lam_g"]).ravel(), x.copy()
+        return x, ok, status, its
 
 
 def _eps_path(eps: float) -> list:
@@ -321,6 +339,16 @@ def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0):
             x_new, ok, st, i = fs.solve(x_new, x, un.to_unit(b), muN, e, rho, w)
             it += i
         its += it
+        if not ok:  # a drag on every node, relaxed to nothing: each solve starts from the last one's minimum
+            x_new = x
+            for r in DRAG_PATH:
+                x_new, ok_r, st, i = fs.solve(x_new, x, un.to_unit(b), muN, eps, rho + r, w + np.repeat(fs.area, 2))
+                its += i
+                if not ok_r:
+                    break
+            if ok_r:
+                x_new, ok, st, i = fs.solve(x_new, x, un.to_unit(b), muN, eps, rho, w)
+                its += i
         if not ok and depth < MAX_SPLITS:
             x_new, ok, st, it = _frame(fs, x, a, b, 2, un, muN, eps, rho, w, depth + 1)
             its += it
@@ -377,7 +405,8 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     units : the mesh's length unit (reported).
     start : (n, 2) array, optional
         The state the walk starts from: the body in the cycle's first frame (e.g. solved by
-        :func:`~mdsr_opt.solve_internal`); default the rest shape (strokes zero).
+        :func:`~mdsr_opt.solve_internal`), first settled into this model off the table (ropes and anchor
+        patches as here, a vanishing drag holding it in place); default the rest shape (strokes zero).
 
     Returns
     -------
@@ -432,6 +461,13 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     states, ok, status, its = [X.copy()], [True], ["start"], [0]
     slip = [np.zeros(mesh.n_nodes, dtype=bool)]
     x = un.to_unit(X).reshape(-1)
+    if start is not None:  # settle the given state into this model (its ropes and patches) off the table
+        drag = np.repeat(node_loads(mesh, 1.0), 2) * 1e-6
+        x_s, ok_s, st_s, _ = fs.solve(x, x, un.to_unit(S[0]), np.zeros(mesh.n_nodes), eps, 1.0, drag)
+        if not ok_s:
+            raise ValueError(f"start: the body in the cycle's first frame does not solve ({st_s})")
+        x = x_s
+        states[0] = x.reshape(-1, 2) * un.length
     prev_s = np.zeros(len(mus)) if start is None else S[0].copy()
     for k in range(len(full)):
         check_stop()
