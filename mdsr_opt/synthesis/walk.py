@@ -24,6 +24,12 @@ node feels ``mu N (1 - eps^2/(2 u^2))`` instead of ``mu N``. With ``mu = 0`` not
 then moves it as little as it can, ``min sum_k N_k |x_k - x0_k|^2`` over rigid motions (a vanishing viscous
 drag; its mass centre stays put), and the displacement is that of a body on ice.
 
+What walks: while friction is weak against the body's stiffness (``mu W << E t size``, as for a silicone robot on
+a table) it only decides which way the body's rigid motion goes, the least dissipating one. With every node (or
+the same feet) loaded in every frame, a reciprocal gait (out to a pose and back, as ``rest -> bend_left -> rest``)
+goes nowhere: the way back undoes the way out. A gait walks when it lifts feet (``touching``: the inchworm, the
+gecko's diagonal pairs) or when its strokes go round a loop of poses (a small drift).
+
 :func:`walk` solves a stroke schedule (one cycle, repeated ``cycles`` times) and returns a :class:`WalkResult`:
 the centroid's displacement and the rotation per cycle, and the nodes (and named feet) that slip in each frame.
 :func:`walk_gait` takes the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule`.
