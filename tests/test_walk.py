@@ -230,3 +230,27 @@ def test_foot_groups_are_the_connected_pieces():
     assert set(g["foot 1"]) == set(left) and set(g["foot 2"]) == set(right)
     with pytest.raises(ValueError, match="feet must be node indices"):
         foot_groups(mesh, [])
+
+
+def test_library_gecko_reciprocal_gait_goes_nowhere_on_all_nodes():
+    """The gecko's gait (bend left, straight, bend right, straight) with its weight on every node in every frame:
+    each bend is undone on the way back, so the body stays where it is (to 1e-3 of its size per cycle)."""
+    import importlib.util
+    from pathlib import Path
+
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walk import walk_scene
+
+    spec = importlib.util.spec_from_file_location("gecko_scene", Path(__file__).parents[1] / "problems" / "gecko.py")
+    gecko = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gecko)
+    sc = gecko.build("coarse")
+    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
+    lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
+                       routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
+    sch, flat = walk_scene(sc, lay, feet="all", mu=0.5, cycles=2)
+    assert flat.success.all() and flat.units == sc.units
+    assert flat.distance[-1] < 1e-3 * sc.mesh.size
+    # the body did bend: the feet moved by a good part of the size within the cycle
+    assert np.abs(flat.states - flat.states[1]).max() > 0.05 * sc.mesh.size

@@ -71,6 +71,9 @@ EPS_START = 1e-2
 #: a failed solve is done again with a drag ``r/2 sum_k a_k |x_k - x0_k|^2`` on every node (``a_k`` its share of the
 #: area; unit body), ``r`` relaxed along this path, then without it from there
 DRAG_PATH = (1e-2, 1e-4, 1e-6)
+#: a solve that moves a node by more than this many body sizes has failed (a quasi-static frame moves it by
+#: about a stroke)
+MAX_MOVE = 2.0
 #: a frame whose solve fails is split in halves at most this many times
 MAX_SPLITS = 4
 #: default weight of the body, a fraction of ``E t size`` (its stiffness times its size)
@@ -301,6 +304,7 @@ class _FrameSolver:
             "ipopt.warm_start_bound_push": 1e-12, "ipopt.warm_start_mult_bound_push": 1e-12})
         self.lam, self.x_last = None, None
         self.area = node_loads(mesh, 1.0)
+        self.size = float(mesh.size)
         self.material = material
 
     def solve(self, x_start, x0, strokes, muN, eps, rho, w):
@@ -358,6 +362,9 @@ def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0):
         if not ok and depth < MAX_SPLITS:
             x_new, ok, st, it = _frame(fs, x, a, b, 2, un, muN, eps, rho, w, depth + 1)
             its += it
+        if ok and np.abs(x_new - x).max() > MAX_MOVE * fs.size:
+            ok, st = False, (f"the body flew off (a node moved more than {MAX_MOVE:g} times the body's size in one "
+                             "solve)")
         if not ok:
             return x, False, st, its
         x = x_new
