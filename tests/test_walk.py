@@ -163,6 +163,10 @@ def test_inchworm_walks_forward_and_back():
     assert np.abs(d[:, 1]).max() < 1e-6 and np.abs(fwd.rotation).max() < 1e-6  # the strip is symmetric
     # the planted foot never slides as a whole
     assert not any(v.any() for v in fwd.feet_slipping.values())
+    import json
+    summary = json.loads(json.dumps(fwd.summary()))
+    assert summary["distance"] == pytest.approx(fwd.distance.tolist()) and summary["failed_frames"] == []
+    assert set(summary["feet_slipping"]) == {"rear", "front"}
     # the other foot down first: the same gait backwards
     back = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=1, feet_groups=feet, touching=~INCH_T)
     assert back.displacement[0, 0] == pytest.approx(-d[0, 0], rel=0.05)
