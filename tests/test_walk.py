@@ -1,0 +1,260 @@
+"""Walking on a table with Coulomb friction (mdsr_opt.synthesis.walk): the friction potential's derivatives,
+a frictionless cycle that goes nowhere, stick and slip against the elastic forces, an inchworm that walks and
+its refinement study."""
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, Muscle, NeoHookean
+from mdsr_opt.mechanics.model import get_model
+from mdsr_opt.mechanics.units import Units
+from mdsr_opt.synthesis.walk import EPS, GroundFriction, node_loads, rigid_motion, walk
+
+MAT = NeoHookean(1.0, 0.3)
+STROKE = 0.3
+
+
+def _strip(nx, ny, length=4.0):
+    mesh = Mesh.rectangle(length, 1.0, nx, ny)
+    return mesh, mesh.points
+
+
+def _bender(nx=16, ny=4):
+    """A 4 x 1 strip with a rope along its top and one along its bottom edge."""
+    mesh, P = _strip(nx, ny)
+    top = Muscle([int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 1.0])
+    bot = Muscle([int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 0.0])
+    return mesh, [top, bot]
+
+
+def _inchworm(nx=16, ny=4):
+    """A 4 x 1 strip with a rope along its middle line between two feet, the ends x < 0.5 and x > 3.5."""
+    mesh, P = _strip(nx, ny)
+    tol = 1e-9
+    mid = Muscle([int(i) for i in np.argsort(P[:, 0]) if abs(P[i, 1] - 0.5) < tol
+                  and 0.5 - tol <= P[i, 0] <= 3.5 + tol])
+    feet = {"rear": np.flatnonzero(P[:, 0] < 0.5 + tol), "front": np.flatnonzero(P[:, 0] > 3.5 - tol)}
+    return mesh, [mid], feet
+
+
+# rear foot down while the rope is released, front foot down while it pulls: the two-anchor inchworm
+INCH_S = np.array([[0.0], [STROKE], [STROKE]])
+INCH_T = np.array([[True, False], [False, True], [True, False]])
+
+
+def test_friction_derivatives_match_finite_differences():
+    rng = np.random.default_rng(3)
+    n = 6
+    x0 = rng.normal(size=2 * n)
+    muN = rng.uniform(0.1, 2.0, n)
+    eps = 1e-2
+    gf = GroundFriction(x0, muN, eps)
+    # points in stick (|u| ~ eps), across it and in slip (|u| >> eps)
+    for scale in (0.3 * eps, 3 * eps, 1.0):
+        x = x0 + scale * rng.normal(size=2 * n)
+        h = 1e-6 * max(scale, eps)
+        g_fd = np.array([(gf.energy(x + h * e) - gf.energy(x - h * e)) / (2 * h) for e in np.eye(2 * n)])
+        H_fd = np.array([(gf.gradient(x + h * e) - gf.gradient(x - h * e)) / (2 * h) for e in np.eye(2 * n)])
+        assert np.allclose(gf.gradient(x), g_fd, rtol=1e-6, atol=1e-8 * muN.max())
+        H = gf.hessian(x).toarray()
+        assert np.allclose(H, H_fd, rtol=1e-5, atol=1e-6 * np.abs(H).max())
+        assert np.allclose(H, H.T)
+    # the force never exceeds mu N, and reaches it in slip
+    x = x0 + rng.normal(size=2 * n)
+    f = np.hypot(*gf.forces(x).T)
+    assert np.all(f <= muN) and np.all(f >= muN * 0.999)
+    # the CasADi expression the solver uses is the same function
+    import casadi as ca
+    X, X0, M, E = ca.SX.sym("x", 2 * n), ca.SX.sym("x0", 2 * n), ca.SX.sym("m", n), ca.SX.sym("e")
+    fn = ca.Function("D", [X, X0, M, E], [GroundFriction.expr(X, X0, M, E)])
+    assert float(fn(x, x0, muN, eps)) == pytest.approx(gf.energy(x), rel=1e-12)
+
+
+def test_node_loads_share_the_weight_by_area():
+    mesh, P = _strip(8, 2)
+    N = node_loads(mesh, 3.0)
+    assert N.sum() == pytest.approx(3.0)
+    corner, middle = int(np.argmin(P.sum(1))), int(np.argmin(np.hypot(P[:, 0] - 2.0, P[:, 1] - 0.5)))
+    assert N[middle] > N[corner] > 0
+    feet = np.flatnonzero(P[:, 0] < 0.6)
+    Nf = node_loads(mesh, 3.0, feet)
+    assert Nf.sum() == pytest.approx(3.0) and np.all(Nf[np.setdiff1d(np.arange(mesh.n_nodes), feet)] == 0)
+
+
+def test_rigid_motion_recovers_a_rigid_motion():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(20, 2))
+    a = 0.3
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    d, r = rigid_motion(X, X @ R.T + [1.0, -2.0])
+    assert r == pytest.approx(a)
+    assert np.allclose(d, X.mean(0) @ R.T + [1.0, -2.0] - X.mean(0))
+
+
+def test_frictionless_symmetric_cycle_goes_nowhere():
+    mesh, mus = _bender()
+    S = np.array([[0.0, 0.0], [0.4, 0.0], [0.0, 0.0], [0.0, 0.4]])  # bend one way, straight, the other way
+    r = walk(mesh, MAT, mus, S, mu=0.0, cycles=2)
+    assert r.success.all()
+    assert np.all(r.distance < 1e-6 * mesh.size)
+    assert np.all(np.abs(r.rotation) < 1e-6)
+    # a body on ice: its centre of area stays where it was in every frame, bent or not
+    w = node_loads(mesh, 1.0)
+    c = np.einsum("n,fnk->fk", w, r.states)
+    assert np.abs(c - c[0]).max() < 1e-6 * mesh.size
+    # the shape did change (a cycle that moves nothing would pass vacuously)
+    assert np.abs(r.states[2] - r.states[0]).max() > 0.05
+
+
+def test_stick_nodes_do_not_move_and_slip_is_at_the_limit():
+    """Against the elastic forces (computed from the body's energy, not from the friction): nodes under a
+    tangential force below 0.9 mu N creep by at most the stated 2.07 eps; nodes that moved by more than 10 eps
+    feel mu N."""
+    mesh, mus, feet = _inchworm(16, 4)
+    un = Units(mesh, MAT)
+    weight = 0.2 * un.force
+    mu = 0.5
+    # both feet down while the rope pulls: the whole strip is loaded, stick and slip regions side by side
+    r = walk(mesh, MAT, mus, np.array([[0.0], [STROKE]]), mu=mu, cycles=1, weight=weight, anchor_radius=0)
+    assert r.success.all()
+    model = get_model(un.unit_mesh, un.unit_material)
+    p = model.params(un.unit_material)
+    rope = np.zeros(mesh.n_nodes, dtype=bool)
+    rope[list(mus[0].nodes)] = True
+    eps = EPS * mesh.size
+    n_stick = n_slip = 0
+    for k in range(1, len(r.states)):
+        x = r.states[k]
+        F = np.hypot(*(model.gradient((x / un.length).reshape(-1), p).reshape(-1, 2) * un.force).T)
+        u = np.hypot(*(x - r.states[k - 1]).T)
+        cap = mu * r.loads[k]
+        free = ~rope & (cap > 0)
+        stick = free & (F < 0.9 * cap)
+        assert np.all(u[stick] <= 2.07 * eps * 1.05 + 1e-9 * mesh.size)
+        slip = free & (u > 10 * eps)
+        assert np.allclose(F[slip], cap[slip], rtol=0.02)
+        n_stick += stick.sum()
+        n_slip += slip.sum()
+    assert n_stick > 5 and n_slip > 5  # both regimes were checked
+
+
+def test_heavier_foot_holds_lighter_foot_slides():
+    mesh, P = _strip(16, 4)
+    tol = 1e-9
+    mid = Muscle([int(i) for i in np.argsort(P[:, 0]) if abs(P[i, 1] - 0.5) < tol and 1.0 - tol <= P[i, 0] <= 3.5 + tol])
+    feet = {"rear": np.flatnonzero(P[:, 0] < 1.0 + tol), "front": np.flatnonzero(P[:, 0] > 3.5 - tol)}
+    r = walk(mesh, MAT, [mid], np.array([[0.0], [STROKE]]), mu=0.5, cycles=1, feet_groups=feet,
+             touching=np.ones((2, 2), bool))
+    assert r.success.all()
+    k = 2  # the frame in which the rope pulls
+    move = {n: np.hypot(*(r.states[k][v] - r.states[k - 1][v]).mean(0)) for n, v in feet.items()}
+    # the heavy foot deforms where the rope pulls it (partial slip) but does not slide: its mean moves little
+    assert move["rear"] < 0.03 * STROKE and move["front"] > 0.5 * STROKE
+    assert r.feet_slipping["front"][k] and not r.feet_slipping["rear"][k]
+
+
+def test_inchworm_walks_forward_and_back():
+    mesh, mus, feet = _inchworm(16, 4)
+    fwd = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=3, feet_groups=feet, touching=INCH_T)
+    assert fwd.success.all()
+    d = fwd.displacement
+    assert np.all(d[:, 0] > 0.3 * STROKE) and np.all(d[:, 0] < STROKE)  # forward, less than the stroke
+    assert np.abs(d[:, 0] - d[0, 0]).max() < 1e-3 * d[0, 0]  # the same step every cycle
+    assert np.abs(d[:, 1]).max() < 1e-6 and np.abs(fwd.rotation).max() < 1e-6  # the strip is symmetric
+    # the planted foot never slides as a whole
+    assert not any(v.any() for v in fwd.feet_slipping.values())
+    import json
+    summary = json.loads(json.dumps(fwd.summary()))
+    assert summary["distance"] == pytest.approx(fwd.distance.tolist()) and summary["failed_frames"] == []
+    assert set(summary["feet_slipping"]) == {"rear", "front"}
+    # the other foot down first: the same gait backwards
+    back = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=1, feet_groups=feet, touching=~INCH_T)
+    assert back.displacement[0, 0] == pytest.approx(-d[0, 0], rel=0.05)
+    # while friction is weak against the body's stiffness (mu W << E t size) it only decides who holds: the
+    # distance hardly depends on mu or the weight (here mu W is 16 times larger: 0.2 % longer)
+    other = walk(mesh, MAT, mus, INCH_S, mu=0.8, cycles=1, weight=0.01 * Units(mesh, MAT).force,
+                 feet_groups=feet, touching=INCH_T)
+    assert other.displacement[0, 0] == pytest.approx(d[0, 0], rel=0.01)
+
+
+def test_inchworm_step_converges_under_refinement():
+    steps = []
+    for nx, ny in ((16, 4), (32, 8), (64, 16)):
+        mesh, mus, feet = _inchworm(nx, ny)
+        r = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=1, feet_groups=feet, touching=INCH_T)
+        assert r.success.all()
+        steps.append(float(r.displacement[0, 0]))
+    d1, d2 = abs(steps[1] - steps[0]), abs(steps[2] - steps[1])
+    assert d2 < 0.5 * d1
+    assert d2 < 0.05 * steps[2]
+
+
+@pytest.mark.parametrize("kw, msg", [
+    ({"strokes": np.zeros((3, 2))}, "strokes must be an"),
+    ({"mu": -0.1}, "mu must be a number"),
+    ({"touching": np.ones((2, 2), bool)}, "touching must be an"),
+    ({"touching": np.array([[True, False], [False, False], [True, False]])}, "with no foot"),
+    ({"feet": [10 ** 6]}, "feet must be node indices"),
+    ({"cycles": 0}, "cycles"),
+])
+def test_bad_input_is_refused_at_the_door(kw, msg):
+    mesh, mus, feet = _inchworm(8, 2)
+    args = dict(strokes=INCH_S, mu=0.5, cycles=1, feet_groups=feet)
+    args.update(kw)
+    S = args.pop("strokes")
+    with pytest.raises(ValueError, match=msg):
+        walk(mesh, MAT, mus, S, **args)
+
+
+def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):
+    import matplotlib
+    matplotlib.use("Agg")
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.walk import plot_walk
+
+    mesh, mus, feet = _inchworm(8, 2)
+    r = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=2, feet_groups=feet, touching=INCH_T)
+    fig = plot_walk(r)
+    ax = fig.axes[0]
+    dist = [ln for ln in ax.lines if ln.get_label() == "centroid distance"][0]
+    assert np.allclose(dist.get_xdata(), [0, 1, 2])
+    assert np.allclose(dist.get_ydata(), np.concatenate([[0.0], np.cumsum(r.distance)]), rtol=1e-9, atol=1e-12)
+    assert "displacement (mm)" == ax.get_ylabel()
+    path = save_figure(fig, tmp_path / "walk.png", close=True)
+    assert (tmp_path / "walk.png").stat().st_size > 1000 and path.endswith("walk.png")
+
+
+def test_foot_groups_are_the_connected_pieces():
+    from mdsr_opt.synthesis.walk import foot_groups
+
+    mesh, P = _strip(16, 4)
+    left, right = np.flatnonzero(P[:, 0] < 0.3), np.flatnonzero(P[:, 0] > 3.7)
+    g = foot_groups(mesh, np.concatenate([right, left]))
+    assert list(g) == ["foot 1", "foot 2"]
+    assert set(g["foot 1"]) == set(left) and set(g["foot 2"]) == set(right)
+    with pytest.raises(ValueError, match="feet must be node indices"):
+        foot_groups(mesh, [])
+
+
+def test_library_gecko_reciprocal_gait_goes_nowhere_on_all_nodes():
+    """The gecko's gait (bend left, straight, bend right, straight) with its weight on every node in every frame:
+    each bend is undone on the way back, so the body stays where it is (to 1e-3 of its size per cycle)."""
+    import importlib.util
+    from pathlib import Path
+
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walk import walk_scene
+
+    spec = importlib.util.spec_from_file_location("gecko_scene", Path(__file__).parents[1] / "problems" / "gecko.py")
+    gecko = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gecko)
+    sc = gecko.build("coarse")
+    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
+    lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
+                       routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
+    sch, flat = walk_scene(sc, lay, feet="all", mu=0.5, cycles=2)
+    assert flat.success.all() and flat.units == sc.units
+    assert flat.distance[-1] < 1e-3 * sc.mesh.size
+    # the body did bend: the feet moved by a good part of the size within the cycle
+    assert np.abs(flat.states - flat.states[1]).max() > 0.05 * sc.mesh.size
