@@ -226,7 +226,7 @@ class WalkResult:
     weight: float
     eps: float
     loads: np.ndarray
-    units: str = "mm"
+    units: str = "body units"
     centroids: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     turns: np.ndarray = field(default_factory=lambda: np.zeros(0))
     iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
@@ -385,7 +385,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
          weight: float | None = None, feet=None, feet_groups: Mapping | None = None, touching=None,
          substeps: int = 1,
          anchor_radius: float | None = None, tol: float = 1e-8, max_iter: int = 300, options: dict | None = None,
-         units: str = "mm", start=None) -> WalkResult:
+         units: str = "body units", start=None) -> WalkResult:
     """Walk a cyclic stroke schedule on the table with Coulomb friction (the module docstring's model).
 
     Parameters
@@ -415,7 +415,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
         Solves per frame (strokes interpolated linearly), the friction's reference moved each time.
     anchor_radius : as in :func:`~mdsr_opt.solve_internal`.
     tol, max_iter, options : IPOPT's tolerance contract, iterations and options per solve.
-    units : the mesh's length unit (reported).
+    units : the mesh's length unit (reported; default "body units": none is invented).
     start : (n, 2) array, optional
         The state the walk starts from: the body in the cycle's first frame (e.g. solved by
         :func:`~mdsr_opt.solve_internal`), first settled into this model off the table (ropes and anchor
