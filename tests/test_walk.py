@@ -213,7 +213,7 @@ def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):
     from mdsr_opt.plot.walk import plot_walk
 
     mesh, mus, feet = _inchworm(8, 2)
-    r = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=2, feet_groups=feet, touching=INCH_T)
+    r = walk(mesh, MAT, mus, INCH_S, mu=0.5, cycles=2, feet_groups=feet, touching=INCH_T, units="mm")
     fig = plot_walk(r)
     ax = fig.axes[0]
     dist = [ln for ln in ax.lines if ln.get_label() == "centroid distance"][0]
