@@ -1,0 +1,94 @@
+"""Design with contact (issue 35 item 6): targets posed with contact are designed and verified with contact;
+crossings checked independently with shapely; without contact the same verification rejects the design."""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from shapely.geometry import Point, Polygon
+
+from mdsr_opt import Disk, Mesh, Muscle, NeoHookean, design_contractions, solve_external, solve_internal
+from mdsr_opt.synthesis.results import MuscleWarning
+from mdsr_opt.synthesis.verify import verify_design
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_contact import _gripper  # noqa: E402  the library's gripper with two rim muscles
+
+MAT = NeoHookean(1.0, 0.3)
+
+
+def _valid_outline(mesh, x):
+    x = np.asarray(x)
+    return Polygon(x[mesh.boundary_loops[0]]).is_valid and not mesh.boundary_crosses(x)
+
+
+def _strip_target(frac=0.3):
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    drags = {int(i): (P[i, 0] - frac * 4.0, P[i, 1]) for i in right}
+    plain = solve_external(mesh, MAT, left, drags)
+    target = solve_external(mesh, MAT, left, drags, contact=True)
+    return mesh, plain, target
+
+
+def test_strip_pushed_past_buckling_designed_and_verified_with_contact():
+    mesh, plain, target = _strip_target()
+    # the target needs contact: without it the buckled strip folds through itself
+    assert not plain.success and "crosses itself" in plain.status
+    assert target.success and any(p["force"] > 0 for p in target.contact["pairs"])
+    assert _valid_outline(mesh, target.x)
+    P = mesh.points
+    top = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 1.0]
+    bot = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 0.0]
+    mus = [Muscle(top[:9]), Muscle(top[8:17]), Muscle(top[16:]), Muscle(bot[4:21])]
+    with pytest.warns(MuscleWarning):  # the middle muscle ends at a_max: a free body only approaches the clamped fold
+        res = design_contractions(mesh, MAT, mus, target.x, contact=True)
+    assert res.method == "derivative-free"
+    assert res.success and res.verification.passed, res.status
+    assert res.contact is not None and res.verification.forward_success
+    assert _valid_outline(mesh, res.x)
+    # the shape: within 6 % of the body's size of the clamped, folded target (a free body has no clamps)
+    assert res.difference < 0.06 * mesh.size
+    assert res.verification.gap <= res.verification.gap_tol
+
+
+def _gripper_design():
+    mesh, mat, mus = _gripper()
+    disk = Disk((0.0, 0.0), 1.1)
+    target = solve_internal(mesh, mat, mus, [0.3, 0.25], obstacles=[disk])
+    res = design_contractions(mesh, mat, mus, target.x, obstacles=[disk], initial_guess=[0.2, 0.2])
+    return mesh, mat, mus, disk, target, res
+
+
+def test_gripper_closed_on_a_disk_designed_and_verified_with_contact_and_not_without():
+    mesh, mat, mus, disk, target, res = _gripper_design()
+    assert target.success and target.stable
+    assert res.success and res.verification.passed, res.status
+    assert np.allclose(res.contractions, [0.3, 0.25], atol=1e-4)
+    assert res.difference < 1e-4 * mesh.size
+    # the verified state presses on the disk: positive normal forces, no node inside it, no self-crossing
+    N = [p["force"] for p in res.contact["pairs"] if p["kind"] == "obstacle"]
+    assert len(N) >= 1 and min(N) > 0
+    assert np.linalg.norm(res.x - disk.center, axis=1).min() >= disk.radius
+    assert Polygon(res.x[mesh.boundary_loops[0]]).intersection(Point(0.0, 0.0).buffer(1.1, 256)).area < 1e-3
+    assert _valid_outline(mesh, res.x)
+    # the same verification without contact rejects it: the jaws close through the disk and each other
+    v = verify_design(mesh, mat, mus, res, target.x)
+    assert not v.passed and "crosses itself" in v.message and v.gap > 100 * v.gap_tol
+
+
+def test_design_with_contact_refused_at_the_door():
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    mus = [Muscle(range(1, 8))]
+    with pytest.raises(ValueError, match="derivative-free"):
+        design_contractions(mesh, MAT, mus, mesh.points, contact=True, method="flattened")
+    with pytest.raises(ValueError, match="derivative-free"):
+        design_contractions(mesh, MAT, mus, mesh.points, obstacles=[Disk((2.0, -1.0), 0.5)], method="nested")
+    with pytest.raises(TypeError, match="contact must be True or False"):
+        design_contractions(mesh, MAT, mus, mesh.points, contact="yes")
+    with pytest.raises(ValueError, match="holds node"):
+        design_contractions(mesh, MAT, mus, mesh.points, obstacles=[Disk((2.0, 0.5), 0.2)])
+    with pytest.raises(TypeError, match="obstacles"):
+        design_contractions(mesh, MAT, mus, mesh.points, obstacles=[(0.0, 0.0)])
