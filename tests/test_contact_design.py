@@ -92,3 +92,16 @@ def test_design_with_contact_refused_at_the_door():
         design_contractions(mesh, MAT, mus, mesh.points, obstacles=[Disk((2.0, 0.5), 0.2)])
     with pytest.raises(TypeError, match="obstacles"):
         design_contractions(mesh, MAT, mus, mesh.points, obstacles=[(0.0, 0.0)])
+
+
+def test_check_minimum_with_contact_on_the_gripper_pressing_its_disk():
+    from mdsr_opt.synthesis.verify import check_minimum
+
+    mesh, mat, mus = _gripper()
+    disk = Disk((0.0, 0.0), 1.1)
+    res = solve_internal(mesh, mat, mus, [0.3, 0.25], obstacles=[disk])
+    ok, lam, r = check_minimum(mesh, mat, mus, [0.3, 0.25], res.x, obstacles=[disk])
+    assert ok and r <= 1e-8 and np.isnan(lam)
+    # without the disk the pressed state is no equilibrium (the contact forces are missing)
+    ok0, _, r0 = check_minimum(mesh, mat, mus, [0.3, 0.25], res.x)
+    assert r0 > 1e-6

@@ -32,7 +32,8 @@ SAME_STATE_RTOL = 1e-9
 def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
                   muscle_model: str = "cable", stiffness: float = 10.0,
                   anchor_radius: float | None = None, lowest: bool = True,
-                  tol: float = 1e-8) -> tuple[bool, float, float]:
+                  tol: float = 1e-8, contact: bool = False, obstacles=None,
+                  contact_gap: float | None = None) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
     With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
@@ -50,6 +51,11 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     ``lowest=False`` the eigenvalue estimate is skipped when the state is positive definite (NaN returned;
     the inertia alone decides, 30-100x cheaper at thousands of nodes). The check runs on the body scaled to
     unit size and stiffness (:class:`~mdsr_opt.mechanics.units.Units`).
+
+    With contact (``contact=True`` and/or ``obstacles``, as in :func:`~mdsr_opt.solve_internal`) the test is
+    on the tangent space of the active ropes, anchor patches and pushing contacts: a contact solve started at
+    ``x`` must stay there and be stable (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); the
+    eigenvalue is then NaN.
 
     Example
     -------
@@ -71,6 +77,12 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
     tol = positive_float(tol, "tol")
     radius = check_anchor_radius(mesh, anchor_radius)
+    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
+    if ckw:
+        ok, residual, _ = contact_minimum(mesh, material, mus, a, mesh._check_state(x), ckw,
+                                          muscle_model=muscle_model, stiffness=stiffness, anchor_radius=radius,
+                                          tol=tol)
+        return ok, float("nan"), residual
     units = Units(mesh, material)  # checked on the unit body (size and E t about 1)
     x = units.state_in(mesh._check_state(x))
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, x, np.ones(mesh.n_nodes), muscle_model,
