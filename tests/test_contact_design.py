@@ -105,3 +105,24 @@ def test_check_minimum_with_contact_on_the_gripper_pressing_its_disk():
     # without the disk the pressed state is no equilibrium (the contact forces are missing)
     ok0, _, r0 = check_minimum(mesh, mat, mus, [0.3, 0.25], res.x)
     assert r0 > 1e-6
+
+
+def test_pipeline_with_contact_solves_the_target_and_verifies_with_contact():
+    from mdsr_opt.synthesis.pipeline import design_pipeline
+
+    mesh = Mesh.rectangle(4.0, 1.0, 24, 6)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    drags = {int(i): (P[i, 0] - 1.2, P[i, 1]) for i in right}
+    top = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] == 1.0]
+    mus = [Muscle(top[:9]), Muscle(top[8:17]), Muscle(top[16:])]
+    with pytest.raises(ValueError, match="derivative-free"):
+        design_pipeline(mesh, MAT, left, drags, muscles=mus, contact=True, method="flattened")
+    with pytest.warns(MuscleWarning):
+        out = design_pipeline(mesh, MAT, left, drags, muscles=mus, contact=True, idle_contraction=0.0)
+    assert out.external.success and out.external.contact["total_force"] > 0  # the target solved with contact
+    assert _valid_outline(mesh, out.target)
+    d = out.design
+    assert d.method == "derivative-free" and d.success and d.verification.passed, d.status
+    assert d.contact is not None and _valid_outline(mesh, d.x)
+    assert d.difference < 0.06 * mesh.size
