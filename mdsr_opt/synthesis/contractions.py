@@ -17,6 +17,7 @@ from ..core.checks import positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
+from ..mechanics.equilibrium import solve_internal
 from ..mechanics.loadsteps import upright
 from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
@@ -160,9 +161,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
-    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
+    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
     m = len(mus)
     if tol is None:
@@ -259,6 +260,14 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         else:
             _J, a, x = obj.best
     build_time += fwd.build_time
+    if ckw and np.all(np.isfinite(a)):
+        # the state a servo reaches from rest at these contractions: contact states reached along the search's
+        # path of warm starts may differ from it by about the contact gap (another set of touching pairs)
+        r = solve_internal(umesh, prob.material, mus, np.clip(a, 0.0, 0.999), muscle_model=prob.muscle_model,
+                           stiffness=prob.stiffness, anchor_radius=prob.anchor_radius, tol=inner_tol,
+                           align_to_rest=False, **fwd.contact)
+        if r.success:
+            x = np.asarray(r.x, dtype=float).reshape(-1)
     if upright(umesh, x) and not ckw:  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
         x = prob.polished(a, x, min(inner_tol, VERIFY_TOL))
     x2 = x.reshape(-1, 2)
