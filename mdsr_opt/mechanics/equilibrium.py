@@ -411,7 +411,9 @@ def _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm,
     res.achieved = 1.0 - L / L0
     res.stroke = L0 - L
     if model == "cable":
-        res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None else np.zeros(len(mus))
+        # no multipliers from a failed contact solve: no tension to report
+        res.tension = np.where(taut, lam[:len(mus)], 0.0) if cm is not None and lam is not None \
+            else np.full(len(mus), np.nan if cm is not None else 0.0)
         # slack: no tension and the path shorter than the rope (a rope at its length with no load is taut,
         # not slack; one a little short that still pulls, within the tolerance contract, is taut)
         res.slack = ~taut & (res.achieved > a + tol)

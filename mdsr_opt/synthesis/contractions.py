@@ -17,9 +17,12 @@ from ..core.checks import positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
+from ..mechanics.equilibrium import solve_internal
 from ..mechanics.loadsteps import upright
+from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
 from ..plot.style import muscle_label
+from .contactdesign import check_design_contact, unit_contact
 from .nlp import ACCEPTABLE, run_flattened
 from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
@@ -33,14 +36,15 @@ __all__ = ['check_design_options', 'design_contractions', 'warn_saturated']
 @interruptible()  # Ctrl-C inside the design NLP (CasADi swallows it) raises KeyboardInterrupt
 @one_blas_thread()  # as the forward solves run: the design NLP's MUMPS too (see mdsr_opt.mechanics.blas)
 def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target: ArrayLike, *,
-                        method: str = "flattened", a_max: float = 0.6, initial_guess: ArrayLike | None = None,
+                        method: str | None = None, a_max: float = 0.6, initial_guess: ArrayLike | None = None,
                         weights: ArrayLike | None = None, interior_weight: float = 0.5,
                         muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool | str = True, outer: str = "nelder-mead", options: dict | None = None,
                         inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
-                        derivatives: str = "numeric") -> DesignResult:
+                        derivatives: str = "numeric", contact: bool = False, obstacles=None,
+                        contact_gap: float | None = None) -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
 
     Parameters
@@ -49,8 +53,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     muscles : sequence of Muscle (or node lists), at least one, along mesh edges.
     target : (n, 2) array
         Target node positions, in any pose (only the shape matters).
-    method : {"flattened", "nested", "derivative-free"}
-        See the module docstring.
+    method : {"flattened", "nested", "derivative-free"}, optional
+        See the module docstring. Default ``"flattened"``, or ``"derivative-free"`` with contact (the only
+        method that takes it).
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -106,6 +111,14 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
+    contact, obstacles, contact_gap :
+        Contact, as in :func:`~mdsr_opt.solve_internal`: self-contact of the boundary (``contact=True``) and
+        rigid obstacles (:class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Obstacle`,
+        in the frame of the body at rest, which the forward solves then hold at its gauge). Every forward
+        solve of the design and the verification's (from rest, and the design state's stability on the
+        tangent space of its pushing contacts) models them; the design's state ``x`` stays in the obstacles'
+        frame. Designed by ``method="derivative-free"`` only (:mod:`~mdsr_opt.synthesis.contactdesign`);
+        ``contact`` of the result reports the verified state's contact forces.
 
     Returns
     -------
@@ -132,6 +145,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     """
     initial = initial_guess
     clock0 = time.perf_counter()
+    if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
+        method = "derivative-free" if contact is True or check_obstacles(obstacles) else "flattened"
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if hessian not in ("exact", "gauss-newton"):
@@ -149,6 +164,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     options = check_design_options(options, method, outer)
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
+    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
     m = len(mus)
     if tol is None:
@@ -171,7 +187,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units)
+            verify, gap_rtol, units, ckw)
     res, fwd, rejected = _design(*args, warm=warm)
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
@@ -209,13 +225,14 @@ def warn_saturated(res: DesignResult, muscles) -> None:
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units, warm) -> tuple[DesignResult, ForwardSolver, bool]:
+            verify, gap_rtol, units, ckw, warm) -> tuple[DesignResult, ForwardSolver, bool]:
     """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start) of the unit problem
     ``prob``, checked, mapped to the caller's ``units`` and verified there; returns the result, the forward
     solver it used and whether the verification rejected a design the optimiser had found."""
     mesh = units.mesh  # the caller's body; the design runs on its unit copy, umesh
     umesh, mus, y, w = prob.mesh, prob.muscles, prob.y, prob.w
     fwd = ForwardSolver(prob, inner_tol, 200)
+    fwd.contact = unit_contact(ckw, units)
     t_solve0 = time.perf_counter()
 
     def clock():
@@ -246,11 +263,19 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         else:
             _J, a, x = obj.best
     build_time += fwd.build_time
-    if upright(umesh, x):  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
+    if ckw and np.all(np.isfinite(a)):
+        # the state a servo reaches from rest at these contractions: contact states reached along the search's
+        # path of warm starts may differ from it by about the contact gap (another set of touching pairs)
+        r = solve_internal(umesh, prob.material, mus, np.clip(a, 0.0, 0.999), muscle_model=prob.muscle_model,
+                           stiffness=prob.stiffness, anchor_radius=prob.anchor_radius, tol=inner_tol,
+                           align_to_rest=False, **fwd.contact)
+        if r.success:
+            x = np.asarray(r.x, dtype=float).reshape(-1)
+    if upright(umesh, x) and not ckw:  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
         x = prob.polished(a, x, min(inner_tol, VERIFY_TOL))
     x2 = x.reshape(-1, 2)
-    al_rest = align(x2, umesh.points)
-    x_rest = al_rest.apply(x2)
+    # aligned to rest, unless obstacles hold the body in their frame
+    x_rest = x2 if ckw.get("obstacles") else align(x2, umesh.points).apply(x2)
     al = align(x_rest, y, w)
     t_end = time.perf_counter()
     if method == "flattened":  # seconds of solving: the NLP's build is not part of the trace
@@ -284,7 +309,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.status += "; not verified (verify=False), so IPOPT's acceptable exit is not a success"
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
-                          tol=min(inner_tol, VERIFY_TOL))
+                          tol=min(inner_tol, VERIFY_TOL), **ckw)
         res.verification = v
         if res.success and not v.passed:
             res.success = False

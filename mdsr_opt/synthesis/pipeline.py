@@ -252,10 +252,11 @@ def _target(mesh, material, anchors, drags, opts: dict, solve_external) -> Equil
 
 @interruptible()
 def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
-                    routing_options: dict | None = None, method: str = "flattened",
+                    routing_options: dict | None = None, method: str | None = None,
                     external_options: dict | None = None, fabrication=None,
                     idle_contraction: float = IDLE_CONTRACTION, bands: bool = False,
-                    band_options: dict | None = None, units: str | None = None,
+                    band_options: dict | None = None, units: str | None = None, contact: bool = False,
+                    obstacles=None,
                     **design_options) -> PipelineResult:
     """The whole pipeline in one call: external driving -> muscle routing -> contractions -> verification.
 
@@ -267,8 +268,12 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         Use these muscles instead of routing them.
     routing_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
-    method : str
-        The design method (see :func:`design_contractions`).
+    method : str, optional
+        The design method (see :func:`design_contractions`; default ``"flattened"``, with contact
+        ``"derivative-free"``).
+    contact, obstacles : optional
+        Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
+        verification (:func:`design_contractions`); refused at the door with a method that cannot take it.
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...). Without a
         ``backend`` the target is solved by ``"newton"``, and by IPOPT when Newton fails.
@@ -340,11 +345,25 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          "max_refined_nodes, max_iter)")
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
+    from .contactdesign import check_design_contact
+    from ..mechanics.obstacles import check_obstacles
+
     didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
     if len(didx) == 0:
         raise ValueError("drags is empty: design_pipeline's target is the body dragged by its drags "
                          "({node: (x, y)}), so with none it is the rest shape and there is nothing to design")
-    ext = _target(mesh, material, anchors, drags, dict(external_options or {}), solve_external)
+    eopts = dict(external_options or {})
+    if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
+        raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
+    if method is None:
+        method = "derivative-free" if contact is True or check_obstacles(obstacles) else "flattened"
+    ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
+    if ckw:  # contact: the target by IPOPT (the Newton backend takes no contact)
+        eopts.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
+        design_options.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
+        ext = solve_external(mesh, material, anchors, drags, **eopts)
+    else:
+        ext = _target(mesh, material, anchors, drags, eopts, solve_external)
     ext.raise_on_failure()
     t1 = time.perf_counter()
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)

@@ -366,13 +366,15 @@ class ForwardSolver:
         self.iterations = 0
         self.build_time = 0.0
         self.started_from = None
+        #: contact keywords of every forward solve (``contact``, ``obstacles`` on the unit body, ``contact_gap``)
+        self.contact: dict = {}
 
     def _run(self, a, guess, max_iter, min_step=1.0 / 256, check_stability: bool = True):
         prob = self.prob
         res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
                              muscle_model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
                              tol=self.tol, max_iter=max_iter, align_to_rest=False, initial_guess=guess,
-                             min_step=min_step, check_stability=check_stability)
+                             min_step=min_step, check_stability=check_stability, **self.contact)
         if self.n_solves == 0:
             self.build_time += res.build_time
         self.n_solves += 1

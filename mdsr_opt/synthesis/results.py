@@ -68,6 +68,10 @@ class Verification:
         Seconds spent verifying.
     target_stable : bool or None
         The target is a stable equilibrium of its external driving (None: anchors and drags not given).
+    contact : dict or None
+        With contact, the forward re-solve's contact report (``pairs`` with their normal forces,
+        ``node_forces``, ``obstacle_forces``, ``total_force``, ``gap``; see :func:`~mdsr_opt.solve_internal`);
+        None without.
     """
 
     passed: bool
@@ -82,6 +86,7 @@ class Verification:
     message: str = ""
     time: float = 0.0
     target_stable: bool | None = None
+    contact: dict | None = None
 
     def __repr__(self) -> str:
         return compact_repr(self, ("passed", "gap", "gap_tol", "residual", "positive_definite", "message"))
@@ -201,6 +206,12 @@ class DesignResult:
     muscle_names: tuple = ()
     units: str | None = None
     stress_unit: str | None = None
+
+    @property
+    def contact(self) -> dict | None:
+        """The contact report of the verified state (the verification's forward re-solve with contact: pairs
+        and their normal forces, forces on nodes and obstacles); None without contact or verification."""
+        return None if self.verification is None else self.verification.contact
 
     def __repr__(self) -> str:
         extra = {"saturated": self.saturated_names} if self.saturated.any() else {}

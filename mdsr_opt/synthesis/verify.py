@@ -17,6 +17,7 @@ from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_in
 from ..mechanics.loadsteps import check_mesh_material, upright
 from ..mechanics.stability import check_stability
 from ..mechanics.units import Units
+from .contactdesign import check_design_contact, contact_minimum
 from .problem import DesignProblem
 from .results import DesignResult, Verification
 
@@ -31,7 +32,8 @@ SAME_STATE_RTOL = 1e-9
 def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions: ArrayLike, x: ArrayLike, *,
                   muscle_model: str = "cable", stiffness: float = 10.0,
                   anchor_radius: float | None = None, lowest: bool = True,
-                  tol: float = 1e-8) -> tuple[bool, float, float]:
+                  tol: float = 1e-8, contact: bool = False, obstacles=None,
+                  contact_gap: float | None = None) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
     With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
@@ -49,6 +51,11 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     ``lowest=False`` the eigenvalue estimate is skipped when the state is positive definite (NaN returned;
     the inertia alone decides, 30-100x cheaper at thousands of nodes). The check runs on the body scaled to
     unit size and stiffness (:class:`~mdsr_opt.mechanics.units.Units`).
+
+    With contact (``contact=True`` and/or ``obstacles``, as in :func:`~mdsr_opt.solve_internal`) the test is
+    on the tangent space of the active ropes, anchor patches and pushing contacts: a contact solve started at
+    ``x`` must stay there and be stable (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); the
+    eigenvalue is then NaN.
 
     Example
     -------
@@ -70,6 +77,12 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     a = as_float_array(np.atleast_1d(contractions), "contractions", shape=(len(mus),))
     tol = positive_float(tol, "tol")
     radius = check_anchor_radius(mesh, anchor_radius)
+    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
+    if ckw:
+        ok, residual, _ = contact_minimum(mesh, material, mus, a, mesh._check_state(x), ckw,
+                                          muscle_model=muscle_model, stiffness=stiffness, anchor_radius=radius,
+                                          tol=tol)
+        return ok, float("nan"), residual
     units = Units(mesh, material)  # checked on the unit body (size and E t about 1)
     x = units.state_in(mesh._check_state(x))
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, x, np.ones(mesh.n_nodes), muscle_model,
@@ -91,7 +104,8 @@ def _stability(prob: DesignProblem, a, xflat, tol: float, lowest: bool = True) -
 
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
                   weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
-                  drags=None, lowest: bool = False, start: str = "rest", tol: float = 1e-10) -> Verification:
+                  drags=None, lowest: bool = False, start: str = "rest", tol: float = 1e-10,
+                  contact: bool = False, obstacles=None, contact_gap: float | None = None) -> Verification:
     """Check a design independently of how it was found.
 
     Solves the forward internal-driving problem at ``result.contractions`` (:func:`~mdsr_opt.solve_internal`:
@@ -122,6 +136,12 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     :data:`SAME_STATE_RTOL` of the body's size after alignment) its own stability check, made at the end of
     every successful solve, answers the test.
 
+    With contact (``contact=True`` and/or ``obstacles``, as in :func:`~mdsr_opt.solve_internal`) the forward
+    solve models it, and the design's state must be a stable equilibrium with its contacts: a contact solve
+    started there stays there and is stable on the tangent space of its active ropes and pushing contacts
+    (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); ``min_eigenvalue`` is then NaN. ``contact`` of
+    the result reports the forward state's contacts (pairs, normal forces, forces on nodes and obstacles).
+
     Example
     -------
     >>> from mdsr_opt import Mesh, Muscle, NeoHookean, design_contractions, solve_internal
@@ -150,6 +170,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     radius = getattr(result, "anchor_radius", None)
     radius = None if radius is None or not np.isfinite(radius) else float(radius)
     radius = check_anchor_radius(mesh, radius)
+    ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
     target_check = None
     if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
@@ -160,6 +181,9 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     mesh, material, x = units.unit_mesh, units.unit_material, units.state_in(x)
     prob = DesignProblem(mesh, material, mus, units.state_in(y), w, result.muscle_model, result.stiffness, 0.99,
                          anchor_radius=units.to_unit(radius))
+    if ckw:  # in the caller's units (solve_internal scales itself), the obstacles where the caller put them
+        return _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check,
+                               target_residual if target_check is not None else None, t0)
     guess = in_gauge_frame(mesh, x) if start == "design" else None
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), muscle_model=result.muscle_model,
                          stiffness=result.stiffness, anchor_radius=prob.anchor_radius, tol=tol,
@@ -203,3 +227,47 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
                         positive_definite=bool(pd), min_eigenvalue=lam, message="; ".join(msgs),
                         time=time.perf_counter() - t0,
                         target_stable=None if target_check is None else bool(target_check.stable))
+
+
+def _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check, target_residual,
+                    t0) -> Verification:
+    """:func:`verify_design` with contact, on the caller's body (``units.mesh``; ``x`` the design's state on
+    the unit body)."""
+    mesh, material, L = units.mesh, units.material, units.length
+    xc = x * L
+    opts = dict(muscle_model=result.muscle_model, stiffness=result.stiffness, anchor_radius=radius, tol=tol)
+    guess = "predictor" if start == "rest" else xc
+    fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), initial_guess=guess, align_to_rest=False,
+                         **opts, **ckw)
+    fx = np.asarray(fwd.x, dtype=float)
+    moved = fx - xc if ckw.get("obstacles") else align(xc, fx).apply(xc) - fx
+    gap = float(np.linalg.norm(moved, axis=1).max())
+    fdiff = align(fx, y * L, w).difference
+    inverted = not upright(units.unit_mesh, x)
+    msgs = []
+    if inverted:
+        pd, residual = False, float("nan")
+    elif fwd.success and gap <= SAME_STATE_RTOL * mesh.size:
+        pd, residual = bool(fwd.stable), float(fwd.residual)  # the forward solve's own check answers
+    else:
+        pd, residual, _ = contact_minimum(mesh, material, mus, a, xc, ckw, **opts)
+    if not fwd.success:
+        msgs.append(f"forward re-solve with contact failed ({fwd.status})")
+    if not np.isfinite(gap) or gap > gap_tol:
+        msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
+    if inverted:
+        msgs.append("the design's state inverts an element (det F <= 0)")
+    elif not pd or not residual <= tol:
+        msgs.append("the design's state is not a stable equilibrium with its contacts (a contact solve started "
+                    f"there moves away, fails or finds a saddle; residual {residual:.3g})")
+    if target_check is not None and not target_check.stable:
+        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
+                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
+    if target_residual is not None and target_residual > 1e-5:
+        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
+    return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
+                        forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
+                        positive_definite=bool(pd), min_eigenvalue=float("nan"), message="; ".join(msgs),
+                        time=time.perf_counter() - t0,
+                        target_stable=None if target_check is None else bool(target_check.stable),
+                        contact=fwd.contact)
