@@ -28,7 +28,6 @@ import contextlib
 import importlib
 import os
 import pickle
-import signal
 import sys
 import threading
 from concurrent.futures import Executor, wait as wait_for
@@ -82,9 +81,8 @@ def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | 
     """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
     variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
     threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
-    signal.signal(signal.SIGINT, signal.default_int_handler)  # the server ignores Ctrl-C (_start_server):
-    # a worker stops on it, as the run does; one interrupted while it starts ends quietly (the run reports
-    # the interrupt; the pool's own report would be a traceback)
+    # a worker interrupted by Ctrl-C while it starts ends quietly (the run reports the interrupt; the pool's
+    # own report would be a traceback); one interrupted in a job returns the KeyboardInterrupt to the run
     try:
         _prepare_worker(env, modules, setup)
     except KeyboardInterrupt:
@@ -135,7 +133,6 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     if context.get_start_method() == "forkserver":
         ours = __name__.split(".")[0]
         context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
-        _start_server()
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
     # start the workers now, from a thread: starting one waits until the forkserver has imported the
@@ -148,24 +145,6 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     finally:
         starter.join()
         pool.shutdown(wait=True, cancel_futures=True)
-
-
-def _start_server() -> None:
-    """Start the fork server now, with Ctrl-C (SIGINT) ignored in it: a terminal sends Ctrl-C to the whole
-    process group, and a server still importing its preloaded modules would die of it with a traceback of
-    its own, beside the run's one-line message. An ignored signal stays ignored across the server's start
-    (POSIX), and Python then installs no KeyboardInterrupt handler; the run handles Ctrl-C itself and shuts
-    the pool down, and the workers take Python's handler back as they start (:func:`_start_worker`). A
-    Ctrl-C in the few milliseconds this process takes to start the server is lost (press it again)."""
-    from multiprocessing import forkserver
-
-    here = threading.current_thread() is threading.main_thread()
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if here else None
-    try:
-        forkserver.ensure_running()
-    finally:
-        if here and old is not None:  # None: a handler not set from Python, which it cannot restore
-            signal.signal(signal.SIGINT, old)
 
 
 def _start_workers(pool: Executor) -> None:
