@@ -563,6 +563,8 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
     default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
     for key in ("method", "a_max", "muscle_model", "stiffness", "verify"):
         want = dopt.get(key, default[key].default)
+        if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
+            want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
         if key == "verify":
             if want and d.verification is None:
                 return False
