@@ -12,7 +12,6 @@ import http.client
 import json
 import socket
 import threading
-from pathlib import Path
 from urllib.parse import urlsplit
 
 import pytest

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sl
 
-from mdsr_opt import Mesh, Muscle, NeoHookean, check_minimum, get_model, solve_internal
+from mdsr_opt import Mesh, Muscle, NeoHookean, check_minimum, solve_internal
 from mdsr_opt.synthesis.problem import DesignProblem
 from mdsr_opt.mechanics.equilibrium import gauge_coordinates
 

@@ -6,10 +6,8 @@ from __future__ import annotations
 
 import csv
 import json
-import warnings
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal

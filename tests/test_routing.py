@@ -301,7 +301,6 @@ def _router(mesh, t, w, K_a, K_b, K_h, n_seeds=10):
 def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
     """h of every candidate step = shortest path over all mesh edges (rest lengths) from the new end node
     to the nearest end node of another unit, in mean edge lengths (checked against networkx)."""
-    from mdsr_opt.synthesis import routing
 
     t = family(body)["shorten 35 deg"]
     _, _, w = edge_weights(body, t)
@@ -330,7 +329,6 @@ def test_heuristic_is_the_path_length_along_mesh_edges_to_another_unit(body):
 def test_pruned_choice_equals_the_full_heuristic(body, K_h):
     """The growth step computes h only where a straight-line bound says it can matter; every step it
     takes must be the one the full computation of h picks."""
-    from mdsr_opt.synthesis import routing
 
     ell = float(body.edge_lengths.mean())
     steps = 0

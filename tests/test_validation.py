@@ -16,7 +16,7 @@ from mdsr_opt import Mesh, Muscle, NeoHookean, solve_external
 from mdsr_opt.mechanics.backends import check_options
 from mdsr_opt.cli.main import main
 from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
-from mdsr_opt.scenes.scene import Animation, Case, Scene
+from mdsr_opt.scenes.scene import Case, Scene
 from mdsr_opt.scenes.reader import SceneFileError
 from mdsr_opt.scenes.select import boundary_path, edge_path
 from mdsr_opt.scenes.names import check_output_names

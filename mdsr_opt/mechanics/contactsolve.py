@@ -26,12 +26,12 @@ import numpy as np
 import scipy.sparse as sp
 from shapely.geometry import Point, Polygon
 
-from ..core.guards import check_stop, interruptible
+from ..core.guards import interruptible
 from .assembly import ipopt_functions
 from .contact import ContactRows, broad_phase
 from .friction import EPS as FRICTION_EPS, FrictionTerm, friction_expr, friction_params
 from .kkt import kkt_factor
-from .loadsteps import min_jacobian, upright
+from .loadsteps import upright
 from .residual import Residual, ipopt_tolerances
 from .result import MinimizeOutcome, solver_status
 from .ropesolve import pinned_bounds
