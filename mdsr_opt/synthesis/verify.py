@@ -217,16 +217,24 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         if not pd:
             msgs.append(f"the design's state is not a minimum of the energy (a saddle: curvature {lam:.3g} E t "
                         f"along its direction of negative curvature)")
-    if target_check is not None and not target_check.stable:
-        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
-                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
-    if target_check is not None and target_residual > 1e-5:
-        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
+    msgs += _target_messages(target_check, target_residual if target_check is not None else None)
     return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
                         forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
                         positive_definite=bool(pd), min_eigenvalue=lam, message="; ".join(msgs),
                         time=time.perf_counter() - t0,
                         target_stable=None if target_check is None else bool(target_check.stable))
+
+
+def _target_messages(target_check, target_residual) -> list[str]:
+    """Why the target fails its own check (unstable, or not an equilibrium of its external driving): the
+    lines both verifications add; none without a target check (``None``)."""
+    msgs = []
+    if target_check is not None and not target_check.stable:
+        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
+                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
+    if target_residual is not None and target_residual > 1e-5:
+        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
+    return msgs
 
 
 def _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check, target_residual,
@@ -260,11 +268,7 @@ def _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol,
     elif not pd or not residual <= tol:
         msgs.append("the design's state is not a stable equilibrium with its contacts (a contact solve started "
                     f"there moves away, fails or finds a saddle; residual {residual:.3g})")
-    if target_check is not None and not target_check.stable:
-        msgs.append(f"the target is not a stable equilibrium of its external driving ({target_check.n_negative} "
-                    f"direction(s) of negative curvature, {target_check.n_zero} zero)")
-    if target_residual is not None and target_residual > 1e-5:
-        msgs.append(f"the target is not an equilibrium of its external driving (residual {target_residual:.3g})")
+    msgs += _target_messages(target_check, target_residual)
     return Verification(passed=not msgs, gap=gap, gap_tol=gap_tol, forward_success=bool(fwd.success),
                         forward_status=fwd.status, forward_difference=float(fdiff), residual=residual,
                         positive_definite=bool(pd), min_eigenvalue=float("nan"), message="; ".join(msgs),
