@@ -45,7 +45,7 @@ import numpy as np
 from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
-           "boundary_distance", "body_depth", "check_fabrication"]
+           "boundary_distance", "body_depth", "check_fabrication", "admissible_edges"]
 
 #: Default channel diameter, as a fraction of the body's diameter.
 CHANNEL_FRACTION = 0.01
@@ -188,3 +188,39 @@ def body_depth(mesh) -> float:
     if not poly.is_valid:
         poly = poly.buffer(0)
     return float(shapely.maximum_inscribed_circle(poly, 1e-4 * body_size(mesh)).length)
+
+
+def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
+    """The edges a rope may run on: both nodes at least ``clearance`` inside the outline and every hole.
+
+    Only whole mesh edges far enough inside are used (no band refined, no route offset inward): the rope
+    then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
+    mesh -- every rope node has its clearance, which an offset route or a refined band would have to
+    re-establish after moving nodes. The price is a mesh fine enough to have edges inside; one that has none
+    is refused here, with the numbers that would work."""
+    dist = boundary_distance(mesh)
+    tol = 1e-12 * float(dist.max() if len(dist) else 0.0)
+    ok = dist >= clearance - tol
+    E = mesh.edges
+    adm = ok[E[:, 0]] & ok[E[:, 1]]
+    if adm.any():
+        return adm
+    D = body_size(mesh)
+    deepest = float(np.minimum(dist[E[:, 0]], dist[E[:, 1]]).max())
+    h = float(mesh.edge_lengths.mean())
+    R = body_depth(mesh)
+    inset = MIN_INSET_FRACTION * D
+    msg = (f"the mesh is too coarse to hold a channel with its wall: every rope node must lie at least "
+           f"{clearance:.4g} inside the outline and the holes (channel_diameter {fab.channel_diameter:.4g} / 2 + "
+           f"wall {fab.wall:.4g}, and at least {MIN_INSET_FRACTION:.0%} of the body's size, {inset:.4g}), but no "
+           f"mesh edge has both nodes that deep (the deepest edge: {deepest:.4g}; mean edge length {h:.4g}). ")
+    ways = []
+    if R > clearance:
+        ways.append(f"a finer mesh, mean edge length at most {(R - clearance) / 2:.3g} (the body is "
+                    f"{R:.4g} deep at its deepest point)")
+    if deepest >= inset:
+        ways.append(f"a smaller channel and wall: channel_diameter / 2 + wall <= {deepest:.4g} on this mesh")
+    if not ways:
+        ways.append(f"a thicker body: it is {R:.4g} deep at its deepest point, less than the "
+                    f"{MIN_INSET_FRACTION:.0%} inset {inset:.4g} plus an edge")
+    raise ValueError(msg + "Would work: " + "; or ".join(ways))

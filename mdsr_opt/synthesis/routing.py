@@ -116,7 +116,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
-from .fabrication import MIN_INSET_FRACTION, Fabrication, body_depth, boundary_distance, check_fabrication
+from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_fabrication
 from .routing_fixtures import FixtureFit, fit_fixtures
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
@@ -373,7 +373,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         clearance = fab.clearance(mesh)
         if inset is not None:
             clearance = max(clearance, positive_float(inset, "inset", allow_zero=True))
-        adm_edges = _admissible_edges(mesh, fab, clearance)
+        adm_edges = admissible_edges(mesh, fab, clearance)
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
                   seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio,
@@ -503,44 +503,6 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                                  max_turn=largest_turn(mesh.points, path)))
     return RoutingResult(tuple(muscles), tuple(stats), graph, seed_edges, len(units), params, tuple(dropped),
                          reflection, len(regions), **extra)
-
-
-def _admissible_edges(mesh: Mesh, fab: Fabrication, clearance: float) -> np.ndarray:
-    """The edges a rope may run on: both nodes at least ``clearance`` inside the outline and every hole.
-
-    Only whole mesh edges far enough inside are used (no band refined, no route offset inward): the rope
-    then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
-    mesh -- every rope node has its clearance, which an offset route or a refined band would have to
-    re-establish after moving nodes. The price is a mesh fine enough to have edges inside; one that has none
-    is refused here, with the numbers that would work."""
-    dist = boundary_distance(mesh)
-    tol = 1e-12 * float(dist.max() if len(dist) else 0.0)
-    ok = dist >= clearance - tol
-    E = mesh.edges
-    adm = ok[E[:, 0]] & ok[E[:, 1]]
-    if adm.any():
-        return adm
-    from ..mechanics.anchors import body_size
-
-    D = body_size(mesh)
-    deepest = float(np.minimum(dist[E[:, 0]], dist[E[:, 1]]).max())
-    h = float(mesh.edge_lengths.mean())
-    R = body_depth(mesh)
-    inset = MIN_INSET_FRACTION * D
-    msg = (f"the mesh is too coarse to hold a channel with its wall: every rope node must lie at least "
-           f"{clearance:.4g} inside the outline and the holes (channel_diameter {fab.channel_diameter:.4g} / 2 + "
-           f"wall {fab.wall:.4g}, and at least {MIN_INSET_FRACTION:.0%} of the body's size, {inset:.4g}), but no "
-           f"mesh edge has both nodes that deep (the deepest edge: {deepest:.4g}; mean edge length {h:.4g}). ")
-    ways = []
-    if R > clearance:
-        ways.append(f"a finer mesh, mean edge length at most {(R - clearance) / 2:.3g} (the body is "
-                    f"{R:.4g} deep at its deepest point)")
-    if deepest >= inset:
-        ways.append(f"a smaller channel and wall: channel_diameter / 2 + wall <= {deepest:.4g} on this mesh")
-    if not ways:
-        ways.append(f"a thicker body: it is {R:.4g} deep at its deepest point, less than the "
-                    f"{MIN_INSET_FRACTION:.0%} inset {inset:.4g} plus an edge")
-    raise ValueError(msg + "Would work: " + "; or ".join(ways))
 
 
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
