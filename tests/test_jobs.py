@@ -208,3 +208,40 @@ def test_run_scene_from_a_plain_script_without_a_main_guard_runs_once(tmp_path):
     assert proc.stdout.count("START") == 1 and "START True" in proc.stdout
     assert "DONE True" in proc.stdout and (tmp_path / "out" / "a30" / "design.png").is_file()
 
+
+
+def _import_broken_by(interrupt: bool):
+    """What an extension module's import raises when Ctrl-C arrives during its initialisation."""
+    try:
+        raise KeyboardInterrupt if interrupt else OSError("no such library")
+    except BaseException as exc:
+        raise ImportError("initialization failed") from exc
+
+
+_BROKEN_START = """
+import multiprocessing, sys
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from mdsr_opt.core.jobs import _start_worker, start_method, worker_environment
+sys.path.insert(0, {tests!r})
+from test_jobs import _import_broken_by
+if __name__ == "__main__":
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context(start_method()), initializer=_start_worker,
+                               initargs=(worker_environment(), (), (_import_broken_by, ({interrupt},))))
+    try:
+        pool.submit(sum, [1]).result(timeout=60)
+    except BrokenProcessPool:
+        print("broken")
+"""
+
+
+@pytest.mark.parametrize("interrupt", [True, False])
+def test_a_worker_whose_start_ctrl_c_broke_ends_quietly_other_errors_are_reported(tmp_path, interrupt):
+    """Ctrl-C while a worker imports a C extension surfaces as that import's ImportError (caused by the
+    KeyboardInterrupt): the worker ends without the pool's traceback; an ImportError of its own is reported."""
+    script = tmp_path / "start.py"
+    script.write_text(_BROKEN_START.format(tests=str(Path(__file__).parent), interrupt=interrupt))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120,
+                          cwd=Path(__file__).resolve().parents[1])
+    assert done.stdout.strip() == "broken"
+    assert ("Exception in initializer" in done.stderr) is (not interrupt), done.stderr[-2000:]

@@ -85,8 +85,21 @@ def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | 
     # own report would be a traceback); one interrupted in a job returns the KeyboardInterrupt to the run
     try:
         _prepare_worker(env, modules, setup)
-    except KeyboardInterrupt:
-        os._exit(1)
+    except BaseException as exc:  # noqa: B036 - a Ctrl-C may surface as the error of the import it broke
+        if _interrupted(exc):  # (an extension module's "ImportError: initialization failed" caused by it)
+            os._exit(1)
+        raise
+
+
+def _interrupted(exc: BaseException | None) -> bool:
+    """Whether ``exc`` is a KeyboardInterrupt or was raised while handling or because of one."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _prepare_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None) -> None:
