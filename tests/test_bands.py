@@ -57,6 +57,7 @@ def test_the_band_holds_the_nominal_stroke_and_names_its_sources(bent):
     assert b.values["anchor_radius"] == pytest.approx([0.75 * d.anchor_radius, 1.25 * d.anchor_radius])
     assert b.values["nu"] == pytest.approx([0.25, 0.35]) and b.values["mesh"] == [mesh.n_nodes + len(mesh.edges)]
     assert "lower" in b.table() and "anchor_radius" in b.table()
+    assert "in the mesh's length units" in b.table()  # the unit is said
 
 
 def test_the_band_widens_with_the_tolerances(bent):

@@ -87,6 +87,8 @@ def test_result_round_trips_through_json(lr, tmp_path):
     for f in ("strokes", "contractions", "differences", "separate_differences", "states", "engaged"):
         np.testing.assert_array_equal(getattr(back, f), getattr(res, f))
     assert json.loads(Path(p).read_text())["names"] == ["left", "right"]
+    lines = res.table().splitlines()
+    assert [r.split()[0] for r in lines[2:4]] == ["left", "right"] and "length units" in lines[-1]
 
 
 @pytest.mark.parametrize("cyclic", [True, False])

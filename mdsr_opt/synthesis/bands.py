@@ -103,6 +103,7 @@ class StrokeBands:
             rows.append(f"{n:<10} {self.nominal[i]:>10.4g} {self.band[i, 0]:>10.4g} {self.band[i, 1]:>10.4g}"
                         + "".join(f" {f'{self.contributions[s][i, 0]:+.3g} / {self.contributions[s][i, 1]:+.3g}':>22}"
                                   for s in src))
+        rows.append("strokes, bands and deviations in the mesh's length units")
         rows += [f"note: {n}" for n in self.notes]
         return "\n".join(rows)
 

@@ -255,6 +255,7 @@ class PosesResult:
         for k, n in enumerate(self.names):
             rows.append(f"{n:<14} {self.differences[k]:>10.4g} {self.separate_differences[k]:>10.4g} "
                         f"{int(self.separate_n_muscles[k]):>5d}  " + " ".join(f"{s:.4g}" for s in self.strokes[k]))
+        rows.append("D (weighted RMS node distance) and strokes in the mesh's length units")
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
