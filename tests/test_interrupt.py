@@ -537,3 +537,17 @@ def test_a_stop_inside_a_line_search_refuses_the_evaluations_quietly(capfd):
         (solver,) = model._solvers.values()
         churned += solver.stats()["n_call_nlp_f"] > 500  # the line search's refused evaluations
     assert churned >= 1
+
+
+def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsys):
+    """Ctrl-C while the command's modules still import (before main's own handler): 130 and one line, as
+    once the command runs, instead of an import traceback."""
+    from mdsr_opt.cli import main as cli_main
+
+    def interrupted_import(argv=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_main, "main", interrupted_import)
+    assert cli_main.console_main() == 130
+    err = capsys.readouterr().err
+    assert "interrupted (Ctrl-C) before the command started" in err and "Traceback" not in err

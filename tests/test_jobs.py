@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -245,3 +246,42 @@ def test_a_worker_whose_start_ctrl_c_broke_ends_quietly_other_errors_are_reporte
                           cwd=Path(__file__).resolve().parents[1])
     assert done.stdout.strip() == "broken"
     assert ("Exception in initializer" in done.stderr) is (not interrupt), done.stderr[-2000:]
+
+
+_BUSY_POOL = """
+import multiprocessing, os, time
+from mdsr_opt.core.jobs import Jobs, process_pool
+if __name__ == "__main__":
+    with process_pool(2) as pool, Jobs(pool) as jobs:
+        for _ in range(12):
+            jobs.submit(time.sleep, 30)  # two running, ten waiting
+        time.sleep(1.0)
+        print(*[p.pid for p in multiprocessing.active_children()], flush=True)
+        time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="signals a process group")
+def test_ctrl_c_to_the_whole_group_stops_a_busy_pool_at_once():
+    """A terminal's Ctrl-C reaches the workers too, with jobs running and jobs waiting: the process stops
+    within seconds (the workers are ended, not waited for; no job is cancelled under a breaking pool, which
+    stopped the pool's manager thread with InvalidStateError and hung the shutdown), and no worker is left."""
+    proc = subprocess.Popen([sys.executable, "-c", _BUSY_POOL], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=Path(__file__).resolve().parents[1], start_new_session=True)
+    try:
+        pids = [int(p) for p in proc.stdout.readline().split()]
+        t0 = time.monotonic()
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=20)
+        elapsed = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = proc.stderr.read()
+    assert len(pids) == 2 and elapsed < 10 and "KeyboardInterrupt" in err, err[-2000:]
+    assert "InvalidStateError" not in err and "Exception in thread" not in err, err[-2000:]
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(map(_exists, pids)):
+        time.sleep(0.05)
+    assert [p for p in pids if _exists(p)] == []

@@ -181,8 +181,13 @@ def _run(parser, argv: list[str]) -> int:
 
 def console_main() -> int:
     """The ``mdsr`` program (the console script and ``python -m mdsr_opt``): :func:`main` on the process's
-    arguments. Returns :func:`main`'s exit code."""
-    return main()
+    arguments. Returns :func:`main`'s exit code; 130 with one line when Ctrl-C comes before the command
+    runs (while its modules import), as it does once the command runs."""
+    try:
+        return main()
+    except KeyboardInterrupt:
+        print("\nmdsr: interrupted (Ctrl-C) before the command started; nothing written", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

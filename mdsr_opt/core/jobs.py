@@ -25,12 +25,15 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import functools
 import importlib
 import os
 import pickle
+import signal
 import sys
 import threading
-from concurrent.futures import Executor, wait as wait_for
+import weakref
+from concurrent.futures import BrokenExecutor, Executor, wait as wait_for
 from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
@@ -80,10 +83,12 @@ def _exit_with_parent() -> None:
 def _start_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None = None) -> None:
     """A worker's initializer: a watch on its parent (:func:`_exit_with_parent`), :func:`worker_environment`'s
     variables, the jobs' ``modules``, then ``setup`` (a picklable ``(function, args)``), if given."""
-    threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
-    # a worker interrupted by Ctrl-C while it starts ends quietly (the run reports the interrupt; the pool's
-    # own report would be a traceback); one interrupted in a job returns the KeyboardInterrupt to the run
+    # Ctrl-C is the run's to handle: a terminal sends it to the workers too, and a worker it ended would break
+    # the pool under the run's feet; the run ends its workers itself (process_pool). One that arrives before
+    # this line ends the worker quietly (the run reports the interrupt; the pool's report would be a traceback)
     try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        threading.Thread(target=_exit_with_parent, name="exit-with-parent", daemon=True).start()
         _prepare_worker(env, modules, setup)
     except BaseException as exc:  # noqa: B036 - a Ctrl-C may surface as the error of the import it broke
         if _interrupted(exc):  # (an extension module's "ImportError: initialization failed" caused by it)
@@ -146,8 +151,10 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     if context.get_start_method() == "forkserver":
         ours = __name__.split(".")[0]
         context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
+    before = {p.pid for p in multiprocessing.active_children()}
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
+    _ENDERS[pool] = functools.partial(_end_workers, pool, before)
     # start the workers now, from a thread: starting one waits until the forkserver has imported the
     # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile
     # instead of waiting at its first job
@@ -155,13 +162,47 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     starter.start()
     try:
         yield pool
+    except BaseException:
+        _ENDERS.pop(pool, lambda: None)()  # unless a Jobs block ended them already
+        raise
     finally:
         starter.join()
-        pool.shutdown(wait=True, cancel_futures=True)
+        # jobs are never cancelled here: a cancelled job of a pool that breaks meanwhile (a worker ended by a
+        # signal) stops the pool's own manager thread (InvalidStateError in CPython's terminate_broken) and
+        # the shutdown then waits for ever; a block left by an exception ends the workers instead, and the
+        # pool fails its jobs not yet done (BrokenProcessPool)
+        pool.shutdown(wait=True)
+        _ENDERS.pop(pool, None)
+
+
+#: the pools made by process_pool, each with the function that ends its workers
+_ENDERS: "weakref.WeakKeyDictionary[Executor, Callable[[], None]]" = weakref.WeakKeyDictionary()
+
+
+def _end_workers(pool: Executor, before: set[int]) -> None:
+    """End ``pool``'s worker processes at once (SIGTERM): its jobs not yet done fail (BrokenProcessPool).
+    ``before``: the process ids of this process's children before the pool was made (where the pool has no
+    ``terminate_workers``, Python < 3.14, its workers are the children made since)."""
+    import multiprocessing
+
+    terminate = getattr(pool, "terminate_workers", None)
+    if terminate is not None:
+        with contextlib.suppress(Exception):
+            terminate()
+        return
+    for proc in multiprocessing.active_children():
+        if proc.pid not in before:
+            with contextlib.suppress(Exception):
+                proc.terminate()
 
 
 def _start_workers(pool: Executor) -> None:
-    """Make ``pool`` start its worker processes (by a job that does nothing)."""
+    """Make ``pool`` start its worker processes (by a job that does nothing). This thread blocks Ctrl-C
+    (SIGINT) where the platform can: the processes it starts (the forkserver, which imports the preloaded
+    modules, and through it the workers) inherit the block, so that a terminal's Ctrl-C, which the run
+    handles in its main thread, does not interrupt them with a traceback of their own."""
+    if hasattr(signal, "pthread_sigmask"):  # POSIX; this thread only (the main thread still gets the signal)
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         pool.submit(os.getpid)
     except Exception:  # the pool was shut down first (its block ended at once), or broken by a Ctrl-C: the
@@ -223,9 +264,16 @@ class Jobs:
             if on_done is not None:
                 on_done(value)
 
-    def stop(self) -> None:
-        """Cancel the jobs not yet started and wait for the running ones; their results are dropped."""
+    def stop(self, exc: BaseException | None = None) -> None:
+        """Drop the jobs' results. After Ctrl-C, SIGTERM or a broken pool (``exc``), the workers of a pool
+        made by :func:`process_pool` are ended at once (its jobs not yet done fail); otherwise the jobs not yet
+        started are cancelled and the running ones waited for."""
         pending, self._pending = self._pending, collections.deque()
+        end = _ENDERS.get(self.pool) if self.pool is not None else None
+        if end is not None and isinstance(exc, (KeyboardInterrupt, BrokenExecutor)):
+            _ENDERS.pop(self.pool, None)
+            end()
+            return
         futures = [f for f, _ in pending if not f.cancel()]
         wait_for(futures)
 
@@ -236,9 +284,9 @@ class Jobs:
         if exc_type is None:
             try:
                 self.wait()
-            except BaseException:
-                self.stop()
+            except BaseException as failed:
+                self.stop(failed)
                 raise
         else:
-            self.stop()
+            self.stop(exc)
         return False
