@@ -286,3 +286,44 @@ def test_a_slack_rope_is_dropped_and_the_design_stays_the_same():
     assert abs(res.difference - both.difference) < 1e-8 * mesh.size
     _, kept_all, none = design_active(mesh, mat, [pull, along], target, drop_slack=False)
     assert len(kept_all) == 2 and none == ()
+
+
+def _ring_scene(tmp_path):
+    """A thick ring (outer radius 50, hole 28) squeezed from the top by 20 % of its size, with one given
+    muscle on a quarter of the hole's edge that can barely help: the rest shape is already 4.8 % from the
+    target, within the 5 % bound."""
+    def circle(r, n=48):
+        t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        return [[round(float(r * np.cos(a)), 3), round(float(r * np.sin(a)), 3)] for a in t]
+
+    text = (f'name = "ring"\n[body]\noutline = {circle(50.0)}\nholes = [{circle(28.0)}]\nresolution = "coarse"\n'
+            '[material]\nE = 1.0\nnu = 0.4\n[regions]\n'
+            'bottom = { near = [0, -50], radius = 8, boundary = true }\n'
+            'top = { near = [0, 50], radius = 8, boundary = true }\n'
+            '[[muscles]]\nname = "inner_left"\nboundary = { from = [-28, 0], to = [0, 28] }\n'
+            '[[cases]]\nname = "squash"\nanchors = "bottom"\ndrags = [{ nodes = "top", by = [0, -20] }]\n')
+    (tmp_path / "ring.toml").write_text(text)
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    return load_scene(tmp_path / "ring.toml")
+
+
+def test_a_design_that_barely_moves_the_body_is_no_success(tmp_path):
+    """Within 5 % of the size is not enough when the rest shape ("do nothing") is nearly as close: the case
+    fails, naming how little of the rest shape's difference the design removes."""
+    from mdsr_opt.mechanics.align import difference, node_weights
+    from mdsr_opt.scenes.cases import prepare_case
+    from mdsr_opt.scenes.runner import run_case
+
+    scene = _ring_scene(tmp_path)
+    rep = run_case(scene, "squash", photo=False).report
+    target = prepare_case(scene, "squash").target
+    assert rep.rest_difference == pytest.approx(difference(scene.mesh.points, target, node_weights(scene.mesh)),
+                                                rel=1e-9)
+    assert rep.difference < 0.05 * scene.mesh.size and rep.difference > 0.9 * rep.rest_difference
+    assert rep.design_success and not rep.success
+    assert "of the rest shape's difference" in rep.message and "barely move the body" in rep.message
+    # the rule itself: a tenth of the rest shape's difference removed passes; a target at rest asks for nothing
+    assert difference_failure(0.89, 100.0, rest_difference=1.0) == ""
+    assert "removes 9 %" in difference_failure(0.91, 100.0, rest_difference=1.0)
+    assert difference_failure(0.01, 100.0, rest_difference=0.05) == ""  # rest within 0.1 % of the size

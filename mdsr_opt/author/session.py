@@ -33,6 +33,7 @@ from ..body.material import NeoHookean
 from ..synthesis.acceptance import design_active, difference_failure
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
+from ..mechanics.align import difference, node_weights
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
@@ -562,7 +563,9 @@ class Session:
                 # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
                 "acceptance": difference_failure(res.difference, self.mesh.size,
                                                  *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance],
-                                                 units=self.units or None),
+                                                 units=self.units or None,
+                                                 rest_difference=difference(self.mesh.points, target,
+                                                                            node_weights(self.mesh))),
                 "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles]}
 
 

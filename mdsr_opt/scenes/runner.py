@@ -15,6 +15,7 @@ import numpy as np
 from ..core.errors import LayoutError
 from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
+from ..mechanics.align import difference, node_weights
 from ..plot.style import unit_label
 from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
@@ -48,6 +49,8 @@ class CaseReport:
     difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
         relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
     initial_difference : difference at the design's starting point.
+    rest_difference : the rest shape's difference to the target (the "do nothing" design; a case whose
+        design removes less than a tenth of it fails: :func:`~mdsr_opt.synthesis.acceptance.difference_failure`).
     design_success, design_status, verified, gap : the design, its verification and the forward check's
         largest node distance between the design's state and a fresh forward solve at its contractions.
     routing : ``n_units`` and per-muscle ``contraction`` / ``n_edges``; internal cases also ``recovered``,
@@ -88,6 +91,7 @@ class CaseReport:
     difference: float | None = None
     relative_difference: float | None = None
     initial_difference: float | None = None
+    rest_difference: float | None = None
     design_success: bool | None = None
     design_status: str = ""
     verified: bool | None = None
@@ -365,7 +369,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if photo:
         measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()
-    far = difference_failure(res.difference, mesh.size, accept["max_difference"], units=scene.units)
+    w = opts.get("weights")
+    w = node_weights(mesh, opts.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
+    rep.rest_difference = float(difference(mesh.points, setup.target, w))  # the design's own weights
+    far = difference_failure(res.difference, mesh.size, accept["max_difference"], units=scene.units,
+                             rest_difference=rep.rest_difference)
     rep.success = bool(res.success) and not far
     if not res.success:
         rep.message = f"design {'not verified' if 'verification' in res.status else 'failed'}: {res.status}"

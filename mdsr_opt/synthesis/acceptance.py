@@ -11,6 +11,10 @@ robot. Two outcomes used to pass unnoticed:
   the body and is no success.
 - a difference to the target larger than a stated fraction of the body's size: :data:`MAX_DIFFERENCE`,
   the default bound of :func:`difference_failure`, with which ``mdsr run`` fails a case.
+- a design that barely moves the body: a target close to the rest shape is within that fraction of the size
+  even when every muscle does nothing, so :func:`difference_failure` also compares the design's difference
+  with the rest shape's (the "do nothing" design) and fails a design that covers less than
+  :data:`MIN_PROGRESS` of the way from rest to the target.
 
 A muscle at ``a_max`` is flagged by the design itself
 (:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated` and a
@@ -31,7 +35,7 @@ from ..core.checks import positive_float
 from ..core.results import to_jsonable
 from ..plot.style import muscle_label, muscle_name
 
-__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
+__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
            "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
@@ -40,6 +44,14 @@ IDLE_CONTRACTION = 1e-3
 #: the largest difference to the target, as a fraction of the body's size (``mesh.size``), with which a
 #: case of ``mdsr run`` is a success
 MAX_DIFFERENCE = 0.05
+
+#: the least fraction of the rest shape's difference to the target a design must remove (``1 - D / D_rest``)
+#: to count as moving the body towards it (:func:`difference_failure`): a bar against designs that do next to
+#: nothing, not a measure of quality (that is ``max_difference``)
+MIN_PROGRESS = 0.1
+
+#: a target nearer the rest shape than this fraction of the size is "the rest shape": no progress is asked
+REST_TOLERANCE = 1e-3
 
 #: whether ``mdsr run`` and the scene runner compute every stroke's uncertainty band unless told
 #: (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: four to five more designs per case, 3-6 times the
@@ -91,9 +103,14 @@ def check_max_difference(value, name: str = "max_difference") -> float:
 
 
 def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE,
-                       units: str | None = None) -> str:
-    """Why a design's ``difference`` (a length) to its target is too large for a body of ``size``, or ``""``
-    when it is within ``max_difference * size``. Lengths are quoted in ``units`` (default ``"body units"``).
+                       units: str | None = None, rest_difference: float | None = None,
+                       min_progress: float = MIN_PROGRESS) -> str:
+    """Why a design's ``difference`` (a length) to its target fails, or ``""`` when it passes.
+
+    It fails when it is above ``max_difference * size``, and, given ``rest_difference`` (the rest shape's
+    difference to the same target, with the same weights), when it removes less than ``min_progress`` of it:
+    ``difference > (1 - min_progress) * rest_difference``; a target within :data:`REST_TOLERANCE` of the
+    size of the rest shape asks for no progress. Lengths are quoted in ``units`` (default ``"body units"``).
 
     Example
     -------
@@ -101,15 +118,24 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     ''
     >>> difference_failure(0.12, 2.0, 0.05, units="mm")
     'difference 0.12 mm is 6.00 % of the size 2 mm, more than max_difference 5 %'
+    >>> difference_failure(0.043, 1.0, rest_difference=0.045)[:40]
+    'the design removes 4 % of the rest shape'
     """
     from ..plot.style import unit_label
 
     d, u = float(difference), unit_label(units)
-    if math.isfinite(d) and d <= max_difference * size:
+    if not (math.isfinite(d) and d <= max_difference * size):
+        rel = f"{100 * d / size:.2f} %" if math.isfinite(d) else "not finite"
+        return (f"difference {d:.3g} {u} is {rel} of the size {size:.3g} {u}, more than max_difference "
+                f"{100 * max_difference:g} %")
+    if rest_difference is None:
         return ""
-    rel = f"{100 * d / size:.2f} %" if math.isfinite(d) else "not finite"
-    return (f"difference {d:.3g} {u} is {rel} of the size {size:.3g} {u}, more than max_difference "
-            f"{100 * max_difference:g} %")
+    d0 = float(rest_difference)
+    if not math.isfinite(d0) or d0 <= REST_TOLERANCE * size or d <= (1.0 - min_progress) * d0:
+        return ""
+    return (f"the design removes {100 * (1.0 - d / d0):.0f} % of the rest shape's difference {d0:.3g} {u} to the "
+            f"target (difference {d:.3g} {u}), less than min_progress {100 * min_progress:g} %: the muscles "
+            "barely move the body")
 
 
 def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_contraction: float = IDLE_CONTRACTION,
