@@ -785,8 +785,26 @@ def test_a_design_warm_started_from_the_target_that_fails_is_repeated_from_rest(
 
 def test_warm_start_takes_numpy_booleans_and_refuses_numbers(mesh, muscles, target):
     assert design_contractions(mesh, MAT, muscles, target, warm_start=np.True_, verify=False).success
-    with pytest.raises(ValueError, match="warm_start must be True, False, 'target' or 'rest', got 1"):
+    with pytest.raises(ValueError, match="warm_start must be True, False, 'target', 'rest' or an \\(n, 2\\) array of "
+                                         "node positions, got 1"):
         design_contractions(mesh, MAT, muscles, target, warm_start=1)
+
+
+def test_a_design_warm_started_from_a_given_shape_is_the_design_from_the_target(mesh, muscles, target):
+    target = target * [1.05, 0.97]  # out of reach: the warm start's solve from the target has work to do
+    ref = design_contractions(mesh, MAT, muscles, target)
+    # an earlier design's state (in another pose: only the shape counts) starts the forward solve there
+    moved = ref.x @ np.array([[0.0, -1.0], [1.0, 0.0]]).T + [3.0, -2.0]
+    again = design_contractions(mesh, MAT, muscles, target, warm_start=moved, initial_guess=ref.contractions)
+    assert again.success and again.verification.passed
+    np.testing.assert_allclose(again.contractions, ref.contractions, atol=1e-7)
+    assert abs(again.difference - ref.difference) < 1e-9 * mesh.size and ref.difference > 1e-3 * mesh.size
+    # started at the equilibrium itself: the warm start's solve has (next to) nothing to do
+    assert again.inner_iterations <= 2 < ref.inner_iterations
+    with pytest.raises(ValueError, match=rf"warm_start must have shape \({mesh.n_nodes}, 2\)"):
+        design_contractions(mesh, MAT, muscles, target, warm_start=ref.x[:-1])
+    with pytest.raises(ValueError, match="warm_start"):
+        design_contractions(mesh, MAT, muscles, target, warm_start=np.full_like(ref.x, np.nan))
 
 
 def test_the_verification_takes_the_forward_check_only_for_the_same_state(monkeypatch, mesh, muscles, target):

@@ -116,7 +116,8 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                   drop_slack: bool | None = None, **design_options):
     """:func:`~mdsr_opt.synthesis.contractions.design_contractions`, then every idle muscle (designed
     contraction below ``idle_contraction``, or a rope slack at the designed state) dropped from the layout
-    and the design made again on the others (started from their contractions), until no muscle is idle.
+    and the design made again on the others (started from their contractions and, unless ``warm_start`` says
+    otherwise, from the state just designed), until no muscle is idle.
 
     A slack rope carries no tension at the designed state: its length constraint is inactive there, so the
     layout without it has the same equilibrium, and a workshop would build and drive it for nothing.
@@ -176,8 +177,13 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                               f"idle_contraction {thr:g}" if a[i] < thr else f"idle: slack at the designed "
                               f"state (contraction {a[i]:.3g}, no tension): it does not pull")
                 for i, mu in enumerate(mus) if idle[i]]
+        more = dict(initial_guess=a[keep])
+        if opts.get("warm_start", True) in (True, "target") and np.isfinite(res.x).all():
+            # the state just designed is near an equilibrium without the idle muscles (exactly one when
+            # they were slack): the warm start's forward solve starts there rather than from the target
+            more["warm_start"] = res.x
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
-                                        dict(opts, initial_guess=a[keep]))
+                                        dict(opts, **more))
         names = ", ".join(g.name for g in gone)
         if not again.success:
             res.status += (f"; idle muscle(s) {names} kept: the design without them failed "

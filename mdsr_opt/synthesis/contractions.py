@@ -13,7 +13,7 @@ from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_float, positive_int
+from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
@@ -41,7 +41,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
-                        warm_start: bool | str = True, outer: str = "nelder-mead", options: dict | None = None,
+                        warm_start: bool | str | ArrayLike = True, outer: str = "nelder-mead", options: dict | None = None,
                         inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
                         contact_gap: float | None = None) -> DesignResult:
@@ -85,12 +85,13 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     scaling : {"auto", "size"}
         Flattened only: objective over ``sum(e) h^2`` and constraints over ``E t h`` (``h`` the mean edge
         length), or the objective normalised by the body's size instead (for comparison studies).
-    warm_start : {True, "target", "rest", False}
+    warm_start : {True, "target", "rest", False} or (n, 2) array
         Flattened only: start the NLP from an equilibrium at the initial contractions, found by a forward
         solve started from the target shape (``True`` or ``"target"``: any equilibrium, not checked for
         stability; from rest, stable, when that solve fails; and the whole design repeated from rest when
-        its verification fails) or from rest (``"rest"``: the stable equilibrium load stepping reaches);
-        ``False`` starts from the rest shape itself. The verification always solves from rest. Started from
+        its verification fails), from a shape given as an array (in any pose; handled as the target is: e.g.
+        an earlier design's state, near an equilibrium at these contractions) or from rest (``"rest"``: the
+        stable equilibrium load stepping reaches); ``False`` starts from the rest shape itself. The verification always solves from rest. Started from
         a reachable target the forward solve takes one or two iterations instead of two load steps.
     derivatives : {"numeric", "assembled", "casadi"}
         Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
@@ -157,8 +158,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
     if isinstance(warm_start, np.bool_):
         warm_start = bool(warm_start)
-    if not (isinstance(warm_start, bool) or (isinstance(warm_start, str) and warm_start in ("target", "rest"))):
-        raise ValueError(f"warm_start must be True, False, 'target' or 'rest', got {warm_start!r}")
+    shaped = isinstance(warm_start, (np.ndarray, list, tuple))  # a start shape: checked with the mesh below
+    if not shaped and not (isinstance(warm_start, bool) or
+                           (isinstance(warm_start, str) and warm_start in ("target", "rest"))):
+        raise ValueError(f"warm_start must be True, False, 'target', 'rest' or an (n, 2) array of node positions, "
+                         f"got {warm_start!r}")
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
@@ -166,6 +170,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                                                     interior_weight, muscle_model, stiffness, initial)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
+    if shaped:
+        warm_start = as_float_array(warm_start, "warm_start", shape=(mesh.n_nodes, 2))
     m = len(mus)
     if tol is None:
         tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
@@ -186,6 +192,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
     a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
+    if isinstance(warm, np.ndarray):
+        warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units, ckw)
     res, fwd, rejected = _design(*args, warm=warm)
@@ -193,10 +201,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
         # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
         again, _, _ = _design(*args, warm="rest")
+        where = "given shape" if isinstance(warm, np.ndarray) else "target"
         first = res
         if again.success:
             res = again
-            res.status += f" (warm-started from rest after the design warm-started from the target failed " \
+            res.status += f" (warm-started from rest after the design warm-started from the {where} failed " \
                           f"its verification: {first.verification.message})"
         else:
             res.status += f" (warm-started from rest, the design failed too: {again.status})"
