@@ -42,7 +42,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool | str | ArrayLike = True, outer: str = "nelder-mead", options: dict | None = None,
-                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
+                        inner_tol: float = 1e-10, verify: bool = True, skip_verification=None,
+                        gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
                         contact_gap: float | None = None) -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
@@ -110,6 +111,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         nothing checks that the design's state is stable or reached from rest: the warm start from the
         target is not checked for stability either). A flattened design that IPOPT ends at its acceptable
         tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
+    skip_verification : callable, optional
+        For a caller that discards some designs before using them (:func:`~mdsr_opt.synthesis.acceptance.
+        design_active`, which makes a layout with idle muscles again without them): called with the design
+        found, before its verification; a non-empty string it returns is why the verification is left out
+        (the result has no ``verification``, its ``status`` says so, and it must not be used as a verified
+        design).
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
     contact, obstacles, contact_gap :
@@ -166,6 +173,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
+    if skip_verification is not None and not callable(skip_verification):
+        raise TypeError(f"skip_verification must be a function of the design or None, got "
+                        f"{type(skip_verification).__name__}")
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
@@ -195,7 +205,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if isinstance(warm, np.ndarray):
         warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units, ckw)
+            verify, gap_rtol, units, ckw, skip_verification)
     res, fwd, rejected = _design(*args, warm=warm)
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
@@ -234,7 +244,7 @@ def warn_saturated(res: DesignResult, muscles) -> None:
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units, ckw, warm) -> tuple[DesignResult, ForwardSolver, bool]:
+            verify, gap_rtol, units, ckw, skip, warm) -> tuple[DesignResult, ForwardSolver, bool]:
     """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start) of the unit problem
     ``prob``, checked, mapped to the caller's ``units`` and verified there; returns the result, the forward
     solver it used and whether the verification rejected a design the optimiser had found."""
@@ -316,6 +326,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     if res.success and not verify and status.startswith(ACCEPTABLE):
         res.success = False
         res.status += "; not verified (verify=False), so IPOPT's acceptable exit is not a success"
+    why = str(skip(res) or "") if verify and skip is not None and res.success else ""
+    if why:  # the caller discards this design (and verifies the one it keeps)
+        res.status += f"; not verified: {why}"
+        return res, fwd, False
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL), **ckw)
