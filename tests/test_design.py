@@ -286,6 +286,31 @@ def test_verification_rejects_wrong_states(mesh, muscles, target):
     assert "not a minimum" in v.message
 
 
+def test_the_verification_from_rest_takes_the_predictor_when_the_rest_shape_fails(monkeypatch, mesh, muscles,
+                                                                                 target):
+    from mdsr_opt.synthesis import verify
+
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    starts, real = [], verify.solve_internal
+
+    def rest_fails(*a, **kw):  # as if the solve from the rest shape had failed
+        starts.append(kw["initial_guess"])
+        out = real(*a, **kw)
+        if kw["initial_guess"] == "rest":
+            out.success, out.status = False, "load stepping stalled (test)"
+        return out
+
+    monkeypatch.setattr(verify, "solve_internal", rest_fails)
+    v = verify_design(mesh, MAT, muscles, res, target)
+    assert starts == ["rest", "predictor"] and v.passed and v.forward_start == "rest, predictor"
+    alone = real(mesh, MAT, muscles, res.contractions, muscle_model=res.muscle_model, tol=1e-10,
+                 anchor_radius=res.anchor_radius)
+    assert v.forward_iterations > alone.iterations  # both solves counted
+    saved = DesignResult.from_dict(json.loads(json.dumps(dict(res.to_dict(), verification=v.to_dict()))))
+    assert saved.verification.forward_start == "rest, predictor"
+    assert saved.verification.forward_iterations == v.forward_iterations
+
+
 def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target):
     from mdsr_opt.mechanics.equilibrium import gauge_coordinates
     from mdsr_opt.mechanics.equilibrium import in_gauge_frame
@@ -296,6 +321,8 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
     assert v_design.passed and v_rest.passed
     assert v_design.gap < 1e-9 * mesh.size and v_rest.gap < 1e-7 * mesh.size
     assert v_design.forward_difference == pytest.approx(v_rest.forward_difference, abs=1e-8 * mesh.size)
+    assert (v_design.forward_start, v_rest.forward_start) == ("design", "rest")
+    assert 0 <= v_design.forward_iterations < v_rest.forward_iterations
     with pytest.raises(ValueError, match="start must be"):
         verify_design(mesh, MAT, muscles, res, target, start="target")
     # the design's state in any pose is moved rigidly into the solver's gauge frame
