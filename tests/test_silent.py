@@ -303,7 +303,7 @@ def test_only_the_design_kept_is_verified_and_a_failed_redesign_returns_the_veri
         return verify(*args, **kw)
 
     monkeypatch.setattr(contractions, "verify_design", counted)
-    res, kept, dropped = design_active(mesh, MAT, [lower, upper], target)
+    res, kept, _dropped = design_active(mesh, MAT, [lower, upper], target)
     assert calls == [1] and res.success and res.verification.passed and [m.name for m in kept] == ["lower"]
     assert "not verified" not in res.status and "dropped" in res.status
     # the design without the idle muscle fails (as if it had): the design with it, verified, is returned

@@ -185,7 +185,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                               f"idle_contraction {thr:g}" if a[i] < thr else f"idle: slack at the designed "
                               f"state (contraction {a[i]:.3g}, no tension): it does not pull")
                 for i, mu in enumerate(mus) if idle[i]]
-        more = dict(initial_guess=a[keep])
+        more = {"initial_guess": a[keep]}
         if opts.get("warm_start", True) in (True, "target") and np.isfinite(res.x).all():
             # the state just designed is near an equilibrium without the idle muscles (exactly one when
             # they were slack): the warm start's forward solve starts there rather than from the target

@@ -175,7 +175,7 @@ class RoutingResult:
                         f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
         return "\n".join(rows)
 
-    def replaced(self, **changes) -> "RoutingResult":
+    def replaced(self, **changes) -> RoutingResult:
         """A copy with ``changes`` (as :func:`dataclasses.replace`), its graph still unbuilt if it was."""
         return replace(self, **{"graph": self.__dict__["_graph"], **changes})
 

@@ -189,8 +189,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     if ckw:  # in the caller's units (solve_internal scales itself), the obstacles where the caller put them
         return _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check,
                                target_residual if target_check is not None else None, t0)
-    fopts = dict(muscle_model=result.muscle_model, stiffness=result.stiffness, anchor_radius=prob.anchor_radius,
-                 tol=tol)
+    fopts = {"muscle_model": result.muscle_model, "stiffness": result.stiffness,
+             "anchor_radius": prob.anchor_radius, "tol": tol}
     a_fwd = np.clip(a, 0.0, 0.999)
     guess = in_gauge_frame(mesh, x) if start == "design" else None  # None: an inverted state, from rest
     if guess is not None:
