@@ -619,6 +619,29 @@ def test_design_solvers_are_evicted_safely():
     assert again.build_time > 0  # rebuilt: the first solver was evicted
 
 
+def test_the_numeric_jacobian_kept_from_the_last_call_is_that_of_the_point_asked():
+    """The numeric NLP keeps its last Jacobian (IPOPT asks twice at its start): a call at another point, or
+    with other parameters, is evaluated anew, and a call at the same point returns the same values."""
+    import casadi as ca
+
+    from mdsr_opt.synthesis.nlp_numeric import numeric_nlp
+
+    D, prob, z, par, _lam = _nlp_point("cable", CASES[0][1])
+    _nlp, fn, _keep = numeric_nlp(prob, "exact")
+    snlp, _extra = D._symbolic_nlp(prob, "exact")
+    ref = ca.Function("J", [snlp["x"], snlp["p"]], [ca.jacobian(snlp["g"], snlp["x"])])
+
+    def jac(zz, pp):
+        return np.array(ca.DM(fn["jac_g"](zz, pp)[1]))
+
+    z2 = z + 1e-3 * np.cos(np.arange(len(z)))
+    par2 = par.copy()
+    par2[-1] *= 1.5  # the constraints' scale
+    for zz, pp in ((z, par), (z, par), (z2, par), (z2, par2), (z, par)):
+        J_ref = np.array(ca.DM(ref(zz, pp)))
+        assert np.abs(jac(zz, pp) - J_ref).max() <= 1e-13 * np.abs(J_ref).max()
+
+
 def test_numeric_nlp_refuses_a_symbolic_energy():
     from mdsr_opt.mechanics.model import get_model
     from mdsr_opt.synthesis.nlp_numeric import numeric_nlp, supports
