@@ -268,26 +268,6 @@ def test_a_bad_max_difference_is_bad_input(tmp_path, capsys, value):
     assert not (tmp_path / "o").exists()
 
 
-def test_a_slack_rope_is_dropped_and_the_design_stays_the_same():
-    """A rope slack at the designed state carries no tension: dropping it leaves the equilibrium unchanged
-    (its constraint is inactive), and the result says it was dropped as slack; springs are never dropped so."""
-    from mdsr_opt.synthesis.acceptance import design_active
-
-    mesh, mat = Mesh.rectangle(4, 1, 16, 4), NeoHookean(1.0, 0.3)
-    pull = Muscle([17 + i for i in range(2, 15)])           # the rope that made the target
-    along = Muscle([34 + i for i in range(2, 15)])          # a parallel rope on the mid line: shortened, no pull
-    target = solve_internal(mesh, mat, [pull], [0.15]).x
-    both = design_contractions(mesh, mat, [pull, along], target)
-    assert both.success and both.slack.tolist() == [False, True] and both.contractions[1] > 1e-2
-    res, kept, dropped = design_active(mesh, mat, [pull, along], target)
-    assert res.success and kept == (pull,) and len(dropped) == 1
-    assert dropped[0].nodes == tuple(along.nodes) and "slack" in dropped[0].reason
-    assert res.contractions[0] == pytest.approx(both.contractions[0], abs=1e-6)
-    assert abs(res.difference - both.difference) < 1e-8 * mesh.size
-    _, kept_all, none = design_active(mesh, mat, [pull, along], target, drop_slack=False)
-    assert len(kept_all) == 2 and none == ()
-
-
 def test_only_the_design_kept_is_verified_and_a_failed_redesign_returns_the_verified_first(monkeypatch):
     """design_active leaves out the verification (a forward solve from rest) of a design it makes again
     without its idle muscles; the design it returns is verified, also when the design without them fails."""
@@ -322,3 +302,23 @@ def test_only_the_design_kept_is_verified_and_a_failed_redesign_returns_the_veri
     assert calls[-1] == 2 and "kept: the design without them failed" in res2.status
     with pytest.raises(TypeError, match="skip_verification must be a function"):
         design_contractions(mesh, MAT, [lower], target, skip_verification="yes")
+
+
+def test_a_slack_rope_is_dropped_and_the_design_stays_the_same():
+    """A rope slack at the designed state carries no tension: dropping it leaves the equilibrium unchanged
+    (its constraint is inactive), and the result says it was dropped as slack; springs are never dropped so."""
+    from mdsr_opt.synthesis.acceptance import design_active
+
+    mesh, mat = Mesh.rectangle(4, 1, 16, 4), NeoHookean(1.0, 0.3)
+    pull = Muscle([17 + i for i in range(2, 15)])           # the rope that made the target
+    along = Muscle([34 + i for i in range(2, 15)])          # a parallel rope on the mid line: shortened, no pull
+    target = solve_internal(mesh, mat, [pull], [0.15]).x
+    both = design_contractions(mesh, mat, [pull, along], target)
+    assert both.success and both.slack.tolist() == [False, True] and both.contractions[1] > 1e-2
+    res, kept, dropped = design_active(mesh, mat, [pull, along], target)
+    assert res.success and kept == (pull,) and len(dropped) == 1
+    assert dropped[0].nodes == tuple(along.nodes) and "slack" in dropped[0].reason
+    assert res.contractions[0] == pytest.approx(both.contractions[0], abs=1e-6)
+    assert abs(res.difference - both.difference) < 1e-8 * mesh.size
+    _, kept_all, none = design_active(mesh, mat, [pull, along], target, drop_slack=False)
+    assert len(kept_all) == 2 and none == ()
