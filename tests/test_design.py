@@ -286,6 +286,31 @@ def test_verification_rejects_wrong_states(mesh, muscles, target):
     assert "not a minimum" in v.message
 
 
+def test_the_verification_from_rest_takes_the_predictor_when_the_rest_shape_fails(monkeypatch, mesh, muscles,
+                                                                                 target):
+    from mdsr_opt.synthesis import verify
+
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    starts, real = [], verify.solve_internal
+
+    def rest_fails(*a, **kw):  # as if the solve from the rest shape had failed
+        starts.append(kw["initial_guess"])
+        out = real(*a, **kw)
+        if kw["initial_guess"] == "rest":
+            out.success, out.status = False, "load stepping stalled (test)"
+        return out
+
+    monkeypatch.setattr(verify, "solve_internal", rest_fails)
+    v = verify_design(mesh, MAT, muscles, res, target)
+    assert starts == ["rest", "predictor"] and v.passed and v.forward_start == "rest, predictor"
+    alone = real(mesh, MAT, muscles, res.contractions, muscle_model=res.muscle_model, tol=1e-10,
+                 anchor_radius=res.anchor_radius)
+    assert v.forward_iterations > alone.iterations  # both solves counted
+    saved = DesignResult.from_dict(json.loads(json.dumps(dict(res.to_dict(), verification=v.to_dict()))))
+    assert saved.verification.forward_start == "rest, predictor"
+    assert saved.verification.forward_iterations == v.forward_iterations
+
+
 def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target):
     from mdsr_opt.mechanics.equilibrium import gauge_coordinates
     from mdsr_opt.mechanics.equilibrium import in_gauge_frame
@@ -296,6 +321,8 @@ def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target)
     assert v_design.passed and v_rest.passed
     assert v_design.gap < 1e-9 * mesh.size and v_rest.gap < 1e-7 * mesh.size
     assert v_design.forward_difference == pytest.approx(v_rest.forward_difference, abs=1e-8 * mesh.size)
+    assert (v_design.forward_start, v_rest.forward_start) == ("design", "rest")
+    assert 0 <= v_design.forward_iterations < v_rest.forward_iterations
     with pytest.raises(ValueError, match="start must be"):
         verify_design(mesh, MAT, muscles, res, target, start="target")
     # the design's state in any pose is moved rigidly into the solver's gauge frame
@@ -592,6 +619,29 @@ def test_design_solvers_are_evicted_safely():
     assert again.build_time > 0  # rebuilt: the first solver was evicted
 
 
+def test_the_numeric_jacobian_kept_from_the_last_call_is_that_of_the_point_asked():
+    """The numeric NLP keeps its last Jacobian (IPOPT asks twice at its start): a call at another point, or
+    with other parameters, is evaluated anew, and a call at the same point returns the same values."""
+    import casadi as ca
+
+    from mdsr_opt.synthesis.nlp_numeric import numeric_nlp
+
+    D, prob, z, par, _lam = _nlp_point("cable", CASES[0][1])
+    _nlp, fn, _keep = numeric_nlp(prob, "exact")
+    snlp, _extra = D._symbolic_nlp(prob, "exact")
+    ref = ca.Function("J", [snlp["x"], snlp["p"]], [ca.jacobian(snlp["g"], snlp["x"])])
+
+    def jac(zz, pp):
+        return np.array(ca.DM(fn["jac_g"](zz, pp)[1]))
+
+    z2 = z + 1e-3 * np.cos(np.arange(len(z)))
+    par2 = par.copy()
+    par2[-1] *= 1.5  # the constraints' scale
+    for zz, pp in ((z, par), (z, par), (z2, par), (z2, par2), (z, par)):
+        J_ref = np.array(ca.DM(ref(zz, pp)))
+        assert np.abs(jac(zz, pp) - J_ref).max() <= 1e-13 * np.abs(J_ref).max()
+
+
 def test_numeric_nlp_refuses_a_symbolic_energy():
     from mdsr_opt.mechanics.model import get_model
     from mdsr_opt.synthesis.nlp_numeric import numeric_nlp, supports
@@ -785,8 +835,26 @@ def test_a_design_warm_started_from_the_target_that_fails_is_repeated_from_rest(
 
 def test_warm_start_takes_numpy_booleans_and_refuses_numbers(mesh, muscles, target):
     assert design_contractions(mesh, MAT, muscles, target, warm_start=np.True_, verify=False).success
-    with pytest.raises(ValueError, match="warm_start must be True, False, 'target' or 'rest', got 1"):
+    with pytest.raises(ValueError, match="warm_start must be True, False, 'target', 'rest' or an \\(n, 2\\) array of "
+                                         "node positions, got 1"):
         design_contractions(mesh, MAT, muscles, target, warm_start=1)
+
+
+def test_a_design_warm_started_from_a_given_shape_is_the_design_from_the_target(mesh, muscles, target):
+    target = target * [1.05, 0.97]  # out of reach: the warm start's solve from the target has work to do
+    ref = design_contractions(mesh, MAT, muscles, target)
+    # an earlier design's state (in another pose: only the shape counts) starts the forward solve there
+    moved = ref.x @ np.array([[0.0, -1.0], [1.0, 0.0]]).T + [3.0, -2.0]
+    again = design_contractions(mesh, MAT, muscles, target, warm_start=moved, initial_guess=ref.contractions)
+    assert again.success and again.verification.passed
+    np.testing.assert_allclose(again.contractions, ref.contractions, atol=1e-7)
+    assert abs(again.difference - ref.difference) < 1e-9 * mesh.size and ref.difference > 1e-3 * mesh.size
+    # started at the equilibrium itself: the warm start's solve has (next to) nothing to do
+    assert again.inner_iterations <= 2 < ref.inner_iterations
+    with pytest.raises(ValueError, match=rf"warm_start must have shape \({mesh.n_nodes}, 2\)"):
+        design_contractions(mesh, MAT, muscles, target, warm_start=ref.x[:-1])
+    with pytest.raises(ValueError, match="warm_start"):
+        design_contractions(mesh, MAT, muscles, target, warm_start=np.full_like(ref.x, np.nan))
 
 
 def test_the_verification_takes_the_forward_check_only_for_the_same_state(monkeypatch, mesh, muscles, target):

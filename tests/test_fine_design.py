@@ -48,6 +48,10 @@ def _check(mesh, out):
     d = out.design
     assert out.success, d.status
     assert d.verification.passed
+    # verified by a forward solve from rest (the rest shape, or the predictor when that fails), not from the
+    # design's own state, and its iterations reported
+    assert d.verification.forward_start in ("rest", "rest, predictor") and d.verification.forward_iterations > 0
+    assert "not verified" not in d.status
     assert d.difference / mesh.size < 0.02
     # the target is not reachable: the difference is well above the solver's tolerance
     assert d.difference / mesh.size > 1e-3

@@ -449,6 +449,22 @@ def test_stats_agree_with_the_muscles(body):
     assert res == res and res != again and hash(res) != hash(again)
 
 
+def test_the_graph_is_built_on_first_access_and_kept(grid_strip):
+    t = grid_strip.points * [0.8, 1.0]
+    res = route_muscles(grid_strip, t)
+    G = res.graph
+    assert G is res.graph and G.number_of_edges() == len(grid_strip.edges)
+    ref = contraction_graph(grid_strip, t)
+    assert all(G.edges[e]["weight"] == pytest.approx(ref.edges[e]["weight"], abs=1e-15) for e in ref.edges)
+    calls = []
+    lazy = res.replaced(graph=lambda: calls.append(1) or ref, notes=("x",))
+    assert calls == [] and lazy.notes == ("x",) and lazy.muscles == res.muscles
+    kept = lazy.replaced(notes=("y",))  # a copy keeps the builder unbuilt
+    assert calls == [] and kept.graph is ref and kept.graph is ref and calls == [1]
+    with pytest.raises(TypeError, match="graph must be a networkx.Graph or a function"):
+        res.replaced(graph=3)
+
+
 def X_first_is_smaller(mesh, m) -> bool:
     return tuple(mesh.points[m.nodes[0]]) < tuple(mesh.points[m.nodes[-1]])
 

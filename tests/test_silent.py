@@ -268,6 +268,42 @@ def test_a_bad_max_difference_is_bad_input(tmp_path, capsys, value):
     assert not (tmp_path / "o").exists()
 
 
+def test_only_the_design_kept_is_verified_and_a_failed_redesign_returns_the_verified_first(monkeypatch):
+    """design_active leaves out the verification (a forward solve from rest) of a design it makes again
+    without its idle muscles; the design it returns is verified, also when the design without them fails."""
+    from mdsr_opt.synthesis import contractions
+
+    mesh = strip()
+    lower, upper = lower_upper(mesh)
+    target = solve_internal(mesh, MAT, [lower], [0.15]).x
+    calls, verify = [], contractions.verify_design
+
+    def counted(*args, **kw):
+        calls.append(len(args[2]))  # the muscles verified
+        return verify(*args, **kw)
+
+    monkeypatch.setattr(contractions, "verify_design", counted)
+    res, kept, _dropped = design_active(mesh, MAT, [lower, upper], target)
+    assert calls == [1] and res.success and res.verification.passed and [m.name for m in kept] == ["lower"]
+    assert "not verified" not in res.status and "dropped" in res.status
+    # the design without the idle muscle fails (as if it had): the design with it, verified, is returned
+    calls.clear()
+    real = contractions.design_contractions
+
+    def one_muscle_fails(mesh_, mat_, mus_, *a, **kw):
+        out = real(mesh_, mat_, mus_, *a, **kw)
+        if len(mus_) == 1:
+            out.success, out.status = False, out.status + "; failed (test)"
+        return out
+
+    monkeypatch.setattr(contractions, "design_contractions", one_muscle_fails)
+    res2, kept2, dropped2 = design_active(mesh, MAT, [lower, upper], target)
+    assert len(kept2) == 2 and dropped2 == () and res2.success and res2.verification.passed
+    assert calls[-1] == 2 and "kept: the design without them failed" in res2.status
+    with pytest.raises(TypeError, match="skip_verification must be a function"):
+        design_contractions(mesh, MAT, [lower], target, skip_verification="yes")
+
+
 def test_a_slack_rope_is_dropped_and_the_design_stays_the_same():
     """A rope slack at the designed state carries no tension: dropping it leaves the equilibrium unchanged
     (its constraint is inactive), and the result says it was dropped as slack; springs are never dropped so."""

@@ -142,7 +142,8 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                   drop_slack: bool | None = None, **design_options):
     """:func:`~mdsr_opt.synthesis.contractions.design_contractions`, then every idle muscle (designed
     contraction below ``idle_contraction``, or a rope slack at the designed state) dropped from the layout
-    and the design made again on the others (started from their contractions), until no muscle is idle.
+    and the design made again on the others (started from their contractions and, unless ``warm_start`` says
+    otherwise, from the state just designed), until no muscle is idle.
 
     A slack rope carries no tension at the designed state: its length constraint is inactive there, so the
     layout without it has the same equilibrium, and a workshop would build and drive it for nothing.
@@ -183,12 +184,20 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     where = np.arange(len(mus))
     opts = dict(design_options)
     dropped: list[DroppedMuscle] = []
-    res, caught = _designed(design_contractions, mesh, material, mus, target, opts)
-    while res.success and (thr > 0 or drop_slack):
+    dropping = thr > 0 or drop_slack
+    deferred = dict(opts)
+    if dropping and opts.get("verify", True):
+        # a design with idle muscles (some, not all) is made again without them: its own verification, a
+        # forward solve from rest, is left out; the design kept is verified as always
+        def defer(r):
+            idle = _idle(r, thr, drop_slack)
+            return "idle muscle(s) to drop first" if idle.any() and not idle.all() else ""
+        deferred["skip_verification"] = defer
+    res, caught = _designed(design_contractions, mesh, material, mus, target, deferred)
+    asked = opts  # the options of the design res (without the deferral)
+    while res.success and dropping:
         a = np.asarray(res.contractions, dtype=float)
-        slack = np.asarray(getattr(res, "slack", ()), dtype=bool).reshape(-1)
-        slack = slack if drop_slack and slack.shape == a.shape else np.zeros(a.shape, dtype=bool)
-        idle = (np.isfinite(a) & (a < thr)) | slack
+        idle = _idle(res, thr, drop_slack)
         if not idle.any():
             break
         if idle.all():
@@ -202,19 +211,36 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
                               f"idle_contraction {thr:g}" if a[i] < thr else f"idle: slack at the designed "
                               f"state (contraction {a[i]:.3g}, no tension): it does not pull")
                 for i, mu in enumerate(mus) if idle[i]]
+        more = {"initial_guess": a[keep]}
+        if opts.get("warm_start", True) in (True, "target") and np.isfinite(res.x).all():
+            # the state just designed is near an equilibrium without the idle muscles (exactly one when
+            # they were slack): the warm start's forward solve starts there rather than from the target
+            more["warm_start"] = res.x
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
-                                        dict(opts, initial_guess=a[keep]))
+                                        dict(deferred, **more))
         names = ", ".join(g.name for g in gone)
         if not again.success:
-            res.status += (f"; idle muscle(s) {names} kept: the design without them failed "
-                           f"({again.status})")
+            why = again.status
+            if res.verification is None and asked.get("verify", True):
+                # the design with them was left unverified: made again, verified, to be returned
+                res, caught = _designed(design_contractions, mesh, material, mus, target, asked)
+            res.status += f"; idle muscle(s) {names} kept: the design without them failed ({why})"
             break
         dropped += gone
         again.status += f"; idle muscle(s) {names} dropped and the design made again"
         res, caught, mus, where = again, caught_again, tuple(mus[i] for i in keep), where[keep]
+        asked = dict(opts, **more)
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return res, mus, tuple(dropped)
+
+
+def _idle(res, thr: float, drop_slack: bool) -> np.ndarray:
+    """The idle muscles of the design ``res``: contraction below ``thr``, or (with ``drop_slack``) rope slack."""
+    a = np.asarray(res.contractions, dtype=float)
+    slack = np.asarray(getattr(res, "slack", ()), dtype=bool).reshape(-1)
+    slack = slack if drop_slack and slack.shape == a.shape else np.zeros(a.shape, dtype=bool)
+    return (np.isfinite(a) & (a < thr)) | slack
 
 
 def _designed(design_contractions, mesh, material, mus, target, opts):

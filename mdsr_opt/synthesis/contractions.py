@@ -13,7 +13,7 @@ from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_float, positive_int
+from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.blas import one_blas_thread
@@ -41,8 +41,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         muscle_model: str = "cable", stiffness: float = 10.0, anchor_radius: float | None = None,
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
-                        warm_start: bool | str = True, outer: str = "nelder-mead", options: dict | None = None,
-                        inner_tol: float = 1e-10, verify: bool = True, gap_rtol: float = 1e-5,
+                        warm_start: bool | str | ArrayLike = True, outer: str = "nelder-mead", options: dict | None = None,
+                        inner_tol: float = 1e-10, verify: bool = True, skip_verification=None,
+                        gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
                         contact_gap: float | None = None) -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
@@ -85,12 +86,13 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     scaling : {"auto", "size"}
         Flattened only: objective over ``sum(e) h^2`` and constraints over ``E t h`` (``h`` the mean edge
         length), or the objective normalised by the body's size instead (for comparison studies).
-    warm_start : {True, "target", "rest", False}
+    warm_start : {True, "target", "rest", False} or (n, 2) array
         Flattened only: start the NLP from an equilibrium at the initial contractions, found by a forward
         solve started from the target shape (``True`` or ``"target"``: any equilibrium, not checked for
         stability; from rest, stable, when that solve fails; and the whole design repeated from rest when
-        its verification fails) or from rest (``"rest"``: the stable equilibrium load stepping reaches);
-        ``False`` starts from the rest shape itself. The verification always solves from rest. Started from
+        its verification fails), from a shape given as an array (in any pose; handled as the target is: e.g.
+        an earlier design's state, near an equilibrium at these contractions) or from rest (``"rest"``: the
+        stable equilibrium load stepping reaches); ``False`` starts from the rest shape itself. The verification always solves from rest. Started from
         a reachable target the forward solve takes one or two iterations instead of two load steps.
     derivatives : {"numeric", "assembled", "casadi"}
         Flattened only, how IPOPT gets the NLP's exact derivatives: ``"numeric"``, numpy callbacks with
@@ -109,6 +111,12 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         nothing checks that the design's state is stable or reached from rest: the warm start from the
         target is not checked for stability either). A flattened design that IPOPT ends at its acceptable
         tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
+    skip_verification : callable, optional
+        For a caller that discards some designs before using them (:func:`~mdsr_opt.synthesis.acceptance.
+        design_active`, which makes a layout with idle muscles again without them): called with the design
+        found, before its verification; a non-empty string it returns is why the verification is left out
+        (the result has no ``verification``, its ``status`` says so, and it must not be used as a verified
+        design).
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
     contact, obstacles, contact_gap :
@@ -157,15 +165,23 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
     if isinstance(warm_start, np.bool_):
         warm_start = bool(warm_start)
-    if not (isinstance(warm_start, bool) or (isinstance(warm_start, str) and warm_start in ("target", "rest"))):
-        raise ValueError(f"warm_start must be True, False, 'target' or 'rest', got {warm_start!r}")
+    shaped = isinstance(warm_start, (np.ndarray, list, tuple))  # a start shape: checked with the mesh below
+    if not shaped and not (isinstance(warm_start, bool) or
+                           (isinstance(warm_start, str) and warm_start in ("target", "rest"))):
+        raise ValueError(f"warm_start must be True, False, 'target', 'rest' or an (n, 2) array of node positions, "
+                         f"got {warm_start!r}")
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
+    if skip_verification is not None and not callable(skip_verification):
+        raise TypeError(f"skip_verification must be a function of the design or None, got "
+                        f"{type(skip_verification).__name__}")
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
+    if shaped:
+        warm_start = as_float_array(warm_start, "warm_start", shape=(mesh.n_nodes, 2))
     m = len(mus)
     if tol is None:
         tol = {"flattened": 1e-10, "nested": 1e-10, "derivative-free": 1e-7}[method]
@@ -186,17 +202,20 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
     a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
+    if isinstance(warm, np.ndarray):
+        warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units, ckw)
+            verify, gap_rtol, units, ckw, skip_verification)
     res, fwd, rejected = _design(*args, warm=warm)
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
         # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
         again, _, _ = _design(*args, warm="rest")
+        where = "given shape" if isinstance(warm, np.ndarray) else "target"
         first = res
         if again.success:
             res = again
-            res.status += f" (warm-started from rest after the design warm-started from the target failed " \
+            res.status += f" (warm-started from rest after the design warm-started from the {where} failed " \
                           f"its verification: {first.verification.message})"
         else:
             res.status += f" (warm-started from rest, the design failed too: {again.status})"
@@ -225,7 +244,7 @@ def warn_saturated(res: DesignResult, muscles) -> None:
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
-            verify, gap_rtol, units, ckw, warm) -> tuple[DesignResult, ForwardSolver, bool]:
+            verify, gap_rtol, units, ckw, skip, warm) -> tuple[DesignResult, ForwardSolver, bool]:
     """One design by ``method`` from ``a0`` (``warm``: the flattened NLP's warm start) of the unit problem
     ``prob``, checked, mapped to the caller's ``units`` and verified there; returns the result, the forward
     solver it used and whether the verification rejected a design the optimiser had found."""
@@ -307,6 +326,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     if res.success and not verify and status.startswith(ACCEPTABLE):
         res.success = False
         res.status += "; not verified (verify=False), so IPOPT's acceptable exit is not a success"
+    why = str(skip(res) or "") if verify and skip is not None and res.success else ""
+    if why:  # the caller discards this design (and verifies the one it keeps)
+        res.status += f"; not verified: {why}"
+        return res, fwd, False
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL), **ckw)

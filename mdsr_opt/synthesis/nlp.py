@@ -490,6 +490,11 @@ def _gauge_residual(prob: DesignProblem, x, a, kappa, sc) -> float:
 def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
                    derivatives="numeric"):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
+    start = None  # the warm start's forward solve starts from this shape (else from rest)
+    if isinstance(warm_start, np.ndarray):  # a given shape: handled as the target is
+        start, warm_start = warm_start, "target"
+    elif warm_start == "target":
+        start = prob.y
     ipopt_opts = {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": max_iter, "mu_strategy": "monotone",
                   "mumps_pivot_order": MUMPS_ORDERING, "bound_relax_factor": BOUND_RELAX}
     if warm_start:
@@ -501,7 +506,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
     if warm_start:
         # from the target any equilibrium will do (no stability check), since the design
         # is verified from rest and repeated from rest if that fails; from rest, the stable one
-        x0, ok, status = fwd.solve(a0, start=prob.y if warm_start == "target" else None)
+        x0, ok, status = fwd.solve(a0, start=start)
         if not ok:
             return None, f"warm start failed: {status}", 0, bt
     else:

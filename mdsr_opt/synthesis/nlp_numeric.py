@@ -200,6 +200,17 @@ class _NumericNLP:
         return out
 
     def jacobian(self, z, par) -> np.ndarray:
+        """The constraints' Jacobian values at ``(z, par)``; the last one is kept (IPOPT asks twice at its
+        starting point, and each such call assembles the energy's Hessian)."""
+        key = (np.asarray(z, dtype=float).tobytes(), np.asarray(par, dtype=float).tobytes())
+        last = self.__dict__.get("_last_jacobian")
+        if last is not None and last[0] == key:
+            return last[1]
+        data = self._jacobian(z, par)
+        self.__dict__["_last_jacobian"] = (key, data)
+        return data
+
+    def _jacobian(self, z, par) -> np.ndarray:
         x, a, kap, _y, _w, p0, _so, sc = self._split(z, par)
         parts = [self.model.hessian_data(x, self._params(p0, a)) * sc]
         xl = x[self.dofs]

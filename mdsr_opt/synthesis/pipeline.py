@@ -231,7 +231,7 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
     if not isinstance(data, dict):
         raise TypeError(f"routing is a {type(data).__name__}, not an object")
     return RoutingResult(muscles=tuple(muscles), stats=tuple(MuscleStats(**st) for st in data["stats"]),
-                         graph=contraction_graph(mesh, target),
+                         graph=lambda: contraction_graph(mesh, target),
                          seeds=tuple(tuple(int(i) for i in sd) for sd in data.get("seeds", ())),
                          n_units=int(data.get("n_units", 0)), params=dict(data.get("params", {})),
                          fabrication=None if data.get("fabrication") is None else Fabrication(**data["fabrication"]),

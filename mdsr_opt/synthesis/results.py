@@ -72,6 +72,11 @@ class Verification:
         With contact, the forward re-solve's contact report (``pairs`` with their normal forces,
         ``node_forces``, ``obstacle_forces``, ``total_force``, ``gap``; see :func:`~mdsr_opt.solve_internal`);
         None without.
+    forward_iterations : int or None
+        The forward re-solve's solver iterations (all its solves; None: a result saved before they were kept).
+    forward_start : str or None
+        Where the forward re-solve started: ``"rest"`` (the rest shape), ``"rest, predictor"`` (from rest with
+        the load-stepping predictor, after the solve from the rest shape failed) or ``"design"``.
     """
 
     passed: bool
@@ -87,6 +92,8 @@ class Verification:
     time: float = 0.0
     target_stable: bool | None = None
     contact: dict | None = None
+    forward_iterations: int | None = None
+    forward_start: str | None = None
 
     def __repr__(self) -> str:
         return compact_repr(self, ("passed", "gap", "gap_tol", "residual", "positive_definite", "message"))

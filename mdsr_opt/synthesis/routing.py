@@ -381,7 +381,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
     x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
-    graph = _graph(mesh, x, l0, l, w)
+    def graph():  # built when a caller asks for result.graph (the search needs no networkx graph)
+        return _graph(mesh, x, l0, l, w)
 
     def empty(msg: str) -> RoutingResult:
         warnings.warn(msg, RoutingWarning, stacklevel=3)
@@ -537,13 +538,13 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
                     f"{f.min_fixture_radius + f.wall:.4g} inside the body and the smallest fixtures, radius "
                     f"{f.min_fixture_radius:.4g}: "
                     f"{len(deep)} kept")
-            rr, caught = replace(deep, notes=(note,) + deep.notes), caught_deep
+            rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
         if len(again):
             why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
             note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
-            rr, caught = replace(again, notes=(note,) + again.notes), caught2
+            rr, caught = again.replaced(notes=(note,) + again.notes), caught2
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return rr

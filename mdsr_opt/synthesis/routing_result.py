@@ -5,7 +5,7 @@ whole answer (:class:`RoutingResult`)."""
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import networkx as nx
 
@@ -99,7 +99,9 @@ class RoutingResult:
     stats : tuple of MuscleStats
         One entry per muscle, same order.
     graph : networkx.Graph
-        The contraction graph (see :func:`contraction_graph`).
+        The contraction graph (see :func:`contraction_graph`). The routing passes a function that builds it,
+        called on first access (a search on 16k nodes does not need the networkx graph: it took a third of a
+        second to build); a graph given is kept as it is.
     seeds : tuple of (int, int)
         The seed edges, most contracted first.
     n_units : int
@@ -172,3 +174,25 @@ class RoutingResult:
                         f"{s.contraction:>7.3f} {s.mean_weight:>8.4f} {s.nonuniformity:>9.2e} "
                         f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
         return "\n".join(rows)
+
+    def replaced(self, **changes) -> RoutingResult:
+        """A copy with ``changes`` (as :func:`dataclasses.replace`), its graph still unbuilt if it was."""
+        return replace(self, **{"graph": self.__dict__["_graph"], **changes})
+
+
+def _get_graph(self) -> nx.Graph:
+    g = self.__dict__["_graph"]
+    if not isinstance(g, nx.Graph):  # a builder: the graph is made on first access
+        g = g()
+        self.__dict__["_graph"] = g
+    return g
+
+
+def _set_graph(self, value) -> None:
+    if not (isinstance(value, nx.Graph) or callable(value)):
+        raise TypeError(f"graph must be a networkx.Graph or a function building one, got {type(value).__name__}")
+    self.__dict__["_graph"] = value
+
+
+# the field ``graph`` set by the dataclass's __init__ through this property: a graph, or a function building it
+RoutingResult.graph = property(_get_graph, _set_graph, doc="The contraction graph (built on first access).")

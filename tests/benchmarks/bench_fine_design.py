@@ -8,9 +8,13 @@ project's Newton backend and by ``solve_external``'s default (IPOPT); the ratio 
 the faster of the two, in wall time and in process CPU time (single-threaded BLAS: on a shared machine the
 CPU time is nearer the quiet wall time).
 
+The budget (issue 32, item 4): the pipeline within 3x the reference solve. The last lines give the CPU ratio
+per size against it, and ``--plot FILE`` draws them.
+
 Run:  python tests/benchmarks/bench_fine_design.py                     # 2.4k, 8k, 16k nodes
       python tests/benchmarks/bench_fine_design.py --ny 24 32 36 44 64 70
       python tests/benchmarks/bench_fine_design.py --ny 32 --ipopt-print 5   # the design NLP's log
+      python tests/benchmarks/bench_fine_design.py --plot ratios.png         # the ratios per size, drawn
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external
 from mdsr_opt.synthesis.pipeline import design_pipeline
 
 MAT = NeoHookean(1.0, 0.3)
+#: the issue's budget: the whole pipeline within this many times the reference solve of the target
+BUDGET = 3.0
 LENGTH, WIDTH = 4.0, 1.0
 ANGLE, SHIFT = 0.6, (-0.6, 1.0)
 
@@ -85,18 +91,51 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ny", type=int, nargs="+", default=[24, 44, 64], help="cells across (nodes ~ 4 ny^2)")
     ap.add_argument("--ipopt-print", type=int, default=0, help="IPOPT print level of the design NLP (0: silent)")
+    ap.add_argument("--plot", default=None, help="draw the ratio per size into this image file")
     args = ap.parse_args(argv)
+    rows = []
     head = f"{'nodes':>6} {'design s':>9} {'newton s':>9} {'ipopt s':>8} {'ratio':>6} {'cpu ratio':>9} " \
            f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
     print(head, flush=True)
     for ny in args.ny:
         r = run(ny, args.ipopt_print)
+        rows.append(r)
         print(f"{r['nodes']:6d} {r['design_s']:9.2f} {r['newton_s']:9.2f} {r['ipopt_s']:8.2f} {r['ratio']:6.2f} "
               f"{r['cpu_ratio']:9.2f} {r['diff_rel']:9.4f} {str(r['success']):>5} {r['iters']:5d}  {r['muscles']} {r['status']}",
               flush=True)
         print(f"{'':6} stages {({k: round(v, 2) for k, v in r['times'].items()})}, verified {r['verified']}; "
               f"CPU s: design {r['design_cpu']:.2f}, newton {r['newton_cpu']:.2f}, ipopt {r['ipopt_cpu']:.2f}",
               flush=True)
+    print(f"\nCPU ratio per size (pipeline over the faster reference solve; budget {BUDGET:g}x):")
+    for r in rows:
+        verdict = "within" if r["cpu_ratio"] <= BUDGET else "over"
+        print(f"  {r['nodes']:6d} nodes: {r['cpu_ratio']:5.2f}x ({verdict} budget; wall {r['ratio']:.2f}x), "
+              f"difference {100 * r['diff_rel']:.2f} % of the size, success {r['success']}")
+    if args.plot:
+        plot_ratios(rows, args.plot)
+
+
+def plot_ratios(rows: list, path: str) -> None:
+    """The CPU and wall ratios per size against the budget, as a bar chart written to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    nodes = [f"{r['nodes']}" for r in rows]
+    x = np.arange(len(rows))
+    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    ax.bar(x - 0.2, [r["cpu_ratio"] for r in rows], 0.4, label="CPU time")
+    ax.bar(x + 0.2, [r["ratio"] for r in rows], 0.4, label="wall time")
+    ax.axhline(BUDGET, color="k", ls="--", lw=1, label=f"budget {BUDGET:g}x")
+    ax.set_xticks(x, nodes)
+    ax.set_xlabel("nodes")
+    ax.set_ylabel("pipeline / reference solve")
+    ax.legend(frameon=False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
