@@ -129,7 +129,12 @@ class Router:
         out: dict[int, list[int]] = {}
         for j in order.tolist():
             out.setdefault(int(lab[E[idx[j], 0]]), []).append(int(idx[j]))
-        return list(out.values())  # dicts keep insertion order: the region of the strongest edge first
+        regions = list(out.values())  # dicts keep insertion order: the region of the strongest edge first
+        # the contraction a region holds, sum w * l0 over its strong edges, on a grid of 1e-6 of the largest
+        # (mirror regions' rest lengths differ by round-off; the stable sort keeps them in the order above)
+        hold = np.array([float(np.dot(self.wq[r], self.l0[r])) for r in regions])
+        hold = np.rint(hold / (1e-6 * hold.max())).astype(np.int64)
+        return [regions[i] for i in np.argsort(-hold, kind="stable").tolist()]
 
     def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
         """First units, region by region: the region's ``n_seeds`` most contracted edges are its seeds; each
