@@ -19,10 +19,10 @@ their node chains.
 The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no geometry); they
 are not the paper's meshes. A face is asked for at least ``MIN_NODES`` = 900 nodes (845 after meshing, for
 ``coarse`` and ``medium`` alike), the mesh on which the one layout, its ropes 0.16 inside the outline and the
-holes, makes all four expressions: smile 80.1 %, frown 91.9 %, wink 72.9 %, pucker 75.8 % of their motion.
+holes, makes all four expressions: smile 80.1 %, frown 91.6 %, wink 72.9 %, pucker 74.8 % of their motion.
 The wink and the pucker hang on which ring ropes round the eye and the lips the routing lays, and that
-changes with the mesh: on 553 / 766 / 953 / 1235 / 2310 nodes the wink reaches 67 / 61 / 64 / 68 / 62 % and
-the pucker 62 / 65 / 52 / 63 / 74 % (smile 74-86 %, frown 91-94 %). A rope kept inside the body cannot draw
+changes with the mesh: on 553 / 766 / 953 / 1235 / 2310 nodes the wink reaches 67 / 68 / 64 / 68 / 62 % and
+the pucker 62 / 65 / 51 / 63 / 74 % (smile 74-85 %, frown 91-95 %). A rope kept inside the body cannot draw
 an eye's rim as far as a rope on the rim does: the strip of lid between the rope and the hole lags behind.
 
 How well a design makes its expression is :func:`motion_recovered` over :func:`moving_nodes`: the share of

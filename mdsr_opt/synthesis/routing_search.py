@@ -110,8 +110,10 @@ class Router:
         strongly contracted edges alone would not do: only the edges aligned with the compression contract
         much, so they form parallel chains that never touch, one "region" per chain.) Only ``eligible``
         edges mark nodes (see :func:`route_muscles`: compression, not the Poisson response to a stretch).
-        Regions are ordered by
-        their strongest edge, then by rest geometry.
+        Regions are ordered by the contraction they hold (``sum w * l0`` over their strong edges), then by
+        their strongest edge and rest geometry: a small island of strongly contracted edges (where a mesh's
+        first ring of nodes round a hole happens to clear the ropes' inset) would otherwise be seeded first
+        and, through the seed spacing, keep the ring just outside it from being seeded.
         """
         E = self.mesh.edges
         strong = self.feasible & (self.wq >= threshold_q) & eligible
