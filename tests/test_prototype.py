@@ -184,6 +184,9 @@ def test_a_short_rope_between_close_fixtures_does_not_fold_the_prototype():
     x = shot.x
     L = np.linalg.norm(x[short.nodes[1]] - x[short.nodes[0]])
     assert L == pytest.approx(0.4 * 0.25, rel=0.05)  # the rope's stroke reached (friction-free, straight)
+    # fixtures of radius 0.1 leave about 0.1 of the short rope between them: a stroke of 0.15 is refused, saying why
+    big = VirtualPrototype.for_scene(scene, seed=0, fixture_radius=0.1).internal(scene.muscles, [0.6, 0.6], photo=False)
+    assert not big.success and "rope short's stroke 0.15" in big.status and "at least its length between its fixtures" in big.status
 
 
 def test_bad_input_is_refused(one):

@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["RigidReduction", "fixture_groups", "fixture_mesh", "join_close", "rings_held"]
+__all__ = ["RigidReduction", "fixture_groups", "fixture_mesh", "free_lengths", "join_close", "rings_held"]
 
 
 def fixture_groups(mesh, muscles, radius: float, midnodes: np.ndarray | None = None) -> list[np.ndarray]:
@@ -112,6 +112,23 @@ def join_close(mesh, muscles, groups: Sequence[np.ndarray], radius: float) -> li
                 nodes += extra.tolist()
         out.append(np.asarray(nodes, dtype=np.int64))
     return out
+
+
+def free_lengths(points, chains, groups) -> np.ndarray:
+    """Per rope (a node chain of ``points``) the rest length of its segments that do not lie within one rigid
+    group of ``groups``: the rope between its fixtures, which its stroke shortens. A stroke as long as that
+    would bring the fixtures together (the silicone between them folds before)."""
+    X = np.asarray(points, dtype=float).reshape(-1, 2)
+    gid = np.full(len(X), -1, dtype=np.int64)
+    for k, g in enumerate(groups):
+        gid[np.asarray(g, dtype=np.int64)] = k
+    out = []
+    for c in chains:
+        c = np.asarray(c, dtype=np.int64)
+        seg = np.linalg.norm(np.diff(X[c], axis=0), axis=1)
+        a, b = gid[c[:-1]], gid[c[1:]]
+        out.append(float(seg[(a < 0) | (a != b)].sum()))
+    return np.asarray(out)
 
 
 def rings_held(mesh, muscles, radius: float) -> np.ndarray:

@@ -393,7 +393,7 @@ class VirtualPrototype:
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
         be smaller)."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
-        from ..mechanics.fixtures import fixture_groups, fixture_mesh
+        from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
         from ..mechanics.quadsolve import solve_quadratic_internal
 
         a = np.asarray(contractions, dtype=float).ravel()
@@ -421,6 +421,16 @@ class VirtualPrototype:
             groups = fixture_groups(mesh, fine, radius, mid)
             ropes = [CapstanRope(quadratic_chain(mesh, m.nodes, mid) if mid is not None else m.nodes,
                                  self.friction) for m in fine]
+            free = free_lengths(model.points, [r.chain for r in ropes], groups)
+            stroke = a * np.array([r.length(model.points) for r in ropes])
+            over = np.flatnonzero(stroke >= free)
+            if over.size:  # the fixtures would meet: no equilibrium to look for
+                i = int(over[0])
+                return self._keep(key, PrototypeShot(
+                    x=model.points.copy(), success=False, status=(
+                        f"not built: rope {fine[i].name or i}'s stroke {stroke[i]:.4g} is at least its length between "
+                        f"its fixtures (radius {radius:.4g}), {free[i]:.4g}: they would meet; a smaller contraction "
+                        "or smaller fixtures")))
             start = None
             if guess is not None:
                 from ..mechanics.quadratic import transfer_state
