@@ -243,8 +243,8 @@ def _shortest(mesh, a: int, b: int) -> list[int]:
     from scipy.sparse.csgraph import dijkstra
 
     E, L, n = mesh.edges, mesh.edge_lengths, mesh.n_nodes
-    G = sp.csr_matrix((np.concatenate([L, L]), (np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]]))),
-                      shape=(n, n))
+    rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+    G = sp.csr_matrix((np.concatenate([L, L]), (rows, cols)), shape=(n, n))
     _, pred = dijkstra(G, indices=a, return_predecessors=True)
     way = [b]
     while way[-1] != a:

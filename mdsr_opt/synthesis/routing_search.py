@@ -62,6 +62,8 @@ class Router:
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
         self.wql = self.wq.tolist()
+        self.floor_q = floor_q
+        self.eligible = None  # the compression-dominated edges, set by regions()
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
@@ -116,6 +118,7 @@ class Router:
         and, through the seed spacing, keep the ring just outside it from being seeded.
         """
         E = self.mesh.edges
+        self.eligible = eligible  # for the rings of seed_units
         strong = self.feasible & (self.wq >= threshold_q) & eligible
         idx = np.flatnonzero(strong)
         if len(idx) == 0:
@@ -139,7 +142,8 @@ class Router:
         return [regions[i] for i in np.argsort(-hold, kind="stable").tolist()]
 
     def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
-        """First units, region by region: the region's ``n_seeds`` most contracted edges are its seeds; each
+        """First units: the ring ropes round squeezed holes (:meth:`rings`), then region by region: the
+        region's ``n_seeds`` most contracted edges are its seeds; each
         connected component of them is cut into simple paths, straightest continuation first and every
         turn within the tortuosity limit; in symmetric mode each path comes with its mirror image. A path
         is started only from a seed edge farther than ``spacing`` (a length) from every node of the units
@@ -149,6 +153,11 @@ class Router:
         E = self.mesh.edges
         seeds = []
         taken = np.zeros(self.mesh.n_nodes, dtype=bool)  # nodes of the units made so far
+        for group in self.rings():  # a ring rope, or a mirror pair of them (no seed spacing: a ring is no row)
+            for p in group:
+                self._new_unit(p)
+            if len(group) == 2:
+                self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1
         for edges in regions:
             top = edges[:n_seeds]
             seeds += top
@@ -182,6 +191,38 @@ class Router:
                     if len(paths) == 2:
                         self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1
         return seeds
+
+    def rings(self) -> list[tuple[list[int], ...]]:
+        """The ring ropes round the holes the target squeezes (:mod:`~mdsr_opt.synthesis.routing_rings`): per
+        hole whose rim shortens all round and round which a ring of routable edges winds within the tortuosity
+        limit, whose every edge passes the nonuniformity gate against the ring's mean (``K_a * g_a <= 1``) and
+        whose contraction (``sum w * l0``) lies at least half on compression-dominated edges (those
+        :meth:`regions` was given: at the default ``compression_ratio`` a hole drawn shut, whose hoop
+        contraction comes with a radial stretch about as large, gets no ring), the ring opened into a rope
+        (in symmetric mode, a ring that is its own mirror image opened on the axis; a mirror pair of rings
+        is laid as a pair, the second the mirror image of the first)."""
+        from .routing_rings import hole_rings, open_ring
+
+        out, used = [], set()
+        for cycle in hole_rings(self.mesh, self.feasible, self.wq, self.turn_limit, self.floor_q):
+            if used & set(cycle) or (self.mp is not None and used & {self.mp[v] for v in cycle}):
+                continue
+            ks = [self.edge_id(a, b) for a, b in zip(cycle, cycle[1:] + cycle[:1])]
+            n, s1 = len(ks), sum(self.wql[k] for k in ks)
+            if any(self.K_a * mismatch(((n, s1), (1, self.wql[k]))) > 1.0 for k in ks):
+                continue
+            hold = self.wq[ks] * self.l0[ks]
+            if self.eligible is not None and hold[self.eligible[ks]].sum() < 0.5 * hold.sum():
+                continue  # mostly the sideways response of a radial stretch (see compression_ratio)
+            rope = open_ring(cycle, self.wq, self.edge_id, self.XL, self.mp)
+            if rope is None:
+                continue
+            used.update(cycle)
+            if self.mp is not None and {self.mp[v] for v in cycle} != set(cycle):
+                out.append((rope, [self.mp[v] for v in rope]))
+            else:
+                out.append((rope,))
+        return out
 
     def _extract_path(self, k0: int, pool: set[int]) -> list[int]:
         a, b = (int(v) for v in self.mesh.edges[k0])
