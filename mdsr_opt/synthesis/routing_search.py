@@ -64,6 +64,7 @@ class Router:
         self.wql = self.wq.tolist()
         self.floor_q = floor_q
         self.eligible = None  # the compression-dominated edges, set by regions()
+        self.ring_uids: set[int] = set()  # the ring ropes round holes (seed_units)
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
@@ -156,6 +157,7 @@ class Router:
         for group in self.rings():  # a ring rope, or a mirror pair of them (no seed spacing: a ring is no row)
             for p in group:
                 self._new_unit(p)
+                self.ring_uids.add(len(self.units) - 1)  # complete: it neither grows nor is spliced into
             if len(group) == 2:
                 self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1
         for edges in regions:
@@ -294,8 +296,9 @@ class Router:
         out = []
         owner, units, XL, wql = self.owner, self.units, self.XL, self.wql
         K_a, K_b, lim, mp = self.K_a, self.K_b, self.turn_limit, self.mp
+        rings = self.ring_uids
         for U in units:
-            if not U.alive:
+            if not U.alive or U.uid in rings:
                 continue
             for at_tail in (False, True):
                 if at_tail:
@@ -314,7 +317,7 @@ class Router:
                         a = mismatch(((U.n, U.s1), (1, q)))
                         g = K_a * a + K_b * t1
                         partner = None
-                    elif o != U.uid:
+                    elif o != U.uid and o not in rings:
                         V = units[o]
                         if u == V.path[0]:
                             nxt = V.path[1]
@@ -518,7 +521,7 @@ class Router:
                 P = (F.path[-2] if at_tail else F.path[1]) if len(F.path) > 1 else None
                 for u, k in sorted(self.adj[N], key=lambda uk: self._edge_key(uk[1])):
                     o = self.owner[u]
-                    if o == -1 or o == F.uid:
+                    if o == -1 or o == F.uid or o in self.ring_uids:
                         continue
                     V = self.units[o]
                     if u not in (V.path[0], V.path[-1]):
