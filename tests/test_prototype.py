@@ -256,28 +256,3 @@ def test_table_4_lays_the_designed_ropes_with_the_fixtures_they_were_fitted_to()
     table4 = run.report.photo["prototype"]["design"]
     assert table4["success"], table4["status"]
     assert 0 < table4["mean_px"] < 10
-
-
-def test_fixtures_of_two_ropes_closer_than_a_radius_are_cast_as_one_part():
-    """Two ropes ending a sliver apart: their fixtures (and the nodes between them) form one rigid part; the two
-    ends of one rope are never joined (it could not contract), however close."""
-    from mdsr_opt import Mesh
-    from mdsr_opt.mechanics.fixtures import fixture_groups
-    from mdsr_opt.scenes.select import edge_path
-
-    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)  # edges 0.125
-    P = mesh.points
-
-    def node(x, y):
-        return int(np.argmin(np.linalg.norm(P - (x, y), axis=1)))
-
-    left = edge_path(mesh, [(0.5, 0.5), (1.5, 0.5)])
-    right = edge_path(mesh, [(1.875, 0.5), (3.0, 0.5)])
-    groups = fixture_groups(mesh, [left, right], 0.13)  # the fixtures' nearest nodes 0.125 apart: < 0.13
-    joined = [g for g in groups if node(1.5, 0.5) in g]
-    assert len(groups) == 3 and len(joined) == 1 and node(1.875, 0.5) in joined[0]
-    assert node(1.75, 0.5) in joined[0]  # the node between the two fixtures belongs to the part
-    farther = edge_path(mesh, [(2.25, 0.5), (3.0, 0.5)])
-    assert len(fixture_groups(mesh, [left, farther], 0.13)) == 4  # 0.5 apart: four fixtures
-    short = edge_path(mesh, [(1.5, 0.5), (1.875, 0.5)])  # one rope's two ends: left apart
-    assert len(fixture_groups(mesh, [short], 0.13)) == 2

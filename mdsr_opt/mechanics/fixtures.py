@@ -2,7 +2,8 @@
 
 A rope ends on a bead, knot or plate of radius ``r_f`` cast into the body; the body nodes within ``r_f`` of the
 end node (the anchor patches of :func:`~mdsr_opt.mechanics.anchors.rigid_groups`, merged where two fixtures
-overlap) move with it as one rigid body. Instead of constraints with multipliers, each group is given three
+overlap) move with it as one rigid body. A mesh too coarse for the fixtures is refined round the rope ends (:func:`fixture_mesh`), so
+a fixture keeps its physical size, and :func:`free_lengths` gives each rope's length between its fixtures. Instead of constraints with multipliers, each group is given three
 coordinates -- its first node's position and an angle -- and every other member follows:
 ``x_k = x_r + R(phi) (X_k - X_r)``. Nodes outside every group keep their own two coordinates.
 
@@ -28,19 +29,16 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["RigidReduction", "fixture_groups", "fixture_mesh", "free_lengths", "join_close", "rings_held"]
+__all__ = ["RigidReduction", "fixture_groups", "fixture_mesh", "free_lengths", "rings_held"]
 
 
 def fixture_groups(mesh, muscles, radius: float, midnodes: np.ndarray | None = None) -> list[np.ndarray]:
     """The rigid fixture groups of ``muscles`` on ``mesh`` at fixture radius ``radius`` (length units):
-    :func:`~mdsr_opt.mechanics.anchors.rigid_groups` (each group lists an end node first), fixtures of
-    different ropes closer than ``radius`` rim to rim joined into one part (:func:`join_close`), each group
-    extended, when ``midnodes`` gives the midpoint node of every row of ``mesh.edges``, by the midpoints of the
+    :func:`~mdsr_opt.mechanics.anchors.rigid_groups` (each group lists an end node first), each extended, when ``midnodes`` gives the midpoint node of every row of ``mesh.edges``, by the midpoints of the
     edges whose two ends are in the group."""
     from .anchors import rigid_groups
 
-    groups = join_close(mesh, muscles, [np.asarray(g, dtype=np.int64) for g in rigid_groups(mesh, muscles, radius)],
-                        radius)
+    groups = rigid_groups(mesh, muscles, radius)
     if midnodes is None:
         return [np.array(g, dtype=np.int64) for g in groups]
     E = mesh.edges
@@ -50,67 +48,6 @@ def fixture_groups(mesh, muscles, radius: float, midnodes: np.ndarray | None = N
         inside[g] = True
         rows = np.flatnonzero(inside[E[:, 0]] & inside[E[:, 1]])
         out.append(np.concatenate([np.asarray(g, dtype=np.int64), np.asarray(midnodes)[rows]]))
-    return out
-
-
-def join_close(mesh, muscles, groups: Sequence[np.ndarray], radius: float) -> list[np.ndarray]:
-    """``groups`` (fixtures, each listing an end node first) with those of different ropes that come closer than
-    ``radius`` (the fixture radius) rim to rim joined into one rigid part: the part holds both fixtures and every
-    node within ``radius`` of the segment between their end nodes (one plate cast across both). A sliver of
-    silicone that thin between two rigid fixtures, which the ropes pull different ways, takes their whole
-    relative motion in a few elements and folds; a builder casts such fixtures as one. Fixtures that would join
-    the two ends of one rope (it could then not contract) are left apart."""
-    groups = [np.asarray(g, dtype=np.int64) for g in groups]
-    if len(groups) < 2:
-        return groups
-    X = mesh.points
-    where = {}
-    for k, g in enumerate(groups):
-        for v in g.tolist():
-            where[v] = k
-    ends = [(where.get(int(m.nodes[0])), where.get(int(m.nodes[-1]))) for m in muscles]
-    parent = list(range(len(groups)))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    bridges = []
-    for i in range(len(groups)):
-        for j in range(i + 1, len(groups)):
-            D = np.linalg.norm(X[groups[i]][:, None, :] - X[groups[j]][None, :, :], axis=2)
-            if D.min() >= radius or find(i) == find(j):
-                continue
-            a, b = find(i), find(j)
-            trial = [find(k) if find(k) not in (a, b) else min(a, b) for k in range(len(groups))]
-            if any(p is not None and q is not None and trial[p] == trial[q] for p, q in ends):
-                continue  # would hold both ends of one rope
-            parent[max(a, b)] = min(a, b)
-            bridges.append((int(groups[i][0]), int(groups[j][0])))
-    if not bridges:
-        return groups
-    sets: dict[int, list[int]] = {}
-    for k in range(len(groups)):
-        sets.setdefault(find(k), []).append(k)
-    taken = np.zeros(mesh.n_nodes, dtype=bool)
-    for g in groups:
-        taken[g] = True
-    out = []
-    for root, members in sets.items():
-        nodes = list(dict.fromkeys(v for k in members for v in groups[k].tolist()))
-        if len(members) > 1:
-            for a, b in bridges:
-                if find(where[a]) != root:
-                    continue
-                d = X[b] - X[a]
-                t = np.clip((X - X[a]) @ d / float(d @ d), 0.0, 1.0)
-                near = np.linalg.norm(X - (X[a] + t[:, None] * d), axis=1) < radius
-                extra = np.flatnonzero(near & ~taken)
-                taken[extra] = True
-                nodes += extra.tolist()
-        out.append(np.asarray(nodes, dtype=np.int64))
     return out
 
 

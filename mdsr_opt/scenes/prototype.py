@@ -391,7 +391,10 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
         tolerance, found sooner. ``fixture_radius``: the ends' fixtures for these muscles (default
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
-        be smaller)."""
+        be smaller). The mesh is refined round rope ends too coarse for their fixtures
+        (:func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`); a rope whose stroke is at least its length between
+        its fixtures gives a failed shot ``"not built: ..."`` with the figures, not a solve, and a failed solve's
+        status says how much the most shortened rope shortens its length between fixtures."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
         from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
         from ..mechanics.quadsolve import solve_quadratic_internal
@@ -437,7 +440,12 @@ class VirtualPrototype:
 
                 start = transfer_state(self.design_mesh, guess, model.points)
             res = solve_quadratic_internal(model, ropes, a, groups, guess=start)
-            shot = self._keep(key, self._shot(res, photo, model))
+            shot = self._shot(res, photo, model)
+            if not shot.success:
+                i = int(np.argmax(stroke / free))
+                shot.status += (f"; rope {fine[i].name or i} shortens its length between its fixtures (radius "
+                                f"{radius:.4g}) by {100 * stroke[i] / free[i]:.0f} %")
+            shot = self._keep(key, shot)
         return shot
 
 
