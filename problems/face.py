@@ -19,11 +19,15 @@ their node chains.
 The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no geometry); they
 are not the paper's meshes. A face is asked for at least ``MIN_NODES`` = 900 nodes (845 after meshing, for
 ``coarse`` and ``medium`` alike), the mesh on which the one layout, its ropes 0.16 inside the outline and the
-holes, makes all four expressions: smile 80.1 %, frown 91.9 %, wink 72.9 %, pucker 75.8 % of their motion.
-The wink and the pucker hang on which ring ropes round the eye and the lips the routing lays, and that
-changes with the mesh: on 553 / 766 / 953 / 1235 / 2310 nodes the wink reaches 67 / 61 / 64 / 68 / 62 % and
-the pucker 62 / 65 / 52 / 63 / 74 % (smile 74-86 %, frown 91-94 %). A rope kept inside the body cannot draw
-an eye's rim as far as a rope on the rim does: the strip of lid between the rope and the hole lags behind.
+holes, makes all four expressions: smile 80.1 %, frown 91.6 %, wink 72.9 %, pucker 74.8 % of their motion.
+The wink needs a rope ringing the eye: the routing lays one round a squeezed hole where the mesh has a ring
+of routable nodes round it that turns by at most 45 degrees at every node (on 845 nodes growth comes near
+one): on 553 / 1049 / 1423 / 2310 / 2697 / 2949 nodes the wink reaches 78 / 77 / 83 / 77 / 75 / 71 %, and all
+four expressions reach 70 % on 845, 1049, 1423, 2310 and 2697 nodes. On 662 / 766 / 953 / 1235 / 1615 /
+1943 / 2141 nodes no such ring exists (the wink 56-68 %), and the pucker, made by arcs above and below
+the lips, falls to 51-66 % on 553, 662, 766, 953, 1235, 1615, 2141, 2513 and 2949 nodes (smile 74-85 %
+except 42 % on 2949, frown 88-96 %). A rope kept inside the body cannot draw a hole's rim as far as a
+rope on the rim does: the strip between the rope and the hole lags behind.
 
 How well a design makes its expression is :func:`motion_recovered` over :func:`moving_nodes`: the share of
 the target motion the muscle-driven face reproduces on every node the expression moves by more than 10 %

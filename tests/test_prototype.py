@@ -134,22 +134,59 @@ def test_a_scene_without_an_outline_to_remesh_is_split_finer():
     np.testing.assert_allclose(shot.x[dn[:len(c.drag_nodes)]], c.drag_positions, atol=1e-12)
 
 
-def test_a_fixture_holds_at_least_the_ring_of_elements_at_the_rope_end(one):
-    """A fixture smaller than the mesh would be a point force: where the radius holds no node besides a
-    rope's end, the radius on the mesh is the longest edge at the ropes' ends, so every end holds a rigid
-    ring of nodes; a radius that holds nodes is kept."""
-    from mdsr_opt.mechanics.fixtures import fixture_groups
+def test_a_fixture_smaller_than_the_mesh_keeps_its_size_on_a_mesh_refined_round_it(one):
+    """A fixture smaller than the mesh would be a point force; it is not enlarged (two enlarged fixtures meet
+    across one element, which folds): the mesh is refined round the rope ends, every node kept, until each
+    fixture of its physical radius holds its end's whole ring of elements; the ropes keep their nodes."""
+    from mdsr_opt.mechanics.fixtures import fixture_groups, fixture_mesh, rings_held
 
     scene, proto = one
-    tiny = VirtualPrototype.for_scene(scene, refine=2.5, seed=3, fixture_radius=1e-3)
-    fine = [tiny.transfer_muscle(m) for m in scene.muscles]
-    r = tiny.fixture_radius_on_mesh(fine)
-    ends = [fine[0].nodes[0], fine[0].nodes[-1]]
-    edges = tiny.mesh.edges[np.isin(tiny.mesh.edges, ends).any(1)]
-    assert r == pytest.approx(1.001 * tiny.mesh.edge_lengths[tiny.mesh.edge_rows(edges[:, 0], edges[:, 1])].max())
-    groups = fixture_groups(tiny.mesh, fine, r)
-    assert len(groups) == 2 and all(len(g) >= 4 for g in groups)
-    assert proto.fixture_radius_on_mesh(fine) == proto.fixture_radius > r
+    fine = [proto.transfer_muscle(m) for m in scene.muscles]
+    assert fixture_mesh(proto.mesh, fine, proto.fixture_radius)[0] is proto.mesh  # held already: unchanged
+    r = 0.1 * float(proto.mesh.edge_lengths.min())
+    assert not rings_held(proto.mesh, fine, r).any()
+    mesh, laid = fixture_mesh(proto.mesh, fine, r)
+    n = proto.mesh.n_nodes
+    np.testing.assert_array_equal(mesh.points[:n], proto.mesh.points)
+    assert n < mesh.n_nodes < 3 * n and rings_held(mesh, laid, r).all()
+    for a, b in zip(fine, laid):  # the same rope: its nodes in order, ends unchanged, the same length
+        assert b.name == a.name and (b.nodes[0], b.nodes[-1]) == (a.nodes[0], a.nodes[-1])
+        assert [v for v in b.nodes if v < n] == list(a.nodes)
+        assert b.length(mesh.points) == pytest.approx(a.length(proto.mesh.points), rel=1e-9)
+    groups = fixture_groups(mesh, laid, r)
+    assert len(groups) == 2 * len(laid) and all(len(g) >= 4 for g in groups)
+    with pytest.raises(ValueError, match="positive and finite"):
+        fixture_mesh(proto.mesh, fine, 0.0)
+
+
+def test_a_short_rope_between_close_fixtures_does_not_fold_the_prototype():
+    """A user body whose rope is one design edge long, its fixtures (radius 0.04) far smaller than the
+    prototype's elements: fixtures enlarged to their ends' rings met across one element, which folded at
+    a vertex before the full contraction (the face's smile and frown in Table 4); on the mesh refined round
+    them the prototype reaches it with no inverted element."""
+    from mdsr_opt import Mesh, NeoHookean
+    from mdsr_opt.body.muscles import Muscle
+    from mdsr_opt.scenes.scene import Case, Scene
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+
+    def node(x, y):
+        return int(np.argmin(np.linalg.norm(P - (x, y), axis=1)))
+
+    short = Muscle([node(1.75, 0.5), node(2.0, 0.5)], name="short")
+    other = Muscle([node(2.25, 0.5), node(2.5, 0.5), node(2.75, 0.5), node(3.0, 0.5)], name="other")
+    scene = Scene(name="strip", mesh=mesh, material=NeoHookean(E=1.0, nu=0.4), muscles=(short, other),
+                  cases=(Case("pull", contractions=(0.6, 0.6)),), design_options={"anchor_radius": 0.04})
+    proto = VirtualPrototype.for_scene(scene, seed=0)
+    shot = proto.internal(scene.muscles, [0.6, 0.6], photo=False)
+    assert shot.success, shot.status
+    x = shot.x
+    L = np.linalg.norm(x[short.nodes[1]] - x[short.nodes[0]])
+    assert L == pytest.approx(0.4 * 0.25, rel=0.05)  # the rope's stroke reached (friction-free, straight)
+    # fixtures of radius 0.1 leave about 0.1 of the short rope between them: a stroke of 0.15 is refused, saying why
+    big = VirtualPrototype.for_scene(scene, seed=0, fixture_radius=0.1).internal(scene.muscles, [0.6, 0.6], photo=False)
+    assert not big.success and "rope short's stroke 0.15" in big.status and "at least its length between its fixtures" in big.status
 
 
 def test_bad_input_is_refused(one):

@@ -2,7 +2,8 @@
 
 A rope ends on a bead, knot or plate of radius ``r_f`` cast into the body; the body nodes within ``r_f`` of the
 end node (the anchor patches of :func:`~mdsr_opt.mechanics.anchors.rigid_groups`, merged where two fixtures
-overlap) move with it as one rigid body. Instead of constraints with multipliers, each group is given three
+overlap) move with it as one rigid body. A mesh too coarse for the fixtures is refined round the rope ends (:func:`fixture_mesh`), so
+a fixture keeps its physical size, and :func:`free_lengths` gives each rope's length between its fixtures. Instead of constraints with multipliers, each group is given three
 coordinates -- its first node's position and an angle -- and every other member follows:
 ``x_k = x_r + R(phi) (X_k - X_r)``. Nodes outside every group keep their own two coordinates.
 
@@ -28,14 +29,13 @@ from collections.abc import Sequence
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["RigidReduction", "fixture_groups"]
+__all__ = ["RigidReduction", "fixture_groups", "fixture_mesh", "free_lengths", "rings_held"]
 
 
 def fixture_groups(mesh, muscles, radius: float, midnodes: np.ndarray | None = None) -> list[np.ndarray]:
     """The rigid fixture groups of ``muscles`` on ``mesh`` at fixture radius ``radius`` (length units):
-    :func:`~mdsr_opt.mechanics.anchors.rigid_groups` (each group lists an end node first), each extended,
-    when ``midnodes`` gives the midpoint node of every row of ``mesh.edges``, by the midpoints of the edges
-    whose two ends are in the group."""
+    :func:`~mdsr_opt.mechanics.anchors.rigid_groups` (each group lists an end node first), each extended, when ``midnodes`` gives the midpoint node of every row of ``mesh.edges``, by the midpoints of the
+    edges whose two ends are in the group."""
     from .anchors import rigid_groups
 
     groups = rigid_groups(mesh, muscles, radius)
@@ -49,6 +49,144 @@ def fixture_groups(mesh, muscles, radius: float, midnodes: np.ndarray | None = N
         rows = np.flatnonzero(inside[E[:, 0]] & inside[E[:, 1]])
         out.append(np.concatenate([np.asarray(g, dtype=np.int64), np.asarray(midnodes)[rows]]))
     return out
+
+
+def free_lengths(points, chains, groups) -> np.ndarray:
+    """Per rope (a node chain of ``points``) the rest length of its segments that do not lie within one rigid
+    group of ``groups``: the rope between its fixtures, which its stroke shortens. A stroke as long as that
+    would bring the fixtures together (the silicone between them folds before)."""
+    X = np.asarray(points, dtype=float).reshape(-1, 2)
+    gid = np.full(len(X), -1, dtype=np.int64)
+    for k, g in enumerate(groups):
+        gid[np.asarray(g, dtype=np.int64)] = k
+    out = []
+    for c in chains:
+        c = np.asarray(c, dtype=np.int64)
+        seg = np.linalg.norm(np.diff(X[c], axis=0), axis=1)
+        a, b = gid[c[:-1]], gid[c[1:]]
+        out.append(float(seg[(a < 0) | (a != b)].sum()))
+    return np.asarray(out)
+
+
+def rings_held(mesh, muscles, radius: float) -> np.ndarray:
+    """Per muscle end (first and last node of each, in order): whether a fixture of ``radius`` about it holds
+    its whole ring of elements, every mesh edge at the end node shorter than ``radius``."""
+    E, L = mesh.edges, mesh.edge_lengths
+    longest = np.zeros(mesh.n_nodes)
+    np.maximum.at(longest, E[:, 0], L)
+    np.maximum.at(longest, E[:, 1], L)
+    ends = np.array([n for m in muscles for n in (m.nodes[0], m.nodes[-1])], dtype=np.int64)
+    return longest[ends] < radius
+
+
+#: element size at a rope end over the fixture's radius, and its growth per unit of distance from the end,
+#: of :func:`fixture_mesh` (a graded mesh: a few rings of elements round each fixture, the rest unchanged)
+FIXTURE_ELEMENT, FIXTURE_GRADING = 0.5, 0.3
+
+
+def fixture_mesh(mesh, muscles, radius: float, rounds: int = 6):
+    """The mesh on which fixtures of ``radius`` have their physical size, and the muscles laid on it.
+
+    A fixture that holds no node besides its rope's end is a point force, under which a planar body has no
+    finite displacement (quadratic elements fold at that vertex); enlarging it to the end's ring of elements
+    instead changes the body: two fixtures a rope's length apart, or of two ropes ending close together, then
+    meet across one element, which takes the whole stroke and folds. So the mesh is refined round the rope
+    ends instead (Triangle's conforming refinement, every node kept with its index) until every fixture holds
+    its end's whole ring of elements (:func:`rings_held`): elements of :data:`FIXTURE_ELEMENT` times ``radius``
+    at the ends, growing by :data:`FIXTURE_GRADING` per unit of distance. A rope keeps its nodes: an edge the
+    refinement split runs through the new nodes on it, one it flipped along the shortest way round.
+
+    Returns
+    -------
+    (mesh, muscles)
+        ``mesh`` itself and ``muscles`` unchanged when every fixture already holds its ring; otherwise the
+        refined :class:`~mdsr_opt.body.mesh.Mesh` (the first ``mesh.n_nodes`` nodes are ``mesh``'s) and
+        each muscle's chain on it.
+
+    Raises
+    ------
+    ValueError
+        ``radius`` not positive and finite, or a mesh that ``rounds`` refinements do not resolve.
+    """
+    import triangle as tr
+
+    from ..body.mesh import Mesh
+    from ..body.muscles import Muscle
+
+    radius = float(radius)
+    if not np.isfinite(radius) or radius <= 0.0:
+        raise ValueError(f"the fixture radius must be positive and finite, got {radius}")
+    muscles = list(muscles)
+    if not muscles or rings_held(mesh, muscles, radius).all():
+        return mesh, muscles
+    P0 = np.asarray(mesh.points, dtype=float)
+    ends = np.unique([n for m in muscles for n in (m.nodes[0], m.nodes[-1])])
+    chains = [np.asarray(m.nodes, dtype=np.int64) for m in muscles]
+    factor = np.full(len(ends), FIXTURE_ELEMENT)
+    loops = [np.asarray(lp) for lp in mesh.boundary_loops]
+    segs = np.vstack([np.column_stack([lp, np.roll(lp, -1)]) for lp in loops])
+    cur, pieces = mesh, chains
+    for _ in range(rounds):
+        P, T = np.asarray(cur.points, dtype=float), np.asarray(cur.triangles)
+        c = P[T].mean(axis=1)
+        d = np.linalg.norm(c[:, None, :] - P0[ends][None, :, :], axis=2)
+        h = (factor[None, :] * radius + FIXTURE_GRADING * d).min(axis=1)
+        out = tr.triangulate({"vertices": P.copy(), "triangles": T.astype(np.int32),
+                              "segments": segs.astype(np.int32),
+                              "triangle_max_area": np.sqrt(3.0) / 4.0 * h ** 2}, "rpaq30Q")
+        V = out["vertices"]
+        if len(V) < len(P0) or not np.allclose(V[:len(P0)], P0, rtol=0.0, atol=1e-12 * (1.0 + np.abs(P0).max())):
+            raise ValueError("refining the mesh round the fixtures moved its nodes")  # pragma: no cover
+        V[:len(P0)] = P0
+        cur = Mesh(V, out["triangles"])
+        pieces = [_relay(cur, c) for c in chains]
+        segs = out["segments"]
+        held = rings_held(cur, [Muscle(c) for c in pieces], radius)
+        ok = np.ones(len(ends), dtype=bool)
+        for c, pair in zip(pieces, held.reshape(-1, 2)):
+            ok[np.searchsorted(ends, [c[0], c[-1]])] &= pair
+        if ok.all():
+            return cur, [Muscle(c, name=m.name) for c, m in zip(pieces, muscles)]
+        factor[~ok] *= 0.6
+    raise ValueError(f"the mesh could not be refined so that fixtures of radius {radius:.4g} hold their rope ends' "
+                     f"rings of elements in {rounds} rounds; give a larger fixture radius")
+
+
+def _relay(mesh, chain: np.ndarray) -> np.ndarray:
+    """``chain`` (nodes of a coarser mesh whose nodes ``mesh`` kept) on ``mesh``: each of its edges through the
+    nodes that now lie on it, in order."""
+    P = mesh.points
+    out = [int(chain[0])]
+    for a, b in zip(chain[:-1].tolist(), chain[1:].tolist()):
+        if mesh.edge_rows([a], [b])[0] < 0:
+            d = P[b] - P[a]
+            L2 = float(d @ d)
+            t = (P - P[a]) @ d / L2
+            off = np.abs((P[:, 0] - P[a, 0]) * d[1] - (P[:, 1] - P[a, 1]) * d[0]) / np.sqrt(L2)
+            on = np.flatnonzero((t > 1e-9) & (t < 1 - 1e-9) & (off < 1e-9 * np.sqrt(L2)))
+            way = [a] + on[np.argsort(t[on])].tolist() + [b]
+            if (mesh.edge_rows(way[:-1], way[1:]) < 0).any():  # the edge was flipped: the shortest way round
+                way = _shortest(mesh, a, b)
+            out += way[1:-1]
+        out.append(b)
+    c = np.asarray(out, dtype=np.int64)
+    if (mesh.edge_rows(c[:-1], c[1:]) < 0).any():
+        raise ValueError("a rope's edge was not kept when the mesh was refined round the fixtures")  # pragma: no cover
+    return c
+
+
+def _shortest(mesh, a: int, b: int) -> list[int]:
+    """The shortest path from node ``a`` to node ``b`` along the edges of ``mesh`` (rest lengths)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    E, L, n = mesh.edges, mesh.edge_lengths, mesh.n_nodes
+    rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+    G = sp.csr_matrix((np.concatenate([L, L]), (rows, cols)), shape=(n, n))
+    _, pred = dijkstra(G, indices=a, return_predecessors=True)
+    way = [b]
+    while way[-1] != a:
+        way.append(int(pred[way[-1]]))
+    return way[::-1]
 
 
 class RigidReduction:

@@ -15,10 +15,10 @@ the design model in what a real robot differs:
 - a rope with capstan friction in its channel (:mod:`~mdsr_opt.mechanics.capstan`), coefficient ``friction``
   (default :data:`DEFAULT_ROPE_FRICTION`), pulled at its muscle's first node: its tension falls as
   ``exp(-mu theta)`` along the route;
-- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius; a ring
-  of elements where that holds no node besides a rope's end, :meth:`VirtualPrototype.fixture_radius_on_mesh`):
-  every node within it, edge midpoints included, moves rigidly with the end node
-  (:mod:`~mdsr_opt.mechanics.fixtures`);
+- end fixtures of their physical size, radius ``fixture_radius`` (default: the scene's anchor radius; the
+  mesh refined round the rope ends where it is too coarse for its end's ring of elements to lie within it,
+  :func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`): every node within it, edge midpoints included, moves
+  rigidly with the end node (:mod:`~mdsr_opt.mechanics.fixtures`);
 - the muscle's node chain re-laid on the fine mesh through the fine nodes nearest the design muscle's nodes
   (as a builder would place the tube); Young's modulus drawn within ``e_range`` (it scales every force, so
   it changes no shape driven by drags or rope strokes);
@@ -331,17 +331,18 @@ class VirtualPrototype:
         return shot
 
     # ---------------------------------------------------------------------------------------------- states
-    def photograph(self, x) -> Any:
-        """The synthetic camera's photograph of the prototype in state ``x`` (fine mesh)."""
+    def photograph(self, x, model=None) -> Any:
+        """The synthetic camera's photograph of the prototype in state ``x`` (fine mesh; of ``model``'s nodes
+        when given)."""
         from ..photos.camera import render_photo
 
-        return render_photo(self.model.display_mesh, x, **self.camera)
+        return render_photo((model or self.model).display_mesh, x, **self.camera)
 
-    def _shot(self, res, photo: bool) -> PrototypeShot:
+    def _shot(self, res, photo: bool, model=None) -> PrototypeShot:
         shot = PrototypeShot(x=np.asarray(res.x).copy(), success=bool(res.success), status=str(res.status),
                              iterations=int(res.iterations))
         if shot.success and photo:
-            shot.photo = self.photograph(shot.x)
+            shot.photo = self.photograph(shot.x, model)
         return shot
 
     def external(self, case: str, photo: bool = True) -> PrototypeShot:
@@ -363,20 +364,20 @@ class VirtualPrototype:
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
-    def fixture_radius_on_mesh(self, fine_muscles, radius: float | None = None) -> float:
-        """The fixtures' radius on the prototype's mesh: ``fixture_radius``, unless a rope's end would hold no
-        other node within it; then the longest mesh edge at the ropes' ends (times 1.001), so that every
-        fixture holds its end node's ring of elements. A fixture smaller than the mesh would be a point
-        force, under which a planar body has no finite displacement and quadratic elements fold at the
-        rope's end."""
-        r = self.fixture_radius if radius is None else float(radius)
-        E, L = self.mesh.edges, self.mesh.edge_lengths
-        ends = np.array([n for m in fine_muscles for n in (m.nodes[0], m.nodes[-1])])
-        shortest = [L[(E == e).any(1)].min() for e in ends]
-        if not ends.size or min(shortest) <= r:
-            return r
-        at_end = np.isin(E[:, 0], ends) | np.isin(E[:, 1], ends)
-        return float(max(r, 1.001 * L[at_end].max()))
+    def _model_on(self, mesh):
+        """The elastic model on ``mesh``: :attr:`model` on the prototype's mesh, else one built for that mesh
+        (refined round fixtures, :func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`), the last few kept."""
+        if mesh is self.mesh:
+            return self.model
+        from ..mechanics.quadratic import QuadraticModel
+
+        models = self.__dict__.setdefault("_fixture_models", {})
+        key = mesh.points.tobytes() + mesh.triangles.tobytes()
+        if key not in models:
+            while len(models) >= 4:
+                models.pop(next(iter(models)))
+            models[key] = QuadraticModel(mesh, self.material, self.order)
+        return models[key]
 
     def internal(self, muscles: Sequence[Muscle], contractions, photo: bool = True, guess=None,
                  fixture_radius: float | None = None) -> PrototypeShot:
@@ -390,9 +391,12 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
         tolerance, found sooner. ``fixture_radius``: the ends' fixtures for these muscles (default
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
-        be smaller)."""
+        be smaller). The mesh is refined round rope ends too coarse for their fixtures
+        (:func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`); a rope whose stroke is at least its length between
+        its fixtures gives a failed shot ``"not built: ..."`` with the figures, not a solve, and a failed solve's
+        status says how much the most shortened rope shortens its length between fixtures."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
-        from ..mechanics.fixtures import fixture_groups
+        from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
         from ..mechanics.quadsolve import solve_quadratic_internal
 
         a = np.asarray(contractions, dtype=float).ravel()
@@ -413,18 +417,35 @@ class VirtualPrototype:
         key = ("internal", tuple(m.nodes for m in muscles), a.tobytes(), bool(photo), radius)
         shot = self._solved(key)
         if shot is None:
-            fine = [self.transfer_muscle(m) for m in muscles]
-            mid = self.mesh.n_nodes + np.arange(len(self.mesh.edges)) if self.order == 2 else None
-            groups = fixture_groups(self.mesh, fine, self.fixture_radius_on_mesh(fine, radius), mid)
-            ropes = [CapstanRope(quadratic_chain(self.mesh, m.nodes, mid) if mid is not None else m.nodes,
+            # fixtures of their physical size: the mesh refined round the rope ends where it is coarser
+            mesh, fine = fixture_mesh(self.mesh, [self.transfer_muscle(m) for m in muscles], radius)
+            model = self._model_on(mesh)
+            mid = mesh.n_nodes + np.arange(len(mesh.edges)) if self.order == 2 else None
+            groups = fixture_groups(mesh, fine, radius, mid)
+            ropes = [CapstanRope(quadratic_chain(mesh, m.nodes, mid) if mid is not None else m.nodes,
                                  self.friction) for m in fine]
+            free = free_lengths(model.points, [r.chain for r in ropes], groups)
+            stroke = a * np.array([r.length(model.points) for r in ropes])
+            over = np.flatnonzero(stroke >= free)
+            if over.size:  # the fixtures would meet: no equilibrium to look for
+                i = int(over[0])
+                return self._keep(key, PrototypeShot(
+                    x=model.points.copy(), success=False, status=(
+                        f"not built: rope {fine[i].name or i}'s stroke {stroke[i]:.4g} is at least its length between "
+                        f"its fixtures (radius {radius:.4g}), {free[i]:.4g}: they would meet; a smaller contraction "
+                        "or smaller fixtures")))
             start = None
             if guess is not None:
                 from ..mechanics.quadratic import transfer_state
 
-                start = transfer_state(self.design_mesh, guess, self.model.points)
-            res = solve_quadratic_internal(self.model, ropes, a, groups, guess=start)
-            shot = self._keep(key, self._shot(res, photo))
+                start = transfer_state(self.design_mesh, guess, model.points)
+            res = solve_quadratic_internal(model, ropes, a, groups, guess=start)
+            shot = self._shot(res, photo, model)
+            if not shot.success:
+                i = int(np.argmax(stroke / free))
+                shot.status += (f"; rope {fine[i].name or i} shortens its length between its fixtures (radius "
+                                f"{radius:.4g}) by {100 * stroke[i] / free[i]:.0f} %")
+            shot = self._keep(key, shot)
         return shot
 
 

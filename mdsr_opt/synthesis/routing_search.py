@@ -62,6 +62,9 @@ class Router:
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
         self.wql = self.wq.tolist()
+        self.floor_q = floor_q
+        self.eligible = None  # the compression-dominated edges, set by regions()
+        self.ring_uids: set[int] = set()  # the ring ropes round holes (seed_units)
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
@@ -110,10 +113,13 @@ class Router:
         strongly contracted edges alone would not do: only the edges aligned with the compression contract
         much, so they form parallel chains that never touch, one "region" per chain.) Only ``eligible``
         edges mark nodes (see :func:`route_muscles`: compression, not the Poisson response to a stretch).
-        Regions are ordered by
-        their strongest edge, then by rest geometry.
+        Regions are ordered by the contraction they hold (``sum w * l0`` over their strong edges), then by
+        their strongest edge and rest geometry: a small island of strongly contracted edges (where a mesh's
+        first ring of nodes round a hole happens to clear the ropes' inset) would otherwise be seeded first
+        and, through the seed spacing, keep the ring just outside it from being seeded.
         """
         E = self.mesh.edges
+        self.eligible = eligible  # for the rings of seed_units
         strong = self.feasible & (self.wq >= threshold_q) & eligible
         idx = np.flatnonzero(strong)
         if len(idx) == 0:
@@ -129,10 +135,16 @@ class Router:
         out: dict[int, list[int]] = {}
         for j in order.tolist():
             out.setdefault(int(lab[E[idx[j], 0]]), []).append(int(idx[j]))
-        return list(out.values())  # dicts keep insertion order: the region of the strongest edge first
+        regions = list(out.values())  # dicts keep insertion order: the region of the strongest edge first
+        # the contraction a region holds, sum w * l0 over its strong edges, on a grid of 1e-6 of the largest
+        # (mirror regions' rest lengths differ by round-off; the stable sort keeps them in the order above)
+        hold = np.array([float(np.dot(self.wq[r], self.l0[r])) for r in regions])
+        hold = np.rint(hold / (1e-6 * hold.max())).astype(np.int64)
+        return [regions[i] for i in np.argsort(-hold, kind="stable").tolist()]
 
     def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
-        """First units, region by region: the region's ``n_seeds`` most contracted edges are its seeds; each
+        """First units: the ring ropes round squeezed holes (:meth:`rings`), then region by region: the
+        region's ``n_seeds`` most contracted edges are its seeds; each
         connected component of them is cut into simple paths, straightest continuation first and every
         turn within the tortuosity limit; in symmetric mode each path comes with its mirror image. A path
         is started only from a seed edge farther than ``spacing`` (a length) from every node of the units
@@ -142,6 +154,12 @@ class Router:
         E = self.mesh.edges
         seeds = []
         taken = np.zeros(self.mesh.n_nodes, dtype=bool)  # nodes of the units made so far
+        for group in self.rings():  # a ring rope, or a mirror pair of them (no seed spacing: a ring is no row)
+            for p in group:
+                self._new_unit(p)
+                self.ring_uids.add(len(self.units) - 1)  # complete: it neither grows nor is spliced into
+            if len(group) == 2:
+                self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1
         for edges in regions:
             top = edges[:n_seeds]
             seeds += top
@@ -175,6 +193,38 @@ class Router:
                     if len(paths) == 2:
                         self.mirror_uid[-1], self.mirror_uid[-2] = len(self.units) - 2, len(self.units) - 1
         return seeds
+
+    def rings(self) -> list[tuple[list[int], ...]]:
+        """The ring ropes round the holes the target squeezes (:mod:`~mdsr_opt.synthesis.routing_rings`): per
+        hole whose rim shortens all round and round which a ring of routable edges winds within the tortuosity
+        limit, whose every edge passes the nonuniformity gate against the ring's mean (``K_a * g_a <= 1``) and
+        whose contraction (``sum w * l0``) lies at least half on compression-dominated edges (those
+        :meth:`regions` was given: at the default ``compression_ratio`` a hole drawn shut, whose hoop
+        contraction comes with a radial stretch about as large, gets no ring), the ring opened into a rope
+        (in symmetric mode, a ring that is its own mirror image opened on the axis; a mirror pair of rings
+        is laid as a pair, the second the mirror image of the first)."""
+        from .routing_rings import hole_rings, open_ring
+
+        out, used = [], set()
+        for cycle in hole_rings(self.mesh, self.feasible, self.wq, self.turn_limit, self.floor_q):
+            if used & set(cycle) or (self.mp is not None and used & {self.mp[v] for v in cycle}):
+                continue
+            ks = [self.edge_id(a, b) for a, b in zip(cycle, cycle[1:] + cycle[:1])]
+            n, s1 = len(ks), sum(self.wql[k] for k in ks)
+            if any(self.K_a * mismatch(((n, s1), (1, self.wql[k]))) > 1.0 for k in ks):
+                continue
+            hold = self.wq[ks] * self.l0[ks]
+            if self.eligible is not None and hold[self.eligible[ks]].sum() < 0.5 * hold.sum():
+                continue  # mostly the sideways response of a radial stretch (see compression_ratio)
+            rope = open_ring(cycle, self.wq, self.edge_id, self.XL, self.mp)
+            if rope is None:
+                continue
+            used.update(cycle)
+            if self.mp is not None and {self.mp[v] for v in cycle} != set(cycle):
+                out.append((rope, [self.mp[v] for v in rope]))
+            else:
+                out.append((rope,))
+        return out
 
     def _extract_path(self, k0: int, pool: set[int]) -> list[int]:
         a, b = (int(v) for v in self.mesh.edges[k0])
@@ -246,8 +296,9 @@ class Router:
         out = []
         owner, units, XL, wql = self.owner, self.units, self.XL, self.wql
         K_a, K_b, lim, mp = self.K_a, self.K_b, self.turn_limit, self.mp
+        rings = self.ring_uids
         for U in units:
-            if not U.alive:
+            if not U.alive or U.uid in rings:
                 continue
             for at_tail in (False, True):
                 if at_tail:
@@ -266,7 +317,7 @@ class Router:
                         a = mismatch(((U.n, U.s1), (1, q)))
                         g = K_a * a + K_b * t1
                         partner = None
-                    elif o != U.uid:
+                    elif o != U.uid and o not in rings:
                         V = units[o]
                         if u == V.path[0]:
                             nxt = V.path[1]
@@ -470,7 +521,7 @@ class Router:
                 P = (F.path[-2] if at_tail else F.path[1]) if len(F.path) > 1 else None
                 for u, k in sorted(self.adj[N], key=lambda uk: self._edge_key(uk[1])):
                     o = self.owner[u]
-                    if o == -1 or o == F.uid:
+                    if o == -1 or o == F.uid or o in self.ring_uids:
                         continue
                     V = self.units[o]
                     if u not in (V.path[0], V.path[-1]):
