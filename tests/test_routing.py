@@ -463,6 +463,10 @@ def test_the_graph_is_built_on_first_access_and_kept(grid_strip):
     assert calls == [] and kept.graph is ref and kept.graph is ref and calls == [1]
     with pytest.raises(TypeError, match="graph must be a networkx.Graph or a function"):
         res.replaced(graph=3)
+    import pickle  # a run's jobs send results to worker processes: an unbuilt graph pickles too
+
+    back = pickle.loads(pickle.dumps(route_muscles(grid_strip, t)))
+    assert back.muscles == res.muscles and back.graph.number_of_edges() == G.number_of_edges()
 
 
 def X_first_is_smaller(mesh, m) -> bool:

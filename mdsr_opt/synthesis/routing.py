@@ -102,6 +102,7 @@ True
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import replace
@@ -381,8 +382,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
     x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
-    def graph():  # built when a caller asks for result.graph (the search needs no networkx graph)
-        return _graph(mesh, x, l0, l, w)
+    # built when a caller asks for result.graph (the search needs no networkx graph); a partial of a module
+    # function, so that a result still pickles (a run's jobs send it to worker processes)
+    graph = functools.partial(_graph, mesh, x, l0, l, w)
 
     def empty(msg: str) -> RoutingResult:
         warnings.warn(msg, RoutingWarning, stacklevel=3)
