@@ -85,8 +85,9 @@ class Case:
             object.__setattr__(self, "muscles", mus)
         anc = node_indices(self.anchors, f"case {self.name!r}: anchors")
         dn = node_indices(self.drag_nodes, f"case {self.name!r}: drag_nodes")
-        dp = as_float_array(np.asarray(self.drag_positions, dtype=float).reshape(-1, 2) if np.size(
-            self.drag_positions) else np.zeros((0, 2)), f"case {self.name!r}: drag_positions", shape=(len(dn), 2))
+        dp = as_float_array(self.drag_positions, f"case {self.name!r}: drag_positions")
+        dp = as_float_array(dp.reshape(-1, 2) if dp.size else np.zeros((0, 2)),
+                            f"case {self.name!r}: drag_positions", shape=(len(dn), 2))
         object.__setattr__(self, "anchors", anc)
         object.__setattr__(self, "drag_nodes", dn)
         object.__setattr__(self, "drag_positions", dp)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import csv
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +22,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_int
+from ..core.checks import positive_float, positive_int
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
@@ -101,10 +100,8 @@ class Gait:
         object.__setattr__(self, "sequence", seq)
         object.__setattr__(self, "frames_per_step", _frames(self.frames_per_step))
         check_budget(self.max_muscles)
-        if not (float(self.step_time) > 0 and math.isfinite(float(self.step_time))):
-            raise ValueError(f"gait {self.name!r}: step_time must be positive, got {self.step_time!r}")
-        if not (float(self.fps) > 0):
-            raise ValueError(f"gait {self.name!r}: fps must be positive, got {self.fps!r}")
+        positive_float(self.step_time, f"gait {self.name!r}: step_time")  # a string or bool: TypeError
+        positive_float(self.fps, f"gait {self.name!r}: fps")
 
     @property
     def poses(self) -> tuple[str, ...]:
@@ -312,8 +309,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     for s in seq:
         if s != "rest":
             layout.index(s)
-    if not (float(step_time) > 0):
-        raise ValueError(f"step_time must be positive, got {step_time!r}")
+    positive_float(step_time, "step_time")
     max_difference = MAX_DIFFERENCE if max_difference is None else check_max_difference(max_difference)
     if cyclic:
         seq = seq + [seq[0]]

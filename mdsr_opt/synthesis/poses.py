@@ -73,7 +73,7 @@ import numpy as np
 from ..core.guards import interruptible
 from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
-from ..core.checks import check_int, check_label
+from ..core.checks import as_float_array, check_int, check_label, check_options, keyword_names
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from .fabrication import check_fabrication
@@ -139,7 +139,7 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
             raise ValueError(f"pose {p.name!r} belongs to a different mesh ({p.mesh.n_nodes} nodes) than the one "
                              f"given ({mesh.n_nodes} nodes): all poses must be of the same mesh")
         t = solved_state(p.target, f"pose {p.name!r}: target")  # a failed solve's result is refused here
-        t = np.asarray(t, dtype=float) if not isinstance(t, str) else t
+        t = as_float_array(t, f"pose {p.name!r}: target")  # strings, bools, None: TypeError, not coerced
         if np.ndim(t) != 2 or np.shape(t)[1] != 2 or np.shape(t)[0] != mesh.n_nodes:
             raise ValueError(f"pose {p.name!r}: target has shape {np.shape(t)}, expected ({mesh.n_nodes}, 2); all "
                              "poses must be of the same mesh")
@@ -409,6 +409,16 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     return muscles, tuple(tuple(s) for _, _, s in kept)
 
 
+def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
+    """``routing_options`` and ``design_options`` as dicts, each key checked against the keywords of the
+    function it is passed to (an unknown key named with the nearest one)."""
+    from .contractions import design_contractions
+    from .routing import route_muscles
+
+    return (check_options(routing_options, keyword_names(route_muscles), "routing_options"),
+            check_options(design_options, keyword_names(design_contractions), "design_options"))
+
+
 @interruptible()
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
@@ -469,8 +479,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
-    ropt = dict(routing_options or {})
-    dopt = dict(design_options or {})
+    ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
     separate = dict(separate or {})
