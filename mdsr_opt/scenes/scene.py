@@ -322,6 +322,9 @@ def resolve_resolution(resolution: str | int) -> int:
     """The approximate node count for ``resolution`` (a name of :data:`RESOLUTIONS` or an integer from 20
     to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`)."""
     if isinstance(resolution, str):
+        if resolution not in RESOLUTIONS and resolution.strip().lstrip("+-").isdigit() and int(resolution) < 20:
+            # a count typed as text (the command line's ``--resolution -5``): the count's own message
+            raise ValueError(f"resolution must be at least 20 nodes, got {int(resolution)}")
         if resolution not in RESOLUTIONS:
             raise ValueError(f"resolution must be one of {', '.join(map(repr, RESOLUTIONS))} or a node count, "
                              f"got {resolution!r}")
