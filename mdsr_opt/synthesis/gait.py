@@ -465,9 +465,14 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     targets = {c: runs[c].setup.target for c in gait.poses}
     separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
                 if runs[c].design is not None and len(runs[c].setup.muscles)}
+    dopt, case_radii = dict(scene.design_options), _case_radii(runs, gait.poses)
+    if dopt.get("anchor_radius") is None and len(set(case_radii.values())) == 1 and all(
+            c in separate and not _routed(runs[c].setup) for c in gait.poses):
+        # the poses' muscles are given (the scene's), not routed: the fixtures the cases were designed with
+        dopt["anchor_radius"] = next(iter(case_radii.values()))
     try:
         res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
-                           routing_options=scene.routing_options, design_options=scene.design_options,
+                           routing_options=scene.routing_options, design_options=dopt,
                            separate=separate)
         sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
                             cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units,
@@ -476,6 +481,9 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         info.update(success=False, message=str(exc))
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
+    radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
+    if radius_note:
+        info["notes"] = [radius_note]
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
     # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at
@@ -495,7 +503,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
-    info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
+    info.update(success=ok, n_muscles=res.n_muscles, muscles=[m.name for m in res.muscles],
+                fixture_radius=None if res.anchor_radius is None else float(res.anchor_radius), separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),
                 separate_differences={n: (float(v) if np.isfinite(v) else None)
                                       for n, v in zip(res.names, res.separate_differences)},
@@ -522,5 +531,35 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference ({scene.units}) " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
-        + f"; {sch.outcome()}" + ("" if ok else " - FAILED: " + info["message"]))
+        + f"; {sch.outcome()}" + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: "
+                                                                                   + info["message"]))
     return info
+
+
+def _routed(setup) -> bool:
+    """Were this case's muscles routed (fitted to their fixtures), rather than given by the scene or case?"""
+    routing = getattr(setup, "routing", None)
+    return routing is not None and tuple(setup.muscles) == tuple(routing.muscles)
+
+
+def _case_radii(runs: Mapping, poses) -> dict:
+    """Per pose the fixture (anchor patch) radius its case's design was made with, where it has one."""
+    out = {}
+    for c in poses:
+        r = getattr(runs[c].design, "anchor_radius", None) if runs[c].design is not None else None
+        if r is not None:
+            out[c] = float(r)
+    return out
+
+
+def _radius_note(radius, case_radii: Mapping, units) -> str:
+    """The words for a gait whose fixtures differ from those its cases were designed with ("" if the same):
+    its strokes and differences are then not the cases' for the same muscle and target."""
+    if radius is None or not case_radii or all(abs(r - radius) <= 1e-9 * max(abs(r), 1.0)
+                                               for r in case_radii.values()):
+        return ""
+    unit = f" {units}" if units else ""
+    cases = ", ".join(f"{c} {r:.4g}" for c, r in case_radii.items())
+    return (f"the gait's end fixtures have radius {radius:.4g}{unit}, the cases' designs {cases}{unit}: one size "
+            "at which every shared rope keeps its fixtures, so its strokes and differences differ from the "
+            "cases' for the same muscle and target")

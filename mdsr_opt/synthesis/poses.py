@@ -377,7 +377,9 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
 
     Returns
     -------
-    muscles : tuple of Muscle, named ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure)
+    muscles : tuple of Muscle: each keeps its own name (a scene's muscle), a routed one is named by its place
+        ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure); all by place when two
+        would share a name
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
@@ -403,10 +405,24 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
             if budget is not None and len(kept) >= budget:
                 continue
             kept.append((cand, ce, [name]))
-    muscles = tuple(Muscle(m.nodes, name=muscle_name(i)) for i, (m, _, _) in enumerate(kept))
+    # a muscle's own name (a scene's ``inner_left``) is kept; routed ones (named by place) are numbered anew
+    names = [_own_name(m) or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
+    if len(set(names)) < len(names):  # two muscles of one name: every one by its place
+        names = [muscle_name(i) for i in range(len(kept))]
+    muscles = tuple(Muscle(m.nodes, name=n) for n, (m, _, _) in zip(names, kept))
     for m in muscles:
         m.check_on(mesh)
     return muscles, tuple(tuple(s) for _, _, s in kept)
+
+
+def _own_name(muscle) -> str | None:
+    """``muscle``'s name when it was given one, None when it has none or the name of a place in a layout
+    (``"M3"``, as routing names its muscles)."""
+    name = getattr(muscle, "name", None)
+    if not name:
+        return None
+    digits = name.lstrip(name.rstrip("0123456789"))
+    return None if digits and int(digits) > 0 and name == muscle_name(int(digits) - 1) else name
 
 
 def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
