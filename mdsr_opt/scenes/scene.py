@@ -177,9 +177,9 @@ class Scene:
         Approximate node count asked for (0 when the mesh was given).
     source : str
         The file the scene came from.
-    units : str
-        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`, default ``"mm"``),
-        carried into the gait schedule and the fabrication files.
+    units : str or None
+        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`), carried into
+        the gait schedule and the fabrication files; None (the default): "body units", no unit is invented.
     gait : mdsr_opt.synthesis.gait.Gait, optional
         A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
     acceptance : dict
@@ -204,7 +204,7 @@ class Scene:
     expected: dict = field(default_factory=dict)
     resolution: int = 0
     source: str = ""
-    units: str = "mm"
+    units: str | None = None
     gait: Any = None
     acceptance: dict = field(default_factory=dict)
 
@@ -390,10 +390,11 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
 
 
 def check_units_and_gait(scene: Scene) -> None:
-    """Check a scene's ``units`` (a known length unit) and ``gait`` (a Gait naming its cases)."""
+    """Check a scene's ``units`` (a known length unit, or None: body units) and ``gait`` (a Gait naming its
+    cases)."""
     from ..synthesis.export import check_units
 
-    scene.units = check_units(scene.units)
+    scene.units = None if scene.units is None else check_units(scene.units)
     if scene.gait is None:
         return
     if not isinstance(scene.gait, Gait):

@@ -23,6 +23,7 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float, positive_int
+from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
@@ -143,7 +144,7 @@ class GaitSchedule:
     success : (F,) bool ndarray
     status : tuple of str
     units : str
-        The length unit of every stroke.
+        The length unit of every stroke (``"body units"`` when the mesh's is not known).
     rest_mesh : dict or None
         The fingerprint of the mesh the schedule was solved on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`);
         :func:`save_gait_animation` refuses another mesh (None: not recorded, not checked).
@@ -169,7 +170,7 @@ class GaitSchedule:
     states: np.ndarray
     success: np.ndarray
     status: tuple
-    units: str = "mm"
+    units: str = BODY_UNITS
     rest_mesh: dict | None = None
     keyframe_differences: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
@@ -245,7 +246,7 @@ class GaitSchedule:
 
 @interruptible()
 def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[str], *, frames_per_step: int = 6,
-                  cyclic: bool = True, step_time: float = 1.0, units: str = "mm",
+                  cyclic: bool = True, step_time: float = 1.0, units: str | None = None,
                   solve_options: Mapping | None = None, max_difference: float | None = None) -> GaitSchedule:
     """The strokes of every muscle over a cyclic sequence of poses, every frame solved forward.
 
@@ -271,8 +272,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         Close the cycle: the first keyframe is repeated at the end.
     step_time : float
         Seconds per step.
-    units : str
-        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`).
+    units : str, optional
+        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`);
+        None (the default): "body units", no unit is invented.
     solve_options : dict, optional
         Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
         tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
@@ -300,7 +302,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                          f"nodes, the mesh {mesh.n_nodes}")
     check_same_mesh(mesh, layout.rest_mesh, "the layout")
     fps_ = _frames(frames_per_step)
-    units = check_units(units)
+    units = length_unit(units) if units is None else check_units(units)  # none: "body units"
     if isinstance(sequence, str) or not isinstance(sequence, Sequence):
         raise TypeError(f"sequence must be a list of pose names, got {type(sequence).__name__}")
     seq = [str(s) for s in sequence]
@@ -529,7 +531,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         else:
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
-        f"{int(res.separate_n_muscles.sum())}), difference ({scene.units}) " + ", ".join(
+        f"{int(res.separate_n_muscles.sum())}), difference ({length_unit(scene.units)}) " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
         + f"; {sch.outcome()}" + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: "
                                                                                    + info["message"]))
