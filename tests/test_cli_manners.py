@@ -41,3 +41,24 @@ def test_a_small_node_count_gets_the_same_message_from_the_cli_and_the_api(tmp_p
         get_problem("gecko", resolution=int(count))
     with pytest.raises(ValueError, match="must be one of 'coarse', 'medium', 'fine' or a node count, got 'huge'"):
         get_problem("gecko", resolution="huge")
+
+
+def test_photograph_names_the_case_folders_of_a_run_folder(tmp_path, capsys):
+    """README (c): `mdsr photograph out/gecko` found "no state files": it now names the case folders holding
+    them (their files share names, so they are not merged)."""
+    import numpy as np
+
+    from mdsr_opt import Mesh
+    from mdsr_opt.body.io import write_mesh
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    for case in ("bend", "curl"):
+        (tmp_path / "run" / case).mkdir(parents=True)
+        write_mesh(tmp_path / "run" / case / "driven.vtu", mesh, np.asarray(mesh.points))
+    assert main(["photograph", str(tmp_path / "run"), "--out", str(tmp_path / "img")]) == 2
+    err = capsys.readouterr().err
+    assert f"no state files (.vtk, .vtu, .xdmf, .msh) in {tmp_path / 'run'} itself" in err
+    assert "give one of its folders that hold some: bend, curl" in err
+    assert not (tmp_path / "img").exists()
+    assert main(["photograph", str(tmp_path / "run" / "bend"), "--out", str(tmp_path / "img")]) == 0
+    assert (tmp_path / "img" / "driven.png").is_file()

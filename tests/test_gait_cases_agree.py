@@ -71,3 +71,25 @@ def test_the_shared_layout_keeps_given_names_and_numbers_routed_ones():
     assert [m.name for m in mus] == ["bottom_left", "M2"]
     mus, _ = shared_layout(mesh, {"p": [Muscle(range(0, 8), name="x")], "q": [Muscle(range(8, 16), name="x")]})
     assert [m.name for m in mus] == ["M1", "M2"]                       # one name twice: by place
+
+
+def test_an_external_case_of_a_scene_with_muscles_says_it_is_not_routed():
+    """README (d): the scene's [[muscles]] are used for an external case, and the case's messages say so."""
+    from mdsr_opt.scenes.runner import run_case
+
+    spec = {"name": "s", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+            "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+            "muscles": [{"name": "lower", "path": [[0.3, 0.0], [3.7, 0.0]]}],
+            "cases": [{"name": "bend", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.3, 0.6]}]}]}
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "s.json"
+        path.write_text(json.dumps(spec))
+        scene = load_scene(path)
+    lines: list[str] = []
+    run = run_case(scene, "bend", photo=False, log=lines.append)
+    said = [s for s in lines if "not routed" in s]
+    assert len(said) == 1 and "the scene's 1 muscle(s) (lower) are designed for this target" in said[0], lines
+    assert run.setup.routing is None and [m.name for m in run.setup.muscles] == ["lower"]

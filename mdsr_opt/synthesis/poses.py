@@ -186,8 +186,10 @@ class PosesResult:
     separate_n_muscles : (P,) int ndarray
         How many muscles each separate layout has (their sum: what the separate layouts need in total).
     engaged : (P, m) bool ndarray
-        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is paid out
-        to its path length in the designed state: a negative stroke, zero tension.
+        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is left at
+        its path length in the designed state, at zero tension: a negative stroke where that path is longer
+        than at rest (paid out), a positive one where the designed shape, which misses the target, shortens it
+        (slack taken up).
     anchor_radius : float or None
         Radius of the rigid end patches used by the designs.
     muscle_model : str
@@ -546,7 +548,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             D[k], ok[k] = d.difference, d.success
             status.append(str(d.status))
         off = np.flatnonzero(~engaged[k])
-        if len(off):  # released: the stroke that pays out exactly the path's length (negative), no tension
+        if len(off):  # released: the rope at exactly the path's length (paid out or slack taken up), no tension
             Lx = np.array([muscles[i].length(x) for i in off])
             S[k, off] = L0[off] - Lx
             A[k, off] = S[k, off] / L0[off]
