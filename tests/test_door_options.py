@@ -17,11 +17,13 @@ MAT = NeoHookean(1.0, 0.3)
 
 @pytest.fixture
 def no_solve(monkeypatch):
-    for name in ("solve_external", "solve_internal"):
-        @functools.wraps(getattr(equilibrium, name))  # the same signature, which the check reads
-        def refuse(*a, **k):
-            raise AssertionError("the target was solved before the options were checked")
-        monkeypatch.setattr(equilibrium, name, refuse)
+    """The pipeline's target solve refuses to run (patched where the pipeline calls it, so no module imported
+    meanwhile keeps the patched function)."""
+    import mdsr_opt.synthesis.pipeline as pipeline
+
+    def refuse(*a, **k):
+        raise AssertionError("the target was solved before the options were checked")
+    monkeypatch.setattr(pipeline, "_target", refuse)
 
 
 @pytest.mark.parametrize("kwargs, err, words", [
@@ -46,12 +48,31 @@ def test_design_pipeline_checks_its_option_dicts_before_any_solve(no_solve, kwar
     ({"design_options": {"a_mx": 0.3}}, r"design_options: unknown key 'a_mx' \(did you mean 'a_max'\?\)"),
 ])
 def test_design_poses_checks_its_option_dicts_before_any_routing(monkeypatch, kwargs, words):
-    import mdsr_opt.synthesis.routing as routing
+    import mdsr_opt.synthesis.poses as poses
 
-    @functools.wraps(routing.route_muscles)
     def refuse(*a, **k):
         raise AssertionError("routed before the options were checked")
-    monkeypatch.setattr(routing, "route_muscles", refuse)
+    monkeypatch.setattr(poses, "_route", refuse)
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     with pytest.raises(ValueError, match=words):
         design_poses(mesh, MAT, {"squeeze": mesh.points * [0.8, 1.0]}, **kwargs)
+
+
+def test_gait_schedule_checks_its_solve_options_before_any_frame(monkeypatch):
+    from mdsr_opt import Muscle
+    from mdsr_opt.synthesis.gait import gait_schedule
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    target = equilibrium.solve_internal(mesh, MAT, [Muscle(range(1, 9))], [0.1]).x
+    layout = design_poses(mesh, MAT, {"pull": target},
+                          compare=False)
+    import mdsr_opt.synthesis.export  # noqa: F401 - imported before the patch: no module keeps it
+
+    @functools.wraps(equilibrium.solve_internal)
+    def refuse(*a, **k):
+        raise AssertionError("a frame was solved before the options were checked")
+    monkeypatch.setattr(equilibrium, "solve_internal", refuse)
+    with pytest.raises(ValueError, match=r"solve_options: unknown key 'max_iters' \(did you mean 'max_iter'\?\)"):
+        gait_schedule(mesh, MAT, layout, ["rest", "pull"], solve_options={"max_iters": 50})
+    with pytest.raises(ValueError, match="solve_options: unknown key 'anchor_radius'"):  # the layout's own
+        gait_schedule(mesh, MAT, layout, ["rest", "pull"], solve_options={"anchor_radius": 0.1})

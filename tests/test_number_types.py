@@ -69,3 +69,13 @@ def test_targets_drags_strokes_cases_poses_and_gaits_refuse_the_same(strip):
     from mdsr_opt.synthesis.gait import Gait
     with pytest.raises(TypeError, match="step_time must be a real number, got str"):
         Gait("g", ["p", "rest"], step_time="0.5")
+
+
+def test_animation_keyframe_fractions_are_numbers_not_text_or_booleans():
+    from mdsr_opt.scenes.scene import Animation
+
+    with pytest.raises(TypeError, match="keyframe fraction for 'a' must be a real number, got str"):
+        Animation("x", (("a", "0.5"), ("b", 1.0)))
+    with pytest.raises(TypeError, match="keyframe fraction for 'a' must be a real number, got bool"):
+        Animation("x", (("a", True), ("b", 1.0)))
+    assert Animation("x", (("a", 0), ("b", 1))).keyframes == (("a", 0.0), ("b", 1.0))

@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh
 from ..body.polygons import check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
-from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
+from ..core.checks import as_float_array, as_index_array, node_indices, positive_float, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
 from ..synthesis.gait import Gait
@@ -132,13 +132,15 @@ class Animation:
 
     def __post_init__(self):
         check_name(self.name, "animation name")
-        kf = tuple((str(c), float(f)) for c, f in self.keyframes)
+        kf = tuple((str(c), positive_float(f, f"animation {self.name!r}: keyframe fraction for {c!r}",
+                                           allow_zero=True)) for c, f in self.keyframes)  # "0.5", True: TypeError
         if len(kf) < 2:
             raise ValueError(f"animation {self.name!r}: needs at least two keyframes")
         for c, f in kf:
             if not (0.0 <= f <= 1.0):
                 raise ValueError(f"animation {self.name!r}: keyframe fraction {f} for {c!r} is outside [0, 1]")
         positive_int(self.frames_per_step, f"animation {self.name!r}: frames_per_step")
+        positive_float(self.fps, f"animation {self.name!r}: fps")
         object.__setattr__(self, "keyframes", kf)
 
     @property

@@ -22,7 +22,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_float, positive_int
+from ..core.checks import check_options, keyword_names, positive_float, positive_int
 from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
@@ -317,7 +317,11 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         seq = seq + [seq[0]]
     if len(seq) < 2:
         raise ValueError("a non-cyclic gait needs at least two poses")
-    opts = {"tol": 1e-10, **dict(solve_options or {})}  # the design's own forward tolerance
+    # checked at the door (a misspelt key named with the nearest); the layout's model, fixtures and the warm
+    # start are the schedule's own
+    own = {"muscle_model", "anchor_radius", "initial_guess"}
+    opts = {"tol": 1e-10, **check_options(solve_options, set(keyword_names(solve_internal)) - own,
+                                          "solve_options")}  # the design's own forward tolerance
     m = layout.n_muscles
     key = [np.zeros(m) if s == "rest" else layout.strokes[layout.index(s)] for s in seq]
     S, labels, kf = [], [], []
