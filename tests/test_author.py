@@ -329,7 +329,7 @@ def test_downloaded_figures_name_the_scenes_unit(tentacle, monkeypatch, tmp_path
     monkeypatch.setattr(common, "save_figure", lambda fig, path, **kw: (labels.append(fig.axes[0].get_xlabel()),
                                                                        Path(path).write_bytes(b"png")))
     _, media = download(s, "graph.png", tmp_path)
-    assert labels == [f"x ({tentacle.units})"] and media == "image/png"
+    assert labels == [f"x ({tentacle.units or 'body units'})"] and media == "image/png"
 
 
 # ------------------------------------------------------------------------------------------ fabrication and deletion
@@ -343,7 +343,7 @@ def test_the_page_shows_the_bodys_fabrication_defaults(tentacle):
     assert shown == Fabrication().for_body(tentacle.mesh).to_dict()  # the class's defaults, read
     D = body_size(tentacle.mesh)
     assert np.isclose(shown["channel_diameter"], 0.01 * D) and np.isclose(shown["fixture_radius"], 0.04 * D)
-    assert body_message(s)["units"] == "mm"
+    assert body_message(s)["units"] is None  # the library's tentacle states no unit: body units, none invented
     # a scene's own [fabrication] is what the page shows (the fields it leaves open: the body's defaults)
     s2 = Session.from_scene(tentacle)
     s2.routing_options["fabrication"] = {"channel_diameter": 0.2, "wall": 0.05}
@@ -429,7 +429,7 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)
     assert abs(run.report.difference - page["difference"]) <= 1e-9
     assert page["acceptance"] == "" and run.report.success  # the page says what mdsr run will say
-    assert back.units == "mm" and back.acceptance == s.acceptance  # the scene's unit and [acceptance] kept
+    assert back.units == tentacle.units and back.acceptance == s.acceptance  # the scene's unit and [acceptance] kept
     # a stricter [acceptance]: the page names the failure mdsr run reports for the saved scene
     s.acceptance = dict(s.acceptance, max_difference=1e-4)
     strict = s.run_design()

@@ -90,8 +90,9 @@ def test_a_dimensionless_body_is_in_body_units_everywhere(tmp_path):
 
 
 def test_mdsr_run_logs_and_summarises_strokes_and_tensions_with_units(tmp_path, capsys):
-    out = tmp_path / "o"
-    assert main(["run", str(FINGER), "--out", str(out), "--case", "contract", "--serial", "--no-photos",
+    out, finger = tmp_path / "o", tmp_path / "finger_mm.toml"
+    finger.write_text(FINGER.read_text().replace('name = "finger"\n', 'name = "finger"\nunits = "mm"\n'))
+    assert main(["run", str(finger), "--out", str(out), "--case", "contract", "--serial", "--no-photos",
                  "--no-figures", "--no-animations", "--no-prototype"]) == 0
     log = capsys.readouterr().out
     line = next(s for s in log.splitlines() if "strokes [" in s)
@@ -111,7 +112,7 @@ def test_a_scene_file_states_its_stress_unit(tmp_path):
     path = tmp_path / "f.toml"
     path.write_text(src.replace("nu = 0.4\n", 'nu = 0.4\nstress_unit = "kPa"\n'))
     scene = load_scene(path)
-    assert scene.material.stress_unit == "kPa" and scene.units == "mm"
+    assert scene.material.stress_unit == "kPa" and scene.units is None  # no unit given: body units
     assert material_table(scene.material)["stress_unit"] == "kPa"
     assert material_table(silicone("dragon-skin-30"))["stress_unit"] == "Pa"
     path.write_text(src.replace("nu = 0.4\n", 'nu = 0.4\nstress_unit = "psi"\n'))
@@ -128,3 +129,20 @@ def test_export_takes_the_material_for_a_design_that_records_no_stress_unit(tmp_
                                material=NeoHookean(1.0, 0.3, stress_unit="MPa"))
     rows = list(csv.DictReader(open(files["csv"])))
     assert float(rows[0]["tension bend [N]"]) == pytest.approx(d.tension[0], rel=1e-8)  # MPa x mm^2 = N
+
+
+def test_a_scene_without_units_is_in_body_units_everywhere(tmp_path, capsys):
+    """No unit invented (new-user trial: a scene file without `units` reported mm): the scene, the log, the
+    summary and the gait's schedule say body units."""
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.scenes.scene import Scene
+
+    assert load_scene(FINGER).units is None
+    assert Scene.__dataclass_fields__["units"].default is None
+    out = tmp_path / "o"
+    assert main(["run", str(FINGER), "--out", str(out), "--case", "contract", "--serial", "--no-photos",
+                 "--no-figures", "--no-animations", "--no-prototype"]) == 0
+    line = next(s for s in capsys.readouterr().out.splitlines() if "strokes [" in s)
+    assert "] body units, tensions [" in line and " mm" not in line
+    case = json.loads((out / "summary.json").read_text())["cases"][0]
+    assert case["units"]["stroke"] == "body units"

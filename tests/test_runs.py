@@ -141,7 +141,8 @@ def test_two_concurrent_runs_cannot_mix_and_a_crashed_run_leaves_no_lock(tmp_pat
     # the next run takes the folder over and replaces the crashed run's files completely
     assert main(["run", str(strip), "--out", str(out), "--overwrite", "--no-photos"]) == 0
     files = _files(out)
-    assert all(f in (LOCK_NAME, MANIFEST_NAME, "rest.png", "summary.json", "summary.md") or f.startswith("bend/")
+    assert LOCK_NAME not in files
+    assert all(f in (MANIFEST_NAME, "rest.png", "summary.json", "summary.md") or f.startswith("bend/")
                for f in files), files
     assert json.loads((out / "summary.json").read_text())["scene"] == "strip"
     assert json.loads((out / MANIFEST_NAME).read_text())["status"] == "complete"
@@ -188,7 +189,23 @@ def test_a_stale_lock_file_does_not_block(tmp_path):
     (out / LOCK_NAME).write_text(json.dumps({"pid": 999999, "host": "gone"}))
     with RunFolder(out) as f:
         f.begin(["x"])
+    assert not (out / LOCK_NAME).exists()  # the stale file goes with the run's own
     assert _lock_is_free(out)
+
+
+def test_the_lock_file_is_there_while_the_command_runs_and_gone_after_it(tmp_path):
+    out = tmp_path / "out"
+    with RunFolder(out, command="mdsr run gecko") as f:
+        f.begin(["a.txt"])
+        (out / "a.txt").write_text("a")
+        assert (out / LOCK_NAME).exists()
+        with pytest.raises(FolderBusy, match="another mdsr process is writing into this folder"):
+            RunFolder(out, overwrite=True).__enter__()
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST_NAME, "a.txt"]
+    with RunFolder(out, overwrite=True) as f:        # the next command locks it again
+        f.begin(["a.txt"])
+        assert (out / LOCK_NAME).exists()
+    assert not (out / LOCK_NAME).exists() and not (out / HOLDER_NAME).exists()
 
 
 def test_a_held_lock_names_the_holder(tmp_path):
@@ -268,7 +285,7 @@ def test_a_manifest_killed_before_its_first_file_and_one_of_an_older_version(tmp
         RunFolder(out).__enter__()
     with RunFolder(out, overwrite=True) as f:
         f.begin(["bend"])
-    assert _files(out) == [LOCK_NAME, MANIFEST_NAME, "bend/notes.txt"]
+    assert _files(out) == [MANIFEST_NAME, "bend/notes.txt"]   # no lock file left (trial defect 12)
     # version 1 listed the names directly in the folder: a folder among them is refused, nothing removed
     (out / MANIFEST_NAME).write_text(json.dumps({"format": "mdsr_opt.run_folder/1", "status": "complete",
                                                  "command": "mdsr run x", "claims": ["bend", "summary.md"]}))
@@ -276,7 +293,7 @@ def test_a_manifest_killed_before_its_first_file_and_one_of_an_older_version(tmp
     with pytest.raises(OutputFolderError, match=r"earlier mdsr version, names the folder\(s\) 'bend' but not the "
                                                 r"files in them, so --overwrite cannot tell its files from yours"):
         RunFolder(out, overwrite=True).__enter__()
-    assert _files(out) == [LOCK_NAME, MANIFEST_NAME, "bend/notes.txt", "summary.md"]
+    assert _files(out) == [MANIFEST_NAME, "bend/notes.txt", "summary.md"]
 
 
 def test_overwrite_removes_nothing_outside_the_folder_or_of_the_users(tmp_path):

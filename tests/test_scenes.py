@@ -348,7 +348,7 @@ def test_mdsr_run_scene_file_writes_everything(tmp_path, capsys):
     per_case = ["design.png", "driven.vtu", "graph.png", "muscles.png", "overlay.png", "photo.json", "photo.png",
                 "target.png", "target.vtu"] + [f"prototype_{k}.{e}" for k in ("design", "driving") for e in ("json", "png")]
     assert files == sorted([f"{c}/{f}" for c in ("bend", "contract") for f in per_case]
-                           + [".mdsr-lock", ".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json",
+                           + [".mdsr-run.json", "curl.gif", "curl.json", "rest.png", "summary.json",
                               "summary.md", "validation.md"])
     manifest = json.loads((out / ".mdsr-run.json").read_text())
     assert manifest["status"] == "complete" and "bend" in manifest["claims"]
@@ -380,7 +380,7 @@ def test_mdsr_run_reports_a_failed_case(tmp_path, capsys):
     assert "FAILED strip/stretch: routing found no muscle" in text and "cable cannot push" in text
     s = json.loads((out / "summary.json").read_text())
     assert s["success"] is False and s["cases"][0]["target_success"] is True
-    assert sorted(p.name for p in out.iterdir()) == [".mdsr-lock", ".mdsr-run.json", "summary.json", "summary.md"]
+    assert sorted(p.name for p in out.iterdir()) == [".mdsr-run.json", "summary.json", "summary.md"]
 
 
 def test_a_scene_file_may_choose_where_the_design_warm_start_starts():

@@ -149,8 +149,9 @@ def check_distinct_ropes(muscles: Sequence[Muscle]) -> None:
 
 def check_contractions(contractions: ArrayLike, n_muscles: int, a_max: float = 1.0) -> np.ndarray:
     """Contractions as a float vector, one per muscle, each in ``[0, a_max)`` with ``a_max <= 1``."""
-    a = as_float_array(np.atleast_1d(np.asarray(contractions, dtype=float) if not isinstance(contractions, str)
-                                     else contractions), "contractions", shape=(None,))
+    a = np.atleast_1d(as_float_array(contractions, "contractions"))  # strings, bools, None: TypeError
+    if a.ndim != 1:
+        raise ValueError(f"contractions must have shape (k,), got {a.shape}")
     if len(a) != n_muscles:
         raise ValueError(f"contractions must have one value per muscle ({n_muscles}), got {len(a)}")
     bad = (a < 0) | (a >= a_max)

@@ -56,6 +56,19 @@ def _cmd_evaluate(a) -> int:
     return 0
 
 
+def _check_not_above_states(folder: Path, suffixes) -> None:
+    """A folder whose state files are all in its sub-folders (``mdsr run``'s output: one folder per case, each
+    with ``driven.vtu`` and ``target.vtu``, whose names repeat) is refused, naming those sub-folders."""
+    if not folder.is_dir() or any(f.is_file() and f.suffix.lower() in suffixes for f in folder.iterdir()):
+        return
+    below = sorted(d.name for d in folder.iterdir()
+                   if d.is_dir() and any(f.is_file() and f.suffix.lower() in suffixes for f in d.iterdir()))
+    if below:
+        raise InputError(f"no state files ({', '.join(suffixes)}) in {folder} itself (its sub-folders are not "
+                         f"searched: their files share names such as driven.vtu); give one of its folders that "
+                         f"hold some: {', '.join(below)} (e.g. mdsr photograph {folder / below[0]} --out ...)")
+
+
 def _cmd_photograph(a) -> int:
     # imported here, not with the parser (every command paid for the photographs' modules)
     from ..body.io import read_mesh
@@ -63,6 +76,7 @@ def _cmd_photograph(a) -> int:
     from ..photos.folder import STATE_SUFFIXES, list_files, write_together
 
     with checking_input():  # the states named: bad input
+        _check_not_above_states(Path(a.states), STATE_SUFFIXES)
         files = list_files(a.states, STATE_SUFFIXES, "state")
     stems = [f.stem for f in files]
     twice = sorted({st for st in stems if stems.count(st) > 1})

@@ -133,7 +133,7 @@ def _cmd_run(a) -> int:
             if not an.get("success", False):
                 print(f"FAILED {r.scene}/{name} (animation): {an.get('message') or an.get('failed_frames')}")
     print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
-          f"results in {a.out}; photographs are SYNTHETIC")
+          f"results in {a.out}" + ("" if a.no_photos else "; photographs are SYNTHETIC"))
     return 0 if ok else 1
 
 

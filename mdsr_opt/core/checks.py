@@ -3,23 +3,35 @@ names and file stems."""
 
 from __future__ import annotations
 
+import difflib
+import inspect
 import numbers
 import unicodedata
+from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
 __all__ = ['as_float_array', 'as_index_array', 'node_indices', 'positive_float', 'positive_int', 'check_int',
-           'integer_range', 'check_label', 'check_stem']
+           'integer_range', 'check_label', 'check_stem', 'check_options', 'keyword_names', 'unknown_key_hint']
 
 
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
-    """Return ``value`` as a finite float array, raising ``TypeError``/``ValueError`` naming ``name``."""
+    """Return ``value`` as a finite float array, raising ``TypeError``/``ValueError`` naming ``name``.
+
+    Real numbers only: strings (``"0.2"``), booleans (``True`` would read as 1), None, complex numbers and
+    object arrays are refused with a ``TypeError`` naming the first bad element and its type, never
+    converted."""
+    found = _first_non_real(value)
+    if found is not None:
+        where, bad = found
+        raise TypeError(f"{name}{where} must be a real number, got {type(bad).__name__} {bad!r}")
     try:
         arr = np.asarray(value)
     except Exception as exc:  # pragma: no cover - exotic inputs
         raise TypeError(f"{name} must be array-like of numbers: {exc}") from None
-    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
-        raise TypeError(f"{name} must be an array of numbers, got dtype {arr.dtype}")
+    if arr.dtype == object or arr.dtype == bool or not np.issubdtype(arr.dtype, np.number):
+        kind = "booleans" if arr.dtype == bool else f"dtype {arr.dtype}"
+        raise TypeError(f"{name} must be an array of real numbers, got {kind}")
     if np.issubdtype(arr.dtype, np.complexfloating):
         raise TypeError(f"{name} must be real, got complex values")
     arr = arr.astype(float)
@@ -29,6 +41,23 @@ def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | 
         bad = np.argwhere(~np.isfinite(arr))
         raise ValueError(f"{name} contains NaN or inf (first at index {tuple(int(i) for i in bad[0])})")
     return arr
+
+
+def _first_non_real(value) -> tuple[str, object] | None:
+    """The index (``"[2][0]"``, ``""`` for a scalar) and value of the first element of the nested lists,
+    tuples or object array ``value`` that is not a real number (a string, bool, None, complex ...), else
+    None. Numeric numpy arrays are left to the dtype check."""
+    stack: list[tuple[str, object]] = [("", value)]
+    while stack:
+        where, v = stack.pop()
+        if isinstance(v, (list, tuple)) or (isinstance(v, np.ndarray) and v.dtype == object):
+            items = list(v) if not isinstance(v, np.ndarray) or v.ndim else [v.item()]
+            stack.extend((f"{where}[{i}]", e) for i, e in reversed(list(enumerate(items))))
+        elif isinstance(v, np.ndarray):
+            continue
+        elif isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+            return where, v
+    return None
 
 
 def as_index_array(value: ArrayLike, name: str, n: int | None = None,
@@ -212,3 +241,37 @@ def positive_int(value, name: str) -> int:
     if v < 1:
         raise ValueError(f"{name} must be a positive integer, got {v}")
     return v
+
+
+def keyword_names(func: Callable) -> tuple[str, ...]:
+    """The keyword-only parameters of ``func`` (those an ``options`` dict passed on as ``**options`` may
+    name)."""
+    return tuple(p.name for p in inspect.signature(func).parameters.values() if p.kind == p.KEYWORD_ONLY)
+
+
+def unknown_key_hint(key, allowed: Iterable[str]) -> str:
+    """The words after "unknown key": ``" (did you mean 'max_muscles'?)"`` for a near miss, else the list of
+    the keys allowed."""
+    allowed = sorted(allowed)
+    close = difflib.get_close_matches(str(key), allowed, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(allowed)})"
+
+
+def check_options(options, allowed: Iterable[str], name: str) -> dict:
+    """An options dict (``routing_options``, ``design_options`` ...) as a new ``dict``, None as ``{}``, checked
+    before any work: a mapping whose keys are all in ``allowed``.
+
+    Raises ``TypeError`` for a value that is not a mapping or a key that is not a string, ``ValueError`` for
+    an unknown key, naming it with the nearest allowed key (``did you mean 'max_muscles'?``).
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(f"{name} must be a dict, got {type(options).__name__}")
+    allowed = set(allowed)
+    for k in options:
+        if not isinstance(k, str):
+            raise TypeError(f"{name}: keys must be strings, got {type(k).__name__} {k!r}")
+        if k not in allowed:
+            raise ValueError(f"{name}: unknown key {k!r}{unknown_key_hint(k, allowed)}")
+    return dict(options)

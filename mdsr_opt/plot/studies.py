@@ -30,12 +30,19 @@ def _study_time(r):
     return max(r["build_time"] + r["solve_time"], 1e-4)
 
 
+def _lost_time(r):
+    """The time of a run that gave no result (a time-out's budget): its wall time when longer."""
+    wall = r.get("wall_time", float("nan"))
+    return max(_study_time(r), wall if np.isfinite(wall) else 0.0)
+
+
 def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     """Accuracy against time for a study's runs, with the Pareto front of each method.
 
     One panel per kind present: equilibrium runs (state error over body size, against the reference) and
     design runs (largest contraction error). Filled markers are successful runs, crosses failed ones (their
-    last state). The line of each method joins its non-dominated successful runs: no faster run of that
+    last state); a failed run without an error (a time-out) is a cross at the top edge, at its time (its wall
+    time when longer), and the panel's title counts them. The line of each method joins its non-dominated successful runs: no faster run of that
     method is more accurate. Time is build plus solve time, log scale; errors below ``floor`` are drawn at it.
 
     Parameters
@@ -60,6 +67,11 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
     ylabels = {"equilibrium": "max node error / body size (-)", "design": "max contraction error (-)"}
     for ax, kind in zip(axes, kinds):
         rs = [r for r in rows if r["kind"] == kind and np.isfinite(r["error"])]
+        lost = [r for r in rows if r["kind"] == kind and not np.isfinite(r["error"])]
+        for m in dict.fromkeys(r["method"] for r in lost):  # no error to draw (a time-out ...): at the top edge
+            t = [_lost_time(r) for r in lost if r["method"] == m]
+            ax.scatter(t, np.ones(len(t)), transform=ax.get_xaxis_transform(), color=colors[m], marker="x",
+                       s=28, clip_on=False, label=f"{m} (no result: {len(t)})")
         for m in dict.fromkeys(r["method"] for r in rs):
             mr = [r for r in rs if r["method"] == m]
             ok = [r for r in mr if r["success"]]
@@ -79,7 +91,14 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
         ax.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap on a short range
         ax.set_xlabel("build + solve time (s)")
         ax.set_ylabel(ylabels[kind])
-        ax.set_title(f"{kind}: accuracy against time (x = failed run)", fontsize=9)
+        if lost:  # the top edge's crosses are in axes coordinates: the time axis must reach them
+            t_all = [_study_time(r) for r in rs] + [_lost_time(r) for r in lost]
+            ax.set_xlim(min(t_all) / 1.5, max(t_all) * 1.5)
+            if not rs:
+                ax.set_ylim(floor, 1.0)
+        ax.set_title(f"{kind}: accuracy against time (x = failed run" + (
+            f"; {len(lost)} with no result: x on the top edge)" if lost else ")"),
+            fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     if title:

@@ -5,7 +5,7 @@ DIR``, :func:`~mdsr_opt.scenes.runscene.run_scene`, :func:`~mdsr_opt.studies.stu
 
 - **One writer.** The folder is locked (``DIR/.mdsr-lock`` through the ``filelock`` package: an operating
   system lock, which goes with the process however it ends, so a killed run leaves no lock that needs
-  clearing). A second command into the same folder fails at once with a message naming the first (its
+  clearing; the file is removed when the command ends). A second command into the same folder fails at once with a message naming the first (its
   process id and command, from ``DIR/.mdsr-lock.json``).
 - **No mixing.** A folder that already holds files is refused. With ``overwrite=True`` (``--overwrite``)
   the files an earlier mdsr command wrote there are removed first: exactly the files its manifest
@@ -29,7 +29,7 @@ Example
 ...     folder.begin(["result.txt"])
 ...     _ = open(os.path.join(d, "result.txt"), "w").write("42")
 >>> sorted(os.listdir(d))
-['.mdsr-lock', '.mdsr-run.json', 'result.txt']
+['.mdsr-run.json', 'result.txt']
 >>> RunFolder(d).__enter__()  # doctest: +ELLIPSIS
 Traceback (most recent call last):
 ...
@@ -55,7 +55,7 @@ __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "Terminated", "check_
            "MANIFEST_NAME", "remove_temporaries", "noting_interrupts", "check_interrupt", "interrupt_signal",
            "recording_command"]
 
-#: The lock file inside an output folder (it stays there, empty, after the command).
+#: The lock file inside an output folder while a command writes there (removed when it ends).
 LOCK_NAME = ".mdsr-lock"
 #: Who holds the lock: process id, host, command and start (removed when the lock is released).
 HOLDER_NAME = ".mdsr-lock.json"
@@ -389,6 +389,9 @@ class RunFolder:
         self._lock_was_there = (self.path / LOCK_NAME).exists()
         try:
             lock.acquire()
+            if not (self.path / LOCK_NAME).exists():  # the last holder removed the file we locked: lock anew
+                lock.release()
+                lock.acquire()
         except Timeout:
             raise FolderBusy(f"--out {self.path}: another mdsr process is writing into this folder "
                              f"({_holder(self.path / HOLDER_NAME)}); wait for it to finish or choose another "
@@ -547,8 +550,9 @@ class RunFolder:
             self._noting = None
         if self._begun:
             remove_temporaries(self.path, self._claims)
-        # a command that wrote nothing leaves the folder as it found it: no lock file, no folder it made
-        self._unlock(forget_file=not self._begun and not self._lock_was_there)
+        # the lock file goes (removed while still held); a command that wrote nothing also leaves no folder it
+        # made (a lock file that was there before, e.g. left by an older version, stays then)
+        self._unlock(forget_file=self._begun or not self._lock_was_there)
         if not self._begun:
             for p in self._created:
                 try:

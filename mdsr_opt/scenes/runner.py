@@ -16,7 +16,7 @@ from ..core.errors import LayoutError
 from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..mechanics.align import difference, node_weights
-from ..plot.style import unit_label
+from ..plot.style import muscle_label, unit_label
 from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
@@ -308,6 +308,10 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
+    elif case.kind == "external" and scene.muscles is not None and case.muscles is None:
+        names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
+        say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "
+            "(a scene's [[muscles]] drive every case; in a scene without them an external case's are routed)")
     opts = dict(scene.design_options)
     if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
             setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to

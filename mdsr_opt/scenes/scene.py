@@ -11,7 +11,7 @@ from numpy.typing import ArrayLike
 from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh
 from ..body.polygons import check_polygon, polygon_area
 from ..body.muscles import Muscle, check_muscles
-from ..core.checks import as_float_array, as_index_array, node_indices, positive_int
+from ..core.checks import as_float_array, as_index_array, node_indices, positive_float, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
 from ..synthesis.gait import Gait
@@ -85,8 +85,9 @@ class Case:
             object.__setattr__(self, "muscles", mus)
         anc = node_indices(self.anchors, f"case {self.name!r}: anchors")
         dn = node_indices(self.drag_nodes, f"case {self.name!r}: drag_nodes")
-        dp = as_float_array(np.asarray(self.drag_positions, dtype=float).reshape(-1, 2) if np.size(
-            self.drag_positions) else np.zeros((0, 2)), f"case {self.name!r}: drag_positions", shape=(len(dn), 2))
+        dp = as_float_array(self.drag_positions, f"case {self.name!r}: drag_positions")
+        dp = as_float_array(dp.reshape(-1, 2) if dp.size else np.zeros((0, 2)),
+                            f"case {self.name!r}: drag_positions", shape=(len(dn), 2))
         object.__setattr__(self, "anchors", anc)
         object.__setattr__(self, "drag_nodes", dn)
         object.__setattr__(self, "drag_positions", dp)
@@ -131,13 +132,15 @@ class Animation:
 
     def __post_init__(self):
         check_name(self.name, "animation name")
-        kf = tuple((str(c), float(f)) for c, f in self.keyframes)
+        kf = tuple((str(c), positive_float(f, f"animation {self.name!r}: keyframe fraction for {c!r}",
+                                           allow_zero=True)) for c, f in self.keyframes)  # "0.5", True: TypeError
         if len(kf) < 2:
             raise ValueError(f"animation {self.name!r}: needs at least two keyframes")
         for c, f in kf:
             if not (0.0 <= f <= 1.0):
                 raise ValueError(f"animation {self.name!r}: keyframe fraction {f} for {c!r} is outside [0, 1]")
         positive_int(self.frames_per_step, f"animation {self.name!r}: frames_per_step")
+        positive_float(self.fps, f"animation {self.name!r}: fps")
         object.__setattr__(self, "keyframes", kf)
 
     @property
@@ -176,9 +179,9 @@ class Scene:
         Approximate node count asked for (0 when the mesh was given).
     source : str
         The file the scene came from.
-    units : str
-        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`, default ``"mm"``),
-        carried into the gait schedule and the fabrication files.
+    units : str or None
+        The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`), carried into
+        the gait schedule and the fabrication files; None (the default): "body units", no unit is invented.
     gait : mdsr_opt.synthesis.gait.Gait, optional
         A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
     acceptance : dict
@@ -203,7 +206,7 @@ class Scene:
     expected: dict = field(default_factory=dict)
     resolution: int = 0
     source: str = ""
-    units: str = "mm"
+    units: str | None = None
     gait: Any = None
     acceptance: dict = field(default_factory=dict)
 
@@ -321,6 +324,9 @@ def resolve_resolution(resolution: str | int) -> int:
     """The approximate node count for ``resolution`` (a name of :data:`RESOLUTIONS` or an integer from 20
     to :data:`~mdsr_opt.body.mesh.MAX_RESOLUTION`)."""
     if isinstance(resolution, str):
+        if resolution not in RESOLUTIONS and resolution.strip().lstrip("+-").isdigit() and int(resolution) < 20:
+            # a count typed as text (the command line's ``--resolution -5``): the count's own message
+            raise ValueError(f"resolution must be at least 20 nodes, got {int(resolution)}")
         if resolution not in RESOLUTIONS:
             raise ValueError(f"resolution must be one of {', '.join(map(repr, RESOLUTIONS))} or a node count, "
                              f"got {resolution!r}")
@@ -386,10 +392,11 @@ def mesh_polygon(outline: ArrayLike, holes: Sequence[ArrayLike] | None = None,
 
 
 def check_units_and_gait(scene: Scene) -> None:
-    """Check a scene's ``units`` (a known length unit) and ``gait`` (a Gait naming its cases)."""
+    """Check a scene's ``units`` (a known length unit, or None: body units) and ``gait`` (a Gait naming its
+    cases)."""
     from ..synthesis.export import check_units
 
-    scene.units = check_units(scene.units)
+    scene.units = None if scene.units is None else check_units(scene.units)
     if scene.gait is None:
         return
     if not isinstance(scene.gait, Gait):

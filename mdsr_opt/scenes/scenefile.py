@@ -57,8 +57,8 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         name = "finger"                       # required: letters, digits, _ - .
         title = "A finger bent by its tip"    # optional, as is description
         units = "mm"                          # optional: the length unit of every coordinate (mm, cm, m,
-                                              # um, in; default mm), carried into the gait's schedule and
-                                              # the fabrication files (SVG, DXF, CSV)
+                                              # um, in; none: "body units"), carried into the gait's schedule
+                                              # and the fabrication files (SVG, DXF, CSV)
 
         [body]                                # required: outline (+ holes) or mesh
         outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
@@ -530,8 +530,8 @@ def parse_units_and_gait(r: Reader, top: Mapping, case_names: set):
     ``frames_per_step``, ``max_muscles``, ``step_time``, ``cyclic``, ``fps``)."""
     from ..synthesis.export import UNITS
 
-    units = top.get("units", "mm")
-    if not isinstance(units, str) or units not in UNITS:
+    units = top.get("units")  # none given: body units (no unit is invented)
+    if units is not None and (not isinstance(units, str) or units not in UNITS):
         r.fail("units", f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
     if "gait" not in top:
         return units, None

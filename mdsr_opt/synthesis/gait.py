@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import copy
 import csv
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,7 +22,8 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import positive_int
+from ..core.checks import check_options, keyword_names, positive_float, positive_int
+from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
 from .poses import PosesResult, check_budget
@@ -101,10 +101,8 @@ class Gait:
         object.__setattr__(self, "sequence", seq)
         object.__setattr__(self, "frames_per_step", _frames(self.frames_per_step))
         check_budget(self.max_muscles)
-        if not (float(self.step_time) > 0 and math.isfinite(float(self.step_time))):
-            raise ValueError(f"gait {self.name!r}: step_time must be positive, got {self.step_time!r}")
-        if not (float(self.fps) > 0):
-            raise ValueError(f"gait {self.name!r}: fps must be positive, got {self.fps!r}")
+        positive_float(self.step_time, f"gait {self.name!r}: step_time")  # a string or bool: TypeError
+        positive_float(self.fps, f"gait {self.name!r}: fps")
 
     @property
     def poses(self) -> tuple[str, ...]:
@@ -146,7 +144,7 @@ class GaitSchedule:
     success : (F,) bool ndarray
     status : tuple of str
     units : str
-        The length unit of every stroke.
+        The length unit of every stroke (``"body units"`` when the mesh's is not known).
     rest_mesh : dict or None
         The fingerprint of the mesh the schedule was solved on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`);
         :func:`save_gait_animation` refuses another mesh (None: not recorded, not checked).
@@ -172,7 +170,7 @@ class GaitSchedule:
     states: np.ndarray
     success: np.ndarray
     status: tuple
-    units: str = "mm"
+    units: str = BODY_UNITS
     rest_mesh: dict | None = None
     keyframe_differences: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
@@ -248,7 +246,7 @@ class GaitSchedule:
 
 @interruptible()
 def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[str], *, frames_per_step: int = 6,
-                  cyclic: bool = True, step_time: float = 1.0, units: str = "mm",
+                  cyclic: bool = True, step_time: float = 1.0, units: str | None = None,
                   solve_options: Mapping | None = None, max_difference: float | None = None) -> GaitSchedule:
     """The strokes of every muscle over a cyclic sequence of poses, every frame solved forward.
 
@@ -274,8 +272,9 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         Close the cycle: the first keyframe is repeated at the end.
     step_time : float
         Seconds per step.
-    units : str
-        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`).
+    units : str, optional
+        The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`);
+        None (the default): "body units", no unit is invented.
     solve_options : dict, optional
         Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
         tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
@@ -303,7 +302,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                          f"nodes, the mesh {mesh.n_nodes}")
     check_same_mesh(mesh, layout.rest_mesh, "the layout")
     fps_ = _frames(frames_per_step)
-    units = check_units(units)
+    units = length_unit(units) if units is None else check_units(units)  # none: "body units"
     if isinstance(sequence, str) or not isinstance(sequence, Sequence):
         raise TypeError(f"sequence must be a list of pose names, got {type(sequence).__name__}")
     seq = [str(s) for s in sequence]
@@ -312,14 +311,17 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     for s in seq:
         if s != "rest":
             layout.index(s)
-    if not (float(step_time) > 0):
-        raise ValueError(f"step_time must be positive, got {step_time!r}")
+    positive_float(step_time, "step_time")
     max_difference = MAX_DIFFERENCE if max_difference is None else check_max_difference(max_difference)
     if cyclic:
         seq = seq + [seq[0]]
     if len(seq) < 2:
         raise ValueError("a non-cyclic gait needs at least two poses")
-    opts = {"tol": 1e-10, **dict(solve_options or {})}  # the design's own forward tolerance
+    # checked at the door (a misspelt key named with the nearest); the layout's model, fixtures and the warm
+    # start are the schedule's own
+    own = {"muscle_model", "anchor_radius", "initial_guess"}
+    opts = {"tol": 1e-10, **check_options(solve_options, set(keyword_names(solve_internal)) - own,
+                                          "solve_options")}  # the design's own forward tolerance
     m = layout.n_muscles
     key = [np.zeros(m) if s == "rest" else layout.strokes[layout.index(s)] for s in seq]
     S, labels, kf = [], [], []
@@ -469,9 +471,14 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     targets = {c: runs[c].setup.target for c in gait.poses}
     separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
                 if runs[c].design is not None and len(runs[c].setup.muscles)}
+    dopt, case_radii = dict(scene.design_options), _case_radii(runs, gait.poses)
+    if dopt.get("anchor_radius") is None and len(set(case_radii.values())) == 1 and all(
+            c in separate and not _routed(runs[c].setup) for c in gait.poses):
+        # the poses' muscles are given (the scene's), not routed: the fixtures the cases were designed with
+        dopt["anchor_radius"] = next(iter(case_radii.values()))
     try:
         res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
-                           routing_options=scene.routing_options, design_options=scene.design_options,
+                           routing_options=scene.routing_options, design_options=dopt,
                            separate=separate)
         sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
                             cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units,
@@ -480,6 +487,9 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         info.update(success=False, message=str(exc))
         say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
         return info
+    radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
+    if radius_note:
+        info["notes"] = [radius_note]
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
     # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at
@@ -499,7 +509,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
-    info.update(success=ok, n_muscles=res.n_muscles, separate_n_muscles=int(res.separate_n_muscles.sum()),
+    info.update(success=ok, n_muscles=res.n_muscles, muscles=[m.name for m in res.muscles],
+                fixture_radius=None if res.anchor_radius is None else float(res.anchor_radius), separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),
                 separate_differences={n: (float(v) if np.isfinite(v) else None)
                                       for n, v in zip(res.names, res.separate_differences)},
@@ -524,7 +535,37 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         else:
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
-        f"{int(res.separate_n_muscles.sum())}), difference ({scene.units}) " + ", ".join(
+        f"{int(res.separate_n_muscles.sum())}), difference ({length_unit(scene.units)}) " + ", ".join(
             f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
-        + f"; {sch.outcome()}" + ("" if ok else " - FAILED: " + info["message"]))
+        + f"; {sch.outcome()}" + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: "
+                                                                                   + info["message"]))
     return info
+
+
+def _routed(setup) -> bool:
+    """Were this case's muscles routed (fitted to their fixtures), rather than given by the scene or case?"""
+    routing = getattr(setup, "routing", None)
+    return routing is not None and tuple(setup.muscles) == tuple(routing.muscles)
+
+
+def _case_radii(runs: Mapping, poses) -> dict:
+    """Per pose the fixture (anchor patch) radius its case's design was made with, where it has one."""
+    out = {}
+    for c in poses:
+        r = getattr(runs[c].design, "anchor_radius", None) if runs[c].design is not None else None
+        if r is not None:
+            out[c] = float(r)
+    return out
+
+
+def _radius_note(radius, case_radii: Mapping, units) -> str:
+    """The words for a gait whose fixtures differ from those its cases were designed with ("" if the same):
+    its strokes and differences are then not the cases' for the same muscle and target."""
+    if radius is None or not case_radii or all(abs(r - radius) <= 1e-9 * max(abs(r), 1.0)
+                                               for r in case_radii.values()):
+        return ""
+    unit = f" {units}" if units else ""
+    cases = ", ".join(f"{c} {r:.4g}" for c, r in case_radii.items())
+    return (f"the gait's end fixtures have radius {radius:.4g}{unit}, the cases' designs {cases}{unit}: one size "
+            "at which every shared rope keeps its fixtures, so its strokes and differences differ from the "
+            "cases' for the same muscle and target")

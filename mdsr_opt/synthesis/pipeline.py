@@ -15,6 +15,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
+from ..core.checks import check_options, keyword_names
 from ..core.quantities import check_length_unit
 from ..core.results import compact_repr
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
@@ -250,6 +251,26 @@ def _target(mesh, material, anchors, drags, opts: dict, solve_external) -> Equil
     return ext if ext.success else solve_external(mesh, material, anchors, drags, **opts)
 
 
+def _check_option_dicts(band_options, routing_options, external_options, design_options) -> tuple[dict, ...]:
+    """The pipeline's option dicts checked at the door, each key against the keywords of the function it is
+    passed to (an unknown key named with the nearest one: ``did you mean 'max_muscles'?``), before the
+    target is solved; returns the first three as dicts."""
+    from ..mechanics.equilibrium import solve_external
+    from .contractions import design_contractions
+    from .routing import route_muscles
+
+    bands = check_options(band_options, BAND_OPTIONS, "band_options")
+    routing = check_options(routing_options, keyword_names(route_muscles), "routing_options")
+    external = check_options(external_options, keyword_names(solve_external), "external_options")
+    check_options(design_options, set(keyword_names(design_contractions)) | {"drop_slack"},
+                  "design_pipeline's design options (its other keywords)")
+    return bands, routing, external
+
+
+#: The keys of ``band_options``: :func:`~mdsr_opt.synthesis.bands.stroke_bands`' own and the designs' ``max_iter``.
+BAND_OPTIONS = ("radius_tol", "nu_tol", "refine", "max_refined_nodes", "max_iter")
+
+
 @interruptible()
 def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[Muscle] | None = None,
                     routing_options: dict | None = None, method: str | None = None,
@@ -337,12 +358,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     idle_contraction = check_idle_contraction(idle_contraction)
     if not isinstance(bands, (bool, np.bool_)):
         raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
-    if band_options is not None and not isinstance(band_options, dict):
-        raise TypeError(f"band_options must be a dict, got {type(band_options).__name__}")
-    unknown = set(band_options or {}) - {"radius_tol", "nu_tol", "refine", "max_refined_nodes", "max_iter"}
-    if unknown:
-        raise ValueError(f"band_options: unknown key {sorted(unknown)[0]!r} (keys: radius_tol, nu_tol, refine, "
-                         "max_refined_nodes, max_iter)")
+    band_options, routing_options, external_options = _check_option_dicts(
+        band_options, routing_options, external_options, design_options)  # misspelt keys: before any work
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
     from .contactdesign import check_design_contact

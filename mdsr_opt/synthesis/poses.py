@@ -73,7 +73,7 @@ import numpy as np
 from ..core.guards import interruptible
 from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
-from ..core.checks import check_int, check_label
+from ..core.checks import as_float_array, check_int, check_label, check_options, keyword_names
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from .fabrication import check_fabrication
@@ -139,7 +139,7 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
             raise ValueError(f"pose {p.name!r} belongs to a different mesh ({p.mesh.n_nodes} nodes) than the one "
                              f"given ({mesh.n_nodes} nodes): all poses must be of the same mesh")
         t = solved_state(p.target, f"pose {p.name!r}: target")  # a failed solve's result is refused here
-        t = np.asarray(t, dtype=float) if not isinstance(t, str) else t
+        t = as_float_array(t, f"pose {p.name!r}: target")  # strings, bools, None: TypeError, not coerced
         if np.ndim(t) != 2 or np.shape(t)[1] != 2 or np.shape(t)[0] != mesh.n_nodes:
             raise ValueError(f"pose {p.name!r}: target has shape {np.shape(t)}, expected ({mesh.n_nodes}, 2); all "
                              "poses must be of the same mesh")
@@ -186,8 +186,10 @@ class PosesResult:
     separate_n_muscles : (P,) int ndarray
         How many muscles each separate layout has (their sum: what the separate layouts need in total).
     engaged : (P, m) bool ndarray
-        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is paid out
-        to its path length in the designed state: a negative stroke, zero tension.
+        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is left at
+        its path length in the designed state, at zero tension: a negative stroke where that path is longer
+        than at rest (paid out), a positive one where the designed shape, which misses the target, shortens it
+        (slack taken up).
     anchor_radius : float or None
         Radius of the rigid end patches used by the designs.
     muscle_model : str
@@ -377,7 +379,9 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
 
     Returns
     -------
-    muscles : tuple of Muscle, named ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure)
+    muscles : tuple of Muscle: each keeps its own name (a scene's muscle), a routed one is named by its place
+        ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure); all by place when two
+        would share a name
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
@@ -403,10 +407,34 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
             if budget is not None and len(kept) >= budget:
                 continue
             kept.append((cand, ce, [name]))
-    muscles = tuple(Muscle(m.nodes, name=muscle_name(i)) for i, (m, _, _) in enumerate(kept))
+    # a muscle's own name (a scene's ``inner_left``) is kept; routed ones (named by place) are numbered anew
+    names = [_own_name(m) or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
+    if len(set(names)) < len(names):  # two muscles of one name: every one by its place
+        names = [muscle_name(i) for i in range(len(kept))]
+    muscles = tuple(Muscle(m.nodes, name=n) for n, (m, _, _) in zip(names, kept))
     for m in muscles:
         m.check_on(mesh)
     return muscles, tuple(tuple(s) for _, _, s in kept)
+
+
+def _own_name(muscle) -> str | None:
+    """``muscle``'s name when it was given one, None when it has none or the name of a place in a layout
+    (``"M3"``, as routing names its muscles)."""
+    name = getattr(muscle, "name", None)
+    if not name:
+        return None
+    digits = name.lstrip(name.rstrip("0123456789"))
+    return None if digits and int(digits) > 0 and name == muscle_name(int(digits) - 1) else name
+
+
+def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
+    """``routing_options`` and ``design_options`` as dicts, each key checked against the keywords of the
+    function it is passed to (an unknown key named with the nearest one)."""
+    from .contractions import design_contractions
+    from .routing import route_muscles
+
+    return (check_options(routing_options, keyword_names(route_muscles), "routing_options"),
+            check_options(design_options, keyword_names(design_contractions), "design_options"))
 
 
 @interruptible()
@@ -469,8 +497,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
-    ropt = dict(routing_options or {})
-    dopt = dict(design_options or {})
+    ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
     separate = dict(separate or {})
@@ -521,7 +548,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             D[k], ok[k] = d.difference, d.success
             status.append(str(d.status))
         off = np.flatnonzero(~engaged[k])
-        if len(off):  # released: the stroke that pays out exactly the path's length (negative), no tension
+        if len(off):  # released: the rope at exactly the path's length (paid out or slack taken up), no tension
             Lx = np.array([muscles[i].length(x) for i in off])
             S[k, off] = L0[off] - Lx
             A[k, off] = S[k, off] / L0[off]

@@ -47,7 +47,7 @@ import scipy.sparse as sp
 
 from ..body.mesh import Mesh
 from ..body.muscles import check_distinct_ropes, check_muscles
-from ..core.checks import positive_int
+from ..core.checks import as_float_array, positive_int
 from ..core.guards import check_stop, interruptible
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.assembly import ipopt_functions
@@ -372,7 +372,7 @@ def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0):
 
 
 def _strokes(strokes, m: int) -> np.ndarray:
-    S = np.asarray(strokes, dtype=float)
+    S = as_float_array(strokes, "strokes")  # strings, bools, None: TypeError, never coerced
     if S.ndim != 2 or S.shape[1] != m or S.shape[0] < 1:
         raise ValueError(f"strokes must be an (F, {m}) array: one row per frame of the cycle, one column per "
                          f"muscle, got shape {S.shape}")
