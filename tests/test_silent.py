@@ -22,6 +22,7 @@ from mdsr_opt.synthesis.gait import gait_schedule
 from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
 from mdsr_opt.synthesis.poses import design_poses
 from mdsr_opt.synthesis.results import MuscleWarning
+from mdsr_opt.plot.style import unit_label
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
@@ -143,7 +144,7 @@ def test_mdsr_run_fails_a_case_too_far_from_its_target_and_goes_on(tmp_path, cap
     assert main(["run", str(FINGER), "--out", str(tmp_path / "p"), "--bands", *QUIET_RUN]) == 0  # 5 %: both ok
     for c in _summary(tmp_path / "p")["cases"]:
         assert len(c["stroke_band"]) == 1 and c["stroke_band"][0][0] <= c["stroke"][0] <= c["stroke_band"][0][1]
-    assert "] mm |" in (tmp_path / "p" / "summary.md").read_text()  # the strokes' column: [low, high] unit
+    assert "] body units |" in (tmp_path / "p" / "summary.md").read_text()  # strokes: [low, high] unit (none given)
     assert _summary(out)["cases"][0]["stroke_band"] == []  # off unless asked for
 
 
@@ -158,9 +159,10 @@ def test_scene_file_acceptance_section(tmp_path):
     lines = []
     rep = run_case(scene, "bend", photo=False, log=lines.append).report
     assert not rep.success and "max_difference 2 %" in rep.message
-    assert f"difference {rep.difference:.3g} {scene.units} is" in rep.message  # the scene's unit, as its figures
+    u = unit_label(scene.units)  # the finger gives none: "body units", never an invented one
+    assert f"difference {rep.difference:.3g} {u} is" in rep.message  # the scene's unit, as its figures
     design, = [s for s in lines if "design (" in s]
-    assert f"difference {rep.difference:.3g} {scene.units} (" in design and f"] {scene.units}," in design
+    assert f"difference {rep.difference:.3g} {u} (" in design and f"] {u}," in design
     (lo, hi), = rep.stroke_band
     assert lo <= rep.stroke[0] <= hi and lo < hi
     again = run_case(scene, "bend", photo=False, max_difference=0.05, bands=False).report
@@ -220,7 +222,7 @@ def test_gait_reports_each_keyframe_reached_or_not():
     text = repr(sch)
     assert f"{sch.n_frames}/{sch.n_frames} frames solved" not in text
     assert "right (difference" in text and "NOT reached" in text
-    assert f"right (difference {sch.keyframe_differences[1]:.3g} mm)" in text  # the schedule's unit
+    assert f"right (difference {sch.keyframe_differences[1]:.3g} body units)" in text  # the schedule's unit
     full = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)}, compare=False)
     both = gait_schedule(mesh, MAT, full, ["left", "right"], frames_per_step=2)
     assert both.reached.all() and f"{both.n_frames}/{both.n_frames} frames solved" in repr(both)
