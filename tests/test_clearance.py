@@ -161,3 +161,58 @@ def test_sizes_larger_than_the_body_are_refused_at_the_door(tmp_path, scale, kw,
         export_fabrication(mesh, None, tmp_path / "o", muscles=mus, **kw)
     assert f"{0.5 * scale:.4g} deep" in str(e.value)
     assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------- prevention
+def _apart(mesh, paths, c, w, r):
+    """Independent check with shapely: centre lines c + w apart, no crossing, fixture centres 2 r + w apart."""
+    from shapely.geometry import LineString
+
+    P = mesh.points
+    for i in range(len(paths)):
+        for j in range(i + 1, len(paths)):
+            a, b = LineString(P[list(paths[i])]), LineString(P[list(paths[j])])
+            assert a.distance(b) >= (c + w) * (1 - 1e-9)
+            ends = [np.linalg.norm(P[e] - P[f]) for e in (paths[i][0], paths[i][-1]) for f in (paths[j][0], paths[j][-1])]
+            assert min(ends) >= (2 * r + w) * (1 - 1e-9)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 250.0])
+def test_fit_fixtures_keeps_weaker_ropes_a_wall_clear_of_stronger_ones(scale):
+    from mdsr_opt.synthesis.routing_fixtures import fit_fixtures
+
+    mesh = plate(scale)
+    f = Fabrication(channel_diameter=0.2 * scale, wall=0.1 * scale, fixture_radius=0.2 * scale,
+                    min_fixture_radius=0.2 * scale)
+    strong = rope(mesh, [(1, 1.5), (9, 1.5)], "s", scale).nodes
+    beside = rope(mesh, [(1.5, 1.75), (8.5, 1.75)], "b", scale).nodes            # 0.25 from it all along
+    bend = rope(mesh, [(2, 1.75), (4, 1.75), (4, 3), (5, 3)], "L", scale).nodes   # close, then far away
+    cross = rope(mesh, [(7, 0.25), (7, 3.75)], "x", scale).nodes                  # crosses the strong one
+    fit = fit_fixtures(mesh, [strong, beside, bend, cross], f)
+    kept = dict(fit.kept)
+    assert kept[0] == tuple(strong)
+    assert 1 in dict(fit.dropped) and "cannot be moulded beside stronger ropes" in dict(fit.dropped)[1]
+    assert set(kept) >= {2, 3} and len(kept[2]) < len(bend) and len(kept[3]) < len(cross)
+    assert any("shortened to the part that lies a channel and a wall" in n for n in fit.notes)
+    _apart(mesh, list(kept.values()), 0.2 * scale, 0.1 * scale, fit.radius)
+    assert rope_conflicts(mesh, list(kept.values()), f, fixture_radius=fit.radius) == []
+
+
+def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
+    from mdsr_opt.synthesis.poses import shared_layout
+
+    mesh = plate()
+    f = fab().for_body(mesh)
+    a = rope(mesh, [(1, 1.5), (9, 1.5)], "a")
+    near = rope(mesh, [(1.5, 1.75), (8.5, 1.75)], "n")           # beside a all along: a duplicate of it
+    cross = rope(mesh, [(5.5, 0.5), (5.5, 3.5)], "x")            # crosses a: kept (its pose's only rope), said
+    far = rope(mesh, [(1, 3), (9, 3)], "f")
+    layouts = {"p": [a, far], "q": [near, cross]}
+    old, _ = shared_layout(mesh, layouts)
+    assert len(old) == 4                                          # without a fabrication: all kept, overlapping
+    notes: list = []
+    mus, sources = shared_layout(mesh, layouts, fabrication=f, notes=notes)
+    assert [m.nodes for m in mus] == [a.nodes, far.nodes, cross.nodes] and sources == (("p", "q"), ("p",), ("q",))
+    assert len(notes) == 2 and "pose 'q''s rope of rank 1" in notes[0] and "merged into M1" in notes[0]
+    assert "rank 2" in notes[1] and "kept beside M1, NOT mouldable in one layer" in notes[1] and "cross" in notes[1]
+    assert [c.kind for c in rope_conflicts(mesh, mus, f)] == ["crossing", "crossing"]

@@ -46,7 +46,8 @@ from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
            "boundary_distance", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
-           "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit"]
+           "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit",
+           "pair_conflicts"]
 
 #: Default channel diameter, as a fraction of the body's diameter.
 CHANNEL_FRACTION = 0.01
@@ -361,6 +362,22 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
                                         f"{0.5 * c:.4g} and a wall {w:.4g} need {need:.4g}"))
                     break
     return out
+
+
+def pair_conflicts(mesh, kept, cand, fab: Fabrication, fixture_radius: float) -> tuple[list, float]:
+    """The conflicts of rope ``cand`` with rope ``kept`` (:func:`rope_conflicts` between the two, not their
+    insets), and the fraction of ``cand``'s nodes closer to ``kept`` than a channel and a wall (``fab`` with every
+    field set); ``([], 0.0)`` when the two can be moulded side by side."""
+    import shapely
+    from shapely.geometry import LineString
+
+    found = [c for c in rope_conflicts(mesh, [kept, cand], fab, fixture_radius=fixture_radius) if len(c.muscles) == 2]
+    if not found:
+        return found, 0.0
+    P = mesh.points
+    line = LineString(P[list(getattr(kept, "nodes", kept))])
+    d = shapely.distance(shapely.points(P[list(getattr(cand, "nodes", cand))]), line)
+    return found, float(np.mean(d < fab.channel_diameter + fab.wall))
 
 
 def warn_conflicts(conflicts, where: str, stacklevel: int = 3) -> None:
