@@ -216,3 +216,30 @@ def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
     assert len(notes) == 2 and "pose 'q''s rope of rank 1" in notes[0] and "merged into M1" in notes[0]
     assert "rank 2" in notes[1] and "kept beside M1, NOT mouldable in one layer" in notes[1] and "cross" in notes[1]
     assert [c.kind for c in rope_conflicts(mesh, mus, f)] == ["crossing", "crossing"]
+
+
+@pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
+def test_design_pipeline_warns_for_a_given_muscle_that_cannot_be_moulded_and_still_designs(scale):
+    from mdsr_opt import Muscle, NeoHookean, design_pipeline, nodes_in_box
+
+    m = Mesh.from_polygon(np.array([[0, 0], [4, 0], [4, 1], [0, 1]], float), max_area=0.03)
+    mesh = Mesh(m.points * scale, m.triangles)
+    P = mesh.points
+    lower = Muscle(sorted(np.flatnonzero(P[:, 1] < 1e-9 * scale), key=lambda i: P[i, 0]), name="lower")
+    inner = edge_path(mesh, [(0.5 * scale, 0.5 * scale), (3.5 * scale, 0.5 * scale)], name="inner")
+    base, tip = nodes_in_box(mesh, xmax=0.0), nodes_in_box(mesh, xmin=4.0 * scale)
+    drags = {i: P[i] + np.array([-0.6, 0.6]) * scale for i in tip}
+    for mus, bad in (([lower], True), ([inner], False)):
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            res = design_pipeline(mesh, NeoHookean(1.0, 0.3), base, drags, muscles=mus)
+        msgs = [str(x.message) for x in w if issubclass(x.category, FabricationWarning)]
+        assert res.design.success and len(res.muscles) == 1
+        if not bad:
+            assert msgs == []
+            continue
+        assert len(msgs) == 1 and msgs[0].startswith("design_pipeline: the muscles given: ")
+        need = max(0.5 * 0.01 + 0.01, 0.02) * np.hypot(4, 1) * scale
+        assert (f"muscle lower: its channel is not mouldable: its smallest inset from the outline or a hole is 0 "
+                f"(it runs on the outline), a channel {0.01 * np.hypot(4, 1) * scale:.4g} wide") in msgs[0]
+        assert f"needs {need:.4g}" in msgs[0]

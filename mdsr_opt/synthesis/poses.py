@@ -76,7 +76,7 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import check_int, check_label
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from .fabrication import FabricationWarning, check_fabrication, pair_conflicts
+from .fabrication import FabricationWarning, check_fabrication, pair_conflicts, rope_conflicts, warn_conflicts
 from .routing_fixtures import common_fixture_radius
 from ..plot.style import muscle_label, muscle_name
 
@@ -530,6 +530,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+    if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
+        warn_conflicts([c for c in rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
+                        if len(c.muscles) == 1], "design_poses: the shared layout")
 
     t1 = time.perf_counter()
     P, m = len(items), len(muscles)
