@@ -57,6 +57,16 @@ def _assert_buildable(out, poly: Polygon, D: float):
         for end in (Q[0], Q[-1]):
             assert poly.contains(Point(end).buffer(r_f + fab.wall, 64)), (m.name, "fixture reaches outside")
         assert m.rest_length(out.mesh) >= 4 * r_f, (m.name, "shorter than two fixtures")
+    # ropes of different muscles: a channel and a wall between centre lines, no crossing, fixtures apart
+    from shapely.geometry import LineString
+
+    lines = [LineString(P[list(m.nodes)]) for m in out.muscles]
+    ends = [(P[m.nodes[0]], P[m.nodes[-1]]) for m in out.muscles]
+    for i in range(len(lines)):
+        for j in range(i + 1, len(lines)):
+            assert lines[i].distance(lines[j]) >= (fab.channel_diameter + fab.wall) * (1 - 1e-9), (i, j)
+            d = min(np.linalg.norm(a - b) for a in ends[i] for b in ends[j])
+            assert d >= (2 * r_f + fab.wall) * (1 - 1e-9), (i, j, "fixtures overlap")
 
 
 @pytest.mark.parametrize("name", QUICK)
