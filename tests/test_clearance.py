@@ -243,3 +243,23 @@ def test_design_pipeline_warns_for_a_given_muscle_that_cannot_be_moulded_and_sti
         assert (f"muscle lower: its channel is not mouldable: its smallest inset from the outline or a hole is 0 "
                 f"(it runs on the outline), a channel {0.01 * np.hypot(4, 1) * scale:.4g} wide") in msgs[0]
         assert f"needs {need:.4g}" in msgs[0]
+
+
+def test_design_poses_warns_for_a_given_rope_on_the_outline():
+    from mdsr_opt import Muscle, NeoHookean, solve_internal
+    from mdsr_opt.synthesis.poses import design_poses
+
+    mesh = Mesh.from_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], max_area=0.03)
+    P = mesh.points
+    lower = Muscle(sorted(np.flatnonzero(P[:, 1] < 1e-9), key=lambda i: P[i, 0]), name="lower")
+    mat = NeoHookean(1.0, 0.3)
+    x = solve_internal(mesh, mat, [lower], [0.1]).x
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = design_poses(mesh, mat, {"p": x}, separate={"p": ([lower], None)}, compare=False)
+    msgs = [x for x in w if issubclass(x.category, FabricationWarning)]
+    assert res.all_success and res.n_muscles == 1
+    assert len(msgs) == 1 and msgs[0].filename == __file__    # said at the caller's line
+    assert "design_poses: the shared layout: 2 place(s)" in str(msgs[0].message)
+    assert "muscle M1: its channel is not mouldable: its smallest inset from the outline or a hole is 0" in str(
+        msgs[0].message)

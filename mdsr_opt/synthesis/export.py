@@ -10,7 +10,10 @@
     length unit and the ``width``/``height`` attributes state the physical size, so a printer or laser cutter
     reproduces it 1:1. Both ends of every channel carry their fixture: a circle of the fixture's radius
     (the design's ``anchor_radius``, class ``end``) and one of that radius plus the wall (class
-    ``end-wall``); each muscle is labelled with its name.
+    ``end-wall``); each muscle is labelled with its name. A place where the layout cannot be moulded
+    (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or fixture outside the body, channels or
+    fixtures of different muscles closer than a wall, ropes that cross) carries a red ring (class ``conflict``,
+    group ``conflicts``) and the caption, wrapped to the drawing's width, says it.
 ``<name>.dxf``
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
@@ -27,7 +30,9 @@ Every number is in the body's length unit ``units`` (one of :data:`UNITS`; defau
 mm), and every column header says it. Tensions are in newtons when the material's ``stress_unit`` (the
 silicone presets: Pa) and the length unit are known, else in units of ``E * thickness * length``
 (:func:`~mdsr_opt.core.quantities.tension_unit`). Input is checked completely before anything is written, and each
-file is written atomically, so bad input leaves nothing behind.
+file is written atomically, so bad input leaves nothing behind. A layout that cannot be moulded is still
+written, with a :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` naming the muscles, the distance and
+the clearance required.
 """
 
 from __future__ import annotations

@@ -6,7 +6,11 @@ when it lies at least :meth:`Fabrication.clearance` inside the outline and every
 the wall, and never less than :data:`MIN_INSET_FRACTION` (2 %) of the body's diameter; an end fixture fits
 when its disk of radius ``fixture_radius + wall`` lies inside the body. ``fixture_radius`` is what the
 design calls ``anchor_radius`` (the rigid end patch is the fixture). The routing may shrink the fixtures down
-to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`).
+to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`). Ropes of different
+muscles need ``channel_diameter + wall`` between their centre lines and must not cross; their fixtures need
+``2 fixture_radius + wall`` between centres. The routing keeps all this; :func:`rope_conflicts` finds where a
+layout (muscles a user gives, a layout merged from several poses) breaks it, and the design and the export
+warn with a :class:`FabricationWarning`.
 
 Defaults: fractions of the body's size, not millimetres
 -------------------------------------------------------

@@ -532,7 +532,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
         warn_conflicts([c for c in rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
-                        if len(c.muscles) == 1], "design_poses: the shared layout")
+                        if len(c.muscles) == 1], "design_poses: the shared layout", stacklevel=4)
 
     t1 = time.perf_counter()
     P, m = len(items), len(muscles)
