@@ -66,6 +66,10 @@ def test_channels_of_two_muscles_closer_than_channel_plus_wall_are_reported(tmp_
     rings = ET.parse(files["svg"]).getroot().findall(f".//{SVG}g[@id='conflicts']/{SVG}circle")
     assert {r.get("class") for r in rings} == {"conflict ropes", "conflict fixture-channel"}
     assert all(set(r.get("data-muscles").split()) == {"a", "b"} for r in rings)
+    import ezdxf
+
+    circles = [e for e in ezdxf.readfile(files["dxf"]).modelspace() if e.dxf.layer == "CONFLICTS"]
+    assert len(circles) == 2 and all(c.dxftype() == "CIRCLE" for c in circles)
 
 
 def test_crossing_ropes_are_reported(tmp_path):

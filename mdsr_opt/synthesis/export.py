@@ -18,8 +18,8 @@
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
     nodes at rest, its width the channel width), ``WALLS`` (the same polylines as wide as the channel and
-    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles)
-    and ``LABELS`` (text).
+    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles),
+    ``LABELS`` (text) and ``CONFLICTS`` (a circle where the layout cannot be moulded, as the SVG's red rings).
 ``<name>_muscles.csv``
     One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),

@@ -23,7 +23,8 @@ def label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: DXF layers: name and ACI colour (7 white/black, 1 red, 5 blue, 3 green)
-_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("WALLS", 8), ("ENDS", 5), ("LABELS", 3))
+_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("WALLS", 8), ("ENDS", 5), ("LABELS", 3),
+               ("CONFLICTS", 1))
 
 
 def _dxf_number(v: float) -> str:
@@ -186,6 +187,11 @@ def dxf_text(fd) -> str:
         xy(q)
         g(40, _dxf_number(0.035 * size))
         g(1, _dxf_string(mu.name))
+    for cf in getattr(fd, "conflicts", ()):  # where the layout cannot be moulded: a circle, as the SVG's red ring
+        g(0, "CIRCLE")
+        g(8, "CONFLICTS")
+        xy(cf.at)
+        g(40, _dxf_number(max(fd.end_radius, fd.channel_width) + fd.wall))
     g(0, "ENDSEC")
     g(0, "EOF")
     return "\n".join(lines) + "\n"
