@@ -281,7 +281,9 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
     and the holes (and :data:`MIN_INSET_FRACTION` of the body's size, as the routing keeps); an end fixture of
     radius ``r`` needs ``r + w``. Two ropes need their centre lines ``c + w`` apart (one wall between the two
     channels) and must not cross; two fixtures need their centres ``2 r + w`` apart, and a fixture needs
-    ``r + c / 2 + w`` from another rope's centre line.
+    ``r + c / 2 + w`` from another rope's centre line. Two ends closer than ``r`` share one fixture plate (the
+    design holds them as one rigid part): the two ropes meet there, and are checked outside that plate and
+    its wall.
 
     Parameters
     ----------
@@ -330,6 +332,15 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
         for j in range(i + 1, len(paths)):
             a, b = lines[i], lines[j]
             pair = f"muscles {_name(muscles, i)} and {_name(muscles, j)}"
+            ends_i, ends_j = (paths[i][0], paths[i][-1]), (paths[j][0], paths[j][-1])
+            # ends closer than a fixture's radius share one plate (the design holds them as one rigid part):
+            # their ropes meet in it, and only outside it (and its wall) do the channels need their clearance
+            shared = [(ea, eb) for ea in ends_i for eb in ends_j if r > 0 and np.linalg.norm(P[ea] - P[eb]) < r]
+            if shared:
+                zone = shapely.union_all([Point(P[e]).buffer(r + w, 32) for pr in shared for e in pr])
+                a, b = a.difference(zone), b.difference(zone)
+                if a.is_empty or b.is_empty:
+                    continue
             d = float(a.distance(b))
             if d <= tol:
                 x = a.intersection(b)
@@ -346,8 +357,10 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
                                     f"between them need {c + w:.4g}"))
             if r <= 0:
                 continue
-            ends_i, ends_j = (paths[i][0], paths[i][-1]), (paths[j][0], paths[j][-1])
-            dd, ea, eb = min((float(np.linalg.norm(P[ea] - P[eb])), ea, eb) for ea in ends_i for eb in ends_j)
+            own_i, own_j = {e for e, _ in shared}, {e for _, e in shared}
+            pairs = [(float(np.linalg.norm(P[ea] - P[eb])), ea, eb) for ea in ends_i for eb in ends_j
+                     if ea not in own_i and eb not in own_j]
+            dd, ea, eb = min(pairs) if pairs else (np.inf, None, None)
             if dd < 2 * r + w - tol:
                 q = 0.5 * (P[ea] + P[eb])
                 out.append(Conflict("fixtures", (i, j), dd, 2 * r + w, tuple(map(float, q)),
@@ -356,6 +369,9 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
                                     f"{w:.4g} between them need {2 * r + w:.4g}"))
                 continue
             for (own, ends, other, k) in ((i, ends_i, b, j), (j, ends_j, a, i)):
+                ends = [e for e in ends if e not in own_i | own_j]
+                if not ends:
+                    continue
                 de, e = min((float(other.distance(Point(P[e]))), e) for e in ends)
                 need = r + 0.5 * c + w
                 if de < need - tol:

@@ -18,8 +18,10 @@ design. The resolutions, in order, each recorded as a sentence in the routing's 
    centre lines and ``r_f + channel_diameter / 2 + wall`` from their fixtures, with ends (its fixtures) at
    least that far from their lines and ``2 r_f + wall`` from their fixtures; a rope with no such part is
    dropped. Two ropes that cross are thus never both kept whole, and fixtures of different ropes never
-   overlap. (Should fixtures still share nodes, the rope whose two fixtures are joined through others could
-   not contract: the weakest rope of such a part is dropped and the check runs again.)
+   overlap -- but for ends closer than ``r_f``, which share one plate (two ropes knotted to it; the design
+   holds it as one rigid part): there the ropes meet, and their clearance holds outside the plate's wall.
+   The rope whose two fixtures are joined through others' plates could not contract: the weakest rope of
+   such a part is dropped and the check runs again.
 4. **Shrinking.** When the steps above lose a rope at ``r_f`` but would keep more with the smallest
    fixture ``min_fixture_radius``, the fixtures of all ropes shrink to the largest size (on a geometric
    ladder of :data:`N_SHRINK_STEPS` sizes from ``r_f`` down to that minimum) that keeps as many. One size
@@ -86,11 +88,28 @@ def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: fl
         return tuple(path)
     path = np.asarray(path)
     lines = MultiLineString([P[list(q)] for q in stronger])
-    ends = MultiPoint([P[q[e]] for q in stronger for e in (0, -1)])
+    all_ends = [q[e] for q in stronger for e in (0, -1)]
+    # an end of this rope within a fixture's radius of a stronger rope's end shares its plate (one rigid
+    # part, as the design holds it): the ropes meet there and need their clearance only outside its wall
+    mine = [e for e in (path[0], path[-1]) if r > 0]
+    shared = [f for f in all_ends if any(np.linalg.norm(P[f] - P[e]) < r for e in mine)]
+    ends = MultiPoint([P[f] for f in all_ends if f not in shared]) if len(shared) < len(all_ends) else None
+    at_plate = np.zeros(len(path), bool)
+    if shared:
+        zone = shapely.union_all([shapely.Point(P[f]).buffer(r + wall, 32) for f in shared])
+        lines = lines.difference(zone)
+        at_plate = np.min([np.linalg.norm(P[path] - P[f], axis=1) for f in shared], axis=0) < r
     seg = shapely.linestrings(np.stack([P[path[:-1]], P[path[1:]]], axis=1))
+    if shared:
+        seg = shapely.difference(seg, zone)
     tol = 1e-9 * float(np.ptp(P, axis=0).max())
-    ok = ((shapely.distance(seg, lines) >= channel + wall - tol)
-          & (shapely.distance(seg, ends) >= r + 0.5 * channel + wall - tol))
+
+    def far(geoms, items, d):  # NaN (an empty part, inside a shared plate) counts as far enough
+        if geoms is None or geoms.is_empty:
+            return np.ones(len(items), bool)
+        return ~(shapely.distance(items, geoms) < d - tol)
+
+    ok = far(lines, seg, channel + wall) & far(ends, seg, r + 0.5 * channel + wall)
     if ok.all():
         k, j = 0, len(path) - 1
     else:
@@ -103,8 +122,8 @@ def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: fl
                     best, k, j = i - start, start, i
                 start = None
     pts = shapely.points(P[path])
-    end_ok = ((shapely.distance(pts, lines) >= r + 0.5 * channel + wall - tol)
-              & (shapely.distance(pts, ends) >= 2 * r + wall - tol) & (dist[path] >= need - tol))
+    end_ok = (((far(lines, pts, r + 0.5 * channel + wall) & far(ends, pts, 2 * r + wall)) | at_plate)
+              & (dist[path] >= need - tol))
     while k < j and not end_ok[k]:
         k += 1
     while j > k and not end_ok[j]:
