@@ -267,3 +267,18 @@ def test_design_poses_warns_for_a_given_rope_on_the_outline():
     assert "design_poses: the shared layout: 2 place(s)" in str(msgs[0].message)
     assert "muscle M1: its channel is not mouldable: its smallest inset from the outline or a hole is 0" in str(
         msgs[0].message)
+
+
+def test_ends_closer_than_a_fixture_radius_share_one_plate():
+    from mdsr_opt.synthesis.routing_fixtures import fit_fixtures
+
+    mesh = plate()
+    a = rope(mesh, [(1, 2), (4.5, 2)], "a")
+    b = rope(mesh, [(4.5, 2.25), (4.5, 3), (8, 3)], "b")           # its end 0.25 from a's
+    big = Fabrication(channel_diameter=0.2, wall=0.1, fixture_radius=0.3, min_fixture_radius=0.3)
+    assert rope_conflicts(mesh, [a, b], big) == []                 # one plate of radius 0.3 holds both
+    fit = fit_fixtures(mesh, [a.nodes, b.nodes], big)
+    assert dict(fit.kept) == {0: tuple(a.nodes), 1: tuple(b.nodes)} and fit.dropped == ()
+    small = Fabrication(channel_diameter=0.2, wall=0.1, fixture_radius=0.2, min_fixture_radius=0.2)
+    found = rope_conflicts(mesh, [a, b], small)                     # two plates of 0.2, 0.25 apart: overlap
+    assert [c.kind for c in found] == ["ropes", "fixtures"] and found[1].required == pytest.approx(0.5)
