@@ -57,6 +57,23 @@ def _assert_buildable(out, poly: Polygon, D: float):
         for end in (Q[0], Q[-1]):
             assert poly.contains(Point(end).buffer(r_f + fab.wall, 64)), (m.name, "fixture reaches outside")
         assert m.rest_length(out.mesh) >= 4 * r_f, (m.name, "shorter than two fixtures")
+    # ropes of different muscles: a channel and a wall between centre lines, no crossing, fixtures apart;
+    # ends closer than a fixture radius share one plate, and the ropes are checked outside it and its wall
+    from shapely.geometry import LineString
+
+    lines = [LineString(P[list(m.nodes)]) for m in out.muscles]
+    ends = [(P[m.nodes[0]], P[m.nodes[-1]]) for m in out.muscles]
+    for i in range(len(lines)):
+        for j in range(i + 1, len(lines)):
+            pairs = [(np.linalg.norm(a - b), a, b) for a in ends[i] for b in ends[j]]
+            plate = [Point(p).buffer(r_f + fab.wall, 64) for d, a, b in pairs if d < r_f for p in (a, b)]
+            a, b = lines[i], lines[j]
+            for disc in plate:
+                a, b = a.difference(disc), b.difference(disc)
+            if not a.is_empty and not b.is_empty:
+                assert a.distance(b) >= (fab.channel_diameter + fab.wall) * (1 - 1e-9), (i, j)
+            d = [d for d, _, _ in pairs if d >= r_f]
+            assert not d or min(d) >= (2 * r_f + fab.wall) * (1 - 1e-9), (i, j, "fixtures overlap")
 
 
 @pytest.mark.parametrize("name", QUICK)

@@ -208,7 +208,7 @@ def test_a_real_design_exports_its_strokes_and_tensions(tmp_path):
 @pytest.mark.parametrize("kw, kind, words", [
     (dict(units="furlong"), ValueError, "unknown units 'furlong'"),
     (dict(units=3), TypeError, "units must be a string"),
-    (dict(muscles=None), ValueError, "give the muscles"),
+    (dict(muscles=None), TypeError, "design is None and no muscles are given: design must be a PosesResult"),
     (dict(name="../x"), ValueError, "plain file stem"),
     (dict(channel_width=-1.0), ValueError, "channel_width"),
     (dict(design=[1, 2]), TypeError, "design must be"),

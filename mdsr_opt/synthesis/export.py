@@ -10,13 +10,16 @@
     length unit and the ``width``/``height`` attributes state the physical size, so a printer or laser cutter
     reproduces it 1:1. Both ends of every channel carry their fixture: a circle of the fixture's radius
     (the design's ``anchor_radius``, class ``end``) and one of that radius plus the wall (class
-    ``end-wall``); each muscle is labelled with its name.
+    ``end-wall``); each muscle is labelled with its name. A place where the layout cannot be moulded
+    (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or fixture outside the body, channels or
+    fixtures of different muscles closer than a wall, ropes that cross) carries a red ring (class ``conflict``,
+    group ``conflicts``) and the caption, wrapped to the drawing's width, says it.
 ``<name>.dxf``
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
     nodes at rest, its width the channel width), ``WALLS`` (the same polylines as wide as the channel and
-    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles)
-    and ``LABELS`` (text).
+    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles),
+    ``LABELS`` (text) and ``CONFLICTS`` (a circle where the layout cannot be moulded, as the SVG's red rings).
 ``<name>_muscles.csv``
     One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
@@ -27,7 +30,9 @@ Every number is in the body's length unit ``units`` (one of :data:`UNITS`; defau
 mm), and every column header says it. Tensions are in newtons when the material's ``stress_unit`` (the
 silicone presets: Pa) and the length unit are known, else in units of ``E * thickness * length``
 (:func:`~mdsr_opt.core.quantities.tension_unit`). Input is checked completely before anything is written, and each
-file is written atomically, so bad input leaves nothing behind.
+file is written atomically, so bad input leaves nothing behind. A layout that cannot be moulded is still
+written, with a :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` naming the muscles, the distance and
+the clearance required.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import math
 import os
 from dataclasses import dataclass
 import re
+import textwrap
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -51,14 +57,15 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
-from ..plot.style import dxf_color, muscle_color, muscle_label, muscle_name
+from ..plot.style import muscle_color, muscle_label, muscle_name
+from .export_dxf import dxf_text, label_at
+from .fabrication import warn_conflicts
 from .poses import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 
 #: Known length units and their size in metres.
 UNITS = LENGTH_UNITS
-_DXF_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6, "um": 13}
 
 
 def check_units(units) -> str:
@@ -89,6 +96,7 @@ class FabricationData:
     wall: float = 0.0
     stroke_bands: np.ndarray | None = None  # (P, m, 2) low/high stroke per pose and muscle; None: not computed
     tension_unit: str = "units of E*t*length"  # the unit of ``tensions`` (N when known)
+    conflicts: tuple = ()         # fabrication.Conflict: where the layout cannot be moulded (marked in the SVG)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("units", "pose_names"), extra={
@@ -137,6 +145,29 @@ def _known(design, name: str):
     return next((v for v in (getattr(d, name, None) for d in items) if isinstance(v, str) and v), None)
 
 
+def _check_design_type(design, muscles) -> None:
+    """TypeError naming ``design`` when it is none of the results :func:`fabrication_data` reads."""
+    from .pipeline import PipelineResult
+
+    kinds = ("a PosesResult (design_poses), a PipelineResult (design_pipeline), a DesignResult "
+             "(design_contractions), a mapping of pose name to DesignResult, or None with muscles=... (the "
+             "layout alone)")
+    if design is None:
+        if muscles is None:
+            raise TypeError(f"design is None and no muscles are given: design must be {kinds}")
+        return
+    if isinstance(design, (PosesResult, PipelineResult)):
+        return
+    if isinstance(design, Mapping):
+        bad = [k for k, d in design.items() if not hasattr(d, "contractions")]
+        if bad:
+            raise TypeError(f"design is a mapping whose value for {bad[0]!r} is a {type(design[bad[0]]).__name__}, "
+                            f"not a DesignResult: design must be {kinds}")
+        return
+    if not hasattr(design, "contractions"):
+        raise TypeError(f"design must be {kinds}, got {type(design).__name__}")
+
+
 def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
                      channel_width: float | None = None, fabrication=None, material=None) -> FabricationData:
     """Collect and check the geometry and per-pose figures of a design (writes nothing).
@@ -163,7 +194,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         The body's material, for the unit of the tensions (its ``stress_unit``) when the design does not
         record it (a PosesResult); with a known length unit, tensions are then in N.
     """
-    from .fabrication import Fabrication, check_fabrication
+    from .fabrication import Fabrication, check_fabrication, check_sizes_fit, rope_conflicts
     from .pipeline import PipelineResult
 
     known = _known(design, "units")
@@ -181,6 +212,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         fab = Fabrication()
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    _check_design_type(design, muscles)
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
         design, muscles = design.design, design.muscles if muscles is None else muscles
     elif muscles is None and not isinstance(design, (PosesResult, Mapping)):
@@ -229,8 +261,12 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     fab = fab.for_body(mesh)
     if channel_width is None:
         channel_width = fab.channel_diameter if fab.channel_diameter > 0 else 0.2 * h
-    if not (isinstance(channel_width, (int, float)) and math.isfinite(channel_width) and channel_width > 0):
+    if (isinstance(channel_width, bool) or not isinstance(channel_width, (int, float))
+            or not math.isfinite(channel_width) or channel_width <= 0):
         raise ValueError(f"channel_width must be a positive length, got {channel_width!r}")
+    end_radius = (float(radius) if radius is not None and math.isfinite(radius) and radius > 0
+                  else fab.fixture_radius if fab.fixture_radius > 0 else 0.4 * h)
+    check_sizes_fit(mesh, float(channel_width), fab.wall, end_radius)
     loops = [mesh.points[np.asarray(lp)] for lp in mesh.boundary_loops]
     areas = [polygon_area(p) for p in loops]
     k = int(np.argmax(np.abs(areas)))
@@ -243,21 +279,14 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                            contractions=np.asarray(A, float), strokes=np.asarray(S, float),
                            tensions=t_factor * np.asarray(T, float), tension_unit=t_unit,
                            # the end patches' radius, when the design has one (NaN: none; 0: points)
-                           end_radius=float(radius) if radius is not None and math.isfinite(radius) and radius > 0
-                           else fab.fixture_radius if fab.fixture_radius > 0 else 0.4 * h,
+                           end_radius=end_radius,
+                           conflicts=tuple(rope_conflicts(mesh, mus, fab, fixture_radius=end_radius,
+                                                          channel_width=float(channel_width))),
                            channel_width=float(channel_width), units=units, wall=float(fab.wall),
                            stroke_bands=bands if bands is not None and np.isfinite(bands).any() else None)
 
 
 # ---------------------------------------------------------------------------------------------- writers
-def _label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """A label point beside the middle of a polyline, and the text direction."""
-    i = max(1, len(path) // 2)
-    a, b = path[i - 1], path[i]
-    d = (b - a) / (np.linalg.norm(b - a) or 1.0)
-    return (a + b) / 2 + offset * np.array([-d[1], d[0]]), d
-
-
 #: Characters XML 1.0 does not allow in a document (C0 controls but tab, line feed and carriage return;
 #: lone surrogates; U+FFFE and U+FFFF): names are checked at the door, and these never reach the SVG anyway.
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
@@ -284,6 +313,17 @@ def _svg_text(fd: FabricationData, title: str) -> str:
 
     lw = 0.002 * size
     fs = 0.035 * size
+    caption = (f"{title}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
+               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls; units: {u}")
+    if fd.conflicts:
+        caption += (f". NOT MOULDABLE as laid out ({len(fd.conflicts)} place(s), red rings): "
+                    + "; ".join(cf.message for cf in fd.conflicts))
+    fc = fs * 0.8
+    # the caption wrapped to the drawing's width (a sans-serif character is at most ~0.6 em wide on average),
+    # on lines below the drawing, which grows by as many lines
+    lines = textwrap.wrap(caption, max(20, int((W - 0.6 * pad) / (0.6 * fc)))) or [""]
+    y0 = H - pad * 0.3
+    H += 1.25 * fc * (len(lines) - 1)
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            f'<svg xmlns="http://www.w3.org/2000/svg" version="1.1" width="{W * scale:.9g}{phys}" '
            f'height="{H * scale:.9g}{phys}" viewBox="0 0 {W:.9g} {H:.9g}">',
@@ -319,184 +359,26 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     out.append("</g>")
     out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle">')
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
-        p, _ = _label_at(path, 1.2 * fs)
+        p, _ = label_at(path, 1.2 * fs)
         x, y = xy(p).split(",")
         out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i]}">{escape(mu.name)}</text>')
     out.append("</g>")
-    out.append(f'<text x="{pad * 0.3:.6g}" y="{H - pad * 0.3:.6g}" font-family="sans-serif" font-size="{fs * 0.8:.6g}">'
-               f"{escape(title)}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
-               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls; units: {u}</text>")
+    if fd.conflicts:  # where the layout cannot be moulded: a red ring, its sentence as the ring's title
+        out.append(f'<g id="conflicts" fill="none" stroke="#d00000" stroke-width="{2 * lw:.6g}">')
+        for cf in fd.conflicts:
+            x, y = xy(cf.at).split(",")
+            names = " ".join(escape(fd.muscles[i].name) for i in cf.muscles)
+            out.append(f'<circle class="conflict {cf.kind}" cx="{x}" cy="{y}" '
+                       f'r="{max(fd.end_radius, fd.channel_width) + fd.wall:.9g}" data-muscles="{names}" '
+                       f'data-distance="{cf.distance:.9g}" data-required="{cf.required:.9g}">'
+                       f"<title>{escape(cf.message)}</title></circle>")
+        out.append("</g>")
+    out.append(f'<text class="caption" x="{pad * 0.3:.6g}" y="{y0:.6g}" font-family="sans-serif" '
+               f'font-size="{fc:.6g}">' + "".join(
+                   f'<tspan x="{pad * 0.3:.6g}" dy="{0 if k == 0 else 1.25 * fc:.6g}">{escape(t)}</tspan>'
+                   for k, t in enumerate(lines)) + "</text>")
     out.append("</svg>")
     return "\n".join(out) + "\n"
-
-
-#: DXF layers: name and ACI colour (7 white/black, 1 red, 5 blue, 3 green)
-_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("WALLS", 8), ("ENDS", 5), ("LABELS", 3))
-
-
-def _dxf_number(v: float) -> str:
-    """A finite number as DXF wants it: fixed point (no exponent), every digit of its shortest
-    round-tripping form (``5.619e-09`` is ``0.000000005619``)."""
-    v = float(v)
-    if not math.isfinite(v):
-        raise ValueError(f"a DXF coordinate must be finite, got {v}")
-    s = np.format_float_positional(v, trim="0")
-    return "0.0" if s in ("-0.0", "0.0") else s
-
-
-def _dxf_string(text: str) -> str:
-    """A DXF string value: one line (control characters become spaces), ASCII, other characters as the
-    ``\\U+XXXX`` escapes that DXF readers decode (AutoCAD; ezdxf's ``decode_dxf_unicode``), a backslash
-    and a caret too (``^J`` is a caret code); ``%`` as ``%%%``, since ``%%`` starts a TEXT's control codes
-    (``%%u`` underlines); a character beyond U+FFFF becomes ``?``. At most 255 characters, as R12's TEXT
-    takes (whole characters: an escape is never cut); the SVG and the CSV keep the name as it is."""
-    out = []
-    for ch in str(text):
-        o = ord(ch)
-        if o < 32 or o == 127:
-            out.append(" ")
-        elif ch == "%":  # "%%%" is a literal percent sign ("%%u" would toggle underlining)
-            out.append("%%%")
-        elif o < 127 and ch not in "\\^":  # ^ starts a caret code (^J: a line feed)
-            out.append(ch)
-        elif o <= 0xFFFF and not 0xD800 <= o <= 0xDFFF:
-            out.append(f"\\U+{o:04X}")
-        else:  # beyond four hex digits (an emoji, say) or a lone surrogate: no escape holds it
-            out.append("?")
-    n, keep = 0, 0
-    for piece in out:
-        if n + len(piece) > 255:
-            break
-        n, keep = n + len(piece), keep + 1
-    return "".join(out[:keep])
-
-
-def _dxf_text(fd: FabricationData) -> str:
-    """The DXF file (R12, ASCII): written directly, as a sequence of group code / value lines.
-
-    R12 (AC1009) is the version every CAD program, laser cutter and CAM tool reads; its 2-D ``POLYLINE``
-    carries the channel width (groups 40/41). R12 has no unit variable: ``$INSUNITS`` (R2000's) is
-    written for the readers that honour it (ezdxf, QCAD/LibreCAD); AutoCAD reports it as unknown and
-    ignores it, as it does any header variable newer than the file. The SVG and the CSV state the unit
-    as well. It is written here, not through ezdxf, whose import alone costs more than the whole
-    export."""
-    lines: list[str] = []
-
-    def g(code: int, value) -> None:
-        lines.append(f"{code:>3}")
-        lines.append(value if isinstance(value, str) else str(value))
-
-    def xy(p) -> None:
-        g(10, _dxf_number(p[0]))
-        g(20, _dxf_number(p[1]))
-        g(30, "0.0")
-
-    def polyline(points, layer: str, closed: bool, width: float = 0.0, color: int | None = None) -> None:
-        g(0, "POLYLINE")
-        g(8, layer)
-        if color is not None:
-            g(62, color)
-        g(66, 1)  # vertices follow
-        xy((0.0, 0.0))
-        g(70, 1 if closed else 0)
-        if width > 0:
-            g(40, _dxf_number(width))
-            g(41, _dxf_number(width))
-        for p in points:
-            g(0, "VERTEX")
-            g(8, layer)
-            xy(p)
-        g(0, "SEQEND")
-        g(8, layer)
-
-    size = float(np.ptp(fd.outline, axis=0).max())
-    labels = [_label_at(path, 0.05 * size)[0] for path in fd.paths]
-    # the drawing's extents: the outline, the channels at their width, the end circles, the labels' points
-    reach = max(fd.end_radius, 0.5 * fd.channel_width) + fd.wall
-    near = np.vstack([fd.outline] + [p - reach for p in fd.paths] + [p + reach for p in fd.paths]
-                     + [np.vstack(labels) + [0.0, 0.035 * size]])
-    lo, hi = near.min(axis=0), near.max(axis=0)
-    g(0, "SECTION")
-    g(2, "HEADER")
-    g(9, "$ACADVER")
-    g(1, "AC1009")
-    g(9, "$INSUNITS")
-    g(70, _DXF_INSUNITS.get(fd.units, 0))  # 0: unitless
-    g(9, "$MEASUREMENT")
-    g(70, 0 if fd.units == "in" else 1)
-    g(9, "$EXTMIN")
-    xy(lo)
-    g(9, "$EXTMAX")
-    xy(hi)
-    g(0, "ENDSEC")
-    g(0, "SECTION")
-    g(2, "TABLES")
-    g(0, "TABLE")
-    g(2, "LTYPE")
-    g(70, 1)
-    g(0, "LTYPE")
-    g(2, "CONTINUOUS")
-    g(70, 0)
-    g(3, "Solid line")
-    g(72, 65)
-    g(73, 0)
-    g(40, "0.0")
-    g(0, "ENDTAB")
-    g(0, "TABLE")
-    g(2, "LAYER")
-    g(70, len(_DXF_LAYERS) + 1)
-    for name, color in (("0", 7),) + _DXF_LAYERS:
-        g(0, "LAYER")
-        g(2, name)
-        g(70, 0)
-        g(62, color)
-        g(6, "CONTINUOUS")
-    g(0, "ENDTAB")
-    g(0, "TABLE")
-    g(2, "STYLE")
-    g(70, 1)
-    g(0, "STYLE")
-    g(2, "STANDARD")
-    g(70, 0)
-    g(40, "0.0")
-    g(41, "1.0")
-    g(50, "0.0")
-    g(71, 0)
-    g(42, "2.5")
-    g(3, "txt")
-    g(4, "")
-    g(0, "ENDTAB")
-    g(0, "ENDSEC")
-    g(0, "SECTION")
-    g(2, "ENTITIES")
-    polyline(fd.outline, "BODY", closed=True)
-    for h in fd.holes:
-        polyline(h, "HOLES", closed=True)
-    for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
-        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
-        if fd.wall > 0:
-            polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
-        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
-        for p in (path[0], path[-1]):
-            g(0, "CIRCLE")
-            g(8, "ENDS")
-            g(62, dxf_color(i))
-            xy(p)
-            g(40, _dxf_number(fd.end_radius))
-            if fd.wall > 0:
-                g(0, "CIRCLE")
-                g(8, "WALLS")
-                xy(p)
-                g(40, _dxf_number(fd.end_radius + fd.wall))
-        g(0, "TEXT")
-        g(8, "LABELS")
-        g(62, dxf_color(i))
-        xy(q)
-        g(40, _dxf_number(0.035 * size))
-        g(1, _dxf_string(mu.name))
-    g(0, "ENDSEC")
-    g(0, "EOF")
-    return "\n".join(lines) + "\n"
 
 
 def _csv_text(fd: FabricationData) -> str:
@@ -571,13 +453,29 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     TypeError, ValueError
         Unknown units, a design of another mesh (:func:`~mdsr_opt.body.fingerprint.check_same_mesh`) or of
         other muscles, missing muscles, a name that is no plain file stem
-        (:func:`~mdsr_opt.core.checks.check_stem`): before anything is written.
+        (:func:`~mdsr_opt.core.checks.check_stem`), ``out`` naming an existing file, a channel, wall or
+        fixture too large for the body: before anything is written.
+
+    Warns
+    -----
+    FabricationWarning
+        Where the layout cannot be moulded (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or
+        fixture outside the body, channels or fixtures of different muscles closer than a wall, ropes that
+        cross), naming the muscles, the distance and the clearance required; the SVG marks those places.
     """
     check_stem(name, "name")  # no path separator, no control character: before anything is written
+    try:
+        folder = Path(out)
+    except TypeError:
+        raise TypeError(f"out must be a folder path (str or path-like), got {type(out).__name__}") from None
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"out {os.fspath(out)!r} is an existing file, not a folder: give a folder for the "
+                         "fabrication files")
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width,
                           fabrication=fabrication, material=material)
+    warn_conflicts(fd.conflicts, f"export_fabrication ({name})")
     svg = _svg_text(fd, name)
-    dxf = _dxf_text(fd)
+    dxf = dxf_text(fd)
     table = _csv_text(fd)
     paths = fabrication_files(out, name)
     Path(out).mkdir(parents=True, exist_ok=True)

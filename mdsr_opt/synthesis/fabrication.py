@@ -6,7 +6,11 @@ when it lies at least :meth:`Fabrication.clearance` inside the outline and every
 the wall, and never less than :data:`MIN_INSET_FRACTION` (2 %) of the body's diameter; an end fixture fits
 when its disk of radius ``fixture_radius + wall`` lies inside the body. ``fixture_radius`` is what the
 design calls ``anchor_radius`` (the rigid end patch is the fixture). The routing may shrink the fixtures down
-to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`).
+to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`). Ropes of different
+muscles need ``channel_diameter + wall`` between their centre lines and must not cross; their fixtures need
+``2 fixture_radius + wall`` between centres. The routing keeps all this; :func:`rope_conflicts` finds where a
+layout (muscles a user gives, a layout merged from several poses) breaks it, and the design and the export
+warn with a :class:`FabricationWarning`.
 
 Defaults: fractions of the body's size, not millimetres
 -------------------------------------------------------
@@ -45,7 +49,9 @@ import numpy as np
 from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
-           "boundary_distance", "body_depth", "check_fabrication", "admissible_edges"]
+           "boundary_distance", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
+           "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit",
+           "pair_conflicts"]
 
 #: Default channel diameter, as a fraction of the body's diameter.
 CHANNEL_FRACTION = 0.01
@@ -55,6 +61,11 @@ WALL_FRACTION = 0.01
 MIN_FIXTURE_FRACTION = 0.015
 #: Every rope node lies at least this fraction of the body's diameter inside the outline and the holes.
 MIN_INSET_FRACTION = 0.02
+
+
+class FabricationWarning(UserWarning):
+    """A rope that cannot be moulded as laid out: its channel or fixture reaches outside the body, or comes
+    closer to another rope's channel or fixture than a wall (:func:`rope_conflicts`)."""
 
 
 @dataclass(frozen=True)
@@ -224,3 +235,193 @@ def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
         ways.append(f"a thicker body: it is {R:.4g} deep at its deepest point, less than the "
                     f"{MIN_INSET_FRACTION:.0%} inset {inset:.4g} plus an edge")
     raise ValueError(msg + "Would work: " + "; or ".join(ways))
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """One reason a layout cannot be moulded in one layer (:func:`rope_conflicts`).
+
+    Attributes
+    ----------
+    kind : str
+        ``"inset"`` (a channel closer to the outline or a hole than its half width plus the wall),
+        ``"fixture-inset"`` (an end fixture with its wall reaching outside the body), ``"ropes"`` (two channels
+        closer than a channel width plus a wall), ``"crossing"`` (two ropes that cross or touch),
+        ``"fixtures"`` (two fixtures closer than their radii plus a wall) or ``"fixture-channel"`` (a fixture
+        closer to another rope's channel than its radius, half the channel and a wall).
+    muscles : tuple of int
+        The muscle(s) concerned (indices in the layout).
+    distance : float
+        The smallest inset or centre-to-centre distance found (length unit of the mesh).
+    required : float
+        What moulding needs there.
+    at : tuple of float
+        Where (a point of the body at rest), for marking the drawing.
+    message : str
+        The sentence a user reads: the muscles' names, the distance and the required clearance.
+    """
+
+    kind: str
+    muscles: tuple
+    distance: float
+    required: float
+    at: tuple
+    message: str
+
+
+def _name(muscles, i) -> str:
+    return getattr(muscles[i], "name", None) or f"M{i + 1}"
+
+
+def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | None = None,
+                   channel_width: float | None = None) -> list:
+    """Every place where a layout cannot be moulded in one layer, as :class:`Conflict` s (empty: it can).
+
+    A channel of width ``c`` with its wall ``w`` needs every rope node at least ``c / 2 + w`` inside the outline
+    and the holes (and :data:`MIN_INSET_FRACTION` of the body's size, as the routing keeps); an end fixture of
+    radius ``r`` needs ``r + w``. Two ropes need their centre lines ``c + w`` apart (one wall between the two
+    channels) and must not cross; two fixtures need their centres ``2 r + w`` apart, and a fixture needs
+    ``r + c / 2 + w`` from another rope's centre line. Two ends closer than ``r`` share one fixture plate (the
+    design holds them as one rigid part): the two ropes meet there, and are checked outside that plate and
+    its wall.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        The body at rest.
+    muscles : sequence of Muscle (or node sequences)
+    fab : Fabrication
+        The channel, wall and fixtures (fields left None take the body's defaults).
+    fixture_radius : float, optional
+        The ends' radius (the design's ``anchor_radius``); default ``fab.fixture_radius``.
+    channel_width : float, optional
+        The channel's width; default ``fab.channel_diameter``.
+    """
+    import shapely
+    from shapely.geometry import LineString, Point
+    from shapely.ops import nearest_points
+
+    f = fab.for_body(mesh)
+    c = f.channel_diameter if channel_width is None else float(channel_width)
+    r = f.fixture_radius if fixture_radius is None else float(fixture_radius)
+    w = f.wall
+    P = mesh.points
+    D = body_size(mesh)
+    tol = 1e-9 * D
+    dist = boundary_distance(mesh)
+    paths = [np.asarray(list(getattr(m, "nodes", m)), dtype=np.int64) for m in muscles]
+    out = []
+    inset_need = max(0.5 * c + w, MIN_INSET_FRACTION * D)
+    for i, p in enumerate(paths):
+        k = int(p[np.argmin(dist[p])])
+        if dist[k] < inset_need - tol:
+            on = " (it runs on the outline)" if dist[k] <= tol else ""
+            out.append(Conflict("inset", (i,), float(dist[k]), inset_need, tuple(map(float, P[k])),
+                                f"muscle {_name(muscles, i)}: its channel is not mouldable: its smallest inset from "
+                                f"the outline or a hole is {dist[k]:.4g}{on}, a channel {c:.4g} wide with a wall "
+                                f"{w:.4g} needs {inset_need:.4g}"))
+        for e in (p[0], p[-1]):
+            if r > 0 and dist[e] < r + w - tol:
+                out.append(Conflict("fixture-inset", (i,), float(dist[e]), r + w, tuple(map(float, P[e])),
+                                    f"muscle {_name(muscles, i)}: its end fixture at ({P[e][0]:.4g}, {P[e][1]:.4g}) "
+                                    f"reaches outside the body: its centre is {dist[e]:.4g} inside, a fixture of "
+                                    f"radius {r:.4g} with a wall {w:.4g} needs {r + w:.4g}"))
+                break
+    lines = [LineString(P[p]) if len(p) > 1 else Point(P[p[0]]) for p in paths]
+    for i in range(len(paths)):
+        for j in range(i + 1, len(paths)):
+            a, b = lines[i], lines[j]
+            pair = f"muscles {_name(muscles, i)} and {_name(muscles, j)}"
+            ends_i, ends_j = (paths[i][0], paths[i][-1]), (paths[j][0], paths[j][-1])
+            # ends closer than a fixture's radius share one plate (the design holds them as one rigid part):
+            # their ropes meet in it, and only outside it (and its wall) do the channels need their clearance
+            shared = [(ea, eb) for ea in ends_i for eb in ends_j if r > 0 and np.linalg.norm(P[ea] - P[eb]) < r]
+            if shared:
+                zone = shapely.union_all([Point(P[e]).buffer(r + w, 32) for pr in shared for e in pr])
+                a, b = a.difference(zone), b.difference(zone)
+                if a.is_empty or b.is_empty:
+                    continue
+            d = float(a.distance(b))
+            if d <= tol:
+                x = a.intersection(b)
+                q = shapely.get_coordinates(x)[0] if not x.is_empty else P[paths[i][0]]
+                out.append(Conflict("crossing", (i, j), 0.0, c + w, tuple(map(float, q)),
+                                    f"{pair} cross or touch at ({q[0]:.4g}, {q[1]:.4g}): two ropes that cross cannot "
+                                    f"be moulded in one layer (their centre lines need {c + w:.4g} between them)"))
+            elif d < c + w - tol:
+                qa, qb = nearest_points(a, b)
+                q = 0.5 * (np.asarray(qa.coords[0]) + np.asarray(qb.coords[0]))
+                out.append(Conflict("ropes", (i, j), d, c + w, tuple(map(float, q)),
+                                    f"{pair}: their channels overlap: centre lines {d:.4g} apart near "
+                                    f"({q[0]:.4g}, {q[1]:.4g}), two channels {c:.4g} wide with a wall {w:.4g} "
+                                    f"between them need {c + w:.4g}"))
+            if r <= 0:
+                continue
+            own_i, own_j = {e for e, _ in shared}, {e for _, e in shared}
+            pairs = [(float(np.linalg.norm(P[ea] - P[eb])), ea, eb) for ea in ends_i for eb in ends_j
+                     if ea not in own_i and eb not in own_j]
+            dd, ea, eb = min(pairs) if pairs else (np.inf, None, None)
+            if dd < 2 * r + w - tol:
+                q = 0.5 * (P[ea] + P[eb])
+                out.append(Conflict("fixtures", (i, j), dd, 2 * r + w, tuple(map(float, q)),
+                                    f"{pair}: their end fixtures overlap: centres {dd:.4g} apart near "
+                                    f"({q[0]:.4g}, {q[1]:.4g}), two fixtures of radius {r:.4g} with a wall "
+                                    f"{w:.4g} between them need {2 * r + w:.4g}"))
+                continue
+            for (own, ends, other, k) in ((i, ends_i, b, j), (j, ends_j, a, i)):
+                ends = [e for e in ends if e not in own_i | own_j]
+                if not ends:
+                    continue
+                de, e = min((float(other.distance(Point(P[e]))), e) for e in ends)
+                need = r + 0.5 * c + w
+                if de < need - tol:
+                    out.append(Conflict("fixture-channel", (own, k), de, need, tuple(map(float, P[e])),
+                                        f"{pair}: the end fixture of {_name(muscles, own)} at ({P[e][0]:.4g}, "
+                                        f"{P[e][1]:.4g}) overlaps the channel of {_name(muscles, k)}: {de:.4g} from "
+                                        f"its centre line, a fixture of radius {r:.4g}, half the channel "
+                                        f"{0.5 * c:.4g} and a wall {w:.4g} need {need:.4g}"))
+                    break
+    return out
+
+
+def pair_conflicts(mesh, kept, cand, fab: Fabrication, fixture_radius: float) -> tuple[list, float]:
+    """The conflicts of rope ``cand`` with rope ``kept`` (:func:`rope_conflicts` between the two, not their
+    insets), and the fraction of ``cand``'s nodes closer to ``kept`` than a channel and a wall (``fab`` with every
+    field set); ``([], 0.0)`` when the two can be moulded side by side."""
+    import shapely
+    from shapely.geometry import LineString
+
+    found = [c for c in rope_conflicts(mesh, [kept, cand], fab, fixture_radius=fixture_radius) if len(c.muscles) == 2]
+    if not found:
+        return found, 0.0
+    P = mesh.points
+    line = LineString(P[list(getattr(kept, "nodes", kept))])
+    d = shapely.distance(shapely.points(P[list(getattr(cand, "nodes", cand))]), line)
+    return found, float(np.mean(d < fab.channel_diameter + fab.wall))
+
+
+def warn_conflicts(conflicts, where: str, stacklevel: int = 3) -> None:
+    """One :class:`FabricationWarning` listing ``conflicts`` (nothing when there are none)."""
+    if not conflicts:
+        return
+    import warnings
+
+    warnings.warn(f"{where}: {len(conflicts)} place(s) cannot be moulded as laid out: "
+                  + "; ".join(cf.message for cf in conflicts), FabricationWarning, stacklevel=stacklevel)
+
+
+def check_sizes_fit(mesh, channel_width: float, wall: float, fixture_radius: float) -> None:
+    """ValueError when a channel of width ``channel_width`` with its ``wall``, or a fixture of radius
+    ``fixture_radius`` with its wall, cannot fit anywhere in the body (deeper than :func:`body_depth`); the
+    message gives the body's size and the largest channel the body admits."""
+    R = body_depth(mesh)
+    ext = np.ptp(mesh.points, axis=0)
+    body = f"the body is {ext[0]:.4g} x {ext[1]:.4g} and {R:.4g} deep at its deepest point (largest inscribed radius)"
+    if 0.5 * channel_width + wall > R:
+        most = 2.0 * (R - wall)
+        raise ValueError(f"channel_width {channel_width:.4g} with walls of {wall:.4g} does not fit in the body: "
+                         f"{body}, so half the channel plus the wall must be at most {R:.4g} (channel_width at "
+                         + (f"most {most:.4g} with this wall)" if most > 0 else f"any size needs a wall below {R:.4g})"))
+    if fixture_radius + wall > R:
+        raise ValueError(f"the end fixtures (radius {fixture_radius:.4g}) with their wall {wall:.4g} do not fit in "
+                         f"the body: {body}, so fixture radius plus wall must be at most {R:.4g}")

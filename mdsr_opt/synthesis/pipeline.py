@@ -24,7 +24,7 @@ from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import route_for_design
-from .fabrication import Fabrication, check_fabrication
+from .fabrication import Fabrication, check_fabrication, rope_conflicts, warn_conflicts
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -395,6 +395,11 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         design_options["anchor_radius"] = rr.fixture_radius  # the fixtures the ropes fit with
     else:
         mus = tuple(check_muscles(mesh, muscles))
+        # muscles the user gives are designed as given (a rope on the surface may be meant), but one that
+        # cannot be moulded is said, with its inset and what the channel needs
+        fab = ropts["fabrication"] or Fabrication()
+        warn_conflicts(rope_conflicts(mesh, mus, fab, fixture_radius=design_options.get("anchor_radius")),
+                       "design_pipeline: the muscles given")
     t2 = time.perf_counter()
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)

@@ -76,7 +76,7 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import as_float_array, check_int, check_label, check_options, keyword_names
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from .fabrication import check_fabrication
+from .fabrication import FabricationWarning, check_fabrication, pair_conflicts, rope_conflicts, warn_conflicts
 from .routing_fixtures import common_fixture_radius
 from ..plot.style import muscle_label, muscle_name
 
@@ -363,7 +363,8 @@ def _per_muscle(design, muscles, mesh):
 
 
 def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscles: int | None = None,
-                  overlap: float = 0.5) -> tuple[tuple[Muscle, ...], tuple[tuple[str, ...], ...]]:
+                  overlap: float = 0.5, *, fabrication=None, fixture_radius: float | None = None,
+                  notes: list | None = None) -> tuple[tuple[Muscle, ...], tuple[tuple[str, ...], ...]]:
     """Merge per-pose layouts into one: round-robin by rank, duplicates dropped, at most ``max_muscles``.
 
     Parameters
@@ -376,6 +377,18 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     overlap : float in (0, 1]
         A candidate whose edges are covered by a kept muscle to at least this fraction (of the shorter of
         the two) is a duplicate.
+    fabrication : Fabrication, optional
+        With every field set (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`): a candidate that
+        could not be moulded beside a kept muscle (channels closer than a channel and a wall, ropes that
+        cross, fixtures of radius ``fixture_radius`` that overlap each other or the other's channel:
+        :func:`~mdsr_opt.synthesis.fabrication.pair_conflicts`) is merged into it when at least ``overlap`` of
+        its nodes lie that close (a duplicate, serving its pose too); else it is kept (its pose may have no
+        other rope) and reported in ``notes``. None: no such check.
+    fixture_radius : float, optional
+        The fixtures' radius for that check; default ``fabrication.min_fixture_radius`` (the smallest the
+        ends may get).
+    notes : list, optional
+        Receives one sentence per candidate merged, or kept though it cannot be moulded beside a kept one.
 
     Returns
     -------
@@ -400,6 +413,26 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
                 if len(ce & ke) >= overlap * min(len(ce), len(ke)):
                     dup = k
                     break
+            clash = None
+            if dup is None and fabrication is not None:
+                rad = fabrication.min_fixture_radius if fixture_radius is None else float(fixture_radius)
+                for k, (km, _, _) in enumerate(kept):
+                    found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
+                    if found:
+                        clash = (k, found[0], near)
+                        break
+            if clash is not None:
+                k, cf, near = clash
+                merged = near >= overlap
+                if notes is not None:
+                    a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+                    what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
+                    notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
+                                 f"({b[0]:.4g}, {b[1]:.4g}) " + (f"merged into {muscle_name(k)}" if merged else
+                                                               f"kept beside {muscle_name(k)}, NOT mouldable in "
+                                                               "one layer") + f" ({what})")
+                if merged:
+                    dup = k
             if dup is not None:
                 if name not in kept[dup][2]:
                     kept[dup][2].append(name)
@@ -511,13 +544,22 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     for p in items:
         own[p.name] = tuple(separate[p.name][0]) if p.name in separate else _route(mesh, p.target, ropt)
     t_route = time.perf_counter() - t0
-    muscles, sources = shared_layout(mesh, own, budget, overlap)
+    fab = None if ropt["fabrication"] is False else ropt["fabrication"].for_body(mesh)
+    notes: list = []
+    muscles, sources = shared_layout(mesh, own, budget, overlap, fabrication=fab,
+                                     fixture_radius=dopt.get("anchor_radius"), notes=notes)
+    if notes:  # the poses' ropes that could not be moulded beside another: said, not silently overlapped
+        warnings.warn("design_poses: ropes of the poses closer than a channel and a wall: "
+                      + "; ".join(notes), FabricationWarning, stacklevel=3)
     if not muscles:
         raise ValueError("no pose contracts any edge enough to carry a muscle: nothing to route (poses: "
                          + ", ".join(p.name for p in items) + ")")
-    if dopt.get("anchor_radius") is None and ropt["fabrication"] is not False:
+    if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
-        dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, ropt["fabrication"].for_body(mesh))
+        dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+    if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
+        warn_conflicts([c for c in rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
+                        if len(c.muscles) == 1], "design_poses: the shared layout", stacklevel=4)
 
     t1 = time.perf_counter()
     P, m = len(items), len(muscles)

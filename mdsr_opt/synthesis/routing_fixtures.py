@@ -13,10 +13,15 @@ design. The resolutions, in order, each recorded as a sentence in the routing's 
    two rigid end patches) is less than :data:`MIN_FREE_FRACTION` of it, is no muscle: its fixtures would
    hold most of it, and a contraction of 0.6 (the design's ``a_max``) would have to shorten the free part
    by more than itself.
-3. **Joined fixtures.** Fixtures of different ropes that overlap are one rigid part (they are merged, which
-   is the physical meaning of two ropes knotted to one plate). When such merging joins the two ends of one
-   rope, that rope could not contract: the weakest rope of the merged part is dropped (routed ropes come
-   strongest first), and the check runs again.
+3. **Clearance.** Each rope, strongest first, keeps a wall between its channel and the stronger ropes':
+   it is shortened to its longest part whose segments lie at least ``channel_diameter + wall`` from their
+   centre lines and ``r_f + channel_diameter / 2 + wall`` from their fixtures, with ends (its fixtures) at
+   least that far from their lines and ``2 r_f + wall`` from their fixtures; a rope with no such part is
+   dropped. Two ropes that cross are thus never both kept whole, and fixtures of different ropes never
+   overlap -- but for ends closer than ``r_f``, which share one plate (two ropes knotted to it; the design
+   holds it as one rigid part): there the ropes meet, and their clearance holds outside the plate's wall.
+   The rope whose two fixtures are joined through others' plates could not contract: the weakest rope of
+   such a part is dropped and the check runs again.
 4. **Shrinking.** When the steps above lose a rope at ``r_f`` but would keep more with the smallest
    fixture ``min_fixture_radius``, the fixtures of all ropes shrink to the largest size (on a geometric
    ladder of :data:`N_SHRINK_STEPS` sizes from ``r_f`` down to that minimum) that keeps as many. One size
@@ -34,7 +39,7 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..mechanics.anchors import patch_groups
-from .fabrication import Fabrication, boundary_distance
+from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
 __all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius"]
 
@@ -71,7 +76,62 @@ def _where(P, path) -> str:
     return f"the rope from ({a[0]:.4g}, {a[1]:.4g}) to ({b[0]:.4g}, {b[1]:.4g})"
 
 
-def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray) -> FixtureFit:
+def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: float, dist) -> tuple:
+    """The longest part of ``path`` that can be moulded beside the ``stronger`` ropes: every segment at least
+    ``channel + wall`` from their centre lines and ``r + channel / 2 + wall`` from their fixtures; its ends (its
+    fixtures) also ``r + channel / 2 + wall`` from their lines, ``2 r + wall`` from their fixtures and
+    ``need`` inside the body. Empty when no such part of two nodes or more exists."""
+    import shapely
+    from shapely.geometry import MultiLineString, MultiPoint
+
+    if not stronger:
+        return tuple(path)
+    path = np.asarray(path)
+    lines = MultiLineString([P[list(q)] for q in stronger])
+    all_ends = [q[e] for q in stronger for e in (0, -1)]
+    # an end of this rope within a fixture's radius of a stronger rope's end shares its plate (one rigid
+    # part, as the design holds it): the ropes meet there and need their clearance only outside its wall
+    mine = [e for e in (path[0], path[-1]) if r > 0]
+    shared = [f for f in all_ends if any(np.linalg.norm(P[f] - P[e]) < r for e in mine)]
+    ends = MultiPoint([P[f] for f in all_ends if f not in shared]) if len(shared) < len(all_ends) else None
+    at_plate = np.zeros(len(path), bool)
+    if shared:
+        zone = shapely.union_all([shapely.Point(P[f]).buffer(r + wall, 32) for f in shared])
+        lines = lines.difference(zone)
+        at_plate = np.min([np.linalg.norm(P[path] - P[f], axis=1) for f in shared], axis=0) < r
+    seg = shapely.linestrings(np.stack([P[path[:-1]], P[path[1:]]], axis=1))
+    if shared:
+        seg = shapely.difference(seg, zone)
+    tol = 1e-9 * float(np.ptp(P, axis=0).max())
+
+    def far(geoms, items, d):  # NaN (an empty part, inside a shared plate) counts as far enough
+        if geoms is None or geoms.is_empty:
+            return np.ones(len(items), bool)
+        return ~(shapely.distance(items, geoms) < d - tol)
+
+    ok = far(lines, seg, channel + wall) & far(ends, seg, r + 0.5 * channel + wall)
+    if ok.all():
+        k, j = 0, len(path) - 1
+    else:
+        best, k, j, start = 0, 0, -1, None
+        for i, good in enumerate(list(ok) + [False]):
+            if good and start is None:
+                start = i
+            elif not good and start is not None:
+                if i - start > best:
+                    best, k, j = i - start, start, i
+                start = None
+    pts = shapely.points(P[path])
+    end_ok = (((far(lines, pts, r + 0.5 * channel + wall) & far(ends, pts, 2 * r + wall)) | at_plate)
+              & (dist[path] >= need - tol))
+    while k < j and not end_ok[k]:
+        k += 1
+    while j > k and not end_ok[j]:
+        j -= 1
+    return tuple(path[k:j + 1]) if j > k else ()
+
+
+def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float | None = None) -> FixtureFit:
     P = mesh.points
     need = r + wall
     notes, dropped, work = [], [], []
@@ -91,6 +151,23 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray) -> FixtureFit:
             notes.append(f"{_where(P, p)}: ends moved inward by {k} and {len(p) - 1 - j} node(s) so that its "
                          f"fixtures (radius {r:.4g} + wall {wall:.4g}) lie inside the body")
         work.append((i, tuple(p[k:j + 1])))
+    if channel is not None:  # 3. Clearance: each rope kept a wall clear of the stronger ones, trimmed or dropped
+        clear = []
+        for i, p in work:
+            q = _clear_of(P, p, [c for _, c in clear], r, wall, channel, need, dist)
+            if len(q) < 2:
+                why = (f"it cannot be moulded beside stronger ropes: no part of it lies a channel and a wall "
+                       f"({channel:.4g} + {wall:.4g}) from their channels with room for its fixtures (radius "
+                       f"{r:.4g})")
+                dropped.append((i, why))
+                notes.append(f"{_where(P, p)} dropped: {why}")
+                continue
+            if len(q) < len(p):
+                notes.append(f"{_where(P, p)}: shortened to the part that lies a channel and a wall ({channel:.4g}"
+                             f" + {wall:.4g}) clear of stronger ropes' channels and fixtures (radius {r:.4g}): "
+                             f"{len(q) - 1} of its {len(p) - 1} edges")
+            clear.append((i, q))
+        work = clear
     while work:
         mus = [Muscle(p) for _, p in work]
         L = np.array([m.rest_length(mesh) for m in mus])
@@ -144,15 +221,16 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
     dist = boundary_distance(mesh)
     paths = [list(p) for p in paths]
     r0, r_min, wall = fabrication.fixture_radius, fabrication.min_fixture_radius, fabrication.wall
-    fit = _fit_at(mesh, paths, r0, wall, dist)
+    c = fabrication.channel_diameter
+    fit = _fit_at(mesh, paths, r0, wall, dist, c)
     if len(fit.kept) == len(paths) or r_min >= r0:
         return fit
-    low = _fit_at(mesh, paths, r_min, wall, dist)
+    low = _fit_at(mesh, paths, r_min, wall, dist, c)
     if len(low.kept) <= len(fit.kept):
         return fit
     for k in range(1, N_SHRINK_STEPS + 1):
         r = r0 * (r_min / r0) ** (k / N_SHRINK_STEPS) if r_min > 0 else r0 * (1.0 - k / N_SHRINK_STEPS)
-        trial = low if k == N_SHRINK_STEPS else _fit_at(mesh, paths, r, wall, dist)
+        trial = low if k == N_SHRINK_STEPS else _fit_at(mesh, paths, r, wall, dist, c)
         if len(trial.kept) >= len(low.kept):
             note = (f"fixtures shrunk from radius {r0:.4g} to {trial.radius:.4g} (the smallest allowed is "
                     f"{r_min:.4g}) so that {len(trial.kept) - len(fit.kept)} more rope(s) keep room for them")
@@ -163,7 +241,9 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
 def common_fixture_radius(mesh, muscles, fabrication: Fabrication) -> float:
     """One fixture radius for ropes fitted apart (the layouts of several cases driven together, as in an
     animation): the largest size on the ladder from ``fixture_radius`` down to ``min_fixture_radius`` at which
-    every rope keeps both fixtures as it is (no end moved, none dropped); ``min_fixture_radius`` if none.
+    every rope keeps both fixtures as it is (no end moved, none dropped) and no fixture overlaps another's or
+    another rope's channel with its wall (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`);
+    ``min_fixture_radius`` if none.
 
     Parameters
     ----------
@@ -178,6 +258,8 @@ def common_fixture_radius(mesh, muscles, fabrication: Fabrication) -> float:
     for k in range(N_SHRINK_STEPS + 1):
         r = r0 * (r_min / r0) ** (k / N_SHRINK_STEPS) if r_min > 0 else r0 * (1.0 - k / N_SHRINK_STEPS)
         fit = _fit_at(mesh, paths, r, fabrication.wall, dist)
-        if not fit.dropped and not fit.notes:
+        if not fit.dropped and not fit.notes and not any(
+                cf.kind in ("fixtures", "fixture-channel")
+                for cf in rope_conflicts(mesh, paths, fabrication, fixture_radius=r)):
             return float(r)
     return float(r_min)

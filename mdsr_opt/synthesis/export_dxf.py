@@ -1,0 +1,197 @@
+"""The DXF drawing of the fabrication files (:func:`dxf_text`, written by
+:func:`~mdsr_opt.synthesis.export.export_fabrication`): body, holes, channels, walls, fixtures and labels as DXF R12."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..plot.style import dxf_color
+
+__all__ = ["dxf_text", "label_at"]
+
+_DXF_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6, "um": 13}
+
+
+def label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """A label point beside the middle of a polyline, and the text direction."""
+    i = max(1, len(path) // 2)
+    a, b = path[i - 1], path[i]
+    d = (b - a) / (np.linalg.norm(b - a) or 1.0)
+    return (a + b) / 2 + offset * np.array([-d[1], d[0]]), d
+
+
+#: DXF layers: name and ACI colour (7 white/black, 1 red, 5 blue, 3 green)
+_DXF_LAYERS = (("BODY", 7), ("HOLES", 7), ("MUSCLES", 1), ("WALLS", 8), ("ENDS", 5), ("LABELS", 3),
+               ("CONFLICTS", 1))
+
+
+def _dxf_number(v: float) -> str:
+    """A finite number as DXF wants it: fixed point (no exponent), every digit of its shortest
+    round-tripping form (``5.619e-09`` is ``0.000000005619``)."""
+    v = float(v)
+    if not math.isfinite(v):
+        raise ValueError(f"a DXF coordinate must be finite, got {v}")
+    s = np.format_float_positional(v, trim="0")
+    return "0.0" if s in ("-0.0", "0.0") else s
+
+
+def _dxf_string(text: str) -> str:
+    """A DXF string value: one line (control characters become spaces), ASCII, other characters as the
+    ``\\U+XXXX`` escapes that DXF readers decode (AutoCAD; ezdxf's ``decode_dxf_unicode``), a backslash
+    and a caret too (``^J`` is a caret code); ``%`` as ``%%%``, since ``%%`` starts a TEXT's control codes
+    (``%%u`` underlines); a character beyond U+FFFF becomes ``?``. At most 255 characters, as R12's TEXT
+    takes (whole characters: an escape is never cut); the SVG and the CSV keep the name as it is."""
+    out = []
+    for ch in str(text):
+        o = ord(ch)
+        if o < 32 or o == 127:
+            out.append(" ")
+        elif ch == "%":  # "%%%" is a literal percent sign ("%%u" would toggle underlining)
+            out.append("%%%")
+        elif o < 127 and ch not in "\\^":  # ^ starts a caret code (^J: a line feed)
+            out.append(ch)
+        elif o <= 0xFFFF and not 0xD800 <= o <= 0xDFFF:
+            out.append(f"\\U+{o:04X}")
+        else:  # beyond four hex digits (an emoji, say) or a lone surrogate: no escape holds it
+            out.append("?")
+    n, keep = 0, 0
+    for piece in out:
+        if n + len(piece) > 255:
+            break
+        n, keep = n + len(piece), keep + 1
+    return "".join(out[:keep])
+
+
+def dxf_text(fd) -> str:
+    """The DXF file of a :class:`~mdsr_opt.synthesis.export.FabricationData` (R12, ASCII): written directly, as a sequence of group code / value lines.
+
+    R12 (AC1009) is the version every CAD program, laser cutter and CAM tool reads; its 2-D ``POLYLINE``
+    carries the channel width (groups 40/41). R12 has no unit variable: ``$INSUNITS`` (R2000's) is
+    written for the readers that honour it (ezdxf, QCAD/LibreCAD); AutoCAD reports it as unknown and
+    ignores it, as it does any header variable newer than the file. The SVG and the CSV state the unit
+    as well. It is written here, not through ezdxf, whose import alone costs more than the whole
+    export."""
+    lines: list[str] = []
+
+    def g(code: int, value) -> None:
+        lines.append(f"{code:>3}")
+        lines.append(value if isinstance(value, str) else str(value))
+
+    def xy(p) -> None:
+        g(10, _dxf_number(p[0]))
+        g(20, _dxf_number(p[1]))
+        g(30, "0.0")
+
+    def polyline(points, layer: str, closed: bool, width: float = 0.0, color: int | None = None) -> None:
+        g(0, "POLYLINE")
+        g(8, layer)
+        if color is not None:
+            g(62, color)
+        g(66, 1)  # vertices follow
+        xy((0.0, 0.0))
+        g(70, 1 if closed else 0)
+        if width > 0:
+            g(40, _dxf_number(width))
+            g(41, _dxf_number(width))
+        for p in points:
+            g(0, "VERTEX")
+            g(8, layer)
+            xy(p)
+        g(0, "SEQEND")
+        g(8, layer)
+
+    size = float(np.ptp(fd.outline, axis=0).max())
+    labels = [label_at(path, 0.05 * size)[0] for path in fd.paths]
+    # the drawing's extents: the outline, the channels at their width, the end circles, the labels' points
+    reach = max(fd.end_radius, 0.5 * fd.channel_width) + fd.wall
+    near = np.vstack([fd.outline] + [p - reach for p in fd.paths] + [p + reach for p in fd.paths]
+                     + [np.vstack(labels) + [0.0, 0.035 * size]])
+    lo, hi = near.min(axis=0), near.max(axis=0)
+    g(0, "SECTION")
+    g(2, "HEADER")
+    g(9, "$ACADVER")
+    g(1, "AC1009")
+    g(9, "$INSUNITS")
+    g(70, _DXF_INSUNITS.get(fd.units, 0))  # 0: unitless
+    g(9, "$MEASUREMENT")
+    g(70, 0 if fd.units == "in" else 1)
+    g(9, "$EXTMIN")
+    xy(lo)
+    g(9, "$EXTMAX")
+    xy(hi)
+    g(0, "ENDSEC")
+    g(0, "SECTION")
+    g(2, "TABLES")
+    g(0, "TABLE")
+    g(2, "LTYPE")
+    g(70, 1)
+    g(0, "LTYPE")
+    g(2, "CONTINUOUS")
+    g(70, 0)
+    g(3, "Solid line")
+    g(72, 65)
+    g(73, 0)
+    g(40, "0.0")
+    g(0, "ENDTAB")
+    g(0, "TABLE")
+    g(2, "LAYER")
+    g(70, len(_DXF_LAYERS) + 1)
+    for name, color in (("0", 7),) + _DXF_LAYERS:
+        g(0, "LAYER")
+        g(2, name)
+        g(70, 0)
+        g(62, color)
+        g(6, "CONTINUOUS")
+    g(0, "ENDTAB")
+    g(0, "TABLE")
+    g(2, "STYLE")
+    g(70, 1)
+    g(0, "STYLE")
+    g(2, "STANDARD")
+    g(70, 0)
+    g(40, "0.0")
+    g(41, "1.0")
+    g(50, "0.0")
+    g(71, 0)
+    g(42, "2.5")
+    g(3, "txt")
+    g(4, "")
+    g(0, "ENDTAB")
+    g(0, "ENDSEC")
+    g(0, "SECTION")
+    g(2, "ENTITIES")
+    polyline(fd.outline, "BODY", closed=True)
+    for h in fd.holes:
+        polyline(h, "HOLES", closed=True)
+    for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
+        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
+        if fd.wall > 0:
+            polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
+        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
+        for p in (path[0], path[-1]):
+            g(0, "CIRCLE")
+            g(8, "ENDS")
+            g(62, dxf_color(i))
+            xy(p)
+            g(40, _dxf_number(fd.end_radius))
+            if fd.wall > 0:
+                g(0, "CIRCLE")
+                g(8, "WALLS")
+                xy(p)
+                g(40, _dxf_number(fd.end_radius + fd.wall))
+        g(0, "TEXT")
+        g(8, "LABELS")
+        g(62, dxf_color(i))
+        xy(q)
+        g(40, _dxf_number(0.035 * size))
+        g(1, _dxf_string(mu.name))
+    for cf in getattr(fd, "conflicts", ()):  # where the layout cannot be moulded: a circle, as the SVG's red ring
+        g(0, "CIRCLE")
+        g(8, "CONFLICTS")
+        xy(cf.at)
+        g(40, _dxf_number(max(fd.end_radius, fd.channel_width) + fd.wall))
+    g(0, "ENDSEC")
+    g(0, "EOF")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,284 @@
+"""Clearance between ropes, fixtures and the outline in the fabrication export, and the export's door checks."""
+
+from __future__ import annotations
+
+import re
+import warnings
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh
+from mdsr_opt.scenes.select import edge_path
+from mdsr_opt.synthesis.export import export_fabrication
+from mdsr_opt.synthesis.fabrication import Fabrication, FabricationWarning, rope_conflicts
+
+SVG = "{http://www.w3.org/2000/svg}"
+
+
+def plate(scale=1.0):
+    """A 10 x 4 plate (node spacing 0.25), times ``scale``."""
+    m = Mesh.rectangle(10.0, 4.0, 40, 16)
+    return Mesh(m.points * scale, m.triangles)
+
+
+def rope(mesh, pts, name, scale=1.0):
+    return edge_path(mesh, [tuple(scale * np.asarray(p, float)) for p in pts], name=name)
+
+
+def fab(scale=1.0):
+    return Fabrication(channel_diameter=0.2 * scale, wall=0.1 * scale, fixture_radius=0.2 * scale)
+
+
+def export_warnings(mesh, mus, tmp_path, **kw):
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        files = export_fabrication(mesh, None, tmp_path, muscles=mus, name="p", **kw)
+    return files, [str(x.message) for x in w if issubclass(x.category, FabricationWarning)]
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 250.0])
+def test_ropes_apart_export_without_warning(tmp_path, scale):
+    mesh = plate(scale)
+    mus = [rope(mesh, [(2, 1.5), (8, 1.5)], "a", scale), rope(mesh, [(2, 2.5), (8, 2.5)], "b", scale)]
+    assert rope_conflicts(mesh, mus, fab(scale)) == []
+    files, msgs = export_warnings(mesh, mus, tmp_path, fabrication=fab(scale))
+    assert msgs == []
+    assert "conflict" not in open(files["svg"]).read()
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 250.0])
+def test_channels_of_two_muscles_closer_than_channel_plus_wall_are_reported(tmp_path, scale):
+    mesh = plate(scale)
+    mus = [rope(mesh, [(2, 1.5), (8, 1.5)], "a", scale), rope(mesh, [(3, 1.75), (7, 1.75)], "b", scale)]
+    found = rope_conflicts(mesh, mus, fab(scale))
+    ropes = [c for c in found if c.kind == "ropes"]
+    assert len(ropes) == 1 and ropes[0].muscles == (0, 1)
+    assert ropes[0].distance == pytest.approx(0.25 * scale, rel=1e-9)
+    assert ropes[0].required == pytest.approx(0.3 * scale, rel=1e-12)
+    files, msgs = export_warnings(mesh, mus, tmp_path, fabrication=fab(scale))
+    assert len(msgs) == 1
+    assert re.search(r"muscles a and b: their channels overlap: centre lines \S+ apart", msgs[0])
+    assert f"need {0.3 * scale:.4g}" in msgs[0]
+    # the fixture of b lies on a's channel too (0.25 from it; radius 0.2 + half channel 0.1 + wall 0.1)
+    assert "the end fixture of b" in msgs[0] and f"need {0.4 * scale:.4g}" in msgs[0]
+    rings = ET.parse(files["svg"]).getroot().findall(f".//{SVG}g[@id='conflicts']/{SVG}circle")
+    assert {r.get("class") for r in rings} == {"conflict ropes", "conflict fixture-channel"}
+    assert all(set(r.get("data-muscles").split()) == {"a", "b"} for r in rings)
+    import ezdxf
+
+    circles = [e for e in ezdxf.readfile(files["dxf"]).modelspace() if e.dxf.layer == "CONFLICTS"]
+    assert len(circles) == 2 and all(c.dxftype() == "CIRCLE" for c in circles)
+
+
+def test_crossing_ropes_are_reported(tmp_path):
+    mesh = plate()
+    mus = [rope(mesh, [(2, 2), (8, 2)], "flat"), rope(mesh, [(4, 0.75), (5, 3.25)], "steep")]
+    found = rope_conflicts(mesh, mus, fab())
+    assert [c.kind for c in found if c.kind == "crossing"] == ["crossing"]
+    _, msgs = export_warnings(mesh, mus, tmp_path, fabrication=fab())
+    assert "muscles flat and steep cross or touch" in msgs[0] and "cannot be moulded in one layer" in msgs[0]
+
+
+def test_overlapping_fixtures_of_two_muscles_are_reported(tmp_path):
+    mesh = plate()
+    # end to end along one line: b starts 0.25 after a ends (fixtures of radius 0.2 + a wall 0.1 need 0.5)
+    mus = [rope(mesh, [(1, 2), (4.5, 2)], "a"), rope(mesh, [(4.75, 2), (9, 2)], "b")]
+    found = rope_conflicts(mesh, mus, fab())
+    fx = [c for c in found if c.kind == "fixtures"]
+    assert len(fx) == 1 and fx[0].distance == pytest.approx(0.25) and fx[0].required == pytest.approx(0.5)
+    _, msgs = export_warnings(mesh, mus, tmp_path, fabrication=fab())
+    assert "muscles a and b: their end fixtures overlap: centres 0.25 apart" in msgs[0]
+
+
+@pytest.mark.parametrize("scale", [1e-2, 1.0, 40.0])
+def test_a_user_rope_on_the_outline_is_marked_not_mouldable(tmp_path, scale):
+    mesh = plate(scale)
+    mus = [rope(mesh, [(0, 0), (10, 0)], "lower", scale)]
+    files, msgs = export_warnings(mesh, mus, tmp_path, fabrication=fab(scale))
+    assert len(msgs) == 1
+    need = max(0.2, 0.02 * np.hypot(10, 4)) * scale
+    assert (f"muscle lower: its channel is not mouldable: its smallest inset from the outline or a hole is 0 "
+            f"(it runs on the outline), a channel {0.2 * scale:.4g} wide with a wall {0.1 * scale:.4g} needs "
+            f"{need:.4g}") in msgs[0]
+    assert f"a fixture of radius {0.2 * scale:.4g} with a wall {0.1 * scale:.4g} needs {0.3 * scale:.4g}" in msgs[0]
+    assert 'class="conflict inset"' in open(files["svg"]).read()
+    assert "NOT MOULDABLE as laid out (2 place(s), red rings)" in " ".join(caption_lines(files["svg"])[-1])
+
+
+def caption_lines(svg_path):
+    root = ET.parse(svg_path).getroot()
+    W, H = map(float, root.get("viewBox").split()[2:])
+    cap = root.find(f"{SVG}text[@class='caption']")
+    fc = float(cap.get("font-size"))
+    return W, H, fc, float(cap.get("x")), float(cap.get("y")), [t.text for t in cap.findall(f"{SVG}tspan")]
+
+
+@pytest.mark.parametrize("width", [1.0, 11.5, 400.0])
+def test_the_caption_is_wrapped_to_the_drawing(tmp_path, width):
+    m = Mesh.rectangle(width, 0.4 * width, 40, 16)
+    mus = [edge_path(m, [(0.2 * width, 0.2 * width), (0.8 * width, 0.2 * width)], name="a rope with a long name")]
+    files = export_fabrication(m, None, tmp_path, muscles=mus, name="a_drawing_with_a_rather_long_name")
+    W, H, fc, x, y, lines = caption_lines(files["svg"])
+    assert len(lines) >= 2
+    # a sans-serif character is narrower than 0.6 em: every line ends inside the drawing
+    assert all(x + 0.6 * fc * len(t) <= W * (1 + 1e-9) for t in lines)
+    assert y + 1.25 * fc * (len(lines) - 1) <= H * (1 + 1e-9)   # the last line is on the page
+    assert " ".join(lines).startswith("a_drawing_with_a_rather_long_name: 1 muscle channel(s)")
+
+
+def test_out_naming_a_file_is_a_value_error(tmp_path):
+    mesh = plate()
+    f = tmp_path / "afile"
+    f.write_text("x")
+    with pytest.raises(ValueError, match=r"out '.*afile' is an existing file, not a folder"):
+        export_fabrication(mesh, None, f, muscles=[rope(mesh, [(2, 2), (8, 2)], "a")])
+    assert f.read_text() == "x"
+
+
+@pytest.mark.parametrize("design, words", [
+    (None, r"design is None and no muscles are given: design must be a PosesResult \(design_poses\), a "
+           r"PipelineResult"),
+    ({"a": 1}, r"design is a mapping whose value for 'a' is a int, not a DesignResult: design must be"),
+    (3.5, r"design must be a PosesResult .* got float"),
+])
+def test_a_design_of_the_wrong_type_is_a_type_error_naming_design(tmp_path, design, words):
+    with pytest.raises(TypeError, match=words):
+        export_fabrication(plate(), design, tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e3])
+@pytest.mark.parametrize("kw, words", [
+    (dict(channel_width=5.0), r"channel_width \S+ with walls of .* does not fit in the body: the body is "
+                              r"\S+ x \S+ and \S+ deep .*channel_width at most"),
+    (dict(fabrication=dict(wall=1.5)), r"does not fit in the body"),
+    (dict(fabrication=dict(fixture_radius=1.9)), r"the end fixtures \(radius \S+\) with their wall \S+ do not fit"),
+])
+def test_sizes_larger_than_the_body_are_refused_at_the_door(tmp_path, scale, kw, words):
+    m = Mesh.rectangle(4.0, 1.0, 16, 4)
+    mesh = Mesh(m.points * scale, m.triangles)
+    mus = [edge_path(mesh, [(0.5 * scale, 0.5 * scale), (3.5 * scale, 0.5 * scale)], name="a")]
+    kw = {k: (v * scale if k == "channel_width" else {f: x * scale for f, x in v.items()}) for k, v in kw.items()}
+    with pytest.raises(ValueError, match=words) as e:
+        export_fabrication(mesh, None, tmp_path / "o", muscles=mus, **kw)
+    assert f"{0.5 * scale:.4g} deep" in str(e.value)
+    assert not (tmp_path / "o").exists()
+
+
+# ---------------------------------------------------------------------------------------------- prevention
+def _apart(mesh, paths, c, w, r):
+    """Independent check with shapely: centre lines c + w apart, no crossing, fixture centres 2 r + w apart."""
+    from shapely.geometry import LineString
+
+    P = mesh.points
+    for i in range(len(paths)):
+        for j in range(i + 1, len(paths)):
+            a, b = LineString(P[list(paths[i])]), LineString(P[list(paths[j])])
+            assert a.distance(b) >= (c + w) * (1 - 1e-9)
+            ends = [np.linalg.norm(P[e] - P[f]) for e in (paths[i][0], paths[i][-1]) for f in (paths[j][0], paths[j][-1])]
+            assert min(ends) >= (2 * r + w) * (1 - 1e-9)
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 250.0])
+def test_fit_fixtures_keeps_weaker_ropes_a_wall_clear_of_stronger_ones(scale):
+    from mdsr_opt.synthesis.routing_fixtures import fit_fixtures
+
+    mesh = plate(scale)
+    f = Fabrication(channel_diameter=0.2 * scale, wall=0.1 * scale, fixture_radius=0.2 * scale,
+                    min_fixture_radius=0.2 * scale)
+    strong = rope(mesh, [(1, 1.5), (9, 1.5)], "s", scale).nodes
+    beside = rope(mesh, [(1.5, 1.75), (8.5, 1.75)], "b", scale).nodes            # 0.25 from it all along
+    bend = rope(mesh, [(2, 1.75), (4, 1.75), (4, 3), (5, 3)], "L", scale).nodes   # close, then far away
+    cross = rope(mesh, [(7, 0.25), (7, 3.75)], "x", scale).nodes                  # crosses the strong one
+    fit = fit_fixtures(mesh, [strong, beside, bend, cross], f)
+    kept = dict(fit.kept)
+    assert kept[0] == tuple(strong)
+    assert 1 in dict(fit.dropped) and "cannot be moulded beside stronger ropes" in dict(fit.dropped)[1]
+    assert set(kept) >= {2, 3} and len(kept[2]) < len(bend) and len(kept[3]) < len(cross)
+    assert any("shortened to the part that lies a channel and a wall" in n for n in fit.notes)
+    _apart(mesh, list(kept.values()), 0.2 * scale, 0.1 * scale, fit.radius)
+    assert rope_conflicts(mesh, list(kept.values()), f, fixture_radius=fit.radius) == []
+
+
+def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
+    from mdsr_opt.synthesis.poses import shared_layout
+
+    mesh = plate()
+    f = fab().for_body(mesh)
+    a = rope(mesh, [(1, 1.5), (9, 1.5)], "a")
+    near = rope(mesh, [(1.5, 1.75), (8.5, 1.75)], "n")           # beside a all along: a duplicate of it
+    cross = rope(mesh, [(5.5, 0.5), (5.5, 3.5)], "x")            # crosses a: kept (its pose's only rope), said
+    far = rope(mesh, [(1, 3), (9, 3)], "f")
+    layouts = {"p": [a, far], "q": [near, cross]}
+    old, _ = shared_layout(mesh, layouts)
+    assert len(old) == 4                                          # without a fabrication: all kept, overlapping
+    notes: list = []
+    mus, sources = shared_layout(mesh, layouts, fabrication=f, notes=notes)
+    assert [m.nodes for m in mus] == [a.nodes, far.nodes, cross.nodes] and sources == (("p", "q"), ("p",), ("q",))
+    assert len(notes) == 2 and "pose 'q''s rope of rank 1" in notes[0] and "merged into M1" in notes[0]
+    assert "rank 2" in notes[1] and "kept beside M1, NOT mouldable in one layer" in notes[1] and "cross" in notes[1]
+    assert [c.kind for c in rope_conflicts(mesh, mus, f)] == ["crossing", "crossing"]
+
+
+@pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
+def test_design_pipeline_warns_for_a_given_muscle_that_cannot_be_moulded_and_still_designs(scale):
+    from mdsr_opt import Muscle, NeoHookean, design_pipeline, nodes_in_box
+
+    m = Mesh.from_polygon(np.array([[0, 0], [4, 0], [4, 1], [0, 1]], float), max_area=0.03)
+    mesh = Mesh(m.points * scale, m.triangles)
+    P = mesh.points
+    lower = Muscle(sorted(np.flatnonzero(P[:, 1] < 1e-9 * scale), key=lambda i: P[i, 0]), name="lower")
+    inner = edge_path(mesh, [(0.5 * scale, 0.5 * scale), (3.5 * scale, 0.5 * scale)], name="inner")
+    base, tip = nodes_in_box(mesh, xmax=0.0), nodes_in_box(mesh, xmin=4.0 * scale)
+    drags = {i: P[i] + np.array([-0.6, 0.6]) * scale for i in tip}
+    for mus, bad in (([lower], True), ([inner], False)):
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            res = design_pipeline(mesh, NeoHookean(1.0, 0.3), base, drags, muscles=mus)
+        msgs = [str(x.message) for x in w if issubclass(x.category, FabricationWarning)]
+        assert res.design.success and len(res.muscles) == 1
+        if not bad:
+            assert msgs == []
+            continue
+        assert len(msgs) == 1 and msgs[0].startswith("design_pipeline: the muscles given: ")
+        need = max(0.5 * 0.01 + 0.01, 0.02) * np.hypot(4, 1) * scale
+        assert (f"muscle lower: its channel is not mouldable: its smallest inset from the outline or a hole is 0 "
+                f"(it runs on the outline), a channel {0.01 * np.hypot(4, 1) * scale:.4g} wide") in msgs[0]
+        assert f"needs {need:.4g}" in msgs[0]
+
+
+def test_design_poses_warns_for_a_given_rope_on_the_outline():
+    from mdsr_opt import Muscle, NeoHookean, solve_internal
+    from mdsr_opt.synthesis.poses import design_poses
+
+    mesh = Mesh.from_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], max_area=0.03)
+    P = mesh.points
+    lower = Muscle(sorted(np.flatnonzero(P[:, 1] < 1e-9), key=lambda i: P[i, 0]), name="lower")
+    mat = NeoHookean(1.0, 0.3)
+    x = solve_internal(mesh, mat, [lower], [0.1]).x
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = design_poses(mesh, mat, {"p": x}, separate={"p": ([lower], None)}, compare=False)
+    msgs = [x for x in w if issubclass(x.category, FabricationWarning)]
+    assert res.all_success and res.n_muscles == 1
+    assert len(msgs) == 1 and msgs[0].filename == __file__    # said at the caller's line
+    assert "design_poses: the shared layout: 2 place(s)" in str(msgs[0].message)
+    assert "muscle M1: its channel is not mouldable: its smallest inset from the outline or a hole is 0" in str(
+        msgs[0].message)
+
+
+def test_ends_closer_than_a_fixture_radius_share_one_plate():
+    from mdsr_opt.synthesis.routing_fixtures import fit_fixtures
+
+    mesh = plate()
+    a = rope(mesh, [(1, 2), (4.5, 2)], "a")
+    b = rope(mesh, [(4.5, 2.25), (4.5, 3), (8, 3)], "b")           # its end 0.25 from a's
+    big = Fabrication(channel_diameter=0.2, wall=0.1, fixture_radius=0.3, min_fixture_radius=0.3)
+    assert rope_conflicts(mesh, [a, b], big) == []                 # one plate of radius 0.3 holds both
+    fit = fit_fixtures(mesh, [a.nodes, b.nodes], big)
+    assert dict(fit.kept) == {0: tuple(a.nodes), 1: tuple(b.nodes)} and fit.dropped == ()
+    small = Fabrication(channel_diameter=0.2, wall=0.1, fixture_radius=0.2, min_fixture_radius=0.2)
+    found = rope_conflicts(mesh, [a, b], small)                     # two plates of 0.2, 0.25 apart: overlap
+    assert [c.kind for c in found] == ["ropes", "fixtures"] and found[1].required == pytest.approx(0.5)
