@@ -192,3 +192,48 @@ def test_a_solve_from_a_coarser_models_state_reaches_the_load_stepped_state(stri
     assert back.success and "predicted" not in back.status and np.abs(back.x - stepped.x).max() < 1e-7 * mesh.size
     with pytest.raises(ValueError, match="guess must be"):
         solve_quadratic_internal(model, ropes, [0.3], groups, guess=coarse.x)
+
+
+def test_a_guess_whose_fixtures_fold_when_made_rigid_is_carried_into_the_body(strip):
+    """A predicted state whose fixtures are squeezed (as a coarser model's anchor patch may be): made rigid,
+    the fixtures push through the elements at their rim; the solve carries the fixtures' move into the body
+    elastically and still starts from the prediction, reaching the load-stepped state."""
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
+    guess = stepped.x.copy()
+    for g in groups:  # every node near a fixture pulled a fifth of the way to its end node
+        c = guess[g[0]]
+        r = np.linalg.norm(model.points - model.points[g[0]], axis=1)
+        w = np.clip((0.6 - r) / 0.3, 0.0, 1.0)[:, None]
+        guess = guess + 0.2 * w * (c - guess)
+    red = RigidReduction(model.points, groups)
+    assert model.upright(guess) and not model.upright(red.x_of(red.q_of(guess)))  # rigid, it folds
+    guessed = solve_quadratic_internal(model, ropes, [0.3], groups, guess=guess)
+    assert stepped.success and guessed.success and "predicted" in guessed.status, guessed.status
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * mesh.size
+    assert guessed.tension[0] == pytest.approx(stepped.tension[0], rel=1e-6)
+
+
+def test_a_start_at_nearly_the_same_contractions_is_one_newton_solve(strip):
+    """start= a result at contractions within START_FULL_STEP: one Newton solve at the full load from its
+    state, the load-stepped state to the tolerance; farther away, load steps from it."""
+    from mdsr_opt.mechanics.quadsolve import START_FULL_STEP
+
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    first = solve_quadratic_internal(model, ropes, [0.25], groups)
+    a = 0.25 + 0.5 * START_FULL_STEP
+    cold = solve_quadratic_internal(model, ropes, [a], groups)
+    near = solve_quadratic_internal(model, ropes, [a], groups, start=first)
+    assert cold.success and near.success and "start state" in near.status and near.steps == 1
+    assert near.iterations < cold.iterations
+    assert np.abs(near.x - cold.x).max() < 1e-7 * mesh.size
+    far = solve_quadratic_internal(model, ropes, [0.25 + 2 * START_FULL_STEP], groups, start=first)
+    assert far.success and "start state" not in far.status

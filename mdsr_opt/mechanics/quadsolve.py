@@ -172,6 +172,10 @@ class _Upright:
                 f"at {where}")
 
 
+#: largest change of a contraction from a ``start`` result that is first tried in one Newton solve at the
+#: full load (a larger change is stepped)
+START_FULL_STEP = 0.05
+
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
 INTERMEDIATE_TOL = 1e-3
 
@@ -312,15 +316,13 @@ def _gauge(red: RigidReduction) -> np.ndarray:
     return np.array([red.q_index[i], red.q_index[i] + 1, red.q_index[j] + comp])
 
 
-def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
-    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
-    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
-    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
-    state has an inverted element."""
+def _onto_gauge(red: RigidReduction, gauge, y: np.ndarray) -> np.ndarray | None:
+    """The state ``y`` (N, 2) moved rigidly so that its gauge coordinates (:func:`_gauge`) are those of rest;
+    None when no rigid motion does (the two gauge nodes' distance too short for the fixed component)."""
     X = red.X
     i, j = int(np.flatnonzero(red.q_index == gauge[0])[0]), int(np.flatnonzero(red.q_index == gauge[2] - (gauge[2] % 2))[0])
     comp = int(gauge[2] % 2)
-    d, D = guess[j] - guess[i], X[j] - X[i]
+    d, D = y[j] - y[i], X[j] - X[i]
     rho, phi = float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))
     ratio = D[comp] / rho if rho > 0 else 2.0
     if abs(ratio) > 1.0:
@@ -333,11 +335,61 @@ def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, f
         psi = psi if D[1] >= 0 else -psi
     th = psi - phi
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-    x = (guess - guess[i]) @ R.T + X[i]
-    q = red.q_of(x)
-    x = red.x_of(q)
-    if not model.upright(x):  # made rigid at its fixtures, the state folds there
+    return (y - y[i]) @ R.T + X[i]
+
+
+def _rigid_extension(model, red: RigidReduction, x: np.ndarray, xr: np.ndarray) -> np.ndarray | None:
+    """A predicted state ``x`` whose fixtures were made rigid (``xr``: the fixtures' nodes moved, the rest
+    as in ``x``), with the fixtures' move carried into the body: the other nodes displaced by the linear
+    elastic response of the body at ``x`` to the fixtures' displacement (``K_oo d_o = -K_of d_f``), so that
+    the elements at a fixture's rim follow it instead of folding. None when the result still has an
+    inverted element."""
+    moved = np.zeros(red.n, dtype=bool)
+    moved[red.followers] = True
+    moved[red.refs] = True  # each fixture whole: its reference node with its followers
+    fixed = np.repeat(moved, 2)
+    d = (xr - x).reshape(-1)
+    K = sp.csr_matrix(model.evaluate(x)[2])
+    free = np.flatnonzero(~fixed)
+    f_idx = np.flatnonzero(fixed)
+    try:  # an exactly singular matrix (a body the fixtures do not hold) raises
+        dfree = spla.splu(K[free][:, free].tocsc()).solve(-(K[free][:, f_idx] @ d[f_idx]))
+    except RuntimeError:
         return None
+    if not np.isfinite(dfree).all():
+        return None
+    out = x.reshape(-1).copy()
+    out[f_idx] = xr.reshape(-1)[f_idx]
+    out = out.reshape(-1, 2)
+    for frac in (1.0, 0.5):  # the full elastic response, or half of it when that overshoots
+        y = out.reshape(-1).copy()
+        y[free] += frac * dfree
+        y = y.reshape(-1, 2)
+        if model.upright(y):
+            return y
+    return None
+
+
+def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
+    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
+    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
+    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
+    state has an inverted element."""
+    x = _onto_gauge(red, gauge, guess)
+    if x is None:
+        return None
+    q = red.q_of(x)
+    xr = red.x_of(q)
+    if not model.upright(xr):  # made rigid at its fixtures, the state folds at their rim: carry the
+        xr = _rigid_extension(model, red, x, xr)  # fixtures' correction into the body elastically,
+        xr = None if xr is None else _onto_gauge(red, gauge, xr)  # and onto the gauge again
+        if xr is None:
+            return None
+        q = red.q_of(xr)
+        xr = red.x_of(q)
+        if not model.upright(xr):
+            return None
+    x = xr
     P = red.jacobian(q)
     gq = (P.T @ model.energy_gradient(x)[1])[keep]
     C = np.column_stack([(P.T @ r.forces(x, r.weights(x), model.n_nodes)[0])[keep] for r in ropes])
@@ -354,7 +406,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     ``fixtures`` (disjoint node groups, an end node first: see
     :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
-    of from rest. With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
+    of from rest (contractions within :data:`START_FULL_STEP` of its own: first one Newton solve from its
+    state at the full load). With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
     equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
     converge (or the predicted state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
@@ -470,6 +523,14 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                              "ropes and fixtures")
         z0, a0 = start.state.copy(), start.commanded.copy()
     done = None
+    if start is not None and guess is None and np.abs(a - a0).max() <= START_FULL_STEP:
+        # contractions near the start's: one Newton solve from its state at the full load; else load steps
+        zt, conv, it, res = solve_at(1.0, z0, True, 0.0)
+        if conv:
+            done = (zt, 1.0, True, it, 1, res, "converged (from the start state)")
+        else:
+            active[:] = True
+            predictor_iters = it
     if guess is not None:  # one Newton solve at the full load from the predicted state; else load steps
         zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
         if zg is not None:
@@ -481,7 +542,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 predictor_iters = it
     if done is None:
         done = _continue(solve_at, z0, min_step)
-        if guess is not None and predictor_iters:
+        if predictor_iters:
             done = done[:3] + (done[3] + predictor_iters,) + done[4:]
     z, _s, conv, iters, steps, res, status = done
     if not conv and guard[0] is not None:
