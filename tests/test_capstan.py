@@ -237,3 +237,16 @@ def test_a_start_at_nearly_the_same_contractions_is_one_newton_solve(strip):
     assert np.abs(near.x - cold.x).max() < 1e-7 * mesh.size
     far = solve_quadratic_internal(model, ropes, [0.25 + 2 * START_FULL_STEP], groups, start=first)
     assert far.success and "start state" not in far.status
+
+
+def test_the_reduced_gradient_without_forming_the_jacobian_is_p_transpose_g():
+    """quadsolve._pull_back (a line search's residual) is P^T g of RigidReduction.jacobian, to rounding."""
+    from mdsr_opt.mechanics.quadsolve import _pull_back
+
+    rng = np.random.default_rng(1)
+    red = RigidReduction(rng.random((40, 2)), [np.array([3, 5, 7, 9]), np.array([10, 11, 12])])
+    q = red.rest_q() + 0.1 * rng.standard_normal(red.n_q)
+    g = rng.standard_normal(80)
+    assert np.abs(_pull_back(red, q, g) - red.jacobian(q).T @ g).max() < 1e-13
+    free = RigidReduction(rng.random((5, 2)))  # no fixture
+    assert np.abs(_pull_back(free, free.rest_q(), g[:10]) - g[:10]).max() == 0.0

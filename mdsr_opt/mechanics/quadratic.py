@@ -134,6 +134,11 @@ def extend_prescribed(mesh: Mesh, anchors, drag_nodes, drag_positions):
     return new_a, new_dn, new_dp
 
 
+def _det2(F: np.ndarray) -> np.ndarray:
+    """Determinants of a stack of 2x2 matrices ``F`` (..., 2, 2), in closed form."""
+    return F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+
+
 def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
     """Shape-function gradients in reference coordinates at the quadrature points, (nq, nn, 2), and the
     weights (fractions of the element's area), (nq,)."""
@@ -262,14 +267,14 @@ class QuadraticModel:
 
     def jacobians(self, x) -> np.ndarray:
         """``det F`` at every quadrature point, (m, nq)."""
-        return np.linalg.det(self.deformation_gradients(x))
+        return _det2(self.deformation_gradients(x))
 
     def vertex_jacobians(self, x) -> np.ndarray:
         """``det F`` at the three vertices of every element, (m, 3) (order 1: the element's constant
         ``det F``, repeated)."""
         x = self._state(x)
         if self.order == 2:  # the linear F of a quadratic element is extreme at its vertices
-            return np.linalg.det(np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients))
+            return _det2(np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients))
         return np.repeat(self.jacobians(x)[:, :1], 3, axis=1)
 
     def upright(self, x) -> bool:

@@ -303,6 +303,23 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                            residual=float(res))
 
 
+def _pull_back(red: RigidReduction, q: np.ndarray, gx: np.ndarray) -> np.ndarray:
+    """``P^T gx`` (``P = red.jacobian(q)``) without forming ``P``: a gradient in the node coordinates carried
+    to the reduced coordinates (an own node's two, a fixture's reference node and angle)."""
+    g = np.asarray(gx, dtype=float).reshape(-1, 2)
+    out = np.zeros(red.n_q)
+    own, f = red.own, red.followers
+    out[red.q_index[own]] = g[own, 0]
+    out[red.q_index[own] + 1] = g[own, 1]
+    if len(f):
+        ref = red.refs[red.member[f]]
+        out += np.bincount(red.q_index[ref], g[f, 0], red.n_q) + np.bincount(red.q_index[ref] + 1, g[f, 1], red.n_q)
+        x = red.x_of(q)
+        arm = x[f] - x[ref]
+        out[2 * len(own):] += np.bincount(red.member[f], arm[:, 0] * g[f, 1] - arm[:, 1] * g[f, 0], red.n_angles)
+    return out
+
+
 def _gauge(red: RigidReduction) -> np.ndarray:
     """Three reduced coordinates that fix the rigid motion: an own node near the centroid (x and y) and one
     coordinate of the own node farthest from it (across the line joining them)."""
@@ -481,16 +498,16 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                     Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
                     cols.append(f)
                     rows.append(g / L0[c])
+            if not jac:  # a line search's trial: the residual alone
+                return np.concatenate([_pull_back(red, q, gx)[keep] / fs, res_c]), None
             P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
             rq = np.concatenate([(P.T @ gx) / fs, res_c])
-            if not jac:
-                return rq, None
             PT = P.T.tocsr()
             Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
             C = (PT @ np.column_stack(cols)) / fs                          # tension columns
             R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
             D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
-            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
+            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csc")
             return rq, J
 
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
