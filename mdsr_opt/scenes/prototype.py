@@ -388,7 +388,8 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and the solve starts there at the full load,
         stepping the load as without it when that fails
         (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
-        tolerance, found sooner. ``fixture_radius``: the ends' fixtures for these muscles (default
+        tolerance, found sooner. A shot of the same ropes and fixtures solved before at contractions within
+        :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` starts it instead (``start=``), likewise. ``fixture_radius``: the ends' fixtures for these muscles (default
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
         be smaller)."""
         from ..mechanics.capstan import CapstanRope, quadratic_chain
