@@ -204,8 +204,8 @@ def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: f
             steps += 1
             if it <= 6:
                 ds = min(1.0, 1.5 * ds)
-        else:
-            ds *= 0.5
+        else:  # half the step that failed (a step cut short at the end of the load, t = 1, halved
+            ds = 0.5 * (t - s)  # from its own length: never the same failed step again)
             if ds < min_step:
                 return z, s, False, iters, steps, res, (f"load step {s:.4g} -> {t:.4g} failed (residual {res:.3g}) "
                                                      f"with the smallest step {min_step:g}")
