@@ -250,3 +250,19 @@ def test_the_reduced_gradient_without_forming_the_jacobian_is_p_transpose_g():
     assert np.abs(_pull_back(red, q, g) - red.jacobian(q).T @ g).max() < 1e-13
     free = RigidReduction(rng.random((5, 2)))  # no fixture
     assert np.abs(_pull_back(free, free.rest_q(), g[:10]) - g[:10]).max() == 0.0
+
+
+def test_a_newton_solve_that_creeps_stops_as_stalled():
+    """quadsolve._newton on a residual whose Newton matrix is 100 times too stiff (each step 1 % of the way):
+    it stops as not converged after STALL_ITERATIONS * 2 iterations instead of running to max_iter; with
+    the right matrix it converges at once."""
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics.quadsolve import STALL_ITERATIONS, _newton
+
+    A = sp.csr_matrix(np.diag([2.0, 3.0, 4.0]))
+    b = np.array([1.0, 1.0, 1.0])
+    for scale, converged, iterations in ((100.0, False, 2 * STALL_ITERATIONS), (1.0, True, 1)):
+        z, ok, it, res = _newton(lambda z, jac, s=scale: (A @ z - b, s * A if jac else None), np.zeros(3),
+                                 lambda z: True, 1e-9, 30)
+        assert (ok, it) == (converged, iterations)

@@ -107,10 +107,15 @@ class _Ordering:
         return out
 
 
+#: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
+#: twice as many): damped steps that creep, where a smaller load step converges sooner
+STALL_ITERATIONS = 6
+
+
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
             order: _Ordering | None = None):
     """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
+    residual)``; a solve that stalls (:data:`STALL_ITERATIONS`) returns as not converged. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
     solve)."""
     order = order if order is not None else _Ordering()
     z = z0.copy()
@@ -118,9 +123,12 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         return z, False, 0, float("inf")
     r, J = system(z, True)
     norm = float(np.abs(r).max()) if r.size else 0.0
+    seen = [norm]
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
+        if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
+            return z, False, it, norm  # stalled: the caller takes a smaller load step instead
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -141,6 +149,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         z = zt
         r, J = system(z, True)
         norm = float(np.abs(r).max()) if r.size else 0.0
+        seen.append(norm)
     return z, norm <= tol, max_iter, norm
 
 
