@@ -232,7 +232,6 @@ class QuadraticModel:
                             4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
                             4 * (L[0] * dL[2] + L[2] * dL[0])] for L in np.eye(3)])
             self._vertex_gradients = np.einsum("vak,mkj->mvaj", gv, Dm_inv)
-        self._fun = self._element_function(nn, len(wq))
         self._mapped = None
         #: evaluate with the material's closed-form stress and tangent where it has them (else CasADi)
         self.numeric = bool(numeric) and numeric_law(material)
@@ -304,7 +303,7 @@ class QuadraticModel:
         d = self._data
         m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
         if self._mapped is None:
-            self._mapped = self._fun.map(m)
+            self._mapped = self._element_function(nn, nq).map(m)  # built when first needed
         xe = x.reshape(-1)[d.dofs].T                                                 # (2nn, m)
         Gc = d.G.reshape(m, nq, nn * 2).transpose(2, 0, 1).reshape(nn * 2, m * nq)  # (2nn, m nq)
         e, g, H = self._mapped(xe, Gc, d.w.T, np.repeat(p[:, None], m, axis=1))
