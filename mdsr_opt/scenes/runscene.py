@@ -258,10 +258,7 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
         written[cname] = [[] for _ in range(2)]
-        if parts:
-            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
-        elif figures:
-            advance(log)  # no files to draw: the case's figure stage is done
+        # the photograph job (the virtual prototype's solves) first: the longest of the case's jobs starts first
         if photos and run.design is not None:
             bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
                       on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
@@ -270,6 +267,10 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
                 bg.submit(parts[1], on_done=written[cname][1].extend)
             if photos:
                 advance(log)  # no design to photograph: the case's photograph stage is done
+        if parts:
+            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
+        elif figures:
+            advance(log)  # no files to draw: the case's figure stage is done
     if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
         gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector)
         if gait_info is not None:
