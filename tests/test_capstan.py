@@ -192,3 +192,77 @@ def test_a_solve_from_a_coarser_models_state_reaches_the_load_stepped_state(stri
     assert back.success and "predicted" not in back.status and np.abs(back.x - stepped.x).max() < 1e-7 * mesh.size
     with pytest.raises(ValueError, match="guess must be"):
         solve_quadratic_internal(model, ropes, [0.3], groups, guess=coarse.x)
+
+
+def test_a_guess_whose_fixtures_fold_when_made_rigid_is_carried_into_the_body(strip):
+    """A predicted state whose fixtures are squeezed (as a coarser model's anchor patch may be): made rigid,
+    the fixtures push through the elements at their rim; the solve carries the fixtures' move into the body
+    elastically and still starts from the prediction, reaching the load-stepped state."""
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
+    guess = stepped.x.copy()
+    for g in groups:  # every node near a fixture pulled a fifth of the way to its end node
+        c = guess[g[0]]
+        r = np.linalg.norm(model.points - model.points[g[0]], axis=1)
+        w = np.clip((0.6 - r) / 0.3, 0.0, 1.0)[:, None]
+        guess = guess + 0.2 * w * (c - guess)
+    red = RigidReduction(model.points, groups)
+    assert model.upright(guess) and not model.upright(red.x_of(red.q_of(guess)))  # rigid, it folds
+    guessed = solve_quadratic_internal(model, ropes, [0.3], groups, guess=guess)
+    assert stepped.success and guessed.success and "predicted" in guessed.status, guessed.status
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * mesh.size
+    assert guessed.tension[0] == pytest.approx(stepped.tension[0], rel=1e-6)
+
+
+def test_a_start_at_nearly_the_same_contractions_is_one_newton_solve(strip):
+    """start= a result at contractions within START_FULL_STEP: one Newton solve at the full load from its
+    state, the load-stepped state to the tolerance; farther away, load steps from it."""
+    from mdsr_opt.mechanics.quadsolve import START_FULL_STEP
+
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    model = QuadraticModel(mesh, MAT)
+    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    first = solve_quadratic_internal(model, ropes, [0.25], groups)
+    a = 0.25 + 0.5 * START_FULL_STEP
+    cold = solve_quadratic_internal(model, ropes, [a], groups)
+    near = solve_quadratic_internal(model, ropes, [a], groups, start=first)
+    assert cold.success and near.success and "start state" in near.status and near.steps == 1
+    assert near.iterations < cold.iterations
+    assert np.abs(near.x - cold.x).max() < 1e-7 * mesh.size
+    far = solve_quadratic_internal(model, ropes, [0.25 + 2 * START_FULL_STEP], groups, start=first)
+    assert far.success and "start state" not in far.status
+
+
+def test_the_reduced_gradient_without_forming_the_jacobian_is_p_transpose_g():
+    """quadsolve._pull_back (a line search's residual) is P^T g of RigidReduction.jacobian, to rounding."""
+    from mdsr_opt.mechanics.quadsolve import _pull_back
+
+    rng = np.random.default_rng(1)
+    red = RigidReduction(rng.random((40, 2)), [np.array([3, 5, 7, 9]), np.array([10, 11, 12])])
+    q = red.rest_q() + 0.1 * rng.standard_normal(red.n_q)
+    g = rng.standard_normal(80)
+    assert np.abs(_pull_back(red, q, g) - red.jacobian(q).T @ g).max() < 1e-13
+    free = RigidReduction(rng.random((5, 2)))  # no fixture
+    assert np.abs(_pull_back(free, free.rest_q(), g[:10]) - g[:10]).max() == 0.0
+
+
+def test_a_newton_solve_that_creeps_stops_as_stalled():
+    """quadsolve._newton on a residual whose Newton matrix is 100 times too stiff (each step 1 % of the way):
+    it stops as not converged after STALL_ITERATIONS * 2 iterations instead of running to max_iter; with
+    the right matrix it converges at once."""
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics.quadsolve import STALL_ITERATIONS, _newton
+
+    A = sp.csr_matrix(np.diag([2.0, 3.0, 4.0]))
+    b = np.array([1.0, 1.0, 1.0])
+    for scale, converged, iterations in ((100.0, False, 2 * STALL_ITERATIONS), (1.0, True, 1)):
+        z, ok, it, res = _newton(lambda z, jac, s=scale: (A @ z - b, s * A if jac else None), np.zeros(3),
+                                 lambda z: True, 1e-9, 30)
+        assert (ok, it) == (converged, iterations)

@@ -185,9 +185,9 @@ def _niceness():
 
 
 @pytest.mark.skipif(not hasattr(os, "nice"), reason="process priorities are POSIX's (Windows: normal priority)")
-def test_workers_yield_the_cores_to_the_process_that_waits_for_them(pool):
-    # the jobs' process runs the solves, the critical path: its workers run at a lower priority
-    assert pool.submit(_niceness).result(timeout=60) == min(os.nice(0) + 15, 19)
+def test_workers_keep_the_priority_of_the_process_that_waits_for_them(pool):
+    # a lowered priority starves the jobs (and the run waiting for them) on a machine other processes share
+    assert pool.submit(_niceness).result(timeout=60) == os.nice(0)
 
 
 def test_run_scene_from_a_plain_script_without_a_main_guard_runs_once(tmp_path):

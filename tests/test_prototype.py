@@ -241,6 +241,23 @@ def test_a_shot_started_from_the_design_state_is_the_load_stepped_shot(one):
         proto.internal(scene.muscles, [0.25], photo=False, guess=proto.model.points)
 
 
+def test_a_shot_near_one_solved_before_starts_from_it(one):
+    """A shot of the same ropes and fixtures at contractions near those of one solved before (an internal
+    case's Table 4 after its Table 3: the design recovers the known contractions) starts from that state: a
+    Newton solve or two, the state a fresh prototype reaches by itself; a shot far from every solved one
+    does not."""
+    scene, _proto = one
+    proto = VirtualPrototype.for_scene(scene, refine=2.5, seed=3)
+    first = proto.internal(scene.muscles, [0.3], photo=False)
+    near = proto.internal(scene.muscles, [0.3 + 1e-6], photo=False)
+    fresh = VirtualPrototype.for_scene(scene, refine=2.5, seed=3).internal(scene.muscles, [0.3 + 1e-6], photo=False)
+    assert first.success and near.success and fresh.success
+    assert "start state" in near.status and near.iterations <= 3 < fresh.iterations
+    assert np.abs(near.x - fresh.x).max() < 1e-7 * scene.mesh.size
+    far = proto.internal(scene.muscles, [0.2], photo=False)
+    assert far.success and "start state" not in far.status
+
+
 @pytest.mark.slow
 def test_table_4_lays_the_designed_ropes_with_the_fixtures_they_were_fitted_to():
     """A routed design's ropes carry the fixture size the routing fitted them to (smaller than the scene's

@@ -422,22 +422,33 @@ def test_problem_scripts_refuse_a_used_folder_and_take_overwrite(tmp_path, capsy
 
 def test_several_scenes_write_tables_2_to_4_in_tables_md(tmp_path, capsys):
     """``mdsr run A B`` writes one folder per scene and ``tables.md`` with the paper's Tables 2-4 (external
-    cases in Tables 2 and 4, internal ones in Table 3), a row per case of every scene."""
+    cases in Tables 2 and 4, internal ones in Table 3), a row per case of every scene, in the order asked
+    for; the scenes solved while the jobs of those before them run (the scene with more cases first) give
+    the files of a serial run."""
     finger = (Path(__file__).parent / "data" / "finger.toml").read_text()
     a, b = tmp_path / "finger.toml", tmp_path / "thumb.toml"
     a.write_text(finger)
-    b.write_text(finger.replace('name = "finger"', 'name = "thumb"', 1))
-    out = tmp_path / "out"
-    code = main(["run", str(a), str(b), "--out", str(out), "--resolution", "coarse", "--no-figures",
-                 "--no-animations", "--photo-size", "200x200", "--quiet"])
-    assert code == 0, capsys.readouterr().err
+    # thumb: the finger without its internal case (and the animation of it): finger, with more cases, is
+    # solved first, thumb's row still comes first
+    b.write_text(finger[:finger.index('[[cases]]\nname = "contract"')].replace('name = "finger"', 'name = "thumb"', 1))
+    out, serial = tmp_path / "out", tmp_path / "serial"
+    for folder, extra in ((out, []), (serial, ["--serial"])):
+        code = main(["run", str(b), str(a), "--out", str(folder), "--resolution", "coarse", "--no-figures",
+                     "--no-animations", "--photo-size", "200x200", "--quiet", *extra])
+        assert code == 0, capsys.readouterr().err
+    assert (out / "tables.md").read_text() == (serial / "tables.md").read_text()
+    for scene in ("finger", "thumb"):
+        sa, sb = (json.loads((d / scene / "summary.json").read_text()) for d in (out, serial))
+        assert json.dumps(_without_times(sa)) == json.dumps(_without_times(sb))
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["finger", "tables.md", "thumb"]
     text = (out / "tables.md").read_text()
     sections = text.split("\n## Table ")  # the headings (the description above them names tables too)
     assert [s[0] for s in sections[1:]] == ["2", "3", "4"], text[:400]
     for scene in ("finger", "thumb"):  # finger: bend is external (Tables 2, 4), contract internal (Table 3)
         assert f"| {scene} | bend |" in sections[1] and f"| {scene} | bend |" in sections[3]
-        assert f"| {scene} | contract |" in sections[2] and f"| {scene} | contract |" not in sections[1]
+        assert f"| {scene} | contract |" not in sections[1]
+    assert "| finger | contract |" in sections[2] and "| thumb | contract |" not in sections[2]
+    assert sections[1].index("| thumb | bend |") < sections[1].index("| finger | bend |")  # the order asked
 
 
 # ------------------------------------------------------------------------------------ figures beside solves

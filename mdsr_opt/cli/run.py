@@ -97,20 +97,31 @@ def _cmd_run(a) -> int:
                     for c in a.case:
                         s.case(c)  # an unknown --case names the scene's cases
         folder.begin(run_entries(scenes[0], a.case, vector=vector) if len(scenes) == 1 else [s.name for s in scenes] + ["tables.md"])
-        reports = []
+        # several scenes beside a pool: each scene's solves run while the jobs of the scenes before it (figures,
+        # photographs, the virtual prototype's solves) run in the workers, the scenes with the most cases
+        # first (their jobs are the longest); the reports keep the order asked for
+        overlap = len(scenes) > 1 and pool is not None
+        order = sorted(range(len(scenes)), key=lambda k: -len(scenes[k].cases)) if overlap else range(len(scenes))
+        done: dict = {}
         with progress_for_cli(a, sum(n_units(s, a.case, not a.no_animations, photos=not a.no_photos,
                                              figures=not a.no_figures) for s in scenes),
                               "mdsr run", unit="stage") as log:
-            for k, scene in enumerate(scenes):
+            for i, k in enumerate(order):
+                scene = scenes[k]
                 out = Path(a.out) if len(scenes) == 1 else Path(a.out) / scene.name
                 if len(scenes) > 1:
-                    log(f"=== scene {k + 1}/{len(scenes)}: {scene.name} ===")
-                reports.append(write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
-                                           figures=not a.no_figures, animations=not a.no_animations,
-                                           mesh_format=a.format, photo_size=a.photo_size, log=log,
-                                           prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
-                                           background=pool is not None, pool=pool,
-                                           max_difference=a.max_difference, bands=a.bands, vector=vector))
+                    log(f"=== scene {i + 1}/{len(scenes)}: {scene.name} ===")
+                done[k] = write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
+                                      figures=not a.no_figures, animations=not a.no_animations,
+                                      mesh_format=a.format, photo_size=a.photo_size, log=log,
+                                      prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
+                                      background=pool is not None, pool=pool,
+                                      max_difference=a.max_difference, bands=a.bands, vector=vector,
+                                      wait=not overlap)
+            for k in order:  # each scene's jobs, then its summaries
+                if callable(done[k]):
+                    done[k] = done[k]()
+        reports = [done[k] for k in range(len(scenes))]
         if len(scenes) > 1 and not a.no_photos and not a.no_prototype:
             from ..body.io import atomic_path
             from ..scenes.prototype import validation_tables

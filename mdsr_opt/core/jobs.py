@@ -108,9 +108,9 @@ def _interrupted(exc: BaseException | None) -> bool:
 
 
 def _prepare_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple | None) -> None:
-    """:func:`_start_worker`'s work after its watch and handler are set."""
-    if hasattr(os, "nice"):  # POSIX: the jobs yield the cores to the process that waits for them, whose
-        os.nice(15)  # solves are the run's critical path (Windows: normal priority)
+    """:func:`_start_worker`'s work after its watch and handler are set. The worker keeps the command's
+    priority: a lowered one starves its jobs, and the run waiting for them, whenever other processes
+    share the cores."""
     os.environ.update(env)
     if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set
         from threadpoolctl import threadpool_limits

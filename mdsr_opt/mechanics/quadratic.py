@@ -134,6 +134,11 @@ def extend_prescribed(mesh: Mesh, anchors, drag_nodes, drag_positions):
     return new_a, new_dn, new_dp
 
 
+def _det2(F: np.ndarray) -> np.ndarray:
+    """Determinants of a stack of 2x2 matrices ``F`` (..., 2, 2), in closed form."""
+    return F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+
+
 def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
     """Shape-function gradients in reference coordinates at the quadrature points, (nq, nn, 2), and the
     weights (fractions of the element's area), (nq,)."""
@@ -227,7 +232,6 @@ class QuadraticModel:
                             4 * (L[1] * dL[0] + L[0] * dL[1]), 4 * (L[2] * dL[1] + L[1] * dL[2]),
                             4 * (L[0] * dL[2] + L[2] * dL[0])] for L in np.eye(3)])
             self._vertex_gradients = np.einsum("vak,mkj->mvaj", gv, Dm_inv)
-        self._fun = self._element_function(nn, len(wq))
         self._mapped = None
         #: evaluate with the material's closed-form stress and tangent where it has them (else CasADi)
         self.numeric = bool(numeric) and numeric_law(material)
@@ -262,14 +266,14 @@ class QuadraticModel:
 
     def jacobians(self, x) -> np.ndarray:
         """``det F`` at every quadrature point, (m, nq)."""
-        return np.linalg.det(self.deformation_gradients(x))
+        return _det2(self.deformation_gradients(x))
 
     def vertex_jacobians(self, x) -> np.ndarray:
         """``det F`` at the three vertices of every element, (m, 3) (order 1: the element's constant
         ``det F``, repeated)."""
         x = self._state(x)
         if self.order == 2:  # the linear F of a quadratic element is extreme at its vertices
-            return np.linalg.det(np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients))
+            return _det2(np.matmul(x[self.elements].transpose(0, 2, 1)[:, None], self._vertex_gradients))
         return np.repeat(self.jacobians(x)[:, :1], 3, axis=1)
 
     def upright(self, x) -> bool:
@@ -299,7 +303,7 @@ class QuadraticModel:
         d = self._data
         m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
         if self._mapped is None:
-            self._mapped = self._fun.map(m)
+            self._mapped = self._element_function(nn, nq).map(m)  # built when first needed
         xe = x.reshape(-1)[d.dofs].T                                                 # (2nn, m)
         Gc = d.G.reshape(m, nq, nn * 2).transpose(2, 0, 1).reshape(nn * 2, m * nq)  # (2nn, m nq)
         e, g, H = self._mapped(xe, Gc, d.w.T, np.repeat(p[:, None], m, axis=1))

@@ -107,10 +107,15 @@ class _Ordering:
         return out
 
 
+#: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
+#: twice as many): damped steps that creep, where a smaller load step converges sooner
+STALL_ITERATIONS = 6
+
+
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
             order: _Ordering | None = None):
     """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
+    residual)``; a solve that stalls (:data:`STALL_ITERATIONS`) returns as not converged. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
     solve)."""
     order = order if order is not None else _Ordering()
     z = z0.copy()
@@ -118,9 +123,12 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         return z, False, 0, float("inf")
     r, J = system(z, True)
     norm = float(np.abs(r).max()) if r.size else 0.0
+    seen = [norm]
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
+        if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
+            return z, False, it, norm  # stalled: the caller takes a smaller load step instead
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -141,6 +149,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         z = zt
         r, J = system(z, True)
         norm = float(np.abs(r).max()) if r.size else 0.0
+        seen.append(norm)
     return z, norm <= tol, max_iter, norm
 
 
@@ -172,6 +181,10 @@ class _Upright:
                 f"at {where}")
 
 
+#: largest change of a contraction from a ``start`` result that is first tried in one Newton solve at the
+#: full load (a larger change is stepped)
+START_FULL_STEP = 0.05
+
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
 INTERMEDIATE_TOL = 1e-3
 
@@ -200,8 +213,8 @@ def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: f
             steps += 1
             if it <= 6:
                 ds = min(1.0, 1.5 * ds)
-        else:
-            ds *= 0.5
+        else:  # half the step that failed (a step cut short at the end of the load, t = 1, halved
+            ds = 0.5 * (t - s)  # from its own length: never the same failed step again)
             if ds < min_step:
                 return z, s, False, iters, steps, res, (f"load step {s:.4g} -> {t:.4g} failed (residual {res:.3g}) "
                                                      f"with the smallest step {min_step:g}")
@@ -299,6 +312,23 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                            residual=float(res))
 
 
+def _pull_back(red: RigidReduction, q: np.ndarray, gx: np.ndarray) -> np.ndarray:
+    """``P^T gx`` (``P = red.jacobian(q)``) without forming ``P``: a gradient in the node coordinates carried
+    to the reduced coordinates (an own node's two, a fixture's reference node and angle)."""
+    g = np.asarray(gx, dtype=float).reshape(-1, 2)
+    out = np.zeros(red.n_q)
+    own, f = red.own, red.followers
+    out[red.q_index[own]] = g[own, 0]
+    out[red.q_index[own] + 1] = g[own, 1]
+    if len(f):
+        ref = red.refs[red.member[f]]
+        out += np.bincount(red.q_index[ref], g[f, 0], red.n_q) + np.bincount(red.q_index[ref] + 1, g[f, 1], red.n_q)
+        x = red.x_of(q)
+        arm = x[f] - x[ref]
+        out[2 * len(own):] += np.bincount(red.member[f], arm[:, 0] * g[f, 1] - arm[:, 1] * g[f, 0], red.n_angles)
+    return out
+
+
 def _gauge(red: RigidReduction) -> np.ndarray:
     """Three reduced coordinates that fix the rigid motion: an own node near the centroid (x and y) and one
     coordinate of the own node farthest from it (across the line joining them)."""
@@ -312,15 +342,13 @@ def _gauge(red: RigidReduction) -> np.ndarray:
     return np.array([red.q_index[i], red.q_index[i] + 1, red.q_index[j] + comp])
 
 
-def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
-    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
-    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
-    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
-    state has an inverted element."""
+def _onto_gauge(red: RigidReduction, gauge, y: np.ndarray) -> np.ndarray | None:
+    """The state ``y`` (N, 2) moved rigidly so that its gauge coordinates (:func:`_gauge`) are those of rest;
+    None when no rigid motion does (the two gauge nodes' distance too short for the fixed component)."""
     X = red.X
     i, j = int(np.flatnonzero(red.q_index == gauge[0])[0]), int(np.flatnonzero(red.q_index == gauge[2] - (gauge[2] % 2))[0])
     comp = int(gauge[2] % 2)
-    d, D = guess[j] - guess[i], X[j] - X[i]
+    d, D = y[j] - y[i], X[j] - X[i]
     rho, phi = float(np.hypot(*d)), float(np.arctan2(d[1], d[0]))
     ratio = D[comp] / rho if rho > 0 else 2.0
     if abs(ratio) > 1.0:
@@ -333,11 +361,61 @@ def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, f
         psi = psi if D[1] >= 0 else -psi
     th = psi - phi
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-    x = (guess - guess[i]) @ R.T + X[i]
-    q = red.q_of(x)
-    x = red.x_of(q)
-    if not model.upright(x):  # made rigid at its fixtures, the state folds there
+    return (y - y[i]) @ R.T + X[i]
+
+
+def _rigid_extension(model, red: RigidReduction, x: np.ndarray, xr: np.ndarray) -> np.ndarray | None:
+    """A predicted state ``x`` whose fixtures were made rigid (``xr``: the fixtures' nodes moved, the rest
+    as in ``x``), with the fixtures' move carried into the body: the other nodes displaced by the linear
+    elastic response of the body at ``x`` to the fixtures' displacement (``K_oo d_o = -K_of d_f``), so that
+    the elements at a fixture's rim follow it instead of folding. None when the result still has an
+    inverted element."""
+    moved = np.zeros(red.n, dtype=bool)
+    moved[red.followers] = True
+    moved[red.refs] = True  # each fixture whole: its reference node with its followers
+    fixed = np.repeat(moved, 2)
+    d = (xr - x).reshape(-1)
+    K = sp.csr_matrix(model.evaluate(x)[2])
+    free = np.flatnonzero(~fixed)
+    f_idx = np.flatnonzero(fixed)
+    try:  # an exactly singular matrix (a body the fixtures do not hold) raises
+        dfree = spla.splu(K[free][:, free].tocsc()).solve(-(K[free][:, f_idx] @ d[f_idx]))
+    except RuntimeError:
         return None
+    if not np.isfinite(dfree).all():
+        return None
+    out = x.reshape(-1).copy()
+    out[f_idx] = xr.reshape(-1)[f_idx]
+    out = out.reshape(-1, 2)
+    for frac in (1.0, 0.5):  # the full elastic response, or half of it when that overshoots
+        y = out.reshape(-1).copy()
+        y[free] += frac * dfree
+        y = y.reshape(-1, 2)
+        if model.upright(y):
+            return y
+    return None
+
+
+def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, fs):
+    """The unknowns of :func:`solve_quadratic_internal` for a predicted state ``guess`` (N, 2): the state
+    moved rigidly onto the gauge (its gauge coordinates those of rest), its fixtures made rigid (best-fit
+    angles), and each rope's tension the least-squares balance of the elastic force. None when the moved
+    state has an inverted element."""
+    x = _onto_gauge(red, gauge, guess)
+    if x is None:
+        return None
+    q = red.q_of(x)
+    xr = red.x_of(q)
+    if not model.upright(xr):  # made rigid at its fixtures, the state folds at their rim: carry the
+        xr = _rigid_extension(model, red, x, xr)  # fixtures' correction into the body elastically,
+        xr = None if xr is None else _onto_gauge(red, gauge, xr)  # and onto the gauge again
+        if xr is None:
+            return None
+        q = red.q_of(xr)
+        xr = red.x_of(q)
+        if not model.upright(xr):
+            return None
+    x = xr
     P = red.jacobian(q)
     gq = (P.T @ model.energy_gradient(x)[1])[keep]
     C = np.column_stack([(P.T @ r.forces(x, r.weights(x), model.n_nodes)[0])[keep] for r in ropes])
@@ -354,7 +432,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     ``fixtures`` (disjoint node groups, an end node first: see
     :func:`~mdsr_opt.mechanics.fixtures.fixture_groups`) moving rigidly. With ``start`` (an earlier result of
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
-    of from rest. With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
+    of from rest (contractions within :data:`START_FULL_STEP` of its own: first one Newton solve from its
+    state at the full load). With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
     equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
     converge (or the predicted state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
@@ -428,16 +507,16 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                     Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
                     cols.append(f)
                     rows.append(g / L0[c])
+            if not jac:  # a line search's trial: the residual alone
+                return np.concatenate([_pull_back(red, q, gx)[keep] / fs, res_c]), None
             P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
             rq = np.concatenate([(P.T @ gx) / fs, res_c])
-            if not jac:
-                return rq, None
             PT = P.T.tocsr()
             Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
             C = (PT @ np.column_stack(cols)) / fs                          # tension columns
             R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
             D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
-            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csr")
+            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csc")
             return rq, J
 
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
@@ -470,6 +549,14 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                              "ropes and fixtures")
         z0, a0 = start.state.copy(), start.commanded.copy()
     done = None
+    if start is not None and guess is None and np.abs(a - a0).max() <= START_FULL_STEP:
+        # contractions near the start's: one Newton solve from its state at the full load; else load steps
+        zt, conv, it, res = solve_at(1.0, z0, True, 0.0)
+        if conv:
+            done = (zt, 1.0, True, it, 1, res, "converged (from the start state)")
+        else:
+            active[:] = True
+            predictor_iters = it
     if guess is not None:  # one Newton solve at the full load from the predicted state; else load steps
         zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
         if zg is not None:
@@ -481,7 +568,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 predictor_iters = it
     if done is None:
         done = _continue(solve_at, z0, min_step)
-        if guess is not None and predictor_iters:
+        if predictor_iters:
             done = done[:3] + (done[3] + predictor_iters,) + done[4:]
     z, _s, conv, iters, steps, res, status = done
     if not conv and guard[0] is not None:

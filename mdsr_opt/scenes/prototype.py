@@ -389,7 +389,8 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and the solve starts there at the full load,
         stepping the load as without it when that fails
         (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
-        tolerance, found sooner. ``fixture_radius``: the ends' fixtures for these muscles (default
+        tolerance, found sooner. A shot of the same ropes and fixtures solved before at contractions within
+        :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` starts it instead (``start=``), likewise. ``fixture_radius``: the ends' fixtures for these muscles (default
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
         be smaller). The mesh is refined round rope ends too coarse for their fixtures
         (:func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`); a rope whose stroke is at least its length between
@@ -434,12 +435,19 @@ class VirtualPrototype:
                         f"not built: rope {fine[i].name or i}'s stroke {stroke[i]:.4g} is at least its length between "
                         f"its fixtures (radius {radius:.4g}), {free[i]:.4g}: they would meet; a smaller contraction "
                         "or smaller fixtures")))
-            start = None
-            if guess is not None:
+            layout = key[:2] + key[4:]  # the same ropes and fixtures (so the same refined mesh), any contractions
+            near = self._nearest_state(layout, a)
+            predicted = None
+            if near is None and guess is not None:
                 from ..mechanics.quadratic import transfer_state
 
-                start = transfer_state(self.design_mesh, guess, model.points)
-            res = solve_quadratic_internal(model, ropes, a, groups, guess=start)
+                predicted = transfer_state(self.design_mesh, guess, model.points)
+            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted, start=near)
+            if res.success:
+                states = self.__dict__.setdefault("_states", {})
+                states[(layout, a.tobytes())] = res
+                while len(states) > SHOTS_KEPT:
+                    states.pop(next(iter(states)))
             shot = self._shot(res, photo, model)
             if not shot.success:
                 i = int(np.argmax(stroke / free))
@@ -447,6 +455,20 @@ class VirtualPrototype:
                                 f"{radius:.4g}) by {100 * stroke[i] / free[i]:.0f} %")
             shot = self._keep(key, shot)
         return shot
+
+    def _nearest_state(self, layout, a: np.ndarray):
+        """The prototype's own solved equilibrium of the same ropes and fixtures (``layout``) whose
+        contractions are nearest ``a``, when they lie within
+        :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` of it (the design of an internal case recovers
+        its known contractions: its Table 4 shot starts from the Table 3 one); else None."""
+        from ..mechanics.quadsolve import START_FULL_STEP
+
+        best, gap = None, START_FULL_STEP
+        for (lay, _a), res in self.__dict__.get("_states", {}).items():
+            d = float(np.abs(res.commanded - a).max()) if lay == layout else np.inf
+            if d <= gap:
+                best, gap = res, d
+        return best
 
 
 def measure(design_mesh, x_design, photo) -> dict:

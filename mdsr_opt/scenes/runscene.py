@@ -172,87 +172,121 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                 animations: bool = True, mesh_format: str = "vtu", photo_size: tuple[int, int] = (500, 500),
                 log: Callable[[str], None] | None = _LOG.info, prototype: bool = True,
                 prototype_seed: int = 0, background: bool = True, pool: Executor | None = None,
-                max_difference: float | None = None, bands: bool | None = None, vector=None) -> SceneReport:
+                max_difference: float | None = None, bands: bool | None = None, vector=None,
+                wait: bool = True):
     """Internal: the body of :func:`run_scene` without the folder's guard, for ``run_scene`` and ``mdsr run``
     (call :func:`run_scene` instead). Runs and writes into ``out`` as it stands (the caller holds a
     :class:`~mdsr_opt.scenes.rundir.RunFolder`). Same parameters and result; ``pool`` (with ``background``)
     is the process pool to send the jobs to (``mdsr run`` shares one between its scenes; None: one of this
-    call's own)."""
-    from ..body.io import atomic_path, write_json
+    call's own). With ``wait=False`` and a ``pool``, it returns once the scene's solves are done and its jobs
+    sent: a function without arguments that waits for those jobs, writes the summaries and returns the
+    SceneReport (``mdsr run`` solves the next scene meanwhile)."""
     from ..plot.style import figure_formats
 
     names = _check_run(scene, cases, mesh_format, photo_size, max_difference)
     figure_formats(vector)  # a bad vector format: ValueError before any work
     if pool is not None and not isinstance(pool, Executor):
         raise TypeError(f"pool must be a concurrent.futures.Executor or None, got {type(pool).__name__}")
-    say = log or (lambda s: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
     parallel = background and (figures or photos)
+    if not wait and not (parallel and pool is not None):
+        raise ValueError("write_scene(wait=False) needs a pool and background=True")
     with contextlib.ExitStack() as stack:
         if parallel and pool is None:
             pool = stack.enter_context(scene_pool())
-        bg = stack.enter_context(Jobs(pool if parallel else None))
-        say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
-        if figures:
-            bg.submit(_write_rest, scene, out / "rest.png", vector)
-        proto = None
-        if photos and prototype:
-            from .prototype import VirtualPrototype
+        bg = Jobs(pool if parallel else None)
+        try:
+            finish = _start_scene(scene, out, names, bg, method=method, photos=photos, figures=figures,
+                                  animations=animations, mesh_format=mesh_format, photo_size=photo_size,
+                                  log=log, prototype=prototype, prototype_seed=prototype_seed,
+                                  max_difference=max_difference, bands=bands, vector=vector)
+        except BaseException:
+            bg.stop()
+            raise
+        if not wait:
+            return finish
+        return finish()
 
-            proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
-            d = proto.describe()
-            say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
-                f"{d['elements']} elements, silicone nu {d['silicone_nu']:.3f}, E x {d['E_factor']:.3f}, rope friction "
-                f"{d['rope_friction']:g}, fixtures of radius {d['fixture_radius']:.3g}, seed {d['seed']}")
-        runs: dict[str, CaseRun] = {}
-        written: dict[str, list[list[str]]] = {}
-        # an animation (its frames' forward solves, GIF and JSON) is one job, the run's longest: it is sent
-        # as soon as the last of its cases is designed, ahead of that case's figure and photograph jobs, so
-        # that it runs beside them instead of ending the run alone on one core
-        anim_out: dict[str, dict] = {}
-        waiting = [a for a in scene.animations if all(c in names for c in a.cases)] if animations else []
-        for anim in waiting:
-            anim_out[anim.name] = {}  # filled in when its job is done (the summary keeps the scene's order)
 
-        def send_animations():  # those whose cases have all run (an animation of the rest shape: at once)
-            for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
-                waiting.remove(anim)
-                designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
-                           if runs[c].design is not None}
-                bg.submit(_animation_job, scene, anim, designs, out, figures,
-                          on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
+def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, figures, animations, mesh_format,
+                 photo_size, log, prototype, prototype_seed, max_difference, bands, vector) -> Callable[[], SceneReport]:
+    """:func:`write_scene`'s work: the scene's solves, its jobs sent to ``bg``; returns the function that
+    waits for those jobs (on an exception or Ctrl-C there: cancels the rest), then writes the scene's
+    summaries and returns its report."""
+    say = log or (lambda s: None)
+    t0 = time.perf_counter()
+    say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
+    if figures:
+        bg.submit(_write_rest, scene, out / "rest.png", vector)
+    proto = None
+    if photos and prototype:
+        from .prototype import VirtualPrototype
 
+        proto = VirtualPrototype.for_scene(scene, seed=prototype_seed, photo_size=photo_size)
+        d = proto.describe()
+        say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
+            f"{d['elements']} elements, silicone nu {d['silicone_nu']:.3f}, E x {d['E_factor']:.3f}, rope friction "
+            f"{d['rope_friction']:g}, fixtures of radius {d['fixture_radius']:.3g}, seed {d['seed']}")
+    runs: dict[str, CaseRun] = {}
+    written: dict[str, list[list[str]]] = {}
+    # an animation (its frames' forward solves, GIF and JSON) is one job, the run's longest: it is sent
+    # as soon as the last of its cases is designed, ahead of that case's figure and photograph jobs, so
+    # that it runs beside them instead of ending the run alone on one core
+    anim_out: dict[str, dict] = {}
+    waiting = [a for a in scene.animations if all(c in names for c in a.cases)] if animations else []
+    for anim in waiting:
+        anim_out[anim.name] = {}  # filled in when its job is done (the summary keeps the scene's order)
+
+    def send_animations():  # those whose cases have all run (an animation of the rest shape: at once)
+        for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
+            waiting.remove(anim)
+            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
+                       if runs[c].design is not None}
+            bg.submit(_animation_job, scene, anim, designs, out, figures,
+                      on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
+
+    send_animations()
+    for i, cname in enumerate(names):
+        prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
+        check_interrupt()
+        # the photograph stage (measure_case) and the case's files are background jobs: the report's
+        # photo entry, the files and the stage's messages arrive at bg.wait()
+        run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
+                                     max_difference=max_difference, bands=bands)
         send_animations()
-        for i, cname in enumerate(names):
-            prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
-            check_interrupt()
-            # the photograph stage (measure_case) and the case's files are background jobs: the report's
-            # photo entry, the files and the stage's messages arrive at bg.wait()
-            run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
-                                         max_difference=max_difference, bands=bands)
-            send_animations()
-            advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
-            parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
-            written[cname] = [[] for _ in range(2)]
+        advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
+        parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
+        written[cname] = [[] for _ in range(2)]
+        # the photograph job (the virtual prototype's solves) first: the longest of the case's jobs starts first
+        if photos and run.design is not None:
+            bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
+                      on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
+        else:
             if parts:
-                bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
-            elif figures:
-                advance(log)  # no files to draw: the case's figure stage is done
-            if photos and run.design is not None:
-                bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
-                          on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
-            else:
-                if parts:
-                    bg.submit(parts[1], on_done=written[cname][1].extend)
-                if photos:
-                    advance(log)  # no design to photograph: the case's photograph stage is done
-        if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
-            gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector)
-            if gait_info is not None:
-                anim_out[scene.gait.name] = gait_info
-            advance(log)
+                bg.submit(parts[1], on_done=written[cname][1].extend)
+            if photos:
+                advance(log)  # no design to photograph: the case's photograph stage is done
+        if parts:
+            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
+        elif figures:
+            advance(log)  # no files to draw: the case's figure stage is done
+    if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
+        gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector)
+        if gait_info is not None:
+            anim_out[scene.gait.name] = gait_info
+        advance(log)
+    return functools.partial(_finish_scene, scene, out, names, bg, t0, runs, written, anim_out, proto, say, figures,
+                             photos, max_difference)
+
+
+def _finish_scene(scene: Scene, out: Path, names, bg: Jobs, t0: float, runs: dict, written: dict, anim_out: dict,
+                  proto, say, figures: bool, photos: bool, max_difference) -> SceneReport:
+    """The end of :func:`_start_scene`: wait for the scene's jobs, write ``summary.json``, ``summary.md`` and
+    ``validation.md``; the report."""
+    from ..body.io import atomic_path, write_json
+
+    with bg:
         bg.wait()  # every case's files are known before the summary lists them
     if figures:
         for cname, parts in written.items():

@@ -41,6 +41,7 @@ e.g. an exported older commit, to measure before and after with the same script)
 Run:  python tests/benchmarks/bench_run.py                       # gecko and humanoid, 3 repeats
       python tests/benchmarks/bench_run.py --scenes gecko --repeats 1
       python tests/benchmarks/bench_run.py --cli --all
+      python tests/benchmarks/bench_run.py --scenes gecko --repeats 2 --cli --all --against main   # run all vs main
       python tests/benchmarks/bench_run.py --scenes gecko humanoid --repeats 8 --cli --against main
       python tests/benchmarks/bench_run.py --tree /tmp/base --clock cpu --label before   # an older tree
 """
@@ -281,7 +282,8 @@ def main(argv=None) -> int:
     p.add_argument("--scenes", nargs="+", default=["gecko", "humanoid"], help="library scenes (default gecko humanoid)")
     p.add_argument("--repeats", type=int, default=3, help="timed runs per scene after the warm-up (median)")
     p.add_argument("--cli", action="store_true", help="also time `python -m mdsr_opt run NAME` per scene")
-    p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once")
+    p.add_argument("--all", action="store_true", help="also time `python -m mdsr_opt run all` once (with --against:"
+                   " --repeats times here and at REF, alternating)")
     p.add_argument("--against", default=None, metavar="REF",
                    help="with --cli: time the command also as committed at REF (git), alternating with this "
                         "tree, --repeats times each (not capped at 3)")
@@ -331,7 +333,18 @@ def main(argv=None) -> int:
                   + ", ".join(f"{t:.2f}" for t, _ in runs) + f"; CPU {results[name]['cli cpu']:.2f} s, its figure "
                   f"jobs' included ({load()})")
     t_all = None
-    if a.all:
+    if a.all and ref_root is not None:  # this tree and REF, alternating: medians of --repeats runs each
+        got = {"now": [], "ref": []}
+        for _ in range(max(1, a.repeats)):
+            print(f"  mdsr run all: starting at {a.against} and here ({load()})")
+            got["ref"].append(time_cli(["all"], root=ref_root))
+            got["now"].append(time_cli(["all"]))
+            print(f"    {a.against} {got['ref'][-1][0]:.1f} s, here {got['now'][-1][0]:.1f} s wall")
+        t_all, c_all = (statistics.median(v[i] for v in got["now"]) for i in (0, 1))
+        t_ref = statistics.median(t for t, _ in got["ref"])
+        print(f"  mdsr run all: {t_all:.1f} s wall here, {t_ref:.1f} s at {a.against}: ratio {t_all / t_ref:.2f} "
+              f"(medians of {len(got['now'])} alternating runs; {load()})")
+    elif a.all:
         print(f"  mdsr run all: starting ({load()})")
         t_all, c_all = time_cli(["all"])
         print(f"  mdsr run all: {t_all:.1f} s wall, {c_all:.1f} s CPU ({load()})")
