@@ -11,7 +11,7 @@ in; nothing held). Each expression has an animation ``<case>_anim`` (rest, expre
 
 A face robot carries ONE set of muscles for all its expressions. :func:`one_layout` routes every
 expression's target on its own (:data:`EXPRESSION_ROUTING`) and merges the routings into one layout as
-:func:`~mdsr_opt.synthesis.poses.design_poses` does (:func:`~mdsr_opt.synthesis.poses.shared_layout`); each
+:func:`~mdsr_opt.synthesis.poses.design_poses` does (:func:`~mdsr_opt.synthesis.layouts.shared_layout`); each
 case is designed on the muscles of that layout its target shortens (:func:`engaged`; the others' ropes are
 paid out), so the run's ``summary.json`` names, per case, muscles ``M0, M1, ...`` of the one layout with
 their node chains.
@@ -157,13 +157,13 @@ _LAYOUTS: dict = {}
 
 def one_layout(mesh: Mesh, material, cases, routing_options, anchor_radius=None) -> tuple:
     """The face's ONE muscle layout: every expression's target (external driving) routed on its own, the
-    routings merged by :func:`~mdsr_opt.synthesis.poses.shared_layout` (round-robin by rank, duplicates
+    routings merged by :func:`~mdsr_opt.synthesis.layouts.shared_layout` (round-robin by rank, duplicates
     dropped), as :func:`~mdsr_opt.synthesis.poses.design_poses` lays it, the ropes fitted to end fixtures of
     the design's ``anchor_radius`` (as design_poses fits them). Returns ``(muscles, targets)``;
     a target that does not solve raises ``RuntimeError`` naming it."""
     from mdsr_opt.mechanics.equilibrium import solve_external
     from mdsr_opt.synthesis.fabrication import check_fabrication
-    from mdsr_opt.synthesis.poses import shared_layout
+    from mdsr_opt.synthesis.layouts import shared_layout
     from mdsr_opt.synthesis.routing import RoutingWarning, route_muscles
     import warnings
 

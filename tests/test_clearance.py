@@ -203,7 +203,7 @@ def test_fit_fixtures_keeps_weaker_ropes_a_wall_clear_of_stronger_ones(scale):
 
 
 def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
-    from mdsr_opt.synthesis.poses import shared_layout
+    from mdsr_opt.synthesis.layouts import shared_layout
 
     mesh = plate()
     f = fab().for_body(mesh)
@@ -265,7 +265,7 @@ def test_design_poses_warns_for_a_given_rope_on_the_outline():
     assert res.all_success and res.n_muscles == 1
     assert len(msgs) == 1 and msgs[0].filename == __file__    # said at the caller's line
     assert "design_poses: the shared layout: 2 place(s)" in str(msgs[0].message)
-    assert "muscle M1: its channel is not mouldable: its smallest inset from the outline or a hole is 0" in str(
+    assert "muscle lower: its channel is not mouldable: its smallest inset from the outline or a hole is 0" in str(
         msgs[0].message)
 
 

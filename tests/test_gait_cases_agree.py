@@ -14,7 +14,7 @@ from mdsr_opt import Muscle
 from mdsr_opt.scenes.runscene import run_scene
 from mdsr_opt.scenes.scenefile import load_scene
 from mdsr_opt.synthesis.gait import _radius_note
-from mdsr_opt.synthesis.poses import shared_layout
+from mdsr_opt.synthesis.layouts import shared_layout
 
 
 def ring(r: float, n: int = 48) -> list:

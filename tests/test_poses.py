@@ -13,7 +13,8 @@ import pytest
 from mdsr_opt import Mesh, NeoHookean
 from mdsr_opt.plot.design import plot_schedule
 from mdsr_opt.synthesis.gait import Gait, gait_schedule
-from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses, shared_layout
+from mdsr_opt.synthesis.layouts import shared_layout
+from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses
 
 MAT = NeoHookean(1.0, 0.3)
 

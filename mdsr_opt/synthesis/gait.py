@@ -26,7 +26,8 @@ from ..core.checks import check_options, keyword_names, positive_float, positive
 from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from .acceptance import MAX_DIFFERENCE, check_max_difference
-from .poses import PosesResult, check_budget
+from .layouts import check_budget
+from .poses import PosesResult
 
 __all__ = ["Gait", "GaitSchedule", "gait_schedule", "save_gait_animation", "run_gait", "warm_start_state",
            "ZERO_STROKE"]

@@ -25,7 +25,7 @@ import numpy as np
 
 from mdsr_opt.mechanics.align import align, node_weights
 from mdsr_opt.mechanics.model import get_model
-from mdsr_opt.synthesis.poses import shared_layout
+from mdsr_opt.synthesis.layouts import shared_layout
 from mdsr_opt.synthesis.routing import route_muscles
 from mdsr_opt.scenes.library import get_problem
 from mdsr_opt.scenes.cases import prepare_case
