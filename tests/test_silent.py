@@ -365,3 +365,27 @@ def test_a_design_that_barely_moves_the_body_is_no_success(tmp_path):
     assert difference_failure(0.89, 100.0, rest_difference=1.0) == ""
     assert "removes 9 %" in difference_failure(0.91, 100.0, rest_difference=1.0)
     assert difference_failure(0.01, 100.0, rest_difference=0.05) == ""  # rest within 0.1 % of the size
+
+
+def test_a_design_the_caller_discards_is_not_polished():
+    """The flattened design asks skip_verification with a preview before its tension polish (an IPOPT solve
+    fixing near-zero tensions at zero): a design the caller discards keeps those tensions at zero without
+    the polish's iterations; a predicate needing more than the preview is asked only of the design found."""
+    mesh, mat = Mesh.rectangle(4, 1, 16, 4), NeoHookean(1.0, 0.3)
+    pull, along = Muscle([17 + i for i in range(2, 15)]), Muscle([34 + i for i in range(2, 15)])
+    target = solve_internal(mesh, mat, [pull], [0.15]).x
+    both = design_contractions(mesh, mat, [pull, along], target)
+    seen = []
+
+    def discard_slack(r):
+        seen.append(type(r).__name__)
+        return "a slack rope to drop" if np.asarray(r.slack).any() else ""
+
+    skipped = design_contractions(mesh, mat, [pull, along], target, skip_verification=discard_slack)
+    assert seen == ["SimpleNamespace", "DesignResult"] and skipped.verification is None
+    assert "not verified" in skipped.status and skipped.slack.tolist() == [False, True]
+    assert skipped.tension[1] == 0.0 and skipped.iterations < both.iterations
+    assert skipped.contractions[0] == pytest.approx(both.contractions[0], abs=1e-6)
+    needs_more = design_contractions(mesh, mat, [pull, along], target,
+                                     skip_verification=lambda r: "" if r.difference >= 0 else "never")
+    assert needs_more.iterations == both.iterations and needs_more.verification.passed

@@ -318,10 +318,23 @@ class EnergyModel:
     def _pattern_data(self, en, He, Hs) -> np.ndarray:
         """Element blocks (6, 6, m) and the springs' of ``en`` (4, 4, s) summed in :attr:`hessian_pattern`'s order."""
         pat = self.hessian_pattern
-        data = np.bincount(pat.elem_pos, weights=He.ravel(), minlength=pat.nnz)
+        data = self._elem_scatter @ He.ravel()
         if len(Hs):
             data += np.bincount(pat.edge_pos[:, en.spring_on].ravel(), weights=Hs.ravel(), minlength=pat.nnz)
         return data
+
+    @property
+    def _elem_scatter(self) -> sp.csr_matrix:
+        """The 0/1 matrix (nnz, 36 m) summing the element blocks' raveled (6, 6, m) entries into
+        :attr:`hessian_pattern`'s order (made on first use): a sparse product scatters them several times
+        faster than ``np.bincount`` on fine meshes, and the design NLP assembles many Hessians per mesh."""
+        S = self.__dict__.get("_elem_scatter_matrix")
+        if S is None:
+            pat = self.hessian_pattern
+            k = len(pat.elem_pos)  # one entry per column: built as CSC, converted without sorting in Python
+            S = sp.csc_matrix((np.ones(k), pat.elem_pos, np.arange(k + 1)), shape=(pat.nnz, k)).tocsr()
+            self.__dict__["_elem_scatter_matrix"] = S
+        return S
 
     def third_data(self, x, p, v) -> np.ndarray:
         """The values of ``D^3 E(x)[v]`` (the Hessian's derivative along ``v``, symmetric) in the CSC order

@@ -116,7 +116,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         design_active`, which makes a layout with idle muscles again without them): called with the design
         found, before its verification; a non-empty string it returns is why the verification is left out
         (the result has no ``verification``, its ``status`` says so, and it must not be used as a verified
-        design).
+        design). The flattened design asks it first with a preview (``contractions``, ``slack`` as the
+        tension polish would leave them, ``success``) and leaves a design it discards unpolished.
     gap_rtol : float
         Verification tolerance on the state gap, relative to ``mesh.size``.
     contact, obstacles, contact_gap :
@@ -261,7 +262,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     bt = 0.0
     if method == "flattened":
         out, status, iters, bt = run_flattened(prob, a0, fwd, tol, max_iter, hessian, scaling, warm,
-                                                options, clock, derivatives)
+                                                options, clock, derivatives, defer=skip if verify else None)
         build_time += bt
         kappa = None
         if out is None:

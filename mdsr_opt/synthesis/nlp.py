@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import time
+from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
@@ -487,8 +488,20 @@ def _gauge_residual(prob: DesignProblem, x, a, kappa, sc) -> float:
     return float(np.abs(g[prob.gauge]).max())
 
 
+def _discarded(defer, a: np.ndarray, slack: np.ndarray) -> bool:
+    """``defer`` (a caller's ``skip_verification``) discards a design with contractions ``a`` whose ropes
+    ``slack`` carry no tension: asked with a preview holding ``contractions``, ``slack`` and ``success``
+    (a predicate needing more of the design is not asked: False)."""
+    if defer is None:
+        return False
+    try:
+        return bool(defer(SimpleNamespace(contractions=a, slack=slack.copy(), success=True)))
+    except (AttributeError, TypeError, KeyError):
+        return False
+
+
 def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling, warm_start, ipopt_options, clock,
-                   derivatives="numeric"):
+                   derivatives="numeric", defer=None):
     mesh, n, m = prob.mesh, prob.mesh.n_nodes, prob.m
     start = None  # the warm start's forward solve starts from this shape (else from rest)
     if isinstance(warm_start, np.ndarray):  # a given shape: handled as the target is
@@ -561,6 +574,7 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
     # a success only when the verification passes (the design's caller, ACCEPTABLE)
     ok = bool(st.get("success")) and st.get("return_status") in ("Solve_Succeeded", ACCEPTABLE)
     iters = int(st.get("iter_count", 0))
+    unpolished = None  # the near-zero tensions of a design left unpolished
     if ok and blk.rope:
         # A slack rope sits on its bound tau = 0 where the interior point method converges slowly (a
         # degenerate bound: its multiplier is about zero too, e.g. when the target is reachable), leaving
@@ -569,6 +583,11 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         # it converges and the objective is no worse.
         kr = z[ik:ik + m]
         small = kr < 1e-4 * max(1.0, float(kr.max()))
+        if small.any() and _discarded(defer, np.clip(z[2 * n:2 * n + m], 0.0, prob.a_upper), small):
+            # the caller discards this design (it makes the layout again without its idle muscles): the
+            # polish would only turn the near-zero tensions into zeros, so they are reported as zeros
+            unpolished = small.copy()
+            small[:] = False
         if small.any():
             lb2, ub2 = lbz.copy(), ubz.copy()
             lb2[ik + np.nonzero(small)[0]] = 0.0
@@ -589,7 +608,10 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
         if gres > GAUGE_RTOL:
             ok = False
             status += f"; rejected: the gauge coordinates are not in equilibrium (residual {gres:.3g})"
+    kappa = z[ik:].copy()
+    if unpolished is not None:
+        kappa[np.flatnonzero(unpolished)] = 0.0
     out = {"x": z[:2 * n], "a": np.clip(z[2 * n:2 * n + m], 0.0, prob.a_upper), "success": ok,
-           "kappa": z[ik:], "status": status, "iterations": iters,
+           "kappa": kappa, "status": status, "iterations": iters,
            "history": history, "initial_difference": math.sqrt(J0) * prob.h, "t_start": t_start}
     return out, out["status"], out["iterations"], bt

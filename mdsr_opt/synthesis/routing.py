@@ -558,12 +558,9 @@ def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: floa
     sv = np.linalg.svd(mesh.deformation_gradients(x), compute_uv=False)
     stretch = sv[:, 0] - 1.0
     T = mesh.triangles
-    ei = mesh.edge_index
     s_edge = np.full(len(mesh.edges), -np.inf)
     for j in range(3):
-        a, b = T[:, j], T[:, (j + 1) % 3]
-        k = np.array([ei[(p, q) if p < q else (q, p)] for p, q in zip(a.tolist(), b.tolist())])
-        np.maximum.at(s_edge, k, stretch)
+        np.maximum.at(s_edge, mesh.edge_rows(T[:, j], T[:, (j + 1) % 3]), stretch)
     return w > ratio * s_edge
 
 
