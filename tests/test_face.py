@@ -88,7 +88,10 @@ def test_the_expressions_figure_lays_one_layout_with_design_poses(tmp_path, scen
     assert fig.run_figure(tmp_path, resolution="coarse", log=lambda s: None, vector="svg") == 0
     assert "<svg" in (tmp_path / "expressions.svg").read_text()  # the vector copy beside the PNG
     driven = [t for t in titles if ": D = " in t]
-    assert len(driven) == 4 and all(t.split(": D = ")[1].split()[1] == scene.units for t in driven), driven
+    from mdsr_opt.plot.style import unit_label
+
+    u = unit_label(scene.units)  # the face gives no unit: "body units"
+    assert len(driven) == 4 and all(t.split(": D = ")[1].split(" ", 1)[1] == u for t in driven), driven
     assert rows == ["target", "driven by its strokes"]  # no "layout C" of Figure 6 in the face's figure
     n = len(read_json(tmp_path / "layout.json")["muscles"])
     assert f"one layout of {n} muscles (M1..M{n})" in titles[-1], titles[-1]
