@@ -171,7 +171,7 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     channel.send_keys("0.1")
     page.find_element(By.ID, "route").click()
     routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.fabrication.channel_diameter === 0.1 && r;")
-    assert len(routing["muscles"]) >= 3
+    assert len(routing["muscles"]) >= 2  # one to delete, one to design (ropes keep a channel and wall apart)
     shown_notes = page.find_element(By.ID, "routing-notes").text
     assert f"radius {routing['fixture_radius']:.4g}" in shown_notes and all(t in shown_notes for t in routing["notes"])
     # select a muscle on the canvas with the Muscle tool and delete it
