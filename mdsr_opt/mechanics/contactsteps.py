@@ -11,7 +11,7 @@ import numpy as np
 from ..core.guards import check_stop, interruptible
 from .backends import minimize
 from .blas import one_blas_thread
-from .contact import DELTA, ContactRows
+from .contact import DELTA, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import positive_float
 from .contactsolve import ContactProblem, ContactSpec, row_key, merge_rows, contact_stability, polish
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
@@ -74,9 +74,12 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
             bad = (lam_c > 1e-9) & ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
             for i in np.flatnonzero(bad):
                 drop.add(row_key(rows, i))
-            if bad.any():
-                new = merge_rows(new, _empty(prob), drop)
+            if bad.any():  # the segment next to the end it slid past takes over
+                new = merge_rows(new, handoff_rows(prob.mesh, rows, np.flatnonzero(bad), t[bad]), drop)
         grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
+        if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
+            new = merge_rows(new, first_touch_rows(prob.mesh, x_ref, x1, 1e-9 * prob.mesh.size), drop)
+            grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
         if why is None and not grew:
             if len(fsel):  # the lagged normal forces: solved again until they stop changing
                 N = lam_c[fsel]
