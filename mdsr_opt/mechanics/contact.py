@@ -13,8 +13,9 @@ Points are body nodes (variables) or fixed points (obstacles). The line distance
 segment while ``p`` projects inside it; a pair is made only for a point that projects within
 ``[-DELTA, 1 + DELTA]`` of the segment and lies on its outer side in the state the step starts from
 (:func:`broad_phase`), and the pairs are refreshed between solves, so a point that slides past a segment's end
-is held by the next segment (a pair that pushes a point beyond ``[-DELTA, 1 + DELTA]`` is dropped, the segment
-next to that end takes the point over (:func:`handoff_rows`), and the step is solved again). A point may rest
+is held by the next segment (a pair that pushes a point beyond ``[-DELTA, 1 + DELTA]`` is dropped and the step
+solved again; in short load steps, or when the state then crosses, the segment next to that end takes the
+point over: :func:`handoff_rows`). A point may rest
 against the extended line up to ``DELTA`` times a segment's length beyond its end. A solve that crosses the
 boundary with no new pair found (a fold within one step bringing together nodes that projected far beyond
 each other's segments at its start) adds the pairs of the state of first touch along the path
