@@ -303,3 +303,42 @@ def test_strip_pressed_and_sheared_on_ground_with_coulomb_friction(mu):
     assert np.abs(np.array(fr["step_slide"])[slip]).min() > 10 * fr["eps"] if slip.any() else True
     if mu == 0.2:
         assert slip.sum() > 0  # at mu 0.2 part of the bottom slides
+
+
+def _turn(nx, ny, sign):
+    """The 4 x 1 strip (nx x ny cells), left end clamped, right end turned by ``sign`` x 90 degrees about its
+    centre and moved by (-2, 2) (issue 35): the inner side wrinkles into creases that fold onto themselves."""
+    mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    c, th = np.array([4.0, 0.5]), np.radians(sign * 90.0)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    drags = {int(i): tuple(c + R @ (P[i] - c) + np.array([-2.0, 2.0])) for i in right}
+    res = solve_external(mesh, MAT, left, drags, contact=True)
+    assert res.success, res.status
+    assert res.stable and res.residual <= 1e-8
+    assert _outline(mesh, res.x).is_valid and not mesh.boundary_crosses(res.x)  # shapely, and the mesh's test
+    assert _min_gap(mesh, res.x) >= res.contact["gap"] - 1e-8 * mesh.size
+    assert np.allclose(res.x[right], [drags[int(i)] for i in right], atol=1e-9)
+    return mesh, res
+
+
+@pytest.mark.parametrize("sign", [-1.0, 1.0])
+def test_strip_end_turned_90_degrees_solves_with_contact_either_way(sign):
+    _, res = _turn(20, 5, sign)
+    if sign < 0:  # turned clockwise the inner side creases: its faces press on each other
+        assert len(res.contact["pairs"]) > 0 and res.contact["total_force"] > 0
+        assert all(p["force"] > 0 for p in res.contact["pairs"])
+    else:  # turned the other way nothing touches
+        assert res.contact["pairs"] == []
+
+
+def test_strip_end_turned_90_degrees_energy_converges_under_refinement():
+    """At 85, 175 and 297 nodes (16 x 4, 24 x 6, 32 x 8 cells) the strip's energy falls (a displacement model is
+    too stiff on a coarse mesh) and its change at least halves from one refinement to the next, the last
+    within 4 % of the energy."""
+    E = np.array([_turn(4 * k, k, -1.0)[1].energy for k in (4, 6, 8)])
+    d = np.abs(np.diff(E))
+    assert E[0] > E[1] > E[2]
+    assert d[1] <= 0.5 * d[0]
+    assert d[1] <= 0.04 * E[2]

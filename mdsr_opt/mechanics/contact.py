@@ -14,8 +14,12 @@ segment while ``p`` projects inside it; a pair is made only for a point that pro
 ``[-DELTA, 1 + DELTA]`` of the segment and lies on its outer side in the state the step starts from
 (:func:`broad_phase`), and the pairs are refreshed between solves, so a point that slides past a segment's end
 is held by the next segment (a pair that pushes a point beyond ``[-DELTA, 1 + DELTA]`` is dropped and the step
-solved again). A point may rest against the extended line up to ``DELTA`` times a segment's length beyond
-its end.
+solved again; in short load steps, or when the state then crosses, the segment next to that end takes the
+point over: :func:`handoff_rows`). A point may rest
+against the extended line up to ``DELTA`` times a segment's length beyond its end. A solve that crosses the
+boundary with no new pair found (a fold within one step bringing together nodes that projected far beyond
+each other's segments at its start) adds the pairs of the state of first touch along the path
+(:func:`first_touch_rows`).
 
 The multiplier of a row is its contact force (normal, along ``n``; a force ``f n`` on ``p`` and
 ``-f n (1 - t)``, ``-f n t`` on ``a`` and ``b`` at the projection ``t``).
@@ -35,7 +39,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments"]
+__all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments", "first_touch_rows", "handoff_rows"]
 
 #: a pair is made while its point projects within [-DELTA, 1 + DELTA] of the segment
 DELTA = 0.25
@@ -372,3 +376,79 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
                     labels.append((2, k))
     return ContactRows(np.array(pts, dtype=np.int64).reshape(-1, 3), n, np.array(consts).reshape(-1, 2),
                        np.array(w, dtype=float).reshape(-1, 2), np.array(labels, dtype=np.int64).reshape(-1, 2))
+
+
+def _segments_meet(p, q, r, s) -> np.ndarray:
+    """Whether segments ``(p, q)`` and ``(r, s)`` ((k, 2) each) have a point in common (closed segments)."""
+    def orient(a, b, c):
+        return np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    o1, o2, o3, o4 = orient(p, q, r), orient(p, q, s), orient(r, s, p), orient(r, s, q)
+    return (o1 * o2 <= 0) & (o3 * o4 <= 0)
+
+
+def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> ContactRows:
+    """Self-contact rows for the crossings a solve made: for each pair of boundary segments that share no node
+    and meet in ``x1`` ((n, 2)) but not in the admissible state ``x0``, the state of first touch along the
+    straight path from ``x0`` to ``x1`` (bisection), and there the node-segment pair of the four (an end of
+    one segment against the other) that is closest, on the segment's outer side (``g >= -tol``) and
+    projecting within ``[-DELTA, 1 + DELTA]``.
+
+    The broad phase admits a pair by its projection in the state a step starts from; a boundary that folds
+    within one step (a crease forming on a straight side) brings together nodes that projected far beyond
+    each other's segments there. The state of first touch is where such a pair is admissible."""
+    from ..body.polygons import segment_contacts
+
+    X0 = np.asarray(x0, dtype=float).reshape(-1, 2)
+    X1 = np.asarray(x1, dtype=float).reshape(-1, 2)
+    seg, _pos = boundary_segments(mesh)
+    hit = segment_contacts(X1, seg)
+    if len(hit):
+        hit = hit[[not (set(seg[i].tolist()) & set(seg[j].tolist())) for i, j in hit]]
+    empty = ContactRows(np.zeros((0, 3), dtype=np.int64), mesh.n_nodes)
+    if not len(hit):
+        return empty
+    A, B = seg[hit[:, 0]], seg[hit[:, 1]]
+    D = X1 - X0
+
+    def meet(al):
+        X = lambda k: X0[k] + al[:, None] * D[k]
+        return _segments_meet(X(A[:, 0]), X(A[:, 1]), X(B[:, 0]), X(B[:, 1]))
+
+    lo, hi = np.zeros(len(hit)), np.ones(len(hit))
+    keep = ~meet(lo)
+    lo, hi, A, B = lo[keep], hi[keep], A[keep], B[keep]
+    for _ in range(bisections):
+        mid = 0.5 * (lo + hi)
+        m = meet(mid)
+        hi = np.where(m, mid, hi)
+        lo = np.where(m, lo, mid)
+    pts = set()
+    for k in range(len(A)):
+        Xa = X0 + lo[k] * D
+        best = None
+        for p, (a, b) in ((A[k, 0], B[k]), (A[k, 1], B[k]), (B[k, 0], A[k]), (B[k, 1], A[k])):
+            dist, t, g = _point_segment(Xa[[p]], Xa[[a]], Xa[[b]])
+            if g[0] >= -tol and -DELTA <= t[0] <= 1 + DELTA and (best is None or dist[0] < best[0]):
+                best = (dist[0], (int(p), int(a), int(b)))
+        if best is not None:
+            pts.add(best[1])
+    if not pts:
+        return empty
+    P = np.array(sorted(pts), dtype=np.int64)
+    return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))
+
+
+def handoff_rows(mesh, rows: ContactRows, which, t) -> ContactRows:
+    """Self-contact rows that take over from the rows ``which`` of ``rows`` whose point ``t`` (their
+    projections) slid beyond an end of their segment: the point against the boundary segment next to that end
+    (the one before ``a`` for ``t < 0``, after ``b`` for ``t > 1``), unless the point is one of its ends."""
+    seg, pos = boundary_segments(mesh)
+    nxt, prv = _loop_neighbours(seg, len(pos))
+    out = set()
+    for i, ti in zip(np.asarray(which, dtype=np.int64).tolist(), np.asarray(t, dtype=float).tolist()):
+        p, a, b = (int(v) for v in rows.pts[i])
+        a2, b2 = (int(prv[a]), a) if ti < 0 else (b, int(nxt[b]))
+        if min(a2, b2) >= 0 and p not in (a2, b2):
+            out.add((p, a2, b2))
+    P = np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
+    return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))

@@ -11,7 +11,7 @@ import numpy as np
 from ..core.guards import check_stop, interruptible
 from .backends import minimize
 from .blas import one_blas_thread
-from .contact import DELTA, ContactRows
+from .contact import DELTA, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import positive_float
 from .contactsolve import ContactProblem, ContactSpec, row_key, merge_rows, contact_stability, polish
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
@@ -30,10 +30,12 @@ def _empty(prob) -> ContactRows:
 
 
 def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_iter, options, final, loose,
-                 rho: float = 0.0):
+                 rho: float = 0.0, handoff: bool = False):
     """Solve one load step from ``guess`` (``x_ref``: the admissible state it started from) with pairs
     refreshed (module docstring of :mod:`~mdsr_opt.mechanics.contactsolve`): ``(outcome, rows)``. With
-    ``rho > 0`` a proximal step (``rho/2 |x - x_ref|^2`` added to the energy)."""
+    ``rho > 0`` a proximal step (``rho/2 |x - x_ref|^2`` added to the energy). A pair that pushes its point
+    beyond its segment's end is dropped; with ``handoff`` the segment next to that end takes the point over at
+    once (:func:`~mdsr_opt.mechanics.contact.handoff_rows`), else only when the state crosses with no new pair."""
     rows = prob.rows_for(x_ref, [x_ref, guess])
     drop: set = set()
     its, t_solve, t_build = 0, 0.0, 0.0
@@ -41,6 +43,7 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
     start = guess
     out = None
     lags = 0
+    handed = _empty(prob)
     for _ in range(MAX_REFRESH + LAG_ITER):
         check_stop()
         step_tol = tol if final else max(tol, loose)
@@ -75,8 +78,15 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
             for i in np.flatnonzero(bad):
                 drop.add(row_key(rows, i))
             if bad.any():
-                new = merge_rows(new, _empty(prob), drop)
+                new = merge_rows(new, handoff_rows(prob.mesh, rows, np.flatnonzero(bad), t[bad]) if handoff
+                                 else _empty(prob), drop)
+                # kept for a crossing no pair prevents: the segment next to the end the point slid past
+                handed = merge_rows(handed, handoff_rows(prob.mesh, rows, np.flatnonzero(bad), t[bad]))
         grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
+        if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
+            new = merge_rows(merge_rows(new, handed, drop), first_touch_rows(prob.mesh, x_ref, x1,
+                                                                              1e-9 * prob.mesh.size), drop)
+            grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
         if why is None and not grew:
             if len(fsel):  # the lagged normal forces: solved again until they stop changing
                 N = lam_c[fsel]
@@ -222,11 +232,23 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
                     ds /= 2
                     continue
             cap = max_iter if ds < 4 * min_step else min(max_iter, 100)
-            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose)
+            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose,
+                                  handoff=escape)
             lam_last = out.lam_g if r.n_rows else None
             iters += out.iterations
             t_solve += out.solve_time
             t_build += out.build_time
+            if not out.success and escape and ds <= 4 * min_step and guess is not None:
+                # a step this short still fails: the state jumps (a crease snapping in) at any load past this one.
+                # The jump followed by proximal steps, short enough for the broad phase to see each pair it closes
+                y, it = _descend(prob, p, x, guess, fixed, vals, tol, max_iter, options, loose)
+                iters += it
+                if y is not None:
+                    out2, r2 = contact_step(prob, p, y, y, fixed, vals, tol, max_iter, options, s_new >= 1.0, loose)
+                    iters += out2.iterations
+                    if out2.success:
+                        out, r = out2, r2
+                        lam_last = out.lam_g if r.n_rows else None
             status = out.status
             if out.success and s_new < 1.0 and settle and escape:  # a buckling body leaves the unstable branch early
                 lam0 = out.lam_g if r.n_rows else None

@@ -48,16 +48,10 @@ import scipy.sparse as sp
 from ..body.mesh import Mesh
 from ..body.muscles import check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_int
-from ..core.guards import check_stop, interruptible
+from ..core.guards import check_stop
 from ..mechanics.anchors import check_anchor_radius
-from ..mechanics.assembly import ipopt_functions
-from ..mechanics.constrained import ConstrainedModel
-from ..mechanics.constraints import muscle_constraints
-from ..mechanics.model import get_model
-from ..mechanics.residual import ipopt_tolerances
-from ..mechanics.result import solver_status
-from ..mechanics.stopping import with_stop_callback
 from ..mechanics.units import Units
+from .walkframe import MAX_MOVE, FrameSolver
 
 __all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "foot_groups", "node_loads",
            "rigid_motion", "EPS", "SLIP"]
@@ -71,9 +65,6 @@ EPS_START = 1e-2
 #: a failed solve is done again with a drag ``r/2 sum_k a_k |x_k - x0_k|^2`` on every node (``a_k`` its share of the
 #: area; unit body), ``r`` relaxed along this path, then without it from there
 DRAG_PATH = (1e-2, 1e-4, 1e-6)
-#: a solve that moves a node by more than this many body sizes has failed (a quasi-static frame moves it by
-#: about a stroke)
-MAX_MOVE = 2.0
 #: a frame whose solve fails is split in halves at most this many times
 MAX_SPLITS = 4
 #: default weight of the body, a fraction of ``E t size`` (its stiffness times its size)
@@ -258,75 +249,6 @@ class WalkResult:
                 "failed_frames": [int(k) for k in np.flatnonzero(~self.success)]}
 
 
-class _FrameSolver:
-    """The frame's NLP on the unit body: elastic energy + ground friction (+ a drag with mu = 0) subject to the
-    ropes and anchor patches; built once."""
-
-    def __init__(self, mesh, material, mus, radius, tol, max_iter, options):
-        emodel = get_model(mesh, material)
-        mc = muscle_constraints(mesh, mus, radius)
-        self.cm = cm = ConstrainedModel(emodel, mc, True)
-        self.emodel, self.L0 = emodel, mc.rest_lengths
-        n = emodel.n_dof
-        x, p = ca.MX.sym("x", n), ca.MX.sym("p", emodel.n_params)
-        x0, muN = ca.MX.sym("x0", n), ca.MX.sym("muN", n // 2)
-        eps, rho = ca.MX.sym("eps"), ca.MX.sym("rho")
-        w = ca.MX.sym("w", n)  # the drag's weight per coordinate
-        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", cm.n_rows)
-        o = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", **ipopt_tolerances(tol),
-             "ipopt.max_iter": int(max_iter), "ipopt.linear_solver": "mumps", "error_on_fail": False,
-             "calc_lam_p": False, "calc_lam_x": False, "show_eval_warnings": False}
-        o.update(options or {})
-        o = with_stop_callback(o)
-        fr = GroundFriction.expr(x, x0, muN, eps) + rho / 2 * ca.dot(w, (x - x0) ** 2)
-        if getattr(emodel, "is_numeric", False):
-            fns = ipopt_functions(emodel)
-            fe, ge = fns["grad_f"](x, p)
-            o["no_nlp_grad"] = True
-            cf = cm.numeric_functions()
-            g, J = cf["g"](x, p), cf["jac_g"](x, p)[1]
-            He = cf["hess_lag"](x, p, lam_f, lam_g)
-        else:
-            fe, ge = emodel.grad_fn(x, p)
-            g, J = cm.nlp_constraints_expr(x), cm.nlp_jacobian_expr(x)
-            He = cm.hess_lag_upper(x, p, lam_f, lam_g)
-        P = ca.vertcat(p, x0, muN, eps, rho, w)
-        o["grad_f"] = ca.Function("walk_grad_f", [x, P], [fe + fr, ge + ca.gradient(fr, x)], ["x", "p"],
-                                  ["f", "grad"])
-        o["jac_g"] = ca.Function("walk_jac_g", [x, P], [g, J])
-        o["hess_lag"] = ca.Function("walk_hess_lag", [x, P, lam_f, lam_g],
-                                    [He + lam_f * ca.triu(ca.hessian(fr, x)[0])],
-                                    ["x", "p", "lam_f", "lam_g"], ["hess"])
-        nlp = {"x": x, "p": P, "f": fe + fr, "g": g}
-        self.solver = ca.nlpsol("walk_frame", "ipopt", nlp, o)
-        self.warm = ca.nlpsol("walk_frame_warm", "ipopt", nlp, {
-            **o, "ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-9,
-            "ipopt.warm_start_bound_push": 1e-12, "ipopt.warm_start_mult_bound_push": 1e-12})
-        self.lam, self.x_last = None, None
-        self.area = node_loads(mesh, 1.0)
-        self.size = float(mesh.size)
-        self.material = material
-
-    def solve(self, x_start, x0, strokes, muN, eps, rho, w):
-        p = self.cm.params(self.emodel.params(self.material), self.L0 - strokes)
-        lbg, ubg = self.cm.nlp_bounds(p)
-        P = np.concatenate([self.cm.split(p)[0], x0, muN, [eps, rho], w])
-        warm = self.lam is not None and np.array_equal(x_start, self.x_last)
-        with interruptible():  # from the last solution: IPOPT warm-started with its multipliers
-            sol = (self.warm if warm else self.solver)(x0=x_start, p=P, lbg=lbg, ubg=ubg,
-                                                       **({"lam_g0": self.lam} if warm else {}))
-            st = (self.warm if warm else self.solver).stats()
-            if warm and not st.get("success", False):  # a cold start instead
-                sol = self.solver(x0=x_start, p=P, lbg=lbg, ubg=ubg)
-                st = self.solver.stats()
-        status, its = solver_status(st)
-        x = np.asarray(sol["x"]).ravel()
-        ok = bool(st.get("success", False))
-        if ok:
-            self.lam, self.x_last = np.asarray(sol["lam_g"]).ravel(), x.copy()
-        return x, ok, status, its
-
-
 def _eps_path(eps: float) -> list:
     """Smoothing lengths from :data:`EPS_START` of the size (the unit body's size is about 1) down to ``eps``,
     a factor 100 at a time."""
@@ -465,7 +387,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
                                 for row in T])
     X = mesh.points if start is None else np.asarray(start, dtype=float).reshape(mesh.n_nodes, 2)
     t0 = time.perf_counter()
-    fs = _FrameSolver(un.unit_mesh, un.unit_material, mus, un.to_unit(radius), tol, max_iter, options)
+    fs = FrameSolver(un.unit_mesh, un.unit_material, mus, un.to_unit(radius), tol, max_iter, options)
     muN_of = float(mu) * np.vstack([np.tile(frame_loads, (cycles, 1)), frame_loads[:1]]) / un.force
     eps = EPS * un.unit_mesh.size
     rho = 0.0 if mu > 0 else 1.0  # with mu = 0 the vanishing drag of the docstring (weights: the loads)
