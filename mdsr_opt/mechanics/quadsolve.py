@@ -548,24 +548,22 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             raise ValueError("start must be a QuadraticResult of solve_quadratic_internal with the same model, "
                              "ropes and fixtures")
         z0, a0 = start.state.copy(), start.commanded.copy()
+    # one Newton solve at the full load from a state near the answer, when there is one (contractions near the
+    # start's, or a predicted state from the guess); load steps when there is none or it fails
+    near = None
+    if guess is not None:
+        zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
+        near = None if zg is None else (zg, "the predicted state")
+    elif start is not None and np.abs(a - a0).max() <= START_FULL_STEP:
+        near = (z0, "the start state")
     done = None
-    if start is not None and guess is None and np.abs(a - a0).max() <= START_FULL_STEP:
-        # contractions near the start's: one Newton solve from its state at the full load; else load steps
-        zt, conv, it, res = solve_at(1.0, z0, True, 0.0)
+    if near is not None:
+        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0)
         if conv:
-            done = (zt, 1.0, True, it, 1, res, "converged (from the start state)")
+            done = (zt, 1.0, True, it, 1, res, f"converged (from {near[1]})")
         else:
             active[:] = True
             predictor_iters = it
-    if guess is not None:  # one Newton solve at the full load from the predicted state; else load steps
-        zg = _predicted_unknowns(model, red, gauge, keep, ropes, guess, fs)
-        if zg is not None:
-            zt, conv, it, res = solve_at(1.0, zg, True, 0.0)
-            if conv:
-                done = (zt, 1.0, True, it, 1, res, "converged (from the predicted state)")
-            else:
-                active[:] = True
-                predictor_iters = it
     if done is None:
         done = _continue(solve_at, z0, min_step)
         if predictor_iters:
