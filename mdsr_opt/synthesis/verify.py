@@ -218,14 +218,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         pd, lam, residual = True, np.nan, prob.kkt_residual(a, xg, tol)
     else:
         pd, lam, residual = _stability(prob, a, xg, tol, lowest=bool(lowest))
-    msgs = []
-    if not fwd.success:
-        msgs.append(f"forward re-solve failed ({fwd.status})")
-    if not np.isfinite(gap) or gap > gap_tol:
-        msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
-    if inverted:
-        msgs.append("the design's state inverts an element (det F <= 0)")
-    else:
+    msgs = _forward_messages(fwd, "forward re-solve", gap, gap_tol, inverted)
+    if not inverted:
         if not residual <= tol:
             msgs.append(f"the design's state is not an equilibrium at its contractions (scaled KKT residual "
                         f"{residual:.3g} > tol {tol:.3g})")
@@ -239,6 +233,19 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
                         time=time.perf_counter() - t0,
                         target_stable=None if target_check is None else bool(target_check.stable),
                         forward_iterations=f_iters, forward_start=f_start)
+
+
+def _forward_messages(fwd, what: str, gap: float, gap_tol: float, inverted: bool) -> list[str]:
+    """Why the forward re-solve (``what``) does not confirm the design's state: it failed, it ended more than
+    ``gap_tol`` away, or the design's state inverts an element."""
+    msgs = []
+    if not fwd.success:
+        msgs.append(f"{what} failed ({fwd.status})")
+    if not np.isfinite(gap) or gap > gap_tol:
+        msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
+    if inverted:
+        msgs.append("the design's state inverts an element (det F <= 0)")
+    return msgs
 
 
 def _target_messages(target_check, target_residual) -> list[str]:
@@ -275,13 +282,8 @@ def _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol,
         pd, residual = bool(fwd.stable), float(fwd.residual)  # the forward solve's own check answers
     else:
         pd, residual, _ = contact_minimum(mesh, material, mus, a, xc, ckw, **opts)
-    if not fwd.success:
-        msgs.append(f"forward re-solve with contact failed ({fwd.status})")
-    if not np.isfinite(gap) or gap > gap_tol:
-        msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
-    if inverted:
-        msgs.append("the design's state inverts an element (det F <= 0)")
-    elif not pd or not residual <= tol:
+    msgs += _forward_messages(fwd, "forward re-solve with contact", gap, gap_tol, inverted)
+    if not inverted and (not pd or not residual <= tol):
         msgs.append("the design's state is not a stable equilibrium with its contacts (a contact solve started "
                     f"there moves away, fails or finds a saddle; residual {residual:.3g})")
     msgs += _target_messages(target_check, target_residual)
