@@ -43,8 +43,7 @@ Example
 
 from __future__ import annotations
 
-import difflib
-
+from ..core.checks import did_you_mean
 from .material import NeoHookean, Yeoh
 
 __all__ = ["silicone", "SILICONES"]
@@ -95,8 +94,7 @@ def silicone(name: str, thickness: float = 1.0, law: str = "yeoh"):
         raise TypeError(f"the silicone's name must be a string, got {type(name).__name__}")
     key = _key(name)
     if key not in SILICONES:
-        close = difflib.get_close_matches(key, list(SILICONES), n=1, cutoff=0.5)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(key, SILICONES, cutoff=0.5)
         raise ValueError(f"unknown silicone {name!r}{hint}; known: {', '.join(SILICONES)}")
     if law not in _LAWS:
         raise ValueError(f"law must be one of {', '.join(_LAWS)}, got {law!r}")

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 __all__ = ['as_float_array', 'as_index_array', 'node_indices', 'positive_float', 'positive_int', 'check_int',
-           'integer_range', 'check_label', 'check_stem', 'check_options', 'keyword_names', 'unknown_key_hint']
+           'integer_range', 'check_label', 'check_stem', 'check_options', 'keyword_names', 'did_you_mean', 'unknown_key_hint']
 
 
 def as_float_array(value: ArrayLike, name: str, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
@@ -249,12 +249,18 @@ def keyword_names(func: Callable) -> tuple[str, ...]:
     return tuple(p.name for p in inspect.signature(func).parameters.values() if p.kind == p.KEYWORD_ONLY)
 
 
+def did_you_mean(word, choices: Iterable[str], cutoff: float = 0.6) -> str:
+    """``" (did you mean 'gecko'?)"`` naming the choice nearest to ``word`` (by :func:`difflib.get_close_matches`
+    with ``cutoff``), or ``""`` when none is near: the one spelling of a near miss in every message."""
+    close = difflib.get_close_matches(str(word), list(choices), n=1, cutoff=cutoff)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
 def unknown_key_hint(key, allowed: Iterable[str]) -> str:
     """The words after "unknown key": ``" (did you mean 'max_muscles'?)"`` for a near miss, else the list of
     the keys allowed."""
     allowed = sorted(allowed)
-    close = difflib.get_close_matches(str(key), allowed, n=1)
-    return f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(allowed)})"
+    return did_you_mean(key, allowed) or f" (allowed: {', '.join(allowed)})"
 
 
 def check_options(options, allowed: Iterable[str], name: str) -> dict:

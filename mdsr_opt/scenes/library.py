@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import os
 import sys
@@ -10,6 +9,7 @@ from pathlib import Path
 
 from .scene import Scene, UnknownName, resolve_resolution
 from .scenefile import load_scene
+from ..core.checks import did_you_mean
 
 __all__ = ['load_problem_module', 'problems_dir', 'figure_scripts', 'list_problems', 'get_problem']
 
@@ -146,7 +146,6 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
     if s not in files:
         where = problems_dir()
         lib = ", ".join(files) if files else f"none found (problems folder: {where})"
-        close = difflib.get_close_matches(s, list(files), n=1, cutoff=0.6)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(s, files)
         raise UnknownName(f"unknown problem {s!r}{hint}; the library has: {lib}")
     return build_from(files[s], "medium" if resolution is None else resolution)

@@ -3,7 +3,6 @@ scene's routing and design options (also used for scenes built in Python)."""
 
 from __future__ import annotations
 
-import difflib
 import inspect
 import json
 import math
@@ -12,7 +11,7 @@ from pathlib import Path
 from typing import Mapping, Sequence
 import numpy as np
 
-from ..core.checks import check_int, integer_range
+from ..core.checks import check_int, did_you_mean, integer_range
 from ..core.errors import InputError
 
 __all__ = ['check_scene_options', 'SceneFileError']
@@ -59,8 +58,7 @@ class Reader:
             self.fail(where, f"expected a table/object, got {tname(d)}", TypeError)
         for k in d:
             if k not in allowed:
-                close = difflib.get_close_matches(str(k), allowed, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(allowed)})"
+                hint = did_you_mean(k, allowed) or f" (allowed: {', '.join(allowed)})"
                 self.fail(_join(where, k), f"unknown field{hint}")
         for k in required:
             if k not in d:

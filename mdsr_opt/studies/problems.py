@@ -12,6 +12,7 @@ import numpy as np
 from ..body.material import LinearElastic, NeoHookean
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..core.checks import did_you_mean
 
 __all__ = ['Setup', 'StudyProblem', 'list_study_problems', 'get_study_problem', 'build_setup']
 
@@ -235,11 +236,8 @@ def get_study_problem(name: str) -> StudyProblem:
         return PROBLEMS[name]
     p = _scene_problem(name)
     if p is None:
-        import difflib
-
         valid = list_study_problems()
-        close = difflib.get_close_matches(name, valid, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(name, valid)
         raise ValueError(f"unknown study problem {name!r}{hint}; valid: {', '.join(valid)}")
     return p
 

@@ -46,6 +46,7 @@ from .problems import build_setup, is_scene_path, list_study_problems
 from .runs import fill_accuracy, run_all
 from .spec import FAILURES, RECOMMEND, Study
 from .study import StudyResult, environment_info, output_folder
+from ..core.checks import did_you_mean
 
 __all__ = ["Recommendation", "pick_recommendation", "run_recommendation", "recommendation_markdown",
            "RECOMMEND_STUDY", "DEFAULT_SCENES", "DEFAULT_BACKENDS", "DEFAULT_RESOLUTIONS"]
@@ -180,8 +181,6 @@ def scene_stem(scene: str) -> str:
 
 
 def _scene_problems(scenes: Sequence[str]) -> list[str]:
-    import difflib
-
     from ..scenes.library import get_problem
 
     known = list_study_problems()
@@ -195,8 +194,7 @@ def _scene_problems(scenes: Sequence[str]) -> list[str]:
         mine = [p for p in known if p.rsplit("/", 1)[0] == sc and "/" in p]
         if not mine:
             names = sorted({p.rsplit("/", 1)[0] for p in known if "/" in p})
-            close = difflib.get_close_matches(sc, names, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(sc, names)
             raise ValueError(f"unknown library scene {sc!r}{hint}; valid: {', '.join(names)}, or the path of a "
                              "scene file (.toml/.json) or problem script (.py)")
         out += mine
