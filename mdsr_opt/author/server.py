@@ -4,7 +4,8 @@ The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route`
 channel, wall and fixture sizes), ``delete_muscle``, ``design``, ``save``, ``ping``); the server answers with
 ``body``, ``state``, ``graph``, ``routing`` (also after a deletion), ``design``, ``saved``, ``pong`` or
 ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
-a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``). Bad
+a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``), and while
+no request waits after a drag the drag's exact equilibrium is solved ahead of its release. Bad
 input of any kind is answered with an ``error`` message naming the problem, and the server keeps serving.
 """
 
@@ -19,12 +20,14 @@ import os
 import secrets
 import sys
 import tempfile
+import threading
 import traceback
 from pathlib import Path
 
 import numpy as np
 
 from ..core.checks import check_int
+from ..core.guards import cancel_stop, request_stop
 from .files import check_scene_refs, page_file, readable_folders
 from .guard import Guard
 
@@ -34,6 +37,9 @@ __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 MAX_MESSAGE = 4 * 1024 * 1024
 #: Deepest nesting of lists and objects in a message (the page's deepest, an outline's holes, is 5).
 MAX_DEPTH = 16
+#: Seconds a drag must wait for the next move before its exact equilibrium is solved ahead of the release
+#: (longer than the page's 60 Hz frame, so a moving drag does not start solves it then stops).
+SPECULATE_AFTER = 0.02
 STATIC = Path(__file__).with_name("static")
 _SESSIONS: "collections.OrderedDict[str, object]" = collections.OrderedDict()
 _KEEP_SESSIONS = 16
@@ -196,6 +202,10 @@ class Page:
         self.wake = asyncio.Event()
         self.dropped = 0
         self.tmp = tempfile.TemporaryDirectory(prefix="mdsr-author-")
+        # the exact solve started while a drag waits for the next move (see _speculate)
+        self.spec: dict | None = None  # the drag request it solves
+        self.spec_tid: int | None = None  # the thread solving it
+        self.spec_lock = threading.Lock()
 
     async def send(self, obj: dict) -> None:
         await self.ws.send_text(json.dumps(obj, allow_nan=False, default=_json_default))
@@ -210,15 +220,50 @@ class Page:
             self.dropped += 1
         else:
             self.queue.append((msg, trusted))
+        spec = self.spec
+        if spec is not None and not (msg.get("type") == "fixed" and all(
+                msg.get(k) == spec.get(k) for k in ("anchors", "drag_nodes", "drag_positions"))):
+            with self.spec_lock:  # the drag moved on: its exact solve stops at its next iteration
+                self.spec = None
+                if self.spec_tid is not None:
+                    request_stop(self.spec_tid, _Superseded)
         self.wake.set()
+
+    async def _speculate(self, msg: dict) -> None:
+        """While the drag ``msg`` waits for the next move, solve its exact equilibrium
+        (:meth:`~mdsr_opt.author.session.Session.exact`): a release there is then answered at once. A newer
+        request other than that release stops it (:meth:`enqueue`)."""
+        self.spec = msg
+
+        def run():
+            tid = threading.get_ident()
+            with self.spec_lock:
+                if self.spec is not msg:  # superseded before it started
+                    return
+                self.spec_tid = tid
+            try:
+                self.session.exact()
+            except Exception:  # stopped (_Superseded) or failed: the release solves it again and reports it
+                pass
+            finally:
+                with self.spec_lock:
+                    self.spec_tid = None
+                    cancel_stop(tid)
+
+        try:
+            await asyncio.to_thread(run)
+        finally:
+            self.spec = None
 
     async def worker(self) -> None:
         while True:
             await self.wake.wait()
             self.wake.clear()
+            last = None
             while self.queue:
                 msg, trusted = self.queue.popleft()
                 t = msg.get("type")
+                last = msg if t == "drag" else None
                 try:
                     reply = await asyncio.to_thread(self.handle, msg, trusted)
                 except RecursionError:  # a RuntimeError: named before the general case below
@@ -238,6 +283,12 @@ class Page:
                         await self.send(r)
                     except (ValueError, TypeError, RecursionError) as exc:  # a reply JSON cannot hold
                         await self.error(f"{t}: cannot send the reply: {exc}", t)
+            st = self.session.state if self.session is not None else None
+            if last is not None and st is not None and st.live and st.success:
+                try:  # a new request wakes the worker at once; else the drag pauses: solve it exactly
+                    await asyncio.wait_for(self.wake.wait(), SPECULATE_AFTER)
+                except asyncio.TimeoutError:
+                    await self._speculate(last)
 
     def handle(self, msg: dict, trusted: bool = False) -> list[dict]:
         """Serve one request (in a worker thread); returns the messages to send.
@@ -309,6 +360,10 @@ class Page:
                  drag_nodes=s.drag_nodes.tolist(), drag_positions=s.drag_positions.tolist(),
                  settled=s.target is not None)
         return d
+
+
+class _Superseded(Exception):
+    """Stops an exact solve started for a drag the page has moved on from."""
 
 
 def _error(message: str, request=None) -> dict:
