@@ -37,9 +37,10 @@ __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 MAX_MESSAGE = 4 * 1024 * 1024
 #: Deepest nesting of lists and objects in a message (the page's deepest, an outline's holes, is 5).
 MAX_DEPTH = 16
-#: Seconds a drag must wait for the next move before its exact equilibrium is solved ahead of the release
-#: (longer than the page's 60 Hz frame, so a moving drag does not start solves it then stops).
-SPECULATE_AFTER = 0.02
+#: Seconds a drag must wait for the next move before its exact equilibrium is solved ahead of the release:
+#: a pause of the hand, longer than the gaps between mouse moves (16 ms at 60 Hz, 50 ms and more on a busy
+#: machine), so a moving drag does not start solves it then stops.
+SPECULATE_AFTER = 0.1
 STATIC = Path(__file__).with_name("static")
 _SESSIONS: "collections.OrderedDict[str, object]" = collections.OrderedDict()
 _KEEP_SESSIONS = 16
