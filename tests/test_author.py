@@ -603,3 +603,39 @@ def test_a_paused_drag_is_solved_exactly_before_its_release(monkeypatch):
         assert st["settled"] and st["seq"] == seq
     assert out["moved"]["live"] and out["moved"]["success"]
     assert not [m for m in sent if m["type"] == "error"]
+
+
+@pytest.mark.parametrize("source", ["library", "scene file", "mesh file"])
+def test_saved_scenes_and_bundles_hold_no_machine_paths(tmp_path, source):
+    """The scene file, its mesh and the downloaded bundle name the source by its file name only: no folder of
+    this machine (the source's, the output's, the package's) in any byte."""
+    import io
+    import zipfile
+
+    import mdsr_opt
+    from mdsr_opt import write_mesh
+
+    src = tmp_path / "my_lab" / "bodies"
+    src.mkdir(parents=True)
+    if source == "library":
+        s = Session.from_problem("tentacle", "coarse")
+    else:
+        body = {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 80}
+        if source == "mesh file":
+            write_mesh(src / "strip.vtu", Session.from_outline(body["outline"], resolution=80).mesh)
+            body = {"mesh": "strip.vtu"}
+        (src / "strip.json").write_text(json.dumps({"name": "strip", "body": body, "regions": {
+            "base": {"box": [-1, -1, 0.1, 2]}, "tip": {"box": [3.9, -1, 5, 2]}}, "cases": [
+            {"name": "up", "anchors": "base", "drags": [{"nodes": "tip", "by": [0, 0.5]}]}]}))
+        s = Session.from_scene_file(src / "strip.json")
+    assert s.settle().success
+    out = tmp_path / "saved here"
+    files = save_scene(s, out, "mine")
+    data, _ = download(s, "scene.zip", tmp_path)
+    bundle = zipfile.ZipFile(io.BytesIO(data))
+    blobs = [Path(f).read_bytes() for f in files] + [bundle.read(n) for n in bundle.namelist()]
+    folders = {str(tmp_path), str(Path(mdsr_opt.__file__).parent.parent), str(Path.home()), "my_lab"}
+    assert not [f for f in folders for b in blobs if f.encode() in b]
+    scene = json.loads(Path(files[0]).read_text())
+    assert scene["body"] == {"mesh": "mine.mesh.vtu"}
+    assert scene["description"].endswith(("tentacle.py.", "strip.json.")), scene["description"]
