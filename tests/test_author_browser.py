@@ -192,7 +192,7 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     design = wait(page, "return mdsrAuthor.design();", timeout=180)
     assert design["success"], design["status"]
     name = page.find_element(By.ID, "save-name")
-    name.clear()
+    assert name.get_attribute("value") == ""  # the box starts empty: typing gives the name typed
     name.send_keys("authored_tentacle")
     page.find_element(By.ID, "save").click()
     saved = wait(page, "return mdsrAuthor.saved();")
