@@ -185,3 +185,25 @@ def test_the_scene_format_is_documented_once_with_every_key(tmp_path):
     assert [k for k in keys if not re.search(rf"\b{k}\b", example)] == []
     readme = (ROOT / "README.md").read_text()
     assert "Every section is in the docstring of `mdsr_opt.scenes.scenefile.load_scene`" in readme
+
+
+def test_the_scene_format_documents_the_keys_of_the_nested_tables_too(tmp_path):
+    """Keys the reader checks outside the ``*_KEYS`` tuples: a muscle's ``boundary`` (``via``), the
+    ``[fabrication]`` fields and the ``[acceptance]`` keys are named in load_scene's docstring as well."""
+    from dataclasses import fields
+
+    from mdsr_opt.scenes.scene import check_acceptance
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.synthesis.fabrication import Fabrication
+
+    doc = load_scene.__doc__
+    keys = ["from", "to", "via"] + [f.name for f in fields(Fabrication)] + list(check_acceptance({}))
+    assert len(keys) > 9
+    assert [k for k in keys if not re.search(rf"\b{k}\b", doc)] == []
+    # the reader's own list for a boundary muscle: exactly those documented
+    scene = {"name": "s", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+             "muscles": [{"boundary": {"from": [0, 0], "to": [4, 0], "qqq": 1}}],
+             "cases": [{"name": "c", "contractions": [0.1]}]}
+    (tmp_path / "s.json").write_text(__import__("json").dumps(scene))
+    with pytest.raises(ValueError, match=r"boundary\.qqq: unknown field \(allowed: from, to, via\)"):
+        load_scene(tmp_path / "s.json")

@@ -83,6 +83,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [[muscles]]                           # optional; internal cases need them
         name = "lower"
         boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
+                                              # (boundary may add via = [x, y]: which way round the loop)
 
         [routing]                             # keyword arguments of route_muscles
         max_muscles = 2
