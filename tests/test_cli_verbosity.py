@@ -207,3 +207,40 @@ def test_the_scene_format_documents_the_keys_of_the_nested_tables_too(tmp_path):
     (tmp_path / "s.json").write_text(__import__("json").dumps(scene))
     with pytest.raises(ValueError, match=r"boundary\.qqq: unknown field \(allowed: from, to, via\)"):
         load_scene(tmp_path / "s.json")
+
+
+def test_every_sub_result_of_a_pipeline_result_is_an_object_with_manners(pipeline_result):
+    """Walk the PipelineResult's fields (and theirs): every result object in it has its own repr and a
+    JSON-ready to_dict, and those with rows (routing, design, bands) a table()."""
+    import dataclasses
+    import json
+
+    seen = {}
+
+    def walk(obj, where, depth=0):
+        if depth > 3 or id(obj) in seen:
+            return
+        if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+            seen[id(obj)] = (where, obj)
+            for f in dataclasses.fields(obj):
+                if f.name not in ("mesh", "material"):
+                    walk(getattr(obj, f.name), f"{where}.{f.name}", depth + 1)
+        elif isinstance(obj, (list, tuple)):
+            for i, v in enumerate(obj[:3]):
+                walk(v, f"{where}[{i}]", depth + 1)
+        elif isinstance(obj, dict):
+            for k, v in list(obj.items())[:10]:
+                walk(v, f"{where}[{k!r}]", depth + 1)
+
+    walk(pipeline_result, "result")
+    names = {type(o).__name__ for _, o in seen.values()}
+    assert {"PipelineResult", "RoutingResult", "EquilibriumResult", "DesignResult", "Verification",
+            "MuscleStats"} <= names, names
+    for where, obj in seen.values():
+        if type(obj).__name__ in ("Muscle", "Fabrication"):  # inputs carried along, with their own to_dict
+            continue
+        r = repr(obj)
+        assert r.startswith(type(obj).__name__ + "(") and len(r) < 2000, where
+        json.dumps(obj.to_dict(), allow_nan=False, default=str)
+    for sub in (pipeline_result, pipeline_result.routing, pipeline_result.design):
+        assert len(sub.table().splitlines()) >= 2
