@@ -639,3 +639,36 @@ def test_saved_scenes_and_bundles_hold_no_machine_paths(tmp_path, source):
     scene = json.loads(Path(files[0]).read_text())
     assert scene["body"] == {"mesh": "mine.mesh.vtu"}
     assert scene["description"].endswith(("tentacle.py.", "strip.json.")), scene["description"]
+
+
+@pytest.mark.parametrize("suffix", [".json", ".toml"])
+def test_a_scene_file_the_page_opens_is_read_once_by_the_scene_reader(tmp_path, monkeypatch, suffix):
+    """Opening a scene file by path (the page's check of its mesh file included) reads it once, through the
+    scene reader, whose size limit then holds for the page too."""
+    import mdsr_opt.scenes.reader as reader
+
+    scene = tmp_path / f"strip{suffix}"
+    if suffix == ".json":
+        scene.write_text(json.dumps({"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]],
+                                                               "resolution": 60},
+                                     "cases": [{"name": "up", "anchors": [[0, 0], [0, 1]],
+                                                "drags": [{"at": [4, 1], "by": [0, 0.5]}]}]}))
+    else:
+        scene.write_text('name = "strip"\n[body]\noutline = [[0, 0], [4, 0], [4, 1], [0, 1]]\nresolution = 60\n'
+                         '[[cases]]\nname = "up"\nanchors = [[0, 0], [0, 1]]\ndrags = [{ at = [4, 1], by = [0, 0.5] }]\n')
+    reads = []
+    for method in ("read_bytes", "read_text"):
+        real = getattr(Path, method)
+
+        def counted(self, *a, _real=real, _name=method, **k):
+            if self.name == scene.name:
+                reads.append(_name)
+            return _real(self, *a, **k)
+
+        monkeypatch.setattr(Path, method, counted)
+    s = load_body({"kind": "path", "path": str(scene)}, (tmp_path.resolve(),))
+    assert s.name == "strip" and len(s.drag_nodes) == 1
+    assert reads == ["read_bytes"]  # read_file's one read
+    monkeypatch.setattr(reader, "MAX_BYTES", 100)
+    with pytest.raises(ValueError, match=r"strip\.(json|toml): the scene file is 0\.0 MB, more than"):
+        load_body({"kind": "path", "path": str(scene)}, (tmp_path.resolve(),))

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..core.checks import check_int
 from ..core.guards import cancel_stop, request_stop
+from ..scenes.reader import read_file
 from .files import check_scene_refs, page_file, readable_folders
 from .guard import Guard
 
@@ -99,16 +100,19 @@ def _load_body(spec: dict, folders):
             p = Path(str(spec.get("path")))
             if not p.exists():
                 raise FileNotFoundError(f"no such file: {p}")
-        if p.suffix.lower() == ".svg" or p.suffix.lower() == ".json" and not _is_scene_json(p):
-            outline, holes = parse_outline(p.name, p.read_text())
-            return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
-        if p.suffix.lower() == ".py":  # the command line's problem script (page_file refuses these)
+        suffix = p.suffix.lower()
+        if suffix == ".py":  # the command line's problem script (page_file refuses these)
             from ..scenes.library import get_problem
 
             return Session.from_scene(get_problem(p, resolution=res))
+        # a scene file is read once, by the scene reader (its limits on size and nesting)
+        data = None if suffix == ".svg" else read_file(p)
+        if data is None or suffix == ".json" and "body" not in data:  # an outline file
+            outline, holes = parse_outline(p.name, p.read_text())
+            return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
         if folders is not None:
-            check_scene_refs(p, folders)
-        return Session.from_scene_file(p, res)
+            check_scene_refs(p, folders, data=data)
+        return Session.from_scene_file(p, res, data=data)
     if kind == "scene":
         fname, text = _file_fields(spec)
         suffix = Path(fname).suffix.lower()
@@ -117,8 +121,8 @@ def _load_body(spec: dict, folders):
         with tempfile.TemporaryDirectory() as d:
             path = Path(d) / Path(fname).name
             path.write_text(text)
-            check_scene_refs(path, (), shown=Path(fname).name)
-            return Session.from_scene_file(path, res)
+            data = check_scene_refs(path, (), shown=Path(fname).name)
+            return Session.from_scene_file(path, res, data=data)
     if kind == "outline_file":
         fname, text = _file_fields(spec)
         outline, holes = parse_outline(fname, text)
@@ -130,14 +134,6 @@ def _load_body(spec: dict, folders):
         outline, holes = check_outline(spec.get("outline"), holes, where="drawn outline")
         return Session.from_outline(outline, holes, 600 if res is None else res)
     raise ValueError(f"unknown body kind {kind!r} (problem, path, scene, outline, outline_file)")
-
-
-def _is_scene_json(p: Path) -> bool:
-    try:
-        data = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        return True  # let the scene reader name the problem
-    return isinstance(data, dict) and "body" in data
 
 
 def _stem_name(p: Path) -> str:

@@ -45,7 +45,7 @@ from ..synthesis.fabrication import Fabrication, check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
-from ..scenes.scenefile import load_scene
+from ..scenes.scenefile import load_scene, scene_from_data
 
 __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
 
@@ -161,8 +161,10 @@ class Session:
         return cls.from_scene(get_problem(name, resolution=_resolution(resolution)))
 
     @classmethod
-    def from_scene_file(cls, path, resolution: str | int | None = None) -> "Session":
-        """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it."""
+    def from_scene_file(cls, path, resolution: str | int | None = None, data: dict | None = None) -> "Session":
+        """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it (``data``: the file already read)."""
+        if data is not None:
+            return cls.from_scene(scene_from_data(path, data, resolution=_resolution(resolution)))
         return cls.from_scene(load_scene(path, resolution=_resolution(resolution)))
 
     @classmethod
