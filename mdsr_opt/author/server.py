@@ -220,11 +220,15 @@ class Page:
         spec = self.spec
         if spec is not None and not (msg.get("type") == "fixed" and all(
                 msg.get(k) == spec.get(k) for k in ("anchors", "drag_nodes", "drag_positions"))):
-            with self.spec_lock:  # the drag moved on: its exact solve stops at its next iteration
-                self.spec = None
-                if self.spec_tid is not None:
-                    request_stop(self.spec_tid, _Superseded)
+            self.stop_speculation()  # the drag moved on
         self.wake.set()
+
+    def stop_speculation(self) -> None:
+        """Stop the exact solve of a paused drag (:meth:`_speculate`) at its next iteration."""
+        with self.spec_lock:
+            self.spec = None
+            if self.spec_tid is not None:
+                request_stop(self.spec_tid, _Superseded)
 
     async def _speculate(self, msg: dict) -> None:
         """While the drag ``msg`` waits for the next move, solve its exact equilibrium
@@ -488,6 +492,7 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored", *
                 await ws.close(code=1011, reason="internal error (see the server's output)")
         finally:
             task.cancel()
+            page.stop_speculation()  # the page is gone: no solve for it goes on
             page.tmp.cleanup()
 
     routes = [Route("/", index), Route("/api/info", info), Route("/download/{sid}/{what}", get_download),
