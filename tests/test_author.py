@@ -672,3 +672,18 @@ def test_a_scene_file_the_page_opens_is_read_once_by_the_scene_reader(tmp_path, 
     monkeypatch.setattr(reader, "MAX_BYTES", 100)
     with pytest.raises(ValueError, match=r"strip\.(json|toml): the scene file is 0\.0 MB, more than"):
         load_body({"kind": "path", "path": str(scene)}, (tmp_path.resolve(),))
+
+
+def test_a_warm_solve_that_ends_crossing_is_shown_without_a_cold_solve(monkeypatch):
+    """When the preview cannot follow a drag, the warm solve_external takes over; a state it converges to
+    whose boundary crosses itself is shown (failed, crossing named) after that one solve, and the next drag
+    starts from it: one solve per drag, never the cold fallback."""
+    s = Session.from_outline([[0, 0], [10, 0], [10, 1], [0, 1]], resolution=150)
+    P = s.mesh.points
+    s.set_fixed(np.flatnonzero(P[:, 0] < 0.01), np.flatnonzero(P[:, 0] > 9.99), P[P[:, 0] > 9.99])
+    assert s.settle().success
+    _curl(s, np.radians(np.arange(7, 343, 7)))
+    monkeypatch.setattr(Session, "_preview", lambda self, y, t0: None)  # the warm solve_external alone
+    over, calls = _curl(s, np.radians(np.arange(350, 380, 7)))
+    assert calls == len(over) and not any(st.warm_failed for st in over)
+    assert over[-1].crossing and over[-1].live and not over[-1].success and "crosses itself" in over[-1].status

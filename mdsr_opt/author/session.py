@@ -284,8 +284,8 @@ class Session:
         if self._ready():
             return self.settle()
         prev = self.state
-        if prev is None or not (prev.success or prev.live and prev.crossing and not prev.inverted):
-            return self._cold(t0)  # a crossing preview is an equilibrium too: the next preview starts there
+        if prev is None or not (prev.success or prev.crossing and not prev.inverted):
+            return self._cold(t0)  # a crossing equilibrium shown: the next preview starts there too
         for fresh in (False, True):
             guess = self._predict(prev.x, fresh)
             if guess is None:
@@ -297,8 +297,10 @@ class Session:
                 return rep
             res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
                                  initial_guess=guess, min_step=1.0)
-            if res.success:
-                self.state = self._report(res, live=True, warm_failed=False, t0=t0)
+            rep = self._report(res, live=True, warm_failed=False, t0=t0)
+            # converged but crossing itself: shown as it is (a cold solve would not uncross it)
+            if res.success or rep.crossing and not rep.inverted and res.residual <= 1e-6:
+                self.state = rep
                 self.target = None  # a live state is not the settled target until the drag is released
                 return self.state
         return self._cold(t0)
