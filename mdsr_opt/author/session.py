@@ -12,8 +12,9 @@ Two kinds of solve:
   factorised tangent (reused across updates, refreshed every :attr:`Session.REFRESH` updates), stopped
   at the scaled residual :attr:`Session.PREVIEW_TOL` -- no solver set-up, no stability check. When the
   preview inverts an element or does not reach that residual, ``solve_external`` takes over from the
-  predicted state (no load stepping), and when that fails, the settled solve below. A preview whose
-  boundary crosses itself is shown as the failed state it is (no further solve).
+  predicted state (no load stepping), and when that fails, the settled solve below. A preview or warm
+  solve converged to a state whose boundary crosses itself is shown as the failed state it is (no
+  further solve), and the next drag starts from it.
 * **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
   defaults, exactly what ``mdsr run`` solves for the saved scene's target (the same numbers, bit for bit;
   a warm start would reach the same equilibrium only to the tolerance). A released drag is settled; the
