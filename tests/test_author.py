@@ -481,3 +481,209 @@ def test_bad_route_and_delete_messages_get_error_replies_and_the_page_stays_serv
         assert words in text
     routed = [m for m in sent if m["type"] == "routing"]
     assert len(routed) == 1 and routed[0]["fabrication"]["channel_diameter"] == 0.1
+
+
+def _curl(s, turns):
+    """Drag the right end of a 10 x 1 strip (left end anchored) through pure bending, ``turns`` (radians)
+    at a time; returns the states and the number of solve_external calls they took."""
+    import mdsr_opt.author.session as session_module
+
+    P = s.mesh.points
+    anc, dn = np.flatnonzero(P[:, 0] < 0.01), np.flatnonzero(P[:, 0] > 9.99)
+    E = P[dn] - P[dn].mean(0)
+    states, calls = [], 0
+    real = session_module.solve_external
+    for th in turns:
+        R = 10.0 / th
+        rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        s.set_fixed(anc, dn, E @ rot.T + [R * np.sin(th), R - R * np.cos(th)])
+
+        def counted(*a, **k):
+            nonlocal calls
+            calls += 1
+            return real(*a, **k)
+
+        session_module.solve_external = counted
+        try:
+            states.append(s.drag())
+        finally:
+            session_module.solve_external = real
+    return states, calls
+
+
+def test_a_live_drag_into_a_crossing_is_shown_at_once_and_the_drag_goes_on():
+    """A preview that converges to a state whose boundary crosses itself is shown as the failed state it is
+    (crossing named, no solve_external call), and the next drags go on from it, back to success."""
+    s = Session.from_outline([[0, 0], [10, 0], [10, 1], [0, 1]], resolution=150)
+    P = s.mesh.points
+    s.set_fixed(np.flatnonzero(P[:, 0] < 0.01), np.flatnonzero(P[:, 0] > 9.99), P[P[:, 0] > 9.99])
+    assert s.settle().success
+    up, _ = _curl(s, np.radians(np.arange(7, 343, 7)))  # curled almost into a ring: no crossing yet
+    assert all(st.success and st.live for st in up)
+    over, calls = _curl(s, np.radians(np.arange(350, 400, 7)))  # the free end passes over the anchored one
+    crossing = [st for st in over if st.crossing]
+    assert crossing and calls == 0
+    assert all(st.live and not st.success and not st.warm_failed and "crosses itself" in st.status
+               for st in crossing)
+    back, calls = _curl(s, np.radians(np.arange(393, 40, -7)))  # and back out of the crossing
+    assert back[-1].success and back[-1].live and not back[-1].crossing and calls == 0
+    settled = s.settle()  # the release: solve_external's equilibrium, bit for bit
+    ref = solve_external(s.mesh, s.material, s.anchors, (s.drag_nodes, s.drag_positions))
+    assert settled.success and np.array_equal(settled.x, ref.x)
+
+
+def test_a_paused_drag_is_solved_exactly_before_its_release(monkeypatch):
+    """While a drag waits for the next move, the server solves its exact equilibrium; the release then
+    answers with that result (no new solve), bit for bit solve_external's. A move during that solve stops
+    it, and the next release is exact too."""
+    import asyncio
+
+    import mdsr_opt.author.session as session_module
+    from mdsr_opt.author.server import SPECULATE_AFTER, Page
+
+    sent, solved = [], []
+    real = session_module.solve_external
+
+    def counted(mesh, material, anchors, drags, **kw):
+        res = real(mesh, material, anchors, drags, **kw)
+        if not kw:  # the exact solve (the live fallback passes an initial guess)
+            solved.append(np.asarray(drags[1]).copy())
+        return res
+
+    monkeypatch.setattr(session_module, "solve_external", counted)
+
+    class FakeSocket:
+        async def send_text(self, text):
+            sent.append(json.loads(text))
+
+    async def reply(seq):
+        while not any(m["type"] == "state" and m.get("seq") == seq for m in sent):
+            await asyncio.sleep(0.005)
+        return next(m for m in sent if m["type"] == "state" and m.get("seq") == seq)
+
+    async def scenario():
+        page = Page(FakeSocket(), {"out": "unused", "folders": (), "written": set()})
+        page.enqueue({"type": "load", "body": {"kind": "problem", "name": "tentacle", "resolution": "coarse"}})
+        worker = asyncio.create_task(page.worker())
+        start = await reply(None)
+        base = np.array(start["drag_positions"])
+        fixed = {"anchors": start["anchors"], "drag_nodes": start["drag_nodes"]}
+        out = {}
+        p1 = (base + [0.3, -0.2]).tolist()
+        page.enqueue(dict(fixed, type="drag", seq=1, drag_positions=p1))
+        out["drag"] = await reply(1)
+        for _ in range(2000):  # the pause: the exact solve of p1 runs and ends
+            if any(np.array_equal(d, p1) for d in solved):
+                break
+            await asyncio.sleep(0.01)
+        n = len(solved)
+        page.enqueue(dict(fixed, type="fixed", seq=2, drag_positions=p1))
+        out["release"], out["new_solves"] = await reply(2), len(solved) - n
+        # a move stops the exact solve of the paused drag: the next drag and release are answered
+        p3, p4 = (base + [0.5, -0.3]).tolist(), (base + [0.6, -0.2]).tolist()
+        page.enqueue(dict(fixed, type="drag", seq=3, drag_positions=p3))
+        await reply(3)
+        await asyncio.sleep(SPECULATE_AFTER + 0.01)
+        page.enqueue(dict(fixed, type="drag", seq=4, drag_positions=p4))
+        out["moved"] = await reply(4)
+        page.enqueue(dict(fixed, type="fixed", seq=5, drag_positions=p4))
+        out["release2"] = await reply(5)
+        worker.cancel()
+        page.tmp.cleanup()
+        return out
+
+    out = asyncio.run(asyncio.wait_for(scenario(), timeout=300))
+    assert out["drag"]["live"] and out["drag"]["success"]
+    assert out["new_solves"] == 0 and out["release"]["success"] and not out["release"]["live"]
+    tent = get_problem("tentacle", resolution="coarse")
+    for key, seq in (("release", 2), ("release2", 5)):
+        st = out[key]
+        ref = real(tent.mesh, tent.material, st["anchors"], (st["drag_nodes"], st["drag_positions"]))
+        assert np.array_equal(np.asarray(st["x"]), ref.x), key  # exactly mdsr run's equilibrium
+        assert st["settled"] and st["seq"] == seq
+    assert out["moved"]["live"] and out["moved"]["success"]
+    assert not [m for m in sent if m["type"] == "error"]
+
+
+@pytest.mark.parametrize("source", ["library", "scene file", "mesh file"])
+def test_saved_scenes_and_bundles_hold_no_machine_paths(tmp_path, source):
+    """The scene file, its mesh and the downloaded bundle name the source by its file name only: no folder of
+    this machine (the source's, the output's, the package's) in any byte."""
+    import io
+    import zipfile
+
+    import mdsr_opt
+    from mdsr_opt import write_mesh
+
+    src = tmp_path / "my_lab" / "bodies"
+    src.mkdir(parents=True)
+    if source == "library":
+        s = Session.from_problem("tentacle", "coarse")
+    else:
+        body = {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 80}
+        if source == "mesh file":
+            write_mesh(src / "strip.vtu", Session.from_outline(body["outline"], resolution=80).mesh)
+            body = {"mesh": "strip.vtu"}
+        (src / "strip.json").write_text(json.dumps({"name": "strip", "body": body, "regions": {
+            "base": {"box": [-1, -1, 0.1, 2]}, "tip": {"box": [3.9, -1, 5, 2]}}, "cases": [
+            {"name": "up", "anchors": "base", "drags": [{"nodes": "tip", "by": [0, 0.5]}]}]}))
+        s = Session.from_scene_file(src / "strip.json")
+    assert s.settle().success
+    out = tmp_path / "saved here"
+    files = save_scene(s, out, "mine")
+    data, _ = download(s, "scene.zip", tmp_path)
+    bundle = zipfile.ZipFile(io.BytesIO(data))
+    blobs = [Path(f).read_bytes() for f in files] + [bundle.read(n) for n in bundle.namelist()]
+    folders = {str(tmp_path), str(Path(mdsr_opt.__file__).parent.parent), str(Path.home()), "my_lab"}
+    assert not [f for f in folders for b in blobs if f.encode() in b]
+    scene = json.loads(Path(files[0]).read_text())
+    assert scene["body"] == {"mesh": "mine.mesh.vtu"}
+    assert scene["description"].endswith(("tentacle.py.", "strip.json.")), scene["description"]
+
+
+@pytest.mark.parametrize("suffix", [".json", ".toml"])
+def test_a_scene_file_the_page_opens_is_read_once_by_the_scene_reader(tmp_path, monkeypatch, suffix):
+    """Opening a scene file by path (the page's check of its mesh file included) reads it once, through the
+    scene reader, whose size limit then holds for the page too."""
+    import mdsr_opt.scenes.reader as reader
+
+    scene = tmp_path / f"strip{suffix}"
+    if suffix == ".json":
+        scene.write_text(json.dumps({"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]],
+                                                               "resolution": 60},
+                                     "cases": [{"name": "up", "anchors": [[0, 0], [0, 1]],
+                                                "drags": [{"at": [4, 1], "by": [0, 0.5]}]}]}))
+    else:
+        scene.write_text('name = "strip"\n[body]\noutline = [[0, 0], [4, 0], [4, 1], [0, 1]]\nresolution = 60\n'
+                         '[[cases]]\nname = "up"\nanchors = [[0, 0], [0, 1]]\ndrags = [{ at = [4, 1], by = [0, 0.5] }]\n')
+    reads = []
+    for method in ("read_bytes", "read_text"):
+        real = getattr(Path, method)
+
+        def counted(self, *a, _real=real, _name=method, **k):
+            if self.name == scene.name:
+                reads.append(_name)
+            return _real(self, *a, **k)
+
+        monkeypatch.setattr(Path, method, counted)
+    s = load_body({"kind": "path", "path": str(scene)}, (tmp_path.resolve(),))
+    assert s.name == "strip" and len(s.drag_nodes) == 1
+    assert reads == ["read_bytes"]  # read_file's one read
+    monkeypatch.setattr(reader, "MAX_BYTES", 100)
+    with pytest.raises(ValueError, match=r"strip\.(json|toml): the scene file is 0\.0 MB, more than"):
+        load_body({"kind": "path", "path": str(scene)}, (tmp_path.resolve(),))
+
+
+def test_a_warm_solve_that_ends_crossing_is_shown_without_a_cold_solve(monkeypatch):
+    """When the preview cannot follow a drag, the warm solve_external takes over; a state it converges to
+    whose boundary crosses itself is shown (failed, crossing named) after that one solve, and the next drag
+    starts from it: one solve per drag, never the cold fallback."""
+    s = Session.from_outline([[0, 0], [10, 0], [10, 1], [0, 1]], resolution=150)
+    P = s.mesh.points
+    s.set_fixed(np.flatnonzero(P[:, 0] < 0.01), np.flatnonzero(P[:, 0] > 9.99), P[P[:, 0] > 9.99])
+    assert s.settle().success
+    _curl(s, np.radians(np.arange(7, 343, 7)))
+    monkeypatch.setattr(Session, "_preview", lambda self, y, t0: None)  # the warm solve_external alone
+    over, calls = _curl(s, np.radians(np.arange(350, 380, 7)))
+    assert calls == len(over) and not any(st.warm_failed for st in over)
+    assert over[-1].crossing and over[-1].live and not over[-1].success and "crosses itself" in over[-1].status

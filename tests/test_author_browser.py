@@ -192,7 +192,7 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     design = wait(page, "return mdsrAuthor.design();", timeout=180)
     assert design["success"], design["status"]
     name = page.find_element(By.ID, "save-name")
-    name.clear()
+    assert name.get_attribute("value") == ""  # the box starts empty: typing gives the name typed
     name.send_keys("authored_tentacle")
     page.find_element(By.ID, "save").click()
     saved = wait(page, "return mdsrAuthor.saved();")
@@ -402,56 +402,93 @@ def test_draw_outline_anchor_drag_on_the_page(page):
     assert np.abs(np.asarray(st["x"]) - ref.x).max() <= 1e-8
 
 
-#: Loose bounds for the 600-node drag below (issue 36 asks >= 30 updates/s and a settle within 0.3 s;
-#: tests/benchmarks/bench_author.py measures them; a shared CI machine gets this much room)
+#: Loose bounds for the 600-node drags below (issue 36 asks >= 30 updates/s and a settle within 0.3 s of the
+#: last move; tests/benchmarks/bench_author.py measures them; a shared CI machine gets this much room)
 MIN_RATE, MAX_SETTLE_S = 10.0, 1.5
 
+#: an outline of our own (a bent finger with a hole, ~600 nodes): its base anchored, its tip dragged
+FINGER = """name = "finger"
+[body]
+outline = [[0, 0], [7, 0], [9.5, 1.2], [10, 2.4], [8.8, 2.6], [6.5, 1.6], [0, 1.6]]
+holes = [[[2.5, 0.5], [4, 0.5], [4, 1.1], [2.5, 1.1]]]
+resolution = 600
+[regions]
+base = { box = [-1, -1, 0.3, 3] }
+tip = { near = [9.4, 2.5], radius = 0.45 }
+[[cases]]
+name = "lift"
+anchors = "base"
+drags = [{ nodes = "tip", by = [-1.0, 1.0] }]
+"""
 
-def test_drag_on_a_600_node_body_updates_at_interactive_rates(tmp_path):
+#: mouse moves at the display's frame rate for `ms` milliseconds, held still for `hold` ms, then the release;
+#: returns the live updates per second and the times from the last move and from the release to the settled state
+DRAG_SCRIPT = """
+  const [ms, hold, done] = arguments;
+  const c = document.getElementById('canvas'), r = c.getBoundingClientRect();
+  const [sx, sy] = mdsrAuthor.screenOf(mdsrAuthor.state().drag_nodes[0]);
+  const ev = (target, type, x, y) => target.dispatchEvent(new MouseEvent(type,
+      {clientX: r.left + x, clientY: r.top + y, button: 0, bubbles: true}));
+  ev(c, 'mousedown', sx, sy);
+  const n0 = mdsrAuthor.nLive(), t0 = performance.now();
+  let moves = 0, last = t0;
+  function step() {
+    const t = performance.now() - t0;
+    if (t < ms) {
+      moves += 1;
+      ev(c, 'mousemove', sx + 25 * Math.sin(t / 300), sy + 15 * (1 - Math.cos(t / 300)));
+      last = performance.now();
+      requestAnimationFrame(step);
+      return;
+    }
+    const rate = (mdsrAuthor.nLive() - n0) / (t / 1000);
+    setTimeout(() => {
+      ev(window, 'mouseup', sx, sy);
+      const up = performance.now();
+      (function poll() {
+        const s = mdsrAuthor.state();
+        if (!mdsrAuthor.busy() && s && !s.live && s.seq === mdsrAuthor.seq())
+          done({rate: rate, settle: (performance.now() - last) / 1000, release: (performance.now() - up) / 1000, success: s.success, moves: moves,
+                x: s.x, anchors: s.anchors, drag_nodes: s.drag_nodes, drag_positions: s.drag_positions});
+        else setTimeout(poll, 5);
+      })();
+    }, hold);
+  }
+  requestAnimationFrame(step);
+"""
+
+
+@pytest.mark.parametrize("which", ["gecko", "finger"])
+def test_drag_on_a_600_node_body_updates_at_interactive_rates(tmp_path, which):
+    """Real mouse moves on gecko (556 nodes) and a drawn finger (576 nodes): live updates at an interactive
+    rate, and after the release (at once, and after holding still) the state is exactly the equilibrium
+    mdsr run solves (solve_external with its defaults, the same bits)."""
     from mdsr_opt.author import start_in_thread
 
-    url, server = start_in_thread(PROBLEM, resolution=600, out=tmp_path)
+    if which == "gecko":
+        body, scene = "gecko", get_problem("gecko", resolution=600)
+    else:
+        body = tmp_path / "finger.toml"
+        body.write_text(FINGER)
+        scene = load_scene(body)
+    url, server = start_in_thread(str(body), resolution=600 if which == "gecko" else None, out=tmp_path)
     drv = open_browser()
     try:
         drv.get(url)
         wait(drv, "const s = mdsrAuthor.state(); return s !== null && s.settled && !mdsrAuthor.busy();")
-        assert drv.execute_script("return mdsrAuthor.body().points.length;") > 500
+        assert np.array_equal(drv.execute_script("return mdsrAuthor.body().points;"), scene.mesh.points)
+        assert scene.mesh.n_nodes > 500
         drv.find_element(By.CSS_SELECTOR, "input[name=tool][value=move]").click()
         drv.set_script_timeout(60)
-        # two seconds of mouse moves at the display's frame rate, then the release
-        got = drv.execute_async_script("""
-          const done = arguments[arguments.length - 1];
-          const c = document.getElementById('canvas'), r = c.getBoundingClientRect();
-          const [sx, sy] = mdsrAuthor.screenOf(mdsrAuthor.state().drag_nodes[0]);
-          const ev = (target, type, x, y) => target.dispatchEvent(new MouseEvent(type,
-              {clientX: r.left + x, clientY: r.top + y, button: 0, bubbles: true}));
-          ev(c, 'mousedown', sx, sy);
-          const n0 = mdsrAuthor.nLive(), t0 = performance.now();
-          let moves = 0;
-          function step() {
-            const t = performance.now() - t0;
-            if (t < 2000) {
-              moves += 1;
-              ev(c, 'mousemove', sx + 25 * Math.sin(t / 300), sy + 15 * (1 - Math.cos(t / 300)));
-              requestAnimationFrame(step);
-              return;
-            }
-            const rate = (mdsrAuthor.nLive() - n0) / (t / 1000);
-            ev(window, 'mouseup', sx, sy);
-            const t1 = performance.now();
-            (function poll() {
-              const s = mdsrAuthor.state();
-              if (!mdsrAuthor.busy() && s && !s.live && s.seq === mdsrAuthor.seq())
-                done({rate: rate, settle: (performance.now() - t1) / 1000, success: s.success, moves: moves});
-              else setTimeout(poll, 5);
-            })();
-          }
-          requestAnimationFrame(step);
-        """)
+        runs = {hold: drv.execute_async_script(DRAG_SCRIPT, 2000, hold) for hold in (0, 400)}
     finally:
         drv.quit()
         server.should_exit = True
-    print(f"600-node drag in the browser: {got['rate']:.1f} updates/s ({got['moves']} mouse moves), settled "
-          f"{1e3 * got['settle']:.0f} ms after the release")
-    assert got["success"] and got["moves"] > 20
-    assert got["rate"] >= MIN_RATE and got["settle"] <= MAX_SETTLE_S
+    for hold, got in runs.items():
+        print(f"{which} ({scene.mesh.n_nodes} nodes) drag in the browser: {got['rate']:.1f} updates/s "
+              f"({got['moves']} mouse moves), settled {1e3 * got['settle']:.0f} ms after the last move "
+              f"(held {hold} ms), {1e3 * got['release']:.0f} ms after the release")
+        assert got["success"] and got["moves"] > 20
+        assert got["rate"] >= MIN_RATE and got["settle"] <= MAX_SETTLE_S + hold / 1000
+        ref = solve_external(scene.mesh, scene.material, got["anchors"], (got["drag_nodes"], got["drag_positions"]))
+        assert np.array_equal(np.asarray(got["x"]), ref.x)  # exactly the settled state mdsr run computes

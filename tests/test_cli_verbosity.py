@@ -185,3 +185,62 @@ def test_the_scene_format_is_documented_once_with_every_key(tmp_path):
     assert [k for k in keys if not re.search(rf"\b{k}\b", example)] == []
     readme = (ROOT / "README.md").read_text()
     assert "Every section is in the docstring of `mdsr_opt.scenes.scenefile.load_scene`" in readme
+
+
+def test_the_scene_format_documents_the_keys_of_the_nested_tables_too(tmp_path):
+    """Keys the reader checks outside the ``*_KEYS`` tuples: a muscle's ``boundary`` (``via``), the
+    ``[fabrication]`` fields and the ``[acceptance]`` keys are named in load_scene's docstring as well."""
+    from dataclasses import fields
+
+    from mdsr_opt.scenes.scene import check_acceptance
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.synthesis.fabrication import Fabrication
+
+    doc = load_scene.__doc__
+    keys = ["from", "to", "via"] + [f.name for f in fields(Fabrication)] + list(check_acceptance({}))
+    assert len(keys) > 9
+    assert [k for k in keys if not re.search(rf"\b{k}\b", doc)] == []
+    # the reader's own list for a boundary muscle: exactly those documented
+    scene = {"name": "s", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+             "muscles": [{"boundary": {"from": [0, 0], "to": [4, 0], "qqq": 1}}],
+             "cases": [{"name": "c", "contractions": [0.1]}]}
+    (tmp_path / "s.json").write_text(__import__("json").dumps(scene))
+    with pytest.raises(ValueError, match=r"boundary\.qqq: unknown field \(allowed: from, to, via\)"):
+        load_scene(tmp_path / "s.json")
+
+
+def test_every_sub_result_of_a_pipeline_result_is_an_object_with_manners(pipeline_result):
+    """Walk the PipelineResult's fields (and theirs): every result object in it has its own repr and a
+    JSON-ready to_dict, and those with rows (routing, design, bands) a table()."""
+    import dataclasses
+    import json
+
+    seen = {}
+
+    def walk(obj, where, depth=0):
+        if depth > 3 or id(obj) in seen:
+            return
+        if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+            seen[id(obj)] = (where, obj)
+            for f in dataclasses.fields(obj):
+                if f.name not in ("mesh", "material"):
+                    walk(getattr(obj, f.name), f"{where}.{f.name}", depth + 1)
+        elif isinstance(obj, (list, tuple)):
+            for i, v in enumerate(obj[:3]):
+                walk(v, f"{where}[{i}]", depth + 1)
+        elif isinstance(obj, dict):
+            for k, v in list(obj.items())[:10]:
+                walk(v, f"{where}[{k!r}]", depth + 1)
+
+    walk(pipeline_result, "result")
+    names = {type(o).__name__ for _, o in seen.values()}
+    assert {"PipelineResult", "RoutingResult", "EquilibriumResult", "DesignResult", "Verification",
+            "MuscleStats"} <= names, names
+    for where, obj in seen.values():
+        if type(obj).__name__ in ("Muscle", "Fabrication"):  # inputs carried along, with their own to_dict
+            continue
+        r = repr(obj)
+        assert r.startswith(type(obj).__name__ + "(") and len(r) < 2000, where
+        json.dumps(obj.to_dict(), allow_nan=False, default=str)
+    for sub in (pipeline_result, pipeline_result.routing, pipeline_result.design):
+        assert len(sub.table().splitlines()) >= 2

@@ -10,10 +10,10 @@ them too. A Python file is never imported for the page: only the command line ca
 
 from __future__ import annotations
 
-import json
 import os
-import sys
 from pathlib import Path
+
+from ..scenes.reader import read_file
 
 __all__ = ["readable_folders", "page_file", "check_scene_refs", "PAGE_SUFFIXES"]
 
@@ -65,18 +65,20 @@ def page_file(path, folders) -> Path:
     return p
 
 
-def check_scene_refs(scene: Path, folders, shown: str | None = None) -> None:
-    """ValueError when the scene file ``scene`` names a mesh file outside ``folders``.
+def check_scene_refs(scene: Path, folders, shown: str | None = None, data: dict | None = None) -> dict:
+    """The parsed scene file ``scene``; ValueError when it names a mesh file outside ``folders``.
 
-    Reads only the file's ``body.mesh`` entry (a file the scene reader would open, relative to the scene
-    file); an unreadable file is left to the scene reader, which names its problem. ``shown``: the name of
-    an uploaded file (written to a temporary folder as ``scene``), whose mesh file is not on the server.
+    The file is read by the scene reader (:func:`~mdsr_opt.scenes.reader.read_file`, with its limits on size
+    and nesting; ``data``: the file already read so) and only its ``body.mesh`` entry is looked at here (a
+    file the scene reader would open, relative to the scene file). ``shown``: the name of an uploaded file
+    (written to a temporary folder as ``scene``), whose mesh file is not on the server.
     """
-    data = _read(scene)
-    body = data.get("body") if isinstance(data, dict) else None
+    if data is None:
+        data = read_file(scene)
+    body = data.get("body")
     mesh = body.get("mesh") if isinstance(body, dict) else None
     if not isinstance(mesh, str):
-        return
+        return data
     if shown is not None:
         raise ValueError(f"{shown}: an uploaded scene cannot bring its mesh file ({mesh}): start mdsr author "
                          "with the scene file's path instead")
@@ -85,22 +87,7 @@ def check_scene_refs(scene: Path, folders, shown: str | None = None) -> None:
         raise ValueError(f"{scene.name}: body.mesh {mesh!r} lies outside the folders the page may read "
                          f"({_names(folders)}); open the scene with mdsr author PATH or give its mesh's folder "
                          "with --allow-dir")
-
-
-def _read(p: Path):
-    try:
-        text = p.read_text(encoding="utf-8")
-        if p.suffix.lower() == ".toml":
-            if sys.version_info >= (3, 11):
-                import tomllib
-            else:  # pragma: no cover - Python 3.10
-                import tomli as tomllib
-            return tomllib.loads(text)
-        return json.loads(text)
-    except RecursionError:
-        raise ValueError(f"{p.name}: nested too deeply to be a scene file") from None
-    except (OSError, ValueError):  # the scene reader names the problem
-        return None
+    return data
 
 
 def _names(folders) -> str:

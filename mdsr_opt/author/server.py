@@ -4,7 +4,8 @@ The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route`
 channel, wall and fixture sizes), ``delete_muscle``, ``design``, ``save``, ``ping``); the server answers with
 ``body``, ``state``, ``graph``, ``routing`` (also after a deletion), ``design``, ``saved``, ``pong`` or
 ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
-a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``). Bad
+a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``), and while
+no request waits after a drag the drag's exact equilibrium is solved ahead of its release. Bad
 input of any kind is answered with an ``error`` message naming the problem, and the server keeps serving.
 """
 
@@ -19,12 +20,15 @@ import os
 import secrets
 import sys
 import tempfile
+import threading
 import traceback
 from pathlib import Path
 
 import numpy as np
 
 from ..core.checks import check_int
+from ..core.guards import cancel_stop, request_stop
+from ..scenes.reader import read_file
 from .files import check_scene_refs, page_file, readable_folders
 from .guard import Guard
 
@@ -34,6 +38,10 @@ __all__ = ["make_app", "MAX_MESSAGE", "load_body"]
 MAX_MESSAGE = 4 * 1024 * 1024
 #: Deepest nesting of lists and objects in a message (the page's deepest, an outline's holes, is 5).
 MAX_DEPTH = 16
+#: Seconds a drag must wait for the next move before its exact equilibrium is solved ahead of the release:
+#: a pause of the hand, longer than the gaps between mouse moves (16 ms at 60 Hz, 50 ms and more on a busy
+#: machine), so a moving drag does not start solves it then stops.
+SPECULATE_AFTER = 0.1
 STATIC = Path(__file__).with_name("static")
 _SESSIONS: "collections.OrderedDict[str, object]" = collections.OrderedDict()
 _KEEP_SESSIONS = 16
@@ -92,16 +100,19 @@ def _load_body(spec: dict, folders):
             p = Path(str(spec.get("path")))
             if not p.exists():
                 raise FileNotFoundError(f"no such file: {p}")
-        if p.suffix.lower() == ".svg" or p.suffix.lower() == ".json" and not _is_scene_json(p):
-            outline, holes = parse_outline(p.name, p.read_text())
-            return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
-        if p.suffix.lower() == ".py":  # the command line's problem script (page_file refuses these)
+        suffix = p.suffix.lower()
+        if suffix == ".py":  # the command line's problem script (page_file refuses these)
             from ..scenes.library import get_problem
 
             return Session.from_scene(get_problem(p, resolution=res))
+        # a scene file is read once, by the scene reader (its limits on size and nesting)
+        data = None if suffix == ".svg" else read_file(p)
+        if data is None or suffix == ".json" and "body" not in data:  # an outline file
+            outline, holes = parse_outline(p.name, p.read_text())
+            return Session.from_outline(outline, holes, 600 if res is None else res, name=_stem_name(p))
         if folders is not None:
-            check_scene_refs(p, folders)
-        return Session.from_scene_file(p, res)
+            check_scene_refs(p, folders, data=data)
+        return Session.from_scene_file(p, res, data=data)
     if kind == "scene":
         fname, text = _file_fields(spec)
         suffix = Path(fname).suffix.lower()
@@ -110,8 +121,8 @@ def _load_body(spec: dict, folders):
         with tempfile.TemporaryDirectory() as d:
             path = Path(d) / Path(fname).name
             path.write_text(text)
-            check_scene_refs(path, (), shown=Path(fname).name)
-            return Session.from_scene_file(path, res)
+            data = check_scene_refs(path, (), shown=Path(fname).name)
+            return Session.from_scene_file(path, res, data=data)
     if kind == "outline_file":
         fname, text = _file_fields(spec)
         outline, holes = parse_outline(fname, text)
@@ -123,14 +134,6 @@ def _load_body(spec: dict, folders):
         outline, holes = check_outline(spec.get("outline"), holes, where="drawn outline")
         return Session.from_outline(outline, holes, 600 if res is None else res)
     raise ValueError(f"unknown body kind {kind!r} (problem, path, scene, outline, outline_file)")
-
-
-def _is_scene_json(p: Path) -> bool:
-    try:
-        data = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        return True  # let the scene reader name the problem
-    return isinstance(data, dict) and "body" in data
 
 
 def _stem_name(p: Path) -> str:
@@ -196,6 +199,10 @@ class Page:
         self.wake = asyncio.Event()
         self.dropped = 0
         self.tmp = tempfile.TemporaryDirectory(prefix="mdsr-author-")
+        # the exact solve started while a drag waits for the next move (see _speculate)
+        self.spec: dict | None = None  # the drag request it solves
+        self.spec_tid: int | None = None  # the thread solving it
+        self.spec_lock = threading.Lock()
 
     async def send(self, obj: dict) -> None:
         await self.ws.send_text(json.dumps(obj, allow_nan=False, default=_json_default))
@@ -210,15 +217,54 @@ class Page:
             self.dropped += 1
         else:
             self.queue.append((msg, trusted))
+        spec = self.spec
+        if spec is not None and not (msg.get("type") == "fixed" and all(
+                msg.get(k) == spec.get(k) for k in ("anchors", "drag_nodes", "drag_positions"))):
+            self.stop_speculation()  # the drag moved on
         self.wake.set()
+
+    def stop_speculation(self) -> None:
+        """Stop the exact solve of a paused drag (:meth:`_speculate`) at its next iteration."""
+        with self.spec_lock:
+            self.spec = None
+            if self.spec_tid is not None:
+                request_stop(self.spec_tid, _Superseded)
+
+    async def _speculate(self, msg: dict) -> None:
+        """While the drag ``msg`` waits for the next move, solve its exact equilibrium
+        (:meth:`~mdsr_opt.author.session.Session.exact`): a release there is then answered at once. A newer
+        request other than that release stops it (:meth:`enqueue`)."""
+        self.spec = msg
+
+        def run():
+            tid = threading.get_ident()
+            with self.spec_lock:
+                if self.spec is not msg:  # superseded before it started
+                    return
+                self.spec_tid = tid
+            try:
+                self.session.exact()
+            except Exception:  # stopped (_Superseded) or failed: the release solves it again and reports it
+                pass
+            finally:
+                with self.spec_lock:
+                    self.spec_tid = None
+                    cancel_stop(tid)
+
+        try:
+            await asyncio.to_thread(run)
+        finally:
+            self.spec = None
 
     async def worker(self) -> None:
         while True:
             await self.wake.wait()
             self.wake.clear()
+            last = None
             while self.queue:
                 msg, trusted = self.queue.popleft()
                 t = msg.get("type")
+                last = msg if t == "drag" else None
                 try:
                     reply = await asyncio.to_thread(self.handle, msg, trusted)
                 except RecursionError:  # a RuntimeError: named before the general case below
@@ -238,6 +284,12 @@ class Page:
                         await self.send(r)
                     except (ValueError, TypeError, RecursionError) as exc:  # a reply JSON cannot hold
                         await self.error(f"{t}: cannot send the reply: {exc}", t)
+            st = self.session.state if self.session is not None else None
+            if last is not None and st is not None and st.live and st.success:
+                try:  # a new request wakes the worker at once; else the drag pauses: solve it exactly
+                    await asyncio.wait_for(self.wake.wait(), SPECULATE_AFTER)
+                except asyncio.TimeoutError:
+                    await self._speculate(last)
 
     def handle(self, msg: dict, trusted: bool = False) -> list[dict]:
         """Serve one request (in a worker thread); returns the messages to send.
@@ -309,6 +361,10 @@ class Page:
                  drag_nodes=s.drag_nodes.tolist(), drag_positions=s.drag_positions.tolist(),
                  settled=s.target is not None)
         return d
+
+
+class _Superseded(Exception):
+    """Stops an exact solve started for a drag the page has moved on from."""
 
 
 def _error(message: str, request=None) -> dict:
@@ -436,6 +492,7 @@ def make_app(initial: dict | None = None, out: str | os.PathLike = "authored", *
                 await ws.close(code=1011, reason="internal error (see the server's output)")
         finally:
             task.cancel()
+            page.stop_speculation()  # the page is gone: no solve for it goes on
             page.tmp.cleanup()
 
     routes = [Route("/", index), Route("/api/info", info), Route("/download/{sid}/{what}", get_download),

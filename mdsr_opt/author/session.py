@@ -12,10 +12,13 @@ Two kinds of solve:
   factorised tangent (reused across updates, refreshed every :attr:`Session.REFRESH` updates), stopped
   at the scaled residual :attr:`Session.PREVIEW_TOL` -- no solver set-up, no stability check. When the
   preview inverts an element or does not reach that residual, ``solve_external`` takes over from the
-  predicted state (no load stepping), and when that fails, the settled solve below.
+  predicted state (no load stepping), and when that fails, the settled solve below. A preview or warm
+  solve converged to a state whose boundary crosses itself is shown as the failed state it is (no
+  further solve), and the next drag starts from it.
 * **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
   defaults, exactly what ``mdsr run`` solves for the saved scene's target (the same numbers, bit for bit;
-  a warm start would reach the same equilibrium only to the tolerance). A released drag is settled.
+  a warm start would reach the same equilibrium only to the tolerance). A released drag is settled; the
+  server starts this solve (:meth:`Session.exact`) as soon as a drag waits for the next move.
 """
 
 from __future__ import annotations
@@ -43,7 +46,7 @@ from ..synthesis.fabrication import Fabrication, check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
-from ..scenes.scenefile import load_scene
+from ..scenes.scenefile import load_scene, scene_from_data
 
 __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
 
@@ -159,8 +162,10 @@ class Session:
         return cls.from_scene(get_problem(name, resolution=_resolution(resolution)))
 
     @classmethod
-    def from_scene_file(cls, path, resolution: str | int | None = None) -> "Session":
-        """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it."""
+    def from_scene_file(cls, path, resolution: str | int | None = None, data: dict | None = None) -> "Session":
+        """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it (``data``: the file already read)."""
+        if data is not None:
+            return cls.from_scene(scene_from_data(path, data, resolution=_resolution(resolution)))
         return cls.from_scene(load_scene(path, resolution=_resolution(resolution)))
 
     @classmethod
@@ -251,10 +256,23 @@ class Session:
         if why:
             self.state = self._rest_report(why)
             return self.state
-        res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions))
+        res = self.exact()
         self.state = self._report(res, live=False, warm_failed=False, t0=t0)
         self.target = res.x.copy() if res.success else None
         return self.state
+
+    def exact(self):
+        """``solve_external`` of the current anchors and drags with its defaults (what :meth:`settle` shows).
+
+        The last result is kept with its fixed set, so the same fixed set is solved once: the server solves
+        it while a drag pauses (stopped when the drag moves on), and the release then takes that result."""
+        key = b"|".join(np.ascontiguousarray(a).tobytes() + str(a.shape).encode()
+                        for a in (self.anchors, self.drag_nodes, self.drag_positions))
+        c = self.__dict__.get("_exact")
+        if c is None or c[0] != key:
+            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions))
+            c = self.__dict__["_exact"] = (key, res)
+        return c[1]
 
     def drag(self) -> SolveReport:
         """A live solve: warm start from the shown state via a predictor step; settle on failure.
@@ -267,8 +285,8 @@ class Session:
         if self._ready():
             return self.settle()
         prev = self.state
-        if prev is None or not prev.success:
-            return self._cold(t0)
+        if prev is None or not (prev.success or prev.crossing and not prev.inverted):
+            return self._cold(t0)  # a crossing equilibrium shown: the next preview starts there too
         for fresh in (False, True):
             guess = self._predict(prev.x, fresh)
             if guess is None:
@@ -280,8 +298,10 @@ class Session:
                 return rep
             res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
                                  initial_guess=guess, min_step=1.0)
-            if res.success:
-                self.state = self._report(res, live=True, warm_failed=False, t0=t0)
+            rep = self._report(res, live=True, warm_failed=False, t0=t0)
+            # converged but crossing itself: shown as it is (a cold solve would not uncross it)
+            if res.success or rep.crossing and not rep.inverted and res.residual <= 1e-6:
+                self.state = rep
                 self.target = None  # a live state is not the settled target until the drag is released
                 return self.state
         return self._cold(t0)
@@ -308,8 +328,9 @@ class Session:
         """Corrector steps from the predicted state ``y``, until the scaled residual is at most
         :attr:`PREVIEW_TOL`: with the chord predictor's factorised tangent while the residual halves each
         step, else with the tangent refactorised at the current state (a Newton step; that factorisation is
-        then reused by the next updates). A live state, or None (an inverted element, a boundary crossing
-        itself, no convergence within :attr:`PREVIEW_STEPS`)."""
+        then reused by the next updates). A live state, or None (an inverted element, no convergence within
+        :attr:`PREVIEW_STEPS`); a converged state whose boundary crosses itself is a failed live state
+        naming the crossing, as ``solve_external`` rejects it."""
         fixed = self._fixed_mask()
         free = ~fixed
         c = self.__dict__.get("_chord")
@@ -328,10 +349,12 @@ class Session:
                 return None
             if r <= self.PREVIEW_TOL:
                 x = z.reshape(-1, 2)
-                if self.mesh.boundary_crosses(x):  # solve_external's own check names the crossing
-                    return None
-                return SolveReport(x=x.copy(), success=True, status=f"preview (residual {r:.1e})", iterations=k,
-                                   residual=r, min_J=float(self.mesh.jacobians(x).min()), crossing=False,
+                # an equilibrium whose boundary crosses itself: shown as solve_external would reject it
+                crossing = bool(self.mesh.boundary_crosses(x))
+                status = (f"preview (residual {r:.1e}); rejected: the boundary crosses itself (self-contact is "
+                          "not modelled)") if crossing else f"preview (residual {r:.1e})"
+                return SolveReport(x=x.copy(), success=not crossing, status=status, iterations=k,
+                                   residual=r, min_J=float(self.mesh.jacobians(x).min()), crossing=crossing,
                                    inverted=[], live=True, solve_time=time.perf_counter() - t0)
             if k == self.PREVIEW_STEPS:
                 return None

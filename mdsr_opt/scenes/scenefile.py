@@ -18,7 +18,7 @@ from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resol
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
 from .shapes import rigid_motion
 
-__all__ = ['load_scene', 'material_table', 'parse_units_and_gait']
+__all__ = ['load_scene', 'scene_from_data', 'material_table', 'parse_units_and_gait']
 
 
 # ---------------------------------------------------------------------------------------------- scene files
@@ -83,6 +83,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [[muscles]]                           # optional; internal cases need them
         name = "lower"
         boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
+                                              # (boundary may add via = [x, y]: which way round the loop)
 
         [routing]                             # keyword arguments of route_muscles
         max_muscles = 2
@@ -153,6 +154,14 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         data = read_file(path)
     except PermissionError:
         raise SceneFileError(f"{path}: cannot read the scene file (permission denied)") from None
+    return scene_from_data(path, data, resolution)
+
+
+def scene_from_data(path: Path, data: dict, resolution: str | int | None = None) -> Scene:
+    """:func:`load_scene` of the scene file ``path`` already parsed by
+    :func:`~mdsr_opt.scenes.reader.read_file` into ``data`` (so a caller that looked into the file reads it
+    once); ``path`` names the file in messages and locates its mesh file."""
+    path = Path(path)
     r = Reader(path)
     top = r.keys(data, _TOP_KEYS, "", required=("name", "body", "cases"))
     name = r.string(top["name"], "name")
