@@ -351,6 +351,9 @@ WARM_START_OPTIONS = {"mu_init": 1e-8, "bound_push": 1e-10, "bound_frac": 1e-10,
                       "bound_mult_init_val": 1e-8}
 
 
+#: the warm start's forward solve stops at this scaled KKT residual (the NLP meets its equilibrium rows itself)
+WARM_START_TOL = 1e-4
+
 #: MUMPS's fill-reducing ordering for the design's KKT matrices: approximate minimum degree (0) instead of
 #: MUMPS's automatic choice, which on bench_design's strips with 4 muscles (300 to 10k nodes) made the
 #: design's IPOPT call slower at every size, with the same iterations except at 10k nodes (noisy target: 33
@@ -518,8 +521,8 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
     t_start = time.perf_counter()
     if warm_start:
         # from the target any equilibrium will do (no stability check), since the design
-        # is verified from rest and repeated from rest if that fails; from rest, the stable one
-        x0, ok, status = fwd.solve(a0, start=start)
+        # is verified and repeated from rest if that fails; from rest, the stable one
+        x0, ok, status = fwd.solve(a0, start=start, tol=max(fwd.tol, WARM_START_TOL))
         if not ok:
             return None, f"warm start failed: {status}", 0, bt
     else:
