@@ -48,9 +48,11 @@ def _check(mesh, out):
     d = out.design
     assert out.success, d.status
     assert d.verification.passed
-    # verified by a forward solve from rest (the rest shape, or the predictor when that fails), not from the
-    # design's own state, and its iterations reported
-    assert d.verification.forward_start in ("rest", "rest, predictor") and d.verification.forward_iterations > 0
+    # verified by the forward solver started at the design's own state (the pipeline's default): it found the
+    # state an equilibrium at its tolerance and a strict minimum, and stayed there
+    v = d.verification
+    assert v.forward_start == "design" and v.forward_success and v.positive_definite
+    assert v.residual <= 1e-8 and v.gap <= v.gap_tol
     assert "not verified" not in d.status
     assert d.difference / mesh.size < 0.02
     # the target is not reachable: the difference is well above the solver's tolerance
@@ -109,6 +111,21 @@ def test_acceptable_exit_with_passed_verification_is_a_success():
                               verify=False)
     assert raw.status.startswith("Solved_To_Acceptable_Level") and not raw.success
     assert "acceptable exit is not a success" in raw.status
+
+
+def test_pipeline_verifies_from_rest_when_asked():
+    # verify="rest": the forward re-solve starts from the rest shape and lands on the design's state; the
+    # design is the one verified from its own state (the verification does not change the design)
+    mesh = strip(16)
+    anchors, drags = driving(mesh)
+    quick = design_pipeline(mesh, MAT, anchors, drags)
+    full = design_pipeline(mesh, MAT, anchors, drags, verify="rest")
+    assert quick.success and full.success
+    v = full.design.verification
+    assert v.forward_start in ("rest", "rest, predictor") and v.forward_iterations > 0 and v.gap <= v.gap_tol
+    assert np.allclose(full.contractions, quick.contractions, atol=1e-12)
+    with pytest.raises(ValueError, match="verify must be True, False, 'rest' or 'design'"):
+        design_contractions(mesh, MAT, quick.muscles, quick.target, verify="bogus")
 
 
 @pytest.mark.slow

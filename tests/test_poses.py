@@ -78,6 +78,14 @@ def test_a_pose_that_engages_exactly_its_own_layout_reuses_its_separate_design(l
     fresh = design_poses(mesh, MAT, targets, separate=other)
     assert all(fresh.designs[name] is not other[name][1] for name in res.names)
     assert np.allclose(fresh.contractions, again.contractions, atol=1e-6)
+    # verified from its own state only (verify="design"): not taken where a re-solve from rest is asked,
+    # taken where verify="design" is
+    quick = {name: (own[name], design_contractions(mesh, MAT, own[name], targets[name], verify="design"))
+             for name in res.names}
+    redone = design_poses(mesh, MAT, targets, separate=quick)
+    assert all(redone.designs[name] is not quick[name][1] for name in res.names)
+    kept = design_poses(mesh, MAT, targets, separate=quick, design_options={"verify": "design"})
+    assert all(kept.designs[name] is quick[name][1] for name in res.names)
 
 
 def test_result_round_trips_through_json(lr, tmp_path):

@@ -42,7 +42,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         tol: float | None = None,
                         max_iter: int | None = None, hessian: str = "exact", scaling: str = "auto",
                         warm_start: bool | str | ArrayLike = True, outer: str = "nelder-mead", options: dict | None = None,
-                        inner_tol: float = 1e-10, verify: bool = True, skip_verification=None,
+                        inner_tol: float = 1e-10, verify: bool | str = True, skip_verification=None,
                         gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
                         contact_gap: float | None = None) -> DesignResult:
@@ -106,11 +106,16 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     inner_tol : float
         Tolerance of the forward solves (the scaled KKT residual of :func:`~mdsr_opt.solve_internal`); the
         verification uses it too, or the solver's default 1e-8 when that is tighter.
-    verify : bool
+    verify : {True, "rest", "design", False}
         Run :func:`verify_design` (recommended; without it ``success`` reflects the optimiser only, and
         nothing checks that the design's state is stable or reached from rest: the warm start from the
-        target is not checked for stability either). A flattened design that IPOPT ends at its acceptable
-        tolerances (``status`` starting ``"Solved_To_Acceptable_Level"``) is a success only when verified.
+        target is not checked for stability either). ``True`` or ``"rest"``: its forward re-solve starts
+        from rest (it also asks that a solve from the rest shape lands on the design's state);
+        ``"design"``: it starts from the design's state, and certifies that state a stable equilibrium of
+        the designed contractions (the forward solver's KKT residual within its tolerance, the reduced
+        Hessian positive definite) without asking where a solve from rest lands, at a fraction of the
+        cost. A flattened design that IPOPT ends at its acceptable tolerances (``status`` starting
+        ``"Solved_To_Acceptable_Level"``) is a success only when verified.
     skip_verification : callable, optional
         For a caller that discards some designs before using them (:func:`~mdsr_opt.synthesis.acceptance.
         design_active`, which makes a layout with idle muscles again without them): called with the design
@@ -174,6 +179,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if derivatives not in ("numeric", "assembled", "casadi"):
         raise ValueError(f"derivatives must be 'numeric', 'assembled' or 'casadi', got {derivatives!r}")
     options = check_design_options(options, method, outer)
+    if isinstance(verify, np.bool_):
+        verify = bool(verify)
+    if not (isinstance(verify, bool) or (isinstance(verify, str) and verify in ("rest", "design"))):
+        raise ValueError(f"verify must be True, False, 'rest' or 'design', got {verify!r}")
     if skip_verification is not None and not callable(skip_verification):
         raise TypeError(f"skip_verification must be a function of the design or None, got "
                         f"{type(skip_verification).__name__}")
@@ -333,7 +342,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         return res, fwd, False
     if verify:
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
-                          tol=min(inner_tol, VERIFY_TOL), **ckw)
+                          tol=min(inner_tol, VERIFY_TOL), start="design" if verify == "design" else "rest", **ckw)
         res.verification = v
         if res.success and not v.passed:
             res.success = False

@@ -267,6 +267,13 @@ def _check_option_dicts(band_options, routing_options, external_options, design_
     return bands, routing, external
 
 
+#: How the pipeline verifies its designs unless ``verify`` is given (:func:`design_contractions`): from the
+#: design's state, which certifies it a stable equilibrium of the designed contractions (the forward
+#: solver's KKT residual within its tolerance and the reduced Hessian positive definite); ``"rest"`` also
+#: asks where a second, full solve from the rest shape lands
+PIPELINE_VERIFY = "design"
+
+
 #: The keys of ``band_options``: :func:`~mdsr_opt.synthesis.bands.stroke_bands`' own and the designs' ``max_iter``.
 BAND_OPTIONS = ("radius_tol", "nu_tol", "refine", "max_refined_nodes", "max_iter")
 
@@ -320,7 +327,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         ``stress_unit`` (a silicone preset), and the fabrication files default to it. None: body units.
     **design_options
         Passed to :func:`design_contractions` (``a_max``, ``muscle_model`` (default ``"cable"``, the exact
-        rope), ``anchor_radius``, ``stiffness``...). ``.design`` reports per muscle the commanded and achieved
+        rope), ``anchor_radius``, ``stiffness``, ``verify``...). The design is verified from its own state
+        (``verify="design"``, :data:`PIPELINE_VERIFY`): the forward solver started there must find it a
+        stable equilibrium of the designed contractions; ``verify="rest"`` also re-solves from the rest
+        shape and asks that the solve lands there. ``.design`` reports per muscle the commanded and achieved
         contraction, the stroke (rope length pulled in) and the tension; a muscle at ``a_max`` is flagged
         (``.design.saturated``, a :class:`~mdsr_opt.synthesis.results.MuscleWarning`).
 
@@ -401,6 +411,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         warn_conflicts(rope_conflicts(mesh, mus, fab, fixture_radius=design_options.get("anchor_radius")),
                        "design_pipeline: the muscles given")
     t2 = time.perf_counter()
+    design_options.setdefault("verify", PIPELINE_VERIFY)
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
     res.units = units

@@ -534,6 +534,8 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
         if key == "verify":
             if want and d.verification is None:
                 return False
+            if want and want != "design" and not str(d.verification.forward_start or "rest").startswith("rest"):
+                return False  # verified from its own state only: not the re-solve from rest asked for
         elif getattr(d, key) != want:
             return False
     radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))

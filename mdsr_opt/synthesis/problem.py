@@ -369,11 +369,11 @@ class ForwardSolver:
         #: contact keywords of every forward solve (``contact``, ``obstacles`` on the unit body, ``contact_gap``)
         self.contact: dict = {}
 
-    def _run(self, a, guess, max_iter, min_step=1.0 / 256, check_stability: bool = True):
+    def _run(self, a, guess, max_iter, min_step=1.0 / 256, check_stability: bool = True, tol=None):
         prob = self.prob
         res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
                              muscle_model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
-                             tol=self.tol, max_iter=max_iter, align_to_rest=False, initial_guess=guess,
+                             tol=self.tol if tol is None else tol, max_iter=max_iter, align_to_rest=False, initial_guess=guess,
                              min_step=min_step, check_stability=check_stability, **self.contact)
         if self.n_solves == 0:
             self.build_time += res.build_time
@@ -381,25 +381,27 @@ class ForwardSolver:
         self.iterations += res.iterations
         return res
 
-    def solve(self, a, start=None) -> tuple[np.ndarray, bool, str]:
+    def solve(self, a, start=None, tol: float | None = None) -> tuple[np.ndarray, bool, str]:
         """The equilibrium at contractions ``a``: ``(x flat, success, status)``. The first solve starts
         from ``start`` (an (n, 2) shape in any pose, moved rigidly into the gauge frame) when given, with at
         most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` iterations (a load step's, so the same IPOPT
         solver serves both) and no load stepping, and from rest when that fails or none is given; later
         ones from the last accepted state. The solve from ``start`` takes any equilibrium
         (``solve_internal(check_stability=False)``: a warm start whose design is verified from rest); the
-        others only a stable one."""
+        others only a stable one. ``tol`` replaces the solver's tolerance for this solve (a warm start
+        needs no tight equilibrium)."""
         a = np.asarray(a, dtype=float).copy()
         res = None
         if self.started_from is None:
             self.started_from = "rest"
             guess = None if start is None else in_gauge_frame(self.prob.mesh, np.asarray(start, dtype=float))
             if guess is not None:
-                res = self._run(a, guess, min(self.max_iter, STEP_ITER_CAP), min_step=1.0, check_stability=False)
+                res = self._run(a, guess, min(self.max_iter, STEP_ITER_CAP), min_step=1.0, check_stability=False,
+                                tol=tol)
                 if res.success:
                     self.started_from = "target"
         if res is None or not res.success:  # from rest (no state accepted yet) or the last accepted state
-            res = self._run(a, "predictor" if not np.any(self.a) else self.x.reshape(-1, 2), self.max_iter)
+            res = self._run(a, "predictor" if not np.any(self.a) else self.x.reshape(-1, 2), self.max_iter, tol=tol)
         x = res.x.reshape(-1)
         if res.success:
             self.a, self.x = a, x

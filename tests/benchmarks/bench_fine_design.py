@@ -15,6 +15,7 @@ Run:  python tests/benchmarks/bench_fine_design.py                     # 2.4k, 8
       python tests/benchmarks/bench_fine_design.py --ny 24 32 36 44 64 70
       python tests/benchmarks/bench_fine_design.py --ny 32 --ipopt-print 5   # the design NLP's log
       python tests/benchmarks/bench_fine_design.py --plot ratios.png         # the ratios per size, drawn
+      python tests/benchmarks/bench_fine_design.py --verify rest             # verified by a re-solve from rest
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
             "cpu_ratio": c_design / cref, "diff_rel": d.difference / mesh.size, "success": out.success,
             "status": d.status, "iters": d.iterations, "muscles": [len(mu.nodes) for mu in out.muscles],
             "times": out.times, "verified": None if d.verification is None else d.verification.passed,
+            "verified_from": None if d.verification is None else d.verification.forward_start,
             "newton_agree": float(np.abs(xn - xi).max()) if ok_n and ok_i else math.nan}
 
 
@@ -92,18 +94,21 @@ def main(argv=None):
     ap.add_argument("--ny", type=int, nargs="+", default=[24, 44, 64], help="cells across (nodes ~ 4 ny^2)")
     ap.add_argument("--ipopt-print", type=int, default=0, help="IPOPT print level of the design NLP (0: silent)")
     ap.add_argument("--plot", default=None, help="draw the ratio per size into this image file")
+    ap.add_argument("--verify", default=None, choices=["rest", "design"],
+                    help="how the design is verified (default: the pipeline's, from the design's state)")
     args = ap.parse_args(argv)
     rows = []
     head = f"{'nodes':>6} {'design s':>9} {'newton s':>9} {'ipopt s':>8} {'ratio':>6} {'cpu ratio':>9} " \
            f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
     print(head, flush=True)
     for ny in args.ny:
-        r = run(ny, args.ipopt_print)
+        r = run(ny, args.ipopt_print, **({"verify": args.verify} if args.verify else {}))
         rows.append(r)
         print(f"{r['nodes']:6d} {r['design_s']:9.2f} {r['newton_s']:9.2f} {r['ipopt_s']:8.2f} {r['ratio']:6.2f} "
               f"{r['cpu_ratio']:9.2f} {r['diff_rel']:9.4f} {str(r['success']):>5} {r['iters']:5d}  {r['muscles']} {r['status']}",
               flush=True)
-        print(f"{'':6} stages {({k: round(v, 2) for k, v in r['times'].items()})}, verified {r['verified']}; "
+        print(f"{'':6} stages {({k: round(v, 2) for k, v in r['times'].items()})}, verified {r['verified']} "
+              f"(from {r['verified_from']}); "
               f"CPU s: design {r['design_cpu']:.2f}, newton {r['newton_cpu']:.2f}, ipopt {r['ipopt_cpu']:.2f}",
               flush=True)
     print(f"\nCPU ratio per size (pipeline over the faster reference solve; budget {BUDGET:g}x):")
