@@ -15,7 +15,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
-from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color, muscle_label
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color_of, muscle_label
 
 __all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
            'coordinate_axes', 'mesh_paths']
@@ -141,12 +141,13 @@ def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, v
 
 
 def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
-    """Draw muscle paths over configuration ``x``: muscle ``i`` in :func:`.style.muscle_color` ``(i)``,
+    """Draw muscle paths over configuration ``x``: muscle ``i`` in :func:`.style.muscle_color_of` (its name's
+    colour, else that of its place ``i``),
     labelled :func:`.style.muscle_label` (its name, else ``M<i+1>``), as in every figure and drawing."""
     fig, ax = axes_or_new(ax)
     x = np.asarray(x)
     for i, m in enumerate(muscles):
-        c = (colors[i] if colors is not None else muscle_color(i))
+        c = (colors[i] if colors is not None else muscle_color_of(m, i))
         p = x[list(m.nodes)]
         ax.plot(p[:, 0], p[:, 1], "-", color=c, lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)

@@ -8,7 +8,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
-from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, muscle_color,
+from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, name_color,
                     symmetric_limits, unit_label)
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'design_title',
@@ -270,7 +270,7 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
         fig = ax.figure
     t = schedule.times
     for i, n in enumerate(schedule.muscle_names):
-        c = muscle_color(i)
+        c = name_color(n, i)
         ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
                 f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
         if np.isfinite(schedule.achieved[:, i]).any():

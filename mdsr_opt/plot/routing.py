@@ -35,8 +35,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.lines import Line2D
 
 from .common import legend_below
-from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color, muscle_label,
-                    muscle_name, symmetric_limits, unit_label)
+from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color_of, muscle_label,
+                    muscle_name, name_color, symmetric_limits, unit_label)
 
 __all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
 
@@ -50,7 +50,7 @@ def _muscles(ax, x, muscles, lw=2.4, labels=True):
     x = np.asarray(x)
     for i, m in enumerate(muscles):
         p = x[list(m.nodes)]
-        ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color(i), lw=lw, solid_capstyle="round",
+        ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color_of(m, i), lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)
         ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
 
@@ -136,7 +136,7 @@ def plot_layout_grid(columns, title=None):
             own = {muscle_label(m[k], k) for m in lays if k < len(m)}
             names.append(own.pop() if len(own) == 1 else muscle_name(k))
         if names:
-            handles = [Line2D([], [], color=muscle_color(k), lw=2.4) for k in range(len(names))]
+            handles = [Line2D([], [], color=name_color(n, k), lw=2.4) for k, n in enumerate(names)]
             axes[2 + i, -1].legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
                                    borderaxespad=0.0, handlelength=1.5)
     return fig

@@ -5,7 +5,9 @@ This module is the one place that owns
 - muscle names and colours: muscle ``i`` (0-based, its place in the layout) is called
   :func:`muscle_name` ``(i)`` (``"M1"``, ``"M2"``, ...) unless it carries a name of its own
   (:func:`muscle_label`), and is drawn in :func:`muscle_color` ``(i)`` in design figures, Figure 6,
-  schedules, animations and the fabrication SVG and DXF alike;
+  schedules, animations and the fabrication SVG and DXF alike (a numbered name ``M<k>`` is always
+  colour ``k``: :func:`name_color`, so one name is one colour also where a muscle is drawn without the
+  muscles numbered before it);
 - the colours of bodies (driven, target, rest outline) and of measured contours;
 - colour scales (:func:`symmetric_limits` and :func:`shared_limits` give panels meant to be compared one
   scale) and colour bars the height of their axes (:func:`add_colorbar`);
@@ -21,13 +23,15 @@ stage at or above ``plot`` can use it.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..body.muscles import default_muscle_name
 
 __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
-           "muscle_color", "muscle_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
+           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
 #: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 10]``): saturated, apart from
@@ -90,8 +94,34 @@ def muscle_colors(n: int) -> list[str]:
     return [muscle_color(i) for i in range(int(n))]
 
 
+#: a muscle's default name, ``M<k>`` (:func:`muscle_name`)
+_NUMBERED = re.compile(r"M([1-9][0-9]*)")
+
+
+def muscle_slot(label: str, i: int) -> int:
+    """The colour slot of a muscle labelled ``label``, the ``i``-th (0-based) of what is drawn: ``k - 1`` for
+    a numbered name ``M<k>`` (so muscle ``M3`` keeps its colour in a figure that shows it alone or first,
+    as a case of a scene whose muscles are numbered scene-wide), else ``i``."""
+    m = _NUMBERED.fullmatch(str(label))
+    return int(m.group(1)) - 1 if m else int(i)
+
+
+def name_color(label: str, i: int) -> str:
+    """The colour of the muscle labelled ``label``, ``i``-th of what is drawn: :func:`muscle_color` of its
+    :func:`muscle_slot`. Every figure, animation and drawing colours muscles by it (or by
+    :func:`muscle_color_of`), so one name is one colour everywhere."""
+    return muscle_color(muscle_slot(label, i))
+
+
+def muscle_color_of(muscle, i: int) -> str:
+    """The colour of ``muscle``, the ``i``-th (0-based) of what is drawn: :func:`name_color` of its
+    :func:`muscle_label`."""
+    return name_color(muscle_label(muscle, i), i)
+
+
 def dxf_color(i: int) -> int:
-    """The AutoCAD colour index (ACI) standing for :func:`muscle_color` ``(i)`` in DXF files."""
+    """The AutoCAD colour index (ACI) standing for :func:`muscle_color` ``(i)`` in DXF files (``i`` a colour
+    slot: :func:`muscle_slot`)."""
     return _ACI[int(i) % len(_ACI)]
 
 

@@ -247,13 +247,16 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
                       on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
 
     send_animations()
+    taken: list = []
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
         check_interrupt()
         # the photograph stage (measure_case) and the case's files are background jobs: the report's
         # photo entry, the files and the stage's messages arrive at bg.wait()
         run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
-                                     max_difference=max_difference, bands=bands)
+                                     max_difference=max_difference, bands=bands, taken=taken)
+        if run.setup is not None:  # the next cases' routed muscles are named on from these (one name a rope)
+            taken += [m for m in run.setup.muscles if m not in taken]
         send_animations()
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []

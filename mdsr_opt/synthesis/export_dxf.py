@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..plot.style import dxf_color
+from ..plot.style import dxf_color, muscle_slot
 
 __all__ = ["dxf_text", "label_at"]
 
@@ -166,14 +166,16 @@ def dxf_text(fd) -> str:
     for h in fd.holes:
         polyline(h, "HOLES", closed=True)
     for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
-        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
+        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color of its
+        # name's colour slot, as the figures and the SVG colour it)
+        aci = dxf_color(muscle_slot(mu.name, i))
         if fd.wall > 0:
             polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
-        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
+        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=aci)
         for p in (path[0], path[-1]):
             g(0, "CIRCLE")
             g(8, "ENDS")
-            g(62, dxf_color(i))
+            g(62, aci)
             xy(p)
             g(40, _dxf_number(fd.end_radius))
             if fd.wall > 0:
@@ -183,7 +185,7 @@ def dxf_text(fd) -> str:
                 g(40, _dxf_number(fd.end_radius + fd.wall))
         g(0, "TEXT")
         g(8, "LABELS")
-        g(62, dxf_color(i))
+        g(62, aci)
         xy(q)
         g(40, _dxf_number(0.035 * size))
         g(1, _dxf_string(mu.name))
