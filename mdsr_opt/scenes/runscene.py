@@ -241,8 +241,8 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     def send_animations():  # those whose cases have all run (an animation of the rest shape: at once)
         for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
             waiting.remove(anim)
-            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
-                       if runs[c].design is not None}
+            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions, runs[c].design.anchor_radius)
+                       for c in anim.cases if runs[c].design is not None}
             bg.submit(_animation_job, scene, anim, designs, out, figures,
                       on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
 
@@ -443,8 +443,8 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
     data = res.to_dict()
     if res.states:
         said = (f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
-                + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
-                   f"{res.failed_frames})"))
+                + ("all forward solves succeeded" + (f"; {res.message}" if res.message else "") if res.success
+                   else f"{res.message} (frames {res.failed_frames})"))
         if figures:
             act = res.contractions / scene.design_options.get("a_max", 0.6)
             # titles state per muscle the contraction commanded and the one reached along its node chain
