@@ -58,7 +58,7 @@ from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import muscle_color_of, muscle_label, muscle_name
-from .export_dxf import dxf_text, label_at
+from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
 from .poses import PosesResult
 
@@ -292,6 +292,10 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
 
+#: The stroke of a fixture plate that several muscles share (each muscle's own plate is in its colour)
+SHARED_PLATE = "#000000"
+
+
 def escape(text) -> str:
     """``text`` as XML character data or an attribute value: ``& < > " '`` as entities, any character XML
     does not allow replaced by U+FFFD (so the SVG always parses)."""
@@ -313,8 +317,11 @@ def _svg_text(fd: FabricationData, title: str) -> str:
 
     lw = 0.002 * size
     fs = 0.035 * size
+    shared = sum(len({i for i, _ in held}) > 1 for held, _ in fixture_plates(fd.paths, fd.end_radius))
     caption = (f"{title}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
-               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls; units: {u}")
+               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls"
+               + (f" (black: {shared} plate(s) that muscles ending closer than a radius share)" if shared else "")
+               + f"; units: {u}")
     if fd.conflicts:
         caption += (f". NOT MOULDABLE as laid out ({len(fd.conflicts)} place(s), red rings): "
                     + "; ".join(cf.message for cf in fd.conflicts))
@@ -348,18 +355,28 @@ def _svg_text(fd: FabricationData, title: str) -> str:
                    f'stroke-width="{lw:.6g}" data-rest-length="{fd.rest_lengths[i]:.9g}" data-units="{u}"/>')
     out.append("</g>")
     out.append(f'<g id="ends" fill="none" stroke-width="{lw:.6g}">')
-    for i, path in enumerate(fd.paths):
-        c = colors[i]
-        for p in (path[0], path[-1]):
-            x, y = xy(p).split(",")
-            out.append(f'<circle class="end" cx="{x}" cy="{y}" r="{fd.end_radius:.9g}" stroke="{c}"/>')
-            if fd.wall > 0:
-                out.append(f'<circle class="end-wall" cx="{x}" cy="{y}" r="{fd.end_radius + fd.wall:.9g}" '
-                           f'stroke="{c}" stroke-dasharray="{2 * lw:.6g}"/>')
+    # each fixture plate once: a muscle's own in its colour, one that ends closer than a fixture's radius
+    # share (one rigid part) as one outline in black, naming the muscles it holds
+    walls = fixture_plates(fd.paths, fd.end_radius, fd.wall)
+    for (held, shape), (_, wall) in zip(fixture_plates(fd.paths, fd.end_radius), walls):
+        shared = len({i for i, _ in held}) > 1
+        c = SHARED_PLATE if shared else colors[held[0][0]]
+        attrs = (f'class="end shared" data-muscles="{" ".join(escape(fd.muscles[i].name) for i, _ in held)}" '
+                 if shared else 'class="end" ')
+        for kind, outline, r, dash in (("", shape, fd.end_radius, ""),
+                                       ("-wall", wall, fd.end_radius + fd.wall, f' stroke-dasharray="{2 * lw:.6g}"')):
+            if kind and fd.wall <= 0:
+                continue
+            a = attrs.replace('class="end', f'class="end{kind}')
+            if len(outline) == 1:
+                x, y = xy(outline[0]).split(",")
+                out.append(f'<circle {a}cx="{x}" cy="{y}" r="{r:.9g}" stroke="{c}"{dash}/>')
+            else:
+                out.append(f'<polygon {a}points="{" ".join(xy(q) for q in outline)}" stroke="{c}"{dash}/>')
     out.append("</g>")
-    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle">')
-    for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
-        p, _ = label_at(path, 1.2 * fs)
+    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle" dominant-baseline="central">')
+    # each name centred on its point, beside its channel and clear of the other channels and names
+    for i, (mu, p) in enumerate(zip(fd.muscles, label_points(fd.paths, 1.2 * fs))):
         x, y = xy(p).split(",")
         out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i]}">{escape(mu.name)}</text>')
     out.append("</g>")
