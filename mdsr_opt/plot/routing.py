@@ -33,6 +33,7 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
 from matplotlib.lines import Line2D
+from matplotlib.ticker import LogFormatterSciNotation
 
 from .common import legend_below
 from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color_of, muscle_label,
@@ -60,6 +61,52 @@ def _finish(ax):
     ax.autoscale_view()
     ax.set_xticks([])
     ax.set_yticks([])
+
+
+class _PlainLog(LogFormatterSciNotation):
+    """A log axis's tick labels as plain decimals (``0.06``, not ``6 x 10^-2``), on the ticks matplotlib
+    would label (few minor ones, so they never crowd)."""
+
+    def __call__(self, x, pos=None):
+        return f"{x:.3g}" if super().__call__(x, pos) else ""
+
+
+def _scale_bar(ax, x, units=None):
+    """A scale bar under the lower right corner of a drawing without coordinate ticks: a round length near a quarter
+    of the drawing's width, labelled with its unit (:func:`.style.unit_label`), so the panel's size reads
+    as a labelled axis would give it."""
+    from matplotlib.offsetbox import AnchoredOffsetbox, AuxTransformBox, HPacker, TextArea, VPacker
+    from matplotlib.patches import Rectangle
+
+    width = float(np.ptp(np.asarray(x, dtype=float)[:, 0])) or 1.0
+    raw = 0.25 * width
+    step = 10.0 ** np.floor(np.log10(raw))
+    length = max(m * step for m in (1, 2, 5) if m * step <= raw)
+    bar = AuxTransformBox(ax.transData)
+    bar.add_artist(Rectangle((0, 0), length, 0, lw=1.6, edgecolor="k", facecolor="none"))
+    text = TextArea(f"{length:g} {unit_label(units)}", textprops={"fontsize": 7})
+    box = VPacker(children=[bar, HPacker(children=[text], align="center", pad=0, sep=0)], align="center",
+                  pad=0, sep=2)
+    # outside the axes, under their lower right corner: over no part of the drawing
+    ax.add_artist(AnchoredOffsetbox(loc="upper right", child=box, pad=0.1, borderpad=0.1, frameon=False,
+                                    bbox_to_anchor=(1.0, 0.0), bbox_transform=ax.transAxes))
+
+
+def _row_legend(ax, names):
+    """The muscles' names and colours of a row of layouts, beside its last panel (over no drawing)."""
+    if names:
+        handles = [Line2D([], [], color=name_color(n, k), lw=2.4) for k, n in enumerate(names)]
+        ax.legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
+                  handlelength=1.5)
+
+
+def _row_names(layouts):
+    """Per place ``k`` in the layouts of a row, the name its muscles share, else ``M<k+1>``."""
+    names = []
+    for k in range(max((len(m) for m in layouts), default=0)):
+        own = {muscle_label(m[k], k) for m in layouts if k < len(m)}
+        names.append(own.pop() if len(own) == 1 else muscle_name(k))
+    return names
 
 
 def plot_layout_grid(columns, title=None):
@@ -101,12 +148,13 @@ def plot_layout_grid(columns, title=None):
         mesh, x = c["mesh"], np.asarray(c["target"], dtype=float)
         ax = axes[0, j]
         _mesh(ax, mesh, x)
-        for key, mark, col in (("anchors", "s", "k"), ("drag_nodes", "o", "#d62728")):
+        for key, mark, col, what in (("anchors", "s", "k", "anchors"), ("drag_nodes", "o", "#d62728", "drag points")):
             idx = np.asarray(c.get(key, ()), dtype=int)
             if len(idx):
-                ax.plot(x[idx, 0], x[idx, 1], mark, color=col, ms=2.0)
+                ax.plot(x[idx, 0], x[idx, 1], mark, color=col, ms=2.0, label=what)
         ax.set_title(c["title"], fontsize=9)
         _finish(ax)
+        _scale_bar(ax, x, c.get("units"))
         ax = axes[1, j]
         lc = LineCollection(x[mesh.edges], cmap=CONTRACTION_CMAP, linewidths=0.9)
         lc.set_array(weights[j])
@@ -130,15 +178,15 @@ def plot_layout_grid(columns, title=None):
     # one legend per layout row, beside its last panel: over no drawing, the muscles' names and colours
     # as in every figure (a name the columns do not share is the muscle's place, M<k>)
     for i in range(n_lay):
-        lays = [list(c["layouts"][i]) for c in columns if i < len(c["layouts"])]
-        names = []
-        for k in range(max((len(m) for m in lays), default=0)):
-            own = {muscle_label(m[k], k) for m in lays if k < len(m)}
-            names.append(own.pop() if len(own) == 1 else muscle_name(k))
-        if names:
-            handles = [Line2D([], [], color=name_color(n, k), lw=2.4) for k, n in enumerate(names)]
-            axes[2 + i, -1].legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
-                                   borderaxespad=0.0, handlelength=1.5)
+        _row_legend(axes[2 + i, -1], _row_names([list(c["layouts"][i]) for c in columns if i < len(c["layouts"])]))
+    # row A's marks: anchors and drag points, beside its last panel
+    marks = {}
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            marks.setdefault(lab, Line2D([], [], ls="none", marker=h.get_marker(), color=h.get_color(), ms=4))
+    if marks:
+        axes[0, -1].legend(list(marks.values()), list(marks), fontsize=7, loc="upper left",
+                           bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0, handlelength=1.0)
     return fig
 
 
@@ -179,6 +227,7 @@ def plot_design_grid(columns, title=None, row_names=None):
         _mesh(ax, mesh, y, face="#bbbbbb", edge="#888888")
         ax.set_title(c["title"], fontsize=9)
         _finish(ax)
+        _scale_bar(ax, y, c.get("units"))
         for i, (d, label) in enumerate(zip(c["designs"], c["row_labels"])):
             ax = axes[1 + i, j]
             _mesh(ax, mesh, y, face=TARGET["face"], edge="none", alpha=0.45)
@@ -192,6 +241,10 @@ def plot_design_grid(columns, title=None, row_names=None):
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
+    # after the layout: per design row the muscles' names and colours beside its last panel (as in 6a)
+    for i in range(n_lay):
+        _row_legend(axes[1 + i, -1], _row_names([list(c["designs"][i]["muscles"]) for c in columns
+                                                 if i < len(c["designs"])]))
     return fig
 
 
@@ -226,6 +279,8 @@ def plot_convergence(panels, title=None, log=True):
                     label=f"{label} ({int(it[-1]) if len(it) else 0} it.)")
         if log:
             ax.set_yscale("log")
+            ax.yaxis.set_major_formatter(_PlainLog(labelOnlyBase=False))
+            ax.yaxis.set_minor_formatter(_PlainLog(labelOnlyBase=False))
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)
