@@ -536,3 +536,30 @@ def test_figure6_drawings_carry_a_scale_bar_and_legends_and_6c_plain_ticks(strip
     assert "0.1" in labels and all(re.fullmatch(r"[0-9.]+", t) for t in labels), labels
     assert len(labels) == len(set(labels))
     plt.close(fig)
+
+
+def test_demo_figures_label_axes_and_marks_and_share_one_scale(tmp_path, monkeypatch):
+    """mdsr demo: every panel's axes and colour bar carry a quantity and unit, the external figure says what
+    its marks are, and the springs and cable panels share one colour scale and quote commanded -> achieved."""
+    import mdsr_opt.plot.common as common
+    from mdsr_opt.cli.main import main
+
+    seen, save = {}, common.save_figure
+
+    def recording(fig, path, **kw):
+        ax = fig.axes[0]
+        bar = ax.child_axes[0]
+        leg = ax.get_legend()
+        seen[Path(path).name] = (ax.get_xlabel(), ax.get_ylabel(), bar.get_ylabel(), ax.collections[0].get_clim(),
+                                 ax.get_title(), [t.get_text() for t in leg.get_texts()] if leg else [])
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(common, "save_figure", recording)
+    assert main(["demo", "--out", str(tmp_path / "d"), "--max-area", "0.05"]) == 0
+    assert set(seen) == {"external.png", "internal_springs.png", "internal_cable.png"}
+    for name, (xl, yl, bl, _, _, _) in seen.items():
+        assert (xl, yl) == ("x (body units)", "y (body units)") and _has_unit(bl), name
+    assert seen["external.png"][5] == ["anchored nodes", "dragged tip", "rest shape"]
+    assert seen["internal_springs.png"][3] == seen["internal_cable.png"][3]  # one scale: the panels compare
+    for name in ("internal_springs.png", "internal_cable.png"):
+        assert "commanded \u2192 achieved M1 0.300 \u2192 " in seen[name][4] and seen[name][5] == ["M1"]
