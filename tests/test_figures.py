@@ -563,3 +563,29 @@ def test_demo_figures_label_axes_and_marks_and_share_one_scale(tmp_path, monkeyp
     assert seen["internal_springs.png"][3] == seen["internal_cable.png"][3]  # one scale: the panels compare
     for name in ("internal_springs.png", "internal_cable.png"):
         assert "commanded \u2192 achieved M1 0.300 \u2192 " in seen[name][4] and seen[name][5] == ["M1"]
+
+
+def test_study_charts_label_their_axes_with_units_and_keep_legends_off_the_data():
+    from mdsr_opt.plot.studies import plot_fidelity, plot_recommendation, plot_study_pareto, plot_study_scaling
+
+    rows = [{"kind": "equilibrium", "method": m, "nodes": n, "error": e, "success": True, "build_time": 0.01,
+             "solve_time": 0.001 * n, "problem": "strip", "load": 1.0, "material": mat, "resolution": str(n),
+             "failure": ""}
+            for m, mat in (("newton", "neo"), ("ipopt", "svk")) for n, e in ((100, 1e-2), (400, 3e-3), (1600, 1e-3))]
+    figs = [plot_study_pareto(rows), plot_study_scaling(rows),
+            plot_fidelity(rows, [{"problem": "strip", "load": 1.0, "tol": 5e-3, "nodes": 400, "material": "neo",
+                                  "error": 3e-3, "met": True}]),
+            plot_recommendation(rows, {"scene": "strip", "tol": 5e-3, "met": True, "method": "newton",
+                                       "resolution": "400"})]
+    for fig in figs:
+        fig.canvas.draw()
+        for ax in fig.axes:
+            if not ax.axison:
+                continue
+            assert _has_unit(ax.get_xlabel()) and _has_unit(ax.get_ylabel()), (ax.get_xlabel(), ax.get_ylabel())
+            leg = ax.get_legend()
+            if leg is not None:  # a legend of one panel lies beside it, not over it
+                a, b = ax.get_window_extent(), leg.get_window_extent()
+                assert b.x0 >= a.x1 - 1 or b.y1 <= a.y0 + 1, fig
+        plt.close(fig)
+    assert figs[2].legends and [t.get_text() for t in figs[2].legends[0].get_texts()] == ["neo", "svk"]
