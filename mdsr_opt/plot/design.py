@@ -279,6 +279,9 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     for k in schedule.keyframes:
         ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
         ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
+    if np.isfinite(schedule.achieved).any():  # how to read the two kinds of line, in the legend too
+        ax.plot([], [], "-", color="0.35", lw=1.8, label="commanded")
+        ax.plot([], [], ":", color="0.35", lw=1.2, label="achieved")
     bad = ~schedule.success
     if bad.any():
         ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
