@@ -591,3 +591,7 @@ def test_study_charts_label_their_axes_with_units_and_keep_legends_off_the_data(
                 assert b.x0 >= a.x1 - 1 or b.y1 <= a.y0 + 1, fig
         plt.close(fig)
     assert figs[2].legends and [t.get_text() for t in figs[2].legends[0].get_texts()] == ["neo", "svk"]
+    for fig in figs[:2]:  # log axes read 0.001 and 300, not 10^-3 and 3 x 10^2
+        for ax in fig.axes:
+            ticks = [t.get_text() for t in ax.get_xticklabels() + ax.get_yticklabels() if t.get_text()]
+            assert ticks and not any("times" in t or "^" in t for t in ticks), ticks

@@ -18,7 +18,7 @@ from ..body.io import atomic_path
 from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color_of, muscle_label
 
 __all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
-           'coordinate_axes', 'mesh_paths']
+           'coordinate_axes', 'mesh_paths', 'plain_log_ticks']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -35,6 +35,22 @@ def legend_below(ax, ncol: int = 4, fontsize: float = 7, drop: float = 0.5):
     below = ax.transAxes + ScaledTranslation(0.0, -drop, ax.figure.dpi_scale_trans)
     return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
                      ncol=ncol, borderaxespad=0.0)
+
+
+def plain_log_ticks(ax, which: str = "both") -> None:
+    """Tick labels of ``ax``'s log axes (``"x"``, ``"y"`` or ``"both"``) as plain numbers (``0.06``, ``300``,
+    not ``6 x 10^-2``, ``3 x 10^2``), on the ticks matplotlib would label (few minor ones: they never
+    crowd)."""
+    from matplotlib.ticker import LogFormatterSciNotation
+
+    class Plain(LogFormatterSciNotation):
+        def __call__(self, x, pos=None):
+            return f"{x:.3g}" if super().__call__(x, pos) else ""
+
+    for axis in ((ax.xaxis, ax.yaxis) if which == "both" else (ax.xaxis,) if which == "x" else (ax.yaxis,)):
+        if axis.get_scale() == "log":
+            axis.set_major_formatter(Plain(labelOnlyBase=False))
+            axis.set_minor_formatter(Plain(labelOnlyBase=False))
 
 
 def axes_or_new(ax=None, figsize=(6, 4)):

@@ -33,9 +33,8 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
 from matplotlib.lines import Line2D
-from matplotlib.ticker import LogFormatterSciNotation
 
-from .common import legend_below
+from .common import legend_below, plain_log_ticks
 from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color_of, muscle_label,
                     muscle_name, name_color, symmetric_limits, unit_label)
 
@@ -61,14 +60,6 @@ def _finish(ax):
     ax.autoscale_view()
     ax.set_xticks([])
     ax.set_yticks([])
-
-
-class _PlainLog(LogFormatterSciNotation):
-    """A log axis's tick labels as plain decimals (``0.06``, not ``6 x 10^-2``), on the ticks matplotlib
-    would label (few minor ones, so they never crowd)."""
-
-    def __call__(self, x, pos=None):
-        return f"{x:.3g}" if super().__call__(x, pos) else ""
 
 
 def _scale_bar(ax, x, units=None):
@@ -279,8 +270,7 @@ def plot_convergence(panels, title=None, log=True):
                     label=f"{label} ({int(it[-1]) if len(it) else 0} it.)")
         if log:
             ax.set_yscale("log")
-            ax.yaxis.set_major_formatter(_PlainLog(labelOnlyBase=False))
-            ax.yaxis.set_minor_formatter(_PlainLog(labelOnlyBase=False))
+            plain_log_ticks(ax, "y")
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..core.stats import fit_slopes, pareto_front
-from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes
+from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes, plain_log_ticks
 from .style import axis_label
 
 __all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plot_fidelity',
@@ -89,6 +89,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
                            color=c, marker="x", s=18, alpha=0.6, label=None if ok else f"{m} (failed)")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        plain_log_ticks(ax)
         ax.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap on a short range
         ax.set_xlabel("build + solve time (s)")
         ax.set_ylabel(ylabels[kind])
@@ -133,6 +134,7 @@ def plot_study_scaling(rows, slopes=None, ax=None, title=None):
     ax.set_yscale("log")
     ax.set_xlabel(axis_label("mesh nodes", "count"))
     ax.set_ylabel("build + solve time (s)")
+    plain_log_ticks(ax)
     ax.set_title(f"study {title}: time against nodes (fitted time ~ nodes^slope)" if title else
                  "time against nodes (fitted time ~ nodes^slope)", fontsize=9)
     ax.grid(True, which="both", alpha=0.25)
@@ -259,6 +261,7 @@ def plot_fidelity(rows, choices, title=None, max_cols=3, fig=None):
         ax.set_yscale("log")
         ax.set_xlabel(axis_label("mesh nodes", "count"))
         ax.set_ylabel(axis_label("max node error / body size", "1"))
+        plain_log_ticks(ax)
         ax.set_title(f"{p}, load {load:g}", fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
     for ax in axes.ravel()[len(scenes):]:
