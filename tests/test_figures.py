@@ -595,3 +595,14 @@ def test_study_charts_label_their_axes_with_units_and_keep_legends_off_the_data(
         for ax in fig.axes:
             ticks = [t.get_text() for t in ax.get_xticklabels() + ax.get_yticklabels() if t.get_text()]
             assert ticks and not any("times" in t or "^" in t for t in ticks), ticks
+
+
+def test_muscles_drawn_together_never_share_a_colour():
+    """A numbered name keeps its number's colour; any other name takes the first colour no muscle of the
+    figure takes, so a scene's own 'flexor' beside a routed M1 is not drawn red as well."""
+    from mdsr_opt.plot.style import label_colors, muscle_color
+
+    assert label_colors(["flexor", "M1"]) == [muscle_color(1), muscle_color(0)]
+    assert label_colors(["M3", "a", "b"]) == [muscle_color(2), muscle_color(0), muscle_color(1)]
+    assert label_colors(["a", "b"]) == [muscle_color(0), muscle_color(1)]
+    assert len(set(label_colors(["M2", "x", "M1", "y"]))) == 4

@@ -15,7 +15,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
-from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color_of, muscle_label
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, layout_colors, muscle_label
 
 __all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
            'coordinate_axes', 'mesh_paths', 'plain_log_ticks']
@@ -157,13 +157,15 @@ def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, v
 
 
 def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
-    """Draw muscle paths over configuration ``x``: muscle ``i`` in :func:`.style.muscle_color_of` (its name's
-    colour, else that of its place ``i``),
+    """Draw muscle paths over configuration ``x``: each in its colour (:func:`.style.layout_colors`: its
+    number's for ``M<k>``, else the first colour no other muscle drawn takes),
     labelled :func:`.style.muscle_label` (its name, else ``M<i+1>``), as in every figure and drawing."""
     fig, ax = axes_or_new(ax)
     x = np.asarray(x)
+    muscles = list(muscles)
+    own = layout_colors(muscles)
     for i, m in enumerate(muscles):
-        c = (colors[i] if colors is not None else muscle_color_of(m, i))
+        c = (colors[i] if colors is not None else own[i])
         p = x[list(m.nodes)]
         ax.plot(p[:, 0], p[:, 1], "-", color=c, lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)

@@ -8,7 +8,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
-from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, name_color,
+from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, label_colors,
                     symmetric_limits, unit_label)
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'design_title',
@@ -269,8 +269,9 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     else:
         fig = ax.figure
     t = schedule.times
+    colors = label_colors(schedule.muscle_names)
     for i, n in enumerate(schedule.muscle_names):
-        c = name_color(n, i)
+        c = colors[i]
         ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
                 f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
         if np.isfinite(schedule.achieved[:, i]).any():

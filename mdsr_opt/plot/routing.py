@@ -35,8 +35,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.lines import Line2D
 
 from .common import legend_below, plain_log_ticks
-from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color_of, muscle_label,
-                    muscle_name, name_color, symmetric_limits, unit_label)
+from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, label_colors, layout_colors,
+                    muscle_label, muscle_name, symmetric_limits, unit_label)
 
 __all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
 
@@ -48,9 +48,11 @@ def _mesh(ax, mesh, x, face="#e3e9f0", edge="#a9b6c4", alpha=1.0, lw=0.25):
 
 def _muscles(ax, x, muscles, lw=2.4, labels=True):
     x = np.asarray(x)
+    muscles = list(muscles)
+    colors = layout_colors(muscles)
     for i, m in enumerate(muscles):
         p = x[list(m.nodes)]
-        ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color_of(m, i), lw=lw, solid_capstyle="round",
+        ax.plot(p[:, 0], p[:, 1], "-", color=colors[i], lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)
         ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
 
@@ -86,7 +88,7 @@ def _scale_bar(ax, x, units=None):
 def _row_legend(ax, names):
     """The muscles' names and colours of a row of layouts, beside its last panel (over no drawing)."""
     if names:
-        handles = [Line2D([], [], color=name_color(n, k), lw=2.4) for k, n in enumerate(names)]
+        handles = [Line2D([], [], color=c, lw=2.4) for c in label_colors(names)]
         ax.legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0,
                   handlelength=1.5)
 

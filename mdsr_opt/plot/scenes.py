@@ -15,7 +15,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
-from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, muscle_color_of, muscle_label
+from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, layout_colors, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -208,13 +208,13 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     for p in (body, edges):
         ax.add_artist(p)  # not add_patch: its data-limit update walks every segment; the limits are set below
     moving += [body, edges]
-    lines = [ax.plot([], [], "-", color=muscle_color_of(m, i), solid_capstyle="round", zorder=3)[0]
-             for i, m in enumerate(muscles)]
+    colors = layout_colors(muscles)
+    lines = [ax.plot([], [], "-", color=c, solid_capstyle="round", zorder=3)[0] for c in colors]
     moving += lines
     if muscles:  # the legend is drawn once, with the background: proxies, not the moving lines
         from matplotlib.lines import Line2D
 
-        ax.legend([Line2D([], [], color=muscle_color_of(m, i), lw=3) for i, m in enumerate(muscles)],
+        ax.legend([Line2D([], [], color=c, lw=3) for c in colors],
                   [muscle_label(m, i) for i, m in enumerate(muscles)], fontsize=9, **LEGEND_OUTSIDE)
     paths = [list(m.nodes) for m in muscles]
     ax.set_xlim(lo[0] - pad, hi[0] + pad)

@@ -6,8 +6,8 @@ This module is the one place that owns
   :func:`muscle_name` ``(i)`` (``"M1"``, ``"M2"``, ...) unless it carries a name of its own
   (:func:`muscle_label`), and is drawn in :func:`muscle_color` ``(i)`` in design figures, Figure 6,
   schedules, animations and the fabrication SVG and DXF alike (a numbered name ``M<k>`` is always
-  colour ``k``: :func:`name_color`, so one name is one colour also where a muscle is drawn without the
-  muscles numbered before it);
+  colour ``k``, so one name is one colour also where a muscle is drawn without the muscles numbered before
+  it; another name takes the first colour no muscle of the same figure takes: :func:`label_colors`);
 - the colours of bodies (driven, target, rest outline) and of measured contours;
 - colour scales (:func:`symmetric_limits` and :func:`shared_limits` give panels meant to be compared one
   scale) and colour bars the height of their axes (:func:`add_colorbar`);
@@ -31,7 +31,8 @@ from ..body.muscles import default_muscle_name
 
 __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
-           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "dxf_color", "unit_label", "axis_label", "label_coordinates",
+           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots", "label_colors",
+           "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
 #: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 10]``): saturated, apart from
@@ -117,6 +118,34 @@ def muscle_color_of(muscle, i: int) -> str:
     """The colour of ``muscle``, the ``i``-th (0-based) of what is drawn: :func:`name_color` of its
     :func:`muscle_label`."""
     return name_color(muscle_label(muscle, i), i)
+
+
+def label_slots(labels) -> list[int]:
+    """The colour slots of the muscles labelled ``labels``, drawn together: a numbered name ``M<k>`` takes
+    slot ``k - 1`` (:func:`muscle_slot`), every other name the lowest slot no muscle of the set takes, in
+    order, so no two muscles of one figure share a colour unless two are numbered alike."""
+    labels = [str(n) for n in labels]
+    fixed = [muscle_slot(n, -1) for n in labels]
+    used = {s for s in fixed if s >= 0}
+    out, free = [], 0
+    for s in fixed:
+        if s < 0:
+            while free in used:
+                free += 1
+            s = free
+            used.add(s)
+        out.append(s)
+    return out
+
+
+def label_colors(labels) -> list[str]:
+    """The colours of the muscles labelled ``labels``, drawn together (:func:`label_slots`)."""
+    return [muscle_color(s) for s in label_slots(labels)]
+
+
+def layout_colors(muscles) -> list[str]:
+    """The colours of ``muscles`` drawn together: :func:`label_colors` of their :func:`muscle_label`."""
+    return label_colors([muscle_label(m, i) for i, m in enumerate(muscles)])
 
 
 def dxf_color(i: int) -> int:

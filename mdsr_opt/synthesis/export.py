@@ -57,7 +57,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
-from ..plot.style import muscle_color_of, muscle_label, muscle_name
+from ..plot.style import layout_colors, muscle_label, muscle_name
 from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
 from .poses import PosesResult
@@ -342,7 +342,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
         out.append(f'<polygon id="{kind}" class="{"outline" if i == 0 else "hole"}" points="{pts}"/>')
     out.append("</g>")
     out.append('<g id="muscles" fill="none" stroke-linecap="round" stroke-linejoin="round">')
-    colors = [muscle_color_of(mu, i) for i, mu in enumerate(fd.muscles)]  # the figures' colours (plot.style)
+    colors = layout_colors(fd.muscles)  # the figures' colours (plot.style)
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
         c = colors[i]
         pts = " ".join(xy(p) for p in path)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..plot.style import dxf_color, muscle_slot
+from ..plot.style import dxf_color, label_slots
 
 __all__ = ["dxf_text", "label_at", "label_points", "fixture_plates"]
 
@@ -232,10 +232,11 @@ def dxf_text(fd) -> str:
     polyline(fd.outline, "BODY", closed=True)
     for h in fd.holes:
         polyline(h, "HOLES", closed=True)
+    slots = label_slots([mu.name for mu in fd.muscles])  # the figures' colour of each muscle (plot.style)
     for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
         # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color of its
         # name's colour slot, as the figures and the SVG colour it)
-        aci = dxf_color(muscle_slot(mu.name, i))
+        aci = dxf_color(slots[i])
         if fd.wall > 0:
             polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
         polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=aci)
@@ -253,8 +254,7 @@ def dxf_text(fd) -> str:
         for layer, outline, r in (("ENDS", shape, fd.end_radius), ("WALLS", wall, fd.end_radius + fd.wall)):
             if layer == "WALLS" and fd.wall <= 0:
                 continue
-            color = dxf_color(muscle_slot(fd.muscles[held[0][0]].name, held[0][0])) if own and layer == "ENDS" \
-                else None
+            color = dxf_color(slots[held[0][0]]) if own and layer == "ENDS" else None
             if len(outline) == 1:
                 g(0, "CIRCLE")
                 g(8, layer)
