@@ -355,7 +355,8 @@ def test_a_scene_run_gives_each_rope_one_name_and_colour_in_every_figure_and_fil
     sched = {k.split()[0]: c for k, c in legends["walk/schedule.png"].items()}  # "M1 (L0 = ...)"
     assert len(sched) >= 3 and set(sched) <= set(ropes) and sched == {n: name_color(n, 0) for n in sched}
     svg = (out / "walk" / "strip.svg").read_text()
-    assert _svg_colours(svg) == {n: name_color(n, 0) for n in _svg_colours(svg)} and set(_svg_colours(svg)) <= set(ropes)
+    drawn = _svg_colours(svg)
+    assert drawn == {n: name_color(n, 0) for n in drawn} and set(drawn) <= set(ropes)
     dxf = _dxf_label_colours((out / "walk" / "strip.dxf").read_text())
     assert dxf and dxf == {n: dxf_color(muscle_slot(n, 0)) for n in dxf}
 

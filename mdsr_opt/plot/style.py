@@ -31,8 +31,8 @@ from ..body.muscles import default_muscle_name
 
 __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
-           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots", "label_colors",
-           "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
+           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots",
+           "label_colors", "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
 #: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 10]``): saturated, apart from

@@ -10,7 +10,9 @@
     length unit and the ``width``/``height`` attributes state the physical size, so a printer or laser cutter
     reproduces it 1:1. Both ends of every channel carry their fixture: a circle of the fixture's radius
     (the design's ``anchor_radius``, class ``end``) and one of that radius plus the wall (class
-    ``end-wall``); each muscle is labelled with its name. A place where the layout cannot be moulded
+    ``end-wall``); ends closer than that radius share one plate, drawn once in black (class ``end shared``,
+    ``data-muscles`` naming its muscles; :func:`~mdsr_opt.synthesis.export_dxf.fixture_plates`); each muscle
+    is labelled with its name beside its channel, in its colour as in every figure. A place where the layout cannot be moulded
     (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or fixture outside the body, channels or
     fixtures of different muscles closer than a wall, ropes that cross) carries a red ring (class ``conflict``,
     group ``conflicts``) and the caption, wrapped to the drawing's width, says it.
@@ -18,7 +20,8 @@
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
     nodes at rest, its width the channel width), ``WALLS`` (the same polylines as wide as the channel and
-    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles),
+    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles; a
+    shared plate once, as a closed polyline where its ends lie apart),
     ``LABELS`` (text) and ``CONFLICTS`` (a circle where the layout cannot be moulded, as the SVG's red rings).
 ``<name>_muscles.csv``
     One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
@@ -374,7 +377,8 @@ def _svg_text(fd: FabricationData, title: str) -> str:
             else:
                 out.append(f'<polygon {a}points="{" ".join(xy(q) for q in outline)}" stroke="{c}"{dash}/>')
     out.append("</g>")
-    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle" dominant-baseline="central">')
+    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle" '
+               'dominant-baseline="central">')
     # each name centred on its point, beside its channel and clear of the other channels and names
     for i, (mu, p) in enumerate(zip(fd.muscles, label_points(fd.paths, 1.2 * fs))):
         x, y = xy(p).split(",")
