@@ -607,3 +607,29 @@ def test_muscles_drawn_together_never_share_a_colour():
     assert label_colors(["M3", "a", "b"]) == [muscle_color(2), muscle_color(0), muscle_color(1)]
     assert label_colors(["a", "b"]) == [muscle_color(0), muscle_color(1)]
     assert len(set(label_colors(["M2", "x", "M1", "y"]))) == 4
+
+
+def test_a_row_of_panels_pulling_subsets_of_one_layout_names_every_muscle_once():
+    """The face's expressions each pull another subset of one 13-muscle layout: each panel draws a muscle of
+    a name in one colour, the row's legend lists every name drawn (not the places M1..M8 of the longest
+    panel), no two of the 13 share a colour, and a long panel title breaks before its difference."""
+    from mdsr_opt.plot.routing import plot_design_grid
+    from mdsr_opt.plot.style import muscle_color
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    layout = [Muscle([k, k + 1], name=f"M{k + 1}") for k in range(13)]
+    picks = ([0, 4, 8, 9, 11, 12], [1, 2, 5, 6, 7, 9, 10, 12], [2, 3, 7, 10])
+    cols = [{"title": f"e{j}", "mesh": mesh, "target": mesh.points, "row_labels": ["pulls " + ", ".join(
+                 layout[k].name for k in p)],
+             "designs": [{"x": mesh.points, "muscles": [layout[k] for k in p], "difference": 0.04, "success": True}]}
+            for j, p in enumerate(picks)]
+    fig = plot_design_grid(cols)
+    axes = np.array(fig.axes).reshape(2, 3)
+    drawn = sorted({k for p in picks for k in p})
+    assert _legend(axes[1, -1]) == {f"M{k + 1}": muscle_color(k) for k in drawn}
+    assert len({muscle_color(k) for k in range(13)}) == 13
+    for ax, p in zip(axes[1], picks):  # each muscle in its name's colour in every panel
+        got = sorted(to_hex(ln.get_color()) for ln in ax.get_lines() if ln.get_linestyle() == "-")
+        assert got == sorted(muscle_color(k) for k in p)
+    assert axes[1, 1].get_title().endswith(":\nD = 0.04 body units")
+    plt.close(fig)

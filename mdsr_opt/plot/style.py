@@ -35,14 +35,16 @@ __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LI
            "label_colors", "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
-#: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 10]``): saturated, apart from
+#: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 20]``): saturated, apart from
 #: the bodies' blues and greys, and told apart from one another (matplotlib's tab10 without its grey, red
-#: first as the fabrication drawings always had it).
+#: first as the fabrication drawings always had it; then ten darker or stronger ones, so a layout of up to
+#: 20 muscles, as the face's 13, has no colour twice).
 MUSCLE_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-                 "#bcbd22", "#393b79")
+                 "#bcbd22", "#393b79", "#8b0000", "#ffd700", "#006400", "#b8860b", "#4b0082", "#ff1493",
+                 "#008080", "#808000", "#ff00ff", "#5f9ea0")
 
 #: AutoCAD colour index nearest to each of :data:`MUSCLE_COLORS` (DXF entities carry an ACI colour)
-_ACI = (1, 5, 3, 30, 200, 34, 221, 4, 50, 170)
+_ACI = (1, 5, 3, 30, 200, 34, 221, 4, 50, 170, 16, 2, 96, 42, 192, 230, 134, 56, 6, 132)
 
 #: Named node regions (a scene's rest figure): ColorBrewer's Dark2, drawn as squares, so that a region is
 #: never taken for a muscle of the same colour
