@@ -274,8 +274,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
-    if taken and setup.routing is not None and tuple(setup.muscles) == tuple(setup.routing.muscles):
-        setup.muscles = number_in_scene(setup.muscles, taken)  # routed: numbered on from the earlier cases'
+    if taken and setup.routing is not None and case.kind == "external" and scene.muscles is None \
+            and case.muscles is None:  # routed for this case: numbered on from the earlier cases'
+        setup.muscles = number_in_scene(setup.muscles, taken)
     run.setup = setup
     tr = setup.target_result
     rep.target_success, rep.target_status = bool(tr.success), str(tr.status)
