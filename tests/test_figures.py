@@ -633,3 +633,9 @@ def test_a_row_of_panels_pulling_subsets_of_one_layout_names_every_muscle_once()
         assert got == sorted(muscle_color(k) for k in p)
     assert axes[1, 1].get_title().endswith(":\nD = 0.04 body units")
     plt.close(fig)
+
+
+def test_commanded_achieved_never_reads_minus_zero():
+    from mdsr_opt.plot.style import commanded_achieved
+
+    assert commanded_achieved([0.0, 0.26], [-0.001, -0.02], fmt=".2f") == "M1 0.00 \u2192 0.00, M2 0.26 \u2192 -0.02"

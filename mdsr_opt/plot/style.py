@@ -225,11 +225,15 @@ def commanded_achieved(commanded, achieved=None, names=None, fmt: str = ".3f") -
     if a is not None and a.size != c.size:
         a = None
     names = [muscle_name(i) for i in range(c.size)] if names is None else list(names)
+    def num(v):  # a value that rounds to zero reads 0.00, never -0.00
+        t = f"{v:{fmt}}"
+        return t[1:] if t.startswith("-") and float(t) == 0.0 else t
+
     parts = []
     for i, v in enumerate(c):
-        s = f"{names[i]} {v:{fmt}}" if np.isfinite(v) else f"{names[i]} nan"
+        s = f"{names[i]} {num(v)}" if np.isfinite(v) else f"{names[i]} nan"
         if a is not None:
-            s += f" \u2192 {a[i]:{fmt}}" if np.isfinite(a[i]) else " \u2192 nan"
+            s += f" \u2192 {num(a[i])}" if np.isfinite(a[i]) else " \u2192 nan"
         parts.append(s)
     return ", ".join(parts)
 
