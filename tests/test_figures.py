@@ -76,9 +76,12 @@ def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip,
     assert ax.get_xlabel() == "time (s)" and ax.get_ylabel().startswith("stroke (mm")
     got = {t.get_text().split()[0]: to_hex(h.get_color())
            for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)}
-    assert got == want
-    # the achieved strokes are drawn beside the commanded ones, dotted, in the muscle's colour
-    dotted = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":"]
+    assert {k: v for k, v in got.items() if k.startswith("M")} == want
+    # the achieved strokes are drawn beside the commanded ones, dotted, in the muscle's colour, and the
+    # legend says which line is which
+    assert [h.get_linestyle() for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)
+            if t.get_text() in ("commanded", "achieved")] == ["-", ":"]
+    dotted = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":" and len(ln.get_xdata())]
     assert sorted(to_hex(ln.get_color()) for ln in dotted) == sorted(want.values())
     plt.close(fig)
 
@@ -286,3 +289,353 @@ def test_gif_frames_are_large_and_draw_idle_muscles_in_their_colour(strip, tmp_p
         counts.append(int((np.abs(rgb - red).sum(-1) < 60).sum()))
     # idle in the first frame, yet drawn in full colour (thinner than when it pulls), beside the legend's swatch
     assert counts[0] > 300 and counts[1] > counts[0]
+
+
+def _svg_colours(svg: str) -> dict:
+    return dict(re.findall(r'<polyline class="muscle" id="([^"]+)" points="[^"]*" stroke="([^"]+)"', svg))
+
+
+def _dxf_label_colours(text: str) -> dict:
+    """{label: ACI colour} of the DXF's TEXT entities (read as group code / value pairs)."""
+    v = [s.strip() for s in text.split("\n")]
+    pairs = list(zip(v[0::2], v[1::2]))
+    out, cur = {}, None
+    for code, value in pairs + [("0", "EOF")]:
+        if code == "0":
+            if cur is not None and "1" in cur:
+                out[cur["1"]] = int(cur.get("62", 256))
+            cur = {} if value == "TEXT" else None
+        elif cur is not None:
+            cur[code] = value
+    return out
+
+
+def test_a_scene_run_gives_each_rope_one_name_and_colour_in_every_figure_and_file(tmp_path, monkeypatch):
+    """Two routed cases and a gait over both (as gecko): the second case's ropes are numbered on from the
+    first's (M3, M4, not a second M1, M2), the gait's layout, schedule, animation and fabrication files keep
+    those names, and every figure and drawing colours a rope by its name."""
+    import json
+
+    import mdsr_opt.plot.common as common
+    from mdsr_opt.plot.style import dxf_color, muscle_slot, name_color
+    from mdsr_opt.scenes.runscene import run_scene
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    d = {"name": "strip", "units": "cm", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 90},
+         "regions": {"base": {"box": [-1, -1, 0.01, 2]}, "end": {"box": [3.99, -1, 5, 2]}},
+         "cases": [{"name": "up", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.6, 1.0]}]},
+                   {"name": "down", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.6, -1.0]}]}],
+         "animations": [{"name": "wave", "keyframes": [["up", 1], ["down", 1]], "frames_per_step": 1}],
+         "gait": {"name": "walk", "poses": ["up", "rest", "down"], "frames_per_step": 1}}
+    (tmp_path / "strip.json").write_text(json.dumps(d))
+    legends, save = {}, common.save_figure
+
+    def recording(fig, path, **kw):  # the muscles' legend of every figure written: {name: colour}
+        for ax in fig.axes:
+            if ax.get_legend() is not None:
+                legends.setdefault(Path(path).relative_to(tmp_path / "out").as_posix(), {}).update(_legend(ax))
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(common, "save_figure", recording)
+    run_scene(load_scene(tmp_path / "strip.json"), tmp_path / "out", photos=False, prototype=False, log=None,
+              background=False)
+    out = tmp_path / "out"
+    summary = json.loads((out / "summary.json").read_text())
+    cases = {c["case"]: {m["name"]: tuple(m["nodes"]) for m in c["muscles"]} for c in summary["cases"]}
+    names = [n for c in cases.values() for n in c]
+    assert len(names) >= 3 and len(set(names)) == len(names)  # no name used by two ropes
+    assert sorted(names, key=lambda n: int(n[1:])) == [f"M{k + 1}" for k in range(len(names))]
+    ropes = {n: p for c in cases.values() for n, p in c.items()}
+    for f in ("walk/layout.json", "wave.json"):  # the gait's layout and the animation: the cases' names
+        got = {m["name"]: tuple(m["nodes"]) for m in json.loads((out / f).read_text())["muscles"]}
+        assert all(ropes[n] == p for n, p in got.items()), f
+    for case, mus in cases.items():  # every case figure with muscles colours each by its name
+        for fig in (f"{case}/design.png", f"{case}/muscles.png"):
+            assert legends[fig] == {n: name_color(n, 0) for n in mus}, fig
+    sched = {k.split()[0]: c for k, c in legends["walk/schedule.png"].items()}  # "M1 (L0 = ...)"
+    assert len(sched) >= 3 and set(sched) <= set(ropes) and sched == {n: name_color(n, 0) for n in sched}
+    svg = (out / "walk" / "strip.svg").read_text()
+    drawn = _svg_colours(svg)
+    assert drawn == {n: name_color(n, 0) for n in drawn} and set(drawn) <= set(ropes)
+    dxf = _dxf_label_colours((out / "walk" / "strip.dxf").read_text())
+    assert dxf and dxf == {n: dxf_color(muscle_slot(n, 0)) for n in dxf}
+
+
+def test_a_numbered_name_keeps_its_colour_and_shared_layouts_keep_names(strip, tmp_path):
+    """M3 drawn alone is M3's colour in the design figure, the GIF's legend, the SVG and the DXF; number_in_scene
+    numbers a later case's ropes on, keeps a rope an earlier case has and a name of its own; shared_layout keeps
+    names that do not collide."""
+    from mdsr_opt.plot.design import plot_design
+    from mdsr_opt.plot.style import dxf_color, muscle_color, name_color
+    from mdsr_opt.scenes.names import number_in_scene
+    from mdsr_opt.synthesis.contractions import design_contractions
+    from mdsr_opt.synthesis.export import export_fabrication
+    from mdsr_opt.synthesis.layouts import shared_layout
+
+    mesh, muscles, target = strip
+    assert name_color("M3", 0) == muscle_color(2) and name_color("flexor", 1) == muscle_color(1)
+    late = [Muscle(m.nodes, name=n) for m, n in zip(muscles, ("M3", "M4"))]
+    res = design_contractions(mesh, NeoHookean(1.0, 0.3), late, target)
+    fig = plot_design(mesh, res, target, late, units="mm")
+    assert _legend(fig.axes[0]) == {"M3": muscle_color(2), "M4": muscle_color(3)}
+    assert "M3 0.1" in fig.axes[0].get_title()
+    plt.close(fig)
+    files = export_fabrication(mesh, res, tmp_path, muscles=late, units="mm", name="late")
+    assert _svg_colours(Path(files["svg"]).read_text()) == {"M3": muscle_color(2), "M4": muscle_color(3)}
+    assert _dxf_label_colours(Path(files["dxf"]).read_text()) == {"M3": dxf_color(2), "M4": dxf_color(3)}
+
+    a = [Muscle(muscles[0].nodes, name="M1")]
+    b = [Muscle(muscles[1].nodes, name="M1"), Muscle(muscles[0].nodes, name="M2")]
+    got = number_in_scene(b, a)
+    assert [m.name for m in got] == ["M2", "M1"] and [m.nodes for m in got] == [m.nodes for m in b]
+    assert number_in_scene(b) == tuple(b) and [m.name for m in number_in_scene(b)] == ["M1", "M2"]
+    own = number_in_scene([Muscle(muscles[1].nodes, name="flexor")], a)
+    assert [m.name for m in own] == ["flexor"]
+    lay, _ = shared_layout(mesh, {"up": [Muscle(muscles[1].nodes, name="M2")],
+                                  "down": [Muscle(muscles[0].nodes, name="M1")]})
+    assert [m.name for m in lay] == ["M2", "M1"]  # kept: one name a rope
+    lay, _ = shared_layout(mesh, {"up": [Muscle(muscles[1].nodes, name="M1")],
+                                  "down": [Muscle(muscles[0].nodes, name="M1")]})
+    assert [m.name for m in lay] == ["M1", "M2"]  # two poses' own M1: numbered by place
+
+
+def test_a_gif_title_on_two_lines_stays_above_the_axes(strip, tmp_path):
+    from PIL import Image
+
+    from mdsr_opt.plot.scenes import save_animation
+
+    mesh, muscles, target = strip
+    long = [Muscle(m.nodes, name=f"a_rather_long_case_name:M{i + 1}") for i, m in enumerate(muscles)]
+    title = "wave 1/2: " + ", ".join(f"{m.name} 0.00 \u2192 0.00" for m in long)
+    p = save_animation(mesh, [mesh.points, target], tmp_path / "t.gif", muscles=long, titles=[title, title])
+    rgb = np.asarray(Image.open(p).convert("RGB")).astype(int)
+    black = (rgb < 60).all(-1)
+    rows = np.flatnonzero(black.sum(1) > 0.4 * black.shape[1])  # the axes' frame: its top and bottom edges
+    cols = np.flatnonzero(black.sum(0) > 0.3 * (rows[-1] - rows[0]))
+    top, bottom, left, right = rows[0], rows[-1], cols[0], cols[-1]
+    assert bottom - top > 100 and right - left > 400
+    inside = black[top + 3:bottom - 2, left + 3:right - 2]
+    assert inside.sum() == 0  # no title glyph over the drawing (the mesh and muscles are not black)
+    above = black[:top - 1, left:right]
+    lines = np.flatnonzero(above.any(1))
+    assert len(lines) and np.diff(lines).max() > 3  # two lines of text above the frame
+
+
+def test_a_fixture_plate_two_muscles_share_is_drawn_once(tmp_path):
+    """Ends closer than a fixture's radius share one plate: one outline (black, naming both muscles), not
+    two circles; the DXF likewise; and no two names sit on each other."""
+    import warnings
+
+    from mdsr_opt.synthesis.export import SHARED_PLATE, export_fabrication
+
+    mesh = Mesh.rectangle(10.0, 4.0, 40, 16)
+    P = mesh.points
+
+    def row(y, x0, x1):
+        return [int(np.argmin(np.linalg.norm(P - [x, y], axis=1))) for x in np.arange(x0, x1 + 1e-9, 0.25)]
+
+    mus = [Muscle(row(2.0, 1.0, 5.0)), Muscle(row(2.0, 5.0, 9.0)[::-1]),  # meet at one node
+           Muscle(row(1.0, 1.0, 4.5)), Muscle(row(1.0, 4.75, 9.0))]        # ends 0.25 apart
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        files = export_fabrication(mesh, None, tmp_path, muscles=mus, units="mm", name="plates")
+    svg = Path(files["svg"]).read_text()
+    ends = re.findall(r'<(circle|polygon) class="end( shared)?"(?: data-muscles="([^"]*)")?', svg)
+    assert len(ends) == 6  # 8 ends, two plates shared
+    shared = sorted((kind, who) for kind, s, who in ends if s)
+    assert shared == [("circle", "M1 M2"), ("polygon", "M3 M4")]
+    assert f'class="end shared" data-muscles="M1 M2" cx' in svg and f'stroke="{SHARED_PLATE}"' in svg
+    caption = " ".join(re.findall(r"<tspan[^>]*>([^<]*)</tspan>", svg))
+    assert "(black: 2 plate(s) that muscles ending closer than a radius share)" in caption
+    dxf = [s.strip() for s in Path(files["dxf"]).read_text().split("\n")]
+    on_ends = [i for i in range(1, len(dxf)) if dxf[i] == "ENDS" and dxf[i - 1] == "8"
+               and dxf[i - 2] in ("CIRCLE", "POLYLINE")]
+    assert len(on_ends) == 6
+    at = {n: (float(x), float(y)) for x, y, n in
+          re.findall(r'<text class="label" x="([^"]+)" y="([^"]+)"[^>]*>([^<]+)</text>', svg)}
+    assert abs(at["M2"][1] - at["M4"][1]) > 0.5  # the two right-hand names apart (they overlapped)
+
+
+def test_an_animation_solves_with_the_fixtures_its_cases_were_designed_with(tmp_path, monkeypatch):
+    """animate() takes the cases' designs' anchor radius (the fixtures their routed ropes were fitted to);
+    only cases whose radii differ get one common size, and the message says so."""
+    import json
+
+    import mdsr_opt.mechanics.equilibrium as eq
+    from mdsr_opt.scenes.animate import animate
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    d = {"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 60},
+         "regions": {"base": {"box": [-1, -1, 0.01, 2]}, "end": {"box": [3.99, -1, 5, 2]}},
+         "cases": [{"name": "up", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.6, 1.0]}]},
+                   {"name": "down", "anchors": "base", "drags": [{"nodes": "end", "by": [-0.6, -1.0]}]}],
+         "animations": [{"name": "one", "keyframes": [["rest", 1], ["up", 1]], "frames_per_step": 1},
+                        {"name": "both", "keyframes": [["up", 1], ["down", 1]], "frames_per_step": 1}]}
+    (tmp_path / "s.json").write_text(json.dumps(d))
+    scene = load_scene(tmp_path / "s.json")
+    P = scene.mesh.points
+    top = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] > 1 - 1e-9][2:-2]
+    bottom = [int(i) for i in np.argsort(P[:, 0]) if P[i, 1] < 1e-9][2:-2]
+    radii = []
+
+    def fake(mesh, material, muscles, a, **kw):  # records the fixtures each frame is solved with
+        radii.append(kw.get("anchor_radius"))
+        return SimpleNamespace(x=mesh.points.copy(), success=True)
+
+    monkeypatch.setattr(eq, "solve_internal", fake)
+    up, down = [Muscle(top, name="M1")], [Muscle(bottom, name="M2")]
+    res = animate(scene, "one", {"up": (up, [0.2], 0.123)})
+    assert res.success and radii and set(radii) == {0.123} and res.message == ""
+    radii.clear()
+    res = animate(scene, "both", {"up": (up, [0.2], 0.123), "down": (down, [0.2], 0.123)})
+    assert set(radii) == {0.123}
+    radii.clear()
+    res = animate(scene, "both", {"up": (up, [0.2], 0.123), "down": (down, [0.2], 0.2)})
+    assert len(set(radii)) == 1 and radii[0] not in (0.123, 0.2)
+    assert res.success and "the cases' designs: up 0.123, down 0.2" in res.message
+
+
+def test_figure6_drawings_carry_a_scale_bar_and_legends_and_6c_plain_ticks(strip):
+    """Figure 6's drawings have no coordinate ticks: a scale bar in the scene's unit gives their size; row A
+    says what its marks are; 6b names its muscles as 6a does; 6c's log axis reads 0.06, not 6 x 10^-2."""
+    from matplotlib.offsetbox import AnchoredOffsetbox, TextArea
+
+    from mdsr_opt.plot.routing import plot_convergence, plot_design_grid, plot_layout_grid
+    from mdsr_opt.plot.style import name_color
+
+    mesh, muscles, target = strip
+
+    def bars(ax):
+        out = []
+        for a in ax.artists:
+            if isinstance(a, AnchoredOffsetbox):
+                stack = [a.get_child()]
+                while stack:
+                    c = stack.pop()
+                    if isinstance(c, TextArea):
+                        out.append(c.get_text())
+                    stack += list(c.get_children()) if hasattr(c, "get_children") else []
+        return out
+
+    late = [Muscle(m.nodes, name=n) for m, n in zip(muscles, ("M2", "M5"))]
+    cols = [{"title": "a", "mesh": mesh, "target": target, "layouts": [late], "row_labels": ["C"], "anchors": [0],
+             "drag_nodes": [16], "units": "cm"}]
+    fig = plot_layout_grid(cols)
+    axes = np.array(fig.axes[:3]).reshape(3, 1)
+    assert bars(axes[0, 0]) == ["0.5 cm"]
+    leg = axes[0, 0].get_legend()
+    assert [t.get_text() for t in leg.get_texts()] == ["anchors", "drag points"]
+    assert _legend(axes[2, 0]) == {"M2": name_color("M2", 0), "M5": name_color("M5", 1)}
+    plt.close(fig)
+    d = {"x": target, "muscles": late, "difference": 0.01, "success": True}
+    fig = plot_design_grid([{"title": "a", "mesh": mesh, "target": target, "designs": [d], "row_labels": ["C"]}])
+    assert bars(fig.axes[0]) == ["0.5 body units"]
+    assert _legend(fig.axes[1]) == {"M2": name_color("M2", 0), "M5": name_color("M5", 1)}
+    plt.close(fig)
+    fig = plot_convergence([{"title": "a", "traces": [("C", [0, 1, 2], [0.12, 0.025, 0.022])]}])
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.yaxis.get_majorticklabels() + ax.yaxis.get_minorticklabels() if t.get_text()]
+    assert "0.1" in labels and all(re.fullmatch(r"[0-9.]+", t) for t in labels), labels
+    assert len(labels) == len(set(labels))
+    plt.close(fig)
+
+
+def test_demo_figures_label_axes_and_marks_and_share_one_scale(tmp_path, monkeypatch):
+    """mdsr demo: every panel's axes and colour bar carry a quantity and unit, the external figure says what
+    its marks are, and the springs and cable panels share one colour scale and quote commanded -> achieved."""
+    import mdsr_opt.plot.common as common
+    from mdsr_opt.cli.main import main
+
+    seen, save = {}, common.save_figure
+
+    def recording(fig, path, **kw):
+        ax = fig.axes[0]
+        bar = ax.child_axes[0]
+        leg = ax.get_legend()
+        seen[Path(path).name] = (ax.get_xlabel(), ax.get_ylabel(), bar.get_ylabel(), ax.collections[0].get_clim(),
+                                 ax.get_title(), [t.get_text() for t in leg.get_texts()] if leg else [])
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(common, "save_figure", recording)
+    assert main(["demo", "--out", str(tmp_path / "d"), "--max-area", "0.05"]) == 0
+    assert set(seen) == {"external.png", "internal_springs.png", "internal_cable.png"}
+    for name, (xl, yl, bl, _, _, _) in seen.items():
+        assert (xl, yl) == ("x (body units)", "y (body units)") and _has_unit(bl), name
+    assert seen["external.png"][5] == ["anchored nodes", "dragged tip", "rest shape"]
+    assert seen["internal_springs.png"][3] == seen["internal_cable.png"][3]  # one scale: the panels compare
+    for name in ("internal_springs.png", "internal_cable.png"):
+        assert "commanded \u2192 achieved M1 0.300 \u2192 " in seen[name][4] and seen[name][5] == ["M1"]
+
+
+def test_study_charts_label_their_axes_with_units_and_keep_legends_off_the_data():
+    from mdsr_opt.plot.studies import plot_fidelity, plot_recommendation, plot_study_pareto, plot_study_scaling
+
+    rows = [{"kind": "equilibrium", "method": m, "nodes": n, "error": e, "success": True, "build_time": 0.01,
+             "solve_time": 0.001 * n, "problem": "strip", "load": 1.0, "material": mat, "resolution": str(n),
+             "failure": ""}
+            for m, mat in (("newton", "neo"), ("ipopt", "svk")) for n, e in ((100, 1e-2), (400, 3e-3), (1600, 1e-3))]
+    figs = [plot_study_pareto(rows), plot_study_scaling(rows),
+            plot_fidelity(rows, [{"problem": "strip", "load": 1.0, "tol": 5e-3, "nodes": 400, "material": "neo",
+                                  "error": 3e-3, "met": True}]),
+            plot_recommendation(rows, {"scene": "strip", "tol": 5e-3, "met": True, "method": "newton",
+                                       "resolution": "400"})]
+    for fig in figs:
+        fig.canvas.draw()
+        for ax in fig.axes:
+            if not ax.axison:
+                continue
+            assert _has_unit(ax.get_xlabel()) and _has_unit(ax.get_ylabel()), (ax.get_xlabel(), ax.get_ylabel())
+            leg = ax.get_legend()
+            if leg is not None:  # a legend of one panel lies beside it, not over it
+                a, b = ax.get_window_extent(), leg.get_window_extent()
+                assert b.x0 >= a.x1 - 1 or b.y1 <= a.y0 + 1, fig
+        plt.close(fig)
+    assert figs[2].legends and [t.get_text() for t in figs[2].legends[0].get_texts()] == ["neo", "svk"]
+    for fig in figs[:2]:  # log axes read 0.001 and 300, not 10^-3 and 3 x 10^2
+        for ax in fig.axes:
+            ticks = [t.get_text() for t in ax.get_xticklabels() + ax.get_yticklabels() if t.get_text()]
+            assert ticks and not any("times" in t or "^" in t for t in ticks), ticks
+
+
+def test_muscles_drawn_together_never_share_a_colour():
+    """A numbered name keeps its number's colour; any other name takes the first colour no muscle of the
+    figure takes, so a scene's own 'flexor' beside a routed M1 is not drawn red as well."""
+    from mdsr_opt.plot.style import label_colors, muscle_color
+
+    assert label_colors(["flexor", "M1"]) == [muscle_color(1), muscle_color(0)]
+    assert label_colors(["M3", "a", "b"]) == [muscle_color(2), muscle_color(0), muscle_color(1)]
+    assert label_colors(["a", "b"]) == [muscle_color(0), muscle_color(1)]
+    assert len(set(label_colors(["M2", "x", "M1", "y"]))) == 4
+
+
+def test_a_row_of_panels_pulling_subsets_of_one_layout_names_every_muscle_once():
+    """The face's expressions each pull another subset of one 13-muscle layout: each panel draws a muscle of
+    a name in one colour, the row's legend lists every name drawn (not the places M1..M8 of the longest
+    panel), no two of the 13 share a colour, and a long panel title breaks before its difference."""
+    from mdsr_opt.plot.routing import plot_design_grid
+    from mdsr_opt.plot.style import muscle_color
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    layout = [Muscle([k, k + 1], name=f"M{k + 1}") for k in range(13)]
+    picks = ([0, 4, 8, 9, 11, 12], [1, 2, 5, 6, 7, 9, 10, 12], [2, 3, 7, 10])
+    cols = [{"title": f"e{j}", "mesh": mesh, "target": mesh.points, "row_labels": ["pulls " + ", ".join(
+                 layout[k].name for k in p)],
+             "designs": [{"x": mesh.points, "muscles": [layout[k] for k in p], "difference": 0.04, "success": True}]}
+            for j, p in enumerate(picks)]
+    fig = plot_design_grid(cols)
+    axes = np.array(fig.axes).reshape(2, 3)
+    drawn = sorted({k for p in picks for k in p})
+    assert _legend(axes[1, -1]) == {f"M{k + 1}": muscle_color(k) for k in drawn}
+    assert len({muscle_color(k) for k in range(13)}) == 13
+    for ax, p in zip(axes[1], picks):  # each muscle in its name's colour in every panel
+        got = sorted(to_hex(ln.get_color()) for ln in ax.get_lines() if ln.get_linestyle() == "-")
+        assert got == sorted(muscle_color(k) for k in p)
+    assert axes[1, 1].get_title().endswith(":\nD = 0.04 body units")
+    plt.close(fig)
+
+
+def test_commanded_achieved_never_reads_minus_zero():
+    from mdsr_opt.plot.style import commanded_achieved
+
+    assert commanded_achieved([0.0, 0.26], [-0.001, -0.02], fmt=".2f") == "M1 0.00 \u2192 0.00, M2 0.26 \u2192 -0.02"

@@ -68,7 +68,10 @@ def test_the_shared_layout_keeps_given_names_and_numbers_routed_ones():
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     a, b = Muscle(range(0, 8), name="bottom_left"), Muscle(range(8, 16), name="M1")
     mus, _ = shared_layout(mesh, {"p": [a], "q": [b]})
-    assert [m.name for m in mus] == ["bottom_left", "M2"]
+    # names no other muscle takes are kept (a routed M1 stays M1: one name per rope in every figure)
+    assert [m.name for m in mus] == ["bottom_left", "M1"]
+    mus, _ = shared_layout(mesh, {"p": [Muscle(range(0, 8), name="M1")], "q": [Muscle(range(8, 16), name="M1")]})
+    assert [m.name for m in mus] == ["M1", "M2"]                       # two poses' own M1: by place
     mus, _ = shared_layout(mesh, {"p": [Muscle(range(0, 8), name="x")], "q": [Muscle(range(8, 16), name="x")]})
     assert [m.name for m in mus] == ["M1", "M2"]                       # one name twice: by place
 

@@ -78,9 +78,15 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     summary["external"] = ext.summary()
     energy_label = axis_label("strain energy density", "units of E")
     fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label=energy_label,
-                    nodes=np.append(base, tip), title="external driving: anchored base, dragged tip")
-    plot_mesh(mesh, None, ax=fig.axes[0], color="none", edgecolor="#bbbbbb", alpha=0.6)
-    coordinate_axes(fig.axes[0])
+                    title="external driving: anchored base, dragged tip")
+    ax = fig.axes[0]
+    plot_mesh(mesh, None, ax=ax, color="none", edgecolor="#bbbbbb", alpha=0.6)
+    # the marks said in a legend under the drawing (beside it sits the colour bar)
+    ax.plot(ext.x[base, 0], ext.x[base, 1], "s", color="k", ms=3, label="anchored nodes")
+    ax.plot(ext.x[tip, 0], ext.x[tip, 1], "o", color="#d62728", ms=5, label="dragged tip")
+    ax.plot([], [], "-", color="#bbbbbb", lw=0.8, label="rest shape")
+    legend_below(ax, ncol=3)
+    coordinate_axes(ax)
     save_figure(fig, os.path.join(out, "external.png"), close=True)
     io.write_mesh(os.path.join(out, "external.vtu"), mesh, x=ext.x, material=mat)
 

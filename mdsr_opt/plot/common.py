@@ -15,10 +15,10 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
-from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, muscle_color, muscle_label
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, layout_colors, muscle_label
 
 __all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
-           'coordinate_axes', 'mesh_paths']
+           'coordinate_axes', 'mesh_paths', 'plain_log_ticks']
 
 
 # Legends sit outside the axes, to the right (saved with bbox_inches="tight"): never over the drawing, and no
@@ -35,6 +35,22 @@ def legend_below(ax, ncol: int = 4, fontsize: float = 7, drop: float = 0.5):
     below = ax.transAxes + ScaledTranslation(0.0, -drop, ax.figure.dpi_scale_trans)
     return ax.legend(fontsize=fontsize, loc="upper center", bbox_to_anchor=(0.5, 0.0), bbox_transform=below,
                      ncol=ncol, borderaxespad=0.0)
+
+
+def plain_log_ticks(ax, which: str = "both") -> None:
+    """Tick labels of ``ax``'s log axes (``"x"``, ``"y"`` or ``"both"``) as plain numbers (``0.06``, ``300``,
+    not ``6 x 10^-2``, ``3 x 10^2``), on the ticks matplotlib would label (few minor ones: they never
+    crowd)."""
+    from matplotlib.ticker import LogFormatterSciNotation
+
+    class Plain(LogFormatterSciNotation):
+        def __call__(self, x, pos=None):
+            return f"{x:.3g}" if super().__call__(x, pos) else ""
+
+    for axis in ((ax.xaxis, ax.yaxis) if which == "both" else (ax.xaxis,) if which == "x" else (ax.yaxis,)):
+        if axis.get_scale() == "log":
+            axis.set_major_formatter(Plain(labelOnlyBase=False))
+            axis.set_minor_formatter(Plain(labelOnlyBase=False))
 
 
 def axes_or_new(ax=None, figsize=(6, 4)):
@@ -141,12 +157,15 @@ def plot_edges(x, edges, values, ax=None, cmap="coolwarm", lw=1.5, label=None, v
 
 
 def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
-    """Draw muscle paths over configuration ``x``: muscle ``i`` in :func:`.style.muscle_color` ``(i)``,
+    """Draw muscle paths over configuration ``x``: each in its colour (:func:`.style.layout_colors`: its
+    number's for ``M<k>``, else the first colour no other muscle drawn takes),
     labelled :func:`.style.muscle_label` (its name, else ``M<i+1>``), as in every figure and drawing."""
     fig, ax = axes_or_new(ax)
     x = np.asarray(x)
+    muscles = list(muscles)
+    own = layout_colors(muscles)
     for i, m in enumerate(muscles):
-        c = (colors[i] if colors is not None else muscle_color(i))
+        c = (colors[i] if colors is not None else own[i])
         p = x[list(m.nodes)]
         ax.plot(p[:, 0], p[:, 1], "-", color=c, lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)

@@ -8,7 +8,7 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
-from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, muscle_color,
+from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, label_colors,
                     symmetric_limits, unit_label)
 
 __all__ = ['plot_contraction_graph', 'plot_routing', 'plot_routing_timings', 'plot_design', 'design_title',
@@ -269,8 +269,9 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     else:
         fig = ax.figure
     t = schedule.times
+    colors = label_colors(schedule.muscle_names)
     for i, n in enumerate(schedule.muscle_names):
-        c = muscle_color(i)
+        c = colors[i]
         ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
                 f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
         if np.isfinite(schedule.achieved[:, i]).any():
@@ -279,6 +280,9 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     for k in schedule.keyframes:
         ax.axvline(t[k], color="0.75", lw=0.8, zorder=0)
         ax.text(t[k], top * 1.04 if top > 0 else 0.02, schedule.labels[k], ha="center", va="bottom", fontsize=8)
+    if np.isfinite(schedule.achieved).any():  # how to read the two kinds of line, in the legend too
+        ax.plot([], [], "-", color="0.35", lw=1.8, label="commanded")
+        ax.plot([], [], ":", color="0.35", lw=1.2, label="achieved")
     bad = ~schedule.success
     if bad.any():
         ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")

@@ -28,15 +28,17 @@ Example
 
 from __future__ import annotations
 
+import re
+
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
 from matplotlib.lines import Line2D
 
-from .common import legend_below
-from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, muscle_color, muscle_label,
-                    muscle_name, symmetric_limits, unit_label)
+from .common import legend_below, plain_log_ticks
+from .style import (BODY, CONTRACTION_CMAP, TARGET, add_colorbar, axis_label, label_colors, layout_colors,
+                    muscle_label, symmetric_limits, unit_label)
 
 __all__ = ["plot_layout_grid", "plot_design_grid", "plot_convergence"]
 
@@ -46,11 +48,16 @@ def _mesh(ax, mesh, x, face="#e3e9f0", edge="#a9b6c4", alpha=1.0, lw=0.25):
                                      linewidths=lw, alpha=alpha))
 
 
-def _muscles(ax, x, muscles, lw=2.4, labels=True):
+def _muscles(ax, x, muscles, lw=2.4, labels=True, palette=None):
+    """Muscles over ``x``; ``palette`` ({name: colour}, :func:`_row_palette`) colours a row's panels alike."""
     x = np.asarray(x)
+    muscles = list(muscles)
+    colors = layout_colors(muscles)
+    if palette is not None:
+        colors = [palette.get(muscle_label(m, i), c) for i, (m, c) in enumerate(zip(muscles, colors))]
     for i, m in enumerate(muscles):
         p = x[list(m.nodes)]
-        ax.plot(p[:, 0], p[:, 1], "-", color=muscle_color(i), lw=lw, solid_capstyle="round",
+        ax.plot(p[:, 0], p[:, 1], "-", color=colors[i], lw=lw, solid_capstyle="round",
                 label=muscle_label(m, i) if labels else None)
         ax.plot(p[[0, -1], 0], p[[0, -1], 1], "o", color="k", ms=2.5)
 
@@ -60,6 +67,45 @@ def _finish(ax):
     ax.autoscale_view()
     ax.set_xticks([])
     ax.set_yticks([])
+
+
+def _scale_bar(ax, x, units=None):
+    """A scale bar under the lower right corner of a drawing without coordinate ticks: a round length near a quarter
+    of the drawing's width, labelled with its unit (:func:`.style.unit_label`), so the panel's size reads
+    as a labelled axis would give it."""
+    from matplotlib.offsetbox import AnchoredOffsetbox, AuxTransformBox, HPacker, TextArea, VPacker
+    from matplotlib.patches import Rectangle
+
+    width = float(np.ptp(np.asarray(x, dtype=float)[:, 0])) or 1.0
+    raw = 0.25 * width
+    step = 10.0 ** np.floor(np.log10(raw))
+    length = max(m * step for m in (1, 2, 5) if m * step <= raw)
+    bar = AuxTransformBox(ax.transData)
+    bar.add_artist(Rectangle((0, 0), length, 0, lw=1.6, edgecolor="k", facecolor="none"))
+    text = TextArea(f"{length:g} {unit_label(units)}", textprops={"fontsize": 7})
+    box = VPacker(children=[bar, HPacker(children=[text], align="center", pad=0, sep=0)], align="center",
+                  pad=0, sep=2)
+    # outside the axes, under their lower right corner: over no part of the drawing
+    ax.add_artist(AnchoredOffsetbox(loc="upper right", child=box, pad=0.1, borderpad=0.1, frameon=False,
+                                    bbox_to_anchor=(1.0, 0.0), bbox_transform=ax.transAxes))
+
+
+def _row_legend(ax, palette):
+    """The muscles' names and colours of a row of panels (``{name: colour}``), beside its last panel (over no
+    drawing)."""
+    if palette:
+        handles = [Line2D([], [], color=c, lw=2.4) for c in palette.values()]
+        ax.legend(handles, list(palette), fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
+                  borderaxespad=0.0, handlelength=1.5)
+
+
+def _row_palette(layouts) -> dict:
+    """``{name: colour}`` of every muscle drawn in a row of panels, each name once (numbered ones in their
+    number's order): every panel of the row draws a muscle of that name in that colour and the row's
+    legend lists them all (the face's expressions each pull another subset of one layout)."""
+    names = list(dict.fromkeys(muscle_label(m, i) for lay in layouts for i, m in enumerate(lay)))
+    names.sort(key=lambda n: (0, int(n[1:])) if re.fullmatch(r"M[1-9][0-9]*", n) else (1, 0))
+    return dict(zip(names, label_colors(names)))
 
 
 def plot_layout_grid(columns, title=None):
@@ -96,17 +142,20 @@ def plot_layout_grid(columns, title=None):
             w = (l0 - np.linalg.norm(x[E[:, 1]] - x[E[:, 0]], axis=1)) / l0
         weights.append(np.asarray(w, dtype=float))
     lo, hi = symmetric_limits(*weights)  # one scale for the row: the columns compare
+    palettes = [_row_palette([list(c["layouts"][i]) for c in columns if i < len(c["layouts"])])
+                for i in range(n_lay)]
     lc = None
     for j, c in enumerate(columns):
         mesh, x = c["mesh"], np.asarray(c["target"], dtype=float)
         ax = axes[0, j]
         _mesh(ax, mesh, x)
-        for key, mark, col in (("anchors", "s", "k"), ("drag_nodes", "o", "#d62728")):
+        for key, mark, col, what in (("anchors", "s", "k", "anchors"), ("drag_nodes", "o", "#d62728", "drag points")):
             idx = np.asarray(c.get(key, ()), dtype=int)
             if len(idx):
-                ax.plot(x[idx, 0], x[idx, 1], mark, color=col, ms=2.0)
+                ax.plot(x[idx, 0], x[idx, 1], mark, color=col, ms=2.0, label=what)
         ax.set_title(c["title"], fontsize=9)
         _finish(ax)
+        _scale_bar(ax, x, c.get("units"))
         ax = axes[1, j]
         lc = LineCollection(x[mesh.edges], cmap=CONTRACTION_CMAP, linewidths=0.9)
         lc.set_array(weights[j])
@@ -117,7 +166,7 @@ def plot_layout_grid(columns, title=None):
             ax = axes[2 + i, j]
             _mesh(ax, mesh, x, alpha=0.8)
             mus = list(lay)
-            _muscles(ax, x, mus, labels=False)
+            _muscles(ax, x, mus, labels=False, palette=palettes[i])
             ax.set_title(f"{label}: {len(mus)} muscle(s)", fontsize=8)
             _finish(ax)
     for i, name in enumerate(["A target", "B contraction graph"] + [f"{chr(67 + k)} layout" for k in range(n_lay)]):
@@ -130,15 +179,15 @@ def plot_layout_grid(columns, title=None):
     # one legend per layout row, beside its last panel: over no drawing, the muscles' names and colours
     # as in every figure (a name the columns do not share is the muscle's place, M<k>)
     for i in range(n_lay):
-        lays = [list(c["layouts"][i]) for c in columns if i < len(c["layouts"])]
-        names = []
-        for k in range(max((len(m) for m in lays), default=0)):
-            own = {muscle_label(m[k], k) for m in lays if k < len(m)}
-            names.append(own.pop() if len(own) == 1 else muscle_name(k))
-        if names:
-            handles = [Line2D([], [], color=muscle_color(k), lw=2.4) for k in range(len(names))]
-            axes[2 + i, -1].legend(handles, names, fontsize=7, loc="upper left", bbox_to_anchor=(1.03, 1.0),
-                                   borderaxespad=0.0, handlelength=1.5)
+        _row_legend(axes[2 + i, -1], palettes[i])
+    # row A's marks: anchors and drag points, beside its last panel
+    marks = {}
+    for ax in axes[0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            marks.setdefault(lab, Line2D([], [], ls="none", marker=h.get_marker(), color=h.get_color(), ms=4))
+    if marks:
+        axes[0, -1].legend(list(marks.values()), list(marks), fontsize=7, loc="upper left",
+                           bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0, handlelength=1.0)
     return fig
 
 
@@ -173,25 +222,34 @@ def plot_design_grid(columns, title=None, row_names=None):
         raise ValueError(f"plot_design_grid: {len(row_names)} row names for {rows} rows (the target's, then one "
                          f"per design row)")
     fig, axes = plt.subplots(rows, len(columns), figsize=(3.2 * len(columns), 2.6 * rows), squeeze=False)
+    palettes = [_row_palette([list(c["designs"][i]["muscles"]) for c in columns if i < len(c["designs"])])
+                for i in range(n_lay)]
     for j, c in enumerate(columns):
         mesh, y = c["mesh"], np.asarray(c["target"], dtype=float)
         ax = axes[0, j]
         _mesh(ax, mesh, y, face="#bbbbbb", edge="#888888")
         ax.set_title(c["title"], fontsize=9)
         _finish(ax)
+        _scale_bar(ax, y, c.get("units"))
         for i, (d, label) in enumerate(zip(c["designs"], c["row_labels"])):
             ax = axes[1 + i, j]
             _mesh(ax, mesh, y, face=TARGET["face"], edge="none", alpha=0.45)
             _mesh(ax, mesh, d["x"], face=BODY["face"], edge=BODY["edge"], alpha=0.45, lw=0.2)
-            _muscles(ax, d["x"], d["muscles"], lw=1.8, labels=False)
+            _muscles(ax, d["x"], d["muscles"], lw=1.8, labels=False, palette=palettes[i])
             flag = "" if d["success"] else " FAILED"
-            ax.set_title(f"{label}: D = {d['difference']:.3g} {unit_label(c.get('units'))}{flag}", fontsize=8)
+            # a long label (the muscles an expression pulls) keeps its own line: titles never run into the
+            # next panel's
+            what = f"D = {d['difference']:.3g} {unit_label(c.get('units'))}{flag}"
+            ax.set_title(f"{label}: {what}" if len(label) + len(what) <= 42 else f"{label}:\n{what}", fontsize=8)
             _finish(ax)
     for i, name in enumerate(row_names):
         axes[i, 0].set_ylabel(name, fontsize=9)
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
+    # after the layout: per design row the muscles' names and colours beside its last panel (as in 6a)
+    for i in range(n_lay):
+        _row_legend(axes[1 + i, -1], palettes[i])
     return fig
 
 
@@ -226,6 +284,7 @@ def plot_convergence(panels, title=None, log=True):
                     label=f"{label} ({int(it[-1]) if len(it) else 0} it.)")
         if log:
             ax.set_yscale("log")
+            plain_log_ticks(ax, "y")
         ax.set_title(p["title"], fontsize=9)
         ax.set_xlabel(axis_label("IPOPT iteration", "count"))
         ax.grid(alpha=0.3)

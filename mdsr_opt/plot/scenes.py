@@ -15,7 +15,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
-from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, muscle_color, muscle_label
+from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, layout_colors, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -208,13 +208,13 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     for p in (body, edges):
         ax.add_artist(p)  # not add_patch: its data-limit update walks every segment; the limits are set below
     moving += [body, edges]
-    lines = [ax.plot([], [], "-", color=muscle_color(i), solid_capstyle="round", zorder=3)[0]
-             for i in range(len(muscles))]
+    colors = layout_colors(muscles)
+    lines = [ax.plot([], [], "-", color=c, solid_capstyle="round", zorder=3)[0] for c in colors]
     moving += lines
     if muscles:  # the legend is drawn once, with the background: proxies, not the moving lines
         from matplotlib.lines import Line2D
 
-        ax.legend([Line2D([], [], color=muscle_color(i), lw=3) for i in range(len(muscles))],
+        ax.legend([Line2D([], [], color=c, lw=3) for c in colors],
                   [muscle_label(m, i) for i, m in enumerate(muscles)], fontsize=9, **LEGEND_OUTSIDE)
     paths = [list(m.nodes) for m in muscles]
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -234,10 +234,14 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     background = canvas.copy_from_bbox(fig.bbox)
     # The titles: matplotlib's text drawing (laying out and rendering every glyph, twice per frame) was a
     # quarter of a frame's time; Pillow draws them with the same font file and size, centred on the same
-    # baseline point, in a tenth of that.
-    font = ImageFont.truetype(findfont(title.get_fontproperties()), title.get_fontsize() * fig.dpi / 72.0)
-    tx, ty = title.get_transform().transform(title.get_position())
-    anchor = (float(tx), canvas.get_width_height()[1] - float(ty) - 1.0)  # Agg sets text 1 px higher
+    # bottom edge as matplotlib placed the first frame's title (above the axes, clear of them also when a
+    # title wraps to two lines: the lines grow upwards), in a tenth of that.
+    size_px = title.get_fontsize() * fig.dpi / 72.0
+    font = ImageFont.truetype(findfont(title.get_fontproperties()), size_px)
+    tx, _ = title.get_transform().transform(title.get_position())
+    bottom = title.get_window_extent(canvas.get_renderer()).y0
+    anchor = (float(tx), canvas.get_width_height()[1] - float(bottom) - 1.0)  # Agg sets text 1 px higher
+    spacing = 0.2 * size_px  # matplotlib's line spacing (1.2)
     ink = tuple(round(255 * c) for c in to_rgba(title.get_color())[:3])
 
     def frame(k):
@@ -256,7 +260,8 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         buf = canvas.buffer_rgba()
         im = Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), buf, "raw", "RGBA", 0, 1).convert("RGB")
         title.set_text(names[k])  # the figure's own title follows the frame (for anyone drawing it)
-        ImageDraw.Draw(im).text(anchor, names[k], font=font, fill=ink, anchor="ms")
+        ImageDraw.Draw(im).multiline_text(anchor, names[k], font=font, fill=ink, anchor="md", align="center",
+                                          spacing=spacing)
         return im
 
     rgb = [frame(k) for k in range(len(states))]  # RGB copies: the canvas is drawn over for the next frame

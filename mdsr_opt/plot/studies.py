@@ -9,7 +9,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..core.stats import fit_slopes, pareto_front
-from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes
+from .common import LEGEND_OUTSIDE, axes_or_new, panel_axes, plain_log_ticks
+from .style import axis_label
 
 __all__ = ['plot_study_pareto', 'plot_study_scaling', 'plot_study_success', 'plot_fidelity',
            'plot_recommendation']
@@ -88,6 +89,7 @@ def plot_study_pareto(rows, axes=None, title=None, floor=1e-14):
                            color=c, marker="x", s=18, alpha=0.6, label=None if ok else f"{m} (failed)")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        plain_log_ticks(ax)
         ax.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap on a short range
         ax.set_xlabel("build + solve time (s)")
         ax.set_ylabel(ylabels[kind])
@@ -130,8 +132,9 @@ def plot_study_scaling(rows, slopes=None, ax=None, title=None):
             ax.plot(xs, 10 ** (fit[1] + fit[0] * np.log10(xs)), "-", color=colors[m], lw=1.2)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("mesh nodes")
+    ax.set_xlabel(axis_label("mesh nodes", "count"))
     ax.set_ylabel("build + solve time (s)")
+    plain_log_ticks(ax)
     ax.set_title(f"study {title}: time against nodes (fitted time ~ nodes^slope)" if title else
                  "time against nodes (fitted time ~ nodes^slope)", fontsize=9)
     ax.grid(True, which="both", alpha=0.25)
@@ -256,15 +259,18 @@ def plot_fidelity(rows, choices, title=None, max_cols=3, fig=None):
                         fontsize=6, xytext=(4, 4), textcoords="offset points")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("mesh nodes")
-        ax.set_ylabel("max node error / body size")
+        ax.set_xlabel(axis_label("mesh nodes", "count"))
+        ax.set_ylabel(axis_label("max node error / body size", "1"))
+        plain_log_ticks(ax)
         ax.set_title(f"{p}, load {load:g}", fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
     for ax in axes.ravel()[len(scenes):]:
         ax.axis("off")
     fig.suptitle(title or "fidelity: error against the finest model (x = failed; circles = chosen)", fontsize=10)
-    fig.tight_layout()
+    # one legend for every panel (the material models are the same), under the panels: over no curve
+    handles = [plt.Line2D([], [], color=colors[m], marker="o", ms=4, label=m) for m in mats]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     return fig
 
 
@@ -304,7 +310,7 @@ def plot_recommendation(rows, rec, ax=None, floor=1e-8):
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("build + solve time summed over the cases (s)")
-    ax.set_ylabel("worst node error / body size (finer-mesh reference)")
+    ax.set_ylabel(axis_label("worst node error / body size, finer-mesh reference", "1"))
     pick = (f"recommended {rec['method']} at {rec['resolution']} (circled)" if rec["met"] else
             "no backend and mesh met the tolerance (closest circled)")
     ax.set_title(f"{rec['scene']}: {pick}; labels: nodes; x = a case failed", fontsize=9)

@@ -5,7 +5,9 @@ This module is the one place that owns
 - muscle names and colours: muscle ``i`` (0-based, its place in the layout) is called
   :func:`muscle_name` ``(i)`` (``"M1"``, ``"M2"``, ...) unless it carries a name of its own
   (:func:`muscle_label`), and is drawn in :func:`muscle_color` ``(i)`` in design figures, Figure 6,
-  schedules, animations and the fabrication SVG and DXF alike;
+  schedules, animations and the fabrication SVG and DXF alike (a numbered name ``M<k>`` is always
+  colour ``k``, so one name is one colour also where a muscle is drawn without the muscles numbered before
+  it; another name takes the first colour no muscle of the same figure takes: :func:`label_colors`);
 - the colours of bodies (driven, target, rest outline) and of measured contours;
 - colour scales (:func:`symmetric_limits` and :func:`shared_limits` give panels meant to be compared one
   scale) and colour bars the height of their axes (:func:`add_colorbar`);
@@ -21,23 +23,28 @@ stage at or above ``plot`` can use it.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..body.muscles import default_muscle_name
 
 __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LINE", "CONTOUR", "CONTOUR_EDGE", "ENERGY_CMAP",
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
-           "muscle_color", "muscle_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
+           "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots",
+           "label_colors", "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
            "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
-#: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 10]``): saturated, apart from
+#: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 20]``): saturated, apart from
 #: the bodies' blues and greys, and told apart from one another (matplotlib's tab10 without its grey, red
-#: first as the fabrication drawings always had it).
+#: first as the fabrication drawings always had it; then ten darker or stronger ones, so a layout of up to
+#: 20 muscles, as the face's 13, has no colour twice).
 MUSCLE_COLORS = ("#d62728", "#1f77b4", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-                 "#bcbd22", "#393b79")
+                 "#bcbd22", "#393b79", "#8b0000", "#ffd700", "#006400", "#b8860b", "#4b0082", "#ff1493",
+                 "#008080", "#808000", "#ff00ff", "#5f9ea0")
 
 #: AutoCAD colour index nearest to each of :data:`MUSCLE_COLORS` (DXF entities carry an ACI colour)
-_ACI = (1, 5, 3, 30, 200, 34, 221, 4, 50, 170)
+_ACI = (1, 5, 3, 30, 200, 34, 221, 4, 50, 170, 16, 2, 96, 42, 192, 230, 134, 56, 6, 132)
 
 #: Named node regions (a scene's rest figure): ColorBrewer's Dark2, drawn as squares, so that a region is
 #: never taken for a muscle of the same colour
@@ -90,8 +97,62 @@ def muscle_colors(n: int) -> list[str]:
     return [muscle_color(i) for i in range(int(n))]
 
 
+#: a muscle's default name, ``M<k>`` (:func:`muscle_name`)
+_NUMBERED = re.compile(r"M([1-9][0-9]*)")
+
+
+def muscle_slot(label: str, i: int) -> int:
+    """The colour slot of a muscle labelled ``label``, the ``i``-th (0-based) of what is drawn: ``k - 1`` for
+    a numbered name ``M<k>`` (so muscle ``M3`` keeps its colour in a figure that shows it alone or first,
+    as a case of a scene whose muscles are numbered scene-wide), else ``i``."""
+    m = _NUMBERED.fullmatch(str(label))
+    return int(m.group(1)) - 1 if m else int(i)
+
+
+def name_color(label: str, i: int) -> str:
+    """The colour of the muscle labelled ``label``, ``i``-th of what is drawn: :func:`muscle_color` of its
+    :func:`muscle_slot`. Every figure, animation and drawing colours muscles by it (or by
+    :func:`muscle_color_of`), so one name is one colour everywhere."""
+    return muscle_color(muscle_slot(label, i))
+
+
+def muscle_color_of(muscle, i: int) -> str:
+    """The colour of ``muscle``, the ``i``-th (0-based) of what is drawn: :func:`name_color` of its
+    :func:`muscle_label`."""
+    return name_color(muscle_label(muscle, i), i)
+
+
+def label_slots(labels) -> list[int]:
+    """The colour slots of the muscles labelled ``labels``, drawn together: a numbered name ``M<k>`` takes
+    slot ``k - 1`` (:func:`muscle_slot`), every other name the lowest slot no muscle of the set takes, in
+    order, so no two muscles of one figure share a colour unless two are numbered alike."""
+    labels = [str(n) for n in labels]
+    fixed = [muscle_slot(n, -1) for n in labels]
+    used = {s for s in fixed if s >= 0}
+    out, free = [], 0
+    for s in fixed:
+        if s < 0:
+            while free in used:
+                free += 1
+            s = free
+            used.add(s)
+        out.append(s)
+    return out
+
+
+def label_colors(labels) -> list[str]:
+    """The colours of the muscles labelled ``labels``, drawn together (:func:`label_slots`)."""
+    return [muscle_color(s) for s in label_slots(labels)]
+
+
+def layout_colors(muscles) -> list[str]:
+    """The colours of ``muscles`` drawn together: :func:`label_colors` of their :func:`muscle_label`."""
+    return label_colors([muscle_label(m, i) for i, m in enumerate(muscles)])
+
+
 def dxf_color(i: int) -> int:
-    """The AutoCAD colour index (ACI) standing for :func:`muscle_color` ``(i)`` in DXF files."""
+    """The AutoCAD colour index (ACI) standing for :func:`muscle_color` ``(i)`` in DXF files (``i`` a colour
+    slot: :func:`muscle_slot`)."""
     return _ACI[int(i) % len(_ACI)]
 
 
@@ -164,11 +225,15 @@ def commanded_achieved(commanded, achieved=None, names=None, fmt: str = ".3f") -
     if a is not None and a.size != c.size:
         a = None
     names = [muscle_name(i) for i in range(c.size)] if names is None else list(names)
+    def num(v):  # a value that rounds to zero reads 0.00, never -0.00
+        t = f"{v:{fmt}}"
+        return t[1:] if t.startswith("-") and float(t) == 0.0 else t
+
     parts = []
     for i, v in enumerate(c):
-        s = f"{names[i]} {v:{fmt}}" if np.isfinite(v) else f"{names[i]} nan"
+        s = f"{names[i]} {num(v)}" if np.isfinite(v) else f"{names[i]} nan"
         if a is not None:
-            s += f" \u2192 {a[i]:{fmt}}" if np.isfinite(a[i]) else " \u2192 nan"
+            s += f" \u2192 {num(a[i])}" if np.isfinite(a[i]) else " \u2192 nan"
         parts.append(s)
     return ", ".join(parts)
 

@@ -33,7 +33,8 @@ class AnimationResult:
         Every frame's forward solve succeeded.
     failed_frames : list of int
     message : str
-        Why the animation could not be made (empty otherwise).
+        Why the animation could not be made, or (a success) the note that its end fixtures differ from
+        the cases' designs; empty otherwise.
     """
 
     name: str
@@ -77,13 +78,18 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     ----------
     scene : Scene
     animation : Animation or its name in ``scene.animations``.
-    designs : mapping of case name to ``(muscles, contractions)``
+    designs : mapping of case name to ``(muscles, contractions)`` or ``(muscles, contractions, anchor_radius)``
         The designed muscles and contractions of every case the animation names (from :func:`run_case`:
-        ``(run.setup.muscles, run.design.contractions)``).
+        ``(run.setup.muscles, run.design.contractions, run.design.anchor_radius)``), and the radius of the
+        end fixtures the design was made with.
 
     Each keyframe ``(case, f)`` sets that case's muscles to ``f`` times its contractions and every other
     muscle to 0 (``"rest"`` sets all to 0); frames in between interpolate linearly. Muscles shared by
-    several cases (equal node paths) are one muscle.
+    several cases (equal node paths) are one muscle. The frames are solved with the end fixtures the cases
+    were designed with (the scene's ``anchor_radius``, else the radius every case's design gives); only
+    when the cases' fixtures differ (layouts fitted apart) one size is taken at which every rope keeps its
+    fixtures (:func:`~mdsr_opt.synthesis.routing_fixtures.common_fixture_radius`), and the result's
+    ``message`` says so.
     """
     from ..mechanics.equilibrium import solve_internal
 
@@ -96,7 +102,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     for cname in animation.cases:
         if cname not in designs:
             return AnimationResult(animation.name, message=f"case {cname!r} has no design in this run")
-        mus, a = designs[cname]
+        mus, a = designs[cname][:2]
         if len(mus) != len(a):
             raise ValueError(f"designs[{cname!r}]: {len(a)} contraction(s) for {len(mus)} muscle(s)")
     union, slots = union_of_layouts({c: designs[c][0] for c in animation.cases})
@@ -120,14 +126,24 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     # (moved to the solver's gauge: warm_start_state), else from the solver's default start.
     solved: dict[bytes, tuple] = {}
     prev = None
-    radius = opts.get("anchor_radius")
-    if radius is None and scene.muscles is None and scene.routing_options.get("fabrication") is not False:
-        # routed layouts fit their own fixtures: one size all the driven ropes keep theirs with
+    radius, note = opts.get("anchor_radius"), ""
+    # the fixtures the cases' designs were made with (a routed layout's fit its ropes)
+    given = {c: float(designs[c][2]) for c in animation.cases if len(designs[c]) > 2 and designs[c][2] is not None
+             and np.isfinite(designs[c][2])}
+    if radius is None and given and len(given) == len(animation.cases) and (
+            max(given.values()) - min(given.values()) <= 1e-9 * max(max(given.values()), 1e-300)):
+        radius = next(iter(given.values()))
+    elif radius is None and scene.muscles is None and scene.routing_options.get("fabrication") is not False:
+        # routed layouts fitted apart: one size all the driven ropes keep their fixtures with
         from ..synthesis.fabrication import check_fabrication
         from ..synthesis.routing_fixtures import common_fixture_radius
 
         fab = check_fabrication(scene.routing_options.get("fabrication")).for_body(scene.mesh)
         radius = common_fixture_radius(scene.mesh, union, fab)
+        if given:
+            note = (f"end fixtures of radius {radius:.4g} (the cases' designs: "
+                    + ", ".join(f"{c} {r:.4g}" for c, r in given.items()) + "): one size every rope keeps its "
+                    "fixtures with")
     kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=radius)
     for i, a in enumerate(frames):
         key = np.round(a, 12).tobytes()
@@ -149,8 +165,8 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
             fails.append(i)
         states.append(x.copy())
         prev = x if ok and np.any(a > 0) else None
-    return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails,
-                           "" if not fails else f"{len(fails)} forward solve(s) failed")
+    msg = "; ".join(m for m in (f"{len(fails)} forward solve(s) failed" if fails else "", note) if m)
+    return AnimationResult(animation.name, tuple(union), np.array(frames), states, not fails, fails, msg)
 
 
 def union_of_layouts(layouts: Mapping[str, Sequence[Muscle]]) -> tuple[tuple, dict]:

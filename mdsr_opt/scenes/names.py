@@ -1,4 +1,5 @@
-"""The names a run writes into its folder, and the check that case and animation names do not collide."""
+"""The names a run writes into its folder, the check that case and animation names do not collide, and one
+name per muscle across a scene's cases (:func:`number_in_scene`)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from typing import Sequence
 
 from .reader import SceneFileError
 
-__all__ = ['check_output_names']
+__all__ = ['check_output_names', 'number_in_scene']
 
 
 #: Names a case or animation may not take: "rest" is the rest pose in keyframes; "summary" names the run's
@@ -56,3 +57,37 @@ def check_name(name, what: str) -> None:
 
 #: Files every scene run writes directly into its folder; case folders and animation files go beside them.
 RUN_FILES = ("rest.png", "summary.json", "summary.md", "validation.md")
+
+
+def number_in_scene(muscles: Sequence, taken: Sequence = ()) -> tuple:
+    """A case's routed ``muscles`` named as one scene's: a muscle on the node path of one in ``taken`` (the
+    muscles earlier cases of the run were designed with) takes that one's name; the other numbered ones
+    (``M<k>``, as routing names them) are numbered on from the highest number ``taken`` holds; a muscle's
+    own name stays. So in gecko's run bend_left's rope is M1 and bend_right's two are M2 and M3 in the
+    cases' figures, in the gait's layout, schedule, animation and fabrication files alike, each in one
+    colour (:func:`mdsr_opt.plot.style.name_color`). Without ``taken`` the muscles are returned as they are.
+    """
+    from ..body.muscles import Muscle
+    from ..plot.style import muscle_label, muscle_name, muscle_slot
+
+    muscles = tuple(muscles)
+    if not taken:
+        return muscles
+    known = {tuple(m.nodes): muscle_label(m, i) for i, m in enumerate(taken)}
+    labels = [muscle_label(m, i) for i, m in enumerate(taken)]
+    used = set(labels)
+    top = max((muscle_slot(n, -1) + 1 for n in labels), default=0)
+    out = []
+    for i, m in enumerate(muscles):
+        own = muscle_label(m, i)
+        name = known.get(tuple(m.nodes))
+        if name is None:
+            if muscle_slot(own, -1) < 0 and own not in used:  # a name of its own: kept
+                name = own
+            else:
+                while muscle_name(top) in used:
+                    top += 1
+                name = muscle_name(top)
+        used.add(name)
+        out.append(Muscle(m.nodes, name=name))
+    return tuple(out)

@@ -18,7 +18,9 @@ from ..core.results import compact_repr, to_jsonable
 from ..mechanics.align import difference, node_weights
 from ..plot.style import muscle_label, unit_label
 from ..synthesis.results import MuscleWarning
+from ..body.muscles import Muscle
 from .cases import CaseSetup, prepare_case
+from .names import number_in_scene
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
@@ -221,7 +223,7 @@ def _edge_set(muscles) -> set:
 def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo: bool = True,
              photo_size: tuple[int, int] = (500, 500), log: Callable[[str], None] | None = None,
              prefix: str = "", prototype: Any = None, max_difference: float | None = None,
-             bands: bool | None = None) -> CaseRun:
+             bands: bool | None = None, taken: Sequence[Muscle] = ()) -> CaseRun:
     """Run one case through the pipeline (nothing is written).
 
     Target (external or internal driving) -> contraction graph and muscles (:func:`prepare_case`) ->
@@ -239,7 +241,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     made again, :func:`~mdsr_opt.synthesis.acceptance.design_active`; an internal case keeps the scene's
     layout, whose known contractions are the answer); a saturated muscle is reported in ``saturated``.
     With ``bands`` (default: the scene's ``acceptance["bands"]``) every stroke gets its uncertainty band
-    (:func:`~mdsr_opt.synthesis.bands.stroke_bands`).
+    (:func:`~mdsr_opt.synthesis.bands.stroke_bands`). ``taken``: the muscles earlier cases of the same run
+    were designed with; routed muscles are named as the scene's (:func:`~mdsr_opt.scenes.names.number_in_scene`:
+    one rope, one name and colour in every case's figures, the gait and the animations).
 
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``
     says where and why; a stage that refuses the case's own data (a routed layout whose end patches
@@ -270,6 +274,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     check_interrupt()  # Ctrl-C swallowed inside a solve stops here, never reported as a failed case
+    if taken and setup.routing is not None and case.kind == "external" and scene.muscles is None \
+            and case.muscles is None:  # routed for this case: numbered on from the earlier cases'
+        setup.muscles = number_in_scene(setup.muscles, taken)
     run.setup = setup
     tr = setup.target_result
     rep.target_success, rep.target_status = bool(tr.success), str(tr.status)

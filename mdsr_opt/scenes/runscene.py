@@ -241,19 +241,22 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     def send_animations():  # those whose cases have all run (an animation of the rest shape: at once)
         for anim in [a for a in waiting if all(c in runs for c in a.cases)]:
             waiting.remove(anim)
-            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions) for c in anim.cases
-                       if runs[c].design is not None}
+            designs = {c: (runs[c].setup.muscles, runs[c].design.contractions, runs[c].design.anchor_radius)
+                       for c in anim.cases if runs[c].design is not None}
             bg.submit(_animation_job, scene, anim, designs, out, figures,
                       on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
 
     send_animations()
+    taken: list = []
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
         check_interrupt()
         # the photograph stage (measure_case) and the case's files are background jobs: the report's
         # photo entry, the files and the stage's messages arrive at bg.wait()
         run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
-                                     max_difference=max_difference, bands=bands)
+                                     max_difference=max_difference, bands=bands, taken=taken)
+        if run.setup is not None:  # the next cases' routed muscles are named on from these (one name a rope)
+            taken += [m for m in run.setup.muscles if m not in taken]
         send_animations()
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
@@ -440,8 +443,8 @@ def _animation_job(scene: Scene, anim, designs: dict, out: Path, figures: bool) 
     data = res.to_dict()
     if res.states:
         said = (f"[{scene.name}] animation {anim.name}: {len(res.states)} frames, {len(res.muscles)} muscle(s), "
-                + ("all forward solves succeeded" if res.success else f"{res.message} (frames "
-                   f"{res.failed_frames})"))
+                + ("all forward solves succeeded" + (f"; {res.message}" if res.message else "") if res.success
+                   else f"{res.message} (frames {res.failed_frames})"))
         if figures:
             act = res.contractions / scene.design_options.get("a_max", 0.6)
             # titles state per muscle the contraction commanded and the one reached along its node chain

@@ -10,7 +10,9 @@
     length unit and the ``width``/``height`` attributes state the physical size, so a printer or laser cutter
     reproduces it 1:1. Both ends of every channel carry their fixture: a circle of the fixture's radius
     (the design's ``anchor_radius``, class ``end``) and one of that radius plus the wall (class
-    ``end-wall``); each muscle is labelled with its name. A place where the layout cannot be moulded
+    ``end-wall``); ends closer than that radius share one plate, drawn once in black (class ``end shared``,
+    ``data-muscles`` naming its muscles; :func:`~mdsr_opt.synthesis.export_dxf.fixture_plates`); each muscle
+    is labelled with its name beside its channel, in its colour as in every figure. A place where the layout cannot be moulded
     (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or fixture outside the body, channels or
     fixtures of different muscles closer than a wall, ropes that cross) carries a red ring (class ``conflict``,
     group ``conflicts``) and the caption, wrapped to the drawing's width, says it.
@@ -18,7 +20,8 @@
     The same geometry as DXF R12 (ASCII; ``$INSUNITS`` set to the unit): layers ``BODY`` (outer outline,
     a closed POLYLINE), ``HOLES``, ``MUSCLES`` (one open POLYLINE per muscle, its vertices the muscle's
     nodes at rest, its width the channel width), ``WALLS`` (the same polylines as wide as the channel and
-    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles),
+    its two walls, and the fixtures' circles of radius fixture + wall), ``ENDS`` (the fixtures' circles; a
+    shared plate once, as a closed polyline where its ends lie apart),
     ``LABELS`` (text) and ``CONFLICTS`` (a circle where the layout cannot be moulded, as the SVG's red rings).
 ``<name>_muscles.csv``
     One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
@@ -57,8 +60,8 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
-from ..plot.style import muscle_color, muscle_label, muscle_name
-from .export_dxf import dxf_text, label_at
+from ..plot.style import layout_colors, muscle_label, muscle_name
+from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
 from .poses import PosesResult
 
@@ -292,6 +295,10 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
 _NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
 
 
+#: The stroke of a fixture plate that several muscles share (each muscle's own plate is in its colour)
+SHARED_PLATE = "#000000"
+
+
 def escape(text) -> str:
     """``text`` as XML character data or an attribute value: ``& < > " '`` as entities, any character XML
     does not allow replaced by U+FFFD (so the SVG always parses)."""
@@ -313,8 +320,11 @@ def _svg_text(fd: FabricationData, title: str) -> str:
 
     lw = 0.002 * size
     fs = 0.035 * size
+    shared = sum(len({i for i, _ in held}) > 1 for held, _ in fixture_plates(fd.paths, fd.end_radius))
     caption = (f"{title}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
-               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls; units: {u}")
+               f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls"
+               + (f" (black: {shared} plate(s) that muscles ending closer than a radius share)" if shared else "")
+               + f"; units: {u}")
     if fd.conflicts:
         caption += (f". NOT MOULDABLE as laid out ({len(fd.conflicts)} place(s), red rings): "
                     + "; ".join(cf.message for cf in fd.conflicts))
@@ -335,7 +345,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
         out.append(f'<polygon id="{kind}" class="{"outline" if i == 0 else "hole"}" points="{pts}"/>')
     out.append("</g>")
     out.append('<g id="muscles" fill="none" stroke-linecap="round" stroke-linejoin="round">')
-    colors = [muscle_color(i) for i in range(len(fd.muscles))]  # the figures' colours (plot.style)
+    colors = layout_colors(fd.muscles)  # the figures' colours (plot.style)
     for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
         c = colors[i]
         pts = " ".join(xy(p) for p in path)
@@ -348,18 +358,29 @@ def _svg_text(fd: FabricationData, title: str) -> str:
                    f'stroke-width="{lw:.6g}" data-rest-length="{fd.rest_lengths[i]:.9g}" data-units="{u}"/>')
     out.append("</g>")
     out.append(f'<g id="ends" fill="none" stroke-width="{lw:.6g}">')
-    for i, path in enumerate(fd.paths):
-        c = colors[i]
-        for p in (path[0], path[-1]):
-            x, y = xy(p).split(",")
-            out.append(f'<circle class="end" cx="{x}" cy="{y}" r="{fd.end_radius:.9g}" stroke="{c}"/>')
-            if fd.wall > 0:
-                out.append(f'<circle class="end-wall" cx="{x}" cy="{y}" r="{fd.end_radius + fd.wall:.9g}" '
-                           f'stroke="{c}" stroke-dasharray="{2 * lw:.6g}"/>')
+    # each fixture plate once: a muscle's own in its colour, one that ends closer than a fixture's radius
+    # share (one rigid part) as one outline in black, naming the muscles it holds
+    walls = fixture_plates(fd.paths, fd.end_radius, fd.wall)
+    for (held, shape), (_, wall) in zip(fixture_plates(fd.paths, fd.end_radius), walls):
+        shared = len({i for i, _ in held}) > 1
+        c = SHARED_PLATE if shared else colors[held[0][0]]
+        attrs = (f'class="end shared" data-muscles="{" ".join(escape(fd.muscles[i].name) for i, _ in held)}" '
+                 if shared else 'class="end" ')
+        for kind, outline, r, dash in (("", shape, fd.end_radius, ""),
+                                       ("-wall", wall, fd.end_radius + fd.wall, f' stroke-dasharray="{2 * lw:.6g}"')):
+            if kind and fd.wall <= 0:
+                continue
+            a = attrs.replace('class="end', f'class="end{kind}')
+            if len(outline) == 1:
+                x, y = xy(outline[0]).split(",")
+                out.append(f'<circle {a}cx="{x}" cy="{y}" r="{r:.9g}" stroke="{c}"{dash}/>')
+            else:
+                out.append(f'<polygon {a}points="{" ".join(xy(q) for q in outline)}" stroke="{c}"{dash}/>')
     out.append("</g>")
-    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle">')
-    for i, (mu, path) in enumerate(zip(fd.muscles, fd.paths)):
-        p, _ = label_at(path, 1.2 * fs)
+    out.append(f'<g id="labels" font-family="sans-serif" font-size="{fs:.6g}" text-anchor="middle" '
+               'dominant-baseline="central">')
+    # each name centred on its point, beside its channel and clear of the other channels and names
+    for i, (mu, p) in enumerate(zip(fd.muscles, label_points(fd.paths, 1.2 * fs))):
         x, y = xy(p).split(",")
         out.append(f'<text class="label" x="{x}" y="{y}" fill="{colors[i]}">{escape(mu.name)}</text>')
     out.append("</g>")

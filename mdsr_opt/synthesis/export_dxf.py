@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from ..plot.style import dxf_color
+from ..plot.style import dxf_color, label_slots
 
-__all__ = ["dxf_text", "label_at"]
+__all__ = ["dxf_text", "label_at", "label_points", "fixture_plates"]
 
 _DXF_INSUNITS = {"in": 1, "mm": 4, "cm": 5, "m": 6, "um": 13}
 
@@ -20,6 +20,73 @@ def label_at(path: np.ndarray, offset: float) -> tuple[np.ndarray, np.ndarray]:
     a, b = path[i - 1], path[i]
     d = (b - a) / (np.linalg.norm(b - a) or 1.0)
     return (a + b) / 2 + offset * np.array([-d[1], d[0]]), d
+
+
+def label_points(paths, offset: float) -> list[np.ndarray]:
+    """A label point per polyline of ``paths``: beside it, ``offset`` away at a third, half or two thirds of
+    its nodes, on either side, wherever it lies farthest from every other polyline and from the labels
+    placed before it (so no name sits on another muscle or on another name, as two opposed ropes' labels
+    did at their middles)."""
+    out: list[np.ndarray] = []
+    for j, path in enumerate(paths):
+        path = np.asarray(path, dtype=float)
+        others = [np.asarray(p, dtype=float) for k, p in enumerate(paths) if k != j]
+        best, score = None, -np.inf
+        for frac in (0.5, 1 / 3, 2 / 3):
+            i = min(max(1, int(round(frac * len(path)))), len(path) - 1)
+            a, b = path[i - 1], path[i]
+            d = (b - a) / (np.linalg.norm(b - a) or 1.0)
+            for side in (1.0, -1.0):
+                q = (a + b) / 2 + side * offset * np.array([-d[1], d[0]])
+                near = [np.linalg.norm(o - q, axis=1).min() for o in others + [np.array(out)] if len(o)]
+                s = min(near, default=np.inf)
+                if s > score + 1e-9 * offset:
+                    best, score = q, s
+                if score >= 2.0 * offset:  # clear of everything: the first such place
+                    break
+            if score >= 2.0 * offset:
+                break
+        out.append(best)
+    return out
+
+
+def fixture_plates(paths, radius: float, grow: float = 0.0) -> list[tuple[tuple, np.ndarray]]:
+    """The end fixtures of the muscles whose rest polylines are ``paths``, each plate once: ends closer than
+    ``radius`` share one plate (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`; the design holds them
+    as one rigid part), so they are one outline, not two overlapping circles.
+
+    Returns per plate ``(ends, outline)``: ``ends`` the ``(muscle, 0 or -1)`` pairs it holds, ``outline``
+    the (k, 2) closed boundary of the union of discs of radius ``radius + grow`` (``grow``: the wall) about
+    those ends, or a (1, 2) array (its centre) when it is one disc (one end, or ends at one point)."""
+    ends = [(i, k, np.asarray(p[k], dtype=float)) for i, p in enumerate(paths) for k in (0, -1)]
+    n = len(ends)
+    group = list(range(n))
+
+    def root(a):
+        while group[a] != a:
+            group[a] = group[group[a]]
+            a = group[a]
+        return a
+
+    if radius > 0:
+        for a in range(n):
+            for b in range(a + 1, n):
+                if ends[a][0] != ends[b][0] and np.linalg.norm(ends[a][2] - ends[b][2]) < radius:
+                    group[root(a)] = root(b)
+    out = []
+    for g in dict.fromkeys(root(a) for a in range(n)):
+        members = [e for a, e in enumerate(ends) if root(a) == g]
+        pts = np.array([e[2] for e in members])
+        held = tuple((i, k) for i, k, _ in members)
+        if np.ptp(pts, axis=0).max() <= 1e-9 * max(radius, 1e-300):
+            out.append((held, pts[:1]))
+            continue
+        from shapely.geometry import Point
+        from shapely.ops import unary_union
+
+        shape = unary_union([Point(*q).buffer(radius + grow, 64) for q in pts])
+        out.append((held, np.asarray(shape.exterior.coords)[:-1]))
+    return out
 
 
 #: DXF layers: name and ACI colour (7 white/black, 1 red, 5 blue, 3 green)
@@ -103,7 +170,7 @@ def dxf_text(fd) -> str:
         g(8, layer)
 
     size = float(np.ptp(fd.outline, axis=0).max())
-    labels = [label_at(path, 0.05 * size)[0] for path in fd.paths]
+    labels = label_points(fd.paths, 0.05 * size)
     # the drawing's extents: the outline, the channels at their width, the end circles, the labels' points
     reach = max(fd.end_radius, 0.5 * fd.channel_width) + fd.wall
     near = np.vstack([fd.outline] + [p - reach for p in fd.paths] + [p + reach for p in fd.paths]
@@ -165,28 +232,38 @@ def dxf_text(fd) -> str:
     polyline(fd.outline, "BODY", closed=True)
     for h in fd.holes:
         polyline(h, "HOLES", closed=True)
+    slots = label_slots([mu.name for mu in fd.muscles])  # the figures' colour of each muscle (plot.style)
     for i, (mu, path, q) in enumerate(zip(fd.muscles, fd.paths, labels)):
-        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color)
+        # each muscle's entities in the ACI colour nearest its figure colour (plot.style.dxf_color of its
+        # name's colour slot, as the figures and the SVG colour it)
+        aci = dxf_color(slots[i])
         if fd.wall > 0:
             polyline(path, "WALLS", closed=False, width=fd.channel_width + 2 * fd.wall)
-        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=dxf_color(i))
-        for p in (path[0], path[-1]):
-            g(0, "CIRCLE")
-            g(8, "ENDS")
-            g(62, dxf_color(i))
-            xy(p)
-            g(40, _dxf_number(fd.end_radius))
-            if fd.wall > 0:
-                g(0, "CIRCLE")
-                g(8, "WALLS")
-                xy(p)
-                g(40, _dxf_number(fd.end_radius + fd.wall))
+        polyline(path, "MUSCLES", closed=False, width=fd.channel_width, color=aci)
         g(0, "TEXT")
         g(8, "LABELS")
-        g(62, dxf_color(i))
+        g(62, aci)
         xy(q)
         g(40, _dxf_number(0.035 * size))
         g(1, _dxf_string(mu.name))
+    # each fixture plate once (ends closer than a fixture's radius share one: one outline, in the ENDS
+    # layer's colour; a muscle's own plate in its colour), and its wall
+    walls = fixture_plates(fd.paths, fd.end_radius, fd.wall)
+    for (held, shape), (_, wall) in zip(fixture_plates(fd.paths, fd.end_radius), walls):
+        own = len({i for i, _ in held}) == 1
+        for layer, outline, r in (("ENDS", shape, fd.end_radius), ("WALLS", wall, fd.end_radius + fd.wall)):
+            if layer == "WALLS" and fd.wall <= 0:
+                continue
+            color = dxf_color(slots[held[0][0]]) if own and layer == "ENDS" else None
+            if len(outline) == 1:
+                g(0, "CIRCLE")
+                g(8, layer)
+                if color is not None:
+                    g(62, color)
+                xy(outline[0])
+                g(40, _dxf_number(r))
+            else:
+                polyline(outline, layer, closed=True, color=color)
     for cf in getattr(fd, "conflicts", ()):  # where the layout cannot be moulded: a circle, as the SVG's red ring
         g(0, "CIRCLE")
         g(8, "CONFLICTS")

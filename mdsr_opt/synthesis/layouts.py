@@ -56,9 +56,10 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
 
     Returns
     -------
-    muscles : tuple of Muscle: each keeps its own name (a scene's muscle), a routed one is named by its place
-        ``M1, M2, ...`` (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure); all by place when two
-        would share a name
+    muscles : tuple of Muscle: each keeps its name when no two share one; else a muscle's own name (a
+        scene's muscle) is kept and a routed one is named by its place ``M1, M2, ...``
+        (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure); all by place when two would still
+        share a name
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
@@ -104,9 +105,13 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
             if budget is not None and len(kept) >= budget:
                 continue
             kept.append((cand, ce, [name]))
-    # a muscle's own name (a scene's ``inner_left``) is kept; routed ones (named by place) are numbered anew
-    names = [_own_name(m) or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
-    if len(set(names)) < len(names):  # two muscles of one name: every one by its place
+    # every name kept when no two muscles share one (a scene's ``inner_left``; the cases of a run, numbered
+    # scene-wide: scenes.names.number_in_scene); else a muscle's own name is kept and routed ones (named by
+    # place in their pose's layout) are numbered anew, and if two still share one, every one by its place
+    names = [m.name or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
+    if len(set(names)) < len(names):
+        names = [_own_name(m) or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
+    if len(set(names)) < len(names):
         names = [muscle_name(i) for i in range(len(kept))]
     muscles = tuple(Muscle(m.nodes, name=n) for n, (m, _, _) in zip(names, kept))
     for m in muscles:
