@@ -388,6 +388,20 @@ def test_bad_fabrication_fields_are_named_before_routing(tentacle, fab, err, wor
     assert s.routing is None
 
 
+def test_the_page_colours_each_muscle_as_the_figures_do(tentacle):
+    from mdsr_opt.plot.style import muscle_color_of
+
+    s = Session.from_scene(tentacle)
+    s.settle()
+    out = s.route(10.0, 4.0, None, {"channel_diameter": 0.1})
+    assert len(out["muscles"]) >= 2
+    for i, (m, shown) in enumerate(zip(s.muscles, out["muscles"])):
+        assert shown["name"] == m.name and shown["color"] == muscle_color_of(m, i)
+    first = out["muscles"][0]
+    after = s.delete_muscle(first["name"])  # the others keep their names, so their colours
+    assert {m["name"]: m["color"] for m in after["muscles"]} == {m["name"]: m["color"] for m in out["muscles"][1:]}
+
+
 def test_deleting_a_muscle_drops_the_design_and_keeps_the_fixtures(tentacle):
     s = Session.from_scene(tentacle)
     s.settle()

@@ -46,6 +46,7 @@ from ..synthesis.fabrication import Fabrication, check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
+from ..plot.style import label_slots, muscle_color
 from ..scenes.scenefile import load_scene, scene_from_data
 
 __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
@@ -60,6 +61,14 @@ def design_defaults() -> dict:
     """The keyword defaults of :func:`~mdsr_opt.design_contractions` the page offers (read, not copied)."""
     sig = inspect.signature(design_contractions).parameters
     return {k: sig[k].default for k in ("method", "a_max", "muscle_model", "stiffness")}
+
+
+def muscle_entries(muscles) -> list[dict]:
+    """The muscles as the page draws them: name, node path and colour, the colour every figure, SVG and DXF
+    gives the same name (:func:`mdsr_opt.plot.style.label_slots`)."""
+    slots = label_slots([m.name for m in muscles])
+    return [{"name": m.name, "nodes": [int(v) for v in m.nodes], "color": muscle_color(k)}
+            for m, k in zip(muscles, slots)]
 
 
 @dataclass
@@ -498,7 +507,7 @@ class Session:
         fixtures shrunk), the fixture radius and fabrication used, and the muscles the user deleted."""
         rr = self.routing
         names = {m.name for m in self.muscles}
-        return {"muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles],
+        return {"muscles": muscle_entries(self.muscles),
                 "stats": [{"name": s.name, "n_edges": s.n_edges, "contraction": s.contraction,
                            "nonuniformity": s.nonuniformity} for s in rr.stats if s.name in names],
                 "n_units": rr.n_units, "params": {k: v for k, v in self.routing_params.items()},
@@ -519,7 +528,7 @@ class Session:
         self.muscles, self.design, self.dropped = left, None, ()
         self.deleted = self.deleted + (name,)
         return self.routing_message() if self.routing is not None else {
-            "muscles": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in left], "stats": [],
+            "muscles": muscle_entries(left), "stats": [],
             "notes": [], "fixture_radius": None, "deleted": list(self.deleted), "warnings": []}
 
     @property

@@ -4,7 +4,7 @@
   const $ = (id) => document.getElementById(id);
   const canvas = $("canvas");
   const ctx = canvas.getContext("2d");
-  const MUSCLE_COLORS = ["#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#17becf", "#8c564b", "#e377c2", "#bcbd22"];
+  const MUSCLE_COLORS = ["#d62728"];  // M1's colour, for the legend; each muscle's own comes with the routing
   const GROUP_COLORS = ["#e4572e", "#7b2cbf", "#0a9396", "#c9184a", "#f4a261"];
 
   // ------------------------------------------------------------------ page state
@@ -18,7 +18,7 @@
     graph: null, routing: null, design: null, saved: null, confirm: null,
     muscles: [],           // the layout: routed muscles less the deleted ones (and those a design dropped)
     selected: null,        // name of the selected muscle (Delete muscle removes it)
-    colors: new Map(),     // muscle name -> colour index, fixed when routed
+    colors: new Map(),     // muscle name -> colour (sent by the server, as in the figures), fixed when routed
     nLive: 0, seq: 0, inflight: null, pendingDrag: false, sentAt: {}, rtts: [], lastError: null, errors: [],
     view: { s: 1, ox: 0, oy: 0 },
     pointer: null, op: null, pivot: null,
@@ -95,11 +95,11 @@
     if (S.selected !== null && !list.some((u) => u.name === S.selected)) S.selected = null;
     $("delete-muscle").disabled = S.selected === null;
   }
-  function muscleColor(name) { return MUSCLE_COLORS[(S.colors.has(name) ? S.colors.get(name) : 0) % MUSCLE_COLORS.length]; }
+  function muscleColor(name) { return S.colors.get(name) || MUSCLE_COLORS[0]; }  // the figures' colour of the name
 
   function onRouting(m) {  // a new routing, or the layout after a deletion (the design is then gone)
     S.routing = m; S.design = null; S.graph = null;
-    if (!m.deleted.length) { S.colors = new Map(m.muscles.map((u, i) => [u.name, i])); S.selected = null; }
+    if (!m.deleted.length) { S.colors = new Map(m.muscles.map((u) => [u.name, u.color])); S.selected = null; }
     setMuscles(m.muscles);
     for (const w of m.warnings) showError(w);
     const notes = $("routing-notes"); notes.innerHTML = "";
