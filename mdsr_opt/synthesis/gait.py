@@ -407,7 +407,8 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     reasons = [_unreached(layout, s, kd[i], mesh.size, max_difference, units, bool(ok[kf[i]]))
                for i, s in enumerate(seq)]
     reached = np.array([not r for r in reasons], dtype=bool)
-    why = dict.fromkeys(f"{s}: {r}" for s, r in zip(seq, reasons) if r)
+    why = dict.fromkeys(f"{s}: {r}" + (f" ({layout.status[layout.index(s)]})" if r.endswith("failed") else "")
+                        for s, r in zip(seq, reasons) if r)  # a failed design: its status says why
     if why:
         warnings.warn("gait_schedule: pose(s) NOT reached by the shared layout: " + "; ".join(why), GaitWarning,
                       stacklevel=3)
@@ -426,7 +427,7 @@ def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_dif
         return "" if solved else "its frame did not solve"
     k = layout.index(pose)
     if not layout.success[k]:
-        return f"its design on the shared layout failed ({layout.status[k]})"
+        return "its design on the shared layout failed"
     rest = None if layout.rest_differences is None else float(layout.rest_differences[k])
     why = difference_failure(diff, size, max_difference, units,
                              rest_difference=rest if rest is not None and np.isfinite(rest) else None)
