@@ -79,6 +79,18 @@ def test_a_pose_the_layout_moves_most_of_the_way_is_reached():
     assert sch.reached.all() and sch.reasons == ("", "", "")
 
 
+def test_the_comparison_designs_warnings_name_their_pose():
+    """The pose's own layout (for comparison) names its ropes M1.. as its own routing does: its warnings say
+    whose they are, so that its M1 is not read as the shared layout's."""
+    mesh = strip()
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        design_poses(mesh, MAT, {"up": mild_bend(mesh)}, design_options={"a_max": 1e-3})
+    said = [str(x.message) for x in w if "saturated" in str(x.message)]
+    assert len(said) == 2 and said[1].startswith("design_poses: pose 'up' on its own layout (compared): muscle(s) M1")
+    assert not said[0].startswith("design_poses: pose")   # the shared layout's own design
+
+
 def test_the_gait_log_says_why_a_pose_has_no_own_difference():
     from mdsr_opt.synthesis.gait import _own
 
