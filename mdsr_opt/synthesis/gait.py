@@ -216,14 +216,15 @@ class GaitSchedule:
             return f"{int(solved.sum())}/{self.n_frames} frames solved"
         kf = np.asarray(self.keyframes, dtype=int)
         solved[kf[~np.asarray(self.reached, bool)]] = False
-        why = {}
+        why, d = {}, {}
         for k in np.flatnonzero(~np.asarray(self.reached, bool)):
-            r = self.reasons[k] if k < len(self.reasons) and self.reasons[k] else \
-                f"difference {self.keyframe_differences[k]:.3g} {self.units}, max_difference " \
-                f"{100 * self.max_difference:g} % of the size"
-            why.setdefault(self.sequence[k], r)
+            p = self.sequence[k]
+            d.setdefault(p, self.keyframe_differences[k])
+            why.setdefault(p, self.reasons[k] if k < len(self.reasons) and self.reasons[k] else
+                           f"max_difference {100 * self.max_difference:g} % of the size")
         return (f"{int(solved.sum())}/{self.n_frames} frames solved and reaching their pose; pose(s) "
-                + ", ".join(f"{p} ({r})" for p, r in why.items()) + " NOT reached")
+                + ", ".join(f"{p} (difference {v:.3g} {self.units})" for p, v in d.items()) + " NOT reached ("
+                + "; ".join(f"{p}: {r}" for p, r in why.items()) + ")")
 
     def to_dict(self) -> dict:
         """Every field, JSON-ready (arrays as nested lists, NaN as None)."""
@@ -423,14 +424,12 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
 def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_difference: float, units: str,
                solved: bool) -> str:
     """Why a keyframe of ``pose`` does not reach it ("" when it does, and for ``"rest"``)."""
-    if pose == "rest":
-        return "" if solved else "its frame did not solve"
-    k = layout.index(pose)
-    if not layout.success[k]:
+    k = None if pose == "rest" else layout.index(pose)
+    if k is not None and not layout.success[k]:
         return "its design on the shared layout failed"
-    rest = None if layout.rest_differences is None else float(layout.rest_differences[k])
-    why = difference_failure(diff, size, max_difference, units,
-                             rest_difference=rest if rest is not None and np.isfinite(rest) else None)
+    rest = float("nan") if k is None or layout.rest_differences is None else float(layout.rest_differences[k])
+    why = "" if k is None else difference_failure(diff, size, max_difference, units,
+                                                  rest_difference=rest if np.isfinite(rest) else None)
     return why or ("" if solved else "its frame did not solve")
 
 
