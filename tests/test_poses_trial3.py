@@ -167,7 +167,7 @@ def test_ropes_of_two_poses_that_cross_make_the_shared_layout_no_success():
         res = design_poses(mesh, MAT, {"p": xp, "q": xq}, separate={"p": ([along], None), "q": ([across], None)},
                            compare=False)
     assert any(issubclass(x.category, FabricationWarning) and "NOT mouldable" in str(x.message) for x in w)
-    assert res.success.all() and not res.all_success and "success=False" in repr(res)
+    assert res.success.all() and not res.all_success and "success=False, layout NOT mouldable)" in repr(res)
     assert len(res.problems) == 1 and res.problems[0].startswith(
         "the shared layout cannot be moulded in one layer: 1 place(s) where ropes of different poses clash: "
         "muscles p:M1 and q:M1 cross or touch at (2, 1)")

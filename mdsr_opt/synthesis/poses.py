@@ -267,7 +267,7 @@ class PosesResult:
             per = f"{np.nanmin(self.differences):.3g}..{np.nanmax(self.differences):.3g}"
         sep = int(self.separate_n_muscles.sum())
         return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
-                f"difference {per}, success={self.all_success})")
+                f"difference {per}, success={self.all_success}" + (", layout NOT mouldable)" if self.problems else ")"))
 
     def table(self) -> str:
         """Per pose: difference on the shared layout and on its own, and the strokes."""
