@@ -160,7 +160,8 @@ def test_ropes_of_two_poses_that_cross_make_the_shared_layout_no_success():
     notes: list = []
     mus, _ = shared_layout(mesh, {"p": [along], "q": [across]}, fabrication=f, notes=notes, by_pose=True)
     assert len(mus) == 2 and len(notes) == 1
-    assert "pose 'q''s rope of rank 1" in notes[0] and "kept beside pose 'p''s rope of rank 1, NOT mouldable" in notes[0]
+    assert "pose 'q''s rope of rank 1" in notes[0]
+    assert "kept beside pose 'p''s rope of rank 1, NOT mouldable" in notes[0]
     xp, xq = (solve_internal(mesh, MAT, [m], [0.1]).x for m in (along, across))
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")

@@ -577,8 +577,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         f"{int(res.separate_n_muscles.sum())}), difference ({length_unit(scene.units)}) " + ", ".join(
             f"{n} {d:.4g} ({_own(s, c)})" for n, d, s, c in zip(res.names, res.differences, res.separate_differences,
                                                             res.separate_n_muscles))
-        + f"; {sch.outcome()}" + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: "
-                                                                                   + info["message"]))
+        + ("" if sch.unreached else f"; {sch.outcome()}")  # else in the message
+        + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: " + info["message"]))
     return info
 
 
