@@ -217,8 +217,10 @@ def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
     notes: list = []
     mus, sources = shared_layout(mesh, layouts, fabrication=f, notes=notes)
     assert [m.nodes for m in mus] == [a.nodes, far.nodes, cross.nodes] and sources == (("p", "q"), ("p",), ("q",))
-    assert len(notes) == 2 and "pose 'q''s rope of rank 1" in notes[0] and "merged into M1" in notes[0]
-    assert "rank 2" in notes[1] and "kept beside M1, NOT mouldable in one layer" in notes[1] and "cross" in notes[1]
+    assert len(notes) == 2 and "pose 'q''s rope of rank 1" in notes[0] and "merged into pose 'p''s rope of rank 1" \
+        in notes[0]
+    assert "rank 2" in notes[1] and "kept beside pose 'p''s rope of rank 1, NOT mouldable in one layer" in notes[1] \
+        and "cross" in notes[1]
     assert [c.kind for c in rope_conflicts(mesh, mus, f)] == ["crossing", "crossing"]
 
 

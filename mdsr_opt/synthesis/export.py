@@ -195,7 +195,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         design's ``anchor_radius`` when it has one.
     material : optional
         The body's material, for the unit of the tensions (its ``stress_unit``) when the design does not
-        record it (a PosesResult); with a known length unit, tensions are then in N.
+        record it (a PosesResult records it since ``design_poses`` was given ``units``); with a known length
+        unit, tensions are then in N.
     """
     from .fabrication import Fabrication, check_fabrication, check_sizes_fit, rope_conflicts
     from .pipeline import PipelineResult

@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import csv
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -25,18 +26,22 @@ from ..body.muscles import Muscle
 from ..core.checks import check_options, keyword_names, positive_float, positive_int
 from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
-from .acceptance import MAX_DIFFERENCE, check_max_difference
+from .acceptance import MAX_DIFFERENCE, check_max_difference, difference_failure
 from .layouts import check_budget
 from .poses import PosesResult
 
-__all__ = ["Gait", "GaitSchedule", "gait_schedule", "save_gait_animation", "run_gait", "warm_start_state",
-           "ZERO_STROKE"]
+__all__ = ["Gait", "GaitSchedule", "GaitWarning", "gait_schedule", "save_gait_animation", "run_gait",
+           "warm_start_state", "ZERO_STROKE"]
 
 #: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest
 #: length (in the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's
 #: zero stroke at about -1e-16 of the length; the same 1e-9 is the threshold at which
 #: :func:`~mdsr_opt.synthesis.poses.design_poses` counts a muscle's path as shortening.
 ZERO_STROKE = 1e-9
+
+
+class GaitWarning(UserWarning):
+    """A keyframe of a gait schedule does not reach its pose (:attr:`GaitSchedule.reasons` says why)."""
 
 
 # ---------------------------------------------------------------------------------------------- gait
@@ -152,10 +157,14 @@ class GaitSchedule:
     keyframe_differences : (K,) ndarray
         Per keyframe, the difference (a length) its pose reaches on the layout (0 for ``"rest"``).
     reached : (K,) bool ndarray
-        Per keyframe, its pose was reached: the pose's design succeeded, its difference is within
-        ``max_difference`` of the body's size and the keyframe's frame solved.
+        Per keyframe, its pose was reached: the pose's design succeeded, its difference passes
+        :func:`~mdsr_opt.synthesis.acceptance.difference_failure` (within ``max_difference`` of the body's
+        size, and removing at least :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of the rest shape's
+        difference to the pose) and the keyframe's frame solved.
     max_difference : float
         That bound, a fraction of the body's size.
+    reasons : tuple of str
+        Per keyframe, why its pose was not reached ("" when it was).
     """
 
     sequence: tuple
@@ -176,6 +185,7 @@ class GaitSchedule:
     keyframe_differences: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reached: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     max_difference: float = float("nan")
+    reasons: tuple = ()
 
     @property
     def n_frames(self) -> int:
@@ -206,10 +216,15 @@ class GaitSchedule:
             return f"{int(solved.sum())}/{self.n_frames} frames solved"
         kf = np.asarray(self.keyframes, dtype=int)
         solved[kf[~np.asarray(self.reached, bool)]] = False
-        d = {self.sequence[k]: self.keyframe_differences[k] for k in np.flatnonzero(~self.reached)}
+        why, d = {}, {}
+        for k in np.flatnonzero(~np.asarray(self.reached, bool)):
+            p = self.sequence[k]
+            d.setdefault(p, self.keyframe_differences[k])
+            why.setdefault(p, self.reasons[k] if k < len(self.reasons) and self.reasons[k] else
+                           f"max_difference {100 * self.max_difference:g} % of the size")
         return (f"{int(solved.sum())}/{self.n_frames} frames solved and reaching their pose; pose(s) "
-                + ", ".join(f"{p} (difference {v:.3g} {self.units})" for p, v in d.items())
-                + f" NOT reached (max_difference {100 * self.max_difference:g} % of the size)")
+                + ", ".join(f"{p} (difference {v:.3g} {self.units})" for p, v in d.items()) + " NOT reached ("
+                + "; ".join(f"{p}: {r}" for p, r in why.items()) + ")")
 
     def to_dict(self) -> dict:
         """Every field, JSON-ready (arrays as nested lists, NaN as None)."""
@@ -224,7 +239,7 @@ class GaitSchedule:
     def load(cls, path: str | os.PathLike) -> "GaitSchedule":
         """Read a schedule written by :meth:`save` (ValueError naming a damaged or foreign file)."""
         return load_fields(cls, path, "gait_schedule",
-                           convert={k: tuple for k in ("sequence", "labels", "muscle_names", "status")})
+                           convert={k: tuple for k in ("sequence", "labels", "muscle_names", "status", "reasons")})
 
     def write_csv(self, path) -> str:
         """The actuation schedule: one row per frame, strokes in ``units`` (atomically). Returns the path."""
@@ -275,15 +290,18 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
         Seconds per step.
     units : str, optional
         The mesh's length unit, written into the schedule (see :data:`mdsr_opt.synthesis.export.UNITS`);
-        None (the default): "body units", no unit is invented.
+        None (the default): the layout's (``design_poses(units=...)``), else "body units": no unit is invented.
     solve_options : dict, optional
         Extra keywords for :func:`~mdsr_opt.solve_internal` (``backend``...); ``tol`` defaults to 1e-10, the
         tolerance of the design's own forward solves (at the solver's default 1e-8 the cable's nearly slack
         ropes, strokes of ~1e-3 of their length, leave residuals of ~1e-4 that the solve rejects).
     max_difference : float, optional
-        A keyframe's pose is reached when its design succeeded, its difference is at most this fraction of
-        the body's size (default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`) and its frame
-        solved (``reached``; the summary names the poses not reached).
+        A keyframe's pose is reached when its design succeeded, its difference passes
+        :func:`~mdsr_opt.synthesis.acceptance.difference_failure` (at most this fraction of the body's size,
+        default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`, and removing at least
+        :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of the rest shape's difference to the pose) and
+        its frame solved (``reached``, ``reasons``; the summary names the poses not reached, and a
+        :class:`GaitWarning` says why).
 
     Returns
     -------
@@ -303,7 +321,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                          f"nodes, the mesh {mesh.n_nodes}")
     check_same_mesh(mesh, layout.rest_mesh, "the layout")
     fps_ = _frames(frames_per_step)
-    units = length_unit(units) if units is None else check_units(units)  # none: "body units"
+    units = check_units(units) if units is not None else length_unit(layout.units)  # none: "body units"
     if isinstance(sequence, str) or not isinstance(sequence, Sequence):
         raise TypeError(f"sequence must be a list of pose names, got {type(sequence).__name__}")
     seq = [str(s) for s in sequence]
@@ -384,16 +402,35 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
                         f"rope by {over[i]:.3g} {units})")
         states.append(x)
         status.append(msg)
-    # a keyframe reaches its pose when the pose's design succeeded on the layout within max_difference
+    # a keyframe reaches its pose when the pose's design succeeded on the layout, passes the acceptance
+    # rule (within max_difference, and removing a part of the rest shape's difference) and its frame solved
     kd = np.array([0.0 if s == "rest" else float(layout.differences[layout.index(s)]) for s in seq])
-    designed = np.array([s == "rest" or bool(layout.success[layout.index(s)]) for s in seq])
-    reached = designed & (kd <= max_difference * mesh.size) & ok[np.array(kf)]
+    reasons = [_unreached(layout, s, kd[i], mesh.size, max_difference, units, bool(ok[kf[i]]))
+               for i, s in enumerate(seq)]
+    reached = np.array([not r for r in reasons], dtype=bool)
+    why = dict.fromkeys(f"{s}: {r}" + (f" ({layout.status[layout.index(s)]})" if r.endswith("failed") else "")
+                        for s, r in zip(seq, reasons) if r)  # a failed design: its status says why
+    if why:
+        warnings.warn("gait_schedule: pose(s) NOT reached by the shared layout: " + "; ".join(why), GaitWarning,
+                      stacklevel=3)
     return GaitSchedule(sequence=tuple(seq), frames_per_step=fps_, times=np.arange(F) * float(step_time) / fps_,
                         keyframes=np.array(kf), labels=tuple(labels),
                         muscle_names=tuple(mu.name for mu in layout.muscles), rest_lengths=L0.copy(), strokes=S,
                         achieved=ach, tensions=ten, states=np.array(states), success=ok, status=tuple(status),
                         units=units, rest_mesh=mesh_fingerprint(mesh), keyframe_differences=kd, reached=reached,
-                        max_difference=float(max_difference))
+                        max_difference=float(max_difference), reasons=tuple(reasons))
+
+
+def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_difference: float, units: str,
+               solved: bool) -> str:
+    """Why a keyframe of ``pose`` does not reach it ("" when it does, and for ``"rest"``)."""
+    k = None if pose == "rest" else layout.index(pose)
+    if k is not None and not layout.success[k]:
+        return "its design on the shared layout failed"
+    rest = float("nan") if k is None or layout.rest_differences is None else float(layout.rest_differences[k])
+    why = "" if k is None else difference_failure(diff, size, max_difference, units,
+                                                  rest_difference=rest if np.isfinite(rest) else None)
+    return why or ("" if solved else "its frame did not solve")
 
 
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
@@ -480,7 +517,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     try:
         res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
                            routing_options=scene.routing_options, design_options=dopt,
-                           separate=separate)
+                           separate=separate, units=scene.units)
         sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
                             cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units,
                             max_difference=getattr(scene, "acceptance", {}).get("max_difference"))
@@ -518,9 +555,10 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                 strokes={n: [float(v) for v in row] for n, row in zip(res.names, res.strokes)},
                 frames=sch.n_frames, failed_frames=failed,
                 reached=[bool(r) for r in sch.reached], unreached=list(sch.unreached),
-                message="" if ok else ("; ".join(f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
-                                                 if not o) + (f"; frames {failed} failed" if failed else "")
-                                       + (f"; {sch.outcome()}" if sch.unreached else "")),
+                message="" if ok else "; ".join([f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
+                                                  if not o] + list(res.problems)
+                                                 + ([f"frames {failed} failed"] if failed else [])
+                                                 + ([sch.outcome()] if sch.unreached else [])),
                 times={k: float(v) for k, v in res.times.items()},
                 files=[os.path.relpath(f, folder.parent) for f in files])
     record, waiting = copy.deepcopy(info), [len(jobs)]
@@ -537,10 +575,17 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference ({length_unit(scene.units)}) " + ", ".join(
-            f"{n} {d:.4g} (own {s:.4g})" for n, d, s in zip(res.names, res.differences, res.separate_differences))
-        + f"; {sch.outcome()}" + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: "
-                                                                                   + info["message"]))
+            f"{n} {d:.4g} ({_own(s, c)})" for n, d, s, c in zip(res.names, res.differences, res.separate_differences,
+                                                            res.separate_n_muscles))
+        + ("" if sch.unreached else f"; {sch.outcome()}")  # else in the message
+        + (f"; {radius_note}" if radius_note else "") + ("" if ok else " - FAILED: " + info["message"]))
     return info
+
+
+def _own(difference: float, n_muscles: int) -> str:
+    """The words for a pose's difference with its own layout: the number, or why there is none."""
+    return f"own {difference:.4g}" if np.isfinite(difference) else \
+        "own layout: no muscle routed" if not n_muscles else "own layout not designed"
 
 
 def _routed(setup) -> bool:

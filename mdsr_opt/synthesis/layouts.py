@@ -13,7 +13,7 @@ from typing import Mapping, Sequence
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import check_int
-from ..plot.style import muscle_name
+from ..plot.style import muscle_label, muscle_name
 from .fabrication import pair_conflicts
 
 __all__ = ["shared_layout", "check_budget"]
@@ -28,7 +28,8 @@ def check_budget(max_muscles) -> int | None:
 
 def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscles: int | None = None,
                   overlap: float = 0.5, *, fabrication=None, fixture_radius: float | None = None,
-                  notes: list | None = None) -> tuple[tuple[Muscle, ...], tuple[tuple[str, ...], ...]]:
+                  notes: list | None = None, by_pose: bool = False) -> tuple[tuple[Muscle, ...],
+                                                                             tuple[tuple[str, ...], ...]]:
     """Merge per-pose layouts into one: round-robin by rank, duplicates dropped, at most ``max_muscles``.
 
     Parameters
@@ -47,83 +48,115 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
         cross, fixtures of radius ``fixture_radius`` that overlap each other or the other's channel:
         :func:`~mdsr_opt.synthesis.fabrication.pair_conflicts`) is merged into it when at least ``overlap`` of
         its nodes lie that close (a duplicate, serving its pose too); else it is kept (its pose may have no
-        other rope) and reported in ``notes``. None: no such check.
+        other rope) and reported in ``notes``
+        (:func:`~mdsr_opt.synthesis.poses.design_poses` then reports a layout that cannot be moulded). None:
+        no such check.
     fixture_radius : float, optional
         The fixtures' radius for that check; default ``fabrication.min_fixture_radius`` (the smallest the
         ends may get).
     notes : list, optional
         Receives one sentence per candidate merged, or kept though it cannot be moulded beside a kept one.
+    by_pose : bool, default False
+        Name and order the ropes by the poses' own layouts, which are shown beside the merged one (a
+        scene's cases and its gait): see ``muscles``.
 
     Returns
     -------
-    muscles : tuple of Muscle: each keeps its name when no two share one; else a muscle's own name (a
-        scene's muscle) is kept and a routed one is named by its place ``M1, M2, ...``
+    muscles : tuple of Muscle
+        Without ``by_pose`` (the merged layout is the only one shown), in the round-robin order, each keeps
+        its name when no two share one (a scene's ``inner_left``; the cases of a run, numbered run-wide);
+        else a muscle's own name is kept and a routed one is named by its place ``M1, M2, ...``
         (:func:`mdsr_opt.plot.style.muscle_name`, as in every figure); all by place when two would still
-        share a name
+        share a name. With ``by_pose``, ordered by the pose each was taken from (in the order of ``layouts``), then
+        by its rank there, so the first pose's ropes keep their places (and colours); each keeps the name it
+        has in its pose's layout (its own, or ``M<rank>``: :func:`mdsr_opt.plot.style.muscle_label`) when
+        that name means this rope (or one merged into it) in every pose's layout; otherwise every rope named
+        by its place, and every rope whose name is ambiguous, is prefixed by its pose: ``curl:M2`` (as
+        :func:`mdsr_opt.scenes.animate.union_of_layouts` names an animation's muscles).
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
-    kept: list[tuple[Muscle, frozenset, list]] = []
+    # a kept rope: (muscle, edges, poses served, (pose, rank) it was taken from)
+    kept: list[tuple[Muscle, frozenset, list, tuple]] = []
+    taken: dict[tuple, int] = {}  # (pose, rank) -> the kept rope that stands for it
+    labels: dict[tuple, str] = {}  # (pose, rank) -> the name the pose's own layout gives it
     depth = max((len(v) for v in layouts.values()), default=0)
     for r in range(depth):
         for name, mus in layouts.items():
             if r >= len(mus):
                 continue
             cand = mus[r] if isinstance(mus[r], Muscle) else Muscle(mus[r])
+            labels[(name, r)] = muscle_label(cand, r)
             ce = cand.edges
             dup = None
-            for k, (_, ke, src) in enumerate(kept):
+            for k, (_, ke, src, _) in enumerate(kept):
                 if len(ce & ke) >= overlap * min(len(ce), len(ke)):
                     dup = k
                     break
-            clash = None
+            clashes = []
             if dup is None and fabrication is not None:
                 rad = fabrication.min_fixture_radius if fixture_radius is None else float(fixture_radius)
-                for k, (km, _, _) in enumerate(kept):
+                for k, (km, _, _, _) in enumerate(kept):
                     found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
                     if found:
-                        clash = (k, found[0], near)
-                        break
-            if clash is not None:
-                k, cf, near = clash
-                merged = near >= overlap
+                        clashes.append((near < overlap, k, found[0]))
+            if clashes:  # merged into the first rope it runs along; else kept (its pose may have no other rope)
+                unmerged, k, cf = min(clashes, key=lambda c: c[:2])
                 if notes is not None:
                     a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
                     what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
+                    beside = f"pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1}"
                     notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
-                                 f"({b[0]:.4g}, {b[1]:.4g}) " + (f"merged into {muscle_name(k)}" if merged else
-                                                               f"kept beside {muscle_name(k)}, NOT mouldable in "
-                                                               "one layer") + f" ({what})")
-                if merged:
+                                 f"({b[0]:.4g}, {b[1]:.4g}) " + (f"kept beside {beside}, NOT mouldable in one layer"
+                                                               if unmerged else f"merged into {beside}") + f" ({what})")
+                if not unmerged:
                     dup = k
             if dup is not None:
                 if name not in kept[dup][2]:
                     kept[dup][2].append(name)
+                taken[(name, r)] = dup
                 continue
             if budget is not None and len(kept) >= budget:
                 continue
-            kept.append((cand, ce, [name]))
-    # every name kept when no two muscles share one (a scene's ``inner_left``; the cases of a run, numbered
-    # scene-wide: scenes.names.number_in_scene); else a muscle's own name is kept and routed ones (named by
-    # place in their pose's layout) are numbered anew, and if two still share one, every one by its place
-    names = [m.name or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
-    if len(set(names)) < len(names):
-        names = [_own_name(m) or muscle_name(i) for i, (m, _, _) in enumerate(kept)]
-    if len(set(names)) < len(names):
-        names = [muscle_name(i) for i in range(len(kept))]
-    muscles = tuple(Muscle(m.nodes, name=n) for n, (m, _, _) in zip(names, kept))
+            taken[(name, r)] = len(kept)
+            kept.append((cand, ce, [name], (name, r)))
+    if by_pose:  # the first pose's ropes first, each pose's in its own order: the first pose's keep their places
+        order = list(layouts)
+        perm = sorted(range(len(kept)), key=lambda k: (order.index(kept[k][3][0]), kept[k][3][1]))
+        new = {old: i for i, old in enumerate(perm)}
+        kept = [kept[k] for k in perm]
+        names = _names(kept, {key: new[k] for key, k in taken.items()}, labels)
+    else:  # every name kept when no two muscles share one (a scene's ``inner_left``; the cases of a run,
+        # numbered run-wide: scenes.names); else a muscle's own name is kept and routed ones (named by place in
+        # their pose's layout) are numbered anew, and if two still share one, every one by its place
+        names = [m.name or muscle_name(i) for i, (m, _, _, _) in enumerate(kept)]
+        if len(set(names)) < len(names):
+            names = [n if not _is_place_name(n) else muscle_name(i)
+                     for i, n in enumerate(labels[origin] for _, _, _, origin in kept)]
+        if len(set(names)) < len(names):
+            names = [muscle_name(i) for i in range(len(kept))]
+    muscles = tuple(Muscle(m.nodes, name=n) for n, (m, _, _, _) in zip(names, kept))
     for m in muscles:
         m.check_on(mesh)
-    return muscles, tuple(tuple(s) for _, _, s in kept)
+    return muscles, tuple(tuple(s) for _, _, s, _ in kept)
 
 
-def _own_name(muscle) -> str | None:
-    """``muscle``'s name when it was given one, None when it has none or the name of a place in a layout
-    (``"M3"``, as routing names its muscles)."""
-    name = getattr(muscle, "name", None)
-    if not name:
-        return None
-    digits = name.lstrip(name.rstrip("0123456789"))
-    return None if digits and int(digits) > 0 and name == muscle_name(int(digits) - 1) else name
+def _names(kept, taken: dict, labels: dict) -> list[str]:
+    """The names of the kept ropes: the one each has in its pose's layout when, in every pose's layout, that
+    name means a rope standing for this one; else prefixed by its pose (every rope named by its place too,
+    so that no bare ``M2`` reads as another pose's ``M2``)."""
+    own = [labels[origin] for _, _, _, origin in kept]
+    clean = [all(taken.get(key) == k for key, lab in labels.items() if lab == own[k]) for k in range(len(kept))]
+    if all(clean):
+        return own
+    names = [n if ok and not _is_place_name(n) else f"{origin[0]}:{n}"
+             for n, ok, (_, _, _, origin) in zip(own, clean, kept)]
+    return [n if names.count(n) == 1 else f"{n}#{k + 1}" for k, n in enumerate(names)]
+
+
+def _is_place_name(name: str) -> bool:
+    """Is ``name`` the name of a place in a layout (``"M3"``, as routing names its muscles)?"""
+    digits = name[len(name.rstrip("0123456789")):]
+    return bool(digits) and int(digits) > 0 and name == muscle_name(int(digits) - 1)

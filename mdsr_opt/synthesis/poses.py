@@ -14,8 +14,11 @@ The layout is the union of the poses' own routings, deduplicated, under a muscle
 2. the candidates are taken round-robin by rank (every pose's strongest muscle, then every pose's second
    ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
 3. a candidate whose edges are at least ``overlap`` (default half) covered by a muscle already in the layout
-   is the same channel and is not added again (the pose is recorded as a source of the kept muscle);
-4. at most ``max_muscles`` are kept.
+   is the same channel and is not added again (the pose is recorded as a source of the kept muscle), as is
+   one that runs along it too close to be moulded beside it; ropes of different poses that cross or crowd
+   each other otherwise make a layout that cannot be moulded in one layer: said, and no success;
+4. at most ``max_muscles`` are kept; given separate layouts (a scene's cases), named as in them (prefixed
+   by the pose where two poses give one name to different ropes: ``curl:M2``).
 
 Why not route once on a combined contraction graph (e.g. the largest contraction of each edge over the
 poses)? A muscle pulls in one direction: a combined graph mixes edges that contract in different poses, and
@@ -74,6 +77,9 @@ from ..core.guards import interruptible
 from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import as_float_array, check_label, check_options, keyword_names
+from ..core.quantities import check_length_unit
+from ..mechanics.align import difference, node_weights
+from .acceptance import difference_failure
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from .fabrication import FabricationWarning, check_fabrication, rope_conflicts, warn_conflicts
@@ -197,6 +203,20 @@ class PosesResult:
         The fingerprint of the mesh the layout was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
         saved with it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` and
         :func:`~mdsr_opt.synthesis.export.export_fabrication` refuse another mesh (None: not recorded, not checked).
+    rest_differences : (P,) ndarray or None
+        The rest shape's difference to each pose's target (the "do nothing" design, with the designs'
+        weights): a pose whose design removes less than
+        :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of it is not a success
+        (:func:`~mdsr_opt.synthesis.acceptance.difference_failure`); None: not recorded.
+    units : str or None
+        The mesh's length unit (``design_poses(units=...)``, a scene's ``units``): strokes and differences are
+        in it. None: body units.
+    stress_unit : str or None
+        The material's stress unit (a silicone preset's ``"Pa"``): with ``units``, tables and fabrication
+        files give tensions in N (:func:`~mdsr_opt.synthesis.export.export_fabrication`).
+    problems : tuple of str
+        Why the layout itself is no success (ropes kept for different poses that cannot be moulded in one
+        layer); empty when none. ``all_success`` is False when there is any.
     """
 
     names: tuple
@@ -219,6 +239,10 @@ class PosesResult:
     times: dict = field(default_factory=dict)
     designs: dict = field(default_factory=dict, repr=False)
     rest_mesh: dict | None = None
+    rest_differences: np.ndarray | None = None
+    units: str | None = None
+    stress_unit: str | None = None
+    problems: tuple = ()
 
     @property
     def n_muscles(self) -> int:
@@ -226,7 +250,9 @@ class PosesResult:
 
     @property
     def all_success(self) -> bool:
-        return bool(np.all(self.success))
+        """Every pose designed (converged, verified, moving the body towards its target) and the layout
+        mouldable (no ``problems``)."""
+        return bool(np.all(self.success)) and not self.problems
 
     def index(self, name: str) -> int:
         """Position of pose ``name`` (ValueError naming the poses otherwise)."""
@@ -241,7 +267,7 @@ class PosesResult:
             per = f"{np.nanmin(self.differences):.3g}..{np.nanmax(self.differences):.3g}"
         sep = int(self.separate_n_muscles.sum())
         return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
-                f"difference {per}, success={self.all_success})")
+                f"difference {per}, success={self.all_success}" + (", layout NOT mouldable)" if self.problems else ")"))
 
     def table(self) -> str:
         """Per pose: difference on the shared layout and on its own, and the strokes."""
@@ -249,9 +275,13 @@ class PosesResult:
             f"({', '.join(muscle_label(m, i) for i, m in enumerate(self.muscles))})"
         rows = [head, "-" * len(head)]
         for k, n in enumerate(self.names):
-            rows.append(f"{n:<14} {self.differences[k]:>10.4g} {self.separate_differences[k]:>10.4g} "
+            own = self.separate_differences[k]
+            own = f"{own:>10.4g}" if np.isfinite(own) else f"{'-':>10}"  # not compared, or no own layout
+            rows.append(f"{n:<14} {self.differences[k]:>10.4g} {own} "
                         f"{int(self.separate_n_muscles[k]):>5d}  " + " ".join(f"{s:.4g}" for s in self.strokes[k]))
-        rows.append("D (weighted RMS node distance) and strokes in the mesh's length units")
+        u = f"in {self.units}" if self.units else "in the mesh's length units"
+        rows.append(f"D (weighted RMS node distance) and strokes {u}")
+        rows += [f"NOT a success: {p}" for p in self.problems]
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
@@ -277,7 +307,9 @@ class PosesResult:
                 "engaged": np.asarray(self.engaged, dtype=bool).tolist(),
                 "anchor_radius": self.anchor_radius, "muscle_model": self.muscle_model,
                 "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()},
-                "rest_mesh": self.rest_mesh}
+                "rest_mesh": self.rest_mesh,
+                "rest_differences": None if self.rest_differences is None else nan_none(fin(self.rest_differences)),
+                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PosesResult":
@@ -297,7 +329,9 @@ class PosesResult:
                    separate_n_muscles=np.array(d["separate_n_muscles"], dtype=int),
                    engaged=np.array(d["engaged"], dtype=bool).reshape(P, m),
                    anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
-                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"))
+                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"),
+                   rest_differences=None if d.get("rest_differences") is None else arr(d["rest_differences"]),
+                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())))
 
     def save(self, path) -> str:
         """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
@@ -370,7 +404,7 @@ def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
                  overlap: float = 0.5, compare: bool = True,
-                 separate: Mapping[str, tuple] | None = None) -> PosesResult:
+                 separate: Mapping[str, tuple] | None = None, units: str | None = None) -> PosesResult:
     """Route ONE muscle layout for all poses and design each pose's strokes on it.
 
     See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
@@ -402,10 +436,20 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         are exactly its separate muscles (the same node chains in the same order) takes that design as its
         shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness and anchor
         radius are those of ``design_options``.
+    units : str, optional
+        The mesh's length unit (see :data:`mdsr_opt.synthesis.export.UNITS`), recorded in the result with
+        the material's ``stress_unit``: tables and fabrication files then give lengths in it and tensions in
+        N. None: body units.
 
     Returns
     -------
     PosesResult
+        A pose is a success when its design converged, was verified and removes at least
+        :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of the rest shape's difference to its target.
+        Ropes of different poses that cannot be moulded together in one layer (crossing, channels or
+        fixtures too close: :func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`) are listed in
+        ``problems`` and make the result no success. With ``separate``, the muscles keep the names those
+        layouts give them (see :func:`~mdsr_opt.synthesis.layouts.shared_layout`, ``by_pose``).
 
     Raises
     ------
@@ -426,6 +470,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     budget = check_budget(max_muscles)
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
+    units = check_length_unit(units)
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
@@ -443,7 +488,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     fab = None if ropt["fabrication"] is False else ropt["fabrication"].for_body(mesh)
     notes: list = []
     muscles, sources = shared_layout(mesh, own, budget, overlap, fabrication=fab,
-                                     fixture_radius=dopt.get("anchor_radius"), notes=notes)
+                                     fixture_radius=dopt.get("anchor_radius"), notes=notes, by_pose=bool(separate))
     if notes:  # the poses' ropes that could not be moulded beside another: said, not silently overlapped
         warnings.warn("design_poses: ropes of the poses closer than a channel and a wall: "
                       + "; ".join(notes), FabricationWarning, stacklevel=3)
@@ -453,11 +498,21 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+    problems: list[str] = []
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
-        warn_conflicts([c for c in rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
-                        if len(c.muscles) == 1], "design_poses: the shared layout", stacklevel=4)
+        found = rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
+        warn_conflicts([c for c in found if len(c.muscles) == 1], "design_poses: the shared layout", stacklevel=4)
+        # ropes of one pose's own layout (given) that clash were said above; ropes kept for different poses
+        # that still clash make a layout that cannot be moulded: no success
+        across = [c for c in found if len(c.muscles) == 2 and sources[c.muscles[0]][0] != sources[c.muscles[1]][0]]
+        if across:
+            problems.append(f"the shared layout cannot be moulded in one layer: {len(across)} place(s) where ropes "
+                            "of different poses clash: " + "; ".join(c.message for c in across))
 
     t1 = time.perf_counter()
+    w = dopt.get("weights")
+    w = node_weights(mesh, dopt.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
+    Drest = np.array([difference(mesh.points, p.target, w) for p in items])  # the "do nothing" design
     P, m = len(items), len(muscles)
     L0 = np.array([mu.rest_length(mesh) for mu in muscles])
     A, S, T = np.zeros((P, m)), np.zeros((P, m)), np.full((P, m), np.nan)
@@ -469,9 +524,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         on = np.flatnonzero(engaged[k])
         if not len(on):
             x = mesh.points.copy()
-            from ..mechanics.align import align, node_weights
-
-            D[k] = align(x, p.target, node_weights(mesh)).difference
+            D[k] = Drest[k]
             status.append("no muscle of the shared layout shortens in this pose: left at rest")
         else:
             sep = separate.get(p.name)
@@ -485,6 +538,12 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             A[k, on], S[k, on], T[k, on] = d.contractions, st, tn
             D[k], ok[k] = d.difference, d.success
             status.append(str(d.status))
+            why = difference_failure(D[k], mesh.size, math.inf, units, rest_difference=Drest[k])
+            if ok[k] and why:  # converged and verified, but the layout barely moves the body towards this pose
+                ok[k] = False
+                status[-1] += f"; {why}"
+        if own[p.name] and not any(p.name in src for src in sources):
+            status[-1] += "; none of the ropes of its own layout is in the shared layout (over the budget)"
         off = np.flatnonzero(~engaged[k])
         if len(off):  # released: the rope at exactly the path's length (paid out or slack taken up), no tension
             Lx = np.array([muscles[i].length(x) for i in off])
@@ -502,7 +561,11 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             if p.name in separate and separate[p.name][1] is not None:
                 Dsep[k] = float(separate[p.name][1].difference)
             elif own[p.name]:
-                Dsep[k] = design_contractions(mesh, material, own[p.name], p.target, **dopt).difference
+                with warnings.catch_warnings(record=True) as caught:
+                    Dsep[k] = design_contractions(mesh, material, own[p.name], p.target, **dopt).difference
+                for w in caught:  # its muscles are named in the pose's own layout, not in the shared one
+                    warnings.warn(f"design_poses: pose {p.name!r} on its own layout (compared): {w.message}",
+                                  w.category, stacklevel=3)
     t_sep = time.perf_counter() - t2
     radius = next((getattr(d, "anchor_radius", None) for d in designs.values()), None)
     return PosesResult(names=tuple(p.name for p in items), muscles=muscles,
@@ -514,7 +577,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
-                       rest_mesh=mesh_fingerprint(mesh))
+                       rest_mesh=mesh_fingerprint(mesh), rest_differences=Drest, units=units,
+                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems))
 
 
 def _same_design(mesh, sep, engaged, dopt) -> bool:
