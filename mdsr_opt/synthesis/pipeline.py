@@ -24,7 +24,7 @@ from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import route_for_design
-from .fabrication import Fabrication, check_fabrication, rope_conflicts, warn_conflicts
+from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -362,6 +362,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         band_options, routing_options, external_options, design_options)  # misspelt keys: before any work
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
+    check_channel_fits(mesh, ropts["fabrication"], routed=muscles is None)  # a channel the body cannot hold
     from .contactdesign import check_design_contact
     from ..mechanics.obstacles import check_obstacles
 

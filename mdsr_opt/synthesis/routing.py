@@ -117,7 +117,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
-from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_fabrication
+from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_fixtures import FixtureFit, fit_fixtures
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
@@ -370,6 +370,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
     else:
+        check_channel_fits(mesh, fab)  # a channel with its wall deeper than the body: no mesh can hold it
         fab = fab.for_body(mesh)
         clearance = fab.clearance(mesh)
         if inset is not None:

@@ -1,0 +1,131 @@
+"""Trial 3 defects at the doors (2, 3, 5, 8): a channel wider than the body refused at load, routing's failure
+message naming the filter that removed the contracted edges, the virtual prototype's fixtures those of the
+design, and a scene's muscle on the outline warned about under ``mdsr run`` as in the Python API."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, NeoHookean
+from mdsr_opt.cli.main import main
+from mdsr_opt.scenes.scenefile import load_scene
+from mdsr_opt.synthesis.fabrication import Fabrication, check_channel_fits
+
+QUIET_RUN = ("--serial", "--no-photos", "--no-figures", "--no-animations", "--no-prototype")
+
+BODY = """name = "b"
+units = "{units}"
+[body]
+outline = [[0, 0], [{L}, 0], [{L}, {H}], [0, {H}]]
+resolution = "coarse"
+[regions]
+base = {{ box = [{m}, {m}, {e}, {h1}] }}
+tip = {{ box = [{l0}, {m}, {l1}, {h1}] }}
+"""
+BEND = """[[cases]]
+name = "bend"
+anchors = "base"
+drags = [{{ nodes = "tip", by = [{dx}, {dy}] }}]
+"""
+
+
+def _scene_text(s: float, units: str = "mm", extra: str = "") -> str:
+    """A 40 x 10 strip (times ``s``) bent by its tip, with ``extra`` tables."""
+    return (BODY.format(units=units, L=40 * s, H=10 * s, m=-s, e=0.5 * s, h1=11 * s, l0=39.5 * s, l1=41 * s)
+            + extra + BEND.format(dx=-5 * s, dy=15 * s))
+
+
+def _strip(s: float = 1.0) -> tuple[Mesh, list, dict]:
+    mesh = Mesh.rectangle(40.0 * s, 10.0 * s, 16, 4)
+    P = mesh.points
+    anchors = [i for i, (x, y) in enumerate(P) if x == 0.0]
+    drags = {i: (x - 5 * s, y + 15 * s) for i, (x, y) in enumerate(P) if x == 40.0 * s}
+    return mesh, anchors, drags
+
+
+# ---------------------------------------------------------------------------------------------- 2: channel > body
+@pytest.mark.parametrize("s, units", [(1.0, "mm"), (0.001, "m")])
+def test_a_channel_wider_than_the_body_is_refused_when_the_scene_loads(tmp_path, s, units):
+    f = tmp_path / "huge.toml"
+    f.write_text(_scene_text(s, units, f"[fabrication]\nchannel_diameter = {30 * s}\n"))
+    with pytest.raises(ValueError) as e:
+        load_scene(f)
+    msg = str(e.value)
+    assert f"channel_diameter {30 * s:.4g} with a wall" in msg and "does not fit in the body" in msg
+    # the largest channel the body admits: 2 (depth - wall), the depth of a 40 x 10 strip being 5
+    wall = 0.01 * np.hypot(40, 10) * s
+    assert f"admits with this wall is {2 * (5 * s - wall):.4g}" in msg
+    assert "too coarse" not in msg
+
+
+def test_mdsr_run_refuses_a_channel_wider_than_the_body_in_one_line_with_nothing_written(tmp_path, capsys):
+    f = tmp_path / "huge.toml"
+    f.write_text(_scene_text(1.0, "mm", "[fabrication]\nchannel_diameter = 30\n"))
+    out = tmp_path / "o"
+    assert main(["run", str(f), "--out", str(out), *QUIET_RUN]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and "bug" not in err, err
+    assert "channel_diameter 30" in err and "does not fit in the body" in err
+    assert not out.exists()
+
+
+def test_a_wall_alone_deeper_than_a_holed_body_is_refused_naming_it():
+    """The depth is the body's largest inscribed circle: a ring 2 thick is 1 deep whatever its size."""
+    t = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    ring = np.column_stack([np.cos(t), np.sin(t)])
+    from mdsr_opt.scenes.scene import mesh_polygon
+
+    mesh = mesh_polygon(30 * ring, [28 * ring[::-1]], "coarse")
+    with pytest.raises(ValueError, match=r"channel_diameter 0\.5 with a wall 1\.2 .* only 0\.99\d* deep .* no channel "
+                                         r"fits with this wall: the wall must be below 0\.99"):
+        check_channel_fits(mesh, {"channel_diameter": 0.5, "wall": 1.2})
+    check_channel_fits(mesh, {"channel_diameter": 0.5, "wall": 0.5})  # 0.75 <= 1: fits
+
+
+def test_design_pipeline_refuses_the_channel_before_the_external_solve(monkeypatch):
+    mesh, anchors, drags = _strip()
+
+    def no_solve(*a, **k):
+        raise AssertionError("the external solve ran before the channel was checked")
+
+    monkeypatch.setattr("mdsr_opt.synthesis.pipeline._target", no_solve)
+    monkeypatch.setattr("mdsr_opt.mechanics.equilibrium.solve_external", no_solve)
+    from mdsr_opt.synthesis.pipeline import design_pipeline
+
+    with pytest.raises(ValueError, match=r"channel_diameter 30 with a wall .* does not fit in the body"):
+        design_pipeline(mesh, NeoHookean(1.0, 0.3), anchors, drags, fabrication=Fabrication(channel_diameter=30.0))
+
+
+def test_route_muscles_and_design_poses_refuse_the_channel_at_the_door():
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.routing import route_muscles
+
+    mesh, _, _ = _strip()
+    target = mesh.points * [0.8, 1.0]
+    with pytest.raises(ValueError, match="does not fit in the body"):
+        route_muscles(mesh, target, fabrication={"channel_diameter": 12.0, "wall": 0.0})
+    with pytest.raises(ValueError, match="does not fit in the body"):
+        design_poses(mesh, NeoHookean(1.0, 0.3), {"a": target}, routing_options={"fabrication": {"wall": 5.5}})
+
+
+def test_a_body_wide_enough_on_a_coarse_mesh_still_says_the_mesh_is_too_coarse():
+    from mdsr_opt.synthesis.routing import route_muscles
+
+    mesh = Mesh.rectangle(40.0, 10.0, 16, 3)  # 5 deep, but no node deeper than 3.33
+    check_channel_fits(mesh, {"channel_diameter": 7.0, "wall": 1.0})  # 4.5 <= 5: fits the body
+    with pytest.raises(ValueError, match="the mesh is too coarse"):
+        route_muscles(mesh, mesh.points * [0.8, 1.0], fabrication={"channel_diameter": 7.0, "wall": 1.0})
+
+
+def test_given_muscles_are_checked_against_stated_sizes_only():
+    """Muscles the user lays are designed as given: the default channel (a fraction of the diameter) does not
+    refuse a body thinner than it, a stated one does; the routing checks both."""
+    mesh = Mesh.rectangle(100.0, 1.0, 100, 2)  # 0.5 deep; the default channel / 2 + wall is 1.5
+    check_channel_fits(mesh, None, routed=False)
+    with pytest.raises(ValueError, match="channel_diameter the default 1%"):
+        check_channel_fits(mesh, None)
+    with pytest.raises(ValueError, match="does not fit"):
+        check_channel_fits(mesh, {"channel_diameter": 2.0}, routed=False)
