@@ -129,3 +129,99 @@ def test_given_muscles_are_checked_against_stated_sizes_only():
         check_channel_fits(mesh, None)
     with pytest.raises(ValueError, match="does not fit"):
         check_channel_fits(mesh, {"channel_diameter": 2.0}, routed=False)
+
+
+# ---------------------------------------------------------------------------------------------- 3: why no seed
+TEE = """name = "tee"
+units = "mm"
+[body]
+outline = [[30, 0], [50, 0], [50, 60], [80, 60], [80, 80], [0, 80], [0, 60], [30, 60]]
+holes = [[[45.000, 25.000], [44.619, 26.913], [43.536, 28.536], [41.913, 29.619], [40.000, 30.000],
+          [38.087, 29.619], [36.464, 28.536], [35.381, 26.913], [35.000, 25.000], [35.381, 23.087],
+          [36.464, 21.464], [38.087, 20.381], [40.000, 20.000], [41.913, 20.381], [43.536, 21.464],
+          [44.619, 23.087]]]
+resolution = "coarse"
+[material]
+silicone = "dragon-skin-30"
+thickness = 5
+[regions]
+foot = { box = [29, -1, 51, 50] }
+left = { box = [-1, 59, 0.5, 81] }
+[routing]
+max_muscles = 4
+[[cases]]
+name = "left_up"
+anchors = "foot"
+drags = [{ nodes = "left", rotate = -35, about = [30, 70] }]
+"""
+
+
+@pytest.fixture(scope="module")
+def tee_left_up(tmp_path_factory):
+    from mdsr_opt.mechanics.equilibrium import solve_external
+
+    f = tmp_path_factory.mktemp("tee") / "tee.toml"
+    f.write_text(TEE)
+    scene = load_scene(f)
+    case = scene.case("left_up")
+    res = solve_external(scene.mesh, scene.material, case.anchors, case.drags)
+    assert res.success
+    return scene, res.x
+
+
+def _route_warning(mesh, x, **kw) -> tuple:
+    from mdsr_opt.synthesis.routing import RoutingWarning, route_muscles
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        rr = route_muscles(mesh, x, **kw)
+    return rr, [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
+
+
+def test_no_seed_names_the_compression_filter_and_a_ratio_that_routes(tee_left_up):
+    """The trial's T: left_up contracts 8 edges by more than 5 %, all on the outline; the 11 strong edges inside
+    the band are all removed by compression_ratio=1. The message says so and the ratio it suggests routes."""
+    scene, x = tee_left_up
+    rr, msgs = _route_warning(scene.mesh, x, max_muscles=4)
+    assert len(rr) == 0 and len(msgs) == 1
+    msg = msgs[0]
+    assert "does the target shorten any edge" not in msg
+    assert "8 by more than 5 %" in msg
+    assert "lie outside the buildable band" in msg and "8 of those contracting by more than 5 %" in msg
+    assert "the compression_ratio filter (1) removed all 11 of the 11" in msg
+    import re
+
+    ratio = float(re.search(r"try compression_ratio=([0-9.]+)", msg).group(1))
+    assert 0.5 <= ratio < 1.0
+    from mdsr_opt.synthesis.routing import route_for_design
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert len(route_for_design(scene.mesh, x, max_muscles=4, compression_ratio=ratio)) >= 1
+
+
+def test_no_seed_on_a_poisson_response_names_the_compression_filter():
+    """Another body and target: a strip pulled along its length narrows across it; the narrowing edges contract,
+    but only as the sideways response of the stretch, which the compression filter removes."""
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 8)
+    x = mesh.points * [1.2, 0.94] + [0.0, 0.03]
+    rr, msgs = _route_warning(mesh, x, fabrication=False)
+    assert len(rr) == 0 and len(msgs) == 1
+    assert "the compression_ratio filter (1) removed all" in msgs[0]
+    # 6 % across, 20 % along: a ratio below 0.3 keeps them (on the grid of 0.05)
+    assert "try compression_ratio=0.25 or lower (it keeps 136 of them)" in msgs[0]
+
+
+def test_design_pipeline_says_why_routing_found_no_muscle():
+    """The pipeline's error carries the routing's reason, not a guess: a strip pulled at its end only narrows."""
+    from mdsr_opt.synthesis.pipeline import design_pipeline
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 8)
+    left = [i for i, (px, py) in enumerate(mesh.points) if px == 0.0]
+    right = {i: (1.2 * px, py) for i, (px, py) in enumerate(mesh.points) if px == 4.0}
+    with pytest.raises(ValueError, match=r"routing found no muscle for this target \(no muscle unit could be "
+                                         r"seeded: .* compression_ratio filter \(1\) removed"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            design_pipeline(mesh, NeoHookean(1.0, 0.3), left, right, fabrication=False)
+
