@@ -225,3 +225,54 @@ def test_design_pipeline_says_why_routing_found_no_muscle():
             warnings.simplefilter("ignore")
             design_pipeline(mesh, NeoHookean(1.0, 0.3), left, right, fabrication=False)
 
+
+# ---------------------------------------------------------------------------------------------- 8: scene muscles
+def _muscle_scene(tmp_path, s: float, frm, to, units="mm"):
+    text = (BODY.format(units=units, L=40 * s, H=10 * s, m=-s, e=0.5 * s, h1=11 * s, l0=39.5 * s, l1=41 * s)
+            + f"[[muscles]]\nname = \"m\"\nboundary = {{ from = [{frm[0] * s}, {frm[1] * s}], "
+              f"to = [{to[0] * s}, {to[1] * s}] }}\n"
+            + "[[cases]]\nname = \"c\"\ncontractions = [0.2]\n")
+    f = tmp_path / f"m{s}.toml"
+    f.write_text(text)
+    return f
+
+
+@pytest.mark.parametrize("s, units", [(1.0, "mm"), (0.001, "m")])
+def test_a_scene_muscle_on_the_outline_warns_in_the_run_its_log_and_its_table(tmp_path, s, units):
+    from mdsr_opt.scenes.runner import SceneReport, run_case
+    from mdsr_opt.synthesis.fabrication import FabricationWarning, rope_conflicts
+
+    scene = load_scene(_muscle_scene(tmp_path, s, (0, 0), (40, 0), units))
+    said = []
+    with pytest.warns(FabricationWarning, match=r"muscle m: its channel is not mouldable: .*runs on the outline"):
+        run = run_case(scene, "c", photo=False, bands=False, log=said.append)
+    rep = run.report
+    assert rep.success and len(rep.fabrication) == 1
+    # the same check as the Python API's (rope_conflicts), word for word
+    expected = [c.message for c in rope_conflicts(scene.mesh, scene.muscles, Fabrication())]
+    assert all(m in rep.fabrication[0] for m in expected) and expected
+    assert any(line.startswith("FabricationWarning: ") and "runs on the outline" in line for line in said)
+    table = SceneReport(scene="b", title="", n_nodes=scene.mesh.n_nodes, cases=[rep]).table()
+    assert "ok (not mouldable as laid out)" in table
+    assert "runs on the outline" in str(rep.to_dict()["fabrication"])
+
+
+def test_a_mouldable_scene_muscle_gives_no_fabrication_warning(tmp_path):
+    from mdsr_opt.scenes.cases import given_muscle_conflicts
+
+    scene = load_scene(_muscle_scene(tmp_path, 1.0, (0, 0), (40, 0)))
+    import networkx as nx
+
+    from mdsr_opt import Muscle
+    from mdsr_opt.synthesis.fabrication import boundary_distance
+
+    mesh = scene.mesh
+    P, deep = mesh.points, boundary_distance(mesh) >= 2.5
+    g = nx.Graph([(int(a), int(b), {"l": float(np.linalg.norm(P[a] - P[b]))}) for a, b in mesh.edges
+                  if deep[a] and deep[b]])
+    a, b = (min(g.nodes, key=lambda i: np.linalg.norm(P[i] - q)) for q in ((10.0, 5.0), (30.0, 5.0)))
+    path = nx.shortest_path(g, a, b, weight="l")
+    assert len(path) >= 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert given_muscle_conflicts(scene, scene.cases[0], (Muscle(path, name="inside"),)) == []
