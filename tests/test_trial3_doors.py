@@ -239,12 +239,16 @@ def _muscle_scene(tmp_path, s: float, frm, to, units="mm"):
 
 @pytest.mark.parametrize("s, units", [(1.0, "mm"), (0.001, "m")])
 def test_a_scene_muscle_on_the_outline_warns_in_the_run_its_log_and_its_table(tmp_path, s, units):
+    from mdsr_opt.scenes.cases import prepare_case
     from mdsr_opt.scenes.runner import SceneReport, run_case
     from mdsr_opt.synthesis.fabrication import FabricationWarning, rope_conflicts
 
     scene = load_scene(_muscle_scene(tmp_path, s, (0, 0), (40, 0), units))
-    said = []
     with pytest.warns(FabricationWarning, match=r"muscle m: its channel is not mouldable: .*runs on the outline"):
+        prepare_case(scene, "c")
+    said = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FabricationWarning)  # the run reports it in its log and report instead
         run = run_case(scene, "c", photo=False, bands=False, log=said.append)
     rep = run.report
     assert rep.success and len(rep.fabrication) == 1
@@ -276,3 +280,47 @@ def test_a_mouldable_scene_muscle_gives_no_fabrication_warning(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert given_muscle_conflicts(scene, scene.cases[0], (Muscle(path, name="inside"),)) == []
+
+
+# ---------------------------------------------------------------------------------------------- 5: prototype fixtures
+class _Shot:
+    success, status = False, "not solved (a stand-in prototype)"
+
+
+class _Prototype:
+    """validate_case's view of a VirtualPrototype: its default fixtures and what it was asked to build."""
+
+    def __init__(self, radius, mesh):
+        self.fixture_radius, self.design_mesh, self.asked = radius, mesh, []
+
+    def describe(self):
+        return {"fixture_radius": self.fixture_radius}
+
+    def drive(self, scene, case, guess=None):
+        return _Shot()
+
+    def internal(self, muscles, contractions, photo=True, guess=None, fixture_radius=None):
+        self.asked.append(fixture_radius)
+        return _Shot()
+
+
+@pytest.mark.parametrize("designed, used", [(2.61, 2.61), (float("nan"), 3.77), (0.0, 0.0)])
+def test_the_prototype_builds_the_designs_fixtures_and_records_them(designed, used):
+    """The routing shrank the fixtures (3.77 -> 2.61 on the trial's T): the design and the fabrication files use
+    2.61, so the prototype is built with 2.61 and the case's record says so (a design without a radius: the
+    prototype's own)."""
+    from types import SimpleNamespace
+
+    from mdsr_opt.scenes.prototype import validate_case
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    proto = _Prototype(3.77, mesh)
+    setup = SimpleNamespace(case=SimpleNamespace(kind="external", name="c"), scene=None, target=mesh.points,
+                            muscles=())
+    design = SimpleNamespace(anchor_radius=designed, contractions=np.array([0.1]), x=mesh.points)
+    said = []
+    out, _ = validate_case(proto, setup, design, log=said.append)
+    assert proto.asked == [used]
+    assert out["design"]["fixture_radius"] == used and out["prototype"]["fixture_radius"] == used
+    assert "fixture_radius" not in out["driving"]  # anchors and drags: no ropes, no fixtures
+    assert f"fixtures of radius {used:.3g}" in said[-1]

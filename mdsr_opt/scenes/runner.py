@@ -17,6 +17,7 @@ from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..mechanics.align import difference, node_weights
 from ..plot.style import muscle_label, unit_label
+from ..synthesis.fabrication import FabricationWarning
 from ..synthesis.results import MuscleWarning
 from .cases import CaseSetup, prepare_case
 from .rundir import check_interrupt
@@ -267,7 +268,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     what = ("external driving" if case.kind == "external" else
             f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
     try:
-        setup = prepare_case(scene, case)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FabricationWarning)  # reported in the case's ``fabrication`` and log
+            setup = prepare_case(scene, case)
     except LayoutError as exc:  # the scene's muscles cannot make this case's target (their end patches)
         rep.message = f"target refused: {exc}"
         rep.times["total"] = time.perf_counter() - t0
