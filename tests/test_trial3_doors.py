@@ -304,11 +304,11 @@ class _Prototype:
         return _Shot()
 
 
-@pytest.mark.parametrize("designed, used", [(2.61, 2.61), (float("nan"), 3.77), (0.0, 0.0)])
+@pytest.mark.parametrize("designed, used", [(2.61, 2.61), (float("nan"), 3.77), (0.0, 3.77)])
 def test_the_prototype_builds_the_designs_fixtures_and_records_them(designed, used):
     """The routing shrank the fixtures (3.77 -> 2.61 on the trial's T): the design and the fabrication files use
-    2.61, so the prototype is built with 2.61 and the case's record says so (a design without a radius: the
-    prototype's own)."""
+    2.61, so the prototype is built with 2.61 and the case's record says so (a design without a radius, NaN
+    before this fix, or with point ends: the prototype's own)."""
     from types import SimpleNamespace
 
     from mdsr_opt.scenes.prototype import validate_case

@@ -542,7 +542,8 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         None if case.kind == "external" else prototype.fixture_radius)
     if design is not None:
         r_design = getattr(design, "anchor_radius", None)  # the fixtures the ropes were fitted to and exported with
-        radius = prototype.fixture_radius if r_design is None or not np.isfinite(r_design) else float(r_design)
+        radius = float(r_design) if r_design is not None and np.isfinite(r_design) and r_design > 0 else \
+            prototype.fixture_radius  # a point end (0) is no fixture a prototype can mould: its own size
         run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions,
                                                     guess=near(getattr(design, "x", None)),
                                                     fixture_radius=radius), radius)
