@@ -13,7 +13,7 @@ from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .scene import Case, Scene
 
-__all__ = ['CaseSetup', 'prepare_case']
+__all__ = ['CaseSetup', 'prepare_case', 'given_muscle_conflicts']
 
 
 # ---------------------------------------------------------------------------------------------- design problem
@@ -38,6 +38,9 @@ class CaseSetup:
         Seconds for ``target`` and ``routing``.
     warnings : list of str
         The routing's warnings (why it found no muscle, for instance).
+    fabrication : list of str
+        Muscles the scene gives (not routed) that cannot be moulded as laid out: the
+        :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` :func:`prepare_case` emitted (empty: none).
     """
 
     scene: Scene
@@ -49,6 +52,7 @@ class CaseSetup:
     routing: Any = None
     times: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    fabrication: list = field(default_factory=list)
 
     @property
     def success(self) -> bool:
@@ -68,7 +72,7 @@ class CaseSetup:
             "n_nodes": self.scene.mesh.n_nodes, "target": self.target, "muscles": list(self.muscles),
             "known_contractions": self.known_contractions, "target_result": self.target_result.to_dict(),
             "routing": None if self.routing is None else self.routing.to_dict(), "times": self.times,
-            "warnings": self.warnings})
+            "warnings": self.warnings, "fabrication": self.fabrication})
 
     def save(self, path: str | os.PathLike) -> str:
         """Write the setup as one ``.npz`` file: the target, the known contractions and the target solve's
@@ -87,7 +91,8 @@ class CaseSetup:
                 tr_meta[name] = value
         meta = {"scene": self.scene.name, "case": self.case.name, "n_nodes": self.scene.mesh.n_nodes,
                 "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
-                "target_result": tr_meta, "times": self.times, "warnings": list(self.warnings)}
+                "target_result": tr_meta, "times": self.times, "warnings": list(self.warnings),
+                "fabrication": list(self.fabrication)}
         return save_npz(path, "case_setup", arrays, meta)
 
     @classmethod
@@ -120,7 +125,8 @@ class CaseSetup:
             return cls(scene=scene, case=case, target=arrays["target"],
                        muscles=tuple(Muscle(tuple(m["nodes"]), name=m["name"]) for m in meta["muscles"]),
                        known_contractions=arrays.get("known_contractions"), target_result=target_result,
-                       routing=None, times=dict(meta["times"]), warnings=list(meta["warnings"]))
+                       routing=None, times=dict(meta["times"]), warnings=list(meta["warnings"]),
+                       fabrication=list(meta.get("fabrication", [])))
         except KeyError as exc:
             raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing") from None
         except (TypeError, ValueError, AttributeError) as exc:
@@ -175,7 +181,29 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
             muscles = tuple(routing.muscles)
         else:
             muscles = tuple(scene.muscles)
+    given = [] if not muscles or routing is not None and muscles == tuple(routing.muscles) else \
+        given_muscle_conflicts(scene, case, muscles)
     t2 = time.perf_counter()
     return CaseSetup(scene=scene, case=case, target=res.x.copy(), muscles=muscles, known_contractions=known,
                      target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
-                     warnings=notes)
+                     warnings=notes, fabrication=given)
+
+
+def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
+    """Warn (:class:`~mdsr_opt.synthesis.fabrication.FabricationWarning`) where muscles the scene gives cannot be
+    moulded as laid out -- a channel on the outline, ropes too close -- by the check the Python API's
+    :func:`~mdsr_opt.synthesis.pipeline.design_pipeline` makes (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`,
+    with the scene's ``[fabrication]`` and ``anchor_radius``); returns the warning's text (empty: mouldable).
+    The muscles are designed as given."""
+    from ..synthesis.fabrication import Fabrication, FabricationWarning, check_fabrication, rope_conflicts, \
+        warn_conflicts
+
+    r = scene.design_options.get("anchor_radius")
+    fab = check_fabrication(scene.routing_options.get("fabrication"), r) or Fabrication()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", FabricationWarning)
+        warn_conflicts(rope_conflicts(scene.mesh, muscles, fab, fixture_radius=r),
+                       f"scene {scene.name!r}, case {case.name!r}: the muscles given")
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return [str(w.message) for w in caught if issubclass(w.category, FabricationWarning)]

@@ -509,13 +509,14 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
     out: dict = {"prototype": prototype.describe()}
     photos: dict = {}
 
-    def run(key, table, make):
+    def run(key, table, make, radius=None):
+        fixtures = {} if radius is None else {"fixture_radius": float(radius)}
         try:
             shot = make()
         except ValueError as exc:  # a muscle that cannot be laid on the fine mesh
-            out[key] = {"table": table, "success": False, "status": f"not built: {exc}"}
+            out[key] = {"table": table, "success": False, "status": f"not built: {exc}", **fixtures}
             return
-        entry = {"table": table, "success": shot.success, "status": shot.status}
+        entry = {"table": table, "success": shot.success, "status": shot.status, **fixtures}
         if shot.success:
             try:
                 entry.update(measure(scene.mesh, setup.target, shot.photo))
@@ -525,6 +526,7 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
                 photos[key] = shot.photo
         out[key] = entry
         what = "external driving" if table == 2 else "internal driving" if table == 3 else "design"
+        what += f", fixtures of radius {radius:.3g}" if radius is not None else ""
         if entry["success"]:
             say(f"{prefix}virtual prototype ({what}, Table {table}): d = {entry['mean_px']:.2f} px over every "
                 f"loop (outline alone {entry['outer_mean_px']:.2f} px), ratio {100 * entry['ratio']:.2f} %")
@@ -536,12 +538,16 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         return x if x is not None and x.shape == prototype.design_mesh.points.shape and np.isfinite(x).all() else None
 
     run("driving", 2 if case.kind == "external" else 3,
-        lambda: prototype.drive(scene, case, guess=near(setup.target)))
+        lambda: prototype.drive(scene, case, guess=near(setup.target)),
+        None if case.kind == "external" else prototype.fixture_radius)
     if design is not None:
-        r_design = getattr(design, "anchor_radius", None)  # the fixtures the designed ropes were fitted to
+        r_design = getattr(design, "anchor_radius", None)  # the fixtures the ropes were fitted to and exported with
+        radius = float(r_design) if r_design is not None and np.isfinite(r_design) and r_design > 0 else \
+            prototype.fixture_radius  # a point end (0) is no fixture a prototype can mould: its own size
         run("design", 4, lambda: prototype.internal(setup.muscles, design.contractions,
                                                     guess=near(getattr(design, "x", None)),
-                                                    fixture_radius=r_design if r_design else None))
+                                                    fixture_radius=radius), radius)
+        out["prototype"]["fixture_radius"] = radius  # this case's ropes' fixtures, not the scene's default
     return out, photos
 
 
@@ -588,8 +594,8 @@ def validation_tables(reports: Sequence) -> str:
     if proto:
         elements = proto.get("elements", "linear (3-node)")
         rope = (f"ropes with capstan friction mu = {proto['rope_friction']:g} pulled at the muscle's first node, "
-                "end fixtures of each scene's anchor radius (a ring of elements where that radius holds no "
-                "node)") if "rope_friction" in proto else "the exact sliding cable"
+                "end fixtures of the size each design's ropes were fitted to and exported with (a ring of "
+                "elements where that radius holds no node)") if "rope_friction" in proto else "the exact sliding cable"
         nu = (f"silicone with nu = {proto['silicone_nu']:.3f} (drawn in {SILICONE_NU:g} +- {proto['nu_range']:g}, "
               "at most 0.499)" if "silicone_nu" in proto else f"nu + U(+- {proto['nu_range']:g})")
         if proto.get("plane") == "stress":

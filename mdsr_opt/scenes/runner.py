@@ -17,6 +17,7 @@ from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..mechanics.align import difference, node_weights
 from ..plot.style import muscle_label, unit_label
+from ..synthesis.fabrication import FabricationWarning
 from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .cases import CaseSetup, prepare_case
@@ -73,6 +74,8 @@ class CaseReport:
     units : ``{"stroke": ..., "tension": ...}``: the unit of the strokes (the scene's ``units``) and of the
         tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
         ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
+    fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
+        channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
     """
 
     scene: str
@@ -108,6 +111,7 @@ class CaseReport:
     tension: list = field(default_factory=list)
     units: dict = field(default_factory=dict)
     band_notes: list = field(default_factory=list)
+    fabrication: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -194,6 +198,7 @@ class SceneReport:
             ok = "ok" if c.success else "FAILED"
             ok += f" (saturated {', '.join(map(str, c.saturated))})" if c.saturated else ""
             ok += f" (dropped {', '.join(d['name'] for d in c.dropped)})" if c.dropped else ""
+            ok += " (not mouldable as laid out)" if getattr(c, "fabrication", None) else ""
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
@@ -267,7 +272,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     what = ("external driving" if case.kind == "external" else
             f"internal driving at {', '.join(f'{a:.0%}' for a in case.contractions)}")
     try:
-        setup = prepare_case(scene, case)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FabricationWarning)  # reported in the case's ``fabrication`` and log
+            setup = prepare_case(scene, case)
     except LayoutError as exc:  # the scene's muscles cannot make this case's target (their end patches)
         rep.message = f"target refused: {exc}"
         rep.times["total"] = time.perf_counter() - t0
@@ -319,6 +326,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "
             "(a scene's [[muscles]] drive every case; in a scene without them an external case's are routed)")
+    rep.fabrication = list(getattr(setup, "fabrication", []))
+    for msg in rep.fabrication:
+        say(f"{prefix}FabricationWarning: {msg}")
     opts = dict(scene.design_options)
     if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
             setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to

@@ -271,6 +271,14 @@ class Scene:
         check_units_and_gait(self)  # issue 16
         self.routing_options = check_scene_options(self.routing_options, "routing", f"scene {self.name!r}")
         self.design_options = check_scene_options(self.design_options, "design", f"scene {self.name!r}")
+        # a rope's channel with its wall deeper than the body holds no rope: refused before any solve (muscles
+        # the scene lays are designed as given, so only sizes it states are checked unless a case routes)
+        from ..synthesis.fabrication import check_channel_fits
+
+        routes = self.muscles is None or self.gait is not None or any(c.kind == "internal" or c.muscles is not None
+                                                                      for c in cases)
+        check_channel_fits(self.mesh, self.routing_options.get("fabrication"), routed=routes,
+                           where=f"scene {self.name!r}: fabrication")
         if self.design_options.get("anchor_radius") is not None:  # the solvers' own check, against this body
             try:
                 check_anchor_radius(self.mesh, self.design_options["anchor_radius"])

@@ -88,10 +88,10 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [routing]                             # keyword arguments of route_muscles
         max_muscles = 2
         [fabrication]                         # optional: channel, wall and end fixtures, in `units`
-        channel_diameter = 1.0                # each default: a fraction of the body's diameter D (channel
-        wall = 1.0                            # 1 %, wall 1 %, fixture 4 %, smallest fixture 1.5 %); ropes
-        fixture_radius = 4.0                  # lie >= channel/2 + wall (and 2 % of D) inside the body;
-        min_fixture_radius = 1.5              # fixture_radius is the design's anchor_radius
+        channel_diameter = 0.04               # each default: a fraction of the body's diameter D (channel
+        wall = 0.04                           # 1 %, wall 1 %, fixture 4 %, smallest fixture 1.5 %); ropes
+        fixture_radius = 0.16                 # lie >= channel/2 + wall (and 2 % of D) inside the body;
+        min_fixture_radius = 0.06             # fixture_radius is the design's anchor_radius
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
         [acceptance]                          # optional: what a case's design must show to succeed

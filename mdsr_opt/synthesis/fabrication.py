@@ -51,7 +51,7 @@ from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
            "boundary_distance", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
            "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit",
-           "pair_conflicts"]
+           "pair_conflicts", "check_channel_fits"]
 
 #: Default channel diameter, as a fraction of the body's diameter.
 CHANNEL_FRACTION = 0.01
@@ -425,3 +425,35 @@ def check_sizes_fit(mesh, channel_width: float, wall: float, fixture_radius: flo
     if fixture_radius + wall > R:
         raise ValueError(f"the end fixtures (radius {fixture_radius:.4g}) with their wall {wall:.4g} do not fit in "
                          f"the body: {body}, so fixture radius plus wall must be at most {R:.4g}")
+
+
+def check_channel_fits(mesh, fabrication, *, routed: bool = True, where: str = "fabrication") -> None:
+    """ValueError, before any work, when no rope's channel with its wall fits anywhere in the body.
+
+    A rope node needs ``channel_diameter / 2 + wall`` of body on every side (to the outline and each hole),
+    so a body whose largest inscribed circle (:func:`body_depth`) is smaller holds no rope at all: no mesh
+    refinement helps. The message names the channel, the wall and the largest channel the body admits with
+    that wall. ``fabrication`` is anything :func:`check_fabrication` takes (False: no channel, nothing to
+    check). With ``routed=False`` (muscles the user lays, designed as given) only sizes the spec states are
+    checked: the defaults (fractions of the body's diameter) are the routing's, and a given rope that does
+    not fit them is warned about (:func:`rope_conflicts`), not refused.
+    """
+    fab = check_fabrication(fabrication)
+    if fab is False or not routed and fab.channel_diameter is None and fab.wall is None:
+        return
+    f = fab.for_body(mesh)
+    need = 0.5 * f.channel_diameter + f.wall
+    R = body_depth(mesh)
+    if need <= R * (1.0 + 1e-9):
+        return
+    ext = np.ptp(mesh.points, axis=0)
+    said = [f"{n} the default {frac:.0%} of the body's diameter" for n, frac in
+            (("channel_diameter", CHANNEL_FRACTION), ("wall", WALL_FRACTION)) if getattr(fab, n) is None]
+    default = f" ({'; '.join(said)})" if said else ""
+    most = 2.0 * (R - f.wall)
+    admits = (f"the largest channel_diameter this body admits with this wall is {most:.4g}" if most > 0 else
+              f"no channel fits with this wall: the wall must be below {R:.4g}")
+    raise ValueError(f"{where}: channel_diameter {f.channel_diameter:.4g} with a wall {f.wall:.4g}{default} does "
+                     f"not fit in the body: a rope needs channel_diameter / 2 + wall = {need:.4g} of material to the "
+                     f"outline and the holes on every side, but the body ({ext[0]:.4g} x {ext[1]:.4g}) is only "
+                     f"{R:.4g} deep at its deepest point (its largest inscribed circle's radius); {admits}")

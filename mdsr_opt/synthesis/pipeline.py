@@ -23,8 +23,8 @@ from ..mechanics.result import EquilibriumResult
 from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
-from .routing import route_for_design
-from .fabrication import Fabrication, check_fabrication, rope_conflicts, warn_conflicts
+from .routing import RoutingWarning, route_for_design
+from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -372,6 +372,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         band_options, routing_options, external_options, design_options)  # misspelt keys: before any work
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
+    check_channel_fits(mesh, ropts["fabrication"], routed=muscles is None)  # a channel the body cannot hold
     from .contactdesign import check_design_contact
     from ..mechanics.obstacles import check_obstacles
 
@@ -396,11 +397,19 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
     routing = None
     if muscles is None:
-        rr = route_for_design(mesh, ext.x, **ropts)
+        import warnings
+
+        with warnings.catch_warnings(record=True) as caught:  # the routing's reason, for the error below
+            warnings.simplefilter("always", RoutingWarning)
+            rr = route_for_design(mesh, ext.x, **ropts)
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         mus = tuple(rr.muscles)
         if not mus:
-            raise ValueError("routing found no muscle for this target (muscles can only contract: does the "
-                             "target shorten any edge?); pass muscles=... or relax routing_options")
+            why = "; ".join(str(w.message) for w in caught if issubclass(w.category, RoutingWarning)) or (
+                "muscles can only contract: does the target shorten any edge?")
+            raise ValueError(f"routing found no muscle for this target ({why}); pass muscles=... or relax "
+                             "routing_options")
         routing = rr
         design_options["anchor_radius"] = rr.fixture_radius  # the fixtures the ropes fit with
     else:

@@ -82,7 +82,7 @@ from ..mechanics.align import difference, node_weights
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from .fabrication import FabricationWarning, check_fabrication, rope_conflicts, warn_conflicts
+from .fabrication import FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 from .routing_fixtures import common_fixture_radius
 from .layouts import check_budget, shared_layout
 from ..plot.style import muscle_label
@@ -474,6 +474,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
+    check_channel_fits(mesh, ropt["fabrication"])  # a channel the body cannot hold: before any solve
     separate = dict(separate or {})
     for k in separate:
         if k not in {p.name for p in items}:

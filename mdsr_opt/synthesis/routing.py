@@ -117,11 +117,12 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
-from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_fabrication
+from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_fixtures import FixtureFit, fit_fixtures
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
+from .routing_why import beside_stretch, no_seed_message
 
 __all__ = [
     "contraction_graph",
@@ -370,6 +371,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
     else:
+        check_channel_fits(mesh, fab)  # a channel with its wall deeper than the body: no mesh can hold it
         fab = fab.for_body(mesh)
         clearance = fab.clearance(mesh)
         if inset is not None:
@@ -482,9 +484,10 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         inside = "" if fab is None else (
             f"; the ropes lie at least {clearance:.4g} inside the body, and on a mesh this coarse (mean edge length "
             f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
-        why = ("no edge of the target contracts enough to seed a muscle unit (muscles can only contract; a "
-               "target that stretches the body shortens edges only slightly, across the stretch), so no "
-               "muscles are routed: does the target shorten any edge?") if not units and not dropped \
+        why = no_seed_message(mesh, x, w, wq > floor_q, adm_edges, threshold_q * _QUANTUM, router.eligible,
+                              min_contraction=min_contraction, seed_threshold=seed_threshold,
+                              compression_ratio=compression_ratio, clearance=None if fab is None else clearance) \
+            if not units and not dropped \
             else (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
                   f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
                "no routed rope keeps room for its end fixtures: " + "; ".join(fit.notes)
@@ -555,13 +558,7 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
 def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: float = 1.0) -> np.ndarray:
     """Edges whose contraction exceeds ``ratio`` times the largest principal stretch (``sigma_1 - 1``) of the
     triangles beside them: compression, not the sideways (Poisson) response of a stretched region."""
-    sv = np.linalg.svd(mesh.deformation_gradients(x), compute_uv=False)
-    stretch = sv[:, 0] - 1.0
-    T = mesh.triangles
-    s_edge = np.full(len(mesh.edges), -np.inf)
-    for j in range(3):
-        np.maximum.at(s_edge, mesh.edge_rows(T[:, j], T[:, (j + 1) % 3]), stretch)
-    return w > ratio * s_edge
+    return w > ratio * beside_stretch(mesh, x)
 
 
 def largest_turn(x: ArrayLike, path) -> float:

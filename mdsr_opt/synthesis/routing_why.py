@@ -1,0 +1,108 @@
+"""Why routing seeded no muscle unit: the filters between the contracted edges and the seeds, with counts.
+
+:func:`~mdsr_opt.synthesis.routing.route_muscles` seeds its units on edges that pass, in turn, the buildable
+band (both nodes at the fabrication's clearance inside the outline and the holes), the seed threshold
+(``seed_threshold`` times the reference contraction) and the compression filter (the contraction above
+``compression_ratio`` times the largest principal stretch of the triangles beside the edge:
+:func:`beside_stretch`). When no unit is seeded, :func:`no_seed_message` says which of them removed the
+contracted edges, how many each, and the value of the knob that would keep some.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .fabrication import MIN_INSET_FRACTION
+
+__all__ = ["beside_stretch", "no_seed_message"]
+
+#: The contraction the message counts edges above, as the user reads a target ("8 edges contract > 5 %").
+NOTABLE_CONTRACTION = 0.05
+
+
+def beside_stretch(mesh, x: np.ndarray) -> np.ndarray:
+    """Per edge, the largest principal stretch minus one (``sigma_1 - 1``) of the triangles beside it in ``x``."""
+    sv = np.linalg.svd(mesh.deformation_gradients(x), compute_uv=False)
+    stretch = sv[:, 0] - 1.0
+    T = mesh.triangles
+    s_edge = np.full(len(mesh.edges), -np.inf)
+    for j in range(3):
+        np.maximum.at(s_edge, mesh.edge_rows(T[:, j], T[:, (j + 1) % 3]), stretch)
+    return s_edge
+
+
+def _pct(v: float) -> str:
+    return f"{100 * v:.3g} %"
+
+
+def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, admissible: np.ndarray | None,
+                    threshold: float, eligible: np.ndarray | None, *, min_contraction: float,
+                    seed_threshold: float, compression_ratio: float, clearance: float | None) -> str:
+    """The sentence a user reads when routing seeded no unit: which filter removed the contracted edges.
+
+    Parameters
+    ----------
+    mesh, x : the rest mesh and the target.
+    w : (E,) ndarray
+        Each edge's relative contraction.
+    contracted : (E,) bool ndarray
+        The edges contracting by more than ``min_contraction``.
+    admissible : (E,) bool ndarray or None
+        The buildable band (None: no fabrication, every edge).
+    threshold : float
+        The seed threshold (a contraction).
+    eligible : (E,) bool ndarray or None
+        The compression filter's verdict (None: not applied).
+    min_contraction, seed_threshold, compression_ratio : the knobs, quoted in the message.
+    clearance : float or None
+        The band's inset (None: no fabrication).
+    """
+    n_c = int(contracted.sum())
+    notable = int((w > NOTABLE_CONTRACTION).sum())
+    head = (f"no muscle unit could be seeded: {n_c} edge(s) contract by more than min_contraction="
+            f"{min_contraction:g} (the largest {_pct(float(w.max()))}"
+            + (f", {notable} by more than {_pct(NOTABLE_CONTRACTION)}" if notable else "") + ")")
+    parts = []
+    left = contracted.copy()
+    if admissible is not None:
+        out = left & ~admissible
+        if out.any():
+            parts.append(f"{int(out.sum())} lie outside the buildable band (a node closer than {clearance:.4g} to "
+                         f"the outline or a hole: half the channel plus its wall, at least {100 * MIN_INSET_FRACTION:g} % of the body's size)"
+                         + (f", {int((out & (w > NOTABLE_CONTRACTION)).sum())} of those contracting by more than "
+                            f"{_pct(NOTABLE_CONTRACTION)}" if notable else ""))
+        left &= admissible
+    if not left.any():
+        return (head + "; but " + parts[0] + ", so none is left: a smaller channel_diameter or wall, or a finer "
+                "mesh, gives the ropes room nearer the outline; no muscles routed")
+    below = left & (w < threshold)
+    if below.any():
+        parts.append(f"{int(below.sum())} of the rest contract less than the seed threshold {_pct(threshold)} "
+                     f"(seed_threshold={seed_threshold:g} times the reference contraction)")
+    strong = left & ~below
+    hint = ""
+    if eligible is not None and strong.any():
+        cut = strong & ~eligible
+        if cut.any():
+            s = beside_stretch(mesh, x)[cut]
+            ratios = np.where(s > 0, w[cut] / np.where(s > 0, s, 1.0), np.inf)
+            top = float(ratios.max())  # the largest compression_ratio that keeps one of them
+            suggest = math.floor(20.0 * top * (1 - 1e-9)) / 20.0
+            if suggest <= 0:
+                suggest = float(f"{0.9 * top:.2g}")
+            kept = int((ratios > suggest).sum())
+            everything = " all" if not (strong & eligible).any() else ""
+            parts.append(f"the compression_ratio filter ({compression_ratio:g}) removed{everything} "
+                         f"{int(cut.sum())} of the {int(strong.sum())} above it (an edge seeds only where it "
+                         f"contracts by more than compression_ratio times the largest principal stretch beside "
+                         f"it: compression, not the sideways response to a stretch)")
+            if suggest < compression_ratio:
+                half = int((ratios > 0.5).sum())
+                hint = (f"; try compression_ratio={suggest:g} or lower (it keeps {kept} of them"
+                        + (f", 0.5 keeps {half}" if suggest > 0.5 and half > kept else "") + ")")
+    if not parts or eligible is not None and (strong & eligible).any():
+        parts.append(f"{int((strong if eligible is None else strong & eligible).sum())} passed every filter but "
+                     f"no path within max_turn could be cut from them")
+    return head + "; of them " + "; ".join(parts) + hint + "; no muscles routed"
