@@ -378,6 +378,7 @@ def test_route_uses_the_pages_channel_and_reports_its_notes(tentacle):
     ({"channel": 1.0}, ValueError, "unknown field"),
     ({"fixture_radius": 0.05, "min_fixture_radius": 0.1}, ValueError, "larger than fixture_radius"),
     ({"fixture_radius": 100.0}, ValueError, "half the body"),
+    ({"channel_diameter": 5.0}, ValueError, "largest channel_diameter this body admits"),
     ("0.1", TypeError, "object of lengths"),
 ])
 def test_bad_fabrication_fields_are_named_before_routing(tentacle, fab, err, words):

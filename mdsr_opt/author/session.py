@@ -42,7 +42,7 @@ from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
 from ..mechanics.model import get_model
-from ..synthesis.fabrication import Fabrication, check_fabrication
+from ..synthesis.fabrication import Fabrication, check_channel_fits, check_fabrication
 from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
@@ -472,7 +472,9 @@ class Session:
             if not math.isfinite(float(v)) or float(v) < 0:
                 raise ValueError(f"fabrication: {k} must be a finite length >= 0, got {v!r}")
             out[k] = float(v)
-        self._fabrication(out).for_body(self.mesh)  # min above fixture, a fixture half the body: refused here
+        fab = self._fabrication(out)
+        fab.for_body(self.mesh)  # min above fixture, a fixture half the body: refused here
+        check_channel_fits(self.mesh, fab)  # a channel and wall the body cannot hold: refused as entered
         return out
 
     def route(self, K_a: float, K_b: float, max_muscles: int | None, fabrication: dict | None = None) -> dict:
