@@ -79,3 +79,45 @@ def test_vector_format_alone_asks_for_vector_figures(tmp_path, capsys, monkeypat
     assert sorted(p.name for p in (tmp_path / "n").iterdir() if not p.name.startswith(".")) == ["a.png"]
     assert main(["run", "plain", "--out", str(tmp_path / "p"), "--vector-format", "pdf"]) == 2
     assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "p").exists()
+
+
+@pytest.mark.parametrize("columns", [80, 120])
+def test_the_progress_bar_keeps_its_bar_in_the_terminals_width(monkeypatch, columns):
+    """In an 80-column terminal the current stage beside the bar (up to 48 characters, then the rate) left
+    the bar one column; the stage is now shortened to the width, the bar keeps at least 10 columns."""
+    from mdsr_opt.core import progress
+
+    monkeypatch.setattr(progress, "_terminal_width", lambda: columns)
+    with progress.Progress(12, "mdsr run", enabled=True, stream=None, unit="stage") as log:
+        stage = "[plate_mm 1/2 curl] design (flattened, cable): commanded a = [0.265], achieved [0.265]"
+        log(stage)
+        log.advance(5)
+        shown = log._bar.format_dict
+        line = log._bar.format_meter(**dict(shown, ncols=columns))
+    bar = line.split("|")[1]
+    assert len(line) <= columns and len(bar) >= progress.MIN_BAR, line
+    assert "[plate_mm 1/2 curl] des" in line and line.endswith("...]"), line
+
+
+@pytest.mark.parametrize("name, said", [("gait", "[s] gait: not made (no layout)"),
+                                        ("wave", "[s] gait wave: not made (no layout)")])
+def test_the_log_names_a_gait_once(monkeypatch, tmp_path, name, said):
+    """A gait with the default name "gait" was logged as "gait gait: ..."."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from mdsr_opt.synthesis import poses
+    from mdsr_opt.synthesis.gait import Gait, run_gait
+
+    def no_layout(*args, **kwargs):
+        raise ValueError("no layout")
+
+    monkeypatch.setattr(poses, "design_poses", no_layout)
+    runs = {c: SimpleNamespace(setup=SimpleNamespace(target=np.zeros((3, 2)), muscles=()), design=None)
+            for c in ("a", "b")}
+    scene = SimpleNamespace(name="s", gait=Gait(name, ("a", "b")), mesh=None, material=None, routing_options={},
+                            design_options={}, units=None)
+    lines = []
+    info = run_gait(scene, tmp_path, runs, log=lines.append)
+    assert lines == [said] and info["success"] is False
