@@ -75,11 +75,17 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 def _verbosity_options(parser: argparse.ArgumentParser, prefix: str) -> None:
     """``-v``/``--verbose`` and ``-q``/``--quiet`` into ``<prefix>_verbose`` and ``<prefix>_quiet``
-    (:func:`_run` adds up those of the command and of its subcommand)."""
-    parser.add_argument("-v", "--verbose", action="count", default=0, dest=f"{prefix}_verbose",
-                        help="more detail (-vv: debug messages of the library)")
-    parser.add_argument("-q", "--quiet", action="store_true", dest=f"{prefix}_quiet",
-                        help="only warnings, errors and results: no progress lines or bar")
+    (:func:`_run` adds up those of the command and of its subcommand). A subcommand that has an option of
+    either name keeps its own."""
+    for flags, kwargs in ((("-v", "--verbose"), dict(action="count", default=0, dest=f"{prefix}_verbose",
+                                                     help="more detail (-vv: debug messages of the library)")),
+                          (("-q", "--quiet"), dict(action="store_true", dest=f"{prefix}_quiet",
+                                                   help="only warnings, errors and results: no progress lines "
+                                                        "or bar"))):
+        try:
+            parser.add_argument(*flags, **kwargs)
+        except argparse.ArgumentError:
+            pass
 
 
 class _StderrHandler(logging.StreamHandler):
