@@ -102,7 +102,7 @@ def test_pipeline_sub_results_are_result_objects_and_round_trip(pipeline_result,
     res = pipeline_result
     assert isinstance(res.routing, RoutingResult) and isinstance(res.external, EquilibriumResult)
     table = res.routing.table().splitlines()
-    assert len(table) == 2 + len(res.muscles) and table[0].startswith("muscle")
+    assert len(table) == 1 + len(res.muscles) and table[0].startswith("muscle")
     assert repr(res.routing).startswith(f"RoutingResult({len(res.muscles)} muscle(s)")
     assert repr(res.external).startswith("EquilibriumResult(mode='external'")
     assert res.external.x is not None and res.external.success

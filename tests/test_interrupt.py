@@ -190,6 +190,7 @@ def test_sigint_during_solve_raises_keyboard_interrupt_promptly(backend):
     assert "returned" not in out  # no result (neither success nor a failed step) was returned
     assert rc != 0
     assert "KeyboardInterrupt" in err.strip().splitlines()[-1]
+    assert "KeyboardInterruptException" not in err, err[-2000:]  # CasADi's warning: IPOPT aborted from inside
     assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
 
@@ -249,6 +250,8 @@ def test_sigint_during_a_design_raises_keyboard_interrupt_promptly():
     assert len(sent) == 1, (out, err[-2000:])  # the signal was sent from inside the second design's IPOPT
     assert "returned" not in out, out
     assert "KeyboardInterrupt" in err.strip().splitlines()[-1], err[-2000:]
+    # the interrupt does not abort IPOPT from inside (CasADi then warns "KeyboardInterruptException" on stderr)
+    assert "KeyboardInterruptException" not in err and "CasADi" not in err, err[-2000:]
     elapsed = t_exit - float(sent[0][1])
     assert elapsed < 2.0, f"exit took {elapsed:.2f} s after SIGINT"
 
@@ -411,8 +414,9 @@ def test_a_swallowed_interrupt_stops_the_next_solve_at_its_first_iteration(backe
 
 
 def test_an_interrupt_swallowed_inside_an_evaluation_stops_ipopt_at_once(monkeypatch):
-    """The issue's suspect: a KeyboardInterrupt raised inside IPOPT's numpy callback and swallowed there. No
-    evaluation follows it, and the solve raises KeyboardInterrupt (it used to run to its end first)."""
+    """The issue's suspect: a KeyboardInterrupt raised inside IPOPT's numpy callback and swallowed there. The
+    solve ends with the step it is taking (a few evaluations, where the whole solve takes many more) and
+    raises KeyboardInterrupt (it used to run to its end first)."""
     from mdsr_opt.mechanics.backends import minimize
 
     model, p, x0, fixed, values = _pinned_strip(40, 10)
@@ -430,7 +434,10 @@ def test_an_interrupt_swallowed_inside_an_evaluation_stops_ipopt_at_once(monkeyp
     monkeypatch.setattr(model, "numeric", numeric)
     with pytest.raises(KeyboardInterrupt, match="interrupted"):
         minimize(model, p, x0, fixed, values, tol=1e-12, max_iter=1000)
-    assert calls["n"] >= 6 and calls["after"] == 0
+    whole = {"n": 0}
+    monkeypatch.setattr(model, "numeric", lambda p_: whole.update(n=whole["n"] + 1) or real(model, p_))
+    minimize(model, p, x0, fixed, values, tol=1e-12, max_iter=1000)
+    assert calls["n"] >= 6 and calls["after"] <= 4 and whole["n"] >= 20, (calls, whole)
 
 
 @pytest.mark.parametrize("method", ["flattened", "nested", "derivative-free"])
@@ -490,12 +497,13 @@ def test_a_requested_stop_stops_a_solve_at_its_first_iteration():
     assert [s.stats()["success"] for s in model._solvers.values()] == [False]  # stopped, not run to its end
 
 
-def test_a_stop_inside_a_line_search_refuses_the_evaluations_quietly(capfd):
-    """A stop requested (a study's time budget) while IPOPT's L-BFGS line search evaluates the energy: IPOPT
-    answers each refused evaluation with a shorter step, about a thousand of them before it gives up. They
-    are refused quietly (NaN), not each by a Python exception that CasADi prints with all its inputs: that
-    printing made a 0.5 s budget run for 5-6 s. Counted, not timed: the solve raises the stop and prints
-    nothing, for stops landing at several evaluations, at least one of them inside a line search."""
+def test_a_stop_inside_a_line_search_ends_the_solve_quietly_with_its_step(capfd):
+    """A stop requested (a study's time budget) while IPOPT's L-BFGS line search evaluates the energy: the
+    evaluations go on (refused ones, NaN, made IPOPT shorten its step about a thousand times), the solver
+    stops at the end of its step, and nothing is printed (a Python exception per evaluation, which CasADi
+    prints with all its inputs, made a 0.5 s budget run for 5-6 s). Counted, not timed: the solve raises
+    the stop, prints nothing and evaluates the energy a few times more at most, for stops landing at several
+    evaluations."""
     import threading
 
     from mdsr_opt.core.guards import cancel_stop, request_stop
@@ -504,7 +512,7 @@ def test_a_stop_inside_a_line_search_refuses_the_evaluations_quietly(capfd):
     class Budget(BaseException):
         pass
 
-    churned = 0
+    after = []
     for at in range(41, 47):
         model, p, x0, fixed, values = _pinned_strip(60, 15)
         real = type(model).numeric
@@ -535,8 +543,8 @@ def test_a_stop_inside_a_line_search_refuses_the_evaluations_quietly(capfd):
         err = capfd.readouterr().err
         assert "Traceback" not in err and "nlp_f" not in err, (at, err[:300])
         (solver,) = model._solvers.values()
-        churned += solver.stats()["n_call_nlp_f"] > 500  # the line search's refused evaluations
-    assert churned >= 1
+        after.append(solver.stats()["n_call_nlp_f"] - at)  # at least: the evaluations after the stop
+    assert max(after) <= 10, after
 
 
 def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsys):
@@ -551,3 +559,41 @@ def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsy
     assert cli_main.console_main() == 130
     err = capsys.readouterr().err
     assert "interrupted (Ctrl-C) before the command started" in err and "Traceback" not in err
+
+
+def test_ctrl_c_while_a_scene_solves_ends_the_jobs_its_workers_run(monkeypatch, tmp_path):
+    """Ctrl-C (SIGINT to the main process only: the workers ignore it) while a scene solves and a job of it
+    runs in a worker: write_scene ends the workers and raises at once, instead of waiting for the job (the
+    virtual prototype's solves: ``mdsr run gecko`` took 17-28 s to stop)."""
+    from mdsr_opt import Mesh, Muscle, NeoHookean
+    from mdsr_opt.core.jobs import process_pool
+    from mdsr_opt.scenes import runscene
+    from mdsr_opt.scenes.scene import Case, Scene
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    bottom = Muscle([int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0])
+    scene = Scene(name="s", mesh=mesh, material=NeoHookean(1.0, 0.3), cases=(Case("pull", contractions=[0.1]),),
+                  muscles=(bottom,))
+    started, raised = tmp_path / "started", []
+
+    def interrupted(scene, out, names, bg, **kwargs):  # a job running, then Ctrl-C in this process's solve
+        bg.submit(_touch_then_sleep, str(started), 60.0)
+        deadline = time.monotonic() + 60
+        while not started.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        raised.append(time.monotonic())
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runscene, "_start_scene", interrupted)
+    with process_pool(1) as pool:
+        if pool is None:
+            pytest.skip("a single core: process_pool makes no worker processes")
+        with pytest.raises(KeyboardInterrupt):
+            runscene.write_scene(scene, tmp_path / "out", pool=pool)
+        elapsed = time.monotonic() - raised[0]
+    assert started.exists() and elapsed < 20, elapsed  # the job alone takes 60 s
+
+
+def _touch_then_sleep(path, seconds):
+    Path(path).write_text("")
+    time.sleep(seconds)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -98,7 +99,8 @@ def test_equilibrium_result(equilibrium, tmp_path):
     # a 30k-node state still prints one short line
     big = dataclasses.replace(res, x=np.zeros((30000, 2)), status="x" * 500)
     check_repr(big, "x=array((30000, 2), float64)")
-    with pytest.raises(ValueError, match=r"saved as a \.npz file"):
+    with pytest.raises(ValueError, match=r"saved as one \.npz file: give a file name ending in \.npz, e\.g\. "
+                                         r"'.*eq\.npz' \(got '.*eq\.json'"):
         res.save(tmp_path / "eq.json")
 
 
@@ -170,6 +172,14 @@ def test_design_result_and_verification(designed, tmp_path):
     same(res, back)
     assert isinstance(back.verification, type(res.verification)) and isinstance(back.history[0], tuple)
     check_damaged(DesignResult, path, tmp_path)
+    # a folder (PipelineResult.save's argument) is refused at once with the file name to give instead
+    for folder in (tmp_path, tmp_path / "new"):
+        with pytest.raises(ValueError, match=r"give a file name ending in \.npz, e\.g\. '" +
+                           re.escape(str(folder / "design.npz")) + "'.*PipelineResult"):
+            res.save(folder)
+    assert not (tmp_path / "new").exists()
+    with pytest.raises(ValueError, match="is a folder, not a design result file: give the .npz file that save"):
+        DesignResult.load(tmp_path)
     # a file of another kind of result is refused by name, not misread
     other = tmp_path / "eq.npz"
     solve_internal(Mesh.rectangle(1.0, 1.0, 2, 2), MAT, [Muscle([0, 1, 2])], [0.1]).save(other)

@@ -1,7 +1,8 @@
 """The ``mdsr`` command. Subcommands are registered by the modules that own them.
 
-Global options (before the subcommand): ``--version``; ``-v`` (more detail: ``-vv`` for debug output of the
-library's loggers) and ``-q`` (warnings and errors only, no progress bar). Library modules report through
+Global options: ``--version`` (before the subcommand); ``-v`` (more detail: ``-vv`` for debug output of the
+library's loggers) and ``-q`` (warnings, errors and results only: no progress lines or bar), before or after
+the subcommand, with one meaning in both places. Library modules report through
 ``logging.getLogger(__name__)``; this module is the only place that configures logging.
 
 Exit codes: 0 success; 1 the command ran but something it checked failed (a solve, a case), or a bug;
@@ -64,13 +65,27 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mdsr", description="Muscle-driven soft robot design toolkit")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
                         help="print the package version and exit")
-    parser.add_argument("-v", "--verbose", action="count", default=0, dest="log_verbose",
-                        help="more detail (-vv: debug messages of the library)")
-    parser.add_argument("-q", "--quiet", action="store_true", dest="log_quiet",
-                        help="only warnings, errors and results: no progress lines or bar")
+    _verbosity_options(parser, "log")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _register(sub, command)
+    for subparser in sub.choices.values():  # also after the subcommand (`mdsr run x.toml -v`), same meaning
+        _verbosity_options(subparser, "sub")
     return parser
+
+
+def _verbosity_options(parser: argparse.ArgumentParser, prefix: str) -> None:
+    """``-v``/``--verbose`` and ``-q``/``--quiet`` into ``<prefix>_verbose`` and ``<prefix>_quiet``
+    (:func:`_run` adds up those of the command and of its subcommand). A subcommand that has an option of
+    either name keeps its own."""
+    for flags, kwargs in ((("-v", "--verbose"), dict(action="count", default=0, dest=f"{prefix}_verbose",
+                                                     help="more detail (-vv: debug messages of the library)")),
+                          (("-q", "--quiet"), dict(action="store_true", dest=f"{prefix}_quiet",
+                                                   help="only warnings, errors and results: no progress lines "
+                                                        "or bar"))):
+        try:
+            parser.add_argument(*flags, **kwargs)
+        except argparse.ArgumentError:
+            pass
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -151,9 +166,9 @@ def _run(parser, argv: list[str]) -> int:
     """:func:`main` once its parser is built."""
     args = parser.parse_args(argv)
     args.command_line = " ".join(["mdsr", *argv])
+    args.log_verbose += getattr(args, "sub_verbose", 0)  # `mdsr -v run ...` is `mdsr run ... -v`
+    args.log_quiet = args.quiet = args.log_quiet or getattr(args, "sub_quiet", False)
     configure_logging(args.log_verbose, args.log_quiet)
-    if args.log_quiet and hasattr(args, "quiet"):
-        args.quiet = True  # `mdsr -q run ...` is `mdsr run --quiet ...`
     from ..scenes.rundir import interrupt_signal, noting_interrupts, recording_command
 
     try:

@@ -58,7 +58,7 @@ def _cmd_run(a) -> int:
             raise InputError("no problem library found: `mdsr run all` needs the problems/ folder")
 
     t0 = time.perf_counter()
-    vector = a.vector_format if a.vector else None
+    vector = a.vector_format or ("pdf" if a.vector else None)  # --vector-format alone implies --vector
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
     # scene (all input errors, inside checking_input), and only then any solving or writing
     figs = figure_scripts()
@@ -210,8 +210,8 @@ def add_cli(sub) -> None:
     q.add_argument("--vector", action="store_true",
                    help="also write every figure as a vector file beside its PNG, for papers (PDF unless "
                         "--vector-format svg); GIFs stay GIFs")
-    q.add_argument("--vector-format", choices=("pdf", "svg"), default="pdf",
-                   help="the format of --vector's files (default pdf)")
+    q.add_argument("--vector-format", choices=("pdf", "svg"), default=None,
+                   help="the format of the vector files (implies --vector; default pdf)")
     q.add_argument("--serial", action="store_true",
                    help="draw figures, measure photographs and make animations in this process after each "
                         "solve, not in worker processes beside the next solve (the files are the same)")
@@ -222,5 +222,4 @@ def add_cli(sub) -> None:
                    help="compute every stroke's uncertainty band (fixture size +-25 %%, Poisson's ratio +-0.05, "
                    "the mesh refined once): 4-5 more designs per case (default: the scene's [acceptance] bands, "
                    "else off)")
-    q.add_argument("--quiet", action="store_true", help="print only the summary table")
     q.set_defaults(func=_cmd_run)

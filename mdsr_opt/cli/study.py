@@ -133,12 +133,11 @@ _OPTIONS = {
     "--dask": dict(action="store_true", help="run on a local Dask cluster (one worker per core)"),
     "--scheduler": dict(help="address of a running Dask scheduler (implies Dask)"),
     "--workers": dict(type=int, help="workers of the local Dask cluster"),
-    "--quiet": dict(action="store_true", help="no progress lines"),
 }
 
 #: The options of ``mdsr study recommend`` (the others of ``mdsr study`` do not apply to it)
 _RECOMMEND_OPTIONS = ("--out", "--overwrite", "--scenes", "--methods", "--resolutions", "--reference-resolution",
-                      "--tol", "--stroke-tol", "--timeout", "--dask", "--scheduler", "--workers", "--quiet")
+                      "--tol", "--stroke-tol", "--timeout", "--dask", "--scheduler", "--workers")
 
 
 def recommend_parser() -> argparse.ArgumentParser:

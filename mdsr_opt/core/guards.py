@@ -9,9 +9,11 @@ what it raised; the previous handler is put back when the block ends. The except
 landed is not enough: inside a CasADi solve it lands in a Python callback (the numpy energy, the iteration
 callback), where CasADi may turn it into a failed evaluation that the solver answers with a shorter step or a
 restoration phase, and a load-stepping loop with a failed step. So the record is also a flag: the solvers'
-iteration callbacks (:func:`stop_requested`; IPOPT, sqpmethod and Uno stop at the next iteration), the numpy
-callbacks and the package's own loops (:func:`check_stop`) look at it, and the block raises the recorded
-:class:`KeyboardInterrupt` when the solver returns, so its outcome is never used. A previous handler that
+iteration callbacks (:func:`stop_requested`; IPOPT, sqpmethod and Uno stop at the next iteration) and the
+package's own loops (:func:`check_stop`) look at it, and the block raises the recorded
+:class:`KeyboardInterrupt` when the solver returns, so its outcome is never used. Inside a CasADi NLP solver
+the handler only records: raised there, the interrupt would abort the solver with a warning of CasADi's on
+stderr, and the record stops it at its next iteration anyway. A previous handler that
 does not raise (a program's own) is left to decide: nothing is recorded and the solve goes on. A process
 that was started with SIGINT ignored (a background job of a non-interactive shell, ``nohup``) is not
 interrupted by it, in a solve or elsewhere: Python then raises no :class:`KeyboardInterrupt` at all.
@@ -88,6 +90,20 @@ def check_stop() -> None:
     _raise_requested_stop()
 
 
+def _inside_a_solver(frame) -> bool:
+    """Whether ``frame`` (where a signal's handler runs) is inside a call of a CasADi NLP solver: one of its
+    callers is CasADi's Python call of a ``Function`` that is an ``Nlpsol`` (a callback the solver runs,
+    or the solver's own signal check, has that call above it)."""
+    casadi = sys.modules.get("casadi")
+    while casadi is not None and frame is not None:
+        if str(frame.f_globals.get("__name__", "")).partition(".")[0] == "casadi":
+            fn = frame.f_locals.get("self")
+            if isinstance(fn, casadi.Function) and fn.is_a("Nlpsol", True):
+                return True
+        frame = frame.f_back
+    return False
+
+
 @contextlib.contextmanager
 def interruptible():
     """Make Ctrl-C (SIGINT) during a solve stop it and raise :class:`KeyboardInterrupt`, never a result.
@@ -116,12 +132,21 @@ def interruptible():
         return
 
     def handler(signum, frame):
-        try:
-            prev(signum, frame)
-        except BaseException as exc:  # KeyboardInterrupt from the default handler (or the program's handler)
-            if not _SIGINT:
-                _SIGINT.append(exc)
-            raise
+        if _SIGINT:  # a second Ctrl-C in the same block
+            exc = _recorded()
+        else:
+            try:
+                prev(signum, frame)
+            except BaseException as raised:  # KeyboardInterrupt from the default handler (or the program's)
+                _SIGINT.append(raised)
+                exc = raised
+            else:
+                return  # the program's own handler decided to go on
+        if not _inside_a_solver(frame):
+            raise exc
+        # inside a CasADi NLP solver (its signal check between evaluations, or a Python callback it runs) the
+        # interrupt would abort the solver with a warning of CasADi's on stderr: the record alone stops the
+        # solver at its next iteration, and the block raises the interrupt when the solver returns
 
     signal.signal(signal.SIGINT, handler)
     _DEPTH[0] += 1

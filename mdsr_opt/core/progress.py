@@ -33,6 +33,12 @@ from .checks import check_int
 
 __all__ = ["Progress", "advance", "expect", "progress_for_cli"]
 
+#: the bar's layout: tqdm's default without the rate (``3.18s/stage``), which leaves room for the current stage
+BAR_FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]"
+
+#: the fewest columns the bar itself keeps (the current stage beside it is shortened to fit the terminal)
+MIN_BAR = 10
+
 
 def _terminal_width() -> int:
     """Columns of the terminal on stderr; 0 when unknown (some pseudo-terminals report a 0 x 0 size)."""
@@ -92,7 +98,7 @@ class Progress:
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled
         self._bar = tqdm(total=total, desc=desc, unit=unit, disable=disable, file=sys.stderr,
                          **({"dynamic_ncols": True} if _terminal_width() > 0 else {"ncols": 100, "nrows": 24}),
-                         leave=True, smoothing=0.1)
+                         leave=True, smoothing=0.1, bar_format=BAR_FORMAT)
         self.total = total
         self.n = 0
 
@@ -118,9 +124,19 @@ class Progress:
                 print(message, file=out, flush=True)
             return
         first = text.strip().splitlines()[0] if text.strip() else ""
-        self._bar.set_postfix_str(first if len(first) <= 48 else first[:45] + "...", refresh=True)
+        room = self._postfix_room()
+        self._bar.set_postfix_str(first if len(first) <= room else first[:room - 3] + "...", refresh=True)
         if (loud or self.verbose) and out is not None:
             self._bar.write(message, file=out)
+
+    def _postfix_room(self) -> int:
+        """How many characters of the current stage fit beside a bar of :data:`MIN_BAR` columns in the
+        terminal's width (100 where unknown): at most 48, at least 12."""
+        width = _terminal_width() or 100
+        digits = len(str(max(self.total, self.n)))
+        # "desc: 100%|" + bar + "| n/total [mm:ss<mm:ss, " + stage + "]" (hours take two columns more each)
+        fixed = len(self._bar.desc) + 2 + 5 + 2 + 2 * digits + 1 + 1 + 12 + 4 + 2 + 1
+        return max(12, min(48, width - fixed - MIN_BAR))
 
     def advance(self, n: int = 1) -> None:
         """``n`` more units are done."""

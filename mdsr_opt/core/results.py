@@ -148,12 +148,17 @@ def plain(value: Any) -> Any:
 
 def save_npz(path: str | os.PathLike, kind: str, arrays: Mapping[str, np.ndarray], meta: Mapping) -> str:
     """Write ``arrays`` (exactly) and ``meta`` (:func:`plain`, as JSON) into one ``.npz`` file, atomically.
+    ``path`` must end in ``.npz`` (a ``ValueError`` suggests one otherwise, e.g. ``out/design.npz`` for a folder).
 
     The file carries the format tag ``mdsr_opt.<kind>/1``; :func:`load_npz` checks it. Returns the path.
     """
     path = os.fspath(path)
     if not path.endswith(".npz"):
-        raise ValueError(f"a {kind} result is saved as a .npz file; got {path!r}")
+        stem, ext = os.path.splitext(path)
+        like = os.path.join(path, f"{kind}.npz") if os.path.isdir(path) or not ext else stem + ".npz"
+        raise ValueError(f"a {kind} result is saved as one .npz file: give a file name ending in .npz, e.g. "
+                         f"{like!r} (got {path!r}; only a PipelineResult, which holds meshes too, is saved into "
+                         "a folder)")
     if os.path.isdir(path):
         raise InputError(f"cannot write {path}: it is a folder")
     text = json.dumps({"format": f"mdsr_opt.{kind}/1", "arrays": sorted(arrays), "fields": plain(dict(meta))})
@@ -189,7 +194,7 @@ def load_npz(path: str | os.PathLike, kind: str) -> tuple[dict, dict]:
     if not os.path.exists(path):
         raise FileNotFoundError(f"no such {kind} result file: {path}")
     if os.path.isdir(path):
-        raise ValueError(f"{path} is a folder, not a {kind} result file (.npz)")
+        raise ValueError(f"{path} is a folder, not a {kind} result file: give the .npz file that save() wrote")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not isinstance(loaded, np.lib.npyio.NpzFile):

@@ -35,7 +35,6 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..core.guards import stop_requested
 
 __all__ = ["BufferedFunction", "HessianPattern", "SparseLayout", "ipopt_functions"]
 
@@ -118,10 +117,10 @@ class BufferedFunction(ca.Callback):
     place. Floating-point warnings are silenced: a trial step that inverts a triangle gives non-finite
     values, which IPOPT answers by cutting the step. After Ctrl-C inside
     :func:`~mdsr_opt.core.guards.interruptible`, or a stop requested for the thread (a study's time budget),
-    an evaluation is refused quietly: its outputs are NaN and ``fn`` is not called. The solver stops at its
-    next iteration (or gives up on its step) and the block raises the interrupt or the stop. (Raising here
-    would make CasADi print every refused evaluation with its inputs, about a thousand in an L-BFGS line
-    search.)
+    evaluations go on as before: the solver's iteration callback stops it at the end of the step it is
+    taking, and the block raises the interrupt or the stop. (Refused evaluations, NaN, would make IPOPT
+    search its line down to nothing and start a restoration phase; raising here would make CasADi print
+    every evaluation with its inputs.)
 
     Parameters
     ----------
@@ -151,11 +150,6 @@ class BufferedFunction(ca.Callback):
         return True
 
     def eval_buffer(self, arg, res):
-        if stop_requested():  # Ctrl-C or a time budget inside the solve: no more evaluations
-            for r in res:
-                if r is not None:
-                    np.frombuffer(r, dtype=np.float64)[:] = np.nan
-            return 0
         ins = [np.zeros(s.nnz()) if a is None else np.frombuffer(a, dtype=np.float64)
                for a, s in zip(arg, self._sp_in)]
         outs = [None if r is None else np.frombuffer(r, dtype=np.float64) for r in res]  # None: not wanted

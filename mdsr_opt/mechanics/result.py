@@ -86,7 +86,9 @@ class EquilibriumResult:
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
     def save(self, path: str | os.PathLike) -> str:
-        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically.
+        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically:
+        ``path`` ends in ``.npz`` (a folder name is refused, naming a file in it to use; a
+        :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
         Returns the path; :meth:`load` reads it back equal to this result."""
         return save_fields(self, path, "equilibrium")

@@ -50,6 +50,7 @@ from typing import Iterable
 
 from ..body.io import read_json
 from ..core.errors import InputError
+from ..core.guards import stop_requested
 
 __all__ = ["RunFolder", "OutputFolderError", "FolderBusy", "Terminated", "check_out_path", "LOCK_NAME",
            "MANIFEST_NAME", "remove_temporaries", "noting_interrupts", "check_interrupt", "interrupt_signal",
@@ -98,6 +99,8 @@ def _on_sigterm(signum, frame):
     try:  # inside a solve, its guard (core.guards.interruptible, over ours) records the stop as a Ctrl-C
         if signal.SIGINT in _TAKEN and callable(handler) and handler is not _on_sigint:
             handler(signal.SIGINT, frame)
+            if stop_requested():  # recorded inside a CasADi solver: raised when the solver returns
+                return
     finally:
         _SIGNAL[:] = [signal.SIGTERM]
     raise Terminated("terminated (SIGTERM)")

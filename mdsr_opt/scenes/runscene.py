@@ -201,8 +201,8 @@ def write_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | 
                                   animations=animations, mesh_format=mesh_format, photo_size=photo_size,
                                   log=log, prototype=prototype, prototype_seed=prototype_seed,
                                   max_difference=max_difference, bands=bands, vector=vector)
-        except BaseException:
-            bg.stop()
+        except BaseException as exc:  # Ctrl-C or SIGTERM: the workers are ended, not waited for
+            bg.stop(exc)
             raise
         if not wait:
             return finish

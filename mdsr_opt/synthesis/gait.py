@@ -462,6 +462,11 @@ def _write_schedule(schedule: GaitSchedule, title: str, path, vector=None) -> st
     return save_figure(plot_schedule(schedule, title=title), path, close=True, vector=vector)
 
 
+def _gait_label(name: str) -> str:
+    """How the log names a gait: ``gait wave``, and ``gait`` alone for one named "gait" (not "gait gait")."""
+    return "gait" if name == "gait" else f"gait {name}"
+
+
 def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None,
              vector=None) -> dict | None:
     """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
@@ -523,7 +528,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                             max_difference=getattr(scene, "acceptance", {}).get("max_difference"))
     except ValueError as exc:
         info.update(success=False, message=str(exc))
-        say(f"[{scene.name}] gait {gait.name}: not made ({exc})")
+        say(f"[{scene.name}] {_gait_label(gait.name)}: not made ({exc})")
         return info
     radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
     if radius_note:
@@ -573,7 +578,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
             writer.submit(fn, *args, on_done=reported, **kwargs)
         else:
             reported(fn(*args, **kwargs))
-    say(f"[{scene.name}] gait {gait.name}: {res.n_muscles} shared muscle(s) (separate layouts: "
+    say(f"[{scene.name}] {_gait_label(gait.name)}: {res.n_muscles} shared muscle(s) (separate layouts: "
         f"{int(res.separate_n_muscles.sum())}), difference ({length_unit(scene.units)}) " + ", ".join(
             f"{n} {d:.4g} ({_own(s, c)})" for n, d, s, c in zip(res.names, res.differences, res.separate_differences,
                                                             res.separate_n_muscles))

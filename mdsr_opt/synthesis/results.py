@@ -359,7 +359,9 @@ class DesignResult:
         return cls(**d)
 
     def save(self, path: str | os.PathLike) -> str:
-        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically.
+        """Write the result as one ``.npz`` file (arrays exactly, the rest as JSON metadata), atomically:
+        ``path`` ends in ``.npz`` (a folder name is refused, naming a file in it to use; a
+        :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
         Returns the path; :meth:`load` reads it back equal to this result (:meth:`to_dict` is the JSON
         view)."""

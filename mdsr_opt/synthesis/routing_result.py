@@ -165,12 +165,15 @@ class RoutingResult:
                             "fixture_radius": self.fixture_radius, "notes": list(self.notes)})
 
     def table(self) -> str:
-        """The stats as a plain-text table (one row per muscle)."""
-        head = (f"{'muscle':<10} {'edges':>5} {'L0':>9} {'L':>9} {'contr.':>7} {'mean w':>8} "
+        """The stats as a plain-text table, one row per muscle under a header row, laid out as the other
+        results' tables (:meth:`~mdsr_opt.synthesis.results.DesignResult.muscle_table`): lengths L0 (rest)
+        and L (target) in the mesh's units, turning angles in radians (total) and degrees (largest turn)."""
+        w = max([6] + [len(s.name) for s in self.stats])
+        head = (f"{'muscle':<{w}} {'edges':>5} {'L0':>9} {'L':>9} {'contr.':>7} {'mean w':>8} "
                 f"{'var w':>9} {'turn':>7} {'max':>5}")
-        rows = [head, "-" * len(head)]
+        rows = [head]
         for s in self.stats:
-            rows.append(f"{s.name:<10} {s.n_edges:>5d} {s.rest_length:>9.4g} {s.target_length:>9.4g} "
+            rows.append(f"{s.name:<{w}} {s.n_edges:>5d} {s.rest_length:>9.4g} {s.target_length:>9.4g} "
                         f"{s.contraction:>7.3f} {s.mean_weight:>8.4f} {s.nonuniformity:>9.2e} "
                         f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
         return "\n".join(rows)
