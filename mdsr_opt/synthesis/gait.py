@@ -601,12 +601,8 @@ def _routed(setup) -> bool:
 
 def _case_radii(runs: Mapping, poses) -> dict:
     """Per pose the fixture (anchor patch) radius its case's design was made with, where it has one."""
-    out = {}
-    for c in poses:
-        r = getattr(runs[c].design, "anchor_radius", None) if runs[c].design is not None else None
-        if r is not None:
-            out[c] = float(r)
-    return out
+    designs = {c: runs[c].design for c in poses}
+    return {c: float(d.anchor_radius) for c, d in designs.items() if getattr(d, "anchor_radius", None) is not None}
 
 
 def _radius_note(radius, case_radii: Mapping, units) -> str:
