@@ -448,10 +448,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     units = [U for U in router.units if U.alive]
     pieces = [(U.uid, list(U.path)) for U in units]
     if offset:  # the search on every contracted edge, its ropes moved into the band, pooled with the above
-        free = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
-        free.search(**knobs)
-        snapped = snap_into_band(mesh, [list(U.path) for U in free.units if U.alive], adm_edges, free.feasible,
-                                 clearance, turn_limit)
+        free_paths = []
+        for k_a in sorted({K_a, min(K_a, 1.0)}):  # and fewer, longer ropes: the band's gaps cut them anyway
+            free = Router(mesh, wq, k_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
+            free.search(**knobs)
+            free_paths += [list(U.path) for U in free.units if U.alive]
+        snapped = snap_into_band(mesh, free_paths, adm_edges, free.feasible, clearance, turn_limit)
         pieces += [(-1 - i, p) for i, (_, p) in enumerate(snapped)]  # no mirror partner among the search's units
     found = []
     for uid, path in pieces:
