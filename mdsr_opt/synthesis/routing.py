@@ -301,12 +301,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         fabrication's clearance (half the channel plus the wall, at least 2 % of the body's size): a deeper
         route on which end fixtures fit (:func:`route_for_design` tries ``min_fixture_radius + wall`` when
         ropes were lost for lack of room at their ends). Ignored with ``fabrication=False``.
-    band : {"edges", "offset"}, default "edges"
+    band : {"edges", "offset", "offset+long"}, default "edges"
         How ropes keep their clearance (ignored with ``fabrication=False``). ``"edges"``: the search runs on
         the admissible edges only. ``"offset"``: the search runs on every contracted edge and each rope is
         moved into the band (the body shrunk by the clearance) and snapped to admissible edges, cut where the
-        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); :func:`route_for_design` tries it when the
-        first routing lost ropes.
+        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: the same, with the ropes
+        of a search at ``K_a = 1`` (fewer, longer) pooled in. :func:`route_for_design` tries it when the first
+        routing lost ropes.
     compression_ratio : float in (0, 1], default 1
         An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
         principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
@@ -380,8 +381,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                          f"got {seed_threshold}")
     if symmetry not in ("auto", True, False):
         raise ValueError(f"symmetry must be 'auto', True or False, got {symmetry!r}")
-    if band not in ("edges", "offset"):
-        raise ValueError(f"band must be 'edges' or 'offset', got {band!r}")
+    if band not in ("edges", "offset", "offset+long"):
+        raise ValueError(f"band must be 'edges', 'offset' or 'offset+long', got {band!r}")
     fab = check_fabrication(fabrication)
     if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
@@ -423,7 +424,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         wq = (wq + wq[reflection.edge_map]) // 2
     floor_q = int(round(min_contraction / _QUANTUM))
     turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
-    offset = band == "offset" and adm_edges is not None
+    offset = band != "edges" and adm_edges is not None
     router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection, adm_edges)
     if not router.feasible.any():
         w_top = float(w.max())
@@ -449,7 +450,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     pieces = [(U.uid, list(U.path)) for U in units]
     if offset:  # the search on every contracted edge, its ropes moved into the band, pooled with the above
         free_paths = []
-        for k_a in sorted({K_a, min(K_a, 1.0)}):  # and fewer, longer ropes: the band's gaps cut them anyway
+        for k_a in sorted({K_a, min(K_a, 1.0)} if band == "offset+long" else {K_a}):
             free = Router(mesh, wq, k_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
             free.search(**knobs)
             free_paths += [list(U.path) for U in free.units if U.alive]
@@ -564,7 +565,7 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
         # ropes lost inside the band (fragments along its jagged edge, gaps at necks beside holes): route on
         # every contracted edge and snap the ropes into the band (routing_band); kept when its ropes capture
         # clearly more of the target's contraction
-        opts = dict(options, band="offset")
+        opts = dict(options, band="offset" if "K_a" in options else "offset+long")
         if rr.params.get("inset") is not None:
             opts["inset"], opts["fabrication"] = rr.params["inset"], replace(
                 fab.for_body(mesh), fixture_radius=fab.for_body(mesh).min_fixture_radius)

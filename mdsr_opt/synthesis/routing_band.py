@@ -13,9 +13,9 @@ hole the band narrows to necks thinner than the mesh spacing, which no chain of 
 ``band="offset"`` routes in the continuous band instead:
 
 1. The search runs on every contracted edge (as without fabrication), so the ropes follow the contraction
-   where it is, outline or not, and are as long and smooth as the search makes them; it runs with the given
-   ``K_a`` and with ``K_a = 1`` (fewer, longer ropes; the band's gaps cut them anyway), and the fixture fit
-   keeps the strongest of the pooled ropes.
+   where it is, outline or not, and are as long and smooth as the search makes them (``band="offset+long"``:
+   also the ropes of a search at ``K_a = 1``, fewer and longer, which the band's gaps cut anyway; the fixture
+   fit keeps the strongest of the pooled ropes).
 2. Each rope's rest polyline is moved into the band (the body's polygon shrunk by the clearance, with
    shapely): each node to its nearest point of the band. Where that point is farther than the clearance
    plus one mean edge length from the node, the rope crosses a gap of the band (a neck beside a hole too thin
