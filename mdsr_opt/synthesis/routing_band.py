@@ -175,7 +175,7 @@ def snap_into_band(mesh, paths, usable: np.ndarray, contracted: np.ndarray, clea
     on[E[ks].ravel()] = True
     nodes = np.flatnonzero(on)
     node_pts = shapely.points(P[nodes])
-    mid = shapely.points(0.5 * (P[E[ks, 0]] + P[E[ks, 1]]))
+    mid_xy = 0.5 * (P[E[ks, 0]] + P[E[ks, 1]])
     weight = mesh.edge_lengths[ks] * np.where(contracted[ks], 1.0, STRETCHED_COST)
     s, t, j1, j2 = _turn_moves(P, E, ks, max(turn_limit, 1.0 - math.cos(math.radians(SNAP_TURN))))
     M = len(s)
@@ -183,10 +183,16 @@ def snap_into_band(mesh, paths, usable: np.ndarray, contracted: np.ndarray, clea
     for r, path in enumerate(paths):
         for Q in _moved(P, path, band, clearance + h):
             line = LineString(Q)
-            off = shapely.distance(mid, line) / h
+            lo, hi = Q.min(axis=0) - CORRIDOR * h, Q.max(axis=0) + CORRIDOR * h  # measured only near the rope
+            box = np.flatnonzero(np.all((mid_xy >= lo) & (mid_xy <= hi), axis=1))
+            off = np.full(len(ks), np.inf)
+            off[box] = shapely.distance(shapely.points(mid_xy[box]), line) / h
             cost = np.where(off <= CORRIDOR, weight * (1.0 + off ** 2), np.inf)
-            near = shapely.distance(node_pts, line) <= h     # nodes in the corridor along the moved rope
-            along = shapely.line_locate_point(line, node_pts)
+            near = np.zeros(len(nodes), dtype=bool)  # nodes in the corridor along the moved rope
+            along = np.full(len(nodes), -np.inf)
+            nb = np.flatnonzero(np.all((P[nodes] >= lo) & (P[nodes] <= hi), axis=1))
+            near[nb] = shapely.distance(node_pts[nb], line) <= h
+            along[nb] = shapely.line_locate_point(line, node_pts[nb])
             pos = -np.inf
             while True:  # cover the moved rope with the farthest-reaching chains, past each gap of the mesh
                 cand = np.flatnonzero(near & (along > pos))
@@ -208,5 +214,6 @@ def snap_into_band(mesh, paths, usable: np.ndarray, contracted: np.ndarray, clea
                 chain.reverse()
                 if len(set(chain)) == len(chain):
                     out.append((r, chain))
-                pos = float(along[np.searchsorted(nodes, chain[-1])]) + h
+                # past the chain's end, and never back to its start (which would give the same chain again)
+                pos = max(float(along[np.searchsorted(nodes, chain[-1])]) + h, float(along[nodes == a][0]))
     return out
