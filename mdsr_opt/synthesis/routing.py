@@ -278,7 +278,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Only edges with ``w > min_contraction`` are used (a cable cannot push).
     max_turn : float, default 45
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
-        and splice joints alike).
+        and splice joints alike); with ``band="offset"`` the snapped chains zigzag along the band's edge by up
+        to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN` about a centre line that keeps it.
     seed_threshold : float, default 0.6
         Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
         region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
