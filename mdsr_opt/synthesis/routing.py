@@ -278,8 +278,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Only edges with ``w > min_contraction`` are used (a cable cannot push).
     max_turn : float, default 45
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
-        and splice joints alike); with ``band="offset"`` the snapped chains zigzag along the band's edge by up
-        to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN` about a centre line that keeps it.
+        and splice joints alike; ``band="offset"``: up to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN`).
     seed_threshold : float, default 0.6
         Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
         region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
@@ -306,9 +305,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         How ropes keep their clearance (ignored with ``fabrication=False``). ``"edges"``: the search runs on
         the admissible edges only. ``"offset"``: the search runs on every contracted edge and each rope is
         moved into the band (the body shrunk by the clearance) and snapped to admissible edges, cut where the
-        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: the same, with the ropes
-        of a search at ``K_a = 1`` (fewer, longer) pooled in. :func:`route_for_design` tries it when the first
-        routing lost ropes.
+        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: also a search at ``K_a = 1``
+        pooled in. :func:`route_for_design` tries them when the first routing lost ropes.
     compression_ratio : float in (0, 1], default 1
         An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
         principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
