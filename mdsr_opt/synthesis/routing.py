@@ -560,10 +560,16 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
                     f"{f.min_fixture_radius:.4g}: "
                     f"{len(deep)} kept")
             rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
+    if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
+        again, caught2 = attempt(dict(options, K_a=1.0))
+        if len(again):
+            why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
+            note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
+            rr, caught = again.replaced(notes=(note,) + again.notes), caught2
     if fab is not False and options.get("band") is None and (rr.notes or not len(rr)):
         # ropes lost inside the band (fragments along its jagged edge, gaps at necks beside holes): route on
         # every contracted edge and snap the ropes into the band (routing_band); kept when its ropes capture
-        # clearly more of the target's contraction
+        # clearly more of the target's contraction than the best routing inside the band above
         opts = dict(options, band="offset" if "K_a" in options else "offset+long")
         if rr.params.get("inset") is not None:
             opts["inset"], opts["fabrication"] = rr.params["inset"], replace(
@@ -575,12 +581,6 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
                     f"inside the body: they shorten by {_captured(snapped):.4g} in the target, "
                     f"the ropes searched inside the band by {_captured(rr):.4g}")
             rr, caught = snapped.replaced(notes=(note,) + snapped.notes), caught_snapped
-    if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
-        again, caught2 = attempt(dict(options, K_a=1.0))
-        if len(again):
-            why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
-            note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
-            rr, caught = again.replaced(notes=(note,) + again.notes), caught2
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return rr
