@@ -208,7 +208,8 @@ def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
     then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
     mesh -- every rope node has its clearance, which an offset route or a refined band would have to
     re-establish after moving nodes. The price is a mesh fine enough to have edges inside; one that has none
-    is refused here, with the numbers that would work."""
+    is refused here, with the numbers that would work. Ropes routed elsewhere and moved into the band are
+    snapped onto these edges (:mod:`~mdsr_opt.synthesis.routing_band`)."""
     dist = boundary_distance(mesh)
     tol = 1e-12 * float(dist.max() if len(dist) else 0.0)
     ok = dist >= clearance - tol

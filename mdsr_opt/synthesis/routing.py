@@ -44,7 +44,10 @@ runs in a moulded channel with a wall around it, so only edges whose two nodes l
 one. The search runs on those edges only, rather than offsetting routes inward or refining a band along the
 boundary: the rule is then exact on the mesh (every rope node has its clearance, on the very nodes the
 design and the fabrication files use), costs nothing, and changes no node; a mesh with no such edge is
-refused with the mean edge length and the channel and wall that would work. The routed ropes are then fitted
+refused with the mean edge length and the channel and wall that would work. Where the contraction is
+strongest next to the outline, the band's jagged edge and its necks beside holes break such ropes into
+fragments; :func:`route_for_design` then also routes on every contracted edge and snaps the ropes into the
+band (``band="offset"``, :mod:`mdsr_opt.synthesis.routing_band`). The routed ropes are then fitted
 to their end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of
 ``result.notes``. ``fabrication=False`` is the search alone, on every edge.
 
@@ -118,6 +121,7 @@ from ..body.muscles import Muscle
 from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
 from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
+from .routing_band import snap_into_band
 from .routing_fixtures import FixtureFit, fit_fixtures
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing_search import Router
@@ -138,6 +142,10 @@ __all__ = [
 #: mesh, whose most contracted edges lie in more parallel rows a cell apart, does not get more parallel
 #: muscles (a 4 x 1 strip: 3 muscles at 2.4k nodes, 5 at 4.3k, 8 at 17k without it).
 SEED_SPACING = ANCHOR_FRACTION
+
+#: :func:`route_for_design` keeps the ropes snapped into the band (``band="offset"``) when they shorten in the
+#: target by more than this factor times the ropes searched inside it.
+OFFSET_GAIN = 1.2
 
 #: Weights are compared as integers on this grid (rigid-motion round-off is ~1e-16).
 _QUANTUM = 1e-9
@@ -239,7 +247,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                   n_seeds: int = 8, max_muscles: int | None = None, min_length: float | None = None,
                   min_contraction: float = 1e-3, max_turn: float = 45.0, seed_threshold: float = 0.6,
                   symmetry: str | bool = "auto", fabrication: Fabrication | dict | bool | None = None,
-                  compression_ratio: float = 1.0, inset: float | None = None) -> RoutingResult:
+                  compression_ratio: float = 1.0, inset: float | None = None, band: str = "edges") -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
     Parameters
@@ -271,7 +279,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Only edges with ``w > min_contraction`` are used (a cable cannot push).
     max_turn : float, default 45
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
-        and splice joints alike).
+        and splice joints alike; ``band="offset"``: up to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN`).
     seed_threshold : float, default 0.6
         Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
         region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
@@ -294,6 +302,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         fabrication's clearance (half the channel plus the wall, at least 2 % of the body's size): a deeper
         route on which end fixtures fit (:func:`route_for_design` tries ``min_fixture_radius + wall`` when
         ropes were lost for lack of room at their ends). Ignored with ``fabrication=False``.
+    band : {"edges", "offset", "offset+long"}, default "edges"
+        How ropes keep their clearance (ignored with ``fabrication=False``). ``"edges"``: the search runs on
+        the admissible edges only. ``"offset"``: the search runs on every contracted edge and each rope is
+        moved into the band (the body shrunk by the clearance) and snapped to admissible edges, cut where the
+        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: also a search at ``K_a = 1``
+        pooled in. :func:`route_for_design` tries them when the first routing lost ropes.
     compression_ratio : float in (0, 1], default 1
         An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
         principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
@@ -367,6 +381,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                          f"got {seed_threshold}")
     if symmetry not in ("auto", True, False):
         raise ValueError(f"symmetry must be 'auto', True or False, got {symmetry!r}")
+    if band not in ("edges", "offset", "offset+long"):
+        raise ValueError(f"band must be 'edges', 'offset' or 'offset+long', got {band!r}")
     fab = check_fabrication(fabrication)
     if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
@@ -380,7 +396,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
                   seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio,
-                  inset=None if inset is None else float(inset))
+                  inset=None if inset is None else float(inset), band=band)
 
     x = check_target_shape(mesh, target)
     l0, l, w = _weights(mesh, x)
@@ -409,6 +425,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         wq = (wq + wq[reflection.edge_map]) // 2
     floor_q = int(round(min_contraction / _QUANTUM))
     turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
+    offset = band != "edges" and adm_edges is not None
     router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection, adm_edges)
     if not router.feasible.any():
         w_top = float(w.max())
@@ -423,28 +440,30 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
                      f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
                      "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
-    # the reference contraction: the largest w reached by edges of total rest length 4 mean edge lengths
-    # (not w_max, which a single short edge at a corner can dominate)
-    feas = np.flatnonzero(router.feasible)
-    order = feas[np.argsort(-wq[feas], kind="stable")]
-    reach = np.searchsorted(np.cumsum(l0[order]), 4.0 * ell)
-    w_ref_q = int(wq[order[min(reach, len(order) - 1)]])
-    threshold_q = max(floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
-    regions = router.regions(threshold_q, _compression_dominated(mesh, x, w, compression_ratio))
-    seeds = router.seed_units(regions, n_seeds, SEED_SPACING * body_size(mesh))
-    router.grow()
-    dropped = [DroppedUnit(p, L, why) for p, L, why in router.settle_fragments(min_length)]
+    compressed = _compression_dominated(mesh, x, w, compression_ratio)
+    knobs = dict(seed_threshold=seed_threshold, compressed=compressed, n_seeds=n_seeds,
+                 spacing=SEED_SPACING * body_size(mesh), min_length=min_length)
+    regions, seeds, dropped = router.search(**knobs)
+    dropped = [DroppedUnit(*d) for d in dropped]
 
     E = mesh.edges
     units = [U for U in router.units if U.alive]
+    pieces = [(U.uid, list(U.path)) for U in units]
+    if offset:  # the search on every contracted edge, its ropes moved into the band, pooled with the above
+        free_paths = []
+        for k_a in sorted({K_a, min(K_a, 1.0)} if band == "offset+long" else {K_a}):
+            free = Router(mesh, wq, k_a, K_b, K_h, floor_q, ell, turn_limit, reflection)
+            free.search(**knobs)
+            free_paths += [list(U.path) for U in free.units if U.alive]
+        snapped = snap_into_band(mesh, free_paths, adm_edges, free.feasible, clearance, turn_limit)
+        pieces += [(-1 - i, p) for i, (_, p) in enumerate(snapped)]  # no mirror partner among the search's units
     found = []
-    for U in units:
-        path = list(U.path)
+    for uid, path in pieces:
         if tuple(router.XL[path[-1]]) < tuple(router.XL[path[0]]):
             path.reverse()
         ks = [router.edge_id(a, b) for a, b in zip(path[:-1], path[1:])]
         strength = sum(router.wql[k] * l0[k] for k in ks)
-        found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, U.uid])
+        found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
     found.sort(key=lambda t: t[:3])
     if fab is None:
         fit = FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ())
@@ -468,7 +487,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         for f in found:
             if f[5] in taken:
                 continue
-            orbit = [f] + [g for g in found if reflection is not None and g[5] != f[5]
+            orbit = [f] + [g for g in found if reflection is not None and g[5] != f[5] and f[5] >= 0
                            and g[5] == router.mirror_uid[f[5]]]
             if len(kept) + len(orbit) <= max_muscles:
                 kept += orbit
@@ -484,7 +503,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         inside = "" if fab is None else (
             f"; the ropes lie at least {clearance:.4g} inside the body, and on a mesh this coarse (mean edge length "
             f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
-        why = no_seed_message(mesh, x, w, wq > floor_q, adm_edges, threshold_q * _QUANTUM, router.eligible,
+        why = no_seed_message(mesh, x, w, wq > floor_q, adm_edges, router.threshold_q * _QUANTUM, router.eligible,
                               min_contraction=min_contraction, seed_threshold=seed_threshold,
                               compression_ratio=compression_ratio, clearance=None if fab is None else clearance) \
             if not units and not dropped \
@@ -550,9 +569,29 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
             why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
             note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
             rr, caught = again.replaced(notes=(note,) + again.notes), caught2
+    if fab is not False and options.get("band") is None and (rr.notes or not len(rr)):
+        # ropes lost inside the band (fragments along its jagged edge, gaps at necks beside holes): route on
+        # every contracted edge and snap the ropes into the band (routing_band); kept when its ropes capture
+        # clearly more of the target's contraction than the best routing inside the band above
+        opts = dict(options, band="offset" if "K_a" in options else "offset+long")
+        if rr.params.get("inset") is not None:
+            opts["inset"], opts["fabrication"] = rr.params["inset"], replace(
+                fab.for_body(mesh), fixture_radius=fab.for_body(mesh).min_fixture_radius)
+        snapped, caught_snapped = attempt(opts)
+        if _captured(snapped) > OFFSET_GAIN * _captured(rr):
+            note = (f"ropes routed on every contracted edge and snapped into the band at least "
+                    f"{snapped.fabrication.clearance(mesh) if opts.get('inset') is None else opts['inset']:.4g} "
+                    f"inside the body: they shorten by {_captured(snapped):.4g} in the target, "
+                    f"the ropes searched inside the band by {_captured(rr):.4g}")
+            rr, caught = snapped.replaced(notes=(note,) + snapped.notes), caught_snapped
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return rr
+
+
+def _captured(rr: RoutingResult) -> float:
+    """How much the ropes of a routing shorten in its target, summed (rest minus target length)."""
+    return float(sum(st.rest_length - st.target_length for st in rr.stats))
 
 
 def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: float = 1.0) -> np.ndarray:

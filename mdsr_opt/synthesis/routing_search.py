@@ -460,6 +460,24 @@ class Router:
                 best_key, best = key, i
         return best
 
+    # -------------------------------------------------------------- the whole search
+    def search(self, *, seed_threshold: float, compressed: np.ndarray, n_seeds: int, spacing: float,
+               min_length: float):
+        """Regions, seeds, growth and fragments on the feasible edges: (regions, seed edges, dropped units as
+        (path, rest length, why))."""
+        # the reference contraction: the largest w reached by edges of total rest length 4 mean edge lengths
+        # (not w_max, which a single short edge at a corner can dominate)
+        feas = np.flatnonzero(self.feasible)
+        order = feas[np.argsort(-self.wq[feas], kind="stable")]
+        reach = np.searchsorted(np.cumsum(self.l0[order]), 4.0 * self.ell)
+        w_ref_q = int(self.wq[order[min(reach, len(order) - 1)]])
+        threshold_q = max(self.floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
+        self.threshold_q = threshold_q  # the seed threshold reached (quantised), for a message when nothing seeds
+        regions = self.regions(threshold_q, compressed)
+        seeds = self.seed_units(regions, n_seeds, spacing)
+        self.grow()
+        return regions, seeds, self.settle_fragments(min_length)
+
     # -------------------------------------------------------------- growth
     def grow(self) -> None:
         while True:

@@ -7,7 +7,7 @@ muscles, the smallest distance of a rope node from the outline and the holes ove
 (measured with shapely on the polygon the body was meshed from), the fixture radius used and the
 resolutions the routing recorded (``routing.notes``); an error is printed in place of the figures.
 
-Run:  python tests/benchmarks/bench_buildable.py [--nodes 700] [--bodies plate L]
+Run:  python tests/benchmarks/bench_buildable.py [--nodes 700] [--bodies plate L] [--set issue|extra|all]
       python tests/benchmarks/bench_buildable.py --tree /tmp/old   # an older tree (git archive REV mdsr_opt)
 """
 
@@ -72,13 +72,46 @@ def bodies() -> dict:
     return B
 
 
+def _star(n_arms, r_out, r_in):
+    t = np.pi / 2 + np.pi * np.arange(2 * n_arms) / n_arms
+    r = np.where(np.arange(2 * n_arms) % 2 == 0, r_out, r_in)
+    return np.column_stack([r * np.cos(t), r * np.sin(t)])
+
+
+def extra_bodies() -> dict:
+    """More bodies of the same kind (``--set extra``), for checks beyond the eight above: a six- and a seven-arm
+    star, a plate with three windows, a thin ring, a C opened, a wide T with a hole, an L with a window."""
+    B = {}
+    s6 = _star(6, 50.0, 22.0)  # arm tips at 90 + 60 k degrees
+    B["star6"] = (s6, [], lambda P: P[:, 1] > 42, lambda P: (P[:, 1] < -35) & (P[:, 0] > 0) | (P[:, 1] < -42),
+                  (0.4, (12.0, 10.0)))
+    s7 = _star(7, 80.0, 40.0)
+    B["star7"] = (s7, [], lambda P: P[:, 1] > 70, lambda P: (P[:, 0] > 55) & (P[:, 1] > 0),
+                  (0.5, (-15.0, 20.0)))
+    wins = [[(x, 15), (x + 20, 15), (x + 20, 35), (x, 35)] for x in (15, 50, 85)]
+    B["plate3"] = ([(0, 0), (120, 0), (120, 50), (0, 50)], wins, lambda P: P[:, 0] < 6,
+                   lambda P: P[:, 0] > 114, (0.35, (-15.0, 25.0)))
+    B["ring_thin"] = (_circle(0, 0, 30, 40), [_circle(0, 0, 21, 36)], lambda P: P[:, 1] < -25,
+                      lambda P: P[:, 1] > 25, (-0.3, (8.0, -6.0)))
+    C = np.vstack([_circle(0, 0, 40, 24)[[i for i in range(24) if not (i <= 2 or i >= 22)]],
+                   _circle(0, 0, 28, 24)[[i for i in range(24) if not (i <= 2 or i >= 22)]][::-1]])
+    B["C_open"] = (C, [], lambda P: (P[:, 0] > 20) & (P[:, 1] < -8), lambda P: (P[:, 0] > 20) & (P[:, 1] > 8),
+                   (0.3, (6.0, 10.0)))
+    B["T_hole"] = ([(30, 0), (50, 0), (50, 60), (80, 60), (80, 80), (0, 80), (0, 60), (30, 60)],
+                   [_circle(40, 30, 4, 16)], lambda P: P[:, 1] < 4, lambda P: P[:, 0] < 5, (0.4, (10.0, 12.0)))
+    B["L_window"] = ([(0, 0), (90, 0), (90, 25), (25, 25), (25, 90), (0, 90)], [[(8, 8), (17, 8), (17, 17), (8, 17)]],
+                     lambda P: P[:, 1] > 85, lambda P: P[:, 0] > 85, (0.5, (-15.0, 25.0)))
+    return B
+
+
 def make_body(name: str, nodes: int = 700):
-    """(mesh, anchors, drags, outline polygon (shapely), diameter) of body ``name`` at about ``nodes`` nodes."""
+    """(mesh, anchors, drags, outline polygon (shapely), diameter) of body ``name`` (of :func:`bodies` or
+    :func:`extra_bodies`) at about ``nodes`` nodes."""
     from shapely.geometry import Polygon
 
     from mdsr_opt import Mesh
 
-    outline, holes, clamp, drag, (angle, shift) = bodies()[name]
+    outline, holes, clamp, drag, (angle, shift) = {**bodies(), **extra_bodies()}[name]
     poly = Polygon(np.asarray(outline, float), [np.asarray(h, float) for h in holes])
     mesh = Mesh.from_polygon(np.asarray(outline, float), max_area=poly.area / (1.15 * nodes),
                              holes=[np.asarray(h, float) for h in holes] or None)
@@ -149,11 +182,14 @@ def run(names, nodes):
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=700, help="nodes each body is meshed with (default 700)")
-    ap.add_argument("--bodies", nargs="*", default=None, help="names of the bodies to run (default: all eight)")
+    ap.add_argument("--bodies", nargs="*", default=None, help="names of the bodies to run (default: the set's)")
+    ap.add_argument("--set", choices=("issue", "extra", "all"), default="issue",
+                    help="issue: the eight bodies (default); extra: seven more of the kind; all: both")
     ap.add_argument("--tree", default=None, help="import mdsr_opt from this folder instead of the checkout")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(Path(args.tree).resolve()) if args.tree else str(ROOT))
-    run(args.bodies or list(bodies()), args.nodes)
+    sets = {"issue": list(bodies()), "extra": list(extra_bodies()), "all": list(bodies()) + list(extra_bodies())}
+    run(args.bodies or sets[args.set], args.nodes)
 
 
 if __name__ == "__main__":
