@@ -132,7 +132,7 @@ def run_figure(out, resolution="medium", log=print, vector=None) -> int:
         "resolution": resolution, "nodes": scene.mesh.n_nodes, "required": REQUIRED,
         "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes], "sources": list(s)}
                    for m, s in zip(res.muscles, res.sources)],
-        "expressions": rows}))
+        "expressions": rows, "layout_problems": list(res.problems)}))
     files.append(res.save(os.path.join(out, "layout.json")))
     for r in rows:
         log(f"{r['expression']}: pulls {', '.join(r['muscles'])}; {100 * r['motion_recovered']:.1f} % of its "
@@ -141,6 +141,9 @@ def run_figure(out, resolution="medium", log=print, vector=None) -> int:
     log(f"face_expressions: one layout of {res.n_muscles} muscles, {sum(r['success'] for r in rows)}/4 designs "
         f"succeeded in {time.perf_counter() - t0:.1f} s; wrote {', '.join(os.path.basename(f) for f in files)} "
         f"to {out}")
+    if res.problems:  # the expressions are reached, but the one layout cannot be cast in one layer
+        log(f"face_expressions: the layout is NOT mouldable in one layer ({len(res.problems)} place(s), in "
+            "expressions.json's layout_problems): crossing ropes need channels at two depths")
     return 0 if ok else 1
 
 
