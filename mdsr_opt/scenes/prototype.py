@@ -436,13 +436,13 @@ class VirtualPrototype:
                         f"its fixtures (radius {radius:.4g}), {free[i]:.4g}: they would meet; a smaller contraction "
                         "or smaller fixtures")))
             layout = key[:2] + key[4:]  # the same ropes and fixtures (so the same refined mesh), any contractions
-            near = self._nearest_state(layout, a)
+            near, below = self._nearest_state(layout, a)
             predicted = None
             if near is None and guess is not None:
                 from ..mechanics.quadratic import transfer_state
 
                 predicted = transfer_state(self.design_mesh, guess, model.points)
-            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted, start=near)
+            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted, start=near or below)
             if res.success:
                 states = self.__dict__.setdefault("_states", {})
                 states[(layout, a.tobytes())] = res
@@ -457,18 +457,26 @@ class VirtualPrototype:
         return shot
 
     def _nearest_state(self, layout, a: np.ndarray):
-        """The prototype's own solved equilibrium of the same ropes and fixtures (``layout``) whose
-        contractions are nearest ``a``, when they lie within
-        :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` of it (the design of an internal case recovers
-        its known contractions: its Table 4 shot starts from the Table 3 one); else None."""
+        """The prototype's own solved equilibria of the same ropes and fixtures (``layout``) to start a solve
+        at contractions ``a`` from: ``(near, below)``. ``near``: the one whose contractions are nearest ``a``,
+        when they lie within :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` of it (the design of an
+        internal case recovers its known contractions: its Table 4 shot starts from the Table 3 one); else
+        None. ``below``: the one nearest ``a`` among those on the way from rest to ``a`` (each contraction
+        between 0 and its value in ``a``), from which the load is stepped instead of from rest when there is
+        no ``near`` state and a prediction fails (the muscle experiments' 20, 30, 40, 50 %); else None."""
         from ..mechanics.quadsolve import START_FULL_STEP
 
         best, gap = None, START_FULL_STEP
+        below, gap_below = None, np.inf
         for (lay, _a), res in self.__dict__.get("_states", {}).items():
-            d = float(np.abs(res.commanded - a).max()) if lay == layout else np.inf
+            if lay != layout:
+                continue
+            d = float(np.abs(res.commanded - a).max())
             if d <= gap:
                 best, gap = res, d
-        return best
+            if d < gap_below and (res.commanded <= a).all():
+                below, gap_below = res, d
+        return best, below
 
 
 def measure(design_mesh, x_design, photo) -> dict:
