@@ -258,6 +258,24 @@ def test_a_shot_near_one_solved_before_starts_from_it(one):
     assert far.success and "start state" not in far.status
 
 
+def test_a_shot_above_one_solved_before_steps_on_from_it(one):
+    """A shot at larger contractions than one solved before (the muscle experiments' 20 then 40 %), with no
+    state near it: the load is stepped from that state instead of from rest, in fewer Newton iterations, to
+    the state a fresh prototype reaches from rest; a solved state above the contractions asked for is not
+    such a start."""
+    scene, _proto = one
+    proto = VirtualPrototype.for_scene(scene, refine=2.5, seed=3)
+    first = proto.internal(scene.muscles, [0.2], photo=False)
+    on = proto.internal(scene.muscles, [0.4], photo=False)
+    fresh = VirtualPrototype.for_scene(scene, refine=2.5, seed=3).internal(scene.muscles, [0.4], photo=False)
+    assert first.success and on.success and fresh.success
+    assert on.iterations < fresh.iterations
+    assert np.abs(on.x - fresh.x).max() < 1e-7 * scene.mesh.size
+    layout = next(iter(proto.__dict__["_states"]))[0]
+    assert proto._nearest_state(layout, np.array([0.1]))[1] is None
+    assert proto._nearest_state(layout, np.array([0.35]))[1].commanded[0] == 0.2  # not 0.4, above it
+
+
 @pytest.mark.slow
 def test_table_4_lays_the_designed_ropes_with_the_fixtures_they_were_fitted_to():
     """A routed design's ropes carry the fixture size the routing fitted them to (smaller than the scene's
@@ -273,3 +291,17 @@ def test_table_4_lays_the_designed_ropes_with_the_fixtures_they_were_fitted_to()
     table4 = run.report.photo["prototype"]["design"]
     assert table4["success"], table4["status"]
     assert 0 < table4["mean_px"] < 10
+
+
+def test_a_rope_laid_round_a_flipped_edge_stays_a_simple_path():
+    """Refinement round the fixtures may flip a rope's edge; the way round it must not pass a node of the rope
+    twice (gecko's coarse bend_left rope failed its Table 4 shot with 'muscle path repeats node 401')."""
+    from mdsr_opt.body.mesh import Mesh
+    from mdsr_opt.body.muscles import Muscle
+    from mdsr_opt.mechanics.fixtures import _relay
+
+    # a square cut along 1-3 (so the rope's edge 0-2 is gone), node 3 far enough that 0 -> 2 goes round by 1
+    mesh = Mesh(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.5]]), np.array([[0, 1, 3], [1, 2, 3]]))
+    chain = _relay(mesh, np.array([1, 0, 2]))
+    assert chain.tolist() == [1, 2]  # the loop 1-0-1 cut out, every step an edge of the mesh
+    assert len(Muscle(chain).nodes) == len(set(chain.tolist()))

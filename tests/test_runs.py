@@ -504,6 +504,33 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
     assert _files(a) == _files(b)
 
 
+def test_internal_cases_are_validated_in_one_job_as_in_a_serial_run(tmp_path, monkeypatch):
+    """With a pool, the internal cases' photograph jobs are one job, in order of contraction (each prototype
+    solve steps on from the one below it, as in a serial run, whose cases share the prototype): the
+    validation tables and summaries are the serial run's."""
+    from mdsr_opt.scenes import runscene
+    from mdsr_opt.scenes.runscene import run_scene
+
+    sent = []
+    submit = runscene.Jobs.submit
+
+    def spy(self, fn, *args, **kwargs):
+        sent.append(fn.__name__ if hasattr(fn, "__name__") else type(fn).__name__)
+        return submit(self, fn, *args, **kwargs)
+
+    scene = get_problem("one_muscle", resolution="coarse")
+    serial = run_scene(scene, tmp_path / "serial", cases=["a40", "a20"], log=None, background=False,
+                       figures=False)
+    monkeypatch.setattr(runscene.Jobs, "submit", spy)
+    parallel = run_scene(scene, tmp_path / "parallel", cases=["a40", "a20"], log=None, figures=False)
+    assert parallel.success and serial.success
+    assert sent.count("_photo_chain_job") == 1 and "_photo_job" not in sent
+    a, b = tmp_path / "parallel", tmp_path / "serial"
+    assert (a / "validation.md").read_text() == (b / "validation.md").read_text()
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))
+    assert json.dumps(_without_times(sa)) == json.dumps(_without_times(sb))
+
+
 def test_a_pool_that_is_not_an_executor_is_refused_before_any_work(tmp_path):
     from mdsr_opt.scenes.runscene import write_scene
 

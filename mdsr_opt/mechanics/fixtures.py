@@ -154,7 +154,8 @@ def fixture_mesh(mesh, muscles, radius: float, rounds: int = 6):
 
 def _relay(mesh, chain: np.ndarray) -> np.ndarray:
     """``chain`` (nodes of a coarser mesh whose nodes ``mesh`` kept) on ``mesh``: each of its edges through the
-    nodes that now lie on it, in order."""
+    nodes that now lie on it, in order; a simple path (a way round a flipped edge that returns to a node of the
+    rope is cut at that node)."""
     P = mesh.points
     out = [int(chain[0])]
     for a, b in zip(chain[:-1].tolist(), chain[1:].tolist()):
@@ -169,7 +170,17 @@ def _relay(mesh, chain: np.ndarray) -> np.ndarray:
                 way = _shortest(mesh, a, b)
             out += way[1:-1]
         out.append(b)
-    c = np.asarray(out, dtype=np.int64)
+    seen: dict[int, int] = {}
+    simple: list[int] = []
+    for v in out:  # a way round a flipped edge that passes a node the rope already holds: cut that loop out
+        if v in seen:
+            for w in simple[seen[v] + 1:]:
+                del seen[w]
+            del simple[seen[v] + 1:]
+        else:
+            seen[v] = len(simple)
+            simple.append(v)
+    c = np.asarray(simple, dtype=np.int64)
     if (mesh.edge_rows(c[:-1], c[1:]) < 0).any():
         raise ValueError("a rope's edge was not kept when the mesh was refined round the fixtures")  # pragma: no cover
     return c

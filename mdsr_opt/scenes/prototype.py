@@ -54,6 +54,12 @@ import numpy as np
 
 from ..core.checks import check_int, positive_float
 from ..body.muscles import Muscle
+from ..body.material import NeoHookean
+from ..mechanics.anchors import check_anchor_radius
+from ..mechanics.capstan import CapstanRope, quadratic_chain
+from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
+from ..mechanics.quadratic import QuadraticModel, extend_prescribed, split_mesh, transfer_state
+from ..mechanics.quadsolve import START_FULL_STEP, solve_quadratic_external, solve_quadratic_internal
 from .select import edge_path
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE",
@@ -81,8 +87,6 @@ def prototype_material(E: float, nu: float, thickness: float = 1.0):
     stretch that frees the sheet's faces, :class:`~mdsr_opt.body.material.NeoHookean` with
     ``plane="stress"``), Young's modulus ``E``, Poisson's ratio ``nu`` (nearly incompressible), thickness
     ``thickness``."""
-    from ..body.material import NeoHookean
-
     return NeoHookean(E=E, nu=nu, thickness=thickness, plane="stress")
 
 
@@ -119,7 +123,6 @@ def _fine_body(scene, n_fine: int):
     its source at ``n_fine`` nodes, or, when that does not refine it (a mesh file, ``max_area``, no source),
     every triangle split into four. Returns ``(fine scene or the scene, mesh, {case: (anchors, drag nodes,
     drag positions)}, how)``."""
-    from ..mechanics.quadratic import extend_prescribed, split_mesh
     from .library import get_problem
 
     fine = get_problem(scene.source, resolution=n_fine) if scene.source else None
@@ -175,8 +178,6 @@ class VirtualPrototype:
     def model(self):
         """The prototype's elastic model (:class:`~mdsr_opt.mechanics.quadratic.QuadraticModel`), built once."""
         if "_model" not in self.__dict__:
-            from ..mechanics.quadratic import QuadraticModel
-
             self.__dict__["_model"] = QuadraticModel(self.mesh, self.material, self.order)
         return self.__dict__["_model"]
 
@@ -219,7 +220,6 @@ class VirtualPrototype:
             not in [0, 2], a bad ``fixture_radius`` or ``order``, or a fine scene whose cases differ from
             the design scene's.
         """
-        from ..mechanics.anchors import check_anchor_radius
         from .scene import Scene
 
         if not isinstance(scene, Scene):
@@ -348,8 +348,6 @@ class VirtualPrototype:
     def external(self, case: str, photo: bool = True) -> PrototypeShot:
         """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
         mesh, carried to the edge midpoints). Solved once: a second call returns the same shot."""
-        from ..mechanics.quadratic import extend_prescribed
-        from ..mechanics.quadsolve import solve_quadratic_external
 
         if case not in self.fixed:
             raise ValueError(f"case {case!r} is internal driving or unknown; use internal() (external cases: "
@@ -369,8 +367,6 @@ class VirtualPrototype:
         (refined round fixtures, :func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`), the last few kept."""
         if mesh is self.mesh:
             return self.model
-        from ..mechanics.quadratic import QuadraticModel
-
         models = self.__dict__.setdefault("_fixture_models", {})
         key = mesh.points.tobytes() + mesh.triangles.tobytes()
         if key not in models:
@@ -396,9 +392,6 @@ class VirtualPrototype:
         (:func:`~mdsr_opt.mechanics.fixtures.fixture_mesh`); a rope whose stroke is at least its length between
         its fixtures gives a failed shot ``"not built: ..."`` with the figures, not a solve, and a failed solve's
         status says how much the most shortened rope shortens its length between fixtures."""
-        from ..mechanics.capstan import CapstanRope, quadratic_chain
-        from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
-        from ..mechanics.quadsolve import solve_quadratic_internal
 
         a = np.asarray(contractions, dtype=float).ravel()
         if len(a) != len(muscles):
@@ -436,13 +429,12 @@ class VirtualPrototype:
                         f"its fixtures (radius {radius:.4g}), {free[i]:.4g}: they would meet; a smaller contraction "
                         "or smaller fixtures")))
             layout = key[:2] + key[4:]  # the same ropes and fixtures (so the same refined mesh), any contractions
-            near = self._nearest_state(layout, a)
+            near, below = self._nearest_state(layout, a)
             predicted = None
             if near is None and guess is not None:
-                from ..mechanics.quadratic import transfer_state
-
                 predicted = transfer_state(self.design_mesh, guess, model.points)
-            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted, start=near)
+            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted,
+                                           start=near if near is not None else below)
             if res.success:
                 states = self.__dict__.setdefault("_states", {})
                 states[(layout, a.tobytes())] = res
@@ -457,18 +449,24 @@ class VirtualPrototype:
         return shot
 
     def _nearest_state(self, layout, a: np.ndarray):
-        """The prototype's own solved equilibrium of the same ropes and fixtures (``layout``) whose
-        contractions are nearest ``a``, when they lie within
-        :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` of it (the design of an internal case recovers
-        its known contractions: its Table 4 shot starts from the Table 3 one); else None."""
-        from ..mechanics.quadsolve import START_FULL_STEP
-
+        """The prototype's own solved equilibria of the same ropes and fixtures (``layout``) to start a solve
+        at contractions ``a`` from: ``(near, below)``. ``near``: the one whose contractions are nearest ``a``,
+        when they lie within :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` of it (the design of an
+        internal case recovers its known contractions: its Table 4 shot starts from the Table 3 one); else
+        None. ``below``: the one nearest ``a`` among those on the way from rest to ``a`` (each contraction
+        between 0 and its value in ``a``), from which the load is stepped instead of from rest when there is
+        no ``near`` state and a prediction fails (the muscle experiments' 20, 30, 40, 50 %); else None."""
         best, gap = None, START_FULL_STEP
+        below, gap_below = None, np.inf
         for (lay, _a), res in self.__dict__.get("_states", {}).items():
-            d = float(np.abs(res.commanded - a).max()) if lay == layout else np.inf
+            if lay != layout:
+                continue
+            d = float(np.abs(res.commanded - a).max())
             if d <= gap:
                 best, gap = res, d
-        return best
+            if d < gap_below and (res.commanded <= a).all():
+                below, gap_below = res, d
+        return best, below
 
 
 def measure(design_mesh, x_design, photo) -> dict:

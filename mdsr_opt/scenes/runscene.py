@@ -248,6 +248,12 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
 
     send_animations()
     taken: list = []
+    # with a pool, the internal cases' photograph jobs (the prototype driven by the scene's muscles at the
+    # cases' contractions, e.g. 20, 30, 40, 50 %) are one job, sent once the last of them is designed, that
+    # runs them in order of contraction: each prototype solve then steps on from the state below it
+    # (VirtualPrototype keeps its solved states) instead of from rest, as a run without a pool does
+    chained = [c for c in names if scene.case(c).kind == "internal"] if proto is not None and bg.parallel else []
+    chain: list = []
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
         check_interrupt()
@@ -262,7 +268,9 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
         written[cname] = [[] for _ in range(2)]
         # the photograph job (the virtual prototype's solves) first: the longest of the case's jobs starts first
-        if photos and run.design is not None:
+        if photos and run.design is not None and len(chained) > 1 and cname in chained:
+            chain.append((run, prefix, parts[1] if parts else None, written[cname][1]))
+        elif photos and run.design is not None:
             bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
                       on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
         else:
@@ -270,6 +278,10 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
                 bg.submit(parts[1], on_done=written[cname][1].extend)
             if photos:
                 advance(log)  # no design to photograph: the case's photograph stage is done
+        if chain and cname == chained[-1]:
+            chain.sort(key=lambda item: float(max(item[0].setup.case.contractions, default=0.0)))
+            bg.submit(_photo_chain_job, scene, [item[:3] for item in chain], photo_size, proto,
+                      on_done=functools.partial(_photo_chain_done, [(item[0], item[3]) for item in chain], say, log))
         if parts:
             bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
         elif figures:
@@ -480,6 +492,19 @@ def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write
     measure_case(scene, run, photo_size=photo_size, prototype=proto, log=said.append, prefix=prefix)
     files = write_result() if write_result is not None else []
     return {"photo": run.report.photo, "time": run.report.times["photo"], "files": files, "log": said}
+
+
+def _photo_chain_job(scene: Scene, items: list, photo_size, proto) -> list[dict]:
+    """:func:`_photo_job` of several cases, ``items`` of ``(run, prefix, write_result)``, one after the other in
+    one process: the virtual prototype ``proto`` keeps the states it solved, so that each case's prototype
+    solve can start from the one before."""
+    return [_photo_job(scene, run, photo_size, proto, prefix, write) for run, prefix, write in items]
+
+
+def _photo_chain_done(targets: list, say, log, got: list) -> None:
+    """:func:`_photo_done` for each case of a :func:`_photo_chain_job` (``targets``: its ``(run, paths)``)."""
+    for (run, paths), one in zip(targets, got):
+        _photo_done(run, paths, say, log, one)
 
 
 def _photo_done(run: CaseRun, paths: list, say, log, got: dict) -> None:
