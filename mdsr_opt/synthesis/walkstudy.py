@@ -95,11 +95,14 @@ def walk_refinement(mesh: Mesh, material, muscles: Sequence, strokes, *, levels:
 
 
 def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, frames_per_step: int | None = None,
-                          feet: str = "region", progress=None, **kwargs) -> tuple:
+                          feet: str = "region", from_rest: bool = False, progress=None, **kwargs) -> tuple:
     """A scene's gait (the schedule of ``layout`` on the scene's mesh, solved once by
     :func:`~mdsr_opt.synthesis.gait.gait_schedule`) walked on the scene's mesh and its nested refinements
     (:func:`walk_refinement`): ``(schedule, [(mesh, WalkResult), ...])``. ``feet`` as in
-    :func:`~mdsr_opt.synthesis.walk.walk_scene`; ``kwargs`` go to :func:`~mdsr_opt.synthesis.walk.walk`."""
+    :func:`~mdsr_opt.synthesis.walk.walk_scene`; the walk starts from the schedule's first frame (solved on the
+    scene's mesh, settled on each level), or with ``from_rest`` from the rest shape (as when ``anchor_radius``,
+    passed on to :func:`~mdsr_opt.synthesis.walk.walk`, is not the layout's); ``kwargs`` go to
+    :func:`~mdsr_opt.synthesis.walk.walk`."""
     from .gait import gait_schedule
 
     gait = getattr(scene, "gait", None)
@@ -116,7 +119,7 @@ def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, fram
     S = np.asarray(sch.strokes, dtype=float)
     if len(S) > 1 and np.allclose(S[0], S[-1]):
         S = S[:-1]
-    start = sch.states[0] if bool(sch.success[0]) else None
+    start = sch.states[0] if bool(sch.success[0]) and not from_rest else None
     kwargs.setdefault("units", sch.units)
     kwargs.setdefault("anchor_radius", layout.anchor_radius)
     groups = foot_groups(scene.mesh, region) if region is not None else None

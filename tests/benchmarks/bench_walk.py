@@ -49,6 +49,8 @@ def main(argv=None) -> int:
     ap.add_argument("--levels", type=int, default=3)
     ap.add_argument("--cycles", type=int, default=2)
     ap.add_argument("--mu", type=float, default=0.5)
+    ap.add_argument("--anchor-radius", type=float, default=None,
+                    help="the ropes' end patches (cm; the walk then starts from rest); default the layout's")
     ap.add_argument("--out", default="walk_refinement.png")
     a = ap.parse_args(argv)
 
@@ -68,8 +70,11 @@ def main(argv=None) -> int:
               f"distance per cycle {', '.join(f'{v:.4f}' for v in d)} {r.units}, rotation per cycle "
               f"{', '.join(f'{v:.2f}' for v in np.degrees(r.rotation))} deg ({r.time:.0f} s)", flush=True)
 
+    radius = lay.anchor_radius if a.anchor_radius is None else a.anchor_radius
+    print(f"anchor radius {radius:.3g} {sc.units} (coarse mean edge {sc.mesh.edge_lengths.mean():.3g})")
     _, runs = walk_scene_refinement(sc, lay, levels=a.levels, mu=a.mu, cycles=a.cycles,
-                                    touching=diagonal_touching(sc), progress=report)
+                                    touching=diagonal_touching(sc), progress=report, anchor_radius=radius,
+                                    from_rest=a.anchor_radius is not None)
     last = np.array([r.distance[-1] for _, r in runs])
     print("distance in the last cycle: " + ", ".join(f"{m.n_nodes} nodes {v:.4f}" for (m, _), v in zip(runs, last)))
     if len(last) > 1:
