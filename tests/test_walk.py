@@ -330,3 +330,13 @@ def test_inchworm_walk_refinement_with_one_layout_converges():
     steps = np.array([r.displacement[0, 0] for _, r in runs])
     d = np.abs(np.diff(steps))
     assert np.all(steps > 0.3 * STROKE) and d[1] < 0.5 * d[0] and d[1] < 0.05 * steps[-1]
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mdsr_opt.plot.walk import plot_walk_refinement
+
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])  # the study's chart: distance against nodes
+    line = [ln for ln in fig.axes[0].lines if ln.get_label() == "last cycle"][0]
+    assert np.allclose(line.get_xdata(), [85, 297, 1105])
+    assert np.allclose(line.get_ydata(), [r.distance[-1] for _, r in runs], rtol=1e-12)
+    plt.close(fig)

@@ -66,7 +66,9 @@ def plot_walk_refinement(levels, ax=None, title: str | None = None):
     if bad.any():
         ax.plot(n[bad], last[bad], "rx", ms=9, label="a frame failed")
     ax.set_xscale("log")
-    ax.set_xlabel(axis_label("nodes", "1"))
+    ax.set_xticks(n, [str(int(k)) for k in n])
+    ax.xaxis.set_minor_locator(plt.NullLocator())
+    ax.set_xlabel("nodes")
     units = levels[0][1].units if len(levels) else ""
     ax.set_ylabel(axis_label("distance per cycle", units))
     ax.set_title(title or "walk: distance per cycle under mesh refinement (same layout)", fontsize=9)
