@@ -157,14 +157,16 @@ def _descend(prob, p, x, y, fixed, vals, tol, max_iter, options, loose):
     """From the kicked state ``y`` near the saddle ``x``, proximal steps (:func:`contact_step` with
     ``rho > 0``), each from the last admissible state, with the weight lowered after each accepted step and
     raised after a rejected one: the body moves away from the saddle in steps short enough for the broad
-    phase to see every pair it closes. ``(state, iterations)``; state None when no step is accepted."""
+    phase to see every pair it closes, a point that slides past its segment's end handed to the next segment
+    at once. ``(state, iterations)``; state None when no step is accepted."""
     rho, xr, its, ok = PROX_START, np.array(y, dtype=float), 0, False
     guess = y
     for _ in range(60):
         check_stop()
         if rho < PROX_END:
             break
-        out, _r = contact_step(prob, p, xr, guess, fixed, vals, tol, max_iter, options, False, loose, rho)
+        out, _r = contact_step(prob, p, xr, guess, fixed, vals, tol, max_iter, options, False, loose, rho,
+                               handoff=True)
         its += out.iterations
         if out.success:
             step = float(np.abs(out.x - xr).max())
