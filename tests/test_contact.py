@@ -344,28 +344,6 @@ def test_strip_end_turned_90_degrees_energy_converges_under_refinement():
     assert d[1] <= 0.04 * E[2]
 
 
-def test_pushing_rows_are_those_at_their_gap_with_a_multiplier_beyond_it():
-    """An interior point solve held to a loose tol leaves a row 2e-3 of the size off its gap a multiplier
-    of ~5e-4 (mu / slack): it does not push; a row at its gap with a multiplier of 1e-3 does, and one at its gap
-    with a multiplier of 1e-12 does not."""
-    from mdsr_opt.mechanics.contactsolve import ContactProblem, ContactSpec
-    from mdsr_opt.mechanics.contactsteps import pushing
-
-    mesh = Mesh.rectangle(1.0, 1.0, 2, 2)
-    S = mesh.size
-    gap = 1e-4 * S
-    prob = ContactProblem(mesh, get_model(mesh, MAT), ContactSpec([], True, gap))
-    x = np.zeros((mesh.n_nodes, 2))
-    x[0], x[1] = (0.0, 0.0), (1.0, 0.0)  # the segment 0 -> 1, its outside below it
-    x[2], x[3], x[4] = (0.5, -gap), (0.5, -gap - 2e-3 * S), (0.3, -gap)
-    rows = ContactRows(np.array([[2, 0, 1], [3, 0, 1], [4, 0, 1]]), mesh.n_nodes)
-    assert np.allclose(rows.values(x.reshape(-1)), [gap, gap + 2e-3 * S, gap])
-    lam = np.array([1e-3, 1e-3, 1e-12]) * S
-    assert pushing(prob, rows, x.reshape(-1), lam, 1e-6).tolist() == [True, False, False]
-    # held to a tight tol, the row 2e-3 S off its gap is not taken for a contact whatever its multiplier
-    assert pushing(prob, rows, x.reshape(-1), np.array([1.0, 1.0, 1.0]) * S, 1e-8).tolist() == [True, False, True]
-
-
 def _inner_contact(mesh, res):
     """The rest x of the nodes of the inner (bottom) side in pushing pairs, sorted."""
     P = mesh.points
@@ -379,7 +357,7 @@ def test_strip_end_turned_90_degrees_contact_region_converges():
     touches itself along one unbroken stretch (every boundary node in it in a pushing pair) from about x = 2.7
     to the last node before the turned end; the stretch's start moves by less than half as much from the second
     refinement to the third as from the first to the second (2.833, 2.625, 2.7). The sum of the contact forces
-    does not converge so (0.067, 0.091, 0.072): the creases the stretch folds into are an element wide."""
+    (0.067, 0.091, 0.099) is not checked: the creases the stretch folds into are an element wide."""
     starts = []
     for k in (6, 8, 10):
         mesh, res = _turn(4 * k, k, -1.0)

@@ -29,18 +29,6 @@ def _empty(prob) -> ContactRows:
     return ContactRows(np.zeros((0, 3), dtype=np.int64), prob.mesh.n_nodes)
 
 
-def pushing(prob: ContactProblem, rows: ContactRows, x, lam, tol: float) -> np.ndarray:
-    """The rows that push in the solved state ``x`` (a solve held to ``tol``): at their gap (within
-    ``sqrt(tol)`` of the size) with a multiplier ``lam`` (relative to ``E t S``, 1 on the unit body) at least
-    their distance from it. An interior point method leaves every inequality row a multiplier of about
-    ``mu / slack``; at a loose ``tol`` a row a thousandth of the size off its gap still has one of ``1e-3``, and a
-    fixed threshold would take it for a contact."""
-    S = prob.mesh.size
-    d = (rows.values(x) - prob.spec.gap) / S
-    lam = np.asarray(lam, dtype=float)
-    return (lam > 1e-9) & (d <= np.sqrt(tol)) & (lam / S >= d)
-
-
 def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_iter, options, final, loose,
                  rho: float = 0.0, handoff: bool = False):
     """Solve one load step from ``guess`` (``x_ref``: the admissible state it started from) with pairs
@@ -86,8 +74,7 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         bad = np.zeros(rows.n_rows, dtype=bool)
         if rows.n_rows:  # a pair pushing a point beyond its segment's end holds it against the extended line
             t = rows.projections(x1)
-            bad = pushing(prob, rows, x1, lam_c, step_tol) & ((t < -DELTA) | (t > 1 + DELTA)) & \
-                (rows.labels[:, 0] == 0)
+            bad = (lam_c > 1e-9) & ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
             for i in np.flatnonzero(bad):
                 drop.add(row_key(rows, i))
             if bad.any():
@@ -157,16 +144,14 @@ def _descend(prob, p, x, y, fixed, vals, tol, max_iter, options, loose):
     """From the kicked state ``y`` near the saddle ``x``, proximal steps (:func:`contact_step` with
     ``rho > 0``), each from the last admissible state, with the weight lowered after each accepted step and
     raised after a rejected one: the body moves away from the saddle in steps short enough for the broad
-    phase to see every pair it closes, a point that slides past its segment's end handed to the next segment
-    at once. ``(state, iterations)``; state None when no step is accepted."""
+    phase to see every pair it closes. ``(state, iterations)``; state None when no step is accepted."""
     rho, xr, its, ok = PROX_START, np.array(y, dtype=float), 0, False
     guess = y
     for _ in range(60):
         check_stop()
         if rho < PROX_END:
             break
-        out, _r = contact_step(prob, p, xr, guess, fixed, vals, tol, max_iter, options, False, loose, rho,
-                               handoff=True)
+        out, _r = contact_step(prob, p, xr, guess, fixed, vals, tol, max_iter, options, False, loose, rho)
         its += out.iterations
         if out.success:
             step = float(np.abs(out.x - xr).max())
