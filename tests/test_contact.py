@@ -342,3 +342,30 @@ def test_strip_end_turned_90_degrees_energy_converges_under_refinement():
     assert E[0] > E[1] > E[2]
     assert d[1] <= 0.5 * d[0]
     assert d[1] <= 0.04 * E[2]
+
+
+def _inner_contact(mesh, res):
+    """The rest x of the nodes of the inner (bottom) side in pushing pairs, sorted."""
+    P = mesh.points
+    touch = sorted({q for pr in res.contact["pairs"] for q in pr["nodes"] if q >= 0 and P[q, 1] == 0.0})
+    return np.sort(P[touch, 0])
+
+
+@pytest.mark.slow
+def test_strip_end_turned_90_degrees_contact_region_converges():
+    """The turn's contact region at 175, 297 and 451 nodes (24 x 6, 32 x 8, 40 x 10 cells): the inner side
+    touches itself along one unbroken stretch (every boundary node in it in a pushing pair) from about x = 2.7
+    to the last node before the turned end; the stretch's start moves by less than half as much from the second
+    refinement to the third as from the first to the second (2.833, 2.625, 2.7). The sum of the contact forces
+    (0.067, 0.091, 0.099) is not checked: the creases the stretch folds into are an element wide."""
+    starts = []
+    for k in (6, 8, 10):
+        mesh, res = _turn(4 * k, k, -1.0)
+        xs = _inner_contact(mesh, res)
+        h = 4.0 / (4 * k)
+        assert len(xs) >= 5 and np.allclose(np.diff(xs), h)  # one stretch, no node in it left out
+        assert xs[-1] == pytest.approx(4.0 - h)
+        starts.append(xs[0])
+    ds = np.abs(np.diff(starts))
+    assert 2.5 < starts[-1] < 2.9
+    assert ds[1] < 0.5 * ds[0]

@@ -289,3 +289,54 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
     dist = w.distance[1:]  # the first cycle starts from the pose solved off the table
     assert dist.min() > 0.05 * sc.mesh.size
     assert dist.max() - dist.min() <= 0.02 * dist.max()
+
+
+def test_refine_walker_keeps_ropes_feet_and_state():
+    """One split level: the ropes run through the same rest polyline (same rest length, every new node on it),
+    every segment a mesh edge; a foot keeps its nodes and gains only midpoints of its own edges; a state that is
+    an affine map of the rest shape is carried over exactly; a rope off the mesh's edges is refused."""
+    from mdsr_opt.synthesis.walkstudy import refine_walker
+
+    mesh, mus = _bender(8, 2)
+    P = mesh.points
+    foot = np.flatnonzero(P[:, 0] < 1.0 + 1e-9)
+    A = np.array([[1.1, 0.2], [-0.3, 0.9]])
+    fine, fm, sets, x = refine_walker(mesh, mus, {"rear": foot}, P @ A.T + [0.5, -1.0])
+    assert fine.n_nodes == mesh.n_nodes + len(mesh.edges) and len(fine.triangles) == 4 * len(mesh.triangles)
+    for m, f in zip(mus, fm):
+        f.check_on(fine)
+        assert f.rest_length(fine) == pytest.approx(m.rest_length(mesh), rel=1e-12)
+        assert f.nodes[0::2] == m.nodes and f.name == m.name
+        y = fine.points[list(f.nodes)]  # the top rope stays on y = 1, the bottom one on y = 0
+        assert np.allclose(y[:, 1], P[m.nodes[0], 1])
+    rear = sets["rear"]
+    assert set(foot) <= set(rear.tolist()) and np.all(fine.points[rear, 0] <= 1.0 + 1e-9)
+    assert len(rear) == np.sum(fine.points[:, 0] <= 1.0 + 1e-9)  # the same piece of the body, all of it
+    assert np.allclose(x, fine.points @ A.T + [0.5, -1.0], atol=1e-12)
+    with pytest.raises(ValueError, match="not a mesh edge"):
+        refine_walker(mesh, [Muscle([0, int(np.argmax(P[:, 0]))])])
+
+
+def test_inchworm_walk_refinement_with_one_layout_converges():
+    """The inchworm's rope, feet and strokes carried unchanged to two nested refinements (85, 297, 1105 nodes):
+    every frame solves, the step's change falls by more than half from one refinement to the next and the
+    last change is within 5 % of the step."""
+    from mdsr_opt.synthesis.walkstudy import walk_refinement
+
+    mesh, mus, feet = _inchworm(16, 4)
+    runs = walk_refinement(mesh, MAT, mus, INCH_S, levels=3, mu=0.5, cycles=1, feet_groups=feet, touching=INCH_T)
+    assert [m.n_nodes for m, _ in runs] == [85, 297, 1105]
+    assert all(r.success.all() for _, r in runs)
+    steps = np.array([r.displacement[0, 0] for _, r in runs])
+    d = np.abs(np.diff(steps))
+    assert np.all(steps > 0.3 * STROKE) and d[1] < 0.5 * d[0] and d[1] < 0.05 * steps[-1]
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mdsr_opt.plot.walk import plot_walk_refinement
+
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])  # the study's chart: distance against nodes
+    line = [ln for ln in fig.axes[0].lines if ln.get_label() == "last cycle"][0]
+    assert np.allclose(line.get_xdata(), [85, 297, 1105])
+    assert np.allclose(line.get_ydata(), [r.distance[-1] for _, r in runs], rtol=1e-12)
+    plt.close(fig)

@@ -7,7 +7,7 @@ import numpy as np
 
 from .style import axis_label
 
-__all__ = ["plot_walk"]
+__all__ = ["plot_walk", "plot_walk_refinement"]
 
 
 def plot_walk(result, ax=None, title: str | None = None):
@@ -44,5 +44,34 @@ def plot_walk(result, ax=None, title: str | None = None):
     h1, l1 = ax.get_legend_handles_labels()
     h2, l2 = ax2.get_legend_handles_labels()
     ax.legend(h1 + h2, l1 + l2, fontsize=7, loc="upper left", bbox_to_anchor=(1.12, 1.0), borderaxespad=0.0)
+    fig.tight_layout()
+    return fig
+
+
+def plot_walk_refinement(levels, ax=None, title: str | None = None):
+    """A walk's refinement study: the distance per cycle (the last cycle, and every cycle as small marks)
+    against the number of nodes, one point per mesh. ``levels`` is a sequence of ``(n_nodes, WalkResult)``
+    (coarsest first; e.g. from :func:`~mdsr_opt.synthesis.walkstudy.walk_refinement`, its meshes' node counts).
+    Returns the figure."""
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    else:
+        fig = ax.figure
+    n = np.array([int(k) for k, _ in levels], dtype=float)
+    last = np.array([float(r.distance[-1]) if r.cycles else np.nan for _, r in levels])
+    for k, (_, r) in zip(n, levels):
+        ax.plot(np.full(r.cycles, k), r.distance, "_", color="0.5", ms=10)
+    ax.plot(n, last, "o-", color="#1f77b4", label="last cycle")
+    bad = np.array([not bool(np.all(r.success)) for _, r in levels])
+    if bad.any():
+        ax.plot(n[bad], last[bad], "rx", ms=9, label="a frame failed")
+    ax.set_xscale("log")
+    ax.set_xticks(n, [str(int(k)) for k in n])
+    ax.xaxis.set_minor_locator(plt.NullLocator())
+    ax.set_xlabel("nodes")
+    units = levels[0][1].units if len(levels) else ""
+    ax.set_ylabel(axis_label("distance per cycle", units))
+    ax.set_title(title or "walk: distance per cycle under mesh refinement (same layout)", fontsize=9)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     return fig

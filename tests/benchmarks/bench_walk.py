@@ -1,0 +1,92 @@
+"""The gecko's walk under mesh refinement, with one layout: the muscles are designed once on the coarse mesh, the
+gait's strokes are scheduled once, and the same ropes, strokes and feet are walked on the coarse mesh and on
+nested refinements of it (every triangle split into four, :mod:`mdsr_opt.synthesis.walkstudy`). Weight on two
+diagonal feet at a time (front left and hind right for the first half of the cycle, the other pair for the
+second), mu 0.5. Prints the distance per cycle on each mesh and its change, and writes the chart.
+
+    python tests/benchmarks/bench_walk.py                     # 3 levels (146, 496, 1811 nodes), 2 cycles
+    python tests/benchmarks/bench_walk.py --levels 2 --cycles 3 --out /tmp/walk_refinement.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def gecko(resolution="coarse"):
+    spec = importlib.util.spec_from_file_location("gecko_scene", Path(__file__).parents[2] / "problems" / "gecko.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.build(resolution)
+
+
+def layout_of(sc):
+    """The gecko's shared muscle layout of its two bends (designed once)."""
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.synthesis.poses import design_poses
+
+    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
+    return design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
+                        routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
+
+
+def diagonal_touching(sc) -> np.ndarray:
+    """Feet 1 and 4 down for the first half of the cycle, feet 2 and 3 for the second."""
+    F = len(sc.gait.sequence) * sc.gait.frames_per_step
+    T = np.zeros((F, 4), dtype=bool)
+    T[: F // 2, [0, 3]] = True
+    T[F // 2:, [1, 2]] = True
+    return T
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--levels", type=int, default=3)
+    ap.add_argument("--cycles", type=int, default=2)
+    ap.add_argument("--mu", type=float, default=0.5)
+    ap.add_argument("--anchor-radius", type=float, default=None,
+                    help="the ropes' end patches (cm; the walk then starts from rest); default the layout's")
+    ap.add_argument("--out", default="walk_refinement.png")
+    a = ap.parse_args(argv)
+
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.walk import plot_walk_refinement
+    from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
+
+    sc = gecko("coarse")
+    t0 = time.perf_counter()
+    lay = layout_of(sc)
+    print(f"layout: {len(lay.muscles)} muscles designed once on {sc.mesh.n_nodes} nodes "
+          f"({time.perf_counter() - t0:.0f} s)")
+
+    def report(level, mesh, r):
+        d = r.distance
+        print(f"  level {level}: {mesh.n_nodes:5d} nodes, {int(r.success.sum())}/{len(r.success)} frames solved, "
+              f"distance per cycle {', '.join(f'{v:.4f}' for v in d)} {r.units}, rotation per cycle "
+              f"{', '.join(f'{v:.2f}' for v in np.degrees(r.rotation))} deg ({r.time:.0f} s)", flush=True)
+
+    radius = lay.anchor_radius if a.anchor_radius is None else a.anchor_radius
+    print(f"anchor radius {radius:.3g} {sc.units} (coarse mean edge {sc.mesh.edge_lengths.mean():.3g})")
+    _, runs = walk_scene_refinement(sc, lay, levels=a.levels, mu=a.mu, cycles=a.cycles,
+                                    touching=diagonal_touching(sc), progress=report, anchor_radius=radius,
+                                    from_rest=a.anchor_radius is not None)
+    last = np.array([r.distance[-1] for _, r in runs])
+    print("distance in the last cycle: " + ", ".join(f"{m.n_nodes} nodes {v:.4f}" for (m, _), v in zip(runs, last)))
+    if len(last) > 1:
+        ch = np.abs(np.diff(last))
+        print("change from one level to the next: " + ", ".join(f"{v:.4f}" for v in ch)
+              + (f" (ratio {ch[1] / ch[0]:.2f})" if len(ch) > 1 and ch[0] > 0 else ""))
+    import matplotlib
+    matplotlib.use("Agg")
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])
+    print("chart:", save_figure(fig, a.out, close=True))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
