@@ -198,8 +198,10 @@ def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
     from ..synthesis.fabrication import Fabrication, FabricationWarning, check_fabrication, rope_conflicts, \
         warn_conflicts
 
+    # the given ropes are designed with the scene's anchor_radius, so their fixtures are checked at it (a
+    # scene saved by the page keeps the routing's nominal fixture_radius beside the radius it fitted)
     r = scene.design_options.get("anchor_radius")
-    fab = check_fabrication(scene.routing_options.get("fabrication"), r) or Fabrication()
+    fab = check_fabrication(scene.routing_options.get("fabrication")) or Fabrication()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FabricationWarning)
         warn_conflicts(rope_conflicts(scene.mesh, muscles, fab, fixture_radius=r),
