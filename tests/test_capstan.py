@@ -3,6 +3,8 @@ quadsolve): mu = 0 is the exact cable, and the tension falls by exp(-mu theta) a
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -54,6 +56,11 @@ def test_end_tension_falls_by_the_capstan_law_on_a_curved_channel(strip, order):
     mu = 0.4
     res = solve_quadratic_internal(model, [CapstanRope(chain, mu)], [0.1])
     assert res.success, res.status
+    # the result's manners, as every result's: one short line, a strict-JSON dict of every field
+    text = repr(res)
+    assert text.startswith("QuadraticResult(success=True") and "\n" not in text and len(text) <= 200
+    d = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    assert d["commanded"] == [0.1] and np.array(d["x"]).shape == res.x.shape
     x = res.x
     d = np.diff(x[chain], axis=0)
     u = d / np.linalg.norm(d, axis=1)[:, None]

@@ -2,6 +2,8 @@
 a frictionless cycle that goes nowhere, stick and slip against the elastic forces, an inchworm that walks and
 its refinement study."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -117,6 +119,8 @@ def test_stick_nodes_do_not_move_and_slip_is_at_the_limit():
     # both feet down while the rope pulls: the whole strip is loaded, stick and slip regions side by side
     r = walk(mesh, MAT, mus, np.array([[0.0], [STROKE]]), mu=mu, cycles=1, weight=weight, anchor_radius=0)
     assert r.success.all()
+    d = json.loads(json.dumps(r.to_dict(), allow_nan=False))  # every field, strict JSON
+    assert np.array(d["states"]).shape == r.states.shape and d["mu"] == mu and repr(r).startswith("WalkResult(")
     model = get_model(un.unit_mesh, un.unit_material)
     p = model.params(un.unit_material)
     rope = np.zeros(mesh.n_nodes, dtype=bool)

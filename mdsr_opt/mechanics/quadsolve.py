@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..core.results import compact_repr, to_jsonable
 from .align import align
 from .capstan import CapstanRope, turning_angles
 from .fixtures import RigidReduction
@@ -79,6 +80,13 @@ class QuadraticResult:
     achieved: np.ndarray = field(default_factory=lambda: np.zeros(0))
     commanded: np.ndarray = field(default_factory=lambda: np.zeros(0))
     state: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        return compact_repr(self, ("success", "status", "iterations", "steps", "residual", "commanded", "achieved"))
+
+    def to_dict(self) -> dict:
+        """Every field as JSON-ready values (arrays as nested lists, NaN as None)."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
 
 class _Ordering:

@@ -49,6 +49,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_int
 from ..core.guards import check_stop
+from ..core.results import to_jsonable
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.units import Units
 from .walkframe import MAX_MOVE, FrameSolver
@@ -237,6 +238,11 @@ class WalkResult:
         return (f"WalkResult({self.cycles} cycle(s) of {self.cycle_frames} frames, mu {self.mu:g}: per cycle "
                 f"({d[0]:.4g}, {d[1]:.4g}) {self.units}, rotation {np.degrees(self.rotation.mean()):.3g} deg; "
                 f"{int(self.success.sum())}/{len(self.success)} frames solved)")
+
+    def to_dict(self) -> dict:
+        """Every field as JSON-ready values (arrays as nested lists, NaN as None); :meth:`summary` is the
+        short form."""
+        return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
     def summary(self) -> dict:
         """JSON-ready figures: displacement and rotation per cycle, slipping per frame."""
