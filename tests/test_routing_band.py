@@ -149,3 +149,30 @@ def test_more_user_bodies_of_the_kind_are_designed_buildable():
         assert min(out.design.contractions) > 1e-3, name
         ok.append(name)
     assert len(ok) >= 6, ok
+
+
+def test_route_for_design_runs_each_search_once_with_the_same_result(monkeypatch):
+    """The band routing pools the in-band search an earlier routing already ran (routing_memo): fewer searches,
+    and the same ropes, notes and fixture radius as the routings run without sharing."""
+    import mdsr_opt.synthesis.routing as routing
+    from mdsr_opt.synthesis.routing_search import Router
+
+    spec = importlib.util.spec_from_file_location(
+        "bench_fine_design", Path(__file__).parent / "benchmarks" / "bench_fine_design.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    mesh = bench.strip(16)
+    x = solve_external(mesh, bench.MAT, *bench.driving(mesh), backend="newton").x
+    calls = []
+    search = Router.search
+    monkeypatch.setattr(Router, "search", lambda self, **kw: calls.append(1) or search(self, **kw))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shared = routing.route_for_design(mesh, x)
+        n_shared = len(calls)
+        calls.clear()
+        alone, _ = routing._routed_for_design(mesh, x, {})  # every routing on its own (no shared_work)
+    assert [m.nodes for m in shared.muscles] == [m.nodes for m in alone.muscles] and len(shared.muscles) >= 2
+    assert shared.notes == alone.notes and shared.fixture_radius == alone.fixture_radius
+    assert "snapped into the band" in shared.notes[0]  # the band routing ran and was kept
+    assert n_shared < len(calls)  # the band routing's in-band search (and any with the same edges) run once

@@ -73,7 +73,7 @@ def test_a_hole_drawn_shut_is_ringed_by_one_rope_within_the_turn_limit():
     slot's sharp ends), every turn within max_turn, its two ends a short gap apart, and it shortens. Fixtures
     of radius 0.05 (the face's), which the ring's ends keep room for."""
     from mdsr_opt.synthesis.fabrication import check_fabrication
-    from mdsr_opt.synthesis.routing import largest_turn
+    from mdsr_opt.synthesis.routing_result import largest_turn
 
     mesh = mesh_polygon(_ring(48, (0.0, 0.0), (4.0, 3.0)), [_ring(20, (0.0, 0.0), (0.7, 0.35))], resolution=900)
     P = mesh.points

@@ -123,7 +123,8 @@ from ..plot.style import muscle_name
 from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_band import snap_into_band
 from .routing_fixtures import FixtureFit, fit_fixtures
-from .routing_result import DroppedUnit, MuscleStats, RoutingResult
+from .routing_memo import memoised, shared_work
+from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_turn
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
 from .routing_why import beside_stretch, no_seed_message
@@ -133,7 +134,6 @@ __all__ = [
     "edge_weights",
     "route_muscles",
     "RoutingWarning",
-    "largest_turn",
     "route_for_design",
 ]
 
@@ -416,7 +416,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                      f"|w| = {w_abs:.3g}), so there is nothing for a muscle to do; no muscles routed")
     reflection = None
     if symmetry is not False:
-        reflection = next((m for m in find_reflections(mesh) if weights_are_symmetric(w, m)), None)
+        reflection = next((m for m in memoised("mirrors", lambda: find_reflections(mesh))
+                           if weights_are_symmetric(w, m)), None)
         if symmetry is True and reflection is None:
             raise ValueError("symmetry=True but the body is not mirror-symmetric or the target does not "
                              "contract mirrored edges alike")
@@ -426,7 +427,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     floor_q = int(round(min_contraction / _QUANTUM))
     turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
     offset = band != "edges" and adm_edges is not None
-    router = Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit, reflection, adm_edges)
+    # one search per set of inputs (routing_memo): the band routing pools the search an earlier one ran
+    same = (wq.tobytes(), reflection is None, K_b, K_h, floor_q, ell, turn_limit, seed_threshold, compression_ratio,
+            n_seeds, min_length)
+    key = same + (K_a, None if adm_edges is None else adm_edges.tobytes())
+    router = memoised(("router",) + key, lambda: Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit,
+                                                         reflection, adm_edges))
     if not router.feasible.any():
         w_top = float(w.max())
         if fab is not None and (wq > floor_q).any():
@@ -440,10 +446,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
                      f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
                      "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
-    compressed = _compression_dominated(mesh, x, w, compression_ratio)
+    compressed = memoised(("compressed", compression_ratio),
+                          lambda: _compression_dominated(mesh, x, w, compression_ratio))
     knobs = dict(seed_threshold=seed_threshold, compressed=compressed, n_seeds=n_seeds,
                  spacing=SEED_SPACING * body_size(mesh), min_length=min_length)
-    regions, seeds, dropped = router.search(**knobs)
+    regions, seeds, dropped = memoised(("search",) + key, lambda: router.search(**knobs))
     dropped = [DroppedUnit(*d) for d in dropped]
 
     E = mesh.edges
@@ -543,6 +550,14 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
     >>> len(route_for_design(mesh, mesh.points * [0.8, 1.0])) >= 1
     True
     """
+    with shared_work():  # the routings below share their mirrors, compressed edges and searches (routing_memo)
+        rr, caught = _routed_for_design(mesh, target, options)
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return rr
+
+
+def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
     def attempt(opts):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -584,9 +599,7 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
                     f"inside the body: they shorten by {_captured(snapped):.4g} in the target, "
                     f"the ropes searched inside the band by {_captured(rr):.4g}")
             rr, caught = snapped.replaced(notes=(note,) + snapped.notes), caught_snapped
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return rr
+    return rr, caught
 
 
 def _captured(rr: RoutingResult) -> float:
@@ -598,20 +611,3 @@ def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: floa
     """Edges whose contraction exceeds ``ratio`` times the largest principal stretch (``sigma_1 - 1``) of the
     triangles beside them: compression, not the sideways (Poisson) response of a stretched region."""
     return w > ratio * beside_stretch(mesh, x)
-
-
-def largest_turn(x: ArrayLike, path) -> float:
-    """The largest turning angle (radians) at any interior node of ``path`` in configuration ``x``.
-
-    Example
-    -------
-    >>> round(math.degrees(largest_turn([[0, 0], [1, 0], [2, 1]], [0, 1, 2])), 6)
-    45.0
-    """
-    x = np.asarray(x, dtype=float)
-    d = np.diff(x[list(path)], axis=0)
-    if len(d) < 2:
-        return 0.0
-    a, b = d[:-1], d[1:]
-    c = (a * b).sum(axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
-    return float(np.arccos(np.clip(c, -1.0, 1.0)).max())

@@ -8,13 +8,15 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 
 import networkx as nx
+import numpy as np
+from numpy.typing import ArrayLike
 
 from ..body.muscles import Muscle
 from ..core.results import format_value, to_jsonable
 from .fabrication import Fabrication
 from .routing_symmetry import Reflection
 
-__all__ = ["MuscleStats", "DroppedUnit", "RoutingResult"]
+__all__ = ["MuscleStats", "DroppedUnit", "RoutingResult", "largest_turn"]
 
 
 @dataclass(frozen=True)
@@ -199,3 +201,20 @@ def _set_graph(self, value) -> None:
 
 # the field ``graph`` set by the dataclass's __init__ through this property: a graph, or a function building it
 RoutingResult.graph = property(_get_graph, _set_graph, doc="The contraction graph (built on first access).")
+
+
+def largest_turn(x: ArrayLike, path) -> float:
+    """The largest turning angle (radians) at any interior node of ``path`` in configuration ``x``.
+
+    Example
+    -------
+    >>> round(math.degrees(largest_turn([[0, 0], [1, 0], [2, 1]], [0, 1, 2])), 6)
+    45.0
+    """
+    x = np.asarray(x, dtype=float)
+    d = np.diff(x[list(path)], axis=0)
+    if len(d) < 2:
+        return 0.0
+    a, b = d[:-1], d[1:]
+    c = (a * b).sum(axis=1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))
+    return float(np.arccos(np.clip(c, -1.0, 1.0)).max())
