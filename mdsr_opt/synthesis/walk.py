@@ -54,8 +54,8 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.units import Units
 from .walkframe import MAX_MOVE, FrameSolver
 
-__all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "foot_groups", "node_loads",
-           "rigid_motion", "EPS", "SLIP"]
+__all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "scene_schedule", "foot_groups",
+           "node_loads", "rigid_motion", "EPS", "SLIP"]
 
 #: the smoothing length of the ground's friction potential, relative to the body's size
 EPS = 1e-6
@@ -477,17 +477,12 @@ def foot_groups(mesh: Mesh, nodes) -> dict:
     return {f"foot {i + 1}": g for i, g in enumerate(parts)}
 
 
-def walk_scene(scene, layout, *, sequence=None, frames_per_step: int | None = None, feet: str | None = "all",
-               **kwargs) -> tuple:
-    """A scene's gait walked on the table: the schedule of ``layout`` (a
-    :class:`~mdsr_opt.synthesis.poses.PosesResult` laid for the scene's gait, e.g. ``layout.json`` of
-    ``mdsr run``) solved by :func:`~mdsr_opt.synthesis.gait.gait_schedule`, then :func:`walk_gait`.
-
-    ``feet="all"`` (default): the weight on every node by lumped area (a sheet lying flat); ``feet="region"``:
-    on the scene's ``"feet"`` region alone; either way the pieces of that region are the named feet whose
-    slipping is reported (:func:`foot_groups`). ``sequence`` and ``frames_per_step`` default to the scene's
-    ``[gait]``; ``kwargs`` go to :func:`walk` (``mu``, ``cycles``, ``touching``...). Returns
-    ``(schedule, WalkResult)``."""
+def scene_schedule(scene, layout, *, sequence=None, frames_per_step: int | None = None,
+                   feet: str | None = "all") -> tuple:
+    """The schedule of ``layout`` for ``scene``'s gait (:func:`~mdsr_opt.synthesis.gait.gait_schedule`;
+    ``sequence`` and ``frames_per_step`` default to the scene's ``[gait]``) and the scene's ``"feet"`` region
+    (None when it names none): ``(schedule, region)``. ``feet`` (``"all"`` or ``"region"``, which needs that
+    region) is checked here, before the schedule is solved."""
     from .gait import gait_schedule
 
     gait = getattr(scene, "gait", None)
@@ -500,7 +495,21 @@ def walk_scene(scene, layout, *, sequence=None, frames_per_step: int | None = No
         raise ValueError(f"scene {scene.name!r} names no 'feet' region")
     seq = list(gait.sequence if sequence is None else sequence)
     fps = gait.frames_per_step if frames_per_step is None else frames_per_step
-    sch = gait_schedule(scene.mesh, scene.material, layout, seq, frames_per_step=fps, units=scene.units)
+    return gait_schedule(scene.mesh, scene.material, layout, seq, frames_per_step=fps, units=scene.units), region
+
+
+def walk_scene(scene, layout, *, sequence=None, frames_per_step: int | None = None, feet: str | None = "all",
+               **kwargs) -> tuple:
+    """A scene's gait walked on the table: the schedule of ``layout`` (a
+    :class:`~mdsr_opt.synthesis.poses.PosesResult` laid for the scene's gait, e.g. ``layout.json`` of
+    ``mdsr run``) solved by :func:`~mdsr_opt.synthesis.gait.gait_schedule`, then :func:`walk_gait`.
+
+    ``feet="all"`` (default): the weight on every node by lumped area (a sheet lying flat); ``feet="region"``:
+    on the scene's ``"feet"`` region alone; either way the pieces of that region are the named feet whose
+    slipping is reported (:func:`foot_groups`). ``sequence`` and ``frames_per_step`` default to the scene's
+    ``[gait]``; ``kwargs`` go to :func:`walk` (``mu``, ``cycles``, ``touching``...). Returns
+    ``(schedule, WalkResult)``."""
+    sch, region = scene_schedule(scene, layout, sequence=sequence, frames_per_step=frames_per_step, feet=feet)
     if region is not None:
         kwargs.setdefault("feet_groups", foot_groups(scene.mesh, region))
     if feet == "region":

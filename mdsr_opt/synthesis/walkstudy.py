@@ -22,7 +22,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import positive_int
 from ..mechanics.quadratic import split_mesh
-from .walk import WalkResult, foot_groups, walk
+from .walk import foot_groups, scene_schedule, walk
 
 __all__ = ["refine_walker", "walk_refinement", "walk_scene_refinement"]
 
@@ -103,19 +103,7 @@ def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, fram
     scene's mesh, settled on each level), or with ``from_rest`` from the rest shape (as when ``anchor_radius``,
     passed on to :func:`~mdsr_opt.synthesis.walk.walk`, is not the layout's); ``kwargs`` go to
     :func:`~mdsr_opt.synthesis.walk.walk`."""
-    from .gait import gait_schedule
-
-    gait = getattr(scene, "gait", None)
-    if gait is None and (sequence is None or frames_per_step is None):
-        raise ValueError(f"scene {getattr(scene, 'name', '?')!r} has no [gait]: give sequence and frames_per_step")
-    if feet not in ("all", "region"):
-        raise ValueError(f"feet must be 'all' or 'region', got {feet!r}")
-    region = dict(getattr(scene, "regions", {}) or {}).get("feet")
-    if feet == "region" and region is None:
-        raise ValueError(f"scene {scene.name!r} names no 'feet' region")
-    seq = list(gait.sequence if sequence is None else sequence)
-    fps = gait.frames_per_step if frames_per_step is None else frames_per_step
-    sch = gait_schedule(scene.mesh, scene.material, layout, seq, frames_per_step=fps, units=scene.units)
+    sch, region = scene_schedule(scene, layout, sequence=sequence, frames_per_step=frames_per_step, feet=feet)
     S = np.asarray(sch.strokes, dtype=float)
     if len(S) > 1 and np.allclose(S[0], S[-1]):
         S = S[:-1]
