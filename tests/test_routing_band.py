@@ -92,6 +92,8 @@ def test_band_is_checked_at_the_door():
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     with pytest.raises(ValueError, match="band must be 'edges', 'offset' or 'offset\\+long'"):
         route_muscles(mesh, mesh.points * [0.8, 1.0], band="inside")
+    with pytest.raises(ValueError, match="fabrication=False has none"):  # no band to snap into
+        route_muscles(mesh, mesh.points * [0.8, 1.0], band="offset", fabrication=False)
 
 
 def test_humanoid_arms_get_their_ropes():

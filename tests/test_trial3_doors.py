@@ -324,3 +324,13 @@ def test_the_prototype_builds_the_designs_fixtures_and_records_them(designed, us
     assert out["design"]["fixture_radius"] == used and out["prototype"]["fixture_radius"] == used
     assert "fixture_radius" not in out["driving"]  # anchors and drags: no ropes, no fixtures
     assert f"fixtures of radius {used:.3g}" in said[-1]
+
+
+def test_no_seed_message_when_nothing_contracts_names_it_without_failing():
+    from mdsr_opt.synthesis.routing_why import no_seed_message
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    w = -0.1 * np.ones(len(mesh.edges))  # every edge stretched
+    msg = no_seed_message(mesh, mesh.points * 1.1, w, w > 0.001, None, 0.05, None, min_contraction=0.001,
+                          seed_threshold=0.5, compression_ratio=1.0, clearance=None)
+    assert msg.startswith("no muscle unit could be seeded: 0 edge(s) contract") and msg.endswith("no muscles routed")

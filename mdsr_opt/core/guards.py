@@ -132,16 +132,15 @@ def interruptible():
         return
 
     def handler(signum, frame):
-        if _SIGINT:  # a second Ctrl-C in the same block
-            exc = _recorded()
+        if _SIGINT:  # a second Ctrl-C in the same block: raised wherever it lands (a solver stuck in one
+            raise _recorded()  # iteration is then aborted, with CasADi's warning)
+        try:
+            prev(signum, frame)
+        except BaseException as raised:  # KeyboardInterrupt from the default handler (or the program's)
+            _SIGINT.append(raised)
+            exc = raised
         else:
-            try:
-                prev(signum, frame)
-            except BaseException as raised:  # KeyboardInterrupt from the default handler (or the program's)
-                _SIGINT.append(raised)
-                exc = raised
-            else:
-                return  # the program's own handler decided to go on
+            return  # the program's own handler decided to go on
         if not _inside_a_solver(frame):
             raise exc
         # inside a CasADi NLP solver (its signal check between evaluations, or a Python callback it runs) the

@@ -124,10 +124,11 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     from ..plot.style import unit_label
 
     d, u = float(difference), unit_label(units)
-    if not (math.isfinite(d) and d <= max_difference * size):
-        rel = f"{100 * d / size:.2f} %" if math.isfinite(d) else "not finite"
-        return (f"difference {d:.3g} {u} is {rel} of the size {size:.3g} {u}, more than max_difference "
-                f"{100 * max_difference:g} %")
+    if not math.isfinite(d):
+        return "its difference is not finite (no shape to compare)"
+    if d > max_difference * size:
+        return (f"difference {d:.3g} {u} is {100 * d / size:.2f} % of the size {size:.3g} {u}, more than "
+                f"max_difference {100 * max_difference:g} %")
     if rest_difference is None:
         return ""
     d0 = float(rest_difference)

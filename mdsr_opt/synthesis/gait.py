@@ -427,10 +427,12 @@ def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_dif
     k = None if pose == "rest" else layout.index(pose)
     if k is not None and not layout.success[k]:
         return "its design on the shared layout failed"
+    if not solved:
+        return "its frame did not solve"
     rest = float("nan") if k is None or layout.rest_differences is None else float(layout.rest_differences[k])
     why = "" if k is None else difference_failure(diff, size, max_difference, units,
                                                   rest_difference=rest if np.isfinite(rest) else None)
-    return why or ("" if solved else "its frame did not solve")
+    return why
 
 
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",

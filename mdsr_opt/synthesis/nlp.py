@@ -341,12 +341,9 @@ def _assembled_nlp(prob: DesignProblem, hessian: str):
 #: IPOPT options of a warm-started design (the start is an equilibrium with its least-squares multipliers):
 #: a small first barrier parameter and bound push keep IPOPT near that start instead of recentring the
 #: contractions and tensions, and the least-squares estimate of the constraints' multipliers (a
-#: factorisation) is skipped. On the 3k-node, 4-muscle case of bench_design that takes IPOPT iterations
-#: from 6 to 2 (reachable target), 9 to 7 (noisy target) and 11 to 9 (far start), contractions equal to
-#: 1e-15. The barrier starts at 1e-11 (IPOPT's smallest), so no iteration only lowers it to the tolerance, and
-#: the bounds' multipliers at 1e-8 instead of 1 (the start's bounds are inactive but for slack ropes and
-#: contractions at 0): over 7 strips with routed or given muscles (reachable, slack-rope and unreachable
-#: targets) 34 iterations against 46 with a barrier of 1e-8 (one case 9 against 19), the same contractions.
+#: factorisation) is skipped. The barrier starts at 1e-11 (IPOPT's smallest), so no iteration only lowers it
+#: to the tolerance, and the bounds' multipliers at 1e-8 instead of 1 (the start's bounds are inactive but
+#: for slack ropes and contractions at 0).
 WARM_START_OPTIONS = {"mu_init": 1e-11, "bound_push": 1e-10, "bound_frac": 1e-10, "constr_mult_init_max": 0.0,
                       "bound_mult_init_val": 1e-8}
 
@@ -520,8 +517,9 @@ def run_flattened(prob, a0, fwd: ForwardSolver, tol, max_iter, hessian, scaling,
                                    tuple(sorted((k, repr(v)) for k, v in ipopt_opts.items())), ipopt_opts)
     t_start = time.perf_counter()
     if warm_start:
-        # from the target any equilibrium will do (no stability check), since the design
-        # is verified and repeated from rest if that fails; from rest, the stable one
+        # from the target any equilibrium will do (no stability check), since the design is verified
+        # (a stable equilibrium, from its state or from rest) and repeated from rest if that fails; the warm
+        # start's equilibrium need only meet WARM_START_TOL, and it becomes the forward solver's last state
         x0, ok, status = fwd.solve(a0, start=start, tol=max(fwd.tol, WARM_START_TOL))
         if not ok:
             return None, f"warm start failed: {status}", 0, bt

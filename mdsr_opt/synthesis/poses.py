@@ -474,8 +474,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
-    check_channel_fits(mesh, ropt["fabrication"])  # a channel the body cannot hold: before any solve
     separate = dict(separate or {})
+    # a channel the body cannot hold: before any solve (only sizes given, when no pose is routed)
+    check_channel_fits(mesh, ropt["fabrication"], routed=any(p.name not in separate for p in items))
     for k in separate:
         if k not in {p.name for p in items}:
             raise ValueError(f"separate names an unknown pose {k!r}")

@@ -387,9 +387,9 @@ class ForwardSolver:
         most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` iterations (a load step's, so the same IPOPT
         solver serves both) and no load stepping, and from rest when that fails or none is given; later
         ones from the last accepted state. The solve from ``start`` takes any equilibrium
-        (``solve_internal(check_stability=False)``: a warm start whose design is verified from rest); the
+        (``solve_internal(check_stability=False)``: a warm start whose design is verified afterwards); the
         others only a stable one. ``tol`` replaces the solver's tolerance for this solve (a warm start
-        needs no tight equilibrium)."""
+        needs no tight equilibrium); its state becomes the last accepted one all the same."""
         a = np.asarray(a, dtype=float).copy()
         res = None
         if self.started_from is None:

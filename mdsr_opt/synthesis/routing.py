@@ -384,6 +384,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     if band not in ("edges", "offset", "offset+long"):
         raise ValueError(f"band must be 'edges', 'offset' or 'offset+long', got {band!r}")
     fab = check_fabrication(fabrication)
+    if fab is False and band != "edges":
+        raise ValueError(f"band={band!r} snaps ropes into the buildable band, which fabrication=False has none of")
     if fab is False:
         fab, clearance, adm_edges = None, 0.0, None
     else:
@@ -416,7 +418,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                      f"|w| = {w_abs:.3g}), so there is nothing for a muscle to do; no muscles routed")
     reflection = None
     if symmetry is not False:
-        reflection = next((m for m in memoised("mirrors", lambda: find_reflections(mesh))
+        reflection = next((m for m in memoised(("mirrors", id(mesh)), lambda: find_reflections(mesh))
                            if weights_are_symmetric(w, m)), None)
         if symmetry is True and reflection is None:
             raise ValueError("symmetry=True but the body is not mirror-symmetric or the target does not "
@@ -428,7 +430,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     turn_limit = (1.0 - math.cos(math.radians(max_turn))) + 1e-12
     offset = band != "edges" and adm_edges is not None
     # one search per set of inputs (routing_memo): the band routing pools the search an earlier one ran
-    same = (wq.tobytes(), reflection is None, K_b, K_h, floor_q, ell, turn_limit, seed_threshold, compression_ratio,
+    same = (id(mesh), wq.tobytes(), reflection is None, K_b, K_h, floor_q, ell, turn_limit, seed_threshold, compression_ratio,
             n_seeds, min_length)
     key = same + (K_a, None if adm_edges is None else adm_edges.tobytes())
     router = memoised(("router",) + key, lambda: Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit,
@@ -446,7 +448,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
                      f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
                      "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
-    compressed = memoised(("compressed", compression_ratio),
+    compressed = memoised(("compressed", id(mesh), hash(x.tobytes()), compression_ratio),
                           lambda: _compression_dominated(mesh, x, w, compression_ratio))
     knobs = dict(seed_threshold=seed_threshold, compressed=compressed, n_seeds=n_seeds,
                  spacing=SEED_SPACING * body_size(mesh), min_length=min_length)
@@ -538,10 +540,13 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
 
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
-    """:func:`route_muscles` for a design that must not fail on the routing's own choices: when no rope is kept
-    with the default ``K_a`` (4) -- none keeps room for its end fixtures, or every unit inside the body is a
-    fragment -- route again with ``K_a = 1`` (fewer, longer ropes), and say so first in ``result.notes``. A ``K_a`` the caller gave, or
-    ``fabrication=False``, is used as given. Warnings of the kept routing are re-emitted.
+    """:func:`route_muscles` for a design that must not fail on the routing's own choices. When ropes were
+    dropped or cut for their fixtures, route again deeper inside with the smallest fixtures (kept if it keeps
+    more ropes); when no rope is kept with the default ``K_a`` (4), route again with ``K_a = 1`` (fewer,
+    longer ropes); when ropes are still lost inside the band, route on every contracted edge and snap into
+    the band (``band="offset"``, kept when its ropes capture :data:`OFFSET_GAIN` times more contraction).
+    Each change is said first in ``result.notes``. A ``K_a`` the caller gave, or ``fabrication=False``, is
+    used as given. Warnings of the kept routing are re-emitted.
 
     Example
     -------

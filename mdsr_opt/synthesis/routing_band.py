@@ -24,8 +24,9 @@ hole the band narrows to necks thinner than the mesh spacing, which no chain of 
    the clearance inside; a cable cannot push) from the admissible node nearest its first point to the one
    nearest its last point, each edge costing its rest length times ``1 + (d / h)**2``, with ``d`` the
    distance of the edge's midpoint from the moved polyline and ``h`` the mean edge length: a corridor
-   along the moved rope. Shortest paths go round the band's teeth rather than into them. Where the two end
-   nodes are not joined inside the band, the reachable node nearest the last point ends the part.
+   along the moved rope. Shortest paths go round the band's teeth rather than into them. The part is covered
+   by such chains from its start onwards, each reaching as far along the moved rope as the corridor allows,
+   the next starting past its end where the band's mesh has a break.
 
 Why not refine the band (add nodes along it) or offset whole routes node by node: a refined band changes the
 user's mesh, and with it the target, the anchors' and drags' nodes and every figure of the design; an
@@ -33,8 +34,8 @@ offset route's nodes are no mesh nodes. Snapping keeps every rope on mesh edges 
 node exactly as far inside as the admissible edges guarantee. Snapped ropes may come near each other (two
 outline ropes moved onto one band edge); the fixture fit that follows
 (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`) keeps a channel and a wall between them, as for
-any routing, and the turn rule is applied to the snapped chain (a part is cut where it turns more than
-``max_turn``).
+any routing. A snapped chain turns by at most :data:`SNAP_TURN` at a node (or ``max_turn`` when that is
+larger): it zigzags about the moved rope along the band's jagged edge.
 """
 
 from __future__ import annotations
@@ -149,8 +150,9 @@ def snap_into_band(mesh, paths, usable: np.ndarray, contracted: np.ndarray, clea
     clearance : float
         How far inside the outline and the holes a rope node lies.
     turn_limit : float
-        The largest turn at a node, as ``1 - cos``: the snapped chain never turns more (the shortest path
-        runs over directed edges, a move to the next edge allowed only within the limit).
+        The search's largest turn at a node, as ``1 - cos``; the snapped chain turns by at most the larger
+        of it and :data:`SNAP_TURN` (the shortest path runs over directed edges, a move to the next edge
+        allowed only within that limit).
     band : shapely geometry, optional
         :func:`band_polygon` of ``mesh`` and ``clearance`` (computed when not given).
 

@@ -6,7 +6,8 @@ Much of that is the same work: the body's mirror symmetry, the compression-domin
 inside the band at an inset an earlier routing already searched (the band routing pools exactly that search
 with its snapped ropes). Inside :func:`shared_work`, :func:`memoised` computes each such piece once and
 returns the same object afterwards; outside it, it simply computes. The results are the same either way: the
-keys name every input the piece depends on, and the routings run on one mesh and one target.
+keys name every input the piece depends on, the mesh (by identity, alive for the whole scope) and the target
+included.
 """
 
 from __future__ import annotations

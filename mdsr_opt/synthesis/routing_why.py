@@ -74,6 +74,8 @@ def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, 
                          + (f", {int((out & (w > NOTABLE_CONTRACTION)).sum())} of those contracting by more than "
                             f"{_pct(NOTABLE_CONTRACTION)}" if notable else ""))
         left &= admissible
+    if not left.any() and not parts:  # nothing contracts: the head says it all
+        return head + "; no muscles routed"
     if not left.any():
         return (head + "; but " + parts[0] + ", so none is left: a smaller channel_diameter or wall, or a finer "
                 "mesh, gives the ropes room nearer the outline; no muscles routed")
