@@ -46,12 +46,12 @@ def diagonal_touching(sc) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--levels", type=int, default=3)
-    ap.add_argument("--cycles", type=int, default=2)
-    ap.add_argument("--mu", type=float, default=0.5)
+    ap.add_argument("--levels", type=int, default=3, help="meshes: the scene's and its nested refinements")
+    ap.add_argument("--cycles", type=int, default=2, help="gait cycles walked on each mesh")
+    ap.add_argument("--mu", type=float, default=0.5, help="the table's Coulomb friction coefficient")
     ap.add_argument("--anchor-radius", type=float, default=None,
                     help="the ropes' end patches (cm; the walk then starts from rest); default the layout's")
-    ap.add_argument("--out", default="walk_refinement.png")
+    ap.add_argument("--out", default="walk_refinement.png", help="the chart of distance per cycle against nodes")
     a = ap.parse_args(argv)
 
     from mdsr_opt.plot.common import save_figure
