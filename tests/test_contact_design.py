@@ -33,6 +33,7 @@ def _strip_target(frac=0.3):
     return mesh, plain, target
 
 
+@pytest.mark.slow  # 13-23 s: the default suite keeps the gripper's and the pipeline's contact designs
 def test_strip_pushed_past_buckling_designed_and_verified_with_contact():
     mesh, plain, target = _strip_target()
     # the target needs contact: without it the buckled strip folds through itself
@@ -128,6 +129,7 @@ def test_pipeline_with_contact_solves_the_target_and_verifies_with_contact():
     assert d.difference < 0.06 * mesh.size
 
 
+@pytest.mark.slow  # 13-23 s: the default suite keeps the gripper's and the pipeline's contact designs
 def test_strip_curled_onto_itself_designed_with_self_contact_and_rejected_without():
     mesh = Mesh.rectangle(4.0, 0.5, 32, 4)
     P = mesh.points
