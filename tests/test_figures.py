@@ -639,3 +639,25 @@ def test_commanded_achieved_never_reads_minus_zero():
     from mdsr_opt.plot.style import commanded_achieved
 
     assert commanded_achieved([0.0, 0.26], [-0.001, -0.02], fmt=".2f") == "M1 0.00 \u2192 0.00, M2 0.26 \u2192 -0.02"
+
+
+def test_energy_maps_say_their_unit_and_the_overlay_title_says_it_measures_the_outline():
+    """Trial 3: a silicone target's energy bar read 'units of E' at values near 1.6e5 Pa·mm; the overlay's d
+    was the outline's while the table's is every loop's."""
+    import matplotlib.pyplot as plt
+
+    from mdsr_opt.plot.scenes import plot_target
+    from mdsr_opt.plot.style import energy_label
+
+    assert energy_label("Pa", "mm") == "strain energy per area (Pa·mm)"
+    assert energy_label(None, "mm") == "strain energy per area (units of E*t)"
+    mesh = Mesh.rectangle(2.0, 1.0, 4, 2)
+    fig = plot_target(mesh, mesh.points * 1.1, values=np.ones(len(mesh.triangles)), units="mm",
+                      colorbar_label=energy_label("Pa", "mm"))
+    labels = [a.get_ylabel() for ax in fig.axes for a in [ax, *ax.child_axes]]  # the bar is an inset axes
+    assert "strain energy per area (Pa·mm)" in labels
+    plt.close(fig)
+    import inspect
+
+    from mdsr_opt.plot import photos
+    assert "outline d = " in inspect.getsource(photos.plot_overlay)

@@ -37,7 +37,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     log = log or logging.getLogger(__name__).info
     from ..body import io
     from ..plot.common import coordinate_axes, legend_below, plot_mesh, plot_muscles, save_figure
-    from ..plot.style import axis_label, commanded_achieved, shared_limits
+    from ..plot.style import commanded_achieved, energy_label, shared_limits
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..body.material import NeoHookean
     from ..body.mesh import Mesh
@@ -76,8 +76,8 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     log(f"      {ext.status}: {ext.iterations} iterations in {len(ext.steps)} load step(s), "
         f"{ext.solve_time:.2f} s")
     summary["external"] = ext.summary()
-    energy_label = axis_label("strain energy density", "units of E")
-    fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label=energy_label,
+    energy = energy_label(getattr(mat, "stress_unit", None), None)
+    fig = plot_mesh(mesh, ext.x, values=io_energy(mesh, mat, ext.x), colorbar_label=energy,
                     title="external driving: anchored base, dragged tip")
     ax = fig.axes[0]
     plot_mesh(mesh, None, ax=ax, color="none", edgecolor="#bbbbbb", alpha=0.6)
@@ -108,7 +108,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     lo, hi = shared_limits(*energies.values())
     for model, res in results.items():
         # the title states the commanded contraction beside the one the muscle reached
-        fig = plot_mesh(mesh, res.x, values=energies[model], colorbar_label=energy_label, vmin=lo, vmax=hi,
+        fig = plot_mesh(mesh, res.x, values=energies[model], colorbar_label=energy, vmin=lo, vmax=hi,
                         title=f"{model}: contraction commanded \u2192 achieved "
                               f"{commanded_achieved([contraction], res.achieved)}, "
                               f"stroke {float(res.stroke[0]):.3g} body units")

@@ -61,7 +61,7 @@ def plot_overlay(image, mesh, x, comparison, ax=None, synthetic=False, title=Non
     ax.set_ylabel(axis_label("image y", "px"), fontsize=8)
     legend_below(ax, ncol=2, drop=0.5 if ticks else 0.3)
     head = f"{title}: " if title else ""
-    text = f"{head}d = {comparison.mean_px:.2f} px, sd = {comparison.std_px:.2f} px"
+    text = f"{head}outline d = {comparison.mean_px:.2f} px, sd = {comparison.std_px:.2f} px"  # the loop drawn
     if synthetic:
         text += " (SYNTHETIC photograph)"
     ax.set_title(text, fontsize=9, y=1.0)  # placed, not searched (see plot_scene): pixels have no offset text

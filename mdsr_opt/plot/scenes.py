@@ -15,7 +15,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
 from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
-from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, layout_colors, muscle_label
+from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, energy_label, layout_colors, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
 
@@ -48,7 +48,7 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4, units=None
 
 
 def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, muscles=(), values=None,
-                ax=None, title=None, colorbar_label="strain energy density (units of E)", units=None,
+                ax=None, title=None, colorbar_label=None, units=None,
                 ticks=True):
     """A target shape over the rest outline: anchors (black), drag nodes (red, with their paths from rest).
 
@@ -57,8 +57,9 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     mesh : the rest mesh; target : (n, 2) target positions.
     anchors, drag_nodes : node indices; drag_positions : (d, 2) where the drags go (default: ``target``).
     muscles : muscles to draw over the target (e.g. an internal-driving case's).
-    values : per-triangle values to colour the target by (e.g. strain energy density), with a colour bar
-        the height of the axes.
+    values : per-triangle values to colour the target by (e.g. strain energy per area), with a colour bar
+        the height of the axes, labelled ``colorbar_label`` (default :func:`~mdsr_opt.plot.style.energy_label`
+        without a stress unit: units of ``E*t``).
     units : the coordinates' length unit, on the axes (default ``"body units"``); ticks : coordinate ticks
         (``False``: three a side).
     """
@@ -67,7 +68,8 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
     for loop in mesh.boundary_loops:
         p = mesh.points[np.append(loop, loop[0])]
         ax.plot(p[:, 0], p[:, 1], "-", color=REST_LINE, lw=0.8)
-    plot_mesh(mesh, x, ax=ax, values=values, colorbar_label=colorbar_label if values is not None else None,
+    label = energy_label(None, units) if colorbar_label is None else colorbar_label  # values: an energy map
+    plot_mesh(mesh, x, ax=ax, values=values, colorbar_label=label if values is not None else None,
               alpha=0.9)
     anchors = np.asarray(anchors, dtype=int)
     dn = np.asarray(drag_nodes, dtype=int)

@@ -33,7 +33,7 @@ __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LI
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
            "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots",
            "label_colors", "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
-           "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
+           "energy_label", "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
 
 #: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 20]``): saturated, apart from
 #: the bodies' blues and greys, and told apart from one another (matplotlib's tab10 without its grey, red
@@ -166,6 +166,15 @@ def axis_label(quantity: str, units: str | None = None) -> str:
     gives ``"quantity (-)"``."""
     u = "-" if units == "1" else unit_label(units)
     return f"{quantity} ({u})"
+
+
+def energy_label(stress_unit: str | None = None, units: str | None = None) -> str:
+    """The colour bar label of a strain energy map: ``Psi`` times the sheet's thickness, an energy per rest
+    area, in ``stress_unit`` times the length ``units`` (``"Pa·mm"``) when the material states its stress
+    unit, else in units of ``E*t``."""
+    if stress_unit:
+        return axis_label("strain energy per area", f"{stress_unit}·{unit_label(units)}")
+    return "strain energy per area (units of E*t)"
 
 
 def label_coordinates(ax, units: str | None = None) -> None:

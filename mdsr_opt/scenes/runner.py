@@ -521,6 +521,7 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
     from ..plot.common import figure_paths, save_figure
     from ..plot.design import plot_contraction_graph, plot_design, plot_routing
     from ..plot.scenes import plot_target
+    from ..plot.style import energy_label
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
 
@@ -540,7 +541,8 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
         fig = plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
                           drag_positions=case.drag_positions if len(case.drag_nodes) else None,
                           muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                          title=title, units=units)
+                          title=title, units=units,
+                          colorbar_label=energy_label(getattr(mat, "stress_unit", None), units))
         save(fig, "target.png")
         write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
         files.append(str(folder / f"target{fmt}"))
