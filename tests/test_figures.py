@@ -69,7 +69,7 @@ def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip,
     t = np.linspace(0.0, 1.0, 5)
     strokes = np.outer(t, [0.3, 0.1])
     sched = SimpleNamespace(times=t, muscle_names=("M1", "M2"), strokes=strokes, achieved=strokes * 0.98,
-                            rest_lengths=np.array([3.5, 3.5]), units="mm", keyframes=[0, 4], labels=["rest"] * 5,
+                            rest_lengths=np.array([3.5, 1650.0]), units="mm", keyframes=[0, 4], labels=["rest"] * 5,
                             success=np.ones(5, bool), sequence=("rest", "pose"), n_frames=5)
     fig = plot_schedule(sched)
     ax = fig.axes[0]
@@ -77,6 +77,8 @@ def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip,
     got = {t.get_text().split()[0]: to_hex(h.get_color())
            for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)}
     assert {k: v for k, v in got.items() if k.startswith("M")} == want
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "M1 (L0 = 3.5 mm)" in texts and "M2 (L0 = 1650 mm)" in texts  # plain numbers, not 1.65e+03
     # the achieved strokes are drawn beside the commanded ones, dotted, in the muscle's colour, and the
     # legend says which line is which
     assert [h.get_linestyle() for t, h in zip(ax.get_legend().get_texts(), ax.get_legend().legend_handles)

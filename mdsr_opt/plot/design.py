@@ -272,8 +272,9 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     colors = label_colors(schedule.muscle_names)
     for i, n in enumerate(schedule.muscle_names):
         c = colors[i]
-        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = "
-                f"{schedule.rest_lengths[i]:.3g} {schedule.units})")
+        L0 = float(schedule.rest_lengths[i])
+        length = f"{L0:.0f}" if abs(L0) >= 100 else f"{L0:.3g}"  # 1650 mm, not 1.65e+03 mm beside 705 mm
+        ax.plot(t, schedule.strokes[:, i], "-o", color=c, ms=3, lw=1.8, label=f"{n} (L0 = {length} {schedule.units})")
         if np.isfinite(schedule.achieved[:, i]).any():
             ax.plot(t, schedule.achieved[:, i], ":", color=c, lw=1.2)
     top = float(np.nanmax(schedule.strokes)) if schedule.strokes.size else 1.0
