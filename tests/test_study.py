@@ -158,6 +158,7 @@ def test_quick_study_files(quick):
     assert not [p for p in os.listdir(out) if p.startswith(".tmp-")]
 
 
+@pytest.mark.slow  # 10 s: a local Dask cluster; the serial and process-pool runs stay in the default suite
 def test_dask_run_is_identical_to_serial(quick, quick_dask):
     serial, _ = quick
     assert quick_dask.comparable() == serial.comparable()
