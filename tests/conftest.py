@@ -7,7 +7,9 @@ only when no ``-m`` is given, so it never fights the command line).
 
 from __future__ import annotations
 
+import importlib.util
 import os
+from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # tests write figures, never show them (subprocesses inherit it)
 
@@ -15,6 +17,19 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from mdsr_opt import Mesh, NeoHookean
+
+#: the project's root (benchmarks under tests/benchmarks, problem scripts under problems/)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def load_script(relative: str):
+    """The module of a script that is no package (a benchmark, a problem script), by its path from the root:
+    the tests check the cases those scripts define, so each case has one copy."""
+    path = ROOT / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def pytest_addoption(parser):

@@ -5,10 +5,8 @@ own distances."""
 
 from __future__ import annotations
 
-import importlib.util
 import warnings
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,17 +15,10 @@ from shapely.geometry import Point, Polygon
 
 from mdsr_opt import Fabrication, Mesh, NeoHookean, design_pipeline, export_fabrication, route_muscles
 from mdsr_opt.synthesis.fabrication import MIN_INSET_FRACTION
+from conftest import load_script
 
 
-def _bench():
-    path = Path(__file__).parent / "benchmarks" / "bench_buildable.py"
-    spec = importlib.util.spec_from_file_location("bench_buildable", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-BENCH = _bench()
+BENCH = load_script("tests/benchmarks/bench_buildable.py")
 ALL = list(BENCH.bodies())
 QUICK = ["plate", "L", "C"]
 

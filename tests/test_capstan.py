@@ -24,6 +24,15 @@ def strip():
     return mesh, bottom
 
 
+def _roped(strip):
+    """The strip with one rope (friction 0.3) along its bottom on quadratic elements, fixtures of radius 0.3:
+    ``(mesh, bottom, mid, groups, model, ropes)``."""
+    mesh, bottom = strip
+    mid = mesh.n_nodes + np.arange(len(mesh.edges))
+    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    return mesh, bottom, mid, groups, QuadraticModel(mesh, MAT), [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+
+
 def test_frictionless_rope_is_the_exact_cable_of_solve_internal(strip):
     """mu = 0 on linear elements with the anchor patches of solve_internal as fixtures: the same state (both
     aligned to rest) and the same tension, to the solvers' tolerances."""
@@ -130,11 +139,7 @@ def test_bad_input_is_refused(strip):
 
 
 def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
-    mesh, bottom = strip
-    model = QuadraticModel(mesh, MAT, order=2)
-    mid = mesh.n_nodes + np.arange(len(mesh.edges))
-    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
-    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
     first = solve_quadratic_internal(model, ropes, [0.1], groups)
     cold = solve_quadratic_internal(model, ropes, [0.2], groups)
     warm = solve_quadratic_internal(model, ropes, [0.2], groups, start=first)
@@ -151,11 +156,7 @@ def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_
 
     from mdsr_opt.mechanics import quadsolve
 
-    mesh, bottom = strip
-    mid = mesh.n_nodes + np.arange(len(mesh.edges))
-    model = QuadraticModel(mesh, MAT)
-    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
-    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
     fast = solve_quadratic_internal(model, ropes, [0.25], groups)
     orders = []
     real = spla.splu
@@ -179,11 +180,7 @@ def test_a_solve_from_a_coarser_models_state_reaches_the_load_stepped_state(stri
     load steps; a guess of the wrong shape is refused."""
     from mdsr_opt.mechanics.quadratic import transfer_state
 
-    mesh, bottom = strip
-    mid = mesh.n_nodes + np.arange(len(mesh.edges))
-    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
-    model = QuadraticModel(mesh, MAT)
-    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
     coarse = solve_quadratic_internal(QuadraticModel(mesh, MAT, order=1), [CapstanRope(bottom, 0.3)], [0.3],
                                       fixture_groups(mesh, [Muscle(bottom)], 0.3))
     stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
@@ -205,11 +202,7 @@ def test_a_guess_whose_fixtures_fold_when_made_rigid_is_carried_into_the_body(st
     """A predicted state whose fixtures are squeezed (as a coarser model's anchor patch may be): made rigid,
     the fixtures push through the elements at their rim; the solve carries the fixtures' move into the body
     elastically and still starts from the prediction, reaching the load-stepped state."""
-    mesh, bottom = strip
-    mid = mesh.n_nodes + np.arange(len(mesh.edges))
-    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
-    model = QuadraticModel(mesh, MAT)
-    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
     stepped = solve_quadratic_internal(model, ropes, [0.3], groups)
     guess = stepped.x.copy()
     for g in groups:  # every node near a fixture pulled a fifth of the way to its end node
@@ -230,11 +223,7 @@ def test_a_start_at_nearly_the_same_contractions_is_one_newton_solve(strip):
     state, the load-stepped state to the tolerance; farther away, load steps from it."""
     from mdsr_opt.mechanics.quadsolve import START_FULL_STEP
 
-    mesh, bottom = strip
-    mid = mesh.n_nodes + np.arange(len(mesh.edges))
-    groups = fixture_groups(mesh, [Muscle(bottom)], 0.3, mid)
-    model = QuadraticModel(mesh, MAT)
-    ropes = [CapstanRope(quadratic_chain(mesh, bottom, mid), 0.3)]
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
     first = solve_quadratic_internal(model, ropes, [0.25], groups)
     a = 0.25 + 0.5 * START_FULL_STEP
     cold = solve_quadratic_internal(model, ropes, [a], groups)

@@ -9,8 +9,6 @@ exactly when the verification passes, its status kept.
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,15 +17,12 @@ from mdsr_opt.mechanics.constraints import spring_segments
 from mdsr_opt.synthesis.contractions import design_contractions
 from mdsr_opt.synthesis.pipeline import design_pipeline
 from mdsr_opt.synthesis.problem import FREE_SHORTENING_MAX
+from conftest import load_script
 
 
 def _bench():
     """The benchmark module: its strip and driving are the case under test (one copy of the case)."""
-    path = Path(__file__).parent / "benchmarks" / "bench_fine_design.py"
-    spec = importlib.util.spec_from_file_location("bench_fine_design", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+    return load_script("tests/benchmarks/bench_fine_design.py")
 
 
 _B = _bench()

@@ -4,9 +4,7 @@ Distances are checked with shapely on the polygon the body was meshed from."""
 
 from __future__ import annotations
 
-import importlib.util
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,17 +15,10 @@ from mdsr_opt.mechanics.equilibrium import solve_external
 from mdsr_opt.synthesis.fabrication import Fabrication, admissible_edges
 from mdsr_opt.synthesis.routing import route_for_design, route_muscles
 from mdsr_opt.synthesis.routing_band import band_polygon, snap_into_band
+from conftest import load_script
 
 
-def _bench():
-    path = Path(__file__).parent / "benchmarks" / "bench_buildable.py"
-    spec = importlib.util.spec_from_file_location("bench_buildable", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-BENCH = _bench()
+BENCH = load_script("tests/benchmarks/bench_buildable.py")
 
 
 def _target(name, nodes=700):
@@ -159,10 +150,7 @@ def test_route_for_design_runs_each_search_once_with_the_same_result(monkeypatch
     import mdsr_opt.synthesis.routing as routing
     from mdsr_opt.synthesis.routing_search import Router
 
-    spec = importlib.util.spec_from_file_location(
-        "bench_fine_design", Path(__file__).parent / "benchmarks" / "bench_fine_design.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("tests/benchmarks/bench_fine_design.py")
     mesh = bench.strip(16)
     x = solve_external(mesh, bench.MAT, *bench.driving(mesh), backend="newton").x
     calls = []

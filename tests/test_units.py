@@ -15,7 +15,6 @@ defaults.
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +26,7 @@ from mdsr_opt.mechanics.equilibrium import external_stability
 from mdsr_opt.mechanics.units import REFERENCE_SIZE, Units, power_of_two, unit_material, unit_mesh
 from mdsr_opt.synthesis.contractions import design_contractions
 from mdsr_opt.synthesis.verify import check_minimum
+from conftest import load_script
 
 #: agreement asked of a scaled copy with the unit-scale solution, in dimensionless form
 AGREE = 1e-8
@@ -171,11 +171,7 @@ def _strip():
 def _random_muscles(mesh, rng, m):
     """``m`` ropes along shortest edge paths between random boundary nodes far apart: the generator of
     ``tests/benchmarks/bench_units.py``, whose figures these tests check on a few seeds."""
-    path = Path(__file__).parent / "benchmarks" / "bench_units.py"
-    spec = importlib.util.spec_from_file_location("bench_units", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench.random_ropes(mesh, rng, m)
+    return load_script("tests/benchmarks/bench_units.py").random_ropes(mesh, rng, m)
 
 
 @pytest.mark.parametrize("seed", [1, 20, 31])

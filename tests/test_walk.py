@@ -11,6 +11,7 @@ from mdsr_opt import Mesh, Muscle, NeoHookean
 from mdsr_opt.mechanics.model import get_model
 from mdsr_opt.mechanics.units import Units
 from mdsr_opt.synthesis.walk import EPS, GroundFriction, node_loads, rigid_motion, walk
+from conftest import load_script
 
 MAT = NeoHookean(1.0, 0.3)
 STROKE = 0.3
@@ -243,16 +244,12 @@ def test_foot_groups_are_the_connected_pieces():
 def test_library_gecko_reciprocal_gait_goes_nowhere_on_all_nodes():
     """The gecko's gait (bend left, straight, bend right, straight) with its weight on every node in every frame:
     each bend is undone on the way back, so the body stays where it is (to 1e-3 of its size per cycle)."""
-    import importlib.util
-    from pathlib import Path
 
     from mdsr_opt.scenes.runner import run_case
     from mdsr_opt.synthesis.poses import design_poses
     from mdsr_opt.synthesis.walk import walk_scene
 
-    spec = importlib.util.spec_from_file_location("gecko_scene", Path(__file__).parents[1] / "problems" / "gecko.py")
-    gecko = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gecko)
+    gecko = load_script("problems/gecko.py")
     sc = gecko.build("coarse")
     targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
     lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
@@ -270,16 +267,12 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
     first half of the cycle, the other pair for the second): every frame solves (the coarse mesh failed 6-16
     of its frames before the epigraph form), and the body walks the same distance in each cycle (to 2 %; it
     turns by about 2 degrees a cycle, so the step's direction turns with it)."""
-    import importlib.util
-    from pathlib import Path
 
     from mdsr_opt.scenes.runner import run_case
     from mdsr_opt.synthesis.poses import design_poses
     from mdsr_opt.synthesis.walk import walk_scene
 
-    spec = importlib.util.spec_from_file_location("gecko_scene", Path(__file__).parents[1] / "problems" / "gecko.py")
-    gecko = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gecko)
+    gecko = load_script("problems/gecko.py")
     sc = gecko.build("coarse")
     targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
     lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
