@@ -94,30 +94,82 @@ class _Ordering:
     factorisation and reuse it for later matrices of the same shape: the Newton matrices of one solve share
     their pattern up to entries that happen to vanish (a rope's friction coupling at a straight node; all its
     terms while its tension is 0). A matrix with more stored entries than the one ordered gets a new order.
-    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix."""
+    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix.
+
+    The ordered matrix of a pattern seen before is a gather of the new matrix's stored values (the positions
+    found once per pattern), so a Newton matrix given as COO, CSR or CSC triplets with one pattern is
+    reordered without sorting."""
 
     def __init__(self):
         self.inv = None  # the order as an index array: row/column k of the ordered matrix is inv[k]
         self.key = None  # (shape, stored entries) of the matrix the order was found for
+        self.plan = None  # (pattern arrays, take, indices, indptr): the ordered CSC of the last pattern
+
+    @staticmethod
+    def _pattern(J) -> tuple:
+        return (J.format,) + ((J.row, J.col) if J.format == "coo" else (J.indices, J.indptr))
+
+    def _ordered(self, J):
+        """``J`` with rows and columns in the order ``inv``, CSC (through the plan of its pattern)."""
+        pattern = self._pattern(J)
+        plan = self.plan
+        if plan is None or len(plan[0]) != len(pattern) or plan[0][0] != pattern[0] or not all(
+                a.shape == b.shape and np.array_equal(a, b) for a, b in zip(plan[0][1:], pattern[1:])):
+            marker = J.copy()
+            marker.data = np.arange(1, J.nnz + 1, dtype=float)  # each stored entry's position, plus one
+            inv = self.inv
+            Mp = sp.csc_matrix(marker)[:, inv].tocsr()[inv].tocsc()
+            if Mp.nnz != J.nnz:  # repeated entries (COO) are summed: no gather
+                Jc = sp.csc_matrix(J)
+                return Jc[:, inv].tocsr()[inv].tocsc()
+            plan = self.plan = (tuple(a.copy() if isinstance(a, np.ndarray) else a for a in pattern),
+                                Mp.data.astype(np.int64) - 1, Mp.indices, Mp.indptr)
+        return sp.csc_matrix((J.data[plan[1]], plan[2], plan[3]), shape=J.shape)
 
     def solve(self, J, rhs: np.ndarray) -> np.ndarray:
         """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
         opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
-        J = sp.csc_matrix(J)
+        if not sp.issparse(J) or J.format not in ("coo", "csr", "csc"):
+            J = sp.csc_matrix(J)
         if self.inv is None or self.key[0] != J.shape or J.nnz > self.key[1]:
+            J = sp.csc_matrix(J)
             lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
-            self.inv, self.key = np.argsort(lu.perm_c), (J.shape, J.nnz)
+            self.inv, self.key, self.plan = np.argsort(lu.perm_c), (J.shape, J.nnz), None
             return lu.solve(rhs)
         inv = self.inv
-        Jp = J[:, inv].tocsr()[inv].tocsc()
         out = np.empty_like(rhs)
-        out[inv] = spla.splu(Jp, permc_spec="NATURAL", **opts).solve(rhs[inv])
+        out[inv] = spla.splu(self._ordered(J), permc_spec="NATURAL", **opts).solve(rhs[inv])
         return out
+
+
+class _Restriction:
+    """``K[rows][:, cols]`` of matrices that share one CSR pattern (a model's Hessians,
+    :meth:`~mdsr_opt.mechanics.quadratic.QuadraticModel.evaluate`): a gather of their stored values at the
+    positions found once from ``K``."""
+
+    def __init__(self, K, rows, cols):
+        K = sp.csr_matrix(K)
+        marker = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
+        S = marker[rows][:, cols]
+        self.take = S.data.astype(np.int64) - 1
+        self.indices, self.indptr, self.shape = S.indices, S.indptr, S.shape
+        self.nnz, self.pattern = K.nnz, (K.indices, K.indptr)
+
+    def __call__(self, K) -> sp.csr_matrix:
+        if K.format != "csr" or K.nnz != self.nnz or not (K.indices is self.pattern[0] or np.array_equal(
+                K.indices, self.pattern[0])):
+            raise ValueError("a matrix of another pattern than the one the restriction was found for")
+        return sp.csr_matrix((K.data[self.take], self.indices.copy(), self.indptr.copy()), shape=self.shape)
 
 
 #: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
 #: twice as many): damped steps that creep, where a smaller load step converges sooner
 STALL_ITERATIONS = 6
+
+#: a Newton solve also stops as stalled after this many consecutive steps the line search cut to at most
+#: :data:`SHORT_STEP` of the Newton step: the Newton step is dominated by a soft mode it overshoots (a slender
+#: part swung far along its tangent), and the damped steps that follow creep
+SHORT_STEPS, SHORT_STEP = 2, 1.0 / 16
 
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
@@ -132,6 +184,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     r, J = system(z, True)
     norm = float(np.abs(r).max()) if r.size else 0.0
     seen = [norm]
+    short = 0  # consecutive steps cut to at most SHORT_STEP
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
@@ -154,10 +207,13 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
             alpha *= 0.5
         else:
             return z, False, it, norm
+        short = short + 1 if alpha <= SHORT_STEP else 0
         z = zt
         r, J = system(z, True)
         norm = float(np.abs(r).max()) if r.size else 0.0
         seen.append(norm)
+        if short >= SHORT_STEPS and norm > tol:
+            return z, False, it + 1, norm  # stalled: the caller takes a smaller load step instead
     return z, norm <= tol, max_iter, norm
 
 
@@ -289,13 +345,17 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
     fixed_idx = np.flatnonzero(fixed)
     order = _Ordering()
     guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
+    K_rest = model.evaluate(X)[2]
+    ff, fc = _Restriction(K_rest, free, free), _Restriction(K_rest, free, fixed_idx)
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
             x = full(t, z)
             if jac:
                 _e, g, K = model.evaluate(x)
-                return g[free] / fs, K[free][:, free] / fs
+                Kff = ff(K)
+                Kff.data /= fs
+                return g[free] / fs, Kff
             return model.energy_gradient(x)[1][free] / fs, None
 
         ok = _Upright(model, lambda z: full(t, z))
@@ -304,7 +364,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
         K = model.evaluate(full(s, z0))[2]
         try:
-            dz = order.solve(K[free][:, free], -(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx])))
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
@@ -502,6 +562,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             else:
                 gx, Kx = model.energy_gradient(x)[1], None
             cols, rows, res_c = [], [], np.zeros(nc)
+            Kr = None  # the ropes' stiffness, added to the body's once
             for c, rope in enumerate(ropes):
                 if not active[c]:
                     res_c[c] = tau[c]
@@ -512,19 +573,26 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 gx = gx + tau[c] * f
                 res_c[c] = (rope.length(x) - targets[c]) / L0[c]
                 if jac:
-                    Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
+                    Hc = tau[c] * (H + rope.weight_coupling(x, n))
+                    Kr = Hc if Kr is None else Kr + Hc
                     cols.append(f)
                     rows.append(g / L0[c])
             if not jac:  # a line search's trial: the residual alone
                 return np.concatenate([_pull_back(red, q, gx)[keep] / fs, res_c]), None
+            if Kr is not None:
+                Kx = Kx + Kr
             P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
             rq = np.concatenate([(P.T @ gx) / fs, res_c])
             PT = P.T.tocsr()
-            Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
-            C = (PT @ np.column_stack(cols)) / fs                          # tension columns
-            R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
-            D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
-            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csc")
+            Kq = ((PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs).tocoo()
+            C = (PT @ np.column_stack(cols)) / fs                          # tension columns (nk, nc)
+            R = (PT @ np.column_stack(rows)).T                             # rope length rows (nc, nk)
+            ci, cj = np.nonzero(C)
+            ri, rj = np.nonzero(R)
+            slack = np.flatnonzero(~active)                               # tau_c = 0 for a slack rope
+            J = sp.coo_matrix((np.concatenate([Kq.data, C[ci, cj], R[ri, rj], np.ones(len(slack))]),
+                               (np.concatenate([Kq.row, ci, nk + ri, nk + slack]),
+                                np.concatenate([Kq.col, nk + cj, rj, nk + slack]))), shape=(nk + nc, nk + nc))
             return rq, J
 
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
