@@ -151,21 +151,21 @@ def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
 
 def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_state(strip, monkeypatch):
     """Intermediate load steps to quadsolve.INTERMEDIATE_TOL and LU factorisations in an order found once per
-    solve (quadsolve._Ordering) give the state of every step solved to 1e-9 with a fresh order each time."""
+    solve (sparselu.ReusedOrdering) give the state of every step solved to 1e-9 with a fresh order each time."""
     import scipy.sparse.linalg as spla
 
-    from mdsr_opt.mechanics import quadsolve
+    from mdsr_opt.mechanics import quadsolve, sparselu
 
     mesh, bottom, mid, groups, model, ropes = _roped(strip)
     fast = solve_quadratic_internal(model, ropes, [0.25], groups)
     orders = []
     real = spla.splu
-    monkeypatch.setattr(quadsolve.spla, "splu", lambda A, permc_spec=None, **k: orders.append(permc_spec)
+    monkeypatch.setattr(sparselu.spla, "splu", lambda A, permc_spec=None, **k: orders.append(permc_spec)
                         or real(A, permc_spec=permc_spec, **k))
     fast_again = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert "NATURAL" in orders and orders.count("MMD_AT_PLUS_A") < len(orders) / 2  # the order is reused
     monkeypatch.setattr(quadsolve, "INTERMEDIATE_TOL", 1e-9)
-    monkeypatch.setattr(quadsolve._Ordering, "solve", lambda self, J, rhs: real(
+    monkeypatch.setattr(sparselu.ReusedOrdering, "solve", lambda self, J, rhs: real(
         J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs))
     strict = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert fast.success and strict.success and fast.residual <= 1e-9
@@ -284,19 +284,19 @@ def test_a_newton_solve_whose_steps_the_line_search_keeps_cutting_stops_as_stall
 
 @pytest.mark.parametrize("fmt", ["coo", "csr", "csc"])
 def test_an_lu_solve_in_a_reused_order_gathers_the_same_matrix(fmt):
-    """quadsolve._Ordering: the second and later matrices of one pattern are reordered by a gather of their
+    """sparselu.ReusedOrdering: the second and later matrices of one pattern are reordered by a gather of their
     values (found once); the solutions equal those of a fresh factorisation, and a matrix of another pattern
     (an entry gone, one added) is still solved right."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    from mdsr_opt.mechanics.quadsolve import _Ordering
+    from mdsr_opt.mechanics.sparselu import ReusedOrdering
 
     rng = np.random.default_rng(3)
     n = 60
     base = sp.random(n, n, density=0.08, random_state=4, format="coo") + sp.eye(n) * 5.0
     base = sp.coo_matrix(base)
-    order = _Ordering()
+    order = ReusedOrdering()
     rhs = rng.standard_normal(n)
     for k in range(4):
         data = base.data * (1.0 + 0.1 * rng.standard_normal(base.nnz))
@@ -312,7 +312,7 @@ def test_an_lu_solve_in_a_reused_order_gathers_the_same_matrix(fmt):
 def test_a_restriction_gathers_k_free_free_of_every_matrix_of_its_pattern_and_refuses_another():
     import scipy.sparse as sp
 
-    from mdsr_opt.mechanics.quadsolve import _Restriction
+    from mdsr_opt.mechanics.sparselu import PatternRestriction
 
     model = QuadraticModel(Mesh.rectangle(2.0, 1.0, 3, 2), MAT)
     rng = np.random.default_rng(2)
@@ -321,7 +321,7 @@ def test_a_restriction_gathers_k_free_free_of_every_matrix_of_its_pattern_and_re
     free = np.sort(rng.choice(2 * model.n_nodes, 20, replace=False))
     cols = np.setdiff1d(np.arange(2 * model.n_nodes), free)
     for c in (free, cols):
-        R = _Restriction(K0, free, c)
+        R = PatternRestriction(K0, free, c)
         assert abs(R(K) - K[free][:, c]).max() == 0.0
     with pytest.raises(ValueError, match="another pattern"):
         R(sp.csr_matrix(np.eye(2 * model.n_nodes)))

@@ -36,6 +36,7 @@ from .align import align
 from .capstan import CapstanRope, turning_angles
 from .fixtures import RigidReduction
 from .quadratic import QuadraticModel
+from .sparselu import PatternRestriction, ReusedOrdering
 
 __all__ = ["QuadraticResult", "solve_quadratic_external", "solve_quadratic_internal"]
 
@@ -89,79 +90,6 @@ class QuadraticResult:
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
 
-class _Ordering:
-    """Sparse LU solves that find a fill-reducing column order (minimum degree on ``A^T + A``) at the first
-    factorisation and reuse it for later matrices of the same shape: the Newton matrices of one solve share
-    their pattern up to entries that happen to vanish (a rope's friction coupling at a straight node; all its
-    terms while its tension is 0). A matrix with more stored entries than the one ordered gets a new order.
-    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix.
-
-    The ordered matrix of a pattern seen before is a gather of the new matrix's stored values (the positions
-    found once per pattern), so a Newton matrix given as COO, CSR or CSC triplets with one pattern is
-    reordered without sorting."""
-
-    def __init__(self):
-        self.inv = None  # the order as an index array: row/column k of the ordered matrix is inv[k]
-        self.key = None  # (shape, stored entries) of the matrix the order was found for
-        self.plan = None  # (pattern arrays, take, indices, indptr): the ordered CSC of the last pattern
-
-    @staticmethod
-    def _pattern(J) -> tuple:
-        return (J.format,) + ((J.row, J.col) if J.format == "coo" else (J.indices, J.indptr))
-
-    def _ordered(self, J):
-        """``J`` with rows and columns in the order ``inv``, CSC (through the plan of its pattern)."""
-        pattern = self._pattern(J)
-        plan = self.plan
-        if plan is None or len(plan[0]) != len(pattern) or plan[0][0] != pattern[0] or not all(
-                a.shape == b.shape and np.array_equal(a, b) for a, b in zip(plan[0][1:], pattern[1:])):
-            marker = J.copy()
-            marker.data = np.arange(1, J.nnz + 1, dtype=float)  # each stored entry's position, plus one
-            inv = self.inv
-            Mp = sp.csc_matrix(marker)[:, inv].tocsr()[inv].tocsc()
-            if Mp.nnz != J.nnz:  # repeated entries (COO) are summed: no gather
-                Jc = sp.csc_matrix(J)
-                return Jc[:, inv].tocsr()[inv].tocsc()
-            plan = self.plan = (tuple(a.copy() if isinstance(a, np.ndarray) else a for a in pattern),
-                                Mp.data.astype(np.int64) - 1, Mp.indices, Mp.indptr)
-        return sp.csc_matrix((J.data[plan[1]], plan[2], plan[3]), shape=J.shape)
-
-    def solve(self, J, rhs: np.ndarray) -> np.ndarray:
-        """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
-        opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
-        if not sp.issparse(J) or J.format not in ("coo", "csr", "csc"):
-            J = sp.csc_matrix(J)
-        if self.inv is None or self.key[0] != J.shape or J.nnz > self.key[1]:
-            J = sp.csc_matrix(J)
-            lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
-            self.inv, self.key, self.plan = np.argsort(lu.perm_c), (J.shape, J.nnz), None
-            return lu.solve(rhs)
-        inv = self.inv
-        out = np.empty_like(rhs)
-        out[inv] = spla.splu(self._ordered(J), permc_spec="NATURAL", **opts).solve(rhs[inv])
-        return out
-
-
-class _Restriction:
-    """``K[rows][:, cols]`` of matrices that share one CSR pattern (a model's Hessians,
-    :meth:`~mdsr_opt.mechanics.quadratic.QuadraticModel.evaluate`): a gather of their stored values at the
-    positions found once from ``K``."""
-
-    def __init__(self, K, rows, cols):
-        K = sp.csr_matrix(K)
-        marker = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
-        S = marker[rows][:, cols]
-        self.take = S.data.astype(np.int64) - 1
-        self.indices, self.indptr, self.shape = S.indices, S.indptr, S.shape
-        self.nnz, self.pattern = K.nnz, (K.indices, K.indptr)
-
-    def __call__(self, K) -> sp.csr_matrix:
-        if K.format != "csr" or K.nnz != self.nnz or not (K.indices is self.pattern[0] or np.array_equal(
-                K.indices, self.pattern[0])):
-            raise ValueError("a matrix of another pattern than the one the restriction was found for")
-        return sp.csr_matrix((K.data[self.take], self.indices.copy(), self.indptr.copy()), shape=self.shape)
-
-
 #: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
 #: twice as many): damped steps that creep, where a smaller load step converges sooner
 STALL_ITERATIONS = 6
@@ -173,11 +101,11 @@ SHORT_STEPS, SHORT_STEP = 2, 1.0 / 16
 
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
-            order: _Ordering | None = None):
+            order: ReusedOrdering | None = None):
     """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
     residual)``; a solve that stalls (:data:`STALL_ITERATIONS`) returns as not converged. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
     solve)."""
-    order = order if order is not None else _Ordering()
+    order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
         return z, False, 0, float("inf")
@@ -343,10 +271,10 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         return x
 
     fixed_idx = np.flatnonzero(fixed)
-    order = _Ordering()
+    order = ReusedOrdering()
     guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
     K_rest = model.evaluate(X)[2]
-    ff, fc = _Restriction(K_rest, free, free), _Restriction(K_rest, free, fixed_idx)
+    ff, fc = PatternRestriction(K_rest, free, free), PatternRestriction(K_rest, free, fixed_idx)
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
@@ -535,7 +463,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     keep = np.setdiff1d(np.arange(red.n_q), gauge)
     nk = len(keep)
     select = sp.csr_matrix((np.ones(nk), (keep, np.arange(nk))), shape=(red.n_q, nk))  # z -> q (gauge left out)
-    order = _Ordering()
+    order = ReusedOrdering()
     X = model.points
     L0 = np.array([r.length(X) for r in ropes])
     q_rest = red.rest_q()
