@@ -102,14 +102,16 @@ SHORT_STEPS, SHORT_STEP = 2, 1.0 / 16
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
             order: ReusedOrdering | None = None):
-    """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``; a solve that stalls (:data:`STALL_ITERATIONS`) returns as not converged. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
-    solve)."""
+    """Damped Newton on ``system(z, jac) -> (scaled residual, Jacobian or None)``; returns ``(z, converged,
+    iterations, residual)``; a solve that stalls (:data:`STALL_ITERATIONS`, :data:`SHORT_STEPS`) returns as not
+    converged. The Jacobian is asked for only at a state that does not meet ``tol`` (the residual of an
+    accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
+    by the calls of one solve)."""
     order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
         return z, False, 0, float("inf")
-    r, J = system(z, True)
+    r = system(z, False)[0]
     norm = float(np.abs(r).max()) if r.size else 0.0
     seen = [norm]
     short = 0  # consecutive steps cut to at most SHORT_STEP
@@ -118,6 +120,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
             return z, True, it, norm
         if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
             return z, False, it, norm  # stalled: the caller takes a smaller load step instead
+        r, J = system(z, True)
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -136,8 +139,7 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
         else:
             return z, False, it, norm
         short = short + 1 if alpha <= SHORT_STEP else 0
-        z = zt
-        r, J = system(z, True)
+        z, r = zt, rt
         norm = float(np.abs(r).max()) if r.size else 0.0
         seen.append(norm)
         if short >= SHORT_STEPS and norm > tol:
