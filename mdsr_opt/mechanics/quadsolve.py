@@ -97,7 +97,7 @@ STALL_ITERATIONS = 6
 #: a Newton solve also stops as stalled after this many consecutive steps the line search cut to at most
 #: :data:`SHORT_STEP` of the Newton step: the Newton step is dominated by a soft mode it overshoots (a slender
 #: part swung far along its tangent), and the damped steps that follow creep
-SHORT_STEPS, SHORT_STEP = 2, 1.0 / 16
+SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
 
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
