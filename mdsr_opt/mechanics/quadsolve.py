@@ -15,7 +15,9 @@ Both are solved by Newton's method on the equilibrium equations with load contin
   equation is dropped and its tension set to 0 until its path is longer than the rope again.
 
 Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
-with an element inverted at a quadrature point or a vertex. A load step that fails is halved (down to
+with an element inverted at a quadrature point or a vertex. A Newton solve that creeps (its residual
+falling by less than 10 % over :data:`STALL_ITERATIONS` iterations, or :data:`SHORT_STEPS` steps in a row cut
+to :data:`SHORT_STEP` of the Newton step) is given up as stalled. A load step that fails is halved (down to
 ``min_step``); the failure status names the element the last refused trial state inverted, if any. Success
 means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the stiffness times the
 body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
