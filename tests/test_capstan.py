@@ -151,21 +151,21 @@ def test_a_solve_started_from_an_earlier_result_reaches_the_same_state(strip):
 
 def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_state(strip, monkeypatch):
     """Intermediate load steps to quadsolve.INTERMEDIATE_TOL and LU factorisations in an order found once per
-    solve (quadsolve._Ordering) give the state of every step solved to 1e-9 with a fresh order each time."""
+    solve (sparselu.ReusedOrdering) give the state of every step solved to 1e-9 with a fresh order each time."""
     import scipy.sparse.linalg as spla
 
-    from mdsr_opt.mechanics import quadsolve
+    from mdsr_opt.mechanics import quadsolve, sparselu
 
     mesh, bottom, mid, groups, model, ropes = _roped(strip)
     fast = solve_quadratic_internal(model, ropes, [0.25], groups)
     orders = []
     real = spla.splu
-    monkeypatch.setattr(quadsolve.spla, "splu", lambda A, permc_spec=None, **k: orders.append(permc_spec)
+    monkeypatch.setattr(sparselu.spla, "splu", lambda A, permc_spec=None, **k: orders.append(permc_spec)
                         or real(A, permc_spec=permc_spec, **k))
     fast_again = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert "NATURAL" in orders and orders.count("MMD_AT_PLUS_A") < len(orders) / 2  # the order is reused
     monkeypatch.setattr(quadsolve, "INTERMEDIATE_TOL", 1e-9)
-    monkeypatch.setattr(quadsolve._Ordering, "solve", lambda self, J, rhs: real(
+    monkeypatch.setattr(sparselu.ReusedOrdering, "solve", lambda self, J, rhs: real(
         J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs))
     strict = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert fast.success and strict.success and fast.residual <= 1e-9
@@ -262,3 +262,66 @@ def test_a_newton_solve_that_creeps_stops_as_stalled():
         z, ok, it, res = _newton(lambda z, jac, s=scale: (A @ z - b, s * A if jac else None), np.zeros(3),
                                  lambda z: True, 1e-9, 30)
         assert (ok, it) == (converged, iterations)
+
+
+def test_a_newton_solve_whose_steps_the_line_search_keeps_cutting_stops_as_stalled():
+    """quadsolve._newton on a residual whose Newton step overshoots far (a soft mode swung along its tangent:
+    here the matrix is 50 times too soft, so every step is cut to 1/64): it stops as not converged after
+    SHORT_STEPS such steps instead of creeping for 2 * STALL_ITERATIONS; with the right matrix, at once."""
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics.quadsolve import SHORT_STEP, SHORT_STEPS, STALL_ITERATIONS, _newton
+
+    A = sp.csr_matrix(np.diag([2.0, 3.0, 4.0]))
+    b = np.array([1.0, 1.0, 1.0])
+    assert SHORT_STEP >= 1.0 / 64  # the line search's cut to 1/64 below counts as short
+    z, ok, it, res = _newton(lambda z, jac: (A @ z - b, A / 50 if jac else None), np.zeros(3), lambda z: True,
+                             1e-9, 30)
+    assert not ok and it == SHORT_STEPS < 2 * STALL_ITERATIONS and 0 < res < 1.0
+    z, ok, it, res = _newton(lambda z, jac: (A @ z - b, A if jac else None), np.zeros(3), lambda z: True, 1e-9, 30)
+    assert ok and it == 1
+
+
+@pytest.mark.parametrize("fmt", ["coo", "csr", "csc"])
+def test_an_lu_solve_in_a_reused_order_gathers_the_same_matrix(fmt):
+    """sparselu.ReusedOrdering: the second and later matrices of one pattern are reordered by a gather of their
+    values (found once); the solutions equal those of a fresh factorisation, and a matrix of another pattern
+    (an entry gone, one added) is still solved right."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from mdsr_opt.mechanics.sparselu import ReusedOrdering
+
+    rng = np.random.default_rng(3)
+    n = 60
+    base = sp.random(n, n, density=0.08, random_state=4, format="coo") + sp.eye(n) * 5.0
+    base = sp.coo_matrix(base)
+    order = ReusedOrdering()
+    rhs = rng.standard_normal(n)
+    for k in range(4):
+        data = base.data * (1.0 + 0.1 * rng.standard_normal(base.nnz))
+        J = sp.coo_matrix((data, (base.row, base.col)), shape=(n, n))
+        if k == 3:  # another pattern: one entry dropped
+            J = sp.coo_matrix((data[1:], (base.row[1:], base.col[1:])), shape=(n, n))
+        J = J.asformat(fmt)
+        x = order.solve(J, rhs)
+        assert np.abs(x - spla.spsolve(sp.csc_matrix(J), rhs)).max() < 1e-10
+        assert order.plan is None if k == 0 else order.plan is not None
+
+
+def test_a_restriction_gathers_k_free_free_of_every_matrix_of_its_pattern_and_refuses_another():
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics.sparselu import PatternRestriction
+
+    model = QuadraticModel(Mesh.rectangle(2.0, 1.0, 3, 2), MAT)
+    rng = np.random.default_rng(2)
+    x = model.points + 0.01 * rng.standard_normal(model.points.shape)
+    K0, K = model.evaluate(model.points)[2], model.evaluate(x)[2]
+    free = np.sort(rng.choice(2 * model.n_nodes, 20, replace=False))
+    cols = np.setdiff1d(np.arange(2 * model.n_nodes), free)
+    for c in (free, cols):
+        R = PatternRestriction(K0, free, c)
+        assert abs(R(K) - K[free][:, c]).max() == 0.0
+    with pytest.raises(ValueError, match="another pattern"):
+        R(sp.csr_matrix(np.eye(2 * model.n_nodes)))

@@ -21,7 +21,8 @@ def patch_mesh():
 
 
 @pytest.mark.parametrize("order", [1, 2])
-@pytest.mark.parametrize("material", [MAT, LinearElastic(2.0, 0.4, thickness=0.5)])
+@pytest.mark.parametrize("material", [MAT, LinearElastic(2.0, 0.4, thickness=0.5),
+                                      NeoHookean(1.5, 0.49, thickness=0.3, plane="stress")])  # the prototype's
 def test_derivatives_agree_with_casadi_and_finite_differences(order, material):
     mesh = Mesh.rectangle(2.0, 1.0, 3, 2)
     fast, ref = QuadraticModel(mesh, material, order), QuadraticModel(mesh, material, order, numeric=False)

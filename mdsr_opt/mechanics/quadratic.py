@@ -172,6 +172,21 @@ class _ElementData:
     G: np.ndarray        # (m, nq, nn, 2): physical shape-function gradients at the quadrature points
     w: np.ndarray        # (m, nq): area x quadrature weight
     dofs: np.ndarray     # (m, 2 nn): global coordinates of each element, node-interleaved
+    D: np.ndarray        # (2, 2, m): the inverse rest edge matrix of each element, G[e, q] = dref[q] @ D[:, :, e]
+    Tx: np.ndarray       # (nn, 2 nq): dref[q, a, r] at [a, (q, r)]: element nodes -> reference gradients
+    Tg: np.ndarray       # (2 nq, nn): its transpose: reference stresses -> nodal forces
+    TH: np.ndarray       # (4 nq, nn nn): dref[q, a, r] dref[q, b, s] at [(q, r, s), (a, b)]
+
+
+def _reference_maps(dref: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The constant matrices that turn the per-element work of :class:`QuadraticModel` into products with
+    the reference shape-function gradients ``dref`` (nq, nn, 2), shared by every element: ``F`` from the
+    nodes, forces from the stresses and the element Hessian from the tangent are each one matrix product
+    over all elements at once (the element's own ``Dm^-1`` enters as 2 x 2 factors per quadrature point)."""
+    nq, nn, _ = dref.shape
+    Tx = dref.transpose(1, 0, 2).reshape(nn, 2 * nq)
+    TH = np.einsum("qar,qbs->qrsab", dref, dref).reshape(4 * nq, nn * nn)
+    return Tx, np.ascontiguousarray(Tx.T), TH
 
 
 class QuadraticModel:
@@ -225,7 +240,9 @@ class QuadraticModel:
         G = np.einsum("qak,mkj->mqaj", dref, Dm_inv)
         nn = self.elements.shape[1]
         dofs = np.stack([2 * self.elements, 2 * self.elements + 1], axis=2).reshape(-1, 2 * nn)
-        self._data = _ElementData(G=G, w=areas[:, None] * wq[None, :], dofs=dofs)
+        Tx, Tg, TH = _reference_maps(dref)
+        self._data = _ElementData(G=G, w=areas[:, None] * wq[None, :], dofs=dofs,
+                                  D=np.ascontiguousarray(np.transpose(Dm_inv, (1, 2, 0))), Tx=Tx, Tg=Tg, TH=TH)
         if self.order == 2:  # shape-function gradients at the three vertices, (m, 3, 6, 2)
             dL = np.array([[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]])
             gv = np.array([[(4 * L[0] - 1) * dL[0], (4 * L[1] - 1) * dL[1], (4 * L[2] - 1) * dL[2],
@@ -260,9 +277,17 @@ class QuadraticModel:
     # ------------------------------------------------------------------------------------------- geometry
     def deformation_gradients(self, x) -> np.ndarray:
         """``F`` at every quadrature point, (m, nq, 2, 2), of the state ``x`` ((N, 2) or (2N,))."""
+        return self._gradients(x).transpose(2, 3, 0, 1)
+
+    def _gradients(self, x) -> np.ndarray:
+        """``F`` at every quadrature point as (2, 2, m, nq) (components first)."""
         x = self._state(x)
-        xe = x[self.elements]  # (m, nn, 2)
-        return np.matmul(xe.transpose(0, 2, 1)[:, None], self._data.G)  # (m, nq, 2, 2)
+        d = self._data
+        m, nq = d.w.shape
+        xe = x[self.elements].transpose(2, 0, 1).reshape(2 * m, -1)        # (i, e) x a
+        Fr = (xe @ d.Tx).reshape(2, m, nq, 2)                            # sum_a x_ai dref_qar: (i, e, q, r)
+        D = d.D[:, :, :, None]                                           # (r, j, e, 1)
+        return Fr[..., 0][:, None] * D[0][None] + Fr[..., 1][:, None] * D[1][None]  # (i, j, e, q)
 
     def jacobians(self, x) -> np.ndarray:
         """``det F`` at every quadrature point, (m, nq)."""
@@ -312,29 +337,36 @@ class QuadraticModel:
         return np.asarray(e).ravel(), np.asarray(g).T, H
 
     def _evaluate_numeric(self, x, p, need: int):
-        """:meth:`_evaluate` from the material's closed-form stress and tangent (``numeric_law``)."""
+        """:meth:`_evaluate` from the material's closed-form stress and tangent (``numeric_law``).
+
+        With ``G[e, q] = dref[q] D_e`` (reference gradients times the element's inverse rest edge matrix), the
+        element's forces are ``sum_q dref[q] (w P D_e^T)`` and its Hessian ``sum_q dref[q] (w D_e A D_e^T)
+        dref[q]^T`` in the pairs of indices of ``A``: the 2 x 2 factors are taken per quadrature point, the
+        sums over the shared ``dref`` are one matrix product over all elements (:func:`_reference_maps`)."""
         d = self._data
-        m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
-        F = self.deformation_gradients(x)                                      # (m, nq, 2, 2)
-        Fl = F.transpose(2, 3, 0, 1).reshape(2, 2, m * nq)
+        m, nq = d.w.shape
+        nn = d.Tx.shape[0]
+        Fl = self._gradients(x).reshape(2, 2, m * nq)                          # (i, j, n), n = (e, q)
         with np.errstate(divide="ignore", invalid="ignore"):
             psi = self.material.density(Fl[0, 0] - 1, Fl[0, 1], Fl[1, 0], Fl[1, 1] - 1, p[0], p[1])
             P, A = self.material.stress_tangent(Fl, p[0], p[1], need == 2)
         J = Fl[0, 0] * Fl[1, 1] - Fl[0, 1] * Fl[1, 0]
         psi = np.where(J > 0, psi, np.nan).reshape(m, nq)
-        w = d.w
-        e = (w * psi).sum(1)
-        G = d.G.reshape(m * nq, nn, 2)                                          # (n, a, j)
-        Pw = (P * w.reshape(-1)).transpose(2, 0, 1)                               # (n, i, j), weighted
-        g = np.matmul(G, Pw.transpose(0, 2, 1)).reshape(m, nq, nn, 2).sum(1).reshape(m, 2 * nn)  # (m, a i)
+        w = d.w.reshape(-1)
+        e = (d.w * psi).sum(1)
+        Dn = np.broadcast_to(d.D[:, :, :, None], (2, 2, m, nq)).reshape(2, 2, m * nq)  # (r, j, n)
+        Pw = P * w
+        Pr = np.einsum("ijn,rjn->nir", Pw, Dn)                                # (n, i, r)
+        g = (Pr.reshape(m, nq, 2, 2).transpose(0, 2, 1, 3).reshape(2 * m, 2 * nq) @ d.Tg)  # ((e, i), a)
+        g = g.reshape(m, 2, nn).transpose(0, 2, 1).reshape(m, 2 * nn)
         H = None
         if need == 2:
-            A = np.broadcast_to(A, (2, 2, 2, 2, m * nq)) * w.reshape(-1)
-            At = A.transpose(4, 1, 0, 2, 3).reshape(m * nq, 2, 8)                 # (n, j, i k l)
-            C = np.matmul(G, At).reshape(m * nq, nn * 4, 2)                      # (n, a i k, l)
-            Hq = np.matmul(C, G.transpose(0, 2, 1))                               # (n, a i k, b)
-            Hq = Hq.reshape(m, nq, nn, 2, 2, nn).sum(1)                           # (m, a, i, k, b)
-            H = Hq.transpose(0, 1, 2, 4, 3).reshape(m, 2 * nn, 2 * nn)
+            A = np.broadcast_to(A, (2, 2, 2, 2, m * nq)) * w
+            B = np.einsum("ijkln,sln->ijksn", A, Dn)                         # (i, j, k, s, n)
+            Ar = np.einsum("rjn,ijksn->iknrs", Dn, B)  # (i, k, n, r, s)
+            Ar = Ar.reshape(4 * m, nq * 4)                                   # ((i, k, e), (q, r, s))
+            Hq = (Ar @ d.TH).reshape(2, 2, m, nn, nn)                        # (i, k, e, a, b)
+            H = Hq.transpose(2, 3, 0, 4, 1).reshape(m, 2 * nn, 2 * nn)
         return e, g, H
 
     def energy(self, x, params=None) -> float:

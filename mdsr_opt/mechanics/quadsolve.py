@@ -15,7 +15,9 @@ Both are solved by Newton's method on the equilibrium equations with load contin
   equation is dropped and its tension set to 0 until its path is longer than the rope again.
 
 Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
-with an element inverted at a quadrature point or a vertex. A load step that fails is halved (down to
+with an element inverted at a quadrature point or a vertex. A Newton solve that creeps (its residual
+falling by less than 10 % over :data:`STALL_ITERATIONS` iterations, or :data:`SHORT_STEPS` steps in a row cut
+to :data:`SHORT_STEP` of the Newton step) is given up as stalled. A load step that fails is halved (down to
 ``min_step``); the failure status names the element the last refused trial state inverted, if any. Success
 means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the stiffness times the
 body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
@@ -36,6 +38,7 @@ from .align import align
 from .capstan import CapstanRope, turning_angles
 from .fixtures import RigidReduction
 from .quadratic import QuadraticModel
+from .sparselu import PatternRestriction, ReusedOrdering
 
 __all__ = ["QuadraticResult", "solve_quadratic_external", "solve_quadratic_internal"]
 
@@ -89,54 +92,37 @@ class QuadraticResult:
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
 
-class _Ordering:
-    """Sparse LU solves that find a fill-reducing column order (minimum degree on ``A^T + A``) at the first
-    factorisation and reuse it for later matrices of the same shape: the Newton matrices of one solve share
-    their pattern up to entries that happen to vanish (a rope's friction coupling at a straight node; all its
-    terms while its tension is 0). A matrix with more stored entries than the one ordered gets a new order.
-    Row pivoting (threshold 0.1, diagonal preferred) is still done per matrix."""
-
-    def __init__(self):
-        self.inv = None  # the order as an index array: row/column k of the ordered matrix is inv[k]
-        self.key = None  # (shape, stored entries) of the matrix the order was found for
-
-    def solve(self, J, rhs: np.ndarray) -> np.ndarray:
-        """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
-        opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
-        J = sp.csc_matrix(J)
-        if self.inv is None or self.key[0] != J.shape or J.nnz > self.key[1]:
-            lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
-            self.inv, self.key = np.argsort(lu.perm_c), (J.shape, J.nnz)
-            return lu.solve(rhs)
-        inv = self.inv
-        Jp = J[:, inv].tocsr()[inv].tocsc()
-        out = np.empty_like(rhs)
-        out[inv] = spla.splu(Jp, permc_spec="NATURAL", **opts).solve(rhs[inv])
-        return out
-
-
 #: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
 #: twice as many): damped steps that creep, where a smaller load step converges sooner
 STALL_ITERATIONS = 6
 
+#: a Newton solve also stops as stalled after this many consecutive steps the line search cut to at most
+#: :data:`SHORT_STEP` of the Newton step: the Newton step is dominated by a soft mode it overshoots (a slender
+#: part swung far along its tangent), and the damped steps that follow creep
+SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
+
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
-            order: _Ordering | None = None):
-    """Damped Newton on ``system(z) -> (scaled residual, Jacobian)``; returns ``(z, converged, iterations,
-    residual)``; a solve that stalls (:data:`STALL_ITERATIONS`) returns as not converged. ``order`` keeps the fill-reducing order of the linear solves (shared by the calls of one
-    solve)."""
-    order = order if order is not None else _Ordering()
+            order: ReusedOrdering | None = None):
+    """Damped Newton on ``system(z, jac) -> (scaled residual, Jacobian or None)``; returns ``(z, converged,
+    iterations, residual)``; a solve that stalls (:data:`STALL_ITERATIONS`, :data:`SHORT_STEPS`) returns as not
+    converged. The Jacobian is asked for only at a state that does not meet ``tol`` (the residual of an
+    accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
+    by the calls of one solve)."""
+    order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
         return z, False, 0, float("inf")
-    r, J = system(z, True)
+    r = system(z, False)[0]
     norm = float(np.abs(r).max()) if r.size else 0.0
     seen = [norm]
+    short = 0  # consecutive steps cut to at most SHORT_STEP
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
         if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
             return z, False, it, norm  # stalled: the caller takes a smaller load step instead
+        r, J = system(z, True)
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -154,10 +140,12 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
             alpha *= 0.5
         else:
             return z, False, it, norm
-        z = zt
-        r, J = system(z, True)
+        short = short + 1 if alpha <= SHORT_STEP else 0
+        z, r = zt, rt
         norm = float(np.abs(r).max()) if r.size else 0.0
         seen.append(norm)
+        if short >= SHORT_STEPS and norm > tol:
+            return z, False, it + 1, norm  # stalled: the caller takes a smaller load step instead
     return z, norm <= tol, max_iter, norm
 
 
@@ -287,15 +275,19 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         return x
 
     fixed_idx = np.flatnonzero(fixed)
-    order = _Ordering()
+    order = ReusedOrdering()
     guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
+    K_rest = model.evaluate(X)[2]
+    ff, fc = PatternRestriction(K_rest, free, free), PatternRestriction(K_rest, free, fixed_idx)
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
             x = full(t, z)
             if jac:
                 _e, g, K = model.evaluate(x)
-                return g[free] / fs, K[free][:, free] / fs
+                Kff = ff(K)
+                Kff.data /= fs
+                return g[free] / fs, Kff
             return model.energy_gradient(x)[1][free] / fs, None
 
         ok = _Upright(model, lambda z: full(t, z))
@@ -304,7 +296,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
         K = model.evaluate(full(s, z0))[2]
         try:
-            dz = order.solve(K[free][:, free], -(K[free][:, fixed_idx] @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx])))
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
@@ -475,7 +467,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     keep = np.setdiff1d(np.arange(red.n_q), gauge)
     nk = len(keep)
     select = sp.csr_matrix((np.ones(nk), (keep, np.arange(nk))), shape=(red.n_q, nk))  # z -> q (gauge left out)
-    order = _Ordering()
+    order = ReusedOrdering()
     X = model.points
     L0 = np.array([r.length(X) for r in ropes])
     q_rest = red.rest_q()
@@ -502,6 +494,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             else:
                 gx, Kx = model.energy_gradient(x)[1], None
             cols, rows, res_c = [], [], np.zeros(nc)
+            Kr = None  # the ropes' stiffness, added to the body's once
             for c, rope in enumerate(ropes):
                 if not active[c]:
                     res_c[c] = tau[c]
@@ -512,19 +505,26 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 gx = gx + tau[c] * f
                 res_c[c] = (rope.length(x) - targets[c]) / L0[c]
                 if jac:
-                    Kx = Kx + tau[c] * (H + rope.weight_coupling(x, n))
+                    Hc = tau[c] * (H + rope.weight_coupling(x, n))
+                    Kr = Hc if Kr is None else Kr + Hc
                     cols.append(f)
                     rows.append(g / L0[c])
             if not jac:  # a line search's trial: the residual alone
                 return np.concatenate([_pull_back(red, q, gx)[keep] / fs, res_c]), None
+            if Kr is not None:
+                Kx = Kx + Kr
             P = red.jacobian(q) @ select  # dx / dz over the kept coordinates
             rq = np.concatenate([(P.T @ gx) / fs, res_c])
             PT = P.T.tocsr()
-            Kq = (PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs
-            C = (PT @ np.column_stack(cols)) / fs                          # tension columns
-            R = sp.csr_matrix(np.column_stack(rows).T) @ P                 # rope length rows
-            D = sp.diags((~active).astype(float))                         # tau_c = 0 for a slack rope
-            J = sp.bmat([[Kq, sp.csr_matrix(C)], [sp.csr_matrix(R), D]], format="csc")
+            Kq = ((PT @ (Kx @ P) + select.T @ red.curvature(q, gx) @ select) / fs).tocoo()
+            C = (PT @ np.column_stack(cols)) / fs                          # tension columns (nk, nc)
+            R = (PT @ np.column_stack(rows)).T                             # rope length rows (nc, nk)
+            ci, cj = np.nonzero(C)
+            ri, rj = np.nonzero(R)
+            slack = np.flatnonzero(~active)                               # tau_c = 0 for a slack rope
+            J = sp.coo_matrix((np.concatenate([Kq.data, C[ci, cj], R[ri, rj], np.ones(len(slack))]),
+                               (np.concatenate([Kq.row, ci, nk + ri, nk + slack]),
+                                np.concatenate([Kq.col, nk + cj, rj, nk + slack]))), shape=(nk + nc, nk + nc))
             return rq, J
 
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
