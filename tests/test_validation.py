@@ -78,10 +78,11 @@ OPTION_CASES = [
     (lambda d: d["animations"][0].update(name="summary.md"), SceneFileError, r"animations\[0\]\.name: .*reserved"),
     (lambda d: d["cases"][0].update(name="curl.gif"), SceneFileError,
      r"animations\[0\]\.name: the animation 'curl' would write 'curl\.gif', which is written by the case 'curl\.gif'"),
-    (lambda d: d["muscles"][0].pop("boundary") and d["muscles"][0].update(path=[[0, 1], [2, 1], [3.5, 2.5]]),
+    (lambda d: d["muscles"][0].update(path=[[0, 1], [2, 1], [3.5, 2.5]]),
      SceneFileError, r"muscles\[0\]\.path: waypoint 2 \[3\.5, 2\.5\] lies 1\.5 from the nearest node, more than "
      r"0\.\d+ \(one mean edge length\)"),
-    (lambda d: d["muscles"][0].update(boundary={"from": [0, 1], "to": [2, 2]}), SceneFileError,
+    (lambda d: d["muscles"][0].pop("path") and d["muscles"][0].update(boundary={"from": [0, 1], "to": [2, 2]}),
+     SceneFileError,
      r"muscles\[0\]\.boundary: end \[2\.0, 2\.0\] lies 1 from the nearest boundary node"),
 ]
 

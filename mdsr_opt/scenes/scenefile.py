@@ -80,7 +80,8 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         tip = { near = [4, 0.5], radius = 0.3, boundary = true }
         # also: nodes = [...], polygon = [[x, y], ...], loop = 0 (a boundary loop)
 
-        [[muscles]]                           # optional; internal cases need them
+        [[muscles]]                           # optional; internal cases need them; given muscles
+                                              # also drive external cases (no routing then)
         name = "lower"
         boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
                                               # (boundary may add via = [x, y]: which way round the loop)
