@@ -18,6 +18,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
+from .routing_memo import memoised
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -50,6 +51,21 @@ def mismatch(parts) -> float:
     return max(((s * N - S * n) / (S * n)) ** 2 for n, s in parts)
 
 
+def _rest_lists(mesh: Mesh) -> tuple[list, list]:
+    """The rest positions and the edge midpoints of ``mesh`` as nested lists."""
+    X, E = mesh.points, mesh.edges
+    return X.tolist(), (0.5 * (X[E[:, 0]] + X[E[:, 1]])).tolist()
+
+
+def _rest_graph(mesh: Mesh):
+    """``(graph, components)``: every edge of ``mesh`` with its rest length both ways (CSR), and the connected
+    component of each node."""
+    E, n, l0 = mesh.edges, mesh.n_nodes, mesh.edge_lengths
+    rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+    graph = csr_matrix((np.concatenate([l0, l0]), (rows, cols)), shape=(n, n))
+    return graph, connected_components(graph, directed=False)[1]
+
+
 class Router:
     """One routing run; all orderings use rest geometry, never node indices."""
 
@@ -57,7 +73,9 @@ class Router:
                  ell: float, turn_limit: float, mirror=None, admissible: np.ndarray | None = None):
         self.mesh = mesh
         self.X = mesh.points
-        self.XL = mesh.points.tolist()
+        # rest positions and edge midpoints as lists (read in the search's Python loops), shared by the
+        # routings of one body (routing_memo)
+        self.XL, self.midl = memoised(("rest lists", id(mesh)), lambda: _rest_lists(mesh))
         self.K_a, self.K_b, self.K_h = K_a, K_b, K_h
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
@@ -68,18 +86,19 @@ class Router:
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
-        mid = 0.5 * (self.X[E[:, 0]] + self.X[E[:, 1]])
-        self.midl = mid.tolist()
         self.l0 = mesh.edge_lengths
         self.ell = ell
         self.mp = None if mirror is None else mirror.node_map.tolist()
         self.me = None if mirror is None else mirror.edge_map.tolist()
-        # adjacency over feasible (contracted) edges only: a cable cannot push
-        adj: list[list[tuple[int, int]]] = [[] for _ in range(mesh.n_nodes)]
+        # adjacency over feasible (contracted) edges only: a cable cannot push; each node's (neighbour, edge)
+        # pairs in increasing edge order
         feasible = np.flatnonzero(self.feasible)
-        for k, (a, b) in zip(feasible.tolist(), E[feasible].tolist()):
-            adj[a].append((b, k))
-            adj[b].append((a, k))
+        ends = np.concatenate([E[feasible, 0], E[feasible, 1]])
+        order = np.lexsort((np.concatenate([feasible, feasible]), ends))
+        pairs = list(zip(np.concatenate([E[feasible, 1], E[feasible, 0]])[order].tolist(),
+                         np.concatenate([feasible, feasible])[order].tolist()))
+        cut = np.searchsorted(ends[order], np.arange(mesh.n_nodes + 1)).tolist()
+        adj: list[list[tuple[int, int]]] = [pairs[s:e] for s, e in zip(cut[:-1], cut[1:])]
         self.adj = adj
         self.owner = [-1] * mesh.n_nodes
         self.units: list[_Unit] = []
@@ -389,10 +408,7 @@ class Router:
     def _graph(self) -> None:
         """The whole mesh with rest edge lengths and its connected components, built on first use."""
         if self.csgraph is None:
-            E, n = self.mesh.edges, self.mesh.n_nodes
-            rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
-            self.csgraph = csr_matrix((np.concatenate([self.l0, self.l0]), (rows, cols)), shape=(n, n))
-            self.component = connected_components(self.csgraph, directed=False)[1]
+            self.csgraph, self.component = memoised(("rest graph", id(self.mesh)), lambda: _rest_graph(self.mesh))
 
     def _field(self, node: int) -> np.ndarray:
         """Shortest-path lengths (rest lengths, all mesh edges) from ``node`` to every node; cached."""
