@@ -18,7 +18,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
-from .routing_memo import memoised
+from .routing_memo import rest_graph, rest_lists
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -51,21 +51,6 @@ def mismatch(parts) -> float:
     return max(((s * N - S * n) / (S * n)) ** 2 for n, s in parts)
 
 
-def _rest_lists(mesh: Mesh) -> tuple[list, list]:
-    """The rest positions and the edge midpoints of ``mesh`` as nested lists."""
-    X, E = mesh.points, mesh.edges
-    return X.tolist(), (0.5 * (X[E[:, 0]] + X[E[:, 1]])).tolist()
-
-
-def _rest_graph(mesh: Mesh):
-    """``(graph, components)``: every edge of ``mesh`` with its rest length both ways (CSR), and the connected
-    component of each node."""
-    E, n, l0 = mesh.edges, mesh.n_nodes, mesh.edge_lengths
-    rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
-    graph = csr_matrix((np.concatenate([l0, l0]), (rows, cols)), shape=(n, n))
-    return graph, connected_components(graph, directed=False)[1]
-
-
 class Router:
     """One routing run; all orderings use rest geometry, never node indices."""
 
@@ -75,7 +60,7 @@ class Router:
         self.X = mesh.points
         # rest positions and edge midpoints as lists (read in the search's Python loops), shared by the
         # routings of one body (routing_memo)
-        self.XL, self.midl = memoised(("rest lists", id(mesh)), lambda: _rest_lists(mesh))
+        self.XL, self.midl = rest_lists(mesh)
         self.K_a, self.K_b, self.K_h = K_a, K_b, K_h
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
@@ -408,7 +393,7 @@ class Router:
     def _graph(self) -> None:
         """The whole mesh with rest edge lengths and its connected components, built on first use."""
         if self.csgraph is None:
-            self.csgraph, self.component = memoised(("rest graph", id(self.mesh)), lambda: _rest_graph(self.mesh))
+            self.csgraph, self.component = rest_graph(self.mesh)
 
     def _field(self, node: int) -> np.ndarray:
         """Shortest-path lengths (rest lengths, all mesh edges) from ``node`` to every node; cached."""
