@@ -20,6 +20,7 @@ from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
 from ..mechanics.constrained import ConstrainedModel
 from ..mechanics.kkt import least_squares_multipliers
 from ..mechanics.model import get_model, to_dm
+from ..mechanics.ropesolve import projected_energy_hessian
 from ..mechanics.residual import kkt_residual, meet_tolerance
 
 
@@ -387,17 +388,21 @@ class ForwardSolver:
         most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` iterations (a load step's, so the same IPOPT
         solver serves both) and no load stepping, and from rest when that fails or none is given; later
         ones from the last accepted state. The solve from ``start`` takes any equilibrium
-        (``solve_internal(check_stability=False)``: a warm start whose design is verified afterwards); the
-        others only a stable one. ``tol`` replaces the solver's tolerance for this solve (a warm start
-        needs no tight equilibrium); its state becomes the last accepted one all the same."""
+        (``solve_internal(check_stability=False)``: a warm start whose design is verified afterwards), with
+        the energy's Hessian projected per element
+        (:func:`~mdsr_opt.mechanics.ropesolve.projected_energy_hessian`: a start such as the target, far
+        from the ropes' equilibrium, meets compressed elements on the way); the others only a stable one.
+        ``tol`` replaces the solver's tolerance for this solve (a warm start needs no tight equilibrium); its
+        state becomes the last accepted one all the same."""
         a = np.asarray(a, dtype=float).copy()
         res = None
         if self.started_from is None:
             self.started_from = "rest"
             guess = None if start is None else in_gauge_frame(self.prob.mesh, np.asarray(start, dtype=float))
             if guess is not None:
-                res = self._run(a, guess, min(self.max_iter, STEP_ITER_CAP), min_step=1.0, check_stability=False,
-                                tol=tol)
+                with projected_energy_hessian():  # far from equilibrium, for a start: Newton-like steps
+                    res = self._run(a, guess, min(self.max_iter, STEP_ITER_CAP), min_step=1.0,
+                                    check_stability=False, tol=tol)
                 if res.success:
                     self.started_from = "target"
         if res is None or not res.success:  # from rest (no state accepted yet) or the last accepted state
