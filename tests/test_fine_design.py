@@ -131,3 +131,58 @@ def test_strip_designs_on_fine_meshes(ny, angle, shift):
     mesh, out = _design(ny, angle, shift)
     _check(mesh, out)
     assert len(out.muscles) <= 4
+
+
+def test_projected_energy_hessian_is_positive_semidefinite_and_exact_where_the_energy_is_convex():
+    """The warm start's Hessian (projected per element, as the newton backend's): positive semi-definite at a
+    compressed state where the exact one is not, equal to the exact one at rest."""
+    from mdsr_opt.mechanics.model import get_model
+    from mdsr_opt.mechanics.units import Units
+
+    mesh = strip(4)
+    units = Units(mesh, MAT)
+    model = get_model(units.unit_mesh, units.unit_material)
+    p = model.params(units.unit_material)
+    X = units.unit_mesh.points
+    squeezed = (X * [0.45, 1.0]).reshape(-1)  # shortened to 45 %: compressed elements, an indefinite Hessian
+    pat = model.hessian_pattern
+
+    def dense(data):
+        import scipy.sparse as sp
+
+        return sp.csc_matrix((data, pat.indices, pat.indptr), shape=pat.shape).toarray()
+
+    exact, projected = dense(model.hessian_data(squeezed, p)), dense(model.projected_hessian_data(squeezed, p))
+    assert np.linalg.eigvalsh(exact).min() < -1e-3
+    assert np.linalg.eigvalsh(projected).min() > -1e-10 * np.abs(projected).max()
+    rest = X.reshape(-1)
+    np.testing.assert_allclose(model.projected_hessian_data(rest, p), model.hessian_data(rest, p), atol=1e-12)
+
+
+def test_warm_start_with_the_projected_hessian_reaches_the_exact_equilibrium():
+    """Inside ``projected_energy_hessian`` a roped solve from the target converges to the same equilibrium
+    as the exact Hessian's (within the tolerance's reach) and certifies nothing; outside, the scope is off."""
+    from mdsr_opt import Muscle, solve_internal
+    from mdsr_opt.mechanics.equilibrium import in_gauge_frame
+    from mdsr_opt.mechanics.ropesolve import projected_energy_hessian, projecting
+
+    from mdsr_opt import solve_external
+
+    mesh = strip(6)
+    anchors, drags = driving(mesh)
+    target = solve_external(mesh, MAT, anchors, drags, backend="newton").x
+    P = mesh.points
+    top = [int(i) for i in np.flatnonzero(np.isclose(P[:, 1], P[:, 1].max()))]
+    top = sorted(top, key=lambda i: P[i, 0])[2:-2]
+    rope = Muscle(top)
+    a = [1.0 - rope.length(target) / rope.rest_length(mesh)]
+    guess = in_gauge_frame(mesh, target)
+    kw = dict(initial_guess=guess, min_step=1.0, check_stability=False, align_to_rest=False, tol=1e-8)
+    exact = solve_internal(mesh, MAT, [rope], a, **kw)
+    with projected_energy_hessian():
+        assert projecting()
+        proj = solve_internal(mesh, MAT, [rope], a, **kw)
+    assert not projecting()
+    assert exact.success and proj.success
+    assert proj.residual <= 1e-8
+    assert np.abs(np.asarray(proj.x) - np.asarray(exact.x)).max() < 1e-6 * mesh.size

@@ -24,6 +24,7 @@ from .constraints import MuscleConstraints
 from .kkt import kkt_factor, least_squares_multipliers
 from .loadsteps import min_jacobian
 from .model import to_dm
+from .ropesolve import projecting
 
 __all__ = ["ConstrainedModel"]
 
@@ -250,7 +251,8 @@ class ConstrainedModel:
             lam = np.zeros(mc.n_constraints)
             lam[m.rows] = ins[3] * m.row_scale  # the physical multipliers
             out = outs[0]
-            eh = m.model.hessian_data(ins[0], ins[1])[pat.upper]
+            energy_hessian = m.model.projected_hessian_data if projecting() else m.model.hessian_data
+            eh = energy_hessian(ins[0], ins[1])[pat.upper]
             if energy_is_all:
                 np.multiply(eh, ins[2][0], out=out)
             else:

@@ -315,6 +315,12 @@ class EnergyModel:
         en = self.numeric(p)
         return self._pattern_data(en, *en.hessian_blocks(np.asarray(x, dtype=float).reshape(-1)))
 
+    def projected_hessian_data(self, x, p) -> np.ndarray:
+        """As :meth:`hessian_data`, each element's and spring's term projected to positive semi-definite
+        (:meth:`~mdsr_opt.mechanics.newton.NewtonEnergy.element_blocks`): a positive semi-definite matrix."""
+        en = self.numeric(p)
+        return self._pattern_data(en, *en.element_blocks(np.asarray(x, dtype=float).reshape(-1), True)[1:])
+
     def _pattern_data(self, en, He, Hs) -> np.ndarray:
         """Element blocks (6, 6, m) and the springs' of ``en`` (4, 4, s) summed in :attr:`hessian_pattern`'s order."""
         pat = self.hessian_pattern

@@ -9,7 +9,9 @@ bounds, in which order) and settles ropes an inequality-form answer leaves undec
 
 from __future__ import annotations
 
+import contextlib
 import time
+from contextvars import ContextVar
 
 import casadi as ca
 import numpy as np
@@ -20,7 +22,35 @@ from .result import MinimizeOutcome, solver_status
 from .stability import STEP_RTOL, ipopt_certifies_minimum
 from .stopping import with_stop_callback
 
-__all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "rope_forms", "solve_constrained"]
+__all__ = ["WARM_MULTIPLIERS", "UNDECIDED_RTOL", "pinned_bounds", "projected_energy_hessian", "projecting",
+           "rope_forms", "solve_constrained"]
+
+
+_PROJECTED: ContextVar[bool] = ContextVar("mdsr_projected_energy_hessian", default=False)
+
+
+@contextlib.contextmanager
+def projected_energy_hessian():
+    """A scope in which IPOPT's constrained solves (numeric models) take the energy's Hessian projected to
+    positive semi-definite per term (each element's tangent and each spring's block, as the ``newton``
+    backend projects them) instead of the exact one, and certify no state by IPOPT's inertia test.
+
+    For a start far from equilibrium that needs only a loose tolerance (the design's warm start): where
+    compressed elements make the exact Hessian indefinite, IPOPT regularises it by a multiple of the
+    identity grown until the inertia is right and shrunk by a third per iteration, and crawls with short,
+    gradient-like steps; the projected Hessian keeps Newton-like steps there. Near the answer it converges
+    only linearly where a tangent is projected, so tight tolerances keep the exact Hessian (outside this
+    scope). The states it returns are equilibria by the same KKT residual as any other."""
+    token = _PROJECTED.set(True)
+    try:
+        yield
+    finally:
+        _PROJECTED.reset(token)
+
+
+def projecting() -> bool:
+    """Inside :func:`projected_energy_hessian`?"""
+    return _PROJECTED.get()
 
 
 def _constrained_factory(plugin: str, opts: dict, symbolic: bool = False):
@@ -149,8 +179,9 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
         # every row an equality (no slack variable's barrier in IPOPT's matrix) and every rope pulling (a rope
         # with no tension could also shorten: IPOPT's tangent space would be too small): its inertia test
         # certifies the state a strict minimum or leaves the question to the stability check
+        # (not with a projected energy Hessian: IPOPT's inertia is then that of another matrix)
         cert = plugin == "ipopt" and bool(np.all(lbg == ubg)) and bool(np.all(lam[:nt] > push_tol)) and \
-            ipopt_certifies_minimum(st, options_for(warm), step_tol)
+            not projecting() and ipopt_certifies_minimum(st, options_for(warm), step_tol)
         return sol, status, bool(st.get("success", False)), lam, cert
 
     def pushing(lam, held):

@@ -16,7 +16,11 @@ import contextlib
 from contextvars import ContextVar
 from typing import Callable, Hashable, Iterator, TypeVar
 
-__all__ = ["memoised", "shared_work"]
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["memoised", "rest_graph", "rest_lists", "shared_work"]
 
 T = TypeVar("T")
 
@@ -51,3 +55,24 @@ def memoised(key: Hashable, make: Callable[[], T]) -> T:
     if key not in memo:
         memo[key] = make()
     return memo[key]
+
+
+def rest_lists(mesh) -> tuple[list, list]:
+    """The rest positions and the edge midpoints of ``mesh`` as nested lists (for Python loops), memoised."""
+    def make():
+        X, E = mesh.points, mesh.edges
+        return X.tolist(), (0.5 * (X[E[:, 0]] + X[E[:, 1]])).tolist()
+
+    return memoised(("rest lists", id(mesh)), make)
+
+
+def rest_graph(mesh):
+    """``(graph, components)``, memoised: every edge of ``mesh`` with its rest length both ways (CSR), and
+    the connected component of each node."""
+    def make():
+        E, n, l0 = mesh.edges, mesh.n_nodes, mesh.edge_lengths
+        rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+        graph = csr_matrix((np.concatenate([l0, l0]), (rows, cols)), shape=(n, n))
+        return graph, connected_components(graph, directed=False)[1]
+
+    return memoised(("rest graph", id(mesh)), make)

@@ -18,6 +18,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
+from .routing_memo import rest_graph, rest_lists
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -57,7 +58,9 @@ class Router:
                  ell: float, turn_limit: float, mirror=None, admissible: np.ndarray | None = None):
         self.mesh = mesh
         self.X = mesh.points
-        self.XL = mesh.points.tolist()
+        # rest positions and edge midpoints as lists (read in the search's Python loops), shared by the
+        # routings of one body (routing_memo)
+        self.XL, self.midl = rest_lists(mesh)
         self.K_a, self.K_b, self.K_h = K_a, K_b, K_h
         self.turn_limit = turn_limit  # largest allowed 1 - cos(turn) at any node (+ round-off slack)
         self.wq = wq
@@ -68,18 +71,19 @@ class Router:
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
         E = mesh.edges
-        mid = 0.5 * (self.X[E[:, 0]] + self.X[E[:, 1]])
-        self.midl = mid.tolist()
         self.l0 = mesh.edge_lengths
         self.ell = ell
         self.mp = None if mirror is None else mirror.node_map.tolist()
         self.me = None if mirror is None else mirror.edge_map.tolist()
-        # adjacency over feasible (contracted) edges only: a cable cannot push
-        adj: list[list[tuple[int, int]]] = [[] for _ in range(mesh.n_nodes)]
+        # adjacency over feasible (contracted) edges only: a cable cannot push; each node's (neighbour, edge)
+        # pairs in increasing edge order
         feasible = np.flatnonzero(self.feasible)
-        for k, (a, b) in zip(feasible.tolist(), E[feasible].tolist()):
-            adj[a].append((b, k))
-            adj[b].append((a, k))
+        ends = np.concatenate([E[feasible, 0], E[feasible, 1]])
+        order = np.lexsort((np.concatenate([feasible, feasible]), ends))
+        pairs = list(zip(np.concatenate([E[feasible, 1], E[feasible, 0]])[order].tolist(),
+                         np.concatenate([feasible, feasible])[order].tolist()))
+        cut = np.searchsorted(ends[order], np.arange(mesh.n_nodes + 1)).tolist()
+        adj: list[list[tuple[int, int]]] = [pairs[s:e] for s, e in zip(cut[:-1], cut[1:])]
         self.adj = adj
         self.owner = [-1] * mesh.n_nodes
         self.units: list[_Unit] = []
@@ -87,7 +91,7 @@ class Router:
         # the whole mesh with rest edge lengths, for the heuristic's shortest paths (built on first use)
         self.csgraph = None
         self.component = None
-        self.fields: dict[int, np.ndarray] = {}
+        self.fields: dict[int, tuple[np.ndarray, float]] = {}  # per end node: lengths, radius searched
 
     # -------------------------------------------------------------- helpers
     def _dir(self, a: int, b: int) -> tuple[float, float]:
@@ -386,17 +390,41 @@ class Router:
             del self.fields[node]  # an old endpoint is inside its unit now and never an endpoint again
         return ends
 
+    def _graph(self) -> None:
+        """The whole mesh with rest edge lengths and its connected components, built on first use."""
+        if self.csgraph is None:
+            self.csgraph, self.component = rest_graph(self.mesh)
+
     def _field(self, node: int) -> np.ndarray:
         """Shortest-path lengths (rest lengths, all mesh edges) from ``node`` to every node; cached."""
-        f = self.fields.get(node)
-        if f is None:
-            if self.csgraph is None:
-                E, n = self.mesh.edges, self.mesh.n_nodes
-                rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
-                self.csgraph = csr_matrix((np.concatenate([self.l0, self.l0]), (rows, cols)), shape=(n, n))
-                self.component = connected_components(self.csgraph, directed=False)[1]
-            f = self.fields[node] = dijkstra(self.csgraph, directed=True, indices=node)
+        f, reach = self.fields.get(node, (None, -1.0))
+        if reach < math.inf:
+            self._graph()
+            f = dijkstra(self.csgraph, directed=True, indices=node)
+            self.fields[node] = (f, math.inf)
         return f
+
+    def _distance(self, node: int, u: int, need: float, straight: float) -> float:
+        """The shortest-path length from ``node`` to ``u`` (in the same component) when it is at most
+        ``need``, else ``inf``; ``straight`` is a lower bound of it (the straight line).
+
+        Dijkstra's search from ``node`` stops at a radius (``limit``): at least ``need``, and when ``need``
+        is unbounded twice the straight line plus a few edges, doubled until ``u`` lies inside. The lengths
+        inside the radius are those of the whole search (the same nodes settled in the same order), so the
+        choice of :meth:`_choose` is that of the full fields, and on a fine mesh each search settles only the
+        nodes near the unit's end instead of the whole body. The search is kept per end node with its
+        radius."""
+        f, reach = self.fields.get(node, (None, -1.0))
+        while True:
+            if f is not None:
+                d = float(f[u])
+                if d <= reach:  # settled inside the radius: exact
+                    return d if d <= need else math.inf
+                if reach >= need:  # farther than the radius, which covers what is asked
+                    return math.inf
+            reach = max(need if math.isfinite(need) else 2.0 * straight + 4.0 * self.ell, 2.0 * reach)
+            f = dijkstra(self.csgraph, directed=True, indices=node, limit=reach)
+            self.fields[node] = (f, reach)
 
     def _heuristic(self, cands) -> np.ndarray:
         """``h`` of every candidate: the shortest-path length along mesh edges (rest lengths, in mean edge
@@ -422,14 +450,15 @@ class Router:
         edges is never shorter than the straight line, so ``g + K_h * |u - e| / ell`` bounds each
         candidate's ``f`` from below. Candidates are visited in the order of that bound and the search
         stops once the bound exceeds the best ``f`` found; within a candidate, endpoints are visited by
-        straight-line distance, so a Dijkstra field is computed only for endpoints that could be the
-        nearest. Most steps then need no new field at all.
+        straight-line distance, so a Dijkstra search runs only from endpoints that could be the nearest,
+        and only as far as a length that could still make the candidate the best (:meth:`_distance`). Most
+        steps then need no new search at all.
         """
         K_h = self.K_h
         ends = self._ends() if K_h > 0 else []
         if len(ends) < 4:  # fewer than two units: h = 0 everywhere
             return min(range(len(cands)), key=lambda i: (cands[i][0], cands[i][1], cands[i][2]))
-        self._field(ends[0][1])  # builds the graph and its components on first use
+        self._graph()  # the whole mesh's graph and components, on first use
         comp = self.component
         P = np.array([self.XL[c[5]] for c in cands])
         Q = np.array([self.XL[node] for _, node in ends])
@@ -441,7 +470,8 @@ class Router:
         en = np.array([node for _, node in ends])
         lb[(ids[None, :] == cid[:, None]) | (comp[cn][:, None] != comp[en][None, :])] = np.inf
         lb_h = lb.min(axis=1)
-        lb_h[~np.isfinite(lb_h)] = 0.0  # no other unit reachable: h = 0
+        reachable = np.isfinite(lb_h)  # another unit's end in the same part of the body
+        lb_h[~reachable] = 0.0  # no other unit reachable: h = 0
         g = np.array([c[0] for c in cands])
         bound = g + K_h * lb_h
         best_key, best = None, -1
@@ -449,11 +479,17 @@ class Router:
             if best_key is not None and bound[i] > best_key[0]:
                 break
             u, row = cands[i][5], lb[i]
+            # a path longer than ``cap`` makes this step's key larger than the best one (a margin for
+            # round-off): such lengths need not be known
+            cap = math.inf if best_key is None else \
+                (best_key[0] - cands[i][0]) / K_h * self.ell * (1.0 + 1e-9) + 1e-12 * self.ell
             h = math.inf
             for j in np.argsort(row, kind="stable").tolist():
-                if row[j] * self.ell >= h:  # also ends the loop at the masked (inf) entries
+                if row[j] * self.ell >= min(h, cap):  # also ends the loop at the masked (inf) entries
                     break
-                h = min(h, float(self._field(ends[j][1])[u]))
+                h = min(h, self._distance(ends[j][1], u, min(h, cap), row[j] * self.ell))
+            if math.isinf(h) and reachable[i]:
+                continue  # another unit is reachable, but farther than cap: this step cannot be chosen
             h = h / self.ell if math.isfinite(h) else 0.0
             key = (cands[i][0] + K_h * h, cands[i][1], cands[i][2])
             if best_key is None or key < best_key:
