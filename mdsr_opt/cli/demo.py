@@ -21,7 +21,7 @@ import numpy as np
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import progress_for_cli
 
-__all__ = ["finger_outline", "run_demo", "add_cli"]
+__all__ = ["finger_outline", "run_demo", "check_demo_mesh_size", "add_cli"]
 
 
 def finger_outline(length: float = 4.0, width: float = 1.0, n_round: int = 12) -> np.ndarray:
@@ -54,6 +54,7 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
         raise InputError(f"contraction {contraction} is outside [0, 1) (a fraction of the muscle's rest length)")
     if max_area <= 0:
         raise InputError(f"max_area must be > 0, got {max_area}")
+    check_demo_mesh_size(max_area)
     check_out_path(out)
     os.makedirs(out, exist_ok=True)
     t_all = time.perf_counter()
@@ -126,6 +127,20 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     log(f"done in {summary['total_time_s']:.1f} s: {'all solves succeeded' if ok else 'SOME SOLVES FAILED'}; "
         f"results in {out}")
     return summary
+
+
+def check_demo_mesh_size(max_area: float) -> None:
+    """Refuse, before any work, a ``max_area`` that would make more triangles than :meth:`Mesh.from_polygon`
+    allows (its ``MAX_TRIANGLES``): the finger has no thin part, so its count is the area bound's."""
+    from ..body.mesh import MAX_TRIANGLES
+    from ..body.polygons import polygon_area
+    from ..body.triangulate import TRIANGLES_PER_AREA
+
+    area = abs(polygon_area(finger_outline()))
+    expected = TRIANGLES_PER_AREA * area / float(max_area)
+    if expected > MAX_TRIANGLES:
+        raise InputError(f"max_area {max_area:g} would make about {expected:.3g} triangles, more than the limit "
+                         f"{MAX_TRIANGLES:,}; give --max-area of at least {TRIANGLES_PER_AREA * area / MAX_TRIANGLES:.2g}")
 
 
 def io_energy(mesh, material, x):
