@@ -22,6 +22,7 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
+from .verdict import design_verdict
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
@@ -195,10 +196,7 @@ class SceneReport:
             s += f" {u}" if c.stroke else ""
             d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
-            ok = "ok" if c.success else "FAILED"
-            ok += f" (saturated {', '.join(map(str, c.saturated))})" if c.saturated else ""
-            ok += f" (dropped {', '.join(d['name'] for d in c.dropped)})" if c.dropped else ""
-            ok += " (not mouldable as laid out)" if getattr(c, "fabrication", None) else ""
+            ok = design_verdict(c)  # the cause of a failure first, then the secondary flags
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
