@@ -187,7 +187,8 @@ class SceneReport:
         can be joined."""
         u = unit_label(self.units)
         head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
+                "diff/size (%) | design | photo d over every loop (px) | ratio (%) | prototype d over every loop (px) | "
+                "time (s) |")
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
@@ -460,9 +461,11 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
         rep.photo = {"synthetic": True, "image_size": list(photo_size),
                      "target": figures(cmp_t), "self": figures(cmp_s)}
         run.photo, run.comparison = ph, cmp_t.outer
-        say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
-            f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
-            f"{cmp_s.mean_px:.2f} px")
+        # "d over every loop" (outline and holes, the table's figure) and "outline d" (the outline alone, the
+        # overlay's figure) are two numbers: each said by its name
+        say(f"{prefix}SYNTHETIC photograph: target d over every loop = {cmp_t.mean_px:.2f} px "
+            f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %), outline d = {cmp_t.outer.mean_px:.2f} px; "
+            f"measuring floor {cmp_s.mean_px:.2f} px over every loop")
     if prototype is not None:
         from .prototype import validate_case
 
