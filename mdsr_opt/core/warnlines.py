@@ -55,9 +55,11 @@ def one_line_warnings() -> None:
     """From now on, this process displays each warning as one line on stderr (:func:`warning_line`): for
     the worker processes of a pool, whose output goes beside their command's log lines."""
     def show(message, category, filename, lineno, file=None, line=None):
+        stream = file or sys.stderr  # as Python's own display: the stream's write, no print
         try:
-            print(warning_line(message, category), file=file or sys.stderr, flush=True)
-        except OSError:  # stderr gone: nothing to tell it to
+            stream.write(warning_line(message, category) + "\n")
+            stream.flush()
+        except (OSError, AttributeError):  # stderr gone (or None): nothing to tell it to
             pass
 
     warnings.showwarning = show
