@@ -171,3 +171,43 @@ def test_the_package_input_errors_are_input_errors():
     for cls in (SceneFileError, OutputFolderError, FolderBusy, UnknownName):
         assert issubclass(cls, InputError) and issubclass(cls, ValueError), cls
     assert issubclass(UnknownName, KeyError)
+
+
+# ------------------------------------------------------------------- limits found inside: checked at the door
+def test_mdsr_demo_too_fine_a_mesh_is_refused_at_the_door(tmp_path, capsys, monkeypatch):
+    """A --max-area whose mesh would exceed Mesh.from_polygon's triangle limit: one line, exit 2, before meshing
+    and before any folder is made (it was an 'internal error' from inside meshing, with an empty folder)."""
+    monkeypatch.setattr("mdsr_opt.body.mesh.Mesh.from_polygon", lambda *a, **k: pytest.fail("meshing started"))
+    assert main(["demo", "--out", str(tmp_path / "d"), "--max-area", "1e-7"]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert "max_area 1e-07 would make about 6.22e+07 triangles" in line and "at least 3.1e-06" in line
+    assert not (tmp_path / "d").exists()
+
+
+def test_demo_mesh_size_door_agrees_with_the_mesher():
+    """The demo's door refuses exactly what Mesh.from_polygon would refuse (its limit, scaled down)."""
+    from mdsr_opt import Mesh
+    from mdsr_opt.cli.demo import check_demo_mesh_size, finger_outline
+
+    with pytest.raises(ValueError, match="more than the limit max_triangles=1000"):
+        Mesh.from_polygon(finger_outline(), max_area=4.0 * 1.6 / 1500, max_triangles=1000)
+    check_demo_mesh_size(1e-5)  # about 6.2e5 triangles: allowed
+    with pytest.raises(InputError, match="would make about"):
+        check_demo_mesh_size(2e-6)
+
+
+def test_mdsr_study_fidelity_bad_tolerance_is_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("mdsr_opt.studies.fidelity._run_fidelity", lambda *a, **k: pytest.fail("runs started"))
+    assert main(["study", "fidelity", "--out", str(tmp_path / "f"), "--tol", "0.01,-1"]) == 2
+    assert "tolerances must be positive numbers, got -1.0" in _one_line(capsys.readouterr().err)
+    assert not (tmp_path / "f").exists()
+
+
+@pytest.mark.parametrize("study, option", [("quick", ["--tol", "0.1"]), ("quick", ["--scenes", "gecko"]),
+                                           ("fidelity", ["--methods", "ipopt"]), ("recommend", ["--problems", "x"]),
+                                           ("fidelity", ["--timeout", "5"]), ("speed", ["--stroke-tol", "0.1"])])
+def test_mdsr_study_refuses_an_option_the_study_would_ignore(tmp_path, capsys, study, option):
+    assert main(["study", study, "--out", str(tmp_path / "s"), *option]) == 2
+    line = _one_line(capsys.readouterr().err)
+    assert f"{option[0]} does not apply to the {study} study" in line
+    assert not (tmp_path / "s").exists()

@@ -29,15 +29,19 @@ def test_verbosity_flags_add_logger_names_then_debug_lines(tmp_path):
     assert said and not any(line.startswith("INFO ") for line in plain_out)
     # -v: the same messages, each led by its level and the module that said it
     named = [line for line in v_out if line.startswith(("INFO mdsr_opt.scenes.runner: [finger",
-                                                       "INFO mdsr_opt.scenes.runscene: [finger"))]
+                                                       "INFO mdsr_opt.scenes.runscene: [finger",
+                                                       "WARNING mdsr_opt.scenes.runner: [finger"))]
     assert len(named) == len(said)
+    # a warning is led by WARNING (finger.toml's muscle runs on the outline)
+    assert [line for line in named if line.startswith("WARNING")] == [
+        "WARNING mdsr_opt.scenes.runner: " + line for line in said if "FabricationWarning" in line] != []
     assert not any(line.startswith("DEBUG") for line in plain_err + v_err)
     # -vv: debug records of the library too (one per equilibrium solve, the case's stage times)
     debug = [line for line in vv_err if line.startswith("DEBUG mdsr_opt.")]
     assert any("mechanics.loadsteps: internal solve on" in line and "iteration(s)" in line for line in debug)
     assert any("scenes.runner: [finger 1/1 contract] stage times: target" in line for line in debug)
-    assert len([line for line in vv_out if line.startswith("INFO mdsr_opt.")]) == \
-        len([line for line in v_out if line.startswith("INFO mdsr_opt.")]) == len(plain_out) - len(
+    assert len([line for line in vv_out if line.startswith(("INFO mdsr_opt.", "WARNING mdsr_opt."))]) == \
+        len([line for line in v_out if line.startswith(("INFO mdsr_opt.", "WARNING mdsr_opt."))]) == len(plain_out) - len(
             [line for line in plain_out if not line.startswith(("[finger", "finger: "))])
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from ..core.errors import InputError, InputTypeError
 from ..core.progress import progress_for_cli
 
-__all__ = ["finger_outline", "run_demo", "add_cli"]
+__all__ = ["finger_outline", "run_demo", "check_demo_mesh_size", "add_cli"]
 
 
 def finger_outline(length: float = 4.0, width: float = 1.0, n_round: int = 12) -> np.ndarray:
@@ -32,17 +32,20 @@ def finger_outline(length: float = 4.0, width: float = 1.0, n_round: int = 12) -
     return np.vstack([[0.0, 0.0], tip, [0.0, width]])
 
 
-def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=None) -> dict:
-    """Run the demo into ``out``; ``log`` takes the progress messages (default: this module's logger)."""
+#: the files the demo writes into its folder
+DEMO_FILES = ("external.png", "external.vtu", "internal_springs.png", "internal_springs.vtu", "internal_cable.png",
+              "internal_cable.vtu", "summary.json")
+
+
+def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=None, overwrite: bool = False) -> dict:
+    """Run the demo into ``out``; ``log`` takes the progress messages (default: this module's logger).
+
+    ``out`` follows ``mdsr run``'s rules (:class:`~mdsr_opt.scenes.rundir.RunFolder`): a new or empty folder,
+    locked while the demo writes; with ``overwrite`` an earlier mdsr output there is replaced (only the files
+    its manifest lists), without it a folder that holds anything is refused.
+    """
     log = log or logging.getLogger(__name__).info
-    from ..body import io
-    from ..plot.common import coordinate_axes, legend_below, plot_mesh, plot_muscles, save_figure
-    from ..plot.style import commanded_achieved, energy_label, shared_limits
-    from ..mechanics.equilibrium import solve_external, solve_internal
-    from ..body.material import NeoHookean
-    from ..body.mesh import Mesh
-    from ..body.muscles import Muscle
-    from ..scenes.rundir import check_out_path
+    from ..scenes.rundir import RunFolder, check_out_path
 
     # every argument before any work: meshing and solving take seconds
     for name, v in (("max_area", max_area), ("contraction", contraction)):
@@ -54,8 +57,25 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
         raise InputError(f"contraction {contraction} is outside [0, 1) (a fraction of the muscle's rest length)")
     if max_area <= 0:
         raise InputError(f"max_area must be > 0, got {max_area}")
+    check_demo_mesh_size(max_area)
     check_out_path(out)
-    os.makedirs(out, exist_ok=True)
+    with RunFolder(out, overwrite=overwrite, claims=DEMO_FILES) as folder:
+        folder.begin(DEMO_FILES)
+        summary = _write_demo(out, max_area, contraction, log)
+        folder.finish("complete" if summary["success"] else "complete, some solves failed")
+    return summary
+
+
+def _write_demo(out: str, max_area: float, contraction: float, log) -> dict:
+    """The demo's work, into the folder ``out`` (made and guarded by :func:`run_demo`)."""
+    from ..body import io
+    from ..plot.common import coordinate_axes, legend_below, plot_mesh, plot_muscles, save_figure
+    from ..plot.style import commanded_achieved, energy_label, shared_limits
+    from ..mechanics.equilibrium import solve_external, solve_internal
+    from ..body.material import NeoHookean
+    from ..body.mesh import Mesh
+    from ..body.muscles import Muscle
+
     t_all = time.perf_counter()
     log(f"[1/4] meshing a finger (max triangle area {max_area})")
     mesh = Mesh.from_polygon(finger_outline(), max_area=max_area)
@@ -128,6 +148,20 @@ def run_demo(out: str, max_area: float = 0.01, contraction: float = 0.3, log=Non
     return summary
 
 
+def check_demo_mesh_size(max_area: float) -> None:
+    """Refuse, before any work, a ``max_area`` that would make more triangles than :meth:`Mesh.from_polygon`
+    allows (its ``MAX_TRIANGLES``): the finger has no thin part, so its count is the area bound's."""
+    from ..body.mesh import MAX_TRIANGLES
+    from ..body.polygons import polygon_area
+    from ..body.triangulate import TRIANGLES_PER_AREA
+
+    area = abs(polygon_area(finger_outline()))
+    expected = TRIANGLES_PER_AREA * area / float(max_area)
+    if expected > MAX_TRIANGLES:
+        raise InputError(f"max_area {max_area:g} would make about {expected:.3g} triangles, more than the limit "
+                         f"{MAX_TRIANGLES:,}; give --max-area of at least {TRIANGLES_PER_AREA * area / MAX_TRIANGLES:.2g}")
+
+
 def io_energy(mesh, material, x):
     return material.psi(mesh.deformation_gradients(x))
 
@@ -137,5 +171,8 @@ def add_cli(sub) -> None:
     p.add_argument("--out", default="demo_out", help="output folder (default: demo_out)")
     p.add_argument("--max-area", type=float, default=0.01, help="largest triangle area (default 0.01)")
     p.add_argument("--contraction", type=float, default=0.3, help="muscle contraction in [0, 1) (default 0.3)")
-    p.set_defaults(func=lambda a: 0 if run_demo(a.out, a.max_area, a.contraction,
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr command in --out (as mdsr run --overwrite); without "
+                   "it a non-empty --out is refused")
+    p.set_defaults(func=lambda a: 0 if run_demo(a.out, a.max_area, a.contraction, overwrite=a.overwrite,
                                                 log=progress_for_cli(a, 0, "mdsr demo", bar=False))["success"] else 1)

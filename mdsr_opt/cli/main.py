@@ -169,10 +169,12 @@ def _run(parser, argv: list[str]) -> int:
     args.log_verbose += getattr(args, "sub_verbose", 0)  # `mdsr -v run ...` is `mdsr run ... -v`
     args.log_quiet = args.quiet = args.log_quiet or getattr(args, "sub_quiet", False)
     configure_logging(args.log_verbose, args.log_quiet)
+    from ..core.warnlines import warnings_as_log_lines
     from ..scenes.rundir import interrupt_signal, noting_interrupts, recording_command
 
     try:
-        with agg_backend(), noting_interrupts(sigterm=True), recording_command(args.command_line):
+        with agg_backend(), noting_interrupts(sigterm=True), recording_command(args.command_line), \
+                warnings_as_log_lines():
             return int(args.func(args) or 0)
     except KeyboardInterrupt:
         # Ctrl-C or SIGTERM: stop at once with one line (no traceback); the commands' writers have removed

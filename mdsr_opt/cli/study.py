@@ -70,6 +70,8 @@ def _cli(args) -> int:
     scheduler = args.scheduler or ("local" if args.dask else None)
     from ..studies.recommend import RECOMMEND_STUDY
 
+    _refuse_unused_options(args, RECOMMEND_STUDY, FIDELITY_STUDY)
+
     if args.name == RECOMMEND_STUDY:
         from ..studies.recommend import recommendation_markdown, run_recommendation
 
@@ -109,6 +111,21 @@ def _cli(args) -> int:
                         scheduler=scheduler, workers=args.workers, progress=not args.quiet, log=log)
     print(res.markdown())
     return 0
+
+
+#: The options that only some studies take (the others would ignore them): flag -> the studies that take it
+_ONLY_FOR = {"--tol": ("fidelity", "recommend"), "--stroke-tol": ("recommend",), "--scenes": ("recommend",),
+             "--problems": (None,), "--materials": (None,), "--methods": (None, "recommend"),
+             "--timeout": (None, "recommend")}
+
+
+def _refuse_unused_options(args, recommend: str, fidelity: str) -> None:
+    """An option given to a study that does not take it is bad input (it would be ignored silently); ``None``
+    in :data:`_ONLY_FOR` stands for the solver comparison studies (quick, speed, stability)."""
+    kind = {recommend: "recommend", fidelity: "fidelity"}.get(args.name)
+    for flag, takers in _ONLY_FOR.items():
+        if getattr(args, flag[2:].replace("-", "_")) is not None and kind not in takers:
+            raise InputError(f"{flag} does not apply to the {args.name} study (mdsr study {args.name} --help)")
 
 
 #: The options of ``mdsr study``: flag -> add_argument keywords

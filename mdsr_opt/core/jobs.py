@@ -112,6 +112,9 @@ def _prepare_worker(env: dict[str, str], modules: tuple[str, ...], setup: tuple 
     priority: a lowered one starves its jobs, and the run waiting for them, whenever other processes
     share the cores."""
     os.environ.update(env)
+    from .warnlines import one_line_warnings
+
+    one_line_warnings()  # a job's warning: one line beside the run's log lines, not a path and source
     if "numpy" in sys.modules:  # preloaded by the server: its BLAS read the variable before it was set
         from threadpoolctl import threadpool_limits
 

@@ -26,12 +26,13 @@ Example
 from __future__ import annotations
 
 import os
+import re
 import sys
 from typing import Any, TextIO
 
 from .checks import check_int
 
-__all__ = ["Progress", "advance", "expect", "progress_for_cli"]
+__all__ = ["Progress", "advance", "expect", "is_loud", "progress_for_cli"]
 
 #: the bar's layout: tqdm's default without the rate (``3.18s/stage``), which leaves room for the current stage
 BAR_FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}{postfix}]"
@@ -84,15 +85,20 @@ class Progress:
     names : bool
         Start every printed line with ``INFO <module>: `` (``WARNING`` for a warning or a failure), the
         module being the one that called the callback: the format of the log records under ``mdsr -v``.
+    quiet : bool
+        Print only warnings and failures (``mdsr -q``): a message saying ``FAILED``, or one that starts,
+        after its ``[scene case]`` label, with ``warning``, ``error`` or a warning's class name
+        (``FabricationWarning: ...``).
     """
 
     def __init__(self, total: int = 0, desc: str = "", *, enabled: bool | None = None,
                  stream: TextIO | None | str = "stdout", verbose: bool = False, unit: str = "step",
-                 names: bool = False) -> None:
+                 names: bool = False, quiet: bool = False) -> None:
         from tqdm import tqdm
 
         total = check_int(total, "total", 0)
         self._stream = stream
+        self.quiet = bool(quiet)
         self.verbose = bool(verbose)
         self.names = bool(names)
         disable = (not sys.stderr.isatty()) if enabled is None else not enabled
@@ -115,7 +121,9 @@ class Progress:
         """Log one message: the bar's current stage, and a printed line (see ``verbose``)."""
         text = message = str(message)
         out = self._out()
-        loud = "FAILED" in message or message.lower().startswith(("warning", "error"))
+        loud = is_loud(message)
+        if self.quiet and not loud:
+            return
         if self.names:
             caller = sys._getframe(1).f_globals.get("__name__", "?")
             message = f"{'WARNING' if loud else 'INFO'} {caller}: {message}"
@@ -162,12 +170,23 @@ class Progress:
         self.close()
 
 
+def is_loud(message: str) -> bool:
+    """Whether a log message is a warning or a failure (shown under ``-q`` and above a bar): it says
+    ``FAILED``, or after its ``[scene case]`` label it starts with ``warning``, ``error`` or the name of a
+    warning class (``FabricationWarning: ...``)."""
+    message = str(message)
+    body = re.sub(r"^\s*\[[^\]]*\]\s*", "", message)
+    return ("FAILED" in message or body.lower().startswith(("warning", "error"))
+            or re.match(r"[A-Za-z]*Warning\b", body) is not None)
+
+
 def progress_for_cli(args: Any, total: int, desc: str, *, stream: str = "stdout", unit: str = "step",
                      bar: bool = True) -> Progress:
-    """The :class:`Progress` a subcommand uses: off with ``-q``/``--quiet`` (messages dropped too), a bar on
+    """The :class:`Progress` a subcommand uses: off with ``-q``/``--quiet`` (only warnings and failures
+    printed), a bar on
     a terminal (unless ``bar=False``), messages printed above it with ``-v`` and each line led by its level
     and module's name (``-v``, ``-vv``)."""
     quiet = bool(getattr(args, "quiet", False) or getattr(args, "log_quiet", False))
-    return Progress(total, desc, enabled=False if (quiet or not bar) else None, stream=None if quiet else stream,
+    return Progress(total, desc, enabled=False if (quiet or not bar) else None, stream=stream, quiet=quiet,
                     verbose=bool(getattr(args, "log_verbose", 0)), unit=unit,
                     names=bool(getattr(args, "log_verbose", 0)))

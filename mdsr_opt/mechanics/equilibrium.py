@@ -19,6 +19,7 @@ from .anchors import check_anchor_radius, rigid_groups
 from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
+from .obstacles import check_obstacles, check_prescribed
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
                         upright)
@@ -115,6 +116,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     t0 = time.perf_counter()
     units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
     spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
+    if spec.obstacles:  # a drag into an obstacle: refused here, not a load stepping that stalls at its edge
+        check_prescribed(check_obstacles(obstacles), didx, path.positions, spec.gap * units.length)
     mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before

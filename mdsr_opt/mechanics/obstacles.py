@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core.checks import as_float_array
 
-__all__ = ["HalfPlane", "Disk", "Obstacle", "check_obstacles"]
+__all__ = ["HalfPlane", "Disk", "Obstacle", "check_obstacles", "check_prescribed"]
 
 
 def _point(value, name) -> np.ndarray:
@@ -191,3 +191,48 @@ def check_obstacles(obstacles, mesh=None) -> list:
                 raise ValueError(f"obstacles[{i}] ({o!r}) holds node {k} of the body at rest (gap {g[k]:.3g}): "
                                  "place the obstacle outside the body")
     return obs
+
+
+#: the load fractions at which :func:`check_prescribed` looks at the prescribed nodes' path
+PATH_FRACTIONS = np.linspace(0.0, 1.0, 65)
+
+
+def check_prescribed(obstacles, nodes, positions, tolerance: float, what: str = "dragged") -> None:
+    """Refuse prescribed nodes that would have to enter a rigid obstacle: a node held at a place inside one
+    (deeper than ``tolerance``, the contact's gap) can never be reached, and a solve asked to would stall.
+
+    Parameters
+    ----------
+    obstacles : list of :class:`HalfPlane`, :class:`Disk`, :class:`Obstacle` (as :func:`check_obstacles`
+        gives).
+    nodes : (k,) node numbers of the prescribed nodes.
+    positions : callable ``s -> (k, 2)``, their positions at load fraction ``s`` in [0, 1] (a drag's path),
+        or a fixed (k, 2) array.
+    tolerance : the penetration allowed (length units), the contact gap.
+    what : how the nodes are prescribed, for the message (``"dragged"``, ``"anchored"``).
+
+    Raises
+    ------
+    ValueError
+        Naming the first such node, the obstacle, the penetration depth and the load fraction at which the
+        path first enters it (its target when only that is inside).
+    """
+    nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+    if not len(obstacles) or not len(nodes):
+        return
+    fixed = not callable(positions)
+    # the target first (its depth is what the user must change), then the path to it
+    for s in (1.0,) if fixed else (1.0, *PATH_FRACTIONS[:-1]):
+        x = np.asarray(positions if fixed else positions(float(s)), dtype=float).reshape(-1, 2)
+        for i, o in enumerate(obstacles):
+            g = o.gap(x)
+            if g.min() < -tolerance:
+                j = int(np.argmin(g))
+                final = np.asarray(positions if fixed else positions(1.0), dtype=float).reshape(-1, 2)
+                where = "its target" if s == 1.0 else f"{s:.0%} of the way along its drag (target " \
+                    f"({final[j, 0]:.4g}, {final[j, 1]:.4g}))"
+                raise ValueError(
+                    f"node {int(nodes[j])} is {what} to ({x[j, 0]:.4g}, {x[j, 1]:.4g}), {-g[j]:.3g} deep inside "
+                    f"obstacles[{i}] ({o!r}) at {where}: a prescribed node cannot enter a rigid obstacle (more than "
+                    f"the contact gap {tolerance:.3g}), so the solve could never reach it; move the {what} nodes' "
+                    "target or path outside the obstacle")

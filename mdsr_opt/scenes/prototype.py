@@ -526,8 +526,8 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         what = "external driving" if table == 2 else "internal driving" if table == 3 else "design"
         what += f", fixtures of radius {radius:.3g}" if radius is not None else ""
         if entry["success"]:
-            say(f"{prefix}virtual prototype ({what}, Table {table}): d = {entry['mean_px']:.2f} px over every "
-                f"loop (outline alone {entry['outer_mean_px']:.2f} px), ratio {100 * entry['ratio']:.2f} %")
+            say(f"{prefix}virtual prototype ({what}, Table {table}): d over every loop = {entry['mean_px']:.2f} px "
+                f"(ratio {100 * entry['ratio']:.2f} %), outline d = {entry['outer_mean_px']:.2f} px")
         else:
             say(f"{prefix}virtual prototype ({what}, Table {table}): FAILED: {entry['status']}")
 
@@ -569,7 +569,7 @@ def validation_tables(reports: Sequence) -> str:
         d = r if isinstance(r, dict) else r.to_dict()
         return d["scene"], d["cases"]
 
-    head = ("| scene | case | {} | d (px) | sd (px) | ratio (%) | outline-only d (px) | unmatched holes |\n"
+    head = ("| scene | case | {} | d over every loop (px) | sd (px) | ratio (%) | outline d (px) | unmatched holes |\n"
             "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |")
     t2, t3, t4 = [], [], []
     proto = None

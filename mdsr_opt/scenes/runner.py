@@ -22,6 +22,7 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
+from .verdict import design_verdict
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
@@ -186,7 +187,8 @@ class SceneReport:
         can be joined."""
         u = unit_label(self.units)
         head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d (px) | ratio (%) | prototype d (px) | time (s) |")
+                "diff/size (%) | design | photo d over every loop (px) | ratio (%) | prototype d over every loop (px) | "
+                "time (s) |")
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
@@ -195,10 +197,7 @@ class SceneReport:
             s += f" {u}" if c.stroke else ""
             d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
-            ok = "ok" if c.success else "FAILED"
-            ok += f" (saturated {', '.join(map(str, c.saturated))})" if c.saturated else ""
-            ok += f" (dropped {', '.join(d['name'] for d in c.dropped)})" if c.dropped else ""
-            ok += " (not mouldable as laid out)" if getattr(c, "fabrication", None) else ""
+            ok = design_verdict(c)  # the cause of a failure first, then the secondary flags
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
@@ -462,9 +461,11 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
         rep.photo = {"synthetic": True, "image_size": list(photo_size),
                      "target": figures(cmp_t), "self": figures(cmp_s)}
         run.photo, run.comparison = ph, cmp_t.outer
-        say(f"{prefix}SYNTHETIC photograph: target outline d = {cmp_t.mean_px:.2f} px "
-            f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %); measuring floor "
-            f"{cmp_s.mean_px:.2f} px")
+        # "d over every loop" (outline and holes, the table's figure) and "outline d" (the outline alone, the
+        # overlay's figure) are two numbers: each said by its name
+        say(f"{prefix}SYNTHETIC photograph: target d over every loop = {cmp_t.mean_px:.2f} px "
+            f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %), outline d = {cmp_t.outer.mean_px:.2f} px; "
+            f"measuring floor {cmp_s.mean_px:.2f} px over every loop")
     if prototype is not None:
         from .prototype import validate_case
 

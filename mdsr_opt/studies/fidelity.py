@@ -222,6 +222,9 @@ def run_fidelity_study(out: str | os.PathLike | None = None, *, tolerances: Sequ
     """
     with checking_input():  # the scenes and the study's axes: bad input, before any run
         tolerances = tuple(DEFAULT_TOLERANCES if tolerances is None else tolerances)
+        for tol in tolerances:
+            if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) or not (math.isfinite(tol) and tol > 0):
+                raise ValueError(f"tolerances must be positive numbers, got {tol!r}")
         loads: dict = {}
         for p, load in cases:
             get_study_problem(p)
