@@ -19,6 +19,7 @@ import time
 from typing import Callable, Sequence
 
 from ..body.material import material_dict
+from ..core.costs import animation_cost, figure_cost, photo_cost, shapes_cost
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, main_is_plain_script, process_pool
 from ..core.progress import advance, progress_for_cli
@@ -218,7 +219,7 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     t0 = time.perf_counter()
     say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
     if figures:
-        bg.submit(_write_rest, scene, out / "rest.png", vector)
+        bg.submit(_write_rest, scene, out / "rest.png", vector, cost=figure_cost())
     proto = None
     if photos and prototype:
         from .prototype import VirtualPrototype
@@ -244,7 +245,9 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
             designs = {c: (runs[c].setup.muscles, runs[c].design.contractions, runs[c].design.anchor_radius)
                        for c in anim.cases if runs[c].design is not None}
             bg.submit(_animation_job, scene, anim, designs, out, figures,
-                      on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
+                      on_done=functools.partial(_animation_done, anim_out, anim.name, say, log),
+                      cost=animation_cost((len(anim.keyframes) - 1) * anim.frames_per_step + 1,
+                                         scene.mesh.n_nodes, figures))
 
     send_animations()
     taken: list = []
@@ -272,18 +275,20 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
             chain.append((run, prefix, parts[1] if parts else None, written[cname][1]))
         elif photos and run.design is not None:
             bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
-                      on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
+                      on_done=functools.partial(_photo_done, run, written[cname][1], say, log),
+                      cost=_photo_cost(run, proto))
         else:
             if parts:
-                bg.submit(parts[1], on_done=written[cname][1].extend)
+                bg.submit(parts[1], on_done=written[cname][1].extend, cost=figure_cost())
             if photos:
                 advance(log)  # no design to photograph: the case's photograph stage is done
         if chain and cname == chained[-1]:
             chain.sort(key=lambda item: float(max(item[0].setup.case.contractions, default=0.0)))
             bg.submit(_photo_chain_job, scene, [item[:3] for item in chain], photo_size, proto,
-                      on_done=functools.partial(_photo_chain_done, [(item[0], item[3]) for item in chain], say, log))
+                      on_done=functools.partial(_photo_chain_done, [(item[0], item[3]) for item in chain], say, log),
+                      cost=sum(_photo_cost(item[0], proto) for item in chain))
         if parts:
-            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
+            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log), cost=shapes_cost())
         elif figures:
             advance(log)  # no files to draw: the case's figure stage is done
     if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
@@ -482,6 +487,12 @@ def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
 
 def _run_gait(scene: Scene, out, runs, figures: bool, log, writer, vector=None):
     return run_gait(scene, out, runs, figures=figures, log=log, writer=writer, vector=vector)
+
+
+def _photo_cost(run: CaseRun, proto) -> float:
+    """The estimated cost of a case's photograph job (:mod:`mdsr_opt.core.costs`)."""
+    nodes = proto.describe()["nodes"] if proto is not None else 0
+    return photo_cost(nodes, len(run.setup.muscles) if run.setup is not None else 0)
 
 
 def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write_result) -> dict:
