@@ -112,6 +112,22 @@ def test_jobs_sharing_a_pool_share_its_queue():
     assert [n for n, _ in sorted(done, key=lambda d: d[1])] == ["a first", "b dear", "a cheap"]
 
 
+def test_a_pools_queue_does_not_keep_the_pool_alive():
+    import gc
+    import weakref
+
+    with process_pool(1) as one:
+        if one is None:
+            pytest.skip("a single core: no pool")
+        with Jobs(one) as jobs:
+            jobs.submit(os.getpid, cost=1.0)
+        ref = weakref.ref(one)
+        del jobs
+    del one
+    gc.collect()
+    assert ref() is None
+
+
 def test_a_failed_job_raises_its_own_error_with_the_workers_traceback(pool):
     with pytest.raises(ValueError, match="the writer broke") as info:
         with Jobs(pool) as jobs:

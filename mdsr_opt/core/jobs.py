@@ -234,7 +234,7 @@ class _Queue:
     this queue's own, made when the job is sent (cancelled while the job waits here: it never starts)."""
 
     def __init__(self, pool: Executor, slots: int):
-        self.pool, self.slots = pool, slots
+        self.pool, self.slots = weakref.ref(pool), slots  # weak: the queue is the value of _QUEUES[pool]
         self._heap: list = []
         self._count = itertools.count()
         self._running = 0
@@ -258,7 +258,10 @@ class _Queue:
                     continue
                 self._running += 1
             try:
-                inner = self.pool.submit(_call, job)
+                pool = self.pool()
+                if pool is None:  # pragma: no cover - a pool is kept by its Jobs until their jobs are done
+                    raise RuntimeError("the pool of this job is gone")
+                inner = pool.submit(_call, job)
             except BaseException as exc:  # noqa: B036 - a pool shut down or broken: the job's outcome
                 with self._lock:
                     self._running -= 1
