@@ -293,6 +293,28 @@ def test_gif_frames_are_large_and_draw_idle_muscles_in_their_colour(strip, tmp_p
     assert counts[0] > 300 and counts[1] > counts[0]
 
 
+def test_gif_frames_of_one_state_differ_by_their_line_widths_and_titles_only(strip, tmp_path):
+    # an animation goes out and back: a frame of a state and widths drawn before is a copy of it (its own
+    # title on it); the same state at other widths is drawn anew
+    from PIL import Image
+
+    from mdsr_opt.plot.scenes import save_animation
+
+    mesh, muscles, target = strip
+    p = save_animation(mesh, [target, target, target], tmp_path / "a.gif", muscles=muscles,
+                       activations=[[1.0, 0.2], [1.0, 0.2], [0.0, 0.0]], titles=["out", "back", "idle"])
+    im = Image.open(p)
+    frames = []
+    for k in range(3):
+        im.seek(k)
+        frames.append(np.asarray(im.convert("RGB")).astype(int))
+    rows = np.flatnonzero((frames[0] != frames[1]).any(axis=(1, 2)))  # one line of text: the titles
+    assert len(rows) and rows.max() - rows.min() < 30
+    rest = np.ones(len(frames[0]), bool)
+    rest[rows.min():rows.max() + 1] = False
+    assert (frames[0][rest] != frames[2][rest]).any()  # other widths: the muscles drawn anew
+
+
 def _svg_colours(svg: str) -> dict:
     return dict(re.findall(r'<polyline class="muscle" id="([^"]+)" points="[^"]*" stroke="([^"]+)"', svg))
 

@@ -78,6 +78,56 @@ def test_a_job_gets_its_arguments_as_they_were_when_it_was_sent(pool):
     assert done[0][1] == [1, 2]
 
 
+def _started_at(name, seconds=0.0):
+    start = time.time()
+    time.sleep(seconds)
+    return name, start
+
+
+def test_a_free_worker_takes_the_costliest_job_waiting_and_reports_keep_the_order_sent():
+    # one worker: the first job holds it while the others wait in the queue; then the costliest starts
+    # first (ties: the first sent), whatever order they were sent in; on_done still sees the order sent
+    done = []
+    with process_pool(1) as one:
+        if one is None:
+            pytest.skip("a single core: no pool (each job runs at once, in order)")
+        with Jobs(one) as jobs:
+            jobs.submit(_started_at, "first", 0.5, on_done=done.append)
+            for name, cost in (("cheap", 1.0), ("dear", 9.0), ("middle", 3.0), ("middle too", 3.0)):
+                jobs.submit(_started_at, name, cost=cost, on_done=done.append)
+    assert [n for n, _ in done] == ["first", "cheap", "dear", "middle", "middle too"]
+    assert [n for n, _ in sorted(done, key=lambda d: d[1])] == ["first", "dear", "middle", "middle too", "cheap"]
+
+
+def test_jobs_sharing_a_pool_share_its_queue():
+    # two runs' Jobs on one pool of one worker: the costliest waiting job of either starts first
+    done = []
+    with process_pool(1) as one:
+        if one is None:
+            pytest.skip("a single core: no pool")
+        with Jobs(one) as a, Jobs(one) as b:
+            a.submit(_started_at, "a first", 0.5, on_done=done.append)
+            a.submit(_started_at, "a cheap", cost=1.0, on_done=done.append)
+            b.submit(_started_at, "b dear", cost=5.0, on_done=done.append)
+    assert [n for n, _ in sorted(done, key=lambda d: d[1])] == ["a first", "b dear", "a cheap"]
+
+
+def test_a_pools_queue_does_not_keep_the_pool_alive():
+    import gc
+    import weakref
+
+    with process_pool(1) as one:
+        if one is None:
+            pytest.skip("a single core: no pool")
+        with Jobs(one) as jobs:
+            jobs.submit(os.getpid, cost=1.0)
+        ref = weakref.ref(one)
+        del jobs
+    del one
+    gc.collect()
+    assert ref() is None
+
+
 def test_a_failed_job_raises_its_own_error_with_the_workers_traceback(pool):
     with pytest.raises(ValueError, match="the writer broke") as info:
         with Jobs(pool) as jobs:

@@ -7,6 +7,11 @@ explicit start method (:func:`start_method`: never a plain fork of a process tha
 :class:`Jobs` sends a run's jobs to it, or runs each at once in this process when there is no pool. The
 files are the same either way.
 
+A pool's jobs wait in one queue per pool (shared by every :class:`Jobs` sending to it) and start longest
+first: each job says its estimated ``cost`` and a worker that becomes free takes the costliest job waiting
+(the longest-processing-time rule). The executor only ever holds as many jobs as it has workers, so a long
+job sent late does not wait behind short ones sent before it, and does not end the run alone.
+
 A job is a module-level function with picklable arguments, pickled when it is submitted (so that it sees
 its arguments as they were then) and run in a worker; its return value comes back pickled. A worker runs
 with one OpenBLAS thread unless ``OPENBLAS_NUM_THREADS`` says otherwise (CasADi's bundled OpenBLAS, which
@@ -26,14 +31,16 @@ from __future__ import annotations
 import collections
 import contextlib
 import functools
+import heapq
 import importlib
+import itertools
 import os
 import pickle
 import signal
 import sys
 import threading
 import weakref
-from concurrent.futures import BrokenExecutor, Executor, wait as wait_for
+from concurrent.futures import BrokenExecutor, CancelledError, Executor, Future, wait as wait_for
 from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
@@ -158,6 +165,7 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
     _ENDERS[pool] = functools.partial(_end_workers, pool, before)
+    _SLOTS[pool] = workers
     # start the workers now, from a thread: starting one waits until the forkserver has imported the
     # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile
     # instead of waiting at its first job
@@ -180,6 +188,11 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
 
 #: the pools made by process_pool, each with the function that ends its workers
 _ENDERS: "weakref.WeakKeyDictionary[Executor, Callable[[], None]]" = weakref.WeakKeyDictionary()
+#: the pools made by process_pool, each with its number of workers
+_SLOTS: "weakref.WeakKeyDictionary[Executor, int]" = weakref.WeakKeyDictionary()
+#: per pool, the queue of its jobs not yet started (:class:`_Queue`)
+_QUEUES: "weakref.WeakKeyDictionary[Executor, _Queue]" = weakref.WeakKeyDictionary()
+_QUEUES_LOCK = threading.Lock()
 
 
 def _end_workers(pool: Executor, before: set[int]) -> None:
@@ -218,13 +231,77 @@ def _call(job: bytes) -> Any:
     return fn(*args, **kwargs)
 
 
+class _Queue:
+    """The jobs of one pool not yet started, costliest first (ties: the first sent); at most ``slots`` of
+    them are in the pool at a time. Each job's outcome goes to a :class:`concurrent.futures.Future` of
+    this queue's own, made when the job is sent (cancelled while the job waits here: it never starts)."""
+
+    def __init__(self, pool: Executor, slots: int):
+        self.pool, self.slots = weakref.ref(pool), slots  # weak: the queue is the value of _QUEUES[pool]
+        self._heap: list = []
+        self._count = itertools.count()
+        self._running = 0
+        self._lock = threading.Lock()
+
+    def put(self, job: bytes, cost: float) -> Future:
+        outer: Future = Future()
+        with self._lock:
+            heapq.heappush(self._heap, (-cost, next(self._count), outer, job))
+        self._start()
+        return outer
+
+    def _start(self) -> None:
+        """Send the costliest waiting jobs to the pool while it has a free worker."""
+        while True:
+            with self._lock:
+                if self._running >= self.slots or not self._heap:
+                    return
+                _, _, outer, job = heapq.heappop(self._heap)
+                if not outer.set_running_or_notify_cancel():  # cancelled while it waited
+                    continue
+                self._running += 1
+            try:
+                pool = self.pool()
+                if pool is None:  # pragma: no cover - a pool is kept by its Jobs until their jobs are done
+                    raise RuntimeError("the pool of this job is gone")
+                inner = pool.submit(_call, job)
+            except BaseException as exc:  # noqa: B036 - a pool shut down or broken: the job's outcome
+                with self._lock:
+                    self._running -= 1
+                outer.set_exception(exc)
+                continue
+            inner.add_done_callback(functools.partial(self._finished, outer))
+
+    def _finished(self, outer: Future, inner: Future) -> None:
+        with self._lock:
+            self._running -= 1
+        if inner.cancelled():
+            outer.set_exception(CancelledError())
+        elif inner.exception() is not None:
+            outer.set_exception(inner.exception())
+        else:
+            outer.set_result(inner.result())
+        self._start()
+
+
+def _queue(pool: Executor) -> _Queue:
+    """The queue of ``pool``'s jobs (made at the first job): as many at a time in the pool as it has
+    workers (a pool not made by :func:`process_pool`: as many as there are cores)."""
+    with _QUEUES_LOCK:
+        q = _QUEUES.get(pool)
+        if q is None:
+            q = _QUEUES[pool] = _Queue(pool, _SLOTS.get(pool) or available_cores())
+        return q
+
+
 class Jobs:
     """A run's write jobs: sent to ``pool`` (a :class:`concurrent.futures.Executor`), or with None each
     run at once in this process.
 
-    :meth:`submit` sends a job and collects the jobs done so far; :meth:`wait` collects all of them. A
-    job's ``on_done`` gets its return value, in the order the jobs were submitted; a job's exception is
-    raised again here (with the worker's traceback as its cause). Leaving the ``with`` block waits for every
+    :meth:`submit` sends a job and collects the jobs done so far; :meth:`wait` collects all of them. The
+    pool's workers start the costliest job waiting first (each job's ``cost``, see the module's
+    docstring). A job's ``on_done`` gets its return value, in the order the jobs were submitted; a job's
+    exception is raised again here (with the worker's traceback as its cause). Leaving the ``with`` block waits for every
     job; leaving it by an exception (a failed job, Ctrl-C) cancels the jobs not yet started and waits for
     the running ones, whose outcome is dropped.
     """
@@ -239,9 +316,11 @@ class Jobs:
         return self.pool is not None
 
     def submit(self, fn: Callable[..., Any], *args, on_done: Callable[[Any], None] | None = None,
-               **kwargs) -> None:
+               cost: float = 0.0, **kwargs) -> None:
         """Run ``fn(*args, **kwargs)``: in the pool, or here and now without one. ``on_done`` receives the
-        return value (for a pool's job, at a later :meth:`submit` or at :meth:`wait`)."""
+        return value (for a pool's job, at a later :meth:`submit` or at :meth:`wait`). ``cost``: the job's
+        estimated run time in any unit the run's jobs share (a pool's free worker takes the costliest job
+        waiting; equal costs in the order sent)."""
         if self.pool is None:
             value = fn(*args, **kwargs)
             if on_done is not None:
@@ -252,7 +331,7 @@ class Jobs:
         except (pickle.PicklingError, AttributeError, TypeError) as exc:
             raise TypeError(f"the job {getattr(fn, '__name__', fn)!r} cannot be sent to a worker process (a job "
                             f"is a module-level function with picklable arguments): {exc}") from exc
-        self._pending.append((self.pool.submit(_call, job), on_done))
+        self._pending.append((_queue(self.pool).put(job, float(cost)), on_done))
         self._collect(block=False)
 
     def wait(self) -> None:

@@ -246,7 +246,19 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
     spacing = 0.2 * size_px  # matplotlib's line spacing (1.2)
     ink = tuple(round(255 * c) for c in to_rgba(title.get_color())[:3])
 
+    drawn: dict = {}  # an animation goes out and back: a frame drawn before (same state, same widths) is copied
+
     def frame(k):
+        key = states[k].tobytes() + (b"" if act is None else act[k].tobytes())
+        if key not in drawn:
+            drawn[key] = draw(k)
+        im = drawn[key].copy()
+        title.set_text(names[k])  # the figure's own title follows the frame (for anyone drawing it)
+        ImageDraw.Draw(im).multiline_text(anchor, names[k], font=font, fill=ink, anchor="md", align="center",
+                                          spacing=spacing)
+        return im
+
+    def draw(k):  # the frame without its title
         x = states[k]
         body.set_path(fill_path(x))
         edges.set_path(edge_path(x))
@@ -260,11 +272,7 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
         for a in moving:
             ax.draw_artist(a)
         buf = canvas.buffer_rgba()
-        im = Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), buf, "raw", "RGBA", 0, 1).convert("RGB")
-        title.set_text(names[k])  # the figure's own title follows the frame (for anyone drawing it)
-        ImageDraw.Draw(im).multiline_text(anchor, names[k], font=font, fill=ink, anchor="md", align="center",
-                                          spacing=spacing)
-        return im
+        return Image.frombuffer("RGBA", (buf.shape[1], buf.shape[0]), buf, "raw", "RGBA", 0, 1).convert("RGB")
 
     rgb = [frame(k) for k in range(len(states))]  # RGB copies: the canvas is drawn over for the next frame
     palette = gif_palette([np.asarray(f) for f in rgb])

@@ -467,12 +467,25 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
             f"(sd {cmp_t.std_px:.2f}, ratio {100 * cmp_t.ratio:.2f} %), outline d = {cmp_t.outer.mean_px:.2f} px; "
             f"measuring floor {cmp_s.mean_px:.2f} px over every loop")
     if prototype is not None:
-        from .prototype import validate_case
-
-        metrics, shots = validate_case(prototype, setup, res, log=say, prefix=prefix)
-        rep.photo = dict(rep.photo or {}, prototype=metrics)
-        run.prototype_photos = shots
+        measure_prototype(run, prototype, log=say, prefix=prefix)
     rep.times["photo"] = time.perf_counter() - t2
+
+
+def measure_prototype(run: CaseRun, prototype: Any, *, log: Callable[[str], None] | None = None,
+                      prefix: str = "") -> float:
+    """The virtual prototype's part of :func:`measure_case`, on a run whose design is done: its validation of
+    the case's driving and design (``run.report.photo["prototype"]``, ``run.prototype_photos``). Returns the
+    seconds it took."""
+    from .prototype import validate_case
+
+    rep = run.report
+    if run.design is None:
+        raise ValueError(f"case {rep.case!r} has no design to photograph")
+    t = time.perf_counter()
+    metrics, shots = validate_case(prototype, run.setup, run.design, log=log, prefix=prefix)
+    rep.photo = dict(rep.photo or {}, prototype=metrics)
+    run.prototype_photos = shots
+    return time.perf_counter() - t
 
 
 def write_case(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu") -> list[str]:
@@ -497,13 +510,14 @@ def case_files(parts: Sequence[Sequence[str]], out: str | os.PathLike) -> list[s
 
 
 def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: str = "vtu", vector=None) -> list:
-    """:func:`write_case`'s work as two independent parts: functions without arguments, each writing some
+    """:func:`write_case`'s work as three independent parts: functions without arguments, each writing some
     of the case's files into ``out`` and returning their paths (in :func:`write_case`'s order). The first
-    draws the shapes (``target``, ``graph``, ``muscles``, ``design`` and the meshes), the second the
-    photographs (the prototype's, ``photo`` and ``overlay``: what :func:`measure_case` made).
+    draws the shapes (``target``, ``graph``, ``muscles``, ``design`` and the meshes), the second writes the
+    virtual prototype's photographs (:func:`measure_prototype`'s), the third the synthetic photograph
+    ``photo`` and its ``overlay`` (:func:`measure_case`'s own).
 
-    ``run_scene`` gives each part to its own job (:class:`~mdsr_opt.core.jobs.Jobs`), the second after
-    the photograph stage in the same job, so that two processes draw a case's files while the parent
+    ``run_scene`` gives each part to a job (:class:`~mdsr_opt.core.jobs.Jobs`), the photographs' after the
+    stage that made them in the same job, so that worker processes draw a case's files while the parent
     solves the next case. ``vector``: every figure also as PDF/SVG beside its PNG
     (:func:`mdsr_opt.plot.common.save_figure`).
     """
@@ -513,6 +527,7 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
     if run.setup is None:
         return []
     return [functools.partial(_write_shapes, scene, run, folder, fmt, vector),
+            functools.partial(_write_prototype_photos, run, folder),
             functools.partial(_write_photos, scene, run, folder, vector)]
 
 
@@ -562,15 +577,21 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
     return files
 
 
+def _write_prototype_photos(run: CaseRun, folder: Path) -> list[str]:
+    """The virtual prototype's photographs (Tables 2-4), each a PNG with its JSON."""
+    files: list[str] = []
+    for key, ph in run.prototype_photos.items():
+        files.append(str(ph.save(folder / f"prototype_{key}.png")))
+        files.append(str(folder / f"prototype_{key}.json"))
+    return files
+
+
 def _write_photos(scene: Scene, run: CaseRun, folder: Path, vector=None) -> list[str]:
-    """The virtual prototype's photographs, ``photo.png`` (with ``photo.json``) and ``overlay.png``."""
+    """``photo.png`` (with ``photo.json``) and ``overlay.png``."""
     from ..plot.common import figure_paths, save_figure
     from ..plot.photos import plot_overlay
 
     files: list[str] = []
-    for key, ph in run.prototype_photos.items():  # the virtual prototype's photographs (Tables 2-4)
-        files.append(str(ph.save(folder / f"prototype_{key}.png")))
-        files.append(str(folder / f"prototype_{key}.json"))
     if run.photo is not None:
         files.append(str(run.photo.save(folder / "photo.png")))
         files.append(str(folder / "photo.json"))

@@ -19,6 +19,7 @@ import time
 from typing import Callable, Sequence
 
 from ..body.material import material_dict
+from ..core.costs import animation_cost, figure_cost, photo_cost, shapes_cost
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, main_is_plain_script, process_pool
 from ..core.progress import advance, progress_for_cli
@@ -26,7 +27,7 @@ from ..synthesis.gait import run_gait
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt, RunFolder, noting_interrupts
-from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, run_case
+from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, measure_prototype, run_case
 from .scene import Scene, resolve_resolution
 
 __all__ = ['run_scene', 'run_main', 'figure_arguments']
@@ -218,7 +219,7 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     t0 = time.perf_counter()
     say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
     if figures:
-        bg.submit(_write_rest, scene, out / "rest.png", vector)
+        bg.submit(_write_rest, scene, out / "rest.png", vector, cost=figure_cost())
     proto = None
     if photos and prototype:
         from .prototype import VirtualPrototype
@@ -244,7 +245,9 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
             designs = {c: (runs[c].setup.muscles, runs[c].design.contractions, runs[c].design.anchor_radius)
                        for c in anim.cases if runs[c].design is not None}
             bg.submit(_animation_job, scene, anim, designs, out, figures,
-                      on_done=functools.partial(_animation_done, anim_out, anim.name, say, log))
+                      on_done=functools.partial(_animation_done, anim_out, anim.name, say, log),
+                      cost=animation_cost((len(anim.keyframes) - 1) * anim.frames_per_step + 1,
+                                         scene.mesh.n_nodes, figures))
 
     send_animations()
     taken: list = []
@@ -266,24 +269,28 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         send_animations()
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
-        written[cname] = [[] for _ in range(2)]
-        # the photograph job (the virtual prototype's solves) first: the longest of the case's jobs starts first
+        written[cname] = [[] for _ in range(3)]  # the files of the shapes, the prototype's and the photograph
         if photos and run.design is not None and len(chained) > 1 and cname in chained:
-            chain.append((run, prefix, parts[1] if parts else None, written[cname][1]))
+            chain.append((run, prefix, parts[1:], written[cname][1]))
         elif photos and run.design is not None:
-            bg.submit(_photo_job, scene, run, photo_size, proto, prefix, parts[1] if parts else None,
-                      on_done=functools.partial(_photo_done, run, written[cname][1], say, log))
-        else:
-            if parts:
-                bg.submit(parts[1], on_done=written[cname][1].extend)
-            if photos:
-                advance(log)  # no design to photograph: the case's photograph stage is done
+            # the synthetic photograph and the virtual prototype are two jobs: the prototype's solves (the
+            # run's longest jobs) start at once on a free worker, the photograph beside them on the other
+            bg.submit(_photo_job, scene, run, photo_size, None, prefix, parts[2:],
+                      on_done=functools.partial(_photo_done, run, written[cname][2], say, log if proto is None
+                                                else None), cost=photo_cost())
+            if proto is not None:
+                bg.submit(_prototype_job, run, proto, prefix, parts[1:2],
+                          on_done=functools.partial(_prototype_done, run, written[cname][1], say, log),
+                          cost=_photo_cost(run, proto) - photo_cost())
+        elif photos:
+            advance(log)  # no design to photograph: the case's photograph stage is done
         if chain and cname == chained[-1]:
             chain.sort(key=lambda item: float(max(item[0].setup.case.contractions, default=0.0)))
             bg.submit(_photo_chain_job, scene, [item[:3] for item in chain], photo_size, proto,
-                      on_done=functools.partial(_photo_chain_done, [(item[0], item[3]) for item in chain], say, log))
+                      on_done=functools.partial(_photo_chain_done, [(item[0], item[3]) for item in chain], say, log),
+                      cost=sum(_photo_cost(item[0], proto) for item in chain))
         if parts:
-            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log))
+            bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log), cost=shapes_cost())
         elif figures:
             advance(log)  # no files to draw: the case's figure stage is done
     if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
@@ -484,14 +491,37 @@ def _run_gait(scene: Scene, out, runs, figures: bool, log, writer, vector=None):
     return run_gait(scene, out, runs, figures=figures, log=log, writer=writer, vector=vector)
 
 
-def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write_result) -> dict:
-    """A case's photograph stage (:func:`~mdsr_opt.scenes.runner.measure_case`), then its result-side
-    files (``write_result``, a :func:`~mdsr_opt.scenes.runner.case_parts` part, or None): what the run's
-    report needs back from a job run in a worker."""
+def _photo_cost(run: CaseRun, proto) -> float:
+    """The estimated cost of a case's photograph job (:mod:`mdsr_opt.core.costs`)."""
+    nodes = proto.describe()["nodes"] if proto is not None else 0
+    return photo_cost(nodes, len(run.setup.muscles) if run.setup is not None else 0)
+
+
+def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, writers=()) -> dict:
+    """A case's photograph stage (:func:`~mdsr_opt.scenes.runner.measure_case`, with the virtual prototype
+    ``proto`` unless None), then its result-side files (``writers``: :func:`~mdsr_opt.scenes.runner.case_parts`
+    parts): what the run's report needs back from a job run in a worker."""
     said: list[str] = []
     measure_case(scene, run, photo_size=photo_size, prototype=proto, log=said.append, prefix=prefix)
-    files = write_result() if write_result is not None else []
+    files = [f for write in writers for f in write()]
     return {"photo": run.report.photo, "time": run.report.times["photo"], "files": files, "log": said}
+
+
+def _prototype_job(run: CaseRun, proto, prefix: str, writers=()) -> dict:
+    """A case's validation against the virtual prototype ``proto``
+    (:func:`~mdsr_opt.scenes.runner.measure_prototype`), then its photographs (``writers``)."""
+    said: list[str] = []
+    seconds = measure_prototype(run, proto, log=said.append, prefix=prefix)
+    files = [f for write in writers for f in write()]
+    return {"prototype": run.report.photo["prototype"], "time": seconds, "files": files, "log": said}
+
+
+def _prototype_done(run: CaseRun, paths: list, say, log, got: dict) -> None:
+    """Put a :func:`_prototype_job`'s answer into the run (after its :func:`_photo_job`'s); the case's
+    photograph stage is done (one unit of ``log``'s progress)."""
+    run.report.photo = dict(run.report.photo or {}, prototype=got["prototype"])
+    _photo_done(run, paths, say, log, dict(got, photo=run.report.photo,
+                                           time=run.report.times.get("photo", 0.0) + got["time"]), got["time"])
 
 
 def _photo_chain_job(scene: Scene, items: list, photo_size, proto) -> list[dict]:
@@ -507,12 +537,13 @@ def _photo_chain_done(targets: list, say, log, got: list) -> None:
         _photo_done(run, paths, say, log, one)
 
 
-def _photo_done(run: CaseRun, paths: list, say, log, got: dict) -> None:
+def _photo_done(run: CaseRun, paths: list, say, log, got: dict, added: float | None = None) -> None:
     """Put a :func:`_photo_job`'s answer into the run (its report, its files, its messages); one more unit
-    of ``log``'s progress done."""
+    of ``log``'s progress done (``log`` None: the stage goes on in a :func:`_prototype_job`). ``added``: the
+    seconds of ``got["time"]`` not yet in the run's total (default all)."""
     run.report.photo = got["photo"]
     run.report.times["photo"] = got["time"]
-    run.report.times["total"] = run.report.times.get("total", 0.0) + got["time"]
+    run.report.times["total"] = run.report.times.get("total", 0.0) + (got["time"] if added is None else added)
     paths.extend(got["files"])
     for line in got["log"]:
         say(line)

@@ -23,6 +23,7 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..core.costs import figure_cost, gif_cost
 from ..core.checks import check_options, keyword_names, positive_float, positive_int
 from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
@@ -543,14 +544,13 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     if figures:
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
         jobs += [(_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
-                                         "dotted: achieved)", chart), {"vector": vector}),
+                                         "dotted: achieved)", chart), {"vector": vector}, figure_cost()),
                  (save_gait_animation, (scene.mesh, sch, res.muscles, gif),
-                  {"title": f"{scene.name} {gait.name}:", "fps": gait.fps})]
+                  {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames))]
         from ..plot.common import figure_paths
-
         files += figure_paths(chart, vector) + [str(gif)]
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,
-                                                                   "material": scene.material}))
+                                                                   "material": scene.material}, 0.0))
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
@@ -575,9 +575,9 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         if not waiting[0]:
             write_json(folder / f"{gait.name}.json", record)
 
-    for fn, args, kwargs in jobs:
+    for fn, args, kwargs, cost in jobs:
         if writer is not None:
-            writer.submit(fn, *args, on_done=reported, **kwargs)
+            writer.submit(fn, *args, on_done=reported, cost=cost, **kwargs)
         else:
             reported(fn(*args, **kwargs))
     say(f"[{scene.name}] {_gait_label(gait.name)}: {res.n_muscles} shared muscle(s) (separate layouts: "
