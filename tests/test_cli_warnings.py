@@ -17,8 +17,12 @@ FINGER = ROOT / "tests" / "data" / "finger.toml"
 
 
 def test_quiet_run_still_prints_the_fabrication_warning(tmp_path, capsys):
-    """finger.toml's muscle runs on the outline: mdsr -q run printed no FabricationWarning at all."""
-    code = main(["-q", "run", str(FINGER), "--out", str(tmp_path / "o"), "--case", "contract", "--serial",
+    """finger.toml with its muscle moved onto the outline: mdsr -q run printed no FabricationWarning at all."""
+    text = FINGER.read_text()
+    path_line = next(line for line in text.splitlines() if line.startswith("path = "))
+    scene = tmp_path / "finger.toml"
+    scene.write_text(text.replace(path_line, "boundary = { from = [0, 1], to = [3.5, 1] }"))
+    code = main(["-q", "run", str(scene), "--out", str(tmp_path / "o"), "--case", "contract", "--serial",
                  "--no-photos", "--no-figures", "--no-animations", "--no-prototype", "--resolution", "coarse"])
     assert code == 0
     out = capsys.readouterr().out.splitlines()

@@ -4,6 +4,7 @@ rejected by verification), the secondary flags after it."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -49,5 +50,5 @@ def test_mdsr_run_too_far_says_so_in_the_table(tmp_path, capsys):
     assert code == 1
     row = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| finger | bend |")]
     assert len(row) == 1
-    assert "| FAILED (too far from the target: 3.45 % of size, more than max_difference 1 %; not mouldable as " \
-           "laid out) |" in row[0]
+    assert re.search(r"\| FAILED \(too far from the target: \d+\.\d+ % of size, more than max_difference 1 %\) \|",
+                     row[0]), row[0]
