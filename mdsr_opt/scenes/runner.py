@@ -354,6 +354,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     run.design = res
     res.units = scene.units
     if dropped:
+        if setup.routing is not None and rep.routing is not None and tuple(m.nodes for m in setup.muscles) == tuple(
+                m.nodes for m in setup.routing.muscles):  # the routing names the muscles the case keeps
+            setup.routing = setup.routing.keeping(kept, dropped)
+            rep.routing["muscles"] = [{"n_edges": s.n_edges, "contraction": s.contraction,
+                                       "nonuniformity": s.nonuniformity} for s in setup.routing.stats]
         setup.muscles = kept
         rep.n_muscles = len(kept)
         rep.dropped = [d.to_dict() for d in dropped]

@@ -1,0 +1,66 @@
+"""The routing in a design's result names the muscles the result has, fresh and loaded (the fourth new-user
+trial: the README's first design dropped an idle muscle, the fresh routing still listed it and the loaded one
+paired five names with six figures)."""
+
+from __future__ import annotations
+
+import json
+import re
+import warnings
+
+import numpy as np
+import pytest
+
+from mdsr_opt import Mesh, NeoHookean, PipelineResult, design_pipeline, nodes_in_box
+
+
+@pytest.fixture(scope="module")
+def first_design():
+    """The README's first design: a strip clamped at x = 0, its tip dragged up and back."""
+    mesh = Mesh.from_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], max_area=0.03)
+    base, tip = nodes_in_box(mesh, xmax=0.0), nodes_in_box(mesh, xmin=4.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = design_pipeline(mesh, NeoHookean(1.0, 0.3), base, {i: mesh.points[i] + [-0.6, 1.4] for i in tip})
+    assert res.dropped, "the README's first design no longer drops an idle muscle: pick another witness"
+    return res
+
+
+def _consistent(res):
+    rr = res.routing
+    names = [m.name for m in res.muscles]
+    assert [m.name for m in rr.muscles] == names and [tuple(m.nodes) for m in rr] == [tuple(m.nodes) for m in res.muscles]
+    assert [s.name for s in rr.stats] == names
+    shown = re.search(r"muscle\(s\) (\[.*?\]), edges (\[.*?\]), contractions (\[.*?\])", repr(rr))
+    assert shown and len(eval(shown.group(1))) == len(eval(shown.group(2))) == len(eval(shown.group(3))) == len(names)
+    rows = [line.split()[0] for line in rr.table().splitlines()[1:]]
+    assert rows == names
+    out = [d for d in rr.dropped if d.reason.startswith("dropped after the design: ")]
+    assert [d.nodes for d in out] == [tuple(d.nodes) for d in res.dropped]
+    assert [d.reason for d in out] == [f"dropped after the design: {d.reason}" for d in res.dropped]
+
+
+def test_the_routing_of_a_result_names_its_muscles_fresh_and_loaded(first_design, tmp_path):
+    res = first_design
+    _consistent(res)
+    back = PipelineResult.load(res.save(tmp_path / "r").rsplit("/", 1)[0])
+    _consistent(back)
+    assert repr(back.routing) == repr(res.routing) and back.routing.table() == res.routing.table()
+    assert [d.to_dict() for d in back.routing.dropped] == [d.to_dict() for d in res.routing.dropped]
+
+
+def test_a_result_saved_with_the_dropped_muscles_figures_loads_consistent(first_design, tmp_path):
+    """A design.json written before: the routing's figures of a muscle the design dropped are still there."""
+    res = first_design
+    path = res.save(tmp_path / "old")
+    data = json.loads(open(path).read())
+    d = res.dropped[0]
+    data["routing"]["stats"].append(dict(data["routing"]["stats"][0], name=d.name))
+    data["routing"]["dropped"] = [u for u in data["routing"]["dropped"]
+                                  if not u["reason"].startswith("dropped after the design")]
+    open(path, "w").write(json.dumps(data))
+    back = PipelineResult.load(tmp_path / "old")
+    assert [s.name for s in back.routing.stats] == [m.name for m in back.muscles]
+    assert d.name not in back.routing.table() and len(back.routing.stats) == len(back.muscles)
+    assert np.isfinite([s.contraction for s in back.routing.stats]).all()
+
