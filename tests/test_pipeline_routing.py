@@ -64,3 +64,24 @@ def test_a_result_saved_with_the_dropped_muscles_figures_loads_consistent(first_
     assert d.name not in back.routing.table() and len(back.routing.stats) == len(back.muscles)
     assert np.isfinite([s.contraction for s in back.routing.stats]).all()
 
+
+def test_a_scene_run_keeps_its_routing_to_the_muscles_kept_and_says_its_notes(tmp_path):
+    """The same design as a scene file through run_case (as ``mdsr run``): the routing, its figures in the
+    report and the summary name the muscles kept, and the summary says every routing note once."""
+    from mdsr_opt import load_scene, run_case
+
+    (tmp_path / "strip.toml").write_text(
+        'name = "strip"\n[body]\noutline = [[0, 0], [4, 0], [4, 1], [0, 1]]\nmax_area = 0.03\n'
+        '[material]\nmodel = "neo-hookean"\nE = 1.0\nnu = 0.3\n'
+        '[regions]\nbase = { box = [-1, -1, 0, 2] }\ntip = { box = [4, -1, 5, 2] }\n'
+        '[[cases]]\nname = "first"\nanchors = "base"\ndrags = [{ nodes = "tip", by = [-0.6, 1.4] }]\n')
+    lines: list = []
+    run = run_case(load_scene(tmp_path / "strip.toml"), "first", photo=False, log=lines.append)
+    rep, rr = run.report, run.setup.routing
+    assert rep.dropped, "the strip no longer drops an idle muscle: pick another witness"
+    assert [tuple(m.nodes) for m in rr] == [tuple(m.nodes) for m in run.setup.muscles]
+    assert len(rr.stats) == len(rr.muscles) == rep.n_muscles == len(rep.routing["muscles"])
+    assert [s.n_edges for s in rr.stats] == [m["n_edges"] for m in rep.routing["muscles"]]
+    assert any(d.reason.startswith("dropped after the design: idle") for d in rr.dropped)
+    said = [ln[len("routing: "):] for ln in lines if ln.startswith("routing: ") and "muscle(s) from" not in ln]
+    assert rr.notes and said == list(rr.notes) and len(set(said)) == len(said)

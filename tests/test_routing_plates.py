@@ -1,8 +1,10 @@
 """Routed ropes stay a channel and a wall apart unless they share a fixture plate the routing reports (the
-fourth new-user trial: two ropes of a T with a window ended on one node, unreported)."""
+fourth new-user trial: two ropes of a T with a window ended on one node, unreported), and the routing's notes
+say every resolution once, in design_pipeline's result as in route_muscles'."""
 
 from __future__ import annotations
 
+import re
 import warnings
 
 import numpy as np
@@ -11,7 +13,7 @@ import shapely
 
 from mdsr_opt import NeoHookean, mesh_polygon, nodes_in_box
 from mdsr_opt.mechanics.equilibrium import solve_external
-from mdsr_opt.synthesis.fabrication import rope_conflicts
+from mdsr_opt.synthesis.fabrication import Fabrication, rope_conflicts
 from mdsr_opt.synthesis.routing import route_for_design, route_muscles
 from conftest import load_script
 
@@ -100,6 +102,7 @@ def test_routed_ropes_are_apart_or_share_a_reported_plate(name):
     for r in (rr, offset):
         assert len(r) >= 1
         _check_apart(mesh, r)
+        assert len(set(r.notes)) == len(r.notes)                         # each resolution said once
         assert len({tuple(m.nodes) for m in r.muscles}) == len(r.muscles)
 
 
@@ -115,3 +118,21 @@ def test_the_tee_ropes_ending_on_one_node_share_a_reported_plate():
     (_, node), _ = same[0]
     note = next(n for n in rr.notes if "share one end fixture" in n and f"({P[node][0]:.4g}, {P[node][1]:.4g})" in n)
     assert "their ends lie 0 apart" in note and f"fixture radius {rr.fixture_radius:.4g}" in note
+
+
+def test_shrunk_fixtures_are_said_in_the_notes():
+    """Whenever the routing designs with fixtures smaller than the fabrication's, a note says so with both
+    radii (route_for_design's band routing with the smallest fixtures said nothing)."""
+    shrunk = []
+    for name in ("tee", "trial C", "T_hole"):
+        mesh, x = _body(name)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rr = route_for_design(mesh, x)
+        r0 = Fabrication().for_body(mesh).fixture_radius   # the default the routing started from
+        if rr.fixture_radius < r0 * (1 - 1e-9):
+            said = [n for n in rr.notes if re.search(rf"fixtures shrunk from radius {r0:.4g} to (the smallest, )?"
+                                                     rf"{rr.fixture_radius:.4g}", n)]
+            assert len(said) == 1, (name, rr.notes[:3])
+            shrunk.append(name)
+    assert "trial C" in shrunk  # the trial's witness: routed in the band with the smallest fixtures

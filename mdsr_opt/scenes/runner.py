@@ -322,6 +322,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
+        for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
+            say(f"{prefix}routing: {note}")
     elif case.kind == "external" and scene.muscles is not None and case.muscles is None:
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "

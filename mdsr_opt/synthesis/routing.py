@@ -466,10 +466,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
             free_paths += [list(U.path) for U in free.units if U.alive]
         snapped = snap_into_band(mesh, free_paths, adm_edges, free.feasible, clearance, turn_limit)
         pieces += [(-1 - i, p) for i, (_, p) in enumerate(snapped)]  # no mirror partner among the search's units
-    found = []
+    found, laid = [], set()
     for uid, path in pieces:
         if tuple(router.XL[path[-1]]) < tuple(router.XL[path[0]]):
             path.reverse()
+        if tuple(path) in laid or laid.add(tuple(path)):  # pooled searches and snapping can lay a rope twice
+            continue
         ks = [router.edge_id(a, b) for a, b in zip(path[:-1], path[1:])]
         strength = sum(router.wql[k] * l0[k] for k in ks)
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
@@ -579,8 +581,8 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
                                          fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
         if len(deep) > len(rr):
             note = (f"{len(rr)} rope(s) kept at the fabrication's clearance; routed again with every rope node "
-                    f"{f.min_fixture_radius + f.wall:.4g} inside the body and the smallest fixtures, radius "
-                    f"{f.min_fixture_radius:.4g}: "
+                    f"{f.min_fixture_radius + f.wall:.4g} inside the body, fixtures shrunk from radius "
+                    f"{f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "
                     f"{len(deep)} kept")
             rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
@@ -599,10 +601,10 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
                 fab.for_body(mesh), fixture_radius=fab.for_body(mesh).min_fixture_radius)
         snapped, caught_snapped = attempt(opts)
         if _captured(snapped) > OFFSET_GAIN * _captured(rr):
-            note = (f"ropes routed on every contracted edge and snapped into the band at least "
-                    f"{snapped.fabrication.clearance(mesh) if opts.get('inset') is None else opts['inset']:.4g} "
-                    f"inside the body: they shorten by {_captured(snapped):.4g} in the target, "
-                    f"the ropes searched inside the band by {_captured(rr):.4g}")
+            depth, r0 = snapped.params["inset"] or snapped.fabrication.clearance(mesh), fab.for_body(mesh).fixture_radius
+            small = "" if opts.get("inset") is None else f", fixtures shrunk from radius {r0:.4g} to the smallest, {snapped.fixture_radius:.4g}"
+            note = (f"ropes routed on every contracted edge and snapped into the band at least {depth:.4g} inside the body{small}: "
+                    f"they shorten by {_captured(snapped):.4g} in the target, the ropes searched inside the band by {_captured(rr):.4g}")
             rr, caught = snapped.replaced(notes=(note,) + snapped.notes), caught_snapped
     return rr, caught
 
