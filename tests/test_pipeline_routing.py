@@ -85,3 +85,18 @@ def test_a_scene_run_keeps_its_routing_to_the_muscles_kept_and_says_its_notes(tm
     assert any(d.reason.startswith("dropped after the design: idle") for d in rr.dropped)
     said = [ln[len("routing: "):] for ln in lines if ln.startswith("routing: ") and "muscle(s) from" not in ln]
     assert rr.notes and said == list(rr.notes) and len(set(said)) == len(said)
+
+
+def test_route_for_design_gives_the_pipelines_layout_and_fixtures(first_design):
+    """What route_muscles' docstring and the README promise: route_for_design on the pipeline's target routes
+    the pipeline's ropes (those kept and those the design dropped) with the fixture radius it designed with."""
+    from mdsr_opt import route_for_design
+
+    res = first_design
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rr = route_for_design(res.mesh, res.target)
+    routed = sorted([tuple(m.nodes) for m in res.routing] + [d.nodes for d in res.routing.dropped
+                                                             if d.reason.startswith("dropped after the design")])
+    assert sorted(tuple(m.nodes) for m in rr) == routed
+    assert rr.fixture_radius == pytest.approx(res.design.anchor_radius, rel=1e-12) and rr.notes == res.routing.notes
