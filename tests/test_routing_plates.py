@@ -136,3 +136,18 @@ def test_shrunk_fixtures_are_said_in_the_notes():
             assert len(said) == 1, (name, rr.notes[:3])
             shrunk.append(name)
     assert "trial C" in shrunk  # the trial's witness: routed in the band with the smallest fixtures
+
+
+@pytest.mark.parametrize("max_muscles", [1, 2, 3])
+def test_shared_plates_are_said_only_among_the_ropes_kept(max_muscles):
+    """A rope cut by max_muscles shares no plate in the notes (the gecko's notes named cut ropes)."""
+    mesh, x = _body("tee")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rr = route_for_design(mesh, x, max_muscles=max_muscles)
+    P = mesh.points
+    ends = {f"({P[e][0]:.4g}, {P[e][1]:.4g})" for m in rr.muscles for e in (m.nodes[0], m.nodes[-1])}
+    for n in (n for n in rr.notes if "share one end fixture" in n):
+        named = re.findall(r"\(-?[\d.e+-]+, -?[\d.e+-]+\)", n.split(" share one end fixture")[0])
+        assert named and set(named) <= ends, (n, ends)
+    _check_apart(mesh, rr)

@@ -119,7 +119,7 @@ from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
 from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_band import snap_into_band
-from .routing_fixtures import FixtureFit, fit_fixtures
+from .routing_fixtures import FixtureFit, fit_fixtures, shared_plates
 from .routing_memo import memoised, shared_work
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_turn
 from .routing_search import Router
@@ -477,10 +477,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         strength = sum(router.wql[k] * l0[k] for k in ks)
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
     found.sort(key=lambda t: t[:3])
-    if fab is None:
-        fit = FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ())
-    else:
-        fit = fit_fixtures(mesh, [f[3] for f in found], fab)
+    fit = (FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ()) if fab is None
+           else fit_fixtures(mesh, [f[3] for f in found], fab))
     for i, why in fit.dropped:
         L = float(sum(l0[k] for k in found[i][4]))
         dropped.append(DroppedUnit(tuple(found[i][3]), L, f"dropped: {why}"))
@@ -510,6 +508,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                                                                   "than the muscles kept; mirror pairs kept whole)"))
             taken.update(g[5] for g in orbit)
         found = sorted(kept, key=lambda t: t[:3])
+    if fab is not None:  # the end plates the ropes kept share (after the max_muscles cut)
+        extra["notes"] = fit.notes + shared_plates(mesh.points, [f[3] for f in found], fit.radius)
     seed_edges = tuple((int(E[k, 0]), int(E[k, 1])) for k in seeds)
     if not found:
         inside = "" if fab is None else (

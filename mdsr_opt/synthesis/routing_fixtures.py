@@ -28,9 +28,9 @@ design. The resolutions, in order, each recorded as a sentence in the routing's 
    holds for every end, since the design takes one ``anchor_radius``.
 
 5. **Shared plates.** Ropes whose ends lie closer than ``r_f`` (the same node, where ropes snapped into the
-   band meet, or neighbours) keep one fixture plate between them, as step 3 allows; each such plate is said
-   in ``notes`` with the ropes it holds (the SVG and DXF drawings draw it once, in black). Ropes are merged
-   through their fixtures, never spliced into one rope.
+   band meet, or neighbours) keep one fixture plate between them, as step 3 allows; the routing says each
+   plate among the ropes it keeps (:func:`shared_plates`) in its ``notes`` with the ropes it holds (the SVG
+   and DXF drawings draw it once, in black). Ropes are merged through their fixtures, never spliced.
 """
 
 from __future__ import annotations
@@ -43,7 +43,8 @@ from ..body.muscles import Muscle
 from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
-__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius"]
+__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius",
+           "shared_plates"]
 
 #: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
 MIN_FREE_FRACTION = 2.0 / 3.0
@@ -222,12 +223,12 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
     FixtureFit
     """
     fit = _fitted(mesh, [list(p) for p in paths], fabrication)
-    notes = tuple(dict.fromkeys(fit.notes + _shared_plates(mesh.points, [p for _, p in fit.kept], fit.radius)))
-    return FixtureFit(fit.kept, fit.radius, notes, fit.dropped)
+    return FixtureFit(fit.kept, fit.radius, tuple(dict.fromkeys(fit.notes)), fit.dropped)
 
 
-def _shared_plates(P, paths, r: float) -> tuple:
-    """One sentence per fixture plate that ropes ending closer than ``r`` share (as the drawings group them)."""
+def shared_plates(P, paths, r: float) -> tuple:
+    """One sentence per fixture plate of radius ``r`` that ropes (node ``paths`` on the points ``P``) ending
+    closer than ``r`` share (as :func:`~mdsr_opt.synthesis.export_dxf.fixture_plates` draws them): step 5."""
     ends = [(i, e) for i, p in enumerate(paths) for e in (p[0], p[-1])]
     seen, out = set(), []
     for a, (i, e) in enumerate(ends):
