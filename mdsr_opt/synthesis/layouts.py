@@ -15,6 +15,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_int
 from ..plot.style import muscle_label, muscle_name
 from .fabrication import pair_conflicts
+from .routing_fixtures import clear_part
 
 __all__ = ["shared_layout", "check_budget"]
 
@@ -102,8 +103,19 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
                     found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
                     if found:
                         clashes.append((near < overlap, k, found[0]))
-            if clashes:  # merged into the first rope it runs along; else kept (its pose may have no other rope)
+            if clashes:  # merged into the first rope it runs along; else cut clear of the kept ones, else kept
                 unmerged, k, cf = min(clashes, key=lambda c: c[:2])
+                part = clear_part(mesh, cand.nodes, [km for km, _, _, _ in kept], fabrication, rad) if unmerged else ()
+                if part and not any(pair_conflicts(mesh, km, part, fabrication, rad)[0] for km, _, _, _ in kept):
+                    if notes is not None:
+                        a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+                        notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
+                                     f"({b[0]:.4g}, {b[1]:.4g}) shortened to its part a channel and a wall clear of "
+                                     f"the other poses' ropes and fixtures (radius {rad:.4g}): {len(part) - 1} of its "
+                                     f"{len(cand.nodes) - 1} edges")
+                    cand = Muscle(part, name=cand.name)
+                    ce, clashes = cand.edges, []
+            if clashes:
                 if notes is not None:
                     a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
                     what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
