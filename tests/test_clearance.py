@@ -227,8 +227,9 @@ def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
 @pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
 @pytest.mark.parametrize("across", [[(7, 0.25), (7, 3.75)], [(6, 0.5), (6, 1.75), (7.5, 3.5)]])
 def test_shared_layout_cuts_a_rope_crossing_another_poses_to_its_part_clear_of_it(scale, across):
-    """A pose's rope that crosses another pose's (gecko's walk at the coarse resolution: 'muscles M2 and M4
-    cross') is kept as its longest part clear of it, fixtures included, and said; not left crossing."""
+    """A pose's rope that crosses another pose's, both from layouts fitted apart (by_pose: gecko's walk at the
+    coarse resolution, 'muscles M2 and M4 cross'), is kept as its longest part clear of it, fixtures included,
+    and said; not left crossing."""
     from mdsr_opt.synthesis.layouts import shared_layout
 
     mesh = plate(scale)
@@ -237,7 +238,7 @@ def test_shared_layout_cuts_a_rope_crossing_another_poses_to_its_part_clear_of_i
     x = rope(mesh, across, "x", scale)
     assert "crossing" in [c.kind for c in rope_conflicts(mesh, [a, x], f)]
     notes: list = []
-    mus, sources = shared_layout(mesh, {"p": [a], "q": [x]}, fabrication=f, notes=notes)
+    mus, sources = shared_layout(mesh, {"p": [a], "q": [x]}, fabrication=f, notes=notes, by_pose=True)
     assert sources == (("p",), ("q",)) and mus[0].nodes == a.nodes
     cut = mus[1].nodes
     assert 2 <= len(cut) < len(x.nodes) and set(cut) <= set(x.nodes)
