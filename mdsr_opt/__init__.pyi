@@ -40,6 +40,7 @@ from .synthesis.results import DesignResult as DesignResult, Verification as Ver
 from .synthesis.routing import (
     contraction_graph as contraction_graph,
     edge_weights as edge_weights,
+    route_for_design as route_for_design,
     route_muscles as route_muscles,
 )
 from .synthesis.routing_result import RoutingResult as RoutingResult

@@ -225,6 +225,30 @@ def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
 
 
 @pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
+@pytest.mark.parametrize("across", [[(7, 0.25), (7, 3.75)], [(6, 0.5), (6, 1.75), (7.5, 3.5)]])
+def test_shared_layout_cuts_a_rope_crossing_another_poses_to_its_part_clear_of_it(scale, across):
+    """A pose's rope that crosses another pose's, both from layouts fitted apart (by_pose: gecko's walk at the
+    coarse resolution, 'muscles M2 and M4 cross'), is kept as its longest part clear of it, fixtures included,
+    and said; not left crossing."""
+    from mdsr_opt.synthesis.layouts import shared_layout
+
+    mesh = plate(scale)
+    f = fab(scale).for_body(mesh)
+    a = rope(mesh, [(1, 1.5), (9, 1.5)], "a", scale)
+    x = rope(mesh, across, "x", scale)
+    assert "crossing" in [c.kind for c in rope_conflicts(mesh, [a, x], f)]
+    notes: list = []
+    mus, sources = shared_layout(mesh, {"p": [a], "q": [x]}, fabrication=f, notes=notes, by_pose=True)
+    assert sources == (("p",), ("q",)) and mus[0].nodes == a.nodes
+    cut = mus[1].nodes
+    assert 2 <= len(cut) < len(x.nodes) and set(cut) <= set(x.nodes)
+    assert mus[1].rest_length(mesh) >= 4 * f.min_fixture_radius
+    assert [c for c in rope_conflicts(mesh, mus, f, fixture_radius=f.min_fixture_radius) if len(c.muscles) == 2] == []
+    assert len(notes) == 1 and "pose 'q''s rope of rank 1" in notes[0] and "shortened to its part" in notes[0] \
+        and f"{len(cut) - 1} of its {len(x.nodes) - 1} edges" in notes[0]
+
+
+@pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
 def test_design_pipeline_warns_for_a_given_muscle_that_cannot_be_moulded_and_still_designs(scale):
     from mdsr_opt import Muscle, NeoHookean, design_pipeline, nodes_in_box
 

@@ -321,6 +321,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
+        for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
+            say(f"{prefix}routing: {note}")
     elif case.kind == "external" and scene.muscles is not None and case.muscles is None:
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "
@@ -353,6 +355,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     run.design = res
     res.units = scene.units
     if dropped:
+        if setup.routing is not None and rep.routing is not None and tuple(m.nodes for m in setup.muscles) == tuple(
+                m.nodes for m in setup.routing.muscles):  # the routing names the muscles the case keeps
+            setup.routing = setup.routing.keeping(kept, dropped)
+            rep.routing["muscles"] = [{"n_edges": s.n_edges, "contraction": s.contraction,
+                                       "nonuniformity": s.nonuniformity} for s in setup.routing.stats]
         setup.muscles = kept
         rep.n_muscles = len(kept)
         rep.dropped = [d.to_dict() for d in dropped]

@@ -15,6 +15,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_int
 from ..plot.style import muscle_label, muscle_name
 from .fabrication import pair_conflicts
+from .routing_fixtures import clear_part
 
 __all__ = ["shared_layout", "check_budget"]
 
@@ -47,15 +48,17 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
         could not be moulded beside a kept muscle (channels closer than a channel and a wall, ropes that
         cross, fixtures of radius ``fixture_radius`` that overlap each other or the other's channel:
         :func:`~mdsr_opt.synthesis.fabrication.pair_conflicts`) is merged into it when at least ``overlap`` of
-        its nodes lie that close (a duplicate, serving its pose too); else it is kept (its pose may have no
-        other rope) and reported in ``notes``
+        its nodes lie that close (a duplicate, serving its pose too); else, with ``by_pose`` (poses whose own
+        layouts were each fitted apart, as a gait's cases), it is cut to its longest part clear of the kept ones
+        (:func:`~mdsr_opt.synthesis.routing_fixtures.clear_part`) when one exists; else it is kept (its pose may
+        have no other rope) and reported in ``notes``
         (:func:`~mdsr_opt.synthesis.poses.design_poses` then reports a layout that cannot be moulded). None:
         no such check.
     fixture_radius : float, optional
         The fixtures' radius for that check; default ``fabrication.min_fixture_radius`` (the smallest the
         ends may get).
     notes : list, optional
-        Receives one sentence per candidate merged, or kept though it cannot be moulded beside a kept one.
+        Receives one sentence per candidate merged, cut, or kept though it cannot be moulded beside a kept one.
     by_pose : bool, default False
         Name and order the ropes by the poses' own layouts, which are shown beside the merged one (a
         scene's cases and its gait): see ``muscles``.
@@ -102,8 +105,20 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
                     found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
                     if found:
                         clashes.append((near < overlap, k, found[0]))
-            if clashes:  # merged into the first rope it runs along; else kept (its pose may have no other rope)
+            if clashes:  # merged into the first rope it runs along; else cut clear of the kept ones, else kept
                 unmerged, k, cf = min(clashes, key=lambda c: c[:2])
+                part = clear_part(mesh, cand.nodes, [km for km, _, _, _ in kept], fabrication, rad) \
+                    if unmerged and by_pose else ()
+                if part and not any(pair_conflicts(mesh, km, part, fabrication, rad)[0] for km, _, _, _ in kept):
+                    if notes is not None:
+                        a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+                        notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
+                                     f"({b[0]:.4g}, {b[1]:.4g}) shortened to its part a channel and a wall clear of "
+                                     f"the other poses' ropes and fixtures (radius {rad:.4g}): {len(part) - 1} of its "
+                                     f"{len(cand.nodes) - 1} edges")
+                    cand = Muscle(part, name=cand.name)
+                    ce, clashes = cand.edges, []
+            if clashes:
                 if notes is not None:
                     a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
                     what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message

@@ -231,7 +231,11 @@ def _routing_from(data: dict, muscles: tuple, mesh: Mesh, target: np.ndarray) ->
 
     if not isinstance(data, dict):
         raise TypeError(f"routing is a {type(data).__name__}, not an object")
-    return RoutingResult(muscles=tuple(muscles), stats=tuple(MuscleStats(**st) for st in data["stats"]),
+    stats = [MuscleStats(**st) for st in data["stats"]]
+    names = {m.name for m in muscles}
+    if len(stats) != len(muscles):  # saved before the routing dropped the muscles the design took out
+        stats = [st for st in stats if st.name in names]
+    return RoutingResult(muscles=tuple(muscles), stats=tuple(stats),
                          graph=lambda: contraction_graph(mesh, target),
                          seeds=tuple(tuple(int(i) for i in sd) for sd in data.get("seeds", ())),
                          n_units=int(data.get("n_units", 0)), params=dict(data.get("params", {})),
@@ -424,6 +428,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
     res.units = units
+    if routing is not None and dropped:
+        routing = routing.keeping(mus, dropped)
     t3 = time.perf_counter()
     times = {"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2}
     out = PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,

@@ -38,18 +38,17 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
 
-Channels inside the body (``fabrication``, :class:`~mdsr_opt.synthesis.fabrication.Fabrication`): a rope
-runs in a moulded channel with a wall around it, so only edges whose two nodes lie at least
-``channel_diameter / 2 + wall`` (and 2 % of the body's diameter) inside the outline and every hole can carry
-one. The search runs on those edges only, rather than offsetting routes inward or refining a band along the
-boundary: the rule is then exact on the mesh (every rope node has its clearance, on the very nodes the
-design and the fabrication files use), costs nothing, and changes no node; a mesh with no such edge is
-refused with the mean edge length and the channel and wall that would work. Where the contraction is
-strongest next to the outline, the band's jagged edge and its necks beside holes break such ropes into
-fragments; :func:`route_for_design` then also routes on every contracted edge and snaps the ropes into the
-band (``band="offset"``, :mod:`mdsr_opt.synthesis.routing_band`). The routed ropes are then fitted
-to their end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of
-``result.notes``. ``fabrication=False`` is the search alone, on every edge.
+Channels inside the body (``fabrication``, :class:`~mdsr_opt.synthesis.fabrication.Fabrication`): a rope runs in a
+moulded channel with a wall around it, so only edges whose two nodes lie at least ``channel_diameter / 2 + wall``
+(and 2 % of the body's diameter) inside the outline and every hole can carry one. The search runs on those edges
+only, rather than offsetting routes inward or refining a band along the boundary: the rule is then exact on the mesh
+(every rope node has its clearance, on the very nodes the design and the fabrication files use), costs nothing, and
+changes no node; a mesh with no such edge is refused with the mean edge length and the channel and wall that would
+work. Where the contraction is strongest next to the outline, the band's jagged edge and its necks beside holes break
+such ropes into fragments; :func:`route_for_design` then also routes on every contracted edge and snaps the ropes
+into the band (``band="offset"``, :mod:`mdsr_opt.synthesis.routing_band`). The routed ropes are then fitted to their
+end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of ``result.notes``.
+``fabrication=False`` is the search alone, on every edge.
 
 A cable cannot push: an edge with ``w <= min_contraction`` (every elongated or unchanged edge) is never
 part of a muscle, neither as a seed nor by growth. A target that only stretches the body, contracts
@@ -81,10 +80,8 @@ Deviations from the paper (and from the project's design notes), on purpose:
 * The tortuosity is a rule (``max_turn``) besides a cost: the paper wants smooth muscles; a rope that turns
   sharply at a node rubs and cuts the silicone.
 
-The search itself lives in :mod:`mdsr_opt.synthesis.routing_search`
-(:class:`~mdsr_opt.synthesis.routing_search.Router`), the mirror symmetry in
-:mod:`mdsr_opt.synthesis.routing_symmetry`, the quality table of the problem library in
-:mod:`mdsr_opt.studies.routing_quality`.
+The search lives in :mod:`mdsr_opt.synthesis.routing_search` (:class:`~mdsr_opt.synthesis.routing_search.Router`), the
+mirror symmetry in :mod:`mdsr_opt.synthesis.routing_symmetry`, the quality table in :mod:`mdsr_opt.studies.routing_quality`.
 
 Determinism: ties are broken by rest geometry (edge midpoints, node coordinates), never by node index,
 and weights are compared on a grid of ``1e-9``, so the ~1e-16 round-off of a rigid motion of the target
@@ -122,7 +119,7 @@ from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
 from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_band import snap_into_band
-from .routing_fixtures import FixtureFit, fit_fixtures
+from .routing_fixtures import FixtureFit, fit_fixtures, shared_plates
 from .routing_memo import memoised, shared_work
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_turn
 from .routing_search import Router
@@ -250,6 +247,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                   compression_ratio: float = 1.0, inset: float | None = None, band: str = "edges") -> RoutingResult:
     """Route muscle units along contracted, uniform, smooth chains of mesh edges.
 
+    One search with the knobs given (by default the paper's, on the admissible edges), so each knob acts as
+    documented and studies of the search reproduce. :func:`~mdsr_opt.design_pipeline` and ``mdsr run`` route with
+    :func:`route_for_design`, which routes again (deeper, with ``K_a = 1``, snapped into the band) when this loses
+    ropes: for the pipeline's layout call ``route_for_design(mesh, target)``; design with its ``fixture_radius``.
+
     Parameters
     ----------
     mesh : Mesh
@@ -306,8 +308,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         How ropes keep their clearance (ignored with ``fabrication=False``). ``"edges"``: the search runs on
         the admissible edges only. ``"offset"``: the search runs on every contracted edge and each rope is
         moved into the band (the body shrunk by the clearance) and snapped to admissible edges, cut where the
-        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: also a search at ``K_a = 1``
-        pooled in. :func:`route_for_design` tries them when the first routing lost ropes.
+        band has a gap (:mod:`~mdsr_opt.synthesis.routing_band`); ``"offset+long"``: also a search at ``K_a = 1``.
     compression_ratio : float in (0, 1], default 1
         An edge seeds a region only if its contraction exceeds ``compression_ratio`` times the largest
         principal stretch of the triangles beside it. 1: compression dominates (the default; the sideways
@@ -466,18 +467,18 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
             free_paths += [list(U.path) for U in free.units if U.alive]
         snapped = snap_into_band(mesh, free_paths, adm_edges, free.feasible, clearance, turn_limit)
         pieces += [(-1 - i, p) for i, (_, p) in enumerate(snapped)]  # no mirror partner among the search's units
-    found = []
+    found, laid = [], set()
     for uid, path in pieces:
         if tuple(router.XL[path[-1]]) < tuple(router.XL[path[0]]):
             path.reverse()
+        if tuple(path) in laid or laid.add(tuple(path)):  # pooled searches and snapping can lay a rope twice
+            continue
         ks = [router.edge_id(a, b) for a, b in zip(path[:-1], path[1:])]
         strength = sum(router.wql[k] * l0[k] for k in ks)
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
     found.sort(key=lambda t: t[:3])
-    if fab is None:
-        fit = FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ())
-    else:
-        fit = fit_fixtures(mesh, [f[3] for f in found], fab)
+    fit = (FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ()) if fab is None
+           else fit_fixtures(mesh, [f[3] for f in found], fab))
     for i, why in fit.dropped:
         L = float(sum(l0[k] for k in found[i][4]))
         dropped.append(DroppedUnit(tuple(found[i][3]), L, f"dropped: {why}"))
@@ -507,6 +508,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                                                                   "than the muscles kept; mirror pairs kept whole)"))
             taken.update(g[5] for g in orbit)
         found = sorted(kept, key=lambda t: t[:3])
+    if fab is not None:  # the end plates the ropes kept share (after the max_muscles cut)
+        extra["notes"] = fit.notes + shared_plates(mesh.points, [f[3] for f in found], fit.radius)
     seed_edges = tuple((int(E[k, 0]), int(E[k, 1])) for k in seeds)
     if not found:
         inside = "" if fab is None else (
@@ -540,13 +543,12 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
 
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
-    """:func:`route_muscles` for a design that must not fail on the routing's own choices. When ropes were
-    dropped or cut for their fixtures, route again deeper inside with the smallest fixtures (kept if it keeps
-    more ropes); when no rope is kept with the default ``K_a`` (4), route again with ``K_a = 1`` (fewer,
-    longer ropes); when ropes are still lost inside the band, route on every contracted edge and snap into
-    the band (``band="offset"``, kept when its ropes capture :data:`OFFSET_GAIN` times more contraction).
-    Each change is said first in ``result.notes``. A ``K_a`` the caller gave, or ``fabrication=False``, is
-    used as given. Warnings of the kept routing are re-emitted.
+    """:func:`route_muscles` as the pipeline routes (:func:`~mdsr_opt.design_pipeline`, ``mdsr run``). Ropes
+    dropped or cut for their fixtures: route again deeper inside with the smallest fixtures (kept if it keeps
+    more); no rope kept with the default ``K_a`` (4): again with ``K_a = 1``; ropes still lost inside the band:
+    route on every contracted edge and snap into the band (``band="offset"``, kept when its ropes capture
+    :data:`OFFSET_GAIN` times more contraction). Each change is said first in ``result.notes``; a ``K_a`` or
+    ``band`` given, or ``fabrication=False``, is used as given; the kept routing's warnings are re-emitted.
 
     Example
     -------
@@ -579,8 +581,8 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
                                          fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
         if len(deep) > len(rr):
             note = (f"{len(rr)} rope(s) kept at the fabrication's clearance; routed again with every rope node "
-                    f"{f.min_fixture_radius + f.wall:.4g} inside the body and the smallest fixtures, radius "
-                    f"{f.min_fixture_radius:.4g}: "
+                    f"{f.min_fixture_radius + f.wall:.4g} inside the body, fixtures shrunk from radius "
+                    f"{f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "
                     f"{len(deep)} kept")
             rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
@@ -599,10 +601,10 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
                 fab.for_body(mesh), fixture_radius=fab.for_body(mesh).min_fixture_radius)
         snapped, caught_snapped = attempt(opts)
         if _captured(snapped) > OFFSET_GAIN * _captured(rr):
-            note = (f"ropes routed on every contracted edge and snapped into the band at least "
-                    f"{snapped.fabrication.clearance(mesh) if opts.get('inset') is None else opts['inset']:.4g} "
-                    f"inside the body: they shorten by {_captured(snapped):.4g} in the target, "
-                    f"the ropes searched inside the band by {_captured(rr):.4g}")
+            depth, r0 = snapped.params["inset"] or snapped.fabrication.clearance(mesh), fab.for_body(mesh).fixture_radius
+            small = "" if opts.get("inset") is None else f", fixtures shrunk from radius {r0:.4g} to the smallest, {snapped.fixture_radius:.4g}"
+            note = (f"ropes routed on every contracted edge and snapped into the band at least {depth:.4g} inside the body{small}: "
+                    f"they shorten by {_captured(snapped):.4g} in the target, the ropes searched inside the band by {_captured(rr):.4g}")
             rr, caught = snapped.replaced(notes=(note,) + snapped.notes), caught_snapped
     return rr, caught
 

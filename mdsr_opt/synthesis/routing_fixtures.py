@@ -27,8 +27,10 @@ design. The resolutions, in order, each recorded as a sentence in the routing's 
    ladder of :data:`N_SHRINK_STEPS` sizes from ``r_f`` down to that minimum) that keeps as many. One size
    holds for every end, since the design takes one ``anchor_radius``.
 
-Ropes that share an end node cannot occur (routing gives each node to one unit); ropes whose ends lie close
-are merged through their fixtures (step 3), not spliced into one rope.
+5. **Shared plates.** Ropes whose ends lie closer than ``r_f`` (the same node, where ropes snapped into the
+   band meet, or neighbours) keep one fixture plate between them, as step 3 allows; the routing says each
+   plate among the ropes it keeps (:func:`shared_plates`) in its ``notes`` with the ropes it holds (the SVG
+   and DXF drawings draw it once, in black). Ropes are merged through their fixtures, never spliced.
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ from ..body.muscles import Muscle
 from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
-__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius"]
+__all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius",
+           "shared_plates", "clear_part"]
 
 #: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
 MIN_FREE_FRACTION = 2.0 / 3.0
@@ -60,7 +63,8 @@ class FixtureFit:
     radius : float
         The fixture radius the ropes fit with (``fixture_radius``, or smaller down to ``min_fixture_radius``).
     notes : tuple of str
-        One sentence per resolution (an end moved inward, a rope dropped and why, the fixtures shrunk).
+        One sentence per resolution (an end moved inward, a rope dropped and why, the fixtures shrunk, a
+        fixture plate that ropes ending closer than its radius share), each once.
     dropped : tuple of (int, str)
         Per dropped rope: its input index and the reason.
     """
@@ -218,8 +222,61 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
     -------
     FixtureFit
     """
+    fit = _fitted(mesh, [list(p) for p in paths], fabrication)
+    return FixtureFit(fit.kept, fit.radius, tuple(dict.fromkeys(fit.notes)), fit.dropped)
+
+
+def clear_part(mesh, path, others, fabrication: Fabrication, radius: float) -> tuple:
+    """The longest part of rope ``path`` that can be moulded beside the ropes ``others`` (step 3, with fixtures
+    of ``radius`` and ``fabrication``'s channel and wall, every field set) and is no stub (step 2): at least
+    ``4 radius`` long. Empty when no such part exists.
+
+    Example
+    -------
+    >>> from mdsr_opt import Mesh
+    >>> mesh = Mesh.rectangle(4.0, 2.0, nx=16, ny=8)
+    >>> f = Fabrication(0.05, 0.05, 0.1, 0.1)
+    >>> row, col = list(range(4 * 17, 5 * 17)), [8 + 17 * k for k in range(1, 8)]  # y = 1 and x = 2
+    >>> part = clear_part(mesh, col, [row], f, 0.1)
+    >>> bool(len(part) == 3 and set(part) <= set(col) and abs(mesh.points[list(part), 1] - 1).min() > 0.2)
+    True
+    """
+    q = _clear_of(mesh.points, list(path), [list(getattr(o, "nodes", o)) for o in others], float(radius),
+                  fabrication.wall, fabrication.channel_diameter, float(radius) + fabrication.wall,
+                  boundary_distance(mesh))
+    if len(q) < 2 or Muscle(q).rest_length(mesh) < 4.0 * float(radius):
+        return ()
+    return q
+
+
+def shared_plates(P, paths, r: float) -> tuple:
+    """One sentence per fixture plate of radius ``r`` that ropes (node ``paths`` on the points ``P``) ending
+    closer than ``r`` share (as :func:`~mdsr_opt.synthesis.export_dxf.fixture_plates` draws them): step 5."""
+    ends = [(i, e) for i, p in enumerate(paths) for e in (p[0], p[-1])]
+    seen, out = set(), []
+    for a, (i, e) in enumerate(ends):
+        if a in seen:
+            continue
+        group, todo = {a}, [a]
+        while todo:  # ends chained closer than r form one plate
+            b = todo.pop()
+            for c, (_, f) in enumerate(ends):
+                if c not in group and np.linalg.norm(P[ends[b][1]] - P[f]) < r:
+                    group.add(c)
+                    todo.append(c)
+        seen |= group
+        ropes = sorted({ends[b][0] for b in group})
+        if len(ropes) > 1:
+            q = np.mean([P[ends[b][1]] for b in group], axis=0)
+            gap = max(np.linalg.norm(P[ends[b][1]] - P[ends[c][1]]) for b in group for c in group)
+            out.append(" and ".join(_where(P, paths[k]) for k in ropes)
+                       + f" share one end fixture at ({q[0]:.4g}, {q[1]:.4g}): their ends lie {gap:.4g} apart, "
+                       f"closer than the fixture radius {r:.4g}, so one plate holds them (one rigid part)")
+    return tuple(out)
+
+
+def _fitted(mesh, paths, fabrication: Fabrication) -> FixtureFit:
     dist = boundary_distance(mesh)
-    paths = [list(p) for p in paths]
     r0, r_min, wall = fabrication.fixture_radius, fabrication.min_fixture_radius, fabrication.wall
     c = fabrication.channel_diameter
     fit = _fit_at(mesh, paths, r0, wall, dist, c)

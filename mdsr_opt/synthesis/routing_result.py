@@ -112,7 +112,8 @@ class RoutingResult:
         The knobs used (``K_a``, ``K_b``, ``K_h``, ``n_seeds``, ``max_muscles``, ``min_length``,
         ``min_contraction``, ``max_turn``, ``seed_threshold``, ``symmetry``, ``compression_ratio``).
     dropped : tuple of DroppedUnit
-        Fragments shorter than ``min_length`` (spliced or dropped) and muscles cut by ``max_muscles``.
+        Fragments shorter than ``min_length`` (spliced or dropped), muscles cut by ``max_muscles`` and, in a
+        design's result, muscles the design took out (idle: "dropped after the design: ...").
     reflection : Reflection or None
         The mirror symmetry the muscles were routed with (None: not symmetric, or switched off).
     n_regions : int
@@ -179,6 +180,18 @@ class RoutingResult:
                         f"{s.contraction:>7.3f} {s.mean_weight:>8.4f} {s.nonuniformity:>9.2e} "
                         f"{s.turning_angle:>7.3f} {math.degrees(s.max_turn):>5.1f}")
         return "\n".join(rows)
+
+    def keeping(self, kept, dropped) -> RoutingResult:
+        """A copy with only the muscles ``kept`` after a design (their stats alike), each muscle the design
+        took out (``dropped``: :class:`~mdsr_opt.synthesis.acceptance.DroppedMuscle` s, or anything with
+        ``nodes`` and ``reason``) added to :attr:`dropped` with its reason: the routing of a result then names
+        the muscles the result has, fresh or loaded."""
+        paths = {tuple(m.nodes) for m in kept}
+        pairs = [(m, st) for m, st in zip(self.muscles, self.stats) if tuple(m.nodes) in paths]
+        out = tuple(DroppedUnit(tuple(d.nodes), float(st.rest_length), f"dropped after the design: {d.reason}")
+                    for d in dropped for m, st in zip(self.muscles, self.stats) if tuple(m.nodes) == tuple(d.nodes))
+        return self.replaced(muscles=tuple(m for m, _ in pairs), stats=tuple(st for _, st in pairs),
+                             dropped=tuple(self.dropped) + out)
 
     def replaced(self, **changes) -> RoutingResult:
         """A copy with ``changes`` (as :func:`dataclasses.replace`), its graph still unbuilt if it was."""
