@@ -78,6 +78,25 @@ def test_gap_rows_derivatives_match_finite_differences():
     assert rows.values(x)[0] == pytest.approx((d[1] * (p - a)[0] - d[0] * (p - a)[1]) / np.hypot(*d))
 
 
+def test_a_point_that_slid_past_its_segment_is_handed_to_the_segment_it_slid_to():
+    """handoff_rows: a point pressed on a bottom segment of a strip that slid 2.5 segment lengths past its end
+    goes to the segment under it (the walk along the boundary), not only to the next one; without the state,
+    to the next one."""
+    from mdsr_opt.mechanics.contact import handoff_rows
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)  # bottom segments (k, k + 1), k = 0..7, 0.5 long
+    x = mesh.points.copy()
+    p = int(np.flatnonzero((x[:, 1] == 1.0) & (x[:, 0] == 2.0))[0])
+    rows = ContactRows([[p, 1, 2]], mesh.n_nodes, w=np.zeros((1, 2)))
+    x[p] = (2.0 + 0.25 + 0.01, 0.01)  # over segment (4, 5): 2.5 lengths past node 2
+    t = rows.projections(x)
+    assert t[0] == pytest.approx(3.52)
+    assert handoff_rows(mesh, rows, [0], t, x).pts.tolist() == [[p, 4, 5]]
+    assert handoff_rows(mesh, rows, [0], t).pts.tolist() == [[p, 2, 3]]
+    back = ContactRows([[p, 6, 7]], mesh.n_nodes)  # slid the other way past node 6: (4, 5) again
+    assert handoff_rows(mesh, back, [0], back.projections(x), x).pts.tolist() == [[p, 4, 5]]
+
+
 def test_strip_pressed_onto_ground_rests_on_it_and_reactions_balance():
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     P = mesh.points

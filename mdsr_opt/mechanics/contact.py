@@ -13,10 +13,9 @@ Points are body nodes (variables) or fixed points (obstacles). The line distance
 segment while ``p`` projects inside it; a pair is made only for a point that projects within
 ``[-DELTA, 1 + DELTA]`` of the segment and lies on its outer side in the state the step starts from
 (:func:`broad_phase`), and the pairs are refreshed between solves, so a point that slides past a segment's end
-is held by the next segment (a pair that pushes a point beyond ``[-DELTA, 1 + DELTA]`` is dropped and the step
-solved again; in short load steps, or when the state then crosses, the segment next to that end takes the
-point over: :func:`handoff_rows`). A point may rest
-against the extended line up to ``DELTA`` times a segment's length beyond its end. A solve that crosses the
+is held by the next segment (a pair whose point a solve leaves beyond ``[-DELTA, 1 + DELTA]`` is dropped and
+the segment the point slid to takes it over: :func:`handoff_rows`). A point may rest against the extended
+line up to ``DELTA`` times a segment's length beyond its end. A solve that crosses the
 boundary with no new pair found (a fold within one step bringing together nodes that projected far beyond
 each other's segments at its start) adds the pairs of the state of first touch along the path
 (:func:`first_touch_rows`).
@@ -438,17 +437,29 @@ def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> Co
     return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))
 
 
-def handoff_rows(mesh, rows: ContactRows, which, t) -> ContactRows:
+def handoff_rows(mesh, rows: ContactRows, which, t, x=None) -> ContactRows:
     """Self-contact rows that take over from the rows ``which`` of ``rows`` whose point ``t`` (their
     projections) slid beyond an end of their segment: the point against the boundary segment next to that end
-    (the one before ``a`` for ``t < 0``, after ``b`` for ``t > 1``), unless the point is one of its ends."""
+    (the one before ``a`` for ``t < 0``, after ``b`` for ``t > 1``), unless the point is one of its ends.
+    Given the state ``x`` ((n, 2)), the walk along the boundary goes on past that segment, up to
+    ``ceil(|t|) + 1`` segments (the point slid that many segment lengths), to the segment nearest the point
+    there: the one its closest boundary point moved to."""
     seg, pos = boundary_segments(mesh)
     nxt, prv = _loop_neighbours(seg, len(pos))
+    X = None if x is None else np.asarray(x, dtype=float).reshape(-1, 2)
     out = set()
     for i, ti in zip(np.asarray(which, dtype=np.int64).tolist(), np.asarray(t, dtype=float).tolist()):
         p, a, b = (int(v) for v in rows.pts[i])
-        a2, b2 = (int(prv[a]), a) if ti < 0 else (b, int(nxt[b]))
-        if min(a2, b2) >= 0 and p not in (a2, b2):
-            out.add((p, a2, b2))
+        best = None
+        hops = 1 if X is None else int(np.ceil(abs(ti if ti < 0 else ti - 1.0))) + 1
+        for _ in range(hops):
+            a, b = (int(prv[a]), a) if ti < 0 else (b, int(nxt[b]))
+            if min(a, b) < 0 or p in (a, b):
+                break
+            d = 0.0 if X is None else float(_point_segment(X[[p]], X[[a]], X[[b]])[0][0])
+            if best is None or d < best[0]:
+                best = (d, (p, a, b))
+        if best is not None:
+            out.add(best[1])
     P = np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
     return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))

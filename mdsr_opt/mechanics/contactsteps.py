@@ -30,12 +30,13 @@ def _empty(prob) -> ContactRows:
 
 
 def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_iter, options, final, loose,
-                 rho: float = 0.0, handoff: bool = False):
+                 rho: float = 0.0):
     """Solve one load step from ``guess`` (``x_ref``: the admissible state it started from) with pairs
     refreshed (module docstring of :mod:`~mdsr_opt.mechanics.contactsolve`): ``(outcome, rows)``. With
-    ``rho > 0`` a proximal step (``rho/2 |x - x_ref|^2`` added to the energy). A pair that pushes its point
-    beyond its segment's end is dropped; with ``handoff`` the segment next to that end takes the point over at
-    once (:func:`~mdsr_opt.mechanics.contact.handoff_rows`), else only when the state crosses with no new pair."""
+    ``rho > 0`` a proximal step (``rho/2 |x - x_ref|^2`` added to the energy). A pair whose point is beyond
+    its segment's end is dropped and the segment the point slid to takes it over
+    (:func:`~mdsr_opt.mechanics.contact.handoff_rows`); where the point already touches that segment, before
+    the last load step, without a new solve (:func:`_hand_over`)."""
     rows = prob.rows_for(x_ref, [x_ref, guess])
     drop: set = set()
     its, t_solve, t_build = 0, 0.0, 0.0
@@ -71,18 +72,19 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         x1 = out.x
         why = prob.penetrates(x1)
         new = merge_rows(rows, prob.rows_for(x_ref, [x_ref, guess, x1]), drop)
-        bad = np.zeros(rows.n_rows, dtype=bool)
-        if rows.n_rows:  # a pair pushing a point beyond its segment's end holds it against the extended line
+        swapped, swap_in = set(), set()
+        if rows.n_rows:  # a pair whose point is beyond its segment's end holds it against the extended line:
+            # dropped, its point handed to the segment it slid to
             t = rows.projections(x1)
-            bad = (lam_c > 1e-9) & ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
-            for i in np.flatnonzero(bad):
+            outside = ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
+            for i in np.flatnonzero(outside):
                 drop.add(row_key(rows, i))
-            if bad.any():
-                new = merge_rows(new, handoff_rows(prob.mesh, rows, np.flatnonzero(bad), t[bad]) if handoff
-                                 else _empty(prob), drop)
-                # kept for a crossing no pair prevents: the segment next to the end the point slid past
-                handed = merge_rows(handed, handoff_rows(prob.mesh, rows, np.flatnonzero(bad), t[bad]))
-        grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
+            if outside.any():
+                hand, swapped, swap_in = _hand_over(prob, rows, np.flatnonzero(outside), t, x1, step_tol, final)
+                new = merge_rows(new, hand, drop)
+                handed = merge_rows(handed, hand)  # kept for a crossing no pair prevents
+        grew = {row_key(new, i) for i in range(new.n_rows)} - swap_in != \
+            {row_key(rows, i) for i in range(rows.n_rows)} - swapped
         if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
             new = merge_rows(merge_rows(new, handed, drop), first_touch_rows(prob.mesh, x_ref, x1,
                                                                               1e-9 * prob.mesh.size), drop)
@@ -116,6 +118,28 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         out.status += f"; contact pairs still changing after {MAX_REFRESH} solves"
     out.iterations, out.solve_time, out.build_time = its, t_solve, t_build
     return out, rows
+
+
+def _hand_over(prob, rows, which, t, x1, tol, final):
+    """The rows that take over from the rows ``which`` whose points (projections ``t``) are beyond their
+    segments' ends in the solve's state ``x1``: ``(rows, keys swapped out, keys swapped in)``. A point's new
+    segment is the one its closest boundary point moved to (:func:`~mdsr_opt.mechanics.contact.handoff_rows`).
+    Before the last load step (``final`` False), where the point already touches that segment in ``x1``
+    (projecting onto it, its gap within the stated gap, or ``100 tol`` of the size, of the bound) the state
+    needs no new solve for it: the pair is swapped (a point sliding along a face past several of its
+    segments within one load step, as on a fine mesh)."""
+    gtol = max(prob.spec.gap, 100.0 * tol * prob.mesh.size)
+    hand, out, inn = _empty(prob), set(), set()
+    for i in which:
+        h = handoff_rows(prob.mesh, rows, [i], [t[i]], x1)
+        if not h.n_rows:
+            continue
+        hand = merge_rows(hand, h)
+        th = float(h.projections(x1)[0])
+        if not final and abs(float(h.values(x1)[0]) - prob.spec.gap) <= gtol and -DELTA <= th <= 1 + DELTA:
+            out.add(row_key(rows, i))
+            inn.add(row_key(h, 0))
+    return hand, out, inn
 
 
 def _kick(prob, p, x, direction, fixed, amp):
@@ -232,8 +256,7 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
                     ds /= 2
                     continue
             cap = max_iter if ds < 4 * min_step else min(max_iter, 100)
-            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose,
-                                  handoff=escape)
+            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose)
             lam_last = out.lam_g if r.n_rows else None
             iters += out.iterations
             t_solve += out.solve_time

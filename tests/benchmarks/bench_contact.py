@@ -9,6 +9,13 @@ contact), and the library gripper's jaws closing with inner-rim muscles at 30 %.
 
     python tests/benchmarks/bench_contact.py            # 40 x 10 strips (451 nodes)
     python tests/benchmarks/bench_contact.py --nx 80 --repeat 1
+
+``--turn 40,80,160`` instead solves the 90-degree turn of issue 35 once per mesh (the 4 x 1 strip, nx x nx/4
+cells, left end clamped, right end turned by -90 degrees about its centre and moved by (-2, 2), with
+self-contact) and prints per mesh: nodes, time, load steps, whether the outline crosses itself (shapely),
+stability, the start (rest x) of the inner side's touching stretch and the total contact force.
+
+    python tests/benchmarks/bench_contact.py --turn 40,80,160
 """
 
 from __future__ import annotations
@@ -68,11 +75,45 @@ def gripper():
             lambda: solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True))
 
 
+def turn(nx: int):
+    """The 90-degree turn on ``nx`` x ``nx/4`` cells: ``(mesh, result, seconds)``."""
+    mesh = Mesh.rectangle(4.0, 1.0, nx, nx // 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    c, th = np.array([4.0, 0.5]), np.radians(-90.0)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    drags = {int(i): tuple(c + R @ (P[i] - c) + np.array([-2.0, 2.0])) for i in right}
+    t0 = time.perf_counter()
+    res = solve_external(mesh, MAT, left, drags, contact=True)
+    return mesh, res, time.perf_counter() - t0
+
+
+def turn_study(sizes) -> None:
+    """Print the turn's contact region per mesh (module docstring)."""
+    from shapely.geometry import Polygon
+
+    print(f"{'cells':>8s} {'nodes':>6s} {'time s':>8s} {'steps':>5s} {'ok':>3s} {'valid':>5s} {'stable':>6s} "
+          f"{'start x':>7s} {'force':>8s}  status")
+    for nx in sizes:
+        mesh, res, t = turn(nx)
+        P = mesh.points
+        valid = Polygon(res.x[mesh.boundary_loops[0]]).is_valid  # shapely: the outline does not cross itself
+        touch = sorted({q for pr in res.contact["pairs"] for q in pr["nodes"] if q >= 0 and P[q, 1] == 0.0})
+        start = float(P[touch, 0].min()) if touch else float("nan")
+        print(f"{nx:>4d}x{nx // 4:<3d} {mesh.n_nodes:6d} {t:8.1f} {len(res.steps):5d} "
+              f"{'yes' if res.success else 'no':>3s} {valid!s:>5s} {bool(res.stable)!s:>6s} {start:7.3f} "
+              f"{res.contact['total_force']:8.5f}  {res.status[:70]}", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--nx", type=int, default=40, help="cells along the strip (nx/4 across)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per solve (the best is reported)")
+    ap.add_argument("--turn", default=None, help="comma-separated nx: the 90-degree turn's refinement study")
     args = ap.parse_args(argv)
+    if args.turn:
+        turn_study([int(v) for v in args.turn.split(",")])
+        return 0
     print(f"{'scene':10s} {'case':20s} {'plain s':>9s} {'ok':>3s} {'contact s':>10s} {'ok':>3s} {'ratio':>6s} "
           f"{'pairs':>5s}  status (contact)")
     for kind, name, plain, contact in [*scenes(args.nx), gripper()]:
