@@ -84,6 +84,47 @@ def test_node_loads_share_the_weight_by_area():
     assert Nf.sum() == pytest.approx(3.0) and np.all(Nf[np.setdiff1d(np.arange(mesh.n_nodes), feet)] == 0)
 
 
+def test_feet_loads_do_not_depend_on_the_mesh():
+    """A foot's weight is a uniform pressure on the area its nodes cover (the triangles with three feet
+    corners): on a refinement that keeps the feet nodes and adds the midpoints between them (everywhere, or
+    near a point only) each foot carries the same share and its centre of pressure is the same point, the
+    centroid of that area (exact for the consistent load); nodes of no covered triangle carry nothing; a foot
+    of nodes that cover no triangle is refused."""
+    from mdsr_opt.synthesis.walkstudy import refine_walker
+
+    mesh, mus, _ = _inchworm(16, 4)
+    P = mesh.points
+    feet = {"rear": np.flatnonzero(np.hypot(P[:, 0] - 0.5, P[:, 1] - 0.5) < 0.4),
+            "front": np.flatnonzero(P[:, 0] > 3.6)}
+    every = np.concatenate(list(feet.values()))
+
+    def figures(m, sets):
+        N = node_loads(m, 2.0, np.concatenate(list(sets.values())))
+        return [(N[v].sum(), N[v] @ m.points[v] / N[v].sum()) for v in sets.values()]
+
+    inside = np.zeros(mesh.n_nodes, bool)
+    inside[feet["rear"]] = True
+    cov = inside[mesh.triangles].all(1)
+    centroid = (mesh.areas[cov] @ P[mesh.triangles[cov]].mean(1)) / mesh.areas[cov].sum()
+    base = figures(mesh, feet)
+    assert base[0][1] == pytest.approx(centroid, abs=1e-12)
+    share = mesh.areas[cov].sum() / (mesh.areas[cov].sum() + 0.25 * 1.0)  # the front foot covers x >= 3.75
+    assert base[0][0] == pytest.approx(2.0 * share, rel=1e-12)
+    m, ms, sets = mesh, mus, feet
+    for near in (None, P[mus[0].nodes[0]][None]):
+        m, ms, sets, _ = refine_walker(m, ms, sets, near=near, distance=None if near is None else 0.5)
+        for (w0, c0), (w1, c1) in zip(base, figures(m, sets)):
+            assert w1 == pytest.approx(w0, rel=1e-12) and np.allclose(c1, c0, atol=1e-12)
+    lumped = np.zeros(mesh.n_nodes)  # the nodes' lumped areas would move the rear foot's share with the mesh
+    np.add.at(lumped, mesh.triangles.reshape(-1), np.repeat(mesh.areas / 3, 3))
+    assert abs(lumped[feet["rear"]].sum() / lumped[every].sum() - share) > 0.01
+    lone = int(np.argmin(np.hypot(P[:, 0] - 2.0, P[:, 1] - 0.5)))  # a feet node of no covered triangle
+    N = node_loads(mesh, 1.0, np.append(every, lone))
+    assert N[lone] == 0 and np.allclose(N, node_loads(mesh, 1.0, every), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="feet cover no triangle"):
+        node_loads(mesh, 1.0, [0, 20])
+
+
 def test_rigid_motion_recovers_a_rigid_motion():
     rng = np.random.default_rng(0)
     X = rng.normal(size=(20, 2))
@@ -337,3 +378,46 @@ def test_inchworm_walk_refinement_with_one_layout_converges():
     assert np.allclose(line.get_xdata(), [85, 297, 1105])
     assert np.allclose(line.get_ydata(), [r.distance[-1] for _, r in runs], rtol=1e-12)
     plt.close(fig)
+
+
+def test_refine_walker_near_points_splits_only_there_and_stays_conforming():
+    """Local refinement near a rope's end: the triangles with a corner within the distance split into four and
+    no far triangle changes; the mesh stays conforming (the same area and boundary, no hanging node: every
+    interior edge has two triangles), its smallest angle at least a quarter of the base's; the rope keeps its rest
+    polyline and length on mesh edges; a foot gains only midpoints of its own split edges; an affine state is
+    carried exactly; the end's patch, one node before, holds several after two rounds."""
+    from mdsr_opt.mechanics.anchors import anchor_patches
+    from mdsr_opt.synthesis.walkstudy import refine_walker
+
+    mesh, mus, feet = _inchworm(16, 4)
+    P = mesh.points
+    end = P[mus[0].nodes[0]]
+    A = np.array([[1.1, 0.2], [-0.3, 0.9]])
+    radius = 0.15
+    assert [len(p) for p in anchor_patches(mesh, mus, radius)[0]] == [1, 1]
+    m, ms, sets, x = mesh, mus, feet, P @ A.T
+    for d in (0.4, 0.2):
+        m, ms, sets, x = refine_walker(m, ms, sets, x, near=end[None], distance=d)
+    assert mesh.n_nodes < m.n_nodes < 297  # one uniform split gives 297
+    assert m.area == pytest.approx(mesh.area, rel=1e-12) and np.all(m.areas > 0)
+    bl = lambda q: np.linalg.norm(np.diff(q.points[q.boundary_edges], axis=1), axis=2).sum()
+    assert bl(m) == pytest.approx(bl(mesh), rel=1e-12) and len(m.boundary_loops) == 1
+    assert m.quality()["min_angle_deg"] >= 0.25 * mesh.quality()["min_angle_deg"]  # a halved one halved again at most
+    far = np.hypot(*(P[mesh.triangles].mean(1) - end).T) > 1.5  # triangles far away: unchanged
+    kept = {tuple(sorted(t)) for t in m.triangles.tolist()}
+    assert all(tuple(sorted(t)) in kept for t in mesh.triangles[far].tolist())
+    near = np.hypot(*(m.points[m.triangles].mean(1) - end).T) < 0.2
+    assert m.areas[near].max() <= 1.01 * mesh.areas.max() / 16  # twice split into four there
+    f = ms[0]
+    f.check_on(m)
+    assert f.rest_length(m) == pytest.approx(mus[0].rest_length(mesh), rel=1e-12)
+    assert np.allclose(m.points[list(f.nodes), 1], 0.5) and len(f.nodes) > len(mus[0].nodes)
+    for k, v in feet.items():  # the same piece of the body: its nodes and midpoints between them
+        assert set(v) <= set(sets[k].tolist())
+        lo, hi = P[v, 0].min(), P[v, 0].max()
+        assert np.all((m.points[sets[k], 0] >= lo - 1e-12) & (m.points[sets[k], 0] <= hi + 1e-12))
+    assert np.allclose(x, m.points @ A.T, atol=1e-12)
+    start, _ = anchor_patches(m, ms, radius)[0]
+    assert len(start) >= 5
+    with pytest.raises(ValueError, match="distance a length > 0"):
+        refine_walker(mesh, mus, near=end[None], distance=0.0)
