@@ -373,10 +373,15 @@ def test_inchworm_walk_refinement_with_one_layout_converges():
     import matplotlib.pyplot as plt
     from mdsr_opt.plot.walk import plot_walk_refinement
 
-    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])  # the study's chart: distance against nodes
+    from mdsr_opt.synthesis.walkstudy import richardson
+
+    est = richardson([r.distance[-1] for _, r in runs])
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs], estimate=est)  # distance against nodes
     line = [ln for ln in fig.axes[0].lines if ln.get_label() == "last cycle"][0]
     assert np.allclose(line.get_xdata(), [85, 297, 1105])
     assert np.allclose(line.get_ydata(), [r.distance[-1] for _, r in runs], rtol=1e-12)
+    limit = [ln for ln in fig.axes[0].lines if ln.get_label().startswith("limit")][0]
+    assert np.allclose(limit.get_ydata(), est["extrapolated"]) and "Richardson" in limit.get_label()
     plt.close(fig)
 
 
@@ -421,3 +426,19 @@ def test_refine_walker_near_points_splits_only_there_and_stays_conforming():
     assert len(start) >= 5
     with pytest.raises(ValueError, match="distance a length > 0"):
         refine_walker(mesh, mus, near=end[None], distance=0.0)
+
+
+def test_richardson_estimates_the_limit_of_a_refinement_study():
+    from mdsr_opt.synthesis.walkstudy import richardson
+
+    e = richardson([1.4, 1.1, 1.025])  # 1 + 0.4 h^2 for h = 1, 1/2, 1/4: second order, limit 1
+    assert e["ratios"] == pytest.approx([0.25]) and e["order"] == pytest.approx(2.0)
+    assert e["extrapolated"] == pytest.approx(1.0) and e["error"] == pytest.approx(0.025)
+    a = richardson([0.26, 0.273, 0.2728])  # changes of alternating sign, shrinking: the last value +- last change
+    assert a["order"] is None and a["extrapolated"] == 0.2728 and a["error"] == pytest.approx(0.0002)
+    g = richardson([0.932, 0.941, 1.124])  # growing changes: no estimate
+    assert g["ratios"][0] > 1 and g["extrapolated"] is None and g["error"] is None
+    with pytest.raises(TypeError, match="real number"):
+        richardson(["1.0", 2.0])
+    with pytest.raises(ValueError, match="two finite numbers"):
+        richardson([1.0])

@@ -66,8 +66,9 @@ def plot_walk_refinement(levels, ax=None, title: str | None = None, estimate: di
     if estimate is not None and estimate.get("extrapolated") is not None:
         v, e = float(estimate["extrapolated"]), float(estimate["error"])
         ax.axhspan(v - e, v + e, color="#1f77b4", alpha=0.12, lw=0)
-        ax.axhline(v, color="#1f77b4", ls="--", lw=1,
-                   label=f"extrapolated {v:.4g} ± {e:.2g} (order {estimate['order']:.2g})")
+        order = estimate.get("order")
+        ax.axhline(v, color="#1f77b4", ls="--", lw=1, label=f"limit {v:.4g} ± {e:.2g}"
+                   + (f" (Richardson, order {order:.2g})" if order is not None else " (last change)"))
     bad = np.array([not bool(np.all(r.success)) for _, r in levels])
     if bad.any():
         ax.plot(n[bad], last[bad], "rx", ms=9, label="a frame failed")

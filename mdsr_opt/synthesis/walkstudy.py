@@ -183,11 +183,11 @@ def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, fram
 
 def richardson(values) -> dict:
     """The convergence of a quantity over nested refinements (each halving the mesh size), coarsest first:
-    ``changes`` from one level to the next, their ``ratios``, and from the last three values, when the last two
-    changes have one sign and shrink (``0 < q < 1``, ``q`` the last ratio), the observed ``order``
-    ``log2(1/q)``, the ``extrapolated`` limit ``v + d q / (1 - q)`` (``v`` the last value, ``d`` the last change:
-    the changes continued as a geometric series) and its ``error`` estimate ``|d q / (1 - q)|`` (the distance of
-    the last value from it); else these three are None."""
+    ``changes`` from one level to the next and their ``ratios``; from the last two changes (``d`` the last,
+    ``q`` its ratio to the one before, ``v`` the last value), when they shrink (``|q| < 1``): with one sign
+    (``q > 0``) the observed ``order`` ``log2(1/q)``, the ``extrapolated`` limit ``v + d q / (1 - q)`` (the
+    changes continued as a geometric series) and its ``error`` ``|d q / (1 - q)|``; with alternating signs the
+    limit ``v`` with the error ``|d|`` (order None). Else (changes that do not shrink) those three are None."""
     v = as_float_array(values, "values").reshape(-1)
     if len(v) < 2 or not np.isfinite(v).all():
         raise ValueError(f"values must be two finite numbers or more, got {v.tolist()}")
@@ -199,4 +199,6 @@ def richardson(values) -> dict:
         q = ratios[-1]
         tail = float(d[-1] * q / (1.0 - q))
         out.update(order=float(np.log2(1.0 / q)), extrapolated=float(v[-1] + tail), error=abs(tail))
+    elif ratios and -1.0 < ratios[-1] <= 0.0:
+        out.update(extrapolated=float(v[-1]), error=float(abs(d[-1])))
     return out

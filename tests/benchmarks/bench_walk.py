@@ -97,8 +97,9 @@ def main(argv=None) -> int:
         print("change from one level to the next: " + ", ".join(f"{v:+.4f}" for v in est["changes"])
               + "".join(f" (ratio {q:.2f})" for q in est["ratios"]))
         if est["extrapolated"] is not None:
-            print(f"Richardson: limit {est['extrapolated']:.4f} +- {est['error']:.4f} {runs[0][1].units} per cycle, "
-                  f"observed order {est['order']:.2f}")
+            print(f"limit {est['extrapolated']:.4f} +- {est['error']:.4f} {runs[0][1].units} per cycle "
+                  + (f"(Richardson, observed order {est['order']:.2f})" if est["order"] is not None
+                     else "(the last change: the changes alternate in sign)"))
     import matplotlib
     matplotlib.use("Agg")
     fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs], estimate=est)
