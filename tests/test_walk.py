@@ -442,3 +442,14 @@ def test_richardson_estimates_the_limit_of_a_refinement_study():
         richardson(["1.0", 2.0])
     with pytest.raises(ValueError, match="two finite numbers"):
         richardson([1.0])
+
+
+@pytest.mark.parametrize("local, err, msg", [([0.0], ValueError, "local must be distances > 0"),
+                                             ([np.inf], ValueError, "local contains NaN or inf"),
+                                             (["0.4"], TypeError, "real number")])
+def test_walk_refinement_refuses_bad_local_distances_at_the_door(local, err, msg):
+    from mdsr_opt.synthesis.walkstudy import walk_refinement
+
+    mesh, mus, feet = _inchworm(8, 2)
+    with pytest.raises(err, match=msg):
+        walk_refinement(mesh, MAT, mus, INCH_S, levels=1, local=local, feet_groups=feet, touching=INCH_T)
