@@ -329,6 +329,42 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
     assert dist.max() - dist.min() <= 0.02 * dist.max()
 
 
+@pytest.mark.slow
+def test_library_gecko_walks_on_a_mesh_that_resolves_its_rope_ends():
+    """The gecko's layout on its coarse mesh refined twice near the ropes' ends (411 nodes; each end patch of
+    radius 0.19 cm holds 10-18 nodes, one node on the coarse mesh): the gait on diagonal feet solves every
+    frame, the planted feet never slide as a whole, and it walks 1.14 cm in its first cycle where the coarse
+    mesh's point-like ends walk 0.93 (the refinement study, tests/benchmarks/bench_walk.py: 1.141 on 411 nodes,
+    1.229 on 1543); with mu = 0 the same cycle goes nowhere (a body on ice, to 1e-5 of its size)."""
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
+
+    gecko = load_script("problems/gecko.py")
+    sc = gecko.build("coarse")
+    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
+    lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
+                       routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
+    F = len(sc.gait.sequence) * sc.gait.frames_per_step
+    T = np.zeros((F, 4), dtype=bool)
+    T[: F // 2, [0, 3]] = True
+    T[F // 2:, [1, 2]] = True
+    out = {}
+    for mu in (0.5, 0.0):
+        _, [(mesh, r)] = walk_scene_refinement(sc, lay, levels=1, local=(0.4, 0.2), mu=mu, cycles=1, touching=T)
+        assert r.success.all(), [r.status[k] for k in np.flatnonzero(~r.success)]
+        out[mu] = r
+    assert mesh.n_nodes == 411
+    walked = out[0.5]
+    assert walked.distance[0] == pytest.approx(1.141, abs=0.02)
+    names = list(walked.feet_slipping)
+    down = np.vstack([T[:1], T, T[:1]])  # the feet down in each state's frame (the start, the cycle, its close)
+    for g, name in enumerate(names):
+        assert not walked.feet_slipping[name][1:][down[1:, g]].any()
+    assert out[0.0].distance[0] < 1e-5 * sc.mesh.size
+    assert np.abs(out[0.0].states - out[0.0].states[1]).max() > 0.05 * sc.mesh.size  # it did bend
+
+
 def test_refine_walker_keeps_ropes_feet_and_state():
     """One split level: the ropes run through the same rest polyline (same rest length, every new node on it),
     every segment a mesh edge; a foot keeps its nodes and gains only midpoints of its own edges; a state that is

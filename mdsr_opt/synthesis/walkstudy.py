@@ -6,7 +6,15 @@ Each level splits every triangle of the last into four through its edge midpoint
 rope's rest polyline stay where they were (a rope through nodes ``a, b`` runs through ``a``, the midpoint of
 ``ab``, ``b``), the strokes keep their meaning (the same rest lengths), and a foot is the same piece of the body
 (its nodes and the midpoints of the edges between them). A layout designed anew on each mesh would change the
-ropes, the strokes and the feet with it, and the study would not show the mesh's own error.
+ropes, the strokes and the feet with it, and the study would not show the mesh's own error. The feet's weight
+rests on the area they cover (:func:`~mdsr_opt.synthesis.walk.node_loads`), the same on every level.
+
+The levels start from a base mesh that resolves what is smallest: a rope's end patch (``anchor_radius``, 4 % of
+the body's size by default) narrower than the design mesh's edges holds a single node, a point force under which
+the body's displacement grows without bound as the mesh refines, so the body bends less and less for the same
+strokes until the patch spans several elements. ``local`` refines the mesh near the ropes' ends first (red-green:
+nested and conforming, :func:`refine_walker` with ``near``). :func:`richardson` estimates the limit from the
+last three levels.
 
 :func:`walk_refinement` walks a stroke schedule on ``levels`` such meshes; :func:`walk_scene_refinement` designs
 nothing, it takes a scene's gait schedule of a given layout (on the scene's mesh) and walks it on the refinements.

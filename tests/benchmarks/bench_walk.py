@@ -6,7 +6,9 @@ one node on the coarse mesh (0.43 cm edges), a point force that sinks further in
 body bends less for the same strokes until the patches are resolved (10-18 nodes each). Weight on two diagonal
 feet at a time (front left and hind right for the first half of the cycle, the other pair for the second),
 mu 0.5. Prints the distance per cycle on each mesh, its changes and their Richardson estimate, and writes the
-chart.
+chart. The coarse mesh's legs are about one element wide, so its far field bends too stiffly as well: a round
+with a distance beyond the body's size splits every triangle (``--local 20 0.3``: the coarse mesh split once,
+then refined near the ends: 795, 3000, 11643 nodes).
 
     python tests/benchmarks/bench_walk.py                     # 3 levels (411, 1543, 5973 nodes), 2 cycles
     python tests/benchmarks/bench_walk.py --local             # the coarse mesh's own refinements (146, 496, 1811)
