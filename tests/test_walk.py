@@ -84,6 +84,47 @@ def test_node_loads_share_the_weight_by_area():
     assert Nf.sum() == pytest.approx(3.0) and np.all(Nf[np.setdiff1d(np.arange(mesh.n_nodes), feet)] == 0)
 
 
+def test_feet_loads_do_not_depend_on_the_mesh():
+    """A foot's weight is a uniform pressure on the area its nodes cover (the triangles with three feet
+    corners): on a refinement that keeps the feet nodes and adds the midpoints between them (everywhere, or
+    near a point only) each foot carries the same share and its centre of pressure is the same point, the
+    centroid of that area (exact for the consistent load); nodes of no covered triangle carry nothing; a foot
+    of nodes that cover no triangle is refused."""
+    from mdsr_opt.synthesis.walkstudy import refine_walker
+
+    mesh, mus, _ = _inchworm(16, 4)
+    P = mesh.points
+    feet = {"rear": np.flatnonzero(np.hypot(P[:, 0] - 0.5, P[:, 1] - 0.5) < 0.4),
+            "front": np.flatnonzero(P[:, 0] > 3.6)}
+    every = np.concatenate(list(feet.values()))
+
+    def figures(m, sets):
+        N = node_loads(m, 2.0, np.concatenate(list(sets.values())))
+        return [(N[v].sum(), N[v] @ m.points[v] / N[v].sum()) for v in sets.values()]
+
+    inside = np.zeros(mesh.n_nodes, bool)
+    inside[feet["rear"]] = True
+    cov = inside[mesh.triangles].all(1)
+    centroid = (mesh.areas[cov] @ P[mesh.triangles[cov]].mean(1)) / mesh.areas[cov].sum()
+    base = figures(mesh, feet)
+    assert base[0][1] == pytest.approx(centroid, abs=1e-12)
+    share = mesh.areas[cov].sum() / (mesh.areas[cov].sum() + 0.25 * 1.0)  # the front foot covers x >= 3.75
+    assert base[0][0] == pytest.approx(2.0 * share, rel=1e-12)
+    m, ms, sets = mesh, mus, feet
+    for near in (None, P[mus[0].nodes[0]][None]):
+        m, ms, sets, _ = refine_walker(m, ms, sets, near=near, distance=None if near is None else 0.5)
+        for (w0, c0), (w1, c1) in zip(base, figures(m, sets)):
+            assert w1 == pytest.approx(w0, rel=1e-12) and np.allclose(c1, c0, atol=1e-12)
+    lumped = np.zeros(mesh.n_nodes)  # the nodes' lumped areas would move the rear foot's share with the mesh
+    np.add.at(lumped, mesh.triangles.reshape(-1), np.repeat(mesh.areas / 3, 3))
+    assert abs(lumped[feet["rear"]].sum() / lumped[every].sum() - share) > 0.01
+    lone = int(np.argmin(np.hypot(P[:, 0] - 2.0, P[:, 1] - 0.5)))  # a feet node of no covered triangle
+    N = node_loads(mesh, 1.0, np.append(every, lone))
+    assert N[lone] == 0 and np.allclose(N, node_loads(mesh, 1.0, every), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="feet cover no triangle"):
+        node_loads(mesh, 1.0, [0, 20])
+
+
 def test_rigid_motion_recovers_a_rigid_motion():
     rng = np.random.default_rng(0)
     X = rng.normal(size=(20, 2))
@@ -288,6 +329,42 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
     assert dist.max() - dist.min() <= 0.02 * dist.max()
 
 
+@pytest.mark.slow
+def test_library_gecko_walks_on_a_mesh_that_resolves_its_rope_ends():
+    """The gecko's layout on its coarse mesh refined twice near the ropes' ends (411 nodes; each end patch of
+    radius 0.19 cm holds 10-18 nodes, one node on the coarse mesh): the gait on diagonal feet solves every
+    frame, the planted feet never slide as a whole, and it walks 1.14 cm in its first cycle where the coarse
+    mesh's point-like ends walk 0.93 (the refinement study, tests/benchmarks/bench_walk.py: 1.141 on 411 nodes,
+    1.229 on 1543); with mu = 0 the same cycle goes nowhere (a body on ice, to 1e-5 of its size)."""
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
+
+    gecko = load_script("problems/gecko.py")
+    sc = gecko.build("coarse")
+    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
+    lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
+                       routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
+    F = len(sc.gait.sequence) * sc.gait.frames_per_step
+    T = np.zeros((F, 4), dtype=bool)
+    T[: F // 2, [0, 3]] = True
+    T[F // 2:, [1, 2]] = True
+    out = {}
+    for mu in (0.5, 0.0):
+        _, [(mesh, r)] = walk_scene_refinement(sc, lay, levels=1, local=(0.4, 0.2), mu=mu, cycles=1, touching=T)
+        assert r.success.all(), [r.status[k] for k in np.flatnonzero(~r.success)]
+        out[mu] = r
+    assert mesh.n_nodes == 411
+    walked = out[0.5]
+    assert walked.distance[0] == pytest.approx(1.141, abs=0.02)
+    names = list(walked.feet_slipping)
+    down = np.vstack([T[:1], T, T[:1]])  # the feet down in each state's frame (the start, the cycle, its close)
+    for g, name in enumerate(names):
+        assert not walked.feet_slipping[name][1:][down[1:, g]].any()
+    assert out[0.0].distance[0] < 1e-5 * sc.mesh.size
+    assert np.abs(out[0.0].states - out[0.0].states[1]).max() > 0.05 * sc.mesh.size  # it did bend
+
+
 def test_refine_walker_keeps_ropes_feet_and_state():
     """One split level: the ropes run through the same rest polyline (same rest length, every new node on it),
     every segment a mesh edge; a foot keeps its nodes and gains only midpoints of its own edges; a state that is
@@ -332,8 +409,83 @@ def test_inchworm_walk_refinement_with_one_layout_converges():
     import matplotlib.pyplot as plt
     from mdsr_opt.plot.walk import plot_walk_refinement
 
-    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])  # the study's chart: distance against nodes
+    from mdsr_opt.synthesis.walkstudy import richardson
+
+    est = richardson([r.distance[-1] for _, r in runs])
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs], estimate=est)  # distance against nodes
     line = [ln for ln in fig.axes[0].lines if ln.get_label() == "last cycle"][0]
     assert np.allclose(line.get_xdata(), [85, 297, 1105])
     assert np.allclose(line.get_ydata(), [r.distance[-1] for _, r in runs], rtol=1e-12)
+    limit = [ln for ln in fig.axes[0].lines if ln.get_label().startswith("limit")][0]
+    assert np.allclose(limit.get_ydata(), est["extrapolated"]) and "Richardson" in limit.get_label()
     plt.close(fig)
+
+
+def test_refine_walker_near_points_splits_only_there_and_stays_conforming():
+    """Local refinement near a rope's end: the triangles with a corner within the distance split into four and
+    no far triangle changes; the mesh stays conforming (the same area and boundary, no hanging node: every
+    interior edge has two triangles), its smallest angle at least a quarter of the base's; the rope keeps its rest
+    polyline and length on mesh edges; a foot gains only midpoints of its own split edges; an affine state is
+    carried exactly; the end's patch, one node before, holds several after two rounds."""
+    from mdsr_opt.mechanics.anchors import anchor_patches
+    from mdsr_opt.synthesis.walkstudy import refine_walker
+
+    mesh, mus, feet = _inchworm(16, 4)
+    P = mesh.points
+    end = P[mus[0].nodes[0]]
+    A = np.array([[1.1, 0.2], [-0.3, 0.9]])
+    radius = 0.15
+    assert [len(p) for p in anchor_patches(mesh, mus, radius)[0]] == [1, 1]
+    m, ms, sets, x = mesh, mus, feet, P @ A.T
+    for d in (0.4, 0.2):
+        m, ms, sets, x = refine_walker(m, ms, sets, x, near=end[None], distance=d)
+    assert mesh.n_nodes < m.n_nodes < 297  # one uniform split gives 297
+    assert m.area == pytest.approx(mesh.area, rel=1e-12) and np.all(m.areas > 0)
+    bl = lambda q: np.linalg.norm(np.diff(q.points[q.boundary_edges], axis=1), axis=2).sum()
+    assert bl(m) == pytest.approx(bl(mesh), rel=1e-12) and len(m.boundary_loops) == 1
+    assert m.quality()["min_angle_deg"] >= 0.25 * mesh.quality()["min_angle_deg"]  # a halved one halved again at most
+    far = np.hypot(*(P[mesh.triangles].mean(1) - end).T) > 1.5  # triangles far away: unchanged
+    kept = {tuple(sorted(t)) for t in m.triangles.tolist()}
+    assert all(tuple(sorted(t)) in kept for t in mesh.triangles[far].tolist())
+    near = np.hypot(*(m.points[m.triangles].mean(1) - end).T) < 0.2
+    assert m.areas[near].max() <= 1.01 * mesh.areas.max() / 16  # twice split into four there
+    f = ms[0]
+    f.check_on(m)
+    assert f.rest_length(m) == pytest.approx(mus[0].rest_length(mesh), rel=1e-12)
+    assert np.allclose(m.points[list(f.nodes), 1], 0.5) and len(f.nodes) > len(mus[0].nodes)
+    for k, v in feet.items():  # the same piece of the body: its nodes and midpoints between them
+        assert set(v) <= set(sets[k].tolist())
+        lo, hi = P[v, 0].min(), P[v, 0].max()
+        assert np.all((m.points[sets[k], 0] >= lo - 1e-12) & (m.points[sets[k], 0] <= hi + 1e-12))
+    assert np.allclose(x, m.points @ A.T, atol=1e-12)
+    start, _ = anchor_patches(m, ms, radius)[0]
+    assert len(start) >= 5
+    with pytest.raises(ValueError, match="distance a length > 0"):
+        refine_walker(mesh, mus, near=end[None], distance=0.0)
+
+
+def test_richardson_estimates_the_limit_of_a_refinement_study():
+    from mdsr_opt.synthesis.walkstudy import richardson
+
+    e = richardson([1.4, 1.1, 1.025])  # 1 + 0.4 h^2 for h = 1, 1/2, 1/4: second order, limit 1
+    assert e["ratios"] == pytest.approx([0.25]) and e["order"] == pytest.approx(2.0)
+    assert e["extrapolated"] == pytest.approx(1.0) and e["error"] == pytest.approx(0.025)
+    a = richardson([0.26, 0.273, 0.2728])  # changes of alternating sign, shrinking: the last value +- last change
+    assert a["order"] is None and a["extrapolated"] == 0.2728 and a["error"] == pytest.approx(0.0002)
+    g = richardson([0.932, 0.941, 1.124])  # growing changes: no estimate
+    assert g["ratios"][0] > 1 and g["extrapolated"] is None and g["error"] is None
+    with pytest.raises(TypeError, match="real number"):
+        richardson(["1.0", 2.0])
+    with pytest.raises(ValueError, match="two finite numbers"):
+        richardson([1.0])
+
+
+@pytest.mark.parametrize("local, err, msg", [([0.0], ValueError, "local must be distances > 0"),
+                                             ([np.inf], ValueError, "local contains NaN or inf"),
+                                             (["0.4"], TypeError, "real number")])
+def test_walk_refinement_refuses_bad_local_distances_at_the_door(local, err, msg):
+    from mdsr_opt.synthesis.walkstudy import walk_refinement
+
+    mesh, mus, feet = _inchworm(8, 2)
+    with pytest.raises(err, match=msg):
+        walk_refinement(mesh, MAT, mus, INCH_S, levels=1, local=local, feet_groups=feet, touching=INCH_T)

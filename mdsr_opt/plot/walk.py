@@ -48,11 +48,12 @@ def plot_walk(result, ax=None, title: str | None = None):
     return fig
 
 
-def plot_walk_refinement(levels, ax=None, title: str | None = None):
+def plot_walk_refinement(levels, ax=None, title: str | None = None, estimate: dict | None = None):
     """A walk's refinement study: the distance per cycle (the last cycle, and every cycle as small marks)
     against the number of nodes, one point per mesh. ``levels`` is a sequence of ``(n_nodes, WalkResult)``
     (coarsest first; e.g. from :func:`~mdsr_opt.synthesis.walkstudy.walk_refinement`, its meshes' node counts).
-    Returns the figure."""
+    ``estimate``, if given, is :func:`~mdsr_opt.synthesis.walkstudy.richardson` of the last cycles: its
+    extrapolated limit is drawn as a dashed line in a band of its error. Returns the figure."""
     if ax is None:
         fig, ax = plt.subplots(figsize=(5.5, 3.6))
     else:
@@ -62,6 +63,12 @@ def plot_walk_refinement(levels, ax=None, title: str | None = None):
     for k, (_, r) in zip(n, levels):
         ax.plot(np.full(r.cycles, k), r.distance, "_", color="0.5", ms=10)
     ax.plot(n, last, "o-", color="#1f77b4", label="last cycle")
+    if estimate is not None and estimate.get("extrapolated") is not None:
+        v, e = float(estimate["extrapolated"]), float(estimate["error"])
+        ax.axhspan(v - e, v + e, color="#1f77b4", alpha=0.12, lw=0)
+        order = estimate.get("order")
+        ax.axhline(v, color="#1f77b4", ls="--", lw=1, label=f"limit {v:.4g} ± {e:.2g}"
+                   + (f" (Richardson, order {order:.2g})" if order is not None else " (last change)"))
     bad = np.array([not bool(np.all(r.success)) for _, r in levels])
     if bad.any():
         ax.plot(n[bad], last[bad], "rx", ms=9, label="a frame failed")

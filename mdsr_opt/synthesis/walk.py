@@ -3,8 +3,9 @@
 The robot lies flat on a table and is seen from above. The table is under the whole body (out of plane), so
 the normal forces are known without a contact solve: every node carries a share ``N_k`` of the body's weight
 ``W`` -- by its lumped area (a third of each triangle's area at each of its corners: a uniform sheet pressing
-evenly on the table, the default), or, when ``feet`` are given, the feet alone carry it, shared by their nodes'
-lumped areas (a body resting on its feet). The table resists in-plane sliding by isotropic Coulomb friction:
+evenly on the table, the default), or, when ``feet`` are given, the feet alone carry it: a uniform pressure on
+the area they cover, the triangles whose corners are all feet nodes (a body resting on its feet; the same area,
+so the same loads, on a refinement that keeps the feet nodes and adds the midpoints between them). The table resists in-plane sliding by isotropic Coulomb friction:
 a node sticks while its tangential force is below ``mu N_k`` and slips at it.
 
 Each frame is one minimisation (a lagged, smoothed dissipation potential, the standard way to keep a quasi-static
@@ -73,22 +74,29 @@ WEIGHT = 1e-3
 
 
 def node_loads(mesh: Mesh, weight: float = 1.0, feet=None) -> np.ndarray:
-    """The normal force on every node (n,): ``weight`` shared by lumped area (each triangle's area, a third at
-    each corner), over all nodes or, with ``feet`` (node indices), over the feet only (0 elsewhere)."""
+    """The normal force on every node (n,): ``weight`` spread as a uniform pressure over the whole body or, with
+    ``feet`` (node indices), over the area the feet cover: the triangles whose three corners are all feet nodes
+    (0 elsewhere). Each triangle of the area gives a third of its share to each of its corners (the consistent
+    load of a uniform pressure on linear triangles), so the loads do not depend on the mesh beyond the area: a
+    refinement that keeps the feet nodes and adds the midpoints between them covers the same area."""
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     w = float(weight)
     if not (np.isfinite(w) and w >= 0):
         raise ValueError(f"weight must be a number >= 0, got {weight!r}")
-    share = np.zeros(mesh.n_nodes)
-    np.add.at(share, mesh.triangles.reshape(-1), np.repeat(mesh.areas / 3.0, 3))
+    covered = np.ones(mesh.n_triangles, dtype=bool)
     if feet is not None:
         f = np.unique(np.asarray(feet, dtype=np.int64).reshape(-1))
         if not len(f) or f.min() < 0 or f.max() >= mesh.n_nodes:
             raise ValueError(f"feet must be node indices in [0, {mesh.n_nodes}), at least one, got {feet!r}")
         keep = np.zeros(mesh.n_nodes, dtype=bool)
         keep[f] = True
-        share[~keep] = 0.0
+        covered = keep[mesh.triangles].all(1)
+        if not covered.any():
+            raise ValueError("feet cover no triangle of the mesh: a foot is an area of the body, give the nodes of "
+                             "a triangle or more")
+    share = np.zeros(mesh.n_nodes)
+    np.add.at(share, mesh.triangles[covered].reshape(-1), np.repeat(mesh.areas[covered] / 3.0, 3))
     return w * share / share.sum()
 
 
@@ -331,12 +339,13 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
         With ``mu`` it sets the friction forces (their ratio to the elastic forces); without slip of the whole
         body nothing else depends on it.
     feet : node indices, optional
-        The nodes that touch the table (the weight shared by their lumped areas); default all nodes.
+        The nodes that touch the table: the weight spread evenly over the triangles they cover (all three
+        corners feet nodes; :func:`node_loads`); default all nodes.
     feet_groups : mapping name -> node indices, optional
         Named feet whose slipping is reported per frame (``WalkResult.feet_slipping``).
     touching : (F, G) bool array, optional
         Per frame of the cycle, which of the ``G`` ``feet_groups`` (in their order) touch the table: in that
-        frame the weight rests on those feet alone (shared by their nodes' lumped areas) and the others are
+        frame the weight rests on those feet alone (evenly over the area they cover) and the others are
         lifted (no friction). This is how a gait anchors one end and then the other (an inchworm). Default: the
         contact given by ``feet`` in every frame.
     substeps : int >= 1
@@ -378,6 +387,11 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     for k, v in groups.items():
         if not len(v) or v.min() < 0 or v.max() >= mesh.n_nodes:
             raise ValueError(f"foot {k!r}: node indices must be in [0, {mesh.n_nodes}), at least one")
+        inside = np.zeros(mesh.n_nodes, dtype=bool)
+        inside[v] = True
+        if touching is not None and not inside[mesh.triangles].all(1).any():
+            raise ValueError(f"foot {k!r} covers no triangle of the mesh: a foot that carries weight is an area of "
+                             "the body, give the nodes of a triangle or more")
     F = len(S)
     if touching is None:
         frame_loads = np.tile(loads, (F, 1))

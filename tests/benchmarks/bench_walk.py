@@ -1,11 +1,18 @@
 """The gecko's walk under mesh refinement, with one layout: the muscles are designed once on the coarse mesh, the
-gait's strokes are scheduled once, and the same ropes, strokes and feet are walked on the coarse mesh and on
-nested refinements of it (every triangle split into four, :mod:`mdsr_opt.synthesis.walkstudy`). Weight on two
-diagonal feet at a time (front left and hind right for the first half of the cycle, the other pair for the
-second), mu 0.5. Prints the distance per cycle on each mesh and its change, and writes the chart.
+gait's strokes are scheduled once, and the same ropes, strokes and feet are walked on a base mesh and on nested
+refinements of it (every triangle split into four, :mod:`mdsr_opt.synthesis.walkstudy`). The base mesh is the
+coarse one refined twice near the ropes' ends (within 0.4 and 0.2 cm): the end patches (radius 0.19 cm) hold
+one node on the coarse mesh (0.43 cm edges), a point force that sinks further into every refinement, so the
+body bends less for the same strokes until the patches are resolved (10-18 nodes each). Weight on two diagonal
+feet at a time (front left and hind right for the first half of the cycle, the other pair for the second),
+mu 0.5. Prints the distance per cycle on each mesh, its changes and their Richardson estimate, and writes the
+chart. The coarse mesh's legs are about one element wide, so its far field bends too stiffly as well: a round
+with a distance beyond the body's size splits every triangle (``--local 20 0.3``: the coarse mesh split once,
+then refined near the ends: 795, 3000, 11643 nodes).
 
-    python tests/benchmarks/bench_walk.py                     # 3 levels (146, 496, 1811 nodes), 2 cycles
-    python tests/benchmarks/bench_walk.py --levels 2 --cycles 3 --out /tmp/walk_refinement.png
+    python tests/benchmarks/bench_walk.py                     # 3 levels (411, 1543, 5973 nodes), 2 cycles
+    python tests/benchmarks/bench_walk.py --local             # the coarse mesh's own refinements (146, 496, 1811)
+    python tests/benchmarks/bench_walk.py --levels 2 --cycles 1 --out /tmp/walk_refinement.png
 """
 
 from __future__ import annotations
@@ -51,12 +58,15 @@ def main(argv=None) -> int:
     ap.add_argument("--mu", type=float, default=0.5, help="the table's Coulomb friction coefficient")
     ap.add_argument("--anchor-radius", type=float, default=None,
                     help="the ropes' end patches (cm; the walk then starts from rest); default the layout's")
+    ap.add_argument("--local", type=float, nargs="*", default=[0.4, 0.2],
+                    help="distances (cm) of the rounds of refinement near the ropes' ends that make the base mesh; "
+                         "none: the coarse mesh")
     ap.add_argument("--out", default="walk_refinement.png", help="the chart of distance per cycle against nodes")
     a = ap.parse_args(argv)
 
     from mdsr_opt.plot.common import save_figure
     from mdsr_opt.plot.walk import plot_walk_refinement
-    from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
+    from mdsr_opt.synthesis.walkstudy import richardson, walk_scene_refinement
 
     sc = gecko("coarse")
     t0 = time.perf_counter()
@@ -64,26 +74,37 @@ def main(argv=None) -> int:
     print(f"layout: {len(lay.muscles)} muscles designed once on {sc.mesh.n_nodes} nodes "
           f"({time.perf_counter() - t0:.0f} s)")
 
+    radius = lay.anchor_radius if a.anchor_radius is None else a.anchor_radius
+
     def report(level, mesh, r):
         d = r.distance
-        print(f"  level {level}: {mesh.n_nodes:5d} nodes, {int(r.success.sum())}/{len(r.success)} frames solved, "
-              f"distance per cycle {', '.join(f'{v:.4f}' for v in d)} {r.units}, rotation per cycle "
-              f"{', '.join(f'{v:.2f}' for v in np.degrees(r.rotation))} deg ({r.time:.0f} s)", flush=True)
+        slid = sorted(k for k, v in r.feet_slipping.items() if v.any())
+        print(f"  level {level}: {mesh.n_nodes:5d} nodes (smallest angle {mesh.quality()['min_angle_deg']:.1f} deg), "
+              f"{int(r.success.sum())}/{len(r.success)} frames solved, distance per cycle "
+              f"{', '.join(f'{v:.4f}' for v in d)} {r.units}, rotation per cycle "
+              f"{', '.join(f'{v:.2f}' for v in np.degrees(r.rotation))} deg, feet sliding as a whole: "
+              f"{', '.join(slid) or 'none'} ({r.time:.0f} s)", flush=True)
 
-    radius = lay.anchor_radius if a.anchor_radius is None else a.anchor_radius
-    print(f"anchor radius {radius:.3g} {sc.units} (coarse mean edge {sc.mesh.edge_lengths.mean():.3g})")
+    print(f"anchor radius {radius:.3g} {sc.units} (coarse mean edge {sc.mesh.edge_lengths.mean():.3g}); base mesh: "
+          + (f"coarse refined near the ropes' ends within {', '.join(f'{d:g}' for d in a.local)} {sc.units}"
+             if a.local else "coarse"))
     _, runs = walk_scene_refinement(sc, lay, levels=a.levels, mu=a.mu, cycles=a.cycles,
                                     touching=diagonal_touching(sc), progress=report, anchor_radius=radius,
-                                    from_rest=a.anchor_radius is not None)
+                                    from_rest=a.anchor_radius is not None, local=a.local or ())
     last = np.array([r.distance[-1] for _, r in runs])
     print("distance in the last cycle: " + ", ".join(f"{m.n_nodes} nodes {v:.4f}" for (m, _), v in zip(runs, last)))
+    est = None
     if len(last) > 1:
-        ch = np.abs(np.diff(last))
-        print("change from one level to the next: " + ", ".join(f"{v:.4f}" for v in ch)
-              + (f" (ratio {ch[1] / ch[0]:.2f})" if len(ch) > 1 and ch[0] > 0 else ""))
+        est = richardson(last)
+        print("change from one level to the next: " + ", ".join(f"{v:+.4f}" for v in est["changes"])
+              + "".join(f" (ratio {q:.2f})" for q in est["ratios"]))
+        if est["extrapolated"] is not None:
+            print(f"limit {est['extrapolated']:.4f} +- {est['error']:.4f} {runs[0][1].units} per cycle "
+                  + (f"(Richardson, observed order {est['order']:.2f})" if est["order"] is not None
+                     else "(the last change: the changes alternate in sign)"))
     import matplotlib
     matplotlib.use("Agg")
-    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs])
+    fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs], estimate=est)
     print("chart:", save_figure(fig, a.out, close=True))
     return 0
 
