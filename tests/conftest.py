@@ -32,6 +32,17 @@ def load_script(relative: str):
     return mod
 
 
+def outline_finger(folder) -> Path:
+    """tests/data/finger.toml with its muscle moved onto the outline (not mouldable: a FabricationWarning),
+    written into ``folder``."""
+    text = (Path(__file__).parent / "data" / "finger.toml").read_text()
+    path_line = next(line for line in text.splitlines() if line.startswith("path = "))
+    scene = Path(folder) / "finger_outline.toml"
+    scene.parent.mkdir(parents=True, exist_ok=True)
+    scene.write_text(text.replace(path_line, "boundary = { from = [0, 1], to = [3.5, 1] }"))
+    return scene
+
+
 def pytest_addoption(parser):
     parser.addoption("--slow", action="store_true", default=False,
                      help="also run the slow cases (by default they are left out unless -m selects them)")

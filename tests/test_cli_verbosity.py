@@ -7,13 +7,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import outline_finger
 
 ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
 
 
 def _mdsr(tmp_path, *flags):
-    cmd = [sys.executable, "-m", "mdsr_opt", *flags, "run", str(FINGER), "--out", str(tmp_path / "out"),
+    cmd = [sys.executable, "-m", "mdsr_opt", *flags, "run", str(outline_finger(tmp_path)), "--out", str(tmp_path / "out"),
            "--resolution", "coarse", "--no-figures", "--no-animations", "--no-prototype", "--case", "contract"]
     env = {**__import__("os").environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
@@ -32,7 +33,7 @@ def test_verbosity_flags_add_logger_names_then_debug_lines(tmp_path):
                                                        "INFO mdsr_opt.scenes.runscene: [finger",
                                                        "WARNING mdsr_opt.scenes.runner: [finger"))]
     assert len(named) == len(said)
-    # a warning is led by WARNING (finger.toml's muscle runs on the outline)
+    # a warning is led by WARNING (this finger's muscle runs on the outline)
     assert [line for line in named if line.startswith("WARNING")] == [
         "WARNING mdsr_opt.scenes.runner: " + line for line in said if "FabricationWarning" in line] != []
     assert not any(line.startswith("DEBUG") for line in plain_err + v_err)

@@ -9,19 +9,16 @@ import sys
 import warnings
 from pathlib import Path
 
+from conftest import outline_finger
 from mdsr_opt.cli.main import main
 from mdsr_opt.core.progress import Progress, is_loud
 
 ROOT = Path(__file__).resolve().parents[1]
-FINGER = ROOT / "tests" / "data" / "finger.toml"
 
 
 def test_quiet_run_still_prints_the_fabrication_warning(tmp_path, capsys):
     """finger.toml with its muscle moved onto the outline: mdsr -q run printed no FabricationWarning at all."""
-    text = FINGER.read_text()
-    path_line = next(line for line in text.splitlines() if line.startswith("path = "))
-    scene = tmp_path / "finger.toml"
-    scene.write_text(text.replace(path_line, "boundary = { from = [0, 1], to = [3.5, 1] }"))
+    scene = outline_finger(tmp_path)
     code = main(["-q", "run", str(scene), "--out", str(tmp_path / "o"), "--case", "contract", "--serial",
                  "--no-photos", "--no-figures", "--no-animations", "--no-prototype", "--resolution", "coarse"])
     assert code == 0

@@ -372,7 +372,9 @@ def test_a_scene_run_gives_each_rope_one_name_and_colour_in_every_figure_and_fil
     ropes = {n: p for c in cases.values() for n, p in c.items()}
     for f in ("walk/layout.json", "wave.json"):  # the gait's layout and the animation: the cases' names
         got = {m["name"]: tuple(m["nodes"]) for m in json.loads((out / f).read_text())["muscles"]}
-        assert all(ropes[n] == p for n, p in got.items()), f
+        # the same rope, or (in the gait's shared layout) the part of it cut clear of another pose's ropes
+        assert all(any(ropes[n][i:i + len(p)] == p for i in range(len(ropes[n]) - len(p) + 1))
+                   for n, p in got.items()), f
     for case, mus in cases.items():  # every case figure with muscles colours each by its name
         for fig in (f"{case}/design.png", f"{case}/muscles.png"):
             assert legends[fig] == {n: name_color(n, 0) for n in mus}, fig

@@ -3,7 +3,7 @@ source code.
 
 The ``mdsr`` command shows the warnings raised while it works (:class:`~mdsr_opt.synthesis.fabrication.
 FabricationWarning`, ``MuscleWarning``, ...) through :func:`warnings_as_log_lines`: each becomes one
-record of the ``mdsr_opt.warnings`` logger at level WARNING, so it is printed like the other log lines and
+record of the ``mdsr_opt.core.warnlines`` logger at level WARNING, so it is printed like the other log lines and
 also under ``-q`` (which keeps warnings, errors and results). The worker processes of a run's pool
 (:mod:`mdsr_opt.core.jobs`) print theirs as the same one line on stderr (:func:`one_line_warnings`).
 A script that imports the package keeps Python's own display.
@@ -24,7 +24,7 @@ import warnings
 
 __all__ = ["warning_line", "warnings_as_log_lines", "one_line_warnings"]
 
-_LOG = logging.getLogger("mdsr_opt.warnings")
+_LOG = logging.getLogger(__name__)
 
 
 def warning_line(message, category) -> str:
@@ -36,7 +36,7 @@ def warning_line(message, category) -> str:
 @contextlib.contextmanager
 def warnings_as_log_lines():
     """Within the block, a warning that Python would display is one WARNING record of the
-    ``mdsr_opt.warnings`` logger (:func:`warning_line`); warnings recorded by ``catch_warnings(record=True)``
+    ``mdsr_opt.core.warnlines`` logger (:func:`warning_line`); warnings recorded by ``catch_warnings(record=True)``
     or filtered out are not affected. Python's display is back after the block."""
     before = warnings.showwarning
 
