@@ -302,16 +302,11 @@ def test_library_gecko_reciprocal_gait_goes_nowhere_on_all_nodes():
     assert np.abs(flat.states - flat.states[1]).max() > 0.05 * sc.mesh.size
 
 
-@pytest.mark.slow
-def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
-    """The gecko's gait with its weight on two diagonal feet at a time (front left and hind right down for the
-    first half of the cycle, the other pair for the second): every frame solves (the coarse mesh failed 6-16
-    of its frames before the epigraph form), and the body walks the same distance in each cycle (to 2 %; it
-    turns by about 2 degrees a cycle, so the step's direction turns with it)."""
-
+def _gecko_on_diagonal_feet():
+    """The coarse gecko, its gait's shared layout, and the touching pattern of diagonal feet (front left and
+    hind right down for the first half of the cycle, the other pair for the second)."""
     from mdsr_opt.scenes.runner import run_case
     from mdsr_opt.synthesis.poses import design_poses
-    from mdsr_opt.synthesis.walk import walk_scene
 
     gecko = load_script("problems/gecko.py")
     sc = gecko.build("coarse")
@@ -322,6 +317,18 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
     T = np.zeros((F, 4), dtype=bool)
     T[: F // 2, [0, 3]] = True
     T[F // 2:, [1, 2]] = True
+    return sc, lay, T
+
+
+@pytest.mark.slow
+def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
+    """The gecko's gait with its weight on two diagonal feet at a time (front left and hind right down for the
+    first half of the cycle, the other pair for the second): every frame solves (the coarse mesh failed 6-16
+    of its frames before the epigraph form), and the body walks the same distance in each cycle (to 2 %; it
+    turns by about 2 degrees a cycle, so the step's direction turns with it)."""
+    from mdsr_opt.synthesis.walk import walk_scene
+
+    sc, lay, T = _gecko_on_diagonal_feet()
     _, w = walk_scene(sc, lay, feet="region", mu=0.5, cycles=3, touching=T)
     assert w.success.all(), [w.status[k] for k in np.flatnonzero(~w.success)]
     dist = w.distance[1:]  # the first cycle starts from the pose solved off the table
@@ -336,19 +343,9 @@ def test_library_gecko_walks_on_a_mesh_that_resolves_its_rope_ends():
     frame, the planted feet never slide as a whole, and it walks 1.14 cm in its first cycle where the coarse
     mesh's point-like ends walk 0.93 (the refinement study, tests/benchmarks/bench_walk.py: 1.141 on 411 nodes,
     1.229 on 1543); with mu = 0 the same cycle goes nowhere (a body on ice, to 1e-5 of its size)."""
-    from mdsr_opt.scenes.runner import run_case
-    from mdsr_opt.synthesis.poses import design_poses
     from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
 
-    gecko = load_script("problems/gecko.py")
-    sc = gecko.build("coarse")
-    targets = {c: run_case(sc, c, photo=False).setup.target for c in sc.gait.poses}
-    lay = design_poses(sc.mesh, sc.material, targets, max_muscles=sc.gait.max_muscles,
-                       routing_options=sc.routing_options, design_options=sc.design_options, compare=False)
-    F = len(sc.gait.sequence) * sc.gait.frames_per_step
-    T = np.zeros((F, 4), dtype=bool)
-    T[: F // 2, [0, 3]] = True
-    T[F // 2:, [1, 2]] = True
+    sc, lay, T = _gecko_on_diagonal_feet()
     out = {}
     for mu in (0.5, 0.0):
         _, [(mesh, r)] = walk_scene_refinement(sc, lay, levels=1, local=(0.4, 0.2), mu=mu, cycles=1, touching=T)
