@@ -872,3 +872,19 @@ def test_the_verification_takes_the_forward_check_only_for_the_same_state(monkey
     off = DesignResult(**{**res.__dict__, "x": res.x + 1e-6 * mesh.size * np.sin(np.arange(res.x.size)).reshape(-1, 2)})
     v2 = verify_design(mesh, MAT, muscles, off, target)
     assert checks and v2.gap > verify_mod.SAME_STATE_RTOL * mesh.size and v2.residual > 10 * v.residual
+
+
+def test_a_long_outer_loop_design_says_how_far_it_got(mesh, muscles, target, monkeypatch, caplog):
+    """A derivative-free design (the only one that takes contact, each forward solve seconds long) printed
+    nothing for minutes; it now logs its forward solves and best difference every PROGRESS_SECONDS."""
+    import logging
+
+    import mdsr_opt.synthesis.rivals as rivals
+
+    monkeypatch.setattr(rivals, "PROGRESS_SECONDS", 0.0)
+    with caplog.at_level(logging.INFO, logger="mdsr_opt.synthesis.rivals"):
+        res = design_contractions(mesh, MAT, muscles, target, method="derivative-free", max_iter=5)
+    said = [r.getMessage() for r in caplog.records if r.name == "mdsr_opt.synthesis.rivals"]
+    assert len(said) >= 5 and all(m.startswith("design: ") and "forward solve(s)" in m for m in said)
+    assert said[-1].startswith(f"design: {len(said)} forward solve(s)")
+    assert float(said[-1].split("best difference so far ")[1].split()[0]) >= res.difference - 1e-12

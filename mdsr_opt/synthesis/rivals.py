@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import logging
 import math
+import time
 from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .problem import ForwardSolver, DesignProblem
+
+_LOG = logging.getLogger(__name__)
+
+#: a design of the outer loops (nested, derivative-free) says how far it got at most this often (seconds of
+#: wall time): each of its forward solves may take seconds with contact, and nothing else is printed meanwhile
+PROGRESS_SECONDS = 10.0
 
 
 # ---------------------------------------------------------------------------------------------- outer loops
@@ -22,6 +30,7 @@ class _Outer:
         self.best: tuple[float, np.ndarray, np.ndarray] | None = None
         self.failures: list[str] = []
         self.n_eval = 0
+        self._started = self._said = time.monotonic()
 
     def _eval(self, a):
         a = np.clip(np.asarray(a, dtype=float), 0.0, self.prob.a_upper)
@@ -29,12 +38,24 @@ class _Outer:
         self.n_eval += 1
         if not ok:
             self.failures.append(status)
+            self._progress()
             return None, a, x, None, None
         J, al, dJ = self.prob.objective(x.reshape(-1, 2))
         if self.best is None or J < self.best[0]:
             self.best = (J, a.copy(), x.copy())
         self.history.append((self.clock(), math.sqrt(self.best[0]) * self.prob.h))
+        self._progress()
         return J, a, x, al, dJ
+
+    def _progress(self) -> None:
+        """An INFO record (``mdsr run`` prints it) when :data:`PROGRESS_SECONDS` have passed since the last."""
+        now = time.monotonic()
+        if now - self._said < PROGRESS_SECONDS:
+            return
+        self._said = now
+        best = f"{self.history[-1][1]:.4g}" if self.history else "none yet"
+        _LOG.info("design: %d forward solve(s) in %.0f s, best difference so far %s (%d failed)", self.n_eval,
+                  now - self._started, best, len(self.failures))
 
     def value(self, a) -> float:
         J, *_ = self._eval(a)
