@@ -78,7 +78,9 @@ def node_loads(mesh: Mesh, weight: float = 1.0, feet=None) -> np.ndarray:
     ``feet`` (node indices), over the area the feet cover: the triangles whose three corners are all feet nodes
     (0 elsewhere). Each triangle of the area gives a third of its share to each of its corners (the consistent
     load of a uniform pressure on linear triangles), so the loads do not depend on the mesh beyond the area: a
-    refinement that keeps the feet nodes and adds the midpoints between them covers the same area."""
+    refinement that keeps the feet nodes and adds the midpoints between them covers the same area. Every foot
+    (connected piece of ``feet``, :func:`foot_groups`) must cover a triangle: a ``ValueError`` names one that
+    does not, as it would carry no weight."""
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     w = float(weight)
@@ -95,6 +97,14 @@ def node_loads(mesh: Mesh, weight: float = 1.0, feet=None) -> np.ndarray:
         if not covered.any():
             raise ValueError("feet cover no triangle of the mesh: a foot is an area of the body, give the nodes of "
                              "a triangle or more")
+        for name, nodes in foot_groups(mesh, f).items():  # a foot covering no triangle would carry no weight
+            one = np.zeros(mesh.n_nodes, dtype=bool)
+            one[nodes] = True
+            if not one[mesh.triangles].all(1).any():
+                near = np.round(mesh.points[nodes].mean(0), 4).tolist()
+                raise ValueError(f"feet: {name} ({len(nodes)} node(s) near {near}) covers no triangle of the mesh, "
+                                 "so it would carry no weight: a foot is an area of the body, give the nodes of a "
+                                 "triangle or more")
     share = np.zeros(mesh.n_nodes)
     np.add.at(share, mesh.triangles[covered].reshape(-1), np.repeat(mesh.areas[covered] / 3.0, 3))
     return w * share / share.sum()
