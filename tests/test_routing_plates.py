@@ -118,6 +118,12 @@ def test_the_tee_ropes_ending_on_one_node_share_a_reported_plate():
     (_, node), _ = same[0]
     note = next(n for n in rr.notes if "share one end fixture" in n and f"({P[node][0]:.4g}, {P[node][1]:.4g})" in n)
     assert "their ends lie 0 apart" in note and f"fixture radius {rr.fixture_radius:.4g}" in note
+    # a shared plate loses nothing: route_for_design's re-routings start on the other notes alone
+    from mdsr_opt.synthesis.routing_fixtures import fitting_notes
+
+    fitting = fitting_notes(P, rr)
+    assert note not in fitting and all("share one end fixture" not in n for n in fitting)
+    assert len(fitting) + sum("share one end fixture" in n for n in rr.notes) == len(rr.notes)
 
 
 def test_shrunk_fixtures_are_said_in_the_notes():

@@ -119,7 +119,7 @@ from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
 from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_band import snap_into_band
-from .routing_fixtures import FixtureFit, fit_fixtures, shared_plates
+from .routing_fixtures import FixtureFit, fit_fixtures, fitting_notes, shared_plates
 from .routing_memo import memoised, shared_work
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_turn
 from .routing_search import Router
@@ -573,7 +573,7 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
 
     rr, caught = attempt(options)
     fab = check_fabrication(options.get("fabrication"))
-    if fab is not False and options.get("inset") is None and rr.notes:
+    if fab is not False and options.get("inset") is None and fitting_notes(mesh.points, rr):
         # ropes were dropped or shortened for their end fixtures: route deeper inside, where the smallest
         # fixture fits at any rope node, and keep that routing if it keeps more ropes
         f = fab.for_body(mesh)
@@ -588,10 +588,10 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
         if len(again):
-            why = "; ".join(rr.notes) or "; ".join(str(w.message) for w in caught)
+            why = "; ".join(fitting_notes(mesh.points, rr)) or "; ".join(str(w.message) for w in caught)
             note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
             rr, caught = again.replaced(notes=(note,) + again.notes), caught2
-    if fab is not False and options.get("band") is None and (rr.notes or not len(rr)):
+    if fab is not False and options.get("band") is None and (fitting_notes(mesh.points, rr) or not len(rr)):
         # ropes lost inside the band (fragments along its jagged edge, gaps at necks beside holes): route on
         # every contracted edge and snap the ropes into the band (routing_band); kept when its ropes capture
         # clearly more of the target's contraction than the best routing inside the band above

@@ -44,7 +44,7 @@ from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
 __all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius",
-           "shared_plates", "clear_part"]
+           "shared_plates", "clear_part", "fitting_notes"]
 
 #: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
 MIN_FREE_FRACTION = 2.0 / 3.0
@@ -320,3 +320,13 @@ def common_fixture_radius(mesh, muscles, fabrication: Fabrication) -> float:
                 for cf in rope_conflicts(mesh, paths, fabrication, fixture_radius=r)):
             return float(r)
     return float(r_min)
+
+
+def fitting_notes(P, routing) -> list:
+    """The notes of a routing (:class:`~mdsr_opt.synthesis.routing_result.RoutingResult` on the points ``P``)
+    that say a rope was moved, cut or dropped for its fixtures: all but the sentences of the end plates its
+    ropes share (:func:`shared_plates`), which lose nothing."""
+    if routing.fixture_radius is None:
+        return list(routing.notes)
+    plates = set(shared_plates(P, [list(m.nodes) for m in routing.muscles], routing.fixture_radius))
+    return [n for n in routing.notes if n not in plates]
