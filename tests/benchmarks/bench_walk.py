@@ -12,7 +12,7 @@ then refined near the ends: 795, 3000, 11643 nodes).
 
     python tests/benchmarks/bench_walk.py                     # 3 levels (411, 1543, 5973 nodes), 2 cycles
     python tests/benchmarks/bench_walk.py --local             # the coarse mesh's own refinements (146, 496, 1811)
-    python tests/benchmarks/bench_walk.py --levels 2 --cycles 1 --out /tmp/walk_refinement.png
+    python tests/benchmarks/bench_walk.py --levels 2 --cycles 1 --out bench_out
 """
 
 from __future__ import annotations
@@ -61,8 +61,13 @@ def main(argv=None) -> int:
     ap.add_argument("--local", type=float, nargs="*", default=[0.4, 0.2],
                     help="distances (cm) of the rounds of refinement near the ropes' ends that make the base mesh; "
                          "none: the coarse mesh")
-    ap.add_argument("--out", default="walk_refinement.png", help="the chart of distance per cycle against nodes")
+    ap.add_argument("--out", default="bench_out",
+                    help="folder for the chart of distance per cycle against nodes (walk_refinement.png)")
     a = ap.parse_args(argv)
+    out = Path(a.out)
+    if out.exists() and not out.is_dir():  # at the door, not after the study's minutes
+        ap.error(f"--out {a.out}: not a folder")
+    out.mkdir(parents=True, exist_ok=True)
 
     from mdsr_opt.plot.common import save_figure
     from mdsr_opt.plot.walk import plot_walk_refinement
@@ -92,6 +97,10 @@ def main(argv=None) -> int:
                                     touching=diagonal_touching(sc), progress=report, anchor_radius=radius,
                                     from_rest=a.anchor_radius is not None, local=a.local or ())
     last = np.array([r.distance[-1] for _, r in runs])
+    for (m, r) in runs:
+        if not r.success.all():
+            print(f"WARNING: {m.n_nodes} nodes: {int((~r.success).sum())} frame(s) not solved: its distance is not a "
+                  "figure to trust, nor the estimate below")
     print("distance in the last cycle: " + ", ".join(f"{m.n_nodes} nodes {v:.4f}" for (m, _), v in zip(runs, last)))
     est = None
     if len(last) > 1:
@@ -105,7 +114,7 @@ def main(argv=None) -> int:
     import matplotlib
     matplotlib.use("Agg")
     fig = plot_walk_refinement([(m.n_nodes, r) for m, r in runs], estimate=est)
-    print("chart:", save_figure(fig, a.out, close=True))
+    print("chart:", save_figure(fig, out / "walk_refinement.png", close=True))
     return 0
 
 
