@@ -565,7 +565,7 @@ def test_batch_command_writes_csv_and_markdown(design, capsys):
     assert md.count("| bend_0.") == 2 and "**SYNTHETIC**" in md
     assert "Average distance" in capsys.readouterr().out
     assert (out / "bend_0.8_overlay.png").stat().st_size > 1000
-    assert not [p for p in out.iterdir() if p.name.startswith(".")]
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [".mdsr-run.json"]  # no temporaries
 
 
 def test_batch_swapped_states_score_worse(design):
@@ -587,10 +587,42 @@ def test_batch_error_leaves_previous_table_untouched(design, capsys):
     write_mesh(design / "states" / "zz_broken.vtu", mesh)
     with pytest.raises(ValueError, match="case 'zz_broken'.*cannot decode"):
         evaluate_folder(design / "images", design / "states", out=out)
-    assert cli_main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out)]) == 2
-    assert "cannot decode" in capsys.readouterr().err
     assert (out / "evaluation.csv").read_text() == "old table\n"
     assert sorted(p.name for p in out.iterdir()) == ["evaluation.csv"]
+    # the command: a new folder is left as it was (not made), a used one is refused before any work
+    assert cli_main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(design / "new")]) == 2
+    assert "cannot decode" in capsys.readouterr().err
+    assert not (design / "new").exists()
+    assert cli_main(["evaluate", str(design / "images"), str(design / "states"), "--out", str(out)]) == 2
+    assert "already holds 1 entry ('evaluation.csv')" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["evaluation.csv"]
+
+
+def test_photograph_and_evaluate_keep_their_folders_apart_and_replace_only_with_overwrite(design, capsys):
+    """A second command into a used --out is refused (one folder never mixes two commands' files); with
+    --overwrite only the earlier command's files go; an --out that is or holds a folder the command reads is
+    refused even with --overwrite (replacing would delete what it reads)."""
+    images, states, out = design / "images", design / "states", design / "ev"
+    assert cli_main(["evaluate", str(images), str(states), "--out", str(out), "--figures"]) == 0
+    assert (out / "bend_0.5_overlay.png").is_file()
+    (out / "notes.txt").write_text("mine")
+    assert cli_main(["evaluate", str(images), str(states), "--out", str(out)]) == 2
+    assert "pass --overwrite" in capsys.readouterr().err
+    assert cli_main(["evaluate", str(images), str(states), "--out", str(out), "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["evaluation.csv", "evaluation.md",
+                                                                                 "notes.txt"]
+    capsys.readouterr()
+    before = sorted(p.name for p in images.iterdir())
+    assert cli_main(["photograph", str(states), "--out", str(images)]) == 2
+    assert "pass --overwrite" in capsys.readouterr().err
+    for cmd in (["evaluate", str(images), str(states), "--out", str(images)],
+                ["evaluate", str(images), str(states), "--out", str(design)],
+                ["photograph", str(states), "--out", str(states)]):
+        assert cli_main(cmd + ["--overwrite"]) == 2
+        assert "that this command reads: give an output folder of its own" in capsys.readouterr().err
+    assert sorted(p.name for p in images.iterdir()) == before
+    assert cli_main(["photograph", str(states), "--out", str(images), "--overwrite"]) == 0
+    assert sorted(p.name for p in images.iterdir()) == before
 
 
 def test_batch_ignores_non_state_files_beside_the_states(design):
@@ -649,7 +681,7 @@ def test_photograph_command_writes_all_or_nothing(tmp_path, body, capsys):
         write_mesh(states / f"bend_{k}.vtu", mesh, x=bend(mesh.points, k))
     (tmp_path / "images" / "bend_0.8.png").mkdir(parents=True)  # the second photo cannot be written
     assert cli_main(["photograph", str(states), "--out", str(tmp_path / "images")]) == 2
-    assert "bend_0.8.png: it is a folder" in capsys.readouterr().err
+    assert "already holds 1 entry ('bend_0.8.png')" in capsys.readouterr().err  # refused before rendering
     assert sorted(p.name for p in (tmp_path / "images").iterdir()) == ["bend_0.8.png"]
 
 
@@ -758,3 +790,25 @@ def test_polyline_distance_tree_matches_all_segments():
     square = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
     got = _PolylineDistance(square)(np.array([[5.0, 5.0], [13.0, 14.0], [-2.0, 5.0]]))
     assert got == pytest.approx([5.0, 5.0, 2.0], abs=1e-12)
+
+
+def test_write_together_writes_all_files_or_none(tmp_path):
+    """A target that is a folder is refused before anything is written; a writer that fails leaves every
+    earlier file as it was and no temporary file behind."""
+    from mdsr_opt.photos.folder import bytes_writer, write_together
+
+    (tmp_path / "a.txt").write_text("old a")
+    (tmp_path / "c.txt").mkdir()
+    with pytest.raises(ValueError, match="c.txt: it is a folder"):
+        write_together([(tmp_path / "a.txt", bytes_writer(b"new a")), (tmp_path / "c.txt", bytes_writer(b"c"))])
+
+    def broken(tmp):
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        write_together([(tmp_path / "a.txt", bytes_writer(b"new a")), (tmp_path / "b.txt", broken)])
+    assert (tmp_path / "a.txt").read_text() == "old a"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.txt"]
+    assert write_together([(tmp_path / "a.txt", bytes_writer(b"new a")),
+                           (tmp_path / "b.txt", bytes_writer(b"b"))]) == [tmp_path / "a.txt", tmp_path / "b.txt"]
+    assert (tmp_path / "a.txt").read_text() == "new a" and (tmp_path / "b.txt").read_text() == "b"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from ..core.errors import InputError, checking_input
@@ -40,8 +41,20 @@ def _parse_ints(n: int, what: str, sep: str = ","):
     return parse
 
 
+def _check_out_apart(out: str, read: dict) -> None:
+    """Refuse an ``--out`` that is, or holds, a folder the command reads (``read``: what -> path): replacing
+    an earlier command's files there (``--overwrite``) would remove what it reads."""
+    o = os.path.realpath(out)
+    for what, where in read.items():
+        w = os.path.realpath(where)
+        if w == o or w.startswith(o.rstrip(os.sep) + os.sep):
+            raise InputError(f"--out {out} {'is' if w == o else 'holds'} the {what} {where} that this command "
+                             "reads: give an output folder of its own")
+
+
 def _cmd_evaluate(a) -> int:
-    from ..photos.folder import evaluate_folder
+    from ..photos.folder import evaluate_folder, evaluation_files, write_evaluation
+    from ..scenes.rundir import RunFolder, check_out_path
 
     extract = {"method": a.method, "body": a.body, "largest": a.largest}
     if a.color is not None:
@@ -49,8 +62,14 @@ def _cmd_evaluate(a) -> int:
     if a.roi is not None:
         extract["roi"] = a.roi
     compare = {"registration": a.registration, "flip_y": not a.no_flip, "scaling": a.scaling}
-    results = evaluate_folder(a.images, a.states, out=a.out, name=a.name, extract=extract, compare=compare,
-                              figures=a.figures)
+    check_out_path(a.out)
+    _check_out_apart(a.out, {"images folder": a.images, "states folder": a.states})
+    # the folder first (busy, or holding files of someone else's), then the comparisons (bad input), and
+    # only when all succeeded the files, together
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+        results = evaluate_folder(a.images, a.states, name=a.name, extract=extract, compare=compare)
+        folder.begin(evaluation_files(results, a.name, a.figures))
+        write_evaluation(results, a.out, name=a.name, figures=a.figures)
     print(Path(a.out, f"{a.name}.md").read_text(), end="")
     print(f"wrote {Path(a.out, a.name + '.csv')} and {Path(a.out, a.name + '.md')} ({len(results)} case(s))")
     return 0
@@ -74,10 +93,13 @@ def _cmd_photograph(a) -> int:
     from ..body.io import read_mesh
     from ..photos.camera import render_photo
     from ..photos.folder import STATE_SUFFIXES, list_files, write_together
+    from ..scenes.rundir import RunFolder, check_out_path
 
+    check_out_path(a.out)
     with checking_input():  # the states named: bad input
         _check_not_above_states(Path(a.states), STATE_SUFFIXES)
         files = list_files(a.states, STATE_SUFFIXES, "state")
+    _check_out_apart(a.out, {"states folder": a.states})
     stems = [f.stem for f in files]
     twice = sorted({st for st in stems if stems.count(st) > 1})
     if twice:
@@ -90,7 +112,10 @@ def _cmd_photograph(a) -> int:
                           rotation_deg=a.rotation, noise_sigma=a.noise, blur_sigma=a.blur,
                           lighting=a.lighting)
         writers += ph.writers(Path(a.out) / f"{f.stem}.png")
-    for path in write_together(writers):
+    with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder:
+        folder.begin([p.name for p, _ in writers])
+        written = write_together(writers)
+    for path in written:
         if path.suffix == ".png":
             print(f"wrote {path} (SYNTHETIC, seed {a.seed})")
     return 0
@@ -102,7 +127,10 @@ def add_cli(sub) -> None:
                        "Markdown table of contour distances")
     p.add_argument("images", help="folder of images (.png/.jpg/...); case.png is compared with case.*")
     p.add_argument("states", help="folder of state mesh files (.vtu/.vtk/.xdmf/.msh)")
-    p.add_argument("--out", default="evaluation_out", help="output folder (default: evaluation_out)")
+    p.add_argument("--out", default="evaluation_out",
+                   help="output folder (default: evaluation_out); new or empty, as for mdsr run")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr command in --out (as mdsr run --overwrite)")
     p.add_argument("--name", default="evaluation", help="table file stem (default: evaluation)")
     p.add_argument("--color", type=_parse_color, default=None,
                    help="body colour R,G,B or #rrggbb (switches to colour segmentation)")
@@ -126,7 +154,10 @@ def add_cli(sub) -> None:
 
     q = sub.add_parser("photograph", help="render states as SYNTHETIC photographs (synthetic camera)")
     q.add_argument("states", help="a state mesh file or a folder of them")
-    q.add_argument("--out", required=True, help="output folder for <state>.png and <state>.json")
+    q.add_argument("--out", required=True,
+                   help="output folder for <state>.png and <state>.json; new or empty, as for mdsr run")
+    q.add_argument("--overwrite", action="store_true",
+                   help="replace the files of an earlier mdsr command in --out (as mdsr run --overwrite)")
     q.add_argument("--seed", type=int, default=0, help="random seed of noise and placement (default 0)")
     q.add_argument("--photo-size", type=_parse_ints(2, "photo size", "x"), default=(500, 500), metavar="WxH",
                    help="size of the photographs in pixels (default 500x500), as `mdsr run --photo-size`")

@@ -21,7 +21,7 @@ from .compare import ContourComparison, compare_contours, simulated_outline
 from .contours import contour_from_image
 from .images import IMAGE_SUFFIXES, load_image
 
-__all__ = ['CaseResult', 'evaluate_folder', 'write_table']
+__all__ = ['CaseResult', 'evaluate_folder', 'evaluation_files', 'write_evaluation', 'write_table']
 
 
 #: State files are the mesh formats of :mod:`mdsr_opt.body.io` (so a ``case.svg`` figure beside ``case.vtu``
@@ -177,7 +177,7 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
             raise ValueError(f"no state file for image(s) {', '.join(missing)} (states are matched by file name "
                              f"without extension; available: {', '.join(sorted(by_stem)) or 'none'})")
     seen: set[str] = set()
-    results, overlays = [], []
+    results = []
     for img_path in image_files:
         case = img_path.stem
         if case in seen:
@@ -195,26 +195,43 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
             kind = ValueError if isinstance(exc, TypeError) else InputError
             raise kind(f"case {case!r}: {exc}") from exc
         results.append(CaseResult(case, str(img_path), str(by_stem[case]), _is_synthetic(img_path), comp))
-        if figures:
-            overlays.append((image, data.mesh, data.x, comp, results[-1].synthetic))
     if out is not None:
-        out = Path(out)
-        writers = _table_writers(results, out / f"{name}.csv", out / f"{name}.md")
-        if figures:
-            from ..plot.common import close_figure, save_figure
-            from ..plot.photos import plot_overlay
-
-            # render every figure to PNG bytes now (one figure open at a time), write with the tables
-            with tempfile.TemporaryDirectory() as scratch:
-                for k, ((image, mesh, x, comp, synth), row) in enumerate(zip(overlays, results)):
-                    fig = plot_overlay(image, mesh, x, comp, synthetic=synth, title=row.case)
-                    try:
-                        png = Path(save_figure(fig, Path(scratch, f"{k}.png")))
-                    finally:
-                        close_figure(fig)
-                    writers.insert(k, (out / f"{row.case}_overlay.png", bytes_writer(png.read_bytes())))
-        write_together(writers)
+        write_evaluation(results, out, name=name, figures=figures)
     return results
+
+
+def evaluation_files(results: Sequence[CaseResult], name: str = "evaluation", figures: bool = False) -> list[str]:
+    """The names of the files :func:`write_evaluation` writes for ``results``: the tables, then one
+    ``<case>_overlay.png`` per case with ``figures``."""
+    return [f"{name}.csv", f"{name}.md"] + ([f"{r.case}_overlay.png" for r in results] if figures else [])
+
+
+def write_evaluation(results: Sequence[CaseResult], out: str | os.PathLike, *, name: str = "evaluation",
+                     figures: bool = False) -> list[Path]:
+    """Write the tables of :func:`evaluate_folder`'s ``results`` into the folder ``out`` (and, with
+    ``figures``, an overlay figure per case, drawn from the image and state files the results name).
+
+    Everything is rendered before anything is written; then all files are written together
+    (:func:`write_together`): an error leaves the previous files untouched. Returns the paths written.
+    """
+    out = Path(out)
+    writers = _table_writers(results, out / f"{name}.csv", out / f"{name}.md")
+    if figures:
+        from ..plot.common import close_figure, save_figure
+        from ..plot.photos import plot_overlay
+
+        # render every figure to PNG bytes now (one figure open at a time), write with the tables
+        with tempfile.TemporaryDirectory() as scratch:
+            for k, row in enumerate(results):
+                data = read_mesh(row.state)
+                fig = plot_overlay(load_image(row.image), data.mesh, data.x, row.comparison,
+                                   synthetic=row.synthetic, title=row.case)
+                try:
+                    png = Path(save_figure(fig, Path(scratch, f"{k}.png")))
+                finally:
+                    close_figure(fig)
+                writers.insert(k, (out / f"{row.case}_overlay.png", bytes_writer(png.read_bytes())))
+    return write_together(writers)
 
 
 def _table_rows(results: Sequence[CaseResult]) -> list[dict[str, Any]]:
