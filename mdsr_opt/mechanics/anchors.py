@@ -126,12 +126,15 @@ def _ball(mesh, centre: int, other: int, radius: float) -> list[int]:
     """Nodes within ``radius`` of ``centre`` at rest and strictly nearer to it than to ``other`` (the
     muscle's other end), connected to it through such nodes, by increasing distance.
 
-    Only the nodes a k-d tree of the rest positions finds near the centre are looked at (a margin of 1e-9
-    of the radius for round-off; the distances are then the same numpy norms as over the whole mesh), and the
-    breadth-first search walks the mesh's edges among them: the work grows with the patch, not the mesh."""
+    Only the nodes whose rest ``x`` lies within the radius of the centre's (plus a margin for round-off) are
+    looked at, found by a binary search in the nodes sorted by ``x``; the distances are then the same numpy
+    norms as over the whole mesh, and the breadth-first search walks the mesh's edges among them."""
     P = mesh.points
-    near = _points_tree(mesh).query_ball_point(P[centre], radius * (1.0 + 1e-9))
-    cand = np.unique(np.asarray(near + [centre], dtype=np.int64))
+    order, xs = _nodes_by_x(mesh)
+    cx = float(P[centre, 0])
+    reach = radius * (1.0 + 1e-9) + 1e-12 * (abs(cx) + radius)
+    lo, hi = int(np.searchsorted(xs, cx - reach, side="left")), int(np.searchsorted(xs, cx + reach, side="right"))
+    cand = np.unique(np.append(order[lo:hi], centre))  # sorted, the centre among them at any radius
     dist = np.linalg.norm(P[cand] - P[centre], axis=1)
     inside = (dist <= radius) & (dist < np.linalg.norm(P[cand] - P[other], axis=1))
     inside[np.searchsorted(cand, centre)] = True
@@ -147,14 +150,14 @@ def _ball(mesh, centre: int, other: int, radius: float) -> list[int]:
     return [centre] + rest
 
 
-def _points_tree(mesh):
-    """A k-d tree of the mesh's rest positions, cached on the mesh (not pickled: a ``*_cache`` key)."""
-    tree = mesh.__dict__.get("_points_tree_cache")
-    if tree is None:
-        from scipy.spatial import cKDTree
-
-        tree = mesh.__dict__["_points_tree_cache"] = cKDTree(mesh.points)
-    return tree
+def _nodes_by_x(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, x)``: the nodes sorted by their rest ``x`` and those ``x``, cached on the mesh (not pickled:
+    a ``*_cache`` key)."""
+    out = mesh.__dict__.get("_nodes_by_x_cache")
+    if out is None:
+        order = np.argsort(mesh.points[:, 0], kind="stable")
+        out = mesh.__dict__["_nodes_by_x_cache"] = (order, mesh.points[order, 0])
+    return out
 
 
 def _adjacency(mesh) -> tuple[list, list]:
