@@ -156,7 +156,8 @@ class Mesh:
     def edge_index(self) -> dict[tuple[int, int], int]:
         """Map ``(i, j)`` with ``i < j`` to the row of :attr:`edges` (for many single lookups in Python; see
         :meth:`edge_rows` for arrays)."""
-        return {(int(a), int(b)): k for k, (a, b) in enumerate(self.edges)}
+        e = self.edges
+        return dict(zip(zip(e[:, 0].tolist(), e[:, 1].tolist()), range(len(e))))
 
     def edge_rows(self, i: ArrayLike, j: ArrayLike) -> np.ndarray:
         """The rows of :attr:`edges` joining nodes ``i[k]`` and ``j[k]`` (either order), -1 where the two

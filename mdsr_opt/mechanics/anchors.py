@@ -24,7 +24,6 @@ Example
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..core.errors import LayoutError
 from ..core.checks import positive_float
@@ -123,23 +122,55 @@ def anchor_radius_or_default(mesh, radius) -> float:
     return default_anchor_radius(mesh) if radius is None else float(radius)
 
 
-def _ball(mesh, centre: int, radius: float, keep: np.ndarray) -> list[int]:
-    """Nodes within ``radius`` of ``centre`` at rest (among ``keep``), connected to it through such nodes,
-    by increasing distance (a breadth-first search over the mesh edges between such nodes, without building
-    per-node neighbour lists)."""
-    from scipy.sparse.csgraph import breadth_first_order
+def _ball(mesh, centre: int, other: int, radius: float) -> list[int]:
+    """Nodes within ``radius`` of ``centre`` at rest and strictly nearer to it than to ``other`` (the
+    muscle's other end), connected to it through such nodes, by increasing distance.
 
+    Only the nodes whose rest ``x`` lies within the radius of the centre's (plus a margin for round-off) are
+    looked at, found by a binary search in the nodes sorted by ``x``; the distances are then the same numpy
+    norms as over the whole mesh, and the breadth-first search walks the mesh's edges among them."""
     P = mesh.points
-    dist = np.linalg.norm(P - P[centre], axis=1)
-    inside = (dist <= radius) & keep
-    inside[centre] = True
-    E = mesh.edges
-    E = E[inside[E[:, 0]] & inside[E[:, 1]]]
-    n = mesh.n_nodes
-    G = sp.csr_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-    reach = breadth_first_order(G, centre, directed=False, return_predecessors=False)
-    rest = sorted((int(i) for i in reach if i != centre), key=lambda i: (float(dist[i]), i))
+    order, xs = _nodes_by_x(mesh)
+    cx = float(P[centre, 0])
+    reach = radius * (1.0 + 1e-9) + 1e-12 * (abs(cx) + radius)
+    lo, hi = int(np.searchsorted(xs, cx - reach, side="left")), int(np.searchsorted(xs, cx + reach, side="right"))
+    cand = np.unique(np.append(order[lo:hi], centre))  # sorted, the centre among them at any radius
+    dist = np.linalg.norm(P[cand] - P[centre], axis=1)
+    inside = (dist <= radius) & (dist < np.linalg.norm(P[cand] - P[other], axis=1))
+    inside[np.searchsorted(cand, centre)] = True
+    of = dict(zip(cand[inside].tolist(), dist[inside].tolist()))
+    indptr, indices = _adjacency(mesh)
+    seen, queue = {centre}, [centre]
+    for v in queue:
+        for w in indices[indptr[v]:indptr[v + 1]]:
+            if w in of and w not in seen:
+                seen.add(w)
+                queue.append(w)
+    rest = sorted((i for i in seen if i != centre), key=lambda i: (of[i], i))
     return [centre] + rest
+
+
+def _nodes_by_x(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """``(order, x)``: the nodes sorted by their rest ``x`` and those ``x``, cached on the mesh (not pickled:
+    a ``*_cache`` key)."""
+    out = mesh.__dict__.get("_nodes_by_x_cache")
+    if out is None:
+        order = np.argsort(mesh.points[:, 0], kind="stable")
+        out = mesh.__dict__["_nodes_by_x_cache"] = (order, mesh.points[order, 0])
+    return out
+
+
+def _adjacency(mesh) -> tuple[list, list]:
+    """``(indptr, indices)`` as lists: the neighbours of node ``v`` along mesh edges are
+    ``indices[indptr[v]:indptr[v + 1]]``; cached on the mesh."""
+    adj = mesh.__dict__.get("_adjacency_lists_cache")
+    if adj is None:
+        E, n = mesh.edges, mesh.n_nodes
+        rows, cols = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+        order = np.argsort(rows, kind="stable")
+        indptr = np.searchsorted(rows[order], np.arange(n + 1))
+        adj = mesh.__dict__["_adjacency_lists_cache"] = (indptr.tolist(), cols[order].tolist())
+    return adj
 
 
 def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -161,14 +192,10 @@ def anchor_patches(mesh, muscles, radius: float | None = None) -> list[tuple[np.
     """
     mus = valid_muscles(mesh, muscles)
     r = anchor_radius_or_default(mesh, radius)
-    P = mesh.points
     out = []
     for m in mus:
         s, e = m.nodes[0], m.nodes[-1]
-        ds = np.linalg.norm(P - P[s], axis=1)
-        de = np.linalg.norm(P - P[e], axis=1)
-        out.append((np.array(_ball(mesh, s, r, ds < de), dtype=np.int64),
-                    np.array(_ball(mesh, e, r, de < ds), dtype=np.int64)))
+        out.append((np.array(_ball(mesh, s, e, r), dtype=np.int64), np.array(_ball(mesh, e, s, r), dtype=np.int64)))
     return out
 
 

@@ -182,7 +182,15 @@ def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool 
 
 # ---------------------------------------------------------------------------------- internal driving
 def gauge_coordinates(mesh) -> tuple[int, int, int]:
-    """Three gauge coordinates (node i x & y, node j one coordinate), chosen from geometry alone."""
+    """Three gauge coordinates (node i x & y, node j one coordinate), chosen from geometry alone (cached on
+    the mesh: every solve and every design asks for them)."""
+    cached = mesh.__dict__.get("_gauge_coordinates")
+    if cached is None:
+        cached = mesh.__dict__["_gauge_coordinates"] = _gauge_coordinates(mesh)
+    return cached
+
+
+def _gauge_coordinates(mesh) -> tuple[int, int, int]:
     P = mesh.points
     c = P.mean(0)
     d = np.linalg.norm(P - c, axis=1)

@@ -189,16 +189,20 @@ def boundary_distance(mesh) -> np.ndarray:
 
 
 def body_depth(mesh) -> float:
-    """The radius of the largest disk inside the body at rest (outline minus holes)."""
-    import shapely
-    from shapely.geometry import Polygon
+    """The radius of the largest disk inside the body at rest (outline minus holes), cached on the mesh (the
+    pipeline's door and each of its routings ask for it)."""
+    cache = mesh.__dict__
+    if "_body_depth" not in cache:
+        import shapely
+        from shapely.geometry import Polygon
 
-    P = mesh.points
-    loops = mesh.boundary_loops
-    poly = Polygon(P[loops[0]], [P[lp] for lp in loops[1:]])
-    if not poly.is_valid:
-        poly = poly.buffer(0)
-    return float(shapely.maximum_inscribed_circle(poly, 1e-4 * body_size(mesh)).length)
+        P = mesh.points
+        loops = mesh.boundary_loops
+        poly = Polygon(P[loops[0]], [P[lp] for lp in loops[1:]])
+        if not poly.is_valid:
+            poly = poly.buffer(0)
+        cache["_body_depth"] = float(shapely.maximum_inscribed_circle(poly, 1e-4 * body_size(mesh)).length)
+    return cache["_body_depth"]
 
 
 def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:

@@ -16,18 +16,27 @@ Run:  python tests/benchmarks/bench_fine_design.py                     # 2.4k, 8
       python tests/benchmarks/bench_fine_design.py --ny 32 --ipopt-print 5   # the design NLP's log
       python tests/benchmarks/bench_fine_design.py --plot ratios.png         # the ratios per size, drawn
       python tests/benchmarks/bench_fine_design.py --verify rest             # verified by a re-solve from rest
+      python tests/benchmarks/bench_fine_design.py --tree /tmp/old           # an older tree (git archive REV mdsr_opt)
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external
-from mdsr_opt.synthesis.pipeline import design_pipeline
+ROOT = Path(__file__).resolve().parents[2]
+if __name__ == "__main__":  # the checkout this file is in (or --tree's), not the mdsr_opt installed elsewhere
+    _tree = sys.argv[sys.argv.index("--tree") + 1] if "--tree" in sys.argv[:-1] else None
+    sys.path.insert(0, str(Path(_tree).resolve()) if _tree else str(ROOT))
+
+import mdsr_opt  # noqa: E402
+from mdsr_opt import Mesh, NeoHookean, RigidDrag, solve_external  # noqa: E402
+from mdsr_opt.synthesis.pipeline import design_pipeline  # noqa: E402
 
 MAT = NeoHookean(1.0, 0.3)
 #: the issue's budget: the whole pipeline within this many times the reference solve of the target
@@ -96,7 +105,10 @@ def main(argv=None):
     ap.add_argument("--plot", default=None, help="draw the ratio per size into this image file")
     ap.add_argument("--verify", default=None, choices=["rest", "design"],
                     help="how the design is verified (default: the pipeline's, from the design's state)")
+    ap.add_argument("--tree", default=None,
+                    help="import mdsr_opt from this folder (e.g. git archive REV mdsr_opt) instead of this checkout")
     args = ap.parse_args(argv)
+    print(f"mdsr_opt from {Path(mdsr_opt.__file__).parent}", flush=True)
     rows = []
     head = f"{'nodes':>6} {'design s':>9} {'newton s':>9} {'ipopt s':>8} {'ratio':>6} {'cpu ratio':>9} " \
            f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
