@@ -143,7 +143,8 @@ def test_figure6_panels_use_the_muscle_names_one_colour_scale_and_units(strip):
 
 
 def test_scene_figures_label_their_axes_and_save_vector_copies(strip, tmp_path):
-    from mdsr_opt.plot.common import figure_paths, save_figure
+    from mdsr_opt.plot.common import save_figure
+    from mdsr_opt.plot.style import figure_paths
     from mdsr_opt.plot.design import plot_contraction_graph, plot_routing
     from mdsr_opt.plot.scenes import plot_scene, plot_target
 

@@ -84,6 +84,12 @@ def _started_at(name, seconds=0.0):
     return name, start
 
 
+def _started(pool) -> None:
+    """Wait until ``pool``'s workers are started (a job sent through its queue has run)."""
+    with Jobs(pool) as jobs:
+        jobs.submit(os.getpid)
+
+
 def test_a_free_worker_takes_the_costliest_job_waiting_and_reports_keep_the_order_sent():
     # one worker: the first job holds it while the others wait in the queue; then the costliest starts
     # first (ties: the first sent), whatever order they were sent in; on_done still sees the order sent
@@ -91,6 +97,7 @@ def test_a_free_worker_takes_the_costliest_job_waiting_and_reports_keep_the_orde
     with process_pool(1) as one:
         if one is None:
             pytest.skip("a single core: no pool (each job runs at once, in order)")
+        _started(one)
         with Jobs(one) as jobs:
             jobs.submit(_started_at, "first", 0.5, on_done=done.append)
             for name, cost in (("cheap", 1.0), ("dear", 9.0), ("middle", 3.0), ("middle too", 3.0)):
@@ -105,11 +112,34 @@ def test_jobs_sharing_a_pool_share_its_queue():
     with process_pool(1) as one:
         if one is None:
             pytest.skip("a single core: no pool")
+        _started(one)
         with Jobs(one) as a, Jobs(one) as b:
             a.submit(_started_at, "a first", 0.5, on_done=done.append)
             a.submit(_started_at, "a cheap", cost=1.0, on_done=done.append)
             b.submit(_started_at, "b dear", cost=5.0, on_done=done.append)
     assert [n for n, _ in sorted(done, key=lambda d: d[1])] == ["a first", "b dear", "a cheap"]
+
+
+def test_jobs_sent_while_the_workers_start_wait_in_the_queue_and_start_costliest_first(monkeypatch):
+    # the caller goes on while the pool starts its workers: its jobs wait in the queue meanwhile (none is
+    # sent to the executor, which would make the caller wait for the workers), then start costliest first
+    import threading
+
+    from mdsr_opt.core import jobs as jobs_module
+
+    go, start = threading.Event(), jobs_module._start_workers
+    monkeypatch.setattr(jobs_module, "_start_workers", lambda *a: (go.wait(30), start(*a)))  # slow to start
+    done = []
+    with process_pool(1) as one:
+        if one is None:
+            pytest.skip("a single core: no pool")
+        with Jobs(one) as jobs:
+            for name, cost in (("cheap", 1.0), ("dear", 9.0), ("middle", 3.0)):
+                jobs.submit(_started_at, name, cost=cost, on_done=done.append)
+            assert not any(f.running() or f.done() for f, _ in jobs._pending)  # still starting: all queued
+            go.set()
+    assert [n for n, _ in done] == ["cheap", "dear", "middle"]  # reported in the order sent
+    assert [n for n, _ in sorted(done, key=lambda d: d[1])] == ["dear", "middle", "cheap"]
 
 
 def test_a_pools_queue_does_not_keep_the_pool_alive():
@@ -189,6 +219,27 @@ def test_process_pool_has_workers_only_where_they_pay():
             with process_pool(bad):
                 pass
     assert start_method() in multiprocessing.get_all_start_methods()
+
+
+def test_the_forkserver_preloads_this_package_only_where_it_would_import_this_copy(tmp_path, monkeypatch):
+    # the server starts in the working folder: the checkout holding this copy gives this copy; a folder
+    # holding another copy of the package gives that one (never preloaded); a folder holding none leaves the
+    # search to the site folders (this copy preloaded only when installed there)
+    import site
+
+    import mdsr_opt
+    from mdsr_opt.core.jobs import server_imports_this_package
+
+    root = Path(mdsr_opt.__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    assert server_imports_this_package()
+    (tmp_path / "other" / "mdsr_opt").mkdir(parents=True)
+    (tmp_path / "other" / "mdsr_opt" / "__init__.py").write_text("")
+    monkeypatch.chdir(tmp_path / "other")
+    assert not server_imports_this_package()
+    monkeypatch.chdir(tmp_path)
+    installed = str(root) in {os.path.realpath(f) for f in site.getsitepackages() + [site.getusersitepackages()]}
+    assert server_imports_this_package() is installed
 
 
 _KILLED = """

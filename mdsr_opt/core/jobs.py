@@ -45,7 +45,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 from .checks import check_int
 
-__all__ = ["Jobs", "available_cores", "main_is_plain_script", "process_pool", "start_method"]
+__all__ = ["Jobs", "available_cores", "main_is_plain_script", "process_pool", "server_imports_this_package",
+           "start_method"]
 
 
 def start_method() -> str:
@@ -70,6 +71,25 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # macOS, Windows
         return os.cpu_count() or 1
+
+
+def server_imports_this_package() -> bool:
+    """Whether a forkserver started now would import this very copy of the package. The server is a new
+    interpreter in this process's working folder with the interpreter's default search path: the working
+    folder first (unless ``-I``/``-P``), then ``PYTHONPATH`` and the site folders, not the folder of this
+    process's script nor what it added to ``sys.path`` itself. So: the package found in the working folder
+    is this one, or none is found there and this one lies in a site folder (an installed package)."""
+    import site
+    from importlib.machinery import PathFinder
+
+    name = __name__.split(".")[0]
+    here = os.path.realpath(sys.modules[name].__file__ or "")
+    if not (sys.flags.isolated or sys.flags.safe_path):
+        there = PathFinder.find_spec(name, [os.getcwd()])
+        if there is not None:
+            return os.path.realpath(there.origin or "") == here
+    folders = list(site.getsitepackages()) + ([site.getusersitepackages()] if site.ENABLE_USER_SITE else [])
+    return os.path.dirname(os.path.dirname(here)) in {os.path.realpath(f) for f in folders}
 
 
 def worker_environment() -> dict[str, str]:
@@ -142,11 +162,11 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
                  setup: tuple | None = None) -> Iterator[Executor | None]:
     """A pool of ``workers`` processes for write jobs (default: one per available core), or None with
     ``workers`` 0 or a single core (nothing to gain beside this process). ``modules``: what the jobs
-    import, imported by each worker as it starts; with 'forkserver' those of other packages (matplotlib,
-    the solvers) are imported once by the server the workers are forked from, while this package's own
-    are left to the workers, which import them from this process's ``sys.path`` (the server has the
-    interpreter's default one). ``setup``: a picklable ``(function, args)`` each worker calls after those
-    imports. Shut down when the block ends: jobs not started are cancelled, running ones finish.
+    import, imported by each worker as it starts; with 'forkserver' they are imported once by the server
+    the workers are forked from, except this package's own where the server would not import this very
+    copy of it (:func:`server_imports_this_package`): the workers then import those from this process's
+    ``sys.path``. ``setup``: a picklable ``(function, args)`` each worker calls after those imports. Shut
+    down when the block ends: jobs not started are cancelled, running ones finish.
     """
     if workers is None:
         workers = available_cores()
@@ -160,16 +180,19 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     context = multiprocessing.get_context(start_method())
     if context.get_start_method() == "forkserver":
         ours = __name__.split(".")[0]
-        context.set_forkserver_preload([m for m in modules if m.split(".")[0] != ours])
+        mine = server_imports_this_package()
+        context.set_forkserver_preload([m for m in modules if mine or m.split(".")[0] != ours])
     before = {p.pid for p in multiprocessing.active_children()}
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
     _ENDERS[pool] = functools.partial(_end_workers, pool, before)
     _SLOTS[pool] = workers
     # start the workers now, from a thread: starting one waits until the forkserver has imported the
-    # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile
-    # instead of waiting at its first job
-    starter = threading.Thread(target=_start_workers, args=(pool,), name="start-workers", daemon=True)
+    # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile;
+    # its jobs wait in the pool's queue until the workers are started (a job sent to the executor itself
+    # before would wait, in the caller's thread, for the workers it starts)
+    _STARTING[pool] = threading.Event()
+    starter = threading.Thread(target=_start_workers, args=(pool, workers), name="start-workers", daemon=True)
     starter.start()
     try:
         yield pool
@@ -190,6 +213,8 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
 _ENDERS: "weakref.WeakKeyDictionary[Executor, Callable[[], None]]" = weakref.WeakKeyDictionary()
 #: the pools made by process_pool, each with its number of workers
 _SLOTS: "weakref.WeakKeyDictionary[Executor, int]" = weakref.WeakKeyDictionary()
+#: the pools made by process_pool whose workers are being started, each with the event set once they are
+_STARTING: "weakref.WeakKeyDictionary[Executor, threading.Event]" = weakref.WeakKeyDictionary()
 #: per pool, the queue of its jobs not yet started (:class:`_Queue`)
 _QUEUES: "weakref.WeakKeyDictionary[Executor, _Queue]" = weakref.WeakKeyDictionary()
 _QUEUES_LOCK = threading.Lock()
@@ -212,17 +237,23 @@ def _end_workers(pool: Executor, before: set[int]) -> None:
                 proc.terminate()
 
 
-def _start_workers(pool: Executor) -> None:
-    """Make ``pool`` start its worker processes (by a job that does nothing). This thread blocks Ctrl-C
-    (SIGINT) where the platform can: the processes it starts (the forkserver, which imports the preloaded
-    modules, and through it the workers) inherit the block, so that a terminal's Ctrl-C, which the run
-    handles in its main thread, does not interrupt them with a traceback of their own."""
+def _start_workers(pool: Executor, workers: int) -> None:
+    """Make ``pool`` start its ``workers`` worker processes (by jobs that do nothing; the executor starts a
+    worker for a job that finds none idle), then send it the jobs that its queue holds meanwhile. This
+    thread blocks Ctrl-C (SIGINT) where the platform can: the processes it starts (the forkserver, which
+    imports the preloaded modules, and through it the workers) inherit the block, so that a terminal's
+    Ctrl-C, which the run handles in its main thread, does not interrupt them with a traceback of their
+    own."""
     if hasattr(signal, "pthread_sigmask"):  # POSIX; this thread only (the main thread still gets the signal)
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        pool.submit(os.getpid)
+        for _ in range(workers):
+            pool.submit(os.getpid)
     except Exception:  # the pool was shut down first (its block ended at once), or broken by a Ctrl-C: the
-        pass  # run reports that itself
+        pass  # run reports that itself (its jobs, sent now, fail with the pool's error)
+    finally:
+        _STARTING.pop(pool).set()
+        _queue(pool).start()
 
 
 def _call(job: bytes) -> Any:
@@ -247,11 +278,15 @@ class _Queue:
         outer: Future = Future()
         with self._lock:
             heapq.heappush(self._heap, (-cost, next(self._count), outer, job))
-        self._start()
+        self.start()
         return outer
 
-    def _start(self) -> None:
-        """Send the costliest waiting jobs to the pool while it has a free worker."""
+    def start(self) -> None:
+        """Send the costliest waiting jobs to the pool while it has a free worker (none while its workers
+        are being started: :func:`_start_workers` calls this once they are)."""
+        pool = self.pool()
+        if pool is not None and pool in _STARTING:
+            return
         while True:
             with self._lock:
                 if self._running >= self.slots or not self._heap:
@@ -281,7 +316,7 @@ class _Queue:
             outer.set_exception(inner.exception())
         else:
             outer.set_result(inner.result())
-        self._start()
+        self.start()
 
 
 def _queue(pool: Executor) -> _Queue:

@@ -15,9 +15,9 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.patches import PathPatch
 
 from ..body.io import atomic_path
-from .style import BODY, ENERGY_CMAP, add_colorbar, figure_formats, label_coordinates, layout_colors, muscle_label
+from .style import BODY, ENERGY_CMAP, add_colorbar, figure_paths, label_coordinates, layout_colors, muscle_label
 
-__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'figure_paths', 'close_figure', 'hide_ticks',
+__all__ = ['plot_mesh', 'plot_edges', 'plot_muscles', 'save_figure', 'close_figure', 'hide_ticks',
            'coordinate_axes', 'mesh_paths', 'plain_log_ticks']
 
 
@@ -189,12 +189,12 @@ def save_figure(fig, path, *, close: bool = False, dpi: float = 130, vector=None
         Resolution of raster formats.
     vector : bool, str or sequence of str, optional
         Also write the figure in these vector formats beside ``path`` (:func:`.style.figure_formats`:
-        ``True`` is PDF; ``"svg"``, ``"pdf"`` or both). :func:`figure_paths` names every file written.
+        ``True`` is PDF; ``"svg"``, ``"pdf"`` or both). :func:`.style.figure_paths` names every file written.
 
     Returns
     -------
     str
-        The path written (the first; the vector copies follow :func:`figure_paths`).
+        The path written (the first; the vector copies follow :func:`.style.figure_paths`).
     """
     path = os.fspath(path)
     extra = figure_paths(path, vector)[1:]  # checked before anything is written
@@ -376,14 +376,6 @@ def _has_layout_engine(fig) -> bool:
     placeholder engine behind that does nothing)."""
     engine = fig.get_layout_engine()
     return engine is not None and not isinstance(engine, PlaceHolderLayoutEngine)
-
-
-def figure_paths(path, vector=None) -> list[str]:
-    """Every file :func:`save_figure` writes for ``path`` and ``vector``: ``path``, then one per vector
-    format with the same stem (``design.png`` and ``vector=True``: ``design.png``, ``design.pdf``)."""
-    path = os.fspath(path)
-    stem, ext = os.path.splitext(path)
-    return [path] + [f"{stem}.{f}" for f in figure_formats(vector) if f != ext.lower().lstrip(".")]
 
 
 def close_figure(fig) -> None:

@@ -15,7 +15,7 @@ This module is the one place that owns
   unit where known, else ``"body units"``;
 - how a contraction or stroke is quoted: commanded and achieved side by side (:func:`commanded_achieved`);
 - the file formats figures are written in (:func:`figure_formats`): PNG, and with the vector option a PDF
-  or SVG beside it (:func:`mdsr_opt.plot.common.save_figure`).
+  or SVG beside it (:func:`mdsr_opt.plot.common.save_figure`), and the files so written (:func:`figure_paths`).
 
 It imports only matplotlib's colour helpers and the muscles' default name (:mod:`mdsr_opt.body.muscles`), so every
 stage at or above ``plot`` can use it.
@@ -23,6 +23,7 @@ stage at or above ``plot`` can use it.
 
 from __future__ import annotations
 
+import os
 import re
 
 import numpy as np
@@ -33,7 +34,8 @@ __all__ = ["MUSCLE_COLORS", "REGION_COLORS", "BODY", "TARGET", "LIGHT", "REST_LI
            "CONTRACTION_CMAP", "DISTANCE_CMAP", "BODY_UNITS", "VECTOR_FORMATS", "muscle_name", "muscle_label",
            "muscle_color", "muscle_colors", "muscle_slot", "name_color", "muscle_color_of", "label_slots",
            "label_colors", "layout_colors", "dxf_color", "unit_label", "axis_label", "label_coordinates",
-           "energy_label", "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats"]
+           "energy_label", "symmetric_limits", "shared_limits", "add_colorbar", "commanded_achieved", "figure_formats",
+           "figure_paths"]
 
 #: Muscle colours by place in the layout (muscle ``i`` is ``MUSCLE_COLORS[i % 20]``): saturated, apart from
 #: the bodies' blues and greys, and told apart from one another (matplotlib's tab10 without its grey, red
@@ -269,3 +271,12 @@ def figure_formats(vector=None) -> tuple[str, ...]:
         if f not in out:
             out.append(f)
     return tuple(out)
+
+
+def figure_paths(path, vector=None) -> list[str]:
+    """Every file :func:`mdsr_opt.plot.common.save_figure` writes for ``path`` and ``vector``: ``path``, then
+    one per vector format with the same stem (``design.png`` and ``vector=True``: ``design.png``,
+    ``design.pdf``)."""
+    path = os.fspath(path)
+    stem, ext = os.path.splitext(path)
+    return [path] + [f"{stem}.{f}" for f in figure_formats(vector) if f != ext.lower().lstrip(".")]

@@ -541,7 +541,8 @@ def case_parts(scene: Scene, run: CaseRun, out: str | os.PathLike, mesh_format: 
 def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=None) -> list[str]:
     """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
     ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
-    from ..plot.common import figure_paths, save_figure
+    from ..plot.common import save_figure
+    from ..plot.style import figure_paths
     from ..plot.design import plot_contraction_graph, plot_design, plot_routing
     from ..plot.scenes import plot_target
     from ..plot.style import energy_label
@@ -595,7 +596,8 @@ def _write_prototype_photos(run: CaseRun, folder: Path) -> list[str]:
 
 def _write_photos(scene: Scene, run: CaseRun, folder: Path, vector=None) -> list[str]:
     """``photo.png`` (with ``photo.json``) and ``overlay.png``."""
-    from ..plot.common import figure_paths, save_figure
+    from ..plot.common import save_figure
+    from ..plot.style import figure_paths
     from ..plot.photos import plot_overlay
 
     files: list[str] = []

@@ -218,8 +218,6 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     say = log or (lambda s: None)
     t0 = time.perf_counter()
     say(f"{scene.name}: {scene.title or scene.name} ({scene.mesh.n_nodes} nodes, {len(names)} case(s))")
-    if figures:
-        bg.submit(_write_rest, scene, out / "rest.png", vector, cost=figure_cost())
     proto = None
     if photos and prototype:
         from .prototype import VirtualPrototype
@@ -298,6 +296,8 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         if gait_info is not None:
             anim_out[scene.gait.name] = gait_info
         advance(log)
+    if figures:  # sent last: the cheapest job, which a free worker takes last, holds back no job's report
+        bg.submit(_write_rest, scene, out / "rest.png", vector, cost=figure_cost())
     return functools.partial(_finish_scene, scene, out, names, bg, t0, runs, written, anim_out, proto, say, figures,
                              photos, max_difference)
 

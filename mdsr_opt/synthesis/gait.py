@@ -547,7 +547,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                                          "dotted: achieved)", chart), {"vector": vector}, figure_cost()),
                  (save_gait_animation, (scene.mesh, sch, res.muscles, gif),
                   {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames))]
-        from ..plot.common import figure_paths
+        from ..plot.style import figure_paths
         files += figure_paths(chart, vector) + [str(gif)]
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,
                                                                    "material": scene.material}, 0.0))
