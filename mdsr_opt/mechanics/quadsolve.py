@@ -426,7 +426,7 @@ def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, f
 def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope], contractions,
                              fixtures: Sequence[np.ndarray] = (), *, tol: float = 1e-9, max_iter: int = 30,
                              min_step: float = 1.0 / 256, align_to_rest: bool = True,
-                             start: QuadraticResult | None = None, guess=None, step: bool = True) -> QuadraticResult:
+                             start: QuadraticResult | None = None, guess=None) -> QuadraticResult:
     """Internal driving of ``model`` by ``ropes`` (chains of its nodes, pulled at their first node, with
     capstan friction) contracted by ``contractions`` (fractions of their rest lengths), the nodes of each of
     ``fixtures`` (disjoint node groups, an end node first: see
@@ -437,7 +437,6 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
     converge (or the predicted state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
-    With ``step=False`` a failed solve from the prediction (or the start state) is returned as it is, unstepped.
 
     Raises
     ------
@@ -573,9 +572,6 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         else:
             active[:] = True
             predictor_iters = it
-    if done is None and not step:  # no prediction, or it failed: returned unstepped
-        done = (zt, 1.0, False, it, 0, res, f"not converged from {near[1]} (residual {res:.3g}; load not stepped)") \
-            if near is not None else (z0, 0.0, False, 0, 0, float("inf"), "no upright predicted state (load not stepped)")
     if done is None:
         done = _continue(solve_at, z0, min_step)
         if predictor_iters:

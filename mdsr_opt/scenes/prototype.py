@@ -59,8 +59,7 @@ from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.capstan import CapstanRope, quadratic_chain
 from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
 from ..mechanics.quadratic import QuadraticModel, extend_prescribed, split_mesh, transfer_state
-from ..mechanics.quadnested import solve_quadratic_nested
-from ..mechanics.quadsolve import START_FULL_STEP, solve_quadratic_external
+from ..mechanics.quadsolve import START_FULL_STEP, solve_quadratic_external, solve_quadratic_internal
 from .select import edge_path
 
 __all__ = ["VirtualPrototype", "PrototypeShot", "DEFAULT_REFINE", "DEFAULT_E_RANGE", "DEFAULT_NU_RANGE",
@@ -383,10 +382,10 @@ class VirtualPrototype:
         ``contractions`` (rounded to 1e-9). Solved once per muscles and contractions: a second call returns the
         same shot. ``guess``, a state of the design mesh near the answer (the design model's equilibrium at
         these contractions), is carried to the prototype's nodes
-        (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and starts the solve of its linear-element
-        counterpart, whose equilibrium starts the quadratic solve at the full load, the load stepped as without
-        them when that fails (:func:`~mdsr_opt.mechanics.quadnested.solve_quadratic_nested`): the same state to
-        the solver's tolerance, found sooner. A shot of the same ropes and fixtures solved before at contractions within
+        (:func:`~mdsr_opt.mechanics.quadratic.transfer_state`) and the solve starts there at the full load,
+        stepping the load as without it when that fails
+        (:func:`~mdsr_opt.mechanics.quadsolve.solve_quadratic_internal`): the same state to the solver's
+        tolerance, found sooner. A shot of the same ropes and fixtures solved before at contractions within
         :data:`~mdsr_opt.mechanics.quadsolve.START_FULL_STEP` starts it instead (``start=``), likewise. ``fixture_radius``: the ends' fixtures for these muscles (default
         ``fixture_radius``; a routed design's ropes carry the fixture size they were fitted to, which may
         be smaller). The mesh is refined round rope ends too coarse for their fixtures
@@ -434,7 +433,7 @@ class VirtualPrototype:
             predicted = None
             if near is None and guess is not None:
                 predicted = transfer_state(self.design_mesh, guess, model.points)
-            res = solve_quadratic_nested(model, ropes, a, groups, guess=predicted,
+            res = solve_quadratic_internal(model, ropes, a, groups, guess=predicted,
                                            start=near if near is not None else below)
             if res.success:
                 states = self.__dict__.setdefault("_states", {})
