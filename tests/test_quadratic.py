@@ -39,6 +39,18 @@ def test_derivatives_agree_with_casadi_and_finite_differences(order, material):
     assert np.abs((gp - gm) / (2 * h) - K @ d).max() < 1e-7 * np.abs(K @ d).max()
 
 
+@pytest.mark.parametrize("numeric", [True, False])
+def test_gradient_without_the_energy_is_the_same_gradient_and_hessian(numeric):
+    model = QuadraticModel(Mesh.rectangle(2.0, 1.0, 3, 2), NeoHookean(1.5, 0.49, thickness=0.3, plane="stress"),
+                           numeric=numeric)
+    x = model.points + 0.05 * np.random.default_rng(3).standard_normal(model.points.shape)
+    e, g, K = model.evaluate(x)
+    e2, g2, K2 = model.evaluate(x, energy=False)
+    assert e2 is None and np.isfinite(e) and e > 0
+    assert np.array_equal(g, g2) and np.array_equal(K.toarray(), K2.toarray())
+    assert np.array_equal(model.gradient(x), model.energy_gradient(x)[1]) and np.array_equal(model.gradient(x), g)
+
+
 def test_split_mesh_and_quadratic_nodes_are_the_same_nodes():
     mesh = Mesh.rectangle(2.0, 1.0, 3, 2)
     model, fine = QuadraticModel(mesh, MAT, 2), split_mesh(mesh)

@@ -155,16 +155,32 @@ def _reference_gradients(order: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(out), QUAD_WEIGHTS
 
 
-def _assembly_plan(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The CSR pattern of the sparse matrix summing entries at ``(rows, cols)`` (n x n), computed once per mesh:
-    returns ``(slot, indices, indptr)`` with ``slot[k]`` the position in the CSR data of entry ``k``, so that a
-    matrix of these entries is ``np.bincount(slot, values, len(indices))`` with ``indices`` and ``indptr``
-    (columns sorted and unique in each row)."""
-    key = rows.astype(np.int64) * n + cols
-    uniq, slot = np.unique(key, return_inverse=True)
-    indices = (uniq % n).astype(np.int32)
-    indptr = np.searchsorted(uniq // n, np.arange(n + 1)).astype(np.int32)
-    return slot.ravel(), indices, indptr
+def _assembly_plan(elements: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The CSR pattern of the (2 n_nodes)-square matrix summing element blocks over the node-interleaved
+    coordinates of ``elements`` (m, nn), computed once per mesh: returns ``(slot, indices, indptr)`` with
+    ``slot`` the position in the CSR data of each entry of the blocks (m, 2nn, 2nn) raveled, so that the
+    matrix is ``np.bincount(slot, blocks.ravel(), len(indices))`` with ``indices`` and ``indptr`` (columns
+    sorted and unique in each row). Found on the node pairs (a quarter of the entries): node ``a``'s
+    neighbours ``b`` (sorted) give rows ``2a + i`` with columns ``2b + j``."""
+    m, nn = elements.shape
+    e = elements.astype(np.int64)
+    key = (np.repeat(e, nn, axis=1) * n_nodes + np.tile(e, (1, nn))).ravel()          # (m nn nn): a, b
+    uniq, pslot = np.unique(key, return_inverse=True)
+    a_of, b_of = uniq // n_nodes, uniq % n_nodes
+    nptr = np.searchsorted(a_of, np.arange(n_nodes + 1))
+    deg = np.diff(nptr)
+    # the pair p = (a, b) at offset k = p - nptr[a] in row a: dof (2a + i, 2b + j) at 4 nptr[a] + 2 i deg[a] + 2 k + j
+    base = 4 * nptr[a_of] + 2 * (np.arange(len(uniq)) - nptr[a_of])                   # (pairs,)
+    i = np.arange(2)
+    pos = base[:, None, None] + 2 * i[None, :, None] * deg[a_of][:, None, None] + i[None, None, :]  # (pairs, i, j)
+    slot = pos[pslot.ravel().reshape(m, nn, nn)].transpose(0, 1, 3, 2, 4).reshape(-1)   # (e, a, i, b, j)
+    indices = np.empty(4 * len(uniq), dtype=np.int32)
+    indices[pos.ravel()] = np.broadcast_to(2 * b_of[:, None, None] + i[None, None, :], pos.shape).ravel()
+    indptr = np.empty(2 * n_nodes + 1, dtype=np.int64)
+    indptr[0:-1:2] = 4 * nptr[:-1]
+    indptr[1::2] = 4 * nptr[:-1] + 2 * deg
+    indptr[-1] = 4 * nptr[-1]
+    return slot, indices, indptr.astype(np.int32)
 
 
 @dataclass(frozen=True)
@@ -252,9 +268,7 @@ class QuadraticModel:
         self._mapped = None
         #: evaluate with the material's closed-form stress and tangent where it has them (else CasADi)
         self.numeric = bool(numeric) and numeric_law(material)
-        rows = np.repeat(dofs, 2 * nn, axis=1).ravel()
-        cols = np.tile(dofs, (1, 2 * nn)).ravel()
-        self._pattern = _assembly_plan(rows, cols, 2 * self.n_nodes)
+        self._pattern = _assembly_plan(self.elements, self.n_nodes)
 
     def _element_function(self, nn: int, nq: int):
         """CasADi function ``(xe, G, w, p) -> (energy, gradient, Hessian)`` of one element."""
@@ -319,11 +333,12 @@ class QuadraticModel:
         return x.reshape(-1, 2)
 
     # --------------------------------------------------------------------------------------------- energy
-    def _evaluate(self, x, params=None, need: int = 2):
-        """Per element energies (m,), gradients (m, 2nn) and, for ``need=2``, Hessians (m, 2nn, 2nn)."""
+    def _evaluate(self, x, params=None, need: int = 2, energy: bool = True):
+        """Per element energies (m,), gradients (m, 2nn) and, for ``need=2``, Hessians (m, 2nn, 2nn); with
+        ``energy=False`` the closed-form path leaves the energies out (None)."""
         p = self.params if params is None else np.asarray(params, dtype=float).ravel()
         if self.numeric and len(p) == 2:
-            return self._evaluate_numeric(x, p, need)
+            return self._evaluate_numeric(x, p, need, energy)
         x = self._state(x)
         d = self._data
         m, nq, nn = d.G.shape[0], d.G.shape[1], d.G.shape[2]
@@ -336,7 +351,7 @@ class QuadraticModel:
         H = np.asarray(H).reshape(k, m, k).transpose(1, 0, 2) if need == 2 else None
         return np.asarray(e).ravel(), np.asarray(g).T, H
 
-    def _evaluate_numeric(self, x, p, need: int):
+    def _evaluate_numeric(self, x, p, need: int, energy: bool = True):
         """:meth:`_evaluate` from the material's closed-form stress and tangent (``numeric_law``).
 
         With ``G[e, q] = dref[q] D_e`` (reference gradients times the element's inverse rest edge matrix), the
@@ -347,13 +362,14 @@ class QuadraticModel:
         m, nq = d.w.shape
         nn = d.Tx.shape[0]
         Fl = self._gradients(x).reshape(2, 2, m * nq)                          # (i, j, n), n = (e, q)
+        e = None
         with np.errstate(divide="ignore", invalid="ignore"):
-            psi = self.material.density(Fl[0, 0] - 1, Fl[0, 1], Fl[1, 0], Fl[1, 1] - 1, p[0], p[1])
+            if energy:
+                psi = self.material.density(Fl[0, 0] - 1, Fl[0, 1], Fl[1, 0], Fl[1, 1] - 1, p[0], p[1])
+                J = Fl[0, 0] * Fl[1, 1] - Fl[0, 1] * Fl[1, 0]
+                e = (d.w * np.where(J > 0, psi, np.nan).reshape(m, nq)).sum(1)
             P, A = self.material.stress_tangent(Fl, p[0], p[1], need == 2)
-        J = Fl[0, 0] * Fl[1, 1] - Fl[0, 1] * Fl[1, 0]
-        psi = np.where(J > 0, psi, np.nan).reshape(m, nq)
         w = d.w.reshape(-1)
-        e = (d.w * psi).sum(1)
         Dn = np.broadcast_to(d.D[:, :, :, None], (2, 2, m, nq)).reshape(2, 2, m * nq)  # (r, j, n)
         Pw = P * w
         Pr = np.einsum("ijn,rjn->nir", Pw, Dn)                                # (n, i, r)
@@ -379,13 +395,19 @@ class QuadraticModel:
         out = np.bincount(self._data.dofs.ravel(), g.ravel(), 2 * self.n_nodes)
         return float(e.sum()), out
 
-    def evaluate(self, x, params=None) -> tuple[float, np.ndarray, sp.csr_matrix]:
-        """The energy, its gradient (2N,) and its Hessian (2N, 2N) (sparse) at ``x``."""
-        e, g, H = self._evaluate(x, params, 2)
+    def gradient(self, x, params=None) -> np.ndarray:
+        """The energy's gradient (2N,) alone (the energy itself is not evaluated)."""
+        g = self._evaluate(x, params, 1, energy=False)[1]
+        return np.bincount(self._data.dofs.ravel(), g.ravel(), 2 * self.n_nodes)
+
+    def evaluate(self, x, params=None, energy: bool = True) -> tuple[float | None, np.ndarray, sp.csr_matrix]:
+        """The energy (None with ``energy=False``: not evaluated), its gradient (2N,) and its Hessian (2N, 2N)
+        (sparse) at ``x``."""
+        e, g, H = self._evaluate(x, params, 2, energy)
         n2 = 2 * self.n_nodes
         grad = np.bincount(self._data.dofs.ravel(), g.ravel(), n2)
         slot, indices, indptr = self._pattern
         data = np.bincount(slot, H.ravel(), len(indices))
         K = sp.csr_matrix((data, indices, indptr), shape=(n2, n2))
         K.has_sorted_indices = True  # the plan's columns are sorted and unique in every row
-        return float(e.sum()), grad, K
+        return (float(e.sum()) if energy else None), grad, K

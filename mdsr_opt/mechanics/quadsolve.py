@@ -277,24 +277,24 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
     fixed_idx = np.flatnonzero(fixed)
     order = ReusedOrdering()
     guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
-    K_rest = model.evaluate(X)[2]
+    K_rest = model.evaluate(X, energy=False)[2]
     ff, fc = PatternRestriction(K_rest, free, free), PatternRestriction(K_rest, free, fixed_idx)
 
     def solve_at(t, z0, final, s):
         def system(z, jac):
             x = full(t, z)
             if jac:
-                _e, g, K = model.evaluate(x)
+                _e, g, K = model.evaluate(x, energy=False)
                 Kff = ff(K)
                 Kff.data /= fs
                 return g[free] / fs, Kff
-            return model.energy_gradient(x)[1][free] / fs, None
+            return model.gradient(x)[free] / fs, None
 
         ok = _Upright(model, lambda z: full(t, z))
         guard[0] = ok
 
         # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
-        K = model.evaluate(full(s, z0))[2]
+        K = K_rest if s == 0.0 else model.evaluate(full(s, z0), energy=False)[2]  # at s = 0: the rest state
         try:
             dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx])))
         except RuntimeError:
@@ -375,7 +375,7 @@ def _rigid_extension(model, red: RigidReduction, x: np.ndarray, xr: np.ndarray) 
     moved[red.refs] = True  # each fixture whole: its reference node with its followers
     fixed = np.repeat(moved, 2)
     d = (xr - x).reshape(-1)
-    K = sp.csr_matrix(model.evaluate(x)[2])
+    K = sp.csr_matrix(model.evaluate(x, energy=False)[2])
     free = np.flatnonzero(~fixed)
     f_idx = np.flatnonzero(fixed)
     try:  # an exactly singular matrix (a body the fixtures do not hold) raises
@@ -417,7 +417,7 @@ def _predicted_unknowns(model, red: RigidReduction, gauge, keep, ropes, guess, f
             return None
     x = xr
     P = red.jacobian(q)
-    gq = (P.T @ model.energy_gradient(x)[1])[keep]
+    gq = (P.T @ model.gradient(x))[keep]
     C = np.column_stack([(P.T @ r.forces(x, r.weights(x), model.n_nodes)[0])[keep] for r in ropes])
     tau = np.maximum(np.linalg.lstsq(C, -gq, rcond=None)[0], 0.0)
     return np.concatenate([q[keep], tau])
@@ -490,9 +490,9 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
             q, tau = split(z)
             x = red.x_of(q)
             if jac:
-                _e, gx, Kx = model.evaluate(x)
+                _e, gx, Kx = model.evaluate(x, energy=False)
             else:
-                gx, Kx = model.energy_gradient(x)[1], None
+                gx, Kx = model.gradient(x), None
             cols, rows, res_c = [], [], np.zeros(nc)
             Kr = None  # the ropes' stiffness, added to the body's once
             for c, rope in enumerate(ropes):
