@@ -82,7 +82,8 @@ from ..mechanics.align import difference, node_weights
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from .fabrication import FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
+from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
+                          warn_conflicts)
 from .routing_fixtures import common_fixture_radius
 from .layouts import check_budget, shared_layout
 from ..plot.style import muscle_label
@@ -217,6 +218,9 @@ class PosesResult:
     problems : tuple of str
         Why the layout itself is no success (ropes kept for different poses that cannot be moulded in one
         layer); empty when none. ``all_success`` is False when there is any.
+    fabrication : Fabrication or None
+        The channel, wall and fixtures the layout was routed with, every field set (None: routed without
+        one); :func:`~mdsr_opt.synthesis.export.export_fabrication` draws it.
     """
 
     names: tuple
@@ -243,6 +247,7 @@ class PosesResult:
     units: str | None = None
     stress_unit: str | None = None
     problems: tuple = ()
+    fabrication: Fabrication | None = None
 
     @property
     def n_muscles(self) -> int:
@@ -309,7 +314,8 @@ class PosesResult:
                 "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()},
                 "rest_mesh": self.rest_mesh,
                 "rest_differences": None if self.rest_differences is None else nan_none(fin(self.rest_differences)),
-                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems)}
+                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems),
+                "fabrication": None if self.fabrication is None else self.fabrication.to_dict()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PosesResult":
@@ -331,7 +337,8 @@ class PosesResult:
                    anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
                    max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"),
                    rest_differences=None if d.get("rest_differences") is None else arr(d["rest_differences"]),
-                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())))
+                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())),
+                   fabrication=None if d.get("fabrication") is None else Fabrication(**d["fabrication"]))
 
     def save(self, path) -> str:
         """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
@@ -580,7 +587,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
                        rest_mesh=mesh_fingerprint(mesh), rest_differences=Drest, units=units,
-                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems))
+                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems), fabrication=fab)
 
 
 def _same_design(mesh, sep, engaged, dopt) -> bool:
