@@ -233,7 +233,7 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     _check_design_type(design, muscles)
-    failure = "; ".join(w for w in (failure.strip(), design_failure(design)) if w)
+    failure = "; ".join(w for w in (design_failure(design), failure.strip()) if w)
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
         design, muscles = design.design, design.muscles if muscles is None else muscles
     elif muscles is None and not isinstance(design, (PosesResult, Mapping)):

@@ -539,11 +539,11 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     # the writer's wait when they run in workers): a job that fails leaves none
     jobs = []
     if figures:
-        from ..plot.common import figure_paths
+        from ..plot.style import figure_formats  # not plot.common: matplotlib is the jobs' import
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
         jobs.append((_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
                                             "dotted: achieved)", chart), {"vector": vector}, figure_cost()))
-        files += figure_paths(chart, vector)
+        files += [str(chart)] + [str(chart.with_suffix(f".{f}")) for f in figure_formats(vector) if f != "png"]
     if figures and animation:
         jobs.append((save_gait_animation, (scene.mesh, sch, res.muscles, gif),
                      {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames)))
