@@ -11,6 +11,7 @@ import html
 import json
 import re
 import warnings
+from pathlib import Path
 from types import SimpleNamespace
 
 import ezdxf
@@ -18,6 +19,8 @@ import numpy as np
 import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
+from mdsr_opt.scenes.casefab import write_case_fabrication
+from mdsr_opt.scenes.runner import run_case
 from mdsr_opt.scenes.runscene import n_units, run_scene
 from mdsr_opt.scenes.scenefile import load_scene
 from mdsr_opt.synthesis.export import export_fabrication
@@ -174,3 +177,20 @@ def test_a_failed_gait_writes_its_fabrication_files_marked(tmp_path):
     first = (out / "gait" / "thick_ring_muscles.csv").read_text().splitlines()[0]
     assert first.startswith("# FAILED DESIGN: ") and first.endswith(", do not build")
     assert any(t.startswith("FAILED DESIGN: ") for t in dxf_texts(out / "gait" / "thick_ring.dxf"))
+
+
+def test_a_case_of_a_scene_stating_its_fabrication_gets_its_files(tmp_path):
+    """mdsr run writes them beside the case's figures (runner's shapes job); a scene stating none gets none."""
+    scene = ring_scene(tmp_path)
+    run = run_case(scene, "squash", photo=False)
+    assert run.report.success
+    files = write_case_fabrication(scene, run, tmp_path / "ok")
+    assert sorted(Path(f).name for f in files) == ["thick_ring_squash.dxf", "thick_ring_squash.svg",
+                                                   "thick_ring_squash_muscles.csv"]
+    assert caption(files[0]).startswith("thick_ring_squash: ") and "2 wide with walls of 1.5" in caption(files[0])
+    failed = dataclasses.replace(run, report=dataclasses.replace(run.report, success=False, message="too far"))
+    with pytest.warns(UserWarning, match="FAILED DESIGN: the case failed"):
+        files = write_case_fabrication(scene, failed, tmp_path / "failed")
+    assert caption(files[0]).startswith("FAILED DESIGN: the case failed (too far), do not build. thick_ring_squash")
+    scene.routing_options.pop("fabrication")
+    assert write_case_fabrication(scene, run, tmp_path / "none") == [] and not (tmp_path / "none").exists()
