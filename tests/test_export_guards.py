@@ -74,6 +74,9 @@ def test_a_layout_is_drawn_with_the_fabrication_it_was_routed_with(routed, tmp_p
     with pytest.raises(ValueError, match=r"routed with: wall 1 \(routed with 0.6\).*leave fabrication out"):
         export_fabrication(mesh, res, tmp_path / "other", fabrication=Fabrication(wall=1.0))
     assert not (tmp_path / "other").exists()
+    with pytest.raises(ValueError, match=r"give the fabrication once: as design_poses\(fabrication=...\) or in"):
+        design_poses(mesh, NeoHookean(1.0, 0.4), {"bend": mesh.points}, fabrication=FAB,
+                     routing_options={"fabrication": FAB})
 
 
 def strip_with_muscles():

@@ -410,8 +410,8 @@ def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
 @interruptible()
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
-                 overlap: float = 0.5, compare: bool = True,
-                 separate: Mapping[str, tuple] | None = None, units: str | None = None) -> PosesResult:
+                 overlap: float = 0.5, compare: bool = True, separate: Mapping[str, tuple] | None = None,
+                 units: str | None = None, fabrication=None) -> PosesResult:
     """Route ONE muscle layout for all poses and design each pose's strokes on it.
 
     See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
@@ -447,6 +447,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         The mesh's length unit (see :data:`mdsr_opt.synthesis.export.UNITS`), recorded in the result with
         the material's ``stress_unit``: tables and fabrication files then give lengths in it and tensions in
         N. None: body units.
+    fabrication : Fabrication or dict of its fields, optional
+        As ``routing_options["fabrication"]`` (give it once): the ropes' channel, wall and fixtures, recorded.
 
     Returns
     -------
@@ -480,7 +482,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     units = check_length_unit(units)
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
-    ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
+    if fabrication is not None and "fabrication" in ropt:
+        raise ValueError("give the fabrication once: as design_poses(fabrication=...) or in routing_options")
+    ropt["fabrication"] = check_fabrication(ropt.get("fabrication", fabrication), dopt.get("anchor_radius"))
     separate = dict(separate or {})
     # a channel the body cannot hold: before any solve (only sizes given, when no pose is routed)
     check_channel_fits(mesh, ropt["fabrication"], routed=any(p.name not in separate for p in items))
