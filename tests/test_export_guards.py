@@ -71,7 +71,7 @@ def test_a_layout_is_drawn_with_the_fabrication_it_was_routed_with(routed, tmp_p
         assert dxf_radii(files["dxf"]) == {round(r, 6), round(r + 0.6, 6)}
     # the same sizes given again: fine; others: refused before anything is written
     export_fabrication(mesh, res, tmp_path / "same", name="strip", fabrication={"wall": 0.6})
-    with pytest.raises(ValueError, match=r"routed with: wall 1 \(routed with 0.6\).*leave fabrication out"):
+    with pytest.raises(ValueError, match=r"routed \(or given\) with: wall 1 \(the layout's: 0.6\).*leave fabrication out"):
         export_fabrication(mesh, res, tmp_path / "other", fabrication=Fabrication(wall=1.0))
     assert not (tmp_path / "other").exists()
     with pytest.raises(ValueError, match=r"give the fabrication once: as design_poses\(fabrication=...\) or in"):
@@ -197,3 +197,25 @@ def test_a_case_of_a_scene_stating_its_fabrication_gets_its_files(tmp_path):
     assert caption(files[0]).startswith("FAILED DESIGN: the case failed (too far), do not build. thick_ring_squash")
     scene.routing_options.pop("fabrication")
     assert write_case_fabrication(scene, run, tmp_path / "none") == [] and not (tmp_path / "none").exists()
+
+
+def test_a_pipeline_of_given_muscles_is_drawn_with_the_fabrication_it_was_given(tmp_path):
+    from mdsr_opt.synthesis.pipeline import PipelineResult, design_pipeline
+
+    mesh, mus = strip_with_muscles()
+    mat = NeoHookean(1.0, 0.4)
+    bent = solve_internal(mesh, mat, [mus[0]], [0.1]).x
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    right = {i: tuple(bent[i]) for i, (x, y) in enumerate(mesh.points) if x == 40.0}
+    fab = Fabrication(channel_diameter=0.5, wall=0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = design_pipeline(mesh, mat, left, right, muscles=[mus[0]], fabrication=fab, units="mm")
+    assert res.success and res.fabrication == fab
+    res.save(tmp_path / "saved")
+    loaded = PipelineResult.load(tmp_path / "saved")
+    for k, design in enumerate((res, loaded)):
+        files = export_fabrication(mesh, design, tmp_path / f"f{k}", name="strip")
+        assert "channel(s) 0.5 wide with walls of 0.3" in caption(files["svg"])
+    with pytest.raises(ValueError, match=r"channel_diameter 1 \(the layout's: 0.5\)"):
+        export_fabrication(mesh, res, tmp_path / "other", fabrication={"channel_diameter": 1.0})

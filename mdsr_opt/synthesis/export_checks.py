@@ -78,12 +78,14 @@ def impossible_strokes(fd) -> list:
 
 def routed_fabrication(design):
     """The :class:`~mdsr_opt.synthesis.fabrication.Fabrication` the design's layout was routed with (every
-    field set), or None when it records none (muscles given, a DesignResult, a result saved without it)."""
+    field set) or, for muscles given to design_pipeline, given for; None when it records none (a
+    DesignResult, a result saved without it)."""
     from .pipeline import PipelineResult
     from .poses import PosesResult
 
     if isinstance(design, PipelineResult):
-        return None if design.routing is None else design.routing.fabrication
+        routed = None if design.routing is None else design.routing.fabrication
+        return design.fabrication if routed is None else routed
     if isinstance(design, PosesResult):
         return design.fabrication
     return None
@@ -99,10 +101,10 @@ def check_same_fabrication(given, routed) -> None:
     fab = check_fabrication(given)
     if routed is None or fab is False or fab is None:
         return
-    off = [f"{f.name} {getattr(fab, f.name):g} (routed with {getattr(routed, f.name):g})"
+    off = [f"{f.name} {getattr(fab, f.name):g} (the layout's: {getattr(routed, f.name):g})"
            for f in fields(fab) if getattr(fab, f.name) is not None and getattr(routed, f.name) is not None
            and not math.isclose(getattr(fab, f.name), getattr(routed, f.name), rel_tol=1e-9, abs_tol=0.0)]
     if off:
-        raise ValueError("fabrication differs from the one the layout was routed with: " + ", ".join(off)
-                         + ". The ropes were placed for the routed channel, wall and fixtures; leave fabrication "
-                         "out (the routed one is drawn) or route again with this one")
+        raise ValueError("fabrication differs from the one the layout was routed (or given) with: " + ", ".join(off)
+                         + ". The ropes were placed for the layout's channel, wall and fixtures; leave fabrication "
+                         "out (the layout's is drawn) or design again with this one")
