@@ -206,7 +206,8 @@ def add_cli(sub) -> None:
     q.add_argument("--prototype-seed", type=parse_seed, default=0,
                    help="seed of the virtual prototype's material perturbation and camera (default 0)")
     q.add_argument("--no-figures", action="store_true", help="write only the JSON and Markdown summaries")
-    q.add_argument("--no-animations", action="store_true", help="skip the animations (GIF)")
+    q.add_argument("--no-animations", action="store_true",
+                   help="skip the animations (GIFs; a [gait]'s layout, schedule and fabrication files are still written)")
     q.add_argument("--vector", action="store_true",
                    help="also write every figure as a vector file beside its PNG, for papers (PDF unless "
                         "--vector-format svg); GIFs stay GIFs")

@@ -548,6 +548,7 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
     from ..plot.style import energy_label
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
+    from .casefab import write_case_fabrication
 
     setup, mesh, mat = run.setup, scene.mesh, scene.material
     case, x = setup.case, setup.target
@@ -582,6 +583,7 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
         save(plot_design(mesh, res, x, setup.muscles, ticks=False, units=units), "design.png")
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
+        files += write_case_fabrication(scene, run, folder)  # the scene's [fabrication]: SVG, DXF, CSV
     return files
 
 

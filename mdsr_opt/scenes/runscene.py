@@ -75,7 +75,8 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     out : folder (created).
     cases : names of the cases to run (default all); animations needing a case not run are skipped.
     method : design method overriding the scene's ``design_options["method"]``.
-    photos, figures, animations : turn the photographs, the figures and the animations off.
+    photos, figures, animations : turn the photographs, the figures and the animations (GIFs) off; a gait's
+        layout, schedule and fabrication files are written all the same.
     mesh_format : ``"vtu"``, ``"vtk"`` or ``"xdmf"`` (through meshio).
     photo_size : (width, height) of the synthetic photographs, in pixels.
     log : progress messages (default: this module's logger at INFO level; ``None`` for silence).
@@ -291,8 +292,9 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
             bg.submit(parts[0], on_done=functools.partial(_files_done, written[cname][0], log), cost=shapes_cost())
         elif figures:
             advance(log)  # no files to draw: the case's figure stage is done
-    if animations and scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files
-        gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector)
+    if scene.gait is not None:  # issue 16: one layout, gait schedule, fabrication files (no GIF: --no-animations)
+        gait_info = _run_gait(scene, out, runs, figures=figures, log=say, writer=bg, vector=vector,
+                              animation=animations)
         if gait_info is not None:
             anim_out[scene.gait.name] = gait_info
         advance(log)
@@ -443,11 +445,11 @@ def parse_size(text: str) -> tuple[int, int]:
 def n_units(scene: Scene, cases, animations: bool, photos: bool = True, figures: bool = True) -> int:
     """Units of work of ``run_scene`` for the progress bar, one per stage that takes time: per case its
     solves (target, routing, design), with ``photos`` its photograph stage, with ``figures`` its figures and
-    meshes; one per animation made and, with ``animations``, one for the scene's gait."""
+    meshes; with ``animations`` one per animation made; one for the scene's gait."""
     names = set(scene.case_names if cases is None else cases)
-    n = len(names) * (1 + bool(photos) + bool(figures))
+    n = len(names) * (1 + bool(photos) + bool(figures)) + (scene.gait is not None)
     if animations:
-        n += sum(set(x.cases) <= names for x in scene.animations) + (scene.gait is not None)
+        n += sum(set(x.cases) <= names for x in scene.animations)
     return n
 
 
@@ -487,8 +489,8 @@ def _animation_done(anim_out: dict, name: str, say, log, got: dict) -> None:
     advance(log)
 
 
-def _run_gait(scene: Scene, out, runs, figures: bool, log, writer, vector=None):
-    return run_gait(scene, out, runs, figures=figures, log=log, writer=writer, vector=vector)
+def _run_gait(scene: Scene, out, runs, figures: bool, log, writer, vector=None, animation=True):
+    return run_gait(scene, out, runs, figures=figures, log=log, writer=writer, vector=vector, animation=animation)
 
 
 def _photo_cost(run: CaseRun, proto) -> float:

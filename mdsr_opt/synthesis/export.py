@@ -24,7 +24,8 @@
     shared plate once, as a closed polyline where its ends lie apart),
     ``LABELS`` (text) and ``CONFLICTS`` (a circle where the layout cannot be moulded, as the SVG's red rings).
 ``<name>_muscles.csv``
-    One row per muscle: rest length, end points, and per pose the stroke, contraction and tension it needs;
+    One row per muscle: rest length, end points, and per pose the stroke, the commanded contraction, the
+    achieved one (``stroke / rest length``) and the tension it needs;
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
     each pose's stroke band (``stroke <pose> low``, ``stroke <pose> high``).
 
@@ -35,7 +36,10 @@ silicone presets: Pa) and the length unit are known, else in units of ``E * thic
 (:func:`~mdsr_opt.core.quantities.tension_unit`). Input is checked completely before anything is written, and each
 file is written atomically, so bad input leaves nothing behind. A layout that cannot be moulded is still
 written, with a :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` naming the muscles, the distance and
-the clearance required.
+the clearance required. A design that failed, or whose stroke would stretch a rope, is refused unless
+``allow_failed=True``, and then every file says ``FAILED DESIGN: <reason>, do not build``
+(:mod:`~mdsr_opt.synthesis.export_checks`). The channel, wall and fixtures drawn are those the layout was
+routed with unless told otherwise.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import layout_colors, muscle_label, muscle_name
+from .export_checks import failed_mark
 from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
 from .poses import PosesResult
@@ -100,6 +105,7 @@ class FabricationData:
     stroke_bands: np.ndarray | None = None  # (P, m, 2) low/high stroke per pose and muscle; None: not computed
     tension_unit: str = "units of E*t*length"  # the unit of ``tensions`` (N when known)
     conflicts: tuple = ()         # fabrication.Conflict: where the layout cannot be moulded (marked in the SVG)
+    failure: str = ""             # why this is no design to build ("": it is; export_checks.design_failure)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("units", "pose_names"), extra={
@@ -172,7 +178,8 @@ def _check_design_type(design, muscles) -> None:
 
 
 def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
-                     channel_width: float | None = None, fabrication=None, material=None) -> FabricationData:
+                     channel_width: float | None = None, fabrication=None, material=None,
+                     failure: str = "") -> FabricationData:
     """Collect and check the geometry and per-pose figures of a design (writes nothing).
 
     Parameters
@@ -191,13 +198,19 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
         Drawn width of a channel (length units); default the fabrication's ``channel_diameter``.
     fabrication : Fabrication or dict of its fields, optional
         Channel, wall and fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`); default: the one
-        a PipelineResult was routed with, else the defaults for this body. The fixtures' radius is the
-        design's ``anchor_radius`` when it has one.
+        the layout was routed with (a PipelineResult's, a PosesResult's), else the defaults for this body;
+        one stating other sizes than the routed one is refused. The fixtures' radius is the design's
+        ``anchor_radius`` when it has one.
     material : optional
         The body's material, for the unit of the tensions (its ``stress_unit``) when the design does not
         record it (a PosesResult records it since ``design_poses`` was given ``units``); with a known length
         unit, tensions are then in N.
+    failure : str, optional
+        Why the design is not to be built beyond what it records itself (a gait whose schedule failed);
+        the result's ``failure`` joins it with :func:`~mdsr_opt.synthesis.export_checks.design_failure` and
+        :func:`~mdsr_opt.synthesis.export_checks.impossible_strokes` ("" when the design may be built).
     """
+    from .export_checks import check_same_fabrication, design_failure, impossible_strokes, routed_fabrication
     from .fabrication import Fabrication, check_fabrication, check_sizes_fit, rope_conflicts
     from .pipeline import PipelineResult
 
@@ -209,14 +222,18 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
                          f"{known} (leave units out, or give units={known!r})")
     units = None if units is None else check_units(units)
     t_unit, t_factor = tension_unit(_known(design, "stress_unit") or getattr(material, "stress_unit", None), units)
-    if fabrication is None and isinstance(design, PipelineResult) and design.routing is not None:
-        fabrication = design.routing.fabrication
+    if not isinstance(failure, str):
+        raise TypeError(f"failure must be a string (why the design is not to be built), got {type(failure).__name__}")
+    routed = routed_fabrication(design)
+    check_same_fabrication(fabrication, routed)
+    fabrication = routed if fabrication is None and routed is not None else fabrication
     fab = check_fabrication(fabrication)
     if fab is False:  # routed without a fabrication: the defaults' channel, wall and fixtures are drawn
         fab = Fabrication()
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     _check_design_type(design, muscles)
+    failure = "; ".join(w for w in (design_failure(design), failure.strip()) if w)
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
         design, muscles = design.design, design.muscles if muscles is None else muscles
     elif muscles is None and not isinstance(design, (PosesResult, Mapping)):
@@ -277,17 +294,19 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     outline = loops[k] if areas[k] > 0 else loops[k][::-1]
     holes = [p for i, p in enumerate(loops) if i != k]
     P = mesh.points
-    return FabricationData(outline=outline, holes=holes, muscles=tuple(mus),
-                           paths=[P[list(mu.nodes)] for mu in mus],
-                           rest_lengths=np.array([mu.rest_length(mesh) for mu in mus]), pose_names=tuple(names),
-                           contractions=np.asarray(A, float), strokes=np.asarray(S, float),
-                           tensions=t_factor * np.asarray(T, float), tension_unit=t_unit,
-                           # the end patches' radius, when the design has one (NaN: none; 0: points)
-                           end_radius=end_radius,
-                           conflicts=tuple(rope_conflicts(mesh, mus, fab, fixture_radius=end_radius,
-                                                          channel_width=float(channel_width))),
-                           channel_width=float(channel_width), units=units, wall=float(fab.wall),
-                           stroke_bands=bands if bands is not None and np.isfinite(bands).any() else None)
+    fd = FabricationData(outline=outline, holes=holes, muscles=tuple(mus),
+                         paths=[P[list(mu.nodes)] for mu in mus],
+                         rest_lengths=np.array([mu.rest_length(mesh) for mu in mus]), pose_names=tuple(names),
+                         contractions=np.asarray(A, float), strokes=np.asarray(S, float),
+                         tensions=t_factor * np.asarray(T, float), tension_unit=t_unit,
+                         # the end patches' radius, when the design has one (NaN: none; 0: points)
+                         end_radius=end_radius,
+                         conflicts=tuple(rope_conflicts(mesh, mus, fab, fixture_radius=end_radius,
+                                                        channel_width=float(channel_width))),
+                         channel_width=float(channel_width), units=units, wall=float(fab.wall),
+                         stroke_bands=bands if bands is not None and np.isfinite(bands).any() else None)
+    fd.failure = "; ".join(w for w in (failure, *impossible_strokes(fd)) if w)  # a rope that would stretch too
+    return fd
 
 
 # ---------------------------------------------------------------------------------------------- writers
@@ -326,6 +345,8 @@ def _svg_text(fd: FabricationData, title: str) -> str:
                f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls"
                + (f" (black: {shared} plate(s) that muscles ending closer than a radius share)" if shared else "")
                + f"; units: {u}")
+    if fd.failure:  # first, in the title and the caption: no one builds it by mistake
+        title, caption = f"{failed_mark(fd.failure)}. {title}", f"{failed_mark(fd.failure)}. {caption}"
     if fd.conflicts:
         caption += (f". NOT MOULDABLE as laid out ({len(fd.conflicts)} place(s), red rings): "
                     + "; ".join(cf.message for cf in fd.conflicts))
@@ -408,12 +429,15 @@ def _csv_text(fd: FabricationData) -> str:
     head = ["muscle", "edges", f"rest length [{u}]", f"start x [{u}]", f"start y [{u}]", f"end x [{u}]",
             f"end y [{u}]"]
     for p in fd.pose_names:
-        head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"tension {p} [{tu}]"]
+        # the commanded contraction beside the achieved one (the stroke's): a slack or stretched rope shows
+        head += [f"stroke {p} [{u}]", f"contraction {p} [1]", f"achieved {p} [1]", f"tension {p} [{tu}]"]
     if fd.pose_names:
         head += [f"max stroke [{u}]", f"max tension [{tu}]"]
     if fd.stroke_bands is not None:  # the strokes' uncertainty bands (synthesis.bands), last
         head += [f"stroke {p} {e} [{u}]" for p in fd.pose_names for e in ("low", "high")]
     buf = _stdio.StringIO()
+    if fd.failure:  # a first line no one misses (a spreadsheet shows it above the table)
+        buf.write(f"# {failed_mark(fd.failure)}\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
 
@@ -424,7 +448,8 @@ def _csv_text(fd: FabricationData) -> str:
         row = [mu.name, len(mu.nodes) - 1, num(fd.rest_lengths[i]), num(path[0, 0]), num(path[0, 1]),
                num(path[-1, 0]), num(path[-1, 1])]
         for k in range(len(fd.pose_names)):
-            row += [num(fd.strokes[k, i]), num(fd.contractions[k, i]), num(fd.tensions[k, i])]
+            achieved = fd.strokes[k, i] / fd.rest_lengths[i] if fd.rest_lengths[i] > 0 else np.nan
+            row += [num(fd.strokes[k, i]), num(fd.contractions[k, i]), num(achieved), num(fd.tensions[k, i])]
         if fd.pose_names:
             t = fd.tensions[:, i]
             row += [num(fd.strokes[:, i].max()), num(np.nanmax(t)) if np.isfinite(t).any() else ""]
@@ -443,7 +468,7 @@ def fabrication_files(out, name: str) -> dict[str, Path]:
 
 def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | None = None, units: str | None = None,
                        name: str = "robot", channel_width: float | None = None, fabrication=None,
-                       material=None) -> dict[str, str]:
+                       material=None, allow_failed: bool = False, failure: str = "") -> dict[str, str]:
     """Write the fabrication files of a design: SVG and DXF at true scale, and the muscle CSV.
 
     Parameters
@@ -460,10 +485,18 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         without a unit), never an invented mm. A unit other than the design's is refused.
     name : file stem: ``<name>.svg``, ``<name>.dxf``, ``<name>_muscles.csv``.
     channel_width : drawn channel width, length units (default the fabrication's ``channel_diameter``).
-    fabrication : Fabrication or dict of its fields (default: a PipelineResult's, else the defaults for the
-        body): the channels' walls and the end fixtures drawn.
+    fabrication : Fabrication or dict of its fields (default: the one the layout was routed with, a
+        PipelineResult's or a PosesResult's, else the defaults for the body): the channels' walls and the
+        end fixtures drawn. One stating other sizes than the routed one is refused.
     material : optional: the body's material, for the tensions' unit when the design does not record it
         (:func:`fabrication_data`).
+    allow_failed : bool, default False
+        Write the files of a design that is not to be built (it failed, or a muscle's stroke would stretch
+        its rope: :mod:`~mdsr_opt.synthesis.export_checks`); every file then says ``FAILED DESIGN: <reason>,
+        do not build`` (the SVG's title and caption, a DXF text, the CSV's first line) and a warning says so.
+    failure : str, optional
+        Why the design is not to be built beyond what it records (a gait whose schedule failed): it is then
+        a failed design as above.
 
     Returns
     -------
@@ -476,7 +509,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         Unknown units, a design of another mesh (:func:`~mdsr_opt.body.fingerprint.check_same_mesh`) or of
         other muscles, missing muscles, a name that is no plain file stem
         (:func:`~mdsr_opt.core.checks.check_stem`), ``out`` naming an existing file, a channel, wall or
-        fixture too large for the body: before anything is written.
+        fixture too large for the body, a fabrication other than the routed one, a failed design without
+        ``allow_failed``: before anything is written.
 
     Warns
     -----
@@ -493,8 +527,19 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"out {os.fspath(out)!r} is an existing file, not a folder: give a folder for the "
                          "fabrication files")
+    if not isinstance(allow_failed, (bool, np.bool_)):
+        raise TypeError(f"allow_failed must be True or False, got {type(allow_failed).__name__}")
     fd = fabrication_data(mesh, design, muscles=muscles, units=units, channel_width=channel_width,
-                          fabrication=fabrication, material=material)
+                          fabrication=fabrication, material=material, failure=failure)
+    if fd.failure and not allow_failed:
+        raise ValueError(f"export_fabrication ({name}): {fd.failure}: its files would describe a robot that "
+                         "does not do what was asked. Give allow_failed=True to write them anyway, marked "
+                         "'FAILED DESIGN ... do not build'")
+    if fd.failure:
+        import warnings
+
+        warnings.warn(f"export_fabrication ({name}): {failed_mark(fd.failure)}; every file says so",
+                      UserWarning, stacklevel=2)
     warn_conflicts(fd.conflicts, f"export_fabrication ({name})")
     svg = _svg_text(fd, name)
     dxf = dxf_text(fd)

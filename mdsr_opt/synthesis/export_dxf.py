@@ -269,6 +269,17 @@ def dxf_text(fd) -> str:
         g(8, "CONFLICTS")
         xy(cf.at)
         g(40, _dxf_number(max(fd.end_radius, fd.channel_width) + fd.wall))
+    if getattr(fd, "failure", ""):  # a failed design: said in red below the drawing, in lines R12 takes
+        import textwrap
+
+        from .export_checks import failed_mark
+
+        for k, line in enumerate(textwrap.wrap(failed_mark(fd.failure), 200)):
+            g(0, "TEXT")
+            g(8, "CONFLICTS")
+            xy((lo[0], lo[1] - (k + 1) * 0.05 * size))
+            g(40, _dxf_number(0.035 * size))
+            g(1, _dxf_string(line))
     g(0, "ENDSEC")
     g(0, "EOF")
     return "\n".join(lines) + "\n"

@@ -34,10 +34,9 @@ from .poses import PosesResult
 __all__ = ["Gait", "GaitSchedule", "GaitWarning", "gait_schedule", "save_gait_animation", "run_gait",
            "warm_start_state", "ZERO_STROKE"]
 
-#: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest
-#: length (in the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's
-#: zero stroke at about -1e-16 of the length; the same 1e-9 is the threshold at which
-#: :func:`~mdsr_opt.synthesis.poses.design_poses` counts a muscle's path as shortening.
+#: A stroke within this fraction of its rope's rest length of zero is zero: the rope held at its rest length (in
+#: the frame's solve at contraction 0, able to pull), not paid out. Round-off leaves a pose's zero stroke at about
+#: -1e-16 of the length; at the same 1e-9 :func:`~mdsr_opt.synthesis.poses.design_poses` counts a path as shortening.
 ZERO_STROKE = 1e-9
 
 
@@ -471,34 +470,33 @@ def _gait_label(name: str) -> str:
 
 
 def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, writer=None,
-             vector=None) -> dict | None:
+             vector=None, animation: bool = True) -> dict | None:
     """The scene runner's hook: a scene's :class:`Gait` from its designed cases, written to ``out/<gait>/``.
 
     Lays one muscle layout for the gait's poses (:func:`~mdsr_opt.synthesis.poses.design_poses`, the scene's routing and
     design options, the budget ``gait.max_muscles``; the runner's own per-case routings and designs are the
     separate layouts compared against), solves the schedule (:func:`gait_schedule`) and writes
-    ``layout.json``, ``schedule.csv``, ``schedule.png`` and ``<gait>.gif`` (with ``figures``) and the
-    fabrication files ``<scene>.svg``, ``<scene>.dxf``, ``<scene>_muscles.csv`` in ``scene.units``.
+    ``layout.json``, ``schedule.csv``, ``schedule.png`` (with ``figures``), ``<gait>.gif`` (with ``figures``
+    and ``animation``) and the fabrication files ``<scene>.svg``, ``<scene>.dxf``, ``<scene>_muscles.csv``
+    in ``scene.units``, with the channel, wall and fixtures the layout was routed with (the scene's
+    ``[fabrication]``); a failed gait's say ``FAILED DESIGN: <reason>, do not build``.
 
     Parameters
     ----------
     scene : Scene with a ``gait``.
     out : the run's folder.
     runs : mapping case name -> CaseRun (``.setup.target``, ``.setup.muscles``, ``.design``).
-    figures : write the chart and the GIF.
+    figures, animation : write the chart; with both, the GIF. ``log``: progress messages.
     vector : with ``figures``, also write the chart as PDF/SVG (:func:`mdsr_opt.plot.common.save_figure`).
-    log : progress messages.
     writer : :class:`~mdsr_opt.core.jobs.Jobs`, optional
-        Draws the chart and the GIF and writes the fabrication files (its ``submit``); by default all
-        this is done here, one after the other. ``<gait>.json``, which lists the files, is written when the
-        last of these jobs has reported: with a pool's jobs, at the writer's ``wait``.
+        Runs the chart, GIF and fabrication jobs (its ``submit``; default: here, in turn); ``<gait>.json``,
+        listing the files, is written when the last has reported (a pool's: at the writer's ``wait``).
 
     Returns
     -------
     dict or None
         JSON-friendly summary with ``success`` (every pose designed, every frame solved, every keyframe's pose
-        reached: ``reached``, ``unreached``) and the files;
-        None when a pose of the gait was not run (``--case``).
+        reached: ``reached``, ``unreached``) and the files; None when a pose of the gait was not run (``--case``).
     """
     from .export import export_fabrication, fabrication_files
     from ..body.io import write_json
@@ -534,26 +532,28 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] {_gait_label(gait.name)}: not made ({exc})")
         return info
     radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
-    if radius_note:
-        info["notes"] = [radius_note]
+    info.update({"notes": [radius_note]} if radius_note else {})
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
     # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at
     # the writer's wait when they run in workers): a job that fails leaves none
     jobs = []
     if figures:
+        from ..plot.style import figure_paths  # not plot.common: matplotlib is the jobs' import
         chart, gif = folder / "schedule.png", folder / f"{gait.name}.gif"
-        jobs += [(_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
-                                         "dotted: achieved)", chart), {"vector": vector}, figure_cost()),
-                 (save_gait_animation, (scene.mesh, sch, res.muscles, gif),
-                  {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames))]
-        from ..plot.style import figure_paths
-        files += figure_paths(chart, vector) + [str(gif)]
-    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,
-                                                                   "material": scene.material}, 0.0))
-    files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
+        jobs.append((_write_schedule, (sch, f"{scene.name} {gait.name}: strokes over time ({sch.n_frames} frames; "
+                                            "dotted: achieved)", chart), {"vector": vector}, figure_cost()))
+        files += figure_paths(chart, vector)
+    if figures and animation:
+        jobs.append((save_gait_animation, (scene.mesh, sch, res.muscles, gif),
+                     {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames)))
+        files.append(str(gif))
     ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
+    why = "; ".join([f"frames {failed} of the schedule failed"] * bool(failed) + [sch.outcome()] * bool(sch.unreached))
+    jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,  # a failed
+                 "material": scene.material, "allow_failed": True, "failure": why}, 0.0))  # one's say FAILED
+    files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
     info.update(success=ok, n_muscles=res.n_muscles, muscles=[m.name for m in res.muscles],
                 fixture_radius=None if res.anchor_radius is None else float(res.anchor_radius), separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),

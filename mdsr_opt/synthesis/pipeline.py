@@ -60,6 +60,9 @@ class PipelineResult:
     bands : StrokeBands or None
         The strokes' uncertainty bands (:func:`~mdsr_opt.synthesis.bands.stroke_bands`), when asked for
         (``design.stroke_band`` holds their ranges).
+    fabrication : Fabrication or None
+        The channel, wall and fixtures the muscles were routed (``routing.fabrication``) or given for:
+        :func:`~mdsr_opt.synthesis.export.export_fabrication` draws them (None: routed without one).
     """
 
     mesh: Mesh
@@ -75,6 +78,7 @@ class PipelineResult:
     times: dict = field(default_factory=dict)
     dropped: tuple = ()
     bands: Any = None
+    fabrication: Any = None
 
     @property
     def success(self) -> bool:
@@ -121,6 +125,7 @@ class PipelineResult:
             "routing": None if self.routing is None else self.routing.to_dict(), "design": self.design.to_dict(),
             "times": self.times, "dropped_muscles": [m.to_dict() for m in self.dropped],
             "bands": None if self.bands is None else self.bands.to_dict(),
+            "fabrication": None if self.fabrication is None else self.fabrication.to_dict(),
         }
 
     def save(self, out: str | os.PathLike) -> str:
@@ -201,7 +206,8 @@ class PipelineResult:
                             for d in data.get("dropped_muscles", ()))
             return cls(mesh=md.mesh, material=material, target=md.x, external=external,
                        muscles=muscles, routing=routing, design=design, times=data.get("times", {}),
-                       dropped=dropped, **kw)
+                       dropped=dropped, **kw, fabrication=None if data.get("fabrication") is None
+                       else Fabrication(**data["fabrication"]))
         except FileNotFoundError:
             raise
         except KeyError as exc:
@@ -434,7 +440,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     times = {"external": t1 - t0, "routing": t2 - t1, "design": t3 - t2}
     out = PipelineResult(mesh=mesh, material=material, anchors=anc, drag_nodes=didx, drag_positions=dpos,
                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
-                         times=times, dropped=dropped)
+                         times=times, dropped=dropped,
+                         fabrication=routing.fabrication if routing is not None else ropts["fabrication"] or None)
     if bands and res.success:
         from .bands import stroke_bands
 

@@ -82,7 +82,8 @@ from ..mechanics.align import difference, node_weights
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from .fabrication import FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
+from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
+                          warn_conflicts)
 from .routing_fixtures import common_fixture_radius
 from .layouts import check_budget, shared_layout
 from ..plot.style import muscle_label
@@ -217,6 +218,9 @@ class PosesResult:
     problems : tuple of str
         Why the layout itself is no success (ropes kept for different poses that cannot be moulded in one
         layer); empty when none. ``all_success`` is False when there is any.
+    fabrication : Fabrication or None
+        The channel, wall and fixtures the layout was routed with, every field set (None: routed without
+        one); :func:`~mdsr_opt.synthesis.export.export_fabrication` draws it.
     """
 
     names: tuple
@@ -243,6 +247,7 @@ class PosesResult:
     units: str | None = None
     stress_unit: str | None = None
     problems: tuple = ()
+    fabrication: Fabrication | None = None
 
     @property
     def n_muscles(self) -> int:
@@ -309,7 +314,8 @@ class PosesResult:
                 "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()},
                 "rest_mesh": self.rest_mesh,
                 "rest_differences": None if self.rest_differences is None else nan_none(fin(self.rest_differences)),
-                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems)}
+                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems),
+                "fabrication": None if self.fabrication is None else self.fabrication.to_dict()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PosesResult":
@@ -331,7 +337,8 @@ class PosesResult:
                    anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
                    max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"),
                    rest_differences=None if d.get("rest_differences") is None else arr(d["rest_differences"]),
-                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())))
+                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())),
+                   fabrication=None if d.get("fabrication") is None else Fabrication(**d["fabrication"]))
 
     def save(self, path) -> str:
         """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
@@ -403,8 +410,8 @@ def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
 @interruptible()
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
-                 overlap: float = 0.5, compare: bool = True,
-                 separate: Mapping[str, tuple] | None = None, units: str | None = None) -> PosesResult:
+                 overlap: float = 0.5, compare: bool = True, separate: Mapping[str, tuple] | None = None,
+                 units: str | None = None, fabrication=None) -> PosesResult:
     """Route ONE muscle layout for all poses and design each pose's strokes on it.
 
     See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
@@ -440,6 +447,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         The mesh's length unit (see :data:`mdsr_opt.synthesis.export.UNITS`), recorded in the result with
         the material's ``stress_unit``: tables and fabrication files then give lengths in it and tensions in
         N. None: body units.
+    fabrication : Fabrication or dict of its fields, optional
+        As ``routing_options["fabrication"]`` (give it once): the ropes' channel, wall and fixtures, recorded.
 
     Returns
     -------
@@ -473,7 +482,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     units = check_length_unit(units)
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
-    ropt["fabrication"] = check_fabrication(ropt.get("fabrication"), dopt.get("anchor_radius"))
+    if fabrication is not None and "fabrication" in ropt:
+        raise ValueError("give the fabrication once: as design_poses(fabrication=...) or in routing_options")
+    ropt["fabrication"] = check_fabrication(ropt.get("fabrication", fabrication), dopt.get("anchor_radius"))
     separate = dict(separate or {})
     # a channel the body cannot hold: before any solve (only sizes given, when no pose is routed)
     check_channel_fits(mesh, ropt["fabrication"], routed=any(p.name not in separate for p in items))
@@ -580,7 +591,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
                        rest_mesh=mesh_fingerprint(mesh), rest_differences=Drest, units=units,
-                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems))
+                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems), fabrication=fab)
 
 
 def _same_design(mesh, sep, engaged, dopt) -> bool:
