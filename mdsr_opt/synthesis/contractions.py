@@ -228,7 +228,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
             res.status += f" (warm-started from rest after the design warm-started from the {where} failed " \
                           f"its verification: {first.verification.message})"
         else:
-            res.status += f" (warm-started from rest, the design failed too: {again.status})"
+            # the second design's reason once: said in full only when it differs from the first's
+            why = again.verification.message if again.verification is not None else again.status
+            same = first.verification is not None and why == first.verification.message
+            res.status += " (again from rest: " + ("rejected the same way)" if same else f"{again.status})")
         # the counters and clocks cover both designs; the history is the returned one's
         res.iterations = first.iterations + again.iterations
         res.n_forward = first.n_forward + again.n_forward
@@ -327,7 +330,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
     capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
     if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
-        res.status += "; at the free-length cap (their end patches hold most of the rope, contraction_caps): " \
+        res.status += "; at the most their ropes can shorten (the end fixtures hold much of each rope): " \
                       + ", ".join(f"{muscle_label(mus[c], int(c))} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
