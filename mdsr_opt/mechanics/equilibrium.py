@@ -20,6 +20,7 @@ from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
 from .obstacles import check_obstacles, check_prescribed
+from .selfprescribed import check_prescribed_self
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
                         upright)
@@ -118,6 +119,10 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     if spec.obstacles:  # a drag into an obstacle: refused here, not a load stepping that stalls at its edge
         check_prescribed(check_obstacles(obstacles), didx, path.positions, spec.gap * units.length)
+    if spec.self_contact and len(didx):  # prescribed parts pushed through each other: refused, not a stalled solve
+        rest_anc = mesh.points[anc]
+        check_prescribed_self(mesh, nodes, lambda s: np.vstack([rest_anc, path.positions(s)]),
+                              spec.gap * units.length, anchored=len(anc))
     mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
