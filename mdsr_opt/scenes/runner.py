@@ -75,6 +75,7 @@ class CaseReport:
     units : ``{"stroke": ..., "tension": ...}``: the unit of the strokes (the scene's ``units``) and of the
         tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
         ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
+    contact : with contact: total and per-obstacle contact force, in ``force_unit`` (the tensions'), pairs.
     fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
         channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
     """
@@ -113,6 +114,7 @@ class CaseReport:
     units: dict = field(default_factory=dict)
     band_notes: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
+    contact: dict | None = None
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -371,6 +373,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.stroke = [float(s) for s in res.stroke]
     rep.tension = [float(t) for t in res.tensions_in_unit()]
     rep.units = {"stroke": length_unit(res.units), "tension": res.tension_unit}
+    rep.contact = res.contact_summary().get("contact")  # forces in the tensions' unit
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / mesh.size
     rep.initial_difference = float(res.initial_difference)
@@ -403,7 +406,6 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                              rest_difference=rep.rest_difference)
     rep.success = bool(res.success) and not far
     if not res.success:
-        # the cause once, in the user's words, with what helps; the solver's whole status is in summary.json
         rep.message = f"design {'rejected' if 'verification' in res.status else 'failed'}: {plain_failure(res.status)}"
         _LOG.debug("%sdesign status: %s", prefix, res.status)
     elif far:
