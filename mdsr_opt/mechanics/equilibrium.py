@@ -68,12 +68,14 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
         combine them with ``min_step=1`` to forbid load stepping.
     obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle`
-        Rigid obstacles the body's boundary may touch but not enter (frictionless); none may hold a node at
-        rest. See :mod:`~mdsr_opt.mechanics.contactsolve`.
+        Rigid obstacles the body's boundary may touch but not enter (with Coulomb ``friction`` when given);
+        none may hold a node at rest, and no drag may enter one. See :mod:`~mdsr_opt.mechanics.contactsolve`.
     contact : bool
         Model self-contact of the boundary (outline and holes): no crossing, a gap kept between a boundary
         node and the boundary segments it touches. Off by default (each load step then also looks for
-        candidate pairs).
+        candidate pairs). Anchors and drags that would push prescribed parts of the body through each other
+        are refused (:func:`~mdsr_opt.mechanics.selfprescribed.check_prescribed_self`). The contact report's
+        forces are in ``contact["force_unit"]``, units of ``E*t*length`` as rope tensions.
     contact_gap : the gap kept by every contact, length units (default 1e-4 x the body's size).
     friction : Coulomb's coefficient between the body and the obstacles (default 0: frictionless):
         quasi-static, a lagged smoothed potential per load step (:mod:`~mdsr_opt.mechanics.friction`, which
