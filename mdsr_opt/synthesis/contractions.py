@@ -284,9 +284,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             kappa = out["kappa"]
     else:
         if method == "nested":
-            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, max_iter, options, clock)
+            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, max_iter, options, clock, units.length)
         else:
-            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, max_iter, outer, options, clock)
+            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, max_iter, outer, options, clock,
+                                                         units.length)
         hist = obj.history
         kappa = None
         d0 = hist[0][1] if hist else float("nan")
