@@ -28,3 +28,16 @@ def test_the_progress_line_is_in_the_callers_lengths(scale, monkeypatch, caplog)
     assert d == pytest.approx(res.difference, rel=1e-3, abs=1e-9 * scale)  # the design's own figure, its units
     assert share == pytest.approx(100 * res.difference / mesh.size, rel=2e-3, abs=1e-6)
     assert "% of the body's size" in last
+
+
+def test_the_pipeline_says_each_stage(caplog):
+    from mdsr_opt import design_pipeline
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    left = [i for i, (x, y) in enumerate(mesh.points) if x == 0.0]
+    top_right = {i: (x - 0.3, y - 0.4) for i, (x, y) in enumerate(mesh.points) if x == 4.0}
+    with caplog.at_level(logging.INFO, logger="mdsr_opt.synthesis.pipeline"):
+        out = design_pipeline(mesh, NeoHookean(1.0, 0.3), left, top_right)
+    said = [r.getMessage() for r in caplog.records if r.name == "mdsr_opt.synthesis.pipeline"]
+    assert said[0].startswith("design_pipeline: target solved in ") and said[0].endswith(" s")
+    assert said[1] == f"design_pipeline: designing {len(out.routing.muscles) + len(out.dropped)} muscle(s) by flattened"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from typing import Sequence
@@ -28,6 +29,8 @@ from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_o
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ['check_design_options', 'design_contractions', 'warn_saturated']
 
@@ -220,6 +223,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
         # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
+        _LOG.info("design: rejected by its verification (%s); designing again from rest",
+                  res.verification.message if res.verification is not None else res.status)
         again, _, _ = _design(*args, warm="rest")
         where = "given shape" if isinstance(warm, np.ndarray) else "target"
         first = res
@@ -345,6 +350,9 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.status += f"; not verified: {why}"
         return res, fwd, False
     if verify:
+        if ckw:  # a forward contact solve from rest (load stepping): the longest silent part after the search
+            _LOG.info("design: verifying contractions [%s] with contact",
+                      ", ".join(f"{c:.4g}" for c in res.contractions))
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL), start="design" if verify == "design" else "rest", **ckw)
         res.verification = v
