@@ -64,3 +64,17 @@ def test_a_cell_is_cut_cleanly(message):
     cell = failure_cause(message)
     assert len(cell) <= 90 and _balanced(cell), cell
     assert "Solve_Succeeded" not in cell and "Solved_To_Acceptable_Level" not in cell, cell
+
+
+def test_a_forward_re_solve_rejected_says_why_not_its_solver_status():
+    from types import SimpleNamespace
+
+    from mdsr_opt.synthesis.verify import _forward_messages
+
+    fwd = SimpleNamespace(success=False, status="Solve_Succeeded; rejected: the boundary crosses itself (contact is "
+                                                "off: contact=True models it)")
+    msgs = _forward_messages(fwd, "forward re-solve", 0.0, 1.0, False)
+    assert msgs == ["forward re-solve failed (the boundary crosses itself (contact is off: contact=True models it))"]
+    stalled = SimpleNamespace(success=False, status="load stepping stalled at fraction 0.5 (Restoration_Failed)")
+    assert _forward_messages(stalled, "forward re-solve", 0.0, 1.0, False) == [
+        "forward re-solve failed (load stepping stalled at fraction 0.5 (Restoration_Failed))"]
