@@ -41,3 +41,17 @@ def test_the_pipeline_says_each_stage(caplog):
     said = [r.getMessage() for r in caplog.records if r.name == "mdsr_opt.synthesis.pipeline"]
     assert said[0].startswith("design_pipeline: target solved in ") and said[0].endswith(" s")
     assert said[1] == f"design_pipeline: designing {len(out.routing.muscles) + len(out.dropped)} muscle(s) by flattened"
+
+
+def test_dropping_an_idle_muscle_says_so_before_designing_again(caplog):
+    from mdsr_opt.synthesis.acceptance import design_active
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    mat = NeoHookean(1.0, 0.3)
+    lower, upper = Muscle(range(1, 16), name="lower"), Muscle(range(69, 84), name="upper")
+    target = solve_internal(mesh, mat, [lower], [0.15]).x  # the upper muscle lengthens: idle
+    with caplog.at_level(logging.INFO, logger="mdsr_opt.synthesis.acceptance"):
+        _, kept, dropped = design_active(mesh, mat, [lower, upper], target)
+    said = [r.getMessage() for r in caplog.records if r.name == "mdsr_opt.synthesis.acceptance"]
+    assert [d.name for d in dropped] == ["upper"]
+    assert said == ["design: idle muscle(s) upper left out; designing again with the 1 kept"]
