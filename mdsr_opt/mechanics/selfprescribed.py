@@ -15,7 +15,7 @@ import numpy as np
 __all__ = ["check_prescribed_self", "PATH_FRACTIONS"]
 
 #: the load fractions (besides the target) at which the prescribed nodes' path is looked at
-PATH_FRACTIONS = np.linspace(0.0, 1.0, 17)[1:-1]
+PATH_FRACTIONS = np.linspace(0.0, 1.0, 9)[1:-1]
 
 
 def _groups(mesh, nodes: np.ndarray) -> np.ndarray:
@@ -31,52 +31,76 @@ def _groups(mesh, nodes: np.ndarray) -> np.ndarray:
     return connected_components(g, directed=False)[1]
 
 
-def _overlap(mesh, nodes: np.ndarray, x: np.ndarray, gap: float):
-    """The first overlap of the prescribed nodes ``nodes`` at positions ``x`` (k, 2), or None: ``(kind, i, j)``
-    with ``i``, ``j`` positions in ``nodes``."""
+class _Prescribed:
+    """The prescribed part of the body: its boundary edges and triangles (in positions of ``nodes``) and
+    which prescribed node is joined by a mesh edge to which."""
+
+    def __init__(self, mesh, nodes: np.ndarray):
+        at = np.full(mesh.n_nodes, -1)
+        at[nodes] = np.arange(len(nodes))
+        seg = at[mesh.boundary_edges]
+        self.seg = seg[(seg >= 0).all(axis=1)]
+        tri = at[mesh.triangles]
+        self.tri = tri[(tri >= 0).all(axis=1)]
+        self.bnd = np.unique(self.seg)
+        e = at[mesh.edges]
+        e = np.sort(e[(e >= 0).all(axis=1)], axis=1)
+        self.k = len(nodes)
+        self.keys = np.sort(e[:, 0] * self.k + e[:, 1])
+        self.X0 = mesh.points[nodes]
+
+    def joined(self, u, v) -> np.ndarray:
+        """Whether the prescribed nodes ``u[i]`` and ``v[i]`` (positions) share a mesh edge."""
+        q = np.minimum(u, v) * self.k + np.maximum(u, v)
+        i = np.minimum(np.searchsorted(self.keys, q), max(len(self.keys) - 1, 0))
+        return (self.keys[i] == q) if len(self.keys) else np.zeros(len(q), dtype=bool)
+
+
+def _overlap(pr: _Prescribed, x: np.ndarray, gap: float):
+    """The first overlap of the prescribed part ``pr`` at positions ``x`` (k, 2), or None: ``(kind, i, j)``
+    with ``i``, ``j`` positions in the prescribed nodes."""
     import shapely
 
     from ..body.polygons import segment_contacts
 
-    at = np.full(mesh.n_nodes, -1)
-    at[nodes] = np.arange(len(nodes))
-    # boundary edges with both ends prescribed, in positions of ``nodes``
-    seg = at[mesh.boundary_edges]
-    seg = seg[(seg >= 0).all(axis=1)]
+    seg, tri, bnd = pr.seg, pr.tri, pr.bnd
     if len(seg) >= 2:
         bad = segment_contacts(x, seg)
         if len(bad):
             return "cross", int(seg[bad[0, 0], 0]), int(seg[bad[0, 1], 0])
     # a prescribed node strictly inside a prescribed triangle it is not a corner of
-    tri = at[mesh.triangles]
-    tri = tri[(tri >= 0).all(axis=1)]
-    if len(tri):
-        polys = shapely.polygons(x[tri])
-        pts = shapely.points(x)
-        ip, it = shapely.STRtree(polys).query(pts, predicate="within")
+    moved = np.any(x != pr.X0, axis=1)  # nodes and triangles at rest cannot overlap one another
+    tmoved = moved[tri].any(axis=1) if len(tri) else np.zeros(0, dtype=bool)
+    if tmoved.any():
+        ti = np.flatnonzero(tmoved)
+        ip, it = shapely.STRtree(shapely.polygons(x[tri[ti]])).query(shapely.points(x), predicate="within")
+        it = ti[it]
+        if (~tmoved).any() and moved.any():  # the moved nodes against the triangles at rest
+            tr = np.flatnonzero(~tmoved)
+            pm = np.flatnonzero(moved)
+            jp, jt = shapely.STRtree(shapely.polygons(x[tri[tr]])).query(shapely.points(x[pm]), predicate="within")
+            ip, it = np.concatenate([ip, pm[jp]]), np.concatenate([it, tr[jt]])
         own = (tri[it] == ip[:, None]).any(axis=1)
         ip, it = ip[~own], it[~own]
         if len(ip):
             return "inside", int(ip[0]), int(tri[it[0], 0])
     # prescribed boundary nodes closer than the gap to a prescribed boundary edge they are not next to (and
     # closer than at rest: a fine mesh's nodes may lie that close already)
-    bnd = np.unique(seg) if len(seg) else np.zeros(0, dtype=np.int64)
     if gap > 0 and len(bnd) and len(seg):
         lines = shapely.linestrings(np.stack([x[seg[:, 0]], x[seg[:, 1]]], axis=1))
         ip, js = shapely.STRtree(lines).query(shapely.points(x[bnd]), predicate="dwithin", distance=gap)
-        p = bnd[ip]
-        a, b = seg[js, 0], seg[js, 1]
+        p, a, b = bnd[ip], seg[js, 0], seg[js, 1]
         keep = (p != a) & (p != b)
-        # not a neighbour along the boundary: the node shares no mesh edge with the segment's ends
-        X0 = mesh.points[nodes]
-        for k in np.flatnonzero(keep):
-            pk, ak, bk = int(p[k]), int(a[k]), int(b[k])
-            if mesh.has_edge(int(nodes[pk]), int(nodes[ak])) or mesh.has_edge(int(nodes[pk]), int(nodes[bk])):
-                continue
-            d = shapely.distance(shapely.points(x[pk]), lines[js[k]])
-            d0 = shapely.distance(shapely.points(X0[pk]), shapely.linestrings(X0[[ak, bk]]))
-            if d < min(gap, d0):
-                return "close", pk, ak
+        p, a, b, js = p[keep], a[keep], b[keep], js[keep]
+        keep = ~pr.joined(p, a) & ~pr.joined(p, b)  # not a neighbour along the boundary
+        p, a, b, js = p[keep], a[keep], b[keep], js[keep]
+        if len(p):
+            X0 = pr.X0
+            d = shapely.distance(shapely.points(x[p]), lines[js])
+            d0 = shapely.distance(shapely.points(X0[p]), shapely.linestrings(np.stack([X0[a], X0[b]], axis=1)))
+            close = np.flatnonzero(d < np.minimum(gap, d0))
+            if len(close):
+                return "close", int(p[close[0]]), int(a[close[0]])
     return None
 
 
@@ -102,9 +126,10 @@ def check_prescribed_self(mesh, nodes, positions, gap: float, anchored: int = 0)
     nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
     if len(nodes) < 2:
         return
+    pr = _Prescribed(mesh, nodes)
     for s in (1.0, *PATH_FRACTIONS):
         x = np.asarray(positions(float(s)), dtype=float).reshape(-1, 2)
-        found = _overlap(mesh, nodes, x, float(gap))
+        found = _overlap(pr, x, float(gap))
         if found is None:
             continue
         kind, i, j = found
