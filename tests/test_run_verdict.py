@@ -27,7 +27,7 @@ OUTLINE = ["muscle upper: its channel runs on the outline"]
      "FAILED (too far from the target: removes 4 % of the rest shape's difference, less than 10 %)"),
     ("design failed: Solve_Succeeded; every muscle is idle (contractions 0.001, 0.002 below idle_contraction "
      "0.005): the design does not move the body", {"fabrication": OUTLINE},
-     "FAILED (every muscle idle: the design does not move the body; not mouldable as laid out)"),
+     "FAILED (every muscle is idle: the design does not move the body; not mouldable as laid out)"),
     ("design not verified: Solve_Succeeded; rejected by verification: the boundary crosses itself (segments 3 "
      "and 17)", {"saturated": ["M2"]},
      "FAILED (the body would touch itself; saturated M2)"),

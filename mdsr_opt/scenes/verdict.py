@@ -31,8 +31,8 @@ _CAUSES = (
      "its outline crosses itself; turn contact on (contact=True in Python, contact = true under [design] in a "
      "scene file)"),
     (r"every muscle is idle",
-     "every muscle idle: the design does not move the body",
-     "check that the target differs from rest where the muscles run"),
+     "every muscle is idle: the design does not move the body",
+     "muscles only pull: the target must shorten the body along them"),
     (r"target is not a stable equilibrium",
      "the target is not stable under its drags",
      "drag less far or anchor more nodes"),
