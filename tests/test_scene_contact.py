@@ -63,3 +63,30 @@ def test_contact_is_checked_at_the_door(tmp_path, design, error):
     with pytest.raises((SceneFileError, TypeError), match=error.replace("(", r"\(").replace(")", r"\)")
                        .replace("?", r"\?")):
         _scene(tmp_path, design)
+
+
+FOLD = """name = "strip"
+[body]
+outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
+resolution = 60
+[design]
+{design}
+[regions]
+start = {{ box = [-1, -1, 0.1, 2] }}
+end = {{ box = [3.9, -1, 5, 2] }}
+[[cases]]
+name = "fold"
+anchors = "start"
+drags = [{{ nodes = "end", by = [-4, 0] }}]
+"""
+
+
+def test_drags_through_the_body_itself_are_refused_when_the_scene_loads(tmp_path):
+    p = tmp_path / "fold.toml"
+    p.write_text(FOLD.format(design="contact = true"))  # the right end dragged onto the anchored left end
+    with pytest.raises(SceneFileError, match=r"fold\.toml: scene 'strip', case 'fold': with contact, the "
+                                             r"prescribed nodes would overlap at their targets: .*node \d+ "
+                                             r"\(anchored; .*node \d+ \(dragged to"):
+        load_scene(p)
+    p.write_text(FOLD.format(design="a_max = 0.5"))  # without contact the file loads (the solve rejects it)
+    assert load_scene(p).case("fold").drag_nodes.size > 0
