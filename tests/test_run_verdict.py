@@ -27,13 +27,13 @@ OUTLINE = ["muscle upper: its channel runs on the outline"]
      "FAILED (too far from the target: removes 4 % of the rest shape's difference, less than 10 %)"),
     ("design failed: Solve_Succeeded; every muscle is idle (contractions 0.001, 0.002 below idle_contraction "
      "0.005): the design does not move the body", {"fabrication": OUTLINE},
-     "FAILED (every muscle idle: the design does not move the body; not mouldable as laid out)"),
+     "FAILED (every muscle is idle: the design does not move the body; not mouldable as laid out)"),
     ("design not verified: Solve_Succeeded; rejected by verification: the boundary crosses itself (segments 3 "
      "and 17)", {"saturated": ["M2"]},
-     "FAILED (rejected by verification: the boundary crosses itself (segments 3 and 17); saturated M2)"),
+     "FAILED (the body would touch itself; saturated M2)"),
     ("design failed: Maximum_Iterations_Exceeded (warm-started from rest, the design failed too: x)",
-     {"dropped": [{"name": "M3"}]}, "FAILED (Maximum_Iterations_Exceeded; dropped M3)"),
-    ("target solve failed: Infeasible_Problem_Detected", {}, "FAILED (target solve failed (Infeasible_Problem_Detected))"),
+     {"dropped": [{"name": "M3"}]}, "FAILED (the optimiser ran out of iterations; dropped M3)"),
+    ("target solve failed: Infeasible_Problem_Detected", {}, "FAILED (target solve failed: Infeasible_Problem_Detected)"),
     ("", {"saturated": ["M1"], "fabrication": OUTLINE, "success": True}, "ok (saturated M1; not mouldable as laid out)"),
 ])
 def test_the_design_cell_names_the_cause_first(message, extra, cell):

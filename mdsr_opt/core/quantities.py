@@ -19,7 +19,7 @@ Example
 from __future__ import annotations
 
 __all__ = ["LENGTH_UNITS", "STRESS_UNITS", "BODY_UNITS", "check_length_unit", "check_stress_unit", "length_unit",
-           "tension_unit"]
+           "tension_unit", "contact_in_unit"]
 
 #: Known length units and their size in metres.
 LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
@@ -63,3 +63,32 @@ def tension_unit(stress_unit: str | None, units: str | None) -> tuple[str, float
     if stress_unit in STRESS_UNITS and units in LENGTH_UNITS:
         return "N", STRESS_UNITS[stress_unit] * LENGTH_UNITS[units] ** 2
     return f"units of E*t*{units if units else 'length'}", 1.0
+
+
+def contact_in_unit(report: dict | None, stress_unit: str | None, units: str | None) -> dict | None:
+    """A contact report (``EquilibriumResult.contact``: forces in ``E * t * length``) with its forces in the
+    unit rope tensions are given in (:func:`tension_unit`: newtons when ``stress_unit`` and ``units`` are
+    known) and that unit in ``force_unit``; a copy (None stays None)."""
+    if report is None:
+        return None
+    label, factor = tension_unit(stress_unit, units)
+    if report.get("force_unit") == label:
+        return dict(report)
+    if report.get("force_unit", tension_unit(stress_unit, None)[0]) != tension_unit(stress_unit, None)[0]:
+        raise ValueError(f"the contact report is in {report['force_unit']!r}, not in units of E*t*length")
+
+    def scaled(v):
+        return [scaled(u) for u in v] if isinstance(v, (list, tuple)) else float(v) * factor
+
+    out = dict(report, force_unit=label)
+    for key in ("node_forces", "obstacle_forces", "total_force"):
+        if key in out:
+            out[key] = scaled(out[key])
+    out["pairs"] = [dict(p, force=float(p["force"]) * factor) for p in report.get("pairs", [])]
+    if isinstance(report.get("friction"), dict):
+        fr = dict(report["friction"])
+        for key in ("tangential", "normal"):
+            if key in fr:
+                fr[key] = scaled(fr[key])
+        out["friction"] = fr
+    return out

@@ -20,6 +20,7 @@ from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
 from .obstacles import check_obstacles, check_prescribed
+from .selfprescribed import check_prescribed_self
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
                         upright)
@@ -67,12 +68,14 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
         combine them with ``min_step=1`` to forbid load stepping.
     obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle`
-        Rigid obstacles the body's boundary may touch but not enter (frictionless); none may hold a node at
-        rest. See :mod:`~mdsr_opt.mechanics.contactsolve`.
+        Rigid obstacles the body's boundary may touch but not enter (with Coulomb ``friction`` when given);
+        none may hold a node at rest, and no drag may enter one. See :mod:`~mdsr_opt.mechanics.contactsolve`.
     contact : bool
         Model self-contact of the boundary (outline and holes): no crossing, a gap kept between a boundary
         node and the boundary segments it touches. Off by default (each load step then also looks for
-        candidate pairs).
+        candidate pairs). Anchors and drags that would push prescribed parts of the body through each other
+        are refused (:func:`~mdsr_opt.mechanics.selfprescribed.check_prescribed_self`). The contact report's
+        forces are in ``contact["force_unit"]``, units of ``E*t*length`` as rope tensions.
     contact_gap : the gap kept by every contact, length units (default 1e-4 x the body's size).
     friction : Coulomb's coefficient between the body and the obstacles (default 0: frictionless):
         quasi-static, a lagged smoothed potential per load step (:mod:`~mdsr_opt.mechanics.friction`, which
@@ -118,6 +121,10 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     if spec.obstacles:  # a drag into an obstacle: refused here, not a load stepping that stalls at its edge
         check_prescribed(check_obstacles(obstacles), didx, path.positions, spec.gap * units.length)
+    if spec.self_contact and len(didx):  # prescribed parts pushed through each other: refused, not a stalled solve
+        rest_anc = mesh.points[anc]
+        check_prescribed_self(mesh, nodes, lambda s: np.vstack([rest_anc, path.positions(s)]),
+                              spec.gap * units.length, anchored=len(anc))
     mesh, material = units.unit_mesh, units.unit_material
     model = get_model(mesh, material)
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before

@@ -401,9 +401,9 @@ def equilibrium_result(mesh, model, material, p, p_elastic, xflat, fixed, status
             status = f"{status}; rejected: not a stable equilibrium ({chk.n_negative} negative, {chk.n_zero} " \
                      "zero curvature directions)"
     if ok and mesh.boundary_crosses(xflat.reshape(-1, 2)):
-        # every element upright, yet the body folds through itself: contact is not modelled
+        # every element upright, yet the body folds through itself: contact is off
         ok = False
-        status = f"{status}; rejected: the boundary crosses itself (self-contact is not modelled)"
+        status = f"{status}; rejected: the boundary crosses itself (contact is off: contact=True models it)"
     same = p_elastic is p or np.array_equal(np.asarray(p_elastic), np.asarray(p))
     _LOG.debug("%s solve on %d nodes (%s): %s, %s iteration(s) in %d load step(s), residual %.3g (tol %.3g), "
                "min J %.3g, build %.3f s, solve %.3f s", mode, mesh.n_nodes, backend, status, iters, len(steps or ()),

@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 
+from ..core.quantities import tension_unit
+
 __all__ = ["Units", "unit_mesh", "unit_material", "power_of_two"]
 
 #: the key of a mesh's unit copy in its ``__dict__`` (a ``*_cache`` key: left out of pickles, made again)
@@ -135,7 +137,10 @@ class Units:
 
     def equilibrium_out(self, res):
         """An :class:`~mdsr_opt.mechanics.result.EquilibriumResult` of the unit problem in the user's units
-        (in place; returned). ``residual``, ``min_J``, contractions and rotations have no units."""
+        (in place; returned). ``residual``, ``min_J``, contractions and rotations have no units; the contact
+        report's forces are in ``E * t * length``, as rope tensions, and say so (``force_unit``)."""
+        if res.contact is not None:
+            res.contact["force_unit"] = tension_unit(getattr(self.material, "stress_unit", None), None)[0]
         if self.identity:
             return res
         L = self.length

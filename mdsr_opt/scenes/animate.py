@@ -10,6 +10,7 @@ from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields
 from ..plot.style import muscle_label
 from ..synthesis.gait import warm_start_state
+from .reader import contact_options
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
 
@@ -144,7 +145,7 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
             note = (f"end fixtures of radius {radius:.4g} (the cases' designs: "
                     + ", ".join(f"{c} {r:.4g}" for c, r in given.items()) + "): one size every rope keeps its "
                     "fixtures with")
-    kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=radius)
+    kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=radius, **contact_options(opts))
     for i, a in enumerate(frames):
         key = np.round(a, 12).tobytes()
         if key not in solved:

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
+from .reader import contact_options
 from .scene import Case, Scene
 
 __all__ = ['CaseSetup', 'prepare_case', 'given_muscle_conflicts']
@@ -152,14 +153,15 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
         case = scene.case(case)
     t0 = time.perf_counter()
     known = None
+    contact = contact_options(scene.design_options)  # [design] contact = true: the targets touch, too
     if case.kind == "external":
-        res = solve_external(scene.mesh, scene.material, case.anchors, case.drags)
+        res = solve_external(scene.mesh, scene.material, case.anchors, case.drags, **contact)
     else:
         known = case.contractions.copy()
         res = solve_internal(scene.mesh, scene.material, scene.muscles, known,
                              muscle_model=scene.design_options.get("muscle_model", "cable"),
                              stiffness=scene.design_options.get("stiffness", 10.0),
-                             anchor_radius=scene.design_options.get("anchor_radius"))
+                             anchor_radius=scene.design_options.get("anchor_radius"), **contact)
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()

@@ -14,7 +14,7 @@ import numpy as np
 from ..core.checks import check_int, did_you_mean, integer_range
 from ..core.errors import InputError
 
-__all__ = ['check_scene_options', 'SceneFileError']
+__all__ = ['check_scene_options', 'contact_options', 'SceneFileError']
 
 
 def check_scene_options(options, kind: str, label: str = "") -> dict:
@@ -186,6 +186,11 @@ def scene_options(r: Reader, spec, where: str) -> dict:
         opts[k] = checks[k](r, v, f"{where}.{k}")
     if where == "design" and "options" in opts:
         opts["options"] = _solver_options(r, opts["options"], opts)
+    if where == "design" and opts.get("contact") and opts.get("method", "derivative-free") != "derivative-free":
+        r.fail(f"{where}.method", f"contact = true is designed by method = \"derivative-free\" only (the other "
+               f"methods solve equations without contact rows), got {opts['method']!r}")
+    if where == "design" and "contact_gap" in opts and not opts.get("contact"):
+        r.fail(f"{where}.contact_gap", "is the gap of self-contact: set contact = true too")
     return opts
 
 
@@ -290,7 +295,18 @@ _DESIGN_CHECKS = {
     "derivatives": _choice("numeric", "assembled", "casadi"),
     # a length; its bound against the body's size is checked where the mesh is known (Scene)
     "anchor_radius": _positive(allow_zero=True),
+    # self-contact of the boundary, in the target solves, the design and the animations (a length: the gap)
+    "contact": _boolean,
+    "contact_gap": _positive(),
 }
+
+
+def contact_options(design_options) -> dict:
+    """The contact keywords (``contact``, ``contact_gap``) of a scene's ``design_options`` for the solves of
+    :func:`~mdsr_opt.solve_external` and :func:`~mdsr_opt.solve_internal`: ``{}`` without contact."""
+    if not design_options.get("contact"):
+        return {}
+    return {"contact": True, "contact_gap": design_options.get("contact_gap")}
 
 
 _ROUTING_CHECKS = {

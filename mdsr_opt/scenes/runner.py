@@ -22,7 +22,7 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
-from .verdict import design_verdict
+from .verdict import design_verdict, plain_failure
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
@@ -75,6 +75,7 @@ class CaseReport:
     units : ``{"stroke": ..., "tension": ...}``: the unit of the strokes (the scene's ``units``) and of the
         tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
         ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
+    contact : with contact: total and per-obstacle contact force, in ``force_unit`` (the tensions'), pairs.
     fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
         channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
     """
@@ -113,6 +114,7 @@ class CaseReport:
     units: dict = field(default_factory=dict)
     band_notes: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
+    contact: dict | None = None
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -306,7 +308,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
             rep.routing["recovered"] = len(seen & _edge_set(rr.muscles)) / max(len(seen), 1)
             rep.routing["hidden_edges"] = len(true - seen)
     if not tr.success:
-        rep.message = f"target solve failed: {tr.status}"
+        rep.message = f"target solve failed: {plain_failure(tr.status)}"
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
         return run
@@ -371,6 +373,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.stroke = [float(s) for s in res.stroke]
     rep.tension = [float(t) for t in res.tensions_in_unit()]
     rep.units = {"stroke": length_unit(res.units), "tension": res.tension_unit}
+    rep.contact = res.contact_summary().get("contact")  # forces in the tensions' unit
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / mesh.size
     rep.initial_difference = float(res.initial_difference)
@@ -385,10 +388,10 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     st = ", ".join(f"{v:.4g}" for v in res.stroke)
     u = unit_label(scene.units)
     tn = ", ".join(f"{v:.4g}" for v in res.tensions_in_unit())
+    verdict = "verified" if res.success else "FAILED: " + plain_failure(res.status)
     say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
         f"strokes [{st}] {u}, tensions [{tn}] {res.tension_unit}, difference {res.difference:.3g} {u} "
-        f"({100 * rep.relative_difference:.2f} % of size), {'verified' if res.success else 'FAILED: ' + res.status}"
-        f" ({rep.times['design']:.1f} s)")
+        f"({100 * rep.relative_difference:.2f} % of size), {verdict} ({rep.times['design']:.1f} s)")
     if rep.saturated:
         say(f"{prefix}saturated at a_max = {res.a_max:g}: {', '.join(map(str, rep.saturated))}")
     if accept["bands"] and res.success:
@@ -403,7 +406,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                              rest_difference=rep.rest_difference)
     rep.success = bool(res.success) and not far
     if not res.success:
-        rep.message = f"design {'not verified' if 'verification' in res.status else 'failed'}: {res.status}"
+        rep.message = f"design {'rejected' if 'verification' in res.status else 'failed'}: {plain_failure(res.status)}"
+        _LOG.debug("%sdesign status: %s", prefix, res.status)
     elif far:
         rep.message = f"design too far from the target: {far}"
         say(f"{prefix}FAILED: {rep.message}")

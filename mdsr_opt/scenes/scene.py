@@ -284,6 +284,9 @@ class Scene:
                 check_anchor_radius(self.mesh, self.design_options["anchor_radius"])
             except ValueError as exc:
                 raise ValueError(f"scene {self.name!r}: design.{exc}") from None
+        if self.design_options.get("contact"):  # drags through the body itself: refused here, not mid-run
+            for c in cases:
+                _check_contact_drags(self, c)
         self.expected = dict(self.expected)
         self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance")
         check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}",
@@ -415,3 +418,22 @@ def check_units_and_gait(scene: Scene) -> None:
         if c not in names:
             raise ValueError(f"scene {scene.name!r}, gait {scene.gait.name!r}: unknown case {c!r} "
                              f"(cases: {', '.join(names)}, or 'rest')")
+
+
+def _check_contact_drags(scene: Scene, case: Case) -> None:
+    """With ``contact = true``: refuse an external case whose anchors and drags push prescribed parts of the
+    body through each other (:func:`~mdsr_opt.mechanics.selfprescribed.check_prescribed_self`), naming it."""
+    from ..mechanics.contactsteps import DEFAULT_GAP
+    from ..mechanics.selfprescribed import check_prescribed_self
+
+    if case.kind != "external" or not len(case.drag_nodes):
+        return
+    P = scene.mesh.points
+    nodes = np.concatenate([case.anchors, case.drag_nodes])
+    rest, final = P[nodes], np.vstack([P[case.anchors], case.drag_positions])
+    gap = scene.design_options.get("contact_gap") or DEFAULT_GAP * scene.mesh.size
+    try:
+        check_prescribed_self(scene.mesh, nodes, lambda s: rest + s * (final - rest), gap,
+                              anchored=len(case.anchors))
+    except ValueError as exc:
+        raise ValueError(f"scene {scene.name!r}, case {case.name!r}: {exc}") from None

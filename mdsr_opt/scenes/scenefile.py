@@ -96,6 +96,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
                                               # each case's and the gait's fabrication files with them
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
+        # contact = true                      # self-contact of the outline in every solve (targets, design,
+                                              # animations; design by method "derivative-free"), optional
+                                              # contact_gap = a length
         [acceptance]                          # optional: what a case's design must show to succeed
         max_difference = 0.05                 # difference over the size (default 0.05)
         idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)

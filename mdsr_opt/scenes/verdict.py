@@ -1,45 +1,113 @@
-"""The ``design`` cell of ``mdsr run``'s table: ``ok`` or ``FAILED``, the cause of a failure first, then the
-flags that did not make it fail (saturated or dropped muscles, a layout that cannot be moulded).
+"""What made a design fail, in the user's words: the ``FAILED`` lines of ``mdsr run`` (:func:`plain_failure`: the
+cause first, once, and what helps) and the ``design`` cell of its table (:func:`design_verdict`: ``ok`` or
+``FAILED``, the cause first, then the flags that did not make it fail: saturated or dropped muscles, a layout
+that cannot be moulded). The solvers' own status, with every clause, stays in ``summary.json``.
 
 Example
 -------
 >>> from types import SimpleNamespace as C
 >>> design_verdict(C(success=False, message="design not verified: Solve_Succeeded; rejected by verification: "
 ...                  "the boundary crosses itself at node 3", saturated=["M2"], dropped=[], fabrication=[]))
-'FAILED (rejected by verification: the boundary crosses itself at node 3; saturated M2)'
+'FAILED (the body would touch itself; saturated M2)'
 """
 
 from __future__ import annotations
 
 import re
 
-__all__ = ["design_verdict", "failure_cause"]
+__all__ = ["design_verdict", "failure_cause", "plain_failure"]
 
 #: the longest cause a cell shows (the whole reason is in the run's log, its FAILED lines and summary.json)
 MAX_CAUSE = 90
 
+#: a solver's status that names a success: never shown as (part of) a failure's cause
+_SUCCESS = re.compile(r"\b(Solve_Succeeded|Solved_To_Acceptable_Level|converged|Optimization terminated "
+                      r"successfully\.?)\b[;,]?\s*")
+
+#: the causes a design's status may hold, most telling first: (pattern, what happened, what helps)
+_CAUSES = (
+    (r"boundary crosses itself",
+     "the body would touch itself",
+     "its outline crosses itself; turn contact on (contact=True in Python, contact = true under [design] in a "
+     "scene file)"),
+    (r"every muscle is idle",
+     "every muscle is idle: the design does not move the body",
+     "muscles only pull: the target must shorten the body along them"),
+    (r"target is not a stable equilibrium",
+     "the target is not stable under its drags",
+     "drag less far or anchor more nodes"),
+    (r"target is not an equilibrium",
+     "the target is not an equilibrium of its drags",
+     "drag less far or anchor more nodes"),
+    (r"inverts an element|inverted an element",
+     "the shape would turn elements inside out",
+     "ask for a smaller deformation, or a finer mesh"),
+    (r"not a (stable equilibrium|minimum of the energy)",
+     "the designed shape is not stable (the body would snap to another shape)",
+     "ask for a smaller deformation, or give more muscles (routing max_muscles)"),
+    (r"gap \S+ between the design's state and the forward re-solve",
+     "the muscles, pulled from rest, reach another shape than the design's",
+     "try warm_start = \"rest\" under [design]"),
+    (r"load stepping stalled at fraction (\S+)",
+     "the solver could not follow the load past a fraction {0} of it",
+     "ask for a smaller deformation, or a finer mesh"),
+    (r"Maximum_Iterations_Exceeded|ITERATIONS REACHED LIMIT|max_iter",
+     "the optimiser ran out of iterations",
+     "raise max_iter under [design]"),
+    (r"not verified \(verify=False\)",
+     "not verified (verify=False), so the solver's acceptable exit is not a success",
+     "verify the design (verify = true)"),
+)
+
 
 def _short(text: str, limit: int = MAX_CAUSE) -> str:
+    """``text`` on one line and at most ``limit`` characters, cut cleanly: at a word, never inside brackets
+    (an unclosed one is dropped with what follows it), with ``...`` where it was cut."""
     text = " ".join(str(text).split()).replace("|", "/")
-    return text if len(text) <= limit else text[:limit - 3].rstrip() + "..."
+    if len(text) <= limit:
+        return text
+    cut = text[:limit - 3]
+    if " " in cut:
+        cut = cut[:cut.rfind(" ")]
+    while cut.count("(") > cut.count(")"):  # the last unclosed bracket and what follows it
+        cut = cut[:cut.rfind("(")]
+    return cut.rstrip(" ;:,(") + "..."
 
 
-def _from_status(status: str) -> str:
-    """The reason a design's ``status`` gives for its failure: the clause that rejected it, else the solver's
-    own status (IPOPT's return status)."""
-    for pattern, label in ((r"every muscle is idle", "every muscle idle: the design does not move the body"),
-                           (r"rejected by verification: ([^;]*)", "rejected by verification: {}"),
-                           (r"rejected: ([^;]*)", "rejected: {}"),
-                           (r"not verified: ([^;]*)", "not verified: {}"),
-                           (r"not verified \(verify=False\)", "not verified (verify=False)")):
+def _solver_status(status: str) -> str:
+    """A solver's status with its success words removed (``Solve_Succeeded; rejected: ...`` is a failure)."""
+    return _SUCCESS.sub("", str(status or "")).strip(" ;,")
+
+
+def causes(status: str) -> list[tuple[str, str]]:
+    """The known causes in a design's ``status``, each once: ``(what happened, what helps)``."""
+    out, status = [], str(status or "")
+    for pattern, what, helps in _CAUSES:
         m = re.search(pattern, status)
-        if m:
-            return label.format(*m.groups())
-    return re.split(r";| \(", status, maxsplit=1)[0].strip() or "design failed"
+        said = what.format(*m.groups()) if m else what if "{" not in what and what in status else None
+        if said and all(w != said for w, _ in out):  # a line already in the user's words keeps its cause
+            out.append((said, helps))
+    return out
+
+
+def plain_failure(status: str) -> str:
+    """A design's failure, from its ``status``, in the user's words: the first cause, once, then what helps;
+    a status holding no known cause gives the solver's own words without its success statuses.
+
+    Example
+    -------
+    >>> plain_failure("Solve_Succeeded; rejected by verification: forward re-solve failed (Solve_Succeeded; "
+    ...               "rejected: the boundary crosses itself (contact is off))")
+    'the body would touch itself: its outline crosses itself; turn contact on (contact=True in Python, contact = true under [design] in a scene file)'
+    """
+    found = causes(status)
+    if found:
+        return f"{found[0][0]}: {found[0][1]}"
+    return _short(_solver_status(re.split(r" \(", str(status or ""), maxsplit=1)[0]) or "design failed", 200)
 
 
 def failure_cause(message: str) -> str:
-    """What made a case fail, in a few words, from its report's ``message``."""
+    """What made a case fail, in a few words (no advice), from its report's ``message``."""
     msg = str(message or "")
     if msg.startswith("design too far from the target:"):
         far = msg.split(":", 1)[1]
@@ -50,12 +118,19 @@ def failure_cause(message: str) -> str:
         if m:
             return f"too far from the target: removes {m.group(1)} of the rest shape's difference, less than {m.group(2)}"
         return _short("too far from the target: " + far.strip())
-    for head in ("design not verified: ", "design failed: "):
-        if msg.startswith(head) and not msg.startswith(("design failed: RuntimeError", "design failed: SolverFailure")):
-            return _short(_from_status(msg[len(head):]))
     if msg.startswith("target solve failed: "):
-        return _short(f"target solve failed ({msg.split(': ', 1)[1]})")
-    return _short(re.split(r" \(", msg, maxsplit=1)[0] or "failed")
+        found = causes(msg)
+        why = found[0][0] if found else _solver_status(msg.split(": ", 1)[1])
+        return _short(f"target solve failed: {why or 'no equilibrium'}")
+    if msg.startswith(("design failed: RuntimeError", "design failed: SolverFailure")):
+        return _short(re.split(r" \(", msg, maxsplit=1)[0])
+    found = causes(msg)
+    if found:
+        return _short(found[0][0])
+    for head in ("design rejected: ", "design not verified: ", "design failed: "):
+        if msg.startswith(head):
+            msg = msg[len(head):]
+    return _short(_solver_status(re.split(r";| \(", msg, maxsplit=1)[0]) or "failed")
 
 
 def design_verdict(case) -> str:

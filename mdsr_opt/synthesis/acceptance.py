@@ -23,6 +23,7 @@ A muscle at ``a_max`` is flagged by the design itself
 
 from __future__ import annotations
 
+import logging
 import math
 import warnings
 from dataclasses import asdict, dataclass
@@ -34,6 +35,8 @@ from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..core.results import to_jsonable
 from ..plot.style import muscle_label, muscle_name
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
            "check_idle_contraction", "check_max_difference"]
@@ -217,6 +220,8 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
             # the state just designed is near an equilibrium without the idle muscles (exactly one when
             # they were slack): the warm start's forward solve starts there rather than from the target
             more["warm_start"] = res.x
+        _LOG.info("design: idle muscle(s) %s left out; designing again with the %d kept",
+                  ", ".join(g.name for g in gone), len(keep))
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
                                         dict(deferred, **more))
         names = ", ".join(g.name for g in gone)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from typing import Sequence
@@ -28,6 +29,8 @@ from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_o
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ['check_design_options', 'design_contractions', 'warn_saturated']
 
@@ -220,6 +223,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
         # (the verification's): the design again, warm-started from rest, is the answer when it succeeds
+        _LOG.info("design: rejected by its verification (%s); designing again from rest",
+                  res.verification.message if res.verification is not None else res.status)
         again, _, _ = _design(*args, warm="rest")
         where = "given shape" if isinstance(warm, np.ndarray) else "target"
         first = res
@@ -228,7 +233,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
             res.status += f" (warm-started from rest after the design warm-started from the {where} failed " \
                           f"its verification: {first.verification.message})"
         else:
-            res.status += f" (warm-started from rest, the design failed too: {again.status})"
+            # the second design's reason once: said in full only when it differs from the first's
+            why = again.verification.message if again.verification is not None else again.status
+            same = first.verification is not None and why == first.verification.message
+            res.status += " (again from rest: " + ("rejected the same way)" if same else f"{again.status})")
         # the counters and clocks cover both designs; the history is the returned one's
         res.iterations = first.iterations + again.iterations
         res.n_forward = first.n_forward + again.n_forward
@@ -281,9 +289,10 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             kappa = out["kappa"]
     else:
         if method == "nested":
-            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, max_iter, options, clock)
+            obj, ok, status, iters = run_nested(prob, a0, fwd, tol, max_iter, options, clock, units.length)
         else:
-            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, max_iter, outer, options, clock)
+            obj, ok, status, iters = run_derivative_free(prob, a0, fwd, tol, max_iter, outer, options, clock,
+                                                         units.length)
         hist = obj.history
         kappa = None
         d0 = hist[0][1] if hist else float("nan")
@@ -327,7 +336,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
     capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
     if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
-        res.status += "; at the free-length cap (their end patches hold most of the rope, contraction_caps): " \
+        res.status += "; at the most their ropes can shorten (the end fixtures hold much of each rope): " \
                       + ", ".join(f"{muscle_label(mus[c], int(c))} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
@@ -341,6 +350,9 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.status += f"; not verified: {why}"
         return res, fwd, False
     if verify:
+        if ckw:  # a forward contact solve from rest (load stepping): the longest silent part after the search
+            _LOG.info("design: verifying contractions [%s] with contact",
+                      ", ".join(f"{c:.4g}" for c in res.contractions))
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
                           tol=min(inner_tol, VERIFY_TOL), start="design" if verify == "design" else "rest", **ckw)
         res.verification = v

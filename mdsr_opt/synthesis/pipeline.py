@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import time
 from dataclasses import dataclass, field
@@ -25,6 +26,8 @@ from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import RoutingWarning, route_for_design
 from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
+
+_LOG = logging.getLogger(__name__)
 
 __all__ = ['PipelineResult', 'design_pipeline']
 
@@ -404,6 +407,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         ext = _target(mesh, material, anchors, drags, eopts, solve_external)
     ext.raise_on_failure()
     t1 = time.perf_counter()
+    _LOG.info("design_pipeline: target solved%s in %.1f s", " with contact" if ckw else "", t1 - t0)
     anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
     routing = None
     if muscles is None:
@@ -431,6 +435,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                        "design_pipeline: the muscles given")
     t2 = time.perf_counter()
     design_options.setdefault("verify", PIPELINE_VERIFY)
+    _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method,
+              " with contact (each trial a contact solve; progress below)" if ckw else "")
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
     res.units = units

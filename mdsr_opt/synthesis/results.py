@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields
-from ..core.quantities import length_unit, tension_unit
+from ..core.quantities import contact_in_unit, length_unit, tension_unit
 from ..plot.style import muscle_name
 from .problem import DesignProblem
 
@@ -217,8 +217,11 @@ class DesignResult:
     @property
     def contact(self) -> dict | None:
         """The contact report of the verified state (the verification's forward re-solve with contact: pairs
-        and their normal forces, forces on nodes and obstacles); None without contact or verification."""
-        return None if self.verification is None else self.verification.contact
+        and their normal forces, forces on nodes and obstacles); None without contact or verification. Its
+        forces are in the unit of the tensions (:attr:`tension_unit`: N when the material's stress unit and
+        :attr:`units` are known), named by its ``force_unit``."""
+        c = None if self.verification is None else self.verification.contact
+        return contact_in_unit(c, self.stress_unit, self.units)
 
     def __repr__(self) -> str:
         extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
@@ -319,7 +322,16 @@ class DesignResult:
                 "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
                 "build_time": self.build_time, "solve_time": self.solve_time, "time": self.time,
                 "verified": None if v is None else v.passed, "gap": None if v is None else v.gap,
-                "min_eigenvalue": None if v is None or not np.isfinite(v.min_eigenvalue) else v.min_eigenvalue}
+                "min_eigenvalue": None if v is None or not np.isfinite(v.min_eigenvalue) else v.min_eigenvalue,
+                **self.contact_summary()}
+
+    def contact_summary(self) -> dict:
+        """With contact: the total contact force and each obstacle's, in :attr:`tension_unit`."""
+        c = self.contact
+        if c is None:
+            return {}
+        return {"contact": {"force_unit": c["force_unit"], "total_force": c.get("total_force"),
+                            "obstacle_forces": c.get("obstacle_forces", []), "n_pairs": len(c.get("pairs", []))}}
 
     def to_dict(self) -> dict:
         """A JSON-ready dict (arrays as nested lists); :meth:`from_dict` inverts it."""

@@ -23,8 +23,10 @@ PROGRESS_SECONDS = 10.0
 class _Outer:
     """Objective of the reduced problem ``a -> J(x*(a))`` with a record of every evaluation."""
 
-    def __init__(self, prob: DesignProblem, fwd: ForwardSolver, clock: Callable[[], float], penalty: float = 1e6):
+    def __init__(self, prob: DesignProblem, fwd: ForwardSolver, clock: Callable[[], float], penalty: float = 1e6,
+                 length: float = 1.0):
         self.prob, self.fwd, self.clock = prob, fwd, clock
+        self.length = length  # the caller's length of one unit of the problem's body (for the progress line)
         self.penalty = penalty
         self.history: list[tuple[float, float]] = []
         self.best: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -53,7 +55,9 @@ class _Outer:
         if now - self._said < PROGRESS_SECONDS:
             return
         self._said = now
-        best = f"{self.history[-1][1]:.4g}" if self.history else "none yet"
+        d = self.history[-1][1] if self.history else None
+        best = "none yet" if d is None else \
+            f"{d * self.length:.4g} ({100 * d / self.prob.mesh.size:.3g} % of the body's size)"
         _LOG.info("design: %d forward solve(s) in %.0f s, best difference so far %s (%d failed)", self.n_eval,
                   now - self._started, best, len(self.failures))
 
@@ -107,10 +111,10 @@ def _reduced_gradient(prob: DesignProblem, a, x, dJ) -> np.ndarray:
     return -(dFa.T @ lam)
 
 
-def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
+def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock, length: float = 1.0):
     from scipy.optimize import minimize
 
-    obj = _Outer(prob, fwd, clock)
+    obj = _Outer(prob, fwd, clock, length=length)
     opts = {"maxiter": max_iter, "ftol": tol ** 2, "gtol": tol}
     opts.update(outer_options or {})
     try:
@@ -121,10 +125,10 @@ def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock):
     return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
 
 
-def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock):
+def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock, length: float = 1.0):
     from scipy.optimize import minimize
 
-    obj = _Outer(prob, fwd, clock)
+    obj = _Outer(prob, fwd, clock, length=length)
     bounds = [(0.0, u) for u in prob.a_upper]
     if outer == "nelder-mead":
         opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": tol ** 2, "adaptive": prob.m > 2}

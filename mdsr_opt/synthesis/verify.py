@@ -239,8 +239,10 @@ def _forward_messages(fwd, what: str, gap: float, gap_tol: float, inverted: bool
     """Why the forward re-solve (``what``) does not confirm the design's state: it failed, it ended more than
     ``gap_tol`` away, or the design's state inverts an element."""
     msgs = []
-    if not fwd.success:
-        msgs.append(f"{what} failed ({fwd.status})")
+    if not fwd.success:  # the reason the solve's state was rejected, not the solver's success status before it
+        status = str(fwd.status)
+        why = status.split("; rejected: ", 1)[1] if "; rejected: " in status else status
+        msgs.append(f"{what} failed ({why})")
     if not np.isfinite(gap) or gap > gap_tol:
         msgs.append(f"gap {gap:.3g} between the design's state and the forward re-solve exceeds {gap_tol:.3g}")
     if inverted:
