@@ -180,7 +180,11 @@ def one_layout(mesh: Mesh, material, cases, routing_options, anchor_radius=None)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RoutingWarning)
                 own[c.name] = tuple(route_muscles(mesh, res.x, **routing_options))
-        muscles, _ = shared_layout(mesh, own)
+        # merged as design_poses merges them: a rope that cannot be moulded beside a kept one (channels closer
+        # than a channel and a wall, crossing ropes, fixtures of anchor_radius that overlap) merged into it
+        fab = routing_options["fabrication"]
+        muscles, _ = shared_layout(mesh, own, fabrication=None if fab is False else fab.for_body(mesh),
+                                   fixture_radius=anchor_radius, notes=[])
         _LAYOUTS[key] = (muscles, targets)
     return _LAYOUTS[key]
 

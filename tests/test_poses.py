@@ -336,12 +336,17 @@ def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monke
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, gait", [("gecko", "walk"), ("starfish", "swim_cycle")])
-def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait):
+@pytest.mark.parametrize("name, gait, resolution",
+                         [("gecko", "walk", "coarse"), ("starfish", "swim_cycle", "medium")])
+def test_library_scenes_have_one_layout_for_their_gait(tmp_path, name, gait, resolution):
+    """The scene's gait on one buildable layout. The starfish runs at its default resolution (569 nodes): on
+    its coarse mesh (145 nodes) the arms are too narrow for ropes in channels inside the body, and the
+    pinwheel case itself removes only 6 % of the rest shape's difference (test_problems.py's coarse runs
+    route on the whole graph for that reason)."""
     from mdsr_opt.scenes.library import get_problem
     from mdsr_opt.scenes.runscene import run_scene
 
-    scene = get_problem(name, resolution="coarse")
+    scene = get_problem(name, resolution=resolution)
     assert scene.gait.name == gait and scene.units == "cm"
     rep = run_scene(scene, tmp_path, photos=False, log=None)
     info = rep.animations[gait]
