@@ -164,7 +164,7 @@ def test_saved_scene_reads_back_with_the_same_mesh_case_and_muscles(tentacle, tm
     files = save_scene(s, tmp_path, "x1")
     back = load_scene(files[0])
     assert np.array_equal(back.mesh.points, tentacle.mesh.points)
-    c = back.case("authored")
+    c = back.case("curl")  # the case edited on the page keeps its name
     assert np.array_equal(c.drag_positions, s.drag_positions)  # exact floats, not rounded
     assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles]
     data = json.loads(Path(files[0]).read_text())
@@ -439,7 +439,7 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     back = load_scene(files[0])
     assert back.routing_options["fabrication"] == fab
     assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles] and len(back.muscles) == len(names) - 1
-    run = run_case(back, "authored", photo=False)
+    run = run_case(back, "curl", photo=False)
     assert run.report.success, run.report.message
     np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)
     assert abs(run.report.difference - page["difference"]) <= 1e-9
@@ -449,7 +449,7 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     s.acceptance = dict(s.acceptance, max_difference=1e-4)
     strict = s.run_design()
     assert "more than max_difference 0.01 %" in strict["acceptance"]
-    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "authored", photo=False)
+    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "curl", photo=False)
     assert not run.report.success and strict["acceptance"] in run.report.message
     # the saved scene loads on the page again with its channel and routes without a conflict of radii
     s2 = Session.from_scene_file(files[0])

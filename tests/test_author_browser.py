@@ -200,7 +200,7 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     assert scene_file.parent == Path(out).resolve() and scene_file.name == "authored_tentacle.json"
     # the scene file holds the same target and muscles ...
     scene = load_scene(scene_file)
-    setup = prepare_case(scene, "authored")
+    setup = prepare_case(scene, "curl")  # the case edited keeps its name
     assert np.array_equal(setup.target, np.asarray(st["x"]))
     assert [list(m.nodes) for m in setup.muscles] == [m["nodes"] for m in routing["muscles"]]  # less the deleted
     saved_fab = json.loads(scene_file.read_text())["fabrication"]

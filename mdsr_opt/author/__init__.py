@@ -14,7 +14,8 @@ and replaces no file it did not write without asking.
 
 Modules: :mod:`.session` (the state and the solves), :mod:`.server` (the web app), :mod:`.guard` (who
 may use it), :mod:`.files` (what the page may open), :mod:`.export` (scene file, figures, meshes,
-results), :mod:`.outline` (SVG/JSON outlines). Start it from Python with :func:`serve`, or in a thread
+results), :mod:`.roundtrip` (what a saved scene keeps of the scene opened), :mod:`.summary` (the design
+as the page shows it), :mod:`.outline` (SVG/JSON outlines). Start it from Python with :func:`serve`, or in a thread
 for tests with :func:`start_in_thread`.
 """
 
