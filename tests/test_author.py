@@ -310,7 +310,7 @@ def test_serve_says_where_files_go(capsys, monkeypatch, tmp_path):
             for s in sockets:
                 s.close()
 
-    monkeypatch.setattr(author, "_server", lambda app, sock, quiet: NoServer())
+    monkeypatch.setattr(author, "_server", lambda app, sock, access_log=False: NoServer())
     assert author.serve(None, port=0, open_browser=False, out=str(tmp_path / "saved")) == 0
     out = capsys.readouterr().out
     assert f"Save writes scene files to {(tmp_path / 'saved').resolve()} (--out)" in out
