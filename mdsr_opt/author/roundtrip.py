@@ -239,6 +239,8 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         d["gait"] = o.raw("gait") or _gait_table(scene.gait)
     if scene is not None and scene.expected:
         d["expected"] = o.raw("expected") or _plain(dict(scene.expected))
+    if notes:  # the file says it too, for whoever runs it
+        d["description"] += " Saved with notes: " + " ".join(n.rstrip(".") + "." for n in notes)
     return d, notes
 
 
