@@ -167,10 +167,11 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
           out="authored", resolution=None, allow_dirs=(), access_log: bool = False) -> int:
     """Serve the authoring page until interrupted (what ``mdsr author`` runs).
 
-    Returns 0 when the server stops by itself. Ctrl-C (SIGINT) and, where the caller turned it into one,
-    SIGTERM stop the server and then raise ``KeyboardInterrupt`` as uvicorn re-sends the signal it caught:
-    ``mdsr author`` then exits 130 (143 on SIGTERM), as every command does. The server's log records go to
-    the ``uvicorn`` loggers, left for the caller to configure.
+    Returns 0 when the server stops by itself. Ctrl-C (SIGINT) and SIGTERM stop the server, which then
+    re-sends the signal to the handler that was there before (uvicorn does): Ctrl-C raises
+    ``KeyboardInterrupt`` here, SIGTERM does what its handler does (the ``mdsr`` command's raises one too,
+    so ``mdsr author`` exits 130 or 143, as every command). The server's log records go to the ``uvicorn``
+    loggers, left for the caller to configure.
 
     Parameters
     ----------
