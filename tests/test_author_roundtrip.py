@@ -168,3 +168,15 @@ def test_a_bad_save_name_is_called_a_scene_name(gripper, tmp_path):
     with pytest.raises(ValueError, match=r"^scene name 'my scene/v2' may hold only letters"):
         save_scene(s, tmp_path / "out", "my scene/v2")
     assert not (tmp_path / "out").exists()  # nothing written, not even the folder
+
+
+def test_what_a_scene_file_cannot_hold_is_said(tmp_path):
+    """face's cases lay their own muscles (a problem script's Case.muscles): a scene file has no such field, so
+    the save says which cases lose them, and the saved file's description says it too."""
+    s = Session.from_problem("face", "coarse")
+    data, back, notes = _saved(s, tmp_path, "face2")
+    assert notes == ["cases smile, frown, wink, pucker: their own muscles (set by the problem script) cannot be "
+                     "written in a scene file: mdsr run of the saved file routes them, or lays the muscles routed "
+                     "on the page"]
+    assert data["description"].endswith("Saved with notes: " + notes[0] + ".")
+    assert [c.name for c in back.cases] == ["smile", "frown", "wink", "pucker"] and back.muscles is None

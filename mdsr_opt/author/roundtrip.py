@@ -94,7 +94,7 @@ def _same_fixed(case, anchors, drag_nodes, drag_positions) -> bool:
             and np.array_equal(a[1], b[1]))
 
 
-def _case_table(case, notes: list) -> dict:
+def _case_table(case) -> dict:
     """A problem script's case as a scene file's ``[[cases]]`` table."""
     d = {"name": case.name}
     if case.description:
@@ -102,9 +102,6 @@ def _case_table(case, notes: list) -> dict:
     if case.kind == "internal":
         d["contractions"] = [float(a) for a in case.contractions]
         return d
-    if case.muscles is not None:
-        notes.append(f"case {case.name!r}: its own muscles (set by the problem script) cannot be written in a "
-                     "scene file: mdsr run of the saved file routes them (or lays the saved scene's muscles)")
     d.update(_fixed_table(case.anchors, case.drag_nodes, case.drag_positions))
     return d
 
@@ -129,15 +126,12 @@ def _cases(session, notes: list) -> list:
     for i, c in enumerate(o.scene.cases if o is not None else ()):
         own = raw[i] if isinstance(raw, list) and i < len(raw) else None
         if c.name != edited:
-            out.append(own if own is not None else _case_table(c, notes))
+            out.append(own if own is not None else _case_table(c))
             continue
         seen = True
         if own is not None and _same_fixed(c, *fixed):
             out.append(own)
             continue
-        if c.muscles is not None and session.routing is None:
-            notes.append(f"case {c.name!r}: its own muscles (set by the problem script) cannot be written in a "
-                         "scene file: route muscles on the page to save a layout")
         d = {"name": c.name, "description": c.description or "anchors and drags set on the page"}
         d.update(_fixed_table(*fixed))
         out.append(d)
@@ -145,6 +139,14 @@ def _cases(session, notes: list) -> list:
         d = {"name": edited, "description": "anchors and drags set on the page"}
         d.update(_fixed_table(*fixed))
         out.append(d)
+    # a problem script's case may lay its own muscles; the edited one lays the page's once routed
+    own = [c.name for c in (o.scene.cases if o is not None else ()) if c.muscles is not None
+           and (c.name != edited or session.routing is None)]
+    if own:
+        many = len(own) > 1
+        notes.append(f"case{'s' * many} {', '.join(own)}: {'their' if many else 'its'} own muscles (set by the "
+                     "problem script) cannot be written in a scene file: mdsr run of the saved file routes "
+                     "them, or lays the muscles routed on the page")
     return out
 
 
