@@ -334,6 +334,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
             setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
         opts["anchor_radius"] = setup.routing.fixture_radius
+    if case.muscles is not None and case.anchor_radius is not None:  # the fixtures of the case's own muscles
+        opts["anchor_radius"] = case.anchor_radius
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()
