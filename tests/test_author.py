@@ -166,9 +166,10 @@ def test_saved_scene_reads_back_with_the_same_mesh_case_and_muscles(tentacle, tm
     assert np.array_equal(back.mesh.points, tentacle.mesh.points)
     c = back.case("curl")  # the case edited on the page keeps its name
     assert np.array_equal(c.drag_positions, s.drag_positions)  # exact floats, not rounded
-    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles]
+    assert [m.nodes for m in c.muscles] == [m.nodes for m in s.muscles] and back.muscles is None  # curl's alone
+    assert c.anchor_radius == s.fixture_radius and back.case("s_curve").muscles is None
     data = json.loads(Path(files[0]).read_text())
-    assert data["routing"]["max_muscles"] == 2 and data["routing"]["K_a"] == 10.0
+    assert data["routing"] == tentacle.routing_options  # the knobs s_curve routes with (not the page's K_a=10)
 
 
 def test_saving_needs_fixed_nodes_and_a_valid_name(tentacle, tmp_path):
@@ -435,10 +436,11 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     files = save_scene(s, tmp_path, "fab_deleted")
     data = json.loads(Path(files[0]).read_text())
     assert data["fabrication"] == fab and "fabrication" not in data.get("routing", {})
-    assert data["design"]["anchor_radius"] == s.routing.fixture_radius
+    assert data["cases"][0]["anchor_radius"] == s.routing.fixture_radius  # curl's own ropes' fixtures
     back = load_scene(files[0])
     assert back.routing_options["fabrication"] == fab
-    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles] and len(back.muscles) == len(names) - 1
+    curl = back.case("curl").muscles
+    assert [m.nodes for m in curl] == [m.nodes for m in s.muscles] and len(curl) == len(names) - 1
     run = run_case(back, "curl", photo=False)
     assert run.report.success, run.report.message
     np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)

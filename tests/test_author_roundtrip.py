@@ -1,6 +1,6 @@
 """mdsr author's Save scene keeps every part of the scene opened that the page does not edit (trial 5,
 defect 4): a scene file's gait, regions, other cases and case names, material, title; a problem script's
-too; what an edit makes inconsistent is said, not dropped."""
+too, with every case's own muscles; the muscles routed on the page are the edited case's alone."""
 
 from __future__ import annotations
 
@@ -107,6 +107,7 @@ def test_the_page_lists_what_a_save_keeps(gripper):
     assert "gait 'grip' (poses rest, close, open): kept as loaded" in kept
     assert "case 'close': anchors and drags as set here; cases open: kept as loaded" in kept
     assert "regions back, upper_jaw, lower_jaw: kept as loaded" in kept
+    assert "muscles routed here: case 'close''s alone; cases open: their muscles (or routing) as loaded" in kept
     assert body_message(Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=80))["kept"] == []
 
 
@@ -129,9 +130,10 @@ def test_a_problem_scripts_gait_cases_and_regions_are_saved(problem, tmp_path):
     assert back.animations == scene.animations and back.expected == scene.expected
 
 
-def test_an_edit_that_breaks_a_kept_case_is_said_not_dropped(tmp_path):
-    """two_muscles' internal cases give two contractions; the page routes one muscle. The saved file keeps
-    the cases (mdsr run names them), and the save says so."""
+def test_routing_on_a_scene_with_given_muscles_keeps_them_for_its_internal_cases(tmp_path):
+    """two_muscles' internal cases give two contractions for the scene's two muscles; the page routes one muscle
+    for a new case. The saved scene keeps the two [[muscles]] (its internal cases still load and run) and lays
+    the routed one on the new case alone."""
     s = Session.from_problem("two_muscles", "coarse")
     P = s.mesh.points
     span = np.ptp(P, axis=0)
@@ -140,27 +142,64 @@ def test_an_edit_that_breaks_a_kept_case_is_said_not_dropped(tmp_path):
     s.set_fixed(left, right, P[right] + [0.0, 0.2 * span[1]])
     assert s.settle().success
     assert len(s.route(10.0, 4.0, 1)["muscles"]) == 1
-    notes = []
-    files = save_scene(s, tmp_path, "routed", notes=notes)
-    data = json.loads(Path(files[0]).read_text())
-    assert [c["name"] for c in data["cases"]] == ["a20", "a30", "a40", "a50", "authored"]
-    assert data["cases"][0]["contractions"] == [0.2, 0.2] and len(data["muscles"]) == 1
-    assert "cases a20, a30, a40, a50 (kept as loaded) give 2 contraction(s)" in notes[0]
-    assert "the saved scene has 1 muscle(s)" in notes[0]
-    with pytest.raises(ValueError, match=r"cases\[0\]\.contractions: needs one value per muscle \(1\), got 2") as exc:
-        load_scene(files[0])
-    assert notes[-1] == f"mdsr run says: {exc.value}"  # the page shows what mdsr run will say
+    data, back, notes = _saved(s, tmp_path, "routed")
+    assert notes == [] and [c["name"] for c in data["cases"]] == ["a20", "a30", "a40", "a50", "authored"]
+    assert data["cases"][0]["contractions"] == [0.2, 0.2]
+    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.origin.scene.muscles]
+    assert [m.nodes for m in back.case("authored").muscles] == [m.nodes for m in s.muscles]
+    assert back.case("a20").muscles is None
 
 
-def test_routed_muscles_that_drive_kept_cases_are_said(tmp_path):
-    scene = get_problem("tentacle", resolution="coarse")
+def _same_run(a, b):
+    """Two runs of one case designed the same muscles to the same contractions, both succeeding."""
+    ra, rb = a.report, b.report
+    assert ra.success and rb.success, (ra.message, rb.message)
+    assert ra.muscles == rb.muscles
+    np.testing.assert_allclose(ra.contractions, rb.contractions, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("problem, edited, kept", [("tentacle", "curl", "s_curve"),
+                                                   ("gecko", "bend_left", "bend_right")])
+def test_muscles_routed_for_one_case_leave_the_kept_cases_as_they_ran(problem, edited, kept, tmp_path):
+    """Issue 32 item 6: the saved scene runs with the same result. The layout routed on the page is the edited
+    case's own muscles: mdsr run designs that case with it as the page did, and the kept case routes its own
+    layout as it did before the save (with the page's layout it failed, every muscle idle)."""
+    from mdsr_opt.scenes.runner import run_case
+
+    scene = get_problem(problem, resolution="coarse")
     s = Session.from_scene(scene)
+    assert s.settle().success
+    s.route(10.0, 4.0, 2)
+    page = s.run_design()
+    data, back, notes = _saved(s, tmp_path, "mine")
+    assert notes == [] and "muscles" not in data  # no scene-wide layout: each case's is its own
+    assert data["routing"] == {k: v for k, v in scene.routing_options.items()}  # the kept cases' knobs
+    assert "anchor_radius" not in data["design"]
+    assert data["cases"][[c.name for c in scene.cases].index(edited)]["anchor_radius"] == s.fixture_radius
+    assert [c.get("muscles") for c in data["cases"]] == [
+        [{"name": m.name, "nodes": list(m.nodes)} for m in s.muscles] if c["name"] == edited else None
+        for c in data["cases"]]
+    mine = run_case(back, edited, photo=False)
+    assert mine.report.success and [m["nodes"] for m in mine.report.muscles] == [list(m.nodes) for m in s.muscles]
+    np.testing.assert_allclose(mine.report.contractions, page["contractions"], rtol=0, atol=1e-9)
+    _same_run(run_case(back, kept, photo=False), run_case(scene, kept, photo=False))
+
+
+def test_design_and_fabrication_set_on_the_page_are_said_to_drive_the_kept_cases(tmp_path):
+    s = Session.from_scene(get_problem("tentacle", resolution="coarse"))
     s.settle()
     s.route(10.0, 4.0, 2)
-    _, back, notes = _saved(s, tmp_path, "t")
-    assert [c.name for c in back.cases] == ["curl", "s_curve"]
-    assert notes == ["the muscles routed here are the scene's [[muscles]]: mdsr run designs every external "
-                     "case with them (also s_curve, kept as loaded)"]
+    s.run_design(a_max=0.5)
+    data, back, notes = _saved(s, tmp_path, "t")
+    assert notes == ["the design settings set here (a_max 0.5, was 0.6) are the scene's [design]: mdsr run designs "
+                     "every case with them, also s_curve"]
+    assert back.design_options["a_max"] == 0.5 and data["description"].endswith(notes[0] + ".")
+    s.route(10.0, 4.0, 2, {"channel_diameter": 0.1})  # a channel size too: the [fabrication] every case routes with
+    s.run_design()
+    _, back, notes = _saved(s, tmp_path, "t2")
+    assert notes == ["the channel, wall and fixture sizes set here (channel_diameter 0.1, was 0.06279) are the "
+                     "scene's [fabrication]: mdsr run routes and checks every case's ropes with them, also s_curve"]
+    assert back.routing_options["fabrication"]["channel_diameter"] == 0.1
 
 
 def test_a_bad_save_name_is_called_a_scene_name(gripper, tmp_path):
@@ -170,13 +209,14 @@ def test_a_bad_save_name_is_called_a_scene_name(gripper, tmp_path):
     assert not (tmp_path / "out").exists()  # nothing written, not even the folder
 
 
-def test_what_a_scene_file_cannot_hold_is_said(tmp_path):
-    """face's cases lay their own muscles (a problem script's Case.muscles): a scene file has no such field, so
-    the save says which cases lose them, and the saved file's description says it too."""
-    s = Session.from_problem("face", "coarse")
+def test_a_problem_scripts_per_case_muscles_are_saved(tmp_path):
+    """face's cases lay their own muscles (a problem script's Case.muscles): the saved file holds them as each
+    case's ``muscles``, and each reads back as the case's own."""
+    scene = get_problem("face", resolution="coarse")
+    s = Session.from_scene(scene)
     data, back, notes = _saved(s, tmp_path, "face2")
-    assert notes == ["cases smile, frown, wink, pucker: their own muscles (set by the problem script) cannot be "
-                     "written in a scene file: mdsr run of the saved file routes them, or lays the muscles routed "
-                     "on the page"]
-    assert data["description"].endswith("Saved with notes: " + notes[0] + ".")
+    assert notes == [] and "Saved with notes" not in data["description"]
     assert [c.name for c in back.cases] == ["smile", "frown", "wink", "pucker"] and back.muscles is None
+    for c in scene.cases:
+        assert [m.nodes for m in back.case(c.name).muscles] == [m.nodes for m in c.muscles], c.name
+        assert [m.name for m in back.case(c.name).muscles] == [m.name for m in c.muscles], c.name

@@ -5,7 +5,8 @@ written next to it as ``<name>.mesh.vtu`` (binary float64, so the nodes and thei
 exactly and node ids stay valid); the edited case keeps its name, its anchors are node ids and each drag
 is one node moved ``to`` its exact position; every part of the scene opened that the page does not edit
 is kept (:mod:`.roundtrip`: the other cases, regions, gait, animations, material...); routed muscles are
-node lists, without the ones the user deleted (so ``mdsr run`` uses them instead of routing again);
+the edited case's own ``muscles``, node lists without the ones the user deleted (so ``mdsr run`` designs
+that case with them instead of routing again, and the other cases as before);
 routing and design options are the ones the page used, the muscle model written out so a changed default
 cannot change the result; the channel, wall and fixture sizes are the ``[fabrication]`` table, and the
 design's ``anchor_radius`` is the fixture radius the ropes were fitted to.
@@ -19,7 +20,7 @@ import zipfile
 from pathlib import Path
 
 from ..body.io import write_json, write_mesh
-from .roundtrip import check_read_back, refused_cases, scene_file
+from .roundtrip import check_read_back, scene_file
 
 __all__ = ["save_scene", "download", "DOWNLOADS", "WouldReplace"]
 
@@ -49,9 +50,9 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True, notes: 
     paths.
 
     The file keeps every part of the scene the session opened that the page does not edit
-    (:mod:`.roundtrip`). ``notes``: a list that receives what the file cannot hold or what ``mdsr run``
-    will refuse in it because of an edit on the page (e.g. an internal case whose contractions no longer
-    match the routed muscles; the file is written, and the message ``mdsr run`` gives for it is noted).
+    (:mod:`.roundtrip`); the muscles routed on the page are the edited case's own. ``notes``: a list that
+    receives what the save changes for the cases the page did not edit (design settings or channel sizes
+    set on the page, which are the scene's).
 
     ``overwrite``: ``True`` replaces existing files; ``False``, or a function of a path returning whether
     that existing file may be replaced, raises :class:`WouldReplace` (before anything is written) for the
@@ -62,7 +63,7 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True, notes: 
     ``RuntimeError`` rather than leaving a scene that would not reproduce the page.
     """
     from ..scenes.names import check_name
-    from ..scenes.scenefile import load_scene, scene_from_data
+    from ..scenes.scenefile import load_scene
 
     if len(session.anchors) + len(session.drag_nodes) < 2:
         raise ValueError("nothing to save yet: a scene's case needs at least two fixed nodes (anchors and drags)")
@@ -79,20 +80,11 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True, notes: 
     folder.mkdir(parents=True, exist_ok=True)
     write_mesh(mesh_path, session.mesh)
     write_json(scene_path, d)
-    refused = refused_cases(d, session)
     try:
         back = load_scene(scene_path)
     except (ValueError, TypeError) as exc:
-        if not refused:
-            raise RuntimeError(f"{scene_path} does not read back: {exc} (please report this)") from None
-        said.append(f"mdsr run says: {exc}")
-        # the rest of the file, read without the cases mdsr run refuses (and the gait and animations)
-        trimmed = {k: v for k, v in d.items() if k not in ("gait", "animations")}
-        trimmed["cases"] = [c for c in d["cases"] if c["name"] not in refused]
-        back = scene_from_data(scene_path, trimmed)
-    else:
-        refused = []
-    wrong = check_read_back(back, session, d, refused)
+        raise RuntimeError(f"{scene_path} does not read back: {exc} (please report this)") from None
+    wrong = check_read_back(back, session, d)
     if wrong:
         raise RuntimeError(f"{scene_path} does not read back as the session: {wrong} (please report this)")
     if notes is not None:

@@ -1,15 +1,17 @@
 """The scene file a session saves: the page's edits laid over the scene it opened, every other part kept.
 
-The page edits one external case (its anchors and drags), the muscles (routing, deletions), the routing,
-fabrication and design settings. Everything else of the scene it opened -- the other cases and every
-case's name, regions, gait, animations, given muscles (until the page routes), material, units,
-acceptance, expected figures, title -- goes into the saved file as it was loaded: for a scene file, its
-own tables (a region stays ``{ box = [...] }``, a case that was not edited keeps its ``by`` drags); for a
-problem script's scene, the same parts written out as node ids and exact positions. :func:`scene_file`
-builds the file's content and names what the saved file cannot hold or what an edit made inconsistent
-(e.g. an internal case whose contractions no longer match the routed layout): the page shows those notes,
-and ``mdsr run`` names the same field when it reads the file. :func:`check_read_back` compares the saved
-file, read with :func:`~mdsr_opt.load_scene`, with the session and the scene it came from.
+The page edits one external case: its anchors and drags and, once routed, its muscles (less the deleted
+ones), saved as that case's own ``muscles`` with the radius of the end fixtures they were fitted to (so
+they drive that case alone); and the fabrication and design settings. Everything else of the scene it
+opened -- the ``[routing]`` knobs (the page's made the saved layout), the other cases with their own
+muscles (or their routing) and every case's name, the scene's given ``[[muscles]]``, regions, gait, animations,
+material, units, acceptance, expected figures, title -- goes into the saved file as it was loaded: for a
+scene file, its own tables (a region stays ``{ box = [...] }``, a case that was not edited keeps its ``by``
+drags); for a problem script's scene, the same parts written out as node ids and exact positions.
+:func:`scene_file` builds the file's content and the notes the page shows with it (the design settings and
+channel sizes set on the page are the scene's: the other cases are designed with them too).
+:func:`check_read_back` compares the saved file, read with :func:`~mdsr_opt.load_scene`, with the session
+and the scene it came from.
 """
 
 from __future__ import annotations
@@ -19,8 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "refused_cases", "kept_lines",
-           "edited_case_name"]
+__all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name"]
 
 #: what the page calls the case it edits when the scene it opened has no external case
 AUTHORED = "authored"
@@ -94,8 +95,13 @@ def _same_fixed(case, anchors, drag_nodes, drag_positions) -> bool:
             and np.array_equal(a[1], b[1]))
 
 
+def _muscle_tables(muscles) -> list:
+    """Muscles as ``[[muscles]]`` tables (node ids), unnamed ones called ``m<i>``."""
+    return [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]} for i, m in enumerate(muscles)]
+
+
 def _case_table(case) -> dict:
-    """A problem script's case as a scene file's ``[[cases]]`` table."""
+    """A problem script's case as a scene file's ``[[cases]]`` table (with its own muscles, if any)."""
     d = {"name": case.name}
     if case.description:
         d["description"] = case.description
@@ -103,6 +109,10 @@ def _case_table(case) -> dict:
         d["contractions"] = [float(a) for a in case.contractions]
         return d
     d.update(_fixed_table(case.anchors, case.drag_nodes, case.drag_positions))
+    if case.muscles is not None:
+        d["muscles"] = _muscle_tables(case.muscles)
+    if case.anchor_radius is not None:
+        d["anchor_radius"] = float(case.anchor_radius)
     return d
 
 
@@ -114,10 +124,10 @@ def _gait_table(g) -> dict:
     return d
 
 
-def _cases(session, notes: list) -> list:
+def _cases(session) -> list:
     """The saved scene's cases, in the opened scene's order, the edited one with the page's anchors and drags
-    (its own table when they did not change), a new ``authored`` case last when the scene had no external
-    case."""
+    (its own table when they did not change) and the page's muscles once routed as its own ``muscles`` (its
+    own muscles kept otherwise), a new ``authored`` case last when the scene had no external case."""
     o = session.origin
     fixed = (session.anchors, session.drag_nodes, session.drag_positions)
     edited = edited_case_name(session)
@@ -130,53 +140,40 @@ def _cases(session, notes: list) -> list:
             continue
         seen = True
         if own is not None and _same_fixed(c, *fixed):
-            out.append(own)
-            continue
-        d = {"name": c.name, "description": c.description or "anchors and drags set on the page"}
-        d.update(_fixed_table(*fixed))
-        out.append(d)
+            d = dict(own)
+        else:
+            d = {"name": c.name, "description": c.description or "anchors and drags set on the page"}
+            d.update(_fixed_table(*fixed))
+            if c.muscles is not None:  # its own muscles (and their fixtures' radius), as written
+                d["muscles"] = own["muscles"] if own is not None else _muscle_tables(c.muscles)
+            if c.anchor_radius is not None:
+                d["anchor_radius"] = float(c.anchor_radius)
+        out.append(_with_page_muscles(d, session))
     if not seen:
         d = {"name": edited, "description": "anchors and drags set on the page"}
         d.update(_fixed_table(*fixed))
-        out.append(d)
-    # a problem script's case may lay its own muscles; the edited one lays the page's once routed
-    own = [c.name for c in (o.scene.cases if o is not None else ()) if c.muscles is not None
-           and (c.name != edited or session.routing is None)]
-    if own:
-        many = len(own) > 1
-        notes.append(f"case{'s' * many} {', '.join(own)}: {'their' if many else 'its'} own muscles (set by the "
-                     "problem script) cannot be written in a scene file: mdsr run of the saved file routes "
-                     "them, or lays the muscles routed on the page")
+        out.append(_with_page_muscles(d, session))
     return out
 
 
-def refused_cases(d: dict, session) -> list[str]:
-    """The internal cases kept as loaded whose contractions no longer match the saved layout ``d["muscles"]``
-    (the page routed or deleted muscles): ``mdsr run`` refuses the saved file until they are fixed."""
-    o = session.origin
-    n = len(d.get("muscles", ()))
-    return [c.name for c in (o.scene.cases if o is not None else ()) if c.kind == "internal"
-            and len(c.contractions) != n]
-
-
-def _muscle_notes(d: dict, session, notes: list) -> None:
-    refused = refused_cases(d, session)
-    if refused:  # a scene's internal cases give one contraction per muscle of that scene
-        k = len(session.origin.scene.case(refused[0]).contractions)
-        many = len(refused) > 1
-        notes.append(f"case{'s' * many} {', '.join(refused)} (kept as loaded) give{'' if many else 's'} "
-                     f"{k} contraction(s), one per muscle of the scene opened, but the saved scene has "
-                     f"{len(d.get('muscles', ()))} muscle(s) (the layout routed on the page): mdsr run refuses "
-                     "the file until each gives one per muscle")
+def _with_page_muscles(d: dict, session) -> dict:
+    """The edited case's table ``d`` with the layout routed on the page (after its deletions) as its own
+    muscles, designed with the end fixtures they were fitted to: they drive this case alone."""
+    if session.muscles:
+        d["muscles"] = _muscle_tables(session.muscles)
+        d.pop("anchor_radius", None)
+        if session.fixture_radius is not None:  # the routed ropes' fixtures (shrunk when they had to be)
+            d["anchor_radius"] = float(session.fixture_radius)
+    return d
 
 
 def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
     """The scene file's content for ``session`` (body = ``mesh_file``) and the notes the page shows with it.
 
-    The page's parts: the edited case's anchors and drags (:func:`edited_case_name`), the muscles once
-    routed (without the deleted ones), the routing, fabrication and design settings used. Every other part
-    of the scene opened is kept (see the module's description). Notes name what the file cannot hold or what
-    ``mdsr run`` will refuse in it because of an edit on the page.
+    The page's parts: the edited case's anchors and drags (:func:`edited_case_name`) and, once routed, its
+    own muscles (without the deleted ones); the routing, fabrication and design settings used. Every other
+    part of the scene opened is kept (see the module's description). Notes name the settings set on the page
+    that are the scene's and so change how the other cases are designed (``[design]``, ``[fabrication]``).
     """
     from ..scenes.scenefile import material_table
 
@@ -200,14 +197,11 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         d["acceptance"] = {k: _plain(v) for k, v in session.acceptance.items()}
     if scene is not None and scene.regions:
         d["regions"] = o.raw("regions") or {k: {"nodes": [int(v) for v in idx]} for k, idx in scene.regions.items()}
-    if session.routing is not None or session.muscles:  # the layout routed on the page (after its deletions)
-        if session.muscles:
-            d["muscles"] = [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}
-                            for i, m in enumerate(session.muscles)]
-    elif scene is not None and scene.muscles:  # the scene's given muscles, until the page routes
-        d["muscles"] = o.raw("muscles") or [{"name": m.name or f"m{i}", "nodes": [int(v) for v in m.nodes]}
-                                            for i, m in enumerate(scene.muscles)]
-    routing = dict(session.routing_params or session.routing_options)
+    if scene is not None and scene.muscles:  # the scene's given muscles (the page's are its case's own)
+        d["muscles"] = o.raw("muscles") or _muscle_tables(scene.muscles)
+    # the scene's routing knobs: the page's made the edited case's layout, which its table holds; they are
+    # not the other cases' (nor the gait's)
+    routing = dict(session.routing_options)
     fab = session.fabrication if session.routing is not None else routing.get("fabrication")
     routing.pop("fabrication", None)  # written as the [fabrication] table
     if routing:
@@ -215,8 +209,9 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
     if fab is False or fab:
         d["fabrication"] = fab if fab is False else {k: float(v) for k, v in fab.items() if v is not None}
     design = dict(session.design_params or session.design_options)
-    if session.fixture_radius is not None:  # the routed ropes' fixtures (shrunk when they had to be)
-        design["anchor_radius"] = float(session.fixture_radius)
+    design.pop("anchor_radius", None)  # the scene's: the routed ropes' fixtures are the edited case's own
+    if session.design_options.get("anchor_radius") is not None:
+        design["anchor_radius"] = session.design_options["anchor_radius"]
     if session.design is not None:
         design["muscle_model"] = session.design.muscle_model
         design["stiffness"] = float(session.design.stiffness)
@@ -224,15 +219,9 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         design["method"] = session.design.method
     if design:
         d["design"] = {k: _plain(v) for k, v in design.items() if v is not None}
-    d["cases"] = _cases(session, notes)
-    _muscle_notes(d, session, notes)
-    others = [c.name for c in (scene.cases if scene is not None else ()) if c.kind == "external"
-              and c.name != edited_case_name(session)]
-    if session.routing is not None and session.muscles and scene is not None and (others or scene.muscles):
-        was = (f"replace the scene's muscles {', '.join(str(m.name) for m in scene.muscles)}" if scene.muscles
-               else "are the scene's [[muscles]]")
-        notes.append(f"the muscles routed here {was}: mdsr run designs every external case with them"
-                     + (f" (also {', '.join(others)}, kept as loaded)" if others else ""))
+        _design_note(session, d["design"], notes)
+    _fabrication_note(session, notes)
+    d["cases"] = _cases(session)
     if scene is not None and scene.animations:
         d["animations"] = o.raw("animations") or [
             {"name": a.name, "keyframes": [[k, float(w)] for k, w in a.keyframes],
@@ -246,9 +235,50 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
     return d, notes
 
 
+def _design_note(session, design: dict, notes: list) -> None:
+    """Say so when the design settings set on the page, which are the scene's ``[design]``, change how the
+    other cases of the scene opened are designed."""
+    import inspect
+
+    from ..synthesis.contractions import design_contractions
+
+    o = session.origin
+    others = [c.name for c in (o.scene.cases if o is not None else ()) if c.name != edited_case_name(session)]
+    if not others:
+        return
+    default = {k: p.default for k, p in inspect.signature(design_contractions).parameters.items()}
+    changed = [f"{k} {design[k]!r}, was {session.design_options.get(k, default.get(k))!r}"
+               for k in ("method", "a_max", "muscle_model", "stiffness")
+               if k in design and design[k] != session.design_options.get(k, default.get(k))]
+    if changed:
+        notes.append(f"the design settings set here ({'; '.join(changed)}) are the scene's [design]: mdsr run "
+                     f"designs every case with them, also {', '.join(others)}")
+
+
+def _fabrication_note(session, notes: list) -> None:
+    """Say so when the channel, wall and fixture sizes the page routed with, which are the scene's
+    ``[fabrication]``, differ from the ones the other cases of the scene opened were routed with."""
+    o = session.origin
+    others = [c.name for c in (o.scene.cases if o is not None else ()) if c.name != edited_case_name(session)]
+    if session.routing is None or not others:
+        return
+    now, was = session.fabrication_sizes(session.fabrication), \
+        session.fabrication_sizes(session.routing_options.get("fabrication"))
+    if now == was:
+        return
+    changed = ("off, was on" if now is False else "on, was off" if was is False else
+               "; ".join(f"{k} {now[k]:.4g}, was {was[k]:.4g}" for k in now if now[k] != was.get(k)))
+    notes.append(f"the channel, wall and fixture sizes set here ({changed}) are the scene's [fabrication]: "
+                 f"mdsr run routes and checks every case's ropes with them, also {', '.join(others)}")
+
+
 def scene_dict(session, name: str, mesh_file: str) -> dict:
     """The scene file's content for ``session`` (:func:`scene_file` without its notes)."""
     return scene_file(session, name, mesh_file)[0]
+
+
+def _layout(muscles) -> list:
+    return [tuple(m.nodes) for m in (muscles or ())]
 
 
 def _same_case(a, b) -> bool:
@@ -256,18 +286,16 @@ def _same_case(a, b) -> bool:
         return False
     if a.kind == "internal":
         return np.array_equal(a.contractions, b.contractions)
-    return _same_fixed(a, b.anchors, b.drag_nodes, b.drag_positions)
+    return (_same_fixed(a, b.anchors, b.drag_nodes, b.drag_positions) and _layout(a.muscles) == _layout(b.muscles)
+            and a.anchor_radius == b.anchor_radius)
 
 
-def check_read_back(back, session, d: dict, refused=()) -> str:
+def check_read_back(back, session, d: dict) -> str:
     """What differs between the saved scene ``back`` (read with :func:`~mdsr_opt.load_scene`) and the
-    session it was saved from, its content ``d`` and the scene the session opened ("" when nothing does).
-
-    ``refused``: the cases (:func:`refused_cases`) left out of ``back`` with the gait and animations, which
-    are then not compared."""
+    session it was saved from, its content ``d`` and the scene the session opened ("" when nothing does)."""
     o = session.origin
     edited = edited_case_name(session)
-    names = [c["name"] for c in d["cases"] if c["name"] not in refused]
+    names = [c["name"] for c in d["cases"]]
     if [c.name for c in back.cases] != names:
         return f"cases {[c.name for c in back.cases]} for {names}"
     case = back.case(edited)
@@ -276,21 +304,26 @@ def check_read_back(back, session, d: dict, refused=()) -> str:
     if not (np.array_equal(back.mesh.points, session.mesh.points)
             and np.array_equal(back.mesh.triangles, session.mesh.triangles)):
         return "the mesh"
-    if session.routing is not None or session.muscles:  # the page's layout
-        want = [tuple(m.nodes) for m in session.muscles]
-    else:  # the scene's given muscles (or none)
-        want = [tuple(m.nodes) for m in (o.scene.muscles or ())] if o is not None else []
-    if [tuple(m.nodes) for m in (back.muscles or ())] != want:
-        return "the muscles"
+    was = o.scene.case(edited) if o is not None and edited in o.scene.case_names else None
+    # the edited case lays the page's layout once routed, else its own muscles as loaded (or none)
+    if _layout(case.muscles) != _layout(session.muscles or (was.muscles if was is not None else None)):
+        return f"case {edited!r}: muscles"
+    radius = session.fixture_radius if session.muscles else (was.anchor_radius if was is not None else None)
+    if case.anchor_radius != (None if radius is None else float(radius)):
+        return f"case {edited!r}: anchor_radius"
+    if _layout(back.muscles) != _layout(o.scene.muscles if o is not None else None):
+        return "the scene's muscles"
+    if back.design_options.get("anchor_radius") != session.design_options.get("anchor_radius"):
+        return "the design's anchor_radius"
     if back.routing_options.get("fabrication") != d.get("fabrication"):
         return "the fabrication table"
     if o is None:
         return ""
     scene = o.scene
     for c in scene.cases:
-        if c.name != edited and c.name not in refused and not _same_case(back.case(c.name), c):
+        if c.name != edited and not _same_case(back.case(c.name), c):
             return f"case {c.name!r} kept as loaded"
-    if not refused and (back.gait != scene.gait or back.animations != scene.animations):
+    if back.gait != scene.gait or back.animations != scene.animations:
         return "the gait or the animations"
     if set(back.regions) != set(scene.regions) or any(
             not np.array_equal(np.unique(back.regions[k]), np.unique(scene.regions[k])) for k in scene.regions):
@@ -314,7 +347,10 @@ def kept_lines(session) -> list[str]:
     if scene.regions:
         out.append(f"regions {', '.join(scene.regions)}: kept as loaded")
     if scene.muscles:
-        out.append(f"muscles {', '.join(str(m.name) for m in scene.muscles)}: kept as loaded until you route")
+        out.append(f"muscles {', '.join(str(m.name) for m in scene.muscles)}: kept as loaded")
+    if others:  # the layout routed here is the edited case's own: the other cases keep theirs (or route)
+        out.append(f"muscles routed here: case {edited!r}'s alone; cases {', '.join(others)}: their muscles (or "
+                   "routing) as loaded")
     if scene.gait is not None:
         out.append(f"gait {scene.gait.name!r} (poses {', '.join(scene.gait.sequence)}): kept as loaded")
     if scene.animations:

@@ -447,8 +447,13 @@ class Session:
         ``anchor_radius`` if the scene gives one), each field left open taking
         :meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`'s default for this body."""
         spec = self.fabrication if self.routing is not None else self.routing_options.get("fabrication")
+        return self.fabrication_sizes(spec) or Fabrication().for_body(self.mesh).to_dict()
+
+    def fabrication_sizes(self, spec) -> dict | bool:
+        """The sizes a routing with the fabrication ``spec`` (a dict of Fabrication's fields, None or False)
+        uses on this body, every field set; False when ``spec`` turns the fabrication off."""
         fab = self._fabrication(spec)
-        return (fab if fab is not False else Fabrication()).for_body(self.mesh).to_dict()
+        return False if fab is False else (fab or Fabrication()).for_body(self.mesh).to_dict()
 
     def _fabrication(self, spec):
         """``spec`` (a dict of Fabrication's fields, None or False) checked against the design's anchor_radius
