@@ -107,3 +107,16 @@ def test_a_python_case_takes_anchor_radius_only_with_its_own_muscles():
     with pytest.raises(ValueError, match=r"case 'up': anchor_radius"):
         Case("up", anchors=[0, 1], muscles=(Muscle((0, 1)),), anchor_radius=-1.0)
     assert Case("up", anchors=[0, 1], muscles=(Muscle((0, 1)),), anchor_radius=0.2).anchor_radius == 0.2
+
+
+def test_mdsr_run_designs_a_case_with_its_own_muscles_and_fixture_radius(tmp_path):
+    from mdsr_opt.scenes.runner import run_case
+
+    scene = _load(tmp_path)
+    lines: list[str] = []
+    run = run_case(scene, "up", photo=False, log=lines.append)
+    said = [s for s in lines if "not routed" in s]
+    assert said == ["not routed: the case's own 1 muscle(s) (top) are designed for this target"], lines
+    assert run.design is not None and run.design.anchor_radius == 0.1  # the case's, not the default 0.1649
+    assert [m["name"] for m in run.report.muscles] == ["top"]
+    assert "a fixture of radius 0.1 with" in run.report.fabrication[0]  # reported, as for the scene's muscles
