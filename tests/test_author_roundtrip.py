@@ -12,6 +12,7 @@ import pytest
 
 from mdsr_opt import get_problem, load_scene
 from mdsr_opt.author.export import save_scene
+from mdsr_opt.author.roundtrip import kept_lines
 from mdsr_opt.author.server import body_message
 from mdsr_opt.author.session import Session
 
@@ -175,6 +176,7 @@ def test_muscles_routed_for_one_case_leave_the_kept_cases_as_they_ran(problem, e
     assert notes == [] and "muscles" not in data  # no scene-wide layout: each case's is its own
     assert data["routing"] == {k: v for k, v in scene.routing_options.items()}  # the kept cases' knobs
     assert "anchor_radius" not in data["design"]
+    assert any(line.startswith("material, routing knobs") for line in kept_lines(s))  # the page says it too
     assert data["cases"][[c.name for c in scene.cases].index(edited)]["anchor_radius"] == s.fixture_radius
     assert [c.get("muscles") for c in data["cases"]] == [
         [{"name": m.name, "nodes": list(m.nodes)} for m in s.muscles] if c["name"] == edited else None

@@ -171,7 +171,8 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
     """The scene file's content for ``session`` (body = ``mesh_file``) and the notes the page shows with it.
 
     The page's parts: the edited case's anchors and drags (:func:`edited_case_name`) and, once routed, its
-    own muscles (without the deleted ones); the routing, fabrication and design settings used. Every other
+    own muscles (without the deleted ones); the fabrication and design settings used (the ``[routing]``
+    knobs stay the scene's: the other cases and the gait route with them). Every other
     part of the scene opened is kept (see the module's description). Notes name the settings set on the page
     that are the scene's and so change how the other cases are designed (``[design]``, ``[fabrication]``).
     """
@@ -355,7 +356,9 @@ def kept_lines(session) -> list[str]:
         out.append(f"gait {scene.gait.name!r} (poses {', '.join(scene.gait.sequence)}): kept as loaded")
     if scene.animations:
         out.append(f"animations {', '.join(a.name for a in scene.animations)}: kept as loaded")
-    rest = [k for k, v in (("material", True), ("units", scene.units), ("acceptance", scene.acceptance),
+    knobs = [k for k in scene.routing_options if k != "fabrication"]  # the layout routed here is saved as such
+    rest = [k for k, v in (("material", True), ("routing knobs", knobs), ("units", scene.units),
+                           ("acceptance", scene.acceptance),
                            ("expected figures", scene.expected), ("title", scene.title)) if v]
     out.append(f"{', '.join(rest)}: kept as loaded")
     return out
