@@ -164,11 +164,12 @@ def test_saved_scene_reads_back_with_the_same_mesh_case_and_muscles(tentacle, tm
     files = save_scene(s, tmp_path, "x1")
     back = load_scene(files[0])
     assert np.array_equal(back.mesh.points, tentacle.mesh.points)
-    c = back.case("authored")
+    c = back.case("curl")  # the case edited on the page keeps its name
     assert np.array_equal(c.drag_positions, s.drag_positions)  # exact floats, not rounded
-    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles]
+    assert [m.nodes for m in c.muscles] == [m.nodes for m in s.muscles] and back.muscles is None  # curl's alone
+    assert c.anchor_radius == s.fixture_radius and back.case("s_curve").muscles is None
     data = json.loads(Path(files[0]).read_text())
-    assert data["routing"]["max_muscles"] == 2 and data["routing"]["K_a"] == 10.0
+    assert data["routing"] == tentacle.routing_options  # the knobs s_curve routes with (not the page's K_a=10)
 
 
 def test_saving_needs_fixed_nodes_and_a_valid_name(tentacle, tmp_path):
@@ -310,7 +311,7 @@ def test_serve_says_where_files_go(capsys, monkeypatch, tmp_path):
             for s in sockets:
                 s.close()
 
-    monkeypatch.setattr(author, "_server", lambda app, sock, quiet: NoServer())
+    monkeypatch.setattr(author, "_server", lambda app, sock, access_log=False: NoServer())
     assert author.serve(None, port=0, open_browser=False, out=str(tmp_path / "saved")) == 0
     out = capsys.readouterr().out
     assert f"Save writes scene files to {(tmp_path / 'saved').resolve()} (--out)" in out
@@ -435,11 +436,12 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     files = save_scene(s, tmp_path, "fab_deleted")
     data = json.loads(Path(files[0]).read_text())
     assert data["fabrication"] == fab and "fabrication" not in data.get("routing", {})
-    assert data["design"]["anchor_radius"] == s.routing.fixture_radius
+    assert data["cases"][0]["anchor_radius"] == s.routing.fixture_radius  # curl's own ropes' fixtures
     back = load_scene(files[0])
     assert back.routing_options["fabrication"] == fab
-    assert [m.nodes for m in back.muscles] == [m.nodes for m in s.muscles] and len(back.muscles) == len(names) - 1
-    run = run_case(back, "authored", photo=False)
+    curl = back.case("curl").muscles
+    assert [m.nodes for m in curl] == [m.nodes for m in s.muscles] and len(curl) == len(names) - 1
+    run = run_case(back, "curl", photo=False)
     assert run.report.success, run.report.message
     np.testing.assert_allclose(run.report.contractions, page["contractions"], rtol=0, atol=1e-9)
     assert abs(run.report.difference - page["difference"]) <= 1e-9
@@ -449,7 +451,7 @@ def test_saved_fabrication_and_deletion_are_reproduced_by_run_case(tentacle, tmp
     s.acceptance = dict(s.acceptance, max_difference=1e-4)
     strict = s.run_design()
     assert "more than max_difference 0.01 %" in strict["acceptance"]
-    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "authored", photo=False)
+    run = run_case(load_scene(save_scene(s, tmp_path, "strict")[0]), "curl", photo=False)
     assert not run.report.success and strict["acceptance"] in run.report.message
     # the saved scene loads on the page again with its channel and routes without a conflict of radii
     s2 = Session.from_scene_file(files[0])

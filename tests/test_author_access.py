@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import http.client
 import json
+import signal
 import socket
+import sys
 import threading
 from urllib.parse import urlsplit
 
@@ -276,3 +278,67 @@ def test_the_printed_address_carries_the_token(monkeypatch, capsys, tmp_path):
     assert len(token) >= 40 and str(tmp_path) in line
     with pytest.raises(ValueError, match="not a folder"):
         author.serve(None, open_browser=False, allow_dirs=[str(tmp_path / "nothing")])
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="sends POSIX signals to a child process")
+@pytest.mark.parametrize("sig, code, name", [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_mdsr_author_exits_as_every_command_on_ctrl_c_and_sigterm(tmp_path, sig, code, name):
+    """README: every command exits 130 on Ctrl-C and 143 on SIGTERM, with one line; the server's own INFO lines
+    (uvicorn's) are not printed without -v, as no other command prints a library's progress."""
+    import os
+    import re
+    import subprocess
+    import time
+    import urllib.error
+    import urllib.request
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-m", "mdsr_opt", "author", "tentacle", "--resolution", "coarse",
+                             "--no-browser", "--out", str(tmp_path)], cwd=root,
+                            env=dict(os.environ, PYTHONPATH=str(root), OPENBLAS_NUM_THREADS="1"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = re.search(r"http://\S+", proc.stdout.readline()).group(0)
+        deadline = time.monotonic() + 60
+        while True:  # signalled while serving, not while starting
+            try:
+                assert urllib.request.urlopen(url, timeout=5).status == 200
+                break
+            except urllib.error.URLError:
+                assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read()
+                time.sleep(0.05)
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, err
+    assert err.strip().splitlines() == [f"mdsr author: interrupted ({name}); files already complete are kept"]
+
+
+@pytest.mark.parametrize("verbose, quiet, lines", [
+    (0, False, ["Invalid HTTP request received."]),
+    (1, False, ["INFO uvicorn.error: Started server process", "WARNING uvicorn.error: Invalid HTTP request received."]),
+    (0, True, ["Invalid HTTP request received."])])
+def test_the_servers_log_lines_follow_the_command_lines_verbosity(capsys, verbose, quiet, lines):
+    """uvicorn's records go through the command line's handler: its INFO lines only with -v (then with the
+    logger's name, as -v shows every logger's), its warnings always."""
+    import logging
+
+    from mdsr_opt.author import _server_logs
+    from mdsr_opt.cli.main import configure_logging
+
+    lib, server = logging.getLogger("mdsr_opt"), logging.getLogger("uvicorn")
+    before = (list(lib.handlers), lib.level, list(server.handlers), server.level, server.propagate)
+    try:
+        configure_logging(verbose, quiet)
+        with _server_logs(verbose, quiet):
+            logging.getLogger("uvicorn.error").info("Started server process")
+            logging.getLogger("uvicorn.error").warning("Invalid HTTP request received.")
+        assert (list(server.handlers), server.level, server.propagate) == before[2:]  # left as it was
+    finally:
+        lib.handlers[:] = before[0]
+        lib.setLevel(before[1])
+    assert capsys.readouterr().err.splitlines() == lines

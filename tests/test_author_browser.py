@@ -155,6 +155,10 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
                f"&& mdsrAuthor.seq() === {seq} && mdsrAuthor.routing() === null;")
     st = idle(page)
     assert np.array_equal(st["anchors"], get_problem(PROBLEM, resolution=RESOLUTION).cases[0].anchors)
+    # the page says what Save keeps of the scene opened: its other case, its regions
+    kept = page.find_element(By.ID, "kept").text
+    assert "case 'curl': anchors and drags as set here; cases s_curve: kept as loaded" in kept, kept
+    assert "muscles routed here: case 'curl''s alone; cases s_curve: their muscles (or routing) as loaded" in kept
     page.find_element(By.ID, "show-graph").click()
     weights = wait(page, "return mdsrAuthor.graph();")
     scene0 = get_problem(PROBLEM, resolution=RESOLUTION)
@@ -197,22 +201,31 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     page.find_element(By.ID, "save").click()
     saved = wait(page, "return mdsrAuthor.saved();")
     scene_file = Path(saved["files"][0])
+    shown = page.find_element(By.ID, "save-notes").text  # the channel size set here: the kept case's too
+    assert saved["notes"] and all(n in shown for n in saved["notes"]) and "also s_curve" in shown, shown
+    assert "channel_diameter 0.1" in shown, shown
     assert scene_file.parent == Path(out).resolve() and scene_file.name == "authored_tentacle.json"
     # the scene file holds the same target and muscles ...
     scene = load_scene(scene_file)
-    setup = prepare_case(scene, "authored")
+    setup = prepare_case(scene, "curl")  # the case edited keeps its name
     assert np.array_equal(setup.target, np.asarray(st["x"]))
     assert [list(m.nodes) for m in setup.muscles] == [m["nodes"] for m in routing["muscles"]]  # less the deleted
     saved_fab = json.loads(scene_file.read_text())["fabrication"]
     assert saved_fab == dict(fab, channel_diameter=0.1) and scene.routing_options["fabrication"] == saved_fab
-    assert scene.design_options["anchor_radius"] == routing["fixture_radius"]
+    # curl's own ropes, designed with the fixtures they were fitted to; the scene's design radius as it was
+    assert scene.case("curl").anchor_radius == routing["fixture_radius"] and "anchor_radius" not in scene.design_options
     # ... and `mdsr run` designs the same contractions
     res = subprocess.run([sys.executable, "-m", "mdsr_opt", "run", str(scene_file), "--out", str(tmp_path / "run"),
                           "--no-photos", "--no-figures", "--no-animations", "--quiet"], cwd=ROOT,
                          capture_output=True, text=True, timeout=300)
+    # s_curve, kept as loaded, routes its own layout (not curl's) and succeeds, as it did before the save
     assert res.returncode == 0, res.stdout + res.stderr
-    case = json.loads((tmp_path / "run" / "summary.json").read_text())["cases"][0]
-    assert case["n_muscles"] == len(routing["muscles"])
+    cases = {c["case"]: c for c in json.loads((tmp_path / "run" / "summary.json").read_text())["cases"]}
+    assert list(cases) == ["curl", "s_curve"] and "also s_curve" in scene.description
+    assert cases["s_curve"]["success"] and scene.case("s_curve").muscles is None
+    assert [m["nodes"] for m in cases["s_curve"]["muscles"]] != [m["nodes"] for m in routing["muscles"]]
+    case = cases["curl"]
+    assert case["n_muscles"] == len(routing["muscles"]) and case["success"]
     np.testing.assert_allclose(case["contractions"], design["contractions"], rtol=0, atol=1e-9)
     assert abs(case["difference"] - design["difference"]) <= 1e-9
     # downloads: figures, meshes, results and the scene as a zip (with the token, as the page's cookie has it)

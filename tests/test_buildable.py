@@ -233,7 +233,7 @@ def test_page_route_design_save_and_run_agree_on_the_tentacle(tmp_path):
     summary = s.run_design()
     assert s.design.anchor_radius == pytest.approx(s.routing.fixture_radius) and s.design.success, summary
     back = load_scene(save_scene(s, tmp_path, "authored")[0])
-    run = run_case(back, "authored", photo=False)
+    run = run_case(back, "curl", photo=False)  # the case edited keeps its name
     assert run.report.success, run.report.message
     assert np.allclose(run.design.contractions, s.design.contractions, atol=1e-6)
 

@@ -14,13 +14,16 @@ and replaces no file it did not write without asking.
 
 Modules: :mod:`.session` (the state and the solves), :mod:`.server` (the web app), :mod:`.guard` (who
 may use it), :mod:`.files` (what the page may open), :mod:`.export` (scene file, figures, meshes,
-results), :mod:`.outline` (SVG/JSON outlines). Start it from Python with :func:`serve`, or in a thread
+results), :mod:`.roundtrip` (what a saved scene keeps of the scene opened), :mod:`.summary` (the design
+as the page shows it), :mod:`.outline` (SVG/JSON outlines). Start it from Python with :func:`serve`, or in a thread
 for tests with :func:`start_in_thread`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
+import logging
 import secrets
 import socket
 import sys
@@ -84,17 +87,40 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def _server(app, sock, quiet: bool):
+def _server(app, sock, access_log: bool = False):
     import uvicorn
 
     from .server import MAX_MESSAGE
 
     # no per-message deflate: on the loopback, compressing a 3k-node state costs more than sending it;
-    # no proxy headers: nothing stands between the page and this server
-    config = uvicorn.Config(app, log_level="warning" if quiet else "info", ws_max_size=2 * MAX_MESSAGE,
-                            ws_ping_interval=None, ws_per_message_deflate=False, lifespan="off",
-                            proxy_headers=False, server_header=False)
+    # no proxy headers: nothing stands between the page and this server; no logging set-up of uvicorn's
+    # own: its records go where the caller's logging sends them (the command line: _server_logs)
+    config = uvicorn.Config(app, log_config=None, log_level=None, access_log=access_log,
+                            ws_max_size=2 * MAX_MESSAGE, ws_ping_interval=None, ws_per_message_deflate=False,
+                            lifespan="off", proxy_headers=False, server_header=False)
     return uvicorn.Server(config)
+
+
+@contextlib.contextmanager
+def _server_logs(verbose: int = 0, quiet: bool = False):
+    """Within the block, uvicorn's log records go to the command line's handlers (the ``mdsr_opt`` logger's,
+    so in its format): warnings and errors only, as the other commands print; ``-v`` adds uvicorn's INFO lines
+    (server start and stop), ``-vv`` its debug lines (and one line per request: see :func:`serve`)."""
+    log = logging.getLogger("uvicorn")
+    level = logging.WARNING if quiet or verbose < 1 else (logging.INFO if verbose == 1 else logging.DEBUG)
+    handlers = [h for h in logging.getLogger("mdsr_opt").handlers if h not in log.handlers]
+    before = (log.level, log.propagate)
+    log.setLevel(level)
+    log.propagate = False
+    for h in handlers:
+        log.addHandler(h)
+    try:
+        yield
+    finally:
+        for h in handlers:
+            log.removeHandler(h)
+        log.setLevel(before[0])
+        log.propagate = before[1]
 
 
 def _app(spec, sock, host: str, body, out, allow_dirs):
@@ -126,7 +152,7 @@ def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", 
     except BaseException:
         sock.close()
         raise
-    server = _server(app, sock, quiet=True)
+    server = _server(app, sock)
     th = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
     th.start()
     t0 = time.time()
@@ -138,8 +164,14 @@ def start_in_thread(body: str | dict | None = None, *, host: str = "127.0.0.1", 
 
 
 def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, open_browser: bool = True,
-          out="authored", resolution=None, allow_dirs=()) -> int:
+          out="authored", resolution=None, allow_dirs=(), access_log: bool = False) -> int:
     """Serve the authoring page until interrupted (what ``mdsr author`` runs).
+
+    Returns 0 when the server stops by itself. Ctrl-C (SIGINT) and SIGTERM stop the server, which then
+    re-sends the signal to the handler that was there before (uvicorn does): Ctrl-C raises
+    ``KeyboardInterrupt`` here, SIGTERM does what its handler does (the ``mdsr`` command's raises one too,
+    so ``mdsr author`` exits 130 or 143, as every command). The server's log records go to the ``uvicorn``
+    loggers, left for the caller to configure.
 
     Parameters
     ----------
@@ -152,6 +184,7 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
     resolution : node count (or coarse/medium/fine) for the body.
     allow_dirs : more folders whose scene, outline and mesh files the page may open by path (besides
         ``body``'s folder and ``out``).
+    access_log : log one line per request (logger ``uvicorn.access``, INFO).
     """
     _require()
     import webbrowser
@@ -173,13 +206,10 @@ def serve(body: str | None = None, *, host: str = "127.0.0.1", port: int = 0, op
           f"  figures, meshes and the scene bundle are downloads: your browser's download folder\n"
           f"  the page may open files in {', '.join(map(str, folders))}\n"
           f"  Ctrl-C stops", flush=True)
-    server = _server(app, sock, quiet=False)
+    server = _server(app, sock, access_log)
     if open_browser:
         threading.Timer(0.8, webbrowser.open, args=(url,)).start()
-    try:
-        server.run(sockets=[sock])
-    except KeyboardInterrupt:  # pragma: no cover
-        pass
+    server.run(sockets=[sock])  # Ctrl-C: uvicorn stops, then raises it again here (KeyboardInterrupt)
     return 0
 
 
@@ -194,8 +224,10 @@ def _cmd(a) -> int:
     matplotlib.use("Agg")  # figures are drawn in worker threads for downloads
     if not 0 <= a.port <= 65535:
         raise InputError(f"--port must be in [0, 65535], got {a.port}")
-    return serve(a.body, host=a.host, port=a.port, open_browser=not a.no_browser, out=a.out,
-                 resolution=a.resolution, allow_dirs=a.allow_dir)
+    verbose, quiet = getattr(a, "log_verbose", 0), getattr(a, "log_quiet", False)
+    with _server_logs(verbose, quiet):
+        return serve(a.body, host=a.host, port=a.port, open_browser=not a.no_browser, out=a.out,
+                     resolution=a.resolution, allow_dirs=a.allow_dir, access_log=verbose >= 2 and not quiet)
 
 
 def add_cli(sub) -> None:

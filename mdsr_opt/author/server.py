@@ -2,8 +2,9 @@
 
 The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route`` (with its ``fabrication``:
 channel, wall and fixture sizes), ``delete_muscle``, ``design``, ``save``, ``ping``); the server answers with
-``body``, ``state``, ``graph``, ``routing`` (also after a deletion), ``design``, ``saved``, ``pong`` or
-``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
+``body`` (with ``kept``: what a saved scene keeps of the scene opened), ``state``, ``graph``, ``routing``
+(also after a deletion), ``design``, ``saved`` (with ``notes``: what ``mdsr run`` will refuse in the file),
+``pong`` or ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
 a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``), and while
 no request waits after a drag the drag's exact equilibrium is solved ahead of its release. Bad
 input of any kind is answered with an ``error`` message naming the problem, and the server keeps serving.
@@ -149,6 +150,7 @@ def _file_fields(spec):
 
 
 def body_message(s) -> dict:
+    from .roundtrip import kept_lines
     from .session import design_defaults
 
     m = s.mesh
@@ -163,7 +165,7 @@ def body_message(s) -> dict:
             "drag_positions": s.drag_positions.tolist(),
             "routing": {"K_a": ro.get("K_a", 10.0), "K_b": ro.get("K_b", 4.0), "max_muscles": ro.get("max_muscles")},
             "design": {k: (v if isinstance(v, (int, float, str)) else None) for k, v in dd.items()},
-            "fabrication": s.fabrication_shown(), "units": s.units,
+            "fabrication": s.fabrication_shown(), "units": s.units, "kept": kept_lines(s),
             "material": {"model": s.material.kind, "E": s.material.E, "nu": s.material.nu}}
 
 
@@ -343,14 +345,15 @@ class Page:
                 raise TypeError(f"save name must be a string, got {name!r}")
             written = self.app["written"]  # the files this server wrote: replaced without asking
             may = True if msg.get("confirm") is True else (lambda p: p.resolve() in written)
+            notes: list[str] = []  # what mdsr run will refuse in the file, what it cannot hold
             try:
-                files = save_scene(s, self.app["out"], name, overwrite=may)
+                files = save_scene(s, self.app["out"], name, overwrite=may, notes=notes)
             except WouldReplace as exc:
                 return [{"type": "confirm", "action": "save", "name": name, "files": exc.paths,
                          "message": f"{exc} and {'was' if len(exc.paths) == 1 else 'were'} not written by "
                                     "this page: replace?"}]
             written.update(Path(f).resolve() for f in files)
-            return [{"type": "saved", "files": [os.path.abspath(f) for f in files],
+            return [{"type": "saved", "files": [os.path.abspath(f) for f in files], "notes": notes,
                      "download": f"/download/{self.sid}/scene.zip"}]
         raise ValueError(f"unknown message type {t!r}")
 

@@ -28,15 +28,15 @@ import math
 import time
 from dataclasses import dataclass, field
 import warnings
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse.linalg as spla
 
 from ..body.material import NeoHookean
-from ..synthesis.acceptance import design_active, difference_failure
+from ..synthesis.acceptance import design_active
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
-from ..mechanics.align import difference, node_weights
 from ..mechanics.equilibrium import solve_external
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
@@ -47,7 +47,10 @@ from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
 from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
 from ..scenes.library import get_problem
 from ..plot.style import label_slots, muscle_color
+from ..scenes.reader import read_file
 from ..scenes.scenefile import load_scene, scene_from_data
+from .roundtrip import Origin
+from .summary import design_summary
 
 __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
 
@@ -147,11 +150,13 @@ class Session:
     fabrication: dict | bool | None = None
     deleted: tuple = ()  # names of the routed muscles the user deleted
     acceptance: dict = field(default_factory=dict)  # the scene's [acceptance] (mdsr run's; saved with the scene)
+    origin: Origin | None = None  # the scene opened and its edited case: what a saved scene keeps (.roundtrip)
 
     # ------------------------------------------------------------------ building
     @classmethod
-    def from_scene(cls, scene: Scene, case: str | None = None) -> "Session":
-        """A session on ``scene``'s body, starting from its first external case (or ``case``)."""
+    def from_scene(cls, scene: Scene, case: str | None = None, data: dict | None = None) -> "Session":
+        """A session on ``scene``'s body, starting from its first external case (or ``case``); ``data``: the
+        scene file's content, whose tables a saved scene keeps where the page edits nothing."""
         s = cls(name=scene.name, mesh=scene.mesh, material=scene.material, source=scene.source,
                 resolution=scene.resolution, routing_options=dict(scene.routing_options),
                 design_options=dict(scene.design_options), units=scene.units,
@@ -163,6 +168,7 @@ class Session:
             s.anchors = ext[0].anchors.copy()
             s.drag_nodes = ext[0].drag_nodes.copy()
             s.drag_positions = ext[0].drag_positions.copy()
+        s.origin = Origin(scene, ext[0].name if ext and ext[0].kind == "external" else None, data)
         return s
 
     @classmethod
@@ -174,8 +180,8 @@ class Session:
     def from_scene_file(cls, path, resolution: str | int | None = None, data: dict | None = None) -> "Session":
         """A scene file (TOML/JSON) as :func:`~mdsr_opt.load_scene` reads it (``data``: the file already read)."""
         if data is not None:
-            return cls.from_scene(scene_from_data(path, data, resolution=_resolution(resolution)))
-        return cls.from_scene(load_scene(path, resolution=_resolution(resolution)))
+            return cls.from_scene(scene_from_data(path, data, resolution=_resolution(resolution)), data=data)
+        return cls.from_scene(load_scene(path, resolution=_resolution(resolution)), data=read_file(Path(path)))
 
     @classmethod
     def from_outline(cls, outline, holes=(), resolution: str | int = 600, name: str = "authored",
@@ -441,8 +447,13 @@ class Session:
         ``anchor_radius`` if the scene gives one), each field left open taking
         :meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`'s default for this body."""
         spec = self.fabrication if self.routing is not None else self.routing_options.get("fabrication")
+        return self.fabrication_sizes(spec) or Fabrication().for_body(self.mesh).to_dict()
+
+    def fabrication_sizes(self, spec) -> dict | bool:
+        """The sizes a routing with the fabrication ``spec`` (a dict of Fabrication's fields, None or False)
+        uses on this body, every field set; False when ``spec`` turns the fabrication off."""
         fab = self._fabrication(spec)
-        return (fab if fab is not False else Fabrication()).for_body(self.mesh).to_dict()
+        return False if fab is False else (fab or Fabrication()).for_body(self.mesh).to_dict()
 
     def _fabrication(self, spec):
         """``spec`` (a dict of Fabrication's fields, None or False) checked against the design's anchor_radius
@@ -565,50 +576,8 @@ class Session:
         return self.design_summary()
 
     def design_summary(self) -> dict:
-        """The design as the page shows it: per-muscle contraction, achieved contraction, stroke, tension."""
-        res = self.design
-        target = self.target
-        xd = res.x_aligned
-        rows = []
-        for i, m in enumerate(self.muscles):
-            nodes = np.asarray(m.nodes)
-            L0 = _path_length(self.mesh.points[nodes])
-            Lt = _path_length(target[nodes])
-            Ld = _path_length(xd[nodes])
-            row = {"name": m.name, "contraction": float(res.contractions[i]), "rest_length": L0,
-                   "target_length": Lt, "driven_length": Ld, "achieved_geometric": 1.0 - Ld / L0,
-                   "stroke_geometric": L0 - Ld}
-            for k in ("achieved", "stroke", "tension"):  # per-muscle fields of newer results, when present
-                v = getattr(res, k, None)
-                if v is not None:
-                    try:
-                        row[k] = float(np.asarray(v, dtype=float).reshape(-1)[i])
-                    except (TypeError, ValueError, IndexError):
-                        pass
-            rows.append(row)
-        dist = np.linalg.norm(xd - target, axis=1)
-        return {"method": res.method, "success": bool(res.success), "status": str(res.status),
-                "contractions": [float(a) for a in res.contractions], "difference": _num(res.difference),
-                "relative_difference": _num(res.difference / self.mesh.size),
-                "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
-                "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(self.design_params),
-                "saturated": [m.name for m, sat in zip(self.muscles, res.saturated) if sat],
-                "dropped": [d.to_dict() for d in self.dropped],
-                # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
-                "acceptance": difference_failure(res.difference, self.mesh.size,
-                                                 *[self.acceptance[k] for k in ("max_difference",) if k in self.acceptance],
-                                                 units=self.units or None,
-                                                 rest_difference=difference(self.mesh.points, target,
-                                                                            node_weights(self.mesh))),
-                "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in self.muscles]}
-
-
-def _path_length(p: np.ndarray) -> float:
-    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
-
-
-def _jsonable(d: dict) -> dict:
-    return {k: (v if isinstance(v, (str, int, float, bool, type(None))) else str(v)) for k, v in d.items()}
+        """The design as the page shows it (:func:`~mdsr_opt.author.summary.design_summary`)."""
+        return design_summary(self)
 
 
 def _resolution(resolution):

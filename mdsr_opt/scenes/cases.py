@@ -195,14 +195,14 @@ def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
     """Warn (:class:`~mdsr_opt.synthesis.fabrication.FabricationWarning`) where muscles the scene gives cannot be
     moulded as laid out -- a channel on the outline, ropes too close -- by the check the Python API's
     :func:`~mdsr_opt.synthesis.pipeline.design_pipeline` makes (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`,
-    with the scene's ``[fabrication]`` and ``anchor_radius``); returns the warning's text (empty: mouldable).
-    The muscles are designed as given."""
+    with the scene's ``[fabrication]`` and the case's ``anchor_radius``, else the scene's); returns the
+    warning's text (empty: mouldable). The muscles are designed as given."""
     from ..synthesis.fabrication import Fabrication, FabricationWarning, check_fabrication, rope_conflicts, \
         warn_conflicts
 
     # the given ropes are designed with the scene's anchor_radius, so their fixtures are checked at it (a
     # scene saved by the page keeps the routing's nominal fixture_radius beside the radius it fitted)
-    r = scene.design_options.get("anchor_radius")
+    r = case.anchor_radius if case.anchor_radius is not None else scene.design_options.get("anchor_radius")
     fab = check_fabrication(scene.routing_options.get("fabrication")) or Fabrication()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FabricationWarning)

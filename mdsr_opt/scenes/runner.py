@@ -328,7 +328,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     elif case.kind == "external" and scene.muscles is not None and case.muscles is None:
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "
-            "(a scene's [[muscles]] drive every case; in a scene without them an external case's are routed)")
+            "(a scene's [[muscles]] drive every case without muscles of its own; in a scene without them an "
+            "external case's are routed)")
+    elif case.muscles is not None:
+        names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
+        say(f"{prefix}not routed: the case's own {rep.n_muscles} muscle(s) ({names}) are designed for this target")
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
@@ -336,6 +340,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
             setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
         opts["anchor_radius"] = setup.routing.fixture_radius
+    if case.muscles is not None and case.anchor_radius is not None:  # the fixtures of the case's own muscles
+        opts["anchor_radius"] = case.anchor_radius
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()

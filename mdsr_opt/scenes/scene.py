@@ -63,6 +63,9 @@ class Case:
     muscles : sequence of Muscle, optional
         External case: lay these muscles instead of routing them on the target (e.g. a muscle along a hole's
         rim that routing does not find); the design then finds their contractions.
+    anchor_radius : float, optional
+        With ``muscles``: the radius of their end fixtures, which the design uses for this case (default: the
+        scene's ``design_options["anchor_radius"]``); e.g. the radius the ropes were fitted to when routed.
     """
 
     name: str
@@ -72,9 +75,17 @@ class Case:
     contractions: np.ndarray | None = None
     description: str = ""
     muscles: tuple | None = None
+    anchor_radius: float | None = None
 
     def __post_init__(self):
         check_name(self.name, "case name")
+        if self.anchor_radius is not None:
+            if self.muscles is None:
+                raise ValueError(f"case {self.name!r}: anchor_radius is the end-fixture radius of the case's own "
+                                 "muscles: give muscles too (or set the scene's design anchor_radius)")
+            object.__setattr__(self, "anchor_radius", positive_float(self.anchor_radius,
+                                                                     f"case {self.name!r}: anchor_radius",
+                                                                     allow_zero=True))
         if self.muscles is not None:
             if self.contractions is not None:
                 raise ValueError(f"case {self.name!r}: muscles are for an external case (an internal case "
@@ -250,6 +261,11 @@ class Scene:
         for c in cases:
             if c.muscles is not None:
                 check_muscles(self.mesh, c.muscles)  # nodes of this mesh, along its edges
+            if c.anchor_radius is not None:
+                try:
+                    check_anchor_radius(self.mesh, c.anchor_radius)
+                except ValueError as exc:
+                    raise ValueError(f"scene {self.name!r}, case {c.name!r}: {exc}") from None
             if c.kind == "internal":
                 if self.muscles is None:
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: an internal case needs the "

@@ -39,7 +39,7 @@ _REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
 _MUSCLE_KEYS = ("name", "nodes", "path", "boundary")
 
 
-_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions")
+_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions", "muscles", "anchor_radius")
 
 
 _DRAG_KEYS = ("nodes", "at", "to", "by", "rotate", "about")
@@ -81,7 +81,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         # also: nodes = [...], polygon = [[x, y], ...], loop = 0 (a boundary loop)
 
         [[muscles]]                           # optional; internal cases need them; given muscles
-                                              # also drive external cases (no routing then)
+                                              # also drive external cases without their own (no routing)
         name = "lower"
         boundary = { from = [0, 0], to = [4, 0] }      # or path = [[x, y], ...], or nodes = [...]
                                               # (boundary may add via = [x, y]: which way round the loop)
@@ -110,6 +110,11 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         anchors = "base"                      # a region, node indices or [x, y] points
         drags = [{ nodes = "tip", by = [-1.0, 1.5] },
                  { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
+        muscles = [{ name = "upper", nodes = [3, 9, 15] }]   # optional: this external case's own muscles
+                                              # (tables as [[muscles]]), designed instead of the scene's
+                                              # [[muscles]] or a routing; other cases keep theirs
+        anchor_radius = 0.12                  # optional, with muscles: their end fixtures' radius
+                                              # (default: the design's anchor_radius)
         [[cases]]
         name = "contract"
         contractions = [0.3]                  # an internal case: one per muscle
@@ -181,12 +186,7 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
     r.keys(reg_in, list(reg_in) if isinstance(reg_in, Mapping) else (), "regions")
     for rname, spec in reg_in.items():
         regions[rname] = _scene_region(r, mesh, spec, f"regions.{rname}", regions)
-    muscles = None
-    if "muscles" in top:
-        mus_in = top["muscles"]
-        if not isinstance(mus_in, list):
-            r.fail("muscles", f"expected a list of muscles ([[muscles]] tables), got {tname(mus_in)}", TypeError)
-        muscles = tuple(_scene_muscle(r, mesh, m, f"muscles[{i}]", regions) for i, m in enumerate(mus_in))
+    muscles = _muscle_list(r, mesh, top["muscles"], "muscles", regions) if "muscles" in top else None
     routing = scene_options(r, top.get("routing", {}), "routing")
     if "fabrication" in top:  # the [fabrication] table: the routing's (and, through it, the design's)
         if "fabrication" in routing:
@@ -411,6 +411,13 @@ def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.
     return np.asarray(idx, dtype=np.int64)
 
 
+def _muscle_list(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> tuple:
+    """The muscles of a ``muscles`` list (the scene's ``[[muscles]]`` or a case's own)."""
+    if not isinstance(v, list):
+        r.fail(where, f"expected a list of muscles ([[muscles]] tables), got {tname(v)}", TypeError)
+    return tuple(_scene_muscle(r, mesh, m, f"{where}[{i}]", regions) for i, m in enumerate(v))
+
+
 def _scene_muscle(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> Muscle:
     m = r.keys(spec, _MUSCLE_KEYS, where)
     sel = [k for k in ("nodes", "path", "boundary") if k in m]
@@ -453,9 +460,10 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
         r.fail(f"{where}.name", str(exc))
     desc = str(c.get("description", ""))
     if "contractions" in c:
-        for k in ("anchors", "drags"):
+        for k in ("anchors", "drags", "muscles", "anchor_radius"):
             if k in c:
-                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors or drags")
+                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors, drags or muscles "
+                       "of its own: it drives the scene's [[muscles]], one contraction each")
         v = c["contractions"]
         if not isinstance(v, list):
             r.fail(f"{where}.contractions", f"expected a list of numbers, got {tname(v)}", TypeError)
@@ -489,7 +497,22 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
     if len(anchors) + len(dn) < 2:
         r.fail(where, "an external case needs at least two fixed nodes (anchors + drags); an internal case "
                "needs contractions")
-    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc)
+    own = None
+    if "muscles" in c:  # this case's own layout: the scene's [[muscles]] (or a routing) drive the others
+        own = _muscle_list(r, mesh, c["muscles"], f"{where}.muscles", regions)
+        if not own:
+            r.fail(f"{where}.muscles", "is empty: give at least one muscle, or leave the key out (the scene's "
+                   "[[muscles]] then drive this case, or its muscles are routed)")
+    radius = None
+    if "anchor_radius" in c:
+        if own is None:
+            r.fail(f"{where}.anchor_radius", "is the end-fixture radius of the case's own muscles: give muscles "
+                   "too (or set design.anchor_radius for every case)")
+        radius = r.number(c["anchor_radius"], f"{where}.anchor_radius")
+        if radius < 0:
+            r.fail(f"{where}.anchor_radius", f"must be >= 0, got {radius:g}")
+    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc, muscles=own,
+                anchor_radius=radius)
 
 
 def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -86,7 +86,7 @@
       if (!m.success) showError(`design not verified: ${m.status}`);
       else if (m.acceptance) showError(`design too far from the target for mdsr run: ${m.acceptance}`); updateTable(); render(); return;
     }
-    if (m.type === "saved") { S.saved = m; S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "saved: " + m.files.join(", "); return; }
+    if (m.type === "saved") { S.saved = m; S.confirm = null; $("confirm").hidden = true; $("saved").textContent = "saved: " + m.files.join(", "); listLines("save-notes", m.notes || []); return; }
     if (m.type === "confirm") { S.confirm = m; $("confirm-text").textContent = m.message; $("confirm").hidden = false; return; }
   }
 
@@ -110,6 +110,10 @@
     updateTable(); render();
   }
   const fmt = (v) => Number(v.toPrecision(4)).toString();
+  function listLines(id, lines) {  // one list item per line of text
+    const ul = $(id); ul.innerHTML = "";
+    for (const t of lines) { const li = document.createElement("li"); li.textContent = t; ul.appendChild(li); }
+  }
 
   // the fabrication fields: lengths in the body's unit, empty for the body's default
   const FAB = ["channel_diameter", "wall", "fixture_radius", "min_fixture_radius"];
@@ -139,6 +143,7 @@
     $("save-name").value = ""; $("save-name").placeholder = m.name;  // empty: Save uses the body's name
     if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
     $("saved").textContent = ""; S.confirm = null; $("confirm").hidden = true;
+    listLines("kept", m.kept || []); listLines("save-notes", []);
     updateTable(); drawButtons(); updateDownloads();
     fit(m.points.concat(m.drag_positions));
     S.needFit = true;
