@@ -23,10 +23,11 @@ holes, makes all four expressions: smile 80.1 %, frown 91.6 %, wink 72.9 %, puck
 The wink needs a rope ringing the eye: the routing lays one round a squeezed hole where the mesh has a ring
 of routable nodes round it that turns by at most 45 degrees at every node (on 845 nodes growth comes near
 one): on 553 / 1049 / 1423 / 2310 / 2697 / 2949 nodes the wink reaches 78 / 77 / 83 / 77 / 75 / 71 %, and all
-four expressions reach 70 % on 845, 1049, 1423, 2310 and 2697 nodes. On 662 / 766 / 953 / 1235 / 1615 /
+four expressions reach 70 % on 845, 1049, 1423 and 2697 nodes. On 662 / 766 / 953 / 1235 / 1615 /
 1943 / 2141 nodes no such ring exists (the wink 56-68 %), and the pucker, made by arcs above and below
-the lips, falls to 51-66 % on 553, 662, 766, 953, 1235, 1615, 2141, 2513 and 2949 nodes (smile 74-85 %
-except 42 % on 2949, frown 88-96 %). A rope kept inside the body cannot draw a hole's rim as far as a
+the lips, falls to 51-66 % on 553, 662, 766, 953, 1235, 1615, 2141, 2310, 2513 and 2949 nodes (smile 74-85 %
+except 42 % on 2949, frown 88-96 %); on 2310 nodes (``fine``) its lip arcs cross its corner ropes and are
+cut back to the parts clear of them (60 %). A rope kept inside the body cannot draw a hole's rim as far as a
 rope on the rim does: the strip between the rope and the hole lags behind.
 
 How well a design makes its expression is :func:`motion_recovered` over :func:`moving_nodes`: the share of

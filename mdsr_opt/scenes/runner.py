@@ -325,14 +325,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
             f"({setup.times['routing']:.2f} s)")
         for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
             say(f"{prefix}routing: {note}")
-    elif case.kind == "external" and scene.muscles is not None and case.muscles is None:
+    elif case.muscles is not None or (case.kind == "external" and scene.muscles is not None):
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
-        say(f"{prefix}not routed: the scene's {rep.n_muscles} muscle(s) ({names}) are designed for this target "
-            "(a scene's [[muscles]] drive every case without muscles of its own; in a scene without them an "
-            "external case's are routed)")
-    elif case.muscles is not None:
-        names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
-        say(f"{prefix}not routed: the case's own {rep.n_muscles} muscle(s) ({names}) are designed for this target")
+        whose, why = ("case's own", "") if case.muscles is not None else ("scene's", " (a scene's [[muscles]] drive "
+            "every case without muscles of its own; in a scene without them an external case's are routed)")
+        say(f"{prefix}not routed: the {whose} {rep.n_muscles} muscle(s) ({names}) are designed for this target{why}")
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
@@ -552,10 +549,9 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
     """``target.png``, ``target.<fmt>``, ``graph.png``, ``muscles.png`` (when the target was reached),
     ``design.png`` and ``driven.<fmt>`` (when there is a design)."""
     from ..plot.common import save_figure
-    from ..plot.style import figure_paths
     from ..plot.design import plot_contraction_graph, plot_design, plot_routing
     from ..plot.scenes import plot_target
-    from ..plot.style import energy_label
+    from ..plot.style import energy_label, figure_paths
     from ..body.io import write_mesh
     from ..synthesis.routing import contraction_graph
     from .casefab import write_case_fabrication
