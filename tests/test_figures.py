@@ -264,7 +264,8 @@ def test_figure6_vector_copies_and_differences_in_the_scenes_unit(tmp_path, monk
     files = json.loads((out / ".mdsr-run.json").read_text())["files"]
     for f in ("figure6a", "figure6b", "figure6c"):
         assert (out / f"{f}.pdf").read_bytes()[:5] == b"%PDF-" and f"{f}.pdf" in files and f"{f}.png" in files
-    unit = get_problem("tentacle", resolution="coarse").units
+    # the scene's length unit; a scene without one (the tentacle) is in "body units", as the README says
+    unit = get_problem("tentacle", resolution="coarse").units or "body units"
     (_, titles_b, ylabels_b), = [t for t in texts if t[0] == "figure6b.png"]
     assert [y for y in ylabels_b if y] == ["target", "layout C, driven", "layout D, driven"]
     driven = [t for t in titles_b if ": D = " in t]

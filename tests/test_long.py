@@ -37,7 +37,10 @@ def test_full_quick_study_is_identical_on_dask():
     pytest.importorskip("distributed", reason="needs the dask extra: pip install 'mdsr_opt[dask]'")
     from mdsr_opt.studies.study import run_study
 
-    serial = run_study("quick", progress=False, figures=False)
-    dask = run_study("quick", scheduler="local", workers=2, progress=False, figures=False)
+    # with a per-run time budget that cannot bind: a run the quick study's 30 s budget stops on a busy machine
+    # in one of the two runs but not in the other differs for the machine's speed, not the code's
+    serial = run_study("quick", timeout=3600.0, progress=False, figures=False)
+    dask = run_study("quick", timeout=3600.0, scheduler="local", workers=2, progress=False, figures=False)
     assert len(serial.rows) == len(dask.rows) >= 100
+    assert not [r for r in serial.rows + dask.rows if r["failure"] == "time-out"]
     assert dask.comparable() == serial.comparable()

@@ -63,7 +63,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
-        shortens by at most ``max(a_max, 0.6)``.
+        shortens by at most ``max(a_max, 0.6)``, or a little more than the target shortens it.
     initial_guess : (m,) array, optional
         Starting contractions; default: each muscle's geometric contraction ``1 - L_target / L_rest``
         clipped to ``[0, 0.9 a_max]``.

@@ -63,7 +63,8 @@ class DesignProblem:
         self.free = ~self.fixed
         #: per muscle the largest contraction the design may give: ``a_max``, or less where the end patches
         #: hold most of the rope (:func:`contraction_caps`)
-        self.a_upper = contraction_caps(mesh, material, muscles, stiffness, self.anchor_radius, a_max)
+        self.a_upper = contraction_caps(mesh, material, muscles, stiffness, self.anchor_radius, a_max,
+                                        target)
         self.X = mesh.points.reshape(-1).copy()
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
@@ -196,14 +197,22 @@ class DesignProblem:
 #: radius 0.165: ``f = 4.3``) drove the flattened design of a 4 x 1 strip at 4.3k nodes through iterates
 #: that inverted elements (500 IPOPT iterations, no convergence), and at 8k nodes to ``a f = 0.94``.
 FREE_SHORTENING_MAX = 0.6
+#: where the target shortens a rope's free part further, the share of what the target leaves of it that the
+#: design must keep (:func:`contraction_caps`), and the share of its rest length it keeps in any case
+TARGET_FREE_SHARE = 0.9
+FREE_REMAINDER_MIN = 0.1
 
 
-def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max) -> np.ndarray:
-    """Per muscle the upper bound of its contraction in a design, ``min(a_max, s / f)``: no rope's free part
-    shortens by more than ``s = max(a_max, FREE_SHORTENING_MAX)``, ``f = L0 / L0_free`` the rope's rest
-    length over its length outside its end patches
-    (:func:`~mdsr_opt.mechanics.constraints.spring_segments`). A rope without patch segments (``f = 1``)
-    keeps ``a_max``.
+def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max, target=None) -> np.ndarray:
+    """Per muscle the upper bound of its contraction in a design, ``min(a_max, (1 - r) / f)``: no rope's free
+    part keeps less than the share ``r`` of its rest length, ``f = L0 / L0_free`` the rope's rest length over
+    its length outside its end patches (:func:`~mdsr_opt.mechanics.constraints.spring_segments`).
+    ``r = 1 - max(a_max, FREE_SHORTENING_MAX)``, so a rope without patch segments (``f = 1``) keeps
+    ``a_max``. Where the ``target`` shape itself shortens a rope's path further (it contracts by
+    ``a_t = 1 - L(target) / L0``, its free part keeps ``1 - a_t f`` of its length as far as the patches keep
+    theirs, and the target inverts no element), the design may go a little beyond the target:
+    ``r = TARGET_FREE_SHARE (1 - a_t f)`` (0.9 of it), never below ``FREE_REMAINDER_MIN``. A contraction the body was shown at is thus
+    never cut off by the cap (a target made by the forward solve at known contractions is recovered).
 
     Example
     -------
@@ -212,10 +221,18 @@ def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max) -
     >>> long, short = Muscle(range(0, 33)), Muscle(range(265, 270))  # 4 and 0.5 long, bottom and top edge
     >>> contraction_caps(mesh, NeoHookean(1.0, 0.3), [long, short], 10.0, 0.125, 0.6).round(4).tolist()
     [0.5625, 0.3]
+    >>> squeezed = mesh.points * [0.6, 1.0]  # the target shortens both paths by 40 %
+    >>> contraction_caps(mesh, NeoHookean(1.0, 0.3), [long, short], 10.0, 0.125, 0.6, squeezed).round(4).tolist()
+    [0.5625, 0.41]
     """
     _ks, fac = spring_segments(mesh, material, muscles, stiffness, anchor_radius)
-    s = max(float(a_max), FREE_SHORTENING_MAX)
-    return np.minimum(float(a_max), s / np.asarray(fac, dtype=float))
+    fac = np.asarray(fac, dtype=float)
+    keep = np.full(len(fac), 1.0 - max(float(a_max), FREE_SHORTENING_MAX))
+    if target is not None:
+        y = np.asarray(target, dtype=float).reshape(-1, 2)
+        a_t = np.array([1.0 - m.length(y) / m.length(mesh.points) for m in muscles])
+        keep = np.minimum(keep, np.maximum(TARGET_FREE_SHARE * (1.0 - a_t * fac), FREE_REMAINDER_MIN))
+    return np.minimum(float(a_max), (1.0 - keep) / fac)
 
 
 def _nonzeros(M: ca.SX) -> ca.SX:
