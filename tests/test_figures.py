@@ -322,13 +322,14 @@ def _svg_colours(svg: str) -> dict:
 
 
 def _dxf_label_colours(text: str) -> dict:
-    """{label: ACI colour} of the DXF's TEXT entities (read as group code / value pairs)."""
+    """{label: ACI colour} of the DXF's TEXT entities (read as group code / value pairs), but those on the
+    CONFLICTS layer (marks of clashes and of a failed design, not labels)."""
     v = [s.strip() for s in text.split("\n")]
     pairs = list(zip(v[0::2], v[1::2]))
     out, cur = {}, None
     for code, value in pairs + [("0", "EOF")]:
         if code == "0":
-            if cur is not None and "1" in cur:
+            if cur is not None and "1" in cur and cur.get("8") != "CONFLICTS":
                 out[cur["1"]] = int(cur.get("62", 256))
             cur = {} if value == "TEXT" else None
         elif cur is not None:
