@@ -190,7 +190,10 @@ def test_mdsr_run_figure6_writes_panels_table_chart_and_the_readme_findings(tmp_
         assert tr["iterations"][-1] == row["iterations"]
         # every point is an equilibrium's difference: the first at the start, the last at the design
         assert tr["difference"][-1] == pytest.approx(row["difference"], rel=1e-6)
-        assert math.isclose(tr["difference"][0], row["initial_difference"], rel_tol=1e-3)
+        # the design starts from an equilibrium solved from the target to the warm start's residual
+        # (nlp.WARM_START_TOL, 1e-4), the trace's first point from the predictor to the solver's tolerance: on
+        # the soft one-rope tentacle/curl (layout D) they differ by 0.23 % in D, elsewhere by 0.09 % at most
+        assert math.isclose(tr["difference"][0], row["initial_difference"], rel_tol=5e-3)
         assert figure6.rises(tr["difference"]) == row["equilibrium_rises"]
 
 
