@@ -222,3 +222,29 @@ def test_a_problem_scripts_per_case_muscles_are_saved(tmp_path):
     for c in scene.cases:
         assert [m.nodes for m in back.case(c.name).muscles] == [m.nodes for m in c.muscles], c.name
         assert [m.name for m in back.case(c.name).muscles] == [m.name for m in c.muscles], c.name
+
+
+def test_a_save_that_would_not_load_leaves_no_file_and_names_the_cause(tmp_path):
+    """An edit the scene file refuses (here: drags through the anchored base of a contact scene) is reported
+    as the user's ValueError, not a bug, and neither file is left in the folder."""
+    text = (Path(__file__).parent / "data" / "finger.toml").read_text()
+    assert "[design]\n" in text
+    (tmp_path / "fc.toml").write_text(text.replace("[design]\n", "[design]\ncontact = true\n", 1))
+    s = Session.from_scene_file(tmp_path / "fc.toml")
+    s.set_fixed(s.anchors, s.drag_nodes, s.mesh.points[s.drag_nodes] - [3.85, 0.0])
+    out = tmp_path / "saved"
+    with pytest.raises(ValueError, match=r"not saved: as edited, fc_edit would not load: .*prescribed nodes would"):
+        save_scene(s, out, "fc_edit")
+    assert sorted(p.name for p in out.iterdir()) == []
+    s.set_fixed(s.anchors, s.drag_nodes, s.mesh.points[s.drag_nodes] + [0.0, 0.5])  # a drag it accepts
+    assert [Path(p).name for p in save_scene(s, out, "fc_edit")] == ["fc_edit.json", "fc_edit.mesh.vtu"]
+    assert sorted(p.name for p in out.iterdir()) == ["fc_edit.json", "fc_edit.mesh.vtu"]
+
+
+def test_saving_a_saved_scene_again_keeps_one_authored_sentence(gripper, tmp_path):
+    src = tmp_path / "mine.toml"
+    src.write_text(Path(gripper).read_text().replace('units = "mm"', 'units = "mm"\ndescription = "my gripper"', 1))
+    for k in range(3):
+        src = save_scene(Session.from_scene_file(src), tmp_path / f"out{k}", f"s{k}")[0]
+    text = json.loads(Path(src).read_text())["description"]
+    assert text == "my gripper Authored on the mdsr author page from s1.json."

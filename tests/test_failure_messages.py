@@ -37,6 +37,9 @@ def _balanced(text: str) -> bool:
      "max_iter"),
     ("load stepping stalled at fraction 0.7812 (Error_In_Step_Computation)", "past a fraction 0.7812",
      "smaller deformation"),
+    # with contact on, a crossing means the contact solve lost the fold: not "turn contact on"
+    ("load stepping stalled at fraction 0.7812; rejected: the boundary crosses itself and no new contact pair to "
+     "prevent it", "could not follow the body as it folds onto itself", "finer mesh"),
 ])
 def test_a_failure_line_says_the_cause_once_and_what_helps(status, cause, helps):
     line = plain_failure(status)

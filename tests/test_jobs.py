@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -240,6 +241,12 @@ def test_the_forkserver_preloads_this_package_only_where_it_would_import_this_co
     monkeypatch.chdir(tmp_path)
     installed = str(root) in {os.path.realpath(f) for f in site.getsitepackages() + [site.getusersitepackages()]}
     assert server_imports_this_package() is installed
+    # Python 3.10's sys.flags has no safe_path (the package supports 3.10): the working folder is searched
+    flags = types.SimpleNamespace(**{k: getattr(sys.flags, k) for k in dir(sys.flags)
+                                     if not k.startswith("_") and k != "safe_path"})
+    monkeypatch.setattr(sys, "flags", flags)
+    monkeypatch.chdir(root)
+    assert server_imports_this_package()
 
 
 _KILLED = """

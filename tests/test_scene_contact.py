@@ -58,6 +58,7 @@ def test_without_contact_nothing_changes(tmp_path):
                                              '"derivative-free" only'),
     ("contact_gap = 0.01", "design.contact_gap: is the gap of self-contact: set contact = true too"),
     ("contact = true\ncontact_gap = -1", "design.contact_gap: must be > 0"),
+    ("contact = true\ncontact_gap = 1", "contact_gap 1 is 24% of the body's size 4.123: it is the small clearance"),
 ])
 def test_contact_is_checked_at_the_door(tmp_path, design, error):
     with pytest.raises((SceneFileError, TypeError), match=error.replace("(", r"\(").replace(")", r"\)")
@@ -90,3 +91,13 @@ def test_drags_through_the_body_itself_are_refused_when_the_scene_loads(tmp_path
         load_scene(p)
     p.write_text(FOLD.format(design="a_max = 0.5"))  # without contact the file loads (the solve rejects it)
     assert load_scene(p).case("fold").drag_nodes.size > 0
+
+
+def test_a_contact_gap_is_a_small_clearance_in_python_too():
+    from mdsr_opt import Mesh, NeoHookean, solve_external
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    left = [i for i, p in enumerate(mesh.points) if p[0] == 0.0]
+    with pytest.raises(ValueError, match=r"contact_gap 0.5 is 12% of the body's size 4.123.*less than 0.1 of"):
+        solve_external(mesh, NeoHookean(E=1.0, nu=0.3), left, {int(mesh.n_nodes - 1): (4.0, 1.5)}, contact=True,
+                       contact_gap=0.5)

@@ -120,3 +120,35 @@ def test_mdsr_run_designs_a_case_with_its_own_muscles_and_fixture_radius(tmp_pat
     assert run.design is not None and run.design.anchor_radius == 0.1  # the case's, not the default 0.1649
     assert [m["name"] for m in run.report.muscles] == ["top"]
     assert "a fixture of radius 0.1 with" in run.report.fabrication[0]  # reported, as for the scene's muscles
+
+
+def test_an_animation_solves_with_the_fixtures_of_the_cases_own_muscles(tmp_path, monkeypatch):
+    """The scene's [design] anchor_radius is 0.1, the animated case's own muscles have fixtures of 0.25: the
+    animation's frames are solved with 0.25, as the case was designed (not the scene's 0.1)."""
+    from pathlib import Path
+
+    import mdsr_opt.mechanics.equilibrium as equilibrium
+    from mdsr_opt.scenes.runscene import run_scene
+
+    text = (Path(__file__).parent / "data" / "finger.toml").read_text()
+    text = text.replace("[design]\n", "[design]\nanchor_radius = 0.1\n", 1)
+    text = text.replace('drags = [{ nodes = "tip", rotate = 60, about = [0, 0.5] }]\n',
+                        'drags = [{ nodes = "tip", rotate = 60, about = [0, 0.5] }]\n'
+                        'muscles = [{ name = "own", path = [[0.3, 0.7], [3.3, 0.7]] }]\nanchor_radius = 0.25\n', 1)
+    text = text.replace('keyframes = [["rest", 0], ["contract", 1], ["rest", 0]]',
+                        'keyframes = [["rest", 0], ["bend", 1]]')
+    assert text.count("anchor_radius") == 2 and '["bend", 1]' in text
+    (tmp_path / "fr.toml").write_text(text)
+    seen, solve = [], equilibrium.solve_internal
+
+    def spy(*a, **k):
+        seen.append(k.get("anchor_radius"))
+        return solve(*a, **k)
+
+    monkeypatch.setattr(equilibrium, "solve_internal", spy)  # the design's checks and the animation's frames
+    scene = load_scene(tmp_path / "fr.toml")
+    run_scene(scene, tmp_path / "run", cases=["bend"], photos=False, prototype=False, log=None, background=False)
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert [c["case"] for c in summary["cases"]] == ["bend"] and summary["cases"][0]["success"]
+    assert (tmp_path / "run" / f"{scene.animations[0].name}.gif").is_file()  # the animation ran, here
+    assert seen and set(seen) == {0.25}, seen

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import os
+import tempfile
 import zipfile
 from pathlib import Path
 
@@ -58,9 +59,10 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True, notes: 
     that existing file may be replaced, raises :class:`WouldReplace` (before anything is written) for the
     existing files it may not replace.
 
-    The file is read back with :func:`~mdsr_opt.load_scene` and compared with the session and the scene it
-    opened (mesh, cases, muscles, fabrication, regions, gait, animations); a mismatch raises
-    ``RuntimeError`` rather than leaving a scene that would not reproduce the page.
+    Both files are written in a scratch folder, read back there with :func:`~mdsr_opt.load_scene` and
+    compared with the session and the scene it opened (mesh, cases, muscles, fabrication, regions, gait,
+    animations), and only then moved into ``out``: a scene ``load_scene`` refuses (an edit it does not accept)
+    raises ``ValueError``, a mismatch ``RuntimeError``, and neither leaves a file.
     """
     from ..scenes.names import check_name
     from ..scenes.scenefile import load_scene
@@ -78,15 +80,22 @@ def save_scene(session, out, name: str | None = None, *, overwrite=True, notes: 
         if keep:
             raise WouldReplace(keep)
     folder.mkdir(parents=True, exist_ok=True)
-    write_mesh(mesh_path, session.mesh)
-    write_json(scene_path, d)
-    try:
-        back = load_scene(scene_path)
-    except (ValueError, TypeError) as exc:
-        raise RuntimeError(f"{scene_path} does not read back: {exc} (please report this)") from None
-    wrong = check_read_back(back, session, d)
-    if wrong:
-        raise RuntimeError(f"{scene_path} does not read back as the session: {wrong} (please report this)")
+    # written and read back in a scratch folder beside the targets, moved into place only when it reads back:
+    # a scene mdsr run would refuse leaves no file behind
+    with tempfile.TemporaryDirectory(prefix=".mdsr-save-", dir=folder) as scratch:
+        tmp_scene, tmp_mesh = Path(scratch) / scene_path.name, Path(scratch) / mesh_path.name
+        write_mesh(tmp_mesh, session.mesh)
+        write_json(tmp_scene, d)
+        try:
+            back = load_scene(tmp_scene)
+        except (ValueError, TypeError) as exc:  # e.g. drags a contact scene refuses: the edit, not a bug
+            raise ValueError(f"not saved: as edited, {name} would not load: "
+                             f"{str(exc).replace(str(tmp_scene), scene_path.name)}") from None
+        wrong = check_read_back(back, session, d)
+        if wrong:
+            raise RuntimeError(f"{scene_path} does not read back as the session: {wrong} (please report this)")
+        os.replace(tmp_mesh, mesh_path)
+        os.replace(tmp_scene, scene_path)
     if notes is not None:
         notes.extend(said)
     return [os.fspath(scene_path), os.fspath(mesh_path)]

@@ -23,6 +23,9 @@ import numpy as np
 
 __all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name"]
 
+#: the sentence a save adds to the scene's description (followed by the file it was opened from)
+AUTHORED_FROM = "Authored on the mdsr author page from "
+
 #: what the page calls the case it edits when the scene it opened has no external case
 AUTHORED = "authored"
 
@@ -183,11 +186,12 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
     notes: list[str] = []
     src = _file_name(session.source) or session.name
     said = (scene.description.rstrip() + " ") if scene is not None and scene.description else ""
+    said = said.split(AUTHORED_FROM)[0]  # saved again: one sentence saying where from, the last source
     d = {
         "name": name,
         "title": scene.title if scene is not None and scene.title else f"{name}: authored with mdsr author",
         # the file's name alone: a scene file holds no path of the machine it was saved on
-        "description": f"{said}Authored on the mdsr author page from {src}.",
+        "description": f"{said}{AUTHORED_FROM}{src}.",
         "body": {"mesh": mesh_file},
         "material": o.raw("material") if o is not None and o.raw("material") is not None
         else material_table(session.material),

@@ -3,7 +3,7 @@
 The page sends JSON messages (``load``, ``fixed``, ``drag``, ``graph``, ``route`` (with its ``fabrication``:
 channel, wall and fixture sizes), ``delete_muscle``, ``design``, ``save``, ``ping``); the server answers with
 ``body`` (with ``kept``: what a saved scene keeps of the scene opened), ``state``, ``graph``, ``routing``
-(also after a deletion), ``design``, ``saved`` (with ``notes``: what ``mdsr run`` will refuse in the file),
+(also after a deletion), ``design``, ``saved`` (with ``notes``: what the save changes for the cases the page did not edit),
 ``pong`` or ``error`` messages. Work runs in a thread, one request at a time per page; while a solve runs,
 a newer ``drag`` replaces a waiting one (stale drags are dropped, counted in ``state.dropped``), and while
 no request waits after a drag the drag's exact equilibrium is solved ahead of its release. Bad
@@ -345,7 +345,7 @@ class Page:
                 raise TypeError(f"save name must be a string, got {name!r}")
             written = self.app["written"]  # the files this server wrote: replaced without asking
             may = True if msg.get("confirm") is True else (lambda p: p.resolve() in written)
-            notes: list[str] = []  # what mdsr run will refuse in the file, what it cannot hold
+            notes: list[str] = []  # what the save changes for the cases the page did not edit
             try:
                 files = save_scene(s, self.app["out"], name, overwrite=may, notes=notes)
             except WouldReplace as exc:

@@ -99,7 +99,7 @@ def _cmd_photograph(a) -> int:
     with checking_input():  # the states named: bad input
         _check_not_above_states(Path(a.states), STATE_SUFFIXES)
         files = list_files(a.states, STATE_SUFFIXES, "state")
-    _check_out_apart(a.out, {"states folder": a.states})
+    _check_out_apart(a.out, {"states folder" if Path(a.states).is_dir() else "state file": a.states})
     stems = [f.stem for f in files]
     twice = sorted({st for st in stems if stems.count(st) > 1})
     if twice:

@@ -84,7 +84,7 @@ def server_imports_this_package() -> bool:
 
     name = __name__.split(".")[0]
     here = os.path.realpath(sys.modules[name].__file__ or "")
-    if not (sys.flags.isolated or sys.flags.safe_path):
+    if not (sys.flags.isolated or getattr(sys.flags, "safe_path", False)):  # safe_path: Python 3.11+
         there = PathFinder.find_spec(name, [os.getcwd()])
         if there is not None:
             return os.path.realpath(there.origin or "") == here

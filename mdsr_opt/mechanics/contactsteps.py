@@ -18,7 +18,7 @@ from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
 from .loadsteps import INTERMEDIATE_TOL, equilibrium_result, min_jacobian, predict_state, solve_step, upright
 from .obstacles import check_obstacles
 
-__all__ = ["contact_continuation", "contact_report", "contact_spec", "solve_with_contact", "MAX_REFRESH",
+__all__ = ["check_gap", "contact_continuation", "contact_report", "contact_spec", "solve_with_contact", "MAX_REFRESH",
            "DEFAULT_GAP"]
 
 #: solves of one load step with refreshed pairs before it is given up (and halved)
@@ -380,7 +380,7 @@ def contact_spec(units, obstacles, contact, contact_gap, backend, friction=0.0):
     if contact_gap is None:
         gap = DEFAULT_GAP * units.unit_mesh.size
     else:
-        gap = units.to_unit(positive_float(contact_gap, "contact_gap"))
+        gap = units.to_unit(check_gap(positive_float(contact_gap, "contact_gap"), units.mesh.size))
     if isinstance(friction, bool) or not isinstance(friction, (int, float, np.integer, np.floating)) or \
             not np.isfinite(friction) or friction < 0:
         raise ValueError(f"friction must be a number >= 0 (Coulomb's coefficient), got {friction!r}")
@@ -401,6 +401,19 @@ RETRY_STEP = 0.125
 
 #: the default gap a contact keeps, relative to the body's size
 DEFAULT_GAP = 1e-4
+
+#: the largest contact gap, as a fraction of the body's size: a gap is a small clearance between touching parts
+MAX_GAP = 0.1
+
+
+def check_gap(gap: float, size: float) -> float:
+    """``gap`` (the self-contact gap, in the body's units) if it is below :data:`MAX_GAP` of the body's
+    ``size``; else a ``ValueError`` naming both."""
+    if gap >= MAX_GAP * size:
+        raise ValueError(f"contact_gap {gap:g} is {gap / size:.0%} of the body's size {size:.4g}: it is the small "
+                         f"clearance kept between touching parts (default {DEFAULT_GAP:g} of the size); give less "
+                         f"than {MAX_GAP:g} of the size")
+    return gap
 
 
 def solve_with_contact(mesh, model, material, p_of, fixed, values_of, x_start, spec, tol, max_iter, options,

@@ -131,9 +131,12 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     # the fixtures the cases' designs were made with (a routed layout's fit its ropes)
     given = {c: float(designs[c][2]) for c in animation.cases if len(designs[c]) > 2 and designs[c][2] is not None
              and np.isfinite(designs[c][2])}
-    if radius is None and given and len(given) == len(animation.cases) and (
+    if given and len(given) == len(animation.cases) and (
             max(given.values()) - min(given.values()) <= 1e-9 * max(max(given.values()), 1e-300)):
-        radius = next(iter(given.values()))
+        radius = next(iter(given.values()))  # also over the scene's: a case's own muscles bring their own
+    elif radius is not None and given and any(abs(r - radius) > 1e-9 * radius for r in given.values()):
+        note = (f"end fixtures of radius {radius:.4g}, the scene's (the cases' designs: "
+                + ", ".join(f"{c} {r:.4g}" for c, r in given.items()) + ")")
     elif radius is None and scene.muscles is None and scene.routing_options.get("fabrication") is not False:
         # routed layouts fitted apart: one size all the driven ropes keep their fixtures with
         from ..synthesis.fabrication import check_fabrication

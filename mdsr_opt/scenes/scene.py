@@ -439,7 +439,7 @@ def check_units_and_gait(scene: Scene) -> None:
 def _check_contact_drags(scene: Scene, case: Case) -> None:
     """With ``contact = true``: refuse an external case whose anchors and drags push prescribed parts of the
     body through each other (:func:`~mdsr_opt.mechanics.selfprescribed.check_prescribed_self`), naming it."""
-    from ..mechanics.contactsteps import DEFAULT_GAP
+    from ..mechanics.contactsteps import DEFAULT_GAP, check_gap
     from ..mechanics.selfprescribed import check_prescribed_self
 
     if case.kind != "external" or not len(case.drag_nodes):
@@ -449,6 +449,7 @@ def _check_contact_drags(scene: Scene, case: Case) -> None:
     rest, final = P[nodes], np.vstack([P[case.anchors], case.drag_positions])
     gap = scene.design_options.get("contact_gap") or DEFAULT_GAP * scene.mesh.size
     try:
+        check_gap(gap, scene.mesh.size)
         check_prescribed_self(scene.mesh, nodes, lambda s: rest + s * (final - rest), gap,
                               anchored=len(case.anchors))
     except ValueError as exc:

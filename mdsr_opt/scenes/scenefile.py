@@ -110,7 +110,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         anchors = "base"                      # a region, node indices or [x, y] points
         drags = [{ nodes = "tip", by = [-1.0, 1.5] },
                  { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
-        muscles = [{ name = "upper", nodes = [3, 9, 15] }]   # optional: this external case's own muscles
+        muscles = [{ name = "upper", path = [[0.3, 0.7], [3.3, 0.7]] }]  # optional: the case's own muscles
                                               # (tables as [[muscles]]), designed instead of the scene's
                                               # [[muscles]] or a routing; other cases keep theirs
         anchor_radius = 0.12                  # optional, with muscles: their end fixtures' radius

@@ -26,6 +26,9 @@ _SUCCESS = re.compile(r"\b(Solve_Succeeded|Solved_To_Acceptable_Level|converged|
 
 #: the causes a design's status may hold, most telling first: (pattern, what happened, what helps)
 _CAUSES = (
+    (r"boundary crosses itself and no new contact pair",  # contact on: the solver lost the fold
+     "the contact solve could not follow the body as it folds onto itself",
+     "ask for a smaller deformation, or a finer mesh"),
     (r"boundary crosses itself",
      "the body would touch itself",
      "its outline crosses itself; turn contact on (contact=True in Python, contact = true under [design] in a "
