@@ -248,3 +248,25 @@ def test_saving_a_saved_scene_again_keeps_one_authored_sentence(gripper, tmp_pat
         src = save_scene(Session.from_scene_file(src), tmp_path / f"out{k}", f"s{k}")[0]
     text = json.loads(Path(src).read_text())["description"]
     assert text == "my gripper Authored on the mdsr author page from s1.json."
+
+
+def test_the_page_solves_a_contact_scene_with_contact_as_mdsr_run_does(tmp_path, monkeypatch):
+    """A scene with contact = true under [design]: the page's settled and live solves pass contact=True (the
+    target mdsr run solves), and a live drag skips the preview, which models no contact."""
+    import mdsr_opt.author.session as session_module
+
+    text = (Path(__file__).parent / "data" / "finger.toml").read_text()
+    (tmp_path / "fc.toml").write_text(text.replace("[design]\n", "[design]\ncontact = true\n", 1))
+    seen, solve = [], session_module.solve_external
+
+    def spy(*a, **k):
+        seen.append(k.get("contact"))
+        return solve(*a, **k)
+
+    monkeypatch.setattr(session_module, "solve_external", spy)
+    monkeypatch.setattr(Session, "_preview", lambda *a: pytest.fail("the contact-free preview was used"))
+    s = Session.from_scene_file(tmp_path / "fc.toml")
+    assert s.settle().success
+    s.set_fixed(s.anchors, s.drag_nodes, s.drag_positions + [0.0, 0.05])
+    assert s.drag().success
+    assert seen and all(c is True for c in seen), seen

@@ -38,6 +38,7 @@ from ..synthesis.acceptance import design_active
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
+from ..scenes.reader import contact_options
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
@@ -285,7 +286,8 @@ class Session:
                         for a in (self.anchors, self.drag_nodes, self.drag_positions))
         c = self.__dict__.get("_exact")
         if c is None or c[0] != key:
-            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions))
+            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
+                                 **contact_options(self.design_options))  # a contact scene's, as mdsr run
             c = self.__dict__["_exact"] = (key, res)
         return c[1]
 
@@ -302,17 +304,18 @@ class Session:
         prev = self.state
         if prev is None or not (prev.success or prev.crossing and not prev.inverted):
             return self._cold(t0)  # a crossing equilibrium shown: the next preview starts there too
+        contact = contact_options(self.design_options)
         for fresh in (False, True):
             guess = self._predict(prev.x, fresh)
             if guess is None:
                 continue
-            rep = self._preview(guess, t0)
+            rep = None if contact else self._preview(guess, t0)  # the preview models no contact
             if rep is not None:
                 self.state = rep
                 self.target = None
                 return rep
             res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
-                                 initial_guess=guess, min_step=1.0)
+                                 initial_guess=guess, min_step=1.0, **contact)
             rep = self._report(res, live=True, warm_failed=False, t0=t0)
             # converged but crossing itself: shown as it is (a cold solve would not uncross it)
             if res.success or rep.crossing and not rep.inverted and res.residual <= 1e-6:
