@@ -41,8 +41,8 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["compact_repr", "format_value", "to_jsonable", "plain", "save_npz", "load_npz", "save_fields",
-           "load_fields"]
+__all__ = ["compact_repr", "format_value", "one_line", "to_jsonable", "plain", "save_npz", "load_npz",
+           "save_fields", "load_fields"]
 
 #: Longest ``repr`` a result object prints (one line).
 MAX_REPR = 200
@@ -50,6 +50,24 @@ MAX_REPR = 200
 #: A 1-D numeric array of at most this many values (one per muscle, say) prints its values, a longer one
 #: its shape: ``contractions=[0.1, 0.2, ...]`` for up to 16 muscles, ``x=array((54,), float64)`` for a state.
 MAX_VALUES = 16
+
+
+def one_line(text: Any, limit: int) -> str:
+    """``text`` on one line and at most ``limit`` characters, cut cleanly: at a word, never inside brackets
+    (an unclosed one is dropped with what follows it), with ``...`` where it was cut.
+
+    >>> one_line("rejected (the boundary crosses itself) at load 0.5", 30)
+    'rejected...'
+    """
+    text = " ".join(str(text).split())
+    if len(text) <= limit:
+        return text
+    cut = text[:limit - 3]
+    if " " in cut:
+        cut = cut[:cut.rfind(" ")]
+    while cut.count("(") > cut.count(")"):  # the last unclosed bracket and what follows it
+        cut = cut[:cut.rfind("(")]
+    return cut.rstrip(" ;:,(") + "..."
 
 
 def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:

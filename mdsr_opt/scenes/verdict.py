@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import re
 
+from ..core.results import one_line
+
 __all__ = ["design_verdict", "failure_cause", "plain_failure"]
 
 #: the longest cause a cell shows (the whole reason is in the run's log, its FAILED lines and summary.json)
@@ -64,17 +66,9 @@ _CAUSES = (
 
 
 def _short(text: str, limit: int = MAX_CAUSE) -> str:
-    """``text`` on one line and at most ``limit`` characters, cut cleanly: at a word, never inside brackets
-    (an unclosed one is dropped with what follows it), with ``...`` where it was cut."""
-    text = " ".join(str(text).split()).replace("|", "/")
-    if len(text) <= limit:
-        return text
-    cut = text[:limit - 3]
-    if " " in cut:
-        cut = cut[:cut.rfind(" ")]
-    while cut.count("(") > cut.count(")"):  # the last unclosed bracket and what follows it
-        cut = cut[:cut.rfind("(")]
-    return cut.rstrip(" ;:,(") + "..."
+    """``text`` cut cleanly to ``limit`` characters (:func:`~mdsr_opt.core.results.one_line`), with no ``|``
+    (it would split a Markdown table's cell)."""
+    return one_line(str(text).replace("|", "/"), limit)
 
 
 def _solver_status(status: str) -> str:

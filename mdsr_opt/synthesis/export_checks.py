@@ -21,6 +21,8 @@ from typing import Mapping
 
 import numpy as np
 
+from ..core.results import one_line
+
 __all__ = ["design_failure", "impossible_strokes", "failed_mark", "routed_fabrication", "check_same_fabrication"]
 
 #: A commanded contraction and the achieved one may differ by this much before a stretched rope is called
@@ -33,11 +35,6 @@ def failed_mark(reason: str) -> str:
     return f"FAILED DESIGN: {reason.strip().rstrip('.;')}, do not build"
 
 
-def _short(text, limit: int = 300) -> str:
-    text = " ".join(str(text).split())
-    return text if len(text) <= limit else text[:limit - 3].rstrip() + "..."
-
-
 def design_failure(design) -> str:
     """Why ``design`` (anything :func:`~mdsr_opt.synthesis.export.fabrication_data` reads) is no design to
     build, in one phrase naming the failed pose(s) and their status; "" when it succeeded (or is None: a
@@ -48,13 +45,13 @@ def design_failure(design) -> str:
     if design is None:
         return ""
     if isinstance(design, PipelineResult):
-        return "" if design.success else f"the design failed ({_short(design.design.status)})"
+        return "" if design.success else f"the design failed ({one_line(design.design.status, 300)})"
     if isinstance(design, PosesResult):
-        why = [f"pose {n}: {_short(s, 160)}" for n, s, ok in zip(design.names, design.status, design.success)
-               if not ok] + [_short(p, 160) for p in design.problems]
+        why = [f"pose {n}: {one_line(s, 160)}" for n, s, ok in zip(design.names, design.status, design.success)
+               if not ok] + [one_line(p, 160) for p in design.problems]
         return "" if not why else "the layout's design failed (" + "; ".join(why) + ")"
     items = dict(design) if isinstance(design, Mapping) else {"design": design}
-    why = [(f"{k}: " if len(items) > 1 else "") + _short(getattr(d, "status", "not a success"), 160)
+    why = [(f"{k}: " if len(items) > 1 else "") + one_line(getattr(d, "status", "not a success"), 160)
            for k, d in items.items() if not bool(getattr(d, "success", True))]
     return "" if not why else "the design failed (" + "; ".join(why) + ")"
 
