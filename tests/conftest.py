@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import signal
 from pathlib import Path
 
 os.environ.setdefault("MPLBACKEND", "Agg")  # tests write figures, never show them (subprocesses inherit it)
@@ -41,6 +42,14 @@ def outline_finger(folder) -> Path:
     scene.parent.mkdir(parents=True, exist_ok=True)
     scene.write_text(text.replace(path_line, "boundary = { from = [0, 1], to = [3.5, 1] }"))
     return scene
+
+
+def pytest_sessionstart(session):
+    """The Ctrl-C tests need Ctrl-C delivered: a suite started with SIGINT ignored (under ``nohup``, or as a
+    background job of a non-interactive shell) gets Python's usual handler back, which the processes the
+    tests start then inherit as the default. (tests/test_interrupt.py checks an ignored SIGINT on its own.)"""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_addoption(parser):

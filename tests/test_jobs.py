@@ -393,3 +393,62 @@ def test_ctrl_c_to_the_whole_group_stops_a_busy_pool_at_once():
     while time.monotonic() < deadline and any(map(_exists, pids)):
         time.sleep(0.05)
     assert [p for p in pids if _exists(p)] == []
+
+
+def test_a_block_left_by_an_error_while_its_workers_start_starts_no_more_of_them(monkeypatch):
+    """Bad input found while the pool starts its workers (``mdsr run`` of a scene file it refuses) ends the
+    block at once: the worker being started is the last one, and every worker is ended before the block is
+    left. A worker started after the others were ended is one that the broken pool's shutdown waits for,
+    for ever, while it waits for a job (the run, and the interpreter's exit, hung)."""
+    from concurrent.futures import process as cfp
+
+    spawned = []
+    real = cfp.ProcessPoolExecutor._spawn_process
+
+    def slow_spawn(self):  # a forkserver still importing its preloaded modules
+        time.sleep(0.3)
+        real(self)
+        spawned.append(time.monotonic())
+
+    monkeypatch.setattr(cfp.ProcessPoolExecutor, "_spawn_process", slow_spawn)
+    before = set(multiprocessing.active_children())  # other tests' pools
+    with pytest.raises(ValueError, match="bad input"):
+        with process_pool(2) as two:
+            if two is None:
+                pytest.skip("a single core: no pool")
+            time.sleep(0.1)  # the first worker is being started
+            raise ValueError("bad input")
+    left = time.monotonic()
+    assert len(spawned) == 1 and spawned[0] <= left
+    assert set(multiprocessing.active_children()) <= before
+
+
+_REFUSED_RUNS = """
+import contextlib, io, json, pathlib, sys, tempfile
+from mdsr_opt.cli.main import main
+if __name__ == "__main__":
+    scene = json.loads(pathlib.Path(sys.argv[1]).read_text())
+    scene.setdefault("design", {})["a_max"] = 1.5
+    for i in range(int(sys.argv[2])):
+        d = pathlib.Path(tempfile.mkdtemp())
+        (d / "scene.json").write_text(json.dumps(scene))
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err):
+            code = main(["run", str(d / "scene.json"), "--out", str(d / "out")])
+        print(code, len(err.getvalue().strip().splitlines()), (d / "out").exists(), flush=True)
+"""
+
+
+def test_mdsr_run_refuses_a_bad_scene_file_again_and_again_in_one_process(tmp_path):
+    """``main`` of ``mdsr run`` called over and over in one process (as a test suite does), each time with a
+    scene file it refuses while its pool starts: each call returns 2 with one line and no folder, at once."""
+    import json
+
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+ (the scene file is read by the package either way)
+    base = tmp_path / "finger.json"
+    base.write_text(json.dumps(tomllib.loads((Path(__file__).parent / "data" / "finger.toml").read_text())))
+    n = 12
+    done = subprocess.run([sys.executable, "-c", _REFUSED_RUNS, str(base), str(n)], capture_output=True,
+                          text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split("\n")[:n] == ["2 1 False"] * n, done.stdout + done.stderr[-2000:]

@@ -185,14 +185,16 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     before = {p.pid for p in multiprocessing.active_children()}
     pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                                initargs=(worker_environment(), tuple(modules), setup))
-    _ENDERS[pool] = functools.partial(_end_workers, pool, before)
     _SLOTS[pool] = workers
     # start the workers now, from a thread: starting one waits until the forkserver has imported the
     # preloaded modules, and the caller's own work (building the scenes, the first solves) goes on meanwhile;
     # its jobs wait in the pool's queue until the workers are started (a job sent to the executor itself
     # before would wait, in the caller's thread, for the workers it starts)
     _STARTING[pool] = threading.Event()
-    starter = threading.Thread(target=_start_workers, args=(pool, workers), name="start-workers", daemon=True)
+    stop = threading.Event()
+    starter = threading.Thread(target=_start_workers, args=(pool, workers, stop), name="start-workers",
+                               daemon=True)
+    _ENDERS[pool] = functools.partial(_end_workers, pool, before, starter, stop)
     starter.start()
     try:
         yield pool
@@ -220,12 +222,21 @@ _QUEUES: "weakref.WeakKeyDictionary[Executor, _Queue]" = weakref.WeakKeyDictiona
 _QUEUES_LOCK = threading.Lock()
 
 
-def _end_workers(pool: Executor, before: set[int]) -> None:
+def _end_workers(pool: Executor, before: set[int], starter: threading.Thread, stop: threading.Event) -> None:
     """End ``pool``'s worker processes at once (SIGTERM): its jobs not yet done fail (BrokenProcessPool).
     ``before``: the process ids of this process's children before the pool was made (where the pool has no
-    ``terminate_workers``, Python < 3.14, its workers are the children made since)."""
+    ``terminate_workers``, Python < 3.14, its workers are the children made since). ``starter``, ``stop``:
+    the thread starting the workers (:func:`_start_workers`) and the event that makes it start no more; it
+    is waited for (at most the start of the worker it is starting) before any worker is ended: a worker
+    started after the others were ended would be one the broken pool waits for at its shutdown, for ever,
+    while it waits for a job that never comes."""
     import multiprocessing
 
+    stop.set()
+    _queue(pool).close()
+    while starter.is_alive():  # a Ctrl-C now (the run is already stopping, by an error or an interrupt that
+        with contextlib.suppress(KeyboardInterrupt):  # its caller raises again) does not cut this short
+            starter.join(0.05)
     terminate = getattr(pool, "terminate_workers", None)
     if terminate is not None:
         with contextlib.suppress(Exception):
@@ -237,9 +248,10 @@ def _end_workers(pool: Executor, before: set[int]) -> None:
                 proc.terminate()
 
 
-def _start_workers(pool: Executor, workers: int) -> None:
+def _start_workers(pool: Executor, workers: int, stop: threading.Event) -> None:
     """Make ``pool`` start its ``workers`` worker processes (by jobs that do nothing; the executor starts a
-    worker for a job that finds none idle), then send it the jobs that its queue holds meanwhile. This
+    worker for a job that finds none idle), then send it the jobs that its queue holds meanwhile; once
+    ``stop`` is set (the workers are being ended), start no more and send nothing. This
     thread blocks Ctrl-C (SIGINT) where the platform can: the processes it starts (the forkserver, which
     imports the preloaded modules, and through it the workers) inherit the block, so that a terminal's
     Ctrl-C, which the run handles in its main thread, does not interrupt them with a traceback of their
@@ -248,12 +260,15 @@ def _start_workers(pool: Executor, workers: int) -> None:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         for _ in range(workers):
+            if stop.is_set():
+                break
             pool.submit(os.getpid)
     except Exception:  # the pool was shut down first (its block ended at once), or broken by a Ctrl-C: the
         pass  # run reports that itself (its jobs, sent now, fail with the pool's error)
     finally:
         _STARTING.pop(pool).set()
-        _queue(pool).start()
+        if not stop.is_set():
+            _queue(pool).start()
 
 
 def _call(job: bytes) -> Any:
@@ -272,14 +287,28 @@ class _Queue:
         self._heap: list = []
         self._count = itertools.count()
         self._running = 0
+        self._closed = False
         self._lock = threading.Lock()
 
     def put(self, job: bytes, cost: float) -> Future:
         outer: Future = Future()
         with self._lock:
+            if self._closed:
+                outer.set_exception(BrokenExecutor("the pool's workers were ended; the job was not started"))
+                return outer
             heapq.heappush(self._heap, (-cost, next(self._count), outer, job))
         self.start()
         return outer
+
+    def close(self) -> None:
+        """Send no more jobs to the pool (its workers are being ended): the jobs waiting, and any sent
+        later, fail with :class:`~concurrent.futures.BrokenExecutor` without starting."""
+        with self._lock:
+            self._closed = True
+            waiting, self._heap = self._heap, []
+        for _, _, outer, _ in waiting:
+            if outer.set_running_or_notify_cancel():
+                outer.set_exception(BrokenExecutor("the pool's workers were ended; the job was not started"))
 
     def start(self) -> None:
         """Send the costliest waiting jobs to the pool while it has a free worker (none while its workers
@@ -289,7 +318,7 @@ class _Queue:
             return
         while True:
             with self._lock:
-                if self._running >= self.slots or not self._heap:
+                if self._closed or self._running >= self.slots or not self._heap:
                     return
                 _, _, outer, job = heapq.heappop(self._heap)
                 if not outer.set_running_or_notify_cancel():  # cancelled while it waited
