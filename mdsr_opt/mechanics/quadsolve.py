@@ -101,14 +101,24 @@ STALL_ITERATIONS = 6
 #: part swung far along its tangent), and the damped steps that follow creep
 SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
 
+#: the pseudo-transient shift of :func:`_newton` (``shifted``) at its first step, over the median diagonal
+#: entry of the body's block of the Newton matrix
+SHIFT = 1e-3
+
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
-            order: ReusedOrdering | None = None):
+            order: ReusedOrdering | None = None, shifted: int = 0):
     """Damped Newton on ``system(z, jac) -> (scaled residual, Jacobian or None)``; returns ``(z, converged,
     iterations, residual)``; a solve that stalls (:data:`STALL_ITERATIONS`, :data:`SHORT_STEPS`) returns as not
     converged. The Jacobian is asked for only at a state that does not meet ``tol`` (the residual of an
     accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
-    by the calls of one solve)."""
+    by the calls of one solve).
+
+    With ``shifted`` > 0 the first ``shifted`` unknowns (the body's coordinates) get a pseudo-transient shift
+    on the matrix's diagonal: :data:`SHIFT` x the median of those diagonal entries at the start, scaled by the
+    square of the residual's fall since then (switched-evolution relaxation), so that a start far from the
+    answer moves its soft modes (a slender part that swings) by damped steps instead of overshooting them,
+    and the last steps are Newton's. The equations, and so the equilibrium, are unchanged."""
     order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
@@ -117,12 +127,19 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     norm = float(np.abs(r).max()) if r.size else 0.0
     seen = [norm]
     short = 0  # consecutive steps cut to at most SHORT_STEP
+    shift0 = None
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
         if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
             return z, False, it, norm  # stalled: the caller takes a smaller load step instead
         r, J = system(z, True)
+        if shifted:
+            if shift0 is None:
+                shift0 = SHIFT * float(np.median(np.abs(J.diagonal()[:shifted])))
+            d = np.zeros(J.shape[0])
+            d[:shifted] = shift0 * (norm / seen[0]) ** 2
+            J = (J + sp.diags(d)).tocsr()
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -434,7 +451,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
     of from rest (contractions within :data:`START_FULL_STEP` of its own: first one Newton solve from its
     state at the full load). With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
-    equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
+    equilibrium interpolated onto these nodes) Newton's method starts there at the full load, with a
+    pseudo-transient shift that damps its first steps (:func:`_newton`'s ``shifted``); when it does not
     converge (or the predicted state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
 
@@ -482,7 +500,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         q[keep] = z[:nk]
         return q, z[nk:]
 
-    def solve_at(s, z0, final, _s_from):
+    def solve_at(s, z0, final, _s_from, shifted=False):
         targets = (1.0 - (a0 + s * (a - a0))) * L0
         tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
 
@@ -530,7 +548,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
         guard[0] = ok
 
-        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order)
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -566,7 +584,9 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         near = (z0, "the start state")
     done = None
     if near is not None:
-        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0)
+        # from a predicted state (far from the answer: another model's equilibrium) with the pseudo-transient
+        # shift; from a start state (a solve of nearly these contractions) Newton's own steps
+        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0, shifted=guess is not None)
         if conv:
             done = (zt, 1.0, True, it, 1, res, f"converged (from {near[1]})")
         else:
