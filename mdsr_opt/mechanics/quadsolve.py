@@ -101,8 +101,7 @@ STALL_ITERATIONS = 6
 #: part swung far along its tangent), and the damped steps that follow creep
 SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
 
-#: the pseudo-transient shift of :func:`_newton` (``shifted``) at its first step, over the median diagonal
-#: entry of the body's block of the Newton matrix
+#: :func:`_newton`'s first pseudo-transient shift over the median diagonal entry of the shifted block
 SHIFT = 1e-3
 
 
@@ -114,11 +113,9 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
     by the calls of one solve).
 
-    With ``shifted`` > 0 the first ``shifted`` unknowns (the body's coordinates) get a pseudo-transient shift
-    on the matrix's diagonal: :data:`SHIFT` x the median of those diagonal entries at the start, scaled by the
-    square of the residual's fall since then (switched-evolution relaxation), so that a start far from the
-    answer moves its soft modes (a slender part that swings) by damped steps instead of overshooting them,
-    and the last steps are Newton's. The equations, and so the equilibrium, are unchanged."""
+    ``shifted`` > 0: the first ``shifted`` unknowns get a pseudo-transient shift on the diagonal, :data:`SHIFT`
+    x their median diagonal entry at the start times the square of the residual's fall since (a far start's
+    soft modes take damped steps, the last steps are Newton's; the equations are unchanged)."""
     order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
@@ -246,26 +243,35 @@ def _checks(tol, max_iter, min_step):
     return tol, int(max_iter), min_step
 
 
+def _checked_guess(guess, n: int) -> np.ndarray | None:
+    guess = None if guess is None else np.asarray(guess, dtype=float)
+    if guess is not None and (guess.shape != (n, 2) or not np.isfinite(guess).all()):
+        raise ValueError(f"guess must be finite node positions of shape ({n}, 2), got shape {guess.shape}")
+    return guess
+
+
 def _force_scale(model: QuadraticModel) -> float:
     return float(np.abs(model.params).max()) * float(model.mesh.size)
 
 
 def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_positions, *, tol: float = 1e-9,
-                             max_iter: int = 30, min_step: float = 1.0 / 256) -> QuadraticResult:
+                             max_iter: int = 30, min_step: float = 1.0 / 256, guess=None) -> QuadraticResult:
     """External driving of ``model``: nodes ``anchors`` held at rest, ``drag_nodes`` moved to
     ``drag_positions`` (node indices of the model, midpoints included: see
-    :func:`~mdsr_opt.mechanics.quadratic.extend_prescribed`).
+    :func:`~mdsr_opt.mechanics.quadratic.extend_prescribed`). ``guess``: predicted node positions (N, 2) that
+    start one Newton solve at the full load, as :func:`solve_quadratic_internal`'s (its own steps, unshifted).
 
     Raises
     ------
     ValueError
         Node indices out of range or given twice, positions of the wrong shape or not finite, fewer than two
-        fixed nodes, or bad ``tol``, ``max_iter``, ``min_step``.
+        fixed nodes, a guess of the wrong shape or not finite, or bad ``tol``, ``max_iter``, ``min_step``.
     """
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
     n = model.n_nodes
+    guess = _checked_guess(guess, n)
     anc = np.asarray(anchors, dtype=np.int64).ravel()
     dn = np.asarray(drag_nodes, dtype=np.int64).ravel()
     dp = np.asarray(drag_positions, dtype=float).reshape(-1, 2)
@@ -310,10 +316,10 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         ok = _Upright(model, lambda z: full(t, z))
         guard[0] = ok
 
-        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
-        K = K_rest if s == 0.0 else model.evaluate(full(s, z0), energy=False)[2]  # at s = 0: the rest state
+        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s)); none for a start at t
+        K = K_rest if s == 0.0 else model.evaluate(full(s, z0), energy=False)[2] if s < t else None
         try:
-            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx]))) if K is not None else 0 * z0
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
@@ -321,7 +327,12 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 break
         return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
-    z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
+    zg, conv, tried, res = solve_at(1.0, guess.reshape(-1)[free], True, 1.0) if guess is not None else (None, False, 0, 0.0)
+    done = (zg, 1.0, True, tried, 1, res, "converged (from the predicted state)") if conv else None
+    if done is None:
+        done = _continue(solve_at, X[free], min_step, secant=False)
+        done = done[:3] + (done[3] + tried,) + done[4:]
+    z, s, conv, iters, steps, res, status = done
     if not conv and guard[0] is not None:
         status += guard[0].why()
     x = full(s, z)
@@ -465,11 +476,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
-    if guess is not None:
-        guess = np.asarray(guess, dtype=float)
-        if guess.shape != (model.n_nodes, 2) or not np.isfinite(guess).all():
-            raise ValueError(f"guess must be finite node positions of shape ({model.n_nodes}, 2), "
-                             f"got shape {guess.shape}")
+    guess = _checked_guess(guess, model.n_nodes)
     ropes = list(ropes)
     if not ropes or not all(isinstance(r, CapstanRope) for r in ropes):
         raise ValueError("internal driving needs at least one CapstanRope")

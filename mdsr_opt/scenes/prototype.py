@@ -307,7 +307,7 @@ class VirtualPrototype:
         or the scene's muscles at the case's own contractions (:meth:`internal`, ``guess`` passed on)."""
         c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
-            return self.external(c.name)
+            return self.external(c.name, guess=guess)
         return self.internal(scene.muscles, c.contractions, guess=guess)
 
     def _solved(self, key):
@@ -345,9 +345,9 @@ class VirtualPrototype:
             shot.photo = self.photograph(shot.x, model)
         return shot
 
-    def external(self, case: str, photo: bool = True) -> PrototypeShot:
-        """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
-        mesh, carried to the edge midpoints). Solved once: a second call returns the same shot."""
+    def external(self, case: str, photo: bool = True, guess=None) -> PrototypeShot:
+        """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine mesh,
+        carried to the edge midpoints), from ``guess`` (as :meth:`internal`'s). Solved once per case."""
 
         if case not in self.fixed:
             raise ValueError(f"case {case!r} is internal driving or unknown; use internal() (external cases: "
@@ -358,7 +358,8 @@ class VirtualPrototype:
             anchors, dn, dp = self.fixed[case]
             if self.order == 2:
                 anchors, dn, dp = extend_prescribed(self.mesh, anchors, dn, dp)
-            res = solve_quadratic_external(self.model, anchors, dn, dp)
+            res = solve_quadratic_external(self.model, anchors, dn, dp, guess=None if guess is None else
+                                           transfer_state(self.design_mesh, guess, self.model.points))
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
