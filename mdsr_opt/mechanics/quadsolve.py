@@ -327,7 +327,8 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 break
         return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
-    zg, conv, tried, res = solve_at(1.0, guess.reshape(-1)[free], True, 1.0) if guess is not None else (None, False, 0, 0.0)
+    zg, conv, tried, res = (solve_at(1.0, guess.reshape(-1)[free], True, 1.0) if guess is not None  # a start at
+                            else (None, False, 0, 0.0))  # the full load from the guess, else load steps
     done = (zg, 1.0, True, tried, 1, res, "converged (from the predicted state)") if conv else None
     if done is None:
         done = _continue(solve_at, X[free], min_step, secant=False)
