@@ -282,6 +282,26 @@ def test_a_newton_solve_whose_steps_the_line_search_keeps_cutting_stops_as_stall
     assert ok and it == 1
 
 
+def test_a_shifted_newton_solve_crosses_a_soft_mode_that_newtons_step_overshoots():
+    """quadsolve._newton with ``shifted``: a soft coordinate (stiffness 1e-6 at the start, cubic hardening)
+    whose Newton step overshoots a thousandfold, so that no cut of it is accepted, is crossed by the damped
+    steps of the pseudo-transient shift, which fades with the residual: the root of the unchanged equations,
+    to the tolerance."""
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics.quadsolve import _newton
+
+    def system(z, jac):
+        r = np.array([1e-6 * z[0] + z[0] ** 3 - 1e-3, z[1] - 1.0, z[2] - 2.0])
+        return r, (sp.csr_matrix(np.diag([1e-6 + 3 * z[0] ** 2, 1.0, 1.0])) if jac else None)
+
+    z, ok, it, res = _newton(system, np.zeros(3), lambda z: True, 1e-12, 40)
+    assert not ok and it == 0  # every cut of the first step refused
+    z, ok, it, res = _newton(system, np.zeros(3), lambda z: True, 1e-12, 40, None, 3)
+    assert ok and res <= 1e-12 and it <= 15
+    assert 1e-6 * z[0] + z[0] ** 3 == pytest.approx(1e-3, abs=1e-12) and z[1:].tolist() == [1.0, 2.0]
+
+
 @pytest.mark.parametrize("fmt", ["coo", "csr", "csc"])
 def test_an_lu_solve_in_a_reused_order_gathers_the_same_matrix(fmt):
     """sparselu.ReusedOrdering: the second and later matrices of one pattern are reordered by a gather of their

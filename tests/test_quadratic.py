@@ -220,3 +220,30 @@ def test_a_solve_refused_by_an_inverting_step_says_which_element_and_where():
     assert not res.success
     assert "the last trial step inverted element" in res.status
     assert ("at a vertex" in res.status) or ("at a quadrature point" in res.status)
+
+
+def test_an_external_solve_from_a_coarser_models_state_reaches_the_load_stepped_state():
+    """guess=: the linear-element equilibrium of the same driving carried to the quadratic nodes starts one
+    Newton solve at the full load (no load steps, no predictors); the same equilibrium to the tolerance in
+    fewer Newton iterations. A guess that inverts an element falls back to load steps; one of the wrong
+    shape is refused."""
+    from mdsr_opt.mechanics.quadratic import transfer_state
+
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    coarse, model = QuadraticModel(mesh, MAT, 1), QuadraticModel(mesh, MAT, 2)
+    left = np.flatnonzero(np.isclose(model.points[:, 0], 0.0))
+    right = np.flatnonzero(np.isclose(model.points[:, 0], 4.0))
+    turn = _bend(model.points[right], k=0.4)
+    stepped = solve_quadratic_external(model, left, right, turn)
+    lin = solve_quadratic_external(coarse, left[left < mesh.n_nodes], right[right < mesh.n_nodes],
+                                   turn[right < mesh.n_nodes])
+    guessed = solve_quadratic_external(model, left, right, turn, guess=transfer_state(mesh, lin.x, model.points))
+    assert stepped.success and lin.success and guessed.success and stepped.steps > 1
+    assert "predicted" in guessed.status and guessed.steps == 1 and guessed.iterations < stepped.iterations
+    assert np.abs(guessed.x - stepped.x).max() < 1e-7 * mesh.size
+    folded = model.points.copy()
+    folded[[0, 1]] = folded[[1, 0]]
+    back = solve_quadratic_external(model, left, right, turn, guess=folded)
+    assert back.success and "predicted" not in back.status and np.abs(back.x - stepped.x).max() < 1e-7 * mesh.size
+    with pytest.raises(ValueError, match="guess must be"):
+        solve_quadratic_external(model, left, right, turn, guess=lin.x[:5])

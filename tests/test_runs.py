@@ -489,8 +489,8 @@ def test_figures_drawn_beside_the_solves_are_the_files_of_a_serial_run(tmp_path)
 
 def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path, monkeypatch):
     """The photograph jobs get the prototype pickled and solve its drivings in a worker: the validation
-    tables and the summary are the serial run's. The synthetic photograph and the prototype are two jobs,
-    the prototype's the costlier (a free worker starts it first)."""
+    tables and the summary are the serial run's. The synthetic photograph and the prototype's two drivings
+    (Table 2, Table 4) are three jobs, the prototype's together the costlier (free workers start them first)."""
     from mdsr_opt.scenes import runscene
     from mdsr_opt.scenes.runscene import run_scene
 
@@ -498,7 +498,7 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
     submit = runscene.Jobs.submit
 
     def spy(self, fn, *args, cost=0.0, **kwargs):
-        sent[getattr(fn, "__name__", None) or fn.func.__name__] = cost
+        sent.setdefault(getattr(fn, "__name__", None) or fn.func.__name__, []).append((args[4:5], cost))
         return submit(self, fn, *args, cost=cost, **kwargs)
 
     scene = get_problem("gecko", resolution="coarse")
@@ -506,7 +506,8 @@ def test_a_parallel_run_validates_against_the_prototype_as_a_serial_run(tmp_path
     monkeypatch.setattr(runscene.Jobs, "submit", spy)
     parallel = run_scene(scene, tmp_path / "parallel", cases=["bend_left"], log=None)
     assert parallel.success and serial.success
-    assert sent["_prototype_job"] > sent["_photo_job"] > 0
+    assert [part for part, _ in sent["_prototype_job"]] == [("driving",), ("design",)]
+    assert sum(c for _, c in sent["_prototype_job"]) > sent["_photo_job"][0][1] > 0
     a, b = tmp_path / "parallel", tmp_path / "serial"
     assert (a / "validation.md").read_text() == (b / "validation.md").read_text()
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (a, b))

@@ -101,14 +101,21 @@ STALL_ITERATIONS = 6
 #: part swung far along its tangent), and the damped steps that follow creep
 SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
 
+#: :func:`_newton`'s first pseudo-transient shift over the median diagonal entry of the shifted block
+SHIFT = 1e-3
+
 
 def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
-            order: ReusedOrdering | None = None):
+            order: ReusedOrdering | None = None, shifted: int = 0):
     """Damped Newton on ``system(z, jac) -> (scaled residual, Jacobian or None)``; returns ``(z, converged,
     iterations, residual)``; a solve that stalls (:data:`STALL_ITERATIONS`, :data:`SHORT_STEPS`) returns as not
     converged. The Jacobian is asked for only at a state that does not meet ``tol`` (the residual of an
     accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
-    by the calls of one solve)."""
+    by the calls of one solve).
+
+    ``shifted`` > 0: the first ``shifted`` unknowns get a pseudo-transient shift on the diagonal, :data:`SHIFT`
+    x their median diagonal entry at the start times the square of the residual's fall since (a far start's
+    soft modes take damped steps, the last steps are Newton's; the equations are unchanged)."""
     order = order if order is not None else ReusedOrdering()
     z = z0.copy()
     if not ok(z):
@@ -117,12 +124,19 @@ def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter
     norm = float(np.abs(r).max()) if r.size else 0.0
     seen = [norm]
     short = 0  # consecutive steps cut to at most SHORT_STEP
+    shift0 = None
     for it in range(max_iter):
         if norm <= tol:
             return z, True, it, norm
         if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
             return z, False, it, norm  # stalled: the caller takes a smaller load step instead
         r, J = system(z, True)
+        if shifted:
+            if shift0 is None:
+                shift0 = SHIFT * float(np.median(np.abs(J.diagonal()[:shifted])))
+            d = np.zeros(J.shape[0])
+            d[:shifted] = shift0 * (norm / seen[0]) ** 2
+            J = (J + sp.diags(d)).tocsr()
         try:
             dz = order.solve(J, -r)
         except RuntimeError:  # an exactly singular matrix
@@ -229,26 +243,35 @@ def _checks(tol, max_iter, min_step):
     return tol, int(max_iter), min_step
 
 
+def _checked_guess(guess, n: int) -> np.ndarray | None:
+    guess = None if guess is None else np.asarray(guess, dtype=float)
+    if guess is not None and (guess.shape != (n, 2) or not np.isfinite(guess).all()):
+        raise ValueError(f"guess must be finite node positions of shape ({n}, 2), got shape {guess.shape}")
+    return guess
+
+
 def _force_scale(model: QuadraticModel) -> float:
     return float(np.abs(model.params).max()) * float(model.mesh.size)
 
 
 def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_positions, *, tol: float = 1e-9,
-                             max_iter: int = 30, min_step: float = 1.0 / 256) -> QuadraticResult:
+                             max_iter: int = 30, min_step: float = 1.0 / 256, guess=None) -> QuadraticResult:
     """External driving of ``model``: nodes ``anchors`` held at rest, ``drag_nodes`` moved to
     ``drag_positions`` (node indices of the model, midpoints included: see
-    :func:`~mdsr_opt.mechanics.quadratic.extend_prescribed`).
+    :func:`~mdsr_opt.mechanics.quadratic.extend_prescribed`). ``guess``: predicted node positions (N, 2) that
+    start one Newton solve at the full load, as :func:`solve_quadratic_internal`'s (its own steps, unshifted).
 
     Raises
     ------
     ValueError
         Node indices out of range or given twice, positions of the wrong shape or not finite, fewer than two
-        fixed nodes, or bad ``tol``, ``max_iter``, ``min_step``.
+        fixed nodes, a guess of the wrong shape or not finite, or bad ``tol``, ``max_iter``, ``min_step``.
     """
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
     n = model.n_nodes
+    guess = _checked_guess(guess, n)
     anc = np.asarray(anchors, dtype=np.int64).ravel()
     dn = np.asarray(drag_nodes, dtype=np.int64).ravel()
     dp = np.asarray(drag_positions, dtype=float).reshape(-1, 2)
@@ -293,10 +316,10 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         ok = _Upright(model, lambda z: full(t, z))
         guard[0] = ok
 
-        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s))
-        K = K_rest if s == 0.0 else model.evaluate(full(s, z0), energy=False)[2]  # at s = 0: the rest state
+        # tangent predictor from the equilibrium at s: K_ff dz = -K_fc (x_c(t) - x_c(s)); none for a start at t
+        K = K_rest if s == 0.0 else model.evaluate(full(s, z0), energy=False)[2] if s < t else None
         try:
-            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx])))
+            dz = order.solve(ff(K), -(fc(K) @ ((t - s) * (target - X)[fixed_idx]))) if K is not None else 0 * z0
         except RuntimeError:
             dz = np.zeros_like(z0)
         for frac in (1.0, 0.5, 0.25, 0.0):
@@ -304,7 +327,13 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 break
         return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
-    z, s, conv, iters, steps, res, status = _continue(solve_at, X[free], min_step, secant=False)
+    zg, conv, tried, res = (solve_at(1.0, guess.reshape(-1)[free], True, 1.0) if guess is not None  # a start at
+                            else (None, False, 0, 0.0))  # the full load from the guess, else load steps
+    done = (zg, 1.0, True, tried, 1, res, "converged (from the predicted state)") if conv else None
+    if done is None:
+        done = _continue(solve_at, X[free], min_step, secant=False)
+        done = done[:3] + (done[3] + tried,) + done[4:]
+    z, s, conv, iters, steps, res, status = done
     if not conv and guard[0] is not None:
         status += guard[0].why()
     x = full(s, z)
@@ -434,7 +463,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     the same model, ropes and fixtures) the contractions are stepped from its contractions and state instead
     of from rest (contractions within :data:`START_FULL_STEP` of its own: first one Newton solve from its
     state at the full load). With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
-    equilibrium interpolated onto these nodes) Newton's method starts there at the full load; when it does not
+    equilibrium interpolated onto these nodes) Newton's method starts there at the full load, with a
+    pseudo-transient shift that damps its first steps (:func:`_newton`'s ``shifted``); when it does not
     converge (or the predicted state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
 
@@ -447,11 +477,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     if not isinstance(model, QuadraticModel):
         raise TypeError(f"model must be a QuadraticModel, got {type(model).__name__}")
     tol, max_iter, min_step = _checks(tol, max_iter, min_step)
-    if guess is not None:
-        guess = np.asarray(guess, dtype=float)
-        if guess.shape != (model.n_nodes, 2) or not np.isfinite(guess).all():
-            raise ValueError(f"guess must be finite node positions of shape ({model.n_nodes}, 2), "
-                             f"got shape {guess.shape}")
+    guess = _checked_guess(guess, model.n_nodes)
     ropes = list(ropes)
     if not ropes or not all(isinstance(r, CapstanRope) for r in ropes):
         raise ValueError("internal driving needs at least one CapstanRope")
@@ -482,7 +508,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         q[keep] = z[:nk]
         return q, z[nk:]
 
-    def solve_at(s, z0, final, _s_from):
+    def solve_at(s, z0, final, _s_from, shifted=False):
         targets = (1.0 - (a0 + s * (a - a0))) * L0
         tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
 
@@ -530,7 +556,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
         guard[0] = ok
 
-        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order)
+        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -566,7 +592,9 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         near = (z0, "the start state")
     done = None
     if near is not None:
-        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0)
+        # from a predicted state (far from the answer: another model's equilibrium) with the pseudo-transient
+        # shift; from a start state (a solve of nearly these contractions) Newton's own steps
+        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0, shifted=guess is not None)
         if conv:
             done = (zt, 1.0, True, it, 1, res, f"converged (from {near[1]})")
         else:

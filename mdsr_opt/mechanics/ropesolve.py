@@ -113,7 +113,8 @@ def rope_forms(cmodel, p, x0) -> tuple[bool, ...]:
     with 8 muscles, two or three of them ending slack: 30-92 IPOPT iterations (20-84 of them in the
     equality solve) against 8-17, the same equilibria (``bench_loadsteps.py --strips``). Other starts (a warm start from an earlier state,
     where a released rope is short but usually pulls again) keep the equality form first: on gecko's gait
-    taking a short rope as slack cost 51 iterations against 42."""
+    taking a short rope as slack cost 51 iterations against 42. (Such a start first tries the ropes its
+    own state had slack, by their multipliers rather than their lengths: :func:`_warm_active_set`.)"""
     if not cmodel.n_targets:
         return (False,)
     slack = cmodel.predicted_slack(x0, p)
@@ -136,7 +137,9 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
     """Solve in the forms :func:`rope_forms` gives, each from ``x0``: an equality-form answer with no rope
     pushing is the answer; so is an inequality-form one, with any rope it left undecided settled by
     :func:`_decide_ropes` when that succeeds (as it is otherwise). A failed inequality form tried first is
-    followed by the equality form, whose answer replaces it only when it succeeds with no rope pushing."""
+    followed by the equality form, whose answer replaces it only when it succeeds with no rope pushing.
+    Before those, a warm start with slack ropes (IPOPT) tries its own guess of them
+    (:func:`_warm_active_set`)."""
     solvers, build = {}, [0.0]
 
     def options_for(multipliers: bool) -> dict:
@@ -159,15 +162,17 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
     clock = {"t": 0.0, "it": 0}
     step_tol = STEP_RTOL * cmodel.mesh.size
 
-    def run(start, equality, released=None):
+    def run(start, equality, released=None, lam0=None):
         lbg, ubg = cmodel.nlp_bounds(p, equality_ropes=equality, released=released)
         t0 = time.perf_counter()
         kw = {}
         # every row an equality: IPOPT starts from the least-squares multipliers of the start, fitted here
-        # (a system the size of the rows) instead of by its own (one the size of the unknowns)
-        warm = plugin == "ipopt" and bool(np.all(lbg == ubg))
+        # (a system the size of the rows) instead of by its own (one the size of the unknowns); ``lam0``: the
+        # caller's fit, for rows that are equalities or released (no bound at all)
+        warm = plugin == "ipopt" and (bool(np.all(lbg == ubg)) or lam0 is not None)
         if warm:
-            kw["lam_g0"] = cmodel.multipliers(start, p, fixed, ropes_only_pull=False)[0] / cmodel.row_scale
+            lam0 = cmodel.multipliers(start, p, fixed, ropes_only_pull=False)[0] if lam0 is None else lam0
+            kw["lam_g0"] = lam0 / cmodel.row_scale
         solver = solver_for(warm)
         with interruptible(), quiet_stdout(plugin == "uno"):  # Ctrl-C stops here, not after the re-solve
             sol = solver(x0=start, p=pe, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **kw)
@@ -187,8 +192,14 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
     def pushing(lam, held):
         return np.broadcast_to(held, (nt,)) & (lam[:nt] < -push_tol)
 
+    forms = rope_forms(cmodel, p, x0)
+    guessed = _warm_active_set(run, cmodel, p, x0, fixed, forms, pushing) if plugin == "ipopt" else None
+    if guessed is not None:
+        sol, status, ok, lam, cert = guessed
+        return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build[0], lam,
+                               certified=bool(ok and cert))
     first = None  # a failed inequality form tried first: it stands unless the equality form does better
-    for equality in rope_forms(cmodel, p, x0):
+    for equality in forms:
         sol, status, ok, lam, cert = run(x0, equality)
         if equality:
             if ok and not pushing(lam, True).any():
@@ -214,6 +225,39 @@ def solve_constrained(plugin, opts, cmodel, p, x0, fixed, values, symbolic: bool
             first = (sol, status, ok, lam, cert)  # failed: the equality form next, if any
     return MinimizeOutcome(np.asarray(sol["x"]).ravel(), ok, status, clock["it"], clock["t"], build[0], lam,
                            certified=bool(ok and cert))
+
+
+def _warm_active_set(run, cmodel, p, x0, fixed, forms, pushing):
+    """A warm start's own guess of the slack ropes, solved first. From a state that is no prediction (an
+    earlier equilibrium, e.g. the previous frame of an animation), the least-squares multipliers of every row
+    at ``x0`` are those of the state it solved (its targets do not enter them): a rope they leave without
+    tension (at most :data:`SLACK_MULTIPLIER` x the force scale) was slack there and is released (its row
+    dropped), the others are held at their new lengths (equalities, started from those multipliers). The
+    answer is a KKT point of the inequality problem, returned as the solve's, when it succeeds with no held
+    rope pushing and no released rope longer than its target; otherwise None, and :func:`solve_constrained`
+    solves the forms of :func:`rope_forms` from ``x0`` as without it. None at once when no rope is released
+    (the equality form first is that guess) and for a start made by the KKT predictor (which has its own
+    guess, :func:`rope_forms`)."""
+    nt = cmodel.n_targets
+    if not nt or forms[0] is not True or cmodel.predicted_slack(x0, p) is not None:
+        return None
+    lam = cmodel.multipliers(x0, p, fixed, ropes_only_pull=False)[0]
+    released = lam[:nt] <= SLACK_MULTIPLIER * cmodel.force_scale(p)
+    if not released.any():
+        return None
+    lam[:nt][released] = 0.0
+    out = run(x0, ~released, released, lam)
+    if not out[2] or pushing(out[3], ~released).any():
+        return None
+    x = np.asarray(out[0]["x"]).ravel()
+    if np.any(released & ~cmodel.short_ropes(x, p, -1e-9)):  # a released rope longer than its target: it pulls
+        return None
+    return out
+
+
+#: a rope whose least-squares multiplier at a warm start is at most this fraction of the force scale (no
+#: tension but round-off) was slack in the state the start was solved as (:func:`_warm_active_set`)
+SLACK_MULTIPLIER = 1e-6
 
 
 def _decide_ropes(run, cmodel, p, sol, pushing):

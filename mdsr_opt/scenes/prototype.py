@@ -307,7 +307,7 @@ class VirtualPrototype:
         or the scene's muscles at the case's own contractions (:meth:`internal`, ``guess`` passed on)."""
         c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
-            return self.external(c.name)
+            return self.external(c.name, guess=guess)
         return self.internal(scene.muscles, c.contractions, guess=guess)
 
     def _solved(self, key):
@@ -345,9 +345,9 @@ class VirtualPrototype:
             shot.photo = self.photograph(shot.x, model)
         return shot
 
-    def external(self, case: str, photo: bool = True) -> PrototypeShot:
-        """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine
-        mesh, carried to the edge midpoints). Solved once: a second call returns the same shot."""
+    def external(self, case: str, photo: bool = True, guess=None) -> PrototypeShot:
+        """The prototype driven externally as the case ``case`` says (its anchors and drags on the fine mesh,
+        carried to the edge midpoints), from ``guess`` (as :meth:`internal`'s). Solved once per case."""
 
         if case not in self.fixed:
             raise ValueError(f"case {case!r} is internal driving or unknown; use internal() (external cases: "
@@ -358,7 +358,8 @@ class VirtualPrototype:
             anchors, dn, dp = self.fixed[case]
             if self.order == 2:
                 anchors, dn, dp = extend_prescribed(self.mesh, anchors, dn, dp)
-            res = solve_quadratic_external(self.model, anchors, dn, dp)
+            res = solve_quadratic_external(self.model, anchors, dn, dp, guess=None if guess is None else
+                                           transfer_state(self.design_mesh, guess, self.model.points))
             shot = self._keep(key, self._shot(res, photo))
         return shot
 
@@ -483,7 +484,8 @@ def measure(design_mesh, x_design, photo) -> dict:
             "n_unmatched": r.n_unmatched}
 
 
-def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, prefix: str = "") -> tuple[dict, dict]:
+def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, prefix: str = "",
+                  driving: bool = True) -> tuple[dict, dict]:
     """The paper's validation of one case against the virtual prototype.
 
     ``driving`` (Table 2 for an external case, Table 3 for an internal one): the design model's simulation
@@ -491,7 +493,8 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
     (:meth:`VirtualPrototype.drive`: the anchors and drags of the prototype's case of that name; or the
     scene's muscles at ``setup.case``'s contractions). ``design`` (Table 4):
     the target against a photograph of the prototype driven by the designed contractions of the designed
-    muscles (``design``, a :class:`~mdsr_opt.synthesis.results.DesignResult`; skipped when None).
+    muscles (``design``, a :class:`~mdsr_opt.synthesis.results.DesignResult`; skipped when None; ``driving``
+    False skips the driving: a job of its own beside the design's).
 
     Returns
     -------
@@ -535,9 +538,9 @@ def validate_case(prototype: VirtualPrototype, setup, design=None, log=None, pre
         x = None if x is None else np.asarray(x, dtype=float)
         return x if x is not None and x.shape == prototype.design_mesh.points.shape and np.isfinite(x).all() else None
 
-    run("driving", 2 if case.kind == "external" else 3,
-        lambda: prototype.drive(scene, case, guess=near(setup.target)),
-        None if case.kind == "external" else prototype.fixture_radius)
+    if driving:
+        run("driving", 2 if case.kind == "external" else 3, lambda: prototype.drive(scene, case, guess=near(
+            setup.target)), None if case.kind == "external" else prototype.fixture_radius)
     if design is not None:
         r_design = getattr(design, "anchor_radius", None)  # the fixtures the ropes were fitted to and exported with
         radius = float(r_design) if r_design is not None and np.isfinite(r_design) and r_design > 0 else \

@@ -486,9 +486,10 @@ def measure_case(scene: Scene, run: CaseRun, *, photo_size: tuple[int, int] = (5
 
 
 def measure_prototype(run: CaseRun, prototype: Any, *, log: Callable[[str], None] | None = None,
-                      prefix: str = "") -> float:
+                      prefix: str = "", driving: bool = True, design: bool = True) -> float:
     """The virtual prototype's part of :func:`measure_case`, on a run whose design is done: its validation of
-    the case's driving and design (``run.report.photo["prototype"]``, ``run.prototype_photos``). Returns the
+    the case's driving and design, or of one of them (``driving``, ``design``), added to
+    ``run.report.photo["prototype"]`` (``run.prototype_photos``: the photographs of this call). Returns the
     seconds it took."""
     from .prototype import validate_case
 
@@ -496,8 +497,8 @@ def measure_prototype(run: CaseRun, prototype: Any, *, log: Callable[[str], None
     if run.design is None:
         raise ValueError(f"case {rep.case!r} has no design to photograph")
     t = time.perf_counter()
-    metrics, shots = validate_case(prototype, run.setup, run.design, log=log, prefix=prefix)
-    rep.photo = dict(rep.photo or {}, prototype=metrics)
+    metrics, shots = validate_case(prototype, run.setup, run.design if design else None, log, prefix, driving)
+    rep.photo = dict(rep.photo or {}, prototype={**((rep.photo or {}).get("prototype") or {}), **metrics})
     run.prototype_photos = shots
     return time.perf_counter() - t
 

@@ -272,15 +272,17 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         if photos and run.design is not None and len(chained) > 1 and cname in chained:
             chain.append((run, prefix, parts[1:], written[cname][1]))
         elif photos and run.design is not None:
-            # the synthetic photograph and the virtual prototype are two jobs: the prototype's solves (the
-            # run's longest jobs) start at once on a free worker, the photograph beside them on the other
+            # the synthetic photograph and the virtual prototype's two drivings (its Table 2/3 and Table 4
+            # solves, the run's longest jobs) are three jobs, which free workers start costliest first; the
+            # case's photograph stage is done (one unit of progress) when the last, the design's, reports
             bg.submit(_photo_job, scene, run, photo_size, None, prefix, parts[2:],
                       on_done=functools.partial(_photo_done, run, written[cname][2], say, log if proto is None
                                                 else None), cost=photo_cost())
-            if proto is not None:
-                bg.submit(_prototype_job, run, proto, prefix, parts[1:2],
-                          on_done=functools.partial(_prototype_done, run, written[cname][1], say, log),
-                          cost=_photo_cost(run, proto) - photo_cost())
+            for part in (("driving", "design") if proto is not None else ()):
+                bg.submit(_prototype_job, run, proto, prefix, parts[1:2], part,
+                          on_done=functools.partial(_prototype_done, run, written[cname][1], say,
+                                                    log if part == "design" else None),
+                          cost=_prototype_cost(run, proto, part))
         elif photos:
             advance(log)  # no design to photograph: the case's photograph stage is done
         if chain and cname == chained[-1]:
@@ -509,19 +511,31 @@ def _photo_job(scene: Scene, run: CaseRun, photo_size, proto, prefix: str, write
     return {"photo": run.report.photo, "time": run.report.times["photo"], "files": files, "log": said}
 
 
-def _prototype_job(run: CaseRun, proto, prefix: str, writers=()) -> dict:
+def _prototype_cost(run: CaseRun, proto, part: str) -> float:
+    """The estimated cost of a :func:`_prototype_job` of ``part`` ``"driving"`` or ``"design"``: the
+    prototype's share of :func:`_photo_cost` (half a muscle for the external driving, as there)."""
+    share = _photo_cost(run, proto) - photo_cost()
+    muscles = len(run.setup.muscles) if run.setup is not None else 0
+    return share * (muscles if part == "design" else 0.5) / (muscles + 0.5)
+
+
+def _prototype_job(run: CaseRun, proto, prefix: str, writers=(), part: str = "both") -> dict:
     """A case's validation against the virtual prototype ``proto``
-    (:func:`~mdsr_opt.scenes.runner.measure_prototype`), then its photographs (``writers``)."""
+    (:func:`~mdsr_opt.scenes.runner.measure_prototype`): its ``part``, ``"driving"`` (Table 2/3),
+    ``"design"`` (Table 4) or ``"both"``; then its photographs (``writers``)."""
     said: list[str] = []
-    seconds = measure_prototype(run, proto, log=said.append, prefix=prefix)
+    seconds = measure_prototype(run, proto, log=said.append, prefix=prefix, driving=part != "design",
+                                design=part != "driving")
     files = [f for write in writers for f in write()]
     return {"prototype": run.report.photo["prototype"], "time": seconds, "files": files, "log": said}
 
 
 def _prototype_done(run: CaseRun, paths: list, say, log, got: dict) -> None:
-    """Put a :func:`_prototype_job`'s answer into the run (after its :func:`_photo_job`'s); the case's
-    photograph stage is done (one unit of ``log``'s progress)."""
-    run.report.photo = dict(run.report.photo or {}, prototype=got["prototype"])
+    """Put a :func:`_prototype_job`'s answer into the run (after its :func:`_photo_job`'s), beside that of
+    the case's other prototype job; with ``log``, the case's photograph stage is done (one unit of its
+    progress)."""
+    mine = (run.report.photo or {}).get("prototype") or {}
+    run.report.photo = dict(run.report.photo or {}, prototype={**mine, **got["prototype"]})
     _photo_done(run, paths, say, log, dict(got, photo=run.report.photo,
                                            time=run.report.times.get("photo", 0.0) + got["time"]), got["time"])
 
