@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
 from .routing_memo import rest_graph, rest_lists
+from .routing_spacing import joined_within
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -109,7 +110,7 @@ class Router:
         return self.mesh.edge_index[(a, b) if a < b else (b, a)]
 
     # -------------------------------------------------------------- seeds and first units
-    def regions(self, threshold_q: int, eligible: np.ndarray) -> list[list[int]]:
+    def regions(self, threshold_q: int, eligible: np.ndarray, spacing: float = 0.0) -> list[list[int]]:
         """Contracted regions, each as its strongly contracted edges (``wq >= threshold_q``), strongest first.
 
         A node is marked when an edge contracted by at least ``threshold_q`` (quantised) ends at it; a
@@ -134,6 +135,11 @@ class Router:
         link = np.flatnonzero(self.feasible & marked[E[:, 0]] & marked[E[:, 1]])
         A = csr_matrix((np.ones(len(link)), (E[link, 0], E[link, 1])), shape=(n, n))
         _, lab = connected_components(A, directed=False)
+        if spacing > 0:  # components closer than the seed spacing are one region (routing_spacing)
+            nodes = np.flatnonzero(marked)
+            comp, at = np.unique(lab[nodes], return_inverse=True)
+            groups = np.split(nodes[np.argsort(at, kind="stable")], np.cumsum(np.bincount(at))[:-1])
+            lab[nodes] = comp[joined_within(self.X, groups, spacing)][at]
         mid = np.asarray(self.midl)[idx]
         order = np.lexsort((mid[:, 1], mid[:, 0], -self.wq[idx]))
         out: dict[int, list[int]] = {}
@@ -509,7 +515,7 @@ class Router:
         w_ref_q = int(self.wq[order[min(reach, len(order) - 1)]])
         threshold_q = max(self.floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
         self.threshold_q = threshold_q  # the seed threshold reached (quantised), for a message when nothing seeds
-        regions = self.regions(threshold_q, compressed)
+        regions = self.regions(threshold_q, compressed, spacing)
         seeds = self.seed_units(regions, n_seeds, spacing)
         self.grow()
         return regions, seeds, self.settle_fragments(min_length)
