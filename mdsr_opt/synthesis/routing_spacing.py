@@ -50,18 +50,15 @@ def joined_within(P: np.ndarray, groups, spacing: float) -> np.ndarray:
             a = root[a]
         return a
 
-    pts = [P[list(g)] for g in groups]
-    lo = np.array([q.min(axis=0) for q in pts]) - spacing
-    hi = np.array([q.max(axis=0) for q in pts]) + spacing
-    trees = {}
-    for i in range(len(groups)):
-        for j in range(i + 1, len(groups)):
-            if find(i) == find(j) or np.any(pts[j].min(axis=0) > hi[i]) or np.any(pts[j].max(axis=0) < lo[i]):
-                continue
-            tree = trees.setdefault(i, shapely.STRtree(shapely.points(pts[i])))
-            if tree.query_nearest(shapely.points(pts[j]), max_distance=spacing, exclusive=False).size:
-                a, b = find(i), find(j)
-                root[max(a, b)] = min(a, b)
+    sizes = [len(g) for g in groups]
+    if len(groups) > 1:
+        owner = np.repeat(np.arange(len(groups)), sizes)
+        pts = shapely.points(P[np.concatenate([np.asarray(g, dtype=np.int64) for g in groups])])
+        ask = np.flatnonzero(owner != int(np.argmax(sizes)))  # the largest group's own pairs are never asked
+        i, j = shapely.STRtree(pts).query(pts[ask], predicate="dwithin", distance=spacing)
+        for a, b in {(int(owner[ask[u]]), int(owner[v])) for u, v in zip(i, j) if owner[ask[u]] != owner[v]}:
+            a, b = find(a), find(b)
+            root[max(a, b)] = min(a, b)
     return np.array([find(i) for i in range(len(groups))])
 
 
