@@ -106,17 +106,15 @@ def test_routed_ropes_are_apart_or_share_a_reported_plate(name):
         assert len({tuple(m.nodes) for m in r.muscles}) == len(r.muscles)
 
 
-def test_ropes_ending_on_one_node_share_a_reported_plate():
-    # the witness: a T whose ropes snapped into the band (the pooled searches) end on one node (the trial's tee
-    # did, until twin ropes beside stronger ones were dropped: routing_spacing)
-    mesh, x = _body("T")
+def test_the_tee_ropes_ending_on_one_node_share_a_reported_plate():
+    mesh, x = _body("tee")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rr = route_for_design(mesh, x, band="offset+long")
+        rr = route_for_design(mesh, x)
     P = mesh.points
     same = [(a, b) for a, b in _plates(P, [list(m.nodes) for m in rr.muscles], rr.fixture_radius)
             if a[1] == b[1]]
-    assert same, "the case no longer routes two ropes to one node: pick another witness"
+    assert same, "the trial's case no longer routes two ropes to one node: pick another witness"
     (_, node), _ = same[0]
     note = next(n for n in rr.notes if "share one end fixture" in n and f"({P[node][0]:.4g}, {P[node][1]:.4g})" in n)
     assert "their ends lie 0 apart" in note and f"fixture radius {rr.fixture_radius:.4g}" in note

@@ -10,10 +10,10 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    of total rest length four mean edge lengths; one short edge at a corner would dominate ``w_max``),
    counting only compression: an edge whose contraction is smaller than the largest principal stretch
    of the triangles beside it is the sideways (Poisson) response of a stretched region, which a cable
-   cannot produce. Sets closer than :data:`SEED_SPACING` times the body's diameter are one region (a fine
-   mesh's noisy weights break a region into islands). Each region is seeded on its own with its ``n_seeds``
-   most contracted edges (a global top-n would put every seed in the most contracted region); a seed nearer
-   than the spacing to a unit already made starts none.
+   cannot produce. A region nearer than :data:`SEED_SPACING` times the body's diameter (through the body)
+   to one holding ten times its contraction is its fragment and not seeded (a fine mesh's noisy weights
+   break off islands). Each region is seeded on its own with its ``n_seeds`` most contracted edges (a global top-n
+   would put every seed in the most contracted region); a seed nearer than the spacing to a unit made starts none.
 2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
    continuation first, every turn within ``max_turn`` and every edge passing the same gate ``g <= 1`` as
    growth (below), so no seed joins edges that contract very differently; each path is a muscle unit.
@@ -287,8 +287,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
         and splice joints alike; ``band="offset"``: up to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN`).
     seed_threshold : float, default 0.6
-        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref`` (sets closer
-        than :data:`SEED_SPACING` of the body's diameter joined); each region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
+        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref`` (but islands
+        within :data:`SEED_SPACING` of the diameter of one holding far more); each gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
         length four mean edge lengths (so one short edge at a corner cannot set it).
     symmetry : {"auto", True, False}, default "auto"
         Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
@@ -479,7 +479,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
     found.sort(key=lambda t: t[:3])
     # the spacing holds for the grown ropes too: a rope beside stronger ones is their twin (routing_spacing)
-    twins = parallel_twins(mesh.points, [f[3] for f in found], max(knobs["spacing"], fab.channel_diameter + fab.wall
+    twins = parallel_twins(mesh, [f[3] for f in found], max(knobs["spacing"], fab.channel_diameter + fab.wall
                            if fab else 0.0), [f[5] for f in found], None if reflection is None else router.mirror_uid)
     dropped += [DroppedUnit(tuple(found[i][3]), float(l0[found[i][4]].sum()), why) for i, why in twins.items()]
     found = [f for i, f in enumerate(found) if i not in twins]
@@ -550,8 +550,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
     """:func:`route_muscles` as the pipeline routes (:func:`~mdsr_opt.design_pipeline`, ``mdsr run``). Ropes
-    dropped or cut for their fixtures: route again deeper inside with the smallest fixtures (kept if its ropes
-    shorten more in the target; more ropes alone are no gain); no rope kept with the default ``K_a`` (4): again with ``K_a = 1``; ropes still lost inside the band:
+    dropped or cut for their fixtures: route again deeper inside with the smallest fixtures (kept if it keeps
+    more ropes, or ropes that shorten :data:`OFFSET_GAIN` times more in the target); no rope kept with the default ``K_a`` (4): again with ``K_a = 1``; ropes still lost inside the band:
     route on every contracted edge and snap into the band (``band="offset"``, kept when its ropes capture
     :data:`OFFSET_GAIN` times more contraction). Each change is said first in ``result.notes``; a ``K_a`` or
     ``band`` given, or ``fabrication=False``, is used as given; the kept routing's warnings are re-emitted.
@@ -585,7 +585,7 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
         f = fab.for_body(mesh)
         deep, caught_deep = attempt(dict(options, inset=f.min_fixture_radius + f.wall,
                                          fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
-        if _captured(deep) > _captured(rr):  # its ropes shorten more in the target (not merely more ropes)
+        if len(deep) > len(rr) or _captured(deep) > OFFSET_GAIN * _captured(rr):  # or clearly more shortening
             note = (f"{len(rr)} rope(s) kept at the fabrication's clearance, shortening by {_captured(rr):.4g} in the "
                     f"target; routed again with every rope node {f.min_fixture_radius + f.wall:.4g} inside the body, "
                     f"fixtures shrunk from radius {f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "

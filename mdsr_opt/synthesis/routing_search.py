@@ -19,7 +19,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
 from .routing_memo import rest_graph, rest_lists
-from .routing_spacing import joined_within
+from .routing_spacing import apart_from_stronger
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -121,8 +121,8 @@ class Router:
         Regions are ordered by the contraction they hold (``sum w * l0`` over their strong edges), then by
         their strongest edge and rest geometry: a small island of strongly contracted edges (where a mesh's
         first ring of nodes round a hole happens to clear the ropes' inset) would otherwise be seeded first
-        and, through the seed spacing, keep the ring just outside it from being seeded.
-        """
+        and, through the seed spacing, keep the ring just outside it from being seeded. Islands beside a region
+        holding far more are left out (routing_spacing)."""
         E = self.mesh.edges
         self.eligible = eligible  # for the rings of seed_units
         strong = self.feasible & (self.wq >= threshold_q) & eligible
@@ -135,11 +135,6 @@ class Router:
         link = np.flatnonzero(self.feasible & marked[E[:, 0]] & marked[E[:, 1]])
         A = csr_matrix((np.ones(len(link)), (E[link, 0], E[link, 1])), shape=(n, n))
         _, lab = connected_components(A, directed=False)
-        if spacing > 0:  # components closer than the seed spacing are one region (routing_spacing)
-            nodes = np.flatnonzero(marked)
-            comp, at = np.unique(lab[nodes], return_inverse=True)
-            groups = np.split(nodes[np.argsort(at, kind="stable")], np.cumsum(np.bincount(at))[:-1])
-            lab[nodes] = comp[joined_within(self.X, groups, spacing)][at]
         mid = np.asarray(self.midl)[idx]
         order = np.lexsort((mid[:, 1], mid[:, 0], -self.wq[idx]))
         out: dict[int, list[int]] = {}
@@ -150,7 +145,12 @@ class Router:
         # (mirror regions' rest lengths differ by round-off; the stable sort keeps them in the order above)
         hold = np.array([float(np.dot(self.wq[r], self.l0[r])) for r in regions])
         hold = np.rint(hold / (1e-6 * hold.max())).astype(np.int64)
-        return [regions[i] for i in np.argsort(-hold, kind="stable").tolist()]
+        order = np.argsort(-hold, kind="stable")
+        regions = [regions[i] for i in order.tolist()]
+        if spacing > 0:  # an island beside a region holding far more is its fragment (routing_spacing)
+            regions = [r for r, ok in zip(regions, apart_from_stronger(self.mesh, [E[r].ravel() for r in regions],
+                                                                        spacing, hold[order])) if ok]
+        return regions
 
     def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
         """First units: the ring ropes round squeezed holes (:meth:`rings`), then region by region: the
