@@ -10,10 +10,10 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    of total rest length four mean edge lengths; one short edge at a corner would dominate ``w_max``),
    counting only compression: an edge whose contraction is smaller than the largest principal stretch
    of the triangles beside it is the sideways (Poisson) response of a stretched region, which a cable
-   cannot produce. A region nearer than :data:`SEED_SPACING` times the body's diameter (through the body)
-   to one holding ten times its contraction is its fragment and not seeded (a fine mesh's noisy weights
-   break off islands). Each region is seeded on its own with its ``n_seeds`` most contracted edges (a global top-n
-   would put every seed in the most contracted region); a seed nearer than the spacing to a unit made starts none.
+   cannot produce. Each region is seeded on its own with its ``n_seeds`` most contracted edges (a global
+   top-n would put every seed in the most contracted region), but an island nearer than :data:`SEED_SPACING`
+   times the body's diameter (through the body) to a region holding ten times its contraction is not seeded;
+   a seed nearer than the spacing to a unit already made starts none.
 2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
    continuation first, every turn within ``max_turn`` and every edge passing the same gate ``g <= 1`` as
    growth (below), so no seed joins edges that contract very differently; each path is a muscle unit.
@@ -34,9 +34,8 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
 4. **Fragments and selection.** Units shorter than ``min_length`` are spliced into a neighbouring unit
    end (within the tortuosity limit, and ``K_a * share * g_a <= 1`` with ``share`` the fragment's share
    of the joined edges) or dropped; the result's ``dropped`` records each with the reason.
-   The rest are ranked by the contraction they capture (``sum w * l0``); a rope within the spacing of
-   stronger ones over half its length is their twin and dropped (:mod:`~mdsr_opt.synthesis.routing_spacing`);
-   at most ``max_muscles`` are kept.
+   The rest are ranked by the contraction they capture (``sum w * l0``), twins of stronger ones dropped (within
+   the spacing over half their length: :mod:`~mdsr_opt.synthesis.routing_spacing`), at most ``max_muscles`` kept.
 5. **Symmetry.** When the body is mirror-symmetric and the target contracts mirrored edges alike,
    every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
@@ -287,9 +286,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
         and splice joints alike; ``band="offset"``: up to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN`).
     seed_threshold : float, default 0.6
-        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref`` (but islands
-        within :data:`SEED_SPACING` of the diameter of one holding far more); each gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
-        length four mean edge lengths (so one short edge at a corner cannot set it).
+        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref`` (islands
+        beside far stronger ones aside); each gets its own seeds. ``w_ref``: the largest contraction reached
+        by edges of total rest length four mean edge lengths (so one short edge at a corner cannot set it).
     symmetry : {"auto", True, False}, default "auto"
         Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
         mirrored edges contract alike (within ``1e-6 * max|w|``). ``True`` requires that and raises
@@ -551,10 +550,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
     """:func:`route_muscles` as the pipeline routes (:func:`~mdsr_opt.design_pipeline`, ``mdsr run``). Ropes
     dropped or cut for their fixtures: route again deeper inside with the smallest fixtures (kept if it keeps
-    more ropes, or ropes that shorten :data:`OFFSET_GAIN` times more in the target); no rope kept with the default ``K_a`` (4): again with ``K_a = 1``; ropes still lost inside the band:
-    route on every contracted edge and snap into the band (``band="offset"``, kept when its ropes capture
-    :data:`OFFSET_GAIN` times more contraction). Each change is said first in ``result.notes``; a ``K_a`` or
-    ``band`` given, or ``fabrication=False``, is used as given; the kept routing's warnings are re-emitted.
+    more ropes, or ropes that shorten :data:`OFFSET_GAIN` times more); no rope kept with the default ``K_a``
+    (4): again with ``K_a = 1``; ropes still lost inside the band: route on every contracted edge and snap
+    into the band (``band="offset"``, kept when its ropes capture :data:`OFFSET_GAIN` times more contraction).
+    Each change is said first in ``result.notes``; a ``K_a`` or ``band`` given, or ``fabrication=False``, is
+    used as given; the kept routing's warnings are re-emitted.
 
     Example
     -------
