@@ -10,9 +10,10 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
    of total rest length four mean edge lengths; one short edge at a corner would dominate ``w_max``),
    counting only compression: an edge whose contraction is smaller than the largest principal stretch
    of the triangles beside it is the sideways (Poisson) response of a stretched region, which a cable
-   cannot produce. Each region is seeded on its own with its ``n_seeds`` most contracted edges (a
-   global top-n would put every seed in the most contracted region); a seed nearer than
-   :data:`SEED_SPACING` times the body's diameter to a unit already made starts none.
+   cannot produce. Each region is seeded on its own with its ``n_seeds`` most contracted edges (a global
+   top-n would put every seed in the most contracted region), but an island nearer than :data:`SEED_SPACING`
+   times the body's diameter (through the body) to a region holding ten times its contraction is not seeded;
+   a seed nearer than the spacing to a unit already made starts none.
 2. **First units.** Each connected component of the seed edges is cut into simple paths, straightest
    continuation first, every turn within ``max_turn`` and every edge passing the same gate ``g <= 1`` as
    growth (below), so no seed joins edges that contract very differently; each path is a muscle unit.
@@ -33,7 +34,8 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
 4. **Fragments and selection.** Units shorter than ``min_length`` are spliced into a neighbouring unit
    end (within the tortuosity limit, and ``K_a * share * g_a <= 1`` with ``share`` the fragment's share
    of the joined edges) or dropped; the result's ``dropped`` records each with the reason.
-   The rest are ranked by the contraction they capture (``sum w * l0``), and at most ``max_muscles`` kept.
+   The rest are ranked by the contraction they capture (``sum w * l0``), twins of stronger ones dropped (within
+   the spacing over half their length: :mod:`~mdsr_opt.synthesis.routing_spacing`), at most ``max_muscles`` kept.
 5. **Symmetry.** When the body is mirror-symmetric and the target contracts mirrored edges alike,
    every step is taken together with its mirror image (:mod:`mdsr_opt.synthesis.routing_symmetry`), so the
    muscles are mirror pairs or their own mirror images, node for node.
@@ -124,7 +126,8 @@ from .routing_memo import memoised, shared_work
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_turn
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
-from .routing_why import beside_stretch, no_seed_message
+from .routing_spacing import parallel_twins
+from .routing_why import compression_dominated, no_seed_message
 
 __all__ = [
     "contraction_graph",
@@ -283,9 +286,9 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         Tortuosity rule, degrees: no muscle turns by more than this at any node (seed paths, growth steps
         and splice joints alike; ``band="offset"``: up to :data:`~mdsr_opt.synthesis.routing_band.SNAP_TURN`).
     seed_threshold : float, default 0.6
-        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref``; each
-        region gets its own seeds. ``w_ref`` is the largest contraction reached by edges of total rest
-        length four mean edge lengths (so one short edge at a corner cannot set it).
+        Contracted regions are the connected sets of edges with ``w >= seed_threshold * w_ref`` (islands
+        beside far stronger ones aside); each gets its own seeds. ``w_ref``: the largest contraction reached
+        by edges of total rest length four mean edge lengths (so one short edge at a corner cannot set it).
     symmetry : {"auto", True, False}, default "auto"
         Route mirrored pairs of muscles when the body is mirror-symmetric (``find_reflections``) and
         mirrored edges contract alike (within ``1e-6 * max|w|``). ``True`` requires that and raises
@@ -361,10 +364,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     if max_muscles is not None:
         max_muscles = check_int(max_muscles, "max_muscles", 1)
     ell = float(mesh.edge_lengths.mean())
-    if min_length is None:
-        min_length = 2.0 * ell
-    else:
-        min_length = positive_float(min_length, "min_length", allow_zero=True)
+    min_length = 2.0 * ell if min_length is None else positive_float(min_length, "min_length", allow_zero=True)
     min_contraction = positive_float(min_contraction, "min_contraction", allow_zero=True)
     if min_contraction >= 1.0:
         raise ValueError("min_contraction must be < 1 (a fraction of the rest length), "
@@ -450,7 +450,7 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
                      f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
                      "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
     compressed = memoised(("compressed", id(mesh), hash(x.tobytes()), compression_ratio),
-                          lambda: _compression_dominated(mesh, x, w, compression_ratio))
+                          lambda: compression_dominated(mesh, x, w, compression_ratio))
     knobs = dict(seed_threshold=seed_threshold, compressed=compressed, n_seeds=n_seeds,
                  spacing=SEED_SPACING * body_size(mesh), min_length=min_length)
     regions, seeds, dropped = memoised(("search",) + key, lambda: router.search(**knobs))
@@ -477,6 +477,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         strength = sum(router.wql[k] * l0[k] for k in ks)
         found.append([-strength, tuple(router.XL[path[0]]), tuple(router.XL[path[-1]]), path, ks, uid])
     found.sort(key=lambda t: t[:3])
+    # the spacing holds for the grown ropes too: a rope beside stronger ones is their twin (routing_spacing)
+    twins = parallel_twins(mesh, [f[3] for f in found], max(knobs["spacing"], fab.channel_diameter + fab.wall
+                           if fab else 0.0), [f[5] for f in found], None if reflection is None else router.mirror_uid)
+    dropped += [DroppedUnit(tuple(found[i][3]), float(l0[found[i][4]].sum()), why) for i, why in twins.items()]
+    found = [f for i, f in enumerate(found) if i not in twins]
     fit = (FixtureFit(tuple((i, tuple(f[3])) for i, f in enumerate(found)), None, (), ()) if fab is None
            else fit_fixtures(mesh, [f[3] for f in found], fab))
     for i, why in fit.dropped:
@@ -545,10 +550,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
 def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
     """:func:`route_muscles` as the pipeline routes (:func:`~mdsr_opt.design_pipeline`, ``mdsr run``). Ropes
     dropped or cut for their fixtures: route again deeper inside with the smallest fixtures (kept if it keeps
-    more); no rope kept with the default ``K_a`` (4): again with ``K_a = 1``; ropes still lost inside the band:
-    route on every contracted edge and snap into the band (``band="offset"``, kept when its ropes capture
-    :data:`OFFSET_GAIN` times more contraction). Each change is said first in ``result.notes``; a ``K_a`` or
-    ``band`` given, or ``fabrication=False``, is used as given; the kept routing's warnings are re-emitted.
+    more ropes, or ropes that shorten :data:`OFFSET_GAIN` times more); no rope kept with the default ``K_a``
+    (4): again with ``K_a = 1``; ropes still lost inside the band: route on every contracted edge and snap
+    into the band (``band="offset"``, kept when its ropes capture :data:`OFFSET_GAIN` times more contraction).
+    Each change is said first in ``result.notes``; a ``K_a`` or ``band`` given, or ``fabrication=False``, is
+    used as given; the kept routing's warnings are re-emitted.
 
     Example
     -------
@@ -579,11 +585,11 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
         f = fab.for_body(mesh)
         deep, caught_deep = attempt(dict(options, inset=f.min_fixture_radius + f.wall,
                                          fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
-        if len(deep) > len(rr):
-            note = (f"{len(rr)} rope(s) kept at the fabrication's clearance; routed again with every rope node "
-                    f"{f.min_fixture_radius + f.wall:.4g} inside the body, fixtures shrunk from radius "
-                    f"{f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "
-                    f"{len(deep)} kept")
+        if len(deep) > len(rr) or _captured(deep) > OFFSET_GAIN * _captured(rr):  # or clearly more shortening
+            note = (f"{len(rr)} rope(s) kept at the fabrication's clearance, shortening by {_captured(rr):.4g} in the "
+                    f"target; routed again with every rope node {f.min_fixture_radius + f.wall:.4g} inside the body, "
+                    f"fixtures shrunk from radius {f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "
+                    f"{len(deep)} kept, shortening by {_captured(deep):.4g}")
             rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
@@ -612,9 +618,3 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
 def _captured(rr: RoutingResult) -> float:
     """How much the ropes of a routing shorten in its target, summed (rest minus target length)."""
     return float(sum(st.rest_length - st.target_length for st in rr.stats))
-
-
-def _compression_dominated(mesh: Mesh, x: np.ndarray, w: np.ndarray, ratio: float = 1.0) -> np.ndarray:
-    """Edges whose contraction exceeds ``ratio`` times the largest principal stretch (``sigma_1 - 1``) of the
-    triangles beside them: compression, not the sideways (Poisson) response of a stretched region."""
-    return w > ratio * beside_stretch(mesh, x)

@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
 from .routing_memo import rest_graph, rest_lists
+from .routing_spacing import apart_from_stronger
 
 __all__ = ["Router", "mismatch", "turn_cost"]
 
@@ -109,7 +110,7 @@ class Router:
         return self.mesh.edge_index[(a, b) if a < b else (b, a)]
 
     # -------------------------------------------------------------- seeds and first units
-    def regions(self, threshold_q: int, eligible: np.ndarray) -> list[list[int]]:
+    def regions(self, threshold_q: int, eligible: np.ndarray, spacing: float = 0.0) -> list[list[int]]:
         """Contracted regions, each as its strongly contracted edges (``wq >= threshold_q``), strongest first.
 
         A node is marked when an edge contracted by at least ``threshold_q`` (quantised) ends at it; a
@@ -120,8 +121,8 @@ class Router:
         Regions are ordered by the contraction they hold (``sum w * l0`` over their strong edges), then by
         their strongest edge and rest geometry: a small island of strongly contracted edges (where a mesh's
         first ring of nodes round a hole happens to clear the ropes' inset) would otherwise be seeded first
-        and, through the seed spacing, keep the ring just outside it from being seeded.
-        """
+        and, through the seed spacing, keep the ring just outside it from being seeded. Islands beside a region
+        holding far more are left out (routing_spacing)."""
         E = self.mesh.edges
         self.eligible = eligible  # for the rings of seed_units
         strong = self.feasible & (self.wq >= threshold_q) & eligible
@@ -144,7 +145,12 @@ class Router:
         # (mirror regions' rest lengths differ by round-off; the stable sort keeps them in the order above)
         hold = np.array([float(np.dot(self.wq[r], self.l0[r])) for r in regions])
         hold = np.rint(hold / (1e-6 * hold.max())).astype(np.int64)
-        return [regions[i] for i in np.argsort(-hold, kind="stable").tolist()]
+        order = np.argsort(-hold, kind="stable")
+        regions = [regions[i] for i in order.tolist()]
+        if spacing > 0:  # an island beside a region holding far more is its fragment (routing_spacing)
+            regions = [r for r, ok in zip(regions, apart_from_stronger(self.mesh, [E[r].ravel() for r in regions],
+                                                                        spacing, hold[order])) if ok]
+        return regions
 
     def seed_units(self, regions: list[list[int]], n_seeds: int, spacing: float = 0.0) -> list[int]:
         """First units: the ring ropes round squeezed holes (:meth:`rings`), then region by region: the
@@ -509,7 +515,7 @@ class Router:
         w_ref_q = int(self.wq[order[min(reach, len(order) - 1)]])
         threshold_q = max(self.floor_q + 1, int(math.ceil(seed_threshold * w_ref_q)))
         self.threshold_q = threshold_q  # the seed threshold reached (quantised), for a message when nothing seeds
-        regions = self.regions(threshold_q, compressed)
+        regions = self.regions(threshold_q, compressed, spacing)
         seeds = self.seed_units(regions, n_seeds, spacing)
         self.grow()
         return regions, seeds, self.settle_fragments(min_length)

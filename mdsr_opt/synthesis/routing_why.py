@@ -16,7 +16,7 @@ import numpy as np
 
 from .fabrication import MIN_INSET_FRACTION
 
-__all__ = ["beside_stretch", "no_seed_message"]
+__all__ = ["beside_stretch", "compression_dominated", "no_seed_message"]
 
 #: The contraction the message counts edges above, as the user reads a target ("8 edges contract > 5 %").
 NOTABLE_CONTRACTION = 0.05
@@ -31,6 +31,12 @@ def beside_stretch(mesh, x: np.ndarray) -> np.ndarray:
     for j in range(3):
         np.maximum.at(s_edge, mesh.edge_rows(T[:, j], T[:, (j + 1) % 3]), stretch)
     return s_edge
+
+
+def compression_dominated(mesh, x: np.ndarray, w: np.ndarray, ratio: float = 1.0) -> np.ndarray:
+    """Edges whose contraction exceeds ``ratio`` times the largest principal stretch (``sigma_1 - 1``) of the
+    triangles beside them: compression, not the sideways (Poisson) response of a stretched region."""
+    return w > ratio * beside_stretch(mesh, x)
 
 
 def _pct(v: float) -> str:
