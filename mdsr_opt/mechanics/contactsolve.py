@@ -42,6 +42,14 @@ __all__ = ["ContactSpec", "ContactProblem", "contact_residual", "polish", "conta
            "row_key"]
 
 
+#: IPOPT's first barrier parameter in a solve with contact rows (its default is 0.1). A load step starts from
+#: an admissible state in which touching pairs sit at their gap, a slack of about ``gap``; a barrier of 0.1
+#: pushes them apart with a force ``mu / slack`` hundreds of times the elastic forces, IPOPT's first
+#: iterates tear a crease open and it may never come back (an iteration cap reached, or a state far from the
+#: load step's start that crosses pairs the broad phase did not see)
+MU_INIT = 1e-5
+
+
 @dataclass
 class ContactSpec:
     """What contact a solve models (on the unit body): ``obstacles`` (list), ``self_contact``, ``gap`` and
@@ -143,6 +151,8 @@ class ContactProblem:
              "ipopt.max_iter": int(max_iter), "ipopt.linear_solver": "mumps", "error_on_fail": False,
              "calc_lam_p": False, "calc_lam_x": False, "ipopt.fixed_variable_treatment": "make_parameter_nodual",
              "ipopt.bound_relax_factor": 0.0, "show_eval_warnings": False}
+        if rows.n_rows:
+            o["ipopt.mu_init"] = MU_INIT
         o.update(options or {})
         o = with_stop_callback(o)
         if numeric:

@@ -72,19 +72,24 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         x1 = out.x
         why = prob.penetrates(x1)
         new = merge_rows(rows, prob.rows_for(x_ref, [x_ref, guess, x1]), drop)
+        if why is None:  # and the pairs of the solve's own state (admissible: the next solve starts from it),
+            # e.g. a point come to a segment's end that projected beyond it where the step started
+            new = merge_rows(new, prob.rows_for(x1, [x1]), drop)
         swapped, swap_in = set(), set()
-        if rows.n_rows:  # a pair whose point is beyond its segment's end holds it against the extended line:
-            # dropped, its point handed to the segment it slid to
+        if rows.n_rows:  # a pair whose point is beyond its segment's end: its point handed to the segment it
+            # slid to, the pair dropped unless its gap lets it go there (a released row, RELEASE: kept, for the
+            # point may slide back within the step)
             t = rows.projections(x1)
             outside = ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
-            for i in np.flatnonzero(outside):
+            for i in np.flatnonzero(outside & (rows.w[:, 1] <= 0)):
                 drop.add(row_key(rows, i))
             if outside.any():
                 hand, swapped, swap_in = _hand_over(prob, rows, np.flatnonzero(outside), t, x1, step_tol, final)
                 new = merge_rows(new, hand, drop)
                 handed = merge_rows(handed, hand)  # kept for a crossing no pair prevents
-        grew = {row_key(new, i) for i in range(new.n_rows)} - swap_in != \
-            {row_key(rows, i) for i in range(rows.n_rows)} - swapped
+        keys_new = {row_key(new, i) for i in range(new.n_rows)}
+        keys_old = {row_key(rows, i) for i in range(rows.n_rows)}
+        grew = bool(keys_new - keys_old - swap_in) or bool(keys_old - keys_new - swapped)
         if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
             new = merge_rows(merge_rows(new, handed, drop), first_touch_rows(prob.mesh, x_ref, x1,
                                                                               1e-9 * prob.mesh.size), drop)
@@ -238,6 +243,7 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
         steps, iters, t_solve, t_build, status = [], 0, 0.0, 0.0, "not started"
         rows = _empty(prob)
         lam_last = None
+        plain_wins = False  # a load step failed from the predictor and was solved from the plain guess
         while s < 1.0 - 1e-12:
             check_stop()
             if ds < min_step:
@@ -246,17 +252,31 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
             s_new = min(1.0, s + ds)
             p, vals = p_of(s_new), values_of(s_new)
             t0 = time.perf_counter()
-            guess = predict_state(prob.solver_model, p, x, fixed, vals) if predict else None
+            guess = predict_state(prob.solver_model, p, x, fixed, vals) if predict and not (plain_wins and rows.n_rows) \
+                else None
             t_solve += time.perf_counter() - t0
+            plain = x.copy()  # the state the step starts from with only the fixed nodes moved
+            plain[fixed] = vals
+            predicted = True
             if guess is None or min_jacobian(mesh, guess) <= 0.0 or prob.penetrates(guess) is not None:
-                guess = x.copy()
-                guess[fixed] = vals
+                guess, predicted = plain, False
                 if min_jacobian(mesh, guess) <= 0.0:
                     status = "first guess inverts an element"
                     ds /= 2
                     continue
             cap = max_iter if ds < 4 * min_step else min(max_iter, 100)
             out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose)
+            if not out.success and predicted and min_jacobian(mesh, plain) > 0.0:
+                # the Newton predictor models no contact: where the body presses on itself (a crease) it can
+                # move nodes many elements for a short load step, and the pairs the broad phase then admits
+                # hold a state far from this one. Again from the state the step starts from
+                first = out
+                out, r = contact_step(prob, p, x, plain, fixed, vals, tol, cap, options, s_new >= 1.0, loose)
+                out.iterations += first.iterations
+                out.solve_time += first.solve_time
+                out.build_time += first.build_time
+                if out.success:  # and while the body touches itself, no predictor
+                    guess, plain_wins = plain, True
             lam_last = out.lam_g if r.n_rows else None
             iters += out.iterations
             t_solve += out.solve_time
