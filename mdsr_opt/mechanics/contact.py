@@ -43,7 +43,7 @@ __all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments", "first_to
 #: a pair is made while its point projects within [-DELTA, 1 + DELTA] of the segment
 DELTA = 0.25
 
-#: the weight of a self-contact row's release: beyond ``[-DELTA, 1 + DELTA]`` its gap grows by
+#: the weight of a self-contact row's release (careful load steps, :mod:`~mdsr_opt.mechanics.contactsteps`): beyond ``[-DELTA, 1 + DELTA]`` its gap grows by
 #: ``RELEASE |b - a| e^2`` (``e`` how far beyond, in segment lengths), so a point that slides past the
 #: segment's end within a solve is not held against the extended line (the segment next to it, or the
 #: crossing check, takes over); within the range the gap is the line distance
@@ -269,11 +269,12 @@ def _point_segment(p, a, b):
 
 
 def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: bool = True,
-                tol: float = 0.0) -> ContactRows:
+                tol: float = 0.0, release: float = 0.0) -> ContactRows:
     """Candidate rows: pairs that come within ``radius`` in any of ``states`` ((n, 2) each) and whose point
     lies on the outer side of the segment (``g >= -tol``) projecting within ``[-DELTA, 1 + DELTA]`` in ``x_ref``
     (a state without penetration: the start of the step).
 
+    ``release``: the self-contact rows' release weight (:data:`RELEASE`; 0: held against the extended line).
     Self-contact pairs a boundary node with every boundary segment not its own (at a straight or convex
     boundary its neighbours project beyond the segment's ends and are left out; at a fold they are not);
     obstacles add their rows for boundary nodes (and a polygon's corners against body segments)."""
@@ -314,7 +315,7 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
             ok &= (g >= -tol) & (t >= -DELTA) & (t <= 1 + DELTA)
             for q, aa, bb in zip(p[ok], a[ok], b[ok]):
                 pts.append((q, aa, bb))
-                w.append((0.0, RELEASE))
+                w.append((0.0, release))
                 labels.append((0, -1))
         # creases: the outside angle at a boundary node kept positive where it folds (below FOLD_ANGLE) in some
         # state, or where it went through zero in one (from below 5 pi / 4 in the reference state to above
@@ -395,7 +396,7 @@ def _segments_meet(p, q, r, s) -> np.ndarray:
     return (o1 * o2 <= 0) & (o3 * o4 <= 0)
 
 
-def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> ContactRows:
+def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40, release: float = 0.0) -> ContactRows:
     """Self-contact rows for the crossings a solve made: for each pair of boundary segments that share no node
     and meet in ``x1`` ((n, 2)) but not in the admissible state ``x0``, the state of first touch along the
     straight path from ``x0`` to ``x1`` (bisection), and there the node-segment pair of the four (an end of
@@ -444,10 +445,10 @@ def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> Co
     if not pts:
         return empty
     P = np.array(sorted(pts), dtype=np.int64)
-    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, RELEASE], (len(P), 1)), np.tile([0, -1], (len(P), 1)))
+    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, release], (len(P), 1)), np.tile([0, -1], (len(P), 1)))
 
 
-def handoff_rows(mesh, rows: ContactRows, which, t, x=None) -> ContactRows:
+def handoff_rows(mesh, rows: ContactRows, which, t, x=None, release: float = 0.0) -> ContactRows:
     """Self-contact rows that take over from the rows ``which`` of ``rows`` whose point ``t`` (their
     projections) slid beyond an end of their segment: the point against the boundary segment next to that end
     (the one before ``a`` for ``t < 0``, after ``b`` for ``t > 1``), unless the point is one of its ends.
@@ -472,4 +473,4 @@ def handoff_rows(mesh, rows: ContactRows, which, t, x=None) -> ContactRows:
         if best is not None:
             out.add(best[1])
     P = np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
-    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, RELEASE], (len(P), 1)), np.tile([0, -1], (len(P), 1)))
+    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, release], (len(P), 1)), np.tile([0, -1], (len(P), 1)))

@@ -42,14 +42,6 @@ __all__ = ["ContactSpec", "ContactProblem", "contact_residual", "polish", "conta
            "row_key"]
 
 
-#: IPOPT's first barrier parameter in a solve with contact rows (its default is 0.1). A load step starts from
-#: an admissible state in which touching pairs sit at their gap, a slack of about ``gap``; a barrier of 0.1
-#: pushes them apart with a force ``mu / slack`` hundreds of times the elastic forces, IPOPT's first
-#: iterates tear a crease open and it may never come back (an iteration cap reached, or a state far from the
-#: load step's start that crosses pairs the broad phase did not see)
-MU_INIT = 1e-5
-
-
 @dataclass
 class ContactSpec:
     """What contact a solve models (on the unit body): ``obstacles`` (list), ``self_contact``, ``gap`` and
@@ -78,6 +70,7 @@ class ContactProblem:
         self.friction_term = None  # the step's FrictionTerm (contact_step sets it), None without friction
         self.normal_lag: dict = {}  # row key -> the normal force the friction of the next solve takes
         self.lag_error = 0.0  # the last step's relative change of the lagged normal forces
+        self.release = 0.0  # the release weight of new self-contact rows (contact.RELEASE in careful load steps)
 
     def friction_rows(self, rows: ContactRows) -> np.ndarray:
         """The rows that carry friction: a body node against an obstacle (none without friction)."""
@@ -111,7 +104,7 @@ class ContactProblem:
         move = max(float(np.abs(np.asarray(s).reshape(-1) - np.asarray(x_ref).reshape(-1)).max()) for s in states)
         radius = 0.5 * self.h + 2.0 * move + self.spec.gap + extra
         return broad_phase(self.mesh, x_ref, states, radius, self.spec.obstacles, self.spec.self_contact,
-                           tol=1e-9 * self.mesh.size)
+                           tol=1e-9 * self.mesh.size, release=self.release)
 
     def penetrates(self, x) -> str | None:
         """Why ``x`` (2n,) is not admissible (a crossing, a node inside an obstacle), or None."""
@@ -151,8 +144,6 @@ class ContactProblem:
              "ipopt.max_iter": int(max_iter), "ipopt.linear_solver": "mumps", "error_on_fail": False,
              "calc_lam_p": False, "calc_lam_x": False, "ipopt.fixed_variable_treatment": "make_parameter_nodual",
              "ipopt.bound_relax_factor": 0.0, "show_eval_warnings": False}
-        if rows.n_rows:
-            o["ipopt.mu_init"] = MU_INIT
         o.update(options or {})
         o = with_stop_callback(o)
         if numeric:
