@@ -301,9 +301,11 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
             iters += out.iterations
             t_solve += out.solve_time
             t_build += out.build_time
-            if not out.success and escape and ds <= 4 * min_step and guess is not None:
+            if not out.success and (escape and ds <= 4 * min_step or careful and ds / 2 < min_step) and \
+                    guess is not None:
                 # a step this short still fails: the state jumps (a crease snapping in) at any load past this one.
                 # The jump followed by proximal steps, short enough for the broad phase to see each pair it closes
+                # (in careful load steps of the first attempt too, when the next halving would stall)
                 y, it = _descend(prob, p, x, guess, fixed, vals, tol, max_iter, opts, loose)
                 iters += it
                 if y is not None:
