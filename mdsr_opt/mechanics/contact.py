@@ -43,10 +43,17 @@ __all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments", "first_to
 #: a pair is made while its point projects within [-DELTA, 1 + DELTA] of the segment
 DELTA = 0.25
 
+#: the weight of a self-contact row's release (careful load steps, :mod:`~mdsr_opt.mechanics.contactsteps`): beyond ``[-DELTA, 1 + DELTA]`` its gap grows by
+#: ``RELEASE |b - a| e^2`` (``e`` how far beyond, in segment lengths), so a point that slides past the
+#: segment's end within a solve is not held against the extended line (the segment next to it, or the
+#: crossing check, takes over); within the range the gap is the line distance
+RELEASE = 4.0
+
 
 def _functions():
     """CasADi SX functions of one row, mapped later: ``g(z, w)``, ``dg/dz`` and ``d2g/dz2`` with
-    ``z = (p, a, b)`` and ``w = (kind, r)`` (kind 0 node-segment, 1 disk centred at ``a``, 2 node-line: the
+    ``z = (p, a, b)`` and ``w = (kind, r)`` (kind 0 node-segment, ``r`` its release weight (:data:`RELEASE`, 0 for
+    none), 1 disk centred at ``a``, 2 node-line: the
     node-segment formula on the whole line through ``a`` and ``b``, a half-plane; 3 angle: ``r`` times the
     angle outside the body at ``a`` between its boundary neighbours ``p`` and ``b``, in ``(0, 2 pi]``)."""
     cached = globals().get("_FNS")
@@ -57,6 +64,8 @@ def _functions():
     p, a, b = z[0:2], z[2:4], z[4:6]
     d = b - a
     ns = (d[1] * (p[0] - a[0]) - d[0] * (p[1] - a[1])) / ca.sqrt(ca.dot(d, d))
+    tp = ca.dot(p - a, d) / ca.dot(d, d)  # a self-contact row let go beyond its projection range (RELEASE)
+    ns = ns + w[1] * ca.sqrt(ca.dot(d, d)) * (ca.fmax(-DELTA - tp, 0) ** 2 + ca.fmax(tp - 1 - DELTA, 0) ** 2)
     dk = ca.sqrt(ca.dot(p - a, p - a)) - w[1]
     u, v = p - a, b - a  # the angle row: outside angle at a from p (previous node) to b (next node)
     ang = w[1] * (np.pi + ca.atan2(-(u[0] * v[1] - u[1] * v[0]), -ca.dot(u, v)))
@@ -77,7 +86,8 @@ class ContactRows:
         ``consts[j]``.
     n_nodes : int
     consts : (k, 2) fixed points (obstacles).
-    w : (N, 2) per row ``(kind, radius)``: kind 0 node-segment, 1 disk (centre ``a``), 2 node-line, 3 angle
+    w : (N, 2) per row ``(kind, radius)``: kind 0 node-segment (``radius``: its release weight,
+        :data:`RELEASE` for a self-contact pair, else 0), 1 disk (centre ``a``), 2 node-line, 3 angle
         (``radius``: the length the angle is scaled by).
     labels : (N, 2) int per row ``(kind code, obstacle index or -1)``; kind codes: 0 self, 1 node-obstacle,
         2 obstacle corner-body segment, 3 an interior node kept inside a boundary segment next to it, 4 the
@@ -259,11 +269,12 @@ def _point_segment(p, a, b):
 
 
 def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: bool = True,
-                tol: float = 0.0) -> ContactRows:
+                tol: float = 0.0, release: float = 0.0) -> ContactRows:
     """Candidate rows: pairs that come within ``radius`` in any of ``states`` ((n, 2) each) and whose point
     lies on the outer side of the segment (``g >= -tol``) projecting within ``[-DELTA, 1 + DELTA]`` in ``x_ref``
     (a state without penetration: the start of the step).
 
+    ``release``: the self-contact rows' release weight (:data:`RELEASE`; 0: held against the extended line).
     Self-contact pairs a boundary node with every boundary segment not its own (at a straight or convex
     boundary its neighbours project beyond the segment's ends and are left out; at a fold they are not);
     obstacles add their rows for boundary nodes (and a polygon's corners against body segments)."""
@@ -304,7 +315,7 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
             ok &= (g >= -tol) & (t >= -DELTA) & (t <= 1 + DELTA)
             for q, aa, bb in zip(p[ok], a[ok], b[ok]):
                 pts.append((q, aa, bb))
-                w.append((0.0, 0.0))
+                w.append((0.0, release))
                 labels.append((0, -1))
         # creases: the outside angle at a boundary node kept positive where it folds (below FOLD_ANGLE) in some
         # state, or where it went through zero in one (from below 5 pi / 4 in the reference state to above
@@ -385,7 +396,7 @@ def _segments_meet(p, q, r, s) -> np.ndarray:
     return (o1 * o2 <= 0) & (o3 * o4 <= 0)
 
 
-def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> ContactRows:
+def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40, release: float = 0.0) -> ContactRows:
     """Self-contact rows for the crossings a solve made: for each pair of boundary segments that share no node
     and meet in ``x1`` ((n, 2)) but not in the admissible state ``x0``, the state of first touch along the
     straight path from ``x0`` to ``x1`` (bisection), and there the node-segment pair of the four (an end of
@@ -434,10 +445,10 @@ def first_touch_rows(mesh, x0, x1, tol: float = 0.0, bisections: int = 40) -> Co
     if not pts:
         return empty
     P = np.array(sorted(pts), dtype=np.int64)
-    return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))
+    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, release], (len(P), 1)), np.tile([0, -1], (len(P), 1)))
 
 
-def handoff_rows(mesh, rows: ContactRows, which, t, x=None) -> ContactRows:
+def handoff_rows(mesh, rows: ContactRows, which, t, x=None, release: float = 0.0) -> ContactRows:
     """Self-contact rows that take over from the rows ``which`` of ``rows`` whose point ``t`` (their
     projections) slid beyond an end of their segment: the point against the boundary segment next to that end
     (the one before ``a`` for ``t < 0``, after ``b`` for ``t > 1``), unless the point is one of its ends.
@@ -462,4 +473,4 @@ def handoff_rows(mesh, rows: ContactRows, which, t, x=None) -> ContactRows:
         if best is not None:
             out.add(best[1])
     P = np.array(sorted(out), dtype=np.int64).reshape(-1, 3)
-    return ContactRows(P, mesh.n_nodes, None, np.zeros((len(P), 2)), np.tile([0, -1], (len(P), 1)))
+    return ContactRows(P, mesh.n_nodes, None, np.tile([0.0, release], (len(P), 1)), np.tile([0, -1], (len(P), 1)))

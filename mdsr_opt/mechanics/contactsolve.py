@@ -70,6 +70,7 @@ class ContactProblem:
         self.friction_term = None  # the step's FrictionTerm (contact_step sets it), None without friction
         self.normal_lag: dict = {}  # row key -> the normal force the friction of the next solve takes
         self.lag_error = 0.0  # the last step's relative change of the lagged normal forces
+        self.release = 0.0  # the release weight of new self-contact rows (contact.RELEASE in careful load steps)
 
     def friction_rows(self, rows: ContactRows) -> np.ndarray:
         """The rows that carry friction: a body node against an obstacle (none without friction)."""
@@ -103,7 +104,7 @@ class ContactProblem:
         move = max(float(np.abs(np.asarray(s).reshape(-1) - np.asarray(x_ref).reshape(-1)).max()) for s in states)
         radius = 0.5 * self.h + 2.0 * move + self.spec.gap + extra
         return broad_phase(self.mesh, x_ref, states, radius, self.spec.obstacles, self.spec.self_contact,
-                           tol=1e-9 * self.mesh.size)
+                           tol=1e-9 * self.mesh.size, release=self.release)
 
     def penetrates(self, x) -> str | None:
         """Why ``x`` (2n,) is not admissible (a crossing, a node inside an obstacle), or None."""

@@ -11,7 +11,7 @@ import numpy as np
 from ..core.guards import check_stop, interruptible
 from .backends import minimize
 from .blas import one_blas_thread
-from .contact import DELTA, ContactRows, first_touch_rows, handoff_rows
+from .contact import DELTA, RELEASE, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import positive_float
 from .contactsolve import ContactProblem, ContactSpec, row_key, merge_rows, contact_stability, polish
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
@@ -23,6 +23,19 @@ __all__ = ["check_gap", "contact_continuation", "contact_report", "contact_spec"
 
 #: solves of one load step with refreshed pairs before it is given up (and halved)
 MAX_REFRESH = 8
+
+#: IPOPT's first barrier parameter in careful load steps (:func:`careful_options`; its default is 0.1)
+MU_INIT = 1e-5
+
+
+def careful_options(options: dict | None) -> dict:
+    """The IPOPT options of a careful load step: ``options`` (which win) with the first barrier parameter
+    :data:`MU_INIT`. A load step starts from an admissible state in which touching pairs sit at their gap, a
+    slack of about ``gap``; IPOPT's default barrier of 0.1 pushes them apart with a force ``mu / slack``
+    hundreds of times the elastic forces. Where a crease has formed its first iterates tear the crease open,
+    and it may not come back within its iteration cap, or comes back to a state far from the step's start
+    that crosses pairs the broad phase did not see."""
+    return {"ipopt.mu_init": MU_INIT, **(options or {})}
 
 
 def _empty(prob) -> ContactRows:
@@ -72,22 +85,29 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         x1 = out.x
         why = prob.penetrates(x1)
         new = merge_rows(rows, prob.rows_for(x_ref, [x_ref, guess, x1]), drop)
+        if why is None and prob.release > 0:  # careful: and the pairs of the solve's own state (admissible: the
+            # next solve starts from it),
+            # e.g. a point come to a segment's end that projected beyond it where the step started
+            new = merge_rows(new, prob.rows_for(x1, [x1]), drop)
         swapped, swap_in = set(), set()
-        if rows.n_rows:  # a pair whose point is beyond its segment's end holds it against the extended line:
-            # dropped, its point handed to the segment it slid to
+        if rows.n_rows:  # a pair whose point is beyond its segment's end: its point handed to the segment it
+            # slid to, the pair dropped unless its gap lets it go there (a released row, RELEASE: kept, for the
+            # point may slide back within the step)
             t = rows.projections(x1)
             outside = ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
-            for i in np.flatnonzero(outside):
+            for i in np.flatnonzero(outside & (rows.w[:, 1] <= 0)):
                 drop.add(row_key(rows, i))
             if outside.any():
                 hand, swapped, swap_in = _hand_over(prob, rows, np.flatnonzero(outside), t, x1, step_tol, final)
                 new = merge_rows(new, hand, drop)
                 handed = merge_rows(handed, hand)  # kept for a crossing no pair prevents
-        grew = {row_key(new, i) for i in range(new.n_rows)} - swap_in != \
-            {row_key(rows, i) for i in range(rows.n_rows)} - swapped
+        keys_new = {row_key(new, i) for i in range(new.n_rows)}
+        keys_old = {row_key(rows, i) for i in range(rows.n_rows)}
+        grew = bool(keys_new - keys_old - swap_in) or bool(keys_old - keys_new - swapped)
         if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
             new = merge_rows(merge_rows(new, handed, drop), first_touch_rows(prob.mesh, x_ref, x1,
-                                                                              1e-9 * prob.mesh.size), drop)
+                                                                              1e-9 * prob.mesh.size,
+                                                                              release=prob.release), drop)
             grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
         if why is None and not grew:
             if len(fsel):  # the lagged normal forces: solved again until they stop changing
@@ -131,7 +151,7 @@ def _hand_over(prob, rows, which, t, x1, tol, final):
     gtol = max(prob.spec.gap, 100.0 * tol * prob.mesh.size)
     hand, out, inn = _empty(prob), set(), set()
     for i in which:
-        h = handoff_rows(prob.mesh, rows, [i], [t[i]], x1)
+        h = handoff_rows(prob.mesh, rows, [i], [t[i]], x1, release=prob.release)
         if not h.n_rows:
             continue
         hand = merge_rows(hand, h)
@@ -238,6 +258,8 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
         steps, iters, t_solve, t_build, status = [], 0, 0.0, 0.0, "not started"
         rows = _empty(prob)
         lam_last = None
+        careful = False  # switched on by a load step about to stall (careful_options, released rows)
+        prob.release = 0.0
         while s < 1.0 - 1e-12:
             check_stop()
             if ds < min_step:
@@ -246,28 +268,48 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
             s_new = min(1.0, s + ds)
             p, vals = p_of(s_new), values_of(s_new)
             t0 = time.perf_counter()
-            guess = predict_state(prob.solver_model, p, x, fixed, vals) if predict else None
+            guess = predict_state(prob.solver_model, p, x, fixed, vals) if predict and not (careful and rows.n_rows) \
+                else None
             t_solve += time.perf_counter() - t0
+            plain = x.copy()  # the state the step starts from with only the fixed nodes moved
+            plain[fixed] = vals
+            predicted = True
             if guess is None or min_jacobian(mesh, guess) <= 0.0 or prob.penetrates(guess) is not None:
-                guess = x.copy()
-                guess[fixed] = vals
+                guess, predicted = plain, False
                 if min_jacobian(mesh, guess) <= 0.0:
                     status = "first guess inverts an element"
                     ds /= 2
                     continue
             cap = max_iter if ds < 4 * min_step else min(max_iter, 100)
-            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, options, s_new >= 1.0, loose)
+            opts = careful_options(options) if careful else options
+            out, r = contact_step(prob, p, x, guess, fixed, vals, tol, cap, opts, s_new >= 1.0, loose)
+            if not out.success and (careful and predicted or not careful and ds / 2 < min_step) and \
+                    min_jacobian(mesh, plain) > 0.0:
+                # about to stall (or already careful): from here on careful steps (careful_options), each from
+                # the state it starts from where the body touches itself. The Newton predictor models no
+                # contact: at a crease it can move nodes many elements for a short load step, and the pairs
+                # the broad phase then admits hold a state far from this one
+                first, careful = out, True
+                opts, prob.release = careful_options(options), RELEASE
+                out, r = contact_step(prob, p, x, plain, fixed, vals, tol, cap, opts, s_new >= 1.0, loose)
+                out.iterations += first.iterations
+                out.solve_time += first.solve_time
+                out.build_time += first.build_time
+                if out.success:
+                    guess = plain
             lam_last = out.lam_g if r.n_rows else None
             iters += out.iterations
             t_solve += out.solve_time
             t_build += out.build_time
-            if not out.success and escape and ds <= 4 * min_step and guess is not None:
+            if not out.success and (escape and ds <= 4 * min_step or careful and ds / 2 < min_step) and \
+                    guess is not None:
                 # a step this short still fails: the state jumps (a crease snapping in) at any load past this one.
                 # The jump followed by proximal steps, short enough for the broad phase to see each pair it closes
-                y, it = _descend(prob, p, x, guess, fixed, vals, tol, max_iter, options, loose)
+                # (in careful load steps of the first attempt too, when the next halving would stall)
+                y, it = _descend(prob, p, x, guess, fixed, vals, tol, max_iter, opts, loose)
                 iters += it
                 if y is not None:
-                    out2, r2 = contact_step(prob, p, y, y, fixed, vals, tol, max_iter, options, s_new >= 1.0, loose)
+                    out2, r2 = contact_step(prob, p, y, y, fixed, vals, tol, max_iter, opts, s_new >= 1.0, loose)
                     iters += out2.iterations
                     if out2.success:
                         out, r = out2, r2
@@ -277,7 +319,7 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
                 lam0 = out.lam_g if r.n_rows else None
                 xs, res_s, fc_s = polish(prob, r, out.x, p, fixed, max(tol, loose), force, lam0)
                 xs, r, _res, _fc, chk_s, tries_s, it = _escape(prob, p, xs, r, res_s, fc_s, fixed, vals, tol, max_iter,
-                                                              options, loose, force, False)
+                                                              opts, loose, force, False)
                 iters += it
                 if tries_s:
                     out.x = xs
@@ -299,7 +341,8 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
             return _out(x, status, True, iters, steps, t_solve, t_build, rows, res, fc)
         if escape:
             x, rows, res, fc, chk, tries, it = _escape(prob, p1, x, rows, res, fc, fixed, values_of(1.0), tol,
-                                                       max_iter, options, loose, force, True)
+                                                       max_iter, careful_options(options) if careful else options,
+                                                       loose, force, True)
         else:
             chk, tries, it = contact_stability(prob, rows, x, p1, fixed, res, fc), 0, 0
         iters += it
