@@ -191,10 +191,8 @@ def process_pool(workers: int | None = None, modules: Sequence[str] = (),
     # its jobs wait in the pool's queue until the workers are started (a job sent to the executor itself
     # before would wait, in the caller's thread, for the workers it starts)
     _STARTING[pool] = threading.Event()
-    stop = threading.Event()
-    starter = threading.Thread(target=_start_workers, args=(pool, workers, stop), name="start-workers",
-                               daemon=True)
-    _ENDERS[pool] = functools.partial(_end_workers, pool, before, starter, stop)
+    starter = threading.Thread(target=_start_workers, args=(pool, workers), name="start-workers", daemon=True)
+    _ENDERS[pool] = functools.partial(_end_workers, pool, before, starter)
     starter.start()
     try:
         yield pool
@@ -222,17 +220,16 @@ _QUEUES: "weakref.WeakKeyDictionary[Executor, _Queue]" = weakref.WeakKeyDictiona
 _QUEUES_LOCK = threading.Lock()
 
 
-def _end_workers(pool: Executor, before: set[int], starter: threading.Thread, stop: threading.Event) -> None:
+def _end_workers(pool: Executor, before: set[int], starter: threading.Thread) -> None:
     """End ``pool``'s worker processes at once (SIGTERM): its jobs not yet done fail (BrokenProcessPool).
     ``before``: the process ids of this process's children before the pool was made (where the pool has no
-    ``terminate_workers``, Python < 3.14, its workers are the children made since). ``starter``, ``stop``:
-    the thread starting the workers (:func:`_start_workers`) and the event that makes it start no more; it
+    ``terminate_workers``, Python < 3.14, its workers are the children made since). ``starter``: the thread
+    starting the workers (:func:`_start_workers`), which starts no more once the pool's queue is closed; it
     is waited for (at most the start of the worker it is starting) before any worker is ended: a worker
     started after the others were ended would be one the broken pool waits for at its shutdown, for ever,
     while it waits for a job that never comes."""
     import multiprocessing
 
-    stop.set()
     _queue(pool).close()
     while starter.is_alive():  # a Ctrl-C now (the run is already stopping, by an error or an interrupt that
         with contextlib.suppress(KeyboardInterrupt):  # its caller raises again) does not cut this short
@@ -248,33 +245,37 @@ def _end_workers(pool: Executor, before: set[int], starter: threading.Thread, st
                 proc.terminate()
 
 
-def _start_workers(pool: Executor, workers: int, stop: threading.Event) -> None:
+def _start_workers(pool: Executor, workers: int) -> None:
     """Make ``pool`` start its ``workers`` worker processes (by jobs that do nothing; the executor starts a
-    worker for a job that finds none idle), then send it the jobs that its queue holds meanwhile; once
-    ``stop`` is set (the workers are being ended), start no more and send nothing. This
+    worker for a job that finds none idle), then send it the jobs that its queue holds meanwhile; once the
+    queue is closed (the workers are being ended), start no more and send nothing. This
     thread blocks Ctrl-C (SIGINT) where the platform can: the processes it starts (the forkserver, which
     imports the preloaded modules, and through it the workers) inherit the block, so that a terminal's
     Ctrl-C, which the run handles in its main thread, does not interrupt them with a traceback of their
     own."""
     if hasattr(signal, "pthread_sigmask"):  # POSIX; this thread only (the main thread still gets the signal)
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    queue = _queue(pool)
     try:
         for _ in range(workers):
-            if stop.is_set():
+            if queue.closed:
                 break
             pool.submit(os.getpid)
     except Exception:  # the pool was shut down first (its block ended at once), or broken by a Ctrl-C: the
         pass  # run reports that itself (its jobs, sent now, fail with the pool's error)
     finally:
         _STARTING.pop(pool).set()
-        if not stop.is_set():
-            _queue(pool).start()
+        queue.start()  # (nothing once closed)
 
 
 def _call(job: bytes) -> Any:
     """Run a pickled job in a worker."""
     fn, args, kwargs = pickle.loads(job)
     return fn(*args, **kwargs)
+
+
+#: the error of a job that a closed queue (:meth:`_Queue.close`) never started
+_NOT_STARTED = "the pool's workers were ended; the job was not started"
 
 
 class _Queue:
@@ -294,7 +295,7 @@ class _Queue:
         outer: Future = Future()
         with self._lock:
             if self._closed:
-                outer.set_exception(BrokenExecutor("the pool's workers were ended; the job was not started"))
+                outer.set_exception(BrokenExecutor(_NOT_STARTED))
                 return outer
             heapq.heappush(self._heap, (-cost, next(self._count), outer, job))
         self.start()
@@ -308,7 +309,12 @@ class _Queue:
             waiting, self._heap = self._heap, []
         for _, _, outer, _ in waiting:
             if outer.set_running_or_notify_cancel():
-                outer.set_exception(BrokenExecutor("the pool's workers were ended; the job was not started"))
+                outer.set_exception(BrokenExecutor(_NOT_STARTED))
+
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
 
     def start(self) -> None:
         """Send the costliest waiting jobs to the pool while it has a free worker (none while its workers
