@@ -243,6 +243,22 @@ def _checks(tol, max_iter, min_step):
     return tol, int(max_iter), min_step
 
 
+def _full_load_first(solve_at: Callable, near, z0: np.ndarray, min_step: float, s_from: float = 0.0,
+                     on_fail: Callable[[], None] | None = None, first: dict | None = None, **continue_kw):
+    """:func:`_continue`'s result: one Newton solve at the full load from ``near`` (``(unknowns, what they
+    are)``, or None; ``solve_at``'s keywords ``first``), else, or when it fails (after ``on_fail()``), the
+    load stepped from ``z0``; the iterations of both tries count."""
+    tried = 0
+    if near is not None:
+        z, conv, tried, res = solve_at(1.0, near[0], True, s_from, **(first or {}))
+        if conv:
+            return z, 1.0, True, tried, 1, res, f"converged (from {near[1]})"
+        if on_fail is not None:
+            on_fail()
+    done = _continue(solve_at, z0, min_step, **continue_kw)
+    return done[:3] + (done[3] + tried,) + done[4:]
+
+
 def _checked_guess(guess, n: int) -> np.ndarray | None:
     guess = None if guess is None else np.asarray(guess, dtype=float)
     if guess is not None and (guess.shape != (n, 2) or not np.isfinite(guess).all()):
@@ -327,13 +343,9 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
                 break
         return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
-    zg, conv, tried, res = (solve_at(1.0, guess.reshape(-1)[free], True, 1.0) if guess is not None  # a start at
-                            else (None, False, 0, 0.0))  # the full load from the guess, else load steps
-    done = (zg, 1.0, True, tried, 1, res, "converged (from the predicted state)") if conv else None
-    if done is None:
-        done = _continue(solve_at, X[free], min_step, secant=False)
-        done = done[:3] + (done[3] + tried,) + done[4:]
-    z, s, conv, iters, steps, res, status = done
+    # a start at the full load from the guess (no predictor: from s = 1), else load steps
+    near = None if guess is None else (guess.reshape(-1)[free], "the predicted state")
+    z, s, conv, iters, steps, res, status = _full_load_first(solve_at, near, X[free], min_step, 1.0, secant=False)
     if not conv and guard[0] is not None:
         status += guard[0].why()
     x = full(s, z)
@@ -501,7 +513,6 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     fs = _force_scale(model)
     active = np.ones(nc, dtype=bool)  # a slack rope's equation is tau_c = 0
     guard = [None]  # the inversion check of the latest load step, to say why a failed one was refused
-    predictor_iters = 0
 
     def split(z):
         q = q_rest.copy()
@@ -590,21 +601,10 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         near = None if zg is None else (zg, "the predicted state")
     elif start is not None and np.abs(a - a0).max() <= START_FULL_STEP:
         near = (z0, "the start state")
-    done = None
-    if near is not None:
-        # from a predicted state (far from the answer: another model's equilibrium) with the pseudo-transient
-        # shift; from a start state (a solve of nearly these contractions) Newton's own steps
-        zt, conv, it, res = solve_at(1.0, near[0], True, 0.0, shifted=guess is not None)
-        if conv:
-            done = (zt, 1.0, True, it, 1, res, f"converged (from {near[1]})")
-        else:
-            active[:] = True
-            predictor_iters = it
-    if done is None:
-        done = _continue(solve_at, z0, min_step)
-        if predictor_iters:
-            done = done[:3] + (done[3] + predictor_iters,) + done[4:]
-    z, _s, conv, iters, steps, res, status = done
+    # from a predicted state (far from the answer: another model's equilibrium) with the pseudo-transient
+    # shift; from a start state (a solve of nearly these contractions) Newton's own steps
+    z, _s, conv, iters, steps, res, status = _full_load_first(
+        solve_at, near, z0, min_step, on_fail=lambda: active.fill(True), first={"shifted": guess is not None})
     if not conv and guard[0] is not None:
         status += guard[0].why()
     q, tau = split(z)
