@@ -108,7 +108,8 @@ def test_the_log_names_a_gait_once(monkeypatch, tmp_path, name, said):
     import numpy as np
 
     from mdsr_opt.synthesis import poses
-    from mdsr_opt.synthesis.gait import Gait, run_gait
+    from mdsr_opt.scenes.gaitrun import run_gait
+    from mdsr_opt.synthesis.gait import Gait
 
     def no_layout(*args, **kwargs):
         raise ValueError("no layout")

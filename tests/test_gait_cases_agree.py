@@ -13,7 +13,7 @@ import numpy as np
 from mdsr_opt import Muscle
 from mdsr_opt.scenes.runscene import run_scene
 from mdsr_opt.scenes.scenefile import load_scene
-from mdsr_opt.synthesis.gait import _radius_note
+from mdsr_opt.scenes.gaitrun import _radius_note
 from mdsr_opt.synthesis.layouts import shared_layout
 
 

@@ -318,14 +318,14 @@ def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monke
     from test_scenes import finger_dict, write_json
 
     import mdsr_opt.synthesis.export as export
-    import mdsr_opt.synthesis.gait as gait_mod
+    import mdsr_opt.scenes.gaitrun as gaitrun
     from mdsr_opt.scenes.scenefile import load_scene
     from mdsr_opt.scenes.runscene import run_scene
 
     if job == "export":
         monkeypatch.setattr(export, "export_fabrication", _broken_export)
     else:
-        monkeypatch.setattr(gait_mod, "save_gait_animation", _slow_broken_gif)
+        monkeypatch.setattr(gaitrun, "save_gait_animation", _slow_broken_gif)
     d = finger_dict()
     d["gait"] = {"name": "wave", "poses": ["rest", "bend"], "frames_per_step": 2}
     scene = load_scene(write_json(tmp_path, d))

@@ -92,7 +92,7 @@ def test_the_comparison_designs_warnings_name_their_pose():
 
 
 def test_the_gait_log_says_why_a_pose_has_no_own_difference():
-    from mdsr_opt.synthesis.gait import _own
+    from mdsr_opt.scenes.gaitrun import _own
 
     assert _own(1.25, 2) == "own 1.25"
     assert _own(float("nan"), 0) == "own layout: no muscle routed"

@@ -23,7 +23,7 @@ from ..core.costs import animation_cost, figure_cost, photo_cost, shapes_cost
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, main_is_plain_script, process_pool
 from ..core.progress import advance, progress_for_cli
-from ..synthesis.gait import run_gait
+from .gaitrun import run_gait
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt, RunFolder, noting_interrupts

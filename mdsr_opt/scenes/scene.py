@@ -194,7 +194,7 @@ class Scene:
         The length unit of the mesh coordinates (one of :data:`mdsr_opt.synthesis.export.UNITS`), carried into
         the gait schedule and the fabrication files; None (the default): "body units", no unit is invented.
     gait : mdsr_opt.synthesis.gait.Gait, optional
-        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.synthesis.gait.run_gait`).
+        A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.scenes.gaitrun.run_gait`).
     acceptance : dict
         What a case's design must show to succeed (:func:`check_acceptance`): ``max_difference`` (a fraction
         of the size, default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`), ``idle_contraction``
