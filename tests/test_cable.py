@@ -131,6 +131,29 @@ def test_a_warm_start_whose_released_rope_pulls_again_solves_the_forms():
     assert np.abs(res.x - cold.x).max() < 1e-7
 
 
+def test_a_start_far_from_equilibrium_makes_no_guess_of_slack_ropes(monkeypatch):
+    """Inside ``projected_energy_hessian`` (the design's warm start from its target shape, no equilibrium)
+    the start's multipliers are no sign of slack ropes: no guess is solved, the rope forms are. Outside, the
+    same start (an earlier equilibrium) has its slack ropes released first. Both reach the same state."""
+    from mdsr_opt.mechanics import ropesolve
+    from mdsr_opt.mechanics.ropesolve import projected_energy_hessian
+
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    mus = [row(mesh, 0.0), row(mesh, 0.25, 1.0, 3.0), row(mesh, 0.125, 0.5, 3.5)]
+    first = solve_internal(mesh, MAT, mus, [0.3, 0.05, 0.0])
+    guesses, original = [], ropesolve._warm_active_set
+    monkeypatch.setattr(ropesolve, "_warm_active_set", lambda *args: guesses.append(original(*args)) or guesses[-1])
+    kw = dict(initial_guess=first.x, min_step=1.0, check_stability=False, align_to_rest=False)
+    plain = solve_internal(mesh, MAT, mus, [0.35, 0.05, 0.0], **kw)
+    assert len(guesses) == 1 and guesses[0] is not None  # the guess was solved and taken
+    guesses.clear()
+    with projected_energy_hessian():
+        far = solve_internal(mesh, MAT, mus, [0.35, 0.05, 0.0], **kw)
+    assert len(guesses) == 1 and guesses[0] is None
+    assert plain.success and far.success and list(far.slack) == [False, True, True]
+    assert np.abs(np.asarray(far.x) - np.asarray(plain.x)).max() < 1e-6 * mesh.size
+
+
 def test_a_rope_predicted_slack_that_ends_at_its_length_is_met_exactly(monkeypatch):
     from mdsr_opt.mechanics import ropesolve
 

@@ -76,6 +76,52 @@ def test_block_projection_clamps_only_negative_eigenvalues():
     assert np.array_equal(P[:10], A[:10])
 
 
+@pytest.mark.parametrize("mat", [NeoHookean(2.0, 0.3, thickness=0.7), NeoHookean(2.0, 0.45, 0.7, plane="stress"),
+                                 Yeoh(0.5, 0.1, -0.004), MooneyRivlin(0.4, 0.1)], ids=lambda m: m.kind[:24])
+def test_isotropic_tangents_are_projected_in_closed_form_as_eigh_projects_them(mat):
+    """The closed form of _psd_isotropic (the SVD basis of F: two scalings, twist, flip) against eigh's clamp on
+    material tangents at stretched, compressed, sheared and turned F, with equal or nearly equal singular
+    values, a pure rotation and the identity: every block split by the basis, the same projection."""
+    from mdsr_opt.mechanics.newton import _psd_isotropic
+
+    rng = np.random.default_rng(3)
+    F = np.eye(2)[None] + 0.6 * rng.standard_normal((3000, 2, 2))
+    F[:, 0] *= 0.5  # compressed rows: many tangents indefinite
+    F = F[np.linalg.det(F) > 0.05]
+    c, s = np.cos(0.7), np.sin(0.7)
+    F = np.concatenate([F, [np.eye(2), 0.7 * np.eye(2), 0.9 * np.array([[c, -s], [s, c]]),
+                            np.diag([0.5, 0.5 + 1e-13]), np.diag([1.3, 0.6]) @ np.array([[c, -s], [s, c]])]])
+    mesh = Mesh.rectangle(1.0, 1.0, 1, 1)
+    model = get_model(mesh, mat)
+    en = NewtonEnergy(model, model.params(mat))
+    _P, A = en._stress_tangent(np.ascontiguousarray(np.moveaxis(F, 0, -1)), True)
+    A = np.ascontiguousarray(np.moveaxis(A.reshape(4, 4, -1), -1, 0))
+    proj, split = _psd_isotropic(A, F)
+    assert split.all()
+    w, V = np.linalg.eigh(A)
+    ref = (V * np.maximum(w, 0.0)[:, None, :]) @ np.swapaxes(V, 1, 2)
+    scale = np.abs(A).max(axis=(1, 2))[:, None, None]
+    assert np.abs(proj - ref).max() < 1e-12 * scale.max() and (np.abs(proj - ref) < 1e-12 * scale).all()
+    assert (~_pd4(A)).sum() > len(A) // 3  # many indefinite tangents were projected
+    assert np.abs(_psd4(A, F) - _psd4(A)).max() < 1e-12 * scale.max()  # through _psd4: its eigh path
+    assert np.array_equal(_psd4(A, F)[_pd4(A)], A[_pd4(A)])  # definite blocks untouched
+
+
+def test_a_tangent_the_isotropic_basis_does_not_split_is_projected_by_eigh():
+    from mdsr_opt.mechanics.newton import _psd_isotropic
+
+    rng = np.random.default_rng(4)
+    A = rng.standard_normal((40, 4, 4))
+    A = A + np.swapaxes(A, 1, 2)  # no isotropic energy's: its scalings and rotations couple
+    F = np.eye(2)[None] + 0.3 * rng.standard_normal((40, 2, 2))
+    _proj, split = _psd_isotropic(A, F)
+    assert not split.any()
+    w, V = np.linalg.eigh(A)
+    ref = (V * np.maximum(w, 0.0)[:, None, :]) @ np.swapaxes(V, 1, 2)
+    bad = ~_pd4(A)
+    assert np.abs(_psd4(A, F)[bad] - ref[bad]).max() < 1e-12 * np.abs(A).max()
+
+
 @pytest.mark.parametrize("bend", [False, True])
 def test_energies_match_ipopt(bend):
     mesh = Mesh.from_polygon([[0, 0], [4, 0], [4, 1], [0, 1]], max_area=0.012)

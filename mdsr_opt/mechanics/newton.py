@@ -8,8 +8,9 @@ semi-definite approximation of its Hessian with vectorised numpy (no per-element
 * elements: ``F = Ds B`` (``B = Dm^-1``), the energy density, first Piola stress ``P`` and the 4 x 4 tangent
   ``dP/dF`` in the material's closed forms (:mod:`mdsr_opt.body.material`, where the law is stated once and
   checked against CasADi's derivatives of it); the tangent is projected to positive semi-definite per
-  element (batched 4 x 4 ``eigh``), so the element Hessian ``area D' (dP/dF)+ D`` is positive semi-definite
-  too;
+  element (in closed form in the basis of ``F``'s SVD, as every material here is isotropic; batched 4 x 4
+  ``eigh`` for a tangent that basis does not split), so the element Hessian ``area D' (dP/dF)+ D`` is
+  positive semi-definite too;
 * springs ``k/2 (l - r l0)^2``: the 2 x 2 block ``k (u u' + max(1 - r l0 / l, 0) (I - u u'))``;
   only springs with ``k != 0`` are evaluated.
 
@@ -61,16 +62,71 @@ def _pd4(A: np.ndarray) -> np.ndarray:
     return ok
 
 
-def _psd4(A: np.ndarray) -> np.ndarray:
-    """Clamp the negative eigenvalues of each symmetric (N, 4, 4) block to zero (``eigh`` only on the blocks
-    that are not positive definite already)."""
+def _psd4(A: np.ndarray, F: np.ndarray | None = None) -> np.ndarray:
+    """Clamp the negative eigenvalues of each symmetric (N, 4, 4) block to zero (only the blocks that are not
+    positive definite already). With the deformation gradients ``F`` (N, 2, 2) of blocks that are tangents
+    ``dP/dF`` of an isotropic energy, in closed form in the basis their SVD gives (:func:`_psd_isotropic`);
+    ``eigh`` for the others and for any block that basis does not split."""
     bad = np.flatnonzero(~_pd4(A))
     if not len(bad):
         return A
-    w, V = np.linalg.eigh(A[bad])
     out = A.copy()
+    if F is not None:
+        proj, split = _psd_isotropic(A[bad], F[bad])
+        out[bad[split]] = proj[split]
+        bad = bad[~split]
+        if not len(bad):
+            return out
+    w, V = np.linalg.eigh(A[bad])
     out[bad] = (V * np.maximum(w, 0.0)[:, None, :]) @ np.swapaxes(V, 1, 2)
     return out
+
+
+#: the largest coupling, relative to the block's largest entry, between the scaling and the rotation modes of
+#: :func:`_psd_isotropic`'s basis for which a tangent counts as split by it (an isotropic energy's is zero up to
+#: round-off, about 1e-15)
+SPLIT_RTOL = 1e-10
+
+
+def _psd_isotropic(A: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The positive semi-definite parts of tangents ``A`` (N, 4, 4; rows and columns ``2 i + j`` for
+    ``F_ij``) of an isotropic energy at deformation gradients ``F`` (N, 2, 2), and where that applies.
+
+    With ``F = U diag(s1, s2) V'`` (an SVD in closed form: ``U``, ``V`` rotations, ``s2`` may be negative),
+    the four matrices ``U S V'`` with ``S`` = ``e1 e1'``, ``e2 e2'``, ``[[0, -1], [1, 0]] / sqrt 2`` and
+    ``[[0, 1], [1, 0]] / sqrt 2`` (two scalings, the twist and the flip) are an orthonormal basis in which an
+    isotropic energy's tangent has two 2 x 2 blocks (scalings; twist and flip), the analytic eigensystems
+    of isotropic distortion energies (Smith, de Goes and Kim, 2019). Each block's positive part is
+    ``(B + |B|) / 2`` with ``|B| = (B^2 + |det B| I) / sqrt(tr B^2 + 2 |det B|)``, the eigenvalues clamped at
+    zero as ``eigh`` would. Returns ``(projected (N, 4, 4), split (N,) bool)``: False where the blocks
+    couple by more than :data:`SPLIT_RTOL` (not an isotropic tangent: the caller uses ``eigh``)."""
+    f00, f01, f10, f11 = F[:, 0, 0], F[:, 0, 1], F[:, 1, 0], F[:, 1, 1]
+    phi_p = np.arctan2(f10 - f01, f00 + f11)  # F = R(phi) diag(s1, s2) R(theta): phi + theta, then phi - theta
+    phi_m = np.arctan2(f10 + f01, f00 - f11)
+    phi, theta = 0.5 * (phi_p + phi_m), 0.5 * (phi_p - phi_m)
+    cu, su, cv, sv = np.cos(phi), np.sin(phi), np.cos(theta), np.sin(theta)
+    # u1 = (cu, su), u2 = (-su, cu) (columns of U); v1 = (cv, -sv), v2 = (sv, cv) (rows of V'); flattened
+    # row-major: a b' = (a0 b0, a0 b1, a1 b0, a1 b1)
+    u1v1 = np.stack([cu * cv, -cu * sv, su * cv, -su * sv], 1)
+    u2v2 = np.stack([-su * sv, -su * cv, cu * sv, cu * cv], 1)
+    u2v1 = np.stack([-su * cv, su * sv, cu * cv, -cu * sv], 1)
+    u1v2 = np.stack([cu * sv, cu * cv, su * sv, su * cv], 1)
+    r = np.sqrt(0.5)
+    Q = np.stack([u1v1, u2v2, r * (u2v1 - u1v2), r * (u2v1 + u1v2)], 2)  # (N, 4, 4): columns, the basis
+    Qt = np.swapaxes(Q, 1, 2)
+    B = Qt @ A @ Q
+    scale = np.abs(B).max(axis=(1, 2))
+    split = np.abs(B[:, :2, 2:]).max(axis=(1, 2)) <= SPLIT_RTOL * np.maximum(scale, np.finfo(float).tiny)
+    P = np.zeros_like(B)
+    for lo in (0, 2):  # each block [[p, q], [q, r]]: B^2 = [[p^2 + q^2, q (p + r)], [q (p + r), r^2 + q^2]]
+        p, r, q = B[:, lo, lo], B[:, lo + 1, lo + 1], 0.5 * (B[:, lo, lo + 1] + B[:, lo + 1, lo])
+        det = np.abs(p * r - q * q)
+        den = np.sqrt(p * p + r * r + 2.0 * (q * q + det))
+        inv = 0.5 / np.where(den > 0, den, 1.0)
+        P[:, lo, lo] = 0.5 * p + (p * p + q * q + det) * inv
+        P[:, lo + 1, lo + 1] = 0.5 * r + (r * r + q * q + det) * inv
+        P[:, lo, lo + 1] = P[:, lo + 1, lo] = 0.5 * q + q * (p + r) * inv
+    return Q @ P @ Qt, split
 
 
 class NewtonEnergy:
@@ -207,11 +263,12 @@ class NewtonEnergy:
         """``(gradient (2n,), element Hessians (6, 6, m), spring Hessians (4, 4, s))`` at ``x``; projected
         to positive semi-definite per term unless ``project=False`` (then their sum is the exact Hessian).
         The element tangents are kept for :meth:`projected_blocks`."""
-        P, A = self._stress_tangent(self._F(x), True)
+        F = self._F(x)
+        P, A = self._stress_tangent(F, True)
         self._A = A
         self._x = x
         g = self._element_gradient(P)
-        He = self._element_hessians(_project_tangent(A) if project else A)
+        He = self._element_hessians(_project_tangent(A, F) if project else A)
         Hs = np.zeros((4, 4, 0))
         if len(self.k):
             gs, Hs = self._spring_terms(x, True, project)
@@ -249,7 +306,7 @@ class NewtonEnergy:
 
     def projected_blocks(self):
         """The projected element and spring blocks at the state of the last :meth:`element_blocks` call."""
-        He = self._element_hessians(_project_tangent(self._A))
+        He = self._element_hessians(_project_tangent(self._A, self._F(self._x)))
         Hs = self._spring_terms(self._x, True, True)[1] if len(self.k) else np.zeros((4, 4, 0))
         return He, Hs
 
@@ -266,12 +323,15 @@ class NewtonEnergy:
                              shape=(self.n, self.n))
 
 
-def _project_tangent(A):
-    """The tangents (2, 2, 2, 2, m) with each element's 4 x 4 matrix projected to positive semi-definite."""
+def _project_tangent(A, F=None):
+    """The tangents (2, 2, 2, 2, m) with each element's 4 x 4 matrix projected to positive semi-definite;
+    ``F`` (2, 2, m), the elements' deformation gradients, for the closed form of an isotropic tangent
+    (:func:`_psd4`)."""
     if A.ndim == 5 and A.shape[-1] > 1:
         m = A.shape[-1]
         Am = np.ascontiguousarray(np.moveaxis(A.reshape(4, 4, m), -1, 0))
-        return np.moveaxis(_psd4(Am), 0, -1).reshape(2, 2, 2, 2, m)
+        Fm = None if F is None else np.ascontiguousarray(np.moveaxis(F, -1, 0))
+        return np.moveaxis(_psd4(Am, Fm), 0, -1).reshape(2, 2, 2, 2, m)
     return A  # a constant tangent (linear material) is positive semi-definite
 
 

@@ -236,10 +236,12 @@ def _warm_active_set(run, cmodel, p, x0, fixed, forms, pushing):
     answer is a KKT point of the inequality problem, returned as the solve's, when it succeeds with no held
     rope pushing and no released rope longer than its target; otherwise None, and :func:`solve_constrained`
     solves the forms of :func:`rope_forms` from ``x0`` as without it. None at once when no rope is released
-    (the equality form first is that guess) and for a start made by the KKT predictor (which has its own
-    guess, :func:`rope_forms`)."""
+    (the equality form first is that guess), for a start made by the KKT predictor (which has its own
+    guess, :func:`rope_forms`) and inside :func:`projected_energy_hessian`: a start far from equilibrium (the
+    design's target shape) is no earlier equilibrium, so its multipliers tell nothing of slack ropes (on
+    bench_fine_design's strip the guess released a rope that then pulled, and that solve was thrown away)."""
     nt = cmodel.n_targets
-    if not nt or forms[0] is not True or cmodel.predicted_slack(x0, p) is not None:
+    if not nt or forms[0] is not True or projecting() or cmodel.predicted_slack(x0, p) is not None:
         return None
     lam = cmodel.multipliers(x0, p, fixed, ropes_only_pull=False)[0]
     released = lam[:nt] <= SLACK_MULTIPLIER * cmodel.force_scale(p)
