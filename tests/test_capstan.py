@@ -165,8 +165,8 @@ def test_load_steps_to_a_loose_tolerance_and_a_reused_ordering_reach_the_strict_
     fast_again = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert "NATURAL" in orders and orders.count("MMD_AT_PLUS_A") < len(orders) / 2  # the order is reused
     monkeypatch.setattr(quadsolve, "INTERMEDIATE_TOL", 1e-9)
-    monkeypatch.setattr(sparselu.ReusedOrdering, "solve", lambda self, J, rhs: real(
-        J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve(rhs))
+    monkeypatch.setattr(sparselu.ReusedOrdering, "factor", lambda self, J: real(
+        J.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True}).solve)
     strict = solve_quadratic_internal(model, ropes, [0.25], groups)
     assert fast.success and strict.success and fast.residual <= 1e-9
     assert np.abs(fast.x - fast_again.x).max() == 0.0
@@ -249,57 +249,121 @@ def test_the_reduced_gradient_without_forming_the_jacobian_is_p_transpose_g():
 
 
 def test_a_newton_solve_that_creeps_stops_as_stalled():
-    """quadsolve._newton on a residual whose Newton matrix is 100 times too stiff (each step 1 % of the way):
-    it stops as not converged after STALL_ITERATIONS * 2 iterations instead of running to max_iter; with
+    """dampednewton.damped_newton on a residual whose Newton matrix is 100 times too stiff (each step 1 % of
+    the way): it stops as not converged after STALL_ITERATIONS * 2 iterations instead of running to max_iter; with
     the right matrix it converges at once."""
     import scipy.sparse as sp
 
-    from mdsr_opt.mechanics.quadsolve import STALL_ITERATIONS, _newton
+    from mdsr_opt.mechanics.dampednewton import STALL_ITERATIONS, damped_newton
 
     A = sp.csr_matrix(np.diag([2.0, 3.0, 4.0]))
     b = np.array([1.0, 1.0, 1.0])
     for scale, converged, iterations in ((100.0, False, 2 * STALL_ITERATIONS), (1.0, True, 1)):
-        z, ok, it, res = _newton(lambda z, jac, s=scale: (A @ z - b, s * A if jac else None), np.zeros(3),
-                                 lambda z: True, 1e-9, 30)
+        z, ok, it, res = damped_newton(lambda z, jac, s=scale: (A @ z - b, s * A if jac else None), np.zeros(3),
+                                       lambda z: True, 1e-9, 30)
         assert (ok, it) == (converged, iterations)
 
 
 def test_a_newton_solve_whose_steps_the_line_search_keeps_cutting_stops_as_stalled():
-    """quadsolve._newton on a residual whose Newton step overshoots far (a soft mode swung along its tangent:
-    here the matrix is 50 times too soft, so every step is cut to 1/64): it stops as not converged after
+    """dampednewton.damped_newton on a residual whose Newton step overshoots far (a soft mode swung along its
+    tangent: here the matrix is 50 times too soft, so every step is cut to 1/64): it stops as not converged after
     SHORT_STEPS such steps instead of creeping for 2 * STALL_ITERATIONS; with the right matrix, at once."""
     import scipy.sparse as sp
 
-    from mdsr_opt.mechanics.quadsolve import SHORT_STEP, SHORT_STEPS, STALL_ITERATIONS, _newton
+    from mdsr_opt.mechanics.dampednewton import SHORT_STEP, SHORT_STEPS, STALL_ITERATIONS, damped_newton
 
     A = sp.csr_matrix(np.diag([2.0, 3.0, 4.0]))
     b = np.array([1.0, 1.0, 1.0])
     assert SHORT_STEP >= 1.0 / 64  # the line search's cut to 1/64 below counts as short
-    z, ok, it, res = _newton(lambda z, jac: (A @ z - b, A / 50 if jac else None), np.zeros(3), lambda z: True,
-                             1e-9, 30)
+    z, ok, it, res = damped_newton(lambda z, jac: (A @ z - b, A / 50 if jac else None), np.zeros(3),
+                                   lambda z: True, 1e-9, 30)
     assert not ok and it == SHORT_STEPS < 2 * STALL_ITERATIONS and 0 < res < 1.0
-    z, ok, it, res = _newton(lambda z, jac: (A @ z - b, A if jac else None), np.zeros(3), lambda z: True, 1e-9, 30)
+    z, ok, it, res = damped_newton(lambda z, jac: (A @ z - b, A if jac else None), np.zeros(3), lambda z: True,
+                                   1e-9, 30)
     assert ok and it == 1
 
 
 def test_a_shifted_newton_solve_crosses_a_soft_mode_that_newtons_step_overshoots():
-    """quadsolve._newton with ``shifted``: a soft coordinate (stiffness 1e-6 at the start, cubic hardening)
-    whose Newton step overshoots a thousandfold, so that no cut of it is accepted, is crossed by the damped
+    """dampednewton.damped_newton with ``shifted``: a soft coordinate (stiffness 1e-6 at the start, cubic
+    hardening) whose Newton step overshoots a thousandfold, so that no cut of it is accepted, is crossed by the damped
     steps of the pseudo-transient shift, which fades with the residual: the root of the unchanged equations,
     to the tolerance."""
     import scipy.sparse as sp
 
-    from mdsr_opt.mechanics.quadsolve import _newton
+    from mdsr_opt.mechanics.dampednewton import damped_newton
 
     def system(z, jac):
         r = np.array([1e-6 * z[0] + z[0] ** 3 - 1e-3, z[1] - 1.0, z[2] - 2.0])
         return r, (sp.csr_matrix(np.diag([1e-6 + 3 * z[0] ** 2, 1.0, 1.0])) if jac else None)
 
-    z, ok, it, res = _newton(system, np.zeros(3), lambda z: True, 1e-12, 40)
+    z, ok, it, res = damped_newton(system, np.zeros(3), lambda z: True, 1e-12, 40)
     assert not ok and it == 0  # every cut of the first step refused
-    z, ok, it, res = _newton(system, np.zeros(3), lambda z: True, 1e-12, 40, None, 3)
+    z, ok, it, res = damped_newton(system, np.zeros(3), lambda z: True, 1e-12, 40, None, 3)
     assert ok and res <= 1e-12 and it <= 15
     assert 1e-6 * z[0] + z[0] ** 3 == pytest.approx(1e-3, abs=1e-12) and z[1:].tolist() == [1.0, 2.0]
+
+
+def test_chord_steps_near_the_root_reach_it_with_fewer_factorisations():
+    """dampednewton.damped_newton: once a full Newton step cuts the residual to CHORD_RATIO of what it was, the
+    next steps reuse that step's factorisation while each cuts the residual as much; the root is the one of
+    Newton's steps alone (CHORD_RATIO 0: a factorisation per step), to the tolerance, in fewer factorisations.
+    A chord step that falls too slowly is dropped for a Newton step."""
+    import scipy.sparse as sp
+
+    from mdsr_opt.mechanics import dampednewton
+    from mdsr_opt.mechanics.sparselu import ReusedOrdering
+
+    class Counted(ReusedOrdering):
+        def __init__(self):
+            super().__init__()
+            self.factored = 0
+
+        def factor(self, J):
+            self.factored += 1
+            return super().factor(J)
+
+    def system(z, jac):  # z_i**3 + z_i = c_i, coupled weakly: a root near (1.2, 1.5, 1.7)
+        r = z ** 3 + z + 0.1 * np.roll(z, 1) - np.array([3.0, 5.0, 7.0])
+        J = sp.csr_matrix(np.diag(3 * z ** 2 + 1) + 0.1 * np.roll(np.eye(3), 1, axis=1)) if jac else None
+        return r, J
+
+    runs = {}
+    for ratio in (dampednewton.CHORD_RATIO, 0.0):
+        order = Counted()
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(dampednewton, "CHORD_RATIO", ratio)
+            z, ok, it, res = dampednewton.damped_newton(system, np.ones(3), lambda z: True, 1e-12, 40, order)
+        assert ok and res <= 1e-12 and np.abs(system(z, False)[0]).max() <= 1e-12
+        runs[ratio] = (z, it, order.factored)
+    (zc, itc, fc), (zn, itn, fn) = runs[dampednewton.CHORD_RATIO], runs[0.0]
+    assert np.abs(zc - zn).max() < 1e-11
+    assert fn == itn and fc < itc and fc < fn  # Newton alone: one factorisation a step; chord steps: fewer
+
+
+def test_a_quadratic_solve_with_chord_steps_reaches_the_state_of_newton_steps_alone(strip, monkeypatch):
+    """solve_quadratic_internal with chord steps (dampednewton.CHORD_RATIO) and without them (0): the same
+    equilibrium to the solver's tolerance, with fewer factorisations."""
+    from mdsr_opt.mechanics import dampednewton, sparselu
+
+    mesh, bottom, mid, groups, model, ropes = _roped(strip)
+    counts = []
+    real = sparselu.ReusedOrdering.factor
+
+    def counted(self, J):
+        counts[-1] += 1
+        return real(self, J)
+
+    monkeypatch.setattr(sparselu.ReusedOrdering, "factor", counted)
+    out = {}
+    for ratio in (dampednewton.CHORD_RATIO, 0.0):
+        monkeypatch.setattr(dampednewton, "CHORD_RATIO", ratio)
+        counts.append(0)
+        out[ratio] = solve_quadratic_internal(model, ropes, [0.25], groups)
+    chord, newton = out[dampednewton.CHORD_RATIO], out[0.0]
+    assert chord.success and newton.success and chord.residual <= 1e-9 and newton.residual <= 1e-9
+    assert np.abs(chord.x - newton.x).max() < 1e-7 * mesh.size
+    assert chord.tension[0] == pytest.approx(newton.tension[0], rel=1e-6)
+    assert counts[0] < counts[1]
 
 
 @pytest.mark.parametrize("fmt", ["coo", "csr", "csc"])

@@ -14,10 +14,10 @@ Both are solved by Newton's method on the equilibrium equations with load contin
   (:meth:`~mdsr_opt.mechanics.capstan.CapstanRope.weight_coupling`). A rope that would push (``tau_c < 0``) goes slack: its
   equation is dropped and its tension set to 0 until its path is longer than the rope again.
 
-Each Newton step is damped by a backtracking line search on the scaled residual that also refuses a state
-with an element inverted at a quadrature point or a vertex. A Newton solve that creeps (its residual
-falling by less than 10 % over :data:`STALL_ITERATIONS` iterations, or :data:`SHORT_STEPS` steps in a row cut
-to :data:`SHORT_STEP` of the Newton step) is given up as stalled. A load step that fails is halved (down to
+Each load step is solved by :func:`~mdsr_opt.mechanics.dampednewton.damped_newton`: Newton steps damped by a
+backtracking line search on the scaled residual that also refuses a state with an element inverted at a
+quadrature point or a vertex, chord steps near the answer, a solve that creeps given up as stalled. A load step
+that fails is halved (down to
 ``min_step``); the failure status names the element the last refused trial state inverted, if any. Success
 means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the stiffness times the
 body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
@@ -36,6 +36,7 @@ import scipy.sparse.linalg as spla
 from ..core.results import compact_repr, to_jsonable
 from .align import align
 from .capstan import CapstanRope, turning_angles
+from .dampednewton import damped_newton
 from .fixtures import RigidReduction
 from .quadratic import QuadraticModel
 from .sparselu import PatternRestriction, ReusedOrdering
@@ -90,77 +91,6 @@ class QuadraticResult:
     def to_dict(self) -> dict:
         """Every field as JSON-ready values (arrays as nested lists, NaN as None)."""
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
-
-
-#: a Newton solve stops as stalled once its residual fell by less than 10 % over this many iterations (after
-#: twice as many): damped steps that creep, where a smaller load step converges sooner
-STALL_ITERATIONS = 6
-
-#: a Newton solve also stops as stalled after this many consecutive steps the line search cut to at most
-#: :data:`SHORT_STEP` of the Newton step: the Newton step is dominated by a soft mode it overshoots (a slender
-#: part swung far along its tangent), and the damped steps that follow creep
-SHORT_STEPS, SHORT_STEP = 2, 1.0 / 32
-
-#: :func:`_newton`'s first pseudo-transient shift over the median diagonal entry of the shifted block
-SHIFT = 1e-3
-
-
-def _newton(system: Callable, z0: np.ndarray, ok: Callable, tol: float, max_iter: int,
-            order: ReusedOrdering | None = None, shifted: int = 0):
-    """Damped Newton on ``system(z, jac) -> (scaled residual, Jacobian or None)``; returns ``(z, converged,
-    iterations, residual)``; a solve that stalls (:data:`STALL_ITERATIONS`, :data:`SHORT_STEPS`) returns as not
-    converged. The Jacobian is asked for only at a state that does not meet ``tol`` (the residual of an
-    accepted step is the line search's). ``order`` keeps the fill-reducing order of the linear solves (shared
-    by the calls of one solve).
-
-    ``shifted`` > 0: the first ``shifted`` unknowns get a pseudo-transient shift on the diagonal, :data:`SHIFT`
-    x their median diagonal entry at the start times the square of the residual's fall since (a far start's
-    soft modes take damped steps, the last steps are Newton's; the equations are unchanged)."""
-    order = order if order is not None else ReusedOrdering()
-    z = z0.copy()
-    if not ok(z):
-        return z, False, 0, float("inf")
-    r = system(z, False)[0]
-    norm = float(np.abs(r).max()) if r.size else 0.0
-    seen = [norm]
-    short = 0  # consecutive steps cut to at most SHORT_STEP
-    shift0 = None
-    for it in range(max_iter):
-        if norm <= tol:
-            return z, True, it, norm
-        if it >= 2 * STALL_ITERATIONS and norm > 0.9 * seen[-1 - STALL_ITERATIONS]:
-            return z, False, it, norm  # stalled: the caller takes a smaller load step instead
-        r, J = system(z, True)
-        if shifted:
-            if shift0 is None:
-                shift0 = SHIFT * float(np.median(np.abs(J.diagonal()[:shifted])))
-            d = np.zeros(J.shape[0])
-            d[:shifted] = shift0 * (norm / seen[0]) ** 2
-            J = (J + sp.diags(d)).tocsr()
-        try:
-            dz = order.solve(J, -r)
-        except RuntimeError:  # an exactly singular matrix
-            return z, False, it, norm
-        if not np.isfinite(dz).all():
-            return z, False, it, norm
-        phi = float(r @ r)
-        alpha = 1.0
-        for _ in range(12):
-            zt = z + alpha * dz
-            if ok(zt):
-                rt, _unused = system(zt, False)
-                if np.isfinite(rt).all() and float(rt @ rt) <= (1.0 - 1e-4 * alpha) * phi:
-                    break
-            alpha *= 0.5
-        else:
-            return z, False, it, norm
-        short = short + 1 if alpha <= SHORT_STEP else 0
-        z, r = zt, rt
-        norm = float(np.abs(r).max()) if r.size else 0.0
-        seen.append(norm)
-        if short >= SHORT_STEPS and norm > tol:
-            return z, False, it + 1, norm  # stalled: the caller takes a smaller load step instead
-    return z, norm <= tol, max_iter, norm
 
 
 class _Upright:
@@ -341,7 +271,7 @@ def solve_quadratic_external(model: QuadraticModel, anchors, drag_nodes, drag_po
         for frac in (1.0, 0.5, 0.25, 0.0):
             if ok(z0 + frac * dz):
                 break
-        return _newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
+        return damped_newton(system, z0 + frac * dz, ok, tol if final else max(tol, INTERMEDIATE_TOL), max_iter, order)
 
     # a start at the full load from the guess (no predictor: from s = 1), else load steps
     near = None if guess is None else (guess.reshape(-1)[free], "the predicted state")
@@ -476,8 +406,9 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     of from rest (contractions within :data:`START_FULL_STEP` of its own: first one Newton solve from its
     state at the full load). With ``guess`` (node positions (N, 2) predicted for ``contractions``, e.g. a coarser model's
     equilibrium interpolated onto these nodes) Newton's method starts there at the full load, with a
-    pseudo-transient shift that damps its first steps (:func:`_newton`'s ``shifted``); when it does not
-    converge (or the predicted state has an inverted element) the load is stepped as without it. The result
+    pseudo-transient shift that damps its first steps (``shifted`` of
+    :func:`~mdsr_opt.mechanics.dampednewton.damped_newton`); when it does not converge (or the predicted
+    state has an inverted element) the load is stepped as without it. The result
     is the same equilibrium to ``tol`` when the prediction lies in its basin (``iterations`` counts both tries).
 
     Raises
@@ -567,7 +498,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
         guard[0] = ok
 
-        z, conv, it, res = _newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
+        z, conv, it, res = damped_newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -581,7 +512,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
                 break
             active[:] = new
             z = np.concatenate([z[:nk], np.where(active, np.maximum(tau, 0.0), 0.0)])
-            z, conv, it2, res = _newton(system, z, ok, tol_s, max_iter, order)
+            z, conv, it2, res = damped_newton(system, z, ok, tol_s, max_iter, order)
             it += it2
         return z, conv, it, res
 

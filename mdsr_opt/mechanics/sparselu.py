@@ -54,6 +54,11 @@ class ReusedOrdering:
 
     def solve(self, J, rhs: np.ndarray) -> np.ndarray:
         """``J^{-1} rhs``; raises RuntimeError for an exactly singular ``J``."""
+        return self.factor(J)(rhs)
+
+    def factor(self, J):
+        """The LU factorisation of ``J`` as a function ``rhs -> J^{-1} rhs`` (for several right-hand sides, or
+        for later steps that keep this matrix); raises RuntimeError for an exactly singular ``J``."""
         opts = {"diag_pivot_thresh": 0.1, "options": {"SymmetricMode": True}}
         if not sp.issparse(J) or J.format not in ("coo", "csr", "csc"):
             J = sp.csc_matrix(J)
@@ -61,11 +66,16 @@ class ReusedOrdering:
             J = sp.csc_matrix(J)
             lu = spla.splu(J, permc_spec="MMD_AT_PLUS_A", **opts)
             self.inv, self.key, self.plan = np.argsort(lu.perm_c), (J.shape, J.nnz), None
-            return lu.solve(rhs)
+            return lu.solve
         inv = self.inv
-        out = np.empty_like(rhs)
-        out[inv] = spla.splu(self._ordered(J), permc_spec="NATURAL", **opts).solve(rhs[inv])
-        return out
+        lu = spla.splu(self._ordered(J), permc_spec="NATURAL", **opts)
+
+        def solve(rhs: np.ndarray) -> np.ndarray:
+            out = np.empty_like(rhs)
+            out[inv] = lu.solve(rhs[inv])
+            return out
+
+        return solve
 
 
 class PatternRestriction:
