@@ -20,6 +20,7 @@ from ..plot.style import muscle_label, unit_label
 from ..synthesis.fabrication import FabricationWarning
 from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
+from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
 from .verdict import design_verdict, plain_failure
@@ -333,14 +334,13 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
-    opts = dict(scene.design_options)
+    opts = dict(scene.design_options, fixture_wall=fixture_wall(scene))  # the fixtures' wall: the fabrication's
     if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
             setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
         opts["anchor_radius"] = setup.routing.fixture_radius
     if case.muscles is not None and case.anchor_radius is not None:  # the fixtures of the case's own muscles
         opts["anchor_radius"] = case.anchor_radius
-    if method is not None:
-        opts["method"] = method
+    opts.update({} if method is None else {"method": method})
     t1 = time.perf_counter()
     idle = accept["idle_contraction"] if case.kind == "external" else 0.0
     try:
