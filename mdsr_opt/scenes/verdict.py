@@ -115,7 +115,7 @@ def failure_cause(message: str) -> str:
         m = re.search(r"is ([\d.]+ %) of the size .*more than max_difference (\S+ %)", far)
         if m:
             return f"too far from the target: {m.group(1)} of size, more than max_difference {m.group(2)}"
-        m = re.search(r"removes (-?\d+ %) of the rest shape.*less than min_progress (\S+ %)", far)
+        m = re.search(r"removes (-?[\d.]+ %) of the rest shape.*less than min_progress (\S+ %)", far)
         if m:
             return f"too far from the target: removes {m.group(1)} of the rest shape's difference, less than {m.group(2)}"
         return _short("too far from the target: " + far.strip())
