@@ -205,7 +205,7 @@ class SceneReport:
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
             pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
-            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "-"
+            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "FAILED (validation.md)" if pt else "-"
             rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
                         f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
