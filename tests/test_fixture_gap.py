@@ -69,7 +69,7 @@ def test_a_design_whose_fixtures_still_meet_is_no_success(strip, monkeypatch):
     assert d < NEED  # the cap at rest scale alone leaves the bending strip's ends too close
     assert not res.success
     m = re.search(r"rejected: end fixtures meet in the designed state: rope M1 at a = (\S+) brings its end "
-                  r"fixtures' centres (\S+) apart, less than two fixtures of radius 0.1 with a wall 0.04 need "
+                  r"fixtures' centres (\S+) apart \(0.5 at rest\), less than two fixtures of radius 0.1 with a wall 0.04 need "
                   r"\(0.24\)", res.status)
     assert m, res.status
     assert float(m.group(1)) == pytest.approx(res.contractions[0], abs=1e-3)

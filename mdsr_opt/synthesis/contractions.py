@@ -389,8 +389,8 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.success = False
         res.status += "; rejected: end fixtures meet in the designed state: " + "; ".join(
             f"rope {muscle_label(mus[c], int(c))} at a = {res.contractions[c]:.4g} brings its end fixtures' centres "
-            f"{d * L:.4g} apart, less than two fixtures of radius {r:.4g} with a wall {prob.fixture_wall * L:.4g} "
-            f"need ({need * L:.4g})" for c, d, need in met)
+            f"{d * L:.4g} apart ({_rest_ends(umesh, mus[c]) * L:.4g} at rest), less than two fixtures of radius "
+            f"{r:.4g} with a wall {prob.fixture_wall * L:.4g} need ({need * L:.4g})" for c, d, need in met)
     res = _in_units(res, units)
     if res.success and not verify and status.startswith(ACCEPTABLE):
         res.success = False
@@ -411,6 +411,11 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             res.status += f"; rejected by verification: {v.message}"
             return res, fwd, True
     return res, fwd, False
+
+
+def _rest_ends(mesh, muscle) -> float:
+    """The distance of ``muscle``'s end nodes on ``mesh`` at rest."""
+    return float(np.linalg.norm(mesh.points[muscle.nodes[-1]] - mesh.points[muscle.nodes[0]]))
 
 
 #: the verification's tolerance when the forward solves' ``inner_tol`` is looser: ``solve_internal``'s
