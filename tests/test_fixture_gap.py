@@ -146,3 +146,39 @@ def test_mdsr_run_designs_the_short_rope_buildable(tmp_path, capsys):
     assert case["contraction_error"] > 0.05
     assert "end fixtures" in case["design_status"]
     assert Path(tmp_path / "o").is_dir()
+
+
+PLATE = """
+name = "plate2win"
+[body]
+outline = [[0,0],[6,0],[6,2],[0,2]]
+holes = [[[1,0.6],[2.5,0.6],[2.5,1.4],[1,1.4]], [[3.5,0.6],[5,0.6],[5,1.4],[3.5,1.4]]]
+resolution = 400
+[regions]
+base = { box = [-1, -1, 0, 3] }
+tip = { box = [6, -1, 7, 3] }
+[[cases]]
+name = "lift"
+anchors = "base"
+drags = [{ nodes = "tip", by = [-0.8, 1.8] }]
+"""
+
+
+@pytest.mark.slow
+def test_the_trial7_plate_designs_ropes_whose_fixtures_stay_apart(tmp_path):
+    # trial7's reproducer: routed rope M8 designed to a = 0.6 with its ends 0.187 apart (fixtures of radius
+    # 0.0949: 2 r = 0.190), the design a success and its virtual prototype failed
+    from mdsr_opt.scenes.casefab import fixture_wall
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    path = tmp_path / "plate.toml"
+    path.write_text(PLATE)
+    scene = load_scene(path)
+    run = run_case(scene, "lift")
+    assert run.report.success, run.report.message
+    res, mus = run.design, run.setup.muscles
+    need = 2 * res.anchor_radius + fixture_wall(scene)
+    assert res.anchor_radius == pytest.approx(0.09487, rel=1e-3) and need == pytest.approx(0.2530, rel=1e-3)
+    for m in mus:
+        assert _ends(res.x, m) >= need - 1e-9, (m.name, _ends(res.x, m), need)
