@@ -333,12 +333,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
-    opts = dict(scene.design_options)
-    if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
-            setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
-        opts["anchor_radius"] = setup.routing.fixture_radius
-    if case.muscles is not None and case.anchor_radius is not None:  # the fixtures of the case's own muscles
-        opts["anchor_radius"] = case.anchor_radius
+    # the muscles' end fixtures (cases.case_anchor_radius): routed ropes' fitted size, a case's own, the scene's
+    opts = {**scene.design_options, "anchor_radius": setup.anchor_radius}
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()
