@@ -66,7 +66,9 @@ class Case:
         rim that routing does not find); the design then finds their contractions.
     anchor_radius : float, optional
         With ``muscles``: the radius of their end fixtures, which the design uses for this case (default: the
-        scene's ``design_options["anchor_radius"]``); e.g. the radius the ropes were fitted to when routed.
+        scene's, :func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`); e.g. the radius the ropes were fitted
+        to when routed. With a fabrication that states them, at most its ``fixture_radius`` and at least its
+        ``min_fixture_radius`` (the :class:`Scene` refuses another).
     """
 
     name: str
