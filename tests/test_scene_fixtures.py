@@ -118,8 +118,8 @@ def test_an_internal_case_is_recovered_with_the_fabrication_fixture_radius(tmp_p
     run = run_case(scene, "c", photo=False)
     assert run.report.success, run.report.message
     assert run.design.anchor_radius == pytest.approx(0.1, abs=0)
-    assert abs(run.design.contractions[0] - 0.2) < 1e-8
-    assert run.report.contraction_error < 1e-8
+    assert abs(run.design.contractions[0] - 0.2) < 1e-9  # 8.7e-12 measured; 1.8e-3 with the old target
+    assert run.report.contraction_error < 1e-9
 
 
 def test_given_muscles_are_designed_and_checked_with_the_fabrication_fixture_radius(tmp_path):

@@ -3,9 +3,11 @@
 The ``[fabrication]`` table's ``fixture_radius`` and the ``[design]`` table's ``anchor_radius`` name one
 thing: the radius of the fixture (bead, knot, plate) at each rope end, which the design models as a rigid
 anchor patch (:mod:`mdsr_opt.synthesis.fabrication`). A scene states it in either place, or in both with one
-value (:func:`fixture_radius_conflict` refuses two values); :func:`scene_fixture_radius` is the size every
-consumer of a scene uses -- the target of an internal case, the designs of given muscles, the gait's shared
-layout, the animations and the virtual prototype. A case's own ``anchor_radius`` (its muscles' fixtures, e.g.
+value (:func:`fixture_radius_conflict` refuses two values); :func:`scene_fixture_radius` is the size the
+consumers of a scene take for muscles it gives -- the target of an internal case, the designs of given muscles
+(:func:`~mdsr_opt.scenes.cases.case_anchor_radius`, whose radii a gait of given muscles takes), the
+animations of the scene's muscles and the virtual prototype. Routed ropes keep the size they were fitted to
+(the routing may shrink the stated size). A case's own ``anchor_radius`` (its muscles' fixtures, e.g.
 routed ropes whose fixtures had to shrink) lies between the stated ``min_fixture_radius`` and
 ``fixture_radius``: the routing shrinks fixtures, it never grows them.
 """
