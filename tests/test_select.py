@@ -58,3 +58,19 @@ def test_the_limits_of_good_selections_still_select(mesh):
                                                        (1.0, 0.0)]
     assert len(boundary_path(mesh, [0, 0], [1.5, 0], inset=1).nodes) == 2  # 4 nodes, one dropped at each end
     assert nearest_node(mesh, [1.0, 0.5], tol=0) == k
+
+
+def test_a_scene_region_whose_polygon_encloses_nothing_is_named_by_its_field(tmp_path):
+    from mdsr_opt.cli.main import main
+    from mdsr_opt.scenes.reader import SceneFileError
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    scene = tmp_path / "flat.toml"
+    scene.write_text('name = "flat"\n[body]\noutline = [[0, 0], [4, 0], [4, 1], [0, 1]]\nresolution = "coarse"\n'
+                     '[regions]\nbase = { box = [-1, -1, 0, 2] }\n'
+                     'tip = { polygon = [[3.5, 0.2], [3.7, 0.4], [3.9, 0.6]] }\n'
+                     '[[cases]]\nname = "bend"\nanchors = "base"\ndrags = [{ nodes = "tip", by = [0, 0.3] }]\n')
+    with pytest.raises(SceneFileError, match=r"flat\.toml: regions\.tip\.polygon: the polygon's 3 vertices lie on "
+                                             r"one line"):
+        load_scene(scene)
+    assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2 and not (tmp_path / "o").exists()

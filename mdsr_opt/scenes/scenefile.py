@@ -412,7 +412,11 @@ def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.
             r.fail(f"{where}.radius", "missing (required with near)")
         idx = nodes_near(mesh, p, r.number(s["radius"], f"{where}.radius", positive=True), boundary=bnd)
     elif kind == "polygon":
-        idx = nodes_in_polygon(mesh, r.points(s["polygon"], f"{where}.polygon", at_least=3), boundary=bnd)
+        poly = r.points(s["polygon"], f"{where}.polygon", at_least=3)
+        try:
+            idx = nodes_in_polygon(mesh, poly, boundary=bnd)
+        except ValueError as exc:  # a polygon that encloses nothing (its vertices on one line): named by its field
+            r.fail(f"{where}.polygon", str(exc).removeprefix("nodes_in_polygon: "))
     else:
         k = r.integer(s["loop"], f"{where}.loop (a boundary loop index)", 0, len(mesh.boundary_loops) - 1)
         idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
