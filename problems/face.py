@@ -157,30 +157,27 @@ _LAYOUTS: dict = {}
 
 
 def one_layout(mesh: Mesh, material, cases, routing_options, anchor_radius=None) -> tuple:
-    """The face's ONE muscle layout: every expression's target (external driving) routed on its own, the
+    """The face's ONE muscle layout: every expression's target (external driving) routed on its own
+    (:func:`~mdsr_opt.synthesis.layouts.route_poses`, the pipeline's routing), the
     routings merged by :func:`~mdsr_opt.synthesis.layouts.shared_layout` (round-robin by rank, duplicates
     dropped), as :func:`~mdsr_opt.synthesis.poses.design_poses` lays it, the ropes fitted to end fixtures of
     the design's ``anchor_radius`` (as design_poses fits them). Returns ``(muscles, targets)``;
     a target that does not solve raises ``RuntimeError`` naming it."""
     from mdsr_opt.mechanics.equilibrium import solve_external
     from mdsr_opt.synthesis.fabrication import check_fabrication
-    from mdsr_opt.synthesis.layouts import shared_layout
-    from mdsr_opt.synthesis.routing import RoutingWarning, route_muscles
-    import warnings
+    from mdsr_opt.synthesis.layouts import route_poses, shared_layout
 
     key = (mesh.n_nodes, mesh.points.tobytes())
     if key not in _LAYOUTS:
         routing_options = {**routing_options,
                            "fabrication": check_fabrication(routing_options.get("fabrication"), anchor_radius)}
-        own, targets = {}, {}
+        targets = {}
         for c in cases:
             res = solve_external(mesh, material, c.anchors, c.drags)
             if not res.success:
                 raise RuntimeError(f"face: the target of {c.name!r} did not solve: {res.status}")
             targets[c.name] = res.x
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RoutingWarning)
-                own[c.name] = tuple(route_muscles(mesh, res.x, **routing_options))
+        own, _ = route_poses(mesh, targets, routing_options)  # every target routed as design_poses routes it
         # merged as design_poses merges them: a rope that cannot be moulded beside a kept one (channels closer
         # than a channel and a wall, crossing ropes, fixtures of anchor_radius that overlap) merged into it
         fab = routing_options["fabrication"]

@@ -81,6 +81,20 @@ def test_vector_format_alone_asks_for_vector_figures(tmp_path, capsys, monkeypat
     assert "writes no vector figures" in capsys.readouterr().err and not (tmp_path / "p").exists()
 
 
+@pytest.mark.parametrize("extra, said", [
+    (["--no-figures", "--vector"], "--vector writes the figures as vector files too: it cannot go with --no-figures"),
+    (["--vector-format", "svg", "--no-figures"], "--vector-format writes the figures as vector files too"),
+    (["--no-photos", "--photo-size", "300x300"], "--photo-size sets the size of the synthetic photographs"),
+])
+def test_options_that_contradict_each_other_are_refused_at_the_door(tmp_path, capsys, extra, said):
+    """A new user's trial: ``--no-figures --vector`` and ``--no-photos --photo-size`` ran and silently ignored
+    one of the two; now exit 2 with one line, and no folder."""
+    out = tmp_path / "o"
+    assert main(["run", "one_muscle", "--out", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err and not out.exists()
+
+
 @pytest.mark.parametrize("columns", [80, 120])
 def test_the_progress_bar_keeps_its_bar_in_the_terminals_width(monkeypatch, columns):
     """In an 80-column terminal the current stage beside the bar (up to 48 characters, then the rate) left

@@ -304,3 +304,21 @@ def test_external_load_steps_before_the_last_keep_the_tighter_intermediate_toler
     assert res.success and res.steps == [0.5, 1.0]
     assert tols == [loadsteps.INTERMEDIATE_TOL, 1e-10]
     assert loadsteps.INTERMEDIATE_TOL == 1e-6 and loadsteps.INTERNAL_INTERMEDIATE_TOL > loadsteps.INTERMEDIATE_TOL
+
+
+def test_max_iter_caps_each_solve_not_the_call_as_documented():
+    """trial7: solve_internal's docstring did not say what max_iter caps. It caps every solve (each load step
+    tried, the stability re-solve); the result's iterations sum them, so a tiny cap shows in many short load
+    steps, not in a failure."""
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    bottom = Muscle([int(i) for i in np.argsort(mesh.points[:, 0]) if mesh.points[i, 1] == 0.0])
+    for solve in (solve_internal, solve_external):
+        doc = " ".join(solve.__doc__.split())
+        assert "max_iter : iteration cap of each solve" in doc and "not of the call" in doc
+    free = solve_internal(mesh, NeoHookean(1.0, 0.3), [bottom], [0.3])
+    capped = solve_internal(mesh, NeoHookean(1.0, 0.3), [bottom], [0.3], max_iter=1)
+    assert free.success and capped.success and capped.stable
+    assert list(free.steps) == [1.0] and len(capped.steps) > 4 and capped.steps[-1] == 1.0
+    assert capped.iterations > len(capped.steps) - 1 > 1  # summed over the steps: above the cap of 1
+    assert np.allclose(capped.achieved, [0.3], atol=1e-9)
+    assert np.abs(capped.x - free.x).max() < 1e-6 * mesh.size  # the same state, reached in small steps

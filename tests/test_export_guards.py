@@ -6,6 +6,7 @@ every file, and ``--no-animations`` skips only the gait's GIF, not its schedule 
 from __future__ import annotations
 
 import csv
+import xml.etree.ElementTree as ET
 import dataclasses
 import html
 import json
@@ -99,6 +100,11 @@ def test_a_failed_design_is_refused_unless_asked_for_and_then_every_file_says_so
     mark = "FAILED DESIGN: the design failed (Maximum_Iterations_Exceeded; rejected: the design's state inverts"
     assert caption(files["svg"]).strip().startswith(mark)
     assert "do not build" in open(files["svg"], encoding="utf-8").read().split("</title>")[0]
+    svg = ET.parse(files["svg"]).getroot()  # across the drawing in red, and the caption in red
+    ns = {"s": "http://www.w3.org/2000/svg"}
+    mark_text = svg.find("s:text[@id='failed']", ns)
+    assert mark_text is not None and mark_text.text == "FAILED DESIGN: DO NOT BUILD" and mark_text.get("fill") == "#d00000"
+    assert svg.find("s:text[@class='caption']", ns).get("fill") == "#d00000"
     assert " ".join(dxf_texts(files["dxf"])).startswith(mark)
     lines = open(files["csv"], encoding="utf-8").read().splitlines()
     assert lines[0].startswith("# " + mark) and lines[0].endswith("do not build")
@@ -106,6 +112,7 @@ def test_a_failed_design_is_refused_unless_asked_for_and_then_every_file_says_so
     # a design that succeeded: no mark anywhere
     ok = export_fabrication(mesh, good, tmp_path / "ok", muscles=mus, units="mm")
     assert not any("FAILED" in open(f, encoding="utf-8").read() for f in ok.values())
+    assert 'fill="#d00000"' not in open(ok["svg"], encoding="utf-8").read()
 
 
 def test_a_stroke_that_would_stretch_its_rope_is_never_paired_silently(tmp_path):

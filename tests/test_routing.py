@@ -565,6 +565,10 @@ def test_figures(grid_strip, tmp_path):
     _, _, w = edge_weights(grid_strip, t)
     assert np.allclose(colored[0].get_array(), w)
     assert colored[0].get_clim() == pytest.approx((-np.abs(w).max(), np.abs(w).max()))
+    black = [c for c in lcs if c.get_array() is None]  # the seed edges, and the title says what they are
+    assert len(black) == 1 and len(black[0].get_segments()) == len(res.seeds)
+    assert "black: seed edges" in ax.get_title()
+    assert "black" not in plot_contraction_graph(grid_strip, t, res.graph).axes[0].get_title()
     assert save_figure(fig, tmp_path / "graph.png") and (tmp_path / "graph.png").stat().st_size > 1000
 
     fig = plot_routing(grid_strip, t, res)

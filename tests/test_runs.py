@@ -159,7 +159,7 @@ def test_a_second_run_is_refused_without_overwrite_and_replaces_the_first_with_i
     assert main(["run", str(strip), "--out", str(out), "--no-photos"]) == 2
     err = capsys.readouterr().err
     assert f"--out {out} holds an earlier mdsr output (`mdsr run {strip}" in err
-    assert "complete); pass --overwrite to replace it, or choose a new folder" in err
+    assert "complete); pass --overwrite to replace it (overwrite=True from Python), or choose a new folder" in err
     assert _files(out) == first
     # a re-run whose case now fails leaves nothing of the earlier run beside its summary
     failing = dict(STRIP, material={"nu": 0.0},

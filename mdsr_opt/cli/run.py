@@ -59,6 +59,13 @@ def _cmd_run(a) -> int:
 
     t0 = time.perf_counter()
     vector = a.vector_format or ("pdf" if a.vector else None)  # --vector-format alone implies --vector
+    if vector is not None and a.no_figures:  # options that contradict each other: said, not one silently ignored
+        raise InputError(f"--{'vector-format' if a.vector_format else 'vector'} writes the figures as vector files "
+                         "too: it cannot go with --no-figures")
+    if a.photo_size is not None and a.no_photos:
+        raise InputError("--photo-size sets the size of the synthetic photographs (and of the virtual "
+                         "prototype's camera): it cannot go with --no-photos")
+    size = {} if a.photo_size is None else {"photo_size": a.photo_size}  # else write_scene's default (the paper's)
     # the folder first (a one-line error for an empty, unwritable, busy or non-empty --out), then every
     # scene (all input errors, inside checking_input), and only then any solving or writing
     figs = figure_scripts()
@@ -113,7 +120,7 @@ def _cmd_run(a) -> int:
                     log(f"=== scene {i + 1}/{len(scenes)}: {scene.name} ===")
                 done[k] = write_scene(scene, out, cases=a.case, method=a.method, photos=not a.no_photos,
                                       figures=not a.no_figures, animations=not a.no_animations,
-                                      mesh_format=a.format, photo_size=a.photo_size, log=log,
+                                      mesh_format=a.format, log=log, **size,
                                       prototype=not a.no_prototype, prototype_seed=a.prototype_seed,
                                       background=pool is not None, pool=pool,
                                       max_difference=a.max_difference, bands=a.bands, vector=vector,
@@ -197,7 +204,7 @@ def add_cli(sub) -> None:
                    help="design method (default: the scene's, normally flattened)")
     q.add_argument("--format", choices=("vtu", "vtk", "xdmf"), default="vtu", help="mesh files (default vtu)")
     q.add_argument("--no-photos", action="store_true", help="skip the synthetic photographs and contour metrics")
-    q.add_argument("--photo-size", type=parse_size, default=(500, 500), metavar="WxH",
+    q.add_argument("--photo-size", type=parse_size, default=None, metavar="WxH",
                    help="size of the synthetic photographs in pixels (default 500x500, as in the paper)")
     q.add_argument("--no-prototype", action="store_true",
                    help="skip the virtual prototype (quadratic elements on a 2x finer mesh, silicone, ropes with "

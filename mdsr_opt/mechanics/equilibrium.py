@@ -58,7 +58,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         (the max-norm of the free energy gradient relative to ``E t size``; ``residual``) at most ``tol``,
         in any units (the solve runs on the body scaled to a reference size and unit stiffness,
         :mod:`~mdsr_opt.mechanics.units`, and its results are mapped back).
-    max_iter : iteration cap per load step.
+    max_iter : iteration cap of each solve (per load step tried, as in :func:`solve_internal`), not of the
+        call: ``iterations`` in the result sums them all.
     options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
     min_step : smallest load fraction tried before giving up, in (0, 1].
     verbose : print each accepted load step.
@@ -287,6 +288,13 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         pulling only within ``tol L0`` of their targets, and the ropes' and anchor patches' violation), in
         any units (solved on the body's unit copy, :mod:`~mdsr_opt.mechanics.units`); a state re-checked with
         :func:`~mdsr_opt.synthesis.verify.check_minimum` at ``tol`` meets it too.
+    max_iter : iteration cap of each solve, not of the call: every load step tried (a long one is first
+        given at most :data:`~mdsr_opt.mechanics.loadsteps.STEP_ITER_CAP` and halved), and the stability
+        check's re-solve, may take up to ``max_iter``; ``iterations`` in the result sums them all, so it can
+        exceed ``max_iter``. An integer >= 1.
+    options : extra options for the backend (e.g. ``{"ipopt.print_level": 5}``).
+    min_step : smallest load fraction tried before giving up, in (0, 1].
+    verbose : print each accepted load step.
     align_to_rest : rigidly align the result to the rest shape (the body's pose is otherwise arbitrary).
     initial_guess : ``"predictor"``, ``"rest"`` or an (n, 2) state, as in :func:`solve_external`; a state
         in any pose (e.g. an earlier result's ``x``) is moved rigidly into the solver's gauge frame

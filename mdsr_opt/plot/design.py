@@ -36,7 +36,7 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap=CONTRACTION_C
     cmap : str
         A diverging colormap, centred on 0: contraction (w > 0) at the top end, elongation below.
     seeds : sequence of (i, j), optional
-        Seed edges to outline in black.
+        Seed edges to outline in black (the default title says so).
     ticks : bool, default True
         Coordinate ticks on the drawing (the colour bar keeps its own); ``False`` for a run's figures,
         whose coordinates the target figure gives: three ticks a side.
@@ -69,7 +69,8 @@ def plot_contraction_graph(mesh, target, graph=None, ax=None, cmap=CONTRACTION_C
                label=axis_label("relative contraction $(l_0 - l)/l_0$", "1"))
     if seeds is not None and len(seeds):
         ax.add_collection(LineCollection(x[np.asarray(seeds)], colors="k", linewidths=lw * 2.2, zorder=3))
-    ax.set_title(title or "contraction graph (red: shortens, blue: stretches)", fontsize=10)
+    seeded = ";\nblack: seed edges, where the routing starts muscles" if seeds is not None and len(seeds) else ""
+    ax.set_title(title or f"contraction graph (red: shortens, blue: stretches{seeded})", fontsize=10)
     ax.autoscale_view()
     coordinate_axes(ax, units, ticks)
     return fig

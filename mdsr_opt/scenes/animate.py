@@ -10,6 +10,7 @@ from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_fields, save_fields
 from ..plot.style import muscle_label
 from ..synthesis.gait import warm_start_state
+from .fixtures import scene_fixture_radius
 from .reader import contact_options
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
@@ -127,7 +128,8 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     # (moved to the solver's gauge: warm_start_state), else from the solver's default start.
     solved: dict[bytes, tuple] = {}
     prev = None
-    radius, note = opts.get("anchor_radius"), ""
+    # given muscles end on the scene's one fixture size ([design] anchor_radius or [fabrication] fixture_radius)
+    radius, note = (scene_fixture_radius(scene) if scene.muscles is not None else opts.get("anchor_radius")), ""
     # the fixtures the cases' designs were made with (a routed layout's fit its ropes)
     given = {c: float(designs[c][2]) for c in animation.cases if len(designs[c]) > 2 and designs[c][2] is not None
              and np.isfinite(designs[c][2])}

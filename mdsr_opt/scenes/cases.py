@@ -11,10 +11,11 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
+from .fixtures import scene_fixture_radius
 from .reader import contact_options
 from .scene import Case, Scene
 
-__all__ = ['CaseSetup', 'prepare_case', 'given_muscle_conflicts']
+__all__ = ['CaseSetup', 'prepare_case', 'case_anchor_radius', 'given_muscle_conflicts']
 
 
 # ---------------------------------------------------------------------------------------------- design problem
@@ -42,6 +43,9 @@ class CaseSetup:
     fabrication : list of str
         Muscles the scene gives (not routed) that cannot be moulded as laid out: the
         :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` :func:`prepare_case` emitted (empty: none).
+    anchor_radius : float or None
+        The radius of the muscles' end fixtures, which their design takes (:func:`case_anchor_radius`); None:
+        the default (:func:`~mdsr_opt.mechanics.anchors.default_anchor_radius`).
     """
 
     scene: Scene
@@ -54,6 +58,7 @@ class CaseSetup:
     times: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
+    anchor_radius: float | None = None
 
     @property
     def success(self) -> bool:
@@ -73,7 +78,7 @@ class CaseSetup:
             "n_nodes": self.scene.mesh.n_nodes, "target": self.target, "muscles": list(self.muscles),
             "known_contractions": self.known_contractions, "target_result": self.target_result.to_dict(),
             "routing": None if self.routing is None else self.routing.to_dict(), "times": self.times,
-            "warnings": self.warnings, "fabrication": self.fabrication})
+            "warnings": self.warnings, "fabrication": self.fabrication, "anchor_radius": self.anchor_radius})
 
     def save(self, path: str | os.PathLike) -> str:
         """Write the setup as one ``.npz`` file: the target, the known contractions and the target solve's
@@ -93,7 +98,7 @@ class CaseSetup:
         meta = {"scene": self.scene.name, "case": self.case.name, "n_nodes": self.scene.mesh.n_nodes,
                 "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
                 "target_result": tr_meta, "times": self.times, "warnings": list(self.warnings),
-                "fabrication": list(self.fabrication)}
+                "fabrication": list(self.fabrication), "anchor_radius": self.anchor_radius}
         return save_npz(path, "case_setup", arrays, meta)
 
     @classmethod
@@ -127,7 +132,7 @@ class CaseSetup:
                        muscles=tuple(Muscle(tuple(m["nodes"]), name=m["name"]) for m in meta["muscles"]),
                        known_contractions=arrays.get("known_contractions"), target_result=target_result,
                        routing=None, times=dict(meta["times"]), warnings=list(meta["warnings"]),
-                       fabrication=list(meta.get("fabrication", [])))
+                       fabrication=list(meta.get("fabrication", [])), anchor_radius=meta.get("anchor_radius"))
         except KeyError as exc:
             raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing") from None
         except (TypeError, ValueError, AttributeError) as exc:
@@ -140,8 +145,10 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     External cases: :func:`~mdsr_opt.solve_external` with the case's anchors and drags, then
     :func:`~mdsr_opt.synthesis.routing.route_muscles` with the scene's ``routing_options`` (unless the scene gives
     muscles). Internal cases: :func:`~mdsr_opt.solve_internal` with the scene's muscles at the case's
-    contractions, using the scene's ``design_options`` ``muscle_model`` and ``stiffness`` so the design can
-    recover them exactly; routing runs as a diagnostic when ``route_internal``.
+    contractions, using the scene's ``design_options`` ``muscle_model`` and ``stiffness`` and its end-fixture
+    radius (:func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`: ``[design] anchor_radius`` or
+    ``[fabrication] fixture_radius``) so the design can recover them exactly; routing runs as a diagnostic
+    when ``route_internal``.
 
     A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty.
     """
@@ -161,7 +168,7 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
         res = solve_internal(scene.mesh, scene.material, scene.muscles, known,
                              muscle_model=scene.design_options.get("muscle_model", "cable"),
                              stiffness=scene.design_options.get("stiffness", 10.0),
-                             anchor_radius=scene.design_options.get("anchor_radius"), **contact)
+                             anchor_radius=scene_fixture_radius(scene), **contact)
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()
@@ -173,8 +180,7 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", RoutingWarning)
                 ropts = dict(scene.routing_options)  # the fixtures are the design's anchor patches
-                ropts["fabrication"] = check_fabrication(ropts.get("fabrication"),
-                                                         scene.design_options.get("anchor_radius"))
+                ropts["fabrication"] = check_fabrication(ropts.get("fabrication"), scene_fixture_radius(scene))
                 routing = route_for_design(scene.mesh, res.x, **ropts)
             notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
         if own:
@@ -188,7 +194,20 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     t2 = time.perf_counter()
     return CaseSetup(scene=scene, case=case, target=res.x.copy(), muscles=muscles, known_contractions=known,
                      target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
-                     warnings=notes, fabrication=given)
+                     warnings=notes, fabrication=given, anchor_radius=case_anchor_radius(scene, case, routing))
+
+
+def case_anchor_radius(scene: Scene, case: Case, routing=None) -> float | None:
+    """The end-fixture radius the design of ``case``'s muscles takes: the radius its routed ropes were fitted
+    to (``routing.fixture_radius``, when routing laid them: an external case of a scene without muscles and
+    without its own), the case's own ``anchor_radius`` (with its own muscles), else the scene's one size
+    (:func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`), which also made an internal case's target."""
+    routed = case.kind == "external" and scene.muscles is None and case.muscles is None
+    if routed and routing is not None and routing.fixture_radius is not None:
+        return float(routing.fixture_radius)
+    if case.muscles is not None and case.anchor_radius is not None:
+        return float(case.anchor_radius)
+    return scene_fixture_radius(scene)
 
 
 def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
@@ -200,9 +219,9 @@ def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
     from ..synthesis.fabrication import Fabrication, FabricationWarning, check_fabrication, rope_conflicts, \
         warn_conflicts
 
-    # the given ropes are designed with the scene's anchor_radius, so their fixtures are checked at it (a
+    # the given ropes are designed with the scene's fixture radius, so their fixtures are checked at it (a
     # scene saved by the page keeps the routing's nominal fixture_radius beside the radius it fitted)
-    r = case.anchor_radius if case.anchor_radius is not None else scene.design_options.get("anchor_radius")
+    r = case.anchor_radius if case.anchor_radius is not None else scene_fixture_radius(scene)
     fab = check_fabrication(scene.routing_options.get("fabrication")) or Fabrication()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FabricationWarning)

@@ -56,6 +56,7 @@ from ..core.checks import check_int, positive_float
 from ..body.muscles import Muscle
 from ..body.material import NeoHookean
 from ..mechanics.anchors import check_anchor_radius
+from .fixtures import scene_fixture_radius
 from ..mechanics.capstan import CapstanRope, quadratic_chain
 from ..mechanics.fixtures import fixture_groups, fixture_mesh, free_lengths
 from ..mechanics.quadratic import QuadraticModel, extend_prescribed, split_mesh, transfer_state
@@ -203,8 +204,8 @@ class VirtualPrototype:
         friction : float
             Coefficient of friction of the ropes in their channels (capstan law), in [0, 2].
         fixture_radius : float, optional
-            Radius of the end fixtures in length units (default: the scene's ``anchor_radius``, else
-            :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` of the design mesh).
+            Radius of the end fixtures in length units (default: the scene's, ``anchor_radius`` or ``[fabrication]
+            fixture_radius``, else :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` of the design mesh).
         order : 1 or 2
             Element order (2: quadratic triangles; 1 for comparisons only).
         material : optional
@@ -239,8 +240,8 @@ class VirtualPrototype:
         if isinstance(order, bool) or order not in (1, 2):
             raise ValueError(f"order must be 1 or 2, got {order!r}")
         seed = check_int(seed, "seed", 0)
-        if fixture_radius is None:
-            fixture_radius = scene.design_options.get("anchor_radius")
+        if fixture_radius is None:  # [design] anchor_radius or [fabrication] fixture_radius: one size
+            fixture_radius = scene_fixture_radius(scene)
         radius = check_anchor_radius(scene.mesh, fixture_radius)
         fine, mesh, fixed, how = _fine_body(scene, int(round(refine * scene.mesh.n_nodes)))
         rng = np.random.default_rng([int(seed), 14])

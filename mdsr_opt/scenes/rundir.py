@@ -451,7 +451,7 @@ class RunFolder:
         if not self.overwrite:
             if earlier is not None:
                 raise OutputFolderError(f"--out {self.path} holds {earlier.describe()}; pass --overwrite to "
-                                        "replace it, or choose a new folder")
+                                        "replace it (overwrite=True from Python), or choose a new folder")
             shown = ", ".join(map(repr, entries[:3])) + (", ..." if len(entries) > 3 else "")
             raise OutputFolderError(
                 f"--out {self.path} already holds {len(entries)} {'entry' if len(entries) == 1 else 'entries'} "

@@ -43,7 +43,7 @@ class CaseReport:
     scene, case, kind : names and ``"external"``/``"internal"``.
     n_nodes, n_muscles : mesh size and number of muscles designed.
     muscles : per muscle designed, its ``name`` and node chain ``nodes`` (the layout, so two cases on one
-        layout show it).
+        layout show it): the muscles the per-muscle lists below give values for, in their order.
     success : the target solve, the routing (at least one muscle) and the design all succeeded.
     message : why not, when ``success`` is False.
     target_success, target_status : the solve that made the target.
@@ -334,13 +334,11 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
-    opts = dict(scene.design_options, fixture_wall=fixture_wall(scene))  # the fixtures' wall: the fabrication's
-    if setup.routing is not None and setup.routing.fixture_radius is not None and tuple(setup.muscles) == tuple(
-            setup.routing.muscles):  # routed muscles: designed with the end fixtures they were fitted to
-        opts["anchor_radius"] = setup.routing.fixture_radius
-    if case.muscles is not None and case.anchor_radius is not None:  # the fixtures of the case's own muscles
-        opts["anchor_radius"] = case.anchor_radius
-    opts.update({} if method is None else {"method": method})
+    # the muscles' end fixtures (cases.case_anchor_radius): routed ropes' fitted size, a case's own, the scene's;
+    # the wall a rope's two fixtures keep between them: the fabrication's (casefab.fixture_wall)
+    opts = {**scene.design_options, "anchor_radius": setup.anchor_radius, "fixture_wall": fixture_wall(scene)}
+    if method is not None:
+        opts["method"] = method
     t1 = time.perf_counter()
     idle = accept["idle_contraction"] if case.kind == "external" else 0.0
     try:
@@ -366,7 +364,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
             rep.routing["muscles"] = [{"n_edges": s.n_edges, "contraction": s.contraction,
                                        "nonuniformity": s.nonuniformity} for s in setup.routing.stats]
         setup.muscles = kept
-        rep.n_muscles = len(kept)
+        rep.n_muscles = len(kept)  # the names line up with the values below; dropped ones are in ``dropped``
+        rep.muscles = [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in kept]
         rep.dropped = [d.to_dict() for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
     rep.saturated = res.saturated_names

@@ -15,6 +15,7 @@ from ..core.checks import as_float_array, as_index_array, node_indices, positive
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
 from ..synthesis.gait import Gait
+from .fixtures import fixture_radius_conflict, muscle_name_clash
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -65,7 +66,9 @@ class Case:
         rim that routing does not find); the design then finds their contractions.
     anchor_radius : float, optional
         With ``muscles``: the radius of their end fixtures, which the design uses for this case (default: the
-        scene's ``design_options["anchor_radius"]``); e.g. the radius the ropes were fitted to when routed.
+        scene's, :func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`); e.g. the radius the ropes were fitted
+        to when routed. With a fabrication that states them, at most its ``fixture_radius`` and at least its
+        ``min_fixture_radius`` (the :class:`Scene` refuses another).
     """
 
     name: str
@@ -93,6 +96,10 @@ class Case:
             mus = tuple(self.muscles)
             if not mus or not all(isinstance(m, Muscle) for m in mus):
                 raise TypeError(f"case {self.name!r}: muscles must be a non-empty sequence of Muscle")
+            clash = muscle_name_clash(mus)
+            if clash:
+                raise ValueError(f"case {self.name!r}: muscle name {clash[0]!r} is used twice (muscles[{clash[1]}] "
+                                 f"and muscles[{clash[2]}]): every table, figure and file names a muscle by it")
             object.__setattr__(self, "muscles", mus)
         anc = node_indices(self.anchors, f"case {self.name!r}: anchors")
         dn = node_indices(self.drag_nodes, f"case {self.name!r}: drag_nodes")
@@ -256,6 +263,10 @@ class Scene:
         self.cases = cases
         if self.muscles is not None:
             self.muscles = tuple(check_muscles(self.mesh, self.muscles))
+            clash = muscle_name_clash(self.muscles)
+            if clash:
+                raise ValueError(f"scene {self.name!r}: muscle name {clash[0]!r} is used twice (muscles[{clash[1]}] "
+                                 f"and muscles[{clash[2]}]): every table, figure and file names a muscle by it")
             if not self.muscles:
                 self.muscles = None
         for c in cases:
@@ -295,6 +306,13 @@ class Scene:
                                                                       for c in cases)
         check_channel_fits(self.mesh, self.routing_options.get("fabrication"), routed=routes,
                            where=f"scene {self.name!r}: fabrication")
+        conflict = fixture_radius_conflict(  # one end-fixture size: [design] anchor_radius IS fixture_radius
+            self.design_options.get("anchor_radius"), self.routing_options,
+            {c.name: c.anchor_radius for c in cases},
+            {"design": "design_options['anchor_radius']", "fixture": "the fabrication's fixture_radius",
+             "min": "the fabrication's min_fixture_radius", "case": "case {!r}: anchor_radius"})
+        if conflict:
+            raise ValueError(f"scene {self.name!r}: {conflict[0]} {conflict[1]}")
         if self.design_options.get("anchor_radius") is not None:  # the solvers' own check, against this body
             try:
                 check_anchor_radius(self.mesh, self.design_options["anchor_radius"])

@@ -13,6 +13,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_label
 from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
+from .fixtures import fixture_radius_conflict, muscle_name_clash
 from .reader import SceneFileError, Reader, read_file, scene_options, tname, fabrication_table
 from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
@@ -216,6 +217,13 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
     expected = top.get("expected", {})
     if not isinstance(expected, Mapping):
         r.fail("expected", f"expected a table, got {tname(expected)}", TypeError)
+    fab_field = "fabrication" if "fabrication" in top else "routing.fabrication"
+    conflict = fixture_radius_conflict(  # one end-fixture size: [design] anchor_radius IS fixture_radius
+        design.get("anchor_radius"), routing, {i: c.anchor_radius for i, c in enumerate(cases)},
+        {"design": "design.anchor_radius", "fixture": f"{fab_field}.fixture_radius",
+         "min": f"{fab_field}.min_fixture_radius", "case": "cases[{}].anchor_radius"})
+    if conflict:
+        r.fail(*conflict)
     acceptance = top.get("acceptance", {})
     try:
         acceptance = check_acceptance(dict(acceptance) if isinstance(acceptance, Mapping) else acceptance,
@@ -304,9 +312,9 @@ def _scene_material(r: Reader, spec):
             r.fail(f"material.{extra[0]}", "a silicone preset takes only a thickness (and model = 'yeoh' or "
                    "'neo-hookean')")
         law = m.get("model", "yeoh")
+        thickness = r.number(m.get("thickness", 1.0), "material.thickness")  # its own error: named once
         try:
-            return silicone(m["silicone"], r.number(m.get("thickness", 1.0), "material.thickness"),
-                            law=law if law != "neohookean" else "neo-hookean")
+            return silicone(m["silicone"], thickness, law=law if law != "neohookean" else "neo-hookean")
         except (TypeError, ValueError) as exc:
             field_ = "model" if str(exc).startswith("law") else "silicone"
             r.fail(f"material.{field_}", str(exc), type(exc) if isinstance(exc, TypeError) else SceneFileError)
@@ -333,6 +341,8 @@ def _scene_material(r: Reader, spec):
         if "C10" not in vals:
             r.fail("material.C10", "a mooney-rivlin material needs C10")
         return MooneyRivlin(vals["C10"], vals.get("C01", 0.0), vals.get("thickness", 1.0), stress_unit=su)
+    except SceneFileError:  # a field's own error (C1 missing...) names the file and the field once
+        raise
     except (TypeError, ValueError) as exc:
         field_ = next((k for k in (*own[cls], "C10 + C01", "unknown stress_unit") if str(exc).startswith(k)), "")
         field_ = "stress_unit" if field_ == "unknown stress_unit" else field_
@@ -402,7 +412,11 @@ def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.
             r.fail(f"{where}.radius", "missing (required with near)")
         idx = nodes_near(mesh, p, r.number(s["radius"], f"{where}.radius", positive=True), boundary=bnd)
     elif kind == "polygon":
-        idx = nodes_in_polygon(mesh, r.points(s["polygon"], f"{where}.polygon", at_least=3), boundary=bnd)
+        poly = r.points(s["polygon"], f"{where}.polygon", at_least=3)
+        try:
+            idx = nodes_in_polygon(mesh, poly, boundary=bnd)
+        except ValueError as exc:  # a polygon that encloses nothing (its vertices on one line): named by its field
+            r.fail(f"{where}.polygon", str(exc).removeprefix("nodes_in_polygon: "))
     else:
         k = r.integer(s["loop"], f"{where}.loop (a boundary loop index)", 0, len(mesh.boundary_loops) - 1)
         idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
@@ -415,7 +429,17 @@ def _muscle_list(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> tuple:
     """The muscles of a ``muscles`` list (the scene's ``[[muscles]]`` or a case's own)."""
     if not isinstance(v, list):
         r.fail(where, f"expected a list of muscles ([[muscles]] tables), got {tname(v)}", TypeError)
-    return tuple(_scene_muscle(r, mesh, m, f"{where}[{i}]", regions) for i, m in enumerate(v))
+    out = tuple(_scene_muscle(r, mesh, m, f"{where}[{i}]", regions) for i, m in enumerate(v))
+    clash = muscle_name_clash(out)
+    if clash:
+        name, i, j = clash
+        named = isinstance(v[j], Mapping) and "name" in v[j]
+        r.fail(f"{where}[{j}].name" if named else f"{where}[{j}]",
+               f"muscle name {name!r} is used twice, by {where}[{i}] and {where}[{j}]"
+               + ("" if named and isinstance(v[i], Mapping) and "name" in v[i] else
+                  " (an unnamed muscle is called by its place: M1, M2 ...)")
+               + ": every table, figure and file names a muscle by it; give each its own name")
+    return out
 
 
 def _scene_muscle(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> Muscle:
@@ -550,10 +574,11 @@ def _scene_animation(r: Reader, spec, where: str, case_names: set) -> Animation:
         if k[0] != "rest" and k[0] not in case_names:
             r.fail(w, f"unknown case {k[0]!r} (cases: {', '.join(sorted(case_names))}, or 'rest')")
         pairs.append((k[0], r.number(k[1], f"{w}[1]")))
-    fps_ = r.integer(a.get("frames_per_step", 6), f"{where}.frames_per_step", 1)
+    steps = r.integer(a.get("frames_per_step", 6), f"{where}.frames_per_step", 1)
+    name = r.string(a["name"], f"{where}.name")  # each field's own error names the file and field once
+    fps = r.number(a.get("fps", 8.0), f"{where}.fps", positive=True)
     try:
-        return Animation(r.string(a["name"], f"{where}.name"), tuple(pairs), frames_per_step=fps_,
-                         fps=r.number(a.get("fps", 8.0), f"{where}.fps", positive=True))
+        return Animation(name, tuple(pairs), frames_per_step=steps, fps=fps)
     except ValueError as exc:
         r.fail(where, str(exc))
 
@@ -584,10 +609,12 @@ def parse_units_and_gait(r: Reader, top: Mapping, case_names: set):
             r.integer(g[key], f"gait.{key}", 1)
     if not isinstance(g.get("cyclic", True), bool):
         r.fail("gait.cyclic", f"expected true or false, got {g['cyclic']!r}")
+    name = r.string(g.get("name", "gait"), "gait.name")  # each field's own error names file and field once
+    step_time = r.number(g.get("step_time", 1.0), "gait.step_time", positive=True)
+    fps = r.number(g.get("fps", 8.0), "gait.fps", positive=True)
     try:
-        return units, Gait(r.string(g.get("name", "gait"), "gait.name"), tuple(poses),
-                           frames_per_step=g.get("frames_per_step", 6), max_muscles=g.get("max_muscles"),
-                           step_time=r.number(g.get("step_time", 1.0), "gait.step_time", positive=True),
-                           cyclic=g.get("cyclic", True), fps=r.number(g.get("fps", 8.0), "gait.fps", positive=True))
+        return units, Gait(name, tuple(poses), frames_per_step=g.get("frames_per_step", 6),
+                           max_muscles=g.get("max_muscles"), step_time=step_time, cyclic=g.get("cyclic", True),
+                           fps=fps)
     except (ValueError, TypeError) as exc:
         r.fail("gait", str(exc))

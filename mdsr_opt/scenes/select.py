@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+import numbers
+
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..core.checks import as_float_array
+from ..core.checks import as_float_array, check_int, positive_float
 
 __all__ = ['nodes_in_box', 'nodes_near', 'nearest_node', 'nodes_in_polygon', 'edge_path', 'edge_graph', 'boundary_path']
 
@@ -16,19 +18,37 @@ __all__ = ['nodes_in_box', 'nodes_near', 'nearest_node', 'nodes_in_polygon', 'ed
 # ---------------------------------------------------------------------------------------------- node selection
 def nodes_in_box(mesh: Mesh, xmin: float = -math.inf, ymin: float = -math.inf, xmax: float = math.inf,
                  ymax: float = math.inf, boundary: bool = False) -> np.ndarray:
-    """Nodes with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (boundary nodes only with ``boundary``)."""
+    """Nodes with ``xmin <= x <= xmax`` and ``ymin <= y <= ymax`` (boundary nodes only with ``boundary``).
+
+    A bound is a real number or infinite (no bound on that side); NaN, or a minimum above its maximum, is a
+    ``ValueError`` naming it."""
+    x0, y0, x1, y1 = (_bound(v, k) for v, k in ((xmin, "xmin"), (ymin, "ymin"), (xmax, "xmax"), (ymax, "ymax")))
+    for lo, hi, a in ((x0, x1, "x"), (y0, y1, "y")):
+        if lo > hi:
+            raise ValueError(f"nodes_in_box: {a}min {lo:g} is above {a}max {hi:g}: the box is empty")
     P = mesh.points
     eps = 1e-9 * mesh.size
-    sel = (P[:, 0] >= xmin - eps) & (P[:, 0] <= xmax + eps) & (P[:, 1] >= ymin - eps) & (P[:, 1] <= ymax + eps)
+    sel = (P[:, 0] >= x0 - eps) & (P[:, 0] <= x1 + eps) & (P[:, 1] >= y0 - eps) & (P[:, 1] <= y1 + eps)
     idx = np.flatnonzero(sel)
     if boundary:
         idx = np.intersect1d(idx, mesh.boundary_nodes)
     return idx.astype(np.int64)
 
 
+def _bound(value, name: str) -> float:
+    """A box bound: a real number, infinite allowed, not NaN (``TypeError``/``ValueError`` naming it)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise TypeError(f"nodes_in_box: {name} must be a real number, got {type(value).__name__} {value!r}")
+    if math.isnan(float(value)):
+        raise ValueError(f"nodes_in_box: {name} is NaN")
+    return float(value)
+
+
 def nodes_near(mesh: Mesh, point: ArrayLike, radius: float, boundary: bool = False) -> np.ndarray:
-    """Nodes within ``radius`` of ``point`` (boundary nodes only with ``boundary``)."""
+    """Nodes within ``radius`` (finite, >= 0; ``ValueError`` otherwise) of ``point`` (boundary nodes only with
+    ``boundary``)."""
     p = as_float_array(point, "point", shape=(2,))
+    radius = positive_float(radius, "nodes_near: radius", allow_zero=True)
     idx = np.flatnonzero(np.linalg.norm(mesh.points - p, axis=1) <= radius)
     if boundary:
         idx = np.intersect1d(idx, mesh.boundary_nodes)
@@ -38,6 +58,7 @@ def nodes_near(mesh: Mesh, point: ArrayLike, radius: float, boundary: bool = Fal
 def nearest_node(mesh: Mesh, point: ArrayLike, boundary: bool = False, tol: float | None = None) -> int:
     """The node nearest to ``point``; with ``tol``, a ``ValueError`` when it lies farther than ``tol``."""
     p = as_float_array(point, "point", shape=(2,))
+    tol = None if tol is None else positive_float(tol, "nearest_node: tol", allow_zero=True)
     cand = mesh.boundary_nodes if boundary else np.arange(mesh.n_nodes)
     d = np.linalg.norm(mesh.points[cand] - p, axis=1)
     k = int(np.argmin(d))
@@ -48,10 +69,18 @@ def nearest_node(mesh: Mesh, point: ArrayLike, boundary: bool = False, tol: floa
 
 
 def nodes_in_polygon(mesh: Mesh, polygon: ArrayLike, boundary: bool = False) -> np.ndarray:
-    """Nodes inside (or on) ``polygon``."""
+    """Nodes inside (or on) ``polygon``: at least three vertices enclosing an area (a ``ValueError``
+    otherwise: fewer vertices, or all on one line)."""
     from matplotlib.path import Path as _MplPath  # geometry only, no plotting
 
     poly = as_float_array(polygon, "polygon", shape=(None, 2))
+    if len(poly) < 3:
+        raise ValueError(f"nodes_in_polygon: polygon needs at least 3 vertices, got {len(poly)}")
+    d = poly - poly[0]
+    far = d[int(np.argmax(np.hypot(d[:, 0], d[:, 1])))]  # the vertex farthest from the first
+    if np.abs(far[0] * d[:, 1] - far[1] * d[:, 0]).max() <= 1e-12 * float(far @ far):  # every one on its line
+        raise ValueError(f"nodes_in_polygon: the polygon's {len(poly)} vertices lie on one line (or one point): "
+                         "it encloses no area")
     inside = _MplPath(poly).contains_points(mesh.points, radius=1e-9 * mesh.size) | \
         _MplPath(poly).contains_points(mesh.points, radius=-1e-9 * mesh.size)
     idx = np.flatnonzero(inside)
@@ -63,7 +92,7 @@ def nodes_in_polygon(mesh: Mesh, polygon: ArrayLike, boundary: bool = False) -> 
 def _snap(mesh: Mesh, p: np.ndarray, boundary: bool, tol: float | None, what: str) -> int:
     """The node nearest ``p``; a ValueError naming ``what`` when it is farther than ``tol`` (default one mean
     edge length)."""
-    tol = float(mesh.edge_lengths.mean()) if tol is None else float(tol)
+    tol = float(mesh.edge_lengths.mean()) if tol is None else positive_float(tol, "tol", allow_zero=True)
     k = nearest_node(mesh, p, boundary=boundary)
     d = float(np.linalg.norm(mesh.points[k] - p))
     if d > tol:
@@ -102,9 +131,10 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
 
     ``start`` and ``end`` must lie within ``tol`` (default: one mean edge length) of a boundary node, else a
     ``ValueError`` names the point and the distance. Of the two ways round the loop, the one passing
-    nearest ``via`` is taken (default: the shorter one). ``inset`` drops that many nodes at each end (a
-    muscle that stops short of a corner).
+    nearest ``via`` is taken (default: the shorter one). ``inset`` (an integer >= 0) drops that many nodes at
+    each end (a muscle that stops short of a corner); it must leave at least two.
     """
+    inset = check_int(inset, "boundary_path: inset", 0)
     a = _snap(mesh, as_float_array(start, "start", shape=(2,)), True, tol, "start")
     b = _snap(mesh, as_float_array(end, "end", shape=(2,)), True, tol, "end")
     if a == b:
@@ -125,6 +155,9 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
         v = as_float_array(via, "via", shape=(2,))
         path = min(fwd, bwd, key=lambda p: float(np.linalg.norm(mesh.points[p] - v, axis=1).min()))
     if inset:
+        if len(path) - 2 * inset < 2:
+            raise ValueError(f"boundary_path: inset {inset} drops every node of the {len(path)}-node path "
+                             "(it must leave at least two)")
         path = path[inset:-inset]
     return Muscle(path, name=name)
 

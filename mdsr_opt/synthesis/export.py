@@ -416,12 +416,21 @@ def _svg_text(fd: FabricationData, title: str) -> str:
                        f'data-distance="{cf.distance:.9g}" data-required="{cf.required:.9g}">'
                        f"<title>{escape(cf.message)}</title></circle>")
         out.append("</g>")
+    if fd.failure:  # across the drawing, in red: a print of it cannot be taken for a design to build
+        out.append(f'<text id="failed" x="{W / 2:.6g}" y="{(H - 1.25 * fc * (len(lines) - 1)) / 2:.6g}" '
+                   f'font-family="sans-serif" font-weight="bold" font-size="{min(0.12 * size, W / 20):.6g}" '
+                   'fill="#d00000" fill-opacity="0.55" text-anchor="middle" dominant-baseline="central">'
+                   "FAILED DESIGN: DO NOT BUILD</text>")
     out.append(f'<text class="caption" x="{pad * 0.3:.6g}" y="{y0:.6g}" font-family="sans-serif" '
-               f'font-size="{fc:.6g}">' + "".join(
+               f'font-size="{fc:.6g}"{FAILED_FILL if fd.failure else ""}>' + "".join(
                    f'<tspan x="{pad * 0.3:.6g}" dy="{0 if k == 0 else 1.25 * fc:.6g}">{escape(t)}</tspan>'
                    for k, t in enumerate(lines)) + "</text>")
     out.append("</svg>")
     return "\n".join(out) + "\n"
+
+
+#: the caption of a failed design is drawn in this colour (its first sentence says why it failed)
+FAILED_FILL = ' fill="#d00000"'
 
 
 def _csv_text(fd: FabricationData) -> str:

@@ -1,6 +1,7 @@
 """One muscle layout from several: the per-pose routings merged under a muscle budget.
 
-:func:`shared_layout` is step 2-4 of :func:`~mdsr_opt.synthesis.poses.design_poses` (its module docstring
+:func:`route_poses` is step 1 of :func:`~mdsr_opt.synthesis.poses.design_poses` (every pose routed as the
+pipeline routes, with the reason for a pose that gets no rope); :func:`shared_layout` is step 2-4 of :func:`~mdsr_opt.synthesis.poses.design_poses` (its module docstring
 says why a union of per-pose layouts and not one routing on a combined graph): candidates taken round-robin
 by rank, duplicates (ropes sharing most of their edges, or too close to be moulded apart) merged, at most
 ``max_muscles`` kept. :func:`check_budget` checks that budget.
@@ -8,6 +9,7 @@ by rank, duplicates (ropes sharing most of their edges, or too close to be mould
 
 from __future__ import annotations
 
+import warnings
 from typing import Mapping, Sequence
 
 from ..body.mesh import Mesh
@@ -17,7 +19,7 @@ from ..plot.style import muscle_label, muscle_name
 from .fabrication import pair_conflicts
 from .routing_fixtures import clear_part
 
-__all__ = ["shared_layout", "check_budget"]
+__all__ = ["route_poses", "shared_layout", "check_budget"]
 
 
 def check_budget(max_muscles) -> int | None:
@@ -25,6 +27,49 @@ def check_budget(max_muscles) -> int | None:
     if max_muscles is None:
         return None
     return check_int(max_muscles, "max_muscles (the muscle budget, or None)", 1)
+
+
+def route_poses(mesh: Mesh, targets: Mapping, routing_options: Mapping) -> tuple[dict, dict]:
+    """Every pose's own layout, routed as :func:`~mdsr_opt.design_pipeline` and ``mdsr run`` route a target
+    (:func:`~mdsr_opt.synthesis.routing.route_for_design`, with its fallbacks: deeper inside with smaller
+    fixtures, ``K_a = 1``, ropes snapped into the buildable band), so that a pose the pipeline can design gets
+    its ropes here too.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    targets : mapping pose name -> (n, 2) target (checked)
+    routing_options : mapping, keywords of :func:`~mdsr_opt.synthesis.routing.route_muscles`
+
+    Returns
+    -------
+    layouts : dict pose name -> tuple of Muscle, ranked strongest first (in the order of ``targets``)
+    reasons : dict pose name -> str, for every pose that got no rope: why (the first routing's warnings -- no
+        contracted edge, units shorter than ``min_length``, ropes that keep no room for their fixtures or lie
+        outside the buildable band, with their figures -- and its notes on ropes dropped for their fixtures).
+        The routing's other warnings are passed on; its :class:`~mdsr_opt.synthesis.routing.RoutingWarning`
+        are not (a pose with ropes needs none; one without has them here).
+    """
+    from .routing import RoutingWarning, route_for_design
+    from .routing_fixtures import fitting_notes
+
+    layouts, reasons = {}, {}
+    for name, target in targets.items():
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            rr = route_for_design(mesh, target, **routing_options)
+        said = []
+        for w in caught:
+            if issubclass(w.category, RoutingWarning):
+                said.append(str(w.message))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        layouts[name] = tuple(rr.muscles)
+        if not layouts[name]:
+            why = list(dict.fromkeys(said + list(fitting_notes(mesh.points, rr))))
+            reasons[name] = ("no rope kept by the routing nor by its fallbacks; the routing with the options "
+                             "given: " + ("; ".join(why) or "no reason said"))
+    return layouts, reasons
 
 
 def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscles: int | None = None,

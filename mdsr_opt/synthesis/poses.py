@@ -9,8 +9,9 @@ Shared layout
 -------------
 The layout is the union of the poses' own routings, deduplicated, under a muscle budget:
 
-1. every pose is routed on its own target (:func:`~mdsr_opt.synthesis.routing.route_muscles` with the same options),
-   giving each pose a ranked list of muscles (strongest first);
+1. every pose is routed on its own target as the pipeline routes (:func:`~mdsr_opt.synthesis.layouts.route_poses`:
+   :func:`~mdsr_opt.synthesis.routing.route_for_design` with the same options and its fallbacks), giving each
+   pose a ranked list of muscles (strongest first);
 2. the candidates are taken round-robin by rank (every pose's strongest muscle, then every pose's second
    ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
 3. a candidate whose edges are at least ``overlap`` (default half) covered by a muscle already in the layout
@@ -85,7 +86,7 @@ from ..body.muscles import Muscle
 from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
                           warn_conflicts)
 from .routing_fixtures import common_fixture_radius
-from .layouts import check_budget, shared_layout
+from .layouts import check_budget, route_poses, shared_layout
 from ..plot.style import muscle_label
 
 __all__ = ["Pose", "PosesResult", "design_poses"]
@@ -377,14 +378,6 @@ class PosesResult:
 
 
 # ---------------------------------------------------------------------------------------------- design
-def _route(mesh, target, routing_options):
-    from .routing import RoutingWarning, route_muscles
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RoutingWarning)
-        return tuple(route_muscles(mesh, target, **routing_options))
-
-
 def _per_muscle(design, muscles, mesh):
     """(stroke, tension) of a design, read from its per-muscle fields when it has them."""
     a = np.asarray(design.contractions, dtype=float)
@@ -421,6 +414,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     ----------
     mesh, material : the body.
     poses : mapping name -> (n, 2) target, or a list of :class:`Pose` / ``(name, target)`` / targets.
+        A bare target in a list is named by its place: ``pose0``, ``pose1``...
         At least one; all of ``mesh`` (a :class:`Pose` carrying another mesh is refused). A target may be a
         solve's result (an :class:`~mdsr_opt.mechanics.result.EquilibriumResult`): its ``x``, refused when the
         solve failed.
@@ -428,8 +422,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         The muscle budget of the shared layout (at least 1); default: every non-duplicate muscle the poses'
         routings give.
     routing_options : dict, optional
-        Keywords of :func:`~mdsr_opt.synthesis.routing.route_muscles`, used for every pose's own routing (a
-        ``max_muscles`` there limits each pose's own layout).
+        Keywords of :func:`~mdsr_opt.synthesis.routing.route_muscles`, used for every pose's own routing, made
+        as the pipeline's (:func:`~mdsr_opt.synthesis.routing.route_for_design`: a ``K_a`` or ``band`` given
+        is used as given; a ``max_muscles`` there limits each pose's own layout).
     design_options : dict, optional
         Keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
         ``muscle_model``...).
@@ -466,7 +461,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         Before any work: an empty pose list, a target from a failed solve, poses of a different mesh or
         shape, a target that is no shape of the body (:func:`~mdsr_opt.body.checks.check_target_shape`), a pose name with a control
         character, a separate design made on another mesh, a budget below one, a duplicated pose name, a
-        bad overlap.
+        bad overlap. ValueError after routing when no pose gets a rope, with each pose's reason.
     """
     from .contractions import design_contractions
     from ..body.material import Material
@@ -494,9 +489,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         sep_design = separate[k][1] if isinstance(separate[k], (tuple, list)) and len(separate[k]) == 2 else None
         check_same_mesh(mesh, getattr(sep_design, "rest_mesh", None), f"the separate design of pose {k!r}")
 
-    own: dict[str, tuple] = {}
-    for p in items:
-        own[p.name] = tuple(separate[p.name][0]) if p.name in separate else _route(mesh, p.target, ropt)
+    routed, why_none = route_poses(mesh, {p.name: p.target for p in items if p.name not in separate}, ropt)
+    own = {p.name: tuple(separate[p.name][0]) if p.name in separate else routed[p.name] for p in items}
+    why_none.update({k: "its given layout has no muscle" for k in separate if not own[k]})
     t_route = time.perf_counter() - t0
     fab = None if ropt["fabrication"] is False else ropt["fabrication"].for_body(mesh)
     notes: list = []
@@ -505,9 +500,9 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if notes:  # the poses' ropes that could not be moulded beside another: said, not silently overlapped
         warnings.warn("design_poses: ropes of the poses closer than a channel and a wall: "
                       + "; ".join(notes), FabricationWarning, stacklevel=3)
-    if not muscles:
-        raise ValueError("no pose contracts any edge enough to carry a muscle: nothing to route (poses: "
-                         + ", ".join(p.name for p in items) + ")")
+    if not muscles:  # every pose's routing (as the pipeline routes) kept no rope: each one's reason
+        raise ValueError("no rope for any pose, nothing to design: " + "; ".join(f"pose {k!r}: {v}"
+                                                                               for k, v in why_none.items()))
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
@@ -557,6 +552,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                 status[-1] += f"; {why}"
         if own[p.name] and not any(p.name in src for src in sources):
             status[-1] += "; none of the ropes of its own layout is in the shared layout (over the budget)"
+        elif not own[p.name]:
+            status[-1] += f"; its own routing kept no rope ({why_none[p.name]})"
         off = np.flatnonzero(~engaged[k])
         if len(off):  # released: the rope at exactly the path's length (paid out or slack taken up), no tension
             Lx = np.array([muscles[i].length(x) for i in off])

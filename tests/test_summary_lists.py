@@ -1,0 +1,59 @@
+"""summary.json's per-muscle lists line up (trial 7, defect 5): a case's ``muscles`` names exactly the muscles
+whose contractions, achieved contractions, strokes, tensions and stroke bands it gives (the designed layout);
+a muscle the design dropped is named in ``dropped`` only."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mdsr_opt import load_scene
+
+SCENE = """name = "drop"
+[body]
+outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
+resolution = "coarse"
+[[muscles]]
+name = "low"
+path = [[0.3, 0.3], [3.3, 0.3]]
+[[muscles]]
+name = "high"
+path = [[0.3, 0.7], [3.3, 0.7]]
+[[muscles]]
+path = [[0.3, 0.5], [3.3, 0.5]]
+[[cases]]
+name = "up"
+anchors = [[0, 0], [0, 1], [0, 0.5]]
+drags = [{ at = [4, 1], by = [-0.5, 1.0] }]
+[acceptance]
+bands = true
+"""
+
+
+def test_a_dropped_muscle_is_named_only_in_dropped_and_the_lists_pair_names_with_values(tmp_path):
+    from mdsr_opt.scenes.runscene import run_scene
+
+    (tmp_path / "drop.toml").write_text(SCENE)
+    scene = load_scene(tmp_path / "drop.toml")
+    run_scene(scene, tmp_path / "o", photos=False, prototype=False, figures=False, animations=False, log=None,
+              background=False)
+    case = json.loads((tmp_path / "o" / "summary.json").read_text())["cases"][0]
+    dropped = [d["name"] for d in case["dropped"]]
+    assert dropped == ["low"]  # the lower rope is slack when the tip is lifted
+    names = [m["name"] for m in case["muscles"]]
+    assert names == ["high", "M3"] and case["n_muscles"] == 2
+    for key in ("contractions", "achieved", "stroke", "tension", "stroke_band"):
+        assert len(case[key]) == len(names), (key, case[key])
+    # each name's nodes belong with its values: its stroke is its achieved contraction times its rest length
+    P = scene.mesh.points
+    for m, a, s in zip(case["muscles"], case["achieved"], case["stroke"]):
+        L0 = float(np.linalg.norm(np.diff(P[m["nodes"]], axis=0), axis=1).sum())
+        assert s == pytest.approx(a * L0, rel=1e-9), m["name"]
+        given = next(g for g in scene.muscles if g.label(scene.muscles.index(g)) == m["name"])
+        assert list(given.nodes) == m["nodes"]
+    for (lo, hi), s in zip(case["stroke_band"], case["stroke"]):
+        assert lo <= s <= hi
+    row = next(line for line in (tmp_path / "o" / "summary.md").read_text().splitlines() if "| up |" in line)
+    assert "| 2 |" in row and "dropped low" in row
