@@ -52,3 +52,16 @@ def test_mdsr_run_too_far_says_so_in_the_table(tmp_path, capsys):
     assert len(row) == 1
     assert re.search(r"\| FAILED \(too far from the target: \d+\.\d+ % of size, more than max_difference 1 %\) \|",
                      row[0]), row[0]
+
+
+@pytest.mark.parametrize("design, cell", [
+    ({"table": 4, "success": False, "status": "load step 0.9961 -> 1 failed"}, "FAILED (validation.md)"),
+    ({"table": 4, "success": True, "mean_px": 3.256, "ratio": 0.0154}, "3.26"),
+    (None, "-"),  # no prototype run (--no-prototype, or no design)
+])
+def test_the_prototype_column_says_when_the_prototype_failed(design, cell):
+    # trial7: a design whose virtual prototype failed showed "-" in summary.md, as if none had been run
+    photo = {"prototype": {"design": design}} if design is not None else {}
+    c = CaseReport(scene="s", case="c", kind="external", n_nodes=10, success=True, photo=photo)
+    row = SceneReport(scene="s", title="", n_nodes=10, cases=[c]).table().splitlines()[-1]
+    assert row.split("|")[13].strip() == cell, row

@@ -19,7 +19,7 @@ Example
 from __future__ import annotations
 
 __all__ = ["LENGTH_UNITS", "STRESS_UNITS", "BODY_UNITS", "check_length_unit", "check_stress_unit", "length_unit",
-           "tension_unit", "contact_in_unit"]
+           "tension_unit", "contact_in_unit", "percent_beside"]
 
 #: Known length units and their size in metres.
 LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
@@ -92,3 +92,25 @@ def contact_in_unit(report: dict | None, stress_unit: str | None, units: str | N
                 fr[key] = scaled(fr[key])
         out["friction"] = fr
     return out
+
+
+def percent_beside(value: float, threshold: float, digits: int = 0, most: int = 6) -> str:
+    """The fraction ``value`` as a percentage (the number, without ``%``) with ``digits`` decimals, or as many
+    more (up to ``most``) as it takes to print it on the same side of the fraction ``threshold`` as it lies:
+    a message comparing the two never shows a value equal to the threshold, or across it.
+
+    Example
+    -------
+    >>> percent_beside(0.0966, 0.1), percent_beside(0.0996, 0.1), percent_beside(0.5, 0.1)
+    ('9.7', '9.96', '50')
+    >>> percent_beside(0.05004, 0.05, 2), percent_beside(0.1, 0.1)
+    ('5.004', '10')
+    """
+    v, t = 100.0 * float(value), 100.0 * float(threshold)
+    side = (v > t) - (v < t)
+    for d in range(int(digits), max(int(most), int(digits)) + 1):
+        text = f"{v:.{d}f}"
+        shown = float(text)
+        if (shown > t) - (shown < t) == side:
+            return text
+    return text

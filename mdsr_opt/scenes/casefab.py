@@ -13,7 +13,7 @@ import os
 import warnings
 from pathlib import Path
 
-__all__ = ["stated_fabrication", "write_case_fabrication"]
+__all__ = ["stated_fabrication", "fixture_wall", "write_case_fabrication"]
 
 
 def stated_fabrication(scene):
@@ -21,6 +21,15 @@ def stated_fabrication(scene):
     ``False``: routed without one)."""
     fab = (getattr(scene, "routing_options", None) or {}).get("fabrication")
     return None if fab is None or fab is False else fab
+
+
+def fixture_wall(scene) -> float:
+    """The wall (a length) the scene's designs keep between a rope's two end fixtures: its ``[fabrication]``
+    ``wall``, else the default fabrication's for its body
+    (:data:`~mdsr_opt.synthesis.fabrication.WALL_FRACTION` of the diameter)."""
+    from ..synthesis.fabrication import Fabrication, check_fabrication
+
+    return (check_fabrication(stated_fabrication(scene)) or Fabrication()).for_body(scene.mesh).wall
 
 
 def write_case_fabrication(scene, run, folder) -> list[str]:

@@ -20,6 +20,7 @@ from ..plot.style import muscle_label, unit_label
 from ..synthesis.fabrication import FabricationWarning
 from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
+from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
 from .verdict import design_verdict, plain_failure
@@ -204,7 +205,7 @@ class SceneReport:
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
             pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
-            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "-"
+            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "FAILED (validation.md)" if pt else "-"
             rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
                         f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
@@ -333,8 +334,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.fabrication = list(getattr(setup, "fabrication", []))
     for msg in rep.fabrication:
         say(f"{prefix}FabricationWarning: {msg}")
-    # the muscles' end fixtures (cases.case_anchor_radius): routed ropes' fitted size, a case's own, the scene's
-    opts = {**scene.design_options, "anchor_radius": setup.anchor_radius}
+    # the muscles' end fixtures (cases.case_anchor_radius): routed ropes' fitted size, a case's own, the scene's;
+    # the wall a rope's two fixtures keep between them: the fabrication's (casefab.fixture_wall)
+    opts = {**scene.design_options, "anchor_radius": setup.anchor_radius, "fixture_wall": fixture_wall(scene)}
     if method is not None:
         opts["method"] = method
     t1 = time.perf_counter()

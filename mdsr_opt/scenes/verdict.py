@@ -47,6 +47,10 @@ _CAUSES = (
     (r"inverts an element|inverted an element",
      "the shape would turn elements inside out",
      "ask for a smaller deformation, or a finer mesh"),
+    (r"end fixtures meet in the designed state: rope (\S+) at a = (\S+) brings its end fixtures' centres (\S+) "
+     r"apart.*?need \((\S+)\)",
+     "the end fixtures of rope {0} would meet: at a = {1} their centres lie {2} apart, {3} needed",
+     "smaller fixtures (anchor_radius, or fixture_radius under [fabrication]) or longer muscles"),
     (r"not a (stable equilibrium|minimum of the energy)",
      "the designed shape is not stable (the body would snap to another shape)",
      "ask for a smaller deformation, or give more muscles (routing max_muscles)"),
@@ -111,7 +115,7 @@ def failure_cause(message: str) -> str:
         m = re.search(r"is ([\d.]+ %) of the size .*more than max_difference (\S+ %)", far)
         if m:
             return f"too far from the target: {m.group(1)} of size, more than max_difference {m.group(2)}"
-        m = re.search(r"removes (-?\d+ %) of the rest shape.*less than min_progress (\S+ %)", far)
+        m = re.search(r"removes (-?[\d.]+ %) of the rest shape.*less than min_progress (\S+ %)", far)
         if m:
             return f"too far from the target: removes {m.group(1)} of the rest shape's difference, less than {m.group(2)}"
         return _short("too far from the target: " + far.strip())

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..core.checks import positive_float
+from ..core.quantities import percent_beside
 from ..core.results import to_jsonable
 from ..plot.style import muscle_label, muscle_name
 
@@ -123,6 +124,8 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     'difference 0.12 mm is 6.00 % of the size 2 mm, more than max_difference 5 %'
     >>> difference_failure(0.043, 1.0, rest_difference=0.045)[:40]
     'the design removes 4 % of the rest shape'
+    >>> difference_failure(0.9034, 100.0, rest_difference=1.0)[:42]   # 9.66 %: not "10 %", the threshold
+    'the design removes 9.7 % of the rest shape'
     """
     from ..plot.style import unit_label
 
@@ -130,14 +133,14 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     if not math.isfinite(d):
         return "its difference is not finite (no shape to compare)"
     if d > max_difference * size:
-        return (f"difference {d:.3g} {u} is {100 * d / size:.2f} % of the size {size:.3g} {u}, more than "
+        return (f"difference {d:.3g} {u} is {percent_beside(d / size, max_difference, 2)} % of the size {size:.3g} {u}, more than "
                 f"max_difference {100 * max_difference:g} %")
     if rest_difference is None:
         return ""
     d0 = float(rest_difference)
     if not math.isfinite(d0) or d0 <= REST_TOLERANCE * size or d <= (1.0 - min_progress) * d0:
         return ""
-    return (f"the design removes {100 * (1.0 - d / d0):.0f} % of the rest shape's difference {d0:.3g} {u} to the "
+    return (f"the design removes {percent_beside(1.0 - d / d0, min_progress)} % of the rest shape's difference {d0:.3g} {u} to the "
             f"target (difference {d:.3g} {u}), less than min_progress {100 * min_progress:g} %: the muscles "
             "barely move the body")
 

@@ -16,7 +16,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
-from ..mechanics.anchors import check_anchor_radius
+from ..mechanics.anchors import body_size, check_anchor_radius
 from ..mechanics.blas import one_blas_thread
 from ..mechanics.equilibrium import solve_internal
 from ..mechanics.loadsteps import upright
@@ -25,12 +25,18 @@ from ..mechanics.units import Units
 from ..plot.style import muscle_label
 from .contactdesign import check_design_contact, unit_contact
 from .nlp import ACCEPTABLE, run_flattened
-from .problem import ForwardSolver, DesignProblem, check_inputs, initial_guess_of
+from .fabrication import WALL_FRACTION
+from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
 
 _LOG = logging.getLogger(__name__)
+
+#: how often a design whose end fixtures meet is made again with the muscles concerned capped lower
+FIXTURE_REDESIGNS = 2
+#: the share beyond ``2 r + wall`` its ends are aimed at when a muscle is capped again
+FIXTURE_MARGIN = 0.01
 
 __all__ = ['check_design_options', 'design_contractions', 'warn_saturated']
 
@@ -48,7 +54,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         inner_tol: float = 1e-10, verify: bool | str = True, skip_verification=None,
                         gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
-                        contact_gap: float | None = None) -> DesignResult:
+                        contact_gap: float | None = None, fixture_wall: float | None = None) -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
 
     Parameters
@@ -78,6 +84,13 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     anchor_radius : float, optional
         Radius of the rigid patch at each muscle end (a length, >= 0); default
         :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` (a fraction of the body's size).
+    fixture_wall : float, optional
+        The wall (a length, >= 0) the two end fixtures of a rope (disks of ``anchor_radius``) keep between
+        them in the designed state: no contraction brings a rope's ends closer than ``2 anchor_radius +
+        fixture_wall`` at rest scale (:func:`~mdsr_opt.synthesis.problem.fixture_caps`), and a design whose
+        state does (:func:`~mdsr_opt.synthesis.problem.fixture_overlaps`) is no success, its ``status``
+        naming the rope and the distances. Default: the fabrication's default wall,
+        :data:`~mdsr_opt.synthesis.fabrication.WALL_FRACTION` of the body's diameter.
     tol : float, optional
         Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
         (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).
@@ -193,6 +206,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                                                     interior_weight, muscle_model, stiffness, initial)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
+    fixture_wall = WALL_FRACTION * body_size(mesh) if fixture_wall is None else \
+        positive_float(fixture_wall, "fixture_wall", allow_zero=True)
     if shaped:
         warm_start = as_float_array(warm_start, "warm_start", shape=(mesh.n_nodes, 2))
     m = len(mus)
@@ -211,7 +226,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     # result mapped back to the caller's units before its verification
     units = Units(mesh, material)
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, units.state_in(y), w, muscle_model, stiffness,
-                         a_max, units.to_unit(anchor_radius))
+                         a_max, units.to_unit(anchor_radius), units.to_unit(fixture_wall))
     # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
     a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
@@ -219,6 +234,37 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units, ckw, skip_verification)
+    res = _design_from(args, warm, clock0)
+    for _ in range(FIXTURE_REDESIGNS):
+        # end fixtures that meet in the designed state (a rope bent or zig-zagging more than the caps assume):
+        # their muscles capped below the contraction that brought them there, and the design made again
+        met = (fixture_overlaps(res.x, mus, res.anchor_radius, fixture_wall, 1e-9 * mesh.size)
+               if np.isfinite(res.x).all() else [])
+        if not met:
+            break
+        for c, d, need in met:
+            scale = (1.0 - res.contractions[c]) * need * (1.0 + FIXTURE_MARGIN) / max(d, 1e-300)
+            prob.a_upper[c] = min(prob.a_upper[c], max(0.0, 1.0 - scale))
+        caps = ", ".join(f"{muscle_label(mus[c], int(c))} to a <= {prob.a_upper[c]:.4g}" for c, _d, _n in met)
+        args = (prob, method, np.minimum(a0, prob.a_upper)) + args[3:]
+        first = res
+        res = _design_from(args, warm, clock0)
+        res.status += f" (designed again with {caps}: at the contractions first found their end fixtures met)"
+        res.iterations += first.iterations
+        res.n_forward += first.n_forward
+        res.inner_iterations += first.inner_iterations
+        res.time = time.perf_counter() - clock0
+        res.solve_time = res.time - res.build_time
+    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    res.stress_unit = getattr(material, "stress_unit", None)
+    if res.saturated.any():
+        warn_saturated(res, mus)
+    return res
+
+
+def _design_from(args, warm, clock0) -> DesignResult:
+    """:func:`_design` warm-started at ``warm``, and again from rest when a design warm-started from the
+    target fails its verification (the answer when that one succeeds)."""
     res, fwd, rejected = _design(*args, warm=warm)
     if fwd.started_from == "target" and rejected:
         # the equilibrium found from the target may lie on another branch than the one reached from rest
@@ -244,10 +290,6 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.time = time.perf_counter() - clock0
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
-    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
-    res.stress_unit = getattr(material, "stress_unit", None)
-    if res.saturated.any():
-        warn_saturated(res, mus)
     return res
 
 
@@ -336,11 +378,19 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.contractions[sl] = np.clip(res.achieved[sl], 0.0, prob.a_upper[sl])
     capped = np.flatnonzero((prob.a_upper < prob.a_max) & (res.contractions >= prob.a_upper - 1e-3))
     if len(capped):  # at a cap below a_max: the best within the bound, as a contraction at a_max is
-        res.status += "; at the most their ropes can shorten (the end fixtures hold much of each rope): " \
+        res.status += "; at the most their ropes can shorten (the end fixtures hold much of each rope, or would meet): " \
                       + ", ".join(f"{muscle_label(mus[c], int(c))} a = {prob.a_upper[c]:.4g}" for c in capped)
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
+    met = fixture_overlaps(res.x, mus, prob.anchor_radius, prob.fixture_wall) if prob.fixture_wall is not None else []
+    if met:  # the fixtures would meet in the silicone: nothing a workshop can build (the prototype's fixtures)
+        L, r = units.length, prob.anchor_radius * units.length
+        res.success = False
+        res.status += "; rejected: end fixtures meet in the designed state: " + "; ".join(
+            f"rope {muscle_label(mus[c], int(c))} at a = {res.contractions[c]:.4g} brings its end fixtures' centres "
+            f"{d * L:.4g} apart ({_rest_ends(umesh, mus[c]) * L:.4g} at rest), less than two fixtures of radius "
+            f"{r:.4g} with a wall {prob.fixture_wall * L:.4g} need ({need * L:.4g})" for c, d, need in met)
     res = _in_units(res, units)
     if res.success and not verify and status.startswith(ACCEPTABLE):
         res.success = False
@@ -361,6 +411,11 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             res.status += f"; rejected by verification: {v.message}"
             return res, fwd, True
     return res, fwd, False
+
+
+def _rest_ends(mesh, muscle) -> float:
+    """The distance of ``muscle``'s end nodes on ``mesh`` at rest."""
+    return float(np.linalg.norm(mesh.points[muscle.nodes[-1]] - mesh.points[muscle.nodes[0]]))
 
 
 #: the verification's tolerance when the forward solves' ``inner_tol`` is looser: ``solve_internal``'s

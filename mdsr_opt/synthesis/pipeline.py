@@ -433,6 +433,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         fab = ropts["fabrication"] or Fabrication()
         warn_conflicts(rope_conflicts(mesh, mus, fab, fixture_radius=design_options.get("anchor_radius")),
                        "design_pipeline: the muscles given")
+    # the wall a rope's two end fixtures keep between them in the designed state: the fabrication's
+    design_options.setdefault("fixture_wall", (ropts["fabrication"] or Fabrication()).for_body(mesh).wall)
     t2 = time.perf_counter()
     design_options.setdefault("verify", PIPELINE_VERIFY)
     _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method,

@@ -30,7 +30,7 @@ class DesignProblem:
     constraints (rope lengths for the cable, rigid end patches for both models), gauge, weights, scales."""
 
     def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max,
-                 anchor_radius=None):
+                 anchor_radius=None, fixture_wall=None):
         self.mesh, self.material, self.muscles = mesh, material, muscles
         self.y = target
         self.w = weights
@@ -61,10 +61,16 @@ class DesignProblem:
         self.gauge = list(gauge_coordinates(mesh))
         self.fixed[self.gauge] = True
         self.free = ~self.fixed
+        #: the wall between a rope's two end fixtures the design keeps (None: not kept), see
+        #: :func:`fixture_caps`
+        self.fixture_wall = fixture_wall
         #: per muscle the largest contraction the design may give: ``a_max``, or less where the end patches
-        #: hold most of the rope (:func:`contraction_caps`)
+        #: hold most of the rope (:func:`contraction_caps`) or its end fixtures would meet (:func:`fixture_caps`)
         self.a_upper = contraction_caps(mesh, material, muscles, stiffness, self.anchor_radius, a_max,
                                         target)
+        if fixture_wall is not None:
+            self.a_upper = np.minimum(self.a_upper, fixture_caps(mesh.points, muscles, self.anchor_radius,
+                                                                 fixture_wall))
         self.X = mesh.points.reshape(-1).copy()
         self.h = float(mesh.edge_lengths.mean())
         self.Et = material.E * material.thickness
@@ -233,6 +239,56 @@ def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max, t
         a_t = np.array([1.0 - m.length(y) / m.length(mesh.points) for m in muscles])
         keep = np.minimum(keep, np.maximum(TARGET_FREE_SHARE * (1.0 - a_t * fac), FREE_REMAINDER_MIN))
     return np.minimum(float(a_max), (1.0 - keep) / fac)
+
+
+def fixture_caps(points, muscles, radius: float, wall: float) -> np.ndarray:
+    """Per muscle the largest contraction at which its two end fixtures (disks of ``radius``) keep a ``wall``
+    between them, ``1 - (2 radius + wall) / D0`` (at least 0), ``D0`` the distance of its end nodes at rest
+    (``points``): a rope drawn in by ``a`` brings its ends to about ``(1 - a) D0`` (its path keeps its shape
+    as the body around it shortens), and two fixtures need ``2 radius + wall`` between their centres, as
+    fixtures of different ropes do (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`). Without end
+    fixtures (``radius`` 0) every cap is 1. :func:`fixture_overlaps` checks the designed state itself.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Muscle
+    >>> P = np.array([[0.0, 0.0], [0.5, 0.1], [1.0, 0.0]])
+    >>> fixture_caps(P, [Muscle([0, 1, 2])], 0.2, 0.1).round(4).tolist()   # 1 - 0.5 / 1
+    [0.5]
+    """
+    X = np.asarray(points, dtype=float).reshape(-1, 2)
+    need = 2.0 * float(radius) + float(wall)
+    if float(radius) <= 0.0:
+        return np.ones(len(muscles))
+    d0 = np.array([np.linalg.norm(X[m.nodes[-1]] - X[m.nodes[0]]) for m in muscles])
+    with np.errstate(divide="ignore"):
+        return np.clip(1.0 - need / d0, 0.0, 1.0)
+
+
+def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9) -> list:
+    """The muscles whose two end fixtures (disks of ``radius``) keep less than ``wall`` between them in the
+    state ``x`` (their end nodes closer than ``2 radius + wall - tol``): per such muscle ``(index, distance,
+    2 radius + wall)``; empty without end fixtures (``radius`` 0).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from mdsr_opt import Muscle
+    >>> x = np.array([[0.0, 0.0], [0.2, 0.0], [0.45, 0.0]])
+    >>> [(c, round(d, 3), round(n, 3)) for c, d, n in fixture_overlaps(x, [Muscle([0, 1, 2])], 0.2, 0.1)]
+    [(0, 0.45, 0.5)]
+    """
+    if float(radius) <= 0.0:
+        return []
+    X = np.asarray(x, dtype=float).reshape(-1, 2)
+    need = 2.0 * float(radius) + float(wall)
+    out = []
+    for c, m in enumerate(muscles):
+        d = float(np.linalg.norm(X[m.nodes[-1]] - X[m.nodes[0]]))
+        if d < need - tol:
+            out.append((c, d, need))
+    return out
 
 
 def _nonzeros(M: ca.SX) -> ca.SX:

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..body.muscles import Muscle
+from ..core.quantities import percent_beside
 from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
@@ -188,7 +189,7 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float
         if stub:
             c = stub[-1]  # the weakest first: dropping it may free another's fixtures
             why = (f"too short for two fixtures of radius {r:.4g}: rest length {L[c]:.4g}, of which "
-                   f"{free[c]:.0%} lies outside its end fixtures (at least {4 * r:.4g} and "
+                   f"{percent_beside(free[c], MIN_FREE_FRACTION)}% lies outside its end fixtures (at least {4 * r:.4g} and "
                    f"{MIN_FREE_FRACTION:.0%} needed)")
         elif joined:
             c0 = joined[0]
