@@ -52,7 +52,7 @@ def test_design_poses_checks_its_option_dicts_before_any_routing(monkeypatch, kw
 
     def refuse(*a, **k):
         raise AssertionError("routed before the options were checked")
-    monkeypatch.setattr(poses, "_route", refuse)
+    monkeypatch.setattr(poses, "route_poses", refuse)
     mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     with pytest.raises(ValueError, match=words):
         design_poses(mesh, MAT, {"squeeze": mesh.points * [0.8, 1.0]}, **kwargs)
