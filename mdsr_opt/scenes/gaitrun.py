@@ -63,6 +63,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     from ..synthesis.export import export_fabrication, fabrication_files
     from ..body.io import write_json
     from ..synthesis.poses import design_poses
+    from .casefab import fixture_wall
 
     gait = scene.gait
     say = log or (lambda s: None)
@@ -77,7 +78,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     targets = {c: runs[c].setup.target for c in gait.poses}
     separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
                 if runs[c].design is not None and len(runs[c].setup.muscles)}
-    dopt, case_radii = dict(scene.design_options), _case_radii(runs, gait.poses)
+    # every design of the gait keeps a rope's two end fixtures the scene's wall apart, as its cases' designs
+    dopt, case_radii = {**scene.design_options, "fixture_wall": fixture_wall(scene)}, _case_radii(runs, gait.poses)
     if dopt.get("anchor_radius") is None and len(set(case_radii.values())) == 1 and all(
             c in separate and not _routed(runs[c].setup) for c in gait.poses):
         # the poses' muscles are given (the scene's), not routed: the fixtures the cases were designed with

@@ -427,7 +427,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         is used as given; a ``max_muscles`` there limits each pose's own layout).
     design_options : dict, optional
         Keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
-        ``muscle_model``...).
+        ``muscle_model``...); ``fixture_wall`` defaults to the fabrication's ``wall``.
     overlap : float, default 0.5
         Duplicate threshold of :func:`~mdsr_opt.synthesis.layouts.shared_layout`.
     compare : bool, default True
@@ -506,6 +506,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+    # the wall a rope's two end fixtures keep between them in every design: the fabrication's (as the pipeline's)
+    dopt.setdefault("fixture_wall", (fab or Fabrication().for_body(mesh)).wall)
     problems: list[str] = []
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
         found = rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
