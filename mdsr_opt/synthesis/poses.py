@@ -82,7 +82,7 @@ from ..core.quantities import check_length_unit
 from ..mechanics.align import difference, node_weights
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle
+from ..body.muscles import Muscle, check_muscles
 from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
                           warn_conflicts)
 from .routing_fixtures import common_fixture_radius
@@ -486,6 +486,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     for k in separate:
         if k not in {p.name for p in items}:
             raise ValueError(f"separate names an unknown pose {k!r}")
+        check_muscles(mesh, separate[k][0], f"separate[{k!r}] muscles")  # of this mesh, one label each
         sep_design = separate[k][1] if isinstance(separate[k], (tuple, list)) and len(separate[k]) == 2 else None
         check_same_mesh(mesh, getattr(sep_design, "rest_mesh", None), f"the separate design of pose {k!r}")
 
@@ -585,7 +586,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        contractions=A, strokes=S, tensions=T, differences=D, success=ok, status=tuple(status),
                        states=np.array(states), separate_differences=Dsep, separate_n_muscles=nsep, engaged=engaged,
                        anchor_radius=None if radius is None else float(radius),
-                       muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values())),
+                       muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values()), None),
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
