@@ -12,6 +12,7 @@ import numpy as np
 
 from ..core.costs import figure_cost, gif_cost
 from ..core.quantities import length_unit
+from ..plot.style import muscle_label
 from ..synthesis.gait import GaitSchedule, gait_schedule, save_gait_animation
 
 __all__ = ["run_gait"]
@@ -118,7 +119,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,  # a failed
                  "material": scene.material, "allow_failed": True, "failure": why}, 0.0))  # one's say FAILED
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
-    info.update(success=ok, n_muscles=res.n_muscles, muscles=[m.name for m in res.muscles],
+    info.update(success=ok, n_muscles=res.n_muscles, muscles=[muscle_label(m, i) for i, m in enumerate(res.muscles)],
                 fixture_radius=None if res.anchor_radius is None else float(res.anchor_radius), separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),
                 separate_differences={n: (float(v) if np.isfinite(v) else None)
