@@ -97,3 +97,31 @@ def test_a_gait_designs_with_the_scene_s_fabrication_wall(tmp_path, monkeypatch)
     run_scene(load_scene(p), tmp_path / "run", photos=False, prototype=False, figures=False, log=None,
               background=False)
     assert len(asked) == 1 and asked[0].get("fixture_wall") == pytest.approx(0.08, abs=0), asked  # before: absent
+
+
+def test_a_separate_design_is_reused_only_with_the_same_fixture_wall(strip, monkeypatch):
+    """design_poses takes a pose's separate design as its shared-layout design only when it was made with
+    the options asked; the wall between a rope's fixtures is one (before: reused whatever its wall)."""
+    mesh, rope, target = strip
+    mat = NeoHookean(1.0, 0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        made = contractions.design_contractions(mesh, mat, [rope], target, anchor_radius=R, fixture_wall=WALL)
+    assert made.fixture_wall == WALL and made.to_dict()["fixture_wall"] == WALL
+    calls = []
+    design = contractions.design_contractions
+
+    @functools.wraps(design)
+    def spy(*args, **kwargs):
+        calls.append(kwargs.get("fixture_wall"))
+        return design(*args, **kwargs)
+
+    monkeypatch.setattr(contractions, "design_contractions", spy)
+    for wall, designed in ((WALL, []), (0.02, [0.02])):
+        calls.clear()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = design_poses(mesh, mat, {"p": target}, separate={"p": ((rope,), made)},
+                               design_options={"anchor_radius": R, "fixture_wall": wall})
+        assert calls == designed, (wall, calls)  # before: [] for both (the design with the wall 0.1 reused)
+        assert (res.designs["p"] is made) == (wall == WALL)

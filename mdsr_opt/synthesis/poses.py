@@ -436,8 +436,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         Separate layouts and designs already made (e.g. by the scene runner) with the same options: they
         are used instead of routing and designing again. A pose whose engaged muscles on the shared layout
         are exactly its separate muscles (the same node chains in the same order) takes that design as its
-        shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness and anchor
-        radius are those of ``design_options``.
+        shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness, anchor
+        radius and fixture wall are those of ``design_options``.
     units : str, optional
         The mesh's length unit (see :data:`mdsr_opt.synthesis.export.UNITS`), recorded in the result with
         the material's ``stress_unit``: tables and fabrication files then give lengths in it and tensions in
@@ -604,7 +604,7 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
     if d is None or [tuple(m.nodes) for m in muscles] != [tuple(m.nodes) for m in engaged]:
         return False
     default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
-    for key in ("method", "a_max", "muscle_model", "stiffness", "verify"):
+    for key in ("method", "a_max", "muscle_model", "stiffness", "verify", "fixture_wall"):
         want = dopt.get(key, default[key].default)
         if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
             want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
@@ -613,7 +613,7 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
                 return False
             if want and want != "design" and not str(d.verification.forward_start or "rest").startswith("rest"):
                 return False  # verified from its own state only: not the re-solve from rest asked for
-        elif getattr(d, key) != want:
+        elif getattr(d, key, None) != want:  # a design that records no fixture_wall: not the same
             return False
     radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))
     return bool(np.isclose(float(d.anchor_radius), radius, rtol=1e-12, atol=0.0))
