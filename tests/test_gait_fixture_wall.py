@@ -125,3 +125,23 @@ def test_a_separate_design_is_reused_only_with_the_same_fixture_wall(strip, monk
                                design_options={"anchor_radius": R, "fixture_wall": wall})
         assert calls == designed, (wall, calls)  # before: [] for both (the design with the wall 0.1 reused)
         assert (res.designs["p"] is made) == (wall == WALL)
+
+
+def test_the_authoring_page_designs_with_its_fabrication_wall_and_saves_it_once(tmp_path):
+    """The page's design keeps the ropes' end fixtures its fabrication's wall apart, as mdsr run designs the
+    scene it saves (before: the default wall); the wall is saved in [fabrication], never in [design]."""
+    import json
+    from pathlib import Path
+
+    from mdsr_opt import get_problem
+    from mdsr_opt.author.export import save_scene
+    from mdsr_opt.author.session import Session
+
+    s = Session.from_scene(get_problem("tentacle", resolution="coarse"))
+    s.settle()
+    s.route(10.0, 4.0, None, {"channel_diameter": 0.1, "wall": 0.07})
+    page = s.run_design()
+    assert page["params"]["fixture_wall"] == 0.07 and s.design.fixture_wall == 0.07  # before: absent (the default wall)
+    data = json.loads(Path(save_scene(s, tmp_path, "walled")[0]).read_text())
+    assert data["fabrication"]["wall"] == 0.07 and "fixture_wall" not in data.get("design", {})
+    assert load_scene(Path(save_scene(s, tmp_path, "walled2")[0])).routing_options["fabrication"]["wall"] == 0.07
