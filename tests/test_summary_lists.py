@@ -57,3 +57,19 @@ def test_a_dropped_muscle_is_named_only_in_dropped_and_the_lists_pair_names_with
         assert lo <= s <= hi
     row = next(line for line in (tmp_path / "o" / "summary.md").read_text().splitlines() if "| up |" in line)
     assert "| 2 |" in row and "dropped low" in row
+
+
+def test_an_unnamed_muscle_is_named_by_its_place_with_or_without_a_drop(tmp_path):
+    """trial 7 (fixa): summary.json wrote an unnamed muscle as ``name: null`` in a case with no drop and as
+    "M3" in a case with one; now always by its label, as every table, figure and file names it."""
+    from mdsr_opt.scenes.runscene import run_scene
+
+    text = SCENE.replace("[acceptance]\nbands = true\n", '[[cases]]\nname = "c"\ncontractions = [0.05, 0.05, 0.05]\n')
+    (tmp_path / "drop.toml").write_text(text)
+    run_scene(load_scene(tmp_path / "drop.toml"), tmp_path / "o", photos=False, prototype=False, figures=False,
+              animations=False, log=None, background=False)
+    cases = {c["case"]: c for c in json.loads((tmp_path / "o" / "summary.json").read_text())["cases"]}
+    assert [d["name"] for d in cases["up"]["dropped"]] == ["low"]
+    assert [m["name"] for m in cases["up"]["muscles"]] == ["high", "M3"]
+    assert not cases["c"].get("dropped") and cases["c"]["success"], cases["c"].get("message")
+    assert [m["name"] for m in cases["c"]["muscles"]] == ["low", "high", "M3"]  # before: ["low", "high", None]

@@ -215,6 +215,7 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         d["fabrication"] = fab if fab is False else {k: float(v) for k, v in fab.items() if v is not None}
     design = dict(session.design_params or session.design_options)
     design.pop("anchor_radius", None)  # the scene's: the routed ropes' fixtures are the edited case's own
+    design.pop("fixture_wall", None)  # the [fabrication] table's wall, not a [design] key
     if session.design_options.get("anchor_radius") is not None:
         design["anchor_radius"] = session.design_options["anchor_radius"]
     if session.design is not None:

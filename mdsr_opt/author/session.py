@@ -569,6 +569,8 @@ class Session:
         opts.update({k: v for k, v in params.items() if v is not None})
         if self.fixture_radius is not None:  # routed muscles: designed with the end fixtures they were fitted to
             opts["anchor_radius"] = self.fixture_radius
+        # the wall a rope's two end fixtures keep between them: the fabrication's, as mdsr run designs it
+        opts["fixture_wall"] = self.fabrication_shown()["wall"]
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it

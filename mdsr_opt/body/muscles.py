@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 from ..core.checks import as_float_array, as_index_array, check_label
 
 __all__ = ["Muscle", "check_muscles", "check_contractions", "check_distinct_ropes", "default_muscle_name",
-           "label_of"]
+           "label_of", "muscle_name_clash", "check_muscle_names"]
 
 
 def default_muscle_name(i: int) -> str:
@@ -120,8 +120,9 @@ class Muscle:
         return float(np.abs(turn).sum())
 
 
-def check_muscles(mesh, muscles: Sequence[Muscle]) -> list[Muscle]:
-    """Validate a list of muscles against ``mesh``; accept plain node lists too."""
+def check_muscles(mesh, muscles: Sequence[Muscle], what: str = "muscles") -> list[Muscle]:
+    """Validate a list of muscles against ``mesh``; accept plain node lists too. Two muscles of the list
+    with one label (:func:`check_muscle_names`) are refused; ``what`` names the list in that message."""
     if isinstance(muscles, Muscle):
         muscles = [muscles]
     out = []
@@ -132,7 +133,31 @@ def check_muscles(mesh, muscles: Sequence[Muscle]) -> list[Muscle]:
             m = Muscle(tuple(m) if not isinstance(m, np.ndarray) else m)
         m.check_on(mesh)
         out.append(m)
+    check_muscle_names(out, what)
     return out
+
+
+def muscle_name_clash(muscles) -> tuple[str, int, int] | None:
+    """The first label two of ``muscles`` (one layout) share: ``(label, first index, second index)``, or None.
+    An unnamed muscle is called by its place (``M1``, ``M2`` ...: every table, figure and file does), so a
+    muscle named ``"M2"`` clashes with an unnamed second one; a node list is an unnamed muscle."""
+    seen: dict[str, int] = {}
+    for i, m in enumerate(muscles):
+        label = m.label(i) if isinstance(m, Muscle) else default_muscle_name(i)
+        if label in seen:
+            return label, seen[label], i
+        seen[label] = i
+    return None
+
+
+def check_muscle_names(muscles, what: str = "muscles") -> None:
+    """Raise ``ValueError`` when two of ``muscles`` have one label (:func:`muscle_name_clash`), naming the
+    label and both places in ``what`` (the list's name): every table, figure and file names a muscle by its
+    label, so two would read as one."""
+    clash = muscle_name_clash(muscles)
+    if clash:
+        raise ValueError(f"muscle name {clash[0]!r} is used twice ({what}[{clash[1]}] and {what}[{clash[2]}]): "
+                         "every table, figure and file names a muscle by it")
 
 
 def check_distinct_ropes(muscles: Sequence[Muscle]) -> None:

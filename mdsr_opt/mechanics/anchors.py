@@ -100,7 +100,7 @@ def valid_muscles(mesh, muscles) -> list:
     seq = [muscles] if isinstance(muscles, Muscle) else muscles
     if not isinstance(seq, (list, tuple)) or not seq or not all(isinstance(m, Muscle) for m in seq):
         return check_muscles(mesh, muscles)
-    key = tuple(m.nodes for m in seq)
+    key = tuple((m.nodes, m.name) for m in seq)  # the names too: two muscles with one label are refused
     checked = mesh.__dict__.setdefault("_checked_muscle_chains", set())
     if key not in checked:
         out = check_muscles(mesh, seq)

@@ -1,4 +1,4 @@
-"""A scene's one end-fixture size, and the names of its muscles.
+"""A scene's one end-fixture size.
 
 The ``[fabrication]`` table's ``fixture_radius`` and the ``[design]`` table's ``anchor_radius`` name one
 thing: the radius of the fixture (bead, knot, plate) at each rope end, which the design models as a rigid
@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-__all__ = ["stated_fixture_radii", "scene_fixture_radius", "fixture_radius_conflict", "muscle_name_clash"]
+__all__ = ["stated_fixture_radii", "scene_fixture_radius", "fixture_radius_conflict"]
 
 
 def stated_fixture_radii(routing_options: Mapping | None) -> tuple[float | None, float | None]:
@@ -71,17 +71,4 @@ def fixture_radius_conflict(design_radius, routing_options, case_radii: Mapping,
         if r_min is not None and rc < r_min and not _same(rc, r_min):
             return names["case"].format(key), (f"{rc:g} is smaller than {names['min']} {r_min:g}, the smallest "
                                                "fixture the fabrication allows")
-    return None
-
-
-def muscle_name_clash(muscles) -> tuple[str, int, int] | None:
-    """The first name two of ``muscles`` (one layout) share: ``(name, first index, second index)``, or None.
-    An unnamed muscle is called by its place (``M1``, ``M2`` ...: every table, figure and file does), so a
-    muscle named ``"M2"`` clashes with an unnamed second one."""
-    seen: dict[str, int] = {}
-    for i, m in enumerate(muscles):
-        label = m.label(i) if hasattr(m, "label") else f"M{i + 1}"
-        if label in seen:
-            return label, seen[label], i
-        seen[label] = i
     return None

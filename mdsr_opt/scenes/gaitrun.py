@@ -12,6 +12,7 @@ import numpy as np
 
 from ..core.costs import figure_cost, gif_cost
 from ..core.quantities import length_unit
+from ..plot.style import muscle_label
 from ..synthesis.gait import GaitSchedule, gait_schedule, save_gait_animation
 
 __all__ = ["run_gait"]
@@ -63,6 +64,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     from ..synthesis.export import export_fabrication, fabrication_files
     from ..body.io import write_json
     from ..synthesis.poses import design_poses
+    from .casefab import fixture_wall
 
     gait = scene.gait
     say = log or (lambda s: None)
@@ -77,7 +79,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     targets = {c: runs[c].setup.target for c in gait.poses}
     separate = {c: (tuple(runs[c].setup.muscles), runs[c].design) for c in gait.poses
                 if runs[c].design is not None and len(runs[c].setup.muscles)}
-    dopt, case_radii = dict(scene.design_options), _case_radii(runs, gait.poses)
+    # every design of the gait keeps a rope's two end fixtures the scene's wall apart, as its cases' designs
+    dopt, case_radii = {**scene.design_options, "fixture_wall": fixture_wall(scene)}, _case_radii(runs, gait.poses)
     if dopt.get("anchor_radius") is None and len(set(case_radii.values())) == 1 and all(
             c in separate and not _routed(runs[c].setup) for c in gait.poses):
         # the poses' muscles are given (the scene's), not routed: the fixtures the cases were designed with
@@ -116,7 +119,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,  # a failed
                  "material": scene.material, "allow_failed": True, "failure": why}, 0.0))  # one's say FAILED
     files += [os.fspath(p) for p in fabrication_files(folder, scene.name).values()]
-    info.update(success=ok, n_muscles=res.n_muscles, muscles=[m.name for m in res.muscles],
+    info.update(success=ok, n_muscles=res.n_muscles, muscles=[muscle_label(m, i) for i, m in enumerate(res.muscles)],
                 fixture_radius=None if res.anchor_radius is None else float(res.anchor_radius), separate_n_muscles=int(res.separate_n_muscles.sum()),
                 differences=dict(zip(res.names, map(float, res.differences))),
                 separate_differences={n: (float(v) if np.isfinite(v) else None)

@@ -320,7 +320,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     rep.n_muscles = len(setup.muscles)
-    rep.muscles = [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in setup.muscles]
+    # every muscle by its label, an unnamed one by its place (M1, M2 ...), as every table, figure and file
+    rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(setup.muscles)]
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
         say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
             f"({setup.times['routing']:.2f} s)")
@@ -365,7 +366,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
                                        "nonuniformity": s.nonuniformity} for s in setup.routing.stats]
         setup.muscles = kept
         rep.n_muscles = len(kept)  # the names line up with the values below; dropped ones are in ``dropped``
-        rep.muscles = [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in kept]
+        rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(kept)]
         rep.dropped = [d.to_dict() for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
     rep.saturated = res.saturated_names

@@ -10,12 +10,12 @@ from numpy.typing import ArrayLike
 
 from ..body.mesh import MAX_RESOLUTION, MAX_TRIANGLES, Mesh
 from ..body.polygons import check_polygon, polygon_area
-from ..body.muscles import Muscle, check_muscles
+from ..body.muscles import Muscle, check_muscles, muscle_name_clash
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_float, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
 from ..synthesis.gait import Gait
-from .fixtures import fixture_radius_conflict, muscle_name_clash
+from .fixtures import fixture_radius_conflict
 from .names import check_name, check_output_names
 from .reader import check_scene_options
 
@@ -262,11 +262,12 @@ class Scene:
                                  "and dragged")
         self.cases = cases
         if self.muscles is not None:
-            self.muscles = tuple(check_muscles(self.mesh, self.muscles))
-            clash = muscle_name_clash(self.muscles)
+            self.muscles = (self.muscles,) if isinstance(self.muscles, Muscle) else tuple(self.muscles)
+            clash = muscle_name_clash(self.muscles)  # said with the scene's name, before check_muscles says it
             if clash:
                 raise ValueError(f"scene {self.name!r}: muscle name {clash[0]!r} is used twice (muscles[{clash[1]}] "
                                  f"and muscles[{clash[2]}]): every table, figure and file names a muscle by it")
+            self.muscles = tuple(check_muscles(self.mesh, self.muscles))
             if not self.muscles:
                 self.muscles = None
         for c in cases:

@@ -9,11 +9,11 @@ from typing import Mapping
 import numpy as np
 
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle
+from ..body.muscles import Muscle, muscle_name_clash
 from ..core.checks import check_label
 from ..synthesis.gait import Gait
 from .names import check_name, check_output_names
-from .fixtures import fixture_radius_conflict, muscle_name_clash
+from .fixtures import fixture_radius_conflict
 from .reader import SceneFileError, Reader, read_file, scene_options, tname, fabrication_table
 from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
 from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near

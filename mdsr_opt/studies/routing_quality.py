@@ -112,6 +112,7 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
     from ..synthesis.contractions import design_contractions
     from ..scenes.library import get_problem
     from ..scenes.cases import prepare_case
+    from ..scenes.casefab import fixture_wall
 
     pairs = _library_cases(cases)
     scenes: dict = {}
@@ -145,7 +146,8 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
         row.largest_turn = math.degrees(max(s.max_turn for s in rr.stats))
         row.nonuniformity = float(max(math.sqrt(s.nonuniformity) / s.mean_weight for s in rr.stats))
         dopts = {k: v for k, v in scene.design_options.items() if k != "method"}
-        res = design_contractions(scene.mesh, scene.material, rr.muscles, y, **dopts)
+        # the ropes' end fixtures the scene's wall apart, as mdsr run designs them (casefab.fixture_wall)
+        res = design_contractions(scene.mesh, scene.material, rr.muscles, y, **dopts, fixture_wall=fixture_wall(scene))
         row.difference = res.difference
         status = [] if res.success else [f"design: {res.status}"]
         if bound:

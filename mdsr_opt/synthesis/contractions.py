@@ -257,6 +257,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.solve_time = res.time - res.build_time
     res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
     res.stress_unit = getattr(material, "stress_unit", None)
+    res.fixture_wall = float(fixture_wall)  # a length: the caller's units
     if res.saturated.any():
         warn_saturated(res, mus)
     return res

@@ -386,6 +386,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     ropts = dict(routing_options or {})  # the fabrication checked at the door, before any solve
     ropts["fabrication"] = check_fabrication(ropts.get("fabrication", fabrication), design_options.get("anchor_radius"))
     check_channel_fits(mesh, ropts["fabrication"], routed=muscles is None)  # a channel the body cannot hold
+    if muscles is not None:  # of this mesh, one label each: before the target's solve
+        muscles = tuple(check_muscles(mesh, muscles))
     from .contactdesign import check_design_contact
     from ..mechanics.obstacles import check_obstacles
 

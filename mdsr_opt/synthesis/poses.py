@@ -82,7 +82,7 @@ from ..core.quantities import check_length_unit
 from ..mechanics.align import difference, node_weights
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle
+from ..body.muscles import Muscle, check_muscles
 from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
                           warn_conflicts)
 from .routing_fixtures import common_fixture_radius
@@ -427,7 +427,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         is used as given; a ``max_muscles`` there limits each pose's own layout).
     design_options : dict, optional
         Keywords of :func:`~mdsr_opt.synthesis.contractions.design_contractions` (``method``, ``a_max``,
-        ``muscle_model``...).
+        ``muscle_model``...); ``fixture_wall`` defaults to the fabrication's ``wall``.
     overlap : float, default 0.5
         Duplicate threshold of :func:`~mdsr_opt.synthesis.layouts.shared_layout`.
     compare : bool, default True
@@ -436,8 +436,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         Separate layouts and designs already made (e.g. by the scene runner) with the same options: they
         are used instead of routing and designing again. A pose whose engaged muscles on the shared layout
         are exactly its separate muscles (the same node chains in the same order) takes that design as its
-        shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness and anchor
-        radius are those of ``design_options``.
+        shared-layout design too, when its recorded method, ``a_max``, muscle model, stiffness, anchor
+        radius and fixture wall are those of ``design_options``.
     units : str, optional
         The mesh's length unit (see :data:`mdsr_opt.synthesis.export.UNITS`), recorded in the result with
         the material's ``stress_unit``: tables and fabrication files then give lengths in it and tensions in
@@ -486,6 +486,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     for k in separate:
         if k not in {p.name for p in items}:
             raise ValueError(f"separate names an unknown pose {k!r}")
+        check_muscles(mesh, separate[k][0], f"separate[{k!r}] muscles")  # of this mesh, one label each
         sep_design = separate[k][1] if isinstance(separate[k], (tuple, list)) and len(separate[k]) == 2 else None
         check_same_mesh(mesh, getattr(sep_design, "rest_mesh", None), f"the separate design of pose {k!r}")
 
@@ -506,6 +507,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+    # the wall a rope's two end fixtures keep between them in every design: the fabrication's (as the pipeline's)
+    dopt.setdefault("fixture_wall", (fab or Fabrication().for_body(mesh)).wall)
     problems: list[str] = []
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
         found = rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
@@ -583,7 +586,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        contractions=A, strokes=S, tensions=T, differences=D, success=ok, status=tuple(status),
                        states=np.array(states), separate_differences=Dsep, separate_n_muscles=nsep, engaged=engaged,
                        anchor_radius=None if radius is None else float(radius),
-                       muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values())),
+                       muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values()), None),
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
@@ -601,7 +604,7 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
     if d is None or [tuple(m.nodes) for m in muscles] != [tuple(m.nodes) for m in engaged]:
         return False
     default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
-    for key in ("method", "a_max", "muscle_model", "stiffness", "verify"):
+    for key in ("method", "a_max", "muscle_model", "stiffness", "verify", "fixture_wall"):
         want = dopt.get(key, default[key].default)
         if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
             want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
@@ -610,7 +613,7 @@ def _same_design(mesh, sep, engaged, dopt) -> bool:
                 return False
             if want and want != "design" and not str(d.verification.forward_start or "rest").startswith("rest"):
                 return False  # verified from its own state only: not the re-solve from rest asked for
-        elif getattr(d, key) != want:
+        elif getattr(d, key, None) != want:  # a design that records no fixture_wall: not the same
             return False
     radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))
     return bool(np.isclose(float(d.anchor_radius), radius, rtol=1e-12, atol=0.0))

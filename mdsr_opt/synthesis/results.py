@@ -145,6 +145,9 @@ class DesignResult:
     anchor_radius : float
         Radius of the rigid patch at each muscle end (a length; see
         :func:`~mdsr_opt.mechanics.anchors.anchor_patches`).
+    fixture_wall : float or None
+        The wall (a length) the design kept between a rope's two end fixtures (``design_contractions``'
+        ``fixture_wall``); None for a design that does not record it.
     rest_lengths : (m,) ndarray
         Each muscle's rest length ``L0`` along its node chain.
     achieved : (m,) ndarray
@@ -213,6 +216,7 @@ class DesignResult:
     muscle_names: tuple = ()
     units: str | None = None
     stress_unit: str | None = None
+    fixture_wall: float | None = None
 
     @property
     def contact(self) -> dict | None:
