@@ -131,7 +131,10 @@ def test_the_log_names_a_gait_once(monkeypatch, tmp_path, name, said):
     monkeypatch.setattr(poses, "design_poses", no_layout)
     runs = {c: SimpleNamespace(setup=SimpleNamespace(target=np.zeros((3, 2)), muscles=()), design=None)
             for c in ("a", "b")}
-    scene = SimpleNamespace(name="s", gait=Gait(name, ("a", "b")), mesh=None, material=None, routing_options={},
+    from mdsr_opt import Mesh
+
+    mesh = Mesh.rectangle(1.0, 1.0, 2, 2)  # the fixtures' default wall is a fraction of the body's size
+    scene = SimpleNamespace(name="s", gait=Gait(name, ("a", "b")), mesh=mesh, material=None, routing_options={},
                             design_options={}, units=None)
     lines = []
     info = run_gait(scene, tmp_path, runs, log=lines.append)
