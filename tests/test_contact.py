@@ -9,6 +9,7 @@ from shapely.geometry import LineString, Point, Polygon
 
 from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, Obstacle, solve_external
 from mdsr_opt.mechanics.contact import ContactRows
+from mdsr_opt.mechanics.quadratic import transfer_state
 from mdsr_opt.mechanics.model import get_model
 
 MAT = NeoHookean(1.0, 0.3)
@@ -324,16 +325,19 @@ def test_strip_pressed_and_sheared_on_ground_with_coulomb_friction(mu):
         assert slip.sum() > 0  # at mu 0.2 part of the bottom slides
 
 
-def _turn(nx, ny, sign):
+def _turn(nx, ny, sign, seed=None):
     """The 4 x 1 strip (nx x ny cells), left end clamped, right end turned by ``sign`` x 90 degrees about its
-    centre and moved by (-2, 2) (issue 35): the inner side wrinkles into creases that fold onto themselves."""
+    centre and moved by (-2, 2) (issue 35): the inner side wrinkles into creases that fold onto themselves.
+    ``seed``: a solved ``(mesh, result)`` of the turn on a coarser mesh, whose state carried to this mesh's
+    nodes starts one load step at full load."""
     mesh = Mesh.rectangle(4.0, 1.0, nx, ny)
     P = mesh.points
     left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
     c, th = np.array([4.0, 0.5]), np.radians(sign * 90.0)
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     drags = {int(i): tuple(c + R @ (P[i] - c) + np.array([-2.0, 2.0])) for i in right}
-    res = solve_external(mesh, MAT, left, drags, contact=True)
+    kw = {} if seed is None else {"initial_guess": transfer_state(seed[0], seed[1].x, P), "min_step": 1.0}
+    res = solve_external(mesh, MAT, left, drags, contact=True, **kw)
     assert res.success, res.status
     assert res.stable and res.residual <= 1e-8
     assert _outline(mesh, res.x).is_valid and not mesh.boundary_crosses(res.x)  # shapely, and the mesh's test
@@ -388,3 +392,29 @@ def test_strip_end_turned_90_degrees_contact_region_converges():
     ds = np.abs(np.diff(starts))
     assert 2.5 < starts[-1] < 2.9
     assert ds[1] < 0.5 * ds[0]
+
+
+@pytest.mark.slow
+def test_strip_end_turned_90_degrees_contact_region_at_1701_nodes():
+    """The turn at 451 nodes by load steps and at 1,701 nodes (80 x 20 cells) in one load step at full load from
+    the 451-node state carried to its nodes (a fine mesh's own load path folds its inner side into creases an
+    element wide, one short load step at a time): each a stable state without crossing (``_turn``); the inner
+    side touches itself along one unbroken stretch from x = 2.70 to 3.90 at both (3.90: the last node before the
+    turned end at 451 nodes, the last but one at 1,701); the energy falls (0.24525, 0.23728). The finer state is a minimum of its own mesh, not the coarse state: its
+    nodes move by more than a fifth of a coarse element from where they started (0.049). The total contact force
+    (0.0989, 0.1457) is reported, not checked: at 1,701 nodes the nodes of both faces push (24 pairs on 25
+    nodes), at 451 nodes 9 pairs on 13."""
+    coarse = _turn(40, 10, -1.0)
+    mesh, res = _turn(80, 20, -1.0, seed=coarse)
+    start = transfer_state(coarse[0], coarse[1].x, mesh.points)
+    assert np.abs(res.x - start).max() > 0.2 * 0.1
+    starts = []
+    for m, r in (coarse, (mesh, res)):
+        xs = _inner_contact(m, r)
+        h = 4.0 / (len(np.unique(m.points[:, 0])) - 1)
+        assert len(xs) >= 5 and np.allclose(np.diff(xs), h)  # one stretch, no node in it left out
+        assert 3.9 - 1e-9 <= xs[-1] <= 4.0 - h + 1e-9  # to within a coarse element of the turned end
+        starts.append(xs[0])
+    assert abs(starts[1] - starts[0]) <= 0.1 + 1e-9  # within one coarse element
+    assert 2.5 < starts[1] < 2.9
+    assert res.energy < coarse[1].energy

@@ -101,14 +101,17 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
                 hand, swapped, swap_in = _hand_over(prob, rows, np.flatnonzero(outside), t, x1, step_tol, final)
                 new = merge_rows(new, hand, drop)
                 handed = merge_rows(handed, hand)  # kept for a crossing no pair prevents
-        keys_new = {row_key(new, i) for i in range(new.n_rows)}
         keys_old = {row_key(rows, i) for i in range(rows.n_rows)}
+        nxt = x1 if why is None else start  # the state the next solve starts from
+        new = _admissible(prob, new, nxt, keys_old)
+        keys_new = {row_key(new, i) for i in range(new.n_rows)}
         grew = bool(keys_new - keys_old - swap_in) or bool(keys_old - keys_new - swapped)
         if why is not None and not grew and prob.spec.self_contact:  # the pairs a fold within the step brought
             new = merge_rows(merge_rows(new, handed, drop), first_touch_rows(prob.mesh, x_ref, x1,
                                                                               1e-9 * prob.mesh.size,
                                                                               release=prob.release), drop)
-            grew = {row_key(new, i) for i in range(new.n_rows)} != {row_key(rows, i) for i in range(rows.n_rows)}
+            new = _admissible(prob, new, nxt, keys_old)
+            grew = {row_key(new, i) for i in range(new.n_rows)} != keys_old
         if why is None and not grew:
             if len(fsel):  # the lagged normal forces: solved again until they stop changing
                 N = lam_c[fsel]
@@ -138,6 +141,21 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         out.status += f"; contact pairs still changing after {MAX_REFRESH} solves"
     out.iterations, out.solve_time, out.build_time = its, t_solve, t_build
     return out, rows
+
+
+def _admissible(prob, rows: ContactRows, start, keep) -> ContactRows:
+    """In careful load steps (``prob.release > 0``), ``rows`` without the rows new to the step's set (keys not
+    in ``keep``) that the state ``start`` the next solve starts from violates (gap below the stated one): a
+    pair taken from a crossing state (a handed-over point, a first touch along the path) whose point lies
+    inside its segment's line at the start. IPOPT started from such a row's violation (at the turn's crease
+    mouth and clamped corner, 0.03-0.16) spent its iteration cap in the restoration phase, every step halving
+    cutting back at inverted elements; without the row the crossing it was for is found again or the step is
+    rejected and halved. Outside careful steps ``rows`` as given."""
+    if prob.release <= 0 or not rows.n_rows:
+        return rows
+    g = rows.values(start) - prob.spec.gap
+    bad = {row_key(rows, i) for i in np.flatnonzero(g < -1e-9 * prob.mesh.size)} - set(keep)
+    return merge_rows(rows, _empty(prob), bad) if bad else rows
 
 
 def _hand_over(prob, rows, which, t, x1, tol, final):

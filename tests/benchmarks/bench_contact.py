@@ -16,6 +16,13 @@ self-contact) and prints per mesh: nodes, time, load steps, whether the outline 
 stability, the start (rest x) of the inner side's touching stretch and the total contact force.
 
     python tests/benchmarks/bench_contact.py --turn 40,80,160
+
+``--seed`` solves only the first mesh of ``--turn`` by load steps and each finer one in one load step at full
+load from the state of the mesh before it carried to its nodes (``transfer_state``, ``initial_guess`` with
+``min_step=1``): the load path of a fine mesh folds its inner side in creases an element wide, one load step
+of 1/256 at a time.
+
+    python tests/benchmarks/bench_contact.py --turn 40,80,160 --seed
 """
 
 from __future__ import annotations
@@ -75,34 +82,43 @@ def gripper():
             lambda: solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True))
 
 
-def turn(nx: int):
-    """The 90-degree turn on ``nx`` x ``nx/4`` cells: ``(mesh, result, seconds)``."""
+def turn(nx: int, seed=None):
+    """The 90-degree turn on ``nx`` x ``nx/4`` cells: ``(mesh, result, seconds)``; ``seed``: a solved
+    ``(mesh, result)`` of the turn on another mesh, whose state starts the one load step at full load."""
     mesh = Mesh.rectangle(4.0, 1.0, nx, nx // 4)
     P = mesh.points
     left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
     c, th = np.array([4.0, 0.5]), np.radians(-90.0)
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     drags = {int(i): tuple(c + R @ (P[i] - c) + np.array([-2.0, 2.0])) for i in right}
+    kw = {}
+    if seed is not None:
+        from mdsr_opt.mechanics.quadratic import transfer_state
+
+        kw = {"initial_guess": transfer_state(seed[0], seed[1].x, P), "min_step": 1.0}
     t0 = time.perf_counter()
-    res = solve_external(mesh, MAT, left, drags, contact=True)
+    res = solve_external(mesh, MAT, left, drags, contact=True, **kw)
     return mesh, res, time.perf_counter() - t0
 
 
-def turn_study(sizes) -> None:
-    """Print the turn's contact region per mesh (module docstring)."""
+def turn_study(sizes, seed: bool = False) -> None:
+    """Print the turn's contact region per mesh (module docstring); ``seed``: each mesh after the first
+    started from the one before."""
     from shapely.geometry import Polygon
 
     print(f"{'cells':>8s} {'nodes':>6s} {'time s':>8s} {'steps':>5s} {'ok':>3s} {'valid':>5s} {'stable':>6s} "
-          f"{'start x':>7s} {'force':>8s}  status")
+          f"{'start x':>7s} {'force':>8s} {'energy':>8s}  status")
+    last = None
     for nx in sizes:
-        mesh, res, t = turn(nx)
+        mesh, res, t = turn(nx, last if seed else None)
+        last = (mesh, res) if res.success else None
         P = mesh.points
         valid = Polygon(res.x[mesh.boundary_loops[0]]).is_valid  # shapely: the outline does not cross itself
         touch = sorted({q for pr in res.contact["pairs"] for q in pr["nodes"] if q >= 0 and P[q, 1] == 0.0})
         start = float(P[touch, 0].min()) if touch else float("nan")
         print(f"{nx:>4d}x{nx // 4:<3d} {mesh.n_nodes:6d} {t:8.1f} {len(res.steps):5d} "
               f"{'yes' if res.success else 'no':>3s} {valid!s:>5s} {bool(res.stable)!s:>6s} {start:7.3f} "
-              f"{res.contact['total_force']:8.5f}  {res.status[:70]}", flush=True)
+              f"{res.contact['total_force']:8.5f} {res.energy:8.5f}  {res.status[:70]}", flush=True)
 
 
 def main(argv=None) -> int:
@@ -110,9 +126,11 @@ def main(argv=None) -> int:
     ap.add_argument("--nx", type=int, default=40, help="cells along the strip (nx/4 across)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per solve (the best is reported)")
     ap.add_argument("--turn", default=None, help="comma-separated nx: the 90-degree turn's refinement study")
+    ap.add_argument("--seed", action="store_true", help="with --turn: each mesh after the first at full load from "
+                    "the one before")
     args = ap.parse_args(argv)
     if args.turn:
-        turn_study([int(v) for v in args.turn.split(",")])
+        turn_study([int(v) for v in args.turn.split(",")], args.seed)
         return 0
     print(f"{'scene':10s} {'case':20s} {'plain s':>9s} {'ok':>3s} {'contact s':>10s} {'ok':>3s} {'ratio':>6s} "
           f"{'pairs':>5s}  status (contact)")
