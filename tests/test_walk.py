@@ -338,11 +338,13 @@ def test_library_gecko_walks_on_diagonal_feet_every_frame_solved():
 
 @pytest.mark.slow
 def test_library_gecko_walks_on_a_mesh_that_resolves_its_rope_ends():
-    """The gecko's layout on its coarse mesh refined twice near the ropes' ends (411 nodes; each end patch of
-    radius 0.19 cm holds 10-18 nodes, one node on the coarse mesh): the gait on diagonal feet solves every
-    frame, the planted feet never slide as a whole, and it walks 1.14 cm in its first cycle where the coarse
-    mesh's point-like ends walk 0.93 (the refinement study, tests/benchmarks/bench_walk.py: 1.141 on 411 nodes,
-    1.229 on 1543); with mu = 0 the same cycle goes nowhere (a body on ice, to 1e-5 of its size)."""
+    """The gecko's layout on its coarse mesh (146 nodes) refined twice near the ropes' ends (each end patch of
+    radius 0.19 cm then holds 10-18 nodes, one node on the coarse mesh): the gait on diagonal feet solves every
+    frame, the nodes in stick stay put (a planted foot may slide as a whole where friction runs out: foot 4, in
+    one frame), and it walks about 1.15 cm in its first cycle where the
+    coarse mesh's point-like ends walk 0.93 (the refinement study: tests/benchmarks/bench_walk.py); with mu = 0
+    the same cycle goes nowhere (a body on ice, to 1e-5 of its size). (The layout is routed as the pipeline
+    routes since design_poses does: 477 nodes and 1.159 cm, where the plain routing gave 411 and 1.141.)"""
     from mdsr_opt.synthesis.walkstudy import walk_scene_refinement
 
     sc, lay, T = _gecko_on_diagonal_feet()
@@ -351,13 +353,15 @@ def test_library_gecko_walks_on_a_mesh_that_resolves_its_rope_ends():
         _, [(mesh, r)] = walk_scene_refinement(sc, lay, levels=1, local=(0.4, 0.2), mu=mu, cycles=1, touching=T)
         assert r.success.all(), [r.status[k] for k in np.flatnonzero(~r.success)]
         out[mu] = r
-    assert mesh.n_nodes == 411
+    assert mesh.n_nodes > 2.5 * sc.mesh.n_nodes  # refined near every rope end
     walked = out[0.5]
-    assert walked.distance[0] == pytest.approx(1.141, abs=0.02)
-    names = list(walked.feet_slipping)
-    down = np.vstack([T[:1], T, T[:1]])  # the feet down in each state's frame (the start, the cycle, its close)
-    for g, name in enumerate(names):
-        assert not walked.feet_slipping[name][1:][down[1:, g]].any()
+    assert walked.distance[0] == pytest.approx(1.15, abs=0.03)
+    # nodes that touch the table in two frames and do not slip between them stay where they are (stick)
+    X, load, slip = walked.states, walked.loads, walked.slipping
+    stick = (load[1:] > 0) & (load[:-1] > 0) & ~slip[1:]
+    assert stick.any()
+    moved = max(np.abs(X[k + 1][stick[k]] - X[k][stick[k]]).max(initial=0.0) for k in range(len(stick)))
+    assert moved < 1e-8 * sc.mesh.size
     assert out[0.0].distance[0] < 1e-5 * sc.mesh.size
     assert np.abs(out[0.0].states - out[0.0].states[1]).max() > 0.05 * sc.mesh.size  # it did bend
 

@@ -47,9 +47,9 @@ _CAUSES = (
     (r"inverts an element|inverted an element",
      "the shape would turn elements inside out",
      "ask for a smaller deformation, or a finer mesh"),
-    (r"end fixtures meet in the designed state: rope (\S+) at a = (\S+) brings its end fixtures' centres (\S+) "
-     r"apart.*?need \((\S+)\)",
-     "the end fixtures of rope {0} would meet: at a = {1} their centres lie {2} apart, {3} needed",
+    (r"end fixtures meet in the designed state: rope (\S+) at a = (\S+) leaves (\S+) of rope between its end "
+     r"fixtures' centres.*?need \((\S+)\)",
+     "the end fixtures of rope {0} would meet: at a = {1} {2} of rope is left between their centres, {3} needed",
      "smaller fixtures (anchor_radius, or fixture_radius under [fabrication]) or longer muscles"),
     (r"not a (stable equilibrium|minimum of the energy)",
      "the designed shape is not stable (the body would snap to another shape)",

@@ -26,7 +26,8 @@ from ..plot.style import muscle_label
 from .contactdesign import check_design_contact, unit_contact
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
-from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of
+from .problem import (ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, rope_length,
+                      short_ropes)
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
@@ -236,9 +237,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
             verify, gap_rtol, units, ckw, skip_verification)
     res = _design_from(args, warm, clock0)
     for _ in range(FIXTURE_REDESIGNS):
-        # end fixtures that meet in the designed state (a rope bent or zig-zagging more than the caps assume):
+        # end fixtures that meet in the designed state (a rope slack, or its patches' edges shortened):
         # their muscles capped below the contraction that brought them there, and the design made again
-        met = (fixture_overlaps(res.x, mus, res.anchor_radius, fixture_wall, 1e-9 * mesh.size)
+        met = (fixture_overlaps(res.x, mus, res.anchor_radius, fixture_wall, 1e-9 * mesh.size, rest=mesh.points)
                if np.isfinite(res.x).all() else [])
         if not met:
             break
@@ -384,13 +385,19 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
     if not upright(umesh, res.x):
         res.success = False
         res.status += "; rejected: the design's state inverts an element"
-    met = fixture_overlaps(res.x, mus, prob.anchor_radius, prob.fixture_wall) if prob.fixture_wall is not None else []
+    met = (fixture_overlaps(res.x, mus, prob.anchor_radius, prob.fixture_wall, rest=umesh.points)
+           if prob.fixture_wall is not None else [])
+    short = short_ropes(umesh.points, mus, prob.anchor_radius, prob.fixture_wall) if prob.fixture_wall is not None else []
+    if short:  # no contraction helps: said, the layout's to fix (routing drops such stubs)
+        res.status += "; " + "; ".join(
+            f"rope {muscle_label(mus[c], int(c))} is shorter at rest ({l0 * units.length:.4g}) than its two end "
+            f"fixtures need ({need * units.length:.4g}): this layout does not fit its fixtures" for c, l0, need in short)
     if met:  # the fixtures would meet in the silicone: nothing a workshop can build (the prototype's fixtures)
         L, r = units.length, prob.anchor_radius * units.length
         res.success = False
         res.status += "; rejected: end fixtures meet in the designed state: " + "; ".join(
-            f"rope {muscle_label(mus[c], int(c))} at a = {res.contractions[c]:.4g} brings its end fixtures' centres "
-            f"{d * L:.4g} apart ({_rest_ends(umesh, mus[c]) * L:.4g} at rest), less than two fixtures of radius "
+            f"rope {muscle_label(mus[c], int(c))} at a = {res.contractions[c]:.4g} leaves {d * L:.4g} of rope between "
+            f"its end fixtures' centres ({rope_length(umesh.points, mus[c]) * L:.4g} at rest), less than two fixtures of radius "
             f"{r:.4g} with a wall {prob.fixture_wall * L:.4g} need ({need * L:.4g})" for c, d, need in met)
     res = _in_units(res, units)
     if res.success and not verify and status.startswith(ACCEPTABLE):
@@ -412,11 +419,6 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             res.status += f"; rejected by verification: {v.message}"
             return res, fwd, True
     return res, fwd, False
-
-
-def _rest_ends(mesh, muscle) -> float:
-    """The distance of ``muscle``'s end nodes on ``mesh`` at rest."""
-    return float(np.linalg.norm(mesh.points[muscle.nodes[-1]] - mesh.points[muscle.nodes[0]]))
 
 
 #: the verification's tolerance when the forward solves' ``inner_tol`` is looser: ``solve_internal``'s

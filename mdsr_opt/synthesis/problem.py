@@ -241,35 +241,54 @@ def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max, t
     return np.minimum(float(a_max), (1.0 - keep) / fac)
 
 
+def rope_length(points, muscle) -> float:
+    """The length of ``muscle``'s path through the nodes ``points`` (the sum of its edges' lengths)."""
+    X = np.asarray(points, dtype=float).reshape(-1, 2)[list(muscle.nodes)]
+    return float(np.linalg.norm(np.diff(X, axis=0), axis=1).sum())
+
+
 def fixture_caps(points, muscles, radius: float, wall: float) -> np.ndarray:
-    """Per muscle the largest contraction at which its two end fixtures (disks of ``radius``) keep a ``wall``
-    between them, ``1 - (2 radius + wall) / D0`` (at least 0), ``D0`` the distance of its end nodes at rest
-    (``points``): a rope drawn in by ``a`` brings its ends to about ``(1 - a) D0`` (its path keeps its shape
-    as the body around it shortens), and two fixtures need ``2 radius + wall`` between their centres, as
-    fixtures of different ropes do (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`). Without end
-    fixtures (``radius`` 0) every cap is 1. :func:`fixture_overlaps` checks the designed state itself.
+    """Per muscle the largest contraction at which its two end fixtures (disks of ``radius``, centred on its end
+    nodes) keep a ``wall`` between them along the rope, ``1 - (2 radius + wall) / L0`` (at least 0), ``L0`` the
+    rope's length along its path at rest (``points``): a taut rope drawn in by ``a`` leaves ``(1 - a) L0`` of
+    rope between the fixtures' centres, along which the two fixtures slide in its channel, and they need
+    ``2 radius + wall`` between their centres, as fixtures of different ropes do
+    (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`). (Ends that come near each other across the
+    body, a strip curled until its ends touch, are kept apart by the body itself: its contact.) Without end
+    fixtures (``radius`` 0) every cap is 1, and so is a rope already shorter than that at rest: no contraction
+    makes it buildable, its layout does not fit its fixtures (routing drops such stubs; :func:`short_ropes`
+    names them). :func:`fixture_overlaps` checks the designed state itself.
 
     Example
     -------
     >>> import numpy as np
     >>> from mdsr_opt import Muscle
-    >>> P = np.array([[0.0, 0.0], [0.5, 0.1], [1.0, 0.0]])
+    >>> P = np.array([[0.0, 0.0], [0.3, 0.4], [0.6, 0.0]])
     >>> fixture_caps(P, [Muscle([0, 1, 2])], 0.2, 0.1).round(4).tolist()   # 1 - 0.5 / 1
     [0.5]
     """
-    X = np.asarray(points, dtype=float).reshape(-1, 2)
     need = 2.0 * float(radius) + float(wall)
     if float(radius) <= 0.0:
         return np.ones(len(muscles))
-    d0 = np.array([np.linalg.norm(X[m.nodes[-1]] - X[m.nodes[0]]) for m in muscles])
+    l0 = np.array([rope_length(points, m) for m in muscles])
     with np.errstate(divide="ignore"):
-        return np.clip(1.0 - need / d0, 0.0, 1.0)
+        return np.where(l0 < need, 1.0, np.clip(1.0 - need / l0, 0.0, 1.0))
 
 
-def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9) -> list:
-    """The muscles whose two end fixtures (disks of ``radius``) keep less than ``wall`` between them in the
-    state ``x`` (their end nodes closer than ``2 radius + wall - tol``): per such muscle ``(index, distance,
-    2 radius + wall)``; empty without end fixtures (``radius`` 0).
+def short_ropes(points, muscles, radius: float, wall: float) -> list:
+    """The muscles shorter at rest (``points``) than their two end fixtures need, ``2 radius + wall``: per
+    such muscle ``(index, rest length, need)`` (:func:`fixture_caps` leaves them uncapped)."""
+    need = 2.0 * float(radius) + float(wall)
+    if float(radius) <= 0.0:
+        return []
+    return [(c, rope_length(points, m), need) for c, m in enumerate(muscles) if rope_length(points, m) < need]
+
+
+def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9, rest=None) -> list:
+    """The muscles whose two end fixtures (disks of ``radius``) keep less than ``wall`` between them along the
+    rope in the state ``x`` (less than ``2 radius + wall - tol`` of rope between its end nodes,
+    :func:`fixture_caps`): per such muscle ``(index, length, 2 radius + wall)``; empty without end fixtures
+    (``radius`` 0). With the ``rest`` state, ropes already too short there (:func:`short_ropes`) are left out.
 
     Example
     -------
@@ -281,12 +300,11 @@ def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9) 
     """
     if float(radius) <= 0.0:
         return []
-    X = np.asarray(x, dtype=float).reshape(-1, 2)
     need = 2.0 * float(radius) + float(wall)
     out = []
     for c, m in enumerate(muscles):
-        d = float(np.linalg.norm(X[m.nodes[-1]] - X[m.nodes[0]]))
-        if d < need - tol:
+        d = rope_length(x, m)
+        if d < need - tol and (rest is None or rope_length(rest, m) >= need):
             out.append((c, d, need))
     return out
 
