@@ -30,9 +30,10 @@ def strip():
     return mesh, rope, t.x.reshape(-1, 2)
 
 
-def _ends(x, rope) -> float:
-    x = np.asarray(x).reshape(-1, 2)
-    return float(np.linalg.norm(x[rope.nodes[-1]] - x[rope.nodes[0]]))
+def _ends(x, rope) -> float:  # the rope left between its fixtures' centres, along its path
+    from mdsr_opt.synthesis.problem import rope_length
+
+    return rope_length(np.asarray(x).reshape(-1, 2), rope)
 
 
 def test_design_poses_keeps_the_fabrication_wall_between_a_rope_s_fixtures(strip, monkeypatch):
