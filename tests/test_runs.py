@@ -296,6 +296,23 @@ def test_a_manifest_killed_before_its_first_file_and_one_of_an_older_version(tmp
     assert _files(out) == [MANIFEST_NAME, "bend/notes.txt", "summary.md"]
 
 
+def test_overwrite_removes_a_killed_runs_folder_that_holds_only_a_cut_short_write(tmp_path):
+    """A worker ended in the middle of an atomic write leaves its temporary (``.tmp-*``) in a case folder of the
+    killed run: --overwrite removes the temporary before the folders the run made, so that folder goes too (it
+    was left empty: the temporaries were removed after the folders, seen once in a CI-like run)."""
+    out = tmp_path / "out"
+    (out / "contract").mkdir(parents=True)
+    (out / "contract" / ".tmp-target.png.x1y2").write_bytes(b"half a png")
+    (out / MANIFEST_NAME).write_text(json.dumps({"format": "mdsr_opt.run_folder/2", "status": "running",
+                                                 "command": "mdsr run x", "started": "2026-01-01 10:00:00",
+                                                 "claims": ["bend", "contract", "summary.md"], "files": [],
+                                                 "dirs": []}))
+    with RunFolder(out, overwrite=True) as f:
+        f.begin(["summary.md"])
+    assert not (out / "contract").exists()
+    assert _files(out) == [MANIFEST_NAME]
+
+
 def test_overwrite_removes_nothing_outside_the_folder_or_of_the_users(tmp_path):
     out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
     out.mkdir()

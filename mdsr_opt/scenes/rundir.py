@@ -489,13 +489,14 @@ class RunFolder:
         claims = _check_claims(claims)
         self._refuse_users_files(claims)
         old = self._earlier
+        # the cut-short writes first: a temporary left in a folder of a killed run would keep that folder
+        remove_temporaries(self.path, claims + (old.claims if old else []))
         if old is not None:
             self._remove_earlier(old)
         try:  # what a command noted is its own record: a journal left without its manifest says nothing
             os.remove(self.path / JOURNAL_NAME)
         except FileNotFoundError:
             pass
-        remove_temporaries(self.path, claims + (old.claims if old else []))
         self._earlier = None
         self._claims = claims
         self._before = _walk(self.path)
