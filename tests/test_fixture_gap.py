@@ -17,7 +17,7 @@ import pytest
 
 from mdsr_opt import Mesh, Muscle, NeoHookean, design_contractions, solve_internal
 from mdsr_opt.synthesis import contractions, problem
-from mdsr_opt.synthesis.problem import fixture_caps, fixture_overlaps, rope_length
+from mdsr_opt.synthesis.problem import fixture_caps, fixture_overlaps
 
 R, WALL = 0.1, 0.04
 NEED = 2 * R + WALL
@@ -33,12 +33,12 @@ def strip():
     t = solve_internal(mesh, mat, [rope], [0.58], anchor_radius=R)
     assert t.success
     x = t.x.reshape(-1, 2)
-    assert rope_length(x, rope) < NEED - 0.02  # the target itself brings the fixtures together
+    assert rope.length(x) < NEED - 0.02  # the target itself brings the fixtures together
     return mesh, mat, rope, t.x
 
 
 def _ends(x, rope) -> float:  # the rope left between the fixtures' centres, along its path
-    return rope_length(np.asarray(x).reshape(-1, 2), rope)
+    return rope.length(np.asarray(x).reshape(-1, 2))
 
 
 def _design(strip):
@@ -54,7 +54,7 @@ def test_a_design_keeps_the_fixtures_of_a_short_strongly_contracted_rope_apart(s
     # before: success with a = 0.58 and 0.21 of rope between the fixtures
     assert res.success, res.status
     assert _ends(res.x, rope) >= NEED - 1e-9
-    cap = 1.0 - NEED / rope_length(mesh.points, rope)
+    cap = 1.0 - NEED / rope.length(mesh.points)
     assert res.contractions[0] == pytest.approx(cap, abs=1e-6)  # as far as the fixtures allow, not given up
     assert "at the most their ropes can shorten" in res.status
 
@@ -143,7 +143,7 @@ def test_mdsr_run_designs_the_short_rope_buildable(tmp_path, capsys):
     scene = load_scene(path)
     mus = scene.muscles
     p = scene.mesh.points
-    l0 = rope_length(p, mus[0])
+    l0 = mus[0].length(p)
     assert case["contractions"][0] <= 1 - 0.29 / l0 + 1e-6  # capped below the known 0.58
     assert case["contractions"][0] < 0.58 - 0.01  # the known contraction would bring the fixtures together
     assert "end fixtures" in case["design_status"]

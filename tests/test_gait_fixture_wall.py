@@ -31,9 +31,7 @@ def strip():
 
 
 def _ends(x, rope) -> float:  # the rope left between its fixtures' centres, along its path
-    from mdsr_opt.synthesis.problem import rope_length
-
-    return rope_length(np.asarray(x).reshape(-1, 2), rope)
+    return rope.length(np.asarray(x).reshape(-1, 2))
 
 
 def test_design_poses_keeps_the_fabrication_wall_between_a_rope_s_fixtures(strip, monkeypatch):

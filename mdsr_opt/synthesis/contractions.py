@@ -26,8 +26,7 @@ from ..plot.style import muscle_label
 from .contactdesign import check_design_contact, unit_contact
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
-from .problem import (ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, rope_length,
-                      short_ropes)
+from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, short_ropes
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
 from .verify import verify_design
@@ -87,10 +86,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius` (a fraction of the body's size).
     fixture_wall : float, optional
         The wall (a length, >= 0) the two end fixtures of a rope (disks of ``anchor_radius``) keep between
-        them in the designed state: no contraction brings a rope's ends closer than ``2 anchor_radius +
-        fixture_wall`` at rest scale (:func:`~mdsr_opt.synthesis.problem.fixture_caps`), and a design whose
+        them in the designed state: no contraction leaves less than ``2 anchor_radius + fixture_wall`` of a
+        taut rope between its ends (:func:`~mdsr_opt.synthesis.problem.fixture_caps`), and a design whose
         state does (:func:`~mdsr_opt.synthesis.problem.fixture_overlaps`) is no success, its ``status``
-        naming the rope and the distances. Default: the fabrication's default wall,
+        naming the rope and the lengths. Default: the fabrication's default wall,
         :data:`~mdsr_opt.synthesis.fabrication.WALL_FRACTION` of the body's diameter.
     tol : float, optional
         Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
@@ -397,7 +396,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         res.success = False
         res.status += "; rejected: end fixtures meet in the designed state: " + "; ".join(
             f"rope {muscle_label(mus[c], int(c))} at a = {res.contractions[c]:.4g} leaves {d * L:.4g} of rope between "
-            f"its end fixtures' centres ({rope_length(umesh.points, mus[c]) * L:.4g} at rest), less than two fixtures of radius "
+            f"its end fixtures' centres ({mus[c].length(umesh.points) * L:.4g} at rest), less than two fixtures of radius "
             f"{r:.4g} with a wall {prob.fixture_wall * L:.4g} need ({need * L:.4g})" for c, d, need in met)
     res = _in_units(res, units)
     if res.success and not verify and status.startswith(ACCEPTABLE):

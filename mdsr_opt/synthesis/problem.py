@@ -241,12 +241,6 @@ def contraction_caps(mesh, material, muscles, stiffness, anchor_radius, a_max, t
     return np.minimum(float(a_max), (1.0 - keep) / fac)
 
 
-def rope_length(points, muscle) -> float:
-    """The length of ``muscle``'s path through the nodes ``points`` (the sum of its edges' lengths)."""
-    X = np.asarray(points, dtype=float).reshape(-1, 2)[list(muscle.nodes)]
-    return float(np.linalg.norm(np.diff(X, axis=0), axis=1).sum())
-
-
 def fixture_caps(points, muscles, radius: float, wall: float) -> np.ndarray:
     """Per muscle the largest contraction at which its two end fixtures (disks of ``radius``, centred on its end
     nodes) keep a ``wall`` between them along the rope, ``1 - (2 radius + wall) / L0`` (at least 0), ``L0`` the
@@ -270,7 +264,8 @@ def fixture_caps(points, muscles, radius: float, wall: float) -> np.ndarray:
     need = 2.0 * float(radius) + float(wall)
     if float(radius) <= 0.0:
         return np.ones(len(muscles))
-    l0 = np.array([rope_length(points, m) for m in muscles])
+    X = np.asarray(points, dtype=float).reshape(-1, 2)
+    l0 = np.array([m.length(X) for m in muscles])
     with np.errstate(divide="ignore"):
         return np.where(l0 < need, 1.0, np.clip(1.0 - need / l0, 0.0, 1.0))
 
@@ -281,7 +276,8 @@ def short_ropes(points, muscles, radius: float, wall: float) -> list:
     need = 2.0 * float(radius) + float(wall)
     if float(radius) <= 0.0:
         return []
-    return [(c, rope_length(points, m), need) for c, m in enumerate(muscles) if rope_length(points, m) < need]
+    X = np.asarray(points, dtype=float).reshape(-1, 2)
+    return [(c, l0, need) for c, l0 in enumerate(m.length(X) for m in muscles) if l0 < need]
 
 
 def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9, rest=None) -> list:
@@ -301,10 +297,12 @@ def fixture_overlaps(x, muscles, radius: float, wall: float, tol: float = 1e-9, 
     if float(radius) <= 0.0:
         return []
     need = 2.0 * float(radius) + float(wall)
+    X = np.asarray(x, dtype=float).reshape(-1, 2)
+    R = None if rest is None else np.asarray(rest, dtype=float).reshape(-1, 2)
     out = []
     for c, m in enumerate(muscles):
-        d = rope_length(x, m)
-        if d < need - tol and (rest is None or rope_length(rest, m) >= need):
+        d = m.length(X)
+        if d < need - tol and (R is None or m.length(R) >= need):
             out.append((c, d, need))
     return out
 
