@@ -13,14 +13,15 @@ import os
 import warnings
 from pathlib import Path
 
+from .fixtures import stated_fabrication_of
+
 __all__ = ["stated_fabrication", "fixture_wall", "write_case_fabrication"]
 
 
 def stated_fabrication(scene):
     """The fabrication the scene states (a Fabrication or a dict of its fields), or None (none stated, or
     ``False``: routed without one)."""
-    fab = (getattr(scene, "routing_options", None) or {}).get("fabrication")
-    return None if fab is None or fab is False else fab
+    return stated_fabrication_of(getattr(scene, "routing_options", None))
 
 
 def fixture_wall(scene) -> float:

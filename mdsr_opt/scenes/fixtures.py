@@ -17,14 +17,21 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
-__all__ = ["stated_fixture_radii", "scene_fixture_radius", "fixture_radius_conflict"]
+__all__ = ["stated_fabrication_of", "stated_fixture_radii", "scene_fixture_radius", "fixture_radius_conflict"]
+
+
+def stated_fabrication_of(routing_options: Mapping | None):
+    """The fabrication that routing options state (``routing_options["fabrication"]``: a Fabrication or a dict
+    of its fields), or None (none stated, or ``False``: routed without one)."""
+    fab = (routing_options or {}).get("fabrication")
+    return None if fab is None or fab is False else fab
 
 
 def stated_fixture_radii(routing_options: Mapping | None) -> tuple[float | None, float | None]:
-    """``(fixture_radius, min_fixture_radius)`` as the scene's fabrication (``routing_options["fabrication"]``:
-    a Fabrication, a dict of its fields, None or False) states them; None where it states none."""
-    fab = (routing_options or {}).get("fabrication")
-    if fab is None or fab is False:
+    """``(fixture_radius, min_fixture_radius)`` as the scene's fabrication (:func:`stated_fabrication_of`)
+    states them; None where it states none."""
+    fab = stated_fabrication_of(routing_options)
+    if fab is None:
         return None, None
     get = fab.get if isinstance(fab, Mapping) else (lambda k: getattr(fab, k, None))
     r, r_min = get("fixture_radius"), get("min_fixture_radius")
