@@ -12,6 +12,8 @@ import pytest
 
 from mdsr_opt.scenes.library import figure_scripts, get_problem, list_problems
 from mdsr_opt.scenes.cases import prepare_case
+from mdsr_opt.scenes.casefab import fixture_wall
+from mdsr_opt.synthesis.contractions import design_contractions
 from mdsr_opt.synthesis.routing_band import SNAP_TURN
 from problems import figure6
 
@@ -148,6 +150,23 @@ def test_routing_quality_rows_and_tables(tmp_path):
     assert got[0]["scene"] == "gripper" and float(got[0]["difference"]) == pytest.approx(r.difference)
     md = (tmp_path / "q.md").read_text()
     assert "| gripper | close |" in md and "edge_bound" in md
+
+
+def test_routing_quality_routes_and_designs_as_mdsr_run():
+    from mdsr_opt.studies.routing_quality import routing_quality
+
+    # gecko bend_left: route_for_design lays 2 ropes deeper inside (a plain route_muscles lays 1), fitted to
+    # a fixture radius smaller than the default; the study's row is that layout, designed with that radius
+    (r,) = routing_quality([("gecko", "bend_left")], resolution="coarse", bound=False)
+    scene = get_problem("gecko", resolution="coarse")
+    setup = prepare_case(scene, "bend_left")
+    assert r.muscles == len(setup.routing.muscles) == 2
+    assert r.total_length == pytest.approx(sum(s.rest_length for s in setup.routing.stats), rel=1e-12)
+    res = design_contractions(scene.mesh, scene.material, setup.routing.muscles, setup.target,
+                              **scene.design_options, anchor_radius=setup.anchor_radius,
+                              fixture_wall=fixture_wall(scene))
+    assert setup.anchor_radius == setup.routing.fixture_radius
+    assert r.success and r.difference == pytest.approx(res.difference, rel=1e-9)
 
 
 def test_routing_quality_rejects_bad_cases_before_any_work():

@@ -7,7 +7,9 @@ prepare_case`; for an internal case, the muscles routing would choose on its tar
   muscle at any node; the routing's tortuosity rule bounds it by ``max_turn``);
 - ``nonuniformity``: the largest relative spread of a muscle's edge contractions,
   ``max_c std(w over c) / mean(w over c)`` (0 = every part contracts alike);
-- ``difference``: the design difference reached with the routed muscles (the scene's design options);
+- ``difference``: the design difference reached with the routed muscles (routed as ``mdsr run`` routes them,
+  :func:`~mdsr_opt.synthesis.routing.route_for_design`; the scene's design options, with the end-fixture
+  radius the routing fitted the ropes to);
 - ``edge_bound``: the difference reached when every contracted edge (``w > min_contraction``) is a muscle
   of its own, designed as point-to-point dummy springs (``muscle_model="springs"``, ``anchor_radius=0``).
   For spring muscles this relaxes every routed layout (each segment gets its own contraction), so, up to
@@ -38,7 +40,8 @@ import numpy as np
 
 from ..body.io import atomic_path
 from ..body.muscles import Muscle
-from ..synthesis.routing import edge_weights, RoutingWarning, route_muscles
+from ..synthesis.fabrication import check_fabrication
+from ..synthesis.routing import edge_weights, RoutingWarning, route_for_design
 
 __all__ = ["QualityRow", "routing_quality", "write_quality_table", "edge_muscles"]
 
@@ -113,6 +116,7 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
     from ..scenes.library import get_problem
     from ..scenes.cases import prepare_case
     from ..scenes.casefab import fixture_wall
+    from ..scenes.fixtures import scene_fixture_radius
 
     pairs = _library_cases(cases)
     scenes: dict = {}
@@ -134,9 +138,12 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
             rows.append(row)
             continue
         y = setup.target
+        # routed as mdsr run routes (route_for_design, its fixtures the scene's), and designed with the fixture
+        # radius the routing fitted the ropes to
+        opts["fabrication"] = check_fabrication(opts.get("fabrication"), scene_fixture_radius(scene))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RoutingWarning)
-            rr = route_muscles(scene.mesh, y, **opts)
+            rr = route_for_design(scene.mesh, y, **opts)
         row.muscles, row.dropped = len(rr), len(rr.dropped)
         if not len(rr):
             row.status = "routing found no muscle"
@@ -146,6 +153,8 @@ def routing_quality(cases: Sequence[tuple[str, str]] | None = None, *, resolutio
         row.largest_turn = math.degrees(max(s.max_turn for s in rr.stats))
         row.nonuniformity = float(max(math.sqrt(s.nonuniformity) / s.mean_weight for s in rr.stats))
         dopts = {k: v for k, v in scene.design_options.items() if k != "method"}
+        if rr.fixture_radius is not None:
+            dopts["anchor_radius"] = float(rr.fixture_radius)
         # the ropes' end fixtures the scene's wall apart, as mdsr run designs them (casefab.fixture_wall)
         res = design_contractions(scene.mesh, scene.material, rr.muscles, y, **dopts, fixture_wall=fixture_wall(scene))
         row.difference = res.difference
