@@ -709,3 +709,27 @@ def test_a_warm_solve_that_ends_crossing_is_shown_without_a_cold_solve(monkeypat
     over, calls = _curl(s, np.radians(np.arange(350, 380, 7)))
     assert calls == len(over) and not any(st.warm_failed for st in over)
     assert over[-1].crossing and over[-1].live and not over[-1].success and "crosses itself" in over[-1].status
+
+
+def test_route_with_the_shown_knobs_lays_what_mdsr_run_lays():
+    # gecko bend_left: mdsr run routes with route_for_design, which routes deeper inside when ropes are lost to
+    # their fixtures (2 ropes; a plain route_muscles lays 1); the page's Route with the knobs it shows does too
+    from mdsr_opt.author.server import body_message
+    from mdsr_opt.author.session import routing_defaults
+    from mdsr_opt.scenes.cases import prepare_case
+
+    scene = get_problem("gecko", resolution="coarse")
+    s = Session.from_scene(scene, case="bend_left")
+    knobs = body_message(s)["routing"]
+    given = {k: scene.routing_options[k] for k in ("K_a", "K_b", "max_muscles") if k in scene.routing_options}
+    assert knobs == dict(routing_defaults(), **given)  # the scene's knobs, else route_muscles' own defaults
+    assert Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=200).routing_options == {}
+    assert body_message(Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=200))["routing"] == \
+        {"K_a": 4.0, "K_b": 4.0, "max_muscles": None} == routing_defaults()
+    s.settle()
+    out = s.route(knobs["K_a"], knobs["K_b"], knobs["max_muscles"])
+    ran = prepare_case(scene, "bend_left").routing
+    assert [m.nodes for m in s.muscles] == [m.nodes for m in ran.muscles] and len(ran.muscles) == 2
+    assert out["fixture_radius"] == ran.fixture_radius
+    # a knob the page changes is routed as given
+    assert s.route(1.0, knobs["K_b"], None)["params"]["K_a"] == 1.0

@@ -151,7 +151,7 @@ def _file_fields(spec):
 
 def body_message(s) -> dict:
     from .roundtrip import kept_lines
-    from .session import design_defaults
+    from .session import design_defaults, routing_defaults
 
     m = s.mesh
     ro = dict(s.routing_options)
@@ -163,7 +163,7 @@ def body_message(s) -> dict:
             "edge_length": float(m.edge_lengths.mean()),
             "anchors": s.anchors.tolist(), "drag_nodes": s.drag_nodes.tolist(),
             "drag_positions": s.drag_positions.tolist(),
-            "routing": {"K_a": ro.get("K_a", 10.0), "K_b": ro.get("K_b", 4.0), "max_muscles": ro.get("max_muscles")},
+            "routing": dict(routing_defaults(), **{k: ro[k] for k in ("K_a", "K_b", "max_muscles") if k in ro}),
             "design": {k: (v if isinstance(v, (int, float, str)) else None) for k, v in dd.items()},
             "fabrication": s.fabrication_shown(), "units": s.units, "kept": kept_lines(s),
             "material": {"model": s.material.kind, "E": s.material.E, "nu": s.material.nu}}

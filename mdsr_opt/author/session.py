@@ -1,8 +1,8 @@
 """The state of one authoring session: a body, its anchors and drags, the live equilibrium, muscles, design.
 
 Everything numerical goes through the public API: :func:`~mdsr_opt.solve_external` for the equilibria,
-:func:`~mdsr_opt.contraction_graph` and :func:`~mdsr_opt.route_muscles` for the muscles,
-:func:`~mdsr_opt.design_contractions` for the design. The session keeps one mesh for its whole life, so
+:func:`~mdsr_opt.contraction_graph` and :func:`~mdsr_opt.synthesis.routing.route_for_design` (the routing
+``mdsr run`` makes) for the muscles, :func:`~mdsr_opt.design_contractions` for the design. The session keeps one mesh for its whole life, so
 :func:`~mdsr_opt.get_model` builds the energy model once and every drag is a repeated solve.
 
 Two kinds of solve:
@@ -44,8 +44,8 @@ from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
 from ..mechanics.model import get_model
 from ..synthesis.fabrication import Fabrication, check_channel_fits, check_fabrication
-from ..synthesis.routing import RoutingWarning, contraction_graph, route_muscles
-from ..scenes.scene import Scene, mesh_polygon, resolve_resolution, seeds_for
+from ..synthesis.routing import RoutingWarning, contraction_graph, route_for_design, route_muscles
+from ..scenes.scene import Scene, mesh_polygon, resolve_resolution
 from ..scenes.library import get_problem
 from ..plot.style import label_slots, muscle_color
 from ..scenes.reader import read_file
@@ -53,7 +53,7 @@ from ..scenes.scenefile import load_scene, scene_from_data
 from .roundtrip import Origin
 from .summary import design_summary
 
-__all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults"]
+__all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults", "routing_defaults"]
 
 #: Largest mesh the page will build (node count), to keep a typo from freezing the server.
 MAX_NODES = 20000
@@ -65,6 +65,13 @@ def design_defaults() -> dict:
     """The keyword defaults of :func:`~mdsr_opt.design_contractions` the page offers (read, not copied)."""
     sig = inspect.signature(design_contractions).parameters
     return {k: sig[k].default for k in ("method", "a_max", "muscle_model", "stiffness")}
+
+
+def routing_defaults() -> dict:
+    """The keyword defaults of :func:`~mdsr_opt.route_muscles` the page offers (read, not copied): the knobs
+    ``mdsr run`` routes a scene with when the scene gives none."""
+    sig = inspect.signature(route_muscles).parameters
+    return {k: sig[k].default for k in ("K_a", "K_b", "max_muscles")}
 
 
 def muscle_entries(muscles) -> list[dict]:
@@ -498,8 +505,14 @@ class Session:
         take their defaults for this body); None keeps the scene's ``[fabrication]``."""
         target = self._need_target()
         opts = dict(self.routing_options)
-        opts.setdefault("n_seeds", seeds_for(self.mesh))
-        opts.update(K_a=float(K_a), K_b=float(K_b), max_muscles=max_muscles)
+        # routed as mdsr run routes: route_for_design with its fallbacks, the scene's n_seeds or the default; a
+        # knob is given only where the page changed it from the scene's (or the default), since route_for_design
+        # keeps a given K_a as given
+        shown = dict(routing_defaults(), **{k: v for k, v in self.routing_options.items() if k in ("K_a", "K_b")})
+        for k, v in (("K_a", float(K_a)), ("K_b", float(K_b))):
+            if k in self.routing_options or v != shown[k]:
+                opts[k] = v
+        opts["max_muscles"] = max_muscles
         if max_muscles is None:
             opts.pop("max_muscles")
         spec = opts.pop("fabrication", None)
@@ -508,7 +521,7 @@ class Session:
         fab = self._fabrication(spec)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RoutingWarning)
-            rr = route_muscles(self.mesh, target, **dict(opts, fabrication=fab))
+            rr = route_for_design(self.mesh, target, **dict(opts, fabrication=fab))
         self.routing, self.routing_params, self.muscles, self.design = rr, opts, tuple(rr.muscles), None
         self.fabrication = spec
         self.dropped = ()
