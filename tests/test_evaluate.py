@@ -17,7 +17,7 @@ from scipy import ndimage
 
 from mdsr_opt import Mesh
 from mdsr_opt.cli.main import main as cli_main
-from mdsr_opt.photos.contours import body_mask, contour_from_image
+from mdsr_opt.photos.contours import body_mask, contour_from_image, contour_loops_from_image
 from mdsr_opt.photos.compare import compare_contours, evaluate_image, simulated_outline
 from mdsr_opt.photos.folder import evaluate_folder
 from mdsr_opt.photos.images import load_image
@@ -328,6 +328,20 @@ def test_a_body_touching_the_border_is_not_replaced_by_a_speck():
     assert polygon_area(c) == pytest.approx(100 * 120, rel=0.03)
 
 
+def test_a_body_cut_by_the_image_border_is_refused_not_measured():
+    # the only blob runs out of the picture: its outline would follow the frame's cut
+    img = np.full((200, 300), 210, dtype=np.uint8)
+    img[60:200, 80:220] = 60                     # cut by the bottom border, nothing else in the picture
+    with pytest.raises(ValueError, match=r"the body touches the image border.*no blob lies inside"):
+        contour_from_image(img)
+    with pytest.raises(ValueError, match=r"the body touches the image border"):
+        contour_loops_from_image(img)
+    c = contour_from_image(img, largest=True)
+    assert polygon_area(c) == pytest.approx(140 * 140, rel=0.03)
+    img[195:, :] = 210                           # background below it: the whole body, measured
+    assert polygon_area(contour_from_image(img)) == pytest.approx(135 * 140, rel=0.03)
+
+
 def test_kernel_must_be_an_odd_integer():
     img = disc_image([(150, 100)], [50])
     for bad in (4, 2):
@@ -365,7 +379,7 @@ def test_rgba_with_transparency_says_alpha_is_ignored(tmp_path):
     (np.zeros((20, 20), dtype=complex), TypeError, "dtype complex"),
     (np.array([["a"] * 20] * 20), TypeError, "numeric"),
     (np.full((20, 20), 300.0), ValueError, r"values in \[300, 300\]; float images must lie in \[0, 1\] or \[0, 255\]"),
-    (np.full((20, 20), 7, dtype=np.uint16), ValueError, r"image is uniform \(all pixels about 7\)"),
+    (np.full((20, 20), 7, dtype=np.uint16), ValueError, r"image is uniform \(all pixels about 7 of 255"),
     (np.full((20, 20), np.nan), ValueError, "NaN"),
     (np.zeros((20, 20, 2), dtype=np.uint8), ValueError, "shape"),
 ])

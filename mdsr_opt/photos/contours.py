@@ -196,8 +196,8 @@ def _segment(crop: np.ndarray, *, color: Any, method: str, body: str, color_tol:
     if method == "color" and crop.ndim == 2:
         raise ValueError("colour segmentation needs an RGB image; this image is grey")
     if int(crop.max()) - int(crop.min()) < 2:
-        raise ValueError(f"image is uniform (all pixels about {int(crop.min())}): there is no body to "
-                         "extract")
+        raise ValueError(f"image is uniform (all pixels about {int(crop.min())} of 255, as load_image reads "
+                         "its dtype's range): there is no body to extract")
     max_kernel = check_int(max_kernel, "max_kernel", lo=1)
     if kernel is None:
         k = _default_kernel(h, w)
@@ -354,8 +354,9 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     contours of the mask are found. Blobs that touch the border of the image (or ``roi``) give way to
     blobs inside it, and blobs smaller than ``min_blob_fraction`` of the largest are treated as noise
     (specks, grid-line fragments, the caption of a synthetic photo). If every blob inside is smaller
-    than ``min_blob_fraction`` of a blob touching the border, the body itself probably touches the
-    border: that is an error (pass ``roi`` or ``largest=True``), never a speck returned as the body.
+    than ``min_blob_fraction`` of a blob touching the border, or every blob touches the image's border, the
+    body itself probably touches the border: that is an error (pass ``roi`` or ``largest=True``), never a
+    speck, or an outline cut by the frame, returned as the body.
 
     Parameters
     ----------
@@ -364,8 +365,8 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     roi, color, method, body, color_tol, kernel, flatten, max_pixels, max_kernel
         See :func:`body_mask`.
     largest : bool
-        When several blobs of comparable size remain, or the only large blob touches the border, keep
-        the largest blob instead of raising.
+        When several blobs of comparable size remain, or the body touches the border (the only blobs touch
+        it, or those inside are specks), keep the largest blob instead of raising.
     min_blob_fraction : float
         Blobs with less than this fraction of the largest blob's area are ignored.
     subpixel : bool
@@ -382,8 +383,8 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     Raises
     ------
     ValueError
-        No contour, several separate blobs (unless ``largest``), a body that touches the border next to
-        specks (unless ``largest``), a mask that fills the search region, or bad options. See
+        No contour, several separate blobs (unless ``largest``), a body that touches the image's border
+        (unless ``largest`` or ``roi``) or the roi's next to specks (unless ``largest``), a mask that fills the search region, or bad options. See
         :func:`load_image` for the image errors.
     TypeError
         A non-integer ``kernel`` or a non-bool flag.
@@ -430,6 +431,14 @@ def _extract_outline(image, *, roi, color, method, body, color_tol, kernel, flat
     inner = np.flatnonzero(~touches & (areas > 0))
     border = np.flatnonzero(touches & (areas > 0))
     pool = inner if len(inner) else np.flatnonzero(areas > 0)
+    if not len(inner) and not largest and roi is None:
+        # every blob touches the border: the body runs out of the picture (or merged with the plate's edge), and
+        # its outline would be the frame's cut, measured as if it were the body's (a roi is the user's own frame)
+        a_border = float(areas[border].max())
+        raise ValueError(
+            f"the body touches the image border: the largest blob ({a_border:.0f} px) touches the border of the "
+            "image and no blob lies inside it, so its outline would be cut by the frame; photograph the whole "
+            "body, or pass roi=(x, y, width, height) or largest=True to keep the blob as it is")
     if len(inner) and len(border):
         a_in, a_border = float(areas[inner].max()), float(areas[border].max())
         if a_in < frac * a_border:
