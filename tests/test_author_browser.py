@@ -148,13 +148,16 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     _, out = served
     # the body afresh (its own case): routed with a channel size set on the page, it has a stub to delete
     page.find_element(By.ID, "resolution").send_keys(RESOLUTION)
-    page.execute_script("document.getElementById('problem').value = arguments[0];", PROBLEM)
+    page.execute_script("const s = document.getElementById('problem'); s.value = arguments[0]; "
+                        "s.dispatchEvent(new Event('change'));", PROBLEM)
     seq = page.execute_script("return mdsrAuthor.seq();")
     page.find_element(By.ID, "load-problem").click()
     wait(page, "const s = mdsrAuthor.state(); return s && s.settled && s.seq === null && !mdsrAuthor.busy() "
                f"&& mdsrAuthor.seq() === {seq} && mdsrAuthor.routing() === null;")
     st = idle(page)
     assert np.array_equal(st["anchors"], get_problem(PROBLEM, resolution=RESOLUTION).cases[0].anchors)
+    assert page.execute_script("return [document.getElementById('problem').value, mdsrAuthor.body().library, "
+                               "document.getElementById('load-problem').disabled];") == [PROBLEM, True, False]
     # the page says what Save keeps of the scene opened: its other case, its regions
     kept = page.find_element(By.ID, "kept").text
     assert "case 'curl': anchors and drags as set here; cases s_curve: kept as loaded" in kept, kept
@@ -371,6 +374,11 @@ def test_svg_outline_file_with_a_hole(page, tmp_path):
     page.find_element(By.ID, "file").send_keys(str(svg))
     body = wait(page, "const b = mdsrAuthor.body(); return b && b.name === 'plate' ? b : null;")
     assert len(body["boundary"]) == 2 and 150 < body["n_nodes"] < 260
+    # the body drop-down names the loaded file's body, not the library problem it showed before
+    sel = page.execute_script("const s = document.getElementById('problem'); "
+                              "return [s.value, s.options[s.selectedIndex].textContent, "
+                              "document.getElementById('load-problem').disabled];")
+    assert sel == ["", "plate (loaded: outline)", True] and body["library"] is False
 
 
 def test_draw_outline_anchor_drag_on_the_page(page):

@@ -149,6 +149,14 @@ def _file_fields(spec):
     return fname, text
 
 
+def _is_library(s) -> bool:
+    """Whether the session's body is a library problem's (its factory script), not a scene file or outline."""
+    from ..scenes.library import list_problems
+
+    src = Path(s.source) if s.source and s.source != "outline" else None
+    return bool(src is not None and src.suffix == ".py" and src.stem == s.name and s.name in list_problems())
+
+
 def body_message(s) -> dict:
     from .roundtrip import kept_lines
     from .session import design_defaults, routing_defaults
@@ -157,7 +165,7 @@ def body_message(s) -> dict:
     ro = dict(s.routing_options)
     dd = design_defaults()
     dd.update({k: v for k, v in s.design_options.items() if k in dd})
-    return {"type": "body", "name": s.name, "source": s.source, "n_nodes": m.n_nodes,
+    return {"type": "body", "name": s.name, "source": s.source, "library": _is_library(s), "n_nodes": m.n_nodes,
             "points": m.points.tolist(), "triangles": m.triangles.tolist(), "edges": m.edges.tolist(),
             "boundary": [[int(v) for v in loop] for loop in m.boundary_loops], "size": m.size,
             "edge_length": float(m.edge_lengths.mean()),

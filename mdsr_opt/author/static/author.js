@@ -141,7 +141,7 @@
     if (m.design.method) setSelect("method", m.design.method);
     if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
     $("save-name").value = ""; $("save-name").placeholder = m.name;  // empty: Save uses the body's name
-    if ([...$("problem").options].some((o) => o.value === m.name)) $("problem").value = m.name;
+    showLoaded(m);
     $("saved").textContent = ""; S.confirm = null; $("confirm").hidden = true;
     listLines("kept", m.kept || []); listLines("save-notes", []);
     updateTable(); drawButtons(); updateDownloads();
@@ -598,6 +598,26 @@
     sendRaw: (text) => S.ws.send(text),
     send: (m) => send(m),
   };
+
+  // the body drop-down names what is loaded: a library problem is selected; a scene file or an outline of
+  // the user's shows as its own entry (a library name beside it would say that problem is loaded)
+  function showLoaded(m) {
+    const sel = $("problem");
+    let own = $("problem-own");
+    if (m.library && [...sel.options].some((o) => o.value === m.name && o !== own)) {
+      if (own) own.remove();
+      sel.value = m.name;
+    } else {
+      if (!own) {
+        own = document.createElement("option"); own.id = "problem-own"; own.value = ""; own.disabled = true;
+        sel.insertBefore(own, sel.firstChild);
+      }
+      own.textContent = `${m.name} (loaded${m.source === "outline" ? ": outline" : ": scene file"})`;
+      sel.value = "";
+    }
+    $("load-problem").disabled = sel.value === "";
+  }
+  $("problem").addEventListener("change", () => { $("load-problem").disabled = $("problem").value === ""; });
 
   // ------------------------------------------------------------------ start
   resize();
