@@ -378,7 +378,7 @@ def test_svg_outline_file_with_a_hole(page, tmp_path):
     sel = page.execute_script("const s = document.getElementById('problem'); "
                               "return [s.value, s.options[s.selectedIndex].textContent, "
                               "document.getElementById('load-problem').disabled];")
-    assert sel == ["", "plate (loaded: outline)", True] and body["library"] is False
+    assert sel == ["", "plate (outline)", True] and body["library"] is False
 
 
 def test_draw_outline_anchor_drag_on_the_page(page):

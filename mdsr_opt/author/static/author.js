@@ -612,7 +612,7 @@
         own = document.createElement("option"); own.id = "problem-own"; own.value = ""; own.disabled = true;
         sel.insertBefore(own, sel.firstChild);
       }
-      own.textContent = `${m.name} (loaded${m.source === "outline" ? ": outline" : ": scene file"})`;
+      own.textContent = `${m.name} (${m.source === "outline" ? "outline" : "file"})`;
       sel.value = "";
     }
     $("load-problem").disabled = sel.value === "";
