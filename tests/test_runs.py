@@ -208,6 +208,27 @@ def test_the_lock_file_is_there_while_the_command_runs_and_gone_after_it(tmp_pat
     assert not (out / LOCK_NAME).exists() and not (out / HOLDER_NAME).exists()
 
 
+def test_a_stopped_command_leaves_no_empty_folder_of_its_own(tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with RunFolder(out, command="mdsr run gecko") as f:
+            f.begin(["a", "b", "c"])
+            (out / "a" / "x" / "y").mkdir(parents=True)     # made, then stopped before any file
+            (out / "b" / "x").mkdir(parents=True)
+            (out / "b" / "done.txt").write_text("complete")
+            (out / "b" / "x" / "done.txt").write_text("complete")
+            (out / "c").mkdir()
+            raise KeyboardInterrupt
+    manifest = json.loads((out / MANIFEST_NAME).read_text())
+    assert manifest["status"] == "interrupted"
+    assert not (out / "a").exists() and not (out / "c").exists()
+    assert sorted(manifest["dirs"]) == ["b", "b/x"] and sorted(manifest["files"]) == ["b/done.txt", "b/x/done.txt"]
+    with RunFolder(tmp_path / "done", command="mdsr run gecko") as f:     # a complete command keeps what it made
+        f.begin(["d"])
+        (tmp_path / "done" / "d").mkdir()
+    assert (tmp_path / "done" / "d").is_dir()
+
+
 def test_a_held_lock_names_the_holder(tmp_path):
     with RunFolder(tmp_path / "out", command="mdsr run gecko") as f:
         with pytest.raises(FolderBusy, match=rf"another mdsr process is writing .*pid {os.getpid()}.*mdsr run gecko"):

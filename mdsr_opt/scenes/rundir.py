@@ -230,6 +230,16 @@ def _under(name: str, tops: Iterable[str]) -> bool:
     return any(name == t or name.startswith(t + "/") for t in tops)
 
 
+def _remove_if_empty(folder: Path) -> None:
+    """Remove ``folder``'s sub-folders that hold no file, deepest first, and ``folder`` if that empties it."""
+    subs = [q for q in folder.rglob("*") if q.is_dir()] if folder.is_dir() else []
+    for q in sorted(subs, key=lambda q: len(q.parts), reverse=True) + [folder]:
+        try:
+            q.rmdir()
+        except OSError:  # not empty, or gone
+            pass
+
+
 def _journal(folder: Path) -> list[str]:
     try:
         text = (folder / JOURNAL_NAME).read_bytes()
@@ -574,6 +584,10 @@ class RunFolder:
                 else:
                     status = f"failed: {exc_type.__name__}: {exc}"[:300]
                 files, dirs = self._written()
+                if exc_type is not None:  # a stopped command leaves no empty folder of its own
+                    for d in dirs:
+                        _remove_if_empty(self.path / d)
+                    dirs = [d for d in dirs if (self.path / d).is_dir()]
                 self._manifest.update(status=status, finished=time.strftime("%Y-%m-%d %H:%M:%S"), files=files,
                                       dirs=dirs)
                 self._write_manifest()
