@@ -315,6 +315,36 @@ def test_bad_input_is_refused_at_the_door(kw, msg):
         walk(mesh, MAT, mus, S, **args)
 
 
+def test_touching_takes_a_gaits_schedule_rows_with_its_closing_frame():
+    """walk_gait drops a cyclic schedule's closing frame (it repeats the first): ``touching`` may have a row per
+    frame of the cycle, or a row per frame of the schedule whose last repeats its first (before: refused, "must be
+    an (2, 2) bool array", though the schedule has 3 rows). Both walk the same; a closing row that differs
+    from the first is refused, saying why; a wrong count says what the rows are."""
+    from mdsr_opt import solve_internal
+    from mdsr_opt.synthesis.gait import gait_schedule
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walk import walk_gait
+
+    mesh, mus, feet = _inchworm(8, 2)
+    x = solve_internal(mesh, MAT, mus, [STROKE / mus[0].rest_length(mesh)]).x
+    lay = design_poses(mesh, MAT, {"pull": x}, separate={"pull": (mus, None)}, compare=False)
+    sch = gait_schedule(mesh, MAT, lay, ["rest", "pull"], frames_per_step=1)
+    assert len(sch.strokes) == 3 and np.allclose(sch.strokes[0], sch.strokes[-1])
+    cycle = INCH_T[:2]
+    args = dict(mu=0.5, cycles=2, feet_groups=feet)
+    a = walk_gait(mesh, MAT, sch, lay.muscles, touching=cycle, **args)
+    b = walk_gait(mesh, MAT, sch, lay.muscles, touching=np.vstack([cycle, cycle[:1]]), **args)
+    assert a.cycle_frames == 2 and a.success.all()
+    assert np.array_equal(a.states, b.states) and np.array_equal(a.loads, b.loads)
+    assert a.distance.min() > 0.01 * mesh.size  # it walks: the rows did lift feet in turn
+    with pytest.raises(ValueError, match=r"touching has 3 rows.*its last row must repeat its first.*2 rows of one "
+                                         r"cycle.*cycle_frames"):
+        walk_gait(mesh, MAT, sch, lay.muscles, touching=np.vstack([cycle, cycle[1:]]), **args)
+    with pytest.raises(ValueError, match=r"touching must be an \(2, 2\) bool array: a row per frame of the cycle "
+                                         r"\(the 2 rows of strokes, WalkResult.cycle_frames; a gait schedule's closing"):
+        walk_gait(mesh, MAT, sch, lay.muscles, touching=np.ones((4, 2), bool), **args)
+
+
 def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):
     import matplotlib
     matplotlib.use("Agg")

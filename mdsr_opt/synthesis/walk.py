@@ -380,7 +380,8 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     feet_groups : mapping name -> node indices, optional
         Named feet whose slipping is reported per frame (``WalkResult.feet_slipping``).
     touching : (F, G) bool array, optional
-        Per frame of the cycle, which of the ``G`` ``feet_groups`` (in their order) touch the table: in that
+        Per frame of the cycle (the ``F`` rows of ``strokes``), which of the ``G`` ``feet_groups`` (in their
+        order) touch the table: in that
         frame the weight rests on those feet alone (evenly over the area they cover) and the others are
         lifted (no friction). This is how a gait anchors one end and then the other (an inchworm). Default: the
         contact given by ``feet`` in every frame.
@@ -434,8 +435,10 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     else:
         T = np.asarray(touching)
         if T.shape != (F, len(groups)) or T.dtype != bool:
-            raise ValueError(f"touching must be an ({F}, {len(groups)}) bool array: per frame of the cycle, per "
-                             f"foot of feet_groups, got shape {T.shape} of {T.dtype}")
+            raise ValueError(f"touching must be an ({F}, {len(groups)}) bool array: a row per frame of the cycle "
+                             f"(the {F} rows of strokes, WalkResult.cycle_frames; a gait schedule's closing frame, "
+                             f"which repeats its first, is not one), a column per foot of feet_groups, got shape "
+                             f"{T.shape} of {T.dtype}")
         if not T.any(1).all():
             raise ValueError(f"touching: frame(s) {np.flatnonzero(~T.any(1)).tolist()} touch the table with no foot")
         names = list(groups)
@@ -499,10 +502,21 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
 def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> WalkResult:
     """:func:`walk` with the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its last frame, which
     repeats the first in a cyclic gait, dropped) on the muscles of its layout, starting from its first frame's
-    state (placed on the table as it is); ``kwargs`` as in :func:`walk`."""
+    state (placed on the table as it is); ``kwargs`` as in :func:`walk`. ``touching`` has a row per frame of
+    the cycle; with a row per frame of the schedule (its closing frame too), the last must repeat the first
+    and is dropped with it."""
     S = np.asarray(schedule.strokes, dtype=float)
     if len(S) > 1 and np.allclose(S[0], S[-1]):
         S = S[:-1]
+        T = kwargs.get("touching")
+        if T is not None and np.ndim(T) == 2 and len(T) == len(S) + 1:  # the schedule's rows, closing one too
+            T = np.asarray(T)
+            if not np.array_equal(T[0], T[-1]):
+                raise ValueError(f"touching has {len(T)} rows, the schedule's frames with the closing one, which "
+                                 f"repeats the first: its last row must repeat its first row too (it differs), "
+                                 f"or give the {len(S)} rows of one cycle without the closing frame "
+                                 "(WalkResult.cycle_frames)")
+            kwargs["touching"] = T[:-1]
     kwargs.setdefault("units", schedule.units)
     if kwargs.get("start") is None and bool(schedule.success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays
