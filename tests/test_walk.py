@@ -316,14 +316,15 @@ def test_bad_input_is_refused_at_the_door(kw, msg):
 
 
 def test_touching_takes_a_gaits_schedule_rows_with_its_closing_frame():
-    """walk_gait drops a cyclic schedule's closing frame (it repeats the first): ``touching`` may have a row per
-    frame of the cycle, or a row per frame of the schedule whose last repeats its first (before: refused, "must be
-    an (2, 2) bool array", though the schedule has 3 rows). Both walk the same; a closing row that differs
-    from the first is refused, saying why; a wrong count says what the rows are."""
+    """walk_gait (and walk_scene_refinement, through schedule_cycle) drop a cyclic schedule's closing frame (it
+    repeats the first): ``touching`` may have a row per frame of the cycle, or a row per frame of the schedule
+    whose last repeats its first (before: refused, "must be an (2, 2) bool array", though the schedule has 3
+    rows). Both walk the same; a closing row that differs from the first is refused, saying why; a wrong count
+    says what the rows are."""
     from mdsr_opt import solve_internal
     from mdsr_opt.synthesis.gait import gait_schedule
     from mdsr_opt.synthesis.poses import design_poses
-    from mdsr_opt.synthesis.walk import walk_gait
+    from mdsr_opt.synthesis.walk import schedule_cycle, walk_gait
 
     mesh, mus, feet = _inchworm(8, 2)
     x = solve_internal(mesh, MAT, mus, [STROKE / mus[0].rest_length(mesh)]).x
@@ -337,6 +338,9 @@ def test_touching_takes_a_gaits_schedule_rows_with_its_closing_frame():
     assert a.cycle_frames == 2 and a.success.all()
     assert np.array_equal(a.states, b.states) and np.array_equal(a.loads, b.loads)
     assert a.distance.min() > 0.01 * mesh.size  # it walks: the rows did lift feet in turn
+    S, T = schedule_cycle(sch, np.vstack([cycle, cycle[:1]]))  # as walk_scene_refinement takes them too
+    assert np.array_equal(S, sch.strokes[:2]) and np.array_equal(T, cycle)
+    assert schedule_cycle(sch, cycle)[1] is cycle and schedule_cycle(sch)[1] is None
     with pytest.raises(ValueError, match=r"touching has 3 rows.*its last row must repeat its first.*2 rows of one "
                                          r"cycle.*cycle_frames"):
         walk_gait(mesh, MAT, sch, lay.muscles, touching=np.vstack([cycle, cycle[1:]]), **args)

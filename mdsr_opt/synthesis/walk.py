@@ -61,7 +61,7 @@ from ..mechanics.units import Units
 from .walkframe import MAX_MOVE, FrameSolver
 
 __all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "scene_schedule", "foot_groups",
-           "node_loads", "rigid_motion", "place_rigidly", "EPS", "SLIP"]
+           "node_loads", "rigid_motion", "place_rigidly", "schedule_cycle", "EPS", "SLIP"]
 
 #: the smoothing length of the ground's friction potential, relative to the body's size
 EPS = 1e-6
@@ -499,24 +499,33 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
                       iterations=np.array(its), time=time.perf_counter() - t0)
 
 
-def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> WalkResult:
-    """:func:`walk` with the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its last frame, which
-    repeats the first in a cyclic gait, dropped) on the muscles of its layout, starting from its first frame's
-    state (placed on the table as it is); ``kwargs`` as in :func:`walk`. ``touching`` has a row per frame of
-    the cycle; with a row per frame of the schedule (its closing frame too), the last must repeat the first
-    and is dropped with it."""
+def schedule_cycle(schedule, touching=None) -> tuple:
+    """One cycle of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule`: its strokes (F, m) without the closing
+    frame, which repeats the first in a cyclic gait, and ``touching`` fitted to them: ``(strokes, touching)``.
+    ``touching`` may have a row per frame of the cycle, or a row per frame of the schedule, closing frame
+    too: then its last row must repeat its first (a ``ValueError`` says so) and is dropped with it."""
     S = np.asarray(schedule.strokes, dtype=float)
     if len(S) > 1 and np.allclose(S[0], S[-1]):
         S = S[:-1]
-        T = kwargs.get("touching")
-        if T is not None and np.ndim(T) == 2 and len(T) == len(S) + 1:  # the schedule's rows, closing one too
-            T = np.asarray(T)
+        if touching is not None and np.ndim(touching) == 2 and len(touching) == len(S) + 1:
+            T = np.asarray(touching)
             if not np.array_equal(T[0], T[-1]):
                 raise ValueError(f"touching has {len(T)} rows, the schedule's frames with the closing one, which "
                                  f"repeats the first: its last row must repeat its first row too (it differs), "
                                  f"or give the {len(S)} rows of one cycle without the closing frame "
                                  "(WalkResult.cycle_frames)")
-            kwargs["touching"] = T[:-1]
+            touching = T[:-1]
+    return S, touching
+
+
+def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> WalkResult:
+    """:func:`walk` with the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its last frame, which
+    repeats the first in a cyclic gait, dropped: :func:`schedule_cycle`, which fits ``touching`` to them too)
+    on the muscles of its layout, starting from its first frame's state (placed on the table as it is);
+    ``kwargs`` as in :func:`walk`."""
+    S, touching = schedule_cycle(schedule, kwargs.get("touching"))
+    if touching is not None:
+        kwargs["touching"] = touching
     kwargs.setdefault("units", schedule.units)
     if kwargs.get("start") is None and bool(schedule.success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays
