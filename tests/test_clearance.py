@@ -224,6 +224,29 @@ def test_shared_layout_merges_a_rope_beside_a_kept_one_and_reports_a_crossing():
     assert [c.kind for c in rope_conflicts(mesh, mus, f)] == ["crossing", "crossing"]
 
 
+def test_shared_layout_says_no_clash_of_a_rope_the_budget_leaves_out():
+    """A rope that would clash with a kept one but is left out over the budget is in no layout: no note says it
+    is kept NOT mouldable (before: trial8's walker, 'pose 'turn''s rope of rank 3 ... kept beside ..., NOT
+    mouldable', of a rope not in the final layout). Kept within the budget, the clash is still said."""
+    from mdsr_opt.synthesis.layouts import shared_layout
+
+    mesh = plate()
+    f = fab().for_body(mesh)
+    a = rope(mesh, [(1, 1.5), (9, 1.5)], "a")
+    near = rope(mesh, [(1.5, 1.75), (8.5, 1.75)], "n")
+    cross = rope(mesh, [(5.5, 0.5), (5.5, 3.5)], "x")
+    far = rope(mesh, [(1, 3), (9, 3)], "f")
+    layouts = {"p": [a, far], "q": [near, cross]}
+    for budget, kept_cross in ((2, False), (3, True)):
+        notes: list = []
+        mus, _ = shared_layout(mesh, layouts, budget, fabrication=f, notes=notes)
+        assert [m.nodes for m in mus] == [a.nodes, far.nodes] + ([cross.nodes] if kept_cross else [])
+        crossings = [c for c in rope_conflicts(mesh, mus, f) if c.kind == "crossing"]
+        said = [n for n in notes if "NOT mouldable" in n]
+        assert len(said) == (1 if kept_cross else 0) and bool(crossings) == kept_cross
+        assert len(notes) == len(said) + 1 and "merged into pose 'p''s rope of rank 1" in notes[0]  # n merged
+
+
 @pytest.mark.parametrize("scale", [1e-2, 1.0, 30.0])
 @pytest.mark.parametrize("across", [[(7, 0.25), (7, 3.75)], [(6, 0.5), (6, 1.75), (7.5, 3.5)]])
 def test_shared_layout_cuts_a_rope_crossing_another_poses_to_its_part_clear_of_it(scale, across):

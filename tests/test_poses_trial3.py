@@ -179,6 +179,20 @@ def test_ropes_of_two_poses_that_cross_make_the_shared_layout_no_success():
         assert gait_schedule(mesh, MAT, res, ["p", "q"], frames_per_step=1).reached.all()
 
 
+def test_a_crossing_rope_left_out_over_the_budget_is_not_warned_as_not_mouldable():
+    """design_poses warns only of clashes of ropes in the shared layout: with a budget of one rope, the second
+    pose's crossing rope is left out, and no FabricationWarning says the layout is NOT mouldable (before: it
+    did, for a rope the layout does not have); the layout is mouldable (no problems)."""
+    mesh, along, across = crossing_poses()
+    xp, xq = (solve_internal(mesh, MAT, [m], [0.1]).x for m in (along, across))
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = design_poses(mesh, MAT, {"p": xp, "q": xq}, separate={"p": ([along], None), "q": ([across], None)},
+                           compare=False, max_muscles=1)
+    assert [m.nodes for m in res.muscles] == [along.nodes] and res.problems == ()
+    assert not [x for x in w if issubclass(x.category, FabricationWarning)]
+
+
 def test_crossing_ropes_of_one_pose_as_given_are_said_not_failed():
     """A pose's own layout as given (a scene's muscles) is its user's: its crossing ropes are said (as
     design_pipeline says them), not a failure of the merge."""

@@ -10,7 +10,7 @@ import pytest
 from mdsr_opt import Mesh, Muscle, NeoHookean
 from mdsr_opt.mechanics.model import get_model
 from mdsr_opt.mechanics.units import Units
-from mdsr_opt.synthesis.walk import EPS, GroundFriction, node_loads, rigid_motion, walk
+from mdsr_opt.synthesis.walk import EPS, GroundFriction, node_loads, place_rigidly, rigid_motion, walk
 from conftest import load_script
 
 MAT = NeoHookean(1.0, 0.3)
@@ -150,6 +150,69 @@ def test_frictionless_symmetric_cycle_goes_nowhere():
     assert np.abs(r.states[2] - r.states[0]).max() > 0.05
 
 
+def test_place_rigidly_is_the_weighted_least_squares_rigid_placement():
+    """Against the objective itself: the placed state is a rigid motion of the given one (distances kept), and
+    no small rotation or shift of it moves it less from the reference, with weights."""
+    rng = np.random.default_rng(5)
+    X0 = rng.normal(size=(15, 2))
+    a = 0.7
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    Y = (X0 + 0.1 * rng.normal(size=X0.shape)) @ R.T + [3.0, -1.0]
+    w = rng.uniform(0.1, 2.0, len(X0))
+    Z = place_rigidly(Y.reshape(-1), X0.reshape(-1), w).reshape(-1, 2)
+    dist = lambda P: np.hypot(*(P[:, None] - P[None]).transpose(2, 0, 1))
+    assert np.allclose(dist(Z), dist(Y), atol=1e-12)
+    cost = lambda P: float((w * ((P - X0) ** 2).sum(1)).sum())
+    c = (w @ Z) / w.sum()
+    for t in (1e-4, -1e-4):
+        Rt = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+        assert cost((Z - c) @ Rt.T + c) > cost(Z)
+        for e in np.eye(2):
+            assert cost(Z + t * e) > cost(Z)
+    d, r = rigid_motion(X0, Z, w)
+    assert np.abs(d).max() < 1e-12 and abs(r) < 1e-12
+
+
+def _walker_on_legs():
+    """A 4 x 1.4 body on four legs, ropes on the front and back halves of its top edge (trial8's walker)."""
+    from mdsr_opt import edge_path, nodes_in_box
+
+    body = [[0, 0.6], [0.3, 0.6], [0.3, 0], [0.6, 0], [0.6, 0.6], [1.4, 0.6], [1.4, 0], [1.7, 0], [1.7, 0.6],
+            [2.3, 0.6], [2.3, 0], [2.6, 0], [2.6, 0.6], [3.4, 0.6], [3.4, 0], [3.7, 0], [3.7, 0.6], [4, 0.6],
+            [4, 1.4], [0, 1.4]]
+    mesh = Mesh.from_polygon(body, max_area=0.02)
+    mus = [edge_path(mesh, [(2.3, 1.4), (3.9, 1.4)]), edge_path(mesh, [(0.1, 1.4), (1.7, 1.4)])]
+    return mesh, mus, np.array([[0.0, 0.0], [0.1, 0.05]]), dict(feet=nodes_in_box(mesh, ymax=0.35))
+
+
+def _l_body():
+    """An L (3 x 2.5, arms 1 wide), ropes along its bottom edge and its left edge, out in two frames and back."""
+    from mdsr_opt import edge_path
+
+    mesh = Mesh.from_polygon([[0, 0], [3, 0], [3, 1], [1, 1], [1, 2.5], [0, 2.5]], max_area=0.03)
+    mus = [edge_path(mesh, [(0.2, 0.0), (2.8, 0.0)]), edge_path(mesh, [(0.0, 2.3), (0.0, 0.3)])]
+    return mesh, mus, np.array([[0.0, 0.0], [0.15, 0.05], [0.3, 0.1], [0.15, 0.05]]), {}
+
+
+@pytest.mark.parametrize("body", [_walker_on_legs, _l_body])
+def test_frictionless_reciprocal_cycle_returns_the_body_at_the_default_tol(body):
+    """Out and back with mu = 0 at the default tol: the body returns to where it was (before: the drag of
+    1e-6 fixed its rigid motion only to the solve's tolerance, and the walker turned by 5.1e-4 rad, the L by
+    9.4e-3 rad in every cycle, the same each time). The rigid placement in every frame is the least weighted
+    motion: the centre of the drag's weights stays put to round-off."""
+    mesh, mus, S, kw = body()
+    r = walk(mesh, MAT, mus, S, mu=0.0, cycles=3, **kw)
+    assert r.success.all()
+    assert np.abs(r.rotation).max() < 1e-7
+    assert r.distance.max() < 1e-7 * mesh.size
+    w = node_loads(mesh, 1.0, kw.get("feet"))
+    c = np.einsum("n,fnk->fk", w, r.states)
+    assert np.abs(c - c[0]).max() < 1e-12 * mesh.size
+    # each frame's placement: no rotation about that centre against the previous frame (weighted best fit)
+    assert max(abs(rigid_motion(r.states[k - 1], r.states[k], w)[1]) for k in range(1, len(r.states))) < 1e-12
+    assert np.abs(r.states[2] - r.states[1]).max() > 0.01 * mesh.size  # the shape did change
+
+
 def test_stick_nodes_do_not_move_and_slip_is_at_the_limit():
     """Against the elastic forces (computed from the body's energy, not from the friction): nodes under a
     tangential force below 0.9 mu N creep by at most the stated 2.07 eps; nodes that moved by more than 10 eps
@@ -250,6 +313,40 @@ def test_bad_input_is_refused_at_the_door(kw, msg):
     S = args.pop("strokes")
     with pytest.raises(ValueError, match=msg):
         walk(mesh, MAT, mus, S, **args)
+
+
+def test_touching_takes_a_gaits_schedule_rows_with_its_closing_frame():
+    """walk_gait (and walk_scene_refinement, through schedule_cycle) drop a cyclic schedule's closing frame (it
+    repeats the first): ``touching`` may have a row per frame of the cycle, or a row per frame of the schedule
+    whose last repeats its first (before: refused, "must be an (2, 2) bool array", though the schedule has 3
+    rows). Both walk the same; a closing row that differs from the first is refused, saying why; a wrong count
+    says what the rows are."""
+    from mdsr_opt import solve_internal
+    from mdsr_opt.synthesis.gait import gait_schedule
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.walk import schedule_cycle, walk_gait
+
+    mesh, mus, feet = _inchworm(8, 2)
+    x = solve_internal(mesh, MAT, mus, [STROKE / mus[0].rest_length(mesh)]).x
+    lay = design_poses(mesh, MAT, {"pull": x}, separate={"pull": (mus, None)}, compare=False)
+    sch = gait_schedule(mesh, MAT, lay, ["rest", "pull"], frames_per_step=1)
+    assert len(sch.strokes) == 3 and np.allclose(sch.strokes[0], sch.strokes[-1])
+    cycle = INCH_T[:2]
+    args = dict(mu=0.5, cycles=2, feet_groups=feet)
+    a = walk_gait(mesh, MAT, sch, lay.muscles, touching=cycle, **args)
+    b = walk_gait(mesh, MAT, sch, lay.muscles, touching=np.vstack([cycle, cycle[:1]]), **args)
+    assert a.cycle_frames == 2 and a.success.all()
+    assert np.array_equal(a.states, b.states) and np.array_equal(a.loads, b.loads)
+    assert a.distance.min() > 0.01 * mesh.size  # it walks: the rows did lift feet in turn
+    S, T = schedule_cycle(sch, np.vstack([cycle, cycle[:1]]))  # as walk_scene_refinement takes them too
+    assert np.array_equal(S, sch.strokes[:2]) and np.array_equal(T, cycle)
+    assert schedule_cycle(sch, cycle)[1] is cycle and schedule_cycle(sch)[1] is None
+    with pytest.raises(ValueError, match=r"touching has 3 rows.*its last row must repeat its first.*2 rows of one "
+                                         r"cycle.*cycle_frames"):
+        walk_gait(mesh, MAT, sch, lay.muscles, touching=np.vstack([cycle, cycle[1:]]), **args)
+    with pytest.raises(ValueError, match=r"touching must be an \(2, 2\) bool array: a row per frame of the cycle "
+                                         r"\(the 2 rows of strokes, WalkResult.cycle_frames; a gait schedule's closing"):
+        walk_gait(mesh, MAT, sch, lay.muscles, touching=np.ones((4, 2), bool), **args)
 
 
 def test_walk_chart_draws_the_displacement_per_cycle(tmp_path):

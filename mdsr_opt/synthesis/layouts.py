@@ -103,7 +103,8 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
         The fixtures' radius for that check; default ``fabrication.min_fixture_radius`` (the smallest the
         ends may get).
     notes : list, optional
-        Receives one sentence per candidate merged, cut, or kept though it cannot be moulded beside a kept one.
+        Receives one sentence per candidate merged, cut, or kept though it cannot be moulded beside a kept one;
+        none for a candidate the budget leaves out (no rope of the layout is the one it would describe).
     by_pose : bool, default False
         Name and order the ropes by the poses' own layouts, which are shown beside the merged one (a
         scene's cases and its gait): see ``muscles``.
@@ -150,36 +151,40 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
                     found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
                     if found:
                         clashes.append((near < overlap, k, found[0]))
+            said = None  # what became of the candidate: noted when it is merged or kept, not when the budget
+            # leaves it out (no rope of the layout would then be the one the note describes)
             if clashes:  # merged into the first rope it runs along; else cut clear of the kept ones, else kept
                 unmerged, k, cf = min(clashes, key=lambda c: c[:2])
                 part = clear_part(mesh, cand.nodes, [km for km, _, _, _ in kept], fabrication, rad) \
                     if unmerged and by_pose else ()
                 if part and not any(pair_conflicts(mesh, km, part, fabrication, rad)[0] for km, _, _, _ in kept):
-                    if notes is not None:
-                        a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
-                        notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
-                                     f"({b[0]:.4g}, {b[1]:.4g}) shortened to its part a channel and a wall clear of "
-                                     f"the other poses' ropes and fixtures (radius {rad:.4g}): {len(part) - 1} of its "
-                                     f"{len(cand.nodes) - 1} edges")
+                    a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+                    said = (f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
+                            f"({b[0]:.4g}, {b[1]:.4g}) shortened to its part a channel and a wall clear of the "
+                            f"other poses' ropes and fixtures (radius {rad:.4g}): {len(part) - 1} of its "
+                            f"{len(cand.nodes) - 1} edges")
                     cand = Muscle(part, name=cand.name)
                     ce, clashes = cand.edges, []
             if clashes:
-                if notes is not None:
-                    a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
-                    what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
-                    beside = f"pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1}"
-                    notes.append(f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
-                                 f"({b[0]:.4g}, {b[1]:.4g}) " + (f"kept beside {beside}, NOT mouldable in one layer"
-                                                               if unmerged else f"merged into {beside}") + f" ({what})")
+                a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+                what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
+                beside = f"pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1}"
+                said = (f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
+                        f"({b[0]:.4g}, {b[1]:.4g}) " + (f"kept beside {beside}, NOT mouldable in one layer"
+                                                      if unmerged else f"merged into {beside}") + f" ({what})")
                 if not unmerged:
                     dup = k
             if dup is not None:
+                if said is not None and notes is not None:
+                    notes.append(said)
                 if name not in kept[dup][2]:
                     kept[dup][2].append(name)
                 taken[(name, r)] = dup
                 continue
             if budget is not None and len(kept) >= budget:
                 continue
+            if said is not None and notes is not None:
+                notes.append(said)
             taken[(name, r)] = len(kept)
             kept.append((cand, ce, [name], (name, r)))
     if by_pose:  # the first pose's ropes first, each pose's in its own order: the first pose's keep their places

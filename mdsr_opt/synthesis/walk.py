@@ -22,8 +22,13 @@ Errors of the model (``eps`` = :data:`EPS` times the body's size, 1e-6 by defaul
 is ``mu N u / sqrt(u^2 + eps^2)`` with ``u = |x_k - x0_k|``, so a sticking node under a tangential force ``F``
 creeps by ``eps (F/mu N) / sqrt(1 - (F/mu N)^2)`` per frame (below 2 eps for ``F < 0.9 mu N``) and a slipping
 node feels ``mu N (1 - eps^2/(2 u^2))`` instead of ``mu N``. With ``mu = 0`` nothing holds the body: a frame
-then moves it as little as it can, ``min sum_k N_k |x_k - x0_k|^2`` over rigid motions (a vanishing viscous
-drag; its mass centre stays put), and the displacement is that of a body on ice.
+then moves it as little as it can, ``min sum_k N_k |x_k - x0_k|^2`` over rigid motions (``N_k`` the loads of
+``feet``; a vanishing viscous drag; its mass centre stays put), and the displacement is that of a body on ice.
+That rigid motion is placed exactly (weighted Procrustes, :func:`place_rigidly`), not left to the solve: the
+small drag that keeps the NLP regular fixes it only to about the solve's tolerance divided by the drag, an error
+the same in every cycle. The drag's own pull on the shape is then taken out by a second solve centred on the
+placed state, so a reciprocal cycle with ``mu = 0`` returns the body to where it was to within the solve's
+tolerance (and to round-off as ``tol`` goes to zero).
 
 What walks: while friction is weak against the body's stiffness (``mu W << E t size``, as for a silicone robot on
 a table) it only decides which way the body's rigid motion goes, the least dissipating one. With every node (or
@@ -56,7 +61,7 @@ from ..mechanics.units import Units
 from .walkframe import MAX_MOVE, FrameSolver
 
 __all__ = ["GroundFriction", "WalkResult", "walk", "walk_gait", "walk_scene", "scene_schedule", "foot_groups",
-           "node_loads", "rigid_motion", "EPS", "SLIP"]
+           "node_loads", "rigid_motion", "place_rigidly", "schedule_cycle", "EPS", "SLIP"]
 
 #: the smoothing length of the ground's friction potential, relative to the body's size
 EPS = 1e-6
@@ -282,10 +287,23 @@ def _eps_path(eps: float) -> list:
     return out[::-1] if len(out) > 1 else out
 
 
-def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0):
+def place_rigidly(y, x0, weights) -> np.ndarray:
+    """``y`` (2n,) moved rigidly to where ``sum_k w_k |y_k - x0_k|^2`` is least (weighted Procrustes, weights
+    (n,)): the weighted centroid onto ``x0``'s and the best-fit rotation undone (:func:`rigid_motion`)."""
+    Y, X0 = np.asarray(y, float).reshape(-1, 2), np.asarray(x0, float).reshape(-1, 2)
+    w = np.asarray(weights, float) / np.sum(weights)
+    d, a = rigid_motion(X0, Y, w)
+    c, s = np.cos(a), np.sin(a)
+    cy = w @ Y
+    return ((Y - cy) @ np.array([[c, -s], [s, c]]) + (cy - d)).reshape(-1)
+
+
+def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0, place=None):
     """One frame from state ``x`` at strokes ``s_from`` to ``s_to`` in ``substeps`` solves, each from the last
     (the friction's reference too); a failed solve is split in two halves, at most :data:`MAX_SPLITS` times.
-    Returns ``(x, success, status, iterations)``."""
+    ``place`` (n,) weights, with ``mu = 0``: each solve's state is placed rigidly where it moves least from the
+    last (:func:`place_rigidly`), then solved again with the drag centred there and placed again (the module
+    docstring). Returns ``(x, success, status, iterations)``."""
     its = 0
     for j in range(1, substeps + 1):
         a = s_from + (s_to - s_from) * (j - 1) / substeps
@@ -306,8 +324,16 @@ def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0):
                 x_new, ok, st, i = fs.solve(x_new, x, un.to_unit(b), muN, eps, rho, w)
                 its += i
         if not ok and depth < MAX_SPLITS:
-            x_new, ok, st, it = _frame(fs, x, a, b, 2, un, muN, eps, rho, w, depth + 1)
+            x_new, ok, st, it = _frame(fs, x, a, b, 2, un, muN, eps, rho, w, depth + 1, place)
             its += it
+        elif ok and place is not None:
+            x_new = place_rigidly(x_new, x, place)
+            fs.moved_to(x_new)
+            x_c, ok_c, _, i = fs.solve(x_new, x_new, un.to_unit(b), muN, eps, rho, w)  # no pull left at its start
+            its += i
+            if ok_c:
+                x_new = place_rigidly(x_c, x, place)
+                fs.moved_to(x_new)
         if ok and np.abs(x_new - x).max() > MAX_MOVE * fs.size:
             ok, st = False, (f"the body flew off (a node moved more than {MAX_MOVE:g} times the body's size in one "
                              "solve)")
@@ -354,7 +380,8 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     feet_groups : mapping name -> node indices, optional
         Named feet whose slipping is reported per frame (``WalkResult.feet_slipping``).
     touching : (F, G) bool array, optional
-        Per frame of the cycle, which of the ``G`` ``feet_groups`` (in their order) touch the table: in that
+        Per frame of the cycle (the ``F`` rows of ``strokes``), which of the ``G`` ``feet_groups`` (in their
+        order) touch the table: in that
         frame the weight rests on those feet alone (evenly over the area they cover) and the others are
         lifted (no friction). This is how a gait anchors one end and then the other (an inchworm). Default: the
         contact given by ``feet`` in every frame.
@@ -408,8 +435,10 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     else:
         T = np.asarray(touching)
         if T.shape != (F, len(groups)) or T.dtype != bool:
-            raise ValueError(f"touching must be an ({F}, {len(groups)}) bool array: per frame of the cycle, per "
-                             f"foot of feet_groups, got shape {T.shape} of {T.dtype}")
+            raise ValueError(f"touching must be an ({F}, {len(groups)}) bool array: a row per frame of the cycle "
+                             f"(the {F} rows of strokes, WalkResult.cycle_frames; a gait schedule's closing frame, "
+                             f"which repeats its first, is not one), a column per foot of feet_groups, got shape "
+                             f"{T.shape} of {T.dtype}")
         if not T.any(1).all():
             raise ValueError(f"touching: frame(s) {np.flatnonzero(~T.any(1)).tolist()} touch the table with no foot")
         names = list(groups)
@@ -421,23 +450,26 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
     muN_of = float(mu) * np.vstack([np.tile(frame_loads, (cycles, 1)), frame_loads[:1]]) / un.force
     eps = EPS * un.unit_mesh.size
     rho = 0.0 if mu > 0 else 1.0  # with mu = 0 the vanishing drag of the docstring (weights: the loads)
-    wdrag = np.repeat(node_loads(mesh, 1.0, feet), 2) * 1e-6 if mu == 0 else np.zeros(2 * mesh.n_nodes)
+    place = node_loads(mesh, 1.0, feet) if mu == 0 else None  # the drag's weights; its limit placed exactly
+    wdrag = np.repeat(place, 2) * 1e-6 if mu == 0 else np.zeros(2 * mesh.n_nodes)
     full = np.vstack([np.tile(S, (cycles, 1)), S[:1]])
     states, ok, status, its = [X.copy()], [True], ["start"], [0]
     slip = [np.zeros(mesh.n_nodes, dtype=bool)]
     x = un.to_unit(X).reshape(-1)
     if start is not None:  # settle the given state into this model (its ropes and patches) off the table
-        drag = np.repeat(node_loads(mesh, 1.0), 2) * 1e-6
-        x_s, ok_s, st_s, _ = fs.solve(x, x, un.to_unit(S[0]), np.zeros(mesh.n_nodes), eps, 1.0, drag)
+        area = node_loads(mesh, 1.0)
+        x_s, ok_s, st_s, _ = fs.solve(x, x, un.to_unit(S[0]), np.zeros(mesh.n_nodes), eps, 1.0,
+                                      np.repeat(area, 2) * 1e-6)
         if not ok_s:
             raise ValueError(f"start: the body in the cycle's first frame does not solve ({st_s})")
-        x = x_s
+        x = place_rigidly(x_s, x, area)  # the drag's limit: where the given state is, not where tol left it
+        fs.moved_to(x)
         states[0] = x.reshape(-1, 2) * un.length
     prev_s = np.zeros(len(mus)) if start is None else S[0].copy()
     for k in range(len(full)):
         check_stop()
         frame_start = x.copy()
-        x, good, msg, itk = _frame(fs, x, prev_s, full[k], substeps, un, muN_of[k], eps, rho, wdrag)
+        x, good, msg, itk = _frame(fs, x, prev_s, full[k], substeps, un, muN_of[k], eps, rho, wdrag, place=place)
         prev_s = full[k]
         gf = GroundFriction(frame_start, muN_of[k], eps)
         slip.append(gf.slipping(x) if mu > 0 else np.ones(mesh.n_nodes, dtype=bool))
@@ -467,13 +499,33 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
                       iterations=np.array(its), time=time.perf_counter() - t0)
 
 
-def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> WalkResult:
-    """:func:`walk` with the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its last frame, which
-    repeats the first in a cyclic gait, dropped) on the muscles of its layout, starting from its first frame's
-    state (placed on the table as it is); ``kwargs`` as in :func:`walk`."""
+def schedule_cycle(schedule, touching=None) -> tuple:
+    """One cycle of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule`: its strokes (F, m) without the closing
+    frame, which repeats the first in a cyclic gait, and ``touching`` fitted to them: ``(strokes, touching)``.
+    ``touching`` may have a row per frame of the cycle, or a row per frame of the schedule, closing frame
+    too: then its last row must repeat its first (a ``ValueError`` says so) and is dropped with it."""
     S = np.asarray(schedule.strokes, dtype=float)
     if len(S) > 1 and np.allclose(S[0], S[-1]):
         S = S[:-1]
+        if touching is not None and np.ndim(touching) == 2 and len(touching) == len(S) + 1:
+            T = np.asarray(touching)
+            if not np.array_equal(T[0], T[-1]):
+                raise ValueError(f"touching has {len(T)} rows, the schedule's frames with the closing one, which "
+                                 f"repeats the first: its last row must repeat its first row too (it differs), "
+                                 f"or give the {len(S)} rows of one cycle without the closing frame "
+                                 "(WalkResult.cycle_frames)")
+            touching = T[:-1]
+    return S, touching
+
+
+def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> WalkResult:
+    """:func:`walk` with the strokes of a :class:`~mdsr_opt.synthesis.gait.GaitSchedule` (its last frame, which
+    repeats the first in a cyclic gait, dropped: :func:`schedule_cycle`, which fits ``touching`` to them too)
+    on the muscles of its layout, starting from its first frame's state (placed on the table as it is);
+    ``kwargs`` as in :func:`walk`."""
+    S, touching = schedule_cycle(schedule, kwargs.get("touching"))
+    if touching is not None:
+        kwargs["touching"] = touching
     kwargs.setdefault("units", schedule.units)
     if kwargs.get("start") is None and bool(schedule.success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays

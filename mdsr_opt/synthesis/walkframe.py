@@ -128,6 +128,12 @@ class FrameSolver:
             zs, ok, st, it = self._epigraph(x_start, P, lbg, ubg, x0, eps)
             return zs[:len(x_start)], ok, st, its + it
 
+    def moved_to(self, x) -> None:
+        """The last solution moved rigidly to ``x`` (the ropes' multipliers do not change): the next solve from
+        ``x`` is still warm-started."""
+        if self.x_last is not None:
+            self.x_last = np.asarray(x, dtype=float).copy()
+
     def _plain(self, solver, x_start, P, lbg, ubg, lam):
         sol = solver(x0=x_start, p=P, lbg=lbg, ubg=ubg, **({"lam_g0": lam} if lam is not None else {}))
         st = solver.stats()

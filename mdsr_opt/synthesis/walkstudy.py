@@ -30,7 +30,7 @@ from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from ..core.checks import as_float_array, positive_int
 from ..mechanics.quadratic import split_mesh
-from .walk import foot_groups, scene_schedule, walk
+from .walk import foot_groups, scene_schedule, schedule_cycle, walk
 
 __all__ = ["refine_walker", "walk_refinement", "walk_scene_refinement", "richardson"]
 
@@ -176,9 +176,9 @@ def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, fram
     passed on to :func:`~mdsr_opt.synthesis.walk.walk`, is not the layout's); ``local`` as in
     :func:`walk_refinement`; ``kwargs`` go to :func:`~mdsr_opt.synthesis.walk.walk`."""
     sch, region = scene_schedule(scene, layout, sequence=sequence, frames_per_step=frames_per_step, feet=feet)
-    S = np.asarray(sch.strokes, dtype=float)
-    if len(S) > 1 and np.allclose(S[0], S[-1]):
-        S = S[:-1]
+    S, touching = schedule_cycle(sch, kwargs.get("touching"))
+    if touching is not None:
+        kwargs["touching"] = touching
     start = sch.states[0] if bool(sch.success[0]) and not from_rest else None
     kwargs.setdefault("units", sch.units)
     kwargs.setdefault("anchor_radius", layout.anchor_radius)
