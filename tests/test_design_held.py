@@ -8,6 +8,7 @@ from shapely.geometry import Point, Polygon
 from shapely.ops import unary_union
 
 from mdsr_opt import Disk, Mesh, Muscle, NeoHookean, design_contractions, design_pipeline, nodes_in_box, solve_internal
+from mdsr_opt.synthesis.results import DesignResult
 from mdsr_opt.synthesis.verify import check_minimum, verify_design
 
 MAT = NeoHookean(1.0, 0.3)
@@ -82,7 +83,7 @@ def test_known_contractions_come_back_from_a_target_pressed_on_a_disk_by_a_clamp
     assert len(res.verification.contact["pairs"]) > 0
 
 
-def test_clamped_design_without_obstacles_recovers_contractions_by_the_nested_method():
+def test_clamped_design_without_obstacles_recovers_contractions_by_the_nested_method(tmp_path):
     mesh, base, row = _finger()
     mus = [Muscle(row(0.8, 0.3, 3.8)), Muscle(row(0.0, 0.3, 2.0))]
     a_true = np.array([0.2, 0.1])
@@ -100,9 +101,15 @@ def test_clamped_design_without_obstacles_recovers_contractions_by_the_nested_me
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     moved = design_contractions(mesh, MAT, mus, target.x @ R.T + [3.0, -1.0], held=base, initial_guess=[0.1, 0.05])
     assert np.abs(moved.contractions - a_true).max() < 1e-6
-    # a design verified as a free body is another body: the clamped state is not where a free one goes
-    v = verify_design(mesh, MAT, mus, res, target.x, held=base)
-    assert v.passed and v.gap <= v.gap_tol
+    # the design records its mount; the verification clamps it again by default, also after a save and load
+    assert res.held == tuple(int(i) for i in base)
+    back = DesignResult.load(res.save(tmp_path / "held.npz"))
+    assert back.held == res.held and DesignResult.from_dict(res.to_dict()).held == res.held
+    v = verify_design(mesh, MAT, mus, back, target.x)
+    assert v.passed and v.gap <= 1e-12 and v.forward_difference < 1e-6
+    # verified as a free body instead, the clamped state is not where a free body goes (aligned to rest)
+    free_v = verify_design(mesh, MAT, mus, DesignResult.from_dict({**res.to_dict(), "held": None}), target.x)
+    assert not free_v.passed and free_v.gap > 1e-3
 
 
 def test_an_anchor_patch_holding_two_clamped_nodes_is_clamped_whole():

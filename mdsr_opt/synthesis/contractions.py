@@ -276,6 +276,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
     res.stress_unit = getattr(material, "stress_unit", None)
     res.fixture_wall = float(fixture_wall)  # a length: the caller's units
+    res.held = None if hold is None else tuple(int(i) for i in hold)
     if res.saturated.any():
         warn_saturated(res, mus)
     return res

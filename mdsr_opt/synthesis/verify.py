@@ -150,7 +150,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); ``min_eigenvalue`` is then NaN. ``contact`` of
     the result reports the forward state's contacts (pairs, normal forces, forces on nodes and obstacles).
 
-    With ``held`` nodes (clamped at rest, as in :func:`~mdsr_opt.solve_internal`; a design made with them) the
+    With ``held`` nodes (clamped at rest, as in :func:`~mdsr_opt.solve_internal`; default: the design's own,
+    ``result.held``, recorded by :func:`~mdsr_opt.synthesis.contractions.design_contractions`) the
     forward solves hold them too, and gaps and the forward difference are measured where the states are,
     without rigid alignment (the held nodes fix the pose; the target is first moved rigidly onto their rest
     positions, the identity for a target solved with them anchored).
@@ -184,7 +185,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     radius = None if radius is None or not np.isfinite(radius) else float(radius)
     radius = check_anchor_radius(mesh, radius)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
-    hold = check_held(mesh, held, mus)
+    hold = check_held(mesh, getattr(result, "held", None) if held is None else held, mus)
     target_check = None
     if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
