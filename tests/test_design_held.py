@@ -157,3 +157,20 @@ def test_pipeline_with_obstacles_needs_a_mount():
         design_pipeline(mesh, MAT, None, drags, obstacles=[disk], muscles=[Muscle(row(0.8, 0.2, 3.8))])
     with pytest.raises(ValueError, match="held is empty"):  # at the door: before the target's solve
         design_pipeline(mesh, MAT, base, drags, obstacles=[disk], muscles=[Muscle(row(0.8, 0.2, 3.8))], held=[])
+
+
+def test_pipeline_with_held_and_no_obstacles_designs_the_clamped_body_by_the_nested_method():
+    mesh, base, row = _finger()
+    P = mesh.points
+    tip = nodes_in_box(mesh, xmin=4.0)
+    drags = {int(i): P[i] + [-1.0, 2.0] for i in tip}
+    mus = [Muscle(row(0.8, 0.2, 3.8))]
+    with pytest.raises(ValueError, match="method='nested' or 'derivative-free'"):  # at the door
+        design_pipeline(mesh, MAT, base, drags, muscles=mus, held=base, method="flattened")
+    r = design_pipeline(mesh, MAT, base, drags, muscles=mus, held=base)
+    d = r.design
+    assert d.method == "nested" and r.success, d.status
+    assert d.held == tuple(int(i) for i in base) and np.abs(d.x[base] - P[base]).max() <= 1e-12
+    # the free body's design of the same target matches it after alignment only: its base leaves the mount
+    free = design_pipeline(mesh, MAT, base, drags, muscles=mus)
+    assert free.design.held is None and np.abs(free.design.x[base] - P[base]).max() > 1e-2

@@ -406,8 +406,9 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     eopts = dict(external_options or {})
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
-    if method is None:
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else "flattened"
+    if method is None:  # as design_contractions chooses (held nodes: the nested method without contact)
+        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
+            "flattened" if design_options.get("held") is None else "nested"
     ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
     anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=mesh.n_nodes)
     if ckw.get("obstacles") and design_options.get("held") is None:
@@ -416,7 +417,9 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                              f"stand in that frame), but the target has {len(anc)} anchor(s): give at least two "
                              "anchors, or the clamped nodes as held=[...]")
         design_options["held"] = anc  # the body mounted where its target was clamped
-    check_held(mesh, design_options.get("held"), muscles)  # bad held: at the door, before the target's solve
+    if check_held(mesh, design_options.get("held"), muscles) is not None and method == "flattened":
+        raise ValueError("held nodes are designed by method='nested' or 'derivative-free' (the flattened NLP pins "
+                         "the body's three gauge coordinates only), got method='flattened'")
     if ckw:  # contact: the target by IPOPT (the Newton backend takes no contact)
         eopts.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
         design_options.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
