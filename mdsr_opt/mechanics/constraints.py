@@ -138,6 +138,10 @@ class MuscleConstraints:
     muscles : sequence of Muscle or node lists
     radius : float, optional
         Anchor radius (default :func:`~mdsr_opt.mechanics.anchors.default_anchor_radius`; 0 for single-node ends).
+    held : node indices, optional
+        Nodes clamped at rest (:func:`~mdsr_opt.solve_internal`'s ``held``): a rigid group holding two or more
+        of them is clamped whole (its nodes are fixed coordinates of the solve), so it has no rows here (they
+        would constrain fixed coordinates only: rows with no free column, a singular KKT matrix).
 
     Attributes
     ----------
@@ -146,7 +150,7 @@ class MuscleConstraints:
     rest_lengths : (n_muscles,) ndarray
         ``L0`` per muscle along its node chain.
     groups : list of ndarray
-        The rigid groups (see :func:`rigid_groups`).
+        The rigid groups (see :func:`rigid_groups`) with rows: all but those clamped by ``held``.
     dofs : ndarray
         Sorted global coordinates (of the 2n) that any constraint involves; ``n_local`` their number (the
         ``local_*`` methods take the state at these coordinates).
@@ -155,13 +159,14 @@ class MuscleConstraints:
     radius : float
     """
 
-    def __init__(self, mesh, muscles, radius: float | None = None):
+    def __init__(self, mesh, muscles, radius: float | None = None, held=None):
         self.mesh = mesh
         self.muscles = valid_muscles(mesh, muscles)
         if not self.muscles:
             raise ValueError("MuscleConstraints needs at least one muscle")
         self.radius = anchor_radius_or_default(mesh, radius)
-        self.groups = rigid_groups(mesh, self.muscles, self.radius)
+        self.groups = [g for g in rigid_groups(mesh, self.muscles, self.radius)
+                       if held is None or np.isin(g, held).sum() < 2]
         n = mesh.n_nodes
         self.n_dof = 2 * n
         P = mesh.points
@@ -461,8 +466,9 @@ class MuscleConstraints:
         return sp.csc_matrix((Hl.data, (self.dofs[Hl.row], self.dofs[Hl.col])), shape=(self.n_dof, self.n_dof))
 
 
-def muscle_constraints(mesh, muscles, radius: float | None = None) -> MuscleConstraints:
-    """The :class:`MuscleConstraints` of ``muscles`` on ``mesh``, cached on the mesh per node chains and radius.
+def muscle_constraints(mesh, muscles, radius: float | None = None, held=None) -> MuscleConstraints:
+    """The :class:`MuscleConstraints` of ``muscles`` on ``mesh`` (``held``: clamped nodes, as there), cached on
+    the mesh per node chains, radius and held nodes.
 
     :func:`~mdsr_opt.solve_internal` keeps its constraints in the same cache (same key), so a design, its
     forward solves and its verification share one set (and one built CasADi function of it).
@@ -470,11 +476,11 @@ def muscle_constraints(mesh, muscles, radius: float | None = None) -> MuscleCons
     mus = valid_muscles(mesh, muscles)
     r = anchor_radius_or_default(mesh, radius)
     cache = mesh.__dict__.setdefault("_muscle_constraint_cache", {})
-    key = (tuple(m.nodes for m in mus), float(r))
+    key = (tuple(m.nodes for m in mus), float(r)) + (() if held is None else (tuple(sorted(map(int, held))),))
     if key not in cache:
         if len(cache) >= 16:
             cache.pop(next(iter(cache)))
-        cache[key] = MuscleConstraints(mesh, mus, r)
+        cache[key] = MuscleConstraints(mesh, mus, r, held)
     return cache[key]
 
 

@@ -30,7 +30,8 @@ from .result import EquilibriumResult
 from .stability import check_stability
 from .units import Units
 
-__all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_frame', 'gauge_coordinates']
+__all__ = ['solve_external', 'external_stability', 'solve_internal', 'in_gauge_frame', 'gauge_coordinates',
+           'check_held', 'in_held_frame']
 
 
 # ---------------------------------------------------------------------------------- external driving
@@ -210,6 +211,23 @@ def _gauge_coordinates(mesh) -> tuple[int, int, int]:
     return 2 * i, 2 * i + 1, 2 * j + comp
 
 
+def held_coordinates(mesh, held: np.ndarray | None, muscles=(), radius: float | None = None) -> np.ndarray:
+    """The fixed-coordinate mask of internal driving: the three gauge coordinates of a free body
+    (``held`` None), else both coordinates of every held node and of every node of an anchor patch of
+    ``muscles`` (:func:`~mdsr_opt.mechanics.anchors.rigid_groups` at ``radius``) holding two or more held
+    nodes: such a patch moves rigidly with two clamped points, so it stays at rest (and has no constraint rows,
+    :class:`~mdsr_opt.mechanics.constraints.MuscleConstraints`)."""
+    fixed = np.zeros(2 * mesh.n_nodes, dtype=bool)
+    if held is None:
+        fixed[list(gauge_coordinates(mesh))] = True
+        return fixed
+    groups = rigid_groups(mesh, muscles, radius) if len(muscles) else []
+    nodes = [np.asarray(held)] + [g for g in groups if np.isin(g, held).sum() >= 2]
+    nodes = np.unique(np.concatenate(nodes))
+    fixed[2 * nodes] = fixed[2 * nodes + 1] = True
+    return fixed
+
+
 def _constrained_model(emodel, mc, ropes) -> ConstrainedModel:
     cache = emodel.__dict__.setdefault("_constrained_cache", {})
     key = (id(mc), bool(ropes))
@@ -251,6 +269,40 @@ def in_gauge_frame(mesh: Mesh, x: np.ndarray) -> np.ndarray | None:
     return (x - x[i]) @ R.T + P[i]
 
 
+def check_held(mesh, held, muscles=None) -> np.ndarray | None:
+    """The ``held`` nodes of internal driving checked at the door: None (a free body), or a sorted int64 array
+    of at least two distinct node indices in range (:func:`~mdsr_opt.core.checks.node_indices`: integers, a
+    float or boolean refused). With ``muscles`` (checked :class:`Muscle` objects) a rope whose every node is
+    held is refused: nothing of it could move.
+
+    Raises ``TypeError`` (not integers) or ``ValueError`` (empty, one node, out of range, repeated)."""
+    if held is None:
+        return None
+    idx = node_indices(held, "held", n=mesh.n_nodes)
+    if len(idx) == 0:
+        raise ValueError("held is empty: give the nodes the body is clamped at (at least two), or held=None for "
+                         "a free body")
+    if len(idx) < 2:
+        raise ValueError(f"held needs at least two nodes (got node {int(idx[0])} only): one node held leaves the "
+                         "body free to turn about it; give two or more, e.g. the nodes of a clamped base")
+    hs = set(idx.tolist())
+    for c, mu in enumerate(muscles or ()):
+        if set(mu.nodes) <= hs:
+            raise ValueError(f"held: every node of muscle {label_of(muscles, c)} is held, so it could not contract; "
+                             "hold fewer nodes")
+    return np.sort(idx)
+
+
+def in_held_frame(mesh: Mesh, x: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """``x`` (n, 2) moved rigidly so that its ``held`` nodes lie as near their rest positions as a rigid motion
+    takes them (least squares; exact when ``x`` holds them at rest): a state in any pose starting a solve with
+    those nodes held, without the shear that setting them alone would make."""
+    x = np.asarray(x, dtype=float)
+    if x.shape != (mesh.n_nodes, 2):
+        raise ValueError(f"x must have shape ({mesh.n_nodes}, 2), got {x.shape}")
+    return align(x[held], mesh.points[held]).apply(x)
+
+
 @interruptible()  # Ctrl-C anywhere in the solve raises KeyboardInterrupt, never a result
 def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions, *, muscle_model: str = "cable",
                    stiffness: float = 10.0, anchor_radius: float | None = None, backend: str = "ipopt",
@@ -258,8 +310,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                    min_step: float = 1.0 / 256, align_to_rest: bool = True, verbose: bool = False,
                    initial_guess: str | np.ndarray = "predictor", check_stability: bool = True,
                    obstacles=None, contact: bool = False, contact_gap: float | None = None,
-                   friction: float = 0.0) -> EquilibriumResult:
-    """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body.
+                   friction: float = 0.0, held=None) -> EquilibriumResult:
+    """Internal driving: muscles contract by fractions ``contractions`` of their rest lengths in a free body,
+    or in a body clamped at its ``held`` nodes.
 
     Parameters
     ----------
@@ -307,6 +360,16 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     obstacles, contact, contact_gap, friction : contact, as in :func:`solve_external`. With obstacles the body is held
         at its three gauge coordinates (at rest) in the obstacles' frame and not aligned to rest; the net force
         the gauge holds is then ``contact["gauge_force"]`` (zero when the contacts balance the body).
+    held : node indices, optional
+        Nodes clamped at their rest positions, as a robot is mounted on its base (at least two distinct nodes,
+        integers in range, each once: :func:`check_held`); default None, the paper's free body, held only at
+        its three gauge coordinates (:func:`gauge_coordinates`) and aligned to rest. With ``held`` the held
+        nodes fix the body's pose: the result is not aligned to rest (``align_to_rest`` is ignored), an
+        initial state in any pose is first moved rigidly onto the held nodes' rest positions
+        (:func:`in_held_frame`), and obstacles, also at rest coordinates, stand where they stand relative to
+        the mount; with obstacles ``contact["held_force"]`` is the net force the held nodes exert on the body
+        (the mount's reaction) instead of ``gauge_force``. A muscle's anchor patch holding two or more held
+        nodes is clamped whole (it moves rigidly with them, so it stays at rest).
 
     Returns
     -------
@@ -343,9 +406,11 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
     a = check_contractions(contractions, len(mus))
     if not isinstance(check_stability, (bool, np.bool_)):
         raise TypeError(f"check_stability must be True or False, got {check_stability!r}")
+    hold = check_held(mesh, held, mus)
     predict, x_start = initial_guess_of(initial_guess, mesh)
-    if not isinstance(initial_guess, str):  # a state in any pose: moved rigidly into the solver's gauge frame
-        moved = in_gauge_frame(mesh, x_start.reshape(-1, 2))
+    if not isinstance(initial_guess, str):  # a state in any pose: moved rigidly into the solver's frame
+        moved = in_gauge_frame(mesh, x_start.reshape(-1, 2)) if hold is None else \
+            in_held_frame(mesh, x_start.reshape(-1, 2), hold)
         if moved is not None:
             x_start = moved.reshape(-1)
     n = mesh.n_nodes
@@ -366,9 +431,9 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                          f"{', '.join(CONSTRAINED_BACKENDS)}" + ("" if model == "cable" else
                                                                  ", or anchor_radius=0"))
     t0 = time.perf_counter()
-    mc = muscle_constraints(mesh, mus, radius)  # one cache per mesh, shared with the design
+    mc = muscle_constraints(mesh, mus, radius, hold)  # one cache per mesh, shared with the design
     emodel = get_model(mesh, material)
-    cm = _constrained_model(emodel, mc, model == "cable") if constrained else None
+    cm = _constrained_model(emodel, mc, model == "cable") if model == "cable" or mc.n_rigid else None
     t_model = time.perf_counter() - t0  # ~0 when the mesh's model was built before
     L0 = mc.rest_lengths
     K = spring_stiffness(mesh, material, stiffness)
@@ -382,8 +447,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         return cm.params(p_energy(s), (1.0 - s * a) * L0) if cm is not None else p_energy(s)
 
     p_el0 = emodel.params(material)
-    fixed = np.zeros(2 * n, dtype=bool)
-    fixed[list(gauge_coordinates(mesh))] = True
+    fixed = held_coordinates(mesh, hold, mus, radius)
     X = mesh.points.reshape(-1).copy()
     vals = X[fixed]
     solver_model = cm if cm is not None else emodel
@@ -393,17 +457,18 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                                       settle=bool(check_stability), loose=loadsteps.INTERNAL_INTERMEDIATE_TOL,
                                       p_elastic=p_el0 if cm is None else None, t_model=t_model)
         if spec.obstacles:
-            align_to_rest = False  # the body stays in the obstacles' frame, held at its gauge
+            align_to_rest = False  # the body stays in the obstacles' frame, held at its gauge or held nodes
             g = emodel.gradient(res.x.reshape(-1), p_energy(1.0)) - (np.asarray(res.contact["node_forces"]).reshape(-1)
                                                                      / units.force)
             if cm is not None and lam is not None:
                 g = g + cm.jacobian(res.x.reshape(-1)).T @ lam
             # the force the gauge exerts on the body: what balances the rest at its fixed coordinates
             gx, gy = g[0::2][fixed[0::2]].sum(), g[1::2][fixed[1::2]].sum()
-            res.contact["gauge_force"] = [float(gx) * units.force, float(gy) * units.force]
+            res.contact["gauge_force" if hold is None else "held_force"] = [float(gx) * units.force,
+                                                                           float(gy) * units.force]
         taut = np.ones(len(mus), dtype=bool) if lam is None else lam[:len(mus)] > 0
         return _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol,
-                             align_to_rest)
+                             align_to_rest and hold is None)
     x, status, ok, iters, steps, t_solve, t_build = load_continuation(
         mesh, solver_model, p_of, fixed, lambda s: vals, x_start, backend, tol, max_iter, options, min_step,
         verbose, predict, settle=bool(check_stability), intermediate_tol=loadsteps.INTERNAL_INTERMEDIATE_TOL)
@@ -423,7 +488,7 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
                   t_model + t_build, t_solve, backend, "internal", tol, check_stability=bool(check_stability),
                   residual=residual)
     return _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol,
-                         align_to_rest)
+                         align_to_rest and hold is None)
 
 
 def _internal_out(res, units, mesh, mc, model, mus, a, a_fac, K, radius, L0, cm, lam, taut, tol, align_to_rest):

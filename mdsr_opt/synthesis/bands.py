@@ -138,8 +138,9 @@ def refine_mesh(mesh: Mesh) -> tuple[Mesh, np.ndarray]:
     return Mesh(pts, np.asarray(tris, dtype=np.int64)), np.asarray(e)
 
 
-def _refined(mesh: Mesh, muscles, target):
-    """The refined mesh, the muscles along it (every edge split at its midpoint) and the target on it."""
+def _refined(mesh: Mesh, muscles, target, held=None):
+    """The refined mesh, the muscles along it (every edge split at its midpoint), the target on it and the
+    held nodes on it (``held`` and the midpoints of the edges between two held nodes; None stays None)."""
     fine, e = refine_mesh(mesh)
     n = mesh.n_nodes
     index = {(int(a), int(b)): n + k for k, (a, b) in enumerate(e)}
@@ -150,7 +151,10 @@ def _refined(mesh: Mesh, muscles, target):
             path += [index[(min(a, b), max(a, b))], int(b)]
         mus.append(Muscle(tuple(path), name=mu.name))
     y = np.asarray(target, dtype=float)
-    return fine, mus, np.vstack([y, 0.5 * (y[e[:, 0]] + y[e[:, 1]])])
+    if held is not None:
+        both = np.isin(e, np.asarray(held)).all(axis=1)
+        held = np.concatenate([np.asarray(held, dtype=np.int64), n + np.flatnonzero(both)])
+    return fine, mus, np.vstack([y, 0.5 * (y[e[:, 0]] + y[e[:, 1]])]), held
 
 
 def stroke_bands(source, material=None, muscles=None, target=None, design=None, *, radius_tol: float | None = None,
@@ -272,8 +276,10 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
         notes.append(f"mesh: refinement left out (the refined mesh would have {mesh.n_nodes + len(mesh.edges)} "
                      f"nodes, more than max_refined_nodes {max_refined_nodes})")
     else:
-        fine, fmus, fy = _refined(mesh, mus, target)
+        fine, fmus, fy, fheld = _refined(mesh, mus, target, opts.get("held"))
         values["mesh"].append(fine.n_nodes)
+        if fheld is not None:  # the same clamp on the refined body
+            opts["held"] = fheld
         runs["mesh"].append(strokes(f"mesh refined to {fine.n_nodes} nodes", fine, material, fmus, fy, r0))
     contributions = {}
     for src, got in runs.items():

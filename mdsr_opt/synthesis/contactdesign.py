@@ -56,14 +56,15 @@ def unit_contact(kw: dict, units: Units) -> dict:
 
 
 def contact_minimum(mesh, material, muscles, contractions, x, kw: dict, *, muscle_model: str = "cable",
-                    stiffness: float = 10.0, anchor_radius: float | None = None, tol: float = 1e-8):
+                    stiffness: float = 10.0, anchor_radius: float | None = None, tol: float = 1e-8, held=None):
     """Is ``x`` a stable equilibrium at ``contractions`` with the contacts ``kw`` (caller's units)?
 
     A contact solve (:func:`~mdsr_opt.solve_internal` with ``kw``) starts at ``x`` with no load stepping; its
     stability check is the Hessian of the Lagrangian on the tangent space of the active ropes, anchor patches
     and pushing contacts (:func:`~mdsr_opt.mechanics.contactsolve.contact_stability`). ``x`` passes when that
     solve succeeds (stable, scaled KKT residual at most ``tol``) and stays within :data:`STAY_RTOL` of the body's
-    size of ``x`` (after rigid alignment; with obstacles the frame is the obstacles' and no alignment is made).
+    size of ``x`` (after rigid alignment; with obstacles or ``held`` nodes the frame is fixed and no alignment
+    is made). ``held``: nodes clamped at rest, as in :func:`~mdsr_opt.solve_internal`.
 
     Returns ``(stable, residual, result)``: the solve's residual stands for ``x``'s when it stays (NaN when it
     moves away), and ``result`` is that :class:`~mdsr_opt.mechanics.result.EquilibriumResult`.
@@ -71,9 +72,9 @@ def contact_minimum(mesh, material, muscles, contractions, x, kw: dict, *, muscl
     x = np.asarray(x, dtype=float).reshape(-1, 2)
     res = solve_internal(mesh, material, muscles, np.clip(contractions, 0.0, 0.999), muscle_model=muscle_model,
                          stiffness=stiffness, anchor_radius=anchor_radius, tol=tol, initial_guess=x, min_step=1.0,
-                         align_to_rest=False, **kw)
+                         align_to_rest=False, held=held, **kw)
     fx = np.asarray(res.x, dtype=float)
-    moved = fx - x if kw.get("obstacles") else align(x, fx).apply(x) - fx
+    moved = fx - x if kw.get("obstacles") or held is not None else align(x, fx).apply(x) - fx
     stays = bool(np.isfinite(moved).all() and np.linalg.norm(moved, axis=1).max() <= STAY_RTOL * mesh.size)
     ok = bool(res.success and res.stable and stays)
     residual = float(res.residual) if stays and res.residual is not None else float("nan")

@@ -18,7 +18,7 @@ from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import body_size, check_anchor_radius
 from ..mechanics.blas import one_blas_thread
-from ..mechanics.equilibrium import solve_internal
+from ..mechanics.equilibrium import check_held, solve_internal
 from ..mechanics.loadsteps import upright
 from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
@@ -54,7 +54,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                         inner_tol: float = 1e-10, verify: bool | str = True, skip_verification=None,
                         gap_rtol: float = 1e-5,
                         derivatives: str = "numeric", contact: bool = False, obstacles=None,
-                        contact_gap: float | None = None, fixture_wall: float | None = None) -> DesignResult:
+                        contact_gap: float | None = None, fixture_wall: float | None = None,
+                        held=None) -> DesignResult:
     """Find the contractions that make the muscle-driven body match ``target`` after rigid alignment.
 
     Parameters
@@ -65,7 +66,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         Target node positions, in any pose (only the shape matters).
     method : {"flattened", "nested", "derivative-free"}, optional
         See the module docstring. Default ``"flattened"``, or ``"derivative-free"`` with contact (the only
-        method that takes it).
+        method that takes it), or ``"nested"`` with ``held`` nodes and no contact (the flattened NLP pins the
+        three gauge coordinates only).
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -144,11 +146,22 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     contact, obstacles, contact_gap :
         Contact, as in :func:`~mdsr_opt.solve_internal`: self-contact of the boundary (``contact=True``) and
         rigid obstacles (:class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Obstacle`,
-        in the frame of the body at rest, which the forward solves then hold at its gauge). Every forward
+        in the frame of the body at rest, which the forward solves then hold at its gauge, or at its ``held``
+        nodes: give them for a body mounted on a base, as :func:`design_pipeline` does). Every forward
         solve of the design and the verification's (from rest, and the design state's stability on the
         tangent space of its pushing contacts) models them; the design's state ``x`` stays in the obstacles'
         frame. Designed by ``method="derivative-free"`` only (:mod:`~mdsr_opt.synthesis.contactdesign`);
         ``contact`` of the result reports the verified state's contact forces.
+    held : node indices, optional
+        Nodes clamped at their rest positions in every forward solve and the verification, as a robot
+        mounted on its base (:func:`~mdsr_opt.solve_internal`'s ``held``; at least two nodes, integers in range,
+        each once). Without them (the default) the body is the paper's free body and the target is matched
+        after the best rigid alignment; with them the pose is the mount's, so the target is moved rigidly
+        onto the held nodes' rest positions (the identity for a target solved with them anchored) and
+        matched where it is, without alignment (``rotation`` the identity, ``translation`` zero), and
+        obstacles stand where they are relative to the mount. Give the target's anchors to design a gripper
+        clamped where its target was. Designed by ``"nested"`` or ``"derivative-free"`` (refused with
+        ``"flattened"``). Verify such a design with :func:`verify_design` with the same ``held``.
 
     Returns
     -------
@@ -176,7 +189,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     initial = initial_guess
     clock0 = time.perf_counter()
     if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else "flattened"
+        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
+            "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if hessian not in ("exact", "gauss-newton"):
@@ -205,6 +219,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     mus, y, a_max, w, stiffness, a0 = check_inputs(mesh, material, muscles, target, a_max, weights,
                                                     interior_weight, muscle_model, stiffness, initial)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, method)
+    hold = check_held(mesh, held, mus)
+    if hold is not None and method == "flattened":
+        raise ValueError("held nodes are designed by method='nested' or 'derivative-free' (the flattened NLP pins "
+                         "the body's three gauge coordinates only), got method='flattened'")
     anchor_radius = check_anchor_radius(mesh, anchor_radius)
     fixture_wall = WALL_FRACTION * body_size(mesh) if fixture_wall is None else \
         positive_float(fixture_wall, "fixture_wall", allow_zero=True)
@@ -226,7 +244,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     # result mapped back to the caller's units before its verification
     units = Units(mesh, material)
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, units.state_in(y), w, muscle_model, stiffness,
-                         a_max, units.to_unit(anchor_radius), units.to_unit(fixture_wall))
+                         a_max, units.to_unit(anchor_radius), units.to_unit(fixture_wall), held=hold)
     # within each muscle's cap (a rope mostly inside its end patches may shorten less than a_max)
     a0 = np.minimum(a0, np.where(prob.a_upper < a_max, 0.9 * prob.a_upper, prob.a_upper))
     warm = "target" if warm_start is True else warm_start
@@ -258,6 +276,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
     res.stress_unit = getattr(material, "stress_unit", None)
     res.fixture_wall = float(fixture_wall)  # a length: the caller's units
+    res.held = None if hold is None else tuple(int(i) for i in hold)
     if res.saturated.any():
         warn_saturated(res, mus)
     return res
@@ -349,15 +368,15 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
         # path of warm starts may differ from it by about the contact gap (another set of touching pairs)
         r = solve_internal(umesh, prob.material, mus, np.clip(a, 0.0, 0.999), muscle_model=prob.muscle_model,
                            stiffness=prob.stiffness, anchor_radius=prob.anchor_radius, tol=inner_tol,
-                           align_to_rest=False, **fwd.contact)
+                           align_to_rest=False, held=prob.held, **fwd.contact)
         if r.success:
             x = np.asarray(r.x, dtype=float).reshape(-1)
     if upright(umesh, x) and not ckw:  # the equilibrium at a to the verification's tolerance (the NLP's rows meet their own)
         x = prob.polished(a, x, min(inner_tol, VERIFY_TOL))
     x2 = x.reshape(-1, 2)
-    # aligned to rest, unless obstacles hold the body in their frame
-    x_rest = x2 if ckw.get("obstacles") else align(x2, umesh.points).apply(x2)
-    al = align(x_rest, y, w)
+    # aligned to rest, unless obstacles or held nodes hold the body in their frame
+    x_rest = x2 if ckw.get("obstacles") or prob.held is not None else align(x2, umesh.points).apply(x2)
+    al = prob.alignment(x_rest)
     t_end = time.perf_counter()
     if method == "flattened":  # seconds of solving: the NLP's build is not part of the trace
         hist = [(t - bt, d) for t, d in hist] + [(t_end - t_solve0 - bt, al.difference)]
@@ -411,7 +430,8 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
             _LOG.info("design: verifying contractions [%s] with contact",
                       ", ".join(f"{c:.4g}" for c in res.contractions))
         v = verify_design(mesh, units.material, mus, res, y * units.length, weights=w, gap_rtol=gap_rtol,
-                          tol=min(inner_tol, VERIFY_TOL), start="design" if verify == "design" else "rest", **ckw)
+                          tol=min(inner_tol, VERIFY_TOL), start="design" if verify == "design" else "rest",
+                          held=prob.held, **ckw)
         res.verification = v
         if res.success and not v.passed:
             res.success = False

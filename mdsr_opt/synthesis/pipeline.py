@@ -16,9 +16,10 @@ from ..core.guards import interruptible
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
-from ..core.checks import check_options, keyword_names
+from ..core.checks import check_options, keyword_names, node_indices
 from ..core.quantities import check_length_unit
 from ..core.results import compact_repr
+from ..mechanics.equilibrium import check_held
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
 from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
@@ -315,6 +316,13 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     contact, obstacles : optional
         Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
         verification (:func:`design_contractions`); refused at the door with a method that cannot take it.
+        With obstacles the design's body is clamped at the target's ``anchors`` (``held=anchors`` in
+        :func:`design_contractions`, unless ``held`` is given among the design options): the obstacles stand
+        in the target's frame, which its anchors fix, so a body that presses on or grips one is designed as the
+        robot that does it, mounted where the target was clamped; a free body held at gauge coordinates chosen
+        from its geometry would meet the obstacles (if at all) somewhere else. Without obstacles the design
+        is the paper's free body (self-contact alone does not depend on where the body is). A design with
+        obstacles needs at least two anchors, or ``held``: refused at the door otherwise.
     external_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.solve_external` (``backend``, ``tol``...). Without a
         ``backend`` the target is solved by ``"newton"``, and by IPOPT when Newton fails.
@@ -398,9 +406,20 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     eopts = dict(external_options or {})
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
-    if method is None:
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else "flattened"
+    if method is None:  # as design_contractions chooses (held nodes: the nested method without contact)
+        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
+            "flattened" if design_options.get("held") is None else "nested"
     ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
+    anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=mesh.n_nodes)
+    if ckw.get("obstacles") and design_options.get("held") is None:
+        if len(anc) < 2:
+            raise ValueError(f"a design with obstacles clamps the body where the target was anchored (the obstacles "
+                             f"stand in that frame), but the target has {len(anc)} anchor(s): give at least two "
+                             "anchors, or the clamped nodes as held=[...]")
+        design_options["held"] = anc  # the body mounted where its target was clamped
+    if check_held(mesh, design_options.get("held"), muscles) is not None and method == "flattened":
+        raise ValueError("held nodes are designed by method='nested' or 'derivative-free' (the flattened NLP pins "
+                         "the body's three gauge coordinates only), got method='flattened'")
     if ckw:  # contact: the target by IPOPT (the Newton backend takes no contact)
         eopts.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
         design_options.update(contact=ckw["contact"], obstacles=ckw["obstacles"])
@@ -410,7 +429,6 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     ext.raise_on_failure()
     t1 = time.perf_counter()
     _LOG.info("design_pipeline: target solved%s in %.1f s", " with contact" if ckw else "", t1 - t0)
-    anc = np.asarray([] if anchors is None else anchors, dtype=np.int64).reshape(-1)
     routing = None
     if muscles is None:
         import warnings

@@ -15,7 +15,8 @@ from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
 from ..mechanics.anchors import anchor_radius_or_default
 from ..mechanics.constraints import muscle_constraints, segment_spring_parameters, spring_segments, spring_stiffness
-from ..mechanics.equilibrium import gauge_coordinates, in_gauge_frame, solve_internal
+from ..mechanics.align import Alignment
+from ..mechanics.equilibrium import gauge_coordinates, held_coordinates, in_gauge_frame, in_held_frame, solve_internal
 from ..mechanics.loadsteps import STEP_ITER_CAP, check_mesh_material, upright
 from ..mechanics.constrained import ConstrainedModel
 from ..mechanics.kkt import least_squares_multipliers
@@ -27,12 +28,19 @@ from ..mechanics.residual import kkt_residual, meet_tolerance
 # ---------------------------------------------------------------------------------------------- the problem
 class DesignProblem:
     """Everything the three methods share: model, affine parameters ``p(a) = p0 + B a``, the muscle
-    constraints (rope lengths for the cable, rigid end patches for both models), gauge, weights, scales."""
+    constraints (rope lengths for the cable, rigid end patches for both models), gauge, weights, scales.
+
+    ``held`` (checked node indices, :func:`~mdsr_opt.mechanics.equilibrium.check_held`, or None): the body is
+    clamped at these nodes, at rest, as a robot mounted on its base; its pose is then no longer free, so the
+    target is moved rigidly onto the held nodes' rest positions once (:func:`in_held_frame`; the identity for a
+    target solved with those nodes anchored) and states are compared with it where they are, without a rigid
+    alignment (:meth:`objective`): a design whose tip is off by a turn about the mount is off."""
 
     def __init__(self, mesh, material, muscles, target, weights, muscle_model, stiffness, a_max,
-                 anchor_radius=None, fixture_wall=None):
+                 anchor_radius=None, fixture_wall=None, held=None):
         self.mesh, self.material, self.muscles = mesh, material, muscles
-        self.y = target
+        self.held = None if held is None else np.asarray(held, dtype=np.int64)
+        self.y = target if held is None else in_held_frame(mesh, target, self.held)
         self.w = weights
         self.muscle_model = muscle_model
         self.stiffness = stiffness
@@ -44,7 +52,7 @@ class DesignProblem:
         # per-segment springs of the "springs" model, zero for the cable)
         self.model = get_model(mesh, material)
         self.anchor_radius = anchor_radius_or_default(mesh, anchor_radius)  # checked by the callers, at their doors
-        self.constraints = muscle_constraints(mesh, muscles, self.anchor_radius)
+        self.constraints = muscle_constraints(mesh, muscles, self.anchor_radius, self.held)
         self.build_time = time.perf_counter() - t0
         self.L0 = np.asarray(self.constraints.rest_lengths, dtype=float)
 
@@ -57,9 +65,9 @@ class DesignProblem:
         self.p0 = params(np.zeros(self.m))
         # p is affine in a (springs: r_e = 1 - stiffness-weighted mean contraction; the cable: constant)
         self.B = np.column_stack([params(np.eye(self.m)[c]) - self.p0 for c in range(self.m)])
-        self.fixed = np.zeros(2 * n, dtype=bool)
-        self.gauge = list(gauge_coordinates(mesh))
-        self.fixed[self.gauge] = True
+        self.fixed = held_coordinates(mesh, self.held, muscles, self.anchor_radius)
+        # the fixed coordinates: the three gauge coordinates (in their order), or the held nodes'
+        self.gauge = list(gauge_coordinates(mesh)) if held is None else list(np.flatnonzero(self.fixed))
         self.free = ~self.fixed
         #: the wall between a rope's two end fixtures the design keeps (None: not kept), see
         #: :func:`fixture_caps`
@@ -96,11 +104,27 @@ class DesignProblem:
 
     def objective(self, x2):
         """Scaled objective ``D / (sum e h^2)`` of a state (n, 2), its alignment, and ``dJ/dx`` (2n,)."""
-        al = align(x2, self.y, self.w)
+        al = self.alignment(x2)
         r = x2 @ al.R.T + al.t - self.y
         J = float((self.w * (r ** 2).sum(1)).sum()) / (self.W * self.h ** 2)
         dJ = (2.0 / (self.W * self.h ** 2)) * (self.w[:, None] * (r @ al.R))  # envelope theorem: R, t optimal
         return J, al, dJ.reshape(-1)
+
+    def alignment(self, x2) -> Alignment:
+        """The best rigid alignment of a state (n, 2) onto the target (weighted), or with ``held`` nodes the
+        identity with the weighted RMS distance where the state is (the held nodes fix the pose)."""
+        if self.held is None:
+            return align(x2, self.y, self.w)
+        r = np.asarray(x2, dtype=float) - self.y
+        return Alignment(np.eye(2), np.zeros(2), float(np.sqrt((self.w * (r ** 2).sum(1)).sum() / self.W)))
+
+    def in_frame(self, x2) -> np.ndarray | None:
+        """A state (n, 2) in any pose moved rigidly into the forward solver's frame: the gauge frame of a
+        free body (:func:`in_gauge_frame`; None when no rotation does it), or onto the held nodes' rest
+        positions (:func:`in_held_frame`)."""
+        if self.held is None:
+            return in_gauge_frame(self.mesh, x2)
+        return in_held_frame(self.mesh, x2, self.held)
 
     def dg_da(self, xflat) -> np.ndarray:
         """``dg/da`` (2n, m): exact columns since the gradient is affine in ``p`` and ``p`` is affine in ``a``."""
@@ -154,7 +178,7 @@ class DesignProblem:
         (:func:`~mdsr_opt.mechanics.residual.meet_tolerance`): the design NLP meets its equilibrium rows to
         its own tolerance and scaling, the verification asks the forward solver's measure."""
         xflat = np.asarray(xflat, dtype=float).reshape(-1)
-        moved = in_gauge_frame(self.mesh, xflat.reshape(-1, 2))
+        moved = self.in_frame(xflat.reshape(-1, 2))
         if moved is None:
             return xflat
         model, p = self._contract(a)
@@ -169,7 +193,7 @@ class DesignProblem:
         in the solver's gauge frame (:func:`~mdsr_opt.mechanics.equilibrium.in_gauge_frame`: a state aligned
         to rest is checked where the solver had it)."""
         xflat = np.asarray(xflat, dtype=float).reshape(-1)
-        moved = in_gauge_frame(self.mesh, xflat.reshape(-1, 2))
+        moved = self.in_frame(xflat.reshape(-1, 2))
         if moved is not None:
             xflat = moved.reshape(-1)
         model, p = self._contract(a)
@@ -477,7 +501,7 @@ class ForwardSolver:
         res = solve_internal(prob.mesh, prob.material, prob.muscles, np.clip(a, 0.0, 0.999),
                              muscle_model=prob.muscle_model, stiffness=prob.stiffness, anchor_radius=prob.anchor_radius,
                              tol=self.tol if tol is None else tol, max_iter=max_iter, align_to_rest=False, initial_guess=guess,
-                             min_step=min_step, check_stability=check_stability, **self.contact)
+                             min_step=min_step, check_stability=check_stability, held=prob.held, **self.contact)
         if self.n_solves == 0:
             self.build_time += res.build_time
         self.n_solves += 1
@@ -501,7 +525,7 @@ class ForwardSolver:
         res = None
         if self.started_from is None:
             self.started_from = "rest"
-            guess = None if start is None else in_gauge_frame(self.prob.mesh, np.asarray(start, dtype=float))
+            guess = None if start is None else self.prob.in_frame(np.asarray(start, dtype=float))
             if guess is not None:
                 cap = min(self.max_iter, STEP_ITER_CAP)
                 with projected_energy_hessian():  # far from equilibrium: Newton-like steps to near it

@@ -148,6 +148,10 @@ class DesignResult:
     fixture_wall : float or None
         The wall (a length) the design kept between a rope's two end fixtures (``design_contractions``'
         ``fixture_wall``); None for a design that does not record it.
+    held : tuple of int or None
+        The nodes clamped at rest in the design's forward solves (``design_contractions(held=...)``; the
+        pipeline's anchors with obstacles), whose frame ``x`` is in; None for the free body.
+        :func:`~mdsr_opt.synthesis.verify.verify_design` clamps them again unless told otherwise.
     rest_lengths : (m,) ndarray
         Each muscle's rest length ``L0`` along its node chain.
     achieved : (m,) ndarray
@@ -217,6 +221,7 @@ class DesignResult:
     units: str | None = None
     stress_unit: str | None = None
     fixture_wall: float | None = None
+    held: tuple | None = None
 
     @property
     def contact(self) -> dict | None:
@@ -372,6 +377,8 @@ class DesignResult:
             d["verification"] = Verification(**v)
         d["history"] = [tuple(h) for h in d.get("history", [])]
         d["muscle_names"] = tuple(d.get("muscle_names", ()))
+        if d.get("held") is not None:
+            d["held"] = tuple(int(i) for i in d["held"])
         return cls(**d)
 
     def save(self, path: str | os.PathLike) -> str:
@@ -396,7 +403,8 @@ class DesignResult:
         """
         return load_fields(cls, path, "design",
                            convert={"verification": lambda v: Verification(**v),
-                                    "history": lambda h: [tuple(p) for p in h], "muscle_names": tuple})
+                                    "history": lambda h: [tuple(p) for p in h], "muscle_names": tuple,
+                                    "held": lambda h: tuple(int(i) for i in h)})
 
 
 def finite_or_none(o):

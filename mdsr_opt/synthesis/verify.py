@@ -13,7 +13,7 @@ from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_float
 from ..mechanics.align import align, node_weights
 from ..mechanics.anchors import check_anchor_radius
-from ..mechanics.equilibrium import external_stability, in_gauge_frame, solve_internal
+from ..mechanics.equilibrium import check_held, external_stability, solve_internal
 from ..mechanics.loadsteps import check_mesh_material, upright
 from ..mechanics.stability import check_stability
 from ..mechanics.units import Units
@@ -33,7 +33,7 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
                   muscle_model: str = "cable", stiffness: float = 10.0,
                   anchor_radius: float | None = None, lowest: bool = True,
                   tol: float = 1e-8, contact: bool = False, obstacles=None,
-                  contact_gap: float | None = None) -> tuple[bool, float, float]:
+                  contact_gap: float | None = None, held=None) -> tuple[bool, float, float]:
     """Is ``x`` a strict minimum of the internal-driving energy (rigid gauge pinned)?
 
     With muscle constraints (the exact cable's taut ropes, the rigid anchor patches) the test is on the
@@ -55,7 +55,8 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     With contact (``contact=True`` and/or ``obstacles``, as in :func:`~mdsr_opt.solve_internal`) the test is
     on the tangent space of the active ropes, anchor patches and pushing contacts: a contact solve started at
     ``x`` must stay there and be stable (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); the
-    eigenvalue is then NaN.
+    eigenvalue is then NaN. ``held``: nodes clamped at rest (:func:`~mdsr_opt.solve_internal`), pinned
+    instead of the gauge.
 
     Example
     -------
@@ -78,15 +79,16 @@ def check_minimum(mesh: Mesh, material, muscles: Sequence[Muscle], contractions:
     tol = positive_float(tol, "tol")
     radius = check_anchor_radius(mesh, anchor_radius)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
+    hold = check_held(mesh, held, mus)
     if ckw:
         ok, residual, _ = contact_minimum(mesh, material, mus, a, mesh._check_state(x), ckw,
                                           muscle_model=muscle_model, stiffness=stiffness, anchor_radius=radius,
-                                          tol=tol)
+                                          tol=tol, held=hold)
         return ok, float("nan"), residual
     units = Units(mesh, material)  # checked on the unit body (size and E t about 1)
     x = units.state_in(mesh._check_state(x))
     prob = DesignProblem(units.unit_mesh, units.unit_material, mus, x, np.ones(mesh.n_nodes), muscle_model,
-                         stiffness, 0.99, anchor_radius=units.to_unit(radius))
+                         stiffness, 0.99, anchor_radius=units.to_unit(radius), held=hold)
     return _stability(prob, a, x.reshape(-1), tol, lowest=bool(lowest))
 
 
@@ -105,7 +107,8 @@ def _stability(prob: DesignProblem, a, xflat, tol: float, lowest: bool = True) -
 def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: DesignResult, target: ArrayLike, *,
                   weights: ArrayLike | None = None, gap_rtol: float = 1e-5, anchors=None,
                   drags=None, lowest: bool = False, start: str = "rest", tol: float = 1e-10,
-                  contact: bool = False, obstacles=None, contact_gap: float | None = None) -> Verification:
+                  contact: bool = False, obstacles=None, contact_gap: float | None = None,
+                  held=None) -> Verification:
     """Check a design independently of how it was found.
 
     Solves the forward internal-driving problem at ``result.contractions`` (:func:`~mdsr_opt.solve_internal`:
@@ -147,6 +150,12 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     (:func:`~mdsr_opt.synthesis.contactdesign.contact_minimum`); ``min_eigenvalue`` is then NaN. ``contact`` of
     the result reports the forward state's contacts (pairs, normal forces, forces on nodes and obstacles).
 
+    With ``held`` nodes (clamped at rest, as in :func:`~mdsr_opt.solve_internal`; default: the design's own,
+    ``result.held``, recorded by :func:`~mdsr_opt.synthesis.contractions.design_contractions`) the
+    forward solves hold them too, and gaps and the forward difference are measured where the states are,
+    without rigid alignment (the held nodes fix the pose; the target is first moved rigidly onto their rest
+    positions, the identity for a target solved with them anchored).
+
     Example
     -------
     >>> from mdsr_opt import Mesh, Muscle, NeoHookean, design_contractions, solve_internal
@@ -176,6 +185,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     radius = None if radius is None or not np.isfinite(radius) else float(radius)
     radius = check_anchor_radius(mesh, radius)
     ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, "derivative-free")
+    hold = check_held(mesh, getattr(result, "held", None) if held is None else held, mus)
     target_check = None
     if anchors is not None or drags is not None:  # checked first: cheap, and bad anchors/drags fail before any solve
         target_check, target_residual = external_stability(mesh, material, anchors, drags, y)
@@ -185,14 +195,14 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     L, size = units.length, mesh.size
     mesh, material, x = units.unit_mesh, units.unit_material, units.state_in(x)
     prob = DesignProblem(mesh, material, mus, units.state_in(y), w, result.muscle_model, result.stiffness, 0.99,
-                         anchor_radius=units.to_unit(radius))
+                         anchor_radius=units.to_unit(radius), held=hold)
     if ckw:  # in the caller's units (solve_internal scales itself), the obstacles where the caller put them
-        return _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check,
-                               target_residual if target_check is not None else None, t0)
+        return _verify_contact(units, mus, a, result, x, prob.y, w, radius, start, tol, gap_tol, ckw,
+                               target_check, target_residual if target_check is not None else None, t0, hold)
     fopts = {"muscle_model": result.muscle_model, "stiffness": result.stiffness,
-             "anchor_radius": prob.anchor_radius, "tol": tol}
+             "anchor_radius": prob.anchor_radius, "tol": tol, "held": hold}
     a_fwd = np.clip(a, 0.0, 0.999)
-    guess = in_gauge_frame(mesh, x) if start == "design" else None  # None: an inverted state, from rest
+    guess = prob.in_frame(x) if start == "design" else None  # None: an inverted state, from rest
     if guess is not None:
         fwd = solve_internal(mesh, material, mus, a_fwd, initial_guess=guess, **fopts)
         f_iters, f_start = int(fwd.iterations), "design"
@@ -204,9 +214,9 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
             fwd = solve_internal(mesh, material, mus, a_fwd, initial_guess="predictor", **fopts)
             f_iters, f_start = f_iters + int(fwd.iterations), "rest, predictor"
     fx = fwd.x
-    al = align(x, fx)
-    gap = float(np.linalg.norm(al.apply(x) - fx, axis=1).max()) * L
-    fdiff = align(fx, prob.y, w).difference * L
+    moved = align(x, fx).apply(x) - fx if hold is None else x - fx  # held: both where the mount holds them
+    gap = float(np.linalg.norm(moved, axis=1).max()) * L
+    fdiff = prob.alignment(fx).difference * L
     # the design's own state, expressed in the gauge frame used by the model
     xg = x.reshape(-1)
     inverted = not upright(mesh, x)
@@ -263,19 +273,23 @@ def _target_messages(target_check, target_residual) -> list[str]:
 
 
 def _verify_contact(units, mus, a, result, x, y, w, radius, start, tol, gap_tol, ckw, target_check, target_residual,
-                    t0) -> Verification:
+                    t0, hold=None) -> Verification:
     """:func:`verify_design` with contact, on the caller's body (``units.mesh``; ``x`` the design's state on
     the unit body)."""
     mesh, material, L = units.mesh, units.material, units.length
     xc = x * L
-    opts = dict(muscle_model=result.muscle_model, stiffness=result.stiffness, anchor_radius=radius, tol=tol)
+    opts = dict(muscle_model=result.muscle_model, stiffness=result.stiffness, anchor_radius=radius, tol=tol,
+                held=hold)
     guess = "predictor" if start == "rest" else xc
     fwd = solve_internal(mesh, material, mus, np.clip(a, 0.0, 0.999), initial_guess=guess, align_to_rest=False,
                          **opts, **ckw)
     fx = np.asarray(fwd.x, dtype=float)
-    moved = fx - xc if ckw.get("obstacles") else align(xc, fx).apply(xc) - fx
+    fixed_frame = bool(ckw.get("obstacles")) or hold is not None
+    moved = fx - xc if fixed_frame else align(xc, fx).apply(xc) - fx
     gap = float(np.linalg.norm(moved, axis=1).max())
-    fdiff = align(fx, y * L, w).difference
+    r = fx - y * L
+    fdiff = float(np.sqrt((w * (r ** 2).sum(1)).sum() / w.sum())) if hold is not None else \
+        align(fx, y * L, w).difference
     inverted = not upright(units.unit_mesh, x)
     msgs = []
     if inverted:
