@@ -4,7 +4,8 @@
 fabrication's clearance, deeper inside, with ``K_a = 1``, and on every contracted edge snapped into the band).
 Much of that is the same work: the body's mirror symmetry, the compression-dominated edges, and the search
 inside the band at an inset an earlier routing already searched (the band routing pools exactly that search
-with its snapped ropes). Inside :func:`shared_work`, :func:`memoised` computes each such piece once and
+with its snapped ropes), and the searches' shortest-path lengths from unit ends (:class:`FieldStore`). Inside
+:func:`shared_work`, :func:`memoised` computes each such piece once and
 returns the same object afterwards; outside it, it simply computes. The results are the same either way: the
 keys name every input the piece depends on, the mesh (by identity, alive for the whole scope) and the target
 included.
@@ -20,7 +21,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["memoised", "rest_graph", "rest_lists", "shared_work"]
+__all__ = ["FieldStore", "SHARED_FIELD_FLOATS", "memoised", "rest_graph", "rest_lists", "shared_work"]
 
 T = TypeVar("T")
 
@@ -76,3 +77,38 @@ def rest_graph(mesh):
         return graph, connected_components(graph, directed=False)[1]
 
     return memoised(("rest graph", id(mesh)), make)
+
+
+#: the most shortest-path lengths (floats) the routings of one body keep for each other inside
+#: :func:`shared_work`, besides each routing's own (:class:`FieldStore`)
+SHARED_FIELD_FLOATS = 1 << 23
+
+
+class FieldStore(dict):
+    """One routing's shortest-path lengths per source node (``node -> (lengths, radius searched)``, the
+    rest graph's: :func:`rest_graph`), shared with the other routings of the same body inside
+    :func:`shared_work`: a node the routing has not searched from is looked up among theirs (the lengths
+    depend on the mesh alone, and an entry is exact within its radius whoever searched), and what it searches
+    is kept there too, up to :data:`SHARED_FIELD_FLOATS` (the oldest dropped first). The routing's own
+    entries are the dict's: it drops them as it did alone."""
+
+    def __init__(self, mesh):
+        super().__init__()
+        memo = _MEMO.get()
+        self.shared = None if memo is None else memo.setdefault(("path fields", id(mesh)), {})
+
+    def get(self, node, default=None):
+        if node in self:
+            return self[node]
+        return default if self.shared is None else self.shared.get(node, default)
+
+    def __setitem__(self, node, value) -> None:
+        super().__setitem__(node, value)
+        sh = self.shared
+        if sh is None:
+            return
+        sh.pop(node, None)
+        sh[node] = value
+        total = sum(len(f) for f, _ in sh.values())
+        while total > SHARED_FIELD_FLOATS and len(sh) > 1:
+            total -= len(sh.pop(next(iter(sh)))[0])

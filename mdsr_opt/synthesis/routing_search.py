@@ -18,7 +18,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
-from .routing_memo import rest_graph, rest_lists
+from .routing_memo import FieldStore, rest_graph, rest_lists
 from .routing_spacing import apart_from_stronger
 
 __all__ = ["Router", "mismatch", "turn_cost"]
@@ -92,7 +92,7 @@ class Router:
         # the whole mesh with rest edge lengths, for the heuristic's shortest paths (built on first use)
         self.csgraph = None
         self.component = None
-        self.fields: dict[int, tuple[np.ndarray, float]] = {}  # per end node: lengths, radius searched
+        self.fields = FieldStore(mesh)  # per end node: lengths, radius searched (shared: routing_memo)
 
     # -------------------------------------------------------------- helpers
     def _dir(self, a: int, b: int) -> tuple[float, float]:
