@@ -95,20 +95,22 @@ class FieldStore(dict):
     def __init__(self, mesh):
         super().__init__()
         memo = _MEMO.get()
-        self.shared = None if memo is None else memo.setdefault(("path fields", id(mesh)), {})
+        # the shared entries and the floats they hold
+        self.shared = None if memo is None else memo.setdefault(("path fields", id(mesh)), [{}, 0])
 
     def get(self, node, default=None):
         if node in self:
             return self[node]
-        return default if self.shared is None else self.shared.get(node, default)
+        return default if self.shared is None else self.shared[0].get(node, default)
 
     def __setitem__(self, node, value) -> None:
         super().__setitem__(node, value)
-        sh = self.shared
-        if sh is None:
+        if self.shared is None:
             return
-        sh.pop(node, None)
+        sh, total = self.shared
+        old = sh.pop(node, None)
         sh[node] = value
-        total = sum(len(f) for f, _ in sh.values())
+        total += len(value[0]) - (0 if old is None else len(old[0]))
         while total > SHARED_FIELD_FLOATS and len(sh) > 1:
             total -= len(sh.pop(next(iter(sh)))[0])
+        self.shared[1] = total
