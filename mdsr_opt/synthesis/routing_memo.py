@@ -21,7 +21,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-__all__ = ["FieldStore", "SHARED_FIELD_FLOATS", "memoised", "rest_graph", "rest_lists", "shared_work"]
+__all__ = ["FieldStore", "NodeAdjacency", "PointList", "SHARED_FIELD_FLOATS", "memoised", "node_adjacency",
+           "rest_graph", "rest_lists", "shared_work"]
 
 T = TypeVar("T")
 
@@ -58,11 +59,29 @@ def memoised(key: Hashable, make: Callable[[], T]) -> T:
     return memo[key]
 
 
-def rest_lists(mesh) -> tuple[list, list]:
-    """The rest positions and the edge midpoints of ``mesh`` as nested lists (for Python loops), memoised."""
+class PointList:
+    """Points of an ``(n, 2)`` array for Python loops: ``points[i]`` is the pair ``(x_i, y_i)`` of floats, made
+    on access from two flat lists (a list per point made up front was 10^4-10^5 containers per routing on a
+    fine mesh, whose allocations set off full passes of the cyclic garbage collector)."""
+
+    __slots__ = ("x", "y")
+
+    def __init__(self, A: np.ndarray):
+        self.x, self.y = A[:, 0].tolist(), A[:, 1].tolist()
+
+    def __getitem__(self, i: int) -> tuple[float, float]:
+        return (self.x[i], self.y[i])
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+
+def rest_lists(mesh) -> tuple[PointList, PointList]:
+    """The rest positions and the edge midpoints of ``mesh`` as :class:`PointList`\ s (for Python loops),
+    memoised."""
     def make():
         X, E = mesh.points, mesh.edges
-        return X.tolist(), (0.5 * (X[E[:, 0]] + X[E[:, 1]])).tolist()
+        return PointList(X), PointList(0.5 * (X[E[:, 0]] + X[E[:, 1]]))
 
     return memoised(("rest lists", id(mesh)), make)
 
@@ -114,3 +133,32 @@ class FieldStore(dict):
         while total > SHARED_FIELD_FLOATS and len(sh) > 1:
             total -= len(sh.pop(next(iter(sh)))[0])
         self.shared[1] = total
+
+
+class NodeAdjacency:
+    """Each node's ``(neighbour, edge)`` pairs over the edges ``keep`` (a mask over ``E``, the mesh's edges),
+    in increasing edge order: ``adjacency[node]`` is a list made on first access and kept. A search reads
+    the nodes its units reach, a small part of a fine mesh; a list per node made up front was some 10^5
+    containers per routing, whose allocations set off full passes of the cyclic garbage collector."""
+
+    def __init__(self, E: np.ndarray, keep: np.ndarray, n_nodes: int):
+        k = np.flatnonzero(keep)
+        ends = np.concatenate([E[k, 0], E[k, 1]])
+        order = np.lexsort((np.concatenate([k, k]), ends))
+        self._nbr = np.concatenate([E[k, 1], E[k, 0]])[order].tolist()
+        self._edge = np.concatenate([k, k])[order].tolist()
+        self._cut = np.searchsorted(ends[order], np.arange(n_nodes + 1)).tolist()
+        self._made: dict[int, list] = {}
+
+    def __getitem__(self, node: int) -> list:
+        pairs = self._made.get(node)
+        if pairs is None:
+            s, e = self._cut[node], self._cut[node + 1]
+            pairs = self._made[node] = list(zip(self._nbr[s:e], self._edge[s:e]))
+        return pairs
+
+
+def node_adjacency(mesh, keep: np.ndarray) -> NodeAdjacency:
+    """:class:`NodeAdjacency` of ``mesh`` over the edges ``keep``, memoised (routings on the same edges share it)."""
+    return memoised(("adjacency", id(mesh), np.asarray(keep, dtype=bool).tobytes()),
+                    lambda: NodeAdjacency(mesh.edges, keep, mesh.n_nodes))
