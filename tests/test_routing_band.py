@@ -166,3 +166,35 @@ def test_route_for_design_runs_each_search_once_with_the_same_result(monkeypatch
     assert shared.notes == alone.notes and shared.fixture_radius == alone.fixture_radius
     assert "snapped into the band" in shared.notes[0]  # the band routing ran and was kept
     assert n_shared < len(calls)  # the band routing's in-band search (and any with the same edges) run once
+
+
+def test_routings_share_their_shortest_path_lengths_with_the_same_result(monkeypatch):
+    """The routings of route_for_design look up each other's Dijkstra searches (routing_memo.FieldStore):
+    fewer searches, the same ropes and notes as the routings run alone; with a budget of one search's lengths
+    the store keeps one entry and the ropes are still the same."""
+    import mdsr_opt.synthesis.routing as routing
+    import mdsr_opt.synthesis.routing_memo as memo
+    import mdsr_opt.synthesis.routing_search as search
+
+    bench = load_script("tests/benchmarks/bench_fine_design.py")
+    mesh = bench.strip(16)
+    x = solve_external(mesh, bench.MAT, *bench.driving(mesh), backend="newton").x
+    calls = []
+    dijkstra = search.dijkstra
+    monkeypatch.setattr(search, "dijkstra", lambda *a, **kw: calls.append(1) or dijkstra(*a, **kw))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone, _ = routing._routed_for_design(mesh, x, {})  # no shared_work: each Router searches alone
+        n_alone = len(calls)
+        calls.clear()
+        shared = routing.route_for_design(mesh, x)
+        n_shared = len(calls)
+        monkeypatch.setattr(memo, "SHARED_FIELD_FLOATS", mesh.n_nodes)
+        with memo.shared_work() as kept:
+            small, _ = routing._routed_for_design(mesh, x, {})
+    paths = [m.nodes for m in alone.muscles]
+    assert [m.nodes for m in shared.muscles] == paths and [m.nodes for m in small.muscles] == paths
+    assert shared.notes == alone.notes == small.notes and len(paths) >= 2
+    assert 0 < n_shared < n_alone
+    entries, total = kept[("path fields", id(mesh))]
+    assert len(entries) == 1 and total == mesh.n_nodes

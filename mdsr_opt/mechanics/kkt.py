@@ -122,11 +122,13 @@ def least_squares_multipliers(J, g, rtol: float = 1e-10):
     equations ``J J' lam = -J g``).
 
     Solved as the augmented system ``[[I, J'], [J, 0]] [r; lam] = [-g; 0]`` on the columns ``J`` involves,
-    factorised with diagonal pivots in an order that eliminates each row right after a column only that
-    row involves (a node of an anchor patch: the row's pivot is then ``-J_kc^2``), the other columns
-    next and the rows without such a column last. The normal equations couple every row of a patch through
-    its two reference nodes (a dense block per patch); this order keeps that coupling to the reference
-    nodes' few columns.
+    factorised with diagonal pivots in an order that eliminates first every column only one row involves
+    (a node of an anchor patch, a rope node outside the patches: pivot 1, no fill but that row's diagonal,
+    which becomes ``-sum J_kc^2``), then the rows that had such a column, the other columns next and the
+    rows without such a column last. The normal equations couple every row of a patch through its two
+    reference nodes (a dense block per patch); this order keeps that coupling to the reference nodes' few
+    columns. (Eliminating a rope's row right after one of its own columns, before the others, coupled all
+    of its nodes' columns: a dense block of the rope's length squared.)
     """
     J = sp.csr_matrix(J, copy=True)
     J.eliminate_zeros()
@@ -140,13 +142,12 @@ def least_squares_multipliers(J, g, rtol: float = 1e-10):
     rows = np.repeat(np.arange(m), np.diff(Jc.indptr))
     big = np.abs(Jc.data) >= 1e-3 * np.maximum.reduceat(np.abs(Jc.data), Jc.indptr[:-1])[rows]
     solo = (np.bincount(Jc.indices, minlength=nc)[Jc.indices] == 1) & big  # alone in their column, no tiny pivot
-    own = np.full(m, -1, dtype=np.int64)
-    own[rows[solo]] = Jc.indices[solo]
-    paired = own >= 0
-    rest = np.ones(nc, dtype=bool)
-    rest[own[paired]] = False
-    order = np.concatenate([np.stack([own[paired], nc + np.flatnonzero(paired)], axis=1).ravel(),
-                            np.flatnonzero(rest), nc + np.flatnonzero(~paired)])
+    first = np.zeros(nc, dtype=bool)  # the columns eliminated first: one row each
+    first[Jc.indices[solo]] = True
+    paired = np.zeros(m, dtype=bool)  # the rows with such a column: a nonzero pivot once those are eliminated
+    paired[rows[solo]] = True
+    order = np.concatenate([np.flatnonzero(first), nc + np.flatnonzero(paired), np.flatnonzero(~first),
+                            nc + np.flatnonzero(~paired)])
     K = sp.bmat([[sp.identity(nc, format="csr"), Jc.T], [Jc, None]], format="csc")
     rhs = np.concatenate([-g[cols], np.zeros(m)])
     try:

@@ -448,6 +448,10 @@ def check_channel_fits(mesh, fabrication, *, routed: bool = True, where: str = "
         return
     f = fab.for_body(mesh)
     need = 0.5 * f.channel_diameter + f.wall
+    # a node that deep: the largest inscribed circle is no smaller (the routing reads these distances anyway,
+    # and the circle itself is then not needed)
+    if need <= float(boundary_distance(mesh).max()):
+        return
     R = body_depth(mesh)
     if need <= R * (1.0 + 1e-9):
         return

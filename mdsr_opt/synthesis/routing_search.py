@@ -18,7 +18,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
-from .routing_memo import rest_graph, rest_lists
+from .routing_memo import FieldStore, node_adjacency, rest_graph, rest_lists
 from .routing_spacing import apart_from_stronger
 
 __all__ = ["Router", "mismatch", "turn_cost"]
@@ -71,28 +71,21 @@ class Router:
         self.ring_uids: set[int] = set()  # the ring ropes round holes (seed_units)
         # a cable cannot push; ``admissible``: the edges far enough inside the body for a channel
         self.feasible = self.wq > floor_q if admissible is None else (self.wq > floor_q) & admissible
-        E = mesh.edges
         self.l0 = mesh.edge_lengths
         self.ell = ell
         self.mp = None if mirror is None else mirror.node_map.tolist()
         self.me = None if mirror is None else mirror.edge_map.tolist()
         # adjacency over feasible (contracted) edges only: a cable cannot push; each node's (neighbour, edge)
-        # pairs in increasing edge order
-        feasible = np.flatnonzero(self.feasible)
-        ends = np.concatenate([E[feasible, 0], E[feasible, 1]])
-        order = np.lexsort((np.concatenate([feasible, feasible]), ends))
-        pairs = list(zip(np.concatenate([E[feasible, 1], E[feasible, 0]])[order].tolist(),
-                         np.concatenate([feasible, feasible])[order].tolist()))
-        cut = np.searchsorted(ends[order], np.arange(mesh.n_nodes + 1)).tolist()
-        adj: list[list[tuple[int, int]]] = [pairs[s:e] for s, e in zip(cut[:-1], cut[1:])]
-        self.adj = adj
+        # pairs in increasing edge order, made for the nodes the search reaches (routing_memo)
+        self.adj = node_adjacency(mesh, self.feasible)
+        self.edges_at = node_adjacency(mesh, np.ones(len(self.l0), dtype=bool))  # every edge: edge_id
         self.owner = [-1] * mesh.n_nodes
         self.units: list[_Unit] = []
         self.mirror_uid: list[int] = []
         # the whole mesh with rest edge lengths, for the heuristic's shortest paths (built on first use)
         self.csgraph = None
         self.component = None
-        self.fields: dict[int, tuple[np.ndarray, float]] = {}  # per end node: lengths, radius searched
+        self.fields = FieldStore(mesh)  # per end node: lengths, radius searched (shared: routing_memo)
 
     # -------------------------------------------------------------- helpers
     def _dir(self, a: int, b: int) -> tuple[float, float]:
@@ -104,10 +97,14 @@ class Router:
         return turn_cost(self._dir(a, b), self._dir(b, c)) <= self.turn_limit
 
     def _edge_key(self, k: int) -> tuple[float, float]:
-        return (self.midl[k][0], self.midl[k][1])
+        return self.midl[k]  # (x, y)
 
     def edge_id(self, a: int, b: int) -> int:
-        return self.mesh.edge_index[(a, b) if a < b else (b, a)]
+        """The row of ``mesh.edges`` joining nodes ``a`` and ``b`` (KeyError if none)."""
+        for u, k in self.edges_at[a]:
+            if u == b:
+                return k
+        raise KeyError((a, b))
 
     # -------------------------------------------------------------- seeds and first units
     def regions(self, threshold_q: int, eligible: np.ndarray, spacing: float = 0.0) -> list[list[int]]:
@@ -135,7 +132,7 @@ class Router:
         link = np.flatnonzero(self.feasible & marked[E[:, 0]] & marked[E[:, 1]])
         A = csr_matrix((np.ones(len(link)), (E[link, 0], E[link, 1])), shape=(n, n))
         _, lab = connected_components(A, directed=False)
-        mid = np.asarray(self.midl)[idx]
+        mid = 0.5 * (self.X[E[idx, 0]] + self.X[E[idx, 1]])  # the midpoints of rest_lists, as an array
         order = np.lexsort((mid[:, 1], mid[:, 0], -self.wq[idx]))
         out: dict[int, list[int]] = {}
         for j in order.tolist():
