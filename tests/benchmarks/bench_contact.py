@@ -13,7 +13,10 @@ contact), and the library gripper's jaws closing with inner-rim muscles at 30 %.
 ``--turn 40,80,160`` instead solves the 90-degree turn of issue 35 once per mesh (the 4 x 1 strip, nx x nx/4
 cells, left end clamped, right end turned by -90 degrees about its centre and moved by (-2, 2), with
 self-contact) and prints per mesh: nodes, time, load steps, whether the outline crosses itself (shapely),
-stability, the start (rest x) of the inner side's touching stretch and the total contact force.
+stability, the start (rest x) of the inner side's touching stretch, the total contact force, the energy and
+the force the clamp exerts on the body; then per touching region (a stretch of the boundary,
+:func:`contact_regions`) its pairs and their summed force, beside half the summed magnitudes of the contact
+forces on its nodes (equal for a flat fold: a pair pushing each way is not counted twice).
 
     python tests/benchmarks/bench_contact.py --turn 40,80,160
 
@@ -101,13 +104,55 @@ def turn(nx: int, seed=None):
     return mesh, res, time.perf_counter() - t0
 
 
+def contact_regions(mesh, res) -> list[dict]:
+    """The result's touching regions: its pushing pairs grouped by stretches of the boundary (the nodes of
+    each pair, ``p, a, b``, by their places along the loop; places at most two boundary edges apart join).
+    Per region: ``nodes`` (in it, sorted along the loop), ``pairs``, ``force`` (the sum of the pairs' normal
+    forces) and ``half_abs`` (half the sum of the magnitudes of the contact forces on its nodes). Where every
+    pair's normal is that of the region's interface (a flat fold), ``half_abs`` equals ``force`` whichever way
+    the pairs point (node of one face against segment of the other, or back): the force is not counted twice
+    where both faces' nodes push."""
+    loop = np.asarray(mesh.boundary_loops[0])
+    place = np.full(mesh.n_nodes, -1)
+    place[loop] = np.arange(len(loop))
+    pairs = [pr for pr in res.contact["pairs"] if all(q >= 0 and place[q] >= 0 for q in pr["nodes"])]
+    used = np.unique([place[q] for pr in pairs for q in pr["nodes"]]).astype(int)
+    if not len(used):
+        return []
+    gaps = np.diff(np.r_[used, used[0] + len(loop)])
+    cut = np.flatnonzero(gaps > 2)  # a run ends after these
+    runs = []
+    starts = np.roll(cut + 1, 1) % len(used) if len(cut) else np.array([0])
+    for s0, e0 in zip(starts, cut if len(cut) else np.array([len(used) - 1])):
+        idx = used[s0:e0 + 1] if s0 <= e0 else np.r_[used[s0:], used[:e0 + 1]]
+        runs.append(loop[idx])
+    f = np.asarray(res.contact["node_forces"])
+    out = []
+    for nodes in runs:
+        mine = set(nodes.tolist())
+        prs = [pr for pr in pairs if pr["nodes"][0] in mine]
+        out.append({"nodes": nodes, "pairs": len(prs), "force": float(sum(pr["force"] for pr in prs)),
+                    "half_abs": 0.5 * float(np.linalg.norm(f[nodes], axis=1).sum())})
+    return out
+
+
+def clamp_reaction(mesh, x, anchors) -> np.ndarray:
+    """The force the anchors exert on the body (2,): minus the energy gradient summed over them (the contact
+    forces, internal to the body, add nothing to it)."""
+    from mdsr_opt.mechanics.model import get_model
+
+    model = get_model(mesh, MAT)
+    g = model.gradient(np.asarray(x, dtype=float).reshape(-1), model.params(MAT)).reshape(-1, 2)
+    return -g[np.asarray(anchors)].sum(0)
+
+
 def turn_study(sizes, seed: bool = False) -> None:
     """Print the turn's contact region per mesh (module docstring); ``seed``: each mesh after the first
     started from the one before."""
     from shapely.geometry import Polygon
 
     print(f"{'cells':>8s} {'nodes':>6s} {'time s':>8s} {'steps':>5s} {'ok':>3s} {'valid':>5s} {'stable':>6s} "
-          f"{'start x':>7s} {'force':>8s} {'energy':>8s}  status")
+          f"{'start x':>7s} {'force':>8s} {'energy':>8s} {'clamp Rx':>8s} {'clamp Ry':>8s}  status")
     last = None
     for nx in sizes:
         mesh, res, t = turn(nx, last if seed else None)
@@ -115,10 +160,18 @@ def turn_study(sizes, seed: bool = False) -> None:
         P = mesh.points
         valid = Polygon(res.x[mesh.boundary_loops[0]]).is_valid  # shapely: the outline does not cross itself
         touch = sorted({q for pr in res.contact["pairs"] for q in pr["nodes"] if q >= 0 and P[q, 1] == 0.0})
+        R = clamp_reaction(mesh, res.x, np.flatnonzero(P[:, 0] == 0.0))
         start = float(P[touch, 0].min()) if touch else float("nan")
         print(f"{nx:>4d}x{nx // 4:<3d} {mesh.n_nodes:6d} {t:8.1f} {len(res.steps):5d} "
               f"{'yes' if res.success else 'no':>3s} {valid!s:>5s} {bool(res.stable)!s:>6s} {start:7.3f} "
-              f"{res.contact['total_force']:8.5f} {res.energy:8.5f}  {res.status[:70]}", flush=True)
+              f"{res.contact['total_force']:8.5f} {res.energy:8.5f} {R[0]:8.5f} {R[1]:8.5f}  {res.status[:70]}",
+              flush=True)
+        for k, reg in enumerate(contact_regions(mesh, res)):  # where it touches, and how hard
+            side = ["bottom" if P[q, 1] == 0.0 else "top" if P[q, 1] == 1.0 else "end" for q in reg["nodes"]]
+            xs = P[reg["nodes"], 0]
+            print(f"{'':8s} region {k}: {max(set(side), key=side.count):6s} x {xs.min():.3f}-{xs.max():.3f}, "
+                  f"{reg['pairs']:3d} pairs, force {reg['force']:.5f} (half the sum of |node force| "
+                  f"{reg['half_abs']:.5f})", flush=True)
 
 
 def main(argv=None) -> int:
