@@ -378,7 +378,7 @@ def _out(x, status, ok, iters, steps, t_solve, t_build, rows, res=None, forces=N
             "build_time": t_build, "rows": rows, "residual": res, "forces": forces, "stability": chk}
 
 
-_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "crease"}
+_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "crease", 5: "obstacle segment"}
 
 
 def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: float = 1.0) -> dict:
@@ -416,7 +416,9 @@ def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: 
         if term is not None and len(term.nodes) != len(sel):
             term = None
         fr = {"mu": prob.spec.friction, "eps": FRICTION_EPS * prob.mesh.size * length, "lag_error": prob.lag_error,
-              "nodes": [] if term is None else term.nodes.tolist(),
+              "nodes": [] if term is None else term.nodes.tolist(),  # -1: a point on a segment (a disk's)
+              "segments": [] if term is None else [None if q >= 0 else [int(a), int(b), float(wb)] for q, (a, b), wb
+                                                   in zip(term.nodes, term.pairs, term.weights[:, 1])],
               "tangential": [] if term is None else (term.forces(x) * force).tolist(),
               "normal": [] if term is None else (term.N * force).tolist(),
               "slipping": [] if term is None else term.slipping(x).tolist(),
