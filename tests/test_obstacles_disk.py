@@ -167,3 +167,27 @@ def test_coarse_jaws_close_on_a_disk_with_friction_in_seconds():
     assert N.max() > 0 and np.all(np.abs(F) <= 0.3 * N * (1 + 1e-9) + 1e-12)  # inside the friction cone
     load = _reaction(mesh, res.x, np.r_[lo, hi, back])
     assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.slow
+def test_a_failed_contact_solve_reports_the_contacts_of_the_state_it_returns():
+    """A ring (R 2, hole 1) squeezed by 1.2 with self-contact is rejected (its residual 0.0185 stays above tol);
+    its report listed no pair and a total force of 0, for a state squeezed further than the solved d = 1.1
+    (38 pairs, 0.448). The forces reported now are those fitted on its touching rows."""
+    th = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    outer, inner = np.c_[2 * np.cos(th), 2 * np.sin(th)], np.c_[np.cos(th), np.sin(th)]
+    mesh = Mesh.from_polygon(outer, holes=[inner[::-1]], max_area=0.03)
+    P = mesh.points
+    top, bot = nodes_in_box(mesh, ymin=1.6), nodes_in_box(mesh, ymax=-1.6)
+
+    def squeeze(d):
+        return solve_external(mesh, MAT, None, {**{int(i): P[i] + [0, -d] for i in top},
+                                                **{int(i): P[i] + [0, d] for i in bot}}, contact=True)
+
+    ok, bad = squeeze(1.1), squeeze(1.2)
+    assert ok.success  # (should the squeeze by 1.2 come to solve, its report is checked the same way)
+    c = bad.contact
+    assert c["forces_known"] and c["load_fraction"] == 1.0
+    assert len(c["pairs"]) >= len(ok.contact["pairs"]) and c["total_force"] > ok.contact["total_force"]
+    assert all(p["force"] > 0 and p["gap"] <= c["gap"] + 1e-4 * mesh.size for p in c["pairs"])
+    assert np.allclose(np.sum(c["node_forces"], axis=0), 0.0, atol=1e-9)  # self-contact: action and reaction
