@@ -84,7 +84,8 @@ def contact_in_unit(report: dict | None, stress_unit: str | None, units: str | N
     for key in ("node_forces", "obstacle_forces", "total_force"):
         if key in out:
             out[key] = scaled(out[key])
-    out["pairs"] = [dict(p, force=float(p["force"]) * factor) for p in report.get("pairs", [])]
+    out["pairs"] = [dict(p, force=None if p["force"] is None else float(p["force"]) * factor)
+                    for p in report.get("pairs", [])]
     if isinstance(report.get("friction"), dict):
         fr = dict(report["friction"])
         for key in ("tangential", "normal"):

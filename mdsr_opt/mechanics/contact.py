@@ -7,7 +7,15 @@ Every row is a gap ``g(x) >= gap`` (``gap`` small, stated by the solve) of one o
   ``p`` from the segment's line, positive outside. Self-contact (``p`` a boundary node, ``(a, b)`` a boundary
   segment not near it along the boundary), a body node against a half-plane or a polygon's edge (``a``,
   ``b`` fixed, the obstacle on the left), and a polygon's corner against a body segment (``p`` fixed).
-- **disk**: ``g = |p - c| - r``.
+- **disk**: ``g = |p - c| - r`` for a body node ``p``; and **disk-segment**, the disk against a body segment
+  ``(a, b)`` near it: ``g = n . (c - a) - r`` while the centre ``c`` projects inside the segment (the same line
+  distance, the centre as the point), beyond an end the distance from that end plus a release that makes the
+  row looser than the end node's disk row (:func:`_disk_segment_gap`). A disk has no corners to keep out of
+  the body's segments, as a polygon's are: without this row a segment between two nodes outside the disk can
+  cut through it (a disk smaller than an edge passes into the body between two nodes). The row is exact (the
+  distance from the centre to the segment) where the centre projects inside it, the node rows where it does
+  not; a pair is made only with the centre on the segment's outer side in the state the step starts from
+  (``n . (c - a) >= 0``), and its point of contact is the centre's projection.
 
 Points are body nodes (variables) or fixed points (obstacles). The line distance equals the distance to the
 segment while ``p`` projects inside it; a pair is made only for a point that projects within
@@ -38,7 +46,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments", "first_touch_rows", "handoff_rows"]
+__all__ = ["ContactRows", "broad_phase", "DELTA", "boundary_segments", "disk_segments", "first_touch_rows",
+           "handoff_rows"]
 
 #: a pair is made while its point projects within [-DELTA, 1 + DELTA] of the segment
 DELTA = 0.25
@@ -55,7 +64,8 @@ def _functions():
     ``z = (p, a, b)`` and ``w = (kind, r)`` (kind 0 node-segment, ``r`` its release weight (:data:`RELEASE`, 0 for
     none), 1 disk centred at ``a``, 2 node-line: the
     node-segment formula on the whole line through ``a`` and ``b``, a half-plane; 3 angle: ``r`` times the
-    angle outside the body at ``a`` between its boundary neighbours ``p`` and ``b``, in ``(0, 2 pi]``)."""
+    angle outside the body at ``a`` between its boundary neighbours ``p`` and ``b``, in ``(0, 2 pi]``; 4 a disk
+    centred at ``p`` of radius ``r`` against the body segment ``(a, b)``, :func:`_disk_segment_gap`)."""
     cached = globals().get("_FNS")
     if cached is not None:
         return cached
@@ -70,10 +80,36 @@ def _functions():
     u, v = p - a, b - a  # the angle row: outside angle at a from p (previous node) to b (next node)
     ang = w[1] * (np.pi + ca.atan2(-(u[0] * v[1] - u[1] * v[0]), -ca.dot(u, v)))
     g = ca.if_else(ca.fabs(w[0] - 1.0) < 0.5, dk, ca.if_else(ca.fabs(w[0] - 3.0) < 0.5, ang, ns))
+    g = ca.if_else(ca.fabs(w[0] - 4.0) < 0.5, _disk_segment_gap(p, a, b, w[1]), g)
     fns = (ca.Function("contact_gap", [z, w], [g]), ca.Function("contact_gap_jac", [z, w], [ca.jacobian(g, z)]),
            ca.Function("contact_gap_hess", [z, w], [ca.hessian(g, z)[0]]))
     globals()["_FNS"] = fns
     return fns
+
+
+#: the release of a disk-segment row beyond its segment's ends (:func:`_disk_segment_gap`): small, for its
+#: curvature ``2 DISK_RELEASE / |b - a|`` enters the Lagrangian's Hessian times the row's multiplier (with 1 the
+#: library gripper's first load step took 276 IPOPT iterations, 67 with 0.03, 80 with 0.01; with 0 the row
+#: equals the end node's row there and the solve failed)
+DISK_RELEASE = 0.03
+
+
+def _disk_segment_gap(c, a, b, r):
+    """The gap of a disk (centre ``c``, radius ``r``) and a body segment ``(a, b)`` (body on its left), CasADi
+    SX: while ``c`` projects onto the segment, its signed distance from the segment's line (positive outside)
+    minus ``r``; beyond an end (``s`` how far along the line) the distance from that end plus
+    ``DISK_RELEASE s^2 / |b - a|`` minus ``r``. The two pieces meet with equal value and gradient where ``c``
+    projects onto an end (from the outer side); beyond the ends the row is strictly looser than the end node's
+    own disk row ``|x - c| - r``, which takes over there (so the two are never both active with the same
+    gradient)."""
+    d = b - a
+    dd = ca.dot(d, d)
+    L = ca.sqrt(dd)
+    h = (d[1] * (c[0] - a[0]) - d[0] * (c[1] - a[1])) / L
+    t = ca.dot(c - a, d) / dd
+    s = L * (ca.fmax(-t, 0) + ca.fmax(t - 1, 0))
+    q = a + ca.fmin(ca.fmax(t, 0), 1) * d
+    return ca.if_else(s > 0, ca.sqrt(ca.dot(c - q, c - q)) + DISK_RELEASE * s * s / L, h) - r
 
 
 class ContactRows:
@@ -88,10 +124,10 @@ class ContactRows:
     consts : (k, 2) fixed points (obstacles).
     w : (N, 2) per row ``(kind, radius)``: kind 0 node-segment (``radius``: its release weight,
         :data:`RELEASE` for a self-contact pair, else 0), 1 disk (centre ``a``), 2 node-line, 3 angle
-        (``radius``: the length the angle is scaled by).
+        (``radius``: the length the angle is scaled by), 4 disk-segment (centre ``p``, segment ``(a, b)``).
     labels : (N, 2) int per row ``(kind code, obstacle index or -1)``; kind codes: 0 self, 1 node-obstacle,
         2 obstacle corner-body segment, 3 an interior node kept inside a boundary segment next to it, 4 the
-        outside angle at a boundary node (a crease).
+        outside angle at a boundary node (a crease), 5 a disk against a body segment.
     """
 
     def __init__(self, pts, n_nodes, consts=None, w=None, labels=None):
@@ -268,6 +304,22 @@ def _point_segment(p, a, b):
     return dist, t, g
 
 
+def disk_segments(disk, seg, x_ref, states, radius: float, tol: float = 0.0) -> np.ndarray:
+    """The boundary segments ``seg`` ((b, 2) node pairs) that a disk's rows (kind 4) are made for: those
+    within ``radius`` of the disk (the distance from its centre to the segment, less its radius) in any of
+    ``states`` ((n, 2) each), with the centre on the segment's outer side (``n . (c - a) >= -tol``) in
+    ``x_ref``."""
+    c = np.asarray(disk.center, dtype=float)
+    if not len(seg):
+        return np.zeros(0, dtype=np.int64)
+    close = np.zeros(len(seg), dtype=bool)
+    for s in states:
+        dist, _, _ = _point_segment(np.tile(c, (len(seg), 1)), s[seg[:, 0]], s[seg[:, 1]])
+        close |= dist - disk.radius < radius
+    _, _, g = _point_segment(np.tile(c, (len(seg), 1)), x_ref[seg[:, 0]], x_ref[seg[:, 1]])
+    return np.flatnonzero(close & (g >= -tol))
+
+
 def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: bool = True,
                 tol: float = 0.0, release: float = 0.0) -> ContactRows:
     """Candidate rows: pairs that come within ``radius`` in any of ``states`` ((n, 2) each) and whose point
@@ -277,7 +329,8 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
     ``release``: the self-contact rows' release weight (:data:`RELEASE`; 0: held against the extended line).
     Self-contact pairs a boundary node with every boundary segment not its own (at a straight or convex
     boundary its neighbours project beyond the segment's ends and are left out; at a fold they are not);
-    obstacles add their rows for boundary nodes (and a polygon's corners against body segments)."""
+    obstacles add their rows for boundary nodes (and a polygon's corners, a disk itself, against body segments:
+    :func:`disk_segments`)."""
     from scipy.spatial import cKDTree  # on first use: a solve without contact never loads it
 
     xr = np.asarray(x_ref, dtype=float).reshape(-1, 2)
@@ -373,6 +426,11 @@ def broad_phase(mesh, x_ref, states, radius: float, obstacles=(), self_contact: 
                 pts.append((q, c, c + 1))
                 w.append((2.0 if ob.kind == "half-plane" else 0.0, 0.0))
             labels.append((1, k))
+        for si in disk_segments(ob, seg, xr, states, radius, tol) if ob.kind == "disk" else ():
+            consts.append(ob.center)
+            pts.append((n + len(consts) - 1, seg[si, 0], seg[si, 1]))
+            w.append((4.0, ob.radius))
+            labels.append((5, k))
         C = ob.corners()
         if len(C):
             arr = near_pairs([C for _ in states])

@@ -29,7 +29,7 @@ from shapely.geometry import Point, Polygon
 from ..core.guards import interruptible
 from .assembly import ipopt_functions
 from .contact import ContactRows, broad_phase
-from .friction import EPS as FRICTION_EPS, FrictionTerm, friction_expr, friction_params
+from .friction import EPS as FRICTION_EPS, FrictionTerm, friction_expr, friction_params, n_friction_params
 from .kkt import kkt_factor
 from .loadsteps import upright
 from .residual import Residual, ipopt_tolerances
@@ -73,10 +73,17 @@ class ContactProblem:
         self.release = 0.0  # the release weight of new self-contact rows (contact.RELEASE in careful load steps)
 
     def friction_rows(self, rows: ContactRows) -> np.ndarray:
-        """The rows that carry friction: a body node against an obstacle (none without friction)."""
+        """The rows that carry friction: a body node against an obstacle, a disk against a body segment (none
+        without friction)."""
         if self.spec.friction <= 0 or not rows.n_rows:
             return np.zeros(0, dtype=np.int64)
-        return np.flatnonzero(rows.labels[:, 0] == 1)
+        return np.flatnonzero((rows.labels[:, 0] == 1) | (rows.labels[:, 0] == 5))
+
+    @staticmethod
+    def friction_points(rows: ContactRows, sel) -> np.ndarray:
+        """The body node pairs (k, 2) of the friction rows ``sel``: a node twice, a disk-segment row's segment."""
+        P = rows.pts[sel]
+        return np.where((rows.w[sel, 0] == 4.0)[:, None], P[:, 1:], P[:, [0, 0]])
 
     def friction_for(self, rows: ContactRows, x0, N) -> FrictionTerm | None:
         """The :class:`~mdsr_opt.mechanics.friction.FrictionTerm` of ``rows`` from the step's start ``x0`` with
@@ -87,10 +94,16 @@ class ContactProblem:
         z = np.concatenate([np.asarray(x0, dtype=float).reshape(-1), rows.consts.reshape(-1)]).reshape(-1, 2)
         pts = rows.pts[sel]
         disk = rows.w[sel, 0] == 1.0
-        t = np.where(disk[:, None], z[pts[:, 0]] - z[pts[:, 1]], z[pts[:, 2]] - z[pts[:, 1]])
-        t[disk] = np.column_stack([-t[disk, 1], t[disk, 0]])
+        onseg = rows.w[sel, 0] == 4.0  # the disk's centre p against the segment (a, b): the point it touches
+        a, b = z[pts[:, 1]], z[pts[:, 2]]
+        ts = np.clip(((z[pts[:, 0]] - a) * (b - a)).sum(1) / np.maximum(((b - a) ** 2).sum(1), 1e-300), 0.0, 1.0)
+        t = np.where(disk[:, None], z[pts[:, 0]] - a, b - a)
+        t[onseg] = a[onseg] + ts[onseg, None] * (b - a)[onseg] - z[pts[onseg, 0]]
+        t[disk | onseg] = np.column_stack([-t[disk | onseg, 1], t[disk | onseg, 0]])
         t /= np.maximum(np.linalg.norm(t, axis=1), 1e-300)[:, None]
-        return FrictionTerm(pts[:, 0], t, x0, N, self.spec.friction, FRICTION_EPS * self.mesh.size)
+        wts = np.column_stack([np.where(onseg, 1.0 - ts, 1.0), np.where(onseg, ts, 0.0)])
+        return FrictionTerm(self.friction_points(rows, sel), t, x0, N, self.spec.friction,
+                            FRICTION_EPS * self.mesh.size, wts)
 
     # ------------------------------------------------------------------ pieces
     def split(self, p):
@@ -117,6 +130,11 @@ class ContactProblem:
             g = ob.gap(X[bn])
             if g.min() < 0:
                 return f"node {int(bn[int(np.argmin(g))])} inside obstacle {k}"
+            if ob.kind == "disk":  # a boundary segment cutting into a disk between two nodes outside it
+                seg = self.mesh.boundary_edges
+                gs = ob.segment_gap(X[seg[:, 0]], X[seg[:, 1]])
+                if gs.min() < 0:
+                    return f"boundary segment {seg[int(np.argmin(gs))].tolist()} cuts into obstacle {k}"
             inner = getattr(ob, "inner_point", None)
             if inner is not None:  # an obstacle between the nodes, inside the body (passed through it)
                 if body is None:
@@ -154,8 +172,14 @@ class ContactProblem:
             fe, ge = model.grad_fn(x, p)
         prox = rho / 2 * ca.sumsqr(x - xr)
         fsel = self.friction_rows(rows)
-        FP = ca.MX.sym("fp", 2 + 5 * len(fsel))
-        fr = friction_expr(x, rows.pts[fsel, 0], FP)
+        if len(fsel) and "ipopt.max_soc" not in (options or {}):
+            # no second-order corrections with friction: where a contact slips the friction potential is all but
+            # linear (its curvature mu N eps^2 / |u|^3), and steps made with a correction jumped across its kink
+            # and back, accepted as lowering the infeasibility, until the iteration cap (a C's jaws closed on a
+            # disk at mu 0.3: 57,454 iterations in all, the load stepping stalled)
+            o["ipopt.max_soc"] = 0
+        FP = ca.MX.sym("fp", n_friction_params(len(fsel)))
+        fr = friction_expr(x, self.friction_points(rows, fsel), FP)
         f = fe + prox + fr
         P = ca.vertcat(p, xr, rho, FP)
         gf = ge + rho * (x - xr) + (ca.gradient(fr, x) if len(fsel) else 0)

@@ -13,7 +13,8 @@ from .backends import minimize
 from .blas import one_blas_thread
 from .contact import DELTA, RELEASE, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import positive_float
-from .contactsolve import ContactProblem, ContactSpec, row_key, merge_rows, contact_stability, polish
+from .contactsolve import (ContactProblem, ContactSpec, contact_residual, row_key, merge_rows, contact_stability,
+                           polish)
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
 from .loadsteps import INTERMEDIATE_TOL, equilibrium_result, min_jacobian, predict_state, solve_step, upright
 from .obstacles import check_obstacles
@@ -280,9 +281,11 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
         prob.release = 0.0
         while s < 1.0 - 1e-12:
             check_stop()
-            if ds < min_step:
+            if ds < min_step:  # the state returned is the last one solved: its contact forces fitted there
+                fc_s = contact_residual(prob, rows, x, p_of(s), fixed, max(float(np.sqrt(tol)), loose), force)[1] \
+                    if rows.n_rows else None
                 return _out(x, f"load stepping stalled at fraction {s:.4g} ({status})", False, iters, steps,
-                            t_solve, t_build, rows)
+                            t_solve, t_build, rows, forces=fc_s, fraction=s)
             s_new = min(1.0, s + ds)
             p, vals = p_of(s_new), values_of(s_new)
             t0 = time.perf_counter()
@@ -352,9 +355,12 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
                 ds /= 2
         p1 = p_of(1.0)
         x, res, fc = polish(prob, rows, x, p1, fixed, tol, force, lam_last)
-        if not res.value <= tol:
+        if not res.value <= tol:  # the forces reported: fitted on the rows within sqrt(tol) of their gap (an
+            # interior point leaves touching rows 1e-8 to 1e-7 of the size off it: within tol none may be held)
+            fc_r = contact_residual(prob, rows, x, p1, fixed, max(float(np.sqrt(tol)), tol), force)[1] \
+                if rows.n_rows else fc
             return _out(x, status + f"; rejected: residual {res.value:.3g} > tol {tol:.3g}", False, iters, steps,
-                        t_solve, t_build, rows, res, fc)
+                        t_solve, t_build, rows, res, fc_r)
         if not settle:
             return _out(x, status, True, iters, steps, t_solve, t_build, rows, res, fc)
         if escape:
@@ -373,21 +379,26 @@ def contact_continuation(prob: ContactProblem, p_of, fixed, values_of, x_start, 
         return _out(x, status, ok, iters, steps, t_solve, t_build, rows, res, fc, chk)
 
 
-def _out(x, status, ok, iters, steps, t_solve, t_build, rows, res=None, forces=None, chk=None) -> dict:
+def _out(x, status, ok, iters, steps, t_solve, t_build, rows, res=None, forces=None, chk=None,
+         fraction=1.0) -> dict:
     return {"x": x, "status": status, "success": ok, "iterations": iters, "steps": steps, "solve_time": t_solve,
-            "build_time": t_build, "rows": rows, "residual": res, "forces": forces, "stability": chk}
+            "build_time": t_build, "rows": rows, "residual": res, "forces": forces, "stability": chk,
+            "fraction": fraction}
 
 
-_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "crease"}
+_KINDS = {0: "self", 1: "obstacle", 2: "obstacle corner", 3: "inner", 4: "crease", 5: "obstacle segment"}
 
 
 def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: float = 1.0) -> dict:
     """The contact part of a result (JSON-ready, in the user's units: lengths times ``length``, forces times
     ``force``): per active pair its kind, nodes (``p, a, b``; -1 for an obstacle's fixed point), obstacle,
     gap and normal force; the contact force on each node and the total on each obstacle (the force the body
-    exerts on it)."""
+    exerts on it). ``load_fraction``: the load at which the state was solved (below 1 when the load stepping
+    stalled: the forces are those of the state returned, at that load); ``forces_known`` False when the
+    forces of the state's touching rows (listed with force None) could not be fitted."""
     rows, fc, x = out["rows"], out["forces"], out["x"]
     n = prob.mesh.n_nodes
+    known = fc is not None or rows.n_rows == 0
     if fc is None or rows.n_rows == 0:
         fc = np.zeros(rows.n_rows)
     g = rows.values(x) if rows.n_rows else np.zeros(0)
@@ -399,6 +410,8 @@ def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: 
         if sel.any():
             per_ob[k] = -(rows.jacobian(x)[sel].T @ fc[sel]).reshape(-1, 2).sum(0)
     act = fc > 0
+    if not known:  # the rows at their gap (within 1e-6 of the size), forces unknown
+        act = g - prob.spec.gap <= 1e-6 * prob.mesh.size
     fr = None
     if prob.friction_term is not None and prob.spec.friction > 0:  # the friction force on the body: -grad D
         tf = prob.friction_term  # with the lagged normal forces the equilibrium holds with
@@ -416,15 +429,18 @@ def contact_report(prob: ContactProblem, out: dict, length: float = 1.0, force: 
         if term is not None and len(term.nodes) != len(sel):
             term = None
         fr = {"mu": prob.spec.friction, "eps": FRICTION_EPS * prob.mesh.size * length, "lag_error": prob.lag_error,
-              "nodes": [] if term is None else term.nodes.tolist(),
+              "nodes": [] if term is None else term.nodes.tolist(),  # -1: a point on a segment (a disk's)
+              "segments": [] if term is None else [None if q >= 0 else [int(a), int(b), float(wb)] for q, (a, b), wb
+                                                   in zip(term.nodes, term.pairs, term.weights[:, 1])],
               "tangential": [] if term is None else (term.forces(x) * force).tolist(),
               "normal": [] if term is None else (term.N * force).tolist(),
               "slipping": [] if term is None else term.slipping(x).tolist(),
               "step_slide": [] if term is None else (term.tangential_move(x) * length).tolist()}
-    return {"gap": prob.spec.gap * length, "friction": fr,
+    return {"gap": prob.spec.gap * length, "friction": fr, "load_fraction": float(out.get("fraction", 1.0)),
+            "forces_known": bool(known),
             "pairs": [{"kind": _KINDS[int(rows.labels[i, 0])], "nodes": nodes[i].tolist(),
                        "obstacle": int(rows.labels[i, 1]), "gap": float(g[i]) * length,
-                       "force": float(fc[i]) * force} for i in np.flatnonzero(act)],
+                       "force": float(fc[i]) * force if known else None} for i in np.flatnonzero(act)],
             "n_candidates": int(rows.n_rows),
             "node_forces": (node_f * force).tolist(),
             "obstacle_forces": (per_ob * force).tolist(),

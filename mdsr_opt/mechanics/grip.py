@@ -1,6 +1,7 @@
 """Does a grip hold its object? The loads a body's contacts on a rigid disk can resist with Coulomb friction.
 
-From a solve with the disk as an obstacle (its contact forces ``N_i`` at the body nodes ``x_i``, normal
+From a solve with the disk as an obstacle (its contact forces ``N_i`` at the points ``x_i`` where it touches
+the body: a node, or the point of a boundary segment closest to the centre (:func:`contact_points`); normal
 ``n_i = (x_i - c) / |x_i - c|``), the body pushes on the disk with ``sum_i N_i (-n_i) + tau_i t_i`` where
 ``t_i`` is the tangent (``n_i`` turned by +90 degrees) and ``|tau_i| <= mu N_i`` (Coulomb: stick while the
 tangential force is below ``mu`` times the normal force). The disk, now free, is held against a load ``L`` when
@@ -35,7 +36,7 @@ from scipy.optimize import linprog
 from ..core.checks import as_float_array
 from .obstacles import Disk
 
-__all__ = ["grip_report", "free_disk"]
+__all__ = ["grip_report", "free_disk", "contact_points"]
 
 
 def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None, directions: int = 16,
@@ -58,7 +59,8 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
     Returns
     -------
     dict
-        ``mu``; ``normal_forces`` (per contact), ``contact_nodes``; ``squeeze`` (the net force of the contacts'
+        ``mu``; ``normal_forces`` (per contact), ``contact_nodes`` (-1 for a point on a segment),
+        ``contact_points``; ``squeeze`` (the net force of the contacts'
         normal forces on the disk); ``directions`` (unit vectors) and ``resisted`` (the largest load in each,
         0 where none is held, NaN where even no load is); ``holding_force`` (the smallest of them: a load of
         any direction up to it is held); ``held`` (the load ``load`` is held).
@@ -68,12 +70,13 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
         raise ValueError(f"mu must be a number >= 0, got {mu!r}")
     x = as_float_array(x, "x", shape=(None, 2))
     L = np.zeros(2) if load is None else as_float_array(load, "load", shape=(2,)).astype(float)
-    pairs = [p for p in contact.get("pairs", []) if p["kind"] == "obstacle" and p["obstacle"] == obstacle]
-    nodes = np.array([p["nodes"][0] for p in pairs], dtype=np.int64)
-    N = np.array([p["force"] for p in pairs], dtype=float)
+    pairs = [p for p in contact.get("pairs", []) if p["kind"] in ("obstacle", "obstacle segment") and
+             p["obstacle"] == obstacle]
     c = np.asarray(disk.center, dtype=float)
-    n = (x[nodes] - c) / np.maximum(np.linalg.norm(x[nodes] - c, axis=1), 1e-300)[:, None] if len(nodes) else \
-        np.zeros((0, 2))
+    nodes = np.array([p["nodes"][0] for p in pairs], dtype=np.int64)  # -1: the disk on a segment
+    pts = contact_points(x, pairs, c)
+    N = np.array([p["force"] for p in pairs], dtype=float)
+    n = (pts - c) / np.maximum(np.linalg.norm(pts - c, axis=1), 1e-300)[:, None] if len(nodes) else np.zeros((0, 2))
     t = np.column_stack([-n[:, 1], n[:, 0]]) if len(nodes) else np.zeros((0, 2))
     squeeze = -(N[:, None] * n).sum(0) if len(nodes) else np.zeros(2)
     angles = 2 * np.pi * np.arange(directions) / directions
@@ -103,10 +106,31 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
     resisted = np.array([largest(d) for d in D])
     held_load = not np.isnan(largest(None, L))
     finite = resisted[np.isfinite(resisted)]
-    return {"mu": float(mu), "contact_nodes": nodes.tolist(), "normal_forces": N.tolist(),
+    return {"mu": float(mu), "contact_nodes": nodes.tolist(), "contact_points": pts.tolist(),
+            "normal_forces": N.tolist(),
             "squeeze": squeeze.tolist(), "directions": D.tolist(), "resisted": resisted.tolist(),
             "holding_force": float(np.nanmin(resisted)) + 0.0 if len(finite) == len(resisted) else float("nan"),
             "held": bool(held_load)}
+
+
+def contact_points(x, pairs, center) -> np.ndarray:
+    """Where each contact pair on a disk (``center``) touches the body in the state ``x`` (n, 2): a node pair's
+    node; a segment pair's (``"obstacle segment"``, nodes ``[-1, a, b]``) point of the segment closest to the
+    centre. (k, 2)."""
+    out = np.zeros((len(pairs), 2))
+    for i, p in enumerate(pairs):
+        q, a, b = p["nodes"]
+        if p["kind"] == "obstacle segment":
+            d = x[b] - x[a]
+            s = np.clip(float((center - x[a]) @ d) / max(float(d @ d), 1e-300), 0.0, 1.0)
+            out[i] = x[a] + s * d
+        else:
+            out[i] = x[q]
+    return out
+
+
+#: the halvings of a secant step of :func:`free_disk` whose disk ``solve`` refuses (it holds a node of the body)
+HALVINGS = 6
 
 
 def free_disk(solve, disk, *, rtol: float = 1e-3, max_iter: int = 12):
@@ -118,7 +142,9 @@ def free_disk(solve, disk, *, rtol: float = 1e-3, max_iter: int = 12):
     ----------
     solve : callable
         ``solve(disk) -> EquilibriumResult`` of the body with the disk as its obstacle number 0 (e.g. a
-        ``solve_internal`` of the gripper's muscles with ``obstacles=[disk]``).
+        ``solve_internal`` of the gripper's muscles with ``obstacles=[disk]``). A step to a centre at which it
+        raises ValueError (the solves refuse a disk that holds a node of the body at rest) is halved, up to
+        :data:`HALVINGS` times; at the first centre the error is raised.
     disk : the :class:`~mdsr_opt.Disk` to start from (its radius is kept).
 
     Returns
@@ -132,9 +158,22 @@ def free_disk(solve, disk, *, rtol: float = 1e-3, max_iter: int = 12):
     B = None
     history = []
     res, F, c_old, F_old = None, None, None, None
+    last = None
     for it in range(max_iter):
         d = Disk(c, r)
-        res = solve(d)
+        for _ in range(HALVINGS):
+            try:
+                res = solve(d)
+                break
+            except ValueError:  # the disk holds a node of the body at rest: the secant step halved
+                if last is None:
+                    raise
+                last = 0.5 * last
+                c = c_old + last
+                d = Disk(c, r)
+        else:
+            return res, d, {"converged": False, "iterations": it + 1, "net_force": None, "history": history,
+                            "why": f"the disk holds a node of the body at rest after {HALVINGS} halvings of the step"}
         if not res.success:
             return res, d, {"converged": False, "iterations": it + 1, "net_force": None, "history": history,
                             "why": res.status}
@@ -156,7 +195,7 @@ def free_disk(solve, disk, *, rtol: float = 1e-3, max_iter: int = 12):
                 step *= 0.25 * r / np.linalg.norm(step)
         if B is None:
             B = -np.eye(2) * np.linalg.norm(F) / (0.1 * r)
-        c_old, F_old = c, F
+        c_old, F_old, last = c, F, step
         c = c + step
     return res, Disk(c, r), {"converged": False, "iterations": max_iter, "net_force": F.tolist(),
                              "history": history, "why": "the net force did not vanish"}

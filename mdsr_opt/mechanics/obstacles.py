@@ -4,7 +4,9 @@ Each obstacle gives, for a body node at ``x``, the gap function the contact solv
 (:mod:`mdsr_opt.mechanics.contact`):
 
 - :class:`HalfPlane` ``(point q, normal n)``: ``g = n . (x - q)`` (``n`` normalised, pointing into the free side);
-- :class:`Disk` ``(center c, radius r)``: ``g = |x - c| - r``;
+- :class:`Disk` ``(center c, radius r)``: ``g = |x - c| - r``; and the disk is kept out of each boundary segment
+  near it by the gap between its centre and the segment (a disk has no corners; without it a segment between two
+  nodes outside the disk could cut through it);
 - :class:`Obstacle` ``(polygon)``, convex: ``g = max_e n_e . (x - a_e)`` over its edges (outward normals),
   posed as the line of the edge that attains the maximum at the start of each solve (refreshed until it no
   longer changes); its corners are kept out of the body by the same gap between each corner and the body's
@@ -102,6 +104,14 @@ class Disk:
     def inner_point(self) -> np.ndarray:
         """A point of the obstacle that must never be inside the body (its centre)."""
         return self.center
+
+    def segment_gap(self, a, b) -> np.ndarray:
+        """The gap of each segment ``(a[i], b[i])`` ((k, 2) each): its distance from the centre less the radius
+        (negative where the segment cuts into the disk)."""
+        a, b = np.asarray(a, dtype=float).reshape(-1, 2), np.asarray(b, dtype=float).reshape(-1, 2)
+        d = b - a
+        t = np.clip(((self.center - a) * d).sum(1) / np.maximum((d * d).sum(1), 1e-300), 0.0, 1.0)
+        return np.linalg.norm(a + t[:, None] * d - self.center, axis=1) - self.radius
 
     def scaled(self, scale: float, shift) -> "Disk":
         return Disk(scale * (self.center - shift), scale * self.radius)
