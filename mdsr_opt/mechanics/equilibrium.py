@@ -69,7 +69,7 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         first, with only the fixed nodes moved) or an (n, 2) state to start the first step from (its fixed
         nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
         combine them with ``min_step=1`` to forbid load stepping.
-    obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle`
+    obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle` (or one)
         Rigid obstacles the body's boundary may touch but not enter (with Coulomb ``friction`` when given);
         none may hold a node at rest, and no drag may enter one. See :mod:`~mdsr_opt.mechanics.contactsolve`.
     contact : bool
