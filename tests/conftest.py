@@ -95,3 +95,14 @@ def arc_map(points, length=4.0, angle=np.pi / 2):
 def rotation(theta):
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
+
+
+def assert_matches_central_differences(energy, gradient, hessian, x, h=1e-6, gtol=1e-7, htol=1e-6):
+    """``gradient`` against central differences of ``energy``, and ``hessian`` (dense) against those of
+    ``gradient``, coordinate by coordinate at ``x``."""
+    g, H = gradient(x), hessian(x)
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h
+        assert (energy(x + e) - energy(x - e)) / (2 * h) == pytest.approx(g[k], abs=gtol)
+        assert np.allclose((gradient(x + e) - gradient(x - e)) / (2 * h), H[:, k], atol=htol)

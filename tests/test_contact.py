@@ -11,6 +11,7 @@ from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, Obstacle, solve_external
 from mdsr_opt.mechanics.contact import ContactRows
 from mdsr_opt.mechanics.quadratic import transfer_state
 from mdsr_opt.mechanics.model import get_model
+from conftest import assert_matches_central_differences
 
 MAT = NeoHookean(1.0, 0.3)
 
@@ -297,13 +298,7 @@ def test_friction_term_derivatives_match_finite_differences():
     t /= np.linalg.norm(t, axis=1)[:, None]
     ft = FrictionTerm(np.array([0, 2, 3]), t, rng.normal(size=8), np.array([0.5, 1.0, 2.0]), 0.4, 0.05)
     x = rng.normal(size=8)
-    g, H = ft.gradient(x), ft.hessian(x).toarray()
-    h = 1e-6
-    for k in range(8):
-        e = np.zeros(8)
-        e[k] = h
-        assert (ft.energy(x + e) - ft.energy(x - e)) / (2 * h) == pytest.approx(g[k], abs=1e-7)
-        assert np.allclose((ft.gradient(x + e) - ft.gradient(x - e)) / (2 * h), H[:, k], atol=1e-6)
+    assert_matches_central_differences(ft.energy, ft.gradient, lambda y: ft.hessian(y).toarray(), x)
     assert np.all(np.abs(ft.forces(x)) < 0.4 * ft.N)  # never beyond mu N
 
 

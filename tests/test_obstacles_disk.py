@@ -10,6 +10,7 @@ from shapely.ops import unary_union
 from mdsr_opt import Disk, Mesh, NeoHookean, nodes_in_box, solve_external
 from mdsr_opt.mechanics.contact import ContactRows
 from mdsr_opt.mechanics.model import get_model
+from conftest import assert_matches_central_differences
 
 MAT = NeoHookean(1.0, 0.3)
 
@@ -86,22 +87,28 @@ def test_a_disk_smaller_than_an_edge_stays_out_of_the_body(d):
     assert np.allclose(np.sum(res.contact["node_forces"], axis=0), -load, rtol=1e-6, atol=1e-8)
 
 
-def test_coarse_jaws_closed_on_a_disk_keep_their_edges_out():
-    """A C whose jaws (coarse, edges about 0.25) are dragged shut by 0.5 on a disk of radius 0.4: before, its
-    edges cut 0.026 into the disk (shapely overlap 6.8e-3)."""
+def _jaws_on_disk():
+    """A C (edges about 0.25), its back anchored, its jaws dragged shut by 0.5 each on a disk of radius 0.4:
+    ``(mesh, anchors, drags, disk)``."""
     C = [[0, 0], [3, 0], [3, 0.8], [1, 0.8], [1, 2.2], [3, 2.2], [3, 3], [0, 3]]
     mesh = Mesh.from_polygon(C, max_area=0.03)
     P = mesh.points
     back = nodes_in_box(mesh, xmax=0.0)
     lo, hi = nodes_in_box(mesh, xmin=2.8, ymax=0.8), nodes_in_box(mesh, xmin=2.8, ymin=2.2)
-    disk = Disk((2.2, 1.5), 0.4)
     drags = {**{int(i): P[i] + [0, 0.5] for i in lo}, **{int(i): P[i] + [0, -0.5] for i in hi}}
+    return mesh, back, drags, Disk((2.2, 1.5), 0.4)
+
+
+def test_coarse_jaws_closed_on_a_disk_keep_their_edges_out():
+    """A C whose jaws (coarse, edges about 0.25) are dragged shut by 0.5 on a disk of radius 0.4: before, its
+    edges cut 0.026 into the disk (shapely overlap 6.8e-3)."""
+    mesh, back, drags, disk = _jaws_on_disk()
     res = solve_external(mesh, MAT, back, drags, obstacles=[disk])
     assert res.success and res.stable, res.status
     assert _overlap(mesh, res.x, disk) == 0.0
     assert _edge_gap(mesh, res.x, disk) >= res.contact["gap"] * (1 - 1e-6) - 1e-9
     # the forces on the disk: what the drags and the clamp put in
-    load = _reaction(mesh, res.x, np.r_[lo, hi, back])
+    load = _reaction(mesh, res.x, np.r_[list(drags), back])
     assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-5, atol=1e-8)
 
 
@@ -133,13 +140,8 @@ def test_friction_at_a_point_on_a_segment_matches_finite_differences():
                       0.05, w)
     assert ft.nodes.tolist() == [0, -1, -1]
     x = rng.normal(size=8)
-    g, H = ft.gradient(x), ft.hessian(x).toarray()
-    h = 1e-6
-    for k in range(8):
-        e = np.zeros(8)
-        e[k] = h
-        assert (ft.energy(x + e) - ft.energy(x - e)) / (2 * h) == pytest.approx(g[k], abs=1e-7)
-        assert np.allclose((ft.gradient(x + e) - ft.gradient(x - e)) / (2 * h), H[:, k], atol=1e-6)
+    assert_matches_central_differences(ft.energy, ft.gradient, lambda y: ft.hessian(y).toarray(), x)
+    g = ft.gradient(x)
     # a point's friction force is shared by its segment's nodes by their weights, and sums to it
     f = ft.forces(x)
     G = g.reshape(-1, 2)
@@ -151,13 +153,7 @@ def test_coarse_jaws_close_on_a_disk_with_friction_in_seconds():
     """The C's jaws shut on the disk with Coulomb friction mu 0.3: before, IPOPT's steps cycled across the
     friction potential's kink until each solve's iteration cap (57,454 iterations in all, 156 s) and the load
     stepping stalled at 0.85."""
-    C = [[0, 0], [3, 0], [3, 0.8], [1, 0.8], [1, 2.2], [3, 2.2], [3, 3], [0, 3]]
-    mesh = Mesh.from_polygon(C, max_area=0.03)
-    P = mesh.points
-    back = nodes_in_box(mesh, xmax=0.0)
-    lo, hi = nodes_in_box(mesh, xmin=2.8, ymax=0.8), nodes_in_box(mesh, xmin=2.8, ymin=2.2)
-    disk = Disk((2.2, 1.5), 0.4)
-    drags = {**{int(i): P[i] + [0, 0.5] for i in lo}, **{int(i): P[i] + [0, -0.5] for i in hi}}
+    mesh, back, drags, disk = _jaws_on_disk()
     res = solve_external(mesh, MAT, back, drags, obstacles=[disk], friction=0.3)
     assert res.success and res.stable, res.status
     assert res.iterations < 5000
@@ -165,7 +161,7 @@ def test_coarse_jaws_close_on_a_disk_with_friction_in_seconds():
     fr = res.contact["friction"]
     F, N = np.array(fr["tangential"]), np.array(fr["normal"])
     assert N.max() > 0 and np.all(np.abs(F) <= 0.3 * N * (1 + 1e-9) + 1e-12)  # inside the friction cone
-    load = _reaction(mesh, res.x, np.r_[lo, hi, back])
+    load = _reaction(mesh, res.x, np.r_[list(drags), back])
     assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-5, atol=1e-7)
 
 
