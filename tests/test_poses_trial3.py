@@ -20,7 +20,7 @@ import pytest
 from mdsr_opt import Mesh, Muscle, NeoHookean, solve_internal
 from mdsr_opt.scenes.select import edge_path
 from mdsr_opt.synthesis.export import export_fabrication
-from mdsr_opt.synthesis.fabrication import Fabrication, FabricationWarning, rope_conflicts
+from mdsr_opt.synthesis.fabrication import Fabrication, FabricationWarning
 from mdsr_opt.synthesis.gait import GaitWarning, gait_schedule
 from mdsr_opt.synthesis.layouts import shared_layout
 from mdsr_opt.synthesis.poses import design_poses
