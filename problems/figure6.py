@@ -152,7 +152,10 @@ def equilibrium_trace(scene, target, muscles, res, opts):
 
 
 def table_rows(runs):
-    """Table 1 rows (dicts) from the runs of :func:`run_figure`."""
+    """Table 1 rows (dicts) from the runs of :func:`run_figure`; ``relative_difference`` is over the body's
+    diameter at rest, as ``mdsr run``'s."""
+    from mdsr_opt.mechanics.anchors import body_size
+
     rows = []
     for r in runs:
         for j, (K_a, lay, res) in enumerate(zip(r["K_a"], r["layouts"], r["designs"])):
@@ -166,7 +169,7 @@ def table_rows(runs):
             row["idle"] = int(sum(float(a) < 1e-3 for a in res.contractions))
             tr = r["traces"][j]
             d = np.asarray(tr["difference"], dtype=float)
-            row.update({"difference": res.difference, "relative_difference": res.difference / r["scene"].mesh.size,
+            row.update({"difference": res.difference, "relative_difference": res.difference / body_size(r["scene"].mesh),
                         "initial_difference": res.initial_difference, "iterations": res.iterations,
                         "success": bool(res.success), "status": res.status,
                         "equilibrium_start": float(d[0]), "equilibrium_rises": rises(d),
@@ -253,7 +256,7 @@ def write_table(rows, csv_path, md_path):
     note = ("\n\nstrokeN = aN * L0 of muscle lN (rest length, the length the servo pulls); idle = muscles the "
             "design leaves at a < 0.001 (routed, but not worth building for this target); difference = "
             "weighted RMS node distance to the target after rigid alignment (a length), relative = over the "
-            "body's size; iterations = IPOPT iterations of the flattened design; equilibrium_start = difference of the "
+            "body's diameter; iterations = IPOPT iterations of the flattened design; equilibrium_start = difference of the "
             "equilibrium at the design's starting contractions, equilibrium_rises = iterates after which the "
             "difference of the equilibrium at the iterate's contractions grows (Figure 6c).\n")
     with atomic_path(md_path) as tmp:

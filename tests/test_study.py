@@ -319,6 +319,22 @@ def test_interpolation_is_exact_for_affine_fields():
     assert state_error(mesh.points, moved, mesh.points, mesh.triangles, mesh.points) > 0.1
 
 
+def test_state_error_is_over_the_bodys_diameter_however_the_body_is_turned():
+    """The largest node error is over the reference body's diameter (mdsr run's size), which a rotation leaves
+    alone; over the bounding-box diagonal, as before, the same run turned by 45 degrees had a smaller error."""
+    from mdsr_opt.mechanics.anchors import body_size
+
+    mesh = Mesh.from_polygon([[0, 0], [3, 0], [3, 1], [1, 2], [0, 1]], max_area=0.05)
+    P = mesh.points
+    x = P + 0.02 * np.column_stack([np.sin(3 * P[:, 1]), np.cos(2 * P[:, 0])])
+    e = state_error(P, x, P, mesh.triangles, P)
+    assert e == pytest.approx(np.linalg.norm(x - P, axis=1).max() / body_size(mesh), rel=1e-12)
+    R = np.array([[1.0, -1.0], [1.0, 1.0]]) / np.sqrt(2.0)
+    Q = P @ R.T
+    assert np.linalg.norm(np.ptp(Q, axis=0)) > 1.05 * np.linalg.norm(np.ptp(P, axis=0))  # the old denominator grows
+    assert state_error(Q, x @ R.T, Q, mesh.triangles, Q) == pytest.approx(e, rel=1e-9)
+
+
 def test_pareto_front_and_slopes():
     rng = np.random.default_rng(0)
     t, e = rng.uniform(0.1, 10, 60), rng.uniform(1e-6, 1, 60)

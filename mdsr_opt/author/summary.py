@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ..mechanics.align import difference, node_weights
+from ..mechanics.anchors import body_size
 from ..synthesis.acceptance import difference_failure
 
 __all__ = ["design_summary"]
@@ -39,13 +40,13 @@ def design_summary(session) -> dict:
     dist = np.linalg.norm(xd - target, axis=1)
     return {"method": res.method, "success": bool(res.success), "status": str(res.status),
             "contractions": [float(a) for a in res.contractions], "difference": _num(res.difference),
-            "relative_difference": _num(res.difference / session.mesh.size),
+            "relative_difference": _num(res.difference / body_size(session.mesh)),  # as `mdsr run`
             "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
             "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(session.design_params),
             "saturated": [m.name for m, sat in zip(session.muscles, res.saturated) if sat],
             "dropped": [d.to_dict() for d in session.dropped],
             # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
-            "acceptance": difference_failure(res.difference, session.mesh.size,
+            "acceptance": difference_failure(res.difference, body_size(session.mesh),
                                              *[session.acceptance[k] for k in ("max_difference",) if k in session.acceptance],
                                              units=session.units or None,
                                              rest_difference=difference(session.mesh.points, target,

@@ -170,7 +170,7 @@ def figure_outputs(outputs, vector=None) -> list[str]:
 
 
 def _fraction(text: str) -> float:
-    """``--max-difference``: a positive fraction of the size."""
+    """``--max-difference``: a positive fraction of the body's diameter."""
     from ..synthesis.acceptance import check_max_difference
 
     try:
@@ -225,7 +225,7 @@ def add_cli(sub) -> None:
                         "solve, not in worker processes beside the next solve (the files are the same)")
     q.add_argument("--max-difference", type=_fraction, default=None, metavar="FRACTION",
                    help="a case whose design differs from its target by more than this fraction of the body's "
-                   "size fails (default: the scene's [acceptance] max_difference, else 0.05)")
+                   "diameter (largest node-to-node distance) fails (default: the scene's [acceptance] max_difference, else 0.05)")
     q.add_argument("--bands", action=argparse.BooleanOptionalAction, default=None,
                    help="compute every stroke's uncertainty band (fixture size +-25 %%, Poisson's ratio +-0.05, "
                    "the mesh refined once): 4-5 more designs per case (default: the scene's [acceptance] bands, "

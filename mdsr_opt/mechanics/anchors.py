@@ -30,7 +30,7 @@ from ..core.checks import positive_float
 from ..body.muscles import Muscle, check_muscles, label_of
 
 __all__ = ["ANCHOR_FRACTION", "MAX_ANCHOR_FRACTION", "body_size", "convex_hull", "default_anchor_radius", "check_anchor_radius",
-           "anchor_radius_or_default", "valid_muscles", "anchor_patches", "rigid_groups",
+           "anchor_radius_or_default", "point_diameter", "valid_muscles", "anchor_patches", "rigid_groups",
            "patch_groups"]
 
 #: Default anchor radius as a fraction of the body's size (its diameter at rest, :func:`body_size`).
@@ -78,14 +78,20 @@ def body_size(mesh) -> float:
     cache = mesh.__dict__
     if "_diameter" not in cache:
         # the farthest pair of nodes are vertices of the convex hull, which are boundary nodes (every node
-        # belongs to a triangle): the hull of those, without importing scipy.spatial on the path of every
-        # scene's build
-        V = convex_hull(mesh.points[mesh.boundary_nodes])
-        d = 0.0
-        for i0 in range(0, len(V), 1024):
-            d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))
-        cache["_diameter"] = d
+        # belongs to a triangle): the hull of those
+        cache["_diameter"] = point_diameter(mesh.points[mesh.boundary_nodes])
     return cache["_diameter"]
+
+
+def point_diameter(P) -> float:
+    """The largest distance between two of the points ``P`` (m, 2) (0 for fewer than two): the largest
+    between two vertices of their convex hull, without importing scipy.spatial on the path of every scene's
+    build."""
+    V = convex_hull(P)
+    d = 0.0
+    for i0 in range(0, len(V), 1024):
+        d = max(d, float(np.sqrt(((V[i0:i0 + 1024, None, :] - V[None, :, :]) ** 2).sum(-1)).max()))
+    return d
 
 
 def default_anchor_radius(mesh) -> float:

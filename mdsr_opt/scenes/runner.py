@@ -16,6 +16,7 @@ from ..core.errors import LayoutError
 from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..mechanics.align import difference, node_weights
+from ..mechanics.anchors import body_size
 from ..plot.style import muscle_label, unit_label
 from ..synthesis.fabrication import FabricationWarning
 from ..synthesis.results import MuscleWarning
@@ -27,8 +28,7 @@ from .verdict import design_verdict, plain_failure
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
-__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'measure_case', 'write_case', 'case_parts',
-           'case_files']
+__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'measure_case', 'write_case', 'case_parts', 'case_files']
 
 _LOG = logging.getLogger(__name__)
 
@@ -52,7 +52,7 @@ class CaseReport:
         (``1 - L/L0``) and the rope length pulled in (``achieved * L0``, length units).
     contraction_error : internal cases: largest ``|designed - known|``.
     difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
-        relative_difference : over ``mesh.size`` (the rest bounding-box diagonal).
+        relative_difference : over the body's size, its rest diameter (:func:`~mdsr_opt.mechanics.anchors.body_size`).
     initial_difference : difference at the design's starting point.
     rest_difference : the rest shape's difference to the target (the "do nothing" design; a case whose
         design removes less than a tenth of it fails: :func:`~mdsr_opt.synthesis.acceptance.difference_failure`).
@@ -243,7 +243,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     paper's Table 2 or 3 (the case's own driving) and Table 4 (the design) in ``report.photo["prototype"]``.
 
     What counts as a success is the scene's ``acceptance`` (:func:`~mdsr_opt.scenes.scene.check_acceptance`):
-    the design's difference within ``max_difference`` of the size (this keyword overrides the scene's), no
+    the design's difference within ``max_difference`` of the body's diameter (this keyword overrides the scene's), no
     idle muscle (an external case's muscles designed below ``idle_contraction`` are dropped and the design
     made again, :func:`~mdsr_opt.synthesis.acceptance.design_active`; an internal case keeps the scene's
     layout, whose known contractions are the answer); a saturated muscle is reported in ``saturated``.
@@ -378,7 +378,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.units = {"stroke": length_unit(res.units), "tension": res.tension_unit}
     rep.contact = res.contact_summary().get("contact")  # forces in the tensions' unit
     rep.difference = float(res.difference)
-    rep.relative_difference = float(res.difference) / mesh.size
+    rep.relative_difference = float(res.difference) / body_size(mesh)  # the same however the body is turned
     rep.initial_difference = float(res.initial_difference)
     rep.design_success, rep.design_status = bool(res.success), str(res.status)
     if res.verification is not None:
@@ -405,7 +405,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     w = opts.get("weights")
     w = node_weights(mesh, opts.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
     rep.rest_difference = float(difference(mesh.points, setup.target, w))  # the design's own weights
-    far = difference_failure(res.difference, mesh.size, accept["max_difference"], units=scene.units,
+    far = difference_failure(res.difference, body_size(mesh), accept["max_difference"], units=scene.units,
                              rest_difference=rep.rest_difference)
     rep.success = bool(res.success) and not far
     if not res.success:

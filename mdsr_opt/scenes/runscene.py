@@ -99,7 +99,7 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
         (only those it recorded; see :class:`~mdsr_opt.scenes.rundir.RunFolder`, which also locks the folder
         against a second run and removes the temporaries of an interrupted one).
     max_difference : float, optional
-        A case whose difference exceeds this fraction of the size fails (default: the scene's
+        A case whose difference exceeds this fraction of the body's diameter fails (default: the scene's
         ``acceptance``, :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE` unless it says otherwise).
     bands : bool, optional
         Compute every stroke's uncertainty band (default: the scene's ``acceptance["bands"]``).

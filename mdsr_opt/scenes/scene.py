@@ -204,7 +204,7 @@ class Scene:
         A cyclic sequence of cases played on ONE shared muscle layout (:func:`~mdsr_opt.scenes.gaitrun.run_gait`).
     acceptance : dict
         What a case's design must show to succeed (:func:`check_acceptance`): ``max_difference`` (a fraction
-        of the size, default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`), ``idle_contraction``
+        of the body's diameter, default :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE`), ``idle_contraction``
         (muscles designed below it are dropped, default
         :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`) and ``bands`` (compute the strokes'
         uncertainty bands, default :data:`~mdsr_opt.synthesis.acceptance.BANDS`).
@@ -345,7 +345,7 @@ class Scene:
 
 # ---------------------------------------------------------------------------------------------- resolution
 def check_acceptance(acceptance, label: str = "acceptance") -> dict:
-    """A scene's ``acceptance`` with every key filled in: ``max_difference`` (> 0, a fraction of the size),
+    """A scene's ``acceptance`` with every key filled in: ``max_difference`` (> 0, a fraction of the diameter),
     ``idle_contraction`` (in [0, 1)) and ``bands`` (bool). TypeError/ValueError naming ``label`` and the key
     otherwise (an unknown key too)."""
     from ..synthesis.acceptance import (BANDS, IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,

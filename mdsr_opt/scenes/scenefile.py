@@ -101,7 +101,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
                                               # animations; design by method "derivative-free"), optional
                                               # contact_gap = a length
         [acceptance]                          # optional: what a case's design must show to succeed
-        max_difference = 0.05                 # difference over the size (default 0.05)
+        max_difference = 0.05                 # difference over the body's diameter (default 0.05)
         idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)
         bands = true                          # strokes' uncertainty bands (default false)
 

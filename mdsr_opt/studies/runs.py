@@ -18,6 +18,7 @@ from ..core.errors import InputError
 from ..core.progress import advance, expect
 from ..core.results import format_value, to_jsonable
 from ..mechanics.align import align
+from ..mechanics.anchors import point_diameter
 from ..mechanics.model import get_model, spring_parameters
 from ..scenes.rundir import check_interrupt
 from ..synthesis.verify import check_minimum
@@ -385,7 +386,8 @@ def interpolate(points: np.ndarray, triangles: np.ndarray, values: np.ndarray, q
 def state_error(points: np.ndarray, x: np.ndarray, ref_points: np.ndarray, ref_triangles: np.ndarray,
                 ref_x: np.ndarray, free_body: bool = False, mirror=None) -> float:
     """Largest node distance between state ``x`` (on rest ``points``) and the reference state interpolated at
-    those rest points, over the reference body's size (its bounding-box diagonal). ``free_body``: compare
+    those rest points, over the reference body's size (its diameter at rest, the largest distance between two
+    of its nodes: the same however the body is turned, as ``mdsr run``'s). ``free_body``: compare
     after the best rigid motion of ``x`` onto the reference (internal driving has no fixed frame).
 
     ``mirror``: a reflection ``(k, 2) -> (k, 2)`` that maps the problem (rest body and loads) onto itself;
@@ -398,7 +400,7 @@ def state_error(points: np.ndarray, x: np.ndarray, ref_points: np.ndarray, ref_t
     x = np.asarray(x, dtype=float)
     if free_body:
         x = align(x, y).apply(x)
-    size = float(np.linalg.norm(np.ptp(np.asarray(ref_points), axis=0)))
+    size = point_diameter(ref_points)
     return float(np.linalg.norm(x - y, axis=1).max() / size)
 
 

@@ -10,7 +10,9 @@ robot. Two outcomes used to pass unnoticed:
   designs again, and says so (:class:`DroppedMuscle`); when every muscle is idle the design does not move
   the body and is no success.
 - a difference to the target larger than a stated fraction of the body's size: :data:`MAX_DIFFERENCE`,
-  the default bound of :func:`difference_failure`, with which ``mdsr run`` fails a case.
+  the default bound of :func:`difference_failure`, with which ``mdsr run`` fails a case. The size is the
+  body's diameter at rest (:func:`~mdsr_opt.mechanics.anchors.body_size`), which does not change when the
+  body is rotated (the bounding-box diagonal ``mesh.size`` of a square grows by 41 % turned 45 degrees).
 - a design that barely moves the body: a target close to the rest shape is within that fraction of the size
   even when every muscle does nothing, so :func:`difference_failure` also compares the design's difference
   with the rest shape's (the "do nothing" design) and fails a design that covers less than
@@ -45,8 +47,8 @@ __all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "Dropp
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
 
-#: the largest difference to the target, as a fraction of the body's size (``mesh.size``), with which a
-#: case of ``mdsr run`` is a success
+#: the largest difference to the target, as a fraction of the body's size (its diameter at rest,
+#: :func:`~mdsr_opt.mechanics.anchors.body_size`), with which a case of ``mdsr run`` is a success
 MAX_DIFFERENCE = 0.05
 
 #: the least fraction of the rest shape's difference to the target a design must remove (``1 - D / D_rest``)
@@ -111,6 +113,8 @@ def difference_failure(difference: float, size: float, max_difference: float = M
                        min_progress: float = MIN_PROGRESS) -> str:
     """Why a design's ``difference`` (a length) to its target fails, or ``""`` when it passes.
 
+    ``size`` is the body's size, a length: its diameter at rest (:func:`~mdsr_opt.mechanics.anchors.body_size`,
+    the same however the body is turned) wherever ``mdsr run`` and the design tools judge a design.
     It fails when it is above ``max_difference * size``, and, given ``rest_difference`` (the rest shape's
     difference to the same target, with the same weights), when it removes less than ``min_progress`` of it:
     ``difference > (1 - min_progress) * rest_difference``; a target within :data:`REST_TOLERANCE` of the

@@ -24,6 +24,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_options, keyword_names, positive_float, positive_int
 from ..core.quantities import BODY_UNITS, length_unit
 from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
+from ..mechanics.anchors import body_size
 from .acceptance import MAX_DIFFERENCE, check_max_difference, difference_failure
 from .layouts import check_budget
 from .poses import PosesResult
@@ -402,7 +403,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     # a keyframe reaches its pose when the pose's design succeeded on the layout, passes the acceptance
     # rule (within max_difference, and removing a part of the rest shape's difference) and its frame solved
     kd = np.array([0.0 if s == "rest" else float(layout.differences[layout.index(s)]) for s in seq])
-    reasons = [_unreached(layout, s, kd[i], mesh.size, max_difference, units, bool(ok[kf[i]]))
+    reasons = [_unreached(layout, s, kd[i], body_size(mesh), max_difference, units, bool(ok[kf[i]]))
                for i, s in enumerate(seq)]
     reached = np.array([not r for r in reasons], dtype=bool)
     why = dict.fromkeys(f"{s}: {r}" + (f" ({layout.status[layout.index(s)]})" if r.endswith("failed") else "")

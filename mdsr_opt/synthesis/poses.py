@@ -80,6 +80,7 @@ from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import as_float_array, check_label, check_options, keyword_names
 from ..core.quantities import check_length_unit
 from ..mechanics.align import difference, node_weights
+from ..mechanics.anchors import body_size
 from .acceptance import difference_failure
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
@@ -549,7 +550,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             A[k, on], S[k, on], T[k, on] = d.contractions, st, tn
             D[k], ok[k] = d.difference, d.success
             status.append(str(d.status))
-            why = difference_failure(D[k], mesh.size, math.inf, units, rest_difference=Drest[k])
+            why = difference_failure(D[k], body_size(mesh), math.inf, units, rest_difference=Drest[k])
             if ok[k] and why:  # converged and verified, but the layout barely moves the body towards this pose
                 ok[k] = False
                 status[-1] += f"; {why}"

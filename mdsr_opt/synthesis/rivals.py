@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..mechanics.anchors import body_size
 from .problem import ForwardSolver, DesignProblem
 
 _LOG = logging.getLogger(__name__)
@@ -57,7 +58,7 @@ class _Outer:
         self._said = now
         d = self.history[-1][1] if self.history else None
         best = "none yet" if d is None else \
-            f"{d * self.length:.4g} ({100 * d / self.prob.mesh.size:.3g} % of the body's size)"
+            f"{d * self.length:.4g} ({100 * d / body_size(self.prob.mesh):.3g} % of the body's size)"
         _LOG.info("design: %d forward solve(s) in %.0f s, best difference so far %s (%d failed)", self.n_eval,
                   now - self._started, best, len(self.failures))
 
