@@ -16,6 +16,7 @@ from .body.muscles import Muscle as Muscle
 
 # mechanics: equilibria of external and internal driving, stability, alignment
 from .mechanics.align import align as align, difference as difference, node_weights as node_weights
+from .mechanics.anchors import body_size as body_size
 from .mechanics.backends import available_backends as available_backends
 from .mechanics.drags import RigidDrag as RigidDrag
 from .mechanics.equilibrium import (
