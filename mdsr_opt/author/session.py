@@ -2,8 +2,9 @@
 
 Everything numerical goes through the public API: :func:`~mdsr_opt.solve_external` for the equilibria,
 :func:`~mdsr_opt.contraction_graph` and :func:`~mdsr_opt.synthesis.routing.route_for_design` (the routing
-``mdsr run`` makes) for the muscles, :func:`~mdsr_opt.design_contractions` for the design. The session keeps one mesh for its whole life, so
-:func:`~mdsr_opt.get_model` builds the energy model once and every drag is a repeated solve.
+``mdsr run`` makes) for the muscles, :func:`~mdsr_opt.design_contractions` for the design. The session keeps
+one mesh for its whole life, so :func:`~mdsr_opt.get_model` builds the energy model once and every drag is a
+repeated solve.
 
 Two kinds of solve:
 
@@ -508,9 +509,9 @@ class Session:
         # routed as mdsr run routes: route_for_design with its fallbacks, the scene's n_seeds or the default; a
         # knob is given only where the page changed it from the scene's (or the default), since route_for_design
         # keeps a given K_a as given
-        shown = dict(routing_defaults(), **{k: v for k, v in self.routing_options.items() if k in ("K_a", "K_b")})
+        defaults = routing_defaults()
         for k, v in (("K_a", float(K_a)), ("K_b", float(K_b))):
-            if k in self.routing_options or v != shown[k]:
+            if k in self.routing_options or v != defaults[k]:
                 opts[k] = v
         opts["max_muscles"] = max_muscles
         if max_muscles is None:

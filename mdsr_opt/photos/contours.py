@@ -384,8 +384,8 @@ def contour_from_image(image: ArrayLike | str | os.PathLike, *, roi: Sequence[in
     ------
     ValueError
         No contour, several separate blobs (unless ``largest``), a body that touches the image's border
-        (unless ``largest`` or ``roi``) or the roi's next to specks (unless ``largest``), a mask that fills the search region, or bad options. See
-        :func:`load_image` for the image errors.
+        (unless ``largest`` or ``roi``) or the roi's next to specks (unless ``largest``), a mask that fills
+        the search region, or bad options. See :func:`load_image` for the image errors.
     TypeError
         A non-integer ``kernel`` or a non-bool flag.
 

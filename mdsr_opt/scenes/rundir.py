@@ -230,14 +230,22 @@ def _under(name: str, tops: Iterable[str]) -> bool:
     return any(name == t or name.startswith(t + "/") for t in tops)
 
 
-def _remove_if_empty(folder: Path) -> None:
-    """Remove ``folder``'s sub-folders that hold no file, deepest first, and ``folder`` if that empties it."""
-    subs = [q for q in folder.rglob("*") if q.is_dir()] if folder.is_dir() else []
-    for q in sorted(subs, key=lambda q: len(q.parts), reverse=True) + [folder]:
-        try:
-            q.rmdir()
-        except OSError:  # not empty, or gone
-            pass
+def _inside(folder: Path, q: Path) -> bool:
+    """Whether ``q``'s parent is ``folder`` or lies in it, symbolic links resolved."""
+    root, parent = os.path.realpath(folder), os.path.realpath(q.parent)
+    return parent == root or parent.startswith(root + os.sep)
+
+
+def _remove_empty_folders(folder: Path, names: Iterable[str]) -> None:
+    """Remove the folders ``names`` (relative to ``folder``) that are empty, deepest first, so a folder whose
+    sub-folders all go goes too; nothing reached through a symbolic link, nothing outside ``folder``."""
+    for name in sorted(names, key=lambda n: -n.count("/")):
+        q = folder / name
+        if _inside(folder, q) and q.is_dir() and not q.is_symlink():
+            try:
+                q.rmdir()
+            except OSError:  # not empty: it holds files that are not this command's
+                pass
 
 
 def _journal(folder: Path) -> list[str]:
@@ -520,23 +528,11 @@ class RunFolder:
     def _remove_earlier(self, old: _Earlier) -> None:
         """Remove the files ``old`` lists, then the folders it made that are left empty; nothing that lies
         outside this folder (through a symbolic link) and nothing else."""
-        root = os.path.realpath(self.path)
-
-        def inside(q: Path) -> bool:
-            parent = os.path.realpath(q.parent)
-            return parent == root or parent.startswith(root + os.sep)
-
         for name in old.files:
             q = self.path / name
-            if inside(q) and (q.is_symlink() or q.is_file()):
+            if _inside(self.path, q) and (q.is_symlink() or q.is_file()):
                 q.unlink()
-        for name in sorted(old.dirs, key=lambda n: -n.count("/")):
-            q = self.path / name
-            if inside(q) and q.is_dir() and not q.is_symlink():
-                try:
-                    q.rmdir()
-                except OSError:  # not empty: it holds files that are not the earlier command's
-                    pass
+        _remove_empty_folders(self.path, old.dirs)
 
     def finish(self, status: str = "complete") -> None:
         """Record the command's final status (``"complete"``, ``"failed: ..."``) in the manifest."""
@@ -585,8 +581,7 @@ class RunFolder:
                     status = f"failed: {exc_type.__name__}: {exc}"[:300]
                 files, dirs = self._written()
                 if exc_type is not None:  # a stopped command leaves no empty folder of its own
-                    for d in dirs:
-                        _remove_if_empty(self.path / d)
+                    _remove_empty_folders(self.path, dirs)
                     dirs = [d for d in dirs if (self.path / d).is_dir()]
                 self._manifest.update(status=status, finished=time.strftime("%Y-%m-%d %H:%M:%S"), files=files,
                                       dirs=dirs)
