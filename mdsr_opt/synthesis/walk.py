@@ -56,6 +56,7 @@ from ..body.muscles import check_distinct_ropes, check_muscles
 from ..core.checks import as_float_array, positive_int
 from ..core.guards import check_stop
 from ..core.results import to_jsonable
+from ..mechanics.align import align
 from ..mechanics.anchors import check_anchor_radius
 from ..mechanics.units import Units
 from .walkframe import MAX_MOVE, FrameSolver
@@ -289,13 +290,9 @@ def _eps_path(eps: float) -> list:
 
 def place_rigidly(y, x0, weights) -> np.ndarray:
     """``y`` (2n,) moved rigidly to where ``sum_k w_k |y_k - x0_k|^2`` is least (weighted Procrustes, weights
-    (n,)): the weighted centroid onto ``x0``'s and the best-fit rotation undone (:func:`rigid_motion`)."""
+    (n,): :func:`~mdsr_opt.mechanics.align.align`)."""
     Y, X0 = np.asarray(y, float).reshape(-1, 2), np.asarray(x0, float).reshape(-1, 2)
-    w = np.asarray(weights, float) / np.sum(weights)
-    d, a = rigid_motion(X0, Y, w)
-    c, s = np.cos(a), np.sin(a)
-    cy = w @ Y
-    return ((Y - cy) @ np.array([[c, -s], [s, c]]) + (cy - d)).reshape(-1)
+    return align(Y, X0, weights).apply(Y).reshape(-1)
 
 
 def _frame(fs, x, s_from, s_to, substeps, un, muN, eps, rho, w, depth: int = 0, place=None):
