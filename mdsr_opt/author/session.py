@@ -58,7 +58,7 @@ __all__ = ["Session", "SolveReport", "MAX_NODES", "design_defaults", "routing_de
 
 #: Largest mesh the page will build (node count), to keep a typo from freezing the server.
 MAX_NODES = 20000
-#: Coordinates farther than this many body sizes from the body are refused.
+#: Coordinates farther than this many body diameters (:func:`body_size`) from the body are refused.
 FAR = 1e3
 
 
@@ -233,10 +233,10 @@ class Session:
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{what}: coordinates must be finite numbers (got NaN or infinity)")
         c = self.mesh.points.mean(0)
-        far = np.abs(a - c).max()
-        if far > FAR * self.mesh.size:
+        far, size = np.abs(a - c).max(), body_size(self.mesh)
+        if far > FAR * size:
             raise ValueError(f"{what}: coordinate {far:.3g} away from the body is too large "
-                             f"(limit {FAR:g} body sizes = {FAR * self.mesh.size:.3g})")
+                             f"(limit {FAR:g} body sizes = {FAR * size:.3g})")
         return a
 
     def set_fixed(self, anchors, drag_nodes, drag_positions) -> None:
