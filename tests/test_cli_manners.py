@@ -62,3 +62,33 @@ def test_photograph_names_the_case_folders_of_a_run_folder(tmp_path, capsys):
     assert not (tmp_path / "img").exists()
     assert main(["photograph", str(tmp_path / "run" / "bend"), "--out", str(tmp_path / "img")]) == 0
     assert (tmp_path / "img" / "driven.png").is_file()
+
+
+@pytest.mark.parametrize("how", ["script", "stdin"])
+def test_main_called_from_an_unguarded_script_or_stdin_runs_once_without_a_pool(tmp_path, how):
+    """A pool's workers run the main script again as they start (and cannot run standard input at all): main()
+    called from such a script keeps mdsr run's jobs in its own process (trial9 #6: a broken pool reported as a
+    bug from stdin, a nested run in every worker from a script without a main guard)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = ("import os\n"
+            "from mdsr_opt.cli.main import main\n"
+            "print('START', os.getpid(), flush=True)\n"
+            "print('CODE', main(['-q', 'run', 'one_muscle', '--resolution', 'coarse', '--case', 'a30',\n"
+            "                    '--no-photos', '--no-animations', '--out', 'out']), flush=True)\n")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]), OPENBLAS_NUM_THREADS="1")
+    if how == "script":
+        (tmp_path / "go.py").write_text(code)
+        proc = subprocess.run([sys.executable, "go.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=300)
+    else:
+        proc = subprocess.run([sys.executable, "-"], input=code, cwd=tmp_path, env=env, capture_output=True,
+                              text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.count("START") == 1 and "CODE 0" in proc.stdout, (proc.stdout[-2000:], proc.stderr[-2000:])
+    assert "internal error" not in proc.stderr and "BrokenProcessPool" not in proc.stderr, proc.stderr[-2000:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["out"] + (["go.py"] if how == "script" else []))
+    assert (tmp_path / "out" / "a30" / "design.png").is_file()

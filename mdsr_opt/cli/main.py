@@ -26,6 +26,7 @@ import signal
 import sys
 
 from .. import __version__
+from ..core.jobs import main_is_plain_script
 
 
 #: the modules that register subcommands (each has ``add_cli(sub)``) and the subcommands each one adds, in
@@ -156,16 +157,28 @@ def main(argv: list[str] | None = None) -> int:
     0: success; 1: the command ran but something it checked failed (a solve, a case), or a bug of the package
     (its traceback on stderr); 2: bad input or an unusable file or folder (one line on stderr, nothing
     written); 130: interrupted by Ctrl-C; 143: stopped by SIGTERM.
+
+    Called from a plain script file (``python my_script.py``) or from standard input, ``mdsr run`` works in
+    this one process, as with ``--serial``: the worker processes of its pool would run the script again
+    (:func:`~mdsr_opt.core.jobs.main_is_plain_script`). The ``mdsr`` program and ``python -m mdsr_opt`` use
+    the pool.
     """
+    return _main(argv, console=False)
+
+
+def _main(argv: list[str] | None, console: bool) -> int:
+    """:func:`main`; ``console``: run as the ``mdsr`` program (:func:`console_main`), whose workers may start
+    from its guarded entry point."""
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
-    return _run(build_parser(command_of(argv)), argv)
+    return _run(build_parser(command_of(argv)), argv, pool=console or not main_is_plain_script())
 
 
-def _run(parser, argv: list[str]) -> int:
-    """:func:`main` once its parser is built."""
+def _run(parser, argv: list[str], pool: bool = True) -> int:
+    """:func:`main` once its parser is built; ``pool``: whether a command may start worker processes."""
     args = parser.parse_args(argv)
     args.command_line = " ".join(["mdsr", *argv])
+    args.pool = pool
     args.log_verbose += getattr(args, "sub_verbose", 0)  # `mdsr -v run ...` is `mdsr run ... -v`
     args.log_quiet = args.quiet = args.log_quiet or getattr(args, "sub_quiet", False)
     configure_logging(args.log_verbose, args.log_quiet)
@@ -201,7 +214,7 @@ def console_main() -> int:
     arguments. Returns :func:`main`'s exit code; 130 with one line when Ctrl-C comes before the command
     runs (while its modules import), as it does once the command runs."""
     try:
-        return main()
+        return _main(None, console=True)
     except KeyboardInterrupt:
         print("\nmdsr: interrupted (Ctrl-C) before the command started; nothing written", file=sys.stderr)
         return 130

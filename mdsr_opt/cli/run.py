@@ -87,7 +87,7 @@ def _cmd_run(a) -> int:
                 code = int(module.run_figure(a.out, resolution=a.resolution or "medium", log=log, **extra))
             folder.finish("complete" if code == 0 else "complete, some designs failed")
         return code
-    parallel = not a.serial and not (a.no_figures and a.no_photos)
+    parallel = getattr(a, "pool", True) and not a.serial and not (a.no_figures and a.no_photos)
     # the folder first (a busy or used --out is refused before any work), then one pool of worker processes
     # for every scene's jobs, shut down before the folder is released
     with RunFolder(a.out, overwrite=a.overwrite, command=getattr(a, "command_line", "")) as folder, \
