@@ -31,9 +31,10 @@ the per-stage clock's total (``run_scene``). The medians per stage are printed a
 to ``run.csv`` and drawn as a stacked bar chart ``run.png`` (``run_<label>.*`` with ``--label``; in ``--out``,
 default ``bench_out``). ``--cli`` additionally times the command itself (``python -m mdsr_opt run NAME``,
 imports and scene building included, with the modules' bytecode written first as an installation has it),
-the median of ``--repeats`` runs (at most 3) per scene, with its CPU time (``cli cpu``: the command's and its
-figure jobs'), and ``--all`` times ``mdsr run all`` once. ``--against REF`` runs the command as committed at ``REF`` too,
-alternating with this tree, ``--repeats`` times each, and prints both medians and their ratio.
+the median of ``--repeats`` runs (at most 3) per scene, with its CPU time (``cli cpu``: that of the command's
+process and of the processes it reaped, see :func:`time_cli`), and ``--all`` times ``mdsr run all`` once.
+``--against REF`` runs the command as committed at ``REF`` too, alternating with this tree, ``--repeats`` times
+each, and prints both medians and their ratio.
 
 The package and the problem library are imported from the source tree this script lives in (or ``--tree``,
 e.g. an exported older commit, to measure before and after with the same script).
@@ -219,7 +220,11 @@ def compile_tree(root: Path) -> None:
 def time_cli(args: list[str], root: Path | None = None) -> tuple[float, float]:
     """``(wall, cpu)`` seconds of ``python -m mdsr_opt -q run ARGS --out <tmp>`` (imports included), from the
     tree ``root`` (default: the measured one), with the tree's bytecode written (:func:`compile_tree`); ``cpu``
-    is the command's user and system time with its figure jobs' (every process it forked and reaped)."""
+    is the user and system time of the command's process and of the processes it reaped. The worker processes
+    of a ``forkserver`` pool (Linux) are children of the pool's server, which the command never reaps: their
+    CPU, and the server's, are not in ``cpu``, so it is the command's own process only, while a tree whose job
+    processes the command reaps itself (a fork server of the command's own) counts them: compare such trees by
+    wall time, or by the CPU of ``--serial`` runs (every job in the command's process)."""
     import resource
 
     root = Path(os.environ["MDSR_PROBLEMS"]).parent if root is None else Path(root)
@@ -322,7 +327,8 @@ def main(argv=None) -> int:
             results[name]["cli"], results[name]["cli cpu"] = got["now"]["wall"], got["now"]["cpu"]
             results[name]["cli ref"], results[name]["cli ref cpu"] = got["ref"]["wall"], got["ref"]["cpu"]
             print(f"  {name}: `mdsr run {name}` {got['now']['wall']:.2f} s wall (fastest {got['now']['min']:.2f}), "
-                  f"CPU {got['now']['cpu']:.2f} s; at {a.against} {got['ref']['wall']:.2f} s (fastest "
+                  f"CPU {got['now']['cpu']:.2f} s (the command and what it reaped); at {a.against} "
+                  f"{got['ref']['wall']:.2f} s (fastest "
                   f"{got['ref']['min']:.2f}), CPU {got['ref']['cpu']:.2f} s: ratio "
                   f"{got['now']['wall'] / got['ref']['wall']:.2f}; medians of {a.repeats} alternating runs ({load()})")
         elif a.cli:  # the command's wall clock is as noisy as the runs': the median of --repeats (at most 3)
@@ -330,8 +336,8 @@ def main(argv=None) -> int:
             results[name]["cli"] = statistics.median(t for t, _ in runs)
             results[name]["cli cpu"] = statistics.median(c for _, c in runs)
             print(f"  {name}: `mdsr run {name}` {results[name]['cli']:.2f} s wall, median of "
-                  + ", ".join(f"{t:.2f}" for t, _ in runs) + f"; CPU {results[name]['cli cpu']:.2f} s, its figure "
-                  f"jobs' included ({load()})")
+                  + ", ".join(f"{t:.2f}" for t, _ in runs) + f"; CPU {results[name]['cli cpu']:.2f} s of the command "
+                  f"and the processes it reaped ({load()})")
     t_all = None
     if a.all and ref_root is not None:  # this tree and REF, alternating: medians of --repeats runs each
         got = {"now": [], "ref": []}
