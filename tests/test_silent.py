@@ -105,6 +105,30 @@ def test_a_contraction_at_a_max_is_flagged_and_warned():
     assert free.saturated.tolist() == [False]
 
 
+def test_a_contraction_at_its_end_fixtures_cap_is_saturated_too():
+    """A rope's contraction capped below a_max by its end fixtures (2 r + wall of rope kept between them) is as
+    much the best within a bound as one at a_max: flagged, named in the warning, kept through to_dict (trial9
+    #2: the status said so, `saturated` and the warnings did not)."""
+    from mdsr_opt.synthesis.results import DesignResult
+
+    mesh = Mesh.rectangle(4.0, 1.0, 32, 8)
+    P = mesh.points
+    rope = Muscle(sorted(np.flatnonzero((P[:, 1] < 1e-9) & (P[:, 0] > 0.5 - 1e-9) & (P[:, 0] < 2.0 + 1e-9)),
+                         key=lambda i: P[i, 0]))
+    target = solve_internal(mesh, MAT, [rope], [0.5], anchor_radius=0.05).x
+    cap = 1.0 - (2 * 0.3 + 0.6) / 1.5   # the rope is 1.5 long: 1.2 of it stays between the fixtures
+    with pytest.warns(MuscleWarning, match=r"M1 \(a = 0\.2, the most its rope can shorten between its end fixtures\)"):
+        res = design_contractions(mesh, MAT, [rope], target, anchor_radius=0.3, fixture_wall=0.6)
+    assert res.success and abs(res.contractions[0] - cap) < 1e-6 and abs(res.bounds[0] - cap) < 1e-9
+    assert res.saturated.tolist() == [True] and res.capped.tolist() == [True]
+    back = DesignResult.from_dict(json.loads(json.dumps(res.to_dict())))
+    assert back.saturated.tolist() == [True] and back.capped.tolist() == [True]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MuscleWarning)  # a wall that leaves room: below its cap, no warning
+        free = design_contractions(mesh, MAT, [rope], target, anchor_radius=0.3, fixture_wall=0.1)
+    assert free.saturated.tolist() == [False] and free.contractions[0] < free.bounds[0] - 1e-2
+
+
 def test_the_pipeline_warns_once_for_the_design_it_keeps():
     mesh = strip()
     lower, upper = lower_upper(mesh)

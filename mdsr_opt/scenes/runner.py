@@ -24,7 +24,7 @@ from ..body.muscles import Muscle
 from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
-from .verdict import design_verdict, plain_failure
+from .verdict import design_verdict, plain_failure, saturation_line
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
@@ -396,7 +396,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"strokes [{st}] {u}, tensions [{tn}] {res.tension_unit}, difference {res.difference:.3g} {u} "
         f"({100 * rep.relative_difference:.2f} % of size), {verdict} ({rep.times['design']:.1f} s)")
     if rep.saturated:
-        say(f"{prefix}saturated at a_max = {res.a_max:g}: {', '.join(map(str, rep.saturated))}")
+        say(prefix + saturation_line(res))
     if accept["bands"] and res.success:
         _bands(scene, run, opts, say, prefix)
     if photo:

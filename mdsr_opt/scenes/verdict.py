@@ -17,7 +17,7 @@ import re
 
 from ..core.results import one_line
 
-__all__ = ["design_verdict", "failure_cause", "plain_failure"]
+__all__ = ["design_verdict", "failure_cause", "plain_failure", "saturation_line"]
 
 #: the longest cause a cell shows (the whole reason is in the run's log, its FAILED lines and summary.json)
 MAX_CAUSE = 90
@@ -145,3 +145,11 @@ def design_verdict(case) -> str:
     if getattr(case, "fabrication", None):
         notes.append("not mouldable as laid out")
     return ("ok" if case.success else "FAILED") + (f" ({'; '.join(notes)})" if notes else "")
+
+
+def saturation_line(design) -> str:
+    """The log line naming a design's saturated muscles (:attr:`~mdsr_opt.synthesis.results.DesignResult.
+    saturated`), those stopped by their end fixtures' cap below ``a_max`` marked ``(fixture cap)``."""
+    capped = design.capped
+    names = [f"{n}{' (fixture cap)' if c else ''}" for n, s, c in zip(design.names, design.saturated, capped) if s]
+    return f"saturated at a_max = {design.a_max:g}{' or their fixture cap' if capped.any() else ''}: {', '.join(names)}"

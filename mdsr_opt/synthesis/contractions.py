@@ -315,12 +315,17 @@ def _design_from(args, warm, clock0) -> DesignResult:
 
 def warn_saturated(res: DesignResult, muscles) -> None:
     """Warn (:class:`~mdsr_opt.synthesis.results.MuscleWarning`) naming the muscles of ``res`` whose
-    contraction is at ``a_max`` (:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated`)."""
-    sat = np.flatnonzero(res.saturated)
-    names = ", ".join(f"{muscle_label(muscles[i], i)} (a = {res.contractions[i]:.4g})" for i in sat)
-    warnings.warn(f"muscle(s) {names} saturated at a_max = {res.a_max:g}: the design is the best within the "
-                  "bound, not the target; raise a_max, add muscles or accept the difference "
-                  f"{res.difference:.3g}", MuscleWarning, stacklevel=5)
+    contraction is at its bound, ``a_max`` or its end fixtures' cap
+    (:attr:`~mdsr_opt.synthesis.results.DesignResult.saturated`)."""
+    sat, capped = np.flatnonzero(res.saturated), res.capped
+    names = ", ".join(f"{muscle_label(muscles[i], i)} (a = {res.contractions[i]:.4g}"
+                      + (", the most its rope can shorten between its end fixtures)" if capped[i] else ")")
+                      for i in sat)
+    how = "raise a_max, add muscles" if not capped[sat].all() else "add muscles, give smaller end fixtures"
+    bound = f"their bound (a_max = {res.a_max:g}, or their end fixtures' cap)" if capped.any() else \
+        f"a_max = {res.a_max:g}"
+    warnings.warn(f"muscle(s) {names} saturated at {bound}: the design is the best within the bound, not the "
+                  f"target; {how} or accept the difference {res.difference:.3g}", MuscleWarning, stacklevel=5)
 
 
 def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, inner_tol, derivatives, clock0,
@@ -388,7 +393,7 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
                        initial_contractions=np.asarray(a0, dtype=float).copy(), initial_difference=float(d0),
                        a_max=prob.a_max, muscle_model=prob.muscle_model, stiffness=prob.stiffness, history=list(hist),
                        anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy(),
-                       rest_mesh=mesh_fingerprint(mesh))
+                       rest_mesh=mesh_fingerprint(mesh), a_upper=np.asarray(prob.a_upper, dtype=float).copy())
     report_muscles(prob, res, x, kappa)
     if method != "flattened" and prob.muscle_model == "cable" and res.slack.any():
         # any contraction below the one its path reached leaves a rope slack with the same shape: report

@@ -138,6 +138,10 @@ class DesignResult:
         Difference of the warm-start state.
     a_max : float
         Upper bound on the contractions.
+    a_upper : (m,) ndarray
+        Each muscle's own upper bound: ``a_max``, or less where its end fixtures cap it (the most its rope
+        can shorten with ``2 anchor_radius + fixture_wall`` of rope kept between them); empty when not
+        recorded (then ``a_max`` for every muscle).
     muscle_model : str
         ``"cable"`` (the exact rope) or ``"springs"``.
     stiffness : float
@@ -222,6 +226,7 @@ class DesignResult:
     stress_unit: str | None = None
     fixture_wall: float | None = None
     held: tuple | None = None
+    a_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def contact(self) -> dict | None:
@@ -238,10 +243,23 @@ class DesignResult:
         return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
 
     @property
+    def bounds(self) -> np.ndarray:
+        """(m,) each muscle's upper bound: :attr:`a_upper` where recorded, else ``a_max``."""
+        m = len(self.contractions)
+        up = np.asarray(self.a_upper, dtype=float).reshape(-1)
+        return up.copy() if len(up) == m else np.full(m, float(self.a_max))
+
+    @property
     def saturated(self) -> np.ndarray:
-        """(m,) bool: the muscle's contraction is at ``a_max`` (within :data:`SATURATION_TOL`)."""
+        """(m,) bool: the muscle's contraction is at its upper bound (within :data:`SATURATION_TOL`): ``a_max``,
+        or the cap its end fixtures set (:attr:`a_upper`). Either way the design is the best within the bound."""
         a = np.asarray(self.contractions, dtype=float)
-        return np.isfinite(a) & (a >= float(self.a_max) - SATURATION_TOL)
+        return np.isfinite(a) & (a >= self.bounds - SATURATION_TOL)
+
+    @property
+    def capped(self) -> np.ndarray:
+        """(m,) bool: the muscle is :attr:`saturated` at a cap of its end fixtures below ``a_max``."""
+        return self.saturated & (self.bounds < float(self.a_max) - SATURATION_TOL)
 
     @property
     def names(self) -> tuple:
@@ -362,7 +380,7 @@ class DesignResult:
              for k, v in d.items()}
         for k in ("contractions", "x", "rotation", "translation", "initial_contractions"):
             d[k] = np.asarray(d[k], dtype=float)
-        for k in ("rest_lengths", "achieved", "stroke", "tension"):
+        for k in ("rest_lengths", "achieved", "stroke", "tension", "a_upper"):
             if k in d:
                 d[k] = np.asarray([np.nan if v is None else v for v in d[k]], dtype=float)
         if "slack" in d:
