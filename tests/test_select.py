@@ -74,3 +74,26 @@ def test_a_scene_region_whose_polygon_encloses_nothing_is_named_by_its_field(tmp
                                              r"one line"):
         load_scene(scene)
     assert main(["run", str(scene), "--out", str(tmp_path / "o")]) == 2 and not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.7])
+def test_an_edge_path_follows_its_drawn_line_not_a_straight_outline_beside_it(angle):
+    """A rope drawn 4 mm inside the straight top edge of an unstructured 80 x 30 mm plate with a window: the plain
+    shortest edge path ran along the outline for most of its length (trial9 #7: 22 of 31 nodes on it); the path
+    now stays within an edge or so of the drawn line, at any orientation, and is still a simple path."""
+    c, s = math.cos(angle), math.sin(angle)
+    R = np.array([[c, -s], [s, c]])
+    outline = np.array([[0, 0], [80, 0], [80, 30], [0, 30]], float) @ R.T
+    window = np.array([[20, 8], [40, 8], [40, 18], [20, 18]], float) @ R.T
+    mesh = Mesh.from_polygon(outline, holes=[window], max_area=3.0)
+    a, b = np.array([6.0, 26.0]) @ R.T, np.array([66.0, 26.0]) @ R.T
+    rope = edge_path(mesh, [a, b])
+    P = mesh.points[list(rope.nodes)]
+    u = (b - a) / np.linalg.norm(b - a)
+    off = np.abs((P - a) @ np.array([-u[1], u[0]]))          # distance of each node from the drawn line
+    h = float(mesh.edge_lengths.mean())
+    assert off.max() < 1.5 * h, (off.max(), h)
+    top = np.abs((P - outline[3]) @ (R @ [0.0, 1.0]))          # distance from the top edge's line
+    assert top.min() > 4.0 - 1.5 * h                          # never on the outline, 4 mm away
+    assert len(set(rope.nodes)) == len(rope.nodes)
+    assert rope.rest_length(mesh) < 1.2 * np.linalg.norm(b - a)  # a zig-zag, not a detour

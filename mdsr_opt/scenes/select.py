@@ -107,8 +107,11 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
 
     The waypoints are snapped to their nearest nodes (boundary nodes with ``boundary``), each of which must
     lie within ``tol`` (default: one mean edge length) of its waypoint, else a ``ValueError`` names the
-    waypoint and the distance; consecutive ones are joined by the shortest edge path (Dijkstra on rest edge
-    lengths). The result must be a simple path.
+    waypoint and the distance; consecutive ones are joined by the edge path that follows the straight segment
+    between them: Dijkstra on rest edge lengths, each weighted by ``1 + (d / h)**2`` with ``d`` the distance of
+    the edge's midpoint from the segment and ``h`` the mean edge length. The plain shortest path would run
+    along a straight outline or hole edge near the drawn line rather than through the zig-zag of interior
+    edges on it (a channel on the outline cannot be moulded). The result must be a simple path.
     """
     import networkx as nx
 
@@ -117,12 +120,28 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
         raise ValueError("a muscle path needs at least two waypoints")
     G = edge_graph(mesh)
     ids = [_snap(mesh, p, boundary, tol, f"waypoint {i}") for i, p in enumerate(wp)]
+    P, h = mesh.points, float(mesh.edge_lengths.mean())
     path = [ids[0]]
     for a, b in zip(ids[:-1], ids[1:]):
         if a == b:
             continue
-        path += nx.shortest_path(G, a, b, weight="length")[1:]
+        path += nx.shortest_path(G, a, b, weight=_along(P[a], P[b], P, h))[1:]
     return Muscle(path, name=name)
+
+
+def _along(pa: np.ndarray, pb: np.ndarray, P: np.ndarray, h: float):
+    """:func:`edge_path`'s edge weight between waypoints at ``pa`` and ``pb``: the rest length times ``1 + (d /
+    h)**2``, ``d`` the distance of the edge's midpoint (rest positions ``P``) from the segment."""
+    u = pb - pa
+    uu = max(float(u @ u), 1e-300)
+
+    def weight(i, j, data):
+        m = 0.5 * (P[i] + P[j]) - pa
+        t = min(max(float(m @ u) / uu, 0.0), 1.0)
+        d = m - t * u
+        return data["length"] * (1.0 + float(d @ d) / (h * h))
+
+    return weight
 
 
 def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike | None = None,
