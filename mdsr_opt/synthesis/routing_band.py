@@ -112,9 +112,9 @@ def _turn_moves(P, E, ks, turn_limit: float):
     deg = ptr[t + 1] - ptr[t]                        # moves out of each directed edge's end node
     j1 = np.repeat(np.arange(2 * m), deg)
     j2 = order[np.repeat(ptr[t], deg) + (np.arange(len(j1)) - np.repeat(np.cumsum(deg) - deg, deg))]
-    d1 = P[t[j1]] - P[s[j1]]
-    d2 = P[t[j2]] - P[s[j2]]
-    cos = (d1 * d2).sum(axis=1) / (np.linalg.norm(d1, axis=1) * np.linalg.norm(d2, axis=1))
+    vec = P[t] - P[s]  # each directed edge's vector and length, gathered per move below
+    norm = np.linalg.norm(vec, axis=1)
+    cos = (vec[j1] * vec[j2]).sum(axis=1) / (norm[j1] * norm[j2])
     ok = (t[j2] != s[j1]) & (1.0 - cos <= turn_limit)
     return s, t, j1[ok], j2[ok]
 
