@@ -415,3 +415,27 @@ def test_a_design_the_caller_discards_is_not_polished():
     needs_more = design_contractions(mesh, mat, [pull, along], target,
                                      skip_verification=lambda r: "" if r.difference >= 0 else "never")
     assert needs_more.iterations == both.iterations and needs_more.verification.passed
+
+
+def test_a_pipeline_success_far_from_its_target_says_so(tmp_path):
+    """success means found, verified and stable; a success farther than mdsr run accepts (5 % of the body's
+    diameter) carries the reason and an AcceptanceWarning (trial7, trial9: success=True at 10.8 % of the size)."""
+    from mdsr_opt import body_size
+    from mdsr_opt.synthesis.acceptance import MAX_DIFFERENCE, AcceptanceWarning
+
+    mesh = strip()
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    _, upper = lower_upper(mesh)
+    with pytest.warns(AcceptanceWarning, match=r"verified stable state, but difference .* % of the size"):
+        out = design_pipeline(mesh, MAT, left, {int(i): P[i] + [-1.0, 2.0] for i in right}, muscles=[upper],
+                              a_max=0.1)
+    assert out.success and out.design.difference > MAX_DIFFERENCE * body_size(mesh)
+    assert "more than max_difference 5 %" in out.far_from_target
+    out.save(tmp_path / "far")
+    assert PipelineResult.load(tmp_path / "far").far_from_target == out.far_from_target
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", AcceptanceWarning)   # a reachable target: no word
+        bent = solve_internal(mesh, MAT, [upper], [0.05]).x          # the tip where the muscle itself takes it
+        near = design_pipeline(mesh, MAT, left, {int(i): bent[i] for i in right}, muscles=[upper])
+    assert near.success and near.far_from_target == ""

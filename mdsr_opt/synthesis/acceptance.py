@@ -41,8 +41,8 @@ from ..plot.style import muscle_label, muscle_name
 
 _LOG = logging.getLogger(__name__)
 
-__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "DroppedMuscle", "design_active", "difference_failure",
-           "check_idle_contraction", "check_max_difference"]
+__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
+           "design_active", "difference_failure", "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
@@ -58,6 +58,12 @@ MIN_PROGRESS = 0.1
 
 #: a target nearer the rest shape than this fraction of the size is "the rest shape": no progress is asked
 REST_TOLERANCE = 1e-3
+
+
+class AcceptanceWarning(UserWarning):
+    """A design found and verified (``success``) that lies farther from its target than ``mdsr run`` accepts
+    (:func:`difference_failure` with :data:`MAX_DIFFERENCE` and :data:`MIN_PROGRESS`): a stable state, but not
+    the shape asked for."""
 
 #: whether ``mdsr run`` and the scene runner compute every stroke's uncertainty band unless told
 #: (:func:`~mdsr_opt.synthesis.bands.stroke_bands`: four to five more designs per case, 3-6 times the

@@ -6,6 +6,7 @@ import json
 import logging
 import os
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 import numpy as np
@@ -22,7 +23,9 @@ from ..core.results import compact_repr
 from ..mechanics.equilibrium import check_held
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
-from .acceptance import IDLE_CONTRACTION, DroppedMuscle, design_active
+from ..mechanics.align import difference, node_weights
+from ..mechanics.anchors import body_size
+from .acceptance import IDLE_CONTRACTION, AcceptanceWarning, DroppedMuscle, design_active, difference_failure
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import RoutingWarning, route_for_design
@@ -67,6 +70,13 @@ class PipelineResult:
     fabrication : Fabrication or None
         The channel, wall and fixtures the muscles were routed (``routing.fabrication``) or given for:
         :func:`~mdsr_opt.synthesis.export.export_fabrication` draws them (None: routed without one).
+    far_from_target : str
+        Why ``mdsr run`` would fail this design for its distance to the target
+        (:func:`~mdsr_opt.synthesis.acceptance.difference_failure`: more than
+        :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE` of the body's diameter, or less than
+        :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of the rest shape's difference removed); ``""``
+        when it would not. A success that is far gives an
+        :class:`~mdsr_opt.synthesis.acceptance.AcceptanceWarning`.
     """
 
     mesh: Mesh
@@ -83,10 +93,12 @@ class PipelineResult:
     dropped: tuple = ()
     bands: Any = None
     fabrication: Any = None
+    far_from_target: str = ""
 
     @property
     def success(self) -> bool:
-        """The design succeeded and was verified."""
+        """The design succeeded and was verified (a stable state; how close it comes to the target is
+        :attr:`far_from_target`'s)."""
         return bool(self.design.success)
 
     @property
@@ -130,6 +142,7 @@ class PipelineResult:
             "times": self.times, "dropped_muscles": [m.to_dict() for m in self.dropped],
             "bands": None if self.bands is None else self.bands.to_dict(),
             "fabrication": None if self.fabrication is None else self.fabrication.to_dict(),
+            "far_from_target": self.far_from_target,
         }
 
     def save(self, out: str | os.PathLike) -> str:
@@ -211,7 +224,7 @@ class PipelineResult:
             return cls(mesh=md.mesh, material=material, target=md.x, external=external,
                        muscles=muscles, routing=routing, design=design, times=data.get("times", {}),
                        dropped=dropped, **kw, fabrication=None if data.get("fabrication") is None
-                       else Fabrication(**data["fabrication"]))
+                       else Fabrication(**data["fabrication"]), far_from_target=str(data.get("far_from_target", "")))
         except FileNotFoundError:
             raise
         except KeyError as exc:
@@ -431,8 +444,6 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     _LOG.info("design_pipeline: target solved%s in %.1f s", " with contact" if ckw else "", t1 - t0)
     routing = None
     if muscles is None:
-        import warnings
-
         with warnings.catch_warnings(record=True) as caught:  # the routing's reason, for the error below
             warnings.simplefilter("always", RoutingWarning)
             rr = route_for_design(mesh, ext.x, **ropts)
@@ -470,6 +481,14 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
                          times=times, dropped=dropped,
                          fabrication=routing.fabrication if routing is not None else ropts["fabrication"] or None)
+    w = design_options.get("weights")
+    w = node_weights(mesh, design_options.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
+    out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units,
+                                             rest_difference=float(difference(mesh.points, ext.x, w)))
+    if res.success and out.far_from_target:
+        warnings.warn(f"design_pipeline: the design is a verified stable state, but {out.far_from_target}: "
+                      "mdsr run would fail it (add muscles, lower seed_threshold, or accept it)",
+                      AcceptanceWarning, stacklevel=3)
     if bands and res.success:
         from .bands import stroke_bands
 
