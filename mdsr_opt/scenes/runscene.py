@@ -27,8 +27,11 @@ from .gaitrun import run_gait
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt, RunFolder, noting_interrupts
-from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, measure_prototype, run_case
+from .runner import CaseRun, case_files, case_parts, finite, measure_case, measure_prototype, run_case
 from .scene import Scene, resolve_resolution
+from .scenereport import SceneReport
+from .casefab import write_case_fabrication
+from .verdict import prototype_verdict
 
 __all__ = ['run_scene', 'run_main', 'figure_arguments']
 
@@ -314,6 +317,12 @@ def _finish_scene(scene: Scene, out: Path, names, bg: Jobs, t0: float, runs: dic
 
     with bg:
         bg.wait()  # every case's files are known before the summary lists them
+    for i, cname in enumerate(names):  # the prototype's validations are in: a case it failed fails
+        run = runs[cname]
+        if prototype_verdict(run.report):
+            say(f"[{scene.name} {i + 1}/{len(names)} {cname}] FAILED: {run.report.message}")
+            if figures:  # its fabrication files, drawn while the prototype ran, say so too (the same names)
+                write_case_fabrication(scene, run, out / cname)
     if figures:
         for cname, parts in written.items():
             runs[cname].report.files = case_files(parts, out / cname)

@@ -1,0 +1,74 @@
+"""A scene's run as a whole (:class:`SceneReport`): its cases' reports and its table (``summary.md``, the end
+of ``mdsr run``'s output)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from ..core.results import compact_repr, to_jsonable
+from ..plot.style import unit_label
+from .verdict import design_verdict
+
+__all__ = ["SceneReport"]
+
+
+@dataclass
+class SceneReport:
+    """The outcome of :func:`~mdsr_opt.scenes.runscene.run_scene`: one
+    :class:`~mdsr_opt.scenes.runner.CaseReport` per case, animations, timing, and the scene's length ``units``
+    in which :meth:`table` quotes differences and strokes (``""``: body units)."""
+
+    scene: str
+    title: str
+    n_nodes: int
+    cases: list
+    animations: dict = field(default_factory=dict)
+    out: str = ""
+    time: float = 0.0
+    units: str = ""
+
+    def __repr__(self) -> str:
+        n_ok = sum(bool(c.success) for c in self.cases)
+        return compact_repr(self, ("scene", "success"), extra={
+            "cases": f"{n_ok}/{len(self.cases)} ok", "animations": len(self.animations), "n_nodes": self.n_nodes,
+            "time": self.time, "out": self.out})
+
+    @property
+    def success(self) -> bool:
+        """Every case succeeded and every animation's forward solves succeeded."""
+        return all(c.success for c in self.cases) and all(a.get("success", False)
+                                                             for a in self.animations.values())
+
+    def table(self) -> str:
+        """A Markdown table of the key figures, one row per case; differences and strokes carry the scene's
+        unit in every cell (:func:`~mdsr_opt.plot.style.unit_label`), so tables of scenes in different units
+        can be joined."""
+        u = unit_label(self.units)
+        head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
+                "diff/size (%) | design | photo d over every loop (px) | ratio (%) | prototype d over every loop (px) | "
+                "time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
+        for c in self.cases:
+            a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
+            s = ", ".join(f"{v:.4g}" + (f" [{b[0]:.4g}, {b[1]:.4g}]" if len(c.stroke_band) == len(c.stroke) else "")
+                          for v, b in zip(c.stroke, c.stroke_band or [()] * len(c.stroke))) if c.stroke else "-"
+            s += f" {u}" if c.stroke else ""
+            d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
+            r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
+            ok = design_verdict(c)  # the cause of a failure first, then the secondary flags
+            ph = (c.photo or {}).get("target")
+            pd = "-" if not ph else f"{ph['mean_px']:.2f}"
+            pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
+            pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
+            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "FAILED (validation.md)" if pt else "-"
+            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
+                        f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
+        return "\n".join(rows)
+
+    def to_dict(self) -> dict:
+        """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
+        return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
+                            "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
+                            "cases": [asdict(c) for c in self.cases], "animations": self.animations})
+
+
