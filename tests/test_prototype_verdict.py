@@ -1,5 +1,7 @@
 """A case whose virtual prototype fails is no success (trial9 #3: `mdsr run` counted a case ``ok`` whose design
-the prototype could not reach, "1/4 case(s) succeeded")."""
+the prototype could not reach, "1/4 case(s) succeeded"), and what the pipeline resolved on its own in a case
+(fixtures shrunk, ropes cut or dropped) is listed in summary.md, not only in the log and summary.json (trial9
+#4: fixtures of 14 mm shrunk to 1.5 mm without a word in summary.md)."""
 
 from __future__ import annotations
 
@@ -124,3 +126,39 @@ def test_write_scene_with_a_pool_waits_for_the_prototype_before_the_verdict(tmp_
     assert not rep.success and not case.success and case.message.startswith("virtual prototype failed: ")
     assert any(s.startswith("[finger 1/1 bend] FAILED: virtual prototype failed") for s in said), said
     _check_failed_run(tmp_path / "o")
+
+
+def test_summary_md_lists_what_the_pipeline_resolved(tmp_path, capsys):
+    # fixtures asked of 0.6 for a finger 1 wide: routing shrinks them, cuts ropes; summary.md says so
+    text = FINGER.read_text().split('[[cases]]\nname = "contract"')[0]
+    text = re.sub(r"\[\[muscles\]\]\nname = \"upper\"\npath = [^\n]*\n", "", text)
+    text = text.replace("[design]", "[fabrication]\nfixture_radius = 0.6\n\n[design]")
+    scene = tmp_path / "finger.toml"
+    scene.write_text(text)
+    out = tmp_path / "o"
+    assert main(["run", str(scene), "--out", str(out), "--serial", "--no-animations", "--no-photos"]) in (0, 1)
+    printed = capsys.readouterr().out
+    notes = json.loads((out / "summary.json").read_text())["cases"][0]["notes"]
+    shrunk = [n for n in notes if re.match(r"routing: fixtures shrunk from radius 0\.6 to \S+", n)]
+    assert len(shrunk) == 1, notes
+    md = (out / "summary.md").read_text()
+    head, _, section = md.partition("\n## Notes\n")
+    assert "| finger | bend |" in head
+    assert "- **bend**" in section and f"  - {shrunk[0]}" in section
+    assert all(f"  - {n}" in section for n in notes)
+    assert re.search(r"^notes \(.*\) of finger/bend \(\d+\): under Notes in summary\.md$", printed, re.M), printed
+
+
+def test_scene_report_notes():
+    a = _report(case="a", success=True, notes=["routing: fixtures shrunk from radius 14 to the smallest, 1.5",
+                                               "design: M3 dropped (idle: designed contraction 0 below 0.001)"])
+    b = _report(case="b", success=True, fabrication=["muscle top: its channel runs on the outline"])
+    c = _report(case="c", success=True)
+    md = SceneReport(scene="s", title="T", n_nodes=10, cases=[a, b, c]).markdown()
+    lines = md.splitlines()
+    assert lines[0] == "# T" and "## Notes" in lines
+    notes = lines[lines.index("## Notes"):]
+    assert "- **a**" in notes and "- **b**" in notes and "- **c**" not in notes
+    assert "  - routing: fixtures shrunk from radius 14 to the smallest, 1.5" in notes
+    assert "  - fabrication: muscle top: its channel runs on the outline" in notes
+    assert "## Notes" not in SceneReport(scene="s", title="T", n_nodes=10, cases=[c]).markdown()

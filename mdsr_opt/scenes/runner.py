@@ -79,6 +79,9 @@ class CaseReport:
     contact : with contact: total and per-obstacle contact force, in ``force_unit`` (the tensions'), pairs.
     fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
         channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
+    notes : what the pipeline resolved on its own, each a sentence headed by its stage (``routing: fixtures
+        shrunk from radius ...``, ``design: M3 dropped (idle ...)``): the routing's resolutions when the case's
+        muscles were routed, the idle muscles dropped. ``summary.md`` lists them under its table.
     """
 
     scene: str
@@ -116,6 +119,7 @@ class CaseReport:
     band_notes: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
     contact: dict | None = None
+    notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -268,6 +272,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
             f"({setup.times['routing']:.2f} s)")
         for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
             say(f"{prefix}routing: {note}")
+        rep.notes = [f"routing: {note}" for note in setup.routing.notes]
     elif case.muscles is not None or (case.kind == "external" and scene.muscles is not None):
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         whose, why = ("case's own", "") if case.muscles is not None else ("scene's", " (a scene's [[muscles]] drive "
@@ -309,6 +314,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.n_muscles = len(kept)  # the names line up with the values below; dropped ones are in ``dropped``
         rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(kept)]
         rep.dropped = [d.to_dict() for d in dropped]
+        rep.notes += [f"design: {d.name} dropped ({d.reason})" for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
     rep.saturated = res.saturated_names
     rep.times["design"] = time.perf_counter() - t1

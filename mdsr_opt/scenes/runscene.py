@@ -70,7 +70,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     forward check, SYNTHETIC photograph and contour metrics (:func:`run_case`), then its figures, meshes
     and photograph into ``out/<case>/`` (:func:`write_case`). Then each animation (forward solves of
     interpolated contractions) as ``out/<animation>.gif`` with ``out/<animation>.json``; the rest mesh
-    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table).
+    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table,
+    then the notes of what the pipeline resolved on its own:
+    :meth:`~mdsr_opt.scenes.scenereport.SceneReport.markdown`).
 
     Parameters
     ----------
@@ -342,7 +344,7 @@ def _finish_scene(scene: Scene, out: Path, names, bg: Jobs, t0: float, runs: dic
                     "expected": scene.expected})
     write_json(out / "summary.json", finite(summary))
     with atomic_path(out / "summary.md") as tmp:
-        Path(tmp).write_text(f"# {scene.title or scene.name}\n\n{report.table()}\n")
+        Path(tmp).write_text(report.markdown())
     if proto is not None:
         from .prototype import validation_tables
 

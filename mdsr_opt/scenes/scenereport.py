@@ -1,5 +1,6 @@
-"""A scene's run as a whole (:class:`SceneReport`): its cases' reports and its table (``summary.md``, the end
-of ``mdsr run``'s output)."""
+"""A scene's run as a whole (:class:`SceneReport`): its cases' reports, its table (``summary.md``, the end of
+``mdsr run``'s output) and the notes of what the pipeline resolved on its own in each case (fixtures shrunk,
+ropes cut, dropped or moved, idle muscles dropped), which ``summary.md`` lists under its table."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from ..core.results import compact_repr, to_jsonable
 from ..plot.style import unit_label
 from .verdict import design_verdict
 
-__all__ = ["SceneReport"]
+__all__ = ["SceneReport", "case_notes"]
 
 
 @dataclass
@@ -65,6 +66,25 @@ class SceneReport:
                         f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
 
+    def notes(self) -> str:
+        """What the pipeline resolved on its own in each case (:func:`case_notes`) as a Markdown section, the
+        end of ``summary.md``; ``""`` when no case has any."""
+        items = [(c.case, case_notes(c)) for c in self.cases]
+        items = [(name, lines) for name, lines in items if lines]
+        if not items:
+            return ""
+        out = ["## Notes", "", "What the pipeline resolved on its own to make each case's ropes buildable, and what "
+               "it could not (each case's `notes` and `fabrication` in summary.json):", ""]
+        for name, lines in items:
+            out.append(f"- **{name}**")
+            out += [f"  - {line}" for line in lines]
+        return "\n".join(out) + "\n"
+
+    def markdown(self) -> str:
+        """``summary.md``: the title, the table (:meth:`table`) and the notes (:meth:`notes`)."""
+        notes = self.notes()
+        return f"# {self.title or self.scene}\n\n{self.table()}\n" + (f"\n{notes}" if notes else "")
+
     def to_dict(self) -> dict:
         """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
         return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
@@ -72,3 +92,10 @@ class SceneReport:
                             "cases": [asdict(c) for c in self.cases], "animations": self.animations})
 
 
+def case_notes(case) -> list[str]:
+    """A case report's notes (:class:`~mdsr_opt.scenes.runner.CaseReport`): what the pipeline resolved on its
+    own (``notes``: fixtures shrunk, ropes cut, dropped or moved, idle muscles dropped), then the places of the
+    muscles the scene gives that cannot be moulded as laid out (``fabrication``), each once."""
+    lines = list(getattr(case, "notes", None) or [])
+    lines += [f"fabrication: {m}" for m in getattr(case, "fabrication", None) or []]
+    return list(dict.fromkeys(str(line).replace("\n", " ") for line in lines))
