@@ -146,19 +146,20 @@ def test_summary_md_lists_what_the_pipeline_resolved(tmp_path, capsys):
     assert "| finger | bend |" in head
     assert "- **bend**" in section and f"  - {shrunk[0]}" in section
     assert all(f"  - {n}" in section for n in notes)
-    assert re.search(r"^notes \(.*\) of finger/bend \(\d+\): under Notes in summary\.md$", printed, re.M), printed
+    assert re.search(r"^notes \(.*\) of finger/bend: under Notes in summary\.md$", printed, re.M), printed
 
 
 def test_scene_report_notes():
     a = _report(case="a", success=True, notes=["routing: fixtures shrunk from radius 14 to the smallest, 1.5",
                                                "design: M3 dropped (idle: designed contraction 0 below 0.001)"])
-    b = _report(case="b", success=True, fabrication=["muscle top: its channel runs on the outline"])
+    b, b2 = (_report(case=n, success=True, fabrication=[f"scene 's', case '{n}': muscle top: its channel runs on "
+                                                         "the outline"]) for n in ("b", "b2"))
     c = _report(case="c", success=True)
-    md = SceneReport(scene="s", title="T", n_nodes=10, cases=[a, b, c]).markdown()
+    md = SceneReport(scene="s", title="T", n_nodes=10, cases=[a, b, c, b2]).markdown()
     lines = md.splitlines()
     assert lines[0] == "# T" and "## Notes" in lines
     notes = lines[lines.index("## Notes"):]
-    assert "- **a**" in notes and "- **b**" in notes and "- **c**" not in notes
+    assert "- **a**" in notes and "- **b, b2**" in notes and not any(n.startswith("- **c") for n in notes)
     assert "  - routing: fixtures shrunk from radius 14 to the smallest, 1.5" in notes
     assert "  - fabrication: muscle top: its channel runs on the outline" in notes
     assert "## Notes" not in SceneReport(scene="s", title="T", n_nodes=10, cases=[c]).markdown()

@@ -4,6 +4,7 @@ ropes cut, dropped or moved, idle muscles dropped), which ``summary.md`` lists u
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, field
 
 from ..core.results import compact_repr, to_jsonable
@@ -11,6 +12,9 @@ from ..plot.style import unit_label
 from .verdict import design_verdict
 
 __all__ = ["SceneReport", "case_notes"]
+
+#: the head of a FabricationWarning's message that names its scene and case
+_NAMED = r"^scene '[^']*', case '[^']*': "
 
 
 @dataclass
@@ -69,14 +73,17 @@ class SceneReport:
     def notes(self) -> str:
         """What the pipeline resolved on its own in each case (:func:`case_notes`) as a Markdown section, the
         end of ``summary.md``; ``""`` when no case has any."""
-        items = [(c.case, case_notes(c)) for c in self.cases]
-        items = [(name, lines) for name, lines in items if lines]
-        if not items:
+        groups: dict = {}  # cases with the same notes (an internal scene's muscles, say) listed once
+        for c in self.cases:
+            lines = tuple(case_notes(c))
+            if lines:
+                groups.setdefault(lines, []).append(c.case)
+        if not groups:
             return ""
         out = ["## Notes", "", "What the pipeline resolved on its own to make each case's ropes buildable, and what "
                "it could not (each case's `notes` and `fabrication` in summary.json):", ""]
-        for name, lines in items:
-            out.append(f"- **{name}**")
+        for lines, names in groups.items():
+            out.append(f"- **{', '.join(names)}**")
             out += [f"  - {line}" for line in lines]
         return "\n".join(out) + "\n"
 
@@ -97,5 +104,6 @@ def case_notes(case) -> list[str]:
     own (``notes``: fixtures shrunk, ropes cut, dropped or moved, idle muscles dropped), then the places of the
     muscles the scene gives that cannot be moulded as laid out (``fabrication``), each once."""
     lines = list(getattr(case, "notes", None) or [])
-    lines += [f"fabrication: {m}" for m in getattr(case, "fabrication", None) or []]
+    # a FabricationWarning names its scene and case first: said by the list's heading already
+    lines += [f"fabrication: {re.sub(_NAMED, '', str(m))}" for m in getattr(case, "fabrication", None) or []]
     return list(dict.fromkeys(str(line).replace("\n", " ") for line in lines))
