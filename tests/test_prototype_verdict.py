@@ -128,6 +128,19 @@ def test_write_scene_with_a_pool_waits_for_the_prototype_before_the_verdict(tmp_
     _check_failed_run(tmp_path / "o")
 
 
+def test_run_case_with_a_prototype_fails_the_case_it_fails(failing_prototype):
+    from mdsr_opt.scenes.prototype import VirtualPrototype
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    scene = load_scene(FINGER)
+    said: list[str] = []
+    rep = run_case(scene, "bend", prototype=VirtualPrototype.for_scene(scene), log=said.append).report
+    assert rep.design_success and not rep.success
+    assert rep.message.startswith("virtual prototype failed: driven by the design (Table 4): load step 0.9961")
+    assert said[-1] == f"FAILED: {rep.message}"
+
+
 def test_summary_md_lists_what_the_pipeline_resolved(tmp_path, capsys):
     # fixtures asked of 0.6 for a finger 1 wide: routing shrinks them, cuts ropes; summary.md says so
     text = FINGER.read_text().split('[[cases]]\nname = "contract"')[0]
