@@ -733,7 +733,8 @@ def test_design_strokes_converge_under_refinement():
 
 
 def test_scene_table_prints_achieved_contractions_and_strokes():
-    from mdsr_opt.scenes.runner import CaseReport, SceneReport
+    from mdsr_opt.scenes.runner import CaseReport
+    from mdsr_opt.scenes.scenereport import SceneReport
 
     c = CaseReport(scene="s", case="c", kind="internal", n_nodes=10, n_muscles=2, success=True,
                    contractions=[0.3, 0.2], achieved=[0.25, 0.2], stroke=[0.5, 0.125], difference=0.01,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 import xml.etree.ElementTree as ET
 from types import SimpleNamespace
 
@@ -105,6 +106,31 @@ def test_units_go_into_every_file(tmp_path):
     files = export_fabrication(mesh, None, tmp_path / "m", muscles=mus, units="m", name="p")
     root = ET.parse(files["svg"]).getroot()   # metres: the physical size is written in mm
     assert float(root.get("width")[:-2]) == pytest.approx(1000 * float(root.get("viewBox").split()[2]))
+
+
+def test_svg_in_body_units_has_a_drawable_size(tmp_path):
+    """trial9: a body-units SVG had width="5.75" (px), a few pixels in a browser. Its longer side is now
+    SVG_SIDE_PX px, width and height in the viewBox's proportion, and the caption states the scale."""
+    from mdsr_opt.synthesis.export import SVG_SIDE_PX
+
+    mesh, mus = body()
+    for scale in (1.0, 0.01):  # a body 40 or 0.4 units long (wider than tall): the same drawn size
+        m = Mesh(mesh.points * scale, mesh.triangles)
+        files = export_fabrication(m, None, tmp_path / str(scale), muscles=mus, name="p")
+        root = ET.parse(files["svg"]).getroot()
+        w, h = root.get("width"), root.get("height")
+        assert w.endswith("px") and h.endswith("px")
+        vb = [float(v) for v in root.get("viewBox").split()]
+        w, h = float(w[:-2]), float(h[:-2])
+        assert w / h == pytest.approx(vb[2] / vb[3])  # one scale for both sides
+        assert w == pytest.approx(SVG_SIDE_PX) and 0.2 * SVG_SIDE_PX < h < w  # the caption's lines below
+        caption = " ".join(t.text or "" for t in root.iter(SVG + "tspan"))
+        said = re.search(r"drawn at ([\d.e+-]+) px per body unit", " ".join(caption.split()))
+        assert said and float(said.group(1)) == pytest.approx(w / vb[2], rel=1e-3), caption
+        assert "true scale" not in root.find(SVG + "title").text
+    # a known unit keeps its true scale (1 user unit = 1 mm), no px and no such note
+    root = ET.parse(export_fabrication(mesh, None, tmp_path / "mm", muscles=mus, units="mm", name="p")["svg"]).getroot()
+    assert root.get("width").endswith("mm") and "px per body unit" not in ET.tostring(root, encoding="unicode")
 
 
 def test_dxf_labels_keep_any_name_on_one_line(tmp_path):

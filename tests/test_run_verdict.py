@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from mdsr_opt.cli.main import main
-from mdsr_opt.scenes.runner import CaseReport, SceneReport
+from mdsr_opt.scenes.runner import CaseReport
+from mdsr_opt.scenes.scenereport import SceneReport
 from mdsr_opt.scenes.verdict import design_verdict
 
 ROOT = Path(__file__).resolve().parents[1]

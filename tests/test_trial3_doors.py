@@ -240,7 +240,8 @@ def _muscle_scene(tmp_path, s: float, frm, to, units="mm"):
 @pytest.mark.parametrize("s, units", [(1.0, "mm"), (0.001, "m")])
 def test_a_scene_muscle_on_the_outline_warns_in_the_run_its_log_and_its_table(tmp_path, s, units):
     from mdsr_opt.scenes.cases import prepare_case
-    from mdsr_opt.scenes.runner import SceneReport, run_case
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenereport import SceneReport
     from mdsr_opt.synthesis.fabrication import FabricationWarning, rope_conflicts
 
     scene = load_scene(_muscle_scene(tmp_path, s, (0, 0), (40, 0), units))

@@ -13,6 +13,7 @@ from ..core.progress import progress_for_cli
 from ..scenes.library import build_from, load_module, problem_files, figure_scripts, get_problem, list_problems, problems_dir
 from ..scenes.rundir import RunFolder
 from ..scenes.scene import resolve_resolution
+from ..scenes.scenereport import case_notes
 from ..scenes.runscene import n_units, parse_resolution, parse_seed, parse_size, run_entries, scene_pool, write_scene
 
 __all__ = ['add_cli']
@@ -150,6 +151,12 @@ def _cmd_run(a) -> int:
         for name, an in r.animations.items():
             if not an.get("success", False):
                 print(f"FAILED {r.scene}/{name} (animation): {an.get('message') or an.get('failed_frames')}")
+    noted = [f"{r.scene}/{c.case}" for r in reports for c in r.cases if case_notes(c)]
+    if noted:  # the resolutions themselves are long: each scene's summary.md lists them
+        where = "summary.md" if len(reports) == 1 else "each scene's summary.md"
+        which = ", ".join(noted) if len(noted) <= 4 else f"{len(noted)} case(s)"
+        print(f"notes (fixtures shrunk, ropes cut, dropped or moved, idle muscles dropped, layouts that cannot be "
+              f"moulded) of {which}: under Notes in {where}")
     print(f"{n_cases - n_bad}/{n_cases} case(s) succeeded in {time.perf_counter() - t0:.1f} s; "
           f"results in {a.out}" + ("" if a.no_photos else "; photographs are SYNTHETIC"))
     return 0 if ok else 1

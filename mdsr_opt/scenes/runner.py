@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from dataclasses import dataclass, field, asdict
+from dataclasses import dataclass, field
 from pathlib import Path
 import time
 from typing import Any, Callable, Sequence
@@ -24,11 +24,11 @@ from ..body.muscles import Muscle
 from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
 from .names import number_in_scene
-from .verdict import design_verdict, plain_failure, saturation_line
+from .verdict import plain_failure, prototype_verdict, saturation_line
 from .rundir import check_interrupt
 from .scene import Case, Scene
 
-__all__ = ['CaseReport', 'CaseRun', 'SceneReport', 'run_case', 'measure_case', 'write_case', 'case_parts', 'case_files']
+__all__ = ['CaseReport', 'CaseRun', 'run_case', 'measure_case', 'write_case', 'case_parts', 'case_files']
 
 _LOG = logging.getLogger(__name__)
 
@@ -79,6 +79,9 @@ class CaseReport:
     contact : with contact: total and per-obstacle contact force, in ``force_unit`` (the tensions'), pairs.
     fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
         channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
+    notes : what the pipeline resolved on its own, each a sentence headed by its stage (``routing: fixtures
+        shrunk from radius ...``, ``design: M3 dropped (idle ...)``): the routing's resolutions when the case's
+        muscles were routed, the idle muscles dropped. ``summary.md`` lists them under its table.
     """
 
     scene: str
@@ -116,6 +119,7 @@ class CaseReport:
     band_notes: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
     contact: dict | None = None
+    notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
@@ -156,65 +160,6 @@ class CaseRun:
         return to_jsonable({"report": self.report.to_dict(), "setup": d(self.setup), "design": d(self.design),
                             "photo": d(self.photo), "comparison": d(self.comparison),
                             "prototype_photos": {k: d(v) for k, v in self.prototype_photos.items()}})
-
-
-@dataclass
-class SceneReport:
-    """The outcome of :func:`run_scene`: one :class:`CaseReport` per case, animations, timing, and the
-    scene's length ``units`` in which :meth:`table` quotes differences and strokes (``""``: body units)."""
-
-    scene: str
-    title: str
-    n_nodes: int
-    cases: list
-    animations: dict = field(default_factory=dict)
-    out: str = ""
-    time: float = 0.0
-    units: str = ""
-
-    def __repr__(self) -> str:
-        n_ok = sum(bool(c.success) for c in self.cases)
-        return compact_repr(self, ("scene", "success"), extra={
-            "cases": f"{n_ok}/{len(self.cases)} ok", "animations": len(self.animations), "n_nodes": self.n_nodes,
-            "time": self.time, "out": self.out})
-
-    @property
-    def success(self) -> bool:
-        """Every case succeeded and every animation's forward solves succeeded."""
-        return all(c.success for c in self.cases) and all(a.get("success", False)
-                                                             for a in self.animations.values())
-
-    def table(self) -> str:
-        """A Markdown table of the key figures, one row per case; differences and strokes carry the scene's
-        unit in every cell (:func:`~mdsr_opt.plot.style.unit_label`), so tables of scenes in different units
-        can be joined."""
-        u = unit_label(self.units)
-        head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d over every loop (px) | ratio (%) | prototype d over every loop (px) | "
-                "time (s) |")
-        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
-        for c in self.cases:
-            a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
-            s = ", ".join(f"{v:.4g}" + (f" [{b[0]:.4g}, {b[1]:.4g}]" if len(c.stroke_band) == len(c.stroke) else "")
-                          for v, b in zip(c.stroke, c.stroke_band or [()] * len(c.stroke))) if c.stroke else "-"
-            s += f" {u}" if c.stroke else ""
-            d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
-            r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
-            ok = design_verdict(c)  # the cause of a failure first, then the secondary flags
-            ph = (c.photo or {}).get("target")
-            pd = "-" if not ph else f"{ph['mean_px']:.2f}"
-            pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
-            pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
-            pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "FAILED (validation.md)" if pt else "-"
-            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
-                        f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
-        return "\n".join(rows)
-
-    def to_dict(self) -> dict:
-        """JSON-ready (``summary.json`` holds it): the cases' reports and the animations' figures."""
-        return to_jsonable({"format": "mdsr_opt.scene_run/1", "scene": self.scene, "title": self.title,
-                            "n_nodes": self.n_nodes, "success": self.success, "time": self.time,
-                            "cases": [asdict(c) for c in self.cases], "animations": self.animations})
 
 
 def finite(v):
@@ -327,6 +272,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
             f"({setup.times['routing']:.2f} s)")
         for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
             say(f"{prefix}routing: {note}")
+        rep.notes = [f"routing: {note}" for note in setup.routing.notes]
     elif case.muscles is not None or (case.kind == "external" and scene.muscles is not None):
         names = ", ".join(muscle_label(m, i) for i, m in enumerate(setup.muscles))
         whose, why = ("case's own", "") if case.muscles is not None else ("scene's", " (a scene's [[muscles]] drive "
@@ -368,6 +314,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.n_muscles = len(kept)  # the names line up with the values below; dropped ones are in ``dropped``
         rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(kept)]
         rep.dropped = [d.to_dict() for d in dropped]
+        rep.notes += [f"design: {d.name} dropped ({d.reason})" for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
     rep.saturated = res.saturated_names
     rep.times["design"] = time.perf_counter() - t1
@@ -413,6 +360,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         _LOG.debug("%sdesign status: %s", prefix, res.status)
     elif far:
         rep.message = f"design too far from the target: {far}"
+        say(f"{prefix}FAILED: {rep.message}")
+    elif prototype_verdict(rep):  # a design the virtual prototype cannot reproduce is no success
         say(f"{prefix}FAILED: {rep.message}")
     rep.times["total"] = time.perf_counter() - t0
     _LOG.debug("%sstage times: %s", prefix, ", ".join(f"{k} {v:.3f} s" for k, v in rep.times.items()))

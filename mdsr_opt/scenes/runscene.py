@@ -27,8 +27,11 @@ from .gaitrun import run_gait
 from .animate import animate
 from .names import RUN_FILES
 from .rundir import check_interrupt, RunFolder, noting_interrupts
-from .runner import CaseRun, SceneReport, case_files, case_parts, finite, measure_case, measure_prototype, run_case
+from .runner import CaseRun, case_files, case_parts, finite, measure_case, measure_prototype, run_case
 from .scene import Scene, resolve_resolution
+from .scenereport import SceneReport
+from .casefab import write_case_fabrication
+from .verdict import prototype_verdict
 
 __all__ = ['run_scene', 'run_main', 'figure_arguments']
 
@@ -67,7 +70,9 @@ def run_scene(scene: Scene, out: str | os.PathLike, *, cases: Sequence[str] | No
     forward check, SYNTHETIC photograph and contour metrics (:func:`run_case`), then its figures, meshes
     and photograph into ``out/<case>/`` (:func:`write_case`). Then each animation (forward solves of
     interpolated contractions) as ``out/<animation>.gif`` with ``out/<animation>.json``; the rest mesh
-    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table).
+    with its regions as ``out/rest.png``; and last ``out/summary.json`` and ``out/summary.md`` (the table,
+    then the notes of what the pipeline resolved on its own:
+    :meth:`~mdsr_opt.scenes.scenereport.SceneReport.markdown`).
 
     Parameters
     ----------
@@ -314,6 +319,12 @@ def _finish_scene(scene: Scene, out: Path, names, bg: Jobs, t0: float, runs: dic
 
     with bg:
         bg.wait()  # every case's files are known before the summary lists them
+    for i, cname in enumerate(names):  # the prototype's validations are in: a case it failed fails
+        run = runs[cname]
+        if prototype_verdict(run.report):
+            say(f"[{scene.name} {i + 1}/{len(names)} {cname}] FAILED: {run.report.message}")
+            if figures:  # its fabrication files, drawn while the prototype ran, say so too (the same names)
+                write_case_fabrication(scene, run, out / cname)
     if figures:
         for cname, parts in written.items():
             runs[cname].report.files = case_files(parts, out / cname)
@@ -333,7 +344,7 @@ def _finish_scene(scene: Scene, out: Path, names, bg: Jobs, t0: float, runs: dic
                     "expected": scene.expected})
     write_json(out / "summary.json", finite(summary))
     with atomic_path(out / "summary.md") as tmp:
-        Path(tmp).write_text(f"# {scene.title or scene.name}\n\n{report.table()}\n")
+        Path(tmp).write_text(report.markdown())
     if proto is not None:
         from .prototype import validation_tables
 

@@ -16,7 +16,8 @@ from .names import check_name, check_output_names
 from .fixtures import fixture_radius_conflict
 from .reader import SceneFileError, Reader, read_file, scene_options, tname, fabrication_table
 from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
-from .select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
+from .noderefs import node_ref, scene_region
+from .select import boundary_path, edge_path
 from .shapes import rigid_motion
 
 __all__ = ['load_scene', 'scene_from_data', 'material_table', 'parse_units_and_gait']
@@ -32,9 +33,6 @@ _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
 
 _MATERIAL_KEYS = ("model", "E", "nu", "thickness", "plane", "silicone", "C1", "C2", "C3", "C10", "C01",
                   "stress_unit")
-
-
-_REGION_KEYS = ("nodes", "box", "near", "radius", "polygon", "boundary", "loop")
 
 
 _MUSCLE_KEYS = ("name", "nodes", "path", "boundary")
@@ -186,7 +184,7 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
     reg_in = top.get("regions", {})
     r.keys(reg_in, list(reg_in) if isinstance(reg_in, Mapping) else (), "regions")
     for rname, spec in reg_in.items():
-        regions[rname] = _scene_region(r, mesh, spec, f"regions.{rname}", regions)
+        regions[rname] = scene_region(r, mesh, spec, f"regions.{rname}", regions)
     muscles = _muscle_list(r, mesh, top["muscles"], "muscles", regions) if "muscles" in top else None
     routing = scene_options(r, top.get("routing", {}), "routing")
     if "fabrication" in top:  # the [fabrication] table: the routing's (and, through it, the design's)
@@ -351,80 +349,6 @@ def _scene_material(r: Reader, spec):
                TypeError if isinstance(exc, TypeError) else SceneFileError)
 
 
-def _node_ref(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> np.ndarray:
-    """A region name, region names, node indices or [x, y] points -> node indices."""
-    tol = float(mesh.edge_lengths.mean())
-    if isinstance(v, str):
-        v = [v]
-    if not isinstance(v, list) or not v:
-        r.fail(where, f"expected a region name, node indices or [x, y] points, got {v!r}",
-               TypeError if not isinstance(v, list) else SceneFileError)
-    out = []
-    for i, item in enumerate(v):
-        w = f"{where}[{i}]"
-        if isinstance(item, str):
-            if item not in regions:
-                r.fail(w, f"unknown region {item!r} (regions: {', '.join(regions) or 'none defined'})")
-            out.extend(regions[item].tolist())
-        elif isinstance(item, bool):
-            r.fail(w, "expected a node index, a region name or a point, got a boolean", TypeError)
-        elif isinstance(item, int):
-            if not 0 <= item < mesh.n_nodes:
-                r.fail(w, f"node index {item} out of range [0, {mesh.n_nodes})")
-            out.append(item)
-        elif isinstance(item, list):
-            p = r.point(item, w)
-            try:
-                out.append(nearest_node(mesh, p, tol=tol))
-            except ValueError as exc:
-                r.fail(w, str(exc))
-        else:
-            r.fail(w, f"expected a node index, a region name or a point [x, y], got {tname(item)}", TypeError)
-    return np.unique(np.asarray(out, dtype=np.int64))
-
-
-def _scene_region(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> np.ndarray:
-    s = r.keys(spec, _REGION_KEYS, where)
-    sel = [k for k in ("nodes", "box", "near", "polygon", "loop") if k in s]
-    if len(sel) != 1:
-        r.fail(where, "give exactly one of nodes, box, near, polygon, loop (boundary = true may restrict it)")
-    kind = sel[0]
-    bnd = s.get("boundary", False)
-    if not isinstance(bnd, bool):
-        r.fail(f"{where}.boundary", f"expected true or false, got {bnd!r}", TypeError)
-    if "radius" in s and kind != "near":
-        r.fail(f"{where}.radius", "only applies to near")
-    if kind == "nodes":
-        idx = _node_ref(r, mesh, s["nodes"], f"{where}.nodes", regions)
-        if bnd:
-            idx = np.intersect1d(idx, mesh.boundary_nodes)
-    elif kind == "box":
-        v = s["box"]
-        if not isinstance(v, list) or len(v) != 4:
-            r.fail(f"{where}.box", f"expected [xmin, ymin, xmax, ymax], got {v!r}")
-        x0, y0, x1, y1 = (r.number(c, f"{where}.box[{i}]") for i, c in enumerate(v))
-        if x0 > x1 or y0 > y1:
-            r.fail(f"{where}.box", "needs xmin <= xmax and ymin <= ymax")
-        idx = nodes_in_box(mesh, x0, y0, x1, y1, boundary=bnd)
-    elif kind == "near":
-        p = r.point(s["near"], f"{where}.near")
-        if "radius" not in s:
-            r.fail(f"{where}.radius", "missing (required with near)")
-        idx = nodes_near(mesh, p, r.number(s["radius"], f"{where}.radius", positive=True), boundary=bnd)
-    elif kind == "polygon":
-        poly = r.points(s["polygon"], f"{where}.polygon", at_least=3)
-        try:
-            idx = nodes_in_polygon(mesh, poly, boundary=bnd)
-        except ValueError as exc:  # a polygon that encloses nothing (its vertices on one line): named by its field
-            r.fail(f"{where}.polygon", str(exc).removeprefix("nodes_in_polygon: "))
-    else:
-        k = r.integer(s["loop"], f"{where}.loop (a boundary loop index)", 0, len(mesh.boundary_loops) - 1)
-        idx = np.sort(np.asarray(mesh.boundary_loops[k], dtype=np.int64))
-    if len(idx) == 0:
-        r.fail(where, "selects no node of the mesh")
-    return np.asarray(idx, dtype=np.int64)
-
-
 def _muscle_list(r: Reader, mesh: Mesh, v, where: str, regions: dict) -> tuple:
     """The muscles of a ``muscles`` list (the scene's ``[[muscles]]`` or a case's own)."""
     if not isinstance(v, list):
@@ -500,8 +424,8 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
             if not 0.0 <= x < 1.0:
                 r.fail(f"{where}.contractions[{i}]", f"must lie in [0, 1), got {x}")
         return Case(name, contractions=a, description=desc)
-    anchors = (_node_ref(r, mesh, c["anchors"], f"{where}.anchors", regions) if "anchors" in c
-               else np.zeros(0, dtype=np.int64))
+    # anchors = [] is no anchor, as the key left out (the drags then hold the body)
+    anchors = node_ref(r, mesh, c.get("anchors", []), f"{where}.anchors", regions, empty=True)
     drags_in = c.get("drags", [])
     if not isinstance(drags_in, list):
         r.fail(f"{where}.drags", f"expected a list of drags, got {tname(drags_in)}", TypeError)
@@ -543,8 +467,8 @@ def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple
     d = r.keys(spec, _DRAG_KEYS, where)
     if ("nodes" in d) == ("at" in d):
         r.fail(where, "give exactly one of nodes (region, indices or points) and at (a point)")
-    idx = (_node_ref(r, mesh, d["nodes"], f"{where}.nodes", regions) if "nodes" in d
-           else _node_ref(r, mesh, [d["at"]], f"{where}.at", regions))
+    idx = (node_ref(r, mesh, d["nodes"], f"{where}.nodes", regions) if "nodes" in d
+           else node_ref(r, mesh, [d["at"]], f"{where}.at", regions))
     P = mesh.points[idx]
     if "to" in d:
         for k in ("by", "rotate", "about"):

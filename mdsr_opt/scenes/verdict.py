@@ -1,7 +1,9 @@
 """What made a design fail, in the user's words: the ``FAILED`` lines of ``mdsr run`` (:func:`plain_failure`: the
 cause first, once, and what helps) and the ``design`` cell of its table (:func:`design_verdict`: ``ok`` or
 ``FAILED``, the cause first, then the flags that did not make it fail: saturated or dropped muscles, a layout
-that cannot be moulded). The solvers' own status, with every clause, stays in ``summary.json``.
+that cannot be moulded). A case whose validation against the virtual prototype failed fails
+(:func:`prototype_verdict`): a design the finer model cannot reproduce is no success. The solvers' own status,
+with every clause, stays in ``summary.json``.
 
 Example
 -------
@@ -17,7 +19,8 @@ import re
 
 from ..core.results import one_line
 
-__all__ = ["design_verdict", "failure_cause", "plain_failure", "saturation_line"]
+__all__ = ["design_verdict", "failure_cause", "plain_failure", "prototype_failure", "prototype_verdict",
+           "saturation_line"]
 
 #: the longest cause a cell shows (the whole reason is in the run's log, its FAILED lines and summary.json)
 MAX_CAUSE = 90
@@ -25,6 +28,13 @@ MAX_CAUSE = 90
 #: a solver's status that names a success: never shown as (part of) a failure's cause
 _SUCCESS = re.compile(r"\b(Solve_Succeeded|Solved_To_Acceptable_Level|converged|Optimization terminated "
                       r"successfully\.?)\b[;,]?\s*")
+
+#: the virtual prototype's validations of a case (keys of its report's ``photo["prototype"]``), each by what
+#: drove the prototype: a failed one fails the case (:func:`prototype_verdict`)
+PROTOTYPE_PARTS = (("design", "driven by the design"), ("driving", "driven as the case"))
+
+#: the head of the message of a case failed by its virtual prototype
+PROTOTYPE_FAILED = "virtual prototype failed: "
 
 #: the causes a design's status may hold, most telling first: (pattern, what happened, what helps)
 _CAUSES = (
@@ -110,6 +120,8 @@ def plain_failure(status: str) -> str:
 def failure_cause(message: str) -> str:
     """What made a case fail, in a few words (no advice), from its report's ``message``."""
     msg = str(message or "")
+    if msg.startswith(PROTOTYPE_FAILED):  # which validation, then the prototype's own status, cut to fit
+        return _short("virtual prototype failed " + re.sub(r"^driven [^(]*", "", msg[len(PROTOTYPE_FAILED):]))
     if msg.startswith("design too far from the target:"):
         far = msg.split(":", 1)[1]
         m = re.search(r"is ([\d.]+ %) of the size .*more than max_difference (\S+ %)", far)
@@ -134,10 +146,38 @@ def failure_cause(message: str) -> str:
     return _short(_solver_status(re.split(r";| \(", msg, maxsplit=1)[0]) or "failed")
 
 
+def prototype_failure(photo) -> str:
+    """What failed in a case's validation against the virtual prototype, from its report's ``photo`` (its
+    ``"prototype"`` entries, :func:`~mdsr_opt.scenes.prototype.validate_case`): each failed part with its
+    table and the prototype's status; ``""`` when every part that ran succeeded, or none ran."""
+    proto = (photo or {}).get("prototype") or {}
+    out = []
+    for key, what in PROTOTYPE_PARTS:
+        entry = proto.get(key)
+        if isinstance(entry, dict) and not entry.get("success", False):
+            out.append(f"{what} (Table {entry.get('table', '?')}): {entry.get('status') or 'failed'}")
+    return "; ".join(out)
+
+
+def prototype_verdict(case) -> bool:
+    """Fail a case (a :class:`~mdsr_opt.scenes.runner.CaseReport`) whose validation against the virtual
+    prototype failed (:func:`prototype_failure`): ``success`` False and ``message`` ``"virtual prototype
+    failed: ..."``. Returns True when it turned a success into this failure (the caller says so); a case that
+    failed already keeps its first cause (its design cell names the prototype's failure too)."""
+    why = prototype_failure(case.photo)
+    if not why or not case.success:
+        return False
+    case.success, case.message = False, PROTOTYPE_FAILED + why
+    return True
+
+
 def design_verdict(case) -> str:
     """The ``design`` cell for a case report (:class:`~mdsr_opt.scenes.runner.CaseReport`): ``ok`` or
     ``FAILED``, then in brackets the failure's cause first and the secondary flags after it."""
     notes = [] if case.success else [failure_cause(case.message)]
+    if not case.success and not str(case.message).startswith(PROTOTYPE_FAILED) and prototype_failure(
+            getattr(case, "photo", None)):
+        notes.append("virtual prototype failed too")
     if case.saturated:
         notes.append(f"saturated {', '.join(map(str, case.saturated))}")
     if case.dropped:

@@ -75,6 +75,10 @@ __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabri
 #: Known length units and their size in metres.
 UNITS = LENGTH_UNITS
 
+#: the longer side, in px, of an SVG drawn in body units (no unit, so no true scale): a size a browser or a
+#: viewer shows (at one px per unit a body a few units across would be a few px wide); its caption says the scale
+SVG_SIDE_PX = 600.0
+
 
 def check_units(units) -> str:
     """``units`` if it is a known length unit (:data:`UNITS`); TypeError/ValueError naming the choices."""
@@ -334,6 +338,10 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     W, H = float(hi[0] - lo[0] + 2 * pad), float(hi[1] - lo[1] + 2 * pad)
     u = length_unit(fd.units)
     scale, phys = (1.0, u) if u in ("mm", "cm", "in") else (UNITS[u] / 1e-3, "mm") if u in UNITS else (1.0, "")
+    drawn = ""
+    if not phys:  # body units have no physical size: a drawable one (1 body unit = 1 px would be a speck)
+        scale, phys = SVG_SIDE_PX / max(W, H), "px"
+        drawn = f" (no true scale: drawn at {scale:.4g} px per body unit)"
 
     def xy(p):
         return f"{p[0] - lo[0] + pad:.9g},{hi[1] - p[1] + pad:.9g}"
@@ -344,7 +352,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     caption = (f"{title}: {len(fd.muscles)} muscle channel(s) {fd.channel_width:.4g} wide with walls of "
                f"{fd.wall:.4g}; circles: end fixtures (radius {fd.end_radius:.4g}) and their walls"
                + (f" (black: {shared} plate(s) that muscles ending closer than a radius share)" if shared else "")
-               + f"; units: {u}")
+               + f"; units: {u}{drawn}")
     if fd.failure:  # first, in the title and the caption: no one builds it by mistake
         title, caption = f"{failed_mark(fd.failure)}. {title}", f"{failed_mark(fd.failure)}. {caption}"
     if fd.conflicts:
