@@ -26,7 +26,6 @@ import signal
 import sys
 
 from .. import __version__
-from ..core.jobs import main_is_plain_script
 
 
 #: the modules that register subcommands (each has ``add_cli(sub)``) and the subcommands each one adds, in
@@ -171,6 +170,9 @@ def _main(argv: list[str] | None, console: bool) -> int:
     from its guarded entry point."""
     argv = sys.argv[1:] if argv is None else list(argv)
     one_blas_thread_per_process()
+    # imported after the variable is set: it imports numpy, whose OpenBLAS reads it as it loads
+    from ..core.jobs import main_is_plain_script
+
     return _run(build_parser(command_of(argv)), argv, pool=console or not main_is_plain_script())
 
 
