@@ -554,10 +554,10 @@ def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsy
     once the command runs, instead of an import traceback."""
     from mdsr_opt.cli import main as cli_main
 
-    def interrupted_import(argv=None):
+    def interrupted_import(argv=None, console=True):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(cli_main, "main", interrupted_import)
+    monkeypatch.setattr(cli_main, "_main", interrupted_import)
     assert cli_main.console_main() == 130
     err = capsys.readouterr().err
     assert "interrupted (Ctrl-C) before the command started" in err and "Traceback" not in err

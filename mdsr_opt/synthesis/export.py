@@ -75,7 +75,7 @@ __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabri
 #: Known length units and their size in metres.
 UNITS = LENGTH_UNITS
 
-#: the longer side, in px, of an SVG drawn in body units (no unit, so no true scale): a size a browser or a
+#: the longer side, in px, of an SVG drawn in body units (no unit, so not to scale): a size a browser or a
 #: viewer shows (at one px per unit a body a few units across would be a few px wide); its caption says the scale
 SVG_SIDE_PX = 600.0
 
@@ -341,7 +341,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     drawn = ""
     if not phys:  # body units have no physical size: a drawable one (1 body unit = 1 px would be a speck)
         scale, phys = SVG_SIDE_PX / max(W, H), "px"
-        drawn = f" (no true scale: drawn at {scale:.4g} px per body unit)"
+        drawn = f" (not to scale: drawn at {scale:.4g} px per body unit)"
 
     def xy(p):
         return f"{p[0] - lo[0] + pad:.9g},{hi[1] - p[1] + pad:.9g}"
