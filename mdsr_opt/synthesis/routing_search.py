@@ -413,7 +413,7 @@ class Router:
         ``need``, else ``inf``; ``straight`` is a lower bound of it (the straight line).
 
         Dijkstra's search from ``node`` stops at a radius (``limit``): at least ``need``, and when ``need``
-        is unbounded twice the straight line plus a few edges, doubled until ``u`` lies inside. The lengths
+        is unbounded 1.1 times the straight line plus two edges, doubled until ``u`` lies inside. The lengths
         inside the radius are those of the whole search (the same nodes settled in the same order), so the
         choice of :meth:`_choose` is that of the full fields, and on a fine mesh each search settles only the
         nodes near the unit's end instead of the whole body. The search is kept per end node with its radius;
@@ -428,7 +428,7 @@ class Router:
                     return math.inf
             if math.isfinite(need) and self.bounds.farther(node, u, need):
                 return math.inf
-            reach = max(need if math.isfinite(need) else 2.0 * straight + 4.0 * self.ell, 2.0 * reach)
+            reach = max(need if math.isfinite(need) else 1.1 * straight + 2.0 * self.ell, 2.0 * reach)
             f = dijkstra(self.csgraph, directed=True, indices=node, limit=reach)
             self.fields[node] = (f, reach)
 
