@@ -112,3 +112,22 @@ def test_the_routing_is_the_same_without_the_bounds(monkeypatch):
         assert with_bounds == route(mesh, x) and len(with_bounds[0]) >= 1
     assert all(answers) and len(answers) >= 100
     assert sum(proofs) >= 20
+
+
+def test_the_kept_graphs_and_searches_stay_within_their_budgets(monkeypatch):
+    """With room for one reduced graph and one search only, the answers are those with room for all (the kept
+    work only saves time) and no more than one of each is kept."""
+    mesh = _plate_with_window()
+    rng = np.random.default_rng(1)
+    pairs = [(int(s), int(u)) for s, u in rng.choice(mesh.n_nodes, (60, 2)) if s != u]
+    G = rest_graph(mesh)[0]
+    needs = [float(dijkstra(G, directed=True, indices=s)[u]) * f for (s, u), f in
+             zip(pairs, np.tile([0.999, 1.0, 0.99], len(pairs)))]
+    roomy = rb.LowerBounds(mesh)
+    want = [roomy.farther(s, u, need) for (s, u), need in zip(pairs, needs)]
+    assert len(roomy._graphs) > 1 and len(roomy._searched) > 1 and any(want)
+    monkeypatch.setattr(rb, "GRAPH_FLOATS", 1)
+    monkeypatch.setattr(rb, "BOUND_FLOATS", 1)
+    tight = rb.LowerBounds(mesh)
+    assert [tight.farther(s, u, need) for (s, u), need in zip(pairs, needs)] == want
+    assert len(tight._graphs) == 1 and len(tight._searched) == 1

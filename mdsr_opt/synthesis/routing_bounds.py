@@ -32,15 +32,17 @@ from scipy.sparse.csgraph import dijkstra
 
 from .routing_memo import rest_graph
 
-__all__ = ["LowerBounds", "N_DIRECTIONS", "BOUND_REACH", "BOUND_FLOATS"]
+__all__ = ["LowerBounds", "N_DIRECTIONS", "BOUND_REACH", "BOUND_FLOATS", "GRAPH_FLOATS"]
 
 #: the fixed directions of the linear potentials (a query uses the nearest to its own direction)
 N_DIRECTIONS = 32
 #: a search goes this many mean edge lengths (in reduced length) beyond what its own query needs, so that it also
 #: answers the next steps near the same unit end
 BOUND_REACH = 0.25
-#: the most settled lengths (floats) kept, the oldest searches dropped first
-BOUND_FLOATS = 1 << 22
+#: the most settled lengths kept (nodes with their reduced lengths), the oldest searches dropped first
+BOUND_FLOATS = 1 << 21
+#: the most reduced lengths (one per directed edge and direction) kept, the least recently used direction dropped
+GRAPH_FLOATS = 1 << 23
 
 
 class LowerBounds:
@@ -52,6 +54,8 @@ class LowerBounds:
     >>> mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
     >>> b = LowerBounds(mesh)
     >>> b.farther(0, 16, 3.9), b.farther(0, 16, 4.0 + 1e-6)   # node 16 is the corner (4, 0): a path of length 4
+    (True, False)
+    >>> b.farther(0, 84, 4.2), b.farther(0, 84, 4.5)   # to the corner (4, 1): 4 + sqrt(2) - 1 along the edges
     (True, False)
     """
 
@@ -78,12 +82,15 @@ class LowerBounds:
         self._floats = 0
 
     def _reduced(self, k: int) -> csr_matrix:
-        H = self._graphs.get(k)
+        H = self._graphs.pop(k, None)
         if H is None:
             c, s = self.unit[k]
             G = self.graph
             data = np.maximum(G.data - (self.dx * c + self.dy * s), self.floor)
-            H = self._graphs[k] = csr_matrix((data, G.indices, G.indptr), shape=G.shape)
+            H = csr_matrix((data, G.indices, G.indptr), shape=G.shape)
+            while self._graphs and (len(self._graphs) + 1) * G.nnz > GRAPH_FLOATS:
+                self._graphs.pop(next(iter(self._graphs)))
+        self._graphs[k] = H  # the most recently used last
         return H
 
     def farther(self, s: int, u: int, need: float) -> bool:
