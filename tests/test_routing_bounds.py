@@ -59,6 +59,8 @@ def test_farther_across_a_gap_between_two_parts():
     b = rb.LowerBounds(mesh)
     assert b.farther(0, a.n_nodes, 100.0)
     assert not b.farther(0, a.n_nodes - 1, 2.0)  # the far corner of its own square: sqrt(2) by the diagonals or 2
+    with pytest.raises(ValueError, match="need must be a finite length"):
+        b.farther(0, 1, float("inf"))
 
 
 def test_the_routing_is_the_same_without_the_bounds(monkeypatch):

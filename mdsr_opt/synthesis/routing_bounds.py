@@ -96,6 +96,8 @@ class LowerBounds:
     def farther(self, s: int, u: int, need: float) -> bool:
         """True when the shortest path from node ``s`` to node ``u`` (rest lengths) is proven longer than ``need``;
         False when it is not known (it may still be)."""
+        if not math.isfinite(need):
+            raise ValueError(f"need must be a finite length, got {need!r}")
         if self.graph is None:
             self._build()
         vx, vy = float(self.X[u, 0] - self.X[s, 0]), float(self.X[u, 1] - self.X[s, 1])
@@ -103,7 +105,7 @@ class LowerBounds:
         c, sn = self.unit[k]
         proj = vx * c + vy * sn
         margin = 1e-9 * abs(need) + self.slack
-        # the reduced length that proves it: a bound at least need + margin
+        # a reduced length above this proves it (the path's length then exceeds need + margin)
         want = need + margin - proj
         if want < 0.0:  # reduced lengths are not negative: farther than the projection alone
             return True
