@@ -18,7 +18,8 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from ..body.mesh import Mesh
-from .routing_memo import FieldStore, node_adjacency, rest_graph, rest_lists
+from .routing_bounds import LowerBounds
+from .routing_memo import FieldStore, memoised, node_adjacency, rest_graph, rest_lists
 from .routing_spacing import apart_from_stronger
 
 __all__ = ["Router", "mismatch", "turn_cost"]
@@ -86,6 +87,7 @@ class Router:
         self.csgraph = None
         self.component = None
         self.fields = FieldStore(mesh)  # per end node: lengths, radius searched (shared: routing_memo)
+        self.bounds = memoised(("lower bounds", id(mesh)), lambda: LowerBounds(mesh))  # the body's, built on use
 
     # -------------------------------------------------------------- helpers
     def _dir(self, a: int, b: int) -> tuple[float, float]:
@@ -383,7 +385,6 @@ class Router:
             if Z.alive:
                 self.mirror_uid[Z.uid] = self.owner[self.mp[Z.path[0]]]
 
-
     # -------------------------------------------------------------- heuristic
     def _ends(self) -> list[tuple[int, int]]:
         """(unit id, node) of both endpoints of every alive unit; drops the fields of stale endpoints."""
@@ -412,11 +413,11 @@ class Router:
         ``need``, else ``inf``; ``straight`` is a lower bound of it (the straight line).
 
         Dijkstra's search from ``node`` stops at a radius (``limit``): at least ``need``, and when ``need``
-        is unbounded twice the straight line plus a few edges, doubled until ``u`` lies inside. The lengths
+        is unbounded 1.1 times the straight line plus two edges, doubled until ``u`` lies inside. The lengths
         inside the radius are those of the whole search (the same nodes settled in the same order), so the
         choice of :meth:`_choose` is that of the full fields, and on a fine mesh each search settles only the
-        nodes near the unit's end instead of the whole body. The search is kept per end node with its
-        radius."""
+        nodes near the unit's end instead of the whole body. The search is kept per end node with its radius;
+        a search on a thin region first proves most "farther than ``need``" (routing_bounds)."""
         f, reach = self.fields.get(node, (None, -1.0))
         while True:
             if f is not None:
@@ -425,7 +426,9 @@ class Router:
                     return d if d <= need else math.inf
                 if reach >= need:  # farther than the radius, which covers what is asked
                     return math.inf
-            reach = max(need if math.isfinite(need) else 2.0 * straight + 4.0 * self.ell, 2.0 * reach)
+            if math.isfinite(need) and self.bounds.farther(node, u, need):
+                return math.inf
+            reach = max(need if math.isfinite(need) else 1.1 * straight + 2.0 * self.ell, 2.0 * reach)
             f = dijkstra(self.csgraph, directed=True, indices=node, limit=reach)
             self.fields[node] = (f, reach)
 
