@@ -331,3 +331,39 @@ def test_ends_closer_than_a_fixture_radius_share_one_plate():
     small = Fabrication(channel_diameter=0.2, wall=0.1, fixture_radius=0.2, min_fixture_radius=0.2)
     found = rope_conflicts(mesh, [a, b], small)                     # two plates of 0.2, 0.25 apart: overlap
     assert [c.kind for c in found] == ["ropes", "fixtures"] and found[1].required == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("scale", [1.0, 40.0])
+def test_a_rope_segment_that_cuts_a_reflex_corner_is_not_mouldable_and_no_admissible_edge_does(scale):
+    """Every node of a rope may lie deep enough while the segment between two of them passes a reflex corner of
+    the outline too closely (trial9 #8: 1.87 % of the diameter against the 2 % rule at a star's inner corner).
+    The check measures segments, and the edges routing may use keep their clearance along their whole length
+    (checked against shapely's distance of each edge from the boundary)."""
+    import shapely
+    from shapely.geometry import LineString, Polygon
+
+    from mdsr_opt.synthesis.fabrication import admissible_edges, boundary_distance
+
+    L = np.array([[0, 0], [4, 0], [4, 2], [2, 2], [2, 4], [0, 4]], float) * scale
+    mesh = Mesh.from_polygon(L, max_area=0.01 * scale ** 2)
+    P, d = mesh.points, boundary_distance(mesh)
+    a = int(np.argmin(np.linalg.norm(P - np.array([2.6, 1.7]) * scale, axis=1)))
+    b = int(np.argmin(np.linalg.norm(P - np.array([1.7, 2.6]) * scale, axis=1)))
+    boundary = Polygon(L).exterior
+    seg = boundary.distance(LineString(P[[a, b]]))
+    need = 0.5 * (min(d[a], d[b]) + seg)                       # between the segment's inset and its nodes'
+    f = Fabrication(channel_diameter=need, wall=0.5 * need, fixture_radius=0.0)
+    conflicts = [c for c in rope_conflicts(mesh, [[a, b]], f) if c.kind == "inset"]
+    assert len(conflicts) == 1 and abs(conflicts[0].distance - seg) < 1e-9 * scale
+    assert "between two of its nodes" in conflicts[0].message
+    assert np.linalg.norm(np.asarray(conflicts[0].at) - np.array([2.0, 2.0]) * scale) < 0.3 * scale  # at the corner
+    E = mesh.edges
+    exact = shapely.distance(shapely.linestrings(P[E.reshape(-1)].reshape(-1, 2, 2)), boundary)
+    dip = np.minimum(d[E[:, 0]], d[E[:, 1]]) - exact
+    k = int(np.argmax(dip))                                    # the edge passing the corner most closely
+    assert dip[k] > 1e-3 * scale
+    clearance = exact[k] + 0.5 * dip[k]                        # its nodes are deep enough, its middle is not
+    adm = admissible_edges(mesh, Fabrication(channel_diameter=0.1 * scale, wall=0.1 * scale), clearance)
+    assert not adm[k] and exact[adm].min() >= clearance * (1 - 1e-9)
+    nodes_ok = (d[E[:, 0]] >= clearance) & (d[E[:, 1]] >= clearance)
+    assert ((exact >= clearance * (1 - 1e-9)) & nodes_ok).sum() == adm.sum()  # no edge refused that fits

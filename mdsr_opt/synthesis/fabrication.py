@@ -49,7 +49,7 @@ import numpy as np
 from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
-           "boundary_distance", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
+           "boundary_distance", "segment_insets", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
            "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit",
            "pair_conflicts", "check_channel_fits"]
 
@@ -177,15 +177,36 @@ def boundary_distance(mesh) -> np.ndarray:
     cache = mesh.__dict__
     if "_boundary_distance" not in cache:
         import shapely
-        from shapely.geometry import MultiLineString
 
-        P = mesh.points
-        rings = MultiLineString([np.vstack([P[lp], P[lp[:1]]]) for lp in mesh.boundary_loops])
-        d = shapely.distance(shapely.points(P), rings)
+        d = shapely.distance(shapely.points(mesh.points), _boundary_lines(mesh))
         d[mesh.boundary_nodes] = 0.0
         d.flags.writeable = False
         cache["_boundary_distance"] = d
     return cache["_boundary_distance"]
+
+
+def _boundary_lines(mesh):
+    """The body's boundary at rest (the outline and every hole) as one shapely MultiLineString, cached on the
+    mesh."""
+    cache = mesh.__dict__
+    if "_boundary_lines" not in cache:
+        from shapely.geometry import MultiLineString
+
+        P = mesh.points
+        cache["_boundary_lines"] = MultiLineString([np.vstack([P[lp], P[lp[:1]]]) for lp in mesh.boundary_loops])
+    return cache["_boundary_lines"]
+
+
+def segment_insets(mesh, edges: np.ndarray) -> np.ndarray:
+    """The distance at rest of each segment ``edges`` (k, 2 node ids) from the body's boundary: at most its
+    nodes' :func:`boundary_distance`, less where the segment passes a reflex corner of the outline or a hole."""
+    import shapely
+
+    E = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if not len(E):
+        return np.zeros(0)
+    P = mesh.points
+    return shapely.distance(shapely.linestrings(P[E.reshape(-1)].reshape(-1, 2, 2)), _boundary_lines(mesh))
 
 
 def body_depth(mesh) -> float:
@@ -206,7 +227,8 @@ def body_depth(mesh) -> float:
 
 
 def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
-    """The edges a rope may run on: both nodes at least ``clearance`` inside the outline and every hole.
+    """The edges a rope may run on: the whole edge at least ``clearance`` inside the outline and every hole (its
+    nodes, and the segment between them where it passes a reflex corner: :func:`segment_insets`).
 
     Only whole mesh edges far enough inside are used (no band refined, no route offset inward): the rope
     then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
@@ -219,6 +241,9 @@ def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
     ok = dist >= clearance - tol
     E = mesh.edges
     adm = ok[E[:, 0]] & ok[E[:, 1]]
+    # a point of an edge lies within half its length of a node: only edges that near the clearance can dip below it
+    near = np.flatnonzero(adm & (np.minimum(dist[E[:, 0]], dist[E[:, 1]]) - 0.5 * mesh.edge_lengths < clearance))
+    adm[near[segment_insets(mesh, E[near]) < clearance - tol]] = False
     if adm.any():
         return adm
     D = body_size(mesh)
@@ -282,8 +307,8 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
                    channel_width: float | None = None) -> list:
     """Every place where a layout cannot be moulded in one layer, as :class:`Conflict` s (empty: it can).
 
-    A channel of width ``c`` with its wall ``w`` needs every rope node at least ``c / 2 + w`` inside the outline
-    and the holes (and :data:`MIN_INSET_FRACTION` of the body's size, as the routing keeps); an end fixture of
+    A channel of width ``c`` with its wall ``w`` needs every point of the rope (its nodes and the segments
+    between them) at least ``c / 2 + w`` inside the outline and the holes (and :data:`MIN_INSET_FRACTION` of the body's size, as the routing keeps); an end fixture of
     radius ``r`` needs ``r + w``. Two ropes need their centre lines ``c + w`` apart (one wall between the two
     channels) and must not cross; two fixtures need their centres ``2 r + w`` apart, and a fixture needs
     ``r + c / 2 + w`` from another rope's centre line. Two ends closer than ``r`` share one fixture plate (the
@@ -319,12 +344,21 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
     inset_need = max(0.5 * c + w, MIN_INSET_FRACTION * D)
     for i, p in enumerate(paths):
         k = int(p[np.argmin(dist[p])])
-        if dist[k] < inset_need - tol:
-            on = " (it runs on the outline)" if dist[k] <= tol else ""
-            out.append(Conflict("inset", (i,), float(dist[k]), inset_need, tuple(map(float, P[k])),
+        at, d_in, where = P[k], float(dist[k]), ""
+        if len(p) > 1 and d_in >= inset_need - tol:  # its nodes are deep enough: is every segment?
+            seg = segment_insets(mesh, np.column_stack([p[:-1], p[1:]]))
+            j = int(np.argmin(seg))
+            if seg[j] < d_in:
+                line = LineString(P[p[j:j + 2]])
+                at = np.asarray(shapely.shortest_line(line, _boundary_lines(mesh)).coords[0])
+                d_in = float(seg[j])
+                where = f" (between two of its nodes, near ({at[0]:.4g}, {at[1]:.4g}))"
+        if d_in < inset_need - tol:
+            on = " (it runs on the outline)" if d_in <= tol else ""
+            out.append(Conflict("inset", (i,), d_in, inset_need, tuple(map(float, at)),
                                 f"muscle {_name(muscles, i)}: its channel is not mouldable: its smallest inset from "
-                                f"the outline or a hole is {dist[k]:.4g}{on}, a channel {c:.4g} wide with a wall "
-                                f"{w:.4g} needs {inset_need:.4g}"))
+                                f"the outline or a hole is {d_in:.4g}{on}{where}, a channel {c:.4g} wide with a "
+                                f"wall {w:.4g} needs {inset_need:.4g}"))
         for e in (p[0], p[-1]):
             if r > 0 and dist[e] < r + w - tol:
                 out.append(Conflict("fixture-inset", (i,), float(dist[e]), r + w, tuple(map(float, P[e])),
