@@ -21,7 +21,15 @@ that fails is halved (down to
 ``min_step``); the failure status names the element the last refused trial state inverted, if any. Success
 means every scaled residual at most ``tol``: forces relative to ``|params| * size`` (the stiffness times the
 body's size), rope lengths relative to ``L0``. Stability is not checked: the continuation
-follows the branch from rest.
+follows the branch from rest (internal driving: and past its end, another).
+
+Internal driving: the branch from rest may end before the full load (a limit point, e.g. where a strip
+compressed beside a strongly contracted rope, wrinkled one way, carries no more: no load step beyond
+converges, however small). There the failed step's load is solved once more from the last equilibrium by pseudo-transient
+continuation (:func:`~mdsr_opt.mechanics.pseudotransient.pseudo_transient`, at most
+:data:`TRANSIENT_ITERATIONS` steps): the damped motion of the body to an equilibrium of another branch, from
+which the stepping goes on; the status says at which load the branch from rest was left. When that solve
+does not converge either, the failure says so.
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ from .align import align
 from .capstan import CapstanRope, turning_angles
 from .dampednewton import damped_newton
 from .fixtures import RigidReduction
+from .pseudotransient import pseudo_transient
 from .quadratic import QuadraticModel
 from .sparselu import PatternRestriction, ReusedOrdering
 
@@ -125,19 +134,26 @@ class _Upright:
 #: full load (a larger change is stepped)
 START_FULL_STEP = 0.05
 
+#: most pseudo-transient steps of a solve past a limit point of the internal driving's load path
+#: (:func:`~mdsr_opt.mechanics.pseudotransient.pseudo_transient`)
+TRANSIENT_ITERATIONS = 200
+
 #: scaled residual at which an intermediate load step is accepted (the last one meets ``tol``)
 INTERMEDIATE_TOL = 1e-3
 
 
 def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: float = 0.25,
-              secant: bool = True):
+              secant: bool = True, snap: Callable | None = None):
     """Load continuation from ``s = 0`` (state ``z0``) to 1: ``solve_at(t, z_start, final, s) -> (z, converged,
     iterations, residual)`` for a step from the equilibrium at ``s`` to ``t`` (``final`` at ``t = 1``). Returns ``(z, s, converged, iterations, steps, residual, status)`` (``s`` the last
-    load fraction reached)."""
+    load fraction reached). ``snap``: called as ``solve_at`` when a step fails at the smallest step (the branch
+    from rest ends at a limit point): a solve that may reach an equilibrium at ``t`` of another branch (a
+    pseudo-transient one); when it converges the stepping goes on from there and the status says where."""
     s, z, ds = 0.0, z0, first_step
     prev = None  # (s, z) of the step before, for a secant predictor
     iters = steps = 0
     res = 0.0
+    snapped = []  # the load fractions whose limit point a snap passed
     while s < 1.0:
         t = min(1.0, s + ds)
         start = z
@@ -156,8 +172,23 @@ def _continue(solve_at: Callable, z0: np.ndarray, min_step: float, first_step: f
         else:  # half the step that failed (a step cut short at the end of the load, t = 1, halved
             ds = 0.5 * (t - s)  # from its own length: never the same failed step again)
             if ds < min_step:
-                return z, s, False, iters, steps, res, (f"load step {s:.4g} -> {t:.4g} failed (residual {res:.3g}) "
-                                                     f"with the smallest step {min_step:g}")
+                failed = (f"load step {s:.4g} -> {t:.4g} failed (residual {res:.3g}) with the smallest step "
+                          f"{min_step:g}")
+                if snap is None:
+                    return z, s, False, iters, steps, res, failed
+                zt, conv, it, res_t = snap(t, z, t >= 1.0, s)
+                iters += it
+                if not conv:
+                    return z, s, False, iters, steps, res, (f"{failed}, and a pseudo-transient solve from there did "
+                                                         f"not converge either (residual {res_t:.3g})")
+                snapped.append(s)
+                prev, s, z, res = None, t, zt, res_t  # a new branch: no secant across the snap
+                steps += 1
+                ds = min_step
+    if snapped:
+        at = ", ".join(f"{v:.4g}" for v in snapped)
+        return z, s, True, iters, steps, res, (f"converged (the load steps from rest stalled at load {at}: passed "
+                                               "by a pseudo-transient solve to another branch)")
     return z, s, True, iters, steps, res, "converged"
 
 
@@ -450,7 +481,7 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         q[keep] = z[:nk]
         return q, z[nk:]
 
-    def solve_at(s, z0, final, _s_from, shifted=False):
+    def solve_at(s, z0, final, _s_from, shifted=False, transient=False):
         targets = (1.0 - (a0 + s * (a - a0))) * L0
         tol_s = tol if final else max(tol, INTERMEDIATE_TOL)
 
@@ -498,7 +529,10 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
         ok = _Upright(model, lambda z: red.x_of(split(z)[0]))
         guard[0] = ok
 
-        z, conv, it, res = damped_newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
+        if transient:
+            z, conv, it, res = pseudo_transient(system, z0, ok, tol_s, max(max_iter, TRANSIENT_ITERATIONS), nk, order)
+        else:
+            z, conv, it, res = damped_newton(system, z0, ok, tol_s, max_iter, order, nk if shifted else 0)
         for _ in range(3):  # ropes that push go slack; slack ropes pulled taut again take up the load
             if not conv:
                 break
@@ -535,7 +569,8 @@ def solve_quadratic_internal(model: QuadraticModel, ropes: Sequence[CapstanRope]
     # from a predicted state (far from the answer: another model's equilibrium) with the pseudo-transient
     # shift; from a start state (a solve of nearly these contractions) Newton's own steps
     z, _s, conv, iters, steps, res, status = _full_load_first(
-        solve_at, near, z0, min_step, on_fail=lambda: active.fill(True), first={"shifted": guess is not None})
+        solve_at, near, z0, min_step, on_fail=lambda: active.fill(True), first={"shifted": guess is not None},
+        snap=lambda t, zs, final, s: solve_at(t, zs, final, s, transient=True))
     if not conv and guard[0] is not None:
         status += guard[0].why()
     q, tau = split(z)
