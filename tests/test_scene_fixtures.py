@@ -211,3 +211,26 @@ def test_a_bad_field_is_named_with_its_file_once(tmp_path, extra, field):
     assert msg.count("fx.toml") == 1, msg
     import re
     assert re.match(rf"fx.toml: {field}: ", msg), msg
+
+
+def test_a_stub_too_short_for_its_fixtures_is_dropped_with_the_rule_it_breaks():
+    """A rope shorter than 4 fixture radii is dropped saying so, not 'of which 100 % lies outside its end fixtures
+    (at least 6 and 67 % needed)', which read as a contradiction (trial9)."""
+    import numpy as np
+
+    from mdsr_opt import Mesh
+    from mdsr_opt.synthesis.fabrication import Fabrication
+    from mdsr_opt.synthesis.routing_fixtures import fit_fixtures
+
+    mesh = Mesh.rectangle(8.0, 4.0, 32, 16)   # nodes on a 0.25 grid
+    P = mesh.points
+
+    def row(y, x0, x1):
+        return sorted((int(i) for i in np.flatnonzero(np.abs(P[:, 1] - y) < 1e-9)
+                       if x0 - 1e-9 <= P[i, 0] <= x1 + 1e-9), key=lambda i: P[i, 0])
+
+    fab = Fabrication(channel_diameter=0.05, wall=0.05, fixture_radius=0.3, min_fixture_radius=0.3).for_body(mesh)
+    fit = fit_fixtures(mesh, [row(2.0, 1.0, 7.0), row(1.0, 3.0, 4.0)], fab)
+    assert [i for i, _ in fit.kept] == [0] and len(fit.dropped) == 1 and fit.dropped[0][0] == 1
+    assert fit.dropped[0][1] == ("too short for two fixtures of radius 0.3: rest length 1, less than the 1.2 "
+                                 "(4 radii) two fixtures and the rope between them need")

@@ -268,8 +268,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     # every muscle by its label, an unnamed one by its place (M1, M2 ...), as every table, figure and file
     rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(setup.muscles)]
     if setup.routing is not None and case.kind == "external" and scene.muscles is None and case.muscles is None:
-        say(f"{prefix}routing: {rep.n_muscles} muscle(s) from {setup.routing.n_units} unit(s) "
-            f"({setup.times['routing']:.2f} s)")
+        units = f" from {setup.routing.n_units} unit(s)" if setup.routing.n_units else ""
+        say(f"{prefix}routing: {rep.n_muscles} muscle(s){units} ({setup.times['routing']:.2f} s)")
         for note in setup.routing.notes:  # what made the ropes buildable, each resolution once
             say(f"{prefix}routing: {note}")
         rep.notes = [f"routing: {note}" for note in setup.routing.notes]

@@ -188,9 +188,11 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float
         stub = [c for c in range(len(mus)) if L[c] < 4.0 * r or free[c] < MIN_FREE_FRACTION]
         if stub:
             c = stub[-1]  # the weakest first: dropping it may free another's fixtures
-            why = (f"too short for two fixtures of radius {r:.4g}: rest length {L[c]:.4g}, of which "
-                   f"{percent_beside(free[c], MIN_FREE_FRACTION)}% lies outside its end fixtures (at least {4 * r:.4g} and "
-                   f"{MIN_FREE_FRACTION:.0%} needed)")
+            why = (f"too short for two fixtures of radius {r:.4g}: " + (
+                f"rest length {L[c]:.4g}, less than the {4 * r:.4g} (4 radii) two fixtures and the rope between "
+                f"them need" if L[c] < 4.0 * r else
+                f"of its rest length {L[c]:.4g} only {percent_beside(free[c], MIN_FREE_FRACTION)}% lies outside its "
+                f"end fixtures (at least {MIN_FREE_FRACTION:.0%} needed)"))
         elif joined:
             c0 = joined[0]
             g = group_of[work[c0][1][0]]
