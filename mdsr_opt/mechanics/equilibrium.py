@@ -66,9 +66,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     verbose : print each accepted load step.
     initial_guess : ``"predictor"`` (default: every load step starts from a Newton predictor, at rest the
         linear-elastic solution), ``"rest"`` (each step starts from the current state, the rest shape at
-        first, with only the fixed nodes moved) or an (n, 2) state to start the first step from (its fixed
-        nodes are moved to their prescribed positions). The last two exist to study poor first guesses;
-        combine them with ``min_step=1`` to forbid load stepping.
+        first, with only the fixed nodes moved) or an (n, 2) state to start the first step from. The load
+        steps move the fixed nodes from where that state has them to their prescribed positions: along the
+        drags' paths when it has them at rest, else straight (a state solved for nearby drags: a
+        continuation from it, not again from rest). ``"rest"`` exists to study poor first guesses; combine
+        it with ``min_step=1`` to forbid load stepping.
     obstacles : list of :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.Obstacle` (or one)
         Rigid obstacles the body's boundary may touch but not enter (with Coulomb ``friction`` when given);
         none may hold a node at rest, and no drag may enter one. See :mod:`~mdsr_opt.mechanics.contactsolve`.
@@ -141,6 +143,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         at = np.vstack([anchored, units.to_unit(path.positions(s))])
         return np.concatenate([at[:, 0], at[:, 1]])[order]
 
+    values_of = _from_guess(values_of, None if isinstance(initial_guess, str) else units.state_in(x_start)[fixed])
+
     if spec.active:
         res, _lam = solve_with_contact(mesh, model, material, lambda s: p, fixed, values_of, units.state_in(x_start),
                                        spec, tol, max_iter, options, min_step, verbose, predict, "external", units,
@@ -152,6 +156,20 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     return units.equilibrium_out(equilibrium_result(
         mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve, backend,
         "external", tol))
+
+
+def _from_guess(values_of, start):
+    """The fixed coordinates' path ``values_of`` over the load, starting instead from their values ``start`` in
+    a given first state (None: none given): unchanged when the state has them where the path starts (at
+    rest), else straight from there to the path's end, so that a state solved for nearby drags is continued
+    from, not solved again from rest through states far from it."""
+    if start is None:
+        return values_of
+    v0, v1 = values_of(0.0), values_of(1.0)
+    if np.allclose(start, v0, rtol=0.0, atol=1e-12 * max(1.0, float(np.abs(v0).max(initial=1.0)))):
+        return values_of
+    start = np.array(start, dtype=float)
+    return lambda s: start + s * (v1 - start)
 
 
 def external_stability(mesh: Mesh, material, anchors, drags, x, *, lowest: bool = False):
