@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from shapely.geometry import Point
 
 from mdsr_opt import Mesh
 from mdsr_opt.scenes.select import boundary_path, edge_path, nearest_node, nodes_in_box, nodes_in_polygon, nodes_near
@@ -97,3 +98,20 @@ def test_an_edge_path_follows_its_drawn_line_not_a_straight_outline_beside_it(an
     assert top.min() > 4.0 - 1.5 * h                          # never on the outline, 4 mm away
     assert len(set(rope.nodes)) == len(rope.nodes)
     assert rope.rest_length(mesh) < 1.2 * np.linalg.norm(b - a)  # a zig-zag, not a detour
+
+
+def test_an_edge_path_round_a_corner_waypoint_turns_before_it_instead_of_repeating_a_node():
+    """Both joins at a right-angle waypoint may run along the same last edge (out to the corner node and back):
+    the rope turns at the node before it (recheck9: 'muscle path repeats node 472: a muscle is a simple path')."""
+    from shapely.geometry import LineString
+
+    from mdsr_opt import mesh_polygon
+
+    mesh = mesh_polygon([[0, 0], [8, 0], [8, 2], [2, 2], [2, 7], [0, 7]], resolution=900)
+    way = [[0.35, 6.6], [0.35, 0.35], [7.6, 0.35]]
+    rope = edge_path(mesh, way)
+    P, h = mesh.points, float(mesh.edge_lengths.mean())
+    assert len(set(rope.nodes)) == len(rope.nodes)
+    line = LineString(way)
+    assert max(line.distance(Point(p)) for p in P[list(rope.nodes)]) < 1.5 * h
+    assert np.linalg.norm(P[rope.nodes[0]] - way[0]) < h and np.linalg.norm(P[rope.nodes[-1]] - way[-1]) < h

@@ -111,7 +111,8 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     between them: Dijkstra on rest edge lengths, each weighted by ``1 + (d / h)**2`` with ``d`` the distance of
     the edge's midpoint from the segment and ``h`` the mean edge length. The plain shortest path would run
     along a straight outline or hole edge near the drawn line rather than through the zig-zag of interior
-    edges on it (a channel on the outline cannot be moulded). The result must be a simple path.
+    edges on it (a channel on the outline cannot be moulded). Where two joins meet at a waypoint by the same
+    edge (a corner waypoint), the rope turns at the node before it. The result must be a simple path.
     """
     import networkx as nx
 
@@ -125,7 +126,11 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     for a, b in zip(ids[:-1], ids[1:]):
         if a == b:
             continue
-        path += nx.shortest_path(G, a, b, weight=_along(P[a], P[b], P, h))[1:]
+        for k in nx.shortest_path(G, a, b, weight=_along(P[a], P[b], P, h))[1:]:
+            if len(path) >= 2 and path[-2] == k:  # out to a corner waypoint and back along the same edge: a
+                path.pop()                        # rope turns at the node before it (no spike)
+            else:
+                path.append(k)
     return Muscle(path, name=name)
 
 
