@@ -232,7 +232,8 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         d = proto.describe()
         say(f"{scene.name}: virtual prototype: {d['nodes']} nodes ({d['design_nodes']} in the design model), "
             f"{d['elements']} elements, silicone nu {d['silicone_nu']:.3f}, E x {d['E_factor']:.3f}, rope friction "
-            f"{d['rope_friction']:g}, fixtures of radius {d['fixture_radius']:.3g}, seed {d['seed']}")
+            f"{d['rope_friction']:g}, fixtures of radius {d['fixture_radius']:.3g} (the scene's; a routed layout's "
+            f"own, where shrunk, on its Table 4 line), seed {d['seed']}")
     runs: dict[str, CaseRun] = {}
     written: dict[str, list[list[str]]] = {}
     # an animation (its frames' forward solves, GIF and JSON) is one job, the run's longest: it is sent
