@@ -425,3 +425,39 @@ def test_strip_end_turned_90_degrees_contact_region_at_1701_nodes():
     assert abs(starts[1] - starts[0]) <= 0.1 + 1e-9  # within one coarse element
     assert 2.5 < starts[1] < 2.9
     assert res.energy < coarse[1].energy
+
+
+def test_polish_falls_back_to_independent_rows_where_the_held_rows_are_dependent():
+    """Where the held contact rows are dependent (a point past a segment's end held by both segments' rows at a
+    flat fold; here every pushing row of the turned strip twice, which makes the KKT matrix singular), the polishing
+    Newton step holds an independent subset of them and meets the tolerance as with each row once."""
+    from mdsr_opt.mechanics.contactsolve import ContactProblem, ContactSpec, contact_residual, polish
+    from mdsr_opt.mechanics.kkt import kkt_factor
+
+    mesh, res = _turn(20, 5, -1.0)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    model = get_model(mesh, MAT)
+    p = model.params(MAT)
+    gap = res.contact["gap"]
+    prob = ContactProblem(mesh, model, ContactSpec([], True, gap))
+    fixed = np.zeros((mesh.n_nodes, 2), dtype=bool)
+    fixed[np.r_[left, right]] = True
+    fixed = fixed.reshape(-1)
+    x = res.x.reshape(-1)
+    once = prob.rows_for(x, [x])
+    pushing = np.flatnonzero(once.values(x) - gap < 1e-6 * mesh.size)
+    assert len(pushing) >= 2
+    twice = ContactRows(np.vstack([once.pts[pushing]] * 2), mesh.n_nodes, None, np.vstack([once.w[pushing]] * 2),
+                        np.vstack([once.labels[pushing]] * 2))
+    rng = np.random.default_rng(0)
+    y = x + np.where(fixed, 0.0, rng.normal(scale=1e-5 * mesh.size, size=x.shape))  # off the solution
+    F = MAT.E * MAT.thickness * mesh.size
+    for rows in (once, twice):
+        r0, _ = contact_residual(prob, rows, y, p, fixed, 1e-8, F)
+        assert r0.value > 1e-6
+        x2, r2, fc = polish(prob, rows, y, p, fixed, 1e-8, F, steps=4)
+        assert r2.value <= 1e-8, r2.value
+        assert np.abs(x2 - x).max() < 1e-7 * mesh.size  # the solved state again
+    H = model.hessian(y, p).tocsr()[~fixed][:, ~fixed]
+    assert kkt_factor(H, twice.jacobian(y)[:, ~fixed]) is None  # all rows held: no step
