@@ -25,6 +25,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr
+from scipy.optimize import lsq_linear
 from shapely.geometry import Point, Polygon
 
 from ..core.guards import interruptible
@@ -285,6 +286,7 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
         Jz.data[~free[Jz.indices]] = 0.0
     lam = np.zeros(nm + rows.n_rows)
     sign = np.concatenate([np.ones(nt), np.zeros(nm - nt), -np.ones(rows.n_rows)])  # ropes pull, contacts push
+    first = active.copy()
     for _ in range(nt + rows.n_rows + 1):
         lam[:] = 0.0
         Ja = Jz[active]
@@ -300,6 +302,19 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
         active[worst] = False
     gl = g + (J.T @ lam if J.shape[0] else 0.0)
     s = float(np.abs(gl[free]).max()) / force if free.any() else 0.0
+    if s > tol and (first != active).any():  # rows released for their sign: where the rows are dependent (both
+        # faces of a flat fold pushing) a least-squares solution has forces of either sign where ones of the right
+        # sign fit as well, and releasing the worst one at a time leaves too few; the fit again with the signs as
+        # bounds (bounded-variable least squares)
+        lam2 = np.zeros_like(lam)
+        lo = np.where(sign[first] > 0, 0.0, -np.inf)
+        hi = np.where(sign[first] < 0, 0.0, np.inf)
+        lam2[first] = lsq_linear(Jz[first].T.toarray()[free], -gf[free], bounds=(lo, hi), method="bvls",
+                                 tol=1e-14).x
+        gl2 = g + J.T @ lam2
+        s2 = float(np.abs(gl2[free]).max()) / force
+        if s2 < s:
+            lam, gl, s = lam2, gl2, s2
     viol = 0.0
     if nm:
         v = cm.values(x)
