@@ -407,10 +407,10 @@ def test_strip_end_turned_90_degrees_contact_region_at_1701_nodes():
     the 451-node state carried to its nodes (a fine mesh's own load path folds its inner side into creases an
     element wide, one short load step at a time): each a stable state without crossing (``_turn``); the inner
     side touches itself along one unbroken stretch from x = 2.70 to 3.90 at both (3.90: the last node before the
-    turned end at 451 nodes, the last but one at 1,701); the energy falls (0.24525, 0.23728). The finer state is a minimum of its own mesh, not the coarse state: its
+    turned end at 451 nodes, the last but one at 1,701); the energy falls (0.24528, 0.23728). The finer state is a minimum of its own mesh, not the coarse state: its
     nodes move by more than a fifth of a coarse element from where they started (0.049). The total contact force
-    (0.0989, 0.1457) is reported, not checked: at 1,701 nodes the nodes of both faces push (24 pairs on 25
-    nodes), at 451 nodes 9 pairs on 13."""
+    (0.0986, 0.1476) is reported, not checked: at 1,701 nodes the nodes of both faces push (26 pairs on 25
+    nodes), at 451 nodes 8 pairs on 13."""
     coarse = _turn(40, 10, -1.0)
     mesh, res = _turn(80, 20, -1.0, seed=coarse)
     start = transfer_state(coarse[0], coarse[1].x, mesh.points)
@@ -447,3 +447,39 @@ def test_a_contact_solve_continues_from_a_state_solved_for_nearby_drags():
     assert cont.energy == pytest.approx(fresh.energy, rel=1e-6)
     assert np.abs(cont.x - near.x).max() < 0.2           # the guess's own fold, pushed a little further
     assert _outline(mesh, cont.x).is_valid and _min_gap(mesh, cont.x) > 0.0
+
+
+def test_polish_falls_back_to_independent_rows_where_the_held_rows_are_dependent():
+    """Where the held contact rows are dependent (a point past a segment's end held by both segments' rows at a
+    flat fold; here every pushing row of the turned strip twice, which makes the KKT matrix singular), the polishing
+    Newton step holds an independent subset of them and meets the tolerance as with each row once."""
+    from mdsr_opt.mechanics.contactsolve import ContactProblem, ContactSpec, contact_residual, polish
+    from mdsr_opt.mechanics.kkt import kkt_factor
+
+    mesh, res = _turn(20, 5, -1.0)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    model = get_model(mesh, MAT)
+    p = model.params(MAT)
+    gap = res.contact["gap"]
+    prob = ContactProblem(mesh, model, ContactSpec([], True, gap))
+    fixed = np.zeros((mesh.n_nodes, 2), dtype=bool)
+    fixed[np.r_[left, right]] = True
+    fixed = fixed.reshape(-1)
+    x = res.x.reshape(-1)
+    once = prob.rows_for(x, [x])
+    pushing = np.flatnonzero(once.values(x) - gap < 1e-6 * mesh.size)
+    assert len(pushing) >= 2
+    twice = ContactRows(np.vstack([once.pts[pushing]] * 2), mesh.n_nodes, None, np.vstack([once.w[pushing]] * 2),
+                        np.vstack([once.labels[pushing]] * 2))
+    rng = np.random.default_rng(0)
+    y = x + np.where(fixed, 0.0, rng.normal(scale=1e-5 * mesh.size, size=x.shape))  # off the solution
+    F = MAT.E * MAT.thickness * mesh.size
+    for rows in (once, twice):
+        r0, _ = contact_residual(prob, rows, y, p, fixed, 1e-8, F)
+        assert r0.value > 1e-6
+        x2, r2, fc = polish(prob, rows, y, p, fixed, 1e-8, F, steps=4)
+        assert r2.value <= 1e-8, r2.value
+        assert np.abs(x2 - x).max() < 1e-7 * mesh.size  # the solved state again
+    H = model.hessian(y, p).tocsr()[~fixed][:, ~fixed]
+    assert kkt_factor(H, twice.jacobian(y)[:, ~fixed]) is None  # all rows held: no step

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import qr
+from scipy.optimize import lsq_linear
 from shapely.geometry import Point, Polygon
 
 from ..core.guards import interruptible
@@ -284,6 +286,7 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
         Jz.data[~free[Jz.indices]] = 0.0
     lam = np.zeros(nm + rows.n_rows)
     sign = np.concatenate([np.ones(nt), np.zeros(nm - nt), -np.ones(rows.n_rows)])  # ropes pull, contacts push
+    first = active.copy()
     for _ in range(nt + rows.n_rows + 1):
         lam[:] = 0.0
         Ja = Jz[active]
@@ -299,6 +302,19 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
         active[worst] = False
     gl = g + (J.T @ lam if J.shape[0] else 0.0)
     s = float(np.abs(gl[free]).max()) / force if free.any() else 0.0
+    if s > tol and (first != active).any():  # rows released for their sign: where the rows are dependent (both
+        # faces of a flat fold pushing) a least-squares solution has forces of either sign where ones of the right
+        # sign fit as well, and releasing the worst one at a time leaves too few; the fit again with the signs as
+        # bounds (bounded-variable least squares)
+        lam2 = np.zeros_like(lam)
+        lo = np.where(sign[first] > 0, 0.0, -np.inf)
+        hi = np.where(sign[first] < 0, 0.0, np.inf)
+        lam2[first] = lsq_linear(Jz[first].T.toarray()[free], -gf[free], bounds=(lo, hi), method="bvls",
+                                 tol=1e-14).x
+        gl2 = g + J.T @ lam2
+        s2 = float(np.abs(gl2[free]).max()) / force
+        if s2 < s:
+            lam, gl, s = lam2, gl2, s2
     viol = 0.0
     if nm:
         v = cm.values(x)
@@ -339,7 +355,8 @@ def polish(prob: ContactProblem, rows, x, p, fixed, tol, force, lam=None, steps:
         d = (rows.values(x) - prob.spec.gap) / S
         act[nm:] = (d <= np.sqrt(tol)) | (lam[nm:] / force >= d)
     free = ~fixed
-    nf = int(free.sum())
+    scale = np.concatenate([cm.constraints.rest_lengths[:nt] if nt else np.zeros(0), np.full(nm - nt, S),
+                            np.full(rows.n_rows, S)])
     for _ in range(steps):
         H = _hessian(prob, rows, x, p, lam)
         Hf = H.tocsr()[free][:, free]
@@ -347,41 +364,76 @@ def polish(prob: ContactProblem, rows, x, p, fixed, tol, force, lam=None, steps:
         g = prob.model.gradient(x, pe)
         if prob.friction_term is not None:
             g = g + prob.friction_term.gradient(x)
-        sol = None
         Jfree = J[:, free]
-        for _ in range(ACTIVE_SET_TRIES):
-            fac = kkt_factor(Hf, Jfree[act])
-            if fac is None:
-                sol = None
+        done = None
+        for reduce in (False, True):  # every held row in the step; if that fails, only independent ones
+            dx, mult, act2 = _kkt_step(Hf, Jfree, g[free], c, act, (nt, nm), 0.1 * tol * scale, reduce)
+            if dx is None:
+                continue
+            y = x.copy()
+            y[free] += dx
+            if not upright(prob.mesh, y) or prob.penetrates(y):
+                continue
+            r2, f2 = contact_residual(prob, rows, y, p, fixed, tol, force)
+            if r2.value < res.value:
+                done = y, r2, f2, mult, act2
                 break
-            sol = fac.solve(np.concatenate([-g[free], -c[act]]))
-            mult = np.zeros(len(act))
-            mult[act] = sol[nf:]
-            wrong = act & (np.concatenate([-mult[:nt], np.zeros(nm - nt), mult[nm:]]) > 0)
-            # a row left free that the step would violate (a rope longer than its target, a contact inside
-            # its gap): held, and the step made again
-            lin = c + Jfree @ sol[:nf]
-            scale = np.concatenate([cm.constraints.rest_lengths[:nt] if nt else np.zeros(0), np.full(nm - nt, S),
-                                    np.full(rows.n_rows, S)])
-            over = ~act & (np.concatenate([lin[:nt], np.zeros(nm - nt), -lin[nm:]]) > 0.1 * tol * scale)
-            if not wrong.any() and not over.any():
-                break
-            act = (act & ~wrong) | over
-            sol = None
-        if sol is None or not np.all(np.isfinite(sol)):
+        if done is None:
             break
-        y = x.copy()
-        y[free] += sol[:nf]
-        if not upright(prob.mesh, y) or prob.penetrates(y):
-            break
-        r2, f2 = contact_residual(prob, rows, y, p, fixed, tol, force)
-        if not r2.value < res.value:
-            break
+        x, res, fc, mult, act = done
         lam = np.concatenate([mult[:nm], -mult[nm:]])
-        x, res, fc = y, r2, f2
         if res.value <= 1e-2 * tol:
             break
     return x, res, fc
+
+
+def _kkt_step(Hf, J, g, c, act, counts, over_tol, reduce):
+    """One Newton step of :func:`polish` on the KKT system with the rows ``act`` held: ``(step, multipliers,
+    rows held)``, the step None when no consistent active set was found within :data:`ACTIVE_SET_TRIES`. A held
+    row whose multiplier comes out of sign (a rope pushing, a contact pulling) is released, a free row that the
+    step would violate by more than ``over_tol`` (a rope longer than its target, a contact inside its gap) is
+    held, and the step made again. ``reduce``: of the held rows only independent ones enter the system
+    (:func:`_independent`); the others are left to them, neither released nor checked."""
+    nt, nm = counts
+    nf = Hf.shape[0]
+    for _ in range(ACTIVE_SET_TRIES):
+        held = _independent(J, act) if reduce else act
+        fac = kkt_factor(Hf, J[held])
+        if fac is None:
+            return None, None, act
+        sol = fac.solve(np.concatenate([-g, -c[held]]))
+        if not np.all(np.isfinite(sol)):
+            return None, None, act
+        mult = np.zeros(len(act))
+        mult[held] = sol[nf:]
+        wrong = held & (np.concatenate([-mult[:nt], np.zeros(nm - nt), mult[nm:]]) > 0)
+        lin = c + J @ sol[:nf]
+        over = ~act & (np.concatenate([lin[:nt], np.zeros(nm - nt), -lin[nm:]]) > over_tol)
+        if not wrong.any() and not over.any():
+            return sol[:nf], mult, act
+        act = (act & ~wrong) | over
+    return None, None, act
+
+
+#: a held row whose Jacobian row is within this (relative to the largest pivot of a pivoted QR) of the span of
+#: the rows before it is left to them (:func:`_independent`)
+DEPENDENT_RTOL = 1e-6
+
+
+def _independent(J, act) -> np.ndarray:
+    """The rows of ``act`` (mask) whose rows of ``J`` are linearly independent: a column-pivoted QR of their
+    transpose, the rows of pivots above :data:`DEPENDENT_RTOL` of the first. Where both faces of a flat fold
+    push, a point sliding past a segment's end onto the next held by both segments' rows, the held rows are
+    dependent to 1e-7 and the KKT step of all of them solves an inconsistency of their values (1e-7 of the
+    size) through that near-singular direction: a step of a third of an element."""
+    idx = np.flatnonzero(act)
+    if len(idx) < 2:
+        return act
+    R, piv = qr(J[idx].toarray().T, mode="r", pivoting=True)
+    d = np.abs(np.diag(R))
+    out = np.zeros_like(act)
+    out[idx[piv[d > DEPENDENT_RTOL * d[0]]]] = True
+    return out
 
 
 def _hessian(prob, rows, x, p, lam):

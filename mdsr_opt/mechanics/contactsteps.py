@@ -59,14 +59,16 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
     out = None
     lags = 0
     handed = _empty(prob)
+    warm = False  # the solve starts from the last one's state: admissible, its touching pairs at their gap
     for _ in range(MAX_REFRESH + LAG_ITER):
         check_stop()
         step_tol = tol if final else max(tol, loose)
+        opts = careful_options(options) if warm else options
         fsel = prob.friction_rows(rows)
         lagged = np.array([prob.normal_lag.get(row_key(rows, i), 0.0) for i in fsel])
         prob.friction_term = prob.friction_for(rows, x_ref, lagged)
         if rho > 0:
-            out = prob.minimize(rows, p, start, fixed, vals, step_tol, max_iter, options, (rho, x_ref))
+            out = prob.minimize(rows, p, start, fixed, vals, step_tol, max_iter, opts, (rho, x_ref))
             lam_c = out.lam_g[nm:]
         elif rows.n_rows == 0:
             if final:
@@ -76,7 +78,7 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
                                max_iter=max_iter, options=options)
             lam_c = np.zeros(0)
         else:
-            out = prob.minimize(rows, p, start, fixed, vals, step_tol, max_iter, options)
+            out = prob.minimize(rows, p, start, fixed, vals, step_tol, max_iter, opts)
             lam_c = out.lam_g[nm:]
         its += out.iterations
         t_solve += out.solve_time
@@ -86,9 +88,9 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         x1 = out.x
         why = prob.penetrates(x1)
         new = merge_rows(rows, prob.rows_for(x_ref, [x_ref, guess, x1]), drop)
-        if why is None and prob.release > 0:  # careful: and the pairs of the solve's own state (admissible: the
-            # next solve starts from it),
-            # e.g. a point come to a segment's end that projected beyond it where the step started
+        if why is None:  # and the pairs of the solve's own state (admissible: the next solve starts from it), e.g.
+            # a point come to a segment's end that projected beyond it where the step started, or a fold closed
+            # within the solve whose point projected beyond the segment it now rests on
             new = merge_rows(new, prob.rows_for(x1, [x1]), drop)
         swapped, swap_in = set(), set()
         if rows.n_rows:  # a pair whose point is beyond its segment's end: its point handed to the segment it
@@ -135,8 +137,10 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
             out.status += f"; rejected: {why} and no new contact pair to prevent it"
             break
         rows = new
-        if why is None:
-            start = x1
+        if why is None:  # the next solve from this one's state, IPOPT's barrier started at MU_INIT: its default
+            # (0.1) pushes the touching pairs apart with forces hundreds of times the elastic ones, and where a
+            # fold has closed within the solve it tears the fold open again
+            start, warm = x1, True
     if out is not None and out.success:
         out.success = False
         out.status += f"; contact pairs still changing after {MAX_REFRESH} solves"
