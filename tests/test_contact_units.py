@@ -54,3 +54,20 @@ def test_a_design_reports_its_contact_forces_in_the_unit_of_its_tensions():
     assert s["n_pairs"] == len(res.contact["pairs"]) > 0
     res.units = None  # no length unit: both in units of E*t*length, unchanged
     assert res.contact["force_unit"] == res.tension_unit == "units of E*t*length"
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.6])
+def test_the_default_contact_gap_is_the_same_however_the_body_is_turned(angle):
+    """The default gap is a fraction of the body's diameter (body_size), not of its bounding-box diagonal, which
+    grows by up to 41 % as a body turns: a C turned by 0.6 rad kept a gap 1.39 times the upright C's."""
+    from mdsr_opt import body_size
+    from mdsr_opt.mechanics.contactsteps import DEFAULT_GAP, contact_spec
+    from mdsr_opt.mechanics.units import Units
+
+    C = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [4, 3], [4, 4], [0, 4]], float)
+    c, s = np.cos(angle), np.sin(angle)
+    mesh = Mesh.from_polygon(C @ np.array([[c, -s], [s, c]]).T, max_area=0.1)
+    units = Units(mesh, NeoHookean(1.0, 0.3))
+    gap = contact_spec(units, None, True, None, "ipopt").gap * units.length
+    assert gap == pytest.approx(DEFAULT_GAP * 4 * np.sqrt(2), rel=1e-9)   # the C's diameter: its diagonal
+    assert body_size(mesh) == pytest.approx(4 * np.sqrt(2), rel=1e-9)

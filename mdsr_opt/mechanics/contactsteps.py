@@ -10,6 +10,7 @@ import numpy as np
 
 from ..core.guards import check_stop, interruptible
 from .backends import minimize
+from .anchors import body_size
 from .blas import one_blas_thread
 from .contact import DELTA, RELEASE, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import positive_float
@@ -459,9 +460,9 @@ def contact_spec(units, obstacles, contact, contact_gap, backend, friction=0.0):
         raise TypeError(f"contact must be True or False, got {contact!r}")
     obs = check_obstacles(obstacles, units.mesh)
     if contact_gap is None:
-        gap = DEFAULT_GAP * units.unit_mesh.size
+        gap = DEFAULT_GAP * body_size(units.unit_mesh)
     else:
-        gap = units.to_unit(check_gap(positive_float(contact_gap, "contact_gap"), units.mesh.size))
+        gap = units.to_unit(check_gap(positive_float(contact_gap, "contact_gap"), body_size(units.mesh)))
     if isinstance(friction, bool) or not isinstance(friction, (int, float, np.integer, np.floating)) or \
             not np.isfinite(friction) or friction < 0:
         raise ValueError(f"friction must be a number >= 0 (Coulomb's coefficient), got {friction!r}")
@@ -480,7 +481,8 @@ def contact_spec(units, obstacles, contact, contact_gap, backend, friction=0.0):
 #: leaves the unstable branch as soon as it buckles
 RETRY_STEP = 0.125
 
-#: the default gap a contact keeps, relative to the body's size
+#: the default gap a contact keeps, relative to the body's size (its diameter,
+#: :func:`~mdsr_opt.mechanics.anchors.body_size`, the same however the body is turned)
 DEFAULT_GAP = 1e-4
 
 #: the largest contact gap, as a fraction of the body's size: a gap is a small clearance between touching parts

@@ -466,9 +466,9 @@ def _check_contact_drags(scene: Scene, case: Case) -> None:
     P = scene.mesh.points
     nodes = np.concatenate([case.anchors, case.drag_nodes])
     rest, final = P[nodes], np.vstack([P[case.anchors], case.drag_positions])
-    gap = scene.design_options.get("contact_gap") or DEFAULT_GAP * scene.mesh.size
+    gap = scene.design_options.get("contact_gap") or DEFAULT_GAP * body_size(scene.mesh)
     try:
-        check_gap(gap, scene.mesh.size)
+        check_gap(gap, body_size(scene.mesh))
         check_prescribed_self(scene.mesh, nodes, lambda s: rest + s * (final - rest), gap,
                               anchored=len(case.anchors))
     except ValueError as exc:
