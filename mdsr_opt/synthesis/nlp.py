@@ -362,7 +362,7 @@ MUMPS_ORDERING = 0
 #: none, so a contraction at ``a_max``, at its cap or at 0 is the one the ropes' lengths were solved for.
 #: With the default, clipping it back left the rope 1e-8 L0 off its target, which the forward solver's
 #: measure reads as a slack rope (scaled KKT residual 1e-3), and the design's state took a Newton polish
-#: (strip of bench_fine_design, 16.7k nodes, two ropes at their caps: 1.2 s of 10 s CPU; same iterations)
+#: (the strip of bench_fine_design with two ropes at their caps; commit 8be3578 has the figures)
 BOUND_RELAX = 0.0
 
 
