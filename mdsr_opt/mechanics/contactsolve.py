@@ -25,7 +25,6 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import qr
-from scipy.optimize import lsq_linear
 from shapely.geometry import Point, Polygon
 
 from ..core.guards import interruptible
@@ -305,7 +304,10 @@ def contact_residual(prob: ContactProblem, rows: ContactRows, x, p, fixed, tol: 
     if s > tol and (first != active).any():  # rows released for their sign: where the rows are dependent (both
         # faces of a flat fold pushing) a least-squares solution has forces of either sign where ones of the right
         # sign fit as well, and releasing the worst one at a time leaves too few; the fit again with the signs as
-        # bounds (bounded-variable least squares)
+        # bounds (bounded-variable least squares). Imported here: scipy.optimize imports scipy.spatial and more,
+        # which a run's main process otherwise leaves to its jobs (only such a contact fit needs it)
+        from scipy.optimize import lsq_linear
+
         lam2 = np.zeros_like(lam)
         lo = np.where(sign[first] > 0, 0.0, -np.inf)
         hi = np.where(sign[first] < 0, 0.0, np.inf)
