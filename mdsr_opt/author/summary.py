@@ -7,9 +7,8 @@ import math
 
 import numpy as np
 
-from ..mechanics.align import difference, node_weights
 from ..mechanics.anchors import body_size
-from ..synthesis.acceptance import difference_failure
+from ..synthesis.acceptance import difference_failure, rest_difference
 
 __all__ = ["design_summary"]
 
@@ -49,8 +48,7 @@ def design_summary(session) -> dict:
             "acceptance": difference_failure(res.difference, body_size(session.mesh),
                                              *[session.acceptance[k] for k in ("max_difference",) if k in session.acceptance],
                                              units=session.units or None,
-                                             rest_difference=difference(session.mesh.points, target,
-                                                                        node_weights(session.mesh))),
+                                             rest_difference=rest_difference(session.mesh, target)),
             "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in session.muscles]}
 
 

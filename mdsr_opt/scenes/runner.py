@@ -15,7 +15,6 @@ import numpy as np
 from ..core.errors import LayoutError
 from ..core.quantities import length_unit
 from ..core.results import compact_repr, to_jsonable
-from ..mechanics.align import difference, node_weights
 from ..mechanics.anchors import body_size
 from ..plot.style import muscle_label, unit_label
 from ..synthesis.fabrication import FabricationWarning
@@ -202,7 +201,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     join, say) is such a failure. Bad arguments (``TypeError``/``ValueError`` from the checks at the door)
     still raise.
     """
-    from ..synthesis.acceptance import check_max_difference, design_active, difference_failure
+    from ..synthesis.acceptance import check_max_difference, design_active, difference_failure, rest_difference
 
     say = log or (lambda s: None)
     if isinstance(case, str):
@@ -349,9 +348,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     if photo:
         measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()
-    w = opts.get("weights")
-    w = node_weights(mesh, opts.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
-    rep.rest_difference = float(difference(mesh.points, setup.target, w))  # the design's own weights
+    rep.rest_difference = rest_difference(mesh, setup.target, opts)  # the design's own weights
     far = difference_failure(res.difference, body_size(mesh), accept["max_difference"], units=scene.units,
                              rest_difference=rep.rest_difference)
     rep.success = bool(res.success) and not far

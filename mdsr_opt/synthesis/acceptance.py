@@ -37,12 +37,13 @@ from ..body.muscles import Muscle
 from ..core.checks import positive_float
 from ..core.quantities import percent_beside
 from ..core.results import to_jsonable
+from ..mechanics.align import difference, node_weights
 from ..plot.style import muscle_label, muscle_name
 
 _LOG = logging.getLogger(__name__)
 
 __all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
-           "design_active", "difference_failure", "check_idle_contraction", "check_max_difference"]
+           "design_active", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
@@ -112,6 +113,16 @@ def check_max_difference(value, name: str = "max_difference") -> float:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
         return math.inf
     return positive_float(value, name)
+
+
+def rest_difference(mesh, target, design_options: dict | None = None) -> float:
+    """The rest shape's difference to ``target`` (the "do nothing" design, :func:`difference_failure`'s
+    ``rest_difference``), with the weights a design made with ``design_options`` measures by: their ``weights``,
+    else :func:`~mdsr_opt.mechanics.align.node_weights` with their ``interior_weight`` (default 0.5)."""
+    opts = design_options or {}
+    w = opts.get("weights")
+    w = node_weights(mesh, opts.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
+    return float(difference(mesh.points, target, w))
 
 
 def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE,

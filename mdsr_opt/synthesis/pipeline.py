@@ -23,9 +23,9 @@ from ..core.results import compact_repr
 from ..mechanics.equilibrium import check_held
 from ..mechanics.loadsteps import check_mesh_material, parse_drags
 from ..mechanics.result import EquilibriumResult
-from ..mechanics.align import difference, node_weights
 from ..mechanics.anchors import body_size
-from .acceptance import IDLE_CONTRACTION, AcceptanceWarning, DroppedMuscle, design_active, difference_failure
+from .acceptance import (IDLE_CONTRACTION, AcceptanceWarning, DroppedMuscle, design_active, difference_failure,
+                         rest_difference)
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import RoutingWarning, route_for_design
@@ -481,10 +481,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
                          times=times, dropped=dropped,
                          fabrication=routing.fabrication if routing is not None else ropts["fabrication"] or None)
-    w = design_options.get("weights")
-    w = node_weights(mesh, design_options.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
     out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units,
-                                             rest_difference=float(difference(mesh.points, ext.x, w)))
+                                             rest_difference=rest_difference(mesh, ext.x, design_options))
     if res.success and out.far_from_target:
         warnings.warn(f"design_pipeline: the design is a verified stable state, but {out.far_from_target}: "
                       "mdsr run would fail it (add muscles, lower seed_threshold, or accept it)",

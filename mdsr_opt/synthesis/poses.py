@@ -79,9 +79,8 @@ from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import as_float_array, check_label, check_options, keyword_names
 from ..core.quantities import check_length_unit
-from ..mechanics.align import difference, node_weights
 from ..mechanics.anchors import body_size
-from .acceptance import difference_failure
+from .acceptance import difference_failure, rest_difference
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_muscles
 from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
@@ -522,9 +521,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                             "of different poses clash: " + "; ".join(c.message for c in across))
 
     t1 = time.perf_counter()
-    w = dopt.get("weights")
-    w = node_weights(mesh, dopt.get("interior_weight", 0.5)) if w is None else np.asarray(w, dtype=float)
-    Drest = np.array([difference(mesh.points, p.target, w) for p in items])  # the "do nothing" design
+    Drest = np.array([rest_difference(mesh, p.target, dopt) for p in items])  # the "do nothing" design
     P, m = len(items), len(muscles)
     L0 = np.array([mu.rest_length(mesh) for mu in muscles])
     A, S, T = np.zeros((P, m)), np.zeros((P, m)), np.full((P, m), np.nan)
