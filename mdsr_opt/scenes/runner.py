@@ -193,7 +193,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     layout, whose known contractions are the answer); a saturated muscle is reported in ``saturated``.
     With ``bands`` (default: the scene's ``acceptance["bands"]``) every stroke gets its uncertainty band
     (:func:`~mdsr_opt.synthesis.bands.stroke_bands`). ``taken``: the muscles earlier cases of the same run
-    were designed with; routed muscles are named as the scene's (:func:`~mdsr_opt.scenes.names.number_in_scene`:
+    were designed with or dropped as idle; routed muscles are named as the scene's (:func:`~mdsr_opt.scenes.names.number_in_scene`:
     one rope, one name and colour in every case's figures, the gait and the animations).
 
     A failure at any stage is reported, not raised: ``report.success`` is False and ``report.message``

@@ -19,6 +19,7 @@ import time
 from typing import Callable, Sequence
 
 from ..body.material import material_dict
+from ..body.muscles import Muscle
 from ..core.costs import animation_cost, figure_cost, photo_cost, shapes_cost
 from ..core.errors import checking_input, exit_report
 from ..core.jobs import Jobs, main_is_plain_script, process_pool
@@ -269,8 +270,10 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         # photo entry, the files and the stage's messages arrive at bg.wait()
         run = runs[cname] = run_case(scene, cname, method=method, photo=False, log=say, prefix=prefix,
                                      max_difference=max_difference, bands=bands, taken=taken)
-        if run.setup is not None:  # the next cases' routed muscles are named on from these (one name a rope)
-            taken += [m for m in run.setup.muscles if m not in taken]
+        if run.setup is not None:  # the next cases' routed muscles are named on from these (one name a rope),
+            # the idle ones this case dropped too: a rope dropped here and kept later keeps its name
+            dropped = [Muscle(tuple(d["nodes"]), name=d["name"]) for d in run.report.dropped]
+            taken += [m for m in (*run.setup.muscles, *dropped) if m not in taken]
         send_animations()
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
