@@ -323,7 +323,8 @@ class Scene:
             for c in cases:
                 _check_contact_drags(self, c)
         self.expected = dict(self.expected)
-        self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance")
+        self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance",
+                                           a_max=self.design_options.get("a_max"))
         check_output_names(self.case_names, [a.name for a in anims], f"scene {self.name!r}",
                            gait_names=[self.gait.name] if self.gait is not None else ())
 
@@ -344,11 +345,12 @@ class Scene:
 
 
 # ---------------------------------------------------------------------------------------------- resolution
-def check_acceptance(acceptance, label: str = "acceptance") -> dict:
-    """A scene's ``acceptance`` with every key filled in: ``max_difference`` (> 0, a fraction of the diameter),
-    ``idle_contraction`` (in [0, 1)) and ``bands`` (bool). TypeError/ValueError naming ``label`` and the key
-    otherwise (an unknown key too)."""
-    from ..synthesis.acceptance import (BANDS, IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,
+def check_acceptance(acceptance, label: str = "acceptance", a_max=None) -> dict:
+    """A scene's ``acceptance`` with every key filled in: ``max_difference`` (in (0, 1], a fraction of the
+    diameter), ``idle_contraction`` (in [0, 1), below the design's ``a_max``: default
+    :data:`~mdsr_opt.synthesis.acceptance.A_MAX`) and ``bands`` (bool). TypeError/ValueError naming ``label``
+    and the key otherwise (an unknown key too)."""
+    from ..synthesis.acceptance import (A_MAX, BANDS, IDLE_CONTRACTION, MAX_DIFFERENCE, check_idle_contraction,
                                         check_max_difference)
 
     if not isinstance(acceptance, dict):
@@ -359,7 +361,8 @@ def check_acceptance(acceptance, label: str = "acceptance") -> dict:
             raise ValueError(f"{label}: unknown key {k!r} (keys: {', '.join(known)})")
     out = {**known, **acceptance}
     out["max_difference"] = check_max_difference(out["max_difference"], f"{label}.max_difference")
-    out["idle_contraction"] = check_idle_contraction(out["idle_contraction"], f"{label}.idle_contraction")
+    out["idle_contraction"] = check_idle_contraction(out["idle_contraction"], f"{label}.idle_contraction",
+                                                     a_max=A_MAX if a_max is None else a_max)
     if not isinstance(out["bands"], (bool, np.bool_)):
         raise TypeError(f"{label}.bands must be true or false, got {type(out['bands']).__name__}")
     out["bands"] = bool(out["bands"])

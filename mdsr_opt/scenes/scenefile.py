@@ -137,7 +137,8 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     region names, a list of node indices, or a list of ``[x, y]`` points, each snapped to the nearest node
     (which must lie within one mean edge length). A drag moves its nodes ``to`` a point (one node; for
     several, their centroid goes there), ``by`` a displacement, or ``rotate`` (degrees, anticlockwise)
-    ``about`` a point and then ``by``. Every error names the file and the field, e.g.
+    ``about`` a point (default: their centroid; one node needs one) and then ``by``. Every error names the
+    file and the field, e.g.
     ``scene.toml: cases[1].drags[0].by: expected a point [x, y], got [1]``; unknown fields are errors
     (with a suggestion).
 
@@ -225,7 +226,7 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
     acceptance = top.get("acceptance", {})
     try:
         acceptance = check_acceptance(dict(acceptance) if isinstance(acceptance, Mapping) else acceptance,
-                                      f"{path.name}: acceptance")
+                                      f"{path.name}: acceptance", a_max=design.get("a_max"))
     except ValueError as exc:
         raise SceneFileError(str(exc)) from None
     try:
@@ -479,6 +480,9 @@ def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple
         r.fail(where, "say where the nodes go: to (a point), by (a displacement) or rotate (+ about)")
     if "about" in d and "rotate" not in d:
         r.fail(f"{where}.about", "only applies with rotate")
+    if "rotate" in d and "about" not in d and len(np.unique(idx)) == 1:
+        r.fail(f"{where}.rotate", "turns one node about itself, which moves nothing: give about (the point "
+                                  "to turn it around), or by")
     ang = math.radians(r.number(d["rotate"], f"{where}.rotate")) if "rotate" in d else 0.0
     about = r.point(d["about"], f"{where}.about") if "about" in d else P.mean(0)
     shift = r.point(d["by"], f"{where}.by") if "by" in d else np.zeros(2)

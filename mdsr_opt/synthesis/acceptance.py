@@ -42,11 +42,16 @@ from ..plot.style import muscle_label, muscle_name
 
 _LOG = logging.getLogger(__name__)
 
-__all__ = ["IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
+__all__ = ["A_MAX", "IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
            "design_active", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
+
+#: the largest contraction a design gives a muscle unless told otherwise (``design_contractions``' ``a_max``):
+#: a muscle at it is ``saturated``, and an idle threshold must lie below it (the same number as that default:
+#: tests/test_door_fractions.py checks it)
+A_MAX = 0.6
 
 #: the largest difference to the target, as a fraction of the body's size (its diameter at rest,
 #: :func:`~mdsr_opt.mechanics.anchors.body_size`), with which a case of ``mdsr run`` is a success
@@ -98,21 +103,33 @@ class DroppedMuscle:
         return to_jsonable(asdict(self))
 
 
-def check_idle_contraction(value, name: str = "idle_contraction") -> float:
-    """``value`` as a contraction threshold in ``[0, 1)`` (0: drop nothing); TypeError/ValueError naming
-    ``name`` otherwise."""
+def check_idle_contraction(value, name: str = "idle_contraction", a_max=None) -> float:
+    """``value`` as a contraction threshold in ``[0, 1)`` (0: drop nothing), below the design's ``a_max``
+    when that is given (at or above it every muscle would be idle); TypeError/ValueError naming ``name``
+    otherwise."""
     v = positive_float(value, name, allow_zero=True)
     if v >= 1.0:
         raise ValueError(f"{name} must lie in [0, 1) (a fraction of the rope's rest length), got {v:g}")
+    if a_max is not None and v > 0 and isinstance(a_max, (int, float)) and not isinstance(a_max, bool) \
+            and v >= a_max:
+        raise ValueError(f"{name} ({v:g}) must lie below a_max ({a_max:g}), the most a design contracts a "
+                         f"muscle: every muscle would count as idle (the threshold is {100 * IDLE_CONTRACTION:g} % "
+                         "by default)")
     return v
 
 
 def check_max_difference(value, name: str = "max_difference") -> float:
-    """``value`` as a fraction of the body's size, ``> 0`` (``inf``: no bound); TypeError/ValueError naming
-    ``name`` otherwise."""
+    """``value`` as a fraction of the body's size in ``(0, 1]`` (``inf``: no bound); TypeError/ValueError
+    naming ``name`` otherwise. A value above 1 (a difference larger than the body) is refused as a percent
+    typed by mistake: 5 would turn the acceptance off, where 0.05 was meant."""
     if isinstance(value, (int, float)) and not isinstance(value, bool) and value == math.inf:
         return math.inf
-    return positive_float(value, name)
+    v = positive_float(value, name)
+    if v > 1.0:
+        raise ValueError(f"{name} is a fraction of the body's size (0.05 = 5 %), got {v:g}: a difference "
+                         f"larger than the body accepts any design; give {v / 100:g} for {v:g} %, or inf for "
+                         "no bound")
+    return v
 
 
 def rest_difference(mesh, target, design_options: dict | None = None) -> float:
@@ -202,7 +219,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     """
     from .contractions import design_contractions
 
-    thr = check_idle_contraction(idle_contraction)
+    thr = check_idle_contraction(idle_contraction, a_max=design_options.get("a_max", A_MAX))
     drop_slack = (thr > 0 if drop_slack is None else bool(drop_slack)) and \
         design_options.get("muscle_model", "cable") == "cable"
     # unnamed muscles are named by their place in the layout given (M1, M2, ...), so that a muscle keeps its

@@ -394,12 +394,12 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     """
     from ..mechanics.equilibrium import solve_external
 
-    from .acceptance import check_idle_contraction
+    from .acceptance import A_MAX, check_idle_contraction
 
     t0 = time.perf_counter()
     check_mesh_material(mesh, material)
     units = check_length_unit(units)
-    idle_contraction = check_idle_contraction(idle_contraction)
+    idle_contraction = check_idle_contraction(idle_contraction, a_max=design_options.get("a_max", A_MAX))
     if not isinstance(bands, (bool, np.bool_)):
         raise TypeError(f"bands must be True or False, got {type(bands).__name__}")
     band_options, routing_options, external_options = _check_option_dicts(
