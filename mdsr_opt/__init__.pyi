@@ -24,6 +24,7 @@ from .mechanics.equilibrium import (
     solve_external as solve_external,
     solve_internal as solve_internal,
 )
+from .mechanics.grip import free_disk as free_disk, grip_report as grip_report
 from .mechanics.model import EnergyModel as EnergyModel, get_model as get_model
 from .mechanics.obstacles import Disk as Disk, HalfPlane as HalfPlane, Obstacle as Obstacle
 from .mechanics.result import EquilibriumResult as EquilibriumResult, SolverFailure as SolverFailure

@@ -251,8 +251,7 @@ def test_gripper_jaws_meet_with_self_contact_in_internal_driving():
 
 
 def test_gripper_holds_a_disk_with_friction():
-    from mdsr_opt import solve_internal
-    from mdsr_opt.mechanics.grip import free_disk, grip_report
+    from mdsr_opt import free_disk, grip_report, solve_internal  # top-level names, as the README calls them
 
     mesh, mat, muscles = _gripper()
     # (radius 1.2: a disk of 1.1 is pushed out into the opening, to where it would hold a jaw's node at rest)
