@@ -68,6 +68,7 @@ class CaseReport:
         included.
     times : seconds per stage; files : files written (relative to the scene's folder).
     dropped : muscles taken out of the layout after a design (idle ones: name, nodes, contraction, reason).
+    idle_kept : names of idle muscles the design kept because the design without them failed.
     saturated : names (``M1``, ... or their own) of the muscles whose designed contraction is at ``a_max``.
     stroke_band : per muscle the stroke's (low, high) under the fabrication's uncertainties, when computed
         (:func:`~mdsr_opt.synthesis.bands.stroke_bands`); band_notes : what the band left out, and why.
@@ -111,6 +112,7 @@ class CaseReport:
     times: dict = field(default_factory=dict)
     files: list = field(default_factory=list)
     dropped: list = field(default_factory=list)
+    idle_kept: list = field(default_factory=list)
     saturated: list = field(default_factory=list)
     stroke_band: list = field(default_factory=list)
     tension: list = field(default_factory=list)
@@ -201,7 +203,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     join, say) is such a failure. Bad arguments (``TypeError``/``ValueError`` from the checks at the door)
     still raise.
     """
-    from ..synthesis.acceptance import check_max_difference, design_active, difference_failure, rest_difference
+    from ..synthesis.acceptance import (check_max_difference, design_active, difference_failure, idle_mask,
+                                        rest_difference)
 
     say = log or (lambda s: None)
     if isinstance(case, str):
@@ -316,6 +319,12 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.notes += [f"design: {d.name} dropped ({d.reason})" for d in dropped]
         say(f"{prefix}dropped " + "; ".join(f"{d.name} ({d.reason})" for d in dropped))
     rep.saturated = res.saturated_names
+    still = idle_mask(res, idle) if idle > 0 and res.success else np.zeros(0, dtype=bool)
+    if still.any():  # idle muscles the design kept (the design without them failed): said, as dropped ones are
+        rep.idle_kept = [muscle_label(m, i) for i, m in enumerate(kept) if still[i]]
+        rep.notes.append(f"design: idle {', '.join(rep.idle_kept)} kept (a contraction below idle_contraction "
+                         f"{idle:g} or a slack rope): the design without them failed; a build may leave them out")
+        say(f"{prefix}idle {', '.join(rep.idle_kept)} kept: the design without them failed")
     rep.times["design"] = time.perf_counter() - t1
     rep.contractions = [float(a) for a in res.contractions]
     rep.achieved = [float(a) for a in res.achieved]

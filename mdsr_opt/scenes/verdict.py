@@ -182,6 +182,8 @@ def design_verdict(case) -> str:
         notes.append(f"saturated {', '.join(map(str, case.saturated))}")
     if case.dropped:
         notes.append(f"dropped {', '.join(d['name'] for d in case.dropped)}")
+    if getattr(case, "idle_kept", None):
+        notes.append(f"idle {', '.join(map(str, case.idle_kept))} kept")
     if getattr(case, "fabrication", None):
         notes.append("not mouldable as laid out")
     return ("ok" if case.success else "FAILED") + (f" ({'; '.join(notes)})" if notes else "")

@@ -43,7 +43,7 @@ from ..plot.style import muscle_label, muscle_name
 _LOG = logging.getLogger(__name__)
 
 __all__ = ["A_MAX", "IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
-           "design_active", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
+           "design_active", "idle_mask", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
@@ -208,8 +208,11 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     -------
     design : DesignResult
         The design of the muscles kept. Its ``status`` names what was dropped. When every muscle is idle,
-        nothing is dropped and ``success`` is False (the design does not move the body); when the design
-        without the idle muscles fails, the design with them is returned, its ``status`` saying so.
+        nothing is dropped and ``success`` is False (the design does not move the body). A design without the
+        idle muscles whose optimiser stopped short (an evaluation cap, say) is a success when it is verified,
+        rejected for nothing and no farther from the target than the design with them (to :data:`IDLE_RTOL`);
+        when it fails otherwise, the design with them is returned, its ``status`` saying so, and a
+        :class:`~mdsr_opt.synthesis.results.MuscleWarning` names the idle muscles kept.
     muscles : tuple of Muscle
         The muscles kept (those of ``design``).
     dropped : tuple of DroppedMuscle
@@ -235,14 +238,14 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
         # a design with idle muscles (some, not all) is made again without them: its own verification, a
         # forward solve from rest, is left out; the design kept is verified as always
         def defer(r):
-            idle = _idle(r, thr, drop_slack)
+            idle = idle_mask(r, thr, drop_slack)
             return "idle muscle(s) to drop first" if idle.any() and not idle.all() else ""
         deferred["skip_verification"] = defer
     res, caught = _designed(design_contractions, mesh, material, mus, target, deferred)
     asked = opts  # the options of the design res (without the deferral)
     while res.success and dropping:
         a = np.asarray(res.contractions, dtype=float)
-        idle = _idle(res, thr, drop_slack)
+        idle = idle_mask(res, thr, drop_slack)
         if not idle.any():
             break
         if idle.all():
@@ -266,12 +269,24 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
                                         dict(deferred, **more))
         names = ", ".join(g.name for g in gone)
+        if not again.success and _as_good(again, res):
+            # the optimiser stopped short (its evaluation cap, say) no farther from the target than the design
+            # with the idle muscles, a success: the layout without them does as well, verified, with fewer ropes
+            again.success = True
+            again.status += (f"; a success all the same: verified, at a difference {again.difference:.4g} no larger "
+                             f"than the design with {names} ({res.difference:.4g}, to {100 * IDLE_RTOL:g} %)")
         if not again.success:
             why = again.status
             if res.verification is None and asked.get("verify", True):
                 # the design with them was left unverified: made again, verified, to be returned
                 res, caught = _designed(design_contractions, mesh, material, mus, target, asked)
             res.status += f"; idle muscle(s) {names} kept: the design without them failed ({why})"
+            from .results import MuscleWarning
+
+            caught.append(warnings.WarningMessage(
+                MuscleWarning(f"idle muscle(s) {names} kept in the layout (contraction below idle_contraction "
+                              f"{thr:g}, or a slack rope): the design without them failed ({why}); they may be "
+                              "left out of the build"), MuscleWarning, __file__, 0))
             break
         dropped += gone
         again.status += f"; idle muscle(s) {names} dropped and the design made again"
@@ -282,8 +297,24 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
     return res, mus, tuple(dropped)
 
 
-def _idle(res, thr: float, drop_slack: bool) -> np.ndarray:
-    """The idle muscles of the design ``res``: contraction below ``thr``, or (with ``drop_slack``) rope slack."""
+#: how much larger than the design with its idle muscles the design without them may end and still be its
+#: optimum when its optimiser stopped short of its own tolerance (:func:`design_active`)
+IDLE_RTOL = 1e-3
+
+
+def _as_good(again, res) -> bool:
+    """The design ``again`` (without the idle muscles of the successful ``res``), though its optimiser did not
+    report success, is verified, rejected for nothing else and ends no farther from the target than ``res``
+    (to :data:`IDLE_RTOL`)."""
+    v = getattr(again, "verification", None)
+    d, d0 = float(again.difference), float(res.difference)
+    return bool(res.success and v is not None and v.passed and "rejected" not in again.status
+                and math.isfinite(d) and d <= d0 * (1.0 + IDLE_RTOL) + 1e-300)
+
+
+def idle_mask(res, thr: float, drop_slack: bool = True) -> np.ndarray:
+    """The idle muscles of the design ``res`` (as :func:`design_active` drops them): contraction below ``thr``,
+    or (with ``drop_slack``) rope slack."""
     a = np.asarray(res.contractions, dtype=float)
     slack = np.asarray(getattr(res, "slack", ()), dtype=bool).reshape(-1)
     slack = slack if drop_slack and slack.shape == a.shape else np.zeros(a.shape, dtype=bool)

@@ -24,7 +24,8 @@ SATURATION_TOL = 1e-3
 
 class MuscleWarning(UserWarning):
     """A designed muscle is saturated (its contraction at ``a_max``): the design's shape is the best within
-    the bound, not the target's; raise ``a_max``, add muscles or accept the difference."""
+    the bound, not the target's; raise ``a_max``, add muscles or accept the difference. Also: an idle muscle
+    kept because the design without it failed (:func:`~mdsr_opt.synthesis.acceptance.design_active`)."""
 
 
 # ---------------------------------------------------------------------------------------------- results
