@@ -118,3 +118,24 @@ def test_pipeline_band_in_the_table_the_csv_and_the_figure(tmp_path):
     plain_csv = Path(export_fabrication(mesh, plain, tmp_path / "p", name="plate")["csv"])
     rows = list(csv.reader(plain_csv.read_text().splitlines()))
     assert not any("low" in h for h in rows[0])
+
+
+def test_a_saturated_stroke_has_a_point_band_said_to_be_its_bound(bent):
+    """At a_max in every design of the band, the stroke is the bound's: the band is a point, which the notes
+    and the stroke table call the bound rather than showing "s .. s" (trial10)."""
+    import warnings
+
+    mesh, mus, target, d = bent
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sat = design_contractions(mesh, MAT, mus, target, a_max=0.5 * float(d.contractions[0]))
+    assert sat.saturated.tolist() == [True]
+    b = stroke_bands(mesh, MAT, mus, target, sat)
+    assert b.high[0] - b.low[0] <= 1e-6 * b.nominal[0]  # the bound to IPOPT's bound relaxation
+    assert any(n.startswith("lower: saturated (at its bound)") for n in b.notes)
+    sat.stroke_band = b.band.copy()
+    row = sat.muscle_table().splitlines()[1]
+    assert f"{b.nominal[0]:.4g} (its bound)" in row and ".." not in row
+    d.stroke_band = stroke_bands(mesh, MAT, mus, target, d).band.copy()  # not saturated: a real band
+    assert ".." in d.muscle_table().splitlines()[1]
+    d.stroke_band = np.zeros((0, 2))

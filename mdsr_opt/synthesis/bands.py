@@ -202,7 +202,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
     import time
 
     from .contractions import design_contractions
-    from .results import MuscleWarning
+    from .results import POINT_BAND_RTOL, MuscleWarning
 
     t0 = time.perf_counter()
     if material is None and muscles is None and target is None and design is None:
@@ -290,6 +290,12 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
         contributions[src] = np.column_stack([stack.min(axis=0), stack.max(axis=0)])
     down = sum((c[:, 0] for c in contributions.values()), np.zeros_like(s0))
     up = sum((c[:, 1] for c in contributions.values()), np.zeros_like(s0))
-    return StrokeBands(names=tuple(muscle_label(mu, i) for i, mu in enumerate(mus)), nominal=s0.copy(),
-                       band=np.column_stack([s0 + down, s0 + up]), contributions=contributions, values=values,
-                       notes=tuple(notes), time=time.perf_counter() - t0)
+    names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    sat = np.asarray(getattr(design, "saturated", np.zeros(len(s0), dtype=bool)), dtype=bool).reshape(-1)
+    for i in np.flatnonzero(sat if sat.shape == s0.shape else np.zeros(len(s0), dtype=bool)):
+        if up[i] - down[i] <= POINT_BAND_RTOL * max(abs(s0[i]), 1e-300):  # a point: the bound, not a certainty
+            notes.append(f"{names[i]}: saturated (at its bound) in the design and in every design of the band: "
+                         "its stroke is the bound's (a_max, or its fixtures' cap, times its rest length), so its "
+                         "band is that point; the uncertainty is in the shape reached, not in the stroke")
+    return StrokeBands(names=names, nominal=s0.copy(), band=np.column_stack([s0 + down, s0 + up]),
+                       contributions=contributions, values=values, notes=tuple(notes), time=time.perf_counter() - t0)

@@ -21,6 +21,9 @@ METHODS = ("flattened", "nested", "derivative-free")
 #: muscle would pull further if it could, so the body reaches less than the layout could with more stroke
 SATURATION_TOL = 1e-3
 
+#: a saturated muscle's stroke band narrower than this (relative to the stroke) is its bound, a point
+POINT_BAND_RTOL = 1e-6
+
 
 class MuscleWarning(UserWarning):
     """A designed muscle is saturated (its contraction at ``a_max``): the design's shape is the best within
@@ -302,7 +305,10 @@ class DesignResult:
             def at(v, k=i):
                 return float(v[k]) if len(v) > k else float("nan")
             sl = bool(self.slack[i]) if len(self.slack) > i else False
-            b = f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} " if has_band else ""
+            # a saturated muscle's band of zero width is its bound (a_max or the fixtures' cap), not a certainty
+            point = has_band and sat[i] and band[i, 1] - band[i, 0] <= POINT_BAND_RTOL * max(abs(band[i, 0]), 1e-300)
+            b = "" if not has_band else f"{f'{band[i, 0]:.4g} (its bound)':>21} " if point else \
+                f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} "
             lines.append(f"{names[i]:>{w}} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "
                          f"{at(self.stroke):>{ws}.4g} {b}{factor * at(self.tension):>{wt}.4g} "
                          f"{'yes' if sl else 'no':>5} {'YES' if sat[i] else 'no':>9}")
