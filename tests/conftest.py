@@ -33,6 +33,18 @@ def load_script(relative: str):
     return mod
 
 
+#: the head of a scene file of a 4 x 1 strip with its end regions ``left`` and ``right`` (scene-file tests add
+#: their muscles and cases)
+STRIP_HEAD = """name = "strip"
+[body]
+outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
+resolution = 80
+[regions]
+left = { box = [-0.1, -0.1, 0.1, 1.1] }
+right = { box = [3.9, -0.1, 4.1, 1.1] }
+"""
+
+
 def outline_finger(folder) -> Path:
     """tests/data/finger.toml with its muscle moved onto the outline (not mouldable: a FabricationWarning),
     written into ``folder``."""

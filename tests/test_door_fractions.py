@@ -15,15 +15,9 @@ from mdsr_opt.scenes.reader import SceneFileError
 from mdsr_opt.synthesis.acceptance import A_MAX, check_idle_contraction, check_max_difference
 from mdsr_opt.synthesis.contractions import design_contractions
 from mdsr_opt.synthesis.pipeline import design_pipeline
+from conftest import STRIP_HEAD
 
-STRIP = """name = "strip"
-[body]
-outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
-resolution = 80
-[regions]
-left = { box = [-0.1, -0.1, 0.1, 1.1] }
-right = { box = [3.9, -0.1, 4.1, 1.1] }
-"""
+STRIP = STRIP_HEAD
 CASE = """[[cases]]
 name = "bend"
 anchors = "left"

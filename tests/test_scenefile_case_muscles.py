@@ -12,15 +12,9 @@ from mdsr_opt import Case, load_scene
 from mdsr_opt.body.muscles import Muscle
 from mdsr_opt.scenes.cases import prepare_case
 from mdsr_opt.synthesis.fabrication import FabricationWarning
+from conftest import STRIP_HEAD
 
-STRIP = """name = "strip"
-[body]
-outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
-resolution = 80
-[regions]
-left = { box = [-0.1, -0.1, 0.1, 1.1] }
-right = { box = [3.9, -0.1, 4.1, 1.1] }
-[[muscles]]
+STRIP = STRIP_HEAD + """[[muscles]]
 name = "lower"
 boundary = { from = [0, 0], to = [4, 0] }
 [[cases]]

@@ -9,15 +9,9 @@ import pytest
 
 from mdsr_opt import load_scene
 from mdsr_opt.scenes.reader import SceneFileError
+from conftest import STRIP_HEAD
 
-HEAD = """name = "strip"
-[body]
-outline = [[0, 0], [4, 0], [4, 1], [0, 1]]
-resolution = 80
-[regions]
-left = { box = [-0.1, -0.1, 0.1, 1.1] }
-right = { box = [3.9, -0.1, 4.1, 1.1] }
-"""
+HEAD = STRIP_HEAD
 
 
 def _load(tmp_path, text):
