@@ -37,7 +37,8 @@ from .synthesis.fabrication import Fabrication as Fabrication
 from .synthesis.gait import Gait as Gait, gait_schedule as gait_schedule, GaitSchedule as GaitSchedule
 from .synthesis.walk import walk as walk, walk_scene as walk_scene, WalkResult as WalkResult
 from .synthesis.pipeline import design_pipeline as design_pipeline, PipelineResult as PipelineResult
-from .synthesis.poses import design_poses as design_poses, Pose as Pose, PosesResult as PosesResult
+from .synthesis.poses import design_poses as design_poses, Pose as Pose
+from .synthesis.poses_result import PosesResult as PosesResult
 from .synthesis.results import DesignResult as DesignResult, Verification as Verification
 from .synthesis.routing import (
     contraction_graph as contraction_graph,

@@ -15,7 +15,7 @@ This script is a figure, not a scene: ``mdsr run face_expressions --out DIR`` ca
   with the layout's muscles it pulls (bottom);
 - ``expressions.json``: the layout (each muscle's name and node chain) and per expression the muscles it
   pulls, their contractions and strokes, the difference, the motion recovered and the nodes measured;
-- ``layout.json``: the :class:`~mdsr_opt.synthesis.poses.PosesResult`;
+- ``layout.json``: the :class:`~mdsr_opt.synthesis.poses_result.PosesResult`;
 - with ``--vector``, ``expressions.pdf`` (or ``.svg``) beside the PNG.
 
 Run ``python problems/face_expressions.py --out out/face_expressions``.
@@ -54,7 +54,8 @@ def design_expressions(resolution="medium"):
     layout, targets = face.one_layout(scene.mesh, scene.material, scene.cases, routing,
                                       scene.design_options.get("anchor_radius"))
     res = design_poses(scene.mesh, scene.material, {c: targets[c] for c in scene.case_names},
-                       routing_options=routing, design_options=scene.design_options, compare=False)
+                       routing_options=routing, design_options=scene.design_options, compare=False,
+                       clashes=face.CLASHES)
     if [tuple(m.nodes) for m in res.muscles] != [tuple(m.nodes) for m in layout]:
         raise RuntimeError("face_expressions: design_poses laid another layout than the face scene's cases use")
     return scene, face, targets, res
@@ -73,7 +74,7 @@ def expression_rows(scene, face, targets, res) -> list[dict]:
                      "contractions": [float(res.contractions[k, i]) for i in on],
                      "strokes": [float(res.strokes[k, i]) for i in on], "difference": float(res.differences[k]),
                      "motion_recovered": float(rec), "measured_nodes": int(len(moving)),
-                     "success": bool(res.success[k]), "status": str(res.status[k])})
+                     "success": bool(res.pose_success[k]), "status": str(res.status[k])})
     return rows
 
 

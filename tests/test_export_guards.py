@@ -26,7 +26,8 @@ from mdsr_opt.scenes.runscene import n_units, run_scene
 from mdsr_opt.scenes.scenefile import load_scene
 from mdsr_opt.synthesis.export import export_fabrication
 from mdsr_opt.synthesis.fabrication import Fabrication
-from mdsr_opt.synthesis.poses import PosesResult, design_poses
+from mdsr_opt.synthesis.poses import design_poses
+from mdsr_opt.synthesis.poses_result import PosesResult
 
 FAB = Fabrication(channel_diameter=1.0, wall=0.6, fixture_radius=1.5, min_fixture_radius=1.0)
 
@@ -56,7 +57,7 @@ def routed():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = design_poses(mesh, mat, {"bend": bent}, routing_options={"fabrication": FAB}, units="mm", compare=False)
-    assert res.all_success
+    assert res.success
     return mesh, res
 
 
@@ -132,7 +133,7 @@ def test_a_stroke_that_would_stretch_its_rope_is_never_paired_silently(tmp_path)
 
 def test_a_failed_pose_of_a_layout_is_refused_and_named(routed, tmp_path):
     mesh, res = routed
-    failed = dataclasses.replace(res, success=np.array([False]), status=("Restoration_Failed",))
+    failed = dataclasses.replace(res, pose_success=np.array([False]), status=("Restoration_Failed",))
     with pytest.raises(ValueError, match=r"the layout's design failed \(pose bend: Restoration_Failed\)"):
         export_fabrication(mesh, failed, tmp_path / "no")
     files = export_fabrication(mesh, failed, tmp_path / "yes", allow_failed=True, failure="frames [3] failed")

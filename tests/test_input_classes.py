@@ -148,7 +148,8 @@ def test_pipeline_result_keeps_its_mesh_and_refuses_a_foreign_one(tmp_path):
 
 def test_layouts_and_schedules_refuse_another_mesh_and_keep_it_on_disk(tmp_path):
     from mdsr_opt.synthesis.gait import GaitSchedule, gait_schedule, save_gait_animation
-    from mdsr_opt.synthesis.poses import PosesResult, design_poses
+    from mdsr_opt.synthesis.poses import design_poses
+    from mdsr_opt.synthesis.poses_result import PosesResult
 
     mesh = strip()
     lay = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)}, compare=False)
@@ -382,7 +383,7 @@ def test_an_oversized_scene_file_is_refused_before_it_is_read(tmp_path, monkeypa
 
 
 def test_deeply_nested_result_files_are_a_clear_error(tmp_path):
-    from mdsr_opt.synthesis.poses import PosesResult
+    from mdsr_opt.synthesis.poses_result import PosesResult
 
     path = tmp_path / "layout.json"
     path.write_text('{"format": "mdsr_opt.poses/1", "names": ' + "[" * 10_000 + "]" * 10_000 + "}")

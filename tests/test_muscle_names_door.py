@@ -66,5 +66,5 @@ def test_design_poses_of_a_layout_no_pose_engages_returns_its_result():
     target = MESH.points.copy()
     target[:, 1] *= 0.95
     res = design_poses(MESH, MAT, {"p": target}, separate={"p": ((A, Muscle(B.nodes)), None)})
-    assert not res.success[0] and "left at rest" in res.status[0] and res.muscle_model == "cable"
+    assert not res.pose_success[0] and "left at rest" in res.status[0] and res.muscle_model == "cable"
     assert np.array_equal(res.states[0], MESH.points)

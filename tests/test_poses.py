@@ -14,7 +14,8 @@ from mdsr_opt import Mesh, NeoHookean
 from mdsr_opt.plot.design import plot_schedule
 from mdsr_opt.synthesis.gait import Gait, gait_schedule
 from mdsr_opt.synthesis.layouts import shared_layout
-from mdsr_opt.synthesis.poses import Pose, PosesResult, design_poses
+from mdsr_opt.synthesis.poses import Pose, design_poses
+from mdsr_opt.synthesis.poses_result import PosesResult
 
 MAT = NeoHookean(1.0, 0.3)
 
@@ -41,7 +42,7 @@ def lr():
 
 def test_shared_layout_reproduces_each_pose_with_no_more_muscles(lr):
     mesh, res = lr
-    assert res.all_success
+    assert res.success
     assert res.n_muscles <= int(res.separate_n_muscles.sum())
     assert np.all(np.isfinite(res.separate_differences))
     assert np.all(res.differences <= 1.10 * res.separate_differences)
@@ -147,7 +148,7 @@ def _held_top_layout(top_stroke):
     res = PosesResult(names=("curl",), muscles=mus, rest_lengths=L0, sources=(("curl",), ("curl",)),
                       contractions=np.array([[0.15, top_stroke / L0[1]]]),
                       strokes=np.array([[0.15 * L0[0], top_stroke]]), tensions=np.full((1, 2), np.nan),
-                      differences=np.array([0.0]), success=np.array([True]), status=("ok",),
+                      differences=np.array([0.0]), pose_success=np.array([True]), status=("ok",),
                       states=np.array([eq.x]), separate_differences=np.array([np.nan]),
                       separate_n_muscles=np.array([2]), engaged=np.array([[True, True]]),
                       rest_mesh=mesh_fingerprint(mesh))

@@ -220,7 +220,7 @@ def poses():
 
 
 def test_poses_result(poses, tmp_path):
-    from mdsr_opt.synthesis.poses import PosesResult
+    from mdsr_opt.synthesis.poses_result import PosesResult
 
     mesh, res = poses
     check_repr(res, "2 poses", "shared muscles", "success=")
@@ -228,7 +228,7 @@ def test_poses_result(poses, tmp_path):
     path = tmp_path / "layout.json"
     res.save(path)
     back = PosesResult.load(path)
-    for f in ("rest_lengths", "contractions", "strokes", "states", "differences", "success", "engaged"):
+    for f in ("rest_lengths", "contractions", "strokes", "states", "differences", "pose_success", "engaged"):
         a, b = getattr(res, f), getattr(back, f)
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), f
     assert back.names == res.names and back.muscles == res.muscles and back.designs == {}

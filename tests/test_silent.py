@@ -230,7 +230,7 @@ def test_design_poses_refuses_a_failed_target():
     res = design_poses(mesh, MAT, {"up": ok}, compare=False)  # a successful solve's result is its state
     same = design_poses(mesh, MAT, {"up": ok.x}, compare=False)
     # (the target's rope ran on the outline; routed ropes keep inside the body, so the pose is near, not exact)
-    assert res.all_success and res.differences[0] == pytest.approx(same.differences[0], rel=1e-9, abs=1e-12)
+    assert res.success and res.differences[0] == pytest.approx(same.differences[0], rel=1e-9, abs=1e-12)
     assert res.differences[0] < 0.05 * mesh.size
 
 
@@ -238,7 +238,7 @@ def test_gait_reports_each_keyframe_reached_or_not():
     mesh = strip()
     # a budget of one muscle: the layout serves "left" only; "right" is left at rest, never reached
     res = design_poses(mesh, MAT, {"left": bend(mesh, 1), "right": bend(mesh, -1)}, max_muscles=1, compare=False)
-    assert res.success.tolist() == [True, False]
+    assert res.pose_success.tolist() == [True, False]
     sch = gait_schedule(mesh, MAT, res, ["left", "right"], frames_per_step=2)
     assert sch.success.all()  # every frame solves: what used to be reported as the whole story
     assert sch.reached.tolist() == [True, False, True] and sch.unreached == ("right",)

@@ -40,9 +40,12 @@ def solved_state(target, name: str = "target"):
 
 def check_target_shape(mesh, target, name: str = "target") -> np.ndarray:
     """The target shape of a design as a finite ``(n, 2)`` float array in which every triangle keeps its
-    orientation: the one check of every design entry point (routing, :func:`~mdsr_opt.design_contractions`
-    and its rivals, the pipeline, :func:`~mdsr_opt.synthesis.poses.design_poses`). A solve's result is taken
-    for its state ``x`` (:func:`solved_state`).
+    orientation and the outline does not cross itself: the one check of every entry point that takes a target
+    (routing, :func:`~mdsr_opt.design_contractions` and its rivals, the pipeline,
+    :func:`~mdsr_opt.synthesis.poses.design_poses`, :func:`~mdsr_opt.synthesis.verify.verify_design`,
+    :func:`~mdsr_opt.synthesis.bands.stroke_bands`). A solve's result is taken for its state ``x``
+    (:func:`solved_state`); a bare array is checked the same, so a failed solve's ``x`` is refused as its
+    result is when that state is no shape of the body.
 
     Raises
     ------
@@ -50,7 +53,9 @@ def check_target_shape(mesh, target, name: str = "target") -> np.ndarray:
         Not an array of numbers.
     ValueError
         The result of a failed solve, the wrong shape, NaN or inf, a mirror image of the body (every triangle
-        inverted), or some triangles inverted or degenerate (``det F <= 0``; the first is named).
+        inverted), some triangles inverted or degenerate (``det F <= 0``; the first is named), or an outline
+        that crosses or touches itself (the body overlapping itself:
+        :meth:`~mdsr_opt.body.mesh.Mesh.boundary_crossing`; no contact keeps it apart in a target).
     """
     x = as_float_array(solved_state(target, name), name, shape=(mesh.n_nodes, 2))
     J = mesh.jacobians(x)
@@ -67,4 +72,9 @@ def check_target_shape(mesh, target, name: str = "target") -> np.ndarray:
                          f"{mesh.triangles[k].tolist()} with det F = {J[k]:.3g}"
                          + (" (degenerate: its corners on a line)" if J[k] == 0 else "")
                          + "; a physical target keeps every element positively oriented")
+    crossing = mesh.boundary_crossing(x)
+    if crossing is not None:
+        raise ValueError(f"{name} overlaps itself: {crossing}; a physical target keeps its outline from crossing "
+                         "itself (is it the state of a failed solve? solve it again, with contact=True where the "
+                         "body touches itself)")
     return x

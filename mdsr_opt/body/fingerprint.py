@@ -4,7 +4,7 @@ A design's strokes, rest lengths and states are lengths and positions of the bod
 another body with the same node count (a copy scaled by 2, moved, with a node shifted), the numbers would be
 read against the wrong geometry without any error: a muscle of rest length 3.5 with the stroke designed for
 one of 1.75. Every result that pairs with a mesh later (:class:`~mdsr_opt.synthesis.results.DesignResult`,
-:class:`~mdsr_opt.synthesis.poses.PosesResult`, :class:`~mdsr_opt.synthesis.gait.GaitSchedule`) therefore records
+:class:`~mdsr_opt.synthesis.poses_result.PosesResult`, :class:`~mdsr_opt.synthesis.gait.GaitSchedule`) therefore records
 :func:`mesh_fingerprint` of its mesh, saved and loaded with it, and every function that takes such a
 ``(mesh, result)`` pair calls :func:`check_same_mesh` first.
 

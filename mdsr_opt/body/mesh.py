@@ -258,8 +258,12 @@ class Mesh:
         triangles around a boundary node cover more than a full turn. Exact for the floating-point input
         and O(B log B) in the number B of boundary edges (see :func:`segment_contacts`).
         """
-        x = self._check_state(x)
-        return _overlap(x, self._triangles, self._boundary) is not None
+        return self.boundary_crossing(x) is not None
+
+    def boundary_crossing(self, x: ArrayLike) -> str | None:
+        """Where the body overlaps itself in configuration ``x`` (the nodes or boundary edges, and a point), as
+        a sentence; None when it does not (the test of :meth:`boundary_crosses`)."""
+        return _overlap(self._check_state(x), self._triangles, self._boundary)
 
     def _check_state(self, x: ArrayLike, name: str = "x") -> np.ndarray:
         return as_float_array(x, name, shape=(self.n_nodes, 2))

@@ -97,7 +97,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] {_gait_label(gait.name)}: not made ({exc})")
         return info
     radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
-    info.update({"notes": [radius_note]} if radius_note else {})
+    notes = list(res.notes) + [radius_note] * bool(radius_note)  # what the layout resolved, then the fixtures
+    info.update({"notes": notes} if notes else {})
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
     # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at
@@ -113,7 +114,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         jobs.append((save_gait_animation, (scene.mesh, sch, res.muscles, gif),
                      {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames)))
         files.append(str(gif))
-    ok = res.all_success and bool(sch.success.all()) and bool(sch.reached.all())
+    ok = res.success and bool(sch.success.all()) and bool(sch.reached.all())
     failed = [int(k) for k in np.flatnonzero(~sch.success)]
     why = "; ".join([f"frames {failed} of the schedule failed"] * bool(failed) + [sch.outcome()] * bool(sch.unreached))
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,  # a failed
@@ -127,7 +128,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                 strokes={n: [float(v) for v in row] for n, row in zip(res.names, res.strokes)},
                 frames=sch.n_frames, failed_frames=failed,
                 reached=[bool(r) for r in sch.reached], unreached=list(sch.unreached),
-                message="" if ok else "; ".join([f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.success)
+                message="" if ok else "; ".join([f"{n}: {s}" for n, s, o in zip(res.names, res.status, res.pose_success)
                                                   if not o] + list(res.problems)
                                                  + ([f"frames {failed} failed"] if failed else [])
                                                  + ([sch.outcome()] if sch.unreached else [])),

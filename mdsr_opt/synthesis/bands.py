@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..body.checks import check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..core.checks import positive_float, positive_int
@@ -215,6 +216,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
         mesh = source
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
+    target = check_target_shape(mesh, target)  # the check of every entry point that takes a target
     mus = tuple(muscles)
     a0 = np.asarray(design.contractions, dtype=float)
     s0 = np.asarray(design.stroke, dtype=float)

@@ -1,6 +1,6 @@
 """Fabrication files: the body and its muscle channels at true scale, and the muscle table.
 
-:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.synthesis.poses.PosesResult`, a
+:func:`export_fabrication` writes, for any design (a :class:`~mdsr_opt.synthesis.poses_result.PosesResult`, a
 :class:`~mdsr_opt.synthesis.results.DesignResult` or a mapping of pose names to DesignResults):
 
 ``<name>.svg``
@@ -68,7 +68,7 @@ from ..plot.style import layout_colors, muscle_label, muscle_name
 from .export_checks import failed_mark
 from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
-from .poses import PosesResult
+from .poses_result import PosesResult
 
 __all__ = ["UNITS", "check_units", "FabricationData", "fabrication_data", "fabrication_files", "export_fabrication"]
 

@@ -9,7 +9,7 @@
   asked for (``allow_failed=True``), and each of them then says :func:`failed_mark`.
 * :func:`routed_fabrication`: the channel, wall and fixtures the layout was routed with (a
   :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`'s routing, a
-  :class:`~mdsr_opt.synthesis.poses.PosesResult`'s ``fabrication``): the files draw it unless told otherwise,
+  :class:`~mdsr_opt.synthesis.poses_result.PosesResult`'s ``fabrication``): the files draw it unless told otherwise,
   and :func:`check_same_fabrication` refuses an explicit one that states other sizes.
 """
 
@@ -40,14 +40,14 @@ def design_failure(design) -> str:
     build, in one phrase naming the failed pose(s) and their status; "" when it succeeded (or is None: a
     layout alone)."""
     from .pipeline import PipelineResult
-    from .poses import PosesResult
+    from .poses_result import PosesResult
 
     if design is None:
         return ""
     if isinstance(design, PipelineResult):
         return "" if design.success else f"the design failed ({one_line(design.design.status, 300)})"
     if isinstance(design, PosesResult):
-        why = [f"pose {n}: {one_line(s, 160)}" for n, s, ok in zip(design.names, design.status, design.success)
+        why = [f"pose {n}: {one_line(s, 160)}" for n, s, ok in zip(design.names, design.status, design.pose_success)
                if not ok] + [one_line(p, 160) for p in design.problems]
         return "" if not why else "the layout's design failed (" + "; ".join(why) + ")"
     items = dict(design) if isinstance(design, Mapping) else {"design": design}
@@ -78,7 +78,7 @@ def routed_fabrication(design):
     field set) or, for muscles given to design_pipeline, given for; None when it records none (a
     DesignResult, a result saved without it)."""
     from .pipeline import PipelineResult
-    from .poses import PosesResult
+    from .poses_result import PosesResult
 
     if isinstance(design, PipelineResult):
         routed = None if design.routing is None else design.routing.fabrication

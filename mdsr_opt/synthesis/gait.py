@@ -1,6 +1,6 @@
 """Gait schedules: the strokes of every muscle over a cyclic sequence of poses on one shared layout.
 
-:func:`gait_schedule` takes a :class:`~mdsr_opt.synthesis.poses.PosesResult` (one layout, every pose's strokes) and a
+:func:`gait_schedule` takes a :class:`~mdsr_opt.synthesis.poses_result.PosesResult` (one layout, every pose's strokes) and a
 sequence of its poses, interpolates the strokes linearly between them and solves every frame forward. The
 schedule is written as a CSV actuation schedule in length units (:meth:`GaitSchedule.write_csv`), drawn as
 a chart (:func:`mdsr_opt.plot.design.plot_schedule`) and replayed as a GIF (:func:`save_gait_animation`). :func:`run_gait` is
@@ -27,7 +27,7 @@ from ..core.results import compact_repr, load_fields, save_fields, to_jsonable
 from ..mechanics.anchors import body_size
 from .acceptance import MAX_DIFFERENCE, check_max_difference, difference_failure
 from .layouts import check_budget
-from .poses import PosesResult
+from .poses_result import PosesResult
 
 __all__ = ["Gait", "GaitSchedule", "GaitWarning", "gait_schedule", "save_gait_animation",
            "warm_start_state", "ZERO_STROKE"]
@@ -423,7 +423,7 @@ def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_dif
                solved: bool) -> str:
     """Why a keyframe of ``pose`` does not reach it ("" when it does, and for ``"rest"``)."""
     k = None if pose == "rest" else layout.index(pose)
-    if k is not None and not layout.success[k]:
+    if k is not None and not layout.pose_success[k]:
         return "its design on the shared layout failed"
     if not solved:
         return "its frame did not solve"

@@ -3,13 +3,16 @@
 :func:`route_poses` is step 1 of :func:`~mdsr_opt.synthesis.poses.design_poses` (every pose routed as the
 pipeline routes, with the reason for a pose that gets no rope); :func:`shared_layout` is step 2-4 of :func:`~mdsr_opt.synthesis.poses.design_poses` (its module docstring
 says why a union of per-pose layouts and not one routing on a combined graph): candidates taken round-robin
-by rank, duplicates (ropes sharing most of their edges, or too close to be moulded apart) merged, at most
-``max_muscles`` kept. :func:`check_budget` checks that budget.
+by rank, duplicates (ropes sharing most of their edges, or too close to be moulded apart) merged, a rope
+that crosses or crowds the stronger ones fitted beside them as the routing fits its own
+(:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`: shortened or dropped), at most ``max_muscles``
+kept. :func:`check_budget` checks that budget.
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 from typing import Mapping, Sequence
 
 from ..body.mesh import Mesh
@@ -17,7 +20,7 @@ from ..body.muscles import Muscle
 from ..core.checks import check_int
 from ..plot.style import muscle_label, muscle_name
 from .fabrication import pair_conflicts
-from .routing_fixtures import clear_part
+from .routing_fixtures import fit_fixtures
 
 __all__ = ["route_poses", "shared_layout", "check_budget"]
 
@@ -74,7 +77,8 @@ def route_poses(mesh: Mesh, targets: Mapping, routing_options: Mapping) -> tuple
 
 def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscles: int | None = None,
                   overlap: float = 0.5, *, fabrication=None, fixture_radius: float | None = None,
-                  notes: list | None = None, by_pose: bool = False) -> tuple[tuple[Muscle, ...],
+                  notes: list | None = None, by_pose: bool = False,
+                  clashes: str = "resolve") -> tuple[tuple[Muscle, ...],
                                                                              tuple[tuple[str, ...], ...]]:
     """Merge per-pose layouts into one: round-robin by rank, duplicates dropped, at most ``max_muscles``.
 
@@ -90,24 +94,30 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
         the two) is a duplicate.
     fabrication : Fabrication, optional
         With every field set (:meth:`~mdsr_opt.synthesis.fabrication.Fabrication.for_body`): a candidate that
-        could not be moulded beside a kept muscle (channels closer than a channel and a wall, ropes that
+        could not be moulded beside a kept muscle of another pose (channels closer than a channel and a wall, ropes that
         cross, fixtures of radius ``fixture_radius`` that overlap each other or the other's channel:
         :func:`~mdsr_opt.synthesis.fabrication.pair_conflicts`) is merged into it when at least ``overlap`` of
-        its nodes lie that close (a duplicate, serving its pose too); else, with ``by_pose`` (poses whose own
-        layouts were each fitted apart, as a gait's cases), it is cut to its longest part clear of the kept ones
-        (:func:`~mdsr_opt.synthesis.routing_fixtures.clear_part`) when one exists; else it is kept (its pose may
-        have no other rope) and reported in ``notes``
-        (:func:`~mdsr_opt.synthesis.poses.design_poses` then reports a layout that cannot be moulded). None:
-        no such check.
+        its nodes lie that close (a duplicate, serving its pose too); else it is fitted beside the kept ones,
+        which are stronger (those of the other poses: a pose's own layout, routed or given, is taken as it is),
+        as the routing fits its own ropes
+        (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures` with fixtures of ``fixture_radius``: its
+        longest part a channel and a wall clear of their channels and fixtures, with room for its own fixtures
+        and no stub), the kept ones left as they are; a rope with no such part, or one that would cost a kept
+        rope its fixtures, is dropped (``clashes="keep"``: kept as it is, said NOT mouldable in one layer).
+        None: no such check.
     fixture_radius : float, optional
         The fixtures' radius for that check; default ``fabrication.min_fixture_radius`` (the smallest the
         ends may get).
     notes : list, optional
-        Receives one sentence per candidate merged, cut, or kept though it cannot be moulded beside a kept one;
-        none for a candidate the budget leaves out (no rope of the layout is the one it would describe).
+        Receives one sentence per candidate merged, shortened or dropped beside a kept one; none for a candidate
+        the budget leaves out (no rope of the layout is the one it would describe).
     by_pose : bool, default False
         Name and order the ropes by the poses' own layouts, which are shown beside the merged one (a
         scene's cases and its gait): see ``muscles``.
+    clashes : {"resolve", "keep"}, default "resolve"
+        What becomes of a rope that crosses or crowds a kept rope of another pose and is no duplicate of it:
+        fitted beside it (shortened or dropped), or kept as routed for a layout whose crossing ropes get
+        channels at two depths (the face's expressions), which cannot be moulded in one layer.
 
     Returns
     -------
@@ -125,6 +135,8 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     sources : tuple of tuple of str, the poses each muscle serves (the pose it was taken from first).
     """
     budget = check_budget(max_muscles)
+    if clashes not in ("resolve", "keep"):
+        raise ValueError(f"clashes must be 'resolve' or 'keep', got {clashes!r}")
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
     # a kept rope: (muscle, edges, poses served, (pose, rank) it was taken from)
@@ -144,36 +156,40 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
                 if len(ce & ke) >= overlap * min(len(ce), len(ke)):
                     dup = k
                     break
-            clashes = []
+            hits = []
             if dup is None and fabrication is not None:
                 rad = fabrication.min_fixture_radius if fixture_radius is None else float(fixture_radius)
-                for k, (km, _, _, _) in enumerate(kept):
+                for k, (km, _, _, origin) in enumerate(kept):
+                    if origin[0] == name:  # its own pose's layout: fitted by its routing, or given as it is
+                        continue
                     found, near = pair_conflicts(mesh, km, cand, fabrication, rad)
                     if found:
-                        clashes.append((near < overlap, k, found[0]))
-            said = None  # what became of the candidate: noted when it is merged or kept, not when the budget
-            # leaves it out (no rope of the layout would then be the one the note describes)
-            if clashes:  # merged into the first rope it runs along; else cut clear of the kept ones, else kept
-                unmerged, k, cf = min(clashes, key=lambda c: c[:2])
-                part = clear_part(mesh, cand.nodes, [km for km, _, _, _ in kept], fabrication, rad) \
-                    if unmerged and by_pose else ()
-                if part and not any(pair_conflicts(mesh, km, part, fabrication, rad)[0] for km, _, _, _ in kept):
-                    a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
-                    said = (f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
-                            f"({b[0]:.4g}, {b[1]:.4g}) shortened to its part a channel and a wall clear of the "
-                            f"other poses' ropes and fixtures (radius {rad:.4g}): {len(part) - 1} of its "
-                            f"{len(cand.nodes) - 1} edges")
-                    cand = Muscle(part, name=cand.name)
-                    ce, clashes = cand.edges, []
-            if clashes:
-                a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
-                what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
-                beside = f"pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1}"
-                said = (f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to "
-                        f"({b[0]:.4g}, {b[1]:.4g}) " + (f"kept beside {beside}, NOT mouldable in one layer"
-                                                      if unmerged else f"merged into {beside}") + f" ({what})")
+                        hits.append((near < overlap, k, found[0]))
+            said = None  # what became of the candidate: noted when it is merged, cut or dropped, not when the
+            # budget leaves it out (no rope of the layout would then be the one the note describes)
+            a, b = mesh.points[cand.nodes[0]], mesh.points[cand.nodes[-1]]
+            rope = f"pose {name!r}'s rope of rank {r + 1} from ({a[0]:.4g}, {a[1]:.4g}) to ({b[0]:.4g}, {b[1]:.4g})"
+            if hits:  # merged into the first rope it runs along; else fitted beside the kept ones
+                unmerged, k, cf = min(hits, key=lambda c: c[:2])
                 if not unmerged:
+                    what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
+                    said = f"{rope} merged into pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1} ({what})"
                     dup = k
+                elif budget is not None and len(kept) >= budget:
+                    continue
+                elif clashes == "keep":
+                    what = cf.message.split(": ", 1)[1] if ": " in cf.message else cf.message
+                    said = (f"{rope} kept beside pose {kept[k][3][0]!r}'s rope of rank {kept[k][3][1] + 1}, NOT "
+                            f"mouldable in one layer ({what})")
+                else:
+                    others = [km for km, _, _, origin in kept if origin[0] != name]
+                    part, said = _fitted_beside(mesh, cand, others, fabrication, rad, rope)
+                    if not part:
+                        if notes is not None:
+                            notes.append(said)
+                        continue
+                    cand = Muscle(part, name=cand.name)
+                    ce = cand.edges
             if dup is not None:
                 if said is not None and notes is not None:
                     notes.append(said)
@@ -206,6 +222,34 @@ def shared_layout(mesh: Mesh, layouts: Mapping[str, Sequence[Muscle]], max_muscl
     for m in muscles:
         m.check_on(mesh)
     return muscles, tuple(tuple(s) for _, _, s, _ in kept)
+
+
+def _fitted_beside(mesh: Mesh, cand: Muscle, kept: Sequence[Muscle], fabrication, radius: float,
+                   rope: str) -> tuple[tuple, str | None]:
+    """Rope ``cand`` fitted beside the stronger ``kept`` ones (of the other poses) as the routing fits its own ropes
+    (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`, every fixture of ``radius``: its fixtures
+    inside, its longest part a channel and a wall clear of their channels and fixtures, no stub, no fixture
+    joining another rope's two), the kept ones left as they are. Returns its node path (empty: dropped) and
+    the sentence that says what became of it (None: kept whole), which begins with ``rope``."""
+    fab = replace(fabrication, fixture_radius=float(radius), min_fixture_radius=float(radius))
+    paths = [list(m.nodes) for m in kept]
+    n = len(paths)
+    alone = fit_fixtures(mesh, paths, fab)
+    fit = fit_fixtures(mesh, paths + [list(cand.nodes)], fab)
+    part = dict(fit.kept).get(n, ())
+    if [q for i, q in fit.kept if i < n] != list(q for _, q in alone.kept):  # it would cost a stronger rope
+        why = [w for i, w in fit.dropped if i < n and i not in dict(alone.dropped)]
+        return (), (f"{rope} dropped: keeping it would drop or shorten a stronger rope of the shared layout"
+                    + (f" ({why[0]})" if why else ""))
+    if len(part) < 2 or any(pair_conflicts(mesh, m, part, fabrication, radius)[0] for m in kept):
+        why = dict(fit.dropped).get(n, "its part clear of them conflicts with them still")
+        return (), f"{rope} dropped: no part of it that can be moulded beside the stronger ropes is a muscle ({why})"
+    if tuple(part) == tuple(cand.nodes):
+        return tuple(part), None
+    return tuple(part), (f"{rope} shortened to its part that can be moulded beside the stronger ropes of the "
+                         f"shared layout (a channel and a wall, {fabrication.channel_diameter:.4g} + "
+                         f"{fabrication.wall:.4g}, clear of their channels and of fixtures of radius {radius:.4g}, "
+                         f"its own fixtures inside the body): {len(part) - 1} of its {len(cand.nodes) - 1} edges")
 
 
 def _names(kept, taken: dict, labels: dict) -> list[str]:

@@ -16,8 +16,13 @@ The layout is the union of the poses' own routings, deduplicated, under a muscle
    ...), so under a budget each pose keeps its most important muscles rather than one pose taking all;
 3. a candidate whose edges are at least ``overlap`` (default half) covered by a muscle already in the layout
    is the same channel and is not added again (the pose is recorded as a source of the kept muscle), as is
-   one that runs along it too close to be moulded beside it; ropes of different poses that cross or crowd
-   each other otherwise make a layout that cannot be moulded in one layer: said, and no success;
+   one that runs along it too close to be moulded beside it; a candidate that otherwise crosses or crowds
+   the ropes already kept is fitted beside them as the routing fits its own ropes
+   (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`, the stronger ropes first: shortened to its
+   longest part a channel and a wall clear of their channels and fixtures, or dropped), at the smallest
+   fixture; the fixtures then get the largest size every kept rope has room for
+   (:func:`~mdsr_opt.synthesis.routing_fixtures.common_fixture_radius`). Each of these is said in the
+   result's ``notes``; a clash left (ropes given, not routed) is in its ``problems``, and no success;
 4. at most ``max_muscles`` are kept; given separate layouts (a scene's cases), named as in them (prefixed
    by the pose where two poses give one name to different ropes: ``curl:M2``).
 
@@ -55,7 +60,7 @@ Example
 ...     R = 3.0; phi = (X[:, 0] - 2.0) / R; r = R - s * (X[:, 1] - 0.5)
 ...     return np.column_stack([r * np.sin(phi), s * (R - r * np.cos(phi))])
 >>> res = design_poses(mesh, NeoHookean(1.0, 0.3), {"left": bend(1), "right": bend(-1)})
->>> res.n_muscles, int(res.separate_n_muscles.sum()), res.all_success
+>>> res.n_muscles, int(res.separate_n_muscles.sum()), res.success
 (2, 2, True)
 >>> bool(np.all(res.differences <= 1.1 * res.separate_differences))
 True
@@ -64,12 +69,10 @@ True
 from __future__ import annotations
 
 import inspect
-import json
 import math
-import os
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
@@ -82,14 +85,13 @@ from ..core.quantities import check_length_unit
 from ..mechanics.anchors import body_size
 from .acceptance import difference_failure, rest_difference
 from ..body.mesh import Mesh
-from ..body.muscles import Muscle, check_muscles
-from .fabrication import (Fabrication, FabricationWarning, check_channel_fits, check_fabrication, rope_conflicts,
-                          warn_conflicts)
+from ..body.muscles import check_muscles
+from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 from .routing_fixtures import common_fixture_radius
 from .layouts import check_budget, route_poses, shared_layout
-from ..plot.style import muscle_label
+from .poses_result import PosesResult
 
-__all__ = ["Pose", "PosesResult", "design_poses"]
+__all__ = ["Pose", "design_poses"]
 
 
 # ---------------------------------------------------------------------------------------------- inputs
@@ -157,226 +159,6 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
     return out
 
 
-# ---------------------------------------------------------------------------------------------- result
-@dataclass(eq=False)
-class PosesResult:
-    """One muscle layout for several poses and each pose's design on it.
-
-    Attributes
-    ----------
-    names : tuple of str
-        The poses, in order.
-    muscles : tuple of Muscle
-        The shared layout.
-    rest_lengths : (m,) ndarray
-        Rest length of every shared muscle (length units of the mesh).
-    sources : tuple of tuple of str
-        For every shared muscle, the poses whose own routing produced it (first: the one it was taken from).
-    contractions, strokes, tensions : (P, m) ndarrays
-        Per pose and muscle: the designed contraction, the stroke (length taken in, ``a L0`` where the design
-        gives no ``stroke``) and the rope tension (NaN where the design gives none).
-    differences : (P,) ndarray
-        Difference index (weighted RMS node distance, a length) each pose reaches on the shared layout.
-    success : (P,) bool ndarray
-        Each pose's design succeeded (converged and verified).
-    status : tuple of str
-    states : (P, n, 2) ndarray
-        Each pose's designed state (aligned to rest).
-    separate_differences : (P,) ndarray
-        For comparison: the difference each pose reaches with its own separately routed layout (NaN when not
-        compared).
-    separate_n_muscles : (P,) int ndarray
-        How many muscles each separate layout has (their sum: what the separate layouts need in total).
-    engaged : (P, m) bool ndarray
-        The muscle pulls in that pose (its path shortens in the target); a released muscle's rope is left at
-        its path length in the designed state, at zero tension: a negative stroke where that path is longer
-        than at rest (paid out), a positive one where the designed shape, which misses the target, shortens it
-        (slack taken up).
-    anchor_radius : float or None
-        Radius of the rigid end patches used by the designs.
-    muscle_model : str
-    max_muscles : int or None
-        The budget asked for.
-    times : dict
-        Seconds: ``routing``, ``shared`` (designs on the shared layout), ``separate``, ``total``.
-    designs : dict of str to DesignResult
-        The full per-pose designs (in memory only; empty after :meth:`load`).
-    rest_mesh : dict or None
-        The fingerprint of the mesh the layout was made on (:func:`~mdsr_opt.body.fingerprint.mesh_fingerprint`),
-        saved with it; :func:`~mdsr_opt.synthesis.gait.gait_schedule` and
-        :func:`~mdsr_opt.synthesis.export.export_fabrication` refuse another mesh (None: not recorded, not checked).
-    rest_differences : (P,) ndarray or None
-        The rest shape's difference to each pose's target (the "do nothing" design, with the designs'
-        weights): a pose whose design removes less than
-        :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of it is not a success
-        (:func:`~mdsr_opt.synthesis.acceptance.difference_failure`); None: not recorded.
-    units : str or None
-        The mesh's length unit (``design_poses(units=...)``, a scene's ``units``): strokes and differences are
-        in it. None: body units.
-    stress_unit : str or None
-        The material's stress unit (a silicone preset's ``"Pa"``): with ``units``, tables and fabrication
-        files give tensions in N (:func:`~mdsr_opt.synthesis.export.export_fabrication`).
-    problems : tuple of str
-        Why the layout itself is no success (ropes kept for different poses that cannot be moulded in one
-        layer); empty when none. ``all_success`` is False when there is any.
-    fabrication : Fabrication or None
-        The channel, wall and fixtures the layout was routed with, every field set (None: routed without
-        one); :func:`~mdsr_opt.synthesis.export.export_fabrication` draws it.
-    """
-
-    names: tuple
-    muscles: tuple
-    rest_lengths: np.ndarray
-    sources: tuple
-    contractions: np.ndarray
-    strokes: np.ndarray
-    tensions: np.ndarray
-    differences: np.ndarray
-    success: np.ndarray
-    status: tuple
-    states: np.ndarray
-    separate_differences: np.ndarray
-    separate_n_muscles: np.ndarray
-    engaged: np.ndarray | None = None
-    anchor_radius: float | None = None
-    muscle_model: str = "cable"
-    max_muscles: int | None = None
-    times: dict = field(default_factory=dict)
-    designs: dict = field(default_factory=dict, repr=False)
-    rest_mesh: dict | None = None
-    rest_differences: np.ndarray | None = None
-    units: str | None = None
-    stress_unit: str | None = None
-    problems: tuple = ()
-    fabrication: Fabrication | None = None
-
-    @property
-    def n_muscles(self) -> int:
-        return len(self.muscles)
-
-    @property
-    def all_success(self) -> bool:
-        """Every pose designed (converged, verified, moving the body towards its target) and the layout
-        mouldable (no ``problems``)."""
-        return bool(np.all(self.success)) and not self.problems
-
-    def index(self, name: str) -> int:
-        """Position of pose ``name`` (ValueError naming the poses otherwise)."""
-        if name not in self.names:
-            raise ValueError(f"unknown pose {name!r} (poses: {', '.join(self.names)})")
-        return self.names.index(name)
-
-    def __repr__(self) -> str:
-        per = ", ".join(f"{n}: {d:.3g}" + ("" if not np.isfinite(s) else f" (sep. {s:.3g})")
-                        for n, d, s in zip(self.names, self.differences, self.separate_differences))
-        if len(per) > 90:  # many poses: the range, not one figure per pose (one short line)
-            per = f"{np.nanmin(self.differences):.3g}..{np.nanmax(self.differences):.3g}"
-        sep = int(self.separate_n_muscles.sum())
-        return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
-                f"difference {per}, success={self.all_success}" + (", layout NOT mouldable)" if self.problems else ")"))
-
-    def table(self) -> str:
-        """Per pose: difference on the shared layout and on its own, and the strokes."""
-        head = f"{'pose':<14} {'shared D':>10} {'own D':>10} {'own m':>5}  strokes " + \
-            f"({', '.join(muscle_label(m, i) for i, m in enumerate(self.muscles))})"
-        rows = [head, "-" * len(head)]
-        for k, n in enumerate(self.names):
-            own = self.separate_differences[k]
-            own = f"{own:>10.4g}" if np.isfinite(own) else f"{'-':>10}"  # not compared, or no own layout
-            rows.append(f"{n:<14} {self.differences[k]:>10.4g} {own} "
-                        f"{int(self.separate_n_muscles[k]):>5d}  " + " ".join(f"{s:.4g}" for s in self.strokes[k]))
-        u = f"in {self.units}" if self.units else "in the mesh's length units"
-        rows.append(f"D (weighted RMS node distance) and strokes {u}")
-        rows += [f"NOT a success: {p}" for p in self.problems]
-        return "\n".join(rows)
-
-    def to_dict(self) -> dict:
-        """JSON-friendly (NaN as None); :meth:`from_dict` inverts it."""
-        def fin(a):
-            a = np.asarray(a, dtype=float)
-            return np.where(np.isfinite(a), a, np.nan).astype(object).tolist() if a.ndim else float(a)
-
-        def nan_none(v):
-            if isinstance(v, list):
-                return [nan_none(u) for u in v]
-            return None if isinstance(v, float) and not math.isfinite(v) else v
-
-        return {"names": list(self.names),
-                "muscles": [{"name": m.name, "nodes": list(m.nodes)} for m in self.muscles],
-                "rest_lengths": nan_none(fin(self.rest_lengths)), "sources": [list(s) for s in self.sources],
-                "contractions": nan_none(fin(self.contractions)), "strokes": nan_none(fin(self.strokes)),
-                "tensions": nan_none(fin(self.tensions)), "differences": nan_none(fin(self.differences)),
-                "success": [bool(s) for s in self.success], "status": list(self.status),
-                "states": np.asarray(self.states, dtype=float).tolist(),
-                "separate_differences": nan_none(fin(self.separate_differences)),
-                "separate_n_muscles": [int(v) for v in self.separate_n_muscles],
-                "engaged": np.asarray(self.engaged, dtype=bool).tolist(),
-                "anchor_radius": self.anchor_radius, "muscle_model": self.muscle_model,
-                "max_muscles": self.max_muscles, "times": {k: float(v) for k, v in self.times.items()},
-                "rest_mesh": self.rest_mesh,
-                "rest_differences": None if self.rest_differences is None else nan_none(fin(self.rest_differences)),
-                "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems),
-                "fabrication": None if self.fabrication is None else self.fabrication.to_dict()}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "PosesResult":
-        def arr(v, dtype=float):
-            return np.array([[np.nan if u is None else u for u in r] if isinstance(r, list) else
-                             (np.nan if r is None else r) for r in v], dtype=dtype)
-
-        m = len(d["muscles"])
-        P = len(d["names"])
-        return cls(names=tuple(d["names"]),
-                   muscles=tuple(Muscle(x["nodes"], name=x["name"]) for x in d["muscles"]),
-                   rest_lengths=arr(d["rest_lengths"]), sources=tuple(tuple(s) for s in d["sources"]),
-                   contractions=arr(d["contractions"]).reshape(P, m), strokes=arr(d["strokes"]).reshape(P, m),
-                   tensions=arr(d["tensions"]).reshape(P, m), differences=arr(d["differences"]),
-                   success=np.array(d["success"], dtype=bool), status=tuple(d["status"]),
-                   states=np.array(d["states"], dtype=float), separate_differences=arr(d["separate_differences"]),
-                   separate_n_muscles=np.array(d["separate_n_muscles"], dtype=int),
-                   engaged=np.array(d["engaged"], dtype=bool).reshape(P, m),
-                   anchor_radius=d.get("anchor_radius"), muscle_model=d.get("muscle_model", "cable"),
-                   max_muscles=d.get("max_muscles"), times=dict(d.get("times", {})), rest_mesh=d.get("rest_mesh"),
-                   rest_differences=None if d.get("rest_differences") is None else arr(d["rest_differences"]),
-                   units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())),
-                   fabrication=None if d.get("fabrication") is None else Fabrication(**d["fabrication"]))
-
-    def save(self, path) -> str:
-        """Write :meth:`to_dict` as JSON (atomically), tagged ``mdsr_opt.poses/1``. Returns the path."""
-        from ..body.io import write_json
-
-        return write_json(path, {"format": "mdsr_opt.poses/1", **self.to_dict()})
-
-    @classmethod
-    def load(cls, path) -> "PosesResult":
-        """Read a result written by :meth:`save`.
-
-        Raises
-        ------
-        FileNotFoundError
-            No such file.
-        ValueError
-            The file (named) is not valid JSON, not a poses result, or damaged (a field missing or of the
-            wrong shape).
-        """
-        from ..body.io import read_json
-
-        try:
-            data = read_json(path)
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{os.fspath(path)} is damaged: not valid JSON ({exc})") from None
-        if not isinstance(data, dict) or data.get("format", "mdsr_opt.poses/1") != "mdsr_opt.poses/1" \
-                or "names" not in data:
-            fmt = data.get("format") if isinstance(data, dict) else None
-            raise ValueError(f"{os.fspath(path)} is not a mdsr_opt poses result (format {fmt!r})")
-        try:
-            return cls.from_dict(data)
-        except KeyError as exc:
-            raise ValueError(f"{os.fspath(path)} is damaged: field {exc.args[0]!r} is missing") from None
-        except (TypeError, ValueError, AttributeError, IndexError) as exc:
-            raise ValueError(f"{os.fspath(path)} is damaged: {exc}") from None
-
-
 # ---------------------------------------------------------------------------------------------- design
 def _per_muscle(design, muscles, mesh):
     """(stroke, tension) of a design, read from its per-muscle fields when it has them."""
@@ -404,7 +186,7 @@ def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
                  overlap: float = 0.5, compare: bool = True, separate: Mapping[str, tuple] | None = None,
-                 units: str | None = None, fabrication=None) -> PosesResult:
+                 units: str | None = None, fabrication=None, clashes: str = "resolve") -> PosesResult:
     """Route ONE muscle layout for all poses and design each pose's strokes on it.
 
     See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
@@ -444,15 +226,21 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         N. None: body units.
     fabrication : Fabrication or dict of its fields, optional
         As ``routing_options["fabrication"]`` (give it once): the ropes' channel, wall and fixtures, recorded.
+    clashes : {"resolve", "keep"}, default "resolve"
+        Ropes of different poses that cross or crowd each other: resolved (see Returns), or kept as routed
+        (a layout whose crossing ropes get channels at two depths): then listed in ``problems``, and the
+        result is no success (:func:`~mdsr_opt.synthesis.layouts.shared_layout`).
 
     Returns
     -------
     PosesResult
-        A pose is a success when its design converged, was verified and removes at least
+        A pose is a success (``pose_success``) when its design converged, was verified and removes at least
         :data:`~mdsr_opt.synthesis.acceptance.MIN_PROGRESS` of the rest shape's difference to its target.
-        Ropes of different poses that cannot be moulded together in one layer (crossing, channels or
-        fixtures too close: :func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`) are listed in
-        ``problems`` and make the result no success. With ``separate``, the muscles keep the names those
+        The result's ``success`` is every pose's and the layout's. Ropes of different poses that cross or
+        crowd each other are resolved as the routing resolves its own (merged, shortened or dropped, the
+        fixtures as large as every rope has room for), each said in ``notes``; a clash left (ropes given,
+        not routed: :func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`) is listed in ``problems`` and
+        makes the result no success. With ``separate``, the muscles keep the names those
         layouts give them (see :func:`~mdsr_opt.synthesis.layouts.shared_layout`, ``by_pose``).
 
     Raises
@@ -472,6 +260,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         raise TypeError(f"material must be a NeoHookean, LinearElastic, Yeoh or MooneyRivlin, got "
                         f"{type(material).__name__}")
     budget = check_budget(max_muscles)
+    if clashes not in ("resolve", "keep"):
+        raise ValueError(f"clashes must be 'resolve' or 'keep', got {clashes!r}")
     if not (0.0 < float(overlap) <= 1.0):
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
     units = check_length_unit(units)
@@ -497,25 +287,27 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     fab = None if ropt["fabrication"] is False else ropt["fabrication"].for_body(mesh)
     notes: list = []
     muscles, sources = shared_layout(mesh, own, budget, overlap, fabrication=fab,
-                                     fixture_radius=dopt.get("anchor_radius"), notes=notes, by_pose=bool(separate))
-    if notes:  # the poses' ropes that could not be moulded beside another: said, not silently overlapped
-        warnings.warn("design_poses: ropes of the poses closer than a channel and a wall: "
-                      + "; ".join(notes), FabricationWarning, stacklevel=3)
+                                     fixture_radius=dopt.get("anchor_radius"), notes=notes, by_pose=bool(separate),
+                                     clashes=clashes)
     if not muscles:  # every pose's routing (as the pipeline routes) kept no rope: each one's reason
         raise ValueError("no rope for any pose, nothing to design: " + "; ".join(f"pose {k!r}: {v}"
                                                                                for k, v in why_none.items()))
     if dopt.get("anchor_radius") is None and fab is not None:
         # the poses' layouts were fitted apart: one fixture size every shared rope keeps its fixtures with
         dopt["anchor_radius"] = common_fixture_radius(mesh, muscles, fab)
+        if dopt["anchor_radius"] < fab.fixture_radius:
+            notes.append(f"fixtures shrunk from radius {fab.fixture_radius:.4g} to {dopt['anchor_radius']:.4g} (the "
+                         f"smallest allowed is {fab.min_fixture_radius:.4g}): the largest size at which every rope of "
+                         "the shared layout keeps both fixtures inside the body and clear of the other ropes")
     # the wall a rope's two end fixtures keep between them in every design: the fabrication's (as the pipeline's)
     dopt.setdefault("fixture_wall", (fab or Fabrication().for_body(mesh)).wall)
     problems: list[str] = []
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
         found = rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
-        warn_conflicts([c for c in found if len(c.muscles) == 1], "design_poses: the shared layout", stacklevel=4)
-        # ropes of one pose's own layout (given) that clash were said above; ropes kept for different poses
-        # that still clash make a layout that cannot be moulded: no success
+        # ropes of one pose's own layout (given: a routed one is fitted) that clash are said, as design_pipeline
+        # says them; ropes kept for different poses that still clash make a layout that cannot be moulded
         across = [c for c in found if len(c.muscles) == 2 and sources[c.muscles[0]][0] != sources[c.muscles[1]][0]]
+        warn_conflicts(found, "design_poses: the shared layout", stacklevel=4)
         if across:
             problems.append(f"the shared layout cannot be moulded in one layer: {len(across)} place(s) where ropes "
                             "of different poses clash: " + "; ".join(c.message for c in across))
@@ -552,7 +344,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                 ok[k] = False
                 status[-1] += f"; {why}"
         if own[p.name] and not any(p.name in src for src in sources):
-            status[-1] += "; none of the ropes of its own layout is in the shared layout (over the budget)"
+            status[-1] += ("; none of the ropes of its own layout is in the shared layout (over the budget, or "
+                           "dropped beside stronger ropes: see the notes)")
         elif not own[p.name]:
             status[-1] += f"; its own routing kept no rope ({why_none[p.name]})"
         off = np.flatnonzero(~engaged[k])
@@ -581,7 +374,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
     radius = next((getattr(d, "anchor_radius", None) for d in designs.values()), None)
     return PosesResult(names=tuple(p.name for p in items), muscles=muscles,
                        rest_lengths=np.array([mu.rest_length(mesh) for mu in muscles]), sources=sources,
-                       contractions=A, strokes=S, tensions=T, differences=D, success=ok, status=tuple(status),
+                       contractions=A, strokes=S, tensions=T, differences=D, pose_success=ok, status=tuple(status),
                        states=np.array(states), separate_differences=Dsep, separate_n_muscles=nsep, engaged=engaged,
                        anchor_radius=None if radius is None else float(radius),
                        muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values()), None),
@@ -589,7 +382,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
                        rest_mesh=mesh_fingerprint(mesh), rest_differences=Drest, units=units,
-                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems), fabrication=fab)
+                       stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems), fabrication=fab,
+                       notes=tuple(dict.fromkeys(notes)))
 
 
 def _same_design(mesh, sep, engaged, dopt) -> bool:

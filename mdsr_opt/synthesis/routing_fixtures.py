@@ -45,7 +45,7 @@ from ..mechanics.anchors import patch_groups
 from .fabrication import Fabrication, boundary_distance, rope_conflicts
 
 __all__ = ["MIN_FREE_FRACTION", "N_SHRINK_STEPS", "FixtureFit", "fit_fixtures", "common_fixture_radius",
-           "shared_plates", "clear_part", "fitting_notes"]
+           "shared_plates", "fitting_notes"]
 
 #: The free rope (outside its two end patches) must be at least this fraction of a muscle's rest length.
 MIN_FREE_FRACTION = 2.0 / 3.0
@@ -227,29 +227,6 @@ def fit_fixtures(mesh, paths, fabrication: Fabrication) -> FixtureFit:
     """
     fit = _fitted(mesh, [list(p) for p in paths], fabrication)
     return FixtureFit(fit.kept, fit.radius, tuple(dict.fromkeys(fit.notes)), fit.dropped)
-
-
-def clear_part(mesh, path, others, fabrication: Fabrication, radius: float) -> tuple:
-    """The longest part of rope ``path`` that can be moulded beside the ropes ``others`` (step 3, with fixtures
-    of ``radius`` and ``fabrication``'s channel and wall, every field set) and is no stub (step 2): at least
-    ``4 radius`` long. Empty when no such part exists.
-
-    Example
-    -------
-    >>> from mdsr_opt import Mesh
-    >>> mesh = Mesh.rectangle(4.0, 2.0, nx=16, ny=8)
-    >>> f = Fabrication(0.05, 0.05, 0.1, 0.1)
-    >>> row, col = list(range(4 * 17, 5 * 17)), [8 + 17 * k for k in range(1, 8)]  # y = 1 and x = 2
-    >>> part = clear_part(mesh, col, [row], f, 0.1)
-    >>> bool(len(part) == 3 and set(part) <= set(col) and abs(mesh.points[list(part), 1] - 1).min() > 0.2)
-    True
-    """
-    q = _clear_of(mesh.points, list(path), [list(getattr(o, "nodes", o)) for o in others], float(radius),
-                  fabrication.wall, fabrication.channel_diameter, float(radius) + fabrication.wall,
-                  boundary_distance(mesh))
-    if len(q) < 2 or Muscle(q).rest_length(mesh) < 4.0 * float(radius):
-        return ()
-    return q
 
 
 def shared_plates(P, paths, r: float) -> tuple:

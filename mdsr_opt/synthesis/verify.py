@@ -7,6 +7,7 @@ from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..body.checks import check_target_shape
 from ..body.fingerprint import check_same_mesh
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle, check_distinct_ropes, check_muscles
@@ -171,7 +172,7 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
         raise ValueError(f"start must be 'design' or 'rest', got {start!r}")
     check_mesh_material(mesh, material)
     mus = check_muscles(mesh, muscles)
-    y = as_float_array(target, "target", shape=(mesh.n_nodes, 2))
+    y = check_target_shape(mesh, target)  # the check of every entry point that takes a target
     w = node_weights(mesh) if weights is None else as_float_array(weights, "weights", shape=(mesh.n_nodes,))
     if not isinstance(result, DesignResult):
         raise TypeError(f"result must be a DesignResult, got {type(result).__name__}")

@@ -574,7 +574,7 @@ def scene_schedule(scene, layout, *, sequence=None, frames_per_step: int | None 
 def walk_scene(scene, layout, *, sequence=None, frames_per_step: int | None = None, feet: str | None = "all",
                **kwargs) -> tuple:
     """A scene's gait walked on the table: the schedule of ``layout`` (a
-    :class:`~mdsr_opt.synthesis.poses.PosesResult` laid for the scene's gait, e.g. ``layout.json`` of
+    :class:`~mdsr_opt.synthesis.poses_result.PosesResult` laid for the scene's gait, e.g. ``layout.json`` of
     ``mdsr run``) solved by :func:`~mdsr_opt.synthesis.gait.gait_schedule`, then :func:`walk_gait`.
 
     ``feet="all"`` (default): the weight on every node by lumped area (a sheet lying flat); ``feet="region"``:
