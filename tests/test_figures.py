@@ -70,7 +70,7 @@ def test_design_figure_schedule_and_svg_agree_on_muscle_names_and_colours(strip,
     strokes = np.outer(t, [0.3, 0.1])
     sched = SimpleNamespace(times=t, muscle_names=("M1", "M2"), strokes=strokes, achieved=strokes * 0.98,
                             rest_lengths=np.array([3.5, 1650.0]), units="mm", keyframes=[0, 4], labels=["rest"] * 5,
-                            success=np.ones(5, bool), sequence=("rest", "pose"), n_frames=5)
+                            frame_success=np.ones(5, bool), sequence=("rest", "pose"), n_frames=5)
     fig = plot_schedule(sched)
     ax = fig.axes[0]
     assert ax.get_xlabel() == "time (s)" and ax.get_ylabel().startswith("stroke (mm")

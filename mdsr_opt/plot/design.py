@@ -285,7 +285,7 @@ def plot_schedule(schedule, ax=None, title: str | None = None):
     if np.isfinite(schedule.achieved).any():  # how to read the two kinds of line, in the legend too
         ax.plot([], [], "-", color="0.35", lw=1.8, label="commanded")
         ax.plot([], [], ":", color="0.35", lw=1.2, label="achieved")
-    bad = ~schedule.success
+    bad = ~np.asarray(schedule.frame_success, bool)
     if bad.any():
         ax.plot(t[bad], np.zeros(bad.sum()), "rx", ms=8, label="frame solve failed")
     ax.set_xlabel("time (s)")

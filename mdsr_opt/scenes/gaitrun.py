@@ -114,8 +114,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         jobs.append((save_gait_animation, (scene.mesh, sch, res.muscles, gif),
                      {"title": f"{scene.name} {gait.name}:", "fps": gait.fps}, gif_cost(sch.n_frames)))
         files.append(str(gif))
-    ok = res.success and bool(sch.success.all()) and bool(sch.reached.all())
-    failed = [int(k) for k in np.flatnonzero(~sch.success)]
+    ok = res.success and sch.success
+    failed = [int(k) for k in np.flatnonzero(~sch.frame_success)]
     why = "; ".join([f"frames {failed} of the schedule failed"] * bool(failed) + [sch.outcome()] * bool(sch.unreached))
     jobs.append((export_fabrication, (scene.mesh, res, folder), {"units": scene.units, "name": scene.name,  # a failed
                  "material": scene.material, "allow_failed": True, "failure": why}, 0.0))  # one's say FAILED

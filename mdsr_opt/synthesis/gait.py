@@ -145,7 +145,8 @@ class GaitSchedule:
         Strokes the forward solve achieved (NaN when the solver gives none).
     tensions : (F, m) ndarray
     states : (F, n, 2) ndarray
-    success : (F,) bool ndarray
+    frame_success : (F,) bool ndarray
+        Per frame, its forward solve succeeded.
     status : tuple of str
     units : str
         The length unit of every stroke (``"body units"`` when the mesh's is not known).
@@ -163,6 +164,8 @@ class GaitSchedule:
         That bound, a fraction of the body's size.
     reasons : tuple of str
         Per keyframe, why its pose was not reached ("" when it was).
+    success : bool (property)
+        The whole schedule's verdict: every frame solved and every keyframe's pose reached.
     """
 
     sequence: tuple
@@ -176,7 +179,7 @@ class GaitSchedule:
     achieved: np.ndarray
     tensions: np.ndarray
     states: np.ndarray
-    success: np.ndarray
+    frame_success: np.ndarray
     status: tuple
     units: str = BODY_UNITS
     rest_mesh: dict | None = None
@@ -188,6 +191,11 @@ class GaitSchedule:
     @property
     def n_frames(self) -> int:
         return len(self.times)
+
+    @property
+    def success(self) -> bool:
+        """Every frame solved and every keyframe's pose reached (``frame_success``, ``reached``)."""
+        return bool(np.all(self.frame_success) and np.all(self.reached))
 
     @property
     def unreached(self) -> tuple[str, ...]:
@@ -209,7 +217,7 @@ class GaitSchedule:
     def outcome(self) -> str:
         """One phrase: the frames solved, or, when a keyframe's pose was not reached, the frames solved and
         reaching their pose and the poses never reached."""
-        solved = np.asarray(self.success, bool).copy()
+        solved = np.asarray(self.frame_success, bool).copy()
         if not self.unreached:
             return f"{int(solved.sum())}/{self.n_frames} frames solved"
         kf = np.asarray(self.keyframes, dtype=int)
@@ -254,7 +262,7 @@ class GaitSchedule:
                     w.writerow([k, f"{self.times[k]:.6g}", self.labels[k]]
                                + [f"{v:.9g}" for v in self.strokes[k]]
                                + ["" if not np.isfinite(v) else f"{v:.9g}" for v in self.achieved[k]]
-                               + [int(self.success[k])])
+                               + [int(self.frame_success[k])])
         return os.fspath(path)
 
 
@@ -304,7 +312,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     Returns
     -------
     GaitSchedule
-        ``n_frames = steps * frames_per_step + 1``; a failed frame solve is reported in ``success`` and
+        ``n_frames = steps * frames_per_step + 1``; a failed frame solve is reported in ``frame_success`` and
         ``status``.
     """
     from ..mechanics.equilibrium import solve_internal
@@ -414,7 +422,7 @@ def gait_schedule(mesh: Mesh, material, layout: PosesResult, sequence: Sequence[
     return GaitSchedule(sequence=tuple(seq), frames_per_step=fps_, times=np.arange(F) * float(step_time) / fps_,
                         keyframes=np.array(kf), labels=tuple(labels),
                         muscle_names=tuple(mu.name for mu in layout.muscles), rest_lengths=L0.copy(), strokes=S,
-                        achieved=ach, tensions=ten, states=np.array(states), success=ok, status=tuple(status),
+                        achieved=ach, tensions=ten, states=np.array(states), frame_success=ok, status=tuple(status),
                         units=units, rest_mesh=mesh_fingerprint(mesh), keyframe_differences=kd, reached=reached,
                         max_difference=float(max_difference), reasons=tuple(reasons))
 

@@ -524,7 +524,7 @@ def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> Wa
     if touching is not None:
         kwargs["touching"] = touching
     kwargs.setdefault("units", schedule.units)
-    if kwargs.get("start") is None and bool(schedule.success[0]):
+    if kwargs.get("start") is None and bool(schedule.frame_success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays
     return walk(mesh, material, muscles, S, **kwargs)
 

@@ -179,7 +179,7 @@ def walk_scene_refinement(scene, layout, *, levels: int = 3, sequence=None, fram
     S, touching = schedule_cycle(sch, kwargs.get("touching"))
     if touching is not None:
         kwargs["touching"] = touching
-    start = sch.states[0] if bool(sch.success[0]) and not from_rest else None
+    start = sch.states[0] if bool(sch.frame_success[0]) and not from_rest else None
     kwargs.setdefault("units", sch.units)
     kwargs.setdefault("anchor_radius", layout.anchor_radius)
     groups = foot_groups(scene.mesh, region) if region is not None else None
