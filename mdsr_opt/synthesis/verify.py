@@ -132,7 +132,10 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     forward solve from the design's own state (moved rigidly into the solver's gauge frame) instead: the
     forward solver must find it a stable equilibrium at these contractions, or move away from it (a gap) or
     fail; it does not check that the state is reached from rest, at about a third of the cost. A design
-    state that cannot start a solve (an inverted element) is verified from rest.
+    state that cannot start a solve (an inverted element) is verified from rest. A state already within
+    ``tol`` is the one that solve returns at once, so it is checked where it stands, with the solve's own
+    tests (the residual, the inertia of the reduced Hessian, the boundary) and no solver run
+    (``forward_iterations`` 0, ``forward_status`` says so).
 
     When the target came from external driving, give its ``anchors`` and ``drags`` (as in
     :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
