@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import time
@@ -309,6 +310,26 @@ def test_the_verification_from_rest_takes_the_predictor_when_the_rest_shape_fail
     saved = DesignResult.from_dict(json.loads(json.dumps(dict(res.to_dict(), verification=v.to_dict()))))
     assert saved.verification.forward_start == "rest, predictor"
     assert saved.verification.forward_iterations == v.forward_iterations
+
+
+def test_verification_from_the_design_checks_a_converged_state_where_it_stands(mesh, muscles, target):
+    """A design state within tol is what the forward solve from it returns: verified there (residual, the
+    reduced Hessian's inertia, the boundary) with no solver iteration; a state that is not an equilibrium
+    still goes through the forward solve, which moves away from it (a gap) and fails the check."""
+    res = design_contractions(mesh, MAT, muscles, target, verify=False)
+    v = verify_design(mesh, MAT, muscles, res, target, start="design")
+    assert v.passed and v.forward_success and v.positive_definite
+    assert v.forward_iterations == 0 and "stops there" in v.forward_status
+    assert v.gap < 1e-12 * mesh.size and v.residual <= 1e-10
+    pd, _lam, r = check_minimum(mesh, MAT, muscles, res.contractions, res.x, tol=1e-10, lowest=False)
+    assert pd is True and r == pytest.approx(v.residual, abs=1e-12)  # the independent check agrees
+    # the same design with its state moved off the equilibrium (1e-4 of the size): the solver path
+    bent = copy.deepcopy(res)
+    rng = np.random.default_rng(3)
+    bent.x = res.x + 1e-4 * mesh.size * rng.uniform(-1.0, 1.0, res.x.shape)
+    vb = verify_design(mesh, MAT, muscles, bent, target, start="design")
+    assert not vb.passed and vb.forward_iterations > 0 and "stops there" not in vb.forward_status
+    assert vb.gap > vb.gap_tol and "gap" in vb.message and "not an equilibrium" in vb.message
 
 
 def test_verification_starts_from_the_design_or_from_rest(mesh, muscles, target):

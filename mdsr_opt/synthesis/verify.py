@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 from typing import Sequence
 import numpy as np
 from numpy.typing import ArrayLike
@@ -132,7 +133,10 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     forward solve from the design's own state (moved rigidly into the solver's gauge frame) instead: the
     forward solver must find it a stable equilibrium at these contractions, or move away from it (a gap) or
     fail; it does not check that the state is reached from rest, at about a third of the cost. A design
-    state that cannot start a solve (an inverted element) is verified from rest.
+    state that cannot start a solve (an inverted element) is verified from rest. A state already within
+    ``tol`` is the one that solve returns at once, so it is checked where it stands, with the solve's own
+    tests (the residual, the inertia of the reduced Hessian, the boundary) and no solver run
+    (``forward_iterations`` 0, ``forward_status`` says so).
 
     When the target came from external driving, give its ``anchors`` and ``drags`` (as in
     :func:`~mdsr_opt.solve_external`): the target must then also be a stable equilibrium of that driving
@@ -204,7 +208,11 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
              "anchor_radius": prob.anchor_radius, "tol": tol, "held": hold}
     a_fwd = np.clip(a, 0.0, 0.999)
     guess = prob.in_frame(x) if start == "design" else None  # None: an inverted state, from rest
-    if guess is not None:
+    stopped = _stops_at_start(prob, a_fwd, guess, tol, bool(lowest)) if guess is not None else None
+    if stopped is not None:  # the forward solve from the design's state would stop there: its checks, made here
+        fwd, (pd, lam, residual) = stopped
+        f_iters, f_start = 0, "design"
+    elif guess is not None:
         fwd = solve_internal(mesh, material, mus, a_fwd, initial_guess=guess, **fopts)
         f_iters, f_start = int(fwd.iterations), "design"
     else:
@@ -223,6 +231,8 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
     inverted = not upright(mesh, x)
     if inverted:  # no energy there (log det F): not a minimum, and no Hessian to factorise
         pd, lam, residual = False, float("nan"), float("nan")
+    elif stopped is not None:
+        pass  # answered at the start
     elif fwd.success and gap <= SAME_STATE_RTOL * size and not lowest:
         # the forward solve reached the design's state (up to a rigid motion, which leaves the energy and
         # its curvature as they are) and found it a strict minimum: its check answers for both
@@ -244,6 +254,39 @@ def verify_design(mesh: Mesh, material, muscles: Sequence[Muscle], result: Desig
                         time=time.perf_counter() - t0,
                         target_stable=None if target_check is None else bool(target_check.stable),
                         forward_iterations=f_iters, forward_start=f_start)
+
+
+def _stops_at_start(prob: DesignProblem, a, x0, tol: float, lowest: bool):
+    """What the forward solve from the design's state ``x0`` (in the solver's frame) finds when ``x0`` already
+    meets ``tol``: ``(forward outcome, (positive_definite, min_eigenvalue, residual))``, or None when it does
+    not (or inverts an element: the solve then runs).
+
+    :func:`~mdsr_opt.solve_internal` accepts a state by its scaled KKT residual
+    (:meth:`DesignProblem.kkt_residual`), so from a start already within ``tol`` it stops there, and its
+    result is that start when the start is a stable equilibrium whose boundary does not cross itself (the
+    checks every solve's result passes: :func:`~mdsr_opt.mechanics.loadsteps.equilibrium_result`). Those
+    checks are made here, once (the residual, the inertia of the Hessian of the Lagrangian on the tangent
+    space of the active constraints, :func:`_stability`, and the boundary), instead of by a solve that would
+    not move: the same answer without the solver's set-up, its own residual fits and a second residual."""
+    if not upright(prob.mesh, x0):
+        return None
+    xflat = x0.reshape(-1)
+    residual = prob.kkt_residual(a, xflat, tol)
+    if not residual <= tol:
+        return None
+    H, free, A, _kap, _res = prob.kkt_data(a, xflat)
+    chk = check_stability(H, free, A, lowest=lowest, order=prob.model.free_ordering(free))
+    lam = float(chk.curvature) * prob.h if chk.curvature is not None else (0.0 if not chk.stable else np.nan)
+    status = f"the design's state meets tol (scaled KKT residual {residual:.3g}): the solve from it stops there"
+    ok = bool(chk.stable)
+    if not ok:
+        status += f"; rejected: not a stable equilibrium ({chk.n_negative} negative, {chk.n_zero} zero curvature " \
+                  "directions)"
+    elif prob.mesh.boundary_crosses(x0):
+        ok = False
+        status += "; rejected: the boundary crosses itself (contact is off: contact=True models it)"
+    fwd = SimpleNamespace(x=np.array(x0, dtype=float), success=ok, status=status, iterations=0)
+    return fwd, (bool(chk.stable), lam, residual)
 
 
 def _forward_messages(fwd, what: str, gap: float, gap_tol: float, inverted: bool) -> list[str]:
