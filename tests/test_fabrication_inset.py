@@ -27,7 +27,7 @@ from mdsr_opt.synthesis.fabrication import MIN_INSET_FRACTION
 from mdsr_opt.synthesis.routing import RoutingWarning, route_for_design, route_muscles
 
 OUTLINE = [[0.0, 0.0], [100.0, 1.5], [100.0, 2.5], [0.0, 4.0]]  # mm: 4 thick at the base, 1 at the tip
-SIZES = dict(channel_diameter=1.0, wall=0.5, fixture_radius=1.0, min_fixture_radius=0.8)
+SIZES = {"channel_diameter": 1.0, "wall": 0.5, "fixture_radius": 1.0, "min_fixture_radius": 0.8}
 
 SCENE = """name = "slender"
 units = "mm"

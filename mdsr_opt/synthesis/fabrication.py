@@ -313,23 +313,23 @@ def no_band_message(mesh, fab: Fabrication, clearance: float) -> str:
         why += f"; here routed deeper, at an inset of {clearance:.4g}"
     # on this mesh every term above ``fits`` must come down to it (together)
     here = []
-    if floor > fits and fits > 0:
-        here.append(f"min_inset_fraction at most {_at_most(fits / D):.3g}")
-    if need > fits and fits > 0:
-        here.append(f"channel_diameter / 2 + wall at most {_at_most(fits):.4g}")
-    if clearance > max(need, floor, fits) * (1 + 1e-9) and fits > 0:
-        here.append(f"an inset at most {_at_most(fits):.4g}")
+    if fits > 0:  # a mesh with every edge on the boundary holds nothing at any size
+        if floor > fits:
+            here.append(f"min_inset_fraction at most {_at_most(fits / D):.3g}")
+        if need > fits:
+            here.append(f"channel_diameter / 2 + wall at most {_at_most(fits):.4g}")
+        if clearance > max(need, floor, fits) * (1 + 1e-9):
+            here.append(f"an inset at most {_at_most(fits):.4g}")
     asks = ("the channel and its wall ask" if need >= max(floor, clearance) * (1 - 1e-12) else
             "min_inset_fraction asks" if floor >= clearance * (1 - 1e-12) else "asked")
-    on_mesh = f"on this mesh (its deepest edge lies {fits:.4g} inside): " + " and ".join(here) if here and fits > 0 \
-        else ""
+    on_mesh = f"on this mesh (its deepest edge lies {fits:.4g} inside): " + " and ".join(here) if here else ""
     finer = f"a finer mesh, mean edge length at most {_at_most((R - clearance) / 2):.3g} (now {h:.4g})"
     if R <= clearance * (1 + 1e-9):
         head = (f"the body is too thin for the inset {asks}: every rope node must lie at least {clearance:.4g} "
                 f"inside the outline and the holes ({why}), but the body is only {R:.4g} deep at its deepest point "
                 f"(its largest inscribed circle's radius), so no finer mesh helps. ")
-        ways = [on_mesh] if on_mesh else [f"a finer mesh, with channel_diameter / 2 + wall and min_inset_fraction "
-                                          f"times the diameter below the body's depth {R:.4g}"]
+        ways = [on_mesh] if on_mesh else [(f"a finer mesh, with channel_diameter / 2 + wall and min_inset_fraction "
+                                           f"times the diameter below the body's depth {R:.4g}")]
     else:
         head = (f"the mesh is too coarse to hold a rope at its inset: every rope node must lie at least "
                 f"{clearance:.4g} inside the outline and the holes ({why}); the body is {R:.4g} deep at its deepest "
