@@ -63,9 +63,9 @@ def routed():
 
 def test_a_layout_is_drawn_with_the_fabrication_it_was_routed_with(routed, tmp_path):
     mesh, res = routed
-    assert res.fabrication == FAB  # it travels with the result ...
+    assert res.fabrication == FAB.for_body(mesh)  # it travels with the result (every field set) ...
     loaded = PosesResult.load(res.save(tmp_path / "layout.json"))
-    assert loaded.fabrication == FAB  # ... and with its file
+    assert loaded.fabrication == FAB.for_body(mesh)  # ... and with its file
     r = res.anchor_radius
     for k, design in enumerate((res, loaded)):
         files = export_fabrication(mesh, design, tmp_path / f"f{k}", name="strip")  # not given again

@@ -477,7 +477,8 @@ class Session:
         """The page's fabrication fields as a dict of the ones given (ValueError/TypeError naming a bad one).
 
         ``spec``: a dict with any of ``channel_diameter``, ``wall``, ``fixture_radius``,
-        ``min_fixture_radius``, each a length >= 0 in the body's unit or None (the default for this body)."""
+        ``min_fixture_radius``, each a length >= 0 in the body's unit, and ``min_inset_fraction`` (a fraction of
+        the body's diameter in [0, 0.5)), each or None (the default for this body)."""
         if not isinstance(spec, dict):
             raise TypeError(f"fabrication must be an object of lengths, got {type(spec).__name__}")
         names = [f for f in Fabrication.__dataclass_fields__]
@@ -489,10 +490,11 @@ class Session:
             v = spec.get(k)
             if v is None or v == "":
                 continue
+            what = "fraction" if k == "min_inset_fraction" else "length"
             if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise TypeError(f"fabrication: {k} must be a length (a number >= 0), got {v!r}")
+                raise TypeError(f"fabrication: {k} must be a {what} (a number >= 0), got {v!r}")
             if not math.isfinite(float(v)) or float(v) < 0:
-                raise ValueError(f"fabrication: {k} must be a finite length >= 0, got {v!r}")
+                raise ValueError(f"fabrication: {k} must be a finite {what} >= 0, got {v!r}")
             out[k] = float(v)
         fab = self._fabrication(out)
         fab.for_body(self.mesh)  # min above fixture, a fixture half the body: refused here

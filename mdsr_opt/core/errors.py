@@ -42,9 +42,12 @@ class InputTypeError(InputError, TypeError):
 
 class LayoutError(ValueError):
     """A muscle layout that cannot work on its body: a muscle's end patches joined through other muscles'
-    patches, or covering so much of it that it cannot contract. A routed layout can be one (the data a stage
-    made, not the user's input): ``mdsr run`` fails the case and goes on (exit code 1); a function given
-    such muscles raises it as the ``ValueError`` it is."""
+    patches, or covering so much of it that it cannot contract; or ropes the routing cannot lay on this body,
+    mesh and target (a body too thin for the ropes' inset, a mesh too coarse for it, a channel or fixture
+    the body cannot hold, ``symmetry=True`` on a target that is not mirror-symmetric). A routed layout can be
+    one (the data a stage made, not the user's input): ``mdsr run`` fails the case and goes on (exit code
+    1); a function given such muscles or sizes raises it as the ``ValueError`` it is (at a command's door,
+    :func:`checking_input` makes it bad input, exit code 2)."""
 
 
 @contextlib.contextmanager

@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 
 from ..body.muscles import Muscle
+from ..core.errors import LayoutError
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .fixtures import scene_fixture_radius
 from .reader import contact_options
@@ -46,6 +47,11 @@ class CaseSetup:
     anchor_radius : float or None
         The radius of the muscles' end fixtures, which their design takes (:func:`case_anchor_radius`); None:
         the default (:func:`~mdsr_opt.mechanics.anchors.default_anchor_radius`).
+    routing_error : str or None
+        Why the routing could lay no rope on this body and mesh (the message of its
+        :class:`~mdsr_opt.core.errors.LayoutError`: a body too thin for the ropes' inset, a mesh too coarse);
+        ``routing`` is then None. A case whose muscles are routed has none (``muscles`` is empty: the case
+        fails); one whose routing is a diagnostic (its own muscles, an internal case) goes on without it.
     """
 
     scene: Scene
@@ -59,6 +65,7 @@ class CaseSetup:
     warnings: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
     anchor_radius: float | None = None
+    routing_error: str | None = None
 
     @property
     def success(self) -> bool:
@@ -78,7 +85,8 @@ class CaseSetup:
             "n_nodes": self.scene.mesh.n_nodes, "target": self.target, "muscles": list(self.muscles),
             "known_contractions": self.known_contractions, "target_result": self.target_result.to_dict(),
             "routing": None if self.routing is None else self.routing.to_dict(), "times": self.times,
-            "warnings": self.warnings, "fabrication": self.fabrication, "anchor_radius": self.anchor_radius})
+            "warnings": self.warnings, "fabrication": self.fabrication, "anchor_radius": self.anchor_radius,
+            "routing_error": self.routing_error})
 
     def save(self, path: str | os.PathLike) -> str:
         """Write the setup as one ``.npz`` file: the target, the known contractions and the target solve's
@@ -98,7 +106,8 @@ class CaseSetup:
         meta = {"scene": self.scene.name, "case": self.case.name, "n_nodes": self.scene.mesh.n_nodes,
                 "muscles": [{"nodes": list(m.nodes), "name": m.name} for m in self.muscles],
                 "target_result": tr_meta, "times": self.times, "warnings": list(self.warnings),
-                "fabrication": list(self.fabrication), "anchor_radius": self.anchor_radius}
+                "fabrication": list(self.fabrication), "anchor_radius": self.anchor_radius,
+                "routing_error": self.routing_error}
         return save_npz(path, "case_setup", arrays, meta)
 
     @classmethod
@@ -132,7 +141,8 @@ class CaseSetup:
                        muscles=tuple(Muscle(tuple(m["nodes"]), name=m["name"]) for m in meta["muscles"]),
                        known_contractions=arrays.get("known_contractions"), target_result=target_result,
                        routing=None, times=dict(meta["times"]), warnings=list(meta["warnings"]),
-                       fabrication=list(meta.get("fabrication", [])), anchor_radius=meta.get("anchor_radius"))
+                       fabrication=list(meta.get("fabrication", [])), anchor_radius=meta.get("anchor_radius"),
+                       routing_error=meta.get("routing_error"))
         except KeyError as exc:
             raise ValueError(f"{path} is damaged: field {exc.args[0]!r} is missing") from None
         except (TypeError, ValueError, AttributeError) as exc:
@@ -150,7 +160,9 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     ``[fabrication] fixture_radius``) so the design can recover them exactly; routing runs as a diagnostic
     when ``route_internal``.
 
-    A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty.
+    A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty. Nor is a
+    routing this body or mesh cannot hold (a :class:`~mdsr_opt.core.errors.LayoutError`): its message is
+    ``routing_error``, and ``muscles`` is empty when they were to be routed.
     """
     from ..mechanics.equilibrium import solve_external, solve_internal
     from ..synthesis.fabrication import check_fabrication
@@ -173,6 +185,7 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     routing = None
     muscles: tuple = ()
     notes: list[str] = []
+    refused = None
     if res.success:
         own = case.kind == "external" and case.muscles is not None
         # a case with its own muscles is routed too, as a diagnostic (what routing would have laid)
@@ -181,12 +194,15 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
                 warnings.simplefilter("always", RoutingWarning)
                 ropts = dict(scene.routing_options)  # the fixtures are the design's anchor patches
                 ropts["fabrication"] = check_fabrication(ropts.get("fabrication"), scene_fixture_radius(scene))
-                routing = route_for_design(scene.mesh, res.x, **ropts)
+                try:
+                    routing = route_for_design(scene.mesh, res.x, **ropts)
+                except LayoutError as exc:  # this body or mesh holds no rope: the case's failure, not the run's
+                    refused = str(exc)
             notes = [str(w.message) for w in caught if issubclass(w.category, RoutingWarning)]
         if own:
             muscles = tuple(case.muscles)
         elif case.kind == "external" and scene.muscles is None:
-            muscles = tuple(routing.muscles)
+            muscles = () if routing is None else tuple(routing.muscles)
         else:
             muscles = tuple(scene.muscles)
     given = [] if not muscles or routing is not None and muscles == tuple(routing.muscles) else \
@@ -194,7 +210,8 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     t2 = time.perf_counter()
     return CaseSetup(scene=scene, case=case, target=res.x.copy(), muscles=muscles, known_contractions=known,
                      target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
-                     warnings=notes, fabrication=given, anchor_radius=case_anchor_radius(scene, case, routing))
+                     warnings=notes, fabrication=given, anchor_radius=case_anchor_radius(scene, case, routing),
+                     routing_error=refused)
 
 
 def case_anchor_radius(scene: Scene, case: Case, routing=None) -> float | None:

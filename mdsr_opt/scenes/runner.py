@@ -262,7 +262,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         return run
     if not setup.muscles:
         why = "; ".join(setup.warnings) or "does the target shorten any edge?"
-        rep.message = f"routing found no muscle on the target ({why})"
+        rep.message = f"routing found no muscle on the target ({why})" if setup.routing_error is None else \
+            f"routing failed: {setup.routing_error}"  # a body too thin for the ropes' inset, a mesh too coarse
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
         return run

@@ -90,9 +90,11 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [fabrication]                         # optional: channel, wall and end fixtures, in `units`
         channel_diameter = 0.04               # each default: a fraction of the body's diameter D (channel
         wall = 0.04                           # 1 %, wall 1 %, fixture 4 %, smallest fixture 1.5 %); ropes
-        fixture_radius = 0.16                 # lie >= channel/2 + wall (and 2 % of D) inside the body;
-        min_fixture_radius = 0.06             # fixture_radius is the design's anchor_radius; mdsr run draws
-                                              # each case's and the gait's fabrication files with them
+        fixture_radius = 0.16                 # lie >= the larger of channel/2 + wall and min_inset_fraction
+        min_fixture_radius = 0.06             # times D inside the body (a fraction in [0, 0.5), default 0.02:
+        min_inset_fraction = 0.02             # smaller for a slender body); fixture_radius is the design's
+                                              # anchor_radius; mdsr run draws each case's and the gait's
+                                              # fabrication files with them
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
         # contact = true                      # self-contact of the outline in every solve (targets, design,

@@ -135,6 +135,8 @@ def failure_cause(message: str) -> str:
         found = causes(msg)
         why = found[0][0] if found else _solver_status(msg.split(": ", 1)[1])
         return _short(f"target solve failed: {why or 'no equilibrium'}")
+    if msg.startswith("routing failed: "):  # the body or mesh holds no rope: its cause, before the numbers
+        return _short("routing failed: " + msg[len("routing failed: "):].split(":", 1)[0])
     if msg.startswith(("design failed: RuntimeError", "design failed: SolverFailure")):
         return _short(re.split(r" \(", msg, maxsplit=1)[0])
     found = causes(msg)

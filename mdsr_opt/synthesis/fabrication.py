@@ -2,8 +2,9 @@
 
 A rope runs in a moulded channel of diameter ``channel_diameter`` with a ``wall`` of material around it, and
 ends on a fixture (a bead, a knot, a washer plate) of radius ``fixture_radius``. A rope node is admissible
-when it lies at least :meth:`Fabrication.clearance` inside the outline and every hole: half the channel plus
-the wall, and never less than :data:`MIN_INSET_FRACTION` (2 %) of the body's diameter; an end fixture fits
+when it lies at least :meth:`Fabrication.clearance` inside the outline and every hole: the larger of half the
+channel plus the wall and ``min_inset_fraction`` of the body's diameter (default :data:`MIN_INSET_FRACTION`,
+2 %; a slender body needs less, see :class:`Fabrication`); an end fixture fits
 when its disk of radius ``fixture_radius + wall`` lies inside the body. ``fixture_radius`` is what the
 design calls ``anchor_radius`` (the rigid end patch is the fixture). The routing may shrink the fixtures down
 to ``min_fixture_radius`` to keep a muscle (see :mod:`mdsr_opt.synthesis.routing_fixtures`). Ropes of different
@@ -46,10 +47,12 @@ from typing import Mapping
 
 import numpy as np
 
+from ..core.errors import LayoutError
 from ..mechanics.anchors import ANCHOR_FRACTION, MAX_ANCHOR_FRACTION, body_size
 
 __all__ = ["Fabrication", "CHANNEL_FRACTION", "WALL_FRACTION", "MIN_FIXTURE_FRACTION", "MIN_INSET_FRACTION",
-           "boundary_distance", "segment_insets", "body_depth", "check_fabrication", "admissible_edges", "FabricationWarning",
+           "boundary_distance", "segment_insets", "deepest_edge", "body_depth", "no_band_message", "check_fabrication",
+           "admissible_edges", "FabricationWarning",
            "Conflict", "rope_conflicts", "warn_conflicts", "check_sizes_fit",
            "pair_conflicts", "check_channel_fits"]
 
@@ -59,7 +62,8 @@ CHANNEL_FRACTION = 0.01
 WALL_FRACTION = 0.01
 #: Default smallest fixture the routing may shrink an end to, as a fraction of the body's diameter.
 MIN_FIXTURE_FRACTION = 0.015
-#: Every rope node lies at least this fraction of the body's diameter inside the outline and the holes.
+#: Every rope node lies at least this fraction of the body's diameter inside the outline and the holes: the
+#: default of :attr:`Fabrication.min_inset_fraction`.
 MIN_INSET_FRACTION = 0.02
 
 
@@ -85,29 +89,41 @@ class Fabrication:
         The smallest fixture the routing may shrink the ends to when the full size does not fit (>= 0, at
         most ``fixture_radius``); default 1.5 % of the diameter, or ``fixture_radius`` if that is smaller.
         Give ``min_fixture_radius = fixture_radius`` to forbid shrinking.
+    min_inset_fraction : float, optional
+        The least inset of a routed rope node as a fraction of the body's diameter, a fraction in
+        ``[0, 0.5)`` and not a length: a rope node lies at least the larger of ``channel_diameter / 2 + wall``
+        and ``min_inset_fraction`` times the diameter inside the outline and every hole. Default
+        :data:`MIN_INSET_FRACTION` (2 %), which keeps a rope off the outline when the channel and wall are
+        small beside the body. A body thinner than about twice that fraction of its length (a slender
+        tentacle) has no room for it: give a smaller fraction, or 0 to let the channel and wall alone decide.
 
     Raises
     ------
     TypeError, ValueError
-        A field that is not a real number, negative or not finite (the message names it), or
-        ``min_fixture_radius > fixture_radius``.
+        A field that is not a real number, negative or not finite (the message names it),
+        ``min_fixture_radius > fixture_radius``, or ``min_inset_fraction >= 0.5`` (no body is that deep).
     """
 
     channel_diameter: float | None = None
     wall: float | None = None
     fixture_radius: float | None = None
     min_fixture_radius: float | None = None
+    min_inset_fraction: float | None = None
 
     def __post_init__(self):
         for f in fields(self):
             v = getattr(self, f.name)
             if v is None:
                 continue
+            what = "a fraction" if f.name == "min_inset_fraction" else "a length"
             if isinstance(v, bool) or not isinstance(v, numbers.Real):
-                raise TypeError(f"Fabrication: {f.name} must be a length (a real number), got {type(v).__name__}")
+                raise TypeError(f"Fabrication: {f.name} must be {what} (a real number), got {type(v).__name__}")
             if not math.isfinite(float(v)) or float(v) < 0:
-                raise ValueError(f"Fabrication: {f.name} must be a finite length >= 0, got {v!r}")
+                raise ValueError(f"Fabrication: {f.name} must be a finite {what[2:]} >= 0, got {v!r}")
             object.__setattr__(self, f.name, float(v))
+        if self.min_inset_fraction is not None and self.min_inset_fraction >= 0.5:
+            raise ValueError(f"Fabrication: min_inset_fraction must be below 0.5 (a fraction of the body's diameter: "
+                             f"no point of a body lies half its diameter inside it), got {self.min_inset_fraction:g}")
         if (self.fixture_radius is not None and self.min_fixture_radius is not None
                 and self.min_fixture_radius > self.fixture_radius):
             raise ValueError(f"Fabrication: min_fixture_radius {self.min_fixture_radius:g} is larger than "
@@ -116,22 +132,25 @@ class Fabrication:
     def for_body(self, mesh) -> "Fabrication":
         """This spec with every field set: the defaults (fractions of ``mesh``'s diameter) for those left None.
 
-        Raises ``ValueError`` for a fixture at least half the body's size (it would hold most of it)."""
+        Raises :class:`~mdsr_opt.core.errors.LayoutError` (a ``ValueError``) for a fixture at least half the
+        body's size (it would hold most of it)."""
         D = body_size(mesh)
         r = ANCHOR_FRACTION * D if self.fixture_radius is None else self.fixture_radius
         if r >= MAX_ANCHOR_FRACTION * D:
-            raise ValueError(f"Fabrication: fixture_radius {r:g} is at least half the body's size ({D:.3g}): a "
-                             "muscle's end fixture would hold most of the body")
+            raise LayoutError(f"Fabrication: fixture_radius {r:g} is at least half the body's size ({D:.3g}): a "
+                              "muscle's end fixture would hold most of the body")
         r_min = min(r, MIN_FIXTURE_FRACTION * D) if self.min_fixture_radius is None else self.min_fixture_radius
         return Fabrication(channel_diameter=CHANNEL_FRACTION * D if self.channel_diameter is None
                            else self.channel_diameter, wall=WALL_FRACTION * D if self.wall is None else self.wall,
-                           fixture_radius=r, min_fixture_radius=r_min)
+                           fixture_radius=r, min_fixture_radius=r_min,
+                           min_inset_fraction=MIN_INSET_FRACTION if self.min_inset_fraction is None
+                           else self.min_inset_fraction)
 
     def clearance(self, mesh) -> float:
-        """How far inside the outline and the holes every rope node lies: ``channel_diameter / 2 + wall``, at
-        least :data:`MIN_INSET_FRACTION` of the body's diameter."""
+        """How far inside the outline and the holes every rope node lies: the larger of ``channel_diameter / 2
+        + wall`` and ``min_inset_fraction`` (default :data:`MIN_INSET_FRACTION`) of the body's diameter."""
         f = self.for_body(mesh)
-        return max(0.5 * f.channel_diameter + f.wall, MIN_INSET_FRACTION * body_size(mesh))
+        return max(0.5 * f.channel_diameter + f.wall, f.min_inset_fraction * body_size(mesh))
 
     def to_dict(self) -> dict:
         """The fields as a JSON-ready dict (None: the default)."""
@@ -234,8 +253,10 @@ def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
     then lies exactly on the nodes the design and the fabrication files use, and the rule is exact on the
     mesh -- every rope node has its clearance, which an offset route or a refined band would have to
     re-establish after moving nodes. The price is a mesh fine enough to have edges inside; one that has none
-    is refused here, with the numbers that would work. Ropes routed elsewhere and moved into the band are
-    snapped onto these edges (:mod:`~mdsr_opt.synthesis.routing_band`)."""
+    is refused here with a :class:`~mdsr_opt.core.errors.LayoutError` (a ``ValueError``: a layout this body and
+    mesh cannot hold, which ``mdsr run`` reports as the case's failure) naming the cause and the numbers that
+    would work (:func:`no_band_message`). Ropes routed elsewhere and moved into the band are snapped onto
+    these edges (:mod:`~mdsr_opt.synthesis.routing_band`)."""
     dist = boundary_distance(mesh)
     tol = 1e-12 * float(dist.max() if len(dist) else 0.0)
     ok = dist >= clearance - tol
@@ -246,25 +267,76 @@ def admissible_edges(mesh, fab: Fabrication, clearance: float) -> np.ndarray:
     adm[near[segment_insets(mesh, E[near]) < clearance - tol]] = False
     if adm.any():
         return adm
+    raise LayoutError(no_band_message(mesh, fab, clearance))
+
+
+def deepest_edge(mesh) -> float:
+    """How deep inside the body at rest the deepest mesh edge lies (its nodes and the segment between them:
+    :func:`segment_insets`): the largest clearance at which :func:`admissible_edges` finds an edge; 0 for a
+    mesh with every edge touching the boundary."""
+    dist = boundary_distance(mesh)
+    E = mesh.edges
+    d = np.minimum(dist[E[:, 0]], dist[E[:, 1]])  # a segment lies no deeper than its nodes: read the deepest first
+    order = np.argsort(-d, kind="stable")
+    best = 0.0
+    for start in range(0, len(order), 256):
+        chunk = order[start:start + 256]
+        chunk = chunk[d[chunk] > best]
+        if not len(chunk):
+            break
+        best = max(best, float(segment_insets(mesh, E[chunk]).max()))
+    return best
+
+
+def _at_most(v: float) -> float:
+    """``v`` rounded down to three significant digits (a value to quote that still satisfies ``<= v``)."""
+    if v <= 0:
+        return 0.0
+    step = 10.0 ** (math.floor(math.log10(v)) - 2)
+    return math.floor(v / step * (1 + 1e-12)) * step
+
+
+def no_band_message(mesh, fab: Fabrication, clearance: float) -> str:
+    """Why no mesh edge lies ``clearance`` inside the body (:func:`admissible_edges` found none) and what would
+    work: the real cause first -- a body not deep enough for the inset (no finer mesh helps: the channel, the
+    wall or ``min_inset_fraction`` must shrink) or a mesh too coarse for it -- with the values that fit."""
+    f = fab.for_body(mesh)
     D = body_size(mesh)
-    deepest = float(np.minimum(dist[E[:, 0]], dist[E[:, 1]]).max())
-    h = float(mesh.edge_lengths.mean())
+    need = 0.5 * f.channel_diameter + f.wall
+    floor = f.min_inset_fraction * D
     R = body_depth(mesh)
-    inset = MIN_INSET_FRACTION * D
-    msg = (f"the mesh is too coarse to hold a channel with its wall: every rope node must lie at least "
-           f"{clearance:.4g} inside the outline and the holes (channel_diameter {fab.channel_diameter:.4g} / 2 + "
-           f"wall {fab.wall:.4g}, and at least {MIN_INSET_FRACTION:.0%} of the body's size, {inset:.4g}), but no "
-           f"mesh edge has both nodes that deep (the deepest edge: {deepest:.4g}; mean edge length {h:.4g}). ")
-    ways = []
-    if R > clearance:
-        ways.append(f"a finer mesh, mean edge length at most {(R - clearance) / 2:.3g} (the body is "
-                    f"{R:.4g} deep at its deepest point)")
-    if deepest >= inset:
-        ways.append(f"a smaller channel and wall: channel_diameter / 2 + wall <= {deepest:.4g} on this mesh")
-    if not ways:
-        ways.append(f"a thicker body: it is {R:.4g} deep at its deepest point, less than the "
-                    f"{MIN_INSET_FRACTION:.0%} inset {inset:.4g} plus an edge")
-    raise ValueError(msg + "Would work: " + "; or ".join(ways))
+    fits = deepest_edge(mesh)  # the largest clearance this mesh admits
+    h = float(mesh.edge_lengths.mean())
+    why = (f"the larger of channel_diameter {f.channel_diameter:.4g} / 2 + wall {f.wall:.4g} = {need:.4g} and "
+           f"min_inset_fraction {f.min_inset_fraction:g} of the body's diameter {D:.4g} = {floor:.4g}")
+    if clearance > max(need, floor) * (1 + 1e-9):
+        why += f"; here routed deeper, at an inset of {clearance:.4g}"
+    # on this mesh every term above ``fits`` must come down to it (together)
+    here = []
+    if fits > 0:  # a mesh with every edge on the boundary holds nothing at any size
+        if floor > fits:
+            here.append(f"min_inset_fraction at most {_at_most(fits / D):.3g}")
+        if need > fits:
+            here.append(f"channel_diameter / 2 + wall at most {_at_most(fits):.4g}")
+        if clearance > max(need, floor, fits) * (1 + 1e-9):
+            here.append(f"an inset at most {_at_most(fits):.4g}")
+    asks = ("the channel and its wall ask" if need >= max(floor, clearance) * (1 - 1e-12) else
+            "min_inset_fraction asks" if floor >= clearance * (1 - 1e-12) else "asked")
+    on_mesh = f"on this mesh (its deepest edge lies {fits:.4g} inside): " + " and ".join(here) if here else ""
+    finer = f"a finer mesh, mean edge length at most {_at_most((R - clearance) / 2):.3g} (now {h:.4g})"
+    if R <= clearance * (1 + 1e-9):
+        head = (f"the body is too thin for the inset {asks}: every rope node must lie at least {clearance:.4g} "
+                f"inside the outline and the holes ({why}), but the body is only {R:.4g} deep at its deepest point "
+                f"(its largest inscribed circle's radius), so no finer mesh helps. ")
+        ways = [on_mesh] if on_mesh else [(f"a finer mesh, with channel_diameter / 2 + wall and min_inset_fraction "
+                                           f"times the diameter below the body's depth {R:.4g}")]
+    else:
+        head = (f"the mesh is too coarse to hold a rope at its inset: every rope node must lie at least "
+                f"{clearance:.4g} inside the outline and the holes ({why}); the body is {R:.4g} deep at its deepest "
+                f"point, but no mesh edge lies that deep, its two nodes and the segment between them (the deepest: "
+                f"{fits:.4g}; mean edge length {h:.4g}). ")
+        ways = [finer] + ([on_mesh] if on_mesh else [])
+    return head + "Would work: " + "; or ".join(ways)
 
 
 @dataclass(frozen=True)
@@ -308,8 +380,8 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
     """Every place where a layout cannot be moulded in one layer, as :class:`Conflict` s (empty: it can).
 
     A channel of width ``c`` with its wall ``w`` needs every point of the rope (its nodes and the segments
-    between them) at least ``c / 2 + w`` inside the outline and the holes (and :data:`MIN_INSET_FRACTION` of the body's size, as the routing keeps); an end fixture of
-    radius ``r`` needs ``r + w``. Two ropes need their centre lines ``c + w`` apart (one wall between the two
+    between them) at least ``c / 2 + w`` inside the outline and the holes (and ``fab.min_inset_fraction`` of the
+    body's size, as the routing keeps); an end fixture of radius ``r`` needs ``r + w``. Two ropes need their centre lines ``c + w`` apart (one wall between the two
     channels) and must not cross; two fixtures need their centres ``2 r + w`` apart, and a fixture needs
     ``r + c / 2 + w`` from another rope's centre line. Two ends closer than ``r`` share one fixture plate (the
     design holds them as one rigid part): the two ropes meet there, and are checked outside that plate and
@@ -341,7 +413,7 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
     dist = boundary_distance(mesh)
     paths = [np.asarray(list(getattr(m, "nodes", m)), dtype=np.int64) for m in muscles]
     out = []
-    inset_need = max(0.5 * c + w, MIN_INSET_FRACTION * D)
+    inset_need = max(0.5 * c + w, f.min_inset_fraction * D)
     for i, p in enumerate(paths):
         k = int(p[np.argmin(dist[p])])
         at, d_in, where = P[k], float(dist[k]), ""
@@ -467,7 +539,8 @@ def check_sizes_fit(mesh, channel_width: float, wall: float, fixture_radius: flo
 
 
 def check_channel_fits(mesh, fabrication, *, routed: bool = True, where: str = "fabrication") -> None:
-    """ValueError, before any work, when no rope's channel with its wall fits anywhere in the body.
+    """:class:`~mdsr_opt.core.errors.LayoutError` (a ``ValueError``), before any work, when no rope's channel with
+    its wall fits anywhere in the body.
 
     A rope node needs ``channel_diameter / 2 + wall`` of body on every side (to the outline and each hole),
     so a body whose largest inscribed circle (:func:`body_depth`) is smaller holds no rope at all: no mesh
@@ -496,7 +569,7 @@ def check_channel_fits(mesh, fabrication, *, routed: bool = True, where: str = "
     most = 2.0 * (R - f.wall)
     admits = (f"the largest channel_diameter this body admits with this wall is {most:.4g}" if most > 0 else
               f"no channel fits with this wall: the wall must be below {R:.4g}")
-    raise ValueError(f"{where}: channel_diameter {f.channel_diameter:.4g} with a wall {f.wall:.4g}{default} does "
-                     f"not fit in the body: a rope needs channel_diameter / 2 + wall = {need:.4g} of material to the "
-                     f"outline and the holes on every side, but the body ({ext[0]:.4g} x {ext[1]:.4g}) is only "
-                     f"{R:.4g} deep at its deepest point (its largest inscribed circle's radius); {admits}")
+    raise LayoutError(f"{where}: channel_diameter {f.channel_diameter:.4g} with a wall {f.wall:.4g}{default} does "
+                      f"not fit in the body: a rope needs channel_diameter / 2 + wall = {need:.4g} of material to the "
+                      f"outline and the holes on every side, but the body ({ext[0]:.4g} x {ext[1]:.4g}) is only "
+                      f"{R:.4g} deep at its deepest point (its largest inscribed circle's radius); {admits}")

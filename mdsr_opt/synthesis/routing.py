@@ -42,12 +42,12 @@ muscle units along strongly and uniformly contracted, smooth chains of edges:
 
 Channels inside the body (``fabrication``, :class:`~mdsr_opt.synthesis.fabrication.Fabrication`): a rope runs in a
 moulded channel with a wall around it, so only edges whose two nodes lie at least ``channel_diameter / 2 + wall``
-(and 2 % of the body's diameter) inside the outline and every hole can carry one. The search runs on those edges
-only, rather than offsetting routes inward or refining a band along the boundary: the rule is then exact on the mesh
-(every rope node has its clearance, on the very nodes the design and the fabrication files use), costs nothing, and
-changes no node; a mesh with no such edge is refused with the mean edge length and the channel and wall that would
-work. Where the contraction is strongest next to the outline, the band's jagged edge and its necks beside holes break
-such ropes into fragments; :func:`route_for_design` then also routes on every contracted edge and snaps the ropes
+(and ``min_inset_fraction``, 2 %, of the body's diameter) inside the outline and every hole can carry one. The search
+runs on those edges only, rather than offsetting routes inward or refining a band along the boundary: the rule is then
+exact on the mesh (every rope node has its clearance, on the very nodes the design and the fabrication files use),
+costs nothing, and changes no node; a body or mesh with no such edge is refused (a LayoutError) naming the cause and
+the values that would work. Where the contraction is strongest next to the outline, the band's jagged edge and its
+necks beside holes break such ropes into fragments; :func:`route_for_design` then also routes on every contracted edge and snaps the ropes
 into the band (``band="offset"``, :mod:`mdsr_opt.synthesis.routing_band`). The routed ropes are then fitted to their
 end fixtures (:mod:`mdsr_opt.synthesis.routing_fixtures`), each resolution a sentence of ``result.notes``.
 ``fabrication=False`` is the search alone, on every edge.
@@ -114,12 +114,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..core.checks import check_int, positive_float
+from ..core.errors import LayoutError
 from ..body.checks import check_mesh, check_target_shape
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
 from ..mechanics.anchors import ANCHOR_FRACTION, body_size
 from ..plot.style import muscle_name
-from .fabrication import MIN_INSET_FRACTION, Fabrication, admissible_edges, check_channel_fits, check_fabrication
+from .fabrication import Fabrication, admissible_edges, check_channel_fits, check_fabrication
 from .routing_band import snap_into_band
 from .routing_fixtures import FixtureFit, fit_fixtures, fitting_notes, shared_plates
 from .routing_memo import memoised, shared_work
@@ -127,7 +128,7 @@ from .routing_result import DroppedUnit, MuscleStats, RoutingResult, largest_tur
 from .routing_search import Router
 from .routing_symmetry import find_reflections, weights_are_symmetric
 from .routing_spacing import parallel_twins
-from .routing_why import compression_dominated, no_seed_message
+from .routing_why import compression_dominated, no_feasible_message, no_seed_message
 
 __all__ = [
     "contraction_graph",
@@ -295,8 +296,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         otherwise; ``False`` never does it.
     fabrication : Fabrication or dict of its fields, optional
         The channel, wall and end fixtures (:class:`~mdsr_opt.synthesis.fabrication.Fabrication`; default:
-        its defaults for this body). Ropes run only on edges whose two nodes lie at least
-        ``channel_diameter / 2 + wall`` (and 2 % of the body's diameter) inside the outline and every hole,
+        its defaults for this body). Ropes run only on edges whose two nodes lie at least the larger of
+        ``channel_diameter / 2 + wall`` and ``min_inset_fraction`` times the diameter inside the outline and holes,
         and the routed ropes are fitted to their end fixtures (:func:`~mdsr_opt.synthesis.routing_fixtures.fit_fixtures`:
         ends moved inward, stubs and joined ropes dropped, fixtures shrunk), each step recorded in
         ``result.notes``; ``result.fixture_radius`` is the fixture radius to design with (``anchor_radius``).
@@ -304,8 +305,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         for studies of the search, not for a robot to build).
     inset : float, optional
         Lay every rope node at least this far inside the outline and the holes, when that is more than the
-        fabrication's clearance (half the channel plus the wall, at least 2 % of the body's size): a deeper
-        route on which end fixtures fit (:func:`route_for_design` tries ``min_fixture_radius + wall`` when
+        fabrication's clearance (half the channel plus the wall, at least ``min_inset_fraction`` of the body's
+        size): a deeper route on which end fixtures fit (:func:`route_for_design` tries ``min_fixture_radius + wall`` when
         ropes were lost for lack of room at their ends). Ignored with ``fabrication=False``.
     band : {"edges", "offset", "offset+long"}, default "edges"
         How ropes keep their clearance (ignored with ``fabrication=False``). ``"edges"``: the search runs on
@@ -331,10 +332,11 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     TypeError
         ``mesh`` is not a Mesh, a knob has the wrong type, or ``target`` is not numeric.
     ValueError
-        ``target`` has the wrong shape, contains NaN/inf or inverts a triangle; a knob is out of range;
-        ``symmetry=True`` for a body or target that is not mirror-symmetric; a mesh too coarse to hold a
-        channel with its wall (no edge with both nodes far enough inside): the message gives the mean edge
-        length and the channel and wall that would work.
+        ``target`` has the wrong shape, contains NaN/inf or inverts a triangle; a knob is out of range. A
+        :class:`~mdsr_opt.core.errors.LayoutError` (a ``ValueError``; ``mdsr run`` fails the case) for what this
+        body, mesh and target cannot hold: ``symmetry=True`` for a body or target that is not mirror-symmetric;
+        a channel with its wall deeper than the body; no edge far enough inside (a body too thin for the inset,
+        or a mesh too coarse): the message names the cause and the values that would work.
 
     Warns
     -----
@@ -422,8 +424,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         reflection = next((m for m in memoised(("mirrors", id(mesh)), lambda: find_reflections(mesh))
                            if weights_are_symmetric(w, m)), None)
         if symmetry is True and reflection is None:
-            raise ValueError("symmetry=True but the body is not mirror-symmetric or the target does not "
-                             "contract mirrored edges alike")
+            raise LayoutError("symmetry=True but the body is not mirror-symmetric or the target does not "
+                              "contract mirrored edges alike")
     wq = np.rint(w / _QUANTUM).astype(np.int64)
     if reflection is not None:  # exact symmetry of the quantised weights (floor of the pair's mean)
         wq = (wq + wq[reflection.edge_map]) // 2
@@ -437,18 +439,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
     router = memoised(("router",) + key, lambda: Router(mesh, wq, K_a, K_b, K_h, floor_q, ell, turn_limit,
                                                          reflection, adm_edges))
     if not router.feasible.any():
-        w_top = float(w.max())
-        if fab is not None and (wq > floor_q).any():
-            return empty(f"no edge at least {clearance:.4g} inside the outline and the holes (the channel's "
-                         f"half width {0.5 * fab.channel_diameter:.4g} plus its wall {fab.wall:.4g}, at least "
-                         f"{MIN_INSET_FRACTION:.0%} of the body's size) contracts by more than min_contraction="
-                         f"{min_contraction:g}; no muscles routed")
-        if w_top <= _REST_RTOL:
-            return empty(f"no edge contracts (largest relative stretch {-float(w.min()):.3g}): the "
-                         "target only stretches the body and a cable cannot push; no muscles routed")
-        return empty(f"no edge contracts by more than min_contraction={min_contraction:g} (largest "
-                     f"contraction {w_top:.3g}); lower min_contraction to route such weak contractions. "
-                     "Elongated edges cannot carry a muscle (a cable cannot push); no muscles routed")
+        return empty(no_feasible_message(w, bool((wq > floor_q).any()), fab, clearance,
+                                         min_contraction=min_contraction, rest_rtol=_REST_RTOL))
     compressed = memoised(("compressed", id(mesh), hash(x.tobytes()), compression_ratio),
                           lambda: compression_dominated(mesh, x, w, compression_ratio))
     knobs = dict(seed_threshold=seed_threshold, compressed=compressed, n_seeds=n_seeds,
@@ -522,7 +514,8 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
             f"{ell:.4g}) few edges there form a unit: a finer mesh gives them room")
         why = no_seed_message(mesh, x, w, wq > floor_q, adm_edges, router.threshold_q * _QUANTUM, router.eligible,
                               min_contraction=min_contraction, seed_threshold=seed_threshold,
-                              compression_ratio=compression_ratio, clearance=None if fab is None else clearance) \
+                              compression_ratio=compression_ratio, clearance=None if fab is None else clearance,
+                              min_inset_fraction=None if fab is None else fab.min_inset_fraction) \
             if not units and not dropped \
             else (f"all {len(units) + len(dropped)} muscle unit(s) are shorter than min_length={min_length:.4g}; "
                   f"no muscles routed (lower min_length, K_a or K_b{inside})") if not fit.notes else (
@@ -571,13 +564,18 @@ def route_for_design(mesh: Mesh, target: ArrayLike, **options) -> RoutingResult:
 
 
 def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
-    def attempt(opts):
+    def attempt(opts, first=False):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            rr = route_muscles(mesh, target, **opts)
+            try:
+                rr = route_muscles(mesh, target, **opts)
+            except LayoutError:  # a fallback (deeper inside, say) this body cannot hold: the routing before it stays
+                if first:
+                    raise
+                return None, []
         return rr, caught
 
-    rr, caught = attempt(options)
+    rr, caught = attempt(options, first=True)
     fab = check_fabrication(options.get("fabrication"))
     if fab is not False and options.get("inset") is None and fitting_notes(mesh.points, rr):
         # ropes were dropped or shortened for their end fixtures: route deeper inside, where the smallest
@@ -585,7 +583,7 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
         f = fab.for_body(mesh)
         deep, caught_deep = attempt(dict(options, inset=f.min_fixture_radius + f.wall,
                                          fabrication=replace(f, fixture_radius=f.min_fixture_radius)))
-        if len(deep) > len(rr) or _captured(deep) > OFFSET_GAIN * _captured(rr):  # or clearly more shortening
+        if deep is not None and (len(deep) > len(rr) or _captured(deep) > OFFSET_GAIN * _captured(rr)):
             note = (f"{len(rr)} rope(s) kept at the fabrication's clearance, shortening by {_captured(rr):.4g} in the "
                     f"target; routed again with every rope node {f.min_fixture_radius + f.wall:.4g} inside the body, "
                     f"fixtures shrunk from radius {f.fixture_radius:.4g} to the smallest, {f.min_fixture_radius:.4g}: "
@@ -593,7 +591,7 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
             rr, caught = deep.replaced(notes=(note,) + deep.notes), caught_deep
     if not len(rr) and "K_a" not in options and options.get("fabrication") is not False:
         again, caught2 = attempt(dict(options, K_a=1.0))
-        if len(again):
+        if again is not None and len(again):
             why = "; ".join(fitting_notes(mesh.points, rr)) or "; ".join(str(w.message) for w in caught)
             note = f"no rope routed with K_a=4 was kept ({why}): routed again with K_a=1 (fewer, longer ropes)"
             rr, caught = again.replaced(notes=(note,) + again.notes), caught2
@@ -606,7 +604,7 @@ def _routed_for_design(mesh: Mesh, target: ArrayLike, options: dict):
             opts["inset"], opts["fabrication"] = rr.params["inset"], replace(
                 fab.for_body(mesh), fixture_radius=fab.for_body(mesh).min_fixture_radius)
         snapped, caught_snapped = attempt(opts)
-        if _captured(snapped) > OFFSET_GAIN * _captured(rr):
+        if snapped is not None and _captured(snapped) > OFFSET_GAIN * _captured(rr):
             depth, r0 = snapped.params["inset"] or snapped.fabrication.clearance(mesh), fab.for_body(mesh).fixture_radius
             small = "" if opts.get("inset") is None else f", fixtures shrunk from radius {r0:.4g} to the smallest, {snapped.fixture_radius:.4g}"
             note = (f"ropes routed on every contracted edge and snapped into the band at least {depth:.4g} inside the body{small}: "

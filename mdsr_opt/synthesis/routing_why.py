@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
-from .fabrication import MIN_INSET_FRACTION
+from .fabrication import MIN_INSET_FRACTION, body_depth, boundary_distance
 
-__all__ = ["beside_stretch", "compression_dominated", "no_seed_message"]
+__all__ = ["beside_stretch", "compression_dominated", "no_feasible_message", "no_seed_message"]
 
 #: The contraction the message counts edges above, as the user reads a target ("8 edges contract > 5 %").
 NOTABLE_CONTRACTION = 0.05
@@ -43,9 +43,47 @@ def _pct(v: float) -> str:
     return f"{100 * v:.3g} %"
 
 
+def no_feasible_message(w: np.ndarray, contracts: bool, fab, clearance: float, *, min_contraction: float,
+                        rest_rtol: float) -> str:
+    """The sentence a user reads when no edge may carry a rope at all: none inside the buildable band contracts
+    (``contracts``: some edge contracts by more than ``min_contraction``; ``fab``: the fabrication, every field
+    set, None without one), the target only stretches the body (no ``w`` above ``rest_rtol``), or no edge
+    contracts by more than ``min_contraction``."""
+    w_top = float(w.max())
+    if fab is not None and contracts:
+        return (f"no edge at least {clearance:.4g} inside the outline and the holes (the channel's half width "
+                f"{0.5 * fab.channel_diameter:.4g} plus its wall {fab.wall:.4g}, at least min_inset_fraction "
+                f"{fab.min_inset_fraction:g} of the body's size) contracts by more than min_contraction="
+                f"{min_contraction:g}; no muscles routed")
+    if w_top <= rest_rtol:
+        return (f"no edge contracts (largest relative stretch {-float(w.min()):.3g}): the target only stretches the "
+                "body and a cable cannot push; no muscles routed")
+    return (f"no edge contracts by more than min_contraction={min_contraction:g} (largest contraction {w_top:.3g}); "
+            "lower min_contraction to route such weak contractions. Elongated edges cannot carry a muscle (a cable "
+            "cannot push); no muscles routed")
+
+
+def _finer_mesh(mesh, out: np.ndarray, clearance: float) -> str:
+    """The hint that a finer mesh gives the contracted edges ``out`` (outside the buildable band) edges inside it,
+    when it does: the body is deeper than the band's inset, and some of them reach within one of their lengths
+    of the band (a node at least ``clearance`` minus the edge's length inside), so a finer mesh has whole edges
+    there; empty otherwise."""
+    R = body_depth(mesh)
+    if R <= clearance * (1 + 1e-9):
+        return ""  # the band is empty: no mesh has an edge in it
+    dist, E = boundary_distance(mesh), mesh.edges
+    reach = out & (np.maximum(dist[E[:, 0]], dist[E[:, 1]]) >= clearance - mesh.edge_lengths)
+    if not reach.any():
+        return ""
+    h_mean, h_max = float(mesh.edge_lengths.mean()), 0.5 * (R - clearance)
+    return (f"; {int(reach.sum())} of those reach within an edge of the band: a finer mesh (mean edge length at most "
+            f"{h_max:.3g}, now {h_mean:.4g}; the body is {R:.4g} deep) gives them edges inside it")
+
+
 def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, admissible: np.ndarray | None,
                     threshold: float, eligible: np.ndarray | None, *, min_contraction: float,
-                    seed_threshold: float, compression_ratio: float, clearance: float | None) -> str:
+                    seed_threshold: float, compression_ratio: float, clearance: float | None,
+                    min_inset_fraction: float | None = None) -> str:
     """The sentence a user reads when routing seeded no unit: which filter removed the contracted edges.
 
     Parameters
@@ -64,6 +102,9 @@ def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, 
     min_contraction, seed_threshold, compression_ratio : the knobs, quoted in the message.
     clearance : float or None
         The band's inset (None: no fabrication).
+    min_inset_fraction : float, optional
+        The fabrication's least inset as a fraction of the body's diameter, quoted in the message (default
+        :data:`~mdsr_opt.synthesis.fabrication.MIN_INSET_FRACTION`).
     """
     n_c = int(contracted.sum())
     notable = int((w > NOTABLE_CONTRACTION).sum())
@@ -75,10 +116,12 @@ def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, 
     if admissible is not None:
         out = left & ~admissible
         if out.any():
+            frac = MIN_INSET_FRACTION if min_inset_fraction is None else min_inset_fraction
             parts.append(f"{int(out.sum())} lie outside the buildable band (a node closer than {clearance:.4g} to "
-                         f"the outline or a hole: half the channel plus its wall, at least {100 * MIN_INSET_FRACTION:g} % of the body's size)"
+                         f"the outline or a hole: half the channel plus its wall, at least min_inset_fraction "
+                         f"{frac:g} of the body's size)"
                          + (f", {int((out & (w > NOTABLE_CONTRACTION)).sum())} of those contracting by more than "
-                            f"{_pct(NOTABLE_CONTRACTION)}" if notable else ""))
+                            f"{_pct(NOTABLE_CONTRACTION)}" if notable else "") + _finer_mesh(mesh, out, clearance))
         left &= admissible
     if not left.any() and not parts:  # nothing contracts: the head says it all
         return head + "; no muscles routed"

@@ -115,12 +115,13 @@
     for (const t of lines) { const li = document.createElement("li"); li.textContent = t; ul.appendChild(li); }
   }
 
-  // the fabrication fields: lengths in the body's unit, empty for the body's default
-  const FAB = ["channel_diameter", "wall", "fixture_radius", "min_fixture_radius"];
+  // the fabrication fields: lengths in the body's unit (min_inset_fraction: a fraction of its diameter), empty
+  // for the body's default
+  const FAB = ["channel_diameter", "wall", "fixture_radius", "min_fixture_radius", "min_inset_fraction"];
   function fabrication() {
     const out = {};
     for (const k of FAB) {
-      if ($(k).validity.badInput) { showError(`${k}: not a number (give a length, or leave it empty for the default)`); return null; }
+      if ($(k).validity.badInput) { showError(`${k}: not a number (give a ${k === "min_inset_fraction" ? "fraction" : "length"}, or leave it empty for the default)`); return null; }
       const v = $(k).value.trim(); out[k] = v === "" ? null : Number(v);
     }
     return out;
