@@ -93,6 +93,9 @@ def test_mdsr_run_fails_the_routed_case_of_a_body_too_thin_and_runs_the_others(t
     assert "no finer mesh helps" in curl["message"] and "too coarse" not in curl["message"]
     assert "min_inset_fraction at most 0.0" in curl["message"]
     assert cases["given"]["success"] and cases["given"]["n_muscles"] == 1
+    # its diagnostic routing could not be made either: said in its notes, not only stored in the setup
+    assert any(n.startswith("routing (a diagnostic beside the given muscles) not made: the body is too thin")
+               for n in cases["given"]["notes"])
     table = (out / "summary.md").read_text()
     assert "| FAILED (routing failed: the body is too thin for the inset min_inset_fraction asks) |" in table
     assert "FAILED slender/curl: routing failed: the body is too thin" in text.out

@@ -267,6 +267,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
         return run
+    if setup.routing_error is not None:  # the routing was only a diagnostic here (the case's muscles are given)
+        rep.notes.append(f"routing (a diagnostic beside the given muscles) not made: {setup.routing_error}")
+        say(f"{prefix}routing (a diagnostic beside the given muscles) not made: {setup.routing_error}")
     rep.n_muscles = len(setup.muscles)
     # every muscle by its label, an unnamed one by its place (M1, M2 ...), as every table, figure and file
     rep.muscles = [{"name": muscle_label(m, i), "nodes": list(map(int, m.nodes))} for i, m in enumerate(setup.muscles)]
