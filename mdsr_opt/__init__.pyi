@@ -31,20 +31,22 @@ from .mechanics.result import EquilibriumResult as EquilibriumResult, SolverFail
 from .mechanics.stability import check_stability as check_stability, StabilityCheck as StabilityCheck
 
 # from target to robot: routing, design, verification, poses, gaits, fabrication files
+from .synthesis.acceptance import AcceptanceWarning as AcceptanceWarning
 from .synthesis.contractions import design_contractions as design_contractions
 from .synthesis.export import export_fabrication as export_fabrication
-from .synthesis.fabrication import Fabrication as Fabrication
-from .synthesis.gait import Gait as Gait, gait_schedule as gait_schedule, GaitSchedule as GaitSchedule
+from .synthesis.fabrication import Fabrication as Fabrication, FabricationWarning as FabricationWarning
+from .synthesis.gait import Gait as Gait, gait_schedule as gait_schedule, GaitSchedule as GaitSchedule, GaitWarning as GaitWarning
 from .synthesis.walk import walk as walk, walk_scene as walk_scene, WalkResult as WalkResult
 from .synthesis.pipeline import design_pipeline as design_pipeline, PipelineResult as PipelineResult
 from .synthesis.poses import design_poses as design_poses, Pose as Pose
 from .synthesis.poses_result import PosesResult as PosesResult
-from .synthesis.results import DesignResult as DesignResult, Verification as Verification
+from .synthesis.results import DesignResult as DesignResult, MuscleWarning as MuscleWarning, Verification as Verification
 from .synthesis.routing import (
     contraction_graph as contraction_graph,
     edge_weights as edge_weights,
     route_for_design as route_for_design,
     route_muscles as route_muscles,
+    RoutingWarning as RoutingWarning,
 )
 from .synthesis.routing_result import RoutingResult as RoutingResult
 from .synthesis.verify import check_minimum as check_minimum, verify_design as verify_design

@@ -139,3 +139,22 @@ def test_a_saturated_stroke_has_a_point_band_said_to_be_its_bound(bent):
     d.stroke_band = stroke_bands(mesh, MAT, mus, target, d).band.copy()  # not saturated: a real band
     assert ".." in d.muscle_table().splitlines()[1]
     d.stroke_band = np.zeros((0, 2))
+
+
+def test_mdsr_run_bands_call_a_saturated_point_band_its_bound(tmp_path, capsys):
+    """recheck10: summary.md and the log of ``mdsr run --bands`` printed "3.093 [3.093, 3.093]"."""
+    from mdsr_opt.cli.main import main
+
+    scene = tmp_path / "sat.toml"
+    scene.write_text('name = "sat"\n[body]\noutline = [[0, 0], [60, 0], [60, 12], [0, 12]]\nresolution = 300\n'
+                     '[regions]\nbase = { box = [-1, -1, 0.5, 13] }\ntip = { box = [59.5, -1, 61, 13] }\n'
+                     '[[muscles]]\nname = "top"\npath = [[5, 8], [55, 8]]\n[design]\na_max = 0.05\n'
+                     '[[cases]]\nname = "bend"\nanchors = "base"\n'
+                     'drags = [{ nodes = "tip", rotate = 57, about = [60, 6], by = [-12, 30] }]\n')
+    out = tmp_path / "o"
+    assert main(["run", str(scene), "--out", str(out), "--bands", "--serial", "--no-photos", "--no-animations",
+                 "--no-prototype"]) == 0
+    log = capsys.readouterr().out
+    row = next(line for line in (out / "summary.md").read_text().splitlines() if line.startswith("| sat | bend"))
+    assert "(its bound)" in row and "saturated top" in row and "[" not in row.split("|")[7]
+    assert "stroke bands: " in log and "(its bound); top: saturated (at its bound)" in log

@@ -79,3 +79,23 @@ def test_a_drag_turning_one_node_about_itself_needs_about(tmp_path):
     np.testing.assert_allclose(one.drag_positions, [[3.5, 0.0]], atol=0.05)  # turned a quarter about (4, 0)
     many = load_scene(_scene(tmp_path, CASE.format(drag='nodes = "right", rotate = 30'))).case("bend")
     assert len(many.drag_nodes) > 1  # several nodes: about their centroid, as before
+
+
+def test_leftovers_of_recheck10(tmp_path):
+    """a numpy a_max is checked too; one node turned about itself with ``by`` is told to drop ``rotate``; a high
+    (legal) idle threshold that leaves every muscle idle says to lower it, not only that the target must
+    shorten the body."""
+    from mdsr_opt import Muscle, solve_internal
+    from mdsr_opt.synthesis.acceptance import design_active
+
+    with pytest.raises(ValueError, match=r"must lie below a_max \(0.6\)"):
+        check_idle_contraction(0.7, a_max=np.float32(0.6))
+    with pytest.raises(SceneFileError, match=r"turns one node about itself, which moves nothing: give about \(the "
+                                             r"point to turn it around\), or leave rotate out \(by alone moves it\)"):
+        load_scene(_scene(tmp_path, CASE.format(drag="at = [4, 0.5], rotate = 30, by = [0, 1]")))
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    lower = Muscle(range(1, 16), name="lower")
+    target = solve_internal(mesh, NeoHookean(1.0, 0.3), [lower], [0.15]).x
+    res, kept, dropped = design_active(mesh, NeoHookean(1.0, 0.3), [lower], target, idle_contraction=0.2,
+                                       a_max=0.3)
+    assert not res.success and "every muscle is idle" in res.status and "lower it to keep these muscles" in res.status

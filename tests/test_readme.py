@@ -74,3 +74,17 @@ def test_readme_command_lines_parse_and_name_real_files():
             elif argv[0] == "python" and argv[1].endswith(".py"):
                 assert (ROOT / argv[1]).exists(), argv[1]
     assert {"demo", "list", "run", "study", "evaluate", "photograph", "--version"} <= seen
+
+
+def test_every_warning_class_the_readme_names_is_a_top_level_name():
+    """recheck10: the README named MuscleWarning, AcceptanceWarning... that ``from mdsr_opt import`` could not give
+    (a user filters warnings by class)."""
+    import warnings
+
+    import mdsr_opt
+
+    names = sorted(set(re.findall(r"\b([A-Z][A-Za-z]*Warning)\b", README.read_text())))
+    assert names and all(issubclass(getattr(mdsr_opt, n), UserWarning) for n in names), names
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", mdsr_opt.MuscleWarning)  # usable as a filter's category
+        warnings.simplefilter("ignore", mdsr_opt.AcceptanceWarning)

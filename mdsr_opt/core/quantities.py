@@ -19,7 +19,7 @@ Example
 from __future__ import annotations
 
 __all__ = ["LENGTH_UNITS", "STRESS_UNITS", "BODY_UNITS", "check_length_unit", "check_stress_unit", "length_unit",
-           "tension_unit", "contact_in_unit", "percent_beside"]
+           "tension_unit", "contact_in_unit", "percent_beside", "POINT_BAND_RTOL", "point_band", "band_text"]
 
 #: Known length units and their size in metres.
 LENGTH_UNITS = {"mm": 1e-3, "cm": 1e-2, "m": 1.0, "um": 1e-6, "in": 0.0254}
@@ -115,3 +115,23 @@ def percent_beside(value: float, threshold: float, digits: int = 0, most: int = 
         if (shown > t) - (shown < t) == side:
             return text
     return text
+
+
+#: a stroke band narrower than this (relative to the stroke) of a muscle at its bound is that bound, a point
+POINT_BAND_RTOL = 1e-6
+
+
+def point_band(low: float, high: float, at_bound: bool) -> bool:
+    """A stroke band ``[low, high]`` of a muscle ``at_bound`` (saturated) that is its bound: a point (within
+    :data:`POINT_BAND_RTOL`), not a certain stroke."""
+    return bool(at_bound) and high - low <= POINT_BAND_RTOL * max(abs(low), 1e-300)
+
+
+def band_text(low: float, high: float, at_bound: bool = False) -> str:
+    """A stroke band as read beside its stroke: ``"[low, high]"``, or ``"(its bound)"`` for a saturated muscle's
+    point band (:func:`point_band`).
+
+    >>> band_text(1.0, 1.25), band_text(3.0, 3.0, at_bound=True)
+    ('[1, 1.25]', '(its bound)')
+    """
+    return "(its bound)" if point_band(low, high, at_bound) else f"[{low:.4g}, {high:.4g}]"

@@ -13,7 +13,7 @@ import warnings
 import numpy as np
 
 from ..core.errors import LayoutError
-from ..core.quantities import length_unit
+from ..core.quantities import band_text, length_unit
 from ..core.results import compact_repr, to_jsonable
 from ..mechanics.anchors import body_size
 from ..plot.style import muscle_label, unit_label
@@ -394,8 +394,8 @@ def _bands(scene: Scene, run: CaseRun, opts: dict, say, prefix: str) -> None:
         res.stroke_band = b.band.copy()
         rep.stroke_band = [[float(lo), float(hi)] for lo, hi in b.band]
         rep.band_notes = list(b.notes)
-        say(f"{prefix}stroke bands: " + ", ".join(f"{s:.4g} [{lo:.4g}, {hi:.4g}]" for s, (lo, hi)
-                                                  in zip(b.nominal, b.band))
+        say(f"{prefix}stroke bands: " + ", ".join(f"{s:.4g} {band_text(lo, hi, at)}" for s, (lo, hi), at
+                                                  in zip(b.nominal, b.band, res.saturated))
             + "".join(f"; {n}" for n in b.notes))
     rep.times["bands"] = time.perf_counter() - t
 

@@ -484,7 +484,8 @@ def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple
         r.fail(f"{where}.about", "only applies with rotate")
     if "rotate" in d and "about" not in d and len(np.unique(idx)) == 1:
         r.fail(f"{where}.rotate", "turns one node about itself, which moves nothing: give about (the point "
-                                  "to turn it around), or by")
+                                  "to turn it around)" + (", or leave rotate out (by alone moves it)" if "by" in d
+                                                          else ", or by"))
     ang = math.radians(r.number(d["rotate"], f"{where}.rotate")) if "rotate" in d else 0.0
     about = r.point(d["about"], f"{where}.about") if "about" in d else P.mean(0)
     shift = r.point(d["by"], f"{where}.by") if "by" in d else np.zeros(2)

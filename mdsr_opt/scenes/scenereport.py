@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from dataclasses import asdict, dataclass, field
 
+from ..core.quantities import band_text
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import unit_label
 from .verdict import design_verdict
@@ -55,8 +56,11 @@ class SceneReport:
         rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
-            s = ", ".join(f"{v:.4g}" + (f" [{b[0]:.4g}, {b[1]:.4g}]" if len(c.stroke_band) == len(c.stroke) else "")
-                          for v, b in zip(c.stroke, c.stroke_band or [()] * len(c.stroke))) if c.stroke else "-"
+            names = [m.get("name") for m in (c.muscles or [])]
+            at = [len(names) == len(c.stroke) and names[i] in (c.saturated or ()) for i in range(len(c.stroke))]
+            s = ", ".join(f"{v:.4g}" + (f" {band_text(b[0], b[1], at[i])}" if len(c.stroke_band) == len(c.stroke) else "")
+                          for i, (v, b) in enumerate(zip(c.stroke, c.stroke_band or [()] * len(c.stroke)))) \
+                if c.stroke else "-"
             s += f" {u}" if c.stroke else ""
             d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"

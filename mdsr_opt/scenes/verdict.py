@@ -47,7 +47,7 @@ _CAUSES = (
      "scene file)"),
     (r"every muscle is idle",
      "every muscle is idle: the design does not move the body",
-     "muscles only pull: the target must shorten the body along them"),
+     "muscles only pull: the target must shorten the body along them (or lower idle_contraction, if set high)"),
     (r"target is not a stable equilibrium",
      "the target is not stable under its drags",
      "drag less far or anchor more nodes"),

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import warnings
 from dataclasses import asdict, dataclass
 from typing import Sequence
@@ -110,7 +111,7 @@ def check_idle_contraction(value, name: str = "idle_contraction", a_max=None) ->
     v = positive_float(value, name, allow_zero=True)
     if v >= 1.0:
         raise ValueError(f"{name} must lie in [0, 1) (a fraction of the rope's rest length), got {v:g}")
-    if a_max is not None and v > 0 and isinstance(a_max, (int, float)) and not isinstance(a_max, bool) \
+    if a_max is not None and v > 0 and isinstance(a_max, numbers.Real) and not isinstance(a_max, bool) \
             and v >= a_max:
         raise ValueError(f"{name} ({v:g}) must lie below a_max ({a_max:g}), the most a design contracts a "
                          f"muscle: every muscle would count as idle (the threshold is {100 * IDLE_CONTRACTION:g} % "
@@ -250,8 +251,11 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
             break
         if idle.all():
             res.success = False
+            high = thr > IDLE_CONTRACTION and np.nanmax(a, initial=0.0) >= IDLE_CONTRACTION
             res.status += (f"; every muscle is idle (contractions {', '.join(f'{v:.3g}' for v in a)} below "
-                           f"idle_contraction {thr:g}): the design does not move the body")
+                           f"idle_contraction {thr:g}): the design does not move the body"
+                           + (f" by more than that threshold, above the default {IDLE_CONTRACTION:g}: lower it "
+                              "to keep these muscles" if high else ""))
             break
         keep = np.flatnonzero(~idle)
         gone = [DroppedMuscle(name=muscle_label(mu, where[i]), nodes=tuple(int(n) for n in mu.nodes),

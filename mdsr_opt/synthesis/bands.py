@@ -34,6 +34,7 @@ from ..body.muscles import Muscle
 from ..core.checks import positive_float, positive_int
 from ..core.errors import LayoutError
 from ..mechanics.anchors import check_anchor_radius
+from ..core.quantities import point_band
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import muscle_label
 
@@ -203,7 +204,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
     import time
 
     from .contractions import design_contractions
-    from .results import POINT_BAND_RTOL, MuscleWarning
+    from .results import MuscleWarning
 
     t0 = time.perf_counter()
     if material is None and muscles is None and target is None and design is None:
@@ -295,7 +296,7 @@ def stroke_bands(source, material=None, muscles=None, target=None, design=None, 
     names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
     sat = np.asarray(getattr(design, "saturated", np.zeros(len(s0), dtype=bool)), dtype=bool).reshape(-1)
     for i in np.flatnonzero(sat if sat.shape == s0.shape else np.zeros(len(s0), dtype=bool)):
-        if up[i] - down[i] <= POINT_BAND_RTOL * max(abs(s0[i]), 1e-300):  # a point: the bound, not a certainty
+        if point_band(s0[i] + down[i], s0[i] + up[i], True):  # a point: the bound, not a certainty
             notes.append(f"{names[i]}: saturated (at its bound) in the design and in every design of the band: "
                          "its stroke is the bound's (a_max, or its fixtures' cap, times its rest length), so its "
                          "band is that point; the uncertainty is in the shape reached, not in the stroke")

@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..core.results import compact_repr, load_fields, save_fields
-from ..core.quantities import contact_in_unit, length_unit, tension_unit
+from ..core.quantities import contact_in_unit, length_unit, point_band, tension_unit
 from ..plot.style import muscle_name
 from .problem import DesignProblem
 
@@ -20,9 +20,6 @@ METHODS = ("flattened", "nested", "derivative-free")
 #: a designed contraction within this of ``a_max`` is saturated (:attr:`DesignResult.saturated`): the
 #: muscle would pull further if it could, so the body reaches less than the layout could with more stroke
 SATURATION_TOL = 1e-3
-
-#: a saturated muscle's stroke band narrower than this (relative to the stroke) is its bound, a point
-POINT_BAND_RTOL = 1e-6
 
 
 class MuscleWarning(UserWarning):
@@ -306,7 +303,7 @@ class DesignResult:
                 return float(v[k]) if len(v) > k else float("nan")
             sl = bool(self.slack[i]) if len(self.slack) > i else False
             # a saturated muscle's band of zero width is its bound (a_max or the fixtures' cap), not a certainty
-            point = has_band and sat[i] and band[i, 1] - band[i, 0] <= POINT_BAND_RTOL * max(abs(band[i, 0]), 1e-300)
+            point = has_band and point_band(band[i, 0], band[i, 1], sat[i])
             b = "" if not has_band else f"{f'{band[i, 0]:.4g} (its bound)':>21} " if point else \
                 f"{f'{band[i, 0]:.4g} .. {band[i, 1]:.4g}':>21} "
             lines.append(f"{names[i]:>{w}} {at(self.contractions):>10.4f} {at(self.achieved):>9.4f} "

@@ -128,8 +128,10 @@ def case(spec: str):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--cases", nargs="+", default=["s24_0.3", "s24_0.45", "L", "tentacle"])
-    ap.add_argument("--steps", type=int, nargs="+", default=[1, 2, 3])
+    ap.add_argument("--cases", nargs="+", default=["s24_0.3", "s24_0.45", "L", "tentacle"],
+                    help="bodies: s<ny>_<nu> (the fine-design strip), L, tentacle")
+    ap.add_argument("--steps", type=int, nargs="+", default=[1, 2, 3],
+                    help="numbers of Gauss-Newton warm-start steps to compare with the default")
     args = ap.parse_args(argv)
     warnings.simplefilter("ignore")
     for spec in args.cases:
