@@ -28,7 +28,7 @@ def plot_walk(result, ax=None, title: str | None = None):
         ax.plot(t[1:], y[1:], "-", color=col, lw=1.0, alpha=0.6)
         ends = np.arange(1, S.shape[0], result.cycle_frames)
         ax.plot(t[ends], y[ends], "o", color=col, ms=5, label=f"centroid {lab}")
-    bad = ~np.asarray(result.success, bool)
+    bad = ~np.asarray(result.frame_success, bool)
     if bad.any():
         ax.plot(t[bad], d[bad, 0], "rx", ms=8, label="frame solve failed")
     ax.axhline(0.0, color="0.6", lw=0.6, zorder=0)
@@ -69,7 +69,7 @@ def plot_walk_refinement(levels, ax=None, title: str | None = None, estimate: di
         order = estimate.get("order")
         ax.axhline(v, color="#1f77b4", ls="--", lw=1, label=f"limit {v:.4g} ± {e:.2g}"
                    + (f" (Richardson, order {order:.2g})" if order is not None else " (last change)"))
-    bad = np.array([not bool(np.all(r.success)) for _, r in levels])
+    bad = np.array([not r.success for _, r in levels])
     if bad.any():
         ax.plot(n[bad], last[bad], "rx", ms=9, label="a frame failed")
     ax.set_xscale("log")

@@ -216,7 +216,8 @@ class WalkResult:
         Per named foot, (F,) bool: it touches the table and slides as a whole in that frame (the net friction
         force on it reaches :data:`SLIP` of its ``mu N``); a planted foot may still slip locally where it
         deforms (``slipping``).
-    success : (F,) bool ndarray
+    frame_success : (F,) bool ndarray
+        Per frame, its solve succeeded.
     status : tuple of str
     mu, weight, eps : float
         The friction coefficient, the body's weight and the smoothing length (the mesh's units).
@@ -227,6 +228,12 @@ class WalkResult:
         The centre of area in each frame relative to the cycle's first frame (``states[1]``).
     turns : (F,) ndarray
         The best-fit rotation in each frame relative to ``states[1]`` (radians, unwrapped).
+    unreached : tuple of str
+        The poses of the walked schedule its layout never reached (:attr:`GaitSchedule.unreached
+        <mdsr_opt.synthesis.gait.GaitSchedule.unreached>`; :func:`walk_gait`): the body walks, but not the gait
+        that was asked for.
+    success : bool (property)
+        Every frame solved and every pose of the schedule reached.
     """
 
     states: np.ndarray
@@ -236,7 +243,7 @@ class WalkResult:
     rotation: np.ndarray
     slipping: np.ndarray
     feet_slipping: dict
-    success: np.ndarray
+    frame_success: np.ndarray
     status: tuple
     mu: float
     weight: float
@@ -247,10 +254,16 @@ class WalkResult:
     turns: np.ndarray = field(default_factory=lambda: np.zeros(0))
     iterations: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     time: float = 0.0
+    unreached: tuple = ()
 
     @property
     def cycles(self) -> int:
         return len(self.rotation)
+
+    @property
+    def success(self) -> bool:
+        """Every frame solved and every pose of the schedule reached (``frame_success``, ``unreached``)."""
+        return bool(np.all(self.frame_success)) and not self.unreached
 
     @property
     def distance(self) -> np.ndarray:
@@ -261,7 +274,8 @@ class WalkResult:
         d = self.displacement.mean(0) if self.cycles else np.zeros(2)
         return (f"WalkResult({self.cycles} cycle(s) of {self.cycle_frames} frames, mu {self.mu:g}: per cycle "
                 f"({d[0]:.4g}, {d[1]:.4g}) {self.units}, rotation {np.degrees(self.rotation.mean()):.3g} deg; "
-                f"{int(self.success.sum())}/{len(self.success)} frames solved)")
+                f"{int(self.frame_success.sum())}/{len(self.frame_success)} frames solved"
+                + (f"; pose(s) {', '.join(self.unreached)} NOT reached by the layout" if self.unreached else "") + ")")
 
     def to_dict(self) -> dict:
         """Every field as JSON-ready values (arrays as nested lists, NaN as None); :meth:`summary` is the
@@ -273,10 +287,11 @@ class WalkResult:
         return {"mu": self.mu, "weight": self.weight, "eps": self.eps, "units": self.units,
                 "cycles": self.cycles, "cycle_frames": self.cycle_frames,
                 "displacement": self.displacement.tolist(), "distance": self.distance.tolist(),
-                "rotation_deg": np.degrees(self.rotation).tolist(), "success": bool(self.success.all()),
+                "rotation_deg": np.degrees(self.rotation).tolist(), "success": self.success,
+                "unreached": list(self.unreached),
                 "slipping_fraction": (self.slipping.sum(1) / self.slipping.shape[1]).tolist(),
                 "feet_slipping": {k: v.astype(int).tolist() for k, v in self.feet_slipping.items()},
-                "failed_frames": [int(k) for k in np.flatnonzero(~self.success)]}
+                "failed_frames": [int(k) for k in np.flatnonzero(~np.asarray(self.frame_success, bool))]}
 
 
 def _eps_path(eps: float) -> list:
@@ -491,7 +506,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
             cap = float(mu) * loads_all[i, v].sum()
             feet_slip[k][i] = cap > 0 and np.hypot(*f[v].sum(0)) >= SLIP * cap
     return WalkResult(states=states, strokes=strokes_all, cycle_frames=F, displacement=disp,
-                      rotation=rot, centroids=centroids, turns=turns, slipping=slip, feet_slipping=feet_slip, success=np.array(ok),
+                      rotation=rot, centroids=centroids, turns=turns, slipping=slip, feet_slipping=feet_slip, frame_success=np.array(ok),
                       status=tuple(status), mu=float(mu), weight=W, eps=EPS * mesh.size, loads=loads_all, units=units,
                       iterations=np.array(its), time=time.perf_counter() - t0)
 
@@ -526,7 +541,9 @@ def walk_gait(mesh: Mesh, material, schedule, muscles: Sequence, **kwargs) -> Wa
     kwargs.setdefault("units", schedule.units)
     if kwargs.get("start") is None and bool(schedule.frame_success[0]):
         kwargs["start"] = schedule.states[0]  # the first pose, solved without the table: its first frame stays
-    return walk(mesh, material, muscles, S, **kwargs)
+    res = walk(mesh, material, muscles, S, **kwargs)
+    res.unreached = tuple(schedule.unreached)  # the gait asked for, not walked: no success
+    return res
 
 
 def foot_groups(mesh: Mesh, nodes) -> dict:

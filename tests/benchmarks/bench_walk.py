@@ -85,7 +85,7 @@ def main(argv=None) -> int:
         d = r.distance
         slid = sorted(k for k, v in r.feet_slipping.items() if v.any())
         print(f"  level {level}: {mesh.n_nodes:5d} nodes (smallest angle {mesh.quality()['min_angle_deg']:.1f} deg), "
-              f"{int(r.success.sum())}/{len(r.success)} frames solved, distance per cycle "
+              f"{int(r.frame_success.sum())}/{len(r.frame_success)} frames solved, distance per cycle "
               f"{', '.join(f'{v:.4f}' for v in d)} {r.units}, rotation per cycle "
               f"{', '.join(f'{v:.2f}' for v in np.degrees(r.rotation))} deg, feet sliding as a whole: "
               f"{', '.join(slid) or 'none'} ({r.time:.0f} s)", flush=True)
@@ -98,8 +98,8 @@ def main(argv=None) -> int:
                                     from_rest=a.anchor_radius is not None, local=a.local or ())
     last = np.array([r.distance[-1] for _, r in runs])
     for (m, r) in runs:
-        if not r.success.all():
-            print(f"WARNING: {m.n_nodes} nodes: {int((~r.success).sum())} frame(s) not solved: its distance is not a "
+        if not r.frame_success.all():
+            print(f"WARNING: {m.n_nodes} nodes: {int((~r.frame_success).sum())} frame(s) not solved: its distance is not a "
                   "figure to trust, nor the estimate below")
     print("distance in the last cycle: " + ", ".join(f"{m.n_nodes} nodes {v:.4f}" for (m, _), v in zip(runs, last)))
     est = None
