@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..mechanics.anchors import body_size
-from ..synthesis.acceptance import difference_failure, rest_difference
+from ..synthesis.acceptance import IDLE_CONTRACTION, difference_failure, idle_mask, rest_difference
 
 __all__ = ["design_summary"]
 
@@ -44,12 +44,22 @@ def design_summary(session) -> dict:
             "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(session.design_params),
             "saturated": [m.name for m, sat in zip(session.muscles, res.saturated) if sat],
             "dropped": [d.to_dict() for d in session.dropped],
+            # idle muscles the design kept (the design without them failed), as mdsr run's "idle ... kept"
+            "idle_kept": _idle_kept(session, res),
             # what `mdsr run` says of this design: "" (within the scene's max_difference) or why it fails
             "acceptance": difference_failure(res.difference, body_size(session.mesh),
                                              *[session.acceptance[k] for k in ("max_difference",) if k in session.acceptance],
                                              units=session.units or None,
                                              rest_difference=rest_difference(session.mesh, target)),
             "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in session.muscles]}
+
+
+def _idle_kept(session, res) -> list:
+    thr = float(session.acceptance.get("idle_contraction", IDLE_CONTRACTION))
+    if thr <= 0 or not res.success:
+        return []
+    idle = idle_mask(res, thr)
+    return [m.name for m, i in zip(session.muscles, idle) if i]
 
 
 def _num(v):

@@ -241,9 +241,19 @@
       tr.innerHTML = `<td colspan="${cols.length + 1}">difference ${d == null ? "-" : d.toExponential(3)} ` +
         `(${S.design.relative_difference == null ? "-" : (100 * S.design.relative_difference).toFixed(2)} % of size), ` +
         `${S.design.success ? "verified" : "NOT verified"}` +
-        (S.design.acceptance ? `; mdsr run fails it: ${S.design.acceptance}` : "") + "</td>";
+        (S.design.acceptance ? `; mdsr run fails it: ${S.design.acceptance}` : "") +
+        designFlags(S.design) + "</td>";
       t.appendChild(tr);
     }
+  }
+
+  function designFlags(d) {  // what mdsr run's verdict adds after "ok": saturated, dropped, idle kept
+    const esc = (v) => String(v).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
+    const parts = [];
+    if ((d.saturated || []).length) parts.push(`saturated ${d.saturated.map(esc).join(", ")}`);
+    if ((d.dropped || []).length) parts.push(`dropped ${d.dropped.map((x) => esc(x.name)).join(", ")} (idle)`);
+    if ((d.idle_kept || []).length) parts.push(`idle ${d.idle_kept.map(esc).join(", ")} kept (the design without them failed)`);
+    return parts.length ? "; " + parts.join("; ") : "";
   }
 
   function updateDownloads() {
