@@ -6,12 +6,14 @@ verification, by the one method that models contact (``"derivative-free"``); an 
 clamped where its target was anchored (``held``), as :func:`~mdsr_opt.synthesis.pipeline.design_pipeline`
 does; the design's solves are frictionless (friction enters the target's solve and the grip report).
 
-A disk stays FIXED where the scene puts it: no stage moves it until the contacts' net force on it vanishes
-(:func:`~mdsr_opt.mechanics.grip.free_disk` does that in Python). Its grip report (:func:`case_grips`) asks
-whether the grip holds it once that support is taken away: friction at the stated coefficient, within
-``mu`` times each contact's normal force, must balance the contacts' net push on it
-(:func:`~mdsr_opt.mechanics.grip.grip_report`); ``holding_force`` is then the largest load of any direction
-the grip resists.
+A :class:`~mdsr_opt.Disk` stays FIXED where the scene puts it; a
+:class:`~mdsr_opt.scenes.obstacles.FreeDisk` is moved by the case's target until the contacts' net force on
+it vanishes (:func:`~mdsr_opt.mechanics.grip.free_disk`), and the design takes it there. The grip report
+(:func:`case_grips`) asks whether the grip holds the disk once any support is taken away: friction at the
+stated coefficient, within ``mu`` times each contact's normal force, must balance the contacts' net push on
+it (:func:`~mdsr_opt.mechanics.grip.grip_report`; a fixed disk pushed harder from one side than the other
+is not held); ``holding_force`` is then the largest load of any direction the grip resists (of 16
+directions tried: a grip of two opposite contacts resists none along their line).
 """
 
 from __future__ import annotations
@@ -101,8 +103,8 @@ def grip_line(g: dict) -> str:
     N = ", ".join(f"{v:.3g}" for v in g["normal_forces"])
     net = float(np.hypot(*g["net_force"]))
     if g["held"]:
-        verdict = (f"HELD at friction {g['friction']:g}: it resists a load of {g['holding_force']:.3g}{unit} in any "
-                   f"direction, up to {max(g['resisted']):.3g}{unit} in the best")
+        verdict = (f"HELD at friction {g['friction']:g}: it stays without a load and resists one of up to "
+                   f"{g['holding_force']:.3g}{unit} in any direction")
     else:
         verdict = (f"NOT HELD at friction {g['friction']:g}: friction cannot balance the contacts' net push of "
                    f"{net:.3g}{unit}")
