@@ -257,12 +257,12 @@ def place_free_disk(obstacles, solve) -> tuple[list, dict | None]:
     the disk first in its solves) and ``{"result", "start", "center", "converged", "iterations",
     "net_force", "why"}``. A search that does not bring the net force down leaves a failed result, its
     ``status`` saying why (a target in which a free disk is pushed away is no grip)."""
-    from ..mechanics.grip import free_disk
-    from ..mechanics.obstacles import Disk
-
     free = [i for i, o in enumerate(obstacles) if isinstance(o, FreeDisk)]
     if not free:
         return list(obstacles), None
+    from ..mechanics.grip import free_disk  # scipy.optimize: only for a free disk
+    from ..mechanics.obstacles import Disk
+
     i = free[0]
     start = obstacles[i]
     others = [o for j, o in enumerate(obstacles) if j != i]

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mechanics.grip import grip_report
 from ..mechanics.obstacles import Disk
 from .obstacles import FreeDisk, case_contact
 
@@ -72,6 +71,8 @@ def case_grips(scene, case, x, contact: dict | None, state: str, obstacles=None,
     kw = case_contact(scene, case)
     if not kw or contact is None:
         return []
+    from ..mechanics.grip import grip_report  # scipy.optimize: only where a case has obstacles
+
     out = []
     for i, o in enumerate(kw["obstacles"] if obstacles is None else obstacles):
         if not isinstance(o, Disk):
