@@ -163,3 +163,19 @@ def test_the_gripper_hold_case_never_enters_its_disk():
     assert np.linalg.norm(run.design.x - disk.center, axis=1).min() >= disk.radius - 1e-9
     assert _outline(scene.mesh, run.design.x).intersection(Point(*disk.center).buffer(disk.radius, 256)).area == 0.0
     assert np.allclose(run.design.contractions, hold.contractions, atol=1e-4)
+
+
+def test_the_author_page_saves_the_gripper_with_its_free_disk_and_reads_it_back(tmp_path):
+    from mdsr_opt.author.export import save_scene
+    from mdsr_opt.author.session import Session
+
+    scene = get_problem("gripper", resolution="coarse")
+    files = save_scene(Session.from_scene(scene), tmp_path, "mine", notes=[])
+    data = json.loads(Path(files[0]).read_text())
+    hold = data["cases"][1]
+    assert hold["obstacles"] == [{"disk": {"center": [0.0, 0.0], "radius": 1.2, "free": True}, "friction": 0.5}]
+    back = load_scene(files[0]).case("hold")
+    want = scene.case("hold")
+    assert isinstance(back.obstacles[0], FreeDisk) and back.friction == 0.5 and back.kind == "internal"
+    assert [m.nodes for m in back.muscles] == [m.nodes for m in want.muscles]
+    assert back.contractions.tolist() == want.contractions.tolist()
