@@ -149,6 +149,7 @@ def test_the_gripper_holds_its_free_disk_and_summary_json_says_so(tmp_path):
     assert max(g["resisted"]) <= 0.5 * N.sum() * (1 + 1e-9)
     md = (out / "summary.md").read_text()
     assert "grip: disk obstacles[0] (free: moved" in md and "HELD at friction 0.5: it stays without a load" in md
+    assert "| ok (not mouldable as laid out; disk 0 held at friction 0.5) |" in md  # the case's row says it too
 
 
 @pytest.mark.slow  # 13 s: the free disk's search and the design with contact again, in Python

@@ -103,7 +103,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         disk = { center = [2, -1.2], radius = 0.5 }   # or halfplane = { point = [0, -1], normal = [0, 1] }
         friction = 0.3                        # or polygon = [[x, y], ...] (convex); friction: Coulomb's, one
                                               # for all (default 0), in the targets (the design: frictionless);
-                                              # a case's disks get a grip report (held or not at it)
+                                              # a case's disks get a grip report (held or not at it);
+                                              # disk = { ..., free = true }: the target moves it to where the
+                                              # contacts' net force vanishes (its solves then frictionless)
         [acceptance]                          # optional: what a case's design must show to succeed
         max_difference = 0.05                 # difference over the body's diameter (default 0.05)
         idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)
