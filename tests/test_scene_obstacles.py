@@ -180,3 +180,19 @@ def test_the_author_page_saves_the_gripper_with_its_free_disk_and_reads_it_back(
     assert isinstance(back.obstacles[0], FreeDisk) and back.friction == 0.5 and back.kind == "internal"
     assert [m.nodes for m in back.muscles] == [m.nodes for m in want.muscles]
     assert back.contractions.tolist() == want.contractions.tolist()
+
+
+def test_friction_without_obstacles_is_refused():
+    from mdsr_opt.scenes.scene import Case
+
+    scene = get_problem("gripper", resolution="coarse")
+    close = scene.case("close")
+    with pytest.raises(ValueError, match=r"scene 'gripper', case 'close': friction 0\.3 is given but the case has no "
+                                         r"obstacles"):
+        dataclasses.replace(scene, cases=(dataclasses.replace(close, friction=0.3),))
+    with pytest.raises(ValueError, match=r"scene 'gripper': friction 0\.3 is given but no case has obstacles"):
+        dataclasses.replace(scene, cases=(close,), friction=0.3)
+    with pytest.raises(TypeError, match=r"case 'c': obstacles\[0\] must be a HalfPlane, Disk or Obstacle"):
+        Case("c", anchors=[0, 1], obstacles=[(0.0, 0.0)])
+    with pytest.raises(ValueError, match=r"case 'c': friction must be a number >= 0"):
+        Case("c", anchors=[0, 1], friction=-0.1)

@@ -113,9 +113,12 @@ def check_case_obstacles(scene, case) -> None:
 
     kw = case_contact(scene, case)
     obs = kw.get("obstacles", [])
-    if not obs:
-        return
     label = f"scene {scene.name!r}, case {case.name!r}"
+    if not obs:
+        if case.friction is not None:  # a coefficient between the body and nothing: a mistake, said
+            raise ValueError(f"{label}: friction {case.friction:g} is given but the case has no obstacles (neither "
+                             "the scene's nor its own)")
+        return
     free = [i for i, o in enumerate(obs) if isinstance(o, FreeDisk)]
     if len(free) > 1:
         raise ValueError(f"{label}: {len(free)} free disks (obstacles {free}): a case places one free disk where its "

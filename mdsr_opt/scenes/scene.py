@@ -348,6 +348,8 @@ class Scene:
         self.friction = check_friction(self.friction, f"scene {self.name!r}")
         for c in cases:  # an obstacle holding a node at rest, a drag into one: refused here, not mid-run
             check_case_obstacles(self, c)
+        if self.friction is not None and not self.obstacles and not any(c.obstacles for c in cases):
+            raise ValueError(f"scene {self.name!r}: friction {self.friction:g} is given but no case has obstacles")
         self.expected = dict(self.expected)
         self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance",
                                            a_max=self.design_options.get("a_max"))
