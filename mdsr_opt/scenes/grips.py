@@ -104,8 +104,9 @@ def grip_line(g: dict) -> str:
     N = ", ".join(f"{v:.3g}" for v in g["normal_forces"])
     net = float(np.hypot(*g["net_force"]))
     if g["held"]:
-        verdict = (f"HELD at friction {g['friction']:g}: it stays without a load and resists one of up to "
-                   f"{g['holding_force']:.3g}{unit} in any direction")
+        verdict = f"HELD at friction {g['friction']:g}: it stays without a load" + (
+            f" and resists any load up to {g['holding_force']:.3g}{unit}" if g["holding_force"] > 0 else
+            ", but a load in the weakest direction (of 16), however small, slips it")
     else:
         verdict = (f"NOT HELD at friction {g['friction']:g}: friction cannot balance the contacts' net push of "
                    f"{net:.3g}{unit}")
