@@ -77,9 +77,9 @@ def test_a_cases_own_muscles_read_back_from_json_as_node_ids(tmp_path):
      r"cases\[1\]\.muscles\[0\]\.nme: unknown field \(did you mean 'name'\?\)"),
     ("anchor_radius = 0.1\n", "anchor_radus = 0.1\n",
      r"cases\[1\]\.anchor_radus: unknown field \(did you mean 'anchor_radius'\?\)"),
-    ("contractions = [0.2]", "contractions = [0.2]\nmuscles = [{ nodes = [0, 1] }]",
-     r"cases\[0\]\.muscles: an internal case \(with contractions\) has no anchors, drags or muscles of its own: "
-     r"it drives the scene's \[\[muscles\]\], one contraction each"),
+    ("contractions = [0.2]", "contractions = [0.2]\nanchors = [0, 1]",
+     r"cases\[0\]\.anchors: an internal case \(with contractions\) has no anchors or drags: it drives the "
+     r"scene's \[\[muscles\]\] \(or its own muscles\), one contraction each"),
     ("anchor_radius = 0.1\n[[cases.muscles]]\nname = \"top\"\nboundary = { from = [4, 1], to = [0, 1] }\n",
      "anchor_radius = 0.1\n", r"cases\[1\]\.anchor_radius: is the end-fixture radius of the case's own muscles"),
     ("anchor_radius = 0.1\n[[cases.muscles]]\nname = \"top\"\nboundary = { from = [4, 1], to = [0, 1] }\n",

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scenes.obstacles import obstacle_tables
+
 __all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name"]
 
 #: the sentence a save adds to the scene's description (followed by the file it was opened from)
@@ -108,10 +110,12 @@ def _case_table(case) -> dict:
     d = {"name": case.name}
     if case.description:
         d["description"] = case.description
+    if case.obstacles:  # its own obstacles (and their friction)
+        d["obstacles"] = obstacle_tables(case.obstacles, case.friction)
     if case.kind == "internal":
         d["contractions"] = [float(a) for a in case.contractions]
-        return d
-    d.update(_fixed_table(case.anchors, case.drag_nodes, case.drag_positions))
+    else:
+        d.update(_fixed_table(case.anchors, case.drag_nodes, case.drag_positions))
     if case.muscles is not None:
         d["muscles"] = _muscle_tables(case.muscles)
     if case.anchor_radius is not None:
@@ -151,6 +155,9 @@ def _cases(session) -> list:
                 d["muscles"] = own["muscles"] if own is not None else _muscle_tables(c.muscles)
             if c.anchor_radius is not None:
                 d["anchor_radius"] = float(c.anchor_radius)
+            if c.obstacles:  # its own obstacles, as written
+                d["obstacles"] = own["obstacles"] if own is not None and "obstacles" in own else \
+                    obstacle_tables(c.obstacles, c.friction)
         out.append(_with_page_muscles(d, session))
     if not seen:
         d = {"name": edited, "description": "anchors and drags set on the page"}
@@ -202,6 +209,8 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         d["acceptance"] = {k: _plain(v) for k, v in session.acceptance.items()}
     if scene is not None and scene.regions:
         d["regions"] = o.raw("regions") or {k: {"nodes": [int(v) for v in idx]} for k, idx in scene.regions.items()}
+    if scene is not None and scene.obstacles:  # the rigid obstacles of every case
+        d["obstacles"] = o.raw("obstacles") or obstacle_tables(scene.obstacles, scene.friction)
     if scene is not None and scene.muscles:  # the scene's given muscles (the page's are its case's own)
         d["muscles"] = o.raw("muscles") or _muscle_tables(scene.muscles)
     # the scene's routing knobs: the page's made the edited case's layout, which its table holds; they are

@@ -11,6 +11,7 @@ from ..core.results import compact_repr, load_fields, save_fields
 from ..plot.style import muscle_label
 from ..synthesis.gait import warm_start_state
 from .fixtures import scene_fixture_radius
+from .obstacles import case_contact
 from .reader import contact_options
 from .rundir import check_interrupt
 from .scene import Animation, Scene, UnknownName
@@ -91,7 +92,8 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
     were designed with (the scene's ``anchor_radius``, else the radius every case's design gives); only
     when the cases' fixtures differ (layouts fitted apart) one size is taken at which every rope keeps its
     fixtures (:func:`~mdsr_opt.synthesis.routing_fixtures.common_fixture_radius`), and the result's
-    ``message`` says so.
+    ``message`` says so. Every frame takes the scene's obstacles and those of the cases named (the
+    message names the cases whose own obstacles stand in every frame), and self-contact as the scene asks.
     """
     from ..mechanics.equilibrium import solve_internal
 
@@ -151,6 +153,15 @@ def animate(scene: Scene, animation: Animation | str, designs: Mapping[str, tupl
                     + ", ".join(f"{c} {r:.4g}" for c, r in given.items()) + "): one size every rope keeps its "
                     "fixtures with")
     kw = dict(muscle_model=model, stiffness=stiffness, anchor_radius=radius, **contact_options(opts))
+    # the scene's obstacles and those of every case named, in every frame (a frame is one state of the body)
+    obs = list(scene.obstacles) + [o for c in animation.cases for o in scene.case(c).obstacles]
+    if obs:
+        mus = {case_contact(scene, scene.case(c)).get("friction", 0.0) for c in animation.cases} or {0.0}
+        kw.update(obstacles=obs, friction=max(mus) if animation.cases else float(scene.friction or 0.0))
+        own = [c for c in animation.cases if scene.case(c).obstacles]
+        if own:
+            note = "; ".join(m for m in (note, "every frame solved with the obstacles of case(s) " + ", ".join(own)
+                                         + (" and the scene's" if scene.obstacles else "")) if m)
     for i, a in enumerate(frames):
         key = np.round(a, 12).tobytes()
         if key not in solved:

@@ -13,10 +13,11 @@ from ..body.muscles import Muscle
 from ..core.errors import LayoutError
 from ..core.results import compact_repr, load_npz, save_npz, to_jsonable
 from .fixtures import scene_fixture_radius
+from .obstacles import FreeDisk, case_contact, solve_friction
 from .reader import contact_options
 from .scene import Case, Scene
 
-__all__ = ['CaseSetup', 'prepare_case', 'case_anchor_radius', 'given_muscle_conflicts']
+__all__ = ['CaseSetup', 'prepare_case', 'case_anchor_radius', 'given_muscle_conflicts', 'place_free_disk']
 
 
 # ---------------------------------------------------------------------------------------------- design problem
@@ -52,6 +53,12 @@ class CaseSetup:
         :class:`~mdsr_opt.core.errors.LayoutError`: a body too thin for the ropes' inset, a mesh too coarse);
         ``routing`` is then None. A case whose muscles are routed has none (``muscles`` is empty: the case
         fails); one whose routing is a diagnostic (its own muscles, an internal case) goes on without it.
+    obstacles : list or None
+        The case's obstacles as its target placed them (a :class:`~mdsr_opt.scenes.obstacles.FreeDisk` moved
+        to where the grip holds it), which its design takes; None: no obstacles.
+    free_disk : dict or None
+        With a free disk, where it started and ended and :func:`~mdsr_opt.mechanics.grip.free_disk`'s report
+        (``converged``, ``iterations``, ``net_force``).
     """
 
     scene: Scene
@@ -66,6 +73,8 @@ class CaseSetup:
     fabrication: list = field(default_factory=list)
     anchor_radius: float | None = None
     routing_error: str | None = None
+    obstacles: list | None = None
+    free_disk: dict | None = None
 
     @property
     def success(self) -> bool:
@@ -158,7 +167,8 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     contractions, using the scene's ``design_options`` ``muscle_model`` and ``stiffness`` and its end-fixture
     radius (:func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`: ``[design] anchor_radius`` or
     ``[fabrication] fixture_radius``) so the design can recover them exactly; routing runs as a diagnostic
-    when ``route_internal``.
+    when ``route_internal``. Both solves take the scene's self-contact and the case's obstacles with their
+    friction (:func:`~mdsr_opt.scenes.obstacles.case_contact`).
 
     A failed target solve is not raised: ``target_result.success`` is False and ``muscles`` is empty. Nor is a
     routing this body or mesh cannot hold (a :class:`~mdsr_opt.core.errors.LayoutError`): its message is
@@ -173,14 +183,20 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     t0 = time.perf_counter()
     known = None
     contact = contact_options(scene.design_options)  # [design] contact = true: the targets touch, too
-    if case.kind == "external":
-        res = solve_external(scene.mesh, scene.material, case.anchors, case.drags, **contact)
-    else:
-        known = case.contractions.copy()
-        res = solve_internal(scene.mesh, scene.material, scene.muscles, known,
-                             muscle_model=scene.design_options.get("muscle_model", "cable"),
-                             stiffness=scene.design_options.get("stiffness", 10.0),
-                             anchor_radius=scene_fixture_radius(scene), **contact)
+    contact.update(solve_friction(case_contact(scene, case)))  # the scene's and the case's obstacles
+
+    def solve(obstacles=None):
+        kw = dict(contact, **({} if obstacles is None else {"obstacles": obstacles}))
+        if case.kind == "external":
+            return solve_external(scene.mesh, scene.material, case.anchors, case.drags, **kw)
+        return solve_internal(scene.mesh, scene.material, scene.case_muscles(case), case.contractions,
+                              muscle_model=scene.design_options.get("muscle_model", "cable"),
+                              stiffness=scene.design_options.get("stiffness", 10.0),
+                              anchor_radius=case_anchor_radius(scene, case), **kw)
+
+    known = None if case.kind == "external" else case.contractions.copy()
+    placed, freed = place_free_disk(contact.get("obstacles", []), solve)
+    res = solve() if freed is None else freed.pop("result")
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()
@@ -204,14 +220,14 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
         elif case.kind == "external" and scene.muscles is None:
             muscles = () if routing is None else tuple(routing.muscles)
         else:
-            muscles = tuple(scene.muscles)
+            muscles = tuple(scene.case_muscles(case))
     given = [] if not muscles or routing is not None and muscles == tuple(routing.muscles) else \
         given_muscle_conflicts(scene, case, muscles)
     t2 = time.perf_counter()
     return CaseSetup(scene=scene, case=case, target=res.x.copy(), muscles=muscles, known_contractions=known,
                      target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
                      warnings=notes, fabrication=given, anchor_radius=case_anchor_radius(scene, case, routing),
-                     routing_error=refused)
+                     routing_error=refused, obstacles=placed or None, free_disk=freed)
 
 
 def case_anchor_radius(scene: Scene, case: Case, routing=None) -> float | None:
@@ -247,3 +263,31 @@ def given_muscle_conflicts(scene: Scene, case: Case, muscles) -> list[str]:
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return [str(w.message) for w in caught if issubclass(w.category, FabricationWarning)]
+
+
+def place_free_disk(obstacles, solve) -> tuple[list, dict | None]:
+    """Place a case's :class:`~mdsr_opt.scenes.obstacles.FreeDisk` where its grip holds it.
+
+    ``solve(obstacles)`` is the case's target solve with those obstacles. Returns ``(obstacles, None)`` when
+    none is free; else the obstacles with the free disk moved (:func:`~mdsr_opt.mechanics.grip.free_disk`,
+    the disk first in its solves) and ``{"result", "start", "center", "converged", "iterations",
+    "net_force", "why"}``. A search that does not bring the net force down leaves a failed result, its
+    ``status`` saying why (a target in which a free disk is pushed away is no grip)."""
+    free = [i for i, o in enumerate(obstacles) if isinstance(o, FreeDisk)]
+    if not free:
+        return list(obstacles), None
+    from ..mechanics.grip import free_disk  # scipy.optimize: only for a free disk
+    from ..mechanics.obstacles import Disk
+
+    i = free[0]
+    start = obstacles[i]
+    others = [o for j, o in enumerate(obstacles) if j != i]
+    res, disk, info = free_disk(lambda d: solve([d, *others]), Disk(start.center, start.radius))
+    if res.success and not info["converged"]:
+        res.success = False
+        res.status = f"the free disk found no place where the grip holds it: {info.get('why')}"
+    placed = list(obstacles)
+    placed[i] = FreeDisk(disk.center, disk.radius)
+    return placed, {"result": res, "obstacle": i, "start": start.center.tolist(), "center": disk.center.tolist(),
+                    "converged": bool(info["converged"]), "iterations": int(info["iterations"]),
+                    "net_force": info.get("net_force"), "why": info.get("why", "")}

@@ -65,6 +65,7 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     from ..body.io import write_json
     from ..synthesis.poses import design_poses
     from .casefab import fixture_wall
+    from .obstacles import case_contact
 
     gait = scene.gait
     say = log or (lambda s: None)
@@ -97,7 +98,13 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
         say(f"[{scene.name}] {_gait_label(gait.name)}: not made ({exc})")
         return info
     radius_note = _radius_note(res.anchor_radius, case_radii, scene.units)
-    notes = list(res.notes) + [radius_note] * bool(radius_note)  # what the layout resolved, then the fixtures
+    touching = [c for c in gait.poses if case_contact(scene, scene.case(c))]
+    obstacle_note = (f"the gait's layout and schedule are designed without the obstacles of {', '.join(touching)} "
+                     "(its designs model none)") if touching else ""
+    if obstacle_note:
+        say(f"[{scene.name}] {_gait_label(gait.name)}: {obstacle_note}")
+    # what the layout resolved, then the fixtures and the obstacles left out
+    notes = list(res.notes) + [n for n in (radius_note, obstacle_note) if n]
     info.update({"notes": notes} if notes else {})
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's

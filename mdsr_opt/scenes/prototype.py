@@ -305,11 +305,11 @@ class VirtualPrototype:
     def drive(self, scene, case, guess=None) -> PrototypeShot:
         """The prototype driven as the design scene's ``case`` (a Case, or the name of one of ``scene``'s)
         says, photographed: the anchors and drags of the prototype's case of that name (:meth:`external`),
-        or the scene's muscles at the case's own contractions (:meth:`internal`, ``guess`` passed on)."""
+        or the case's muscles (the scene's) at its contractions (:meth:`internal`, ``guess`` passed on)."""
         c = scene.case(case) if isinstance(case, str) else case
         if c.kind == "external":
             return self.external(c.name, guess=guess)
-        return self.internal(scene.muscles, c.contractions, guess=guess)
+        return self.internal(scene.case_muscles(c), c.contractions, guess=guess)
 
     def _solved(self, key):
         """The shot kept for ``key`` (the arguments that made it), or None; a shot asked for is kept longest."""

@@ -22,7 +22,9 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
+from .grips import BANDS_NOTE, PROTOTYPE_NOTE, case_grips, grip_line, obstacle_design
 from .names import number_in_scene
+from .obstacles import case_contact
 from .verdict import plain_failure, prototype_verdict, saturation_line
 from .rundir import check_interrupt
 from .scene import Case, Scene
@@ -77,6 +79,8 @@ class CaseReport:
         tensions (``"N"`` for a material with a ``stress_unit``, a silicone preset; else units of
         ``E*t*length``: :func:`~mdsr_opt.core.quantities.tension_unit`).
     contact : with contact: total and per-obstacle contact force, in ``force_unit`` (the tensions'), pairs.
+    grip : per disk among the case's obstacles, whether the design's grip holds it at the stated friction,
+        the contact forces and the load it resists (:func:`~mdsr_opt.scenes.grips.case_grips`); None without.
     fabrication : the FabricationWarning of muscles the scene gives that cannot be moulded as laid out (a
         channel on the outline, ropes too close; :func:`~mdsr_opt.scenes.cases.given_muscle_conflicts`).
     notes : what the pipeline resolved on its own, each a sentence headed by its stage (``routing: fixtures
@@ -120,6 +124,7 @@ class CaseReport:
     band_notes: list = field(default_factory=list)
     fabrication: list = field(default_factory=list)
     contact: dict | None = None
+    grip: list | None = None
     notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
@@ -249,7 +254,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         if case.kind == "internal":
             # the muscle edges that contract in the target: an edge inside a muscle's rigid end patch keeps
             # its length, so no routing can see it (it is counted apart as hidden)
-            true = _edge_set(scene.muscles)
+            true = _edge_set(scene.case_muscles(case))
             X0, Y = scene.mesh.points, np.asarray(setup.target)
             seen = {e for e in true
                     if np.linalg.norm(Y[e[1]] - Y[e[0]]) < (1 - 1e-3) * np.linalg.norm(X0[e[1]] - X0[e[0]])}
@@ -292,6 +297,10 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     opts = {**scene.design_options, "anchor_radius": setup.anchor_radius, "fixture_wall": fixture_wall(scene)}
     if method is not None:
         opts["method"] = method
+    opts, said = obstacle_design(scene, case, opts, setup.obstacles)  # a case with obstacles: designed with them, said how
+    rep.notes += said
+    for note in said:
+        say(prefix + note)
     t1 = time.perf_counter()
     idle = accept["idle_contraction"] if case.kind == "external" else 0.0
     try:
@@ -356,8 +365,20 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         f"({100 * rep.relative_difference:.2f} % of size), {verdict} ({rep.times['design']:.1f} s)")
     if rep.saturated:
         say(prefix + saturation_line(res))
+    rep.grip = case_grips(scene, case, res.x, res.contact, "design", setup.obstacles, setup.free_disk) or None
+    for g in rep.grip or ():
+        rep.notes.append(grip_line(g))
+        say(prefix + grip_line(g))
     if accept["bands"] and res.success:
-        _bands(scene, run, opts, say, prefix)
+        if case_contact(scene, case):
+            rep.band_notes = [BANDS_NOTE]
+            say(f"{prefix}stroke bands: {BANDS_NOTE}")
+        else:
+            _bands(scene, run, opts, say, prefix)
+    if prototype is not None and case_contact(scene, case):
+        prototype = None
+        rep.notes.append(PROTOTYPE_NOTE)
+        say(prefix + PROTOTYPE_NOTE)
     if photo:
         measure_case(scene, run, photo_size=photo_size, prototype=prototype, log=say, prefix=prefix)
         check_interrupt()

@@ -32,6 +32,8 @@ from .runner import CaseRun, case_files, case_parts, finite, measure_case, measu
 from .scene import Scene, resolve_resolution
 from .scenereport import SceneReport
 from .casefab import write_case_fabrication
+from .grips import PROTOTYPE_NOTE
+from .obstacles import case_contact
 from .verdict import prototype_verdict
 
 __all__ = ['run_scene', 'run_main', 'figure_arguments']
@@ -261,7 +263,9 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
     # cases' contractions, e.g. 20, 30, 40, 50 %) are one job, sent once the last of them is designed, that
     # runs them in order of contraction: each prototype solve then steps on from the state below it
     # (VirtualPrototype keeps its solved states) instead of from rest, as a run without a pool does
-    chained = [c for c in names if scene.case(c).kind == "internal"] if proto is not None and bg.parallel else []
+    chained = [c for c in names if scene.case(c).kind == "internal" and scene.case(c).muscles is None
+               and not case_contact(scene, scene.case(c))] \
+        if proto is not None and bg.parallel else []
     chain: list = []
     for i, cname in enumerate(names):
         prefix = f"[{scene.name} {i + 1}/{len(names)} {cname}] "
@@ -278,6 +282,11 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
         advance(log)  # the progress bar of `mdsr run` (no-op for a plain callable): the case's solves
         parts = case_parts(scene, run, out / cname, mesh_format, vector=vector) if figures else []
         written[cname] = [[] for _ in range(3)]  # the files of the shapes, the prototype's and the photograph
+        cproto = proto
+        if proto is not None and photos and run.design is not None and case_contact(scene, scene.case(cname)):
+            cproto = None  # the virtual prototype models no contact: said, never run without the obstacles
+            run.report.notes.append(PROTOTYPE_NOTE)
+            say(prefix + PROTOTYPE_NOTE)
         if photos and run.design is not None and len(chained) > 1 and cname in chained:
             chain.append((run, prefix, parts[1:], written[cname][1]))
         elif photos and run.design is not None:
@@ -285,13 +294,13 @@ def _start_scene(scene: Scene, out: Path, names, bg: Jobs, *, method, photos, fi
             # solves, the run's longest jobs) are three jobs, which free workers start costliest first; the
             # case's photograph stage is done (one unit of progress) when the last, the design's, reports
             bg.submit(_photo_job, scene, run, photo_size, None, prefix, parts[2:],
-                      on_done=functools.partial(_photo_done, run, written[cname][2], say, log if proto is None
+                      on_done=functools.partial(_photo_done, run, written[cname][2], say, log if cproto is None
                                                 else None), cost=photo_cost())
-            for part in (("driving", "design") if proto is not None else ()):
-                bg.submit(_prototype_job, run, proto, prefix, parts[1:2], part,
+            for part in (("driving", "design") if cproto is not None else ()):
+                bg.submit(_prototype_job, run, cproto, prefix, parts[1:2], part,
                           on_done=functools.partial(_prototype_done, run, written[cname][1], say,
                                                     log if part == "design" else None),
-                          cost=_prototype_cost(run, proto, part))
+                          cost=_prototype_cost(run, cproto, part))
         elif photos:
             advance(log)  # no design to photograph: the case's photograph stage is done
         if chain and cname == chained[-1]:

@@ -14,9 +14,11 @@ from ..body.muscles import Muscle, check_muscles, muscle_name_clash
 from ..core.checks import as_float_array, as_index_array, node_indices, positive_float, positive_int
 from ..core.errors import InputError
 from ..mechanics.anchors import body_size, check_anchor_radius
+from ..mechanics.obstacles import check_obstacles
 from ..synthesis.gait import Gait
 from .fixtures import fixture_radius_conflict
 from .names import check_name, check_output_names
+from .obstacles import check_case_obstacles, check_friction
 from .reader import check_scene_options
 
 __all__ = ['UnknownName', 'Case', 'Animation', 'Scene', 'resolve_resolution', 'seeds_for', 'mesh_polygon', 'check_units_and_gait',
@@ -63,12 +65,17 @@ class Case:
         One line for reports.
     muscles : sequence of Muscle, optional
         External case: lay these muscles instead of routing them on the target (e.g. a muscle along a hole's
-        rim that routing does not find); the design then finds their contractions.
+        rim that routing does not find); the design then finds their contractions. Internal case: the
+        muscles its contractions drive instead of the scene's (one contraction each).
     anchor_radius : float, optional
         With ``muscles``: the radius of their end fixtures, which the design uses for this case (default: the
         scene's, :func:`~mdsr_opt.scenes.fixtures.scene_fixture_radius`); e.g. the radius the ropes were fitted
         to when routed. With a fabrication that states them, at most its ``fixture_radius`` and at least its
         ``min_fixture_radius`` (the :class:`Scene` refuses another).
+    obstacles : sequence of Disk, HalfPlane, Obstacle, optional
+        Rigid obstacles of this case only, added to the scene's (:mod:`~mdsr_opt.scenes.obstacles`).
+    friction : float, optional
+        Coulomb's coefficient between the body and the obstacles in this case (default: the scene's).
     """
 
     name: str
@@ -79,9 +86,16 @@ class Case:
     description: str = ""
     muscles: tuple | None = None
     anchor_radius: float | None = None
+    obstacles: tuple = ()
+    friction: float | None = None
 
     def __post_init__(self):
         check_name(self.name, "case name")
+        try:
+            object.__setattr__(self, "obstacles", tuple(check_obstacles(self.obstacles)))
+        except TypeError as exc:
+            raise TypeError(f"case {self.name!r}: {exc}") from None
+        object.__setattr__(self, "friction", check_friction(self.friction, f"case {self.name!r}"))
         if self.anchor_radius is not None:
             if self.muscles is None:
                 raise ValueError(f"case {self.name!r}: anchor_radius is the end-fixture radius of the case's own "
@@ -90,9 +104,6 @@ class Case:
                                                                      f"case {self.name!r}: anchor_radius",
                                                                      allow_zero=True))
         if self.muscles is not None:
-            if self.contractions is not None:
-                raise ValueError(f"case {self.name!r}: muscles are for an external case (an internal case "
-                                 "drives the scene's muscles)")
             mus = tuple(self.muscles)
             if not mus or not all(isinstance(m, Muscle) for m in mus):
                 raise TypeError(f"case {self.name!r}: muscles must be a non-empty sequence of Muscle")
@@ -208,6 +219,11 @@ class Scene:
         (muscles designed below it are dropped, default
         :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`) and ``bands`` (compute the strokes'
         uncertainty bands, default :data:`~mdsr_opt.synthesis.acceptance.BANDS`).
+    obstacles : sequence of Disk, HalfPlane, Obstacle
+        Rigid obstacles in every case (a case may add its own), at rest coordinates; every solve of a case
+        with obstacles takes them (:func:`~mdsr_opt.scenes.obstacles.case_contact`), and one holding a node
+        of the body at rest, or a drag into one, is refused here. ``friction``: Coulomb's coefficient between
+        the body and the obstacles (default 0).
     """
 
     name: str
@@ -227,6 +243,8 @@ class Scene:
     units: str | None = None
     gait: Any = None
     acceptance: dict = field(default_factory=dict)
+    obstacles: tuple = ()
+    friction: float | None = None
 
     def __post_init__(self):
         from ..mechanics.loadsteps import check_mesh_material
@@ -279,12 +297,13 @@ class Scene:
                 except ValueError as exc:
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: {exc}") from None
             if c.kind == "internal":
-                if self.muscles is None:
+                driven = self.case_muscles(c)
+                if driven is None:
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: an internal case needs the "
-                                     "scene's muscles")
-                if len(c.contractions) != len(self.muscles):
+                                     "scene's muscles (or its own)")
+                if len(c.contractions) != len(driven):
                     raise ValueError(f"scene {self.name!r}, case {c.name!r}: {len(c.contractions)} "
-                                     f"contraction(s) for {len(self.muscles)} muscle(s)")
+                                     f"contraction(s) for {len(driven)} muscle(s)")
         self.regions = {str(k): as_index_array(np.asarray(v), f"region {k!r}", n=n, shape=(None,))
                         for k, v in dict(self.regions).items()}
         anims = tuple(self.animations)
@@ -322,6 +341,15 @@ class Scene:
         if self.design_options.get("contact"):  # drags through the body itself: refused here, not mid-run
             for c in cases:
                 _check_contact_drags(self, c)
+        try:
+            self.obstacles = tuple(check_obstacles(self.obstacles))
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"scene {self.name!r}: {exc}") from None
+        self.friction = check_friction(self.friction, f"scene {self.name!r}")
+        for c in cases:  # an obstacle holding a node at rest, a drag into one: refused here, not mid-run
+            check_case_obstacles(self, c)
+        if self.friction is not None and not self.obstacles and not any(c.obstacles for c in cases):
+            raise ValueError(f"scene {self.name!r}: friction {self.friction:g} is given but no case has obstacles")
         self.expected = dict(self.expected)
         self.acceptance = check_acceptance(self.acceptance, f"scene {self.name!r}: acceptance",
                                            a_max=self.design_options.get("a_max"))
@@ -331,6 +359,10 @@ class Scene:
     @property
     def case_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.cases)
+
+    def case_muscles(self, case: Case) -> tuple | None:
+        """The muscles an internal ``case`` drives: its own, else the scene's (None: neither)."""
+        return case.muscles if case.muscles is not None else self.muscles
 
     def case(self, name: str) -> Case:
         """The case called ``name`` (:class:`UnknownName`, a ``KeyError``, naming the choices otherwise)."""

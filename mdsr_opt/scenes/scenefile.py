@@ -17,6 +17,7 @@ from .fixtures import fixture_radius_conflict
 from .reader import SceneFileError, Reader, read_file, scene_options, tname, fabrication_table
 from .scene import Animation, Case, Scene, check_acceptance, mesh_polygon, resolve_resolution
 from .noderefs import node_ref, scene_region
+from .obstacles import read_obstacles
 from .select import boundary_path, edge_path
 from .shapes import rigid_motion
 
@@ -25,7 +26,7 @@ __all__ = ['load_scene', 'scene_from_data', 'material_table', 'parse_units_and_g
 
 # ---------------------------------------------------------------------------------------------- scene files
 _TOP_KEYS = ("name", "title", "description", "body", "material", "regions", "muscles", "routing", "design",
-             "cases", "animations", "expected", "units", "gait", "acceptance", "fabrication")
+             "cases", "animations", "expected", "units", "gait", "acceptance", "fabrication", "obstacles")
 
 
 _BODY_KEYS = ("outline", "holes", "mesh", "resolution", "max_area", "min_angle")
@@ -38,7 +39,7 @@ _MATERIAL_KEYS = ("model", "E", "nu", "thickness", "plane", "silicone", "C1", "C
 _MUSCLE_KEYS = ("name", "nodes", "path", "boundary")
 
 
-_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions", "muscles", "anchor_radius")
+_CASE_KEYS = ("name", "description", "anchors", "drags", "contractions", "muscles", "anchor_radius", "obstacles")
 
 
 _DRAG_KEYS = ("nodes", "at", "to", "by", "rotate", "about")
@@ -100,6 +101,13 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         # contact = true                      # self-contact of the outline in every solve (targets, design,
                                               # animations; design by method "derivative-free"), optional
                                               # contact_gap = a length
+        [[obstacles]]                         # optional: rigid obstacles in every case, at rest coordinates
+        disk = { center = [2, -1.2], radius = 0.5 }   # or halfplane = { point = [0, -1], normal = [0, 1] }
+        friction = 0.3                        # or polygon = [[x, y], ...] (convex); friction: Coulomb's, one
+                                              # for all (default 0), in the targets (the design: frictionless);
+                                              # a case's disks get a grip report (held or not at it);
+                                              # disk = { ..., free = true }: the target moves it to where the
+                                              # contacts' net force vanishes (its solves then frictionless)
         [acceptance]                          # optional: what a case's design must show to succeed
         max_difference = 0.05                 # difference over the body's diameter (default 0.05)
         idle_contraction = 0.001              # muscles designed below it are dropped (default 0.001)
@@ -112,10 +120,11 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         drags = [{ nodes = "tip", by = [-1.0, 1.5] },
                  { at = [4, 0], to = [3, 1.8] }]       # to / by / rotate (degrees) + about
         muscles = [{ name = "upper", path = [[0.3, 0.7], [3.3, 0.7]] }]  # optional: the case's own muscles
-                                              # (tables as [[muscles]]), designed instead of the scene's
-                                              # [[muscles]] or a routing; other cases keep theirs
+                                              # (tables as [[muscles]]), designed (an internal case: driven)
+                                              # instead of the scene's [[muscles]] or a routing
         anchor_radius = 0.12                  # optional, with muscles: their end fixtures' radius
                                               # (default: the design's anchor_radius)
+        obstacles = [{ halfplane = { point = [0, -2], normal = [0, 1] } }]   # optional: this case's own
         [[cases]]
         name = "contract"
         contractions = [0.3]                  # an internal case: one per muscle
@@ -195,6 +204,7 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
             r.fail("fabrication", "is given twice: as [fabrication] and as routing.fabrication; keep one")
         routing["fabrication"] = fabrication_table(r, top["fabrication"], "fabrication")
     design = scene_options(r, top.get("design", {}), "design")
+    obstacles, friction = read_obstacles(r, top["obstacles"], "obstacles") if "obstacles" in top else ((), None)
     cases_in = top["cases"]
     if not isinstance(cases_in, list) or not cases_in:
         r.fail("cases", "expected a non-empty list of cases ([[cases]] tables)",
@@ -236,7 +246,7 @@ def scene_from_data(path: Path, data: dict, resolution: str | int | None = None)
                      title=str(top.get("title", "")), description=str(top.get("description", "")),
                      muscles=muscles, regions=regions, routing_options=routing, design_options=design,
                      animations=tuple(anims), expected=dict(expected), resolution=res_used, source=str(path),
-                     units=units, gait=gait, acceptance=acceptance)
+                     units=units, gait=gait, acceptance=acceptance, obstacles=tuple(obstacles), friction=friction)
     except (ValueError, TypeError) as exc:  # cross-field checks of Scene (contraction counts...)
         raise SceneFileError(f"{path.name}: {exc}") from None
 
@@ -410,23 +420,27 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
     except ValueError as exc:
         r.fail(f"{where}.name", str(exc))
     desc = str(c.get("description", ""))
+    obs, mu = read_obstacles(r, c["obstacles"], f"{where}.obstacles") if "obstacles" in c else ((), None)
+    own, radius = _case_muscles(r, mesh, c, where, regions)
     if "contractions" in c:
-        for k in ("anchors", "drags", "muscles", "anchor_radius"):
+        for k in ("anchors", "drags"):
             if k in c:
-                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors, drags or muscles "
-                       "of its own: it drives the scene's [[muscles]], one contraction each")
+                r.fail(f"{where}.{k}", "an internal case (with contractions) has no anchors or drags: it drives "
+                       "the scene's [[muscles]] (or its own muscles), one contraction each")
         v = c["contractions"]
         if not isinstance(v, list):
             r.fail(f"{where}.contractions", f"expected a list of numbers, got {tname(v)}", TypeError)
         a = [r.number(x, f"{where}.contractions[{i}]") for i, x in enumerate(v)]
-        if muscles is None:
-            r.fail(f"{where}.contractions", "an internal case needs muscles ([[muscles]])")
-        if len(a) != len(muscles):
-            r.fail(f"{where}.contractions", f"needs one value per muscle ({len(muscles)}), got {len(a)}")
+        driven = own if own is not None else muscles
+        if driven is None:
+            r.fail(f"{where}.contractions", "an internal case needs muscles ([[muscles]], or its own muscles)")
+        if len(a) != len(driven):
+            r.fail(f"{where}.contractions", f"needs one value per muscle ({len(driven)}), got {len(a)}")
         for i, x in enumerate(a):
             if not 0.0 <= x < 1.0:
                 r.fail(f"{where}.contractions[{i}]", f"must lie in [0, 1), got {x}")
-        return Case(name, contractions=a, description=desc)
+        return Case(name, contractions=a, description=desc, muscles=own, anchor_radius=radius, obstacles=obs,
+                    friction=mu)
     # anchors = [] is no anchor, as the key left out (the drags then hold the body)
     anchors = node_ref(r, mesh, c.get("anchors", []), f"{where}.anchors", regions, empty=True)
     drags_in = c.get("drags", [])
@@ -448,6 +462,12 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
     if len(anchors) + len(dn) < 2:
         r.fail(where, "an external case needs at least two fixed nodes (anchors + drags); an internal case "
                "needs contractions")
+    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc, muscles=own,
+                anchor_radius=radius, obstacles=obs, friction=mu)
+
+
+def _case_muscles(r: Reader, mesh: Mesh, c: dict, where: str, regions: dict):
+    """A case's own ``muscles`` (None: not given) and their ``anchor_radius`` (None: not given)."""
     own = None
     if "muscles" in c:  # this case's own layout: the scene's [[muscles]] (or a routing) drive the others
         own = _muscle_list(r, mesh, c["muscles"], f"{where}.muscles", regions)
@@ -462,8 +482,7 @@ def _scene_case(r: Reader, mesh: Mesh, spec, where: str, regions: dict, muscles)
         radius = r.number(c["anchor_radius"], f"{where}.anchor_radius")
         if radius < 0:
             r.fail(f"{where}.anchor_radius", f"must be >= 0, got {radius:g}")
-    return Case(name, anchors=anchors, drag_nodes=dn, drag_positions=dp, description=desc, muscles=own,
-                anchor_radius=radius)
+    return own, radius
 
 
 def _scene_drag(r: Reader, mesh: Mesh, spec, where: str, regions: dict) -> tuple[np.ndarray, np.ndarray]:

@@ -188,6 +188,8 @@ def design_verdict(case) -> str:
         notes.append(f"idle {', '.join(map(str, case.idle_kept))} kept")
     if getattr(case, "fabrication", None):
         notes.append("not mouldable as laid out")
+    for g in getattr(case, "grip", None) or ():  # a disk the case touches: held or not (scenes.grips)
+        notes.append(f"disk {g['obstacle']} {'held' if g['held'] else 'NOT HELD'} at friction {g['friction']:g}")
     return ("ok" if case.success else "FAILED") + (f" ({'; '.join(notes)})" if notes else "")
 
 
