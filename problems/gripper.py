@@ -8,10 +8,7 @@ centre-line radius 2 and width 1, open over 60 degrees on its right, with one of
 the ring's centre line curls more tightly (angles from the back grow by ``CLOSE``, lengths along the
 centre line kept). ``two_muscles.py`` uses the same body for the paper's two-muscle experiment.
 
-Case ``hold`` closes the gripper on an object: two muscles along the inner rim (its upper and lower half),
-contracted by ``HOLD``, close the jaws on a free disk, which the target's solves move until the contacts'
-net force on it vanishes (a disk held in the air); the case reports whether the grip holds it at friction
-``FRICTION`` and the load it resists (``grip`` in ``summary.json``).
+The gripper closing on an object, a free disk, with its grip report, is ``gripper_hold.py``.
 
 The shapes are drawn by the mdsr_opt authors from the paper's descriptions (it gives no geometry); they
 are not the paper's meshes.
@@ -31,14 +28,12 @@ import numpy as np
 
 from mdsr_opt import NeoHookean
 from mdsr_opt.scenes.scene import Case, Scene, mesh_polygon, resolve_resolution, seeds_for
-from mdsr_opt.scenes.obstacles import FreeDisk
-from mdsr_opt.scenes.select import boundary_path, nodes_in_polygon
+from mdsr_opt.scenes.select import nodes_in_polygon
 from mdsr_opt.scenes.runscene import run_main
 
 R0, WIDTH = 2.0, 1.0          # centre-line radius and ring width
 OPENING = np.radians(60.0)    # the gap between the jaws, centred on +x
 CLOSE = 1.12                  # angles from the back are multiplied by this
-HOLD, DISK, FRICTION = 0.3, 1.2, 0.5   # case hold: the muscles' contraction, the disk's radius, Coulomb's mu
 
 
 def outline(n_arc: int = 40) -> np.ndarray:
@@ -69,21 +64,8 @@ def closed(points: np.ndarray, factor: float = CLOSE) -> np.ndarray:
     return centre + np.column_stack([-rn * np.cos(factor * psi), rn * np.sin(factor * psi)])
 
 
-def inner_muscles(mesh):
-    """Two muscles along the inner rim, the upper and the lower half: contracted, they close the jaws."""
-    ri, half = R0 - WIDTH / 2, OPENING / 2
-
-    def rim(a0, a1):
-        return ri * np.array([np.cos(a0), np.sin(a0)]), ri * np.array([np.cos(a1), np.sin(a1)])
-
-    return (boundary_path(mesh, *rim(half + 0.08, np.pi - 0.12), via=ri * np.array([0.0, 1.0]), name="upper"),
-            boundary_path(mesh, *rim(np.pi + 0.12, 2 * np.pi - half - 0.08), via=ri * np.array([0.0, -1.0]),
-                          name="lower"))
-
-
 def build(resolution="medium") -> Scene:
-    """The gripper scene: case ``close`` (external driving, muscles routed) and ``hold`` (internal driving of
-    two inner-rim muscles closing the jaws on a free disk, with its grip report)."""
+    """The gripper scene: case ``close`` (external driving, muscles routed)."""
     mesh, material = body(resolution)
     P = mesh.points
     wedge = lambda a0, a1: nodes_in_polygon(mesh, 4 * np.array(  # noqa: E731
@@ -92,10 +74,7 @@ def build(resolution="medium") -> Scene:
     jaws = np.concatenate([wedge(OPENING / 2 - 0.01, OPENING / 2 + 0.25),
                            wedge(-OPENING / 2 - 0.25, -OPENING / 2 + 0.01)])
     cases = (Case("close", anchors=back, drag_nodes=jaws, drag_positions=closed(P[jaws]),
-                  description=f"back anchored, jaws closed (centre line curled by a factor {CLOSE})"),
-             Case("hold", contractions=[HOLD, HOLD], muscles=inner_muscles(mesh), obstacles=(FreeDisk((0.0, 0.0),
-                  DISK),), friction=FRICTION, description=f"two inner-rim muscles contracted by {HOLD:.0%} close "
-                  f"the jaws on a free disk of radius {DISK}: held at friction {FRICTION}?"))
+                  description=f"back anchored, jaws closed (centre line curled by a factor {CLOSE})"),)
     return Scene(
         name="gripper", title="Gripper (MDSR body 2 of 3): the C closes its jaws by external driving",
         description=__doc__.split("\n\n")[1].replace("\n", " "), mesh=mesh, material=material, cases=cases,

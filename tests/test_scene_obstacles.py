@@ -129,11 +129,11 @@ def test_a_case_curled_onto_a_disk_never_enters_it_and_its_grip_is_reported(tmp_
 
 
 def test_the_gripper_holds_its_free_disk_and_summary_json_says_so(tmp_path):
-    full = get_problem("gripper", resolution="coarse")
-    hold = full.case("hold")
+    scene = get_problem("gripper_hold")  # its own default: the coarse mesh
+    hold = scene.case("hold")
+    assert scene.mesh.n_nodes < 300 and scene.case_names == ("hold",)
     assert hold.kind == "internal" and isinstance(hold.obstacles[0], FreeDisk) and hold.friction == 0.5
-    assert full.case("close").obstacles == () and not full.obstacles  # the close case has none
-    scene = dataclasses.replace(full, cases=(hold,), animations=())
+    assert get_problem("gripper", resolution="coarse").case_names == ("close",)  # the close case alone, no obstacle
     out = tmp_path / "out"
     report = run_scene(scene, out, photos=False, figures=False, animations=False, log=None)
     case = json.loads((out / "summary.json").read_text())["cases"][0]
@@ -154,9 +154,8 @@ def test_the_gripper_holds_its_free_disk_and_summary_json_says_so(tmp_path):
 
 @pytest.mark.slow  # 13 s: the free disk's search and the design with contact again, in Python
 def test_the_gripper_hold_case_never_enters_its_disk():
-    full = get_problem("gripper", resolution="coarse")
-    hold = full.case("hold")
-    scene = dataclasses.replace(full, cases=(hold,), animations=())
+    scene = get_problem("gripper_hold", resolution="coarse")
+    hold = scene.case("hold")
     run = run_case(scene, "hold", photo=False)
     (g,) = run.report.grip
     disk = Disk(g["disk"]["center"], g["disk"]["radius"])
@@ -170,7 +169,11 @@ def test_the_author_page_saves_the_gripper_with_its_free_disk_and_reads_it_back(
     from mdsr_opt.author.export import save_scene
     from mdsr_opt.author.session import Session
 
-    scene = get_problem("gripper", resolution="coarse")
+    # the page saves a scene beside the case it edits (an external one): the gripper's close, with gripper_hold's
+    # case on the same body (the same coarse mesh)
+    grip, held = get_problem("gripper", resolution="coarse"), get_problem("gripper_hold", resolution="coarse")
+    assert np.array_equal(grip.mesh.points, held.mesh.points)
+    scene = dataclasses.replace(grip, cases=(grip.case("close"), held.case("hold")))
     files = save_scene(Session.from_scene(scene), tmp_path, "mine", notes=[])
     data = json.loads(Path(files[0]).read_text())
     hold = data["cases"][1]

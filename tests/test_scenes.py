@@ -62,7 +62,7 @@ def test_problems_folder_from_the_environment(tmp_path, monkeypatch):
 
 def test_problem_script_by_path():
     scene = get_problem(str(Path(__file__).resolve().parents[1] / "problems" / "gripper.py"), resolution="coarse")
-    assert scene.name == "gripper" and scene.case_names == ("close", "hold")
+    assert scene.name == "gripper" and scene.case_names == ("close",)
 
 
 @pytest.mark.parametrize("bad, err, match", [("tiny", ValueError, "resolution must be one of"),

@@ -101,7 +101,7 @@ def build_from(path: Path, resolution) -> Scene:
     build = getattr(mod, "build", None)
     if not callable(build):
         raise ValueError(f"{path} defines no factory build(resolution=...) -> Scene")
-    scene = build(resolution=resolution)
+    scene = build() if resolution is None else build(resolution=resolution)  # None: the script's own default
     if not isinstance(scene, Scene):
         raise TypeError(f"{path}: build() must return a Scene, got {type(scene).__name__}")
     if not scene.source:
@@ -118,8 +118,9 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
         A name from :func:`list_problems`, a ``.py`` file with a ``build`` factory, or a ``.toml`` /
         ``.json`` scene file (:func:`load_scene`).
     resolution : {"coarse", "medium", "fine"} or int, optional
-        Approximate node count (see the module docstring); default ``"medium"`` for scripts and the file's
-        own ``body.resolution`` for scene files. A scene file that gives ``max_area`` or a mesh file keeps
+        Approximate node count (see the module docstring); default: the script's own ``build`` default
+        (``"medium"`` for the library's scenes, ``"coarse"`` for ``gripper_hold``, whose solves are contact
+        solves) and the file's own ``body.resolution`` for scene files. A scene file that gives ``max_area`` or a mesh file keeps
         its own mesh.
 
     Raises
@@ -140,7 +141,7 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
             raise ValueError(f"{s} is a folder, not a scene: give a problem name, a problem script (.py) or a "
                              "scene file (.toml/.json)")
         if p.suffix.lower() == ".py":
-            return build_from(p, "medium" if resolution is None else resolution)
+            return build_from(p, resolution)
         return load_scene(p, resolution=resolution)
     files = problem_files()
     if s not in files:
@@ -148,4 +149,4 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
         lib = ", ".join(files) if files else f"none found (problems folder: {where})"
         hint = did_you_mean(s, files)
         raise UnknownName(f"unknown problem {s!r}{hint}; the library has: {lib}")
-    return build_from(files[s], "medium" if resolution is None else resolution)
+    return build_from(files[s], resolution)

@@ -404,8 +404,8 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
     """
     p = argparse.ArgumentParser(description=(build.__doc__ or "").strip().split("\n")[0])
     p.add_argument("--out", default=None, help="output folder (default: out/<scene>)")
-    p.add_argument("--resolution", default="medium", type=parse_resolution,
-                   help="coarse, medium, fine or a node count (default medium)")
+    p.add_argument("--resolution", default=None, type=parse_resolution,
+                   help="coarse, medium, fine or a node count (default: the script's, medium for most)")
     p.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
     p.add_argument("--method", default=None, choices=("flattened", "nested", "derivative-free"),
                    help="design method (default: the scene's, normally flattened)")
@@ -418,7 +418,7 @@ def run_main(build: Callable[..., Scene], argv: Sequence[str] | None = None) -> 
 
             check_out_path(a.out)
         with checking_input():  # building the scene checks it: bad input, before any work
-            scene = build(resolution=a.resolution)
+            scene = build() if a.resolution is None else build(resolution=a.resolution)
         with progress_for_cli(a, n_units(scene, a.case, True), scene.name, unit="stage") as log:
             rep = run_scene(scene, a.out or os.path.join("out", scene.name), cases=a.case,
                             method=a.method, overwrite=a.overwrite, log=log,
