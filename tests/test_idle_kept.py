@@ -42,6 +42,20 @@ def _short_second(monkeypatch, difference: float | None = None):
     monkeypatch.setattr(contractions, "design_contractions", design)
 
 
+def _reject_one_muscle_redesigns(monkeypatch):
+    """design_contractions whose designs of a single muscle are rejected (as a redesign without an idle one
+    may be)."""
+    real = contractions.design_contractions
+
+    def one_muscle_rejected(mesh, material, muscles, target, **kw):
+        res = real(mesh, material, muscles, target, **kw)
+        if len(muscles) == 1:
+            res = dataclasses.replace(res, success=False, status="rejected (test)")
+        return res
+
+    monkeypatch.setattr(contractions, "design_contractions", one_muscle_rejected)
+
+
 def test_a_redesign_stopped_short_but_verified_and_as_near_is_the_answer(monkeypatch):
     mesh, mus, target = _layout()
     with_idle, _, _ = design_active(mesh, MAT, mus, target, idle_contraction=0.0)
@@ -81,16 +95,28 @@ def test_mdsr_run_notes_an_idle_muscle_kept(monkeypatch, tmp_path):
     text = finger.read_text().replace("[routing]", lower, 1).replace("contractions = [0.3]", "contractions = [0.3, 0]")
     (tmp_path / "f.toml").write_text(text)
     scene = load_scene(tmp_path / "f.toml")  # before the patch: the file's keys are checked against the signature
-    real = contractions.design_contractions
-
-    def one_muscle_rejected(mesh, material, muscles, target, **kw):
-        res = real(mesh, material, muscles, target, **kw)
-        if len(muscles) == 1:
-            res = dataclasses.replace(res, success=False, status="rejected (test)")
-        return res
-
-    monkeypatch.setattr(contractions, "design_contractions", one_muscle_rejected)
+    _reject_one_muscle_redesigns(monkeypatch)
     rep = run_case(scene, "bend", photo=False).report
     assert rep.success and rep.idle_kept == ["lower"] and rep.dropped == []  # the tip turned up: lower idle
     assert any(n.startswith("design: idle lower kept") for n in rep.notes)
     assert design_verdict(rep).startswith("ok (idle lower kept")
+
+
+def test_the_page_says_an_idle_muscle_kept(monkeypatch):
+    """recheck10 A: when the design without the idle rope fails, the page's summary names the rope kept (it said
+    nothing: no field, and the status shown only on failure)."""
+    from mdsr_opt.author.session import Session
+
+    s = Session.from_outline([[0, 0], [4, 0], [4, 1], [0, 1]], resolution=120)
+    X = s.mesh.points
+    left, right = np.flatnonzero(X[:, 0] < 1e-9), np.flatnonzero(X[:, 0] > 4 - 1e-9)
+    c, si = np.cos(np.pi / 3), np.sin(np.pi / 3)
+    s.set_fixed(left, right, (X[right] - [0, 0.5]) @ np.array([[c, si], [-si, c]]) + [0, 0.5])
+    assert s.settle().success
+    bottom = [int(i) for i in np.argsort(X[:, 0]) if X[i, 1] < 1e-9]
+    top = [int(i) for i in np.argsort(X[:, 0]) if X[i, 1] > 1 - 1e-9]
+    s.muscles = (Muscle(bottom[1:-1], name="bottom"), Muscle(top[1:-1], name="top"))
+    s.routed_target = s.target.copy()
+    _reject_one_muscle_redesigns(monkeypatch)
+    out = s.run_design()
+    assert out["success"] and out["idle_kept"] == ["bottom"] and out["dropped"] == []
