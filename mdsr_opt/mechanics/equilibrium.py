@@ -431,7 +431,6 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
             in_held_frame(mesh, x_start.reshape(-1, 2), hold)
         if moved is not None:
             x_start = moved.reshape(-1)
-    n = mesh.n_nodes
     units = Units(mesh, material)  # solved on the unit body (size and E t about 1), mapped back
     spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
     mesh, material = units.unit_mesh, units.unit_material

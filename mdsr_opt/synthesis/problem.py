@@ -46,7 +46,6 @@ class DesignProblem:
         self.stiffness = stiffness
         self.a_max = a_max
         self.m = len(muscles)
-        n = mesh.n_nodes
         t0 = time.perf_counter()
         # the exact cable is a constraint, not an energy: the energy model is the body's (plus the
         # per-segment springs of the "springs" model, zero for the cable)
