@@ -199,3 +199,28 @@ def test_friction_without_obstacles_is_refused():
         Case("c", anchors=[0, 1], obstacles=[(0.0, 0.0)])
     with pytest.raises(ValueError, match=r"case 'c': friction must be a number >= 0"):
         Case("c", anchors=[0, 1], friction=-0.1)
+
+
+def test_the_case_figures_draw_the_obstacles_where_the_solve_had_them():
+    """The gripper's hold figures showed no disk (a grip on nothing): plot_target and plot_design draw a case's
+    obstacles, a disk inside the view, a half-plane across it without moving it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mdsr_opt import HalfPlane, Mesh
+    from mdsr_opt.plot.scenes import plot_target
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 2)
+    disk, ground = Disk((6.0, 0.5), 1.0), HalfPlane((0.0, -0.5), (0.0, 1.0))
+    fig = plot_target(mesh, mesh.points, anchors=[0], obstacles=[disk, ground])
+    ax = fig.axes[0]
+    hatched = [p for p in ax.patches if p.get_hatch() == "///"]
+    assert len(hatched) == 2 and [p.get_label() for p in hatched].count("obstacle") == 1
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    assert x0 <= 0.0 and x1 >= 7.0 and y0 <= -0.5 <= y1  # the body, the whole disk and the ground's edge in view
+    assert x1 - x0 < 20  # the half-plane's fill did not widen the view
+    assert "obstacle" in [t.get_text() for t in ax.get_legend().get_texts()]
+    plt.close(fig)

@@ -127,11 +127,11 @@ def point_band(low: float, high: float, at_bound: bool) -> bool:
     return bool(at_bound) and high - low <= POINT_BAND_RTOL * max(abs(low), 1e-300)
 
 
-def band_text(low: float, high: float, at_bound: bool = False) -> str:
-    """A stroke band as read beside its stroke: ``"[low, high]"``, or ``"(its bound)"`` for a saturated muscle's
-    point band (:func:`point_band`).
+def band_text(low: float, high: float, at_bound: bool = False, digits: int = 4) -> str:
+    """A stroke band as read beside its stroke: ``"[low, high]"`` (``digits`` significant digits), or
+    ``"(its bound)"`` for a saturated muscle's point band (:func:`point_band`).
 
     >>> band_text(1.0, 1.25), band_text(3.0, 3.0, at_bound=True)
     ('[1, 1.25]', '(its bound)')
     """
-    return "(its bound)" if point_band(low, high, at_bound) else f"[{low:.4g}, {high:.4g}]"
+    return "(its bound)" if point_band(low, high, at_bound) else f"[{low:.{digits}g}, {high:.{digits}g}]"

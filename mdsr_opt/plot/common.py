@@ -88,6 +88,39 @@ def coordinate_axes(ax, units=None, ticks=True) -> None:
         ax.yaxis.set_major_locator(MaxNLocator(3))
 
 
+#: how rigid obstacles are drawn: grey, hatched
+OBSTACLE = {"face": "#d9d9d9", "edge": "#4d4d4d", "hatch": "///"}
+
+
+def draw_obstacles(ax, obstacles) -> None:
+    """Rigid obstacles (:class:`~mdsr_opt.Disk`, :class:`~mdsr_opt.HalfPlane`, :class:`~mdsr_opt.Obstacle`)
+    drawn grey and hatched under the body, the first labelled "obstacle". A disk or polygon widens the view to
+    hold it; a half-plane fills its solid side across the view as it is (call this last)."""
+    from matplotlib.patches import Circle, Polygon
+
+    style = {"facecolor": OBSTACLE["face"], "edgecolor": OBSTACLE["edge"], "hatch": OBSTACLE["hatch"],
+             "lw": 0.8, "zorder": 0.5}
+    obstacles = list(obstacles or ())
+    for i, ob in enumerate(o for o in obstacles if not hasattr(o, "normal")):
+        patch = Circle(tuple(np.asarray(ob.center, float)), float(ob.radius)) if hasattr(ob, "radius") \
+            else Polygon(np.asarray(ob.polygon, float), closed=True)
+        patch.set(label="obstacle" if i == 0 else None, **style)
+        ax.add_patch(patch)
+    ax.autoscale_view()  # the view widened to hold the disks and polygons
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    big = 4.0 * (abs(x1 - x0) + abs(y1 - y0) + 1.0)
+    first = not any(hasattr(o, "radius") or hasattr(o, "polygon") for o in obstacles)
+    for ob in (o for o in obstacles if hasattr(o, "normal")):  # the side the normal points away from is solid
+        p, n = np.asarray(ob.point, float), np.asarray(ob.normal, float)
+        t = np.array([-n[1], n[0]])
+        corners = [p + big * t, p - big * t, p - big * t - big * n, p + big * t - big * n]
+        ax.add_patch(Polygon(corners, closed=True, label="obstacle" if first else None, **style))
+        first = False
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+
+
 def mesh_paths(mesh):
     """(fill, edges) path builders for ``mesh`` in a state ``x``: the triangles as one compound path (drawn
     in one pass, no seams) and each mesh edge once as a second one. A PolyCollection fills and strokes

@@ -7,7 +7,9 @@ import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
-from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, plot_edges, plot_mesh, plot_muscles
+from ..core.quantities import band_text
+from .common import (LEGEND_OUTSIDE, axes_or_new, coordinate_axes, draw_obstacles, plot_edges, plot_mesh,
+                     plot_muscles)
 from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, label_colors,
                     symmetric_limits, unit_label)
 
@@ -148,7 +150,7 @@ def plot_routing_timings(series, budget=None, budget_nodes=None, ax=None):
     return fig
 
 
-def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=True, units=None):
+def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=True, units=None, obstacles=()):
     """Overlay a design's driven state (moved onto the target) on the target, with the muscles.
 
     The title gives, per muscle (named and coloured as in every figure: :mod:`mdsr_opt.plot.style`), the
@@ -163,6 +165,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     muscles : muscles to draw over the driven state.
     ticks : coordinate ticks (``False``: a run's figures, see :func:`plot_contraction_graph`).
     units : the coordinates' length unit, on the axes and the difference (default ``"body units"``).
+    obstacles : rigid obstacles the design touched, drawn where they are (:func:`~mdsr_opt.plot.common.draw_obstacles`).
 
     Example
     -------
@@ -185,6 +188,8 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     if len(muscles):
         plot_muscles(result.x_aligned, muscles, ax=ax)
     ax.set_title(title or design_title(result, muscles, units), fontsize=9)
+    if len(obstacles):
+        draw_obstacles(ax, obstacles)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
     coordinate_axes(ax, units, ticks)
     return fig
@@ -210,7 +215,9 @@ def design_title(result, muscles=(), units=None, per_line: int = 3) -> str:
     strokes = np.asarray(getattr(result, "stroke", ()), dtype=float).reshape(-1)
     tail = []
     if len(band) and len(band) == len(strokes) == len(names):
-        cells = [f"{n} {v:.3g} [{lo:.3g}, {hi:.3g}]" for n, v, (lo, hi) in zip(names, strokes, band)]
+        sat = np.asarray(getattr(result, "saturated", np.zeros(len(band), bool)), dtype=bool).reshape(-1)
+        sat = sat if sat.shape == (len(band),) else np.zeros(len(band), dtype=bool)
+        cells = [f"{n} {v:.3g} {band_text(lo, hi, at, 3)}" for n, v, (lo, hi), at in zip(names, strokes, band, sat)]
         tail = [f"stroke {unit_label(units)} [band]:"] + [", ".join(cells[k:k + per_line])
                                                          for k in range(0, len(cells), per_line)]
     if len(parts) <= 2:

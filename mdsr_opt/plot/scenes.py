@@ -14,7 +14,8 @@ from matplotlib.collections import LineCollection
 from PIL import Image, ImageDraw, ImageFont
 
 from ..body.io import atomic_path
-from .common import LEGEND_OUTSIDE, axes_or_new, coordinate_axes, legend_below, mesh_paths, plot_mesh, plot_muscles
+from .common import (LEGEND_OUTSIDE, axes_or_new, coordinate_axes, draw_obstacles, legend_below, mesh_paths, plot_mesh,
+                     plot_muscles)
 from .style import BODY, LIGHT, REGION_COLORS, REST_LINE, energy_label, layout_colors, muscle_label
 
 __all__ = ['plot_scene', 'plot_target', 'save_animation']
@@ -49,7 +50,7 @@ def plot_scene(mesh, regions=None, ax=None, title=None, markersize=4, units=None
 
 def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, muscles=(), values=None,
                 ax=None, title=None, colorbar_label=None, units=None,
-                ticks=True):
+                ticks=True, obstacles=()):
     """A target shape over the rest outline: anchors (black), drag nodes (red, with their paths from rest).
 
     Parameters
@@ -62,6 +63,7 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
         without a stress unit: units of ``E*t``).
     units : the coordinates' length unit, on the axes (default ``"body units"``); ticks : coordinate ticks
         (``False``: three a side).
+    obstacles : rigid obstacles the target touches, drawn where they are (:func:`~mdsr_opt.plot.common.draw_obstacles`).
     """
     fig, ax = axes_or_new(ax, figsize=(7, 4.5))
     x = np.asarray(target, dtype=float)
@@ -82,13 +84,15 @@ def plot_target(mesh, target, anchors=(), drag_nodes=(), drag_positions=None, mu
         ax.plot(dp[:, 0], dp[:, 1], "o", color="#d62728", ms=3, label="drag points")
     if len(muscles):
         plot_muscles(x, muscles, ax=ax)
-    if len(anchors) or len(dn) or len(muscles):
+    ax.autoscale_view()
+    if len(obstacles):
+        draw_obstacles(ax, obstacles)
+    if len(anchors) or len(dn) or len(muscles) or len(obstacles):
         # beside the axes unless the colour bar is there (it would cover the legend): then below them
         if values is None:
             ax.legend(fontsize=7, **LEGEND_OUTSIDE)
         else:
             legend_below(ax)
-    ax.autoscale_view()
     coordinate_axes(ax, units, ticks)
     if title:
         ax.set_title(title, fontsize=9, y=1.0)  # placed, not searched: see plot_scene

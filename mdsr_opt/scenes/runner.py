@@ -553,7 +553,7 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
         fig = plot_target(mesh, x, anchors=case.anchors, drag_nodes=case.drag_nodes,
                           drag_positions=case.drag_positions if len(case.drag_nodes) else None,
                           muscles=setup.muscles if case.kind == "internal" else (), values=energy,
-                          title=title, units=units,
+                          title=title, units=units, obstacles=setup.obstacles or (),
                           colorbar_label=energy_label(getattr(mat, "stress_unit", None), units))
         save(fig, "target.png")
         write_mesh(folder / f"target{fmt}", mesh, x=x, material=mat)
@@ -567,7 +567,8 @@ def _write_shapes(scene: Scene, run: CaseRun, folder: Path, fmt: str, vector=Non
             save(plot_routing(mesh, x, setup.muscles, ticks=False, units=units), "muscles.png")
     if run.design is not None:
         res = run.design
-        save(plot_design(mesh, res, x, setup.muscles, ticks=False, units=units), "design.png")
+        save(plot_design(mesh, res, x, setup.muscles, ticks=False, units=units, obstacles=setup.obstacles or ()),
+             "design.png")
         write_mesh(folder / f"driven{fmt}", mesh, x=res.x_aligned, material=mat)
         files.append(str(folder / f"driven{fmt}"))
         files += write_case_fabrication(scene, run, folder)  # the scene's [fabrication]: SVG, DXF, CSV
