@@ -1,4 +1,4 @@
-"""Gripper holding an object: the C-shaped ring of ``gripper.py`` closes on a free disk; is it held?
+"""Gripper holding an object: the C-shaped ring of gripper.py closes on a free disk; is it held?
 
 Two muscles along the inner rim (its upper and lower half), contracted by ``HOLD``, close the jaws on a disk
 of radius ``DISK`` that nothing else supports: the target's solves move it (``FreeDisk``) until the
