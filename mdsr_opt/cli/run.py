@@ -205,7 +205,8 @@ def add_cli(sub) -> None:
                    "lists are removed, any other file there stays (a folder holding files but no manifest is "
                    "refused). Without it a non-empty --out is refused, so one folder never mixes two runs")
     q.add_argument("--resolution", type=parse_resolution, default=None,
-                   help="coarse (~150 nodes), medium (~600, default), fine (~2400) or a node count")
+                   help="coarse (~150 nodes), medium (~600), fine (~2400) or a node count (default: the scene's: "
+                        "medium for the library's but gripper_hold, coarse; a scene file's own)")
     q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
     q.add_argument("--method", choices=("flattened", "nested", "derivative-free"), default=None,
                    help="design method (default: the scene's, normally flattened)")
