@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import math
 import numbers
 import unicodedata
 from collections.abc import Callable, Iterable, Mapping
@@ -198,6 +199,15 @@ def positive_float(value, name: str, allow_zero: bool = False) -> float:
     if v < 0 or (v == 0 and not allow_zero):
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {v}")
     return v
+
+
+def friction_coefficient(value, name: str = "friction") -> float:
+    """Coulomb's friction coefficient: a finite real number >= 0; ``ValueError`` naming ``name`` otherwise (a
+    non-number too)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(float(value)) \
+            or value < 0:
+        raise ValueError(f"{name} must be a number >= 0 (Coulomb's coefficient), got {value!r}")
+    return float(value)
 
 
 def integer_range(lo: int | None = None, hi: int | None = None) -> str:

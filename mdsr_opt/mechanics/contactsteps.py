@@ -13,7 +13,7 @@ from .backends import minimize
 from .anchors import body_size
 from .blas import one_blas_thread
 from .contact import DELTA, RELEASE, ContactRows, first_touch_rows, handoff_rows
-from ..core.checks import positive_float
+from ..core.checks import friction_coefficient, positive_float
 from .contactsolve import (ContactProblem, ContactSpec, contact_residual, row_key, merge_rows, contact_stability,
                            polish)
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
@@ -463,9 +463,7 @@ def contact_spec(units, obstacles, contact, contact_gap, backend, friction=0.0):
         gap = DEFAULT_GAP * body_size(units.unit_mesh)
     else:
         gap = units.to_unit(check_gap(positive_float(contact_gap, "contact_gap"), body_size(units.mesh)))
-    if isinstance(friction, bool) or not isinstance(friction, (int, float, np.integer, np.floating)) or \
-            not np.isfinite(friction) or friction < 0:
-        raise ValueError(f"friction must be a number >= 0 (Coulomb's coefficient), got {friction!r}")
+    friction = friction_coefficient(friction)
     if friction > 0 and not obs:
         raise ValueError("friction acts between the body and obstacles: give obstacles")
     spec = ContactSpec([o.scaled(1.0 / units.length, np.zeros(2)) for o in obs], bool(contact), float(gap),

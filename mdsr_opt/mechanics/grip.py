@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linprog
 
-from ..core.checks import as_float_array
+from ..core.checks import as_float_array, friction_coefficient
 from .obstacles import Disk
 
 __all__ = ["grip_report", "free_disk", "contact_points"]
@@ -65,9 +65,7 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
         0 where none is held, NaN where even no load is); ``holding_force`` (the smallest of them: a load of
         any direction up to it is held); ``held`` (the load ``load`` is held).
     """
-    if isinstance(mu, bool) or not isinstance(mu, (int, float, np.integer, np.floating)) or not np.isfinite(mu) \
-            or mu < 0:
-        raise ValueError(f"mu must be a number >= 0, got {mu!r}")
+    mu = friction_coefficient(mu, "mu")
     x = as_float_array(x, "x", shape=(None, 2))
     L = np.zeros(2) if load is None else as_float_array(load, "load", shape=(2,)).astype(float)
     pairs = [p for p in contact.get("pairs", []) if p["kind"] in ("obstacle", "obstacle segment") and

@@ -18,8 +18,9 @@ Example
 
 from __future__ import annotations
 
-import numpy as np
+import numbers
 
+from ..core.checks import friction_coefficient
 from ..mechanics.obstacles import Disk, HalfPlane, Obstacle, check_obstacles
 from .reader import Reader, SceneFileError, tname
 
@@ -94,11 +95,9 @@ def check_friction(friction, label: str) -> float | None:
     ``label`` otherwise."""
     if friction is None:
         return None
-    if isinstance(friction, bool) or not isinstance(friction, (int, float, np.integer, np.floating)):
+    if isinstance(friction, bool) or not isinstance(friction, numbers.Real):
         raise TypeError(f"{label}: friction must be a number >= 0, got {type(friction).__name__}")
-    if not np.isfinite(friction) or friction < 0:
-        raise ValueError(f"{label}: friction must be a number >= 0 (Coulomb's coefficient), got {friction!r}")
-    return float(friction)
+    return friction_coefficient(friction, f"{label}: friction")
 
 
 def check_case_obstacles(scene, case) -> None:

@@ -53,7 +53,7 @@ import scipy.sparse as sp
 
 from ..body.mesh import Mesh
 from ..body.muscles import check_distinct_ropes, check_muscles
-from ..core.checks import as_float_array, positive_int
+from ..core.checks import as_float_array, friction_coefficient, positive_int
 from ..core.guards import check_stop
 from ..core.results import to_jsonable
 from ..mechanics.align import align
@@ -421,9 +421,7 @@ def walk(mesh: Mesh, material, muscles: Sequence, strokes, *, mu: float = 0.5, c
         raise ValueError("walking needs at least one muscle")
     check_distinct_ropes(mus)
     S = _strokes(strokes, len(mus))
-    if isinstance(mu, bool) or not isinstance(mu, (int, float, np.integer, np.floating)) or not np.isfinite(mu) \
-            or mu < 0:
-        raise ValueError(f"mu must be a number >= 0 (Coulomb's coefficient), got {mu!r}")
+    mu = friction_coefficient(mu, "mu")
     cycles, substeps = positive_int(cycles, "cycles"), positive_int(substeps, "substeps")
     radius = check_anchor_radius(mesh, anchor_radius)
     L0 = np.array([m.length(mesh.points) for m in mus])
