@@ -101,22 +101,23 @@ def draw_obstacles(ax, obstacles) -> None:
     style = {"facecolor": OBSTACLE["face"], "edgecolor": OBSTACLE["edge"], "hatch": OBSTACLE["hatch"],
              "lw": 0.8, "zorder": 0.5}
     obstacles = list(obstacles or ())
-    for i, ob in enumerate(o for o in obstacles if not hasattr(o, "normal")):
-        patch = Circle(tuple(np.asarray(ob.center, float)), float(ob.radius)) if hasattr(ob, "radius") \
-            else Polygon(np.asarray(ob.polygon, float), closed=True)
-        patch.set(label="obstacle" if i == 0 else None, **style)
+    label = ["obstacle"]  # the first drawn takes it
+
+    def add(patch):
+        patch.set(label=label.pop() if label else None, **style)
         ax.add_patch(patch)
+
+    for ob in (o for o in obstacles if not hasattr(o, "normal")):
+        add(Circle(tuple(np.asarray(ob.center, float)), float(ob.radius)) if hasattr(ob, "radius")
+            else Polygon(np.asarray(ob.polygon, float), closed=True))
     ax.autoscale_view()  # the view widened to hold the disks and polygons
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
     big = 4.0 * (abs(x1 - x0) + abs(y1 - y0) + 1.0)
-    first = not any(hasattr(o, "radius") or hasattr(o, "polygon") for o in obstacles)
     for ob in (o for o in obstacles if hasattr(o, "normal")):  # the side the normal points away from is solid
         p, n = np.asarray(ob.point, float), np.asarray(ob.normal, float)
         t = np.array([-n[1], n[0]])
-        corners = [p + big * t, p - big * t, p - big * t - big * n, p + big * t - big * n]
-        ax.add_patch(Polygon(corners, closed=True, label="obstacle" if first else None, **style))
-        first = False
+        add(Polygon([p + big * t, p - big * t, p - big * t - big * n, p + big * t - big * n], closed=True))
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
 

@@ -369,13 +369,14 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     for g in rep.grip or ():
         rep.notes.append(grip_line(g))
         say(prefix + grip_line(g))
+    touching = bool(case_contact(scene, case))  # obstacles: stages that model none say so
     if accept["bands"] and res.success:
-        if case_contact(scene, case):
+        if touching:
             rep.band_notes = [BANDS_NOTE]
             say(f"{prefix}stroke bands: {BANDS_NOTE}")
         else:
             _bands(scene, run, opts, say, prefix)
-    if prototype is not None and case_contact(scene, case):
+    if prototype is not None and touching:
         prototype = None
         rep.notes.append(PROTOTYPE_NOTE)
         say(prefix + PROTOTYPE_NOTE)
