@@ -122,16 +122,11 @@ def check_case_obstacles(scene, case) -> None:
     if len(free) > 1:
         raise ValueError(f"{label}: {len(free)} free disks (obstacles {free}): a case places one free disk where its "
                          "grip holds it; give the others as fixed disks")
-    try:
-        check_obstacles(obs, scene.mesh)
-    except ValueError as exc:
-        own = len(scene.obstacles)
-        msg = str(exc)
-        if "obstacles[" in msg:  # name it where the scene or the case gives it
-            i = int(msg.split("obstacles[", 1)[1].split("]", 1)[0])
-            where = f"the scene's obstacles[{i}]" if i < own else f"the case's obstacles[{i - own}]"
-            msg = where + msg.split("]", 1)[1]
-        raise ValueError(f"{label}: {msg}") from None
+    for whose, given in (("the scene's", scene.obstacles), ("the case's", case.obstacles)):
+        try:  # each list on its own, so that the message's index is where the scene or the case gives it
+            check_obstacles(list(given), scene.mesh)
+        except ValueError as exc:
+            raise ValueError(f"{label}: {whose} {exc}") from None
     if case.kind != "external":
         return
     if len(case.anchors) < 2:
