@@ -309,3 +309,17 @@ def test_no_module_keeps_deprecated_spellings():
     assert bad == []
     assert not (PKG / "core" / "deprecation.py").exists()
     assert not any("deprecat" in p.read_text().lower() for p in _modules().values())
+
+
+def test_every_file_compiles_without_warnings():
+    """No invalid escape sequence or other compile-time warning (a SyntaxError in a later Python)."""
+    import warnings
+
+    bad = []
+    for path in sorted([*PKG.rglob("*.py"), *PKG.parent.joinpath("tests").rglob("*.py"),
+                        *PKG.parent.joinpath("problems").rglob("*.py")]):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            compile(path.read_text(), str(path), "exec")
+        bad += [f"{path.name}:{w.lineno} {w.message}" for w in caught]
+    assert bad == []

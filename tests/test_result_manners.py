@@ -259,6 +259,17 @@ def test_gait_and_schedule(poses, tmp_path):
     sch.save(path)
     same(sch, GaitSchedule.load(path))
     check_damaged(GaitSchedule, path, tmp_path)
+    # a file written before the per-frame verdicts were named frame_success (its 'success' that array)
+    from mdsr_opt.core.results import load_npz, save_npz
+
+    arrays, meta = load_npz(path, "gait_schedule")
+    arrays["success"] = arrays.pop("frame_success")
+    older = tmp_path / "older.npz"
+    save_npz(older, "gait_schedule", arrays, meta)
+    same(sch, GaitSchedule.load(older))
+    arrays["success"] = np.zeros_like(arrays["success"])  # its frames failed: read so, not as solved
+    save_npz(older, "gait_schedule", arrays, meta)
+    assert not GaitSchedule.load(older).success and not GaitSchedule.load(older).frame_success.any()
 
 
 def test_fabrication_data(poses):

@@ -243,9 +243,13 @@ class GaitSchedule:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "GaitSchedule":
-        """Read a schedule written by :meth:`save` (ValueError naming a damaged or foreign file)."""
+        """Read a schedule written by :meth:`save` (ValueError naming a damaged or foreign file).
+
+        A file written before the per-frame verdicts were named ``frame_success`` (its ``success`` the
+        per-frame array) is read too: that array becomes ``frame_success``."""
         return load_fields(cls, path, "gait_schedule",
-                           convert={k: tuple for k in ("sequence", "labels", "muscle_names", "status", "reasons")})
+                           convert={k: tuple for k in ("sequence", "labels", "muscle_names", "status", "reasons")},
+                           extra=_older_frame_success)
 
     def write_csv(self, path) -> str:
         """The actuation schedule: one row per frame, strokes in ``units`` (atomically). Returns the path."""
@@ -459,3 +463,11 @@ def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Mu
     return save_animation(mesh, list(schedule.states), path, muscles=list(muscles),
                           activations=np.clip(schedule.contractions / top, 0, 1), titles=titles, fps=fps,
                           units=schedule.units)
+
+
+def _older_frame_success(arrays: dict, fields: dict) -> dict:
+    """``fields`` with an older file's per-frame ``success`` array named ``frame_success``."""
+    old = arrays.get("success")
+    if "frame_success" not in fields and old is not None and np.ndim(old) == 1:
+        fields = {**fields, "frame_success": np.asarray(old, bool)}
+    return fields

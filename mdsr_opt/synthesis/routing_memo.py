@@ -77,7 +77,7 @@ class PointList:
 
 
 def rest_lists(mesh) -> tuple[PointList, PointList]:
-    """The rest positions and the edge midpoints of ``mesh`` as :class:`PointList`\ s (for Python loops),
+    """The rest positions and the edge midpoints of ``mesh`` as :class:`PointList` objects (for Python loops),
     memoised."""
     def make():
         X, E = mesh.points, mesh.edges
