@@ -192,8 +192,12 @@ def test_downloads_say_what_is_missing(tentacle, tmp_path):
     with pytest.raises(ValueError, match="no settled target"):
         download(s, "target.vtu", tmp_path)
     s.settle()
+    import matplotlib.pyplot as plt
+
+    open_before = set(plt.get_fignums())
     data, media = download(s, "target.png", tmp_path)
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and media == "image/png"
+    assert set(plt.get_fignums()) == open_before  # the server keeps no figure of a download open
     with pytest.raises(ValueError, match="no design yet"):
         download(s, "design.png", tmp_path)
     with pytest.raises(ValueError, match="unknown download"):

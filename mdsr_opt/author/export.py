@@ -158,5 +158,5 @@ def download(session, what: str, tmpdir) -> tuple[bytes, str]:
             fig = plot_routing(mesh, x, session.muscles, units=units)
         else:
             fig = plot_design(mesh, session.design, x, session.muscles, units=units)
-        save_figure(fig, path)
+        save_figure(fig, path, close=True)  # the server runs for hours: no figure kept open
     return path.read_bytes(), "image/png" if what.endswith(".png") else "application/octet-stream"
