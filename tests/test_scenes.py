@@ -17,8 +17,8 @@ from mdsr_opt.scenes.scene import Animation, Case, Scene, UnknownName, mesh_poly
 from mdsr_opt.scenes.reader import SceneFileError
 from mdsr_opt.scenes.shapes import arc_map, arc_rigid
 from mdsr_opt.scenes.select import boundary_path, edge_path
-from mdsr_opt.scenes.library import get_problem, list_problems, problems_dir
-from mdsr_opt.scenes.scenefile import load_scene
+from mdsr_opt.scenes.library import get_problem, list_problems, problems_dir, remeshable_source
+from mdsr_opt.scenes.scenefile import load_scene, remeshable
 
 DATA = Path(__file__).parent / "data"
 FINGER = DATA / "finger.toml"
@@ -178,9 +178,37 @@ def test_scene_file_with_a_mesh_file(tmp_path):
     d["body"] = {"mesh": "body.vtu"}
     d["regions"]["tip"] = {"box": [3.9, -1, 5, 2]}
     d["muscles"][0] = {"name": "upper", "boundary": {"from": [0, 1], "to": [4, 1]}}
-    scene = load_scene(write_json(tmp_path, d))
+    path = write_json(tmp_path, d)
+    scene = load_scene(path)
     assert scene.mesh.n_nodes == mesh.n_nodes and np.allclose(scene.mesh.points, mesh.points)
     assert set(scene.regions["tip"].tolist()) == set(np.flatnonzero(mesh.points[:, 0] == 4.0).tolist())
+    # its nodes are given: a resolution asked for is refused, not silently ignored (a mesh study would
+    # repeat one mesh), at every door that takes one
+    assert not remeshable(path) and not remeshable_source(path) and remeshable(FINGER)
+    with pytest.raises(SceneFileError, match=r"body\.mesh: the body is a mesh file .* resolution 'coarse' cannot"):
+        load_scene(path, resolution="coarse")
+    with pytest.raises(SceneFileError, match="cannot re-mesh"):
+        get_problem(path, resolution=2000)
+
+
+def test_a_resolution_asked_for_re_meshes_a_max_area_body(tmp_path, capsys):
+    """``max_area`` is the file's own mesh density; a resolution given (``mdsr run --resolution``, a study)
+    meshes the outline at that node count instead of being ignored."""
+    d = finger_dict()
+    del d["body"]["resolution"]
+    d["body"]["max_area"] = 0.01
+    path = write_json(tmp_path, d)
+    own = load_scene(path).mesh.n_nodes
+    sizes = {r: load_scene(path, resolution=r).mesh.n_nodes for r in ("coarse", 1200)}
+    assert sizes["coarse"] < 0.7 * own < 1.3 * own < sizes[1200]
+    assert abs(sizes[1200] - 1200) < 0.15 * 1200 and get_problem(path, resolution=1200).mesh.n_nodes == sizes[1200]
+    d["body"] = {"mesh": "body.vtu"}
+    write_mesh(tmp_path / "body.vtu", Mesh.rectangle(4.0, 1.0, 8, 2))
+    d["regions"]["tip"] = {"box": [3.9, -1, 5, 2]}
+    d["muscles"][0] = {"name": "upper", "boundary": {"from": [0, 1], "to": [4, 1]}}
+    mesh_path = write_json(tmp_path, d, "mesh_body.json")
+    code = main(["run", str(mesh_path), "--out", str(tmp_path / "out"), "--resolution", "coarse"])
+    assert code == 2 and "cannot re-mesh it" in capsys.readouterr().err and not (tmp_path / "out").exists()
 
 
 def _set(path, value):

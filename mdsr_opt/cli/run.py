@@ -206,7 +206,8 @@ def add_cli(sub) -> None:
                    "refused). Without it a non-empty --out is refused, so one folder never mixes two runs")
     q.add_argument("--resolution", type=parse_resolution, default=None,
                    help="coarse (~150 nodes), medium (~600), fine (~2400) or a node count (default: the scene's: "
-                        "medium for the library's but gripper_hold, coarse; a scene file's own)")
+                        "medium for the library's but gripper_hold, coarse; a scene file's own resolution or "
+                        "max_area); refused for a scene file whose body is a mesh file")
     q.add_argument("--case", action="append", default=None, help="run only this case (repeatable)")
     q.add_argument("--method", choices=("flattened", "nested", "derivative-free"), default=None,
                    help="design method (default: the scene's, normally flattened)")

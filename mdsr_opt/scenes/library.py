@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 
 from .scene import Scene, UnknownName, resolve_resolution
-from .scenefile import load_scene
+from .scenefile import load_scene, remeshable
 from ..core.checks import did_you_mean
 
-__all__ = ['load_problem_module', 'problems_dir', 'figure_scripts', 'list_problems', 'get_problem']
+__all__ = ['load_problem_module', 'problems_dir', 'figure_scripts', 'list_problems', 'get_problem', 'remeshable_source']
 
 
 def load_problem_module(path: str | os.PathLike):
@@ -120,8 +120,8 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
     resolution : {"coarse", "medium", "fine"} or int, optional
         Approximate node count (see the module docstring); default: the script's own ``build`` default
         (``"medium"`` for the library's scenes, ``"coarse"`` for ``gripper_hold``, whose solves are contact
-        solves) and the file's own ``body.resolution`` for scene files. A scene file that gives ``max_area`` or a mesh file keeps
-        its own mesh.
+        solves) and the file's own ``body.resolution`` (or ``max_area``) for scene files. A resolution given
+        re-meshes a scene file's outline; a scene file whose body is a mesh file refuses one.
 
     Raises
     ------
@@ -150,3 +150,11 @@ def get_problem(name: str | os.PathLike, resolution: str | int | None = None) ->
         hint = did_you_mean(s, files)
         raise UnknownName(f"unknown problem {s!r}{hint}; the library has: {lib}")
     return build_from(files[s], resolution)
+
+
+def remeshable_source(name: str | os.PathLike) -> bool:
+    """Whether :func:`get_problem` can build the scene ``name`` at another resolution: a library name or a
+    script (its ``build`` takes the resolution), or a scene file whose body is an outline (not a mesh file:
+    :func:`~mdsr_opt.scenes.scenefile.remeshable`)."""
+    p = Path(os.fspath(name))
+    return remeshable(p) if p.suffix.lower() in (".toml", ".json") and p.exists() else True

@@ -124,9 +124,9 @@ def _fine_body(scene, n_fine: int):
     its source at ``n_fine`` nodes, or, when that does not refine it (a mesh file, ``max_area``, no source),
     every triangle split into four. Returns ``(fine scene or the scene, mesh, {case: (anchors, drag nodes,
     drag positions)}, how)``."""
-    from .library import get_problem
+    from .library import get_problem, remeshable_source
 
-    fine = get_problem(scene.source, resolution=n_fine) if scene.source else None
+    fine = get_problem(scene.source, resolution=n_fine) if scene.source and remeshable_source(scene.source) else None
     if fine is not None and fine.mesh.n_nodes >= 1.2 * scene.mesh.n_nodes:
         if fine.case_names != scene.case_names:
             raise ValueError(f"the prototype of {scene.name!r} has cases {fine.case_names}, the design scene "

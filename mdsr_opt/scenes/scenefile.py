@@ -21,7 +21,7 @@ from .obstacles import read_obstacles
 from .select import boundary_path, edge_path
 from .shapes import rigid_motion
 
-__all__ = ['load_scene', 'scene_from_data', 'material_table', 'parse_units_and_gait']
+__all__ = ['load_scene', 'remeshable', 'scene_from_data', 'material_table', 'parse_units_and_gait']
 
 
 # ---------------------------------------------------------------------------------------------- scene files
@@ -157,7 +157,9 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     ----------
     path : a ``.toml`` or ``.json`` file.
     resolution : optional
-        Overrides the file's ``body.resolution`` (not ``max_area`` or a mesh file).
+        Meshes the outline at this resolution instead of the file's ``body.resolution`` or ``body.max_area``
+        (a mesh study of the scene). A scene whose body is a mesh file keeps its nodes: a resolution is
+        refused for it (:func:`remeshable` tells beforehand).
 
     Raises
     ------
@@ -176,6 +178,15 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
     except PermissionError:
         raise SceneFileError(f"{path}: cannot read the scene file (permission denied)") from None
     return scene_from_data(path, data, resolution)
+
+
+def remeshable(path: str | os.PathLike) -> bool:
+    """Whether the scene file ``path`` gives its body as an outline, which :func:`load_scene` meshes at any
+    resolution (False: a mesh file, whose nodes are given). Raises as :func:`load_scene` for an unreadable
+    file."""
+    data = read_file(Path(path))
+    body = data.get("body") if isinstance(data, Mapping) else None
+    return not (isinstance(body, Mapping) and "mesh" in body)
 
 
 def scene_from_data(path: Path, data: dict, resolution: str | int | None = None) -> Scene:
@@ -259,6 +270,9 @@ def _scene_mesh(r: Reader, body, path: Path, resolution) -> tuple[Mesh, int]:
         for k in ("holes", "resolution", "max_area", "min_angle"):
             if k in b:
                 r.fail(f"body.{k}", "only applies to an outline, not to a mesh file")
+        if resolution is not None:
+            r.fail("body.mesh", f"the body is a mesh file with its own nodes: resolution {resolution!r} cannot "
+                               "re-mesh it (leave the resolution out, or give body.outline)")
         from ..body.io import read_mesh
 
         mpath = path.parent / r.string(b["mesh"], "body.mesh")
@@ -277,7 +291,7 @@ def _scene_mesh(r: Reader, body, path: Path, resolution) -> tuple[Mesh, int]:
     if "max_area" in b and "resolution" in b:
         r.fail("body", "give max_area or resolution, not both")
     try:
-        if "max_area" in b:
+        if "max_area" in b and resolution is None:  # a resolution asked for re-meshes (a mesh study)
             return Mesh.from_polygon(outline, max_area=r.number(b["max_area"], "body.max_area", positive=True),
                                      holes=holes, min_angle=min_angle), 0
         res = resolution if resolution is not None else b.get("resolution", "medium")
