@@ -13,7 +13,10 @@ stroke goes:
   midpoints (:func:`refine_mesh`). Any mesh can be refined so, whether it was made from an outline or
   read from a file; the outline's polygon stays the same, every muscle keeps its path (its edges are
   split) and the target is carried to the new nodes along the edges. Above ``max_refined_nodes`` this
-  part is left out, and the band says so.
+  part is left out, and the band says so. It is the discretisation error of the rope as laid out; a rope
+  drawn as waypoints and snapped to the edges of *another* mesh of the body follows another zig-zag path
+  (its rest length differs by a few per cent on coarse meshes) and takes another stroke: compare strokes
+  of ropes of the same rest length, or design on the mesh that matches the channel.
 
 Each source gives a deviation below and above the nominal stroke (the smallest and largest change among
 its designs, and 0); the band adds the sources' deviations (a worst case, not a statistical interval).
