@@ -186,3 +186,37 @@ def test_warm_start_with_the_projected_hessian_reaches_the_exact_equilibrium():
     assert exact.success and proj.success
     assert proj.residual <= 1e-8
     assert np.abs(np.asarray(proj.x) - np.asarray(exact.x)).max() < 1e-6 * mesh.size
+
+
+def test_benchmark_stage_clock_covers_the_pipeline_and_restores_it():
+    """``bench_fine_design --stages``: every stage of a pipeline run gets its CPU seconds (the solves were
+    reached: none is zero), the stages nest as stated (the rest of the design is not negative) and add up to
+    no more than the run's own CPU, and the functions wrapped for the run are the originals again after it."""
+    import importlib
+    import time
+
+    originals = []
+    for _label, module, attr in _B.STAGES:
+        owner = importlib.import_module(module)
+        for part in attr.split("."):
+            owner = getattr(owner, part)
+        originals.append(owner)
+    mesh = strip(8)
+    anchors, drags = driving(mesh)
+    cpu = {}
+    with _B.stage_cpu(cpu):
+        c0 = time.process_time()
+        out = design_pipeline(mesh, MAT, anchors, drags)
+        total = time.process_time() - c0
+    assert out.success, out.design.status
+    assert set(cpu) == {label for label, *_ in _B.STAGES}
+    for label in ("target", "routing", "warm start", "NLP", "verification"):
+        assert cpu[label] > 0.0, label
+    assert cpu["design"] >= -1e-3
+    assert sum(cpu.values()) <= total + 1e-3
+    for (_label, module, attr), f in zip(_B.STAGES, originals):
+        owner = importlib.import_module(module)
+        for part in attr.split("."):
+            owner = getattr(owner, part)
+        assert owner is f, attr
+    assert "(x" in _B.stage_line({"stage_cpu": cpu, "newton_cpu": 0.1, "ipopt_cpu": float("nan")})

@@ -168,6 +168,32 @@ def test_route_for_design_runs_each_search_once_with_the_same_result(monkeypatch
     assert n_shared < len(calls)  # the band routing's in-band search (and any with the same edges) run once
 
 
+def test_route_for_design_checks_the_target_and_finds_each_band_once_with_the_same_result(monkeypatch):
+    """The routings of route_for_design share the target's check and the admissible edges of each clearance
+    (routing_memo): the target checked once and the band found once per clearance (three routings, two
+    clearances on this strip), the same ropes, notes and fixture radius as the routings run without sharing."""
+    import mdsr_opt.synthesis.routing as routing
+
+    bench = load_script("tests/benchmarks/bench_fine_design.py")
+    mesh = bench.strip(16)
+    x = solve_external(mesh, bench.MAT, *bench.driving(mesh), backend="newton").x
+    checks, bands = [], []
+    check, band = routing.check_target_shape, routing.admissible_edges
+    monkeypatch.setattr(routing, "check_target_shape", lambda *a, **kw: checks.append(1) or check(*a, **kw))
+    monkeypatch.setattr(routing, "admissible_edges", lambda m, f, c: bands.append(c) or band(m, f, c))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shared = routing.route_for_design(mesh, x)
+        n_checks, clearances = len(checks), list(bands)
+        checks.clear()
+        bands.clear()
+        alone, _ = routing._routed_for_design(mesh, x, {})  # every routing on its own (no shared_work)
+    assert [m.nodes for m in shared.muscles] == [m.nodes for m in alone.muscles] and len(shared.muscles) >= 2
+    assert shared.notes == alone.notes and shared.fixture_radius == alone.fixture_radius
+    assert len(checks) == len(bands) == 3  # alone: each routing checks and finds its band
+    assert n_checks == 1 and len(clearances) == len(set(clearances)) == 2
+
+
 def test_routings_share_their_shortest_path_lengths_with_the_same_result(monkeypatch):
     """The routings of route_for_design look up each other's Dijkstra searches (routing_memo.FieldStore):
     fewer searches, the same ropes and notes as the routings run alone; with a budget of one search's lengths

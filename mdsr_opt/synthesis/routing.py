@@ -397,13 +397,15 @@ def route_muscles(mesh: Mesh, target: ArrayLike, *, K_a: float = 4.0, K_b: float
         clearance = fab.clearance(mesh)
         if inset is not None:
             clearance = max(clearance, positive_float(inset, "inset", allow_zero=True))
-        adm_edges = admissible_edges(mesh, fab, clearance)
+        # the routings of one body at one clearance share their band (routing_memo: deeper and band routings)
+        adm_edges = memoised(("admissible", id(mesh), fab, clearance), lambda: admissible_edges(mesh, fab, clearance))
     params = dict(K_a=K_a, K_b=K_b, K_h=K_h, n_seeds=n_seeds, max_muscles=max_muscles,
                   min_length=min_length, min_contraction=min_contraction, max_turn=max_turn,
                   seed_threshold=seed_threshold, symmetry=symmetry, compression_ratio=compression_ratio,
                   inset=None if inset is None else float(inset), band=band)
 
-    x = check_target_shape(mesh, target)
+    x = memoised(("target", id(mesh), target.dtype.str, target.shape, target.tobytes()), lambda: check_target_shape(
+        mesh, target)) if isinstance(target, np.ndarray) else check_target_shape(mesh, target)  # checked once per scope
     l0, l, w = _weights(mesh, x)
     # built when a caller asks for result.graph (the search needs no networkx graph); a partial of a module
     # function, so that a result still pickles (a run's jobs send it to worker processes)

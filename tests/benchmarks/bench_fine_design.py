@@ -17,11 +17,19 @@ Run:  python tests/benchmarks/bench_fine_design.py                     # 2.4k, 8
       python tests/benchmarks/bench_fine_design.py --plot ratios.png         # the ratios per size, drawn
       python tests/benchmarks/bench_fine_design.py --verify rest             # verified by a re-solve from rest
       python tests/benchmarks/bench_fine_design.py --tree /tmp/old           # an older tree (git archive REV mdsr_opt)
+      python tests/benchmarks/bench_fine_design.py --stages                  # the pipeline's CPU per stage
+
+``--stages`` times (process CPU) each stage of the pipeline's run: the target's solve, the routing, the design's
+warm start (its forward solve from the target), the design NLP (IPOPT, with its build and polish), the
+verification and the rest of the design (checks, set-up, reports); each beside the reference solve as a
+multiple of it, so what stands between a size and the budget can be read per stage.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import functools
 import math
 import sys
 import time
@@ -74,7 +82,60 @@ def newton_time(ny: int, backend: str) -> tuple[float, bool, np.ndarray]:
     return (time.perf_counter() - t0, time.process_time() - c0), bool(ext.success), ext.x
 
 
-def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
+#: the stages ``--stages`` times: (label, module, attribute) of the function whose calls make the stage; the
+#: outermost call counts (a stage inside another is subtracted from it, see :func:`stage_cpu`)
+STAGES = (("target", "mdsr_opt.mechanics.equilibrium", "solve_external"),
+          ("routing", "mdsr_opt.synthesis.pipeline", "route_for_design"),
+          ("design", "mdsr_opt.synthesis.pipeline", "design_active"),
+          ("warm start", "mdsr_opt.synthesis.problem", "ForwardSolver.solve"),
+          ("NLP", "mdsr_opt.synthesis.contractions", "run_flattened"),
+          ("verification", "mdsr_opt.synthesis.contractions", "verify_design"))
+
+
+@contextlib.contextmanager
+def stage_cpu(cpu: dict):
+    """Within the block, the process CPU seconds of each of :data:`STAGES` add up in ``cpu`` (by label); the
+    functions are wrapped where the pipeline looks them up and restored after. On leaving, ``cpu["NLP"]``
+    excludes the warm start inside it and ``cpu["design"]`` becomes the rest of the design (its checks,
+    set-up and reports), the NLP and the verification taken out."""
+    import importlib
+
+    saved = []
+
+    def wrap(label, f):
+        depth = [0]
+
+        @functools.wraps(f)
+        def timed(*args, **kwargs):
+            depth[0] += 1
+            c0 = time.process_time()
+            try:
+                return f(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+                if not depth[0]:
+                    cpu[label] = cpu.get(label, 0.0) + time.process_time() - c0
+        return timed
+
+    for label, module, attr in STAGES:
+        owner = importlib.import_module(module)
+        *path, name = attr.split(".")
+        for part in path:
+            owner = getattr(owner, part)
+        saved.append((owner, name, getattr(owner, name)))
+        setattr(owner, name, wrap(label, getattr(owner, name)))
+    try:
+        yield cpu
+    finally:
+        for owner, name, f in reversed(saved):
+            setattr(owner, name, f)
+        for label, *_ in STAGES:
+            cpu.setdefault(label, 0.0)
+        cpu["NLP"] -= cpu["warm start"]
+        cpu["design"] -= cpu["NLP"] + cpu["warm start"] + cpu["verification"]
+
+
+def run(ny: int, ipopt_print: int = 0, stages: bool = False, **design_options) -> dict:
     t_newton, ok_n, xn = newton_time(ny, "newton")
     t_ipopt, ok_i, xi = newton_time(ny, "ipopt")
     mesh = strip(ny)  # a new Mesh: nothing cached from the target solves
@@ -82,9 +143,11 @@ def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
     opts = dict(design_options)
     if ipopt_print:
         opts["options"] = {"print_level": ipopt_print}
-    t0, c0 = time.perf_counter(), time.process_time()
-    out = design_pipeline(mesh, MAT, anchors, drags, **opts)
-    t_design, c_design = time.perf_counter() - t0, time.process_time() - c0
+    cpu = {}
+    with stage_cpu(cpu) if stages else contextlib.nullcontext():
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = design_pipeline(mesh, MAT, anchors, drags, **opts)
+        t_design, c_design = time.perf_counter() - t0, time.process_time() - c0
     d = out.design
     ok = [t for t, good in ((t_newton, ok_n), (t_ipopt, ok_i)) if good]
     ref = min(ok) if ok else (math.nan, math.nan)
@@ -95,7 +158,8 @@ def run(ny: int, ipopt_print: int = 0, **design_options) -> dict:
             "status": d.status, "iters": d.iterations, "muscles": [len(mu.nodes) for mu in out.muscles],
             "times": out.times, "verified": None if d.verification is None else d.verification.passed,
             "verified_from": None if d.verification is None else d.verification.forward_start,
-            "newton_agree": float(np.abs(xn - xi).max()) if ok_n and ok_i else math.nan}
+            "newton_agree": float(np.abs(xn - xi).max()) if ok_n and ok_i else math.nan, "stage_cpu": cpu,
+            "strokes": np.asarray(d.stroke, dtype=float).tolist()}
 
 
 def main(argv=None):
@@ -105,6 +169,7 @@ def main(argv=None):
     ap.add_argument("--plot", default=None, help="draw the ratio per size into this image file")
     ap.add_argument("--verify", default=None, choices=["rest", "design"],
                     help="how the design is verified (default: the pipeline's, from the design's state)")
+    ap.add_argument("--stages", action="store_true", help="also the pipeline's CPU per stage (see the module)")
     ap.add_argument("--tree", default=None,
                     help="import mdsr_opt from this folder (e.g. git archive REV mdsr_opt) instead of this checkout")
     args = ap.parse_args(argv)
@@ -114,7 +179,7 @@ def main(argv=None):
            f"{'diff/size':>9} {'ok':>5} {'iters':>5}  muscles / status"
     print(head, flush=True)
     for ny in args.ny:
-        r = run(ny, args.ipopt_print, **({"verify": args.verify} if args.verify else {}))
+        r = run(ny, args.ipopt_print, args.stages, **({"verify": args.verify} if args.verify else {}))
         rows.append(r)
         print(f"{r['nodes']:6d} {r['design_s']:9.2f} {r['newton_s']:9.2f} {r['ipopt_s']:8.2f} {r['ratio']:6.2f} "
               f"{r['cpu_ratio']:9.2f} {r['diff_rel']:9.4f} {str(r['success']):>5} {r['iters']:5d}  {r['muscles']} {r['status']}",
@@ -123,6 +188,8 @@ def main(argv=None):
               f"(from {r['verified_from']}); "
               f"CPU s: design {r['design_cpu']:.2f}, newton {r['newton_cpu']:.2f}, ipopt {r['ipopt_cpu']:.2f}",
               flush=True)
+        if r["stage_cpu"]:
+            print(f"{'':6} {stage_line(r)}", flush=True)
     print(f"\nCPU ratio per size (pipeline over the faster reference solve; budget {BUDGET:g}x):")
     for r in rows:
         verdict = "within" if r["cpu_ratio"] <= BUDGET else "over"
@@ -130,6 +197,14 @@ def main(argv=None):
               f"difference {100 * r['diff_rel']:.2f} % of the size, success {r['success']}")
     if args.plot:
         plot_ratios(rows, args.plot)
+
+
+def stage_line(r: dict) -> str:
+    """The pipeline's CPU per stage of a row of :func:`run` (``--stages``), each in seconds and as a multiple of
+    the reference solve."""
+    ref = min(c for c in (r["newton_cpu"], r["ipopt_cpu"]) if np.isfinite(c))
+    return "CPU per stage, s (x reference): " + ", ".join(
+        f"{label} {r['stage_cpu'][label]:.3f} ({r['stage_cpu'][label] / ref:.2f}x)" for label, *_ in STAGES)
 
 
 def plot_ratios(rows: list, path: str) -> None:
