@@ -23,7 +23,7 @@ import numpy as np
 
 from ..scenes.obstacles import obstacle_tables
 
-__all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name"]
+__all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name", "saved_layout"]
 
 #: the sentence a save adds to the scene's description (followed by the file it was opened from)
 AUTHORED_FROM = "Authored on the mdsr author page from "
@@ -166,11 +166,20 @@ def _cases(session) -> list:
     return out
 
 
+def saved_layout(session) -> tuple:
+    """The muscles a save lays in the edited case: the layout the last design was made for when it dropped idle
+    muscles (``mdsr run`` drops them again from the same design, so its result is the page's: a design made
+    afresh on the muscles kept may stop elsewhere), else the page's layout (after its deletions)."""
+    if session.design is not None and session.dropped and session.designed_layout:
+        return tuple(session.designed_layout)
+    return tuple(session.muscles)
+
+
 def _with_page_muscles(d: dict, session) -> dict:
     """The edited case's table ``d`` with the layout routed on the page (after its deletions) as its own
     muscles, designed with the end fixtures they were fitted to: they drive this case alone."""
     if session.muscles:
-        d["muscles"] = _muscle_tables(session.muscles)
+        d["muscles"] = _muscle_tables(saved_layout(session))
         d.pop("anchor_radius", None)
         if session.fixture_radius is not None:  # the routed ropes' fixtures (shrunk when they had to be)
             d["anchor_radius"] = float(session.fixture_radius)
@@ -231,10 +240,17 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         design["muscle_model"] = session.design.muscle_model
         design["stiffness"] = float(session.design.stiffness)
         design["a_max"] = float(session.design.a_max)
-        design["method"] = session.design.method
+        # the method asked where the obstacles forced the derivative-free one (mdsr run forces it again, and a case
+        # without them keeps the one asked), else the one the design ran
+        design["method"] = (session.design_params.get("method") if session.design_notes else None) or \
+            session.design.method
     if design:
         d["design"] = {k: _plain(v) for k, v in design.items() if v is not None}
         _design_note(session, d["design"], notes)
+    if saved_layout(session) != tuple(session.muscles):
+        names = ", ".join(str(x.name) for x in session.dropped)
+        notes.append(f"muscles: saved with {names}, which the design dropped as idle: mdsr run drops "
+                     f"{'it' if len(session.dropped) == 1 else 'them'} again from the same design (the page's result)")
     _fabrication_note(session, notes)
     d["cases"] = _cases(session)
     if scene is not None and scene.animations:
@@ -305,6 +321,10 @@ def _same_case(a, b) -> bool:
             and a.anchor_radius == b.anchor_radius)
 
 
+def _obstacles(obstacles) -> list:
+    return obstacle_tables(obstacles)
+
+
 def check_read_back(back, session, d: dict) -> str:
     """What differs between the saved scene ``back`` (read with :func:`~mdsr_opt.load_scene`) and the
     session it was saved from, its content ``d`` and the scene the session opened ("" when nothing does)."""
@@ -321,7 +341,7 @@ def check_read_back(back, session, d: dict) -> str:
         return "the mesh"
     was = o.scene.case(edited) if o is not None and edited in o.scene.case_names else None
     # the edited case lays the page's layout once routed, else its own muscles as loaded (or none)
-    if _layout(case.muscles) != _layout(session.muscles or (was.muscles if was is not None else None)):
+    if _layout(case.muscles) != _layout(saved_layout(session) or (was.muscles if was is not None else None)):
         return f"case {edited!r}: muscles"
     radius = session.fixture_radius if session.muscles else (was.anchor_radius if was is not None else None)
     if case.anchor_radius != (None if radius is None else float(radius)):
@@ -345,6 +365,11 @@ def check_read_back(back, session, d: dict) -> str:
         return "the regions"
     if (back.units or None) != (scene.units or None):
         return "the units"
+    if _obstacles(back.obstacles) != _obstacles(scene.obstacles) or back.friction != scene.friction:
+        return "the obstacles"
+    if o.case is not None and (_obstacles(back.case(edited).obstacles) != _obstacles(scene.case(edited).obstacles)
+                               or back.case(edited).friction != scene.case(edited).friction):
+        return f"case {edited!r}: obstacles"
     return ""
 
 
@@ -366,6 +391,12 @@ def kept_lines(session) -> list[str]:
     if others:  # the layout routed here is the edited case's own: the other cases keep theirs (or route)
         out.append(f"muscles routed here: case {edited!r}'s alone; cases {', '.join(others)}: their muscles (or "
                    "routing) as loaded")
+    owned = [c.name for c in scene.cases if c.obstacles]
+    if scene.obstacles or owned:  # every solve of the page takes them, as mdsr run does
+        what = [f"{len(scene.obstacles)} of the scene"] if scene.obstacles else []
+        what += [f"case {n!r}'s own" for n in owned]
+        fr = "" if scene.friction is None else f", friction {scene.friction:g}"
+        out.append(f"obstacles ({'; '.join(what)}){fr}: kept as loaded")
     if scene.gait is not None:
         out.append(f"gait {scene.gait.name!r} (poses {', '.join(scene.gait.sequence)}): kept as loaded")
     if scene.animations:

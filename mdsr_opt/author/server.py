@@ -158,6 +158,7 @@ def _is_library(s) -> bool:
 
 
 def body_message(s) -> dict:
+    from .contact import contact_lines, obstacle_entries, solve_options
     from .roundtrip import kept_lines
     from .session import design_defaults, routing_defaults
 
@@ -174,6 +175,8 @@ def body_message(s) -> dict:
             "routing": dict(routing_defaults(), **{k: ro[k] for k in ("K_a", "K_b", "max_muscles") if k in ro}),
             "design": {k: (v if isinstance(v, (int, float, str)) else None) for k, v in dd.items()},
             "fabrication": s.fabrication_shown(), "units": s.units, "kept": kept_lines(s),
+            # the edited case's obstacles (drawn), and what the page's solves do with them and the self-contact
+            "obstacles": obstacle_entries(solve_options(s).get("obstacles", [])), "contact": contact_lines(s),
             "material": {"model": s.material.kind, "E": s.material.E, "nu": s.material.nu}}
 
 
@@ -371,6 +374,9 @@ class Page:
         d.update(type="state", seq=msg.get("seq"), dropped=self.dropped, anchors=s.anchors.tolist(),
                  drag_nodes=s.drag_nodes.tolist(), drag_positions=s.drag_positions.tolist(),
                  settled=s.target is not None)
+        if s.placed:  # the obstacles as this target placed them (a free disk moves)
+            from .contact import obstacle_entries
+            d["obstacles"] = obstacle_entries(s.placed)
         return d
 
 

@@ -17,9 +17,10 @@ Two kinds of solve:
   solve converged to a state whose boundary crosses itself is shown as the failed state it is (no
   further solve), and the next drag starts from it.
 * **settled** (:meth:`Session.settle`): ``solve_external(mesh, material, anchors, drags)`` with its
-  defaults, exactly what ``mdsr run`` solves for the saved scene's target (the same numbers, bit for bit;
-  a warm start would reach the same equilibrium only to the tolerance). A released drag is settled; the
-  server starts this solve (:meth:`Session.exact`) as soon as a drag waits for the next move.
+  defaults and the case's obstacles, friction and self-contact, exactly what ``mdsr run`` solves for the saved
+  scene's target (:mod:`~mdsr_opt.author.contact`; bit for bit; a warm start would reach the same equilibrium
+  only to the tolerance). A released drag is settled; the server starts this solve (:meth:`Session.exact`)
+  as soon as a drag waits for the next move. With contact the live drag makes no preview (it models none).
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ from ..synthesis.acceptance import design_active
 from ..synthesis.contractions import design_contractions
 from ..synthesis.results import MuscleWarning
 from ..mechanics.equilibrium import solve_external
-from ..scenes.reader import contact_options
 from ..body.mesh import Mesh
 from ..core.checks import node_indices
 from ..mechanics.anchors import body_size
@@ -51,6 +51,7 @@ from ..scenes.library import get_problem
 from ..plot.style import label_slots, muscle_color
 from ..scenes.reader import read_file
 from ..scenes.scenefile import load_scene, scene_from_data
+from .contact import design_options_with_obstacles, live_options, target_solve
 from .roundtrip import Origin
 from .summary import design_summary
 
@@ -160,6 +161,9 @@ class Session:
     deleted: tuple = ()  # names of the routed muscles the user deleted
     acceptance: dict = field(default_factory=dict)  # the scene's [acceptance] (mdsr run's; saved with the scene)
     origin: Origin | None = None  # the scene opened and its edited case: what a saved scene keeps (.roundtrip)
+    placed: list = field(default_factory=list)  # the edited case's obstacles as the last target placed them
+    design_notes: list = field(default_factory=list)  # what the obstacles changed in the last design (mdsr run's)
+    designed_layout: tuple = ()  # the muscles the last design started from (before it dropped idle ones)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -258,11 +262,9 @@ class Session:
         return None
 
     def _report(self, res, live: bool, warm_failed: bool, t0: float) -> SolveReport:
-        if res.success:  # solve_external accepts no inverted element and no self-crossing boundary
-            crossing, inverted = False, []
-        else:
-            crossing = bool(self.mesh.boundary_crosses(res.x))
-            inverted = np.flatnonzero(self.mesh.jacobians(res.x) <= 0).tolist()
+        # solve_external accepts no inverted element and no self-crossing boundary
+        crossing = not res.success and bool(self.mesh.boundary_crosses(res.x))
+        inverted = [] if res.success else np.flatnonzero(self.mesh.jacobians(res.x) <= 0).tolist()
         return SolveReport(x=res.x.copy(), success=bool(res.success), status=str(res.status),
                            iterations=int(res.iterations), residual=float(res.residual),
                            min_J=float(res.min_J), crossing=crossing, inverted=inverted,
@@ -270,8 +272,7 @@ class Session:
                            build_time=float(res.build_time))
 
     def _rest_report(self, why: str) -> SolveReport:
-        return SolveReport(x=self.mesh.points.copy(), success=False, status=why, iterations=0, residual=0.0,
-                           min_J=1.0, crossing=False, inverted=[], live=False)
+        return SolveReport(self.mesh.points.copy(), False, why, 0, 0.0, 1.0, False, [], live=False)
 
     def settle(self) -> SolveReport:
         """``solve_external`` with the session's anchors and drags and its defaults (the scene's target)."""
@@ -280,13 +281,19 @@ class Session:
         if why:
             self.state = self._rest_report(why)
             return self.state
-        res = self.exact()
-        self.state = self._report(res, live=False, warm_failed=False, t0=t0)
-        self.target = res.x.copy() if res.success else None
+        try:
+            res = self.exact()
+        except ValueError as exc:  # what the saved scene would refuse (a drag into an obstacle ...): shown
+            self.state, self.target = self._rest_report(f"refused: {exc}"), None
+            return self.state
+        self.placed = list(self.__dict__["_exact"][2])
+        self.state, self.target = self._report(res, False, False, t0), (res.x.copy() if res.success else None)
         return self.state
 
     def exact(self):
-        """``solve_external`` of the current anchors and drags with its defaults (what :meth:`settle` shows).
+        """``solve_external`` of the current anchors and drags with its defaults (what :meth:`settle` shows), with
+        the scene's self-contact and the case's obstacles and friction as ``mdsr run`` solves the saved scene's
+        target (:func:`~mdsr_opt.author.contact.target_solve`).
 
         The last result is kept with its fixed set, so the same fixed set is solved once: the server solves
         it while a drag pauses (stopped when the drag moves on), and the release then takes that result."""
@@ -294,9 +301,8 @@ class Session:
                         for a in (self.anchors, self.drag_nodes, self.drag_positions))
         c = self.__dict__.get("_exact")
         if c is None or c[0] != key:
-            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
-                                 **contact_options(self.design_options))  # a contact scene's, as mdsr run
-            c = self.__dict__["_exact"] = (key, res)
+            res, placed, _ = target_solve(self)
+            c = self.__dict__["_exact"] = (key, res, placed)
         return c[1]
 
     def drag(self) -> SolveReport:
@@ -312,18 +318,22 @@ class Session:
         prev = self.state
         if prev is None or not (prev.success or prev.crossing and not prev.inverted):
             return self._cold(t0)  # a crossing equilibrium shown: the next preview starts there too
-        contact = contact_options(self.design_options)
-        for fresh in (False, True):
-            guess = self._predict(prev.x, fresh)
+        contact = live_options(self)  # the obstacles where the last settled solve placed them
+        # with contact no preview (it models none) and no predictor (its step may enter an obstacle): a
+        # continuation from the shown state, load-stepped as needed
+        for fresh in (None,) if contact else (False, True):
+            guess = prev.x if contact else self._predict(prev.x, fresh)
             if guess is None:
                 continue
-            rep = None if contact else self._preview(guess, t0)  # the preview models no contact
+            rep = None if contact else self._preview(guess, t0)
             if rep is not None:
-                self.state = rep
-                self.target = None
+                self.state, self.target = rep, None  # a live state is not the settled target
                 return rep
-            res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
-                                 initial_guess=guess, min_step=1.0, **contact)
+            try:
+                res = solve_external(self.mesh, self.material, self.anchors, (self.drag_nodes, self.drag_positions),
+                                     initial_guess=guess, **({} if contact else {"min_step": 1.0}), **contact)
+            except ValueError:  # e.g. a drag into an obstacle: the settled solve names it
+                break
             rep = self._report(res, live=True, warm_failed=False, t0=t0)
             # converged but crossing itself: shown as it is (a cold solve would not uncross it)
             if res.success or rep.crossing and not rep.inverted and res.residual <= 1e-6:
@@ -587,13 +597,15 @@ class Session:
             opts["anchor_radius"] = self.fixture_radius
         # the wall a rope's two end fixtures keep between them: the fabrication's, as mdsr run designs it
         opts["fixture_wall"] = self.fabrication_shown()["wall"]
+        # a case with obstacles: designed with them as mdsr run designs it (derivative-free, clamped), said how
+        run, said = design_options_with_obstacles(self, opts)
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", MuscleWarning)  # the summary's "saturated" says it
             idle = {k: self.acceptance[k] for k in ("idle_contraction",) if k in self.acceptance}  # as mdsr run
-            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **idle, **opts)
-        self.muscles = tuple(kept)
-        self.design, self.design_params = res, opts
+            res, kept, self.dropped = design_active(self.mesh, self.material, self.muscles, target, **idle, **run)
+        self.designed_layout, self.muscles = self.muscles, tuple(kept)  # a save lays the layout designed
+        self.design, self.design_params, self.design_notes = res, opts, said
         return self.design_summary()
 
     def design_summary(self) -> dict:

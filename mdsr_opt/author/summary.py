@@ -51,6 +51,7 @@ def design_summary(session) -> dict:
                                              *[session.acceptance[k] for k in ("max_difference",) if k in session.acceptance],
                                              units=session.units or None,
                                              rest_difference=rest_difference(session.mesh, target)),
+            "notes": list(getattr(session, "design_notes", [])),  # what the obstacles changed, as mdsr run says
             "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in session.muscles]}
 
 

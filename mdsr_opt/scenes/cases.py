@@ -17,7 +17,8 @@ from .obstacles import FreeDisk, case_contact, solve_friction
 from .reader import contact_options
 from .scene import Case, Scene
 
-__all__ = ['CaseSetup', 'prepare_case', 'case_anchor_radius', 'given_muscle_conflicts', 'place_free_disk']
+__all__ = ['CaseSetup', 'prepare_case', 'case_solve_options', 'solve_target', 'case_anchor_radius',
+           'given_muscle_conflicts', 'place_free_disk']
 
 
 # ---------------------------------------------------------------------------------------------- design problem
@@ -174,29 +175,14 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
     routing this body or mesh cannot hold (a :class:`~mdsr_opt.core.errors.LayoutError`): its message is
     ``routing_error``, and ``muscles`` is empty when they were to be routed.
     """
-    from ..mechanics.equilibrium import solve_external, solve_internal
     from ..synthesis.fabrication import check_fabrication
     from ..synthesis.routing import RoutingWarning, route_for_design
 
     if isinstance(case, str):
         case = scene.case(case)
     t0 = time.perf_counter()
-    known = None
-    contact = contact_options(scene.design_options)  # [design] contact = true: the targets touch, too
-    contact.update(solve_friction(case_contact(scene, case)))  # the scene's and the case's obstacles
-
-    def solve(obstacles=None):
-        kw = dict(contact, **({} if obstacles is None else {"obstacles": obstacles}))
-        if case.kind == "external":
-            return solve_external(scene.mesh, scene.material, case.anchors, case.drags, **kw)
-        return solve_internal(scene.mesh, scene.material, scene.case_muscles(case), case.contractions,
-                              muscle_model=scene.design_options.get("muscle_model", "cable"),
-                              stiffness=scene.design_options.get("stiffness", 10.0),
-                              anchor_radius=case_anchor_radius(scene, case), **kw)
-
     known = None if case.kind == "external" else case.contractions.copy()
-    placed, freed = place_free_disk(contact.get("obstacles", []), solve)
-    res = solve() if freed is None else freed.pop("result")
+    res, placed, freed = solve_target(scene, case)
     t1 = time.perf_counter()
     routing = None
     muscles: tuple = ()
@@ -228,6 +214,42 @@ def prepare_case(scene: Scene, case: Case | str, *, route_internal: bool = True)
                      target_result=res, routing=routing, times={"target": t1 - t0, "routing": t2 - t1},
                      warnings=notes, fabrication=given, anchor_radius=case_anchor_radius(scene, case, routing),
                      routing_error=refused, obstacles=placed or None, free_disk=freed)
+
+
+def case_solve_options(scene: Scene, case: Case) -> dict:
+    """The contact keywords of ``case``'s solves: the scene's self-contact
+    (:func:`~mdsr_opt.scenes.reader.contact_options`) and the scene's and the case's obstacles with their
+    friction (:func:`~mdsr_opt.scenes.obstacles.case_contact`, frictionless with a free disk,
+    :func:`~mdsr_opt.scenes.obstacles.solve_friction`); ``{}`` for a case without contact."""
+    contact = contact_options(scene.design_options)  # [design] contact = true: the targets touch, too
+    contact.update(solve_friction(case_contact(scene, case)))  # the scene's and the case's obstacles
+    return contact
+
+
+def solve_target(scene: Scene, case: Case, **options):
+    """The target solve of ``case`` as :func:`prepare_case` makes it: ``(result, obstacles, free_disk)``.
+
+    External cases: :func:`~mdsr_opt.solve_external` of its anchors and drags; internal ones:
+    :func:`~mdsr_opt.solve_internal` of its muscles at its contractions; both with :func:`case_solve_options`,
+    a free disk first placed where the grip holds it (:func:`place_free_disk`). ``obstacles`` are the case's
+    as the target placed them (empty without obstacles), ``free_disk`` the placement's report (None without a
+    free disk). ``options``: further keywords of the solver (an ``initial_guess``, say)."""
+    from ..mechanics.equilibrium import solve_external, solve_internal
+
+    contact = case_solve_options(scene, case)
+
+    def solve(obstacles=None):
+        kw = dict(contact, **options, **({} if obstacles is None else {"obstacles": obstacles}))
+        if case.kind == "external":
+            return solve_external(scene.mesh, scene.material, case.anchors, case.drags, **kw)
+        return solve_internal(scene.mesh, scene.material, scene.case_muscles(case), case.contractions,
+                              muscle_model=scene.design_options.get("muscle_model", "cable"),
+                              stiffness=scene.design_options.get("stiffness", 10.0),
+                              anchor_radius=case_anchor_radius(scene, case), **kw)
+
+    placed, freed = place_free_disk(contact.get("obstacles", []), solve)
+    res = solve() if freed is None else freed.pop("result")
+    return res, placed, freed
 
 
 def case_anchor_radius(scene: Scene, case: Case, routing=None) -> float | None:

@@ -153,9 +153,9 @@ def measure(nodes: int, step: float, updates: int, log=print, body_name: str = "
     return row
 
 
-def screenshot(path: str) -> str:
-    """Drive the page in headless chromium (tentacle, route, delete the shortest rope, design, overlay) and save
-    a PNG at ``path``."""
+def screenshot(path: str, body: str = "tentacle", resolution: str | None = "coarse") -> str:
+    """Drive the page in headless chromium (``body``, default tentacle: route, delete the shortest rope, design,
+    overlay) and save a PNG at ``path``."""
     import shutil
     import tempfile
 
@@ -165,7 +165,7 @@ def screenshot(path: str) -> str:
 
     from mdsr_opt.author import start_in_thread
 
-    url, server = start_in_thread("tentacle", resolution="coarse", out=tempfile.mkdtemp())
+    url, server = start_in_thread(body, resolution=resolution, out=tempfile.mkdtemp())
     opts = webdriver.ChromeOptions()
     opts.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
     for flag in ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -188,14 +188,16 @@ def screenshot(path: str) -> str:
         wait("const s = mdsrAuthor.state(); return s && s.settled && !mdsrAuthor.busy();")
         drv.find_element(By.ID, "route").click()
         routing = wait("return mdsrAuthor.routing();")
-        stub = min(routing["muscles"], key=lambda m: len(m["nodes"]))["name"]  # the shortest rope: deleted
-        drv.find_element(By.CSS_SELECTOR, f"#muscle-table tr[data-name='{stub}']").click()
-        drv.find_element(By.ID, "delete-muscle").click()
-        wait("const r = mdsrAuthor.routing(); return r && r.deleted.length;")
-        drv.find_element(By.ID, "design").click()
-        wait("return mdsrAuthor.design();")
-        drv.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()
-        wait("return document.querySelector('#muscle-table tr') !== null;")
+        if len(routing["muscles"]) > 1:  # the shortest rope: deleted
+            stub = min(routing["muscles"], key=lambda m: len(m["nodes"]))["name"]
+            drv.find_element(By.CSS_SELECTOR, f"#muscle-table tr[data-name='{stub}']").click()
+            drv.find_element(By.ID, "delete-muscle").click()
+            wait("const r = mdsrAuthor.routing(); return r && r.deleted.length;")
+        if routing["muscles"]:  # a body the routing lays no rope on is shown with its target alone
+            drv.find_element(By.ID, "design").click()
+            wait("return mdsrAuthor.design();", timeout=600)
+            drv.find_element(By.CSS_SELECTOR, "input[name=view][value=overlay]").click()
+            wait("return document.querySelector('#muscle-table tr') !== null;")
         time.sleep(0.5)
         drv.save_screenshot(path)
     finally:

@@ -144,9 +144,9 @@
     $("save-name").value = ""; $("save-name").placeholder = m.name;  // empty: Save uses the body's name
     showLoaded(m);
     $("saved").textContent = ""; S.confirm = null; $("confirm").hidden = true;
-    listLines("kept", m.kept || []); listLines("save-notes", []);
+    listLines("kept", m.kept || []); listLines("save-notes", []); listLines("contact", m.contact || []);
     updateTable(); drawButtons(); updateDownloads();
-    fit(m.points.concat(m.drag_positions));
+    fit(m.points.concat(m.drag_positions, obstaclePoints(m.obstacles || [], m.size)));
     S.needFit = true;
   }
 
@@ -155,7 +155,7 @@
     if (t0 !== undefined) { S.rtts.push([performance.now(), performance.now() - t0]); delete S.sentAt[m.seq]; }
     if (S.rtts.length > 40) S.rtts.shift();
     S.state = m;
-    if (S.needFit && m.x) { fit(S.body.points.concat(m.x, m.drag_positions)); S.needFit = false; }
+    if (S.needFit && m.x) { fit(S.body.points.concat(m.x, m.drag_positions, obstaclePoints(obstacles(), S.body.size))); S.needFit = false; }
     if (m.live) S.nLive += 1;
     if (m.seq == null || m.seq === S.inflight) S.inflight = null;
     // the server's fixed sets are what was solved; take them when no local edit is in progress
@@ -253,6 +253,7 @@
     if ((d.saturated || []).length) parts.push(`saturated ${d.saturated.map(esc).join(", ")}`);
     if ((d.dropped || []).length) parts.push(`dropped ${d.dropped.map((x) => esc(x.name)).join(", ")} (idle)`);
     if ((d.idle_kept || []).length) parts.push(`idle ${d.idle_kept.map(esc).join(", ")} kept (the design without them failed)`);
+    for (const n of d.notes || []) parts.push(esc(n));  // what the obstacles changed, as mdsr run says
     return parts.length ? "; " + parts.join("; ") : "";
   }
 
@@ -277,6 +278,37 @@
     const w = Math.max(x1 - x0, 1e-9), h = Math.max(y1 - y0, 1e-9);
     const s = 0.8 * Math.min(r.width / w, r.height / h);
     S.view = { s, ox: r.width / 2 - s * (x0 + x1) / 2, oy: r.height / 2 + s * (y0 + y1) / 2 };
+  }
+  // the obstacles: as the last target placed them (a free disk moves), else as the scene gives them
+  function obstacles() { return (S.state && S.state.obstacles) || (S.body && S.body.obstacles) || []; }
+  function obstaclePoints(obs, size) {  // points the view keeps in sight: a disk's box, a polygon, a half-plane's point
+    const out = [];
+    for (const o of obs) {
+      if (o.kind === "disk") out.push([o.center[0] - o.radius, o.center[1] - o.radius], [o.center[0] + o.radius, o.center[1] + o.radius]);
+      else if (o.kind === "polygon") out.push(...o.points);
+      else if (Math.abs(o.point[0]) < 10 * size && Math.abs(o.point[1]) < 10 * size) out.push(o.point);
+    }
+    return out;
+  }
+  function drawObstacles() {  // grey, hatched by transparency: the body may touch them, never enter
+    const r = canvas.getBoundingClientRect();
+    ctx.fillStyle = "rgba(90,90,90,.28)"; ctx.strokeStyle = "#555"; ctx.lineWidth = 1.5;
+    for (const o of obstacles()) {
+      ctx.beginPath();
+      if (o.kind === "disk") {
+        const c = toScreen(o.center); ctx.arc(c[0], c[1], o.radius * S.view.s, 0, 2 * Math.PI);
+        if (o.free) ctx.setLineDash([5, 3]);
+      } else if (o.kind === "polygon") {
+        o.points.forEach((p, k) => { const q = toScreen(p); k ? ctx.lineTo(q[0], q[1]) : ctx.moveTo(q[0], q[1]); }); ctx.closePath();
+      } else {  // the half-plane the normal points away from: its edge across the view, filled beyond it
+        const p = toScreen(o.point), n = [o.normal[0], -o.normal[1]], L = 4 * (r.width + r.height);
+        const nn = Math.hypot(n[0], n[1]), u = [n[0] / nn, n[1] / nn], t = [-u[1], u[0]];
+        ctx.moveTo(p[0] + L * t[0], p[1] + L * t[1]); ctx.lineTo(p[0] - L * t[0], p[1] - L * t[1]);
+        ctx.lineTo(p[0] - L * t[0] - L * u[0], p[1] - L * t[1] - L * u[1]); ctx.lineTo(p[0] + L * t[0] - L * u[0], p[1] + L * t[1] - L * u[1]);
+        ctx.closePath();
+      }
+      ctx.fill(); ctx.stroke(); ctx.setLineDash([]);
+    }
   }
   const toScreen = (p) => [S.view.ox + S.view.s * p[0], S.view.oy - S.view.s * p[1]];
   const toWorld = (q) => [(q[0] - S.view.ox) / S.view.s, (S.view.oy - q[1]) / S.view.s];
@@ -369,6 +401,7 @@
     const items = [["#b9d0ea", "target (shown state)", "fill"], ["#9aa5b1", "rest outline (dashed)", "dash"],
                    ["#111", "anchor", "square"], [GROUP_COLORS[0], "drag node", "dot"]];
     if (S.muscles.length) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
+    if (obstacles().length) items.push(["rgba(90,90,90,.5)", "obstacle (touched, never entered)", "fill"]);
     if (S.design && view === "overlay") items.push(["#f4a261", "driven by the design (aligned)", "fill"]);
     if (S.graph && $("show-graph").checked) items.push(["#d62728", "contracted edge", "line"], ["#1f77b4", "elongated edge", "line"]);
     if (S.design && view === "difference") items.push(["rgb(175,40,20)", "far from target", "fill"]);
@@ -389,6 +422,7 @@
     ctx.clearRect(0, 0, r.width, r.height);
     if (S.body) {
       const B = S.body, x = shown(), st = S.state;
+      drawObstacles();
       for (const loop of B.boundary) { path(B.points, loop); ctx.strokeStyle = "#c3cad3"; ctx.setLineDash([4, 3]); ctx.lineWidth = 1; ctx.stroke(); ctx.setLineDash([]); }
       const view = document.querySelector("input[name=view]:checked").value;
       const inv = new Set(st ? st.inverted : []);
