@@ -85,3 +85,36 @@ def test_search_stopped_by_the_cap_whose_last_simplex_meets_the_test_succeeds():
                               options={"xatol": 0.5, "fatol": 1.0})
     assert "its last simplex met the test" in res.status, res.status
     assert res.success, res.status
+
+
+def _tee(L):
+    """A T (bar 100 x 25, stem 24 x 65, in mm at L = 1, in m at L = 1e-3) whose stem is bent 35 deg about its
+    root: the nested search's first full step folds the outline through itself."""
+    outline = np.array([[0, 0], [100, 0], [100, 25], [62, 25], [62, 90], [38, 90], [38, 25], [0, 25]]) * L
+    mesh = Mesh.from_polygon(outline, max_area=20 * L * L)
+    P = mesh.points
+    bar, stem = np.flatnonzero(P[:, 1] < 1e-9 * L), np.flatnonzero(P[:, 1] > 90 * L * (1 - 1e-9))
+    c, s = np.cos(np.deg2rad(35)), np.sin(np.deg2rad(35))
+    R, pivot = np.array([[c, -s], [s, c]]), np.array([50, 25]) * L
+    return mesh, solve_external(mesh, MAT, bar, {int(i): pivot + (P[i] - pivot) @ R.T for i in stem}).x
+
+
+def test_nested_design_backs_off_a_step_whose_outline_crosses_itself_the_same_in_mm_and_m():
+    from mdsr_opt import route_for_design
+    mesh, target = _tee(1.0)
+    routing = route_for_design(mesh, target)  # routed once in mm: the same ropes (node paths) in m
+    mus, radius = list(routing), routing.fixture_radius
+    assert len(mus) == 4
+    found = []
+    for L in (1.0, 1e-3):
+        mesh, target = _tee(L)
+        res = design_contractions(mesh, MAT, mus, target, method="nested", anchor_radius=radius * L)
+        # before: "forward solve failed: ... the boundary crosses itself" at the first guess, difference 7.30
+        assert res.success and res.verification.passed, res.status
+        assert "trial step(s) backed off" in res.status and "crosses itself" in res.status, res.status
+        found.append((res.contractions, res.difference / L))
+    flat = design_contractions(mesh, MAT, mus, target, method="flattened", anchor_radius=radius * 1e-3)
+    for a, d in found:  # the flattened design's answer (it never solves a crossed state)
+        np.testing.assert_allclose(a, flat.contractions, atol=2e-3)
+        assert d == pytest.approx(flat.difference / 1e-3, rel=1e-3)
+        assert d == pytest.approx(2.385, abs=2e-3)

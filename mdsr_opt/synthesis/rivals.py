@@ -18,6 +18,11 @@ _LOG = logging.getLogger(__name__)
 #: a design of the outer loops (nested, derivative-free) says how far it got at most this often (seconds of
 #: wall time): each of its forward solves may take seconds with contact, and nothing else is printed meanwhile
 PROGRESS_SECONDS = 10.0
+#: the nested search's failed trial steps in a row (a forward solve failed, e.g. the outline crossed itself)
+#: it backs off from, each by the line search's shorter step, before it gives up
+MAX_BACKOFFS = 8
+#: a failed trial step's value: this many times the last accepted one, plus one
+BACKOFF_FACTOR = 4.0
 #: Nelder-Mead's ``fatol``: the differences of its simplex's points agree within this share of the body's size
 DIFF_ATOL = 1e-9
 #: Powell's ``ftol``: the objective's relative decrease in a sweep below which it stops
@@ -37,6 +42,8 @@ class _Outer:
         self.best: tuple[float, np.ndarray, np.ndarray] | None = None
         self.failures: list[str] = []
         self.n_eval = 0
+        self.last: tuple[float, np.ndarray] | None = None  # the nested search's last accepted value and gradient
+        self.backoffs = 0  # its failed trial steps in a row
         self._started = self._said = time.monotonic()
 
     def _eval(self, a):
@@ -72,9 +79,15 @@ class _Outer:
 
     def value_and_grad(self, a):
         J, a, x, _al, dJ = self._eval(a)
-        if J is None:
-            raise _ForwardFailed(self.failures[-1])
-        return J, _reduced_gradient(self.prob, a, x, dJ)
+        if J is None:  # a trial step whose body crossed itself, or whose solve failed: backed off
+            self.backoffs += 1
+            if self.backoffs > MAX_BACKOFFS or self.last is None:
+                raise _ForwardFailed(self.failures[-1])
+            # a value well above the last accepted one (the line search shortens its step), its slope kept
+            return BACKOFF_FACTOR * self.last[0] + 1.0, self.last[1]
+        g = _reduced_gradient(self.prob, a, x, dJ)
+        self.last, self.backoffs = (J, g), 0
+        return J, g
 
 
 class _ForwardFailed(RuntimeError):
@@ -117,6 +130,12 @@ def _reduced_gradient(prob: DesignProblem, a, x, dJ) -> np.ndarray:
 
 
 def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock, length: float = 1.0):
+    """The nested search (L-BFGS-B on ``a -> J(x*(a))`` with adjoint gradients) from ``a0``.
+
+    A trial step whose forward solve fails (its outline crosses itself, say) is backed off: its value is
+    :data:`BACKOFF_FACTOR` times the last accepted one, so the line search tries a shorter step; after
+    :data:`MAX_BACKOFFS` failed trials in a row (or a failed first solve) the search gives up, a failure.
+    """
     from scipy.optimize import minimize
 
     obj = _Outer(prob, fwd, clock, length=length)
@@ -126,8 +145,12 @@ def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock, length: float
         res = minimize(obj.value_and_grad, a0, jac=True, method="L-BFGS-B",
                        bounds=[(0.0, u) for u in prob.a_upper], options=opts)
     except _ForwardFailed as exc:
-        return obj, False, f"forward solve failed: {exc}", obj.n_eval
-    return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
+        return obj, False, f"forward solve failed: {exc}" + (
+            f" ({obj.backoffs - 1} shorter step(s) failed before it)" if obj.backoffs > 1 else ""), obj.n_eval
+    status = f"L-BFGS-B: {res.message}"
+    if obj.failures:  # trial steps backed off: said, the design verified all the same
+        status += f"; {len(obj.failures)} trial step(s) backed off: their forward solve failed ({obj.failures[-1]})"
+    return obj, bool(res.success), status, int(res.nit)
 
 
 def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock, length: float = 1.0):
