@@ -95,7 +95,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         :data:`~mdsr_opt.synthesis.fabrication.WALL_FRACTION` of the body's diameter.
     tol : float, optional
         Optimiser tolerance: IPOPT's ``tol`` (flattened, default 1e-10), the projected-gradient tolerance
-        (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7).
+        (nested, default 1e-10), the tolerance on ``a`` (derivative-free, default 1e-7: Nelder-Mead's
+        ``xatol``, its simplex's extent in every contraction; its ``fatol`` bounds the spread of the
+        simplex's differences as a share of the body's size, :data:`~mdsr_opt.synthesis.rivals.DIFF_ATOL`,
+        so the test means the same in any units: :func:`~mdsr_opt.synthesis.rivals.run_derivative_free`).
     max_iter : int, optional
         IPOPT iterations (default 500), L-BFGS-B iterations (default 500), or function evaluations
         (derivative-free, default ``400 * m``).
@@ -120,7 +123,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     outer : {"nelder-mead", "powell"}
         Derivative-free only: the scipy method.
     options : dict, optional
-        Extra options for IPOPT (flattened, without the ``ipopt.`` prefix) or scipy's ``minimize``.
+        Extra options for IPOPT (flattened, without the ``ipopt.`` prefix) or scipy's ``minimize``
+        (Nelder-Mead's ``fatol`` is a share of the body's size, its objective the difference over the size).
     inner_tol : float
         Tolerance of the forward solves (the scaled KKT residual of :func:`~mdsr_opt.solve_internal`); the
         verification uses it too, or the solver's default 1e-8 when that is tighter.

@@ -18,6 +18,15 @@ _LOG = logging.getLogger(__name__)
 #: a design of the outer loops (nested, derivative-free) says how far it got at most this often (seconds of
 #: wall time): each of its forward solves may take seconds with contact, and nothing else is printed meanwhile
 PROGRESS_SECONDS = 10.0
+#: the nested search's failed trial steps in a row (a forward solve failed, e.g. the outline crossed itself)
+#: it backs off from, each by the line search's shorter step, before it gives up
+MAX_BACKOFFS = 8
+#: a failed trial step's value: this many times the last accepted one, plus one
+BACKOFF_FACTOR = 4.0
+#: Nelder-Mead's ``fatol``: the differences of its simplex's points agree within this share of the body's size
+DIFF_ATOL = 1e-9
+#: Powell's ``ftol``: the objective's relative decrease in a sweep below which it stops
+POWELL_FTOL = 1e-10
 
 
 # ---------------------------------------------------------------------------------------------- outer loops
@@ -33,6 +42,8 @@ class _Outer:
         self.best: tuple[float, np.ndarray, np.ndarray] | None = None
         self.failures: list[str] = []
         self.n_eval = 0
+        self.last: tuple[float, np.ndarray] | None = None  # the nested search's last accepted value and gradient
+        self.backoffs = 0  # its failed trial steps in a row
         self._started = self._said = time.monotonic()
 
     def _eval(self, a):
@@ -68,9 +79,15 @@ class _Outer:
 
     def value_and_grad(self, a):
         J, a, x, _al, dJ = self._eval(a)
-        if J is None:
-            raise _ForwardFailed(self.failures[-1])
-        return J, _reduced_gradient(self.prob, a, x, dJ)
+        if J is None:  # a trial step whose body crossed itself, or whose solve failed: backed off
+            self.backoffs += 1
+            if self.backoffs > MAX_BACKOFFS or self.last is None:
+                raise _ForwardFailed(self.failures[-1])
+            # a value well above the last accepted one (the line search shortens its step), its slope kept
+            return BACKOFF_FACTOR * self.last[0] + 1.0, self.last[1]
+        g = _reduced_gradient(self.prob, a, x, dJ)
+        self.last, self.backoffs = (J, g), 0
+        return J, g
 
 
 class _ForwardFailed(RuntimeError):
@@ -113,6 +130,12 @@ def _reduced_gradient(prob: DesignProblem, a, x, dJ) -> np.ndarray:
 
 
 def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock, length: float = 1.0):
+    """The nested search (L-BFGS-B on ``a -> J(x*(a))`` with adjoint gradients) from ``a0``.
+
+    A trial step whose forward solve fails (its outline crosses itself, say) is backed off: its value is
+    :data:`BACKOFF_FACTOR` times the last accepted one, so the line search tries a shorter step; after
+    :data:`MAX_BACKOFFS` failed trials in a row (or a failed first solve) the search gives up, a failure.
+    """
     from scipy.optimize import minimize
 
     obj = _Outer(prob, fwd, clock, length=length)
@@ -122,24 +145,57 @@ def run_nested(prob, a0, fwd, tol, max_iter, outer_options, clock, length: float
         res = minimize(obj.value_and_grad, a0, jac=True, method="L-BFGS-B",
                        bounds=[(0.0, u) for u in prob.a_upper], options=opts)
     except _ForwardFailed as exc:
-        return obj, False, f"forward solve failed: {exc}", obj.n_eval
-    return obj, bool(res.success), f"L-BFGS-B: {res.message}", int(res.nit)
+        return obj, False, f"forward solve failed: {exc}" + (
+            f" ({obj.backoffs - 1} shorter step(s) failed before it)" if obj.backoffs > 1 else ""), obj.n_eval
+    status = f"L-BFGS-B: {res.message}"
+    if obj.failures:  # trial steps backed off: said, the design verified all the same
+        status += f"; {len(obj.failures)} trial step(s) backed off: their forward solve failed ({obj.failures[-1]})"
+    return obj, bool(res.success), status, int(res.nit)
 
 
 def run_derivative_free(prob, a0, fwd, tol, max_iter, outer, outer_options, clock, length: float = 1.0):
+    """The derivative-free search of ``a`` from ``a0`` (Nelder-Mead or Powell after ``outer``).
+
+    Its stopping test means the same for a body in any units and any number of muscles: the contractions
+    (fractions of a rest length) of the search's points agree within ``tol`` (the simplex's extent in
+    every muscle for Nelder-Mead), and so do their differences (the rms node distance from the target, a
+    length) within :data:`DIFF_ATOL` of the body's size (Nelder-Mead searches the difference as a share of
+    the body's size, which orders its points as the objective ``J`` does: its moves are the same; Powell
+    asks the objective's relative decrease per sweep to fall below :data:`POWELL_FTOL`). Both bounds lie
+    above the noise of the warm-started forward solves (about ``1e-13`` of ``J`` at ``inner_tol = 1e-10``),
+    which a test on ``J`` itself (``tol ** 2``) lay below: the search sat at its answer until the evaluation
+    cap. A search that stops at the cap passes when its last points meet the test all the same; else it
+    fails, its ``status`` saying how far apart they were.
+    """
     from scipy.optimize import minimize
 
     obj = _Outer(prob, fwd, clock, length=length)
     bounds = [(0.0, u) for u in prob.a_upper]
+    share = prob.h / body_size(prob.mesh)  # J -> the difference as a share of the body's size
+
+    def fraction(a):
+        J = obj.value(a)
+        return J if J >= obj.penalty else share * math.sqrt(max(J, 0.0))
+
     if outer == "nelder-mead":
-        opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": tol ** 2, "adaptive": prob.m > 2}
+        opts = {"maxfev": max_iter, "maxiter": max_iter, "xatol": tol, "fatol": DIFF_ATOL, "adaptive": prob.m > 2}
         opts.update(outer_options or {})
-        res = minimize(obj.value, a0, method="Nelder-Mead", bounds=bounds, options=opts)
+        res = minimize(fraction, a0, method="Nelder-Mead", bounds=bounds, options=opts)
+        ok = bool(res.success)
+        if not ok and res.status in (1, 2):  # the cap: met the test on its last simplex all the same?
+            sim, fsim = res.final_simplex
+            dx, df = float(np.abs(sim[1:] - sim[0]).max()), float(np.abs(fsim[1:] - fsim[0]).max())
+            ok = dx <= opts["xatol"] and df <= opts["fatol"]
+            res.message += (f" (its last simplex met the test: contractions within {dx:.3g} <= xatol, differences "
+                            f"within {df:.3g} <= fatol of the body's size)" if ok else
+                            f" (its last simplex: contractions {dx:.3g} apart, xatol {opts['xatol']:.3g}; differences "
+                            f"{df:.3g} of the body's size apart, fatol {opts['fatol']:.3g})")
     else:
-        opts = {"maxfev": max_iter, "xtol": tol, "ftol": tol ** 2}
+        opts = {"maxfev": max_iter, "xtol": tol, "ftol": POWELL_FTOL}
         opts.update(outer_options or {})
         res = minimize(obj.value, a0, method="Powell", bounds=bounds, options=opts)
-    ok = bool(res.success) and not obj.failures
+        ok = bool(res.success)
+    ok = ok and not obj.failures
     status = f"{'Nelder-Mead' if outer == 'nelder-mead' else 'Powell'}: {res.message}"
     if obj.failures:
         status += f"; {len(obj.failures)} forward solve(s) failed ({obj.failures[-1]})"
