@@ -73,3 +73,21 @@ def test_a_body_without_holes_scores_as_its_outline(tmp_path):
     (row,) = evaluate_folder(tmp_path / "img", tmp_path / "states", out=tmp_path / "out")
     assert row.loops.mean_px == row.comparison.mean_px and row.loops.n_unmatched == 0
     assert "Holes" not in (tmp_path / "out" / "evaluation.md").read_text()
+
+
+def test_a_disk_with_an_off_centre_hole_is_registered_by_its_hole_too():
+    """A disk's outline fits at any rotation: the registration kept one that put the hole 5-57 px away from
+    the photographed hole (the true photograph scored as another body); compare_loops now turns the
+    registration about the photographed outline's centre when that places the holes far better."""
+    from mdsr_opt import compare_loops, contour_loops_from_image, simulated_loops
+
+    t = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    mesh = Mesh.from_polygon(np.c_[50 * np.cos(t), 50 * np.sin(t)], max_area=40,
+                             holes=[np.c_[12 + 20 * np.cos(t), 5 + 20 * np.sin(t)]])
+    photo = render_photo(mesh, image_size=(400, 400), seed=0)
+    r = compare_loops(simulated_loops(mesh), contour_loops_from_image(photo.image))
+    assert r.n_unmatched == 0 and [row["kind"] for row in r.loops] == ["outer", "hole"]
+    assert r.loops[1]["mean_px"] < 1.0 and r.outer.mean_px < 0.5 and r.mean_px < 0.5
+    # the turned registration maps the mesh onto the photograph: the hole's nodes land on the photographed hole
+    hole_px = r.outer.to_pixels(mesh.points[mesh.boundary_loops[1]])
+    np.testing.assert_allclose(hole_px.mean(axis=0), photo.to_pixels([[12.0, 5.0]])[0], atol=1.5)
