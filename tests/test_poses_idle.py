@@ -63,6 +63,7 @@ def test_a_muscle_no_pose_uses_is_dropped_said_saved_and_not_exported(star, tmp_
     assert len(said) == 1 and "left: slack (contraction" in said[0] and "right: released" in said[0]
     assert "pose(s) left designed again without it" in said[0]
     assert not any("idle" in n for n in before.notes)
+    assert res.table().splitlines()[-1] == "dropped, no pose uses it: M3" and "dropped" not in before.table()
     back = PosesResult.load(res.save(tmp_path / "layout.json"))
     assert back.dropped == res.dropped and back.notes == res.notes
     files = export_fabrication(mesh, res, tmp_path / "parts", name="star")

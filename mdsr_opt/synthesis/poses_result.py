@@ -169,6 +169,8 @@ class PosesResult:
         u = f"in {self.units}" if self.units else "in the mesh's length units"
         rows.append(f"D (weighted RMS node distance) and strokes {u}")
         rows += [f"NOT a success: {p}" for p in self.problems]
+        if self.dropped:  # said, as the notes say it: a rope no pose uses is not in the layout
+            rows.append(f"dropped, no pose uses it: {', '.join(d.name for d in self.dropped)}")
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
