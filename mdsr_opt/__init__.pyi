@@ -58,7 +58,15 @@ from .photos.compare import (
     ContourComparison as ContourComparison,
     simulated_outline as simulated_outline,
 )
-from .photos.contours import contour_from_image as contour_from_image
+from .photos.contours import (
+    contour_from_image as contour_from_image,
+    contour_loops_from_image as contour_loops_from_image,
+)
+from .photos.loops import (
+    compare_loops as compare_loops,
+    LoopComparison as LoopComparison,
+    simulated_loops as simulated_loops,
+)
 from .photos.folder import evaluate_folder as evaluate_folder
 
 # scenes and the problem library: the data model, node selection, target maps, the runner

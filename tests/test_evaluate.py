@@ -653,7 +653,7 @@ def test_batch_case_errors_become_value_errors_naming_the_case(design, monkeypat
     def fail(*args, **kwargs):
         raise error
 
-    monkeypatch.setattr("mdsr_opt.photos.folder.contour_from_image", fail)
+    monkeypatch.setattr("mdsr_opt.photos.folder.contour_loops_from_image", fail)  # the outline and holes
     with pytest.raises(ValueError, match="case 'bend_0.5'") as info:
         evaluate_folder(design / "images", design / "states")
     assert info.value.__cause__ is error

@@ -87,7 +87,11 @@ def test_svg_dxf_csv_at_true_scale(tmp_path):
     hole = np.array([(p[0], p[1]) for p in holes[0].points()])
     assert np.ptp(hole, axis=0) == pytest.approx([4, 2])
     # CSV: units in every header with a length; strokes a * L0
-    rows = list(csv.reader(open(files["csv"])))
+    lines = open(files["csv"]).read().splitlines()
+    # this layout cannot be moulded (its top rope's channel is 0.79 mm inside the hole's edge): the CSV's first
+    # line says so, as the SVG and DXF do
+    assert lines[0].startswith("# NOT MOULDABLE as laid out (")
+    rows = list(csv.reader(line for line in lines if not line.startswith("#")))
     head = rows[0]
     assert head[2] == "rest length [mm]" and "stroke up [mm]" in head and "tension down [units of E*t*mm]" in head
     assert [r[0] for r in rows[1:]] == ["bottom", "top", "diag"]
@@ -102,7 +106,8 @@ def test_units_go_into_every_file(tmp_path):
     root = ET.parse(files["svg"]).getroot()
     assert root.get("width").endswith("cm")
     assert ezdxf.readfile(files["dxf"]).header["$INSUNITS"] == 5
-    assert open(files["csv"]).readline().split(",")[2] == "rest length [cm]"
+    head = next(line for line in open(files["csv"]) if not line.startswith("#"))  # after the NOT MOULDABLE line
+    assert head.split(",")[2] == "rest length [cm]"
     files = export_fabrication(mesh, None, tmp_path / "m", muscles=mus, units="m", name="p")
     root = ET.parse(files["svg"]).getroot()   # metres: the physical size is written in mm
     assert float(root.get("width")[:-2]) == pytest.approx(1000 * float(root.get("viewBox").split()[2]))
@@ -222,7 +227,8 @@ def test_a_real_design_exports_its_strokes_and_tensions(tmp_path):
     target = solve_internal(mesh, NeoHookean(1.0, 0.3), [m], [0.2]).x
     res = design_contractions(mesh, NeoHookean(1.0, 0.3), [m], target)
     files = export_fabrication(mesh, res, tmp_path, muscles=[m], units="mm")
-    rows = list(csv.DictReader(open(files["csv"])))
+    # the rope runs on the outline (the bottom row of nodes): a NOT MOULDABLE comment line, then the table
+    rows = list(csv.DictReader(line for line in open(files["csv"]) if not line.startswith("#")))
     stroke = getattr(res, "stroke", None)
     expect = float(stroke[0]) if stroke is not None else 0.2 * m.rest_length(mesh)
     assert float(rows[0]["stroke design [mm]"]) == pytest.approx(expect, rel=1e-8)

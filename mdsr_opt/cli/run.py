@@ -151,7 +151,9 @@ def _cmd_run(a) -> int:
         for name, an in r.animations.items():
             if not an.get("success", False):
                 print(f"FAILED {r.scene}/{name} (animation): {an.get('message') or an.get('failed_frames')}")
-    noted = [f"{r.scene}/{c.case}" for r in reports for c in r.cases if case_notes(c)]
+    noted = [f"{r.scene}/{c.case}" for r in reports for c in r.cases if case_notes(c)] + [
+        f"{r.scene}/gait {name}" for r in reports for name, an in r.animations.items()
+        if an.get("kind") == "gait" and an.get("notes")]  # a gait's shared layout: listed as a case's
     if noted:  # the resolutions themselves are long: each scene's summary.md lists them
         where = "summary.md" if len(reports) == 1 else "each scene's summary.md"
         which = ", ".join(noted) if len(noted) <= 4 else f"{len(noted)} case(s)"

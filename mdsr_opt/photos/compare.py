@@ -352,6 +352,13 @@ def compare_contours(simulated_outline: ArrayLike, measured_contour: ArrayLike, 
     :class:`ContourComparison`.
 
     .. warning::
+       One loop against one loop: a body's holes are not compared, so a photograph of the body with a hole
+       filled in scores as well as the true one. For a body with holes compare every loop:
+       ``compare_loops(simulated_loops(mesh, x), contour_loops_from_image(image))``
+       (:func:`~mdsr_opt.photos.loops.compare_loops`, as ``mdsr run`` and ``mdsr evaluate`` do), which
+       matches each hole to its photographed counterpart and counts one without a counterpart
+       (``n_unmatched``) by its full distance.
+
        Because the simulated outline is rescaled to the photograph (as in the paper), a simulation
        that is uniformly too large or too small by any factor scores as well as the right size: only
        shape differences show.
@@ -530,7 +537,8 @@ def evaluate_image(image: ArrayLike | str | os.PathLike, mesh, x: ArrayLike | No
     """Extract the contour of ``image`` and compare the outline of ``mesh`` in state ``x`` with it.
 
     ``extract`` holds keyword arguments of :func:`contour_from_image`; the rest go to
-    :func:`compare_contours`.
+    :func:`compare_contours`. The outer outline only: a body with holes is compared loop by loop by
+    :func:`~mdsr_opt.photos.loops.compare_loops` (see :func:`compare_contours`' warning).
 
     Example
     -------

@@ -17,8 +17,9 @@ import numpy as np
 from ..body.io import FORMATS, atomic_path, read_mesh
 from ..core.results import compact_repr
 from ..core.errors import InputError, checking_input
-from .compare import ContourComparison, compare_contours, simulated_outline
-from .contours import contour_from_image
+from .compare import ContourComparison
+from .contours import contour_loops_from_image
+from .loops import LoopComparison, compare_loops, simulated_loops
 from .images import IMAGE_SUFFIXES, load_image
 
 __all__ = ['CaseResult', 'evaluate_folder', 'evaluation_files', 'write_evaluation', 'write_table']
@@ -57,13 +58,19 @@ def bytes_writer(data: bytes) -> Callable[[str], None]:
 # ----------------------------------------------------------------------------------------------- batch
 @dataclass(frozen=True)
 class CaseResult:
-    """One row of an evaluation table: an image compared with the state of the same name."""
+    """One row of an evaluation table: an image compared with the state of the same name.
+
+    ``comparison`` is the outer outline's (its registration places the state on the photograph, as the
+    overlay draws it); ``loops`` every boundary loop's, the holes matched to the photograph's
+    (:func:`~mdsr_opt.photos.loops.compare_loops`): the table's figures. None: made without (by hand).
+    """
 
     case: str
     image: str
     state: str
     synthetic: bool
     comparison: ContourComparison
+    loops: LoopComparison | None = None
 
     def __repr__(self) -> str:
         c = self.comparison
@@ -73,7 +80,8 @@ class CaseResult:
     def to_dict(self) -> dict:
         """The row with its comparison (arrays as lists) as a JSON-ready dict."""
         return {"case": self.case, "image": self.image, "state": self.state, "synthetic": self.synthetic,
-                "comparison": self.comparison.to_dict()}
+                "comparison": self.comparison.to_dict(),
+                "loops": None if self.loops is None else self.loops.summary()}
 
 
 def list_files(where: str | os.PathLike | Sequence, suffixes: tuple[str, ...], what: str) -> list[Path]:
@@ -112,6 +120,13 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
                     figures: bool = False) -> list[CaseResult]:
     """Compare every image of a folder with the simulated state of the same name; write a table.
 
+    Every boundary loop is compared, as ``mdsr run``'s validation compares them
+    (:func:`~mdsr_opt.photos.loops.compare_loops`): the outline, and each hole of the state against the
+    photographed hole it matches. A hole of the body that the photograph does not show (filled in, or another
+    body) is measured to the nearest photographed loop, so it is never scored as a match, and the table says
+    so below it (its ``Holes body/photo`` column, ``UNMATCHED``); the CSV gives ``holes``, ``photo_holes``,
+    ``unmatched_holes`` and the outline's own ``outline_mean_px``.
+
     Parameters
     ----------
     images : folder or list of image files
@@ -131,7 +146,8 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
     name : str
         Base name of the table files.
     extract, compare : dict, optional
-        Keyword arguments of :func:`contour_from_image` and :func:`compare_contours`.
+        Keyword arguments of :func:`~mdsr_opt.photos.contours.contour_loops_from_image` (those of
+        :func:`contour_from_image`, and ``min_hole_fraction``) and :func:`compare_contours`.
     figures : bool
         Also write an overlay figure per case.
 
@@ -186,15 +202,18 @@ def evaluate_folder(images: str | os.PathLike | Sequence, states: str | os.PathL
         try:
             data = read_mesh(by_stem[case])
             image = load_image(img_path)
-            contour = contour_from_image(image, **(extract or {}))
-            comp = compare_contours(simulated_outline(data.mesh, data.x), contour, **(compare or {}))
+            # every loop, as mdsr run's validation measures it: the outline and each hole against its
+            # photographed counterpart, so that a photograph without the body's hole is no match
+            found = contour_loops_from_image(image, **(extract or {}))
+            comp = compare_loops(simulated_loops(data.mesh, data.x), found, **(compare or {}))
         except (ValueError, TypeError, OSError, cv2.error) as exc:
             # one type for every per-case failure (re-raising type(exc) breaks for exceptions whose
             # constructors need more arguments); the original is chained. A case's files that cannot be
             # read, or in which no body is found, are bad input; a TypeError is a bug, named with its case
             kind = ValueError if isinstance(exc, TypeError) else InputError
             raise kind(f"case {case!r}: {exc}") from exc
-        results.append(CaseResult(case, str(img_path), str(by_stem[case]), _is_synthetic(img_path), comp))
+        results.append(CaseResult(case, str(img_path), str(by_stem[case]), _is_synthetic(img_path), comp.outer,
+                                  comp))
     if out is not None:
         write_evaluation(results, out, name=name, figures=figures)
     return results
@@ -235,15 +254,48 @@ def write_evaluation(results: Sequence[CaseResult], out: str | os.PathLike, *, n
 
 
 def _table_rows(results: Sequence[CaseResult]) -> list[dict[str, Any]]:
+    """One row per case: the distances over every loop (the outline's alone when ``loops`` is None), the
+    outline's own mean, the normalised ones (over every loop: divided by the unit rectangle's side in pixels
+    when a hole is measured), the holes of the body and of the photograph and how many have no counterpart."""
     rows = []
     for r in results:
-        c = r.comparison
+        c, lc = r.comparison, r.loops or _outline_only(r.comparison)
+        holes = [row for row in lc.loops if row["kind"] != "outer"]
+        norm = (c.mean_norm, c.std_norm) if not holes else (lc.mean_px / c.size_px, lc.std_px / c.size_px)
         rows.append({"case": r.case, "source": "synthetic" if r.synthetic else "photo",
-                     "mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px,
-                     "mean_norm": c.mean_norm, "std_norm": c.std_norm, "ratio": c.ratio,
+                     "mean_px": lc.mean_px, "std_px": lc.std_px, "max_px": lc.max_px,
+                     "mean_norm": norm[0], "std_norm": norm[1], "ratio": lc.ratio, "outline_mean_px": c.mean_px,
+                     "holes": sum(row["kind"] == "hole" for row in holes),
+                     "photo_holes": sum(row["matched"] is not None for row in holes)
+                     + sum(row["kind"] == "photo-only hole" for row in holes),
+                     "unmatched_holes": lc.n_unmatched,
                      "bias_px": c.bias_px, "angle_deg": c.angle_deg, "n_nodes": c.n_nodes,
                      "image": r.image, "state": r.state})
     return rows
+
+
+def _outline_only(c: ContourComparison) -> LoopComparison:
+    """A comparison of the outline alone, as :func:`~mdsr_opt.photos.loops.compare_loops` gives it."""
+    return LoopComparison(outer=c, loops=[{"kind": "outer", "index": 0, "matched": 0, "n": int(c.n_nodes),
+                                           "mean_px": c.mean_px, "std_px": c.std_px, "max_px": c.max_px}],
+                          mean_px=c.mean_px, std_px=c.std_px, max_px=c.max_px, ratio=c.ratio, n_unmatched=0)
+
+
+def unmatched_words(loops: LoopComparison | None) -> str:
+    """The words for a comparison whose holes do not all have a counterpart (``""`` when they do): the holes
+    the body has that the photograph does not show, and the reverse."""
+    if loops is None:
+        return ""
+    body_only = sum(row["kind"] == "hole" and row["matched"] is None for row in loops.loops)
+    photo_only = sum(row["kind"] == "photo-only hole" for row in loops.loops)
+    said = []
+    if body_only:
+        said.append(f"the body has {body_only} hole(s) the photograph does not show (filled in, or another "
+                    "body): each is measured to the nearest photographed loop, not scored as a match")
+    if photo_only:
+        said.append(f"the photograph shows {photo_only} hole(s) the body does not have: each is measured to the "
+                    "nearest simulated loop")
+    return "; ".join(said)
 
 
 def write_table(results: Sequence[CaseResult], csv_path: str | os.PathLike,
@@ -256,6 +308,7 @@ def write_table(results: Sequence[CaseResult], csv_path: str | os.PathLike,
     Example
     -------
     >>> import tempfile, numpy as np
+    >>> from mdsr_opt.photos.compare import compare_contours
     >>> sq = np.array([[0, 0], [2, 0], [2, 1], [0, 1]], float)
     >>> r = CaseResult("a", "a.png", "a.vtu", False, compare_contours(sq, sq * [100, -100]))
     >>> with tempfile.TemporaryDirectory() as d:
@@ -278,21 +331,32 @@ def _table_writers(results: Sequence[CaseResult], csv_path: str | os.PathLike,
         writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
     writers = [(Path(csv_path), bytes_writer(buf.getvalue().encode()))]
     if md_path is not None:
+        holes = any(row["holes"] or row["photo_holes"] for row in rows)  # a column of its own only then
+
+        def hole_cell(row):
+            return (f" {row['holes']}/{row['photo_holes']}" + (" UNMATCHED" if row["unmatched_holes"] else "")
+                    + " |") if holes else ""
+
         lines = ["| Case | Source | Average distance d (px) | Standard deviation (px) | Max (px) | "
-                 "d normalised | Ratio d/size (%) |",
-                 "| --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+                 "d normalised | Ratio d/size (%) |" + (" Holes body/photo |" if holes else ""),
+                 "| --- | --- | ---: | ---: | ---: | ---: | ---: |" + (" ---: |" if holes else "")]
         for row in rows:
             lines.append(f"| {row['case']} | {row['source']} | {row['mean_px']:.2f} | {row['std_px']:.2f} | "
-                         f"{row['max_px']:.2f} | {row['mean_norm']:.4f} | {100 * row['ratio']:.2f} |")
+                         f"{row['max_px']:.2f} | {row['mean_norm']:.4f} | {100 * row['ratio']:.2f} |" + hole_cell(row))
         mean = {k: float(np.mean([row[k] for row in rows])) for k in ("mean_px", "std_px", "max_px",
                                                                         "mean_norm", "ratio")}
         lines.append(f"| **mean** | | {mean['mean_px']:.2f} | {mean['std_px']:.2f} | {mean['max_px']:.2f} | "
-                     f"{mean['mean_norm']:.4f} | {100 * mean['ratio']:.2f} |")
+                     f"{mean['mean_norm']:.4f} | {100 * mean['ratio']:.2f} |" + (" |" if holes else ""))
         lines.append("")
-        lines.append("d: mean distance of the simulated boundary nodes to the measured contour "
-                     "(cv2.pointPolygonTest); normalised: in the unit rectangle (the simulated outline's "
-                     "bounding rectangle at the registered scale, longer side 1); ratio: d over the "
-                     "square root of the measured contour's area.")
+        lines.append("d: mean distance of the simulated boundary nodes (the outline's and every hole's, each hole "
+                     "matched to the photographed hole nearest it: mdsr_opt.photos.loops.compare_loops) to the "
+                     "measured contours (cv2.pointPolygonTest); normalised: in the unit rectangle (the simulated "
+                     "outline's bounding rectangle at the registered scale, longer side 1); ratio: d over the "
+                     "square root of the measured outline's area.")
+        for r in results:
+            words = unmatched_words(r.loops)
+            if words:
+                lines += ["", f"**{r.case}**: {words}."]
         if any(row["source"] == "synthetic" for row in rows):
             lines.append("")
             lines.append("**SYNTHETIC**: rows marked synthetic compare with images rendered by the synthetic "

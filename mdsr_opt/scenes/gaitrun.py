@@ -89,7 +89,8 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
     try:
         res = design_poses(scene.mesh, scene.material, targets, max_muscles=gait.max_muscles,
                            routing_options=scene.routing_options, design_options=dopt,
-                           separate=separate, units=scene.units)
+                           separate=separate, units=scene.units,
+                           idle_contraction=getattr(scene, "acceptance", {}).get("idle_contraction"))
         sch = gait_schedule(scene.mesh, scene.material, res, list(gait.sequence), frames_per_step=gait.frames_per_step,
                             cyclic=gait.cyclic, step_time=gait.step_time, units=scene.units,
                             max_difference=getattr(scene, "acceptance", {}).get("max_difference"))
@@ -103,9 +104,13 @@ def run_gait(scene, out, runs: Mapping, *, figures: bool = True, log=None, write
                      "(its designs model none)") if touching else ""
     if obstacle_note:
         say(f"[{scene.name}] {_gait_label(gait.name)}: {obstacle_note}")
+    if res.dropped:  # said as a case's idle muscles are (the notes, in summary.json and summary.md, say why)
+        say(f"[{scene.name}] {_gait_label(gait.name)}: idle {', '.join(d.name for d in res.dropped)} dropped from "
+            f"the shared layout (no pose uses {'it' if len(res.dropped) == 1 else 'them'})")
     # what the layout resolved, then the fixtures and the obstacles left out
     notes = list(res.notes) + [n for n in (radius_note, obstacle_note) if n]
     info.update({"notes": notes} if notes else {})
+    info.update({"dropped": [d.to_dict() for d in res.dropped]} if res.dropped else {})
     files = [res.save(folder / "layout.json"), sch.write_csv(folder / "schedule.csv")]
     # the chart, the GIF and the fabrication files are jobs; <gait>.json (beside <gait>.gif, as an animation's
     # <name>.json beside its GIF), which lists their files, is written once every one of them has reported (at

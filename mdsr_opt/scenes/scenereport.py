@@ -75,17 +75,23 @@ class SceneReport:
         return "\n".join(rows)
 
     def notes(self) -> str:
-        """What the pipeline resolved on its own in each case (:func:`case_notes`) as a Markdown section, the
-        end of ``summary.md``; ``""`` when no case has any."""
+        """What the pipeline resolved on its own in each case (:func:`case_notes`) and in a gait's shared layout
+        (its ``notes``: ropes merged or shortened, fixtures shrunk, idle muscles dropped) as a Markdown section,
+        the end of ``summary.md``; ``""`` when none has any."""
         groups: dict = {}  # cases with the same notes (an internal scene's muscles, say) listed once
         for c in self.cases:
             lines = tuple(case_notes(c))
             if lines:
                 groups.setdefault(lines, []).append(c.case)
+        for name, anim in self.animations.items():  # a gait's shared layout: what it resolved, idle muscles dropped
+            lines = tuple(dict.fromkeys(str(n).replace("\n", " ") for n in (anim.get("notes") or ())))
+            if anim.get("kind") == "gait" and lines:
+                groups.setdefault(lines, []).append("gait" if name == "gait" else f"gait {name}")
         if not groups:
             return ""
         out = ["## Notes", "", "What the pipeline resolved on its own to make each case's ropes buildable, and what "
-               "it could not (each case's `notes` and `fabrication` in summary.json):", ""]
+               "it could not (each case's `notes` and `fabrication` in summary.json, a gait's `notes` under "
+               "`animations`):", ""]
         for lines, names in groups.items():
             out.append(f"- **{', '.join(names)}**")
             out += [f"  - {line}" for line in lines]

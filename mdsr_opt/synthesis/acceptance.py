@@ -44,7 +44,7 @@ from ..plot.style import muscle_label, muscle_name
 _LOG = logging.getLogger(__name__)
 
 __all__ = ["A_MAX", "IDLE_CONTRACTION", "MAX_DIFFERENCE", "MIN_PROGRESS", "BANDS", "AcceptanceWarning", "DroppedMuscle",
-           "design_active", "idle_mask", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
+           "design_active", "idle_mask", "as_good", "difference_failure", "rest_difference", "check_idle_contraction", "check_max_difference"]
 
 #: a designed contraction below this (a fraction of the rope's rest length) leaves the muscle idle
 IDLE_CONTRACTION = 1e-3
@@ -273,7 +273,7 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
         again, caught_again = _designed(design_contractions, mesh, material, tuple(mus[i] for i in keep), target,
                                         dict(deferred, **more))
         names = ", ".join(g.name for g in gone)
-        if not again.success and _as_good(again, res):
+        if not again.success and as_good(again, res):
             # the optimiser stopped short (its evaluation cap, say) no farther from the target than the design
             # with the idle muscles, a success: the layout without them does as well, verified, with fewer ropes
             again.success = True
@@ -306,10 +306,11 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
 IDLE_RTOL = 1e-3
 
 
-def _as_good(again, res) -> bool:
+def as_good(again, res) -> bool:
     """The design ``again`` (without the idle muscles of the successful ``res``), though its optimiser did not
     report success, is verified, rejected for nothing else and ends no farther from the target than ``res``
-    (to :data:`IDLE_RTOL`)."""
+    (to :data:`IDLE_RTOL`): :func:`design_active` and :func:`~mdsr_opt.synthesis.poses.design_poses` then
+    count it a success."""
     v = getattr(again, "verification", None)
     d, d0 = float(again.difference), float(res.difference)
     return bool(res.success and v is not None and v.passed and "rejected" not in again.status

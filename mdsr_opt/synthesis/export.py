@@ -27,7 +27,9 @@
     One row per muscle: rest length, end points, and per pose the stroke, the commanded contraction, the
     achieved one (``stroke / rest length``) and the tension it needs;
     last, when the design carries them (``stroke_band``, :func:`~mdsr_opt.synthesis.bands.stroke_bands`),
-    each pose's stroke band (``stroke <pose> low``, ``stroke <pose> high``).
+    each pose's stroke band (``stroke <pose> low``, ``stroke <pose> high``). Above the header, comment lines
+    (``#``, e.g. ``pandas.read_csv(path, comment="#")``) say what the drawings say: ``# FAILED DESIGN:
+    <reason>, do not build`` and ``# NOT MOULDABLE as laid out (<k> place(s)): <each place>``.
 
 Every number is in the body's length unit ``units`` (one of :data:`UNITS`; default the design's own
 ``units``, a scene's, else "body units": a drawing whose unit is not known says so and is never labelled
@@ -65,7 +67,7 @@ from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
 from ..plot.style import layout_colors, muscle_label, muscle_name
-from .export_checks import failed_mark
+from .export_checks import failed_mark, not_mouldable
 from .export_dxf import dxf_text, fixture_plates, label_points
 from .fabrication import warn_conflicts
 from .poses_result import PosesResult
@@ -356,8 +358,7 @@ def _svg_text(fd: FabricationData, title: str) -> str:
     if fd.failure:  # first, in the title and the caption: no one builds it by mistake
         title, caption = f"{failed_mark(fd.failure)}. {title}", f"{failed_mark(fd.failure)}. {caption}"
     if fd.conflicts:
-        caption += (f". NOT MOULDABLE as laid out ({len(fd.conflicts)} place(s), red rings): "
-                    + "; ".join(cf.message for cf in fd.conflicts))
+        caption += ". " + not_mouldable(fd.conflicts, "red rings")
     fc = fs * 0.8
     # the caption wrapped to the drawing's width (a sans-serif character is at most ~0.6 em wide on average),
     # on lines below the drawing, which grows by as many lines
@@ -455,6 +456,8 @@ def _csv_text(fd: FabricationData) -> str:
     buf = _stdio.StringIO()
     if fd.failure:  # a first line no one misses (a spreadsheet shows it above the table)
         buf.write(f"# {failed_mark(fd.failure)}\n")
+    if fd.conflicts:  # as the SVG's caption and the DXF's CONFLICTS layer say it
+        buf.write(f"# {not_mouldable(fd.conflicts)}\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(head)
 
@@ -534,7 +537,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     FabricationWarning
         Where the layout cannot be moulded (:func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`: a channel or
         fixture outside the body, channels or fixtures of different muscles closer than a wall, ropes that
-        cross), naming the muscles, the distance and the clearance required; the SVG marks those places.
+        cross), naming the muscles, the distance and the clearance required; every file marks those places
+        (the SVG's red rings and caption, the DXF's ``CONFLICTS`` layer, the CSV's ``# NOT MOULDABLE`` line).
     """
     check_stem(name, "name")  # no path separator, no control character: before anything is written
     try:

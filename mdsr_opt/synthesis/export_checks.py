@@ -23,7 +23,8 @@ import numpy as np
 
 from ..core.results import one_line
 
-__all__ = ["design_failure", "impossible_strokes", "failed_mark", "routed_fabrication", "check_same_fabrication"]
+__all__ = ["design_failure", "impossible_strokes", "failed_mark", "not_mouldable", "routed_fabrication",
+           "check_same_fabrication"]
 
 #: A commanded contraction and the achieved one may differ by this much before a stretched rope is called
 #: impossible (the solvers' tolerance on a taut rope is far below it).
@@ -33,6 +34,14 @@ STRETCH_TOLERANCE = 1e-3
 def failed_mark(reason: str) -> str:
     """The sentence every file of a failed design carries: ``FAILED DESIGN: <reason>, do not build``."""
     return f"FAILED DESIGN: {reason.strip().rstrip('.;')}, do not build"
+
+
+def not_mouldable(conflicts, marked: str = "") -> str:
+    """The sentence every file of a layout that cannot be moulded carries (the SVG's caption, the CSV's comment
+    line): ``NOT MOULDABLE as laid out (<k> place(s)[, <marked>]): <each place's message>``, ``conflicts``
+    :class:`~mdsr_opt.synthesis.fabrication.Conflict` s and ``marked`` how the drawing marks them."""
+    where = f"{len(conflicts)} place(s)" + (f", {marked}" if marked else "")
+    return f"NOT MOULDABLE as laid out ({where}): " + "; ".join(cf.message for cf in conflicts)
 
 
 def design_failure(design) -> str:

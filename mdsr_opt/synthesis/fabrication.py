@@ -204,6 +204,20 @@ def boundary_distance(mesh) -> np.ndarray:
     return cache["_boundary_distance"]
 
 
+def _boundary_at(mesh, at) -> str:
+    """The words for the boundary loop of ``mesh`` at rest nearest the point ``at``: ``"the outline"``, or
+    ``"the edge of the hole around (x, y)"`` (its nodes' mean: holes are not numbered alike everywhere)."""
+    from shapely.geometry import LineString, Point
+
+    P, loops = mesh.points, mesh.boundary_loops
+    d = [LineString(np.vstack([P[lp], P[lp[:1]]])).distance(Point(at)) for lp in loops]
+    k = int(np.argmin(d))
+    if k == 0:
+        return "the outline"
+    c = P[loops[k]].mean(axis=0)
+    return f"the edge of the hole around ({c[0]:.4g}, {c[1]:.4g})"
+
+
 def _boundary_lines(mesh):
     """The body's boundary at rest (the outline and every hole) as one shapely MultiLineString, cached on the
     mesh."""
@@ -426,7 +440,7 @@ def rope_conflicts(mesh, muscles, fab: Fabrication, *, fixture_radius: float | N
                 d_in = float(seg[j])
                 where = f" (between two of its nodes, near ({at[0]:.4g}, {at[1]:.4g}))"
         if d_in < inset_need - tol:
-            on = " (it runs on the outline)" if d_in <= tol else ""
+            on = f" (it runs on {_boundary_at(mesh, at)})" if d_in <= tol else ""
             out.append(Conflict("inset", (i,), d_in, inset_need, tuple(map(float, at)),
                                 f"muscle {_name(muscles, i)}: its channel is not mouldable: its smallest inset from "
                                 f"the outline or a hole is {d_in:.4g}{on}{where}, a channel {c:.4g} wide with a "

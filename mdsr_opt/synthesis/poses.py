@@ -24,7 +24,11 @@ The layout is the union of the poses' own routings, deduplicated, under a muscle
    (:func:`~mdsr_opt.synthesis.routing_fixtures.common_fixture_radius`). Each of these is said in the
    result's ``notes``; a clash left (ropes given, not routed) is in its ``problems``, and no success;
 4. at most ``max_muscles`` are kept; given separate layouts (a scene's cases), named as in them (prefixed
-   by the pose where two poses give one name to different ropes: ``curl:M2``).
+   by the pose where two poses give one name to different ropes: ``curl:M2``);
+5. after the poses are designed on it (below), a muscle that pulls in no pose (released in every pose, or
+   idle -- below ``idle_contraction``, or slack -- wherever engaged) is dropped and those poses designed
+   again, as :func:`~mdsr_opt.synthesis.acceptance.design_active` drops an idle muscle of one design
+   (:mod:`~mdsr_opt.synthesis.poses_rounds`).
 
 Why not route once on a combined contraction graph (e.g. the largest contraction of each edge over the
 poses)? A muscle pulls in one direction: a combined graph mixes edges that contract in different poses, and
@@ -68,8 +72,7 @@ True
 
 from __future__ import annotations
 
-import inspect
-import math
+import numbers
 import time
 import warnings
 from dataclasses import dataclass
@@ -82,14 +85,14 @@ from ..body.checks import check_target_shape, solved_state
 from ..body.fingerprint import check_same_mesh, mesh_fingerprint
 from ..core.checks import as_float_array, check_label, check_options, keyword_names
 from ..core.quantities import check_length_unit
-from ..mechanics.anchors import body_size
-from .acceptance import difference_failure, rest_difference
+from .acceptance import A_MAX, IDLE_CONTRACTION, check_idle_contraction, rest_difference
 from ..body.mesh import Mesh
 from ..body.muscles import check_muscles
 from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 from .routing_fixtures import common_fixture_radius
 from .layouts import check_budget, route_poses, shared_layout
 from .poses_result import PosesResult
+from .poses_rounds import design_round, drop_idle
 
 __all__ = ["Pose", "design_poses"]
 
@@ -160,16 +163,17 @@ def _check_poses(mesh: Mesh, poses) -> list[Pose]:
 
 
 # ---------------------------------------------------------------------------------------------- design
-def _per_muscle(design, muscles, mesh):
-    """(stroke, tension) of a design, read from its per-muscle fields when it has them."""
-    a = np.asarray(design.contractions, dtype=float)
-    L0 = np.array([m.rest_length(mesh) for m in muscles])
-    stroke = getattr(design, "stroke", None)
-    stroke = a * L0 if stroke is None or np.size(stroke) != len(a) else np.asarray(stroke, dtype=float)
-    tension = getattr(design, "tension", None)
-    tension = np.full(len(a), np.nan) if tension is None or np.size(tension) != len(a) else \
-        np.asarray(tension, dtype=float)
-    return stroke, tension
+def _idle_threshold(idle_contraction, dopt: dict) -> tuple[float, bool]:
+    """The idle threshold and whether slack ropes count as idle: ``idle_contraction`` checked (below ``a_max``;
+    a slack rope idle when it is above 0); None: :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION`, or 0
+    when ``a_max`` is not above it (a design asked for tiny contractions), and a slack rope idle."""
+    cable = dopt.get("muscle_model", "cable") == "cable"  # a spring under compression pushes: never slack
+    if idle_contraction is not None:
+        thr = check_idle_contraction(idle_contraction, a_max=dopt.get("a_max", A_MAX))
+        return thr, thr > 0 and cable
+    a_max = dopt.get("a_max", A_MAX)
+    low = isinstance(a_max, numbers.Real) and not isinstance(a_max, bool) and a_max <= IDLE_CONTRACTION
+    return (0.0 if low else IDLE_CONTRACTION), cable
 
 
 def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
@@ -186,7 +190,8 @@ def _check_option_dicts(routing_options, design_options) -> tuple[dict, dict]:
 def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                  routing_options: Mapping | None = None, design_options: Mapping | None = None,
                  overlap: float = 0.5, compare: bool = True, separate: Mapping[str, tuple] | None = None,
-                 units: str | None = None, fabrication=None, clashes: str = "resolve") -> PosesResult:
+                 units: str | None = None, fabrication=None, clashes: str = "resolve",
+                 idle_contraction: float | None = None) -> PosesResult:
     """Route ONE muscle layout for all poses and design each pose's strokes on it.
 
     See the module docstring for how the layout is made (union of the poses' routings, round-robin by rank,
@@ -230,6 +235,15 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         Ropes of different poses that cross or crowd each other: resolved (see Returns), or kept as routed
         (a layout whose crossing ropes get channels at two depths): then listed in ``problems``, and the
         result is no success (:func:`~mdsr_opt.synthesis.layouts.shared_layout`).
+    idle_contraction : float in [0, 1), optional
+        A muscle that pulls in no pose -- released in every pose, or designed below this contraction or
+        slack (no tension) in every pose that engages it -- is idle, as in
+        :func:`~mdsr_opt.synthesis.pipeline.design_pipeline`: dropped from the shared layout and the poses
+        that engaged it designed again without it (:func:`~mdsr_opt.synthesis.poses_rounds.drop_idle`), said in
+        ``notes`` and ``dropped``; when a pose fails without it, it is kept, with a
+        :class:`~mdsr_opt.synthesis.results.MuscleWarning` and a note. Default
+        :data:`~mdsr_opt.synthesis.acceptance.IDLE_CONTRACTION` (0 when ``a_max`` is not above it; slack ropes
+        are still dropped); 0: keep every muscle. Must lie below ``a_max``.
 
     Returns
     -------
@@ -241,7 +255,10 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         fixtures as large as every rope has room for), each said in ``notes``; a clash left (ropes given,
         not routed: :func:`~mdsr_opt.synthesis.fabrication.rope_conflicts`) is listed in ``problems`` and
         makes the result no success. With ``separate``, the muscles keep the names those
-        layouts give them (see :func:`~mdsr_opt.synthesis.layouts.shared_layout`, ``by_pose``).
+        layouts give them (see :func:`~mdsr_opt.synthesis.layouts.shared_layout`, ``by_pose``); a muscle
+        dropped as idle leaves its name unused. Each pose's design warnings (a saturated muscle's
+        :class:`~mdsr_opt.synthesis.results.MuscleWarning`) start ``design_poses: pose '<name>' on the
+        shared layout:``.
 
     Raises
     ------
@@ -266,6 +283,7 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
         raise ValueError(f"overlap must be in (0, 1], got {overlap!r}")
     units = check_length_unit(units)
     ropt, dopt = _check_option_dicts(routing_options, design_options)  # misspelt keys: before any work
+    thr, drop_slack = _idle_threshold(idle_contraction, dopt)
     # the ropes are fitted to their end fixtures, which are the design's anchor patches
     if fabrication is not None and "fabrication" in ropt:
         raise ValueError("give the fabrication once: as design_poses(fabrication=...) or in routing_options")
@@ -301,6 +319,27 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                          "the shared layout keeps both fixtures inside the body and clear of the other ropes")
     # the wall a rope's two end fixtures keep between them in every design: the fabrication's (as the pipeline's)
     dopt.setdefault("fixture_wall", (fab or Fabrication().for_body(mesh)).wall)
+    t1 = time.perf_counter()
+    Drest = np.array([rest_difference(mesh, p.target, dopt) for p in items])  # the "do nothing" design
+    rnd = design_round(mesh, material, items, muscles, dopt, separate, Drest, units)
+    # a muscle that pulls in no pose (released, or idle in every design that engages it): dropped, as
+    # design_pipeline drops an idle muscle, and the poses that engaged it designed again
+    rnd, dropped, _ = drop_idle(mesh, material, items, rnd, dopt, separate, Drest, units, thr=thr,
+                                drop_slack=drop_slack, notes=notes)
+    if len(rnd.muscles) < len(muscles):
+        sources = tuple(src for mu, src in zip(muscles, sources) if any(mu is k for k in rnd.muscles))
+        muscles = rnd.muscles
+    status = list(rnd.status)
+    for k, p in enumerate(items):
+        if own[p.name] and not any(p.name in src for src in sources):
+            status[k] += ("; none of the ropes of its own layout is in the shared layout (over the budget, "
+                          "dropped beside stronger ropes or idle in every pose: see the notes)")
+        elif not own[p.name]:
+            status[k] += f"; its own routing kept no rope ({why_none[p.name]})"
+        for w in rnd.caught.get(p.name, ()):  # the muscles named are the shared layout's: the pose is said
+            warnings.warn(f"design_poses: pose {p.name!r} on the shared layout: {w.message}", w.category,
+                          stacklevel=3)
+    t_shared = time.perf_counter() - t1
     problems: list[str] = []
     if fab is not None:  # a rope given (a scene's own) whose channel or fixture leaves the body is said
         found = rope_conflicts(mesh, muscles, fab, fixture_radius=dopt.get("anchor_radius"))
@@ -312,53 +351,8 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
             problems.append(f"the shared layout cannot be moulded in one layer: {len(across)} place(s) where ropes "
                             "of different poses clash: " + "; ".join(c.message for c in across))
 
-    t1 = time.perf_counter()
-    Drest = np.array([rest_difference(mesh, p.target, dopt) for p in items])  # the "do nothing" design
-    P, m = len(items), len(muscles)
-    L0 = np.array([mu.rest_length(mesh) for mu in muscles])
-    A, S, T = np.zeros((P, m)), np.zeros((P, m)), np.full((P, m), np.nan)
-    D, ok, status, states, designs = np.zeros(P), np.zeros(P, bool), [], [], {}
-    engaged = np.zeros((P, m), bool)
-    for k, p in enumerate(items):
-        # a muscle whose path lengthens in this pose is released (its rope paid out, slack)
-        engaged[k] = np.array([mu.length(p.target) for mu in muscles]) < L0 * (1.0 - 1e-9)
-        on = np.flatnonzero(engaged[k])
-        if not len(on):
-            x = mesh.points.copy()
-            D[k] = Drest[k]
-            status.append("no muscle of the shared layout shortens in this pose: left at rest")
-        else:
-            sep = separate.get(p.name)
-            if sep is not None and _same_design(mesh, sep, [muscles[i] for i in on], dopt):
-                d = sep[1]  # the pose engages exactly its own layout: the same NLP, already solved
-            else:
-                d = design_contractions(mesh, material, [muscles[i] for i in on], p.target, **dopt)
-            designs[p.name] = d
-            x = np.asarray(d.x, dtype=float)
-            st, tn = _per_muscle(d, [muscles[i] for i in on], mesh)
-            A[k, on], S[k, on], T[k, on] = d.contractions, st, tn
-            D[k], ok[k] = d.difference, d.success
-            status.append(str(d.status))
-            why = difference_failure(D[k], body_size(mesh), math.inf, units, rest_difference=Drest[k])
-            if ok[k] and why:  # converged and verified, but the layout barely moves the body towards this pose
-                ok[k] = False
-                status[-1] += f"; {why}"
-        if own[p.name] and not any(p.name in src for src in sources):
-            status[-1] += ("; none of the ropes of its own layout is in the shared layout (over the budget, or "
-                           "dropped beside stronger ropes: see the notes)")
-        elif not own[p.name]:
-            status[-1] += f"; its own routing kept no rope ({why_none[p.name]})"
-        off = np.flatnonzero(~engaged[k])
-        if len(off):  # released: the rope at exactly the path's length (paid out or slack taken up), no tension
-            Lx = np.array([muscles[i].length(x) for i in off])
-            S[k, off] = L0[off] - Lx
-            A[k, off] = S[k, off] / L0[off]
-            T[k, off] = 0.0
-        states.append(x)
-    t_shared = time.perf_counter() - t1
-
     t2 = time.perf_counter()
-    Dsep = np.full(P, np.nan)
+    Dsep = np.full(len(items), np.nan)
     nsep = np.array([len(own[p.name]) for p in items], dtype=int)
     if compare:
         for k, p in enumerate(items):
@@ -371,41 +365,18 @@ def design_poses(mesh: Mesh, material, poses, *, max_muscles: int | None = None,
                     warnings.warn(f"design_poses: pose {p.name!r} on its own layout (compared): {w.message}",
                                   w.category, stacklevel=3)
     t_sep = time.perf_counter() - t2
+    designs = rnd.designs
     radius = next((getattr(d, "anchor_radius", None) for d in designs.values()), None)
     return PosesResult(names=tuple(p.name for p in items), muscles=muscles,
                        rest_lengths=np.array([mu.rest_length(mesh) for mu in muscles]), sources=sources,
-                       contractions=A, strokes=S, tensions=T, differences=D, pose_success=ok, status=tuple(status),
-                       states=np.array(states), separate_differences=Dsep, separate_n_muscles=nsep, engaged=engaged,
-                       anchor_radius=None if radius is None else float(radius),
+                       contractions=rnd.contractions, strokes=rnd.strokes, tensions=rnd.tensions,
+                       differences=rnd.differences, pose_success=rnd.ok, status=tuple(status),
+                       states=np.array(rnd.states), separate_differences=Dsep, separate_n_muscles=nsep,
+                       engaged=rnd.engaged, anchor_radius=None if radius is None else float(radius),
                        muscle_model=str(dopt.get("muscle_model", getattr(next(iter(designs.values()), None),
                                                                           "muscle_model", "cable"))),
                        max_muscles=budget, times={"routing": t_route, "shared": t_shared, "separate": t_sep,
                                                   "total": time.perf_counter() - t0}, designs=designs,
                        rest_mesh=mesh_fingerprint(mesh), rest_differences=Drest, units=units,
                        stress_unit=getattr(material, "stress_unit", None), problems=tuple(problems), fabrication=fab,
-                       notes=tuple(dict.fromkeys(notes)))
-
-
-def _same_design(mesh, sep, engaged, dopt) -> bool:
-    """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
-    **dopt)`` would make (same muscles in the same order, same recorded options)?"""
-    from ..mechanics.anchors import anchor_radius_or_default
-    from .contractions import design_contractions
-
-    muscles, d = sep
-    if d is None or [tuple(m.nodes) for m in muscles] != [tuple(m.nodes) for m in engaged]:
-        return False
-    default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
-    for key in ("method", "a_max", "muscle_model", "stiffness", "verify", "fixture_wall"):
-        want = dopt.get(key, default[key].default)
-        if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
-            want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
-        if key == "verify":
-            if want and d.verification is None:
-                return False
-            if want and want != "design" and not str(d.verification.forward_start or "rest").startswith("rest"):
-                return False  # verified from its own state only: not the re-solve from rest asked for
-        elif getattr(d, key, None) != want:  # a design that records no fixture_wall: not the same
-            return False
-    radius = anchor_radius_or_default(mesh, dopt.get("anchor_radius"))
-    return bool(np.isclose(float(d.anchor_radius), radius, rtol=1e-12, atol=0.0))
+                       notes=tuple(dict.fromkeys(notes)), dropped=dropped)

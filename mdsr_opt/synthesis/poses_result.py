@@ -13,6 +13,7 @@ import numpy as np
 
 from ..body.muscles import Muscle
 from ..plot.style import muscle_label
+from .acceptance import DroppedMuscle
 from .fabrication import Fabrication
 
 __all__ = ["PosesResult", "FORMAT"]
@@ -95,7 +96,11 @@ class PosesResult:
         What was resolved to make the shared layout mouldable, one sentence each (as a routing's ``notes``):
         a pose's rope merged into another pose's it runs along, shortened to its part clear of the stronger
         ropes' channels and fixtures, or dropped; the fixtures made smaller than the fabrication's
-        ``fixture_radius`` so that every rope keeps them. Empty when nothing was.
+        ``fixture_radius`` so that every rope keeps them; a muscle that pulls in no pose dropped (or kept, when
+        the poses designed without it failed). Empty when nothing was.
+    dropped : tuple of DroppedMuscle
+        The muscles taken out of the layout because no pose uses them: released in every pose, or designed
+        below ``idle_contraction`` (or slack) wherever engaged (``contraction``: its largest over the poses).
     """
 
     names: tuple
@@ -124,6 +129,7 @@ class PosesResult:
     problems: tuple = ()
     fabrication: Fabrication | None = None
     notes: tuple = ()
+    dropped: tuple = ()
 
     @property
     def n_muscles(self) -> int:
@@ -163,6 +169,8 @@ class PosesResult:
         u = f"in {self.units}" if self.units else "in the mesh's length units"
         rows.append(f"D (weighted RMS node distance) and strokes {u}")
         rows += [f"NOT a success: {p}" for p in self.problems]
+        if self.dropped:  # said, as the notes say it: a rope no pose uses is not in the layout
+            rows.append(f"dropped, no pose uses it: {', '.join(d.name for d in self.dropped)}")
         return "\n".join(rows)
 
     def to_dict(self) -> dict:
@@ -193,7 +201,7 @@ class PosesResult:
                 "rest_differences": None if self.rest_differences is None else nan_none(fin(self.rest_differences)),
                 "units": self.units, "stress_unit": self.stress_unit, "problems": list(self.problems),
                 "fabrication": None if self.fabrication is None else self.fabrication.to_dict(),
-                "notes": list(self.notes)}
+                "notes": list(self.notes), "dropped": [d.to_dict() for d in self.dropped]}
 
     @classmethod
     def from_dict(cls, d: dict) -> "PosesResult":
@@ -217,7 +225,10 @@ class PosesResult:
                    rest_differences=None if d.get("rest_differences") is None else arr(d["rest_differences"]),
                    units=d.get("units"), stress_unit=d.get("stress_unit"), problems=tuple(d.get("problems", ())),
                    fabrication=None if d.get("fabrication") is None else Fabrication(**d["fabrication"]),
-                   notes=tuple(map(str, d.get("notes", ()))))
+                   notes=tuple(map(str, d.get("notes", ()))),
+                   dropped=tuple(DroppedMuscle(name=str(g["name"]), nodes=tuple(int(n) for n in g["nodes"]),
+                                               contraction=float(g["contraction"]), reason=str(g["reason"]))
+                                 for g in d.get("dropped", ())))
 
     def save(self, path) -> str:
         """Write :meth:`to_dict` as JSON (atomically), tagged :data:`FORMAT`. Returns the path."""
