@@ -153,11 +153,10 @@ def barrier_newton(bar: BarrierEnergy, system: _System, x, free, gtol: float, ma
     f = bar.energy(x, cand)
     if not np.isfinite(f):
         return x, False, "the start has an infinite energy", 0, np.inf
-    exact_skip, gn = 0, np.inf
+    gn = np.inf
     for it in range(1, max_iter + 1):
         check_stop()
-        dz, g, used_exact = _step(bar, system, x, cand, free, exact=exact_skip == 0)
-        exact_skip = 0 if used_exact else (2 if exact_skip == 0 else exact_skip - 1)
+        dz, g, _exact = _step(bar, system, x, cand, free)
         gf = g[free]
         gn = float(np.abs(gf).max()) if gf.size else 0.0
         if gn <= gtol:
