@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString, Point, Polygon
 
-from mdsr_opt import Mesh, NeoHookean, solve_external
+from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, solve_external
 from mdsr_opt.mechanics.barrier import BarrierEnergy, barrier, point_segment_distance
 from mdsr_opt.mechanics.ccd import swept_pairs, time_of_impact
 from mdsr_opt.mechanics.model import get_model
@@ -214,10 +214,12 @@ def test_contact_method_is_checked_at_the_door():
     mesh, left, drags = _turn(8)
     with pytest.raises(ValueError, match="contact_method must be"):
         solve_external(mesh, MAT, left, drags, contact=True, contact_method="penalty")
-    with pytest.raises(ValueError, match="give contact=True"):
+    with pytest.raises(ValueError, match="give contact=True and/or obstacles"):
         solve_external(mesh, MAT, left, drags, contact_method="barrier")
-    with pytest.raises(ValueError, match="self-contact only"):
+    with pytest.raises(ValueError, match="no Disk or Obstacle, friction or contact_gap"):
         solve_external(mesh, MAT, left, drags, contact=True, contact_method="barrier", contact_gap=0.01)
+    with pytest.raises(ValueError, match="no Disk or Obstacle"):
+        solve_external(mesh, MAT, left, drags, obstacles=[Disk((9.0, 9.0), 1.0)], contact_method="barrier")
 
 
 @pytest.mark.slow
@@ -254,3 +256,26 @@ def test_a_slot_hole_squeezed_shut_touches_across_the_hole():
     # ipopt's gap constraints: 0.056480 (the slot is a tenth high: the barrier's gap, below dhat = 0.1 of an
     # edge, is a larger part of it than on the strips; measured 1.8 % higher)
     assert res.energy == pytest.approx(0.056480, rel=0.03)
+
+
+def test_strip_pressed_onto_ground_rests_on_it_and_reactions_balance():
+    mesh = Mesh.rectangle(4.0, 1.0, 16, 4)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.3) for i in top}
+    level = -0.05
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, level), (0.0, 1.0))],
+                         contact_method="barrier")
+    assert res.success and res.stable and res.residual <= 1e-8, res.status
+    dhat = res.contact["dhat"]
+    assert dhat == pytest.approx(0.1 * 0.25)  # a tenth of the boundary edge
+    y = res.x[:, 1]
+    assert y.min() > level and np.all(y[bottom] < level + dhat)  # the whole bottom rests within dhat, none below
+    pairs = res.contact["pairs"]
+    assert sorted(p["nodes"][0] for p in pairs) == sorted(bottom.tolist())
+    assert all(p["kind"] == "obstacle" and p["force"] > 0 for p in pairs)
+    model = get_model(mesh, MAT)  # the load the drags apply: the energy gradient summed over them
+    load = model.gradient(res.x.reshape(-1), model.params(MAT)).reshape(-1, 2)[top].sum(0)
+    assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-9)
+    assert np.allclose(-np.sum(res.contact["node_forces"], axis=0), load, rtol=1e-6, atol=1e-9)
+    assert load[1] < -0.5 and abs(load[0]) < 1e-6

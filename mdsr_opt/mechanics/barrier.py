@@ -204,9 +204,16 @@ class BarrierEnergy:
     kappa : float, optional
         The barrier's stiffness (default :data:`KAPPA` times the model's unit stiffness ``E t``; pass it in
         the body's energy units).
+    planes : (k, 2, 2) array, optional
+        Rigid half-planes, each ``(point q, unit normal n)`` (``n`` into the free side): every boundary node
+        ``p`` is kept on the free side by the same barrier on ``d = n . (p - q)`` (a segment cannot enter a
+        half-plane without an end node in it).
+    self_contact : bool
+        Keep the boundary off itself (default); False: only off the planes.
     """
 
-    def __init__(self, model, p, dhat: float | None = None, kappa: float | None = None):
+    def __init__(self, model, p, dhat: float | None = None, kappa: float | None = None, planes=None,
+                 self_contact: bool = True):
         mesh = model.mesh
         self.model, self.p = model, np.asarray(p, dtype=float)
         self.elastic = model.numeric(self.p)
@@ -218,12 +225,41 @@ class BarrierEnergy:
         self.dhat = float(DHAT * h if dhat is None else dhat)
         self.kappa = float(KAPPA if kappa is None else kappa)
         self.n = 2 * mesh.n_nodes
+        self.planes = np.zeros((0, 2, 2)) if planes is None else np.asarray(planes, dtype=float).reshape(-1, 2, 2)
+        self.self_contact = bool(self_contact)
+
+    def plane_distances(self, x) -> np.ndarray:
+        """``d`` (k, b) of every boundary node (:attr:`nodes`) from every plane, signed (negative inside)."""
+        X = np.asarray(x, dtype=float).reshape(-1, 2)[self.nodes]
+        return np.einsum("kj,kbj->kb", self.planes[:, 1], X[None] - self.planes[:, 0][:, None])
+
+    def plane_impact(self, x0, x1) -> float:
+        """The earliest ``t`` in ``[0, 1]`` at which a boundary node reaches a plane along the straight step
+        from ``x0`` to ``x1`` (``inf`` when none does)."""
+        if not len(self.planes):
+            return np.inf
+        d0, d1 = self.plane_distances(x0), self.plane_distances(x1)
+        hit = d1 <= 0.0
+        if not hit.any():
+            return np.inf
+        return float((d0[hit] / np.maximum(d0[hit] - d1[hit], 1e-300)).min())
+
+    def plane_terms(self, x):
+        """The node-plane terms within ``dhat`` at ``x``: ``(nodes (N,), planes (N,), d (N,))``."""
+        if not len(self.planes):
+            z = np.zeros(0, dtype=np.int64)
+            return z, z, np.zeros(0)
+        d = self.plane_distances(x)
+        k, j = np.nonzero(d < self.dhat)
+        return self.nodes[j], k, d[k, j]
 
     def pairs(self, X0, X1=None) -> np.ndarray:
         """The candidate pairs within ``dhat`` anywhere along the step from ``X0`` to ``X1`` (default: at
         ``X0``), (N, 3) rows ``(p, a, b)``."""
         X0 = np.asarray(X0, dtype=float).reshape(-1, 2)
         X1 = X0 if X1 is None else np.asarray(X1, dtype=float).reshape(-1, 2)
+        if not self.self_contact:
+            return np.zeros((0, 3), dtype=np.int64)
         return swept_pairs(X0, X1, self.nodes, self.segs, self.dhat)
 
     def active(self, x, cand) -> np.ndarray:
@@ -234,11 +270,18 @@ class BarrierEnergy:
         return cand[d < self.dhat]
 
     def contact_energy(self, x, cand) -> float:
-        """The barrier energy at ``x`` over the candidate pairs ``cand`` (``inf`` at a zero distance)."""
+        """The barrier energy at ``x`` over the candidate pairs ``cand`` and the planes (``inf`` at a zero
+        distance or a node in a plane)."""
+        W = 0.0
+        if len(self.planes):
+            d = self.plane_distances(x)
+            if (d <= 0.0).any():
+                return np.inf
+            W += self.kappa * float(barrier(d[d < self.dhat], self.dhat)[0].sum())
         if not len(cand):
-            return 0.0
+            return W
         d = point_segment_distance(np.asarray(x).reshape(-1, 2), cand, hessian=False)[0]
-        return self.kappa * float(barrier(d, self.dhat)[0].sum())
+        return W + self.kappa * float(barrier(d, self.dhat)[0].sum())
 
     def energy(self, x, cand) -> float:
         """Strain plus barrier energy at ``x`` (flat), ``inf`` at an inverted element or a zero distance."""
@@ -253,12 +296,23 @@ class BarrierEnergy:
         act = self.active(x, cand)
         if len(act):
             g = g - pair_forces(np.asarray(x).reshape(-1, 2), act, self.kappa, self.dhat)[2].ravel()
-        return g
+        return g - self.plane_forces(x)[2].ravel()
+
+    def plane_forces(self, x):
+        """The planes' forces on the nodes within ``dhat`` of them: ``(magnitudes (N,), the terms
+        (nodes, planes, d), node forces (n, 2))``, each ``-kappa b'(d)`` along the plane's normal."""
+        p, k, d = self.plane_terms(x)
+        f = -self.kappa * barrier(d, self.dhat)[1]
+        node = np.zeros((self.n // 2, 2))
+        if len(p):
+            np.add.at(node, p, f[:, None] * self.planes[k, 1])
+        return f, (p, k, d), node
 
     def blocks(self, x, cand, project: bool = True):
         """``(gradient (2n,), element blocks, spring blocks, pairs (N, 3), pair blocks (N, 6, 6))`` at ``x``
         (flat): each block projected to positive semi-definite unless ``project=False`` (then their sum is
-        the exact Hessian)."""
+        the exact Hessian). The node-plane terms come last among the pairs, as rows ``(p, p, p)`` whose
+        blocks are nonzero on ``p``'s first two coordinates only."""
         g, He, Hs = self.elastic.element_blocks(x, project=False)
         if project:
             He, Hs = self.elastic.projected_blocks()
@@ -272,4 +326,14 @@ class BarrierEnergy:
             Hp = self.kappa * (ddb[:, None, None] * gd[:, :, None] * gd[:, None, :] + db[:, None, None] * Hd)
             if project:
                 Hp = project_psd(Hp)
+        p, k, d = self.plane_terms(x)
+        if len(p):  # as pairs (p, p, p) whose block is kappa b'' n n' on p's coordinates (positive semi-definite)
+            _b, db, ddb = barrier(d, self.dhat)
+            nrm = self.planes[k, 1]
+            g = g + np.bincount(np.stack([2 * p, 2 * p + 1], 1).ravel(), weights=(self.kappa * db[:, None] * nrm).ravel(),
+                                minlength=self.n)
+            Hq = np.zeros((len(p), 6, 6))
+            Hq[:, :2, :2] = self.kappa * ddb[:, None, None] * nrm[:, :, None] * nrm[:, None, :]
+            act = np.concatenate([act, np.stack([p, p, p], 1)])
+            Hp = np.concatenate([Hp, Hq])
         return g, He, Hs, act, Hp

@@ -141,7 +141,7 @@ def _ccd_limit(bar, x, y, cand) -> float:
     """The first trial fraction of the step from ``x`` to ``y``: :data:`TOI_SAFETY` times the earliest time
     of impact of the pairs ``cand`` (swept within ``dhat``), at most 1; 1 with no impact."""
     toi = time_of_impact(x.reshape(-1, 2), y.reshape(-1, 2), cand)
-    t = float(toi.min()) if len(toi) else np.inf
+    t = min(float(toi.min()) if len(toi) else np.inf, bar.plane_impact(x, y))
     return 1.0 if not np.isfinite(t) else min(1.0, TOI_SAFETY * t)
 
 
@@ -191,7 +191,7 @@ def _admissible_move(bar, x, y, cand=None) -> bool:
         return False
     cand = bar.pairs(x, y) if cand is None else cand
     toi = time_of_impact(x.reshape(-1, 2), y.reshape(-1, 2), cand)
-    if len(toi) and np.isfinite(toi).any():
+    if len(toi) and np.isfinite(toi).any() or np.isfinite(bar.plane_impact(x, y)):
         return False
     return bool(np.isfinite(bar.energy(y, cand)))
 
@@ -334,27 +334,36 @@ def barrier_report(bar: BarrierEnergy, x, fraction: float = 1.0, length: float =
     X = np.asarray(x, dtype=float).reshape(-1, 2)
     act = bar.active(X, bar.pairs(X))
     f, d, node = pair_forces(X, act, bar.kappa, bar.dhat)
+    fo, (po, ko, do), node_o = bar.plane_forces(X)
+    per_ob = np.zeros((len(bar.planes), 2))
+    if len(po):
+        np.add.at(per_ob, ko, -fo[:, None] * bar.planes[ko, 1])  # the force the body exerts on each plane
+    gaps = np.concatenate([d, do])
+    pairs = [{"kind": "self", "nodes": [int(v) for v in act[i]], "obstacle": -1, "gap": float(d[i]) * length,
+              "force": float(f[i]) * force} for i in range(len(act))]
+    pairs += [{"kind": "obstacle", "nodes": [int(po[i]), -1, -1], "obstacle": int(ko[i]), "gap": float(do[i]) * length,
+               "force": float(fo[i]) * force} for i in range(len(po))]
     return {"method": "barrier", "dhat": bar.dhat * length, "kappa": bar.kappa * force / length,
-            "gap": float(d.min()) * length if len(d) else None, "friction": None, "load_fraction": float(fraction),
-            "forces_known": True,
-            "pairs": [{"kind": "self", "nodes": [int(v) for v in act[i]], "obstacle": -1, "gap": float(d[i]) * length,
-                       "force": float(f[i]) * force} for i in range(len(act))],
-            "n_candidates": int(len(act)), "node_forces": (node * force).tolist(), "obstacle_forces": [],
-            "total_force": float(f.sum()) * force}
+            "gap": float(gaps.min()) * length if len(gaps) else None, "friction": None,
+            "load_fraction": float(fraction), "forces_known": True, "pairs": pairs, "n_candidates": len(pairs),
+            "node_forces": ((node + node_o) * force).tolist(), "obstacle_forces": (per_ob * force).tolist(),
+            "total_force": float(f.sum() + fo.sum()) * force}
 
 
 def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol, max_iter, min_step, verbose, mode,
-                       units, t_model=0.0, dhat=None, kappa=None):
+                       units, t_model=0.0, dhat=None, kappa=None, planes=None, self_contact=True):
     """The checked :class:`~mdsr_opt.mechanics.result.EquilibriumResult` (unit body) of a self-contact solve
     by the barrier, with its ``contact`` report in the user's units (:func:`barrier_report`; its
     ``barrier_energy`` the barrier's part of the total energy, which ``energy``, the strain energy, leaves
     out). ``dhat`` in unit lengths, ``kappa`` in units of ``E t`` (None: the defaults of
-    :mod:`~mdsr_opt.mechanics.barrier`)."""
+    :mod:`~mdsr_opt.mechanics.barrier`); ``planes`` (k, 2, 2) rigid half-planes (point, unit normal) on the
+    unit body; ``self_contact`` False: the planes alone."""
     if not getattr(model, "is_numeric", False):
         raise ValueError("contact_method='barrier' needs a material with closed forms (every material of "
                          "mdsr_opt.body.material) and no sliding cables")
     F = material.E * material.thickness * mesh.size
-    bar = BarrierEnergy(model, p, dhat, None if kappa is None else kappa * material.E * material.thickness)
+    bar = BarrierEnergy(model, p, dhat, None if kappa is None else kappa * material.E * material.thickness, planes,
+                        self_contact)
     t0 = time.perf_counter()
     with interruptible(), one_blas_thread():
         out = barrier_continuation(bar, fixed, values_of, x_start, tol * F, max_iter, min_step, verbose)

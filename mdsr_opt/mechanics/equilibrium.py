@@ -20,7 +20,7 @@ from .constraints import muscle_constraints, spring_segments, spring_stiffness
 from .barriersolve import solve_with_barrier
 from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
-from .obstacles import check_obstacles, check_prescribed
+from .obstacles import HalfPlane, check_obstacles, check_prescribed
 from .selfprescribed import check_prescribed_self
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
@@ -91,8 +91,9 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         How ``contact=True`` is solved: ``"ipopt"``, a gap constraint per candidate node-segment pair
         (:mod:`~mdsr_opt.mechanics.contactsolve`); ``"barrier"``, a smooth barrier on the node-segment
         distances within ``dhat`` (a tenth of the mean boundary edge) minimised by the project's Newton method
-        with continuous collision detection (:mod:`~mdsr_opt.mechanics.barriersolve`; self-contact only, no
-        ``obstacles``, ``friction`` or ``contact_gap``; backend ``"newton"`` is reported). Its contact report
+        with continuous collision detection (:mod:`~mdsr_opt.mechanics.barriersolve`; self-contact and
+        :class:`~mdsr_opt.HalfPlane` obstacles, frictionless, no ``contact_gap``; backend ``"newton"`` is
+        reported). Its contact report
         gives each pair within ``dhat`` with its distance and the barrier's force, and the barrier's energy
         (``barrier_energy``), which ``energy`` leaves out.
 
@@ -157,9 +158,11 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     values_of = _from_guess(values_of, None if isinstance(initial_guess, str) else units.state_in(x_start)[fixed])
 
     if barrier:
+        planes = [[o.point, o.normal] for o in spec.obstacles]  # HalfPlanes on the unit body
         return units.equilibrium_out(solve_with_barrier(mesh, model, material, p, fixed, values_of,
                                                         units.state_in(x_start), tol, max_iter, min_step, verbose,
-                                                        "external", units, t_model))
+                                                        "external", units, t_model, planes=planes or None,
+                                                        self_contact=spec.self_contact))
     if spec.active:
         res, _lam = solve_with_contact(mesh, model, material, lambda s: p, fixed, values_of, units.state_in(x_start),
                                        spec, tol, max_iter, options, min_step, verbose, predict, "external", units,
@@ -180,11 +183,13 @@ def check_contact_method(method, contact, obstacles, contact_gap, friction) -> b
         raise ValueError(f"contact_method must be 'ipopt' or 'barrier', got {method!r}")
     if method == "ipopt":
         return False
-    if contact is not True:
-        raise ValueError("contact_method='barrier' solves self-contact: give contact=True")
-    if obstacles or contact_gap is not None or friction:
-        raise ValueError("contact_method='barrier' models self-contact only (no obstacles, friction or contact_gap: "
-                         "its gap is set by the barrier); use contact_method='ipopt'")
+    obs = [] if obstacles is None else list(obstacles) if isinstance(obstacles, (list, tuple)) else [obstacles]
+    if contact is not True and not obs:
+        raise ValueError("contact_method='barrier' solves contact: give contact=True and/or obstacles")
+    if any(not isinstance(o, HalfPlane) for o in obs) or contact_gap is not None or friction:
+        raise ValueError("contact_method='barrier' models self-contact and HalfPlane obstacles, frictionless (no "
+                         "Disk or Obstacle, friction or contact_gap: its gap is set by the barrier); use "
+                         "contact_method='ipopt'")
     return True
 
 
