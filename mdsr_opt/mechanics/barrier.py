@@ -24,7 +24,7 @@ Example
 >>> import numpy as np
 >>> x = np.array([[0.5, 0.002], [0.0, 0.0], [1.0, 0.0]])    # node 0 just above the segment (1, 2)
 >>> d, gd, _ = point_segment_distance(x, np.array([[0, 1, 2]]))
->>> round(float(d[0]), 6), np.round(gd[0], 6).tolist()
+>>> round(float(d[0]), 6), (np.round(gd[0], 6) + 0.0).tolist()
 (0.002, [0.0, 1.0, 0.0, -0.5, 0.0, -0.5])
 >>> b, db, _ = barrier(np.array([0.002]), 0.01)
 >>> bool(b[0] > 0 and db[0] < 0)
