@@ -229,6 +229,8 @@ def test_turn_at_1701_nodes_solves_without_crossing():
     free = np.ones(mesh.n_nodes, dtype=bool)
     free[np.r_[left, list(drags)]] = False
     _check(mesh, res, free)
+    # ipopt's own load path: 0.23693 (README's Limits, 462 s); measured 0.23724
+    assert res.stable and res.energy == pytest.approx(0.23724, rel=1e-3)
 
 
 def test_a_barrier_solve_that_cannot_finish_is_reported_failed():
@@ -279,3 +281,16 @@ def test_strip_pressed_onto_ground_rests_on_it_and_reactions_balance():
     assert np.allclose(res.contact["obstacle_forces"][0], load, rtol=1e-6, atol=1e-9)
     assert np.allclose(-np.sum(res.contact["node_forces"], axis=0), load, rtol=1e-6, atol=1e-9)
     assert load[1] < -0.5 and abs(load[0]) < 1e-6
+
+
+@pytest.mark.slow
+def test_turn_at_6601_nodes_solves_without_crossing():
+    # the mesh at which the ipopt method's load stepping stalls (issue 35); here about 2 CPU minutes
+    mesh, left, drags = _turn(160)
+    res = solve_external(mesh, MAT, left, drags, contact=True, contact_method="barrier")
+    free = np.ones(mesh.n_nodes, dtype=bool)
+    free[np.r_[left, list(drags)]] = False
+    _check(mesh, res, free)
+    assert res.stable
+    # the coarser meshes' strain energies: 0.24581 (451 nodes), 0.23724 (1,701); measured 0.23476
+    assert 0.230 < res.energy < 0.240

@@ -250,8 +250,8 @@ def barrier_continuation(bar: BarrierEnergy, fixed, values_of, x_start, gtol: fl
     s, ds = 0.0, 1.0
     steps, iters, status, gn, escaped, chk = [], 0, "not started", np.inf, 0, None
     x[fixed] = values_of(0.0)
-    if not np.isfinite(bar.energy(x, bar.pairs(x))):
-        return {"x": x, "success": False, "status": "the start inverts an element or touches itself",
+    if not np.isfinite(bar.energy(x, bar.pairs(x))) or mesh.boundary_crossing(x.reshape(-1, 2)) is not None:
+        return {"x": x, "success": False, "status": "the first state inverts an element, crosses or touches itself",
                 "iterations": 0, "steps": steps, "gradient": np.inf, "fraction": 0.0}
     while s < 1.0 - 1e-12:
         check_stop()
