@@ -26,7 +26,6 @@ Example
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 __all__ = ["swept_pairs", "time_of_impact", "earliest_impact"]
 
@@ -68,6 +67,8 @@ def swept_pairs(X0, X1, nodes, segs, pad: float) -> np.ndarray:
         within ``pad`` of each other at some point of the step (and possibly others, not farther apart than
         the sum of their bounding circles' radii plus ``pad``), each once, sorted.
     """
+    from scipy.spatial import cKDTree  # here: `mdsr run`'s own process leaves scipy.spatial to its jobs
+
     nodes = np.asarray(nodes, dtype=np.int64)
     segs = np.asarray(segs, dtype=np.int64).reshape(-1, 2)
     if not len(nodes) or not len(segs):
