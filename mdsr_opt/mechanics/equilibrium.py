@@ -17,9 +17,10 @@ from .backends import CONSTRAINED_BACKENDS, supports_constraints
 from .constrained import ConstrainedModel
 from .anchors import check_anchor_radius, rigid_groups
 from .constraints import muscle_constraints, spring_segments, spring_stiffness
+from .barriersolve import solve_with_barrier
 from .contactsteps import contact_spec, solve_with_contact
 from .drags import drag_path
-from .obstacles import check_obstacles, check_prescribed
+from .obstacles import HalfPlane, check_obstacles, check_prescribed
 from .selfprescribed import check_prescribed_self
 from . import loadsteps
 from .loadsteps import (check_common, check_mesh_material, equilibrium_result, initial_guess_of, load_continuation,
@@ -41,7 +42,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                    tol: float = 1e-8, max_iter: int = 200, options: dict | None = None,
                    min_step: float = 1.0 / 256, verbose: bool = False,
                    initial_guess: str | np.ndarray = "predictor", obstacles=None, contact: bool = False,
-                   contact_gap: float | None = None, friction: float = 0.0) -> EquilibriumResult:
+                   contact_gap: float | None = None, friction: float = 0.0,
+                   contact_method: str = "ipopt") -> EquilibriumResult:
     """External driving: anchors stay at rest, drag nodes move to given positions, the rest settle.
 
     Parameters
@@ -85,6 +87,15 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         quasi-static, a lagged smoothed potential per load step (:mod:`~mdsr_opt.mechanics.friction`, which
         states its error); ``contact["friction"]`` then gives each touching node's tangential force and
         whether it slips.
+    contact_method : ``"ipopt"`` (default) or ``"barrier"``
+        How ``contact=True`` is solved: ``"ipopt"``, a gap constraint per candidate node-segment pair
+        (:mod:`~mdsr_opt.mechanics.contactsolve`); ``"barrier"``, a smooth barrier on the node-segment
+        distances within ``dhat`` (a tenth of the mean boundary edge) minimised by the project's Newton method
+        with continuous collision detection (:mod:`~mdsr_opt.mechanics.barriersolve`; self-contact and
+        :class:`~mdsr_opt.HalfPlane` obstacles, frictionless, no ``contact_gap``; backend ``"newton"`` is
+        reported). Its contact report
+        gives each pair within ``dhat`` with its distance and the barrier's force, and the barrier's energy
+        (``barrier_energy``), which ``energy`` leaves out.
 
     Returns
     -------
@@ -122,7 +133,8 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
                          "motion; got 1")
     t0 = time.perf_counter()
     units = Units(mesh, material)  # solved on the unit body (size 1, E t = 1), mapped back
-    spec = contact_spec(units, obstacles, contact, contact_gap, backend, friction)
+    barrier = check_contact_method(contact_method, contact, obstacles, contact_gap, friction)
+    spec = contact_spec(units, obstacles, contact, contact_gap, "ipopt" if barrier else backend, friction)
     if spec.obstacles:  # a drag into an obstacle: refused here, not a load stepping that stalls at its edge
         check_prescribed(check_obstacles(obstacles), didx, path.positions, spec.gap * units.length)
     if spec.self_contact and len(didx):  # prescribed parts pushed through each other: refused, not a stalled solve
@@ -145,6 +157,12 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
 
     values_of = _from_guess(values_of, None if isinstance(initial_guess, str) else units.state_in(x_start)[fixed])
 
+    if barrier:
+        planes = [[o.point, o.normal] for o in spec.obstacles]  # HalfPlanes on the unit body
+        return units.equilibrium_out(solve_with_barrier(mesh, model, material, p, fixed, values_of,
+                                                        units.state_in(x_start), tol, max_iter, min_step, verbose,
+                                                        "external", units, t_model, planes=planes or None,
+                                                        self_contact=spec.self_contact))
     if spec.active:
         res, _lam = solve_with_contact(mesh, model, material, lambda s: p, fixed, values_of, units.state_in(x_start),
                                        spec, tol, max_iter, options, min_step, verbose, predict, "external", units,
@@ -156,6 +174,23 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     return units.equilibrium_out(equilibrium_result(
         mesh, model, material, p, p, x, fixed, status, ok, iters, steps, t_model + t_build, t_solve, backend,
         "external", tol))
+
+
+def check_contact_method(method, contact, obstacles, contact_gap, friction) -> bool:
+    """Whether ``method`` (``contact_method`` of :func:`solve_external`) asks for the barrier; refuses an
+    unknown method and what the barrier does not model."""
+    if method not in ("ipopt", "barrier"):
+        raise ValueError(f"contact_method must be 'ipopt' or 'barrier', got {method!r}")
+    if method == "ipopt":
+        return False
+    obs = [] if obstacles is None else list(obstacles) if isinstance(obstacles, (list, tuple)) else [obstacles]
+    if contact is not True and not obs:
+        raise ValueError("contact_method='barrier' solves contact: give contact=True and/or obstacles")
+    if any(not isinstance(o, HalfPlane) for o in obs) or contact_gap is not None or friction:
+        raise ValueError("contact_method='barrier' models self-contact and HalfPlane obstacles, frictionless (no "
+                         "Disk or Obstacle, friction or contact_gap: its gap is set by the barrier); use "
+                         "contact_method='ipopt'")
+    return True
 
 
 def _from_guess(values_of, start):

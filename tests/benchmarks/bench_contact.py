@@ -26,6 +26,13 @@ load from the state of the mesh before it carried to its nodes (``transfer_state
 of 1/256 at a time.
 
     python tests/benchmarks/bench_contact.py --turn 40,80,160 --seed
+
+``--method ipopt,barrier`` solves each mesh of ``--turn`` by both contact methods, one after the other
+(``contact_method``: the gap constraints solved by IPOPT, or the barrier solved by Newton's method,
+:mod:`mdsr_opt.mechanics.barriersolve`); times are CPU seconds of the solve, ``iters`` IPOPT or Newton
+iterations summed over the load steps, ``energy`` the strain energy (the barrier's own is left out).
+
+    python tests/benchmarks/bench_contact.py --turn 40,80,160 --method ipopt,barrier
 """
 
 from __future__ import annotations
@@ -85,9 +92,10 @@ def gripper():
             lambda: solve_internal(mesh, mat, muscles, [0.3, 0.3], contact=True))
 
 
-def turn(nx: int, seed=None):
+def turn(nx: int, seed=None, method: str = "ipopt", verbose: bool = False):
     """The 90-degree turn on ``nx`` x ``nx/4`` cells: ``(mesh, result, seconds)``; ``seed``: a solved
-    ``(mesh, result)`` of the turn on another mesh, whose state starts the one load step at full load."""
+    ``(mesh, result)`` of the turn on another mesh, whose state starts the one load step at full load;
+    ``method``: the ``contact_method``."""
     mesh = Mesh.rectangle(4.0, 1.0, nx, nx // 4)
     P = mesh.points
     left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
@@ -99,9 +107,9 @@ def turn(nx: int, seed=None):
         from mdsr_opt.mechanics.quadratic import transfer_state
 
         kw = {"initial_guess": transfer_state(seed[0], seed[1].x, P), "min_step": 1.0}
-    t0 = time.perf_counter()
-    res = solve_external(mesh, MAT, left, drags, contact=True, **kw)
-    return mesh, res, time.perf_counter() - t0
+    t0 = time.process_time()
+    res = solve_external(mesh, MAT, left, drags, contact=True, contact_method=method, verbose=verbose, **kw)
+    return mesh, res, time.process_time() - t0
 
 
 def contact_regions(mesh, res) -> list[dict]:
@@ -146,23 +154,24 @@ def clamp_reaction(mesh, x, anchors) -> np.ndarray:
     return -g[np.asarray(anchors)].sum(0)
 
 
-def turn_study(sizes, seed: bool = False) -> None:
+def turn_study(sizes, seed: bool = False, methods=("ipopt",)) -> None:
     """Print the turn's contact region per mesh (module docstring); ``seed``: each mesh after the first
-    started from the one before."""
+    started from the one before; ``methods``: the contact methods, each mesh solved by each in turn."""
     from shapely.geometry import Polygon
 
-    print(f"{'cells':>8s} {'nodes':>6s} {'time s':>8s} {'steps':>5s} {'ok':>3s} {'valid':>5s} {'stable':>6s} "
-          f"{'start x':>7s} {'force':>8s} {'energy':>8s} {'clamp Rx':>8s} {'clamp Ry':>8s}  status")
-    last = None
-    for nx in sizes:
-        mesh, res, t = turn(nx, last if seed else None)
-        last = (mesh, res) if res.success else None
+    print(f"{'cells':>8s} {'method':>7s} {'nodes':>6s} {'CPU s':>8s} {'iters':>5s} {'steps':>5s} {'ok':>3s} "
+          f"{'valid':>5s} {'stable':>6s} {'start x':>7s} {'force':>8s} {'energy':>8s} {'clamp Rx':>8s} "
+          f"{'clamp Ry':>8s}  status")
+    last = {}
+    for nx, method in [(nx, m) for nx in sizes for m in methods]:
+        mesh, res, t = turn(nx, last.get(method) if seed else None, method)
+        last[method] = (mesh, res) if res.success else None
         P = mesh.points
         valid = Polygon(res.x[mesh.boundary_loops[0]]).is_valid  # shapely: the outline does not cross itself
         touch = sorted({q for pr in res.contact["pairs"] for q in pr["nodes"] if q >= 0 and P[q, 1] == 0.0})
         R = clamp_reaction(mesh, res.x, np.flatnonzero(P[:, 0] == 0.0))
         start = float(P[touch, 0].min()) if touch else float("nan")
-        print(f"{nx:>4d}x{nx // 4:<3d} {mesh.n_nodes:6d} {t:8.1f} {len(res.steps):5d} "
+        print(f"{nx:>4d}x{nx // 4:<3d} {method:>7s} {mesh.n_nodes:6d} {t:8.1f} {res.iterations:5d} {len(res.steps):5d} "
               f"{'yes' if res.success else 'no':>3s} {valid!s:>5s} {bool(res.stable)!s:>6s} {start:7.3f} "
               f"{res.contact['total_force']:8.5f} {res.energy:8.5f} {R[0]:8.5f} {R[1]:8.5f}  {res.status[:70]}",
               flush=True)
@@ -181,9 +190,11 @@ def main(argv=None) -> int:
     ap.add_argument("--turn", default=None, help="comma-separated nx: the 90-degree turn's refinement study")
     ap.add_argument("--seed", action="store_true", help="with --turn: each mesh after the first at full load from "
                     "the one before")
+    ap.add_argument("--method", default="ipopt", help="with --turn: comma-separated contact methods (ipopt, barrier), "
+                    "each mesh solved by each in turn")
     args = ap.parse_args(argv)
     if args.turn:
-        turn_study([int(v) for v in args.turn.split(",")], args.seed)
+        turn_study([int(v) for v in args.turn.split(",")], args.seed, args.method.split(","))
         return 0
     print(f"{'scene':10s} {'case':20s} {'plain s':>9s} {'ok':>3s} {'contact s':>10s} {'ok':>3s} {'ratio':>6s} "
           f"{'pairs':>5s}  status (contact)")
