@@ -224,3 +224,17 @@ def test_the_case_figures_draw_the_obstacles_where_the_solve_had_them():
     assert x1 - x0 < 20  # the half-plane's fill did not widen the view
     assert "obstacle" in [t.get_text() for t in ax.get_legend().get_texts()]
     plt.close(fig)
+
+
+def test_an_external_case_with_obstacles_says_its_difference_is_measured_held_not_aligned(tmp_path):
+    """A case with obstacles is designed mounted at its anchors (the obstacles stand in that frame): its
+    notes say the difference is measured there, without the rigid alignment of a case without obstacles,
+    since the two can decide ok against FAILED (recheck11 #1)."""
+    from mdsr_opt.scenes.grips import obstacle_design
+
+    scene = load_scene(_write(tmp_path, STRIP))
+    press = scene.case("press")
+    opts, notes = obstacle_design(scene, press, {})
+    assert opts["method"] == "derivative-free" and np.array_equal(opts["held"], press.anchors)
+    assert any("clamped at the target's anchors" in n and "no rigid alignment" in n for n in notes), notes
+    assert obstacle_design(scene, scene.case("curl"), {})[1] == [n for n in notes if "clamped" not in n]

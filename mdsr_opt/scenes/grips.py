@@ -47,7 +47,9 @@ def obstacle_design(scene, case, opts: dict, obstacles=None) -> tuple[dict, list
     out["method"] = "derivative-free"
     if case.kind == "external" and out.get("held") is None:
         out["held"] = case.anchors  # mounted where the target was clamped: the obstacles stand in that frame
-        notes.append("design: the body clamped at the target's anchors (the obstacles stand in their frame)")
+        notes.append("design: the body clamped at the target's anchors (the obstacles stand in their frame), and "
+                     "its difference measured there, with no rigid alignment to the target (a case without "
+                     "obstacles is aligned first: its difference can be smaller than a mounted robot's)")
     if kw["friction"] > 0 and not any(isinstance(o, FreeDisk) for o in out["obstacles"]):
         notes.append(f"design: frictionless contact (the design's solves take no friction; the target's "
                      f"friction {kw['friction']:g} enters its solve and the grip report)")
