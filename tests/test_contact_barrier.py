@@ -8,7 +8,7 @@ from shapely.geometry import LineString, Point, Polygon
 
 from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, solve_external
 from mdsr_opt.mechanics.barrier import BarrierEnergy, barrier, point_segment_distance
-from mdsr_opt.mechanics.ccd import swept_pairs, time_of_impact
+from mdsr_opt.mechanics.ccd import earliest_impact, swept_pairs, time_of_impact
 from mdsr_opt.mechanics.model import get_model
 
 MAT = NeoHookean(1.0, 0.3)
@@ -294,3 +294,73 @@ def test_turn_at_6601_nodes_solves_without_crossing():
     assert res.stable
     # the coarser meshes' strain energies: 0.24581 (451 nodes), 0.23724 (1,701); measured 0.23476
     assert 0.230 < res.energy < 0.240
+
+
+def _bent_strip(E, scale=1.0):
+    """A 4 x 1 strip (times ``scale``) clamped at the left, its right end pushed in by 1.6 and up by 0.3: it
+    folds and touches itself (no symmetric buckling whose side rounding could pick)."""
+    mesh = Mesh.rectangle(4.0 * scale, 1.0 * scale, 16, 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0 * scale)
+    drags = {int(i): (P[i, 0] - 1.6 * scale, P[i, 1] + 0.3 * scale) for i in right}
+    return solve_external(mesh, NeoHookean(E, 0.3), left, drags, contact=True, contact_method="barrier")
+
+
+def test_default_kappa_scales_with_E_so_a_displacement_driven_shape_does_not():
+    # the default kappa is KAPPA E t (it was KAPPA in the unit body's power-of-two stiffness units: E = 3 then
+    # had kappa 4 / 3 E t, a gap 0.01229 instead of 0.01108 and the shape 6.8e-4 off)
+    one, three = _bent_strip(1.0), _bent_strip(3.0)
+    assert one.success and three.success and len(one.contact["pairs"]) > 0, (one.status, three.status)
+    assert one.contact["kappa"] == pytest.approx(1.0) and three.contact["kappa"] == pytest.approx(3.0)
+    assert np.abs(one.x - three.x).max() <= 1e-10
+    assert three.contact["gap"] == pytest.approx(one.contact["gap"], rel=1e-9)
+    assert three.contact["total_force"] == pytest.approx(3.0 * one.contact["total_force"], rel=1e-9)
+    mm = _bent_strip(1.0, 1000.0)  # the same body in millimetres
+    assert mm.success and np.abs(mm.x / 1000.0 - one.x).max() <= 1e-12
+
+
+def test_a_node_passing_exactly_through_a_shared_vertex_is_an_impact():
+    # node 0 crosses the corner of the segments (1, 2), (2, 3) through their shared vertex 2 at t = 0.3: the
+    # projection parameter there is 0 or 1 only up to rounding (this case was missed, and 16 of the 2,000
+    # one-decimal motions below)
+    v = np.array([-0.7, -0.9])
+    X0 = np.array([[-0.1, -0.4] - 0.3 * v, [-0.5, -1.2], [-0.1, -0.4], [-0.7, -0.9]])
+    X1 = X0.copy()
+    X1[0] += v
+    segs = np.array([[1, 2], [2, 3]])
+    assert earliest_impact(X0, X1, np.arange(4), segs) == pytest.approx(0.3, abs=1e-12)
+    rng = np.random.default_rng(7)
+    ang = lambda z: np.arctan2(z[1], z[0])  # noqa: E731
+    n = 0
+    for _ in range(2000):
+        b = np.round(rng.uniform(-1, 1, 2), 1)
+        a, c = b + np.round(rng.uniform(-1, 1, 2), 1), b + np.round(rng.uniform(-1, 1, 2), 1)
+        v = np.round(rng.uniform(-1, 1, 2), 1)
+        u, w = a - b, c - b
+        inside = lambda q: (ang(q) - ang(u)) % (2 * np.pi) < (ang(w) - ang(u)) % (2 * np.pi)  # noqa: E731
+        if np.linalg.norm(v) == 0 or inside(v) == inside(-v) or u[0] * w[1] - u[1] * w[0] == 0:
+            continue  # a motion that only grazes the corner
+        n += 1
+        X0 = np.array([b - 0.3 * v, a, b, c])
+        X1 = X0.copy()
+        X1[0] += v
+        assert earliest_impact(X0, X1, np.arange(4), segs) <= 0.3 + 1e-9  # at the vertex or before (a start
+    assert n > 500  # on a segment's line through its end, e.g.)
+
+
+def test_a_short_boundary_edge_keeps_every_pair_off_the_barrier_at_rest():
+    # a 0.004 edge at a corner: its node was within dhat = 0.1 x the mean edge (0.0196) of the segment after its
+    # neighbour, so an unloaded body had 31 active pairs, a contact force 0.687 and moved by 0.0104
+    mesh = Mesh.from_polygon(np.array([[0, 0], [4, 0], [4, 1], [0.004, 1], [0, 1]], float), max_area=0.05)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    res = solve_external(mesh, MAT, left, {int(i): tuple(P[i]) for i in right}, contact=True,
+                         contact_method="barrier")
+    assert res.success, res.status
+    bar = BarrierEnergy(get_model(mesh, MAT), get_model(mesh, MAT).params(MAT))
+    cand = swept_pairs(P, P, bar.nodes, bar.segs, 1.0)  # every node-segment pair within 1 at rest
+    d_min = point_segment_distance(P, cand, hessian=False)[0].min()
+    assert d_min < 0.1 * bar.h and bar.dhat == pytest.approx(0.5 * d_min, rel=1e-12)
+    assert res.contact["dhat"] == pytest.approx(bar.dhat, rel=1e-12)
+    assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
+    assert np.abs(res.x - P).max() <= 1e-12

@@ -50,7 +50,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..core.guards import check_stop, interruptible
-from .barrier import BarrierEnergy, pair_dofs, pair_forces, project_psd
+from .barrier import KAPPA, BarrierEnergy, pair_dofs, pair_forces, project_psd
 from .blas import one_blas_thread
 from .ccd import time_of_impact
 from .loadsteps import INTERMEDIATE_TOL, STEP_ITER_CAP, equilibrium_result, min_jacobian
@@ -378,8 +378,8 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
         raise ValueError("contact_method='barrier' needs a material with closed forms (every material of "
                          "mdsr_opt.body.material) and no sliding cables")
     F = material.E * material.thickness * mesh.size
-    bar = BarrierEnergy(model, p, dhat, None if kappa is None else kappa * material.E * material.thickness, planes,
-                        self_contact)
+    kap = KAPPA if kappa is None else kappa  # in units of E t: the shape of a displacement-driven solve is E's
+    bar = BarrierEnergy(model, p, dhat, kap * material.E * material.thickness, planes, self_contact)
     t0 = time.perf_counter()
     with interruptible(), one_blas_thread():
         out = barrier_continuation(bar, fixed, values_of, x_start, tol * F, max_iter, min_step, verbose)
