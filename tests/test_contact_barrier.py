@@ -364,3 +364,40 @@ def test_a_short_boundary_edge_keeps_every_pair_off_the_barrier_at_rest():
     assert res.contact["dhat"] == pytest.approx(bar.dhat, rel=1e-12)
     assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
     assert np.abs(res.x - P).max() <= 1e-12
+
+
+def test_a_body_resting_on_a_half_plane_is_refused_at_the_door_and_one_lifted_by_dhat_solves():
+    # gap 0 at rest: the barrier is infinite there (this returned success False with total_force inf and NaN
+    # node forces); the refusal names the nodes and the ways out
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    with pytest.raises(ValueError, match=r"node\(s\) 0, 1, 2.*\(13 nodes\) lie at rest within .*dhat = 0.03333.*"
+                                         r"lift the body .* by at least dhat.*contact_method='ipopt'"):
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0))],
+                       contact_method="barrier")
+    with pytest.raises(ValueError, match="within the barrier's reach"):  # nearer than dhat, not touching
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.02), (0.0, 1.0))],
+                       contact_method="barrier")
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.04), (0.0, 1.0))],
+                         contact_method="barrier")  # lifted by more than dhat
+    assert res.success and res.stable, res.status
+    assert np.isfinite(res.contact["total_force"]) and np.isfinite(np.array(res.contact["node_forces"])).all()
+    assert sorted(p["nodes"][0] for p in res.contact["pairs"]) == sorted(bottom.tolist())
+    assert res.x[:, 1].min() > -0.04
+
+
+def test_a_body_anchored_on_a_half_plane_solves_with_its_feet_left_out_of_the_barrier():
+    # fixed nodes on the plane (distance 0) are left out of the planes' terms (constants, infinite there):
+    # nothing else reaches the plane, so the solve is the one without it
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    res = solve_external(mesh, MAT, bottom, drags, obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0))],
+                         contact_method="barrier")
+    free = solve_external(mesh, MAT, bottom, drags)
+    assert res.success and res.stable and free.success, res.status
+    assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
+    assert np.abs(res.x - free.x).max() <= 1e-6

@@ -233,10 +233,13 @@ class BarrierEnergy:
         half-plane without an end node in it).
     self_contact : bool
         Keep the boundary off itself (default); False: only off the planes.
+    fixed_nodes : int array, optional
+        Nodes left out of the planes' terms (the fixed ones: their terms are constants, infinite for a node
+        on a plane, so a body anchored on the ground keeps its feet there).
     """
 
     def __init__(self, model, p, dhat: float | None = None, kappa: float | None = None, planes=None,
-                 self_contact: bool = True):
+                 self_contact: bool = True, fixed_nodes=None):
         mesh = model.mesh
         self.model, self.p = model, np.asarray(p, dtype=float)
         self.elastic = model.numeric(self.p)
@@ -251,10 +254,13 @@ class BarrierEnergy:
         self.kappa = float(KAPPA if kappa is None else kappa)
         self.n = 2 * mesh.n_nodes
         self.planes = np.zeros((0, 2, 2)) if planes is None else np.asarray(planes, dtype=float).reshape(-1, 2, 2)
+        skip = np.zeros(0, dtype=np.int64) if fixed_nodes is None else np.asarray(fixed_nodes, dtype=np.int64)
+        self.plane_nodes = np.setdiff1d(self.nodes, skip)  #: the boundary nodes the planes' barrier acts on
 
     def plane_distances(self, x) -> np.ndarray:
-        """``d`` (k, b) of every boundary node (:attr:`nodes`) from every plane, signed (negative inside)."""
-        X = np.asarray(x, dtype=float).reshape(-1, 2)[self.nodes]
+        """``d`` (k, b) of every boundary node the planes act on (:attr:`plane_nodes`) from every plane, signed
+        (negative inside)."""
+        X = np.asarray(x, dtype=float).reshape(-1, 2)[self.plane_nodes]
         return np.einsum("kj,kbj->kb", self.planes[:, 1], X[None] - self.planes[:, 0][:, None])
 
     def plane_impact(self, x0, x1) -> float:
@@ -275,7 +281,7 @@ class BarrierEnergy:
             return z, z, np.zeros(0)
         d = self.plane_distances(x)
         k, j = np.nonzero(d < self.dhat)
-        return self.nodes[j], k, d[k, j]
+        return self.plane_nodes[j], k, d[k, j]
 
     def pairs(self, X0, X1=None) -> np.ndarray:
         """The candidate pairs within ``dhat`` anywhere along the step from ``X0`` to ``X1`` (default: at

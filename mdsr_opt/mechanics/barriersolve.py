@@ -57,7 +57,7 @@ from .loadsteps import INTERMEDIATE_TOL, STEP_ITER_CAP, equilibrium_result, min_
 from .stability import check_stability
 
 __all__ = ["assemble", "barrier_newton", "barrier_continuation", "barrier_report", "block_matvec", "settle", "stability",
-           "solve_with_barrier", "TOI_SAFETY", "RESTARTS", "KICK"]
+           "solve_with_barrier", "check_planes_at_rest", "TOI_SAFETY", "RESTARTS", "KICK"]
 
 #: the first trial of a line search goes this fraction of the way to the earliest time of impact
 TOI_SAFETY = 0.8
@@ -379,7 +379,9 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
                          "mdsr_opt.body.material) and no sliding cables")
     F = material.E * material.thickness * mesh.size
     kap = KAPPA if kappa is None else kappa  # in units of E t: the shape of a displacement-driven solve is E's
-    bar = BarrierEnergy(model, p, dhat, kap * material.E * material.thickness, planes, self_contact)
+    fixed_nodes = np.flatnonzero(np.asarray(fixed, dtype=bool).reshape(-1, 2).all(axis=1))
+    bar = BarrierEnergy(model, p, dhat, kap * material.E * material.thickness, planes, self_contact, fixed_nodes)
+    check_planes_at_rest(bar, mesh.points, x_start, units.length)
     t0 = time.perf_counter()
     with interruptible(), one_blas_thread():
         out = barrier_continuation(bar, fixed, values_of, x_start, tol * F, max_iter, min_step, verbose)
@@ -400,6 +402,26 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
     res.contact = barrier_report(bar, x, out["fraction"], units.length, units.force)
     res.contact["barrier_energy"] = float(bar.contact_energy(x, bar.pairs(x))) * units.energy
     return res
+
+
+def check_planes_at_rest(bar: BarrierEnergy, rest, x_start, length: float = 1.0) -> None:
+    """Refuse (ValueError) a scene whose free boundary nodes lie within ``dhat`` of a half-plane at rest (the
+    barrier, infinite at a zero distance, would push them off with no load) or on or inside one in the first
+    state ``x_start``; the message names the nodes (lengths times ``length``)."""
+    if not len(bar.planes):
+        return
+    for X, reach, where in ((rest, bar.dhat, "at rest"), (x_start, 0.0, "in the initial guess")):
+        d = bar.plane_distances(np.asarray(X, dtype=float).reshape(-1))
+        k, j = np.nonzero(d <= reach if reach == 0.0 else d < reach)
+        if len(j):
+            nodes = sorted({int(v) for v in bar.plane_nodes[j]})
+            few = ", ".join(str(v) for v in nodes[:8]) + (f" ... ({len(nodes)} nodes)" if len(nodes) > 8 else "")
+            raise ValueError(
+                f"contact_method='barrier': free boundary node(s) {few} lie {where} within the barrier's reach "
+                f"dhat = {bar.dhat * length:.4g} of HalfPlane obstacle {int(k[0])} (nearest distance "
+                f"{float(d[k, j].min()) * length:.4g}); the barrier is infinite at distance 0 and pushes nodes "
+                f"nearer than dhat: lift the body off the plane by at least dhat, anchor those nodes, or use "
+                f"contact_method='ipopt'")
 
 
 def assemble(bar, He, Hs, act, Hp) -> sp.csc_matrix:
