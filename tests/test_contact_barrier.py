@@ -401,3 +401,27 @@ def test_a_body_anchored_on_a_half_plane_solves_with_its_feet_left_out_of_the_ba
     assert res.success and res.stable and free.success, res.status
     assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
     assert np.abs(res.x - free.x).max() <= 1e-6
+
+
+def test_a_first_state_touching_itself_or_a_plane_is_refused_at_the_door():
+    # these returned success False with total_force inf and NaN node forces in the report
+    mesh = Mesh.from_polygon(np.array([(0, 0), (4, 0), (4, 1), (2.05, 1), (2.05, 0.3), (1.95, 0.3), (1.95, 1),
+                                       (0, 1)], float), max_area=0.05)  # a slot 0.1 wide from the top
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    wall = lambda x: np.flatnonzero((P[:, 0] == x) & (np.abs(P[:, 1] - 0.65) < 1e-9))  # noqa: E731
+    k, across = wall(1.95), wall(2.05)
+    assert len(k) == 1 and len(across) == 1
+    guess = P.copy()
+    guess[k] = P[across]  # a node of the slot's left wall on the node across it
+    with pytest.raises(ValueError, match="the first state .* touches itself"):
+        solve_external(mesh, MAT, left, {int(i): tuple(P[i]) for i in right}, contact=True,
+                       contact_method="barrier", initial_guess=guess)
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top = np.flatnonzero(P[:, 1] == 1.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    with pytest.raises(ValueError, match=r"lie in the initial guess within the barrier's reach .* \(nearest "
+                                         r"distance 0\)"):
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.04), (0.0, 1.0))],
+                       contact_method="barrier", initial_guess=P - [0.0, 0.04])  # its bottom on the plane

@@ -381,7 +381,15 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
     kap = KAPPA if kappa is None else kappa  # in units of E t: the shape of a displacement-driven solve is E's
     fixed_nodes = np.flatnonzero(np.asarray(fixed, dtype=bool).reshape(-1, 2).all(axis=1))
     bar = BarrierEnergy(model, p, dhat, kap * material.E * material.thickness, planes, self_contact, fixed_nodes)
-    check_planes_at_rest(bar, mesh.points, x_start, units.length)
+    first = np.array(x_start, dtype=float)
+    first[fixed] = values_of(0.0)
+    check_planes_at_rest(bar, mesh.points, first, units.length)
+    why = "inverts an element" if min_jacobian(mesh, first) <= 0.0 else mesh.boundary_crossing(first.reshape(-1, 2))
+    if why is None and not np.isfinite(bar.energy(first, bar.pairs(first))):
+        why = "touches itself (a boundary node on a boundary segment)"
+    if why is not None:  # refused here: the barrier is infinite there, no state to start from or report on
+        raise ValueError(f"contact_method='barrier': the first state (the initial guess with the fixed nodes at "
+                         f"the start of their path) {why}")
     t0 = time.perf_counter()
     with interruptible(), one_blas_thread():
         out = barrier_continuation(bar, fixed, values_of, x_start, tol * F, max_iter, min_step, verbose)
@@ -407,7 +415,7 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
 def check_planes_at_rest(bar: BarrierEnergy, rest, x_start, length: float = 1.0) -> None:
     """Refuse (ValueError) a scene whose free boundary nodes lie within ``dhat`` of a half-plane at rest (the
     barrier, infinite at a zero distance, would push them off with no load) or on or inside one in the first
-    state ``x_start``; the message names the nodes (lengths times ``length``)."""
+    state ``x_start`` (flat); the message names the nodes (lengths times ``length``)."""
     if not len(bar.planes):
         return
     for X, reach, where in ((rest, bar.dhat, "at rest"), (x_start, 0.0, "in the initial guess")):
