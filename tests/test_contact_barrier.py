@@ -8,7 +8,7 @@ from shapely.geometry import LineString, Point, Polygon
 
 from mdsr_opt import Disk, HalfPlane, Mesh, NeoHookean, solve_external
 from mdsr_opt.mechanics.barrier import BarrierEnergy, barrier, point_segment_distance
-from mdsr_opt.mechanics.ccd import swept_pairs, time_of_impact
+from mdsr_opt.mechanics.ccd import earliest_impact, swept_pairs, time_of_impact
 from mdsr_opt.mechanics.model import get_model
 
 MAT = NeoHookean(1.0, 0.3)
@@ -294,3 +294,134 @@ def test_turn_at_6601_nodes_solves_without_crossing():
     assert res.stable
     # the coarser meshes' strain energies: 0.24581 (451 nodes), 0.23724 (1,701); measured 0.23476
     assert 0.230 < res.energy < 0.240
+
+
+def _bent_strip(E, scale=1.0):
+    """A 4 x 1 strip (times ``scale``) clamped at the left, its right end pushed in by 1.6 and up by 0.3: it
+    folds and touches itself (no symmetric buckling whose side rounding could pick)."""
+    mesh = Mesh.rectangle(4.0 * scale, 1.0 * scale, 16, 4)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0 * scale)
+    drags = {int(i): (P[i, 0] - 1.6 * scale, P[i, 1] + 0.3 * scale) for i in right}
+    return solve_external(mesh, NeoHookean(E, 0.3), left, drags, contact=True, contact_method="barrier")
+
+
+def test_default_kappa_scales_with_E_so_a_displacement_driven_shape_does_not():
+    # the default kappa is KAPPA E t (it was KAPPA in the unit body's power-of-two stiffness units: E = 3 then
+    # had kappa 4 / 3 E t, a gap 0.01229 instead of 0.01108 and the shape 6.8e-4 off)
+    one, three = _bent_strip(1.0), _bent_strip(3.0)
+    assert one.success and three.success and len(one.contact["pairs"]) > 0, (one.status, three.status)
+    assert one.contact["kappa"] == pytest.approx(1.0) and three.contact["kappa"] == pytest.approx(3.0)
+    assert np.abs(one.x - three.x).max() <= 1e-10
+    assert three.contact["gap"] == pytest.approx(one.contact["gap"], rel=1e-9)
+    assert three.contact["total_force"] == pytest.approx(3.0 * one.contact["total_force"], rel=1e-9)
+    mm = _bent_strip(1.0, 1000.0)  # the same body in millimetres
+    assert mm.success and np.abs(mm.x / 1000.0 - one.x).max() <= 1e-12
+
+
+def test_a_node_passing_exactly_through_a_shared_vertex_is_an_impact():
+    # node 0 crosses the corner of the segments (1, 2), (2, 3) through their shared vertex 2 at t = 0.3: the
+    # projection parameter there is 0 or 1 only up to rounding (this case was missed, and 16 of the 2,000
+    # one-decimal motions below)
+    v = np.array([-0.7, -0.9])
+    X0 = np.array([[-0.1, -0.4] - 0.3 * v, [-0.5, -1.2], [-0.1, -0.4], [-0.7, -0.9]])
+    X1 = X0.copy()
+    X1[0] += v
+    segs = np.array([[1, 2], [2, 3]])
+    assert earliest_impact(X0, X1, np.arange(4), segs) == pytest.approx(0.3, abs=1e-12)
+    rng = np.random.default_rng(7)
+    ang = lambda z: np.arctan2(z[1], z[0])  # noqa: E731
+    n = 0
+    for _ in range(2000):
+        b = np.round(rng.uniform(-1, 1, 2), 1)
+        a, c = b + np.round(rng.uniform(-1, 1, 2), 1), b + np.round(rng.uniform(-1, 1, 2), 1)
+        v = np.round(rng.uniform(-1, 1, 2), 1)
+        u, w = a - b, c - b
+        inside = lambda q: (ang(q) - ang(u)) % (2 * np.pi) < (ang(w) - ang(u)) % (2 * np.pi)  # noqa: E731
+        if np.linalg.norm(v) == 0 or inside(v) == inside(-v) or u[0] * w[1] - u[1] * w[0] == 0:
+            continue  # a motion that only grazes the corner
+        n += 1
+        X0 = np.array([b - 0.3 * v, a, b, c])
+        X1 = X0.copy()
+        X1[0] += v
+        assert earliest_impact(X0, X1, np.arange(4), segs) <= 0.3 + 1e-9  # at the vertex or before (a start
+    assert n > 500  # on a segment's line through its end, e.g.)
+
+
+def test_a_short_boundary_edge_keeps_every_pair_off_the_barrier_at_rest():
+    # a 0.004 edge at a corner: its node was within dhat = 0.1 x the mean edge (0.0196) of the segment after its
+    # neighbour, so an unloaded body had 31 active pairs, a contact force 0.687 and moved by 0.0104
+    mesh = Mesh.from_polygon(np.array([[0, 0], [4, 0], [4, 1], [0.004, 1], [0, 1]], float), max_area=0.05)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    res = solve_external(mesh, MAT, left, {int(i): tuple(P[i]) for i in right}, contact=True,
+                         contact_method="barrier")
+    assert res.success, res.status
+    bar = BarrierEnergy(get_model(mesh, MAT), get_model(mesh, MAT).params(MAT))
+    cand = swept_pairs(P, P, bar.nodes, bar.segs, 1.0)  # every node-segment pair within 1 at rest
+    d_min = point_segment_distance(P, cand, hessian=False)[0].min()
+    assert d_min < 0.1 * bar.h and bar.dhat == pytest.approx(0.5 * d_min, rel=1e-12)
+    assert res.contact["dhat"] == pytest.approx(bar.dhat, rel=1e-12)
+    assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
+    assert np.abs(res.x - P).max() <= 1e-12
+
+
+def test_a_body_resting_on_a_half_plane_is_refused_at_the_door_and_one_lifted_by_dhat_solves():
+    # gap 0 at rest: the barrier is infinite there (this returned success False with total_force inf and NaN
+    # node forces); the refusal names the nodes and the ways out
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    with pytest.raises(ValueError, match=r"node\(s\) 0, 1, 2.*\(13 nodes\) lie at rest within .*dhat = 0.03333.*"
+                                         r"lift the body .* by at least dhat.*contact_method='ipopt'"):
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0))],
+                       contact_method="barrier")
+    with pytest.raises(ValueError, match="within the barrier's reach"):  # nearer than dhat, not touching
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.02), (0.0, 1.0))],
+                       contact_method="barrier")
+    res = solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.04), (0.0, 1.0))],
+                         contact_method="barrier")  # lifted by more than dhat
+    assert res.success and res.stable, res.status
+    assert np.isfinite(res.contact["total_force"]) and np.isfinite(np.array(res.contact["node_forces"])).all()
+    assert sorted(p["nodes"][0] for p in res.contact["pairs"]) == sorted(bottom.tolist())
+    assert res.x[:, 1].min() > -0.04
+
+
+def test_a_body_anchored_on_a_half_plane_solves_with_its_feet_left_out_of_the_barrier():
+    # fixed nodes on the plane (distance 0) are left out of the planes' terms (constants, infinite there):
+    # nothing else reaches the plane, so the solve is the one without it
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top, bottom = np.flatnonzero(P[:, 1] == 1.0), np.flatnonzero(P[:, 1] == 0.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    res = solve_external(mesh, MAT, bottom, drags, obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0))],
+                         contact_method="barrier")
+    free = solve_external(mesh, MAT, bottom, drags)
+    assert res.success and res.stable and free.success, res.status
+    assert res.contact["pairs"] == [] and res.contact["total_force"] == 0.0
+    assert np.abs(res.x - free.x).max() <= 1e-6
+
+
+def test_a_first_state_touching_itself_or_a_plane_is_refused_at_the_door():
+    # these returned success False with total_force inf and NaN node forces in the report
+    mesh = Mesh.from_polygon(np.array([(0, 0), (4, 0), (4, 1), (2.05, 1), (2.05, 0.3), (1.95, 0.3), (1.95, 1),
+                                       (0, 1)], float), max_area=0.05)  # a slot 0.1 wide from the top
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    wall = lambda x: np.flatnonzero((P[:, 0] == x) & (np.abs(P[:, 1] - 0.65) < 1e-9))  # noqa: E731
+    k, across = wall(1.95), wall(2.05)
+    assert len(k) == 1 and len(across) == 1
+    guess = P.copy()
+    guess[k] = P[across]  # a node of the slot's left wall on the node across it
+    with pytest.raises(ValueError, match="the first state .* touches itself"):
+        solve_external(mesh, MAT, left, {int(i): tuple(P[i]) for i in right}, contact=True,
+                       contact_method="barrier", initial_guess=guess)
+    mesh = Mesh.rectangle(4.0, 1.0, 12, 3)
+    P = mesh.points
+    top = np.flatnonzero(P[:, 1] == 1.0)
+    drags = {int(i): (P[i, 0], P[i, 1] - 0.2) for i in top}
+    with pytest.raises(ValueError, match=r"lie in the initial guess within the barrier's reach .* \(nearest "
+                                         r"distance 0\)"):
+        solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.04), (0.0, 1.0))],
+                       contact_method="barrier", initial_guess=P - [0.0, 0.04])  # its bottom on the plane

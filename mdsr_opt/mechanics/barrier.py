@@ -8,8 +8,10 @@ closer than ``dhat`` add ``kappa b(d)`` with
     ``b(d) = -(d - dhat)^2 log(d / dhat)``  for ``0 < d < dhat``, 0 beyond,
 
 twice continuously differentiable at ``dhat`` (``b``, ``b'`` and ``b''`` vanish there) and infinite at
-``d = 0``. The total energy is the strain energy (:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`) plus the
-barrier's. A state of finite total energy reached along steps that no boundary node crosses a boundary
+``d = 0``. The default ``dhat`` is a tenth of the mean boundary edge at rest (:data:`DHAT`), and at most half
+the smallest rest distance of such a pair (:data:`REST_FRACTION`), so that no pair is within ``dhat`` at rest:
+an unloaded body stays at rest with no contact force. The total energy is the strain energy
+(:class:`~mdsr_opt.mechanics.newton.NewtonEnergy`) plus the barrier's. A state of finite total energy reached along steps that no boundary node crosses a boundary
 segment in (continuous collision detection, :mod:`~mdsr_opt.mechanics.ccd`) has no crossing: the barrier
 pushes touching parts apart with the force ``-kappa b'(d) grad d`` on each pair (:func:`pair_forces`),
 which is how contact forces are reported. ``d`` stays positive: the barrier's contacts keep a gap between
@@ -37,10 +39,18 @@ import numpy as np
 
 from .ccd import swept_pairs
 
-__all__ = ["barrier", "point_segment_distance", "BarrierEnergy", "pair_forces", "project_psd", "DHAT", "KAPPA"]
+__all__ = ["barrier", "point_segment_distance", "BarrierEnergy", "pair_forces", "project_psd", "rest_reach", "DHAT",
+           "KAPPA", "REST_FRACTION"]
 
-#: the barrier's reach ``dhat`` as a fraction of the mean boundary edge length at rest
+#: the barrier's reach ``dhat`` as a fraction of the mean boundary edge length at rest (at most
+#: :data:`REST_FRACTION` of the smallest rest distance of the pairs)
 DHAT = 0.1
+
+#: the default ``dhat`` is at most this fraction of the smallest distance at rest among the pairs the barrier
+#: considers (each boundary node and each boundary segment not ending at it), so that no pair is within
+#: ``dhat`` at rest and an unloaded body stays at rest with no contact force (a short boundary edge, at a
+#: corner for instance, brings a node within a tenth of the mean edge of the segment after its neighbour)
+REST_FRACTION = 0.5
 
 #: the barrier's stiffness ``kappa`` in units of the body's ``E t`` (the unit body's is 1): a pair under a
 #: contact force ``f`` rests at ``d`` with ``kappa |b'(d)| = f``, about ``kappa dhat^2 / d`` for ``d`` well
@@ -191,6 +201,17 @@ def pair_forces(X, pairs, kappa: float, dhat: float):
     return f, d, node.reshape(-1, 2)
 
 
+def rest_reach(X, nodes, segs, reach: float) -> float:
+    """``reach`` or, when smaller, :data:`REST_FRACTION` of the smallest distance at ``X`` (rest) of a node
+    from a segment not ending at it (those within ``reach``; a zero distance, a mesh touching itself at rest,
+    is left to the solve's check of its first state)."""
+    X = np.asarray(X, dtype=float)
+    pairs = swept_pairs(X, X, nodes, segs, reach)
+    d = point_segment_distance(X, pairs, hessian=False)[0] if len(pairs) else np.zeros(0)
+    d = d[d > 0.0]
+    return float(min(reach, REST_FRACTION * d.min())) if len(d) else float(reach)
+
+
 class BarrierEnergy:
     """The strain energy of a model plus the self-contact barrier of its boundary.
 
@@ -200,7 +221,9 @@ class BarrierEnergy:
         A model with closed-form material laws (``model.is_numeric``).
     p : parameter vector of the model.
     dhat : float, optional
-        The barrier's reach (default :data:`DHAT` times the mean boundary edge length at rest).
+        The barrier's reach (default :data:`DHAT` times the mean boundary edge length at rest, at most
+        :data:`REST_FRACTION` of the smallest distance at rest of a node from a segment not ending at it:
+        :func:`rest_reach`; with ``self_contact`` False, the former).
     kappa : float, optional
         The barrier's stiffness (default :data:`KAPPA` times the model's unit stiffness ``E t``; pass it in
         the body's energy units).
@@ -210,10 +233,13 @@ class BarrierEnergy:
         half-plane without an end node in it).
     self_contact : bool
         Keep the boundary off itself (default); False: only off the planes.
+    fixed_nodes : int array, optional
+        Nodes left out of the planes' terms (the fixed ones: their terms are constants, infinite for a node
+        on a plane, so a body anchored on the ground keeps its feet there).
     """
 
     def __init__(self, model, p, dhat: float | None = None, kappa: float | None = None, planes=None,
-                 self_contact: bool = True):
+                 self_contact: bool = True, fixed_nodes=None):
         mesh = model.mesh
         self.model, self.p = model, np.asarray(p, dtype=float)
         self.elastic = model.numeric(self.p)
@@ -222,15 +248,19 @@ class BarrierEnergy:
         pts = mesh.points
         h = float(np.linalg.norm(pts[self.segs[:, 1]] - pts[self.segs[:, 0]], axis=1).mean())
         self.h = h  #: the mean boundary edge length at rest
-        self.dhat = float(DHAT * h if dhat is None else dhat)
+        self.self_contact = bool(self_contact)
+        reach = rest_reach(pts, self.nodes, self.segs, DHAT * h) if self.self_contact else DHAT * h
+        self.dhat = float(reach if dhat is None else dhat)
         self.kappa = float(KAPPA if kappa is None else kappa)
         self.n = 2 * mesh.n_nodes
         self.planes = np.zeros((0, 2, 2)) if planes is None else np.asarray(planes, dtype=float).reshape(-1, 2, 2)
-        self.self_contact = bool(self_contact)
+        skip = np.zeros(0, dtype=np.int64) if fixed_nodes is None else np.asarray(fixed_nodes, dtype=np.int64)
+        self.plane_nodes = np.setdiff1d(self.nodes, skip)  #: the boundary nodes the planes' barrier acts on
 
     def plane_distances(self, x) -> np.ndarray:
-        """``d`` (k, b) of every boundary node (:attr:`nodes`) from every plane, signed (negative inside)."""
-        X = np.asarray(x, dtype=float).reshape(-1, 2)[self.nodes]
+        """``d`` (k, b) of every boundary node the planes act on (:attr:`plane_nodes`) from every plane, signed
+        (negative inside)."""
+        X = np.asarray(x, dtype=float).reshape(-1, 2)[self.plane_nodes]
         return np.einsum("kj,kbj->kb", self.planes[:, 1], X[None] - self.planes[:, 0][:, None])
 
     def plane_impact(self, x0, x1) -> float:
@@ -251,7 +281,7 @@ class BarrierEnergy:
             return z, z, np.zeros(0)
         d = self.plane_distances(x)
         k, j = np.nonzero(d < self.dhat)
-        return self.nodes[j], k, d[k, j]
+        return self.plane_nodes[j], k, d[k, j]
 
     def pairs(self, X0, X1=None) -> np.ndarray:
         """The candidate pairs within ``dhat`` anywhere along the step from ``X0`` to ``X1`` (default: at

@@ -50,14 +50,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..core.guards import check_stop, interruptible
-from .barrier import BarrierEnergy, pair_dofs, pair_forces, project_psd
+from .barrier import KAPPA, BarrierEnergy, pair_dofs, pair_forces, project_psd
 from .blas import one_blas_thread
 from .ccd import time_of_impact
 from .loadsteps import INTERMEDIATE_TOL, STEP_ITER_CAP, equilibrium_result, min_jacobian
 from .stability import check_stability
 
 __all__ = ["assemble", "barrier_newton", "barrier_continuation", "barrier_report", "block_matvec", "settle", "stability",
-           "solve_with_barrier", "TOI_SAFETY", "RESTARTS", "KICK"]
+           "solve_with_barrier", "check_planes_at_rest", "TOI_SAFETY", "RESTARTS", "KICK"]
 
 #: the first trial of a line search goes this fraction of the way to the earliest time of impact
 TOI_SAFETY = 0.8
@@ -378,8 +378,18 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
         raise ValueError("contact_method='barrier' needs a material with closed forms (every material of "
                          "mdsr_opt.body.material) and no sliding cables")
     F = material.E * material.thickness * mesh.size
-    bar = BarrierEnergy(model, p, dhat, None if kappa is None else kappa * material.E * material.thickness, planes,
-                        self_contact)
+    kap = KAPPA if kappa is None else kappa  # in units of E t: the shape of a displacement-driven solve is E's
+    fixed_nodes = np.flatnonzero(np.asarray(fixed, dtype=bool).reshape(-1, 2).all(axis=1))
+    bar = BarrierEnergy(model, p, dhat, kap * material.E * material.thickness, planes, self_contact, fixed_nodes)
+    first = np.array(x_start, dtype=float)
+    first[fixed] = values_of(0.0)
+    check_planes_at_rest(bar, mesh.points, first, units.length)
+    why = "inverts an element" if min_jacobian(mesh, first) <= 0.0 else mesh.boundary_crossing(first.reshape(-1, 2))
+    if why is None and not np.isfinite(bar.energy(first, bar.pairs(first))):
+        why = "touches itself (a boundary node on a boundary segment)"
+    if why is not None:  # refused here: the barrier is infinite there, no state to start from or report on
+        raise ValueError(f"contact_method='barrier': the first state (the initial guess with the fixed nodes at "
+                         f"the start of their path) {why}")
     t0 = time.perf_counter()
     with interruptible(), one_blas_thread():
         out = barrier_continuation(bar, fixed, values_of, x_start, tol * F, max_iter, min_step, verbose)
@@ -400,6 +410,26 @@ def solve_with_barrier(mesh, model, material, p, fixed, values_of, x_start, tol,
     res.contact = barrier_report(bar, x, out["fraction"], units.length, units.force)
     res.contact["barrier_energy"] = float(bar.contact_energy(x, bar.pairs(x))) * units.energy
     return res
+
+
+def check_planes_at_rest(bar: BarrierEnergy, rest, x_start, length: float = 1.0) -> None:
+    """Refuse (ValueError) a scene whose free boundary nodes lie within ``dhat`` of a half-plane at rest (the
+    barrier, infinite at a zero distance, would push them off with no load) or on or inside one in the first
+    state ``x_start`` (flat); the message names the nodes (lengths times ``length``)."""
+    if not len(bar.planes):
+        return
+    for X, reach, where in ((rest, bar.dhat, "at rest"), (x_start, 0.0, "in the initial guess")):
+        d = bar.plane_distances(np.asarray(X, dtype=float).reshape(-1))
+        k, j = np.nonzero(d <= reach if reach == 0.0 else d < reach)
+        if len(j):
+            nodes = sorted({int(v) for v in bar.plane_nodes[j]})
+            few = ", ".join(str(v) for v in nodes[:8]) + (f" ... ({len(nodes)} nodes)" if len(nodes) > 8 else "")
+            raise ValueError(
+                f"contact_method='barrier': free boundary node(s) {few} lie {where} within the barrier's reach "
+                f"dhat = {bar.dhat * length:.4g} of HalfPlane obstacle {int(k[0])} (nearest distance "
+                f"{float(d[k, j].min()) * length:.4g}); the barrier is infinite at distance 0 and pushes nodes "
+                f"nearer than dhat: lift the body off the plane by at least dhat, anchor those nodes, or use "
+                f"contact_method='ipopt'")
 
 
 def assemble(bar, He, Hs, act, Hp) -> sp.csc_matrix:

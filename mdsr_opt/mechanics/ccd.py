@@ -7,7 +7,7 @@ does not end at it (two segments cannot cross without one's end passing through 
 pairs suffice. For such a pair ``p``, ``(a, b)`` the node lies on the segment's line where
 ``c(t) = (b - a) x (p - a)`` vanishes: ``c`` is a quadratic in ``t`` (its coefficients from the moves), and
 a root ``t`` in ``[0, 1]`` is an impact when ``p``'s projection parameter on ``(a, b)`` there lies in
-``[0, 1]`` (:func:`time_of_impact`).
+``[0, 1]``, widened by :data:`S_EPS` for rounding at the segment's ends (:func:`time_of_impact`).
 
 The broad phase (:func:`swept_pairs`) bounds each node's path and each segment's sweep by a circle
 (the segment's: about the mean of its ends' four positions, through the farthest) and keeps the pairs whose
@@ -27,7 +27,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["swept_pairs", "time_of_impact", "earliest_impact"]
+__all__ = ["swept_pairs", "time_of_impact", "earliest_impact", "S_EPS"]
+
+#: a root counts as an impact when the projection parameter ``s`` there lies in ``[-S_EPS, 1 + S_EPS]``: a node
+#: passing exactly through a segment's end (a shared boundary vertex) has ``s`` 0 or 1 only up to rounding
+#: (measured: just outside ``[0, 1]`` for 359 of 6,645 random motions through a vertex); a node passing within
+#: ``S_EPS`` of a segment's length beyond its end is reported as an impact, which only shortens a step
+S_EPS = 1e-9
 
 
 def _cross(u, v):
@@ -153,7 +159,7 @@ def time_of_impact(X0, X1, pairs) -> np.ndarray:
         tt = np.where(np.isfinite(t), t, 0.0)[:, None]
         e, w = e0 + tt * de, w0 + tt * dw
         s = np.einsum("ij,ij->i", w, e) / np.maximum(np.einsum("ij,ij->i", e, e), 1e-300)
-        hit = np.isfinite(t) & (s >= 0.0) & (s <= 1.0)
+        hit = np.isfinite(t) & (s >= -S_EPS) & (s <= 1.0 + S_EPS)
         toi = np.where(hit, np.minimum(toi, np.where(np.isfinite(t), t, np.inf)), toi)
     scale = np.maximum(np.abs(A) + np.abs(B) + np.abs(C), 1e-300)
     size = np.einsum("ij,ij->i", e0, e0) + np.einsum("ij,ij->i", w0, w0) + np.einsum("ij,ij->i", dw, dw)

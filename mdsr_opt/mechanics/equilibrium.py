@@ -90,12 +90,15 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
     contact_method : ``"ipopt"`` (default) or ``"barrier"``
         How ``contact=True`` is solved: ``"ipopt"``, a gap constraint per candidate node-segment pair
         (:mod:`~mdsr_opt.mechanics.contactsolve`); ``"barrier"``, a smooth barrier on the node-segment
-        distances within ``dhat`` (a tenth of the mean boundary edge) minimised by the project's Newton method
-        with continuous collision detection (:mod:`~mdsr_opt.mechanics.barriersolve`; self-contact and
+        distances within ``dhat`` (a tenth of the mean boundary edge, at most half the smallest rest distance
+        of a node from a segment not ending at it) minimised by the project's Newton method with continuous
+        collision detection (:mod:`~mdsr_opt.mechanics.barriersolve`; self-contact and
         :class:`~mdsr_opt.HalfPlane` obstacles, frictionless, no ``contact_gap``; backend ``"newton"`` is
-        reported). Its contact report
-        gives each pair within ``dhat`` with its distance and the barrier's force, and the barrier's energy
-        (``barrier_energy``), which ``energy`` leaves out.
+        reported). A free boundary node within ``dhat`` of a half-plane at rest (a body resting on the ground)
+        is refused with a ValueError: lift the body by at least ``dhat``, anchor those nodes (fixed nodes are
+        left out of the planes' barrier) or use ``"ipopt"``. Its contact report gives each pair within
+        ``dhat`` with its distance and the barrier's force, and the barrier's energy (``barrier_energy``),
+        which ``energy`` leaves out.
 
     Returns
     -------
