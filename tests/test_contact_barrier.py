@@ -425,3 +425,16 @@ def test_a_first_state_touching_itself_or_a_plane_is_refused_at_the_door():
                                          r"distance 0\)"):
         solve_external(mesh, MAT, None, drags, obstacles=[HalfPlane((0.0, -0.04), (0.0, 1.0))],
                        contact_method="barrier", initial_guess=P - [0.0, 0.04])  # its bottom on the plane
+
+
+def test_a_fold_through_itself_with_self_contact_off_is_named_so():
+    """With only a half-plane (``contact=False``) a strip pushed until it folds through itself fails, and
+    the status says self-contact is off, not that the collision detection missed a crossing (recheck11)."""
+    mesh = Mesh.rectangle(4.0, 1.0, 40, 10)
+    P = mesh.points
+    left, right = np.flatnonzero(P[:, 0] == 0.0), np.flatnonzero(P[:, 0] == 4.0)
+    drags = {int(i): (P[i, 0] - 2.0, P[i, 1] + 0.3) for i in right}
+    res = solve_external(mesh, MAT, left, drags, obstacles=[HalfPlane((0.0, -20.0), (0.0, 1.0))],
+                         contact_method="barrier")
+    assert not res.success and "contact is off: contact=True models it" in res.status, res.status
+    assert not mesh.boundary_crosses(res.x)  # the last accepted state

@@ -273,7 +273,8 @@ def barrier_continuation(bar: BarrierEnergy, fixed, values_of, x_start, gtol: fl
         iters += it
         status = st
         if ok and mesh.boundary_crossing(y.reshape(-1, 2)) is not None:
-            ok, status = False, "a crossing the collision detection missed"
+            ok, status = False, ("a crossing the collision detection missed" if bar.self_contact else
+                                 "the boundary crosses itself (contact is off: contact=True models it)")
         if ok:  # a buckling body leaves the unstable branch as soon as it buckles
             y, chk, tries, it, gn_s = settle(bar, system, y, fixed, gtol if s_new >= 1.0 else loose, max_iter)
             iters += it
