@@ -473,7 +473,7 @@ def test_a_fixture_plate_two_muscles_share_is_drawn_once(tmp_path):
     assert len(ends) == 6  # 8 ends, two plates shared
     shared = sorted((kind, who) for kind, s, who in ends if s)
     assert shared == [("circle", "M1 M2"), ("polygon", "M3 M4")]
-    assert f'class="end shared" data-muscles="M1 M2" cx' in svg and f'stroke="{SHARED_PLATE}"' in svg
+    assert 'class="end shared" data-muscles="M1 M2" cx' in svg and f'stroke="{SHARED_PLATE}"' in svg
     caption = " ".join(re.findall(r"<tspan[^>]*>([^<]*)</tspan>", svg))
     assert "(black: 2 plate(s) that muscles ending closer than a radius share)" in caption
     dxf = [s.strip() for s in Path(files["dxf"]).read_text().split("\n")]

@@ -331,7 +331,6 @@ def test_pruned_choice_equals_the_full_heuristic(body, K_h):
     """The growth step computes h only where a straight-line bound says it can matter; every step it
     takes must be the one the full computation of h picks."""
 
-    ell = float(body.edge_lengths.mean())
     steps = 0
     for name in ("shorten 35 deg", "shorten 70 deg", "bend, curvature x1..4"):
         _, _, w = edge_weights(body, family(body)[name])

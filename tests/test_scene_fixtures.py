@@ -216,7 +216,6 @@ def test_a_bad_field_is_named_with_its_file_once(tmp_path, extra, field):
 def test_a_stub_too_short_for_its_fixtures_is_dropped_with_the_rule_it_breaks():
     """A rope shorter than 4 fixture radii is dropped saying so, not 'of which 100 % lies outside its end fixtures
     (at least 6 and 67 % needed)', which read as a contradiction (trial9)."""
-    import numpy as np
 
     from mdsr_opt import Mesh
     from mdsr_opt.synthesis.fabrication import Fabrication

@@ -167,7 +167,6 @@ def test_lowest_eigenvalue_estimate_on_a_mesh():
     left = np.flatnonzero(mesh.points[:, 0] == 0.0)
     free[2 * left] = free[2 * left + 1] = False
     Hff = H[free][:, free].toarray()
-    rng = np.random.default_rng(0)
     A = sp.random(3, H.shape[0], density=0.05, random_state=1, format="csr")
     Z = sl.null_space(A.toarray()[:, free])
     for AA, R in ((None, Hff), (A, Z.T @ Hff @ Z)):
