@@ -428,6 +428,7 @@ def test_deleting_a_muscle_drops_the_design_and_keeps_the_fixtures(tentacle):
         s.delete_muscle("nope")
     d = s.run_design()
     assert d["params"]["anchor_radius"] == s.routing.fixture_radius  # the fixtures the ropes were fitted to
+    assert d["held"] is False  # a free body's design is shown aligned onto the target
     assert [m["name"] for m in d["layout"]] == names[:1] + names[2:]
 
 

@@ -141,6 +141,7 @@ def test_the_design_takes_the_floor_and_the_saved_scene_reproduces_it(tmp_path):
     # the floor forces mdsr run's derivative-free design, said on the page (before the fix: flattened, no floor)
     assert d["method"] == "derivative-free" and d["success"], d["status"]
     assert any("derivative-free" in n for n in d["notes"]) and any("clamped" in n for n in d["notes"])
+    assert d["held"]  # shown where it stands (the legend says so), not aligned onto the target
     saved = save_scene(s, tmp_path / "out", "mine")[0]
     back = load_scene(saved)
     assert len(back.obstacles) == 1 and back.friction == pytest.approx(0.3)

@@ -41,6 +41,8 @@ def design_summary(session) -> dict:
             "contractions": [float(a) for a in res.contractions], "difference": _num(res.difference),
             "relative_difference": _num(res.difference / body_size(session.mesh)),  # as `mdsr run`
             "x_aligned": xd.tolist(), "node_distance": dist.tolist(), "muscles": rows,
+            # a design clamped at nodes (a case with obstacles) is shown where it stands, not aligned
+            "held": getattr(res, "held", None) is not None,
             "muscle_model": getattr(res, "muscle_model", None), "params": _jsonable(session.design_params),
             "saturated": [m.name for m, sat in zip(session.muscles, res.saturated) if sat],
             "dropped": [d.to_dict() for d in session.dropped],

@@ -402,7 +402,7 @@
                    ["#111", "anchor", "square"], [GROUP_COLORS[0], "drag node", "dot"]];
     if (S.muscles.length) items.push([MUSCLE_COLORS[0], "muscles", "line"]);
     if (obstacles().length) items.push(["rgba(90,90,90,.5)", "obstacle (touched, never entered)", "fill"]);
-    if (S.design && view === "overlay") items.push(["#f4a261", "driven by the design (aligned)", "fill"]);
+    if (S.design && view === "overlay") items.push(["#f4a261", S.design.held ? "driven by the design (held at its anchors)" : "driven by the design (aligned)", "fill"]);
     if (S.graph && $("show-graph").checked) items.push(["#d62728", "contracted edge", "line"], ["#1f77b4", "elongated edge", "line"]);
     if (S.design && view === "difference") items.push(["rgb(175,40,20)", "far from target", "fill"]);
     ctx.font = "12px system-ui, sans-serif";
