@@ -570,14 +570,14 @@ def test_a_paused_drag_is_solved_exactly_before_its_release(monkeypatch):
 
     sent, solved = [], []
     real = session_module.solve_external
+    exact = session_module.target_solve
 
-    def counted(mesh, material, anchors, drags, **kw):
-        res = real(mesh, material, anchors, drags, **kw)
-        if not kw:  # the exact solve (the live fallback passes an initial guess)
-            solved.append(np.asarray(drags[1]).copy())
-        return res
+    def counted(session):  # the exact solve (the live fallback calls solve_external with an initial guess)
+        out = exact(session)
+        solved.append(np.asarray(session.drag_positions).copy())
+        return out
 
-    monkeypatch.setattr(session_module, "solve_external", counted)
+    monkeypatch.setattr(session_module, "target_solve", counted)
 
     class FakeSocket:
         async def send_text(self, text):
@@ -603,6 +603,7 @@ def test_a_paused_drag_is_solved_exactly_before_its_release(monkeypatch):
             if any(np.array_equal(d, p1) for d in solved):
                 break
             await asyncio.sleep(0.01)
+        out["paused_solve"] = any(np.array_equal(d, p1) for d in solved)
         n = len(solved)
         page.enqueue(dict(fixed, type="fixed", seq=2, drag_positions=p1))
         out["release"], out["new_solves"] = await reply(2), len(solved) - n
@@ -621,6 +622,7 @@ def test_a_paused_drag_is_solved_exactly_before_its_release(monkeypatch):
 
     out = asyncio.run(asyncio.wait_for(scenario(), timeout=300))
     assert out["drag"]["live"] and out["drag"]["success"]
+    assert out["paused_solve"]  # the pause solved p1 exactly (the count sees the exact solves)
     assert out["new_solves"] == 0 and out["release"]["success"] and not out["release"]["live"]
     tent = get_problem("tentacle", resolution="coarse")
     for key, seq in (("release", 2), ("release2", 5)):
