@@ -220,3 +220,21 @@ def test_benchmark_stage_clock_covers_the_pipeline_and_restores_it():
             owner = getattr(owner, part)
         assert owner is f, attr
     assert "(x" in _B.stage_line({"stage_cpu": cpu, "newton_cpu": 0.1, "ipopt_cpu": float("nan")})
+
+
+def test_benchmark_repeat_reports_the_median_of_each_time(monkeypatch):
+    """``bench_fine_design --repeat K``: each time, ratio and stage time of a size is the median of its K runs,
+    the rest of the row is the last run's."""
+    keys = ("design_s", "newton_s", "ipopt_s", "ratio", "design_cpu", "newton_cpu", "ipopt_cpu", "cpu_ratio")
+    values = iter([5.0, 1.0, 3.0])
+
+    def fake_run(ny, ipopt_print=0, stages=False, **kw):
+        v = next(values)
+        return dict({k: v for k in keys}, ny=ny, success=v > 2.0, stage_cpu={"NLP": 10 * v, "routing": -v})
+
+    monkeypatch.setattr(_B, "run", fake_run)
+    row = _B.run_median(24, 3)
+    assert row["repeat"] == 3 and row["ny"] == 24
+    assert all(row[k] == 3.0 for k in keys)
+    assert row["stage_cpu"] == {"NLP": 30.0, "routing": -3.0}
+    assert row["success"] is True  # the last run's
