@@ -2,8 +2,9 @@
 the contacts, kept when a forward solve with them touches nothing; derivative-free with them otherwise.
 
 Before, every such design ran the derivative-free search with the contacts (each evaluation a contact solve),
-even when nothing was ever touched: a T in mm over a floor 20 mm below it took 7.7 s of CPU against 1.0 s
-nested without the floor, and a star mounted over a floor stopped at Nelder-Mead's evaluation cap, failed."""
+even when nothing was ever touched: a T in mm over a floor 20 mm below it took 63 contact solves where the nested
+design without the floor takes 14 forward solves, and a star mounted over a floor stopped at Nelder-Mead's
+evaluation cap (3,200 contact solves), failed."""
 
 import numpy as np
 import pytest
