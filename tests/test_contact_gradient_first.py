@@ -10,8 +10,17 @@ import numpy as np
 import pytest
 from shapely.geometry import Point, Polygon
 
-from mdsr_opt import (Disk, HalfPlane, Mesh, Muscle, NeoHookean, design_contractions, design_pipeline, nodes_in_box,
-                      solve_external)
+from mdsr_opt import (
+    Disk,
+    HalfPlane,
+    Mesh,
+    Muscle,
+    NeoHookean,
+    design_contractions,
+    design_pipeline,
+    nodes_in_box,
+    solve_external,
+)
 
 MAT = NeoHookean(1.0, 0.3)
 

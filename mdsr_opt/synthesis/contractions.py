@@ -203,14 +203,15 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     clock0 = time.perf_counter()
     if method is None and (contact is True or check_obstacles(obstacles)):
         # contact, no method named: a gradient design without it, checked with it, else derivative-free
-        common = dict(a_max=a_max, initial_guess=initial_guess, weights=weights, interior_weight=interior_weight,
-                      muscle_model=muscle_model, stiffness=stiffness, anchor_radius=anchor_radius,
-                      warm_start=warm_start, inner_tol=inner_tol, verify=verify, skip_verification=skip_verification,
-                      gap_rtol=gap_rtol, fixture_wall=fixture_wall, held=held)
+        common = {"a_max": a_max, "initial_guess": initial_guess, "weights": weights,
+                  "interior_weight": interior_weight, "muscle_model": muscle_model, "stiffness": stiffness,
+                  "anchor_radius": anchor_radius, "warm_start": warm_start, "inner_tol": inner_tol, "verify": verify,
+                  "skip_verification": skip_verification, "gap_rtol": gap_rtol, "fixture_wall": fixture_wall,
+                  "held": held}
         return _gradient_first(mesh, material, muscles, target, clock0, common,
-                               dict(hessian=hessian, scaling=scaling, derivatives=derivatives),
-                               dict(tol=tol, max_iter=max_iter, outer=outer, options=options),
-                               dict(contact=contact, obstacles=obstacles, contact_gap=contact_gap))
+                               {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
+                               {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
+                               {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap})
     if method is None:  # held nodes: the flattened NLP pins the gauge only
         method = "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:
@@ -371,7 +372,7 @@ def _gradient_first(mesh, material, muscles, target, clock0, common: dict, flat:
     why = "" if first.success else f"failed ({first.status})"
     tol, verify = min(common["inner_tol"], VERIFY_TOL), common["verify"]
     if not why:
-        ok, why, fx, gap = untouched(mesh, material, muscles, first, ckw, tol=tol, gap_rtol=common["gap_rtol"])
+        _ok, why, fx, gap = untouched(mesh, material, muscles, first, ckw, tol=tol, gap_rtol=common["gap_rtol"])
     if not why and ckw.get("obstacles") and first.held is None:
         # the free body's state moved rigidly into the obstacles' frame (the gauge the contact solve holds)
         al = align(first.x, fx)
