@@ -22,7 +22,7 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
-from .grips import BANDS_NOTE, PROTOTYPE_NOTE, case_grips, grip_line, obstacle_design
+from .grips import BANDS_NOTE, PROTOTYPE_NOTE, case_grips, design_route, grip_line, obstacle_design
 from .names import number_in_scene
 from .obstacles import case_contact
 from .verdict import plain_failure, prototype_verdict, saturation_line
@@ -319,6 +319,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         return run
     run.design = res
     res.units = scene.units
+    for note in design_route(scene, case, res):  # how a case with obstacles was designed: checked, or searched
+        rep.notes.append(note)
+        say(prefix + note)
     if dropped:
         if setup.routing is not None and rep.routing is not None and tuple(m.nodes for m in setup.muscles) == tuple(
                 m.nodes for m in setup.routing.muscles):  # the routing names the muscles the case keeps

@@ -14,6 +14,7 @@ from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
+from ..body.checks import check_target_shape
 from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import body_size, check_anchor_radius
@@ -23,7 +24,8 @@ from ..mechanics.loadsteps import upright
 from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
 from ..plot.style import muscle_label
-from .contactdesign import check_design_contact, unit_contact
+from .contactdesign import (check_design_contact, contact_words, gradient_method, target_touches, unit_contact,
+                            untouched)
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
 from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, short_ropes
@@ -65,9 +67,13 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     target : (n, 2) array
         Target node positions, in any pose (only the shape matters).
     method : {"flattened", "nested", "derivative-free"}, optional
-        See the module docstring. Default ``"flattened"``, or ``"derivative-free"`` with contact (the only
-        method that takes it), or ``"nested"`` with ``held`` nodes and no contact (the flattened NLP pins the
-        three gauge coordinates only).
+        See the module docstring. Default ``"flattened"``, or ``"nested"`` with ``held`` nodes (the flattened
+        NLP pins the three gauge coordinates only). With contact and no method: that method without the
+        contacts, kept when a forward solve with them from rest at its contractions touches nothing and
+        lands on its state and it passes its verification with them; else ``"derivative-free"`` with the
+        contacts, started from its contractions (:mod:`~mdsr_opt.synthesis.contactdesign`; ``method`` of
+        the result says which, ``status`` why). ``"derivative-free"`` named with contact searches with the
+        contacts from the start; ``"flattened"`` and ``"nested"`` named with contact are refused.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -154,8 +160,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         nodes: give them for a body mounted on a base, as :func:`design_pipeline` does). Every forward
         solve of the design and the verification's (from rest, and the design state's stability on the
         tangent space of its pushing contacts) models them; the design's state ``x`` stays in the obstacles'
-        frame. Designed by ``method="derivative-free"`` only (:mod:`~mdsr_opt.synthesis.contactdesign`);
-        ``contact`` of the result reports the verified state's contact forces.
+        frame. The search takes them by ``method="derivative-free"`` only; without a method a gradient design
+        that never touches them is checked with them and kept (``method`` above;
+        :mod:`~mdsr_opt.synthesis.contactdesign`); ``tol``, ``max_iter``, ``outer`` and ``options`` are then
+        the derivative-free search's, when it runs. ``contact`` of the result reports the verified state's
+        contact forces.
     held : node indices, optional
         Nodes clamped at their rest positions in every forward solve and the verification, as a robot
         mounted on its base (:func:`~mdsr_opt.solve_internal`'s ``held``; at least two nodes, integers in range,
@@ -192,9 +201,19 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     """
     initial = initial_guess
     clock0 = time.perf_counter()
-    if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
-            "flattened" if held is None else "nested"
+    if method is None and (contact is True or check_obstacles(obstacles)):
+        # contact, no method named: a gradient design without it, checked with it, else derivative-free
+        common = {"a_max": a_max, "initial_guess": initial_guess, "weights": weights,
+                  "interior_weight": interior_weight, "muscle_model": muscle_model, "stiffness": stiffness,
+                  "anchor_radius": anchor_radius, "warm_start": warm_start, "inner_tol": inner_tol, "verify": verify,
+                  "skip_verification": skip_verification, "gap_rtol": gap_rtol, "fixture_wall": fixture_wall,
+                  "held": held}
+        return _gradient_first(mesh, material, muscles, target, clock0, common,
+                               {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
+                               {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
+                               {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap})
+    if method is None:  # held nodes: the flattened NLP pins the gauge only
+        method = "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if hessian not in ("exact", "gauss-newton"):
@@ -314,6 +333,86 @@ def _design_from(args, warm, clock0) -> DesignResult:
         res.time = time.perf_counter() - clock0
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
+    return res
+
+
+def _gradient_first(mesh, material, muscles, target, clock0, common: dict, flat: dict, search: dict,
+                    contact_kw: dict) -> DesignResult:
+    """A design with contact and no method named (:mod:`~mdsr_opt.synthesis.contactdesign`): by the gradient
+    method without the contacts (``common`` and the flattened NLP's ``flat`` keywords), kept when
+    :func:`~mdsr_opt.synthesis.contactdesign.untouched` finds that it touches nothing and it passes its
+    verification with the contacts; else made again by the derivative-free method with the contacts
+    (``search``: its ``tol``, ``max_iter``, ``outer``, ``options``), started from its contractions."""
+    ckw = check_design_contact(mesh, material, contact_kw["contact"], contact_kw["obstacles"],
+                               contact_kw["contact_gap"], None)  # at the door, as the options below
+    if search["outer"] not in ("nelder-mead", "powell"):
+        raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {search['outer']!r}")
+    check_design_options(search["options"], "derivative-free", search["outer"])
+    gm, what = gradient_method(common["held"]), contact_words(ckw)
+    hold = check_held(mesh, common["held"], None)  # the muscles are checked with it by the design below
+    pressed = target_touches(mesh, check_target_shape(mesh, target), ckw, hold)
+    if pressed:  # a shape the contact forces make: searched with them from the start, as when named
+        _LOG.info("design: %s: by method derivative-free with %s", pressed, what)
+        res = design_contractions(mesh, material, muscles, target, method="derivative-free", **common, **search,
+                                  **contact_kw)
+        res.contact_route = f"by method 'derivative-free' with {what}: {pressed}"
+        res.status += f"; designed {res.contact_route}"
+        return res
+    skip, skipped = common["skip_verification"], []
+    if skip is not None:  # whether the caller discarded the gradient design (its verification left out)
+        def noted(r):
+            why = skip(r)
+            skipped.append(bool(why))
+            return why
+        common = dict(common, skip_verification=noted)
+    _LOG.info("design: by method %s without %s, then checked with them", gm, what)
+    with warnings.catch_warnings(record=True) as caught:  # issued only when this design is the answer
+        warnings.simplefilter("always")
+        first = design_contractions(mesh, material, muscles, target, method=gm, **common, **flat)
+    why = "" if first.success else f"failed ({first.status})"
+    tol, verify = min(common["inner_tol"], VERIFY_TOL), common["verify"]
+    if not why:
+        _ok, why, fx, gap = untouched(mesh, material, muscles, first, ckw, tol=tol, gap_rtol=common["gap_rtol"])
+    if not why and ckw.get("obstacles") and first.held is None:
+        # the free body's state moved rigidly into the obstacles' frame (the gauge the contact solve holds)
+        al = align(first.x, fx)
+        R = first.rotation @ al.R.T
+        first.x, first.rotation, first.translation = al.apply(first.x), R, first.translation - R @ al.t
+    if not why and verify and not (skipped and skipped[-1]):
+        v = verify_design(mesh, material, muscles, first, target, weights=common["weights"],
+                          gap_rtol=common["gap_rtol"], tol=tol, start="design" if verify == "design" else "rest",
+                          held=first.held, **ckw)
+        if v.passed:
+            first.verification = v
+        else:
+            why = f"fails its verification with them ({v.message})"
+    if not why:
+        for w in caught:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        first.contact_route = (f"by method {gm!r} without {what}, then checked with them: untouched (the forward "
+                               f"solve with them from rest at these contractions has no contact force and lands on "
+                               f"the design's state, within {gap:.3g})"
+                               + ("; verified with them" if first.verification is not None and verify else ""))
+        first.status += f"; designed {first.contact_route}"
+        first.time = time.perf_counter() - clock0
+        first.solve_time = first.time - first.build_time
+        _LOG.info("design: the %s design touches nothing with %s: kept", gm, what)
+        return first
+    a = np.asarray(first.contractions, dtype=float)
+    start = np.clip(a, 0.0, common["a_max"]) if a.shape == (len(first.rest_lengths),) and np.isfinite(a).all() \
+        else common["initial_guess"]
+    _LOG.info("design: %s; designing by method derivative-free with %s, from the %s design's contractions",
+              why, what, gm)
+    res = design_contractions(mesh, material, muscles, target, method="derivative-free",
+                              **dict(common, initial_guess=start), **search, **contact_kw)
+    res.contact_route = (f"by method 'derivative-free' with {what}, started from the contractions of the {gm} "
+                         f"design without them, which {why}")
+    res.status += f"; designed {res.contact_route}"
+    res.iterations += first.iterations
+    res.n_forward += first.n_forward
+    res.inner_iterations += first.inner_iterations
+    res.time = time.perf_counter() - clock0
+    res.solve_time = res.time - res.build_time
     return res
 
 

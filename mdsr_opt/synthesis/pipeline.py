@@ -324,8 +324,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     routing_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
     method : str, optional
-        The design method (see :func:`design_contractions`; default ``"flattened"``, with contact
-        ``"derivative-free"``).
+        The design method (see :func:`design_contractions`; default ``"flattened"``, ``"nested"`` with
+        ``held`` nodes). With contact and no method, each design is made by that gradient method without the
+        contacts and kept when, checked with them, it touches nothing; else by ``"derivative-free"`` with
+        them, started from its contractions (``.design.method`` says which, ``.design.status`` why).
     contact, obstacles : optional
         Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
         verification (:func:`design_contractions`); refused at the door with a method that cannot take it.
@@ -419,9 +421,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     eopts = dict(external_options or {})
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
-    if method is None:  # as design_contractions chooses (held nodes: the nested method without contact)
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
-            "flattened" if design_options.get("held") is None else "nested"
+    if method is None and not (contact is True or check_obstacles(obstacles)):
+        # as design_contractions chooses (held nodes: the nested method); with contact it chooses per design: a
+        # gradient design checked with the contacts, else derivative-free (mdsr_opt.synthesis.contactdesign)
+        method = "flattened" if design_options.get("held") is None else "nested"
     ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
     anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=mesh.n_nodes)
     if ckw.get("obstacles") and design_options.get("held") is None:
@@ -468,8 +471,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     design_options.setdefault("fixture_wall", (ropts["fabrication"] or Fabrication()).for_body(mesh).wall)
     t2 = time.perf_counter()
     design_options.setdefault("verify", PIPELINE_VERIFY)
-    _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method,
-              " with contact (each trial a contact solve; progress below)" if ckw else "")
+    _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method or
+              f"method {'nested' if design_options.get('held') is not None else 'flattened'} without contact, "
+              "checked with it (derivative-free with it when it touches)",
+              " with contact (each trial a contact solve; progress below)" if ckw and method else "")
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
                                       **design_options)
     res.units = units

@@ -191,6 +191,11 @@ class DesignResult:
     stress_unit : str or None
         The unit of the material's constants (``"Pa"`` for the silicone presets), None when dimensionless:
         with ``units`` it gives the tensions in newtons (:meth:`tensions_in_unit`).
+    contact_route : str
+        A design with contact and no method named (:mod:`~mdsr_opt.synthesis.contactdesign`): how it was made,
+        ``"by method 'nested' without the obstacles, then checked with them: untouched ..."`` or ``"by method
+        'derivative-free' with the obstacles, started from the contractions of the nested design without
+        them, which touches ..."``; empty otherwise.
     """
 
     method: str
@@ -228,6 +233,7 @@ class DesignResult:
     fixture_wall: float | None = None
     held: tuple | None = None
     a_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_route: str = ""
 
     @property
     def contact(self) -> dict | None:
