@@ -398,6 +398,11 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
                        a_max=prob.a_max, muscle_model=prob.muscle_model, stiffness=prob.stiffness, history=list(hist),
                        anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy(),
                        rest_mesh=mesh_fingerprint(mesh), a_upper=np.asarray(prob.a_upper, dtype=float).copy())
+    err = np.linalg.norm(al.apply(x_rest) - prob.y, axis=1)  # per node, after the same rigid motion
+    if err.size and np.isfinite(err).all():
+        k = int(np.argmax(err))
+        res.max_error, res.max_error_node = float(err[k]), k
+        res.relative_max_error = float(err[k]) / body_size(umesh)
     report_muscles(prob, res, x, kappa)
     if method != "flattened" and prob.muscle_model == "cable" and res.slack.any():
         # any contraction below the one its path reached leaves a rope slack with the same shape: report
@@ -463,6 +468,7 @@ def _in_units(res: DesignResult, units) -> DesignResult:
     res.x = res.x * L
     res.translation = res.translation * L
     res.difference, res.initial_difference = res.difference * L, res.initial_difference * L
+    res.max_error = res.max_error * L
     res.history = [(t, d * L) for t, d in res.history]
     res.anchor_radius = res.anchor_radius * L
     res.rest_lengths, res.stroke = res.rest_lengths * L, res.stroke * L
