@@ -324,6 +324,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         return run
     run.design = res
     res.units = scene.units
+    if res.fallback:  # the default flattened design failed: which method designed it (or was tried), and why
+        rep.notes.append(f"design: {res.fallback}")
+        say(f"{prefix}design: {res.fallback}")
     if dropped:
         if setup.routing is not None and rep.routing is not None and tuple(m.nodes for m in setup.muscles) == tuple(
                 m.nodes for m in setup.routing.muscles):  # the routing names the muscles the case keeps

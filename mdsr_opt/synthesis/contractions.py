@@ -26,6 +26,7 @@ from ..plot.style import muscle_label
 from .contactdesign import check_design_contact, unit_contact
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
+from .fallback import FALLBACK_METHOD, NESTED_HINT, design_with_fallback
 from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, short_ropes
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
@@ -67,7 +68,10 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     method : {"flattened", "nested", "derivative-free"}, optional
         See the module docstring. Default ``"flattened"``, or ``"derivative-free"`` with contact (the only
         method that takes it), or ``"nested"`` with ``held`` nodes and no contact (the flattened NLP pins the
-        three gauge coordinates only).
+        three gauge coordinates only). A default flattened design that fails (not converged, or rejected by
+        its verification) is made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's
+        ``method``, ``fallback`` and ``status`` say so); a named ``"flattened"`` is not, its failure's
+        ``status`` suggesting ``"nested"``.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -192,6 +196,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     """
     initial = initial_guess
     clock0 = time.perf_counter()
+    named = method is not None  # a default flattened design that fails is made again by the nested method
     if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
         method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
             "flattened" if held is None else "nested"
@@ -256,6 +261,28 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units, ckw, skip_verification)
+    res = _fixtures_apart(args, warm, clock0, fixture_wall)
+    if method == "flattened" and not res.success and not named:  # the nested method from the best start
+        nested = (prob, FALLBACK_METHOD, None, tol, int(max_iter), hessian, scaling, outer, {}) + args[9:]
+        res = design_with_fallback(res, lambda start: _fixtures_apart(nested[:2] + (start,) + nested[3:], "rest",
+                                                                      clock0, fixture_wall),
+                                   a0, prob.a_upper, clock0)
+    elif method == "flattened" and not res.success:
+        res.status += NESTED_HINT
+    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    res.stress_unit = getattr(material, "stress_unit", None)
+    res.fixture_wall = float(fixture_wall)  # a length: the caller's units
+    res.held = None if hold is None else tuple(int(i) for i in hold)
+    if res.saturated.any():
+        warn_saturated(res, mus)
+    return res
+
+
+def _fixtures_apart(args, warm, clock0, fixture_wall) -> DesignResult:
+    """:func:`_design_from`, made again (at most :data:`FIXTURE_REDESIGNS` times) with the muscles whose end
+    fixtures meet in the designed state capped below the contraction that brought them there."""
+    prob, method, a0 = args[:3]
+    mus, mesh = prob.muscles, args[14].mesh
     res = _design_from(args, warm, clock0)
     for _ in range(FIXTURE_REDESIGNS):
         # end fixtures that meet in the designed state (a rope slack, or its patches' edges shortened):
@@ -277,12 +304,6 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.inner_iterations += first.inner_iterations
         res.time = time.perf_counter() - clock0
         res.solve_time = res.time - res.build_time
-    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
-    res.stress_unit = getattr(material, "stress_unit", None)
-    res.fixture_wall = float(fixture_wall)  # a length: the caller's units
-    res.held = None if hold is None else tuple(int(i) for i in hold)
-    if res.saturated.any():
-        warn_saturated(res, mus)
     return res
 
 

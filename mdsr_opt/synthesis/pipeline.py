@@ -325,7 +325,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
     method : str, optional
         The design method (see :func:`design_contractions`; default ``"flattened"``, with contact
-        ``"derivative-free"``).
+        ``"derivative-free"``). A default flattened design that fails is made again by ``"nested"``
+        (:mod:`~mdsr_opt.synthesis.fallback`: ``.design.method`` and ``.design.fallback`` say so).
     contact, obstacles : optional
         Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
         verification (:func:`design_contractions`); refused at the door with a method that cannot take it.
@@ -419,6 +420,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     eopts = dict(external_options or {})
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
+    named = method is not None  # a default flattened design that fails is made again by the nested method
     if method is None:  # as design_contractions chooses (held nodes: the nested method without contact)
         method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
             "flattened" if design_options.get("held") is None else "nested"
@@ -470,8 +472,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     design_options.setdefault("verify", PIPELINE_VERIFY)
     _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method,
               " with contact (each trial a contact solve; progress below)" if ckw else "")
-    res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
-                                      **design_options)
+    res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction,
+                                      method=method if named or method != "flattened" else None, **design_options)
     res.units = units
     if routing is not None and dropped:
         routing = routing.keeping(mus, dropped)

@@ -83,6 +83,7 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
     **dopt)`` would make (same muscles in the same order, same recorded options)?"""
     from ..mechanics.anchors import anchor_radius_or_default
     from .contractions import design_contractions
+    from .fallback import FALLBACK_METHOD
 
     muscles, d = sep
     if d is None or _chains(muscles) != _chains(engaged):
@@ -92,6 +93,8 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
         want = dopt.get(key, default[key].default)
         if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
             want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
+            if getattr(d, "fallback", "") and d.method == FALLBACK_METHOD:  # the default's own fallback
+                want = d.method
         if key == "verify":
             if want and d.verification is None:
                 return False
