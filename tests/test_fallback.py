@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import mdsr_opt.synthesis.contractions as contractions
-import mdsr_opt.synthesis.rivals as rivals
 from mdsr_opt import Mesh, Muscle, NeoHookean, design_pipeline
 from mdsr_opt.cli.main import main
+from mdsr_opt.synthesis import contractions, rivals
 from mdsr_opt.synthesis.contractions import design_contractions
 from mdsr_opt.synthesis.fallback import NESTED_HINT, fallback_starts
 

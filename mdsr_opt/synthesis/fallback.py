@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 _LOG = logging.getLogger(__name__)
 
-__all__ = ["FALLBACK_METHOD", "NESTED_HINT", "fallback_starts", "design_with_fallback"]
+__all__ = ["FALLBACK_METHOD", "NESTED_HINT", "design_with_fallback", "fallback_starts"]
 
 #: the method that makes a failed default (flattened) design again
 FALLBACK_METHOD = "nested"
