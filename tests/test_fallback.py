@@ -161,3 +161,22 @@ def test_trial12_dumbbell_designs_by_default_and_the_same_under_round_off():
     # before the fallback: differences 1.135 and 3.09 (both failures); now one answer (3.73 mm, 3.4 % of size)
     assert out[0].design.difference == pytest.approx(out[1].design.difference, rel=1e-6)
     assert out[0].design.difference == pytest.approx(3.7325, rel=1e-3)
+
+
+def test_a_layout_designed_again_without_its_idle_muscle_says_how_the_first_was_designed(monkeypatch):
+    from mdsr_opt.synthesis.acceptance import design_active
+
+    real = contractions.run_flattened
+
+    def failing_with_two(prob, *args, **kwargs):  # the flattened design fails on the layout with the idle rope
+        out, status, iters, bt = real(prob, *args, **kwargs)
+        if prob.m == 2 and out is not None:
+            return dict(out, success=False, status="Maximum_Iterations_Exceeded"), "Maximum_Iterations_Exceeded", iters, bt
+        return out, status, iters, bt
+
+    monkeypatch.setattr(contractions, "run_flattened", failing_with_two)
+    mesh, (lower,), target = _strip()
+    upper = Muscle(range(69, 84))  # the top edge lengthens in the bend: an idle rope
+    res, kept, dropped = design_active(mesh, MAT, [lower, upper], target)
+    assert [d.name for d in dropped] == ["M2"] and res.success and res.method == "flattened"
+    assert "(the layout with them: the default method='flattened' failed (Maximum_Iterations_Exceeded" in res.status
