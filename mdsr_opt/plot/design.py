@@ -176,7 +176,7 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     >>> target = solve_internal(mesh, mat, mus, [0.15]).x
     >>> fig = plot_design(mesh, design_contractions(mesh, mat, mus, target), target, mus)
     >>> title = fig.axes[0].get_title()
-    >>> "difference D = " in title and "M1 0.150 \u2192 0.150" in title
+    >>> "difference D = " in title and "M1 0.150 \u2192 0.150" in title and "largest node error" in title
     True
     """
     check_same_mesh(mesh, getattr(result, "rest_mesh", None), "the design")  # drawn on the body it was made on
@@ -187,7 +187,13 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
               label="driven (aligned)")
     if len(muscles):
         plot_muscles(result.x_aligned, muscles, ax=ax)
-    ax.set_title(title or design_title(result, muscles, units), fontsize=9)
+    err = np.linalg.norm(np.asarray(result.x_aligned) - np.asarray(target, dtype=float), axis=1)
+    if err.size and np.isfinite(err).all():  # where the design misses the pose most
+        k = int(np.argmax(err))
+        pts = np.array([result.x_aligned[k], np.asarray(target, dtype=float)[k]])
+        ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.0, marker="x", ms=5, zorder=5,
+                label=f"largest node error {err[k]:.3g} {unit_label(units)}")
+    ax.set_title(title or design_title(result, muscles, units, target=target), fontsize=9)
     if len(obstacles):
         draw_obstacles(ax, obstacles)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
@@ -195,10 +201,12 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     return fig
 
 
-def design_title(result, muscles=(), units=None, per_line: int = 3) -> str:
-    """A design's title: method, difference with its unit, then per muscle the commanded contraction and
-    the achieved one (``M1 0.150 -> 0.148``): on the same line for one or two muscles, else ``per_line``
-    muscles to a line under a heading line (the title stays about as wide as the drawing)."""
+def design_title(result, muscles=(), units=None, per_line: int = 3, target=None) -> str:
+    """A design's title: method, difference (the weighted RMS the verdict judges) with its unit and the
+    largest node error after the same alignment (measured against ``target`` when given, else the result's
+    ``max_error``), then per muscle the commanded contraction and the achieved one (``M1 0.150 -> 0.148``): on
+    the same line for one or two muscles, else ``per_line`` muscles to a line under a heading line (the title
+    stays about as wide as the drawing)."""
     from .style import muscle_label, muscle_name
 
     a = np.asarray(result.contractions, dtype=float)
@@ -208,7 +216,12 @@ def design_title(result, muscles=(), units=None, per_line: int = 3) -> str:
     text = commanded_achieved(a, reached if reached.size == a.size else None, names)
     parts = text.split(", ") if text else []
     ok = "" if result.success else "  [FAILED]"
-    head = f"{result.method}: difference D = {result.difference:.3g} {unit_label(units)}{ok}"
+    worst = float(getattr(result, "max_error", float("nan")))
+    if target is not None:
+        err = np.linalg.norm(np.asarray(result.x_aligned) - np.asarray(target, dtype=float), axis=1)
+        worst = float(err.max()) if err.size else worst
+    most = f", largest node error {worst:.3g} {unit_label(units)}" if np.isfinite(worst) else ""
+    head = f"{result.method}: difference D = {result.difference:.3g} {unit_label(units)} (RMS){most}{ok}"
     what = "contraction commanded \u2192 achieved:" if reached.size == a.size else "contraction commanded:"
     # a stroke with its uncertainty band (synthesis.bands) when the design carries one
     band = np.asarray(getattr(result, "stroke_band", ()), dtype=float).reshape(-1, 2)

@@ -54,6 +54,9 @@ class CaseReport:
     contraction_error : internal cases: largest ``|designed - known|``.
     difference : the design's difference to the target (a length, weighted RMS after rigid alignment);
         relative_difference : over the body's size, its rest diameter (:func:`~mdsr_opt.mechanics.anchors.body_size`).
+        The ok/FAILED verdict judges this RMS figure.
+    max_error, relative_max_error : the largest node distance to the target after the same alignment (a length,
+        and over the body's size): reported beside the RMS, which can pass a pose missed at an extremity.
     initial_difference : difference at the design's starting point.
     rest_difference : the rest shape's difference to the target (the "do nothing" design; a case whose
         design removes less than a tenth of it fails: :func:`~mdsr_opt.synthesis.acceptance.difference_failure`).
@@ -105,6 +108,8 @@ class CaseReport:
     contraction_error: float | None = None
     difference: float | None = None
     relative_difference: float | None = None
+    max_error: float | None = None
+    relative_max_error: float | None = None
     initial_difference: float | None = None
     rest_difference: float | None = None
     design_success: bool | None = None
@@ -322,6 +327,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     for note in design_route(scene, case, res):  # how a case with obstacles was designed: checked, or searched
         rep.notes.append(note)
         say(prefix + note)
+    if res.fallback:  # the default flattened design failed: which method designed it (or was tried), and why
+        rep.notes.append(f"design: {res.fallback}")
+        say(f"{prefix}design: {res.fallback}")
     if dropped:
         if setup.routing is not None and rep.routing is not None and tuple(m.nodes for m in setup.muscles) == tuple(
                 m.nodes for m in setup.routing.muscles):  # the routing names the muscles the case keeps
@@ -350,6 +358,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     rep.contact = res.contact_summary().get("contact")  # forces in the tensions' unit
     rep.difference = float(res.difference)
     rep.relative_difference = float(res.difference) / body_size(mesh)  # the same however the body is turned
+    rep.max_error, rep.relative_max_error = float(res.max_error), float(res.relative_max_error)
     rep.initial_difference = float(res.initial_difference)
     rep.design_success, rep.design_status = bool(res.success), str(res.status)
     if res.verification is not None:
@@ -365,7 +374,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     verdict = "verified" if res.success else "FAILED: " + plain_failure(res.status)
     say(f"{prefix}design ({res.method}, {res.muscle_model}): commanded a = [{a}], achieved [{ach}], "
         f"strokes [{st}] {u}, tensions [{tn}] {res.tension_unit}, difference {res.difference:.3g} {u} "
-        f"({100 * rep.relative_difference:.2f} % of size), {verdict} ({rep.times['design']:.1f} s)")
+        f"({100 * rep.relative_difference:.2f} % of size; largest node error {res.max_error:.3g} {u}, "
+        f"{100 * res.relative_max_error:.2f} %), {verdict} ({rep.times['design']:.1f} s)")
     if rep.saturated:
         say(prefix + saturation_line(res))
     rep.grip = case_grips(scene, case, res.x, res.contact, "design", setup.obstacles, setup.free_disk) or None

@@ -48,12 +48,14 @@ class SceneReport:
     def table(self) -> str:
         """A Markdown table of the key figures, one row per case; differences and strokes carry the scene's
         unit in every cell (:func:`~mdsr_opt.plot.style.unit_label`), so tables of scenes in different units
-        can be joined."""
+        can be joined. The difference is the design's weighted RMS (what the ok/FAILED verdict judges); the
+        largest node error after the same alignment stands beside it, since an RMS can pass a pose missed at
+        an extremity."""
         u = unit_label(self.units)
         head = ("| scene | case | kind | nodes | muscles | achieved contractions | strokes | difference | "
-                "diff/size (%) | design | photo d over every loop (px) | ratio (%) | prototype d over every loop (px) | "
-                "time (s) |")
-        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
+                "diff/size (%) | largest node error (% of size) | design | photo d over every loop (px) | ratio (%) | "
+                "prototype d over every loop (px) | time (s) |")
+        rows = [head, "| --- | --- | --- | ---: | ---: | --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
         for c in self.cases:
             a = ", ".join(f"{v:.3f}" for v in (c.achieved or c.contractions)) if c.contractions else "-"
             names = [m.get("name") for m in (c.muscles or [])]
@@ -64,13 +66,15 @@ class SceneReport:
             s += f" {u}" if c.stroke else ""
             d = "-" if c.difference is None else f"{c.difference:.4g} {u}"
             r = "-" if c.relative_difference is None else f"{100 * c.relative_difference:.2f}"
+            e, re_ = getattr(c, "max_error", None), getattr(c, "relative_max_error", None)
+            mx = "-" if e is None or re_ is None else f"{e:.4g} {u} ({100 * re_:.2f})"
             ok = design_verdict(c)  # the cause of a failure first, then the secondary flags
             ph = (c.photo or {}).get("target")
             pd = "-" if not ph else f"{ph['mean_px']:.2f}"
             pr = "-" if not ph else f"{100 * ph['ratio']:.2f}"
             pt = ((c.photo or {}).get("prototype") or {}).get("design") or {}
             pp = f"{pt['mean_px']:.2f}" if pt.get("success") else "FAILED (validation.md)" if pt else "-"
-            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | "
+            rows.append(f"| {c.scene} | {c.case} | {c.kind} | {c.n_nodes} | {c.n_muscles} | {a} | {s} | {d} | {r} | {mx} | "
                         f"{ok} | {pd} | {pr} | {pp} | {c.times.get('total', 0.0):.1f} |")
         return "\n".join(rows)
 

@@ -294,6 +294,8 @@ def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_con
             break
         dropped += gone
         again.status += f"; idle muscle(s) {names} dropped and the design made again"
+        if getattr(res, "fallback", "") and not again.fallback:  # how the layout with them was designed
+            again.status += f" (the layout with them: {res.fallback})"
         res, caught, mus, where = again, caught_again, tuple(mus[i] for i in keep), where[keep]
         asked = dict(opts, **more)
     for w in caught:

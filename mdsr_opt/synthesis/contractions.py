@@ -28,6 +28,7 @@ from .contactdesign import (check_design_contact, contact_words, gradient_method
                             untouched)
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
+from .fallback import FALLBACK_METHOD, NESTED_HINT, design_with_fallback
 from .problem import ForwardSolver, DesignProblem, check_inputs, fixture_overlaps, initial_guess_of, short_ropes
 from .results import DesignResult, METHODS, MuscleWarning, report_muscles
 from .rivals import run_derivative_free, run_nested
@@ -73,7 +74,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         lands on its state and it passes its verification with them; else ``"derivative-free"`` with the
         contacts, started from its contractions (:mod:`~mdsr_opt.synthesis.contactdesign`; ``method`` of
         the result says which, ``status`` why). ``"derivative-free"`` named with contact searches with the
-        contacts from the start; ``"flattened"`` and ``"nested"`` named with contact are refused.
+        contacts from the start; ``"flattened"`` and ``"nested"`` named with contact are refused. Without
+        contact, a default flattened design that fails (not converged, or rejected by its verification) is
+        made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's ``method``,
+        ``fallback`` and ``status`` say so); a named ``"flattened"`` is not, its failure's ``status``
+        suggesting ``"nested"``.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -212,6 +217,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                                {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
                                {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
                                {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap})
+    named = method is not None  # a default flattened design that fails is made again by the nested method
     if method is None:  # held nodes: the flattened NLP pins the gauge only
         method = "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:
@@ -275,6 +281,28 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         warm = units.state_in(warm)  # a start shape, on the unit body
     args = (prob, method, a0, tol, int(max_iter), hessian, scaling, outer, options, inner_tol, derivatives, clock0,
             verify, gap_rtol, units, ckw, skip_verification)
+    res = _fixtures_apart(args, warm, clock0, fixture_wall)
+    if method == "flattened" and not res.success and not named:  # the nested method from the best start
+        nested = (prob, FALLBACK_METHOD, None, tol, int(max_iter), hessian, scaling, outer, {}) + args[9:]
+        res = design_with_fallback(res, lambda start: _fixtures_apart(nested[:2] + (start,) + nested[3:], "rest",
+                                                                      clock0, fixture_wall),
+                                   a0, prob.a_upper, clock0)
+    elif method == "flattened" and not res.success:
+        res.status += NESTED_HINT
+    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
+    res.stress_unit = getattr(material, "stress_unit", None)
+    res.fixture_wall = float(fixture_wall)  # a length: the caller's units
+    res.held = None if hold is None else tuple(int(i) for i in hold)
+    if res.saturated.any():
+        warn_saturated(res, mus)
+    return res
+
+
+def _fixtures_apart(args, warm, clock0, fixture_wall) -> DesignResult:
+    """:func:`_design_from`, made again (at most :data:`FIXTURE_REDESIGNS` times) with the muscles whose end
+    fixtures meet in the designed state capped below the contraction that brought them there."""
+    prob, method, a0 = args[:3]
+    mus, mesh = prob.muscles, args[14].mesh
     res = _design_from(args, warm, clock0)
     for _ in range(FIXTURE_REDESIGNS):
         # end fixtures that meet in the designed state (a rope slack, or its patches' edges shortened):
@@ -296,12 +324,6 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         res.inner_iterations += first.inner_iterations
         res.time = time.perf_counter() - clock0
         res.solve_time = res.time - res.build_time
-    res.muscle_names = tuple(muscle_label(mu, i) for i, mu in enumerate(mus))
-    res.stress_unit = getattr(material, "stress_unit", None)
-    res.fixture_wall = float(fixture_wall)  # a length: the caller's units
-    res.held = None if hold is None else tuple(int(i) for i in hold)
-    if res.saturated.any():
-        warn_saturated(res, mus)
     return res
 
 
@@ -497,6 +519,11 @@ def _design(prob, method, a0, tol, max_iter, hessian, scaling, outer, options, i
                        a_max=prob.a_max, muscle_model=prob.muscle_model, stiffness=prob.stiffness, history=list(hist),
                        anchor_radius=prob.anchor_radius, rest_lengths=prob.L0.copy(),
                        rest_mesh=mesh_fingerprint(mesh), a_upper=np.asarray(prob.a_upper, dtype=float).copy())
+    err = np.linalg.norm(al.apply(x_rest) - prob.y, axis=1)  # per node, after the same rigid motion
+    if err.size and np.isfinite(err).all():
+        k = int(np.argmax(err))
+        res.max_error, res.max_error_node = float(err[k]), k
+        res.relative_max_error = float(err[k]) / body_size(umesh)
     report_muscles(prob, res, x, kappa)
     if method != "flattened" and prob.muscle_model == "cable" and res.slack.any():
         # any contraction below the one its path reached leaves a rope slack with the same shape: report
@@ -562,6 +589,7 @@ def _in_units(res: DesignResult, units) -> DesignResult:
     res.x = res.x * L
     res.translation = res.translation * L
     res.difference, res.initial_difference = res.difference * L, res.initial_difference * L
+    res.max_error = res.max_error * L
     res.history = [(t, d * L) for t, d in res.history]
     res.anchor_radius = res.anchor_radius * L
     res.rest_lengths, res.stroke = res.rest_lengths * L, res.stroke * L

@@ -327,7 +327,9 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         The design method (see :func:`design_contractions`; default ``"flattened"``, ``"nested"`` with
         ``held`` nodes). With contact and no method, each design is made by that gradient method without the
         contacts and kept when, checked with them, it touches nothing; else by ``"derivative-free"`` with
-        them, started from its contractions (``.design.method`` says which, ``.design.status`` why).
+        them, started from its contractions (``.design.method`` says which, ``.design.status`` why). Without
+        contact, a default flattened design that fails is made again by ``"nested"``
+        (:mod:`~mdsr_opt.synthesis.fallback`: ``.design.method`` and ``.design.fallback`` say so).
     contact, obstacles : optional
         Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
         verification (:func:`design_contractions`); refused at the door with a method that cannot take it.
@@ -421,6 +423,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     eopts = dict(external_options or {})
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
+    named = method is not None  # a default flattened design that fails is made again by the nested method
     if method is None and not (contact is True or check_obstacles(obstacles)):
         # as design_contractions chooses (held nodes: the nested method); with contact it chooses per design: a
         # gradient design checked with the contacts, else derivative-free (mdsr_opt.synthesis.contactdesign)
@@ -475,8 +478,8 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
               f"method {'nested' if design_options.get('held') is not None else 'flattened'} without contact, "
               "checked with it (derivative-free with it when it touches)",
               " with contact (each trial a contact solve; progress below)" if ckw and method else "")
-    res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction, method=method,
-                                      **design_options)
+    res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction,
+                                      method=method if named or method != "flattened" else None, **design_options)
     res.units = units
     if routing is not None and dropped:
         routing = routing.keeping(mus, dropped)

@@ -84,6 +84,7 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
     from ..mechanics.anchors import anchor_radius_or_default
     from .contactdesign import gradient_method
     from .contractions import design_contractions
+    from .fallback import FALLBACK_METHOD
 
     muscles, d = sep
     if d is None or _chains(muscles) != _chains(engaged):
@@ -93,7 +94,10 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
         want = dopt.get(key, default[key].default)
         if key == "method" and want is None:  # design_contractions' choice: with contact either route
             grad = gradient_method(dopt.get("held"))
-            if d.method not in ((grad, "derivative-free") if dopt.get("contact") or dopt.get("obstacles") else (grad,)):
+            allowed = (grad, "derivative-free") if dopt.get("contact") or dopt.get("obstacles") else (grad,)
+            if getattr(d, "fallback", "") and d.method == FALLBACK_METHOD:  # the default's own fallback
+                allowed += (FALLBACK_METHOD,)
+            if d.method not in allowed:
                 return False
         elif key == "verify":
             if want and d.verification is None:

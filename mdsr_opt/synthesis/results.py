@@ -120,7 +120,15 @@ class DesignResult:
     rotation, translation : (2, 2) and (2,) ndarrays
         The best rigid motion taking ``x`` onto the target: ``x @ rotation.T + translation``.
     difference : float
-        Weighted RMS node distance to the target after that motion (a length).
+        Weighted RMS node distance to the target after that motion (a length): what the design minimises and
+        what ``mdsr run``'s ok/FAILED verdict judges (:func:`~mdsr_opt.synthesis.acceptance.difference_failure`).
+    max_error : float
+        The largest node distance to the target after the same motion (a length, in the body's units): an
+        RMS can pass a design that misses the pose at an extremity (an arm's tip), so reports give both.
+    relative_max_error : float
+        ``max_error`` over the body's size, its diameter at rest (:func:`~mdsr_opt.mechanics.anchors.body_size`).
+    max_error_node : int
+        The node at ``max_error`` (-1 when not recorded).
     success : bool
         The optimiser converged and the verification passed.
     status : str
@@ -196,6 +204,11 @@ class DesignResult:
         ``"by method 'nested' without the obstacles, then checked with them: untouched ..."`` or ``"by method
         'derivative-free' with the obstacles, started from the contractions of the nested design without
         them, which touches ..."``; empty otherwise.
+    fallback : str
+        Why another method than the default designed it: ``""`` when the method asked for (or the default)
+        did; else what failed and what designed it instead (the default flattened design that fails is
+        made again by ``method="nested"``: :mod:`~mdsr_opt.synthesis.fallback`), or that the fallback was
+        tried and failed too.
     """
 
     method: str
@@ -233,6 +246,10 @@ class DesignResult:
     fixture_wall: float | None = None
     held: tuple | None = None
     a_upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    max_error: float = float("nan")
+    relative_max_error: float = float("nan")
+    max_error_node: int = -1
+    fallback: str = ""
     contact_route: str = ""
 
     @property
@@ -355,6 +372,7 @@ class DesignResult:
                 "saturated": [bool(s) for s in self.saturated],
                 "stroke_band": [[float(lo), float(hi)] for lo, hi in np.asarray(self.stroke_band).reshape(-1, 2)],
                 "anchor_radius": self.anchor_radius, "difference": self.difference,
+                "max_error": self.max_error, "relative_max_error": self.relative_max_error,
                 "initial_difference": self.initial_difference, "iterations": self.iterations,
                 "n_forward": self.n_forward, "inner_iterations": self.inner_iterations,
                 "build_time": self.build_time, "solve_time": self.solve_time, "time": self.time,
@@ -386,8 +404,8 @@ class DesignResult:
 
     @classmethod
     def from_dict(cls, d: dict) -> "DesignResult":
-        d = {k: (float("nan") if v is None and k in ("difference", "initial_difference", "anchor_radius") else v)
-             for k, v in d.items()}
+        nan_keys = ("difference", "initial_difference", "anchor_radius", "max_error", "relative_max_error")
+        d = {k: (float("nan") if v is None and k in nan_keys else v) for k, v in d.items()}
         for k in ("contractions", "x", "rotation", "translation", "initial_contractions"):
             d[k] = np.asarray(d[k], dtype=float)
         for k in ("rest_lengths", "achieved", "stroke", "tension", "a_upper"):
