@@ -14,7 +14,6 @@ from ..mechanics.backends import check_options
 from ..body.fingerprint import mesh_fingerprint
 from ..body.mesh import Mesh
 from ..body.muscles import Muscle
-from ..body.checks import check_target_shape
 from ..core.checks import as_float_array, positive_float, positive_int
 from ..mechanics.align import align
 from ..mechanics.anchors import body_size, check_anchor_radius
@@ -24,8 +23,8 @@ from ..mechanics.loadsteps import upright
 from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
 from ..plot.style import muscle_label
-from .contactdesign import (check_design_contact, contact_words, gradient_method, target_touches, unit_contact,
-                            untouched)
+from .contactdesign import check_design_contact, unit_contact
+from .contactroute import design_gradient_first
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
 from .fallback import FALLBACK_METHOD, NESTED_HINT, design_with_fallback
@@ -213,10 +212,15 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                   "anchor_radius": anchor_radius, "warm_start": warm_start, "inner_tol": inner_tol, "verify": verify,
                   "skip_verification": skip_verification, "gap_rtol": gap_rtol, "fixture_wall": fixture_wall,
                   "held": held}
-        return _gradient_first(mesh, material, muscles, target, clock0, common,
-                               {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
-                               {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
-                               {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap})
+        ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, None)  # at the door
+        if outer not in ("nelder-mead", "powell"):
+            raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+        check_design_options(options, "derivative-free", outer)
+        return design_gradient_first(design_contractions, mesh, material, muscles, target, clock0, common,
+                                     {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
+                                     {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
+                                     {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap},
+                                     ckw, VERIFY_TOL)
     named = method is not None  # a default flattened design that fails is made again by the nested method
     if method is None:  # held nodes: the flattened NLP pins the gauge only
         method = "flattened" if held is None else "nested"
@@ -355,86 +359,6 @@ def _design_from(args, warm, clock0) -> DesignResult:
         res.time = time.perf_counter() - clock0
         res.build_time = max(first.build_time, again.build_time)
         res.solve_time = res.time - res.build_time
-    return res
-
-
-def _gradient_first(mesh, material, muscles, target, clock0, common: dict, flat: dict, search: dict,
-                    contact_kw: dict) -> DesignResult:
-    """A design with contact and no method named (:mod:`~mdsr_opt.synthesis.contactdesign`): by the gradient
-    method without the contacts (``common`` and the flattened NLP's ``flat`` keywords), kept when
-    :func:`~mdsr_opt.synthesis.contactdesign.untouched` finds that it touches nothing and it passes its
-    verification with the contacts; else made again by the derivative-free method with the contacts
-    (``search``: its ``tol``, ``max_iter``, ``outer``, ``options``), started from its contractions."""
-    ckw = check_design_contact(mesh, material, contact_kw["contact"], contact_kw["obstacles"],
-                               contact_kw["contact_gap"], None)  # at the door, as the options below
-    if search["outer"] not in ("nelder-mead", "powell"):
-        raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {search['outer']!r}")
-    check_design_options(search["options"], "derivative-free", search["outer"])
-    gm, what = gradient_method(common["held"]), contact_words(ckw)
-    hold = check_held(mesh, common["held"], None)  # the muscles are checked with it by the design below
-    pressed = target_touches(mesh, check_target_shape(mesh, target), ckw, hold)
-    if pressed:  # a shape the contact forces make: searched with them from the start, as when named
-        _LOG.info("design: %s: by method derivative-free with %s", pressed, what)
-        res = design_contractions(mesh, material, muscles, target, method="derivative-free", **common, **search,
-                                  **contact_kw)
-        res.contact_route = f"by method 'derivative-free' with {what}: {pressed}"
-        res.status += f"; designed {res.contact_route}"
-        return res
-    skip, skipped = common["skip_verification"], []
-    if skip is not None:  # whether the caller discarded the gradient design (its verification left out)
-        def noted(r):
-            why = skip(r)
-            skipped.append(bool(why))
-            return why
-        common = dict(common, skip_verification=noted)
-    _LOG.info("design: by method %s without %s, then checked with them", gm, what)
-    with warnings.catch_warnings(record=True) as caught:  # issued only when this design is the answer
-        warnings.simplefilter("always")
-        first = design_contractions(mesh, material, muscles, target, method=gm, **common, **flat)
-    why = "" if first.success else f"failed ({first.status})"
-    tol, verify = min(common["inner_tol"], VERIFY_TOL), common["verify"]
-    if not why:
-        _ok, why, fx, gap = untouched(mesh, material, muscles, first, ckw, tol=tol, gap_rtol=common["gap_rtol"])
-    if not why and ckw.get("obstacles") and first.held is None:
-        # the free body's state moved rigidly into the obstacles' frame (the gauge the contact solve holds)
-        al = align(first.x, fx)
-        R = first.rotation @ al.R.T
-        first.x, first.rotation, first.translation = al.apply(first.x), R, first.translation - R @ al.t
-    if not why and verify and not (skipped and skipped[-1]):
-        v = verify_design(mesh, material, muscles, first, target, weights=common["weights"],
-                          gap_rtol=common["gap_rtol"], tol=tol, start="design" if verify == "design" else "rest",
-                          held=first.held, **ckw)
-        if v.passed:
-            first.verification = v
-        else:
-            why = f"fails its verification with them ({v.message})"
-    if not why:
-        for w in caught:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        first.contact_route = (f"by method {gm!r} without {what}, then checked with them: untouched (the forward "
-                               f"solve with them from rest at these contractions has no contact force and lands on "
-                               f"the design's state, within {gap:.3g})"
-                               + ("; verified with them" if first.verification is not None and verify else ""))
-        first.status += f"; designed {first.contact_route}"
-        first.time = time.perf_counter() - clock0
-        first.solve_time = first.time - first.build_time
-        _LOG.info("design: the %s design touches nothing with %s: kept", gm, what)
-        return first
-    a = np.asarray(first.contractions, dtype=float)
-    start = np.clip(a, 0.0, common["a_max"]) if a.shape == (len(first.rest_lengths),) and np.isfinite(a).all() \
-        else common["initial_guess"]
-    _LOG.info("design: %s; designing by method derivative-free with %s, from the %s design's contractions",
-              why, what, gm)
-    res = design_contractions(mesh, material, muscles, target, method="derivative-free",
-                              **dict(common, initial_guess=start), **search, **contact_kw)
-    res.contact_route = (f"by method 'derivative-free' with {what}, started from the contractions of the {gm} "
-                         f"design without them, which {why}")
-    res.status += f"; designed {res.contact_route}"
-    res.iterations += first.iterations
-    res.n_forward += first.n_forward
-    res.inner_iterations += first.inner_iterations
-    res.time = time.perf_counter() - clock0
-    res.solve_time = res.time - res.build_time
     return res
 
 
