@@ -128,8 +128,9 @@ class CaseReport:
     notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
-        return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
-                                   "contractions", "message"))
+        return compact_repr(self, ("scene", "case", "kind", "success"), why="" if self.success else self.message,
+                            extra={k: getattr(self, k) for k in ("n_nodes", "n_muscles", "difference", "contractions")
+                                   + (("message",) if self.success else ())})
 
     def to_dict(self) -> dict:
         """Every field, JSON-ready (NaN as None)."""
@@ -153,9 +154,10 @@ class CaseRun:
 
     def __repr__(self) -> str:
         r = self.report
-        return compact_repr(self, (), extra={"scene": r.scene, "case": r.case, "success": r.success,
-                                             "design": self.design is not None, "photo": self.photo is not None,
-                                             "difference": r.difference})
+        return compact_repr(self, (), why="" if r.success else r.message,
+                            extra={"scene": r.scene, "case": r.case, "success": r.success,
+                                   "design": self.design is not None, "photo": self.photo is not None,
+                                   "difference": r.difference})
 
     def to_dict(self) -> dict:
         """JSON-ready: the report, the setup's and the design's dicts, the photograph's metadata and the

@@ -105,14 +105,23 @@ class PipelineResult:
     def contractions(self) -> np.ndarray:
         return self.design.contractions
 
+    @property
+    def reason(self) -> str:
+        """Why this is no design to build, in one phrase ("" when it is one): the design's
+        (:attr:`DesignResult.reason <mdsr_opt.synthesis.results.DesignResult.reason>`), else
+        :attr:`far_from_target` (its ``repr`` shows them as ``why=...``, ``far_from_target=...``)."""
+        return self.design.reason or self.far_from_target
+
     def __repr__(self) -> str:
         d = self.design
-        return compact_repr(self, ("success",), extra={
-            "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
-            "difference": d.difference, "contractions": d.contractions,
-            **({"saturated": d.saturated_names} if d.saturated.any() else {}),
-            **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
-            "total_time": self.times.get("total", float("nan"))})
+        why = self.reason  # then the difference first: the figure that says how far, before what was left out
+        return compact_repr(self, ("success",), why=why, why_name="why" if d.reason else "far_from_target",
+                            extra={**({"difference": d.difference} if why else {}),
+                                   "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
+                                   "difference": d.difference, "contractions": d.contractions,
+                                   **({"saturated": d.saturated_names} if d.saturated.any() else {}),
+                                   **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
+                                   "total_time": self.times.get("total", float("nan"))})
 
     def table(self) -> str:
         """The stroke table (:meth:`DesignResult.muscle_table`, with the stroke bands when computed), then

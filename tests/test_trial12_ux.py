@@ -1,0 +1,105 @@
+"""New-user trial 12's UX defects: a design the acceptance rule rejects exports as a failed one (marked FAILED,
+refused unless asked for), a failed result's repr says why, the routing error of design_pipeline is the one
+``mdsr run`` shows, and clearer messages at the door (a Muscle of a Muscle, node ids for waypoints, a
+finer-mesh hint only when finer, a frictionless grip, a single anchor node)."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+from mdsr_opt import NeoHookean, design_pipeline, export_fabrication, mesh_polygon, nodes_in_box
+from mdsr_opt.synthesis.pipeline import PipelineResult
+
+MAT = NeoHookean(E=1.0, nu=0.3)
+
+
+@pytest.fixture(scope="module")
+def far():
+    """trial12 t18: a 40 x 10 strip whose clamped tip is moved up by 10 (an S-bend its muscles cannot make):
+    a verified design that removes a few % of the rest shape's difference, which mdsr run fails."""
+    mesh = mesh_polygon([[0, 0], [40, 0], [40, 10], [0, 10]], resolution="coarse")
+    X = mesh.points
+    base, tip = nodes_in_box(mesh, xmax=0), nodes_in_box(mesh, xmin=40)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = design_pipeline(mesh, MAT, base, {int(i): X[i] + [0, 10] for i in tip})
+    assert p.success and "the muscles barely move the body" in p.far_from_target
+    return mesh, p
+
+
+def _texts(files) -> dict:
+    return {k: open(f, encoding="utf-8").read() for k, f in files.items()}
+
+
+def test_a_design_the_acceptance_rule_rejects_is_refused_then_marked_with_its_reason(far, tmp_path):
+    mesh, p = far
+    with pytest.raises(ValueError, match=r"export_fabrication \(robot\): too far from the target \(the design "
+                                         r"removes \d+ % of the rest shape's difference.*allow_failed=True"):
+        export_fabrication(mesh, p, tmp_path / "no")
+    assert not (tmp_path / "no").exists()  # refused before anything is written
+    with pytest.warns(UserWarning, match="FAILED DESIGN: too far from the target"):
+        files = export_fabrication(mesh, p, tmp_path / "yes", allow_failed=True)
+    text = _texts(files)
+    mark = "FAILED DESIGN: too far from the target (the design removes"
+    assert mark in text["svg"] and mark in text["dxf"] and text["csv"].startswith("# " + mark)
+    assert "the muscles barely move the body), do not build" in text["csv"].splitlines()[0]
+    # saved and read back, the result keeps its verdict, and so does its export
+    p.save(tmp_path / "saved")
+    back = PipelineResult.load(tmp_path / "saved")
+    with pytest.raises(ValueError, match="too far from the target"):
+        export_fabrication(mesh, back, tmp_path / "no2")
+
+
+def test_an_accepted_design_exports_unmarked(far, tmp_path):
+    mesh, p = far
+    ok = dataclasses.replace(p, far_from_target="")
+    files = export_fabrication(mesh, ok, tmp_path / "ok")
+    text = _texts(files)
+    assert not any("FAILED" in t.upper() or "DO NOT BUILD" in t.upper() for t in text.values())
+
+
+def test_a_failed_results_repr_says_why(far):
+    mesh, p = far
+    # a success far from the target says so
+    text = repr(p)
+    assert text.startswith("PipelineResult(success=True, far_from_target=\"the design removes ")
+    assert len(text) <= 200 and "\n" not in text  # one line, as every result's repr
+    ver = dataclasses.replace(p.design.verification, passed=False,
+                              message="gap 10 between the design's state and the forward re-solve exceeds 0.00117")
+    bad = dataclasses.replace(p.design, success=False, status="Maximum_Iterations_Exceeded", verification=ver)
+    failed = dataclasses.replace(p, design=bad)
+    want = "why=\"Maximum_Iterations_Exceeded; verification: gap 10 between the design's state and the"
+    assert want in repr(failed) and want in repr(bad) and len(repr(failed)) <= 200
+    assert failed.reason.startswith("Maximum_Iterations_Exceeded; verification: gap 10") and p.reason == p.far_from_target
+    # a success's repr is as before: no why
+    assert "why=" not in repr(p.design) and p.design.reason == ""
+
+
+def test_a_failed_layouts_and_cases_repr_says_why():
+    from mdsr_opt import Mesh
+    from mdsr_opt.scenes.runner import CaseReport, CaseRun
+    from mdsr_opt.synthesis.poses import design_poses
+
+    mesh = Mesh.rectangle(4.0, 1.0, 8, 4)
+    X = mesh.points
+    phi, r = (X[:, 0] - 2.0) / 3.0, 3.0 - (X[:, 1] - 0.5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = design_poses(mesh, MAT, {"left": np.column_stack([r * np.sin(phi), 3.0 - r * np.cos(phi)])},
+                           compare=False)
+    assert res.success and "why=" not in repr(res) and res.reason == ""
+    bad = dataclasses.replace(res, pose_success=np.array([False]), status=("Restoration_Failed",))
+    text = repr(bad)
+    assert "success=False, why='pose left: Restoration_Failed')" in text and len(text) <= 200
+    long = dataclasses.replace(bad, status=("Restoration_Failed " + "and more " * 40,), problems=("ropes cross",))
+    assert len(repr(long)) <= 200 and "why='pose left: Restoration_Failed and more" in repr(long)
+    assert long.reason.endswith("; ropes cross")
+    rep = CaseReport(scene="s", case="c", kind="external", n_nodes=10, success=False,
+                     message="routing found no muscle on the target (no edge contracts)")
+    for text in (repr(rep), repr(CaseRun(report=rep))):
+        assert "success=False, why='routing found no muscle on the target (no edge contracts)'" in text, text
+    assert "why=" not in repr(dataclasses.replace(rep, success=True, message=""))
