@@ -103,3 +103,13 @@ def test_a_failed_layouts_and_cases_repr_says_why():
     for text in (repr(rep), repr(CaseRun(report=rep))):
         assert "success=False, why='routing found no muscle on the target (no edge contracts)'" in text, text
     assert "why=" not in repr(dataclasses.replace(rep, success=True, message=""))
+
+
+def test_the_python_writers_say_they_replace_files_of_the_same_name():
+    """The CLI refuses to replace files without --overwrite; the Python writers replace them: documented."""
+    from mdsr_opt.synthesis.poses_result import PosesResult
+    from mdsr_opt.synthesis.results import DesignResult
+
+    for f in (export_fabrication, PipelineResult.save, DesignResult.save, PosesResult.save):
+        doc = " ".join(f.__doc__.split())
+        assert "replaced" in doc and "without a warning" in doc and "--overwrite" in doc, f.__qualname__

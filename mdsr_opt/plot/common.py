@@ -210,6 +210,7 @@ def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
 def save_figure(fig, path, *, close: bool = False, dpi: float = 130, vector=None) -> str:
     """Write ``fig`` to ``path`` through a temporary file, so no partial file is left; with ``vector``, a
     vector copy beside it (same name, ``.pdf`` or ``.svg``) for papers.
+    An existing file of either name is replaced, without a warning (``mdsr run`` refuses to without ``--overwrite``).
 
     Parameters
     ----------

@@ -156,7 +156,23 @@ class PipelineResult:
 
     def save(self, out: str | os.PathLike) -> str:
         """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
-        into the folder ``out`` (created if missing), each atomically. Returns the JSON path."""
+        into the folder ``out`` (created if missing), each atomically.
+
+        Parameters
+        ----------
+        out : str or path-like
+            The folder; :meth:`load` reads it back.
+
+        Returns
+        -------
+        str
+            The path of ``design.json``.
+
+        Notes
+        -----
+        Files of those three names already in ``out`` are replaced, without a warning (``mdsr run`` refuses a
+        folder with files in it unless ``--overwrite``): give a new folder to keep an earlier result.
+        """
         from ..body.io import write_json, write_mesh
 
         directory = os.fspath(out)

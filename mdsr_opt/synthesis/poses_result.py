@@ -243,7 +243,9 @@ class PosesResult:
                                  for g in d.get("dropped", ())))
 
     def save(self, path) -> str:
-        """Write :meth:`to_dict` as JSON (atomically), tagged :data:`FORMAT`. Returns the path."""
+        """Write :meth:`to_dict` as JSON (atomically), tagged :data:`FORMAT`. Returns the path.
+        An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         from ..body.io import write_json
 
         return write_json(path, {"format": FORMAT, **self.to_dict()})

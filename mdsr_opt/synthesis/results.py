@@ -425,7 +425,8 @@ class DesignResult:
         :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
         Returns the path; :meth:`load` reads it back equal to this result (:meth:`to_dict` is the JSON
-        view)."""
+        view). An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         return save_fields(self, path, "design")
 
     @classmethod
