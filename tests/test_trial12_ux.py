@@ -113,3 +113,28 @@ def test_the_python_writers_say_they_replace_files_of_the_same_name():
     for f in (export_fabrication, PipelineResult.save, DesignResult.save, PosesResult.save):
         doc = " ".join(f.__doc__.split())
         assert "replaced" in doc and "without a warning" in doc and "--overwrite" in doc, f.__qualname__
+
+
+def test_design_pipeline_raises_the_no_muscle_message_mdsr_run_fails_the_case_with(tmp_path):
+    import json
+
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenefile import load_scene
+
+    # a strip pulled by its end without lateral contraction: every edge stretches, a cable cannot push
+    d = {"name": "strip", "body": {"outline": [[0, 0], [4, 0], [4, 1], [0, 1]], "resolution": 100},
+         "material": {"nu": 0.0}, "regions": {"base": {"box": [-1, -1, 0, 2]}, "end": {"box": [4, -1, 5, 2]}},
+         "cases": [{"name": "stretch", "anchors": "base", "drags": [{"nodes": "end", "by": [0.5, 0]}]}]}
+    (tmp_path / "strip.json").write_text(json.dumps(d))
+    scene = load_scene(tmp_path / "strip.json")
+    case = scene.case("stretch")
+    run = run_case(scene, "stretch", photo=False)
+    assert not run.report.success
+    assert run.report.message.startswith("routing found no muscle on the target (no edge contracts")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError) as err:
+            design_pipeline(scene.mesh, scene.material, case.anchors, case.drags)
+    assert str(err.value) == run.report.message + "; pass muscles=... or relax routing_options"
+    doc = " ".join(design_pipeline.__doc__.split())
+    assert "routing found no muscle on the target (<the routing's reasons" in doc  # documented under Raises

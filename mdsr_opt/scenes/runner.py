@@ -212,6 +212,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     """
     from ..synthesis.acceptance import (check_max_difference, design_active, difference_failure, idle_mask,
                                         rest_difference)
+    from ..synthesis.routing_why import no_muscle_message
 
     say = log or (lambda s: None)
     if isinstance(case, str):
@@ -268,8 +269,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     if not setup.muscles:
-        why = "; ".join(setup.warnings) or "does the target shorten any edge?"
-        rep.message = f"routing found no muscle on the target ({why})" if setup.routing_error is None else \
+        rep.message = no_muscle_message(setup.warnings) if setup.routing_error is None else \
             f"routing failed: {setup.routing_error}"  # a body too thin for the ropes' inset, a mesh too coarse
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")

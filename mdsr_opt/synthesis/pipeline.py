@@ -29,6 +29,7 @@ from .acceptance import (IDLE_CONTRACTION, AcceptanceWarning, DroppedMuscle, des
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import RoutingWarning, route_for_design
+from .routing_why import no_muscle_message
 from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 
 _LOG = logging.getLogger(__name__)
@@ -404,8 +405,14 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     SolverFailure
         The external-driving solve (the target) failed.
     ValueError
-        Routing found no muscle (e.g. a target that only stretches the body), or bad input (no drags, at
-        the door).
+        Bad input, at the door (no drags, say). And, after the target has been solved (with contact that can
+        take a while), when routing (``muscles`` not given) lays no muscle on it: a target that only
+        stretches the body, contracted edges outside the buildable band of a mesh too coarse for the ropes'
+        inset, units all shorter than ``min_length``. The message is the one ``mdsr run`` fails that case
+        with, ``routing found no muscle on the target (<the routing's reasons, with values that would
+        work>)`` (:func:`~mdsr_opt.synthesis.routing_why.no_muscle_message`), then ``; pass muscles=... or
+        relax routing_options``. A body or mesh that holds no rope at all raises the routing's
+        :class:`~mdsr_opt.core.errors.LayoutError` (a ValueError; ``mdsr run``: "routing failed: ...").
 
     Example
     -------
@@ -475,11 +482,9 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         mus = tuple(rr.muscles)
-        if not mus:
-            why = "; ".join(str(w.message) for w in caught if issubclass(w.category, RoutingWarning)) or (
-                "muscles can only contract: does the target shorten any edge?")
-            raise ValueError(f"routing found no muscle for this target ({why}); pass muscles=... or relax "
-                             "routing_options")
+        if not mus:  # the sentence mdsr run fails the case with, and what to change in Python
+            why = no_muscle_message(str(w.message) for w in caught if issubclass(w.category, RoutingWarning))
+            raise ValueError(f"{why}; pass muscles=... or relax routing_options")
         routing = rr
         design_options["anchor_radius"] = rr.fixture_radius  # the fixtures the ropes fit with
     else:

@@ -16,7 +16,7 @@ import numpy as np
 
 from .fabrication import MIN_INSET_FRACTION, body_depth, boundary_distance
 
-__all__ = ["beside_stretch", "compression_dominated", "no_feasible_message", "no_seed_message"]
+__all__ = ["beside_stretch", "compression_dominated", "no_feasible_message", "no_seed_message", "no_muscle_message"]
 
 #: The contraction the message counts edges above, as the user reads a target ("8 edges contract > 5 %").
 NOTABLE_CONTRACTION = 0.05
@@ -61,6 +61,16 @@ def no_feasible_message(w: np.ndarray, contracts: bool, fab, clearance: float, *
     return (f"no edge contracts by more than min_contraction={min_contraction:g} (largest contraction {w_top:.3g}); "
             "lower min_contraction to route such weak contractions. Elongated edges cannot carry a muscle (a cable "
             "cannot push); no muscles routed")
+
+
+def no_muscle_message(reasons) -> str:
+    """The one sentence ``mdsr run`` (a failed case) and :func:`~mdsr_opt.synthesis.pipeline.design_pipeline`
+    (its ValueError) give when routing laid no muscle on a target: ``routing found no muscle on the target
+    (<reasons>)``, ``reasons`` the routing's warnings (its :class:`~mdsr_opt.synthesis.routing.RoutingWarning`
+    messages, which give the values that would work), else the question every such target raises."""
+    why = "; ".join(str(r) for r in reasons if str(r).strip()) or \
+        "muscles can only contract: does the target shorten any edge?"
+    return f"routing found no muscle on the target ({why})"
 
 
 def _finer_mesh(mesh, out: np.ndarray, clearance: float) -> str:
