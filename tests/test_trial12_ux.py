@@ -138,3 +138,64 @@ def test_design_pipeline_raises_the_no_muscle_message_mdsr_run_fails_the_case_wi
     assert str(err.value) == run.report.message + "; pass muscles=... or relax routing_options"
     doc = " ".join(design_pipeline.__doc__.split())
     assert "routing found no muscle on the target (<the routing's reasons" in doc  # documented under Raises
+
+
+def test_a_muscle_of_a_muscle_and_node_ids_for_points_are_named():
+    from mdsr_opt import Mesh, Muscle, boundary_path, edge_path
+
+    mesh = Mesh.rectangle(4.0, 1.0, nx=16, ny=4)
+    m = edge_path(mesh, [[0.25, 0.5], [3.75, 0.5]])
+    with pytest.raises(TypeError, match=r"Muscle\(\) takes a path of node indices, got a Muscle .*return a Muscle "
+                                        r"already: use it as it is, or Muscle\(m.nodes, name=...\)"):
+        Muscle(m)
+    for bad, shown in ((5, "int 5"), (None, "NoneType None"), ("abc", "str 'abc'")):
+        with pytest.raises(TypeError, match=rf"Muscle\(\) takes a path of node indices .*got {shown}"):
+            Muscle(bad)
+    assert Muscle(m.nodes, name="copy").nodes == m.nodes
+    with pytest.raises(ValueError, match=r"waypoints are points \(x, y\) on the body, one row each, shape \(k, 2\); "
+                                         r"got 3 \(and name=12\): node ids\? give their positions"):
+        edge_path(mesh, 3, 12)
+    with pytest.raises(ValueError, match=r"got \[3, 12\]: node ids\?"):
+        edge_path(mesh, [3, 12])
+    with pytest.raises(ValueError, match=r"got \[0.5, 0.5\]: give at least two points"):
+        edge_path(mesh, [0.5, 0.5])
+    with pytest.raises(ValueError, match=r"boundary_path: start is a point \(x, y\) near the boundary, got 3: a node "
+                                         r"id\? give its position \(mesh.points\[3\]\)"):
+        boundary_path(mesh, 3, 12)
+    # every array checked at the door says what it was given beside its shape
+    from mdsr_opt.core.checks import as_float_array
+
+    with pytest.raises(ValueError, match=r"x must have shape \(k, 2\), got \(\) \(a single value, 3.0\)"):
+        as_float_array(3, "x", shape=(None, 2))
+
+
+def _t_routing_message(max_area):
+    """trial12 t40: a T pressed down onto two disks; routing finds no seed (the compression filter)."""
+    from mdsr_opt import Disk, Mesh, route_muscles, solve_external
+
+    mesh = Mesh.from_polygon([[-0.5, 0], [0.5, 0], [0.5, 3], [2, 3], [2, 4], [-2, 4], [-2, 3], [-0.5, 3]],
+                             max_area=max_area)
+    X = mesh.points
+    drags = {int(i): X[i] + [0, -0.9] for i in np.r_[nodes_in_box(mesh, xmin=1.99), nodes_in_box(mesh, xmax=-1.99)]}
+    r = solve_external(mesh, MAT, nodes_in_box(mesh, ymax=0.0), drags,
+                       obstacles=[Disk([1.3, 2.3], 0.5), Disk([-1.3, 2.3], 0.5)])
+    assert r.success
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert len(route_muscles(mesh, r.x)) == 0
+    (msg,) = [str(w.message) for w in caught if "no muscle unit could be seeded" in str(w.message)]
+    return mesh, msg
+
+
+def test_the_finer_mesh_hint_is_given_only_for_a_mesh_coarser_than_it_asks():
+    mesh, msg = _t_routing_message(0.03)  # mean edge 0.2177, the band asks at most 0.265: already finer
+    h = float(mesh.edge_lengths.mean())
+    assert h == pytest.approx(0.2177, abs=1e-4)
+    assert "a finer mesh (mean edge length at most" not in msg
+    assert ("96 of those reach within an edge of the band, on a mesh already finer than the band asks (mean edge "
+            "length 0.2177, at most 0.265): each has a node on the outline or a hole, where no rope lies at any mesh "
+            "or inset") in msg
+    assert "try compression_ratio=0.9 or lower" in msg  # the hint that works (0.5 routes 3 muscles)
+    coarse, msg = _t_routing_message(0.06)  # mean edge 0.3112 > 0.265: a finer mesh is finer than now
+    assert float(coarse.edge_lengths.mean()) > 0.265
+    assert "a finer mesh (mean edge length at most 0.265, now 0.3112; the body is 0.6248 deep)" in msg
