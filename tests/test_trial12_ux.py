@@ -169,17 +169,25 @@ def test_a_muscle_of_a_muscle_and_node_ids_for_points_are_named():
         as_float_array(3, "x", shape=(None, 2))
 
 
-def _t_routing_message(max_area):
-    """trial12 t40: a T pressed down onto two disks; routing finds no seed (the compression filter)."""
-    from mdsr_opt import Disk, Mesh, route_muscles, solve_external
+def _t_on_disks(max_area):
+    """trial12 t40/t19: a T whose arms are pressed down onto two fixed disks."""
+    from mdsr_opt import Disk, Mesh, solve_external
 
     mesh = Mesh.from_polygon([[-0.5, 0], [0.5, 0], [0.5, 3], [2, 3], [2, 4], [-2, 4], [-2, 3], [-0.5, 3]],
                              max_area=max_area)
     X = mesh.points
     drags = {int(i): X[i] + [0, -0.9] for i in np.r_[nodes_in_box(mesh, xmin=1.99), nodes_in_box(mesh, xmax=-1.99)]}
-    r = solve_external(mesh, MAT, nodes_in_box(mesh, ymax=0.0), drags,
-                       obstacles=[Disk([1.3, 2.3], 0.5), Disk([-1.3, 2.3], 0.5)])
+    disks = [Disk([1.3, 2.3], 0.5), Disk([-1.3, 2.3], 0.5)]
+    r = solve_external(mesh, MAT, nodes_in_box(mesh, ymax=0.0), drags, obstacles=disks)
     assert r.success
+    return mesh, r, disks
+
+
+def _t_routing_message(max_area):
+    """The T on its disks: routing finds no seed (the compression filter)."""
+    from mdsr_opt import route_muscles
+
+    mesh, r, _ = _t_on_disks(max_area)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert len(route_muscles(mesh, r.x)) == 0
@@ -199,3 +207,23 @@ def test_the_finer_mesh_hint_is_given_only_for_a_mesh_coarser_than_it_asks():
     coarse, msg = _t_routing_message(0.06)  # mean edge 0.3112 > 0.265: a finer mesh is finer than now
     assert float(coarse.edge_lengths.mean()) > 0.265
     assert "a finer mesh (mean edge length at most 0.265, now 0.3112; the body is 0.6248 deep)" in msg
+
+
+def test_a_frictionless_grip_reports_finite_figures_and_names_its_contacts():
+    from mdsr_opt import grip_report
+
+    mesh, r, disks = _t_on_disks(0.12)
+    g0 = grip_report(r.x, r.contact, disks[0], 0.0)  # pushed from one side, no friction: not held
+    assert not g0["held"] and g0["holding_force"] is None
+    assert np.isfinite(g0["resisted"]).all() and min(g0["resisted"]) >= 0.0  # NaN before
+    # at mu = 0 a load is held only where it cancels the push exactly: no positive load along any of 16 directions
+    assert max(g0["resisted"]) <= 1e-3 * sum(g0["normal_forces"])
+    k = len(g0["normal_forces"])
+    assert k >= 1 and len(g0["contact_nodes"]) == len(g0["contact_segments"]) == k
+    for node, seg in zip(g0["contact_nodes"], g0["contact_segments"]):  # a node, or a segment: never -1
+        assert (node is None) != (seg is None)
+        assert seg is None or (len(seg) == 2 and all(0 <= v < mesh.n_nodes for v in seg))
+        assert node is None or 0 <= node < mesh.n_nodes
+    # friction holds nothing more here (one side pushed), and the figures stay finite
+    g5 = grip_report(r.x, r.contact, disks[0], 0.5)
+    assert np.isfinite(g5["resisted"]).all() and (g5["holding_force"] is None) == (not g5["held"])
