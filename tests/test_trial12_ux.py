@@ -227,3 +227,65 @@ def test_a_frictionless_grip_reports_finite_figures_and_names_its_contacts():
     # friction holds nothing more here (one side pushed), and the figures stay finite
     g5 = grip_report(r.x, r.contact, disks[0], 0.5)
     assert np.isfinite(g5["resisted"]).all() and (g5["holding_force"] is None) == (not g5["held"])
+
+
+STAR5 = """name = "star5"
+units = "mm"
+
+[body]
+outline = [[0.0, 50.0], [-11.756, 16.18], [-47.553, 15.451], [-19.021, -6.18], [-29.389, -40.451], [-0.0, -20.0],
+           [29.389, -40.451], [19.021, -6.18], [47.553, 15.451], [11.756, 16.18]]
+holes = [[[-5, -5], [5, -5], [5, 5], [-5, 5]]]
+resolution = "coarse"
+
+[material]
+E = 0.5
+nu = 0.45
+stress_unit = "MPa"
+
+[regions]
+centre = { near = [0, 8], radius = 4 }
+arm0 = { near = [0.0, 50.0], radius = 6 }
+
+[fabrication]
+channel_diameter = 1.0
+wall = 1.0
+fixture_radius = 2.5
+min_fixture_radius = 1.5
+
+[[cases]]
+name = "curl_up"
+anchors = "centre"
+drags = [{ nodes = "arm0", rotate = 40, about = [0, 20] }]
+"""
+
+
+def test_a_single_anchor_node_is_named_as_the_reason_a_design_barely_moves_the_body(tmp_path):
+    from mdsr_opt.scenes.runner import run_case
+    from mdsr_opt.scenes.scenefile import load_scene
+    from mdsr_opt.synthesis.acceptance import difference_failure
+
+    (tmp_path / "star5.toml").write_text(STAR5)
+    scene = load_scene(tmp_path / "star5.toml")
+    case = scene.case("curl_up")
+    assert len(case.anchors) == 1  # the region "centre", radius 4 mm, holds one node
+    run = run_case(scene, "curl_up", photo=False)
+    msg = run.report.message
+    assert not run.report.success and "less than min_progress 10 %: the anchors are a single node" in msg, msg
+    assert "the target differs from the rest shape by 0.41 % of the size 95.1 mm after alignment" in msg
+    assert "anchor a region of several nodes" in msg and "barely move" not in msg
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        p = design_pipeline(scene.mesh, scene.material, case.anchors, case.drags, units="mm",
+                            routing_options=dict(scene.routing_options))  # the scene's fabrication, as mdsr run
+    assert "the anchors are a single node, about which the body turns freely" in p.far_from_target
+    # without the anchors' count (a layout's poses): the numbers still say the target is nearly rigid
+    plain = difference_failure(0.378, 95.1, units="mm", rest_difference=0.393)
+    assert plain.endswith("the muscles barely move the body, and the target is nearly a rigid motion of the rest "
+                          "shape (it differs by 0.41 % of the size 95.1 mm after alignment): do the anchors hold the "
+                          "body?")
+    # a target far from rigid: as before
+    assert difference_failure(0.95, 50.0, rest_difference=1.0, n_anchors=1).endswith(
+        "the muscles barely move the body (the anchors are a single node, about which it turns freely)")
+    assert difference_failure(0.95, 50.0, rest_difference=1.0).endswith("less than min_progress 10 %: the muscles "
+                                                                        "barely move the body")

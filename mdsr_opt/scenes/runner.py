@@ -387,7 +387,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         check_interrupt()
     rep.rest_difference = rest_difference(mesh, setup.target, opts)  # the design's own weights
     far = difference_failure(res.difference, body_size(mesh), accept["max_difference"], units=scene.units,
-                             rest_difference=rep.rest_difference)
+                             rest_difference=rep.rest_difference,
+                             n_anchors=len(case.anchors) if case.kind == "external" else None)
     rep.success = bool(res.success) and not far
     if not res.success:
         rep.message = f"design {'rejected' if 'verification' in res.status else 'failed'}: {plain_failure(res.status)}"

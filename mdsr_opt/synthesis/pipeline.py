@@ -511,7 +511,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
                          times=times, dropped=dropped,
                          fabrication=routing.fabrication if routing is not None else ropts["fabrication"] or None)
-    out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units,
+    out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units, n_anchors=len(anc),
                                              rest_difference=rest_difference(mesh, ext.x, design_options))
     if res.success and out.far_from_target:
         warnings.warn(f"design_pipeline: the design is a verified stable state, but {out.far_from_target}: "
