@@ -289,3 +289,39 @@ def test_a_single_anchor_node_is_named_as_the_reason_a_design_barely_moves_the_b
         "the muscles barely move the body (the anchors are a single node, about which it turns freely)")
     assert difference_failure(0.95, 50.0, rest_difference=1.0).endswith("less than min_progress 10 %: the muscles "
                                                                         "barely move the body")
+
+
+def _panel_boxes(fig):
+    """Each axes' drawn box (after its equal aspect is applied), in inches: (x0, x1, width, height)."""
+    fig.canvas.draw()
+    W, H = fig.get_size_inches()
+    out = []
+    for ax in fig.axes:
+        ax.apply_aspect()
+        p = ax.get_position()
+        out.append((p.x0 * W, p.x1 * W, p.width * W, p.height * H))
+    return out
+
+
+@pytest.mark.parametrize("size", [(1.0, 4.0), (4.0, 1.0), (1.0, 1.0)])
+def test_muscles_figure_panels_sit_a_label_apart_for_tall_and_wide_bodies(size):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mdsr_opt import Mesh, Muscle
+    from mdsr_opt.plot.design import plot_routing
+
+    w, h = size
+    mesh = Mesh.rectangle(w, h, 4 * int(w), 4 * int(h))
+    fig = plot_routing(mesh, mesh.points * [0.9, 1.0], [Muscle([0, 1, 2])], ticks=False, units="cm")
+    try:
+        (a0, a1, aw, ah), (b0, b1, bw, bh) = _panel_boxes(fig)
+        gap = b0 - a1
+        # before: an 11 x 4 in figure; a body 1 x 4 drawn 0.8 in wide in each half, 4.5 in of blank between them
+        assert 0.5 < gap <= 1.05, gap
+        assert aw / ah == pytest.approx(w / h, rel=0.1) and bw / bh == pytest.approx(0.9 * w / h, rel=0.1)
+        assert fig.get_size_inches()[0] <= 2 * 5.0 + 2.0  # never wider than two 5 in panels and their labels
+    finally:
+        plt.close(fig)
