@@ -325,3 +325,16 @@ def test_muscles_figure_panels_sit_a_label_apart_for_tall_and_wide_bodies(size):
         assert fig.get_size_inches()[0] <= 2 * 5.0 + 2.0  # never wider than two 5 in panels and their labels
     finally:
         plt.close(fig)
+
+
+def test_a_scene_reports_repr_names_its_failed_cases():
+    from mdsr_opt.scenes.runner import CaseReport
+    from mdsr_opt.scenes.scenereport import SceneReport
+
+    ok = CaseReport(scene="s", case="a", kind="external", n_nodes=10, success=True)
+    bad = CaseReport(scene="s", case="b", kind="external", n_nodes=10, success=False, message="target solve failed: x")
+    rep = SceneReport(scene="s", title="", n_nodes=10, cases=[ok, bad],
+                      animations={"wave": {"success": False, "message": "frames [3] failed"}})
+    text = repr(rep)
+    assert "success=False, why='b: target solve failed: x; wave: frames [3] failed'" in text and len(text) <= 200
+    assert "why=" not in repr(SceneReport(scene="s", title="", n_nodes=10, cases=[ok]))
