@@ -63,7 +63,7 @@ def test_an_accepted_design_exports_unmarked(far, tmp_path):
 
 
 def test_a_failed_results_repr_says_why(far):
-    mesh, p = far
+    _, p = far
     # a success far from the target says so
     text = repr(p)
     assert text.startswith("PipelineResult(success=True, far_from_target=\"the design removes ")
@@ -317,7 +317,7 @@ def test_muscles_figure_panels_sit_a_label_apart_for_tall_and_wide_bodies(size):
     mesh = Mesh.rectangle(w, h, 4 * int(w), 4 * int(h))
     fig = plot_routing(mesh, mesh.points * [0.9, 1.0], [Muscle([0, 1, 2])], ticks=False, units="cm")
     try:
-        (a0, a1, aw, ah), (b0, b1, bw, bh) = _panel_boxes(fig)
+        (_, a1, aw, ah), (b0, _, bw, bh) = _panel_boxes(fig)
         gap = b0 - a1
         # before: an 11 x 4 in figure; a body 1 x 4 drawn 0.8 in wide in each half, 4.5 in of blank between them
         assert 0.5 < gap <= 1.05, gap
