@@ -262,9 +262,25 @@ class DesignResult:
         return contact_in_unit(c, self.stress_unit, self.units)
 
     def __repr__(self) -> str:
-        extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
+        extra = {"difference": self.difference, "contractions": self.contractions}
+        if self.saturated.any():
+            extra["saturated"] = self.saturated_names
         extra.update(muscle_model=self.muscle_model, x=self.x, time=self.time)
-        return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
+        return compact_repr(self, ("method", "success"), why=self.reason, extra=extra)
+
+    @property
+    def reason(self) -> str:
+        """Why the design is no success, in one phrase ("" when it is one): its :attr:`status`, and the
+        verification's message when the verification failed and the status does not give it already (its
+        ``repr`` shows it as ``why=...``)."""
+        if self.success:
+            return ""
+        why = " ".join(str(self.status or "").split()) or "not a success"
+        v = self.verification
+        said = " ".join(str(getattr(v, "message", "") or "").split())
+        if v is not None and not v.passed and said and said[:60] not in why:
+            why += f"; verification: {said}"
+        return why
 
     @property
     def bounds(self) -> np.ndarray:
@@ -433,7 +449,8 @@ class DesignResult:
         :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
         Returns the path; :meth:`load` reads it back equal to this result (:meth:`to_dict` is the JSON
-        view)."""
+        view). An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         return save_fields(self, path, "design")
 
     @classmethod
