@@ -208,3 +208,13 @@ def test_verbose_says_whether_the_contact_free_solve_was_kept(capsys):
     solve_external(mesh, MAT, None, {int(i): (P[i, 0], P[i, 1] - 0.3) for i in top},
                    obstacles=[HalfPlane((0.0, -0.05), (0.0, 1.0))], verbose=True)
     assert "contact-free solve not kept (" in capsys.readouterr().out
+
+
+def test_the_solves_say_a_contact_equilibrium_can_depend_on_path_and_method():
+    """Trial 12 (defect 6): IPOPT's contact solve and the barrier end 12 % apart in energy on the C-ring; the
+    docstrings say so, with the figures."""
+    for fn in (solve_external, solve_internal):
+        doc = " ".join(fn.__doc__.split())
+        assert "several stable states" in doc and "depend on the path" in doc
+    doc = " ".join(solve_external.__doc__.split())
+    assert "8.337" in doc and "7.432" in doc and "7.424" in doc
