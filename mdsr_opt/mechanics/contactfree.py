@@ -58,17 +58,16 @@ KEPT = "contact-free solve checked and kept: no contact pair within its gap alon
 
 class PathCheck:
     """The admissibility of a solve's path for the contact problem ``prob`` (module docstring): call
-    :meth:`step` with each state in turn, starting at ``x_start``; it returns why the state (or the straight
-    move to it from the one before) is not admissible, or None. ``margin``: how far beyond its gap a row must
-    stay at the final state (:meth:`final`), ``loose``: at the states before it (relative to the size)."""
+    :meth:`step` with each state in turn after ``x_start`` (None: the first state starts the path); it returns
+    why the state (or the straight move to it from the one before) is not admissible, or None. ``margin``: how
+    far beyond its gap a row must stay at the final state (load fraction 1), ``loose``: at the states before it
+    (relative to the size)."""
 
     def __init__(self, prob: ContactProblem, x_start, margin: float, loose: float):
         self.prob, self.margin, self.loose = prob, float(margin), float(loose)
         seg, pos = boundary_segments(prob.mesh)
         self.segs, self.nodes = seg, np.flatnonzero(pos[:, 0] >= 0)
-        self.last = np.asarray(x_start, dtype=float).reshape(-1)
-        self.closest = np.inf  # the smallest clearance (row value minus gap, relative to the size) seen
-        self.n_states = 0
+        self.last = None if x_start is None else np.asarray(x_start, dtype=float).reshape(-1)
 
     def step(self, x, s: float = 1.0) -> str | None:
         """Why the state ``x`` ((2n,)) at load fraction ``s`` (1: the final state, held to the final margin), or
@@ -84,7 +83,6 @@ class PathCheck:
         if rows.n_rows:
             clear = rows.values(x) - prob.spec.gap
             k = int(np.argmin(clear))
-            self.closest = min(self.closest, float(clear[k]) / S)
             if clear[k] <= margin:
                 p, a, b = (int(q) if q < prob.mesh.n_nodes else -1 for q in rows.pts[k])
                 return (f"a contact row (nodes {p}, {a}, {b}) within {clear[k] / S:.3g} of the size beyond its "
@@ -94,7 +92,6 @@ class PathCheck:
             if why is not None:
                 return why
         self.last = x
-        self.n_states += 1
         return None
 
     def _corner_inside(self, x) -> str | None:
@@ -150,8 +147,7 @@ def contact_free_solve(prob: ContactProblem, p_of, fixed, values_of, x_start, to
     contact-free state is kept (rows: the candidates near it, forces zero), else None; ``spent``: the first
     try's ``iterations``, ``solve_time`` and ``build_time``; ``why``: why it was not kept ("" when kept)."""
     loose = INTERMEDIATE_TOL if loose is None else float(loose)
-    path = PathCheck(prob, x_start, tol * prob.mesh.size, loose)
-    path.last = None
+    path = PathCheck(prob, None, tol * prob.mesh.size, loose)
     why = path.step(x_start, 0.0)  # a start that touches (or is refused by the contact solve): no first try
     if why is not None:
         return None, {"iterations": 0, "solve_time": 0.0, "build_time": 0.0}, f"its start: {why}"
