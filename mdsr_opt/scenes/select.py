@@ -120,7 +120,7 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
         given = np.asarray(waypoints)
         ids = given.dtype.kind in "iu"
         raise ValueError(
-            f"edge_path: waypoints are points (x, y) on the body, one row each, shape (k, 2); got "
+            "edge_path: waypoints are points (x, y) on the body, one row each, shape (k, 2); got "
             + (f"{given.item()!r}" + (f" (and name={name!r})" if name is not None else "") if given.ndim == 0
                else f"{given.tolist()!r:.60}")
             + (": node ids? give their positions (mesh.points[[i, j]]), or Muscle([...]) for a path of node ids"

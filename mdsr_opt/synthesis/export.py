@@ -68,6 +68,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
+from ..mechanics.anchors import body_size
 from ..plot.style import layout_colors, muscle_label, muscle_name
 from .export_checks import failed_mark, not_mouldable
 from .export_dxf import dxf_text, fixture_plates, label_points
@@ -241,7 +242,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     _check_design_type(design, muscles)
-    failure = "; ".join(w for w in (design_failure(design), failure.strip()) if w)
+    size = body_size(mesh) if isinstance(design, PosesResult) else None  # its poses judged as mdsr run's
+    failure = "; ".join(w for w in (design_failure(design, size), failure.strip()) if w)
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
         design, muscles = design.design, design.muscles if muscles is None else muscles
     elif muscles is None and not isinstance(design, (PosesResult, Mapping)):
