@@ -549,7 +549,17 @@ def test_a_stop_inside_a_line_search_ends_the_solve_quietly_with_its_step(capfd)
     assert max(after) <= 10, after
 
 
-def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsys):
+@pytest.fixture
+def program_signals():
+    """The SIGINT and SIGTERM handlers put back after a test of the ``mdsr`` program's entry point, which
+    ignores both once it stops on one (they are the pytest process's own)."""
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for s, h in saved.items():
+        signal.signal(s, h)
+
+
+def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsys, program_signals):
     """Ctrl-C while the command's modules still import (before main's own handler): 130 and one line, as
     once the command runs, instead of an import traceback."""
     from mdsr_opt.cli import main as cli_main
@@ -561,6 +571,49 @@ def test_ctrl_c_before_the_command_starts_is_one_line_and_130(monkeypatch, capsy
     assert cli_main.console_main() == 130
     err = capsys.readouterr().err
     assert "interrupted (Ctrl-C) before the command started" in err and "Traceback" not in err
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN  # a late Ctrl-C cannot end it by the signal
+
+
+@pytest.mark.parametrize("late", ["before its line", "after its line"])
+def test_a_second_ctrl_c_while_the_program_stops_keeps_its_one_line_and_130(monkeypatch, capsys, program_signals,
+                                                                             late):
+    """A Ctrl-C that lands while the program is stopping on a first one (the terminal's reaching the process
+    late, or pressed twice) raised a KeyboardInterrupt out of the stopping code: the process then ended by
+    the signal, exit -2, after its one line (seen under load in test_runs' early Ctrl-C). It still exits 130
+    with exactly one line, and ignores Ctrl-C from then on."""
+    from mdsr_opt.cli import main as cli_main
+
+    def command(args):
+        raise KeyboardInterrupt  # the first Ctrl-C, inside the command
+
+    calls = []
+    real_line = cli_main._stopped_line
+
+    def stopping_line(name, term):
+        calls.append(name)
+        if late == "before its line" and len(calls) == 1:
+            raise KeyboardInterrupt  # the second one, while the first is handled
+        return real_line(name, term)
+
+    import mdsr_opt.cli.run as cli_run
+
+    monkeypatch.setattr(cli_run, "_cmd_list", command)  # `mdsr list`'s parser takes it as its command
+    monkeypatch.setattr(cli_main, "_stopped_line", stopping_line)
+    monkeypatch.setattr(sys, "argv", ["mdsr", "list"])
+    if late == "after its line":  # the second lands as the command returns its code
+        real_run = cli_main._run
+
+        def run_then_interrupted(*a, **kw):
+            code = real_run(*a, **kw)
+            assert code == 130
+            raise KeyboardInterrupt
+        monkeypatch.setattr(cli_main, "_run", run_then_interrupted)
+    assert cli_main.console_main() == 130
+    err = capsys.readouterr().err
+    assert err.count("interrupted (Ctrl-C)") == 1, err
+    assert "mdsr list: interrupted (Ctrl-C); files already complete are kept" in err
+    assert "before the command started" not in err and "Traceback" not in err
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
 
 
 def test_ctrl_c_while_a_scene_solves_ends_the_jobs_its_workers_run(monkeypatch, tmp_path):

@@ -24,6 +24,7 @@ import logging
 import os
 import signal
 import sys
+import threading
 
 from .. import __version__
 
@@ -187,6 +188,7 @@ def _run(parser, argv: list[str], pool: bool = True) -> int:
     from ..core.warnlines import warnings_as_log_lines
     from ..scenes.rundir import interrupt_signal, noting_interrupts, recording_command
 
+    _STOP.update(command=args.command, said=False)
     try:
         with agg_backend(), noting_interrupts(sigterm=True), recording_command(args.command_line), \
                 warnings_as_log_lines():
@@ -195,8 +197,8 @@ def _run(parser, argv: list[str], pool: bool = True) -> int:
         # Ctrl-C or SIGTERM: stop at once with one line (no traceback); the commands' writers have removed
         # their temporary files, the files already complete stay. 128 + the signal, as shells report it.
         term = interrupt_signal() == signal.SIGTERM
-        print(f"\nmdsr {args.command}: interrupted ({'SIGTERM' if term else 'Ctrl-C'}); files already complete "
-              "are kept", file=sys.stderr)
+        print(_stopped_line(args.command, term), file=sys.stderr)
+        _STOP["said"] = "term" if term else "int"
         return 143 if term else 130
     except BrokenPipeError:  # `mdsr list | head`: the reader left; not an error of ours
         import os
@@ -211,15 +213,46 @@ def _run(parser, argv: list[str], pool: bool = True) -> int:
         return code
 
 
+#: the command :func:`_run` runs now and the one line it said on stopping (``said``: "int", "term" or False)
+_STOP: dict = {"command": None, "said": False}
+
+
+def _stopped_line(command: str, term: bool) -> str:
+    return (f"\nmdsr {command}: interrupted ({'SIGTERM' if term else 'Ctrl-C'}); files already complete "
+            "are kept")
+
+
+def _ignore_late_signals() -> None:
+    """The program stops on Ctrl-C or SIGTERM: later ones are ignored while it exits. A Ctrl-C that lands
+    after the first (pressed twice, or the terminal's one reaching the process while its first interrupt,
+    or a worker's, is being handled) would otherwise end the process by the signal at shutdown, exit -2,
+    after its one line had said 130."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
 def console_main() -> int:
     """The ``mdsr`` program (the console script and ``python -m mdsr_opt``): :func:`main` on the process's
     arguments. Returns :func:`main`'s exit code; 130 with one line when Ctrl-C comes before the command
-    runs (while its modules import), as it does once the command runs."""
+    runs (while its modules import), as it does once the command runs. Once it stops on Ctrl-C or SIGTERM,
+    later ones are ignored (:func:`_ignore_late_signals`): it exits with 130 (143), one line said."""
+    _STOP.update(command=None, said=False)
     try:
-        return _main(None, console=True)
-    except KeyboardInterrupt:
-        print("\nmdsr: interrupted (Ctrl-C) before the command started; nothing written", file=sys.stderr)
-        return 130
+        code = _main(None, console=True)
+    except KeyboardInterrupt:  # before the command ran, or a second interrupt while it was stopping
+        _ignore_late_signals()
+        if not _STOP["said"]:
+            from ..scenes.rundir import interrupt_signal
+
+            term = interrupt_signal() == signal.SIGTERM
+            print("\nmdsr: interrupted (Ctrl-C) before the command started; nothing written"
+                  if _STOP["command"] is None else _stopped_line(_STOP["command"], term), file=sys.stderr)
+            return 143 if term else 130
+        return 143 if _STOP["said"] == "term" else 130
+    if code in (130, 143):
+        _ignore_late_signals()
+    return code
 
 
 if __name__ == "__main__":  # pragma: no cover
