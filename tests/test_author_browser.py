@@ -188,8 +188,8 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     pa, pb = (page.execute_script(f"return mdsrAuthor.screenOf({int(v)});") for v in (a, b))
     canvas = page.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
-    ActionChains(page).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
-                                                   round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
+    ActionChains(page, duration=30).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
+                                                                round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
     assert page.execute_script("return mdsrAuthor.selected();") == victim["name"]
     page.find_element(By.ID, "delete-muscle").click()
     routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.deleted.length && r;")
@@ -357,11 +357,12 @@ def test_oversized_message_is_refused_and_server_keeps_serving(page):
 
 
 def click_at(drv, points):
-    """Left clicks at canvas pixels ``points`` (real mouse events)."""
+    """Left clicks at canvas pixels ``points`` (real mouse events; the pointer moves there in 30 ms, as in
+    :func:`drag_with_mouse`, not selenium's default 250 ms: a click is where it lands)."""
     canvas = drv.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
     for x, y in points:
-        ActionChains(drv).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+        ActionChains(drv, duration=30).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
 
 
 def test_svg_outline_file_with_a_hole(page, tmp_path):
