@@ -362,7 +362,8 @@ def click_at(drv, points):
     canvas = drv.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
     for x, y in points:
-        ActionChains(drv, duration=30).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+        chain = ActionChains(drv, duration=30).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2))
+        chain.click().perform()
 
 
 def test_svg_outline_file_with_a_hole(page, tmp_path):
