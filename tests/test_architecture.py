@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import networkx as nx
@@ -13,6 +14,20 @@ MAX_LINES = 620  # "about 600 lines at most" per module
 
 #: the stages of the data flow, lowest first; a module may import from its own stage and lower ones only
 STAGES = ("core", "body", "mechanics", "plot", "synthesis", "photos", "scenes", "studies", "author", "cli")
+
+
+@functools.lru_cache(maxsize=None)
+def _parse(source: str) -> ast.Module:
+    """The syntax tree of ``source``, parsed once for this module's tests (each walks the package's files; none
+    changes a tree): eight of them parsed all 161 files again."""
+    return ast.parse(source)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _forget_the_trees():
+    yield
+    _parse.cache_clear()  # about 85 MB of trees, not kept for the rest of the session
+    _graph.cache_clear()
 
 
 def _modules() -> dict[str, Path]:
@@ -28,7 +43,7 @@ def _modules() -> dict[str, Path]:
 def _imports(name: str, path: Path, modules: dict[str, Path]):
     """(imported module, imported names, line) for every import in the file, nested ones included."""
     is_pkg = path.name == "__init__.py"
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(_parse(path.read_text())):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = name.split(".") if is_pkg else name.split(".")[:-1]
@@ -50,7 +65,9 @@ def _imports(name: str, path: Path, modules: dict[str, Path]):
                     yield a.name, [], node.lineno
 
 
+@functools.lru_cache(maxsize=None)
 def _graph():
+    """The package's import graph (read, never changed, by three tests) and its modules."""
     modules = _modules()
     g = nx.DiGraph()
     for name, path in modules.items():
@@ -146,7 +163,7 @@ def test_a_modules_public_names_are_its_own():
     for name, path in _modules().items():
         if name == "mdsr_opt":  # the package's own names: its stub (see the tests below)
             continue
-        body = ast.parse(path.read_text()).body
+        body = _parse(path.read_text()).body
         defined: set[str] = set()
         listed: list[str] = []
         for node in body:
@@ -253,7 +270,7 @@ def _import_time_nodes(tree: ast.AST):
 def _posix_imports(source: str) -> list[str]:
     """``line module`` of every import of a POSIX-only module that runs at import time."""
     found = []
-    for node in _import_time_nodes(ast.parse(source)):
+    for node in _import_time_nodes(_parse(source)):
         if isinstance(node, ast.Import):
             found += [f"{node.lineno} {a.name}" for a in node.names if a.name.split(".")[0] in POSIX_ONLY]
         elif isinstance(node, ast.ImportFrom) and not node.level and node.module.split(".")[0] in POSIX_ONLY:
@@ -264,7 +281,7 @@ def _posix_imports(source: str) -> list[str]:
 def _machinery(source: str) -> list[str]:
     """``line what`` of every use of :data:`MACHINERY` or mention of /proc/self, anywhere in the source."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(_parse(source)):
         if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) \
                 and (node.value.id, node.attr) in MACHINERY:
             found.append(f"{node.lineno} {node.value.id}.{node.attr}")
@@ -302,7 +319,7 @@ def test_no_module_keeps_deprecated_spellings():
     """No module issues (or names) a deprecation warning, and the keyword-renaming shim is gone."""
     bad = []
     for name, path in _modules().items():
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_parse(path.read_text())):
             ident = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else None
             if ident in DEPRECATIONS:
                 bad.append(f"{name}:{node.lineno} {ident}")

@@ -188,8 +188,8 @@ def test_route_design_save_reproduced_by_mdsr_run(page, served, tmp_path):
     pa, pb = (page.execute_script(f"return mdsrAuthor.screenOf({int(v)});") for v in (a, b))
     canvas = page.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
-    ActionChains(page).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
-                                                   round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
+    ActionChains(page, duration=30).move_to_element_with_offset(canvas, round((pa[0] + pb[0]) / 2 - w / 2),
+                                                                round((pa[1] + pb[1]) / 2 - h / 2)).click().perform()
     assert page.execute_script("return mdsrAuthor.selected();") == victim["name"]
     page.find_element(By.ID, "delete-muscle").click()
     routing = wait(page, "const r = mdsrAuthor.routing(); return r && r.deleted.length && r;")
@@ -357,11 +357,13 @@ def test_oversized_message_is_refused_and_server_keeps_serving(page):
 
 
 def click_at(drv, points):
-    """Left clicks at canvas pixels ``points`` (real mouse events)."""
+    """Left clicks at canvas pixels ``points`` (real mouse events; the pointer moves there in 30 ms, as in
+    :func:`drag_with_mouse`, not selenium's default 250 ms: a click is where it lands)."""
     canvas = drv.find_element(By.ID, "canvas")
     w, h = canvas.size["width"], canvas.size["height"]
     for x, y in points:
-        ActionChains(drv).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2)).click().perform()
+        chain = ActionChains(drv, duration=30).move_to_element_with_offset(canvas, int(x - w / 2), int(y - h / 2))
+        chain.click().perform()
 
 
 def test_svg_outline_file_with_a_hole(page, tmp_path):
@@ -481,7 +483,9 @@ DRAG_SCRIPT = """
 """
 
 
-@pytest.mark.parametrize("which", ["gecko", "finger"])
+# the drawn finger in the default run (a library scene is on the page in every test of the module fixture);
+# the gecko, the same drag on a library body of the same size, is slow
+@pytest.mark.parametrize("which", [pytest.param("gecko", marks=pytest.mark.slow), "finger"])
 def test_drag_on_a_600_node_body_updates_live_and_settles_exactly(tmp_path, which):
     """Real mouse moves on gecko (556 nodes) and a drawn finger (576 nodes): live updates while the mouse
     moves, and after the release (at once, and after holding still) the state is exactly the equilibrium

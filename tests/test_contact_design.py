@@ -1,6 +1,7 @@
 """Design with contact (issue 35 item 6): targets posed with contact are designed and verified with contact;
 crossings checked independently with shapely; without contact the same verification rejects the design."""
 
+import copy
 import sys
 from pathlib import Path
 
@@ -55,10 +56,22 @@ def test_strip_pushed_past_buckling_designed_and_verified_with_contact():
     assert res.verification.gap <= res.verification.gap_tol
 
 
+#: the gripper (mesh, material, muscles) pressing Disk((0, 0), 1.1) at contractions [0.3, 0.25], and that
+#: pressed state (solve_internal): solved once for the two tests that start from it, each given a copy
+_PRESSED: list = []
+
+
+def _gripper_pressing():
+    if not _PRESSED:
+        mesh, mat, mus = _gripper()
+        disk = Disk((0.0, 0.0), 1.1)
+        _PRESSED.append((mesh, mat, mus, disk, solve_internal(mesh, mat, mus, [0.3, 0.25], obstacles=[disk])))
+    mesh, mat, mus, disk, target = _PRESSED[0]
+    return mesh, mat, mus, disk, copy.deepcopy(target)
+
+
 def _gripper_design():
-    mesh, mat, mus = _gripper()
-    disk = Disk((0.0, 0.0), 1.1)
-    target = solve_internal(mesh, mat, mus, [0.3, 0.25], obstacles=[disk])
+    mesh, mat, mus, disk, target = _gripper_pressing()
     res = design_contractions(mesh, mat, mus, target.x, obstacles=[disk], initial_guess=[0.2, 0.2])
     return mesh, mat, mus, disk, target, res
 
@@ -98,9 +111,7 @@ def test_design_with_contact_refused_at_the_door():
 def test_check_minimum_with_contact_on_the_gripper_pressing_its_disk():
     from mdsr_opt.synthesis.verify import check_minimum
 
-    mesh, mat, mus = _gripper()
-    disk = Disk((0.0, 0.0), 1.1)
-    res = solve_internal(mesh, mat, mus, [0.3, 0.25], obstacles=[disk])
+    mesh, mat, mus, disk, res = _gripper_pressing()
     ok, lam, r = check_minimum(mesh, mat, mus, [0.3, 0.25], res.x, obstacles=[disk])
     assert ok and r <= 1e-8 and np.isnan(lam)
     # without the disk the pressed state is no equilibrium (the contact forces are missing)

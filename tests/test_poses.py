@@ -310,8 +310,11 @@ def _broken_export(*args, **kwargs):  # a module's function: a worker process fi
     raise ValueError("the DXF writer broke")
 
 
-@pytest.mark.parametrize("background", [True, False])
-@pytest.mark.parametrize("job", ["export", "gif"])
+# each failing job in the pool and serially; the default run keeps one of each (the slow GIF failing in a worker
+# after the other jobs reported, the export failing in this process), the other two pairs are slow
+@pytest.mark.parametrize("job, background", [
+    ("gif", True), ("export", False),
+    pytest.param("export", True, marks=pytest.mark.slow), pytest.param("gif", False, marks=pytest.mark.slow)])
 def test_a_failed_gait_job_leaves_no_gait_json_listing_its_files(tmp_path, monkeypatch, background, job):
     """The gait's chart, GIF and fabrication files are background jobs: wave.json (<gait>.json), which lists their files,
     is written only once every one of them has reported; one that fails fails the run (in a worker or

@@ -23,6 +23,28 @@ def fig6_layouts():
     return figure6.route_targets("medium")
 
 
+#: the library's scenes at their coarse resolution, by name, and their cases prepared as mdsr run does, by
+#: (scene name, case name): the tortuosity test prepares every case, the tests below read some of them again
+#: (none changes what it reads)
+_SCENES: dict = {}
+_PREPARED: dict = {}
+
+
+def _prepared(name, case):
+    """The coarse library scene ``name`` and its case ``case`` prepared (:func:`prepare_case`), once a module."""
+    if name not in _SCENES:
+        _SCENES[name] = get_problem(name, resolution="coarse")
+    if (name, case) not in _PREPARED:
+        _PREPARED[name, case] = prepare_case(_SCENES[name], case)
+    return _SCENES[name], _PREPARED[name, case]
+
+
+def _prepared_names(name):
+    if name not in _SCENES:
+        _SCENES[name] = get_problem(name, resolution="coarse")
+    return _SCENES[name].case_names
+
+
 def _layout(result):
     return {min(m.nodes, m.nodes[::-1]) for m in result}
 
@@ -48,10 +70,9 @@ def test_K_a_changes_the_layout_of_at_least_3_of_the_5_figure6_targets(fig6_layo
 def test_no_muscle_in_the_library_turns_more_than_the_tortuosity_limit():
     checked = 0
     for name in list_problems():
-        scene = get_problem(name, resolution="coarse")
-        for case in scene.cases:
-            setup = prepare_case(scene, case)
-            assert setup.target_result.success, f"{name}/{case.name}"
+        for case in _prepared_names(name):
+            scene, setup = _prepared(name, case)
+            assert setup.target_result.success, f"{name}/{case}"
             rr = setup.routing
             # ropes snapped into the buildable band (band != "edges") may zigzag along its jagged edge up to
             # SNAP_TURN; the search's own ropes keep max_turn
@@ -61,7 +82,7 @@ def test_no_muscle_in_the_library_turns_more_than_the_tortuosity_limit():
                 d = np.diff(scene.mesh.points[list(m.nodes)], axis=0)
                 a = np.arctan2(d[:, 1], d[:, 0])
                 turn = np.degrees(np.abs((np.diff(a) + np.pi) % (2 * np.pi) - np.pi))
-                assert turn.max(initial=0.0) <= limit + 1e-6, f"{name}/{case.name}: {turn.max():.1f} deg"
+                assert turn.max(initial=0.0) <= limit + 1e-6, f"{name}/{case}: {turn.max():.1f} deg"
                 checked += 1
     assert checked >= 20
 
@@ -98,8 +119,8 @@ def test_figure6c_charts_equilibria_at_every_iterate():
     the last at its result; the contractions in between are the IPOPT iterates (the design stopped there)."""
     from mdsr_opt.synthesis.routing import route_muscles
 
-    scene = get_problem("tentacle", resolution="coarse")
-    target = prepare_case(scene, "curl").target
+    scene, setup = _prepared("tentacle", "curl")
+    target = setup.target
     muscles = route_muscles(scene.mesh, target, K_a=1.0, **figure6.ROUTING).muscles
     res, tr = figure6.design_layout(scene, target, muscles)
     assert res.success and all(tr["solved"])
@@ -140,8 +161,7 @@ def test_routing_quality_rows_and_tables(tmp_path):
     # every contracted edge its own spring muscle relaxes the routed layout: it can only do better
     assert r.edge_bound <= r.difference * (1 + 1e-6)
     assert r.ratio == pytest.approx(r.difference / r.edge_bound)
-    scene = get_problem("gripper", resolution="coarse")
-    setup = prepare_case(scene, "close")
+    scene, setup = _prepared("gripper", "close")
     assert r.edge_muscles == len(edge_muscles(scene.mesh, setup.target)) > r.muscles
     paths = write_quality_table(rows, tmp_path / "q.csv", tmp_path / "q.md")
     assert len(paths) == 2
@@ -158,8 +178,7 @@ def test_routing_quality_routes_and_designs_as_mdsr_run():
     # gecko bend_left: route_for_design lays 2 ropes deeper inside (a plain route_muscles lays 1), fitted to
     # a fixture radius smaller than the default; the study's row is that layout, designed with that radius
     (r,) = routing_quality([("gecko", "bend_left")], resolution="coarse", bound=False)
-    scene = get_problem("gecko", resolution="coarse")
-    setup = prepare_case(scene, "bend_left")
+    scene, setup = _prepared("gecko", "bend_left")
     assert r.muscles == len(setup.routing.muscles) == 2
     assert r.total_length == pytest.approx(sum(s.rest_length for s in setup.routing.stats), rel=1e-12)
     res = design_contractions(scene.mesh, scene.material, setup.routing.muscles, setup.target,
