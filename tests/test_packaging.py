@@ -42,12 +42,6 @@ def _setuptools_at_least(major: int) -> bool:
     return int(setuptools.__version__.split(".")[0]) >= major
 
 
-def _pip_at_least(major: int, minor: int) -> bool:
-    from importlib.metadata import version
-
-    return tuple(int(p) for p in version("pip").split(".")[:2]) >= (major, minor)
-
-
 # ---------------------------------------------------------------------------------------------- the wheel
 def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     # copy the sources (the build must not write build/ or *.egg-info into the checkout)
@@ -62,10 +56,9 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     if _setuptools_at_least(77):  # else pip fetches setuptools>=77 into an isolated build environment
         cmd.append("--no-build-isolation")
     # the virtual environment the wheel goes into (see below) is made while the wheel builds: without a pip
-    # of its own, the running interpreter's pip installs into it (pip --python, from pip 22.3 on)
+    # of its own, the running interpreter's pip installs into it (pip --python)
     venv = tmp_path / "venv"
-    outer_pip = _pip_at_least(22, 3)
-    making = subprocess.Popen([sys.executable, "-m", "venv", *(["--without-pip"] if outer_pip else []), str(venv)])
+    making = subprocess.Popen([sys.executable, "-m", "venv", "--without-pip", str(venv)])
     try:
         subprocess.run(cmd, check=True, cwd=tmp_path, env=_clean_env(), timeout=300)
         assert making.wait(timeout=120) == 0
@@ -99,8 +92,8 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
                              capture_output=True, text=True, check=True).stdout.strip()
     outer = [p for p in dict.fromkeys(site.getsitepackages() + [site.getusersitepackages()]) if Path(p).is_dir()]
     Path(purelib, "mdsr_test_outer_site.pth").write_text("\n".join(outer) + "\n")
-    pip = [sys.executable, "-m", "pip", "--python", str(py)] if outer_pip else [str(py), "-m", "pip"]
-    subprocess.run([*pip, "install", "-q", "--no-index", "--no-deps", "--ignore-installed", str(wheel)], check=True,
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-index", "--no-deps",
+                    "--ignore-installed", str(wheel)], check=True,
                    env=_clean_env(), timeout=300)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
