@@ -13,30 +13,19 @@ ROOT = Path(__file__).resolve().parents[1]
 FINGER = ROOT / "tests" / "data" / "finger.toml"
 
 
-def _mdsr(tmp_path, *flags) -> subprocess.Popen:
+def _mdsr(tmp_path, *flags):
     cmd = [sys.executable, "-m", "mdsr_opt", *flags, "run", str(outline_finger(tmp_path)), "--out", str(tmp_path / "out"),
            "--resolution", "coarse", "--no-figures", "--no-animations", "--no-prototype", "--case", "contract"]
     env = {**__import__("os").environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
-
-
-def _lines(proc: subprocess.Popen):
-    out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 0, err
-    return out.splitlines(), err.splitlines()
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.splitlines(), done.stderr.splitlines()
 
 
 def test_verbosity_flags_add_logger_names_then_debug_lines(tmp_path):
-    # three independent runs, each in its own folder, started together (a second core runs one while the
-    # first waits for its workers)
-    procs = [_mdsr(tmp_path / "a"), _mdsr(tmp_path / "b", "-v"), _mdsr(tmp_path / "c", "-vv")]
-    try:
-        (plain_out, plain_err), (v_out, v_err), (vv_out, vv_err) = [_lines(p) for p in procs]
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.communicate()
+    plain_out, plain_err = _mdsr(tmp_path / "a")
+    v_out, v_err = _mdsr(tmp_path / "b", "-v")
+    vv_out, vv_err = _mdsr(tmp_path / "c", "-vv")
     said = [line for line in plain_out if line.startswith("[finger")]
     assert said and not any(line.startswith("INFO ") for line in plain_out)
     # -v: the same messages, each led by its level and the module that said it

@@ -55,17 +55,7 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     cmd = [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-w", str(dist), "-q"]
     if _setuptools_at_least(77):  # else pip fetches setuptools>=77 into an isolated build environment
         cmd.append("--no-build-isolation")
-    # the virtual environment the wheel goes into (see below) is made while the wheel builds: without a pip
-    # of its own, the running interpreter's pip installs into it (pip --python)
-    venv = tmp_path / "venv"
-    making = subprocess.Popen([sys.executable, "-m", "venv", "--without-pip", str(venv)])
-    try:
-        subprocess.run(cmd, check=True, cwd=tmp_path, env=_clean_env(), timeout=300)
-        assert making.wait(timeout=120) == 0
-    finally:
-        if making.poll() is None:
-            making.kill()
-            making.wait()
+    subprocess.run(cmd, check=True, cwd=tmp_path, env=_clean_env(), timeout=300)
     (wheel,) = dist.glob("mdsr_opt-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     # the problem library is inside the package, not a top-level `problems` package in site-packages
@@ -86,13 +76,15 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
     # without running their .pth files, so an editable install of the checkout stays invisible).
     # --ignore-installed because CI has already installed this very version, which pip would otherwise call
     # "already satisfied"
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     bindir = venv / ("Scripts" if os.name == "nt" else "bin")
     py = bindir / "python"
     purelib = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                              capture_output=True, text=True, check=True).stdout.strip()
     outer = [p for p in dict.fromkeys(site.getsitepackages() + [site.getusersitepackages()]) if Path(p).is_dir()]
     Path(purelib, "mdsr_test_outer_site.pth").write_text("\n".join(outer) + "\n")
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-index", "--no-deps",
+    subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-index", "--no-deps",
                     "--ignore-installed", str(wheel)], check=True,
                    env=_clean_env(), timeout=300)
     elsewhere = tmp_path / "elsewhere"
@@ -102,28 +94,6 @@ def test_wheel_installs_the_library_outside_the_checkout(tmp_path):
         return subprocess.run([str(bindir / "mdsr"), *args], cwd=elsewhere, env=_clean_env(),
                               capture_output=True, text=True, timeout=300)
 
-    # the run (the longest command) goes on while the quick ones are checked
-    running = subprocess.Popen([str(bindir / "mdsr"), "run", "one_muscle", "--out", str(tmp_path / "out"),
-                                "--resolution", "coarse", "--case", "a30", "--no-animations", "--photo-size",
-                                "300x300"], cwd=elsewhere, env=_clean_env(), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
-    try:
-        _check_the_installed_commands(py, venv, elsewhere, mdsr)
-        ran_out, ran_err = running.communicate(timeout=300)
-    finally:
-        if running.poll() is None:
-            running.kill()
-            running.communicate()
-    assert running.returncode == 0, ran_out + ran_err
-    assert "1/1 case(s) succeeded" in ran_out
-    import json
-
-    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert summary["success"] is True and summary["cases"][0]["contraction_error"] < 1e-6
-
-
-def _check_the_installed_commands(py, venv, elsewhere, mdsr):
-    """The installed package is the venv's (its problem library inside it); `mdsr --version` and `mdsr list`."""
     where = subprocess.run([str(py), "-c", "import mdsr_opt, mdsr_opt.scenes.library as s; "
                             "print(mdsr_opt.__file__); print(s.problems_dir())"],
                            cwd=elsewhere, env=_clean_env(), capture_output=True, text=True, check=True)
@@ -136,6 +106,14 @@ def _check_the_installed_commands(py, venv, elsewhere, mdsr):
     assert listed.returncode == 0, listed.stderr
     for name in ("gecko", "one_muscle", "four_muscles", "face"):
         assert f"  {name} " in listed.stdout
+    ran = mdsr("run", "one_muscle", "--out", str(tmp_path / "out"), "--resolution", "coarse", "--case", "a30",
+               "--no-animations", "--photo-size", "300x300")
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    assert "1/1 case(s) succeeded" in ran.stdout
+    import json
+
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["success"] is True and summary["cases"][0]["contraction_error"] < 1e-6
 
 
 def test_pyproject_declares_an_spdx_license_and_optional_dask():
@@ -244,29 +222,18 @@ def test_mdsr_run_leaves_figure_and_photograph_imports_to_its_jobs(tmp_path):
     worker processes import what the figure jobs need. The Agg backend it chooses through MPLBACKEND is not
     left behind."""
     code = ("import os, sys; from mdsr_opt.cli.main import main\n"
-            "code = main(['-q', 'run', 'gecko', '--resolution', 'coarse', '--no-animations', '--out', sys.argv[1]])\n"
+            f"code = main(['-q', 'run', 'gecko', '--resolution', 'coarse', '--no-animations', "
+            f"'--out', {str(tmp_path / 'out')!r}])\n"
             "print(code, sorted(m for m in ('matplotlib', 'scipy.spatial', 'xml.sax') if m in sys.modules), "
             "os.environ.get('MPLBACKEND'))\n")
-    # the two runs (without MPLBACKEND, and with the user's own) are independent: started together, each
-    # into its own folder
-    runs = {backend: subprocess.Popen([sys.executable, "-c", code, str(tmp_path / str(backend))],
-                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
-                                      env=_clean_env(**({"MPLBACKEND": backend} if backend else {})))
-            for backend in (None, "svg")}
-    try:
-        done = {backend: proc.communicate(timeout=300) for backend, proc in runs.items()}
-    finally:
-        for proc in runs.values():
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-    for backend, (stdout, stderr) in done.items():
-        assert runs[backend].returncode == 0, stderr
-        assert stdout.strip().splitlines()[-1] == f"0 [] {backend}"
-        out = tmp_path / str(backend)
-        assert (out / "bend_left" / "overlay.png").stat().st_size > 1000  # the jobs drew
-        table4 = (out / "validation.md").read_text().split("## Table 4")[1]
+    for backend in (None, "svg"):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True,
+                             env=_clean_env(**({"MPLBACKEND": backend} if backend else {})), timeout=300)
+        assert out.stdout.strip().splitlines()[-1] == f"0 [] {backend}"
+        assert (tmp_path / "out" / "bend_left" / "overlay.png").stat().st_size > 1000  # the jobs drew
+        table4 = (tmp_path / "out" / "validation.md").read_text().split("## Table 4")[1]
         assert "| gecko | bend_left |" in table4 and "FAILED" not in table4  # the prototype was photographed
+        shutil.rmtree(tmp_path / "out")
 
 
 @pytest.mark.parametrize("asked", [None, "2"])
@@ -474,23 +441,15 @@ def test_plot_functions_take_an_axes_and_return_the_figure(tmp_path):
 
 # ---------------------------------------------------------------------------------------------- test selection
 def test_marker_slow_selects_the_long_cases_and_the_default_run_leaves_them_out():
-    def start(*args):
-        return subprocess.Popen([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
-                                 "tests/test_long.py", *args], cwd=ROOT, env=_clean_env(), stdout=subprocess.PIPE,
-                                stderr=subprocess.DEVNULL, text=True)
+    def collect(*args):
+        r = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+                            "tests/test_long.py", *args], cwd=ROOT, env=_clean_env(), capture_output=True,
+                           text=True, timeout=300)
+        return [line for line in r.stdout.splitlines() if "::" in line], r.stdout
 
-    def collected(proc):
-        stdout = proc.communicate(timeout=300)[0]
-        return [line for line in stdout.splitlines() if "::" in line], stdout
-
-    procs = [start("-m", "slow"), start(), start("--slow")]  # three independent collections, started together
-    try:
-        (slow, text), (default, default_text), (everything, _) = [collected(p) for p in procs]
-    finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.communicate()
+    slow, text = collect("-m", "slow")
     assert len(slow) >= 4 and all("test_long.py::" in t for t in slow), text
-    assert default == [] and "deselected" in default_text
+    default, text = collect()
+    assert default == [] and "deselected" in text
+    everything, _ = collect("--slow")
     assert sorted(everything) == sorted(slow)
