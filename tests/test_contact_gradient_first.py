@@ -144,3 +144,26 @@ def test_contact_design_without_a_method_checks_the_searchs_options_at_the_door(
         design_contractions(mesh, MAT, mus, target, obstacles=[floor], outer="simplex")
     with pytest.raises(ValueError, match="derivative-free"):
         design_contractions(mesh, MAT, mus, target, obstacles=[floor], method="nested")
+
+
+@pytest.mark.parametrize("outline", ["L", "U", "star"])
+def test_a_non_convex_body_far_from_itself_does_not_touch_itself(outline):
+    """A body with an inside corner at rest is far from touching itself: the broad phase keeps the corner's
+    neighbour pairs at any distance (recheck12: an L at rest "touches itself (within 0.444, less than
+    0.00781)", and every contact=True design of an L, U, C or star went derivative-free). Only rows within
+    the threshold count."""
+    from mdsr_opt.synthesis.contactdesign import target_touches
+
+    shapes = {"L": [[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [0, 3]],
+              "U": [[0, 0], [3, 0], [3, 3], [2, 3], [2, 1], [1, 1], [1, 3], [0, 3]],
+              "star": [[np.cos(k * np.pi / 5) * (2.0 if k % 2 == 0 else 0.8),
+                        np.sin(k * np.pi / 5) * (2.0 if k % 2 == 0 else 0.8)] for k in range(10)]}
+    mesh = Mesh.from_polygon(shapes[outline], max_area=0.05)
+    assert target_touches(mesh, mesh.points, {"contact": True}) == ""
+    # folded onto itself it does touch: a node moved onto a boundary segment far from it along the outline
+    seg = mesh.boundary_edges
+    loop = mesh.boundary_loops[0]
+    y = mesh.points.copy()
+    a, b = seg[len(seg) // 2]
+    y[loop[0]] = 0.5 * (y[a] + y[b])
+    assert target_touches(mesh, y, {"contact": True}).startswith("its target touches itself (within")

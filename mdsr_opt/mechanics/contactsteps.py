@@ -102,6 +102,10 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
             outside = ((t < -DELTA) | (t > 1 + DELTA)) & (rows.labels[:, 0] == 0)
             for i in np.flatnonzero(outside & (rows.w[:, 1] <= 0)):
                 drop.add(row_key(rows, i))
+            stale = _stale_polygon_rows(prob, rows, x1, t)
+            if len(stale):  # the broad phase of the solve's own state pairs their points anew
+                drop.update(row_key(rows, i) for i in stale)
+                new = merge_rows(new, _empty(prob), drop)
             if outside.any():
                 hand, swapped, swap_in = _hand_over(prob, rows, np.flatnonzero(outside), t, x1, step_tol, final)
                 new = merge_rows(new, hand, drop)
@@ -148,6 +152,26 @@ def contact_step(prob: ContactProblem, p, x_ref, guess, fixed, vals, tol, max_it
         out.status += f"; contact pairs still changing after {MAX_REFRESH} solves"
     out.iterations, out.solve_time, out.build_time = its, t_solve, t_build
     return out, rows
+
+
+def _stale_polygon_rows(prob, rows: ContactRows, x, t) -> np.ndarray:
+    """The rows of polygon obstacles that no longer hold their point in the state ``x`` (``t``: the rows'
+    projections there): a body node held against an edge's line while another edge of the polygon is farther
+    from it by more than the gap (the node went round a corner; held against the first edge's extension, the
+    row would be a wall where there is none, with a contact force on a node clear of the polygon), and a
+    corner against a body segment it projects beyond (by DELTA, as a self-contact pair does)."""
+    lab = rows.labels
+    nodes = np.flatnonzero((lab[:, 0] == 1) & (rows.w[:, 0] == 0.0))  # a node against a polygon's edge
+    out = np.flatnonzero((lab[:, 0] == 2) & ((t < -DELTA) | (t > 1 + DELTA))).tolist()
+    if len(nodes):
+        X = np.asarray(x, dtype=float).reshape(-1, 2)
+        g = rows.values(x)
+        slack = max(prob.spec.gap, 1e-9 * prob.mesh.size)
+        for i in nodes:
+            ob = prob.spec.obstacles[int(lab[i, 1])]
+            if ob.kind == "polygon" and float(ob.gap(X[[int(rows.pts[i, 0])]])[0]) > float(g[i]) + slack:
+                out.append(int(i))
+    return np.array(sorted(out), dtype=np.int64)
 
 
 def _admissible(prob, rows: ContactRows, start, keep) -> ContactRows:

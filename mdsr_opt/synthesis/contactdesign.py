@@ -190,6 +190,8 @@ def target_touches(mesh, target, kw: dict, held=None) -> str:
     if not rows.n_rows:
         return ""
     g = np.asarray(rows.values(y), dtype=float).reshape(-1)
+    if not (g < thr).any():  # the broad phase also keeps farther rows (a concave corner's neighbour pairs)
+        return ""
     i = int(np.argmin(g))
     where = f"obstacles[{int(rows.labels[i, 1])}]" if rows.labels[i, 1] >= 0 else "itself"
     return f"its target touches {where} (within {max(g[i], 0.0):.3g}, less than {thr:.3g})"
