@@ -70,8 +70,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         method that takes it), or ``"nested"`` with ``held`` nodes and no contact (the flattened NLP pins the
         three gauge coordinates only). A default flattened design that fails (not converged, or rejected by
         its verification) is made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's
-        ``method``, ``fallback`` and ``status`` say so); a named ``"flattened"`` is not, its failure's
-        ``status`` suggesting ``"nested"``.
+        ``method``, ``fallback`` and ``status`` say so); a named ``"flattened"``, or one given IPOPT
+        ``options``, is not, its failure's ``status`` suggesting ``"nested"``.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -196,7 +196,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     """
     initial = initial_guess
     clock0 = time.perf_counter()
-    named = method is not None  # a default flattened design that fails is made again by the nested method
+    # a default flattened design that fails is made again by the nested method, unless the caller addressed the
+    # flattened method: named it, or gave IPOPT options (synthesis.fallback)
+    named = method is not None or options is not None
     if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
         method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
             "flattened" if held is None else "nested"
