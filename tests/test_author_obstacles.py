@@ -105,7 +105,8 @@ def test_the_page_draws_and_lists_the_obstacles(disk_file):
     assert len(m["obstacles"][2]["points"]) == 3
     said = " | ".join(m["contact"])
     assert "obstacles (disk, halfplane, polygon), friction 0" in said
-    assert "live drag: no fast preview" in said and "derivative-free" in said
+    assert "live drag: no fast preview" in said and "design: method auto: by the nested method without the " \
+        "obstacles, checked with them, and by the derivative-free search with them when they are touched" in said
     assert "obstacles (2 of the scene; case 'up''s own): kept as loaded" in kept_lines(s)
 
 
@@ -138,17 +139,27 @@ def test_the_design_takes_the_floor_and_the_saved_scene_reproduces_it(tmp_path):
     assert s.settle().success
     assert len(s.route(4.0, 4.0, None)["muscles"]) == 2
     d = s.run_design(method="flattened", muscle_model="cable", a_max=0.6)
-    # the floor forces mdsr run's derivative-free design, said on the page (before the fix: flattened, no floor)
-    assert d["method"] == "derivative-free" and d["success"], d["status"]
-    assert any("derivative-free" in n for n in d["notes"]) and any("clamped" in n for n in d["notes"])
+    # the floor makes mdsr run's choice, said on the page (before the fix: flattened, no floor; then
+    # derivative-free whatever the page showed): the clamped body designed nested without the floor, which it
+    # never touches, checked with it
+    assert d["method"] == "nested" and d["success"], d["status"]
+    said = " | ".join(d["notes"])
+    assert "method 'flattened' asked, which takes no obstacles" in said and "clamped" in said
+    assert "design: by method 'nested' without the obstacles, then checked with them: untouched" in said, said
     assert d["held"]  # shown where it stands (the legend says so), not aligned onto the target
     saved = save_scene(s, tmp_path / "out", "mine")[0]
     back = load_scene(saved)
     assert len(back.obstacles) == 1 and back.friction == pytest.approx(0.3)
     run = run_case(back, "stem_left", photo=False)  # mdsr run on the saved scene
-    assert run.design.method == "derivative-free"
+    assert run.design.method == "nested" and said.endswith(run.report.notes[-1]), run.report.notes
     np.testing.assert_allclose(run.design.contractions, d["contractions"], rtol=0, atol=1e-9)
     assert run.design.difference == pytest.approx(d["difference"], rel=1e-9)
+    # the page's "auto" names no method: the same design, and the saved scene names none
+    auto = s.run_design(method="auto", muscle_model="cable", a_max=0.6)
+    assert auto["method"] == "nested" and auto["contractions"] == d["contractions"]
+    assert not any("asked" in n for n in auto["notes"]), auto["notes"]
+    again = load_scene(save_scene(s, tmp_path / "out2", "mine")[0])
+    assert "method" not in again.design_options
 
 
 def test_a_save_lays_the_layout_the_design_dropped_idle_muscles_from():

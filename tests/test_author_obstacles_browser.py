@@ -56,6 +56,9 @@ def test_the_page_draws_every_obstacle_and_keeps_the_body_out_of_the_disk(page):
         r, g, b, a = pixel(page, where)
         assert a > 40 and max(r, g, b) - min(r, g, b) < 8, (where, (r, g, b, a))  # the obstacles' grey
     assert pixel(page, (50.0, -45.0))[3] == 0  # above the floor, beside everything: nothing drawn
+    # the method offered is the one the design will choose ("auto": with obstacles the nested design checked
+    # with them, derivative-free when touched), not "flattened", which the obstacles never ran
+    assert page.execute_script("return document.getElementById('method').value;") == "auto"
 
 
 def test_the_page_says_what_its_solves_do_with_the_obstacles(page):

@@ -3,7 +3,9 @@ and for two or four muscles, so a design with an obstacle it never touches (or s
 activates) stops on its own, a success, instead of sitting at its answer until the evaluation cap.
 
 Before the fix (``fatol = tol ** 2`` on the objective, below the noise of its warm-started forward solves)
-every design below ran to the cap (400 evaluations per muscle) and came back ``success=False``."""
+every design below ran to the cap (400 evaluations per muscle) and came back ``success=False``. The designs name
+the method: without it a design whose contacts are never touched is made by a gradient method and checked with
+them (test_contact_gradient_first.py)."""
 
 import numpy as np
 import pytest
@@ -34,7 +36,7 @@ def test_design_with_a_far_obstacle_stops_converged_the_same_in_mm_and_m(outer):
     found = {}
     for L in (1e3, 1e-3):  # a 4 m strip in mm, a 4 mm strip in m
         mesh, mus, target, floor = _strip(L)
-        res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], outer=outer)
+        res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], outer=outer, method="derivative-free")
         assert res.method == "derivative-free"
         assert res.success and res.verification.passed, res.status
         assert "terminated successfully" in res.status, res.status
@@ -50,7 +52,7 @@ def test_design_with_a_far_obstacle_stops_converged_the_same_in_mm_and_m(outer):
 
 def test_self_contact_that_never_activates_stops_converged():
     mesh, mus, target, _ = _strip(1e-3)
-    res = design_contractions(mesh, MAT, mus, target, contact=True)
+    res = design_contractions(mesh, MAT, mus, target, contact=True, method="derivative-free")
     assert res.method == "derivative-free"
     assert res.success and res.verification.passed, res.status
     assert "terminated successfully" in res.status, res.status
@@ -62,7 +64,7 @@ def test_four_muscles_with_a_far_obstacle_stop_converged_the_same_in_mm_and_m():
     found = []
     for L in (1e3, 1e-3):
         mesh, mus, target, floor = _strip(L, split=True)
-        res = design_contractions(mesh, MAT, mus, target, obstacles=[floor])
+        res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], method="derivative-free")
         assert res.success and "terminated successfully" in res.status, res.status
         assert res.n_forward < 1600, res.n_forward  # the cap
         found.append((res.contractions, res.difference / L))
@@ -72,7 +74,7 @@ def test_four_muscles_with_a_far_obstacle_stop_converged_the_same_in_mm_and_m():
 
 def test_search_stopped_by_the_cap_fails_and_says_how_far_apart_its_last_points_were():
     mesh, mus, target, floor = _strip(1e3)
-    res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], max_iter=12)
+    res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], max_iter=12, method="derivative-free")
     assert not res.success
     assert "Maximum number of function evaluations" in res.status
     assert "its last simplex: contractions" in res.status and "xatol 1e-07" in res.status, res.status
@@ -82,7 +84,7 @@ def test_search_stopped_by_the_cap_whose_last_simplex_meets_the_test_succeeds():
     # the cap is hit right after the first simplex, whose points lie within the loose xatol and fatol given
     mesh, mus, target, floor = _strip(1e-3)
     res = design_contractions(mesh, MAT, mus, target, obstacles=[floor], max_iter=3,
-                              options={"xatol": 0.5, "fatol": 1.0})
+                              options={"xatol": 0.5, "fatol": 1.0}, method="derivative-free")
     assert "its last simplex met the test" in res.status, res.status
     assert res.success, res.status
 

@@ -227,3 +227,27 @@ def test_a_pipeline_of_given_muscles_is_drawn_with_the_fabrication_it_was_given(
         assert "channel(s) 0.5 wide with walls of 0.3" in caption(files["svg"])
     with pytest.raises(ValueError, match=r"channel_diameter 1 \(the layout's: 0.5\)"):
         export_fabrication(mesh, res, tmp_path / "other", fabrication={"channel_diameter": 1.0})
+
+
+def test_a_layout_pose_beyond_the_5_percent_rule_is_exported_as_failed(routed, tmp_path):
+    """A pose of a layout that is designed (``pose_success``) but whose difference is above 5 % of the body's
+    size is the pose a gait reports not reached and ``mdsr run`` fails: the export refuses it, naming the pose
+    and the rule, and marks its files when told to write them; at 4.9 % it is exported unmarked."""
+    import dataclasses
+
+    from mdsr_opt.mechanics.anchors import body_size
+
+    mesh, res = routed
+    size = body_size(mesh)
+    far = dataclasses.replace(res, differences=np.array([0.06 * size]))
+    with pytest.raises(ValueError, match=r"pose bend: too far from its target \(difference .* mm is 6\.00 % of "
+                                         r"the size .* more than max_difference 5 %\)"):
+        export_fabrication(mesh, far, tmp_path / "no", name="strip")
+    assert not (tmp_path / "no").exists() or not any((tmp_path / "no").iterdir())
+    with pytest.warns(UserWarning):
+        files = export_fabrication(mesh, far, tmp_path / "yes", name="strip", allow_failed=True)
+    csv_text = open(files["csv"], encoding="utf-8").read()
+    assert csv_text.startswith("# FAILED DESIGN") and "pose bend: too far from its target" in csv_text
+    near = dataclasses.replace(res, differences=np.array([0.049 * size]))
+    files = export_fabrication(mesh, near, tmp_path / "near", name="strip")
+    assert "FAILED" not in open(files["csv"], encoding="utf-8").read()

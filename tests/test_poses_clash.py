@@ -178,7 +178,9 @@ def test_success_is_the_whole_results_verdict_and_pose_success_each_poses(tmp_pa
     res = design_poses(mesh, MAT, poses, compare=False)
     assert res.success is True and res.pose_success.dtype == bool and res.pose_success.shape == (2,)
     bad = dataclasses.replace(res, problems=("the shared layout cannot be moulded in one layer: stand-in",))
-    assert bad.pose_success.all() and bad.success is False and "success=False, layout NOT mouldable)" in repr(bad)
+    assert bad.pose_success.all() and bad.success is False
+    assert "success=False, why='the shared layout cannot be moulded in one layer: stand-in', layout NOT mouldable)" \
+        in repr(bad)  # the repr says why (trial12 defect 7)
     one = dataclasses.replace(res, pose_success=np.array([True, False]))
     assert one.success is False
     path = res.save(tmp_path / "layout.json")

@@ -55,7 +55,7 @@ def test_without_contact_nothing_changes(tmp_path):
     ("contac = true", "design.contac: unknown field (did you mean 'contact'?)"),
     ("contact = 1", "design.contact: expected true or false"),
     ('contact = true\nmethod = "flattened"', "design.method: contact = true is designed by method = "
-                                             '"derivative-free" only'),
+                                             '"derivative-free", or with no method'),
     ("contact_gap = 0.01", "design.contact_gap: is the gap of self-contact: set contact = true too"),
     ("contact = true\ncontact_gap = -1", "design.contact_gap: must be > 0"),
     ("contact = true\ncontact_gap = 1", "contact_gap 1 is 24% of the body's size 4.123: it is the small clearance"),

@@ -116,7 +116,10 @@ def test_a_case_curled_onto_a_disk_never_enters_it_and_its_grip_is_reported(tmp_
     # the design took the disk (derivative-free, frictionless, each said in the notes) and found the contraction:
     # near 0.2, not at it, as the target's contact has friction and the design's none
     assert res.method == "derivative-free" and rep.success and 1e-4 < abs(res.contractions[0] - 0.2) < 1e-2
-    assert any("derivative-free" in n for n in rep.notes) and any("frictionless" in n for n in rep.notes)
+    assert any("frictionless" in n for n in rep.notes)
+    # its target presses on the disk: searched with it from the start, said in the notes
+    assert "design: by method 'derivative-free' with the obstacles: its target touches obstacles[0]" in \
+        " | ".join(rep.notes), rep.notes
     # a fixed disk pushed at one place: friction (tangential, mu = 0.2) cannot balance the push
     (g,) = rep.grip
     assert g["fixed"] and g["friction"] == 0.2 and g["state"] == "design" and g["touching"] >= 1
@@ -235,6 +238,10 @@ def test_an_external_case_with_obstacles_says_its_difference_is_measured_held_no
     scene = load_scene(_write(tmp_path, STRIP))
     press = scene.case("press")
     opts, notes = obstacle_design(scene, press, {})
-    assert opts["method"] == "derivative-free" and np.array_equal(opts["held"], press.anchors)
+    # no method: designed without the obstacles and checked with them (derivative-free when touched)
+    assert "method" not in opts and np.array_equal(opts["held"], press.anchors)
+    assert obstacle_design(scene, press, {"method": "derivative-free"})[0]["method"] == "derivative-free"
+    said = obstacle_design(scene, press, {"method": "flattened"})
+    assert "method" not in said[0] and any("method 'flattened' asked, which takes no obstacles" in n for n in said[1])
     assert any("clamped at the target's anchors" in n and "no rigid alignment" in n for n in notes), notes
     assert obstacle_design(scene, scene.case("curl"), {})[1] == [n for n in notes if "clamped" not in n]

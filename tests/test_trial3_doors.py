@@ -219,7 +219,7 @@ def test_design_pipeline_says_why_routing_found_no_muscle():
     mesh = Mesh.rectangle(4.0, 1.0, 16, 8)
     left = [i for i, (px, py) in enumerate(mesh.points) if px == 0.0]
     right = {i: (1.2 * px, py) for i, (px, py) in enumerate(mesh.points) if px == 4.0}
-    with pytest.raises(ValueError, match=r"routing found no muscle for this target \(no muscle unit could be "
+    with pytest.raises(ValueError, match=r"routing found no muscle on the target \(no muscle unit could be "
                                          r"seeded: .* compression_ratio filter \(1\) removed"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -16,14 +16,14 @@ from __future__ import annotations
 from ..mechanics.equilibrium import solve_external
 from ..mechanics.obstacles import Disk, HalfPlane
 from ..scenes.cases import case_solve_options, solve_target
-from ..scenes.grips import obstacle_design
+from ..scenes.grips import design_route, obstacle_design
 from ..scenes.obstacles import FreeDisk, check_case_obstacles
 from ..scenes.reader import contact_options
 from ..scenes.scene import Case
-from .roundtrip import edited_case_name
+from .roundtrip import AUTO, edited_case_name
 
 __all__ = ["edited_case", "solve_options", "target_solve", "live_options", "design_options_with_obstacles",
-           "obstacle_entries", "contact_lines"]
+           "route_notes", "obstacle_entries", "contact_lines"]
 
 
 def edited_case(session) -> Case | None:
@@ -74,12 +74,25 @@ def live_options(session) -> dict:
 
 def design_options_with_obstacles(session, opts: dict) -> tuple[dict, list[str]]:
     """The design keywords ``opts`` with the edited case's obstacles as its target placed them, by
-    :func:`~mdsr_opt.scenes.grips.obstacle_design` (``mdsr run``'s: the derivative-free method, the body clamped
-    at the anchors, frictionless), and the notes saying so: ``(opts, notes)``."""
+    :func:`~mdsr_opt.scenes.grips.obstacle_design` (``mdsr run``'s: designed without them and checked with them,
+    derivative-free with them when touched or named; the body clamped at the anchors, frictionless), and the
+    notes saying so: ``(opts, notes)``. The page's method ``"auto"``
+    (:data:`~mdsr_opt.author.roundtrip.AUTO`) names none."""
+    if opts.get("method") == AUTO:
+        opts = {k: v for k, v in opts.items() if k != "method"}
     case = edited_case(session)
     if case is None:
         return opts, []
     return obstacle_design(session.origin.scene, case, opts, session.placed or None)
+
+
+def route_notes(session) -> list[str]:
+    """How the session's design met the edited case's obstacles, as ``mdsr run`` says it
+    (:func:`~mdsr_opt.scenes.grips.design_route`); empty without obstacles or a design."""
+    case = edited_case(session)
+    if case is None or session.design is None:
+        return []
+    return design_route(session.origin.scene, case, session.design)
 
 
 def obstacle_entries(obstacles) -> list[dict]:
@@ -117,6 +130,7 @@ def contact_lines(session) -> list[str]:
         out.append("live drag: the free disk stays where the last settled solve placed it; a release places it "
                    "again")
     if obs:
-        out.append("design: by method 'derivative-free' (the one whose solves take obstacles), the body clamped at "
-                   "the anchors, frictionless")
+        out.append("design: method auto: by the nested method without the obstacles, checked with them, and by the "
+                   "derivative-free search with them when they are touched (the design says which); the body "
+                   "clamped at the anchors, frictionless")
     return out

@@ -23,7 +23,13 @@ import numpy as np
 
 from ..scenes.obstacles import obstacle_tables
 
-__all__ = ["Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name", "saved_layout"]
+__all__ = ["AUTO", "Origin", "scene_dict", "scene_file", "check_read_back", "kept_lines", "edited_case_name",
+           "saved_layout"]
+
+#: the page's method choice that names none: the design chooses as ``mdsr run`` does for a scene without one
+#: (flattened; nested for a clamped body; with obstacles a gradient design checked with them, derivative-free
+#: when they are touched), and a save writes no method
+AUTO = "auto"
 
 #: the sentence a save adds to the scene's description (followed by the file it was opened from)
 AUTHORED_FROM = "Authored on the mdsr author page from "
@@ -240,9 +246,11 @@ def scene_file(session, name: str, mesh_file: str) -> tuple[dict, list[str]]:
         design["muscle_model"] = session.design.muscle_model
         design["stiffness"] = float(session.design.stiffness)
         design["a_max"] = float(session.design.a_max)
-        # the method asked where the obstacles forced the derivative-free one (mdsr run forces it again, and a case
-        # without them keeps the one asked), else the one the design ran
-        design["method"] = (session.design_params.get("method") if session.design_notes else None) or \
+        # the page's "auto" names no method (mdsr run chooses as the page did); the method asked where the
+        # obstacles made the choice (mdsr run makes it again, a case without them keeps the one asked); else the
+        # one the design ran
+        asked = session.design_params.get("method")
+        design["method"] = None if asked == AUTO else (asked if session.design_notes else None) or \
             session.design.method
     if design:
         d["design"] = {k: _plain(v) for k, v in design.items() if v is not None}

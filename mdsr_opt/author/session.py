@@ -597,7 +597,7 @@ class Session:
             opts["anchor_radius"] = self.fixture_radius
         # the wall a rope's two end fixtures keep between them: the fabrication's, as mdsr run designs it
         opts["fixture_wall"] = self.fabrication_shown()["wall"]
-        # a case with obstacles: designed with them as mdsr run designs it (derivative-free, clamped), said how
+        # a case with obstacles: designed as mdsr run designs it (checked with them, clamped), said how
         run, said = design_options_with_obstacles(self, opts)
         # an idle muscle is dropped from the layout and the design made again; the summary says so
         with warnings.catch_warnings():

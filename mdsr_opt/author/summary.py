@@ -9,6 +9,7 @@ import numpy as np
 
 from ..mechanics.anchors import body_size
 from ..synthesis.acceptance import IDLE_CONTRACTION, difference_failure, idle_mask, rest_difference
+from .contact import route_notes
 
 __all__ = ["design_summary"]
 
@@ -53,7 +54,8 @@ def design_summary(session) -> dict:
                                              *[session.acceptance[k] for k in ("max_difference",) if k in session.acceptance],
                                              units=session.units or None,
                                              rest_difference=rest_difference(session.mesh, target)),
-            "notes": list(getattr(session, "design_notes", [])),  # what the obstacles changed, as mdsr run says
+            # what the obstacles changed and how the design met them, as mdsr run says
+            "notes": list(getattr(session, "design_notes", [])) + route_notes(session),
             "layout": [{"name": m.name, "nodes": [int(v) for v in m.nodes]} for m in session.muscles]}
 
 

@@ -407,7 +407,8 @@ def _json_default(o):
 
 
 def write_json(path, data) -> str:
-    """Write ``data`` (numpy arrays allowed) as JSON atomically; NaN/inf are refused."""
+    """Write ``data`` (numpy arrays allowed) as JSON atomically; NaN/inf are refused.
+    An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without ``--overwrite``)."""
     try:
         text = json.dumps(data, default=_json_default, indent=2, allow_nan=False)
     except ValueError as exc:

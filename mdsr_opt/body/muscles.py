@@ -54,6 +54,14 @@ class Muscle:
     name: str | None = field(default=None, compare=False)
 
     def __post_init__(self):
+        if isinstance(self.nodes, Muscle):
+            raise TypeError(f"Muscle() takes a path of node indices, got a Muscle ({self.nodes.name or 'unnamed'}, "
+                            f"nodes {list(self.nodes.nodes)[:6]}{'...' if len(self.nodes.nodes) > 6 else ''}): "
+                            "edge_path() and boundary_path() return a Muscle already: use it as it is, or "
+                            "Muscle(m.nodes, name=...) for a renamed copy")
+        if isinstance(self.nodes, (str, bytes, dict)) or not hasattr(self.nodes, "__iter__"):
+            raise TypeError(f"Muscle() takes a path of node indices (a list, tuple or integer array of at least two), "
+                            f"got {type(self.nodes).__name__} {self.nodes!r:.60}")
         arr = as_index_array(list(self.nodes) if not isinstance(self.nodes, np.ndarray) else self.nodes,
                              "muscle nodes", shape=(None,))
         if len(arr) < 2:

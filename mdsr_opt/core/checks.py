@@ -186,7 +186,16 @@ def check_stem(value, what: str = "name") -> str:
 def _check_shape(arr: np.ndarray, shape: tuple[int | None, ...], name: str) -> None:
     want = "(" + ", ".join("k" if s is None else str(s) for s in shape) + ")"
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
-        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}{_what_given(arr)}")
+
+
+def _what_given(arr: np.ndarray) -> str:
+    """What a value of the wrong shape was, beside its shape: a single number, or a short list's values."""
+    if arr.ndim == 0:
+        return f" (a single value, {arr.item()!r})"
+    if arr.ndim == 1 and 0 < arr.size <= 4:
+        return f" (the values {arr.tolist()})"
+    return ""
 
 
 def positive_float(value, name: str, allow_zero: bool = False) -> float:

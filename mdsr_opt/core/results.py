@@ -41,11 +41,18 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["compact_repr", "format_value", "one_line", "to_jsonable", "plain", "save_npz", "load_npz",
+__all__ = ["compact_repr", "format_value", "one_line", "MAX_REPR", "WHY_CHARS", "to_jsonable", "plain", "save_npz", "load_npz",
            "save_fields", "load_fields"]
 
 #: Longest ``repr`` a result object prints (one line).
 MAX_REPR = 200
+
+#: Longest reason a failed result's ``repr`` gives (:func:`compact_repr`'s ``why``).
+WHY_CHARS = 90
+
+
+class _Shown(str):
+    """A field's text :func:`compact_repr` shows as it is (not cut to a value's 40 characters)."""
 
 #: A 1-D numeric array of at most this many values (one per muscle, say) prints its values, a longer one
 #: its shape: ``contractions=[0.1, 0.2, ...]`` for up to 16 muscles, ``x=array((54,), float64)`` for a state.
@@ -103,15 +110,23 @@ def format_value(value: Any, *, max_items: int = 6, max_chars: int = 60) -> str:
     return text if len(text) <= max_chars else f"<{type(value).__name__}>"
 
 
-def compact_repr(obj: Any, fields: Sequence[str], *, extra: Mapping[str, Any] | None = None,
-                 max_chars: int = MAX_REPR) -> str:
-    """``TypeName(field=value, ...)`` over ``fields`` (then ``extra`` name/value pairs) with
+def compact_repr(obj: Any, fields: Sequence[str], *, extra: Mapping[str, Any] | None = None, why: str = "",
+                 why_name: str = "why", max_chars: int = MAX_REPR) -> str:
+    """``TypeName(field=value, ...)`` over ``fields`` (then ``why``, then ``extra`` name/value pairs) with
     :func:`format_value`, one line of at most ``max_chars`` characters (the fields that do not fit are
-    left out and ``...`` says so)."""
+    left out and ``...`` says so). ``why``: why the result is no success ("" when it is one), shown as
+    ``<why_name>='...'`` on one line of at most :data:`WHY_CHARS` characters (:func:`one_line`), right after
+    the ``success`` item (else after ``fields``), so that it is never the part left out."""
     items = [(name, getattr(obj, name)) for name in fields] + list((extra or {}).items())
     head, parts = f"{type(obj).__name__}(", []
+    if str(why or "").strip():
+        names = [name for name, _ in items]
+        at = names.index("success") + 1 if "success" in names else len(fields)
+        shown = _Shown(repr(one_line(why, WHY_CHARS)))
+        items.insert(at, (why_name, shown))
     for name, value in items:
-        text = f"{name}={format_value(value, max_chars=40)}".replace("\n", " ")
+        text = (f"{name}={value}" if isinstance(value, _Shown) else
+                f"{name}={format_value(value, max_chars=40)}").replace("\n", " ")
         if len(head) + len(", ".join(parts + [text])) + len(", ...)") > max_chars:
             parts.append("...")
             break

@@ -16,6 +16,7 @@ from .contact import DELTA, RELEASE, ContactRows, first_touch_rows, handoff_rows
 from ..core.checks import friction_coefficient, positive_float
 from .contactsolve import (ContactProblem, ContactSpec, contact_residual, row_key, merge_rows, contact_stability,
                            polish)
+from .contactfree import KEPT, contact_free_solve
 from .friction import EPS as FRICTION_EPS, LAG_ITER, LAG_RTOL
 from .loadsteps import INTERMEDIATE_TOL, equilibrium_result, min_jacobian, predict_state, solve_step, upright
 from .obstacles import check_obstacles
@@ -497,14 +498,10 @@ def check_gap(gap: float, size: float) -> float:
     return gap
 
 
-def solve_with_contact(mesh, model, material, p_of, fixed, values_of, x_start, spec, tol, max_iter, options,
-                       min_step, verbose, predict, mode, units, cm=None, settle=True, loose=None,
-                       p_elastic=None, t_model=0.0):
-    """The checked :class:`~mdsr_opt.mechanics.result.EquilibriumResult` (unit body) of a solve with contact,
-    with its ``contact`` report in the user's units (:func:`contact_report`), and the fitted muscle rows'
-    multipliers (None without them)."""
-    prob = ContactProblem(mesh, model, spec, cm)
-    F = material.E * material.thickness * mesh.size
+def _with_contact(prob, p_of, fixed, values_of, x_start, tol, max_iter, options, min_step, verbose, predict, settle,
+                  loose, F) -> dict:
+    """The contact solve (:func:`contact_continuation`): in long load steps, and if that fails again in short ones
+    with a saddle left at any of them."""
     out = contact_continuation(prob, p_of, fixed, values_of, x_start, tol, max_iter, options, min_step, verbose,
                                predict, settle, loose, F, escape=False)
     if not out["success"]:  # again in short load steps, a saddle left at any of them
@@ -515,6 +512,31 @@ def solve_with_contact(mesh, model, material, p_of, fixed, values_of, x_start, s
             out[k] += first[k]
         if not out["success"]:
             out["status"] += f" (after a first attempt in long load steps: {first['status']})"
+    return out
+
+
+def solve_with_contact(mesh, model, material, p_of, fixed, values_of, x_start, spec, tol, max_iter, options,
+                       min_step, verbose, predict, mode, units, cm=None, settle=True, loose=None,
+                       p_elastic=None, t_model=0.0):
+    """The checked :class:`~mdsr_opt.mechanics.result.EquilibriumResult` (unit body) of a solve with contact,
+    with its ``contact`` report in the user's units (:func:`contact_report`), and the fitted muscle rows'
+    multipliers (None without them)."""
+    prob = ContactProblem(mesh, model, spec, cm)
+    F = material.E * material.thickness * mesh.size
+    # the contact-free solve first, kept when nothing touches along its path (zero multipliers: a KKT point of
+    # the contact problem); else the contact solve from the same start, as without that first try
+    out, spent, why = contact_free_solve(prob, p_of, fixed, values_of, x_start, tol, max_iter, options, min_step,
+                                         verbose, predict, settle, loose, F)
+    if out is not None:
+        if verbose:
+            print(f"  {KEPT}")
+    else:
+        if verbose and why:
+            print(f"  contact-free solve not kept ({why}): solving with contact")
+        out = _with_contact(prob, p_of, fixed, values_of, x_start, tol, max_iter, options, min_step, verbose,
+                            predict, settle, loose, F)
+        for k in ("iterations", "solve_time", "build_time"):
+            out[k] += spent[k]
     p1 = p_of(1.0)
     resid = out["residual"]
     value = resid.value if resid is not None else np.inf

@@ -100,6 +100,16 @@ def solve_external(mesh: Mesh, material, anchors: Sequence[int] | np.ndarray | N
         ``dhat`` with its distance and the barrier's force, and the barrier's energy (``barrier_energy``),
         which ``energy`` leaves out.
 
+        With contact the equilibrium reached can depend on the path and on the method: a body pressed against
+        itself or an obstacle can have several stable states under the same load, and the load steps, the
+        method and the start decide which one a solve finds. Trial 12's C-ring (203 nodes, tip turned 95
+        degrees onto its lower arm): ``"ipopt"`` ends at energy 8.337, ``"barrier"`` at 7.432, and
+        ``"ipopt"`` started from the barrier's state at 7.424, all three stable and free of crossings, 12 %
+        apart. A contact result is a stable equilibrium, not the lowest: to look for a lower one, solve again
+        by the other method or from another state (``initial_guess``) and compare energies. A solve with
+        ``"ipopt"`` whose path touches nothing returns the state of the solve without contact
+        (:mod:`~mdsr_opt.mechanics.contactfree`).
+
     Returns
     -------
     EquilibriumResult
@@ -415,7 +425,10 @@ def solve_internal(mesh: Mesh, material, muscles: Sequence[Muscle], contractions
         None). For warm starts, such as the flattened design's, whose result is verified later.
     obstacles, contact, contact_gap, friction : contact, as in :func:`solve_external`. With obstacles the body is held
         at its three gauge coordinates (at rest) in the obstacles' frame and not aligned to rest; the net force
-        the gauge holds is then ``contact["gauge_force"]`` (zero when the contacts balance the body).
+        the gauge holds is then ``contact["gauge_force"]`` (zero when the contacts balance the body). As
+        :func:`solve_external` notes, with contact the state reached can depend on the path (the load steps,
+        ``initial_guess``): a body pressed against itself or an obstacle can have several stable states at
+        the same contractions; a solve whose path touches nothing returns the state without contact.
     held : node indices, optional
         Nodes clamped at their rest positions, as a robot is mounted on its base (at least two distinct nodes,
         integers in range, each once: :func:`check_held`); default None, the paper's free body, held only at

@@ -59,11 +59,14 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
     Returns
     -------
     dict
-        ``mu``; ``normal_forces`` (per contact), ``contact_nodes`` (-1 for a point on a segment),
-        ``contact_points``; ``squeeze`` (the net force of the contacts'
-        normal forces on the disk); ``directions`` (unit vectors) and ``resisted`` (the largest load in each,
-        0 where none is held, NaN where even no load is); ``holding_force`` (the smallest of them: a load of
-        any direction up to it is held); ``held`` (the load ``load`` is held).
+        ``mu``; per contact: ``normal_forces``, ``contact_points``, ``contact_nodes`` (the body's node that
+        touches, or None where the disk touches a boundary segment between nodes) and ``contact_segments``
+        (that segment's two nodes ``[a, b]``, None for a node contact); ``squeeze`` (the net force of the
+        contacts' normal forces on the disk); ``directions`` (unit vectors) and ``resisted`` (the largest load
+        in each that is held; 0.0 where none is, also where even no load is: a disk pushed harder one way than
+        friction can hold, at ``mu = 0`` any net push); ``holding_force`` (the smallest of them: a load of any
+        direction up to it is held; None when the disk is not held even without a load, as ``mdsr run``'s grip
+        reports say); ``held`` (the load ``load`` is held). Every figure is finite.
     """
     mu = friction_coefficient(mu, "mu")
     x = as_float_array(x, "x", shape=(None, 2))
@@ -103,11 +106,15 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
 
     resisted = np.array([largest(d) for d in D])
     held_load = not np.isnan(largest(None, L))
-    finite = resisted[np.isfinite(resisted)]
-    return {"mu": float(mu), "contact_nodes": nodes.tolist(), "contact_points": pts.tolist(),
-            "normal_forces": N.tolist(),
-            "squeeze": squeeze.tolist(), "directions": D.tolist(), "resisted": resisted.tolist(),
-            "holding_force": float(np.nanmin(resisted)) + 0.0 if len(finite) == len(resisted) else float("nan"),
+    unloaded = held_load if not L.any() else not np.isnan(largest(None, np.zeros(2)))  # held without a load
+    seg = [p["kind"] == "obstacle segment" for p in pairs]
+    return {"mu": float(mu), "contact_nodes": [None if s else int(v) for s, v in zip(seg, nodes)],
+            "contact_segments": [[int(p["nodes"][1]), int(p["nodes"][2])] if s else None for s, p in zip(seg, pairs)],
+            "contact_points": pts.tolist(), "normal_forces": N.tolist(),
+            "squeeze": squeeze.tolist(), "directions": D.tolist(),
+            # NaN (no load along d balances, not even none): nothing held there
+            "resisted": np.where(np.isnan(resisted), 0.0, resisted).tolist(),
+            "holding_force": float(np.nanmin(resisted)) + 0.0 if unloaded else None,
             "held": bool(held_load)}
 
 

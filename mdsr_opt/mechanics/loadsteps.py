@@ -188,7 +188,7 @@ STEP_ITER_CAP = 100
 
 
 def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol, max_iter, options, min_step,
-                  verbose, predict=True, settle=True, intermediate_tol=None):
+                  verbose, predict=True, settle=True, intermediate_tol=None, on_step=None):
     """Apply the load fraction ``s`` from 0 to 1 adaptively; returns (x, status, success, iters, steps, time).
 
     Load steps before the last are solved to ``intermediate_tol`` (default :data:`INTERMEDIATE_TOL`) when
@@ -198,7 +198,12 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
     (no Newton predictor): the "poor first guess" of the comparison studies. At full load the state must be
     stable (:func:`_settle`): a saddle is left along its negative curvature, or the solve fails; with
     ``settle=False`` that check is skipped. A SIGINT
-    raises :class:`KeyboardInterrupt` (never a failed step)."""
+    raises :class:`KeyboardInterrupt` (never a failed step).
+
+    ``on_step``: called as ``on_step(x, s)`` with each accepted load step's state and load fraction (before
+    the stability check at full load); a
+    string it returns stops the load stepping there, a failure naming it (e.g. a contact solve's contact-free
+    first try whose path touches, :mod:`~mdsr_opt.mechanics.contactfree`)."""
     min_step = _check_min_step(min_step)
     loose = INTERMEDIATE_TOL if intermediate_tol is None else float(intermediate_tol)
     with interruptible(), one_blas_thread():
@@ -243,6 +248,9 @@ def load_continuation(mesh, model, p_of, fixed, values_of, x_start, backend, tol
                 steps.append(s)
                 if verbose:
                     print(f"  load {s:.4f}: {out.status}, {out.iterations} iterations")
+                why = on_step(x, s) if on_step is not None else None
+                if why is not None:
+                    return x, f"stopped at load fraction {s:.4g}: {why}", False, iters, steps, t_solve, t_build
                 ds = min(2 * ds, 1.0 - s) if s < 1.0 else ds
             else:
                 ds /= 2

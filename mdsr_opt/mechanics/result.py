@@ -90,7 +90,8 @@ class EquilibriumResult:
         ``path`` ends in ``.npz`` (a folder name is refused, naming a file in it to use; a
         :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
-        Returns the path; :meth:`load` reads it back equal to this result."""
+        Returns the path; :meth:`load` reads it back equal to this result. An existing file of that name is replaced,
+        without a warning (``mdsr run`` refuses to without ``--overwrite``)."""
         return save_fields(self, path, "equilibrium")
 
     @classmethod
@@ -162,7 +163,9 @@ class MinimizeOutcome:
         return {f: to_jsonable(getattr(self, f)) for f in self.__dataclass_fields__}
 
     def save(self, path) -> str:
-        """Write the outcome as one ``.npz`` file (arrays exactly); :meth:`load` reads it back."""
+        """Write the outcome as one ``.npz`` file (arrays exactly); :meth:`load` reads it back.
+        An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         return save_fields(self, path, "minimize")
 
     @classmethod

@@ -232,6 +232,8 @@ def write_evaluation(results: Sequence[CaseResult], out: str | os.PathLike, *, n
 
     Everything is rendered before anything is written; then all files are written together
     (:func:`write_together`): an error leaves the previous files untouched. Returns the paths written.
+    Files of those names already in ``out`` are replaced, without a warning (``mdsr evaluate`` refuses to
+    without ``--overwrite``).
     """
     out = Path(out)
     writers = _table_writers(results, out / f"{name}.csv", out / f"{name}.md")

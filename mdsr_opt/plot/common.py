@@ -66,6 +66,43 @@ def panel_axes(fig, nrow, ncol, figsize):
     return fig, fig.subplots(nrow, ncol, squeeze=False)
 
 
+def body_panels(extents, *, height: float = 3.6, max_width: float = 5.0, min_width: float = 2.2,
+                max_height: float = 5.5):
+    """A new figure with one axes per body drawing, side by side, each as wide as its body's aspect ratio asks.
+
+    Fixed figure sizes leave an equal-aspect drawing of a tall, narrow body in the middle of a wide axes box
+    (two panels then sit at the figure's far edges with a blank gap between them); here each box has its
+    drawing's width-to-height ratio, so the drawings fill their boxes and the panels sit a label's width apart.
+
+    Parameters
+    ----------
+    extents : sequence of (width, height)
+        Each panel's data extent (e.g. ``np.ptp(points, axis=0)``), in one length unit.
+    height : float
+        The panels' height in inches, before they are fitted: lowered so that the widest is at most
+        ``max_width`` inches, raised (up to ``max_height``) so that the narrowest is at least ``min_width``
+        (room for its title and ticks).
+
+    Returns
+    -------
+    (Figure, list of Axes)
+    """
+    ratios = [max(float(w), 1e-12) / max(float(h), 1e-12) for w, h in extents]
+    h = min(height, max_width / max(ratios))  # the widest fits
+    if min(ratios) * h < min_width:  # the narrowest gets room for its title, up to max_height
+        h = min(min_width / min(ratios), max_height)
+    h = max(h, 1.0)
+    widths = [min(h * r, max_width) for r in ratios]
+    left, gap, right, bottom, top = 0.75, 1.0, 0.2, 0.6, 0.5  # inches: tick labels, axis labels, titles
+    W, H = left + sum(widths) + gap * (len(widths) - 1) + right, bottom + h + top
+    fig = plt.figure(figsize=(W, H))
+    axes, x = [], left
+    for w in widths:
+        axes.append(fig.add_axes((x / W, bottom / H, w / W, h / H)))
+        x += w + gap
+    return fig, axes
+
+
 def hide_ticks(*axes) -> None:
     """No tick marks or tick labels on ``axes`` (the frame stays): for drawings whose coordinates another
     figure of the same run already gives. Ticks are most of the cost of drawing an axes (each tick is a
@@ -210,6 +247,7 @@ def plot_muscles(x, muscles, ax=None, colors=None, lw=2.5, labels=True):
 def save_figure(fig, path, *, close: bool = False, dpi: float = 130, vector=None) -> str:
     """Write ``fig`` to ``path`` through a temporary file, so no partial file is left; with ``vector``, a
     vector copy beside it (same name, ``.pdf`` or ``.svg``) for papers.
+    An existing file of either name is replaced, without a warning (``mdsr run`` refuses to without ``--overwrite``).
 
     Parameters
     ----------

@@ -8,8 +8,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 
 from ..body.fingerprint import check_same_mesh
 from ..core.quantities import band_text
-from .common import (LEGEND_OUTSIDE, axes_or_new, coordinate_axes, draw_obstacles, plot_edges, plot_mesh,
-                     plot_muscles)
+from .common import (LEGEND_OUTSIDE, axes_or_new, body_panels, coordinate_axes, draw_obstacles, plot_edges,
+                     plot_mesh, plot_muscles)
 from .style import (BODY, CONTRACTION_CMAP, LIGHT, TARGET, axis_label, commanded_achieved, label_colors,
                     symmetric_limits, unit_label)
 
@@ -106,11 +106,11 @@ def plot_routing(mesh, target, result, axes=None, title=None, ticks=True, units=
     >>> mesh = Mesh.rectangle(2.0, 1.0, 8, 4)
     >>> fig = plot_routing(mesh, mesh.points * [0.8, 1.0], route_muscles(mesh, mesh.points * [0.8, 1.0]))
     """
-    if axes is None:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    x = np.asarray(target, dtype=float)
+    if axes is None:  # each panel as wide as its body: no blank gap beside a tall, narrow one
+        fig, axes = body_panels([np.ptp(mesh.points, axis=0), np.ptp(x, axis=0)])
     fig = axes[0].figure
     muscles = list(result)
-    x = np.asarray(target, dtype=float)
     for ax, pos, name in ((axes[0], mesh.points, "rest"), (axes[1], x, "target")):
         plot_mesh(mesh, pos, ax=ax, color=LIGHT["face"], edgecolor=LIGHT["edge"])
         if muscles:

@@ -153,6 +153,9 @@ def save_animation(mesh, states, path, muscles=(), activations=None, titles=None
                    figsize=(8.0, 5.0), dpi=110, units=None) -> str:
     """Write a sequence of states as an animated GIF (looping, Pillow), atomically.
 
+    An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+    ``--overwrite``).
+
     Parameters
     ----------
     mesh : the rest mesh; states : sequence of (n, 2) states, one per frame.

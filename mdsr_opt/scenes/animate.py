@@ -62,7 +62,8 @@ class AnimationResult:
 
     def save(self, path) -> str:
         """Write the animation, its states included, as one ``.npz`` file (arrays exactly); returns the path.
-        :meth:`load` reads it back."""
+        :meth:`load` reads it back. An existing file of that name is replaced, without a warning (``mdsr run`` refuses
+        to without ``--overwrite``)."""
         states = np.asarray(self.states, dtype=float) if self.states else np.zeros((0, 0, 2))
         return save_fields(self, path, "animation", skip=("states",), extra_arrays={"states": states})
 

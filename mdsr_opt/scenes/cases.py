@@ -101,7 +101,9 @@ class CaseSetup:
     def save(self, path: str | os.PathLike) -> str:
         """Write the setup as one ``.npz`` file: the target, the known contractions and the target solve's
         arrays exactly; muscles, times, warnings and the names of scene and case as metadata. The routing
-        (its contraction graph) is not written: :meth:`load` gives ``routing=None``. Returns the path."""
+        (its contraction graph) is not written: :meth:`load` gives ``routing=None``. Returns the path.
+        An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         tr = self.target_result
         arrays = {"target": np.asarray(self.target)}
         if self.known_contractions is not None:

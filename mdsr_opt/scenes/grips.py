@@ -1,10 +1,14 @@
 """A scene case with obstacles through the pipeline: its design's contact keywords, what the stages that
 model no contact say, and the grip report of every disk it touches.
 
-The design of a case with obstacles (:func:`obstacle_design`) takes them in every forward solve and in its
-verification, by the one method that models contact (``"derivative-free"``); an external case's body is
-clamped where its target was anchored (``held``), as :func:`~mdsr_opt.synthesis.pipeline.design_pipeline`
-does; the design's solves are frictionless (friction enters the target's solve and the grip report).
+The design of a case with obstacles (:func:`obstacle_design`) is checked with them: unless the scene names
+``method = "derivative-free"`` (whose search takes them in every forward solve), it is made as
+:func:`~mdsr_opt.design_contractions` makes a design with contact and no method
+(:mod:`~mdsr_opt.synthesis.contactdesign`): by a gradient method without the obstacles, kept when the
+forward solve with them touches nothing, else by the derivative-free search with them; the case's note
+(:func:`design_route`) says which. An external case's body is clamped where its target was anchored
+(``held``), as :func:`~mdsr_opt.synthesis.pipeline.design_pipeline` does; the design's solves are
+frictionless (friction enters the target's solve and the grip report).
 
 A :class:`~mdsr_opt.Disk` stays FIXED where the scene puts it; a
 :class:`~mdsr_opt.scenes.obstacles.FreeDisk` is moved by the case's target until the contacts' net force on
@@ -23,7 +27,7 @@ import numpy as np
 from ..mechanics.obstacles import Disk
 from .obstacles import FreeDisk, case_contact
 
-__all__ = ["PROTOTYPE_NOTE", "BANDS_NOTE", "obstacle_design", "case_grips", "grip_line"]
+__all__ = ["PROTOTYPE_NOTE", "BANDS_NOTE", "obstacle_design", "design_route", "case_grips", "grip_line"]
 
 #: said (report notes, log) for a case with obstacles in place of the virtual prototype's validation
 PROTOTYPE_NOTE = ("prototype: not run for this case: the virtual prototype models no contact, so it would pass "
@@ -35,16 +39,21 @@ BANDS_NOTE = "no band: the bands' designs take no obstacles (a case with obstacl
 def obstacle_design(scene, case, opts: dict, obstacles=None) -> tuple[dict, list[str]]:
     """The design keywords ``opts`` of ``case`` with its obstacles (module docstring; ``obstacles``: as its
     target placed them, :attr:`~mdsr_opt.scenes.cases.CaseSetup.obstacles`, default the case's), and the
-    notes that say what they change: ``(opts, notes)``; ``opts`` unchanged for a case without obstacles."""
+    notes that say what they change: ``(opts, notes)``; ``opts`` unchanged for a case without obstacles. How
+    the design was made is said once it is made (:func:`design_route`): a ``method`` other than
+    ``"derivative-free"`` is taken out (a design with obstacles and no method, module docstring) and a note
+    says so."""
     kw = case_contact(scene, case)
     if not kw:
         return opts, []
     out = dict(opts, obstacles=list(obstacles) if obstacles is not None else kw["obstacles"])
     notes = []
-    asked = out.get("method") or "flattened"
-    if asked != "derivative-free":
-        notes.append(f"design: by method 'derivative-free', the one whose solves take obstacles (not {asked!r})")
-    out["method"] = "derivative-free"
+    asked = out.pop("method", None)
+    if asked == "derivative-free":
+        out["method"] = asked
+    elif asked is not None:
+        notes.append(f"design: method {asked!r} asked, which takes no obstacles: designed without them and "
+                     "checked with them, by the derivative-free search with them when they are touched")
     if case.kind == "external" and out.get("held") is None:
         out["held"] = case.anchors  # mounted where the target was clamped: the obstacles stand in that frame
         notes.append("design: the body clamped at the target's anchors (the obstacles stand in their frame), and "
@@ -54,6 +63,16 @@ def obstacle_design(scene, case, opts: dict, obstacles=None) -> tuple[dict, list
         notes.append(f"design: frictionless contact (the design's solves take no friction; the target's "
                      f"friction {kw['friction']:g} enters its solve and the grip report)")
     return out, notes
+
+
+def design_route(scene, case, design) -> list[str]:
+    """The note saying how the ``design`` of ``case`` met its obstacles (none for a case without them):
+    its :attr:`~mdsr_opt.synthesis.results.DesignResult.contact_route` (a gradient design checked with them
+    and untouched, or the derivative-free search with them and why), or the method named."""
+    if not case_contact(scene, case):
+        return []
+    return [f"design: {design.contact_route}" if design.contact_route else
+            f"design: by method {design.method!r} as named, its search taking the obstacles"]
 
 
 def case_grips(scene, case, x, contact: dict | None, state: str, obstacles=None, free: dict | None = None) -> list[dict]:

@@ -187,8 +187,9 @@ def scene_options(r: Reader, spec, where: str) -> dict:
     if where == "design" and "options" in opts:
         opts["options"] = _solver_options(r, opts["options"], opts)
     if where == "design" and opts.get("contact") and opts.get("method", "derivative-free") != "derivative-free":
-        r.fail(f"{where}.method", f"contact = true is designed by method = \"derivative-free\" only (the other "
-               f"methods solve equations without contact rows), got {opts['method']!r}")
+        r.fail(f"{where}.method", f"contact = true is designed by method = \"derivative-free\", or with no method (a "
+               f"gradient design without contact, checked with it); the other methods solve equations without "
+               f"contact rows, got {opts['method']!r}")
     if where == "design" and "contact_gap" in opts and not opts.get("contact"):
         r.fail(f"{where}.contact_gap", "is the gap of self-contact: set contact = true too")
     return opts

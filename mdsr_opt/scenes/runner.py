@@ -22,7 +22,7 @@ from ..synthesis.results import MuscleWarning
 from ..body.muscles import Muscle
 from .casefab import fixture_wall
 from .cases import CaseSetup, prepare_case
-from .grips import BANDS_NOTE, PROTOTYPE_NOTE, case_grips, grip_line, obstacle_design
+from .grips import BANDS_NOTE, PROTOTYPE_NOTE, case_grips, design_route, grip_line, obstacle_design
 from .names import number_in_scene
 from .obstacles import case_contact
 from .verdict import plain_failure, prototype_verdict, saturation_line
@@ -133,8 +133,9 @@ class CaseReport:
     notes: list = field(default_factory=list)
 
     def __repr__(self) -> str:
-        return compact_repr(self, ("scene", "case", "kind", "success", "n_nodes", "n_muscles", "difference",
-                                   "contractions", "message"))
+        return compact_repr(self, ("scene", "case", "kind", "success"), why="" if self.success else self.message,
+                            extra={k: getattr(self, k) for k in ("n_nodes", "n_muscles", "difference", "contractions")
+                                   + (("message",) if self.success else ())})
 
     def to_dict(self) -> dict:
         """Every field, JSON-ready (NaN as None)."""
@@ -158,9 +159,10 @@ class CaseRun:
 
     def __repr__(self) -> str:
         r = self.report
-        return compact_repr(self, (), extra={"scene": r.scene, "case": r.case, "success": r.success,
-                                             "design": self.design is not None, "photo": self.photo is not None,
-                                             "difference": r.difference})
+        return compact_repr(self, (), why="" if r.success else r.message,
+                            extra={"scene": r.scene, "case": r.case, "success": r.success,
+                                   "design": self.design is not None, "photo": self.photo is not None,
+                                   "difference": r.difference})
 
     def to_dict(self) -> dict:
         """JSON-ready: the report, the setup's and the design's dicts, the photograph's metadata and the
@@ -215,6 +217,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
     """
     from ..synthesis.acceptance import (check_max_difference, design_active, difference_failure, idle_mask,
                                         rest_difference)
+    from ..synthesis.routing_why import no_muscle_message
 
     say = log or (lambda s: None)
     if isinstance(case, str):
@@ -271,8 +274,7 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         say(f"{prefix}FAILED: {rep.message}")
         return run
     if not setup.muscles:
-        why = "; ".join(setup.warnings) or "does the target shorten any edge?"
-        rep.message = f"routing found no muscle on the target ({why})" if setup.routing_error is None else \
+        rep.message = no_muscle_message(setup.warnings) if setup.routing_error is None else \
             f"routing failed: {setup.routing_error}"  # a body too thin for the ropes' inset, a mesh too coarse
         rep.times["total"] = time.perf_counter() - t0
         say(f"{prefix}FAILED: {rep.message}")
@@ -324,6 +326,9 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         return run
     run.design = res
     res.units = scene.units
+    for note in design_route(scene, case, res):  # how a case with obstacles was designed: checked, or searched
+        rep.notes.append(note)
+        say(prefix + note)
     if res.fallback:  # the default flattened design failed: which method designed it (or was tried), and why
         rep.notes.append(f"design: {res.fallback}")
         say(f"{prefix}design: {res.fallback}")
@@ -395,7 +400,8 @@ def run_case(scene: Scene, case: Case | str, *, method: str | None = None, photo
         check_interrupt()
     rep.rest_difference = rest_difference(mesh, setup.target, opts)  # the design's own weights
     far = difference_failure(res.difference, body_size(mesh), accept["max_difference"], units=scene.units,
-                             rest_difference=rep.rest_difference)
+                             rest_difference=rep.rest_difference,
+                             n_anchors=len(case.anchors) if case.kind == "external" else None)
     rep.success = bool(res.success) and not far
     if not res.success:
         rep.message = f"design {'rejected' if 'verification' in res.status else 'failed'}: {plain_failure(res.status)}"

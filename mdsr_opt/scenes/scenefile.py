@@ -99,7 +99,7 @@ def load_scene(path: str | os.PathLike, resolution: str | int | None = None) -> 
         [design]                              # keyword arguments of design_contractions
         a_max = 0.6
         # contact = true                      # self-contact of the outline in every solve (targets, design,
-                                              # animations; design by method "derivative-free"), optional
+                                              # animations; the design checked with it), optional
                                               # contact_gap = a length
         [[obstacles]]                         # optional: rigid obstacles in every case, at rest coordinates
         disk = { center = [2, -1.2], radius = 0.5 }   # or halfplane = { point = [0, -1], normal = [0, 1] }

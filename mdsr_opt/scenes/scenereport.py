@@ -35,7 +35,10 @@ class SceneReport:
 
     def __repr__(self) -> str:
         n_ok = sum(bool(c.success) for c in self.cases)
-        return compact_repr(self, ("scene", "success"), extra={
+        why = "; ".join([f"{c.case}: {c.message}" for c in self.cases if not c.success]  # the failures, first first
+                        + [f"{k}: {a.get('message') or 'failed'}" for k, a in self.animations.items()
+                           if not a.get("success", False)])
+        return compact_repr(self, ("scene", "success"), why=why, extra={
             "cases": f"{n_ok}/{len(self.cases)} ok", "animations": len(self.animations), "n_nodes": self.n_nodes,
             "time": self.time, "out": self.out})
 

@@ -116,6 +116,15 @@ def edge_path(mesh: Mesh, waypoints: ArrayLike, name: str | None = None, boundar
     """
     import networkx as nx
 
+    if not isinstance(waypoints, (str, bytes)) and np.ndim(waypoints) <= 1:  # node ids, or one point
+        given = np.asarray(waypoints)
+        ids = given.dtype.kind in "iu"
+        raise ValueError(
+            "edge_path: waypoints are points (x, y) on the body, one row each, shape (k, 2); got "
+            + (f"{given.item()!r}" + (f" (and name={name!r})" if name is not None else "") if given.ndim == 0
+               else f"{given.tolist()!r:.60}")
+            + (": node ids? give their positions (mesh.points[[i, j]]), or Muscle([...]) for a path of node ids"
+               if ids else ": give at least two points, [[x0, y0], [x1, y1]]"))
     wp = as_float_array(waypoints, "waypoints", shape=(None, 2))
     if len(wp) < 2:
         raise ValueError("a muscle path needs at least two waypoints")
@@ -159,8 +168,8 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
     each end (a muscle that stops short of a corner); it must leave at least two.
     """
     inset = check_int(inset, "boundary_path: inset", 0)
-    a = _snap(mesh, as_float_array(start, "start", shape=(2,)), True, tol, "start")
-    b = _snap(mesh, as_float_array(end, "end", shape=(2,)), True, tol, "end")
+    a = _snap(mesh, _point(start, "start"), True, tol, "start")
+    b = _snap(mesh, _point(end, "end"), True, tol, "end")
     if a == b:
         raise ValueError("start and end snap to the same boundary node")
     for loop in mesh.boundary_loops:
@@ -176,7 +185,7 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
     if via is None:
         path = min(fwd, bwd, key=lambda p: Muscle(p).rest_length(mesh))
     else:
-        v = as_float_array(via, "via", shape=(2,))
+        v = _point(via, "via")
         path = min(fwd, bwd, key=lambda p: float(np.linalg.norm(mesh.points[p] - v, axis=1).min()))
     if inset:
         if len(path) - 2 * inset < 2:
@@ -184,6 +193,14 @@ def boundary_path(mesh: Mesh, start: ArrayLike, end: ArrayLike, via: ArrayLike |
                              "(it must leave at least two)")
         path = path[inset:-inset]
     return Muscle(path, name=name)
+
+
+def _point(value, what: str) -> np.ndarray:
+    """``value`` as a point (x, y); a single integer (a node id given for a point) is refused, saying so."""
+    if not isinstance(value, (bool, np.bool_)) and np.ndim(value) == 0 and np.asarray(value).dtype.kind in "iu":
+        raise ValueError(f"boundary_path: {what} is a point (x, y) near the boundary, got {value!r}: a node id? give "
+                         f"its position (mesh.points[{value!r}])")
+    return as_float_array(value, what, shape=(2,))
 
 
 def edge_graph(mesh: Mesh):

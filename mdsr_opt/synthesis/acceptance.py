@@ -66,6 +66,10 @@ MIN_PROGRESS = 0.1
 #: a target nearer the rest shape than this fraction of the size is "the rest shape": no progress is asked
 REST_TOLERANCE = 1e-3
 
+#: a target nearer the rest shape than this fraction of the size (after alignment) is nearly a rigid motion of it:
+#: :func:`difference_failure` says so when a design makes no progress towards it
+NEAR_RIGID = 0.01
+
 
 class AcceptanceWarning(UserWarning):
     """A design found and verified (``success``) that lies farther from its target than ``mdsr run`` accepts
@@ -145,7 +149,7 @@ def rest_difference(mesh, target, design_options: dict | None = None) -> float:
 
 def difference_failure(difference: float, size: float, max_difference: float = MAX_DIFFERENCE,
                        units: str | None = None, rest_difference: float | None = None,
-                       min_progress: float = MIN_PROGRESS) -> str:
+                       min_progress: float = MIN_PROGRESS, n_anchors: int | None = None) -> str:
     """Why a design's ``difference`` (a length) to its target fails, or ``""`` when it passes.
 
     ``size`` is the body's size, a length: its diameter at rest (:func:`~mdsr_opt.mechanics.anchors.body_size`,
@@ -154,6 +158,12 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     difference to the same target, with the same weights), when it removes less than ``min_progress`` of it:
     ``difference > (1 - min_progress) * rest_difference``; a target within :data:`REST_TOLERANCE` of the
     size of the rest shape asks for no progress. Lengths are quoted in ``units`` (default ``"body units"``).
+
+    Why a design makes no progress is said as the numbers allow: a target within :data:`NEAR_RIGID` of the
+    size of the rest shape after alignment is nearly a rigid motion of it, and with ``n_anchors == 1`` (the
+    number of anchor nodes, when known) that is why: the body turns freely about its one anchor node, the
+    drags turn it and leave the muscles little to do (anchor a region); else "the muscles barely move the
+    body".
 
     Example
     -------
@@ -179,9 +189,19 @@ def difference_failure(difference: float, size: float, max_difference: float = M
     d0 = float(rest_difference)
     if not math.isfinite(d0) or d0 <= REST_TOLERANCE * size or d <= (1.0 - min_progress) * d0:
         return ""
-    return (f"the design removes {percent_beside(1.0 - d / d0, min_progress)} % of the rest shape's difference {d0:.3g} {u} to the "
-            f"target (difference {d:.3g} {u}), less than min_progress {100 * min_progress:g} %: the muscles "
-            "barely move the body")
+    head = (f"the design removes {percent_beside(1.0 - d / d0, min_progress)} % of the rest shape's difference {d0:.3g} {u} "
+            f"to the target (difference {d:.3g} {u}), less than min_progress {100 * min_progress:g} %: ")
+    rigid = f"{100 * d0 / size:.2g} % of the size {size:.3g} {u}"
+    one = n_anchors == 1
+    if one and d0 < NEAR_RIGID * size:
+        return head + (f"the anchors are a single node, about which the body turns freely, so the drags turn it "
+                       f"nearly rigidly (the target differs from the rest shape by {rigid} after alignment) and leave "
+                       "the muscles little to do: anchor a region of several nodes (a larger radius or box)")
+    if d0 < NEAR_RIGID * size:
+        return head + (f"the muscles barely move the body, and the target is nearly a rigid motion of the rest "
+                       f"shape (it differs by {rigid} after alignment): do the anchors hold the body?")
+    return head + "the muscles barely move the body" + (" (the anchors are a single node, about which it turns "
+                                                         "freely)" if one else "")
 
 
 def design_active(mesh, material, muscles: Sequence[Muscle], target, *, idle_contraction: float = IDLE_CONTRACTION,

@@ -24,6 +24,7 @@ from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
 from ..plot.style import muscle_label
 from .contactdesign import check_design_contact, unit_contact
+from .contactroute import design_gradient_first
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
 from .fallback import FALLBACK_METHOD, NESTED_HINT, design_with_fallback
@@ -66,12 +67,17 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     target : (n, 2) array
         Target node positions, in any pose (only the shape matters).
     method : {"flattened", "nested", "derivative-free"}, optional
-        See the module docstring. Default ``"flattened"``, or ``"derivative-free"`` with contact (the only
-        method that takes it), or ``"nested"`` with ``held`` nodes and no contact (the flattened NLP pins the
-        three gauge coordinates only). A default flattened design that fails (not converged, or rejected by
-        its verification) is made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's
-        ``method``, ``fallback`` and ``status`` say so); a named ``"flattened"``, or one given IPOPT
-        ``options``, is not, its failure's ``status`` suggesting ``"nested"``.
+        See the module docstring. Default ``"flattened"``, or ``"nested"`` with ``held`` nodes (the flattened
+        NLP pins the three gauge coordinates only). With contact and no method: that method without the
+        contacts, kept when a forward solve with them from rest at its contractions touches nothing and
+        lands on its state and it passes its verification with them; else ``"derivative-free"`` with the
+        contacts, started from its contractions (:mod:`~mdsr_opt.synthesis.contactdesign`; ``method`` of
+        the result says which, ``status`` why). ``"derivative-free"`` named with contact searches with the
+        contacts from the start; ``"flattened"`` and ``"nested"`` named with contact are refused. Without
+        contact, a default flattened design that fails (not converged, or rejected by its verification) is
+        made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's ``method``,
+        ``fallback`` and ``status`` say so); a named ``"flattened"``, or one given IPOPT ``options``, is not,
+        its failure's ``status`` suggesting ``"nested"``.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -158,8 +164,11 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         nodes: give them for a body mounted on a base, as :func:`design_pipeline` does). Every forward
         solve of the design and the verification's (from rest, and the design state's stability on the
         tangent space of its pushing contacts) models them; the design's state ``x`` stays in the obstacles'
-        frame. Designed by ``method="derivative-free"`` only (:mod:`~mdsr_opt.synthesis.contactdesign`);
-        ``contact`` of the result reports the verified state's contact forces.
+        frame. The search takes them by ``method="derivative-free"`` only; without a method a gradient design
+        that never touches them is checked with them and kept (``method`` above;
+        :mod:`~mdsr_opt.synthesis.contactdesign`); ``tol``, ``max_iter``, ``outer`` and ``options`` are then
+        the derivative-free search's, when it runs. ``contact`` of the result reports the verified state's
+        contact forces.
     held : node indices, optional
         Nodes clamped at their rest positions in every forward solve and the verification, as a robot
         mounted on its base (:func:`~mdsr_opt.solve_internal`'s ``held``; at least two nodes, integers in range,
@@ -196,12 +205,27 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     """
     initial = initial_guess
     clock0 = time.perf_counter()
+    if method is None and (contact is True or check_obstacles(obstacles)):
+        # contact, no method named: a gradient design without it, checked with it, else derivative-free
+        common = {"a_max": a_max, "initial_guess": initial_guess, "weights": weights,
+                  "interior_weight": interior_weight, "muscle_model": muscle_model, "stiffness": stiffness,
+                  "anchor_radius": anchor_radius, "warm_start": warm_start, "inner_tol": inner_tol, "verify": verify,
+                  "skip_verification": skip_verification, "gap_rtol": gap_rtol, "fixture_wall": fixture_wall,
+                  "held": held}
+        ckw = check_design_contact(mesh, material, contact, obstacles, contact_gap, None)  # at the door
+        if outer not in ("nelder-mead", "powell"):
+            raise ValueError(f"outer must be 'nelder-mead' or 'powell', got {outer!r}")
+        check_design_options(options, "derivative-free", outer)
+        return design_gradient_first(design_contractions, mesh, material, muscles, target, clock0, common,
+                                     {"hessian": hessian, "scaling": scaling, "derivatives": derivatives},
+                                     {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
+                                     {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap},
+                                     ckw, VERIFY_TOL)
     # a default flattened design that fails is made again by the nested method, unless the caller addressed the
     # flattened method: named it, or gave IPOPT options (synthesis.fallback)
     named = method is not None or options is not None
-    if method is None:  # contact is designed derivative-free (bad contact input is refused just below)
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
-            "flattened" if held is None else "nested"
+    if method is None:  # held nodes: the flattened NLP pins the gauge only
+        method = "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if hessian not in ("exact", "gauss-newton"):

@@ -38,9 +38,11 @@ silicone presets: Pa) and the length unit are known, else in units of ``E * thic
 (:func:`~mdsr_opt.core.quantities.tension_unit`). Input is checked completely before anything is written, and each
 file is written atomically, so bad input leaves nothing behind. A layout that cannot be moulded is still
 written, with a :class:`~mdsr_opt.synthesis.fabrication.FabricationWarning` naming the muscles, the distance and
-the clearance required. A design that failed, or whose stroke would stretch a rope, is refused unless
+the clearance required. A design that failed, that the acceptance rule rejects (a PipelineResult's
+``far_from_target``: the case ``mdsr run`` fails), or whose stroke would stretch a rope, is refused unless
 ``allow_failed=True``, and then every file says ``FAILED DESIGN: <reason>, do not build``
-(:mod:`~mdsr_opt.synthesis.export_checks`). The channel, wall and fixtures drawn are those the layout was
+(:mod:`~mdsr_opt.synthesis.export_checks`). Files of the same name already in the folder are replaced
+(``mdsr run`` refuses a folder with files in it unless ``--overwrite``; here give another ``out`` or ``name``). The channel, wall and fixtures drawn are those the layout was
 routed with unless told otherwise.
 """
 
@@ -66,6 +68,7 @@ from ..body.muscles import Muscle, check_muscles
 from ..core.checks import check_stem
 from ..core.quantities import LENGTH_UNITS, length_unit, tension_unit
 from ..core.results import compact_repr, to_jsonable
+from ..mechanics.anchors import body_size
 from ..plot.style import layout_colors, muscle_label, muscle_name
 from .export_checks import failed_mark, not_mouldable
 from .export_dxf import dxf_text, fixture_plates, label_points
@@ -239,7 +242,8 @@ def fabrication_data(mesh: Mesh, design=None, *, muscles: Sequence[Muscle] | Non
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh must be a Mesh, got {type(mesh).__name__}")
     _check_design_type(design, muscles)
-    failure = "; ".join(w for w in (design_failure(design), failure.strip()) if w)
+    size = body_size(mesh) if isinstance(design, PosesResult) else None  # its poses judged as mdsr run's
+    failure = "; ".join(w for w in (design_failure(design, size), failure.strip()) if w)
     if isinstance(design, PipelineResult):  # the design with the muscles it was made for
         design, muscles = design.design, design.muscles if muscles is None else muscles
     elif muscles is None and not isinstance(design, (PosesResult, Mapping)):
@@ -511,9 +515,10 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     material : optional: the body's material, for the tensions' unit when the design does not record it
         (:func:`fabrication_data`).
     allow_failed : bool, default False
-        Write the files of a design that is not to be built (it failed, or a muscle's stroke would stretch
-        its rope: :mod:`~mdsr_opt.synthesis.export_checks`); every file then says ``FAILED DESIGN: <reason>,
-        do not build`` (the SVG's title and caption, a DXF text, the CSV's first line) and a warning says so.
+        Write the files of a design that is not to be built (it failed, the acceptance rule rejects it: a
+        PipelineResult's ``far_from_target``, or a muscle's stroke would stretch its rope:
+        :mod:`~mdsr_opt.synthesis.export_checks`); every file then says ``FAILED DESIGN: <reason>, do not
+        build`` (the SVG's title and caption, a DXF text, the CSV's first line) and a warning says so.
     failure : str, optional
         Why the design is not to be built beyond what it records (a gait whose schedule failed): it is then
         a failed design as above.
@@ -521,7 +526,9 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
     Returns
     -------
     dict
-        ``{"svg": path, "dxf": path, "csv": path}``.
+        ``{"svg": path, "dxf": path, "csv": path}``. Files of those names already in ``out`` are replaced
+        (each atomically), without a warning: unlike ``mdsr run``, which refuses a folder with files in it
+        unless ``--overwrite``.
 
     Raises
     ------
@@ -529,8 +536,8 @@ def export_fabrication(mesh: Mesh, design, out, *, muscles: Sequence[Muscle] | N
         Unknown units, a design of another mesh (:func:`~mdsr_opt.body.fingerprint.check_same_mesh`) or of
         other muscles, missing muscles, a name that is no plain file stem
         (:func:`~mdsr_opt.core.checks.check_stem`), ``out`` naming an existing file, a channel, wall or
-        fixture too large for the body, a fabrication other than the routed one, a failed design without
-        ``allow_failed``: before anything is written.
+        fixture too large for the body, a fabrication other than the routed one, a failed or not accepted
+        design (``far_from_target``) without ``allow_failed``: before anything is written.
 
     Warns
     -----

@@ -44,20 +44,37 @@ def not_mouldable(conflicts, marked: str = "") -> str:
     return f"NOT MOULDABLE as laid out ({where}): " + "; ".join(cf.message for cf in conflicts)
 
 
-def design_failure(design) -> str:
+def design_failure(design, size: float | None = None) -> str:
     """Why ``design`` (anything :func:`~mdsr_opt.synthesis.export.fabrication_data` reads) is no design to
     build, in one phrase naming the failed pose(s) and their status; "" when it succeeded (or is None: a
-    layout alone)."""
+    layout alone).
+
+    A :class:`~mdsr_opt.synthesis.pipeline.PipelineResult` that is a success but that the acceptance rule
+    rejects (its ``far_from_target``, with an :class:`~mdsr_opt.synthesis.acceptance.AcceptanceWarning`: the
+    case ``mdsr run`` fails) is no design to build either: "too far from the target (<its reason>)". A
+    :class:`~mdsr_opt.synthesis.poses_result.PosesResult`'s poses that barely move the body are not
+    ``pose_success`` already; given the body's ``size`` (a length, its diameter at rest), a designed pose
+    whose difference is above :data:`~mdsr_opt.synthesis.acceptance.MAX_DIFFERENCE` of it is named too, "too
+    far from its target" (the pose a gait schedule reports not reached). A bare DesignResult records no
+    acceptance (its caller's ``failure`` says it)."""
     from .pipeline import PipelineResult
     from .poses_result import PosesResult
 
     if design is None:
         return ""
-    if isinstance(design, PipelineResult):
-        return "" if design.success else f"the design failed ({one_line(design.design.status, 300)})"
+    if isinstance(design, PipelineResult):  # failed, or a success the acceptance rule rejects (as mdsr run does)
+        why = ([] if design.success else [f"the design failed ({one_line(design.design.status, 300)})"]) + \
+            ([f"too far from the target ({one_line(design.far_from_target, 300)})"] if design.far_from_target else [])
+        return "; ".join(why)
     if isinstance(design, PosesResult):
+        from .acceptance import difference_failure
+
         why = [f"pose {n}: {one_line(s, 160)}" for n, s, ok in zip(design.names, design.status, design.pose_success)
                if not ok] + [one_line(p, 160) for p in design.problems]
+        if size is not None:  # designed, but too far from its target: the 5 % rule of mdsr run and the gait
+            why += [f"pose {n}: too far from its target ({far})" for n, d, ok in
+                    zip(design.names, design.differences, design.pose_success)
+                    if ok and (far := difference_failure(float(d), size, units=design.units))]
         return "" if not why else "the layout's design failed (" + "; ".join(why) + ")"
     items = dict(design) if isinstance(design, Mapping) else {"design": design}
     why = [(f"{k}: " if len(items) > 1 else "") + one_line(getattr(d, "status", "not a success"), 160)

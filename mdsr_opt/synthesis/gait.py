@@ -238,7 +238,9 @@ class GaitSchedule:
 
     def save(self, path: str | os.PathLike) -> str:
         """Write the schedule, states included, as one ``.npz`` file (arrays exactly); returns the path.
-        :meth:`load` reads it back; :meth:`write_csv` writes the actuation table instead."""
+        :meth:`load` reads it back; :meth:`write_csv` writes the actuation table instead.
+        An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         return save_fields(self, path, "gait_schedule")
 
     @classmethod
@@ -448,7 +450,8 @@ def _unreached(layout: PosesResult, pose: str, diff: float, size: float, max_dif
 def save_gait_animation(mesh: Mesh, schedule: GaitSchedule, muscles: Sequence[Muscle], path, title: str = "",
                         fps: float = 8.0) -> str:
     """Replay a schedule on its shared layout as a GIF (:func:`mdsr_opt.plot.scenes.save_animation`); ``mesh`` must be
-    the body the schedule was solved on."""
+    the body the schedule was solved on. An existing
+    file of that name is replaced, without a warning (``mdsr run`` refuses to without ``--overwrite``)."""
     from ..plot.scenes import save_animation
 
     if not isinstance(mesh, Mesh):

@@ -29,6 +29,7 @@ from .acceptance import (IDLE_CONTRACTION, AcceptanceWarning, DroppedMuscle, des
 from .results import DesignResult, finite_or_none
 from .routing_result import DroppedUnit, MuscleStats, RoutingResult
 from .routing import RoutingWarning, route_for_design
+from .routing_why import no_muscle_message
 from .fabrication import Fabrication, check_channel_fits, check_fabrication, rope_conflicts, warn_conflicts
 
 _LOG = logging.getLogger(__name__)
@@ -105,14 +106,23 @@ class PipelineResult:
     def contractions(self) -> np.ndarray:
         return self.design.contractions
 
+    @property
+    def reason(self) -> str:
+        """Why this is no design to build, in one phrase ("" when it is one): the design's
+        (:attr:`DesignResult.reason <mdsr_opt.synthesis.results.DesignResult.reason>`), else
+        :attr:`far_from_target` (its ``repr`` shows them as ``why=...``, ``far_from_target=...``)."""
+        return self.design.reason or self.far_from_target
+
     def __repr__(self) -> str:
         d = self.design
-        return compact_repr(self, ("success",), extra={
-            "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
-            "difference": d.difference, "contractions": d.contractions,
-            **({"saturated": d.saturated_names} if d.saturated.any() else {}),
-            **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
-            "total_time": self.times.get("total", float("nan"))})
+        why = self.reason  # then the difference first: the figure that says how far, before what was left out
+        return compact_repr(self, ("success",), why=why, why_name="why" if d.reason else "far_from_target",
+                            extra={**({"difference": d.difference} if why else {}),
+                                   "n_nodes": self.mesh.n_nodes, "n_muscles": len(self.muscles), "method": d.method,
+                                   "difference": d.difference, "contractions": d.contractions,
+                                   **({"saturated": d.saturated_names} if d.saturated.any() else {}),
+                                   **({"dropped": [m.name for m in self.dropped]} if self.dropped else {}),
+                                   "total_time": self.times.get("total", float("nan"))})
 
     def table(self) -> str:
         """The stroke table (:meth:`DesignResult.muscle_table`, with the stroke bands when computed), then
@@ -147,7 +157,23 @@ class PipelineResult:
 
     def save(self, out: str | os.PathLike) -> str:
         """Write ``design.json`` and the meshes ``target.vtu`` and ``driven.vtu`` (states as displacements)
-        into the folder ``out`` (created if missing), each atomically. Returns the JSON path."""
+        into the folder ``out`` (created if missing), each atomically.
+
+        Parameters
+        ----------
+        out : str or path-like
+            The folder; :meth:`load` reads it back.
+
+        Returns
+        -------
+        str
+            The path of ``design.json``.
+
+        Notes
+        -----
+        Files of those three names already in ``out`` are replaced, without a warning (``mdsr run`` refuses a
+        folder with files in it unless ``--overwrite``): give a new folder to keep an earlier result.
+        """
         from ..body.io import write_json, write_mesh
 
         directory = os.fspath(out)
@@ -324,8 +350,11 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     routing_options : dict, optional
         Keyword arguments for :func:`~mdsr_opt.synthesis.routing.route_muscles` (``K_a``, ``K_b``, ``max_muscles``...).
     method : str, optional
-        The design method (see :func:`design_contractions`; default ``"flattened"``, with contact
-        ``"derivative-free"``). A default flattened design that fails is made again by ``"nested"``
+        The design method (see :func:`design_contractions`; default ``"flattened"``, ``"nested"`` with
+        ``held`` nodes). With contact and no method, each design is made by that gradient method without the
+        contacts and kept when, checked with them, it touches nothing; else by ``"derivative-free"`` with
+        them, started from its contractions (``.design.method`` says which, ``.design.status`` why). Without
+        contact, a default flattened design that fails is made again by ``"nested"``
         (:mod:`~mdsr_opt.synthesis.fallback`: ``.design.method`` and ``.design.fallback`` say so).
     contact, obstacles : optional
         Contact (as in :func:`~mdsr_opt.solve_external`) in the target's solve and in the design and its
@@ -380,8 +409,14 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     SolverFailure
         The external-driving solve (the target) failed.
     ValueError
-        Routing found no muscle (e.g. a target that only stretches the body), or bad input (no drags, at
-        the door).
+        Bad input, at the door (no drags, say). And, after the target has been solved (with contact that can
+        take a while), when routing (``muscles`` not given) lays no muscle on it: a target that only
+        stretches the body, contracted edges outside the buildable band of a mesh too coarse for the ropes'
+        inset, units all shorter than ``min_length``. The message is the one ``mdsr run`` fails that case
+        with, ``routing found no muscle on the target (<the routing's reasons, with values that would
+        work>)`` (:func:`~mdsr_opt.synthesis.routing_why.no_muscle_message`), then ``; pass muscles=... or
+        relax routing_options``. A body or mesh that holds no rope at all raises the routing's
+        :class:`~mdsr_opt.core.errors.LayoutError` (a ValueError; ``mdsr run``: "routing failed: ...").
 
     Example
     -------
@@ -421,9 +456,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     if ("contact" in eopts or "obstacles" in eopts) and (contact is not False or obstacles is not None):
         raise ValueError("give contact and obstacles once: as design_pipeline's keywords, not in external_options")
     named = method is not None  # a default flattened design that fails is made again by the nested method
-    if method is None:  # as design_contractions chooses (held nodes: the nested method without contact)
-        method = "derivative-free" if contact is True or check_obstacles(obstacles) else \
-            "flattened" if design_options.get("held") is None else "nested"
+    if method is None and not (contact is True or check_obstacles(obstacles)):
+        # as design_contractions chooses (held nodes: the nested method); with contact it chooses per design: a
+        # gradient design checked with the contacts, else derivative-free (mdsr_opt.synthesis.contactdesign)
+        method = "flattened" if design_options.get("held") is None else "nested"
     ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
     anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=mesh.n_nodes)
     if ckw.get("obstacles") and design_options.get("held") is None:
@@ -452,11 +488,9 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
         for w in caught:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         mus = tuple(rr.muscles)
-        if not mus:
-            why = "; ".join(str(w.message) for w in caught if issubclass(w.category, RoutingWarning)) or (
-                "muscles can only contract: does the target shorten any edge?")
-            raise ValueError(f"routing found no muscle for this target ({why}); pass muscles=... or relax "
-                             "routing_options")
+        if not mus:  # the sentence mdsr run fails the case with, and what to change in Python
+            why = no_muscle_message(str(w.message) for w in caught if issubclass(w.category, RoutingWarning))
+            raise ValueError(f"{why}; pass muscles=... or relax routing_options")
         routing = rr
         design_options["anchor_radius"] = rr.fixture_radius  # the fixtures the ropes fit with
     else:
@@ -470,8 +504,10 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     design_options.setdefault("fixture_wall", (ropts["fabrication"] or Fabrication()).for_body(mesh).wall)
     t2 = time.perf_counter()
     design_options.setdefault("verify", PIPELINE_VERIFY)
-    _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method,
-              " with contact (each trial a contact solve; progress below)" if ckw else "")
+    _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method or
+              f"method {'nested' if design_options.get('held') is not None else 'flattened'} without contact, "
+              "checked with it (derivative-free with it when it touches)",
+              " with contact (each trial a contact solve; progress below)" if ckw and method else "")
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction,
                                       method=method if named or method != "flattened" else None, **design_options)
     res.units = units
@@ -483,7 +519,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
                          target=ext.x.copy(), external=ext, muscles=mus, routing=routing, design=res,
                          times=times, dropped=dropped,
                          fabrication=routing.fabrication if routing is not None else ropts["fabrication"] or None)
-    out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units,
+    out.far_from_target = difference_failure(res.difference, body_size(mesh), units=units, n_anchors=len(anc),
                                              rest_difference=rest_difference(mesh, ext.x, design_options))
     if res.success and out.far_from_target:
         warnings.warn(f"design_pipeline: the design is a verified stable state, but {out.far_from_target}: "

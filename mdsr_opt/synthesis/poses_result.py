@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..body.muscles import Muscle
+from ..core.results import MAX_REPR, WHY_CHARS, one_line
 from ..plot.style import muscle_label
 from .acceptance import DroppedMuscle
 from .fabrication import Fabrication
@@ -153,8 +154,19 @@ class PosesResult:
         if len(per) > 90:  # many poses: the range, not one figure per pose (one short line)
             per = f"{np.nanmin(self.differences):.3g}..{np.nanmax(self.differences):.3g}"
         sep = int(self.separate_n_muscles.sum())
-        return (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
-                f"difference {per}, success={self.success}" + (", layout NOT mouldable)" if self.problems else ")"))
+        head = (f"PosesResult({len(self.names)} poses, {self.n_muscles} shared muscles (separate layouts: {sep}), "
+                f"difference {per}, success={self.success}")
+        tail = ", layout NOT mouldable)" if self.problems else ")"
+        room = MAX_REPR - len(head) - len(tail) - len(", why=''")  # one line, as every result's repr
+        why = "" if self.success else f", why={one_line(self.reason, max(min(room, WHY_CHARS), 30))!r}"
+        return head + why + tail
+
+    @property
+    def reason(self) -> str:
+        """Why the result is no success, in one phrase ("" when it is one): each failed pose's status, then
+        the layout's :attr:`problems` (its ``repr`` shows it as ``why=...``)."""
+        return "; ".join([f"pose {n}: {' '.join(str(s).split())}" for n, s, ok in
+                          zip(self.names, self.status, self.pose_success) if not ok] + [str(p) for p in self.problems])
 
     def table(self) -> str:
         """Per pose: difference on the shared layout and on its own, and the strokes."""
@@ -231,7 +243,9 @@ class PosesResult:
                                  for g in d.get("dropped", ())))
 
     def save(self, path) -> str:
-        """Write :meth:`to_dict` as JSON (atomically), tagged :data:`FORMAT`. Returns the path."""
+        """Write :meth:`to_dict` as JSON (atomically), tagged :data:`FORMAT`. Returns the path.
+        An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         from ..body.io import write_json
 
         return write_json(path, {"format": FORMAT, **self.to_dict()})

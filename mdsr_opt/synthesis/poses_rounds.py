@@ -82,6 +82,7 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
     """Is the separate ``(muscles, DesignResult)`` the design ``design_contractions(mesh, ..., engaged,
     **dopt)`` would make (same muscles in the same order, same recorded options)?"""
     from ..mechanics.anchors import anchor_radius_or_default
+    from .contactdesign import gradient_method
     from .contractions import design_contractions
     from .fallback import FALLBACK_METHOD
 
@@ -91,11 +92,14 @@ def same_design(mesh, sep, engaged, dopt) -> bool:
     default = inspect.signature(design_contractions).parameters  # the options' defaults, not copies of them
     for key in ("method", "a_max", "muscle_model", "stiffness", "verify", "fixture_wall"):
         want = dopt.get(key, default[key].default)
-        if key == "method" and want is None:  # design_contractions' choice: derivative-free with contact
-            want = "derivative-free" if dopt.get("contact") or dopt.get("obstacles") else "flattened"
+        if key == "method" and want is None:  # design_contractions' choice: with contact either route
+            grad = gradient_method(dopt.get("held"))
+            allowed = (grad, "derivative-free") if dopt.get("contact") or dopt.get("obstacles") else (grad,)
             if getattr(d, "fallback", "") and d.method == FALLBACK_METHOD:  # the default's own fallback
-                want = d.method
-        if key == "verify":
+                allowed += (FALLBACK_METHOD,)
+            if d.method not in allowed:
+                return False
+        elif key == "verify":
             if want and d.verification is None:
                 return False
             if want and want != "design" and not str(d.verification.forward_start or "rest").startswith("rest"):

@@ -199,6 +199,11 @@ class DesignResult:
     stress_unit : str or None
         The unit of the material's constants (``"Pa"`` for the silicone presets), None when dimensionless:
         with ``units`` it gives the tensions in newtons (:meth:`tensions_in_unit`).
+    contact_route : str
+        A design with contact and no method named (:mod:`~mdsr_opt.synthesis.contactdesign`): how it was made,
+        ``"by method 'nested' without the obstacles, then checked with them: untouched ..."`` or ``"by method
+        'derivative-free' with the obstacles, started from the contractions of the nested design without
+        them, which touches ..."``; empty otherwise.
     fallback : str
         Why another method than the default designed it: ``""`` when the method asked for (or the default)
         did; else what failed and what designed it instead (the default flattened design that fails is
@@ -245,6 +250,7 @@ class DesignResult:
     relative_max_error: float = float("nan")
     max_error_node: int = -1
     fallback: str = ""
+    contact_route: str = ""
 
     @property
     def contact(self) -> dict | None:
@@ -256,9 +262,25 @@ class DesignResult:
         return contact_in_unit(c, self.stress_unit, self.units)
 
     def __repr__(self) -> str:
-        extra = {"saturated": self.saturated_names} if self.saturated.any() else {}
+        extra = {"difference": self.difference, "contractions": self.contractions}
+        if self.saturated.any():
+            extra["saturated"] = self.saturated_names
         extra.update(muscle_model=self.muscle_model, x=self.x, time=self.time)
-        return compact_repr(self, ("method", "success", "difference", "contractions"), extra=extra)
+        return compact_repr(self, ("method", "success"), why=self.reason, extra=extra)
+
+    @property
+    def reason(self) -> str:
+        """Why the design is no success, in one phrase ("" when it is one): its :attr:`status`, and the
+        verification's message when the verification failed and the status does not give it already (its
+        ``repr`` shows it as ``why=...``)."""
+        if self.success:
+            return ""
+        why = " ".join(str(self.status or "").split()) or "not a success"
+        v = self.verification
+        said = " ".join(str(getattr(v, "message", "") or "").split())
+        if v is not None and not v.passed and said and said[:60] not in why:
+            why += f"; verification: {said}"
+        return why
 
     @property
     def bounds(self) -> np.ndarray:
@@ -427,7 +449,8 @@ class DesignResult:
         :class:`~mdsr_opt.synthesis.pipeline.PipelineResult`, which holds meshes too, is saved into a folder).
 
         Returns the path; :meth:`load` reads it back equal to this result (:meth:`to_dict` is the JSON
-        view)."""
+        view). An existing file of that name is replaced, without a warning (``mdsr run`` refuses to without
+        ``--overwrite``)."""
         return save_fields(self, path, "design")
 
     @classmethod

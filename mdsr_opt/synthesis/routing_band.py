@@ -99,19 +99,23 @@ def _moved(P, path, band, jump: float) -> list[np.ndarray]:
     return pieces
 
 
-def _turn_moves(P, E, ks, turn_limit: float):
+def _turn_moves(P, E, ks, turn_limit: float, used=None):
     """The line graph of the edges ``ks`` for shortest paths that never turn by more than ``turn_limit`` (as
     ``1 - cos``): one state per directed edge (``j < m``: row ``ks[j]`` forward, ``j >= m``: backward), and a
     move from ``u -> v`` to ``v -> w`` (``w != u``) where the turn at ``v`` is within the limit. Returns the
-    directed edges' start and end nodes and the moves as two index arrays."""
+    directed edges' start and end nodes and the moves as two index arrays. ``used`` (a mask over ``ks``): only
+    the moves between those edges, in the same order as among all moves (the rest would be barred anyway)."""
     m = len(ks)
     s = np.concatenate([E[ks, 0], E[ks, 1]])
     t = np.concatenate([E[ks, 1], E[ks, 0]])
+    on = np.ones(2 * m, dtype=bool) if used is None else np.concatenate([used, used])
     order = np.argsort(s, kind="stable")
+    order = order[on[order]]  # the directed edges used, by start node (stable: by state within a node)
     ptr = np.searchsorted(s[order], np.arange(len(P) + 1))
-    deg = ptr[t + 1] - ptr[t]                        # moves out of each directed edge's end node
-    j1 = np.repeat(np.arange(2 * m), deg)
-    j2 = order[np.repeat(ptr[t], deg) + (np.arange(len(j1)) - np.repeat(np.cumsum(deg) - deg, deg))]
+    src = np.flatnonzero(on)
+    deg = ptr[t[src] + 1] - ptr[t[src]]              # moves out of each used directed edge's end node
+    j1 = np.repeat(src, deg)
+    j2 = order[np.repeat(ptr[t[src]], deg) + (np.arange(len(j1)) - np.repeat(np.cumsum(deg) - deg, deg))]
     vec = P[t] - P[s]  # each directed edge's vector and length, gathered per move below
     norm = np.linalg.norm(vec, axis=1)
     cos = (vec[j1] * vec[j2]).sum(axis=1) / (norm[j1] * norm[j2])
@@ -176,46 +180,51 @@ def snap_into_band(mesh, paths, usable: np.ndarray, contracted: np.ndarray, clea
     on = np.zeros(mesh.n_nodes, dtype=bool)
     on[E[ks].ravel()] = True
     nodes = np.flatnonzero(on)
-    node_pts = shapely.points(P[nodes])
     mid_xy = 0.5 * (P[E[ks, 0]] + P[E[ks, 1]])
     weight = mesh.edge_lengths[ks] * np.where(contracted[ks], 1.0, STRETCHED_COST)
-    s, t, j1, j2 = _turn_moves(P, E, ks, max(turn_limit, 1.0 - math.cos(math.radians(SNAP_TURN))))
+    parts = [(r, Q) for r, path in enumerate(paths) for Q in _moved(P, path, band, clearance + h)]
+    # the box about each moved rope its edges are measured in (a cost is finite only there): the moves
+    # between edges in none of them would be barred, so they are not made
+    boxes = [(Q.min(axis=0) - CORRIDOR * h, Q.max(axis=0) + CORRIDOR * h) for _, Q in parts]
+    inbox = [np.flatnonzero(np.all((mid_xy >= lo) & (mid_xy <= hi), axis=1)) for lo, hi in boxes]
+    used = np.zeros(len(ks), dtype=bool)
+    for box in inbox:
+        used[box] = True
+    s, t, j1, j2 = _turn_moves(P, E, ks, max(turn_limit, 1.0 - math.cos(math.radians(SNAP_TURN))), used)
     M = len(s)
     out = []
-    for r, path in enumerate(paths):
-        for Q in _moved(P, path, band, clearance + h):
-            line = LineString(Q)
-            lo, hi = Q.min(axis=0) - CORRIDOR * h, Q.max(axis=0) + CORRIDOR * h  # measured only near the rope
-            box = np.flatnonzero(np.all((mid_xy >= lo) & (mid_xy <= hi), axis=1))
-            off = np.full(len(ks), np.inf)
-            off[box] = shapely.distance(shapely.points(mid_xy[box]), line) / h
-            cost = np.where(off <= CORRIDOR, weight * (1.0 + off ** 2), np.inf)
-            near = np.zeros(len(nodes), dtype=bool)  # nodes in the corridor along the moved rope
-            along = np.full(len(nodes), -np.inf)
-            nb = np.flatnonzero(np.all((P[nodes] >= lo) & (P[nodes] <= hi), axis=1))
-            near[nb] = shapely.distance(node_pts[nb], line) <= h
-            along[nb] = shapely.line_locate_point(line, node_pts[nb])
-            pos = -np.inf
-            while True:  # cover the moved rope with the farthest-reaching chains, past each gap of the mesh
-                cand = np.flatnonzero(near & (along > pos))
-                if len(cand) == 0:
-                    break
-                a = int(nodes[cand[np.argmin(along[cand])]])
-                dist, pred = _cheapest_from(s, t, j1, j2, cost, a)
-                reach = np.flatnonzero(np.isfinite(dist))
-                ends = reach[np.isin(t[reach], nodes[near])]
-                if len(ends) == 0:
-                    pos = along[nodes == a][0]
-                    continue
-                far = along[np.searchsorted(nodes, t[ends])]
-                best = ends[np.lexsort((dist[ends], -np.round(far / (1e-6 * h))))[0]]
-                chain, j = [int(t[best])], int(best)
-                while j != M:
-                    chain.append(int(s[j]))
-                    j = int(pred[j])
-                chain.reverse()
-                if len(set(chain)) == len(chain):
-                    out.append((r, chain))
-                # past the chain's end, and never back to its start (which would give the same chain again)
-                pos = max(float(along[np.searchsorted(nodes, chain[-1])]) + h, float(along[nodes == a][0]))
+    for (r, Q), (lo, hi), box in zip(parts, boxes, inbox):
+        line = LineString(Q)
+        off = np.full(len(ks), np.inf)
+        off[box] = shapely.distance(shapely.points(mid_xy[box]), line) / h
+        cost = np.where(off <= CORRIDOR, weight * (1.0 + off ** 2), np.inf)
+        near = np.zeros(len(nodes), dtype=bool)  # nodes in the corridor along the moved rope
+        along = np.full(len(nodes), -np.inf)
+        nb = np.flatnonzero(np.all((P[nodes] >= lo) & (P[nodes] <= hi), axis=1))
+        node_pts = shapely.points(P[nodes[nb]])
+        near[nb] = shapely.distance(node_pts, line) <= h
+        along[nb] = shapely.line_locate_point(line, node_pts)
+        pos = -np.inf
+        while True:  # cover the moved rope with the farthest-reaching chains, past each gap of the mesh
+            cand = np.flatnonzero(near & (along > pos))
+            if len(cand) == 0:
+                break
+            a = int(nodes[cand[np.argmin(along[cand])]])
+            dist, pred = _cheapest_from(s, t, j1, j2, cost, a)
+            reach = np.flatnonzero(np.isfinite(dist))
+            ends = reach[np.isin(t[reach], nodes[near])]
+            if len(ends) == 0:
+                pos = along[nodes == a][0]
+                continue
+            far = along[np.searchsorted(nodes, t[ends])]
+            best = ends[np.lexsort((dist[ends], -np.round(far / (1e-6 * h))))[0]]
+            chain, j = [int(t[best])], int(best)
+            while j != M:
+                chain.append(int(s[j]))
+                j = int(pred[j])
+            chain.reverse()
+            if len(set(chain)) == len(chain):
+                out.append((r, chain))
+            # past the chain's end, and never back to its start (which would give the same chain again)
+            pos = max(float(along[np.searchsorted(nodes, chain[-1])]) + h, float(along[nodes == a][0]))
     return out

@@ -81,11 +81,11 @@ def _where(P, path) -> str:
     return f"the rope from ({a[0]:.4g}, {a[1]:.4g}) to ({b[0]:.4g}, {b[1]:.4g})"
 
 
-def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: float, dist) -> tuple:
+def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: float, dist, tol: float) -> tuple:
     """The longest part of ``path`` that can be moulded beside the ``stronger`` ropes: every segment at least
     ``channel + wall`` from their centre lines and ``r + channel / 2 + wall`` from their fixtures; its ends (its
     fixtures) also ``r + channel / 2 + wall`` from their lines, ``2 r + wall`` from their fixtures and
-    ``need`` inside the body. Empty when no such part of two nodes or more exists."""
+    ``need`` inside the body (each up to ``tol``). Empty when no such part of two nodes or more exists."""
     import shapely
     from shapely.geometry import MultiLineString, MultiPoint
 
@@ -107,7 +107,6 @@ def _clear_of(P, path, stronger, r: float, wall: float, channel: float, need: fl
     seg = shapely.linestrings(np.stack([P[path[:-1]], P[path[1:]]], axis=1))
     if shared:
         seg = shapely.difference(seg, zone)
-    tol = 1e-9 * float(np.ptp(P, axis=0).max())
 
     def far(geoms, items, d):  # NaN (an empty part, inside a shared plate) counts as far enough
         if geoms is None or geoms.is_empty:
@@ -158,8 +157,9 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float
         work.append((i, tuple(p[k:j + 1])))
     if channel is not None:  # 3. Clearance: each rope kept a wall clear of the stronger ones, trimmed or dropped
         clear = []
+        tol = 1e-9 * float(np.ptp(P, axis=0).max())
         for i, p in work:
-            q = _clear_of(P, p, [c for _, c in clear], r, wall, channel, need, dist)
+            q = _clear_of(P, p, [c for _, c in clear], r, wall, channel, need, dist, tol)
             if len(q) < 2:
                 why = (f"it cannot be moulded beside stronger ropes: no part of it lies a channel and a wall "
                        f"({channel:.4g} + {wall:.4g}) from their channels with room for its fixtures (radius "
@@ -173,18 +173,19 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float
                              f"{len(q) - 1} of its {len(p) - 1} edges")
             clear.append((i, q))
         work = clear
+    # each rope's muscle, rest length, segments and their lengths, made once (a dropped rope leaves the lists)
+    mus = [Muscle(p) for _, p in work]
+    L = [m.rest_length(mesh) for m in mus]
+    segs = [(m.segments, m.segment_lengths(P)) for m in mus]
     while work:
-        mus = [Muscle(p) for _, p in work]
-        L = np.array([m.rest_length(mesh) for m in mus])
         groups, joined = patch_groups(mesh, mus, r)
         group_of = np.full(mesh.n_nodes, -1)
         for gi, g in enumerate(groups):
             group_of[g] = gi
         free = np.empty(len(mus))
-        for c, m in enumerate(mus):
-            seg = m.segments
+        for c, (seg, seg_len) in enumerate(segs):
             inside = (group_of[seg[:, 0]] >= 0) & (group_of[seg[:, 0]] == group_of[seg[:, 1]])
-            free[c] = m.segment_lengths(P)[~inside].sum() / L[c]
+            free[c] = seg_len[~inside].sum() / L[c]
         stub = [c for c in range(len(mus)) if L[c] < 4.0 * r or free[c] < MIN_FREE_FRACTION]
         if stub:
             c = stub[-1]  # the weakest first: dropping it may free another's fixtures
@@ -205,6 +206,7 @@ def _fit_at(mesh, paths, r: float, wall: float, dist: np.ndarray, channel: float
         else:
             break
         i, p = work.pop(c)
+        del mus[c], L[c], segs[c]
         dropped.append((i, why))
         notes.append(f"{_where(P, p)} dropped: {why}")
     return FixtureFit(tuple(work), float(r), tuple(notes), tuple(dropped))

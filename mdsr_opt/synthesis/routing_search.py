@@ -466,14 +466,13 @@ class Router:
             return min(range(len(cands)), key=lambda i: (cands[i][0], cands[i][1], cands[i][2]))
         self._graph()  # the whole mesh's graph and components, on first use
         comp = self.component
-        P = np.array([self.XL[c[5]] for c in cands])
-        Q = np.array([self.XL[node] for _, node in ends])
+        cn = np.array([c[5] for c in cands])
+        en = np.array([node for _, node in ends])
+        P, Q = self.X[cn], self.X[en]  # the rest positions (XL's values)
         # straight-line lower bounds, shrunk by 1e-9 so round-off cannot lift them above the path length
         lb = np.sqrt(((P[:, None, :] - Q[None, :, :]) ** 2).sum(axis=2)) * ((1.0 - 1e-9) / self.ell)
         ids = np.array([uid for uid, _ in ends])
         cid = np.array([c[3].uid for c in cands])
-        cn = np.array([c[5] for c in cands])
-        en = np.array([node for _, node in ends])
         lb[(ids[None, :] == cid[:, None]) | (comp[cn][:, None] != comp[en][None, :])] = np.inf
         lb_h = lb.min(axis=1)
         reachable = np.isfinite(lb_h)  # another unit's end in the same part of the body

@@ -16,7 +16,7 @@ import numpy as np
 
 from .fabrication import MIN_INSET_FRACTION, body_depth, boundary_distance
 
-__all__ = ["beside_stretch", "compression_dominated", "no_feasible_message", "no_seed_message"]
+__all__ = ["beside_stretch", "compression_dominated", "no_feasible_message", "no_seed_message", "no_muscle_message"]
 
 #: The contraction the message counts edges above, as the user reads a target ("8 edges contract > 5 %").
 NOTABLE_CONTRACTION = 0.05
@@ -63,6 +63,16 @@ def no_feasible_message(w: np.ndarray, contracts: bool, fab, clearance: float, *
             "cannot push); no muscles routed")
 
 
+def no_muscle_message(reasons) -> str:
+    """The one sentence ``mdsr run`` (a failed case) and :func:`~mdsr_opt.synthesis.pipeline.design_pipeline`
+    (its ValueError) give when routing laid no muscle on a target: ``routing found no muscle on the target
+    (<reasons>)``, ``reasons`` the routing's warnings (its :class:`~mdsr_opt.synthesis.routing.RoutingWarning`
+    messages, which give the values that would work), else the question every such target raises."""
+    why = "; ".join(str(r) for r in reasons if str(r).strip()) or \
+        "muscles can only contract: does the target shorten any edge?"
+    return f"routing found no muscle on the target ({why})"
+
+
 def _finer_mesh(mesh, out: np.ndarray, clearance: float) -> str:
     """The hint that a finer mesh gives the contracted edges ``out`` (outside the buildable band) edges inside it,
     when it does: the body is deeper than the band's inset, and some of them reach within one of their lengths
@@ -76,8 +86,18 @@ def _finer_mesh(mesh, out: np.ndarray, clearance: float) -> str:
     if not reach.any():
         return ""
     h_mean, h_max = float(mesh.edge_lengths.mean()), 0.5 * (R - clearance)
-    return (f"; {int(reach.sum())} of those reach within an edge of the band: a finer mesh (mean edge length at most "
-            f"{h_max:.3g}, now {h_mean:.4g}; the body is {R:.4g} deep) gives them edges inside it")
+    if h_mean > h_max:
+        return (f"; {int(reach.sum())} of those reach within an edge of the band: a finer mesh (mean edge length at "
+                f"most {h_max:.3g}, now {h_mean:.4g}; the body is {R:.4g} deep) gives them edges inside it")
+    # the mesh is already as fine as the band asks (its edges fit in it): no finer mesh to suggest. Edges with a
+    # node on the outline or a hole stay outside at any mesh and inset; the others need a thinner inset.
+    wall = out & (np.minimum(dist[E[:, 0]], dist[E[:, 1]]) <= 1e-9 * R)
+    head = (f"; {int(reach.sum())} of those reach within an edge of the band, on a mesh already finer than the band "
+            f"asks (mean edge length {h_mean:.4g}, at most {h_max:.3g})")
+    if wall.sum() == out.sum():
+        return head + (": each has a node on the outline or a hole, where no rope lies at any mesh or inset")
+    return head + (f": {int((out & ~wall).sum())} lie off the walls but nearer than {clearance:.4g}, where a smaller "
+                   "channel_diameter or wall (or min_inset_fraction, whichever sets that inset) lets ropes reach them")
 
 
 def no_seed_message(mesh, x: np.ndarray, w: np.ndarray, contracted: np.ndarray, admissible: np.ndarray | None,

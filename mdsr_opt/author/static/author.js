@@ -139,7 +139,7 @@
     $("K_a").value = m.routing.K_a; $("K_b").value = m.routing.K_b;
     $("max_muscles").value = m.routing.max_muscles == null ? "" : m.routing.max_muscles;
     if (m.design.a_max != null) $("a_max").value = m.design.a_max;
-    if (m.design.method) setSelect("method", m.design.method);
+    setSelect("method", m.design.method || "auto");  // no method named: the design chooses (the design line says which)
     if (m.design.muscle_model) setSelect("muscle_model", m.design.muscle_model);
     $("save-name").value = ""; $("save-name").placeholder = m.name;  // empty: Save uses the body's name
     showLoaded(m);
@@ -240,7 +240,7 @@
       const d = S.design.difference;
       tr.innerHTML = `<td colspan="${cols.length + 1}">difference ${d == null ? "-" : d.toExponential(3)} ` +
         `(${S.design.relative_difference == null ? "-" : (100 * S.design.relative_difference).toFixed(2)} % of size), ` +
-        `${S.design.success ? "verified" : "NOT verified"}` +
+        `by ${String(S.design.method).replace(/[&<>"]/g, "")}, ${S.design.success ? "verified" : "NOT verified"}` +
         (S.design.acceptance ? `; mdsr run fails it: ${S.design.acceptance}` : "") +
         designFlags(S.design) + "</td>";
       t.appendChild(tr);
