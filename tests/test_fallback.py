@@ -180,3 +180,10 @@ def test_a_layout_designed_again_without_its_idle_muscle_says_how_the_first_was_
     res, kept, dropped = design_active(mesh, MAT, [lower, upper], target)
     assert [d.name for d in dropped] == ["M2"] and res.success and res.method == "flattened"
     assert "(the layout with them: the default method='flattened' failed (Maximum_Iterations_Exceeded" in res.status
+
+
+def test_ipopt_options_address_the_flattened_method_and_get_no_fallback(flattened_fails):
+    mesh, mus, target = _strip()
+    res = design_contractions(mesh, MAT, mus, target, options={"acceptable_iter": 2})
+    assert not res.success and res.method == "flattened" and res.fallback == ""
+    assert res.status.endswith(NESTED_HINT)

@@ -76,8 +76,8 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
         contacts from the start; ``"flattened"`` and ``"nested"`` named with contact are refused. Without
         contact, a default flattened design that fails (not converged, or rejected by its verification) is
         made again by ``"nested"`` (:mod:`~mdsr_opt.synthesis.fallback`; the result's ``method``,
-        ``fallback`` and ``status`` say so); a named ``"flattened"`` is not, its failure's ``status``
-        suggesting ``"nested"``.
+        ``fallback`` and ``status`` say so); a named ``"flattened"``, or one given IPOPT ``options``, is not,
+        its failure's ``status`` suggesting ``"nested"``.
     a_max : float, default 0.6
         Upper bound on every contraction, in ``(0, 1)``. A rope mostly inside its end patches gets a lower
         one, :func:`~mdsr_opt.synthesis.problem.contraction_caps`: its free part (outside its end patches)
@@ -221,7 +221,9 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
                                      {"tol": tol, "max_iter": max_iter, "outer": outer, "options": options},
                                      {"contact": contact, "obstacles": obstacles, "contact_gap": contact_gap},
                                      ckw, VERIFY_TOL)
-    named = method is not None  # a default flattened design that fails is made again by the nested method
+    # a default flattened design that fails is made again by the nested method, unless the caller addressed the
+    # flattened method: named it, or gave IPOPT options (synthesis.fallback)
+    named = method is not None or options is not None
     if method is None:  # held nodes: the flattened NLP pins the gauge only
         method = "flattened" if held is None else "nested"
     if not isinstance(method, str) or method not in METHODS:

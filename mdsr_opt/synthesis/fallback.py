@@ -14,8 +14,9 @@ verification) is made again by ``method="nested"`` (:data:`FALLBACK_METHOD`): fi
 attempt's contractions when they are usable (finite, within their bounds), then from the usual start. The
 first success is the result; its ``method`` is ``"nested"``, its ``fallback`` and ``status`` say why. When
 both fail the flattened result is returned, its ``status`` and ``fallback`` saying what was tried. A caller
-who names ``method="flattened"`` gets no fallback, and a failure's ``status`` suggests the nested method
-(:data:`NESTED_HINT`). A flattened design that succeeds is returned as before.
+who names ``method="flattened"``, or gives IPOPT ``options`` (which address the flattened method), gets no
+fallback, and a failure's ``status`` suggests the nested method (:data:`NESTED_HINT`). A flattened design
+that succeeds is returned as before.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ FALLBACK_METHOD = "nested"
 
 #: appended to the status of a flattened design that failed when the caller named ``method="flattened"``
 NESTED_HINT = ("; method='nested' (an outer search over the contractions, each trial an equilibrium) may succeed "
-               "where the flattened NLP failed: the default (method=None) tries it on its own")
+               "where the flattened NLP failed: the default (no method, no IPOPT options) tries it on its own")
 
 
 def fallback_starts(failed, a0, a_upper) -> list[tuple[str, np.ndarray]]:
