@@ -94,9 +94,5 @@ def design_gradient_first(design, mesh, material, muscles, target, clock0: float
     res.contact_route = (f"by method 'derivative-free' with {what}, started from the contractions of the {gm} "
                          f"design without them, which {why}")
     res.status += f"; designed {res.contact_route}"
-    res.iterations += first.iterations
-    res.n_forward += first.n_forward
-    res.inner_iterations += first.inner_iterations
-    res.time = time.perf_counter() - clock0
-    res.solve_time = res.time - res.build_time
+    res.count_in([first], clock0)
     return res

@@ -325,11 +325,7 @@ def _fixtures_apart(args, warm, clock0, fixture_wall) -> DesignResult:
         first = res
         res = _design_from(args, warm, clock0)
         res.status += f" (designed again with {caps}: at the contractions first found their end fixtures met)"
-        res.iterations += first.iterations
-        res.n_forward += first.n_forward
-        res.inner_iterations += first.inner_iterations
-        res.time = time.perf_counter() - clock0
-        res.solve_time = res.time - res.build_time
+        res.count_in([first], clock0)
     return res
 
 

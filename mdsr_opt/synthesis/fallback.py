@@ -22,7 +22,6 @@ that succeeds is returned as before.
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -54,17 +53,6 @@ def fallback_starts(failed, a0, a_upper) -> list[tuple[str, np.ndarray]]:
     return starts
 
 
-def _merge_counts(res, others, clock0: float) -> None:
-    """``res`` counts the work of every design in ``others`` too, and its clock runs from ``clock0``."""
-    for o in others:
-        res.iterations += o.iterations
-        res.n_forward += o.n_forward
-        res.inner_iterations += o.inner_iterations
-        res.build_time += o.build_time
-    res.time = time.perf_counter() - clock0
-    res.solve_time = res.time - res.build_time
-
-
 def design_with_fallback(failed, redesign: Callable, a0, a_upper, clock0: float):
     """The result of a failed default (flattened) design ``failed``: the first of the nested designs
     ``redesign(start)`` (from :func:`fallback_starts`) that succeeds, else ``failed`` saying what was tried.
@@ -91,14 +79,14 @@ def design_with_fallback(failed, redesign: Callable, a0, a_upper, clock0: float)
                   why, FALLBACK_METHOD, where)
         res = redesign(start)
         if res.success:
-            _merge_counts(res, [failed] + [r for _w, r in tried], clock0)
+            res.count_in([failed] + [r for _w, r in tried], clock0, build_time=True)
             res.fallback = (f"the default method='flattened' failed ({why}); method={FALLBACK_METHOD!r} designed "
                             f"it, started from {where}")
             res.status += f"; designed by method={FALLBACK_METHOD!r}: {res.fallback}"
             _LOG.info("design: method=%r succeeded where the flattened design failed", FALLBACK_METHOD)
             return res
         tried.append((where, res))
-    _merge_counts(failed, [r for _w, r in tried], clock0)
+    failed.count_in([r for _w, r in tried], clock0, build_time=True)
     said = "; ".join(f"from {where}: {r.status}" for where, r in tried)
     failed.fallback = f"method={FALLBACK_METHOD!r} was tried too after the flattened design failed, and failed ({said})"
     failed.status += f"; method={FALLBACK_METHOD!r} tried too (the default's fallback), and failed: {said}"

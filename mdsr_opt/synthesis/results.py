@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import asdict, dataclass, field
 import numpy as np
 
@@ -374,6 +375,20 @@ class DesignResult:
     def angle(self) -> float:
         """Rotation angle (radians) of the motion onto the target."""
         return float(math.atan2(self.rotation[1, 0], self.rotation[0, 0]))
+
+    def count_in(self, others, clock0: float, build_time: bool = False) -> None:
+        """Count the work of the designs ``others``, made on the way to this one (a first attempt, a design
+        by another method), in this one's counters: iterations, forward solves, inner iterations, and with
+        ``build_time`` their build times; its clock then runs from ``clock0`` (a ``time.perf_counter()``
+        reading)."""
+        for o in others:
+            self.iterations += o.iterations
+            self.n_forward += o.n_forward
+            self.inner_iterations += o.inner_iterations
+            if build_time:
+                self.build_time += o.build_time
+        self.time = time.perf_counter() - clock0
+        self.solve_time = self.time - self.build_time
 
     def summary(self) -> dict:
         """Scalars of the result (no arrays except the per-muscle lists), for tables and logs: strokes and
