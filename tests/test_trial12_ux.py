@@ -227,6 +227,12 @@ def test_a_frictionless_grip_reports_finite_figures_and_names_its_contacts():
     # friction holds nothing more here (one side pushed), and the figures stay finite
     g5 = grip_report(r.x, r.contact, disks[0], 0.5)
     assert np.isfinite(g5["resisted"]).all() and (g5["holding_force"] is None) == (not g5["held"])
+    # a disk nothing touches is not held (recheck12: held True, holding_force 0.0), whatever the friction
+    untouched = dict(r.contact, pairs=[p for p in r.contact["pairs"] if p.get("obstacle") != 0])
+    for mu in (0.0, 0.5):
+        gu = grip_report(r.x, untouched, disks[0], mu)
+        assert gu["held"] is False and gu["holding_force"] is None and gu["normal_forces"] == []
+        assert gu["resisted"] == [0.0] * len(gu["directions"])
 
 
 STAR5 = """name = "star5"

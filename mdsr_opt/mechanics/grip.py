@@ -66,7 +66,8 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
         in each that is held; 0.0 where none is, also where even no load is: a disk pushed harder one way than
         friction can hold, at ``mu = 0`` any net push); ``holding_force`` (the smallest of them: a load of any
         direction up to it is held; None when the disk is not held even without a load, as ``mdsr run``'s grip
-        reports say); ``held`` (the load ``load`` is held). Every figure is finite.
+        reports say); ``held`` (the load ``load`` is held; False when nothing touches the disk). Every figure
+        is finite.
     """
     mu = friction_coefficient(mu, "mu")
     x = as_float_array(x, "x", shape=(None, 2))
@@ -104,9 +105,12 @@ def grip_report(x, contact: dict, disk, mu: float, obstacle: int = 0, load=None,
         # the slack could stand in for up to atol of the load: not counted as held
         return max(float(res.x[k]) - atol, 0.0) if res.status == 0 else np.nan
 
-    resisted = np.array([largest(d) for d in D])
-    held_load = not np.isnan(largest(None, L))
-    unloaded = held_load if not L.any() else not np.isnan(largest(None, np.zeros(2)))  # held without a load
+    if not len(pairs):  # nothing touches the disk: nothing holds it (as mdsr run's grip reports say)
+        resisted, held_load, unloaded = np.full(len(D), np.nan), False, False
+    else:
+        resisted = np.array([largest(d) for d in D])
+        held_load = not np.isnan(largest(None, L))
+        unloaded = held_load if not L.any() else not np.isnan(largest(None, np.zeros(2)))  # held without a load
     seg = [p["kind"] == "obstacle segment" for p in pairs]
     return {"mu": float(mu), "contact_nodes": [None if s else int(v) for s, v in zip(seg, nodes)],
             "contact_segments": [[int(p["nodes"][1]), int(p["nodes"][2])] if s else None for s, p in zip(seg, pairs)],
