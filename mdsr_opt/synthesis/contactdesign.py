@@ -110,8 +110,9 @@ def contact_minimum(mesh, material, muscles, contractions, x, kw: dict, *, muscl
 
 
 def gradient_method(held) -> str:
-    """The gradient method that designs a contact design without its contacts first (module docstring):
-    ``"nested"`` for a body with ``held`` nodes (the flattened NLP pins the gauge only), else ``"flattened"``."""
+    """The gradient method a design takes when none is named: ``"nested"`` for a body with ``held`` nodes
+    (the flattened NLP pins the gauge only), else ``"flattened"``; with contact, the method of its first
+    design, without the contacts (module docstring)."""
     return "flattened" if held is None else "nested"
 
 

@@ -23,7 +23,7 @@ from ..mechanics.loadsteps import upright
 from ..mechanics.obstacles import check_obstacles
 from ..mechanics.units import Units
 from ..plot.style import muscle_label
-from .contactdesign import check_design_contact, unit_contact
+from .contactdesign import check_design_contact, gradient_method, unit_contact
 from .contactroute import design_gradient_first
 from .nlp import ACCEPTABLE, run_flattened
 from .fabrication import WALL_FRACTION
@@ -225,7 +225,7 @@ def design_contractions(mesh: Mesh, material, muscles: Sequence[Muscle], target:
     # flattened method: named it, or gave IPOPT options (synthesis.fallback)
     named = method is not None or options is not None
     if method is None:  # held nodes: the flattened NLP pins the gauge only
-        method = "flattened" if held is None else "nested"
+        method = gradient_method(held)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
     if hessian not in ("exact", "gauss-newton"):

@@ -69,10 +69,7 @@ def design_with_fallback(failed, redesign: Callable, a0, a_upper, clock0: float)
     clock0 : float
         ``time.perf_counter()`` at the start of the whole design (the result's ``time`` covers every attempt).
     """
-    why = failed.status
-    v = getattr(failed, "verification", None)
-    if v is not None and not v.passed and v.message and v.message not in why:
-        why += f"; its state checked: {v.message}"
+    why = failed.reason  # its status, and the verification's message when that failed
     tried = []
     for where, start in fallback_starts(failed, a0, a_upper):
         _LOG.info("design: the default flattened design failed (%s); designing again by method=%r from %s",

@@ -445,7 +445,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     check_channel_fits(mesh, ropts["fabrication"], routed=muscles is None)  # a channel the body cannot hold
     if muscles is not None:  # of this mesh, one label each: before the target's solve
         muscles = tuple(check_muscles(mesh, muscles))
-    from .contactdesign import check_design_contact
+    from .contactdesign import check_design_contact, gradient_method
     from ..mechanics.obstacles import check_obstacles
 
     didx, dpos = parse_drags(drags, mesh)  # the mesh: rigid drags' final positions need it
@@ -459,7 +459,7 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     if method is None and not (contact is True or check_obstacles(obstacles)):
         # as design_contractions chooses (held nodes: the nested method); with contact it chooses per design: a
         # gradient design checked with the contacts, else derivative-free (mdsr_opt.synthesis.contactdesign)
-        method = "flattened" if design_options.get("held") is None else "nested"
+        method = gradient_method(design_options.get("held"))
     ckw = check_design_contact(mesh, material, contact, obstacles, design_options.get("contact_gap"), method)
     anc = node_indices(np.zeros(0, dtype=np.int64) if anchors is None else anchors, "anchors", n=mesh.n_nodes)
     if ckw.get("obstacles") and design_options.get("held") is None:
@@ -505,11 +505,11 @@ def design_pipeline(mesh: Mesh, material, anchors, drags, *, muscles: Sequence[M
     t2 = time.perf_counter()
     design_options.setdefault("verify", PIPELINE_VERIFY)
     _LOG.info("design_pipeline: designing %d muscle(s) by %s%s", len(mus), method or
-              f"method {'nested' if design_options.get('held') is not None else 'flattened'} without contact, "
+              f"method {gradient_method(design_options.get('held'))} without contact, "
               "checked with it (derivative-free with it when it touches)",
               " with contact (each trial a contact solve; progress below)" if ckw and method else "")
     res, mus, dropped = design_active(mesh, material, mus, ext.x, idle_contraction=idle_contraction,
-                                      method=method if named or method != "flattened" else None, **design_options)
+                                      method=method if named else None, **design_options)
     res.units = units
     if routing is not None and dropped:
         routing = routing.keeping(mus, dropped)
