@@ -188,12 +188,14 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     if len(muscles):
         plot_muscles(result.x_aligned, muscles, ax=ax)
     err = np.linalg.norm(np.asarray(result.x_aligned) - np.asarray(target, dtype=float), axis=1)
+    worst = None
     if err.size and np.isfinite(err).all():  # where the design misses the pose most
         k = int(np.argmax(err))
+        worst = float(err[k])
         pts = np.array([result.x_aligned[k], np.asarray(target, dtype=float)[k]])
         ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.0, marker="x", ms=5, zorder=5,
-                label=f"largest node error {err[k]:.3g} {unit_label(units)}")
-    ax.set_title(title or design_title(result, muscles, units, target=target), fontsize=9)
+                label=f"largest node error {worst:.3g} {unit_label(units)}")
+    ax.set_title(title or design_title(result, muscles, units, max_error=worst), fontsize=9)
     if len(obstacles):
         draw_obstacles(ax, obstacles)
     ax.legend(fontsize=7, **LEGEND_OUTSIDE)
@@ -201,10 +203,10 @@ def plot_design(mesh, result, target, muscles=(), ax=None, title=None, ticks=Tru
     return fig
 
 
-def design_title(result, muscles=(), units=None, per_line: int = 3, target=None) -> str:
+def design_title(result, muscles=(), units=None, per_line: int = 3, max_error: float | None = None) -> str:
     """A design's title: method, difference (the weighted RMS the verdict judges) with its unit and the
-    largest node error after the same alignment (measured against ``target`` when given, else the result's
-    ``max_error``), then per muscle the commanded contraction and the achieved one (``M1 0.150 -> 0.148``): on
+    largest node error after the same alignment (``max_error`` when given, as measured against the drawn
+    target, else the result's ``max_error``), then per muscle the commanded contraction and the achieved one (``M1 0.150 -> 0.148``): on
     the same line for one or two muscles, else ``per_line`` muscles to a line under a heading line (the title
     stays about as wide as the drawing)."""
     from .style import muscle_label, muscle_name
@@ -216,10 +218,7 @@ def design_title(result, muscles=(), units=None, per_line: int = 3, target=None)
     text = commanded_achieved(a, reached if reached.size == a.size else None, names)
     parts = text.split(", ") if text else []
     ok = "" if result.success else "  [FAILED]"
-    worst = float(getattr(result, "max_error", float("nan")))
-    if target is not None:
-        err = np.linalg.norm(np.asarray(result.x_aligned) - np.asarray(target, dtype=float), axis=1)
-        worst = float(err.max()) if err.size else worst
+    worst = float(getattr(result, "max_error", float("nan")) if max_error is None else max_error)
     most = f", largest node error {worst:.3g} {unit_label(units)}" if np.isfinite(worst) else ""
     head = f"{result.method}: difference D = {result.difference:.3g} {unit_label(units)} (RMS){most}{ok}"
     what = "contraction commanded \u2192 achieved:" if reached.size == a.size else "contraction commanded:"
